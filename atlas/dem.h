@@ -1,0 +1,38 @@
+// DEM input through GDAL: any single-band raster GDAL reads (GeoTIFF, SRTM .hgt, USGS ASCII DEM,
+// netCDF, ESRI ASCII grid, ...). Voids (nodata, NaN, inf) are filled and counted.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/atlas_format.h"
+
+namespace gimlod {
+
+struct DemOptions {
+  double zScale = 1.0;   // multiplies heights; must be finite and non-zero
+  std::string subdataset;  // netCDF variable (empty: the first 2D one GDAL offers)
+};
+
+// Heights in metres after z-scale, row-major with row 0 at the SOUTH edge (gy grows north).
+struct DemRaster {
+  uint32_t width = 0, height = 0;
+  std::vector<float> heights;
+  std::array<double, 2> spacing{1.0, 1.0};  // metres between samples in x (east) and y (north)
+  Georeference georef;
+  uint64_t voidsFilled = 0;
+  std::string voidFillMethod;
+  float minHeight = 0.f, maxHeight = 0.f;
+};
+
+// Loads and repairs a DEM. Throws InputError naming the file on: unreadable or truncated data,
+// not a raster, zero-size, all samples void, bad options.
+DemRaster loadDem(const std::filesystem::path& path, const DemOptions& options = {});
+
+// Fills voids (mask == true) in place; returns the number filled. Method: documented in dem.cpp.
+uint64_t fillVoids(std::vector<float>& heights, const std::vector<bool>& voidMask, uint32_t width,
+                   uint32_t height);
+
+}  // namespace gimlod

@@ -1,0 +1,45 @@
+// Height-field atlas: partitions a DEM into (2^m+1)^2 charts with a one-sample overlap, builds
+// each chart's subsampled pyramid and normal map, and writes them in blocks.
+// Based on: Niski, Purnomo, Cohen, "Multi-grained Level of Detail Using a Hierarchical Seamless
+// Texture Atlas", I3D 2007, sections 4 and 6 (height-field case).
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+
+#include "atlas/dem.h"
+#include "core/atlas_format.h"
+
+namespace gimlod {
+
+struct TerrainAtlasOptions {
+  uint32_t chartSize = 513;      // samples per chart side; must be 2^m + 1, 9..8193
+  uint32_t blockIntervals = 64;  // block / max node resolution R; power of two, 4..1024
+};
+
+struct TerrainAtlasStats {
+  uint32_t charts = 0;
+  uint64_t samples = 0;        // DEM samples
+  uint64_t storedSamples = 0;  // samples in all pyramid levels of all charts
+  uint64_t bytesOnDisk = 0;
+  double seconds = 0.0;
+};
+
+// The chart's level-0 heights, (chartSize)^2 row-major (row = v = north), edge-clamped outside
+// the DEM. Shared by the writer and the tests.
+std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gridY,
+                                uint32_t chartSize);
+
+// Builds the pyramid (subsampling) and normal maps of one chart. The normal at a sample comes from
+// central differences of the global DEM at that level's spacing, so shared borders match.
+ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t gridY,
+                               uint32_t chartSize);
+
+// Writes all chart files into `dir` (which must exist) and fills the manifest's chart fields
+// (chartsX/Y, charts, neighbours, spacing, samples, heightRange, georef, voids). Charts are
+// written in parallel.
+TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOptions& options,
+                                     const std::filesystem::path& dir, AtlasManifest& manifest);
+
+}  // namespace gimlod

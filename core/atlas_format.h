@@ -1,0 +1,134 @@
+// On-disk atlas format shared by every stage: the manifest (atlas.json), chart pyramid files
+// stored in blocks, and atomic file writing. Pure C++; no GDAL, OpenMesh, CGAL or GL here.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace gimlod {
+
+// Error for bad user input or unreadable files; the message names the file and the problem.
+class InputError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+inline constexpr uint32_t kAtlasFormatVersion = 1;
+inline constexpr const char* kManifestName = "atlas.json";
+
+// Chart edges, counter-clockwise in chart (u, v): 0 = bottom (v = 0), 1 = right (u = max),
+// 2 = top (v = max), 3 = left (u = 0). The edge parameter runs counter-clockwise.
+enum Edge : uint8_t { kEdgeBottom = 0, kEdgeRight = 1, kEdgeTop = 2, kEdgeLeft = 3 };
+
+// The chart across one edge of a root. chart < 0: open border (no neighbour).
+// reversed: the neighbour's edge parameter runs opposite to ours (always true for two
+// consistently oriented charts).
+struct RootNeighbour {
+  int32_t chart = -1;
+  uint8_t edge = 0;
+  bool reversed = true;
+};
+
+struct Georeference {
+  std::string wkt;                          // source spatial reference, may be empty
+  std::array<double, 6> geotransform{};     // GDAL geotransform of the source raster
+  bool geographic = false;                  // source units were degrees
+  double centreLatitudeDeg = 0.0;           // latitude used for degree-to-metre conversion
+};
+
+struct ChartInfo {
+  uint32_t id = 0;
+  int32_t gridX = 0, gridY = 0;             // chart position in the terrain chart grid
+  std::string file;                         // relative to the atlas directory
+  std::array<RootNeighbour, 4> neighbours;  // indexed by Edge
+};
+
+// The atlas manifest. Heights are in metres after z-scale; horizontal positions of terrain
+// sample (gx, gy) are (gx * spacing[0], gy * spacing[1]); gy grows northwards.
+struct AtlasManifest {
+  uint32_t version = kAtlasFormatVersion;
+  std::string kind = "heightfield";         // "heightfield" (1-channel), later "geometry"
+  uint32_t chartSize = 513;                 // samples per chart side, 2^m + 1
+  uint32_t blockIntervals = 64;             // block side in intervals (2^t); = max node res R
+  uint32_t chartsX = 0, chartsY = 0;
+  uint32_t samplesX = 0, samplesY = 0;      // valid DEM extent in global samples
+  std::array<double, 2> spacing{1.0, 1.0};  // metres between samples
+  double zScale = 1.0;
+  std::array<float, 2> heightRange{0.f, 0.f};
+  uint64_t voidsFilled = 0;
+  std::string voidFillMethod;
+  std::string source;
+  Georeference georef;
+  std::vector<ChartInfo> charts;
+  // Hierarchy parameters (log2 values). depth = number of quadtree levels (root = level 0).
+  std::string hierarchyFile = "hierarchy.bin";
+  uint32_t depth = 5;
+  uint32_t maxNodeResLog2 = 6;              // log2(R)
+  uint32_t minNodeResLog2 = 2;
+
+  uint32_t intervalsLog2() const;           // log2(chartSize - 1)
+  uint32_t pyramidLevels() const { return intervalsLog2() + 1; }
+};
+
+// Reads and validates dir/atlas.json. Throws InputError naming the file.
+AtlasManifest readManifest(const std::filesystem::path& dir);
+// Writes dir/atlas.json atomically.
+void writeManifest(const std::filesystem::path& dir, const AtlasManifest& m);
+
+// Writes bytes to path.tmp-<pid> and renames it over path. Throws InputError on failure.
+void atomicWriteFile(const std::filesystem::path& path, const void* data, size_t bytes);
+
+// Normal stored as 4 x uint8 (n * 127.5 + 127.5, w = 255).
+using PackedNormal = std::array<uint8_t, 4>;
+
+// Block layout of one pyramid level: the level has (chartSize-1)>>level intervals per side; it is
+// cut into blocksPerSide^2 blocks of blockSamples^2 samples sharing one row/column with the next.
+struct LevelLayout {
+  uint32_t samples = 0;        // (M >> level) + 1
+  uint32_t blocksPerSide = 0;  // max(1, (M >> level) / B)
+  uint32_t blockSamples = 0;   // min(B, M >> level) + 1
+};
+LevelLayout levelLayout(uint32_t chartSize, uint32_t blockIntervals, uint32_t level);
+
+// One chart's pyramid in memory: level k is a (samples_k)^2 row-major image (row = v).
+struct ChartPyramid {
+  std::vector<std::vector<float>> heights;         // [level][v * samples + u]
+  std::vector<std::vector<PackedNormal>> normals;  // [level][v * samples + u]
+};
+
+// Writes a chart file: header, block directory, then each level's height blocks and normal
+// blocks. Atomic. Returns bytes written.
+uint64_t writeChartFile(const std::filesystem::path& path, const ChartPyramid& pyramid,
+                        uint32_t chartSize, uint32_t blockIntervals);
+
+// Random access to one chart file's blocks; reads only the requested block. Thread-safe.
+class ChartFileReader {
+ public:
+  explicit ChartFileReader(const std::filesystem::path& path);  // throws InputError
+  uint32_t chartSize() const { return chartSize_; }
+  uint32_t blockIntervals() const { return blockIntervals_; }
+  uint32_t levels() const { return levels_; }
+  // Reads the window of level `level` with origin (u0, v0) and side n+1 samples (n intervals),
+  // which must lie inside one block. Output row-major (n+1)^2.
+  void readHeights(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, float* out) const;
+  void readNormals(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, PackedNormal* out) const;
+  // Reads a whole level (all blocks).
+  std::vector<float> readLevelHeights(uint32_t level) const;
+
+ private:
+  struct BlockEntry { uint64_t heightOffset; uint64_t normalOffset; };
+  const BlockEntry& block(uint32_t level, uint32_t bx, uint32_t by) const;
+  std::filesystem::path path_;
+  uint32_t chartSize_ = 0, blockIntervals_ = 0, levels_ = 0;
+  std::vector<std::vector<BlockEntry>> directory_;  // [level][by * blocksPerSide + bx]
+  mutable std::mutex mutex_;
+  mutable std::ifstream file_;
+};
+
+}  // namespace gimlod

@@ -1,0 +1,36 @@
+// What runtime core hands to the GL renderer each frame: one record per drawn node plus the
+// per-node border stitching tables. Pure data; no GL.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace gimlod {
+
+// One node to draw. All coordinates are in level-0 sample units of the terrain's global grid.
+// The node covers [originX, originX + 2^sizeLog2] x [originY, originY + 2^sizeLog2] (closed).
+struct DrawNode {
+  int32_t originX = 0, originY = 0;
+  uint32_t sizeLog2 = 0;     // node side in level-0 intervals
+  uint32_t res = 0;          // drawn grid: 2^res intervals per side, (2^res + 1)^2 vertices
+  uint32_t pageResLog2 = 0;  // page data holds 2^pageResLog2 intervals per side (res <= this)
+  uint32_t pageLayer = 0;    // layer of the GPU page pool holding this node's data
+};
+
+// Border stitching tables, as in paper section 7.4. For every node and each side
+// (0 bottom v=0, 1 right u=max, 2 top v=max, 3 left u=0) there are entriesPerSide bytes. Entry j
+// covers the side's level-0 positions t in [j << leafLog2, (j+1) << leafLog2), t measured from
+// the node origin along +u (bottom/top) or +v (left/right). Each entry is the log2 vertex
+// spacing, in level-0 intervals, of the neighbour drawn there, or 0 where there is no neighbour.
+// A border vertex at t whose own spacing is finer snaps to (t >> s) << s with s that entry.
+struct StitchTables {
+  uint32_t leafLog2 = 0;        // log2 of a leaf node's side in level-0 intervals
+  uint32_t entriesPerSide = 1;  // 2^(depth - 1)
+  std::vector<uint8_t> bytes;   // nodes * 4 * entriesPerSide
+  uint8_t* side(size_t node, uint32_t s) { return bytes.data() + (node * 4 + s) * entriesPerSide; }
+  const uint8_t* side(size_t node, uint32_t s) const {
+    return bytes.data() + (node * 4 + s) * entriesPerSide;
+  }
+};
+
+}  // namespace gimlod

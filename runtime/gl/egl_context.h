@@ -1,0 +1,24 @@
+// Headless OpenGL 4.3+ core context through EGL (device platform, then Mesa surfaceless, then
+// the default display). Works on Mesa llvmpipe and on NVIDIA.
+#pragma once
+
+#include <memory>
+#include <string>
+
+namespace gimlod::gl {
+
+class EglContext {
+ public:
+  // Creates and makes current a context; throws std::runtime_error with the EGL reason.
+  static std::unique_ptr<EglContext> create();
+  ~EglContext();
+  std::string renderer() const;  // GL_RENDERER
+  std::string version() const;   // GL_VERSION
+
+ private:
+  EglContext() = default;
+  void* display_ = nullptr;
+  void* context_ = nullptr;
+};
+
+}  // namespace gimlod::gl

@@ -1,0 +1,41 @@
+#include "tests/test_util.h"
+
+#include <array>
+#include <cstdio>
+#include <random>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace gimlod::test {
+
+std::filesystem::path sharedData() { return GIMLOD_SHARED_DATA; }
+bool haveSharedData() { return std::filesystem::exists(sharedData() / "terrain"); }
+std::filesystem::path repoData() { return GIMLOD_REPO_DATA; }
+std::filesystem::path appPath() { return GIMLOD_APP; }
+
+TempDir::TempDir(const std::string& tag) {
+  std::random_device rd;
+  path_ = std::filesystem::temp_directory_path() /
+          (tag + "-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
+  std::filesystem::create_directories(path_);
+}
+
+TempDir::~TempDir() {
+  std::error_code ec;
+  std::filesystem::remove_all(path_, ec);
+}
+
+int runCommand(const std::string& command, std::string* output) {
+  std::string cmd = command + " 2>&1";
+  FILE* pipe = ::popen(cmd.c_str(), "r");
+  if (!pipe) return -1;
+  std::array<char, 4096> buf{};
+  std::string out;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) out.append(buf.data(), n);
+  int status = ::pclose(pipe);
+  if (output) *output = out;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+}  // namespace gimlod::test
