@@ -1,0 +1,286 @@
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 6 (hierarchy creation): per-node bounds and
+// per-resolution maximum sample deviation, built in parallel.
+#include "hierarchy/hierarchy.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+namespace gimlod {
+namespace {
+
+constexpr char kMagic[4] = {'G', 'L', 'M', 'H'};
+constexpr uint32_t kHierarchyVersion = 1;
+
+// Reduces an n x n array of per-cell values by 2x2 blocks with `op` into an (n/2)^2 array.
+template <typename Op>
+void reduce2x2(const std::vector<float>& in, uint32_t n, std::vector<float>& out, Op op) {
+  const uint32_t h = n / 2;
+  out.resize(size_t(h) * h);
+  for (uint32_t y = 0; y < h; ++y) {
+    const float* r0 = &in[size_t(2 * y) * n];
+    const float* r1 = r0 + n;
+    float* o = &out[size_t(y) * h];
+    for (uint32_t x = 0; x < h; ++x)
+      o[x] = op(op(r0[2 * x], r0[2 * x + 1]), op(r1[2 * x], r1[2 * x + 1]));
+  }
+}
+
+// Per-cell max (or min) of the four corner samples of each level-0 cell: M x M from S x S.
+template <typename Op>
+void cellReduce(const std::vector<float>& s, uint32_t S, std::vector<float>& out, Op op) {
+  const uint32_t M = S - 1;
+  out.resize(size_t(M) * M);
+  for (uint32_t y = 0; y < M; ++y) {
+    const float* r0 = &s[size_t(y) * S];
+    const float* r1 = r0 + S;
+    float* o = &out[size_t(y) * M];
+    for (uint32_t x = 0; x < M; ++x) o[x] = op(op(r0[x], r0[x + 1]), op(r1[x], r1[x + 1]));
+  }
+}
+
+// running[i] = max(running[i], |h - surface_k|) for every level-0 sample, where surface_k is the
+// piecewise-linear interpolation of the level-k subsampled grid split along (0,0)-(1,1).
+void accumulateLevelError(const std::vector<float>& h, uint32_t S, uint32_t k,
+                          std::vector<float>& running) {
+  const uint32_t M = S - 1;
+  const uint32_t n = M >> k;
+  const uint32_t s = 1u << k;
+  const float inv = 1.0f / float(s);
+  for (uint32_t y = 0; y <= M; ++y) {
+    const uint32_t cy = std::min(y >> k, n - 1);
+    const float fy = float(y - cy * s) * inv;
+    const float* row0 = &h[size_t(cy * s) * S];
+    const float* row1 = &h[size_t((cy + 1) * s) * S];
+    const float* src = &h[size_t(y) * S];
+    float* run = &running[size_t(y) * S];
+    for (uint32_t cx = 0; cx < n; ++cx) {
+      const uint32_t x0 = cx * s;
+      const float h00 = row0[x0], h10 = row0[x0 + s], h01 = row1[x0], h11 = row1[x0 + s];
+      const uint32_t xend = (cx == n - 1) ? s : s - 1;
+      for (uint32_t dx = 0; dx <= xend; ++dx) {
+        const float fx = float(dx) * inv;
+        const float lower = h00 + fx * (h10 - h00) + fy * (h11 - h10);  // fx >= fy
+        const float upper = h00 + fy * (h01 - h00) + fx * (h11 - h01);  // fx < fy
+        const float interp = fx >= fy ? lower : upper;
+        const float e = std::fabs(src[x0 + dx] - interp);
+        run[x0 + dx] = std::max(run[x0 + dx], e);
+      }
+    }
+  }
+}
+
+void buildChart(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart,
+                const std::vector<float>& h, Hierarchy::ChartNodes& out) {
+  const uint32_t L = p.intervalsLog2;
+  const uint32_t M = 1u << L;
+  const uint32_t S = M + 1;
+  const uint32_t nodes = nodesPerChart(p.depth);
+  const uint32_t rc = p.resCount();
+  out.bounds.assign(nodes, {});
+  out.flags.assign(nodes, 0);
+  out.errors.assign(size_t(nodes) * rc, std::numeric_limits<float>::quiet_NaN());
+
+  auto fmax = [](float a, float b) { return std::max(a, b); };
+  auto fmin = [](float a, float b) { return std::min(a, b); };
+
+  // Bounds: min/max mips over cells.
+  std::vector<float> mn, mx, tmp;
+  cellReduce(h, S, mn, fmin);
+  cellReduce(h, S, mx, fmax);
+  const int64_t gx0 = int64_t(chart.gridX) * M, gy0 = int64_t(chart.gridY) * M;
+  for (uint32_t n = M, l = L;; n /= 2, --l) {
+    if (l < p.depth) {
+      const uint32_t size = M >> l;
+      for (uint32_t y = 0; y < n; ++y)
+        for (uint32_t x = 0; x < n; ++x) {
+          const uint32_t idx = nodeIndex(l, x, y);
+          const int64_t ox = gx0 + int64_t(x) * size, oy = gy0 + int64_t(y) * size;
+          out.bounds[idx] = {float(double(ox) * m.spacing[0]), float(double(oy) * m.spacing[1]),
+                             mn[size_t(y) * n + x],
+                             float(double(ox + size) * m.spacing[0]),
+                             float(double(oy + size) * m.spacing[1]), mx[size_t(y) * n + x]};
+          const bool empty = ox >= int64_t(m.samplesX) - 1 || oy >= int64_t(m.samplesY) - 1;
+          out.flags[idx] = empty ? kNodeEmpty : 0;
+        }
+    }
+    if (n == 1) break;
+    reduce2x2(mn, n, tmp, fmin);
+    mn.swap(tmp);
+    reduce2x2(mx, n, tmp, fmax);
+    mx.swap(tmp);
+  }
+
+  // Errors at k = 0 (source resolution) are exactly zero.
+  for (uint32_t l = 0; l < p.depth; ++l) {
+    const uint32_t r = L - l;
+    if (r > p.maxRes(l) || r < p.minNodeResLog2) continue;
+    for (uint32_t i = nodeIndex(l, 0, 0); i < nodeIndex(l, 0, 0) + (1u << 2 * l); ++i)
+      out.errors[size_t(i) * rc + (r - p.minNodeResLog2)] = 0.0f;
+  }
+
+  // Errors at k >= 1, accumulated so they never decrease with k.
+  const uint32_t kmax = L - p.minNodeResLog2;
+  std::vector<float> running(size_t(S) * S, 0.0f), cells;
+  for (uint32_t k = 1; k <= kmax; ++k) {
+    accumulateLevelError(h, S, k, running);
+    cellReduce(running, S, cells, fmax);
+    for (uint32_t n = M, l = L;; n /= 2, --l) {
+      if (l < p.depth && L >= l + k) {
+        const uint32_t r = L - l - k;
+        if (r >= p.minNodeResLog2 && r <= p.maxRes(l)) {
+          for (uint32_t y = 0; y < n; ++y)
+            for (uint32_t x = 0; x < n; ++x)
+              out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] =
+                  cells[size_t(y) * n + x];
+        }
+      }
+      if (n == 1) break;
+      reduce2x2(cells, n, tmp, fmax);
+      cells.swap(tmp);
+    }
+  }
+}
+
+template <typename T>
+void put(std::vector<uint8_t>& b, const T& v) {
+  const auto* p = reinterpret_cast<const uint8_t*>(&v);
+  b.insert(b.end(), p, p + sizeof(T));
+}
+
+template <typename T>
+void putVec(std::vector<uint8_t>& b, const std::vector<T>& v) {
+  const auto* p = reinterpret_cast<const uint8_t*>(v.data());
+  b.insert(b.end(), p, p + v.size() * sizeof(T));
+}
+
+}  // namespace
+
+void HierarchyParams::validate() const {
+  if (depth < 1) throw InputError("--depth must be at least 1");
+  if (minNodeResLog2 > maxNodeResLog2)
+    throw InputError("minimum node resolution exceeds the maximum node resolution");
+  if (maxNodeResLog2 > intervalsLog2)
+    throw InputError("maximum node resolution exceeds the chart resolution");
+  if (depth - 1 + minNodeResLog2 > intervalsLog2)
+    throw InputError("--depth " + std::to_string(depth) + " is too deep for charts of " +
+                     std::to_string((1u << intervalsLog2) + 1) + " samples: leaves would have fewer than 2^" +
+                     std::to_string(minNodeResLog2) + " intervals (max depth " +
+                     std::to_string(intervalsLog2 - minNodeResLog2 + 1) + ")");
+  if (depth > 12) throw InputError("--depth must be at most 12");
+}
+
+HierarchyParams hierarchyParams(const AtlasManifest& m) {
+  HierarchyParams p;
+  p.intervalsLog2 = m.intervalsLog2();
+  p.depth = m.depth;
+  p.maxNodeResLog2 = m.maxNodeResLog2;
+  p.minNodeResLog2 = m.minNodeResLog2;
+  return p;
+}
+
+Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeightSource& source,
+                                HierarchyStats* stats) {
+  Hierarchy hier;
+  hier.params = hierarchyParams(manifest);
+  hier.params.validate();
+  const uint32_t count = uint32_t(manifest.charts.size());
+  hier.charts.resize(count);
+  hier.roots.resize(count);
+  for (uint32_t c = 0; c < count; ++c) hier.roots[c] = manifest.charts[c].neighbours;
+
+  const uint32_t S = manifest.chartSize;
+  const auto t0 = std::chrono::steady_clock::now();
+  tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) {
+    std::vector<float> h = source(c);
+    if (h.size() != size_t(S) * S)
+      throw InputError("chart " + std::to_string(c) + ": expected " + std::to_string(S) + "^2 heights");
+    buildChart(hier.params, manifest, manifest.charts[c], h, hier.charts[c]);
+  });
+  if (stats) {
+    stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
+    stats->samples = uint64_t(count) * S * S;
+    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    stats->samplesPerSecond = stats->seconds > 0 ? double(stats->samples) / stats->seconds : 0.0;
+  }
+  return hier;
+}
+
+void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h) {
+  std::vector<uint8_t> b;
+  b.insert(b.end(), kMagic, kMagic + 4);
+  put(b, kHierarchyVersion);
+  put(b, uint32_t(h.charts.size()));
+  put(b, h.params.intervalsLog2);
+  put(b, h.params.depth);
+  put(b, h.params.maxNodeResLog2);
+  put(b, h.params.minNodeResLog2);
+  for (size_t c = 0; c < h.charts.size(); ++c) {
+    for (const RootNeighbour& n : h.roots[c]) {
+      put(b, n.chart);
+      put(b, n.edge);
+      put(b, uint8_t(n.reversed));
+    }
+    putVec(b, h.charts[c].bounds);
+    putVec(b, h.charts[c].flags);
+    putVec(b, h.charts[c].errors);
+  }
+  atomicWriteFile(path, b.data(), b.size());
+}
+
+Hierarchy readHierarchy(const std::filesystem::path& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw InputError(path.string() + ": cannot open hierarchy file");
+  std::vector<uint8_t> b((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  size_t pos = 0;
+  auto get = [&](void* dst, size_t n) {
+    if (pos + n > b.size()) throw InputError(path.string() + ": hierarchy file is truncated");
+    std::memcpy(dst, b.data() + pos, n);
+    pos += n;
+  };
+  char magic[4];
+  get(magic, 4);
+  if (std::memcmp(magic, kMagic, 4) != 0) throw InputError(path.string() + ": not a gimlod hierarchy file");
+  uint32_t version, count;
+  get(&version, 4);
+  if (version != kHierarchyVersion)
+    throw InputError(path.string() + ": unsupported hierarchy version " + std::to_string(version));
+  get(&count, 4);
+  Hierarchy h;
+  get(&h.params.intervalsLog2, 4);
+  get(&h.params.depth, 4);
+  get(&h.params.maxNodeResLog2, 4);
+  get(&h.params.minNodeResLog2, 4);
+  if (h.params.intervalsLog2 > 16 || h.params.depth > 12 || count > (1u << 24))
+    throw InputError(path.string() + ": corrupt hierarchy header");
+  h.params.validate();
+  const uint32_t nodes = nodesPerChart(h.params.depth);
+  h.charts.resize(count);
+  h.roots.resize(count);
+  for (uint32_t c = 0; c < count; ++c) {
+    for (RootNeighbour& n : h.roots[c]) {
+      uint8_t rev;
+      get(&n.chart, 4);
+      get(&n.edge, 1);
+      get(&rev, 1);
+      n.reversed = rev != 0;
+      if (n.chart >= int32_t(count) || n.edge > 3)
+        throw InputError(path.string() + ": corrupt root neighbour");
+    }
+    auto& cn = h.charts[c];
+    cn.bounds.resize(nodes);
+    cn.flags.resize(nodes);
+    cn.errors.resize(size_t(nodes) * h.params.resCount());
+    get(cn.bounds.data(), cn.bounds.size() * sizeof(cn.bounds[0]));
+    get(cn.flags.data(), cn.flags.size());
+    get(cn.errors.data(), cn.errors.size() * sizeof(float));
+  }
+  if (pos != b.size()) throw InputError(path.string() + ": trailing bytes in hierarchy file");
+  return h;
+}
+
+}  // namespace gimlod

@@ -1,0 +1,106 @@
+// Quadtree per chart with per-(node, resolution) geometric errors and bounds.
+// Based on: Niski, Purnomo, Cohen, "Multi-grained Level of Detail Using a Hierarchical Seamless
+// Texture Atlas", I3D 2007, sections 4 and 6.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <vector>
+
+#include "core/atlas_format.h"
+
+namespace gimlod {
+
+// A node of chart `chart`'s quadtree: level 0 is the root; (x, y) in [0, 2^level)^2, y = v.
+struct NodeId {
+  uint32_t chart = 0;
+  uint32_t level = 0;
+  uint32_t x = 0, y = 0;
+  bool operator==(const NodeId&) const = default;
+  uint64_t key() const {
+    return (uint64_t(chart) << 40) | (uint64_t(level) << 34) | (uint64_t(y) << 17) | uint64_t(x);
+  }
+  NodeId parent() const { return {chart, level - 1, x >> 1, y >> 1}; }
+  NodeId child(uint32_t i) const { return {chart, level + 1, 2 * x + (i & 1), 2 * y + (i >> 1)}; }
+};
+
+// Index of a node in its chart's level-order array.
+inline uint32_t nodeIndex(uint32_t level, uint32_t x, uint32_t y) {
+  return ((1u << (2 * level)) - 1) / 3 + (y << level) + x;
+}
+inline uint32_t nodesPerChart(uint32_t depth) { return ((1u << (2 * depth)) - 1) / 3; }
+
+enum NodeFlags : uint8_t {
+  kNodeEmpty = 1,  // the node lies entirely outside the valid data (padding); never drawn
+};
+
+struct HierarchyParams {
+  uint32_t intervalsLog2 = 9;   // log2(M): chart side in level-0 intervals
+  uint32_t depth = 5;           // levels 0 .. depth-1
+  uint32_t maxNodeResLog2 = 6;  // log2(R)
+  uint32_t minNodeResLog2 = 2;
+
+  // Paper eq. 1: the finest resolution (log2 intervals) a node of `level` may use.
+  uint32_t maxRes(uint32_t level) const {
+    return std::min(intervalsLog2 - level, maxNodeResLog2);
+  }
+  uint32_t minRes(uint32_t) const { return minNodeResLog2; }
+  uint32_t resCount() const { return maxNodeResLog2 - minNodeResLog2 + 1; }
+  // Pyramid level a node of `level` reads at resolution `res`.
+  uint32_t pyramidLevel(uint32_t level, uint32_t res) const { return intervalsLog2 - level - res; }
+  // Throws InputError when the combination is impossible.
+  void validate() const;
+};
+
+class Hierarchy {
+ public:
+  HierarchyParams params;
+  std::vector<std::array<RootNeighbour, 4>> roots;  // per chart, indexed by Edge
+  // Per chart, per node (level order): bounds in world units, flags, and errors (metres) for
+  // each res in [minNodeResLog2, maxRes(level)]; NaN for resolutions the node cannot use.
+  struct ChartNodes {
+    std::vector<std::array<float, 6>> bounds;  // minx, miny, minz, maxx, maxy, maxz
+    std::vector<uint8_t> flags;
+    std::vector<float> errors;  // [node * resCount + (res - minNodeResLog2)]
+  };
+  std::vector<ChartNodes> charts;
+
+  uint32_t chartCount() const { return uint32_t(charts.size()); }
+  const std::array<float, 6>& bounds(const NodeId& n) const {
+    return charts[n.chart].bounds[nodeIndex(n.level, n.x, n.y)];
+  }
+  uint8_t flags(const NodeId& n) const { return charts[n.chart].flags[nodeIndex(n.level, n.x, n.y)]; }
+  // Geometric error (world units) of node n drawn at resolution res.
+  float error(const NodeId& n, uint32_t res) const {
+    return charts[n.chart].errors[nodeIndex(n.level, n.x, n.y) * params.resCount() +
+                                  (res - params.minNodeResLog2)];
+  }
+};
+
+struct HierarchyStats {
+  uint64_t samples = 0;      // level-0 samples processed (all charts)
+  double seconds = 0.0;      // wall time, including the source reads
+  double samplesPerSecond = 0.0;
+  uint32_t threads = 0;
+};
+
+// Terrain input: chart id -> level-0 heights (chartSize^2, row = v). Must be thread-safe.
+using ChartHeightSource = std::function<std::vector<float>(uint32_t chart)>;
+
+// Builds the hierarchy of a height-field atlas (multithreaded over charts and pyramid levels).
+// Node error at res r = max over the node's level-0 samples of |h - surface_k|, where surface_k is
+// the piecewise-linear surface drawn from pyramid level k' (split along the (0,0)-(1,1) diagonal
+// like the render grids), maximised over all k' <= k. So errors never decrease as resolution
+// drops, a parent's error is at least its children's, and the bound holds for the drawn mesh.
+Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeightSource& source,
+                                HierarchyStats* stats = nullptr);
+
+void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h);  // atomic
+Hierarchy readHierarchy(const std::filesystem::path& path);  // throws InputError naming the file
+
+HierarchyParams hierarchyParams(const AtlasManifest& m);
+
+}  // namespace gimlod

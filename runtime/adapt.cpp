@@ -1,0 +1,218 @@
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 7.1 (simple top-down error-threshold
+// adaptation with a node budget) and section 7.4 (stitching constraint).
+#include "runtime/adapt.h"
+
+#include <cmath>
+#include <queue>
+
+namespace gimlod {
+namespace {
+
+glm::dvec3 boxLo(const std::array<float, 6>& b) { return {b[0], b[1], b[2]}; }
+glm::dvec3 boxHi(const std::array<float, 6>& b) { return {b[3], b[4], b[5]}; }
+
+double boxDistance(const std::array<float, 6>& b, const glm::dvec3& p) {
+  const glm::dvec3 q = glm::clamp(p, boxLo(b), boxHi(b));
+  return glm::length(q - p);
+}
+
+bool visible(const Hierarchy& h, const NodeId& n, const ViewParams& v, bool cull) {
+  if (h.flags(n) & kNodeEmpty) return false;
+  if (!cull) return true;
+  const auto& b = h.bounds(n);
+  return v.frustum.intersects(boxLo(b), boxHi(b));
+}
+
+uint64_t tris(uint32_t res) { return 2ull << (2 * res); }
+
+struct Candidate {
+  NodeId id;
+  uint32_t res;     // chosen resolution (clamped to maxRes)
+  bool overTol;     // even maxRes is above tolerance
+  double priority;  // larger splits first
+};
+
+struct ByPriority {
+  bool operator()(const Candidate& a, const Candidate& b) const { return a.priority < b.priority; }
+};
+
+}  // namespace
+
+ViewParams makeViewParams(const Camera& c, uint32_t width, uint32_t height) {
+  ViewParams v;
+  v.eye = c.eye;
+  const glm::dmat4 vp = projectionMatrix(c, double(width) / double(height)) * viewMatrix(c);
+  v.frustum = frustumFromMatrix(vp);
+  v.pixelsPerRadian = pixelsPerRadian(c, height);
+  v.minDistance = std::max(c.nearPlane, 1e-6);
+  return v;
+}
+
+double screenError(const Hierarchy& h, const NodeId& n, uint32_t res, const ViewParams& v) {
+  const double d = std::max(boxDistance(h.bounds(n), v.eye), v.minDistance);
+  return double(h.error(n, res)) * v.pixelsPerRadian / d;
+}
+
+uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tolPx) {
+  const double d = std::max(boxDistance(h.bounds(n), v.eye), v.minDistance);
+  const double tolWorld = tolPx * d / v.pixelsPerRadian;
+  const uint32_t rmax = h.params.maxRes(n.level);
+  for (uint32_t r = h.params.minNodeResLog2; r <= rmax; ++r)
+    if (double(h.error(n, r)) <= tolWorld) return r;
+  return rmax + 1;
+}
+
+Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptOptions& options,
+                        AdaptStats* stats) {
+  AdaptStats st;
+  const double tol = options.tolerancePx;
+  const uint32_t budget = options.maxNodes == 0 ? UINT32_MAX : options.maxNodes;
+
+  auto makeCandidate = [&](const NodeId& n) {
+    Candidate c{n, neededResolution(h, n, view, tol), false, 0.0};
+    const uint32_t rmax = h.params.maxRes(n.level);
+    const bool leaf = n.level + 1 >= h.params.depth;
+    if (c.res > rmax) {
+      c.overTol = true;
+      c.res = rmax;
+      // Over tolerance: split first, worst error first.
+      c.priority = leaf ? -1.0 : 1e30 + screenError(h, n, rmax, view);
+      return c;
+    }
+    if (leaf) {
+      c.priority = -1.0;
+      return c;
+    }
+    uint64_t childTris = 0;
+    for (uint32_t i = 0; i < 4; ++i) {
+      const NodeId ch = n.child(i);
+      if (!visible(h, ch, view, options.frustumCull)) continue;
+      childTris += tris(std::min(neededResolution(h, ch, view, tol), h.params.maxRes(ch.level)));
+    }
+    c.priority = double(tris(c.res)) - double(childTris);  // triangles saved by splitting
+    return c;
+  };
+
+  std::priority_queue<Candidate, std::vector<Candidate>, ByPriority> queue;
+  std::vector<Candidate> done;
+  uint32_t count = 0;
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    const NodeId root{c, 0, 0, 0};
+    if (!visible(h, root, view, options.frustumCull)) {
+      ++st.culled;
+      continue;
+    }
+    queue.push(makeCandidate(root));
+    ++count;
+  }
+  while (!queue.empty()) {
+    Candidate c = queue.top();
+    queue.pop();
+    if (c.priority <= 0.0) {
+      done.push_back(c);
+      continue;
+    }
+    uint32_t visibleChildren = 0;
+    for (uint32_t i = 0; i < 4; ++i) visibleChildren += visible(h, c.id.child(i), view, options.frustumCull);
+    if (count - 1 + visibleChildren > budget) {
+      if (c.overTol) st.nodeBudgetBound = true;
+      done.push_back(c);
+      continue;
+    }
+    ++st.splits;
+    count = count - 1 + visibleChildren;
+    for (uint32_t i = 0; i < 4; ++i) {
+      const NodeId ch = c.id.child(i);
+      if (visible(h, ch, view, options.frustumCull))
+        queue.push(makeCandidate(ch));
+      else
+        ++st.culled;
+    }
+  }
+
+  Cut cut;
+  cut.nodes.reserve(done.size());
+  for (const Candidate& c : done) cut.nodes.push_back({c.id, c.res, 0.f});
+  cut.rebuildIndex();
+  enforceStitchConstraint(h, cut, &view, tol, &st);
+  for (CutNode& n : cut.nodes) {
+    n.errorPx = float(screenError(h, n.id, n.res, view));
+    st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
+  }
+  st.triangles = cut.triangles();
+  if (stats) *stats = st;
+  return cut;
+}
+
+namespace {
+
+// Largest level difference to a finer neighbour over all sides of node i.
+uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i,
+                            std::vector<SideNeighbour>& scratch) {
+  uint32_t gap = 0;
+  const NodeId& id = cut.nodes[i].id;
+  for (uint32_t s = 0; s < 4; ++s) {
+    scratch.clear();
+    sideNeighbours(h, cut, id, s, scratch);
+    for (const SideNeighbour& sn : scratch) {
+      const uint32_t l = cut.nodes[sn.cutIndex].id.level;
+      if (l > id.level) gap = std::max(gap, l - id.level);
+    }
+  }
+  return gap;
+}
+
+}  // namespace
+
+bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* view,
+                             double tolerancePx, AdaptStats* stats) {
+  std::vector<SideNeighbour> scratch;
+  // Each pass splits the nodes that cannot reach the needed resolution; the tree is finite, so
+  // this ends after at most depth passes.
+  for (uint32_t pass = 0; pass <= h.params.depth; ++pass) {
+    std::vector<uint32_t> toSplit;
+    for (uint32_t i = 0; i < cut.nodes.size(); ++i) {
+      CutNode& n = cut.nodes[i];
+      const uint32_t gap = finestNeighbourGap(h, cut, i, scratch);
+      if (gap <= n.res) continue;
+      if (gap <= h.params.maxRes(n.id.level)) {
+        n.res = gap;
+        if (stats) ++stats->constraintRaises;
+      } else {
+        toSplit.push_back(i);
+      }
+    }
+    if (toSplit.empty()) return true;
+    std::vector<bool> remove(cut.nodes.size(), false);
+    std::vector<CutNode> added;
+    for (uint32_t i : toSplit) {
+      remove[i] = true;
+      if (stats) ++stats->constraintSplits;
+      for (uint32_t c = 0; c < 4; ++c) {
+        const NodeId ch = cut.nodes[i].id.child(c);
+        if (h.flags(ch) & kNodeEmpty) continue;
+        uint32_t r = h.params.minNodeResLog2;
+        if (view) r = std::min(neededResolution(h, ch, *view, tolerancePx), h.params.maxRes(ch.level));
+        added.push_back({ch, r, 0.f});
+      }
+    }
+    std::vector<CutNode> kept;
+    kept.reserve(cut.nodes.size() + added.size());
+    for (uint32_t i = 0; i < cut.nodes.size(); ++i)
+      if (!remove[i]) kept.push_back(cut.nodes[i]);
+    kept.insert(kept.end(), added.begin(), added.end());
+    cut.nodes.swap(kept);
+    cut.rebuildIndex();
+  }
+  return countStitchViolations(h, cut) == 0;
+}
+
+uint32_t countStitchViolations(const Hierarchy& h, const Cut& cut) {
+  std::vector<SideNeighbour> scratch;
+  uint32_t bad = 0;
+  for (uint32_t i = 0; i < cut.nodes.size(); ++i)
+    if (finestNeighbourGap(h, cut, i, scratch) > cut.nodes[i].res) ++bad;
+  return bad;
+}
+
+}  // namespace gimlod

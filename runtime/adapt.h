@@ -1,0 +1,63 @@
+// View-dependent adaptation: chooses the cut (nodes) and each node's resolution.
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 7.1 (the simple top-down algorithm for the
+// error-threshold problem with a maximum node count) and 7.4 (the stitching constraint).
+#pragma once
+
+#include <cstdint>
+
+#include <glm/glm.hpp>
+
+#include "runtime/camera.h"
+#include "runtime/cut.h"
+
+namespace gimlod {
+
+// What the adaptation needs of a view.
+struct ViewParams {
+  glm::dvec3 eye{0.0};
+  Frustum frustum;
+  double pixelsPerRadian = 1000.0;  // viewport height / (2 tan(fovy / 2))
+  double minDistance = 1e-3;        // distances below this count as this (camera inside a box)
+};
+ViewParams makeViewParams(const Camera& c, uint32_t width, uint32_t height);
+
+// Projected size in pixels of a world-space error seen from the closest point of the node's
+// bounds: error * pixelsPerRadian / distance.
+double screenError(const Hierarchy& h, const NodeId& n, uint32_t res, const ViewParams& v);
+
+struct AdaptOptions {
+  double tolerancePx = 1.0;  // screen-space error threshold in pixels; must be > 0
+  uint32_t maxNodes = 4096;  // node budget; 0 means no limit
+  bool frustumCull = true;
+};
+
+struct AdaptStats {
+  uint32_t splits = 0;
+  uint32_t constraintRaises = 0;  // resolutions raised by the stitching constraint
+  uint32_t constraintSplits = 0;  // splits forced by the stitching constraint
+  uint32_t culled = 0;
+  bool nodeBudgetBound = false;   // some node stays above tolerance because of maxNodes
+  double maxErrorPx = 0.0;
+  uint64_t triangles = 0;
+};
+
+// Error-threshold adaptation: each node gets the lowest resolution within tolerance; nodes are
+// split, best triangle saving first (nodes over tolerance before all others), while the node
+// budget allows. Then the stitching constraint is enforced (enforceStitchConstraint).
+Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptOptions& options,
+                        AdaptStats* stats = nullptr);
+
+// Lowest resolution of n whose screen error is within tolerance, or maxRes + 1 if none.
+uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tolPx);
+
+// The stitching constraint (paper 7.4): a node's resolution is at least the level difference to
+// its finest neighbour on any side, so it has a vertex for every small neighbour's corner. Raises
+// resolutions, and splits nodes whose maximum resolution is too low. Returns false when the cut
+// could not be fixed (never for a valid hierarchy).
+bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* view,
+                             double tolerancePx, AdaptStats* stats = nullptr);
+
+// The number of constraint violations in a cut (0 for a valid cut). For tests and checks.
+uint32_t countStitchViolations(const Hierarchy& h, const Cut& cut);
+
+}  // namespace gimlod

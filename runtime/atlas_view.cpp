@@ -1,0 +1,22 @@
+#include "runtime/atlas_view.h"
+
+namespace gimlod {
+
+AtlasView openAtlas(const std::filesystem::path& dir) {
+  AtlasView a;
+  a.dir = dir;
+  a.manifest = readManifest(dir);
+  const auto hpath = dir / a.manifest.hierarchyFile;
+  a.hierarchy = readHierarchy(hpath);
+  const HierarchyParams p = hierarchyParams(a.manifest);
+  const HierarchyParams& q = a.hierarchy.params;
+  if (p.intervalsLog2 != q.intervalsLog2 || p.depth != q.depth || p.maxNodeResLog2 != q.maxNodeResLog2 ||
+      p.minNodeResLog2 != q.minNodeResLog2 || a.hierarchy.chartCount() != a.manifest.charts.size())
+    throw InputError(hpath.string() + ": does not match " + (dir / kManifestName).string());
+  a.lo = {0.0, 0.0, a.manifest.heightRange[0]};
+  a.hi = {double(a.manifest.samplesX - 1) * a.manifest.spacing[0],
+          double(a.manifest.samplesY - 1) * a.manifest.spacing[1], a.manifest.heightRange[1]};
+  return a;
+}
+
+}  // namespace gimlod

@@ -1,0 +1,23 @@
+// An opened atlas: manifest plus hierarchy, checked against each other. Pure C++.
+#pragma once
+
+#include <filesystem>
+
+#include <glm/glm.hpp>
+
+#include "core/atlas_format.h"
+#include "hierarchy/hierarchy.h"
+
+namespace gimlod {
+
+struct AtlasView {
+  std::filesystem::path dir;
+  AtlasManifest manifest;
+  Hierarchy hierarchy;
+  glm::dvec3 lo{0.0}, hi{0.0};  // world bounds of the valid data
+};
+
+// Reads dir/atlas.json and the hierarchy; throws InputError naming the file on any problem.
+AtlasView openAtlas(const std::filesystem::path& dir);
+
+}  // namespace gimlod

@@ -1,0 +1,124 @@
+#include "runtime/camera.h"
+
+#include <cmath>
+#include <fstream>
+#include <numbers>
+
+#include <glm/gtc/matrix_transform.hpp>
+#include <nlohmann/json.hpp>
+
+#include "core/atlas_format.h"
+
+namespace gimlod {
+
+bool Frustum::intersects(const glm::dvec3& lo, const glm::dvec3& hi) const {
+  for (const glm::dvec4& p : planes) {
+    const glm::dvec3 v{p.x >= 0 ? hi.x : lo.x, p.y >= 0 ? hi.y : lo.y, p.z >= 0 ? hi.z : lo.z};
+    if (p.x * v.x + p.y * v.y + p.z * v.z + p.w < 0) return false;
+  }
+  return true;
+}
+
+glm::dmat4 viewMatrix(const Camera& c) { return glm::lookAt(c.eye, c.target, c.up); }
+
+glm::dmat4 projectionMatrix(const Camera& c, double aspect) {
+  return glm::perspective(glm::radians(c.fovYDeg), aspect, c.nearPlane, c.farPlane);
+}
+
+Frustum frustumFromMatrix(const glm::dmat4& m) {
+  // Gribb-Hartmann: rows of the matrix combined.
+  auto row = [&](int i) { return glm::dvec4(m[0][i], m[1][i], m[2][i], m[3][i]); };
+  Frustum f;
+  f.planes = {row(3) + row(0), row(3) - row(0), row(3) + row(1),
+              row(3) - row(1), row(3) + row(2), row(3) - row(2)};
+  for (auto& p : f.planes) p /= glm::length(glm::dvec3(p));
+  return f;
+}
+
+double pixelsPerRadian(const Camera& c, uint32_t viewportHeight) {
+  return double(viewportHeight) / (2.0 * std::tan(glm::radians(c.fovYDeg) * 0.5));
+}
+
+void fitClipPlanes(Camera& c, const glm::dvec3& lo, const glm::dvec3& hi) {
+  const double diag = glm::length(hi - lo);
+  double farthest = 0.0;
+  for (int i = 0; i < 8; ++i) {
+    const glm::dvec3 corner{(i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z};
+    farthest = std::max(farthest, glm::length(corner - c.eye));
+  }
+  const glm::dvec3 closest = glm::clamp(c.eye, lo, hi);
+  const double dist = glm::length(closest - c.eye);
+  if (c.farPlane <= 0) c.farPlane = farthest * 1.01 + 1.0;
+  if (c.nearPlane <= 0) c.nearPlane = std::max({dist * 0.5, diag * 1e-4, 1e-3});
+}
+
+std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames,
+                              double distanceFraction, double elevationDeg, double fovYDeg) {
+  const glm::dvec3 centre = (lo + hi) * 0.5;
+  const double radius = glm::length(hi - lo) * distanceFraction;
+  const double el = glm::radians(elevationDeg);
+  std::vector<Camera> path;
+  for (uint32_t i = 0; i < frames; ++i) {
+    const double a = 2.0 * std::numbers::pi * double(i) / double(std::max(frames, 1u));
+    Camera c;
+    c.eye = centre + radius * glm::dvec3(std::cos(el) * std::cos(a), std::cos(el) * std::sin(a), std::sin(el));
+    c.target = centre;
+    c.up = {0.0, 0.0, 1.0};
+    c.fovYDeg = fovYDeg;
+    c.nearPlane = 0.0;
+    c.farPlane = 0.0;
+    fitClipPlanes(c, lo, hi);
+    path.push_back(c);
+  }
+  return path;
+}
+
+std::vector<Camera> readCameraPath(const std::filesystem::path& path) {
+  std::ifstream f(path);
+  if (!f) throw InputError(path.string() + ": cannot open camera path");
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(f);
+  } catch (const std::exception& e) {
+    throw InputError(path.string() + ": invalid JSON: " + e.what());
+  }
+  const nlohmann::json& frames = j.is_object() && j.contains("frames") ? j["frames"] : j;
+  if (!frames.is_array() || frames.empty())
+    throw InputError(path.string() + ": expected a non-empty list of frames");
+  auto vec3 = [&](const nlohmann::json& fr, const char* key, size_t i, bool required,
+                  glm::dvec3 fallback) {
+    if (!fr.contains(key)) {
+      if (required)
+        throw InputError(path.string() + ": frame " + std::to_string(i) + " has no \"" + key + "\"");
+      return fallback;
+    }
+    const auto& a = fr[key];
+    if (!a.is_array() || a.size() != 3 || !a[0].is_number() || !a[1].is_number() || !a[2].is_number())
+      throw InputError(path.string() + ": frame " + std::to_string(i) + ": \"" + key +
+                       "\" must be [x, y, z]");
+    glm::dvec3 v{a[0].get<double>(), a[1].get<double>(), a[2].get<double>()};
+    if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
+      throw InputError(path.string() + ": frame " + std::to_string(i) + ": non-finite \"" + key + "\"");
+    return v;
+  };
+  std::vector<Camera> cams;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const auto& fr = frames[i];
+    if (!fr.is_object()) throw InputError(path.string() + ": frame " + std::to_string(i) + " is not an object");
+    Camera c;
+    c.eye = vec3(fr, "eye", i, true, {});
+    c.target = vec3(fr, "target", i, true, {});
+    c.up = vec3(fr, "up", i, false, {0.0, 0.0, 1.0});
+    c.fovYDeg = fr.value("fov_deg", 45.0);
+    c.nearPlane = fr.value("near", 0.0);
+    c.farPlane = fr.value("far", 0.0);
+    if (!(c.fovYDeg > 1.0 && c.fovYDeg < 179.0))
+      throw InputError(path.string() + ": frame " + std::to_string(i) + ": fov_deg must be in (1, 179)");
+    if (glm::length(c.target - c.eye) <= 0.0)
+      throw InputError(path.string() + ": frame " + std::to_string(i) + ": eye equals target");
+    cams.push_back(c);
+  }
+  return cams;
+}
+
+}  // namespace gimlod

@@ -1,0 +1,47 @@
+// Cameras, frusta and camera paths (orbit or JSON). Pure C++ (glm for math), no GL.
+#pragma once
+
+#include <array>
+#include <filesystem>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+namespace gimlod {
+
+struct Camera {
+  glm::dvec3 eye{0.0, 0.0, 1.0};
+  glm::dvec3 target{0.0};
+  glm::dvec3 up{0.0, 0.0, 1.0};
+  double fovYDeg = 45.0;
+  double nearPlane = 1.0;  // 0: choose from the scene (see fitClipPlanes)
+  double farPlane = 0.0;   // 0: choose from the scene
+};
+
+// Six planes (a, b, c, d), inside where a x + b y + c z + d >= 0.
+struct Frustum {
+  std::array<glm::dvec4, 6> planes;
+  // True when the box [lo, hi] may intersect the frustum.
+  bool intersects(const glm::dvec3& lo, const glm::dvec3& hi) const;
+};
+
+glm::dmat4 viewMatrix(const Camera& c);
+glm::dmat4 projectionMatrix(const Camera& c, double aspect);
+Frustum frustumFromMatrix(const glm::dmat4& viewProj);
+
+// Pixels covered by one world unit seen face-on at unit distance: height / (2 tan(fovy / 2)).
+double pixelsPerRadian(const Camera& c, uint32_t viewportHeight);
+
+// Sets near/far (where 0) so the box [lo, hi] fits: far beyond the farthest corner, near a small
+// fraction of the distance to the box (bounded below by 1e-4 of the diagonal).
+void fitClipPlanes(Camera& c, const glm::dvec3& lo, const glm::dvec3& hi);
+
+// N frames circling the box centre at distance = fraction * diagonal, elevation in degrees.
+std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames,
+                              double distanceFraction, double elevationDeg, double fovYDeg = 45.0);
+
+// Reads {"frames": [{"eye": [x,y,z], "target": [...], "up": [...], "fov_deg": 45}, ...]} or a bare
+// list of such frames. Throws InputError naming the file on malformed input.
+std::vector<Camera> readCameraPath(const std::filesystem::path& path);
+
+}  // namespace gimlod

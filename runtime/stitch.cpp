@@ -1,0 +1,86 @@
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 7.4 (border stitching).
+#include "runtime/stitch.h"
+
+#include <algorithm>
+#include <array>
+#include <cstring>
+
+namespace gimlod {
+namespace {
+
+using Bits = std::array<uint32_t, 3>;
+
+Bits bitsOf(const glm::vec3& p) {
+  Bits b;
+  std::memcpy(b.data(), &p, sizeof(b));
+  return b;
+}
+
+// Positions of the vertices on side s of a (2^res + 1)^2 grid.
+void sideVertices(const std::vector<glm::vec3>& v, uint32_t res, uint32_t s, std::vector<Bits>& out) {
+  const uint32_t n = 1u << res, w = n + 1;
+  for (uint32_t k = 0; k <= n; ++k) {
+    uint32_t i = 0, j = 0;
+    switch (s) {
+      case kEdgeBottom: i = k; j = 0; break;
+      case kEdgeRight: i = n; j = k; break;
+      case kEdgeTop: i = k; j = n; break;
+      default: i = 0; j = k; break;
+    }
+    out.push_back(bitsOf(v[size_t(j) * w + i]));
+  }
+}
+
+}  // namespace
+
+StitchTables buildStitchTables(const Hierarchy& h, const Cut& cut) {
+  StitchTables t;
+  const uint32_t L = h.params.intervalsLog2;
+  t.leafLog2 = L - (h.params.depth - 1);
+  t.entriesPerSide = 1u << (h.params.depth - 1);
+  t.bytes.assign(cut.nodes.size() * 4 * t.entriesPerSide, 0);
+  std::vector<SideNeighbour> ns;
+  for (size_t i = 0; i < cut.nodes.size(); ++i) {
+    for (uint32_t s = 0; s < 4; ++s) {
+      ns.clear();
+      sideNeighbours(h, cut, cut.nodes[i].id, s, ns);
+      uint8_t* side = t.side(i, s);
+      for (const SideNeighbour& n : ns) {
+        const CutNode& nb = cut.nodes[n.cutIndex];
+        const uint8_t spacing = uint8_t(L - nb.id.level - nb.res);
+        const uint32_t e0 = n.t0 >> t.leafLog2;
+        const uint32_t e1 = std::min(n.t1 >> t.leafLog2, t.entriesPerSide);
+        for (uint32_t e = e0; e < e1; ++e) side[e] = spacing;
+      }
+    }
+  }
+  return t;
+}
+
+CrackReport countCracks(const Hierarchy& h, const Cut& cut,
+                        const std::vector<std::vector<glm::vec3>>& vertices) {
+  CrackReport r;
+  std::vector<SideNeighbour> ns;
+  std::vector<Bits> mine, theirs;
+  for (size_t i = 0; i < cut.nodes.size(); ++i) {
+    for (uint32_t s = 0; s < 4; ++s) {
+      ns.clear();
+      sideNeighbours(h, cut, cut.nodes[i].id, s, ns);
+      if (ns.empty()) continue;
+      ++r.sharedSides;
+      mine.clear();
+      theirs.clear();
+      sideVertices(vertices[i], cut.nodes[i].res, s, mine);
+      for (const SideNeighbour& n : ns)
+        sideVertices(vertices[n.cutIndex], cut.nodes[n.cutIndex].res, n.theirSide, theirs);
+      std::sort(theirs.begin(), theirs.end());
+      for (const Bits& b : mine) {
+        ++r.borderVertices;
+        if (!std::binary_search(theirs.begin(), theirs.end(), b)) ++r.mismatches;
+      }
+    }
+  }
+  return r;
+}
+
+}  // namespace gimlod
