@@ -2,6 +2,7 @@
 // netCDF, ESRI ASCII grid, ...). Voids (nodata, NaN, inf) are filled and counted.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -25,13 +26,23 @@ struct DemRaster {
   uint64_t voidsFilled = 0;
   std::string voidFillMethod;
   float minHeight = 0.f, maxHeight = 0.f;
+  std::vector<std::string> warnings;  // non-fatal issues (extra bands, no georeference, ...)
 };
+
+// Human-readable name of the void-fill method (stored in DemRaster::voidFillMethod).
+extern const char* const kVoidFillMethod;
+
+// Converts one degree of latitude / longitude to metres at latitude phiDeg (WGS84 series).
+double metresPerDegreeLatitude(double phiDeg);
+double metresPerDegreeLongitude(double phiDeg);  // |phi| clamped to 89 degrees
 
 // Loads and repairs a DEM. Throws InputError naming the file on: unreadable or truncated data,
 // not a raster, zero-size, all samples void, bad options.
 DemRaster loadDem(const std::filesystem::path& path, const DemOptions& options = {});
 
-// Fills voids (mask == true) in place; returns the number filled. Method: documented in dem.cpp.
+// Fills voids (mask == true) in place; returns the number filled. Method: multi-resolution
+// pull-push (see kVoidFillMethod and dem.cpp): deterministic, O(N), fills are convex combinations
+// of valid samples. Throws std::invalid_argument on size mismatch or when no sample is valid.
 uint64_t fillVoids(std::vector<float>& heights, const std::vector<bool>& voidMask, uint32_t width,
                    uint32_t height);
 

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <string>
 
 #include "atlas/dem.h"
 #include "core/atlas_format.h"
@@ -26,6 +27,13 @@ struct TerrainAtlasStats {
   double seconds = 0.0;
 };
 
+// Throws InputError if chartSize is not 2^m+1 in 9..8193, or blockIntervals is not a power of
+// two in 4..1024 and <= chartSize-1. Messages use the command-line flag names.
+void validateTerrainAtlasOptions(const TerrainAtlasOptions& options);
+
+// Relative path of chart `id`'s file inside the atlas directory: "charts/chart_0007.bin".
+std::string chartFileName(uint32_t id);
+
 // The chart's level-0 heights, (chartSize)^2 row-major (row = v = north), edge-clamped outside
 // the DEM. Shared by the writer and the tests.
 std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gridY,
@@ -37,8 +45,9 @@ ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t grid
                                uint32_t chartSize);
 
 // Writes all chart files into `dir` (which must exist) and fills the manifest's chart fields
-// (chartsX/Y, charts, neighbours, spacing, samples, heightRange, georef, voids). Charts are
-// written in parallel.
+// (kind, chartSize, blockIntervals, chartsX/Y, charts, neighbours, spacing, samples, heightRange,
+// georef, voids; maxNodeResLog2 is capped at log2(blockIntervals)). zScale, source and the
+// hierarchy depth are left to the caller. Charts are written in parallel.
 TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOptions& options,
                                      const std::filesystem::path& dir, AtlasManifest& manifest);
 

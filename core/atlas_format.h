@@ -86,6 +86,13 @@ void atomicWriteFile(const std::filesystem::path& path, const void* data, size_t
 
 // Normal stored as 4 x uint8 (n * 127.5 + 127.5, w = 255).
 using PackedNormal = std::array<uint8_t, 4>;
+// Packs a unit normal (components clamped to [-1, 1], rounded to nearest). Deterministic.
+PackedNormal packNormal(float x, float y, float z);
+// Inverse of packNormal (not renormalised): c / 127.5 - 1.
+std::array<float, 3> unpackNormal(const PackedNormal& n);
+
+// True if n = 2^m + 1 for some m >= 1 (3, 5, 9, ..., 65537).
+bool isChartSizeValid(uint32_t n);
 
 // Block layout of one pyramid level: the level has (chartSize-1)>>level intervals per side; it is
 // cut into blocksPerSide^2 blocks of blockSamples^2 samples sharing one row/column with the next.
@@ -120,10 +127,18 @@ class ChartFileReader {
   void readNormals(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, PackedNormal* out) const;
   // Reads a whole level (all blocks).
   std::vector<float> readLevelHeights(uint32_t level) const;
+  std::vector<PackedNormal> readLevelNormals(uint32_t level) const;
+  const std::filesystem::path& path() const { return path_; }
 
  private:
   struct BlockEntry { uint64_t heightOffset; uint64_t normalOffset; };
   const BlockEntry& block(uint32_t level, uint32_t bx, uint32_t by) const;
+  // Block holding the window [u0, u0+n] x [v0, v0+n]; throws std::logic_error if none does.
+  void locateWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, uint32_t& bx,
+                    uint32_t& by) const;
+  // Reads rows of a window of one block (element size `elem`) at `offset`; caller holds no lock.
+  void readWindow(uint64_t offset, uint32_t blockSamples, uint32_t du, uint32_t dv, uint32_t n,
+                  size_t elem, void* out) const;
   std::filesystem::path path_;
   uint32_t chartSize_ = 0, blockIntervals_ = 0, levels_ = 0;
   std::vector<std::vector<BlockEntry>> directory_;  // [level][by * blocksPerSide + bx]

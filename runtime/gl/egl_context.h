@@ -19,6 +19,7 @@ class EglContext {
   EglContext() = default;
   void* display_ = nullptr;
   void* context_ = nullptr;
+  void* surface_ = nullptr;  // 1x1 pbuffer when EGL_KHR_surfaceless_context is missing
 };
 
 }  // namespace gimlod::gl

@@ -1,0 +1,189 @@
+// Height-field atlas: chart grid, subsampled chart pyramids with normal maps, parallel writing.
+// Based on: Niski, Purnomo, Cohen, "Multi-grained Level of Detail Using a Hierarchical Seamless
+// Texture Atlas", I3D 2007, sections 4 and 6 (height-field case: the terrain grid is cut into
+// (2^m+1)^2 charts sharing one row/column, and each chart is mip-mapped by subsampling).
+#include "atlas/terrain_atlas.h"
+
+#include <algorithm>
+#include <atomic>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <tbb/parallel_for.h>
+
+namespace gimlod {
+
+namespace fs = std::filesystem;
+
+void validateTerrainAtlasOptions(const TerrainAtlasOptions& o) {
+  const uint32_t cs = o.chartSize;
+  if (cs < 9 || cs > 8193 || !std::has_single_bit(cs - 1))
+    throw InputError("--chart-size " + std::to_string(cs) +
+                     " is not 2^m+1 between 9 and 8193 (e.g. 129, 257, 513, 1025)");
+  const uint32_t b = o.blockIntervals;
+  if (b < 4 || b > 1024 || !std::has_single_bit(b))
+    throw InputError("--block-intervals " + std::to_string(b) +
+                     " is not a power of two between 4 and 1024 (e.g. 32, 64, 128)");
+  if (b > cs - 1)
+    throw InputError("--block-intervals " + std::to_string(b) + " exceeds --chart-size - 1 (" +
+                     std::to_string(cs - 1) + ")");
+}
+
+std::string chartFileName(uint32_t id) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "charts/chart_%04u.bin", id);
+  return buf;
+}
+
+namespace {
+
+// Height of global sample (gx, gy), edge-clamped to the DEM.
+inline float clampedHeight(const DemRaster& dem, int64_t gx, int64_t gy) {
+  gx = std::clamp<int64_t>(gx, 0, int64_t{dem.width} - 1);
+  gy = std::clamp<int64_t>(gy, 0, int64_t{dem.height} - 1);
+  return dem.heights[static_cast<size_t>(gy) * dem.width + static_cast<size_t>(gx)];
+}
+
+uint32_t chartsAlong(uint32_t samples, uint32_t m) {
+  return std::max<uint32_t>(1, (samples - 1 + m - 1) / m);  // ceil((samples-1)/m)
+}
+
+}  // namespace
+
+std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gridY,
+                                uint32_t chartSize) {
+  const int64_t m = int64_t{chartSize} - 1;
+  std::vector<float> out(size_t{chartSize} * chartSize);
+  for (uint32_t v = 0; v < chartSize; ++v)
+    for (uint32_t u = 0; u < chartSize; ++u)
+      out[size_t{v} * chartSize + u] = clampedHeight(dem, gridX * m + u, gridY * m + v);
+  return out;
+}
+
+ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t gridY,
+                               uint32_t chartSize) {
+  if (chartSize < 3 || !std::has_single_bit(chartSize - 1))
+    throw std::invalid_argument("buildChartPyramid: chartSize is not 2^m+1");
+  if (dem.width == 0 || dem.height == 0 || dem.heights.size() != size_t{dem.width} * dem.height)
+    throw std::invalid_argument("buildChartPyramid: empty or inconsistent DEM");
+  const int64_t m = int64_t{chartSize} - 1;
+  const uint32_t levels = static_cast<uint32_t>(std::countr_zero(chartSize - 1)) + 1;
+  const int64_t ox = gridX * m, oy = gridY * m;
+  const int64_t maxX = int64_t{dem.width} - 1, maxY = int64_t{dem.height} - 1;
+  ChartPyramid p;
+  p.heights.resize(levels);
+  p.normals.resize(levels);
+  for (uint32_t k = 0; k < levels; ++k) {
+    const uint32_t s = static_cast<uint32_t>(m >> k) + 1;
+    const int64_t step = int64_t{1} << k;
+    auto& h = p.heights[k];
+    auto& nrm = p.normals[k];
+    h.resize(size_t{s} * s);
+    nrm.resize(size_t{s} * s);
+    for (uint32_t v = 0; v < s; ++v) {
+      const int64_t gy = oy + (int64_t{v} << k);
+      // note: neighbours are clamped to the DEM and the difference divided by the distance
+      // actually spanned, so borders get one-sided differences and the clamped region outside the
+      // DEM gets the flat slope of its edge-clamped heights. Both depend only on global
+      // coordinates, so two charts compute bit-identical normals on a shared side.
+      const int64_t ya = std::clamp<int64_t>(gy - step, 0, maxY);
+      const int64_t yb = std::clamp<int64_t>(gy + step, 0, maxY);
+      for (uint32_t u = 0; u < s; ++u) {
+        const int64_t gx = ox + (int64_t{u} << k);
+        h[size_t{v} * s + u] = clampedHeight(dem, gx, gy);
+        const int64_t xa = std::clamp<int64_t>(gx - step, 0, maxX);
+        const int64_t xb = std::clamp<int64_t>(gx + step, 0, maxX);
+        double dhdx = 0.0, dhdy = 0.0;
+        if (xb > xa)
+          dhdx = (double{clampedHeight(dem, xb, gy)} - clampedHeight(dem, xa, gy)) /
+                 (static_cast<double>(xb - xa) * dem.spacing[0]);
+        if (yb > ya)
+          dhdy = (double{clampedHeight(dem, gx, yb)} - clampedHeight(dem, gx, ya)) /
+                 (static_cast<double>(yb - ya) * dem.spacing[1]);
+        const double len = std::sqrt(dhdx * dhdx + dhdy * dhdy + 1.0);
+        nrm[size_t{v} * s + u] = packNormal(static_cast<float>(-dhdx / len),
+                                            static_cast<float>(-dhdy / len),
+                                            static_cast<float>(1.0 / len));
+      }
+    }
+  }
+  return p;
+}
+
+TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOptions& options,
+                                     const fs::path& dir, AtlasManifest& manifest) {
+  const auto start = std::chrono::steady_clock::now();
+  validateTerrainAtlasOptions(options);
+  if (dem.width == 0 || dem.height == 0 || dem.heights.size() != size_t{dem.width} * dem.height)
+    throw std::invalid_argument("writeTerrainCharts: empty or inconsistent DEM");
+  const uint32_t cs = options.chartSize;
+  const uint32_t m = cs - 1;
+  const uint32_t cx = chartsAlong(dem.width, m), cy = chartsAlong(dem.height, m);
+
+  std::error_code ec;
+  const fs::path chartDir = dir / "charts";
+  fs::create_directories(chartDir, ec);
+  if (ec || !fs::is_directory(chartDir))
+    throw InputError(chartDir.string() + ": cannot create directory: " +
+                     (ec ? ec.message() : std::string("not a directory")));
+
+  manifest.kind = "heightfield";
+  manifest.chartSize = cs;
+  manifest.blockIntervals = options.blockIntervals;
+  manifest.chartsX = cx;
+  manifest.chartsY = cy;
+  manifest.samplesX = dem.width;
+  manifest.samplesY = dem.height;
+  manifest.spacing = dem.spacing;
+  manifest.heightRange = {dem.minHeight, dem.maxHeight};
+  manifest.georef = dem.georef;
+  manifest.voidsFilled = dem.voidsFilled;
+  manifest.voidFillMethod = dem.voidFillMethod;
+  const uint32_t blockLog2 = static_cast<uint32_t>(std::countr_zero(options.blockIntervals));
+  manifest.maxNodeResLog2 = std::min(manifest.maxNodeResLog2, blockLog2);
+  manifest.minNodeResLog2 = std::min(manifest.minNodeResLog2, manifest.maxNodeResLog2);
+  manifest.depth = std::clamp(manifest.depth, 1u, manifest.intervalsLog2() + 1);
+
+  manifest.charts.assign(size_t{cx} * cy, ChartInfo{});
+  for (uint32_t y = 0; y < cy; ++y) {
+    for (uint32_t x = 0; x < cx; ++x) {
+      const uint32_t id = y * cx + x;
+      ChartInfo& c = manifest.charts[id];
+      c.id = id;
+      c.gridX = static_cast<int32_t>(x);
+      c.gridY = static_cast<int32_t>(y);
+      c.file = chartFileName(id);
+      auto link = [&](Edge e, bool present, uint32_t other, Edge otherEdge) {
+        c.neighbours[e] = present ? RootNeighbour{static_cast<int32_t>(other), otherEdge, true}
+                                  : RootNeighbour{-1, 0, true};
+      };
+      link(kEdgeBottom, y > 0, id - cx, kEdgeTop);
+      link(kEdgeRight, x + 1 < cx, id + 1, kEdgeLeft);
+      link(kEdgeTop, y + 1 < cy, id + cx, kEdgeBottom);
+      link(kEdgeLeft, x > 0, id - 1, kEdgeRight);
+    }
+  }
+
+  std::atomic<uint64_t> bytes{0};
+  tbb::parallel_for(size_t{0}, manifest.charts.size(), [&](size_t i) {
+    const ChartInfo& c = manifest.charts[i];
+    const ChartPyramid p = buildChartPyramid(dem, c.gridX, c.gridY, cs);
+    bytes += writeChartFile(dir / c.file, p, cs, options.blockIntervals);
+  });
+
+  TerrainAtlasStats st;
+  st.charts = cx * cy;
+  st.samples = uint64_t{dem.width} * dem.height;
+  uint64_t perChart = 0;
+  for (uint32_t k = 0; k <= manifest.intervalsLog2(); ++k) {
+    const uint64_t s = (m >> k) + 1;
+    perChart += s * s;
+  }
+  st.storedSamples = perChart * st.charts;
+  st.bytesOnDisk = bytes.load();
+  st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return st;
+}
+
+}  // namespace gimlod

@@ -1,0 +1,628 @@
+// On-disk atlas format: manifest (JSON), block-structured chart pyramid files, atomic writes.
+// Based on: Niski, Purnomo, Cohen, "Multi-grained Level of Detail Using a Hierarchical Seamless
+// Texture Atlas", I3D 2007, section 6 (paging charts in blocks of the maximum node resolution).
+#include "core/atlas_format.h"
+
+#include <algorithm>
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fcntl.h>
+#include <limits>
+#include <sstream>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+
+namespace gimlod {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+constexpr const char* kFormatTag = "gimlod-atlas";
+constexpr char kChartMagic[4] = {'G', 'L', 'M', 'C'};
+constexpr uint32_t kChartFileVersion = 1;
+constexpr size_t kChartHeaderBytes = 4 + 4 * 4;
+constexpr size_t kDirEntryBytes = 16;
+
+std::string quoted(const fs::path& p) { return p.string(); }
+
+// ---- little-endian helpers ----------------------------------------------------------------
+
+template <typename T>
+T toLittle(T v) {
+  if constexpr (std::endian::native == std::endian::big) {
+    auto bytes = std::bit_cast<std::array<uint8_t, sizeof(T)>>(v);
+    std::reverse(bytes.begin(), bytes.end());
+    return std::bit_cast<T>(bytes);
+  } else {
+    return v;
+  }
+}
+
+template <typename T>
+void putLe(std::vector<uint8_t>& buf, size_t at, T v) {
+  v = toLittle(v);
+  std::memcpy(buf.data() + at, &v, sizeof(T));
+}
+
+template <typename T>
+T getLe(const uint8_t* p) {
+  T v;
+  std::memcpy(&v, p, sizeof(T));
+  return toLittle(v);
+}
+
+// Converts an array of little-endian floats in place to native order (no-op on little-endian).
+void floatsFromLe(float* p, size_t n) {
+  if constexpr (std::endian::native == std::endian::big) {
+    for (size_t i = 0; i < n; ++i) p[i] = toLittle(p[i]);
+  }
+}
+
+uint32_t log2Exact(uint32_t v) { return static_cast<uint32_t>(std::countr_zero(v)); }
+
+// ---- manifest JSON helpers ------------------------------------------------------------------
+
+struct JsonReader {
+  const fs::path& file;
+
+  [[noreturn]] void fail(const std::string& what) const {
+    throw InputError(quoted(file) + ": " + what);
+  }
+  const json& field(const json& j, const char* key, const std::string& ctx) const {
+    auto it = j.find(key);
+    if (it == j.end()) fail("missing field '" + ctx + key + "'");
+    return *it;
+  }
+  int64_t integer(const json& v, const std::string& name, int64_t lo, int64_t hi) const {
+    if (!v.is_number_integer()) fail("field '" + name + "' must be an integer");
+    int64_t x;
+    if (v.is_number_unsigned()) {
+      uint64_t u = v.get<uint64_t>();
+      if (u > static_cast<uint64_t>(std::numeric_limits<int64_t>::max()))
+        fail("field '" + name + "' is out of range");
+      x = static_cast<int64_t>(u);
+    } else {
+      x = v.get<int64_t>();
+    }
+    if (x < lo || x > hi)
+      fail("field '" + name + "' = " + std::to_string(x) + " is out of range [" +
+           std::to_string(lo) + ", " + std::to_string(hi) + "]");
+    return x;
+  }
+  uint32_t u32(const json& j, const char* key, const std::string& ctx = "") const {
+    return static_cast<uint32_t>(
+        integer(field(j, key, ctx), ctx + key, 0, std::numeric_limits<uint32_t>::max()));
+  }
+  uint64_t u64(const json& v, const std::string& name) const {
+    if (!v.is_number_unsigned() && !(v.is_number_integer() && v.get<int64_t>() >= 0))
+      fail("field '" + name + "' must be a non-negative integer");
+    return v.get<uint64_t>();
+  }
+  double number(const json& v, const std::string& name) const {
+    if (!v.is_number()) fail("field '" + name + "' must be a number");
+    double d = v.get<double>();
+    if (!std::isfinite(d)) fail("field '" + name + "' must be finite");
+    return d;
+  }
+  std::string string(const json& v, const std::string& name) const {
+    if (!v.is_string()) fail("field '" + name + "' must be a string");
+    return v.get<std::string>();
+  }
+  bool boolean(const json& v, const std::string& name) const {
+    if (!v.is_boolean()) fail("field '" + name + "' must be true or false");
+    return v.get<bool>();
+  }
+  template <size_t N>
+  std::array<double, N> numbers(const json& v, const std::string& name) const {
+    if (!v.is_array() || v.size() != N)
+      fail("field '" + name + "' must be an array of " + std::to_string(N) + " numbers");
+    std::array<double, N> out{};
+    for (size_t i = 0; i < N; ++i) out[i] = number(v[i], name + "[" + std::to_string(i) + "]");
+    return out;
+  }
+};
+
+json toJson(const RootNeighbour& n) {
+  return json{{"chart", n.chart}, {"edge", n.edge}, {"reversed", n.reversed}};
+}
+
+}  // namespace
+
+// ---- small shared helpers ---------------------------------------------------------------------
+
+bool isChartSizeValid(uint32_t n) {
+  return n >= 3 && n <= 65537 && std::has_single_bit(n - 1);
+}
+
+PackedNormal packNormal(float x, float y, float z) {
+  auto q = [](float c) -> uint8_t {
+    if (!(c == c)) c = 0.f;  // NaN -> 0
+    c = std::clamp(c, -1.f, 1.f);
+    return static_cast<uint8_t>(std::lround(c * 127.5f + 127.5f));
+  };
+  return PackedNormal{q(x), q(y), q(z), 255};
+}
+
+std::array<float, 3> unpackNormal(const PackedNormal& n) {
+  return {n[0] / 127.5f - 1.f, n[1] / 127.5f - 1.f, n[2] / 127.5f - 1.f};
+}
+
+uint32_t AtlasManifest::intervalsLog2() const {
+  if (!isChartSizeValid(chartSize))
+    throw std::logic_error("AtlasManifest: chartSize " + std::to_string(chartSize) +
+                           " is not 2^m+1");
+  return log2Exact(chartSize - 1);
+}
+
+LevelLayout levelLayout(uint32_t chartSize, uint32_t blockIntervals, uint32_t level) {
+  if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) ||
+      blockIntervals > chartSize - 1)
+    throw std::logic_error("levelLayout: bad chartSize " + std::to_string(chartSize) +
+                           " / blockIntervals " + std::to_string(blockIntervals));
+  const uint32_t m = chartSize - 1;
+  if (level > log2Exact(m))
+    throw std::logic_error("levelLayout: level " + std::to_string(level) + " > log2(" +
+                           std::to_string(m) + ")");
+  const uint32_t intervals = m >> level;
+  LevelLayout l;
+  l.samples = intervals + 1;
+  l.blocksPerSide = std::max(1u, intervals / blockIntervals);
+  l.blockSamples = std::min(blockIntervals, intervals) + 1;
+  return l;
+}
+
+// ---- atomic file writing ----------------------------------------------------------------------
+
+void atomicWriteFile(const fs::path& path, const void* data, size_t bytes) {
+  const fs::path tmp = fs::path(path.string() + ".tmp-" + std::to_string(::getpid()));
+  auto failWith = [&](const std::string& what, int err, bool removeTmp) {
+    if (removeTmp) ::unlink(tmp.c_str());
+    throw InputError(quoted(path) + ": " + what + ": " + std::strerror(err));
+  };
+  int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) failWith("cannot create " + tmp.filename().string(), errno, false);
+  const auto* p = static_cast<const uint8_t*>(data);
+  size_t left = bytes;
+  while (left > 0) {
+    ssize_t w = ::write(fd, p, std::min<size_t>(left, size_t{1} << 30));
+    if (w < 0) {
+      if (errno == EINTR) continue;
+      int err = errno;
+      ::close(fd);
+      failWith("write failed", err, true);
+    }
+    p += w;
+    left -= static_cast<size_t>(w);
+  }
+  if (::fdatasync(fd) != 0 && errno != EINVAL && errno != EROFS) {
+    int err = errno;
+    ::close(fd);
+    failWith("flush failed", err, true);
+  }
+  if (::close(fd) != 0) failWith("close failed", errno, true);
+  if (::rename(tmp.c_str(), path.c_str()) != 0) failWith("rename failed", errno, true);
+}
+
+// ---- manifest ---------------------------------------------------------------------------------
+
+void writeManifest(const fs::path& dir, const AtlasManifest& m) {
+  json charts = json::array();
+  for (const ChartInfo& c : m.charts) {
+    json nb = json::array();
+    for (const RootNeighbour& n : c.neighbours) nb.push_back(toJson(n));
+    charts.push_back(json{{"id", c.id},
+                          {"gridX", c.gridX},
+                          {"gridY", c.gridY},
+                          {"file", c.file},
+                          {"neighbours", nb}});
+  }
+  json j = {
+      {"format", kFormatTag},
+      {"version", m.version},
+      {"kind", m.kind},
+      {"chartSize", m.chartSize},
+      {"blockIntervals", m.blockIntervals},
+      {"chartsX", m.chartsX},
+      {"chartsY", m.chartsY},
+      {"samplesX", m.samplesX},
+      {"samplesY", m.samplesY},
+      {"spacing", m.spacing},
+      {"zScale", m.zScale},
+      {"heightRange", {m.heightRange[0], m.heightRange[1]}},
+      {"voidsFilled", m.voidsFilled},
+      {"voidFillMethod", m.voidFillMethod},
+      {"source", m.source},
+      {"georef",
+       {{"wkt", m.georef.wkt},
+        {"geotransform", m.georef.geotransform},
+        {"geographic", m.georef.geographic},
+        {"centreLatitudeDeg", m.georef.centreLatitudeDeg}}},
+      {"hierarchy",
+       {{"file", m.hierarchyFile},
+        {"depth", m.depth},
+        {"maxNodeResLog2", m.maxNodeResLog2},
+        {"minNodeResLog2", m.minNodeResLog2}}},
+      {"charts", charts},
+  };
+  // note: dump() throws on invalid UTF-8 (e.g. a Latin-1 file name in `source`); replace instead.
+  const std::string text = j.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
+  atomicWriteFile(dir / kManifestName, text.data(), text.size());
+}
+
+AtlasManifest readManifest(const fs::path& dir) {
+  const fs::path file = dir / kManifestName;
+  JsonReader r{file};
+  std::error_code ec;
+  if (!fs::exists(file, ec)) {
+    if (!fs::exists(dir, ec)) r.fail("no such atlas directory");
+    r.fail("no such file (not an atlas directory?)");
+  }
+  std::ifstream in(file, std::ios::binary);
+  if (!in) r.fail(std::string("cannot open: ") + std::strerror(errno));
+  json j;
+  try {
+    j = json::parse(in);
+  } catch (const json::exception& e) {
+    r.fail(std::string("invalid JSON: ") + e.what());
+  }
+  if (!j.is_object()) r.fail("invalid manifest: top level is not a JSON object");
+  auto fmt = j.find("format");
+  if (fmt == j.end() || !fmt->is_string() || fmt->get<std::string>() != kFormatTag)
+    r.fail(std::string("not a gimlod atlas manifest (\"format\" must be \"") + kFormatTag + "\")");
+
+  AtlasManifest m;
+  m.version = r.u32(j, "version");
+  if (m.version < 1 || m.version > kAtlasFormatVersion)
+    r.fail("unsupported atlas format version " + std::to_string(m.version) +
+           " (this build reads version " + std::to_string(kAtlasFormatVersion) +
+           "; rebuild the atlas)");
+  m.kind = r.string(r.field(j, "kind", ""), "kind");
+  if (m.kind != "heightfield" && m.kind != "geometry")
+    r.fail("unknown atlas kind '" + m.kind + "' (expected heightfield or geometry)");
+  m.chartSize = r.u32(j, "chartSize");
+  if (!isChartSizeValid(m.chartSize))
+    r.fail("chartSize " + std::to_string(m.chartSize) + " is not 2^m+1 (3..65537)");
+  m.blockIntervals = r.u32(j, "blockIntervals");
+  if (!std::has_single_bit(m.blockIntervals) || m.blockIntervals > m.chartSize - 1)
+    r.fail("blockIntervals " + std::to_string(m.blockIntervals) +
+           " is not a power of two <= chartSize-1 (" + std::to_string(m.chartSize - 1) + ")");
+  m.chartsX = r.u32(j, "chartsX");
+  m.chartsY = r.u32(j, "chartsY");
+  if (j.contains("samplesX")) m.samplesX = r.u32(j, "samplesX");
+  if (j.contains("samplesY")) m.samplesY = r.u32(j, "samplesY");
+  auto sp = r.numbers<2>(r.field(j, "spacing", ""), "spacing");
+  if (sp[0] <= 0 || sp[1] <= 0) r.fail("spacing must be positive");
+  m.spacing = sp;
+  if (j.contains("zScale")) {
+    m.zScale = r.number(j["zScale"], "zScale");
+    if (m.zScale == 0) r.fail("zScale must be non-zero");
+  }
+  if (j.contains("heightRange")) {
+    auto hr = r.numbers<2>(j["heightRange"], "heightRange");
+    if (hr[0] > hr[1]) r.fail("heightRange minimum exceeds maximum");
+    m.heightRange = {static_cast<float>(hr[0]), static_cast<float>(hr[1])};
+  }
+  if (j.contains("voidsFilled")) m.voidsFilled = r.u64(j["voidsFilled"], "voidsFilled");
+  if (j.contains("voidFillMethod"))
+    m.voidFillMethod = r.string(j["voidFillMethod"], "voidFillMethod");
+  if (j.contains("source")) m.source = r.string(j["source"], "source");
+  if (j.contains("georef")) {
+    const json& g = j["georef"];
+    if (!g.is_object()) r.fail("field 'georef' must be an object");
+    if (g.contains("wkt")) m.georef.wkt = r.string(g["wkt"], "georef.wkt");
+    if (g.contains("geotransform"))
+      m.georef.geotransform = r.numbers<6>(g["geotransform"], "georef.geotransform");
+    if (g.contains("geographic")) m.georef.geographic = r.boolean(g["geographic"], "georef.geographic");
+    if (g.contains("centreLatitudeDeg"))
+      m.georef.centreLatitudeDeg = r.number(g["centreLatitudeDeg"], "georef.centreLatitudeDeg");
+  }
+  const uint32_t ilog = log2Exact(m.chartSize - 1);
+  if (j.contains("hierarchy")) {
+    const json& h = j["hierarchy"];
+    if (!h.is_object()) r.fail("field 'hierarchy' must be an object");
+    if (h.contains("file")) m.hierarchyFile = r.string(h["file"], "hierarchy.file");
+    if (h.contains("depth")) m.depth = r.u32(h, "depth", "hierarchy.");
+    if (h.contains("maxNodeResLog2")) m.maxNodeResLog2 = r.u32(h, "maxNodeResLog2", "hierarchy.");
+    if (h.contains("minNodeResLog2")) m.minNodeResLog2 = r.u32(h, "minNodeResLog2", "hierarchy.");
+  }
+  if (m.depth < 1 || m.depth > ilog + 1)
+    r.fail("hierarchy.depth " + std::to_string(m.depth) + " must be in [1, " +
+           std::to_string(ilog + 1) + "]");
+  if (m.minNodeResLog2 > m.maxNodeResLog2 || m.maxNodeResLog2 > log2Exact(m.blockIntervals))
+    r.fail("hierarchy node resolutions must satisfy minNodeResLog2 (" +
+           std::to_string(m.minNodeResLog2) + ") <= maxNodeResLog2 (" +
+           std::to_string(m.maxNodeResLog2) + ") <= log2(blockIntervals) (" +
+           std::to_string(log2Exact(m.blockIntervals)) + ")");
+
+  // Charts.
+  const json& cs = r.field(j, "charts", "");
+  if (!cs.is_array()) r.fail("field 'charts' must be an array");
+  if (cs.empty()) r.fail("inconsistent chart list: no charts");
+  if (cs.size() > (size_t{1} << 24)) r.fail("inconsistent chart list: too many charts");
+  const bool grid = m.kind == "heightfield";
+  if (grid && static_cast<uint64_t>(m.chartsX) * m.chartsY != cs.size())
+    r.fail("inconsistent chart list: " + std::to_string(cs.size()) + " charts but chartsX * chartsY = " +
+           std::to_string(m.chartsX) + " * " + std::to_string(m.chartsY));
+  const int64_t n = static_cast<int64_t>(cs.size());
+  m.charts.resize(cs.size());
+  for (size_t i = 0; i < cs.size(); ++i) {
+    const std::string ctx = "charts[" + std::to_string(i) + "].";
+    const json& c = cs[i];
+    if (!c.is_object()) r.fail("field 'charts[" + std::to_string(i) + "]' must be an object");
+    ChartInfo& ci = m.charts[i];
+    ci.id = r.u32(c, "id", ctx);
+    if (ci.id != i)
+      r.fail("inconsistent chart list: " + ctx + "id is " + std::to_string(ci.id) + ", expected " +
+             std::to_string(i));
+    ci.gridX = static_cast<int32_t>(r.integer(r.field(c, "gridX", ctx), ctx + "gridX", 0, INT32_MAX));
+    ci.gridY = static_cast<int32_t>(r.integer(r.field(c, "gridY", ctx), ctx + "gridY", 0, INT32_MAX));
+    if (grid && (static_cast<uint32_t>(ci.gridX) >= m.chartsX ||
+                 static_cast<uint32_t>(ci.gridY) >= m.chartsY ||
+                 static_cast<uint32_t>(ci.gridY) * m.chartsX + static_cast<uint32_t>(ci.gridX) != i))
+      r.fail("inconsistent chart list: " + ctx + "grid position (" + std::to_string(ci.gridX) +
+             ", " + std::to_string(ci.gridY) + ") does not match its id in a " +
+             std::to_string(m.chartsX) + " x " + std::to_string(m.chartsY) + " grid");
+    ci.file = r.string(r.field(c, "file", ctx), ctx + "file");
+    const fs::path fp(ci.file);
+    if (ci.file.empty() || fp.is_absolute() ||
+        std::any_of(fp.begin(), fp.end(), [](const fs::path& e) { return e == ".."; }))
+      r.fail("field '" + ctx + "file' must be a relative path inside the atlas: '" + ci.file + "'");
+    const json& nb = r.field(c, "neighbours", ctx);
+    if (!nb.is_array() || nb.size() != 4) r.fail("field '" + ctx + "neighbours' must have 4 entries");
+    for (size_t e = 0; e < 4; ++e) {
+      const std::string nctx = ctx + "neighbours[" + std::to_string(e) + "].";
+      RootNeighbour& rn = ci.neighbours[e];
+      rn.chart = static_cast<int32_t>(r.integer(r.field(nb[e], "chart", nctx), nctx + "chart", -1, n - 1));
+      rn.edge = static_cast<uint8_t>(r.integer(r.field(nb[e], "edge", nctx), nctx + "edge", 0, 3));
+      if (nb[e].contains("reversed")) rn.reversed = r.boolean(nb[e]["reversed"], nctx + "reversed");
+    }
+  }
+  // Neighbour relations must be symmetric.
+  for (size_t i = 0; i < m.charts.size(); ++i) {
+    for (uint8_t e = 0; e < 4; ++e) {
+      const RootNeighbour& a = m.charts[i].neighbours[e];
+      if (a.chart < 0) continue;
+      const RootNeighbour& b = m.charts[static_cast<size_t>(a.chart)].neighbours[a.edge];
+      if (b.chart != static_cast<int32_t>(i) || b.edge != e || b.reversed != a.reversed)
+        r.fail("inconsistent chart list: chart " + std::to_string(i) + " edge " +
+               std::to_string(e) + " names chart " + std::to_string(a.chart) + " edge " +
+               std::to_string(a.edge) + ", which does not name it back");
+    }
+  }
+  return m;
+}
+
+// ---- chart files ------------------------------------------------------------------------------
+
+uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint32_t chartSize,
+                        uint32_t blockIntervals) {
+  if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) ||
+      blockIntervals > chartSize - 1)
+    throw std::invalid_argument("writeChartFile: bad chartSize/blockIntervals");
+  const uint32_t levels = static_cast<uint32_t>(pyramid.heights.size());
+  if (levels < 1 || levels > log2Exact(chartSize - 1) + 1 || pyramid.normals.size() != levels)
+    throw std::invalid_argument("writeChartFile: bad pyramid level count");
+
+  // Directory and total size.
+  std::vector<LevelLayout> layouts(levels);
+  size_t dirEntries = 0;
+  for (uint32_t k = 0; k < levels; ++k) {
+    layouts[k] = levelLayout(chartSize, blockIntervals, k);
+    const size_t s = layouts[k].samples;
+    if (pyramid.heights[k].size() != s * s || pyramid.normals[k].size() != s * s)
+      throw std::invalid_argument("writeChartFile: level " + std::to_string(k) +
+                                  " has the wrong number of samples");
+    dirEntries += size_t{layouts[k].blocksPerSide} * layouts[k].blocksPerSide;
+  }
+  uint64_t offset = kChartHeaderBytes + dirEntries * kDirEntryBytes;
+  uint64_t total = offset;
+  for (const LevelLayout& l : layouts) {
+    const uint64_t bs2 = uint64_t{l.blockSamples} * l.blockSamples;
+    total += uint64_t{l.blocksPerSide} * l.blocksPerSide * bs2 * (sizeof(float) + sizeof(PackedNormal));
+  }
+  std::vector<uint8_t> buf(total);
+  std::memcpy(buf.data(), kChartMagic, 4);
+  putLe<uint32_t>(buf, 4, kChartFileVersion);
+  putLe<uint32_t>(buf, 8, chartSize);
+  putLe<uint32_t>(buf, 12, blockIntervals);
+  putLe<uint32_t>(buf, 16, levels);
+
+  size_t dirAt = kChartHeaderBytes;
+  for (uint32_t k = 0; k < levels; ++k) {
+    const LevelLayout& l = layouts[k];
+    const uint32_t b = l.blockSamples - 1;
+    const uint32_t bs = l.blockSamples;
+    const std::vector<float>& h = pyramid.heights[k];
+    const std::vector<PackedNormal>& nrm = pyramid.normals[k];
+    for (uint32_t by = 0; by < l.blocksPerSide; ++by) {
+      for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx) {
+        const uint64_t hOff = offset;
+        const uint64_t nOff = hOff + uint64_t{bs} * bs * sizeof(float);
+        offset = nOff + uint64_t{bs} * bs * sizeof(PackedNormal);
+        putLe<uint64_t>(buf, dirAt, hOff);
+        putLe<uint64_t>(buf, dirAt + 8, nOff);
+        dirAt += kDirEntryBytes;
+        for (uint32_t v = 0; v < bs; ++v) {
+          const size_t src = size_t{by * b + v} * l.samples + size_t{bx} * b;
+          uint8_t* hp = buf.data() + hOff + size_t{v} * bs * sizeof(float);
+          for (uint32_t u = 0; u < bs; ++u) {
+            const float f = toLittle(h[src + u]);
+            std::memcpy(hp + size_t{u} * sizeof(float), &f, sizeof(float));
+          }
+          std::memcpy(buf.data() + nOff + size_t{v} * bs * sizeof(PackedNormal), &nrm[src],
+                      size_t{bs} * sizeof(PackedNormal));
+        }
+      }
+    }
+  }
+  atomicWriteFile(path, buf.data(), buf.size());
+  return total;
+}
+
+ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
+  auto fail = [&](const std::string& what) { throw InputError(quoted(path_) + ": " + what); };
+  std::error_code ec;
+  const uint64_t fileSize = fs::file_size(path_, ec);
+  if (ec) fail("cannot read chart file: " + ec.message());
+  file_.open(path_, std::ios::binary);
+  if (!file_) fail(std::string("cannot open chart file: ") + std::strerror(errno));
+  uint8_t hdr[kChartHeaderBytes];
+  if (fileSize < kChartHeaderBytes || !file_.read(reinterpret_cast<char*>(hdr), sizeof hdr))
+    fail("truncated chart file (no header)");
+  if (std::memcmp(hdr, kChartMagic, 4) != 0) fail("not a gimlod chart file (bad magic)");
+  const uint32_t version = getLe<uint32_t>(hdr + 4);
+  if (version != kChartFileVersion)
+    fail("unsupported chart file version " + std::to_string(version));
+  chartSize_ = getLe<uint32_t>(hdr + 8);
+  blockIntervals_ = getLe<uint32_t>(hdr + 12);
+  levels_ = getLe<uint32_t>(hdr + 16);
+  if (!isChartSizeValid(chartSize_) || !std::has_single_bit(blockIntervals_) ||
+      blockIntervals_ > chartSize_ - 1 || levels_ < 1 || levels_ > log2Exact(chartSize_ - 1) + 1)
+    fail("corrupt chart header (chartSize " + std::to_string(chartSize_) + ", blockIntervals " +
+         std::to_string(blockIntervals_) + ", levels " + std::to_string(levels_) + ")");
+  size_t entries = 0;
+  for (uint32_t k = 0; k < levels_; ++k) {
+    const LevelLayout l = levelLayout(chartSize_, blockIntervals_, k);
+    entries += size_t{l.blocksPerSide} * l.blocksPerSide;
+  }
+  const uint64_t dirEnd = kChartHeaderBytes + uint64_t{entries} * kDirEntryBytes;
+  if (fileSize < dirEnd) fail("truncated chart file (block directory incomplete)");
+  std::vector<uint8_t> dir(entries * kDirEntryBytes);
+  if (!file_.read(reinterpret_cast<char*>(dir.data()), static_cast<std::streamsize>(dir.size())))
+    fail("truncated chart file (block directory unreadable)");
+  directory_.resize(levels_);
+  size_t at = 0;
+  for (uint32_t k = 0; k < levels_; ++k) {
+    const LevelLayout l = levelLayout(chartSize_, blockIntervals_, k);
+    const uint64_t bs2 = uint64_t{l.blockSamples} * l.blockSamples;
+    directory_[k].resize(size_t{l.blocksPerSide} * l.blocksPerSide);
+    for (BlockEntry& e : directory_[k]) {
+      e.heightOffset = getLe<uint64_t>(dir.data() + at);
+      e.normalOffset = getLe<uint64_t>(dir.data() + at + 8);
+      at += kDirEntryBytes;
+      auto inside = [&](uint64_t off, uint64_t bytes) {
+        return off >= dirEnd && off <= fileSize && bytes <= fileSize - off;
+      };
+      if (!inside(e.heightOffset, bs2 * sizeof(float)) ||
+          !inside(e.normalOffset, bs2 * sizeof(PackedNormal))) {
+        if (e.heightOffset < dirEnd || e.normalOffset < dirEnd || e.heightOffset > (uint64_t{1} << 50) ||
+            e.normalOffset > (uint64_t{1} << 50))
+          fail("corrupt chart file (block offset out of range at level " + std::to_string(k) + ")");
+        fail("truncated chart file (" + std::to_string(fileSize) +
+             " bytes; level " + std::to_string(k) + " blocks extend beyond the end)");
+      }
+    }
+  }
+}
+
+const ChartFileReader::BlockEntry& ChartFileReader::block(uint32_t level, uint32_t bx,
+                                                          uint32_t by) const {
+  const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
+  return directory_[level][size_t{by} * l.blocksPerSide + bx];
+}
+
+void ChartFileReader::locateWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
+                                   uint32_t& bx, uint32_t& by) const {
+  if (level >= levels_)
+    throw std::logic_error("ChartFileReader: level " + std::to_string(level) + " >= " +
+                           std::to_string(levels_) + " in " + path_.string());
+  const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
+  const uint32_t b = l.blockSamples - 1;
+  auto pick = [&](uint32_t w0, const char* axis) {
+    if (uint64_t{w0} + n >= l.samples)
+      throw std::logic_error(std::string("ChartFileReader: window ") + axis + " [" +
+                             std::to_string(w0) + ", " + std::to_string(uint64_t{w0} + n) +
+                             "] outside level " + std::to_string(level) + " of " + path_.string());
+    uint32_t blk = std::min(w0 / b, l.blocksPerSide - 1);
+    if (w0 + n > blk * b + b)
+      throw std::logic_error(std::string("ChartFileReader: window ") + axis + " [" +
+                             std::to_string(w0) + ", " + std::to_string(w0 + n) +
+                             "] crosses a block boundary (block " + std::to_string(b) +
+                             " intervals) at level " + std::to_string(level));
+    return blk;
+  };
+  bx = pick(u0, "u");
+  by = pick(v0, "v");
+}
+
+void ChartFileReader::readWindow(uint64_t offset, uint32_t bs, uint32_t du, uint32_t dv,
+                                 uint32_t n, size_t elem, void* out) const {
+  auto* dst = static_cast<char*>(out);
+  const size_t rowBytes = size_t{n + 1} * elem;
+  std::lock_guard<std::mutex> lock(mutex_);
+  file_.clear();
+  if (du == 0 && n + 1 == bs) {
+    // Whole rows: one contiguous read.
+    file_.seekg(static_cast<std::streamoff>(offset + uint64_t{dv} * bs * elem));
+    file_.read(dst, static_cast<std::streamsize>(rowBytes * (n + 1)));
+  } else {
+    for (uint32_t r = 0; r <= n && file_; ++r) {
+      file_.seekg(static_cast<std::streamoff>(offset + (uint64_t{dv + r} * bs + du) * elem));
+      file_.read(dst + r * rowBytes, static_cast<std::streamsize>(rowBytes));
+    }
+  }
+  if (!file_)
+    throw InputError(quoted(path_) + ": read failed (file truncated or changed while in use)");
+}
+
+void ChartFileReader::readHeights(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
+                                  float* out) const {
+  uint32_t bx, by;
+  locateWindow(level, u0, v0, n, bx, by);
+  const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
+  const uint32_t b = l.blockSamples - 1;
+  readWindow(block(level, bx, by).heightOffset, l.blockSamples, u0 - bx * b, v0 - by * b, n,
+             sizeof(float), out);
+  floatsFromLe(out, size_t{n + 1} * (n + 1));
+}
+
+void ChartFileReader::readNormals(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
+                                  PackedNormal* out) const {
+  uint32_t bx, by;
+  locateWindow(level, u0, v0, n, bx, by);
+  const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
+  const uint32_t b = l.blockSamples - 1;
+  readWindow(block(level, bx, by).normalOffset, l.blockSamples, u0 - bx * b, v0 - by * b, n,
+             sizeof(PackedNormal), out);
+}
+
+namespace {
+template <typename T, typename ReadFn>
+std::vector<T> assembleLevel(const LevelLayout& l, ReadFn read) {
+  const uint32_t b = l.blockSamples - 1;
+  std::vector<T> level(size_t{l.samples} * l.samples);
+  std::vector<T> blk(size_t{l.blockSamples} * l.blockSamples);
+  for (uint32_t by = 0; by < l.blocksPerSide; ++by)
+    for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx) {
+      read(bx * b, by * b, b, blk.data());
+      for (uint32_t v = 0; v < l.blockSamples; ++v)
+        std::copy_n(blk.data() + size_t{v} * l.blockSamples, l.blockSamples,
+                    level.data() + size_t{by * b + v} * l.samples + bx * b);
+    }
+  return level;
+}
+}  // namespace
+
+std::vector<float> ChartFileReader::readLevelHeights(uint32_t level) const {
+  if (level >= levels_) throw std::logic_error("ChartFileReader: level out of range");
+  return assembleLevel<float>(levelLayout(chartSize_, blockIntervals_, level),
+                              [&](uint32_t u0, uint32_t v0, uint32_t n, float* out) {
+                                readHeights(level, u0, v0, n, out);
+                              });
+}
+
+std::vector<PackedNormal> ChartFileReader::readLevelNormals(uint32_t level) const {
+  if (level >= levels_) throw std::logic_error("ChartFileReader: level out of range");
+  return assembleLevel<PackedNormal>(levelLayout(chartSize_, blockIntervals_, level),
+                                     [&](uint32_t u0, uint32_t v0, uint32_t n, PackedNormal* out) {
+                                       readNormals(level, u0, v0, n, out);
+                                     });
+}
+
+}  // namespace gimlod

@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# The demo: installs what is missing, builds gimlod in Release, builds the atlas of the shipped
+# SRTM tile and renders an orbit plus a fly-by to PNG frames with per-frame statistics.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/install-deps.sh
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build build -j"$(nproc)" --target gimlod
+mkdir -p out
+./build/gimlod build data/terrain/mt_rainier_90m.tif -o out/rainier.atlas
+./build/gimlod render out/rainier.atlas -o out/rainier_orbit --orbit 24 --size 640x480 --tolerance 1
+./build/gimlod render out/rainier.atlas -o out/rainier_flyby --path scenes/rainier_flyby.json --size 640x480 --tolerance 1
+echo "frames and stats.csv are in out/rainier_orbit and out/rainier_flyby"

@@ -1,0 +1,50 @@
+#version 430 core
+// Terrain fragment shader: valid-extent clipping, normal map, Lambert + ambient lighting with a
+// hypsometric colour ramp and light distance fog.
+
+in vec3 v_world;
+in vec2 v_pageUv;
+flat in int v_pageLayer;
+
+uniform sampler2DArray u_normals;  // RGBA8, n * 0.5 + 0.5, bilinear
+uniform vec2 u_spacing;
+uniform vec2 u_validSamples;  // samples per axis; 0 = unlimited
+uniform vec2 u_heightRange;
+uniform vec3 u_lightDir;      // towards the light, normalized
+uniform vec3 u_eye;
+uniform vec3 u_background;
+uniform float u_fogDistance;  // 0 = no fog
+
+out vec4 o_colour;
+
+vec3 hypsometric(float t) {
+  const vec3 kLow = vec3(0.18, 0.42, 0.16);
+  const vec3 kMid = vec3(0.45, 0.55, 0.25);
+  const vec3 kBrown = vec3(0.50, 0.38, 0.24);
+  const vec3 kRock = vec3(0.55, 0.53, 0.50);
+  const vec3 kSnow = vec3(0.95, 0.95, 0.97);
+  if (t < 0.25) return mix(kLow, kMid, t / 0.25);
+  if (t < 0.55) return mix(kMid, kBrown, (t - 0.25) / 0.30);
+  if (t < 0.80) return mix(kBrown, kRock, (t - 0.55) / 0.25);
+  return mix(kRock, kSnow, (t - 0.80) / 0.20);
+}
+
+bool outsideValid(float g, float valid) {
+  return valid > 0.0 && g > valid - 1.0 + (1e-3 + 1e-6 * valid);
+}
+
+void main() {
+  vec2 g = v_world.xy / u_spacing;
+  if (outsideValid(g.x, u_validSamples.x) || outsideValid(g.y, u_validSamples.y)) discard;
+
+  vec3 n = texture(u_normals, vec3(v_pageUv, float(v_pageLayer))).rgb * 2.0 - 1.0;
+  n = length(n) > 1e-4 ? normalize(n) : vec3(0.0, 0.0, 1.0);
+  float span = max(u_heightRange.y - u_heightRange.x, 1e-6);
+  vec3 base = hypsometric(clamp((v_world.z - u_heightRange.x) / span, 0.0, 1.0));
+  vec3 colour = base * (0.30 + 0.70 * max(dot(n, u_lightDir), 0.0));
+  if (u_fogDistance > 0.0) {
+    float d = length(v_world - u_eye) / u_fogDistance;
+    colour = mix(colour, u_background, 0.6 * (1.0 - exp(-d * d)));
+  }
+  o_colour = vec4(colour, 1.0);
+}

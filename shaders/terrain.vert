@@ -1,0 +1,70 @@
+#version 430 core
+// Terrain patch vertex shader (paper sections 7.3-7.4): a reusable (u,v) grid vertex becomes a
+// world position by integer sample arithmetic, border stitching against the neighbours' vertex
+// spacing, and a height fetch from the node's page in the page pool.
+
+layout(location = 0) in uvec2 a_ij;   // grid vertex (i, j), 0..2^res
+layout(location = 1) in uint a_node;  // node record index (instanced, divisor 1)
+
+struct NodeRecord {
+  ivec2 origin;     // level-0 samples
+  int sizeLog2;     // node side in level-0 intervals
+  int res;          // grid: 2^res intervals per side
+  int pageResLog2;  // page: 2^pageResLog2 intervals per side
+  int pageLayer;
+  int pad0;
+  int pad1;
+};
+layout(std430, binding = 0) readonly buffer Nodes { NodeRecord u_nodes[]; };
+// Stitch tables bytes, (node * 4 + side) * entriesPerSide + entry, packed little-endian in words.
+layout(std430, binding = 1) readonly buffer Stitch { uint u_stitchWords[]; };
+
+uniform mat4 u_viewProj;
+uniform vec2 u_spacing;
+uniform int u_leafLog2;
+uniform int u_entriesPerSide;
+uniform sampler2DArray u_heights;  // R32F, read with texelFetch only
+
+precise out vec3 v_world;  // captured by transform feedback
+out vec2 v_pageUv;
+flat out int v_pageLayer;
+invariant gl_Position;
+
+const int kBottom = 0, kRight = 1, kTop = 2, kLeft = 3;
+
+// log2 spacing of the neighbour drawn at position t (level-0 intervals from the node origin).
+int neighbourSpacing(int node, int side, int t) {
+  int e = min(t >> u_leafLog2, u_entriesPerSide - 1);
+  int b = (node * 4 + side) * u_entriesPerSide + e;
+  return int((u_stitchWords[b >> 2] >> uint((b & 3) * 8)) & 0xFFu);
+}
+
+// Moves a border coordinate onto the neighbour's coarser vertex lattice.
+int snapToNeighbour(int node, int side, int t, int ownSpacing, int sizeLog2) {
+  // note: s is clamped to the node size so corners stay fixed even for a malformed table.
+  int s = min(neighbourSpacing(node, side, t), sizeLog2);
+  return s > ownSpacing ? (t >> s) << s : t;
+}
+
+void main() {
+  int node = int(a_node);
+  NodeRecord r = u_nodes[node];
+  int n = 1 << r.res;
+  int i = int(a_ij.x), j = int(a_ij.y);
+  int so = r.sizeLog2 - r.res;
+  int tx = i << so, ty = j << so;
+  int sx = tx, sy = ty;
+  if (j == 0) sx = snapToNeighbour(node, kBottom, tx, so, r.sizeLog2);
+  if (j == n) sx = snapToNeighbour(node, kTop, tx, so, r.sizeLog2);
+  if (i == 0) sy = snapToNeighbour(node, kLeft, ty, so, r.sizeLog2);
+  if (i == n) sy = snapToNeighbour(node, kRight, ty, so, r.sizeLog2);
+
+  int ps = r.sizeLog2 - r.pageResLog2;
+  ivec2 texel = ivec2(sx >> ps, sy >> ps);
+  float height = texelFetch(u_heights, ivec3(texel, r.pageLayer), 0).r;
+  // Integer sample first, one conversion, one multiply: bit-identical across nodes.
+  v_world = vec3(float(r.origin.x + sx) * u_spacing.x, float(r.origin.y + sy) * u_spacing.y, height);
+  gl_Position = u_viewProj * vec4(v_world, 1.0);
+  v_pageUv = (vec2(texel) + 0.5) / float(textureSize(u_heights, 0).x);
+  v_pageLayer = r.pageLayer;
+}

@@ -1,0 +1,143 @@
+// Cracks measured on the real vertex shader: stitched positions captured with transform
+// feedback, every border vertex checked against the neighbours across that side.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "apps/pipeline.h"
+#include "runtime/adapt.h"
+#include "runtime/atlas_view.h"
+#include "runtime/gl/egl_context.h"
+#include "runtime/gl/terrain_scene.h"
+#include "runtime/stitch.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+class CrackTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() { context_ = gl::EglContext::create(); }
+  static void TearDownTestSuite() { context_.reset(); }
+  static std::unique_ptr<gl::EglContext> context_;
+
+  // Builds an atlas of `dem` into the temp dir and opens it.
+  AtlasView build(const std::filesystem::path& dem, uint32_t chartSize, uint32_t depth, uint32_t nodeRes,
+                  uint32_t minNodeRes) {
+    BuildOptions o;
+    o.input = dem;
+    o.output = dir_.path() / ("atlas_" + dem.stem().string() + "_" + std::to_string(chartSize));
+    o.chartSize = chartSize;
+    o.depth = depth;
+    o.nodeRes = nodeRes;
+    o.minNodeRes = minNodeRes;
+    buildAtlas(o);
+    return openAtlas(o.output);
+  }
+
+  // Crack count of a cut through the real shader; also checks the negative control.
+  CrackReport check(gl::TerrainScene& scene, const Cut& cut, bool expectControlToFail = true) {
+    const auto verts = scene.capture(cut);
+    EXPECT_EQ(verts.size(), cut.nodes.size());
+    for (size_t i = 0; i < verts.size(); ++i) EXPECT_EQ(verts[i].size(), size_t(((1u << cut.nodes[i].res) + 1) * ((1u << cut.nodes[i].res) + 1)));
+    const CrackReport r = countCracks(scene.atlas().hierarchy, cut, verts);
+    if (expectControlToFail) {
+      // Without the stitching tables the same cut must crack, or this test could not fail.
+      const CrackReport control = countCracks(scene.atlas().hierarchy, cut, scene.capture(cut, false));
+      EXPECT_GT(control.mismatches, 0u) << "negative control found no cracks";
+    }
+    return r;
+  }
+
+  test::TempDir dir_{"gimlod-crack"};
+};
+
+std::unique_ptr<gl::EglContext> CrackTest::context_;
+
+// Hand-made cuts: neighbours 1..3 levels and several resolutions apart, across chart borders.
+TEST_F(CrackTest, HandMadeCutsAcrossChartBorders) {
+  if (!test::haveSharedData()) GTEST_SKIP() << "no ../shared/data";
+  const AtlasView atlas = build(test::sharedData() / "terrain/SainteHelens.dem", 129, 4, 32, 2);
+  ASSERT_GE(atlas.hierarchy.chartCount(), 4u);
+  gl::SceneOptions so;
+  so.width = 64;
+  so.height = 48;
+  gl::TerrainScene scene(atlas, so);
+  const Hierarchy& h = atlas.hierarchy;
+  const uint32_t cx = atlas.manifest.chartsX;
+
+  // Chart 0 refined to leaves in its top-right corner (3 levels below the neighbour roots);
+  // charts 1 (right) and cx (top) stay roots at resolutions 3..5; chart cx+1 at level 1.
+  for (uint32_t rootRes : {3u, 4u, 5u}) {
+    Cut cut;
+    cut.nodes.push_back({{1, 0, 0, 0}, rootRes, 0});
+    cut.nodes.push_back({{cx, 0, 0, 0}, rootRes, 0});
+    for (uint32_t i = 0; i < 4; ++i) cut.nodes.push_back({NodeId{cx + 1, 0, 0, 0}.child(i), 2 + i % 3, 0});
+    // Chart 0: level-1 children except top-right, which is split down to level 3 at its corner.
+    for (uint32_t i = 0; i < 3; ++i) cut.nodes.push_back({NodeId{0, 0, 0, 0}.child(i), 2 + i, 0});
+    const NodeId tr = NodeId{0, 0, 0, 0}.child(3);
+    for (uint32_t i = 0; i < 3; ++i) cut.nodes.push_back({tr.child(i), 2 + (i % 2) * 3, 0});
+    const NodeId trtr = tr.child(3);
+    for (uint32_t i = 0; i < 4; ++i) cut.nodes.push_back({trtr.child(i), 2 + i % 3, 0});
+    cut.rebuildIndex();
+    // Cover the remaining charts with roots so every shared side has a neighbour.
+    for (uint32_t c = 0; c < h.chartCount(); ++c)
+      if (c != 0 && c != 1 && c != cx && c != cx + 1 && !(h.flags({c, 0, 0, 0}) & kNodeEmpty))
+        cut.nodes.push_back({{c, 0, 0, 0}, 4, 0});
+    cut.rebuildIndex();
+    ASSERT_EQ(countStitchViolations(h, cut), 0u) << "root res " << rootRes;
+    const CrackReport r = check(scene, cut);
+    EXPECT_GT(r.borderVertices, 100u);
+    EXPECT_EQ(r.mismatches, 0u) << "root res " << rootRes;
+  }
+}
+
+// Cuts adapted from several cameras over the real SRTM tiles.
+TEST_F(CrackTest, AdaptedCutsOverRealSrtmTiles) {
+  if (!test::haveSharedData()) GTEST_SKIP() << "no ../shared/data";
+  for (const char* tile : {"terrain/mt_rainier_90m.tif", "terrain/mt_fuji_90m.tif"}) {
+    const AtlasView atlas = build(test::sharedData() / tile, 257, 5, 32, 2);
+    gl::SceneOptions so;
+    so.width = 160;
+    so.height = 120;
+    gl::TerrainScene scene(atlas, so);
+    std::mt19937 rng(42);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    const glm::dvec3 ext = atlas.hi - atlas.lo;
+    uint32_t crossChart = 0;
+    for (int i = 0; i < 6; ++i) {
+      Camera cam;
+      cam.eye = atlas.lo + glm::dvec3(u(rng) * ext.x, u(rng) * ext.y, atlas.hi.z + (0.02 + 0.3 * u(rng)) * ext.x);
+      cam.target = atlas.lo + glm::dvec3(u(rng) * ext.x, u(rng) * ext.y, atlas.lo.z);
+      cam.nearPlane = cam.farPlane = 0.0;
+      fitClipPlanes(cam, atlas.lo, atlas.hi);
+      AdaptOptions o;
+      o.tolerancePx = 0.5 + 2.0 * u(rng);
+      o.maxNodes = 1500;
+      o.frustumCull = (i % 2) == 0;
+      const Cut cut = adaptErrorThreshold(atlas.hierarchy, makeViewParams(cam, so.width, so.height), o);
+      ASSERT_EQ(countStitchViolations(atlas.hierarchy, cut), 0u);
+      // Count resolution and level differences across sides, to show the cut is mixed.
+      uint32_t mixed = 0;
+      std::vector<SideNeighbour> ns;
+      for (const CutNode& n : cut.nodes)
+        for (uint32_t s = 0; s < 4; ++s) {
+          ns.clear();
+          sideNeighbours(atlas.hierarchy, cut, n.id, s, ns);
+          for (const SideNeighbour& sn : ns) {
+            const CutNode& m = cut.nodes[sn.cutIndex];
+            mixed += (m.id.level != n.id.level || m.res != n.res);
+            crossChart += m.id.chart != n.id.chart;
+          }
+        }
+      const CrackReport r = check(scene, cut, mixed > 0);
+      EXPECT_EQ(r.mismatches, 0u) << tile << " camera " << i << ": " << r.mismatches << " of "
+                                  << r.borderVertices << " border vertices";
+      EXPECT_GT(r.borderVertices, 0u);
+    }
+    EXPECT_GT(crossChart, 0u) << "no cut crossed a chart border";
+  }
+}
+
+}  // namespace
+}  // namespace gimlod
