@@ -5,7 +5,7 @@ set -euo pipefail
 
 PACKAGES=(
   build-essential cmake ninja-build pkg-config
-  libopenmesh-dev libcgal-dev libeigen3-dev libopenimageio-dev openimageio-tools python3-imath
+  libopenmesh-dev libcgal-dev libeigen3-dev libopenimageio-dev
   libgdal-dev gdal-bin
   libglfw3-dev libglm-dev libepoxy-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libgl-dev
   libtbb-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev

@@ -1,0 +1,115 @@
+// The command-line tool on bad input: each case gives a clear error naming the file or option,
+// a non-zero exit, and no atlas (partial or otherwise) left behind.
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+namespace fs = std::filesystem;
+
+class CliTest : public ::testing::Test {
+ protected:
+  // Runs `gimlod build INPUT -o OUT ARGS`; returns the exit code and keeps the output.
+  int build(const fs::path& input, const fs::path& out, const std::string& args = "") {
+    return test::runCommand(test::appPath().string() + " build '" + input.string() + "' -o '" +
+                                out.string() + "' " + args,
+                            &output_);
+  }
+  // Nothing named like the atlas, staged or final, is left in dir.
+  void expectNoAtlas(const fs::path& dir, const std::string& name) {
+    EXPECT_FALSE(fs::exists(dir / name)) << output_;
+    for (const auto& e : fs::directory_iterator(dir))
+      EXPECT_EQ(e.path().filename().string().find(name + ".partial"), std::string::npos) << e.path();
+  }
+  fs::path writeFile(const std::string& name, const std::string& bytes) {
+    const fs::path p = dir_.path() / name;
+    std::ofstream(p, std::ios::binary) << bytes;
+    return p;
+  }
+  fs::path dem() const { return test::repoData() / "terrain/mt_rainier_90m.tif"; }
+
+  test::TempDir dir_{"gimlod-cli"};
+  std::string output_;
+};
+
+TEST_F(CliTest, TruncatedGeoTiff) {
+  std::ifstream in(dem(), std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_GT(bytes.size(), 100000u);
+  const fs::path cut = writeFile("truncated.tif", bytes.substr(0, bytes.size() / 3));
+  EXPECT_NE(build(cut, dir_.path() / "a.atlas"), 0);
+  EXPECT_NE(output_.find("truncated.tif"), std::string::npos) << output_;
+  expectNoAtlas(dir_.path(), "a.atlas");
+}
+
+TEST_F(CliTest, NotARaster) {
+  const fs::path p = writeFile("notes.tif", "this is not a raster, just some text\n");
+  EXPECT_NE(build(p, dir_.path() / "a.atlas"), 0);
+  EXPECT_NE(output_.find("notes.tif"), std::string::npos) << output_;
+  expectNoAtlas(dir_.path(), "a.atlas");
+}
+
+TEST_F(CliTest, AllNodataRaster) {
+  // An ESRI ASCII grid (read through GDAL) whose samples are all nodata.
+  std::string grid = "ncols 4\nnrows 3\nxllcorner 0\nyllcorner 0\ncellsize 30\nNODATA_value -9999\n";
+  for (int r = 0; r < 3; ++r) grid += "-9999 -9999 -9999 -9999\n";
+  const fs::path p = writeFile("void.asc", grid);
+  EXPECT_NE(build(p, dir_.path() / "a.atlas"), 0);
+  EXPECT_NE(output_.find("void.asc"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("nodata"), std::string::npos) << output_;
+  expectNoAtlas(dir_.path(), "a.atlas");
+}
+
+TEST_F(CliTest, NansAreFilledAndReported) {
+  std::string grid = "ncols 9\nnrows 9\nxllcorner 0\nyllcorner 0\ncellsize 30\n";
+  for (int r = 0; r < 9; ++r) {
+    for (int c = 0; c < 9; ++c) grid += (r == 4 && c >= 3 && c <= 5) ? "nan " : std::to_string(100 + r + c) + " ";
+    grid += "\n";
+  }
+  const fs::path p = writeFile("nans.asc", grid);
+  EXPECT_EQ(build(p, dir_.path() / "n.atlas", "--chart-size 9 --depth 2 --node-res 4 --min-node-res 2"), 0) << output_;
+  EXPECT_NE(output_.find("voids filled      3"), std::string::npos) << output_;
+  EXPECT_TRUE(fs::exists(dir_.path() / "n.atlas/atlas.json"));
+}
+
+TEST_F(CliTest, InvalidOptions) {
+  for (const std::string args : {"--chart-size 500", "--chart-size 3", "--depth 0", "--depth 40",
+                                 "--node-res 48", "--z-scale 0", "--min-node-res 128"}) {
+    EXPECT_NE(build(dem(), dir_.path() / "a.atlas", args), 0) << args;
+    const std::string opt = args.substr(0, args.find(' '));
+    EXPECT_TRUE(output_.find(opt) != std::string::npos || output_.find("depth") != std::string::npos)
+        << args << ": " << output_;
+    expectNoAtlas(dir_.path(), "a.atlas");
+  }
+}
+
+TEST_F(CliTest, UnwritableOutput) {
+  EXPECT_NE(build(dem(), "/proc/gimlod_test.atlas"), 0);
+  EXPECT_NE(output_.find("/proc/gimlod_test.atlas"), std::string::npos) << output_;
+  const fs::path file = writeFile("plain.txt", "x");
+  EXPECT_NE(build(dem(), file / "a.atlas"), 0);
+  EXPECT_NE(output_.find("plain.txt"), std::string::npos) << output_;
+  // An existing non-atlas directory is never replaced.
+  fs::create_directories(dir_.path() / "mine");
+  writeFile("mine/keep.txt", "precious");
+  EXPECT_NE(build(dem(), dir_.path() / "mine"), 0);
+  EXPECT_TRUE(fs::exists(dir_.path() / "mine/keep.txt"));
+}
+
+TEST_F(CliTest, MissingInputAndBadRenderOptions) {
+  EXPECT_NE(build(dir_.path() / "nope.tif", dir_.path() / "a.atlas"), 0);
+  EXPECT_NE(output_.find("nope.tif"), std::string::npos) << output_;
+  const std::string app = test::appPath().string();
+  EXPECT_NE(test::runCommand(app + " render '" + (dir_.path() / "missing.atlas").string() + "' -o '" +
+                                 (dir_.path() / "out").string() + "' --orbit 1",
+                             &output_),
+            0);
+  EXPECT_NE(output_.find("missing.atlas"), std::string::npos) << output_;
+}
+
+}  // namespace
+}  // namespace gimlod
