@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 namespace gimlod {
 
@@ -165,21 +166,31 @@ TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOpt
     }
   }
 
+  uint64_t perChart = 0;  // samples in one chart's pyramid
+  for (uint32_t k = 0; k <= manifest.intervalsLog2(); ++k) {
+    const uint64_t s = (m >> k) + 1;
+    perChart += s * s;
+  }
+  // note: each chart in flight holds its pyramid and its file image (8 + 8 bytes per sample:
+  // about 1.4 GB for chartSize 8193), so concurrency is capped by a memory budget.
+  constexpr uint64_t kMemoryBudget = uint64_t{4} << 30;
+  const uint64_t perChartBytes = perChart * 2 * (sizeof(float) + sizeof(PackedNormal));
+  const int concurrency = static_cast<int>(std::clamp<uint64_t>(
+      kMemoryBudget / perChartBytes, 1,
+      static_cast<uint64_t>(tbb::this_task_arena::max_concurrency())));
   std::atomic<uint64_t> bytes{0};
-  tbb::parallel_for(size_t{0}, manifest.charts.size(), [&](size_t i) {
-    const ChartInfo& c = manifest.charts[i];
-    const ChartPyramid p = buildChartPyramid(dem, c.gridX, c.gridY, cs);
-    bytes += writeChartFile(dir / c.file, p, cs, options.blockIntervals);
+  tbb::task_arena arena(concurrency);
+  arena.execute([&] {
+    tbb::parallel_for(size_t{0}, manifest.charts.size(), [&](size_t i) {
+      const ChartInfo& c = manifest.charts[i];
+      const ChartPyramid p = buildChartPyramid(dem, c.gridX, c.gridY, cs);
+      bytes += writeChartFile(dir / c.file, p, cs, options.blockIntervals);
+    });
   });
 
   TerrainAtlasStats st;
   st.charts = cx * cy;
   st.samples = uint64_t{dem.width} * dem.height;
-  uint64_t perChart = 0;
-  for (uint32_t k = 0; k <= manifest.intervalsLog2(); ++k) {
-    const uint64_t s = (m >> k) + 1;
-    perChart += s * s;
-  }
   st.storedSamples = perChart * st.charts;
   st.bytesOnDisk = bytes.load();
   st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

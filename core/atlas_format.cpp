@@ -128,8 +128,8 @@ struct JsonReader {
   }
 };
 
-json toJson(const RootNeighbour& n) {
-  return json{{"chart", n.chart}, {"edge", n.edge}, {"reversed", n.reversed}};
+nlohmann::ordered_json toJson(const RootNeighbour& n) {
+  return nlohmann::ordered_json{{"chart", n.chart}, {"edge", n.edge}, {"reversed", n.reversed}};
 }
 
 }  // namespace
@@ -212,17 +212,18 @@ void atomicWriteFile(const fs::path& path, const void* data, size_t bytes) {
 // ---- manifest ---------------------------------------------------------------------------------
 
 void writeManifest(const fs::path& dir, const AtlasManifest& m) {
-  json charts = json::array();
+  using ojson = nlohmann::ordered_json;  // keeps "format" and "version" first
+  ojson charts = ojson::array();
   for (const ChartInfo& c : m.charts) {
-    json nb = json::array();
+    ojson nb = ojson::array();
     for (const RootNeighbour& n : c.neighbours) nb.push_back(toJson(n));
-    charts.push_back(json{{"id", c.id},
+    charts.push_back(ojson{{"id", c.id},
                           {"gridX", c.gridX},
                           {"gridY", c.gridY},
                           {"file", c.file},
                           {"neighbours", nb}});
   }
-  json j = {
+  ojson j = {
       {"format", kFormatTag},
       {"version", m.version},
       {"kind", m.kind},
@@ -251,7 +252,7 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
       {"charts", charts},
   };
   // note: dump() throws on invalid UTF-8 (e.g. a Latin-1 file name in `source`); replace instead.
-  const std::string text = j.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
+  const std::string text = j.dump(2, ' ', false, ojson::error_handler_t::replace) + "\n";
   atomicWriteFile(dir / kManifestName, text.data(), text.size());
 }
 

@@ -76,7 +76,9 @@ struct AtlasManifest {
   uint32_t pyramidLevels() const { return intervalsLog2() + 1; }
 };
 
-// Reads and validates dir/atlas.json. Throws InputError naming the file.
+// Reads and validates dir/atlas.json ("format": "gimlod-atlas", version, chart size and block
+// size, chart ids/grid positions, symmetric neighbours, relative chart paths, hierarchy
+// parameters). Throws InputError "<dir>/atlas.json: <problem>".
 AtlasManifest readManifest(const std::filesystem::path& dir);
 // Writes dir/atlas.json atomically.
 void writeManifest(const std::filesystem::path& dir, const AtlasManifest& m);
@@ -101,6 +103,8 @@ struct LevelLayout {
   uint32_t blocksPerSide = 0;  // max(1, (M >> level) / B)
   uint32_t blockSamples = 0;   // min(B, M >> level) + 1
 };
+// Layout of pyramid level `level`; throws std::logic_error on an invalid chartSize, blockIntervals
+// or level.
 LevelLayout levelLayout(uint32_t chartSize, uint32_t blockIntervals, uint32_t level);
 
 // One chart's pyramid in memory: level k is a (samples_k)^2 row-major image (row = v).
@@ -109,8 +113,14 @@ struct ChartPyramid {
   std::vector<std::vector<PackedNormal>> normals;  // [level][v * samples + u]
 };
 
-// Writes a chart file: header, block directory, then each level's height blocks and normal
-// blocks. Atomic. Returns bytes written.
+// Writes a chart file (little-endian): magic "GLMC", u32 version (1), u32 chartSize,
+// u32 blockIntervals, u32 levels; a directory, for each level and each block by rows
+// (by * blocksPerSide + bx), of u64 heightOffset and u64 normalOffset; then per block its
+// blockSamples^2 float32 heights followed by its blockSamples^2 PackedNormal, row-major. Block
+// (bx, by) of level k holds samples u in [bx*B, bx*B+B], v in [by*B, by*B+B] with
+// B = min(blockIntervals, M >> k): neighbouring blocks share one row/column. Built in memory and
+// written atomically. Returns bytes written. Throws std::invalid_argument on a malformed pyramid,
+// InputError if the file cannot be written.
 uint64_t writeChartFile(const std::filesystem::path& path, const ChartPyramid& pyramid,
                         uint32_t chartSize, uint32_t blockIntervals);
 

@@ -70,13 +70,21 @@ CrackReport countCracks(const Hierarchy& h, const Cut& cut,
       ++r.sharedSides;
       mine.clear();
       theirs.clear();
-      sideVertices(vertices[i], cut.nodes[i].res, s, mine);
+      const uint32_t res = cut.nodes[i].res;
+      sideVertices(vertices[i], res, s, mine);
       for (const SideNeighbour& n : ns)
         sideVertices(vertices[n.cutIndex], cut.nodes[n.cutIndex].res, n.theirSide, theirs);
       std::sort(theirs.begin(), theirs.end());
-      for (const Bits& b : mine) {
+      // Only the part of the side that a drawn neighbour covers is shared (the rest may face a
+      // culled or empty region, where nothing is drawn to crack against).
+      const uint32_t step = 1u << (h.params.intervalsLog2 - cut.nodes[i].id.level - res);
+      for (uint32_t k = 0; k < mine.size(); ++k) {
+        const uint32_t t = k * step;
+        const bool shared = std::any_of(ns.begin(), ns.end(),
+                                        [&](const SideNeighbour& n) { return t >= n.t0 && t <= n.t1; });
+        if (!shared) continue;
         ++r.borderVertices;
-        if (!std::binary_search(theirs.begin(), theirs.end(), b)) ++r.mismatches;
+        if (!std::binary_search(theirs.begin(), theirs.end(), mine[k])) ++r.mismatches;
       }
     }
   }

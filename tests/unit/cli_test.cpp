@@ -67,7 +67,7 @@ TEST_F(CliTest, AllNodataRaster) {
 TEST_F(CliTest, NansAreFilledAndReported) {
   std::string grid = "ncols 9\nnrows 9\nxllcorner 0\nyllcorner 0\ncellsize 30\n";
   for (int r = 0; r < 9; ++r) {
-    for (int c = 0; c < 9; ++c) grid += (r == 4 && c >= 3 && c <= 5) ? "nan " : std::to_string(100 + r + c) + " ";
+    for (int c = 0; c < 9; ++c) grid += (r == 4 && c >= 3 && c <= 5) ? "nan " : std::to_string(100 + r + c) + ".5 ";
     grid += "\n";
   }
   const fs::path p = writeFile("nans.asc", grid);

@@ -1,0 +1,530 @@
+// Based on Niski, Purnomo, Cohen, "Multi-grained Level of Detail Using a Hierarchical Seamless
+// Texture Atlas" (I3D 2007), section 7.3 (patch rendering with reusable (u,v) grids) and
+// section 7.4 (border stitching in the vertex program).
+#include "runtime/gl/renderer.h"
+
+#include <epoxy/gl.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/type_ptr.hpp>
+
+#include "gimlod_shaders.h"
+#include "runtime/gl/gl_objects.h"
+#include "runtime/gl/grid_strips.h"
+
+namespace gimlod::gl {
+namespace {
+
+constexpr GLuint kHeightsUnit = 0, kNormalsUnit = 1;
+constexpr GLuint kNodesBinding = 0, kStitchBinding = 1;  // SSBO bindings in terrain.vert
+constexpr GLuint kGridAttrib = 0, kNodeAttrib = 1;       // vertex attribute locations
+constexpr uint32_t kMaxGridResLog2 = 12;                 // (2^12+1)^2 vertices; ushort (i, j)
+
+// std430 layout of terrain.vert's NodeRecord.
+struct NodeRecord {
+  int32_t originX, originY, sizeLog2, res, pageResLog2, pageLayer, pad0, pad1;
+};
+static_assert(sizeof(NodeRecord) == 32);
+
+GLint getInteger(GLenum name) {
+  GLint v = 0;
+  glGetIntegerv(name, &v);
+  return v;
+}
+
+glm::vec3 lightDirection() { return glm::normalize(glm::vec3(-0.45f, -0.35f, 0.82f)); }
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+}  // namespace
+
+struct TerrainRenderer::Impl {
+  // One reusable grid inside the shared vertex and index buffers.
+  struct GridRange {
+    GLint baseVertex = 0;
+    GLsizei vertexCount = 0;
+    size_t indexOffsetBytes = 0;
+    GLsizei indexCount = 0;
+  };
+
+  RendererSetup setup;
+  uint32_t pageSide = 0;  // P = 2^pageIntervalsLog2 + 1
+  uint32_t capacity = 0;
+  GlObject colourBuffer, depthBuffer, framebuffer;
+  GlObject heights, normals;
+  GlObject gridVertices, gridIndices, nodeIndices, vertexArray;
+  uint32_t nodeIndexCapacity = 0;
+  std::vector<GridRange> grids;  // [res - minResLog2]
+  GlObject nodeBuffer, stitchBuffer, feedbackBuffer, feedbackQuery;
+  GlObject terrainProgram, staticProgram;
+
+  explicit Impl(const RendererSetup& s);
+  void checkLimits() const;
+  void createFramebuffer();
+  void createPagePool();
+  void createGrids();
+  void createVertexArray();
+  const GridRange& grid(uint32_t res) const { return grids[res - setup.minResLog2]; }
+  void ensureNodeIndices(size_t count);
+  void validate(std::span<const DrawNode> nodes, const StitchTables& stitch) const;
+  void uploadNodes(std::span<const DrawNode> nodes, const StitchTables& stitch);
+  void bindTerrain(const glm::mat4& viewProj, const glm::vec3& eye, const StitchTables& stitch);
+  void beginFrame() const;
+};
+
+TerrainRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
+  if (setup.width == 0 || setup.height == 0)
+    throw std::invalid_argument("TerrainRenderer: framebuffer size must be positive");
+  if (setup.minResLog2 > setup.maxResLog2 || setup.maxResLog2 > kMaxGridResLog2)
+    throw std::invalid_argument("TerrainRenderer: need minResLog2 <= maxResLog2 <= " +
+                                std::to_string(kMaxGridResLog2));
+  if (setup.pageIntervalsLog2 > kMaxGridResLog2)
+    throw std::invalid_argument("TerrainRenderer: pageIntervalsLog2 too large");
+  checkGl("context before TerrainRenderer setup");
+  checkLimits();
+  pageSide = (1u << setup.pageIntervalsLog2) + 1;
+  createFramebuffer();
+  createPagePool();
+  createGrids();
+  createVertexArray();
+  terrainProgram = linkProgram("terrain", kShader_terrain_vert, kShader_terrain_frag, {"v_world"});
+  staticProgram = linkProgram("static_mesh", kShader_static_mesh_vert, kShader_static_mesh_frag);
+  glUseProgram(terrainProgram.id());
+  glUniform1i(uniform(terrainProgram, "u_heights"), kHeightsUnit);
+  glUniform1i(uniform(terrainProgram, "u_normals"), kNormalsUnit);
+  glUseProgram(0);
+  nodeBuffer = makeBuffer();
+  stitchBuffer = makeBuffer();
+  feedbackBuffer = makeBuffer();
+  feedbackQuery = makeQuery();
+  checkGl("TerrainRenderer setup");
+}
+
+void TerrainRenderer::Impl::checkLimits() const {
+  if (getInteger(GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS) < 2)
+    throw std::runtime_error("TerrainRenderer: the GL implementation offers fewer than 2 shader "
+                             "storage blocks in the vertex stage");
+  const GLint maxSide = getInteger(GL_MAX_TEXTURE_SIZE);
+  if (static_cast<int64_t>(setup.width) > getInteger(GL_MAX_RENDERBUFFER_SIZE) ||
+      static_cast<int64_t>(setup.height) > getInteger(GL_MAX_RENDERBUFFER_SIZE) ||
+      (int64_t(1) << setup.pageIntervalsLog2) + 1 > maxSide)
+    throw std::runtime_error("TerrainRenderer: framebuffer or page size exceeds GL limits");
+}
+
+void TerrainRenderer::Impl::createFramebuffer() {
+  colourBuffer = makeRenderbuffer();
+  glBindRenderbuffer(GL_RENDERBUFFER, colourBuffer.id());
+  glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, GLsizei(setup.width), GLsizei(setup.height));
+  depthBuffer = makeRenderbuffer();
+  glBindRenderbuffer(GL_RENDERBUFFER, depthBuffer.id());
+  glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT32F, GLsizei(setup.width),
+                        GLsizei(setup.height));
+  glBindRenderbuffer(GL_RENDERBUFFER, 0);
+  framebuffer = makeFramebuffer();
+  glBindFramebuffer(GL_FRAMEBUFFER, framebuffer.id());
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER,
+                            colourBuffer.id());
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER,
+                            depthBuffer.id());
+  const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  if (status != GL_FRAMEBUFFER_COMPLETE)
+    throw std::runtime_error("TerrainRenderer: offscreen framebuffer incomplete (status 0x" +
+                             std::to_string(status) + ")");
+  checkGl("framebuffer creation");
+}
+
+void TerrainRenderer::Impl::createPagePool() {
+  capacity = std::clamp<uint32_t>(setup.pageCapacity, 1,
+                                  static_cast<uint32_t>(getInteger(GL_MAX_ARRAY_TEXTURE_LAYERS)));
+  auto makeArray = [&](GLenum format, GLint filter) {
+    GlObject tex = makeTexture();
+    glBindTexture(GL_TEXTURE_2D_ARRAY, tex.id());
+    glTexStorage3D(GL_TEXTURE_2D_ARRAY, 1, format, GLsizei(pageSide), GLsizei(pageSide),
+                   GLsizei(capacity));
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, filter);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, filter);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAX_LEVEL, 0);
+    checkGl("page pool glTexStorage3D");
+    return tex;
+  };
+  heights = makeArray(GL_R32F, GL_NEAREST);
+  normals = makeArray(GL_RGBA8, GL_LINEAR);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+}
+
+void TerrainRenderer::Impl::createGrids() {
+  std::vector<uint16_t> vertices;  // (i, j) pairs of every grid, back to back
+  std::vector<uint32_t> indices;   // grid-local indices; base vertex selects the grid
+  for (uint32_t res = setup.minResLog2; res <= setup.maxResLog2; ++res) {
+    const uint32_t side = (1u << res) + 1;
+    GridRange range;
+    range.baseVertex = GLint(vertices.size() / 2);
+    range.vertexCount = GLsizei(side * side);
+    for (uint32_t j = 0; j < side; ++j)
+      for (uint32_t i = 0; i < side; ++i) {
+        vertices.push_back(uint16_t(i));
+        vertices.push_back(uint16_t(j));
+      }
+    const std::vector<uint32_t> strips = buildGridStripIndices(res);
+    range.indexOffsetBytes = indices.size() * sizeof(uint32_t);
+    range.indexCount = GLsizei(strips.size());
+    indices.insert(indices.end(), strips.begin(), strips.end());
+    grids.push_back(range);
+  }
+  gridVertices = makeBuffer();
+  glBindBuffer(GL_ARRAY_BUFFER, gridVertices.id());
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(vertices.size() * sizeof(uint16_t)), vertices.data(),
+               GL_STATIC_DRAW);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
+  gridIndices = makeBuffer();
+  glBindBuffer(GL_ARRAY_BUFFER, gridIndices.id());  // bound to the VAO as element buffer later
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(indices.size() * sizeof(uint32_t)), indices.data(),
+               GL_STATIC_DRAW);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
+  checkGl("grid buffers");
+}
+
+void TerrainRenderer::Impl::createVertexArray() {
+  nodeIndices = makeBuffer();
+  vertexArray = makeVertexArray();
+  glBindVertexArray(vertexArray.id());
+  glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, gridIndices.id());
+  glBindBuffer(GL_ARRAY_BUFFER, gridVertices.id());
+  glEnableVertexAttribArray(kGridAttrib);
+  glVertexAttribIPointer(kGridAttrib, 2, GL_UNSIGNED_SHORT, 2 * sizeof(uint16_t), nullptr);
+  glBindBuffer(GL_ARRAY_BUFFER, nodeIndices.id());
+  glEnableVertexAttribArray(kNodeAttrib);
+  glVertexAttribIPointer(kNodeAttrib, 1, GL_UNSIGNED_INT, sizeof(uint32_t), nullptr);
+  glVertexAttribDivisor(kNodeAttrib, 1);  // baseinstance picks the node record
+  glBindVertexArray(0);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
+  ensureNodeIndices(256);
+  checkGl("vertex array setup");
+}
+
+void TerrainRenderer::Impl::ensureNodeIndices(size_t count) {
+  if (count <= nodeIndexCapacity) return;
+  uint32_t cap = std::max<uint32_t>(nodeIndexCapacity, 256);
+  while (cap < count) cap *= 2;
+  std::vector<uint32_t> ids(cap);
+  for (uint32_t k = 0; k < cap; ++k) ids[k] = k;
+  glBindBuffer(GL_ARRAY_BUFFER, nodeIndices.id());
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(cap * sizeof(uint32_t)), ids.data(), GL_STATIC_DRAW);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
+  nodeIndexCapacity = cap;
+}
+
+void TerrainRenderer::Impl::validate(std::span<const DrawNode> nodes,
+                                     const StitchTables& stitch) const {
+  if (stitch.entriesPerSide == 0) throw std::invalid_argument("StitchTables: entriesPerSide = 0");
+  if (!stitch.bytes.empty() && stitch.bytes.size() < nodes.size() * 4 * stitch.entriesPerSide)
+    throw std::invalid_argument("StitchTables: fewer bytes than nodes * 4 * entriesPerSide");
+  for (const DrawNode& n : nodes) {
+    const bool ok = n.res >= setup.minResLog2 && n.res <= setup.maxResLog2 &&
+                    n.res <= n.pageResLog2 && n.pageResLog2 <= setup.pageIntervalsLog2 &&
+                    n.pageResLog2 <= n.sizeLog2 && n.sizeLog2 < 30 && n.pageLayer < capacity;
+    if (!ok)
+      throw std::invalid_argument(
+          "TerrainRenderer: bad DrawNode (origin " + std::to_string(n.originX) + "," +
+          std::to_string(n.originY) + " sizeLog2 " + std::to_string(n.sizeLog2) + " res " +
+          std::to_string(n.res) + " pageResLog2 " + std::to_string(n.pageResLog2) + " layer " +
+          std::to_string(n.pageLayer) + ")");
+  }
+}
+
+void TerrainRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
+                                        const StitchTables& stitch) {
+  validate(nodes, stitch);
+  std::vector<NodeRecord> records(std::max<size_t>(nodes.size(), 1), NodeRecord{});
+  for (size_t k = 0; k < nodes.size(); ++k) {
+    const DrawNode& n = nodes[k];
+    records[k] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.res),
+                  int32_t(n.pageResLog2), int32_t(n.pageLayer), 0, 0};
+  }
+  glBindBuffer(GL_SHADER_STORAGE_BUFFER, nodeBuffer.id());
+  glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(records.size() * sizeof(NodeRecord)),
+               records.data(), GL_STREAM_DRAW);
+  // note: an empty table means "no neighbours anywhere"; the shader still needs the words.
+  const size_t tableBytes = nodes.size() * 4 * stitch.entriesPerSide;
+  std::vector<uint32_t> words(std::max<size_t>((tableBytes + 3) / 4, 1), 0u);
+  if (!stitch.bytes.empty()) std::memcpy(words.data(), stitch.bytes.data(), tableBytes);
+  glBindBuffer(GL_SHADER_STORAGE_BUFFER, stitchBuffer.id());
+  glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(words.size() * sizeof(uint32_t)),
+               words.data(), GL_STREAM_DRAW);
+  glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kNodesBinding, nodeBuffer.id());
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kStitchBinding, stitchBuffer.id());
+  ensureNodeIndices(nodes.size());
+  checkGl("node and stitch table upload");
+}
+
+void TerrainRenderer::Impl::bindTerrain(const glm::mat4& viewProj, const glm::vec3& eye,
+                                        const StitchTables& stitch) {
+  const GlObject& p = terrainProgram;
+  glUseProgram(p.id());
+  const glm::vec2 spacing(float(setup.spacing[0]), float(setup.spacing[1]));
+  const glm::vec2 valid(float(setup.validSamples[0]), float(setup.validSamples[1]));
+  const glm::vec3 light = lightDirection();
+  glUniformMatrix4fv(uniform(p, "u_viewProj"), 1, GL_FALSE, glm::value_ptr(viewProj));
+  glUniform3fv(uniform(p, "u_eye"), 1, glm::value_ptr(eye));
+  glUniform2fv(uniform(p, "u_spacing"), 1, glm::value_ptr(spacing));
+  glUniform1i(uniform(p, "u_leafLog2"), GLint(stitch.leafLog2));
+  glUniform1i(uniform(p, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
+  glUniform2fv(uniform(p, "u_validSamples"), 1, glm::value_ptr(valid));
+  glUniform2f(uniform(p, "u_heightRange"), setup.heightRange[0], setup.heightRange[1]);
+  glUniform3fv(uniform(p, "u_lightDir"), 1, glm::value_ptr(light));
+  glUniform3f(uniform(p, "u_background"), setup.background[0], setup.background[1],
+              setup.background[2]);
+  // note: fog scale from the valid extent; no fog when the extent is unknown.
+  const float fog = 1.5f * glm::length(valid * spacing);
+  glUniform1f(uniform(p, "u_fogDistance"), fog);
+  glActiveTexture(GL_TEXTURE0 + kHeightsUnit);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, heights.id());
+  glActiveTexture(GL_TEXTURE0 + kNormalsUnit);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, normals.id());
+  glActiveTexture(GL_TEXTURE0);
+  glBindVertexArray(vertexArray.id());
+  checkGl("terrain state");
+}
+
+void TerrainRenderer::Impl::beginFrame() const {
+  glBindFramebuffer(GL_FRAMEBUFFER, framebuffer.id());
+  glViewport(0, 0, GLsizei(setup.width), GLsizei(setup.height));
+  glDisable(GL_RASTERIZER_DISCARD);
+  glDisable(GL_CULL_FACE);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDepthMask(GL_TRUE);
+  glClearColor(setup.background[0], setup.background[1], setup.background[2], 1.0f);
+  glClearDepth(1.0);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+}
+
+TerrainRenderer::TerrainRenderer(const RendererSetup& setup)
+    : impl_(std::make_unique<Impl>(setup)) {}
+
+TerrainRenderer::~TerrainRenderer() = default;
+
+uint32_t TerrainRenderer::pageCapacity() const { return impl_->capacity; }
+
+void TerrainRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* heights,
+                                 const PackedNormal* normals) {
+  if (layer >= impl_->capacity || samplesPerSide == 0 || samplesPerSide > impl_->pageSide ||
+      !heights)
+    throw std::invalid_argument("TerrainRenderer::uploadPage: layer " + std::to_string(layer) +
+                                " / side " + std::to_string(samplesPerSide) + " out of range");
+  const GLsizei s = GLsizei(samplesPerSide);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->heights.id());
+  glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, GL_RED, GL_FLOAT, heights);
+  if (normals) {
+    glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->normals.id());
+    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, GL_RGBA,
+                    GL_UNSIGNED_BYTE, normals);
+  }
+  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  checkGl("uploadPage glTexSubImage3D");
+}
+
+DrawStats TerrainRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
+                                std::span<const DrawNode> nodes, const StitchTables& stitch) {
+  Impl& m = *impl_;
+  DrawStats stats;
+  const auto t0 = Clock::now();
+  m.beginFrame();
+  if (!nodes.empty()) {
+    m.uploadNodes(nodes, stitch);
+    m.bindTerrain(viewProj, eye, stitch);
+    glEnable(GL_PRIMITIVE_RESTART_FIXED_INDEX);  // 0xFFFFFFFF for 32-bit indices
+    for (size_t k = 0; k < nodes.size(); ++k) {
+      const Impl::GridRange& g = m.grid(nodes[k].res);
+      glDrawElementsInstancedBaseVertexBaseInstance(
+          GL_TRIANGLE_STRIP, g.indexCount, GL_UNSIGNED_INT,
+          reinterpret_cast<const void*>(g.indexOffsetBytes), 1, g.baseVertex, GLuint(k));
+      stats.triangles += uint64_t(2) << (2 * nodes[k].res);
+      ++stats.drawCalls;
+    }
+    glDisable(GL_PRIMITIVE_RESTART_FIXED_INDEX);
+    glBindVertexArray(0);
+    glUseProgram(0);
+  }
+  glFinish();
+  stats.drawMs = msSince(t0);
+  checkGl("TerrainRenderer::draw");
+  return stats;
+}
+
+std::vector<uint8_t> TerrainRenderer::readPixels() const {
+  const uint32_t w = impl_->setup.width, h = impl_->setup.height;
+  std::vector<uint8_t> bottomUp(size_t(w) * h * 4), out(bottomUp.size());
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, impl_->framebuffer.id());
+  glReadBuffer(GL_COLOR_ATTACHMENT0);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(0, 0, GLsizei(w), GLsizei(h), GL_RGBA, GL_UNSIGNED_BYTE, bottomUp.data());
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+  checkGl("readPixels");
+  const size_t row = size_t(w) * 4;
+  for (uint32_t y = 0; y < h; ++y)
+    std::memcpy(out.data() + size_t(y) * row, bottomUp.data() + size_t(h - 1 - y) * row, row);
+  return out;
+}
+
+std::vector<std::vector<glm::vec3>> TerrainRenderer::captureVertices(
+    std::span<const DrawNode> nodes, const StitchTables& stitch) {
+  Impl& m = *impl_;
+  std::vector<std::vector<glm::vec3>> out(nodes.size());
+  if (nodes.empty()) return out;
+  m.uploadNodes(nodes, stitch);
+  m.bindTerrain(glm::mat4(1.0f), glm::vec3(0.0f), stitch);
+  size_t total = 0;
+  for (const DrawNode& n : nodes) total += size_t(m.grid(n.res).vertexCount);
+  const GLsizeiptr bytes = GLsizeiptr(total * sizeof(glm::vec3));
+  glBindBuffer(GL_TRANSFORM_FEEDBACK_BUFFER, m.feedbackBuffer.id());
+  glBufferData(GL_TRANSFORM_FEEDBACK_BUFFER, bytes, nullptr, GL_STREAM_READ);
+  glBindBufferBase(GL_TRANSFORM_FEEDBACK_BUFFER, 0, m.feedbackBuffer.id());
+  // note: draws need a complete framebuffer even with rasterizer discard, and a surfaceless
+  // context has no default one.
+  glBindFramebuffer(GL_FRAMEBUFFER, m.framebuffer.id());
+  glEnable(GL_RASTERIZER_DISCARD);
+  glBeginQuery(GL_TRANSFORM_FEEDBACK_PRIMITIVES_WRITTEN, m.feedbackQuery.id());
+  glBeginTransformFeedback(GL_POINTS);
+  for (size_t k = 0; k < nodes.size(); ++k) {
+    const Impl::GridRange& g = m.grid(nodes[k].res);
+    glDrawArraysInstancedBaseInstance(GL_POINTS, g.baseVertex, g.vertexCount, 1, GLuint(k));
+  }
+  glEndTransformFeedback();
+  glEndQuery(GL_TRANSFORM_FEEDBACK_PRIMITIVES_WRITTEN);
+  glDisable(GL_RASTERIZER_DISCARD);
+  glBindVertexArray(0);
+  glUseProgram(0);
+  checkGl("captureVertices transform feedback");
+  GLuint written = 0;
+  glGetQueryObjectuiv(m.feedbackQuery.id(), GL_QUERY_RESULT, &written);
+  if (written != total)
+    throw std::runtime_error("captureVertices: transform feedback wrote " +
+                             std::to_string(written) + " of " + std::to_string(total) +
+                             " vertices");
+  const auto* mapped = static_cast<const glm::vec3*>(
+      glMapBufferRange(GL_TRANSFORM_FEEDBACK_BUFFER, 0, bytes, GL_MAP_READ_BIT));
+  if (!mapped) {
+    checkGl("captureVertices glMapBufferRange");
+    throw std::runtime_error("captureVertices: glMapBufferRange returned null");
+  }
+  size_t offset = 0;
+  for (size_t k = 0; k < nodes.size(); ++k) {
+    const size_t count = size_t(m.grid(nodes[k].res).vertexCount);
+    out[k].assign(mapped + offset, mapped + offset + count);
+    offset += count;
+  }
+  glUnmapBuffer(GL_TRANSFORM_FEEDBACK_BUFFER);
+  glBindBuffer(GL_TRANSFORM_FEEDBACK_BUFFER, 0);
+  glBindBufferBase(GL_TRANSFORM_FEEDBACK_BUFFER, 0, 0);
+  checkGl("captureVertices read back");
+  return out;
+}
+
+namespace {
+
+// A plain indexed grid over [0,1]^2 with a smooth height field, for the throughput baseline.
+struct StaticMesh {
+  GlObject vertices, indices, vertexArray;
+  GLsizei indexCount = 0;
+  uint64_t triangles = 0;
+};
+
+float staticHeight(float x, float y) {
+  return 0.08f * std::sin(6.0f * x) * std::cos(5.0f * y) + 0.04f * std::sin(17.0f * x + 3.0f * y);
+}
+
+StaticMesh buildStaticMesh(uint64_t triangles) {
+  const uint32_t side = std::max<uint32_t>(
+      1, static_cast<uint32_t>(std::lround(std::sqrt(double(triangles) / 2.0))));
+  if (uint64_t(side) * side * 6 > uint64_t(std::numeric_limits<GLsizei>::max()))
+    throw std::invalid_argument("drawStaticMeshMs: too many triangles");
+  std::vector<glm::vec3> positions;
+  positions.reserve(size_t(side + 1) * (side + 1));
+  for (uint32_t j = 0; j <= side; ++j)
+    for (uint32_t i = 0; i <= side; ++i) {
+      const float x = float(i) / float(side), y = float(j) / float(side);
+      positions.emplace_back(x, y, staticHeight(x, y));
+    }
+  std::vector<uint32_t> idx;
+  idx.reserve(size_t(side) * side * 6);
+  for (uint32_t j = 0; j < side; ++j)
+    for (uint32_t i = 0; i < side; ++i) {
+      const uint32_t a = j * (side + 1) + i, b = a + 1, c = b + side + 1, d = a + side + 1;
+      idx.insert(idx.end(), {a, b, c, a, c, d});
+    }
+  StaticMesh mesh;
+  mesh.triangles = uint64_t(2) * side * side;
+  mesh.indexCount = GLsizei(idx.size());
+  mesh.vertexArray = makeVertexArray();
+  glBindVertexArray(mesh.vertexArray.id());
+  mesh.vertices = makeBuffer();
+  glBindBuffer(GL_ARRAY_BUFFER, mesh.vertices.id());
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(positions.size() * sizeof(glm::vec3)),
+               positions.data(), GL_STATIC_DRAW);
+  glEnableVertexAttribArray(0);
+  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(glm::vec3), nullptr);
+  mesh.indices = makeBuffer();
+  glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mesh.indices.id());
+  glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(idx.size() * sizeof(uint32_t)), idx.data(),
+               GL_STATIC_DRAW);
+  glBindVertexArray(0);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
+  checkGl("static mesh upload");
+  return mesh;
+}
+
+}  // namespace
+
+double TerrainRenderer::drawStaticMeshMs(uint64_t triangles, uint32_t frames,
+                                         uint64_t* drawnTriangles) {
+  Impl& m = *impl_;
+  const StaticMesh mesh = buildStaticMesh(triangles);
+  if (drawnTriangles) *drawnTriangles = mesh.triangles;
+  const float aspect = float(m.setup.width) / float(m.setup.height);
+  const glm::mat4 viewProj =
+      glm::perspective(glm::radians(50.0f), aspect, 0.01f, 10.0f) *
+      glm::lookAt(glm::vec3(0.5f, -0.55f, 0.75f), glm::vec3(0.5f, 0.45f, 0.0f),
+                  glm::vec3(0.0f, 0.0f, 1.0f));
+  glUseProgram(m.staticProgram.id());
+  glUniformMatrix4fv(uniform(m.staticProgram, "u_viewProj"), 1, GL_FALSE,
+                     glm::value_ptr(viewProj));
+  glUniform2f(uniform(m.staticProgram, "u_heightRange"), -0.12f, 0.12f);
+  auto frame = [&] {
+    m.beginFrame();
+    glUseProgram(m.staticProgram.id());
+    glBindVertexArray(mesh.vertexArray.id());
+    glDrawElements(GL_TRIANGLES, mesh.indexCount, GL_UNSIGNED_INT, nullptr);
+    glFinish();
+  };
+  frame();  // warm-up: first use compiles shader variants and faults in buffers
+  checkGl("drawStaticMeshMs warm-up");
+  double totalMs = 0.0;
+  for (uint32_t f = 0; f < frames; ++f) {
+    const auto t0 = Clock::now();
+    frame();
+    totalMs += msSince(t0);
+  }
+  glBindVertexArray(0);
+  glUseProgram(0);
+  checkGl("drawStaticMeshMs");
+  return frames ? totalMs / frames : 0.0;
+}
+
+}  // namespace gimlod::gl

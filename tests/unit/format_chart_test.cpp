@@ -1,0 +1,210 @@
+// Tests for the chart file format (block layout, round trip, corrupt files) and atomic writes.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <fstream>
+#include <atomic>
+#include <random>
+#include <thread>
+#include <vector>
+
+#include "core/atlas_format.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+namespace fs = std::filesystem;
+
+ChartPyramid makePyramid(uint32_t chartSize, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> d(-500.f, 4000.f);
+  ChartPyramid p;
+  const uint32_t m = chartSize - 1;
+  for (uint32_t s = m; ; s >>= 1) {
+    const size_t n = size_t(s + 1) * (s + 1);
+    std::vector<float> h(n);
+    std::vector<PackedNormal> nr(n);
+    for (size_t i = 0; i < n; ++i) {
+      h[i] = d(rng);
+      nr[i] = PackedNormal{uint8_t(rng()), uint8_t(rng()), uint8_t(rng()), 255};
+    }
+    p.heights.push_back(std::move(h));
+    p.normals.push_back(std::move(nr));
+    if (s == 1) break;
+  }
+  return p;
+}
+
+TEST(FormatChart, LevelLayout) {
+  LevelLayout l = levelLayout(65, 16, 0);
+  EXPECT_EQ(l.samples, 65u);
+  EXPECT_EQ(l.blocksPerSide, 4u);
+  EXPECT_EQ(l.blockSamples, 17u);
+  l = levelLayout(65, 16, 1);
+  EXPECT_EQ(l.samples, 33u);
+  EXPECT_EQ(l.blocksPerSide, 2u);
+  l = levelLayout(65, 16, 2);
+  EXPECT_EQ(l.blocksPerSide, 1u);
+  EXPECT_EQ(l.blockSamples, 17u);
+  l = levelLayout(65, 16, 3);
+  EXPECT_EQ(l.samples, 9u);
+  EXPECT_EQ(l.blocksPerSide, 1u);
+  EXPECT_EQ(l.blockSamples, 9u);
+  l = levelLayout(65, 16, 6);
+  EXPECT_EQ(l.samples, 2u);
+  EXPECT_EQ(l.blockSamples, 2u);
+  EXPECT_THROW(levelLayout(65, 16, 7), std::logic_error);
+  EXPECT_THROW(levelLayout(64, 16, 0), std::logic_error);
+  EXPECT_THROW(levelLayout(65, 12, 0), std::logic_error);
+  AtlasManifest m;
+  m.chartSize = 513;
+  EXPECT_EQ(m.intervalsLog2(), 9u);
+  EXPECT_EQ(m.pyramidLevels(), 10u);
+  EXPECT_TRUE(isChartSizeValid(3));
+  EXPECT_TRUE(isChartSizeValid(8193));
+  EXPECT_FALSE(isChartSizeValid(500));
+  EXPECT_FALSE(isChartSizeValid(2));
+}
+
+TEST(FormatChart, PackNormal) {
+  EXPECT_EQ(packNormal(0, 0, 1), (PackedNormal{128, 128, 255, 255}));
+  EXPECT_EQ(packNormal(-1, 1, 0), (PackedNormal{0, 255, 128, 255}));
+  auto u = unpackNormal(packNormal(0.6f, -0.8f, 0.f));
+  EXPECT_NEAR(u[0], 0.6f, 1.f / 127);
+  EXPECT_NEAR(u[1], -0.8f, 1.f / 127);
+}
+
+TEST(FormatChart, RoundTripBlocksAndWindows) {
+  test::TempDir tmp("gimlod-chart");
+  const uint32_t cs = 65, bi = 16;
+  const ChartPyramid p = makePyramid(cs, 7);
+  ASSERT_EQ(p.heights.size(), 7u);
+  const fs::path f = tmp.path() / "chart_0000.bin";
+  const uint64_t bytes = writeChartFile(f, p, cs, bi);
+  EXPECT_EQ(bytes, fs::file_size(f));
+  for (const auto& e : fs::directory_iterator(tmp.path()))
+    EXPECT_EQ(e.path().filename(), "chart_0000.bin") << "temporary file left behind";
+
+  ChartFileReader r(f);
+  EXPECT_EQ(r.chartSize(), cs);
+  EXPECT_EQ(r.blockIntervals(), bi);
+  EXPECT_EQ(r.levels(), 7u);
+  for (uint32_t k = 0; k < r.levels(); ++k) {
+    EXPECT_EQ(r.readLevelHeights(k), p.heights[k]) << "level " << k;
+    EXPECT_EQ(r.readLevelNormals(k), p.normals[k]) << "level " << k;
+  }
+  // Windows: whole blocks, sub-windows, windows touching the shared block row/column.
+  struct W { uint32_t level, u0, v0, n; };
+  const W windows[] = {{0, 0, 0, 16},  {0, 16, 32, 16}, {0, 48, 48, 16}, {0, 20, 37, 5},
+                       {0, 16, 16, 0}, {0, 64, 64, 0},  {0, 60, 0, 4},   {1, 16, 0, 16},
+                       {1, 3, 18, 8},  {2, 0, 0, 16},   {3, 2, 4, 4},    {6, 0, 0, 1}};
+  for (const W& w : windows) {
+    const LevelLayout l = levelLayout(cs, bi, w.level);
+    const uint32_t n1 = w.n + 1;
+    std::vector<float> h(n1 * n1);
+    std::vector<PackedNormal> nr(n1 * n1);
+    r.readHeights(w.level, w.u0, w.v0, w.n, h.data());
+    r.readNormals(w.level, w.u0, w.v0, w.n, nr.data());
+    for (uint32_t v = 0; v < n1; ++v)
+      for (uint32_t u = 0; u < n1; ++u) {
+        const size_t src = size_t(w.v0 + v) * l.samples + w.u0 + u;
+        ASSERT_EQ(h[v * n1 + u], p.heights[w.level][src]) << w.level << " " << w.u0 << " " << w.v0;
+        ASSERT_EQ(nr[v * n1 + u], p.normals[w.level][src]);
+      }
+  }
+  float buf[64 * 64];
+  EXPECT_THROW(r.readHeights(0, 10, 0, 16, buf), std::logic_error);  // crosses u = 16
+  EXPECT_THROW(r.readHeights(0, 0, 60, 5, buf), std::logic_error);   // beyond the level
+  EXPECT_THROW(r.readHeights(7, 0, 0, 1, buf), std::logic_error);    // no such level
+}
+
+TEST(FormatChart, ConcurrentReads) {
+  test::TempDir tmp("gimlod-chart");
+  const ChartPyramid p = makePyramid(129, 3);
+  const fs::path f = tmp.path() / "c.bin";
+  writeChartFile(f, p, 129, 32);
+  ChartFileReader r(f);
+  std::vector<std::thread> threads;
+  std::atomic<int> bad{0};
+  for (int t = 0; t < 4; ++t)
+    threads.emplace_back([&, t] {
+      std::vector<float> h(33 * 33);
+      for (int i = 0; i < 200; ++i) {
+        const uint32_t bx = (i + t) % 4, by = (i * 3 + t) % 4;
+        r.readHeights(0, bx * 32, by * 32, 32, h.data());
+        for (uint32_t v = 0; v <= 32; ++v)
+          for (uint32_t u = 0; u <= 32; ++u)
+            if (h[v * 33 + u] != p.heights[0][(by * 32 + v) * 129 + bx * 32 + u]) ++bad;
+      }
+    });
+  for (auto& th : threads) th.join();
+  EXPECT_EQ(bad.load(), 0);
+}
+
+void expectReaderError(const fs::path& f, const char* what) {
+  try {
+    ChartFileReader r(f);
+    FAIL() << "expected InputError (" << what << ")";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(f.filename().string()), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+  }
+}
+
+TEST(FormatChart, TruncatedAndCorruptFiles) {
+  test::TempDir tmp("gimlod-chart");
+  const ChartPyramid p = makePyramid(65, 1);
+  const fs::path good = tmp.path() / "good.bin";
+  const uint64_t size = writeChartFile(good, p, 65, 16);
+  std::ifstream in(good, std::ios::binary);
+  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), {});
+  auto writeBytes = [&](const char* name, const std::vector<char>& b) {
+    const fs::path f = tmp.path() / name;
+    std::ofstream(f, std::ios::binary).write(b.data(), std::streamsize(b.size()));
+    return f;
+  };
+  expectReaderError(writeBytes("cut_end.bin", {bytes.begin(), bytes.end() - 1}), "truncated");
+  expectReaderError(writeBytes("cut_half.bin", {bytes.begin(), bytes.begin() + size / 2}),
+                    "truncated");
+  expectReaderError(writeBytes("cut_dir.bin", {bytes.begin(), bytes.begin() + 40}), "truncated");
+  expectReaderError(writeBytes("cut_header.bin", {bytes.begin(), bytes.begin() + 10}), "truncated");
+  expectReaderError(writeBytes("empty.bin", {}), "truncated");
+  std::vector<char> bad = bytes;
+  bad[0] = 'X';
+  expectReaderError(writeBytes("bad_magic.bin", bad), "magic");
+  bad = bytes;
+  bad[8] = 64;  // chartSize 64
+  expectReaderError(writeBytes("bad_size.bin", bad), "corrupt");
+  bad = bytes;
+  bad[20 + 7] = 0x7f;  // first block's height offset far beyond the file
+  expectReaderError(writeBytes("bad_offset.bin", bad), "corrupt");
+  expectReaderError(tmp.path() / "missing.bin", "cannot");
+}
+
+TEST(FormatChart, AtomicWriteFailsCleanly) {
+  test::TempDir tmp("gimlod-chart");
+  const char data[] = "hello";
+  const fs::path ok = tmp.path() / "ok.txt";
+  atomicWriteFile(ok, data, 5);
+  atomicWriteFile(ok, data, 3);  // overwrite
+  EXPECT_EQ(fs::file_size(ok), 3u);
+  const fs::path bad = tmp.path() / "no_such_dir" / "x.bin";
+  try {
+    atomicWriteFile(bad, data, 5);
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no_such_dir/x.bin"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("No such file"), std::string::npos) << e.what();
+  }
+  // Renaming onto a directory fails after the temp file was written: the temp must be gone.
+  const fs::path dirTarget = tmp.path() / "a_directory";
+  fs::create_directories(dirTarget / "child");
+  EXPECT_THROW(atomicWriteFile(dirTarget, data, 5), InputError);
+  size_t files = 0;
+  for (const auto& e : fs::directory_iterator(tmp.path())) files += e.is_regular_file();
+  EXPECT_EQ(files, 1u);  // only ok.txt
+}
+
+}  // namespace
+}  // namespace gimlod

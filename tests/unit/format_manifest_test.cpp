@@ -1,0 +1,165 @@
+// Tests for the atlas manifest (atlas.json): round trip and validation errors.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <functional>
+
+#include <nlohmann/json.hpp>
+
+#include "core/atlas_format.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+// A consistent 2 x 1 heightfield manifest.
+AtlasManifest sampleManifest() {
+  AtlasManifest m;
+  m.chartSize = 129;
+  m.blockIntervals = 32;
+  m.chartsX = 2;
+  m.chartsY = 1;
+  m.samplesX = 250;
+  m.samplesY = 100;
+  m.spacing = {63.9731, 92.6343};
+  m.zScale = 1.5;
+  m.heightRange = {-12.5f, 4392.25f};
+  m.voidsFilled = 9033;
+  m.voidFillMethod = "pull-push";
+  m.source = "mt_rainier_90m.tif";
+  m.georef.wkt = "GEOGCRS[\"WGS 84\"]";
+  m.georef.geotransform = {-122.0004166, 0.000833333, 0, 47.0004166, 0, -0.000833333};
+  m.georef.geographic = true;
+  m.georef.centreLatitudeDeg = 46.5;
+  m.depth = 3;
+  m.maxNodeResLog2 = 5;
+  m.minNodeResLog2 = 2;
+  for (uint32_t i = 0; i < 2; ++i) {
+    ChartInfo c;
+    c.id = i;
+    c.gridX = int32_t(i);
+    c.file = i == 0 ? "charts/chart_0000.bin" : "charts/chart_0001.bin";
+    m.charts.push_back(c);
+  }
+  m.charts[0].neighbours[kEdgeRight] = {1, kEdgeLeft, true};
+  m.charts[1].neighbours[kEdgeLeft] = {0, kEdgeRight, true};
+  return m;
+}
+
+TEST(FormatManifest, RoundTrip) {
+  test::TempDir tmp("gimlod-manifest");
+  const AtlasManifest a = sampleManifest();
+  writeManifest(tmp.path(), a);
+  const AtlasManifest b = readManifest(tmp.path());
+  EXPECT_EQ(b.version, kAtlasFormatVersion);
+  EXPECT_EQ(b.kind, a.kind);
+  EXPECT_EQ(b.chartSize, a.chartSize);
+  EXPECT_EQ(b.blockIntervals, a.blockIntervals);
+  EXPECT_EQ(b.chartsX, a.chartsX);
+  EXPECT_EQ(b.chartsY, a.chartsY);
+  EXPECT_EQ(b.samplesX, a.samplesX);
+  EXPECT_EQ(b.samplesY, a.samplesY);
+  EXPECT_EQ(b.spacing, a.spacing);  // exact: doubles round-trip through JSON
+  EXPECT_EQ(b.zScale, a.zScale);
+  EXPECT_EQ(b.heightRange, a.heightRange);
+  EXPECT_EQ(b.voidsFilled, a.voidsFilled);
+  EXPECT_EQ(b.voidFillMethod, a.voidFillMethod);
+  EXPECT_EQ(b.source, a.source);
+  EXPECT_EQ(b.georef.wkt, a.georef.wkt);
+  EXPECT_EQ(b.georef.geotransform, a.georef.geotransform);
+  EXPECT_EQ(b.georef.geographic, a.georef.geographic);
+  EXPECT_EQ(b.georef.centreLatitudeDeg, a.georef.centreLatitudeDeg);
+  EXPECT_EQ(b.hierarchyFile, a.hierarchyFile);
+  EXPECT_EQ(b.depth, a.depth);
+  EXPECT_EQ(b.maxNodeResLog2, a.maxNodeResLog2);
+  EXPECT_EQ(b.minNodeResLog2, a.minNodeResLog2);
+  ASSERT_EQ(b.charts.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(b.charts[i].id, a.charts[i].id);
+    EXPECT_EQ(b.charts[i].gridX, a.charts[i].gridX);
+    EXPECT_EQ(b.charts[i].gridY, a.charts[i].gridY);
+    EXPECT_EQ(b.charts[i].file, a.charts[i].file);
+    for (int e = 0; e < 4; ++e) {
+      EXPECT_EQ(b.charts[i].neighbours[e].chart, a.charts[i].neighbours[e].chart);
+      EXPECT_EQ(b.charts[i].neighbours[e].edge, a.charts[i].neighbours[e].edge);
+      EXPECT_EQ(b.charts[i].neighbours[e].reversed, a.charts[i].neighbours[e].reversed);
+    }
+  }
+  std::ifstream in(tmp.path() / kManifestName);
+  const json j = json::parse(in);
+  EXPECT_EQ(j["format"], "gimlod-atlas");
+  EXPECT_EQ(j["version"], kAtlasFormatVersion);
+}
+
+// Writes the sample manifest, edits its JSON, and expects readManifest to fail naming the
+// manifest and mentioning `what`.
+void expectBad(const std::function<void(json&)>& edit, const std::string& what) {
+  test::TempDir tmp("gimlod-manifest");
+  writeManifest(tmp.path(), sampleManifest());
+  const fs::path file = tmp.path() / kManifestName;
+  json j;
+  {
+    std::ifstream in(file);
+    j = json::parse(in);
+  }
+  edit(j);
+  std::ofstream(file) << j.dump();
+  try {
+    readManifest(tmp.path());
+    FAIL() << "expected InputError mentioning '" << what << "'";
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find(file.string() + ": "), std::string::npos) << msg;
+    EXPECT_NE(msg.find(what), std::string::npos) << msg;
+  }
+}
+
+TEST(FormatManifest, ValidationErrors) {
+  expectBad([](json& j) { j["format"] = "something-else"; }, "not a gimlod atlas manifest");
+  expectBad([](json& j) { j.erase("format"); }, "not a gimlod atlas manifest");
+  expectBad([](json& j) { j["version"] = 99; }, "unsupported atlas format version 99");
+  expectBad([](json& j) { j["chartSize"] = 500; }, "chartSize 500 is not 2^m+1");
+  expectBad([](json& j) { j["chartSize"] = -129; }, "chartSize");
+  expectBad([](json& j) { j["blockIntervals"] = 256; }, "blockIntervals 256");
+  expectBad([](json& j) { j.erase("spacing"); }, "missing field 'spacing'");
+  expectBad([](json& j) { j["spacing"] = {1.0, -2.0}; }, "spacing must be positive");
+  expectBad([](json& j) { j["kind"] = "voxels"; }, "unknown atlas kind");
+  expectBad([](json& j) { j["chartsX"] = 3; }, "inconsistent chart list");
+  expectBad([](json& j) { j["charts"][1]["id"] = 5; }, "inconsistent chart list");
+  expectBad([](json& j) { j["charts"][1]["gridX"] = 0; }, "inconsistent chart list");
+  expectBad([](json& j) { j["charts"][0]["neighbours"][1]["chart"] = -1; },
+            "inconsistent chart list");
+  expectBad([](json& j) { j["charts"][0]["neighbours"][1]["edge"] = 2; },
+            "inconsistent chart list");
+  expectBad([](json& j) { j["charts"][0]["neighbours"][1]["chart"] = 7; }, "out of range");
+  expectBad([](json& j) { j["charts"][0]["file"] = "../../etc/passwd"; }, "relative path");
+  expectBad([](json& j) { j["charts"][0].erase("neighbours"); }, "charts[0].neighbours");
+  expectBad([](json& j) { j["hierarchy"]["maxNodeResLog2"] = 6; }, "log2(blockIntervals)");
+  expectBad([](json& j) { j["hierarchy"]["depth"] = 0; }, "hierarchy.depth");
+  expectBad([](json& j) { j["zScale"] = "big"; }, "zScale");
+  expectBad([](json& j) { j = json::array(); }, "not a JSON object");
+}
+
+TEST(FormatManifest, MissingAndMalformedFiles) {
+  test::TempDir tmp("gimlod-manifest");
+  try {
+    readManifest(tmp.path());
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(kManifestName), std::string::npos) << e.what();
+  }
+  std::ofstream(tmp.path() / kManifestName) << "{ \"format\": \"gimlod-atlas\", ";
+  try {
+    readManifest(tmp.path());
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("invalid JSON"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(readManifest(tmp.path() / "nope"), InputError);
+}
+
+}  // namespace
+}  // namespace gimlod
