@@ -29,6 +29,13 @@ constexpr GLuint kGridAttrib = 0, kNodeAttrib = 1;       // vertex attribute loc
 constexpr uint32_t kMaxGridResLog2 = 12;                 // (2^12+1)^2 vertices; ushort (i, j)
 
 // std430 layout of terrain.vert's NodeRecord.
+// Layout fixed by GL for glMultiDrawElementsIndirect.
+struct DrawElementsIndirectCommand {
+  GLuint count, instanceCount, firstIndex;
+  GLint baseVertex;
+  GLuint baseInstance;
+};
+
 struct NodeRecord {
   int32_t originX, originY, sizeLog2, res, pageResLog2, pageLayer, pad0, pad1;
 };
@@ -66,8 +73,8 @@ struct TerrainRenderer::Impl {
   GlObject gridVertices, gridIndices, nodeIndices, vertexArray;
   uint32_t nodeIndexCapacity = 0;
   std::vector<GridRange> grids;  // [res - minResLog2]
-  GlObject nodeBuffer, stitchBuffer, feedbackBuffer, feedbackQuery;
-  GlObject terrainProgram, staticProgram;
+  GlObject nodeBuffer, stitchBuffer, indirectBuffer, feedbackBuffer, feedbackQuery;
+  GlObject terrainProgram, staticProgram, staticTerrainProgram;
 
   explicit Impl(const RendererSetup& s);
   void checkLimits() const;
@@ -79,6 +86,7 @@ struct TerrainRenderer::Impl {
   void ensureNodeIndices(size_t count);
   void validate(std::span<const DrawNode> nodes, const StitchTables& stitch) const;
   void uploadNodes(std::span<const DrawNode> nodes, const StitchTables& stitch);
+  void setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const;
   void bindTerrain(const glm::mat4& viewProj, const glm::vec3& eye, const StitchTables& stitch);
   void beginFrame() const;
 };
@@ -100,12 +108,16 @@ TerrainRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   createVertexArray();
   terrainProgram = linkProgram("terrain", kShader_terrain_vert, kShader_terrain_frag, {"v_world"});
   staticProgram = linkProgram("static_mesh", kShader_static_mesh_vert, kShader_static_mesh_frag);
+  staticTerrainProgram = linkProgram("static_terrain", kShader_static_terrain_vert, kShader_terrain_frag);
   glUseProgram(terrainProgram.id());
   glUniform1i(uniform(terrainProgram, "u_heights"), kHeightsUnit);
   glUniform1i(uniform(terrainProgram, "u_normals"), kNormalsUnit);
+  glUseProgram(staticTerrainProgram.id());
+  glUniform1i(uniform(staticTerrainProgram, "u_normals"), kNormalsUnit);
   glUseProgram(0);
   nodeBuffer = makeBuffer();
   stitchBuffer = makeBuffer();
+  indirectBuffer = makeBuffer();
   feedbackBuffer = makeBuffer();
   feedbackQuery = makeQuery();
   checkGl("TerrainRenderer setup");
@@ -272,9 +284,8 @@ void TerrainRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
   checkGl("node and stitch table upload");
 }
 
-void TerrainRenderer::Impl::bindTerrain(const glm::mat4& viewProj, const glm::vec3& eye,
-                                        const StitchTables& stitch) {
-  const GlObject& p = terrainProgram;
+void TerrainRenderer::Impl::setShading(const GlObject& p, const glm::mat4& viewProj,
+                                       const glm::vec3& eye) const {
   glUseProgram(p.id());
   const glm::vec2 spacing(float(setup.spacing[0]), float(setup.spacing[1]));
   const glm::vec2 valid(float(setup.validSamples[0]), float(setup.validSamples[1]));
@@ -282,8 +293,6 @@ void TerrainRenderer::Impl::bindTerrain(const glm::mat4& viewProj, const glm::ve
   glUniformMatrix4fv(uniform(p, "u_viewProj"), 1, GL_FALSE, glm::value_ptr(viewProj));
   glUniform3fv(uniform(p, "u_eye"), 1, glm::value_ptr(eye));
   glUniform2fv(uniform(p, "u_spacing"), 1, glm::value_ptr(spacing));
-  glUniform1i(uniform(p, "u_leafLog2"), GLint(stitch.leafLog2));
-  glUniform1i(uniform(p, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
   glUniform2fv(uniform(p, "u_validSamples"), 1, glm::value_ptr(valid));
   glUniform2f(uniform(p, "u_heightRange"), setup.heightRange[0], setup.heightRange[1]);
   glUniform3fv(uniform(p, "u_lightDir"), 1, glm::value_ptr(light));
@@ -297,6 +306,13 @@ void TerrainRenderer::Impl::bindTerrain(const glm::mat4& viewProj, const glm::ve
   glActiveTexture(GL_TEXTURE0 + kNormalsUnit);
   glBindTexture(GL_TEXTURE_2D_ARRAY, normals.id());
   glActiveTexture(GL_TEXTURE0);
+}
+
+void TerrainRenderer::Impl::bindTerrain(const glm::mat4& viewProj, const glm::vec3& eye,
+                                        const StitchTables& stitch) {
+  setShading(terrainProgram, viewProj, eye);
+  glUniform1i(uniform(terrainProgram, "u_leafLog2"), GLint(stitch.leafLog2));
+  glUniform1i(uniform(terrainProgram, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
   glBindVertexArray(vertexArray.id());
   checkGl("terrain state");
 }
@@ -350,14 +366,20 @@ DrawStats TerrainRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
     m.uploadNodes(nodes, stitch);
     m.bindTerrain(viewProj, eye, stitch);
     glEnable(GL_PRIMITIVE_RESTART_FIXED_INDEX);  // 0xFFFFFFFF for 32-bit indices
+    // One multi-draw for the whole cut: a command per node, baseInstance selects its record.
+    std::vector<DrawElementsIndirectCommand> commands(nodes.size());
     for (size_t k = 0; k < nodes.size(); ++k) {
       const Impl::GridRange& g = m.grid(nodes[k].res);
-      glDrawElementsInstancedBaseVertexBaseInstance(
-          GL_TRIANGLE_STRIP, g.indexCount, GL_UNSIGNED_INT,
-          reinterpret_cast<const void*>(g.indexOffsetBytes), 1, g.baseVertex, GLuint(k));
+      commands[k] = {GLuint(g.indexCount), 1, GLuint(g.indexOffsetBytes / sizeof(uint32_t)),
+                     g.baseVertex, GLuint(k)};
       stats.triangles += uint64_t(2) << (2 * nodes[k].res);
-      ++stats.drawCalls;
     }
+    glBindBuffer(GL_DRAW_INDIRECT_BUFFER, m.indirectBuffer.id());
+    glBufferData(GL_DRAW_INDIRECT_BUFFER, GLsizeiptr(commands.size() * sizeof(commands[0])),
+                 commands.data(), GL_STREAM_DRAW);
+    glMultiDrawElementsIndirect(GL_TRIANGLE_STRIP, GL_UNSIGNED_INT, nullptr, GLsizei(commands.size()), 0);
+    glBindBuffer(GL_DRAW_INDIRECT_BUFFER, 0);
+    stats.drawCalls = 1;
     glDisable(GL_PRIMITIVE_RESTART_FIXED_INDEX);
     glBindVertexArray(0);
     glUseProgram(0);
@@ -524,6 +546,46 @@ double TerrainRenderer::drawStaticMeshMs(uint64_t triangles, uint32_t frames,
   glBindVertexArray(0);
   glUseProgram(0);
   checkGl("drawStaticMeshMs");
+  return frames ? totalMs / frames : 0.0;
+}
+
+}  // namespace gimlod::gl
+
+namespace gimlod::gl {
+
+double TerrainRenderer::drawMeshMs(std::span<const glm::vec3> positions,
+                                   std::span<const uint32_t> triangles, const glm::mat4& viewProj,
+                                   const glm::vec3& eye, uint32_t frames) {
+  Impl& m = *impl_;
+  if (triangles.size() % 3 != 0) throw std::invalid_argument("drawMeshMs: index count not a multiple of 3");
+  GlObject vao = makeVertexArray(), vbo = makeBuffer(), ibo = makeBuffer();
+  glBindVertexArray(vao.id());
+  glBindBuffer(GL_ARRAY_BUFFER, vbo.id());
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(positions.size_bytes()), positions.data(), GL_STATIC_DRAW);
+  glEnableVertexAttribArray(0);
+  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(glm::vec3), nullptr);
+  glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo.id());
+  glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(triangles.size_bytes()), triangles.data(), GL_STATIC_DRAW);
+  glBindVertexArray(0);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
+  checkGl("drawMeshMs upload");
+  auto frame = [&] {
+    m.beginFrame();
+    m.setShading(m.staticTerrainProgram, viewProj, eye);
+    glBindVertexArray(vao.id());
+    glDrawElements(GL_TRIANGLES, GLsizei(triangles.size()), GL_UNSIGNED_INT, nullptr);
+    glFinish();
+  };
+  frame();  // warm-up
+  double totalMs = 0.0;
+  for (uint32_t f = 0; f < frames; ++f) {
+    const auto t0 = Clock::now();
+    frame();
+    totalMs += msSince(t0);
+  }
+  glBindVertexArray(0);
+  glUseProgram(0);
+  checkGl("drawMeshMs");
   return frames ? totalMs / frames : 0.0;
 }
 

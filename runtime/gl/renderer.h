@@ -31,7 +31,7 @@ struct RendererSetup {
 struct DrawStats {
   double drawMs = 0.0;     // CPU wall time of submission + glFinish
   uint64_t triangles = 0;  // triangles submitted (grids, excluding strip degenerates)
-  uint32_t drawCalls = 0;
+  uint32_t drawCalls = 0;  // GL draw calls issued (one multi-draw for the whole cut)
 };
 
 class TerrainRenderer {
@@ -62,6 +62,12 @@ class TerrainRenderer {
   // Baseline for throughput: draws one static indexed mesh with about `triangles` triangles
   // (a plain VBO of positions, no texture fetch) `frames` times; returns ms per frame.
   double drawStaticMeshMs(uint64_t triangles, uint32_t frames, uint64_t* drawnTriangles);
+
+  // Baseline at equal work: draws one static indexed triangle mesh (plain positions, one draw,
+  // no texture fetch or stitching) with the terrain fragment shader, from the given camera,
+  // `frames` times; returns ms per frame (submission + glFinish, as draw()).
+  double drawMeshMs(std::span<const glm::vec3> positions, std::span<const uint32_t> triangles,
+                    const glm::mat4& viewProj, const glm::vec3& eye, uint32_t frames);
 
  private:
   struct Impl;

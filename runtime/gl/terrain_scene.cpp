@@ -100,6 +100,17 @@ FrameResult TerrainScene::renderFrame(const Camera& camera, const AdaptOptions& 
   const uint32_t room = (cache_.capacity() - atlas_.hierarchy.chartCount()) * 3 / 4;
   if (o.maxNodes == 0 || o.maxNodes > room) o.maxNodes = room;
   f.cut = adaptErrorThreshold(atlas_.hierarchy, view, o, &f.adapt);
+  // Front to back, so early depth testing rejects hidden fragments.
+  const Hierarchy& h = atlas_.hierarchy;
+  auto distance2 = [&](const CutNode& n) {
+    const auto& b = h.bounds(n.id);
+    const glm::dvec3 c{0.5 * (b[0] + b[3]), 0.5 * (b[1] + b[4]), 0.5 * (b[2] + b[5])};
+    const glm::dvec3 d = c - camera.eye;
+    return glm::dot(d, d);
+  };
+  std::sort(f.cut.nodes.begin(), f.cut.nodes.end(),
+            [&](const CutNode& a, const CutNode& b) { return distance2(a) < distance2(b); });
+  f.cut.rebuildIndex();
   f.adaptMs = msSince(t0);
   f.draw = drawCut(camera, f.cut, &f);
   return f;

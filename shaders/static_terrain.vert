@@ -1,0 +1,14 @@
+#version 430 core
+// Throughput baseline: the same surface as one static mesh of plain positions (no texture fetch,
+// no stitching), shaded by terrain.frag so only the vertex path differs.
+layout(location = 0) in vec3 a_position;
+uniform mat4 u_viewProj;
+out vec3 v_world;
+out vec2 v_pageUv;
+flat out int v_pageLayer;
+void main() {
+  v_world = a_position;
+  v_pageUv = vec2(0.5);
+  v_pageLayer = 0;
+  gl_Position = u_viewProj * vec4(a_position, 1.0);
+}
