@@ -146,16 +146,20 @@ void buildChart(const HierarchyParams& p, const AtlasManifest& m, const ChartInf
   }
 }
 
+void putBytes(std::vector<uint8_t>& b, const void* p, size_t n) {
+  const size_t at = b.size();
+  b.resize(at + n);
+  if (n) std::memcpy(b.data() + at, p, n);
+}
+
 template <typename T>
 void put(std::vector<uint8_t>& b, const T& v) {
-  const auto* p = reinterpret_cast<const uint8_t*>(&v);
-  b.insert(b.end(), p, p + sizeof(T));
+  putBytes(b, &v, sizeof(T));
 }
 
 template <typename T>
 void putVec(std::vector<uint8_t>& b, const std::vector<T>& v) {
-  const auto* p = reinterpret_cast<const uint8_t*>(v.data());
-  b.insert(b.end(), p, p + v.size() * sizeof(T));
+  putBytes(b, v.data(), v.size() * sizeof(T));
 }
 
 }  // namespace
@@ -212,7 +216,7 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeight
 
 void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h) {
   std::vector<uint8_t> b;
-  b.insert(b.end(), kMagic, kMagic + 4);
+  putBytes(b, kMagic, 4);
   put(b, kHierarchyVersion);
   put(b, uint32_t(h.charts.size()));
   put(b, h.params.intervalsLog2);

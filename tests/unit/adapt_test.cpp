@@ -62,7 +62,9 @@ TEST(Adapt, ErrorWithinToleranceAndPartition) {
     EXPECT_FALSE(st.nodeBudgetBound);
     for (const CutNode& n : cut.nodes) {
       const bool atFinest = n.res == w.h.params.maxRes(n.id.level) && n.id.level + 1 == w.h.params.depth;
-      if (!atFinest) EXPECT_LE(n.errorPx, o.tolerancePx + 1e-9) << "level " << n.id.level;
+      if (!atFinest) {
+        EXPECT_LE(n.errorPx, o.tolerancePx + 1e-9) << "level " << n.id.level;
+      }
     }
     EXPECT_EQ(countStitchViolations(w.h, cut), 0u);
   }

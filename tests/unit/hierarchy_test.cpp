@@ -47,15 +47,18 @@ void checkInvariants(const Hierarchy& hier, const AtlasManifest& m,
         for (uint32_t x = 0; x < (1u << l); ++x) {
           const NodeId n{c, l, x, y};
           // Error is zero at the source resolution and never decreases as resolution drops.
-          if (p.maxRes(l) == p.intervalsLog2 - l) EXPECT_EQ(hier.error(n, p.maxRes(l)), 0.f);
+          if (p.maxRes(l) == p.intervalsLog2 - l) {
+            EXPECT_EQ(hier.error(n, p.maxRes(l)), 0.f);
+          }
           for (uint32_t r = p.minNodeResLog2; r < p.maxRes(l); ++r)
             ASSERT_GE(hier.error(n, r), hier.error(n, r + 1)) << "chart " << c << " level " << l;
           // A parent's error is at least each child's at the same pyramid level.
           if (l + 1 < p.depth)
             for (uint32_t i = 0; i < 4; ++i)
               for (uint32_t r = std::max(p.minNodeResLog2 + 1, 1u); r <= p.maxRes(l); ++r)
-                if (r - 1 <= p.maxRes(l + 1) && r - 1 >= p.minNodeResLog2)
+                if (r - 1 <= p.maxRes(l + 1) && r - 1 >= p.minNodeResLog2) {
                   ASSERT_GE(hier.error(n, r), hier.error(n.child(i), r - 1));
+                }
           // Bounds contain every sample of the region.
           const auto& b = hier.bounds(n);
           for (uint32_t v = y * size; v <= (y + 1) * size; ++v)

@@ -1,0 +1,89 @@
+// End to end through the command-line tool: build the shipped DEM, render an orbit and the
+// shipped fly-by headless, and check the frames and per-frame statistics.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::vector<std::vector<std::string>> readCsv(const fs::path& p) {
+  std::ifstream f(p);
+  std::vector<std::vector<std::string>> rows;
+  std::string line;
+  while (std::getline(f, line)) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) cells.push_back(cell);
+    rows.push_back(cells);
+  }
+  return rows;
+}
+
+TEST(RenderCli, BuildAndRenderShippedDem) {
+  test::TempDir dir("gimlod-render");
+  const std::string app = test::appPath().string();
+  const fs::path atlas = dir.path() / "rainier.atlas";
+  std::string out;
+  ASSERT_EQ(test::runCommand(app + " build '" + (test::repoData() / "terrain/mt_rainier_90m.tif").string() +
+                                 "' -o '" + atlas.string() + "'",
+                             &out),
+            0)
+      << out;
+  const auto stats = nlohmann::json::parse(std::ifstream(atlas / "stats.json"));
+  EXPECT_EQ(stats["charts"].get<int>(), 9);
+  EXPECT_EQ(stats["voids_filled"].get<int>(), 9033);
+  EXPECT_GT(stats["hierarchy_samples_per_second"].get<double>(), 0.0);
+  EXPECT_GT(stats["bytes_on_disk"].get<double>(), 1e6);
+  EXPECT_TRUE(fs::exists(atlas / "hierarchy.bin"));
+
+  // Rebuilding over an existing atlas replaces it and leaves nothing staged behind.
+  ASSERT_EQ(test::runCommand(app + " build '" + (test::repoData() / "terrain/mt_rainier_90m.tif").string() +
+                                 "' -o '" + atlas.string() + "' --chart-size 257 --depth 4",
+                             &out),
+            0)
+      << out;
+  EXPECT_EQ(nlohmann::json::parse(std::ifstream(atlas / "stats.json"))["charts"].get<int>(), 25);
+  for (const auto& e : fs::directory_iterator(dir.path()))
+    EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos) << e.path();
+
+  const double tolerance = 1.5;
+  for (const std::string& camera : {std::string("--orbit 3"), "--path '" + (fs::path(GIMLOD_REPO_DATA).parent_path() / "scenes/rainier_flyby.json").string() + "'"}) {
+    const fs::path frames = dir.path() / "frames";
+    fs::remove_all(frames);
+    ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + frames.string() + "' " + camera +
+                                   " --size 96x64 --tolerance 1.5 --background 20,30,40",
+                               &out),
+              0)
+        << out;
+    const auto rows = readCsv(frames / "stats.csv");
+    ASSERT_GE(rows.size(), 4u);
+    const auto& head = rows[0];
+    auto col = [&](const std::string& name) {
+      return size_t(std::find(head.begin(), head.end(), name) - head.begin());
+    };
+    for (const char* name : {"frame", "nodes", "triangles", "max_screen_error_px", "adapt_ms", "draw_ms"})
+      ASSERT_LT(col(name), head.size()) << name;
+    for (size_t r = 1; r < rows.size(); ++r) {
+      char name[32];
+      std::snprintf(name, sizeof(name), "frame_%04zu.png", r - 1);
+      EXPECT_TRUE(fs::exists(frames / name)) << name;
+      EXPECT_GT(std::stoul(rows[r][col("nodes")]), 0u);
+      EXPECT_GT(std::stoull(rows[r][col("triangles")]), 0u);
+      if (rows[r][col("node_budget_bound")] == "0") {
+        EXPECT_LE(std::stod(rows[r][col("max_screen_error_px")]), tolerance) << camera << " frame " << r - 1;
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace gimlod
