@@ -7,6 +7,7 @@ in vec2 v_pageUv;
 flat in int v_pageLayer;
 
 uniform sampler2DArray u_normals;  // RGBA8, n * 0.5 + 0.5, bilinear
+uniform sampler2DArray u_heights;  // R32F page heights, bilinear here (texelFetch in the vertex shader)
 uniform vec2 u_spacing;
 uniform vec2 u_validSamples;  // samples per axis; 0 = unlimited
 uniform vec2 u_heightRange;
@@ -39,8 +40,16 @@ void main() {
 
   vec3 n = texture(u_normals, vec3(v_pageUv, float(v_pageLayer))).rgb * 2.0 - 1.0;
   n = length(n) > 1e-4 ? normalize(n) : vec3(0.0, 0.0, 1.0);
-  float span = max(u_heightRange.y - u_heightRange.x, 1e-6);
-  vec3 base = hypsometric(clamp((v_world.z - u_heightRange.x) / span, 0.0, 1.0));
+  // Below sea level (only when the data goes below 0): bathymetric blues; above: the land ramp.
+  // Colour follows the page heights (finer than the drawn grid), like the normal map.
+  float h = texture(u_heights, vec3(v_pageUv, float(v_pageLayer))).r;
+  float landLow = max(u_heightRange.x, 0.0);
+  float span = max(u_heightRange.y - landLow, 1e-6);
+  vec3 base = hypsometric(clamp((h - landLow) / span, 0.0, 1.0));
+  if (h < 0.0 && u_heightRange.x < 0.0) {
+    float depth = clamp(h / u_heightRange.x, 0.0, 1.0);
+    base = mix(vec3(0.30, 0.55, 0.75), vec3(0.05, 0.12, 0.35), sqrt(depth));
+  }
   vec3 colour = base * (0.30 + 0.70 * max(dot(n, u_lightDir), 0.0));
   if (u_fogDistance > 0.0) {
     float d = length(v_world - u_eye) / u_fogDistance;

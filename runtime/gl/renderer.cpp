@@ -113,6 +113,7 @@ TerrainRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   glUniform1i(uniform(terrainProgram, "u_heights"), kHeightsUnit);
   glUniform1i(uniform(terrainProgram, "u_normals"), kNormalsUnit);
   glUseProgram(staticTerrainProgram.id());
+  glUniform1i(uniform(staticTerrainProgram, "u_heights"), kHeightsUnit);
   glUniform1i(uniform(staticTerrainProgram, "u_normals"), kNormalsUnit);
   glUseProgram(0);
   nodeBuffer = makeBuffer();
@@ -173,7 +174,9 @@ void TerrainRenderer::Impl::createPagePool() {
     checkGl("page pool glTexStorage3D");
     return tex;
   };
-  heights = makeArray(GL_R32F, GL_NEAREST);
+  // note: the vertex shader reads heights with texelFetch (no filtering); the fragment shader
+  // samples them bilinearly for colouring at page resolution, finer than the drawn grid.
+  heights = makeArray(GL_R32F, GL_LINEAR);
   normals = makeArray(GL_RGBA8, GL_LINEAR);
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
 }
