@@ -112,23 +112,11 @@ ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t grid
   return p;
 }
 
-TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOptions& options,
-                                     const fs::path& dir, AtlasManifest& manifest) {
-  const auto start = std::chrono::steady_clock::now();
+void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& options,
+                         AtlasManifest& manifest) {
   validateTerrainAtlasOptions(options);
-  if (dem.width == 0 || dem.height == 0 || dem.heights.size() != size_t{dem.width} * dem.height)
-    throw std::invalid_argument("writeTerrainCharts: empty or inconsistent DEM");
   const uint32_t cs = options.chartSize;
-  const uint32_t m = cs - 1;
-  const uint32_t cx = chartsAlong(dem.width, m), cy = chartsAlong(dem.height, m);
-
-  std::error_code ec;
-  const fs::path chartDir = dir / "charts";
-  fs::create_directories(chartDir, ec);
-  if (ec || !fs::is_directory(chartDir))
-    throw InputError(chartDir.string() + ": cannot create directory: " +
-                     (ec ? ec.message() : std::string("not a directory")));
-
+  const uint32_t cx = chartsAlong(dem.width, cs - 1), cy = chartsAlong(dem.height, cs - 1);
   manifest.kind = "heightfield";
   manifest.chartSize = cs;
   manifest.blockIntervals = options.blockIntervals;
@@ -166,6 +154,25 @@ TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOpt
     }
   }
 
+}
+
+TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOptions& options,
+                                     const fs::path& dir, AtlasManifest& manifest) {
+  const auto start = std::chrono::steady_clock::now();
+  validateTerrainAtlasOptions(options);
+  if (dem.width == 0 || dem.height == 0 || dem.heights.size() != size_t{dem.width} * dem.height)
+    throw std::invalid_argument("writeTerrainCharts: empty or inconsistent DEM");
+  const uint32_t cs = options.chartSize;
+  const uint32_t m = cs - 1;
+  std::error_code ec;
+  const fs::path chartDir = dir / "charts";
+  fs::create_directories(chartDir, ec);
+  if (ec || !fs::is_directory(chartDir))
+    throw InputError(chartDir.string() + ": cannot create directory: " +
+                     (ec ? ec.message() : std::string("not a directory")));
+
+  fillTerrainManifest(dem, options, manifest);
+
   uint64_t perChart = 0;  // samples in one chart's pyramid
   for (uint32_t k = 0; k <= manifest.intervalsLog2(); ++k) {
     const uint64_t s = (m >> k) + 1;
@@ -189,7 +196,7 @@ TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOpt
   });
 
   TerrainAtlasStats st;
-  st.charts = cx * cy;
+  st.charts = uint32_t(manifest.charts.size());
   st.samples = uint64_t{dem.width} * dem.height;
   st.storedSamples = perChart * st.charts;
   st.bytesOnDisk = bytes.load();

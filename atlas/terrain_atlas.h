@@ -44,6 +44,11 @@ std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gri
 ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t gridY,
                                uint32_t chartSize);
 
+// Fills the manifest's chart fields for `dem` (chart grid, files, root neighbours, spacing,
+// samples, height range, georeference, voids) without writing anything.
+void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& options,
+                         AtlasManifest& manifest);
+
 // Writes all chart files into `dir` (which must exist) and fills the manifest's chart fields
 // (kind, chartSize, blockIntervals, chartsX/Y, charts, neighbours, spacing, samples, heightRange,
 // georef, voids; maxNodeResLog2 is capped at log2(blockIntervals)). zScale, source and the

@@ -20,33 +20,12 @@ int main(int argc, char** argv) {
   const uint32_t chartSize = 513;
   const DemRaster dem = loadDem(input);
   AtlasManifest m;
-  m.chartSize = chartSize;
   m.depth = depth;
   m.maxNodeResLog2 = 6;
   m.minNodeResLog2 = 2;
-  m.chartsX = std::max(1u, (dem.width - 2) / (chartSize - 1) + 1);
-  m.chartsY = std::max(1u, (dem.height - 2) / (chartSize - 1) + 1);
-  m.samplesX = dem.width;
-  m.samplesY = dem.height;
-  m.spacing = dem.spacing;
-  for (uint32_t y = 0; y < m.chartsY; ++y)
-    for (uint32_t x = 0; x < m.chartsX; ++x) {
-      ChartInfo c;
-      c.id = y * m.chartsX + x;
-      c.gridX = int32_t(x);
-      c.gridY = int32_t(y);
-      auto nb = [&](int32_t cx, int32_t cy, uint8_t e) {
-        RootNeighbour r;
-        if (cx >= 0 && cy >= 0 && cx < int32_t(m.chartsX) && cy < int32_t(m.chartsY)) {
-          r.chart = cy * int32_t(m.chartsX) + cx;
-          r.edge = e;
-        }
-        return r;
-      };
-      c.neighbours = {nb(int32_t(x), int32_t(y) - 1, kEdgeTop), nb(int32_t(x) + 1, int32_t(y), kEdgeLeft),
-                      nb(int32_t(x), int32_t(y) + 1, kEdgeBottom), nb(int32_t(x) - 1, int32_t(y), kEdgeRight)};
-      m.charts.push_back(c);
-    }
+  TerrainAtlasOptions topt;
+  topt.chartSize = chartSize;
+  fillTerrainManifest(dem, topt, m);
   const Hierarchy h = buildTerrainHierarchy(
       m, [&](uint32_t c) { return extractChart(dem, m.charts[c].gridX, m.charts[c].gridY, chartSize); });
   const glm::dvec3 lo{0, 0, dem.minHeight};

@@ -18,26 +18,15 @@ int main(int argc, char** argv) {
   const std::filesystem::path input = argc > 1 ? argv[1] : "../shared/data/terrain/etopo5.cdf";
   const uint32_t chartSize = argc > 2 ? uint32_t(std::atoi(argv[2])) : 513;
   const int repeats = 3;
+  const uint32_t depth = 5;
   DemRaster dem = loadDem(input);
   AtlasManifest m;
-  m.chartSize = chartSize;
-  m.blockIntervals = 64;
-  m.depth = 5;
+  m.depth = depth;
   m.maxNodeResLog2 = 6;
   m.minNodeResLog2 = 2;
-  m.chartsX = std::max(1u, (dem.width - 2) / (chartSize - 1) + 1);
-  m.chartsY = std::max(1u, (dem.height - 2) / (chartSize - 1) + 1);
-  m.samplesX = dem.width;
-  m.samplesY = dem.height;
-  m.spacing = dem.spacing;
-  for (uint32_t y = 0; y < m.chartsY; ++y)
-    for (uint32_t x = 0; x < m.chartsX; ++x) {
-      ChartInfo c;
-      c.id = y * m.chartsX + x;
-      c.gridX = int32_t(x);
-      c.gridY = int32_t(y);
-      m.charts.push_back(c);
-    }
+  TerrainAtlasOptions topt;
+  topt.chartSize = chartSize;
+  fillTerrainManifest(dem, topt, m);
   std::vector<std::vector<float>> charts;
   for (const ChartInfo& c : m.charts) charts.push_back(extractChart(dem, c.gridX, c.gridY, chartSize));
   const uint64_t demSamples = uint64_t(dem.width) * dem.height;

@@ -54,6 +54,18 @@ double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
+// Mean wall time in ms of `frames` calls of frame() (each ends with glFinish); 0 for no frames.
+template <typename Frame>
+double meanFrameMs(uint32_t frames, Frame&& frame) {
+  double total = 0.0;
+  for (uint32_t f = 0; f < frames; ++f) {
+    const auto t0 = Clock::now();
+    frame();
+    total += msSince(t0);
+  }
+  return frames ? total / frames : 0.0;
+}
+
 }  // namespace
 
 struct TerrainRenderer::Impl {
@@ -540,21 +552,12 @@ double TerrainRenderer::drawStaticMeshMs(uint64_t triangles, uint32_t frames,
   };
   frame();  // warm-up: first use compiles shader variants and faults in buffers
   checkGl("drawStaticMeshMs warm-up");
-  double totalMs = 0.0;
-  for (uint32_t f = 0; f < frames; ++f) {
-    const auto t0 = Clock::now();
-    frame();
-    totalMs += msSince(t0);
-  }
+  const double ms = meanFrameMs(frames, frame);
   glBindVertexArray(0);
   glUseProgram(0);
   checkGl("drawStaticMeshMs");
-  return frames ? totalMs / frames : 0.0;
+  return ms;
 }
-
-}  // namespace gimlod::gl
-
-namespace gimlod::gl {
 
 double TerrainRenderer::drawMeshMs(std::span<const glm::vec3> positions,
                                    std::span<const uint32_t> triangles, const glm::mat4& viewProj,
@@ -580,16 +583,11 @@ double TerrainRenderer::drawMeshMs(std::span<const glm::vec3> positions,
     glFinish();
   };
   frame();  // warm-up
-  double totalMs = 0.0;
-  for (uint32_t f = 0; f < frames; ++f) {
-    const auto t0 = Clock::now();
-    frame();
-    totalMs += msSince(t0);
-  }
+  const double ms = meanFrameMs(frames, frame);
   glBindVertexArray(0);
   glUseProgram(0);
   checkGl("drawMeshMs");
-  return frames ? totalMs / frames : 0.0;
+  return ms;
 }
 
 }  // namespace gimlod::gl
