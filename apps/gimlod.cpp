@@ -113,15 +113,15 @@ int runRender(const RenderArgs& a) {
   ao.tolerancePx = a.tolerance;
   ao.maxNodes = a.maxNodes;
   std::string csv = "frame,nodes,triangles,max_screen_error_px,adapt_ms,stitch_ms,upload_ms,draw_ms,"
-                    "draw_calls,pages_loaded,node_budget_bound,constraint_raises,constraint_splits\n";
+                    "draw_calls,pages_loaded,pages_missing,node_budget_bound,constraint_raises,constraint_splits\n";
   double drawMsTotal = 0.0;
   uint64_t triTotal = 0;
   for (size_t i = 0; i < cams.size(); ++i) {
     const gl::FrameResult f = scene.renderFrame(cams[i], ao);
     writePng(out / fmt::format("frame_{:04d}.png", i), w, h, scene.renderer().readPixels());
-    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{}\n", i, f.cut.nodes.size(),
+    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{}\n", i, f.cut.nodes.size(),
                        f.adapt.triangles, f.adapt.maxErrorPx, f.adaptMs, f.stitchMs, f.uploadMs, f.draw.drawMs,
-                       f.draw.drawCalls, f.pagesLoaded, int(f.adapt.nodeBudgetBound), f.adapt.constraintRaises,
+                       f.draw.drawCalls, f.pagesLoaded, f.pagesMissing, int(f.adapt.nodeBudgetBound), f.adapt.constraintRaises,
                        f.adapt.constraintSplits);
     drawMsTotal += f.draw.drawMs;
     triTotal += f.adapt.triangles;

@@ -78,6 +78,7 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
       EXPECT_TRUE(fs::exists(frames / name)) << name;
       EXPECT_GT(std::stoul(rows[r][col("nodes")]), 0u);
       EXPECT_GT(std::stoull(rows[r][col("triangles")]), 0u);
+      EXPECT_EQ(rows[r][col("pages_missing")], "0");
       if (rows[r][col("node_budget_bound")] == "0") {
         EXPECT_LE(std::stod(rows[r][col("max_screen_error_px")]), tolerance) << camera << " frame " << r - 1;
       }
