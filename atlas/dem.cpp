@@ -93,9 +93,19 @@ std::string withGdal(const std::string& what, const GdalErrorCapture& cap) {
 }
 
 DatasetPtr openRaster(const std::string& name) {
-  return DatasetPtr(GDALDataset::FromHandle(
-      GDALOpenEx(name.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, nullptr,
-                 nullptr, nullptr)));
+  constexpr unsigned kFlags = GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR;
+  DatasetPtr ds(GDALDataset::FromHandle(GDALOpenEx(name.c_str(), kFlags, nullptr, nullptr, nullptr)));
+  // note: GDAL's ESRI ASCII grid driver types the band Int32 when the first values look integral,
+  // and then reads "nan" tokens as 0; reopen such grids as Float32 so NaN voids are seen.
+  if (ds && ds->GetDriver() && EQUAL(ds->GetDriver()->GetDescription(), "AAIGrid") &&
+      ds->GetRasterCount() > 0 && GDALDataTypeIsInteger(ds->GetRasterBand(1)->GetRasterDataType())) {
+    const char* const openOptions[] = {"DATATYPE=Float32", nullptr};
+    const char* const drivers[] = {"AAIGrid", nullptr};
+    DatasetPtr f(GDALDataset::FromHandle(
+        GDALOpenEx(name.c_str(), kFlags, drivers, openOptions, nullptr)));
+    if (f) return f;
+  }
+  return ds;
 }
 
 // Number of dimensions in a subdataset description like "[2161x4320] ROSE (32-bit float)";

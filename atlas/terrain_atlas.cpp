@@ -153,7 +153,6 @@ void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& option
       link(kEdgeLeft, x > 0, id - 1, kEdgeRight);
     }
   }
-
 }
 
 TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOptions& options,

@@ -10,8 +10,6 @@
 #include <cstring>
 #include <fcntl.h>
 #include <limits>
-#include <sstream>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include <nlohmann/json.hpp>
@@ -29,7 +27,7 @@ constexpr uint32_t kChartFileVersion = 1;
 constexpr size_t kChartHeaderBytes = 4 + 4 * 4;
 constexpr size_t kDirEntryBytes = 16;
 
-std::string quoted(const fs::path& p) { return p.string(); }
+std::string quoted(const fs::path& p) { return p.string(); }  // path as shown in messages
 
 // ---- little-endian helpers ----------------------------------------------------------------
 

@@ -11,13 +11,7 @@
 #include <numeric>
 #include <vector>
 
-#if __has_include(<gdal.h>)
 #include <gdal.h>
-#else
-// note: Debian installs GDAL's headers in /usr/include/gdal; the test target only gets them
-// through gimlod_atlas's link-only dependency, so fall back to the prefixed path.
-#include <gdal/gdal.h>
-#endif
 
 #include "atlas/dem.h"
 #include "tests/test_util.h"
@@ -401,6 +395,28 @@ TEST(AtlasDemErrors, NanAndNodataInFloatRasterAreFilled) {
   EXPECT_LE(dem.maxHeight, 90.f);
   // Raw row 3 (from the north) is row h-1-3 after the flip.
   EXPECT_NEAR(dem.heights[size_t(h - 1 - 3) * w + 4], 40.f, 10.f);
+}
+
+// ESRI ASCII grids with integral values are typed Int32 by GDAL, which reads "nan" as 0.
+TEST(AtlasDemErrors, NanTokensInIntegerLookingAsciiGrid) {
+  test::TempDir tmp("gimlod-dem");
+  const fs::path f = tmp.path() / "nans.asc";
+  std::string grid = "ncols 9\nnrows 7\nxllcorner 0\nyllcorner 0\ncellsize 30\n";
+  for (int r = 0; r < 7; ++r) {
+    for (int c = 0; c < 9; ++c)
+      grid += (r == 4 && c >= 3 && c <= 5) ? "nan " : std::to_string(100 + r + c) + " ";
+    grid += "\n";
+  }
+  std::ofstream(f) << grid;
+  const DemRaster dem = loadDem(f);
+  EXPECT_EQ(dem.voidsFilled, 3u);
+  EXPECT_DOUBLE_EQ(dem.spacing[0], 30.0);
+  EXPECT_GE(dem.minHeight, 100.f);
+  // Grid row 4 from the top is row 7-1-4 = 2 from the south; its voids lie between 105 and 111.
+  for (int c = 3; c <= 5; ++c) {
+    EXPECT_GT(dem.heights[2 * 9 + c], 104.f);
+    EXPECT_LT(dem.heights[2 * 9 + c], 112.f);
+  }
 }
 
 TEST(AtlasDemErrors, BadZScale) {
