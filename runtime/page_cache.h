@@ -2,6 +2,7 @@
 // layers of the GPU page pool (paper section 7.2). Pure C++.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <filesystem>
 #include <list>
@@ -30,7 +31,7 @@ class AtlasPages {
  private:
   HierarchyParams params_;
   std::vector<std::unique_ptr<ChartFileReader>> charts_;
-  mutable uint64_t bytesRead_ = 0;
+  mutable std::atomic<uint64_t> bytesRead_{0};
 };
 
 // Least-recently-used assignment of keys to `capacity` layers. Pages touched in the current frame
@@ -45,6 +46,8 @@ class PageCache {
   // Finds or assigns a layer for key in `frame`; false when every layer is in use this frame.
   bool acquire(uint64_t key, uint64_t frame, Slot* slot);
   void lock(uint64_t key);  // never evict key (it must be resident)
+  // Whether key holds a layer now (does not touch the LRU order).
+  bool contains(uint64_t key) const { return map_.count(key) != 0; }
   uint32_t resident() const { return uint32_t(map_.size()); }
   uint32_t capacity() const { return capacity_; }
   uint64_t evictions() const { return evictions_; }

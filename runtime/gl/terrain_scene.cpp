@@ -1,8 +1,11 @@
 #include "runtime/gl/terrain_scene.h"
 
 #include <algorithm>
+#include <cassert>
 #include <chrono>
+#include <limits>
 #include <stdexcept>
+#include <unordered_set>
 
 namespace gimlod::gl {
 namespace {
@@ -45,6 +48,132 @@ TerrainScene::TerrainScene(const AtlasView& atlas, const SceneOptions& options)
     renderer_->uploadPage(slot.layer, pages_.pageSamples(0), heights_.data(), normals_.data());
     cache_.lock(root.key());
   }
+  if (options_.asyncLoads)
+    loader_ = std::make_unique<PageLoader>(pages_, options_.ramCacheBytes);
+}
+
+void TerrainScene::waitForLoads() {
+  if (loader_) loader_->waitIdle();
+}
+
+Cut TerrainScene::substituteResident(const Cut& desired, const ViewParams& view, FrameResult* f) {
+  ++frame_;
+  frameStarted_ = true;
+  const Hierarchy& h = atlas_.hierarchy;
+  const HierarchyParams& p = h.params;
+  // 1. Touch the resident desired pages, so the uploads below cannot evict them; request the
+  // others (coarser levels first, then larger screen error). Requests for nodes no longer in the
+  // cut are dropped.
+  loader_->cancelPending();
+  std::unordered_set<uint64_t> missing, ready;
+  for (const LoadedPage& pg : ready_) ready.insert(pg.id.key());
+  for (const CutNode& n : desired.nodes) {
+    PageCache::Slot slot;
+    if (cache_.contains(n.id.key())) {
+      cache_.acquire(n.id.key(), frame_, &slot);
+      continue;
+    }
+    const double priority = double(p.depth - n.id.level) * 1e3 + std::min(double(n.errorPx), 999.0);
+    if (!ready.count(n.id.key())) loader_->request(n.id, priority);  // else loaded, waiting
+    missing.insert(n.id.key());
+  }
+  // 2. Upload a bounded number of loaded pages that this cut still wants; the rest of the wanted
+  // ones wait for later frames, unwanted ones are dropped (they stay in the RAM cache).
+  for (LoadedPage& pg : loader_->takeCompleted(std::numeric_limits<size_t>::max()))
+    ready_.push_back(std::move(pg));
+  uint32_t uploaded = 0;
+  std::vector<LoadedPage> keep;
+  for (LoadedPage& pg : ready_) {
+    if (!missing.count(pg.id.key())) continue;
+    if (uploaded >= options_.maxUploadsPerFrame) {
+      keep.push_back(std::move(pg));
+      continue;
+    }
+    PageCache::Slot slot;
+    // note: when the pool is full this frame the page is dropped; it stays in the RAM cache.
+    if (!cache_.acquire(pg.id.key(), frame_, &slot) || !slot.needsUpload) continue;
+    renderer_->uploadPage(slot.layer, pages_.pageSamples(pg.id.level), pg.heights.data(),
+                          pg.normals.data());
+    ++uploaded;
+  }
+  ready_.swap(keep);
+  // 3. Every missing node draws as its nearest resident ancestor (roots are locked resident).
+  // Substitutes under another substitute are dropped, so the cut stays a partition.
+  std::unordered_set<uint64_t> substitutes;
+  std::vector<NodeId> candidates;
+  for (const CutNode& n : desired.nodes) {
+    if (cache_.contains(n.id.key())) continue;
+    NodeId a = n.id;
+    while (a.level > 0 && !cache_.contains(a.key())) a = a.parent();
+    assert(cache_.contains(a.key()) && "root pages must be resident");
+    if (substitutes.insert(a.key()).second) candidates.push_back(a);
+  }
+  constexpr uint32_t kUnplaced = ~0u;
+  std::unordered_map<uint64_t, uint32_t> outer;  // outermost substitute -> position in drawn
+  for (const NodeId& a : candidates) {
+    bool inner = false;
+    for (NodeId b = a; b.level > 0 && !inner;) {
+      b = b.parent();
+      inner = substitutes.count(b.key()) != 0;
+    }
+    if (!inner) outer[a.key()] = kUnplaced;
+  }
+  Cut drawn;
+  drawn.nodes.reserve(desired.nodes.size());
+  uint32_t substituted = 0;
+  for (const CutNode& n : desired.nodes) {
+    auto it = outer.end();
+    NodeId b = n.id;
+    while (b.level > 0 && it == outer.end()) {
+      b = b.parent();
+      it = outer.find(b.key());
+    }
+    if (it == outer.end()) {
+      drawn.nodes.push_back(n);
+      continue;
+    }
+    ++substituted;
+    if (it->second == kUnplaced) {
+      it->second = uint32_t(drawn.nodes.size());
+      drawn.nodes.push_back({b, p.minRes(b.level), 0.f});
+    }
+    CutNode& a = drawn.nodes[it->second];
+    a.res = std::max(a.res, std::min(n.res, p.maxRes(b.level)));
+  }
+  drawn.rebuildIndex();
+  // 4. Stitching constraint without splits: substitutes only coarsen the cut, so raising their
+  // resolution suffices whenever log2 R >= depth - 1; anything else is counted.
+  uint32_t unfixable = 0;
+  if (substituted > 0) {
+    std::vector<SideNeighbour> scratch;
+    for (CutNode& n : drawn.nodes) {
+      uint32_t gap = 0;
+      for (uint32_t s = 0; s < 4; ++s) {
+        scratch.clear();
+        sideNeighbours(h, drawn, n.id, s, scratch);
+        for (const SideNeighbour& sn : scratch) {
+          const uint32_t l = drawn.nodes[sn.cutIndex].id.level;
+          if (l > n.id.level) gap = std::max(gap, l - n.id.level);
+        }
+      }
+      if (gap <= n.res) continue;
+      if (gap <= p.maxRes(n.id.level))
+        n.res = gap;
+      else
+        ++unfixable;
+    }
+    for (auto& [key, i] : outer)
+      if (i != kUnplaced)
+        drawn.nodes[i].errorPx = float(screenError(h, drawn.nodes[i].id, drawn.nodes[i].res, view));
+  }
+  assert(unfixable == 0 && "stitching constraint needs a split into a non-resident node");
+  if (f) {
+    f->pagesRequested = uint32_t(missing.size());
+    f->pagesUploaded = uploaded;
+    f->nodesSubstituted = substituted;
+    f->stitchUnfixable = unfixable;
+  }
+  return drawn;
 }
 
 glm::dmat4 TerrainScene::viewProjection(const Camera& c) const {
@@ -52,7 +181,8 @@ glm::dmat4 TerrainScene::viewProjection(const Camera& c) const {
 }
 
 std::vector<DrawNode> TerrainScene::prepare(const Cut& cut, FrameResult* frame) {
-  ++frame_;
+  if (!frameStarted_) ++frame_;
+  frameStarted_ = false;
   const auto t0 = std::chrono::steady_clock::now();
   std::vector<DrawNode> nodes;
   nodes.reserve(cut.nodes.size());
@@ -112,7 +242,17 @@ FrameResult TerrainScene::renderFrame(const Camera& camera, const AdaptOptions& 
             [&](const CutNode& a, const CutNode& b) { return distance2(a) < distance2(b); });
   f.cut.rebuildIndex();
   f.adaptMs = msSince(t0);
+  // Page requests, uploads and ancestor substitution count as upload time.
+  const auto t1 = std::chrono::steady_clock::now();
+  if (loader_) {
+    f.desiredCut = std::move(f.cut);
+    f.cut = substituteResident(f.desiredCut, view, &f);
+  } else {
+    f.desiredCut = f.cut;
+  }
+  const double substituteMs = msSince(t1);
   f.draw = drawCut(camera, f.cut, &f);
+  f.uploadMs += substituteMs;
   return f;
 }
 

@@ -10,6 +10,7 @@
 #include "runtime/atlas_view.h"
 #include "runtime/gl/renderer.h"
 #include "runtime/page_cache.h"
+#include "runtime/page_loader.h"
 #include "runtime/stitch.h"
 
 namespace gimlod::gl {
@@ -18,15 +19,25 @@ struct SceneOptions {
   uint32_t width = 640, height = 480;
   std::array<float, 3> background{0.53f, 0.70f, 0.92f};
   uint32_t pageCapacity = 4096;  // GPU page pool layers (clamped by the GL limit)
+  // Paper 7.2: pages load on a separate thread and missing nodes draw with a resident ancestor.
+  // Off (the default): every page is read synchronously, so frames are deterministic.
+  bool asyncLoads = false;
+  uint32_t maxUploadsPerFrame = 64;            // async: loaded pages uploaded per frame
+  size_t ramCacheBytes = size_t(256) << 20;    // async: RAM page cache budget
 };
 
 struct FrameResult {
-  Cut cut;
+  Cut cut;         // the cut actually drawn (async: with resident ancestors substituted)
+  Cut desiredCut;  // the cut the adaptation chose (equal to `cut` without asyncLoads)
   AdaptStats adapt;
   DrawStats draw;
   double adaptMs = 0.0, stitchMs = 0.0, uploadMs = 0.0;
   uint32_t pagesLoaded = 0;
   uint32_t pagesMissing = 0;  // nodes drawn with an ancestor's page because the pool was full
+  uint32_t pagesRequested = 0;    // async: desired nodes whose page was not GPU-resident
+  uint32_t pagesUploaded = 0;     // async: loaded pages uploaded this frame
+  uint32_t nodesSubstituted = 0;  // async: desired nodes drawn as a resident ancestor
+  uint32_t stitchUnfixable = 0;   // async: drawn nodes left violating the stitching constraint
 };
 
 class TerrainScene {
@@ -44,17 +55,27 @@ class TerrainScene {
   std::vector<std::vector<glm::vec3>> capture(const Cut& cut, bool stitch = true);
 
   glm::dmat4 viewProjection(const Camera& camera) const;
+  // Blocks until the page loader has nothing queued or being read (no-op without asyncLoads).
+  void waitForLoads();
+  // The page loader, or null without asyncLoads.
+  const PageLoader* loader() const { return loader_.get(); }
 
  private:
   std::vector<DrawNode> prepare(const Cut& cut, FrameResult* frame);
+  // Async: requests missing pages, uploads loaded ones, and returns the drawable cut: every
+  // node's page resident, stitching constraint enforced. Starts the frame that prepare draws.
+  Cut substituteResident(const Cut& desired, const ViewParams& view, FrameResult* frame);
   AtlasView atlas_;
   SceneOptions options_;
   std::unique_ptr<TerrainRenderer> renderer_;
   AtlasPages pages_;
   PageCache cache_;
   uint64_t frame_ = 0;
+  bool frameStarted_ = false;  // substituteResident began frame_; prepare must not advance it
   std::vector<float> heights_;
   std::vector<PackedNormal> normals_;
+  std::vector<LoadedPage> ready_;        // loaded pages waiting for the per-frame upload budget
+  std::unique_ptr<PageLoader> loader_;  // last: its thread reads pages_
 };
 
 }  // namespace gimlod::gl

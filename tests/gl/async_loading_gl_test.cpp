@@ -1,0 +1,171 @@
+// Asynchronous page loading in the scene (paper 7.2): missing nodes draw as resident ancestors,
+// every drawn frame is a stitched, crack-free partition, and a static view converges to the
+// desired cut. Cracks are measured on the real vertex shader (transform feedback).
+#include <gtest/gtest.h>
+
+#include "apps/pipeline.h"
+#include "runtime/adapt.h"
+#include "runtime/atlas_view.h"
+#include "runtime/gl/egl_context.h"
+#include "runtime/gl/terrain_scene.h"
+#include "runtime/stitch.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+class AsyncLoadingTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() { context_ = gl::EglContext::create(); }
+  static void TearDownTestSuite() { context_.reset(); }
+  static std::unique_ptr<gl::EglContext> context_;
+
+  AtlasView build() {
+    BuildOptions o;
+    o.input = test::repoData() / "terrain/mt_rainier_90m.tif";
+    o.output = dir_.path() / "atlas";
+    o.chartSize = 129;
+    o.depth = 4;
+    o.nodeRes = 32;
+    o.minNodeRes = 2;
+    buildAtlas(o);
+    return openAtlas(o.output);
+  }
+
+  static Camera camera(const AtlasView& a, double t) {
+    const glm::dvec3 ext = a.hi - a.lo;
+    Camera c;
+    c.eye = a.lo + glm::dvec3((0.15 + 0.5 * t) * ext.x, (0.1 + 0.3 * t) * ext.y, a.hi.z + 0.06 * ext.x);
+    c.target = a.lo + glm::dvec3((0.5 + 0.3 * t) * ext.x, (0.6 + 0.2 * t) * ext.y, a.lo.z);
+    c.nearPlane = c.farPlane = 0.0;
+    fitClipPlanes(c, a.lo, a.hi);
+    return c;
+  }
+
+  test::TempDir dir_{"gimlod-async"};
+};
+
+std::unique_ptr<gl::EglContext> AsyncLoadingTest::context_;
+
+// The drawn cut is a coarsening of the desired one: every desired node is drawn itself (at its
+// resolution) or through exactly one drawn ancestor, and every drawn node covers a desired node.
+void expectDrawnCoversDesired(const Cut& drawn, const Cut& desired, int frame) {
+  std::vector<uint32_t> covers(drawn.nodes.size(), 0);
+  for (const CutNode& n : desired.nodes) {
+    uint32_t found = 0;
+    for (NodeId a = n.id;; a = a.parent()) {
+      const int32_t i = drawn.find(a);
+      if (i >= 0) {
+        ++found;
+        ++covers[i];
+        if (a.key() == n.id.key()) {
+          EXPECT_EQ(drawn.nodes[i].res, n.res) << "frame " << frame;
+        }
+      }
+      if (a.level == 0) break;
+    }
+    EXPECT_EQ(found, 1u) << "frame " << frame << ": desired node not drawn exactly once";
+  }
+  for (size_t i = 0; i < covers.size(); ++i)
+    EXPECT_GT(covers[i], 0u) << "frame " << frame << ": drawn node covers no desired node";
+}
+
+TEST_F(AsyncLoadingTest, SubstitutesResidentAncestorsCrackFreeAndConverges) {
+  const AtlasView atlas = build();
+  const Hierarchy& h = atlas.hierarchy;
+  ASSERT_GE(h.params.maxNodeResLog2 + 1, h.params.depth) << "substitution needs log2 R >= depth-1";
+  gl::SceneOptions so;
+  so.width = 96;
+  so.height = 72;
+  so.asyncLoads = true;
+  so.maxUploadsPerFrame = 4;
+  gl::TerrainScene scene(atlas, so);
+  ASSERT_NE(scene.loader(), nullptr);
+  AdaptOptions ao;
+  ao.tolerancePx = 1.0;
+  ao.maxNodes = 1500;
+
+  auto checkFrame = [&](const gl::FrameResult& f, int i) {
+    EXPECT_EQ(f.pagesMissing, 0u) << "frame " << i;
+    EXPECT_EQ(f.stitchUnfixable, 0u) << "frame " << i;
+    EXPECT_LE(f.pagesUploaded, so.maxUploadsPerFrame) << "frame " << i;
+    EXPECT_EQ(countStitchViolations(h, f.cut), 0u) << "frame " << i;
+    expectDrawnCoversDesired(f.cut, f.desiredCut, i);
+    const auto verts = scene.capture(f.cut);
+    ASSERT_EQ(verts.size(), f.cut.nodes.size());
+    const CrackReport r = countCracks(h, f.cut, verts);
+    EXPECT_EQ(r.mismatches, 0u) << "frame " << i << ": " << r.mismatches << " of "
+                                << r.borderVertices << " border vertices";
+    if (f.cut.nodes.size() > 1) {
+      EXPECT_GT(r.borderVertices, 0u) << "frame " << i;
+    }
+  };
+
+  // Moving camera: the first frame has nothing but the roots resident.
+  uint32_t uploaded = 0, substitutedFrames = 0;
+  const int kMoving = 10;
+  for (int i = 0; i < kMoving; ++i) {
+    const gl::FrameResult f = scene.renderFrame(camera(atlas, double(i) / kMoving), ao);
+    if (i == 0) {
+      uint32_t nonRoot = 0;
+      for (const CutNode& n : f.desiredCut.nodes) nonRoot += n.id.level > 0;
+      ASSERT_GT(nonRoot, so.maxUploadsPerFrame) << "the view must need more pages than one upload batch";
+      EXPECT_GT(f.nodesSubstituted, 0u);
+      EXPECT_GT(f.pagesRequested, 0u);
+      EXPECT_LT(f.cut.nodes.size(), f.desiredCut.nodes.size());
+    }
+    substitutedFrames += f.nodesSubstituted > 0;
+    uploaded += f.pagesUploaded;
+    checkFrame(f, i);
+    if (i % 2 == 1) scene.waitForLoads();  // let some loads finish between frames
+  }
+  EXPECT_GT(substitutedFrames, 0u);
+  EXPECT_GT(uploaded, 0u);
+
+  // Static camera: converges to the desired cut.
+  const Camera still = camera(atlas, 1.0);
+  gl::FrameResult f;
+  int frames = 0;
+  for (; frames < 2000; ++frames) {
+    f = scene.renderFrame(still, ao);
+    if (frames < 5 || f.nodesSubstituted == 0) checkFrame(f, kMoving + frames);
+    if (f.nodesSubstituted == 0) break;
+    scene.waitForLoads();
+  }
+  ASSERT_EQ(f.nodesSubstituted, 0u) << "no convergence after " << frames << " static frames";
+  // note: the converged frame may still have requested pages that were uploaded in that frame.
+  f = scene.renderFrame(still, ao);
+  checkFrame(f, kMoving + frames + 1);
+  EXPECT_EQ(f.pagesRequested, 0u);
+  EXPECT_EQ(f.nodesSubstituted, 0u);
+  ASSERT_EQ(f.cut.nodes.size(), f.desiredCut.nodes.size());
+  for (size_t i = 0; i < f.cut.nodes.size(); ++i) {
+    EXPECT_EQ(f.cut.nodes[i].id.key(), f.desiredCut.nodes[i].id.key());
+    EXPECT_EQ(f.cut.nodes[i].res, f.desiredCut.nodes[i].res);
+  }
+  const PageLoaderStats s = scene.loader()->stats();
+  EXPECT_GT(s.requested, 0u);
+  EXPECT_GT(s.loadedFromDisk, 0u);
+}
+
+TEST_F(AsyncLoadingTest, SynchronousDefaultDrawsDesiredCut) {
+  const AtlasView atlas = build();
+  gl::SceneOptions so;
+  so.width = 96;
+  so.height = 72;
+  gl::TerrainScene scene(atlas, so);
+  EXPECT_EQ(scene.loader(), nullptr);
+  AdaptOptions ao;
+  ao.maxNodes = 1500;
+  const gl::FrameResult f = scene.renderFrame(camera(atlas, 0.0), ao);
+  EXPECT_EQ(f.nodesSubstituted, 0u);
+  EXPECT_EQ(f.pagesRequested, 0u);
+  EXPECT_EQ(f.pagesMissing, 0u);
+  EXPECT_GT(f.pagesLoaded, 0u);
+  ASSERT_EQ(f.cut.nodes.size(), f.desiredCut.nodes.size());
+  for (size_t i = 0; i < f.cut.nodes.size(); ++i)
+    EXPECT_EQ(f.cut.nodes[i].id.key(), f.desiredCut.nodes[i].id.key());
+}
+
+}  // namespace
+}  // namespace gimlod
