@@ -76,6 +76,14 @@ Cut TerrainScene::substituteResident(const Cut& desired, const ViewParams& view,
     const double priority = double(p.depth - n.id.level) * 1e3 + std::min(double(n.errorPx), 999.0);
     if (!ready.count(n.id.key())) loader_->request(n.id, priority);  // else loaded, waiting
     missing.insert(n.id.key());
+    // Its missing ancestors too (coarser first by priority), so the stand-in for a missing node
+    // is soon its parent rather than a far ancestor.
+    for (NodeId a = n.id; a.level > 0;) {
+      a = a.parent();
+      if (cache_.contains(a.key())) break;
+      if (!missing.insert(a.key()).second) break;
+      if (!ready.count(a.key())) loader_->request(a, double(p.depth - a.level) * 1e3 + 999.0);
+    }
   }
   // 2. Upload a bounded number of loaded pages that this cut still wants; the rest of the wanted
   // ones wait for later frames, unwanted ones are dropped (they stay in the RAM cache).
@@ -251,6 +259,11 @@ FrameResult TerrainScene::renderFrame(const Camera& camera, const AdaptOptions& 
     f.desiredCut = f.cut;
   }
   const double substituteMs = msSince(t1);
+  f.maxErrorPx = 0.0;
+  for (CutNode& n : f.cut.nodes) {
+    n.errorPx = float(screenError(h, n.id, n.res, view));
+    f.maxErrorPx = std::max(f.maxErrorPx, double(n.errorPx));
+  }
   f.draw = drawCut(camera, f.cut, &f);
   f.uploadMs += substituteMs;
   return f;

@@ -29,11 +29,14 @@ struct SceneOptions {
 struct FrameResult {
   Cut cut;         // the cut actually drawn (async: with resident ancestors substituted)
   Cut desiredCut;  // the cut the adaptation chose (equal to `cut` without asyncLoads)
-  AdaptStats adapt;
+  AdaptStats adapt;        // of the desired cut
+  double maxErrorPx = 0.0;  // of the drawn cut: above the tolerance while ancestors stand in
   DrawStats draw;
   double adaptMs = 0.0, stitchMs = 0.0, uploadMs = 0.0;
   uint32_t pagesLoaded = 0;
-  uint32_t pagesMissing = 0;  // nodes drawn with an ancestor's page because the pool was full
+  // Nodes that found no free page-pool layer this frame (their data is wrong); the node budget
+  // is clamped to the pool so this stays 0.
+  uint32_t pagesMissing = 0;
   uint32_t pagesRequested = 0;    // async: desired nodes whose page was not GPU-resident
   uint32_t pagesUploaded = 0;     // async: loaded pages uploaded this frame
   uint32_t nodesSubstituted = 0;  // async: desired nodes drawn as a resident ancestor
