@@ -1,0 +1,370 @@
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include "atlas/dem.h"
+#include "atlas/terrain_atlas.h"
+#include "runtime/adapt_dual_queue.h"
+#include "runtime/baselines.h"
+#include "tests/synthetic_terrain.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+struct World {
+  AtlasManifest m;
+  Hierarchy h;
+  glm::dvec3 lo, hi;
+};
+
+World makeWorld(uint32_t chartSize = 65, uint32_t cx = 3, uint32_t cy = 2, uint32_t depth = 4) {
+  World w;
+  w.m = test::syntheticManifest(chartSize, cx, cy, depth, 5, 2);
+  w.h = buildTerrainHierarchy(w.m, [&](uint32_t c) { return test::syntheticChart(w.m, c); });
+  w.lo = {0, 0, -30};
+  w.hi = {double(w.m.samplesX), double(w.m.samplesY), 30};
+  return w;
+}
+
+ViewParams viewAt(const World& w, glm::dvec3 eye, glm::dvec3 target) {
+  Camera c;
+  c.eye = eye;
+  c.target = target;
+  c.nearPlane = 0.0;
+  c.farPlane = 0.0;
+  fitClipPlanes(c, w.lo, w.hi);
+  return makeViewParams(c, 320, 240);
+}
+
+// No node together with an ancestor; total area = all chart area (no empty nodes in these worlds).
+void expectPartition(const Hierarchy& h, const Cut& cut) {
+  const uint32_t L = h.params.intervalsLog2;
+  uint64_t area = 0;
+  for (const CutNode& n : cut.nodes) {
+    area += 1ull << (2 * (L - n.id.level));
+    for (NodeId a = n.id; a.level > 0;) {
+      a = a.parent();
+      ASSERT_LT(cut.find(a), 0) << "node and its ancestor both in the cut";
+    }
+  }
+  EXPECT_EQ(area, uint64_t(h.chartCount()) << (2 * L));
+}
+
+std::vector<std::pair<uint64_t, uint32_t>> sortedNodes(const Cut& cut) {
+  std::vector<std::pair<uint64_t, uint32_t>> v;
+  for (const CutNode& n : cut.nodes) v.push_back({n.id.key(), n.res});
+  std::sort(v.begin(), v.end());
+  return v;
+}
+
+// Updates until a frame ends without hitting the operation cap.
+const Cut& converge(DualQueueAdapter& a, const ViewParams& v, const AdaptOptions& o, AdaptStats* st) {
+  for (int i = 0; i < 1000; ++i) {
+    const Cut& c = a.update(v, o, st);
+    if (!a.frameStats().opCapBound) return c;
+  }
+  ADD_FAILURE() << "did not converge";
+  return a.update(v, o, st);
+}
+
+bool withinToleranceOrFinest(const Hierarchy& h, const CutNode& n, double tol) {
+  const bool finest = n.res == h.params.maxRes(n.id.level) && n.id.level + 1 == h.params.depth;
+  return finest || n.errorPx <= tol + 1e-9;
+}
+
+TEST(DualQueue, ErrorModeWithinToleranceAndPartitionAcrossRandomViews) {
+  const World w = makeWorld();
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> ux(0, w.m.samplesX), uy(0, w.m.samplesY), uz(5, 200);
+  DualQueueAdapter adapter(w.h, 1u << 20);
+  for (int i = 0; i < 20; ++i) {
+    const ViewParams v = viewAt(w, {ux(rng), uy(rng), uz(rng)}, {ux(rng), uy(rng), 0});
+    AdaptOptions o;
+    o.tolerancePx = 0.5 + i * 0.2;
+    o.maxNodes = 0;
+    o.frustumCull = false;
+    AdaptStats st;
+    const Cut& cut = adapter.update(v, o, &st);
+    EXPECT_FALSE(adapter.frameStats().opCapBound);
+    EXPECT_FALSE(st.nodeBudgetBound);
+    expectPartition(w.h, adapter.partition());
+    expectPartition(w.h, cut);
+    EXPECT_EQ(countStitchViolations(w.h, cut), 0u);
+    for (const CutNode& n : cut.nodes) EXPECT_TRUE(withinToleranceOrFinest(w.h, n, o.tolerancePx));
+    // No split is left that would save triangles, no merge that would not add any.
+    const Cut part = adapter.partition();
+    for (const CutNode& n : part.nodes) {
+      EXPECT_LE(dualQueueSplitPriority(w.h, n.id, v, o.tolerancePx, false), 0.0);
+    }
+  }
+}
+
+TEST(DualQueue, NodeBudgetBindsAndIsReported) {
+  const World w = makeWorld();
+  const ViewParams v = viewAt(w, {10, 10, 3}, {100, 60, 0});
+  AdaptOptions o;
+  o.tolerancePx = 0.05;
+  o.maxNodes = 10;
+  o.frustumCull = false;
+  DualQueueAdapter adapter(w.h);
+  AdaptStats st;
+  const Cut& cut = converge(adapter, v, o, &st);
+  EXPECT_TRUE(st.nodeBudgetBound);
+  EXPECT_GT(st.maxErrorPx, o.tolerancePx);
+  EXPECT_LE(adapter.frameStats().drawnNodes, o.maxNodes);
+  EXPECT_LE(cut.nodes.size(), o.maxNodes + 3 * st.constraintSplits);
+  EXPECT_EQ(countStitchViolations(w.h, cut), 0u);
+  expectPartition(w.h, cut);
+  // Lowering the budget merges back under it in one frame.
+  o.maxNodes = 4;
+  const Cut& small = adapter.update(v, o, &st);
+  EXPECT_LE(adapter.frameStats().drawnNodes, 6u);  // 6 chart roots is the floor
+  EXPECT_LE(small.nodes.size(), std::max<size_t>(6, o.maxNodes) + 3 * st.constraintSplits);
+}
+
+TEST(DualQueue, StaticCameraConvergesAndStaysPut) {
+  const World w = makeWorld(129, 3, 2, 5);
+  const ViewParams v = viewAt(w, {20, 20, 15}, {200, 120, 0});
+  for (uint32_t budget : {0u, 60u}) {
+    AdaptOptions o;
+    o.tolerancePx = 0.5;
+    o.maxNodes = budget;
+    DualQueueAdapter adapter(w.h, 64);  // small cap: convergence spans several frames
+    AdaptStats st;
+    const auto first = sortedNodes(converge(adapter, v, o, &st));
+    for (int i = 0; i < 100; ++i) {
+      const Cut& cut = adapter.update(v, o, &st);
+      ASSERT_EQ(adapter.frameStats().splits, 0u) << "frame " << i;
+      ASSERT_EQ(adapter.frameStats().merges, 0u) << "frame " << i;
+      ASSERT_EQ(sortedNodes(cut), first) << "frame " << i;
+      EXPECT_EQ(countStitchViolations(w.h, cut), 0u);
+    }
+  }
+}
+
+TEST(DualQueue, PathAndBackReturnsToTheFreshCut) {
+  const World w = makeWorld(129, 3, 2, 5);
+  std::vector<ViewParams> path;
+  for (int i = 0; i <= 30; ++i) {
+    const double t = i / 30.0;
+    path.push_back(viewAt(w, {20 + 300 * t, 20 + 150 * t, 15 + 40 * t}, {200, 120, 0}));
+  }
+  for (uint32_t budget : {0u, 80u}) {
+    AdaptOptions o;
+    o.tolerancePx = 0.7;
+    o.maxNodes = budget;
+    DualQueueAdapter moving(w.h, 1u << 20);
+    AdaptStats st;
+    for (const ViewParams& v : path) {
+      const Cut& cut = moving.update(v, o, &st);
+      EXPECT_EQ(countStitchViolations(w.h, cut), 0u);
+      if (budget) {
+        EXPECT_LE(moving.frameStats().drawnNodes, budget);
+      }
+      if (!st.nodeBudgetBound) {
+        for (const CutNode& n : cut.nodes) EXPECT_TRUE(withinToleranceOrFinest(w.h, n, o.tolerancePx));
+      }
+    }
+    for (auto it = path.rbegin(); it != path.rend(); ++it) moving.update(*it, o, &st);
+    const Cut back = moving.update(path.front(), o, &st);
+    const AdaptStats backStats = st;
+    // Back at the start the cut is converged: a further frame changes nothing.
+    moving.update(path.front(), o, &st);
+    EXPECT_EQ(moving.frameStats().splits + moving.frameStats().merges, 0u);
+    AdaptStats fs;
+    DualQueueAdapter fresh(w.h, 1u << 20);
+    const Cut start = fresh.update(path.front(), o, &fs);
+    // Not the identical node set in general: the dual queue stops at a local optimum (no split
+    // saves triangles, no merge is free), and split savings are not monotone down the tree, so
+    // the history decides which optimum. Both must be valid optima of the same quality class:
+    // within tolerance (error mode) or within the budget, and close in triangles.
+    std::printf("path and back, budget %u: %llu triangles, max %.3f px, %zu nodes; fresh %llu, %.3f px, %zu\n",
+                budget, (unsigned long long)back.triangles(), backStats.maxErrorPx, back.nodes.size(),
+                (unsigned long long)start.triangles(), fs.maxErrorPx, start.nodes.size());
+    if (budget == 0) {
+      EXPECT_FALSE(backStats.nodeBudgetBound);
+      for (const CutNode& n : back.nodes) EXPECT_TRUE(withinToleranceOrFinest(w.h, n, o.tolerancePx));
+      EXPECT_NEAR(double(back.triangles()), double(start.triangles()), 0.05 * double(start.triangles()));
+    } else {
+      EXPECT_LE(back.nodes.size(), budget + 3 * backStats.constraintSplits);
+      EXPECT_LE(backStats.maxErrorPx, fs.maxErrorPx * 1.05);
+    }
+  }
+}
+
+TEST(DualQueue, FrustumCullingKeepsThePartition) {
+  const World w = makeWorld();
+  const ViewParams v = viewAt(w, {5, 5, 20}, {60, 40, 0});
+  const ViewParams away = viewAt(w, {5, 5, 20}, {-50, -50, 0});
+  AdaptOptions o;
+  DualQueueAdapter adapter(w.h, 1u << 20);
+  AdaptStats st;
+  for (const ViewParams* p : {&v, &away, &v}) {
+    const Cut& cut = adapter.update(*p, o, &st);
+    expectPartition(w.h, adapter.partition());
+    for (const CutNode& n : cut.nodes) EXPECT_TRUE(nodeDrawable(w.h, n.id, *p, true));
+    EXPECT_EQ(countStitchViolations(w.h, cut), 0u);
+  }
+  // Looking away: every drawn-out region collapsed back by zero-cost merges.
+  adapter.update(away, o, &st);
+  EXPECT_LE(adapter.partition().nodes.size(), 3 * w.h.chartCount() + 1);
+}
+
+// A one-chart, depth-3 hierarchy with hand-set errors. All bounds contain the eye, so every
+// distance is minDistance = 1 and the screen error equals the world error (pixelsPerRadian 1).
+Hierarchy handMade() {
+  Hierarchy h;
+  h.params.intervalsLog2 = 6;
+  h.params.depth = 3;
+  h.params.maxNodeResLog2 = 4;
+  h.params.minNodeResLog2 = 2;  // maxRes = 4 on every level; resolutions 2, 3, 4
+  h.roots.resize(1);
+  h.charts.resize(1);
+  auto& c = h.charts[0];
+  const uint32_t n = nodesPerChart(3);
+  c.bounds.assign(n, {-100.f, -100.f, -100.f, 100.f, 100.f, 100.f});
+  c.flags.assign(n, 0);
+  c.errors.assign(n * 3, 0.5f);
+  auto set = [&](NodeId id, float e2, float e3, float e4) {
+    float* e = &c.errors[nodeIndex(id.level, id.x, id.y) * 3];
+    e[0] = e2, e[1] = e3, e[2] = e4;
+  };
+  set({0, 0, 0, 0}, 8, 4, 2);    // over tolerance even at res 4
+  set({0, 1, 0, 0}, .5f, .5f, .5f);  // res 2: 32 triangles
+  set({0, 1, 1, 0}, 2, 1, .5f);  // res 3: 128
+  set({0, 1, 0, 1}, 3, 3, 1);    // res 4: 512
+  set({0, 1, 1, 1}, 5, 5, 5);    // over tolerance
+  for (uint32_t i = 0; i < 4; ++i) set(NodeId{0, 1, 1, 1}.child(i), 2, .8f, .8f);  // res 3: 128
+  return h;
+}
+
+ViewParams handView(double ppr) {
+  ViewParams v;
+  v.pixelsPerRadian = ppr;
+  v.minDistance = 1.0;
+  return v;
+}
+
+TEST(DualQueue, HandMadePrioritiesAndCuts) {
+  const Hierarchy h = handMade();
+  const ViewParams v = handView(1.0);
+  const NodeId root{0, 0, 0, 0}, a{0, 1, 0, 0}, b{0, 1, 1, 0}, c{0, 1, 0, 1}, d{0, 1, 1, 1};
+  EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, root, v, 1.0, false), 1e30 + 2.0);
+  EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, a, v, 1.0, false), 32.0 - 4 * 32.0);
+  EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, b, v, 1.0, false), 128.0 - 4 * 32.0);
+  EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, c, v, 1.0, false), 512.0 - 4 * 32.0);
+  EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, d, v, 1.0, false), 1e30 + 5.0);
+  EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, d.child(0), v, 1.0, false), -1.0);  // leaf level
+  bool over = false;
+  EXPECT_DOUBLE_EQ(dualQueueMergeCost(h, a, v, 1.0, false, &over), -96.0);
+  EXPECT_FALSE(over);
+  EXPECT_DOUBLE_EQ(dualQueueMergeCost(h, c, v, 1.0, false, &over), 384.0);
+  EXPECT_FALSE(over);
+  EXPECT_DOUBLE_EQ(dualQueueMergeCost(h, root, v, 1.0, false, &over), 1e30 + 2.0);
+  EXPECT_TRUE(over);
+  dualQueueMergeCost(h, d, v, 1.0, false, &over);
+  EXPECT_TRUE(over);
+
+  AdaptOptions o;
+  o.maxNodes = 0;
+  o.frustumCull = false;
+  DualQueueAdapter adapter(h);
+  AdaptStats st;
+  // Splits: root (over tolerance), d (over tolerance), c (saves 384); not b (saves 0), not a.
+  const Cut& cut = adapter.update(v, o, &st);
+  EXPECT_EQ(adapter.frameStats().splits, 3u);
+  EXPECT_EQ(adapter.frameStats().merges, 0u);
+  EXPECT_EQ(cut.nodes.size(), 10u);
+  EXPECT_EQ(cut.triangles(), 32u + 128u + 4 * 32u + 4 * 128u);
+  EXPECT_GE(cut.find(a), 0);
+  EXPECT_GE(cut.find(b), 0);
+  EXPECT_GE(cut.find(c.child(3)), 0);
+  EXPECT_GE(cut.find(d.child(0)), 0);
+  EXPECT_FALSE(st.nodeBudgetBound);
+
+  // Budget 7: the 384-triangle split of c no longer fits, and no merge can pay for it.
+  DualQueueAdapter budgeted(h);
+  o.maxNodes = 7;
+  const Cut& cut7 = budgeted.update(v, o, &st);
+  EXPECT_EQ(cut7.nodes.size(), 7u);
+  EXPECT_EQ(cut7.triangles(), 32u + 128u + 512u + 4 * 128u);
+  EXPECT_FALSE(st.nodeBudgetBound);
+  // Budget 4: d's over-tolerance group must merge back; reported as budget-bound.
+  o.maxNodes = 4;
+  const Cut& cut4 = budgeted.update(v, o, &st);
+  EXPECT_EQ(cut4.nodes.size(), 4u);
+  EXPECT_EQ(budgeted.frameStats().merges, 1u);
+  EXPECT_EQ(budgeted.frameStats().splits, 0u);
+  EXPECT_TRUE(st.nodeBudgetBound);
+
+  // Ten times less magnified: everything meets tolerance at res 2, so all three groups merge
+  // (each adds 32 - 128 = -96 triangles), leaves first, then the root group.
+  o.maxNodes = 0;
+  const ViewParams far = handView(0.1);
+  EXPECT_DOUBLE_EQ(dualQueueMergeCost(h, c, far, 1.0, false, nullptr), -96.0);
+  EXPECT_DOUBLE_EQ(dualQueueMergeCost(h, root, far, 1.0, false, nullptr), -96.0);
+  const Cut& merged = adapter.update(far, o, &st);
+  EXPECT_EQ(adapter.frameStats().merges, 3u);
+  EXPECT_EQ(adapter.frameStats().splits, 0u);
+  ASSERT_EQ(merged.nodes.size(), 1u);
+  EXPECT_EQ(merged.nodes[0].id, root);
+  EXPECT_EQ(merged.nodes[0].res, 2u);
+}
+
+TEST(DualQueue, NoMoreTrianglesThanFixedGranularityOnRainier) {
+  const DemRaster dem = loadDem(test::repoData() / "terrain/mt_rainier_90m.tif");
+  AtlasManifest m;
+  m.depth = 5;
+  m.maxNodeResLog2 = 6;
+  m.minNodeResLog2 = 2;
+  TerrainAtlasOptions topt;
+  topt.chartSize = 257;
+  fillTerrainManifest(dem, topt, m);
+  const Hierarchy h = buildTerrainHierarchy(
+      m, [&](uint32_t c) { return extractChart(dem, m.charts[c].gridX, m.charts[c].gridY, 257); });
+  const glm::dvec3 lo{0, 0, dem.minHeight};
+  const glm::dvec3 hi{(dem.width - 1) * dem.spacing[0], (dem.height - 1) * dem.spacing[1], dem.maxHeight};
+  const auto path = orbitPath(lo, hi, 24, 0.35, 20.0);
+  AdaptOptions o;
+  o.tolerancePx = 1.0;
+  o.maxNodes = 400;
+  DualQueueAdapter adapter(h);
+  uint64_t dq = 0, fixed = 0, greedy = 0;
+  int bound = 0, fixedBound = 0, greedyBound = 0;
+  double err = 0, ferr = 0, gerr = 0;
+  for (const Camera& cam : path) {
+    const ViewParams v = makeViewParams(cam, 1280, 720);
+    AdaptStats st, fs, gs;
+    const Cut& cut = converge(adapter, v, o, &st);
+    EXPECT_EQ(countStitchViolations(h, cut), 0u);
+    EXPECT_LE(adapter.frameStats().drawnNodes, o.maxNodes);
+    if (!st.nodeBudgetBound) {
+      for (const CutNode& n : cut.nodes) EXPECT_TRUE(withinToleranceOrFinest(h, n, o.tolerancePx));
+    }
+    for (const CutNode& n : cut.nodes)
+      for (NodeId a = n.id; a.level > 0;) {
+        a = a.parent();
+        ASSERT_LT(cut.find(a), 0);
+      }
+    const Cut f = adaptFixedGranularity(h, v, o.tolerancePx, o.maxNodes, &fs);
+    adaptTopDownGreedy(h, v, o.tolerancePx, o.maxNodes, &gs);
+    EXPECT_EQ(countStitchViolations(h, f), 0u);
+    // The paper's claim: decoupling resolution from node size never costs triangles here.
+    EXPECT_LE(st.triangles, fs.triangles);
+    dq += st.triangles, fixed += fs.triangles, greedy += gs.triangles;
+    bound += st.nodeBudgetBound, fixedBound += fs.nodeBudgetBound, greedyBound += gs.nodeBudgetBound;
+    err = std::max(err, st.maxErrorPx), ferr = std::max(ferr, fs.maxErrorPx), gerr = std::max(gerr, gs.maxErrorPx);
+
+  }
+  std::printf("rainier orbit, 24 frames, 1 px, 400 nodes: triangles/frame (budget-bound frames, max "
+              "error px): dual-queue %llu (%d, %.2f), top-down greedy %llu (%d, %.2f), fixed "
+              "granularity %llu (%d, %.2f)\n",
+              (unsigned long long)(dq / 24), bound, err, (unsigned long long)(greedy / 24), greedyBound,
+              gerr, (unsigned long long)(fixed / 24), fixedBound, ferr);
+}
+
+}  // namespace
+}  // namespace gimlod
