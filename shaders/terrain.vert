@@ -4,18 +4,13 @@
 // spacing, and a height fetch from the node's page in the page pool.
 
 layout(location = 0) in uvec2 a_ij;   // grid vertex (i, j), 0..2^res
-layout(location = 1) in uint a_node;  // node record index (instanced, divisor 1)
+// The node record, per instance (divisor 1, selected by the draw's baseinstance):
+// a_nodeA = (origin.x, origin.y, sizeLog2, res), a_nodeB = (pageResLog2, pageLayer, index, 0).
+// origin in level-0 samples; sizeLog2 = node side in level-0 intervals; the grid has 2^res
+// intervals per side; the page 2^pageResLog2.
+layout(location = 1) in ivec4 a_nodeA;
+layout(location = 2) in ivec4 a_nodeB;
 
-struct NodeRecord {
-  ivec2 origin;     // level-0 samples
-  int sizeLog2;     // node side in level-0 intervals
-  int res;          // grid: 2^res intervals per side
-  int pageResLog2;  // page: 2^pageResLog2 intervals per side
-  int pageLayer;
-  int pad0;
-  int pad1;
-};
-layout(std430, binding = 0) readonly buffer Nodes { NodeRecord u_nodes[]; };
 // Stitch tables bytes, (node * 4 + side) * entriesPerSide + entry, packed little-endian in words.
 layout(std430, binding = 1) readonly buffer Stitch { uint u_stitchWords[]; };
 
@@ -47,24 +42,25 @@ int snapToNeighbour(int node, int side, int t, int ownSpacing, int sizeLog2) {
 }
 
 void main() {
-  int node = int(a_node);
-  NodeRecord r = u_nodes[node];
-  int n = 1 << r.res;
+  int node = a_nodeB.z;
+  ivec2 origin = a_nodeA.xy;
+  int sizeLog2 = a_nodeA.z, res = a_nodeA.w, pageResLog2 = a_nodeB.x, pageLayer = a_nodeB.y;
+  int n = 1 << res;
   int i = int(a_ij.x), j = int(a_ij.y);
-  int so = r.sizeLog2 - r.res;
+  int so = sizeLog2 - res;
   int tx = i << so, ty = j << so;
   int sx = tx, sy = ty;
-  if (j == 0) sx = snapToNeighbour(node, kBottom, tx, so, r.sizeLog2);
-  if (j == n) sx = snapToNeighbour(node, kTop, tx, so, r.sizeLog2);
-  if (i == 0) sy = snapToNeighbour(node, kLeft, ty, so, r.sizeLog2);
-  if (i == n) sy = snapToNeighbour(node, kRight, ty, so, r.sizeLog2);
+  if (j == 0) sx = snapToNeighbour(node, kBottom, tx, so, sizeLog2);
+  if (j == n) sx = snapToNeighbour(node, kTop, tx, so, sizeLog2);
+  if (i == 0) sy = snapToNeighbour(node, kLeft, ty, so, sizeLog2);
+  if (i == n) sy = snapToNeighbour(node, kRight, ty, so, sizeLog2);
 
-  int ps = r.sizeLog2 - r.pageResLog2;
+  int ps = sizeLog2 - pageResLog2;
   ivec2 texel = ivec2(sx >> ps, sy >> ps);
-  float height = texelFetch(u_heights, ivec3(texel, r.pageLayer), 0).r;
+  float height = texelFetch(u_heights, ivec3(texel, pageLayer), 0).r;
   // Integer sample first, one conversion, one multiply: bit-identical across nodes.
-  v_world = vec3(float(r.origin.x + sx) * u_spacing.x, float(r.origin.y + sy) * u_spacing.y, height);
+  v_world = vec3(float(origin.x + sx) * u_spacing.x, float(origin.y + sy) * u_spacing.y, height);
   gl_Position = u_viewProj * vec4(v_world, 1.0);
   v_pageUv = (vec2(texel) + 0.5) / float(textureSize(u_heights, 0).x);
-  v_pageLayer = r.pageLayer;
+  v_pageLayer = pageLayer;
 }

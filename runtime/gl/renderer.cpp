@@ -24,8 +24,10 @@ namespace gimlod::gl {
 namespace {
 
 constexpr GLuint kHeightsUnit = 0, kNormalsUnit = 1;
-constexpr GLuint kNodesBinding = 0, kStitchBinding = 1;  // SSBO bindings in terrain.vert
-constexpr GLuint kGridAttrib = 0, kNodeAttrib = 1;       // vertex attribute locations
+constexpr GLuint kStitchBinding = 1;  // SSBO binding in terrain.vert
+// Vertex attribute locations in terrain.vert: the grid vertex, and the node record as two
+// per-instance ivec4s (divisor 1; the draw's baseinstance selects the node).
+constexpr GLuint kGridAttrib = 0, kNodeAttribA = 1, kNodeAttribB = 2;
 constexpr uint32_t kMaxGridResLog2 = 12;                 // (2^12+1)^2 vertices; ushort (i, j)
 
 // std430 layout of terrain.vert's NodeRecord.
@@ -37,7 +39,7 @@ struct DrawElementsIndirectCommand {
 };
 
 struct NodeRecord {
-  int32_t originX, originY, sizeLog2, res, pageResLog2, pageLayer, pad0, pad1;
+  int32_t originX, originY, sizeLog2, res, pageResLog2, pageLayer, index, pad;
 };
 static_assert(sizeof(NodeRecord) == 32);
 
@@ -82,8 +84,7 @@ struct TerrainRenderer::Impl {
   uint32_t capacity = 0;
   GlObject colourBuffer, depthBuffer, framebuffer;
   GlObject heights, normals;
-  GlObject gridVertices, gridIndices, nodeIndices, vertexArray;
-  uint32_t nodeIndexCapacity = 0;
+  GlObject gridVertices, gridIndices, vertexArray;
   std::vector<GridRange> grids;  // [res - minResLog2]
   GlObject nodeBuffer, stitchBuffer, indirectBuffer, feedbackBuffer, feedbackQuery;
   GlObject terrainProgram, staticProgram, staticTerrainProgram;
@@ -95,7 +96,6 @@ struct TerrainRenderer::Impl {
   void createGrids();
   void createVertexArray();
   const GridRange& grid(uint32_t res) const { return grids[res - setup.minResLog2]; }
-  void ensureNodeIndices(size_t count);
   void validate(std::span<const DrawNode> nodes, const StitchTables& stitch) const;
   void uploadNodes(std::span<const DrawNode> nodes, const StitchTables& stitch);
   void setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const;
@@ -117,6 +117,7 @@ TerrainRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   createFramebuffer();
   createPagePool();
   createGrids();
+  nodeBuffer = makeBuffer();
   createVertexArray();
   terrainProgram = linkProgram("terrain", kShader_terrain_vert, kShader_terrain_frag, {"v_world"});
   staticProgram = linkProgram("static_mesh", kShader_static_mesh_vert, kShader_static_mesh_frag);
@@ -128,7 +129,6 @@ TerrainRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   glUniform1i(uniform(staticTerrainProgram, "u_heights"), kHeightsUnit);
   glUniform1i(uniform(staticTerrainProgram, "u_normals"), kNormalsUnit);
   glUseProgram(0);
-  nodeBuffer = makeBuffer();
   stitchBuffer = makeBuffer();
   indirectBuffer = makeBuffer();
   feedbackBuffer = makeBuffer();
@@ -226,33 +226,22 @@ void TerrainRenderer::Impl::createGrids() {
 }
 
 void TerrainRenderer::Impl::createVertexArray() {
-  nodeIndices = makeBuffer();
   vertexArray = makeVertexArray();
   glBindVertexArray(vertexArray.id());
   glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, gridIndices.id());
   glBindBuffer(GL_ARRAY_BUFFER, gridVertices.id());
   glEnableVertexAttribArray(kGridAttrib);
   glVertexAttribIPointer(kGridAttrib, 2, GL_UNSIGNED_SHORT, 2 * sizeof(uint16_t), nullptr);
-  glBindBuffer(GL_ARRAY_BUFFER, nodeIndices.id());
-  glEnableVertexAttribArray(kNodeAttrib);
-  glVertexAttribIPointer(kNodeAttrib, 1, GL_UNSIGNED_INT, sizeof(uint32_t), nullptr);
-  glVertexAttribDivisor(kNodeAttrib, 1);  // baseinstance picks the node record
+  glBindBuffer(GL_ARRAY_BUFFER, nodeBuffer.id());
+  for (GLuint a : {kNodeAttribA, kNodeAttribB}) {
+    glEnableVertexAttribArray(a);
+    glVertexAttribIPointer(a, 4, GL_INT, sizeof(NodeRecord),
+                           reinterpret_cast<const void*>(a == kNodeAttribA ? 0 : 4 * sizeof(int32_t)));
+    glVertexAttribDivisor(a, 1);  // baseinstance picks the node record
+  }
   glBindVertexArray(0);
   glBindBuffer(GL_ARRAY_BUFFER, 0);
-  ensureNodeIndices(256);
   checkGl("vertex array setup");
-}
-
-void TerrainRenderer::Impl::ensureNodeIndices(size_t count) {
-  if (count <= nodeIndexCapacity) return;
-  uint32_t cap = std::max<uint32_t>(nodeIndexCapacity, 256);
-  while (cap < count) cap *= 2;
-  std::vector<uint32_t> ids(cap);
-  for (uint32_t k = 0; k < cap; ++k) ids[k] = k;
-  glBindBuffer(GL_ARRAY_BUFFER, nodeIndices.id());
-  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(cap * sizeof(uint32_t)), ids.data(), GL_STATIC_DRAW);
-  glBindBuffer(GL_ARRAY_BUFFER, 0);
-  nodeIndexCapacity = cap;
 }
 
 void TerrainRenderer::Impl::validate(std::span<const DrawNode> nodes,
@@ -280,11 +269,12 @@ void TerrainRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
   for (size_t k = 0; k < nodes.size(); ++k) {
     const DrawNode& n = nodes[k];
     records[k] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.res),
-                  int32_t(n.pageResLog2), int32_t(n.pageLayer), 0, 0};
+                  int32_t(n.pageResLog2), int32_t(n.pageLayer), int32_t(k), 0};
   }
-  glBindBuffer(GL_SHADER_STORAGE_BUFFER, nodeBuffer.id());
-  glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(records.size() * sizeof(NodeRecord)),
-               records.data(), GL_STREAM_DRAW);
+  glBindBuffer(GL_ARRAY_BUFFER, nodeBuffer.id());
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(records.size() * sizeof(NodeRecord)), records.data(),
+               GL_STREAM_DRAW);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
   // note: an empty table means "no neighbours anywhere"; the shader still needs the words.
   const size_t tableBytes = nodes.size() * 4 * stitch.entriesPerSide;
   std::vector<uint32_t> words(std::max<size_t>((tableBytes + 3) / 4, 1), 0u);
@@ -293,9 +283,7 @@ void TerrainRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
   glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(words.size() * sizeof(uint32_t)),
                words.data(), GL_STREAM_DRAW);
   glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
-  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kNodesBinding, nodeBuffer.id());
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kStitchBinding, stitchBuffer.id());
-  ensureNodeIndices(nodes.size());
   checkGl("node and stitch table upload");
 }
 
