@@ -1,4 +1,4 @@
-// gimlod: build multi-grained LOD atlases and render them headless.
+// gimlod: build multi-grained LOD atlases, render them headless, and benchmark the adaptation.
 #include <unistd.h>
 
 #include <chrono>
@@ -16,6 +16,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include "apps/bench_command.h"
 #include "apps/pipeline.h"
 #include "core/atlas_format.h"
 #include "runtime/adapt.h"
@@ -179,6 +180,9 @@ int main(int argc, char** argv) {
   render->add_option("--uploads-per-frame", r.uploadsPerFrame, "With --async-loads: pages uploaded per frame")
       ->capture_default_str();
 
+  BenchArgs bn;
+  auto* bench = addBenchCommand(app, bn);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -187,6 +191,7 @@ int main(int argc, char** argv) {
   try {
     if (*build) return runBuild(b);
     if (*render) return runRender(r);
+    if (*bench) return runBench(bn);
   } catch (const InputError& e) {
     spdlog::error("{}", e.what());
     return 2;

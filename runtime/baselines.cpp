@@ -2,7 +2,9 @@
 // the comparison point, and the simple top-down algorithm); section 7.4 (stitching constraint).
 #include "runtime/baselines.h"
 
+#include <algorithm>
 #include <queue>
+#include <unordered_map>
 
 #include "runtime/adapt_dual_queue.h"
 
@@ -80,6 +82,193 @@ Cut adaptTopDownGreedy(const Hierarchy& h, const ViewParams& view, double tolera
   o.maxNodes = maxNodes;
   o.frustumCull = frustumCull;
   return adaptErrorThreshold(h, view, o, stats);
+}
+
+namespace {
+
+uint64_t budgetTris(uint32_t res) { return 2ull << (2 * res); }
+
+// One top-down operation: split id (children at childRes) or raise id's resolution by one.
+struct BudgetOp {
+  NodeId id;
+  bool split = false;
+  uint32_t childRes = 0;
+};
+
+// Roots (drawable) at rootRes, then the first `count` operations.
+Cut replayOps(const Hierarchy& h, const ViewParams& view, bool cull, uint32_t rootRes,
+              const std::vector<BudgetOp>& ops, size_t count) {
+  std::unordered_map<uint64_t, CutNode> live;
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    const NodeId root{c, 0, 0, 0};
+    if (nodeDrawable(h, root, view, cull)) live[root.key()] = {root, rootRes, 0.f};
+  }
+  for (size_t i = 0; i < count; ++i) {
+    const BudgetOp& op = ops[i];
+    if (!op.split) {
+      ++live[op.id.key()].res;
+      continue;
+    }
+    live.erase(op.id.key());
+    for (uint32_t k = 0; k < 4; ++k) {
+      const NodeId ch = op.id.child(k);
+      if (nodeDrawable(h, ch, view, cull)) live[ch.key()] = {ch, std::min(op.childRes, h.params.maxRes(ch.level)), 0.f};
+    }
+  }
+  Cut cut;
+  for (const auto& [k, n] : live) cut.nodes.push_back(n);
+  std::sort(cut.nodes.begin(), cut.nodes.end(),
+            [](const CutNode& a, const CutNode& b) { return a.id.key() < b.id.key(); });
+  cut.rebuildIndex();
+  return cut;
+}
+
+// Replays the operations, enforces the stitching constraint, and backs off (1, 2, 4, ...
+// operations) until the budgets hold. fixedRes: constraint-split children back to maxRes(level).
+Cut finishBudgetCut(const Hierarchy& h, const ViewParams& view, const BudgetOptions& o, uint32_t rootRes,
+                    const std::vector<BudgetOp>& ops, bool fixedRes, BudgetStats& st) {
+  const uint64_t nodeBudget = o.maxNodes == 0 ? UINT64_MAX : o.maxNodes;
+  size_t count = ops.size(), step = 1;
+  Cut cut;
+  for (;;) {
+    cut = replayOps(h, view, o.frustumCull, rootRes, ops, count);
+    AdaptStats as;
+    enforceStitchConstraint(h, cut, &view, 1.0, &as);
+    if (fixedRes && as.constraintSplits > 0)
+      for (CutNode& n : cut.nodes) n.res = std::max(n.res, h.params.maxRes(n.id.level));
+    if (!fixedRes) fitTriangleBudget(h, cut, view, o.maxTriangles);
+    st.constraintRaises = as.constraintRaises;
+    st.constraintSplits = as.constraintSplits;
+    if ((cut.triangles() <= o.maxTriangles && cut.nodes.size() <= nodeBudget) || count == 0) break;
+    count -= std::min(count, step);
+    step *= 2;
+  }
+  st.refines = st.splits = 0;
+  for (size_t i = 0; i < count; ++i) (ops[i].split ? st.splits : st.refines)++;
+  st.nodes = uint32_t(cut.nodes.size());
+  st.triangles = cut.triangles();
+  double sum = 0.0;
+  for (CutNode& n : cut.nodes) {
+    n.errorPx = float(screenError(h, n.id, n.res, view));
+    st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
+    sum += n.errorPx;
+  }
+  st.meanErrorPx = cut.nodes.empty() ? 0.0 : sum / double(cut.nodes.size());
+  return cut;
+}
+
+struct ErrorItem {
+  double errorPx;
+  NodeId id;
+  uint32_t res;
+  bool operator<(const ErrorItem& b) const {
+    return errorPx < b.errorPx || (errorPx == b.errorPx && id.key() > b.id.key());
+  }
+};
+
+}  // namespace
+
+Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options,
+                                BudgetStats* stats) {
+  BudgetStats st;
+  const uint64_t nodeBudget = options.maxNodes == 0 ? UINT64_MAX : options.maxNodes;
+  std::priority_queue<ErrorItem> queue;
+  uint64_t count = 0;
+  for (uint32_t c = 0; c < h.chartCount(); ++c) count += nodeDrawable(h, {c, 0, 0, 0}, view, options.frustumCull);
+  uint32_t rootRes = h.params.maxRes(0);
+  while (rootRes > h.params.minNodeResLog2 && count * budgetTris(rootRes) > options.maxTriangles) --rootRes;
+  uint64_t triangles = count * budgetTris(rootRes);
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    const NodeId root{c, 0, 0, 0};
+    if (nodeDrawable(h, root, view, options.frustumCull)) queue.push({screenError(h, root, rootRes, view), root, rootRes});
+  }
+  std::vector<BudgetOp> ops;
+  while (!queue.empty()) {
+    const ErrorItem it = queue.top();
+    queue.pop();
+    if (it.id.level + 1 >= h.params.depth || it.res != h.params.maxRes(it.id.level)) continue;
+    const uint32_t cres = h.params.maxRes(it.id.level + 1);
+    uint64_t children = 0;
+    for (uint32_t i = 0; i < 4; ++i) children += nodeDrawable(h, it.id.child(i), view, options.frustumCull);
+    const uint64_t t = triangles - budgetTris(it.res) + children * budgetTris(cres);
+    if (t > options.maxTriangles || count - 1 + children > nodeBudget) continue;
+    triangles = t;
+    count = count - 1 + children;
+    ops.push_back({it.id, true, cres});
+    for (uint32_t i = 0; i < 4; ++i) {
+      const NodeId ch = it.id.child(i);
+      if (nodeDrawable(h, ch, view, options.frustumCull)) queue.push({screenError(h, ch, cres, view), ch, cres});
+    }
+  }
+  Cut cut = finishBudgetCut(h, view, options, rootRes, ops, true, st);
+  if (stats) *stats = st;
+  return cut;
+}
+
+Cut adaptGreedyBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options,
+                      BudgetStats* stats) {
+  BudgetStats st;
+  const uint64_t nodeBudget = options.maxNodes == 0 ? UINT64_MAX : options.maxNodes;
+  const uint32_t rmin = h.params.minNodeResLog2;
+  std::priority_queue<ErrorItem> queue;
+  uint64_t count = 0, triangles = 0;
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    const NodeId root{c, 0, 0, 0};
+    if (!nodeDrawable(h, root, view, options.frustumCull)) continue;
+    queue.push({screenError(h, root, rmin, view), root, rmin});
+    ++count;
+    triangles += budgetTris(rmin);
+  }
+  std::vector<BudgetOp> ops;
+  while (!queue.empty()) {
+    const ErrorItem it = queue.top();
+    queue.pop();
+    const NodeId& n = it.id;
+    double raiseGain = -1.0, splitGain = -1.0;
+    uint64_t raiseTris = 0, splitTris = 0, children = 0;
+    const uint32_t cres = std::max(rmin, it.res == 0 ? 0u : it.res - 1);
+    if (it.res < h.params.maxRes(n.level)) {
+      raiseTris = triangles + budgetTris(it.res + 1) - budgetTris(it.res);
+      if (raiseTris <= options.maxTriangles)
+        raiseGain = (it.errorPx - screenError(h, n, it.res + 1, view)) / double(budgetTris(it.res + 1) - budgetTris(it.res));
+    }
+    if (n.level + 1 < h.params.depth) {
+      double worst = 0.0;
+      uint64_t childTris = 0;
+      for (uint32_t i = 0; i < 4; ++i) {
+        const NodeId ch = n.child(i);
+        if (!nodeDrawable(h, ch, view, options.frustumCull)) continue;
+        const uint32_t r = std::min(cres, h.params.maxRes(ch.level));
+        ++children;
+        childTris += budgetTris(r);
+        worst = std::max(worst, screenError(h, ch, r, view));
+      }
+      splitTris = triangles - budgetTris(it.res) + childTris;
+      if (splitTris <= options.maxTriangles && count - 1 + children <= nodeBudget) {
+        const double added = std::max(1.0, double(childTris) - double(budgetTris(it.res)));
+        splitGain = (it.errorPx - worst) / added;
+      }
+    }
+    if (raiseGain <= 0.0 && splitGain <= 0.0) continue;  // final
+    if (splitGain > raiseGain) {
+      triangles = splitTris;
+      count = count - 1 + children;
+      ops.push_back({n, true, cres});
+      for (uint32_t i = 0; i < 4; ++i) {
+        const NodeId ch = n.child(i);
+        if (!nodeDrawable(h, ch, view, options.frustumCull)) continue;
+        const uint32_t r = std::min(cres, h.params.maxRes(ch.level));
+        queue.push({screenError(h, ch, r, view), ch, r});
+      }
+    } else {
+      triangles = raiseTris;
+      ops.push_back({n, false, 0});
+      queue.push({screenError(h, n, it.res + 1, view), n, it.res + 1});
+    }
+  }
+  Cut cut = finishBudgetCut(h, view, options, rmin, ops, false, st);
+  if (stats) *stats = st;
+  return cut;
 }
 
 }  // namespace gimlod

@@ -7,6 +7,7 @@
 #include <cstdint>
 
 #include "runtime/adapt.h"
+#include "runtime/adapt_quad_queue.h"
 
 namespace gimlod {
 
@@ -21,5 +22,23 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
 // The stateless top-down greedy of paper 7.1: adaptErrorThreshold with these arguments.
 Cut adaptTopDownGreedy(const Hierarchy& h, const ViewParams& view, double tolerancePx,
                        uint32_t maxNodes, AdaptStats* stats = nullptr, bool frustumCull = true);
+
+// Triangle-budget fixed granularity: every node of level l at maxRes(l) (when even the visible
+// roots do not fit maxTriangles at maxRes(0), the roots take the highest common resolution that
+// fits). Refines top-down, largest screen error first, splitting while the triangles and drawn
+// nodes stay within maxTriangles and maxNodes; then enforces the stitching constraint, undoing the
+// last splits if the constraint pushed the cut over a budget. Fills refines (0), splits, nodes,
+// triangles, errors, constraint counts.
+Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options,
+                                BudgetStats* stats = nullptr);
+
+// Triangle-budget simple top-down greedy (paper 7.1): roots at minRes; repeatedly takes the node
+// with the largest screen error and either raises its resolution one step or splits it (children
+// at the same sample density, at least minRes), whichever lowers its error more per added
+// triangle and fits maxTriangles and maxNodes; a node neither option helps is final. Then the
+// stitching constraint is enforced and resolutions are lowered (fitTriangleBudget) or the last
+// operations undone until both budgets hold.
+Cut adaptGreedyBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options,
+                      BudgetStats* stats = nullptr);
 
 }  // namespace gimlod

@@ -1,0 +1,484 @@
+// `gimlod bench`: see bench_command.h.
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 7.1 (error-threshold and triangle-budget
+// problems, the dual- and quad-queue adapters against fixed granularity and top-down greedy) and
+// figure 6 (adaptation time and error against the node count).
+#include "apps/bench_command.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <iostream>
+#include <limits>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <tuple>
+#include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "core/atlas_format.h"
+#include "runtime/adapt.h"
+#include "runtime/adapt_dual_queue.h"
+#include "runtime/adapt_quad_queue.h"
+#include "runtime/atlas_view.h"
+#include "runtime/baselines.h"
+#include "runtime/camera.h"
+#include "runtime/gl/egl_context.h"
+#include "runtime/gl/terrain_scene.h"
+
+namespace gimlod {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+const char* const kAlgorithms[] = {"ours", "fixed", "greedy"};
+
+// One frame of one configuration.
+struct Row {
+  std::string algorithm;
+  uint32_t maxNodes = 0;
+  uint64_t maxTriangles = 0;  // budget mode only
+  uint32_t repeat = 0, frame = 0;
+  double adaptUs = 0.0;
+  uint32_t nodes = 0;
+  uint64_t triangles = 0;
+  double maxErrorPx = 0.0, meanErrorPx = 0.0;
+  uint32_t splits = 0, merges = 0, refines = 0, coarsens = 0;
+  bool budgetBound = false;
+  uint32_t constraintSplits = 0;
+  double drawMs = std::numeric_limits<double>::quiet_NaN();  // --render only
+};
+
+// Adapts to one view: fills the row's adapt_us and algorithm counters, returns the drawn cut
+// (valid until the next call).
+using Adapter = std::function<const Cut&(const ViewParams&, Row&)>;
+
+double microsSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+}
+
+// Comma-separated positive integers; throws InputError naming the option.
+std::vector<uint64_t> parseList(const std::string& option, const std::string& text, uint64_t maxValue) {
+  std::vector<uint64_t> out;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    item.erase(0, item.find_first_not_of(" \t"));
+    item.erase(item.find_last_not_of(" \t") + 1);
+    if (item.empty()) throw InputError(option + " '" + text + "' has an empty entry");
+    if (item.find_first_not_of("0123456789") != std::string::npos)
+      throw InputError(option + " '" + text + "': '" + item + "' is not a positive integer");
+    uint64_t v = 0;
+    try {
+      v = std::stoull(item);
+    } catch (const std::exception&) {
+      throw InputError(option + " '" + text + "': '" + item + "' is out of range");
+    }
+    if (v == 0) throw InputError(option + " '" + text + "': budgets must be > 0");
+    if (v > maxValue) throw InputError(fmt::format("{} '{}': {} is above the maximum {}", option, text, v, maxValue));
+    if (std::find(out.begin(), out.end(), v) != out.end())
+      throw InputError(option + " '" + text + "': " + item + " is listed twice");
+    out.push_back(v);
+  }
+  if (out.empty() || text.back() == ',') throw InputError(option + " must be a non-empty comma-separated list");
+  return out;
+}
+
+std::vector<std::string> parseAlgorithms(const std::string& text) {
+  std::vector<std::string> out;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    if (std::find(std::begin(kAlgorithms), std::end(kAlgorithms), item) == std::end(kAlgorithms))
+      throw InputError("--algorithms '" + text + "': unknown algorithm '" + item + "' (ours, fixed, greedy)");
+    if (std::find(out.begin(), out.end(), item) != out.end())
+      throw InputError("--algorithms '" + text + "': " + item + " is listed twice");
+    out.push_back(item);
+  }
+  if (out.empty() || text.back() == ',') throw InputError("--algorithms must be a non-empty list of ours, fixed, greedy");
+  return out;
+}
+
+// Screen error of every drawn node at its drawn resolution, measured the same way for every
+// algorithm; also nodes and triangles.
+void measureCut(const Hierarchy& h, const Cut& cut, const ViewParams& v, Row& r) {
+  double maxE = 0.0, sum = 0.0;
+  for (const CutNode& n : cut.nodes) {
+    const double e = screenError(h, n.id, n.res, v);
+    maxE = std::max(maxE, e);
+    sum += e;
+  }
+  r.nodes = uint32_t(cut.nodes.size());
+  r.triangles = cut.triangles();
+  r.maxErrorPx = maxE;
+  r.meanErrorPx = cut.nodes.empty() ? 0.0 : sum / double(cut.nodes.size());
+}
+
+// Error-threshold mode adapters (fresh state per configuration).
+Adapter makeErrorAdapter(const Hierarchy& h, const std::string& algo, uint32_t maxNodes, double tol) {
+  if (algo == "ours") {
+    auto dq = std::make_shared<DualQueueAdapter>(h);
+    AdaptOptions o;
+    o.tolerancePx = tol;
+    o.maxNodes = maxNodes;
+    return [dq, o](const ViewParams& v, Row& r) -> const Cut& {
+      AdaptStats st;
+      const auto t0 = Clock::now();
+      const Cut& cut = dq->update(v, o, &st);
+      r.adaptUs = microsSince(t0);
+      r.splits = dq->frameStats().splits;
+      r.merges = dq->frameStats().merges;
+      r.budgetBound = st.nodeBudgetBound;
+      r.constraintSplits = st.constraintSplits;
+      return cut;
+    };
+  }
+  auto held = std::make_shared<Cut>();
+  const bool fixed = algo == "fixed";
+  return [&h, held, fixed, maxNodes, tol](const ViewParams& v, Row& r) -> const Cut& {
+    AdaptStats st;
+    const auto t0 = Clock::now();
+    Cut cut = fixed ? adaptFixedGranularity(h, v, tol, maxNodes, &st) : adaptTopDownGreedy(h, v, tol, maxNodes, &st);
+    r.adaptUs = microsSince(t0);
+    r.splits = st.splits;
+    r.budgetBound = st.nodeBudgetBound;
+    r.constraintSplits = st.constraintSplits;
+    *held = std::move(cut);
+    return *held;
+  };
+}
+
+// Triangle-budget mode adapters. budget_bound: at the node budget, or within 25% of the triangle
+// budget (one more refinement step of a node quadruples its triangles).
+Adapter makeBudgetAdapter(const Hierarchy& h, const std::string& algo, uint32_t maxNodes, uint64_t maxTris) {
+  BudgetOptions o;
+  o.maxNodes = maxNodes;
+  o.maxTriangles = maxTris;
+  auto fill = [maxNodes, maxTris](const BudgetStats& st, const Cut& cut, Row& r) {
+    r.refines = st.refines;
+    r.coarsens = st.coarsens;
+    r.splits = st.splits;
+    r.merges = st.merges;
+    r.constraintSplits = st.constraintSplits;
+    r.budgetBound = cut.nodes.size() >= maxNodes || 4 * cut.triangles() >= 3 * maxTris;
+  };
+  if (algo == "ours") {
+    auto qq = std::make_shared<QuadQueueAdapter>(h);
+    return [qq, o, fill](const ViewParams& v, Row& r) -> const Cut& {
+      BudgetStats st;
+      const auto t0 = Clock::now();
+      const Cut& cut = qq->update(v, o, &st);
+      r.adaptUs = microsSince(t0);
+      fill(st, cut, r);
+      return cut;
+    };
+  }
+  auto held = std::make_shared<Cut>();
+  const bool fixed = algo == "fixed";
+  return [&h, held, fixed, o, fill](const ViewParams& v, Row& r) -> const Cut& {
+    BudgetStats st;
+    const auto t0 = Clock::now();
+    Cut cut = fixed ? adaptFixedGranularityBudget(h, v, o, &st) : adaptGreedyBudget(h, v, o, &st);
+    r.adaptUs = microsSince(t0);
+    *held = std::move(cut);
+    fill(st, *held, r);
+    return *held;
+  };
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const size_t k = size_t(std::ceil(p * double(v.size())));
+  return v[std::min(v.size() - 1, k == 0 ? 0 : k - 1)];
+}
+
+struct Summary {
+  std::string algorithm;
+  uint32_t maxNodes = 0;
+  uint64_t maxTriangles = 0;
+  size_t frames = 0;
+  double adaptUs = 0, nodes = 0, triangles = 0, meanErr = 0, boundFrac = 0, drawMs = 0;
+  double errMean = 0, errP50 = 0, errP95 = 0, errMax = 0;
+  uint32_t nodesMax = 0;
+  uint64_t trianglesMax = 0;
+};
+
+Summary summarize(const std::vector<Row>& rows) {
+  Summary s;
+  s.algorithm = rows.front().algorithm;
+  s.maxNodes = rows.front().maxNodes;
+  s.maxTriangles = rows.front().maxTriangles;
+  s.frames = rows.size();
+  std::vector<double> err;
+  for (const Row& r : rows) {
+    s.adaptUs += r.adaptUs;
+    s.nodes += r.nodes;
+    s.triangles += double(r.triangles);
+    s.meanErr += r.meanErrorPx;
+    s.boundFrac += r.budgetBound;
+    s.drawMs += std::isnan(r.drawMs) ? 0.0 : r.drawMs;
+    s.errMean += r.maxErrorPx;
+    s.nodesMax = std::max(s.nodesMax, r.nodes);
+    s.trianglesMax = std::max(s.trianglesMax, r.triangles);
+    err.push_back(r.maxErrorPx);
+  }
+  const double n = double(rows.size());
+  for (double* v : {&s.adaptUs, &s.nodes, &s.triangles, &s.meanErr, &s.boundFrac, &s.drawMs, &s.errMean}) *v /= n;
+  s.errP50 = percentile(err, 0.5);
+  s.errP95 = percentile(err, 0.95);
+  s.errMax = *std::max_element(err.begin(), err.end());
+  return s;
+}
+
+std::string optNum(bool present, double v, const char* f = "{:.4f}") {
+  return present ? fmt::format(fmt::runtime(f), v) : std::string();
+}
+
+}  // namespace
+
+CLI::App* addBenchCommand(CLI::App& app, BenchArgs& a) {
+  auto* b = app.add_subcommand("bench", "Benchmark adaptation (time, nodes, triangles, error) over a camera path");
+  b->add_option("atlas", a.atlas, "Atlas directory")->required();
+  b->add_option("-o,--output", a.output, "Output directory (bench.csv, summary.csv, cost_model.json)")->required();
+  b->add_option("--path", a.path, "Camera path JSON: frames of eye, target, up, fov_deg");
+  b->add_option("--orbit", a.orbit, "Frames of an orbit around the bounding-box centre");
+  b->add_option("--distance", a.distance, "Orbit distance as a fraction of the bounding-box diagonal")->capture_default_str();
+  b->add_option("--elevation", a.elevation, "Orbit elevation in degrees")->capture_default_str();
+  b->add_option("--fov", a.fov, "Vertical field of view for --orbit, degrees")->capture_default_str();
+  b->add_option("--mode", a.mode, "error: error threshold with node budgets; budget: node x triangle budgets")
+      ->capture_default_str();
+  b->add_option("--nodes", a.nodes, "Node budgets, comma-separated")->capture_default_str();
+  auto* tris = b->add_option("--triangles", a.triangles, "Triangle budgets, comma-separated (budget mode)")
+                   ->capture_default_str();
+  auto* tol = b->add_option("--tolerance", a.tolerance, "Screen-space error tolerance in pixels (error mode)")
+                  ->capture_default_str();
+  b->add_option("--size", a.size, "Viewport WxH for the projection")->capture_default_str();
+  b->add_option("--algorithms", a.algorithms, "Subset of ours,fixed,greedy")->capture_default_str();
+  b->add_option("--repeat", a.repeat, "Passes over the camera path per configuration")->capture_default_str();
+  b->add_flag("--render", a.render, "Also draw each cut (headless EGL) and record draw_ms");
+  b->add_option("--frame-ms", a.frameMs, "Cost model: target frame time in ms (needs --tri-rate)");
+  b->add_option("--tri-rate", a.triRate, "Cost model: triangle throughput in triangles/s (e.g. from bench_render)");
+  b->callback([&a, tris, tol] {
+    a.trianglesGiven = tris->count() > 0;
+    a.toleranceGiven = tol->count() > 0;
+  });
+  return b;
+}
+
+int runBench(const BenchArgs& a) {
+  // Options.
+  const bool budgetMode = a.mode == "budget";
+  if (a.mode != "error" && !budgetMode) throw InputError("--mode '" + a.mode + "' must be error or budget");
+  const std::vector<uint64_t> nodeBudgets = parseList("--nodes", a.nodes, 1u << 24);
+  std::vector<uint64_t> triBudgets;
+  if (budgetMode) {
+    triBudgets = parseList("--triangles", a.triangles, uint64_t(1) << 40);
+    if (a.toleranceGiven) throw InputError("--tolerance applies to --mode error only");
+  } else {
+    if (a.trianglesGiven) throw InputError("--triangles applies to --mode budget only");
+    triBudgets = {0};
+    if (!(a.tolerance > 0.0) || !std::isfinite(a.tolerance)) throw InputError("--tolerance must be > 0 pixels");
+  }
+  const std::vector<std::string> algorithms = parseAlgorithms(a.algorithms);
+  uint32_t w = 0, h = 0;
+  char extra;
+  if (std::sscanf(a.size.c_str(), "%ux%u%c", &w, &h, &extra) != 2 || w < 8 || h < 8 || w > 16384 || h > 16384)
+    throw InputError("--size '" + a.size + "' must be WxH with 8 <= W, H <= 16384");
+  if (a.orbit == 0 && a.path.empty()) throw InputError("give --orbit N or --path FILE.json");
+  if (a.orbit > 0 && !a.path.empty()) throw InputError("give only one of --orbit and --path");
+  if (a.orbit > 100000) throw InputError("--orbit must be at most 100000 frames");
+  if (!(a.distance > 0.0) || !std::isfinite(a.distance)) throw InputError("--distance must be > 0");
+  if (!(a.fov > 1.0 && a.fov < 179.0)) throw InputError("--fov must be in (1, 179) degrees");
+  if (a.repeat == 0 || a.repeat > 1000) throw InputError("--repeat must be in [1, 1000]");
+  const bool costModel = a.frameMs != 0.0 || a.triRate != 0.0;
+  if (costModel) {
+    if (!(a.frameMs > 0.0) || !std::isfinite(a.frameMs)) throw InputError("--frame-ms must be > 0 (with --tri-rate)");
+    if (!(a.triRate > 0.0) || !std::isfinite(a.triRate))
+      throw InputError("--tri-rate must be > 0 triangles/s (with --frame-ms); measure it with bench_render");
+    if (std::find(algorithms.begin(), algorithms.end(), "ours") == algorithms.end())
+      throw InputError("the cost model (--frame-ms, --tri-rate) fits the adaptation cost of 'ours': add it to --algorithms");
+  }
+
+  // Inputs.
+  const AtlasView atlas = openAtlas(a.atlas);
+  const Hierarchy& hier = atlas.hierarchy;
+  std::vector<Camera> cams;
+  if (!a.path.empty()) {
+    cams = readCameraPath(a.path);
+    for (Camera& c : cams) fitClipPlanes(c, atlas.lo, atlas.hi);
+  } else {
+    cams = orbitPath(atlas.lo, atlas.hi, a.orbit, a.distance, a.elevation, a.fov);
+  }
+  if (cams.empty()) throw InputError(a.path + ": the camera path has no frames");
+  std::vector<ViewParams> views;
+  for (const Camera& c : cams) views.push_back(makeViewParams(c, w, h));
+
+  const fs::path out = a.output;
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec || !fs::is_directory(out)) throw InputError(a.output + ": cannot create output directory");
+  if (::access(out.c_str(), W_OK) != 0) throw InputError(a.output + ": output directory is not writable");
+
+  std::unique_ptr<gl::EglContext> context;
+  std::unique_ptr<gl::TerrainScene> scene;
+  if (a.render) {
+    context = gl::EglContext::create();
+    spdlog::info("OpenGL: {} ({})", context->renderer(), context->version());
+    gl::SceneOptions so;
+    so.width = w;
+    so.height = h;
+    scene = std::make_unique<gl::TerrainScene>(atlas, so);
+    if (*std::max_element(nodeBudgets.begin(), nodeBudgets.end()) > so.pageCapacity)
+      spdlog::warn("--render: node budgets above the page pool ({} pages) draw some nodes with wrong data; "
+                   "draw_ms is still comparable", so.pageCapacity);
+  }
+
+  // Runs.
+  std::cout << fmt::format("bench {} mode: {} frames x {} pass(es), {}x{}, {} node budget(s){}, algorithms {}\n",
+                           a.mode, cams.size(), a.repeat, w, h, nodeBudgets.size(),
+                           budgetMode ? fmt::format(" x {} triangle budget(s)", triBudgets.size())
+                                      : fmt::format(", tolerance {} px", a.tolerance),
+                           a.algorithms);
+  std::vector<std::vector<Row>> configs;
+  for (uint64_t maxNodes : nodeBudgets) {
+    for (uint64_t maxTris : triBudgets) {
+      for (const std::string& algo : algorithms) {
+        Adapter adapt;
+        if (budgetMode)
+          adapt = makeBudgetAdapter(hier, algo, uint32_t(maxNodes), maxTris);
+        else
+          adapt = makeErrorAdapter(hier, algo, uint32_t(maxNodes), a.tolerance);
+        std::vector<Row> rows;
+        for (uint32_t rep = 0; rep < a.repeat; ++rep) {
+          for (size_t i = 0; i < cams.size(); ++i) {
+            Row r;
+            r.algorithm = algo;
+            r.maxNodes = uint32_t(maxNodes);
+            r.maxTriangles = maxTris;
+            r.repeat = rep;
+            r.frame = uint32_t(i);
+            const Cut& cut = adapt(views[i], r);
+            measureCut(hier, cut, views[i], r);
+            if (scene) r.drawMs = scene->drawCut(cams[i], cut).drawMs;
+            rows.push_back(std::move(r));
+          }
+        }
+        configs.push_back(std::move(rows));
+      }
+    }
+  }
+
+  // bench.csv: one row per frame per configuration.
+  std::string csv =
+      "mode,algorithm,max_nodes,max_triangles,tolerance_px,frame,adapt_us,nodes,triangles,max_error_px,"
+      "mean_error_px,splits,merges,refines,coarsens,budget_bound,repeat,constraint_splits,draw_ms\n";
+  for (const auto& rows : configs)
+    for (const Row& r : rows)
+      csv += fmt::format("{},{},{},{},{},{},{:.3f},{},{},{:.5f},{:.5f},{},{},{},{},{},{},{},{}\n", a.mode, r.algorithm,
+                         r.maxNodes, budgetMode ? std::to_string(r.maxTriangles) : std::string(),
+                         optNum(!budgetMode, a.tolerance, "{}"), r.frame, r.adaptUs, r.nodes, r.triangles,
+                         r.maxErrorPx, r.meanErrorPx, r.splits, r.merges, r.refines, r.coarsens, int(r.budgetBound),
+                         r.repeat, r.constraintSplits, optNum(!std::isnan(r.drawMs), r.drawMs));
+  atomicWriteFile(out / "bench.csv", csv.data(), csv.size());
+
+  // summary.csv: per configuration, means over frames.
+  std::vector<Summary> sums;
+  for (const auto& rows : configs) sums.push_back(summarize(rows));
+  std::string sum =
+      "mode,algorithm,max_nodes,max_triangles,tolerance_px,frames,adapt_us_mean,nodes_mean,nodes_max,"
+      "triangles_mean,triangles_max,max_error_px_mean,max_error_px_p50,max_error_px_p95,max_error_px_max,"
+      "mean_error_px_mean,budget_bound_frac,draw_ms_mean\n";
+  for (const Summary& s : sums)
+    sum += fmt::format("{},{},{},{},{},{},{:.3f},{:.2f},{},{:.1f},{},{:.5f},{:.5f},{:.5f},{:.5f},{:.5f},{:.3f},{}\n",
+                       a.mode, s.algorithm, s.maxNodes, budgetMode ? std::to_string(s.maxTriangles) : std::string(),
+                       optNum(!budgetMode, a.tolerance, "{}"), s.frames, s.adaptUs, s.nodes, s.nodesMax, s.triangles,
+                       s.trianglesMax, s.errMean, s.errP50, s.errP95, s.errMax, s.meanErr, s.boundFrac,
+                       optNum(a.render, s.drawMs));
+  atomicWriteFile(out / "summary.csv", sum.data(), sum.size());
+
+  std::cout << fmt::format("{:>8} {:>10} {:>12} {:>10} {:>12} {:>10} {:>10} {:>10}\n", "algo", "max_nodes",
+                           "max_tris", "adapt_us", "nodes", "triangles", "err_p50", "err_p95");
+  for (const Summary& s : sums)
+    std::cout << fmt::format("{:>8} {:>10} {:>12} {:>10.1f} {:>12.1f} {:>10.0f} {:>10.3f} {:>10.3f}\n", s.algorithm,
+                             s.maxNodes, budgetMode ? std::to_string(s.maxTriangles) : std::string("-"), s.adaptUs,
+                             s.nodes, s.triangles, s.errP50, s.errP95);
+
+  // Cost model: adapt_us = a + b * nodes, least squares over the rows of "ours".
+  nlohmann::json cm;
+  cm["mode"] = a.mode;
+  double sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0, n = 0;
+  for (const auto& rows : configs)
+    for (const Row& r : rows)
+      if (r.algorithm == "ours") {
+        sx += r.nodes, sy += r.adaptUs, sxx += double(r.nodes) * r.nodes, sxy += r.nodes * r.adaptUs;
+        syy += r.adaptUs * r.adaptUs, n += 1;
+      }
+  if (n > 0) {
+    const double varX = sxx - sx * sx / n, cov = sxy - sx * sy / n, varY = syy - sy * sy / n;
+    const double b = varX > 0 ? cov / varX : (sx > 0 ? sy / sx : 0.0);
+    const double a0 = varX > 0 ? (sy - b * sx) / n : 0.0;
+    const double r2 = varX > 0 && varY > 0 ? cov * cov / (varX * varY) : 0.0;
+    cm["adapt_fit"] = {{"intercept_us", a0}, {"us_per_node", b}, {"r2", r2}, {"rows", size_t(n)}};
+    std::cout << fmt::format("adaptation cost fit (ours, {} frames): adapt_us = {:.2f} + {:.4f} * nodes (r^2 {:.3f})\n",
+                             size_t(n), a0, b, r2);
+    if (budgetMode && costModel) {
+      // Predicted frame time at the budgets (the worst case each configuration allows).
+      nlohmann::json cands = nlohmann::json::array();
+      const Summary* best = nullptr;
+      double bestMs = 0;
+      for (const Summary& s : sums) {
+        if (s.algorithm != "ours") continue;
+        const double ms = (a0 + b * s.maxNodes) * 1e-3 + double(s.maxTriangles) / a.triRate * 1e3;
+        const double msMean = (a0 + b * s.nodes) * 1e-3 + s.triangles / a.triRate * 1e3;
+        const bool fits = ms <= a.frameMs;
+        cands.push_back({{"max_nodes", s.maxNodes}, {"max_triangles", s.maxTriangles},
+                         {"predicted_ms", ms}, {"predicted_ms_at_mean_use", msMean},
+                         {"max_error_px_mean", s.errMean}, {"fits", fits}});
+        if (fits && (!best || s.errMean < best->errMean ||
+                     (s.errMean == best->errMean && s.maxTriangles < best->maxTriangles))) {
+          best = &s;
+          bestMs = ms;
+        }
+      }
+      cm["frame_ms"] = a.frameMs;
+      cm["tri_rate"] = a.triRate;
+      cm["candidates"] = cands;
+      if (best) {
+        cm["choice"] = {{"max_nodes", best->maxNodes}, {"max_triangles", best->maxTriangles},
+                        {"predicted_ms", bestMs}, {"max_error_px_mean", best->errMean}};
+        std::cout << fmt::format(
+            "cost model: for {} ms at {:.3g} triangles/s use --nodes {} --triangles {} (predicted {:.3f} ms, "
+            "mean max error {:.3f} px)\n",
+            a.frameMs, a.triRate, best->maxNodes, best->maxTriangles, bestMs, best->errMean);
+      } else {
+        cm["choice"] = nullptr;
+        std::cout << fmt::format("cost model: no swept configuration fits {} ms at {:.3g} triangles/s\n", a.frameMs,
+                                 a.triRate);
+      }
+    } else if (costModel) {
+      std::cout << "cost model: --frame-ms/--tri-rate choose (nodes, triangles) in --mode budget only; "
+                   "error mode reports the per-node cost fit\n";
+    }
+  } else {
+    std::cout << "adaptation cost fit: skipped ('ours' not in --algorithms)\n";
+  }
+  const std::string json = cm.dump(1) + "\n";
+  atomicWriteFile(out / "cost_model.json", json.data(), json.size());
+
+  std::cout << fmt::format("wrote {}/bench.csv ({} rows), summary.csv, cost_model.json\n", a.output,
+                           configs.size() * cams.size() * a.repeat);
+  std::cout << fmt::format("plots (python3 + matplotlib): python3 scripts/plot_bench.py '{}'\n", a.output);
+  return 0;
+}
+
+}  // namespace gimlod

@@ -1,0 +1,635 @@
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 7.1 (the quad-queue algorithm for the
+// triangle-budget problem with a node budget: refine/coarsen and split/merge dual-queue pairs,
+// undo-based termination); section 7.4 (stitching constraint).
+#include "runtime/adapt_quad_queue.h"
+
+#include <algorithm>
+#include <cmath>
+#include <unordered_map>
+#include <unordered_set>
+#include <vector>
+
+#include "runtime/adapt_dual_queue.h"
+
+namespace gimlod {
+namespace {
+
+constexpr double kStuckPriority = 1e30;  // split priority base of a drawn node already at maxRes
+constexpr double kOverCost = 1e30;       // merge cost base when the parent cannot hold the error
+constexpr double kEps = 1e-9;
+
+uint64_t tris(uint32_t res) { return 2ull << (2 * res); }
+
+NodeId keyToNode(uint64_t key) {
+  NodeId n;
+  n.chart = uint32_t(key >> 40);
+  n.level = uint32_t((key >> 34) & 63u);
+  n.y = uint32_t((key >> 17) & 0x1FFFFu);
+  n.x = uint32_t(key & 0x1FFFFu);
+  return n;
+}
+
+struct Entry {
+  NodeId id;
+  uint32_t res = 0;
+  uint32_t floor = 0;  // lowest allowed resolution: minRes, or the stitching gap
+  bool drawn = false;
+  double err = 0.0;    // screen error at res; 0 when not drawn
+  uint32_t splitRound = 0, mergedRound = 0;
+};
+
+// Heap item; all heaps are max-heaps on priority, ties broken by key (deterministic).
+struct Item {
+  double priority;
+  uint64_t key;
+  uint32_t res;  // resolution when pushed (stale when it changed)
+};
+struct ItemLess {
+  bool operator()(const Item& a, const Item& b) const {
+    return a.priority < b.priority || (a.priority == b.priority && a.key < b.key);
+  }
+};
+void heapPush(std::vector<Item>& h, const Item& it) {
+  h.push_back(it);
+  std::push_heap(h.begin(), h.end(), ItemLess{});
+}
+Item heapPop(std::vector<Item>& h) {
+  std::pop_heap(h.begin(), h.end(), ItemLess{});
+  const Item it = h.back();
+  h.pop_back();
+  return it;
+}
+
+// Largest level difference to a finer drawn neighbour on any side of cut node i.
+uint32_t stitchGap(const Hierarchy& h, const Cut& cut, uint32_t i, std::vector<SideNeighbour>& scratch) {
+  uint32_t gap = 0;
+  const NodeId& id = cut.nodes[i].id;
+  for (uint32_t s = 0; s < 4; ++s) {
+    scratch.clear();
+    sideNeighbours(h, cut, id, s, scratch);
+    for (const SideNeighbour& sn : scratch) {
+      const uint32_t l = cut.nodes[sn.cutIndex].id.level;
+      if (l > id.level) gap = std::max(gap, l - id.level);
+    }
+  }
+  return gap;
+}
+
+}  // namespace
+
+struct QuadQueueAdapter::State {
+  std::unordered_map<uint64_t, Entry> cut;  // partition of the non-empty chart area
+  uint32_t drawn = 0;
+  uint64_t triangles = 0;  // drawn
+  uint64_t floorTris = 0;  // drawn, each at its floor
+  uint32_t round = 0;      // increasing round id (split/merge marks)
+  bool needsConstraintSplit = false;
+  // Per-frame context.
+  const Hierarchy* h = nullptr;
+  ViewParams view;
+  BudgetOptions opt;
+  uint32_t ops = 0;
+  BudgetStats st;
+  Cut out;
+  std::vector<SideNeighbour> scratch;
+
+  uint32_t maxRes(const NodeId& n) const { return h->params.maxRes(n.level); }
+  uint32_t minRes() const { return h->params.minNodeResLog2; }
+  uint32_t nodeBudget() const { return opt.maxNodes == 0 ? UINT32_MAX : opt.maxNodes; }
+  bool capped() {
+    if (ops < opt.maxOpsPerFrame) return false;
+    st.opCapBound = true;
+    return true;
+  }
+  double errAt(const Entry& e, uint32_t r) const { return screenError(*h, e.id, r, view); }
+  // Resolution a node needs to hold `tolPx`, clamped to its maxRes.
+  uint32_t resFor(const NodeId& n, double tolPx) const {
+    return std::min(neededResolution(*h, n, view, tolPx), maxRes(n));
+  }
+
+  void setRes(Entry& e, uint32_t r) {
+    if (e.drawn) triangles = triangles - tris(e.res) + tris(r);
+    e.res = r;
+    e.err = e.drawn ? errAt(e, r) : 0.0;
+  }
+  void evaluate(Entry& e) {
+    e.drawn = nodeDrawable(*h, e.id, view, opt.frustumCull);
+    e.res = e.drawn ? std::clamp(e.res, minRes(), maxRes(e.id)) : minRes();
+    e.floor = minRes();
+    e.err = e.drawn ? errAt(e, e.res) : 0.0;
+  }
+  void recount() {
+    drawn = 0;
+    triangles = floorTris = 0;
+    for (const auto& [k, e] : cut)
+      if (e.drawn) {
+        ++drawn;
+        triangles += tris(e.res);
+        floorTris += tris(e.floor);
+      }
+  }
+  double maxError() const {
+    double m = 0.0;
+    for (const auto& [k, e] : cut) m = std::max(m, e.err);
+    return m;
+  }
+  Cut drawnCut() const {
+    Cut c;
+    c.nodes.reserve(drawn);
+    for (const auto& [k, e] : cut)
+      if (e.drawn) c.nodes.push_back({e.id, e.res, float(e.err)});
+    std::sort(c.nodes.begin(), c.nodes.end(),
+              [](const CutNode& a, const CutNode& b) { return a.id.key() < b.id.key(); });
+    c.rebuildIndex();
+    return c;
+  }
+  // Stitching floors of the drawn nodes (paper 7.4): resolution >= level gap to finer neighbours.
+  void computeFloors() {
+    const Cut c = drawnCut();
+    needsConstraintSplit = false;
+    floorTris = 0;
+    for (uint32_t i = 0; i < c.nodes.size(); ++i) {
+      Entry& e = cut[c.nodes[i].id.key()];
+      const uint32_t gap = stitchGap(*h, c, i, scratch);
+      if (gap > maxRes(e.id)) needsConstraintSplit = true;
+      e.floor = std::clamp(gap, minRes(), maxRes(e.id));
+      floorTris += tris(e.floor);
+    }
+  }
+
+  // ---- Phase 1: refine/coarsen dual queue. False when the floors exceed the triangle budget.
+  bool phase1() {
+    for (auto& [k, e] : cut)
+      if (e.drawn && e.res < e.floor) {
+        setRes(e, e.floor);
+        ++st.constraintRaises;
+      }
+    std::vector<Item> refineH, coarsenH, errH;
+    auto push = [&](const Entry& e, bool heapify) {
+      if (!e.drawn) return;
+      const uint64_t k = e.id.key();
+      if (e.res < maxRes(e.id)) {
+        const double gain = (e.err - errAt(e, e.res + 1)) / double(tris(e.res + 1) - tris(e.res));
+        refineH.push_back({gain, k, e.res});
+        if (heapify) std::push_heap(refineH.begin(), refineH.end(), ItemLess{});
+      }
+      if (e.res > e.floor) {
+        const double loss = (errAt(e, e.res - 1) - e.err) / double(tris(e.res) - tris(e.res - 1));
+        coarsenH.push_back({-loss, k, e.res});
+        if (heapify) std::push_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
+      }
+      errH.push_back({e.err, k, e.res});
+      if (heapify) std::push_heap(errH.begin(), errH.end(), ItemLess{});
+    };
+    for (const auto& [k, e] : cut) push(e, false);
+    std::make_heap(refineH.begin(), refineH.end(), ItemLess{});
+    std::make_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
+    std::make_heap(errH.begin(), errH.end(), ItemLess{});
+    auto valid = [&](const Item& it) -> Entry* {
+      auto f = cut.find(it.key);
+      if (f == cut.end() || !f->second.drawn || f->second.res != it.res) return nullptr;
+      return &f->second;
+    };
+    const uint64_t budget = opt.maxTriangles;
+    // (a) Within the triangle budget (never capped).
+    while (triangles > budget) {
+      Entry* e = nullptr;
+      while (!coarsenH.empty() && !(e = valid(coarsenH.front()))) heapPop(coarsenH);
+      if (!e) return false;
+      heapPop(coarsenH);
+      setRes(*e, e->res - 1);
+      ++st.coarsens, ++ops;
+      push(*e, true);
+    }
+    for (;;) {
+      bool progress = false;
+      // (b) Refine, best error reduction per added triangle first, while anything fits.
+      std::vector<Item> aside;
+      while (!refineH.empty() && !capped()) {
+        const Item it = heapPop(refineH);
+        Entry* e = valid(it);
+        if (!e) continue;
+        if (triangles + tris(e->res + 1) - tris(e->res) > budget) {
+          aside.push_back(it);
+          continue;
+        }
+        setRes(*e, e->res + 1);
+        ++st.refines, ++ops;
+        push(*e, true);
+        progress = true;
+      }
+      for (const Item& it : aside) heapPush(refineH, it);
+      // (c) Balance: lower the max error by coarsening others (each staying below it), least
+      // error increase per removed triangle first. Every trade lowers the sorted error vector
+      // lexicographically, so this ends.
+      while (!capped()) {
+        Entry* m = nullptr;
+        while (!errH.empty() && !(m = valid(errH.front()))) heapPop(errH);
+        if (!m || m->res >= maxRes(m->id)) break;
+        const uint64_t need = tris(m->res + 1) - tris(m->res);
+        const uint64_t free = budget - triangles;
+        std::vector<Item> popped;
+        std::vector<Entry*> chosen;
+        uint64_t freed = 0;
+        while (free + freed < need && !coarsenH.empty()) {
+          const Item it = heapPop(coarsenH);
+          Entry* c = valid(it);
+          if (!c) continue;
+          popped.push_back(it);
+          if (c == m || std::find(chosen.begin(), chosen.end(), c) != chosen.end() ||
+              errAt(*c, c->res - 1) >= m->err - kEps)
+            continue;
+          chosen.push_back(c);
+          freed += tris(c->res) - tris(c->res - 1);
+        }
+        for (const Item& it : popped) heapPush(coarsenH, it);
+        if (free + freed < need) break;
+        for (Entry* c : chosen) {
+          setRes(*c, c->res - 1);
+          ++st.coarsens, ++ops;
+          push(*c, true);
+        }
+        setRes(*m, m->res + 1);
+        ++st.refines, ++ops;
+        push(*m, true);
+        progress = true;
+      }
+      if (!progress || capped()) break;
+    }
+    return true;
+  }
+
+  // ---- Phase 2: split/merge proposals (an error-threshold adaptation with each node's current
+  // error as its local threshold). mandatoryOnly: only the merges needed for the node budget and
+  // the triangle floor, and zero-effect merges of culled groups. Returns whether anything changed.
+  double splitPriority(const Entry& e) const {
+    if (!e.drawn || e.id.level + 1 >= h->params.depth) return -1.0;
+    if (e.res >= maxRes(e.id)) return kStuckPriority + e.err;
+    double t = double(tris(e.res));
+    for (uint32_t i = 0; i < 4; ++i) {
+      const NodeId ch = e.id.child(i);
+      if (nodeDrawable(*h, ch, view, opt.frustumCull)) t -= double(tris(resFor(ch, e.err)));
+    }
+    return t;
+  }
+  // Merge cost (added triangles) of the group under p, and the parent's resolution.
+  double mergeCost(const NodeId& p, uint32_t* parentRes) const {
+    double tol = -1.0, childTris = 0.0;
+    for (uint32_t i = 0; i < 4; ++i) {
+      auto f = cut.find(p.child(i).key());
+      if (f == cut.end() || !f->second.drawn) continue;
+      tol = std::max(tol, f->second.err);
+      childTris += double(tris(f->second.res));
+    }
+    *parentRes = minRes();
+    if (!nodeDrawable(*h, p, view, opt.frustumCull)) return -childTris;
+    if (tol < 0.0) return double(tris(minRes()));
+    const uint32_t need = neededResolution(*h, p, view, tol);
+    if (need > maxRes(p)) {
+      *parentRes = maxRes(p);
+      return kOverCost + screenError(*h, p, maxRes(p), view);
+    }
+    *parentRes = need;
+    return double(tris(need)) - childTris;
+  }
+  int64_t drawnDelta(const NodeId& n) const {
+    int64_t d = -int64_t(nodeDrawable(*h, n, view, opt.frustumCull));
+    for (uint32_t i = 0; i < 4; ++i) d += int64_t(nodeDrawable(*h, n.child(i), view, opt.frustumCull));
+    return d;
+  }
+  bool groupMergeable(const NodeId& p, uint32_t r, const std::unordered_set<uint64_t>& reserved) const {
+    bool any = false;
+    for (uint32_t i = 0; i < 4; ++i) {
+      const NodeId ch = p.child(i);
+      if (h->flags(ch) & kNodeEmpty) continue;
+      auto f = cut.find(ch.key());
+      if (f == cut.end() || f->second.splitRound == r || reserved.count(ch.key())) return false;
+      any = true;
+    }
+    return any;
+  }
+  void doSplit(NodeId n, uint32_t r, std::vector<Item>* splitH) {
+    auto it = cut.find(n.key());
+    const double tol = it->second.err;
+    cut.erase(it);
+    for (uint32_t i = 0; i < 4; ++i) {
+      const NodeId ch = n.child(i);
+      if (h->flags(ch) & kNodeEmpty) continue;
+      Entry e;
+      e.id = ch;
+      e.splitRound = r;
+      evaluate(e);
+      if (e.drawn) setRes(e, resFor(ch, tol));
+      cut[ch.key()] = e;
+      if (splitH) {
+        const double p = splitPriority(e);
+        if (p > 0.0) heapPush(*splitH, {p, ch.key(), e.res});
+      }
+    }
+    recount();
+    ++st.splits, ++ops;
+  }
+  void doMerge(const NodeId& p, uint32_t r) {
+    uint32_t pres = 0;
+    mergeCost(p, &pres);
+    for (uint32_t i = 0; i < 4; ++i) cut.erase(p.child(i).key());
+    Entry e;
+    e.id = p;
+    e.mergedRound = r;
+    e.res = pres;
+    evaluate(e);
+    cut[p.key()] = e;
+    recount();
+    ++st.merges, ++ops;
+  }
+
+  bool phase2(bool mandatoryOnly) {
+    const uint32_t r = ++round;
+    std::vector<Item> splitH, mergeH;
+    std::unordered_set<uint64_t> reserved, seen;
+    for (const auto& [k, e] : cut) {
+      if (!mandatoryOnly) {
+        const double p = splitPriority(e);
+        if (p > 0.0) splitH.push_back({p, k, e.res});
+      }
+      if (e.id.level == 0) continue;
+      const NodeId par = e.id.parent();
+      if (!seen.insert(par.key()).second || !groupMergeable(par, r, reserved)) continue;
+      uint32_t pres = 0;
+      mergeH.push_back({-mergeCost(par, &pres), par.key(), 0});
+    }
+    std::make_heap(splitH.begin(), splitH.end(), ItemLess{});
+    std::make_heap(mergeH.begin(), mergeH.end(), ItemLess{});
+    // Valid merge top (the cost is recomputed: child resolutions may have changed).
+    auto mergeTop = [&]() -> const Item* {
+      while (!mergeH.empty()) {
+        const Item& t = mergeH.front();
+        const NodeId p = keyToNode(t.key);
+        if (!cut.count(t.key) && groupMergeable(p, r, reserved)) {
+          uint32_t pres = 0;
+          const double c = -mergeCost(p, &pres);
+          if (c == t.priority) return &mergeH.front();
+          const Item re{c, t.key, 0};
+          heapPop(mergeH);
+          heapPush(mergeH, re);
+          continue;
+        }
+        heapPop(mergeH);
+      }
+      return nullptr;
+    };
+    auto splitTop = [&]() -> Entry* {
+      while (!splitH.empty()) {
+        const Item& t = splitH.front();
+        auto f = cut.find(t.key);
+        if (f != cut.end() && f->second.drawn && f->second.res == t.res && f->second.mergedRound != r &&
+            !reserved.count(t.key))
+          return &f->second;
+        heapPop(splitH);
+      }
+      return nullptr;
+    };
+    auto afterMerge = [&](const NodeId& p) {
+      if (p.level == 0) return;
+      const NodeId pp = p.parent();
+      if (groupMergeable(pp, r, reserved)) {
+        uint32_t pres = 0;
+        heapPush(mergeH, {-mergeCost(pp, &pres), pp.key(), 0});
+      }
+    };
+    const int64_t nodeBudget_ = int64_t(nodeBudget());
+    const int64_t triBudget = int64_t(opt.maxTriangles);
+    int64_t availNodes = nodeBudget_ - int64_t(drawn);
+    int64_t availFloor = triBudget - int64_t(std::max(floorTris, floorTrisNow()));
+    bool changed = false;
+    std::vector<Item> reservedOrder;
+    std::vector<Item> mergeAside;
+    for (;;) {
+      const Item* m = mergeTop();
+      if (availNodes < 0 || availFloor < 0) {  // mandatory
+        if (!m) break;
+        const NodeId p = keyToNode(m->key);
+        const int64_t before = int64_t(drawn);
+        heapPop(mergeH);
+        doMerge(p, r);
+        ++st.budgetMerges;
+        availNodes += before - int64_t(drawn);
+        availFloor = triBudget - int64_t(floorTrisNow()) - reservedFloor(reservedOrder);
+        afterMerge(p);
+        changed = true;
+        continue;
+      }
+      if (mandatoryOnly) {
+        // Culled groups collapse (no drawn node changes).
+        if (m && !nodeDrawable(*h, keyToNode(m->key), view, opt.frustumCull) && -m->priority <= 0.0 &&
+            groupUndrawn(keyToNode(m->key))) {
+          const NodeId p = keyToNode(m->key);
+          heapPop(mergeH);
+          doMerge(p, r);
+          --st.merges, --ops;  // free bookkeeping, not an adaptation operation
+          afterMerge(p);
+          changed = true;
+          continue;
+        }
+        if (m) {
+          mergeAside.push_back(heapPop(mergeH));
+          continue;
+        }
+        break;
+      }
+      if (capped()) break;
+      Entry* s = splitTop();
+      if (m && -m->priority <= 0.0) {  // free merge: no triangles added at the local errors
+        const NodeId p = keyToNode(m->key);
+        if (!s || !(s->id.level > 0 && s->id.parent() == p)) {
+          const int64_t before = int64_t(drawn);
+          heapPop(mergeH);
+          doMerge(p, r);
+          availNodes += before - int64_t(drawn);
+          availFloor = triBudget - int64_t(floorTrisNow()) - reservedFloor(reservedOrder);
+          afterMerge(p);
+          changed = true;
+          continue;
+        }
+      }
+      if (!s) break;
+      const int64_t d = drawnDelta(s->id);
+      const int64_t df = d * int64_t(tris(minRes()));
+      if (d <= availNodes && df <= availFloor) {
+        const Item it = heapPop(splitH);
+        reserved.insert(it.key);
+        reservedOrder.push_back(it);
+        availNodes -= d;
+        availFloor -= df;
+        continue;
+      }
+      const double sp = splitH.front().priority;
+      // Trade: a merge that costs fewer triangles than the split saves pays for it.
+      if (m && -m->priority < sp && -m->priority < kOverCost && !(s->id.level > 0 && s->id.parent() == keyToNode(m->key))) {
+        const NodeId p = keyToNode(m->key);
+        const int64_t before = int64_t(drawn);
+        heapPop(mergeH);
+        doMerge(p, r);
+        availNodes += before - int64_t(drawn);
+        availFloor = triBudget - int64_t(floorTrisNow()) - reservedFloor(reservedOrder);
+        afterMerge(p);
+        changed = true;
+        continue;
+      }
+      heapPop(splitH);  // does not fit, and no merge pays for it
+    }
+    for (const Item& it : mergeAside) heapPush(mergeH, it);
+    if (mandatoryOnly) return changed;
+    // Split: the reserved splits, then any further split that still fits.
+    reserved.clear();
+    for (const Item& it : reservedOrder) {
+      auto f = cut.find(it.key);
+      if (f == cut.end()) continue;
+      doSplit(f->second.id, r, &splitH);
+      changed = true;
+    }
+    while (!capped()) {
+      Entry* s = splitTop();
+      if (!s) break;
+      const Item it = heapPop(splitH);
+      const int64_t d = drawnDelta(s->id);
+      if (int64_t(drawn) + d > nodeBudget_ ||
+          int64_t(floorTrisNow()) + d * int64_t(tris(minRes())) > triBudget)
+        continue;
+      (void)it;
+      doSplit(s->id, r, &splitH);
+      changed = true;
+    }
+    return changed;
+  }
+  // Triangle floor of the drawn nodes at minRes (floors are recomputed after the round).
+  uint64_t floorTrisNow() const { return uint64_t(drawn) * tris(minRes()); }
+  int64_t reservedFloor(const std::vector<Item>& reservedOrder) const {
+    int64_t f = 0;
+    for (const Item& it : reservedOrder) f += drawnDelta(keyToNode(it.key)) * int64_t(tris(minRes()));
+    return f;
+  }
+  bool groupUndrawn(const NodeId& p) const {
+    for (uint32_t i = 0; i < 4; ++i) {
+      auto f = cut.find(p.child(i).key());
+      if (f != cut.end() && f->second.drawn) return false;
+    }
+    return true;
+  }
+};
+
+QuadQueueAdapter::QuadQueueAdapter(const Hierarchy& h) : h_(h), state_(std::make_shared<State>()) {}
+
+void QuadQueueAdapter::reset() {
+  state_->cut.clear();
+  state_->out = Cut{};
+}
+
+const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions& options, BudgetStats* stats) {
+  State& s = *state_;
+  s.h = &h_;
+  s.view = view;
+  s.opt = options;
+  s.opt.maxOpsPerFrame = std::max(options.maxOpsPerFrame, 1u);
+  s.ops = 0;
+  s.st = {};
+  BudgetStats& st = s.st;
+
+  if (s.cut.empty())
+    for (uint32_t c = 0; c < h_.chartCount(); ++c) {
+      const NodeId root{c, 0, 0, 0};
+      if (h_.flags(root) & kNodeEmpty) continue;
+      Entry e;
+      e.id = root;
+      s.cut[root.key()] = e;
+    }
+  for (auto& [k, e] : s.cut) s.evaluate(e);
+  s.recount();
+
+  // Mandatory: node budget, triangle floor (with the stitching floors), culled groups collapse.
+  s.phase2(true);
+  s.computeFloors();
+  for (uint32_t guard = 0; s.floorTris > options.maxTriangles && guard < 64; ++guard) {
+    if (!s.phase2(true)) break;
+    s.computeFloors();
+  }
+  s.phase1();
+
+  for (uint32_t r = 0; r < options.maxRounds && !s.capped(); ++r) {
+    const auto saved = s.cut;
+    const BudgetStats savedStats = st;
+    const double savedMax = s.maxError();
+    if (!s.phase2(false)) break;
+    ++st.rounds;
+    s.computeFloors();
+    const bool ok = s.phase1();
+    const double now = s.maxError();
+    const bool worse = !ok || now > savedMax + kEps;
+    if (worse || now >= savedMax - kEps) {
+      // Undo-based termination (paper 7.1); a round that does not strictly lower the max error
+      // is undone too, so a static view reaches a fixed point.
+      const uint32_t done = st.refines + st.coarsens + st.splits + st.merges;
+      const uint32_t kept = savedStats.refines + savedStats.coarsens + savedStats.splits + savedStats.merges;
+      s.cut = saved;
+      s.recount();
+      st.refines = savedStats.refines, st.coarsens = savedStats.coarsens;
+      st.splits = savedStats.splits, st.merges = savedStats.merges;
+      st.constraintRaises = savedStats.constraintRaises;
+      st.undoneOps += done - kept;
+      if (worse)
+        ++st.undos;
+      else
+        ++st.tieUndos;
+      break;
+    }
+  }
+
+  // The drawn cut; the floors already satisfy the stitching constraint unless a node would need
+  // a resolution above its maxRes (then enforceStitchConstraint splits it: the rare exception
+  // that may exceed maxNodes, reported as constraintSplits).
+  s.out = s.drawnCut();
+  AdaptStats as;
+  enforceStitchConstraint(h_, s.out, &view, 1.0, &as);
+  st.constraintSplits = as.constraintSplits;
+  st.constraintRaises += as.constraintRaises;
+  if (as.constraintSplits > 0) fitTriangleBudget(h_, s.out, view, options.maxTriangles);
+  st.nodes = uint32_t(s.out.nodes.size());
+  st.triangles = s.out.triangles();
+  double sum = 0.0;
+  for (CutNode& n : s.out.nodes) {
+    n.errorPx = float(screenError(h_, n.id, n.res, view));
+    st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
+    sum += n.errorPx;
+  }
+  st.meanErrorPx = s.out.nodes.empty() ? 0.0 : sum / double(s.out.nodes.size());
+  if (stats) *stats = st;
+  return s.out;
+}
+
+bool fitTriangleBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, uint64_t maxTriangles) {
+  std::vector<SideNeighbour> scratch;
+  std::vector<uint32_t> floor(cut.nodes.size());
+  const uint32_t rmin = h.params.minNodeResLog2;
+  for (uint32_t i = 0; i < cut.nodes.size(); ++i) floor[i] = std::max(rmin, stitchGap(h, cut, i, scratch));
+  uint64_t total = cut.triangles();
+  std::vector<Item> heap;
+  auto push = [&](uint32_t i) {
+    const CutNode& n = cut.nodes[i];
+    if (n.res <= floor[i]) return;
+    const double loss = (screenError(h, n.id, n.res - 1, view) - screenError(h, n.id, n.res, view)) /
+                        double(tris(n.res) - tris(n.res - 1));
+    heapPush(heap, {-loss, i, n.res});
+  };
+  for (uint32_t i = 0; i < cut.nodes.size(); ++i) push(i);
+  while (total > maxTriangles && !heap.empty()) {
+    const Item it = heapPop(heap);
+    CutNode& n = cut.nodes[it.key];
+    if (n.res != it.res) continue;
+    total -= tris(n.res) - tris(n.res - 1);
+    --n.res;
+    push(uint32_t(it.key));
+  }
+  return total <= maxTriangles;
+}
+
+}  // namespace gimlod
