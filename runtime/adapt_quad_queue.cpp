@@ -14,6 +14,8 @@
 namespace gimlod {
 namespace {
 
+// Tier bases. A tier value is base * (1 + err): adding err to 1e30 would be lost to rounding (all
+// tier members would tie and fall back to key order), scaling keeps the order by err.
 constexpr double kStuckPriority = 1e30;  // split priority base of a drawn node already at maxRes
 constexpr double kOverCost = 1e30;       // merge cost base when the parent cannot hold the error
 constexpr double kEps = 1e-9;
@@ -264,7 +266,7 @@ struct QuadQueueAdapter::State {
   // the triangle floor, and zero-effect merges of culled groups. Returns whether anything changed.
   double splitPriority(const Entry& e) const {
     if (!e.drawn || e.id.level + 1 >= h->params.depth) return -1.0;
-    if (e.res >= maxRes(e.id)) return kStuckPriority + e.err;
+    if (e.res >= maxRes(e.id)) return kStuckPriority * (1.0 + e.err);
     double t = double(tris(e.res));
     for (uint32_t i = 0; i < 4; ++i) {
       const NodeId ch = e.id.child(i);
@@ -287,7 +289,7 @@ struct QuadQueueAdapter::State {
     const uint32_t need = neededResolution(*h, p, view, tol);
     if (need > maxRes(p)) {
       *parentRes = maxRes(p);
-      return kOverCost + screenError(*h, p, maxRes(p), view);
+      return kOverCost * (1.0 + screenError(*h, p, maxRes(p), view));
     }
     *parentRes = need;
     return double(tris(need)) - childTris;
@@ -464,9 +466,22 @@ struct QuadQueueAdapter::State {
         continue;
       }
       const double sp = splitH.front().priority;
-      // Trade: a merge that costs fewer triangles than the split saves pays for it.
-      if (m && -m->priority < sp && -m->priority < kOverCost && !(s->id.level > 0 && s->id.parent() == keyToNode(m->key))) {
-        const NodeId p = keyToNode(m->key);
+      // Trade: a merge that costs fewer triangles than the split saves pays for it. The split is
+      // blocked by the node budget or the triangle floor (both count drawn nodes), so only a merge
+      // that lowers the drawn node count can pay; one that does not (a culled group whose parent
+      // is visible draws one node more) is set aside for this round.
+      // A merge whose parent cannot hold its children's errors (over cost) pays only when the
+      // parent's error at maxRes stays below the error of the node to split: merging zero-error
+      // groups to split the worst node at maxRes is the trade a full node budget needs.
+      const NodeId mp = m ? keyToNode(m->key) : NodeId{};
+      const bool pays = m && (-m->priority < kOverCost ? -m->priority < sp
+                                                       : screenError(*h, mp, maxRes(mp), view) < s->err - kEps);
+      if (pays && !(s->id.level > 0 && s->id.parent() == mp)) {
+        const NodeId p = mp;
+        if (mergeFreedNodes(p) <= 0) {
+          mergeAside.push_back(heapPop(mergeH));
+          continue;
+        }
         const int64_t before = int64_t(drawn);
         heapPop(mergeH);
         doMerge(p, r);
@@ -508,6 +523,15 @@ struct QuadQueueAdapter::State {
     int64_t f = 0;
     for (const Item& it : reservedOrder) f += drawnDelta(keyToNode(it.key)) * int64_t(tris(minRes()));
     return f;
+  }
+  // Drawn nodes a merge of the group under p removes (drawn children minus the drawn parent).
+  int64_t mergeFreedNodes(const NodeId& p) const {
+    int64_t n = -int64_t(nodeDrawable(*h, p, view, opt.frustumCull));
+    for (uint32_t i = 0; i < 4; ++i) {
+      auto f = cut.find(p.child(i).key());
+      if (f != cut.end() && f->second.drawn) ++n;
+    }
+    return n;
   }
   bool groupUndrawn(const NodeId& p) const {
     for (uint32_t i = 0; i < 4; ++i) {

@@ -11,6 +11,7 @@
 #include "atlas/terrain_atlas.h"
 #include "runtime/adapt_quad_queue.h"
 #include "runtime/baselines.h"
+#include "runtime/camera.h"
 #include "tests/synthetic_terrain.h"
 #include "tests/test_util.h"
 
@@ -298,6 +299,62 @@ TEST(QuadQueue, RainierOrbitNoWorseThanFixedGranularity) {
                 gSum / n, worseFrames, us / n);
     // The paper's claim: decoupling resolution from node size lowers the error at equal budgets.
     EXPECT_LE(qMax, fMax);
+  }
+}
+
+// Regression: with a small node budget and a large triangle budget the quad-queue adapter got stuck
+// far above the fixed-granularity baseline (bench path, 100 nodes: p95 70 px vs 4 px at 400k
+// triangles, and half of an 800k budget unused). Causes: tier priorities 1e30 + err lost err to
+// rounding (splits of nodes at maxRes went in key order, not worst first); trade merges that add a
+// drawn node (culled group, visible parent) forced budget merges; and with the node budget full no
+// merge of a group whose parent cannot hold its children's errors was ever traded for the split of
+// a worse node at maxRes. On the bench path the error must stay at or below the baseline's in every
+// frame, and an error above zero must come with the triangle budget in use.
+TEST(QuadQueue, RainierBenchPathSmallNodeBudgetNoWorseThanFixedPerFrame) {
+  const DemRaster dem = loadDem(test::repoData() / "terrain/mt_rainier_90m.tif");
+  AtlasManifest m;  // as `gimlod build` with default options
+  m.depth = 5;
+  m.maxNodeResLog2 = 6;
+  m.minNodeResLog2 = 2;
+  TerrainAtlasOptions topt;
+  topt.chartSize = 513;
+  fillTerrainManifest(dem, topt, m);
+  const Hierarchy h = buildTerrainHierarchy(
+      m, [&](uint32_t c) { return extractChart(dem, m.charts[c].gridX, m.charts[c].gridY, 513); });
+  const glm::dvec3 lo{0, 0, dem.minHeight};
+  const glm::dvec3 hi{(dem.width - 1) * dem.spacing[0], (dem.height - 1) * dem.spacing[1], dem.maxHeight};
+  std::vector<Camera> path = readCameraPath(test::repoData().parent_path() / "scenes/rainier_bench.json");
+  ASSERT_EQ(path.size(), 120u);
+  for (Camera& c : path) fitClipPlanes(c, lo, hi);
+  for (uint64_t triangles : {400000ull, 800000ull}) {
+    BudgetOptions o;
+    o.maxTriangles = triangles;
+    o.maxNodes = 100;
+    QuadQueueAdapter adapter(h);
+    int worse = 0, unused = 0;
+    double qMax = 0, fMax = 0;
+    for (uint32_t f = 0; f < path.size(); ++f) {
+      const ViewParams v = makeViewParams(path[f], 1280, 720);
+      BudgetStats st, fs;
+      const Cut& cut = adapter.update(v, o, &st);
+      expectWithinBudget(h, cut, o, st);
+      const Cut fixed = adaptFixedGranularityBudget(h, v, o, &fs);
+      expectWithinBudget(h, fixed, o, fs);
+      EXPECT_LE(st.maxErrorPx, fs.maxErrorPx + 1e-9)
+          << "frame " << f << ", " << triangles << " triangles: quad-queue " << st.nodes << " nodes "
+          << st.triangles << " triangles, fixed " << fs.nodes << " nodes " << fs.triangles << " triangles";
+      // Error left: within 25% of the triangle budget (one refinement step quadruples a node's).
+      if (st.maxErrorPx > 0.0) {
+        EXPECT_GE(4 * st.triangles, 3 * o.maxTriangles)
+            << "frame " << f << ": " << st.maxErrorPx << " px left with " << st.triangles << " triangles";
+      }
+      worse += st.maxErrorPx > fs.maxErrorPx + 1e-9;
+      unused += st.maxErrorPx > 0.0 && 4 * st.triangles < 3 * o.maxTriangles;
+      qMax = std::max(qMax, st.maxErrorPx), fMax = std::max(fMax, fs.maxErrorPx);
+    }
+    std::printf("rainier bench path, 100 nodes, %llu triangles: max error px quad-queue %.3f, fixed %.3f; "
+                "quad-queue worse in %d frames, budget unused with error left in %d frames\n",
+                (unsigned long long)triangles, qMax, fMax, worse, unused);
   }
 }
 
