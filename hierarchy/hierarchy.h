@@ -23,6 +23,11 @@ struct NodeId {
   uint64_t key() const {
     return (uint64_t(chart) << 40) | (uint64_t(level) << 34) | (uint64_t(y) << 17) | uint64_t(x);
   }
+  // Inverse of key().
+  static NodeId fromKey(uint64_t k) {
+    return {uint32_t(k >> 40), uint32_t((k >> 34) & 63u), uint32_t(k & 0x1FFFFu),
+            uint32_t((k >> 17) & 0x1FFFFu)};
+  }
   NodeId parent() const { return {chart, level - 1, x >> 1, y >> 1}; }
   NodeId child(uint32_t i) const { return {chart, level + 1, 2 * x + (i & 1), 2 * y + (i >> 1)}; }
 };

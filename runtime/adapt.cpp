@@ -144,9 +144,6 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
   return cut;
 }
 
-namespace {
-
-// Largest level difference to a finer neighbour over all sides of node i.
 uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i,
                             std::vector<SideNeighbour>& scratch) {
   uint32_t gap = 0;
@@ -161,8 +158,6 @@ uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i,
   }
   return gap;
 }
-
-}  // namespace
 
 bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* view,
                              double tolerancePx, AdaptStats* stats) {

@@ -57,6 +57,11 @@ uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams&
 bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* view,
                              double tolerancePx, AdaptStats* stats = nullptr);
 
+// Largest level difference between cut node i and a finer drawn neighbour on any of its sides:
+// the lowest resolution the stitching constraint allows it. scratch is reused storage.
+uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i,
+                            std::vector<SideNeighbour>& scratch);
+
 // The number of constraint violations in a cut (0 for a valid cut). For tests and checks.
 uint32_t countStitchViolations(const Hierarchy& h, const Cut& cut);
 

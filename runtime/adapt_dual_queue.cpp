@@ -173,14 +173,7 @@ bool DualQueueAdapter::validMergeTop() {
   return false;
 }
 
-NodeId DualQueueAdapter::keyToNode(uint64_t key) {
-  NodeId n;
-  n.chart = uint32_t(key >> 40);
-  n.level = uint32_t((key >> 34) & 63u);
-  n.y = uint32_t((key >> 17) & 0x1FFFFu);
-  n.x = uint32_t(key & 0x1FFFFu);
-  return n;
-}
+NodeId DualQueueAdapter::keyToNode(uint64_t key) { return NodeId::fromKey(key); }
 
 const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& options, AdaptStats* stats) {
   AdaptStats st;

@@ -22,14 +22,7 @@ constexpr double kEps = 1e-9;
 
 uint64_t tris(uint32_t res) { return 2ull << (2 * res); }
 
-NodeId keyToNode(uint64_t key) {
-  NodeId n;
-  n.chart = uint32_t(key >> 40);
-  n.level = uint32_t((key >> 34) & 63u);
-  n.y = uint32_t((key >> 17) & 0x1FFFFu);
-  n.x = uint32_t(key & 0x1FFFFu);
-  return n;
-}
+NodeId keyToNode(uint64_t key) { return NodeId::fromKey(key); }
 
 struct Entry {
   NodeId id;
@@ -60,21 +53,6 @@ Item heapPop(std::vector<Item>& h) {
   const Item it = h.back();
   h.pop_back();
   return it;
-}
-
-// Largest level difference to a finer drawn neighbour on any side of cut node i.
-uint32_t stitchGap(const Hierarchy& h, const Cut& cut, uint32_t i, std::vector<SideNeighbour>& scratch) {
-  uint32_t gap = 0;
-  const NodeId& id = cut.nodes[i].id;
-  for (uint32_t s = 0; s < 4; ++s) {
-    scratch.clear();
-    sideNeighbours(h, cut, id, s, scratch);
-    for (const SideNeighbour& sn : scratch) {
-      const uint32_t l = cut.nodes[sn.cutIndex].id.level;
-      if (l > id.level) gap = std::max(gap, l - id.level);
-    }
-  }
-  return gap;
 }
 
 }  // namespace
@@ -152,7 +130,7 @@ struct QuadQueueAdapter::State {
     floorTris = 0;
     for (uint32_t i = 0; i < c.nodes.size(); ++i) {
       Entry& e = cut[c.nodes[i].id.key()];
-      const uint32_t gap = stitchGap(*h, c, i, scratch);
+      const uint32_t gap = finestNeighbourGap(*h, c, i, scratch);
       if (gap > maxRes(e.id)) needsConstraintSplit = true;
       e.floor = std::clamp(gap, minRes(), maxRes(e.id));
       floorTris += tris(e.floor);
@@ -406,19 +384,22 @@ struct QuadQueueAdapter::State {
     bool changed = false;
     std::vector<Item> reservedOrder;
     std::vector<Item> mergeAside;
+    // Pops the top merge (group p), performs it and updates the node and floor room.
+    auto mergeTopAndAccount = [&](const NodeId& p) {
+      const int64_t before = int64_t(drawn);
+      heapPop(mergeH);
+      doMerge(p, r);
+      availNodes += before - int64_t(drawn);
+      availFloor = triBudget - int64_t(floorTrisNow()) - reservedFloor(reservedOrder);
+      afterMerge(p);
+      changed = true;
+    };
     for (;;) {
       const Item* m = mergeTop();
       if (availNodes < 0 || availFloor < 0) {  // mandatory
         if (!m) break;
-        const NodeId p = keyToNode(m->key);
-        const int64_t before = int64_t(drawn);
-        heapPop(mergeH);
-        doMerge(p, r);
         ++st.budgetMerges;
-        availNodes += before - int64_t(drawn);
-        availFloor = triBudget - int64_t(floorTrisNow()) - reservedFloor(reservedOrder);
-        afterMerge(p);
-        changed = true;
+        mergeTopAndAccount(keyToNode(m->key));
         continue;
       }
       if (mandatoryOnly) {
@@ -444,13 +425,7 @@ struct QuadQueueAdapter::State {
       if (m && -m->priority <= 0.0) {  // free merge: no triangles added at the local errors
         const NodeId p = keyToNode(m->key);
         if (!s || !(s->id.level > 0 && s->id.parent() == p)) {
-          const int64_t before = int64_t(drawn);
-          heapPop(mergeH);
-          doMerge(p, r);
-          availNodes += before - int64_t(drawn);
-          availFloor = triBudget - int64_t(floorTrisNow()) - reservedFloor(reservedOrder);
-          afterMerge(p);
-          changed = true;
+          mergeTopAndAccount(p);
           continue;
         }
       }
@@ -482,13 +457,7 @@ struct QuadQueueAdapter::State {
           mergeAside.push_back(heapPop(mergeH));
           continue;
         }
-        const int64_t before = int64_t(drawn);
-        heapPop(mergeH);
-        doMerge(p, r);
-        availNodes += before - int64_t(drawn);
-        availFloor = triBudget - int64_t(floorTrisNow()) - reservedFloor(reservedOrder);
-        afterMerge(p);
-        changed = true;
+        mergeTopAndAccount(p);
         continue;
       }
       heapPop(splitH);  // does not fit, and no merge pays for it
@@ -634,7 +603,7 @@ bool fitTriangleBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, uin
   std::vector<SideNeighbour> scratch;
   std::vector<uint32_t> floor(cut.nodes.size());
   const uint32_t rmin = h.params.minNodeResLog2;
-  for (uint32_t i = 0; i < cut.nodes.size(); ++i) floor[i] = std::max(rmin, stitchGap(h, cut, i, scratch));
+  for (uint32_t i = 0; i < cut.nodes.size(); ++i) floor[i] = std::max(rmin, finestNeighbourGap(h, cut, i, scratch));
   uint64_t total = cut.triangles();
   std::vector<Item> heap;
   auto push = [&](uint32_t i) {

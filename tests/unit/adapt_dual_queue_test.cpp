@@ -8,57 +8,21 @@
 #include "atlas/terrain_atlas.h"
 #include "runtime/adapt_dual_queue.h"
 #include "runtime/baselines.h"
+#include "tests/adapt_fixture.h"
 #include "tests/synthetic_terrain.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
 namespace {
 
-struct World {
-  AtlasManifest m;
-  Hierarchy h;
-  glm::dvec3 lo, hi;
-};
+using test::expectPartition;
+using test::makeWorld;
+using test::sortedNodes;
+using test::viewAt;
+using test::World;
 
-World makeWorld(uint32_t chartSize = 65, uint32_t cx = 3, uint32_t cy = 2, uint32_t depth = 4) {
-  World w;
-  w.m = test::syntheticManifest(chartSize, cx, cy, depth, 5, 2);
-  w.h = buildTerrainHierarchy(w.m, [&](uint32_t c) { return test::syntheticChart(w.m, c); });
-  w.lo = {0, 0, -30};
-  w.hi = {double(w.m.samplesX), double(w.m.samplesY), 30};
-  return w;
-}
 
-ViewParams viewAt(const World& w, glm::dvec3 eye, glm::dvec3 target) {
-  Camera c;
-  c.eye = eye;
-  c.target = target;
-  c.nearPlane = 0.0;
-  c.farPlane = 0.0;
-  fitClipPlanes(c, w.lo, w.hi);
-  return makeViewParams(c, 320, 240);
-}
 
-// No node together with an ancestor; total area = all chart area (no empty nodes in these worlds).
-void expectPartition(const Hierarchy& h, const Cut& cut) {
-  const uint32_t L = h.params.intervalsLog2;
-  uint64_t area = 0;
-  for (const CutNode& n : cut.nodes) {
-    area += 1ull << (2 * (L - n.id.level));
-    for (NodeId a = n.id; a.level > 0;) {
-      a = a.parent();
-      ASSERT_LT(cut.find(a), 0) << "node and its ancestor both in the cut";
-    }
-  }
-  EXPECT_EQ(area, uint64_t(h.chartCount()) << (2 * L));
-}
-
-std::vector<std::pair<uint64_t, uint32_t>> sortedNodes(const Cut& cut) {
-  std::vector<std::pair<uint64_t, uint32_t>> v;
-  for (const CutNode& n : cut.nodes) v.push_back({n.id.key(), n.res});
-  std::sort(v.begin(), v.end());
-  return v;
-}
 
 // Updates until a frame ends without hitting the operation cap.
 const Cut& converge(DualQueueAdapter& a, const ViewParams& v, const AdaptOptions& o, AdaptStats* st) {
@@ -76,7 +40,7 @@ bool withinToleranceOrFinest(const Hierarchy& h, const CutNode& n, double tol) {
 }
 
 TEST(DualQueue, ErrorModeWithinToleranceAndPartitionAcrossRandomViews) {
-  const World w = makeWorld();
+  const World w = makeWorld(65, 3, 2, 4);
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> ux(0, w.m.samplesX), uy(0, w.m.samplesY), uz(5, 200);
   DualQueueAdapter adapter(w.h, 1u << 20);
@@ -103,7 +67,7 @@ TEST(DualQueue, ErrorModeWithinToleranceAndPartitionAcrossRandomViews) {
 }
 
 TEST(DualQueue, NodeBudgetBindsAndIsReported) {
-  const World w = makeWorld();
+  const World w = makeWorld(65, 3, 2, 4);
   const ViewParams v = viewAt(w, {10, 10, 3}, {100, 60, 0});
   AdaptOptions o;
   o.tolerancePx = 0.05;
@@ -196,7 +160,7 @@ TEST(DualQueue, PathAndBackReturnsToTheFreshCut) {
 }
 
 TEST(DualQueue, FrustumCullingKeepsThePartition) {
-  const World w = makeWorld();
+  const World w = makeWorld(65, 3, 2, 4);
   const ViewParams v = viewAt(w, {5, 5, 20}, {60, 40, 0});
   const ViewParams away = viewAt(w, {5, 5, 20}, {-50, -50, 0});
   AdaptOptions o;

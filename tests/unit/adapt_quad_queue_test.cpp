@@ -12,52 +12,20 @@
 #include "runtime/adapt_quad_queue.h"
 #include "runtime/baselines.h"
 #include "runtime/camera.h"
+#include "tests/adapt_fixture.h"
 #include "tests/synthetic_terrain.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
 namespace {
 
-struct World {
-  AtlasManifest m;
-  Hierarchy h;
-  glm::dvec3 lo, hi;
-};
+using test::expectPartition;
+using test::makeWorld;
+using test::sortedNodes;
+using test::viewAt;
+using test::World;
 
-World makeWorld(uint32_t chartSize = 129, uint32_t cx = 3, uint32_t cy = 2, uint32_t depth = 5) {
-  World w;
-  w.m = test::syntheticManifest(chartSize, cx, cy, depth, 5, 2);
-  w.h = buildTerrainHierarchy(w.m, [&](uint32_t c) { return test::syntheticChart(w.m, c); });
-  w.lo = {0, 0, -30};
-  w.hi = {double(w.m.samplesX), double(w.m.samplesY), 30};
-  return w;
-}
 
-ViewParams viewAt(const World& w, glm::dvec3 eye, glm::dvec3 target) {
-  Camera c;
-  c.eye = eye;
-  c.target = target;
-  c.nearPlane = 0.0;
-  c.farPlane = 0.0;
-  fitClipPlanes(c, w.lo, w.hi);
-  return makeViewParams(c, 320, 240);
-}
-
-// No node together with an ancestor; with no culling, total area = all chart area.
-void expectPartition(const Hierarchy& h, const Cut& cut, bool full) {
-  const uint32_t L = h.params.intervalsLog2;
-  uint64_t area = 0;
-  for (const CutNode& n : cut.nodes) {
-    area += 1ull << (2 * (L - n.id.level));
-    for (NodeId a = n.id; a.level > 0;) {
-      a = a.parent();
-      ASSERT_LT(cut.find(a), 0) << "node and its ancestor both in the cut";
-    }
-  }
-  if (full) {
-    EXPECT_EQ(area, uint64_t(h.chartCount()) << (2 * L));
-  }
-}
 
 void expectWithinBudget(const Hierarchy& h, const Cut& cut, const BudgetOptions& o, const BudgetStats& st) {
   EXPECT_LE(cut.triangles(), o.maxTriangles);
@@ -68,17 +36,11 @@ void expectWithinBudget(const Hierarchy& h, const Cut& cut, const BudgetOptions&
   }
 }
 
-std::vector<std::pair<uint64_t, uint32_t>> sortedNodes(const Cut& cut) {
-  std::vector<std::pair<uint64_t, uint32_t>> v;
-  for (const CutNode& n : cut.nodes) v.push_back({n.id.key(), n.res});
-  std::sort(v.begin(), v.end());
-  return v;
-}
 
 uint32_t opsOf(const BudgetStats& s) { return s.refines + s.coarsens + s.splits + s.merges; }
 
 TEST(QuadQueue, BudgetsHoldAcrossRandomViewsAndAPath) {
-  const World w = makeWorld();
+  const World w = makeWorld(129, 3, 2, 5);
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> ux(0, w.m.samplesX), uy(0, w.m.samplesY), uz(5, 200);
   for (bool cull : {false, true}) {
@@ -111,7 +73,7 @@ TEST(QuadQueue, BudgetsHoldAcrossRandomViewsAndAPath) {
 }
 
 TEST(QuadQueue, StaticCameraStableForAHundredFrames) {
-  const World w = makeWorld();
+  const World w = makeWorld(129, 3, 2, 5);
   const ViewParams v = viewAt(w, {20, 20, 15}, {200, 120, 0});
   BudgetOptions o;
   o.maxTriangles = 8000;

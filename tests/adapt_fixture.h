@@ -1,0 +1,69 @@
+// Shared fixtures for the adaptation tests: a small synthetic world, views into it, and cut
+// checks.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <utility>
+#include <vector>
+
+#include "runtime/adapt.h"
+#include "runtime/camera.h"
+#include "tests/synthetic_terrain.h"
+
+namespace gimlod::test {
+
+struct World {
+  AtlasManifest m;
+  Hierarchy h;
+  glm::dvec3 lo, hi;
+};
+
+// A cx x cy grid of synthetic charts with max node resolution 2^5 and min 2^2.
+inline World makeWorld(uint32_t chartSize, uint32_t cx, uint32_t cy, uint32_t depth) {
+  World w;
+  w.m = syntheticManifest(chartSize, cx, cy, depth, 5, 2);
+  w.h = buildTerrainHierarchy(w.m, [&](uint32_t c) { return syntheticChart(w.m, c); });
+  w.lo = {0, 0, -30};
+  w.hi = {double(w.m.samplesX), double(w.m.samplesY), 30};
+  return w;
+}
+
+// A 320x240 view from eye towards target, clip planes fitted to the world.
+inline ViewParams viewAt(const World& w, glm::dvec3 eye, glm::dvec3 target) {
+  Camera c;
+  c.eye = eye;
+  c.target = target;
+  c.nearPlane = 0.0;
+  c.farPlane = 0.0;
+  fitClipPlanes(c, w.lo, w.hi);
+  return makeViewParams(c, 320, 240);
+}
+
+// No node together with an ancestor; when full (no culling, no empty nodes), the cut's area is
+// all chart area.
+inline void expectPartition(const Hierarchy& h, const Cut& cut, bool full = true) {
+  const uint32_t L = h.params.intervalsLog2;
+  uint64_t area = 0;
+  for (const CutNode& n : cut.nodes) {
+    area += 1ull << (2 * (L - n.id.level));
+    for (NodeId a = n.id; a.level > 0;) {
+      a = a.parent();
+      ASSERT_LT(cut.find(a), 0) << "node and its ancestor both in the cut";
+    }
+  }
+  if (full) {
+    EXPECT_EQ(area, uint64_t(h.chartCount()) << (2 * L));
+  }
+}
+
+// (key, resolution) of every cut node, sorted: equal for equal cuts.
+inline std::vector<std::pair<uint64_t, uint32_t>> sortedNodes(const Cut& cut) {
+  std::vector<std::pair<uint64_t, uint32_t>> v;
+  for (const CutNode& n : cut.nodes) v.push_back({n.id.key(), n.res});
+  std::sort(v.begin(), v.end());
+  return v;
+}
+
+}  // namespace gimlod::test
