@@ -250,11 +250,7 @@ CLI::App* addBenchCommand(CLI::App& app, BenchArgs& a) {
   auto* b = app.add_subcommand("bench", "Benchmark adaptation (time, nodes, triangles, error) over a camera path");
   b->add_option("atlas", a.atlas, "Atlas directory")->required();
   b->add_option("-o,--output", a.output, "Output directory (bench.csv, summary.csv, cost_model.json)")->required();
-  b->add_option("--path", a.path, "Camera path JSON: frames of eye, target, up, fov_deg");
-  b->add_option("--orbit", a.orbit, "Frames of an orbit around the bounding-box centre");
-  b->add_option("--distance", a.distance, "Orbit distance as a fraction of the bounding-box diagonal")->capture_default_str();
-  b->add_option("--elevation", a.elevation, "Orbit elevation in degrees")->capture_default_str();
-  b->add_option("--fov", a.fov, "Vertical field of view for --orbit, degrees")->capture_default_str();
+  addCameraOptions(b, a.camera);
   b->add_option("--mode", a.mode, "error: error threshold with node budgets; budget: node x triangle budgets")
       ->capture_default_str();
   b->add_option("--nodes", a.nodes, "Node budgets, comma-separated")->capture_default_str();
@@ -291,14 +287,9 @@ int runBench(const BenchArgs& a) {
   }
   const std::vector<std::string> algorithms = parseAlgorithms(a.algorithms);
   uint32_t w = 0, h = 0;
-  char extra;
-  if (std::sscanf(a.size.c_str(), "%ux%u%c", &w, &h, &extra) != 2 || w < 8 || h < 8 || w > 16384 || h > 16384)
-    throw InputError("--size '" + a.size + "' must be WxH with 8 <= W, H <= 16384");
-  if (a.orbit == 0 && a.path.empty()) throw InputError("give --orbit N or --path FILE.json");
-  if (a.orbit > 0 && !a.path.empty()) throw InputError("give only one of --orbit and --path");
-  if (a.orbit > 100000) throw InputError("--orbit must be at most 100000 frames");
-  if (!(a.distance > 0.0) || !std::isfinite(a.distance)) throw InputError("--distance must be > 0");
-  if (!(a.fov > 1.0 && a.fov < 179.0)) throw InputError("--fov must be in (1, 179) degrees");
+  parseFrameSize(a.size, &w, &h);
+  validateCameraArgs(a.camera);
+  if (a.camera.orbit > 0 && !a.camera.path.empty()) throw InputError("give only one of --orbit and --path");
   if (a.repeat == 0 || a.repeat > 1000) throw InputError("--repeat must be in [1, 1000]");
   const bool costModel = a.frameMs != 0.0 || a.triRate != 0.0;
   if (costModel) {
@@ -312,14 +303,8 @@ int runBench(const BenchArgs& a) {
   // Inputs.
   const AtlasView atlas = openAtlas(a.atlas);
   const Hierarchy& hier = atlas.hierarchy;
-  std::vector<Camera> cams;
-  if (!a.path.empty()) {
-    cams = readCameraPath(a.path);
-    for (Camera& c : cams) fitClipPlanes(c, atlas.lo, atlas.hi);
-  } else {
-    cams = orbitPath(atlas.lo, atlas.hi, a.orbit, a.distance, a.elevation, a.fov);
-  }
-  if (cams.empty()) throw InputError(a.path + ": the camera path has no frames");
+  const std::vector<Camera> cams = loadCameras(a.camera, atlas);
+  if (cams.empty()) throw InputError(a.camera.path + ": the camera path has no frames");
   std::vector<ViewParams> views;
   for (const Camera& c : cams) views.push_back(makeViewParams(c, w, h));
 

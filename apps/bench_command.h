@@ -9,17 +9,20 @@
 
 #include <CLI/CLI.hpp>
 
+#include "apps/view_args.h"
+
 namespace gimlod {
 
 struct BenchArgs {
-  std::string atlas, output, path;
+  std::string atlas, output;
+  CameraArgs camera;
   std::string mode = "error";
   std::string nodes = "100,250,500,1000,2000";
   std::string triangles = "100000,200000,400000,800000";
   std::string size = "1280x720";
   std::string algorithms = "ours,fixed,greedy";
-  uint32_t orbit = 0, repeat = 1;
-  double distance = 0.9, elevation = 35.0, fov = 45.0, tolerance = 1.0;
+  uint32_t repeat = 1;
+  double tolerance = 1.0;
   double frameMs = 0.0, triRate = 0.0;
   bool render = false;
   // Set by the parser: which options were given explicitly.

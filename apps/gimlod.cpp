@@ -18,6 +18,7 @@
 
 #include "apps/bench_command.h"
 #include "apps/pipeline.h"
+#include "apps/view_args.h"
 #include "core/atlas_format.h"
 #include "runtime/adapt.h"
 #include "runtime/atlas_view.h"
@@ -31,10 +32,11 @@ using namespace gimlod;
 namespace {
 
 struct RenderArgs {
-  std::string atlas, output, path, size = "640x480", background = "0.53,0.70,0.92";
-  uint32_t orbit = 0, maxNodes = 2048, uploadsPerFrame = 64;
+  std::string atlas, output, size = "640x480", background = "0.53,0.70,0.92";
+  CameraArgs camera;
+  uint32_t maxNodes = 2048, uploadsPerFrame = 64;
   bool asyncLoads = false;
-  double distance = 0.9, elevation = 35.0, tolerance = 1.0, fov = 45.0;
+  double tolerance = 1.0;
 };
 
 int runBuild(const BuildOptions& o) {
@@ -78,25 +80,14 @@ void writePng(const fs::path& path, uint32_t w, uint32_t h, const std::vector<ui
 
 int runRender(const RenderArgs& a) {
   uint32_t w = 0, h = 0;
-  char extra;
-  if (std::sscanf(a.size.c_str(), "%ux%u%c", &w, &h, &extra) != 2 || w < 8 || h < 8 || w > 16384 || h > 16384)
-    throw InputError("--size '" + a.size + "' must be WxH with 8 <= W, H <= 16384");
+  parseFrameSize(a.size, &w, &h);
   if (!(a.tolerance > 0.0) || !std::isfinite(a.tolerance)) throw InputError("--tolerance must be > 0 pixels");
-  if (!(a.distance > 0.0) || !std::isfinite(a.distance)) throw InputError("--distance must be > 0");
-  if (!(a.fov > 1.0 && a.fov < 179.0)) throw InputError("--fov must be in (1, 179) degrees");
-  if (a.orbit == 0 && a.path.empty()) throw InputError("give --orbit N or --path FILE.json");
-  if (a.orbit > 100000) throw InputError("--orbit must be at most 100000 frames");
+  validateCameraArgs(a.camera);
   if (a.uploadsPerFrame == 0) throw InputError("--uploads-per-frame must be at least 1");
   const auto background = parseBackground(a.background);
 
   const AtlasView atlas = openAtlas(a.atlas);
-  std::vector<Camera> cams;
-  if (!a.path.empty()) {
-    cams = readCameraPath(a.path);
-    for (Camera& c : cams) fitClipPlanes(c, atlas.lo, atlas.hi);
-  } else {
-    cams = orbitPath(atlas.lo, atlas.hi, a.orbit, a.distance, a.elevation, a.fov);
-  }
+  const std::vector<Camera> cams = loadCameras(a.camera, atlas);
 
   const fs::path out = a.output;
   std::error_code ec;
@@ -166,11 +157,7 @@ int main(int argc, char** argv) {
   auto* render = app.add_subcommand("render", "Render an atlas headless (EGL) to PNG frames and stats.csv");
   render->add_option("atlas", r.atlas, "Atlas directory")->required();
   render->add_option("-o,--output", r.output, "Output directory")->required();
-  render->add_option("--orbit", r.orbit, "Frames of an orbit around the bounding-box centre");
-  render->add_option("--path", r.path, "Camera path JSON: frames of eye, target, up, fov_deg");
-  render->add_option("--distance", r.distance, "Orbit distance as a fraction of the bounding-box diagonal")->capture_default_str();
-  render->add_option("--elevation", r.elevation, "Orbit elevation in degrees")->capture_default_str();
-  render->add_option("--fov", r.fov, "Vertical field of view for --orbit, degrees")->capture_default_str();
+  addCameraOptions(render, r.camera);
   render->add_option("--size", r.size, "Frame size WxH")->capture_default_str();
   render->add_option("--background", r.background, "Background colour R,G,B")->capture_default_str();
   render->add_option("--tolerance", r.tolerance, "Screen-space error tolerance in pixels")->capture_default_str();

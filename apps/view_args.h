@@ -1,0 +1,58 @@
+// View options shared by `gimlod render` and `gimlod bench`: an orbit or a JSON camera path, and
+// the frame size.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "runtime/atlas_view.h"
+#include "runtime/camera.h"
+
+namespace gimlod {
+
+struct CameraArgs {
+  std::string path;   // camera path JSON; empty: orbit
+  uint32_t orbit = 0; // orbit frames
+  double distance = 0.9, elevation = 35.0, fov = 45.0;
+};
+
+// Registers --path, --orbit, --distance, --elevation and --fov on cmd.
+inline void addCameraOptions(CLI::App* cmd, CameraArgs& a) {
+  cmd->add_option("--path", a.path, "Camera path JSON: frames of eye, target, up, fov_deg");
+  cmd->add_option("--orbit", a.orbit, "Frames of an orbit around the bounding-box centre");
+  cmd->add_option("--distance", a.distance, "Orbit distance as a fraction of the bounding-box diagonal")
+      ->capture_default_str();
+  cmd->add_option("--elevation", a.elevation, "Orbit elevation in degrees")->capture_default_str();
+  cmd->add_option("--fov", a.fov, "Vertical field of view for --orbit, degrees")->capture_default_str();
+}
+
+// Throws InputError for impossible camera options.
+inline void validateCameraArgs(const CameraArgs& a) {
+  if (!(a.distance > 0.0) || !std::isfinite(a.distance)) throw InputError("--distance must be > 0");
+  if (!(a.fov > 1.0 && a.fov < 179.0)) throw InputError("--fov must be in (1, 179) degrees");
+  if (a.orbit == 0 && a.path.empty()) throw InputError("give --orbit N or --path FILE.json");
+  if (a.orbit > 100000) throw InputError("--orbit must be at most 100000 frames");
+}
+
+// The cameras: the JSON path (clip planes fitted to the atlas) if given, else the orbit.
+inline std::vector<Camera> loadCameras(const CameraArgs& a, const AtlasView& atlas) {
+  if (a.path.empty()) return orbitPath(atlas.lo, atlas.hi, a.orbit, a.distance, a.elevation, a.fov);
+  std::vector<Camera> cams = readCameraPath(a.path);
+  for (Camera& c : cams) fitClipPlanes(c, atlas.lo, atlas.hi);
+  return cams;
+}
+
+// Parses --size WxH (8 <= W, H <= 16384); throws InputError otherwise.
+inline void parseFrameSize(const std::string& size, uint32_t* w, uint32_t* h) {
+  char extra;
+  if (std::sscanf(size.c_str(), "%ux%u%c", w, h, &extra) != 2 || *w < 8 || *h < 8 || *w > 16384 ||
+      *h > 16384)
+    throw InputError("--size '" + size + "' must be WxH with 8 <= W, H <= 16384");
+}
+
+}  // namespace gimlod
