@@ -279,18 +279,9 @@ TEST(DualQueue, HandMadePrioritiesAndCuts) {
 }
 
 TEST(DualQueue, NoMoreTrianglesThanFixedGranularityOnRainier) {
-  const DemRaster dem = loadDem(test::repoData() / "terrain/mt_rainier_90m.tif");
-  AtlasManifest m;
-  m.depth = 5;
-  m.maxNodeResLog2 = 6;
-  m.minNodeResLog2 = 2;
-  TerrainAtlasOptions topt;
-  topt.chartSize = 257;
-  fillTerrainManifest(dem, topt, m);
-  const Hierarchy h = buildTerrainHierarchy(
-      m, [&](uint32_t c) { return extractChart(dem, m.charts[c].gridX, m.charts[c].gridY, 257); });
-  const glm::dvec3 lo{0, 0, dem.minHeight};
-  const glm::dvec3 hi{(dem.width - 1) * dem.spacing[0], (dem.height - 1) * dem.spacing[1], dem.maxHeight};
+  const test::DemWorld world = test::loadDemWorld(test::repoData() / "terrain/mt_rainier_90m.tif", 257);
+  const Hierarchy& h = world.h;
+  const glm::dvec3 lo = world.lo, hi = world.hi;
   const auto path = orbitPath(lo, hi, 24, 0.35, 20.0);
   AdaptOptions o;
   o.tolerancePx = 1.0;

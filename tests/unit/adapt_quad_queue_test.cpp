@@ -217,18 +217,9 @@ TEST(QuadQueue, SplitRoundThatRaisesTheMaxErrorIsUndone) {
 }
 
 TEST(QuadQueue, RainierOrbitNoWorseThanFixedGranularity) {
-  const DemRaster dem = loadDem(test::repoData() / "terrain/mt_rainier_90m.tif");
-  AtlasManifest m;
-  m.depth = 5;
-  m.maxNodeResLog2 = 6;
-  m.minNodeResLog2 = 2;
-  TerrainAtlasOptions topt;
-  topt.chartSize = 257;
-  fillTerrainManifest(dem, topt, m);
-  const Hierarchy h = buildTerrainHierarchy(
-      m, [&](uint32_t c) { return extractChart(dem, m.charts[c].gridX, m.charts[c].gridY, 257); });
-  const glm::dvec3 lo{0, 0, dem.minHeight};
-  const glm::dvec3 hi{(dem.width - 1) * dem.spacing[0], (dem.height - 1) * dem.spacing[1], dem.maxHeight};
+  const test::DemWorld world = test::loadDemWorld(test::repoData() / "terrain/mt_rainier_90m.tif", 257);
+  const Hierarchy& h = world.h;
+  const glm::dvec3 lo = world.lo, hi = world.hi;
   const auto path = orbitPath(lo, hi, 24, 0.35, 20.0);
   for (uint32_t nodes : {100u, 400u}) {
     BudgetOptions o;
@@ -273,18 +264,9 @@ TEST(QuadQueue, RainierOrbitNoWorseThanFixedGranularity) {
 // a worse node at maxRes. On the bench path the error must stay at or below the baseline's in every
 // frame, and an error above zero must come with the triangle budget in use.
 TEST(QuadQueue, RainierBenchPathSmallNodeBudgetNoWorseThanFixedPerFrame) {
-  const DemRaster dem = loadDem(test::repoData() / "terrain/mt_rainier_90m.tif");
-  AtlasManifest m;  // as `gimlod build` with default options
-  m.depth = 5;
-  m.maxNodeResLog2 = 6;
-  m.minNodeResLog2 = 2;
-  TerrainAtlasOptions topt;
-  topt.chartSize = 513;
-  fillTerrainManifest(dem, topt, m);
-  const Hierarchy h = buildTerrainHierarchy(
-      m, [&](uint32_t c) { return extractChart(dem, m.charts[c].gridX, m.charts[c].gridY, 513); });
-  const glm::dvec3 lo{0, 0, dem.minHeight};
-  const glm::dvec3 hi{(dem.width - 1) * dem.spacing[0], (dem.height - 1) * dem.spacing[1], dem.maxHeight};
+  const test::DemWorld world = test::loadDemWorld(test::repoData() / "terrain/mt_rainier_90m.tif", 513);  // as `gimlod build` defaults
+  const Hierarchy& h = world.h;
+  const glm::dvec3 lo = world.lo, hi = world.hi;
   std::vector<Camera> path = readCameraPath(test::repoData().parent_path() / "scenes/rainier_bench.json");
   ASSERT_EQ(path.size(), 120u);
   for (Camera& c : path) fitClipPlanes(c, lo, hi);
