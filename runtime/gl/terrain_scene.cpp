@@ -255,8 +255,6 @@ FrameResult TerrainScene::renderFrame(const Camera& camera, const AdaptOptions& 
   if (loader_) {
     f.desiredCut = std::move(f.cut);
     f.cut = substituteResident(f.desiredCut, view, &f);
-  } else {
-    f.desiredCut = f.cut;
   }
   const double substituteMs = msSince(t1);
   f.maxErrorPx = 0.0;

@@ -28,7 +28,7 @@ struct SceneOptions {
 
 struct FrameResult {
   Cut cut;         // the cut actually drawn (async: with resident ancestors substituted)
-  Cut desiredCut;  // the cut the adaptation chose (equal to `cut` without asyncLoads)
+  Cut desiredCut;  // async: the cut the adaptation chose; empty without asyncLoads (`cut` is it)
   AdaptStats adapt;        // of the desired cut
   double maxErrorPx = 0.0;  // of the drawn cut: above the tolerance while ancestors stand in
   DrawStats draw;
