@@ -2,6 +2,7 @@
 // adaptation with a node budget) and section 7.4 (stitching constraint).
 #include "runtime/adapt.h"
 
+#include <algorithm>
 #include <cmath>
 #include <queue>
 
@@ -76,7 +77,7 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
       c.overTol = true;
       c.res = rmax;
       // Over tolerance: split first, worst error first.
-      c.priority = leaf ? -1.0 : 1e30 + screenError(h, n, rmax, view);
+      c.priority = leaf ? -1.0 : overTolerancePriority(screenError(h, n, rmax, view));
       return c;
     }
     if (leaf) {
@@ -159,16 +160,41 @@ uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i,
   return gap;
 }
 
+void stitchGaps(const Hierarchy& h, const Cut& cut, std::vector<uint32_t>& gaps) {
+  gaps.assign(cut.nodes.size(), 0);
+  for (const CutNode& m : cut.nodes) {
+    if (m.id.level == 0) continue;  // nothing is coarser than a root
+    for (uint32_t s = 0; s < 4; ++s) {
+      NodeId a;
+      uint32_t aSide;
+      if (!adjacentNode(h, m.id, s, &a, &aSide)) continue;
+      const bool sameChart = a.chart == m.id.chart;
+      for (;; a = a.parent()) {
+        // An ancestor of m is never in the cut with m: the walk ends there.
+        const uint32_t up = m.id.level - a.level;
+        if (sameChart && a.x == (m.id.x >> up) && a.y == (m.id.y >> up)) break;
+        const int32_t i = cut.find(a);
+        if (i >= 0) {
+          gaps[i] = std::max(gaps[i], m.id.level - a.level);  // 0 for an equal neighbour
+          break;
+        }
+        if (a.level == 0) break;
+      }
+    }
+  }
+}
+
 bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* view,
                              double tolerancePx, AdaptStats* stats) {
-  std::vector<SideNeighbour> scratch;
+  std::vector<uint32_t> gaps;
   // Each pass splits the nodes that cannot reach the needed resolution; the tree is finite, so
   // this ends after at most depth passes.
   for (uint32_t pass = 0; pass <= h.params.depth; ++pass) {
+    stitchGaps(h, cut, gaps);
     std::vector<uint32_t> toSplit;
     for (uint32_t i = 0; i < cut.nodes.size(); ++i) {
       CutNode& n = cut.nodes[i];
-      const uint32_t gap = finestNeighbourGap(h, cut, i, scratch);
+      const uint32_t gap = gaps[i];
       if (gap <= n.res) continue;
       if (gap <= h.params.maxRes(n.id.level)) {
         n.res = gap;

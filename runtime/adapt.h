@@ -25,6 +25,12 @@ ViewParams makeViewParams(const Camera& c, uint32_t width, uint32_t height);
 // bounds: error * pixelsPerRadian / distance.
 double screenError(const Hierarchy& h, const NodeId& n, uint32_t res, const ViewParams& v);
 
+// Priority tier of a node that cannot meet the tolerance even at its finest resolution: above
+// every triangle-count priority, ordered by its error. note: scaled, not added: 1e30 + err would
+// round every error away and tie the whole tier.
+inline constexpr double kOverTolerancePriority = 1e30;
+inline double overTolerancePriority(double errorPx) { return kOverTolerancePriority * (1.0 + errorPx); }
+
 struct AdaptOptions {
   double tolerancePx = 1.0;  // screen-space error threshold in pixels; must be > 0
   uint32_t maxNodes = 4096;  // node budget; 0 means no limit
@@ -61,6 +67,12 @@ bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* vie
 // the lowest resolution the stitching constraint allows it. scratch is reused storage.
 uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i,
                             std::vector<SideNeighbour>& scratch);
+
+// For every cut node, the largest level difference to a finer drawn neighbour on any side: the
+// lowest resolution the stitching constraint allows it (gaps[i] == finestNeighbourGap(.., i, ..)).
+// Each node finds its equal-or-coarser neighbour on each side by walking up from the adjacent
+// node of its own level and raises that neighbour's gap: O(cut * depth) index lookups.
+void stitchGaps(const Hierarchy& h, const Cut& cut, std::vector<uint32_t>& gaps);
 
 // The number of constraint violations in a cut (0 for a valid cut). For tests and checks.
 uint32_t countStitchViolations(const Hierarchy& h, const Cut& cut);

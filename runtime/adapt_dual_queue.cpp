@@ -5,11 +5,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace gimlod {
 namespace {
 
-constexpr double kOverTolPriority = 1e30;
+constexpr double kOverTolPriority = kOverTolerancePriority;
 
 uint64_t tris(uint32_t res) { return 2ull << (2 * res); }
 
@@ -34,7 +35,7 @@ double childTriangles(const Hierarchy& h, const NodeId& n, const ViewParams& v, 
 double splitPriorityOf(const Hierarchy& h, const NodeId& n, uint32_t res, bool drawn, bool overTol,
                        const ViewParams& v, double tol, bool cull) {
   if (n.level + 1 >= h.params.depth) return -1.0;
-  if (drawn && overTol) return kOverTolPriority + screenError(h, n, h.params.maxRes(n.level), v);
+  if (drawn && overTol) return overTolerancePriority(screenError(h, n, h.params.maxRes(n.level), v));
   const double own = drawn ? double(tris(res)) : 0.0;
   return own - childTriangles(h, n, v, tol, cull);
 }
@@ -61,34 +62,164 @@ double dualQueueMergeCost(const Hierarchy& h, const NodeId& parent, const ViewPa
   const uint32_t res = clampedRes(h, parent, v, tolerancePx, &over);
   const bool drawn = nodeDrawable(h, parent, v, cull);
   if (parentOverTol) *parentOverTol = drawn && over;
-  if (drawn && over) return kOverTolPriority + screenError(h, parent, h.params.maxRes(parent.level), v);
+  if (drawn && over) return overTolerancePriority(screenError(h, parent, h.params.maxRes(parent.level), v));
   const double own = drawn ? double(tris(res)) : 0.0;
   return own - childTriangles(h, parent, v, tolerancePx, cull);
 }
 
-DualQueueAdapter::DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame)
-    : h_(h), maxOps_(std::max(maxOpsPerFrame, 1u)) {}
+DualQueueAdapter::DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame, bool reusePriorities)
+    : h_(h), maxOps_(std::max(maxOpsPerFrame, 1u)), reuse_(reusePriorities), perChart_(nodesPerChart(h.params.depth)) {
+  local_.resize(perChart_);
+  for (uint32_t l = 0; l < h.params.depth; ++l)
+    for (uint32_t y = 0; y < (1u << l); ++y)
+      for (uint32_t x = 0; x < (1u << l); ++x) local_[nodeIndex(l, x, y)] = {0, l, x, y};
+  slot_.assign(size_t(perChart_) * h.chartCount(), -1);
+  drawnState_.assign(slot_.size(), 0);
+  gaps_.assign(slot_.size(), 0);
+}
 
 void DualQueueAdapter::reset() {
-  cut_.clear();
+  for (const Entry& e : entries_) slot_[e.g] = -1, drawnState_[e.g] = 0;
+  entries_.clear();
   out_ = Cut{};
   frame_ = {};
 }
 
 Cut DualQueueAdapter::partition() const {
   Cut c;
-  c.nodes.reserve(cut_.size());
-  for (const auto& [k, e] : cut_) c.nodes.push_back({e.id, e.res, 0.f});
+  c.nodes.reserve(entries_.size());
+  for (const Entry& e : entries_) c.nodes.push_back({e.id, e.res, 0.f});
   c.rebuildIndex();
   return c;
 }
 
+NodeId DualQueueAdapter::nodeOf(uint32_t g) const {
+  NodeId n = local_[g % perChart_];
+  n.chart = g / perChart_;
+  return n;
+}
+
+DualQueueAdapter::Eval DualQueueAdapter::evalNode(const NodeId& n, bool parentInside) const {
+  const Hierarchy::ChartNodes& cn = h_.charts[n.chart];
+  const uint32_t i = nodeIndex(n.level, n.x, n.y);
+  if (cn.flags[i] & kNodeEmpty) return Eval{};
+  return evalBox(cn.bounds[i].data(), &cn.errors[size_t(i) * h_.params.resCount()], n.level, parentInside);
+}
+
+DualQueueAdapter::Eval DualQueueAdapter::evalBox(const float* b, const float* err, uint32_t level,
+                                                 bool parentInside) const {
+  Eval ev;
+  const glm::dvec3 lo{b[0], b[1], b[2]}, hi{b[3], b[4], b[5]};
+  if (parentInside || !opt_.frustumCull) {
+    ev.inside = true;
+  } else {
+    const int c = view_.frustum.classify(lo, hi);
+    if (c == 0) return ev;
+    ev.inside = c == 2;
+  }
+  ev.drawn = true;
+  // Same arithmetic as neededResolution and screenError.
+  const glm::dvec3 q = glm::clamp(view_.eye, lo, hi) - view_.eye;
+  const double d = std::max(std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z), view_.minDistance);
+  const double tolWorld = opt_.tolerancePx * d / view_.pixelsPerRadian;
+  const uint32_t rmin = h_.params.minNodeResLog2, rmax = h_.params.maxRes(level);
+  uint32_t r = rmin;
+  while (r <= rmax && !(double(err[r - rmin]) <= tolWorld)) ++r;
+  ev.overTol = r > rmax;
+  ev.res = uint8_t(std::min(r, rmax));
+  ev.errorPx = double(err[ev.res - rmin]) * view_.pixelsPerRadian / d;
+  // The clamped resolution holds for distances in [lower, upper): lower = where err[res] stops
+  // meeting the tolerance (none at rmax), upper = where err[res - 1] starts to (none at rmin).
+  const double k = view_.pixelsPerRadian / opt_.tolerancePx;
+  double slack = std::numeric_limits<double>::infinity();
+  if (ev.res < rmax) slack = d - double(err[ev.res - rmin]) * k;
+  if (ev.res > rmin) slack = std::min(slack, double(err[ev.res - 1 - rmin]) * k - d);
+  ev.slack = slack - 1e-9 * d;  // margin for rounding
+  return ev;
+}
+
 void DualQueueAdapter::evaluate(Entry& e) {
-  e.drawn = nodeDrawable(h_, e.id, view_, opt_.frustumCull);
-  bool over = false;
-  const uint32_t r = clampedRes(h_, e.id, view_, opt_.tolerancePx, &over);
-  e.overTol = e.drawn && over;
-  e.res = e.drawn ? r : h_.params.minNodeResLog2;
+  // The entry keeps a copy of its bounds and errors: the per-frame pass then streams through
+  // entries_ instead of gathering from the hierarchy's arrays.
+  const Eval ev = e.copied ? evalBox(e.box.data(), e.err.data(), e.id.level, false) : evalNode(e.id, false);
+  e.drawn = ev.drawn;
+  e.inside = ev.inside;
+  e.overTol = ev.drawn && ev.overTol;
+  e.res = ev.drawn ? ev.res : uint8_t(h_.params.minNodeResLog2);
+  e.errorPx = ev.drawn ? ev.errorPx : 0.0;
+}
+
+// Paper 7.1 split priority (see dualQueueSplitPriority), from the entry's evaluation; *delta is
+// the drawn-node change of the split.
+double DualQueueAdapter::cachedSplitPriority(Entry& e, int32_t* delta) {
+  if (!e.drawn || e.overTol || e.id.level + 1 >= h_.params.depth) return splitPriority(e, delta);
+  if (reuse_ && e.cacheSlack >= 0.0 && e.cacheEpoch == epoch_ && e.cacheRes == e.res && e.inside) {
+    const glm::dvec3 m = view_.eye - e.cacheEye;
+    if (m.x * m.x + m.y * m.y + m.z * m.z < e.cacheSlack * e.cacheSlack) {
+      ++frame_.priorityReuses;
+      *delta = e.cacheDelta;
+      return e.cachePriority;
+    }
+  }
+  // Recompute, and cache when the children's visibility cannot change under this class.
+  double slack = std::numeric_limits<double>::infinity();
+  *delta = -1;
+  double t = double(tris(e.res));
+  for (uint32_t i = 0; i < 4; ++i) {
+    const Eval c = evalNode(e.id.child(i), e.inside);
+    if (!c.drawn) continue;
+    t -= double(tris(c.res));
+    ++*delta;
+    slack = std::min(slack, c.slack);
+  }
+  e.cacheSlack = e.inside ? std::max(slack, 0.0) : -1.0;
+  e.cacheEye = view_.eye;
+  e.cachePriority = t;
+  e.cacheDelta = *delta;
+  e.cacheRes = e.res;
+  e.cacheEpoch = epoch_;
+  return t;
+}
+
+double DualQueueAdapter::splitPriority(const Entry& e, int32_t* delta) const {
+  *delta = 0;
+  if (e.id.level + 1 >= h_.params.depth || !e.drawn) return -1.0;  // undrawn: children are too
+  *delta = -1;
+  if (e.overTol) {
+    for (uint32_t i = 0; i < 4; ++i) *delta += int32_t(childDrawn(e, i));
+    return overTolerancePriority(e.errorPx);  // errorPx is at maxRes here
+  }
+  double t = double(tris(e.res));
+  for (uint32_t i = 0; i < 4; ++i) {
+    const Eval c = evalNode(e.id.child(i), e.inside);
+    if (!c.drawn) continue;
+    t -= double(tris(c.res));
+    ++*delta;
+  }
+  return t;
+}
+
+bool DualQueueAdapter::childDrawn(const Entry& e, uint32_t i) const {
+  const NodeId c = e.id.child(i);
+  if (h_.flags(c) & kNodeEmpty) return false;
+  if (e.inside || !opt_.frustumCull) return true;
+  const auto& b = h_.bounds(c);
+  return view_.frustum.classify({b[0], b[1], b[2]}, {b[3], b[4], b[5]}) != 0;
+}
+
+double DualQueueAdapter::mergeCost(const NodeId& parent, bool* overTol, int32_t* freed) const {
+  const Eval p = evalNode(parent, false);
+  *freed = -int32_t(p.drawn);
+  double t = 0.0;
+  for (uint32_t i = 0; i < 4; ++i) {
+    const int32_t s = slot_[globalIndex(parent.child(i))];
+    if (s < 0 || !entries_[s].drawn) continue;
+    t -= double(tris(entries_[s].res));
+    ++*freed;
+  }
+  *overTol = p.drawn && p.overTol;
+  if (*overTol) return overTolerancePriority(p.errorPx);
+  return t + (p.drawn ? double(tris(p.res)) : 0.0);
 }
 
 bool DualQueueAdapter::groupInCut(const NodeId& parent) const {
@@ -96,67 +227,85 @@ bool DualQueueAdapter::groupInCut(const NodeId& parent) const {
   for (uint32_t i = 0; i < 4; ++i) {
     const NodeId ch = parent.child(i);
     if (h_.flags(ch) & kNodeEmpty) continue;
-    auto it = cut_.find(ch.key());
-    if (it == cut_.end()) return false;
-    if (it->second.splitFrame == frameNo_) return false;  // created by a split this frame
+    const int32_t s = slot_[globalIndex(ch)];
+    if (s < 0) return false;
+    if (entries_[s].splitFrame == frameNo_) return false;  // created by a split this frame
     any = true;
   }
   return any;
 }
 
-void DualQueueAdapter::pushSplit(const Entry& e) {
+void DualQueueAdapter::pushSplit(Entry& e) {
   if (e.mergedFrame == frameNo_) return;  // merged this frame: not split again this frame
-  const double p = splitPriorityOf(h_, e.id, e.res, e.drawn, e.overTol, view_, opt_.tolerancePx,
-                                   opt_.frustumCull);
+  int32_t delta = 0;
+  const double p = cachedSplitPriority(e, &delta);
   if (p <= 0.0) return;  // never useful this frame: the view is fixed within a frame
-  splitHeap_.push_back({p, e.id.key(), false});
+  splitHeap_.push_back({p, e.g, false, delta});
   std::push_heap(splitHeap_.begin(), splitHeap_.end(), Less{});
 }
 
 void DualQueueAdapter::pushMerge(const NodeId& parent) {
   bool over = false;
-  const double c = dualQueueMergeCost(h_, parent, view_, opt_.tolerancePx, opt_.frustumCull, &over);
-  mergeHeap_.push_back({c, parent.key(), over});
+  int32_t freed = 0;
+  const double c = mergeCost(parent, &over, &freed);
+  mergeHeap_.push_back({c, globalIndex(parent), over, freed});
   std::push_heap(mergeHeap_.begin(), mergeHeap_.end(), Greater{});
 }
 
-int32_t DualQueueAdapter::drawnDelta(const NodeId& parent) const {
-  int32_t d = -int32_t(nodeDrawable(h_, parent, view_, opt_.frustumCull));
-  for (uint32_t i = 0; i < 4; ++i) d += int32_t(nodeDrawable(h_, parent.child(i), view_, opt_.frustumCull));
-  return d;
+void DualQueueAdapter::addEntry(const Entry& e) {
+  slot_[e.g] = int32_t(entries_.size());
+  entries_.push_back(e);
+  Entry& a = entries_.back();
+  const uint32_t rc = h_.params.resCount();
+  if (rc <= a.err.size()) {
+    const Hierarchy::ChartNodes& cn = h_.charts[a.id.chart];
+    const uint32_t i = nodeIndex(a.id.level, a.id.x, a.id.y);
+    a.box = cn.bounds[i];
+    std::copy_n(&cn.errors[size_t(i) * rc], rc, a.err.begin());
+    a.copied = true;
+  }
+  drawn_ += uint32_t(e.drawn);
+}
+
+void DualQueueAdapter::removeEntry(uint32_t g) {
+  const int32_t s = slot_[g];
+  drawn_ -= uint32_t(entries_[s].drawn);
+  slot_[g] = -1;
+  drawnState_[g] = 0;
+  if (size_t(s) + 1 != entries_.size()) {
+    entries_[s] = entries_.back();
+    slot_[entries_[s].g] = s;
+  }
+  entries_.pop_back();
 }
 
 void DualQueueAdapter::doSplit(const NodeId& n) {
-  auto it = cut_.find(n.key());
-  drawn_ -= uint32_t(it->second.drawn);
-  cut_.erase(it);
+  removeEntry(globalIndex(n));
   for (uint32_t i = 0; i < 4; ++i) {
     const NodeId ch = n.child(i);
     if (h_.flags(ch) & kNodeEmpty) continue;
     Entry e;
     e.id = ch;
+    e.g = globalIndex(ch);
     e.splitFrame = frameNo_;
     evaluate(e);
-    drawn_ += uint32_t(e.drawn);
-    cut_[ch.key()] = e;
-    pushSplit(e);
+    addEntry(e);
+    pushSplit(entries_.back());
   }
   ++frame_.splits;
 }
 
 void DualQueueAdapter::doMerge(const NodeId& parent) {
   for (uint32_t i = 0; i < 4; ++i) {
-    auto it = cut_.find(parent.child(i).key());
-    if (it == cut_.end()) continue;
-    drawn_ -= uint32_t(it->second.drawn);
-    cut_.erase(it);
+    const uint32_t g = globalIndex(parent.child(i));
+    if (slot_[g] >= 0) removeEntry(g);
   }
   Entry e;
   e.id = parent;
+  e.g = globalIndex(parent);
   e.mergedFrame = frameNo_;
   evaluate(e);
-  drawn_ += uint32_t(e.drawn);
-  cut_[parent.key()] = e;
+  addEntry(e);
   if (parent.level > 0 && groupInCut(parent.parent())) pushMerge(parent.parent());
   ++frame_.merges;
 }
@@ -165,15 +314,12 @@ void DualQueueAdapter::doMerge(const NodeId& parent) {
 bool DualQueueAdapter::validMergeTop() {
   while (!mergeHeap_.empty()) {
     const Item& top = mergeHeap_.front();
-    const NodeId p = keyToNode(top.key);
-    if (!cut_.count(top.key) && groupInCut(p)) return true;
+    if (slot_[top.g] < 0 && groupInCut(nodeOf(top.g))) return true;
     std::pop_heap(mergeHeap_.begin(), mergeHeap_.end(), Greater{});
     mergeHeap_.pop_back();
   }
   return false;
 }
-
-NodeId DualQueueAdapter::keyToNode(uint64_t key) { return NodeId::fromKey(key); }
 
 const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& options, AdaptStats* stats) {
   AdaptStats st;
@@ -183,27 +329,43 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   ++frameNo_;
   const uint32_t budget = options.maxNodes == 0 ? UINT32_MAX : options.maxNodes;
 
-  if (cut_.empty())
+  if (entries_.empty())
     for (uint32_t c = 0; c < h_.chartCount(); ++c) {
       const NodeId root{c, 0, 0, 0};
       if (h_.flags(root) & kNodeEmpty) continue;
       Entry e;
       e.id = root;
-      cut_[root.key()] = e;
+      e.g = globalIndex(root);
+      addEntry(e);
     }
 
+  // Partition order follows the forest order, so the per-frame pass reads the hierarchy's
+  // arrays nearly sequentially; re-sorted once the operations since the last sort reach 1/8.
+  if (opsSinceSort_ * 8 > entries_.size()) {
+    std::sort(entries_.begin(), entries_.end(), [](const Entry& a, const Entry& b) { return a.g < b.g; });
+    for (uint32_t i = 0; i < entries_.size(); ++i) slot_[entries_[i].g] = int32_t(i);
+    opsSinceSort_ = 0;
+  }
   // Re-evaluate the persistent cut for this view; rebuild both queues in O(cut).
   drawn_ = 0;
   splitHeap_.clear();
   mergeHeap_.clear();
-  for (auto& [k, e] : cut_) {
+  for (Entry& e : entries_) {
     evaluate(e);
     drawn_ += uint32_t(e.drawn);
   }
-  for (auto& [k, e] : cut_) {
-    const double p = splitPriorityOf(h_, e.id, e.res, e.drawn, e.overTol, view_, options.tolerancePx,
-                                     options.frustumCull);
-    if (p > 0.0) splitHeap_.push_back({p, k, false});
+  if (options.tolerancePx != epochTol_ || view.pixelsPerRadian != epochPpr_ ||
+      view.minDistance != epochMinDist_ || options.frustumCull != epochCull_) {
+    ++epoch_;
+    epochTol_ = options.tolerancePx;
+    epochPpr_ = view.pixelsPerRadian;
+    epochMinDist_ = view.minDistance;
+    epochCull_ = options.frustumCull;
+  }
+  for (Entry& e : entries_) {
+    int32_t delta = 0;
+    const double p = cachedSplitPriority(e, &delta);
+    if (p > 0.0) splitHeap_.push_back({p, e.g, false, delta});
     if (e.id.level == 0) continue;
     // One merge item per group: pushed by its first non-empty child.
     const NodeId par = e.id.parent();
@@ -212,8 +374,9 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
       if (h_.flags(ch) & kNodeEmpty) continue;
       if (ch == e.id && groupInCut(par)) {
         bool over = false;
-        const double c = dualQueueMergeCost(h_, par, view_, options.tolerancePx, options.frustumCull, &over);
-        mergeHeap_.push_back({c, par.key(), over});
+        int32_t freed = 0;
+        const double c = mergeCost(par, &over, &freed);
+        mergeHeap_.push_back({c, globalIndex(par), over, freed});
       }
       break;
     }
@@ -238,7 +401,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
       std::pop_heap(mergeHeap_.begin(), mergeHeap_.end(), Greater{});
       mergeHeap_.pop_back();
       if (top.overTol) st.nodeBudgetBound = true;
-      doMerge(keyToNode(top.key));
+      doMerge(nodeOf(top.g));
       ++ops;
       changed = true;
     }
@@ -252,10 +415,10 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
       std::pop_heap(splitHeap_.begin(), splitHeap_.end(), Less{});
       const Item top = splitHeap_.back();
       splitHeap_.pop_back();
-      auto it = cut_.find(top.key);
-      if (it == cut_.end() || it->second.mergedFrame == frameNo_) continue;  // stale
-      const NodeId n = it->second.id;
-      const int32_t delta = drawnDelta(n);
+      const int32_t slot = slot_[top.g];
+      if (slot < 0 || entries_[slot].mergedFrame == frameNo_) continue;  // stale
+      const NodeId n = entries_[slot].id;
+      const int32_t delta = top.nodes;
       if (int64_t(drawn_) + delta <= int64_t(budget)) {
         doSplit(n);
         ++ops;
@@ -264,26 +427,28 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
       }
       // Over budget: trade a cheaper merge (one that meets tolerance and frees enough nodes)
       // for this split. Look at a few queue tops: the group holding n itself is not eligible.
-      bool traded = false;
-      std::vector<Item> held;
+      bool traded = false, unpaid = false;
+      Item held[4];
+      int heldCount = 0;
       for (int tries = 0; tries < 4 && validMergeTop(); ++tries) {
         std::pop_heap(mergeHeap_.begin(), mergeHeap_.end(), Greater{});
         const Item m = mergeHeap_.back();
         mergeHeap_.pop_back();
-        // Over-tolerance merges trade only for a worse over-tolerance split (both keyed 1e30 +
-        // error), so the largest errors are fixed first, as in the top-down greedy.
+        // Over-tolerance merges trade only for a worse over-tolerance split (both in the
+        // over-tolerance tier), so the largest errors are fixed first, as in the top-down greedy.
         if (m.priority >= top.priority || (m.overTol && top.priority < kOverTolPriority)) {
-          held.push_back(m);
+          held[heldCount++] = m;
+          unpaid = true;  // the cheapest merge costs more than this split saves
           break;
         }
-        const NodeId p = keyToNode(m.key);
+        const NodeId p = nodeOf(m.g);
         if (n.level > 0 && p == n.parent()) {
-          held.push_back(m);
+          held[heldCount++] = m;
           continue;
         }
-        const int32_t freed = -drawnDelta(p);
+        const int32_t freed = m.nodes;
         if (int64_t(drawn_) - freed + delta > int64_t(budget) || ops + 2 > maxOps_) {
-          held.push_back(m);
+          held[heldCount++] = m;
           continue;
         }
         if (m.overTol) st.nodeBudgetBound = true;
@@ -294,35 +459,87 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
         traded = changed = true;
         break;
       }
-      for (const Item& m : held) {
-        mergeHeap_.push_back(m);
+      for (int k = 0; k < heldCount; ++k) {
+        mergeHeap_.push_back(held[k]);
         std::push_heap(mergeHeap_.begin(), mergeHeap_.end(), Greater{});
       }
-      if (!traded) deferred.push_back(top);
+      if (!traded) {
+        deferred.push_back(top);
+        // Every later split saves less, and the merges are cost-ordered: none can be paid for
+        // either, so the split phase is over (the round repeats only if something changed).
+        if (unpaid) break;
+      }
     }
   }
 
   for (const Item& d : deferred) {
-    auto it = cut_.find(d.key);
-    if (it != cut_.end() && it->second.overTol) st.nodeBudgetBound = true;
+    const int32_t s = slot_[d.g];
+    if (s >= 0 && entries_[s].overTol) st.nodeBudgetBound = true;
   }
 
-  // The drawn cut.
+  // The drawn cut (in partition order, which the operation history determines), with the
+  // stitching constraint: gaps from the dense partition index (no hashing), raising resolutions
+  // in place; only when a node would need more than its maxRes does the generic pass split it.
+  for (const Entry& e : entries_) {
+    drawnState_[e.g] = e.drawn ? 2 : 1;
+    gaps_[e.g] = 0;
+  }
+  for (const Entry& m : entries_) {
+    if (!m.drawn || m.id.level == 0) continue;
+    for (uint32_t side = 0; side < 4; ++side) {
+      NodeId a = m.id;
+      const uint32_t last = (1u << m.id.level) - 1;
+      bool inChart = true;
+      switch (side) {  // inside the chart without adjacentNode's border logic
+        case kEdgeBottom: inChart = a.y > 0; --a.y; break;
+        case kEdgeRight: inChart = a.x < last; ++a.x; break;
+        case kEdgeTop: inChart = a.y < last; ++a.y; break;
+        default: inChart = a.x > 0; --a.x; break;
+      }
+      uint32_t aSide;
+      if (!inChart && !adjacentNode(h_, m.id, side, &a, &aSide)) continue;
+      const bool sameChart = a.chart == m.id.chart;
+      for (;; a = a.parent()) {
+        const uint32_t up = m.id.level - a.level;
+        if (sameChart && a.x == (m.id.x >> up) && a.y == (m.id.y >> up)) break;
+        const uint32_t g = globalIndex(a);
+        if (drawnState_[g]) {
+          if (drawnState_[g] == 2) gaps_[g] = std::max<uint8_t>(gaps_[g], uint8_t(up));
+          break;
+        }
+        if (a.level == 0) break;
+      }
+    }
+  }
   out_.nodes.clear();
   out_.nodes.reserve(drawn_);
-  for (const auto& [k, e] : cut_)
-    if (e.drawn)
-      out_.nodes.push_back({e.id, e.res, 0.f});
-    else
+  bool needSplit = false;
+  for (size_t i = 0; i < entries_.size(); ++i) {
+    const Entry& e = entries_[i];
+    if (!e.drawn) {
       ++st.culled;
-  out_.rebuildIndex();
-  frame_.partitionNodes = uint32_t(cut_.size());
-  frame_.drawnNodes = uint32_t(out_.nodes.size());
-  enforceStitchConstraint(h_, out_, &view_, options.tolerancePx, &st);
-  for (CutNode& n : out_.nodes) {
-    n.errorPx = float(screenError(h_, n.id, n.res, view_));
-    st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
+      continue;
+    }
+    const uint8_t gap = gaps_[e.g];
+    if (gap <= e.res) {
+      out_.nodes.push_back({e.id, e.res, float(e.errorPx)});
+    } else if (gap <= h_.params.maxRes(e.id.level)) {
+      ++st.constraintRaises;
+      out_.nodes.push_back({e.id, gap, float(screenError(h_, e.id, gap, view_))});
+    } else {
+      needSplit = true;
+      out_.nodes.push_back({e.id, e.res, float(e.errorPx)});
+    }
   }
+  out_.rebuildIndex();
+  frame_.partitionNodes = uint32_t(entries_.size());
+  frame_.drawnNodes = uint32_t(out_.nodes.size());
+  if (needSplit) {
+    enforceStitchConstraint(h_, out_, &view_, options.tolerancePx, &st);
+    for (CutNode& n : out_.nodes) n.errorPx = float(screenError(h_, n.id, n.res, view_));
+  }
+  for (const CutNode& n : out_.nodes) st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
+  opsSinceSort_ += frame_.splits + frame_.merges;
   st.splits = frame_.splits;
   st.triangles = out_.triangles();
   if (stats) *stats = st;

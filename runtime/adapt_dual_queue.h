@@ -37,6 +37,7 @@ struct DualQueueFrameStats {
   uint32_t partitionNodes = 0;  // nodes of the persistent cut, drawn or not
   uint32_t drawnNodes = 0;      // before the stitching constraint
   bool opCapBound = false;    // stopped at maxOpsPerFrame before converging
+  uint32_t priorityReuses = 0;  // split priorities kept from an earlier frame (coherence)
 };
 
 // The persistent-cut adapter. The internal cut is a partition of all non-empty chart area (every
@@ -51,8 +52,9 @@ struct DualQueueFrameStats {
 // merged this frame and vice versa, and at most maxOpsPerFrame operations run per frame.
 class DualQueueAdapter {
  public:
-  // h must outlive the adapter.
-  explicit DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame = 1024);
+  // h must outlive the adapter. reusePriorities: keep split priorities across frames while they
+  // provably cannot change (see Entry); false recomputes them every frame (same cuts, slower).
+  explicit DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame = 1024, bool reusePriorities = true);
 
   // Adapts the persistent cut to the view and returns the drawn cut (frustum-culled nodes removed,
   // stitching constraint enforced on a copy, errorPx set). Valid until the next update/reset.
@@ -66,18 +68,38 @@ class DualQueueAdapter {
   Cut partition() const;
 
  private:
+  // One partition node. Lives in entries_; slot_[g] is its position (swap-removed).
   struct Entry {
     NodeId id;
-    uint32_t res = 0;
+    uint32_t g = 0;            // dense forest index (see globalIndex)
+    uint8_t res = 0;
     bool drawn = false;
+    bool inside = false;       // bounds entirely inside the frustum (so are the children's)
     bool overTol = false;
+    double errorPx = 0.0;      // screen error at res (drawn nodes)
     uint32_t splitFrame = 0;   // frame in which a split created this node
     uint32_t mergedFrame = 0;  // frame in which a merge created this node
+    // Coherence (paper 7.1, after ROAM's deferred priority updates): the split priority of a
+    // node that is not over tolerance depends on its own resolution and its children's needed
+    // resolutions, which are step functions of the eye distance; the distance to a box moves
+    // no more than the eye does. The cached priority stays exact while the eye is within
+    // `slack` of `cacheEye`, the resolution and frustum class are unchanged and the class is
+    // not partial (a partial node's children may change visibility).
+    std::array<float, 6> box{};  // copies of the hierarchy's bounds and errors (when copied)
+    std::array<float, 8> err{};
+    bool copied = false;
+    glm::dvec3 cacheEye{0.0};
+    double cacheSlack = -1.0;  // < 0: no valid cache
+    double cachePriority = 0.0;
+    int32_t cacheDelta = 0;
+    uint8_t cacheRes = 0;
+    uint32_t cacheEpoch = 0;
   };
   struct Item {
     double priority;
-    uint64_t key;
+    uint32_t g;    // split: the node; merge: the parent
     bool overTol;  // merge items: the parent cannot meet tolerance
+    int32_t nodes;  // split: drawn-node change of the split; merge: drawn nodes it frees
   };
   struct Less {
     bool operator()(const Item& a, const Item& b) const { return a.priority < b.priority; }
@@ -85,28 +107,55 @@ class DualQueueAdapter {
   struct Greater {
     bool operator()(const Item& a, const Item& b) const { return a.priority > b.priority; }
   };
+  // Per-view evaluation of one node: drawn, fully inside, needed resolution (clamped).
+  struct Eval {
+    bool drawn = false, inside = false, overTol = false;
+    uint8_t res = 0;
+    double errorPx = 0.0;
+    double slack = 0.0;  // eye movement before the (clamped) resolution can change
+  };
 
+  uint32_t globalIndex(const NodeId& n) const { return n.chart * perChart_ + nodeIndex(n.level, n.x, n.y); }
+  NodeId nodeOf(uint32_t g) const;
+  // parentInside: the parent is known to lie entirely inside the frustum (skips the test).
+  Eval evalNode(const NodeId& n, bool parentInside) const;
+  Eval evalBox(const float* bounds, const float* errors, uint32_t level, bool parentInside) const;
   void evaluate(Entry& e);
+  double splitPriority(const Entry& e, int32_t* delta) const;
+  double cachedSplitPriority(Entry& e, int32_t* delta);
+  bool childDrawn(const Entry& e, uint32_t i) const;
+  double mergeCost(const NodeId& parent, bool* overTol, int32_t* freed) const;
   bool groupInCut(const NodeId& parent) const;
-  void pushSplit(const Entry& e);
+  void pushSplit(Entry& e);
   void pushMerge(const NodeId& parent);
-  int32_t drawnDelta(const NodeId& parent) const;  // drawn-count change of splitting parent
+  void addEntry(const Entry& e);
+  void removeEntry(uint32_t g);
   void doSplit(const NodeId& n);
   void doMerge(const NodeId& parent);
   bool validMergeTop();
-  static NodeId keyToNode(uint64_t key);
 
   const Hierarchy& h_;
   uint32_t maxOps_;
+  bool reuse_;
+  uint32_t perChart_;
   uint32_t frameNo_ = 0;
-  std::unordered_map<uint64_t, Entry> cut_;
+  std::vector<NodeId> local_;    // chart-local node of each level-order index
+  std::vector<int32_t> slot_;    // per forest node: position in entries_, or -1
+  std::vector<Entry> entries_;   // the persistent cut (a partition of the non-empty area)
   std::vector<Item> splitHeap_, mergeHeap_;
   // Per-frame context.
   ViewParams view_;
   AdaptOptions opt_;
+  uint32_t epoch_ = 0;           // bumped when the tolerance, projection or culling changes
+  double epochTol_ = -1.0, epochPpr_ = -1.0, epochMinDist_ = -1.0;
+  bool epochCull_ = true;
   uint32_t drawn_ = 0;
   DualQueueFrameStats frame_;
   Cut out_;
+  // Per forest node: 0 not in the partition, 1 in it but culled, 2 drawn; and the stitching level
+  // gap to the finest drawn neighbour (valid for partition nodes after update).
+  std::vector<uint8_t> drawnState_, gaps_;
+  uint32_t opsSinceSort_ = 0;
 };
 
 }  // namespace gimlod

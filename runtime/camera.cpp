@@ -19,6 +19,17 @@ bool Frustum::intersects(const glm::dvec3& lo, const glm::dvec3& hi) const {
   return true;
 }
 
+int Frustum::classify(const glm::dvec3& lo, const glm::dvec3& hi) const {
+  int result = 2;
+  for (const glm::dvec4& p : planes) {
+    const glm::dvec3 v{p.x >= 0 ? hi.x : lo.x, p.y >= 0 ? hi.y : lo.y, p.z >= 0 ? hi.z : lo.z};
+    if (p.x * v.x + p.y * v.y + p.z * v.z + p.w < 0) return 0;
+    const glm::dvec3 u{p.x >= 0 ? lo.x : hi.x, p.y >= 0 ? lo.y : hi.y, p.z >= 0 ? lo.z : hi.z};
+    if (p.x * u.x + p.y * u.y + p.z * u.z + p.w < 0) result = 1;
+  }
+  return result;
+}
+
 glm::dmat4 viewMatrix(const Camera& c) { return glm::lookAt(c.eye, c.target, c.up); }
 
 glm::dmat4 projectionMatrix(const Camera& c, double aspect) {

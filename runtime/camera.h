@@ -23,6 +23,9 @@ struct Frustum {
   std::array<glm::dvec4, 6> planes;
   // True when the box [lo, hi] may intersect the frustum.
   bool intersects(const glm::dvec3& lo, const glm::dvec3& hi) const;
+  // 0: the box is outside (exactly when intersects is false), 2: entirely inside every plane,
+  // 1: otherwise. A box inside a box classified 0 or 2 gets the same class.
+  int classify(const glm::dvec3& lo, const glm::dvec3& hi) const;
 };
 
 glm::dmat4 viewMatrix(const Camera& c);

@@ -45,10 +45,33 @@ void collectFiner(const Hierarchy& h, const Cut& cut, const NodeId& n, uint32_t 
 
 }  // namespace
 
+void NodeKeyIndex::reset(size_t count) {
+  size_t cap = 16;
+  shift_ = 60;
+  while (cap < 2 * count) cap *= 2, --shift_;
+  slots_.assign(cap, Slot{});
+  mask_ = cap - 1;
+  size_ = 0;
+}
+
+void NodeKeyIndex::insert(uint64_t key, uint32_t value) {
+  for (size_t i = hash(key);; i = (i + 1) & mask_) {
+    Slot& s = slots_[i];
+    if (s.key == kEmpty) {
+      s = {key, value};
+      ++size_;
+      return;
+    }
+    if (s.key == key) {  // duplicate node in a cut: keep the last position, as a map would
+      s.value = value;
+      return;
+    }
+  }
+}
+
 void Cut::rebuildIndex() {
-  index.clear();
-  index.reserve(nodes.size() * 2);
-  for (uint32_t i = 0; i < nodes.size(); ++i) index[nodes[i].id.key()] = i;
+  index.reset(nodes.size());
+  for (uint32_t i = 0; i < nodes.size(); ++i) index.insert(nodes[i].id.key(), i);
 }
 
 uint64_t Cut::triangles() const {

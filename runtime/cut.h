@@ -3,7 +3,6 @@
 #pragma once
 
 #include <cstdint>
-#include <unordered_map>
 #include <vector>
 
 #include "hierarchy/hierarchy.h"
@@ -16,16 +15,45 @@ struct CutNode {
   float errorPx = 0.f;   // projected error at `res` for the view it was adapted to
 };
 
+// Open-addressing map from NodeId::key() to a position (linear probing, load <= 1/2): the cut is
+// rebuilt and queried every frame, so lookups must cost a few nanoseconds.
+class NodeKeyIndex {
+ public:
+  // Forgets every entry and sizes the table for `count` keys.
+  void reset(size_t count);
+  // Adds key -> value; the key must not be present.
+  void insert(uint64_t key, uint32_t value);
+  // The value of key, or -1.
+  int32_t find(uint64_t key) const {
+    if (slots_.empty()) return -1;
+    for (size_t i = hash(key);; i = (i + 1) & mask_) {
+      const Slot& s = slots_[i];
+      if (s.key == key) return int32_t(s.value);
+      if (s.key == kEmpty) return -1;
+    }
+  }
+  size_t size() const { return size_; }
+
+ private:
+  static constexpr uint64_t kEmpty = ~0ull;  // never a valid key (chart ids stay below 2^24)
+  struct Slot {
+    uint64_t key = kEmpty;
+    uint32_t value = 0;
+  };
+  // Fibonacci hashing: the top bits of the product depend on every bit of the key.
+  size_t hash(uint64_t k) const { return size_t((k * 0x9E3779B97F4A7C15ull) >> shift_); }
+  std::vector<Slot> slots_;
+  size_t mask_ = 0, size_ = 0;
+  uint32_t shift_ = 60;
+};
+
 struct Cut {
   std::vector<CutNode> nodes;
-  std::unordered_map<uint64_t, uint32_t> index;  // NodeId::key() -> position in nodes
+  NodeKeyIndex index;  // NodeId::key() -> position in nodes
 
   void rebuildIndex();
   // Position of node n in `nodes`, or -1.
-  int32_t find(const NodeId& n) const {
-    auto it = index.find(n.key());
-    return it == index.end() ? -1 : int32_t(it->second);
-  }
+  int32_t find(const NodeId& n) const { return index.find(n.key()); }
   uint64_t triangles() const;
 };
 

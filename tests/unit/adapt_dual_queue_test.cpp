@@ -216,18 +216,20 @@ TEST(DualQueue, HandMadePrioritiesAndCuts) {
   const Hierarchy h = handMade();
   const ViewParams v = handView(1.0);
   const NodeId root{0, 0, 0, 0}, a{0, 1, 0, 0}, b{0, 1, 1, 0}, c{0, 1, 0, 1}, d{0, 1, 1, 1};
-  EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, root, v, 1.0, false), 1e30 + 2.0);
+  EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, root, v, 1.0, false), overTolerancePriority(2.0));
   EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, a, v, 1.0, false), 32.0 - 4 * 32.0);
   EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, b, v, 1.0, false), 128.0 - 4 * 32.0);
   EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, c, v, 1.0, false), 512.0 - 4 * 32.0);
-  EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, d, v, 1.0, false), 1e30 + 5.0);
+  EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, d, v, 1.0, false), overTolerancePriority(5.0));
+  // Within the over-tolerance tier the larger error comes first.
+  EXPECT_GT(dualQueueSplitPriority(h, d, v, 1.0, false), dualQueueSplitPriority(h, root, v, 1.0, false));
   EXPECT_DOUBLE_EQ(dualQueueSplitPriority(h, d.child(0), v, 1.0, false), -1.0);  // leaf level
   bool over = false;
   EXPECT_DOUBLE_EQ(dualQueueMergeCost(h, a, v, 1.0, false, &over), -96.0);
   EXPECT_FALSE(over);
   EXPECT_DOUBLE_EQ(dualQueueMergeCost(h, c, v, 1.0, false, &over), 384.0);
   EXPECT_FALSE(over);
-  EXPECT_DOUBLE_EQ(dualQueueMergeCost(h, root, v, 1.0, false, &over), 1e30 + 2.0);
+  EXPECT_DOUBLE_EQ(dualQueueMergeCost(h, root, v, 1.0, false, &over), overTolerancePriority(2.0));
   EXPECT_TRUE(over);
   dualQueueMergeCost(h, d, v, 1.0, false, &over);
   EXPECT_TRUE(over);
