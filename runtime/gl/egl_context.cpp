@@ -89,8 +89,11 @@ struct Candidate {
 };
 
 // Devices from EGL_EXT_device_enumeration; hardware devices before Mesa's software device.
+// note: NVIDIA's libEGL (through glvnd) advertises only EGL_EXT_device_base, which is by its spec
+// EGL_EXT_device_enumeration plus EGL_EXT_device_query, so accept either spelling.
 void addDeviceDisplays(const char* clientExts, std::vector<Candidate>* out) {
-  if (!hasExtension(clientExts, "EGL_EXT_device_enumeration") ||
+  const bool deviceBase = hasExtension(clientExts, "EGL_EXT_device_base");
+  if (!(deviceBase || hasExtension(clientExts, "EGL_EXT_device_enumeration")) ||
       !hasExtension(clientExts, "EGL_EXT_platform_device"))
     return;
   EGLint count = 0;
@@ -106,7 +109,7 @@ void addDeviceDisplays(const char* clientExts, std::vector<Candidate>* out) {
   devices.resize(static_cast<size_t>(count));
   std::vector<Candidate> hardware, software;
   for (size_t i = 0; i < devices.size(); ++i) {
-    const bool hasDeviceQuery = hasExtension(clientExts, "EGL_EXT_device_query");
+    const bool hasDeviceQuery = deviceBase || hasExtension(clientExts, "EGL_EXT_device_query");
     const char* devExts =
         hasDeviceQuery ? eglQueryDeviceStringEXT(devices[i], EGL_EXTENSIONS) : nullptr;
     if (hasDeviceQuery && !devExts) eglGetError();
