@@ -28,6 +28,7 @@ struct Entry {
   NodeId id;
   uint32_t res = 0;
   uint32_t floor = 0;  // lowest allowed resolution: minRes, or the stitching gap
+  uint32_t gap = 0;    // stitching level gap to the finest drawn neighbour (computeFloors)
   bool drawn = false;
   double err = 0.0;    // screen error at res; 0 when not drawn
   uint32_t splitRound = 0, mergedRound = 0;
@@ -55,10 +56,85 @@ Item heapPop(std::vector<Item>& h) {
   return it;
 }
 
+// The kept cut: entries in a vector, found through a dense per-forest-node slot array (no
+// hashing), with the subset of std::unordered_map's interface the adapter uses. Erasing moves the
+// last entry into the hole, so iterators and pointers are valid only until the next change.
+class EntryMap {
+ public:
+  using value_type = std::pair<uint64_t, Entry>;
+  using iterator = std::vector<value_type>::iterator;
+  using const_iterator = std::vector<value_type>::const_iterator;
+
+  void init(const Hierarchy& h) {
+    perChart_ = nodesPerChart(h.params.depth);
+    const size_t n = size_t(perChart_) * h.chartCount();
+    if (slot_.size() != n) {
+      slot_.assign(n, -1);
+      items_.clear();
+    }
+  }
+  iterator begin() { return items_.begin(); }
+  iterator end() { return items_.end(); }
+  const_iterator begin() const { return items_.begin(); }
+  const_iterator end() const { return items_.end(); }
+  bool empty() const { return items_.empty(); }
+  size_t size() const { return items_.size(); }
+  iterator find(uint64_t key) {
+    const int32_t s = slot_[index(key)];
+    return s < 0 ? items_.end() : items_.begin() + s;
+  }
+  const_iterator find(uint64_t key) const {
+    const int32_t s = slot_[index(key)];
+    return s < 0 ? items_.end() : items_.begin() + s;
+  }
+  size_t count(uint64_t key) const { return slot_[index(key)] >= 0 ? 1 : 0; }
+  Entry& operator[](uint64_t key) {
+    const size_t i = index(key);
+    if (slot_[i] < 0) {
+      slot_[i] = int32_t(items_.size());
+      items_.push_back({key, Entry{}});
+    }
+    return items_[size_t(slot_[i])].second;
+  }
+  void erase(iterator it) { eraseAt(size_t(it - items_.begin())); }
+  void erase(uint64_t key) {
+    const int32_t s = slot_[index(key)];
+    if (s >= 0) eraseAt(size_t(s));
+  }
+  void clear() {
+    for (const value_type& v : items_) slot_[index(v.first)] = -1;
+    items_.clear();
+  }
+  // A copy of the entries for undo; restore puts them back (O(size), not O(forest)).
+  std::vector<value_type> snapshot() const { return items_; }
+  void restore(const std::vector<value_type>& saved) {
+    clear();
+    items_ = saved;
+    for (size_t i = 0; i < items_.size(); ++i) slot_[index(items_[i].first)] = int32_t(i);
+  }
+
+ private:
+  size_t index(uint64_t key) const {
+    const NodeId n = NodeId::fromKey(key);
+    return size_t(n.chart) * perChart_ + nodeIndex(n.level, n.x, n.y);
+  }
+  void eraseAt(size_t s) {
+    slot_[index(items_[s].first)] = -1;
+    if (s + 1 != items_.size()) {
+      items_[s] = std::move(items_.back());
+      slot_[index(items_[s].first)] = int32_t(s);
+    }
+    items_.pop_back();
+  }
+  uint32_t perChart_ = 0;
+  std::vector<int32_t> slot_;
+  std::vector<value_type> items_;
+};
+
 }  // namespace
 
 struct QuadQueueAdapter::State {
-  std::unordered_map<uint64_t, Entry> cut;  // partition of the non-empty chart area
+  EntryMap cut;  // partition of the non-empty chart area
   uint32_t drawn = 0;
   uint64_t triangles = 0;  // drawn
   uint64_t floorTris = 0;  // drawn, each at its floor
@@ -118,21 +194,50 @@ struct QuadQueueAdapter::State {
     c.nodes.reserve(drawn);
     for (const auto& [k, e] : cut)
       if (e.drawn) c.nodes.push_back({e.id, e.res, float(e.err)});
-    std::sort(c.nodes.begin(), c.nodes.end(),
-              [](const CutNode& a, const CutNode& b) { return a.id.key() < b.id.key(); });
     c.rebuildIndex();
     return c;
   }
+  void addCounts(const Entry& e) {
+    if (!e.drawn) return;
+    ++drawn;
+    triangles += tris(e.res);
+    floorTris += tris(e.floor);
+  }
+  void removeCounts(const Entry& e) {
+    if (!e.drawn) return;
+    --drawn;
+    triangles -= tris(e.res);
+    floorTris -= tris(e.floor);
+  }
   // Stitching floors of the drawn nodes (paper 7.4): resolution >= level gap to finer neighbours.
+  // As stitchGaps: each drawn node raises the gap of its equal-or-coarser drawn neighbours.
   void computeFloors() {
-    const Cut c = drawnCut();
     needsConstraintSplit = false;
+    for (auto& [k, e] : cut) e.gap = 0;
+    for (const auto& [k, m] : cut) {
+      if (!m.drawn || m.id.level == 0) continue;
+      for (uint32_t side = 0; side < 4; ++side) {
+        NodeId a;
+        uint32_t aSide;
+        if (!adjacentNode(*h, m.id, side, &a, &aSide)) continue;
+        const bool sameChart = a.chart == m.id.chart;
+        for (;; a = a.parent()) {
+          const uint32_t up = m.id.level - a.level;
+          if (sameChart && a.x == (m.id.x >> up) && a.y == (m.id.y >> up)) break;
+          auto f = cut.find(a.key());
+          if (f != cut.end()) {
+            if (f->second.drawn) f->second.gap = std::max(f->second.gap, up);
+            break;
+          }
+          if (a.level == 0) break;
+        }
+      }
+    }
     floorTris = 0;
-    for (uint32_t i = 0; i < c.nodes.size(); ++i) {
-      Entry& e = cut[c.nodes[i].id.key()];
-      const uint32_t gap = finestNeighbourGap(*h, c, i, scratch);
-      if (gap > maxRes(e.id)) needsConstraintSplit = true;
-      e.floor = std::clamp(gap, minRes(), maxRes(e.id));
+    for (auto& [k, e] : cut) {
+      if (!e.drawn) continue;
+      if (e.gap > maxRes(e.id)) needsConstraintSplit = true;
+      e.floor = std::clamp(e.gap, minRes(), maxRes(e.id));
       floorTris += tris(e.floor);
     }
   }
@@ -144,14 +249,19 @@ struct QuadQueueAdapter::State {
         setRes(e, e.floor);
         ++st.constraintRaises;
       }
-    std::vector<Item> refineH, coarsenH, errH;
+    // The refine queue is kept per resolution: a refinement's cost (added triangles) depends on
+    // the resolution alone, so the refinements that fit the remaining budget are whole buckets,
+    // and the best fitting one is the best of their tops (no popping of the ones that don't fit).
+    std::vector<std::vector<Item>> refineB(h->params.maxNodeResLog2 + 1);
+    std::vector<Item> coarsenH, errH;
     auto push = [&](const Entry& e, bool heapify) {
       if (!e.drawn) return;
       const uint64_t k = e.id.key();
       if (e.res < maxRes(e.id)) {
         const double gain = (e.err - errAt(e, e.res + 1)) / double(tris(e.res + 1) - tris(e.res));
-        refineH.push_back({gain, k, e.res});
-        if (heapify) std::push_heap(refineH.begin(), refineH.end(), ItemLess{});
+        std::vector<Item>& b = refineB[e.res];
+        b.push_back({gain, k, e.res});
+        if (heapify) std::push_heap(b.begin(), b.end(), ItemLess{});
       }
       if (e.res > e.floor) {
         const double loss = (errAt(e, e.res - 1) - e.err) / double(tris(e.res) - tris(e.res - 1));
@@ -162,7 +272,7 @@ struct QuadQueueAdapter::State {
       if (heapify) std::push_heap(errH.begin(), errH.end(), ItemLess{});
     };
     for (const auto& [k, e] : cut) push(e, false);
-    std::make_heap(refineH.begin(), refineH.end(), ItemLess{});
+    for (auto& b : refineB) std::make_heap(b.begin(), b.end(), ItemLess{});
     std::make_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
     std::make_heap(errH.begin(), errH.end(), ItemLess{});
     auto valid = [&](const Item& it) -> Entry* {
@@ -184,21 +294,21 @@ struct QuadQueueAdapter::State {
     for (;;) {
       bool progress = false;
       // (b) Refine, best error reduction per added triangle first, while anything fits.
-      std::vector<Item> aside;
-      while (!refineH.empty() && !capped()) {
-        const Item it = heapPop(refineH);
-        Entry* e = valid(it);
-        if (!e) continue;
-        if (triangles + tris(e->res + 1) - tris(e->res) > budget) {
-          aside.push_back(it);
-          continue;
+      while (!capped()) {
+        std::vector<Item>* best = nullptr;
+        for (uint32_t r = 0; r < refineB.size(); ++r) {
+          std::vector<Item>& b = refineB[r];
+          if (triangles + tris(r + 1) - tris(r) > budget) continue;
+          while (!b.empty() && !valid(b.front())) heapPop(b);
+          if (!b.empty() && (!best || ItemLess{}(best->front(), b.front()))) best = &b;
         }
+        if (!best) break;
+        Entry* e = valid(heapPop(*best));
         setRes(*e, e->res + 1);
         ++st.refines, ++ops;
         push(*e, true);
         progress = true;
       }
-      for (const Item& it : aside) heapPush(refineH, it);
       // (c) Balance: lower the max error by coarsening others (each staying below it), least
       // error increase per removed triangle first. Every trade lowers the sorted error vector
       // lexicographically, so this ends.
@@ -215,10 +325,15 @@ struct QuadQueueAdapter::State {
           const Item it = heapPop(coarsenH);
           Entry* c = valid(it);
           if (!c) continue;
-          popped.push_back(it);
-          if (c == m || std::find(chosen.begin(), chosen.end(), c) != chosen.end() ||
-              errAt(*c, c->res - 1) >= m->err - kEps)
+          if (c == m || std::find(chosen.begin(), chosen.end(), c) != chosen.end()) {
+            popped.push_back(it);
             continue;
+          }
+          // note: dropped for good: the max error only falls during the balance, so a node whose
+          // coarsening would reach it now never qualifies later (its own refinement pushes a new
+          // item).
+          if (errAt(*c, c->res - 1) >= m->err - kEps) continue;
+          popped.push_back(it);
           chosen.push_back(c);
           freed += tris(c->res) - tris(c->res - 1);
         }
@@ -291,6 +406,7 @@ struct QuadQueueAdapter::State {
   void doSplit(NodeId n, uint32_t r, std::vector<Item>* splitH) {
     auto it = cut.find(n.key());
     const double tol = it->second.err;
+    removeCounts(it->second);
     cut.erase(it);
     for (uint32_t i = 0; i < 4; ++i) {
       const NodeId ch = n.child(i);
@@ -299,27 +415,35 @@ struct QuadQueueAdapter::State {
       e.id = ch;
       e.splitRound = r;
       evaluate(e);
-      if (e.drawn) setRes(e, resFor(ch, tol));
+      if (e.drawn) {
+        e.res = resFor(ch, tol);
+        e.err = errAt(e, e.res);
+      }
+      addCounts(e);
       cut[ch.key()] = e;
       if (splitH) {
         const double p = splitPriority(e);
         if (p > 0.0) heapPush(*splitH, {p, ch.key(), e.res});
       }
     }
-    recount();
     ++st.splits, ++ops;
   }
   void doMerge(const NodeId& p, uint32_t r) {
     uint32_t pres = 0;
     mergeCost(p, &pres);
-    for (uint32_t i = 0; i < 4; ++i) cut.erase(p.child(i).key());
+    for (uint32_t i = 0; i < 4; ++i) {
+      auto f = cut.find(p.child(i).key());
+      if (f == cut.end()) continue;
+      removeCounts(f->second);
+      cut.erase(f);
+    }
     Entry e;
     e.id = p;
     e.mergedRound = r;
     e.res = pres;
     evaluate(e);
+    addCounts(e);
     cut[p.key()] = e;
-    recount();
     ++st.merges, ++ops;
   }
 
@@ -383,6 +507,7 @@ struct QuadQueueAdapter::State {
     int64_t availFloor = triBudget - int64_t(std::max(floorTris, floorTrisNow()));
     bool changed = false;
     std::vector<Item> reservedOrder;
+    int64_t reservedFloorSum = 0;  // floor triangles of the reserved splits' extra nodes
     std::vector<Item> mergeAside;
     // Pops the top merge (group p), performs it and updates the node and floor room.
     auto mergeTopAndAccount = [&](const NodeId& p) {
@@ -390,7 +515,7 @@ struct QuadQueueAdapter::State {
       heapPop(mergeH);
       doMerge(p, r);
       availNodes += before - int64_t(drawn);
-      availFloor = triBudget - int64_t(floorTrisNow()) - reservedFloor(reservedOrder);
+      availFloor = triBudget - int64_t(floorTrisNow()) - reservedFloorSum;
       afterMerge(p);
       changed = true;
     };
@@ -436,6 +561,7 @@ struct QuadQueueAdapter::State {
         const Item it = heapPop(splitH);
         reserved.insert(it.key);
         reservedOrder.push_back(it);
+        reservedFloorSum += df;
         availNodes -= d;
         availFloor -= df;
         continue;
@@ -488,11 +614,6 @@ struct QuadQueueAdapter::State {
   }
   // Triangle floor of the drawn nodes at minRes (floors are recomputed after the round).
   uint64_t floorTrisNow() const { return uint64_t(drawn) * tris(minRes()); }
-  int64_t reservedFloor(const std::vector<Item>& reservedOrder) const {
-    int64_t f = 0;
-    for (const Item& it : reservedOrder) f += drawnDelta(keyToNode(it.key)) * int64_t(tris(minRes()));
-    return f;
-  }
   // Drawn nodes a merge of the group under p removes (drawn children minus the drawn parent).
   int64_t mergeFreedNodes(const NodeId& p) const {
     int64_t n = -int64_t(nodeDrawable(*h, p, view, opt.frustumCull));
@@ -528,6 +649,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   s.st = {};
   BudgetStats& st = s.st;
 
+  s.cut.init(h_);
   if (s.cut.empty())
     for (uint32_t c = 0; c < h_.chartCount(); ++c) {
       const NodeId root{c, 0, 0, 0};
@@ -549,7 +671,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   s.phase1();
 
   for (uint32_t r = 0; r < options.maxRounds && !s.capped(); ++r) {
-    const auto saved = s.cut;
+    const auto saved = s.cut.snapshot();
     const BudgetStats savedStats = st;
     const double savedMax = s.maxError();
     if (!s.phase2(false)) break;
@@ -563,7 +685,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
       // is undone too, so a static view reaches a fixed point.
       const uint32_t done = st.refines + st.coarsens + st.splits + st.merges;
       const uint32_t kept = savedStats.refines + savedStats.coarsens + savedStats.splits + savedStats.merges;
-      s.cut = saved;
+      s.cut.restore(saved);
       s.recount();
       st.refines = savedStats.refines, st.coarsens = savedStats.coarsens;
       st.splits = savedStats.splits, st.merges = savedStats.merges;
