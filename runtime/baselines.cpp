@@ -3,6 +3,7 @@
 #include "runtime/baselines.h"
 
 #include <algorithm>
+#include <cmath>
 #include <queue>
 #include <unordered_map>
 
@@ -208,67 +209,56 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
 Cut adaptGreedyBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options,
                       BudgetStats* stats) {
   BudgetStats st;
-  const uint64_t nodeBudget = options.maxNodes == 0 ? UINT64_MAX : options.maxNodes;
-  const uint32_t rmin = h.params.minNodeResLog2;
-  std::priority_queue<ErrorItem> queue;
-  uint64_t count = 0, triangles = 0;
-  for (uint32_t c = 0; c < h.chartCount(); ++c) {
-    const NodeId root{c, 0, 0, 0};
-    if (!nodeDrawable(h, root, view, options.frustumCull)) continue;
-    queue.push({screenError(h, root, rmin, view), root, rmin});
-    ++count;
-    triangles += budgetTris(rmin);
-  }
-  std::vector<BudgetOp> ops;
-  while (!queue.empty()) {
-    const ErrorItem it = queue.top();
-    queue.pop();
-    const NodeId& n = it.id;
-    double raiseGain = -1.0, splitGain = -1.0;
-    uint64_t raiseTris = 0, splitTris = 0, children = 0;
-    const uint32_t cres = std::max(rmin, it.res == 0 ? 0u : it.res - 1);
-    if (it.res < h.params.maxRes(n.level)) {
-      raiseTris = triangles + budgetTris(it.res + 1) - budgetTris(it.res);
-      if (raiseTris <= options.maxTriangles)
-        raiseGain = (it.errorPx - screenError(h, n, it.res + 1, view)) / double(budgetTris(it.res + 1) - budgetTris(it.res));
-    }
-    if (n.level + 1 < h.params.depth) {
-      double worst = 0.0;
-      uint64_t childTris = 0;
-      for (uint32_t i = 0; i < 4; ++i) {
-        const NodeId ch = n.child(i);
-        if (!nodeDrawable(h, ch, view, options.frustumCull)) continue;
-        const uint32_t r = std::min(cres, h.params.maxRes(ch.level));
-        ++children;
-        childTris += budgetTris(r);
-        worst = std::max(worst, screenError(h, ch, r, view));
-      }
-      splitTris = triangles - budgetTris(it.res) + childTris;
-      if (splitTris <= options.maxTriangles && count - 1 + children <= nodeBudget) {
-        const double added = std::max(1.0, double(childTris) - double(budgetTris(it.res)));
-        splitGain = (it.errorPx - worst) / added;
-      }
-    }
-    if (raiseGain <= 0.0 && splitGain <= 0.0) continue;  // final
-    if (splitGain > raiseGain) {
-      triangles = splitTris;
-      count = count - 1 + children;
-      ops.push_back({n, true, cres});
-      for (uint32_t i = 0; i < 4; ++i) {
-        const NodeId ch = n.child(i);
-        if (!nodeDrawable(h, ch, view, options.frustumCull)) continue;
-        const uint32_t r = std::min(cres, h.params.maxRes(ch.level));
-        queue.push({screenError(h, ch, r, view), ch, r});
-      }
+  AdaptOptions ao;
+  ao.maxNodes = options.maxNodes;
+  ao.frustumCull = options.frustumCull;
+  AdaptStats as;
+  auto run = [&](double tolPx) {
+    ao.tolerancePx = tolPx;
+    ++st.rounds;
+    return adaptErrorThreshold(h, view, ao, &as);
+  };
+  const uint64_t budget = options.maxTriangles;
+  // Bisection in log(tolerance) between 1e-4 and 1e4 px: the finest cut found that fits.
+  double lo = 1e-4, hi = 1e4;
+  Cut best = run(hi);
+  AdaptStats bestStats = as;
+  if (best.triangles() > budget) {
+    // Not even the coarsest cut fits: lower resolutions as far as the constraint allows.
+    fitTriangleBudget(h, best, view, budget);
+  } else {
+    Cut fine = run(lo);
+    if (fine.triangles() <= budget) {
+      best = std::move(fine);
+      bestStats = as;
     } else {
-      triangles = raiseTris;
-      ops.push_back({n, false, 0});
-      queue.push({screenError(h, n, it.res + 1, view), n, it.res + 1});
+      for (int i = 0; i < 18; ++i) {
+        const double mid = std::sqrt(lo * hi);
+        Cut c = run(mid);
+        if (c.triangles() <= budget) {
+          best = std::move(c);
+          bestStats = as;
+          hi = mid;
+        } else {
+          lo = mid;
+        }
+      }
     }
   }
-  Cut cut = finishBudgetCut(h, view, options, rmin, ops, false, st);
+  st.splits = bestStats.splits;
+  st.constraintRaises = bestStats.constraintRaises;
+  st.constraintSplits = bestStats.constraintSplits;
+  st.nodes = uint32_t(best.nodes.size());
+  st.triangles = best.triangles();
+  double sum = 0.0;
+  for (CutNode& n : best.nodes) {
+    n.errorPx = float(screenError(h, n.id, n.res, view));
+    st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
+    sum += n.errorPx;
+  }
+  st.meanErrorPx = best.nodes.empty() ? 0.0 : sum / double(best.nodes.size());
   if (stats) *stats = st;
-  return cut;
+  return best;
 }
 
 }  // namespace gimlod

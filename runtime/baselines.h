@@ -32,12 +32,12 @@ Cut adaptTopDownGreedy(const Hierarchy& h, const ViewParams& view, double tolera
 Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options,
                                 BudgetStats* stats = nullptr);
 
-// Triangle-budget simple top-down greedy (paper 7.1): roots at minRes; repeatedly takes the node
-// with the largest screen error and either raises its resolution one step or splits it (children
-// at the same sample density, at least minRes), whichever lowers its error more per added
-// triangle and fits maxTriangles and maxNodes; a node neither option helps is final. Then the
-// stitching constraint is enforced and resolutions are lowered (fitTriangleBudget) or the last
-// operations undone until both budgets hold.
+// Triangle-budget simple top-down greedy: the paper's top-down error-threshold algorithm (7.1,
+// adaptErrorThreshold, maxNodes as its node budget) with its tolerance searched every frame, by
+// bisection in log(tolerance) over [1e-4, 1e4] px (20 adaptations), for the finest cut whose
+// triangles fit maxTriangles; the way a one-knob LOD is put under a triangle budget. When not
+// even the coarsest cut fits, its resolutions are lowered (fitTriangleBudget). Fills rounds (the
+// adaptations run), splits, nodes, triangles, errors and the constraint counts.
 Cut adaptGreedyBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options,
                       BudgetStats* stats = nullptr);
 
