@@ -35,8 +35,9 @@ struct RenderArgs {
   std::string atlas, output, size = "640x480", background = "0.53,0.70,0.92";
   CameraArgs camera;
   uint32_t maxNodes = 2048, uploadsPerFrame = 64;
-  bool asyncLoads = false;
-  double tolerance = 1.0;
+  bool asyncLoads = false, topDown = false;
+  double tolerance = 1.0, texelRatio = 1.0;
+  uint64_t triangles = 0;  // > 0: triangle-budget mode (quad queue)
 };
 
 int runBuild(const BuildOptions& o) {
@@ -84,6 +85,9 @@ int runRender(const RenderArgs& a) {
   if (!(a.tolerance > 0.0) || !std::isfinite(a.tolerance)) throw InputError("--tolerance must be > 0 pixels");
   validateCameraArgs(a.camera);
   if (a.uploadsPerFrame == 0) throw InputError("--uploads-per-frame must be at least 1");
+  if (!(a.texelRatio >= 0.0) || !std::isfinite(a.texelRatio) || a.texelRatio > 64.0)
+    throw InputError("--texel-ratio must be in [0, 64] texels per pixel (0: page resolution)");
+  if (a.triangles > 0 && a.topDown) throw InputError("--top-down applies to error mode; --triangles selects the quad queue");
   const auto background = parseBackground(a.background);
 
   const AtlasView atlas = openAtlas(a.atlas);
@@ -103,24 +107,29 @@ int runRender(const RenderArgs& a) {
   so.background = background;
   so.asyncLoads = a.asyncLoads;
   so.maxUploadsPerFrame = a.uploadsPerFrame;
+  so.coherentAdaptation = !a.topDown;
+  so.texelsPerPixel = a.texelRatio;
   gl::TerrainScene scene(atlas, so);
 
   AdaptOptions ao;
   ao.tolerancePx = a.tolerance;
   ao.maxNodes = a.maxNodes;
+  BudgetOptions bo;
+  bo.maxTriangles = a.triangles;
+  bo.maxNodes = a.maxNodes;
   std::string csv = "frame,nodes,triangles,max_screen_error_px,adapt_ms,stitch_ms,upload_ms,draw_ms,"
                     "draw_calls,pages_loaded,pages_missing,pages_requested,nodes_substituted,node_budget_bound,"
-                    "constraint_raises,constraint_splits\n";
+                    "constraint_raises,constraint_splits,attribute_texels,attribute_above_page\n";
   double drawMsTotal = 0.0;
   uint64_t triTotal = 0;
   for (size_t i = 0; i < cams.size(); ++i) {
-    const gl::FrameResult f = scene.renderFrame(cams[i], ao);
+    const gl::FrameResult f = a.triangles > 0 ? scene.renderFrame(cams[i], bo) : scene.renderFrame(cams[i], ao);
     writePng(out / fmt::format("frame_{:04d}.png", i), w, h, scene.renderer().readPixels());
-    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{}\n", i, f.cut.nodes.size(),
+    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{}\n", i, f.cut.nodes.size(),
                        f.draw.triangles, f.maxErrorPx, f.adaptMs, f.stitchMs, f.uploadMs, f.draw.drawMs,
                        f.draw.drawCalls, f.pagesLoaded + f.pagesUploaded, f.pagesMissing, f.pagesRequested, f.nodesSubstituted,
                        int(f.adapt.nodeBudgetBound), f.adapt.constraintRaises,
-                       f.adapt.constraintSplits);
+                       f.adapt.constraintSplits, f.attributes.texels, f.attributes.abovePage);
     drawMsTotal += f.draw.drawMs;
     triTotal += f.draw.triangles;
     spdlog::info("frame {:4d}: {:5d} nodes, {:8d} triangles, max error {:.3f} px, adapt {:.3f} ms, draw {:.2f} ms",
@@ -162,6 +171,13 @@ int main(int argc, char** argv) {
   render->add_option("--background", r.background, "Background colour R,G,B")->capture_default_str();
   render->add_option("--tolerance", r.tolerance, "Screen-space error tolerance in pixels")->capture_default_str();
   render->add_option("--max-nodes", r.maxNodes, "Node budget")->capture_default_str();
+  render->add_option("--triangles", r.triangles,
+                     "Triangle budget: adapt with the quad queue (paper 7.1, problem 2) instead of --tolerance");
+  render->add_flag("--top-down", r.topDown,
+                   "Error mode with the stateless top-down greedy instead of the coherent dual queue");
+  render->add_option("--texel-ratio", r.texelRatio,
+                     "Normal-map texels per pixel of a node's projected size (0: page resolution)")
+      ->capture_default_str();
   render->add_flag("--async-loads", r.asyncLoads,
                    "Load pages on a loader thread; missing nodes draw with a resident ancestor's data");
   render->add_option("--uploads-per-frame", r.uploadsPerFrame, "With --async-loads: pages uploaded per frame")

@@ -228,6 +228,32 @@ bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* vie
   return countStitchViolations(h, cut) == 0;
 }
 
+uint32_t attributeResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double texelsPerPixel) {
+  const auto& b = h.bounds(n);
+  const double diag = glm::length(boxHi(b) - boxLo(b));
+  const double d = std::max(boxDistance(b, v.eye), v.minDistance);
+  const double texels = diag * v.pixelsPerRadian / d * texelsPerPixel;
+  const uint32_t lo = h.params.minNodeResLog2, hi = h.params.intervalsLog2 - n.level;
+  if (!(texels > double(1u << lo))) return lo;  // also NaN
+  const uint32_t r = uint32_t(std::ceil(std::log2(texels)));
+  return std::clamp(r, lo, hi);
+}
+
+AttributeStats assignAttributeResolutions(const Hierarchy& h, Cut& cut, const ViewParams& v,
+                                          double texelsPerPixel) {
+  AttributeStats st;
+  for (CutNode& n : cut.nodes) {
+    n.texRes = attributeResolution(h, n.id, v, texelsPerPixel);
+    const uint64_t side = (1ull << n.texRes) + 1;
+    st.texels += side * side;
+    const uint32_t page = h.params.maxRes(n.id.level);
+    st.aboveGeometry += n.texRes > n.res;
+    st.belowPage += n.texRes < page;
+    st.abovePage += n.texRes > page;
+  }
+  return st;
+}
+
 uint32_t countStitchViolations(const Hierarchy& h, const Cut& cut) {
   std::vector<SideNeighbour> scratch;
   uint32_t bad = 0;

@@ -74,6 +74,25 @@ uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i,
 // node of its own level and raises that neighbour's gap: O(cut * depth) index lookups.
 void stitchGaps(const Hierarchy& h, const Cut& cut, std::vector<uint32_t>& gaps);
 
+// Paper 7.1 (last paragraph): the resolution of a node's attribute textures (normal and colour
+// maps), chosen apart from its geometry from the projected size of its bounds and a
+// pixel-to-texel ratio. Returns log2 texels per node side: the lowest that puts at least
+// texelsPerPixel texels on each pixel of the bounds' projected diagonal (diagonal *
+// pixelsPerRadian / distance), clamped to [minNodeResLog2, intervalsLog2 - level] (the finest
+// data the pyramid holds for the node). texelsPerPixel must be > 0.
+uint32_t attributeResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double texelsPerPixel);
+
+struct AttributeStats {
+  uint64_t texels = 0;        // sum over nodes of (2^texRes + 1)^2: attribute data the cut uses
+  uint32_t aboveGeometry = 0; // nodes whose attribute resolution is finer than their geometry
+  uint32_t belowPage = 0;     // nodes sampling a coarser level than their page holds
+  uint32_t abovePage = 0;     // nodes that want finer data than their page (page res is used)
+};
+
+// Sets texRes of every cut node (attributeResolution). Returns what the choice amounts to.
+AttributeStats assignAttributeResolutions(const Hierarchy& h, Cut& cut, const ViewParams& v,
+                                          double texelsPerPixel);
+
 // The number of constraint violations in a cut (0 for a valid cut). For tests and checks.
 uint32_t countStitchViolations(const Hierarchy& h, const Cut& cut);
 

@@ -13,6 +13,9 @@ struct CutNode {
   NodeId id;
   uint32_t res = 0;      // drawn resolution, log2 intervals
   float errorPx = 0.f;   // projected error at `res` for the view it was adapted to
+  // Attribute (normal, colour) texture resolution, log2 texels per side (assignAttributeResolutions);
+  // 0 means unassigned: the page's own resolution.
+  uint32_t texRes = 0;
 };
 
 // Open-addressing map from NodeId::key() to a position (linear probing, load <= 1/2): the cut is

@@ -15,6 +15,9 @@ struct DrawNode {
   uint32_t res = 0;          // drawn grid: 2^res intervals per side, (2^res + 1)^2 vertices
   uint32_t pageResLog2 = 0;  // page data holds 2^pageResLog2 intervals per side (res <= this)
   uint32_t pageLayer = 0;    // layer of the GPU page pool holding this node's data
+  // Mip level of the page's normal map the fragment shader samples: pageResLog2 minus the node's
+  // attribute resolution when that is coarser (0: the page's full resolution).
+  uint32_t texLod = 0;
 };
 
 // Border stitching tables, as in paper section 7.4. For every node and each side

@@ -78,6 +78,9 @@ DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const Cu
   d.res = n.res;
   d.pageResLog2 = p.maxRes(n.id.level);
   d.pageLayer = layer;
+  // note: an attribute resolution above the page's is clamped to it (finer attribute pages are
+  // not loaded); AttributeStats::abovePage counts those nodes.
+  if (n.texRes != 0 && n.texRes < d.pageResLog2) d.texLod = d.pageResLog2 - n.texRes;
   return d;
 }
 

@@ -6,9 +6,11 @@ uniform mat4 u_viewProj;
 out vec3 v_world;
 out vec2 v_pageUv;
 flat out int v_pageLayer;
+flat out int v_texLod;
 void main() {
   v_world = a_position;
   v_pageUv = vec2(0.5);
   v_pageLayer = 0;
+  v_texLod = 0;
   gl_Position = u_viewProj * vec4(a_position, 1.0);
 }

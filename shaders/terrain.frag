@@ -5,8 +5,9 @@
 in vec3 v_world;
 in vec2 v_pageUv;
 flat in int v_pageLayer;
+flat in int v_texLod;  // mip of the normal map: the node's attribute resolution (paper 7.1, 7.3)
 
-uniform sampler2DArray u_normals;  // RGBA8, n * 0.5 + 0.5, bilinear
+uniform sampler2DArray u_normals;  // RGBA8, n * 0.5 + 0.5, bilinear, with mips
 uniform sampler2DArray u_heights;  // R32F page heights, bilinear here (texelFetch in the vertex shader)
 uniform vec2 u_spacing;
 uniform vec2 u_validSamples;  // samples per axis; 0 = unlimited
@@ -38,7 +39,7 @@ void main() {
   vec2 g = v_world.xy / u_spacing;
   if (outsideValid(g.x, u_validSamples.x) || outsideValid(g.y, u_validSamples.y)) discard;
 
-  vec3 n = texture(u_normals, vec3(v_pageUv, float(v_pageLayer))).rgb * 2.0 - 1.0;
+  vec3 n = textureLod(u_normals, vec3(v_pageUv, float(v_pageLayer)), float(v_texLod)).rgb * 2.0 - 1.0;
   n = length(n) > 1e-4 ? normalize(n) : vec3(0.0, 0.0, 1.0);
   // Below sea level (only when the data goes below 0): bathymetric blues; above: the land ramp.
   // Colour follows the page heights (finer than the drawn grid), like the normal map.

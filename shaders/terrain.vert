@@ -5,7 +5,7 @@
 
 layout(location = 0) in uvec2 a_ij;   // grid vertex (i, j), 0..2^res
 // The node record, per instance (divisor 1, selected by the draw's baseinstance):
-// a_nodeA = (origin.x, origin.y, sizeLog2, res), a_nodeB = (pageResLog2, pageLayer, index, 0).
+// a_nodeA = (origin.x, origin.y, sizeLog2, res), a_nodeB = (pageResLog2, pageLayer, index, texLod).
 // origin in level-0 samples; sizeLog2 = node side in level-0 intervals; the grid has 2^res
 // intervals per side; the page 2^pageResLog2.
 layout(location = 1) in ivec4 a_nodeA;
@@ -23,6 +23,7 @@ uniform sampler2DArray u_heights;  // R32F, read with texelFetch only
 precise out vec3 v_world;  // captured by transform feedback
 out vec2 v_pageUv;
 flat out int v_pageLayer;
+flat out int v_texLod;
 invariant gl_Position;
 
 const int kBottom = 0, kRight = 1, kTop = 2, kLeft = 3;
@@ -63,4 +64,5 @@ void main() {
   gl_Position = u_viewProj * vec4(v_world, 1.0);
   v_pageUv = (vec2(texel) + 0.5) / float(textureSize(u_heights, 0).x);
   v_pageLayer = pageLayer;
+  v_texLod = a_nodeB.w;
 }

@@ -39,7 +39,7 @@ struct DrawElementsIndirectCommand {
 };
 
 struct NodeRecord {
-  int32_t originX, originY, sizeLog2, res, pageResLog2, pageLayer, index, pad;
+  int32_t originX, originY, sizeLog2, res, pageResLog2, pageLayer, index, texLod;
 };
 static_assert(sizeof(NodeRecord) == 32);
 
@@ -70,6 +70,36 @@ double meanFrameMs(uint32_t frames, Frame&& frame) {
 
 }  // namespace
 
+uint32_t normalMipLevel(const PackedNormal* normals, uint32_t samplesPerSide, uint32_t pageSide, uint32_t level,
+                        std::vector<PackedNormal>& out) {
+  const uint32_t mipSide = std::max(1u, pageSide >> level);
+  // Texels of the level covering the page's data: level-0 texel t lies at (t + 0.5) / pageSide.
+  const uint32_t side = std::min(mipSide, (samplesPerSide * mipSide + pageSide - 1) / pageSide);
+  out.assign(size_t(side) * side, PackedNormal{});
+  auto range = [&](uint32_t m, uint32_t* a, uint32_t* b) {
+    *a = std::min(m * pageSide / mipSide, samplesPerSide - 1);
+    *b = std::clamp((m + 1) * pageSide / mipSide, *a + 1, samplesPerSide);
+  };
+  for (uint32_t j = 0; j < side; ++j) {
+    uint32_t y0, y1;
+    range(j, &y0, &y1);
+    for (uint32_t i = 0; i < side; ++i) {
+      uint32_t x0, x1;
+      range(i, &x0, &x1);
+      float sum[3] = {0.f, 0.f, 0.f};
+      for (uint32_t y = y0; y < y1; ++y)
+        for (uint32_t x = x0; x < x1; ++x) {
+          const std::array<float, 3> n = unpackNormal(normals[size_t(y) * samplesPerSide + x]);
+          for (int c = 0; c < 3; ++c) sum[c] += n[c];
+        }
+      const float len = std::sqrt(sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]);
+      out[size_t(j) * side + i] =
+          len > 1e-12f ? packNormal(sum[0] / len, sum[1] / len, sum[2] / len) : packNormal(0.f, 0.f, 1.f);
+    }
+  }
+  return side;
+}
+
 struct TerrainRenderer::Impl {
   // One reusable grid inside the shared vertex and index buffers.
   struct GridRange {
@@ -84,6 +114,7 @@ struct TerrainRenderer::Impl {
   uint32_t capacity = 0;
   GlObject colourBuffer, depthBuffer, framebuffer;
   GlObject heights, normals;
+  uint32_t normalLevels = 1;  // mip levels of the normal page pool
   GlObject gridVertices, gridIndices, vertexArray;
   std::vector<GridRange> grids;  // [res - minResLog2]
   GlObject nodeBuffer, stitchBuffer, indirectBuffer, feedbackBuffer, feedbackQuery;
@@ -173,23 +204,26 @@ void TerrainRenderer::Impl::createFramebuffer() {
 void TerrainRenderer::Impl::createPagePool() {
   capacity = std::clamp<uint32_t>(setup.pageCapacity, 1,
                                   static_cast<uint32_t>(getInteger(GL_MAX_ARRAY_TEXTURE_LAYERS)));
-  auto makeArray = [&](GLenum format, GLint filter) {
+  auto makeArray = [&](GLenum format, GLint levels) {
     GlObject tex = makeTexture();
     glBindTexture(GL_TEXTURE_2D_ARRAY, tex.id());
-    glTexStorage3D(GL_TEXTURE_2D_ARRAY, 1, format, GLsizei(pageSide), GLsizei(pageSide),
+    glTexStorage3D(GL_TEXTURE_2D_ARRAY, levels, format, GLsizei(pageSide), GLsizei(pageSide),
                    GLsizei(capacity));
-    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, filter);
-    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, filter);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, levels > 1 ? GL_LINEAR_MIPMAP_LINEAR : GL_LINEAR);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
-    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAX_LEVEL, 0);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAX_LEVEL, levels - 1);
     checkGl("page pool glTexStorage3D");
     return tex;
   };
   // note: the vertex shader reads heights with texelFetch (no filtering); the fragment shader
-  // samples them bilinearly for colouring at page resolution, finer than the drawn grid.
-  heights = makeArray(GL_R32F, GL_LINEAR);
-  normals = makeArray(GL_RGBA8, GL_LINEAR);
+  // samples them bilinearly for colouring at page resolution, finer than the drawn grid. Normals
+  // carry a mip chain so each node's normal map is read at its attribute resolution (texLod).
+  normalLevels = 1;
+  while ((pageSide >> normalLevels) >= 1) ++normalLevels;
+  heights = makeArray(GL_R32F, 1);
+  normals = makeArray(GL_RGBA8, GLint(normalLevels));
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
 }
 
@@ -252,7 +286,8 @@ void TerrainRenderer::Impl::validate(std::span<const DrawNode> nodes,
   for (const DrawNode& n : nodes) {
     const bool ok = n.res >= setup.minResLog2 && n.res <= setup.maxResLog2 &&
                     n.res <= n.pageResLog2 && n.pageResLog2 <= setup.pageIntervalsLog2 &&
-                    n.pageResLog2 <= n.sizeLog2 && n.sizeLog2 < 30 && n.pageLayer < capacity;
+                    n.pageResLog2 <= n.sizeLog2 && n.sizeLog2 < 30 && n.pageLayer < capacity &&
+                    n.texLod <= n.pageResLog2;
     if (!ok)
       throw std::invalid_argument(
           "TerrainRenderer: bad DrawNode (origin " + std::to_string(n.originX) + "," +
@@ -269,7 +304,7 @@ void TerrainRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
   for (size_t k = 0; k < nodes.size(); ++k) {
     const DrawNode& n = nodes[k];
     records[k] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.res),
-                  int32_t(n.pageResLog2), int32_t(n.pageLayer), int32_t(k), 0};
+                  int32_t(n.pageResLog2), int32_t(n.pageLayer), int32_t(k), int32_t(n.texLod)};
   }
   glBindBuffer(GL_ARRAY_BUFFER, nodeBuffer.id());
   glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(records.size() * sizeof(NodeRecord)), records.data(),
@@ -354,6 +389,12 @@ void TerrainRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const 
     glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->normals.id());
     glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, GL_RGBA,
                     GL_UNSIGNED_BYTE, normals);
+    std::vector<PackedNormal> mip;
+    for (uint32_t level = 1; level < impl_->normalLevels; ++level) {
+      const uint32_t side = normalMipLevel(normals, samplesPerSide, impl_->pageSide, level, mip);
+      glTexSubImage3D(GL_TEXTURE_2D_ARRAY, GLint(level), 0, 0, GLint(layer), GLsizei(side), GLsizei(side), 1,
+                      GL_RGBA, GL_UNSIGNED_BYTE, mip.data());
+    }
   }
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
   checkGl("uploadPage glTexSubImage3D");

@@ -34,6 +34,12 @@ struct DrawStats {
   uint32_t drawCalls = 0;  // GL draw calls issued (one multi-draw for the whole cut)
 };
 
+// Mip `level` (>= 1) of a page's normal map of samplesPerSide^2 texels in a pageSide^2 pool layer:
+// each texel is the renormalised mean of the level-0 texels it covers. Writes side^2 normals
+// (row-major) to out and returns side, the texels of that level that cover the page's data.
+uint32_t normalMipLevel(const PackedNormal* normals, uint32_t samplesPerSide, uint32_t pageSide, uint32_t level,
+                        std::vector<PackedNormal>& out);
+
 class TerrainRenderer {
  public:
   explicit TerrainRenderer(const RendererSetup& setup);
@@ -44,6 +50,7 @@ class TerrainRenderer {
   uint32_t pageCapacity() const;
   // Uploads one node page: (n+1)^2 heights and normals, n = 2^pageIntervalsLog2 at most.
   // Smaller pages (deep nodes) occupy the lower-left corner of the layer.
+  // The normals also get their mip chain (normalMipLevel), for DrawNode::texLod.
   void uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* heights,
                   const PackedNormal* normals);
 

@@ -228,18 +228,54 @@ DrawStats TerrainScene::drawCut(const Camera& camera, const Cut& cut, FrameResul
   return renderer_->draw(glm::mat4(viewProjection(camera)), glm::vec3(camera.eye), nodes, stitch);
 }
 
+uint32_t TerrainScene::nodeRoom() const {
+  // Keep the cut within the page pool: the roots are locked, and the stitching constraint may
+  // add a few nodes beyond the budget.
+  return (cache_.capacity() - atlas_.hierarchy.chartCount()) * 3 / 4;
+}
+
 FrameResult TerrainScene::renderFrame(const Camera& camera, const AdaptOptions& options) {
   FrameResult f;
   const auto t0 = std::chrono::steady_clock::now();
   const ViewParams view = makeViewParams(camera, options_.width, options_.height);
-  // Keep the cut within the page pool: the roots are locked, and the stitching constraint may
-  // add a few nodes beyond the budget.
   AdaptOptions o = options;
-  const uint32_t room = (cache_.capacity() - atlas_.hierarchy.chartCount()) * 3 / 4;
+  const uint32_t room = nodeRoom();
   if (o.maxNodes == 0 || o.maxNodes > room) o.maxNodes = room;
-  f.cut = adaptErrorThreshold(atlas_.hierarchy, view, o, &f.adapt);
-  // Front to back, so early depth testing rejects hidden fragments.
+  if (options_.coherentAdaptation) {
+    if (!dualQueue_) dualQueue_ = std::make_unique<DualQueueAdapter>(atlas_.hierarchy);
+    f.cut = dualQueue_->update(view, o, &f.adapt);
+  } else {
+    f.cut = adaptErrorThreshold(atlas_.hierarchy, view, o, &f.adapt);
+  }
+  finishFrame(camera, view, f, t0);
+  return f;
+}
+
+FrameResult TerrainScene::renderFrame(const Camera& camera, const BudgetOptions& options) {
+  FrameResult f;
+  const auto t0 = std::chrono::steady_clock::now();
+  const ViewParams view = makeViewParams(camera, options_.width, options_.height);
+  BudgetOptions o = options;
+  const uint32_t room = nodeRoom();
+  if (o.maxNodes == 0 || o.maxNodes > room) o.maxNodes = room;
+  if (!quadQueue_) quadQueue_ = std::make_unique<QuadQueueAdapter>(atlas_.hierarchy);
+  f.cut = quadQueue_->update(view, o, &f.budget);
+  f.adapt.splits = f.budget.splits;
+  f.adapt.constraintRaises = f.budget.constraintRaises;
+  f.adapt.constraintSplits = f.budget.constraintSplits;
+  f.adapt.maxErrorPx = f.budget.maxErrorPx;
+  f.adapt.triangles = f.budget.triangles;
+  f.adapt.nodeBudgetBound = f.budget.nodes >= o.maxNodes;
+  finishFrame(camera, view, f, t0);
+  return f;
+}
+
+void TerrainScene::finishFrame(const Camera& camera, const ViewParams& view, FrameResult& f,
+                               std::chrono::steady_clock::time_point t0) {
   const Hierarchy& h = atlas_.hierarchy;
+  if (options_.texelsPerPixel > 0.0)
+    f.attributes = assignAttributeResolutions(h, f.cut, view, options_.texelsPerPixel);
+  // Front to back, so early depth testing rejects hidden fragments.
   auto distance2 = [&](const CutNode& n) {
     const auto& b = h.bounds(n.id);
     const glm::dvec3 c{0.5 * (b[0] + b[3]), 0.5 * (b[1] + b[4]), 0.5 * (b[2] + b[5])};
@@ -264,7 +300,6 @@ FrameResult TerrainScene::renderFrame(const Camera& camera, const AdaptOptions& 
   }
   f.draw = drawCut(camera, f.cut, &f);
   f.uploadMs += substituteMs;
-  return f;
 }
 
 std::vector<std::vector<glm::vec3>> TerrainScene::capture(const Cut& cut, bool stitchOn) {

@@ -3,10 +3,13 @@
 // crack tests. Needs a current GL context.
 #pragma once
 
+#include <chrono>
 #include <memory>
 #include <vector>
 
 #include "runtime/adapt.h"
+#include "runtime/adapt_dual_queue.h"
+#include "runtime/adapt_quad_queue.h"
 #include "runtime/atlas_view.h"
 #include "runtime/gl/renderer.h"
 #include "runtime/page_cache.h"
@@ -24,12 +27,20 @@ struct SceneOptions {
   bool asyncLoads = false;
   uint32_t maxUploadsPerFrame = 64;            // async: loaded pages uploaded per frame
   size_t ramCacheBytes = size_t(256) << 20;    // async: RAM page cache budget
+  // Error mode: the coherent dual-queue adapter (paper 7.1); false: the stateless top-down
+  // greedy (adaptErrorThreshold). Budget mode always uses the quad-queue adapter.
+  bool coherentAdaptation = true;
+  // Pixel-to-texel ratio for the attribute (normal map) resolutions, in texels per pixel; 0
+  // draws every node's normals at its page's resolution.
+  double texelsPerPixel = 1.0;
 };
 
 struct FrameResult {
   Cut cut;         // the cut actually drawn (async: with resident ancestors substituted)
   Cut desiredCut;  // async: the cut the adaptation chose; empty without asyncLoads (`cut` is it)
   AdaptStats adapt;        // of the desired cut
+  BudgetStats budget;      // budget mode: the quad-queue's stats (adapt holds its counts too)
+  AttributeStats attributes;  // attribute resolutions of the desired cut (texelsPerPixel > 0)
   double maxErrorPx = 0.0;  // of the drawn cut: above the tolerance while ancestors stand in
   DrawStats draw;
   double adaptMs = 0.0, stitchMs = 0.0, uploadMs = 0.0;
@@ -49,8 +60,11 @@ class TerrainScene {
   const AtlasView& atlas() const { return atlas_; }
   TerrainRenderer& renderer() { return *renderer_; }
 
-  // Adapts to the camera and draws; the picture is then in renderer().readPixels().
+  // Adapts to the camera (error threshold, paper 7.1 problem 1) and draws; the picture is then in
+  // renderer().readPixels().
   FrameResult renderFrame(const Camera& camera, const AdaptOptions& options);
+  // The same under a triangle budget (problem 2, quad-queue adapter).
+  FrameResult renderFrame(const Camera& camera, const BudgetOptions& options);
   // Draws a given cut (stitching constraint already enforced).
   DrawStats drawCut(const Camera& camera, const Cut& cut, FrameResult* frame = nullptr);
   // Stitched world positions of every vertex of every cut node, from the real vertex shader.
@@ -65,6 +79,10 @@ class TerrainScene {
 
  private:
   std::vector<DrawNode> prepare(const Cut& cut, FrameResult* frame);
+  // Everything after adaptation: attribute resolutions, ordering, loads, drawing.
+  void finishFrame(const Camera& camera, const ViewParams& view, FrameResult& f,
+                   std::chrono::steady_clock::time_point t0);
+  uint32_t nodeRoom() const;
   // Async: requests missing pages, uploads loaded ones, and returns the drawable cut: every
   // node's page resident, stitching constraint enforced. Starts the frame that prepare draws.
   Cut substituteResident(const Cut& desired, const ViewParams& view, FrameResult* frame);
@@ -78,6 +96,8 @@ class TerrainScene {
   std::vector<float> heights_;
   std::vector<PackedNormal> normals_;
   std::vector<LoadedPage> ready_;        // loaded pages waiting for the per-frame upload budget
+  std::unique_ptr<DualQueueAdapter> dualQueue_;
+  std::unique_ptr<QuadQueueAdapter> quadQueue_;
   std::unique_ptr<PageLoader> loader_;  // last: its thread reads pages_
 };
 

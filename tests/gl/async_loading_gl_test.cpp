@@ -165,9 +165,17 @@ TEST_F(AsyncLoadingTest, SynchronousDefaultDrawsDesiredCut) {
   EXPECT_EQ(f.pagesMissing, 0u);
   EXPECT_GT(f.pagesLoaded, 0u);
   EXPECT_TRUE(f.desiredCut.nodes.empty());
-  // The drawn cut is exactly what the adaptation chooses for this view.
-  const Cut expected = adaptErrorThreshold(atlas.hierarchy, makeViewParams(cam, so.width, so.height), ao);
+  // The drawn cut is exactly what the adaptation (a fresh dual-queue adapter, as the scene's
+  // first frame) chooses for this view.
+  DualQueueAdapter independent(atlas.hierarchy);
+  const Cut& expected = independent.update(makeViewParams(cam, so.width, so.height), ao);
   EXPECT_EQ(test::sortedNodes(f.cut), test::sortedNodes(expected));
+  // The stateless top-down greedy draws a valid cut too.
+  so.coherentAdaptation = false;
+  gl::TerrainScene topDown(atlas, so);
+  const gl::FrameResult g = topDown.renderFrame(cam, ao);
+  EXPECT_EQ(test::sortedNodes(g.cut),
+            test::sortedNodes(adaptErrorThreshold(atlas.hierarchy, makeViewParams(cam, so.width, so.height), ao)));
 }
 
 }  // namespace

@@ -6,6 +6,8 @@
 
 #include "apps/pipeline.h"
 #include "runtime/adapt.h"
+#include "runtime/adapt_dual_queue.h"
+#include "runtime/adapt_quad_queue.h"
 #include "runtime/atlas_view.h"
 #include "runtime/gl/egl_context.h"
 #include "runtime/gl/terrain_scene.h"
@@ -137,6 +139,42 @@ TEST_F(CrackTest, AdaptedCutsOverRealSrtmTiles) {
     }
     EXPECT_GT(crossChart, 0u) << "no cut crossed a chart border";
   }
+}
+
+// The cuts of the coherent adapters (dual queue in error mode, quad queue under a triangle
+// budget) along a moving path over real SRTM, frame after frame: no stitching violation, no crack.
+TEST_F(CrackTest, CoherentAdapterCutsAlongAPathOverRealSrtm) {
+  if (!test::haveSharedData()) GTEST_SKIP() << "no ../shared/data";
+  const AtlasView atlas = build(test::sharedData() / "terrain/mt_fuji_90m.tif", 257, 5, 32, 2);
+  gl::SceneOptions so;
+  so.width = 160;
+  so.height = 120;
+  gl::TerrainScene scene(atlas, so);
+  const Hierarchy& h = atlas.hierarchy;
+  const auto path = orbitPath(atlas.lo, atlas.hi, 6, 0.4, 25.0);
+  DualQueueAdapter dq(h);
+  QuadQueueAdapter qq(h);
+  AdaptOptions ao;
+  ao.tolerancePx = 0.8;
+  ao.maxNodes = 600;
+  BudgetOptions bo;
+  bo.maxTriangles = 40000;
+  bo.maxNodes = 150;
+  uint64_t checked = 0;
+  for (size_t f = 0; f < path.size(); ++f) {
+    Camera cam = path[f];
+    fitClipPlanes(cam, atlas.lo, atlas.hi);
+    const ViewParams v = makeViewParams(cam, so.width, so.height);
+    for (int which = 0; which < 2; ++which) {
+      const Cut cut = which == 0 ? dq.update(v, ao) : qq.update(v, bo);
+      ASSERT_EQ(countStitchViolations(h, cut), 0u) << "frame " << f << (which ? " quad" : " dual");
+      const CrackReport r = check(scene, cut, f == 0);
+      EXPECT_EQ(r.mismatches, 0u) << "frame " << f << (which ? " quad" : " dual") << ": " << r.mismatches
+                                  << " of " << r.borderVertices;
+      checked += r.borderVertices;
+    }
+  }
+  EXPECT_GT(checked, 1000u);
 }
 
 }  // namespace

@@ -82,7 +82,34 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
       if (rows[r][col("node_budget_bound")] == "0") {
         EXPECT_LE(std::stod(rows[r][col("max_screen_error_px")]), tolerance) << camera << " frame " << r - 1;
       }
+      EXPECT_GT(std::stoull(rows[r][col("attribute_texels")]), 0u);
     }
+  }
+
+  // Triangle-budget mode (quad queue): every frame within the budgets.
+  const fs::path budget = dir.path() / "budget";
+  ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + budget.string() +
+                                 "' --orbit 3 --size 96x64 --triangles 30000 --max-nodes 60 --texel-ratio 2",
+                             &out),
+            0)
+      << out;
+  const auto rows = readCsv(budget / "stats.csv");
+  ASSERT_EQ(rows.size(), 4u);
+  const auto& head = rows[0];
+  auto col = [&](const std::string& name) { return size_t(std::find(head.begin(), head.end(), name) - head.begin()); };
+  for (size_t r = 1; r < rows.size(); ++r) {
+    EXPECT_LE(std::stoull(rows[r][col("triangles")]), 30000u);
+    EXPECT_GT(std::stoull(rows[r][col("triangles")]), 10000u);
+    EXPECT_LE(std::stoul(rows[r][col("nodes")]), 60u);
+  }
+  // Bad options name themselves.
+  for (const char* bad : {"--texel-ratio -1", "--texel-ratio nan", "--triangles 1000 --top-down"}) {
+    EXPECT_NE(test::runCommand(app + " render '" + atlas.string() + "' -o '" + (dir.path() / "bad").string() +
+                                   "' --orbit 1 --size 32x32 " + bad,
+                               &out),
+              0)
+        << bad;
+    EXPECT_NE(out.find(std::string(bad).substr(0, std::string(bad).find(' '))), std::string::npos) << out;
   }
 }
 

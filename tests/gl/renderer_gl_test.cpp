@@ -432,6 +432,68 @@ TEST_F(RendererGlTest, StaticMeshBaselineDraws) {
       << "the baseline mesh should cover the centre";
 }
 
+TEST(NormalMips, MeanOfCoveredTexelsRenormalised) {
+  // A 5x5 page in a 9-wide pool layer; left half tilted +x, right half tilted -x.
+  const uint32_t s = 5, pageSide = 9;
+  std::vector<PackedNormal> n(s * s);
+  for (uint32_t v = 0; v < s; ++v)
+    for (uint32_t u = 0; u < s; ++u) n[v * s + u] = u < 2 ? packNormal(0.6f, 0.f, 0.8f) : packNormal(-0.6f, 0.f, 0.8f);
+  std::vector<PackedNormal> mip;
+  // Level 1 of a 9-wide layer has 4 texels a side; the page's 5 samples cover 3 of them.
+  EXPECT_EQ(gl::normalMipLevel(n.data(), s, pageSide, 1, mip), 3u);
+  ASSERT_EQ(mip.size(), 9u);
+  // Texel 0 covers level-0 texels [0, 2): all +x.
+  EXPECT_NEAR(unpackNormal(mip[0])[0], 0.6f, 0.01f);
+  // The last level is one texel: the renormalised mean of everything, about straight up.
+  const uint32_t last = gl::normalMipLevel(n.data(), s, pageSide, 3, mip);
+  EXPECT_EQ(last, 1u);
+  const auto up = unpackNormal(mip[0]);
+  EXPECT_LT(std::abs(up[0]), 0.3f);
+  EXPECT_NEAR(std::sqrt(up[0] * up[0] + up[1] * up[1] + up[2] * up[2]), 1.f, 0.02f);
+}
+
+TEST_F(RendererGlTest, AttributeLevelChangesShadingNotGeometry) {
+  gl::RendererSetup setup = smallSetup(5);
+  setup.spacing = {1.0, 1.0};
+  setup.heightRange = {0.f, 1.f};
+  gl::TerrainRenderer r(setup);
+  // A flat page whose normal map alternates tilts every texel: full detail at texLod 0, an even
+  // mean at the coarsest level.
+  const uint32_t side = 33;
+  std::vector<float> heights(side * side, 0.f);
+  std::vector<PackedNormal> normals(side * side);
+  for (uint32_t v = 0; v < side; ++v)
+    for (uint32_t u = 0; u < side; ++u)
+      normals[v * side + u] = (u + v) % 2 ? packNormal(0.7f, 0.f, 0.714f) : packNormal(-0.7f, 0.f, 0.714f);
+  r.uploadPage(0, side, heights.data(), normals.data());
+  StitchTables t;
+  t.bytes.assign(4, 0);
+  const glm::mat4 viewProj = glm::ortho(0.f, 32.f, 0.f, 32.f, -10.f, 10.f);
+  auto spread = [&](uint32_t texLod) {
+    std::vector<DrawNode> nodes = {makeNode(0, 0, 5, 5, 5, 0)};
+    nodes[0].texLod = texLod;
+    r.draw(viewProj, glm::vec3(16.f, 16.f, 10.f), nodes, t);
+    const std::vector<uint8_t> px = r.readPixels();
+    int lo = 255, hi = 0;
+    for (int y = 20; y < 76; ++y)
+      for (int x = 20; x < 108; ++x) {
+        const int g = px[(size_t(y) * 128 + x) * 4 + 1];
+        lo = std::min(lo, g), hi = std::max(hi, g);
+      }
+    return std::make_pair(hi - lo, r.captureVertices(nodes, t));
+  };
+  const auto fine = spread(0), coarse = spread(5);
+  EXPECT_GT(fine.first, 20) << "full-resolution normals should vary";
+  EXPECT_LT(coarse.first, fine.first / 3) << "the coarsest normal level should be nearly even";
+  ASSERT_EQ(fine.second.size(), coarse.second.size());
+  for (size_t k = 0; k < fine.second.size(); ++k)
+    EXPECT_EQ(0, std::memcmp(fine.second[k].data(), coarse.second[k].data(), fine.second[k].size() * sizeof(glm::vec3)));
+  std::vector<DrawNode> bad = {makeNode(0, 0, 5, 5, 5, 0)};
+  bad[0].texLod = 6;  // beyond the page's levels
+  EXPECT_THROW(r.draw(viewProj, glm::vec3(0.f), bad, t), std::invalid_argument);
+  EXPECT_EQ(glGetError(), GLenum(GL_NO_ERROR));
+}
+
 TEST_F(RendererGlTest, BadInputsThrowAndCapacityIsClamped) {
   gl::RendererSetup setup = smallSetup(4);
   setup.pageCapacity = 1u << 20;

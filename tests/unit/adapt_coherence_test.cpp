@@ -147,5 +147,41 @@ TEST(DualQueue, ReusedPrioritiesGiveTheSameCuts) {
   }
 }
 
+// Paper 7.1: attribute texture resolutions from the projected size and the pixel-to-texel ratio.
+TEST(AttributeResolution, FromProjectedDiagonalAndRatio) {
+  const World w = makeWorld(129, 3, 2, 5);
+  const NodeId n{1, 2, 1, 2};
+  const auto& b = w.h.bounds(n);
+  const glm::dvec3 lo{b[0], b[1], b[2]}, hi{b[3], b[4], b[5]};
+  const double diag = glm::length(hi - lo);
+  ViewParams v;
+  v.pixelsPerRadian = 500.0;
+  v.minDistance = 1e-3;
+  const glm::dvec3 centre = 0.5 * (lo + hi);
+  for (double dist : {40.0, 300.0, 5000.0})
+    for (double ratio : {0.5, 1.0, 2.0}) {
+      v.eye = glm::dvec3(centre.x, centre.y, hi.z + dist);  // straight above: distance = dist
+      const double texels = diag * v.pixelsPerRadian / dist * ratio;
+      const uint32_t expect =
+          std::clamp(uint32_t(std::ceil(std::log2(std::max(texels, 4.0)))), w.h.params.minNodeResLog2,
+                     w.h.params.intervalsLog2 - n.level);
+      EXPECT_EQ(attributeResolution(w.h, n, v, ratio), expect) << dist << " " << ratio;
+    }
+  // Inside the bounds: the finest data the pyramid has for the node.
+  v.eye = centre;
+  EXPECT_EQ(attributeResolution(w.h, n, v, 1.0), w.h.params.intervalsLog2 - n.level);
+  // Never coarser when the ratio grows or the camera comes closer.
+  v.eye = glm::dvec3(centre.x, centre.y, hi.z + 200.0);
+  EXPECT_LE(attributeResolution(w.h, n, v, 1.0), attributeResolution(w.h, n, v, 4.0));
+  Cut cut;
+  cut.nodes = {{n, 3, 0.f}, {NodeId{0, 0, 0, 0}, 2, 0.f}};
+  cut.rebuildIndex();
+  const AttributeStats st = assignAttributeResolutions(w.h, cut, v, 1.0);
+  EXPECT_EQ(cut.nodes[0].texRes, attributeResolution(w.h, n, v, 1.0));
+  uint64_t texels = 0;
+  for (const CutNode& c : cut.nodes) texels += ((1ull << c.texRes) + 1) * ((1ull << c.texRes) + 1);
+  EXPECT_EQ(st.texels, texels);
+}
+
 }  // namespace
 }  // namespace gimlod
