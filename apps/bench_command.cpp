@@ -159,10 +159,12 @@ Adapter makeErrorAdapter(const Hierarchy& h, const std::string& algo, uint32_t m
 
 // Triangle-budget mode adapters. budget_bound: at the node budget, or within 25% of the triangle
 // budget (one more refinement step of a node quadruples its triangles).
-Adapter makeBudgetAdapter(const Hierarchy& h, const std::string& algo, uint32_t maxNodes, uint64_t maxTris) {
+Adapter makeBudgetAdapter(const Hierarchy& h, const std::string& algo, uint32_t maxNodes, uint64_t maxTris,
+                          uint32_t maxRounds) {
   BudgetOptions o;
   o.maxNodes = maxNodes;
   o.maxTriangles = maxTris;
+  o.maxRounds = maxRounds;
   auto fill = [maxNodes, maxTris](const BudgetStats& st, const Cut& cut, Row& r) {
     r.refines = st.refines;
     r.coarsens = st.coarsens;
@@ -261,6 +263,9 @@ CLI::App* addBenchCommand(CLI::App& app, BenchArgs& a) {
   b->add_option("--size", a.size, "Viewport WxH for the projection")->capture_default_str();
   b->add_option("--algorithms", a.algorithms, "Subset of ours,fixed,greedy")->capture_default_str();
   b->add_option("--repeat", a.repeat, "Passes over the camera path per configuration")->capture_default_str();
+  b->add_option("--max-rounds", a.maxRounds,
+                "Budget mode: quad-queue split/merge rounds per frame (the per-frame work cap)")
+      ->capture_default_str();
   b->add_flag("--render", a.render, "Also draw each cut (headless EGL) and record draw_ms");
   b->add_option("--frame-ms", a.frameMs, "Cost model: target frame time in ms (needs --tri-rate)");
   b->add_option("--tri-rate", a.triRate, "Cost model: triangle throughput in triangles/s (e.g. from bench_render)");
@@ -291,6 +296,7 @@ int runBench(const BenchArgs& a) {
   validateCameraArgs(a.camera);
   if (a.camera.orbit > 0 && !a.camera.path.empty()) throw InputError("give only one of --orbit and --path");
   if (a.repeat == 0 || a.repeat > 1000) throw InputError("--repeat must be in [1, 1000]");
+  if (a.maxRounds > 1000) throw InputError("--max-rounds must be in [0, 1000]");
   const bool costModel = a.frameMs != 0.0 || a.triRate != 0.0;
   if (costModel) {
     if (!(a.frameMs > 0.0) || !std::isfinite(a.frameMs)) throw InputError("--frame-ms must be > 0 (with --tri-rate)");
@@ -340,7 +346,7 @@ int runBench(const BenchArgs& a) {
       for (const std::string& algo : algorithms) {
         Adapter adapt;
         if (budgetMode)
-          adapt = makeBudgetAdapter(hier, algo, uint32_t(maxNodes), maxTris);
+          adapt = makeBudgetAdapter(hier, algo, uint32_t(maxNodes), maxTris, a.maxRounds);
         else
           adapt = makeErrorAdapter(hier, algo, uint32_t(maxNodes), a.tolerance);
         std::vector<Row> rows;

@@ -22,6 +22,7 @@ struct BenchArgs {
   std::string size = "1280x720";
   std::string algorithms = "ours,fixed,greedy";
   uint32_t repeat = 1;
+  uint32_t maxRounds = 16;  // quad queue: split/merge rounds per frame (work cap; state persists)
   double tolerance = 1.0;
   double frameMs = 0.0, triRate = 0.0;
   bool render = false;

@@ -1,59 +1,68 @@
-// Adaptation time per frame against the number of selected nodes, along a moving orbit.
-// Usage: bench_adapt [DEM] [depth] [tolerance_px]  (default etopo5.cdf, depth 6, 0.02 px: a
-// tolerance that the node budget binds, so the budget sets the node count)
+// Adaptation time per frame against the number of selected nodes (the paper's figure 6), along a
+// moving orbit: the coherent dual-queue adapter (ours) against the stateless top-down greedy, in
+// the same run. The tolerance is small enough that the node budget sets the node count.
+// Usage: bench_adapt ATLAS_DIR [tolerance_px=0.02] [frames=240] [WxH=1280x720]
+// Reads a built atlas only (no GDAL), e.g. `gimlod build ../shared/data/terrain/etopo5.cdf
+// -o out/etopo.atlas --depth 6`.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <filesystem>
+#include <cstdlib>
+#include <vector>
 
-#include "atlas/dem.h"
-#include "atlas/terrain_atlas.h"
-#include "hierarchy/hierarchy.h"
 #include "runtime/adapt.h"
+#include "runtime/adapt_dual_queue.h"
+#include "runtime/atlas_view.h"
 #include "runtime/camera.h"
 
 using namespace gimlod;
+using Clock = std::chrono::steady_clock;
 
 int main(int argc, char** argv) {
-  const std::filesystem::path input = argc > 1 ? argv[1] : "../shared/data/terrain/etopo5.cdf";
-  const uint32_t depth = argc > 2 ? uint32_t(std::atoi(argv[2])) : 6;
-  const double tolerance = argc > 3 ? std::atof(argv[3]) : 0.02;
-  const uint32_t chartSize = 513;
-  const DemRaster dem = loadDem(input);
-  AtlasManifest m;
-  m.depth = depth;
-  m.maxNodeResLog2 = 6;
-  m.minNodeResLog2 = 2;
-  TerrainAtlasOptions topt;
-  topt.chartSize = chartSize;
-  fillTerrainManifest(dem, topt, m);
-  const Hierarchy h = buildTerrainHierarchy(
-      m, [&](uint32_t c) { return extractChart(dem, m.charts[c].gridX, m.charts[c].gridY, chartSize); });
-  const glm::dvec3 lo{0, 0, dem.minHeight};
-  const glm::dvec3 hi{(dem.width - 1) * dem.spacing[0], (dem.height - 1) * dem.spacing[1], dem.maxHeight};
-  const uint32_t frames = 60;
-  const auto path = orbitPath(lo, hi, frames, 0.35, 20.0);
-  std::printf("%s: %u charts, depth %u, %u nodes in the forest; %u-frame orbit, 1280x720, tolerance %.3f px\n",
-              input.c_str(), h.chartCount(), depth, h.chartCount() * nodesPerChart(depth), frames, tolerance);
-  std::printf("%10s %10s %12s %12s %12s %10s\n", "max_nodes", "nodes", "adapt_us", "us_per_node", "triangles",
-              "max_err_px");
+  if (argc < 2) {
+    std::fprintf(stderr, "usage: bench_adapt ATLAS_DIR [tolerance_px] [frames] [WxH]\n");
+    return 2;
+  }
+  const AtlasView atlas = openAtlas(argv[1]);
+  const Hierarchy& h = atlas.hierarchy;
+  const double tolerance = argc > 2 ? std::atof(argv[2]) : 0.02;
+  const uint32_t frames = argc > 3 ? uint32_t(std::atoi(argv[3])) : 240;
+  uint32_t w = 1280, hgt = 720;
+  if (argc > 4) std::sscanf(argv[4], "%ux%u", &w, &hgt);
+  if (!(tolerance > 0.0) || frames == 0 || w == 0 || hgt == 0) {
+    std::fprintf(stderr, "bench_adapt: bad arguments\n");
+    return 2;
+  }
+  std::vector<ViewParams> views;
+  for (Camera c : orbitPath(atlas.lo, atlas.hi, frames, 0.35, 20.0)) views.push_back(makeViewParams(c, w, hgt));
+  std::printf("%s: %u charts, depth %u, %u nodes in the forest; %u-frame orbit, %ux%u, tolerance %.3f px\n",
+              argv[1], h.chartCount(), h.params.depth, h.chartCount() * nodesPerChart(h.params.depth), frames, w, hgt,
+              tolerance);
+  std::printf("%9s %8s %10s %10s %8s %8s %11s %10s %9s\n", "max_nodes", "nodes", "ours_us", "us/node", "ops",
+              "reused", "greedy_us", "greedy/us", "err_px");
   for (uint32_t budget : {100u, 250u, 500u, 1000u, 2000u, 5000u, 10000u, 20000u}) {
-    double totalUs = 0.0, nodes = 0.0, tris = 0.0, err = 0.0;
-    for (int rep = 0; rep < 2; ++rep)
-      for (const Camera& cam : path) {
-        AdaptOptions o;
-        o.tolerancePx = tolerance;
-        o.maxNodes = budget;
-        AdaptStats st;
-        const auto t0 = std::chrono::steady_clock::now();
-        const Cut cut = adaptErrorThreshold(h, makeViewParams(cam, 1280, 720), o, &st);
-        totalUs += std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count();
-        nodes += double(cut.nodes.size());
-        tris += double(st.triangles);
-        err = std::max(err, st.maxErrorPx);
-      }
-    const double n = 2.0 * frames;
-    std::printf("%10u %10.0f %12.1f %12.3f %12.0f %10.2f\n", budget, nodes / n, totalUs / n, totalUs / nodes,
-                tris / n, err);
+    AdaptOptions o;
+    o.tolerancePx = tolerance;
+    o.maxNodes = budget;
+    DualQueueAdapter ours(h);
+    for (const ViewParams& v : views) ours.update(v, o);  // one warm-up pass: a coherent state
+    double us = 0.0, nodes = 0.0, ops = 0.0, reused = 0.0, greedyUs = 0.0, err = 0.0;
+    for (const ViewParams& v : views) {
+      AdaptStats st;
+      auto t0 = Clock::now();
+      const Cut& cut = ours.update(v, o, &st);
+      us += std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+      nodes += double(cut.nodes.size());
+      ops += ours.frameStats().splits + ours.frameStats().merges;
+      reused += ours.frameStats().priorityReuses;
+      err = std::max(err, st.maxErrorPx);
+      t0 = Clock::now();
+      const Cut g = adaptErrorThreshold(h, v, o);
+      greedyUs += std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+    }
+    const double n = double(views.size());
+    std::printf("%9u %8.0f %10.1f %10.4f %8.1f %8.0f %11.1f %10.2f %9.4f\n", budget, nodes / n, us / n,
+                us / nodes, ops / n, reused / n, greedyUs / n, greedyUs / us, err);
   }
   return 0;
 }

@@ -31,6 +31,7 @@ struct Entry {
   uint32_t gap = 0;    // stitching level gap to the finest drawn neighbour (computeFloors)
   bool drawn = false;
   double err = 0.0;    // screen error at res; 0 when not drawn
+  double dist = 1.0;   // eye distance to the bounds this frame (as screenError clamps it)
   uint32_t splitRound = 0, mergedRound = 0;
 };
 
@@ -157,7 +158,10 @@ struct QuadQueueAdapter::State {
     st.opCapBound = true;
     return true;
   }
-  double errAt(const Entry& e, uint32_t r) const { return screenError(*h, e.id, r, view); }
+  // screenError(h, e.id, r, view) with the distance evaluated once per frame.
+  double errAt(const Entry& e, uint32_t r) const {
+    return double(h->error(e.id, r)) * view.pixelsPerRadian / e.dist;
+  }
   // Resolution a node needs to hold `tolPx`, clamped to its maxRes.
   uint32_t resFor(const NodeId& n, double tolPx) const {
     return std::min(neededResolution(*h, n, view, tolPx), maxRes(n));
@@ -170,6 +174,9 @@ struct QuadQueueAdapter::State {
   }
   void evaluate(Entry& e) {
     e.drawn = nodeDrawable(*h, e.id, view, opt.frustumCull);
+    const auto& b = h->bounds(e.id);
+    const glm::dvec3 q = glm::clamp(view.eye, glm::dvec3{b[0], b[1], b[2]}, glm::dvec3{b[3], b[4], b[5]}) - view.eye;
+    e.dist = std::max(glm::length(q), view.minDistance);
     e.res = e.drawn ? std::clamp(e.res, minRes(), maxRes(e.id)) : minRes();
     e.floor = minRes();
     e.err = e.drawn ? errAt(e, e.res) : 0.0;
@@ -217,9 +224,17 @@ struct QuadQueueAdapter::State {
     for (const auto& [k, m] : cut) {
       if (!m.drawn || m.id.level == 0) continue;
       for (uint32_t side = 0; side < 4; ++side) {
-        NodeId a;
+        NodeId a = m.id;
+        const uint32_t last = (1u << m.id.level) - 1;
+        bool inChart = true;
+        switch (side) {  // inside the chart without adjacentNode's border logic
+          case kEdgeBottom: inChart = a.y > 0; --a.y; break;
+          case kEdgeRight: inChart = a.x < last; ++a.x; break;
+          case kEdgeTop: inChart = a.y < last; ++a.y; break;
+          default: inChart = a.x > 0; --a.x; break;
+        }
         uint32_t aSide;
-        if (!adjacentNode(*h, m.id, side, &a, &aSide)) continue;
+        if (!inChart && !adjacentNode(*h, m.id, side, &a, &aSide)) continue;
         const bool sameChart = a.chart == m.id.chart;
         for (;; a = a.parent()) {
           const uint32_t up = m.id.level - a.level;
