@@ -1,0 +1,43 @@
+// The chart layout of a mesh atlas: the surface cut into disk-shaped patches with 3 to 8 sides,
+// each side shared with exactly one other patch (or open), as produced by clustering
+// (atlas/charting.h) and consumed by parameterization and resampling (atlas/patch_param.h).
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 5; Purnomo, Cohen, Kumar, "Seamless Texture
+// Atlases", SGP 2004 (patches, conforming quad layout, shared boundary sampling).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include <glm/vec3.hpp>
+#include <glm/vec4.hpp>
+
+namespace gimlod {
+
+// One side of a patch: the boundary run between two consecutive corners, as mesh vertex ids,
+// in the patch's counter-clockwise boundary order (outward normals, seen from outside).
+struct PatchSide {
+  std::vector<uint32_t> vertices;  // first and last are corners; at least 2 entries
+  int32_t neighbourPatch = -1;     // the patch across this side; -1: open boundary (a hole)
+  uint32_t neighbourSide = 0;      // index of the same side in the neighbour's `sides`
+  // The neighbour lists the same vertices in reverse order (always true for two consistently
+  // oriented patches; false would mean a non-orientable join).
+  bool reversed = true;
+};
+
+// A topological disk of the input surface.
+struct Patch {
+  std::vector<uint32_t> triangles;  // indices into ChartLayout::triangles
+  std::vector<PatchSide> sides;     // 3..8, counter-clockwise; side i ends where side i+1 starts
+};
+
+// The surface (welded, manifold, after repair) and its patches. Every triangle belongs to
+// exactly one patch; every side with a neighbour appears in both patches, reversed.
+struct ChartLayout {
+  std::vector<glm::vec3> positions;
+  std::vector<glm::u8vec4> colours;                 // empty, or one per position
+  std::vector<std::array<uint32_t, 3>> triangles;   // counter-clockwise (outward normals)
+  std::vector<Patch> patches;
+};
+
+}  // namespace gimlod
