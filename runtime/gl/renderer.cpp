@@ -128,7 +128,10 @@ struct TerrainRenderer::Impl {
   void createVertexArray();
   const GridRange& grid(uint32_t res) const { return grids[res - setup.minResLog2]; }
   void validate(std::span<const DrawNode> nodes, const StitchTables& stitch) const;
-  void uploadNodes(std::span<const DrawNode> nodes, const StitchTables& stitch);
+  // Node records in the order given (record j is node order[j]; empty order: node order); each
+  // record keeps its node's index for the stitching tables.
+  void uploadNodes(std::span<const DrawNode> nodes, const StitchTables& stitch,
+                   std::span<const uint32_t> order = {});
   void setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const;
   void bindTerrain(const glm::mat4& viewProj, const glm::vec3& eye, const StitchTables& stitch);
   void beginFrame() const;
@@ -298,12 +301,13 @@ void TerrainRenderer::Impl::validate(std::span<const DrawNode> nodes,
 }
 
 void TerrainRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
-                                        const StitchTables& stitch) {
+                                        const StitchTables& stitch, std::span<const uint32_t> order) {
   validate(nodes, stitch);
   std::vector<NodeRecord> records(std::max<size_t>(nodes.size(), 1), NodeRecord{});
-  for (size_t k = 0; k < nodes.size(); ++k) {
+  for (size_t j = 0; j < nodes.size(); ++j) {
+    const size_t k = order.empty() ? j : order[j];
     const DrawNode& n = nodes[k];
-    records[k] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.res),
+    records[j] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.res),
                   int32_t(n.pageResLog2), int32_t(n.pageLayer), int32_t(k), int32_t(n.texLod)};
   }
   glBindBuffer(GL_ARRAY_BUFFER, nodeBuffer.id());
@@ -407,16 +411,26 @@ DrawStats TerrainRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
   const auto t0 = Clock::now();
   m.beginFrame();
   if (!nodes.empty()) {
-    m.uploadNodes(nodes, stitch);
+    // Records grouped by resolution (stable: front to back within a group), so the whole cut is
+    // one multi-draw of one instanced command per resolution: the per-node cost on the GPU side
+    // is an instance, not a draw command.
+    std::vector<uint32_t> order(nodes.size());
+    for (uint32_t k = 0; k < order.size(); ++k) order[k] = k;
+    std::stable_sort(order.begin(), order.end(),
+                     [&](uint32_t a, uint32_t b) { return nodes[a].res < nodes[b].res; });
+    m.uploadNodes(nodes, stitch, order);
     m.bindTerrain(viewProj, eye, stitch);
     glEnable(GL_PRIMITIVE_RESTART_FIXED_INDEX);  // 0xFFFFFFFF for 32-bit indices
-    // One multi-draw for the whole cut: a command per node, baseInstance selects its record.
-    std::vector<DrawElementsIndirectCommand> commands(nodes.size());
-    for (size_t k = 0; k < nodes.size(); ++k) {
-      const Impl::GridRange& g = m.grid(nodes[k].res);
-      commands[k] = {GLuint(g.indexCount), 1, GLuint(g.indexOffsetBytes / sizeof(uint32_t)),
-                     g.baseVertex, GLuint(k)};
-      stats.triangles += uint64_t(2) << (2 * nodes[k].res);
+    std::vector<DrawElementsIndirectCommand> commands;
+    for (size_t j = 0; j < order.size();) {
+      const uint32_t res = nodes[order[j]].res;
+      size_t e = j;
+      while (e < order.size() && nodes[order[e]].res == res) ++e;
+      const Impl::GridRange& g = m.grid(res);
+      commands.push_back({GLuint(g.indexCount), GLuint(e - j), GLuint(g.indexOffsetBytes / sizeof(uint32_t)),
+                          g.baseVertex, GLuint(j)});
+      stats.triangles += uint64_t(e - j) * (uint64_t(2) << (2 * res));
+      j = e;
     }
     glBindBuffer(GL_DRAW_INDIRECT_BUFFER, m.indirectBuffer.id());
     glBufferData(GL_DRAW_INDIRECT_BUFFER, GLsizeiptr(commands.size() * sizeof(commands[0])),

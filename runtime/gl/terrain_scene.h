@@ -58,6 +58,9 @@ class TerrainScene {
  public:
   TerrainScene(const AtlasView& atlas, const SceneOptions& options);
   const AtlasView& atlas() const { return atlas_; }
+  // The largest node budget a frame gets: 3/4 of the page pool's unlocked layers (the pool is
+  // clamped to GL_MAX_ARRAY_TEXTURE_LAYERS); larger budgets are lowered to it.
+  uint32_t nodeRoom() const;
   TerrainRenderer& renderer() { return *renderer_; }
 
   // Adapts to the camera (error threshold, paper 7.1 problem 1) and draws; the picture is then in
@@ -82,7 +85,6 @@ class TerrainScene {
   // Everything after adaptation: attribute resolutions, ordering, loads, drawing.
   void finishFrame(const Camera& camera, const ViewParams& view, FrameResult& f,
                    std::chrono::steady_clock::time_point t0);
-  uint32_t nodeRoom() const;
   // Async: requests missing pages, uploads loaded ones, and returns the drawable cut: every
   // node's page resident, stitching constraint enforced. Starts the frame that prepare draws.
   Cut substituteResident(const Cut& desired, const ViewParams& view, FrameResult* frame);
