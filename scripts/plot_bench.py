@@ -25,6 +25,11 @@ try:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 except ImportError:
+    # note: another python3 first on PATH (a virtualenv, pyenv) does not see Debian's package;
+    # fall back to the system interpreter once.
+    system = "/usr/bin/python3"
+    if os.path.realpath(sys.executable) != os.path.realpath(system) and os.path.exists(system):
+        os.execv(system, [system] + sys.argv)
     sys.exit("plot_bench.py needs matplotlib (Debian: apt-get install python3-matplotlib)")
 
 STYLE = {"ours": ("tab:blue", "o"), "fixed": ("tab:red", "s"), "greedy": ("tab:green", "^")}
