@@ -146,6 +146,95 @@ void buildChart(const HierarchyParams& p, const AtlasManifest& m, const ChartInf
   }
 }
 
+// The 3D analogue of accumulateLevelError: running[i] = max(running[i], |p - surface_k|) with
+// surface_k interpolated per component at the sample's (u, v).
+void accumulateLevelError3(const std::vector<glm::vec3>& P, uint32_t S, uint32_t k, std::vector<float>& running) {
+  const uint32_t M = S - 1;
+  const uint32_t n = M >> k;
+  const uint32_t s = 1u << k;
+  const float inv = 1.0f / float(s);
+  for (uint32_t y = 0; y <= M; ++y) {
+    const uint32_t cy = std::min(y >> k, n - 1);
+    const float fy = float(y - cy * s) * inv;
+    const glm::vec3* row0 = &P[size_t(cy * s) * S];
+    const glm::vec3* row1 = &P[size_t((cy + 1) * s) * S];
+    const glm::vec3* src = &P[size_t(y) * S];
+    float* run = &running[size_t(y) * S];
+    for (uint32_t cx = 0; cx < n; ++cx) {
+      const uint32_t x0 = cx * s;
+      const glm::vec3 p00 = row0[x0], p10 = row0[x0 + s], p01 = row1[x0], p11 = row1[x0 + s];
+      const uint32_t xend = (cx == n - 1) ? s : s - 1;
+      for (uint32_t dx = 0; dx <= xend; ++dx) {
+        const float fx = float(dx) * inv;
+        const glm::vec3 interp = fx >= fy ? p00 + fx * (p10 - p00) + fy * (p11 - p10)   // lower triangle
+                                          : p00 + fy * (p01 - p00) + fx * (p11 - p01);  // upper triangle
+        const glm::vec3 d = src[x0 + dx] - interp;
+        const float e = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+        run[x0 + dx] = std::max(run[x0 + dx], e);
+      }
+    }
+  }
+}
+
+// Writes the per-node values of an M x M per-cell array (and its 2x2 reductions) for every level
+// that has a node: out(level, x, y, value).
+template <typename Op, typename Out>
+void forEachNodeReduction(std::vector<float> cells, uint32_t L, uint32_t depth, Op op, Out out) {
+  std::vector<float> tmp;
+  for (uint32_t n = 1u << L, l = L;; n /= 2, --l) {
+    if (l < depth)
+      for (uint32_t y = 0; y < n; ++y)
+        for (uint32_t x = 0; x < n; ++x) out(l, x, y, cells[size_t(y) * n + x]);
+    if (n == 1) break;
+    reduce2x2(cells, n, tmp, op);
+    cells.swap(tmp);
+  }
+}
+
+void buildGeometryChart(const HierarchyParams& p, const std::vector<glm::vec3>& P, Hierarchy::ChartNodes& out) {
+  const uint32_t L = p.intervalsLog2;
+  const uint32_t M = 1u << L;
+  const uint32_t S = M + 1;
+  const uint32_t nodes = nodesPerChart(p.depth);
+  const uint32_t rc = p.resCount();
+  out.bounds.assign(nodes, {});
+  out.flags.assign(nodes, 0);
+  out.errors.assign(size_t(nodes) * rc, std::numeric_limits<float>::quiet_NaN());
+  auto fmax = [](float a, float b) { return std::max(a, b); };
+  auto fmin = [](float a, float b) { return std::min(a, b); };
+
+  // Bounds: per-component min/max mips over cells.
+  std::vector<float> comp(size_t(S) * S), cells;
+  for (int c = 0; c < 3; ++c) {
+    for (size_t i = 0; i < comp.size(); ++i) comp[i] = P[i][c];
+    cellReduce(comp, S, cells, fmin);
+    forEachNodeReduction(cells, L, p.depth, fmin,
+                         [&](uint32_t l, uint32_t x, uint32_t y, float v) { out.bounds[nodeIndex(l, x, y)][c] = v; });
+    cellReduce(comp, S, cells, fmax);
+    forEachNodeReduction(cells, L, p.depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
+      out.bounds[nodeIndex(l, x, y)][3 + c] = v;
+    });
+  }
+
+  for (uint32_t l = 0; l < p.depth; ++l) {
+    const uint32_t r = L - l;
+    if (r > p.maxRes(l) || r < p.minNodeResLog2) continue;
+    for (uint32_t i = nodeIndex(l, 0, 0); i < nodeIndex(l, 0, 0) + (1u << 2 * l); ++i)
+      out.errors[size_t(i) * rc + (r - p.minNodeResLog2)] = 0.0f;
+  }
+  const uint32_t kmax = L - p.minNodeResLog2;
+  std::vector<float> running(size_t(S) * S, 0.0f);
+  for (uint32_t k = 1; k <= kmax; ++k) {
+    accumulateLevelError3(P, S, k, running);
+    cellReduce(running, S, cells, fmax);
+    forEachNodeReduction(cells, L, p.depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
+      if (L < l + k) return;
+      const uint32_t r = L - l - k;
+      if (r >= p.minNodeResLog2 && r <= p.maxRes(l)) out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] = v;
+    });
+  }
+}
+
 void putBytes(std::vector<uint8_t>& b, const void* p, size_t n) {
   const size_t at = b.size();
   b.resize(at + n);
@@ -204,6 +293,36 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeight
     if (h.size() != size_t(S) * S)
       throw InputError("chart " + std::to_string(c) + ": expected " + std::to_string(S) + "^2 heights");
     buildChart(hier.params, manifest, manifest.charts[c], h, hier.charts[c]);
+  });
+  if (stats) {
+    stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
+    stats->samples = uint64_t(count) * S * S;
+    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    stats->samplesPerSecond = stats->seconds > 0 ? double(stats->samples) / stats->seconds : 0.0;
+  }
+  return hier;
+}
+
+Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
+                                 const std::vector<std::array<RootNeighbour, 4>>& roots,
+                                 const ChartPositionSource& source, HierarchyStats* stats) {
+  Hierarchy hier;
+  hier.params = params;
+  hier.params.validate();
+  const uint32_t count = uint32_t(roots.size());
+  hier.charts.resize(count);
+  hier.roots = roots;
+  const uint32_t S = (1u << params.intervalsLog2) + 1;
+  const auto t0 = std::chrono::steady_clock::now();
+  tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) {
+    const std::vector<glm::vec3> P = source(c);
+    if (P.size() != size_t(S) * S)
+      throw InputError("chart " + std::to_string(c) + ": expected " + std::to_string(S) + "^2 positions, got " +
+                       std::to_string(P.size()));
+    for (const glm::vec3& q : P)
+      if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z))
+        throw InputError("chart " + std::to_string(c) + ": non-finite position in the geometry image");
+    buildGeometryChart(hier.params, P, hier.charts[c]);
   });
   if (stats) {
     stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());

@@ -10,6 +10,8 @@
 #include <functional>
 #include <vector>
 
+#include <glm/vec3.hpp>
+
 #include "core/atlas_format.h"
 
 namespace gimlod {
@@ -102,6 +104,22 @@ using ChartHeightSource = std::function<std::vector<float>(uint32_t chart)>;
 // drops, a parent's error is at least its children's, and the bound holds for the drawn mesh.
 Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeightSource& source,
                                 HierarchyStats* stats = nullptr);
+
+// Mesh-atlas input: chart id -> level-0 geometry image, chartSize^2 positions (row = v). Must be
+// thread-safe.
+using ChartPositionSource = std::function<std::vector<glm::vec3>(uint32_t chart)>;
+
+// Builds the hierarchy of a geometry-image atlas (section 5 charts; multithreaded over charts).
+// roots: each chart's 4 neighbours (as in the manifest). Bounds are the 3D boxes of the node's
+// samples. Node error at res r = max over the node's level-0 samples of |p(u,v) - surface_k(u,v)|
+// (Euclidean), where surface_k is the level-k grid drawn as the render grids draw it (split along
+// the (0,0)-(1,1) diagonal), interpolated at the sample's own (u,v), maximised over k' <= k: the
+// geometry-image analogue of the terrain's vertical error, and an upper bound on the distance
+// from each sample to the drawn surface. Same monotonicity as buildTerrainHierarchy. Throws
+// InputError for a wrong image size or a non-finite position.
+Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
+                                 const std::vector<std::array<RootNeighbour, 4>>& roots,
+                                 const ChartPositionSource& source, HierarchyStats* stats = nullptr);
 
 void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h);  // atomic
 Hierarchy readHierarchy(const std::filesystem::path& path);  // throws InputError naming the file
