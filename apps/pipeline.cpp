@@ -33,55 +33,6 @@ bool isMeshFile(const fs::path& p) {
   return e == ".ply" || e == ".obj" || e == ".off" || e == ".stl";
 }
 
-// A sibling temporary directory that is removed unless committed (renamed onto the target).
-class StagingDir {
- public:
-  explicit StagingDir(const fs::path& target) : target_(fs::absolute(target)) {
-    std::error_code ec;
-    if (target_.filename().empty()) target_ = target_.parent_path();
-    if (fs::exists(target_, ec) && !fs::is_directory(target_, ec))
-      throw InputError(target_.string() + ": exists and is not a directory");
-    if (fs::exists(target_, ec) && !fs::is_empty(target_, ec) && !fs::exists(target_ / kManifestName, ec))
-      throw InputError(target_.string() + ": exists, is not empty and is not a gimlod atlas; not replacing it");
-    if (!fs::is_directory(target_.parent_path(), ec))
-      throw InputError(target_.string() + ": parent directory does not exist");
-    std::random_device rd;
-    path_ = target_.parent_path() /
-            fmt::format(".{}.partial-{}-{:x}", target_.filename().string(), ::getpid(), rd());
-    if (!fs::create_directory(path_, ec))
-      throw InputError(target_.string() + ": cannot create output directory (" +
-                       (ec ? ec.message() : std::string("already exists")) + ")");
-  }
-  ~StagingDir() {
-    if (!committed_) {
-      std::error_code ec;
-      fs::remove_all(path_, ec);
-    }
-  }
-  StagingDir(const StagingDir&) = delete;
-  StagingDir& operator=(const StagingDir&) = delete;
-  const fs::path& path() const { return path_; }
-
-  // Replaces the target (an earlier atlas or an empty directory) with the staged directory.
-  void commit() {
-    std::error_code ec;
-    fs::path old;
-    if (fs::exists(target_, ec)) {
-      old = path_.string() + ".old";
-      fs::rename(target_, old, ec);
-      if (ec) throw InputError(target_.string() + ": cannot replace (" + ec.message() + ")");
-    }
-    fs::rename(path_, target_, ec);
-    if (ec) throw InputError(target_.string() + ": cannot move the staged atlas into place (" + ec.message() + ")");
-    committed_ = true;
-    if (!old.empty()) fs::remove_all(old, ec);
-  }
-
- private:
-  fs::path target_, path_;
-  bool committed_ = false;
-};
-
 uint64_t directoryBytes(const fs::path& dir) {
   uint64_t total = 0;
   for (const auto& e : fs::recursive_directory_iterator(dir))
@@ -133,7 +84,7 @@ nlohmann::json buildAtlas(const BuildOptions& o) {
                o.input.string(), dem.width, dem.height, dem.spacing[0], dem.spacing[1], dem.minHeight,
                dem.maxHeight, dem.voidsFilled, dem.voidFillMethod);
 
-  StagingDir stage(o.output);
+  StagedDirectory stage(o.output, kManifestName, "atlas");
   AtlasManifest m;
   m.chartSize = o.chartSize;
   m.blockIntervals = o.nodeRes;

@@ -64,59 +64,6 @@ void writeAll(int fd, const void* data, size_t bytes, const fs::path& file) {
   }
 }
 
-// A sibling directory that is removed unless committed (renamed onto the target).
-class StagedDir {
- public:
-  explicit StagedDir(const fs::path& target) : target_(fs::absolute(target)) {
-    std::error_code ec;
-    if (target_.filename().empty()) target_ = target_.parent_path();
-    if (fs::exists(target_, ec) && !fs::is_directory(target_, ec))
-      fail(target_, "exists and is not a directory");
-    if (fs::is_directory(target_, ec) && !fs::is_empty(target_, ec) &&
-        !fs::exists(target_ / kGridManifestName, ec))
-      fail(target_, "exists, is not empty and is not a gimlod grid; not replacing it");
-    if (!fs::is_directory(target_.parent_path(), ec))
-      fail(target_, "parent directory does not exist");
-    std::random_device rd;
-    path_ = target_.parent_path() / ("." + target_.filename().string() + ".partial-" +
-                                     std::to_string(::getpid()) + "-" + std::to_string(rd()));
-    if (!fs::create_directory(path_, ec))
-      fail(target_, "cannot create the staging directory (" +
-                        (ec ? ec.message() : std::string("already exists")) + ")");
-  }
-  ~StagedDir() {
-    if (!committed_) {
-      std::error_code ec;
-      fs::remove_all(path_, ec);
-    }
-  }
-  StagedDir(const StagedDir&) = delete;
-  StagedDir& operator=(const StagedDir&) = delete;
-  const fs::path& path() const { return path_; }
-
-  void commit() {
-    std::error_code ec;
-    fs::path old;
-    if (fs::exists(target_, ec)) {
-      old = path_.string() + ".old";
-      fs::rename(target_, old, ec);
-      if (ec) fail(target_, "cannot replace (" + ec.message() + ")");
-    }
-    fs::rename(path_, target_, ec);
-    if (ec) {
-      std::error_code ignored;
-      if (!old.empty()) fs::rename(old, target_, ignored);
-      fail(target_, "cannot move the staged grid into place (" + ec.message() + ")");
-    }
-    committed_ = true;
-    if (!old.empty()) fs::remove_all(old, ec);
-  }
-
- private:
-  fs::path target_, path_;
-  bool committed_ = false;
-};
-
 void validate(const GridifyOptions& o) {
   auto bad = [](const std::string& what) { throw InputError("bad gridify options: " + what); };
   if (o.maxMemoryBytes < kMinMemoryBytes)
@@ -392,7 +339,7 @@ GridifyResult gridify(const fs::path& mesh, const fs::path& outDir, const Gridif
     result.probed = true;
   }
 
-  StagedDir stage(outDir);
+  StagedDirectory stage(outDir, kGridManifestName, "grid");
   GridWriter writer(stage.path(), options, result.probed ? &probed : nullptr, result);
   result.read = streamMesh(mesh, writer, ro);
   const MeshReadStats& rs = result.read;

@@ -7,9 +7,11 @@
 #include <bit>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fcntl.h>
 #include <limits>
+#include <random>
 #include <unistd.h>
 
 #include <nlohmann/json.hpp>
@@ -622,6 +624,56 @@ std::vector<PackedNormal> ChartFileReader::readLevelNormals(uint32_t level) cons
                                      [&](uint32_t u0, uint32_t v0, uint32_t n, PackedNormal* out) {
                                        readNormals(level, u0, v0, n, out);
                                      });
+}
+
+StagedDirectory::StagedDirectory(const std::filesystem::path& target, const std::string& markerFile,
+                                 const std::string& what)
+    : target_(std::filesystem::absolute(target)), what_(what) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (target_.filename().empty()) target_ = target_.parent_path();
+  if (fs::exists(target_, ec) && !fs::is_directory(target_, ec))
+    throw InputError(target_.string() + ": exists and is not a directory");
+  if (fs::is_directory(target_, ec) && !fs::is_empty(target_, ec) && !fs::exists(target_ / markerFile, ec))
+    throw InputError(target_.string() + ": exists, is not empty and is not a gimlod " + what_ + "; not replacing it");
+  if (!fs::is_directory(target_.parent_path(), ec))
+    throw InputError(target_.string() + ": parent directory does not exist");
+  std::random_device rd;
+  char suffix[64];
+  std::snprintf(suffix, sizeof(suffix), ".partial-%d-%x", int(::getpid()), unsigned(rd()));
+  std::string name = ".";  // note: appended, not "." + ...: GCC 12 warns falsely (-Wrestrict) there
+  name += target_.filename().string();
+  name += suffix;
+  path_ = target_.parent_path() / name;
+  if (!fs::create_directory(path_, ec))
+    throw InputError(target_.string() + ": cannot create the staging directory (" +
+                     (ec ? ec.message() : std::string("already exists")) + ")");
+}
+
+StagedDirectory::~StagedDirectory() {
+  if (!committed_) {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+}
+
+void StagedDirectory::commit() {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::path old;
+  if (fs::exists(target_, ec)) {
+    old = path_.string() + ".old";
+    fs::rename(target_, old, ec);
+    if (ec) throw InputError(target_.string() + ": cannot replace (" + ec.message() + ")");
+  }
+  fs::rename(path_, target_, ec);
+  if (ec) {
+    std::error_code ignored;
+    if (!old.empty()) fs::rename(old, target_, ignored);
+    throw InputError(target_.string() + ": cannot move the staged " + what_ + " into place (" + ec.message() + ")");
+  }
+  committed_ = true;
+  if (!old.empty()) fs::remove_all(old, ec);
 }
 
 }  // namespace gimlod

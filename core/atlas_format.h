@@ -86,6 +86,26 @@ void writeManifest(const std::filesystem::path& dir, const AtlasManifest& m);
 // Writes bytes to path.tmp-<pid> and renames it over path. Throws InputError on failure.
 void atomicWriteFile(const std::filesystem::path& path, const void* data, size_t bytes);
 
+// A sibling temporary directory (".<name>.partial-<pid>-<random>") for building a whole output
+// directory; removed unless committed, when it is renamed onto the target (replacing an earlier
+// output, which is restored if the rename fails). The target must not exist, be empty, or hold
+// `markerFile` (an earlier output of the same kind); anything else is refused. `what` names the
+// kind in messages ("atlas", "grid"). Throws InputError naming the target.
+class StagedDirectory {
+ public:
+  StagedDirectory(const std::filesystem::path& target, const std::string& markerFile, const std::string& what);
+  ~StagedDirectory();
+  StagedDirectory(const StagedDirectory&) = delete;
+  StagedDirectory& operator=(const StagedDirectory&) = delete;
+  const std::filesystem::path& path() const { return path_; }
+  void commit();
+
+ private:
+  std::filesystem::path target_, path_;
+  std::string what_;
+  bool committed_ = false;
+};
+
 // Normal stored as 4 x uint8 (n * 127.5 + 127.5, w = 255).
 using PackedNormal = std::array<uint8_t, 4>;
 // Packs a unit normal (components clamped to [-1, 1], rounded to nearest). Deterministic.
