@@ -43,10 +43,11 @@ void cellReduce(const std::vector<float>& s, uint32_t S, std::vector<float>& out
   }
 }
 
-// running[i] = max(running[i], |h - surface_k|) for every level-0 sample, where surface_k is the
-// piecewise-linear interpolation of the level-k subsampled grid split along (0,0)-(1,1).
-void accumulateLevelError(const std::vector<float>& h, uint32_t S, uint32_t k,
-                          std::vector<float>& running) {
+// running[i] = max(running[i], dist(p_i, surface_k(u_i, v_i))) for every level-0 sample, where
+// surface_k is the piecewise-linear interpolation of the level-k subsampled grid split along
+// (0,0)-(1,1). T is float (heights, dist = |a - b|) or glm::vec3 (geometry images, Euclidean).
+template <typename T, typename Dist>
+void accumulateLevelError(const std::vector<T>& h, uint32_t S, uint32_t k, std::vector<float>& running, Dist dist) {
   const uint32_t M = S - 1;
   const uint32_t n = M >> k;
   const uint32_t s = 1u << k;
@@ -54,24 +55,28 @@ void accumulateLevelError(const std::vector<float>& h, uint32_t S, uint32_t k,
   for (uint32_t y = 0; y <= M; ++y) {
     const uint32_t cy = std::min(y >> k, n - 1);
     const float fy = float(y - cy * s) * inv;
-    const float* row0 = &h[size_t(cy * s) * S];
-    const float* row1 = &h[size_t((cy + 1) * s) * S];
-    const float* src = &h[size_t(y) * S];
+    const T* row0 = &h[size_t(cy * s) * S];
+    const T* row1 = &h[size_t((cy + 1) * s) * S];
+    const T* src = &h[size_t(y) * S];
     float* run = &running[size_t(y) * S];
     for (uint32_t cx = 0; cx < n; ++cx) {
       const uint32_t x0 = cx * s;
-      const float h00 = row0[x0], h10 = row0[x0 + s], h01 = row1[x0], h11 = row1[x0 + s];
+      const T h00 = row0[x0], h10 = row0[x0 + s], h01 = row1[x0], h11 = row1[x0 + s];
       const uint32_t xend = (cx == n - 1) ? s : s - 1;
       for (uint32_t dx = 0; dx <= xend; ++dx) {
         const float fx = float(dx) * inv;
-        const float lower = h00 + fx * (h10 - h00) + fy * (h11 - h10);  // fx >= fy
-        const float upper = h00 + fy * (h01 - h00) + fx * (h11 - h01);  // fx < fy
-        const float interp = fx >= fy ? lower : upper;
-        const float e = std::fabs(src[x0 + dx] - interp);
-        run[x0 + dx] = std::max(run[x0 + dx], e);
+        const T interp = fx >= fy ? h00 + fx * (h10 - h00) + fy * (h11 - h10)   // lower triangle
+                                  : h00 + fy * (h01 - h00) + fx * (h11 - h01);  // upper triangle
+        run[x0 + dx] = std::max(run[x0 + dx], dist(src[x0 + dx], interp));
       }
     }
   }
+}
+
+float heightDistance(float a, float b) { return std::fabs(a - b); }
+float pointDistance(const glm::vec3& a, const glm::vec3& b) {
+  const glm::vec3 d = a - b;
+  return std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
 }
 
 void buildChart(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart,
@@ -127,7 +132,7 @@ void buildChart(const HierarchyParams& p, const AtlasManifest& m, const ChartInf
   const uint32_t kmax = L - p.minNodeResLog2;
   std::vector<float> running(size_t(S) * S, 0.0f), cells;
   for (uint32_t k = 1; k <= kmax; ++k) {
-    accumulateLevelError(h, S, k, running);
+    accumulateLevelError(h, S, k, running, heightDistance);
     cellReduce(running, S, cells, fmax);
     for (uint32_t n = M, l = L;; n /= 2, --l) {
       if (l < p.depth && L >= l + k) {
@@ -142,36 +147,6 @@ void buildChart(const HierarchyParams& p, const AtlasManifest& m, const ChartInf
       if (n == 1) break;
       reduce2x2(cells, n, tmp, fmax);
       cells.swap(tmp);
-    }
-  }
-}
-
-// The 3D analogue of accumulateLevelError: running[i] = max(running[i], |p - surface_k|) with
-// surface_k interpolated per component at the sample's (u, v).
-void accumulateLevelError3(const std::vector<glm::vec3>& P, uint32_t S, uint32_t k, std::vector<float>& running) {
-  const uint32_t M = S - 1;
-  const uint32_t n = M >> k;
-  const uint32_t s = 1u << k;
-  const float inv = 1.0f / float(s);
-  for (uint32_t y = 0; y <= M; ++y) {
-    const uint32_t cy = std::min(y >> k, n - 1);
-    const float fy = float(y - cy * s) * inv;
-    const glm::vec3* row0 = &P[size_t(cy * s) * S];
-    const glm::vec3* row1 = &P[size_t((cy + 1) * s) * S];
-    const glm::vec3* src = &P[size_t(y) * S];
-    float* run = &running[size_t(y) * S];
-    for (uint32_t cx = 0; cx < n; ++cx) {
-      const uint32_t x0 = cx * s;
-      const glm::vec3 p00 = row0[x0], p10 = row0[x0 + s], p01 = row1[x0], p11 = row1[x0 + s];
-      const uint32_t xend = (cx == n - 1) ? s : s - 1;
-      for (uint32_t dx = 0; dx <= xend; ++dx) {
-        const float fx = float(dx) * inv;
-        const glm::vec3 interp = fx >= fy ? p00 + fx * (p10 - p00) + fy * (p11 - p10)   // lower triangle
-                                          : p00 + fy * (p01 - p00) + fx * (p11 - p01);  // upper triangle
-        const glm::vec3 d = src[x0 + dx] - interp;
-        const float e = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
-        run[x0 + dx] = std::max(run[x0 + dx], e);
-      }
     }
   }
 }
@@ -225,7 +200,7 @@ void buildGeometryChart(const HierarchyParams& p, const std::vector<glm::vec3>& 
   const uint32_t kmax = L - p.minNodeResLog2;
   std::vector<float> running(size_t(S) * S, 0.0f);
   for (uint32_t k = 1; k <= kmax; ++k) {
-    accumulateLevelError3(P, S, k, running);
+    accumulateLevelError(P, S, k, running, pointDistance);
     cellReduce(running, S, cells, fmax);
     forEachNodeReduction(cells, L, p.depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
       if (L < l + k) return;

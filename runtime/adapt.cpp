@@ -164,23 +164,12 @@ void stitchGaps(const Hierarchy& h, const Cut& cut, std::vector<uint32_t>& gaps)
   gaps.assign(cut.nodes.size(), 0);
   for (const CutNode& m : cut.nodes) {
     if (m.id.level == 0) continue;  // nothing is coarser than a root
-    for (uint32_t s = 0; s < 4; ++s) {
-      NodeId a;
-      uint32_t aSide;
-      if (!adjacentNode(h, m.id, s, &a, &aSide)) continue;
-      const bool sameChart = a.chart == m.id.chart;
-      for (;; a = a.parent()) {
-        // An ancestor of m is never in the cut with m: the walk ends there.
-        const uint32_t up = m.id.level - a.level;
-        if (sameChart && a.x == (m.id.x >> up) && a.y == (m.id.y >> up)) break;
-        const int32_t i = cut.find(a);
-        if (i >= 0) {
-          gaps[i] = std::max(gaps[i], m.id.level - a.level);  // 0 for an equal neighbour
-          break;
-        }
-        if (a.level == 0) break;
-      }
-    }
+    walkToCoarserNeighbours(h, m.id, [&](const NodeId& a, uint32_t up) {
+      const int32_t i = cut.find(a);
+      if (i < 0) return false;
+      gaps[i] = std::max(gaps[i], up);  // 0 for an equal neighbour
+      return true;
+    });
   }
 }
 

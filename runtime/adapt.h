@@ -68,6 +68,33 @@ bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* vie
 uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i,
                             std::vector<SideNeighbour>& scratch);
 
+// For each side of node m (level > 0), walks from the adjacent node of m's level (across chart
+// borders too) up its ancestors, calling stop(a, m.level - a.level) until it returns true (the
+// caller found its equal-or-coarser neighbour there) or the walk reaches a root or an ancestor of
+// m. The core of the stitching-gap computations (stitchGaps and the adapters' dense versions).
+template <typename Stop>
+void walkToCoarserNeighbours(const Hierarchy& h, const NodeId& m, Stop&& stop) {
+  const uint32_t last = (1u << m.level) - 1;
+  for (uint32_t side = 0; side < 4; ++side) {
+    NodeId a = m;
+    bool inChart = true;
+    switch (side) {  // inside the chart without adjacentNode's border logic
+      case kEdgeBottom: inChart = a.y > 0; --a.y; break;
+      case kEdgeRight: inChart = a.x < last; ++a.x; break;
+      case kEdgeTop: inChart = a.y < last; ++a.y; break;
+      default: inChart = a.x > 0; --a.x; break;
+    }
+    uint32_t aSide;
+    if (!inChart && !adjacentNode(h, m, side, &a, &aSide)) continue;
+    const bool sameChart = a.chart == m.chart;
+    for (;; a = a.parent()) {
+      const uint32_t up = m.level - a.level;
+      if (sameChart && a.x == (m.x >> up) && a.y == (m.y >> up)) break;  // never in a cut with m
+      if (stop(a, up) || a.level == 0) break;
+    }
+  }
+}
+
 // For every cut node, the largest level difference to a finer drawn neighbour on any side: the
 // lowest resolution the stitching constraint allows it (gaps[i] == finestNeighbourGap(.., i, ..)).
 // Each node finds its equal-or-coarser neighbour on each side by walking up from the adjacent

@@ -163,15 +163,7 @@ double DualQueueAdapter::cachedSplitPriority(Entry& e, int32_t* delta) {
   }
   // Recompute, and cache when the children's visibility cannot change under this class.
   double slack = std::numeric_limits<double>::infinity();
-  *delta = -1;
-  double t = double(tris(e.res));
-  for (uint32_t i = 0; i < 4; ++i) {
-    const Eval c = evalNode(e.id.child(i), e.inside);
-    if (!c.drawn) continue;
-    t -= double(tris(c.res));
-    ++*delta;
-    slack = std::min(slack, c.slack);
-  }
+  const double t = splitPriority(e, delta, &slack);
   e.cacheSlack = e.inside ? std::max(slack, 0.0) : -1.0;
   e.cacheEye = view_.eye;
   e.cachePriority = t;
@@ -181,7 +173,7 @@ double DualQueueAdapter::cachedSplitPriority(Entry& e, int32_t* delta) {
   return t;
 }
 
-double DualQueueAdapter::splitPriority(const Entry& e, int32_t* delta) const {
+double DualQueueAdapter::splitPriority(const Entry& e, int32_t* delta, double* slack) const {
   *delta = 0;
   if (e.id.level + 1 >= h_.params.depth || !e.drawn) return -1.0;  // undrawn: children are too
   *delta = -1;
@@ -195,6 +187,7 @@ double DualQueueAdapter::splitPriority(const Entry& e, int32_t* delta) const {
     if (!c.drawn) continue;
     t -= double(tris(c.res));
     ++*delta;
+    if (slack) *slack = std::min(*slack, c.slack);
   }
   return t;
 }
@@ -486,30 +479,12 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   }
   for (const Entry& m : entries_) {
     if (!m.drawn || m.id.level == 0) continue;
-    for (uint32_t side = 0; side < 4; ++side) {
-      NodeId a = m.id;
-      const uint32_t last = (1u << m.id.level) - 1;
-      bool inChart = true;
-      switch (side) {  // inside the chart without adjacentNode's border logic
-        case kEdgeBottom: inChart = a.y > 0; --a.y; break;
-        case kEdgeRight: inChart = a.x < last; ++a.x; break;
-        case kEdgeTop: inChart = a.y < last; ++a.y; break;
-        default: inChart = a.x > 0; --a.x; break;
-      }
-      uint32_t aSide;
-      if (!inChart && !adjacentNode(h_, m.id, side, &a, &aSide)) continue;
-      const bool sameChart = a.chart == m.id.chart;
-      for (;; a = a.parent()) {
-        const uint32_t up = m.id.level - a.level;
-        if (sameChart && a.x == (m.id.x >> up) && a.y == (m.id.y >> up)) break;
-        const uint32_t g = globalIndex(a);
-        if (drawnState_[g]) {
-          if (drawnState_[g] == 2) gaps_[g] = std::max<uint8_t>(gaps_[g], uint8_t(up));
-          break;
-        }
-        if (a.level == 0) break;
-      }
-    }
+    walkToCoarserNeighbours(h_, m.id, [&](const NodeId& a, uint32_t up) {
+      const uint32_t g = globalIndex(a);
+      if (!drawnState_[g]) return false;
+      if (drawnState_[g] == 2) gaps_[g] = std::max<uint8_t>(gaps_[g], uint8_t(up));
+      return true;
+    });
   }
   out_.nodes.clear();
   out_.nodes.reserve(drawn_);

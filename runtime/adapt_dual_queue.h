@@ -121,7 +121,8 @@ class DualQueueAdapter {
   Eval evalNode(const NodeId& n, bool parentInside) const;
   Eval evalBox(const float* bounds, const float* errors, uint32_t level, bool parentInside) const;
   void evaluate(Entry& e);
-  double splitPriority(const Entry& e, int32_t* delta) const;
+  // slack (optional): lowered to the smallest eye movement that may change a child's resolution.
+  double splitPriority(const Entry& e, int32_t* delta, double* slack = nullptr) const;
   double cachedSplitPriority(Entry& e, int32_t* delta);
   bool childDrawn(const Entry& e, uint32_t i) const;
   double mergeCost(const NodeId& parent, bool* overTol, int32_t* freed) const;

@@ -223,30 +223,12 @@ struct QuadQueueAdapter::State {
     for (auto& [k, e] : cut) e.gap = 0;
     for (const auto& [k, m] : cut) {
       if (!m.drawn || m.id.level == 0) continue;
-      for (uint32_t side = 0; side < 4; ++side) {
-        NodeId a = m.id;
-        const uint32_t last = (1u << m.id.level) - 1;
-        bool inChart = true;
-        switch (side) {  // inside the chart without adjacentNode's border logic
-          case kEdgeBottom: inChart = a.y > 0; --a.y; break;
-          case kEdgeRight: inChart = a.x < last; ++a.x; break;
-          case kEdgeTop: inChart = a.y < last; ++a.y; break;
-          default: inChart = a.x > 0; --a.x; break;
-        }
-        uint32_t aSide;
-        if (!inChart && !adjacentNode(*h, m.id, side, &a, &aSide)) continue;
-        const bool sameChart = a.chart == m.id.chart;
-        for (;; a = a.parent()) {
-          const uint32_t up = m.id.level - a.level;
-          if (sameChart && a.x == (m.id.x >> up) && a.y == (m.id.y >> up)) break;
-          auto f = cut.find(a.key());
-          if (f != cut.end()) {
-            if (f->second.drawn) f->second.gap = std::max(f->second.gap, up);
-            break;
-          }
-          if (a.level == 0) break;
-        }
-      }
+      walkToCoarserNeighbours(*h, m.id, [&](const NodeId& a, uint32_t up) {
+        auto f = cut.find(a.key());
+        if (f == cut.end()) return false;
+        if (f->second.drawn) f->second.gap = std::max(f->second.gap, up);
+        return true;
+      });
     }
     floorTris = 0;
     for (auto& [k, e] : cut) {
