@@ -1,7 +1,9 @@
 // Adaptation time per frame against the number of selected nodes (the paper's figure 6), along a
 // moving orbit: the coherent dual-queue adapter (ours) against the stateless top-down greedy, in
 // the same run. The tolerance is small enough that the node budget sets the node count.
-// Usage: bench_adapt ATLAS_DIR [tolerance_px=0.02] [frames=240] [WxH=1280x720]
+// Then the same curve for the quad-queue adapter under a triangle budget (the setting of the
+// paper's figure 6: 4M triangles), with the mean of the per-frame max error.
+// Usage: bench_adapt ATLAS_DIR [tolerance_px=0.02] [frames=240] [WxH=1280x720] [triangles=4000000]
 // Reads a built atlas only (no GDAL), e.g. `gimlod build ../shared/data/terrain/etopo5.cdf
 // -o out/etopo.atlas --depth 6`.
 #include <algorithm>
@@ -12,6 +14,7 @@
 
 #include "runtime/adapt.h"
 #include "runtime/adapt_dual_queue.h"
+#include "runtime/adapt_quad_queue.h"
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
 
@@ -29,6 +32,7 @@ int main(int argc, char** argv) {
   const uint32_t frames = argc > 3 ? uint32_t(std::atoi(argv[3])) : 240;
   uint32_t w = 1280, hgt = 720;
   if (argc > 4) std::sscanf(argv[4], "%ux%u", &w, &hgt);
+  const uint64_t triangles = argc > 5 ? std::strtoull(argv[5], nullptr, 10) : 4000000ull;
   if (!(tolerance > 0.0) || frames == 0 || w == 0 || hgt == 0) {
     std::fprintf(stderr, "bench_adapt: bad arguments\n");
     return 2;
@@ -63,6 +67,29 @@ int main(int argc, char** argv) {
     const double n = double(views.size());
     std::printf("%9u %8.0f %10.1f %10.4f %8.1f %8.0f %11.1f %10.2f %9.4f\n", budget, nodes / n, us / n,
                 us / nodes, ops / n, reused / n, greedyUs / n, greedyUs / us, err);
+  }
+  std::printf("\nquad queue, %llu triangles:\n%9s %8s %10s %10s %8s %8s %10s\n", (unsigned long long)triangles,
+              "max_nodes", "nodes", "ours_us", "us/node", "rounds", "ops", "err_px");
+  for (uint32_t budget : {100u, 250u, 500u, 1000u, 2000u, 5000u, 10000u, 20000u}) {
+    BudgetOptions o;
+    o.maxTriangles = triangles;
+    o.maxNodes = budget;
+    QuadQueueAdapter ours(h);
+    for (const ViewParams& v : views) ours.update(v, o);  // warm-up pass
+    double us = 0.0, nodes = 0.0, rounds = 0.0, ops = 0.0, err = 0.0;
+    for (const ViewParams& v : views) {
+      BudgetStats st;
+      const auto t0 = Clock::now();
+      const Cut& cut = ours.update(v, o, &st);
+      us += std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+      nodes += double(cut.nodes.size());
+      rounds += st.rounds;
+      ops += st.refines + st.coarsens + st.splits + st.merges + st.undoneOps;
+      err += st.maxErrorPx;
+    }
+    const double n = double(views.size());
+    std::printf("%9u %8.0f %10.1f %10.4f %8.2f %8.0f %10.4f\n", budget, nodes / n, us / n, us / nodes, rounds / n,
+                ops / n, err / n);
   }
   return 0;
 }

@@ -89,6 +89,19 @@ namespace {
 
 uint64_t budgetTris(uint32_t res) { return 2ull << (2 * res); }
 
+// Sets every node's errorPx and the cut's nodes, triangles and max/mean error in st.
+void measureBudgetCut(const Hierarchy& h, const ViewParams& view, Cut& cut, BudgetStats& st) {
+  st.nodes = uint32_t(cut.nodes.size());
+  st.triangles = cut.triangles();
+  double sum = 0.0;
+  for (CutNode& n : cut.nodes) {
+    n.errorPx = float(screenError(h, n.id, n.res, view));
+    st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
+    sum += n.errorPx;
+  }
+  st.meanErrorPx = cut.nodes.empty() ? 0.0 : sum / double(cut.nodes.size());
+}
+
 // One top-down operation: split id (children at childRes) or raise id's resolution by one.
 struct BudgetOp {
   NodeId id;
@@ -146,15 +159,7 @@ Cut finishBudgetCut(const Hierarchy& h, const ViewParams& view, const BudgetOpti
   }
   st.refines = st.splits = 0;
   for (size_t i = 0; i < count; ++i) (ops[i].split ? st.splits : st.refines)++;
-  st.nodes = uint32_t(cut.nodes.size());
-  st.triangles = cut.triangles();
-  double sum = 0.0;
-  for (CutNode& n : cut.nodes) {
-    n.errorPx = float(screenError(h, n.id, n.res, view));
-    st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
-    sum += n.errorPx;
-  }
-  st.meanErrorPx = cut.nodes.empty() ? 0.0 : sum / double(cut.nodes.size());
+  measureBudgetCut(h, view, cut, st);
   return cut;
 }
 
@@ -248,15 +253,7 @@ Cut adaptGreedyBudget(const Hierarchy& h, const ViewParams& view, const BudgetOp
   st.splits = bestStats.splits;
   st.constraintRaises = bestStats.constraintRaises;
   st.constraintSplits = bestStats.constraintSplits;
-  st.nodes = uint32_t(best.nodes.size());
-  st.triangles = best.triangles();
-  double sum = 0.0;
-  for (CutNode& n : best.nodes) {
-    n.errorPx = float(screenError(h, n.id, n.res, view));
-    st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
-    sum += n.errorPx;
-  }
-  st.meanErrorPx = best.nodes.empty() ? 0.0 : sum / double(best.nodes.size());
+  measureBudgetCut(h, view, best, st);
   if (stats) *stats = st;
   return best;
 }
