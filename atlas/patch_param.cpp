@@ -1,0 +1,512 @@
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (parameterize); Floater 2003 (mean-value
+// weights); Sander et al. 2001 (stretch); Yoshizawa, Belyaev, Seidel 2004 (stretch reweighting).
+#include "atlas/patch_param.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+
+#include <Eigen/Sparse>
+#include <Eigen/SparseLU>
+#include <glm/geometric.hpp>
+
+namespace gimlod {
+namespace {
+
+[[noreturn]] void fail(uint32_t patch, const std::string& what) {
+  throw std::invalid_argument("parameterizePatch: patch " + std::to_string(patch) + ": " + what);
+}
+
+uint64_t edgeKey(uint32_t a, uint32_t b) { return (uint64_t{a} << 32) | b; }
+
+// Per-triangle stretch of the map param -> surface (Sander et al. 2001), unnormalized.
+struct TriangleStretch {
+  double areaParam = 0.0;  // signed
+  double area3D = 0.0;
+  double l2sq = 0.0;       // (a + c) / 2
+  double gammaSq = 0.0;    // largest singular value squared
+  bool degenerate = false;
+};
+
+TriangleStretch triangleStretch(const glm::dvec2& p1, const glm::dvec2& p2, const glm::dvec2& p3,
+                                const glm::dvec3& q1, const glm::dvec3& q2, const glm::dvec3& q3) {
+  TriangleStretch r;
+  const glm::dvec2 e1 = p2 - p1, e2 = p3 - p1;
+  const double twice = e1.x * e2.y - e2.x * e1.y;
+  r.areaParam = 0.5 * twice;
+  const glm::dvec3 f1 = q2 - q1, f2 = q3 - q1;
+  r.area3D = 0.5 * glm::length(glm::cross(f1, f2));
+  const double scaleParam = glm::dot(e1, e1) + glm::dot(e2, e2);
+  const double scale3D = glm::dot(f1, f1) + glm::dot(f2, f2);
+  if (!(std::abs(twice) > 1e-14 * scaleParam) || !(2.0 * r.area3D > 1e-14 * scale3D)) {
+    r.degenerate = true;
+    return r;
+  }
+  const glm::dvec3 ss = (q1 * (p2.y - p3.y) + q2 * (p3.y - p1.y) + q3 * (p1.y - p2.y)) / twice;
+  const glm::dvec3 st = (q1 * (p3.x - p2.x) + q2 * (p1.x - p3.x) + q3 * (p2.x - p1.x)) / twice;
+  const double a = glm::dot(ss, ss), b = glm::dot(ss, st), c = glm::dot(st, st);
+  r.l2sq = 0.5 * (a + c);
+  r.gammaSq = 0.5 * ((a + c) + std::sqrt((a - c) * (a - c) + 4.0 * b * b));
+  return r;
+}
+
+// The patch as a local triangle mesh with its boundary loop, after validation.
+struct LocalPatch {
+  std::vector<uint32_t> vertices;                  // local -> global
+  std::vector<std::array<uint32_t, 3>> triangles;  // local ids
+  std::vector<glm::dvec3> xyz;                     // per local vertex
+  std::vector<uint32_t> boundary;                  // local ids, CCW, starting at corner 0
+  std::vector<uint32_t> cornerIndex;               // position of corner i in boundary
+};
+
+LocalPatch buildLocalPatch(const ChartLayout& layout, uint32_t patchId) {
+  if (patchId >= layout.patches.size()) fail(patchId, "no such patch");
+  const Patch& patch = layout.patches[patchId];
+  const uint32_t n = uint32_t(patch.sides.size());
+  if (n < 3 || n > 8) fail(patchId, std::to_string(n) + " sides (3..8 supported)");
+  if (patch.triangles.empty()) fail(patchId, "no triangles");
+
+  LocalPatch lp;
+  const uint32_t nv = uint32_t(layout.positions.size());
+  std::unordered_map<uint32_t, uint32_t> local;
+  local.reserve(patch.triangles.size());
+  lp.triangles.reserve(patch.triangles.size());
+  for (uint32_t t : patch.triangles) {
+    if (t >= layout.triangles.size()) fail(patchId, "triangle " + std::to_string(t) + " out of range");
+    std::array<uint32_t, 3> lt;
+    for (int c = 0; c < 3; ++c) {
+      const uint32_t v = layout.triangles[t][c];
+      if (v >= nv) fail(patchId, "vertex " + std::to_string(v) + " out of range");
+      auto [it, inserted] = local.try_emplace(v, uint32_t(lp.vertices.size()));
+      if (inserted) lp.vertices.push_back(v);
+      lt[c] = it->second;
+    }
+    if (lt[0] == lt[1] || lt[1] == lt[2] || lt[0] == lt[2]) {
+      fail(patchId, "triangle " + std::to_string(t) + " repeats a vertex");
+    }
+    lp.triangles.push_back(lt);
+  }
+  lp.xyz.reserve(lp.vertices.size());
+  for (uint32_t v : lp.vertices) lp.xyz.emplace_back(layout.positions[v]);
+
+  // Directed edges: each at most once (manifold, consistently oriented).
+  std::unordered_map<uint64_t, uint32_t> directed;
+  directed.reserve(lp.triangles.size() * 3);
+  for (const auto& t : lp.triangles) {
+    for (int c = 0; c < 3; ++c) {
+      if (!directed.emplace(edgeKey(t[c], t[(c + 1) % 3]), 0).second) {
+        fail(patchId, "non-manifold or inconsistently oriented edge " +
+                          std::to_string(lp.vertices[t[c]]) + "-" +
+                          std::to_string(lp.vertices[t[(c + 1) % 3]]));
+      }
+    }
+  }
+  uint32_t boundaryEdges = 0;
+  for (const auto& kv : directed) {
+    const uint64_t k = kv.first;
+    if (!directed.contains((k << 32) | (k >> 32))) ++boundaryEdges;
+  }
+
+  // The boundary loop from the sides.
+  lp.cornerIndex.resize(n);
+  std::vector<uint8_t> seen(lp.vertices.size(), 0);
+  for (uint32_t i = 0; i < n; ++i) {
+    const PatchSide& s = patch.sides[i];
+    if (s.vertices.size() < 2) fail(patchId, "side " + std::to_string(i) + " has < 2 vertices");
+    if (s.vertices.back() != patch.sides[(i + 1) % n].vertices.front()) {
+      fail(patchId, "side " + std::to_string(i) + " does not end where side " +
+                        std::to_string((i + 1) % n) + " starts");
+    }
+    lp.cornerIndex[i] = uint32_t(lp.boundary.size());
+    for (size_t k = 0; k + 1 < s.vertices.size(); ++k) {
+      auto it = local.find(s.vertices[k]);
+      if (it == local.end()) {
+        fail(patchId, "side " + std::to_string(i) + " vertex " + std::to_string(s.vertices[k]) +
+                          " is not in the patch");
+      }
+      if (seen[it->second]++) {
+        fail(patchId, "boundary vertex " + std::to_string(s.vertices[k]) + " repeats");
+      }
+      lp.boundary.push_back(it->second);
+    }
+  }
+  const size_t nb = lp.boundary.size();
+  for (size_t k = 0; k < nb; ++k) {
+    const uint32_t a = lp.boundary[k], b = lp.boundary[(k + 1) % nb];
+    if (!directed.contains(edgeKey(a, b)) || directed.contains(edgeKey(b, a))) {
+      fail(patchId, "sides do not follow the boundary (edge " + std::to_string(lp.vertices[a]) +
+                        "-" + std::to_string(lp.vertices[b]) + ")");
+    }
+  }
+  if (boundaryEdges != nb) {
+    fail(patchId, "not a disk: " + std::to_string(boundaryEdges) + " boundary edges, sides hold " +
+                      std::to_string(nb));
+  }
+  // Euler characteristic of a disk, and connectivity.
+  const int64_t v = int64_t(lp.vertices.size()), f = int64_t(lp.triangles.size());
+  const int64_t e = (int64_t(directed.size()) + boundaryEdges) / 2;
+  if (v - e + f != 1) fail(patchId, "not a disk (Euler characteristic " + std::to_string(v - e + f) + ")");
+  std::vector<uint32_t> parent(lp.vertices.size());
+  for (uint32_t i = 0; i < parent.size(); ++i) parent[i] = i;
+  auto find = [&](uint32_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  uint32_t components = uint32_t(parent.size());
+  for (const auto& t : lp.triangles) {
+    for (int c = 0; c < 2; ++c) {
+      const uint32_t a = find(t[c]), b = find(t[c + 1]);
+      if (a != b) parent[a] = b, --components;
+    }
+  }
+  if (components != 1) fail(patchId, "not connected");
+  return lp;
+}
+
+// Per-vertex row of weights to neighbours (sorted by neighbour).
+struct WeightRow {
+  std::vector<uint32_t> j;
+  std::vector<double> w;
+};
+
+// Floater's mean-value weights w_ij = (tan(a/2) + tan(b/2)) / |x_j - x_i|, from 3D angles.
+std::vector<WeightRow> meanValueWeights(const LocalPatch& lp) {
+  std::vector<std::vector<std::pair<uint32_t, double>>> acc(lp.vertices.size());
+  for (const auto& t : lp.triangles) {
+    for (int c = 0; c < 3; ++c) {
+      const uint32_t i = t[c], j = t[(c + 1) % 3], k = t[(c + 2) % 3];
+      const glm::dvec3 e1 = lp.xyz[j] - lp.xyz[i], e2 = lp.xyz[k] - lp.xyz[i];
+      const double l1 = glm::length(e1), l2 = glm::length(e2);
+      const double sinPart = glm::length(glm::cross(e1, e2));
+      const double denom = l1 * l2 + glm::dot(e1, e2);  // tan(theta/2) = |e1 x e2| / denom
+      double tanHalf = denom > 1e-300 ? sinPart / denom : 0.0;
+      if (!std::isfinite(tanHalf)) tanHalf = 0.0;
+      acc[i].emplace_back(j, l1 > 0 ? tanHalf / l1 : 0.0);
+      acc[i].emplace_back(k, l2 > 0 ? tanHalf / l2 : 0.0);
+    }
+  }
+  std::vector<WeightRow> rows(lp.vertices.size());
+  for (size_t i = 0; i < acc.size(); ++i) {
+    auto& a = acc[i];
+    std::sort(a.begin(), a.end());
+    WeightRow& r = rows[i];
+    double sum = 0.0;
+    for (const auto& [j, w] : a) {
+      if (!r.j.empty() && r.j.back() == j) {
+        r.w.back() += w;
+      } else {
+        r.j.push_back(j);
+        r.w.push_back(w);
+      }
+      sum += w;
+    }
+    // note: a vertex whose triangles are all degenerate in 3D has no meaningful angles; it
+    // falls back to uniform (Tutte) weights, still positive.
+    if (!(sum > 0.0) || !std::isfinite(sum)) std::fill(r.w.begin(), r.w.end(), 1.0);
+    // A tiny uniform floor keeps every weight strictly positive (slivers give tan(theta/2) = 0).
+    const double floor = 1e-9 * (sum > 0 && std::isfinite(sum) ? sum / double(r.w.size()) : 1.0);
+    for (double& w : r.w) w = std::max(w, floor);
+  }
+  return rows;
+}
+
+// Solves the barycentric system with the boundary fixed; writes interior uv.
+class InteriorSolver {
+ public:
+  InteriorSolver(const LocalPatch& lp, const std::vector<uint8_t>& isBoundary)
+      : isBoundary_(isBoundary), unknown_(lp.vertices.size(), ~0u) {
+    for (uint32_t i = 0; i < lp.vertices.size(); ++i) {
+      if (!isBoundary[i]) {
+        unknown_[i] = uint32_t(interior_.size());
+        interior_.push_back(i);
+      }
+    }
+  }
+
+  // Returns false if the factorization failed.
+  bool solve(const std::vector<WeightRow>& rows, std::vector<glm::dvec2>& uv) {
+    const Eigen::Index m = Eigen::Index(interior_.size());
+    if (m == 0) return true;
+    std::vector<Eigen::Triplet<double>> trip;
+    Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(m, 2);
+    for (Eigen::Index r = 0; r < m; ++r) {
+      const WeightRow& row = rows[interior_[size_t(r)]];
+      double diag = 0.0;
+      for (double w : row.w) diag += w;
+      // Rows are scaled to sum to 1, so the matrix is well conditioned whatever the weights' scale.
+      for (size_t k = 0; k < row.j.size(); ++k) {
+        const uint32_t j = row.j[k];
+        const double w = row.w[k] / diag;
+        if (isBoundary_[j]) {
+          rhs(r, 0) += w * uv[j].x;
+          rhs(r, 1) += w * uv[j].y;
+        } else {
+          trip.emplace_back(r, Eigen::Index(unknown_[j]), -w);
+        }
+      }
+      trip.emplace_back(r, r, 1.0);
+    }
+    Eigen::SparseMatrix<double> a(m, m);
+    a.setFromTriplets(trip.begin(), trip.end());
+    a.makeCompressed();
+    if (!analyzed_) {
+      lu_.analyzePattern(a);
+      analyzed_ = true;
+    }
+    lu_.factorize(a);
+    if (lu_.info() != Eigen::Success) return false;
+    const Eigen::MatrixXd x = lu_.solve(rhs);
+    if (lu_.info() != Eigen::Success || !x.allFinite()) return false;
+    for (Eigen::Index r = 0; r < m; ++r) uv[interior_[size_t(r)]] = {x(r, 0), x(r, 1)};
+    return true;
+  }
+
+ private:
+  const std::vector<uint8_t>& isBoundary_;
+  std::vector<uint32_t> unknown_;
+  std::vector<uint32_t> interior_;
+  Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu_;
+  bool analyzed_ = false;
+};
+
+// Area-weighted RMS of the triangles' L2 stretch around each vertex, divided by its mean.
+std::vector<double> vertexStretch(const LocalPatch& lp, const std::vector<glm::dvec2>& uv) {
+  std::vector<double> num(lp.vertices.size(), 0.0), den(lp.vertices.size(), 0.0);
+  for (const auto& t : lp.triangles) {
+    const TriangleStretch s = triangleStretch(uv[t[0]], uv[t[1]], uv[t[2]], lp.xyz[t[0]],
+                                              lp.xyz[t[1]], lp.xyz[t[2]]);
+    if (s.degenerate || s.areaParam <= 0.0) continue;
+    for (uint32_t v : t) {
+      num[v] += s.area3D * s.l2sq;
+      den[v] += s.area3D;
+    }
+  }
+  std::vector<double> sigma(lp.vertices.size(), 0.0);
+  double sum = 0.0;
+  uint32_t count = 0;
+  for (size_t v = 0; v < sigma.size(); ++v) {
+    if (den[v] > 0.0) {
+      sigma[v] = std::sqrt(num[v] / den[v]);
+      sum += sigma[v];
+      ++count;
+    }
+  }
+  const double mean = count ? sum / count : 1.0;
+  for (double& s : sigma) s = s > 0.0 && mean > 0.0 ? s / mean : 1.0;
+  return sigma;
+}
+
+// L2 stretch energy of the triangles around one vertex with that vertex at `at`: the sum of
+// A3D(T) * L2(T)^2; infinite if a parameter triangle would flip or collapse (Sander's barrier).
+double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv,
+                  const std::vector<uint32_t>& ring, uint32_t v, const glm::dvec2& at,
+                  const std::vector<double>& area3D) {
+  double e = 0.0;
+  for (uint32_t t : ring) {
+    const auto& tri = lp.triangles[t];
+    glm::dvec2 p[3];
+    for (int c = 0; c < 3; ++c) p[c] = tri[c] == v ? at : uv[tri[c]];
+    const glm::dvec2 e1 = p[1] - p[0], e2 = p[2] - p[0];
+    const double twice = e1.x * e2.y - e2.x * e1.y;
+    if (!(twice > 1e-14 * (glm::dot(e1, e1) + glm::dot(e2, e2)))) {
+      return std::numeric_limits<double>::infinity();
+    }
+    const glm::dvec3 &q1 = lp.xyz[tri[0]], &q2 = lp.xyz[tri[1]], &q3 = lp.xyz[tri[2]];
+    const glm::dvec3 ss = (q1 * (p[1].y - p[2].y) + q2 * (p[2].y - p[0].y) + q3 * (p[0].y - p[1].y)) / twice;
+    const glm::dvec3 st = (q1 * (p[2].x - p[1].x) + q2 * (p[0].x - p[2].x) + q3 * (p[1].x - p[0].x)) / twice;
+    e += area3D[t] * 0.5 * (glm::dot(ss, ss) + glm::dot(st, st));
+  }
+  return e;
+}
+
+// Sander et al. 2001 style: per interior vertex, a line search along the negative gradient of the
+// ring's L2 stretch energy, never accepting a step that flips a triangle. Gauss-Seidel sweeps
+// until the total energy stops dropping. Returns the sweeps run.
+uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>& isBoundary,
+                                uint32_t maxSweeps, std::vector<glm::dvec2>& uv) {
+  std::vector<std::vector<uint32_t>> rings(lp.vertices.size());
+  std::vector<double> area3D(lp.triangles.size());
+  for (uint32_t t = 0; t < lp.triangles.size(); ++t) {
+    const auto& tri = lp.triangles[t];
+    area3D[t] = 0.5 * glm::length(glm::cross(lp.xyz[tri[1]] - lp.xyz[tri[0]],
+                                             lp.xyz[tri[2]] - lp.xyz[tri[0]]));
+    for (uint32_t v : tri) rings[v].push_back(t);
+  }
+  uint32_t sweeps = 0;
+  for (; sweeps < maxSweeps; ++sweeps) {
+    double before = 0.0, after = 0.0;
+    for (uint32_t v = 0; v < lp.vertices.size(); ++v) {
+      if (isBoundary[v]) continue;
+      const std::vector<uint32_t>& ring = rings[v];
+      const glm::dvec2 p = uv[v];
+      const double e0 = ringEnergy(lp, uv, ring, v, p, area3D);
+      if (!std::isfinite(e0)) continue;  // a flipped start: leave it to the counts
+      before += e0;
+      double scale = 0.0;  // mean distance to the ring's vertices in the parameter domain
+      for (uint32_t t : ring) {
+        for (uint32_t w : lp.triangles[t]) scale += glm::length(uv[w] - p);
+      }
+      scale /= 2.0 * double(ring.size());
+      const double h = 1e-6 * scale;
+      const glm::dvec2 g(
+          (ringEnergy(lp, uv, ring, v, p + glm::dvec2(h, 0), area3D) -
+           ringEnergy(lp, uv, ring, v, p - glm::dvec2(h, 0), area3D)) / (2 * h),
+          (ringEnergy(lp, uv, ring, v, p + glm::dvec2(0, h), area3D) -
+           ringEnergy(lp, uv, ring, v, p - glm::dvec2(0, h), area3D)) / (2 * h));
+      const double gl = glm::length(g);
+      double best = e0;
+      if (std::isfinite(gl) && gl > 0.0) {
+        const glm::dvec2 d = -g / gl;
+        for (double step = 0.25 * scale; step > 1e-4 * scale; step *= 0.5) {
+          const glm::dvec2 q = p + d * step;
+          const double e = ringEnergy(lp, uv, ring, v, q, area3D);
+          if (e < best) {
+            best = e;
+            uv[v] = q;
+            break;
+          }
+        }
+      }
+      after += best;
+    }
+    if (!(before > 0.0) || before - after < 1e-4 * before) {
+      ++sweeps;
+      break;
+    }
+  }
+  return sweeps;
+}
+
+}  // namespace
+
+glm::dvec2 polygonCorner(uint32_t n, uint32_t i) {
+  const double a = 2.0 * std::numbers::pi * double(i % n) / double(n);
+  return {std::cos(a), std::sin(a)};
+}
+
+ParamQuality measureStretch(const std::vector<glm::dvec2>& uv, const std::vector<glm::dvec3>& xyz,
+                            const std::vector<std::array<uint32_t, 3>>& triangles) {
+  ParamQuality q;
+  double l2num = 0.0, gammaMax = 0.0;
+  for (const auto& t : triangles) {
+    const TriangleStretch s =
+        triangleStretch(uv[t[0]], uv[t[1]], uv[t[2]], xyz[t[0]], xyz[t[1]], xyz[t[2]]);
+    if (s.degenerate) {
+      ++q.degenerateTriangles;
+      continue;
+    }
+    if (s.areaParam < 0.0) {
+      ++q.flippedTriangles;
+      continue;
+    }
+    q.area3D += s.area3D;
+    q.areaParam += s.areaParam;
+    l2num += s.area3D * s.l2sq;
+    gammaMax = std::max(gammaMax, s.gammaSq);
+  }
+  if (q.areaParam > 0.0 && q.area3D > 0.0) {
+    const double scale = std::sqrt(q.area3D / q.areaParam);  // isometric stretch after scaling
+    q.stretchL2 = std::sqrt(l2num / q.area3D) / scale;
+    q.stretchLinf = std::sqrt(gammaMax) / scale;
+  }
+  return q;
+}
+
+ParamQuality combineQuality(const std::vector<ParamQuality>& parts) {
+  // note: each part is normalized by its own scale (charts are scaled independently), so the
+  // combined L2 is the 3D-area-weighted RMS of the normalized figures.
+  ParamQuality q;
+  double num = 0.0;
+  q.stretchLinf = parts.empty() ? 1.0 : 0.0;
+  for (const ParamQuality& p : parts) {
+    num += p.area3D * p.stretchL2 * p.stretchL2;
+    q.area3D += p.area3D;
+    q.areaParam += p.areaParam;
+    q.stretchLinf = std::max(q.stretchLinf, p.stretchLinf);
+    q.flippedTriangles += p.flippedTriangles;
+    q.degenerateTriangles += p.degenerateTriangles;
+  }
+  if (q.area3D > 0.0) q.stretchL2 = std::sqrt(num / q.area3D);
+  return q;
+}
+
+PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patch,
+                                        const ParamOptions& options) {
+  LocalPatch lp = buildLocalPatch(layout, patch);
+  const uint32_t n = uint32_t(layout.patches[patch].sides.size());
+
+  PatchParameterization out;
+  out.patch = patch;
+  out.sides = n;
+  out.uv.assign(lp.vertices.size(), glm::dvec2(0.0));
+
+  // Boundary: side i on the polygon edge from corner i to corner i+1, by normalized arc length.
+  std::vector<uint8_t> isBoundary(lp.vertices.size(), 0);
+  const size_t nb = lp.boundary.size();
+  for (uint32_t i = 0; i < n; ++i) {
+    const size_t begin = lp.cornerIndex[i];
+    const size_t end = i + 1 < n ? lp.cornerIndex[i + 1] : nb;  // exclusive; corner i+1 at end
+    std::vector<double> cum(1, 0.0);
+    for (size_t k = begin; k < end; ++k) {
+      cum.push_back(cum.back() + glm::length(lp.xyz[lp.boundary[(k + 1) % nb]] -
+                                             lp.xyz[lp.boundary[k]]));
+    }
+    const double total = cum.back();
+    if (!(total > 0.0)) fail(patch, "side " + std::to_string(i) + " has zero length");
+    const glm::dvec2 c0 = polygonCorner(n, i), c1 = polygonCorner(n, i + 1);
+    for (size_t k = begin; k < end; ++k) {
+      const double f = cum[k - begin] / total;
+      const uint32_t v = lp.boundary[k];
+      out.uv[v] = k == begin ? c0 : c0 + (c1 - c0) * f;
+      isBoundary[v] = 1;
+    }
+  }
+
+  std::vector<WeightRow> weights = meanValueWeights(lp);
+  InteriorSolver solver(lp, isBoundary);
+  if (!solver.solve(weights, out.uv)) fail(patch, "mean-value system could not be solved");
+  out.initial = measureStretch(out.uv, lp.xyz, lp.triangles);
+  out.quality = out.initial;
+
+  // Stretch reduction: w_ij <- w_ij / sigma_j^eta; keep the best pass, stop when it stops helping.
+  std::vector<glm::dvec2> trial = out.uv;
+  for (uint32_t it = 0; it < options.stretchIterations; ++it) {
+    const std::vector<double> sigma = vertexStretch(lp, trial);
+    for (WeightRow& row : weights) {
+      for (size_t k = 0; k < row.j.size(); ++k) {
+        row.w[k] /= std::pow(sigma[row.j[k]], options.stretchExponent);
+      }
+    }
+    if (!solver.solve(weights, trial)) break;
+    const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
+    const bool better = q.flippedTriangles <= out.quality.flippedTriangles &&
+                        q.degenerateTriangles <= out.quality.degenerateTriangles &&
+                        q.stretchL2 < out.quality.stretchL2 * (1.0 - 1e-4);
+    if (!better) break;
+    out.uv = trial;
+    out.quality = q;
+    out.iterationsUsed = it + 1;
+  }
+
+  if (options.stretchSweeps > 0) {
+    trial = out.uv;
+    out.sweepsUsed = optimizeStretchLocally(lp, isBoundary, options.stretchSweeps, trial);
+    const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
+    if (q.flippedTriangles <= out.quality.flippedTriangles && q.stretchL2 <= out.quality.stretchL2) {
+      out.uv = std::move(trial);
+      out.quality = q;
+    }
+  }
+
+  out.vertices = std::move(lp.vertices);
+  out.triangles = std::move(lp.triangles);
+  out.boundary = std::move(lp.boundary);
+  out.cornerIndex = std::move(lp.cornerIndex);
+  return out;
+}
+
+}  // namespace gimlod

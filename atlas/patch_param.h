@@ -1,0 +1,87 @@
+// Parameterization of one n-sided patch of a chart layout onto a regular n-gon: the boundary is
+// fixed (corners on the polygon's vertices, each side's vertices by normalized arc length along
+// its polygon edge), the interior comes from Floater's mean-value weights (a Tutte embedding:
+// positive weights and a convex border give no flipped triangles), then optional stretch
+// reduction: iterative reweighting, which keeps the weights positive and so the embedding valid,
+// and local L2 stretch minimization, whose energy is infinite on a flipped triangle.
+// The quads of the conforming quad layout (atlas/resample.h) are kites of this polygon.
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (parameterize); Floater, "Mean value
+// coordinates", CAGD 2003; Sander, Snyder, Gortler, Hoppe, "Texture mapping progressive meshes",
+// SIGGRAPH 2001 (L2 / Linf stretch); Yoshizawa, Belyaev, Seidel, "A fast and simple
+// stretch-minimizing mesh parameterization", SMI 2004 (reweighting).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include <glm/vec2.hpp>
+
+#include "atlas/chart_layout.h"
+
+namespace gimlod {
+
+struct ParamOptions {
+  // Global stretch reweighting passes after the mean-value solve (Yoshizawa et al.; each one a
+  // sparse solve); stops at the first pass that does not lower the L2 stretch. 0 skips it.
+  uint32_t stretchIterations = 4;
+  // Reweighting exponent eta in w_ij <- w_ij / sigma_j^eta; 0 < eta <= 1 (smaller is steadier).
+  double stretchExponent = 0.5;
+  // Local L2 stretch minimization sweeps (Sander et al.: per-vertex line searches that never
+  // flip a triangle), until the energy drops by less than 0.01% in a sweep. 0 skips it.
+  uint32_t stretchSweeps = 30;
+};
+
+// Quality of a parameterization (param -> surface map), in the style of xatlas' per-chart
+// figures. Stretch follows Sander et al. 2001: per triangle L2 = sqrt((G^2 + g^2) / 2) and
+// Linf = G (G >= g the singular values of the Jacobian), normalized by sqrt(area3D / areaParam)
+// so that 1 is an isometry up to a global scale (and the minimum).
+struct ParamQuality {
+  double stretchL2 = 1.0;        // sqrt(sum_T A3D(T) L2(T)^2 / sum A3D), normalized; >= 1
+  double stretchLinf = 1.0;      // max_T Linf(T), normalized
+  uint32_t flippedTriangles = 0;     // negative parameter area (0 for a valid embedding)
+  uint32_t degenerateTriangles = 0;  // zero parameter or 3D area (excluded from the stretch)
+  double area3D = 0.0;               // surface area of the valid triangles
+  double areaParam = 0.0;            // parameter area of the valid triangles
+};
+
+// One patch mapped onto the regular n-gon with corner i at (cos 2pi i/n, sin 2pi i/n).
+struct PatchParameterization {
+  uint32_t patch = 0;
+  uint32_t sides = 0;                                 // n, 3..8
+  std::vector<uint32_t> vertices;                     // local -> ChartLayout vertex id
+  std::vector<glm::dvec2> uv;                         // per local vertex, in the n-gon
+  std::vector<std::array<uint32_t, 3>> triangles;     // local ids, patch triangle order
+  std::vector<uint32_t> boundary;                     // local ids of the boundary loop (CCW),
+                                                      // starting at corner 0
+  std::vector<uint32_t> cornerIndex;                  // n entries: position in `boundary`
+  ParamQuality initial;                               // the mean-value embedding
+  ParamQuality quality;                               // the result
+  uint32_t iterationsUsed = 0;                        // reweighting passes kept
+  uint32_t sweepsUsed = 0;                            // local optimization sweeps run
+};
+
+// Corner i of the regular n-gon domain.
+glm::dvec2 polygonCorner(uint32_t n, uint32_t i);
+
+// Parameterizes patch `patch` of `layout`. The patch must be a triangulated disk whose boundary
+// loop is exactly its sides' concatenation in order (side i ends where side i+1 starts, edges
+// oriented like the triangles), with 3..8 sides of non-zero length. Throws
+// std::invalid_argument("parameterizePatch: patch P: <problem>") otherwise. Deterministic and
+// thread-safe (reads `layout` only).
+// note: sides are straight polygon edges, so a triangle with all three vertices on one side (an
+// "ear" of a zig-zag side) gets zero parameter area: it is counted in degenerateTriangles and
+// its surface is squeezed into the side (no flips, no seams; a local sampling distortion).
+PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patch,
+                                        const ParamOptions& options = {});
+
+// Sander et al. stretch of the map from parameter triangles `uv` to surface triangles `xyz`
+// (same indexing). Shared by the parameterization and the resampler's image quality.
+ParamQuality measureStretch(const std::vector<glm::dvec2>& uv, const std::vector<glm::dvec3>& xyz,
+                            const std::vector<std::array<uint32_t, 3>>& triangles);
+
+// Combines per-patch figures, each normalized by its own scale (charts are scaled
+// independently): 3D-area-weighted RMS of L2, max of Linf, summed counts and areas.
+ParamQuality combineQuality(const std::vector<ParamQuality>& parts);
+
+}  // namespace gimlod

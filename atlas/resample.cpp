@@ -1,0 +1,542 @@
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (quadrangulate, resample); Purnomo, Cohen,
+// Kumar, "Seamless Texture Atlases", SGP 2004 (shared boundary sampling).
+#include "atlas/resample.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+namespace gimlod {
+namespace {
+
+// Attributes of the layout's surface: positions, area-weighted unit vertex normals, colours.
+struct Surface {
+  const ChartLayout& layout;
+  std::vector<glm::dvec3> normals;  // unit, or zero where undefined
+  bool hasColours = false;
+};
+
+std::vector<glm::dvec3> vertexNormals(const ChartLayout& layout) {
+  std::vector<glm::dvec3> n(layout.positions.size(), glm::dvec3(0.0));
+  for (const auto& t : layout.triangles) {
+    if (t[0] >= n.size() || t[1] >= n.size() || t[2] >= n.size()) {
+      throw std::invalid_argument("resampleLayout: triangle vertex out of range");
+    }
+    const glm::dvec3 a(layout.positions[t[0]]), b(layout.positions[t[1]]),
+        c(layout.positions[t[2]]);
+    const glm::dvec3 w = glm::cross(b - a, c - a);  // twice the area times the unit normal
+    for (uint32_t v : t) n[v] += w;
+  }
+  for (glm::dvec3& x : n) {
+    const double l = glm::length(x);
+    x = l > 0.0 && std::isfinite(l) ? x / l : glm::dvec3(0.0);
+  }
+  return n;
+}
+
+// One surface sample before packing.
+struct Sample {
+  glm::vec3 p{0.f};
+  glm::vec3 n{0.f, 0.f, 1.f};
+  glm::u8vec4 c{255, 255, 255, 255};
+};
+
+// Interpolates the attributes of vertices v[0..2] with barycentric weights b (sum 1).
+Sample interpolate(const Surface& s, const std::array<uint32_t, 3>& v, const glm::dvec3& b) {
+  Sample out;
+  glm::dvec3 p(0.0), n(0.0), c(0.0);
+  glm::dvec4 col(0.0);
+  for (int k = 0; k < 3; ++k) {
+    p += b[k] * glm::dvec3(s.layout.positions[v[k]]);
+    n += b[k] * s.normals[v[k]];
+    if (s.hasColours) col += b[k] * glm::dvec4(s.layout.colours[v[k]]);
+  }
+  out.p = glm::vec3(p);
+  double l = glm::length(n);
+  if (!(l > 1e-12)) {  // opposite vertex normals cancel: use the face normal
+    const glm::dvec3 a(s.layout.positions[v[0]]), bb(s.layout.positions[v[1]]),
+        cc(s.layout.positions[v[2]]);
+    n = glm::cross(bb - a, cc - a);
+    l = glm::length(n);
+  }
+  if (l > 0.0 && std::isfinite(l)) out.n = glm::vec3(n / l);
+  if (s.hasColours) {
+    for (int k = 0; k < 4; ++k) {
+      out.c[k] = uint8_t(std::clamp(std::lround(col[k]), 0l, 255l));
+    }
+  }
+  return out;
+}
+
+// The sample at layout vertex v: its position bit for bit and its unit vertex normal. Every
+// sample that lands on a vertex (corners above all) comes from here, so it is the same bytes in
+// every chart that holds it.
+Sample vertexSample(const Surface& s, uint32_t v) {
+  Sample out;
+  out.p = s.layout.positions[v];
+  if (glm::dot(s.normals[v], s.normals[v]) > 0.0) out.n = glm::vec3(s.normals[v]);
+  if (s.hasColours) out.c = s.layout.colours[v];
+  return out;
+}
+
+// Samples at fractions k / (count - 1) of the arc length of a 3D polyline (vertex ids), k =
+// 0..count-1. The end samples are the end vertices exactly.
+std::vector<Sample> sampleSide(const Surface& s, const std::vector<uint32_t>& poly, uint32_t count) {
+  std::vector<double> cum(1, 0.0);
+  for (size_t k = 0; k + 1 < poly.size(); ++k) {
+    cum.push_back(cum.back() + glm::length(glm::dvec3(s.layout.positions[poly[k + 1]]) -
+                                           glm::dvec3(s.layout.positions[poly[k]])));
+  }
+  const double total = cum.back();
+  const size_t segments = poly.size() - 1;
+  std::vector<Sample> out(count);
+  for (uint32_t k = 0; k < count; ++k) {
+    size_t seg = 0;
+    double lambda = 0.0;
+    if (k + 1 == count) {
+      seg = segments - 1;
+      lambda = 1.0;
+    } else if (k > 0) {
+      const double target = total * double(k) / double(count - 1);
+      seg = size_t(std::upper_bound(cum.begin(), cum.end(), target) - cum.begin());
+      seg = std::clamp<size_t>(seg, 1, segments) - 1;
+      const double len = cum[seg + 1] - cum[seg];
+      lambda = len > 0.0 ? std::clamp((target - cum[seg]) / len, 0.0, 1.0) : 0.0;
+    }
+    const uint32_t a = poly[seg], b = poly[seg + 1];
+    if (lambda == 0.0) {
+      out[k] = vertexSample(s, a);
+    } else if (lambda == 1.0) {
+      out[k] = vertexSample(s, b);
+    } else {
+      out[k] = interpolate(s, {a, b, b}, {1.0 - lambda, lambda, 0.0});
+    }
+  }
+  return out;
+}
+
+// Point location in a patch's parameter triangulation through a uniform grid.
+class Locator {
+ public:
+  explicit Locator(const PatchParameterization& pp) : pp_(pp) {
+    glm::dvec2 lo(1e300), hi(-1e300);
+    for (const glm::dvec2& q : pp.uv) lo = glm::min(lo, q), hi = glm::max(hi, q);
+    const size_t nt = pp.triangles.size();
+    const uint32_t side = std::max<uint32_t>(1, uint32_t(std::sqrt(double(nt))));
+    valid_.assign(nt, 0);
+    lo_ = lo;
+    cell_ = std::max(hi.x - lo.x, hi.y - lo.y) / side * (1.0 + 1e-9);
+    if (!(cell_ > 0.0)) cell_ = 1.0;
+    nx_ = side;
+    ny_ = side;
+    std::vector<std::vector<uint32_t>> cells(size_t(nx_) * ny_);
+    for (uint32_t t = 0; t < nt; ++t) {
+      const auto& tri = pp.triangles[t];
+      const glm::dvec2 a = pp.uv[tri[0]], b = pp.uv[tri[1]], c = pp.uv[tri[2]];
+      const double twice = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
+      if (!(twice > 0.0)) continue;  // degenerate or flipped: never returned
+      valid_[t] = 1;
+      const glm::dvec2 tlo = glm::min(a, glm::min(b, c)), thi = glm::max(a, glm::max(b, c));
+      const auto [x0, y0] = cellOf(tlo);
+      const auto [x1, y1] = cellOf(thi);
+      for (uint32_t y = y0; y <= y1; ++y) {
+        for (uint32_t x = x0; x <= x1; ++x) cells[size_t(y) * nx_ + x].push_back(t);
+      }
+    }
+    start_.assign(cells.size() + 1, 0);
+    for (size_t i = 0; i < cells.size(); ++i) start_[i + 1] = start_[i] + uint32_t(cells[i].size());
+    tris_.reserve(start_.back());
+    for (const auto& c : cells) tris_.insert(tris_.end(), c.begin(), c.end());
+  }
+
+  // The triangle (local ids) containing p and its barycentric weights, clamped to the triangle.
+  // `hint` is a triangle to try first, updated to the result.
+  void locate(const glm::dvec2& p, uint32_t& hint, std::array<uint32_t, 3>& tri,
+              glm::dvec3& bary) const {
+    double best = -1e300;
+    uint32_t bestTri = 0;
+    glm::dvec3 bestBary(1.0, 0.0, 0.0);
+    auto test = [&](uint32_t t) {
+      const glm::dvec3 b = barycentric(t, p);
+      const double m = std::min(b.x, std::min(b.y, b.z));
+      if (m > best) best = m, bestTri = t, bestBary = b;
+    };
+    if (hint < pp_.triangles.size() && valid_[hint]) test(hint);
+    constexpr double kInside = -1e-12;
+    if (best < kInside) {
+      const auto [cx, cy] = cellOf(p);
+      // note: a point of the domain lies in a triangle listed in its own cell; the rings only
+      // catch points a rounding error outside the polygon.
+      for (uint32_t ring = 0; ring <= std::max(nx_, ny_) && best < kInside; ++ring) {
+        const int64_t x0 = int64_t(cx) - ring, x1 = int64_t(cx) + ring;
+        const int64_t y0 = int64_t(cy) - ring, y1 = int64_t(cy) + ring;
+        for (int64_t y = std::max<int64_t>(y0, 0); y <= std::min<int64_t>(y1, ny_ - 1); ++y) {
+          for (int64_t x = std::max<int64_t>(x0, 0); x <= std::min<int64_t>(x1, nx_ - 1); ++x) {
+            if (x != x0 && x != x1 && y != y0 && y != y1) continue;  // ring cells only
+            const size_t c = size_t(y) * nx_ + size_t(x);
+            for (uint32_t k = start_[c]; k < start_[c + 1]; ++k) test(tris_[k]);
+          }
+        }
+        if (ring >= 1 && best > -1e-6) break;  // near the border: the closest is good enough
+      }
+    }
+    hint = bestTri;
+    tri = pp_.triangles[bestTri];
+    bary = glm::max(bestBary, glm::dvec3(0.0));
+    bary /= bary.x + bary.y + bary.z;
+  }
+
+ private:
+  std::pair<uint32_t, uint32_t> cellOf(const glm::dvec2& p) const {
+    const double fx = std::floor((p.x - lo_.x) / cell_), fy = std::floor((p.y - lo_.y) / cell_);
+    return {uint32_t(std::clamp(fx, 0.0, double(nx_ - 1))),
+            uint32_t(std::clamp(fy, 0.0, double(ny_ - 1)))};
+  }
+  glm::dvec3 barycentric(uint32_t t, const glm::dvec2& p) const {
+    const auto& tri = pp_.triangles[t];
+    const glm::dvec2 a = pp_.uv[tri[0]], b = pp_.uv[tri[1]], c = pp_.uv[tri[2]];
+    const double d = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
+    const double la = ((b.x - p.x) * (c.y - p.y) - (c.x - p.x) * (b.y - p.y)) / d;
+    const double lb = ((c.x - p.x) * (a.y - p.y) - (a.x - p.x) * (c.y - p.y)) / d;
+    return {la, lb, 1.0 - la - lb};
+  }
+
+  const PatchParameterization& pp_;
+  glm::dvec2 lo_{0.0};
+  double cell_ = 1.0;
+  uint32_t nx_ = 1, ny_ = 1;
+  std::vector<uint8_t> valid_;  // positive parameter area
+  std::vector<uint32_t> start_;
+  std::vector<uint32_t> tris_;
+};
+
+// For each patch side: -1 if it has no neighbour, else whether its vertex run is the reverse of
+// the neighbour's. Validates the links.
+struct SideLinks {
+  std::vector<uint32_t> offsets;                 // first chart of each patch
+  std::vector<std::vector<uint8_t>> opposite;    // [patch][side]: runs opposite to the neighbour
+};
+
+SideLinks validateLinks(const ChartLayout& layout, const char* fn) {
+  auto fail = [&](uint32_t p, uint32_t i, const std::string& what) {
+    throw std::invalid_argument(std::string(fn) + ": patch " + std::to_string(p) + " side " +
+                                std::to_string(i) + ": " + what);
+  };
+  SideLinks links;
+  links.offsets = quadChartOffsets(layout);
+  links.opposite.resize(layout.patches.size());
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    const Patch& patch = layout.patches[p];
+    links.opposite[p].assign(patch.sides.size(), 1);
+    for (uint32_t i = 0; i < patch.sides.size(); ++i) {
+      const PatchSide& s = patch.sides[i];
+      if (s.neighbourPatch < 0) continue;
+      const uint32_t q = uint32_t(s.neighbourPatch);
+      if (q >= layout.patches.size() || s.neighbourSide >= layout.patches[q].sides.size()) {
+        fail(p, i, "neighbour out of range");
+      }
+      if (q == p && s.neighbourSide == i) fail(p, i, "is its own neighbour");
+      const PatchSide& o = layout.patches[q].sides[s.neighbourSide];
+      if (o.neighbourPatch != int32_t(p) || o.neighbourSide != i) {
+        fail(p, i, "link is not reciprocal");
+      }
+      if (o.reversed != s.reversed) fail(p, i, "reversed flags differ across the side");
+      const bool same = o.vertices == s.vertices;
+      const bool rev = std::equal(o.vertices.begin(), o.vertices.end(), s.vertices.rbegin(),
+                                  s.vertices.rend()) &&
+                       o.vertices.size() == s.vertices.size();
+      if (s.reversed ? !rev : !same) fail(p, i, "vertex run does not match the neighbour's");
+      links.opposite[p][i] = s.reversed ? 1 : 0;
+    }
+  }
+  return links;
+}
+
+std::vector<std::array<RootNeighbour, 4>> neighboursFrom(const ChartLayout& layout,
+                                                         const SideLinks& links) {
+  std::vector<std::array<RootNeighbour, 4>> out(
+      layout.patches.empty() ? 0 : links.offsets.back() + layout.patches.back().sides.size());
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    const Patch& patch = layout.patches[p];
+    const uint32_t n = uint32_t(patch.sides.size());
+    for (uint32_t i = 0; i < n; ++i) {
+      auto& nb = out[links.offsets[p] + i];
+      nb[kEdgeRight] = {int32_t(links.offsets[p] + (i + 1) % n), kEdgeTop, true};
+      nb[kEdgeTop] = {int32_t(links.offsets[p] + (i + n - 1) % n), kEdgeRight, true};
+      // Bottom: first half of side i. Left: second half of side i-1.
+      const PatchSide& si = patch.sides[i];
+      if (si.neighbourPatch >= 0) {
+        const uint32_t q = uint32_t(si.neighbourPatch), j = si.neighbourSide;
+        const uint32_t nq = uint32_t(layout.patches[q].sides.size());
+        nb[kEdgeBottom] = si.reversed
+                              ? RootNeighbour{int32_t(links.offsets[q] + (j + 1) % nq), kEdgeLeft, true}
+                              : RootNeighbour{int32_t(links.offsets[q] + j), kEdgeBottom, false};
+      }
+      const PatchSide& sp = patch.sides[(i + n - 1) % n];
+      if (sp.neighbourPatch >= 0) {
+        const uint32_t q = uint32_t(sp.neighbourPatch), j = sp.neighbourSide;
+        const uint32_t nq = uint32_t(layout.patches[q].sides.size());
+        nb[kEdgeLeft] = sp.reversed
+                            ? RootNeighbour{int32_t(links.offsets[q] + j), kEdgeBottom, true}
+                            : RootNeighbour{int32_t(links.offsets[q] + (j + 1) % nq), kEdgeLeft, false};
+      }
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+uint32_t edgeSampleIndex(uint32_t chartSize, uint32_t edge, uint32_t k) {
+  const uint32_t m = chartSize - 1;
+  switch (edge) {
+    case kEdgeBottom: return k;
+    case kEdgeRight: return k * chartSize + m;
+    case kEdgeTop: return m * chartSize + (m - k);
+    default: return (m - k) * chartSize;
+  }
+}
+
+std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout) {
+  std::vector<uint32_t> offsets(layout.patches.size());
+  uint32_t next = 0;
+  for (size_t p = 0; p < layout.patches.size(); ++p) {
+    offsets[p] = next;
+    next += uint32_t(layout.patches[p].sides.size());
+  }
+  return offsets;
+}
+
+std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layout) {
+  return neighboursFrom(layout, validateLinks(layout, "quadNeighbours"));
+}
+
+ImageQuality measureImage(const std::vector<glm::vec3>& positions,
+                          const std::vector<glm::vec3>& normals, uint32_t chartSize) {
+  ImageQuality q;
+  const uint32_t m = chartSize - 1;
+  const double scale = double(m);  // d(position)/d(s) = difference * m
+  double l2sum = 0.0, gammaMax = 0.0;
+  // Sander et al.: L2 weighted by 3D area, normalized by sqrt(area3D / parameter area).
+  auto triangle = [&](const glm::dvec3& ss, const glm::dvec3& st) {
+    const double a = glm::dot(ss, ss), b = glm::dot(ss, st), c = glm::dot(st, st);
+    const double area = 0.5 * glm::length(glm::cross(ss, st)) / (scale * scale);
+    q.area3D += area;
+    l2sum += area * 0.5 * (a + c);
+    gammaMax = std::max(gammaMax, 0.5 * ((a + c) + std::sqrt((a - c) * (a - c) + 4.0 * b * b)));
+  };
+  for (uint32_t v = 0; v < m; ++v) {
+    for (uint32_t u = 0; u < m; ++u) {
+      const size_t i00 = size_t(v) * chartSize + u, i10 = i00 + 1, i01 = i00 + chartSize,
+                   i11 = i01 + 1;
+      const glm::dvec3 p00(positions[i00]), p10(positions[i10]), p01(positions[i01]),
+          p11(positions[i11]);
+      // Triangles (00, 10, 11) and (00, 11, 01), each of parameter area 1 / (2 m^2).
+      triangle((p10 - p00) * scale, (p11 - p10) * scale);
+      triangle((p11 - p01) * scale, (p01 - p00) * scale);
+      const glm::dvec3 d1 = p11 - p00, d2 = p01 - p10;
+      const glm::dvec3 cr = glm::cross(d1, d2);
+      const double cl = glm::length(cr);
+      if (!(cl > 1e-8 * (glm::dot(d1, d1) + glm::dot(d2, d2)))) {
+        ++q.degenerateTexels;
+        continue;
+      }
+      const glm::dvec3 n = glm::dvec3(normals[i00]) + glm::dvec3(normals[i10]) +
+                           glm::dvec3(normals[i01]) + glm::dvec3(normals[i11]);
+      if (glm::dot(cr, n) < 0.0) ++q.flippedTexels;
+    }
+  }
+  if (m > 0 && q.area3D > 0.0) {
+    const double s = std::sqrt(q.area3D);  // parameter area is 1
+    q.stretchL2 = std::sqrt(l2sum / q.area3D) / s;
+    q.stretchLinf = std::sqrt(gammaMax) / s;
+  }
+  return q;
+}
+
+ImageQuality combineImageQuality(const std::vector<ImageQuality>& parts) {
+  ImageQuality q;
+  double num = 0.0;
+  q.stretchLinf = parts.empty() ? 1.0 : 0.0;
+  for (const ImageQuality& p : parts) {
+    num += p.area3D * p.stretchL2 * p.stretchL2;
+    q.area3D += p.area3D;
+    q.stretchLinf = std::max(q.stretchLinf, p.stretchLinf);
+    q.flippedTexels += p.flippedTexels;
+    q.degenerateTexels += p.degenerateTexels;
+  }
+  if (q.area3D > 0.0) q.stretchL2 = std::sqrt(num / q.area3D);
+  return q;
+}
+
+GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  const uint32_t size = options.chartSize;
+  if (!isChartSizeValid(size)) {
+    throw std::invalid_argument("resampleLayout: chart size " + std::to_string(size) +
+                                " is not 2^k + 1");
+  }
+  if (!layout.colours.empty() && layout.colours.size() != layout.positions.size()) {
+    throw std::invalid_argument("resampleLayout: colours must be empty or one per position");
+  }
+  const SideLinks links = validateLinks(layout, "resampleLayout");
+  const Surface surface{layout, vertexNormals(layout), !layout.colours.empty()};
+  const uint32_t m = size - 1;
+  const uint32_t sideCount = 2 * m + 1;
+
+  GeometryImageSet set;
+  set.chartSize = size;
+  const auto neighbours = neighboursFrom(layout, links);
+  set.charts.resize(neighbours.size());
+  set.patches.resize(layout.patches.size());
+
+  // Canonical owner of each side: the (patch, side) with the smaller ids; sampled in its order.
+  struct SideRef {
+    uint32_t patch, side;
+  };
+  std::vector<SideRef> owners;
+  std::vector<std::vector<uint32_t>> sideIndex(layout.patches.size());
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    const Patch& patch = layout.patches[p];
+    sideIndex[p].resize(patch.sides.size());
+    for (uint32_t i = 0; i < patch.sides.size(); ++i) {
+      for (uint32_t v : patch.sides[i].vertices) {
+        if (v >= layout.positions.size()) {
+          throw std::invalid_argument("resampleLayout: patch " + std::to_string(p) + " side " +
+                                      std::to_string(i) + ": vertex out of range");
+        }
+      }
+      if (patch.sides[i].vertices.size() < 2) {
+        throw std::invalid_argument("resampleLayout: patch " + std::to_string(p) + " side " +
+                                    std::to_string(i) + " has < 2 vertices");
+      }
+      const PatchSide& s = patch.sides[i];
+      const bool owner = s.neighbourPatch < 0 || p < uint32_t(s.neighbourPatch) ||
+                         (p == uint32_t(s.neighbourPatch) && i < s.neighbourSide);
+      if (owner) {
+        sideIndex[p][i] = uint32_t(owners.size());
+        owners.push_back({p, i});
+      }
+    }
+  }
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    for (uint32_t i = 0; i < layout.patches[p].sides.size(); ++i) {
+      const PatchSide& s = layout.patches[p].sides[i];
+      const bool owner = s.neighbourPatch < 0 || p < uint32_t(s.neighbourPatch) ||
+                         (p == uint32_t(s.neighbourPatch) && i < s.neighbourSide);
+      if (!owner) sideIndex[p][i] = sideIndex[uint32_t(s.neighbourPatch)][s.neighbourSide];
+    }
+  }
+
+  const int concurrency =
+      options.threads ? int(options.threads) : tbb::this_task_arena::max_concurrency();
+  tbb::task_arena arena(concurrency);
+  std::vector<std::vector<Sample>> sides(owners.size());
+  arena.execute([&] {
+    tbb::parallel_for(size_t{0}, owners.size(), [&](size_t k) {
+      sides[k] = sampleSide(surface,
+                            layout.patches[owners[k].patch].sides[owners[k].side].vertices,
+                            sideCount);
+    });
+    tbb::parallel_for(uint32_t{0}, uint32_t(layout.patches.size()), [&](uint32_t p) {
+      const Patch& patch = layout.patches[p];
+      const uint32_t n = uint32_t(patch.sides.size());
+      const PatchParameterization pp = parameterizePatch(layout, p, options.param);
+      PatchResampleStats& st = set.patches[p];
+      st.paramInitial = pp.initial;
+      st.param = pp.quality;
+      st.stretchIterations = pp.iterationsUsed;
+      st.firstChart = links.offsets[p];
+      st.sides = n;
+
+      // Side sample k of side i in this patch's direction (0 = corner i, 2m = corner i+1).
+      auto sideSample = [&](uint32_t i, uint32_t k) -> const Sample& {
+        const std::vector<Sample>& s = sides[sideIndex[p][i]];
+        const bool flipped = owners[sideIndex[p][i]].patch != p ||
+                             owners[sideIndex[p][i]].side != i;
+        return s[flipped && links.opposite[p][i] ? 2 * m - k : k];
+      };
+
+      const Locator locator(pp);
+      uint32_t hint = 0;
+      auto sampleAt = [&](const glm::dvec2& d) {
+        std::array<uint32_t, 3> tri;
+        glm::dvec3 b;
+        locator.locate(d, hint, tri, b);
+        return interpolate(surface, {pp.vertices[tri[0]], pp.vertices[tri[1]], pp.vertices[tri[2]]},
+                           b);
+      };
+      std::vector<glm::dvec2> corner(n), mid(n);
+      for (uint32_t i = 0; i < n; ++i) corner[i] = polygonCorner(n, i);
+      for (uint32_t i = 0; i < n; ++i) mid[i] = 0.5 * (corner[i] + polygonCorner(n, i + 1));
+      const glm::dvec2 centre(0.0);
+      const Sample centreSample = sampleAt(centre);
+      // Spoke i: midpoint of side i (t = 0) to the centre (t = m), shared by quads i and i+1.
+      std::vector<std::vector<Sample>> spokes(n, std::vector<Sample>(m + 1));
+      for (uint32_t i = 0; i < n; ++i) {
+        spokes[i][0] = sideSample(i, m);
+        spokes[i][m] = centreSample;
+        for (uint32_t t = 1; t < m; ++t) {
+          spokes[i][t] = sampleAt(mid[i] + (centre - mid[i]) * (double(t) / m));
+        }
+      }
+
+      std::vector<glm::vec3> floatNormals(size_t(size) * size);
+      for (uint32_t i = 0; i < n; ++i) {
+        GeometryImage& img = set.charts[links.offsets[p] + i];
+        img.patch = p;
+        img.quad = i;
+        img.neighbours = neighbours[links.offsets[p] + i];
+        img.positions.resize(size_t(size) * size);
+        img.normals.resize(size_t(size) * size);
+        if (surface.hasColours) img.colours.resize(size_t(size) * size);
+        const uint32_t prev = (i + n - 1) % n;
+        auto put = [&](uint32_t u, uint32_t v, const Sample& s) {
+          const size_t at = size_t(v) * size + u;
+          img.positions[at] = s.p;
+          img.normals[at] = packNormal(s.n.x, s.n.y, s.n.z);
+          floatNormals[at] = s.n;
+          if (surface.hasColours) img.colours[at] = s.c;
+        };
+        for (uint32_t k = 0; k <= m; ++k) {
+          put(k, 0, sideSample(i, k));             // bottom: corner i -> midpoint i
+          put(0, k, sideSample(prev, 2 * m - k));  // left: corner i -> midpoint i-1
+          put(m, k, spokes[i][k]);                 // right: midpoint i -> centre
+          put(k, m, spokes[prev][k]);              // top: midpoint i-1 -> centre
+        }
+        for (uint32_t v = 1; v < m; ++v) {
+          const double t = double(v) / m;
+          for (uint32_t u = 1; u < m; ++u) {
+            const double s = double(u) / m;
+            const glm::dvec2 d = (1 - s) * (1 - t) * corner[i] + s * (1 - t) * mid[i] +
+                                 s * t * centre + (1 - s) * t * mid[prev];
+            put(u, v, sampleAt(d));
+          }
+        }
+        img.quality = measureImage(img.positions, floatNormals, size);
+      }
+    });
+  });
+
+  std::vector<ParamQuality> initial, final;
+  for (const PatchResampleStats& st : set.patches) {
+    initial.push_back(st.paramInitial);
+    final.push_back(st.param);
+  }
+  set.paramInitial = combineQuality(initial);
+  set.param = combineQuality(final);
+  std::vector<ImageQuality> images;
+  for (const GeometryImage& g : set.charts) images.push_back(g.quality);
+  set.image = combineImageQuality(images);
+  set.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return set;
+}
+
+}  // namespace gimlod

@@ -1,0 +1,108 @@
+// Quadrangulation and resampling of a chart layout into seamless geometry images. Each n-sided
+// patch becomes n quad charts: quad i is the kite (corner i, midpoint of side i, patch centre,
+// midpoint of side i-1) of the patch's n-gon parameterization (atlas/patch_param.h), mapped from
+// the unit square bilinearly. Position, normal and colour are sampled into (2^k+1)^2 images.
+// Seams: every patch side is sampled once, by arc length along its 3D polyline in one canonical
+// direction, and written into both patches; side midpoints, corners and patch centres are single
+// values shared by every quad that meets there; the centre-to-midpoint edges inside a patch are
+// sampled once and written into both quads. So charts that share an edge hold bit-identical
+// samples there, and, since pyramid levels are 2^k+1 subsamplings, at every level.
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (quadrangulate, resample); Purnomo, Cohen,
+// Kumar, "Seamless Texture Atlases", SGP 2004.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include <glm/vec3.hpp>
+#include <glm/vec4.hpp>
+
+#include "atlas/chart_layout.h"
+#include "atlas/patch_param.h"
+#include "core/atlas_format.h"
+
+namespace gimlod {
+
+struct ResampleOptions {
+  uint32_t chartSize = 513;  // samples per quad chart side; must be 2^k + 1 with k >= 1
+  uint32_t threads = 0;      // worker threads for the per-patch work; 0 = all hardware threads
+  ParamOptions param;        // per-patch parameterization
+};
+
+// Quality of a sampled image, seen as a map from the unit square to the sampled surface through
+// its texel quads (two triangles each: (u,v) (u+1,v) (u+1,v+1) and (u,v) (u+1,v+1) (u,v+1)).
+// Stretch as in ParamQuality (normalized per chart; 1 is best).
+struct ImageQuality {
+  double stretchL2 = 1.0;
+  double stretchLinf = 1.0;
+  uint32_t flippedTexels = 0;     // texel quads whose 3D normal (cross of the diagonals)
+                                  // opposes the mean of their 4 interpolated surface normals
+  uint32_t degenerateTexels = 0;  // texel quads of (near) zero 3D area
+  double area3D = 0.0;            // surface area of the sampled grid
+};
+
+// One quad chart: a (chartSize)^2 row-major image, row = v, u = column.
+// Chart (u, v) -> kite: (0,0) corner i, (1,0) midpoint of side i, (1,1) patch centre,
+// (0,1) midpoint of side i-1. Edges (core/atlas_format.h Edge): bottom = first half of side i,
+// right = midpoint i -> centre, top = centre -> midpoint i-1, left = second half of side i-1.
+struct GeometryImage {
+  uint32_t patch = 0;                        // ChartLayout patch
+  uint32_t quad = 0;                         // i, 0..n-1 within the patch
+  std::vector<glm::vec3> positions;          // chartSize^2
+  std::vector<PackedNormal> normals;         // chartSize^2, unit normals (packNormal)
+  std::vector<glm::u8vec4> colours;          // chartSize^2, or empty if the layout has none
+  std::array<RootNeighbour, 4> neighbours;   // by Edge; chart = index into GeometryImageSet
+  ImageQuality quality;
+};
+
+struct PatchResampleStats {
+  ParamQuality paramInitial;   // the mean-value embedding
+  ParamQuality param;          // after stretch reduction
+  uint32_t stretchIterations = 0;
+  uint32_t firstChart = 0;     // charts [firstChart, firstChart + sides) belong to this patch
+  uint32_t sides = 0;
+};
+
+struct GeometryImageSet {
+  uint32_t chartSize = 0;
+  std::vector<GeometryImage> charts;      // patch by patch, quad by quad
+  std::vector<PatchResampleStats> patches;
+  ParamQuality paramInitial;              // all patches combined (combineQuality)
+  ParamQuality param;
+  ImageQuality image;                     // all charts combined
+  double seconds = 0.0;
+};
+
+// Index of sample k (0..chartSize-1) along edge `edge` of a chart, in the edge's counter-clockwise
+// parameter direction: bottom (k, 0), right (M, k), top (M - k, M), left (0, M - k), M =
+// chartSize - 1. Across a shared edge with reversed = true, sample k here equals sample
+// chartSize-1-k of the neighbour's edge.
+uint32_t edgeSampleIndex(uint32_t chartSize, uint32_t edge, uint32_t k);
+
+// Per patch, the chart id of its quad 0 (the sum of the sides of the patches before it): quad i
+// of patch p is chart offsets[p] + i.
+std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout);
+
+// The four neighbours of every quad chart (by Edge): inside a patch from the kite structure,
+// across patches from PatchSide neighbourPatch / neighbourSide / reversed. Open sides give
+// chart = -1. Throws std::invalid_argument("quadNeighbours: ...") on side links that are not
+// reciprocal or whose vertex runs do not match.
+std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layout);
+
+// Parameterizes every patch and resamples its quads (patches in parallel). Normals are the
+// layout's area-weighted vertex normals, interpolated and normalized; colours are interpolated
+// when the layout has them. Throws std::invalid_argument on an invalid chartSize, a malformed
+// patch (see parameterizePatch) or bad side links (see quadNeighbours).
+GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options = {});
+
+// Measures one image (positions and float unit normals, chartSize^2 each).
+ImageQuality measureImage(const std::vector<glm::vec3>& positions,
+                          const std::vector<glm::vec3>& normals, uint32_t chartSize);
+
+// Combines per-chart figures: 3D-area-weighted RMS of the per-chart L2, max Linf, summed counts.
+// note: each chart is normalized by its own area, so imbalance between charts (a large chart
+// gets as many texels as a small one) is not part of these figures.
+ImageQuality combineImageQuality(const std::vector<ImageQuality>& parts);
+
+}  // namespace gimlod

@@ -1,0 +1,152 @@
+// Tests for the n-gon patch parameterization: a flat square maps affinely (stretch 1), disks and
+// hemisphere caps with 3, 5 and 8 sides embed without flips and with bounded stretch, the
+// stretch reduction never makes things worse, and malformed patches are rejected.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+#include "atlas/patch_param.h"
+#include "tests/chart_layout_fixture.h"
+
+namespace gimlod {
+namespace {
+
+// Signed area of the polygon's corner i, i+1 and the point: >= 0 when p is left of edge i.
+double leftOf(uint32_t n, uint32_t i, const glm::dvec2& p) {
+  const glm::dvec2 a = polygonCorner(n, i), b = polygonCorner(n, i + 1);
+  return (b.x - a.x) * (p.y - a.y) - (b.y - a.y) * (p.x - a.x);
+}
+
+TEST(PatchParam, MeasureStretchOfKnownMaps) {
+  // Parameter triangle (0,0), (1,0), (0,1) onto (0,0,0), (2,0,0), (0,1,0): Jacobian diag(2, 1).
+  const std::vector<glm::dvec2> uv{{0, 0}, {1, 0}, {0, 1}};
+  const std::vector<glm::dvec3> xyz{{0, 0, 0}, {2, 0, 0}, {0, 1, 0}};
+  ParamQuality q = measureStretch(uv, xyz, {{0, 1, 2}});
+  // Raw L2 = sqrt((4 + 1) / 2), Linf = 2; normalized by sqrt(area3D / areaParam) = sqrt(2).
+  EXPECT_NEAR(q.stretchL2, std::sqrt(2.5) / std::sqrt(2.0), 1e-12);
+  EXPECT_NEAR(q.stretchLinf, 2.0 / std::sqrt(2.0), 1e-12);
+  EXPECT_EQ(q.flippedTriangles, 0u);
+  // A similarity has stretch 1; the reversed triangle is flipped; a collinear one degenerate.
+  const std::vector<glm::dvec3> sim{{1, 1, 1}, {1, 4, 1}, {1, 1, 4}};
+  EXPECT_NEAR(measureStretch(uv, sim, {{0, 1, 2}}).stretchL2, 1.0, 1e-12);
+  EXPECT_NEAR(measureStretch(uv, sim, {{0, 1, 2}}).stretchLinf, 1.0, 1e-12);
+  q = measureStretch(uv, sim, {{0, 2, 1}});
+  EXPECT_EQ(q.flippedTriangles, 1u);
+  const std::vector<glm::dvec2> line{{0, 0}, {1, 0}, {2, 0}};
+  EXPECT_EQ(measureStretch(line, sim, {{0, 1, 2}}).degenerateTriangles, 1u);
+}
+
+TEST(PatchParam, FlatSquareIsAffine) {
+  const ChartLayout layout = test::gridLayout(10, 10, 2.f, 2.f);
+  const PatchParameterization pp = parameterizePatch(layout, 0);
+  ASSERT_EQ(pp.sides, 4u);
+  ASSERT_EQ(pp.uv.size(), layout.positions.size());
+  // Grid corners (0,0), (2,0), (2,2), (0,2) go to polygon corners 0..3: the affine map
+  // x -> c0 + x/2 (c1 - c0) + y/2 (c3 - c0).
+  const glm::dvec2 c0 = polygonCorner(4, 0), c1 = polygonCorner(4, 1), c3 = polygonCorner(4, 3);
+  for (size_t k = 0; k < pp.vertices.size(); ++k) {
+    const glm::vec3 x = layout.positions[pp.vertices[k]];
+    const glm::dvec2 expect = c0 + double(x.x) / 2 * (c1 - c0) + double(x.y) / 2 * (c3 - c0);
+    EXPECT_NEAR(pp.uv[k].x, expect.x, 1e-9);
+    EXPECT_NEAR(pp.uv[k].y, expect.y, 1e-9);
+  }
+  EXPECT_NEAR(pp.quality.stretchL2, 1.0, 1e-6);
+  EXPECT_NEAR(pp.quality.stretchLinf, 1.0, 1e-6);
+  EXPECT_EQ(pp.quality.flippedTriangles, 0u);
+  EXPECT_EQ(pp.quality.degenerateTriangles, 0u);
+  EXPECT_EQ(pp.boundary.size(), 40u);
+  EXPECT_EQ(pp.cornerIndex, (std::vector<uint32_t>{0, 10, 20, 30}));
+}
+
+TEST(PatchParam, NGonDisksEmbedWithoutFlips) {
+  for (const bool hemisphere : {false, true}) {
+    for (const uint32_t n : {3u, 5u, 8u}) {
+      SCOPED_TRACE(testing::Message() << "n=" << n << " hemisphere=" << hemisphere);
+      const ChartLayout layout = test::diskLayout(n, 12, 48, hemisphere);
+      const PatchParameterization pp = parameterizePatch(layout, 0);
+      EXPECT_EQ(pp.quality.flippedTriangles, 0u);
+      EXPECT_EQ(pp.quality.degenerateTriangles, 0u);
+      EXPECT_EQ(pp.initial.flippedTriangles, 0u);
+      EXPECT_TRUE(std::isfinite(pp.quality.stretchL2));
+      EXPECT_GE(pp.quality.stretchL2, 1.0 - 1e-9);
+      EXPECT_LT(pp.quality.stretchL2, 1.5);
+      EXPECT_LT(pp.quality.stretchLinf, 4.0);
+      EXPECT_LE(pp.quality.stretchL2, pp.initial.stretchL2);
+      // Corners on the polygon's vertices, every vertex inside the polygon.
+      for (uint32_t i = 0; i < n; ++i) {
+        const glm::dvec2 c = pp.uv[pp.boundary[pp.cornerIndex[i]]];
+        EXPECT_EQ(c, polygonCorner(n, i));
+      }
+      for (const glm::dvec2& p : pp.uv) {
+        for (uint32_t i = 0; i < n; ++i) EXPECT_GE(leftOf(n, i, p), -1e-12);
+      }
+      std::printf("  n=%u %s: L2 %.4f -> %.4f, Linf %.4f -> %.4f (%u reweightings, %u sweeps)\n",
+                  n, hemisphere ? "hemisphere" : "flat disk", pp.initial.stretchL2,
+                  pp.quality.stretchL2, pp.initial.stretchLinf, pp.quality.stretchLinf,
+                  pp.iterationsUsed, pp.sweepsUsed);
+    }
+  }
+}
+
+TEST(PatchParam, StretchReductionIsOptional) {
+  const ChartLayout layout = test::diskLayout(4, 10, 40, true);
+  ParamOptions off;
+  off.stretchIterations = 0;
+  off.stretchSweeps = 0;
+  const PatchParameterization a = parameterizePatch(layout, 0, off);
+  EXPECT_EQ(a.iterationsUsed, 0u);
+  EXPECT_EQ(a.sweepsUsed, 0u);
+  EXPECT_EQ(a.quality.stretchL2, a.initial.stretchL2);
+  const PatchParameterization b = parameterizePatch(layout, 0);
+  EXPECT_EQ(b.initial.stretchL2, a.initial.stretchL2);
+  EXPECT_LE(b.quality.stretchL2, a.quality.stretchL2);
+  EXPECT_EQ(b.quality.flippedTriangles, 0u);
+}
+
+TEST(PatchParam, RejectsMalformedPatches) {
+  const ChartLayout good = test::gridLayout(4, 4, 1.f, 1.f);
+  EXPECT_NO_THROW(parameterizePatch(good, 0));
+  EXPECT_THROW(parameterizePatch(good, 1), std::invalid_argument);
+
+  ChartLayout twoSides = good;  // merge sides 0 and 1 and sides 2 and 3
+  auto& s = twoSides.patches[0].sides;
+  s[0].vertices.insert(s[0].vertices.end(), s[1].vertices.begin() + 1, s[1].vertices.end());
+  s[2].vertices.insert(s[2].vertices.end(), s[3].vertices.begin() + 1, s[3].vertices.end());
+  s = {s[0], s[2]};
+  EXPECT_THROW(parameterizePatch(twoSides, 0), std::invalid_argument);
+
+  ChartLayout broken = good;  // side 1 no longer starts where side 0 ends
+  broken.patches[0].sides[1].vertices.erase(broken.patches[0].sides[1].vertices.begin());
+  EXPECT_THROW(parameterizePatch(broken, 0), std::invalid_argument);
+
+  ChartLayout reversed = good;  // sides listed clockwise
+  for (auto& side : reversed.patches[0].sides) std::reverse(side.vertices.begin(), side.vertices.end());
+  std::reverse(reversed.patches[0].sides.begin(), reversed.patches[0].sides.end());
+  EXPECT_THROW(parameterizePatch(reversed, 0), std::invalid_argument);
+
+  ChartLayout holed = good;  // an annulus: the centre cell's two triangles removed
+  auto& tris = holed.patches[0].triangles;
+  tris.erase(tris.begin() + 2 * (1 * 4 + 1), tris.begin() + 2 * (1 * 4 + 1) + 2);
+  EXPECT_THROW(parameterizePatch(holed, 0), std::invalid_argument);
+
+  ChartLayout zero = good;  // a side of zero length
+  for (uint32_t v : zero.patches[0].sides[0].vertices) zero.positions[v] = {0.f, 0.f, 0.f};
+  EXPECT_THROW(parameterizePatch(zero, 0), std::invalid_argument);
+}
+
+TEST(PatchParam, CombineQualityWeightsByArea) {
+  ParamQuality a, b;
+  a.stretchL2 = 1.0, a.stretchLinf = 1.5, a.area3D = 3.0, a.flippedTriangles = 1;
+  b.stretchL2 = 2.0, b.stretchLinf = 3.0, b.area3D = 1.0, b.degenerateTriangles = 2;
+  const ParamQuality c = combineQuality({a, b});
+  EXPECT_NEAR(c.stretchL2, std::sqrt((3.0 * 1.0 + 1.0 * 4.0) / 4.0), 1e-12);
+  EXPECT_EQ(c.stretchLinf, 3.0);
+  EXPECT_EQ(c.flippedTriangles, 1u);
+  EXPECT_EQ(c.degenerateTriangles, 2u);
+}
+
+}  // namespace
+}  // namespace gimlod
