@@ -25,9 +25,15 @@ namespace {
 
 constexpr const char* kFormatTag = "gimlod-atlas";
 constexpr char kChartMagic[4] = {'G', 'L', 'M', 'C'};
-constexpr uint32_t kChartFileVersion = 1;
+constexpr uint32_t kChartFileVersion = 1;  // heights + normals
+constexpr uint32_t kChartFileVersionChannels = 2;  // any channels, with a channel mask
 constexpr size_t kChartHeaderBytes = 4 + 4 * 4;
-constexpr size_t kDirEntryBytes = 16;
+constexpr size_t kChartHeaderBytesV2 = kChartHeaderBytes + 4;
+constexpr size_t kDirEntryBytes = 16;  // version 1
+constexpr size_t kChannelBytes[kChannelCount] = {sizeof(float), sizeof(PackedNormal), 3 * sizeof(float),
+                                                 sizeof(PackedColour)};
+constexpr bool kChannelIsFloat[kChannelCount] = {true, false, true, false};
+constexpr uint32_t kHeightFieldMask = (1u << kChannelHeights) | (1u << kChannelNormals);
 
 std::string quoted(const fs::path& p) { return p.string(); }  // path as shown in messages
 
@@ -406,58 +412,97 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
   if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) ||
       blockIntervals > chartSize - 1)
     throw std::invalid_argument("writeChartFile: bad chartSize/blockIntervals");
-  const uint32_t levels = static_cast<uint32_t>(pyramid.heights.size());
-  if (levels < 1 || levels > log2Exact(chartSize - 1) + 1 || pyramid.normals.size() != levels)
+  // Channels present, as byte images per level.
+  std::array<std::vector<const uint8_t*>, kChannelCount> data;
+  std::array<size_t, kChannelCount> counts{};
+  auto add = [&](ChartChannel c, const auto& levels) {
+    counts[c] = levels.size();
+    for (const auto& l : levels) data[c].push_back(reinterpret_cast<const uint8_t*>(l.data()));
+  };
+  add(kChannelHeights, pyramid.heights);
+  add(kChannelNormals, pyramid.normals);
+  add(kChannelPositions, pyramid.positions);
+  add(kChannelColours, pyramid.colours);
+  const uint32_t levels = static_cast<uint32_t>(pyramid.normals.size());
+  uint32_t mask = 0;
+  for (uint32_t c = 0; c < kChannelCount; ++c)
+    if (counts[c] != 0) mask |= 1u << c;
+  const bool heightField = mask == kHeightFieldMask;
+  const bool geometry = (mask & (1u << kChannelPositions)) && (mask & (1u << kChannelNormals)) &&
+                        !(mask & (1u << kChannelHeights));
+  if (!heightField && !geometry)
+    throw std::invalid_argument("writeChartFile: a chart has heights and normals, or positions and normals (and colours)");
+  if (levels < 1 || levels > log2Exact(chartSize - 1) + 1)
     throw std::invalid_argument("writeChartFile: bad pyramid level count");
+  for (uint32_t c = 0; c < kChannelCount; ++c)
+    if (counts[c] != 0 && counts[c] != levels)
+      throw std::invalid_argument("writeChartFile: channels have different level counts");
+  const uint32_t channels = uint32_t(std::popcount(mask));
+  const size_t header = heightField ? kChartHeaderBytes : kChartHeaderBytesV2;
+  const size_t entryBytes = heightField ? kDirEntryBytes : 8 * channels;
 
   // Directory and total size.
   std::vector<LevelLayout> layouts(levels);
   size_t dirEntries = 0;
+  size_t sampleBytes = 0;
+  for (uint32_t c = 0; c < kChannelCount; ++c)
+    if (mask & (1u << c)) sampleBytes += kChannelBytes[c];
   for (uint32_t k = 0; k < levels; ++k) {
     layouts[k] = levelLayout(chartSize, blockIntervals, k);
     const size_t s = layouts[k].samples;
-    if (pyramid.heights[k].size() != s * s || pyramid.normals[k].size() != s * s)
-      throw std::invalid_argument("writeChartFile: level " + std::to_string(k) +
-                                  " has the wrong number of samples");
+    auto sizeOf = [&](uint32_t c) {
+      switch (c) {
+        case kChannelHeights: return pyramid.heights[k].size();
+        case kChannelNormals: return pyramid.normals[k].size();
+        case kChannelPositions: return pyramid.positions[k].size();
+        default: return pyramid.colours[k].size();
+      }
+    };
+    for (uint32_t c = 0; c < kChannelCount; ++c)
+      if ((mask & (1u << c)) && sizeOf(c) != s * s)
+        throw std::invalid_argument("writeChartFile: level " + std::to_string(k) +
+                                    " has the wrong number of samples");
     dirEntries += size_t{layouts[k].blocksPerSide} * layouts[k].blocksPerSide;
   }
-  uint64_t offset = kChartHeaderBytes + dirEntries * kDirEntryBytes;
+  uint64_t offset = header + dirEntries * entryBytes;
   uint64_t total = offset;
   for (const LevelLayout& l : layouts) {
     const uint64_t bs2 = uint64_t{l.blockSamples} * l.blockSamples;
-    total += uint64_t{l.blocksPerSide} * l.blocksPerSide * bs2 * (sizeof(float) + sizeof(PackedNormal));
+    total += uint64_t{l.blocksPerSide} * l.blocksPerSide * bs2 * sampleBytes;
   }
   std::vector<uint8_t> buf(total);
   std::memcpy(buf.data(), kChartMagic, 4);
-  putLe<uint32_t>(buf, 4, kChartFileVersion);
+  putLe<uint32_t>(buf, 4, heightField ? kChartFileVersion : kChartFileVersionChannels);
   putLe<uint32_t>(buf, 8, chartSize);
   putLe<uint32_t>(buf, 12, blockIntervals);
   putLe<uint32_t>(buf, 16, levels);
+  if (!heightField) putLe<uint32_t>(buf, 20, mask);
 
-  size_t dirAt = kChartHeaderBytes;
+  size_t dirAt = header;
   for (uint32_t k = 0; k < levels; ++k) {
     const LevelLayout& l = layouts[k];
     const uint32_t b = l.blockSamples - 1;
     const uint32_t bs = l.blockSamples;
-    const std::vector<float>& h = pyramid.heights[k];
-    const std::vector<PackedNormal>& nrm = pyramid.normals[k];
     for (uint32_t by = 0; by < l.blocksPerSide; ++by) {
       for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx) {
-        const uint64_t hOff = offset;
-        const uint64_t nOff = hOff + uint64_t{bs} * bs * sizeof(float);
-        offset = nOff + uint64_t{bs} * bs * sizeof(PackedNormal);
-        putLe<uint64_t>(buf, dirAt, hOff);
-        putLe<uint64_t>(buf, dirAt + 8, nOff);
-        dirAt += kDirEntryBytes;
-        for (uint32_t v = 0; v < bs; ++v) {
-          const size_t src = size_t{by * b + v} * l.samples + size_t{bx} * b;
-          uint8_t* hp = buf.data() + hOff + size_t{v} * bs * sizeof(float);
-          for (uint32_t u = 0; u < bs; ++u) {
-            const float f = toLittle(h[src + u]);
-            std::memcpy(hp + size_t{u} * sizeof(float), &f, sizeof(float));
+        for (uint32_t c = 0; c < kChannelCount; ++c) {
+          if (!(mask & (1u << c))) continue;
+          const size_t es = kChannelBytes[c];
+          putLe<uint64_t>(buf, dirAt, offset);
+          dirAt += 8;
+          for (uint32_t v = 0; v < bs; ++v) {
+            const size_t src = size_t{by * b + v} * l.samples + size_t{bx} * b;
+            uint8_t* dst = buf.data() + offset + size_t{v} * bs * es;
+            std::memcpy(dst, data[c][k] + src * es, size_t{bs} * es);
+            if (kChannelIsFloat[c])
+              for (size_t i = 0; i < size_t{bs} * es / sizeof(float); ++i) {
+                float f;
+                std::memcpy(&f, dst + i * sizeof(float), sizeof(float));
+                f = toLittle(f);
+                std::memcpy(dst + i * sizeof(float), &f, sizeof(float));
+              }
           }
-          std::memcpy(buf.data() + nOff + size_t{v} * bs * sizeof(PackedNormal), &nrm[src],
-                      size_t{bs} * sizeof(PackedNormal));
+          offset += uint64_t{bs} * bs * es;
         }
       }
     }
@@ -478,8 +523,21 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
     fail("truncated chart file (no header)");
   if (std::memcmp(hdr, kChartMagic, 4) != 0) fail("not a gimlod chart file (bad magic)");
   const uint32_t version = getLe<uint32_t>(hdr + 4);
-  if (version != kChartFileVersion)
+  if (version != kChartFileVersion && version != kChartFileVersionChannels)
     fail("unsupported chart file version " + std::to_string(version));
+  channelMask_ = kHeightFieldMask;
+  size_t header = kChartHeaderBytes;
+  if (version == kChartFileVersionChannels) {
+    uint8_t m[4];
+    if (fileSize < kChartHeaderBytesV2 || !file_.read(reinterpret_cast<char*>(m), 4))
+      fail("truncated chart file (no channel mask)");
+    channelMask_ = getLe<uint32_t>(m);
+    header = kChartHeaderBytesV2;
+    if (channelMask_ == 0 || channelMask_ >= (1u << kChannelCount) || !(channelMask_ & (1u << kChannelNormals)) ||
+        ((channelMask_ >> kChannelHeights) & 1u) == ((channelMask_ >> kChannelPositions) & 1u))
+      fail("corrupt chart header (channel mask " + std::to_string(channelMask_) + ")");
+  }
+  const size_t entryBytes = version == kChartFileVersion ? kDirEntryBytes : 8 * size_t(std::popcount(channelMask_));
   chartSize_ = getLe<uint32_t>(hdr + 8);
   blockIntervals_ = getLe<uint32_t>(hdr + 12);
   levels_ = getLe<uint32_t>(hdr + 16);
@@ -492,9 +550,9 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
     const LevelLayout l = levelLayout(chartSize_, blockIntervals_, k);
     entries += size_t{l.blocksPerSide} * l.blocksPerSide;
   }
-  const uint64_t dirEnd = kChartHeaderBytes + uint64_t{entries} * kDirEntryBytes;
+  const uint64_t dirEnd = header + uint64_t{entries} * entryBytes;
   if (fileSize < dirEnd) fail("truncated chart file (block directory incomplete)");
-  std::vector<uint8_t> dir(entries * kDirEntryBytes);
+  std::vector<uint8_t> dir(entries * entryBytes);
   if (!file_.read(reinterpret_cast<char*>(dir.data()), static_cast<std::streamsize>(dir.size())))
     fail("truncated chart file (block directory unreadable)");
   directory_.resize(levels_);
@@ -504,16 +562,14 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
     const uint64_t bs2 = uint64_t{l.blockSamples} * l.blockSamples;
     directory_[k].resize(size_t{l.blocksPerSide} * l.blocksPerSide);
     for (BlockEntry& e : directory_[k]) {
-      e.heightOffset = getLe<uint64_t>(dir.data() + at);
-      e.normalOffset = getLe<uint64_t>(dir.data() + at + 8);
-      at += kDirEntryBytes;
-      auto inside = [&](uint64_t off, uint64_t bytes) {
-        return off >= dirEnd && off <= fileSize && bytes <= fileSize - off;
-      };
-      if (!inside(e.heightOffset, bs2 * sizeof(float)) ||
-          !inside(e.normalOffset, bs2 * sizeof(PackedNormal))) {
-        if (e.heightOffset < dirEnd || e.normalOffset < dirEnd || e.heightOffset > (uint64_t{1} << 50) ||
-            e.normalOffset > (uint64_t{1} << 50))
+      for (uint32_t c = 0; c < kChannelCount; ++c) {
+        if (!hasChannel(ChartChannel(c))) continue;
+        const uint64_t off = getLe<uint64_t>(dir.data() + at);
+        at += 8;
+        e.offset[c] = off;
+        const uint64_t bytes = bs2 * kChannelBytes[c];
+        if (off >= dirEnd && off <= fileSize && bytes <= fileSize - off) continue;
+        if (off < dirEnd || off > (uint64_t{1} << 50))
           fail("corrupt chart file (block offset out of range at level " + std::to_string(k) + ")");
         fail("truncated chart file (" + std::to_string(fileSize) +
              " bytes; level " + std::to_string(k) + " blocks extend beyond the end)");
@@ -572,25 +628,35 @@ void ChartFileReader::readWindow(uint64_t offset, uint32_t bs, uint32_t du, uint
     throw InputError(quoted(path_) + ": read failed (file truncated or changed while in use)");
 }
 
-void ChartFileReader::readHeights(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
-                                  float* out) const {
+void ChartFileReader::readChannel(ChartChannel c, size_t elem, uint32_t level, uint32_t u0, uint32_t v0,
+                                  uint32_t n, void* out) const {
+  if (!hasChannel(c))
+    throw std::logic_error("ChartFileReader: " + path_.string() + " has no channel " + std::to_string(c));
   uint32_t bx, by;
   locateWindow(level, u0, v0, n, bx, by);
   const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
   const uint32_t b = l.blockSamples - 1;
-  readWindow(block(level, bx, by).heightOffset, l.blockSamples, u0 - bx * b, v0 - by * b, n,
-             sizeof(float), out);
-  floatsFromLe(out, size_t{n + 1} * (n + 1));
+  readWindow(block(level, bx, by).offset[c], l.blockSamples, u0 - bx * b, v0 - by * b, n, elem, out);
+  if (kChannelIsFloat[c]) floatsFromLe(static_cast<float*>(out), size_t{n + 1} * (n + 1) * elem / sizeof(float));
+}
+
+void ChartFileReader::readHeights(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
+                                  float* out) const {
+  readChannel(kChannelHeights, sizeof(float), level, u0, v0, n, out);
 }
 
 void ChartFileReader::readNormals(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
                                   PackedNormal* out) const {
-  uint32_t bx, by;
-  locateWindow(level, u0, v0, n, bx, by);
-  const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
-  const uint32_t b = l.blockSamples - 1;
-  readWindow(block(level, bx, by).normalOffset, l.blockSamples, u0 - bx * b, v0 - by * b, n,
-             sizeof(PackedNormal), out);
+  readChannel(kChannelNormals, sizeof(PackedNormal), level, u0, v0, n, out);
+}
+
+void ChartFileReader::readPositions(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, glm::vec3* out) const {
+  static_assert(sizeof(glm::vec3) == 3 * sizeof(float));
+  readChannel(kChannelPositions, sizeof(glm::vec3), level, u0, v0, n, out);
+}
+
+void ChartFileReader::readColours(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, PackedColour* out) const {
+  readChannel(kChannelColours, sizeof(PackedColour), level, u0, v0, n, out);
 }
 
 namespace {
@@ -623,6 +689,22 @@ std::vector<PackedNormal> ChartFileReader::readLevelNormals(uint32_t level) cons
   return assembleLevel<PackedNormal>(levelLayout(chartSize_, blockIntervals_, level),
                                      [&](uint32_t u0, uint32_t v0, uint32_t n, PackedNormal* out) {
                                        readNormals(level, u0, v0, n, out);
+                                     });
+}
+
+std::vector<glm::vec3> ChartFileReader::readLevelPositions(uint32_t level) const {
+  if (level >= levels_) throw std::logic_error("ChartFileReader: level out of range");
+  return assembleLevel<glm::vec3>(levelLayout(chartSize_, blockIntervals_, level),
+                                  [&](uint32_t u0, uint32_t v0, uint32_t n, glm::vec3* out) {
+                                    readPositions(level, u0, v0, n, out);
+                                  });
+}
+
+std::vector<PackedColour> ChartFileReader::readLevelColours(uint32_t level) const {
+  if (level >= levels_) throw std::logic_error("ChartFileReader: level out of range");
+  return assembleLevel<PackedColour>(levelLayout(chartSize_, blockIntervals_, level),
+                                     [&](uint32_t u0, uint32_t v0, uint32_t n, PackedColour* out) {
+                                       readColours(level, u0, v0, n, out);
                                      });
 }
 

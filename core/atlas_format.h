@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include <glm/vec3.hpp>
+
 namespace gimlod {
 
 // Error for bad user input or unreadable files; the message names the file and the problem.
@@ -127,13 +129,31 @@ struct LevelLayout {
 // or level.
 LevelLayout levelLayout(uint32_t chartSize, uint32_t blockIntervals, uint32_t level);
 
-// One chart's pyramid in memory: level k is a (samples_k)^2 row-major image (row = v).
+// The sample channels a chart file can hold.
+enum ChartChannel : uint32_t {
+  kChannelHeights = 0,    // float32: height field (terrain)
+  kChannelNormals = 1,    // PackedNormal
+  kChannelPositions = 2,  // 3 x float32: geometry image (mesh atlas)
+  kChannelColours = 3,    // RGBA8
+  kChannelCount = 4
+};
+using PackedColour = std::array<uint8_t, 4>;
+
+// One chart's pyramid in memory: level k is a (samples_k)^2 row-major image (row = v). A
+// height-field chart has heights and normals; a geometry chart has positions and normals, and
+// colours when the source had them. Absent channels are empty.
 struct ChartPyramid {
-  std::vector<std::vector<float>> heights;         // [level][v * samples + u]
-  std::vector<std::vector<PackedNormal>> normals;  // [level][v * samples + u]
+  std::vector<std::vector<float>> heights;          // [level][v * samples + u]
+  std::vector<std::vector<PackedNormal>> normals;   // [level][v * samples + u]
+  std::vector<std::vector<glm::vec3>> positions;    // [level][v * samples + u]
+  std::vector<std::vector<PackedColour>> colours;   // [level][v * samples + u]
 };
 
-// Writes a chart file (little-endian): magic "GLMC", u32 version (1), u32 chartSize,
+// Writes a chart file. A height-field pyramid (heights + normals) is written in version 1; a
+// pyramid with positions or colours in version 2: the same, but the header adds u32 channelMask
+// (1 << ChartChannel) after the level count, each directory entry holds one u64 offset per
+// present channel (in ChartChannel order), and each block stores its channels in that order.
+// Version 1 (little-endian): magic "GLMC", u32 version (1), u32 chartSize,
 // u32 blockIntervals, u32 levels; a directory, for each level and each block by rows
 // (by * blocksPerSide + bx), of u64 heightOffset and u64 normalOffset; then per block its
 // blockSamples^2 float32 heights followed by its blockSamples^2 PackedNormal, row-major. Block
@@ -158,10 +178,17 @@ class ChartFileReader {
   // Reads a whole level (all blocks).
   std::vector<float> readLevelHeights(uint32_t level) const;
   std::vector<PackedNormal> readLevelNormals(uint32_t level) const;
+  // Geometry charts (version 2). Throw std::logic_error when the file lacks the channel.
+  void readPositions(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, glm::vec3* out) const;
+  void readColours(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, PackedColour* out) const;
+  std::vector<glm::vec3> readLevelPositions(uint32_t level) const;
+  std::vector<PackedColour> readLevelColours(uint32_t level) const;
+  uint32_t channelMask() const { return channelMask_; }  // bits 1 << ChartChannel
+  bool hasChannel(ChartChannel c) const { return (channelMask_ >> c) & 1u; }
   const std::filesystem::path& path() const { return path_; }
 
  private:
-  struct BlockEntry { uint64_t heightOffset; uint64_t normalOffset; };
+  struct BlockEntry { std::array<uint64_t, kChannelCount> offset{}; };  // per ChartChannel
   const BlockEntry& block(uint32_t level, uint32_t bx, uint32_t by) const;
   // Block holding the window [u0, u0+n] x [v0, v0+n]; throws std::logic_error if none does.
   void locateWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, uint32_t& bx,
@@ -170,7 +197,11 @@ class ChartFileReader {
   void readWindow(uint64_t offset, uint32_t blockSamples, uint32_t du, uint32_t dv, uint32_t n,
                   size_t elem, void* out) const;
   std::filesystem::path path_;
+  // Reads a window of one channel (element size elem) into out.
+  void readChannel(ChartChannel c, size_t elem, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
+                   void* out) const;
   uint32_t chartSize_ = 0, blockIntervals_ = 0, levels_ = 0;
+  uint32_t channelMask_ = 0;
   std::vector<std::vector<BlockEntry>> directory_;  // [level][by * blocksPerSide + bx]
   mutable std::mutex mutex_;
   mutable std::ifstream file_;

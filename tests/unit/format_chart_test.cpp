@@ -182,6 +182,65 @@ TEST(FormatChart, TruncatedAndCorruptFiles) {
   expectReaderError(tmp.path() / "missing.bin", "cannot");
 }
 
+// Version 2: a geometry chart (positions, normals, colours) in blocks, read back by window and
+// by level; a height field still writes version 1.
+TEST(FormatChart, GeometryChannelsRoundTrip) {
+  test::TempDir tmp("gimlod-chart");
+  const uint32_t cs = 33, bi = 8;
+  ChartPyramid p = makePyramid(cs, 3);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> d(-2.f, 2.f);
+  for (const auto& level : p.heights) {
+    std::vector<glm::vec3> pos(level.size());
+    std::vector<PackedColour> col(level.size());
+    for (size_t i = 0; i < pos.size(); ++i) {
+      pos[i] = {d(rng), d(rng), level[i]};
+      col[i] = {uint8_t(rng()), uint8_t(rng()), uint8_t(rng()), 255};
+    }
+    p.positions.push_back(std::move(pos));
+    p.colours.push_back(std::move(col));
+  }
+  ChartPyramid heightField = p;
+  heightField.positions.clear();
+  heightField.colours.clear();
+  EXPECT_THROW(writeChartFile(tmp.path() / "both.bin", p, cs, bi), std::invalid_argument);  // heights and positions
+  p.heights.clear();
+  const fs::path f = tmp.path() / "geometry.bin";
+  const uint64_t bytes = writeChartFile(f, p, cs, bi);
+  EXPECT_EQ(bytes, fs::file_size(f));
+  ChartFileReader r(f);
+  EXPECT_TRUE(r.hasChannel(kChannelPositions));
+  EXPECT_TRUE(r.hasChannel(kChannelColours));
+  EXPECT_FALSE(r.hasChannel(kChannelHeights));
+  for (uint32_t k = 0; k < r.levels(); ++k) {
+    EXPECT_EQ(r.readLevelPositions(k), p.positions[k]) << "level " << k;
+    EXPECT_EQ(r.readLevelNormals(k), p.normals[k]) << "level " << k;
+    EXPECT_EQ(r.readLevelColours(k), p.colours[k]) << "level " << k;
+  }
+  std::vector<glm::vec3> win(5 * 5);
+  r.readPositions(0, 9, 17, 4, win.data());
+  for (uint32_t v = 0; v < 5; ++v)
+    for (uint32_t u = 0; u < 5; ++u) ASSERT_EQ(win[v * 5 + u], p.positions[0][size_t(17 + v) * cs + 9 + u]);
+  float h[4];
+  EXPECT_THROW(r.readHeights(0, 0, 0, 1, h), std::logic_error);
+  // Without colours, and the height field in version 1 as before.
+  p.colours.clear();
+  writeChartFile(tmp.path() / "nocolour.bin", p, cs, bi);
+  EXPECT_FALSE(ChartFileReader(tmp.path() / "nocolour.bin").hasChannel(kChannelColours));
+  writeChartFile(tmp.path() / "terrain.bin", heightField, cs, bi);
+  std::ifstream in(tmp.path() / "terrain.bin", std::ios::binary);
+  char hdr[8];
+  in.read(hdr, 8);
+  EXPECT_EQ(hdr[4], 1) << "a height field keeps chart file version 1";
+  // A corrupt channel mask is reported.
+  std::ifstream g(f, std::ios::binary);
+  std::vector<char> b((std::istreambuf_iterator<char>(g)), {});
+  b[20] = 1;  // heights only, no normals
+  const fs::path bad = tmp.path() / "badmask.bin";
+  std::ofstream(bad, std::ios::binary).write(b.data(), std::streamsize(b.size()));
+  expectReaderError(bad, "channel mask");
+}
+
 TEST(FormatChart, AtomicWriteFailsCleanly) {
   test::TempDir tmp("gimlod-chart");
   const char data[] = "hello";
