@@ -1,0 +1,178 @@
+// Based on: Niski, Purnomo, Cohen, I3D 2007, sections 3 and 5.
+#include "atlas/mesh_atlas.h"
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <unordered_map>
+
+#include <tbb/parallel_for.h>
+
+namespace gimlod {
+
+namespace fs = std::filesystem;
+
+ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize) {
+  const uint32_t M = chartSize - 1;
+  if (!isChartSizeValid(chartSize) || image.positions.size() != size_t(chartSize) * chartSize ||
+      image.normals.size() != image.positions.size() ||
+      (!image.colours.empty() && image.colours.size() != image.positions.size()))
+    throw std::invalid_argument("geometryPyramid: chart images do not match the chart size");
+  ChartPyramid p;
+  for (uint32_t k = 0; (M >> k) >= 1; ++k) {
+    const uint32_t s = (M >> k) + 1, step = 1u << k;
+    std::vector<glm::vec3> pos(size_t(s) * s);
+    std::vector<PackedNormal> nrm(pos.size());
+    std::vector<PackedColour> col(image.colours.empty() ? 0 : pos.size());
+    for (uint32_t v = 0; v < s; ++v)
+      for (uint32_t u = 0; u < s; ++u) {
+        const size_t src = size_t(v * step) * chartSize + u * step, dst = size_t(v) * s + u;
+        pos[dst] = image.positions[src];
+        nrm[dst] = image.normals[src];
+        if (!col.empty()) {
+          const glm::u8vec4 c = image.colours[src];
+          col[dst] = {c.r, c.g, c.b, c.a};
+        }
+      }
+    p.positions.push_back(std::move(pos));
+    p.normals.push_back(std::move(nrm));
+    if (!col.empty()) p.colours.push_back(std::move(col));
+    if ((M >> k) == 1) break;
+  }
+  return p;
+}
+
+GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs::path& dir,
+                                          uint32_t blockIntervals, AtlasManifest& m) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (set.charts.empty()) throw std::invalid_argument("writeGeometryCharts: no charts");
+  if (!std::has_single_bit(blockIntervals) || blockIntervals > set.chartSize - 1)
+    throw std::invalid_argument("writeGeometryCharts: blockIntervals must be a power of two <= chartSize - 1");
+  std::error_code ec;
+  fs::create_directories(dir / "charts", ec);
+  if (ec) throw InputError((dir / "charts").string() + ": cannot create directory (" + ec.message() + ")");
+  m.kind = "geometry";
+  m.chartSize = set.chartSize;
+  m.blockIntervals = blockIntervals;
+  m.chartsX = uint32_t(set.charts.size());
+  m.chartsY = 1;
+  m.samplesX = m.samplesY = 0;
+  m.charts.resize(set.charts.size());
+  std::vector<uint64_t> bytes(set.charts.size(), 0);
+  std::vector<std::array<float, 6>> boxes(set.charts.size());
+  tbb::parallel_for(size_t(0), set.charts.size(), [&](size_t i) {
+    const GeometryImage& img = set.charts[i];
+    char name[32];
+    std::snprintf(name, sizeof(name), "charts/chart_%04zu.bin", i);
+    ChartInfo& c = m.charts[i];
+    c.id = uint32_t(i);
+    c.gridX = int32_t(i);
+    c.gridY = 0;
+    c.file = name;
+    c.neighbours = img.neighbours;
+    glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
+    for (const glm::vec3& q : img.positions) {
+      lo = {std::min(lo.x, q.x), std::min(lo.y, q.y), std::min(lo.z, q.z)};
+      hi = {std::max(hi.x, q.x), std::max(hi.y, q.y), std::max(hi.z, q.z)};
+    }
+    boxes[i] = {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z};
+    bytes[i] = writeChartFile(dir / name, geometryPyramid(img, set.chartSize), set.chartSize, blockIntervals);
+  });
+  GeometryChartsWritten w;
+  w.bounds = boxes[0];
+  for (size_t i = 0; i < boxes.size(); ++i) {
+    w.bytes += bytes[i];
+    for (int a = 0; a < 3; ++a) {
+      w.bounds[a] = std::min(w.bounds[a], boxes[i][a]);
+      w.bounds[3 + a] = std::max(w.bounds[3 + a], boxes[i][3 + a]);
+    }
+  }
+  m.heightRange = {w.bounds[2], w.bounds[5]};
+  w.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return w;
+}
+
+AtlasSurface readAtlasSurface(const fs::path& atlasDir, uint32_t level) {
+  const AtlasManifest m = readManifest(atlasDir);
+  if (m.kind != "geometry")
+    throw InputError((atlasDir / kManifestName).string() + ": a " + m.kind +
+                     " atlas; export reads geometry (mesh) atlases");
+  if (level >= m.pyramidLevels())
+    throw InputError((atlasDir / kManifestName).string() + ": level " + std::to_string(level) +
+                     " does not exist (charts have levels 0.." + std::to_string(m.pyramidLevels() - 1) + ")");
+  AtlasSurface out;
+  struct Key {
+    uint32_t x, y, z;
+    bool operator==(const Key&) const = default;
+  };
+  struct KeyHash {
+    size_t operator()(const Key& k) const {
+      return size_t((uint64_t(k.x) * 0x9E3779B97F4A7C15ull) ^ (uint64_t(k.y) * 0xC2B2AE3D27D4EB4Full) ^
+                    (uint64_t(k.z) * 0x165667B19E3779F9ull));
+    }
+  };
+  std::unordered_map<Key, uint32_t, KeyHash> weld;
+  for (const ChartInfo& c : m.charts) {
+    const ChartFileReader reader(atlasDir / c.file);
+    if (!reader.hasChannel(kChannelPositions))
+      throw InputError((atlasDir / c.file).string() + ": no positions in a geometry atlas chart");
+    if (level >= reader.levels())
+      throw InputError((atlasDir / c.file).string() + ": has no level " + std::to_string(level));
+    const std::vector<glm::vec3> P = reader.readLevelPositions(level);
+    const uint32_t s = ((m.chartSize - 1) >> level) + 1;
+    std::vector<uint32_t> ids(P.size());
+    for (size_t i = 0; i < P.size(); ++i) {
+      Key k;
+      std::memcpy(&k, &P[i], sizeof(Key));
+      auto [it, inserted] = weld.try_emplace(k, uint32_t(out.positions.size()));
+      if (inserted) out.positions.push_back(P[i]);
+      ids[i] = it->second;
+    }
+    out.samples += P.size();
+    for (uint32_t v = 0; v + 1 < s; ++v)
+      for (uint32_t u = 0; u + 1 < s; ++u) {
+        const uint32_t a = ids[v * s + u], b = ids[v * s + u + 1], cc = ids[(v + 1) * s + u + 1],
+                       d = ids[(v + 1) * s + u];
+        if (a != b && b != cc && a != cc) out.triangles.push_back({a, b, cc});
+        if (a != cc && cc != d && a != d) out.triangles.push_back({a, cc, d});
+      }
+  }
+  std::unordered_map<uint64_t, uint32_t> edges;
+  for (const auto& t : out.triangles)
+    for (int e = 0; e < 3; ++e) {
+      const uint32_t a = t[e], b = t[(e + 1) % 3];
+      ++edges[(uint64_t(std::min(a, b)) << 32) | std::max(a, b)];
+    }
+  for (const auto& [k, n] : edges) out.boundaryEdges += n == 1;
+  return out;
+}
+
+void writePly(const fs::path& path, const std::vector<glm::vec3>& positions,
+              const std::vector<std::array<uint32_t, 3>>& triangles) {
+  std::string header = "ply\nformat binary_little_endian 1.0\ncomment gimlod atlas surface\nelement vertex " +
+                       std::to_string(positions.size()) +
+                       "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
+                       std::to_string(triangles.size()) + "\nproperty list uchar int vertex_indices\nend_header\n";
+  static_assert(std::endian::native == std::endian::little, "writePly writes native little-endian data");
+  std::vector<uint8_t> buf(header.size() + positions.size() * 12 + triangles.size() * 13);
+  std::memcpy(buf.data(), header.data(), header.size());
+  uint8_t* p = buf.data() + header.size();
+  for (const glm::vec3& q : positions) {
+    std::memcpy(p, &q, 12);
+    p += 12;
+  }
+  for (const auto& t : triangles) {
+    *p++ = 3;
+    for (uint32_t i : t) {
+      const int32_t v = int32_t(i);
+      std::memcpy(p, &v, 4);
+      p += 4;
+    }
+  }
+  atomicWriteFile(path, buf.data(), buf.size());
+}
+
+}  // namespace gimlod

@@ -1,0 +1,55 @@
+// The mesh atlas on disk: geometry charts (the quad charts of a resampled chart layout) written
+// as chart files with their pyramids, and the atlas surface read back as one welded mesh (the
+// `gimlod export` command), so that its fidelity can be checked with any mesh tool.
+// Based on: Niski, Purnomo, Cohen, I3D 2007, sections 3 and 5 (seamless geometry-image atlas,
+// 2^k+1 pyramids by subsampling).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "atlas/resample.h"
+#include "core/atlas_format.h"
+
+namespace gimlod {
+
+// The pyramid of one geometry chart: level k keeps every 2^k-th sample of level 0 (so shared
+// borders stay bit-identical at every level), down to 2 intervals per side.
+ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize);
+
+struct GeometryChartsWritten {
+  uint64_t bytes = 0;
+  double seconds = 0.0;
+  std::array<float, 6> bounds{};  // min x, y, z, max x, y, z over every sample
+};
+
+// Writes set's charts to dir/charts/chart_NNNN.bin (atomically, in parallel) and fills m's
+// kind ("geometry"), chart size, block size, chart list (file names, neighbours) and height
+// range (z of the bounds). blockIntervals: a power of two <= chartSize - 1. Throws InputError when
+// a file cannot be written, std::invalid_argument on an empty or inconsistent set.
+GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const std::filesystem::path& dir,
+                                          uint32_t blockIntervals, AtlasManifest& m);
+
+// The surface of a geometry atlas at pyramid level `level`: every chart's grid, triangulated as
+// the renderer draws it (split along the (0,0)-(1,1) diagonal, counter-clockwise in (u, v)), with
+// vertices of bit-identical positions welded into one (the seams), so a seamless atlas gives a
+// watertight mesh wherever the input was closed.
+struct AtlasSurface {
+  std::vector<glm::vec3> positions;
+  std::vector<std::array<uint32_t, 3>> triangles;
+  uint64_t samples = 0;        // chart samples read (before welding)
+  uint64_t boundaryEdges = 0;  // edges used by one triangle only (0 for a closed input)
+};
+// Throws InputError naming the atlas or chart file on a missing or corrupt atlas, a height-field
+// atlas, or a level the charts do not have.
+AtlasSurface readAtlasSurface(const std::filesystem::path& atlasDir, uint32_t level);
+
+// Writes a binary little-endian PLY (float x y z, uchar-list int vertex_indices), atomically.
+void writePly(const std::filesystem::path& path, const std::vector<glm::vec3>& positions,
+              const std::vector<std::array<uint32_t, 3>>& triangles);
+
+}  // namespace gimlod
