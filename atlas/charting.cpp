@@ -1,0 +1,1549 @@
+// Face clustering into a conforming layout of n-sided disk patches.
+// Based on: Garland, Willmott, Heckbert, "Hierarchical Face Clustering on Polygonal Surfaces",
+// I3D 2001 (dual-edge collapse, plane-fit quadric, compactness); Niski, Purnomo, Cohen, I3D
+// 2007, section 5 (per-cell then global clustering); Purnomo, Cohen, Kumar, SGP 2004 (patches).
+#include "atlas/charting.h"
+
+#include <algorithm>
+#include <atomic>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <optional>
+#include <queue>
+#include <string>
+#include <unordered_map>
+#include <utility>
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include "atlas/gridify.h"
+
+namespace gimlod {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
+constexpr double kPi = 3.14159265358979323846;
+// Planarity unit of the merge cost: 1% of the bounding-box diagonal (a mean squared plane
+// distance of kTau^2 costs as much as a perfect disc's compactness at weight 1).
+constexpr double kTau = 0.01;
+// Weight of the normal-spread term 1 - |sum of area-weighted normals| / area (0 flat, 1 folded
+// shut); it keeps clusters from wrapping round thin parts, where the plane fit alone is small.
+constexpr double kNormalWeight = 4.0;
+
+double since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+inline uint32_t nextHe(uint32_t h) { return h - h % 3 + (h % 3 + 1) % 3; }
+inline uint32_t prevHe(uint32_t h) { return h - h % 3 + (h % 3 + 2) % 3; }
+
+uint64_t mix64(uint64_t x) {
+  x ^= x >> 33;
+  x *= 0xff51afd7ed558ccdull;
+  x ^= x >> 33;
+  x *= 0xc4ceb9fe1a85ec53ull;
+  x ^= x >> 33;
+  return x;
+}
+
+// Exact-position weld table (open addressing). +0 and -0 are the same key.
+class PositionWeld {
+ public:
+  explicit PositionWeld(size_t expected) {
+    size_t cap = 16;
+    while (cap < expected * 2 + 16) cap *= 2;
+    slots_.assign(cap, kNone);
+    mask_ = cap - 1;
+  }
+  // Returns the id of p (an earlier equal position's, or `id` if new).
+  uint32_t insert(const glm::vec3& p, uint32_t id, std::vector<glm::vec3>& keys) {
+    const glm::vec3 q = p + 0.0f;
+    const uint64_t hx = std::bit_cast<uint32_t>(q.x), hy = std::bit_cast<uint32_t>(q.y),
+                   hz = std::bit_cast<uint32_t>(q.z);
+    size_t i = mix64((hx << 32 | hy) ^ mix64(hz)) & mask_;
+    while (true) {
+      const uint32_t s = slots_[i];
+      if (s == kNone) {
+        slots_[i] = id;
+        keys.push_back(q);
+        return id;
+      }
+      if (keys[s] == q) return s;
+      i = (i + 1) & mask_;
+    }
+  }
+
+ private:
+  std::vector<uint32_t> slots_;
+  size_t mask_ = 0;
+};
+
+// The welded, repaired, manifold mesh with its adjacency.
+struct Surface {
+  std::vector<glm::vec3> positions;
+  std::vector<glm::u8vec4> colours;
+  std::vector<std::array<uint32_t, 3>> tris;
+  std::vector<uint32_t> source;   // input triangle of each triangle
+  std::vector<uint32_t> twin;     // per half-edge 3f+i (v[i] -> v[i+1]); kNone: open
+  std::vector<uint32_t> vfStart;  // vertex -> faces (CSR)
+  std::vector<uint32_t> vfFaces;
+  uint32_t origin(uint32_t h) const { return tris[h / 3][h % 3]; }
+  uint32_t dest(uint32_t h) const { return tris[h / 3][(h % 3 + 1) % 3]; }
+  size_t bytes() const {
+    return positions.size() * 12 + colours.size() * 4 + tris.size() * 16 + twin.size() * 4 +
+           vfStart.size() * 4 + vfFaces.size() * 4;
+  }
+};
+
+struct UnionFind {
+  std::vector<uint32_t> parent;
+  explicit UnionFind(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
+  uint32_t find(uint32_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  }
+  void unite(uint32_t a, uint32_t b) {
+    a = find(a);
+    b = find(b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  }
+};
+
+// Welds, drops degenerate and duplicate triangles, pairs half-edges (non-manifold edges: the
+// first half-edges of each direction are paired, the rest stay open) and splits every vertex
+// whose corners form more than one fan. `triPos` gives each triangle's corner positions.
+Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm::u8vec4>& inCol,
+                      const std::vector<std::array<uint32_t, 3>>& inTris, ChartingStats& st) {
+  const char* fn = "buildChartLayout";
+  Surface s;
+  st.inputTriangles += inTris.size();
+  // 1. Weld referenced positions.
+  std::vector<uint32_t> remap(inPos.size(), kNone);
+  std::vector<uint32_t> weldSource;  // input vertex of each welded vertex
+  std::vector<glm::vec3> keys;
+  PositionWeld weld(std::min(inPos.size(), inTris.size() * 3));
+  uint64_t referenced = 0;
+  for (const auto& t : inTris) {
+    for (uint32_t v : t) {
+      if (v >= inPos.size())
+        throw InputError(std::string(fn) + ": triangle index " + std::to_string(v) +
+                         " outside the " + std::to_string(inPos.size()) + " positions");
+      if (remap[v] != kNone) continue;
+      const glm::vec3& p = inPos[v];
+      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+        throw InputError(std::string(fn) + ": vertex " + std::to_string(v) + " is not finite");
+      ++referenced;
+      const uint32_t id = weld.insert(p, static_cast<uint32_t>(weldSource.size()), keys);
+      if (id == weldSource.size()) weldSource.push_back(v);
+      remap[v] = id;
+    }
+  }
+  st.inputVertices += referenced;
+  st.verticesWelded += referenced - weldSource.size();
+  // 2. Remap; drop degenerate and duplicate triangles (first one kept).
+  struct Key {
+    std::array<uint32_t, 3> v;
+    uint32_t tri;
+  };
+  std::vector<Key> sorted;
+  sorted.reserve(inTris.size());
+  for (uint32_t i = 0; i < inTris.size(); ++i) {
+    std::array<uint32_t, 3> t{remap[inTris[i][0]], remap[inTris[i][1]], remap[inTris[i][2]]};
+    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) {
+      ++st.droppedDegenerate;
+      continue;
+    }
+    std::sort(t.begin(), t.end());
+    sorted.push_back({t, i});
+  }
+  std::sort(sorted.begin(), sorted.end(),
+            [](const Key& a, const Key& b) { return a.v != b.v ? a.v < b.v : a.tri < b.tri; });
+  std::vector<uint8_t> keep(inTris.size(), 0);
+  for (size_t i = 0; i < sorted.size(); ++i) {
+    if (i > 0 && sorted[i].v == sorted[i - 1].v) {
+      ++st.droppedDuplicate;
+      continue;
+    }
+    keep[sorted[i].tri] = 1;
+  }
+  std::vector<Key>().swap(sorted);
+  std::vector<std::array<uint32_t, 3>> tris;
+  for (uint32_t i = 0; i < inTris.size(); ++i) {
+    if (!keep[i]) continue;
+    tris.push_back({remap[inTris[i][0]], remap[inTris[i][1]], remap[inTris[i][2]]});
+    s.source.push_back(i);
+  }
+  std::vector<uint8_t>().swap(keep);
+  std::vector<uint32_t>().swap(remap);
+  const uint32_t nf = static_cast<uint32_t>(tris.size());
+  if (nf == 0) throw InputError(std::string(fn) + ": no triangle left after welding");
+  // 3. Pair half-edges by undirected key.
+  auto org = [&](uint32_t h) { return tris[h / 3][h % 3]; };
+  auto dst = [&](uint32_t h) { return tris[h / 3][(h % 3 + 1) % 3]; };
+  std::vector<std::pair<uint64_t, uint32_t>> he(size_t{nf} * 3);
+  for (uint32_t h = 0; h < 3 * nf; ++h) {
+    const uint64_t a = org(h), b = dst(h);
+    he[h] = {std::min(a, b) << 32 | std::max(a, b), h};
+  }
+  std::sort(he.begin(), he.end());
+  s.twin.assign(size_t{nf} * 3, kNone);
+  std::vector<std::vector<uint32_t>> badGroups;
+  for (size_t i = 0; i < he.size();) {
+    size_t j = i + 1;
+    while (j < he.size() && he[j].first == he[i].first) ++j;
+    if (j - i == 2 && org(he[i].second) != org(he[i + 1].second)) {
+      s.twin[he[i].second] = he[i + 1].second;
+      s.twin[he[i + 1].second] = he[i].second;
+    } else if (j - i >= 2) {
+      ++st.nonManifoldEdges;
+      std::vector<uint32_t> fw, bw, all;
+      for (size_t k = i; k < j; ++k) {
+        const uint32_t h = he[k].second;
+        all.push_back(h);
+        (org(h) < dst(h) ? fw : bw).push_back(h);
+      }
+      for (size_t k = 0; k < std::min(fw.size(), bw.size()); ++k) {
+        s.twin[fw[k]] = bw[k];
+        s.twin[bw[k]] = fw[k];
+      }
+      badGroups.push_back(std::move(all));
+    }
+    i = j;
+  }
+  std::vector<std::pair<uint64_t, uint32_t>>().swap(he);
+  // 4. Split vertices into fans (corners linked across paired edges). Repeat if a split leaves
+  // two edges between the same two vertices (a fan closing round a fin): detach that triangle.
+  const uint32_t nv0 = static_cast<uint32_t>(weldSource.size());
+  std::vector<uint32_t> newId, vertexOf;  // corner root -> new vertex; new vertex -> welded
+  uint64_t splitVertices = 0;
+  for (int round = 0;; ++round) {
+    UnionFind uf(size_t{nf} * 3);
+    for (uint32_t h = 0; h < 3 * nf; ++h) {
+      const uint32_t t = s.twin[h];
+      if (t == kNone || t < h) continue;
+      uf.unite(h, nextHe(t));
+      uf.unite(nextHe(h), t);
+    }
+    newId.assign(size_t{nf} * 3, kNone);
+    std::vector<uint8_t> owned(nv0, 0);
+    std::vector<uint8_t> counted(nv0, 0);
+    vertexOf.assign(nv0, kNone);
+    for (uint32_t v = 0; v < nv0; ++v) vertexOf[v] = v;
+    splitVertices = 0;
+    uint64_t nonManifoldVertices = 0;
+    for (uint32_t c = 0; c < 3 * nf; ++c) {
+      const uint32_t r = uf.find(c);
+      if (newId[r] != kNone) continue;
+      const uint32_t v = org(c);
+      if (!owned[v]) {
+        owned[v] = 1;
+        newId[r] = v;
+      } else {
+        newId[r] = static_cast<uint32_t>(vertexOf.size());
+        vertexOf.push_back(v);
+        ++splitVertices;
+        if (!counted[v]) {
+          counted[v] = 1;
+          ++nonManifoldVertices;
+        }
+      }
+    }
+    for (uint32_t c = 0; c < 3 * nf; ++c) newId[c] = newId[uf.find(c)];
+    bool changed = false;
+    for (const auto& g : badGroups) {
+      for (size_t a = 0; a < g.size(); ++a) {
+        for (size_t b = 0; b < g.size(); ++b) {
+          const uint32_t ha = g[a], hb = g[b];
+          if (a == b || s.twin[ha] == hb) continue;
+          const uint32_t a0 = newId[ha], a1 = newId[nextHe(ha)];
+          const uint32_t b0 = newId[hb], b1 = newId[nextHe(hb)];
+          if (!((a0 == b0 && a1 == b1) || (a0 == b1 && a1 == b0))) continue;
+          const uint32_t f = ha / 3;
+          for (uint32_t k = 0; k < 3; ++k) {
+            const uint32_t h = 3 * f + k, t = s.twin[h];
+            if (t == kNone) continue;
+            s.twin[h] = s.twin[t] = kNone;
+            changed = true;
+          }
+        }
+      }
+    }
+    if (!changed || round > 64) {
+      st.nonManifoldVertices += nonManifoldVertices;
+      break;
+    }
+  }
+  st.verticesSplit += splitVertices;
+  // 5. Output arrays.
+  const uint32_t nv = static_cast<uint32_t>(vertexOf.size());
+  s.tris.resize(nf);
+  for (uint32_t f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) s.tris[f][k] = newId[3 * f + k];
+  s.positions.resize(nv);
+  for (uint32_t v = 0; v < nv; ++v) s.positions[v] = inPos[weldSource[vertexOf[v]]];
+  if (!inCol.empty()) {
+    s.colours.resize(nv);
+    for (uint32_t v = 0; v < nv; ++v) s.colours[v] = inCol[weldSource[vertexOf[v]]];
+  }
+  s.vfStart.assign(size_t{nv} + 1, 0);
+  for (const auto& t : s.tris)
+    for (uint32_t v : t) ++s.vfStart[v + 1];
+  for (uint32_t v = 0; v < nv; ++v) s.vfStart[v + 1] += s.vfStart[v];
+  s.vfFaces.resize(size_t{nf} * 3);
+  std::vector<uint32_t> fill(s.vfStart.begin(), s.vfStart.end() - 1);
+  for (uint32_t f = 0; f < nf; ++f)
+    for (uint32_t v : s.tris[f]) s.vfFaces[fill[v]++] = f;
+  for (uint32_t t : s.twin) st.boundaryEdges += t == kNone;
+  return s;
+}
+
+// Area moments of a set of triangles, in normalised coordinates (bounding-box centre at 0,
+// diagonal 1): area, first moment, second moment (xx xy xz yy yz zz), area-weighted normal.
+struct Moments {
+  double area = 0, m[3] = {0, 0, 0}, s[6] = {0, 0, 0, 0, 0, 0}, n[3] = {0, 0, 0};
+  void add(const Moments& o) {
+    area += o.area;
+    for (int i = 0; i < 3; ++i) m[i] += o.m[i], n[i] += o.n[i];
+    for (int i = 0; i < 6; ++i) s[i] += o.s[i];
+  }
+};
+
+Moments triangleMoments(const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
+  Moments r;
+  const glm::dvec3 e1 = b - a, e2 = c - a;
+  const glm::dvec3 cr{e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z,
+                      e1.x * e2.y - e1.y * e2.x};
+  const double A = 0.5 * std::sqrt(cr.x * cr.x + cr.y * cr.y + cr.z * cr.z);
+  const glm::dvec3 g = (a + b + c) / 3.0;
+  r.area = A;
+  for (int i = 0; i < 3; ++i) r.m[i] = A * g[i], r.n[i] = 0.5 * cr[i];
+  // Integral of x x^T over the triangle: A/12 (sum v v^T + 9 g g^T).
+  const glm::dvec3* v[3] = {&a, &b, &c};
+  const int ij[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
+  for (int k = 0; k < 6; ++k) {
+    double sum = 9.0 * g[ij[k][0]] * g[ij[k][1]];
+    for (int t = 0; t < 3; ++t) sum += (*v[t])[ij[k][0]] * (*v[t])[ij[k][1]];
+    r.s[k] = A / 12.0 * sum;
+  }
+  return r;
+}
+
+// Smallest eigenvalue of a symmetric 3x3 matrix (xx xy xz yy yz zz), closed form.
+double minEigenvalue(const double c[6]) {
+  const double a00 = c[0], a01 = c[1], a02 = c[2], a11 = c[3], a12 = c[4], a22 = c[5];
+  const double p1 = a01 * a01 + a02 * a02 + a12 * a12;
+  const double q = (a00 + a11 + a22) / 3.0;
+  if (p1 <= 1e-300) return std::min({a00, a11, a22});
+  const double p2 = (a00 - q) * (a00 - q) + (a11 - q) * (a11 - q) + (a22 - q) * (a22 - q) + 2 * p1;
+  const double p = std::sqrt(p2 / 6.0);
+  if (p <= 0) return q;
+  const double b00 = (a00 - q) / p, b11 = (a11 - q) / p, b22 = (a22 - q) / p;
+  const double b01 = a01 / p, b02 = a02 / p, b12 = a12 / p;
+  const double det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) +
+                     b02 * (b01 * b12 - b11 * b02);
+  const double r = std::clamp(det / 2.0, -1.0, 1.0);
+  const double phi = std::acos(r) / 3.0;
+  return q + 2.0 * p * std::cos(phi + 2.0 * kPi / 3.0);
+}
+
+// Mean squared distance to the least-squares plane (normalised units).
+double planeMsd(const Moments& M) {
+  if (M.area <= 0) return 0;
+  double c[6];
+  const int ij[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
+  for (int k = 0; k < 6; ++k) c[k] = M.s[k] - M.m[ij[k][0]] * M.m[ij[k][1]] / M.area;
+  return std::max(0.0, minEigenvalue(c) / M.area);
+}
+
+// Greedy dual-edge collapse over clusters of a Surface's faces.
+class Clusterer {
+ public:
+  Clusterer(const Surface& s, const std::vector<glm::dvec3>& npos, std::vector<uint32_t> labels)
+      : s_(s), npos_(npos), label_(std::move(labels)) {
+    const uint32_t nf = static_cast<uint32_t>(s.tris.size());
+    uint32_t nc = 0;
+    for (uint32_t l : label_) nc = std::max(nc, l + 1);
+    mom_.assign(nc, {});
+    perim_.assign(nc, 0);
+    count_.assign(nc, 0);
+    head_.assign(nc, kNone);
+    nextFace_.assign(nf, kNone);
+    version_.assign(nc, 0);
+    adj_.resize(nc);
+    for (uint32_t f = nf; f-- > 0;) {
+      const uint32_t c = label_[f];
+      mom_[c].add(faceMoments(f));
+      nextFace_[f] = head_[c];
+      head_[c] = f;
+      ++count_[c];
+    }
+    struct Link {
+      uint32_t a, b;
+      double len;
+    };
+    std::vector<Link> links;
+    for (uint32_t h = 0; h < 3 * nf; ++h) {
+      const uint32_t t = s.twin[h];
+      const uint32_t c = label_[h / 3];
+      if (t != kNone && label_[t / 3] == c) continue;
+      const double len = edgeLength(h);
+      perim_[c] += len;
+      if (t != kNone && h < t) {
+        const uint32_t d = label_[t / 3];
+        links.push_back({std::min(c, d), std::max(c, d), len});
+      }
+    }
+    std::sort(links.begin(), links.end(),
+              [](const Link& x, const Link& y) { return x.a != y.a ? x.a < y.a : x.b < y.b; });
+    for (size_t i = 0; i < links.size();) {
+      size_t j = i;
+      Adj e{links[i].b, 0, 0};
+      while (j < links.size() && links[j].a == links[i].a && links[j].b == links[i].b) {
+        ++e.edges;
+        e.length += links[j].len;
+        ++j;
+      }
+      adj_[links[i].a].push_back(e);
+      adj_[e.other].push_back({links[i].a, e.edges, e.length});
+      i = j;
+    }
+    for (uint32_t c = 0; c < nc; ++c) {
+      if (count_[c] > 0) ++alive_;
+      totalArea_ += mom_[c].area;
+    }
+    totalArea_ = std::max(totalArea_, 1e-300);
+    pos_.assign(nc, kNone);
+    vstamp_.assign(s.positions.size(), 0);
+  }
+
+  // Merges until `target` clusters remain (0: no count target) or no allowed merge is left.
+  // maxRms: largest RMS plane distance of a merged cluster (normalised units), or infinity.
+  void run(uint32_t target, double maxRms, double weight) {
+    weight_ = weight;
+    maxRms_ = maxRms;
+    for (uint32_t c = 0; c < adj_.size(); ++c)
+      for (const Adj& e : adj_[c])
+        if (c < e.other) push(c, e);
+    while (!heap_.empty() && alive_ > std::max(target, 1u)) {
+      const Cand k = heap_.top();
+      heap_.pop();
+      if (count_[k.a] == 0 || count_[k.b] == 0 || version_[k.a] != k.va ||
+          version_[k.b] != k.vb)
+        continue;
+      if (!mergeKeepsDisk(k.a, k.b)) {
+        ++refused_;
+        continue;
+      }
+      merge(k.a, k.b);
+    }
+  }
+
+  // True if the cluster's faces form a closed topological disk (connected, V - E + F = 1, one
+  // simple boundary loop).
+  bool isDisk(uint32_t c) {
+    ++stamp_;
+    uint64_t F = 0, E2 = 0, V = 0, B = 0;
+    uint32_t start = kNone;
+    for (uint32_t f = head_[c]; f != kNone; f = nextFace_[f]) {
+      ++F;
+      for (uint32_t k = 0; k < 3; ++k) {
+        const uint32_t h = 3 * f + k, t = s_.twin[h];
+        const bool bnd = t == kNone || label_[t / 3] != c;
+        E2 += bnd ? 2 : 1;
+        if (bnd) ++B, start = h;
+        const uint32_t v = s_.tris[f][k];
+        if (vstamp_[v] != stamp_) vstamp_[v] = stamp_, ++V;
+      }
+    }
+    if (F == 0 || start == kNone) return false;
+    if (static_cast<int64_t>(V) - static_cast<int64_t>(E2 / 2) + static_cast<int64_t>(F) != 1)
+      return false;
+    // Connected: flood over interior edges.
+    std::vector<uint32_t> stack{head_[c]};
+    ++stamp_;
+    std::vector<uint32_t>& seen = faceSeen();
+    seen[head_[c]] = stamp_;
+    uint64_t reached = 0;
+    while (!stack.empty()) {
+      const uint32_t f = stack.back();
+      stack.pop_back();
+      ++reached;
+      for (uint32_t k = 0; k < 3; ++k) {
+        const uint32_t t = s_.twin[3 * f + k];
+        if (t == kNone || label_[t / 3] != c || seen[t / 3] == stamp_) continue;
+        seen[t / 3] = stamp_;
+        stack.push_back(t / 3);
+      }
+    }
+    if (reached != F) return false;
+    // One simple loop through all boundary half-edges.
+    ++stamp_;
+    uint64_t len = 0;
+    uint32_t h = start;
+    do {
+      const uint32_t v = s_.origin(h);
+      if (vstamp_[v] == stamp_) return false;
+      vstamp_[v] = stamp_;
+      ++len;
+      h = nextBoundary(h, c);
+    } while (h != start && len <= B);
+    return len == B && h == start;
+  }
+
+  // Labels with every non-disk cluster replaced by single-triangle clusters (empty if all
+  // clusters are disks); `dissolved` counts those clusters.
+  std::vector<uint32_t> dissolveNonDisks(uint32_t& dissolved) {
+    dissolved = 0;
+    const uint32_t nc = static_cast<uint32_t>(count_.size());
+    std::vector<uint32_t> bad;
+    for (uint32_t c = 0; c < nc; ++c)
+      if (count_[c] > 0 && !isDisk(c)) bad.push_back(c);
+    if (bad.empty()) return {};
+    std::vector<uint32_t> labels = label_;
+    uint32_t next = nc;
+    for (uint32_t c : bad) {
+      ++dissolved;
+      for (uint32_t f = nextFace_[head_[c]]; f != kNone; f = nextFace_[f]) labels[f] = next++;
+    }
+    return labels;
+  }
+
+  uint32_t nextBoundary(uint32_t h, uint32_t c) const {
+    uint32_t n = nextHe(h);
+    while (true) {
+      const uint32_t t = s_.twin[n];
+      if (t == kNone || label_[t / 3] != c) return n;
+      n = nextHe(t);
+    }
+  }
+
+  const std::vector<uint32_t>& labels() const { return label_; }
+  uint32_t alive() const { return alive_; }
+  uint32_t refused() const { return refused_; }
+  size_t bytes() const {
+    return mom_.size() * (sizeof(Moments) + 8 + 4 + 4 + 4 + 4 + sizeof(std::vector<Adj>)) +
+           nextFace_.size() * 8 + heapPeak_ * sizeof(Cand) + vstamp_.size() * 4;
+  }
+
+ private:
+  struct Adj {
+    uint32_t other;
+    uint32_t edges;
+    double length;
+  };
+  struct Cand {
+    double cost;
+    uint32_t a, b, va, vb;
+    bool operator>(const Cand& o) const { return cost > o.cost; }
+  };
+
+  Moments faceMoments(uint32_t f) const {
+    const auto& t = s_.tris[f];
+    return triangleMoments(npos_[t[0]], npos_[t[1]], npos_[t[2]]);
+  }
+  double edgeLength(uint32_t h) const {
+    return glm::length(npos_[s_.origin(h)] - npos_[s_.dest(h)]);
+  }
+  std::vector<uint32_t>& faceSeen() {
+    if (faceSeen_.size() != s_.tris.size()) faceSeen_.assign(s_.tris.size(), 0);
+    return faceSeen_;
+  }
+
+  void push(uint32_t a, const Adj& e) {
+    const uint32_t b = e.other;
+    Moments M = mom_[a];
+    M.add(mom_[b]);
+    const double msd = planeMsd(M);
+    if (msd > maxRms_ * maxRms_) return;
+    const double perim = std::max(0.0, perim_[a] + perim_[b] - 2.0 * e.length);
+    const double area = std::max(M.area, 1e-300);
+    const double nlen = std::sqrt(M.n[0] * M.n[0] + M.n[1] * M.n[1] + M.n[2] * M.n[2]);
+    const double spread = std::max(0.0, 1.0 - nlen / area);
+    const double compact = perim * perim / (4.0 * kPi * area);
+    const double cost =
+        (area / totalArea_) * (msd / (kTau * kTau) + kNormalWeight * spread + weight_ * compact);
+    heap_.push({cost, a, b, version_[a], version_[b]});
+    heapPeak_ = std::max(heapPeak_, heap_.size());
+  }
+
+  // The union of two disks is a disk iff they meet in exactly one boundary arc: shared
+  // vertices = shared edges + 1 (a full shared loop gives 0, several arcs or touching corners
+  // give more).
+  bool mergeKeepsDisk(uint32_t a, uint32_t b) {
+    if (count_[a] > count_[b]) std::swap(a, b);
+    ++stamp_;
+    uint64_t sharedEdges = 0, sharedVertices = 0;
+    for (uint32_t f = head_[a]; f != kNone; f = nextFace_[f]) {
+      for (uint32_t k = 0; k < 3; ++k) {
+        const uint32_t h = 3 * f + k, t = s_.twin[h];
+        if (t != kNone && label_[t / 3] == a) continue;
+        if (t != kNone && label_[t / 3] == b) ++sharedEdges;
+        const uint32_t v = s_.tris[f][k];
+        if (vstamp_[v] == stamp_) continue;
+        vstamp_[v] = stamp_;
+        for (uint32_t i = s_.vfStart[v]; i < s_.vfStart[v + 1]; ++i) {
+          if (label_[s_.vfFaces[i]] == b) {
+            ++sharedVertices;
+            break;
+          }
+        }
+      }
+    }
+    return sharedEdges > 0 && sharedVertices == sharedEdges + 1;
+  }
+
+  void merge(uint32_t a, uint32_t b) {
+    if (count_[a] > count_[b]) std::swap(a, b);  // a (smaller) into b
+    uint32_t last = kNone;
+    for (uint32_t f = head_[a]; f != kNone; f = nextFace_[f]) {
+      label_[f] = b;
+      last = f;
+    }
+    nextFace_[last] = head_[b];
+    head_[b] = head_[a];
+    head_[a] = kNone;
+    count_[b] += count_[a];
+    count_[a] = 0;
+    mom_[b].add(mom_[a]);
+    std::vector<Adj>& ab = adj_[b];
+    double shared = 0;
+    for (size_t i = 0; i < ab.size(); ++i) {
+      if (ab[i].other == a) {
+        shared = ab[i].length;
+        ab[i] = ab.back();
+        ab.pop_back();
+        break;
+      }
+    }
+    perim_[b] = std::max(0.0, perim_[a] + perim_[b] - 2.0 * shared);
+    for (size_t i = 0; i < ab.size(); ++i) pos_[ab[i].other] = static_cast<uint32_t>(i);
+    for (const Adj& e : adj_[a]) {
+      const uint32_t x = e.other;
+      if (x == b) continue;
+      std::vector<Adj>& ax = adj_[x];
+      if (pos_[x] != kNone) {
+        ab[pos_[x]].edges += e.edges;
+        ab[pos_[x]].length += e.length;
+        // x lists both a and b: fold a's entry into b's.
+        size_t ia = kNone, ib = kNone;
+        for (size_t i = 0; i < ax.size(); ++i) {
+          if (ax[i].other == a) ia = i;
+          if (ax[i].other == b) ib = i;
+        }
+        ax[ib].edges += ax[ia].edges;
+        ax[ib].length += ax[ia].length;
+        ax[ia] = ax.back();
+        ax.pop_back();
+      } else {
+        pos_[x] = static_cast<uint32_t>(ab.size());
+        ab.push_back(e);
+        for (Adj& y : ax)
+          if (y.other == a) y.other = b;
+      }
+    }
+    for (const Adj& e : ab) pos_[e.other] = kNone;
+    std::vector<Adj>().swap(adj_[a]);
+    ++version_[a];
+    ++version_[b];
+    --alive_;
+    for (const Adj& e : ab) push(b, e);
+  }
+
+  const Surface& s_;
+  const std::vector<glm::dvec3>& npos_;
+  std::vector<uint32_t> label_;
+  std::vector<Moments> mom_;
+  std::vector<double> perim_;
+  std::vector<uint32_t> count_, head_, nextFace_, version_, pos_, vstamp_, faceSeen_;
+  std::vector<std::vector<Adj>> adj_;
+  std::priority_queue<Cand, std::vector<Cand>, std::greater<Cand>> heap_;
+  size_t heapPeak_ = 0;
+  uint32_t alive_ = 0, refused_ = 0, stamp_ = 0;
+  double totalArea_ = 0, weight_ = 1, maxRms_ = std::numeric_limits<double>::infinity();
+};
+
+void checkOptions(const ChartingOptions& o) {
+  const char* fn = "charting options";
+  if (o.minSides < 3)
+    throw InputError(std::string(fn) + ": minSides must be at least 3");
+  if (o.maxSides < std::max(4u, 2 * o.minSides - 3))
+    throw InputError(std::string(fn) + ": maxSides must be at least max(4, 2 * minSides - 3)");
+  if (o.targetCharts == 0 && !(o.maxError > 0 && std::isfinite(o.maxError)))
+    throw InputError(std::string(fn) + ": maxError must be positive when targetCharts is 0");
+  if (!(o.compactnessWeight >= 0 && std::isfinite(o.compactnessWeight)))
+    throw InputError(std::string(fn) + ": compactnessWeight must be finite and >= 0");
+}
+
+struct Frame {
+  glm::dvec3 centre{0};
+  double diag = 1;
+};
+
+Frame frameOf(const std::vector<glm::vec3>& p) {
+  glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+  for (const auto& q : p) lo = glm::min(lo, glm::dvec3(q)), hi = glm::max(hi, glm::dvec3(q));
+  Frame fr;
+  if (p.empty()) return fr;
+  fr.centre = 0.5 * (lo + hi);
+  fr.diag = glm::length(hi - lo);
+  if (!(fr.diag > 0)) fr.diag = 1;
+  return fr;
+}
+
+std::vector<glm::dvec3> normalised(const Surface& s, const Frame& fr) {
+  std::vector<glm::dvec3> n(s.positions.size());
+  for (size_t i = 0; i < n.size(); ++i) n[i] = (glm::dvec3(s.positions[i]) - fr.centre) / fr.diag;
+  return n;
+}
+
+// ---- Sides: corners, corner insertion, splitting, output ----
+
+class LayoutBuilder {
+ public:
+  LayoutBuilder(const Surface& s, const std::vector<uint32_t>& labels, const ChartingOptions& o,
+                ChartingStats& st)
+      : s_(s), o_(o), st_(st) {
+    const uint32_t nf = static_cast<uint32_t>(s.tris.size());
+    std::vector<uint32_t> compact(nf, kNone);
+    label_.resize(nf);
+    for (uint32_t f = 0; f < nf; ++f) {
+      uint32_t& c = compact[labels[f]];
+      if (c == kNone) c = static_cast<uint32_t>(faces_.size()), faces_.emplace_back();
+      label_[f] = c;
+      faces_[c].push_back(f);
+    }
+    const uint32_t nv = static_cast<uint32_t>(s.positions.size());
+    corner_.assign(nv, 0);
+    std::vector<uint8_t> open(nv, 0);
+    for (uint32_t h = 0; h < 3 * nf; ++h)
+      if (s.twin[h] == kNone) open[s.origin(h)] = open[s.dest(h)] = 1;
+    for (uint32_t v = 0; v < nv; ++v) {
+      uint32_t first = kNone, second = kNone;
+      bool three = false;
+      for (uint32_t i = s.vfStart[v]; i < s.vfStart[v + 1] && !three; ++i) {
+        const uint32_t c = label_[s.vfFaces[i]];
+        if (first == kNone || c == first) first = c;
+        else if (second == kNone || c == second) second = c;
+        else three = true;
+      }
+      corner_[v] = three || (open[v] && second != kNone);
+    }
+    vstamp_.assign(nv, 0);
+    dist_.assign(nv, 0);
+    prev_.assign(nv, kNone);
+    fstamp_.assign(nf, 0);
+    loopPos_.assign(nv, 0);
+    visit_.assign(nv, 0);
+    cut_.assign(size_t{nf} * 3, 0);
+  }
+
+  void fix() {
+    // Corner insertion for patches with too few sides.
+    for (uint32_t p = 0; p < faces_.size(); ++p) insertCorners(p);
+    // Split patches with too many sides (halves have at least minSides and fewer sides).
+    std::vector<uint32_t> work(faces_.size());
+    std::iota(work.begin(), work.end(), 0u);
+    size_t budget = 64 * faces_.size() + 10000;  // guards against ping-pong of new corners
+    while (!work.empty() && budget-- > 0) {
+      const uint32_t p = work.back();
+      work.pop_back();
+      const std::vector<uint32_t> loop = boundaryLoop(p);
+      uint32_t corners = 0;
+      for (uint32_t h : loop) corners += corner_[s_.origin(h)];
+      if (corners <= o_.maxSides) continue;
+      const uint32_t q = split(p, loop, work);
+      if (q == kNone) continue;
+      ++st_.patchesSplit;
+      work.push_back(p);
+      work.push_back(q);
+    }
+    // Patches still out of range (no cut found, or the budget ran out).
+    unfixed_ = 0;
+    for (uint32_t p = 0; p < faces_.size(); ++p) {
+      uint32_t corners = 0;
+      for (uint32_t h : boundaryLoop(p)) corners += corner_[s_.origin(h)];
+      unfixed_ += corners > o_.maxSides || corners < o_.minSides;
+    }
+  }
+
+  ChartLayout output() {
+    ChartLayout out;
+    out.positions = s_.positions;
+    out.colours = s_.colours;
+    out.triangles = s_.tris;
+    const uint32_t np = static_cast<uint32_t>(faces_.size());
+    out.patches.resize(np);
+    std::vector<std::pair<uint32_t, uint32_t>> sideOf(s_.twin.size(), {kNone, kNone});
+    std::vector<std::vector<uint32_t>> firstHe(np);
+    for (uint32_t p = 0; p < np; ++p) {
+      Patch& P = out.patches[p];
+      P.triangles = faces_[p];
+      std::sort(P.triangles.begin(), P.triangles.end());
+      const std::vector<uint32_t> loop = boundaryLoop(p);
+      size_t start = 0;
+      while (start < loop.size() && !corner_[s_.origin(loop[start])]) ++start;
+      if (start == loop.size()) start = 0;  // no corner (only if insertion failed)
+      for (size_t i = 0; i < loop.size(); ++i) {
+        const uint32_t h = loop[(start + i) % loop.size()];
+        if (i == 0 || corner_[s_.origin(h)]) {
+          P.sides.emplace_back();
+          P.sides.back().vertices.push_back(s_.origin(h));
+          const uint32_t t = s_.twin[h];
+          P.sides.back().neighbourPatch = t == kNone ? -1 : static_cast<int32_t>(label_[t / 3]);
+          firstHe[p].push_back(h);
+        }
+        P.sides.back().vertices.push_back(s_.dest(h));
+        sideOf[h] = {p, static_cast<uint32_t>(P.sides.size() - 1)};
+      }
+    }
+    for (uint32_t p = 0; p < np; ++p) {
+      for (size_t i = 0; i < out.patches[p].sides.size(); ++i) {
+        PatchSide& side = out.patches[p].sides[i];
+        if (side.neighbourPatch < 0) continue;
+        side.neighbourSide = sideOf[s_.twin[firstHe[p][i]]].second;
+        side.reversed = true;
+      }
+    }
+    return out;
+  }
+
+  uint32_t unfixed() const { return unfixed_; }
+  const std::vector<uint32_t>& labels() const { return label_; }
+  const std::vector<std::vector<uint32_t>>& patchFaces() const { return faces_; }
+  size_t bytes() const {
+    return label_.size() * 8 + corner_.size() * 13 + fstamp_.size() * 4 + cut_.size();
+  }
+
+ private:
+  uint32_t nextBoundary(uint32_t h, uint32_t c) const {
+    uint32_t n = nextHe(h);
+    while (true) {
+      const uint32_t t = s_.twin[n];
+      if (t == kNone || label_[t / 3] != c) return n;
+      n = nextHe(t);
+    }
+  }
+
+  std::vector<uint32_t> boundaryLoop(uint32_t p) const {
+    std::vector<uint32_t> loop;
+    uint32_t start = kNone;
+    for (uint32_t f : faces_[p]) {
+      for (uint32_t k = 0; k < 3 && start == kNone; ++k) {
+        const uint32_t h = 3 * f + k, t = s_.twin[h];
+        if (t == kNone || label_[t / 3] != p) start = h;
+      }
+      if (start != kNone) break;
+    }
+    if (start == kNone) return loop;
+    uint32_t h = start;
+    do {
+      loop.push_back(h);
+      h = nextBoundary(h, p);
+    } while (h != start && loop.size() <= 3 * faces_[p].size());
+    return loop;
+  }
+
+  double length(uint32_t h) const {
+    return glm::length(glm::dvec3(s_.positions[s_.origin(h)]) -
+                       glm::dvec3(s_.positions[s_.dest(h)]));
+  }
+
+  // Adds corners at the middle (by length) of the longest runs until the patch has minSides.
+  void insertCorners(uint32_t p) {
+    const std::vector<uint32_t> loop = boundaryLoop(p);
+    const size_t L = loop.size();
+    std::vector<double> cum(L + 1, 0);
+    for (size_t i = 0; i < L; ++i) cum[i + 1] = cum[i] + length(loop[i]);
+    auto isCorner = [&](size_t i) { return corner_[s_.origin(loop[i % L])] != 0; };
+    uint32_t corners = 0;
+    for (size_t i = 0; i < L; ++i) corners += isCorner(i);
+    if (corners >= o_.minSides) return;
+    if (corners == 0) {
+      // Spread minSides corners evenly by length.
+      const double total = cum[L];
+      size_t j = 0;
+      for (uint32_t k = 0; k < o_.minSides && j < L; ++k) {
+        const double target = total * k / o_.minSides;
+        while (j + 1 < L && cum[j] < target) ++j;
+        if (!isCorner(j)) {
+          corner_[s_.origin(loop[j])] = 1;
+          ++st_.cornersInserted;
+        }
+        ++j;
+      }
+      corners = 0;
+      for (size_t i = 0; i < L; ++i) corners += isCorner(i);
+    }
+    while (corners < o_.minSides) {
+      // Longest run (in edges >= 2) between consecutive corners.
+      size_t first = 0;
+      while (!isCorner(first)) ++first;
+      size_t bestA = kNone, bestB = 0;
+      double bestLen = -1;
+      size_t a = first;
+      for (size_t step = 0; step < corners; ++step) {
+        size_t b = a + 1;
+        while (!isCorner(b)) ++b;
+        const double len = b <= L ? cum[b] - cum[a] : cum[L] - cum[a] + cum[b - L];
+        if (b - a >= 2 && len > bestLen) bestLen = len, bestA = a, bestB = b;
+        a = b;
+      }
+      if (bestA == kNone) return;  // cannot happen on a loop of >= 3 edges
+      auto at = [&](size_t i) {
+        return i <= L ? cum[i] : cum[L] + cum[i - L];
+      };
+      const double mid = 0.5 * (at(bestA) + at(bestB));
+      size_t pick = bestA + 1;
+      double bestD = std::abs(at(pick) - mid);
+      for (size_t i = bestA + 2; i < bestB; ++i)
+        if (std::abs(at(i) - mid) < bestD) bestD = std::abs(at(i) - mid), pick = i;
+      corner_[s_.origin(loop[pick % L])] = 1;
+      ++st_.cornersInserted;
+      ++corners;
+    }
+  }
+
+  // Shortest paths from boundary vertex a through the interior of patch p (interior vertices
+  // and interior edges only) to every boundary vertex it reaches; returns those vertices.
+  // dist_ / prev_ hold the paths for this run (visit_ == the returned run id).
+  std::vector<uint32_t> shortestFrom(uint32_t p, uint32_t a, uint32_t loopStamp, uint32_t& run) {
+    run = ++stamp_;
+    using Item = std::pair<double, uint32_t>;
+    std::priority_queue<Item, std::vector<Item>, std::greater<Item>> q;
+    std::vector<uint32_t> reached;
+    dist_[a] = 0;
+    prev_[a] = kNone;
+    visit_[a] = run;
+    q.push({0, a});
+    while (!q.empty()) {
+      const auto [d, u] = q.top();
+      q.pop();
+      if (d > dist_[u]) continue;
+      if (u != a && vstamp_[u] == loopStamp) {  // boundary vertices end paths
+        reached.push_back(u);
+        continue;
+      }
+      for (uint32_t i = s_.vfStart[u]; i < s_.vfStart[u + 1]; ++i) {
+        const uint32_t f = s_.vfFaces[i];
+        if (label_[f] != p) continue;
+        for (uint32_t k = 0; k < 3; ++k) {
+          const uint32_t h = 3 * f + k;
+          uint32_t w;
+          if (s_.origin(h) == u) w = s_.dest(h);
+          else if (s_.dest(h) == u) w = s_.origin(h);
+          else continue;
+          const uint32_t t = s_.twin[h];
+          if (t == kNone || label_[t / 3] != p || w == a) continue;  // boundary edge
+          const double nd = d + length(h);
+          if (visit_[w] != run || nd < dist_[w]) {
+            visit_[w] = run;
+            dist_[w] = nd;
+            prev_[w] = u;
+            q.push({nd, w});
+          }
+        }
+      }
+    }
+    return reached;
+  }
+
+  // Splits patch p along a shortest interior path between two boundary vertices so that both
+  // halves have minSides..maxSides sides (or at least fewer than p). Tries, in order: corner to
+  // corner; corner to any boundary vertex; any boundary vertex to any. A non-corner endpoint
+  // becomes a corner (the neighbour across gains a side; its patches are queued in `touched`).
+  // Returns the new patch (p keeps the other half), or kNone if no cut was found.
+  uint32_t split(uint32_t p, const std::vector<uint32_t>& loop, std::vector<uint32_t>& touched) {
+    const size_t L = loop.size();
+    const uint32_t loopStamp = ++stamp_;
+    std::vector<uint32_t> cc(2 * L + 1, 0);  // corners among loop positions [0, t)
+    for (size_t t = 0; t < L; ++t) {
+      const uint32_t v = s_.origin(loop[t]);
+      vstamp_[v] = loopStamp;
+      loopPos_[v] = static_cast<uint32_t>(t);
+    }
+    for (size_t t = 0; t < 2 * L; ++t) cc[t + 1] = cc[t] + corner_[s_.origin(loop[t % L])];
+    const uint32_t k = cc[L];
+    std::vector<uint32_t> cornerPos, allPos;
+    for (size_t t = 0; t < L; ++t) {
+      if (corner_[s_.origin(loop[t])]) cornerPos.push_back(static_cast<uint32_t>(t));
+    }
+    const size_t stride = std::max<size_t>(1, L / 64);
+    for (size_t t = 0; t < L; t += stride) allPos.push_back(static_cast<uint32_t>(t));
+    for (int level = 0; level < 3; ++level) {
+      const std::vector<uint32_t>& starts = level < 2 ? cornerPos : allPos;
+      double bestScore = std::numeric_limits<double>::infinity();
+      std::vector<uint32_t> best;
+      for (uint32_t i : starts) {
+        const uint32_t a = s_.origin(loop[i]);
+        uint32_t run = 0;
+        const std::vector<uint32_t> reached = shortestFrom(p, a, loopStamp, run);
+        for (uint32_t b : reached) {
+          const uint32_t j = loopPos_[b];
+          if (level == 0 && !corner_[b]) continue;
+          // Sides of the two halves: corners on each closed loop segment, endpoints included.
+          const uint32_t i2 = i, j2 = j < i ? j + static_cast<uint32_t>(L) : j;
+          const uint32_t inner1 = cc[j2] - cc[i2 + 1];
+          const uint32_t inner2 = k - inner1 - corner_[a] - corner_[b];
+          const uint32_t s1 = inner1 + 2, s2 = inner2 + 2;
+          if (s1 < o_.minSides || s2 < o_.minSides) continue;
+          const uint32_t worst = std::max(s1, s2);
+          if (worst >= std::max<uint32_t>(k, o_.maxSides + 1) && worst > o_.maxSides) continue;
+          const double over = worst > o_.maxSides ? double(worst - o_.maxSides) : 0.0;
+          const double score = dist_[b] * (1.0 + 0.25 * std::abs(double(s1) - double(s2))) *
+                               (1.0 + 10.0 * over);
+          if (score < bestScore) {
+            bestScore = score;
+            best.clear();
+            for (uint32_t v = b; v != kNone; v = prev_[v]) best.push_back(v);
+          }
+        }
+      }
+      if (best.size() < 2) continue;
+      std::reverse(best.begin(), best.end());
+      const uint32_t q = applyCut(p, best);
+      if (q == kNone) continue;
+      for (uint32_t v : {best.front(), best.back()}) {
+        if (corner_[v]) continue;
+        corner_[v] = 1;
+        ++st_.cornersInserted;
+        for (uint32_t i = s_.vfStart[v]; i < s_.vfStart[v + 1]; ++i)
+          touched.push_back(label_[s_.vfFaces[i]]);
+      }
+      return q;
+    }
+    return kNone;
+  }
+
+  uint32_t applyCut(uint32_t p, const std::vector<uint32_t>& path) {
+    std::vector<uint32_t> marked;
+    uint32_t seedFace = kNone, otherFace = kNone;
+    for (size_t i = 0; i + 1 < path.size(); ++i) {
+      const uint32_t x = path[i], y = path[i + 1];
+      for (uint32_t j = s_.vfStart[x]; j < s_.vfStart[x + 1]; ++j) {
+        const uint32_t f = s_.vfFaces[j];
+        if (label_[f] != p) continue;
+        for (uint32_t k = 0; k < 3; ++k) {
+          const uint32_t h = 3 * f + k;
+          if (s_.origin(h) == x && s_.dest(h) == y) {
+            cut_[h] = 1;
+            marked.push_back(h);
+            if (seedFace == kNone) seedFace = f, otherFace = s_.twin[h] / 3;
+          } else if (s_.origin(h) == y && s_.dest(h) == x) {
+            cut_[h] = 1;
+            marked.push_back(h);
+          }
+        }
+      }
+    }
+    uint32_t result = kNone;
+    if (seedFace != kNone) {
+      const uint32_t run = ++stamp_;
+      std::vector<uint32_t> stack{seedFace}, side;
+      fstamp_[seedFace] = run;
+      while (!stack.empty()) {
+        const uint32_t f = stack.back();
+        stack.pop_back();
+        side.push_back(f);
+        for (uint32_t k = 0; k < 3; ++k) {
+          const uint32_t h = 3 * f + k, t = s_.twin[h];
+          if (cut_[h] || t == kNone || label_[t / 3] != p || fstamp_[t / 3] == run) continue;
+          fstamp_[t / 3] = run;
+          stack.push_back(t / 3);
+        }
+      }
+      if (fstamp_[otherFace] != run && side.size() < faces_[p].size()) {
+        result = static_cast<uint32_t>(faces_.size());
+        faces_.emplace_back();
+        for (uint32_t f : side) label_[f] = result;
+        faces_[result] = std::move(side);
+        std::vector<uint32_t> rest;
+        for (uint32_t f : faces_[p])
+          if (label_[f] == p) rest.push_back(f);
+        faces_[p] = std::move(rest);
+      }
+    }
+    for (uint32_t h : marked) cut_[h] = 0;
+    return result;
+  }
+
+  const Surface& s_;
+  const ChartingOptions& o_;
+  ChartingStats& st_;
+  std::vector<uint32_t> label_;
+  std::vector<std::vector<uint32_t>> faces_;
+  std::vector<uint8_t> corner_, cut_;
+  std::vector<uint32_t> vstamp_, prev_, fstamp_, visit_, loopPos_;
+  std::vector<double> dist_;
+  uint32_t stamp_ = 0, unfixed_ = 0;
+};
+
+// Fills the final statistics from the layout's patches.
+void finishStats(const Surface& s, const ChartLayout& out,
+                 const Frame& fr, ChartingStats& st) {
+  st.outputTriangles = s.tris.size();
+  st.outputVertices = s.positions.size();
+  st.charts = static_cast<uint32_t>(out.patches.size());
+  st.sidesHistogram.assign(1, 0);
+  const std::vector<glm::dvec3> npos = normalised(s, fr);
+  double sum = 0, area = 0;
+  st.maxPlanarityError = 0;
+  for (const Patch& p : out.patches) {
+    const size_t n = p.sides.size();
+    if (st.sidesHistogram.size() <= n) st.sidesHistogram.resize(n + 1, 0);
+    ++st.sidesHistogram[n];
+    Moments M;
+    for (uint32_t f : p.triangles)
+      M.add(triangleMoments(npos[s.tris[f][0]], npos[s.tris[f][1]], npos[s.tris[f][2]]));
+    const double rms = std::sqrt(planeMsd(M));
+    st.maxPlanarityError = std::max(st.maxPlanarityError, rms);
+    sum += rms * M.area;
+    area += M.area;
+  }
+  st.meanPlanarityError = area > 0 ? sum / area : 0;
+}
+
+ChartLayout layoutFromLabels(const Surface& s, const std::vector<uint32_t>& labels,
+                             const Frame& fr, const ChartingOptions& o, ChartingStats& st,
+                             size_t clusterBytes) {
+  const auto t0 = Clock::now();
+  LayoutBuilder lb(s, labels, o, st);
+  lb.fix();
+  ChartLayout out = lb.output();
+  st.sidesSeconds += since(t0);
+  st.peakBytesEstimate = std::max<uint64_t>(
+      st.peakBytesEstimate, s.bytes() + std::max(clusterBytes, lb.bytes()) +
+                                out.triangles.size() * 16 + out.positions.size() * 16);
+  st.patchesUnfixed = lb.unfixed();
+  finishStats(s, out, fr, st);
+  return out;
+}
+
+}  // namespace
+
+namespace {
+
+// Faces of a block of a Surface as a Surface of its own (edges to other blocks open; vertex
+// identity kept, so a closed disk there is a closed disk in the whole surface).
+// faceLocal: each face's index in its block.
+Surface subSurface(const Surface& s, const std::vector<uint32_t>& faces,
+                   const std::vector<uint32_t>& faceBlock, const std::vector<uint32_t>& faceLocal,
+                   uint32_t block) {
+  Surface r;
+  std::vector<uint32_t> verts;
+  verts.reserve(faces.size() * 3);
+  for (uint32_t f : faces)
+    for (uint32_t v : s.tris[f]) verts.push_back(v);
+  std::sort(verts.begin(), verts.end());
+  verts.erase(std::unique(verts.begin(), verts.end()), verts.end());
+  auto local = [&](uint32_t v) {
+    return static_cast<uint32_t>(std::lower_bound(verts.begin(), verts.end(), v) - verts.begin());
+  };
+  r.positions.resize(verts.size());
+  for (size_t i = 0; i < verts.size(); ++i) r.positions[i] = s.positions[verts[i]];
+  r.tris.resize(faces.size());
+  r.twin.assign(faces.size() * 3, kNone);
+  for (size_t i = 0; i < faces.size(); ++i) {
+    const uint32_t f = faces[i];
+    for (uint32_t k = 0; k < 3; ++k) {
+      r.tris[i][k] = local(s.tris[f][k]);
+      const uint32_t t = s.twin[3 * f + k];
+      if (t != kNone && faceBlock[t / 3] == block) r.twin[3 * i + k] = 3 * faceLocal[t / 3] + t % 3;
+    }
+  }
+  const uint32_t nv = static_cast<uint32_t>(verts.size());
+  r.vfStart.assign(size_t{nv} + 1, 0);
+  for (const auto& t : r.tris)
+    for (uint32_t v : t) ++r.vfStart[v + 1];
+  for (uint32_t v = 0; v < nv; ++v) r.vfStart[v + 1] += r.vfStart[v];
+  r.vfFaces.resize(r.tris.size() * 3);
+  std::vector<uint32_t> fill(r.vfStart.begin(), r.vfStart.end() - 1);
+  for (uint32_t f = 0; f < r.tris.size(); ++f)
+    for (uint32_t v : r.tris[f]) r.vfFaces[fill[v]++] = f;
+  return r;
+}
+
+// Per-cell clusters of about `clusterTris` triangles (error mode: within maxRms too).
+double cellClusterTriangles(const ChartingOptions& o, uint64_t triangles) {
+  return o.targetCharts > 0
+             ? std::clamp(double(triangles) / (4.0 * o.targetCharts), 1.0, 4096.0)
+             : 1024.0;
+}
+
+unsigned threadCount(const ChartingOptions& o) {
+  return o.threads ? o.threads : static_cast<unsigned>(tbb::this_task_arena::max_concurrency());
+}
+
+// Meshes above this many triangles are clustered in spatial blocks first (like the cells of
+// buildChartLayoutFromCells): same or better charts, several times faster (small heaps).
+constexpr uint64_t kBlockedAbove = 32768;
+constexpr uint32_t kBlockTriangles = 8192;
+
+// Initial labels for the global merge: each block of the surface clustered on its own.
+std::vector<uint32_t> blockLabels(const Surface& s, const Frame& fr, const ChartingOptions& o,
+                                  ChartingStats& st, size_t& peakBytes) {
+  const uint32_t nf = static_cast<uint32_t>(s.tris.size());
+  MeshBounds bounds;
+  for (const glm::vec3& p : s.positions) bounds.extend(p);
+  const std::array<uint32_t, 3> dims = chooseGridDims(bounds, nf, kBlockTriangles);
+  GridManifest grid;
+  grid.dims = dims;
+  for (int a = 0; a < 3; ++a) {
+    grid.origin[a] = bounds.min[a];
+    grid.cellSize[a] = std::max((double(bounds.max[a]) - bounds.min[a]) / dims[a], 1e-30);
+  }
+  std::vector<uint32_t> faceBlock(nf), faceLocal(nf);
+  std::unordered_map<uint32_t, uint32_t> blockIndex;
+  std::vector<std::vector<uint32_t>> blocks;
+  for (uint32_t f = 0; f < nf; ++f) {
+    MeshTriangle t;
+    for (int k = 0; k < 3; ++k) t.p[k] = s.positions[s.tris[f][k]];
+    const uint32_t id = grid.cellId(grid.cellOf(t));
+    auto [it, added] = blockIndex.try_emplace(id, static_cast<uint32_t>(blocks.size()));
+    if (added) blocks.emplace_back();
+    faceBlock[f] = it->second;
+    faceLocal[f] = static_cast<uint32_t>(blocks[it->second].size());
+    blocks[it->second].push_back(f);
+  }
+  const double clusterTris = cellClusterTriangles(o, nf);
+  const double maxRms =
+      o.targetCharts > 0 ? std::numeric_limits<double>::infinity() : o.maxError;
+  std::vector<std::vector<uint32_t>> local(blocks.size());
+  std::vector<uint32_t> clusters(blocks.size(), 0);
+  std::vector<size_t> bytes(blocks.size(), 0);
+  tbb::task_arena arena(static_cast<int>(std::max(1u, threadCount(o))));
+  arena.execute([&] {
+    tbb::parallel_for(size_t{0}, blocks.size(), [&](size_t b) {
+      const Surface sub =
+          subSurface(s, blocks[b], faceBlock, faceLocal, static_cast<uint32_t>(b));
+      const std::vector<glm::dvec3> npos = normalised(sub, fr);
+      std::vector<uint32_t> labels(sub.tris.size());
+      std::iota(labels.begin(), labels.end(), 0u);
+      Clusterer cl(sub, npos, std::move(labels));
+      const auto target = static_cast<uint32_t>(std::ceil(double(sub.tris.size()) / clusterTris));
+      cl.run(std::max(1u, target), maxRms, o.compactnessWeight);
+      clusters[b] = cl.alive();
+      bytes[b] = sub.bytes() + cl.bytes();
+      local[b] = cl.labels();
+    });
+  });
+  std::vector<uint32_t> labels(nf);
+  uint32_t offset = 0;
+  for (size_t b = 0; b < blocks.size(); ++b) {
+    for (size_t i = 0; i < blocks[b].size(); ++i) labels[blocks[b][i]] = offset + local[b][i];
+    offset += static_cast<uint32_t>(blocks[b].size());  // local labels are face indices
+    st.cellClusters += clusters[b];
+    peakBytes = std::max(peakBytes, bytes[b] * std::max(1u, threadCount(o)));
+  }
+  st.cells = static_cast<uint32_t>(blocks.size());
+  return labels;
+}
+
+}  // namespace
+
+ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& options,
+                             ChartingStats* statsOut) {
+  const auto t0 = Clock::now();
+  checkOptions(options);
+  ChartingStats st;
+  if (!mesh.colours.empty() && mesh.colours.size() != mesh.positions.size())
+    throw InputError("buildChartLayout: colours must be empty or one per position");
+  Surface s = weldAndRepair(mesh.positions, mesh.colours, mesh.triangles, st);
+  const Frame fr = frameOf(s.positions);
+  const std::vector<glm::dvec3> npos = normalised(s, fr);
+  st.weldSeconds = since(t0);
+  const auto t1 = Clock::now();
+  std::vector<uint32_t> labels(s.tris.size());
+  std::iota(labels.begin(), labels.end(), 0u);
+  size_t blockBytes = 0;
+  if (s.tris.size() > kBlockedAbove) labels = blockLabels(s, fr, options, st, blockBytes);
+  Clusterer cl(s, npos, std::move(labels));
+  cl.run(options.targetCharts,
+         options.targetCharts > 0 ? std::numeric_limits<double>::infinity() : options.maxError,
+         options.compactnessWeight);
+  st.clusterSeconds = since(t1);
+  st.chartsBeforeFixing = cl.alive();
+  st.mergesRefusedNotDisk = cl.refused();
+  st.peakBytesEstimate = s.bytes() + blockBytes;
+  ChartLayout out = layoutFromLabels(s, cl.labels(), fr, options, st, cl.bytes());
+  st.seconds = since(t0);
+  if (statsOut) *statsOut = std::move(st);
+  return out;
+}
+
+ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
+                                      const ChartingOptions& options, ChartingStats* statsOut) {
+  const auto t0 = Clock::now();
+  checkOptions(options);
+  const GridManifest manifest = readGridManifest(gridDir);
+  ChartingStats st;
+  st.cells = static_cast<uint32_t>(manifest.cells.size());
+  // Frame of the whole mesh, so that per-cell errors are in the global units.
+  Frame fr;
+  if (!manifest.bounds.empty()) {
+    const glm::dvec3 lo(manifest.bounds.min), hi(manifest.bounds.max);
+    fr.centre = 0.5 * (lo + hi);
+    fr.diag = glm::length(hi - lo);
+    if (!(fr.diag > 0)) fr.diag = 1;
+  }
+  const uint64_t total = std::max<uint64_t>(manifest.triangles, 1);
+  // Cell clusters of about a quarter of the final chart size (error mode: 1024 triangles).
+  const double clusterTris =
+      options.targetCharts > 0
+          ? std::clamp(double(total) / (4.0 * options.targetCharts), 1.0, 4096.0)
+          : 1024.0;
+  const double maxRms =
+      options.targetCharts > 0 ? std::numeric_limits<double>::infinity() : options.maxError;
+
+  struct CellResult {
+    std::vector<glm::vec3> pos;  // 3 per kept triangle (input corners, before repair)
+    std::vector<glm::u8vec4> col;
+    std::vector<uint32_t> label;  // cell-local cluster per kept triangle
+    uint32_t clusters = 0;
+    ChartingStats st;
+    size_t bytes = 0;
+  };
+  std::vector<CellResult> cells(manifest.cells.size());
+  const auto tCells = Clock::now();
+  const unsigned threads =
+      options.threads ? options.threads
+                      : static_cast<unsigned>(tbb::this_task_arena::max_concurrency());
+  tbb::task_arena arena(static_cast<int>(std::max(1u, threads)));
+  arena.execute([&] {
+    tbb::parallel_for(size_t{0}, manifest.cells.size(), [&](size_t ci) {
+      const std::vector<MeshTriangle> tris = readCell(gridDir, manifest, manifest.cells[ci]);
+      CellResult& r = cells[ci];
+      std::vector<glm::vec3> pos;
+      std::vector<glm::u8vec4> col;
+      std::vector<std::array<uint32_t, 3>> idx;
+      pos.reserve(tris.size() * 3);
+      for (const MeshTriangle& t : tris) {
+        const uint32_t b = static_cast<uint32_t>(pos.size());
+        for (int k = 0; k < 3; ++k) pos.push_back(t.p[k]);
+        if (manifest.hasColours)
+          for (int k = 0; k < 3; ++k) col.push_back(t.c[k]);
+        idx.push_back({b, b + 1, b + 2});
+      }
+      if (idx.empty()) return;
+      Surface s;
+      try {
+        s = weldAndRepair(pos, col, idx, r.st);
+      } catch (const InputError&) {
+        return;  // every triangle degenerate: nothing from this cell
+      }
+      const std::vector<glm::dvec3> npos = normalised(s, fr);
+      std::vector<uint32_t> labels(s.tris.size());
+      std::iota(labels.begin(), labels.end(), 0u);
+      Clusterer cl(s, npos, std::move(labels));
+      const auto target = static_cast<uint32_t>(std::ceil(double(s.tris.size()) / clusterTris));
+      cl.run(std::max(1u, target), maxRms, options.compactnessWeight);
+      r.clusters = cl.alive();
+      r.bytes = s.bytes() + cl.bytes();
+      // Hand on the kept input triangles with their cluster (compact ids).
+      std::vector<uint32_t> compact(s.tris.size(), kNone);
+      uint32_t next = 0;
+      for (size_t f = 0; f < s.tris.size(); ++f) {
+        uint32_t& c = compact[cl.labels()[f]];
+        if (c == kNone) c = next++;
+        const uint32_t src = s.source[f];
+        for (int k = 0; k < 3; ++k) r.pos.push_back(pos[idx[src][k]]);
+        if (manifest.hasColours)
+          for (int k = 0; k < 3; ++k) r.col.push_back(col[idx[src][k]]);
+        r.label.push_back(c);
+      }
+    });
+  });
+  st.clusterSeconds = since(tCells);
+  // Global stage: weld all cells together; start from the cell clusters.
+  std::vector<glm::vec3> pos;
+  std::vector<glm::u8vec4> col;
+  std::vector<std::array<uint32_t, 3>> idx;
+  std::vector<uint32_t> cellLabel;
+  uint32_t offset = 0;
+  size_t cellPeak = 0;
+  for (CellResult& r : cells) {
+    st.inputTriangles += r.st.inputTriangles;
+    st.droppedDegenerate += r.st.droppedDegenerate;
+    st.droppedDuplicate += r.st.droppedDuplicate;
+    cellPeak = std::max(cellPeak, r.bytes);
+    for (size_t i = 0; i < r.label.size(); ++i) {
+      const uint32_t b = static_cast<uint32_t>(pos.size());
+      for (int k = 0; k < 3; ++k) pos.push_back(r.pos[3 * i + k]);
+      if (manifest.hasColours)
+        for (int k = 0; k < 3; ++k) col.push_back(r.col[3 * i + k]);
+      idx.push_back({b, b + 1, b + 2});
+      cellLabel.push_back(offset + r.label[i]);
+    }
+    offset += r.clusters;
+    st.cellClusters += r.clusters;
+    r = CellResult{};
+  }
+  const auto tWeld = Clock::now();
+  ChartingStats gst;
+  Surface s = weldAndRepair(pos, col, idx, gst);
+  std::vector<glm::vec3>().swap(pos);
+  std::vector<glm::u8vec4>().swap(col);
+  std::vector<std::array<uint32_t, 3>>().swap(idx);
+  st.verticesWelded = gst.verticesWelded;
+  st.inputVertices = gst.inputVertices;
+  st.nonManifoldEdges = gst.nonManifoldEdges;
+  st.nonManifoldVertices = gst.nonManifoldVertices;
+  st.verticesSplit = gst.verticesSplit;
+  st.boundaryEdges = gst.boundaryEdges;
+  st.droppedDegenerate += gst.droppedDegenerate;
+  st.droppedDuplicate += gst.droppedDuplicate;
+  const std::vector<glm::dvec3> npos = normalised(s, fr);
+  st.weldSeconds = since(tWeld);
+  const auto t1 = Clock::now();
+  std::vector<uint32_t> labels(s.tris.size());
+  for (size_t f = 0; f < s.tris.size(); ++f) labels[f] = cellLabel[s.source[f]];
+  std::vector<uint32_t>().swap(cellLabel);
+  std::optional<Clusterer> cl(std::in_place, s, npos, std::move(labels));
+  std::vector<uint32_t> relabelled = cl->dissolveNonDisks(st.cellClustersDissolved);
+  if (!relabelled.empty()) cl.emplace(s, npos, std::move(relabelled));
+  cl->run(options.targetCharts, maxRms, options.compactnessWeight);
+  st.clusterSeconds += since(t1);
+  st.chartsBeforeFixing = cl->alive();
+  st.mergesRefusedNotDisk = cl->refused();
+  st.peakBytesEstimate = cellPeak * std::max(1u, threads);
+  ChartLayout out = layoutFromLabels(s, cl->labels(), fr, options, st, cl->bytes());
+  st.inputTriangles = manifest.triangles;
+  st.seconds = since(t0);
+  if (statsOut) *statsOut = std::move(st);
+  return out;
+}
+
+std::vector<std::string> validateChartLayout(const ChartLayout& L, uint32_t minSides,
+                                             uint32_t maxSides) {
+  std::vector<std::string> errs;
+  auto fail = [&](const std::string& m) {
+    if (errs.size() < 100) errs.push_back(m);
+  };
+  const size_t nv = L.positions.size(), nt = L.triangles.size();
+  if (!L.colours.empty() && L.colours.size() != nv) fail("colours: not one per position");
+  for (size_t f = 0; f < nt; ++f)
+    for (uint32_t v : L.triangles[f])
+      if (v >= nv) {
+        fail("triangle " + std::to_string(f) + ": vertex out of range");
+        return errs;
+      }
+  // Global edge use counts (undirected).
+  auto key = [](uint32_t a, uint32_t b) { return uint64_t{std::min(a, b)} << 32 | std::max(a, b); };
+  std::unordered_map<uint64_t, uint32_t> edgeUse;
+  edgeUse.reserve(nt * 2);
+  for (const auto& t : L.triangles)
+    for (int k = 0; k < 3; ++k) ++edgeUse[key(t[k], t[(k + 1) % 3])];
+  std::vector<int32_t> owner(nt, -1);
+  for (size_t p = 0; p < L.patches.size(); ++p) {
+    for (uint32_t f : L.patches[p].triangles) {
+      if (f >= nt) {
+        fail("patch " + std::to_string(p) + ": triangle index out of range");
+        continue;
+      }
+      if (owner[f] >= 0)
+        fail("triangle " + std::to_string(f) + ": in patches " + std::to_string(owner[f]) +
+             " and " + std::to_string(p));
+      owner[f] = static_cast<int32_t>(p);
+    }
+  }
+  for (size_t f = 0; f < nt; ++f)
+    if (owner[f] < 0) fail("triangle " + std::to_string(f) + ": in no patch");
+  for (size_t pi = 0; pi < L.patches.size(); ++pi) {
+    const Patch& P = L.patches[pi];
+    const std::string name = "patch " + std::to_string(pi);
+    if (P.triangles.empty()) {
+      fail(name + ": no triangles");
+      continue;
+    }
+    // Directed edges inside the patch; boundary = directed edges whose reverse is absent.
+    std::unordered_map<uint64_t, uint32_t> directed;  // (a<<32|b) -> count
+    std::unordered_map<uint32_t, uint32_t> verts;
+    for (uint32_t f : P.triangles) {
+      if (f >= nt) continue;
+      const auto& t = L.triangles[f];
+      for (int k = 0; k < 3; ++k) {
+        ++directed[uint64_t{t[k]} << 32 | t[(k + 1) % 3]];
+        verts[t[k]] = 0;
+      }
+    }
+    std::unordered_map<uint32_t, uint32_t> nextB;  // boundary: origin -> dest
+    size_t undirected2 = 0, bcount = 0;
+    bool bad = false;
+    for (const auto& [k, c] : directed) {
+      if (c > 1) bad = true;
+      const uint32_t a = static_cast<uint32_t>(k >> 32), b = static_cast<uint32_t>(k);
+      const bool hasRev = directed.count(uint64_t{b} << 32 | a) > 0;
+      undirected2 += hasRev ? 1 : 2;
+      if (!hasRev) {
+        ++bcount;
+        if (!nextB.emplace(a, b).second) bad = true;  // vertex on the loop twice
+      }
+    }
+    if (bad) fail(name + ": repeated directed edge or boundary vertex visited twice");
+    const int64_t chi = int64_t(verts.size()) - int64_t(undirected2 / 2) + int64_t(P.triangles.size());
+    if (chi != 1) fail(name + ": Euler characteristic " + std::to_string(chi) + ", not 1");
+    // One loop.
+    if (nextB.empty()) {
+      fail(name + ": no boundary");
+      continue;
+    }
+    {
+      uint32_t v = nextB.begin()->first;
+      size_t len = 0;
+      do {
+        auto it = nextB.find(v);
+        if (it == nextB.end()) break;
+        v = it->second;
+        ++len;
+      } while (v != nextB.begin()->first && len <= bcount);
+      if (len != bcount) fail(name + ": boundary is not a single loop");
+    }
+    if (P.sides.size() < minSides || P.sides.size() > maxSides)
+      fail(name + ": " + std::to_string(P.sides.size()) + " sides");
+    // Sides chain along the loop.
+    size_t covered = 0;
+    for (size_t si = 0; si < P.sides.size(); ++si) {
+      const PatchSide& S = P.sides[si];
+      const std::string sn = name + " side " + std::to_string(si);
+      if (S.vertices.size() < 2) {
+        fail(sn + ": fewer than 2 vertices");
+        continue;
+      }
+      const PatchSide& N = P.sides[(si + 1) % P.sides.size()];
+      if (!N.vertices.empty() && N.vertices.front() != S.vertices.back())
+        fail(sn + ": does not end where the next side starts");
+      for (size_t i = 0; i + 1 < S.vertices.size(); ++i) {
+        auto it = nextB.find(S.vertices[i]);
+        if (it == nextB.end() || it->second != S.vertices[i + 1]) {
+          fail(sn + ": edge " + std::to_string(i) + " is not a boundary edge in loop order");
+          break;
+        }
+        ++covered;
+        const uint32_t uses = edgeUse[key(S.vertices[i], S.vertices[i + 1])];
+        if (S.neighbourPatch < 0 && uses != 1) fail(sn + ": open side on an interior edge");
+      }
+      if (S.neighbourPatch >= 0) {
+        if (size_t(S.neighbourPatch) >= L.patches.size() ||
+            S.neighbourSide >= L.patches[S.neighbourPatch].sides.size()) {
+          fail(sn + ": neighbour out of range");
+          continue;
+        }
+        const PatchSide& O = L.patches[S.neighbourPatch].sides[S.neighbourSide];
+        if (O.neighbourPatch != int32_t(pi) || O.neighbourSide != si)
+          fail(sn + ": neighbour side does not point back");
+        std::vector<uint32_t> rev(S.vertices.rbegin(), S.vertices.rend());
+        if (O.vertices != rev || !S.reversed) fail(sn + ": neighbour vertices not reversed");
+      }
+    }
+    if (covered != bcount) fail(name + ": sides do not cover the boundary loop exactly");
+  }
+  return errs;
+}
+
+}  // namespace gimlod
