@@ -18,6 +18,7 @@
 
 #include "apps/bench_command.h"
 #include "apps/pipeline.h"
+#include "atlas/mesh_atlas.h"
 #include "apps/view_args.h"
 #include "core/atlas_format.h"
 #include "runtime/adapt.h"
@@ -39,6 +40,20 @@ struct RenderArgs {
   double tolerance = 1.0, texelRatio = 1.0;
   uint64_t triangles = 0;  // > 0: triangle-budget mode (quad queue)
 };
+
+// "4G", "512M", "65536", ...; throws InputError naming the option.
+uint64_t parseBytes(const std::string& option, const std::string& text) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  double unit = 1.0;
+  const std::string suffix = end ? std::string(end) : std::string();
+  if (suffix == "K" || suffix == "k") unit = 1024.0;
+  else if (suffix == "M" || suffix == "m") unit = 1024.0 * 1024.0;
+  else if (suffix == "G" || suffix == "g") unit = 1024.0 * 1024.0 * 1024.0;
+  else if (!suffix.empty()) throw InputError(option + " '" + text + "': unknown unit (use K, M or G)");
+  if (!(v > 0.0) || !std::isfinite(v) || v * unit > 1e15) throw InputError(option + " '" + text + "' must be a positive size");
+  return uint64_t(v * unit);
+}
 
 int runBuild(const BuildOptions& o) {
   const nlohmann::json st = buildAtlas(o);
@@ -157,7 +172,17 @@ int main(int argc, char** argv) {
   auto* build = app.add_subcommand("build", "Build an atlas (charts, pyramids, hierarchy) from a DEM");
   build->add_option("input", b.input, "DEM: GeoTIFF, SRTM .hgt, USGS .dem, netCDF, ESRI ASCII, ...")->required();
   build->add_option("-o,--output", b.output, "Atlas directory to create")->required();
-  build->add_option("--chart-size", b.chartSize, "Chart side in samples, 2^m+1")->capture_default_str();
+  auto* chartSizeOpt =
+      build->add_option("--chart-size", b.chartSize, "Chart side in samples, 2^m+1 (meshes: default 65)")
+          ->capture_default_str();
+  build->add_option("--charts", b.charts, "Meshes: target patches (each becomes 3-8 quad charts); 0: --chart-error")
+      ->capture_default_str();
+  build->add_option("--chart-error", b.maxChartError,
+                    "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
+      ->capture_default_str();
+  std::string maxMemory = "4G";
+  build->add_option("--max-memory", maxMemory, "Meshes: memory cap (e.g. 2G, 512M); larger meshes go through cell files")
+      ->capture_default_str();
   build->add_option("--depth", b.depth, "Quadtree levels per chart")->capture_default_str();
   build->add_option("--node-res", b.nodeRes, "Maximum node resolution R in intervals (power of two)")->capture_default_str();
   build->add_option("--min-node-res", b.minNodeRes, "Minimum node resolution in intervals")->capture_default_str();
@@ -189,15 +214,35 @@ int main(int argc, char** argv) {
   BenchArgs bn;
   auto* bench = addBenchCommand(app, bn);
 
+  std::string exportAtlas, exportOut;
+  uint32_t exportLevel = 0;
+  auto* exportCmd = app.add_subcommand(
+      "export", "Write a mesh atlas's surface at one pyramid level as one PLY, welded along the seams");
+  exportCmd->add_option("atlas", exportAtlas, "Atlas directory (a mesh atlas)")->required();
+  exportCmd->add_option("-o,--output", exportOut, "Output .ply")->required();
+  exportCmd->add_option("--level", exportLevel, "Pyramid level (0: full resolution)")->capture_default_str();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
   try {
-    if (*build) return runBuild(b);
+    if (*build) {
+      if (chartSizeOpt->count() > 0) b.meshChartSize = b.chartSize;
+      b.maxMemory = parseBytes("--max-memory", maxMemory);
+      return runBuild(b);
+    }
     if (*render) return runRender(r);
     if (*bench) return runBench(bn);
+    if (*exportCmd) {
+      const AtlasSurface s = readAtlasSurface(exportAtlas, exportLevel);
+      writePly(exportOut, s.positions, s.triangles);
+      std::cout << fmt::format("wrote {}: {} vertices, {} triangles from {} chart samples at level {}; {} boundary edges\n",
+                               exportOut, s.positions.size(), s.triangles.size(), s.samples, exportLevel,
+                               s.boundaryEdges);
+      return 0;
+    }
   } catch (const InputError& e) {
     spdlog::error("{}", e.what());
     return 2;

@@ -9,7 +9,12 @@
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 
+#include "atlas/charting.h"
 #include "atlas/dem.h"
+#include "atlas/gridify.h"
+#include "atlas/mesh_atlas.h"
+#include "atlas/mesh_io.h"
+#include "atlas/resample.h"
 #include "atlas/terrain_atlas.h"
 #include "core/atlas_format.h"
 #include "hierarchy/hierarchy.h"
@@ -64,12 +69,129 @@ void validateBuildOptions(const BuildOptions& o) {
   p.validate();
 }
 
+// Mesh input: section 5 of the paper, then the same hierarchy as terrain over the geometry images.
+nlohmann::json buildMeshAtlas(const BuildOptions& o) {
+  if (!isChartSizeValid(o.meshChartSize) || o.meshChartSize < 9)
+    throw InputError("--chart-size " + std::to_string(o.meshChartSize) + " must be 2^m + 1 with m >= 3 for meshes");
+  if (o.maxMemory < (64ull << 20)) throw InputError("--max-memory must be at least 64 MiB");
+  if (o.threads > 1024) throw InputError("--threads must be at most 1024");
+  if (o.nodeRes < 4 || (o.nodeRes & (o.nodeRes - 1)) || o.minNodeRes < 2 || (o.minNodeRes & (o.minNodeRes - 1)) ||
+      o.minNodeRes > o.nodeRes)
+    throw InputError("--node-res and --min-node-res must be powers of two with 2 <= min <= node-res");
+  if (o.depth < 1 || o.depth > 12) throw InputError("--depth must be in [1, 12]");
+  // note: for meshes R is capped at chart-size - 1 and the depth at what the chart allows (leaves
+  // keep at least the minimum node resolution).
+  HierarchyParams p;
+  p.intervalsLog2 = log2u(o.meshChartSize - 1);
+  p.maxNodeResLog2 = std::min(log2u(o.nodeRes), p.intervalsLog2);
+  p.minNodeResLog2 = std::min(log2u(o.minNodeRes), p.maxNodeResLog2);
+  p.depth = std::min(o.depth, p.intervalsLog2 - p.minNodeResLog2 + 1);
+  p.validate();
+  std::unique_ptr<tbb::global_control> threads;
+  if (o.threads)
+    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.threads);
+  const auto t0 = std::chrono::steady_clock::now();
+  nlohmann::json stats = {{"input", fs::absolute(o.input).string()}, {"kind", "geometry"}};
+
+  // Read and cluster: in memory, or through cell files when the mesh is large.
+  ChartingOptions copt;
+  copt.targetCharts = o.charts;
+  copt.maxError = o.maxChartError;
+  copt.threads = o.threads;
+  ChartingStats cst;
+  ChartLayout layout;
+  const MeshInfo info = probeMesh(o.input);
+  const bool outOfCore = info.triangleEstimate * 256 > o.maxMemory / 4;
+  StagedDirectory stage(o.output, kManifestName, "atlas");
+  if (outOfCore) {
+    GridifyOptions g;
+    g.maxMemoryBytes = o.maxMemory;
+    const fs::path grid = stage.path() / "grid.tmp";
+    const GridifyResult gr = gridify(o.input, grid, g);
+    layout = buildChartLayoutFromCells(grid, copt, &cst);
+    std::error_code ec;
+    fs::remove_all(grid, ec);
+    stats["gridify"] = {{"cells", gr.cells}, {"seconds", gr.seconds}, {"peak_buffered_bytes", gr.peakBufferedBytes}};
+  } else {
+    const IndexedMesh mesh = readMesh(o.input);
+    const MeshReadStats& rs = mesh.stats;
+    stats["read"] = {{"format", rs.info.formatName},       {"vertices", rs.vertices},
+                     {"triangles", rs.trianglesOut},       {"dropped_non_finite", rs.droppedNonFinite},
+                     {"dropped_degenerate", rs.droppedDegenerate}, {"dropped_duplicate", rs.droppedDuplicate},
+                     {"strips", rs.strips},                {"colours", rs.hasColours},
+                     {"seconds", rs.seconds}};
+    layout = buildChartLayout(mesh, copt, &cst);
+  }
+  const double chartingSec = secondsSince(t0);
+  stats["charting"] = {{"triangles", cst.outputTriangles},     {"patches", cst.charts},
+                       {"vertices_welded", cst.verticesWelded}, {"non_manifold_edges", cst.nonManifoldEdges},
+                       {"non_manifold_vertices", cst.nonManifoldVertices}, {"vertices_split", cst.verticesSplit},
+                       {"boundary_edges", cst.boundaryEdges},   {"corners_inserted", cst.cornersInserted},
+                       {"patches_split", cst.patchesSplit},     {"max_planarity_error", cst.maxPlanarityError},
+                       {"sides_histogram", cst.sidesHistogram}, {"out_of_core", outOfCore},
+                       {"seconds", cst.seconds}};
+  const std::vector<std::string> bad = validateChartLayout(layout);
+  if (!bad.empty()) throw InputError(o.input.string() + ": the chart layout is invalid: " + bad.front());
+
+  // Quads, parameterization and resampling.
+  ResampleOptions ro;
+  ro.chartSize = o.meshChartSize;
+  ro.threads = o.threads;
+  const GeometryImageSet set = resampleLayout(layout, ro);
+  layout = ChartLayout{};
+  stats["resample"] = {{"charts", set.charts.size()},
+                       {"param_stretch_l2", set.param.stretchL2},
+                       {"param_stretch_linf", set.param.stretchLinf},
+                       {"param_flipped", set.param.flippedTriangles},
+                       {"param_degenerate", set.param.degenerateTriangles},
+                       {"image_stretch_l2", set.image.stretchL2},
+                       {"image_stretch_linf", set.image.stretchLinf},
+                       {"flipped_texels", set.image.flippedTexels},
+                       {"degenerate_texels", set.image.degenerateTexels},
+                       {"seconds", set.seconds}};
+
+  AtlasManifest m;
+  m.depth = p.depth;
+  m.maxNodeResLog2 = p.maxNodeResLog2;
+  m.minNodeResLog2 = p.minNodeResLog2;
+  m.source = fs::absolute(o.input).string();
+  const GeometryChartsWritten w = writeGeometryCharts(set, stage.path(), 1u << p.maxNodeResLog2, m);
+  std::vector<std::array<RootNeighbour, 4>> roots;
+  for (const ChartInfo& c : m.charts) roots.push_back(c.neighbours);
+  std::vector<std::unique_ptr<ChartFileReader>> readers;
+  for (const ChartInfo& c : m.charts) readers.push_back(std::make_unique<ChartFileReader>(stage.path() / c.file));
+  HierarchyStats hs;
+  const Hierarchy h =
+      buildGeometryHierarchy(p, roots, [&](uint32_t c) { return readers[c]->readLevelPositions(0); }, &hs);
+  writeHierarchy(stage.path() / m.hierarchyFile, h);
+  writeManifest(stage.path(), m);
+  stats["charts"] = m.charts.size();
+  stats["chart_size"] = m.chartSize;
+  stats["samples"] = uint64_t(m.charts.size()) * m.chartSize * m.chartSize;
+  stats["bounds"] = w.bounds;
+  stats["hierarchy_depth"] = m.depth;
+  stats["hierarchy_samples_per_second"] = hs.samplesPerSecond;
+  stats["hierarchy_seconds"] = hs.seconds;
+  stats["hierarchy_threads"] = hs.threads;
+  stats["voids_filled"] = 0;
+  stats["charting_seconds"] = chartingSec;
+  stats["bytes_on_disk"] = directoryBytes(stage.path());
+  stats["total_seconds"] = secondsSince(t0);
+  stats["charts_grid"] = {m.chartsX, m.chartsY};
+  const std::string text = stats.dump(2) + "\n";
+  atomicWriteFile(stage.path() / "stats.json", text.data(), text.size());
+  stage.commit();
+  return stats;
+}
+
 nlohmann::json buildAtlas(const BuildOptions& o) {
-  validateBuildOptions(o);
   std::error_code ec;
+  if (isMeshFile(o.input)) {
+    if (!fs::exists(o.input, ec)) throw InputError(o.input.string() + ": no such file");
+    return buildMeshAtlas(o);
+  }
+  validateBuildOptions(o);
   if (!fs::exists(o.input, ec)) throw InputError(o.input.string() + ": no such file");
-  if (isMeshFile(o.input))
-    throw InputError(o.input.string() + ": mesh input is not supported yet (height fields only in this version)");
   std::unique_ptr<tbb::global_control> threads;
   if (o.threads)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.threads);

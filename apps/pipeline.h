@@ -1,6 +1,8 @@
 // The build pipeline behind `gimlod build`: DEM -> charts and pyramids (atlas/) -> hierarchy
-// (hierarchy/) -> manifest, staged in a temporary directory and renamed into place, so an
-// interrupted or failed build never leaves a half-valid atlas.
+// (hierarchy/) -> manifest; or mesh -> (gridify ->) charting -> quads, parameterization and
+// resampling -> geometry chart pyramids -> geometry hierarchy -> manifest. Staged in a temporary
+// directory and renamed into place, so an interrupted or failed build never leaves a half-valid
+// atlas.
 #pragma once
 
 #include <cstdint>
@@ -21,6 +23,11 @@ struct BuildOptions {
   uint32_t minNodeRes = 4;    // minimum node resolution (intervals, power of two)
   double zScale = 1.0;
   uint32_t threads = 0;       // 0: all cores
+  // Meshes (PLY, OBJ, OFF, STL).
+  uint32_t meshChartSize = 65;          // quad chart side in samples, 2^m + 1 (--chart-size for meshes)
+  uint32_t charts = 64;                 // target patches before quadrangulation; 0: maxChartError
+  double maxChartError = 0.01;          // with charts = 0: RMS plane distance / bbox diagonal
+  uint64_t maxMemory = 4ull << 30;      // bytes; above a quarter of it the cells (out-of-core) path runs
 };
 
 // Throws InputError for impossible options (before any work is done).

@@ -1,5 +1,7 @@
 #include "runtime/atlas_view.h"
 
+#include <limits>
+
 namespace gimlod {
 
 AtlasView openAtlas(const std::filesystem::path& dir) {
@@ -13,6 +15,17 @@ AtlasView openAtlas(const std::filesystem::path& dir) {
   if (p.intervalsLog2 != q.intervalsLog2 || p.depth != q.depth || p.maxNodeResLog2 != q.maxNodeResLog2 ||
       p.minNodeResLog2 != q.minNodeResLog2 || a.hierarchy.chartCount() != a.manifest.charts.size())
     throw InputError(hpath.string() + ": does not match " + (dir / kManifestName).string());
+  if (a.manifest.kind == "geometry") {
+    // A mesh atlas: the union of the chart roots' boxes.
+    a.lo = glm::dvec3(std::numeric_limits<double>::infinity());
+    a.hi = -a.lo;
+    for (uint32_t c = 0; c < a.hierarchy.chartCount(); ++c) {
+      const auto& b = a.hierarchy.bounds({c, 0, 0, 0});
+      a.lo = glm::min(a.lo, glm::dvec3(b[0], b[1], b[2]));
+      a.hi = glm::max(a.hi, glm::dvec3(b[3], b[4], b[5]));
+    }
+    return a;
+  }
   a.lo = {0.0, 0.0, a.manifest.heightRange[0]};
   a.hi = {double(a.manifest.samplesX - 1) * a.manifest.spacing[0],
           double(a.manifest.samplesY - 1) * a.manifest.spacing[1], a.manifest.heightRange[1]};

@@ -15,6 +15,10 @@ double msSince(std::chrono::steady_clock::time_point t0) {
 }
 
 RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o) {
+  if (a.manifest.kind != "heightfield")
+    throw InputError((a.dir / kManifestName).string() + ": a " + a.manifest.kind +
+                     " (mesh) atlas; this renderer draws height-field atlases only so far (adaptation, "
+                     "`gimlod bench` and `gimlod export` work on mesh atlases)");
   RendererSetup s;
   s.width = o.width;
   s.height = o.height;

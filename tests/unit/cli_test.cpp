@@ -113,3 +113,53 @@ TEST_F(CliTest, MissingInputAndBadRenderOptions) {
 
 }  // namespace
 }  // namespace gimlod
+
+namespace gimlod {
+namespace {
+
+// A mesh end to end through the tool: build (charting, quads, resampling, hierarchy), stats,
+// export of the welded surface, a clear refusal by the height-field renderer, and bad mesh input.
+TEST_F(CliTest, MeshBuildExportAndBadMeshes) {
+  if (!test::haveSharedData()) GTEST_SKIP() << "no ../shared/data";
+  const fs::path atlas = dir_.path() / "bunny.atlas";
+  ASSERT_EQ(build(test::sharedData() / "meshes/bun_zipper.ply", atlas, "--charts 24 --chart-size 17"), 0) << output_;
+  const std::string stats = [&] {
+    std::ifstream f(atlas / "stats.json");
+    return std::string((std::istreambuf_iterator<char>(f)), {});
+  }();
+  EXPECT_NE(stats.find("\"kind\": \"geometry\""), std::string::npos);
+  EXPECT_NE(stats.find("\"triangles\": 69451"), std::string::npos) << stats.substr(0, 400);
+  const fs::path ply = dir_.path() / "surface.ply";
+  ASSERT_EQ(test::runCommand(test::appPath().string() + " export '" + atlas.string() + "' -o '" + ply.string() +
+                                 "' --level 1",
+                             &output_),
+            0)
+      << output_;
+  EXPECT_TRUE(fs::exists(ply));
+  EXPECT_NE(test::runCommand(test::appPath().string() + " render '" + atlas.string() + "' -o '" +
+                                 (dir_.path() / "frames").string() + "' --orbit 1 --size 32x32",
+                             &output_),
+            0);
+  EXPECT_NE(output_.find("atlas.json"), std::string::npos) << output_;
+  EXPECT_NE(test::runCommand(test::appPath().string() + " export '" + atlas.string() + "' -o '" + ply.string() +
+                                 "' --level 9",
+                             &output_),
+            0);
+  // Bad meshes: nothing left behind.
+  const fs::path empty = writeFile("empty.ply", "");
+  EXPECT_NE(build(empty, dir_.path() / "e.atlas"), 0);
+  EXPECT_NE(output_.find("empty.ply"), std::string::npos) << output_;
+  expectNoAtlas(dir_.path(), "e.atlas");
+  const fs::path past = writeFile("past.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n");
+  EXPECT_NE(build(past, dir_.path() / "p.atlas"), 0);
+  EXPECT_NE(output_.find("past.obj"), std::string::npos) << output_;
+  expectNoAtlas(dir_.path(), "p.atlas");
+  EXPECT_NE(build(test::sharedData() / "meshes/bun_zipper.ply", dir_.path() / "c.atlas", "--chart-size 16"), 0);
+  EXPECT_NE(output_.find("--chart-size"), std::string::npos) << output_;
+  EXPECT_NE(build(test::sharedData() / "meshes/bun_zipper.ply", dir_.path() / "m.atlas", "--max-memory 12Q"), 0);
+  EXPECT_NE(output_.find("--max-memory"), std::string::npos) << output_;
+  expectNoAtlas(dir_.path(), "m.atlas");
+}
+
+}  // namespace
+}  // namespace gimlod
