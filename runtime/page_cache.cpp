@@ -6,9 +6,13 @@ namespace gimlod {
 
 AtlasPages::AtlasPages(const std::filesystem::path& atlasDir, const AtlasManifest& manifest,
                        const HierarchyParams& params)
-    : params_(params) {
-  for (const ChartInfo& c : manifest.charts)
+    : params_(params), geometry_(manifest.kind == "geometry") {
+  for (const ChartInfo& c : manifest.charts) {
     charts_.push_back(std::make_unique<ChartFileReader>(atlasDir / c.file));
+    if (!charts_.back()->hasChannel(geometry_ ? kChannelPositions : kChannelHeights))
+      throw InputError((atlasDir / c.file).string() + ": has no " + (geometry_ ? "positions" : "heights") +
+                       " for a " + manifest.kind + " atlas");
+  }
 }
 
 void AtlasPages::read(const NodeId& n, std::vector<float>& heights,
@@ -19,11 +23,14 @@ void AtlasPages::read(const NodeId& n, std::vector<float>& heights,
   const uint32_t size = 1u << (L - n.level);  // level-0 intervals
   const uint32_t u0 = (n.x * size) >> k, v0 = (n.y * size) >> k;
   const uint32_t s = (1u << r) + 1;
-  heights.resize(size_t(s) * s);
+  heights.resize(size_t(s) * s * (geometry_ ? 3 : 1));
   normals.resize(size_t(s) * s);
-  charts_[n.chart]->readHeights(k, u0, v0, 1u << r, heights.data());
+  if (geometry_)
+    charts_[n.chart]->readPositions(k, u0, v0, 1u << r, reinterpret_cast<glm::vec3*>(heights.data()));
+  else
+    charts_[n.chart]->readHeights(k, u0, v0, 1u << r, heights.data());
   charts_[n.chart]->readNormals(k, u0, v0, 1u << r, normals.data());
-  bytesRead_ += heights.size() * (sizeof(float) + sizeof(PackedNormal));
+  bytesRead_ += heights.size() * sizeof(float) + normals.size() * sizeof(PackedNormal);
 }
 
 PageCache::PageCache(uint32_t capacity) : capacity_(capacity) {}

@@ -25,11 +25,14 @@ class AtlasPages {
   AtlasPages(const std::filesystem::path& atlasDir, const AtlasManifest& manifest,
              const HierarchyParams& params);
   uint32_t pageSamples(uint32_t level) const { return (1u << params_.maxRes(level)) + 1; }
+  // heights: (pageSamples)^2 heights, or 3 floats (x, y, z) per sample for a geometry atlas.
   void read(const NodeId& n, std::vector<float>& heights, std::vector<PackedNormal>& normals) const;
+  bool geometry() const { return geometry_; }
   uint64_t bytesRead() const { return bytesRead_; }
 
  private:
   HierarchyParams params_;
+  bool geometry_ = false;
   std::vector<std::unique_ptr<ChartFileReader>> charts_;
   mutable std::atomic<uint64_t> bytesRead_{0};
 };

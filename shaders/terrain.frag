@@ -36,11 +36,25 @@ bool outsideValid(float g, float valid) {
 }
 
 void main() {
+#ifndef GIMLOD_GEOMETRY
   vec2 g = v_world.xy / u_spacing;
   if (outsideValid(g.x, u_validSamples.x) || outsideValid(g.y, u_validSamples.y)) discard;
+#endif
 
   vec3 n = textureLod(u_normals, vec3(v_pageUv, float(v_pageLayer)), float(v_texLod)).rgb * 2.0 - 1.0;
   n = length(n) > 1e-4 ? normalize(n) : vec3(0.0, 0.0, 1.0);
+#ifdef GIMLOD_GEOMETRY
+  // Mesh atlases: a neutral material, lit from both sides of the light (scans have no up).
+  vec3 clay = vec3(0.78, 0.74, 0.68);
+  float lambert = abs(dot(n, u_lightDir));
+  vec3 lit = clay * (0.25 + 0.75 * lambert);
+  if (u_fogDistance > 0.0) {
+    float dm = length(v_world - u_eye) / u_fogDistance;
+    lit = mix(lit, u_background, 0.6 * (1.0 - exp(-dm * dm)));
+  }
+  o_colour = vec4(lit, 1.0);
+  return;
+#endif
   // Below sea level (only when the data goes below 0): bathymetric blues; above: the land ramp.
   // Colour follows the page heights (finer than the drawn grid), like the normal map.
   float h = texture(u_heights, vec3(v_pageUv, float(v_pageLayer))).r;

@@ -18,7 +18,7 @@ uniform mat4 u_viewProj;
 uniform vec2 u_spacing;
 uniform int u_leafLog2;
 uniform int u_entriesPerSide;
-uniform sampler2DArray u_heights;  // R32F, read with texelFetch only
+uniform sampler2DArray u_heights;  // R32F heights (RGB32F positions with GIMLOD_GEOMETRY), texelFetch only
 
 precise out vec3 v_world;  // captured by transform feedback
 out vec2 v_pageUv;
@@ -58,9 +58,14 @@ void main() {
 
   int ps = sizeLog2 - pageResLog2;
   ivec2 texel = ivec2(sx >> ps, sy >> ps);
+#ifdef GIMLOD_GEOMETRY
+  // Geometry image: the position is the sample itself (bit-identical across chart seams).
+  v_world = texelFetch(u_heights, ivec3(texel, pageLayer), 0).xyz;
+#else
   float height = texelFetch(u_heights, ivec3(texel, pageLayer), 0).r;
   // Integer sample first, one conversion, one multiply: bit-identical across nodes.
   v_world = vec3(float(origin.x + sx) * u_spacing.x, float(origin.y + sy) * u_spacing.y, height);
+#endif
   gl_Position = u_viewProj * vec4(v_world, 1.0);
   v_pageUv = (vec2(texel) + 0.5) / float(textureSize(u_heights, 0).x);
   v_pageLayer = pageLayer;

@@ -153,7 +153,14 @@ TerrainRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   createGrids();
   nodeBuffer = makeBuffer();
   createVertexArray();
-  terrainProgram = linkProgram("terrain", kShader_terrain_vert, kShader_terrain_frag, {"v_world"});
+  // note: mesh atlases use the same shaders with GIMLOD_GEOMETRY defined after the #version line.
+  auto variant = [&](const char* source) {
+    std::string s = source;
+    if (setup.geometry) s.insert(s.find('\n') + 1, "#define GIMLOD_GEOMETRY 1\n");
+    return s;
+  };
+  const std::string vert = variant(kShader_terrain_vert), frag = variant(kShader_terrain_frag);
+  terrainProgram = linkProgram("terrain", vert.c_str(), frag.c_str(), {"v_world"});
   staticProgram = linkProgram("static_mesh", kShader_static_mesh_vert, kShader_static_mesh_frag);
   staticTerrainProgram = linkProgram("static_terrain", kShader_static_terrain_vert, kShader_terrain_frag);
   glUseProgram(terrainProgram.id());
@@ -225,7 +232,7 @@ void TerrainRenderer::Impl::createPagePool() {
   // carry a mip chain so each node's normal map is read at its attribute resolution (texLod).
   normalLevels = 1;
   while ((pageSide >> normalLevels) >= 1) ++normalLevels;
-  heights = makeArray(GL_R32F, 1);
+  heights = makeArray(setup.geometry ? GL_RGB32F : GL_R32F, 1);
   normals = makeArray(GL_RGBA8, GLint(normalLevels));
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
 }
@@ -388,7 +395,8 @@ void TerrainRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const 
   const GLsizei s = GLsizei(samplesPerSide);
   glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
   glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->heights.id());
-  glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, GL_RED, GL_FLOAT, heights);
+  glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, impl_->setup.geometry ? GL_RGB : GL_RED,
+                  GL_FLOAT, heights);
   if (normals) {
     glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->normals.id());
     glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, GL_RGBA,

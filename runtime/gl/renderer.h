@@ -26,6 +26,9 @@ struct RendererSetup {
   std::array<double, 2> spacing{1.0, 1.0};     // metres between samples (x, y)
   std::array<uint32_t, 2> validSamples{0, 0};  // fragments with gx > X-1 or gy > Y-1 are discarded
   std::array<float, 2> heightRange{0.f, 1.f};  // for colouring
+  // Geometry images (mesh atlases): pages hold x, y, z per sample (3 floats) instead of a height,
+  // and the vertex shader takes the position from the page; stitching is the same.
+  bool geometry = false;
 };
 
 struct DrawStats {
@@ -50,7 +53,8 @@ class TerrainRenderer {
   uint32_t pageCapacity() const;
   // Uploads one node page: (n+1)^2 heights and normals, n = 2^pageIntervalsLog2 at most.
   // Smaller pages (deep nodes) occupy the lower-left corner of the layer.
-  // The normals also get their mip chain (normalMipLevel), for DrawNode::texLod.
+  // The normals also get their mip chain (normalMipLevel), for DrawNode::texLod. With
+  // RendererSetup::geometry, `heights` holds 3 floats (x, y, z) per sample.
   void uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* heights,
                   const PackedNormal* normals);
 

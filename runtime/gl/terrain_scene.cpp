@@ -15,11 +15,8 @@ double msSince(std::chrono::steady_clock::time_point t0) {
 }
 
 RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o) {
-  if (a.manifest.kind != "heightfield")
-    throw InputError((a.dir / kManifestName).string() + ": a " + a.manifest.kind +
-                     " (mesh) atlas; this renderer draws height-field atlases only so far (adaptation, "
-                     "`gimlod bench` and `gimlod export` work on mesh atlases)");
   RendererSetup s;
+  s.geometry = a.manifest.kind == "geometry";
   s.width = o.width;
   s.height = o.height;
   s.background = o.background;
@@ -28,7 +25,7 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o) {
   s.minResLog2 = a.manifest.minNodeResLog2;
   s.maxResLog2 = a.manifest.maxNodeResLog2;
   s.spacing = a.manifest.spacing;
-  s.validSamples = {a.manifest.samplesX, a.manifest.samplesY};
+  s.validSamples = {a.manifest.samplesX, a.manifest.samplesY};  // {0, 0} for mesh atlases: nothing discarded
   s.heightRange = a.manifest.heightRange;
   return s;
 }
