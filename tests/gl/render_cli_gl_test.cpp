@@ -113,5 +113,38 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
   }
 }
 
+// The shipped scan through the tool, as the demo runs it (smaller): build, then render the shipped
+// orbit path; every frame drawn, no page missing, within tolerance unless the node budget bound.
+TEST(RenderCli, BuildAndRenderShippedScan) {
+  test::TempDir dir("gimlod-render-scan");
+  const std::string app = test::appPath().string();
+  const fs::path atlas = dir.path() / "bunny.atlas";
+  std::string out;
+  ASSERT_EQ(test::runCommand(app + " build '" + (test::repoData() / "meshes/bun_zipper.ply").string() + "' -o '" +
+                                 atlas.string() + "' --charts 24 --chart-size 17",
+                             &out),
+            0)
+      << out;
+  const fs::path frames = dir.path() / "frames";
+  ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + frames.string() + "' --path '" +
+                                 (fs::path(GIMLOD_REPO_DATA).parent_path() / "scenes/bunny_orbit.json").string() +
+                                 "' --size 48x36 --tolerance 2",
+                             &out),
+            0)
+      << out;
+  const auto rows = readCsv(frames / "stats.csv");
+  ASSERT_EQ(rows.size(), 49u);
+  const auto& head = rows[0];
+  auto col = [&](const std::string& name) { return size_t(std::find(head.begin(), head.end(), name) - head.begin()); };
+  for (size_t r = 1; r < rows.size(); ++r) {
+    EXPECT_GT(std::stoull(rows[r][col("triangles")]), 0u);
+    EXPECT_EQ(rows[r][col("pages_missing")], "0");
+    if (rows[r][col("node_budget_bound")] == "0") {
+      EXPECT_LE(std::stod(rows[r][col("max_screen_error_px")]), 2.0);
+    }
+  }
+  EXPECT_TRUE(fs::exists(frames / "frame_0047.png"));
+}
+
 }  // namespace
 }  // namespace gimlod
