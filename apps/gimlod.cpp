@@ -181,6 +181,8 @@ int main(int argc, char** argv) {
                     "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
       ->capture_default_str();
   std::string maxMemory = "4G";
+  bool noFidelity = false;
+  build->add_flag("--no-fidelity", noFidelity, "Meshes: skip the Hausdorff distance between the input and the atlas");
   build->add_option("--max-memory", maxMemory, "Meshes: memory cap (e.g. 2G, 512M); larger meshes go through cell files")
       ->capture_default_str();
   build->add_option("--depth", b.depth, "Quadtree levels per chart")->capture_default_str();
@@ -231,6 +233,7 @@ int main(int argc, char** argv) {
     if (*build) {
       if (chartSizeOpt->count() > 0) b.meshChartSize = b.chartSize;
       b.maxMemory = parseBytes("--max-memory", maxMemory);
+      b.measureFidelity = !noFidelity;
       return runBuild(b);
     }
     if (*render) return runRender(r);

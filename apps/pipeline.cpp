@@ -11,6 +11,7 @@
 
 #include "atlas/charting.h"
 #include "atlas/dem.h"
+#include "atlas/fidelity.h"
 #include "atlas/gridify.h"
 #include "atlas/mesh_atlas.h"
 #include "atlas/mesh_io.h"
@@ -100,6 +101,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   copt.threads = o.threads;
   ChartingStats cst;
   ChartLayout layout;
+  IndexedMesh mesh;  // kept for the fidelity figure (in-memory path)
   const MeshInfo info = probeMesh(o.input);
   const bool outOfCore = info.triangleEstimate * 256 > o.maxMemory / 4;
   StagedDirectory stage(o.output, kManifestName, "atlas");
@@ -113,7 +115,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
     fs::remove_all(grid, ec);
     stats["gridify"] = {{"cells", gr.cells}, {"seconds", gr.seconds}, {"peak_buffered_bytes", gr.peakBufferedBytes}};
   } else {
-    const IndexedMesh mesh = readMesh(o.input);
+    mesh = readMesh(o.input);
     const MeshReadStats& rs = mesh.stats;
     stats["read"] = {{"format", rs.info.formatName},       {"vertices", rs.vertices},
                      {"triangles", rs.trianglesOut},       {"dropped_non_finite", rs.droppedNonFinite},
@@ -165,6 +167,23 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
       buildGeometryHierarchy(p, roots, [&](uint32_t c) { return readers[c]->readLevelPositions(0); }, &hs);
   writeHierarchy(stage.path() / m.hierarchyFile, h);
   writeManifest(stage.path(), m);
+  if (o.measureFidelity && !outOfCore) {
+    const AtlasSurface surface = readAtlasSurface(stage.path(), 0);
+    const FidelityStats f = measureFidelity(mesh.positions, mesh.triangles, surface.positions, surface.triangles);
+    stats["fidelity"] = {{"hausdorff_percent_of_diagonal", f.hausdorffPercent},
+                         {"mean_percent_of_diagonal", f.meanPercent},
+                         {"max_atlas_to_mesh", f.maxAtlasToMesh},
+                         {"max_mesh_to_atlas", f.maxMeshToAtlas},
+                         {"diagonal", f.diagonal},
+                         {"atlas_samples", f.atlasSamples},
+                         {"mesh_samples", f.meshSamples},
+                         {"seconds", f.seconds}};
+    spdlog::info("atlas fidelity: Hausdorff {:.4f}% of the diagonal (mean {:.5f}%), {} atlas and {} mesh samples",
+                 f.hausdorffPercent, f.meanPercent, f.atlasSamples, f.meshSamples);
+  } else {
+    stats["fidelity"] = outOfCore ? "not measured (out-of-core input)" : "not measured (--no-fidelity)";
+  }
+  mesh = IndexedMesh{};
   stats["charts"] = m.charts.size();
   stats["chart_size"] = m.chartSize;
   stats["samples"] = uint64_t(m.charts.size()) * m.chartSize * m.chartSize;

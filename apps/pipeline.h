@@ -28,6 +28,7 @@ struct BuildOptions {
   uint32_t charts = 64;                 // target patches before quadrangulation; 0: maxChartError
   double maxChartError = 0.01;          // with charts = 0: RMS plane distance / bbox diagonal
   uint64_t maxMemory = 4ull << 30;      // bytes; above a quarter of it the cells (out-of-core) path runs
+  bool measureFidelity = true;          // two-sided Hausdorff distance input <-> atlas (in-memory path)
 };
 
 // Throws InputError for impossible options (before any work is done).
