@@ -79,16 +79,22 @@ float pointDistance(const glm::vec3& a, const glm::vec3& b) {
   return std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
 }
 
+// Sizes a chart's node arrays: bounds zero, flags clear, every error NaN (resolutions the node
+// cannot use stay NaN).
+void initChartNodes(const HierarchyParams& p, Hierarchy::ChartNodes& out) {
+  const uint32_t nodes = nodesPerChart(p.depth);
+  out.bounds.assign(nodes, {});
+  out.flags.assign(nodes, 0);
+  out.errors.assign(size_t(nodes) * p.resCount(), std::numeric_limits<float>::quiet_NaN());
+}
+
 void buildChart(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart,
                 const std::vector<float>& h, Hierarchy::ChartNodes& out) {
   const uint32_t L = p.intervalsLog2;
   const uint32_t M = 1u << L;
   const uint32_t S = M + 1;
-  const uint32_t nodes = nodesPerChart(p.depth);
   const uint32_t rc = p.resCount();
-  out.bounds.assign(nodes, {});
-  out.flags.assign(nodes, 0);
-  out.errors.assign(size_t(nodes) * rc, std::numeric_limits<float>::quiet_NaN());
+  initChartNodes(p, out);
 
   auto fmax = [](float a, float b) { return std::max(a, b); };
   auto fmin = [](float a, float b) { return std::min(a, b); };
@@ -170,11 +176,8 @@ void buildGeometryChart(const HierarchyParams& p, const std::vector<glm::vec3>& 
   const uint32_t L = p.intervalsLog2;
   const uint32_t M = 1u << L;
   const uint32_t S = M + 1;
-  const uint32_t nodes = nodesPerChart(p.depth);
   const uint32_t rc = p.resCount();
-  out.bounds.assign(nodes, {});
-  out.flags.assign(nodes, 0);
-  out.errors.assign(size_t(nodes) * rc, std::numeric_limits<float>::quiet_NaN());
+  initChartNodes(p, out);
   auto fmax = [](float a, float b) { return std::max(a, b); };
   auto fmin = [](float a, float b) { return std::min(a, b); };
 
