@@ -59,6 +59,7 @@ struct HeightGrid {
 
 HeightGrid readLevel0(const AtlasView& atlas) {
   const AtlasManifest& m = atlas.manifest;
+  if (m.kind == "geometry") return {};  // mesh atlases: see buildChartMesh
   const uint32_t n = m.chartSize, intervals = n - 1;
   HeightGrid g;
   g.width = m.samplesX;
@@ -104,6 +105,31 @@ void buildGridMesh(const HeightGrid& g, const std::array<double, 2>& spacing, ui
       const uint32_t a = j * (side + 1) + i, b = a + 1, c = b + side + 1, d = a + side + 1;
       indices.insert(indices.end(), {a, b, c, a, c, d});
     }
+}
+
+// Mesh atlases: (a) is every chart's grid at the pyramid level whose triangle count is closest to
+// `triangles`, as one static indexed mesh (the atlas surface, unwelded).
+void buildChartMesh(const AtlasView& atlas, uint64_t triangles, std::vector<glm::vec3>& positions,
+                    std::vector<uint32_t>& indices) {
+  const AtlasManifest& m = atlas.manifest;
+  const uint32_t M = m.chartSize - 1;
+  uint32_t level = 0;
+  auto trisAt = [&](uint32_t k) { return 2.0 * double(m.charts.size()) * double(M >> k) * double(M >> k); };
+  while ((M >> (level + 1)) >= 1 && std::fabs(trisAt(level + 1) - double(triangles)) < std::fabs(trisAt(level) - double(triangles)))
+    ++level;
+  positions.clear();
+  indices.clear();
+  const uint32_t s = (M >> level) + 1;
+  for (const ChartInfo& c : m.charts) {
+    const std::vector<glm::vec3> p = ChartFileReader(atlas.dir / c.file).readLevelPositions(level);
+    const uint32_t base = uint32_t(positions.size());
+    positions.insert(positions.end(), p.begin(), p.end());
+    for (uint32_t v = 0; v + 1 < s; ++v)
+      for (uint32_t u = 0; u + 1 < s; ++u) {
+        const uint32_t a = base + v * s + u, b = a + 1, cc = b + s, d = a + s;
+        indices.insert(indices.end(), {a, b, cc, a, cc, d});
+      }
+  }
 }
 
 class GpuTimer {
@@ -223,7 +249,10 @@ Result runConfig(const AtlasView& atlas, const HeightGrid& grid, const Config& c
   // (a) The atlas's level-0 heights as one regular grid mesh of about meanTris triangles.
   std::vector<glm::vec3> positions;
   std::vector<uint32_t> indices;
-  buildGridMesh(grid, atlas.manifest.spacing, uint64_t(r.meanTris), positions, indices);
+  if (atlas.manifest.kind == "geometry")
+    buildChartMesh(atlas, uint64_t(r.meanTris), positions, indices);
+  else
+    buildGridMesh(grid, atlas.manifest.spacing, uint64_t(r.meanTris), positions, indices);
   r.meshTris = indices.size() / 3;
   for (const Camera& c : path)
     r.meshMs += scene.renderer().drawMeshMs(positions, indices, glm::mat4(scene.viewProjection(c)),
