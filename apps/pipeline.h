@@ -25,7 +25,7 @@ struct BuildOptions {
   uint32_t threads = 0;       // 0: all cores
   // Meshes (PLY, OBJ, OFF, STL).
   uint32_t meshChartSize = 65;          // quad chart side in samples, 2^m + 1 (--chart-size for meshes)
-  uint32_t charts = 64;                 // target patches before quadrangulation; 0: maxChartError
+  uint32_t charts = 128;                // target patches before quadrangulation; 0: maxChartError
   double maxChartError = 0.01;          // with charts = 0: RMS plane distance / bbox diagonal
   uint64_t maxMemory = 4ull << 30;      // bytes; above a quarter of it the cells (out-of-core) path runs
   bool measureFidelity = true;          // two-sided Hausdorff distance input <-> atlas (in-memory path)
