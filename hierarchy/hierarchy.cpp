@@ -73,11 +73,17 @@ void accumulateLevelError(const std::vector<T>& h, uint32_t S, uint32_t k, std::
   }
 }
 
-float heightDistance(float a, float b) { return std::fabs(a - b); }
-float pointDistance(const glm::vec3& a, const glm::vec3& b) {
-  const glm::vec3 d = a - b;
-  return std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
-}
+// note: function objects, not functions: a function pointer as Dist would be an indirect call
+// per sample in accumulateLevelError's inner loop.
+struct HeightDistance {
+  float operator()(float a, float b) const { return std::fabs(a - b); }
+};
+struct PointDistance {
+  float operator()(const glm::vec3& a, const glm::vec3& b) const {
+    const glm::vec3 d = a - b;
+    return std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+  }
+};
 
 // Sizes a chart's node arrays: bounds zero, flags clear, every error NaN (resolutions the node
 // cannot use stay NaN).
@@ -88,12 +94,54 @@ void initChartNodes(const HierarchyParams& p, Hierarchy::ChartNodes& out) {
   out.errors.assign(size_t(nodes) * p.resCount(), std::numeric_limits<float>::quiet_NaN());
 }
 
+// Writes the per-node values of an M x M per-cell array (and its 2x2 reductions) for every level
+// that has a node: out(level, x, y, value).
+template <typename Op, typename Out>
+void forEachNodeReduction(std::vector<float> cells, uint32_t L, uint32_t depth, Op op, Out out) {
+  std::vector<float> tmp;
+  for (uint32_t n = 1u << L, l = L;; n /= 2, --l) {
+    if (l < depth)
+      for (uint32_t y = 0; y < n; ++y)
+        for (uint32_t x = 0; x < n; ++x) out(l, x, y, cells[size_t(y) * n + x]);
+    if (n == 1) break;
+    reduce2x2(cells, n, tmp, op);
+    cells.swap(tmp);
+  }
+}
+
+// Node errors for every usable (level, res): 0 at the source resolution; above it the max over
+// the node's samples of the running level error (accumulateLevelError), so errors never
+// decrease as resolution drops.
+template <typename T, typename Dist>
+void fillErrors(const HierarchyParams& p, const std::vector<T>& samples, Dist dist, Hierarchy::ChartNodes& out) {
+  const uint32_t L = p.intervalsLog2;
+  const uint32_t S = (1u << L) + 1;
+  const uint32_t rc = p.resCount();
+  for (uint32_t l = 0; l < p.depth; ++l) {
+    const uint32_t r = L - l;
+    if (r > p.maxRes(l) || r < p.minNodeResLog2) continue;
+    for (uint32_t i = nodeIndex(l, 0, 0); i < nodeIndex(l, 0, 0) + (1u << 2 * l); ++i)
+      out.errors[size_t(i) * rc + (r - p.minNodeResLog2)] = 0.0f;
+  }
+  auto fmax = [](float a, float b) { return std::max(a, b); };
+  const uint32_t kmax = L - p.minNodeResLog2;
+  std::vector<float> running(size_t(S) * S, 0.0f), cells;
+  for (uint32_t k = 1; k <= kmax; ++k) {
+    accumulateLevelError(samples, S, k, running, dist);
+    cellReduce(running, S, cells, fmax);
+    forEachNodeReduction(cells, L, p.depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
+      if (L < l + k) return;
+      const uint32_t r = L - l - k;
+      if (r >= p.minNodeResLog2 && r <= p.maxRes(l)) out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] = v;
+    });
+  }
+}
+
 void buildChart(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart,
                 const std::vector<float>& h, Hierarchy::ChartNodes& out) {
   const uint32_t L = p.intervalsLog2;
   const uint32_t M = 1u << L;
   const uint32_t S = M + 1;
-  const uint32_t rc = p.resCount();
   initChartNodes(p, out);
 
   auto fmax = [](float a, float b) { return std::max(a, b); };
@@ -126,57 +174,13 @@ void buildChart(const HierarchyParams& p, const AtlasManifest& m, const ChartInf
     mx.swap(tmp);
   }
 
-  // Errors at k = 0 (source resolution) are exactly zero.
-  for (uint32_t l = 0; l < p.depth; ++l) {
-    const uint32_t r = L - l;
-    if (r > p.maxRes(l) || r < p.minNodeResLog2) continue;
-    for (uint32_t i = nodeIndex(l, 0, 0); i < nodeIndex(l, 0, 0) + (1u << 2 * l); ++i)
-      out.errors[size_t(i) * rc + (r - p.minNodeResLog2)] = 0.0f;
-  }
-
-  // Errors at k >= 1, accumulated so they never decrease with k.
-  const uint32_t kmax = L - p.minNodeResLog2;
-  std::vector<float> running(size_t(S) * S, 0.0f), cells;
-  for (uint32_t k = 1; k <= kmax; ++k) {
-    accumulateLevelError(h, S, k, running, heightDistance);
-    cellReduce(running, S, cells, fmax);
-    for (uint32_t n = M, l = L;; n /= 2, --l) {
-      if (l < p.depth && L >= l + k) {
-        const uint32_t r = L - l - k;
-        if (r >= p.minNodeResLog2 && r <= p.maxRes(l)) {
-          for (uint32_t y = 0; y < n; ++y)
-            for (uint32_t x = 0; x < n; ++x)
-              out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] =
-                  cells[size_t(y) * n + x];
-        }
-      }
-      if (n == 1) break;
-      reduce2x2(cells, n, tmp, fmax);
-      cells.swap(tmp);
-    }
-  }
-}
-
-// Writes the per-node values of an M x M per-cell array (and its 2x2 reductions) for every level
-// that has a node: out(level, x, y, value).
-template <typename Op, typename Out>
-void forEachNodeReduction(std::vector<float> cells, uint32_t L, uint32_t depth, Op op, Out out) {
-  std::vector<float> tmp;
-  for (uint32_t n = 1u << L, l = L;; n /= 2, --l) {
-    if (l < depth)
-      for (uint32_t y = 0; y < n; ++y)
-        for (uint32_t x = 0; x < n; ++x) out(l, x, y, cells[size_t(y) * n + x]);
-    if (n == 1) break;
-    reduce2x2(cells, n, tmp, op);
-    cells.swap(tmp);
-  }
+  fillErrors(p, h, HeightDistance{}, out);
 }
 
 void buildGeometryChart(const HierarchyParams& p, const std::vector<glm::vec3>& P, Hierarchy::ChartNodes& out) {
   const uint32_t L = p.intervalsLog2;
   const uint32_t M = 1u << L;
   const uint32_t S = M + 1;
-  const uint32_t rc = p.resCount();
   initChartNodes(p, out);
   auto fmax = [](float a, float b) { return std::max(a, b); };
   auto fmin = [](float a, float b) { return std::min(a, b); };
@@ -194,23 +198,7 @@ void buildGeometryChart(const HierarchyParams& p, const std::vector<glm::vec3>& 
     });
   }
 
-  for (uint32_t l = 0; l < p.depth; ++l) {
-    const uint32_t r = L - l;
-    if (r > p.maxRes(l) || r < p.minNodeResLog2) continue;
-    for (uint32_t i = nodeIndex(l, 0, 0); i < nodeIndex(l, 0, 0) + (1u << 2 * l); ++i)
-      out.errors[size_t(i) * rc + (r - p.minNodeResLog2)] = 0.0f;
-  }
-  const uint32_t kmax = L - p.minNodeResLog2;
-  std::vector<float> running(size_t(S) * S, 0.0f);
-  for (uint32_t k = 1; k <= kmax; ++k) {
-    accumulateLevelError(P, S, k, running, pointDistance);
-    cellReduce(running, S, cells, fmax);
-    forEachNodeReduction(cells, L, p.depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
-      if (L < l + k) return;
-      const uint32_t r = L - l - k;
-      if (r >= p.minNodeResLog2 && r <= p.maxRes(l)) out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] = v;
-    });
-  }
+  fillErrors(p, P, PointDistance{}, out);
 }
 
 void putBytes(std::vector<uint8_t>& b, const void* p, size_t n) {
