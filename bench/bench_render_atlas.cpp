@@ -21,8 +21,6 @@
 //    not flush the query's begin on its own (check: GPU <= draw (wall));
 //  frame: CPU wall time of renderFrame (adapt + stitch + upload + draw + sorting etc.).
 //  (a) and (b) are one glDrawElements + glFinish per frame (CPU wall, as draw (wall)).
-#include <epoxy/egl.h>
-#include <epoxy/gl.h>
 
 #include <algorithm>
 #include <chrono>
@@ -39,6 +37,7 @@
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
 #include "runtime/gl/egl_context.h"
+#include "runtime/gl/gl_objects.h"
 #include "runtime/gl/terrain_scene.h"
 
 using namespace gimlod;
@@ -132,57 +131,6 @@ void buildChartMesh(const AtlasView& atlas, uint64_t triangles, std::vector<glm:
   }
 }
 
-class GpuTimer {
- public:
-  GpuTimer() { glGenQueries(1, &query_); }
-  ~GpuTimer() { glDeleteQueries(1, &query_); }
-  void begin() { glBeginQuery(GL_TIME_ELAPSED, query_); }
-  double endMs() {
-    glEndQuery(GL_TIME_ELAPSED);
-    GLuint64 ns = 0;
-    glGetQueryObjectui64v(query_, GL_QUERY_RESULT, &ns);
-    return double(ns) * 1e-6;
-  }
-
- private:
-  GLuint query_ = 0;
-};
-
-bool hasExt(const char* list, const char* name) {
-  if (!list) return false;
-  const std::string l = std::string(" ") + list + " ";
-  return l.find(std::string(" ") + name + " ") != std::string::npos;
-}
-
-// Which EGL display the current context lives on (EglContext does not say): EGL returns the
-// same handle for the same platform display, so compare against each candidate.
-std::string describeEglDisplay() {
-  const EGLDisplay cur = eglGetCurrentDisplay();
-  if (cur == EGL_NO_DISPLAY) return "no current EGL display";
-  const char* vendor = eglQueryString(cur, EGL_VENDOR);
-  std::string out = std::string("EGL vendor ") + (vendor ? vendor : "?") + ", ";
-  const char* ce = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
-  if (!ce) eglGetError();
-  // NVIDIA advertises EGL_EXT_device_base (= device_enumeration + device_query) alone.
-  if ((hasExt(ce, "EGL_EXT_device_enumeration") || hasExt(ce, "EGL_EXT_device_base")) &&
-      hasExt(ce, "EGL_EXT_platform_device")) {
-    EGLint n = 0;
-    if (eglQueryDevicesEXT(0, nullptr, &n) && n > 0) {
-      std::vector<EGLDeviceEXT> devs(size_t(n), nullptr);
-      eglQueryDevicesEXT(n, devs.data(), &n);
-      for (EGLint i = 0; i < n; ++i)
-        if (eglGetPlatformDisplayEXT(EGL_PLATFORM_DEVICE_EXT, devs[size_t(i)], nullptr) == cur)
-          return out + "EGL device platform, device " + std::to_string(i) + " of " + std::to_string(n);
-    }
-    eglGetError();
-  }
-  if (hasExt(ce, "EGL_MESA_platform_surfaceless") &&
-      eglGetPlatformDisplayEXT(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr) == cur)
-    return out + "Mesa surfaceless platform";
-  if (eglGetDisplay(EGL_DEFAULT_DISPLAY) == cur) return out + "default display";
-  return out + "unidentified display";
-}
-
 struct Config {
   uint32_t width = 640, height = 480;
   double tolerancePx = 1.0;
@@ -216,7 +164,7 @@ Result runConfig(const AtlasView& atlas, const HeightGrid& grid, const Config& c
   AdaptOptions ao;
   ao.tolerancePx = cfg.tolerancePx;
   ao.maxNodes = maxNodes;
-  GpuTimer timer;
+  gl::GpuTimer timer;
   // Warm-up: pages resident, shaders compiled.
   for (const Camera& c : path) scene.renderFrame(c, ao);
   double tris = 0, nodes = 0;
@@ -368,13 +316,7 @@ int main(int argc, char** argv) try {
   const double readMs = msSince(t0);
   auto ctx = gl::EglContext::create();
   std::printf("device: %s (%s)\n", ctx->renderer().c_str(), ctx->version().c_str());
-  if (const char* vendor = reinterpret_cast<const char*>(glGetString(GL_VENDOR)))
-    std::printf("GL_VENDOR: %s\n", vendor);
-  std::printf("EGL: %s; GL_MAX_ARRAY_TEXTURE_LAYERS %d\n", describeEglDisplay().c_str(), [] {
-    GLint v = 0;
-    glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &v);
-    return int(v);
-  }());
+  std::printf("GL_VENDOR: %s\nEGL: %s\n", ctx->vendor().c_str(), ctx->display().c_str());
   std::printf("atlas %s: %zu charts of %u, %ux%u samples; level 0 read in %.0f ms; max nodes %u\n",
               dir.string().c_str(), atlas.manifest.charts.size(), atlas.manifest.chartSize,
               grid.width, grid.height, readMs, maxNodes);

@@ -199,6 +199,8 @@ std::unique_ptr<EglContext> EglContext::create() {
       if (major * 10 + minor < 43)
         throw std::runtime_error("context reports OpenGL " + std::to_string(major) + "." +
                                  std::to_string(minor) + " (< 4.3)");
+      const char* eglVendor = eglQueryString(c.display, EGL_VENDOR);
+      result->displayName_ = c.name + ", EGL vendor " + (eglVendor ? eglVendor : "?");
       return result;
     } catch (const std::exception& e) {
       reasons += "\n  " + c.name + ": " + e.what();
@@ -222,6 +224,11 @@ EglContext::~EglContext() {
 
 std::string EglContext::renderer() const {
   const auto* s = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
+  return s ? s : "";
+}
+
+std::string EglContext::vendor() const {
+  const auto* s = reinterpret_cast<const char*>(glGetString(GL_VENDOR));
   return s ? s : "";
 }
 

@@ -14,12 +14,17 @@ class EglContext {
   ~EglContext();
   std::string renderer() const;  // GL_RENDERER
   std::string version() const;   // GL_VERSION
+  std::string vendor() const;    // GL_VENDOR
+  // The display the context was made on ("EGL device 0", "Mesa surfaceless platform", "default
+  // display") and the EGL vendor.
+  const std::string& display() const { return displayName_; }
 
  private:
   EglContext() = default;
   void* display_ = nullptr;
   void* context_ = nullptr;
   void* surface_ = nullptr;  // 1x1 pbuffer when EGL_KHR_surfaceless_context is missing
+  std::string displayName_;
 };
 
 }  // namespace gimlod::gl

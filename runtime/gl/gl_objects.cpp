@@ -113,4 +113,15 @@ GlObject linkProgram(const char* name, const char* vertexSource, const char* fra
   return program;
 }
 
+GpuTimer::GpuTimer() : query_(makeQuery()) {}
+
+void GpuTimer::begin() { glBeginQuery(GL_TIME_ELAPSED, query_.id()); }
+
+double GpuTimer::endMs() {
+  glEndQuery(GL_TIME_ELAPSED);
+  GLuint64 ns = 0;
+  glGetQueryObjectui64v(query_.id(), GL_QUERY_RESULT, &ns);
+  return double(ns) * 1e-6;
+}
+
 }  // namespace gimlod::gl

@@ -54,6 +54,18 @@ GlObject linkProgram(const char* name, const char* vertexSource, const char* fra
                      const std::vector<const char*>& feedbackVaryings = {});
 
 // Uniform location; -1 (silently ignored by glUniform*) when the linker removed it.
+// GPU time of the commands issued between begin() and endMs() (a GL_TIME_ELAPSED query);
+// endMs waits for the result. Needs a current context; one timer runs at a time.
+class GpuTimer {
+ public:
+  GpuTimer();
+  void begin();
+  double endMs();
+
+ private:
+  GlObject query_;
+};
+
 inline GLint uniform(const GlObject& program, const char* name) {
   return glGetUniformLocation(program.id(), name);
 }

@@ -106,8 +106,10 @@ TEST_F(RendererGlTest, ContextIsCore43OrNewer) {
   EXPECT_NE(context_->version().find(std::to_string(major) + "." + std::to_string(minor)),
             std::string::npos);
   EXPECT_EQ(glGetError(), GLenum(GL_NO_ERROR));
-  std::printf("GL_RENDERER: %s\nGL_VERSION: %s\n", context_->renderer().c_str(),
-              context_->version().c_str());
+  EXPECT_NE(context_->display().find("EGL vendor"), std::string::npos) << context_->display();
+  EXPECT_FALSE(context_->vendor().empty());
+  std::printf("GL_RENDERER: %s\nGL_VERSION: %s\nEGL display: %s\n", context_->renderer().c_str(),
+              context_->version().c_str(), context_->display().c_str());
 }
 
 // ---------------------------------------------------------------------------------------------
