@@ -93,6 +93,18 @@ Cut DualQueueAdapter::partition() const {
   return c;
 }
 
+double DualQueueAdapter::splitPriorityOf(const NodeId& n) const {
+  const int32_t s = slot_[globalIndex(n)];
+  if (s < 0) return -1.0;
+  int32_t delta = 0;
+  return splitPriority(entries_[s], &delta);
+}
+
+double DualQueueAdapter::mergeCostOf(const NodeId& parent, bool* parentOverTol) const {
+  int32_t freed = 0;
+  return mergeCost(parent, parentOverTol, &freed);
+}
+
 NodeId DualQueueAdapter::nodeOf(uint32_t g) const {
   NodeId n = local_[g % perChart_];
   n.chart = g / perChart_;

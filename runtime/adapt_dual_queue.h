@@ -66,6 +66,11 @@ class DualQueueAdapter {
   const DualQueueFrameStats& frameStats() const { return frame_; }
   // The persistent cut before culling and the stitching constraint (res = needed, clamped).
   Cut partition() const;
+  // The priorities the adapter computes from its own per-node evaluation for the last update's
+  // view (what its queues hold; -1 for a node not in the partition): they equal
+  // dualQueueSplitPriority and dualQueueMergeCost, which tests check.
+  double splitPriorityOf(const NodeId& n) const;
+  double mergeCostOf(const NodeId& parent, bool* parentOverTol) const;
 
  private:
   // One partition node. Lives in entries_; slot_[g] is its position (swap-removed).

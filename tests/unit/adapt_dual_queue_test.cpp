@@ -66,6 +66,52 @@ TEST(DualQueue, ErrorModeWithinToleranceAndPartitionAcrossRandomViews) {
   }
 }
 
+// The adapter's own priorities (from its dense per-node evaluation, what its queues hold) are
+// the reference definitions dualQueueSplitPriority / dualQueueMergeCost, with and without culling.
+TEST(DualQueue, AdapterPrioritiesEqualTheReferenceDefinitions) {
+  const World w = makeWorld(129, 3, 2, 5);
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<double> ux(0, w.m.samplesX), uy(0, w.m.samplesY), uz(5, 120);
+  uint32_t checkedSplits = 0, checkedMerges = 0, overTol = 0;
+  for (int i = 0; i < 12; ++i) {
+    const ViewParams v = viewAt(w, {ux(rng), uy(rng), uz(rng)}, {ux(rng), uy(rng), 0});
+    AdaptOptions o;
+    o.tolerancePx = 0.3 + 0.2 * i;
+    o.maxNodes = i % 3 == 0 ? 12 : 0;
+    o.frustumCull = i % 2 == 0;
+    DualQueueAdapter adapter(w.h, 1u << 20);
+    adapter.update(v, o);
+    const Cut part = adapter.partition();
+    for (const CutNode& n : part.nodes) {
+      const double ref = dualQueueSplitPriority(w.h, n.id, v, o.tolerancePx, o.frustumCull);
+      const double own = adapter.splitPriorityOf(n.id);
+      if (ref <= 0.0) {
+        EXPECT_LE(own, 0.0);
+      } else {
+        EXPECT_DOUBLE_EQ(own, ref) << "view " << i << " node " << n.id.level << "," << n.id.x << "," << n.id.y;
+      }
+      ++checkedSplits;
+      overTol += ref >= kOverTolerancePriority;
+      if (n.id.level == 0) continue;
+      // Merge items exist for groups whose children are all partition nodes.
+      bool group = true;
+      for (uint32_t c = 0; c < 4; ++c) {
+        const NodeId sib = n.id.parent().child(c);
+        group = group && ((w.h.flags(sib) & kNodeEmpty) || part.find(sib) >= 0);
+      }
+      if (!group) continue;
+      bool refOver = false, ownOver = false;
+      const double refCost = dualQueueMergeCost(w.h, n.id.parent(), v, o.tolerancePx, o.frustumCull, &refOver);
+      EXPECT_DOUBLE_EQ(adapter.mergeCostOf(n.id.parent(), &ownOver), refCost);
+      EXPECT_EQ(ownOver, refOver);
+      ++checkedMerges;
+    }
+  }
+  EXPECT_GT(checkedSplits, 100u);
+  EXPECT_GT(checkedMerges, 100u);
+  EXPECT_GT(overTol, 0u);
+}
+
 TEST(DualQueue, NodeBudgetBindsAndIsReported) {
   const World w = makeWorld(65, 3, 2, 4);
   const ViewParams v = viewAt(w, {10, 10, 3}, {100, 60, 0});
