@@ -125,7 +125,7 @@ int runRender(const RenderArgs& a) {
   so.coherentAdaptation = !a.topDown;
   so.texelsPerPixel = a.texelRatio;
   gl::TerrainScene scene(atlas, so);
-  if (a.maxNodes == 0 || a.maxNodes > scene.nodeRoom())
+  if (scene.nodeBudget(a.maxNodes) != a.maxNodes)
     spdlog::warn("--max-nodes {} is above what the GPU page pool holds ({} pages): using {}", a.maxNodes,
                  scene.renderer().pageCapacity(), scene.nodeRoom());
 

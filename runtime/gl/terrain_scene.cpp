@@ -154,17 +154,11 @@ Cut TerrainScene::substituteResident(const Cut& desired, const ViewParams& view,
   // resolution suffices whenever log2 R >= depth - 1; anything else is counted.
   uint32_t unfixable = 0;
   if (substituted > 0) {
-    std::vector<SideNeighbour> scratch;
-    for (CutNode& n : drawn.nodes) {
-      uint32_t gap = 0;
-      for (uint32_t s = 0; s < 4; ++s) {
-        scratch.clear();
-        sideNeighbours(h, drawn, n.id, s, scratch);
-        for (const SideNeighbour& sn : scratch) {
-          const uint32_t l = drawn.nodes[sn.cutIndex].id.level;
-          if (l > n.id.level) gap = std::max(gap, l - n.id.level);
-        }
-      }
+    std::vector<uint32_t> gaps;
+    stitchGaps(h, drawn, gaps);
+    for (size_t i = 0; i < drawn.nodes.size(); ++i) {
+      CutNode& n = drawn.nodes[i];
+      const uint32_t gap = gaps[i];
       if (gap <= n.res) continue;
       if (gap <= p.maxRes(n.id.level))
         n.res = gap;
@@ -235,13 +229,17 @@ uint32_t TerrainScene::nodeRoom() const {
   return (cache_.capacity() - atlas_.hierarchy.chartCount()) * 3 / 4;
 }
 
+uint32_t TerrainScene::nodeBudget(uint32_t maxNodes) const {
+  const uint32_t room = nodeRoom();
+  return maxNodes == 0 || maxNodes > room ? room : maxNodes;
+}
+
 FrameResult TerrainScene::renderFrame(const Camera& camera, const AdaptOptions& options) {
   FrameResult f;
   const auto t0 = std::chrono::steady_clock::now();
   const ViewParams view = makeViewParams(camera, options_.width, options_.height);
   AdaptOptions o = options;
-  const uint32_t room = nodeRoom();
-  if (o.maxNodes == 0 || o.maxNodes > room) o.maxNodes = room;
+  o.maxNodes = nodeBudget(options.maxNodes);
   if (options_.coherentAdaptation) {
     if (!dualQueue_) dualQueue_ = std::make_unique<DualQueueAdapter>(atlas_.hierarchy);
     f.cut = dualQueue_->update(view, o, &f.adapt);
@@ -257,8 +255,7 @@ FrameResult TerrainScene::renderFrame(const Camera& camera, const BudgetOptions&
   const auto t0 = std::chrono::steady_clock::now();
   const ViewParams view = makeViewParams(camera, options_.width, options_.height);
   BudgetOptions o = options;
-  const uint32_t room = nodeRoom();
-  if (o.maxNodes == 0 || o.maxNodes > room) o.maxNodes = room;
+  o.maxNodes = nodeBudget(options.maxNodes);
   if (!quadQueue_) quadQueue_ = std::make_unique<QuadQueueAdapter>(atlas_.hierarchy);
   f.cut = quadQueue_->update(view, o, &f.budget);
   f.adapt.splits = f.budget.splits;

@@ -61,6 +61,8 @@ class TerrainScene {
   // The largest node budget a frame gets: 3/4 of the page pool's unlocked layers (the pool is
   // clamped to GL_MAX_ARRAY_TEXTURE_LAYERS); larger budgets are lowered to it.
   uint32_t nodeRoom() const;
+  // maxNodes within nodeRoom (0: nodeRoom).
+  uint32_t nodeBudget(uint32_t maxNodes) const;
   TerrainRenderer& renderer() { return *renderer_; }
 
   // Adapts to the camera (error threshold, paper 7.1 problem 1) and draws; the picture is then in
