@@ -293,7 +293,8 @@ void TerrainScene::finishFrame(const Camera& camera, const ViewParams& view, Fra
   const double substituteMs = msSince(t1);
   f.maxErrorPx = 0.0;
   for (CutNode& n : f.cut.nodes) {
-    n.errorPx = float(screenError(h, n.id, n.res, view));
+    // The adapters set errorPx; substitution changes nodes and resolutions.
+    if (loader_) n.errorPx = float(screenError(h, n.id, n.res, view));
     f.maxErrorPx = std::max(f.maxErrorPx, double(n.errorPx));
   }
   f.draw = drawCut(camera, f.cut, &f);
