@@ -3,6 +3,10 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <ctime>
 #include <random>
 
 #include <fmt/format.h>
@@ -50,6 +54,56 @@ double secondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+// A kB figure ("VmHWM:", "VmRSS:") of /proc/self/status, in bytes; 0 where unavailable.
+uint64_t procStatusBytes(const char* key) {
+  std::FILE* f = std::fopen("/proc/self/status", "r");
+  if (!f) return 0;
+  char line[256];
+  uint64_t kb = 0;
+  const size_t n = std::strlen(key);
+  while (std::fgets(line, sizeof line, f))
+    if (std::strncmp(line, key, n) == 0) {
+      kb = std::strtoull(line + n, nullptr, 10);
+      break;
+    }
+  std::fclose(f);
+  return kb * 1024;
+}
+
+// Per-stage wall time, CPU time and peak resident memory. The kernel's peak (VmHWM) is reset at
+// the start of each stage (writing 5 to /proc/self/clear_refs), so each stage reports its own
+// peak; the whole build's peak is the largest of them.
+class StageMeter {
+ public:
+  explicit StageMeter(nlohmann::json& stages) : stages_(stages) {}
+  void start() {
+    if (std::FILE* f = std::fopen("/proc/self/clear_refs", "w")) {
+      std::fputs("5", f);
+      std::fclose(f);
+    }
+    t0_ = std::chrono::steady_clock::now();
+    cpu0_ = std::clock();
+  }
+  // Ends the running stage, records it under `name`, and starts the next one.
+  void finish(const std::string& name) {
+    const double wall = secondsSince(t0_);
+    const double cpu = double(std::clock() - cpu0_) / CLOCKS_PER_SEC;
+    const uint64_t peak = std::max(procStatusBytes("VmHWM:"), procStatusBytes("VmRSS:"));
+    peak_ = std::max(peak_, peak);
+    stages_.push_back({{"stage", name}, {"seconds", wall}, {"cpu_seconds", cpu}, {"peak_rss_bytes", peak}});
+    spdlog::info("stage {:<10} {:8.2f} s wall {:8.2f} s cpu  peak RSS {:7.1f} MiB", name, wall, cpu,
+                 double(peak) / (1 << 20));
+    start();
+  }
+  uint64_t peak() const { return peak_; }
+
+ private:
+  nlohmann::json& stages_;
+  std::chrono::steady_clock::time_point t0_;
+  std::clock_t cpu0_ = 0;
+  uint64_t peak_ = 0;
+};
+
 }  // namespace
 
 void validateBuildOptions(const BuildOptions& o) {
@@ -93,6 +147,9 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.threads);
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json stats = {{"input", fs::absolute(o.input).string()}, {"kind", "geometry"}};
+  nlohmann::json stages = nlohmann::json::array();
+  StageMeter meter(stages);
+  meter.start();
 
   // Read and cluster: in memory, or through cell files when the mesh is large.
   ChartingOptions copt;
@@ -110,10 +167,17 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
     g.maxMemoryBytes = o.maxMemory;
     const fs::path grid = stage.path() / "grid.tmp";
     const GridifyResult gr = gridify(o.input, grid, g);
+    meter.finish("gridify");
     layout = buildChartLayoutFromCells(grid, copt, &cst);
     std::error_code ec;
     fs::remove_all(grid, ec);
-    stats["gridify"] = {{"cells", gr.cells}, {"seconds", gr.seconds}, {"peak_buffered_bytes", gr.peakBufferedBytes}};
+    stats["gridify"] = {{"cells", gr.cells},
+                        {"triangles", gr.triangles},
+                        {"max_cell_triangles", gr.maxCellTriangles},
+                        {"peak_buffered_bytes", gr.peakBufferedBytes},
+                        {"peak_tracked_bytes", gr.peakTrackedBytes},
+                        {"bytes_written", gr.bytesWritten},
+                        {"seconds", gr.seconds}};
   } else {
     mesh = readMesh(o.input);
     const MeshReadStats& rs = mesh.stats;
@@ -122,8 +186,10 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                      {"dropped_degenerate", rs.droppedDegenerate}, {"dropped_duplicate", rs.droppedDuplicate},
                      {"strips", rs.strips},                {"colours", rs.hasColours},
                      {"seconds", rs.seconds}};
+    meter.finish("read");
     layout = buildChartLayout(mesh, copt, &cst);
   }
+  meter.finish("charting");
   const double chartingSec = secondsSince(t0);
   stats["charting"] = {{"triangles", cst.outputTriangles},     {"patches", cst.charts},
                        {"vertices_welded", cst.verticesWelded}, {"non_manifold_edges", cst.nonManifoldEdges},
@@ -131,9 +197,17 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                        {"boundary_edges", cst.boundaryEdges},   {"corners_inserted", cst.cornersInserted},
                        {"patches_split", cst.patchesSplit},     {"max_planarity_error", cst.maxPlanarityError},
                        {"sides_histogram", cst.sidesHistogram}, {"out_of_core", outOfCore},
+                       {"cells", cst.cells},                    {"cell_clusters", cst.cellClusters},
+                       {"cell_clusters_dissolved", cst.cellClustersDissolved},
+                       {"charts_before_fixing", cst.chartsBeforeFixing},
+                       {"merges_refused_not_disk", cst.mergesRefusedNotDisk},
+                       {"patches_unfixed", cst.patchesUnfixed},
+                       {"weld_seconds", cst.weldSeconds},       {"cluster_seconds", cst.clusterSeconds},
+                       {"sides_seconds", cst.sidesSeconds},     {"peak_bytes_estimate", cst.peakBytesEstimate},
                        {"seconds", cst.seconds}};
   const std::vector<std::string> bad = validateChartLayout(layout);
   if (!bad.empty()) throw InputError(o.input.string() + ": the chart layout is invalid: " + bad.front());
+  meter.finish("validate");
 
   // Quads, parameterization and resampling.
   ResampleOptions ro;
@@ -141,6 +215,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   ro.threads = o.threads;
   const GeometryImageSet set = resampleLayout(layout, ro);
   layout = ChartLayout{};
+  meter.finish("resample");
   stats["resample"] = {{"charts", set.charts.size()},
                        {"param_stretch_l2", set.param.stretchL2},
                        {"param_stretch_linf", set.param.stretchLinf},
@@ -167,6 +242,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
       buildGeometryHierarchy(p, roots, [&](uint32_t c) { return readers[c]->readLevelPositions(0); }, &hs);
   writeHierarchy(stage.path() / m.hierarchyFile, h);
   writeManifest(stage.path(), m);
+  meter.finish("write");
   if (o.measureFidelity && !outOfCore) {
     const AtlasSurface surface = readAtlasSurface(stage.path(), 0);
     const FidelityStats f = measureFidelity(mesh.positions, mesh.triangles, surface.positions, surface.triangles);
@@ -183,6 +259,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   } else {
     stats["fidelity"] = outOfCore ? "not measured (out-of-core input)" : "not measured (--no-fidelity)";
   }
+  if (o.measureFidelity && !outOfCore) meter.finish("fidelity");
   mesh = IndexedMesh{};
   stats["charts"] = m.charts.size();
   stats["chart_size"] = m.chartSize;
@@ -197,6 +274,8 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   stats["bytes_on_disk"] = directoryBytes(stage.path());
   stats["total_seconds"] = secondsSince(t0);
   stats["charts_grid"] = {m.chartsX, m.chartsY};
+  stats["stages"] = stages;
+  stats["peak_rss_bytes"] = meter.peak();
   const std::string text = stats.dump(2) + "\n";
   atomicWriteFile(stage.path() / "stats.json", text.data(), text.size());
   stage.commit();
