@@ -66,6 +66,20 @@ int runBuild(const BuildOptions& o) {
       st["voids_filled"].get<uint64_t>(), st["hierarchy_samples_per_second"].get<double>() * 1e-6,
       st["hierarchy_threads"].get<uint32_t>(), st["hierarchy_seconds"].get<double>(),
       st["bytes_on_disk"].get<uint64_t>(), st["total_seconds"].get<double>());
+  if (st.contains("read") && st.contains("charting")) {
+    // Mesh input: what was repaired (README, "Mesh input").
+    const nlohmann::json& rd = st["read"];
+    const nlohmann::json& ch = st["charting"];
+    std::cout << fmt::format(
+        "  input             {} triangles read, {} kept; dropped: {} non-finite, {} degenerate, {} duplicate\n"
+        "  repaired          {} non-manifold edges, {} non-manifold vertices ({} vertex copies), "
+        "{} more triangles dropped after welding\n",
+        rd.value("triangles_read", uint64_t{0}), rd.value("triangles", uint64_t{0}),
+        rd.value("dropped_non_finite", uint64_t{0}), rd.value("dropped_degenerate", uint64_t{0}),
+        rd.value("dropped_duplicate", uint64_t{0}), ch.value("non_manifold_edges", uint64_t{0}),
+        ch.value("non_manifold_vertices", uint64_t{0}), ch.value("vertices_split", uint64_t{0}),
+        ch.value("dropped_degenerate", uint64_t{0}) + ch.value("dropped_duplicate", uint64_t{0}));
+  }
   return 0;
 }
 

@@ -50,6 +50,26 @@ uint64_t directoryBytes(const fs::path& dir) {
   return total;
 }
 
+// What the mesh reader read, repaired and warned about (README, "Mesh input").
+nlohmann::json readStatsJson(const MeshReadStats& rs) {
+  return {{"format", rs.info.formatName},
+          {"vertices", rs.vertices},
+          {"faces", rs.faces},
+          {"triangles_read", rs.trianglesRead},
+          {"triangles", rs.trianglesOut},
+          {"non_finite_vertices", rs.nonFiniteVertices},
+          {"dropped_non_finite", rs.droppedNonFinite},
+          {"dropped_degenerate", rs.droppedDegenerate},
+          {"dropped_duplicate", rs.droppedDuplicate},
+          {"duplicate_check_complete", rs.duplicateCheckComplete},
+          {"short_faces", rs.shortFaces},
+          {"polygons_fanned", rs.polygonsFanned},
+          {"strips", rs.strips},
+          {"colours", rs.hasColours},
+          {"warnings", rs.warnings},
+          {"seconds", rs.seconds}};
+}
+
 double secondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -134,6 +154,11 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
       o.minNodeRes > o.nodeRes)
     throw InputError("--node-res and --min-node-res must be powers of two with 2 <= min <= node-res");
   if (o.depth < 1 || o.depth > 12) throw InputError("--depth must be in [1, 12]");
+  if (o.meshChartSize > 8193)
+    throw InputError("--chart-size " + std::to_string(o.meshChartSize) + " is above 8193, the largest mesh chart size");
+  if (o.charts == 0 && !(o.maxChartError > 0.0 && std::isfinite(o.maxChartError)))
+    throw InputError("--chart-error must be a positive fraction of the bounding-box diagonal (it is the target when "
+                     "--charts is 0)");
   // note: for meshes R is capped at chart-size - 1 and the depth at what the chart allows (leaves
   // keep at least the minimum node resolution).
   HierarchyParams p;
@@ -178,20 +203,19 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                         {"peak_tracked_bytes", gr.peakTrackedBytes},
                         {"bytes_written", gr.bytesWritten},
                         {"seconds", gr.seconds}};
+    stats["read"] = readStatsJson(gr.read);
   } else {
     mesh = readMesh(o.input);
     const MeshReadStats& rs = mesh.stats;
-    stats["read"] = {{"format", rs.info.formatName},       {"vertices", rs.vertices},
-                     {"triangles", rs.trianglesOut},       {"dropped_non_finite", rs.droppedNonFinite},
-                     {"dropped_degenerate", rs.droppedDegenerate}, {"dropped_duplicate", rs.droppedDuplicate},
-                     {"strips", rs.strips},                {"colours", rs.hasColours},
-                     {"seconds", rs.seconds}};
+    stats["read"] = readStatsJson(rs);
+    for (const std::string& w : rs.warnings) spdlog::warn("{}: {}", o.input.string(), w);
     meter.finish("read");
     layout = buildChartLayout(mesh, copt, &cst);
   }
   meter.finish("charting");
   const double chartingSec = secondsSince(t0);
   stats["charting"] = {{"triangles", cst.outputTriangles},     {"patches", cst.charts},
+                       {"dropped_degenerate", cst.droppedDegenerate}, {"dropped_duplicate", cst.droppedDuplicate},
                        {"vertices_welded", cst.verticesWelded}, {"non_manifold_edges", cst.nonManifoldEdges},
                        {"non_manifold_vertices", cst.nonManifoldVertices}, {"vertices_split", cst.verticesSplit},
                        {"boundary_edges", cst.boundaryEdges},   {"corners_inserted", cst.cornersInserted},
@@ -208,6 +232,18 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   const std::vector<std::string> bad = validateChartLayout(layout);
   if (!bad.empty()) throw InputError(o.input.string() + ": the chart layout is invalid: " + bad.front());
   meter.finish("validate");
+  {
+    // The geometry images are held in memory until they are written: refuse a chart size they
+    // cannot fit in under --max-memory before allocating them.
+    uint64_t quads = 0;
+    for (const Patch& pa : layout.patches) quads += pa.sides.size();
+    const uint64_t bytes = quads * uint64_t(o.meshChartSize) * o.meshChartSize * (layout.colours.empty() ? 16 : 20);
+    if (bytes > o.maxMemory)
+      throw InputError(fmt::format("{}: {} quad charts of {}^2 samples need {:.1f} GiB of geometry images, more than "
+                                   "--max-memory ({:.1f} GiB): lower --chart-size or --charts, or raise --max-memory",
+                                   o.input.string(), quads, o.meshChartSize, double(bytes) / double(1ull << 30),
+                                   double(o.maxMemory) / double(1ull << 30)));
+  }
 
   // Quads, parameterization and resampling.
   ResampleOptions ro;

@@ -97,6 +97,8 @@ class FileBuffer {
   uint64_t offset() const { return consumed_ + cur_; }
   uint64_t remaining() const { return size_ - std::min(size_, offset()); }
   uint64_t lineNumber() const { return line_; }
+  // The last line nextLine returned ended the file without a line break (a cut-off text file).
+  bool lineUnterminated() const { return unterminated_; }
   const uint8_t* data() const { return buf_.get() + cur_; }
   size_t available() const { return end_ - cur_; }
 
@@ -131,6 +133,7 @@ class FileBuffer {
         if (avail == 0) return false;
         setLine(line, b, avail);
         cur_ = end_;
+        unterminated_ = true;
         return true;
       }
       if (avail == capacity_)
@@ -174,7 +177,14 @@ class FileBuffer {
   uint64_t consumed_ = 0;  // file bytes before buf_[0]
   uint64_t line_ = 0;
   bool eof_ = false;
+  bool unterminated_ = false;
 };
+
+// Appended to a parse error on a text line: says so when that line is the file's last and has no
+// line break, i.e. the file was probably cut off there.
+std::string cutShort(const FileBuffer& f) {
+  return f.lineUnterminated() ? " (truncated: the file ends in the middle of this line)" : "";
+}
 
 bool isSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
 
@@ -693,8 +703,13 @@ PlyHeader readPlyHeader(FileBuffer& f) {
       haveFormat = true;
     } else if (kw == "element") {
       int64_t n = -1;
-      if (!t.next(a) || !t.next(b) || !parseInt(b, n) || n < 0)
+      if (!t.next(a) || !t.next(b))
         fail(path, where + ": bad element line (want 'element NAME COUNT')");
+      if (!parseInt(b, n) || n < 0) {
+        const bool digits = !b.empty() && b.find_first_not_of("0123456789") == std::string_view::npos;
+        fail(path, where + ": bad element line (want 'element NAME COUNT'): the count " + shown(b) +
+                       (digits ? " is too large" : " is not a non-negative integer"));
+      }
       PlyElement e;
       e.name = std::string(a);
       e.count = static_cast<uint64_t>(n);
@@ -1175,7 +1190,7 @@ class OffReader {
         if (!ft.next(tok) || !parseInt(tok, idx))
           fail(path_, "line " + std::to_string(f_.lineNumber()) + ": face " + std::to_string(i) +
                           " (counting from 0) declares " + std::to_string(n) +
-                          " corners but does not list them");
+                          " corners but does not list them" + cutShort(f_));
         if (idx < 0 || static_cast<uint64_t>(idx) >= nv)
           fail(path_, "line " + std::to_string(f_.lineNumber()) + ": face " + std::to_string(i) +
                           " (counting from 0): vertex index " + std::to_string(idx) +
@@ -1208,7 +1223,7 @@ class OffReader {
     for (double& c : v) {
       if (!t.next(tok) || !parseDouble(tok, c))
         fail(path_, "line " + std::to_string(f_.lineNumber()) + ": vertex " + std::to_string(i) +
-                        " needs 3 coordinates");
+                        " needs 3 coordinates" + cutShort(f_));
     }
     const glm::vec3 p(static_cast<float>(v[0]), static_cast<float>(v[1]), static_cast<float>(v[2]));
     va_.pos[i] = p;
@@ -1277,11 +1292,13 @@ class ObjReader {
         while (n < 7 && t.next(tok)) {
           if (tok[0] == '#') break;
           if (!parseDouble(tok, c[n]))
-            fail(path_, "line " + std::to_string(f_.lineNumber()) + ": bad number " + shown(tok));
+            fail(path_, "line " + std::to_string(f_.lineNumber()) + ": bad number " + shown(tok) +
+                            cutShort(f_));
           ++n;
         }
         if (n < 3)
-          fail(path_, "line " + std::to_string(f_.lineNumber()) + ": vertex needs 3 coordinates");
+          fail(path_, "line " + std::to_string(f_.lineNumber()) + ": vertex needs 3 coordinates" +
+                          cutShort(f_));
         if (va_.pos.size() >= kMaxVertices ||
             (o_.maxVertexBytes != 0 && (va_.pos.size() + 1) * bytesPerVertex > o_.maxVertexBytes))
           checkVertexBytes(path_, va_.pos.size() + 1, true, o_,
@@ -1310,7 +1327,7 @@ class ObjReader {
         auto [ptr, ec] = std::from_chars(tok.data(), e, idx);
         if (ec != std::errc() || (ptr != e && *ptr != '/'))
           fail(path_, "line " + std::to_string(f_.lineNumber()) + ": bad face corner " +
-                          shown(tok));
+                          shown(tok) + cutShort(f_));
         const int64_t n = static_cast<int64_t>(va_.pos.size());
         const int64_t i = idx > 0 ? idx - 1 : n + idx;
         if (idx == 0 || i < 0 || i >= n)
@@ -1426,12 +1443,18 @@ class StlReader {
       Tokens t{line};
       if (!t.next(tok)) continue;
       const std::string where = "line " + std::to_string(f_.lineNumber());
+      // A bad last line without its line break: the file was cut in the middle of it.
+      const auto bad = [&](const std::string& what) {
+        if (f_.lineUnterminated())
+          fail(path_, "truncated ASCII STL: the file ends in the middle of " + where + " (" +
+                          what + ")");
+        fail(path_, where + ": " + what);
+      };
       if (tok == "vertex") {
         if (!inFacet) fail(path_, where + ": vertex outside a facet");
         double c[3];
         for (double& v : c)
-          if (!t.next(tok) || !parseDouble(tok, v))
-            fail(path_, where + ": vertex needs 3 coordinates");
+          if (!t.next(tok) || !parseDouble(tok, v)) bad("vertex needs 3 coordinates");
         if (corners < 3)
           p[corners] = glm::vec3(static_cast<float>(c[0]), static_cast<float>(c[1]),
                                  static_cast<float>(c[2]));
@@ -1452,7 +1475,7 @@ class StlReader {
         sawSolid = true;
       } else if (tok == "outer" || tok == "endloop" || tok == "endsolid") {
       } else {
-        fail(path_, where + ": unexpected " + shown(tok) + " in an ASCII STL");
+        bad("unexpected " + shown(tok) + " in an ASCII STL");
       }
     }
     if (!sawSolid) fail(path_, "not an ASCII STL (no 'solid')");
@@ -1552,6 +1575,19 @@ MeshReadStats streamImpl(const fs::path& path, TriangleSink& sink, const MeshRea
                      " vertices and no triangles: a point cloud, not a mesh)");
     emit.begin(stats.info);
     emit.finish();
+    if (stats.trianglesOut == 0) {
+      // Every triangle was repaired away (e.g. all vertices at one point): nothing to build from.
+      std::string why = "no usable triangles: ";
+      if (stats.trianglesRead == 0) {
+        why += "all " + std::to_string(stats.faces) + " faces have fewer than 3 corners";
+      } else {
+        why += "all " + std::to_string(stats.trianglesRead) + " triangles were dropped (" +
+               std::to_string(stats.droppedNonFinite) + " with a NaN or infinite coordinate, " +
+               std::to_string(stats.droppedDegenerate) + " degenerate: repeated vertex or zero " +
+               "area, " + std::to_string(stats.droppedDuplicate) + " duplicate)";
+      }
+      fail(path, why);
+    }
   }
   stats.bytesRead = f.offset();
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
