@@ -1,0 +1,314 @@
+// Every shared real scan through `gimlod build` at the default mesh options (--charts 128
+// --chart-size 65, fidelity on), then the atlas invariants of issue 3 checked on what the build
+// wrote, independently of the code that wrote it:
+//  - seams: every pair of charts the manifest joins (any of the 8 edge orientations) holds
+//    bit-identical positions along the shared edge, at every pyramid level; every corner sample is
+//    bit-identical in all the charts that meet there (corners grouped by walking the neighbour
+//    links, not by position);
+//  - the exported surface (readAtlasSurface, `gimlod export --level K`) at every level is welded:
+//    no non-manifold edge, and exactly the input's open boundary loops and Euler characteristic
+//    (the bunny's 5 holes stay holes; closed scans export closed);
+//  - no flipped texels;
+//  - two-sided Hausdorff distance within the issue's bound.
+// One atlas build per scan and process (tests/scan_atlases.h); ctest runs each test alone, so the
+// fidelity build (about 20 s) happens once per scan in Invariants, and NoFlippedTexels builds
+// without fidelity (about 10 s) unless the process already holds a build.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <numeric>
+#include <set>
+
+#include "atlas/mesh_atlas.h"
+#include "atlas/mesh_io.h"
+#include "core/atlas_format.h"
+#include "tests/scan_atlases.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+namespace fs = std::filesystem;
+
+bool bitEqual(const glm::vec3& a, const glm::vec3& b) { return std::memcmp(&a, &b, sizeof(glm::vec3)) == 0; }
+
+// Sample k of `edge` in its counter-clockwise parameter direction on an n x n level (the chart
+// edge convention of core/atlas_format.h): bottom (k, 0), right (m, k), top (m - k, m),
+// left (0, m - k), m = n - 1. Written from the format's definition, not taken from atlas/.
+uint32_t edgeSample(uint32_t n, uint32_t edge, uint32_t k) {
+  const uint32_t m = n - 1;
+  switch (edge) {
+    case kEdgeBottom: return k;
+    case kEdgeRight: return k * n + m;
+    case kEdgeTop: return m * n + (m - k);
+    default: return (m - k) * n;
+  }
+}
+
+// Corner c of a chart is where edge c starts (counter-clockwise): (0,0), (m,0), (m,m), (0,m).
+uint32_t cornerSample(uint32_t n, uint32_t corner) { return edgeSample(n, corner, 0); }
+
+struct UnionFind {
+  std::vector<uint32_t> parent;
+  explicit UnionFind(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
+  uint32_t find(uint32_t a) {
+    while (parent[a] != a) a = parent[a] = parent[parent[a]];
+    return a;
+  }
+  void unite(uint32_t a, uint32_t b) { parent[find(a)] = find(b); }
+};
+
+// Topology of an indexed triangle mesh after welding bit-identical positions (as the exporter
+// welds, and as the charting welds the input): open boundary loops (connected components of the
+// edges used by one triangle), non-manifold edges (used by more than two), and V - E + F over the
+// vertices that triangles use.
+struct Topology {
+  uint64_t vertices = 0, edges = 0, triangles = 0;
+  uint64_t boundaryEdges = 0, boundaryLoops = 0, nonManifoldEdges = 0;
+  int64_t euler() const { return int64_t(vertices) - int64_t(edges) + int64_t(triangles); }
+};
+
+Topology topologyOf(const std::vector<glm::vec3>& positions, const std::vector<std::array<uint32_t, 3>>& tris) {
+  // Weld bit-identical positions.
+  std::vector<uint32_t> order(positions.size());
+  std::iota(order.begin(), order.end(), 0u);
+  auto key = [&](uint32_t i) {
+    std::array<uint32_t, 3> k;
+    std::memcpy(k.data(), &positions[i], sizeof(k));
+    return k;
+  };
+  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+  std::vector<uint32_t> weld(positions.size());
+  uint32_t next = 0;
+  for (size_t i = 0; i < order.size(); ++i) {
+    if (i > 0 && key(order[i]) != key(order[i - 1])) ++next;
+    weld[order[i]] = next;
+  }
+  Topology t;
+  std::vector<std::pair<uint64_t, uint32_t>> edges;  // (undirected edge key, count)
+  std::vector<uint64_t> keys;
+  keys.reserve(tris.size() * 3);
+  std::vector<uint8_t> used(positions.empty() ? 0 : next + 1, 0);
+  for (const auto& tri : tris) {
+    const uint32_t a = weld[tri[0]], b = weld[tri[1]], c = weld[tri[2]];
+    if (a == b || b == c || a == c) continue;  // collapsed by the weld: not a triangle
+    ++t.triangles;
+    for (uint32_t v : {a, b, c}) used[v] = 1;
+    for (auto [p, q] : {std::pair{a, b}, std::pair{b, c}, std::pair{c, a}})
+      keys.push_back((uint64_t(std::min(p, q)) << 32) | std::max(p, q));
+  }
+  std::sort(keys.begin(), keys.end());
+  UnionFind loops(used.size());
+  std::vector<uint8_t> onBoundary(used.size(), 0);
+  for (size_t i = 0; i < keys.size();) {
+    size_t j = i;
+    while (j < keys.size() && keys[j] == keys[i]) ++j;
+    ++t.edges;
+    if (j - i == 1) {
+      ++t.boundaryEdges;
+      const uint32_t p = uint32_t(keys[i] >> 32), q = uint32_t(keys[i]);
+      onBoundary[p] = onBoundary[q] = 1;
+      loops.unite(p, q);
+    } else if (j - i > 2) {
+      ++t.nonManifoldEdges;
+    }
+    i = j;
+  }
+  for (size_t v = 0; v < used.size(); ++v) {
+    t.vertices += used[v];
+    t.boundaryLoops += onBoundary[v] && loops.find(uint32_t(v)) == v;
+  }
+  return t;
+}
+
+std::ostream& operator<<(std::ostream& os, const Topology& t) {
+  return os << "V " << t.vertices << " E " << t.edges << " F " << t.triangles << " (chi " << t.euler() << "), "
+            << t.boundaryLoops << " boundary loops of " << t.boundaryEdges << " edges, " << t.nonManifoldEdges
+            << " non-manifold edges";
+}
+
+class ScanAtlasTest : public ::testing::TestWithParam<std::string> {};
+
+// Seams and corners, read back from the chart files the manifest lists.
+void checkSeams(const fs::path& dir) {
+  const AtlasManifest m = readManifest(dir);  // also checks that neighbour links are symmetric
+  ASSERT_EQ(m.kind, "geometry");
+  const uint32_t charts = uint32_t(m.charts.size());
+  ASSERT_GT(charts, 0u);
+  std::vector<std::unique_ptr<ChartFileReader>> readers;
+  for (const ChartInfo& c : m.charts) {
+    readers.push_back(std::make_unique<ChartFileReader>(dir / c.file));
+    ASSERT_EQ(readers.back()->levels(), m.pyramidLevels()) << c.file;
+  }
+  // Corner groups: corner i of chart c is the start of its edge i; across edge e to (d, f), the
+  // start of e meets the end of f (reversed) or its start (not reversed), and likewise the end.
+  UnionFind corners(size_t(charts) * 4);
+  std::set<std::pair<uint32_t, uint32_t>> orientations;  // (edge, neighbour edge) pairs seen
+  uint64_t sharedEdges = 0, openEdges = 0;
+  for (uint32_t c = 0; c < charts; ++c)
+    for (uint32_t e = 0; e < 4; ++e) {
+      const RootNeighbour& r = m.charts[c].neighbours[e];
+      if (r.chart < 0) {
+        ++openEdges;
+        continue;
+      }
+      ASSERT_LT(uint32_t(r.chart), charts);
+      ASSERT_LT(r.edge, 4u);
+      ++sharedEdges;
+      orientations.insert({e, r.edge});
+      const uint32_t d = uint32_t(r.chart), f = r.edge;
+      const uint32_t startE = c * 4 + e, endE = c * 4 + (e + 1) % 4;
+      const uint32_t startF = d * 4 + f, endF = d * 4 + (f + 1) % 4;
+      corners.unite(startE, r.reversed ? endF : startF);
+      corners.unite(endE, r.reversed ? startF : endF);
+    }
+  EXPECT_GT(sharedEdges, 0u);
+  std::map<uint32_t, uint32_t> valence;  // corner group -> charts meeting there
+  for (uint32_t i = 0; i < charts * 4; ++i) ++valence[corners.find(i)];
+  std::map<uint32_t, uint32_t> valenceHistogram;
+  for (const auto& [g, n] : valence) ++valenceHistogram[n];
+  std::string hist;
+  for (const auto& [n, count] : valenceHistogram) hist += " " + std::to_string(count) + "x" + std::to_string(n);
+  std::cout << "  " << charts << " charts, " << sharedEdges / 2 << " shared edges, " << openEdges << " open, "
+            << orientations.size() << " (edge, neighbour edge) pairs; corners (groups x charts):" << hist
+            << "\n";
+  std::string pairs;
+  uint64_t rotated = 0;  // pairs other than bottom-top / left-right, as a terrain grid would join
+  for (const auto& [e, f] : orientations) {
+    pairs += " " + std::to_string(e) + "-" + std::to_string(f);
+    rotated += f != (e + 2) % 4;
+  }
+  std::cout << "  edge pairs:" << pairs << "\n";
+  EXPECT_GT(rotated, 0u) << "the layout should join charts at other than opposite edges";
+
+  for (uint32_t level = 0; level < m.pyramidLevels(); ++level) {
+    const uint32_t n = ((m.chartSize - 1) >> level) + 1;
+    std::vector<std::vector<glm::vec3>> pos(charts);
+    for (uint32_t c = 0; c < charts; ++c) {
+      pos[c] = readers[c]->readLevelPositions(level);
+      ASSERT_EQ(pos[c].size(), size_t(n) * n);
+    }
+    uint64_t edgeMismatches = 0, checked = 0;
+    std::string first;
+    for (uint32_t c = 0; c < charts; ++c)
+      for (uint32_t e = 0; e < 4; ++e) {
+        const RootNeighbour& r = m.charts[c].neighbours[e];
+        if (r.chart < 0) continue;
+        for (uint32_t k = 0; k < n; ++k) {
+          const glm::vec3& a = pos[c][edgeSample(n, e, k)];
+          const glm::vec3& b = pos[r.chart][edgeSample(n, r.edge, r.reversed ? n - 1 - k : k)];
+          ++checked;
+          if (!bitEqual(a, b)) {
+            if (!edgeMismatches++)
+              first = "chart " + std::to_string(c) + " edge " + std::to_string(e) + " sample " + std::to_string(k) +
+                      " vs chart " + std::to_string(r.chart) + " edge " + std::to_string(r.edge);
+          }
+        }
+      }
+    EXPECT_EQ(edgeMismatches, 0u) << "level " << level << ": " << edgeMismatches << " of " << checked
+                                  << " shared-edge samples differ; first: " << first;
+    uint64_t cornerMismatches = 0;
+    std::map<uint32_t, glm::vec3> groupPosition;
+    for (uint32_t i = 0; i < charts * 4; ++i) {
+      const glm::vec3& p = pos[i / 4][cornerSample(n, i % 4)];
+      const auto [it, fresh] = groupPosition.emplace(corners.find(i), p);
+      cornerMismatches += !fresh && !bitEqual(it->second, p);
+    }
+    EXPECT_EQ(cornerMismatches, 0u) << "level " << level << ": corner samples differ between charts meeting there";
+  }
+}
+
+// The scan's own topology, welded by bit-identical position like the export.
+Topology inputTopology(const fs::path& input) {
+  const IndexedMesh mesh = readMesh(input);
+  return topologyOf(mesh.positions, mesh.triangles);
+}
+
+TEST_P(ScanAtlasTest, Invariants) {
+  const std::string name = GetParam();
+  if (!test::haveSharedScan(name)) GTEST_SKIP() << "no ../shared/data/meshes";
+  const test::BuiltScanAtlas* built = nullptr;
+  ASSERT_NO_THROW(built = &test::scanAtlas(name, true)) << "gimlod build " << test::sharedScanPath(name);
+  const nlohmann::json& st = built->stats;
+  std::cout << "  built " << name << " in " << built->seconds << " s: " << st["charts"] << " charts\n";
+  ASSERT_TRUE(fs::exists(built->dir / "stats.json"));
+  ASSERT_EQ(nlohmann::json::parse(std::ifstream(built->dir / "stats.json")), st);
+  ASSERT_GT(st["charts"].get<uint32_t>(), 0u);
+  EXPECT_EQ(st["chart_size"].get<uint32_t>(), 65u);
+
+  {
+    SCOPED_TRACE("seams");
+    checkSeams(built->dir);
+  }
+
+  {
+    SCOPED_TRACE("exported surface");
+    const Topology in = inputTopology(test::sharedScanPath(name));
+    std::cout << "  input: " << in << "\n";
+    const AtlasManifest m = readManifest(built->dir);
+    for (uint32_t level = 0; level < m.pyramidLevels(); ++level) {
+      const AtlasSurface s = readAtlasSurface(built->dir, level);
+      const Topology t = topologyOf(s.positions, s.triangles);
+      std::cout << "  level " << level << ": " << t << "\n";
+      const uint64_t side = ((m.chartSize - 1) >> level) + 1;
+      EXPECT_EQ(s.samples, m.charts.size() * side * side) << "level " << level;
+      EXPECT_EQ(s.boundaryEdges, t.boundaryEdges) << "level " << level << ": the export's own count disagrees";
+      EXPECT_EQ(t.nonManifoldEdges, in.nonManifoldEdges) << "level " << level;
+      EXPECT_EQ(t.boundaryLoops, in.boundaryLoops) << "level " << level << ": open boundaries other than the scan's";
+      EXPECT_EQ(t.euler(), in.euler()) << "level " << level << ": the welded surface changed topology";
+    }
+  }
+
+  {
+    SCOPED_TRACE("fidelity");
+    ASSERT_TRUE(st["fidelity"].is_object()) << st["fidelity"];
+    const nlohmann::json& f = st["fidelity"];
+    const double hausdorff = f["hausdorff_percent_of_diagonal"].get<double>();
+    const double mean = f["mean_percent_of_diagonal"].get<double>();
+    std::cout << "  Hausdorff " << hausdorff << "% of the diagonal, mean " << mean << "%\n";
+    EXPECT_GT(f["mesh_samples"].get<uint64_t>(), 0u);
+    EXPECT_GT(f["atlas_samples"].get<uint64_t>(), 0u);
+    // Bound: the issue's goal, 0.1% of the bounding-box diagonal at the default chart size. It is
+    // the figure a 65 x 65 chart can be held to: about 700 quad charts of 64 x 64 intervals give
+    // some 2.8M samples for surfaces of 35k-350k vertices, so every input triangle is covered by
+    // several texels and what remains is interpolation error at ridges and sharp creases, of the
+    // order of the input's own edge lengths (0.2-0.5% of the diagonal) times the residual stretch.
+    // Measured when this test was written: 0.04-0.094%. A seam gap, a misplaced chart or a lost
+    // patch gives errors of whole chart sizes (several percent) and fails it.
+    EXPECT_LT(hausdorff, 0.1) << name << ": Hausdorff distance above 0.1% of the diagonal";
+    // The mean is an area average and must be far smaller: a tenth of the maximum's bound (measured
+    // 0.0005% on the bunny) fails on a systematic offset or a shrunken surface.
+    EXPECT_LT(mean, 0.01);
+    EXPECT_GE(mean, 0.0);
+    EXPECT_LE(mean, hausdorff);
+  }
+}
+
+// Flipped texels: the build's own count (stats.json "resample" "flipped_texels", the image measure
+// of atlas/resample.h: texel quads whose normal opposes the interpolated surface normal) must be 0,
+// and so must the parameterization's flipped triangles.
+TEST_P(ScanAtlasTest, NoFlippedTexels) {
+  const std::string name = GetParam();
+  if (!test::haveSharedScan(name)) GTEST_SKIP() << "no ../shared/data/meshes";
+  const test::BuiltScanAtlas* built = nullptr;
+  ASSERT_NO_THROW(built = &test::scanAtlas(name, false)) << "gimlod build " << test::sharedScanPath(name);
+  const nlohmann::json& r = built->stats["resample"];
+  ASSERT_TRUE(r.is_object());
+  const uint64_t flipped = r["flipped_texels"].get<uint64_t>();
+  const uint64_t samples = built->stats["samples"].get<uint64_t>();
+  std::cout << "  " << name << ": " << flipped << " flipped texels of " << samples << " samples, "
+            << r["param_flipped"] << " flipped parameterization triangles, " << r["degenerate_texels"]
+            << " degenerate texels\n";
+  EXPECT_EQ(r["param_flipped"].get<uint64_t>(), 0u);
+  EXPECT_EQ(flipped, 0u) << name << ": " << flipped << " flipped texels";
+}
+
+INSTANTIATE_TEST_SUITE_P(SharedScans, ScanAtlasTest, ::testing::ValuesIn(test::sharedScanNames()),
+                         [](const ::testing::TestParamInfo<std::string>& i) { return i.param; });
+
+}  // namespace
+}  // namespace gimlod
