@@ -147,33 +147,48 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
   }
   st.inputVertices += referenced;
   st.verticesWelded += referenced - weldSource.size();
-  // 2. Remap; drop degenerate and duplicate triangles (first one kept).
-  struct Key {
-    std::array<uint32_t, 3> v;
-    uint32_t tri;
-  };
-  std::vector<Key> sorted;
-  sorted.reserve(inTris.size());
-  for (uint32_t i = 0; i < inTris.size(); ++i) {
-    std::array<uint32_t, 3> t{remap[inTris[i][0]], remap[inTris[i][1]], remap[inTris[i][2]]};
-    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) {
-      ++st.droppedDegenerate;
-      continue;
-    }
-    std::sort(t.begin(), t.end());
-    sorted.push_back({t, i});
-  }
-  std::sort(sorted.begin(), sorted.end(),
-            [](const Key& a, const Key& b) { return a.v != b.v ? a.v < b.v : a.tri < b.tri; });
+  // 2. Remap; drop degenerate and duplicate triangles (first one kept). Triangles are bucketed
+  // by their smallest vertex (counting sort), so each bucket holds a handful of candidates: O(n)
+  // and 4 bytes per triangle, where one global sort of (vertex triple, index) keys would take 16.
+  const uint32_t nw = static_cast<uint32_t>(weldSource.size());
   std::vector<uint8_t> keep(inTris.size(), 0);
-  for (size_t i = 0; i < sorted.size(); ++i) {
-    if (i > 0 && sorted[i].v == sorted[i - 1].v) {
-      ++st.droppedDuplicate;
-      continue;
+  {
+    std::vector<uint32_t> start(size_t{nw} + 1, 0);
+    auto sortedOf = [&](uint32_t i) {
+      std::array<uint32_t, 3> t{remap[inTris[i][0]], remap[inTris[i][1]], remap[inTris[i][2]]};
+      std::sort(t.begin(), t.end());
+      return t;
+    };
+    for (uint32_t i = 0; i < inTris.size(); ++i) {
+      const std::array<uint32_t, 3> t = sortedOf(i);
+      if (t[0] == t[1] || t[1] == t[2]) {
+        ++st.droppedDegenerate;
+        continue;
+      }
+      keep[i] = 1;
+      ++start[t[0] + 1];
     }
-    keep[sorted[i].tri] = 1;
+    for (uint32_t v = 0; v < nw; ++v) start[v + 1] += start[v];
+    std::vector<uint32_t> bucket(start[nw]);
+    {
+      std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+      for (uint32_t i = 0; i < inTris.size(); ++i)
+        if (keep[i]) bucket[fill[sortedOf(i)[0]]++] = i;
+    }
+    std::vector<std::pair<std::array<uint32_t, 3>, uint32_t>> group;
+    for (uint32_t v = 0; v < nw; ++v) {
+      const uint32_t b = start[v], e = start[v + 1];
+      if (e - b < 2) continue;
+      group.clear();
+      for (uint32_t k = b; k < e; ++k) group.push_back({sortedOf(bucket[k]), bucket[k]});
+      std::sort(group.begin(), group.end());
+      for (size_t k = 1; k < group.size(); ++k)
+        if (group[k].first == group[k - 1].first) {
+          keep[group[k].second] = 0;
+          ++st.droppedDuplicate;
+        }
+    }
   }
-  std::vector<Key>().swap(sorted);
   std::vector<std::array<uint32_t, 3>> tris;
   for (uint32_t i = 0; i < inTris.size(); ++i) {
     if (!keep[i]) continue;
@@ -184,40 +199,50 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
   std::vector<uint32_t>().swap(remap);
   const uint32_t nf = static_cast<uint32_t>(tris.size());
   if (nf == 0) throw InputError(std::string(fn) + ": no triangle left after welding");
-  // 3. Pair half-edges by undirected key.
+  // 3. Pair half-edges by undirected edge: half-edges bucketed by their smaller vertex
+  // (counting sort), each bucket ordered by (larger vertex, half-edge), which groups them
+  // exactly as a global sort of (edge key, half-edge) would.
   auto org = [&](uint32_t h) { return tris[h / 3][h % 3]; };
   auto dst = [&](uint32_t h) { return tris[h / 3][(h % 3 + 1) % 3]; };
-  std::vector<std::pair<uint64_t, uint32_t>> he(size_t{nf} * 3);
-  for (uint32_t h = 0; h < 3 * nf; ++h) {
-    const uint64_t a = org(h), b = dst(h);
-    he[h] = {std::min(a, b) << 32 | std::max(a, b), h};
-  }
-  std::sort(he.begin(), he.end());
   s.twin.assign(size_t{nf} * 3, kNone);
   std::vector<std::vector<uint32_t>> badGroups;
-  for (size_t i = 0; i < he.size();) {
-    size_t j = i + 1;
-    while (j < he.size() && he[j].first == he[i].first) ++j;
-    if (j - i == 2 && org(he[i].second) != org(he[i + 1].second)) {
-      s.twin[he[i].second] = he[i + 1].second;
-      s.twin[he[i + 1].second] = he[i].second;
-    } else if (j - i >= 2) {
-      ++st.nonManifoldEdges;
-      std::vector<uint32_t> fw, bw, all;
-      for (size_t k = i; k < j; ++k) {
-        const uint32_t h = he[k].second;
-        all.push_back(h);
-        (org(h) < dst(h) ? fw : bw).push_back(h);
-      }
-      for (size_t k = 0; k < std::min(fw.size(), bw.size()); ++k) {
-        s.twin[fw[k]] = bw[k];
-        s.twin[bw[k]] = fw[k];
-      }
-      badGroups.push_back(std::move(all));
+  {
+    std::vector<uint32_t> start(size_t{nw} + 1, 0);
+    for (uint32_t h = 0; h < 3 * nf; ++h) ++start[std::min(org(h), dst(h)) + 1];
+    for (uint32_t v = 0; v < nw; ++v) start[v + 1] += start[v];
+    std::vector<uint32_t> he(size_t{nf} * 3);
+    {
+      std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+      for (uint32_t h = 0; h < 3 * nf; ++h) he[fill[std::min(org(h), dst(h))]++] = h;  // h ascending
     }
-    i = j;
+    auto far = [&](uint32_t h) { return std::max(org(h), dst(h)); };
+    for (uint32_t v = 0; v < nw; ++v) {
+      const auto b = he.begin() + start[v], e = he.begin() + start[v + 1];
+      std::stable_sort(b, e, [&](uint32_t x, uint32_t y) { return far(x) < far(y); });
+      for (auto i = b; i != e;) {
+        auto j = i + 1;
+        while (j != e && far(*j) == far(*i)) ++j;
+        if (j - i == 2 && org(*i) != org(*(i + 1))) {
+          s.twin[*i] = *(i + 1);
+          s.twin[*(i + 1)] = *i;
+        } else if (j - i >= 2) {
+          ++st.nonManifoldEdges;
+          std::vector<uint32_t> fw, bw, all;
+          for (auto k = i; k != j; ++k) {
+            const uint32_t h = *k;
+            all.push_back(h);
+            (org(h) < dst(h) ? fw : bw).push_back(h);
+          }
+          for (size_t k = 0; k < std::min(fw.size(), bw.size()); ++k) {
+            s.twin[fw[k]] = bw[k];
+            s.twin[bw[k]] = fw[k];
+          }
+          badGroups.push_back(std::move(all));
+        }
+        i = j;
+      }
+    }
   }
-  std::vector<std::pair<uint64_t, uint32_t>>().swap(he);
   // 4. Split vertices into fans (corners linked across paired edges). Repeat if a split leaves
   // two edges between the same two vertices (a fan closing round a fin): detach that triangle.
   const uint32_t nv0 = static_cast<uint32_t>(weldSource.size());
@@ -774,13 +799,12 @@ class LayoutBuilder {
   }
 
   ChartLayout output() {
+    // Patches only: the caller moves the surface's positions, colours and triangles in.
     ChartLayout out;
-    out.positions = s_.positions;
-    out.colours = s_.colours;
-    out.triangles = s_.tris;
     const uint32_t np = static_cast<uint32_t>(faces_.size());
     out.patches.resize(np);
-    std::vector<std::pair<uint32_t, uint32_t>> sideOf(s_.twin.size(), {kNone, kNone});
+    std::unordered_map<uint32_t, uint32_t> sideOf;  // patch-boundary half-edge -> side index
+    sideOf.reserve(size_t{np} * 64);
     std::vector<std::vector<uint32_t>> firstHe(np);
     for (uint32_t p = 0; p < np; ++p) {
       Patch& P = out.patches[p];
@@ -800,14 +824,14 @@ class LayoutBuilder {
           firstHe[p].push_back(h);
         }
         P.sides.back().vertices.push_back(s_.dest(h));
-        sideOf[h] = {p, static_cast<uint32_t>(P.sides.size() - 1)};
+        sideOf[h] = static_cast<uint32_t>(P.sides.size() - 1);
       }
     }
     for (uint32_t p = 0; p < np; ++p) {
       for (size_t i = 0; i < out.patches[p].sides.size(); ++i) {
         PatchSide& side = out.patches[p].sides[i];
         if (side.neighbourPatch < 0) continue;
-        side.neighbourSide = sideOf[s_.twin[firstHe[p][i]]].second;
+        side.neighbourSide = sideOf.at(s_.twin[firstHe[p][i]]);
         side.reversed = true;
       }
     }
@@ -1109,19 +1133,25 @@ void finishStats(const Surface& s, const ChartLayout& out,
   st.meanPlanarityError = area > 0 ? sum / area : 0;
 }
 
-ChartLayout layoutFromLabels(const Surface& s, const std::vector<uint32_t>& labels,
+// Consumes the surface: its positions, colours and triangles move into the layout.
+ChartLayout layoutFromLabels(Surface& s, const std::vector<uint32_t>& labels,
                              const Frame& fr, const ChartingOptions& o, ChartingStats& st,
                              size_t clusterBytes) {
   const auto t0 = Clock::now();
-  LayoutBuilder lb(s, labels, o, st);
-  lb.fix();
-  ChartLayout out = lb.output();
-  st.sidesSeconds += since(t0);
-  st.peakBytesEstimate = std::max<uint64_t>(
-      st.peakBytesEstimate, s.bytes() + std::max(clusterBytes, lb.bytes()) +
-                                out.triangles.size() * 16 + out.positions.size() * 16);
-  st.patchesUnfixed = lb.unfixed();
+  ChartLayout out;
+  {
+    LayoutBuilder lb(s, labels, o, st);
+    lb.fix();
+    out = lb.output();
+    st.peakBytesEstimate =
+        std::max<uint64_t>(st.peakBytesEstimate, s.bytes() + std::max(clusterBytes, lb.bytes()));
+    st.patchesUnfixed = lb.unfixed();
+  }
   finishStats(s, out, fr, st);
+  out.positions = std::move(s.positions);
+  out.colours = std::move(s.colours);
+  out.triangles = std::move(s.tris);
+  st.sidesSeconds += since(t0);
   return out;
 }
 
@@ -1301,9 +1331,12 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   const double maxRms =
       options.targetCharts > 0 ? std::numeric_limits<double>::infinity() : options.maxError;
 
+  // Each cell hands on its welded vertices and kept triangles (an indexed mesh: about a sixth
+  // of the bytes of the 3 corners per triangle of the cell file), with a cluster per triangle.
   struct CellResult {
-    std::vector<glm::vec3> pos;  // 3 per kept triangle (input corners, before repair)
+    std::vector<glm::vec3> pos;  // the cell's welded (and fan-split) vertices
     std::vector<glm::u8vec4> col;
+    std::vector<std::array<uint32_t, 3>> tris;  // kept triangles, in cell-file order
     std::vector<uint32_t> label;  // cell-local cluster per kept triangle
     uint32_t clusters = 0;
     ChartingStats st;
@@ -1345,18 +1378,19 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
       cl.run(std::max(1u, target), maxRms, options.compactnessWeight);
       r.clusters = cl.alive();
       r.bytes = s.bytes() + cl.bytes();
-      // Hand on the kept input triangles with their cluster (compact ids).
+      // Hand on the kept triangles with their cluster (compact ids). The global weld joins
+      // equal positions again, so vertices split here by the repair are welded back there.
       std::vector<uint32_t> compact(s.tris.size(), kNone);
       uint32_t next = 0;
+      r.label.reserve(s.tris.size());
       for (size_t f = 0; f < s.tris.size(); ++f) {
         uint32_t& c = compact[cl.labels()[f]];
         if (c == kNone) c = next++;
-        const uint32_t src = s.source[f];
-        for (int k = 0; k < 3; ++k) r.pos.push_back(pos[idx[src][k]]);
-        if (manifest.hasColours)
-          for (int k = 0; k < 3; ++k) r.col.push_back(col[idx[src][k]]);
         r.label.push_back(c);
       }
+      r.pos = std::move(s.positions);
+      r.col = std::move(s.colours);
+      r.tris = std::move(s.tris);
     });
   });
   st.clusterSeconds = since(tCells);
@@ -1369,15 +1403,15 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   size_t cellPeak = 0;
   for (CellResult& r : cells) {
     st.inputTriangles += r.st.inputTriangles;
+    st.inputVertices += r.st.inputVertices;
     st.droppedDegenerate += r.st.droppedDegenerate;
     st.droppedDuplicate += r.st.droppedDuplicate;
     cellPeak = std::max(cellPeak, r.bytes);
-    for (size_t i = 0; i < r.label.size(); ++i) {
-      const uint32_t b = static_cast<uint32_t>(pos.size());
-      for (int k = 0; k < 3; ++k) pos.push_back(r.pos[3 * i + k]);
-      if (manifest.hasColours)
-        for (int k = 0; k < 3; ++k) col.push_back(r.col[3 * i + k]);
-      idx.push_back({b, b + 1, b + 2});
+    const uint32_t base = static_cast<uint32_t>(pos.size());
+    pos.insert(pos.end(), r.pos.begin(), r.pos.end());
+    if (manifest.hasColours) col.insert(col.end(), r.col.begin(), r.col.end());
+    for (size_t i = 0; i < r.tris.size(); ++i) {
+      idx.push_back({base + r.tris[i][0], base + r.tris[i][1], base + r.tris[i][2]});
       cellLabel.push_back(offset + r.label[i]);
     }
     offset += r.clusters;
@@ -1390,15 +1424,15 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   std::vector<glm::vec3>().swap(pos);
   std::vector<glm::u8vec4>().swap(col);
   std::vector<std::array<uint32_t, 3>>().swap(idx);
-  st.verticesWelded = gst.verticesWelded;
-  st.inputVertices = gst.inputVertices;
+  // Corners of the cell files in, vertices of the global weld out (cell welds included).
+  st.verticesWelded = st.inputVertices - (gst.inputVertices - gst.verticesWelded);
   st.nonManifoldEdges = gst.nonManifoldEdges;
   st.nonManifoldVertices = gst.nonManifoldVertices;
   st.verticesSplit = gst.verticesSplit;
   st.boundaryEdges = gst.boundaryEdges;
   st.droppedDegenerate += gst.droppedDegenerate;
   st.droppedDuplicate += gst.droppedDuplicate;
-  const std::vector<glm::dvec3> npos = normalised(s, fr);
+  std::vector<glm::dvec3> npos = normalised(s, fr);
   st.weldSeconds = since(tWeld);
   const auto t1 = Clock::now();
   std::vector<uint32_t> labels(s.tris.size());
@@ -1412,7 +1446,12 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   st.chartsBeforeFixing = cl->alive();
   st.mergesRefusedNotDisk = cl->refused();
   st.peakBytesEstimate = cellPeak * std::max(1u, threads);
-  ChartLayout out = layoutFromLabels(s, cl->labels(), fr, options, st, cl->bytes());
+  // The clusterer and the normalised positions go before the sides are fixed.
+  const std::vector<uint32_t> finalLabels = cl->labels();
+  const size_t clusterBytes = cl->bytes();
+  cl.reset();
+  std::vector<glm::dvec3>().swap(npos);
+  ChartLayout out = layoutFromLabels(s, finalLabels, fr, options, st, clusterBytes);
   st.inputTriangles = manifest.triangles;
   st.seconds = since(t0);
   if (statsOut) *statsOut = std::move(st);
