@@ -686,6 +686,9 @@ PlyHeader readPlyHeader(FileBuffer& f) {
     if (f.offset() > (uint64_t{1} << 20))
       fail(path, "bad PLY header: no 'end_header' in the first MiB");
     if (!f.nextLine(line)) fail(path, "bad PLY header: the file ends before 'end_header'");
+    if (f.lineUnterminated() && line != "end_header")
+      fail(path, "bad PLY header: the file ends before 'end_header', in the middle of header line " +
+                     std::to_string(f.lineNumber()) + " (truncated)");
     const std::string where = "PLY header line " + std::to_string(f.lineNumber());
     Tokens t{line};
     std::string_view kw, a, b, c, d;
