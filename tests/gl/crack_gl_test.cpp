@@ -15,6 +15,7 @@
 #include "runtime/gl/terrain_scene.h"
 #include "runtime/stitch.h"
 #include "tests/chart_layout_fixture.h"
+#include "tests/gl/crack_check.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -42,16 +43,7 @@ class CrackTest : public ::testing::Test {
 
   // Crack count of a cut through the real shader; also checks the negative control.
   CrackReport check(gl::TerrainScene& scene, const Cut& cut, bool expectControlToFail = true) {
-    const auto verts = scene.capture(cut);
-    EXPECT_EQ(verts.size(), cut.nodes.size());
-    for (size_t i = 0; i < verts.size(); ++i) EXPECT_EQ(verts[i].size(), size_t(((1u << cut.nodes[i].res) + 1) * ((1u << cut.nodes[i].res) + 1)));
-    const CrackReport r = countCracks(scene.atlas().hierarchy, cut, verts);
-    if (expectControlToFail) {
-      // Without the stitching tables the same cut must crack, or this test could not fail.
-      const CrackReport control = countCracks(scene.atlas().hierarchy, cut, scene.capture(cut, false));
-      EXPECT_GT(control.mismatches, 0u) << "negative control found no cracks";
-    }
-    return r;
+    return test::captureCracks(scene, cut, expectControlToFail);
   }
 
   test::TempDir dir_{"gimlod-crack"};
@@ -109,7 +101,7 @@ TEST_F(CrackTest, AdaptedCutsOverRealSrtmTiles) {
     std::mt19937 rng(42);
     std::uniform_real_distribution<double> u(0.0, 1.0);
     const glm::dvec3 ext = atlas.hi - atlas.lo;
-    uint32_t crossChart = 0;
+    uint64_t crossChart = 0;
     for (int i = 0; i < 6; ++i) {
       Camera cam;
       cam.eye = atlas.lo + glm::dvec3(u(rng) * ext.x, u(rng) * ext.y, atlas.hi.z + (0.02 + 0.3 * u(rng)) * ext.x);
@@ -123,18 +115,9 @@ TEST_F(CrackTest, AdaptedCutsOverRealSrtmTiles) {
       const Cut cut = adaptErrorThreshold(atlas.hierarchy, makeViewParams(cam, so.width, so.height), o);
       ASSERT_EQ(countStitchViolations(atlas.hierarchy, cut), 0u);
       // Count resolution and level differences across sides, to show the cut is mixed.
-      uint32_t mixed = 0;
-      std::vector<SideNeighbour> ns;
-      for (const CutNode& n : cut.nodes)
-        for (uint32_t s = 0; s < 4; ++s) {
-          ns.clear();
-          sideNeighbours(atlas.hierarchy, cut, n.id, s, ns);
-          for (const SideNeighbour& sn : ns) {
-            const CutNode& m = cut.nodes[sn.cutIndex];
-            mixed += (m.id.level != n.id.level || m.res != n.res);
-            crossChart += m.id.chart != n.id.chart;
-          }
-        }
+      const test::CutMix mix = test::cutMix(atlas.hierarchy, cut);
+      const uint64_t mixed = mix.mixed;
+      crossChart += mix.crossChart;
       const CrackReport r = check(scene, cut, mixed > 0);
       EXPECT_EQ(r.mismatches, 0u) << tile << " camera " << i << ": " << r.mismatches << " of "
                                   << r.borderVertices << " border vertices";

@@ -4,7 +4,7 @@
 //  - seams: every pair of charts the manifest joins (any of the 8 edge orientations) holds
 //    bit-identical positions along the shared edge, at every pyramid level; every corner sample is
 //    bit-identical in all the charts that meet there (corners grouped by walking the neighbour
-//    links, not by position);
+//    links, not by position); no sample inside a chart coincides with any other sample;
 //  - the exported surface (readAtlasSurface, `gimlod export --level K`) at every level is welded:
 //    no non-manifold edge, and exactly the input's open boundary loops and Euler characteristic
 //    (the bunny's 5 holes stay holes; closed scans export closed);
@@ -131,6 +131,47 @@ std::ostream& operator<<(std::ostream& os, const Topology& t) {
             << " non-manifold edges";
 }
 
+// Samples off their chart's border whose position is bit-identical to another sample's; `where`
+// gets the first few groups as chart (u, v).
+uint64_t coincidentInteriorSamples(const std::vector<std::vector<glm::vec3>>& pos, uint32_t n, std::string* where) {
+  struct Ref {
+    std::array<uint32_t, 3> key;
+    uint32_t chart, index;
+    bool operator<(const Ref& o) const { return key < o.key; }
+  };
+  std::vector<Ref> refs;
+  refs.reserve(pos.size() * n * n);
+  for (uint32_t c = 0; c < pos.size(); ++c)
+    for (uint32_t i = 0; i < pos[c].size(); ++i) {
+      Ref r{{}, c, i};
+      std::memcpy(r.key.data(), &pos[c][i], sizeof(r.key));
+      refs.push_back(r);
+    }
+  std::sort(refs.begin(), refs.end());
+  auto interior = [&](uint32_t i) {
+    const uint32_t u = i % n, v = i / n;
+    return u > 0 && v > 0 && u + 1 < n && v + 1 < n;
+  };
+  uint64_t count = 0, groups = 0;
+  for (size_t i = 0; i < refs.size();) {
+    size_t j = i;
+    bool anyInterior = false;
+    while (j < refs.size() && refs[j].key == refs[i].key) anyInterior |= interior(refs[j++].index);
+    if (j - i > 1 && anyInterior) {
+      for (size_t k = i; k < j; ++k) count += interior(refs[k].index);
+      if (groups++ < 3) {
+        *where += " [";
+        for (size_t k = i; k < j && k < i + 4; ++k)
+          *where += " chart " + std::to_string(refs[k].chart) + " (" + std::to_string(refs[k].index % n) + ", " +
+                    std::to_string(refs[k].index / n) + ")";
+        *where += " ]";
+      }
+    }
+    i = j;
+  }
+  return count;
+}
+
 class ScanAtlasTest : public ::testing::TestWithParam<std::string> {};
 
 // Seams and corners, read back from the chart files the manifest lists.
@@ -219,6 +260,12 @@ void checkSeams(const fs::path& dir) {
       cornerMismatches += !fresh && !bitEqual(it->second, p);
     }
     EXPECT_EQ(cornerMismatches, 0u) << "level " << level << ": corner samples differ between charts meeting there";
+    // The other half of welding: a sample inside a chart (off its border) must coincide with no
+    // other sample of the atlas, or the welded export joins places the seams do not join.
+    std::string where;
+    const uint64_t coincident = coincidentInteriorSamples(pos, n, &where);
+    EXPECT_EQ(coincident, 0u) << "level " << level << ": " << coincident
+                              << " chart-interior samples share their position with another sample, e.g." << where;
   }
 }
 

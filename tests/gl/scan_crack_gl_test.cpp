@@ -1,0 +1,107 @@
+// Cracks on the real scans: the atlas of every shared scan (default mesh options, as `gimlod build`
+// makes it), adapted by the coherent dual-queue adapter frame after frame along a camera path
+// that spirals in from far away to close up, so that charts near the camera are refined while
+// their neighbours across chart borders stay coarse. Every frame's cut is captured from the real
+// vertex shader with transform feedback, and every border vertex is checked against the drawn
+// neighbours across that side: 0 mismatches. The path must actually produce neighbours at
+// different levels and at different resolutions across chart borders, and the same cut without
+// the stitching tables must crack (the negative control), so the test can fail.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <iostream>
+
+#include "runtime/adapt.h"
+#include "runtime/adapt_dual_queue.h"
+#include "runtime/atlas_view.h"
+#include "runtime/camera.h"
+#include "runtime/gl/egl_context.h"
+#include "runtime/gl/terrain_scene.h"
+#include "runtime/stitch.h"
+#include "tests/gl/crack_check.h"
+#include "tests/scan_atlases.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+class ScanCrackTest : public ::testing::TestWithParam<std::string> {
+ protected:
+  static void SetUpTestSuite() { context_ = gl::EglContext::create(); }
+  static void TearDownTestSuite() { context_.reset(); }
+  static std::unique_ptr<gl::EglContext> context_;
+};
+
+std::unique_ptr<gl::EglContext> ScanCrackTest::context_;
+
+// A path spiralling in: frame i of `frames` circles the box centre at a distance going from
+// `far` to `near` times the diagonal (orbitPath's frame i at that distance).
+std::vector<Camera> spiralPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames, double far,
+                               double near, double elevationDeg) {
+  std::vector<Camera> path;
+  for (uint32_t i = 0; i < frames; ++i) {
+    const double t = frames > 1 ? double(i) / (frames - 1) : 0.0;
+    path.push_back(orbitPath(lo, hi, frames, far + (near - far) * t, elevationDeg)[i]);
+  }
+  return path;
+}
+
+TEST_P(ScanCrackTest, DualQueueCutsAlongAPathHaveNoCracks) {
+  const std::string name = GetParam();
+  if (!test::haveSharedScan(name)) GTEST_SKIP() << "no ../shared/data/meshes";
+  const test::BuiltScanAtlas* built = nullptr;
+  ASSERT_NO_THROW(built = &test::scanAtlas(name, false)) << "gimlod build " << test::sharedScanPath(name);
+  const AtlasView atlas = openAtlas(built->dir);
+  const Hierarchy& h = atlas.hierarchy;
+  ASSERT_EQ(atlas.manifest.kind, "geometry");
+  // Small frames: CI renders on llvmpipe. The capture costs the cut's vertices, not the pixels.
+  gl::SceneOptions so;
+  so.width = 128;
+  so.height = 96;
+  gl::TerrainScene scene(atlas, so);
+  AdaptOptions ao;
+  ao.tolerancePx = 0.5;
+  // Every node of a cut must have a page in the GPU pool, where the chart roots stay locked, or
+  // its captured data would be wrong: the scene's own node budget (what renderFrame clamps to).
+  ao.maxNodes = scene.nodeBudget(1500);
+  std::cout << "  " << name << ": " << h.chartCount() << " charts, node budget " << ao.maxNodes << "\n";
+  DualQueueAdapter dq(h);
+  test::CutMix total;
+  uint64_t checked = 0, nodes = 0;
+  uint32_t maxLevel = 0, controls = 0;
+  const std::vector<Camera> path = spiralPath(atlas.lo, atlas.hi, 8, 1.2, 0.4, 25.0);
+  for (size_t f = 0; f < path.size(); ++f) {
+    Camera cam = path[f];
+    fitClipPlanes(cam, atlas.lo, atlas.hi);
+    const Cut& cut = dq.update(makeViewParams(cam, so.width, so.height), ao);
+    ASSERT_FALSE(cut.nodes.empty()) << "frame " << f;
+    ASSERT_EQ(countStitchViolations(h, cut), 0u) << "frame " << f;
+    const test::CutMix mix = test::cutMix(h, cut);
+    // The negative control on the first two frames whose cut is mixed across chart borders.
+    const bool control = controls < 2 && mix.crossChartLevelDiff + mix.crossChartResDiff > 0;
+    controls += control;
+    const CrackReport r = test::captureCracks(scene, cut, control);
+    EXPECT_EQ(r.mismatches, 0u) << name << " frame " << f << ": " << r.mismatches << " of " << r.borderVertices
+                                << " border vertices match no neighbour vertex";
+    for (const CutNode& n : cut.nodes) maxLevel = std::max<uint32_t>(maxLevel, n.id.level);
+    std::cout << "  frame " << f << ": " << cut.nodes.size() << " nodes, " << r.borderVertices << " border vertices, "
+              << r.mismatches << " mismatches; across charts " << mix.crossChart << " sides, "
+              << mix.crossChartLevelDiff << " level and " << mix.crossChartResDiff << " resolution differences\n";
+    total += mix;
+    checked += r.borderVertices;
+    nodes += cut.nodes.size();
+  }
+  std::cout << "  " << name << ": " << nodes << " nodes in " << path.size() << " frames, deepest level " << maxLevel
+            << ", " << checked << " border vertices checked\n";
+  EXPECT_GT(checked, 10000u);
+  EXPECT_GT(controls, 0u) << "no frame was mixed across chart borders, so the negative control never ran";
+  EXPECT_GE(maxLevel, 2u) << "the path never came close enough to refine charts";
+  EXPECT_GT(total.crossChartLevelDiff, 0u) << "no chart-border neighbours at different levels";
+  EXPECT_GT(total.crossChartResDiff, 0u) << "no chart-border neighbours at different resolutions";
+}
+
+INSTANTIATE_TEST_SUITE_P(SharedScans, ScanCrackTest, ::testing::ValuesIn(test::sharedScanNames()),
+                         [](const ::testing::TestParamInfo<std::string>& i) { return i.param; });
+
+}  // namespace
+}  // namespace gimlod
