@@ -227,6 +227,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                        {"merges_refused_not_disk", cst.mergesRefusedNotDisk},
                        {"patches_unfixed", cst.patchesUnfixed},
                        {"weld_seconds", cst.weldSeconds},       {"cluster_seconds", cst.clusterSeconds},
+                       {"cell_seconds", cst.cellSeconds},
                        {"sides_seconds", cst.sidesSeconds},     {"peak_bytes_estimate", cst.peakBytesEstimate},
                        {"seconds", cst.seconds}};
   const std::vector<std::string> bad = validateChartLayout(layout);

@@ -119,8 +119,10 @@ struct UnionFind {
 // Welds, drops degenerate and duplicate triangles, pairs half-edges (non-manifold edges: the
 // first half-edges of each direction are paired, the rest stay open) and splits every vertex
 // whose corners form more than one fan. `triPos` gives each triangle's corner positions.
+// consumeTris: the caller's own copy of inTris, released as soon as it is no longer needed.
 Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm::u8vec4>& inCol,
-                      const std::vector<std::array<uint32_t, 3>>& inTris, ChartingStats& st) {
+                      const std::vector<std::array<uint32_t, 3>>& inTris, ChartingStats& st,
+                      std::vector<std::array<uint32_t, 3>>* consumeTris = nullptr) {
   const char* fn = "buildChartLayout";
   Surface s;
   st.inputTriangles += inTris.size();
@@ -190,6 +192,11 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
     }
   }
   std::vector<std::array<uint32_t, 3>> tris;
+  {
+    const size_t kept = static_cast<size_t>(std::count(keep.begin(), keep.end(), uint8_t{1}));
+    tris.reserve(kept);
+    s.source.reserve(kept);
+  }
   for (uint32_t i = 0; i < inTris.size(); ++i) {
     if (!keep[i]) continue;
     tris.push_back({remap[inTris[i][0]], remap[inTris[i][1]], remap[inTris[i][2]]});
@@ -197,6 +204,7 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
   }
   std::vector<uint8_t>().swap(keep);
   std::vector<uint32_t>().swap(remap);
+  if (consumeTris == &inTris) std::vector<std::array<uint32_t, 3>>().swap(*consumeTris);
   const uint32_t nf = static_cast<uint32_t>(tris.size());
   if (nf == 0) throw InputError(std::string(fn) + ": no triangle left after welding");
   // 3. Pair half-edges by undirected edge: half-edges bucketed by their smaller vertex
@@ -308,9 +316,10 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
   st.verticesSplit += splitVertices;
   // 5. Output arrays.
   const uint32_t nv = static_cast<uint32_t>(vertexOf.size());
-  s.tris.resize(nf);
+  s.tris = std::move(tris);  // renumbered in place
   for (uint32_t f = 0; f < nf; ++f)
     for (int k = 0; k < 3; ++k) s.tris[f][k] = newId[3 * f + k];
+  std::vector<uint32_t>().swap(newId);
   s.positions.resize(nv);
   for (uint32_t v = 0; v < nv; ++v) s.positions[v] = inPos[weldSource[vertexOf[v]]];
   if (!inCol.empty()) {
@@ -387,11 +396,19 @@ double planeMsd(const Moments& M) {
   return std::max(0.0, minEigenvalue(c) / M.area);
 }
 
+// Normalised coordinates: bounding-box centre at 0, diagonal 1.
+struct Frame {
+  glm::dvec3 centre{0};
+  double diag = 1;
+};
+
 // Greedy dual-edge collapse over clusters of a Surface's faces.
 class Clusterer {
  public:
-  Clusterer(const Surface& s, const std::vector<glm::dvec3>& npos, std::vector<uint32_t> labels)
-      : s_(s), npos_(npos), label_(std::move(labels)) {
+  // Normalised positions ((p - centre) / diag, in double) are computed where needed, not
+  // stored: 24 bytes a vertex saved.
+  Clusterer(const Surface& s, const Frame& fr, std::vector<uint32_t> labels)
+      : s_(s), fr_(fr), label_(std::move(labels)) {
     const uint32_t nf = static_cast<uint32_t>(s.tris.size());
     uint32_t nc = 0;
     for (uint32_t l : label_) nc = std::max(nc, l + 1);
@@ -571,10 +588,13 @@ class Clusterer {
 
   Moments faceMoments(uint32_t f) const {
     const auto& t = s_.tris[f];
-    return triangleMoments(npos_[t[0]], npos_[t[1]], npos_[t[2]]);
+    return triangleMoments(npos(t[0]), npos(t[1]), npos(t[2]));
   }
   double edgeLength(uint32_t h) const {
-    return glm::length(npos_[s_.origin(h)] - npos_[s_.dest(h)]);
+    return glm::length(npos(s_.origin(h)) - npos(s_.dest(h)));
+  }
+  glm::dvec3 npos(uint32_t v) const {
+    return (glm::dvec3(s_.positions[v]) - fr_.centre) / fr_.diag;
   }
   std::vector<uint32_t>& faceSeen() {
     if (faceSeen_.size() != s_.tris.size()) faceSeen_.assign(s_.tris.size(), 0);
@@ -682,7 +702,7 @@ class Clusterer {
   }
 
   const Surface& s_;
-  const std::vector<glm::dvec3>& npos_;
+  const Frame fr_;
   std::vector<uint32_t> label_;
   std::vector<Moments> mom_;
   std::vector<double> perim_;
@@ -706,11 +726,6 @@ void checkOptions(const ChartingOptions& o) {
     throw InputError(std::string(fn) + ": compactnessWeight must be finite and >= 0");
 }
 
-struct Frame {
-  glm::dvec3 centre{0};
-  double diag = 1;
-};
-
 Frame frameOf(const std::vector<glm::vec3>& p) {
   glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
   for (const auto& q : p) lo = glm::min(lo, glm::dvec3(q)), hi = glm::max(hi, glm::dvec3(q));
@@ -720,12 +735,6 @@ Frame frameOf(const std::vector<glm::vec3>& p) {
   fr.diag = glm::length(hi - lo);
   if (!(fr.diag > 0)) fr.diag = 1;
   return fr;
-}
-
-std::vector<glm::dvec3> normalised(const Surface& s, const Frame& fr) {
-  std::vector<glm::dvec3> n(s.positions.size());
-  for (size_t i = 0; i < n.size(); ++i) n[i] = (glm::dvec3(s.positions[i]) - fr.centre) / fr.diag;
-  return n;
 }
 
 // ---- Sides: corners, corner insertion, splitting, output ----
@@ -1115,7 +1124,7 @@ void finishStats(const Surface& s, const ChartLayout& out,
   st.outputVertices = s.positions.size();
   st.charts = static_cast<uint32_t>(out.patches.size());
   st.sidesHistogram.assign(1, 0);
-  const std::vector<glm::dvec3> npos = normalised(s, fr);
+  auto npos = [&](uint32_t v) { return (glm::dvec3(s.positions[v]) - fr.centre) / fr.diag; };
   double sum = 0, area = 0;
   st.maxPlanarityError = 0;
   for (const Patch& p : out.patches) {
@@ -1124,7 +1133,7 @@ void finishStats(const Surface& s, const ChartLayout& out,
     ++st.sidesHistogram[n];
     Moments M;
     for (uint32_t f : p.triangles)
-      M.add(triangleMoments(npos[s.tris[f][0]], npos[s.tris[f][1]], npos[s.tris[f][2]]));
+      M.add(triangleMoments(npos(s.tris[f][0]), npos(s.tris[f][1]), npos(s.tris[f][2])));
     const double rms = std::sqrt(planeMsd(M));
     st.maxPlanarityError = std::max(st.maxPlanarityError, rms);
     sum += rms * M.area;
@@ -1252,10 +1261,9 @@ std::vector<uint32_t> blockLabels(const Surface& s, const Frame& fr, const Chart
     tbb::parallel_for(size_t{0}, blocks.size(), [&](size_t b) {
       const Surface sub =
           subSurface(s, blocks[b], faceBlock, faceLocal, static_cast<uint32_t>(b));
-      const std::vector<glm::dvec3> npos = normalised(sub, fr);
       std::vector<uint32_t> labels(sub.tris.size());
       std::iota(labels.begin(), labels.end(), 0u);
-      Clusterer cl(sub, npos, std::move(labels));
+      Clusterer cl(sub, fr, std::move(labels));
       const auto target = static_cast<uint32_t>(std::ceil(double(sub.tris.size()) / clusterTris));
       cl.run(std::max(1u, target), maxRms, o.compactnessWeight);
       clusters[b] = cl.alive();
@@ -1286,14 +1294,16 @@ ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& opt
     throw InputError("buildChartLayout: colours must be empty or one per position");
   Surface s = weldAndRepair(mesh.positions, mesh.colours, mesh.triangles, st);
   const Frame fr = frameOf(s.positions);
-  const std::vector<glm::dvec3> npos = normalised(s, fr);
   st.weldSeconds = since(t0);
   const auto t1 = Clock::now();
   std::vector<uint32_t> labels(s.tris.size());
   std::iota(labels.begin(), labels.end(), 0u);
   size_t blockBytes = 0;
-  if (s.tris.size() > kBlockedAbove) labels = blockLabels(s, fr, options, st, blockBytes);
-  Clusterer cl(s, npos, std::move(labels));
+  if (s.tris.size() > kBlockedAbove) {
+    labels = blockLabels(s, fr, options, st, blockBytes);
+    st.cellSeconds = since(t1);
+  }
+  Clusterer cl(s, fr, std::move(labels));
   cl.run(options.targetCharts,
          options.targetCharts > 0 ? std::numeric_limits<double>::infinity() : options.maxError,
          options.compactnessWeight);
@@ -1370,10 +1380,9 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
       } catch (const InputError&) {
         return;  // every triangle degenerate: nothing from this cell
       }
-      const std::vector<glm::dvec3> npos = normalised(s, fr);
       std::vector<uint32_t> labels(s.tris.size());
       std::iota(labels.begin(), labels.end(), 0u);
-      Clusterer cl(s, npos, std::move(labels));
+      Clusterer cl(s, fr, std::move(labels));
       const auto target = static_cast<uint32_t>(std::ceil(double(s.tris.size()) / clusterTris));
       cl.run(std::max(1u, target), maxRms, options.compactnessWeight);
       r.clusters = cl.alive();
@@ -1394,6 +1403,7 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
     });
   });
   st.clusterSeconds = since(tCells);
+  st.cellSeconds = st.clusterSeconds;
   // Global stage: weld all cells together; start from the cell clusters.
   std::vector<glm::vec3> pos;
   std::vector<glm::u8vec4> col;
@@ -1420,7 +1430,7 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   }
   const auto tWeld = Clock::now();
   ChartingStats gst;
-  Surface s = weldAndRepair(pos, col, idx, gst);
+  Surface s = weldAndRepair(pos, col, idx, gst, &idx);
   std::vector<glm::vec3>().swap(pos);
   std::vector<glm::u8vec4>().swap(col);
   std::vector<std::array<uint32_t, 3>>().swap(idx);
@@ -1432,25 +1442,23 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   st.boundaryEdges = gst.boundaryEdges;
   st.droppedDegenerate += gst.droppedDegenerate;
   st.droppedDuplicate += gst.droppedDuplicate;
-  std::vector<glm::dvec3> npos = normalised(s, fr);
   st.weldSeconds = since(tWeld);
   const auto t1 = Clock::now();
   std::vector<uint32_t> labels(s.tris.size());
   for (size_t f = 0; f < s.tris.size(); ++f) labels[f] = cellLabel[s.source[f]];
   std::vector<uint32_t>().swap(cellLabel);
-  std::optional<Clusterer> cl(std::in_place, s, npos, std::move(labels));
+  std::optional<Clusterer> cl(std::in_place, s, fr, std::move(labels));
   std::vector<uint32_t> relabelled = cl->dissolveNonDisks(st.cellClustersDissolved);
-  if (!relabelled.empty()) cl.emplace(s, npos, std::move(relabelled));
+  if (!relabelled.empty()) cl.emplace(s, fr, std::move(relabelled));
   cl->run(options.targetCharts, maxRms, options.compactnessWeight);
   st.clusterSeconds += since(t1);
   st.chartsBeforeFixing = cl->alive();
   st.mergesRefusedNotDisk = cl->refused();
   st.peakBytesEstimate = cellPeak * std::max(1u, threads);
-  // The clusterer and the normalised positions go before the sides are fixed.
+  // The clusterer goes before the sides are fixed.
   const std::vector<uint32_t> finalLabels = cl->labels();
   const size_t clusterBytes = cl->bytes();
   cl.reset();
-  std::vector<glm::dvec3>().swap(npos);
   ChartLayout out = layoutFromLabels(s, finalLabels, fr, options, st, clusterBytes);
   st.inputTriangles = manifest.triangles;
   st.seconds = since(t0);
@@ -1461,44 +1469,58 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
 std::vector<std::string> validateChartLayout(const ChartLayout& L, uint32_t minSides,
                                              uint32_t maxSides) {
   std::vector<std::string> errs;
-  auto fail = [&](const std::string& m) {
+  auto addErr = [&](const std::string& m) {
     if (errs.size() < 100) errs.push_back(m);
   };
   const size_t nv = L.positions.size(), nt = L.triangles.size();
-  if (!L.colours.empty() && L.colours.size() != nv) fail("colours: not one per position");
+  if (!L.colours.empty() && L.colours.size() != nv) addErr("colours: not one per position");
   for (size_t f = 0; f < nt; ++f)
     for (uint32_t v : L.triangles[f])
       if (v >= nv) {
-        fail("triangle " + std::to_string(f) + ": vertex out of range");
+        addErr("triangle " + std::to_string(f) + ": vertex out of range");
         return errs;
       }
-  // Global edge use counts (undirected).
+  // Global use counts (undirected) of the edges of open sides only: the one global check.
   auto key = [](uint32_t a, uint32_t b) { return uint64_t{std::min(a, b)} << 32 | std::max(a, b); };
   std::unordered_map<uint64_t, uint32_t> edgeUse;
-  edgeUse.reserve(nt * 2);
-  for (const auto& t : L.triangles)
-    for (int k = 0; k < 3; ++k) ++edgeUse[key(t[k], t[(k + 1) % 3])];
+  for (const Patch& P : L.patches)
+    for (const PatchSide& S : P.sides)
+      if (S.neighbourPatch < 0)
+        for (size_t i = 0; i + 1 < S.vertices.size(); ++i) edgeUse[key(S.vertices[i], S.vertices[i + 1])] = 0;
+  if (!edgeUse.empty())
+    for (const auto& t : L.triangles)
+      for (int k = 0; k < 3; ++k) {
+        const auto it = edgeUse.find(key(t[k], t[(k + 1) % 3]));
+        if (it != edgeUse.end()) ++it->second;
+      }
   std::vector<int32_t> owner(nt, -1);
   for (size_t p = 0; p < L.patches.size(); ++p) {
     for (uint32_t f : L.patches[p].triangles) {
       if (f >= nt) {
-        fail("patch " + std::to_string(p) + ": triangle index out of range");
+        addErr("patch " + std::to_string(p) + ": triangle index out of range");
         continue;
       }
       if (owner[f] >= 0)
-        fail("triangle " + std::to_string(f) + ": in patches " + std::to_string(owner[f]) +
+        addErr("triangle " + std::to_string(f) + ": in patches " + std::to_string(owner[f]) +
              " and " + std::to_string(p));
       owner[f] = static_cast<int32_t>(p);
     }
   }
   for (size_t f = 0; f < nt; ++f)
-    if (owner[f] < 0) fail("triangle " + std::to_string(f) + ": in no patch");
-  for (size_t pi = 0; pi < L.patches.size(); ++pi) {
+    if (owner[f] < 0) addErr("triangle " + std::to_string(f) + ": in no patch");
+  std::vector<int32_t>().swap(owner);
+  // Patches are checked in parallel, each into its own list; the lists are joined in order.
+  std::vector<std::vector<std::string>> patchErrs(L.patches.size());
+  tbb::parallel_for(size_t{0}, L.patches.size(), [&](size_t pi) {
+    std::vector<std::string>& pe = patchErrs[pi];
+    auto fail = [&](const std::string& m) {
+      if (pe.size() < 100) pe.push_back(m);
+    };
     const Patch& P = L.patches[pi];
     const std::string name = "patch " + std::to_string(pi);
     if (P.triangles.empty()) {
       fail(name + ": no triangles");
-      continue;
+      return;
     }
     // Directed edges inside the patch; boundary = directed edges whose reverse is absent.
     std::unordered_map<uint64_t, uint32_t> directed;  // (a<<32|b) -> count
@@ -1530,7 +1552,7 @@ std::vector<std::string> validateChartLayout(const ChartLayout& L, uint32_t minS
     // One loop.
     if (nextB.empty()) {
       fail(name + ": no boundary");
-      continue;
+      return;
     }
     {
       uint32_t v = nextB.begin()->first;
@@ -1564,8 +1586,8 @@ std::vector<std::string> validateChartLayout(const ChartLayout& L, uint32_t minS
           break;
         }
         ++covered;
-        const uint32_t uses = edgeUse[key(S.vertices[i], S.vertices[i + 1])];
-        if (S.neighbourPatch < 0 && uses != 1) fail(sn + ": open side on an interior edge");
+        if (S.neighbourPatch < 0 && edgeUse.at(key(S.vertices[i], S.vertices[i + 1])) != 1)
+          fail(sn + ": open side on an interior edge");
       }
       if (S.neighbourPatch >= 0) {
         if (size_t(S.neighbourPatch) >= L.patches.size() ||
@@ -1581,7 +1603,9 @@ std::vector<std::string> validateChartLayout(const ChartLayout& L, uint32_t minS
       }
     }
     if (covered != bcount) fail(name + ": sides do not cover the boundary loop exactly");
-  }
+  });
+  for (const auto& pe : patchErrs)
+    for (const std::string& m : pe) addErr(m);
   return errs;
 }
 

@@ -68,6 +68,8 @@ struct ChartingStats {
   double meanPlanarityError = 0.0;     // area-weighted mean of the same
   double weldSeconds = 0.0;            // weld, repair, adjacency
   double clusterSeconds = 0.0;         // greedy merging (cells and global)
+  double cellSeconds = 0.0;            // of which the per-cell / per-block phase (read, weld and
+                                       // clustering of each cell, in parallel)
   double sidesSeconds = 0.0;           // corners, side fixing, layout output
   double seconds = 0.0;                // total
   uint64_t peakBytesEstimate = 0;      // largest sum of the big arrays held at once
