@@ -19,6 +19,7 @@
 #include "atlas/gridify.h"
 #include "atlas/mesh_atlas.h"
 #include "atlas/mesh_io.h"
+#include "atlas/patch_split.h"
 #include "atlas/resample.h"
 #include "atlas/terrain_atlas.h"
 #include "core/atlas_format.h"
@@ -250,7 +251,9 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   ResampleOptions ro;
   ro.chartSize = o.meshChartSize;
   ro.threads = o.threads;
-  const GeometryImageSet set = resampleLayout(layout, ro);
+  FlipRepairStats flips;
+  const GeometryImageSet set = resampleWithoutFlips(layout, ro, o.flipRepairRounds, &flips);
+  const size_t finalPatches = layout.patches.size();
   layout = ChartLayout{};
   meter.finish("resample");
   stats["resample"] = {{"charts", set.charts.size()},
@@ -261,6 +264,11 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                        {"image_stretch_l2", set.image.stretchL2},
                        {"image_stretch_linf", set.image.stretchLinf},
                        {"flipped_texels", set.image.flippedTexels},
+                       {"flipped_texels_before_splits", flips.flippedTexelsFirst},
+                       {"patches_split_for_flips", flips.patchesSplit},
+                       {"patches_unsplittable", flips.patchesUnsplit},
+                       {"split_rounds", flips.rounds},
+                       {"patches", finalPatches},
                        {"degenerate_texels", set.image.degenerateTexels},
                        {"seconds", set.seconds}};
 

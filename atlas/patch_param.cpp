@@ -388,6 +388,46 @@ glm::dvec2 polygonCorner(uint32_t n, uint32_t i) {
   return {std::cos(a), std::sin(a)};
 }
 
+std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths) {
+  const size_t n = sideLengths.size();
+  const double regular = 2.0 * std::numbers::pi / double(n);
+  const double lo = 0.4 * regular, hi = 1.8 * regular < 0.9 * std::numbers::pi
+                                            ? 1.8 * regular
+                                            : 0.9 * std::numbers::pi;
+  double total = 0.0;
+  for (double l : sideLengths) total += l;
+  std::vector<double> theta(n, regular);
+  if (total > 0.0 && std::isfinite(total)) {
+    // theta_i = clamp(scale * L_i / total * 2 pi, lo, hi) with the scale found by bisection so
+    // the angles close the circle: the sum grows with the scale from n lo < 2 pi to n hi > 2 pi.
+    auto angles = [&](double scale) {
+      double sum = 0.0;
+      for (size_t i = 0; i < n; ++i) {
+        theta[i] = std::clamp(scale * 2.0 * std::numbers::pi * sideLengths[i] / total, lo, hi);
+        sum += theta[i];
+      }
+      return sum;
+    };
+    double below = 0.0, above = 1.0;
+    while (angles(above) < 2.0 * std::numbers::pi && above < 1e30) above *= 2.0;
+    for (int it = 0; it < 200 && above - below > 1e-15 * above; ++it) {
+      const double mid = 0.5 * (below + above);
+      (angles(mid) < 2.0 * std::numbers::pi ? below : above) = mid;
+    }
+    angles(above);
+  }
+  double sum = 0.0;
+  for (double t : theta) sum += t;
+  for (double& t : theta) t *= 2.0 * std::numbers::pi / sum;  // exact closure
+  std::vector<glm::dvec2> corners(n);
+  double angle = 0.0;
+  for (size_t i = 0; i < n; ++i) {
+    corners[i] = {std::cos(angle), std::sin(angle)};
+    angle += theta[i];
+  }
+  return corners;
+}
+
 ParamQuality measureStretch(const std::vector<glm::dvec2>& uv, const std::vector<glm::dvec3>& xyz,
                             const std::vector<std::array<uint32_t, 3>>& triangles) {
   ParamQuality q;
@@ -447,17 +487,31 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
   // Boundary: side i on the polygon edge from corner i to corner i+1, by normalized arc length.
   std::vector<uint8_t> isBoundary(lp.vertices.size(), 0);
   const size_t nb = lp.boundary.size();
+  std::vector<std::vector<double>> arc(n);  // per side, cumulative 3D length at each vertex
+  std::vector<double> sideLength(n);
   for (uint32_t i = 0; i < n; ++i) {
     const size_t begin = lp.cornerIndex[i];
     const size_t end = i + 1 < n ? lp.cornerIndex[i + 1] : nb;  // exclusive; corner i+1 at end
-    std::vector<double> cum(1, 0.0);
+    std::vector<double>& cum = arc[i];
+    cum.assign(1, 0.0);
     for (size_t k = begin; k < end; ++k) {
       cum.push_back(cum.back() + glm::length(lp.xyz[lp.boundary[(k + 1) % nb]] -
                                              lp.xyz[lp.boundary[k]]));
     }
-    const double total = cum.back();
-    if (!(total > 0.0)) fail(patch, "side " + std::to_string(i) + " has zero length");
-    const glm::dvec2 c0 = polygonCorner(n, i), c1 = polygonCorner(n, i + 1);
+    sideLength[i] = cum.back();
+    if (!(sideLength[i] > 0.0)) fail(patch, "side " + std::to_string(i) + " has zero length");
+  }
+  if (options.proportionalPolygon) {
+    out.corners = patchPolygon(sideLength);
+  } else {
+    for (uint32_t i = 0; i < n; ++i) out.corners.push_back(polygonCorner(n, i));
+  }
+  for (uint32_t i = 0; i < n; ++i) {
+    const size_t begin = lp.cornerIndex[i];
+    const size_t end = i + 1 < n ? lp.cornerIndex[i + 1] : nb;
+    const std::vector<double>& cum = arc[i];
+    const double total = sideLength[i];
+    const glm::dvec2 c0 = out.corners[i], c1 = out.corners[(i + 1) % n];
     for (size_t k = begin; k < end; ++k) {
       const double f = cum[k - begin] / total;
       const uint32_t v = lp.boundary[k];

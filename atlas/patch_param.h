@@ -30,6 +30,10 @@ struct ParamOptions {
   // Local L2 stretch minimization sweeps (Sander et al.: per-vertex line searches that never
   // flip a triangle), until the energy drops by less than 0.01% in a sweep. 0 skips it.
   uint32_t stretchSweeps = 30;
+  // Domain polygon: corners on the unit circle with central angles proportional to the sides' 3D
+  // lengths (clamped, see patchPolygon), so long and short sides get parameter length in
+  // proportion; false gives the regular n-gon whatever the side lengths.
+  bool proportionalPolygon = true;
 };
 
 // Quality of a parameterization (param -> surface map), in the style of xatlas' per-chart
@@ -45,10 +49,12 @@ struct ParamQuality {
   double areaParam = 0.0;            // parameter area of the valid triangles
 };
 
-// One patch mapped onto the regular n-gon with corner i at (cos 2pi i/n, sin 2pi i/n).
+// One patch mapped onto a convex n-gon inscribed in the unit circle (corners[i] = corner i),
+// whose centre, the origin, is strictly inside.
 struct PatchParameterization {
   uint32_t patch = 0;
   uint32_t sides = 0;                                 // n, 3..8
+  std::vector<glm::dvec2> corners;                    // n domain corners, CCW
   std::vector<uint32_t> vertices;                     // local -> ChartLayout vertex id
   std::vector<glm::dvec2> uv;                         // per local vertex, in the n-gon
   std::vector<std::array<uint32_t, 3>> triangles;     // local ids, patch triangle order
@@ -63,6 +69,14 @@ struct PatchParameterization {
 
 // Corner i of the regular n-gon domain.
 glm::dvec2 polygonCorner(uint32_t n, uint32_t i);
+
+// The domain polygon for sides of 3D lengths `sideLengths` (n >= 3, all > 0): corner 0 at
+// (1, 0), corner i+1 at central angle theta_i past corner i, theta_i = clamp(s * 2 pi L_i / sum L,
+// 0.4 * 2 pi / n, min(1.8 * 2 pi / n, 0.9 pi)) with s chosen so the angles sum to 2 pi. No angle
+// reaches pi, so the polygon is convex with the origin strictly inside, and every kite (corner i,
+// midpoint of side i, origin, midpoint of side i-1) is convex with right angles at the midpoints.
+// Equal lengths give the regular n-gon.
+std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths);
 
 // Parameterizes patch `patch` of `layout`. The patch must be a triangulated disk whose boundary
 // loop is exactly its sides' concatenation in order (side i ends where side i+1 starts, edges

@@ -46,6 +46,7 @@ struct Sample {
   glm::vec3 p{0.f};
   glm::vec3 n{0.f, 0.f, 1.f};
   glm::u8vec4 c{255, 255, 255, 255};
+  uint32_t triangle = ~0u;  // the layout triangle it was located in; ~0u for side samples
 };
 
 // Interpolates the attributes of vertices v[0..2] with barycentric weights b (sum 1).
@@ -319,7 +320,8 @@ std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layo
 }
 
 ImageQuality measureImage(const std::vector<glm::vec3>& positions,
-                          const std::vector<glm::vec3>& normals, uint32_t chartSize) {
+                          const std::vector<glm::vec3>& normals, uint32_t chartSize,
+                          std::vector<uint32_t>* flippedAt) {
   ImageQuality q;
   const uint32_t m = chartSize - 1;
   const double scale = double(m);  // d(position)/d(s) = difference * m
@@ -350,7 +352,10 @@ ImageQuality measureImage(const std::vector<glm::vec3>& positions,
       }
       const glm::dvec3 n = glm::dvec3(normals[i00]) + glm::dvec3(normals[i10]) +
                            glm::dvec3(normals[i01]) + glm::dvec3(normals[i11]);
-      if (glm::dot(cr, n) < 0.0) ++q.flippedTexels;
+      if (glm::dot(cr, n) < 0.0) {
+        ++q.flippedTexels;
+        if (flippedAt) flippedAt->push_back(uint32_t(i00));
+      }
     }
   }
   if (m > 0 && q.area3D > 0.0) {
@@ -470,12 +475,14 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         std::array<uint32_t, 3> tri;
         glm::dvec3 b;
         locator.locate(d, hint, tri, b);
-        return interpolate(surface, {pp.vertices[tri[0]], pp.vertices[tri[1]], pp.vertices[tri[2]]},
-                           b);
+        Sample r = interpolate(surface, {pp.vertices[tri[0]], pp.vertices[tri[1]], pp.vertices[tri[2]]},
+                               b);
+        r.triangle = patch.triangles[hint];  // the parameterization keeps the patch's order
+        return r;
       };
       std::vector<glm::dvec2> corner(n), mid(n);
-      for (uint32_t i = 0; i < n; ++i) corner[i] = polygonCorner(n, i);
-      for (uint32_t i = 0; i < n; ++i) mid[i] = 0.5 * (corner[i] + polygonCorner(n, i + 1));
+      for (uint32_t i = 0; i < n; ++i) corner[i] = pp.corners[i];
+      for (uint32_t i = 0; i < n; ++i) mid[i] = 0.5 * (corner[i] + pp.corners[(i + 1) % n]);
       const glm::dvec2 centre(0.0);
       const Sample centreSample = sampleAt(centre);
       // Spoke i: midpoint of side i (t = 0) to the centre (t = m), shared by quads i and i+1.
@@ -489,6 +496,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       }
 
       std::vector<glm::vec3> floatNormals(size_t(size) * size);
+      std::vector<uint32_t> triangles(size_t(size) * size, ~0u);
       for (uint32_t i = 0; i < n; ++i) {
         GeometryImage& img = set.charts[links.offsets[p] + i];
         img.patch = p;
@@ -503,6 +511,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
           img.positions[at] = s.p;
           img.normals[at] = packNormal(s.n.x, s.n.y, s.n.z);
           floatNormals[at] = s.n;
+          triangles[at] = s.triangle;
           if (surface.hasColours) img.colours[at] = s.c;
         };
         for (uint32_t k = 0; k <= m; ++k) {
@@ -520,7 +529,18 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
             put(u, v, sampleAt(d));
           }
         }
-        img.quality = measureImage(img.positions, floatNormals, size);
+        std::vector<uint32_t> flipped;
+        img.quality = measureImage(img.positions, floatNormals, size, &flipped);
+        // Where the chart folds, as layout triangles (one per flipped texel, a few per chart).
+        for (uint32_t at : flipped) {
+          for (const size_t k : {size_t(at), size_t(at) + 1, size_t(at) + size, size_t(at) + size + 1}) {
+            if (triangles[k] != ~0u) {
+              img.foldTriangles.push_back(triangles[k]);
+              break;
+            }
+          }
+          if (img.foldTriangles.size() >= 8) break;
+        }
       }
     });
   });

@@ -54,6 +54,7 @@ struct GeometryImage {
   std::vector<glm::u8vec4> colours;          // chartSize^2, or empty if the layout has none
   std::array<RootNeighbour, 4> neighbours;   // by Edge; chart = index into GeometryImageSet
   ImageQuality quality;
+  std::vector<uint32_t> foldTriangles;       // layout triangles under flipped texels (<= 8)
 };
 
 struct PatchResampleStats {
@@ -96,9 +97,11 @@ std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layo
 // patch (see parameterizePatch) or bad side links (see quadNeighbours).
 GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options = {});
 
-// Measures one image (positions and float unit normals, chartSize^2 each).
+// Measures one image (positions and float unit normals, chartSize^2 each). flippedAt, if given,
+// receives the sample index of the (0,0) corner of every flipped texel.
 ImageQuality measureImage(const std::vector<glm::vec3>& positions,
-                          const std::vector<glm::vec3>& normals, uint32_t chartSize);
+                          const std::vector<glm::vec3>& normals, uint32_t chartSize,
+                          std::vector<uint32_t>* flippedAt = nullptr);
 
 // Combines per-chart figures: 3D-area-weighted RMS of the per-chart L2, max Linf, summed counts.
 // note: each chart is normalized by its own area, so imbalance between charts (a large chart

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 #include <stdexcept>
 
 #include "atlas/patch_param.h"
@@ -15,9 +16,46 @@ namespace gimlod {
 namespace {
 
 // Signed area of the polygon's corner i, i+1 and the point: >= 0 when p is left of edge i.
-double leftOf(uint32_t n, uint32_t i, const glm::dvec2& p) {
-  const glm::dvec2 a = polygonCorner(n, i), b = polygonCorner(n, i + 1);
+double leftOf(const std::vector<glm::dvec2>& corners, uint32_t i, const glm::dvec2& p) {
+  const glm::dvec2 a = corners[i], b = corners[(i + 1) % corners.size()];
   return (b.x - a.x) * (p.y - a.y) - (b.y - a.y) * (p.x - a.x);
+}
+
+TEST(PatchParam, DomainPolygonFollowsSideLengths) {
+  // Equal sides: the regular polygon.
+  for (const uint32_t n : {3u, 5u, 8u}) {
+    const std::vector<glm::dvec2> c = patchPolygon(std::vector<double>(n, 2.5));
+    ASSERT_EQ(c.size(), n);
+    for (uint32_t i = 0; i < n; ++i) {
+      EXPECT_NEAR(c[i].x, polygonCorner(n, i).x, 1e-12);
+      EXPECT_NEAR(c[i].y, polygonCorner(n, i).y, 1e-12);
+    }
+  }
+  // Central angles in proportion to the lengths where no clamp applies: 1 : 1 : 1 : 1.5.
+  auto angle = [](const glm::dvec2& a, const glm::dvec2& b) {
+    return std::acos(std::clamp(glm::dot(a, b), -1.0, 1.0));
+  };
+  std::vector<glm::dvec2> c = patchPolygon({1, 1, 1, 1.5});
+  EXPECT_NEAR(angle(c[3], c[0]) / angle(c[0], c[1]), 1.5, 1e-9);
+  EXPECT_NEAR(angle(c[1], c[2]), angle(c[0], c[1]), 1e-12);
+  // Extreme lengths are clamped: every central angle below pi (convex, origin inside), every
+  // corner on the unit circle, and the short sides keep 0.4 of the regular angle.
+  for (const std::vector<double>& lengths :
+       {std::vector<double>{100, 1, 1}, std::vector<double>{1, 1e-6, 1, 1e-6, 50},
+        std::vector<double>{1, 2, 3, 4, 5, 6, 7, 200}}) {
+    c = patchPolygon(lengths);
+    const size_t n = lengths.size();
+    double sum = 0.0;
+    for (size_t i = 0; i < n; ++i) {
+      EXPECT_NEAR(glm::length(c[i]), 1.0, 1e-12);
+      const double a = angle(c[i], c[(i + 1) % n]);
+      // Left turn at every corner, and the origin strictly left of every side.
+      EXPECT_GT(leftOf(c, uint32_t(i), glm::dvec2(0.0)), 0.0);
+      EXPECT_GE(a, 0.4 * 2.0 * std::numbers::pi / double(n) * (1 - 1e-9));
+      sum += a;
+    }
+    EXPECT_NEAR(sum, 2.0 * std::numbers::pi, 1e-9);
+  }
 }
 
 TEST(PatchParam, MeasureStretchOfKnownMaps) {
@@ -76,12 +114,13 @@ TEST(PatchParam, NGonDisksEmbedWithoutFlips) {
       EXPECT_LT(pp.quality.stretchLinf, 4.0);
       EXPECT_LE(pp.quality.stretchL2, pp.initial.stretchL2);
       // Corners on the polygon's vertices, every vertex inside the polygon.
+      ASSERT_EQ(pp.corners.size(), n);
       for (uint32_t i = 0; i < n; ++i) {
         const glm::dvec2 c = pp.uv[pp.boundary[pp.cornerIndex[i]]];
-        EXPECT_EQ(c, polygonCorner(n, i));
+        EXPECT_EQ(c, pp.corners[i]);
       }
       for (const glm::dvec2& p : pp.uv) {
-        for (uint32_t i = 0; i < n; ++i) EXPECT_GE(leftOf(n, i, p), -1e-12);
+        for (uint32_t i = 0; i < n; ++i) EXPECT_GE(leftOf(pp.corners, i, p), -1e-12);
       }
       std::printf("  n=%u %s: L2 %.4f -> %.4f, Linf %.4f -> %.4f (%u reweightings, %u sweeps)\n",
                   n, hemisphere ? "hemisphere" : "flat disk", pp.initial.stretchL2,

@@ -1,0 +1,518 @@
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 5; Sander et al. 2001 (chart splitting).
+#include "atlas/patch_split.h"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <queue>
+#include <unordered_map>
+#include <unordered_set>
+
+#include <glm/geometric.hpp>
+
+namespace gimlod {
+namespace {
+
+uint64_t undirected(uint32_t a, uint32_t b) {
+  return a < b ? (uint64_t{a} << 32) | b : (uint64_t{b} << 32) | a;
+}
+uint64_t directed(uint32_t a, uint32_t b) { return (uint64_t{a} << 32) | b; }
+
+double sideLength(const ChartLayout& layout, const PatchSide& s) {
+  double l = 0.0;
+  for (size_t k = 0; k + 1 < s.vertices.size(); ++k) {
+    l += glm::length(layout.positions[s.vertices[k + 1]] - layout.positions[s.vertices[k]]);
+  }
+  return l;
+}
+
+// The patch's vertex graph restricted to what a cut may use: edges that are not on the patch
+// boundary, through vertices that are not on it (a cut only starts and ends at the boundary).
+struct PatchGraph {
+  std::unordered_map<uint32_t, std::vector<uint32_t>> neighbours;  // global ids
+  std::unordered_set<uint32_t> onBoundary;
+  std::unordered_set<uint64_t> boundaryEdges;
+  std::unordered_map<uint64_t, uint32_t> triangleOf;  // directed edge -> triangle (global)
+};
+
+PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch) {
+  PatchGraph g;
+  for (const PatchSide& s : patch.sides) {
+    for (size_t k = 0; k < s.vertices.size(); ++k) {
+      g.onBoundary.insert(s.vertices[k]);
+      if (k + 1 < s.vertices.size()) g.boundaryEdges.insert(undirected(s.vertices[k], s.vertices[k + 1]));
+    }
+  }
+  for (uint32_t t : patch.triangles) {
+    const auto& tri = layout.triangles[t];
+    for (int c = 0; c < 3; ++c) {
+      const uint32_t a = tri[c], b = tri[(c + 1) % 3];
+      g.triangleOf[directed(a, b)] = t;
+      if (!g.boundaryEdges.contains(undirected(a, b))) {
+        // Each interior edge is seen from both of its triangles: add it from one.
+        if (a < b) {
+          g.neighbours[a].push_back(b);
+          g.neighbours[b].push_back(a);
+        }
+      }
+    }
+  }
+  return g;
+}
+
+// Shortest cut paths from `source`: distances and predecessors over interior vertices.
+struct Paths {
+  std::unordered_map<uint32_t, double> dist;
+  std::unordered_map<uint32_t, uint32_t> prev;
+};
+
+Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t source) {
+  Paths r;
+  using Item = std::pair<double, uint32_t>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<>> heap;
+  r.dist[source] = 0.0;
+  heap.push({0.0, source});
+  while (!heap.empty()) {
+    const auto [d, u] = heap.top();
+    heap.pop();
+    if (d > r.dist[u]) continue;
+    if (u != source && g.onBoundary.contains(u)) continue;  // reached a boundary vertex: stop
+    auto it = g.neighbours.find(u);
+    if (it == g.neighbours.end()) continue;
+    for (uint32_t w : it->second) {
+      const double nd = d + glm::length(layout.positions[w] - layout.positions[u]);
+      auto [dit, inserted] = r.dist.try_emplace(w, nd);
+      if (inserted || nd < dit->second) {
+        dit->second = nd;
+        r.prev[w] = u;
+        heap.push({nd, w});
+      }
+    }
+  }
+  return r;
+}
+
+// Applies a new side list to patch `p` (and an optional second patch), given how the old sides
+// of the changed patches map to new (patch, index) places: links between the changed patches are
+// remapped, links to other patches are updated on the other side.
+struct SidePlace {
+  uint32_t patch, index;
+};
+
+// Cuts patch p along `path` (corner i .. corner j, interior vertices between, interior edges).
+bool splitAlong(ChartLayout& layout, uint32_t p, uint32_t i, uint32_t j, const PatchGraph& g,
+                const std::vector<uint32_t>& path) {
+  const Patch& patch = layout.patches[p];
+  const uint32_t n = uint32_t(patch.sides.size());
+  const uint32_t d = (j + n - i) % n;  // sides in the first part
+  if (d < 2 || d > n - 2 || path.size() < 2) return false;
+  if (path.front() != patch.sides[i].vertices.front() || path.back() != patch.sides[j].vertices.front()) {
+    return false;
+  }
+  std::unordered_set<uint32_t> seenOnPath;
+  for (size_t k = 0; k < path.size(); ++k) {
+    if (!seenOnPath.insert(path[k]).second) return false;  // not simple
+    if (k > 0 && k + 1 < path.size() && g.onBoundary.contains(path[k])) return false;
+    if (k + 1 < path.size() && g.boundaryEdges.contains(undirected(path[k], path[k + 1]))) return false;
+  }
+  std::unordered_set<uint64_t> cut;
+  for (size_t k = 0; k + 1 < path.size(); ++k) cut.insert(undirected(path[k], path[k + 1]));
+
+  // Triangles of the first part: flood from side i's first edge, never crossing the cut.
+  const auto seed = g.triangleOf.find(directed(patch.sides[i].vertices[0], patch.sides[i].vertices[1]));
+  if (seed == g.triangleOf.end()) return false;
+  std::unordered_set<uint32_t> first{seed->second};
+  std::vector<uint32_t> stack{seed->second};
+  while (!stack.empty()) {
+    const uint32_t t = stack.back();
+    stack.pop_back();
+    const auto& tri = layout.triangles[t];
+    for (int c = 0; c < 3; ++c) {
+      const uint32_t a = tri[c], b = tri[(c + 1) % 3];
+      if (cut.contains(undirected(a, b))) continue;
+      const auto o = g.triangleOf.find(directed(b, a));
+      if (o != g.triangleOf.end() && first.insert(o->second).second) stack.push_back(o->second);
+    }
+  }
+  // Every side must border the part it goes to.
+  for (uint32_t s = 0; s < n; ++s) {
+    const PatchSide& side = patch.sides[s];
+    const auto t = g.triangleOf.find(directed(side.vertices[0], side.vertices[1]));
+    if (t == g.triangleOf.end()) return false;
+    const bool inFirst = (s + n - i) % n < d;
+    if (first.contains(t->second) != inFirst) return false;
+  }
+  if (first.size() >= patch.triangles.size()) return false;
+
+  // Disk check by Euler characteristic (V - E + F = 1) for each part.
+  auto isDisk = [&](const std::vector<uint32_t>& tris) {
+    std::unordered_set<uint32_t> verts;
+    std::unordered_set<uint64_t> edges;
+    for (uint32_t t : tris) {
+      const auto& tri = layout.triangles[t];
+      for (int c = 0; c < 3; ++c) {
+        verts.insert(tri[c]);
+        edges.insert(undirected(tri[c], tri[(c + 1) % 3]));
+      }
+    }
+    return int64_t(verts.size()) - int64_t(edges.size()) + int64_t(tris.size()) == 1;
+  };
+  Patch a, b;
+  for (uint32_t t : patch.triangles) (first.contains(t) ? a : b).triangles.push_back(t);
+  if (!isDisk(a.triangles) || !isDisk(b.triangles)) return false;
+
+  const uint32_t q = uint32_t(layout.patches.size());
+  std::vector<SidePlace> place(n);
+  for (uint32_t s = 0; s < n; ++s) {
+    const uint32_t offset = (s + n - i) % n;
+    place[s] = offset < d ? SidePlace{p, offset} : SidePlace{q, (s + n - j) % n};
+  }
+  for (uint32_t k = 0; k < d; ++k) a.sides.push_back(patch.sides[(i + k) % n]);
+  for (uint32_t k = 0; k < n - d; ++k) b.sides.push_back(patch.sides[(j + k) % n]);
+  PatchSide cutA, cutB;
+  cutA.vertices.assign(path.rbegin(), path.rend());  // corner j -> corner i
+  cutB.vertices = path;                              // corner i -> corner j
+  cutA.neighbourPatch = int32_t(q);
+  cutA.neighbourSide = n - d;
+  cutB.neighbourPatch = int32_t(p);
+  cutB.neighbourSide = d;
+  cutA.reversed = cutB.reversed = true;
+  // Links: sides of this patch that face this patch are remapped; others are told the new place.
+  for (uint32_t s = 0; s < n; ++s) {
+    const PatchSide& old = patch.sides[s];
+    PatchSide& moved = place[s].patch == p ? a.sides[place[s].index] : b.sides[place[s].index];
+    if (old.neighbourPatch == int32_t(p)) {
+      moved.neighbourPatch = int32_t(place[old.neighbourSide].patch);
+      moved.neighbourSide = place[old.neighbourSide].index;
+    } else if (old.neighbourPatch >= 0) {
+      PatchSide& other = layout.patches[uint32_t(old.neighbourPatch)].sides[old.neighbourSide];
+      other.neighbourPatch = int32_t(place[s].patch);
+      other.neighbourSide = place[s].index;
+    }
+  }
+  a.sides.push_back(std::move(cutA));
+  b.sides.push_back(std::move(cutB));
+  layout.patches[p] = std::move(a);
+  layout.patches.push_back(std::move(b));
+  return true;
+}
+
+// Where each boundary vertex of a patch sits: (side, index in the side), corners as (side, 0).
+std::unordered_map<uint32_t, std::pair<uint32_t, uint32_t>> boundaryPlaces(const Patch& patch) {
+  std::unordered_map<uint32_t, std::pair<uint32_t, uint32_t>> at;
+  for (uint32_t s = 0; s < patch.sides.size(); ++s) {
+    const auto& v = patch.sides[s].vertices;
+    for (uint32_t k = 0; k + 1 < v.size(); ++k) at[v[k]] = {s, k};
+  }
+  return at;
+}
+
+// Side counts of the two parts if the patch is cut between boundary vertices at places a and b
+// (corners inserted where there are none yet): {part from a forward to b, the other part}; {0, 0}
+// if either part would have fewer than 3 sides.
+std::pair<uint32_t, uint32_t> partSides(const Patch& patch, std::pair<uint32_t, uint32_t> a,
+                                        std::pair<uint32_t, uint32_t> b) {
+  const uint32_t n = uint32_t(patch.sides.size());
+  std::vector<uint32_t> offset(n + 1, 0);
+  for (uint32_t s = 0; s < n; ++s) offset[s + 1] = offset[s] + uint32_t(patch.sides[s].vertices.size()) - 1;
+  const uint32_t loop = offset[n];
+  const uint32_t pa = offset[a.first] + a.second, pb = offset[b.first] + b.second;
+  if (pa == pb) return {0, 0};
+  const uint32_t span = (pb + loop - pa) % loop;
+  uint32_t inside = 0;  // corners strictly between a and b going forward
+  for (uint32_t c = 0; c < n; ++c) {
+    const uint32_t dc = (offset[c] + loop - pa) % loop;
+    if (dc > 0 && dc < span) ++inside;
+  }
+  const uint32_t total = n - (a.second == 0) - (b.second == 0);  // corners other than a and b
+  const uint32_t outside = total - inside;
+  if (inside < 1 || outside < 1) return {0, 0};
+  return {inside + 2, outside + 2};
+}
+
+}  // namespace
+
+bool splitPatchAtCorners(ChartLayout& layout, uint32_t p, uint32_t i, uint32_t j) {
+  if (p >= layout.patches.size()) return false;
+  const Patch& patch = layout.patches[p];
+  const uint32_t n = uint32_t(patch.sides.size());
+  if (i >= n || j >= n) return false;
+  const PatchGraph g = patchGraph(layout, patch);
+  const uint32_t src = patch.sides[i].vertices.front(), dst = patch.sides[j].vertices.front();
+  const Paths paths = shortestCuts(layout, g, src);
+  if (!paths.dist.contains(dst)) return false;
+  std::vector<uint32_t> path{dst};
+  while (path.back() != src) path.push_back(paths.prev.at(path.back()));
+  std::reverse(path.begin(), path.end());  // src .. dst
+  return splitAlong(layout, p, i, j, g, path);
+}
+
+bool insertCorner(ChartLayout& layout, uint32_t p, uint32_t side, uint32_t k, uint32_t maxSides) {
+  if (p >= layout.patches.size() || side >= layout.patches[p].sides.size()) return false;
+  const PatchSide s = layout.patches[p].sides[side];
+  if (k == 0 || k + 1 >= s.vertices.size()) return false;
+  if (layout.patches[p].sides.size() + 1 > maxSides) return false;
+  const int32_t q = s.neighbourPatch;
+  if (q == int32_t(p)) return false;
+  if (q >= 0 && layout.patches[uint32_t(q)].sides.size() + 1 > maxSides) return false;
+
+  // New index of an old side of patch x after the split of side `at` (its second half at + 1).
+  auto shifted = [](uint32_t old, uint32_t at) { return old <= at ? old : old + 1; };
+  const uint32_t t = s.neighbourSide;
+  auto newIndex = [&](int32_t patch, uint32_t old) {
+    if (patch == int32_t(p)) return shifted(old, side);
+    if (patch == q) return shifted(old, t);
+    return old;
+  };
+  // Tell the other patches about the shifted indices, and remap links between p and q.
+  for (const int32_t x : {int32_t(p), q}) {
+    if (x < 0) continue;
+    for (uint32_t o = 0; o < layout.patches[uint32_t(x)].sides.size(); ++o) {
+      if ((x == int32_t(p) && o == side) || (x == q && o == t)) continue;
+      PatchSide& ps = layout.patches[uint32_t(x)].sides[o];
+      if (ps.neighbourPatch < 0) continue;
+      if (ps.neighbourPatch == int32_t(p) || ps.neighbourPatch == q) {
+        ps.neighbourSide = newIndex(ps.neighbourPatch, ps.neighbourSide);
+      } else {
+        layout.patches[uint32_t(ps.neighbourPatch)].sides[ps.neighbourSide].neighbourSide =
+            newIndex(x, o);
+      }
+    }
+  }
+  PatchSide s1 = s, s2 = s;
+  s1.vertices.assign(s.vertices.begin(), s.vertices.begin() + k + 1);
+  s2.vertices.assign(s.vertices.begin() + k, s.vertices.end());
+  auto& ps = layout.patches[p].sides;
+  if (q >= 0) {
+    const PatchSide w = layout.patches[uint32_t(q)].sides[t];
+    const size_t kw = s.reversed ? w.vertices.size() - 1 - k : k;
+    PatchSide w1 = w, w2 = w;
+    w1.vertices.assign(w.vertices.begin(), w.vertices.begin() + kw + 1);
+    w2.vertices.assign(w.vertices.begin() + kw, w.vertices.end());
+    // Reversed runs pair the first half of one with the second half of the other.
+    const uint32_t s1Pair = s.reversed ? t + 1 : t, s2Pair = s.reversed ? t : t + 1;
+    s1.neighbourSide = s1Pair;
+    s2.neighbourSide = s2Pair;
+    w1.neighbourSide = s.reversed ? side + 1 : side;
+    w2.neighbourSide = s.reversed ? side : side + 1;
+    auto& qs = layout.patches[uint32_t(q)].sides;
+    qs[t] = std::move(w1);
+    qs.insert(qs.begin() + t + 1, std::move(w2));
+  }
+  ps[side] = std::move(s1);
+  ps.insert(ps.begin() + side + 1, std::move(s2));
+  return true;
+}
+
+namespace {
+
+// See splitPatchThrough; with neck = true the cut may start at any boundary vertex.
+bool splitByCut(ChartLayout& layout, uint32_t p, uint32_t triangle, uint32_t maxSides, bool neck) {
+  if (p >= layout.patches.size() || triangle >= layout.triangles.size()) return false;
+  const Patch& patch = layout.patches[p];
+  const PatchGraph g = patchGraph(layout, patch);
+  const auto places = boundaryPlaces(patch);
+  // Arc length of every boundary vertex from corner 0, for the parts' perimeters.
+  std::unordered_map<uint32_t, double> arc;
+  double perimeter = 0.0;
+  for (const PatchSide& side : patch.sides) {
+    for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
+      arc[side.vertices[k]] = perimeter;
+      perimeter += glm::length(layout.positions[side.vertices[k + 1]] - layout.positions[side.vertices[k]]);
+    }
+  }
+  auto sidesOf = [&](uint32_t patchId) { return uint32_t(layout.patches[patchId].sides.size()); };
+  // A cut between boundary vertices e1 and e2 is acceptable when both parts get 3..maxSides
+  // sides and every neighbour that gains a corner stays within maxSides.
+  auto acceptable = [&](uint32_t e1, uint32_t e2) {
+    const auto a = places.at(e1), b = places.at(e2);
+    const auto [s1, s2] = partSides(patch, a, b);
+    if (s1 == 0 || s1 > maxSides || s2 > maxSides) return false;
+    for (const auto& at : {a, b}) {
+      if (at.second == 0) continue;
+      const PatchSide& side = patch.sides[at.first];
+      if (side.neighbourPatch == int32_t(p)) return false;
+      if (side.neighbourPatch >= 0 && sidesOf(uint32_t(side.neighbourPatch)) + 1 > maxSides) return false;
+    }
+    return true;
+  };
+  double bestScore = std::numeric_limits<double>::infinity();
+  std::vector<uint32_t> best;
+  auto consider = [&](std::vector<uint32_t> path, double length) {
+    const uint32_t e1 = path.front(), e2 = path.back();
+    if (e1 == e2 || !acceptable(e1, e2)) return;
+    const double forward = std::fmod(arc.at(e2) - arc.at(e1) + perimeter, perimeter);
+    const double smaller = std::min(forward, perimeter - forward) + length;
+    double score = smaller > 0.0 ? length / smaller : std::numeric_limits<double>::infinity();
+    // A new corner changes the neighbour's polygon too: prefer ends at corners.
+    for (const uint32_t e : {e1, e2}) {
+      if (places.at(e).second != 0) score *= 1.25;
+    }
+    if (score < bestScore) bestScore = score, best = std::move(path);
+  };
+  std::vector<uint32_t> sources(layout.triangles[triangle].begin(), layout.triangles[triangle].end());
+  if (neck) {
+    // Every boundary vertex (at most 96, spread evenly) as one end of a cut.
+    std::vector<uint32_t> loop;
+    for (const PatchSide& side : patch.sides) loop.insert(loop.end(), side.vertices.begin(), side.vertices.end() - 1);
+    const size_t step = std::max<size_t>(1, loop.size() / 96);
+    sources.clear();
+    for (size_t k = 0; k < loop.size(); k += step) sources.push_back(loop[k]);
+  }
+  for (const uint32_t v : sources) {
+    const Paths paths = shortestCuts(layout, g, v);
+    std::vector<std::pair<double, uint32_t>> ends;  // reached boundary vertices by distance
+    for (const auto& [w, dist] : paths.dist) {
+      if (w != v && g.onBoundary.contains(w)) ends.push_back({dist, w});
+    }
+    std::sort(ends.begin(), ends.end());
+    if (ends.size() > 48) ends.resize(48);
+    auto pathTo = [&](uint32_t w) {  // v .. w
+      std::vector<uint32_t> path{w};
+      while (path.back() != v) path.push_back(paths.prev.at(path.back()));
+      std::reverse(path.begin(), path.end());
+      return path;
+    };
+    if (g.onBoundary.contains(v)) {
+      for (const auto& [dist, w] : ends) consider(pathTo(w), dist);
+      continue;
+    }
+    // Interior v: two tree paths that leave v by different edges meet only at v.
+    std::vector<std::vector<uint32_t>> toEnd;
+    for (const auto& e : ends) toEnd.push_back(pathTo(e.second));
+    for (size_t x = 0; x < ends.size(); ++x) {
+      for (size_t y = x + 1; y < ends.size(); ++y) {
+        if (toEnd[x][1] == toEnd[y][1]) continue;
+        std::vector<uint32_t> path(toEnd[x].rbegin(), toEnd[x].rend());
+        path.insert(path.end(), toEnd[y].begin() + 1, toEnd[y].end());
+        consider(std::move(path), ends[x].first + ends[y].first);
+      }
+    }
+  }
+  if (best.empty()) return false;
+  // New corners at the ends (indices shift as sides split), then the cut between them.
+  for (const uint32_t e : {best.front(), best.back()}) {
+    const auto at = boundaryPlaces(layout.patches[p]).at(e);
+    if (at.second != 0 && !insertCorner(layout, p, at.first, at.second, maxSides)) return false;
+  }
+  const Patch& now = layout.patches[p];
+  uint32_t i = ~0u, j = ~0u;
+  for (uint32_t c = 0; c < now.sides.size(); ++c) {
+    if (now.sides[c].vertices.front() == best.front()) i = c;
+    if (now.sides[c].vertices.front() == best.back()) j = c;
+  }
+  if (i >= now.sides.size() || j >= now.sides.size()) return false;
+  return splitAlong(layout, p, i, j, patchGraph(layout, now), best);
+}
+
+}  // namespace
+
+bool splitPatchThrough(ChartLayout& layout, uint32_t p, uint32_t triangle, uint32_t maxSides) {
+  return splitByCut(layout, p, triangle, maxSides, false);
+}
+
+namespace {
+
+// The best corner-to-corner cut (splitPatchAtNeck's fallback): no neighbour changes.
+bool splitPatchAtCornerNeck(ChartLayout& layout, uint32_t p) {
+  if (p >= layout.patches.size()) return false;
+  if (layout.patches[p].sides.size() == 3) {
+    // A fourth corner at the arc-length middle of the longest side that has an inner vertex.
+    const Patch& patch = layout.patches[p];
+    int best = -1;
+    double bestLength = 0.0;
+    for (uint32_t s = 0; s < 3; ++s) {
+      const double l = sideLength(layout, patch.sides[s]);
+      if (patch.sides[s].vertices.size() >= 3 && l > bestLength) best = int(s), bestLength = l;
+    }
+    if (best < 0) return false;
+    const PatchSide& s = patch.sides[uint32_t(best)];
+    double run = 0.0;
+    uint32_t k = 1;
+    for (; k + 2 < s.vertices.size(); ++k) {
+      run += glm::length(layout.positions[s.vertices[k]] - layout.positions[s.vertices[k - 1]]);
+      if (run >= 0.5 * bestLength) break;
+    }
+    if (!insertCorner(layout, p, uint32_t(best), k)) return false;
+  }
+  const Patch& patch = layout.patches[p];
+  const uint32_t n = uint32_t(patch.sides.size());
+  std::vector<double> lengths(n);
+  double total = 0.0;
+  for (uint32_t s = 0; s < n; ++s) total += lengths[s] = sideLength(layout, patch.sides[s]);
+  const PatchGraph g = patchGraph(layout, patch);
+  struct Candidate {
+    double score;
+    uint32_t i, j;
+  };
+  std::vector<Candidate> candidates;
+  for (uint32_t i = 0; i < n; ++i) {
+    const Paths paths = shortestCuts(layout, g, patch.sides[i].vertices.front());
+    double perimeter = 0.0;
+    for (uint32_t d = 1; d + 1 < n; ++d) {
+      perimeter += lengths[(i + d - 1) % n];
+      const uint32_t j = (i + d) % n;
+      if (d < 2 || j < i) continue;  // each unordered pair once
+      const auto it = paths.dist.find(patch.sides[j].vertices.front());
+      if (it == paths.dist.end()) continue;
+      const double smaller = std::min(perimeter, total - perimeter) + it->second;
+      candidates.push_back({it->second / smaller, i, j});
+    }
+  }
+  std::sort(candidates.begin(), candidates.end(),
+            [](const Candidate& x, const Candidate& y) { return x.score < y.score; });
+  for (const Candidate& c : candidates) {
+    if (splitPatchAtCorners(layout, p, c.i, c.j)) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+bool splitPatchAtNeck(ChartLayout& layout, uint32_t p) {
+  if (p < layout.patches.size() && !layout.patches[p].triangles.empty() &&
+      splitByCut(layout, p, layout.patches[p].triangles.front(), 8, true)) {
+    return true;
+  }
+  return splitPatchAtCornerNeck(layout, p);
+}
+
+GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions& options,
+                                      uint32_t maxRounds, FlipRepairStats* stats) {
+  FlipRepairStats local;
+  FlipRepairStats& st = stats ? *stats : local;
+  st = FlipRepairStats{};
+  GeometryImageSet set = resampleLayout(layout, options);
+  st.flippedTexelsFirst = set.image.flippedTexels;
+  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0; ++round) {
+    // Per folding patch, the triangle under its first flipped texel.
+    std::vector<std::pair<uint32_t, uint32_t>> bad;
+    for (const GeometryImage& g : set.charts) {
+      if (g.foldTriangles.empty() || (!bad.empty() && bad.back().first == g.patch)) continue;
+      bad.push_back({g.patch, g.foldTriangles.front()});
+    }
+    ChartLayout next = layout;
+    uint32_t split = 0, unsplit = 0;
+    for (const auto& [p, triangle] : bad) {
+      if (splitPatchAtNeck(next, p) || splitPatchThrough(next, p, triangle)) {
+        ++split;
+      } else {
+        ++unsplit;
+      }
+    }
+    if (split == 0) break;
+    GeometryImageSet nextSet = resampleLayout(next, options);
+    ++st.rounds;
+    // A split can move the fold rather than remove it (a new corner reshapes the neighbour's
+    // polygon too): a round is kept only if it lowers the count.
+    if (nextSet.image.flippedTexels >= set.image.flippedTexels) break;
+    layout = std::move(next);
+    set = std::move(nextSet);
+    st.patchesSplit += split;
+    st.patchesUnsplit = unsplit;
+  }
+  return set;
+}
+
+}  // namespace gimlod

@@ -1,0 +1,63 @@
+// Splitting patches of a chart layout whose geometry images fold. A patch whose shape is far from
+// a round blob (a narrow neck, a winding strip) is squeezed by any map onto a convex polygon, and
+// where the squeeze is strong a texel of its quad charts spans surface that turns by more than a
+// right angle, so the texel faces backwards (a flipped texel). Such a patch is cut in two along
+// the shortest interior path across its neck (the cut whose length is smallest against the
+// smaller part's perimeter); the cut's ends become corners, so a neighbour there gains a side
+// (within 8). The layout is then resampled; a round of splits is kept only if it lowers the
+// flipped-texel count, and rounds go on until none is left or a round does not help.
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (patches split until they parameterize
+// well); Sander, Snyder, Gortler, Hoppe, SIGGRAPH 2001 (charts split where stretch is high).
+#pragma once
+
+#include <cstdint>
+
+#include "atlas/chart_layout.h"
+#include "atlas/resample.h"
+
+namespace gimlod {
+
+// Cuts patch `patch` along the shortest path of interior edges (through interior vertices only)
+// between its corners i and j, which must not be adjacent (2 <= (j - i) mod n <= n - 2). The
+// part with sides i..j-1 keeps the patch's index (its side 0 is the old side i); the other part
+// is appended as a new patch (its side 0 is the old side j). Both get the cut as their last
+// side, linked to each other; every neighbour's links follow. Returns false, leaving the layout
+// unchanged, when no such path exists or a part would not be a disk.
+bool splitPatchAtCorners(ChartLayout& layout, uint32_t patch, uint32_t i, uint32_t j);
+
+// Makes the k-th vertex of side `side` of patch `patch` (0 < k < last) a corner: the side becomes
+// two sides, and so does the neighbour's side across it. Returns false, unchanged, when k is not
+// an inner vertex of the side or either patch would get more than maxSides sides.
+bool insertCorner(ChartLayout& layout, uint32_t patch, uint32_t side, uint32_t k,
+                  uint32_t maxSides = 8);
+
+// Splits `patch` by a cut through a vertex of layout triangle `triangle` (where its charts fold):
+// of the shortest interior paths from that vertex to the boundary, the pair (or, from a boundary
+// vertex, the single path) whose length is smallest relative to the smaller part's perimeter, such
+// that both parts get 3..maxSides sides. Ends of the cut that are not corners become corners
+// (insertCorner, so the neighbours there gain a side, within maxSides). Returns false if no cut
+// qualifies (the layout may then have gained a corner, still valid).
+bool splitPatchThrough(ChartLayout& layout, uint32_t patch, uint32_t triangle, uint32_t maxSides = 8);
+
+// Splits `patch` at its best neck: of the shortest interior paths between boundary vertices (at
+// most 96 start vertices, spread evenly), the one whose length is smallest against the smaller
+// part's perimeter, a new corner at an end costing a factor 1.25; both parts and any neighbour
+// that gains a corner must keep 3..8 sides. Falls back to the best corner-to-corner cut. Returns
+// false if nothing could be split.
+bool splitPatchAtNeck(ChartLayout& layout, uint32_t patch);
+
+struct FlipRepairStats {
+  uint32_t rounds = 0;          // resampling rounds after the first (kept or not)
+  uint32_t patchesSplit = 0;    // in kept rounds
+  uint32_t patchesUnsplit = 0;  // patches with flipped texels that could not be split
+  uint32_t flippedTexelsFirst = 0;  // flipped texels of the first resampling
+};
+
+// resampleLayout, then up to maxRounds times: split every patch one of whose charts has flipped
+// texels (splitPatchAtNeck, else splitPatchThrough the fold) and resample; a round is kept only if
+// it lowers the flipped-texel count, and the first round that does not ends the repair. `layout`
+// ends as the layout of the returned set.
+GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions& options,
+                                      uint32_t maxRounds = 4, FlipRepairStats* stats = nullptr);
+
+}  // namespace gimlod

@@ -1,0 +1,159 @@
+// Tests for splitting patches of a chart layout: corner-to-corner cuts partition the triangles
+// into two linked disks, inserted corners split both sides of a seam, a long strip is cut near
+// its middle, refused splits leave the layout as it was, and the flip repair on a real scan never
+// raises the flipped-texel count and leaves a valid layout that matches the charts it returns.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <set>
+
+#include "atlas/charting.h"
+#include "atlas/mesh_io.h"
+#include "atlas/patch_param.h"
+#include "atlas/patch_split.h"
+#include "tests/chart_layout_fixture.h"
+
+namespace gimlod {
+namespace {
+
+void expectValid(const ChartLayout& layout) {
+  const std::vector<std::string> bad = validateChartLayout(layout);
+  EXPECT_TRUE(bad.empty()) << bad.front();
+}
+
+bool sameLayout(const ChartLayout& a, const ChartLayout& b) {
+  if (a.patches.size() != b.patches.size()) return false;
+  for (size_t p = 0; p < a.patches.size(); ++p) {
+    const Patch &x = a.patches[p], &y = b.patches[p];
+    if (x.triangles != y.triangles || x.sides.size() != y.sides.size()) return false;
+    for (size_t s = 0; s < x.sides.size(); ++s) {
+      if (x.sides[s].vertices != y.sides[s].vertices ||
+          x.sides[s].neighbourPatch != y.sides[s].neighbourPatch ||
+          x.sides[s].neighbourSide != y.sides[s].neighbourSide) {
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+TEST(PatchSplit, CornerToCornerCutMakesTwoLinkedDisks) {
+  ChartLayout layout = test::gridLayout(8, 8, 1.f, 1.f);
+  ASSERT_EQ(layout.patches.size(), 1u);
+  ASSERT_TRUE(splitPatchAtCorners(layout, 0, 0, 2));
+  ASSERT_EQ(layout.patches.size(), 2u);
+  expectValid(layout);
+  const Patch &a = layout.patches[0], &b = layout.patches[1];
+  EXPECT_EQ(a.sides.size(), 3u);
+  EXPECT_EQ(b.sides.size(), 3u);
+  // Every triangle in exactly one part, and each part a real share of the square.
+  std::set<uint32_t> all(a.triangles.begin(), a.triangles.end());
+  all.insert(b.triangles.begin(), b.triangles.end());
+  EXPECT_EQ(all.size(), layout.triangles.size());
+  EXPECT_EQ(a.triangles.size() + b.triangles.size(), layout.triangles.size());
+  EXPECT_GE(std::min(a.triangles.size(), b.triangles.size()), layout.triangles.size() / 4);
+  // The cut: last side of each, linked to the other, vertex runs reversed, from corner 0 to 2.
+  const PatchSide &ca = a.sides.back(), &cb = b.sides.back();
+  EXPECT_EQ(ca.neighbourPatch, 1);
+  EXPECT_EQ(cb.neighbourPatch, 0);
+  EXPECT_EQ(ca.neighbourSide, uint32_t(b.sides.size() - 1));
+  EXPECT_EQ(cb.neighbourSide, uint32_t(a.sides.size() - 1));
+  EXPECT_EQ(std::vector<uint32_t>(ca.vertices.rbegin(), ca.vertices.rend()), cb.vertices);
+  EXPECT_EQ(cb.vertices.front(), 0u);            // grid corner (0, 0)
+  EXPECT_EQ(cb.vertices.back(), 8u * 9u + 8u);   // grid corner (8, 8)
+  for (uint32_t p = 0; p < 2; ++p) {
+    const PatchParameterization pp = parameterizePatch(layout, p);
+    EXPECT_EQ(pp.quality.flippedTriangles, 0u);
+  }
+}
+
+TEST(PatchSplit, RefusedSplitsLeaveTheLayoutAlone) {
+  ChartLayout layout = test::gridLayout(6, 6, 1.f, 1.f);
+  const ChartLayout before = layout;
+  EXPECT_FALSE(splitPatchAtCorners(layout, 0, 0, 1));  // adjacent corners: a 2-sided part
+  EXPECT_FALSE(splitPatchAtCorners(layout, 0, 1, 1));
+  EXPECT_FALSE(splitPatchAtCorners(layout, 3, 0, 2));  // no such patch
+  EXPECT_FALSE(insertCorner(layout, 0, 0, 0));          // a corner already
+  EXPECT_FALSE(insertCorner(layout, 0, 0, 6));          // past the side's inner vertices
+  EXPECT_FALSE(insertCorner(layout, 0, 0, 3, 4));       // would give 5 sides, 4 allowed
+  EXPECT_TRUE(sameLayout(layout, before));
+}
+
+TEST(PatchSplit, InsertedCornerSplitsBothSidesOfASeam) {
+  // Two 4 x 4 patches side by side; the seam is patch 0's right side (x = 4).
+  ChartLayout layout = test::gridLayout(8, 4, 2.f, 1.f, {4});
+  ASSERT_EQ(layout.patches.size(), 2u);
+  ASSERT_EQ(layout.patches[0].sides[1].neighbourPatch, 1);
+  ASSERT_TRUE(insertCorner(layout, 0, 1, 2));
+  expectValid(layout);
+  EXPECT_EQ(layout.patches[0].sides.size(), 5u);
+  EXPECT_EQ(layout.patches[1].sides.size(), 5u);
+  // The new corner is grid vertex (4, 2) on both sides of the seam.
+  const uint32_t corner = 2u * 9u + 4u;
+  EXPECT_EQ(layout.patches[0].sides[2].vertices.front(), corner);
+  bool found = false;
+  for (const PatchSide& s : layout.patches[1].sides) found = found || s.vertices.front() == corner;
+  EXPECT_TRUE(found);
+  // And the layout can still be cut, through the new corner.
+  ASSERT_TRUE(splitPatchAtCorners(layout, 0, 0, 2));
+  expectValid(layout);
+}
+
+TEST(PatchSplit, NeckCutCrossesALongStripNearItsMiddle) {
+  ChartLayout layout = test::gridLayout(24, 3, 8.f, 1.f);
+  const size_t total = layout.triangles.size();
+  ASSERT_TRUE(splitPatchAtNeck(layout, 0));
+  expectValid(layout);
+  ASSERT_EQ(layout.patches.size(), 2u);
+  const size_t smaller = std::min(layout.patches[0].triangles.size(), layout.patches[1].triangles.size());
+  EXPECT_GE(smaller, total / 4);
+  // A cut across the strip: about its width (1), not along it.
+  const PatchSide& cut = layout.patches[0].sides.back();
+  double length = 0.0;
+  for (size_t k = 0; k + 1 < cut.vertices.size(); ++k) {
+    length += glm::length(layout.positions[cut.vertices[k + 1]] - layout.positions[cut.vertices[k]]);
+  }
+  EXPECT_LT(length, 2.0);
+}
+
+TEST(PatchSplit, FlipRepairOnARealScanNeverMakesThingsWorse) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 128;
+  ChartLayout layout = buildChartLayout(mesh, copt);
+  const size_t patchesBefore = layout.patches.size();
+  ResampleOptions ro;
+  ro.chartSize = 33;
+  FlipRepairStats st;
+  const GeometryImageSet set = resampleWithoutFlips(layout, ro, 3, &st);
+  std::printf("  bunny at 33^2: %u flipped texels before repair, %u after (%u patches split, %u rounds)\n",
+              st.flippedTexelsFirst, set.image.flippedTexels, st.patchesSplit, st.rounds);
+  EXPECT_LE(set.image.flippedTexels, st.flippedTexelsFirst);
+  expectValid(layout);
+  EXPECT_EQ(layout.patches.size(), patchesBefore + st.patchesSplit);
+  // The returned charts are those of the returned layout.
+  EXPECT_EQ(set.charts.size(), quadChartOffsets(layout).back() + layout.patches.back().sides.size());
+  // Where flipped texels remain, the charts say where (layout triangles), and only there.
+  for (const GeometryImage& g : set.charts) {
+    EXPECT_EQ(g.foldTriangles.empty(), g.quality.flippedTexels == 0);
+    for (uint32_t t : g.foldTriangles) {
+      const auto& tris = layout.patches[g.patch].triangles;
+      EXPECT_NE(std::find(tris.begin(), tris.end(), t), tris.end());
+    }
+  }
+}
+
+TEST(PatchSplit, RepairLeavesAFoldFreeLayoutUnchanged) {
+  ChartLayout layout = test::cubeLayout(8, true);
+  const ChartLayout before = layout;
+  ResampleOptions ro;
+  ro.chartSize = 17;
+  FlipRepairStats st;
+  const GeometryImageSet set = resampleWithoutFlips(layout, ro, 4, &st);
+  EXPECT_EQ(set.image.flippedTexels, 0u);
+  EXPECT_EQ(st.rounds, 0u);
+  EXPECT_TRUE(sameLayout(layout, before));
+}
+
+}  // namespace
+}  // namespace gimlod
