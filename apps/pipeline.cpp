@@ -19,7 +19,7 @@
 #include "atlas/gridify.h"
 #include "atlas/mesh_atlas.h"
 #include "atlas/mesh_io.h"
-#include "atlas/patch_split.h"
+#include "atlas/layout_refine.h"
 #include "atlas/resample.h"
 #include "atlas/terrain_atlas.h"
 #include "core/atlas_format.h"
@@ -251,6 +251,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   ResampleOptions ro;
   ro.chartSize = o.meshChartSize;
   ro.threads = o.threads;
+  const uint32_t straightened = o.straightenRounds ? straightenSides(layout, o.straightenRounds) : 0;
   FlipRepairStats flips;
   const GeometryImageSet set = resampleWithoutFlips(layout, ro, o.flipRepairRounds, &flips);
   const size_t finalPatches = layout.patches.size();
@@ -264,6 +265,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                        {"image_stretch_l2", set.image.stretchL2},
                        {"image_stretch_linf", set.image.stretchLinf},
                        {"flipped_texels", set.image.flippedTexels},
+                       {"sides_straightened", straightened},
                        {"flipped_texels_before_splits", flips.flippedTexelsFirst},
                        {"patches_split_for_flips", flips.patchesSplit},
                        {"patches_unsplittable", flips.patchesUnsplit},
@@ -271,6 +273,14 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                        {"patches", finalPatches},
                        {"degenerate_texels", set.image.degenerateTexels},
                        {"seconds", set.seconds}};
+  // Per chart: its patch and quad, stretch of the sampled image, flipped and degenerate texels.
+  nlohmann::json perChart = nlohmann::json::array();
+  for (const GeometryImage& g : set.charts) {
+    perChart.push_back({{"patch", g.patch}, {"quad", g.quad}, {"stretch_l2", g.quality.stretchL2},
+                        {"stretch_linf", g.quality.stretchLinf}, {"flipped_texels", g.quality.flippedTexels},
+                        {"degenerate_texels", g.quality.degenerateTexels}});
+  }
+  stats["resample"]["per_chart"] = std::move(perChart);
 
   AtlasManifest m;
   m.depth = p.depth;

@@ -474,11 +474,10 @@ class Clusterer {
       for (const Adj& e : adj_[c])
         if (c < e.other) push(c, e);
     while (!heap_.empty() && alive_ > std::max(target, 1u)) {
-      const Cand k = heap_.top();
-      heap_.pop();
-      if (count_[k.a] == 0 || count_[k.b] == 0 || version_[k.a] != k.va ||
-          version_[k.b] != k.vb)
-        continue;
+      std::pop_heap(heap_.begin(), heap_.end(), std::greater<Cand>());
+      const Cand k = heap_.back();
+      heap_.pop_back();
+      if (stale(k)) continue;
       if (!mergeKeepsDisk(k.a, k.b)) {
         ++refused_;
         continue;
@@ -614,8 +613,10 @@ class Clusterer {
     const double compact = perim * perim / (4.0 * kPi * area);
     const double cost =
         (area / totalArea_) * (msd / (kTau * kTau) + kNormalWeight * spread + weight_ * compact);
-    heap_.push({cost, a, b, version_[a], version_[b]});
+    heap_.push_back({cost, a, b, version_[a], version_[b]});
+    std::push_heap(heap_.begin(), heap_.end(), std::greater<Cand>());
     heapPeak_ = std::max(heapPeak_, heap_.size());
+    if (heap_.size() >= purgeAt_) purge();
   }
 
   // The union of two disks is a disk iff they meet in exactly one boundary arc: shared
@@ -642,6 +643,23 @@ class Clusterer {
       }
     }
     return sharedEdges > 0 && sharedVertices == sharedEdges + 1;
+  }
+
+  bool stale(const Cand& k) const {
+    return count_[k.a] == 0 || count_[k.b] == 0 || version_[k.a] != k.va || version_[k.b] != k.vb;
+  }
+
+  // Every merge leaves the candidates of both clusters stale and pushes the merged cluster's
+  // anew, so most of a large heap is stale: popping each costs O(log n) cache misses. Once the
+  // heap has doubled since the last purge (and holds at least kPurgeMin entries: small meshes
+  // never purge), the stale entries are dropped and the heap rebuilt in O(n). The valid
+  // candidates and their costs are unchanged, so the same merges are made (up to the order of
+  // exactly equal costs).
+  static constexpr size_t kPurgeMin = size_t{1} << 16;
+  void purge() {
+    std::erase_if(heap_, [&](const Cand& k) { return stale(k); });
+    std::make_heap(heap_.begin(), heap_.end(), std::greater<Cand>());
+    purgeAt_ = std::max(kPurgeMin, 2 * heap_.size());
   }
 
   void merge(uint32_t a, uint32_t b) {
@@ -708,7 +726,10 @@ class Clusterer {
   std::vector<double> perim_;
   std::vector<uint32_t> count_, head_, nextFace_, version_, pos_, vstamp_, faceSeen_;
   std::vector<std::vector<Adj>> adj_;
-  std::priority_queue<Cand, std::vector<Cand>, std::greater<Cand>> heap_;
+  // A binary min-heap on cost (std::push_heap / pop_heap, as std::priority_queue does), kept
+  // as a vector so that stale candidates can be purged in one pass.
+  std::vector<Cand> heap_;
+  size_t purgeAt_ = kPurgeMin;
   size_t heapPeak_ = 0;
   uint32_t alive_ = 0, refused_ = 0, stamp_ = 0;
   double totalArea_ = 0, weight_ = 1, maxRms_ = std::numeric_limits<double>::infinity();

@@ -14,6 +14,9 @@
 #include <string>
 #include <vector>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <glm/vector_relational.hpp>
 #include <nlohmann/json.hpp>
 
@@ -387,6 +390,29 @@ TEST_F(BadMesh, FailedRebuildKeepsTheEarlierAtlas) {
   EXPECT_TRUE(fs::exists(out_ / "atlas.json"));
   for (const auto& e : fs::directory_iterator(dir_.path()))
     EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos) << e.path();
+}
+
+TEST_F(BadMesh, StagingLeftByAKilledBuildIsRemovedByTheNext) {
+  // A build killed by a signal cannot clean up: its ".out.atlas.partial-PID-*" stays. The next
+  // build at that path removes those of processes that are gone, and keeps a live one's.
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  ASSERT_GT(child, 0);
+  ASSERT_EQ(::waitpid(child, nullptr, 0), child);  // a pid that no longer runs
+  const fs::path dead = dir_.path() / (".out.atlas.partial-" + std::to_string(child) + "-5eed");
+  const fs::path live = dir_.path() / (".out.atlas.partial-" + std::to_string(::getpid()) + "-11fe");
+  for (const fs::path& d : {dead, live, fs::path(dead.string() + ".old")}) {
+    fs::create_directories(d / "charts");
+    write(fs::relative(d / "charts" / "c0.chart", dir_.path()).string(), "half-written");
+  }
+  // Rejected after staging began (the geometry images would not fit --max-memory).
+  EXPECT_EQ(build(write("sphere.off", offText(sphere(4))), "--chart-size 8193 --charts 8"), 2) << output_;
+  EXPECT_NE(output_.find("GiB of geometry images"), std::string::npos) << output_;
+  EXPECT_FALSE(fs::exists(dead));
+  EXPECT_FALSE(fs::exists(dead.string() + ".old"));
+  EXPECT_TRUE(fs::exists(live));
+  fs::remove_all(live);
+  built(write("one.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"));
 }
 
 // ---- repaired and counted ------------------------------------------------------------------------

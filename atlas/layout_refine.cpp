@@ -1,5 +1,5 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5; Sander et al. 2001 (chart splitting).
-#include "atlas/patch_split.h"
+#include "atlas/layout_refine.h"
 
 #include <algorithm>
 #include <cmath>
@@ -93,6 +93,20 @@ Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t sour
   return r;
 }
 
+// Euler characteristic V - E + F = 1 of a set of triangles (with connectivity, a disk).
+bool isDisk(const ChartLayout& layout, const std::vector<uint32_t>& tris) {
+  std::unordered_set<uint32_t> verts;
+  std::unordered_set<uint64_t> edges;
+  for (uint32_t t : tris) {
+    const auto& tri = layout.triangles[t];
+    for (int c = 0; c < 3; ++c) {
+      verts.insert(tri[c]);
+      edges.insert(undirected(tri[c], tri[(c + 1) % 3]));
+    }
+  }
+  return int64_t(verts.size()) - int64_t(edges.size()) + int64_t(tris.size()) == 1;
+}
+
 // Applies a new side list to patch `p` (and an optional second patch), given how the old sides
 // of the changed patches map to new (patch, index) places: links between the changed patches are
 // remapped, links to other patches are updated on the other side.
@@ -145,22 +159,9 @@ bool splitAlong(ChartLayout& layout, uint32_t p, uint32_t i, uint32_t j, const P
   }
   if (first.size() >= patch.triangles.size()) return false;
 
-  // Disk check by Euler characteristic (V - E + F = 1) for each part.
-  auto isDisk = [&](const std::vector<uint32_t>& tris) {
-    std::unordered_set<uint32_t> verts;
-    std::unordered_set<uint64_t> edges;
-    for (uint32_t t : tris) {
-      const auto& tri = layout.triangles[t];
-      for (int c = 0; c < 3; ++c) {
-        verts.insert(tri[c]);
-        edges.insert(undirected(tri[c], tri[(c + 1) % 3]));
-      }
-    }
-    return int64_t(verts.size()) - int64_t(edges.size()) + int64_t(tris.size()) == 1;
-  };
   Patch a, b;
   for (uint32_t t : patch.triangles) (first.contains(t) ? a : b).triangles.push_back(t);
-  if (!isDisk(a.triangles) || !isDisk(b.triangles)) return false;
+  if (!isDisk(layout, a.triangles) || !isDisk(layout, b.triangles)) return false;
 
   const uint32_t q = uint32_t(layout.patches.size());
   std::vector<SidePlace> place(n);
@@ -469,6 +470,91 @@ bool splitPatchAtCornerNeck(ChartLayout& layout, uint32_t p) {
 }
 
 }  // namespace
+
+bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s) {
+  if (p >= layout.patches.size() || s >= layout.patches[p].sides.size()) return false;
+  const PatchSide side = layout.patches[p].sides[s];
+  if (side.neighbourPatch < 0 || side.neighbourPatch == int32_t(p)) return false;
+  const uint32_t q = uint32_t(side.neighbourPatch), t = side.neighbourSide;
+  const Patch &pp = layout.patches[p], &qq = layout.patches[q];
+  // The union of both patches, bounded by every side but the shared one.
+  Patch u;
+  u.triangles = pp.triangles;
+  u.triangles.insert(u.triangles.end(), qq.triangles.begin(), qq.triangles.end());
+  for (uint32_t k = 0; k < pp.sides.size(); ++k) {
+    if (k != s) u.sides.push_back(pp.sides[k]);
+  }
+  for (uint32_t k = 0; k < qq.sides.size(); ++k) {
+    if (k != t) u.sides.push_back(qq.sides[k]);
+  }
+  const PatchGraph g = patchGraph(layout, u);
+  const uint32_t a = side.vertices.front(), b = side.vertices.back();
+  const Paths paths = shortestCuts(layout, g, a);
+  if (!paths.dist.contains(b)) return false;
+  std::vector<uint32_t> path{b};
+  while (path.back() != a) path.push_back(paths.prev.at(path.back()));
+  std::reverse(path.begin(), path.end());
+  if (path == side.vertices) return false;
+  double before = 0.0;
+  for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
+    before += glm::length(layout.positions[side.vertices[k + 1]] - layout.positions[side.vertices[k]]);
+  }
+  if (!(paths.dist.at(b) < before * (1.0 - 1e-9))) return false;
+  // p's part: flood from p's next side, never crossing the new side or any other side.
+  std::unordered_set<uint64_t> walls(g.boundaryEdges.begin(), g.boundaryEdges.end());
+  for (size_t k = 0; k + 1 < path.size(); ++k) walls.insert(undirected(path[k], path[k + 1]));
+  const PatchSide& next = pp.sides[(s + 1) % pp.sides.size()];
+  const auto seed = g.triangleOf.find(directed(next.vertices[0], next.vertices[1]));
+  if (seed == g.triangleOf.end()) return false;
+  std::unordered_set<uint32_t> mine{seed->second};
+  std::vector<uint32_t> stack{seed->second};
+  while (!stack.empty()) {
+    const uint32_t tri = stack.back();
+    stack.pop_back();
+    const auto& v = layout.triangles[tri];
+    for (int c = 0; c < 3; ++c) {
+      if (walls.contains(undirected(v[c], v[(c + 1) % 3]))) continue;
+      const auto o = g.triangleOf.find(directed(v[(c + 1) % 3], v[c]));
+      if (o != g.triangleOf.end() && mine.insert(o->second).second) stack.push_back(o->second);
+    }
+  }
+  // Every other side of p borders p's part, every other side of q does not.
+  auto borders = [&](const PatchSide& x) {
+    const auto it = g.triangleOf.find(directed(x.vertices[0], x.vertices[1]));
+    return it != g.triangleOf.end() && mine.contains(it->second);
+  };
+  for (uint32_t k = 0; k < pp.sides.size(); ++k) {
+    if (k != s && !borders(pp.sides[k])) return false;
+  }
+  for (uint32_t k = 0; k < qq.sides.size(); ++k) {
+    if (k != t && borders(qq.sides[k])) return false;
+  }
+  std::vector<uint32_t> inP, inQ;
+  for (uint32_t tri : u.triangles) (mine.contains(tri) ? inP : inQ).push_back(tri);
+  if (inP.empty() || inQ.empty() || !isDisk(layout, inP) || !isDisk(layout, inQ)) return false;
+  layout.patches[p].triangles = std::move(inP);
+  layout.patches[q].triangles = std::move(inQ);
+  layout.patches[p].sides[s].vertices = path;
+  layout.patches[q].sides[t].vertices =
+      side.reversed ? std::vector<uint32_t>(path.rbegin(), path.rend()) : path;
+  return true;
+}
+
+uint32_t straightenSides(ChartLayout& layout, uint32_t rounds) {
+  uint32_t changed = 0;
+  for (uint32_t r = 0; r < rounds; ++r) {
+    uint32_t now = 0;
+    for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+      for (uint32_t s = 0; s < layout.patches[p].sides.size(); ++s) {
+        const int32_t q = layout.patches[p].sides[s].neighbourPatch;
+        if (q > int32_t(p) && straightenSide(layout, p, s)) ++now;
+      }
+    }
+    changed += now;
+    if (now == 0) break;
+  }
+  return changed;
+}
 
 bool splitPatchAtNeck(ChartLayout& layout, uint32_t p) {
   if (p < layout.patches.size() && !layout.patches[p].triangles.empty() &&

@@ -17,6 +17,19 @@
 
 namespace gimlod {
 
+// Straightens the side `side` of patch `patch` shared with another patch: its vertex run becomes
+// the shortest path between its two corners through the union of both patches (interior edges,
+// no vertex of any other side of either), and the triangles between the old and the new run
+// change patch. Jagged cluster borders (a side that wanders in and out of its neighbour) are
+// what a fixed polygon border squeezes hardest; a straight side gives both patches a rounder
+// shape. Returns false, unchanged, if the side is open or self-adjacent, no shorter path exists,
+// or a part would not be a disk bordered by its other sides.
+bool straightenSide(ChartLayout& layout, uint32_t patch, uint32_t side);
+
+// straightenSide on every shared side once per round, until a round changes nothing; returns the
+// sides changed.
+uint32_t straightenSides(ChartLayout& layout, uint32_t rounds = 2);
+
 // Cuts patch `patch` along the shortest path of interior edges (through interior vertices only)
 // between its corners i and j, which must not be adjacent (2 <= (j - i) mod n <= n - 2). The
 // part with sides i..j-1 keeps the patch's index (its side 0 is the old side i); the other part

@@ -10,7 +10,7 @@
 #include "atlas/charting.h"
 #include "atlas/mesh_io.h"
 #include "atlas/patch_param.h"
-#include "atlas/patch_split.h"
+#include "atlas/layout_refine.h"
 #include "tests/chart_layout_fixture.h"
 
 namespace gimlod {
