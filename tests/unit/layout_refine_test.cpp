@@ -1,4 +1,5 @@
-// Tests for splitting patches of a chart layout: corner-to-corner cuts partition the triangles
+// Tests for refining a chart layout: straightened sides are never longer and keep the layout
+// valid, and splitting patches: corner-to-corner cuts partition the triangles
 // into two linked disks, inserted corners split both sides of a seam, a long strip is cut near
 // its middle, refused splits leave the layout as it was, and the flip repair on a real scan never
 // raises the flipped-texel count and leaves a valid layout that matches the charts it returns.
@@ -6,6 +7,8 @@
 
 #include <algorithm>
 #include <set>
+
+#include <glm/geometric.hpp>
 
 #include "atlas/charting.h"
 #include "atlas/mesh_io.h"
@@ -114,6 +117,58 @@ TEST(PatchSplit, NeckCutCrossesALongStripNearItsMiddle) {
     length += glm::length(layout.positions[cut.vertices[k + 1]] - layout.positions[cut.vertices[k]]);
   }
   EXPECT_LT(length, 2.0);
+}
+
+double runLength(const ChartLayout& layout, const std::vector<uint32_t>& run) {
+  double l = 0.0;
+  for (size_t k = 0; k + 1 < run.size(); ++k) {
+    l += glm::length(layout.positions[run[k + 1]] - layout.positions[run[k]]);
+  }
+  return l;
+}
+
+TEST(LayoutRefine, StraightSidesStayAsTheyAre) {
+  ChartLayout layout = test::gridLayout(8, 4, 2.f, 1.f, {4});
+  const ChartLayout before = layout;
+  EXPECT_EQ(straightenSides(layout), 0u);
+  EXPECT_FALSE(straightenSide(layout, 0, 0));  // open side
+  EXPECT_TRUE(sameLayout(layout, before));
+}
+
+TEST(LayoutRefine, StraightenedScanSidesAreShorterAndTheLayoutStaysValid) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 64;
+  ChartLayout layout = buildChartLayout(mesh, copt);
+  const ChartLayout before = layout;
+  const uint32_t changed = straightenSides(layout);
+  EXPECT_GT(changed, 0u);
+  expectValid(layout);
+  ASSERT_EQ(layout.patches.size(), before.patches.size());
+  size_t triangles = 0, shorter = 0;
+  for (size_t p = 0; p < layout.patches.size(); ++p) {
+    triangles += layout.patches[p].triangles.size();
+    ASSERT_EQ(layout.patches[p].sides.size(), before.patches[p].sides.size());
+    for (size_t s = 0; s < layout.patches[p].sides.size(); ++s) {
+      const PatchSide &now = layout.patches[p].sides[s], &old = before.patches[p].sides[s];
+      // Same corners and links; never longer.
+      EXPECT_EQ(now.vertices.front(), old.vertices.front());
+      EXPECT_EQ(now.vertices.back(), old.vertices.back());
+      EXPECT_EQ(now.neighbourPatch, old.neighbourPatch);
+      const double ln = runLength(layout, now.vertices), lo = runLength(layout, old.vertices);
+      EXPECT_LE(ln, lo * (1 + 1e-12));
+      shorter += ln < lo;
+    }
+  }
+  EXPECT_EQ(triangles, layout.triangles.size());
+  // Both copies of every changed side (a side may change in both rounds).
+  EXPECT_GE(shorter, changed);
+  EXPECT_EQ(shorter % 2, 0u);
+  // Straighter sides parameterize better: the mean image stretch does not rise.
+  ResampleOptions ro;
+  ro.chartSize = 17;
+  ChartLayout raw = before;
+  EXPECT_LE(resampleLayout(layout, ro).image.stretchL2, resampleLayout(raw, ro).image.stretchL2);
 }
 
 TEST(PatchSplit, FlipRepairOnARealScanNeverMakesThingsWorse) {
