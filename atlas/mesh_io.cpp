@@ -1580,7 +1580,7 @@ MeshReadStats streamImpl(const fs::path& path, TriangleSink& sink, const MeshRea
     emit.finish();
     if (stats.trianglesOut == 0) {
       // Every triangle was repaired away (e.g. all vertices at one point): nothing to build from.
-      std::string why = "no usable triangles: ";
+      std::string why = "no valid triangles: ";
       if (stats.trianglesRead == 0) {
         why += "all " + std::to_string(stats.faces) + " faces have fewer than 3 corners";
       } else {

@@ -7,7 +7,9 @@
 #include <bit>
 #include <cerrno>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fcntl.h>
 #include <limits>
@@ -720,6 +722,22 @@ StagedDirectory::StagedDirectory(const std::filesystem::path& target, const std:
     throw InputError(target_.string() + ": exists, is not empty and is not a gimlod " + what_ + "; not replacing it");
   if (!fs::is_directory(target_.parent_path(), ec))
     throw InputError(target_.string() + ": parent directory does not exist");
+  // A build killed by a signal (Ctrl-C, timeout, the OOM killer) cannot remove its staging
+  // directory: remove those of processes that no longer exist before staging anew.
+  {
+    std::string prefix = ".";
+    prefix += target_.filename().string();
+    prefix += ".partial-";
+    std::vector<fs::path> stale;
+    for (fs::directory_iterator it(target_.parent_path(), ec), end; !ec && it != end; it.increment(ec)) {
+      const std::string name = it->path().filename().string();
+      if (name.compare(0, prefix.size(), prefix) != 0) continue;
+      const long pid = std::strtol(name.c_str() + prefix.size(), nullptr, 10);
+      if (pid > 0 && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH) stale.push_back(it->path());
+    }
+    for (const fs::path& d : stale) fs::remove_all(d, ec);
+    ec.clear();
+  }
   std::random_device rd;
   char suffix[64];
   std::snprintf(suffix, sizeof(suffix), ".partial-%d-%x", int(::getpid()), unsigned(rd()));

@@ -325,20 +325,20 @@ TEST_F(BadMesh, NothingLeftAfterRepair) {
   // Every triangle has zero area (collinear), or all vertices are one point, or every triangle
   // uses a non-finite vertex: the repairs leave nothing to build from.
   expectBothReject(write("collinear.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 2 3 4\nf 1 2 4\n"),
-                   {"no usable triangles", "3 degenerate"});
+                   {"no valid triangles", "3 degenerate"});
   Mesh point = sphere(4);
   for (glm::vec3& p : point.v) p = glm::vec3(1.5f, -2.f, 3.f);
   expectBothReject(write("point.ply", plyBinary(point)),
-                   {"no usable triangles", std::to_string(point.f.size()) + " degenerate"});
-  expectBothReject(write("point.stl", stlBinary(point)), {"no usable triangles"});
-  expectBothReject(write("point.off", offText(point)), {"no usable triangles"});
+                   {"no valid triangles", std::to_string(point.f.size()) + " degenerate"});
+  expectBothReject(write("point.stl", stlBinary(point)), {"no valid triangles"});
+  expectBothReject(write("point.off", offText(point)), {"no valid triangles"});
   Mesh nan = sphere(4);
   for (glm::vec3& p : nan.v) p.y = std::numeric_limits<float>::quiet_NaN();
   expectBothReject(write("nan.obj", objText(nan)),
-                   {"no usable triangles", std::to_string(nan.f.size()) + " with a NaN or infinite coordinate"});
+                   {"no valid triangles", std::to_string(nan.f.size()) + " with a NaN or infinite coordinate"});
   // Faces with fewer than 3 corners only.
   expectBothReject(write("short.off", "OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n1 2\n"),
-                   {"no usable triangles", "fewer than 3 corners"});
+                   {"no valid triangles", "fewer than 3 corners"});
   // A point cloud.
   expectBothReject(write("cloud.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"), {"no faces"});
 }
