@@ -5,7 +5,7 @@
 //    bit-identical positions along the shared edge, at every pyramid level; every corner sample is
 //    bit-identical in all the charts that meet there (corners grouped by walking the neighbour
 //    links, not by position); no sample inside a chart coincides with any other sample;
-//  - the exported surface (readAtlasSurface, `gimlod export --level K`) at every level is welded:
+//  - the exported surface (readAtlasSurface at every level, `gimlod export --level 2`) is welded:
 //    no non-manifold edge, and exactly the input's open boundary loops and Euler characteristic
 //    (the bunny's 5 holes stay holes; closed scans export closed);
 //  - no flipped texels;
@@ -309,6 +309,20 @@ TEST_P(ScanAtlasTest, Invariants) {
       EXPECT_EQ(t.boundaryLoops, in.boundaryLoops) << "level " << level << ": open boundaries other than the scan's";
       EXPECT_EQ(t.euler(), in.euler()) << "level " << level << ": the welded surface changed topology";
     }
+    // The same through the command line, at one level: `gimlod export --level 2` writes a PLY that
+    // the mesh reader reads back with the same topology.
+    const fs::path ply = built->dir.parent_path() / (name + "_level2.ply");
+    std::string out;
+    ASSERT_EQ(test::runCommand(test::appPath().string() + " export " + built->dir.string() + " -o " + ply.string() +
+                                   " --level 2",
+                               &out),
+              0)
+        << out;
+    const Topology cli = inputTopology(ply);
+    EXPECT_EQ(cli.boundaryLoops, in.boundaryLoops);
+    EXPECT_EQ(cli.euler(), in.euler());
+    EXPECT_EQ(cli.nonManifoldEdges, 0u);
+    fs::remove(ply);
   }
 
   {
