@@ -265,6 +265,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                        {"image_stretch_l2", set.image.stretchL2},
                        {"image_stretch_linf", set.image.stretchLinf},
                        {"flipped_texels", set.image.flippedTexels},
+                       {"texels_against_vertex_normals", set.image.texelsAgainstNormals},
                        {"sides_straightened", straightened},
                        {"flipped_texels_before_splits", flips.flippedTexelsFirst},
                        {"patches_split_for_flips", flips.patchesSplit},
@@ -278,6 +279,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   for (const GeometryImage& g : set.charts) {
     perChart.push_back({{"patch", g.patch}, {"quad", g.quad}, {"stretch_l2", g.quality.stretchL2},
                         {"stretch_linf", g.quality.stretchLinf}, {"flipped_texels", g.quality.flippedTexels},
+                        {"texels_against_vertex_normals", g.quality.texelsAgainstNormals},
                         {"degenerate_texels", g.quality.degenerateTexels}});
   }
   stats["resample"]["per_chart"] = std::move(perChart);

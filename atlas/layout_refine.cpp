@@ -564,6 +564,34 @@ bool splitPatchAtNeck(ChartLayout& layout, uint32_t p) {
   return splitPatchAtCornerNeck(layout, p);
 }
 
+uint32_t countFlippedTexels(const ChartLayout& layout, const std::vector<uint32_t>& patches,
+                            const ResampleOptions& options) {
+  // The patches alone, sides to other patches opened (an open side is sampled exactly as a shared
+  // one), but every triangle kept so the vertex normals are those of the whole surface.
+  ChartLayout sub;
+  sub.positions = layout.positions;
+  sub.colours = layout.colours;
+  sub.triangles = layout.triangles;
+  std::unordered_map<uint32_t, uint32_t> index;
+  for (uint32_t p : patches) {
+    if (p < layout.patches.size()) index.try_emplace(p, uint32_t(index.size()));
+  }
+  sub.patches.resize(index.size());
+  for (const auto& [p, i] : index) {
+    Patch patch = layout.patches[p];
+    for (PatchSide& side : patch.sides) {
+      const auto it = side.neighbourPatch >= 0 ? index.find(uint32_t(side.neighbourPatch)) : index.end();
+      if (it == index.end()) {
+        side.neighbourPatch = -1;
+      } else {
+        side.neighbourPatch = int32_t(it->second);
+      }
+    }
+    sub.patches[i] = std::move(patch);
+  }
+  return resampleLayout(sub, options).image.flippedTexels;
+}
+
 GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions& options,
                                       uint32_t maxRounds, FlipRepairStats* stats) {
   FlipRepairStats local;
@@ -571,32 +599,87 @@ GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions
   st = FlipRepairStats{};
   GeometryImageSet set = resampleLayout(layout, options);
   st.flippedTexelsFirst = set.image.flippedTexels;
-  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0; ++round) {
-    // Per folding patch, the triangle under its first flipped texel.
+  // Per folding patch, the triangle under its first flipped texel.
+  auto folding = [](const GeometryImageSet& s) {
     std::vector<std::pair<uint32_t, uint32_t>> bad;
-    for (const GeometryImage& g : set.charts) {
+    for (const GeometryImage& g : s.charts) {
       if (g.foldTriangles.empty() || (!bad.empty() && bad.back().first == g.patch)) continue;
       bad.push_back({g.patch, g.foldTriangles.front()});
     }
+    return bad;
+  };
+  // First, whole rounds: every folding patch cut at once (neck first), kept while the total
+  // drops. Cheap (one resampling a round) and it lets halves be cut again.
+  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0; ++round) {
     ChartLayout next = layout;
-    uint32_t split = 0, unsplit = 0;
-    for (const auto& [p, triangle] : bad) {
-      if (splitPatchAtNeck(next, p) || splitPatchThrough(next, p, triangle)) {
-        ++split;
-      } else {
-        ++unsplit;
-      }
+    uint32_t split = 0;
+    for (const auto& [p, triangle] : folding(set)) {
+      split += splitPatchAtNeck(next, p) || splitPatchThrough(next, p, triangle);
     }
     if (split == 0) break;
     GeometryImageSet nextSet = resampleLayout(next, options);
     ++st.rounds;
-    // A split can move the fold rather than remove it (a new corner reshapes the neighbour's
-    // polygon too): a round is kept only if it lowers the count.
     if (nextSet.image.flippedTexels >= set.image.flippedTexels) break;
     layout = std::move(next);
     set = std::move(nextSet);
     st.patchesSplit += split;
-    st.patchesUnsplit = unsplit;
+  }
+  // Then patch by patch, each split judged where it acts.
+  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0; ++round) {
+    const std::vector<std::pair<uint32_t, uint32_t>> bad = folding(set);
+    uint32_t split = 0;
+    st.patchesUnsplit = 0;
+    for (const auto& [p, triangle] : bad) {
+      // Everything a split can touch: the patch and its neighbours (which may gain a corner).
+      std::vector<uint32_t> touched{p};
+      for (const PatchSide& side : layout.patches[p].sides) {
+        if (side.neighbourPatch >= 0) touched.push_back(uint32_t(side.neighbourPatch));
+      }
+      std::sort(touched.begin(), touched.end());
+      touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+      // A new corner in a neighbour renumbers its sides, which its own neighbours' links name:
+      // the undo keeps two rings of patches.
+      std::vector<uint32_t> kept2 = touched;
+      for (uint32_t q : touched) {
+        for (const PatchSide& side : layout.patches[q].sides) {
+          if (side.neighbourPatch >= 0) kept2.push_back(uint32_t(side.neighbourPatch));
+        }
+      }
+      std::sort(kept2.begin(), kept2.end());
+      kept2.erase(std::unique(kept2.begin(), kept2.end()), kept2.end());
+      std::vector<Patch> saved;
+      for (uint32_t q : kept2) saved.push_back(layout.patches[q]);
+      const size_t count = layout.patches.size();
+      const uint32_t before = countFlippedTexels(layout, touched, options);
+      // A split is kept only if it lowers the flipped texels where it acts: a cut can move a
+      // fold rather than remove it, and a new corner reshapes the neighbour's polygon too.
+      // A cut through the fold must remove some of it; a cut at the neck may also just not add
+      // any (the fold is then in a smaller patch, which the next round cuts again).
+      bool kept = false;
+      for (const bool neck : {false, true}) {
+        const bool done = neck ? splitPatchAtNeck(layout, p) : splitPatchThrough(layout, p, triangle);
+        if (done) {
+          std::vector<uint32_t> now = touched;
+          for (size_t q = count; q < layout.patches.size(); ++q) now.push_back(uint32_t(q));
+          const uint32_t after = countFlippedTexels(layout, now, options);
+          if (after < before || (neck && after == before)) {
+            kept = true;
+            break;
+          }
+        }
+        for (size_t k = 0; k < kept2.size(); ++k) layout.patches[kept2[k]] = saved[k];
+        layout.patches.resize(count);
+      }
+      if (kept) {
+        ++split;
+      } else {
+        ++st.patchesUnsplit;
+      }
+    }
+    if (split == 0) break;
+    st.patchesSplit += split;
+    set = resampleLayout(layout, options);
+    ++st.rounds;
   }
   return set;
 }

@@ -60,16 +60,24 @@ bool splitPatchThrough(ChartLayout& layout, uint32_t patch, uint32_t triangle, u
 bool splitPatchAtNeck(ChartLayout& layout, uint32_t patch);
 
 struct FlipRepairStats {
-  uint32_t rounds = 0;          // resampling rounds after the first (kept or not)
-  uint32_t patchesSplit = 0;    // in kept rounds
-  uint32_t patchesUnsplit = 0;  // patches with flipped texels that could not be split
+  uint32_t rounds = 0;          // resampling rounds after the first
+  uint32_t patchesSplit = 0;
+  uint32_t patchesUnsplit = 0;  // folding patches of the last round no split helped
   uint32_t flippedTexelsFirst = 0;  // flipped texels of the first resampling
 };
 
-// resampleLayout, then up to maxRounds times: split every patch one of whose charts has flipped
-// texels (splitPatchAtNeck, else splitPatchThrough the fold) and resample; a round is kept only if
-// it lowers the flipped-texel count, and the first round that does not ends the repair. `layout`
-// ends as the layout of the returned set.
+// Flipped texels of the given patches resampled on their own (sides to other patches sampled as
+// open sides, which gives the same samples), with the whole surface's vertex normals.
+uint32_t countFlippedTexels(const ChartLayout& layout, const std::vector<uint32_t>& patches,
+                            const ResampleOptions& options);
+
+// resampleLayout, then two repairs of up to maxRounds rounds each. Whole rounds: every patch one
+// of whose charts has flipped texels is split (splitPatchAtNeck, else splitPatchThrough the fold)
+// and the layout resampled, the round kept only if the total drops. Then patch by patch: the
+// split through the fold is kept if it lowers the flipped texels of the patch and its neighbours
+// together (countFlippedTexels), else the neck split if it does not raise them; others are
+// undone. Each repair ends at the first round that keeps nothing. `layout` ends as the layout of
+// the returned set.
 GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions& options,
                                       uint32_t maxRounds = 4, FlipRepairStats* stats = nullptr);
 

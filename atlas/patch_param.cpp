@@ -304,7 +304,7 @@ std::vector<double> vertexStretch(const LocalPatch& lp, const std::vector<glm::d
 // A3D(T) * L2(T)^2; infinite if a parameter triangle would flip or collapse (Sander's barrier).
 double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv,
                   const std::vector<uint32_t>& ring, uint32_t v, const glm::dvec2& at,
-                  const std::vector<double>& area3D) {
+                  const std::vector<double>& area3D, double k2) {
   double e = 0.0;
   for (uint32_t t : ring) {
     const auto& tri = lp.triangles[t];
@@ -318,7 +318,16 @@ double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv,
     const glm::dvec3 &q1 = lp.xyz[tri[0]], &q2 = lp.xyz[tri[1]], &q3 = lp.xyz[tri[2]];
     const glm::dvec3 ss = (q1 * (p[1].y - p[2].y) + q2 * (p[2].y - p[0].y) + q3 * (p[0].y - p[1].y)) / twice;
     const glm::dvec3 st = (q1 * (p[2].x - p[1].x) + q2 * (p[0].x - p[2].x) + q3 * (p[1].x - p[0].x)) / twice;
-    e += area3D[t] * 0.5 * (glm::dot(ss, ss) + glm::dot(st, st));
+    if (k2 > 0.0) {
+      // Symmetric Dirichlet: tr(M) + tr(M^-1) of the scaled metric M = k^2 J^T J, which grows
+      // without bound as a triangle is squeezed or spread in any direction (isometry: 4).
+      const double a = glm::dot(ss, ss) * k2, b = glm::dot(ss, st) * k2, c = glm::dot(st, st) * k2;
+      const double det = a * c - b * b;
+      if (!(det > 0.0)) return std::numeric_limits<double>::infinity();
+      e += area3D[t] * ((a + c) + (a + c) / det);
+    } else {
+      e += area3D[t] * 0.5 * (glm::dot(ss, ss) + glm::dot(st, st));
+    }
   }
   return e;
 }
@@ -327,7 +336,7 @@ double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv,
 // ring's L2 stretch energy, never accepting a step that flips a triangle. Gauss-Seidel sweeps
 // until the total energy stops dropping. Returns the sweeps run.
 uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>& isBoundary,
-                                uint32_t maxSweeps, std::vector<glm::dvec2>& uv) {
+                                uint32_t maxSweeps, bool symmetric, std::vector<glm::dvec2>& uv) {
   std::vector<std::vector<uint32_t>> rings(lp.vertices.size());
   std::vector<double> area3D(lp.triangles.size());
   for (uint32_t t = 0; t < lp.triangles.size(); ++t) {
@@ -336,6 +345,13 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
                                              lp.xyz[tri[2]] - lp.xyz[tri[0]]));
     for (uint32_t v : tri) rings[v].push_back(t);
   }
+  // k^2 scales 3D lengths to the domain's (parameter area over surface area), for the symmetric
+  // energy; 0 selects Sander's L2 energy.
+  double k2 = 0.0;
+  if (symmetric) {
+    const ParamQuality q = measureStretch(uv, lp.xyz, lp.triangles);
+    if (q.area3D > 0.0 && q.areaParam > 0.0) k2 = q.areaParam / q.area3D;
+  }
   uint32_t sweeps = 0;
   for (; sweeps < maxSweeps; ++sweeps) {
     double before = 0.0, after = 0.0;
@@ -343,7 +359,7 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
       if (isBoundary[v]) continue;
       const std::vector<uint32_t>& ring = rings[v];
       const glm::dvec2 p = uv[v];
-      const double e0 = ringEnergy(lp, uv, ring, v, p, area3D);
+      const double e0 = ringEnergy(lp, uv, ring, v, p, area3D, k2);
       if (!std::isfinite(e0)) continue;  // a flipped start: leave it to the counts
       before += e0;
       double scale = 0.0;  // mean distance to the ring's vertices in the parameter domain
@@ -353,17 +369,17 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
       scale /= 2.0 * double(ring.size());
       const double h = 1e-6 * scale;
       const glm::dvec2 g(
-          (ringEnergy(lp, uv, ring, v, p + glm::dvec2(h, 0), area3D) -
-           ringEnergy(lp, uv, ring, v, p - glm::dvec2(h, 0), area3D)) / (2 * h),
-          (ringEnergy(lp, uv, ring, v, p + glm::dvec2(0, h), area3D) -
-           ringEnergy(lp, uv, ring, v, p - glm::dvec2(0, h), area3D)) / (2 * h));
+          (ringEnergy(lp, uv, ring, v, p + glm::dvec2(h, 0), area3D, k2) -
+           ringEnergy(lp, uv, ring, v, p - glm::dvec2(h, 0), area3D, k2)) / (2 * h),
+          (ringEnergy(lp, uv, ring, v, p + glm::dvec2(0, h), area3D, k2) -
+           ringEnergy(lp, uv, ring, v, p - glm::dvec2(0, h), area3D, k2)) / (2 * h));
       const double gl = glm::length(g);
       double best = e0;
       if (std::isfinite(gl) && gl > 0.0) {
         const glm::dvec2 d = -g / gl;
         for (double step = 0.25 * scale; step > 1e-4 * scale; step *= 0.5) {
           const glm::dvec2 q = p + d * step;
-          const double e = ringEnergy(lp, uv, ring, v, q, area3D);
+          const double e = ringEnergy(lp, uv, ring, v, q, area3D, k2);
           if (e < best) {
             best = e;
             uv[v] = q;
@@ -548,9 +564,13 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
 
   if (options.stretchSweeps > 0) {
     trial = out.uv;
-    out.sweepsUsed = optimizeStretchLocally(lp, isBoundary, options.stretchSweeps, trial);
+    out.sweepsUsed = optimizeStretchLocally(lp, isBoundary, options.stretchSweeps,
+                                            options.symmetricEnergy, trial);
     const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
-    if (q.flippedTriangles <= out.quality.flippedTriangles && q.stretchL2 <= out.quality.stretchL2) {
+    // The symmetric energy trades a little L2 stretch for no spread-out slivers; it only ever
+    // lowers its own energy, so it is kept unless it flips something.
+    if (q.flippedTriangles <= out.quality.flippedTriangles &&
+        (options.symmetricEnergy || q.stretchL2 <= out.quality.stretchL2)) {
       out.uv = std::move(trial);
       out.quality = q;
     }

@@ -30,6 +30,10 @@ struct ParamOptions {
   // Local L2 stretch minimization sweeps (Sander et al.: per-vertex line searches that never
   // flip a triangle), until the energy drops by less than 0.01% in a sweep. 0 skips it.
   uint32_t stretchSweeps = 30;
+  // The local sweeps minimize the symmetric Dirichlet energy (squeezing and spreading both cost,
+  // so no triangle is left strongly anisotropic next to a bend) instead of Sander's L2 stretch
+  // (which only penalizes squeezing).
+  bool symmetricEnergy = true;
   // Domain polygon: corners on the unit circle with central angles proportional to the sides' 3D
   // lengths (clamped, see patchPolygon), so long and short sides get parameter length in
   // proportion; false gives the regular n-gon whatever the side lengths.

@@ -321,7 +321,8 @@ std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layo
 
 ImageQuality measureImage(const std::vector<glm::vec3>& positions,
                           const std::vector<glm::vec3>& normals, uint32_t chartSize,
-                          std::vector<uint32_t>* flippedAt) {
+                          std::vector<uint32_t>* flippedAt,
+                          const std::vector<glm::vec3>* faceNormals) {
   ImageQuality q;
   const uint32_t m = chartSize - 1;
   const double scale = double(m);  // d(position)/d(s) = difference * m
@@ -352,7 +353,15 @@ ImageQuality measureImage(const std::vector<glm::vec3>& positions,
       }
       const glm::dvec3 n = glm::dvec3(normals[i00]) + glm::dvec3(normals[i10]) +
                            glm::dvec3(normals[i01]) + glm::dvec3(normals[i11]);
-      if (glm::dot(cr, n) < 0.0) {
+      const bool againstNormals = glm::dot(cr, n) < 0.0;
+      bool againstFaces = againstNormals;
+      if (faceNormals) {
+        const auto& f = *faceNormals;
+        const glm::dvec3 fn = glm::dvec3(f[i00]) + glm::dvec3(f[i10]) + glm::dvec3(f[i01]) + glm::dvec3(f[i11]);
+        if (glm::dot(fn, fn) > 0.0) againstFaces = glm::dot(cr, fn) < 0.0;
+      }
+      q.texelsAgainstNormals += againstNormals;
+      if (againstFaces) {
         ++q.flippedTexels;
         if (flippedAt) flippedAt->push_back(uint32_t(i00));
       }
@@ -375,6 +384,7 @@ ImageQuality combineImageQuality(const std::vector<ImageQuality>& parts) {
     q.area3D += p.area3D;
     q.stretchLinf = std::max(q.stretchLinf, p.stretchLinf);
     q.flippedTexels += p.flippedTexels;
+    q.texelsAgainstNormals += p.texelsAgainstNormals;
     q.degenerateTexels += p.degenerateTexels;
   }
   if (q.area3D > 0.0) q.stretchL2 = std::sqrt(num / q.area3D);
@@ -497,6 +507,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
 
       std::vector<glm::vec3> floatNormals(size_t(size) * size);
       std::vector<uint32_t> triangles(size_t(size) * size, ~0u);
+      std::vector<glm::vec3> faceNormals(size_t(size) * size);
       for (uint32_t i = 0; i < n; ++i) {
         GeometryImage& img = set.charts[links.offsets[p] + i];
         img.patch = p;
@@ -529,8 +540,18 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
             put(u, v, sampleAt(d));
           }
         }
+        // The input faces under the samples (zero on sides, where no face is located).
+        for (size_t k = 0; k < faceNormals.size(); ++k) {
+          faceNormals[k] = glm::vec3(0.f);
+          if (triangles[k] == ~0u) continue;
+          const auto& t = layout.triangles[triangles[k]];
+          const glm::dvec3 a(layout.positions[t[0]]), b(layout.positions[t[1]]), c(layout.positions[t[2]]);
+          const glm::dvec3 cr = glm::cross(b - a, c - a);
+          const double l = glm::length(cr);
+          if (l > 0.0 && std::isfinite(l)) faceNormals[k] = glm::vec3(cr / l);
+        }
         std::vector<uint32_t> flipped;
-        img.quality = measureImage(img.positions, floatNormals, size, &flipped);
+        img.quality = measureImage(img.positions, floatNormals, size, &flipped, &faceNormals);
         // Where the chart folds, as layout triangles (one per flipped texel, a few per chart).
         for (uint32_t at : flipped) {
           for (const size_t k : {size_t(at), size_t(at) + 1, size_t(at) + size, size_t(at) + size + 1}) {

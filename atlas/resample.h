@@ -36,8 +36,14 @@ struct ResampleOptions {
 struct ImageQuality {
   double stretchL2 = 1.0;
   double stretchLinf = 1.0;
-  uint32_t flippedTexels = 0;     // texel quads whose 3D normal (cross of the diagonals)
-                                  // opposes the mean of their 4 interpolated surface normals
+  // Texel quads whose 3D normal (cross of the diagonals) opposes the input faces they sample
+  // (the sum of the face normals under their corners; the interpolated vertex normals where no
+  // corner lies in a face): folds the atlas itself makes.
+  uint32_t flippedTexels = 0;
+  // Texel quads whose 3D normal opposes the mean of their 4 interpolated vertex normals. This
+  // also counts texels that faithfully follow a folded input triangle (one facing against its
+  // own vertex normals, as scans have), so it is >= flippedTexels less such texels.
+  uint32_t texelsAgainstNormals = 0;
   uint32_t degenerateTexels = 0;  // texel quads of (near) zero 3D area
   double area3D = 0.0;            // surface area of the sampled grid
 };
@@ -98,10 +104,13 @@ std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layo
 GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options = {});
 
 // Measures one image (positions and float unit normals, chartSize^2 each). flippedAt, if given,
-// receives the sample index of the (0,0) corner of every flipped texel.
+// receives the sample index of the (0,0) corner of every flipped texel. faceNormals, if given, are
+// the unit normals of the input faces under the samples (zero where none); without them a texel
+// is flipped when it opposes the vertex normals.
 ImageQuality measureImage(const std::vector<glm::vec3>& positions,
                           const std::vector<glm::vec3>& normals, uint32_t chartSize,
-                          std::vector<uint32_t>* flippedAt = nullptr);
+                          std::vector<uint32_t>* flippedAt = nullptr,
+                          const std::vector<glm::vec3>* faceNormals = nullptr);
 
 // Combines per-chart figures: 3D-area-weighted RMS of the per-chart L2, max Linf, summed counts.
 // note: each chart is normalized by its own area, so imbalance between charts (a large chart

@@ -448,3 +448,38 @@ TEST(Resample, BunnyDiskRegion) {
 
 }  // namespace
 }  // namespace gimlod
+
+namespace gimlod {
+namespace {
+
+// A flat 5 x 5 image in the z = 0 plane, u along x and v along y (normal +z).
+std::vector<glm::vec3> flatImage(bool mirrored) {
+  std::vector<glm::vec3> p;
+  for (int v = 0; v < 5; ++v) {
+    for (int u = 0; u < 5; ++u) p.emplace_back(float(mirrored ? 4 - u : u), float(v), 0.f);
+  }
+  return p;
+}
+
+TEST(ResampleQuality, FlippedTexelsAreJudgedAgainstTheInputFaces) {
+  const std::vector<glm::vec3> up(25, glm::vec3(0, 0, 1)), down(25, glm::vec3(0, 0, -1));
+  // Faithful to the faces: no flips, whatever the vertex normals say.
+  ImageQuality q = measureImage(flatImage(false), down, 5, nullptr, &up);
+  EXPECT_EQ(q.flippedTexels, 0u);
+  EXPECT_EQ(q.texelsAgainstNormals, 16u);  // a folded input: every texel against its vertex normals
+  q = measureImage(flatImage(false), up, 5, nullptr, &up);
+  EXPECT_EQ(q.flippedTexels, 0u);
+  EXPECT_EQ(q.texelsAgainstNormals, 0u);
+  // A mirrored image faces away from the faces it samples: all flipped, and all reported.
+  std::vector<uint32_t> at;
+  q = measureImage(flatImage(true), up, 5, &at, &up);
+  EXPECT_EQ(q.flippedTexels, 16u);
+  EXPECT_EQ(at.size(), 16u);
+  // Without faces (zero face normals count as none), the vertex normals decide.
+  const std::vector<glm::vec3> none(25, glm::vec3(0.f));
+  EXPECT_EQ(measureImage(flatImage(true), up, 5, nullptr, &none).flippedTexels, 16u);
+  EXPECT_EQ(measureImage(flatImage(true), up, 5).flippedTexels, 16u);
+}
+
+}  // namespace
+}  // namespace gimlod
