@@ -93,6 +93,28 @@ Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t sour
   return r;
 }
 
+// The triangles reached from the one inside `side`'s first edge, crossing no edge in `walls`
+// (undirected keys); empty if that triangle is not in the graph's patch.
+std::unordered_set<uint32_t> floodFrom(const ChartLayout& layout, const PatchGraph& g,
+                                       const PatchSide& side, const std::unordered_set<uint64_t>& walls) {
+  const auto seed = g.triangleOf.find(directed(side.vertices[0], side.vertices[1]));
+  if (seed == g.triangleOf.end()) return {};
+  std::unordered_set<uint32_t> part{seed->second};
+  std::vector<uint32_t> stack{seed->second};
+  while (!stack.empty()) {
+    const uint32_t t = stack.back();
+    stack.pop_back();
+    const auto& tri = layout.triangles[t];
+    for (int c = 0; c < 3; ++c) {
+      const uint32_t a = tri[c], b = tri[(c + 1) % 3];
+      if (walls.contains(undirected(a, b))) continue;
+      const auto o = g.triangleOf.find(directed(b, a));
+      if (o != g.triangleOf.end() && part.insert(o->second).second) stack.push_back(o->second);
+    }
+  }
+  return part;
+}
+
 // Euler characteristic V - E + F = 1 of a set of triangles (with connectivity, a disk).
 bool isDisk(const ChartLayout& layout, const std::vector<uint32_t>& tris) {
   std::unordered_set<uint32_t> verts;
@@ -134,21 +156,8 @@ bool splitAlong(ChartLayout& layout, uint32_t p, uint32_t i, uint32_t j, const P
   for (size_t k = 0; k + 1 < path.size(); ++k) cut.insert(undirected(path[k], path[k + 1]));
 
   // Triangles of the first part: flood from side i's first edge, never crossing the cut.
-  const auto seed = g.triangleOf.find(directed(patch.sides[i].vertices[0], patch.sides[i].vertices[1]));
-  if (seed == g.triangleOf.end()) return false;
-  std::unordered_set<uint32_t> first{seed->second};
-  std::vector<uint32_t> stack{seed->second};
-  while (!stack.empty()) {
-    const uint32_t t = stack.back();
-    stack.pop_back();
-    const auto& tri = layout.triangles[t];
-    for (int c = 0; c < 3; ++c) {
-      const uint32_t a = tri[c], b = tri[(c + 1) % 3];
-      if (cut.contains(undirected(a, b))) continue;
-      const auto o = g.triangleOf.find(directed(b, a));
-      if (o != g.triangleOf.end() && first.insert(o->second).second) stack.push_back(o->second);
-    }
-  }
+  const std::unordered_set<uint32_t> first = floodFrom(layout, g, patch.sides[i], cut);
+  if (first.empty()) return false;
   // Every side must border the part it goes to.
   for (uint32_t s = 0; s < n; ++s) {
     const PatchSide& side = patch.sides[s];
@@ -503,21 +512,8 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s) {
   // p's part: flood from p's next side, never crossing the new side or any other side.
   std::unordered_set<uint64_t> walls(g.boundaryEdges.begin(), g.boundaryEdges.end());
   for (size_t k = 0; k + 1 < path.size(); ++k) walls.insert(undirected(path[k], path[k + 1]));
-  const PatchSide& next = pp.sides[(s + 1) % pp.sides.size()];
-  const auto seed = g.triangleOf.find(directed(next.vertices[0], next.vertices[1]));
-  if (seed == g.triangleOf.end()) return false;
-  std::unordered_set<uint32_t> mine{seed->second};
-  std::vector<uint32_t> stack{seed->second};
-  while (!stack.empty()) {
-    const uint32_t tri = stack.back();
-    stack.pop_back();
-    const auto& v = layout.triangles[tri];
-    for (int c = 0; c < 3; ++c) {
-      if (walls.contains(undirected(v[c], v[(c + 1) % 3]))) continue;
-      const auto o = g.triangleOf.find(directed(v[(c + 1) % 3], v[c]));
-      if (o != g.triangleOf.end() && mine.insert(o->second).second) stack.push_back(o->second);
-    }
-  }
+  const std::unordered_set<uint32_t> mine = floodFrom(layout, g, pp.sides[(s + 1) % pp.sides.size()], walls);
+  if (mine.empty()) return false;
   // Every other side of p borders p's part, every other side of q does not.
   auto borders = [&](const PatchSide& x) {
     const auto it = g.triangleOf.find(directed(x.vertices[0], x.vertices[1]));

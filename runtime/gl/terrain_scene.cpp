@@ -224,9 +224,16 @@ DrawStats TerrainScene::drawCut(const Camera& camera, const Cut& cut, FrameResul
 }
 
 uint32_t TerrainScene::nodeRoom() const {
-  // Keep the cut within the page pool: the roots are locked, and the stitching constraint may
-  // add a few nodes beyond the budget.
-  return (cache_.capacity() - atlas_.hierarchy.chartCount()) * 3 / 4;
+  // Keep the cut's pages within the pool. The roots' pages are locked, so the cut's other nodes
+  // must fit in the rest, `free` (3/4 of it: the stitching constraint may add nodes past the
+  // budget). A cut of at most `free` nodes does; so does one of at most roots + 3/4 free: each
+  // split root leaves the cut but puts >= 4 nodes in it, so with k roots split the non-root nodes
+  // N satisfy 4k <= N <= 3/4 free + k, hence k <= free / 4 and N <= free. The second bound is
+  // the larger one for atlases of many charts (a scan's hundreds), where the first would leave
+  // almost no room to split.
+  const uint32_t roots = atlas_.hierarchy.chartCount();
+  const uint32_t free = (cache_.capacity() - roots) * 3 / 4;
+  return std::max(free, roots + free * 3 / 4);
 }
 
 uint32_t TerrainScene::nodeBudget(uint32_t maxNodes) const {

@@ -58,8 +58,9 @@ class TerrainScene {
  public:
   TerrainScene(const AtlasView& atlas, const SceneOptions& options);
   const AtlasView& atlas() const { return atlas_; }
-  // The largest node budget a frame gets: 3/4 of the page pool's unlocked layers (the pool is
-  // clamped to GL_MAX_ARRAY_TEXTURE_LAYERS); larger budgets are lowered to it.
+  // The largest node budget a frame gets such that the cut's pages fit the page pool (clamped to
+  // GL_MAX_ARRAY_TEXTURE_LAYERS) beside the locked roots: the larger of 3/4 of the unlocked
+  // layers and the root count plus 9/16 of them (see the .cpp); larger budgets are lowered to it.
   uint32_t nodeRoom() const;
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
