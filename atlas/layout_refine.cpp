@@ -339,11 +339,18 @@ bool splitByCut(ChartLayout& layout, uint32_t p, uint32_t triangle, uint32_t max
     const auto a = places.at(e1), b = places.at(e2);
     const auto [s1, s2] = partSides(patch, a, b);
     if (s1 == 0 || s1 > maxSides || s2 > maxSides) return false;
-    for (const auto& at : {a, b}) {
+    int32_t gained[2] = {-1, -1};  // neighbours gaining a corner (the same one may gain two)
+    for (int e = 0; e < 2; ++e) {
+      const auto& at = e == 0 ? a : b;
       if (at.second == 0) continue;
       const PatchSide& side = patch.sides[at.first];
       if (side.neighbourPatch == int32_t(p)) return false;
-      if (side.neighbourPatch >= 0 && sidesOf(uint32_t(side.neighbourPatch)) + 1 > maxSides) return false;
+      gained[e] = side.neighbourPatch;
+    }
+    for (int e = 0; e < 2; ++e) {
+      if (gained[e] < 0) continue;
+      const uint32_t gain = gained[0] == gained[1] ? 2 : 1;
+      if (sidesOf(uint32_t(gained[e])) + gain > maxSides) return false;
     }
     return true;
   };
@@ -404,7 +411,9 @@ bool splitByCut(ChartLayout& layout, uint32_t p, uint32_t triangle, uint32_t max
   // New corners at the ends (indices shift as sides split), then the cut between them.
   for (const uint32_t e : {best.front(), best.back()}) {
     const auto at = boundaryPlaces(layout.patches[p]).at(e);
-    if (at.second != 0 && !insertCorner(layout, p, at.first, at.second, maxSides)) return false;
+    // The patch itself may pass maxSides until it is cut (acceptable() bounded both parts and the
+    // neighbours).
+    if (at.second != 0 && !insertCorner(layout, p, at.first, at.second, maxSides + 2)) return false;
   }
   const Patch& now = layout.patches[p];
   uint32_t i = ~0u, j = ~0u;
