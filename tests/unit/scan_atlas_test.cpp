@@ -354,8 +354,9 @@ TEST_P(ScanAtlasTest, Invariants) {
 // of atlas/resample.h: texel quads that face away from the input faces they sample), and the
 // parameterization's flipped triangles, which must be 0.
 // The goal for flipped texels is 0, reached on igea, the turbine blade and the armadillo. The
-// bunny keeps 7 and the horse 2, each a run of texels over a sliver input triangle at a patch
-// corner on the tip of a thin spike of the scan, which no split the repair tries removes. Until
+// bunny keeps 7, a run over a sliver input triangle at a patch corner on the tip of a thin spike
+// of the scan; the horse 2, texels straddling a folded input triangle (its neighbour faces the
+// other way), where the faces under one texel disagree. No split the repair tries removes them. Until
 // they go, the bound is one texel in 100,000 (about 32 per scan): it still fails on what the
 // unrepaired layouts gave (hundreds to thousands per scan) and on a repair that stops working.
 TEST_P(ScanAtlasTest, FlippedTexels) {
