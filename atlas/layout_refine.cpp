@@ -632,6 +632,8 @@ GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions
   // Then patch by patch, each split judged where it acts.
   for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0; ++round) {
     const std::vector<std::pair<uint32_t, uint32_t>> bad = folding(set);
+    std::vector<uint32_t> flippedOf(layout.patches.size(), 0);
+    for (const GeometryImage& g : set.charts) flippedOf[g.patch] += g.quality.flippedTexels;
     uint32_t split = 0;
     st.patchesUnsplit = 0;
     for (const auto& [p, triangle] : bad) {
@@ -655,7 +657,10 @@ GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions
       std::vector<Patch> saved;
       for (uint32_t q : kept2) saved.push_back(layout.patches[q]);
       const size_t count = layout.patches.size();
-      const uint32_t before = countFlippedTexels(layout, touched, options);
+      // Before: the last full resampling's figures (the same samples as a resampling of these
+      // patches alone, so one evaluation a trial).
+      uint32_t before = 0;
+      for (uint32_t q : touched) before += flippedOf[q];
       // A split is kept only if it lowers the flipped texels where it acts: a cut can move a
       // fold rather than remove it, and a new corner reshapes the neighbour's polygon too.
       // A cut through the fold must remove some of it; a cut at the neck may also just not add
