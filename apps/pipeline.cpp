@@ -3,6 +3,9 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -91,17 +94,39 @@ uint64_t procStatusBytes(const char* key) {
   return kb * 1024;
 }
 
-// Per-stage wall time, CPU time and peak resident memory. The kernel's peak (VmHWM) is reset at
-// the start of each stage (writing 5 to /proc/self/clear_refs), so each stage reports its own
-// peak; the whole build's peak is the largest of them.
+// Per-stage wall time, CPU time and peak resident memory. A sampler thread reads the resident
+// size every 5 ms and keeps the largest since the stage began (the kernel's own peak, VmHWM, is
+// left alone: resetting it would also reset the rusage peak that /usr/bin/time reports). A
+// stage's figure is the larger of its sampled peak and VmHWM when VmHWM grew during the stage;
+// the whole build's peak is VmHWM.
 class StageMeter {
  public:
-  explicit StageMeter(nlohmann::json& stages) : stages_(stages) {}
-  void start() {
-    if (std::FILE* f = std::fopen("/proc/self/clear_refs", "w")) {
-      std::fputs("5", f);
-      std::fclose(f);
+  explicit StageMeter(nlohmann::json& stages) : stages_(stages) {
+    sampler_ = std::thread([this] {
+      std::unique_lock<std::mutex> lock(mutex_);
+      while (!stop_) {
+        lock.unlock();
+        const uint64_t rss = procStatusBytes("VmRSS:");
+        lock.lock();
+        stagePeak_ = std::max(stagePeak_, rss);
+        wake_.wait_for(lock, std::chrono::milliseconds(5));
+      }
+    });
+  }
+  ~StageMeter() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
     }
+    wake_.notify_all();
+    sampler_.join();
+  }
+  void start() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stagePeak_ = procStatusBytes("VmRSS:");
+    }
+    hwm0_ = procStatusBytes("VmHWM:");
     t0_ = std::chrono::steady_clock::now();
     cpu0_ = std::clock();
   }
@@ -109,20 +134,30 @@ class StageMeter {
   void finish(const std::string& name) {
     const double wall = secondsSince(t0_);
     const double cpu = double(std::clock() - cpu0_) / CLOCKS_PER_SEC;
-    const uint64_t peak = std::max(procStatusBytes("VmHWM:"), procStatusBytes("VmRSS:"));
-    peak_ = std::max(peak_, peak);
+    const uint64_t hwm = procStatusBytes("VmHWM:");
+    uint64_t peak = procStatusBytes("VmRSS:");
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      peak = std::max(peak, stagePeak_);
+    }
+    if (hwm > hwm0_) peak = std::max(peak, hwm);  // the process peak was reached in this stage
     stages_.push_back({{"stage", name}, {"seconds", wall}, {"cpu_seconds", cpu}, {"peak_rss_bytes", peak}});
     spdlog::info("stage {:<10} {:8.2f} s wall {:8.2f} s cpu  peak RSS {:7.1f} MiB", name, wall, cpu,
                  double(peak) / (1 << 20));
     start();
   }
-  uint64_t peak() const { return peak_; }
+  uint64_t peak() const { return procStatusBytes("VmHWM:"); }
 
  private:
   nlohmann::json& stages_;
   std::chrono::steady_clock::time_point t0_;
   std::clock_t cpu0_ = 0;
-  uint64_t peak_ = 0;
+  uint64_t hwm0_ = 0;
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  bool stop_ = false;
+  uint64_t stagePeak_ = 0;
+  std::thread sampler_;
 };
 
 }  // namespace

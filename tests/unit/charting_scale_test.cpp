@@ -114,7 +114,7 @@ TEST(ChartingScale, MeshBuildReportsEveryStage) {
   }
   for (const char* want : {"read", "charting", "validate", "resample", "write"})
     EXPECT_TRUE(names.count(want)) << want;
-  EXPECT_EQ(stats.at("peak_rss_bytes").get<uint64_t>(), largest);
+  EXPECT_GE(stats.at("peak_rss_bytes").get<uint64_t>(), largest);  // VmHWM: the process peak
 }
 
 }  // namespace
