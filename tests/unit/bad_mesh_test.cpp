@@ -637,6 +637,16 @@ TEST_F(BadMesh, OutOfCorePathRepairsAndCleansUp) {
   m.f.push_back({0, 1, nv});         // non-finite
   m.f.push_back(m.f[100]);           // duplicate
   m.f.push_back({7, 7, 8});          // degenerate
+  const size_t valid = m.f.size() - 3;
+  // A fin on one edge (non-manifold edge), a triangle touching the south pole only (non-manifold
+  // vertex), and a second, small sphere (another component).
+  m.v.push_back({3.f, 3.f, 3.f});
+  m.f.push_back({m.f[5000][0], m.f[5000][1], uint32_t(m.v.size() - 1)});
+  m.v.push_back({0.2f, 0.f, -1.5f});
+  m.v.push_back({0.f, 0.2f, -1.5f});
+  m.f.push_back({nv - 1, uint32_t(m.v.size() - 1), uint32_t(m.v.size() - 2)});
+  append(m, sphere(8, glm::vec3(0, 0, 4), 0.5f));
+  const size_t extra = 2 + sphere(8).f.size();
   const std::string ply = plyBinary(m);
   const std::string args = "--max-memory 64M --charts 8 --chart-size 9 --depth 2 --no-fidelity";
   const nlohmann::json s = built(write("big.ply", ply), args);
@@ -644,8 +654,13 @@ TEST_F(BadMesh, OutOfCorePathRepairsAndCleansUp) {
   EXPECT_EQ(s["read"]["dropped_non_finite"], 1);
   EXPECT_EQ(s["read"]["dropped_duplicate"], 1);
   EXPECT_EQ(s["read"]["dropped_degenerate"], 1);
-  EXPECT_EQ(s["read"]["triangles"], m.f.size() - 3);
-  EXPECT_EQ(s["charting"]["boundary_edges"], 0);
+  EXPECT_EQ(s["read"]["triangles"], valid + extra);
+  EXPECT_EQ(s["charting"]["triangles"], valid + extra);
+  EXPECT_GE(s["charting"]["non_manifold_edges"].get<uint64_t>(), 1u);
+  EXPECT_GE(s["charting"]["non_manifold_vertices"].get<uint64_t>(), 1u);
+  EXPECT_GT(s["charting"]["vertices_split"].get<uint64_t>(), 0u);
+  EXPECT_NEAR(s["bounds"][5].get<double>(), 4.5, 0.05);  // the small sphere is charted
+  EXPECT_GT(atlasVerticesIn(out_, glm::vec3(-0.6f, -0.6f, 3.4f), glm::vec3(0.6f, 0.6f, 4.6f)), 0u);
   fs::remove_all(out_);
   expectRejected(write("big_cut.ply", ply.substr(0, ply.size() - ply.size() / 5)), {"truncated"}, args);
 }
