@@ -28,7 +28,7 @@ struct BuildOptions {
   uint32_t charts = 128;                // target patches before quadrangulation; 0: maxChartError
   double maxChartError = 0.01;          // with charts = 0: RMS plane distance / bbox diagonal
   uint32_t straightenRounds = 2;        // rounds of straightening shared sides (atlas/layout_refine.h)
-  uint32_t flipRepairRounds = 4;        // rounds of splitting patches whose charts have flipped
+  uint32_t flipRepairRounds = 2;        // rounds of splitting patches whose charts have flipped
                                         // texels (atlas/layout_refine.h); 0 keeps the charting's
   uint64_t maxMemory = 4ull << 30;      // bytes; above a quarter of it the cells (out-of-core) path runs
   bool measureFidelity = true;          // two-sided Hausdorff distance input <-> atlas (in-memory path)

@@ -79,6 +79,6 @@ uint32_t countFlippedTexels(const ChartLayout& layout, const std::vector<uint32_
 // undone. Each repair ends at the first round that keeps nothing. `layout` ends as the layout of
 // the returned set.
 GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions& options,
-                                      uint32_t maxRounds = 4, FlipRepairStats* stats = nullptr);
+                                      uint32_t maxRounds = 2, FlipRepairStats* stats = nullptr);
 
 }  // namespace gimlod
