@@ -129,9 +129,7 @@ bool isDisk(const ChartLayout& layout, const std::vector<uint32_t>& tris) {
   return int64_t(verts.size()) - int64_t(edges.size()) + int64_t(tris.size()) == 1;
 }
 
-// Applies a new side list to patch `p` (and an optional second patch), given how the old sides
-// of the changed patches map to new (patch, index) places: links between the changed patches are
-// remapped, links to other patches are updated on the other side.
+// Where an old side of a split patch goes: the part (patch index) and its side index there.
 struct SidePlace {
   uint32_t patch, index;
 };
@@ -317,9 +315,11 @@ bool insertCorner(ChartLayout& layout, uint32_t p, uint32_t side, uint32_t k, ui
 
 namespace {
 
-// See splitPatchThrough; with neck = true the cut may start at any boundary vertex.
-bool splitByCut(ChartLayout& layout, uint32_t p, uint32_t triangle, uint32_t maxSides, bool neck) {
-  if (p >= layout.patches.size() || triangle >= layout.triangles.size()) return false;
+// The best acceptable cut of patch p passing through one of `sources` (vertices of the patch);
+// with no sources, through boundary vertices (at most 96, spread evenly): the neck. See
+// splitPatchThrough and splitPatchAtNeck.
+bool splitByCut(ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources, uint32_t maxSides) {
+  if (p >= layout.patches.size()) return false;
   const Patch& patch = layout.patches[p];
   const PatchGraph g = patchGraph(layout, patch);
   const auto places = boundaryPlaces(patch);
@@ -368,13 +368,10 @@ bool splitByCut(ChartLayout& layout, uint32_t p, uint32_t triangle, uint32_t max
     }
     if (score < bestScore) bestScore = score, best = std::move(path);
   };
-  std::vector<uint32_t> sources(layout.triangles[triangle].begin(), layout.triangles[triangle].end());
-  if (neck) {
-    // Every boundary vertex (at most 96, spread evenly) as one end of a cut.
+  if (sources.empty()) {
     std::vector<uint32_t> loop;
     for (const PatchSide& side : patch.sides) loop.insert(loop.end(), side.vertices.begin(), side.vertices.end() - 1);
     const size_t step = std::max<size_t>(1, loop.size() / 96);
-    sources.clear();
     for (size_t k = 0; k < loop.size(); k += step) sources.push_back(loop[k]);
   }
   for (const uint32_t v : sources) {
@@ -428,7 +425,9 @@ bool splitByCut(ChartLayout& layout, uint32_t p, uint32_t triangle, uint32_t max
 }  // namespace
 
 bool splitPatchThrough(ChartLayout& layout, uint32_t p, uint32_t triangle, uint32_t maxSides) {
-  return splitByCut(layout, p, triangle, maxSides, false);
+  if (triangle >= layout.triangles.size()) return false;
+  const auto& t = layout.triangles[triangle];
+  return splitByCut(layout, p, {t[0], t[1], t[2]}, maxSides);
 }
 
 namespace {
@@ -562,11 +561,7 @@ uint32_t straightenSides(ChartLayout& layout, uint32_t rounds) {
 }
 
 bool splitPatchAtNeck(ChartLayout& layout, uint32_t p) {
-  if (p < layout.patches.size() && !layout.patches[p].triangles.empty() &&
-      splitByCut(layout, p, layout.patches[p].triangles.front(), 8, true)) {
-    return true;
-  }
-  return splitPatchAtCornerNeck(layout, p);
+  return splitByCut(layout, p, {}, 8) || splitPatchAtCornerNeck(layout, p);
 }
 
 uint32_t countFlippedTexels(const ChartLayout& layout, const std::vector<uint32_t>& patches,
