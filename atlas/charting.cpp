@@ -42,6 +42,18 @@ double since(Clock::time_point t0) {
 }
 
 inline uint32_t nextHe(uint32_t h) { return h - h % 3 + (h % 3 + 1) % 3; }
+
+// The boundary half-edge of cluster c (faces labelled c) that follows boundary half-edge h: turn
+// around h's head through c's faces until a half-edge whose twin is missing or outside c.
+inline uint32_t nextBoundaryHe(const std::vector<uint32_t>& twin, const std::vector<uint32_t>& label,
+                               uint32_t h, uint32_t c) {
+  uint32_t n = nextHe(h);
+  while (true) {
+    const uint32_t t = twin[n];
+    if (t == kNone || label[t / 3] != c) return n;
+    n = nextHe(t);
+  }
+}
 inline uint32_t prevHe(uint32_t h) { return h - h % 3 + (h % 3 + 2) % 3; }
 
 uint64_t mix64(uint64_t x) {
@@ -556,14 +568,7 @@ class Clusterer {
     return labels;
   }
 
-  uint32_t nextBoundary(uint32_t h, uint32_t c) const {
-    uint32_t n = nextHe(h);
-    while (true) {
-      const uint32_t t = s_.twin[n];
-      if (t == kNone || label_[t / 3] != c) return n;
-      n = nextHe(t);
-    }
-  }
+  uint32_t nextBoundary(uint32_t h, uint32_t c) const { return nextBoundaryHe(s_.twin, label_, h, c); }
 
   const std::vector<uint32_t>& labels() const { return label_; }
   uint32_t alive() const { return alive_; }
@@ -876,14 +881,7 @@ class LayoutBuilder {
   }
 
  private:
-  uint32_t nextBoundary(uint32_t h, uint32_t c) const {
-    uint32_t n = nextHe(h);
-    while (true) {
-      const uint32_t t = s_.twin[n];
-      if (t == kNone || label_[t / 3] != c) return n;
-      n = nextHe(t);
-    }
-  }
+  uint32_t nextBoundary(uint32_t h, uint32_t c) const { return nextBoundaryHe(s_.twin, label_, h, c); }
 
   std::vector<uint32_t> boundaryLoop(uint32_t p) const {
     std::vector<uint32_t> loop;

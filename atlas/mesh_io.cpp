@@ -13,6 +13,7 @@
 #include <cstring>
 #include <memory>
 #include <optional>
+#include <type_traits>
 #include <unordered_map>
 
 #include <fcntl.h>
@@ -621,7 +622,10 @@ U loadSwapped(const uint8_t* p, bool swap) {
   return u;
 }
 
-double plyScalar(const uint8_t* p, PlyType t, bool swap) {
+// One PLY scalar as T: double reads every type; int64_t reads the integer types (float index
+// types are rejected in the header, and read as 0 here).
+template <typename T>
+T plyValue(const uint8_t* p, PlyType t, bool swap) {
   switch (t) {
     case PlyType::kI8: return static_cast<int8_t>(p[0]);
     case PlyType::kU8: return p[0];
@@ -629,23 +633,18 @@ double plyScalar(const uint8_t* p, PlyType t, bool swap) {
     case PlyType::kU16: return loadSwapped<uint16_t>(p, swap);
     case PlyType::kI32: return static_cast<int32_t>(loadSwapped<uint32_t>(p, swap));
     case PlyType::kU32: return loadSwapped<uint32_t>(p, swap);
-    case PlyType::kF32: return std::bit_cast<float>(loadSwapped<uint32_t>(p, swap));
-    case PlyType::kF64: return std::bit_cast<double>(loadSwapped<uint64_t>(p, swap));
+    case PlyType::kF32:
+      if constexpr (std::is_floating_point_v<T>) return std::bit_cast<float>(loadSwapped<uint32_t>(p, swap));
+      return 0;
+    case PlyType::kF64:
+      if constexpr (std::is_floating_point_v<T>) return std::bit_cast<double>(loadSwapped<uint64_t>(p, swap));
+      return 0;
   }
   return 0;
 }
 
-int64_t plyInt(const uint8_t* p, PlyType t, bool swap) {
-  switch (t) {
-    case PlyType::kI8: return static_cast<int8_t>(p[0]);
-    case PlyType::kU8: return p[0];
-    case PlyType::kI16: return static_cast<int16_t>(loadSwapped<uint16_t>(p, swap));
-    case PlyType::kU16: return loadSwapped<uint16_t>(p, swap);
-    case PlyType::kI32: return static_cast<int32_t>(loadSwapped<uint32_t>(p, swap));
-    case PlyType::kU32: return loadSwapped<uint32_t>(p, swap);
-    default: return 0;  // float index types are rejected in the header
-  }
-}
+double plyScalar(const uint8_t* p, PlyType t, bool swap) { return plyValue<double>(p, t, swap); }
+int64_t plyInt(const uint8_t* p, PlyType t, bool swap) { return plyValue<int64_t>(p, t, swap); }
 
 struct PlyProp {
   std::string name;
