@@ -475,19 +475,11 @@ ParamQuality measureStretch(const std::vector<glm::dvec2>& uv, const std::vector
 ParamQuality combineQuality(const std::vector<ParamQuality>& parts) {
   // note: each part is normalized by its own scale (charts are scaled independently), so the
   // combined L2 is the 3D-area-weighted RMS of the normalized figures.
-  ParamQuality q;
-  double num = 0.0;
-  q.stretchLinf = parts.empty() ? 1.0 : 0.0;
-  for (const ParamQuality& p : parts) {
-    num += p.area3D * p.stretchL2 * p.stretchL2;
-    q.area3D += p.area3D;
+  return combineStretch(parts, [](ParamQuality& q, const ParamQuality& p) {
     q.areaParam += p.areaParam;
-    q.stretchLinf = std::max(q.stretchLinf, p.stretchLinf);
     q.flippedTriangles += p.flippedTriangles;
     q.degenerateTriangles += p.degenerateTriangles;
-  }
-  if (q.area3D > 0.0) q.stretchL2 = std::sqrt(num / q.area3D);
-  return q;
+  });
 }
 
 PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patch,

@@ -12,6 +12,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -97,6 +98,24 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
 // (same indexing). Shared by the parameterization and the resampler's image quality.
 ParamQuality measureStretch(const std::vector<glm::dvec2>& uv, const std::vector<glm::dvec3>& xyz,
                             const std::vector<std::array<uint32_t, 3>>& triangles);
+
+// The stretch part of combining per-part figures (parts of any type with area3D, stretchL2 and
+// stretchLinf, each normalized by its own scale): the 3D-area-weighted RMS of L2, the max of Linf
+// (1 with no parts) and the summed area, then `add(out, part)` for the part's other figures.
+template <typename Q, typename Add>
+Q combineStretch(const std::vector<Q>& parts, Add add) {
+  Q q;
+  double num = 0.0;
+  q.stretchLinf = parts.empty() ? 1.0 : 0.0;
+  for (const Q& p : parts) {
+    num += p.area3D * p.stretchL2 * p.stretchL2;
+    q.area3D += p.area3D;
+    q.stretchLinf = q.stretchLinf < p.stretchLinf ? p.stretchLinf : q.stretchLinf;
+    add(q, p);
+  }
+  if (q.area3D > 0.0) q.stretchL2 = std::sqrt(num / q.area3D);
+  return q;
+}
 
 // Combines per-patch figures, each normalized by its own scale (charts are scaled
 // independently): 3D-area-weighted RMS of L2, max of Linf, summed counts and areas.

@@ -376,19 +376,11 @@ ImageQuality measureImage(const std::vector<glm::vec3>& positions,
 }
 
 ImageQuality combineImageQuality(const std::vector<ImageQuality>& parts) {
-  ImageQuality q;
-  double num = 0.0;
-  q.stretchLinf = parts.empty() ? 1.0 : 0.0;
-  for (const ImageQuality& p : parts) {
-    num += p.area3D * p.stretchL2 * p.stretchL2;
-    q.area3D += p.area3D;
-    q.stretchLinf = std::max(q.stretchLinf, p.stretchLinf);
+  return combineStretch(parts, [](ImageQuality& q, const ImageQuality& p) {
     q.flippedTexels += p.flippedTexels;
     q.texelsAgainstNormals += p.texelsAgainstNormals;
     q.degenerateTexels += p.degenerateTexels;
-  }
-  if (q.area3D > 0.0) q.stretchL2 = std::sqrt(num / q.area3D);
-  return q;
+  });
 }
 
 GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options) {
