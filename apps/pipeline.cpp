@@ -287,11 +287,14 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   ro.chartSize = o.meshChartSize;
   ro.threads = o.threads;
   const uint32_t straightened = o.straightenRounds ? straightenSides(layout, o.straightenRounds) : 0;
+  meter.finish("straighten");
   FlipRepairStats flips;
-  const GeometryImageSet set = resampleWithoutFlips(layout, ro, o.flipRepairRounds, &flips);
+  GeometryImageSet first = resampleLayout(layout, ro);
+  meter.finish("resample");
+  const GeometryImageSet set = repairFlips(layout, std::move(first), ro, o.flipRepairRounds, &flips);
   const size_t finalPatches = layout.patches.size();
   layout = ChartLayout{};
-  meter.finish("resample");
+  meter.finish("flip_repair");
   stats["resample"] = {{"charts", set.charts.size()},
                        {"param_stretch_l2", set.param.stretchL2},
                        {"param_stretch_linf", set.param.stretchLinf},
@@ -307,8 +310,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                        {"patches_unsplittable", flips.patchesUnsplit},
                        {"split_rounds", flips.rounds},
                        {"patches", finalPatches},
-                       {"degenerate_texels", set.image.degenerateTexels},
-                       {"seconds", set.seconds}};
+                       {"degenerate_texels", set.image.degenerateTexels}};
   // Per chart: its patch and quad, stretch of the sampled image, flipped and degenerate texels.
   nlohmann::json perChart = nlohmann::json::array();
   for (const GeometryImage& g : set.charts) {

@@ -10,6 +10,7 @@
 #include <unordered_set>
 
 #include <glm/geometric.hpp>
+#include <tbb/parallel_for.h>
 
 namespace gimlod {
 namespace {
@@ -67,17 +68,26 @@ struct Paths {
   std::unordered_map<uint32_t, uint32_t> prev;
 };
 
-Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t source) {
+// Dijkstra from `source`. It may stop early, once `target` is settled, or once `boundaryEnds`
+// boundary vertices are: the paths to settled vertices are then final, and every other vertex
+// in `dist` is at least as far as any settled one (so the nearest ends are exactly known).
+Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t source,
+                   uint32_t target = ~0u, size_t boundaryEnds = std::numeric_limits<size_t>::max()) {
   Paths r;
   using Item = std::pair<double, uint32_t>;
   std::priority_queue<Item, std::vector<Item>, std::greater<>> heap;
   r.dist[source] = 0.0;
   heap.push({0.0, source});
+  size_t ends = 0;
   while (!heap.empty()) {
     const auto [d, u] = heap.top();
     heap.pop();
     if (d > r.dist[u]) continue;
-    if (u != source && g.onBoundary.contains(u)) continue;  // reached a boundary vertex: stop
+    if (u == target) break;
+    if (u != source && g.onBoundary.contains(u)) {  // reached a boundary vertex: stop
+      if (++ends >= boundaryEnds) break;
+      continue;
+    }
     auto it = g.neighbours.find(u);
     if (it == g.neighbours.end()) continue;
     for (uint32_t w : it->second) {
@@ -248,7 +258,7 @@ bool splitPatchAtCorners(ChartLayout& layout, uint32_t p, uint32_t i, uint32_t j
   if (i >= n || j >= n) return false;
   const PatchGraph g = patchGraph(layout, patch);
   const uint32_t src = patch.sides[i].vertices.front(), dst = patch.sides[j].vertices.front();
-  const Paths paths = shortestCuts(layout, g, src);
+  const Paths paths = shortestCuts(layout, g, src, dst);
   if (!paths.dist.contains(dst)) return false;
   std::vector<uint32_t> path{dst};
   while (path.back() != src) path.push_back(paths.prev.at(path.back()));
@@ -316,10 +326,11 @@ bool insertCorner(ChartLayout& layout, uint32_t p, uint32_t side, uint32_t k, ui
 namespace {
 
 // The best acceptable cut of patch p passing through one of `sources` (vertices of the patch);
-// with no sources, through boundary vertices (at most 96, spread evenly): the neck. See
-// splitPatchThrough and splitPatchAtNeck.
-bool splitByCut(ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources, uint32_t maxSides) {
-  if (p >= layout.patches.size()) return false;
+// with no sources, through boundary vertices (at most 96, spread evenly): the neck. Empty if
+// none. Reads the layout only. See splitPatchThrough and splitPatchAtNeck.
+std::vector<uint32_t> findCut(const ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources,
+                              uint32_t maxSides) {
+  if (p >= layout.patches.size()) return {};
   const Patch& patch = layout.patches[p];
   const PatchGraph g = patchGraph(layout, patch);
   const auto places = boundaryPlaces(patch);
@@ -375,7 +386,8 @@ bool splitByCut(ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources, 
     for (size_t k = 0; k < loop.size(); k += step) sources.push_back(loop[k]);
   }
   for (const uint32_t v : sources) {
-    const Paths paths = shortestCuts(layout, g, v);
+    // The 48 nearest boundary vertices are all the search needs.
+    const Paths paths = shortestCuts(layout, g, v, ~0u, 48);
     std::vector<std::pair<double, uint32_t>> ends;  // reached boundary vertices by distance
     for (const auto& [w, dist] : paths.dist) {
       if (w != v && g.onBoundary.contains(w)) ends.push_back({dist, w});
@@ -404,8 +416,14 @@ bool splitByCut(ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources, 
       }
     }
   }
-  if (best.empty()) return false;
-  // New corners at the ends (indices shift as sides split), then the cut between them.
+  return best;
+}
+
+// Cuts patch p along `best` (findCut's path): new corners at its ends where there are none
+// (indices shift as sides split), then the cut between them. False if that fails (the patch may
+// then have gained a corner, still valid).
+bool applyCut(ChartLayout& layout, uint32_t p, const std::vector<uint32_t>& best, uint32_t maxSides) {
+  if (best.size() < 2) return false;
   for (const uint32_t e : {best.front(), best.back()}) {
     const auto at = boundaryPlaces(layout.patches[p]).at(e);
     // The patch itself may pass maxSides until it is cut (acceptable() bounded both parts and the
@@ -420,6 +438,10 @@ bool splitByCut(ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources, 
   }
   if (i >= now.sides.size() || j >= now.sides.size()) return false;
   return splitAlong(layout, p, i, j, patchGraph(layout, now), best);
+}
+
+bool splitByCut(ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources, uint32_t maxSides) {
+  return applyCut(layout, p, findCut(layout, p, std::move(sources), maxSides), maxSides);
 }
 
 }  // namespace
@@ -506,7 +528,7 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s) {
   }
   const PatchGraph g = patchGraph(layout, u);
   const uint32_t a = side.vertices.front(), b = side.vertices.back();
-  const Paths paths = shortestCuts(layout, g, a);
+  const Paths paths = shortestCuts(layout, g, a, b);
   if (!paths.dist.contains(b)) return false;
   std::vector<uint32_t> path{b};
   while (path.back() != a) path.push_back(paths.prev.at(path.back()));
@@ -547,12 +569,36 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s) {
 uint32_t straightenSides(ChartLayout& layout, uint32_t rounds) {
   uint32_t changed = 0;
   for (uint32_t r = 0; r < rounds; ++r) {
-    uint32_t now = 0;
+    // Every shared side once, from its smaller patch, in batches of sides whose patch pairs are
+    // disjoint: straightenSide reads and writes its two patches only, so a batch runs in
+    // parallel. Batches are filled greedily in side order, so the result does not depend on the
+    // thread count.
+    std::vector<std::pair<uint32_t, uint32_t>> pending;
     for (uint32_t p = 0; p < layout.patches.size(); ++p) {
       for (uint32_t s = 0; s < layout.patches[p].sides.size(); ++s) {
-        const int32_t q = layout.patches[p].sides[s].neighbourPatch;
-        if (q > int32_t(p) && straightenSide(layout, p, s)) ++now;
+        if (layout.patches[p].sides[s].neighbourPatch > int32_t(p)) pending.push_back({p, s});
       }
+    }
+    uint32_t now = 0;
+    std::vector<uint8_t> busy(layout.patches.size(), 0);
+    while (!pending.empty()) {
+      std::vector<std::pair<uint32_t, uint32_t>> batch, rest;
+      std::fill(busy.begin(), busy.end(), 0);
+      for (const auto& [p, s] : pending) {
+        const uint32_t q = uint32_t(layout.patches[p].sides[s].neighbourPatch);
+        if (busy[p] || busy[q]) {
+          rest.push_back({p, s});
+        } else {
+          busy[p] = busy[q] = 1;
+          batch.push_back({p, s});
+        }
+      }
+      std::vector<uint8_t> done(batch.size(), 0);
+      tbb::parallel_for(size_t{0}, batch.size(), [&](size_t k) {
+        done[k] = straightenSide(layout, batch[k].first, batch[k].second) ? 1 : 0;
+      });
+      for (uint8_t d : done) now += d;
+      pending = std::move(rest);
     }
     changed += now;
     if (now == 0) break;
@@ -564,127 +610,245 @@ bool splitPatchAtNeck(ChartLayout& layout, uint32_t p) {
   return splitByCut(layout, p, {}, 8) || splitPatchAtCornerNeck(layout, p);
 }
 
-uint32_t countFlippedTexels(const ChartLayout& layout, const std::vector<uint32_t>& patches,
-                            const ResampleOptions& options) {
-  // The patches alone, sides to other patches opened (an open side is sampled exactly as a shared
-  // one), but every triangle kept so the vertex normals are those of the whole surface.
-  ChartLayout sub;
-  sub.positions = layout.positions;
-  sub.colours = layout.colours;
-  sub.triangles = layout.triangles;
-  std::unordered_map<uint32_t, uint32_t> index;
-  for (uint32_t p : patches) {
-    if (p < layout.patches.size()) index.try_emplace(p, uint32_t(index.size()));
-  }
-  sub.patches.resize(index.size());
-  for (const auto& [p, i] : index) {
-    Patch patch = layout.patches[p];
-    for (PatchSide& side : patch.sides) {
-      const auto it = side.neighbourPatch >= 0 ? index.find(uint32_t(side.neighbourPatch)) : index.end();
-      if (it == index.end()) {
-        side.neighbourPatch = -1;
-      } else {
-        side.neighbourPatch = int32_t(it->second);
-      }
-    }
-    sub.patches[i] = std::move(patch);
-  }
-  return resampleLayout(sub, options).image.flippedTexels;
-}
-
 GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions& options,
                                       uint32_t maxRounds, FlipRepairStats* stats) {
+  GeometryImageSet set = resampleLayout(layout, options);
+  return repairFlips(layout, std::move(set), options, maxRounds, stats);
+}
+
+namespace {
+
+using Fold = std::pair<uint32_t, uint32_t>;  // a folding patch, the triangle under its first fold
+
+// Patch p and its neighbours (ring 1), and their neighbours too (ring 2), sorted.
+std::vector<uint32_t> patchRing(const ChartLayout& layout, std::vector<uint32_t> from) {
+  std::vector<uint32_t> out = from;
+  for (uint32_t q : from) {
+    for (const PatchSide& side : layout.patches[q].sides) {
+      if (side.neighbourPatch >= 0) out.push_back(uint32_t(side.neighbourPatch));
+    }
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+// One split under trial: the patches it may change (a split changes the patch and gives its
+// neighbours corners, whose new side numbers their own neighbours' links name: two rings), and
+// copies of them for the undo.
+struct Trial {
+  uint32_t patch = 0, triangle = 0;
+  std::vector<uint32_t> touched, rings;
+  std::vector<Patch> saved;
+  std::vector<uint32_t> cut;
+  size_t firstNew = 0, endNew = 0;  // patches it appended
+  bool done = false, kept = false;
+};
+
+// The folds split into a batch, greedily in order, whose two rings are pairwise disjoint, and the
+// rest. A batch's splits touch disjoint patches, so they can be searched in parallel and made in
+// any order with the same result as one after another.
+std::vector<Trial> disjointBatch(const ChartLayout& layout, std::vector<Fold>& folds) {
+  std::vector<uint8_t> busy(layout.patches.size(), 0);
+  std::vector<Trial> batch;
+  std::vector<Fold> rest;
+  for (const Fold& f : folds) {
+    Trial t;
+    t.patch = f.first;
+    t.triangle = f.second;
+    t.touched = patchRing(layout, {f.first});
+    t.rings = patchRing(layout, t.touched);
+    if (std::any_of(t.rings.begin(), t.rings.end(), [&](uint32_t q) { return busy[q] != 0; })) {
+      rest.push_back(f);
+      continue;
+    }
+    for (uint32_t q : t.rings) busy[q] = 1;
+    batch.push_back(std::move(t));
+  }
+  folds = std::move(rest);
+  return batch;
+}
+
+// Removes the patches flagged dead (nothing live may link to them) and renumbers the links;
+// `perPatch` is compacted alike.
+void removePatches(ChartLayout& layout, const std::vector<uint8_t>& dead, std::vector<uint32_t>& perPatch) {
+  std::vector<int32_t> index(layout.patches.size(), -1);
+  uint32_t next = 0;
+  for (uint32_t q = 0; q < layout.patches.size(); ++q) {
+    if (!dead[q]) index[q] = int32_t(next++);
+  }
+  if (next == layout.patches.size()) return;
+  for (uint32_t q = 0; q < layout.patches.size(); ++q) {
+    if (dead[q]) continue;
+    for (PatchSide& side : layout.patches[q].sides) {
+      if (side.neighbourPatch >= 0) side.neighbourPatch = index[uint32_t(side.neighbourPatch)];
+    }
+    if (uint32_t(index[q]) == q) continue;  // (a self move would empty it)
+    layout.patches[uint32_t(index[q])] = std::move(layout.patches[q]);
+    perPatch[uint32_t(index[q])] = perPatch[q];
+  }
+  layout.patches.resize(next);
+  perPatch.resize(next);
+}
+
+}  // namespace
+
+GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
+                             uint32_t maxRounds, FlipRepairStats* stats) {
   FlipRepairStats local;
   FlipRepairStats& st = stats ? *stats : local;
   st = FlipRepairStats{};
-  GeometryImageSet set = resampleLayout(layout, options);
   st.flippedTexelsFirst = set.image.flippedTexels;
-  // Per folding patch, the triangle under its first flipped texel.
+  if (set.image.flippedTexels == 0) return set;
+  const std::vector<glm::dvec3> normals = layoutVertexNormals(layout);
   auto folding = [](const GeometryImageSet& s) {
-    std::vector<std::pair<uint32_t, uint32_t>> bad;
+    std::vector<Fold> bad;
     for (const GeometryImage& g : s.charts) {
       if (g.foldTriangles.empty() || (!bad.empty() && bad.back().first == g.patch)) continue;
       bad.push_back({g.patch, g.foldTriangles.front()});
     }
     return bad;
   };
-  // First, whole rounds: every folding patch cut at once (neck first), kept while the total
-  // drops. Cheap (one resampling a round) and it lets halves be cut again.
+  auto flippedPerPatch = [&](const GeometryImageSet& s) {
+    std::vector<uint32_t> f(layout.patches.size(), 0);
+    for (const GeometryImage& g : s.charts) f[g.patch] += g.quality.flippedTexels;
+    return f;
+  };
+  // Resamples only the flagged patches.
+  auto resampleOnly = [&](const std::vector<uint8_t>& only) {
+    ResampleReuse reuse;
+    reuse.normals = &normals;
+    reuse.only = &only;
+    return resampleLayout(layout, options, reuse);
+  };
+  // The full resampling of the current layout, from `earlier` (made from `earlierPatches`) where
+  // patches are unchanged, and from `extra` (made from the current patches, possibly partial).
+  auto refresh = [&](const std::vector<Patch>& earlierPatches, GeometryImageSet* extra) {
+    ResampleReuse reuse;
+    reuse.normals = &normals;
+    if (extra) reuse.earlier.push_back({&layout.patches, extra});
+    reuse.earlier.push_back({&earlierPatches, &set});
+    set = resampleLayout(layout, options, reuse);
+    ++st.rounds;
+  };
+  // First, whole rounds: every folding patch cut at once (neck first, else through the fold),
+  // kept while the flipped texels drop. Cheap (only the cut patches and their neighbours are
+  // resampled) and it lets halves be cut again.
   for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0; ++round) {
-    ChartLayout next = layout;
+    const std::vector<Patch> saved = layout.patches;
     uint32_t split = 0;
-    for (const auto& [p, triangle] : folding(set)) {
-      split += splitPatchAtNeck(next, p) || splitPatchThrough(next, p, triangle);
+    std::vector<Fold> queue = folding(set);
+    while (!queue.empty()) {
+      std::vector<Trial> batch = disjointBatch(layout, queue);
+      tbb::parallel_for(size_t{0}, batch.size(), [&](size_t k) {
+        batch[k].cut = findCut(layout, batch[k].patch, {}, 8);
+      });
+      for (Trial& t : batch) {
+        split += applyCut(layout, t.patch, t.cut, 8) || splitPatchAtCornerNeck(layout, t.patch) ||
+                 splitPatchThrough(layout, t.patch, t.triangle);
+      }
     }
     if (split == 0) break;
-    GeometryImageSet nextSet = resampleLayout(next, options);
-    ++st.rounds;
-    if (nextSet.image.flippedTexels >= set.image.flippedTexels) break;
-    layout = std::move(next);
-    set = std::move(nextSet);
+    // The patches the round changed, before and after.
+    const std::vector<uint32_t> was = flippedPerPatch(set);
+    std::vector<uint8_t> changed(layout.patches.size(), 0);
+    uint32_t before = 0;
+    for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+      if (p < saved.size() && patchSamplesAlike(saved[p], layout.patches[p], p)) continue;
+      changed[p] = 1;
+      if (p < saved.size()) before += was[p];
+    }
+    GeometryImageSet trial = resampleOnly(changed);
+    if (trial.image.flippedTexels >= before) {
+      layout.patches = saved;
+      ++st.rounds;
+      break;
+    }
+    refresh(saved, &trial);
     st.patchesSplit += split;
   }
-  // Then patch by patch, each split judged where it acts.
+  // Then patch by patch, each split judged where it acts: kept only if it lowers the flipped
+  // texels of the patches it changed (a cut can move a fold rather than remove it, and a new
+  // corner reshapes the neighbour's polygon too). The cut through the fold is tried first and
+  // must remove some of it; else the cut at the neck, which may also just not add any (the fold
+  // is then in a smaller patch, which the next round cuts again). Folds are taken in batches of
+  // disjoint two rings (disjointBatch): cuts searched in parallel, made in turn, judged by one
+  // resampling of every changed patch, the failures undone.
   for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0; ++round) {
-    const std::vector<std::pair<uint32_t, uint32_t>> bad = folding(set);
-    std::vector<uint32_t> flippedOf(layout.patches.size(), 0);
-    for (const GeometryImage& g : set.charts) flippedOf[g.patch] += g.quality.flippedTexels;
+    std::vector<Fold> queue = folding(set);
+    // Kept current as splits are kept (a later split's neighbours may be earlier ones' parts).
+    std::vector<uint32_t> flippedOf = flippedPerPatch(set);
+    const std::vector<Patch> roundStart = layout.patches;
     uint32_t split = 0;
     st.patchesUnsplit = 0;
-    for (const auto& [p, triangle] : bad) {
-      // Everything a split can touch: the patch and its neighbours (which may gain a corner).
-      std::vector<uint32_t> touched{p};
-      for (const PatchSide& side : layout.patches[p].sides) {
-        if (side.neighbourPatch >= 0) touched.push_back(uint32_t(side.neighbourPatch));
+    while (!queue.empty()) {
+      std::vector<Trial> batch = disjointBatch(layout, queue);
+      for (Trial& t : batch) {
+        for (uint32_t q : t.rings) t.saved.push_back(layout.patches[q]);
       }
-      std::sort(touched.begin(), touched.end());
-      touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
-      // A new corner in a neighbour renumbers its sides, which its own neighbours' links name:
-      // the undo keeps two rings of patches.
-      std::vector<uint32_t> kept2 = touched;
-      for (uint32_t q : touched) {
-        for (const PatchSide& side : layout.patches[q].sides) {
-          if (side.neighbourPatch >= 0) kept2.push_back(uint32_t(side.neighbourPatch));
-        }
-      }
-      std::sort(kept2.begin(), kept2.end());
-      kept2.erase(std::unique(kept2.begin(), kept2.end()), kept2.end());
-      std::vector<Patch> saved;
-      for (uint32_t q : kept2) saved.push_back(layout.patches[q]);
-      const size_t count = layout.patches.size();
-      // Before: the last full resampling's figures (the same samples as a resampling of these
-      // patches alone, so one evaluation a trial).
-      uint32_t before = 0;
-      for (uint32_t q : touched) before += flippedOf[q];
-      // A split is kept only if it lowers the flipped texels where it acts: a cut can move a
-      // fold rather than remove it, and a new corner reshapes the neighbour's polygon too.
-      // A cut through the fold must remove some of it; a cut at the neck may also just not add
-      // any (the fold is then in a smaller patch, which the next round cuts again).
-      bool kept = false;
       for (const bool neck : {false, true}) {
-        const bool done = neck ? splitPatchAtNeck(layout, p) : splitPatchThrough(layout, p, triangle);
-        if (done) {
-          std::vector<uint32_t> now = touched;
-          for (size_t q = count; q < layout.patches.size(); ++q) now.push_back(uint32_t(q));
-          const uint32_t after = countFlippedTexels(layout, now, options);
-          if (after < before || (neck && after == before)) {
-            kept = true;
-            break;
-          }
+        std::vector<Trial*> open;
+        for (Trial& t : batch) {
+          if (!t.kept) open.push_back(&t);
         }
-        for (size_t k = 0; k < kept2.size(); ++k) layout.patches[kept2[k]] = saved[k];
-        layout.patches.resize(count);
+        if (open.empty()) break;
+        tbb::parallel_for(size_t{0}, open.size(), [&](size_t k) {
+          Trial& t = *open[k];
+          const auto& tri = layout.triangles[t.triangle];
+          t.cut = neck ? findCut(layout, t.patch, {}, 8) : findCut(layout, t.patch, {tri[0], tri[1], tri[2]}, 8);
+        });
+        std::vector<uint8_t> only;
+        for (Trial* t : open) {
+          t->firstNew = layout.patches.size();
+          t->done = applyCut(layout, t->patch, t->cut, 8) || (neck && splitPatchAtCornerNeck(layout, t->patch));
+          t->endNew = layout.patches.size();
+        }
+        only.assign(layout.patches.size(), 0);
+        flippedOf.resize(layout.patches.size(), 0);
+        // Per trial, the patches it changed, and their flipped texels before.
+        std::vector<std::vector<uint32_t>> now(open.size());
+        std::vector<uint32_t> before(open.size(), 0);
+        for (size_t k = 0; k < open.size(); ++k) {
+          const Trial& t = *open[k];
+          if (!t.done) continue;
+          for (size_t r = 0; r < t.rings.size(); ++r) {
+            const uint32_t q = t.rings[r];
+            if (patchSamplesAlike(t.saved[r], layout.patches[q], q)) continue;
+            now[k].push_back(q);
+            before[k] += flippedOf[q];
+          }
+          for (size_t q = t.firstNew; q < t.endNew; ++q) now[k].push_back(uint32_t(q));
+          for (uint32_t q : now[k]) only[q] = 1;
+        }
+        const GeometryImageSet trial = resampleOnly(only);
+        std::vector<uint32_t> after(layout.patches.size(), 0);
+        for (const GeometryImage& g : trial.charts) after[g.patch] += g.quality.flippedTexels;
+        std::vector<uint8_t> dead(layout.patches.size(), 0);
+        for (size_t k = 0; k < open.size(); ++k) {
+          Trial& t = *open[k];
+          uint32_t a = 0;
+          for (uint32_t q : now[k]) a += after[q];
+          if (t.done && (a < before[k] || (neck && a == before[k]))) {
+            t.kept = true;
+            for (uint32_t q : now[k]) flippedOf[q] = after[q];
+            continue;
+          }
+          for (size_t r = 0; r < t.rings.size(); ++r) layout.patches[t.rings[r]] = t.saved[r];
+          for (size_t q = t.firstNew; q < t.endNew; ++q) dead[q] = 1;
+        }
+        removePatches(layout, dead, flippedOf);
       }
-      if (kept) {
-        ++split;
-      } else {
-        ++st.patchesUnsplit;
+      for (const Trial& t : batch) {
+        if (t.kept) {
+          ++split;
+        } else {
+          ++st.patchesUnsplit;
+        }
       }
     }
     if (split == 0) break;
     st.patchesSplit += split;
-    set = resampleLayout(layout, options);
-    ++st.rounds;
+    refresh(roundStart, nullptr);
   }
   return set;
 }

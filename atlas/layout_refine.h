@@ -66,18 +66,18 @@ struct FlipRepairStats {
   uint32_t flippedTexelsFirst = 0;  // flipped texels of the first resampling
 };
 
-// Flipped texels of the given patches resampled on their own (sides to other patches sampled as
-// open sides, which gives the same samples), with the whole surface's vertex normals.
-uint32_t countFlippedTexels(const ChartLayout& layout, const std::vector<uint32_t>& patches,
-                            const ResampleOptions& options);
+// Two repairs of up to maxRounds rounds each, from `set`, the resampling of `layout`. Whole
+// rounds: every patch one of whose charts has flipped texels is split (splitPatchAtNeck, else
+// splitPatchThrough the fold), the round kept only if the changed patches' flipped texels drop.
+// Then patch by patch: the split through the fold is kept if it lowers the flipped texels of the
+// patch and its neighbours together, else the neck split if it does not
+// raise them; others are undone. Each repair ends at the first round that keeps nothing. Only
+// patches a round changes are parameterized again (ResampleReuse), so the result is bit for bit
+// a full resampling of the final layout. `layout` ends as the layout of the returned set.
+GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
+                             uint32_t maxRounds = 2, FlipRepairStats* stats = nullptr);
 
-// resampleLayout, then two repairs of up to maxRounds rounds each. Whole rounds: every patch one
-// of whose charts has flipped texels is split (splitPatchAtNeck, else splitPatchThrough the fold)
-// and the layout resampled, the round kept only if the total drops. Then patch by patch: the
-// split through the fold is kept if it lowers the flipped texels of the patch and its neighbours
-// together (countFlippedTexels), else the neck split if it does not raise them; others are
-// undone. Each repair ends at the first round that keeps nothing. `layout` ends as the layout of
-// the returned set.
+// resampleLayout, then repairFlips.
 GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions& options,
                                       uint32_t maxRounds = 2, FlipRepairStats* stats = nullptr);
 

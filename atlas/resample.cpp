@@ -19,11 +19,13 @@ namespace {
 // Attributes of the layout's surface: positions, area-weighted unit vertex normals, colours.
 struct Surface {
   const ChartLayout& layout;
-  std::vector<glm::dvec3> normals;  // unit, or zero where undefined
+  const std::vector<glm::dvec3>& normals;  // unit, or zero where undefined
   bool hasColours = false;
 };
 
-std::vector<glm::dvec3> vertexNormals(const ChartLayout& layout) {
+}  // namespace
+
+std::vector<glm::dvec3> layoutVertexNormals(const ChartLayout& layout) {
   std::vector<glm::dvec3> n(layout.positions.size(), glm::dvec3(0.0));
   for (const auto& t : layout.triangles) {
     if (t[0] >= n.size() || t[1] >= n.size() || t[2] >= n.size()) {
@@ -40,6 +42,8 @@ std::vector<glm::dvec3> vertexNormals(const ChartLayout& layout) {
   }
   return n;
 }
+
+namespace {
 
 // One surface sample before packing.
 struct Sample {
@@ -383,7 +387,37 @@ ImageQuality combineImageQuality(const std::vector<ImageQuality>& parts) {
   });
 }
 
+namespace {
+
+// Whether side i of patch `patch`, at index p, is sampled in its own direction (it owns the
+// side): open sides, and shared sides whose (patch, side) is the smaller of the two.
+bool ownsSide(const Patch& patch, uint32_t p, uint32_t i) {
+  const PatchSide& s = patch.sides[i];
+  return s.neighbourPatch < 0 || p < uint32_t(s.neighbourPatch) ||
+         (p == uint32_t(s.neighbourPatch) && i < s.neighbourSide);
+}
+
+}  // namespace
+
+bool patchSamplesAlike(const Patch& x, const Patch& y, uint32_t p) {
+  if (x.sides.size() != y.sides.size() || x.triangles != y.triangles) return false;
+  for (uint32_t i = 0; i < x.sides.size(); ++i) {
+    const PatchSide& s = x.sides[i];
+    const PatchSide& t = y.sides[i];
+    if (s.vertices != t.vertices || (s.neighbourPatch < 0) != (t.neighbourPatch < 0) ||
+        (s.neighbourPatch >= 0 && s.reversed != t.reversed) || ownsSide(x, p, i) != ownsSide(y, p, i)) {
+      return false;
+    }
+  }
+  return true;
+}
+
 GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options) {
+  return resampleLayout(layout, options, ResampleReuse{});
+}
+
+GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options,
+                                const ResampleReuse& reuse) {
   const auto start = std::chrono::steady_clock::now();
   const uint32_t size = options.chartSize;
   if (!isChartSizeValid(size)) {
@@ -393,8 +427,16 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
   if (!layout.colours.empty() && layout.colours.size() != layout.positions.size()) {
     throw std::invalid_argument("resampleLayout: colours must be empty or one per position");
   }
+  if (reuse.only && reuse.only->size() != layout.patches.size()) {
+    throw std::invalid_argument("resampleLayout: the patch selection must have one flag per patch");
+  }
+  if (reuse.normals && reuse.normals->size() != layout.positions.size()) {
+    throw std::invalid_argument("resampleLayout: the vertex normals must be one per position");
+  }
   const SideLinks links = validateLinks(layout, "resampleLayout");
-  const Surface surface{layout, vertexNormals(layout), !layout.colours.empty()};
+  std::vector<glm::dvec3> ownNormals;
+  if (!reuse.normals) ownNormals = layoutVertexNormals(layout);
+  const Surface surface{layout, reuse.normals ? *reuse.normals : ownNormals, !layout.colours.empty()};
   const uint32_t m = size - 1;
   const uint32_t sideCount = 2 * m + 1;
 
@@ -404,11 +446,36 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
   set.charts.resize(neighbours.size());
   set.patches.resize(layout.patches.size());
 
+  // What each patch does: 0 skip (not selected), 1 resample, 2 + k take from source k.
+  std::vector<uint32_t> action(layout.patches.size(), 1);
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    if (reuse.only && !(*reuse.only)[p]) {
+      action[p] = 0;
+      continue;
+    }
+    for (size_t k = 0; k < reuse.earlier.size(); ++k) {
+      const ResampleReuse::Source& src = reuse.earlier[k];
+      if (!src.patches || !src.set || p >= src.patches->size() ||
+          !patchSamplesAlike((*src.patches)[p], layout.patches[p], p)) {
+        continue;
+      }
+      if (p >= src.set->patches.size()) continue;
+      const PatchResampleStats& st = src.set->patches[p];
+      if (st.sides != layout.patches[p].sides.size() || st.firstChart + st.sides > src.set->charts.size() ||
+          src.set->charts[st.firstChart].positions.size() != size_t(size) * size) {
+        continue;
+      }
+      action[p] = 2 + uint32_t(k);
+      break;
+    }
+  }
+
   // Canonical owner of each side: the (patch, side) with the smaller ids; sampled in its order.
   struct SideRef {
     uint32_t patch, side;
   };
   std::vector<SideRef> owners;
+  std::vector<uint8_t> ownerNeeded;  // some patch that resamples holds it
   std::vector<std::vector<uint32_t>> sideIndex(layout.patches.size());
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     const Patch& patch = layout.patches[p];
@@ -424,21 +491,18 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         throw std::invalid_argument("resampleLayout: patch " + std::to_string(p) + " side " +
                                     std::to_string(i) + " has < 2 vertices");
       }
-      const PatchSide& s = patch.sides[i];
-      const bool owner = s.neighbourPatch < 0 || p < uint32_t(s.neighbourPatch) ||
-                         (p == uint32_t(s.neighbourPatch) && i < s.neighbourSide);
-      if (owner) {
+      if (ownsSide(layout.patches[p], p, i)) {
         sideIndex[p][i] = uint32_t(owners.size());
         owners.push_back({p, i});
+        ownerNeeded.push_back(0);
       }
     }
   }
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     for (uint32_t i = 0; i < layout.patches[p].sides.size(); ++i) {
       const PatchSide& s = layout.patches[p].sides[i];
-      const bool owner = s.neighbourPatch < 0 || p < uint32_t(s.neighbourPatch) ||
-                         (p == uint32_t(s.neighbourPatch) && i < s.neighbourSide);
-      if (!owner) sideIndex[p][i] = sideIndex[uint32_t(s.neighbourPatch)][s.neighbourSide];
+      if (!ownsSide(layout.patches[p], p, i)) sideIndex[p][i] = sideIndex[uint32_t(s.neighbourPatch)][s.neighbourSide];
+      if (action[p] == 1) ownerNeeded[sideIndex[p][i]] = 1;
     }
   }
 
@@ -448,6 +512,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
   std::vector<std::vector<Sample>> sides(owners.size());
   arena.execute([&] {
     tbb::parallel_for(size_t{0}, owners.size(), [&](size_t k) {
+      if (!ownerNeeded[k]) return;
       sides[k] = sampleSide(surface,
                             layout.patches[owners[k].patch].sides[owners[k].side].vertices,
                             sideCount);
@@ -455,6 +520,28 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
     tbb::parallel_for(uint32_t{0}, uint32_t(layout.patches.size()), [&](uint32_t p) {
       const Patch& patch = layout.patches[p];
       const uint32_t n = uint32_t(patch.sides.size());
+      if (action[p] == 0) {
+        set.patches[p].firstChart = links.offsets[p];
+        set.patches[p].sides = n;
+        for (uint32_t i = 0; i < n; ++i) {
+          set.charts[links.offsets[p] + i].patch = p;
+          set.charts[links.offsets[p] + i].quad = i;
+          set.charts[links.offsets[p] + i].neighbours = neighbours[links.offsets[p] + i];
+        }
+        return;
+      }
+      if (action[p] >= 2) {
+        GeometryImageSet& src = *reuse.earlier[action[p] - 2].set;
+        set.patches[p] = src.patches[p];
+        const uint32_t first = src.patches[p].firstChart;
+        set.patches[p].firstChart = links.offsets[p];
+        for (uint32_t i = 0; i < n; ++i) {
+          GeometryImage& img = set.charts[links.offsets[p] + i];
+          img = std::move(src.charts[first + i]);
+          img.neighbours = neighbours[links.offsets[p] + i];
+        }
+        return;
+      }
       const PatchParameterization pp = parameterizePatch(layout, p, options.param);
       PatchResampleStats& st = set.patches[p];
       st.paramInitial = pp.initial;
@@ -559,14 +646,17 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
   });
 
   std::vector<ParamQuality> initial, final;
-  for (const PatchResampleStats& st : set.patches) {
-    initial.push_back(st.paramInitial);
-    final.push_back(st.param);
+  for (uint32_t p = 0; p < set.patches.size(); ++p) {
+    if (action[p] == 0) continue;
+    initial.push_back(set.patches[p].paramInitial);
+    final.push_back(set.patches[p].param);
   }
   set.paramInitial = combineQuality(initial);
   set.param = combineQuality(final);
   std::vector<ImageQuality> images;
-  for (const GeometryImage& g : set.charts) images.push_back(g.quality);
+  for (const GeometryImage& g : set.charts) {
+    if (action[g.patch] != 0) images.push_back(g.quality);
+  }
   set.image = combineImageQuality(images);
   set.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return set;

@@ -103,6 +103,38 @@ std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layo
 // patch (see parameterizePatch) or bad side links (see quadNeighbours).
 GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options = {});
 
+// The layout's unit area-weighted vertex normals (zero where undefined), as resampleLayout
+// interpolates them. They depend on positions and triangles only, which layout refinement
+// (atlas/layout_refine.h) never changes, so a refinement loop computes them once.
+std::vector<glm::dvec3> layoutVertexNormals(const ChartLayout& layout);
+
+// What a resampling of a refined layout may take from earlier resamplings of the same surface.
+struct ResampleReuse {
+  const std::vector<glm::dvec3>* normals = nullptr;  // layoutVertexNormals(layout), if known
+  // Earlier resamplings and the patches each was made from, searched in order. Patch p takes
+  // the charts of patch p of the first source whose patch p samples identically (the same
+  // triangles, the same side vertex runs, and each side sampled from the same end: the same
+  // owner and direction) and whose charts for it are not empty: they are moved out of that
+  // source, and only their neighbours are set anew. A patch's charts depend on nothing else, so
+  // the result is bit for bit the full resampling's.
+  struct Source {
+    const std::vector<Patch>* patches = nullptr;
+    GeometryImageSet* set = nullptr;
+  };
+  std::vector<Source> earlier;
+  // If set (one flag per patch), only the flagged patches are resampled; the others' charts
+  // keep no samples and default quality, so the set's figures are those of the flagged patches.
+  const std::vector<uint8_t>* only = nullptr;
+};
+
+// Whether two versions of the patch at index p of a layout sample identically (see
+// ResampleReuse): the same triangles, the same side runs, each side sampled from the same end.
+bool patchSamplesAlike(const Patch& a, const Patch& b, uint32_t p);
+
+// resampleLayout, reusing what `reuse` offers.
+GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options,
+                                const ResampleReuse& reuse);
+
 // Measures one image (positions and float unit normals, chartSize^2 each). flippedAt, if given,
 // receives the sample index of the (0,0) corner of every flipped texel. faceNormals, if given, are
 // the unit normals of the input faces under the samples (zero where none); without them a texel

@@ -6,7 +6,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstring>
 #include <set>
+
+#include <tbb/global_control.h>
 
 #include <glm/geometric.hpp>
 
@@ -22,6 +25,33 @@ namespace {
 void expectValid(const ChartLayout& layout) {
   const std::vector<std::string> bad = validateChartLayout(layout);
   EXPECT_TRUE(bad.empty()) << bad.front();
+}
+
+// Bit-identical charts: samples, normals, neighbours and figures.
+void expectSameCharts(const GeometryImageSet& a, const GeometryImageSet& b) {
+  ASSERT_EQ(a.charts.size(), b.charts.size());
+  for (size_t c = 0; c < a.charts.size(); ++c) {
+    const GeometryImage &x = a.charts[c], &y = b.charts[c];
+    ASSERT_EQ(x.positions.size(), y.positions.size()) << "chart " << c;
+    EXPECT_EQ(std::memcmp(x.positions.data(), y.positions.data(), x.positions.size() * sizeof(glm::vec3)), 0)
+        << "chart " << c;
+    ASSERT_EQ(x.normals.size(), y.normals.size());
+    EXPECT_EQ(std::memcmp(x.normals.data(), y.normals.data(), x.normals.size() * sizeof(PackedNormal)), 0)
+        << "chart " << c;
+    EXPECT_EQ(x.patch, y.patch);
+    EXPECT_EQ(x.quad, y.quad);
+    for (int e = 0; e < 4; ++e) {
+      EXPECT_EQ(x.neighbours[e].chart, y.neighbours[e].chart);
+      EXPECT_EQ(x.neighbours[e].edge, y.neighbours[e].edge);
+      EXPECT_EQ(x.neighbours[e].reversed, y.neighbours[e].reversed);
+    }
+    EXPECT_EQ(x.quality.flippedTexels, y.quality.flippedTexels);
+    EXPECT_EQ(x.quality.stretchL2, y.quality.stretchL2);
+    EXPECT_EQ(x.foldTriangles, y.foldTriangles);
+  }
+  EXPECT_EQ(a.image.flippedTexels, b.image.flippedTexels);
+  EXPECT_EQ(a.image.stretchL2, b.image.stretchL2);
+  EXPECT_EQ(a.param.stretchL2, b.param.stretchL2);
 }
 
 bool sameLayout(const ChartLayout& a, const ChartLayout& b) {
@@ -188,6 +218,9 @@ TEST(PatchSplit, FlipRepairOnARealScanNeverMakesThingsWorse) {
   EXPECT_EQ(layout.patches.size(), patchesBefore + st.patchesSplit);
   // The returned charts are those of the returned layout.
   EXPECT_EQ(set.charts.size(), quadChartOffsets(layout).back() + layout.patches.back().sides.size());
+  // Only changed patches were parameterized again, yet the charts are bit for bit those of a
+  // full resampling of the final layout.
+  expectSameCharts(set, resampleLayout(layout, ro));
   // Where flipped texels remain, the charts say where (layout triangles), and only there.
   for (const GeometryImage& g : set.charts) {
     EXPECT_EQ(g.foldTriangles.empty(), g.quality.flippedTexels == 0);
@@ -196,6 +229,74 @@ TEST(PatchSplit, FlipRepairOnARealScanNeverMakesThingsWorse) {
       EXPECT_NE(std::find(tris.begin(), tris.end(), t), tris.end());
     }
   }
+}
+
+TEST(PatchSplit, FlipRepairDoesNotDependOnTheThreadCount) {
+  // Batches of folds are searched and judged in parallel; the result must be that of one thread.
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 128;
+  const ChartLayout charted = buildChartLayout(mesh, copt);
+  ResampleOptions ro;
+  ro.chartSize = 33;
+  ChartLayout one = charted, many = charted;
+  FlipRepairStats stOne, stMany;
+  GeometryImageSet setOne;
+  {
+    tbb::global_control single(tbb::global_control::max_allowed_parallelism, 1);
+    straightenSides(one, 2);
+    setOne = resampleWithoutFlips(one, ro, 2, &stOne);
+  }
+  straightenSides(many, 2);
+  const GeometryImageSet setMany = resampleWithoutFlips(many, ro, 2, &stMany);
+  EXPECT_GT(stOne.patchesSplit, 0u) << "the bunny at 33^2 should need splits";
+  EXPECT_TRUE(sameLayout(one, many));
+  EXPECT_EQ(stOne.patchesSplit, stMany.patchesSplit);
+  expectSameCharts(setOne, setMany);
+}
+
+TEST(ResampleReuse, ReusedPatchesAreBitIdenticalAndOnlyChangedOnesAreRedone) {
+  ChartLayout layout = test::cubeLayout(8, true);
+  ResampleOptions ro;
+  ro.chartSize = 17;
+  GeometryImageSet earlier = resampleLayout(layout, ro);
+  const std::vector<Patch> before = layout.patches;
+  ASSERT_TRUE(splitPatchAtCorners(layout, 0, 0, 2));
+  const GeometryImageSet full = resampleLayout(layout, ro);
+  std::vector<uint32_t> changed;
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    if (p >= before.size() || !patchSamplesAlike(before[p], layout.patches[p], p)) changed.push_back(p);
+  }
+  // The split patch, its new part, and the neighbours across the sides that moved to the new
+  // part (the side's owner, by patch index, changes); not the rest.
+  ASSERT_GE(changed.size(), 2u);
+  EXPECT_EQ(changed.front(), 0u);
+  EXPECT_EQ(changed.back(), uint32_t(before.size()));
+  ASSERT_LT(changed.size(), layout.patches.size());
+  uint32_t kept = 0;
+  while (std::find(changed.begin(), changed.end(), kept) != changed.end()) ++kept;
+  ResampleReuse reuse;
+  reuse.earlier.push_back({&before, &earlier});
+  const GeometryImageSet incremental = resampleLayout(layout, ro, reuse);
+  expectSameCharts(incremental, full);
+  // The unchanged patches' charts were taken (moved out), the split one's were not.
+  EXPECT_FALSE(earlier.charts[earlier.patches[0].firstChart].positions.empty());
+  EXPECT_TRUE(earlier.charts[earlier.patches[kept].firstChart].positions.empty());
+  // Only the selected patches: their charts and figures as in the full resampling, none else.
+  std::vector<uint8_t> only(layout.patches.size(), 0);
+  only[0] = 1;
+  ResampleReuse selected;
+  selected.only = &only;
+  const GeometryImageSet part = resampleLayout(layout, ro, selected);
+  ASSERT_EQ(part.charts.size(), full.charts.size());
+  for (size_t c = 0; c < part.charts.size(); ++c) {
+    EXPECT_EQ(part.charts[c].positions.empty(), part.charts[c].patch != 0);
+    if (part.charts[c].patch == 0) EXPECT_EQ(part.charts[c].positions, full.charts[c].positions);
+  }
+  // A selection of the wrong size is refused.
+  std::vector<uint8_t> wrong(1, 1);
+  selected.only = &wrong;
+  EXPECT_THROW(resampleLayout(layout, ro, selected), std::invalid_argument);
 }
 
 TEST(PatchSplit, RepairLeavesAFoldFreeLayoutUnchanged) {
