@@ -287,6 +287,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   ro.chartSize = o.meshChartSize;
   ro.threads = o.threads;
   const uint32_t straightened = o.straightenRounds ? straightenSides(layout, o.straightenRounds) : 0;
+  const uint32_t ears = moveSideEars(layout);
   meter.finish("straighten");
   FlipRepairStats flips;
   GeometryImageSet first = resampleLayout(layout, ro);
@@ -305,6 +306,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                        {"flipped_texels", set.image.flippedTexels},
                        {"texels_against_vertex_normals", set.image.texelsAgainstNormals},
                        {"sides_straightened", straightened},
+                       {"side_ears_mended", ears},
                        {"flipped_texels_before_splits", flips.flippedTexelsFirst},
                        {"patches_split_for_flips", flips.patchesSplit},
                        {"patches_unsplittable", flips.patchesUnsplit},

@@ -606,6 +606,74 @@ uint32_t straightenSides(ChartLayout& layout, uint32_t rounds) {
   return changed;
 }
 
+uint32_t moveSideEars(ChartLayout& layout, const std::vector<uint32_t>& only, bool splitFull) {
+  std::vector<uint32_t> patches = only;
+  if (patches.empty()) {
+    for (uint32_t p = 0; p < layout.patches.size(); ++p) patches.push_back(p);
+  }
+  uint32_t moved = 0;
+  for (size_t w = 0; w < patches.size(); ++w) {
+    const uint32_t p = patches[w];
+    if (p >= layout.patches.size()) continue;
+    uint32_t splits = 0;
+    bool again = true;
+    while (again) {
+      again = false;
+      Patch& patch = layout.patches[p];
+      // Directed edge -> triangle of this patch (its boundary runs counter-clockwise, so the
+      // triangle inside along side edge a -> b holds a -> b).
+      std::unordered_map<uint64_t, uint32_t> inside;
+      for (uint32_t t : patch.triangles) {
+        const auto& tri = layout.triangles[t];
+        for (int c = 0; c < 3; ++c) inside[directed(tri[c], tri[(c + 1) % 3])] = t;
+      }
+      for (uint32_t s = 0; s < patch.sides.size() && !again; ++s) {
+        PatchSide& side = patch.sides[s];
+        if (side.neighbourPatch == int32_t(p) || (side.neighbourPatch >= 0 && !side.reversed)) continue;
+        const std::vector<uint32_t>& v = side.vertices;
+        for (size_t k = 0; k + 2 < v.size(); ++k) {
+          const auto it = inside.find(directed(v[k], v[k + 1]));
+          if (it == inside.end()) continue;
+          const uint32_t t = it->second;
+          const auto& tri = layout.triangles[t];
+          if (tri[0] != v[k + 2] && tri[1] != v[k + 2] && tri[2] != v[k + 2]) continue;
+          // The third edge must be inside the patch (else the patch is this one triangle).
+          if (!inside.contains(directed(v[k], v[k + 2]))) continue;
+          if (side.neighbourPatch < 0) {
+            // No neighbour to take it: its middle vertex becomes a corner, so its vertices lie
+            // on two edges of the polygon. A patch with 8 sides already is first cut at its neck
+            // (at most twice), both parts looked at again.
+            if (insertCorner(layout, p, s, uint32_t(k + 1))) {
+              ++moved;
+              again = true;
+              break;
+            }
+            const size_t count = layout.patches.size();
+            if (splitFull && splits < 2 && splitPatchAtNeck(layout, p)) {
+              ++splits;
+              for (size_t q = count; q < layout.patches.size(); ++q) patches.push_back(uint32_t(q));
+              again = true;
+              break;
+            }
+            continue;
+          }
+          Patch& other = layout.patches[uint32_t(side.neighbourPatch)];
+          PatchSide& mirror = other.sides[side.neighbourSide];
+          const uint32_t middle = v[k + 1];
+          patch.triangles.erase(std::find(patch.triangles.begin(), patch.triangles.end(), t));
+          other.triangles.push_back(t);
+          side.vertices.erase(side.vertices.begin() + std::ptrdiff_t(k + 1));
+          mirror.vertices.erase(std::find(mirror.vertices.begin(), mirror.vertices.end(), middle));
+          ++moved;
+          again = true;
+          break;
+        }
+      }
+    }
+  }
+  return moved;
+}
+
 bool splitPatchAtNeck(ChartLayout& layout, uint32_t p) {
   return splitByCut(layout, p, {}, 8) || splitPatchAtCornerNeck(layout, p);
 }
@@ -731,6 +799,13 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
     set = resampleLayout(layout, options, reuse);
     ++st.rounds;
   };
+  // A cut may leave ears (moveSideEars) in the patches it touched; mending them stays within
+  // the trial's two rings.
+  auto mendEars = [&](const Trial& t) {
+    std::vector<uint32_t> patches = t.touched;
+    for (size_t q = t.firstNew; q < t.endNew; ++q) patches.push_back(uint32_t(q));
+    moveSideEars(layout, patches, false);
+  };
   // First, whole rounds: every folding patch cut at once (neck first, else through the fold),
   // kept while the flipped texels drop. Cheap (only the cut patches and their neighbours are
   // resampled) and it lets halves be cut again.
@@ -744,8 +819,12 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
         batch[k].cut = findCut(layout, batch[k].patch, {}, 8);
       });
       for (Trial& t : batch) {
-        split += applyCut(layout, t.patch, t.cut, 8) || splitPatchAtCornerNeck(layout, t.patch) ||
-                 splitPatchThrough(layout, t.patch, t.triangle);
+        t.firstNew = layout.patches.size();
+        const bool done = applyCut(layout, t.patch, t.cut, 8) || splitPatchAtCornerNeck(layout, t.patch) ||
+                          splitPatchThrough(layout, t.patch, t.triangle);
+        t.endNew = layout.patches.size();
+        if (done) mendEars(t);
+        split += done;
       }
     }
     if (split == 0) break;
@@ -802,6 +881,7 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
           t->firstNew = layout.patches.size();
           t->done = applyCut(layout, t->patch, t->cut, 8) || (neck && splitPatchAtCornerNeck(layout, t->patch));
           t->endNew = layout.patches.size();
+          if (t->done) mendEars(*t);
         }
         only.assign(layout.patches.size(), 0);
         flippedOf.resize(layout.patches.size(), 0);

@@ -30,6 +30,17 @@ bool straightenSide(ChartLayout& layout, uint32_t patch, uint32_t side);
 // sides changed.
 uint32_t straightenSides(ChartLayout& layout, uint32_t rounds = 2);
 
+// Moves every "ear" of the given patches (all patches if empty) to the neighbour across its side:
+// a triangle whose three vertices are consecutive vertices of one shared side. Its three
+// vertices lie on one straight edge of the patch's polygon, so the parameterization gives it no
+// area, and the side's samples (by arc length along its two edges) run off the map's interior
+// samples (which cut across its third edge): texels there fold. Moved, the triangle is the
+// neighbour's, whose side (and this one's) then takes the third edge; both patches stay disks.
+// On an open side the ear's middle vertex becomes a corner instead; a patch that has 8 sides
+// already is first cut at its neck (splitPatchAtNeck) if splitFull, which may change patches
+// beyond its neighbours. Returns the ears mended.
+uint32_t moveSideEars(ChartLayout& layout, const std::vector<uint32_t>& patches = {}, bool splitFull = true);
+
 // Cuts patch `patch` along the shortest path of interior edges (through interior vertices only)
 // between its corners i and j, which must not be adjacent (2 <= (j - i) mod n <= n - 2). The
 // part with sides i..j-1 keeps the patch's index (its side 0 is the old side i); the other part

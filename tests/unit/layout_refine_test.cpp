@@ -299,6 +299,66 @@ TEST(ResampleReuse, ReusedPatchesAreBitIdenticalAndOnlyChangedOnesAreRedone) {
   EXPECT_THROW(resampleLayout(layout, ro, selected), std::invalid_argument);
 }
 
+// A square fanned from its centre whose bottom side 0-5-7-6-1 has an ear (5, 7, 6) hanging
+// below the chord 5-6; with `below`, a second patch fills the band under the bottom side and
+// shares it, else the bottom side is open.
+ChartLayout earLayout(bool below) {
+  ChartLayout l;
+  l.positions = {{0, 0, 0}, {2, 0, 0}, {2, 2, 0}, {0, 2, 0}, {1, 1, 0}, {0.7f, 0, 0}, {1.3f, 0, 0}, {1, -0.2f, 0}};
+  l.triangles = {{0, 5, 4}, {5, 6, 4}, {6, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}, {5, 7, 6}};
+  Patch a;
+  a.triangles = {0, 1, 2, 3, 4, 5, 6};
+  a.sides = {{{0, 5, 7, 6, 1}}, {{1, 2}}, {{2, 3}}, {{3, 0}}};
+  l.patches.push_back(a);
+  if (below) {
+    l.positions.push_back({0, -1, 0});  // 8
+    l.positions.push_back({2, -1, 0});  // 9
+    l.triangles.insert(l.triangles.end(), {{8, 9, 7}, {8, 7, 5}, {8, 5, 0}, {9, 6, 7}, {9, 1, 6}});
+    Patch b;
+    b.triangles = {7, 8, 9, 10, 11};
+    b.sides = {{{8, 9}}, {{9, 1}}, {{1, 6, 7, 5, 0}}, {{0, 8}}};
+    b.sides[2].neighbourPatch = 0;
+    b.sides[2].neighbourSide = 0;
+    l.patches[0].sides[0].neighbourPatch = 1;
+    l.patches[0].sides[0].neighbourSide = 2;
+    l.patches.push_back(b);
+  }
+  return l;
+}
+
+TEST(SideEars, AnEarOnASharedSideMovesToTheNeighbour) {
+  ChartLayout layout = earLayout(true);
+  expectValid(layout);
+  ResampleOptions ro;
+  ro.chartSize = 17;
+  EXPECT_GT(resampleLayout(layout, ro).param.degenerateTriangles, 0u) << "the ear has no area in the polygon";
+  EXPECT_EQ(moveSideEars(layout), 1u);
+  expectValid(layout);
+  EXPECT_EQ(layout.patches[0].triangles.size(), 6u);
+  EXPECT_EQ(layout.patches[1].triangles.size(), 6u);
+  EXPECT_NE(std::find(layout.patches[1].triangles.begin(), layout.patches[1].triangles.end(), 6u),
+            layout.patches[1].triangles.end());
+  EXPECT_EQ(layout.patches[0].sides[0].vertices, (std::vector<uint32_t>{0, 5, 6, 1}));
+  EXPECT_EQ(layout.patches[1].sides[2].vertices, (std::vector<uint32_t>{1, 6, 5, 0}));
+  EXPECT_EQ(resampleLayout(layout, ro).param.degenerateTriangles, 0u);
+  EXPECT_EQ(moveSideEars(layout), 0u) << "nothing left to mend";
+}
+
+TEST(SideEars, AnEarOnAnOpenSideGetsACorner) {
+  ChartLayout layout = earLayout(false);
+  expectValid(layout);
+  ResampleOptions ro;
+  ro.chartSize = 17;
+  EXPECT_GT(resampleLayout(layout, ro).param.degenerateTriangles, 0u);
+  EXPECT_EQ(moveSideEars(layout), 1u);
+  expectValid(layout);
+  ASSERT_EQ(layout.patches.size(), 1u);
+  ASSERT_EQ(layout.patches[0].sides.size(), 5u);
+  EXPECT_EQ(layout.patches[0].sides[0].vertices, (std::vector<uint32_t>{0, 5, 7}));
+  EXPECT_EQ(layout.patches[0].sides[1].vertices, (std::vector<uint32_t>{7, 6, 1}));
+  EXPECT_EQ(resampleLayout(layout, ro).param.degenerateTriangles, 0u);
+}
+
 TEST(PatchSplit, RepairLeavesAFoldFreeLayoutUnchanged) {
   ChartLayout layout = test::cubeLayout(8, true);
   const ChartLayout before = layout;
