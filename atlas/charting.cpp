@@ -22,6 +22,10 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
 #include "atlas/gridify.h"
 
 namespace gimlod {
@@ -36,6 +40,15 @@ constexpr double kTau = 0.01;
 // Weight of the normal-spread term 1 - |sum of area-weighted normals| / area (0 flat, 1 folded
 // shut); it keeps clusters from wrapping round thin parts, where the plane fit alone is small.
 constexpr double kNormalWeight = 4.0;
+
+// Hands freed heap memory back to the system. The cells' results are many small blocks spread
+// over the worker threads' malloc arenas; once they are freed, glibc keeps those pages (only
+// the top of an arena is trimmed), which would count against the memory cap in later stages.
+void releaseFreedMemory() {
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
+}
 
 double since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
@@ -65,17 +78,18 @@ uint64_t mix64(uint64_t x) {
   return x;
 }
 
-// Exact-position weld table (open addressing). +0 and -0 are the same key.
+// Exact-position weld table (open addressing). +0 and -0 are the same key. The slots index the
+// caller's array of welded positions (no copy of the keys is kept).
 class PositionWeld {
  public:
   explicit PositionWeld(size_t expected) {
     size_t cap = 16;
-    while (cap < expected * 2 + 16) cap *= 2;
+    while (cap < expected + expected / 2 + 16) cap *= 2;  // load <= 2/3
     slots_.assign(cap, kNone);
     mask_ = cap - 1;
   }
-  // Returns the id of p (an earlier equal position's, or `id` if new).
-  uint32_t insert(const glm::vec3& p, uint32_t id, std::vector<glm::vec3>& keys) {
+  // Returns the id of p: an earlier equal position's, or pos.size() after appending p.
+  uint32_t insert(const glm::vec3& p, std::vector<glm::vec3>& pos) {
     const glm::vec3 q = p + 0.0f;
     const uint64_t hx = std::bit_cast<uint32_t>(q.x), hy = std::bit_cast<uint32_t>(q.y),
                    hz = std::bit_cast<uint32_t>(q.z);
@@ -83,11 +97,12 @@ class PositionWeld {
     while (true) {
       const uint32_t s = slots_[i];
       if (s == kNone) {
+        const auto id = static_cast<uint32_t>(pos.size());
         slots_[i] = id;
-        keys.push_back(q);
+        pos.push_back(p);
         return id;
       }
-      if (keys[s] == q) return s;
+      if (pos[s] + 0.0f == q) return s;
       i = (i + 1) & mask_;
     }
   }
@@ -102,15 +117,43 @@ struct Surface {
   std::vector<glm::vec3> positions;
   std::vector<glm::u8vec4> colours;
   std::vector<std::array<uint32_t, 3>> tris;
-  std::vector<uint32_t> source;   // input triangle of each triangle
   std::vector<uint32_t> twin;     // per half-edge 3f+i (v[i] -> v[i+1]); kNone: open
-  std::vector<uint32_t> vfStart;  // vertex -> faces (CSR)
+  // Faces round a vertex: either vfStart / vfFaces (CSR, ascending faces; a block's sub-surface,
+  // where a vertex may have several fans), or vHe (every vertex one fan, as weldAndRepair
+  // leaves it): an outgoing half-edge, the open one if the fan is open, kNone if no face.
+  std::vector<uint32_t> vHe;
+  std::vector<uint32_t> vfStart;
   std::vector<uint32_t> vfFaces;
   uint32_t origin(uint32_t h) const { return tris[h / 3][h % 3]; }
   uint32_t dest(uint32_t h) const { return tris[h / 3][(h % 3 + 1) % 3]; }
+  // Calls fn(face) for the faces round v until fn returns true.
+  template <class Fn>
+  void forFaces(uint32_t v, Fn&& fn) const {
+    if (!vfStart.empty()) {
+      for (uint32_t i = vfStart[v]; i < vfStart[v + 1]; ++i)
+        if (fn(vfFaces[i])) return;
+      return;
+    }
+    const uint32_t h0 = vHe[v];
+    if (h0 == kNone) return;
+    uint32_t h = h0;
+    do {
+      if (fn(h / 3)) return;
+      h = twin[prevHe(h)];  // the next outgoing half-edge round v
+    } while (h != kNone && h != h0);
+  }
+  // The faces round v in ascending order (as the CSR lists them).
+  void facesAround(uint32_t v, std::vector<uint32_t>& out) const {
+    out.clear();
+    forFaces(v, [&](uint32_t f) {
+      out.push_back(f);
+      return false;
+    });
+    std::sort(out.begin(), out.end());
+  }
   size_t bytes() const {
-    return positions.size() * 12 + colours.size() * 4 + tris.size() * 16 + twin.size() * 4 +
-           vfStart.size() * 4 + vfFaces.size() * 4;
+    return positions.size() * 12 + colours.size() * 4 + tris.size() * 12 + twin.size() * 4 +
+           vHe.size() * 4 + vfStart.size() * 4 + vfFaces.size() * 4;
   }
 };
 
@@ -121,6 +164,7 @@ struct UnionFind {
     while (parent[x] != x) x = parent[x] = parent[parent[x]];
     return x;
   }
+  // The root of a set is its smallest element, and parent[x] <= x throughout.
   void unite(uint32_t a, uint32_t b) {
     a = find(a);
     b = find(b);
@@ -128,52 +172,49 @@ struct UnionFind {
   }
 };
 
-// Welds, drops degenerate and duplicate triangles, pairs half-edges (non-manifold edges: the
-// first half-edges of each direction are paired, the rest stay open) and splits every vertex
-// whose corners form more than one fan. `triPos` gives each triangle's corner positions.
-// consumeTris: the caller's own copy of inTris, released as soon as it is no longer needed.
-Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm::u8vec4>& inCol,
-                      const std::vector<std::array<uint32_t, 3>>& inTris, ChartingStats& st,
-                      std::vector<std::array<uint32_t, 3>>* consumeTris = nullptr) {
+// Step 1 of the repair, streamed: welds exactly equal positions as triangles are added, so that
+// the caller can free its input as it goes. Ids are given in order of first reference.
+struct Welder {
+  explicit Welder(size_t expectedVertices) : table(expectedVertices) {}
+  PositionWeld table;
+  std::vector<glm::vec3> positions;  // first-referenced position of each welded vertex
+  std::vector<glm::u8vec4> colours;  // likewise, if colours are welded
+  std::vector<std::array<uint32_t, 3>> tris;
+  uint64_t referenced = 0;  // input positions referenced (welded into an earlier one or not)
+  // Id of an input position (remapping it for the triangles): a new one or an equal earlier one.
+  uint32_t add(const glm::vec3& p, const glm::u8vec4* c) {
+    ++referenced;
+    const size_t before = positions.size();
+    const uint32_t id = table.insert(p, positions);
+    if (c && positions.size() != before) colours.push_back(*c);
+    return id;
+  }
+};
+
+// Steps 2-5 of weldAndRepair on welded triangles (w: positions, colours and triangles, the
+// latter in input order, consumed). perTriangle: a value per input triangle, filtered as the
+// triangles are (kept in step with Surface::tris).
+Surface repairWelded(Welder&& w, ChartingStats& st, std::vector<uint32_t>* perTriangle = nullptr) {
   const char* fn = "buildChartLayout";
   Surface s;
-  st.inputTriangles += inTris.size();
-  // 1. Weld referenced positions.
-  std::vector<uint32_t> remap(inPos.size(), kNone);
-  std::vector<uint32_t> weldSource;  // input vertex of each welded vertex
-  std::vector<glm::vec3> keys;
-  PositionWeld weld(std::min(inPos.size(), inTris.size() * 3));
-  uint64_t referenced = 0;
-  for (const auto& t : inTris) {
-    for (uint32_t v : t) {
-      if (v >= inPos.size())
-        throw InputError(std::string(fn) + ": triangle index " + std::to_string(v) +
-                         " outside the " + std::to_string(inPos.size()) + " positions");
-      if (remap[v] != kNone) continue;
-      const glm::vec3& p = inPos[v];
-      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
-        throw InputError(std::string(fn) + ": vertex " + std::to_string(v) + " is not finite");
-      ++referenced;
-      const uint32_t id = weld.insert(p, static_cast<uint32_t>(weldSource.size()), keys);
-      if (id == weldSource.size()) weldSource.push_back(v);
-      remap[v] = id;
-    }
-  }
-  st.inputVertices += referenced;
-  st.verticesWelded += referenced - weldSource.size();
-  // 2. Remap; drop degenerate and duplicate triangles (first one kept). Triangles are bucketed
-  // by their smallest vertex (counting sort), so each bucket holds a handful of candidates: O(n)
+  std::vector<std::array<uint32_t, 3>> tris = std::move(w.tris);
+  st.inputTriangles += tris.size();
+  st.inputVertices += w.referenced;
+  st.verticesWelded += w.referenced - w.positions.size();
+  w.table = PositionWeld(0);  // the table is no longer needed
+  // 2. Drop degenerate and duplicate triangles (first one kept). Triangles are bucketed by
+  // their smallest vertex (counting sort), so each bucket holds a handful of candidates: O(n)
   // and 4 bytes per triangle, where one global sort of (vertex triple, index) keys would take 16.
-  const uint32_t nw = static_cast<uint32_t>(weldSource.size());
-  std::vector<uint8_t> keep(inTris.size(), 0);
+  const uint32_t nw = static_cast<uint32_t>(w.positions.size());
+  std::vector<uint8_t> keep(tris.size(), 0);
   {
     std::vector<uint32_t> start(size_t{nw} + 1, 0);
     auto sortedOf = [&](uint32_t i) {
-      std::array<uint32_t, 3> t{remap[inTris[i][0]], remap[inTris[i][1]], remap[inTris[i][2]]};
+      std::array<uint32_t, 3> t = tris[i];
       std::sort(t.begin(), t.end());
       return t;
     };
-    for (uint32_t i = 0; i < inTris.size(); ++i) {
+    for (uint32_t i = 0; i < tris.size(); ++i) {
       const std::array<uint32_t, 3> t = sortedOf(i);
       if (t[0] == t[1] || t[1] == t[2]) {
         ++st.droppedDegenerate;
@@ -186,7 +227,7 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
     std::vector<uint32_t> bucket(start[nw]);
     {
       std::vector<uint32_t> fill(start.begin(), start.end() - 1);
-      for (uint32_t i = 0; i < inTris.size(); ++i)
+      for (uint32_t i = 0; i < tris.size(); ++i)
         if (keep[i]) bucket[fill[sortedOf(i)[0]]++] = i;
     }
     std::vector<std::pair<std::array<uint32_t, 3>, uint32_t>> group;
@@ -203,25 +244,28 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
         }
     }
   }
-  std::vector<std::array<uint32_t, 3>> tris;
   {
-    const size_t kept = static_cast<size_t>(std::count(keep.begin(), keep.end(), uint8_t{1}));
-    tris.reserve(kept);
-    s.source.reserve(kept);
-  }
-  for (uint32_t i = 0; i < inTris.size(); ++i) {
-    if (!keep[i]) continue;
-    tris.push_back({remap[inTris[i][0]], remap[inTris[i][1]], remap[inTris[i][2]]});
-    s.source.push_back(i);
+    size_t n = 0;
+    for (size_t i = 0; i < tris.size(); ++i) {
+      if (!keep[i]) continue;
+      tris[n] = tris[i];
+      if (perTriangle) (*perTriangle)[n] = (*perTriangle)[i];
+      ++n;
+    }
+    tris.resize(n);
+    tris.shrink_to_fit();
+    if (perTriangle) {
+      perTriangle->resize(n);
+      perTriangle->shrink_to_fit();
+    }
   }
   std::vector<uint8_t>().swap(keep);
-  std::vector<uint32_t>().swap(remap);
-  if (consumeTris == &inTris) std::vector<std::array<uint32_t, 3>>().swap(*consumeTris);
   const uint32_t nf = static_cast<uint32_t>(tris.size());
   if (nf == 0) throw InputError(std::string(fn) + ": no triangle left after welding");
   // 3. Pair half-edges by undirected edge: half-edges bucketed by their smaller vertex
   // (counting sort), each bucket ordered by (larger vertex, half-edge), which groups them
-  // exactly as a global sort of (edge key, half-edge) would.
+  // exactly as a global sort of (edge key, half-edge) would. The buckets are filled a range of
+  // vertices at a time, so that the bucket array stays small on large meshes.
   auto org = [&](uint32_t h) { return tris[h / 3][h % 3]; };
   auto dst = [&](uint32_t h) { return tris[h / 3][(h % 3 + 1) % 3]; };
   s.twin.assign(size_t{nf} * 3, kNone);
@@ -230,68 +274,83 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
     std::vector<uint32_t> start(size_t{nw} + 1, 0);
     for (uint32_t h = 0; h < 3 * nf; ++h) ++start[std::min(org(h), dst(h)) + 1];
     for (uint32_t v = 0; v < nw; ++v) start[v + 1] += start[v];
-    std::vector<uint32_t> he(size_t{nf} * 3);
-    {
-      std::vector<uint32_t> fill(start.begin(), start.end() - 1);
-      for (uint32_t h = 0; h < 3 * nf; ++h) he[fill[std::min(org(h), dst(h))]++] = h;  // h ascending
-    }
+    constexpr uint32_t kRange = uint32_t{1} << 23;  // half-edges (and vertices) per range
+    std::vector<uint32_t> he, fill;
     auto far = [&](uint32_t h) { return std::max(org(h), dst(h)); };
-    for (uint32_t v = 0; v < nw; ++v) {
-      const auto b = he.begin() + start[v], e = he.begin() + start[v + 1];
-      std::stable_sort(b, e, [&](uint32_t x, uint32_t y) { return far(x) < far(y); });
-      for (auto i = b; i != e;) {
-        auto j = i + 1;
-        while (j != e && far(*j) == far(*i)) ++j;
-        if (j - i == 2 && org(*i) != org(*(i + 1))) {
-          s.twin[*i] = *(i + 1);
-          s.twin[*(i + 1)] = *i;
-        } else if (j - i >= 2) {
-          ++st.nonManifoldEdges;
-          std::vector<uint32_t> fw, bw, all;
-          for (auto k = i; k != j; ++k) {
-            const uint32_t h = *k;
-            all.push_back(h);
-            (org(h) < dst(h) ? fw : bw).push_back(h);
-          }
-          for (size_t k = 0; k < std::min(fw.size(), bw.size()); ++k) {
-            s.twin[fw[k]] = bw[k];
-            s.twin[bw[k]] = fw[k];
-          }
-          badGroups.push_back(std::move(all));
-        }
-        i = j;
+    for (uint32_t lo = 0; lo < nw;) {
+      uint32_t hi = lo + 1;
+      while (hi < nw && hi - lo < kRange && start[hi + 1] - start[lo] <= kRange) ++hi;
+      he.resize(start[hi] - start[lo]);
+      fill.resize(hi - lo);
+      for (uint32_t v = lo; v < hi; ++v) fill[v - lo] = start[v] - start[lo];
+      for (uint32_t h = 0; h < 3 * nf; ++h) {  // h ascending in each bucket
+        const uint32_t v = std::min(org(h), dst(h));
+        if (v >= lo && v < hi) he[fill[v - lo]++] = h;
       }
+      for (uint32_t v = lo; v < hi; ++v) {
+        const auto b = he.begin() + (start[v] - start[lo]), e = he.begin() + (start[v + 1] - start[lo]);
+        std::stable_sort(b, e, [&](uint32_t x, uint32_t y) { return far(x) < far(y); });
+        for (auto i = b; i != e;) {
+          auto j = i + 1;
+          while (j != e && far(*j) == far(*i)) ++j;
+          if (j - i == 2 && org(*i) != org(*(i + 1))) {
+            s.twin[*i] = *(i + 1);
+            s.twin[*(i + 1)] = *i;
+          } else if (j - i >= 2) {
+            ++st.nonManifoldEdges;
+            std::vector<uint32_t> fw, bw, all;
+            for (auto k = i; k != j; ++k) {
+              const uint32_t h = *k;
+              all.push_back(h);
+              (org(h) < dst(h) ? fw : bw).push_back(h);
+            }
+            for (size_t k = 0; k < std::min(fw.size(), bw.size()); ++k) {
+              s.twin[fw[k]] = bw[k];
+              s.twin[bw[k]] = fw[k];
+            }
+            badGroups.push_back(std::move(all));
+          }
+          i = j;
+        }
+      }
+      lo = hi;
     }
   }
   // 4. Split vertices into fans (corners linked across paired edges). Repeat if a split leaves
   // two edges between the same two vertices (a fan closing round a fin): detach that triangle.
-  const uint32_t nv0 = static_cast<uint32_t>(weldSource.size());
-  std::vector<uint32_t> newId, vertexOf;  // corner root -> new vertex; new vertex -> welded
+  const uint32_t nv0 = nw;
+  std::vector<uint32_t> newId, vertexOf;  // corner -> new vertex; new vertex -> welded
   uint64_t splitVertices = 0;
   for (int round = 0;; ++round) {
-    UnionFind uf(size_t{nf} * 3);
-    for (uint32_t h = 0; h < 3 * nf; ++h) {
-      const uint32_t t = s.twin[h];
-      if (t == kNone || t < h) continue;
-      uf.unite(h, nextHe(t));
-      uf.unite(nextHe(h), t);
+    {
+      UnionFind uf(size_t{nf} * 3);
+      for (uint32_t h = 0; h < 3 * nf; ++h) {
+        const uint32_t t = s.twin[h];
+        if (t == kNone || t < h) continue;
+        uf.unite(h, nextHe(t));
+        uf.unite(nextHe(h), t);
+      }
+      newId = std::move(uf.parent);
     }
-    newId.assign(size_t{nf} * 3, kNone);
+    // Corners in ascending order: a root (the smallest corner of its fan) gets the fan's vertex
+    // id; any other corner's parent is a smaller corner, already replaced by that id.
     std::vector<uint8_t> owned(nv0, 0);
     std::vector<uint8_t> counted(nv0, 0);
-    vertexOf.assign(nv0, kNone);
-    for (uint32_t v = 0; v < nv0; ++v) vertexOf[v] = v;
+    vertexOf.resize(nv0);
+    std::iota(vertexOf.begin(), vertexOf.end(), 0u);
     splitVertices = 0;
     uint64_t nonManifoldVertices = 0;
     for (uint32_t c = 0; c < 3 * nf; ++c) {
-      const uint32_t r = uf.find(c);
-      if (newId[r] != kNone) continue;
+      if (newId[c] != c) {
+        newId[c] = newId[newId[c]];
+        continue;
+      }
       const uint32_t v = org(c);
       if (!owned[v]) {
         owned[v] = 1;
-        newId[r] = v;
+        newId[c] = v;
       } else {
-        newId[r] = static_cast<uint32_t>(vertexOf.size());
+        newId[c] = static_cast<uint32_t>(vertexOf.size());
         vertexOf.push_back(v);
         ++splitVertices;
         if (!counted[v]) {
@@ -300,7 +359,6 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
         }
       }
     }
-    for (uint32_t c = 0; c < 3 * nf; ++c) newId[c] = newId[uf.find(c)];
     bool changed = false;
     for (const auto& g : badGroups) {
       for (size_t a = 0; a < g.size(); ++a) {
@@ -326,28 +384,63 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
     }
   }
   st.verticesSplit += splitVertices;
-  // 5. Output arrays.
+  // 5. Output arrays (vertex v < nw keeps its welded id; split copies come after).
   const uint32_t nv = static_cast<uint32_t>(vertexOf.size());
   s.tris = std::move(tris);  // renumbered in place
   for (uint32_t f = 0; f < nf; ++f)
     for (int k = 0; k < 3; ++k) s.tris[f][k] = newId[3 * f + k];
   std::vector<uint32_t>().swap(newId);
+  s.positions = std::move(w.positions);
   s.positions.resize(nv);
-  for (uint32_t v = 0; v < nv; ++v) s.positions[v] = inPos[weldSource[vertexOf[v]]];
-  if (!inCol.empty()) {
+  for (uint32_t v = nv0; v < nv; ++v) s.positions[v] = s.positions[vertexOf[v]];
+  s.positions.shrink_to_fit();
+  if (!w.colours.empty()) {
+    s.colours = std::move(w.colours);
     s.colours.resize(nv);
-    for (uint32_t v = 0; v < nv; ++v) s.colours[v] = inCol[weldSource[vertexOf[v]]];
+    for (uint32_t v = nv0; v < nv; ++v) s.colours[v] = s.colours[vertexOf[v]];
+    s.colours.shrink_to_fit();
   }
-  s.vfStart.assign(size_t{nv} + 1, 0);
-  for (const auto& t : s.tris)
-    for (uint32_t v : t) ++s.vfStart[v + 1];
-  for (uint32_t v = 0; v < nv; ++v) s.vfStart[v + 1] += s.vfStart[v];
-  s.vfFaces.resize(size_t{nf} * 3);
-  std::vector<uint32_t> fill(s.vfStart.begin(), s.vfStart.end() - 1);
-  for (uint32_t f = 0; f < nf; ++f)
-    for (uint32_t v : s.tris[f]) s.vfFaces[fill[v]++] = f;
+  std::vector<uint32_t>().swap(vertexOf);
+  // One outgoing half-edge per vertex, the open one where the fan is open.
+  s.vHe.assign(nv, kNone);
+  for (uint32_t h = 0; h < 3 * nf; ++h) {
+    uint32_t& e = s.vHe[s.origin(h)];
+    if (e == kNone || s.twin[h] == kNone) e = h;
+  }
   for (uint32_t t : s.twin) st.boundaryEdges += t == kNone;
   return s;
+}
+
+// Welds, drops degenerate and duplicate triangles, pairs half-edges (non-manifold edges: the
+// first half-edges of each direction are paired, the rest stay open) and splits every vertex
+// whose corners form more than one fan.
+Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm::u8vec4>& inCol,
+                      const std::vector<std::array<uint32_t, 3>>& inTris, ChartingStats& st) {
+  const char* fn = "buildChartLayout";
+  // 1. Weld referenced positions.
+  Welder w(std::min(inPos.size(), inTris.size() * 3));
+  {
+    std::vector<uint32_t> remap(inPos.size(), kNone);
+    w.tris.reserve(inTris.size());
+    for (const auto& t : inTris) {
+      std::array<uint32_t, 3> r;
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t v = t[k];
+        if (v >= inPos.size())
+          throw InputError(std::string(fn) + ": triangle index " + std::to_string(v) +
+                           " outside the " + std::to_string(inPos.size()) + " positions");
+        if (remap[v] == kNone) {
+          const glm::vec3& p = inPos[v];
+          if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+            throw InputError(std::string(fn) + ": vertex " + std::to_string(v) + " is not finite");
+          remap[v] = w.add(p, inCol.empty() ? nullptr : &inCol[v]);
+        }
+        r[k] = remap[v];
+      }
+      w.tris.push_back(r);
+    }
+  }
+  return repairWelded(std::move(w), st);
 }
 
 // Area moments of a set of triangles, in normalised coordinates (bounding-box centre at 0,
@@ -518,11 +611,12 @@ class Clusterer {
     if (F == 0 || start == kNone) return false;
     if (static_cast<int64_t>(V) - static_cast<int64_t>(E2 / 2) + static_cast<int64_t>(F) != 1)
       return false;
-    // Connected: flood over interior edges.
+    // Connected: flood over interior edges (marks in a bit per face, cleared afterwards).
+    if (faceSeen_.size() != (s_.tris.size() + 63) / 64) faceSeen_.assign((s_.tris.size() + 63) / 64, 0);
+    auto seen = [&](uint32_t f) { return (faceSeen_[f >> 6] >> (f & 63)) & 1; };
+    auto see = [&](uint32_t f) { faceSeen_[f >> 6] |= uint64_t{1} << (f & 63); };
     std::vector<uint32_t> stack{head_[c]};
-    ++stamp_;
-    std::vector<uint32_t>& seen = faceSeen();
-    seen[head_[c]] = stamp_;
+    see(head_[c]);
     uint64_t reached = 0;
     while (!stack.empty()) {
       const uint32_t f = stack.back();
@@ -530,11 +624,12 @@ class Clusterer {
       ++reached;
       for (uint32_t k = 0; k < 3; ++k) {
         const uint32_t t = s_.twin[3 * f + k];
-        if (t == kNone || label_[t / 3] != c || seen[t / 3] == stamp_) continue;
-        seen[t / 3] = stamp_;
+        if (t == kNone || label_[t / 3] != c || seen(t / 3)) continue;
+        see(t / 3);
         stack.push_back(t / 3);
       }
     }
+    for (uint32_t f = head_[c]; f != kNone; f = nextFace_[f]) faceSeen_[f >> 6] = 0;
     if (reached != F) return false;
     // One simple loop through all boundary half-edges.
     ++stamp_;
@@ -550,27 +645,28 @@ class Clusterer {
     return len == B && h == start;
   }
 
-  // Labels with every non-disk cluster replaced by single-triangle clusters (empty if all
-  // clusters are disks); `dissolved` counts those clusters.
-  std::vector<uint32_t> dissolveNonDisks(uint32_t& dissolved) {
+  // Replaces every non-disk cluster's labels by single-triangle clusters; `dissolved` counts
+  // those clusters. Returns true if any was: then the clusterer is spent (its labels changed
+  // under it), and a new one is to be built from takeLabels().
+  bool dissolveNonDisks(uint32_t& dissolved) {
     dissolved = 0;
     const uint32_t nc = static_cast<uint32_t>(count_.size());
     std::vector<uint32_t> bad;
     for (uint32_t c = 0; c < nc; ++c)
       if (count_[c] > 0 && !isDisk(c)) bad.push_back(c);
-    if (bad.empty()) return {};
-    std::vector<uint32_t> labels = label_;
+    std::vector<uint64_t>().swap(faceSeen_);
     uint32_t next = nc;
     for (uint32_t c : bad) {
       ++dissolved;
-      for (uint32_t f = nextFace_[head_[c]]; f != kNone; f = nextFace_[f]) labels[f] = next++;
+      for (uint32_t f = nextFace_[head_[c]]; f != kNone; f = nextFace_[f]) label_[f] = next++;
     }
-    return labels;
+    return !bad.empty();
   }
 
   uint32_t nextBoundary(uint32_t h, uint32_t c) const { return nextBoundaryHe(s_.twin, label_, h, c); }
 
   const std::vector<uint32_t>& labels() const { return label_; }
+  std::vector<uint32_t> takeLabels() { return std::move(label_); }  // the clusterer is spent
   uint32_t alive() const { return alive_; }
   uint32_t refused() const { return refused_; }
   size_t bytes() const {
@@ -599,10 +695,6 @@ class Clusterer {
   }
   glm::dvec3 npos(uint32_t v) const {
     return (glm::dvec3(s_.positions[v]) - fr_.centre) / fr_.diag;
-  }
-  std::vector<uint32_t>& faceSeen() {
-    if (faceSeen_.size() != s_.tris.size()) faceSeen_.assign(s_.tris.size(), 0);
-    return faceSeen_;
   }
 
   void push(uint32_t a, const Adj& e) {
@@ -639,12 +731,11 @@ class Clusterer {
         const uint32_t v = s_.tris[f][k];
         if (vstamp_[v] == stamp_) continue;
         vstamp_[v] = stamp_;
-        for (uint32_t i = s_.vfStart[v]; i < s_.vfStart[v + 1]; ++i) {
-          if (label_[s_.vfFaces[i]] == b) {
-            ++sharedVertices;
-            break;
-          }
-        }
+        s_.forFaces(v, [&](uint32_t g) {
+          if (label_[g] != b) return false;
+          ++sharedVertices;
+          return true;
+        });
       }
     }
     return sharedEdges > 0 && sharedVertices == sharedEdges + 1;
@@ -729,7 +820,8 @@ class Clusterer {
   std::vector<uint32_t> label_;
   std::vector<Moments> mom_;
   std::vector<double> perim_;
-  std::vector<uint32_t> count_, head_, nextFace_, version_, pos_, vstamp_, faceSeen_;
+  std::vector<uint32_t> count_, head_, nextFace_, version_, pos_, vstamp_;
+  std::vector<uint64_t> faceSeen_;  // isDisk's flood marks, a bit per face
   std::vector<std::vector<Adj>> adj_;
   // A binary min-heap on cost (std::push_heap / pop_heap, as std::priority_queue does), kept
   // as a vector so that stale candidates can be purged in one pass.
@@ -767,17 +859,24 @@ Frame frameOf(const std::vector<glm::vec3>& p) {
 
 class LayoutBuilder {
  public:
-  LayoutBuilder(const Surface& s, const std::vector<uint32_t>& labels, const ChartingOptions& o,
+  // labels: a cluster per face (any ids), renumbered in place by first face.
+  LayoutBuilder(const Surface& s, std::vector<uint32_t> labels, const ChartingOptions& o,
                 ChartingStats& st)
-      : s_(s), o_(o), st_(st) {
+      : s_(s), o_(o), st_(st), label_(std::move(labels)) {
     const uint32_t nf = static_cast<uint32_t>(s.tris.size());
-    std::vector<uint32_t> compact(nf, kNone);
-    label_.resize(nf);
-    for (uint32_t f = 0; f < nf; ++f) {
-      uint32_t& c = compact[labels[f]];
-      if (c == kNone) c = static_cast<uint32_t>(faces_.size()), faces_.emplace_back();
-      label_[f] = c;
-      faces_[c].push_back(f);
+    {
+      uint32_t maxLabel = 0;
+      for (uint32_t l : label_) maxLabel = std::max(maxLabel, l);
+      std::vector<uint32_t> compact(size_t{maxLabel} + 1, kNone), count;
+      for (uint32_t f = 0; f < nf; ++f) {
+        uint32_t& c = compact[label_[f]];
+        if (c == kNone) c = static_cast<uint32_t>(count.size()), count.push_back(0);
+        label_[f] = c;
+        ++count[c];
+      }
+      faces_.resize(count.size());
+      for (size_t c = 0; c < count.size(); ++c) faces_[c].reserve(count[c]);
+      for (uint32_t f = 0; f < nf; ++f) faces_[label_[f]].push_back(f);
     }
     const uint32_t nv = static_cast<uint32_t>(s.positions.size());
     corner_.assign(nv, 0);
@@ -787,21 +886,15 @@ class LayoutBuilder {
     for (uint32_t v = 0; v < nv; ++v) {
       uint32_t first = kNone, second = kNone;
       bool three = false;
-      for (uint32_t i = s.vfStart[v]; i < s.vfStart[v + 1] && !three; ++i) {
-        const uint32_t c = label_[s.vfFaces[i]];
+      s.forFaces(v, [&](uint32_t f) {
+        const uint32_t c = label_[f];
         if (first == kNone || c == first) first = c;
         else if (second == kNone || c == second) second = c;
         else three = true;
-      }
+        return three;
+      });
       corner_[v] = three || (open[v] && second != kNone);
     }
-    vstamp_.assign(nv, 0);
-    dist_.assign(nv, 0);
-    prev_.assign(nv, kNone);
-    fstamp_.assign(nf, 0);
-    loopPos_.assign(nv, 0);
-    visit_.assign(nv, 0);
-    cut_.assign(size_t{nf} * 3, 0);
   }
 
   void fix() {
@@ -843,9 +936,9 @@ class LayoutBuilder {
     std::vector<std::vector<uint32_t>> firstHe(np);
     for (uint32_t p = 0; p < np; ++p) {
       Patch& P = out.patches[p];
-      P.triangles = faces_[p];
-      std::sort(P.triangles.begin(), P.triangles.end());
       const std::vector<uint32_t> loop = boundaryLoop(p);
+      P.triangles = std::move(faces_[p]);  // faces_ is not used after output()
+      std::sort(P.triangles.begin(), P.triangles.end());
       size_t start = 0;
       while (start < loop.size() && !corner_[s_.origin(loop[start])]) ++start;
       if (start == loop.size()) start = 0;  // no corner (only if insertion failed)
@@ -875,9 +968,9 @@ class LayoutBuilder {
 
   uint32_t unfixed() const { return unfixed_; }
   const std::vector<uint32_t>& labels() const { return label_; }
-  const std::vector<std::vector<uint32_t>>& patchFaces() const { return faces_; }
   size_t bytes() const {
-    return label_.size() * 8 + corner_.size() * 13 + fstamp_.size() * 4 + cut_.size();
+    return label_.size() * 8 + corner_.size() + local_.size() * 4 +
+           ldist_.capacity() * 8 + (lprev_.capacity() + lvisit_.capacity() + lpos_.capacity()) * 4;
   }
 
  private:
@@ -962,28 +1055,49 @@ class LayoutBuilder {
     }
   }
 
+  // Local numbering of patch p's vertices for split()'s work arrays (sized to the patch, not
+  // the mesh); undone by clearLocal().
+  void numberLocal(uint32_t p) {
+    if (local_.empty()) local_.assign(s_.positions.size(), kNone);
+    lverts_.clear();
+    for (uint32_t f : faces_[p])
+      for (uint32_t v : s_.tris[f])
+        if (local_[v] == kNone) local_[v] = static_cast<uint32_t>(lverts_.size()), lverts_.push_back(v);
+    const size_t n = lverts_.size();
+    ldist_.assign(n, 0);
+    lprev_.assign(n, kNone);
+    lvisit_.assign(n, 0);
+    lpos_.assign(n, kNone);  // position on the boundary loop; kNone: not on it
+    lrun_ = 0;
+  }
+  void clearLocal() {
+    for (uint32_t v : lverts_) local_[v] = kNone;
+    lverts_.clear();
+  }
+
   // Shortest paths from boundary vertex a through the interior of patch p (interior vertices
   // and interior edges only) to every boundary vertex it reaches; returns those vertices.
-  // dist_ / prev_ hold the paths for this run (visit_ == the returned run id).
-  std::vector<uint32_t> shortestFrom(uint32_t p, uint32_t a, uint32_t loopStamp, uint32_t& run) {
-    run = ++stamp_;
+  // ldist_ / lprev_ hold the paths for this run (lvisit_ == the returned run id).
+  std::vector<uint32_t> shortestFrom(uint32_t p, uint32_t a, uint32_t& run) {
+    run = ++lrun_;
     using Item = std::pair<double, uint32_t>;
     std::priority_queue<Item, std::vector<Item>, std::greater<Item>> q;
     std::vector<uint32_t> reached;
-    dist_[a] = 0;
-    prev_[a] = kNone;
-    visit_[a] = run;
+    const uint32_t la = local_[a];
+    ldist_[la] = 0;
+    lprev_[la] = kNone;
+    lvisit_[la] = run;
     q.push({0, a});
     while (!q.empty()) {
       const auto [d, u] = q.top();
       q.pop();
-      if (d > dist_[u]) continue;
-      if (u != a && vstamp_[u] == loopStamp) {  // boundary vertices end paths
+      if (d > ldist_[local_[u]]) continue;
+      if (u != a && lpos_[local_[u]] != kNone) {  // boundary vertices end paths
         reached.push_back(u);
         continue;
       }
-      for (uint32_t i = s_.vfStart[u]; i < s_.vfStart[u + 1]; ++i) {
-        const uint32_t f = s_.vfFaces[i];
+      s_.facesAround(u, around_);
+      for (const uint32_t f : around_) {
         if (label_[f] != p) continue;
         for (uint32_t k = 0; k < 3; ++k) {
           const uint32_t h = 3 * f + k;
@@ -994,10 +1108,11 @@ class LayoutBuilder {
           const uint32_t t = s_.twin[h];
           if (t == kNone || label_[t / 3] != p || w == a) continue;  // boundary edge
           const double nd = d + length(h);
-          if (visit_[w] != run || nd < dist_[w]) {
-            visit_[w] = run;
-            dist_[w] = nd;
-            prev_[w] = u;
+          const uint32_t lw = local_[w];
+          if (lvisit_[lw] != run || nd < ldist_[lw]) {
+            lvisit_[lw] = run;
+            ldist_[lw] = nd;
+            lprev_[lw] = u;
             q.push({nd, w});
           }
         }
@@ -1012,14 +1127,17 @@ class LayoutBuilder {
   // becomes a corner (the neighbour across gains a side; its patches are queued in `touched`).
   // Returns the new patch (p keeps the other half), or kNone if no cut was found.
   uint32_t split(uint32_t p, const std::vector<uint32_t>& loop, std::vector<uint32_t>& touched) {
+    numberLocal(p);
+    const uint32_t q = splitNumbered(p, loop, touched);
+    clearLocal();
+    return q;
+  }
+
+  uint32_t splitNumbered(uint32_t p, const std::vector<uint32_t>& loop,
+                         std::vector<uint32_t>& touched) {
     const size_t L = loop.size();
-    const uint32_t loopStamp = ++stamp_;
     std::vector<uint32_t> cc(2 * L + 1, 0);  // corners among loop positions [0, t)
-    for (size_t t = 0; t < L; ++t) {
-      const uint32_t v = s_.origin(loop[t]);
-      vstamp_[v] = loopStamp;
-      loopPos_[v] = static_cast<uint32_t>(t);
-    }
+    for (size_t t = 0; t < L; ++t) lpos_[local_[s_.origin(loop[t])]] = static_cast<uint32_t>(t);
     for (size_t t = 0; t < 2 * L; ++t) cc[t + 1] = cc[t] + corner_[s_.origin(loop[t % L])];
     const uint32_t k = cc[L];
     std::vector<uint32_t> cornerPos, allPos;
@@ -1035,9 +1153,9 @@ class LayoutBuilder {
       for (uint32_t i : starts) {
         const uint32_t a = s_.origin(loop[i]);
         uint32_t run = 0;
-        const std::vector<uint32_t> reached = shortestFrom(p, a, loopStamp, run);
+        const std::vector<uint32_t> reached = shortestFrom(p, a, run);
         for (uint32_t b : reached) {
-          const uint32_t j = loopPos_[b];
+          const uint32_t j = lpos_[local_[b]];
           if (level == 0 && !corner_[b]) continue;
           // Sides of the two halves: corners on each closed loop segment, endpoints included.
           const uint32_t i2 = i, j2 = j < i ? j + static_cast<uint32_t>(L) : j;
@@ -1048,12 +1166,12 @@ class LayoutBuilder {
           const uint32_t worst = std::max(s1, s2);
           if (worst >= std::max<uint32_t>(k, o_.maxSides + 1) && worst > o_.maxSides) continue;
           const double over = worst > o_.maxSides ? double(worst - o_.maxSides) : 0.0;
-          const double score = dist_[b] * (1.0 + 0.25 * std::abs(double(s1) - double(s2))) *
+          const double score = ldist_[local_[b]] * (1.0 + 0.25 * std::abs(double(s1) - double(s2))) *
                                (1.0 + 10.0 * over);
           if (score < bestScore) {
             bestScore = score;
             best.clear();
-            for (uint32_t v = b; v != kNone; v = prev_[v]) best.push_back(v);
+            for (uint32_t v = b; v != kNone; v = lprev_[local_[v]]) best.push_back(v);
           }
         }
       }
@@ -1065,8 +1183,8 @@ class LayoutBuilder {
         if (corner_[v]) continue;
         corner_[v] = 1;
         ++st_.cornersInserted;
-        for (uint32_t i = s_.vfStart[v]; i < s_.vfStart[v + 1]; ++i)
-          touched.push_back(label_[s_.vfFaces[i]]);
+        s_.facesAround(v, around_);
+        for (uint32_t f : around_) touched.push_back(label_[f]);
       }
       return q;
     }
@@ -1074,54 +1192,57 @@ class LayoutBuilder {
   }
 
   uint32_t applyCut(uint32_t p, const std::vector<uint32_t>& path) {
-    std::vector<uint32_t> marked;
+    std::vector<uint32_t> marked;  // the path's half-edges, both directions
     uint32_t seedFace = kNone, otherFace = kNone;
     for (size_t i = 0; i + 1 < path.size(); ++i) {
       const uint32_t x = path[i], y = path[i + 1];
-      for (uint32_t j = s_.vfStart[x]; j < s_.vfStart[x + 1]; ++j) {
-        const uint32_t f = s_.vfFaces[j];
+      s_.facesAround(x, around_);
+      for (const uint32_t f : around_) {
         if (label_[f] != p) continue;
         for (uint32_t k = 0; k < 3; ++k) {
           const uint32_t h = 3 * f + k;
           if (s_.origin(h) == x && s_.dest(h) == y) {
-            cut_[h] = 1;
             marked.push_back(h);
             if (seedFace == kNone) seedFace = f, otherFace = s_.twin[h] / 3;
           } else if (s_.origin(h) == y && s_.dest(h) == x) {
-            cut_[h] = 1;
             marked.push_back(h);
           }
         }
       }
     }
+    std::sort(marked.begin(), marked.end());
     uint32_t result = kNone;
     if (seedFace != kNone) {
-      const uint32_t run = ++stamp_;
+      // Flood p's faces from the seed without crossing the cut; reached faces are relabelled
+      // to the would-be new patch (so the label test also marks them visited).
+      const auto mark = static_cast<uint32_t>(faces_.size());
       std::vector<uint32_t> stack{seedFace}, side;
-      fstamp_[seedFace] = run;
+      label_[seedFace] = mark;
       while (!stack.empty()) {
         const uint32_t f = stack.back();
         stack.pop_back();
         side.push_back(f);
         for (uint32_t k = 0; k < 3; ++k) {
           const uint32_t h = 3 * f + k, t = s_.twin[h];
-          if (cut_[h] || t == kNone || label_[t / 3] != p || fstamp_[t / 3] == run) continue;
-          fstamp_[t / 3] = run;
+          if (t == kNone || label_[t / 3] != p ||
+              std::binary_search(marked.begin(), marked.end(), h))
+            continue;
+          label_[t / 3] = mark;
           stack.push_back(t / 3);
         }
       }
-      if (fstamp_[otherFace] != run && side.size() < faces_[p].size()) {
-        result = static_cast<uint32_t>(faces_.size());
+      if (label_[otherFace] != mark && side.size() < faces_[p].size()) {
+        result = mark;
         faces_.emplace_back();
-        for (uint32_t f : side) label_[f] = result;
         faces_[result] = std::move(side);
         std::vector<uint32_t> rest;
         for (uint32_t f : faces_[p])
           if (label_[f] == p) rest.push_back(f);
         faces_[p] = std::move(rest);
+      } else {
+        for (uint32_t f : side) label_[f] = p;
       }
     }
-    for (uint32_t h : marked) cut_[h] = 0;
     return result;
   }
 
@@ -1130,10 +1251,12 @@ class LayoutBuilder {
   ChartingStats& st_;
   std::vector<uint32_t> label_;
   std::vector<std::vector<uint32_t>> faces_;
-  std::vector<uint8_t> corner_, cut_;
-  std::vector<uint32_t> vstamp_, prev_, fstamp_, visit_, loopPos_;
-  std::vector<double> dist_;
-  uint32_t stamp_ = 0, unfixed_ = 0;
+  std::vector<uint8_t> corner_;
+  // split()'s work arrays: local_ maps a vertex to its index in the patch being split (kNone
+  // elsewhere); the l* arrays are indexed by that.
+  std::vector<uint32_t> local_, lverts_, lprev_, lvisit_, lpos_, around_;
+  std::vector<double> ldist_;
+  uint32_t lrun_ = 0, unfixed_ = 0;
 };
 
 // Fills the final statistics from the layout's patches.
@@ -1162,13 +1285,13 @@ void finishStats(const Surface& s, const ChartLayout& out,
 }
 
 // Consumes the surface: its positions, colours and triangles move into the layout.
-ChartLayout layoutFromLabels(Surface& s, const std::vector<uint32_t>& labels,
+ChartLayout layoutFromLabels(Surface& s, std::vector<uint32_t> labels,
                              const Frame& fr, const ChartingOptions& o, ChartingStats& st,
                              size_t clusterBytes) {
   const auto t0 = Clock::now();
   ChartLayout out;
   {
-    LayoutBuilder lb(s, labels, o, st);
+    LayoutBuilder lb(s, std::move(labels), o, st);
     lb.fix();
     out = lb.output();
     st.peakBytesEstimate =
@@ -1322,15 +1445,19 @@ ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& opt
     labels = blockLabels(s, fr, options, st, blockBytes);
     st.cellSeconds = since(t1);
   }
-  Clusterer cl(s, fr, std::move(labels));
-  cl.run(options.targetCharts,
-         options.targetCharts > 0 ? std::numeric_limits<double>::infinity() : options.maxError,
-         options.compactnessWeight);
+  std::optional<Clusterer> cl(std::in_place, s, fr, std::move(labels));
+  cl->run(options.targetCharts,
+          options.targetCharts > 0 ? std::numeric_limits<double>::infinity() : options.maxError,
+          options.compactnessWeight);
   st.clusterSeconds = since(t1);
-  st.chartsBeforeFixing = cl.alive();
-  st.mergesRefusedNotDisk = cl.refused();
+  st.chartsBeforeFixing = cl->alive();
+  st.mergesRefusedNotDisk = cl->refused();
   st.peakBytesEstimate = s.bytes() + blockBytes;
-  ChartLayout out = layoutFromLabels(s, cl.labels(), fr, options, st, cl.bytes());
+  // The clusterer goes before the sides are fixed.
+  const size_t clusterBytes = cl->bytes();
+  std::vector<uint32_t> finalLabels = cl->takeLabels();
+  cl.reset();
+  ChartLayout out = layoutFromLabels(s, std::move(finalLabels), fr, options, st, clusterBytes);
   st.seconds = since(t0);
   if (statsOut) *statsOut = std::move(st);
   return out;
@@ -1379,25 +1506,29 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   tbb::task_arena arena(static_cast<int>(std::max(1u, threads)));
   arena.execute([&] {
     tbb::parallel_for(size_t{0}, manifest.cells.size(), [&](size_t ci) {
-      const std::vector<MeshTriangle> tris = readCell(gridDir, manifest, manifest.cells[ci]);
       CellResult& r = cells[ci];
-      std::vector<glm::vec3> pos;
-      std::vector<glm::u8vec4> col;
-      std::vector<std::array<uint32_t, 3>> idx;
-      pos.reserve(tris.size() * 3);
-      for (const MeshTriangle& t : tris) {
-        const uint32_t b = static_cast<uint32_t>(pos.size());
-        for (int k = 0; k < 3; ++k) pos.push_back(t.p[k]);
-        if (manifest.hasColours)
-          for (int k = 0; k < 3; ++k) col.push_back(t.c[k]);
-        idx.push_back({b, b + 1, b + 2});
-      }
-      if (idx.empty()) return;
       Surface s;
-      try {
-        s = weldAndRepair(pos, col, idx, r.st);
-      } catch (const InputError&) {
-        return;  // every triangle degenerate: nothing from this cell
+      {
+        // Every corner of the cell file is an input position of its own; the weld joins them.
+        const std::vector<MeshTriangle> tris = readCell(gridDir, manifest, manifest.cells[ci]);
+        if (tris.empty()) return;
+        Welder w(tris.size() * 3);
+        w.tris.reserve(tris.size());
+        for (const MeshTriangle& t : tris) {
+          std::array<uint32_t, 3> idx;
+          for (int k = 0; k < 3; ++k) {
+            const glm::vec3& p = t.p[k];
+            if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+              return;  // as weldAndRepair would refuse it: nothing from this cell
+            idx[k] = w.add(p, manifest.hasColours ? &t.c[k] : nullptr);
+          }
+          w.tris.push_back(idx);
+        }
+        try {
+          s = repairWelded(std::move(w), r.st);
+        } catch (const InputError&) {
+          return;  // every triangle degenerate: nothing from this cell
+        }
       }
       std::vector<uint32_t> labels(s.tris.size());
       std::iota(labels.begin(), labels.end(), 0u);
@@ -1423,36 +1554,51 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   });
   st.clusterSeconds = since(tCells);
   st.cellSeconds = st.clusterSeconds;
-  // Global stage: weld all cells together; start from the cell clusters.
-  std::vector<glm::vec3> pos;
-  std::vector<glm::u8vec4> col;
-  std::vector<std::array<uint32_t, 3>> idx;
-  std::vector<uint32_t> cellLabel;
-  uint32_t offset = 0;
-  size_t cellPeak = 0;
-  for (CellResult& r : cells) {
-    st.inputTriangles += r.st.inputTriangles;
-    st.inputVertices += r.st.inputVertices;
-    st.droppedDegenerate += r.st.droppedDegenerate;
-    st.droppedDuplicate += r.st.droppedDuplicate;
-    cellPeak = std::max(cellPeak, r.bytes);
-    const uint32_t base = static_cast<uint32_t>(pos.size());
-    pos.insert(pos.end(), r.pos.begin(), r.pos.end());
-    if (manifest.hasColours) col.insert(col.end(), r.col.begin(), r.col.end());
-    for (size_t i = 0; i < r.tris.size(); ++i) {
-      idx.push_back({base + r.tris[i][0], base + r.tris[i][1], base + r.tris[i][2]});
-      cellLabel.push_back(offset + r.label[i]);
-    }
-    offset += r.clusters;
-    st.cellClusters += r.clusters;
-    r = CellResult{};
-  }
+  // Global stage: weld all cells together, a cell at a time (each freed once welded, so the
+  // cells' vertices and the welded ones are never all held at once); start from the cell
+  // clusters.
   const auto tWeld = Clock::now();
+  size_t cellPeak = 0, cellVertices = 0, cellTriangles = 0;
+  for (const CellResult& r : cells) {
+    cellVertices += r.pos.size();
+    cellTriangles += r.tris.size();
+  }
   ChartingStats gst;
-  Surface s = weldAndRepair(pos, col, idx, gst, &idx);
-  std::vector<glm::vec3>().swap(pos);
-  std::vector<glm::u8vec4>().swap(col);
-  std::vector<std::array<uint32_t, 3>>().swap(idx);
+  Surface s;
+  std::vector<uint32_t> labels;  // cell cluster of each triangle, then of each kept triangle
+  {
+    Welder w(cellVertices);
+    w.positions.reserve(cellVertices);
+    if (manifest.hasColours) w.colours.reserve(cellVertices);
+    w.tris.reserve(cellTriangles);
+    labels.reserve(cellTriangles);
+    uint32_t offset = 0;
+    std::vector<uint32_t> remap;
+    for (CellResult& r : cells) {
+      st.inputTriangles += r.st.inputTriangles;
+      st.inputVertices += r.st.inputVertices;
+      st.droppedDegenerate += r.st.droppedDegenerate;
+      st.droppedDuplicate += r.st.droppedDuplicate;
+      cellPeak = std::max(cellPeak, r.bytes);
+      remap.assign(r.pos.size(), kNone);
+      for (size_t i = 0; i < r.tris.size(); ++i) {
+        std::array<uint32_t, 3> t;
+        for (int k = 0; k < 3; ++k) {
+          const uint32_t v = r.tris[i][k];
+          if (remap[v] == kNone) remap[v] = w.add(r.pos[v], manifest.hasColours ? &r.col[v] : nullptr);
+          t[k] = remap[v];
+        }
+        w.tris.push_back(t);
+        labels.push_back(offset + r.label[i]);
+      }
+      offset += r.clusters;
+      st.cellClusters += r.clusters;
+      r = CellResult{};
+    }
+    std::vector<CellResult>().swap(cells);
+    releaseFreedMemory();
+    s = repairWelded(std::move(w), gst, &labels);
+  }
   // Corners of the cell files in, vertices of the global weld out (cell welds included).
   st.verticesWelded = st.inputVertices - (gst.inputVertices - gst.verticesWelded);
   st.nonManifoldEdges = gst.nonManifoldEdges;
@@ -1463,22 +1609,18 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   st.droppedDuplicate += gst.droppedDuplicate;
   st.weldSeconds = since(tWeld);
   const auto t1 = Clock::now();
-  std::vector<uint32_t> labels(s.tris.size());
-  for (size_t f = 0; f < s.tris.size(); ++f) labels[f] = cellLabel[s.source[f]];
-  std::vector<uint32_t>().swap(cellLabel);
   std::optional<Clusterer> cl(std::in_place, s, fr, std::move(labels));
-  std::vector<uint32_t> relabelled = cl->dissolveNonDisks(st.cellClustersDissolved);
-  if (!relabelled.empty()) cl.emplace(s, fr, std::move(relabelled));
+  if (cl->dissolveNonDisks(st.cellClustersDissolved)) cl.emplace(s, fr, cl->takeLabels());
   cl->run(options.targetCharts, maxRms, options.compactnessWeight);
   st.clusterSeconds += since(t1);
   st.chartsBeforeFixing = cl->alive();
   st.mergesRefusedNotDisk = cl->refused();
   st.peakBytesEstimate = cellPeak * std::max(1u, threads);
   // The clusterer goes before the sides are fixed.
-  const std::vector<uint32_t> finalLabels = cl->labels();
   const size_t clusterBytes = cl->bytes();
+  std::vector<uint32_t> finalLabels = cl->takeLabels();
   cl.reset();
-  ChartLayout out = layoutFromLabels(s, finalLabels, fr, options, st, clusterBytes);
+  ChartLayout out = layoutFromLabels(s, std::move(finalLabels), fr, options, st, clusterBytes);
   st.inputTriangles = manifest.triangles;
   st.seconds = since(t0);
   if (statsOut) *statsOut = std::move(st);
