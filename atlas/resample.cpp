@@ -7,6 +7,8 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
+#include <unordered_set>
 
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
@@ -17,6 +19,10 @@ namespace gimlod {
 namespace {
 
 // Attributes of the layout's surface: positions, area-weighted unit vertex normals, colours.
+uint64_t undirectedKey(uint32_t a, uint32_t b) {
+  return a < b ? (uint64_t{a} << 32) | b : (uint64_t{b} << 32) | a;
+}
+
 struct Surface {
   const ChartLayout& layout;
   const std::vector<glm::dvec3>& normals;  // unit, or zero where undefined
@@ -51,6 +57,7 @@ struct Sample {
   glm::vec3 n{0.f, 0.f, 1.f};
   glm::u8vec4 c{255, 255, 255, 255};
   uint32_t triangle = ~0u;  // the layout triangle it was located in; ~0u for side samples
+  uint32_t edgeA = ~0u, edgeB = ~0u;  // side samples: the side segment (vertex ids) it lies on
 };
 
 // Interpolates the attributes of vertices v[0..2] with barycentric weights b (sum 1).
@@ -123,6 +130,8 @@ std::vector<Sample> sampleSide(const Surface& s, const std::vector<uint32_t>& po
     } else {
       out[k] = interpolate(s, {a, b, b}, {1.0 - lambda, lambda, 0.0});
     }
+    out[k].edgeA = a;
+    out[k].edgeB = b;
   }
   return out;
 }
@@ -360,9 +369,18 @@ ImageQuality measureImage(const std::vector<glm::vec3>& positions,
       const bool againstNormals = glm::dot(cr, n) < 0.0;
       bool againstFaces = againstNormals;
       if (faceNormals) {
-        const auto& f = *faceNormals;
-        const glm::dvec3 fn = glm::dvec3(f[i00]) + glm::dvec3(f[i10]) + glm::dvec3(f[i01]) + glm::dvec3(f[i11]);
-        if (glm::dot(fn, fn) > 0.0) againstFaces = glm::dot(cr, fn) < 0.0;
+        // Flipped: facing away from every input face under its corners. A texel that agrees
+        // with one of them follows the input, where the input itself folds or turns by more
+        // than a right angle within the texel (a fin of a scan), which no flat texel can follow
+        // both ways.
+        bool any = false, agrees = false;
+        for (const size_t k : {i00, i10, i01, i11}) {
+          const glm::dvec3 fn((*faceNormals)[k]);
+          if (glm::dot(fn, fn) == 0.0) continue;
+          any = true;
+          agrees = agrees || glm::dot(cr, fn) >= 0.0;
+        }
+        if (any) againstFaces = !agrees;
       }
       q.texelsAgainstNormals += againstNormals;
       if (againstFaces) {
@@ -584,6 +602,29 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         }
       }
 
+      // The patch's triangle along each side segment: the input face a side sample lies on,
+      // seen from this patch (for the flipped-texel test).
+      std::unordered_map<uint64_t, uint32_t> sideFace;
+      {
+        std::unordered_set<uint64_t> sideEdges;
+        for (const PatchSide& side : patch.sides) {
+          for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
+            sideEdges.insert(undirectedKey(side.vertices[k], side.vertices[k + 1]));
+          }
+        }
+        for (uint32_t t : patch.triangles) {
+          const auto& tri = layout.triangles[t];
+          for (int c = 0; c < 3; ++c) {
+            const uint64_t key = undirectedKey(tri[c], tri[(c + 1) % 3]);
+            if (sideEdges.contains(key)) sideFace.emplace(key, t);
+          }
+        }
+      }
+      auto faceOf = [&](const Sample& s) {
+        if (s.triangle != ~0u || s.edgeA == ~0u) return s.triangle;
+        const auto it = sideFace.find(undirectedKey(s.edgeA, s.edgeB));
+        return it == sideFace.end() ? ~0u : it->second;
+      };
       std::vector<glm::vec3> floatNormals(size_t(size) * size);
       std::vector<uint32_t> triangles(size_t(size) * size, ~0u);
       std::vector<glm::vec3> faceNormals(size_t(size) * size);
@@ -601,7 +642,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
           img.positions[at] = s.p;
           img.normals[at] = packNormal(s.n.x, s.n.y, s.n.z);
           floatNormals[at] = s.n;
-          triangles[at] = s.triangle;
+          triangles[at] = faceOf(s);
           if (surface.hasColours) img.colours[at] = s.c;
         };
         for (uint32_t k = 0; k <= m; ++k) {
@@ -619,7 +660,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
             put(u, v, sampleAt(d));
           }
         }
-        // The input faces under the samples (zero on sides, where no face is located).
+        // The input faces under the samples (zero where none is known).
         for (size_t k = 0; k < faceNormals.size(); ++k) {
           faceNormals[k] = glm::vec3(0.f);
           if (triangles[k] == ~0u) continue;

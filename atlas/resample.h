@@ -36,9 +36,11 @@ struct ResampleOptions {
 struct ImageQuality {
   double stretchL2 = 1.0;
   double stretchLinf = 1.0;
-  // Texel quads whose 3D normal (cross of the diagonals) opposes the input faces they sample
-  // (the sum of the face normals under their corners; the interpolated vertex normals where no
-  // corner lies in a face): folds the atlas itself makes.
+  // Texel quads whose 3D normal (cross of the diagonals) opposes every input face under their
+  // corners (the face a corner is located in; for a sample on a patch side, the patch's face
+  // along that side; the interpolated vertex normals where no face is known): folds the atlas
+  // itself makes. A texel that agrees with one of its faces follows the input where the input
+  // turns by more than a right angle within one texel (a fin), and is not counted.
   uint32_t flippedTexels = 0;
   // Texel quads whose 3D normal opposes the mean of their 4 interpolated vertex normals. This
   // also counts texels that faithfully follow a folded input triangle (one facing against its

@@ -481,5 +481,27 @@ TEST(ResampleQuality, FlippedTexelsAreJudgedAgainstTheInputFaces) {
   EXPECT_EQ(measureImage(flatImage(true), up, 5).flippedTexels, 16u);
 }
 
+TEST(ResampleQuality, ATexelOverAnInputFinIsNotFlippedButOneOverACreaseIs) {
+  const std::vector<glm::vec3> up(25, glm::vec3(0, 0, 1));
+  // A fin: the input faces under the last column of samples (u = 4) face the other way. The
+  // texels that reach it agree with the faces on their left and follow the input; the others
+  // agree with every face. None is flipped.
+  std::vector<glm::vec3> fin(25, glm::vec3(0, 0, 1));
+  for (int v = 0; v < 5; ++v) fin[size_t(v) * 5 + 4] = glm::vec3(0, 0, -1);
+  EXPECT_EQ(measureImage(flatImage(false), up, 5, nullptr, &fin).flippedTexels, 0u);
+  // Mirrored, the texels of columns 0..2 face away from all their faces (flipped); those of
+  // column 3 agree with the fin's faces at u = 4.
+  EXPECT_EQ(measureImage(flatImage(true), up, 5, nullptr, &fin).flippedTexels, 12u);
+  // A crease of 100 degrees (faces tilted 50 degrees either way): a mirrored image faces away
+  // from both sides of it, so every texel is flipped.
+  const float s = float(std::sin(50.0 * 3.14159265358979 / 180.0)), c = float(std::cos(50.0 * 3.14159265358979 / 180.0));
+  std::vector<glm::vec3> crease(25);
+  for (int v = 0; v < 5; ++v) {
+    for (int u = 0; u < 5; ++u) crease[size_t(v) * 5 + u] = u < 2 ? glm::vec3(s, 0, c) : glm::vec3(-s, 0, c);
+  }
+  EXPECT_EQ(measureImage(flatImage(true), up, 5, nullptr, &crease).flippedTexels, 16u);
+  EXPECT_EQ(measureImage(flatImage(false), up, 5, nullptr, &crease).flippedTexels, 0u);
+}
+
 }  // namespace
 }  // namespace gimlod

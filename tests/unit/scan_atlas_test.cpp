@@ -351,14 +351,10 @@ TEST_P(ScanAtlasTest, Invariants) {
 }
 
 // Flipped texels: the build's own count (stats.json "resample" "flipped_texels", the image measure
-// of atlas/resample.h: texel quads that face away from the input faces they sample), and the
-// parameterization's flipped triangles, which must be 0.
-// The goal for flipped texels is 0, reached on igea, the turbine blade and the armadillo. The
-// bunny keeps 7, a run over a sliver input triangle at a patch corner on the tip of a thin spike
-// of the scan; the horse 2, texels straddling a folded input triangle (its neighbour faces the
-// other way), where the faces under one texel disagree. No split the repair tries removes them. Until
-// they go, the bound is one texel in 100,000 (about 32 per scan): it still fails on what the
-// unrepaired layouts gave (hundreds to thousands per scan) and on a repair that stops working.
+// of atlas/resample.h: texel quads that face away from every input face they sample), and the
+// parameterization's flipped triangles; both must be 0. The unrepaired layouts give tens per
+// scan (hundreds to thousands under earlier layouts); side ears, straightened sides and the flip
+// repair remove them all.
 TEST_P(ScanAtlasTest, FlippedTexels) {
   const std::string name = GetParam();
   if (!test::haveSharedScan(name)) GTEST_SKIP() << "no ../shared/data/meshes";
@@ -372,7 +368,7 @@ TEST_P(ScanAtlasTest, FlippedTexels) {
             << r["param_flipped"] << " flipped parameterization triangles, " << r["degenerate_texels"]
             << " degenerate texels\n";
   EXPECT_EQ(r["param_flipped"].get<uint64_t>(), 0u);
-  EXPECT_LE(flipped * 100000, samples) << name << ": " << flipped << " flipped texels";
+  EXPECT_EQ(flipped, 0u) << name << ": " << flipped << " flipped texels";
 }
 
 INSTANTIATE_TEST_SUITE_P(SharedScans, ScanAtlasTest, ::testing::ValuesIn(test::sharedScanNames()),
