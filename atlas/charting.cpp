@@ -1467,6 +1467,7 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
                                       const ChartingOptions& options, ChartingStats* statsOut) {
   const auto t0 = Clock::now();
   checkOptions(options);
+  releaseFreedMemory();  // whatever the caller freed before (gridify's cell buffers)
   const GridManifest manifest = readGridManifest(gridDir);
   ChartingStats st;
   st.cells = static_cast<uint32_t>(manifest.cells.size());

@@ -18,6 +18,9 @@
 
 #include <fcntl.h>
 #include <unistd.h>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include <nlohmann/json.hpp>
 
@@ -323,7 +326,10 @@ std::array<uint32_t, 3> chooseGridDims(const MeshBounds& bounds, uint64_t triang
   return dims;
 }
 
-GridifyResult gridify(const fs::path& mesh, const fs::path& outDir, const GridifyOptions& options) {
+namespace {
+
+GridifyResult gridifyStaged(const fs::path& mesh, const fs::path& outDir,
+                            const GridifyOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   validate(options);
   GridifyResult result;
@@ -364,6 +370,18 @@ GridifyResult gridify(const fs::path& mesh, const fs::path& outDir, const Gridif
   const std::string text = manifestJson(m, result).dump(1) + "\n";
   atomicWriteFile(stage.path() / kGridManifestName, text.data(), text.size());
   stage.commit();
+  return result;
+}
+
+}  // namespace
+
+GridifyResult gridify(const fs::path& mesh, const fs::path& outDir, const GridifyOptions& options) {
+  GridifyResult result = gridifyStaged(mesh, outDir, options);
+  // The cell buffers were many blocks of up to a few MiB in the heap; glibc keeps such freed
+  // pages unless asked, and the next stage would start with them still counted in its RSS.
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
   return result;
 }
 
