@@ -1,7 +1,13 @@
 // The fidelity figure against cases with known answers.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <numeric>
+#include <random>
+
+#include <glm/geometric.hpp>
+#include <tbb/task_arena.h>
 
 #include "atlas/fidelity.h"
 
@@ -42,6 +48,106 @@ TEST(Fidelity, KnownDistances) {
   EXPECT_NEAR(s.maxAtlasToMesh, 0.0, 1e-7);
   EXPECT_NEAR(s.maxMeshToAtlas, 0.5, 1e-6);
   EXPECT_THROW(measureFidelity(p0, {}, p1, t1), std::invalid_argument);
+}
+
+// Exact distance from p to triangle abc (Ericson's closest-point regions), in doubles.
+double pointTriangleDistance(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
+  const glm::dvec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
+  if (d1 <= 0 && d2 <= 0) return glm::length(p - a);
+  const glm::dvec3 bp = p - b;
+  const double d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
+  if (d3 >= 0 && d4 <= d3) return glm::length(p - b);
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return glm::length(p - (a + ab * (d1 / (d1 - d3))));
+  const glm::dvec3 cp = p - c;
+  const double d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
+  if (d6 >= 0 && d5 <= d6) return glm::length(p - c);
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return glm::length(p - (a + ac * (d2 / (d2 - d6))));
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) return glm::length(p - (b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))));
+  const double denom = 1.0 / (va + vb + vc);
+  return glm::length(p - (a + ab * (vb * denom) + ac * (vc * denom)));
+}
+
+struct OneSided {
+  double max = 0.0, sum = 0.0;
+  uint64_t n = 0;
+};
+
+bool degenerate(const std::vector<glm::vec3>& p, const std::array<uint32_t, 3>& f) {
+  const glm::dvec3 a = p[f[0]], b = p[f[1]], c = p[f[2]];
+  const glm::dvec3 n = glm::cross(b - a, c - a);
+  return n.x == 0 && n.y == 0 && n.z == 0;
+}
+
+// Every sample against every triangle, no tree.
+OneSided bruteForce(const std::vector<glm::dvec3>& samples, const std::vector<glm::vec3>& p,
+                    const std::vector<std::array<uint32_t, 3>>& t) {
+  OneSided r;
+  for (const glm::dvec3& s : samples) {
+    double d = std::numeric_limits<double>::infinity();
+    for (const auto& f : t)
+      if (!degenerate(p, f)) d = std::min(d, pointTriangleDistance(s, p[f[0]], p[f[1]], p[f[2]]));
+    r.max = std::max(r.max, d);
+    r.sum += d;
+    ++r.n;
+  }
+  return r;
+}
+
+// A bumpy n x n grid over [0,1]^2.
+void bumpyGrid(uint32_t n, float amp, float phase, std::vector<glm::vec3>& p, std::vector<std::array<uint32_t, 3>>& t) {
+  grid(n, 0.f, p, t);
+  for (glm::vec3& q : p) q.z = amp * std::sin(7.f * q.x + phase) * std::cos(5.f * q.y - phase);
+}
+
+// The trees (runs of consecutive triangles where the input order is coherent, single triangles
+// where it is not, several trees built in parallel) and the hinted searches give the same answer
+// as every sample against every triangle.
+TEST(Fidelity, MatchesBruteForce) {
+  std::vector<glm::vec3> mp, ap;
+  std::vector<std::array<uint32_t, 3>> mt, at;
+  bumpyGrid(24, 0.05f, 0.f, mp, mt);
+  bumpyGrid(100, 0.04f, 0.3f, ap, at);
+  for (glm::vec3& q : ap) q = {q.x * 1.1f - 0.05f, q.y * 0.9f + 0.02f, q.z + 0.01f};
+  mp.push_back({2.f, 2.f, 2.f});  // a vertex no triangle uses: not a sample
+  mt.push_back({0, 0, 1});        // degenerate: dropped (no centroid), its vertices still samples
+
+  // Reference: atlas vertices against the mesh; used mesh vertices and non-degenerate centroids
+  // against the atlas.
+  std::vector<glm::dvec3> atlasSamples(ap.begin(), ap.end()), meshSamples;
+  std::vector<bool> used(mp.size(), false);
+  for (const auto& f : mt)
+    for (uint32_t i : f) used[i] = true;
+  for (size_t i = 0; i < mp.size(); ++i)
+    if (used[i]) meshSamples.push_back(mp[i]);
+  for (const auto& f : mt)
+    if (!degenerate(mp, f)) meshSamples.push_back((glm::dvec3(mp[f[0]]) + glm::dvec3(mp[f[1]]) + glm::dvec3(mp[f[2]])) / 3.0);
+  const OneSided a2m = bruteForce(atlasSamples, mp, mt), m2a = bruteForce(meshSamples, ap, at);
+
+  auto check = [&](const FidelityStats& s) {
+    EXPECT_EQ(s.atlasSamples, a2m.n);
+    EXPECT_EQ(s.meshSamples, m2a.n);
+    EXPECT_NEAR(s.maxAtlasToMesh, a2m.max, 1e-9 * a2m.max);
+    EXPECT_NEAR(s.meanAtlasToMesh, a2m.sum / a2m.n, 1e-9 * a2m.sum / a2m.n);
+    EXPECT_NEAR(s.maxMeshToAtlas, m2a.max, 1e-9 * m2a.max);
+    EXPECT_NEAR(s.meanMeshToAtlas, m2a.sum / m2a.n, 1e-9 * m2a.sum / m2a.n);
+  };
+  ASSERT_GT(a2m.max, 0.01);
+  ASSERT_GT(m2a.max, 0.01);
+  tbb::task_arena arena(2);  // two threads' worth of trees wherever the test runs
+  arena.execute([&] {
+    check(measureFidelity(mp, mt, ap, at));  // in grid order
+    // The same triangles in a scrambled order (and so in single-triangle runs).
+    std::mt19937 rng(7);
+    std::vector<std::array<uint32_t, 3>> mt2 = mt, at2 = at;
+    std::shuffle(mt2.begin(), mt2.end(), rng);
+    std::shuffle(at2.begin(), at2.end(), rng);
+    const FidelityStats s = measureFidelity(mp, mt2, ap, at2);
+    check(s);
+  });
 }
 
 }  // namespace
