@@ -10,6 +10,7 @@
 #include <unordered_map>
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 namespace gimlod {
 
@@ -114,14 +115,20 @@ AtlasSurface readAtlasSurface(const fs::path& atlasDir, uint32_t level) {
                     (uint64_t(k.z) * 0x165667B19E3779F9ull));
     }
   };
-  std::unordered_map<Key, uint32_t, KeyHash> weld;
-  for (const ChartInfo& c : m.charts) {
+  // Charts are read in parallel, then welded in chart order.
+  std::vector<std::vector<glm::vec3>> levels(m.charts.size());
+  tbb::parallel_for(size_t(0), m.charts.size(), [&](size_t i) {
+    const ChartInfo& c = m.charts[i];
     const ChartFileReader reader(atlasDir / c.file);
     if (!reader.hasChannel(kChannelPositions))
       throw InputError((atlasDir / c.file).string() + ": no positions in a geometry atlas chart");
     if (level >= reader.levels())
       throw InputError((atlasDir / c.file).string() + ": has no level " + std::to_string(level));
-    const std::vector<glm::vec3> P = reader.readLevelPositions(level);
+    levels[i] = reader.readLevelPositions(level);
+  });
+  std::unordered_map<Key, uint32_t, KeyHash> weld;
+  for (std::vector<glm::vec3>& chartLevel : levels) {
+    const std::vector<glm::vec3> P = std::move(chartLevel);
     const uint32_t s = ((m.chartSize - 1) >> level) + 1;
     std::vector<uint32_t> ids(P.size());
     for (size_t i = 0; i < P.size(); ++i) {
@@ -140,13 +147,21 @@ AtlasSurface readAtlasSurface(const fs::path& atlasDir, uint32_t level) {
         if (a != cc && cc != d && a != d) out.triangles.push_back({a, cc, d});
       }
   }
-  std::unordered_map<uint64_t, uint32_t> edges;
+  // Edges used by one triangle only: sorted undirected keys, runs of length 1.
+  std::vector<uint64_t> edges;
+  edges.reserve(out.triangles.size() * 3);
   for (const auto& t : out.triangles)
     for (int e = 0; e < 3; ++e) {
       const uint32_t a = t[e], b = t[(e + 1) % 3];
-      ++edges[(uint64_t(std::min(a, b)) << 32) | std::max(a, b)];
+      edges.push_back((uint64_t(std::min(a, b)) << 32) | std::max(a, b));
     }
-  for (const auto& [k, n] : edges) out.boundaryEdges += n == 1;
+  tbb::parallel_sort(edges.begin(), edges.end());
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i + 1;
+    while (j < edges.size() && edges[j] == edges[i]) ++j;
+    out.boundaryEdges += j - i == 1;
+    i = j;
+  }
   return out;
 }
 
