@@ -19,6 +19,7 @@
 
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -1505,53 +1506,65 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
       options.threads ? options.threads
                       : static_cast<unsigned>(tbb::this_task_arena::max_concurrency());
   tbb::task_arena arena(static_cast<int>(std::max(1u, threads)));
+  // Largest cells first, one task each, so that no large cell is left to run alone at the end.
+  std::vector<uint32_t> order(manifest.cells.size());
+  std::iota(order.begin(), order.end(), 0u);
+  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+    return manifest.cells[a].triangles > manifest.cells[b].triangles;
+  });
+  auto clusterCell = [&](size_t ci) {
+    CellResult& r = cells[ci];
+    Surface s;
+    {
+      // Every corner of the cell file is an input position of its own; the weld joins them.
+      const std::vector<MeshTriangle> tris = readCell(gridDir, manifest, manifest.cells[ci]);
+      if (tris.empty()) return;
+      Welder w(tris.size() * 3);
+      w.tris.reserve(tris.size());
+      for (const MeshTriangle& t : tris) {
+        std::array<uint32_t, 3> idx;
+        for (int k = 0; k < 3; ++k) {
+          const glm::vec3& p = t.p[k];
+          if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+            return;  // as weldAndRepair would refuse it: nothing from this cell
+          idx[k] = w.add(p, manifest.hasColours ? &t.c[k] : nullptr);
+        }
+        w.tris.push_back(idx);
+      }
+      try {
+        s = repairWelded(std::move(w), r.st);
+      } catch (const InputError&) {
+        return;  // every triangle degenerate: nothing from this cell
+      }
+    }
+    std::vector<uint32_t> labels(s.tris.size());
+    std::iota(labels.begin(), labels.end(), 0u);
+    Clusterer cl(s, fr, std::move(labels));
+    const auto target = static_cast<uint32_t>(std::ceil(double(s.tris.size()) / clusterTris));
+    cl.run(std::max(1u, target), maxRms, options.compactnessWeight);
+    r.clusters = cl.alive();
+    r.bytes = s.bytes() + cl.bytes();
+    // Hand on the kept triangles with their cluster (compact ids). The global weld joins
+    // equal positions again, so vertices split here by the repair are welded back there.
+    std::vector<uint32_t> compact(s.tris.size(), kNone);
+    uint32_t next = 0;
+    r.label.reserve(s.tris.size());
+    for (size_t f = 0; f < s.tris.size(); ++f) {
+      uint32_t& c = compact[cl.labels()[f]];
+      if (c == kNone) c = next++;
+      r.label.push_back(c);
+    }
+    r.pos = std::move(s.positions);
+    r.col = std::move(s.colours);
+    r.tris = std::move(s.tris);
+  };
   arena.execute([&] {
-    tbb::parallel_for(size_t{0}, manifest.cells.size(), [&](size_t ci) {
-      CellResult& r = cells[ci];
-      Surface s;
-      {
-        // Every corner of the cell file is an input position of its own; the weld joins them.
-        const std::vector<MeshTriangle> tris = readCell(gridDir, manifest, manifest.cells[ci]);
-        if (tris.empty()) return;
-        Welder w(tris.size() * 3);
-        w.tris.reserve(tris.size());
-        for (const MeshTriangle& t : tris) {
-          std::array<uint32_t, 3> idx;
-          for (int k = 0; k < 3; ++k) {
-            const glm::vec3& p = t.p[k];
-            if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
-              return;  // as weldAndRepair would refuse it: nothing from this cell
-            idx[k] = w.add(p, manifest.hasColours ? &t.c[k] : nullptr);
-          }
-          w.tris.push_back(idx);
-        }
-        try {
-          s = repairWelded(std::move(w), r.st);
-        } catch (const InputError&) {
-          return;  // every triangle degenerate: nothing from this cell
-        }
-      }
-      std::vector<uint32_t> labels(s.tris.size());
-      std::iota(labels.begin(), labels.end(), 0u);
-      Clusterer cl(s, fr, std::move(labels));
-      const auto target = static_cast<uint32_t>(std::ceil(double(s.tris.size()) / clusterTris));
-      cl.run(std::max(1u, target), maxRms, options.compactnessWeight);
-      r.clusters = cl.alive();
-      r.bytes = s.bytes() + cl.bytes();
-      // Hand on the kept triangles with their cluster (compact ids). The global weld joins
-      // equal positions again, so vertices split here by the repair are welded back there.
-      std::vector<uint32_t> compact(s.tris.size(), kNone);
-      uint32_t next = 0;
-      r.label.reserve(s.tris.size());
-      for (size_t f = 0; f < s.tris.size(); ++f) {
-        uint32_t& c = compact[cl.labels()[f]];
-        if (c == kNone) c = next++;
-        r.label.push_back(c);
-      }
-      r.pos = std::move(s.positions);
-      r.col = std::move(s.colours);
-      r.tris = std::move(s.tris);
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, order.size(), 1),
+        [&](const tbb::blocked_range<size_t>& range) {
+          for (size_t i = range.begin(); i != range.end(); ++i) clusterCell(order[i]);
+        },
+        tbb::simple_partitioner());
   });
   st.clusterSeconds = since(tCells);
   st.cellSeconds = st.clusterSeconds;
