@@ -30,11 +30,28 @@ double sideLength(const ChartLayout& layout, const PatchSide& s) {
 
 // The patch's vertex graph restricted to what a cut may use: edges that are not on the patch
 // boundary, through vertices that are not on it (a cut only starts and ends at the boundary).
+// Flat sorted arrays (no node per entry): patches of tens of thousands of triangles are built
+// and searched thousands of times by straightening and the flip repair.
 struct PatchGraph {
-  std::unordered_map<uint32_t, std::vector<uint32_t>> neighbours;  // global ids
+  std::vector<std::pair<uint32_t, uint32_t>> adjacency;  // (vertex, neighbour), sorted; global ids
   std::unordered_set<uint32_t> onBoundary;
   std::unordered_set<uint64_t> boundaryEdges;
-  std::unordered_map<uint64_t, uint32_t> triangleOf;  // directed edge -> triangle (global)
+  std::vector<std::pair<uint64_t, uint32_t>> edgeTriangles;  // (directed edge, triangle), sorted
+
+  // The patch's triangle holding directed edge `key`, ~0u if none.
+  uint32_t triangleOf(uint64_t key) const {
+    const auto it = std::lower_bound(edgeTriangles.begin(), edgeTriangles.end(),
+                                     std::pair<uint64_t, uint32_t>{key, 0u});
+    return it != edgeTriangles.end() && it->first == key ? it->second : ~0u;
+  }
+  // The interior neighbours of vertex u, as a range of `adjacency`.
+  std::pair<const std::pair<uint32_t, uint32_t>*, const std::pair<uint32_t, uint32_t>*> neighboursOf(
+      uint32_t u) const {
+    const auto lo = std::lower_bound(adjacency.begin(), adjacency.end(), std::pair<uint32_t, uint32_t>{u, 0u});
+    auto hi = lo;
+    while (hi != adjacency.end() && hi->first == u) ++hi;
+    return {adjacency.data() + (lo - adjacency.begin()), adjacency.data() + (hi - adjacency.begin())};
+  }
 };
 
 PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch) {
@@ -45,20 +62,22 @@ PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch) {
       if (k + 1 < s.vertices.size()) g.boundaryEdges.insert(undirected(s.vertices[k], s.vertices[k + 1]));
     }
   }
+  g.edgeTriangles.reserve(patch.triangles.size() * 3);
+  g.adjacency.reserve(patch.triangles.size() * 3);
   for (uint32_t t : patch.triangles) {
     const auto& tri = layout.triangles[t];
     for (int c = 0; c < 3; ++c) {
       const uint32_t a = tri[c], b = tri[(c + 1) % 3];
-      g.triangleOf[directed(a, b)] = t;
-      if (!g.boundaryEdges.contains(undirected(a, b))) {
-        // Each interior edge is seen from both of its triangles: add it from one.
-        if (a < b) {
-          g.neighbours[a].push_back(b);
-          g.neighbours[b].push_back(a);
-        }
+      g.edgeTriangles.push_back({directed(a, b), t});
+      // Each interior edge is seen from both of its triangles: add it from one.
+      if (a < b && !g.boundaryEdges.contains(undirected(a, b))) {
+        g.adjacency.push_back({a, b});
+        g.adjacency.push_back({b, a});
       }
     }
   }
+  std::sort(g.edgeTriangles.begin(), g.edgeTriangles.end());
+  std::sort(g.adjacency.begin(), g.adjacency.end());
   return g;
 }
 
@@ -88,9 +107,9 @@ Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t sour
       if (++ends >= boundaryEnds) break;
       continue;
     }
-    auto it = g.neighbours.find(u);
-    if (it == g.neighbours.end()) continue;
-    for (uint32_t w : it->second) {
+    const auto [first, last] = g.neighboursOf(u);
+    for (auto e = first; e != last; ++e) {
+      const uint32_t w = e->second;
       const double nd = d + glm::length(layout.positions[w] - layout.positions[u]);
       auto [dit, inserted] = r.dist.try_emplace(w, nd);
       if (inserted || nd < dit->second) {
@@ -107,10 +126,10 @@ Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t sour
 // (undirected keys); empty if that triangle is not in the graph's patch.
 std::unordered_set<uint32_t> floodFrom(const ChartLayout& layout, const PatchGraph& g,
                                        const PatchSide& side, const std::unordered_set<uint64_t>& walls) {
-  const auto seed = g.triangleOf.find(directed(side.vertices[0], side.vertices[1]));
-  if (seed == g.triangleOf.end()) return {};
-  std::unordered_set<uint32_t> part{seed->second};
-  std::vector<uint32_t> stack{seed->second};
+  const uint32_t seed = g.triangleOf(directed(side.vertices[0], side.vertices[1]));
+  if (seed == ~0u) return {};
+  std::unordered_set<uint32_t> part{seed};
+  std::vector<uint32_t> stack{seed};
   while (!stack.empty()) {
     const uint32_t t = stack.back();
     stack.pop_back();
@@ -118,8 +137,8 @@ std::unordered_set<uint32_t> floodFrom(const ChartLayout& layout, const PatchGra
     for (int c = 0; c < 3; ++c) {
       const uint32_t a = tri[c], b = tri[(c + 1) % 3];
       if (walls.contains(undirected(a, b))) continue;
-      const auto o = g.triangleOf.find(directed(b, a));
-      if (o != g.triangleOf.end() && part.insert(o->second).second) stack.push_back(o->second);
+      const uint32_t o = g.triangleOf(directed(b, a));
+      if (o != ~0u && part.insert(o).second) stack.push_back(o);
     }
   }
   return part;
@@ -127,16 +146,22 @@ std::unordered_set<uint32_t> floodFrom(const ChartLayout& layout, const PatchGra
 
 // Euler characteristic V - E + F = 1 of a set of triangles (with connectivity, a disk).
 bool isDisk(const ChartLayout& layout, const std::vector<uint32_t>& tris) {
-  std::unordered_set<uint32_t> verts;
-  std::unordered_set<uint64_t> edges;
+  std::vector<uint32_t> verts;
+  std::vector<uint64_t> edges;
+  verts.reserve(tris.size() * 3);
+  edges.reserve(tris.size() * 3);
   for (uint32_t t : tris) {
     const auto& tri = layout.triangles[t];
     for (int c = 0; c < 3; ++c) {
-      verts.insert(tri[c]);
-      edges.insert(undirected(tri[c], tri[(c + 1) % 3]));
+      verts.push_back(tri[c]);
+      edges.push_back(undirected(tri[c], tri[(c + 1) % 3]));
     }
   }
-  return int64_t(verts.size()) - int64_t(edges.size()) + int64_t(tris.size()) == 1;
+  std::sort(verts.begin(), verts.end());
+  std::sort(edges.begin(), edges.end());
+  const auto v = std::unique(verts.begin(), verts.end()) - verts.begin();
+  const auto e = std::unique(edges.begin(), edges.end()) - edges.begin();
+  return int64_t(v) - int64_t(e) + int64_t(tris.size()) == 1;
 }
 
 // Where an old side of a split patch goes: the part (patch index) and its side index there.
@@ -169,10 +194,10 @@ bool splitAlong(ChartLayout& layout, uint32_t p, uint32_t i, uint32_t j, const P
   // Every side must border the part it goes to.
   for (uint32_t s = 0; s < n; ++s) {
     const PatchSide& side = patch.sides[s];
-    const auto t = g.triangleOf.find(directed(side.vertices[0], side.vertices[1]));
-    if (t == g.triangleOf.end()) return false;
+    const uint32_t t = g.triangleOf(directed(side.vertices[0], side.vertices[1]));
+    if (t == ~0u) return false;
     const bool inFirst = (s + n - i) % n < d;
-    if (first.contains(t->second) != inFirst) return false;
+    if (first.contains(t) != inFirst) return false;
   }
   if (first.size() >= patch.triangles.size()) return false;
 
@@ -546,8 +571,8 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s) {
   if (mine.empty()) return false;
   // Every other side of p borders p's part, every other side of q does not.
   auto borders = [&](const PatchSide& x) {
-    const auto it = g.triangleOf.find(directed(x.vertices[0], x.vertices[1]));
-    return it != g.triangleOf.end() && mine.contains(it->second);
+    const uint32_t t = g.triangleOf(directed(x.vertices[0], x.vertices[1]));
+    return t != ~0u && mine.contains(t);
   };
   for (uint32_t k = 0; k < pp.sides.size(); ++k) {
     if (k != s && !borders(pp.sides[k])) return false;
