@@ -593,17 +593,22 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s) {
 
 uint32_t straightenSides(ChartLayout& layout, uint32_t rounds) {
   uint32_t changed = 0;
+  std::vector<uint8_t> changedBefore;
   for (uint32_t r = 0; r < rounds; ++r) {
     // Every shared side once, from its smaller patch, in batches of sides whose patch pairs are
     // disjoint: straightenSide reads and writes its two patches only, so a batch runs in
     // parallel. Batches are filled greedily in side order, so the result does not depend on the
     // thread count.
+    // After the first round, only sides with a patch the last round changed: the shortest path
+    // between the same corners through the same two patches is the same.
     std::vector<std::pair<uint32_t, uint32_t>> pending;
     for (uint32_t p = 0; p < layout.patches.size(); ++p) {
       for (uint32_t s = 0; s < layout.patches[p].sides.size(); ++s) {
-        if (layout.patches[p].sides[s].neighbourPatch > int32_t(p)) pending.push_back({p, s});
+        const int32_t q = layout.patches[p].sides[s].neighbourPatch;
+        if (q > int32_t(p) && (r == 0 || changedBefore[p] || changedBefore[uint32_t(q)])) pending.push_back({p, s});
       }
     }
+    std::vector<uint8_t> changedNow(layout.patches.size(), 0);
     uint32_t now = 0;
     std::vector<uint8_t> busy(layout.patches.size(), 0);
     while (!pending.empty()) {
@@ -622,9 +627,15 @@ uint32_t straightenSides(ChartLayout& layout, uint32_t rounds) {
       tbb::parallel_for(size_t{0}, batch.size(), [&](size_t k) {
         done[k] = straightenSide(layout, batch[k].first, batch[k].second) ? 1 : 0;
       });
-      for (uint8_t d : done) now += d;
+      for (size_t k = 0; k < batch.size(); ++k) {
+        if (!done[k]) continue;
+        ++now;
+        changedNow[batch[k].first] = 1;
+        changedNow[uint32_t(layout.patches[batch[k].first].sides[batch[k].second].neighbourPatch)] = 1;
+      }
       pending = std::move(rest);
     }
+    changedBefore = std::move(changedNow);
     changed += now;
     if (now == 0) break;
   }
