@@ -302,32 +302,26 @@ std::vector<double> vertexStretch(const LocalPatch& lp, const std::vector<glm::d
 
 // L2 stretch energy of the triangles around one vertex with that vertex at `at`: the sum of
 // A3D(T) * L2(T)^2; infinite if a parameter triangle would flip or collapse (Sander's barrier).
+// The energy of vertex v's ring with v at `at`; with `gradient`, also its derivative there.
 double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv,
                   const std::vector<uint32_t>& ring, uint32_t v, const glm::dvec2& at,
-                  const std::vector<double>& area3D, double k2) {
+                  const std::vector<double>& area3D, double k2, glm::dvec2* gradient = nullptr) {
   double e = 0.0;
+  if (gradient) *gradient = glm::dvec2(0.0);
   for (uint32_t t : ring) {
     const auto& tri = lp.triangles[t];
     glm::dvec2 p[3];
-    for (int c = 0; c < 3; ++c) p[c] = tri[c] == v ? at : uv[tri[c]];
-    const glm::dvec2 e1 = p[1] - p[0], e2 = p[2] - p[0];
-    const double twice = e1.x * e2.y - e2.x * e1.y;
-    if (!(twice > 1e-14 * (glm::dot(e1, e1) + glm::dot(e2, e2)))) {
-      return std::numeric_limits<double>::infinity();
+    glm::dvec3 q[3];
+    int moving = 0;
+    for (int c = 0; c < 3; ++c) {
+      p[c] = tri[c] == v ? at : uv[tri[c]];
+      if (tri[c] == v) moving = c;
+      q[c] = lp.xyz[tri[c]];
     }
-    const glm::dvec3 &q1 = lp.xyz[tri[0]], &q2 = lp.xyz[tri[1]], &q3 = lp.xyz[tri[2]];
-    const glm::dvec3 ss = (q1 * (p[1].y - p[2].y) + q2 * (p[2].y - p[0].y) + q3 * (p[0].y - p[1].y)) / twice;
-    const glm::dvec3 st = (q1 * (p[2].x - p[1].x) + q2 * (p[0].x - p[2].x) + q3 * (p[1].x - p[0].x)) / twice;
-    if (k2 > 0.0) {
-      // Symmetric Dirichlet: tr(M) + tr(M^-1) of the scaled metric M = k^2 J^T J, which grows
-      // without bound as a triangle is squeezed or spread in any direction (isometry: 4).
-      const double a = glm::dot(ss, ss) * k2, b = glm::dot(ss, st) * k2, c = glm::dot(st, st) * k2;
-      const double det = a * c - b * b;
-      if (!(det > 0.0)) return std::numeric_limits<double>::infinity();
-      e += area3D[t] * ((a + c) + (a + c) / det);
-    } else {
-      e += area3D[t] * 0.5 * (glm::dot(ss, ss) + glm::dot(st, st));
-    }
+    glm::dvec2 g(0.0);
+    e += triangleStretchEnergy(p, q, area3D[t], k2, moving, gradient ? &g : nullptr);
+    if (!std::isfinite(e)) return std::numeric_limits<double>::infinity();
+    if (gradient) *gradient += g;
   }
   return e;
 }
@@ -359,7 +353,8 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
       if (isBoundary[v]) continue;
       const std::vector<uint32_t>& ring = rings[v];
       const glm::dvec2 p = uv[v];
-      const double e0 = ringEnergy(lp, uv, ring, v, p, area3D, k2);
+      glm::dvec2 g(0.0);
+      const double e0 = ringEnergy(lp, uv, ring, v, p, area3D, k2, &g);
       if (!std::isfinite(e0)) continue;  // a flipped start: leave it to the counts
       before += e0;
       double scale = 0.0;  // mean distance to the ring's vertices in the parameter domain
@@ -367,12 +362,6 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
         for (uint32_t w : lp.triangles[t]) scale += glm::length(uv[w] - p);
       }
       scale /= 2.0 * double(ring.size());
-      const double h = 1e-6 * scale;
-      const glm::dvec2 g(
-          (ringEnergy(lp, uv, ring, v, p + glm::dvec2(h, 0), area3D, k2) -
-           ringEnergy(lp, uv, ring, v, p - glm::dvec2(h, 0), area3D, k2)) / (2 * h),
-          (ringEnergy(lp, uv, ring, v, p + glm::dvec2(0, h), area3D, k2) -
-           ringEnergy(lp, uv, ring, v, p - glm::dvec2(0, h), area3D, k2)) / (2 * h));
       const double gl = glm::length(g);
       double best = e0;
       if (std::isfinite(gl) && gl > 0.0) {
@@ -398,6 +387,49 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
 }
 
 }  // namespace
+
+double triangleStretchEnergy(const glm::dvec2 p[3], const glm::dvec3 q[3], double area3D, double k2,
+                             int moving, glm::dvec2* gradient) {
+  const double inf = std::numeric_limits<double>::infinity();
+  const glm::dvec2 e1 = p[1] - p[0], e2 = p[2] - p[0];
+  const double twice = e1.x * e2.y - e2.x * e1.y;
+  if (!(twice > 1e-14 * (glm::dot(e1, e1) + glm::dot(e2, e2)))) return inf;
+  // J = [ss st]: ss = sum q_i (y_{i+1} - y_{i+2}) / T, st = sum q_i (x_{i+2} - x_{i+1}) / T,
+  // T = twice the parameter area.
+  const glm::dvec3 ss = (q[0] * (p[1].y - p[2].y) + q[1] * (p[2].y - p[0].y) + q[2] * (p[0].y - p[1].y)) / twice;
+  const glm::dvec3 st = (q[0] * (p[2].x - p[1].x) + q[1] * (p[0].x - p[2].x) + q[2] * (p[1].x - p[0].x)) / twice;
+  // Derivatives of ss and st with respect to the moving point's x and y.
+  glm::dvec3 ssx(0.0), ssy(0.0), stx(0.0), sty(0.0);
+  if (gradient) {
+    const int n1 = (moving + 1) % 3, n2 = (moving + 2) % 3;
+    const double tx = p[n1].y - p[n2].y, ty = p[n2].x - p[n1].x;  // dT/dx, dT/dy
+    ssx = -ss * (tx / twice);
+    ssy = (q[n2] - q[n1]) / twice - ss * (ty / twice);
+    stx = (q[n1] - q[n2]) / twice - st * (tx / twice);
+    sty = -st * (ty / twice);
+  }
+  if (k2 > 0.0) {
+    // Symmetric Dirichlet: tr(M) + tr(M^-1) of the scaled metric M = k^2 J^T J, which grows
+    // without bound as a triangle is squeezed or spread in any direction (isometry: 4).
+    const double a = glm::dot(ss, ss) * k2, b = glm::dot(ss, st) * k2, cc = glm::dot(st, st) * k2;
+    const double det = a * cc - b * b;
+    if (!(det > 0.0)) return inf;
+    if (gradient) {
+      auto d = [&](const glm::dvec3& sd, const glm::dvec3& td) {
+        const double da = 2.0 * k2 * glm::dot(ss, sd), dc = 2.0 * k2 * glm::dot(st, td);
+        const double db = k2 * (glm::dot(sd, st) + glm::dot(ss, td));
+        const double ddet = da * cc + a * dc - 2.0 * b * db;
+        return area3D * ((da + dc) * (1.0 + 1.0 / det) - (a + cc) * ddet / (det * det));
+      };
+      *gradient = glm::dvec2(d(ssx, stx), d(ssy, sty));
+    }
+    return area3D * ((a + cc) + (a + cc) / det);
+  }
+  if (gradient) {
+    *gradient = area3D * glm::dvec2(glm::dot(ss, ssx) + glm::dot(st, stx), glm::dot(ss, ssy) + glm::dot(st, sty));
+  }
+  return area3D * 0.5 * (glm::dot(ss, ss) + glm::dot(st, st));
+}
 
 glm::dvec2 polygonCorner(uint32_t n, uint32_t i) {
   const double a = 2.0 * std::numbers::pi * double(i % n) / double(n);

@@ -72,6 +72,15 @@ struct PatchParameterization {
   uint32_t sweepsUsed = 0;                            // local optimization sweeps run
 };
 
+// The stretch energy of one triangle with parameter points p[0..2] and surface points q[0..2]
+// (area3D its surface area), as the local sweeps minimize it: with k2 > 0 the symmetric
+// Dirichlet energy area3D * (tr M + tr M^-1) of the scaled metric M = k2 J^T J (J the map's
+// Jacobian), else Sander's L2 energy area3D * (|J_s|^2 + |J_t|^2) / 2. Infinite for a triangle
+// flipped or squeezed flat in the parameter plane. If gradient is given, it receives the
+// derivative with respect to p[moving] (exact, not differenced).
+double triangleStretchEnergy(const glm::dvec2 p[3], const glm::dvec3 q[3], double area3D, double k2,
+                             int moving = 0, glm::dvec2* gradient = nullptr);
+
 // Corner i of the regular n-gon domain.
 glm::dvec2 polygonCorner(uint32_t n, uint32_t i);
 

@@ -58,6 +58,36 @@ TEST(PatchParam, DomainPolygonFollowsSideLengths) {
   }
 }
 
+TEST(PatchParam, TriangleEnergyGradientMatchesDifferences) {
+  // The local sweeps descend along the exact gradient: it must agree with central differences
+  // of the energy, for both energies, whichever corner moves, on a skewed triangle in 3D.
+  const glm::dvec3 q[3] = {{0.0, 0.0, 0.0}, {2.0, 0.3, 0.5}, {0.4, 1.5, -0.7}};
+  const double area = 0.5 * glm::length(glm::cross(q[1] - q[0], q[2] - q[0]));
+  for (const double k2 : {0.0, 0.37}) {
+    for (int moving = 0; moving < 3; ++moving) {
+      glm::dvec2 p[3] = {{0.1, 0.05}, {0.9, 0.2}, {0.3, 0.8}};
+      glm::dvec2 g;
+      const double e = triangleStretchEnergy(p, q, area, k2, moving, &g);
+      ASSERT_TRUE(std::isfinite(e));
+      EXPECT_EQ(e, triangleStretchEnergy(p, q, area, k2));  // the gradient does not change it
+      const double h = 1e-6;
+      glm::dvec2 fd;
+      for (int axis = 0; axis < 2; ++axis) {
+        glm::dvec2 plus[3] = {p[0], p[1], p[2]}, minus[3] = {p[0], p[1], p[2]};
+        plus[moving][axis] += h;
+        minus[moving][axis] -= h;
+        fd[axis] = (triangleStretchEnergy(plus, q, area, k2) - triangleStretchEnergy(minus, q, area, k2)) / (2 * h);
+      }
+      EXPECT_NEAR(g.x, fd.x, 1e-6 * std::max(1.0, std::abs(fd.x))) << "k2 " << k2 << " corner " << moving;
+      EXPECT_NEAR(g.y, fd.y, 1e-6 * std::max(1.0, std::abs(fd.y))) << "k2 " << k2 << " corner " << moving;
+      EXPECT_GT(glm::length(g), 0.0);
+    }
+  }
+  // A flipped triangle has no finite energy.
+  const glm::dvec2 flipped[3] = {{0.0, 0.0}, {0.0, 1.0}, {1.0, 0.0}};
+  EXPECT_TRUE(std::isinf(triangleStretchEnergy(flipped, q, area, 0.37)));
+}
+
 TEST(PatchParam, MeasureStretchOfKnownMaps) {
   // Parameter triangle (0,0), (1,0), (0,1) onto (0,0,0), (2,0,0), (0,1,0): Jacobian diag(2, 1).
   const std::vector<glm::dvec2> uv{{0, 0}, {1, 0}, {0, 1}};
