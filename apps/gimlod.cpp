@@ -197,6 +197,9 @@ int main(int argc, char** argv) {
   std::string maxMemory = "4G";
   bool noFidelity = false;
   build->add_flag("--no-fidelity", noFidelity, "Meshes: skip the Hausdorff distance between the input and the atlas");
+  build->add_option("--flip-repair-rounds", b.flipRepairRounds,
+                    "Meshes: rounds of each flip repair (cutting patches whose charts have flipped texels); 0: none")
+      ->capture_default_str();
   build->add_option("--max-memory", maxMemory, "Meshes: memory cap (e.g. 2G, 512M); larger meshes go through cell files")
       ->capture_default_str();
   build->add_option("--depth", b.depth, "Quadtree levels per chart")->capture_default_str();

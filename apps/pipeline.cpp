@@ -190,6 +190,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
       o.minNodeRes > o.nodeRes)
     throw InputError("--node-res and --min-node-res must be powers of two with 2 <= min <= node-res");
   if (o.depth < 1 || o.depth > 12) throw InputError("--depth must be in [1, 12]");
+  if (o.flipRepairRounds > 16) throw InputError("--flip-repair-rounds must be in [0, 16]");
   if (o.meshChartSize > 8193)
     throw InputError("--chart-size " + std::to_string(o.meshChartSize) + " is above 8193, the largest mesh chart size");
   if (o.charts == 0 && !(o.maxChartError > 0.0 && std::isfinite(o.maxChartError)))

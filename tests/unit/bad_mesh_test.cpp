@@ -357,6 +357,8 @@ TEST_F(BadMesh, AbsurdOptions) {
   expectRejected(f, {"--max-memory", "GiB of geometry images"}, "--chart-size 8193 --charts 8", "sphere.ply");
   expectRejected(f, {"--threads"}, base + "--threads 100000", "--threads");
   expectRejected(f, {"--depth"}, "--chart-size 9 --depth 0", "--depth");
+  expectRejected(f, {"--flip-repair-rounds"}, base + "--flip-repair-rounds 17", "--flip-repair-rounds");
+  EXPECT_EQ(build(f, base + "--charts 8 --flip-repair-rounds 0"), 0) << output_;  // in range: builds
 
   // --charts 0 without --chart-error uses the default error target; --charts far above the
   // triangle count stops at what the mesh allows (every patch holds at least one triangle).
