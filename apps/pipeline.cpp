@@ -293,7 +293,14 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   FlipRepairStats flips;
   GeometryImageSet first = resampleLayout(layout, ro);
   meter.finish("resample");
-  const GeometryImageSet set = repairFlips(layout, std::move(first), ro, o.flipRepairRounds, &flips);
+  // Each repair cut adds charts (held until written) and working memory: the repair stops
+  // cutting once the process holds 3/4 of --max-memory.
+  const GeometryImageSet set = repairFlips(layout, std::move(first), ro, o.flipRepairRounds, &flips,
+                                           [&] { return procStatusBytes("VmRSS:") < o.maxMemory / 4 * 3; });
+  if (flips.stoppedForMemory)
+    spdlog::warn("{}: the flip repair stopped at 3/4 of --max-memory ({} flipped texels left); raise --max-memory "
+                 "to repair more",
+                 o.input.string(), set.image.flippedTexels);
   const size_t finalPatches = layout.patches.size();
   layout = ChartLayout{};
   meter.finish("flip_repair");
@@ -312,6 +319,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                        {"patches_split_for_flips", flips.patchesSplit},
                        {"patches_unsplittable", flips.patchesUnsplit},
                        {"split_rounds", flips.rounds},
+                       {"flip_repair_stopped_for_memory", flips.stoppedForMemory},
                        {"patches", finalPatches},
                        {"degenerate_texels", set.image.degenerateTexels}};
   // Per chart: its patch and quad, stretch of the sampled image, flipped and degenerate texels.

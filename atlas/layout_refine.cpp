@@ -798,12 +798,18 @@ void removePatches(ChartLayout& layout, const std::vector<uint8_t>& dead, std::v
 }  // namespace
 
 GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
-                             uint32_t maxRounds, FlipRepairStats* stats) {
+                             uint32_t maxRounds, FlipRepairStats* stats, const std::function<bool()>& mayGrow) {
   FlipRepairStats local;
   FlipRepairStats& st = stats ? *stats : local;
   st = FlipRepairStats{};
   st.flippedTexelsFirst = set.image.flippedTexels;
   if (set.image.flippedTexels == 0) return set;
+  auto grow = [&] {
+    if (!mayGrow || mayGrow()) return true;
+    st.stoppedForMemory = true;
+    return false;
+  };
+  if (!grow()) return set;
   const std::vector<glm::dvec3> normals = layoutVertexNormals(layout);
   auto folding = [](const GeometryImageSet& s) {
     std::vector<Fold> bad;
@@ -845,7 +851,7 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
   // First, whole rounds: every folding patch cut at once (neck first, else through the fold),
   // kept while the flipped texels drop. Cheap (only the cut patches and their neighbours are
   // resampled) and it lets halves be cut again.
-  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0; ++round) {
+  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0 && grow(); ++round) {
     const std::vector<Patch> saved = layout.patches;
     uint32_t split = 0;
     std::vector<Fold> queue = folding(set);
@@ -889,14 +895,14 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
   // is then in a smaller patch, which the next round cuts again). Folds are taken in batches of
   // disjoint two rings (disjointBatch): cuts searched in parallel, made in turn, judged by one
   // resampling of every changed patch, the failures undone.
-  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0; ++round) {
+  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0 && !st.stoppedForMemory; ++round) {
     std::vector<Fold> queue = folding(set);
     // Kept current as splits are kept (a later split's neighbours may be earlier ones' parts).
     std::vector<uint32_t> flippedOf = flippedPerPatch(set);
     const std::vector<Patch> roundStart = layout.patches;
     uint32_t split = 0;
     st.patchesUnsplit = 0;
-    while (!queue.empty()) {
+    while (!queue.empty() && grow()) {
       std::vector<Trial> batch = disjointBatch(layout, queue);
       for (Trial& t : batch) {
         for (uint32_t q : t.rings) t.saved.push_back(layout.patches[q]);

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 
 #include "atlas/chart_layout.h"
 #include "atlas/resample.h"
@@ -75,6 +76,7 @@ struct FlipRepairStats {
   uint32_t patchesSplit = 0;
   uint32_t patchesUnsplit = 0;  // folding patches of the last round no split helped
   uint32_t flippedTexelsFirst = 0;  // flipped texels of the first resampling
+  bool stoppedForMemory = false;    // mayGrow said no before the repair was done
 };
 
 // Two repairs of up to maxRounds rounds each, from `set`, the resampling of `layout`. Whole
@@ -85,8 +87,12 @@ struct FlipRepairStats {
 // raise them; others are undone. Each repair ends at the first round that keeps nothing. Only
 // patches a round changes are parameterized again (ResampleReuse), so the result is bit for bit
 // a full resampling of the final layout. `layout` ends as the layout of the returned set.
+// mayGrow, if given, is asked before every round and batch of cuts (each adds charts and working
+// memory); once it says no, the repair stops there (stats->stoppedForMemory), with a valid
+// layout and its charts.
 GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
-                             uint32_t maxRounds = 2, FlipRepairStats* stats = nullptr);
+                             uint32_t maxRounds = 2, FlipRepairStats* stats = nullptr,
+                             const std::function<bool()>& mayGrow = {});
 
 // resampleLayout, then repairFlips.
 GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions& options,

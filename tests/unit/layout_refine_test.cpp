@@ -231,6 +231,35 @@ TEST(PatchSplit, FlipRepairOnARealScanNeverMakesThingsWorse) {
   }
 }
 
+TEST(PatchSplit, FlipRepairStopsWhenToldMemoryIsShort) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 128;
+  ChartLayout layout = buildChartLayout(mesh, copt);
+  ResampleOptions ro;
+  ro.chartSize = 33;
+  const ChartLayout before = layout;
+  GeometryImageSet first = resampleLayout(layout, ro);
+  ASSERT_GT(first.image.flippedTexels, 0u);
+  const GeometryImageSet reference = resampleLayout(layout, ro);
+  // Refused from the start: nothing is cut, the charts are those it was given.
+  FlipRepairStats st;
+  const GeometryImageSet set = repairFlips(layout, std::move(first), ro, 2, &st, [] { return false; });
+  EXPECT_TRUE(st.stoppedForMemory);
+  EXPECT_EQ(st.patchesSplit, 0u);
+  EXPECT_TRUE(sameLayout(layout, before));
+  expectSameCharts(set, reference);
+  // Allowed a few batches: it stops part way with a valid layout whose charts match it.
+  ChartLayout partial = before;
+  FlipRepairStats st2;
+  uint32_t left = 3;
+  const GeometryImageSet some =
+      repairFlips(partial, resampleLayout(partial, ro), ro, 2, &st2, [&] { return left-- > 0; });
+  EXPECT_TRUE(st2.stoppedForMemory);
+  expectValid(partial);
+  expectSameCharts(some, resampleLayout(partial, ro));
+}
+
 TEST(PatchSplit, FlipRepairDoesNotDependOnTheThreadCount) {
   // Batches of folds are searched and judged in parallel; the result must be that of one thread.
   const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
