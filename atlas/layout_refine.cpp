@@ -684,11 +684,13 @@ uint32_t moveSideEars(ChartLayout& layout, const std::vector<uint32_t>& only, bo
               again = true;
               break;
             }
-            const size_t count = layout.patches.size();
-            if (splitFull && splits < 2 && splitPatchAtNeck(layout, p)) {
+            if (splitFull && splits < 2) {
               ++splits;
-              for (size_t q = count; q < layout.patches.size(); ++q) patches.push_back(uint32_t(q));
-              again = true;
+              const size_t count = layout.patches.size();
+              if (splitPatchAtNeck(layout, p)) {
+                for (size_t q = count; q < layout.patches.size(); ++q) patches.push_back(uint32_t(q));
+              }
+              again = true;  // look again: the patch changed, or a failed cut left it a corner
               break;
             }
             continue;
@@ -869,7 +871,10 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
         split += done;
       }
     }
-    if (split == 0) break;
+    if (split == 0) {
+      layout.patches = saved;  // a failed cut may still have left a corner
+      break;
+    }
     // The patches the round changed, before and after.
     const std::vector<uint32_t> was = flippedPerPatch(set);
     std::vector<uint8_t> changed(layout.patches.size(), 0);
@@ -918,14 +923,13 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
           const auto& tri = layout.triangles[t.triangle];
           t.cut = neck ? findCut(layout, t.patch, {}, 8) : findCut(layout, t.patch, {tri[0], tri[1], tri[2]}, 8);
         });
-        std::vector<uint8_t> only;
         for (Trial* t : open) {
           t->firstNew = layout.patches.size();
           t->done = applyCut(layout, t->patch, t->cut, 8) || (neck && splitPatchAtCornerNeck(layout, t->patch));
           t->endNew = layout.patches.size();
           if (t->done) mendEars(*t);
         }
-        only.assign(layout.patches.size(), 0);
+        std::vector<uint8_t> only(layout.patches.size(), 0);
         flippedOf.resize(layout.patches.size(), 0);
         // Per trial, the patches it changed, and their flipped texels before.
         std::vector<std::vector<uint32_t>> now(open.size());

@@ -1,11 +1,11 @@
-// Splitting patches of a chart layout whose geometry images fold. A patch whose shape is far from
-// a round blob (a narrow neck, a winding strip) is squeezed by any map onto a convex polygon, and
-// where the squeeze is strong a texel of its quad charts spans surface that turns by more than a
-// right angle, so the texel faces backwards (a flipped texel). Such a patch is cut in two along
-// the shortest interior path across its neck (the cut whose length is smallest against the
-// smaller part's perimeter); the cut's ends become corners, so a neighbour there gains a side
-// (within 8). The layout is then resampled; a round of splits is kept only if it lowers the
-// flipped-texel count, and rounds go on until none is left or a round does not help.
+// Refining a chart layout before and while it is resampled, so that its geometry images do not
+// fold: shared sides straightened, side ears moved, and patches whose charts fold cut apart. A
+// patch whose shape is far from a round blob (a narrow neck, a winding strip) is squeezed by any
+// map onto a convex polygon, and where the squeeze is strong a texel of its quad charts spans
+// surface that turns by more than a right angle, so the texel faces backwards (a flipped texel).
+// Such a patch is cut in two along the shortest interior path across its neck or through the
+// fold; the cut's ends become corners, so a neighbour there gains a side (within 8). A cut is
+// kept only if it lowers the flipped-texel count (repairFlips).
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (patches split until they parameterize
 // well); Sander, Snyder, Gortler, Hoppe, SIGGRAPH 2001 (charts split where stretch is high).
 #pragma once
@@ -83,8 +83,7 @@ struct FlipRepairStats {
 // rounds: every patch one of whose charts has flipped texels is split (splitPatchAtNeck, else
 // splitPatchThrough the fold), the round kept only if the changed patches' flipped texels drop.
 // Then patch by patch: the split through the fold is kept if it lowers the flipped texels of the
-// patch and its neighbours together, else the neck split if it does not
-// raise them; others are undone. Each repair ends at the first round that keeps nothing. Only
+// patches it changes, else the neck split if it does not raise them; others are undone. Each repair ends at the first round that keeps nothing. Only
 // patches a round changes are parameterized again (ResampleReuse), so the result is bit for bit
 // a full resampling of the final layout. `layout` ends as the layout of the returned set.
 // mayGrow, if given, is asked before every round and batch of cuts (each adds charts and working

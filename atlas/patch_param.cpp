@@ -300,9 +300,9 @@ std::vector<double> vertexStretch(const LocalPatch& lp, const std::vector<glm::d
   return sigma;
 }
 
-// L2 stretch energy of the triangles around one vertex with that vertex at `at`: the sum of
-// A3D(T) * L2(T)^2; infinite if a parameter triangle would flip or collapse (Sander's barrier).
-// The energy of vertex v's ring with v at `at`; with `gradient`, also its derivative there.
+// The stretch energy (triangleStretchEnergy) of the triangles around vertex v with v at `at`;
+// infinite if a parameter triangle would flip or collapse (Sander's barrier). With `gradient`,
+// also its exact derivative there.
 double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv,
                   const std::vector<uint32_t>& ring, uint32_t v, const glm::dvec2& at,
                   const std::vector<double>& area3D, double k2, glm::dvec2* gradient = nullptr) {
@@ -327,7 +327,7 @@ double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv,
 }
 
 // Sander et al. 2001 style: per interior vertex, a line search along the negative gradient of the
-// ring's L2 stretch energy, never accepting a step that flips a triangle. Gauss-Seidel sweeps
+// ring's stretch energy (symmetric Dirichlet or L2), never accepting a step that flips a triangle. Gauss-Seidel sweeps
 // until the total energy stops dropping. Returns the sweeps run.
 uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>& isBoundary,
                                 uint32_t maxSweeps, bool symmetric, std::vector<glm::dvec2>& uv) {

@@ -18,11 +18,11 @@
 namespace gimlod {
 namespace {
 
-// Attributes of the layout's surface: positions, area-weighted unit vertex normals, colours.
 uint64_t undirectedKey(uint32_t a, uint32_t b) {
   return a < b ? (uint64_t{a} << 32) | b : (uint64_t{b} << 32) | a;
 }
 
+// Attributes of the layout's surface: positions, area-weighted unit vertex normals, colours.
 struct Surface {
   const ChartLayout& layout;
   const std::vector<glm::dvec3>& normals;  // unit, or zero where undefined
