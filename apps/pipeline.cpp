@@ -221,6 +221,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   ChartingStats cst;
   ChartLayout layout;
   IndexedMesh mesh;  // kept for the fidelity figure (in-memory path)
+  fs::path gridDir;  // the cell files, kept for the fidelity figure (out-of-core path)
   const MeshInfo info = probeMesh(o.input);
   const bool outOfCore = info.triangleEstimate * 256 > o.maxMemory / 4;
   StagedDirectory stage(o.output, kManifestName, "atlas");
@@ -231,8 +232,12 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
     const GridifyResult gr = gridify(o.input, grid, g);
     meter.finish("gridify");
     layout = buildChartLayoutFromCells(grid, copt, &cst);
-    std::error_code ec;
-    fs::remove_all(grid, ec);
+    if (o.measureFidelity) {
+      gridDir = grid;  // the input for the fidelity figure, removed after it
+    } else {
+      std::error_code ec;
+      fs::remove_all(grid, ec);
+    }
     stats["gridify"] = {{"cells", gr.cells},
                         {"triangles", gr.triangles},
                         {"max_cell_triangles", gr.maxCellTriangles},
@@ -295,7 +300,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   meter.finish("resample");
   // Each repair cut adds charts (held until written) and working memory: the repair stops
   // cutting once the process holds 3/4 of --max-memory.
-  const GeometryImageSet set = repairFlips(layout, std::move(first), ro, o.flipRepairRounds, &flips,
+  GeometryImageSet set = repairFlips(layout, std::move(first), ro, o.flipRepairRounds, &flips,
                                            [&] { return procStatusBytes("VmRSS:") < o.maxMemory / 4 * 3; });
   if (flips.stoppedForMemory)
     spdlog::warn("{}: the flip repair stopped at 3/4 of --max-memory ({} flipped texels left); raise --max-memory "
@@ -338,19 +343,33 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   m.minNodeResLog2 = p.minNodeResLog2;
   m.source = fs::absolute(o.input).string();
   const GeometryChartsWritten w = writeGeometryCharts(set, stage.path(), 1u << p.maxNodeResLog2, m);
-  std::vector<std::array<RootNeighbour, 4>> roots;
-  for (const ChartInfo& c : m.charts) roots.push_back(c.neighbours);
-  std::vector<std::unique_ptr<ChartFileReader>> readers;
-  for (const ChartInfo& c : m.charts) readers.push_back(std::make_unique<ChartFileReader>(stage.path() / c.file));
+  set = GeometryImageSet{};
   HierarchyStats hs;
-  const Hierarchy h =
-      buildGeometryHierarchy(p, roots, [&](uint32_t c) { return readers[c]->readLevelPositions(0); }, &hs);
-  writeHierarchy(stage.path() / m.hierarchyFile, h);
+  {
+    std::vector<std::array<RootNeighbour, 4>> roots;
+    for (const ChartInfo& c : m.charts) roots.push_back(c.neighbours);
+    std::vector<std::unique_ptr<ChartFileReader>> readers;
+    for (const ChartInfo& c : m.charts) readers.push_back(std::make_unique<ChartFileReader>(stage.path() / c.file));
+    const Hierarchy h =
+        buildGeometryHierarchy(p, roots, [&](uint32_t c) { return readers[c]->readLevelPositions(0); }, &hs);
+    writeHierarchy(stage.path() / m.hierarchyFile, h);
+  }
   writeManifest(stage.path(), m);
   meter.finish("write");
-  if (o.measureFidelity && !outOfCore) {
-    const AtlasSurface surface = readAtlasSurface(stage.path(), 0);
-    const FidelityStats f = measureFidelity(mesh.positions, mesh.triangles, surface.positions, surface.triangles);
+  if (o.measureFidelity) {
+    FidelityStats f;
+    if (outOfCore) {
+      // Block by block, from the cell files and the charts just written, in half of --max-memory.
+      OutOfCoreFidelityOptions fo;
+      fo.memoryBytes = o.maxMemory / 2;
+      f = measureFidelityOutOfCore(gridDir, stage.path(), fo);
+      std::error_code ec;
+      fs::remove_all(gridDir, ec);
+    } else {
+      const AtlasSurface surface = readAtlasSurface(stage.path(), 0);
+      f = measureFidelity(mesh.positions, mesh.triangles, surface.positions, surface.triangles);
+      mesh = IndexedMesh{};
+    }
     stats["fidelity"] = {{"hausdorff_percent_of_diagonal", f.hausdorffPercent},
                          {"mean_percent_of_diagonal", f.meanPercent},
                          {"max_atlas_to_mesh", f.maxAtlasToMesh},
@@ -358,13 +377,24 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                          {"diagonal", f.diagonal},
                          {"atlas_samples", f.atlasSamples},
                          {"mesh_samples", f.meshSamples},
+                         {"out_of_core", outOfCore},
                          {"seconds", f.seconds}};
-    spdlog::info("atlas fidelity: Hausdorff {:.4f}% of the diagonal (mean {:.5f}%), {} atlas and {} mesh samples",
-                 f.hausdorffPercent, f.meanPercent, f.atlasSamples, f.meshSamples);
+    if (outOfCore) {
+      stats["fidelity"]["blocks"] = f.blocks;
+      stats["fidelity"]["samples_beyond_margin"] = f.samplesBeyondMargin;
+      stats["fidelity"]["exact"] = f.exact;
+    }
+    spdlog::info("atlas fidelity: Hausdorff {:.4f}% of the diagonal (mean {:.5f}%), {} atlas and {} mesh samples{}",
+                 f.hausdorffPercent, f.meanPercent, f.atlasSamples, f.meshSamples,
+                 outOfCore ? fmt::format(", {} blocks", f.blocks) : std::string());
+    if (!f.exact)
+      spdlog::warn("{}: too many samples lie far from the other surface to resolve them all within --max-memory; the "
+                   "Hausdorff figure is a lower bound",
+                   o.input.string());
+    meter.finish("fidelity");
   } else {
-    stats["fidelity"] = outOfCore ? "not measured (out-of-core input)" : "not measured (--no-fidelity)";
+    stats["fidelity"] = "not measured (--no-fidelity)";
   }
-  if (o.measureFidelity && !outOfCore) meter.finish("fidelity");
   mesh = IndexedMesh{};
   stats["charts"] = m.charts.size();
   stats["chart_size"] = m.chartSize;

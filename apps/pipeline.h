@@ -31,7 +31,7 @@ struct BuildOptions {
   uint32_t flipRepairRounds = 2;        // rounds of splitting patches whose charts have flipped
                                         // texels (atlas/layout_refine.h); 0 keeps the charting's
   uint64_t maxMemory = 4ull << 30;      // bytes; above a quarter of it the cells (out-of-core) path runs
-  bool measureFidelity = true;          // two-sided Hausdorff distance input <-> atlas (in-memory path)
+  bool measureFidelity = true;          // two-sided Hausdorff distance input <-> atlas (out of core on that path)
 };
 
 // Throws InputError for impossible options (before any work is done).

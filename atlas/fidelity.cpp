@@ -1,6 +1,7 @@
 #include "atlas/fidelity.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -17,6 +18,9 @@
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
+
+#include "atlas/gridify.h"
+#include "core/atlas_format.h"
 
 namespace gimlod {
 namespace {
@@ -185,6 +189,7 @@ class Forest {
 
 struct Acc {
   double max = 0.0, sum = 0.0;
+  std::vector<uint32_t> beyond;  // samples with nothing within the margin (in neither max nor sum)
 };
 
 // The closest point of a forest's surface to one query, as traversal traits for its CGAL trees
@@ -253,9 +258,12 @@ class Nearest {
 // sample's search starts from the previous sample's closest point in its block as the hint: the
 // samples come in a spatially coherent order (an atlas's a chart at a time, a mesh's in input order),
 // so the hint is already close and the search prunes almost everything. No KD-tree of hints needed.
+// A sample farther than `margin` from the forest's surface is listed in beyond (in order) instead
+// of counted: the forest may hold only the part of a surface within the margin around the samples.
 template <class Sample>
-Acc distances(const Forest& forest, size_t count, const Sample& sample) {
-  return tbb::parallel_reduce(
+Acc distances(const Forest& forest, size_t count, const Sample& sample,
+              double margin = std::numeric_limits<double>::infinity()) {
+  Acc acc = tbb::parallel_reduce(
       tbb::blocked_range<size_t>(0, count, 1024), Acc{},
       [&](const tbb::blocked_range<size_t>& r, Acc a) {
         Point hint(CGAL::ORIGIN);
@@ -265,6 +273,10 @@ Acc distances(const Forest& forest, size_t count, const Sample& sample) {
           forest.traverse(q, n);
           hint = n.closest();
           const double d = std::sqrt(n.squaredDistance());
+          if (d > margin) {
+            a.beyond.push_back(uint32_t(i));
+            continue;
+          }
           a.max = std::max(a.max, d);
           a.sum += d;
         }
@@ -273,8 +285,11 @@ Acc distances(const Forest& forest, size_t count, const Sample& sample) {
       [](Acc a, const Acc& b) {
         a.max = std::max(a.max, b.max);
         a.sum += b.sum;
+        a.beyond.insert(a.beyond.end(), b.beyond.begin(), b.beyond.end());
         return a;
       });
+  std::sort(acc.beyond.begin(), acc.beyond.end());
+  return acc;
 }
 
 }  // namespace
@@ -331,6 +346,345 @@ FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
   st.maxMeshToAtlas = b.max;
   st.meanMeshToAtlas = b.sum / double(std::max<uint64_t>(st.meshSamples, 1));
   st.hausdorff = std::max(a.max, b.max);
+  st.hausdorffPercent = st.diagonal > 0 ? 100.0 * st.hausdorff / st.diagonal : 0.0;
+  st.meanPercent = st.diagonal > 0 ? 100.0 * 0.5 * (st.meanAtlasToMesh + st.meanMeshToAtlas) / st.diagonal : 0.0;
+  st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return st;
+}
+
+namespace {
+
+// Working memory per input triangle and per atlas sample of a block (the float triangles, their
+// boxes and tree nodes, the samples), as measured on the 18.7M-triangle sphere, with some slack.
+constexpr uint64_t kBytesPerMeshTriangle = 220, kBytesPerAtlasSample = 160;
+
+struct Box {
+  double lo[3], hi[3];
+  bool overlaps(const FloatBox& b) const {
+    for (int k = 0; k < 3; ++k)
+      if (b.hi[k] < lo[k] || b.lo[k] > hi[k]) return false;
+    return true;
+  }
+};
+
+FloatBox boxOf(const FloatTriangle& t) {
+  FloatBox b;
+  for (int c = 0; c < 3; ++c) {
+    b.lo[c] = std::min({t.v[c], t.v[c + 3], t.v[c + 6]});
+    b.hi[c] = std::max({t.v[c], t.v[c + 3], t.v[c + 6]});
+  }
+  return b;
+}
+
+void extend(FloatBox& b, const FloatBox& o) {
+  for (int c = 0; c < 3; ++c) b.lo[c] = std::min(b.lo[c], o.lo[c]), b.hi[c] = std::max(b.hi[c], o.hi[c]);
+}
+
+FloatBox emptyBox() {
+  FloatBox b;
+  for (int c = 0; c < 3; ++c) b.lo[c] = std::numeric_limits<float>::infinity(), b.hi[c] = -b.lo[c];
+  return b;
+}
+
+// Keeps the first of every run of equal points, in their order (so the samples stay coherent).
+void dropRepeats(std::vector<Point>& p) {
+  std::vector<uint32_t> order(p.size());
+  for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+  auto key = [&](uint32_t i) { return std::array<double, 3>{p[i].x(), p[i].y(), p[i].z()}; };
+  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b) || (key(a) == key(b) && a < b); });
+  std::vector<uint8_t> keep(p.size(), 1);
+  for (size_t i = 1; i < order.size(); ++i)
+    if (key(order[i]) == key(order[i - 1])) keep[order[i]] = 0;
+  size_t n = 0;
+  for (size_t i = 0; i < p.size(); ++i)
+    if (keep[i]) p[n++] = p[i];
+  p.resize(n);
+}
+
+// The level-0 grid of one atlas chart as float triangles, split as readAtlasSurface splits it.
+template <class Emit>
+void chartTriangles(const std::vector<glm::vec3>& P, uint32_t s, const Emit& emit) {
+  auto corner = [&](FloatTriangle& t, int k, uint32_t i) {
+    t.v[3 * k] = P[i].x, t.v[3 * k + 1] = P[i].y, t.v[3 * k + 2] = P[i].z;
+  };
+  for (uint32_t v = 0; v + 1 < s; ++v)
+    for (uint32_t u = 0; u + 1 < s; ++u) {
+      const uint32_t a = v * s + u, b = a + 1, c = a + s + 1, d = a + s;
+      FloatTriangle t1, t2;
+      corner(t1, 0, a), corner(t1, 1, b), corner(t1, 2, c);
+      corner(t2, 0, a), corner(t2, 1, c), corner(t2, 2, d);
+      emit(t1);
+      emit(t2);
+    }
+}
+
+// One side of the measure: samples with nothing within the margin, kept with the closest point
+// found so far (its squared distance infinite while none).
+struct Pending {
+  std::vector<Point> q, closest;
+  std::vector<double> d2;
+  uint64_t unresolved = 0;  // more than could be held: counted at the margin
+};
+
+}  // namespace
+
+FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, const std::filesystem::path& atlasDir,
+                                       const OutOfCoreFidelityOptions& options) {
+  namespace fs = std::filesystem;
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!(options.marginFraction > 0.0 && options.marginFraction < 1.0) || options.memoryBytes < (16u << 20))
+    throw std::invalid_argument("measureFidelityOutOfCore: the margin must be in (0, 1) and the memory at least 16 MiB");
+  const GridManifest gm = readGridManifest(gridDir);
+  const AtlasManifest am = readManifest(atlasDir);
+  if (am.kind != "geometry")
+    throw InputError((atlasDir / kManifestName).string() + ": a " + am.kind + " atlas, not a geometry atlas");
+  if (gm.triangles == 0 || gm.bounds.empty() || am.charts.empty())
+    throw std::invalid_argument("measureFidelityOutOfCore: a surface has no triangles");
+  FidelityStats st;
+  {
+    const glm::vec3 e = gm.bounds.max - gm.bounds.min;
+    st.diagonal = std::sqrt(double(e.x) * e.x + double(e.y) * e.y + double(e.z) * e.z);
+  }
+  const double margin = options.marginFraction * st.diagonal;
+  const uint32_t s = am.chartSize;
+  auto chartPath = [&](uint32_t c) { return atlasDir / am.charts[c].file; };
+  auto readChart = [&](uint32_t c) {
+    const ChartFileReader reader(chartPath(c));
+    if (!reader.hasChannel(kChannelPositions))
+      throw InputError(chartPath(c).string() + ": no positions in a geometry atlas chart");
+    if (reader.chartSize() != s) throw InputError(chartPath(c).string() + ": chart size differs from the manifest's");
+    return reader.readLevelPositions(0);
+  };
+  // Points go to the cell holding them, clamped into the grid (as GridManifest::cellOf places a
+  // centroid), and so to exactly one block.
+  auto cellAxis = [&](double x, int a) {
+    const double c = std::floor((x - gm.origin[a]) / gm.cellSize[a]);
+    return c <= 0 ? 0u : c >= gm.dims[a] - 1 ? gm.dims[a] - 1 : static_cast<uint32_t>(c);
+  };
+  auto cellIdOf = [&](double x, double y, double z) {
+    return gm.cellId({cellAxis(x, 0), cellAxis(y, 1), cellAxis(z, 2)});
+  };
+
+  // What is where: the box of every cell's triangles, and of every chart's samples; the atlas
+  // samples in every cell (to size the blocks).
+  std::vector<FloatBox> cellBoxes(gm.cells.size(), emptyBox()), chartBoxes(am.charts.size(), emptyBox());
+  const uint64_t gridCells = uint64_t(gm.dims[0]) * gm.dims[1] * gm.dims[2];
+  std::vector<std::atomic<uint64_t>> atlasInCell(gridCells);
+  tbb::parallel_for(size_t(0), gm.cells.size(), [&](size_t i) {
+    for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[i])) {
+      FloatTriangle f;
+      for (int k = 0; k < 3; ++k)
+        for (int c = 0; c < 3; ++c) f.v[3 * k + c] = t.p[k][c];
+      extend(cellBoxes[i], boxOf(f));
+    }
+  });
+  tbb::parallel_for(uint32_t(0), uint32_t(am.charts.size()), [&](uint32_t c) {
+    const std::vector<glm::vec3> P = readChart(c);
+    std::vector<uint32_t> cells(P.size());
+    for (size_t i = 0; i < P.size(); ++i) {
+      for (int k = 0; k < 3; ++k)
+        chartBoxes[c].lo[k] = std::min(chartBoxes[c].lo[k], P[i][k]), chartBoxes[c].hi[k] = std::max(chartBoxes[c].hi[k], P[i][k]);
+      cells[i] = cellIdOf(P[i].x, P[i].y, P[i].z);
+    }
+    std::sort(cells.begin(), cells.end());
+    for (size_t i = 0; i < cells.size();) {
+      size_t j = i;
+      while (j < cells.size() && cells[j] == cells[i]) ++j;
+      atlasInCell[cells[i]] += j - i;
+      i = j;
+    }
+  });
+
+  // Blocks of g^3 cells: the largest g whose fullest block (with its margin) fits the memory.
+  std::vector<uint64_t> cellCost(gridCells, 0);
+  for (size_t i = 0; i < gm.cells.size(); ++i) cellCost[gm.cells[i].id] = gm.cells[i].triangles * kBytesPerMeshTriangle;
+  for (uint64_t c = 0; c < gridCells; ++c) cellCost[c] += atlasInCell[c] * kBytesPerAtlasSample;
+  const uint32_t maxDim = std::max({gm.dims[0], gm.dims[1], gm.dims[2]});
+  auto blockDims = [&](uint32_t g) {
+    return std::array<uint32_t, 3>{(gm.dims[0] + g - 1) / g, (gm.dims[1] + g - 1) / g, (gm.dims[2] + g - 1) / g};
+  };
+  auto fullestBlock = [&](uint32_t g) {
+    const std::array<uint32_t, 3> bd = blockDims(g);
+    std::vector<uint64_t> cost(size_t(bd[0]) * bd[1] * bd[2], 0);
+    for (uint32_t z = 0; z < gm.dims[2]; ++z)
+      for (uint32_t y = 0; y < gm.dims[1]; ++y)
+        for (uint32_t x = 0; x < gm.dims[0]; ++x)
+          cost[x / g + bd[0] * (y / g + bd[1] * (z / g))] += cellCost[gm.cellId({x, y, z})];
+    // The margin adds a shell: grow by the ratio of the widened block's face to its own.
+    const double side = g * std::min({gm.cellSize[0], gm.cellSize[1], gm.cellSize[2]});
+    const double grow = side > 0 ? std::pow((side + 2 * margin) / side, 2.0) : 1.0;
+    return double(*std::max_element(cost.begin(), cost.end())) * grow;
+  };
+  uint32_t g = options.maxBlockCells ? std::min(options.maxBlockCells, maxDim) : maxDim;
+  while (g > 1 && fullestBlock(g) > double(options.memoryBytes)) g = (g + 1) / 2;
+  const std::array<uint32_t, 3> bd = blockDims(g);
+  auto blockOf = [&](double x, double y, double z) {
+    return cellAxis(x, 0) / g + bd[0] * (cellAxis(y, 1) / g + bd[1] * (cellAxis(z, 2) / g));
+  };
+  std::vector<uint8_t> blockUsed(size_t(bd[0]) * bd[1] * bd[2], 0);
+  for (uint32_t z = 0; z < gm.dims[2]; ++z)
+    for (uint32_t y = 0; y < gm.dims[1]; ++y)
+      for (uint32_t x = 0; x < gm.dims[0]; ++x)
+        if (cellCost[gm.cellId({x, y, z})]) blockUsed[x / g + bd[0] * (y / g + bd[1] * (z / g))] = 1;
+
+  Pending meshPending, atlasPending;  // input samples without atlas near, atlas samples without input near
+  const uint64_t pendingCap = options.memoryBytes / 4 / (2 * sizeof(Point) + sizeof(double));
+  double atlasMax = 0, atlasSum = 0, meshMax = 0, meshSum = 0;
+  auto addPending = [&](Pending& p, const std::vector<Point>& samples, const std::vector<uint32_t>& ids) {
+    st.samplesBeyondMargin += ids.size();
+    for (uint32_t i : ids) {
+      if (meshPending.q.size() + atlasPending.q.size() >= pendingCap) {
+        ++p.unresolved;
+        continue;
+      }
+      p.q.push_back(samples[i]);
+      p.closest.push_back(CGAL::ORIGIN);
+      p.d2.push_back(std::numeric_limits<double>::infinity());
+    }
+  };
+
+  for (uint32_t bz = 0; bz < bd[2]; ++bz)
+    for (uint32_t by = 0; by < bd[1]; ++by)
+      for (uint32_t bx = 0; bx < bd[0]; ++bx) {
+        const uint32_t block = bx + bd[0] * (by + bd[1] * bz);
+        if (!blockUsed[block]) continue;
+        ++st.blocks;
+        // The block's box widened by the margin; unbounded past the grid's faces, where points
+        // outside the grid are clamped in.
+        Box e;
+        const std::array<uint32_t, 3> b{bx, by, bz};
+        for (int a = 0; a < 3; ++a) {
+          const double pad = margin * (1.0 + 1e-9) + 1e-30;
+          e.lo[a] = b[a] == 0 ? -std::numeric_limits<double>::infinity() : gm.origin[a] + double(b[a] * g) * gm.cellSize[a] - pad;
+          e.hi[a] = b[a] + 1 == bd[a] ? std::numeric_limits<double>::infinity()
+                                       : gm.origin[a] + double((b[a] + 1) * g) * gm.cellSize[a] + pad;
+        }
+        // The input's triangles near the block, and its samples in the block, cell by cell in
+        // grid order (each cell in file order).
+        std::vector<uint32_t> cellsNear;
+        for (uint32_t i = 0; i < gm.cells.size(); ++i)
+          if (e.overlaps(cellBoxes[i])) cellsNear.push_back(i);
+        std::vector<std::vector<FloatTriangle>> meshParts(cellsNear.size());
+        std::vector<std::vector<Point>> meshSampleParts(cellsNear.size()), vertexParts(cellsNear.size());
+        tbb::parallel_for(size_t(0), cellsNear.size(), [&](size_t k) {
+          for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[cellsNear[k]])) {
+            FloatTriangle f;
+            for (int i = 0; i < 3; ++i)
+              for (int c = 0; c < 3; ++c) f.v[3 * i + c] = t.p[i][c];
+            if (!e.overlaps(boxOf(f))) continue;
+            for (int i = 0; i < 3; ++i)
+              if (blockOf(t.p[i].x, t.p[i].y, t.p[i].z) == block) vertexParts[k].emplace_back(t.p[i].x, t.p[i].y, t.p[i].z);
+            if (f.triangle().is_degenerate()) continue;
+            meshParts[k].push_back(f);
+            const Point centroid = CGAL::centroid(f.triangle());
+            if (blockOf(centroid.x(), centroid.y(), centroid.z()) == block) meshSampleParts[k].push_back(centroid);
+          }
+        });
+        std::vector<FloatTriangle> meshTris;
+        std::vector<Point> meshSamples;
+        for (size_t k = 0; k < cellsNear.size(); ++k) {
+          meshTris.insert(meshTris.end(), meshParts[k].begin(), meshParts[k].end());
+          meshSamples.insert(meshSamples.end(), vertexParts[k].begin(), vertexParts[k].end());
+          std::vector<FloatTriangle>().swap(meshParts[k]);
+        }
+        dropRepeats(meshSamples);  // a vertex is a corner of several triangles
+        for (const auto& part : meshSampleParts) meshSamples.insert(meshSamples.end(), part.begin(), part.end());
+        // The atlas's triangles near the block and its samples in the block, chart by chart.
+        std::vector<uint32_t> chartsNear;
+        for (uint32_t c = 0; c < am.charts.size(); ++c)
+          if (e.overlaps(chartBoxes[c])) chartsNear.push_back(c);
+        std::vector<std::vector<FloatTriangle>> atlasParts(chartsNear.size());
+        std::vector<std::vector<Point>> atlasSampleParts(chartsNear.size());
+        tbb::parallel_for(size_t(0), chartsNear.size(), [&](size_t k) {
+          const std::vector<glm::vec3> P = readChart(chartsNear[k]);
+          for (const glm::vec3& q : P)
+            if (blockOf(q.x, q.y, q.z) == block) atlasSampleParts[k].emplace_back(q.x, q.y, q.z);
+          chartTriangles(P, s, [&](const FloatTriangle& t) {
+            if (e.overlaps(boxOf(t)) && !t.triangle().is_degenerate()) atlasParts[k].push_back(t);
+          });
+        });
+        std::vector<FloatTriangle> atlasTris;
+        std::vector<Point> atlasSamples;
+        for (size_t k = 0; k < chartsNear.size(); ++k) {
+          atlasTris.insert(atlasTris.end(), atlasParts[k].begin(), atlasParts[k].end());
+          atlasSamples.insert(atlasSamples.end(), atlasSampleParts[k].begin(), atlasSampleParts[k].end());
+          std::vector<FloatTriangle>().swap(atlasParts[k]);
+        }
+        dropRepeats(atlasSamples);  // seams: bit-identical samples in both charts
+        st.meshSamples += meshSamples.size();
+        st.atlasSamples += atlasSamples.size();
+
+        // Each side's samples against the other's triangles near the block.
+        auto measure = [&](const std::vector<FloatTriangle>& tris, const std::vector<Point>& samples, double& max,
+                           double& sum, Pending& pending) {
+          if (samples.empty()) return;
+          if (tris.empty()) {
+            std::vector<uint32_t> all(samples.size());
+            for (uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+            addPending(pending, samples, all);
+            return;
+          }
+          const Forest forest(tris);
+          const Acc a = distances(forest, samples.size(), [&](size_t i) { return samples[i]; }, margin);
+          max = std::max(max, a.max);
+          sum += a.sum;
+          addPending(pending, samples, a.beyond);
+        };
+        measure(meshTris, atlasSamples, atlasMax, atlasSum, atlasPending);
+        std::vector<FloatTriangle>().swap(meshTris);
+        measure(atlasTris, meshSamples, meshMax, meshSum, meshPending);
+      }
+
+  // Second pass: samples with nothing near, against the whole other surface, a part at a time.
+  auto resolve = [&](Pending& p, const std::vector<FloatTriangle>& part) {
+    if (p.q.empty() || part.empty()) return;
+    const Forest forest(part);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, p.q.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i != r.end(); ++i) {
+        Nearest n = std::isfinite(p.d2[i]) ? Nearest(forest, p.q[i], p.closest[i]) : Nearest(forest);
+        forest.traverse(p.q[i], n);
+        if (n.squaredDistance() < p.d2[i]) p.d2[i] = n.squaredDistance(), p.closest[i] = n.closest();
+      }
+    });
+  };
+  const uint64_t partTriangles = std::max<uint64_t>(options.memoryBytes / 2 / kBytesPerMeshTriangle, 1);
+  if (!atlasPending.q.empty()) {
+    std::vector<FloatTriangle> part;
+    for (size_t i = 0; i < gm.cells.size(); ++i) {
+      for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[i])) {
+        FloatTriangle f;
+        for (int k = 0; k < 3; ++k)
+          for (int c = 0; c < 3; ++c) f.v[3 * k + c] = t.p[k][c];
+        if (!f.triangle().is_degenerate()) part.push_back(f);
+      }
+      if (part.size() >= partTriangles || i + 1 == gm.cells.size()) {
+        resolve(atlasPending, part);
+        part.clear();
+      }
+    }
+  }
+  if (!meshPending.q.empty()) {
+    std::vector<FloatTriangle> part;
+    for (uint32_t c = 0; c < am.charts.size(); ++c) {
+      chartTriangles(readChart(c), s, [&](const FloatTriangle& t) {
+        if (!t.triangle().is_degenerate()) part.push_back(t);
+      });
+      if (part.size() >= partTriangles || c + 1 == am.charts.size()) {
+        resolve(meshPending, part);
+        part.clear();
+      }
+    }
+  }
+  for (double d2 : atlasPending.d2) atlasMax = std::max(atlasMax, std::sqrt(d2)), atlasSum += std::sqrt(d2);
+  for (double d2 : meshPending.d2) meshMax = std::max(meshMax, std::sqrt(d2)), meshSum += std::sqrt(d2);
+  if (atlasPending.unresolved) atlasMax = std::max(atlasMax, margin), atlasSum += margin * atlasPending.unresolved;
+  if (meshPending.unresolved) meshMax = std::max(meshMax, margin), meshSum += margin * meshPending.unresolved;
+  st.exact = !atlasPending.unresolved && !meshPending.unresolved;
+  st.maxAtlasToMesh = atlasMax;
+  st.meanAtlasToMesh = atlasSum / double(std::max<uint64_t>(st.atlasSamples, 1));
+  st.maxMeshToAtlas = meshMax;
+  st.meanMeshToAtlas = meshSum / double(std::max<uint64_t>(st.meshSamples, 1));
+  st.hausdorff = std::max(atlasMax, meshMax);
   st.hausdorffPercent = st.diagonal > 0 ? 100.0 * st.hausdorff / st.diagonal : 0.0;
   st.meanPercent = st.diagonal > 0 ? 100.0 * 0.5 * (st.meanAtlasToMesh + st.meanMeshToAtlas) / st.diagonal : 0.0;
   st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstdint>
+#include <filesystem>
 #include <vector>
 
 #include <glm/vec3.hpp>
@@ -22,6 +23,13 @@ struct FidelityStats {
   double meanPercent = 0.0;         // mean of the two means / diagonal * 100
   uint64_t atlasSamples = 0, meshSamples = 0;
   double seconds = 0.0;
+  // Out of core (measureFidelityOutOfCore) only:
+  uint32_t blocks = 0;              // blocks of grid cells measured one at a time
+  uint64_t samplesBeyondMargin = 0; // samples whose closest point lay beyond their block's margin
+                                    // (found by a second pass over the whole other surface)
+  bool exact = true;                // false: some samples beyond the margin were not resolved
+                                    // (too many to hold); they count at the margin, so the
+                                    // maximum is a lower bound
 };
 
 // Both surfaces as positions + triangles. The atlas side is sampled at its vertices (the chart
@@ -31,5 +39,24 @@ FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
                               const std::vector<std::array<uint32_t, 3>>& meshTriangles,
                               const std::vector<glm::vec3>& atlasPositions,
                               const std::vector<std::array<uint32_t, 3>>& atlasTriangles);
+
+struct OutOfCoreFidelityOptions {
+  uint64_t memoryBytes = 1ull << 30;  // what one block's surfaces, trees and samples may take (estimated)
+  double marginFraction = 0.005;      // search margin around a block, as a fraction of the diagonal
+  uint32_t maxBlockCells = 0;         // at most this many grid cells per block side; 0 = as many as fit
+};
+
+// measureFidelity for a mesh held as gridify cell files (atlas/gridify.h) and the level-0 surface
+// of a geometry atlas on disk (as readAtlasSurface triangulates it), without holding either
+// surface: space is cut into blocks of grid cells, as large as fit in options.memoryBytes. A
+// block's samples (the input's distinct vertex positions and its triangles' centroids, the atlas's
+// distinct sample positions, each in the one block holding it) are measured against the
+// triangles of both surfaces within the margin around the block; a sample with nothing that close
+// is measured again in a second pass over the whole other surface. So the figures are exact, and
+// those of measureFidelity on the same surfaces (up to input vertices that share a position). Throws
+// InputError naming the file on a bad grid or atlas, std::invalid_argument when either surface
+// has no triangles or the options are absurd.
+FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, const std::filesystem::path& atlasDir,
+                                       const OutOfCoreFidelityOptions& options = {});
 
 }  // namespace gimlod

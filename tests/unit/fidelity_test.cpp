@@ -9,7 +9,12 @@
 #include <glm/geometric.hpp>
 #include <tbb/task_arena.h>
 
+#include "apps/pipeline.h"
 #include "atlas/fidelity.h"
+#include "atlas/gridify.h"
+#include "atlas/mesh_atlas.h"
+#include "atlas/mesh_io.h"
+#include "tests/test_util.h"
 
 namespace gimlod {
 namespace {
@@ -148,6 +153,120 @@ TEST(Fidelity, MatchesBruteForce) {
     const FidelityStats s = measureFidelity(mp, mt2, ap, at2);
     check(s);
   });
+}
+
+// Out of core: the figures measured block by block from cell files and an atlas on disk are those
+// of measureFidelity on the same two surfaces held whole, whatever the blocks and the margin:
+// samples whose closest point lies beyond their block's margin are found by the second pass.
+class FidelityOutOfCore : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    tmp_ = new test::TempDir("gimlod-fidelity-ooc");
+    // The shipped bunny, built in memory at a small chart size (fast), and the same scan in cells
+    // of about 3000 triangles (some 25 cells).
+    const std::filesystem::path scan = test::repoData() / "meshes" / "bun_zipper.ply";
+    BuildOptions o;
+    o.input = scan;
+    o.output = atlas();
+    o.meshChartSize = 17;
+    o.charts = 64;
+    o.measureFidelity = false;
+    buildAtlas(o);
+    mesh_ = new IndexedMesh(readMesh(scan));
+    GridifyOptions g;
+    g.targetTrianglesPerCell = 3000;
+    gridify(scan, grid(), g);
+  }
+  static void TearDownTestSuite() {
+    delete mesh_;
+    delete tmp_;
+  }
+  static std::filesystem::path atlas() { return tmp_->path() / "bunny.atlas"; }
+  static std::filesystem::path grid() { return tmp_->path() / "bunny.grid"; }
+  static void expectSame(const FidelityStats& s, const FidelityStats& ref) {
+    EXPECT_EQ(s.atlasSamples, ref.atlasSamples);
+    EXPECT_EQ(s.meshSamples, ref.meshSamples);
+    EXPECT_NEAR(s.diagonal, ref.diagonal, 1e-9 * ref.diagonal);
+    EXPECT_NEAR(s.maxAtlasToMesh, ref.maxAtlasToMesh, 1e-9 * ref.diagonal);
+    EXPECT_NEAR(s.maxMeshToAtlas, ref.maxMeshToAtlas, 1e-9 * ref.diagonal);
+    EXPECT_NEAR(s.meanAtlasToMesh, ref.meanAtlasToMesh, 1e-9 * ref.diagonal);
+    EXPECT_NEAR(s.meanMeshToAtlas, ref.meanMeshToAtlas, 1e-9 * ref.diagonal);
+    EXPECT_NEAR(s.hausdorffPercent, ref.hausdorffPercent, 1e-7);
+  }
+  static test::TempDir* tmp_;
+  static IndexedMesh* mesh_;
+};
+test::TempDir* FidelityOutOfCore::tmp_ = nullptr;
+IndexedMesh* FidelityOutOfCore::mesh_ = nullptr;
+
+TEST_F(FidelityOutOfCore, MatchesInCoreWhateverTheBlocks) {
+  const AtlasSurface surface = readAtlasSurface(atlas(), 0);
+  const FidelityStats ref = measureFidelity(mesh_->positions, mesh_->triangles, surface.positions, surface.triangles);
+  ASSERT_GT(ref.hausdorff, 0.0);
+  ASSERT_GT(readGridManifest(grid()).cells.size(), 8u);
+  uint32_t lastBlocks = 0;
+  for (uint32_t cells : {0u, 2u, 1u}) {
+    SCOPED_TRACE("at most " + std::to_string(cells) + " cells a block side");
+    OutOfCoreFidelityOptions fo;
+    fo.maxBlockCells = cells;
+    const FidelityStats s = measureFidelityOutOfCore(grid(), atlas(), fo);
+    expectSame(s, ref);
+    EXPECT_TRUE(s.exact);
+    EXPECT_EQ(s.samplesBeyondMargin, 0u);  // the atlas lies within 0.5% of the diagonal of the scan
+    EXPECT_GT(s.blocks, lastBlocks);
+    lastBlocks = s.blocks;
+  }
+  // A margin far below the distances: nearly every sample goes to the second pass, which still
+  // finds every exact closest point.
+  OutOfCoreFidelityOptions fo;
+  fo.maxBlockCells = 1;
+  fo.marginFraction = 1e-9;
+  const FidelityStats s = measureFidelityOutOfCore(grid(), atlas(), fo);
+  expectSame(s, ref);
+  EXPECT_TRUE(s.exact);
+  EXPECT_GT(s.samplesBeyondMargin, (ref.atlasSamples + ref.meshSamples) / 2);
+  // Too many of them to hold in 16 MiB: those not held count at the margin, and the figure is a
+  // lower bound, said so.
+  fo.memoryBytes = 16u << 20;
+  const FidelityStats low = measureFidelityOutOfCore(grid(), atlas(), fo);
+  EXPECT_FALSE(low.exact);
+  EXPECT_LE(low.hausdorff, ref.hausdorff * (1 + 1e-9));
+  EXPECT_LE(low.meanPercent, ref.meanPercent * (1 + 1e-9));
+}
+
+// Surfaces far apart (the input moved by a fifth of its diagonal): every distance is beyond the
+// margin, and the second pass gives the whole-surface answer.
+TEST_F(FidelityOutOfCore, SurfacesFarApart) {
+  std::vector<glm::vec3> moved = mesh_->positions;
+  for (glm::vec3& p : moved) p.x += 0.05f;
+  const std::filesystem::path ply = tmp_->path() / "moved.ply";
+  writePly(ply, moved, mesh_->triangles);
+  GridifyOptions g;
+  g.targetTrianglesPerCell = 3000;
+  const std::filesystem::path movedGrid = tmp_->path() / "moved.grid";
+  gridify(ply, movedGrid, g);
+  const AtlasSurface surface = readAtlasSurface(atlas(), 0);
+  const FidelityStats ref = measureFidelity(moved, mesh_->triangles, surface.positions, surface.triangles);
+  ASSERT_GT(ref.hausdorffPercent, 5.0);
+  OutOfCoreFidelityOptions fo;
+  fo.maxBlockCells = 1;
+  const FidelityStats s = measureFidelityOutOfCore(movedGrid, atlas(), fo);
+  expectSame(s, ref);
+  EXPECT_TRUE(s.exact);
+  EXPECT_GT(s.samplesBeyondMargin, 0u);
+}
+
+TEST_F(FidelityOutOfCore, BadInputIsNamed) {
+  try {
+    measureFidelityOutOfCore(tmp_->path() / "no.grid", atlas());
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no.grid"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(measureFidelityOutOfCore(grid(), tmp_->path() / "no.atlas"), InputError);
+  OutOfCoreFidelityOptions fo;
+  fo.marginFraction = 0.0;
+  EXPECT_THROW(measureFidelityOutOfCore(grid(), atlas(), fo), std::invalid_argument);
 }
 
 }  // namespace
