@@ -15,6 +15,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include "atlas/charting.h"
 #include "atlas/dem.h"
@@ -276,22 +277,39 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   if (!bad.empty()) throw InputError(o.input.string() + ": the chart layout is invalid: " + bad.front());
   meter.finish("validate");
   {
-    // The geometry images are held in memory until they are written: refuse a chart size they
-    // cannot fit in under --max-memory before allocating them.
+    // Each chart's samples go to a spill file in the staging directory once measured, and are read
+    // back one chart at a time per thread to be written: what must fit is a patch's charts (up
+    // to 8 quads) and their working arrays on every thread at once in memory, and the spill
+    // plus the chart files (with their pyramids) on disk. Refuse a chart size that cannot, before
+    // any is made.
     uint64_t quads = 0;
     for (const Patch& pa : layout.patches) quads += pa.sides.size();
-    const uint64_t bytes = quads * uint64_t(o.meshChartSize) * o.meshChartSize * (layout.colours.empty() ? 16 : 20);
-    if (bytes > o.maxMemory)
-      throw InputError(fmt::format("{}: {} quad charts of {}^2 samples need {:.1f} GiB of geometry images, more than "
-                                   "--max-memory ({:.1f} GiB): lower --chart-size or --charts, or raise --max-memory",
-                                   o.input.string(), quads, o.meshChartSize, double(bytes) / double(1ull << 30),
+    const uint64_t samples = uint64_t(o.meshChartSize) * o.meshChartSize;
+    const uint64_t perSample = layout.colours.empty() ? 16 : 20;
+    const uint64_t threads = o.threads ? o.threads : uint64_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+    const uint64_t inFlight = threads * samples * (8 * perSample + 32);
+    if (inFlight > o.maxMemory)
+      throw InputError(fmt::format("{}: quad charts of {}^2 samples need {:.1f} GiB of geometry images at once "
+                                   "({} threads), more than --max-memory ({:.1f} GiB): lower --chart-size or "
+                                   "--threads, or raise --max-memory",
+                                   o.input.string(), o.meshChartSize, double(inFlight) / double(1ull << 30), threads,
                                    double(o.maxMemory) / double(1ull << 30)));
+    const uint64_t disk = quads * samples * perSample * 3;  // the spill, and chart files a third larger
+    std::error_code ec;
+    const fs::space_info space = fs::space(stage.path(), ec);
+    if (!ec && disk > space.available)
+      throw InputError(fmt::format("{}: {} quad charts of {}^2 samples need about {:.1f} GiB of disk in {}, which has "
+                                   "{:.1f} GiB free: lower --chart-size or --charts",
+                                   o.input.string(), quads, o.meshChartSize, double(disk) / double(1ull << 30),
+                                   stage.path().parent_path().string(), double(space.available) / double(1ull << 30)));
   }
 
   // Quads, parameterization and resampling.
+  auto spill = std::make_unique<ChartSpill>(stage.path() / "samples.tmp", o.meshChartSize, !layout.colours.empty());
   ResampleOptions ro;
   ro.chartSize = o.meshChartSize;
   ro.threads = o.threads;
+  ro.spill = spill.get();
   const uint32_t straightened = o.straightenRounds ? straightenSides(layout, o.straightenRounds) : 0;
   const uint32_t ears = moveSideEars(layout);
   meter.finish("straighten");
@@ -342,7 +360,9 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   m.maxNodeResLog2 = p.maxNodeResLog2;
   m.minNodeResLog2 = p.minNodeResLog2;
   m.source = fs::absolute(o.input).string();
-  const GeometryChartsWritten w = writeGeometryCharts(set, stage.path(), 1u << p.maxNodeResLog2, m);
+  const GeometryChartsWritten w = writeGeometryCharts(set, stage.path(), 1u << p.maxNodeResLog2, m, spill.get());
+  stats["resample"]["spilled_bytes"] = spill->bytes();
+  spill.reset();  // the file goes before the staging directory becomes the atlas
   set = GeometryImageSet{};
   HierarchyStats hs;
   {

@@ -380,6 +380,13 @@ void extend(FloatBox& b, const FloatBox& o) {
   for (int c = 0; c < 3; ++c) b.lo[c] = std::min(b.lo[c], o.lo[c]), b.hi[c] = std::max(b.hi[c], o.hi[c]);
 }
 
+FloatTriangle floatTriangle(const MeshTriangle& t) {
+  FloatTriangle f;
+  for (int k = 0; k < 3; ++k)
+    for (int c = 0; c < 3; ++c) f.v[3 * k + c] = t.p[k][c];
+  return f;
+}
+
 FloatBox emptyBox() {
   FloatBox b;
   for (int c = 0; c < 3; ++c) b.lo[c] = std::numeric_limits<float>::infinity(), b.hi[c] = -b.lo[c];
@@ -471,12 +478,7 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
   const uint64_t gridCells = uint64_t(gm.dims[0]) * gm.dims[1] * gm.dims[2];
   std::vector<std::atomic<uint64_t>> atlasInCell(gridCells);
   tbb::parallel_for(size_t(0), gm.cells.size(), [&](size_t i) {
-    for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[i])) {
-      FloatTriangle f;
-      for (int k = 0; k < 3; ++k)
-        for (int c = 0; c < 3; ++c) f.v[3 * k + c] = t.p[k][c];
-      extend(cellBoxes[i], boxOf(f));
-    }
+    for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[i])) extend(cellBoxes[i], boxOf(floatTriangle(t)));
   });
   tbb::parallel_for(uint32_t(0), uint32_t(am.charts.size()), [&](uint32_t c) {
     const std::vector<glm::vec3> P = readChart(c);
@@ -568,9 +570,7 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
         std::vector<std::vector<Point>> meshSampleParts(cellsNear.size()), vertexParts(cellsNear.size());
         tbb::parallel_for(size_t(0), cellsNear.size(), [&](size_t k) {
           for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[cellsNear[k]])) {
-            FloatTriangle f;
-            for (int i = 0; i < 3; ++i)
-              for (int c = 0; c < 3; ++c) f.v[3 * i + c] = t.p[i][c];
+            const FloatTriangle f = floatTriangle(t);
             if (!e.overlaps(boxOf(f))) continue;
             for (int i = 0; i < 3; ++i)
               if (blockOf(t.p[i].x, t.p[i].y, t.p[i].z) == block) vertexParts[k].emplace_back(t.p[i].x, t.p[i].y, t.p[i].z);
@@ -652,9 +652,7 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
     std::vector<FloatTriangle> part;
     for (size_t i = 0; i < gm.cells.size(); ++i) {
       for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[i])) {
-        FloatTriangle f;
-        for (int k = 0; k < 3; ++k)
-          for (int c = 0; c < 3; ++c) f.v[3 * k + c] = t.p[k][c];
+        const FloatTriangle f = floatTriangle(t);
         if (!f.triangle().is_degenerate()) part.push_back(f);
       }
       if (part.size() >= partTriangles || i + 1 == gm.cells.size()) {

@@ -47,7 +47,7 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize) {
 }
 
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs::path& dir,
-                                          uint32_t blockIntervals, AtlasManifest& m) {
+                                          uint32_t blockIntervals, AtlasManifest& m, const ChartSpill* spill) {
   const auto t0 = std::chrono::steady_clock::now();
   if (set.charts.empty()) throw std::invalid_argument("writeGeometryCharts: no charts");
   if (!std::has_single_bit(blockIntervals) || blockIntervals > set.chartSize - 1)
@@ -65,7 +65,14 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
   std::vector<uint64_t> bytes(set.charts.size(), 0);
   std::vector<std::array<float, 6>> boxes(set.charts.size());
   tbb::parallel_for(size_t(0), set.charts.size(), [&](size_t i) {
+    GeometryImage back;  // a spilled chart's samples, read back for this chart only
+    if (set.charts[i].spilled >= 0) {
+      if (!spill) throw std::invalid_argument("writeGeometryCharts: a chart's samples are spilled, but no spill is given");
+      back.spilled = set.charts[i].spilled;
+      spill->get(back);
+    }
     const GeometryImage& img = set.charts[i];
+    const GeometryImage& samples = set.charts[i].spilled >= 0 ? back : img;
     char name[32];
     std::snprintf(name, sizeof(name), "charts/chart_%04zu.bin", i);
     ChartInfo& c = m.charts[i];
@@ -75,12 +82,12 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     c.file = name;
     c.neighbours = img.neighbours;
     glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
-    for (const glm::vec3& q : img.positions) {
+    for (const glm::vec3& q : samples.positions) {
       lo = {std::min(lo.x, q.x), std::min(lo.y, q.y), std::min(lo.z, q.z)};
       hi = {std::max(hi.x, q.x), std::max(hi.y, q.y), std::max(hi.z, q.z)};
     }
     boxes[i] = {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z};
-    bytes[i] = writeChartFile(dir / name, geometryPyramid(img, set.chartSize), set.chartSize, blockIntervals);
+    bytes[i] = writeChartFile(dir / name, geometryPyramid(samples, set.chartSize), set.chartSize, blockIntervals);
   });
   GeometryChartsWritten w;
   w.bounds = boxes[0];

@@ -29,10 +29,12 @@ struct GeometryChartsWritten {
 
 // Writes set's charts to dir/charts/chart_NNNN.bin (atomically, in parallel) and fills m's
 // kind ("geometry"), chart size, block size, chart list (file names, neighbours) and height
-// range (z of the bounds). blockIntervals: a power of two <= chartSize - 1. Throws InputError when
-// a file cannot be written, std::invalid_argument on an empty or inconsistent set.
+// range (z of the bounds). blockIntervals: a power of two <= chartSize - 1. Charts whose samples
+// were spilled are read back from `spill`, one at a time per thread. Throws InputError when a file
+// cannot be written, std::invalid_argument on an empty or inconsistent set.
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const std::filesystem::path& dir,
-                                          uint32_t blockIntervals, AtlasManifest& m);
+                                          uint32_t blockIntervals, AtlasManifest& m,
+                                          const ChartSpill* spill = nullptr);
 
 // The surface of a geometry atlas at pyramid level `level`: every chart's grid, triangulated as
 // the renderer draws it (split along the (0,0)-(1,1) diagonal, counter-clockwise in (u, v)), with

@@ -2,9 +2,14 @@
 // Kumar, "Seamless Texture Atlases", SGP 2004 (shared boundary sampling).
 #include "atlas/resample.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -480,7 +485,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       if (p >= src.set->patches.size()) continue;
       const PatchResampleStats& st = src.set->patches[p];
       if (st.sides != layout.patches[p].sides.size() || st.firstChart + st.sides > src.set->charts.size() ||
-          src.set->charts[st.firstChart].positions.size() != size_t(size) * size) {
+          !src.set->charts[st.firstChart].hasSamples(size)) {
         continue;
       }
       action[p] = 2 + uint32_t(k);
@@ -682,6 +687,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
           }
           if (img.foldTriangles.size() >= 8) break;
         }
+        if (options.spill) options.spill->put(img);
       }
     });
   });
@@ -701,6 +707,66 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
   set.image = combineImageQuality(images);
   set.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return set;
+}
+
+ChartSpill::ChartSpill(const std::filesystem::path& file, uint32_t chartSize, bool colours)
+    : file_(file), chartSize_(chartSize), colours_(colours) {
+  fd_ = ::open(file.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) throw InputError(file.string() + ": cannot create (" + std::strerror(errno) + ")");
+}
+
+ChartSpill::~ChartSpill() {
+  ::close(fd_);
+  std::error_code ec;
+  std::filesystem::remove(file_, ec);
+}
+
+void ChartSpill::put(GeometryImage& image) {
+  const size_t n = size_t(chartSize_) * chartSize_;
+  if (image.positions.size() != n || image.normals.size() != n || image.colours.size() != (colours_ ? n : 0))
+    throw std::invalid_argument("ChartSpill::put: the image's samples do not match the spill's chart size and colours");
+  const size_t bytes = n * (sizeof(glm::vec3) + sizeof(PackedNormal) + (colours_ ? sizeof(glm::u8vec4) : 0));
+  const uint64_t at = end_.fetch_add(bytes);
+  std::vector<uint8_t> buf(bytes);
+  std::memcpy(buf.data(), image.positions.data(), n * sizeof(glm::vec3));
+  std::memcpy(buf.data() + n * sizeof(glm::vec3), image.normals.data(), n * sizeof(PackedNormal));
+  if (colours_)
+    std::memcpy(buf.data() + n * (sizeof(glm::vec3) + sizeof(PackedNormal)), image.colours.data(), n * sizeof(glm::u8vec4));
+  for (size_t done = 0; done < bytes;) {
+    const ssize_t w = ::pwrite(fd_, buf.data() + done, bytes - done, off_t(at + done));
+    if (w <= 0) {
+      if (w < 0 && errno == EINTR) continue;
+      throw InputError(file_.string() + ": cannot write chart samples (" + (w < 0 ? std::strerror(errno) : "no space") + ")");
+    }
+    done += size_t(w);
+  }
+  std::vector<glm::vec3>().swap(image.positions);
+  std::vector<PackedNormal>().swap(image.normals);
+  std::vector<glm::u8vec4>().swap(image.colours);
+  image.spilled = int64_t(at);
+}
+
+void ChartSpill::get(GeometryImage& image) const {
+  if (image.spilled < 0) return;
+  const size_t n = size_t(chartSize_) * chartSize_;
+  image.positions.resize(n);
+  image.normals.resize(n);
+  image.colours.resize(colours_ ? n : 0);
+  auto read = [&](void* out, size_t bytes, uint64_t at) {
+    for (size_t done = 0; done < bytes;) {
+      const ssize_t r = ::pread(fd_, static_cast<uint8_t*>(out) + done, bytes - done, off_t(at + done));
+      if (r <= 0) {
+        if (r < 0 && errno == EINTR) continue;
+        throw InputError(file_.string() + ": cannot read chart samples back (" + (r < 0 ? std::strerror(errno) : "short file") + ")");
+      }
+      done += size_t(r);
+    }
+  };
+  const uint64_t at = uint64_t(image.spilled);
+  read(image.positions.data(), n * sizeof(glm::vec3), at);
+  read(image.normals.data(), n * sizeof(PackedNormal), at + n * sizeof(glm::vec3));
+  if (colours_) read(image.colours.data(), n * sizeof(glm::u8vec4), at + n * (sizeof(glm::vec3) + sizeof(PackedNormal)));
+  image.spilled = -1;
 }
 
 }  // namespace gimlod

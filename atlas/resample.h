@@ -12,7 +12,9 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstdint>
+#include <filesystem>
 #include <vector>
 
 #include <glm/vec3.hpp>
@@ -24,10 +26,13 @@
 
 namespace gimlod {
 
+class ChartSpill;
+
 struct ResampleOptions {
   uint32_t chartSize = 513;  // samples per quad chart side; must be 2^k + 1 with k >= 1
   uint32_t threads = 0;      // worker threads for the per-patch work; 0 = all hardware threads
   ParamOptions param;        // per-patch parameterization
+  ChartSpill* spill = nullptr;  // if set, every chart's samples go there once it is measured
 };
 
 // Quality of a sampled image, seen as a map from the unit square to the sampled surface through
@@ -63,7 +68,42 @@ struct GeometryImage {
   std::array<RootNeighbour, 4> neighbours;   // by Edge; chart = index into GeometryImageSet
   ImageQuality quality;
   std::vector<uint32_t> foldTriangles;       // layout triangles under flipped texels (<= 8)
+  int64_t spilled = -1;                      // where a ChartSpill holds the samples; -1: here
+
+  // Whether the chart's samples exist, here or in a spill.
+  bool hasSamples(uint32_t chartSize) const {
+    return spilled >= 0 || positions.size() == size_t(chartSize) * chartSize;
+  }
 };
+
+// A file that charts' samples are moved to once they are measured, so that a large layout's
+// geometry images are not all held in memory until they are written: refinement (which moves
+// charts, reads only their figures and resamples a few patches again) and writing (which reads
+// each back in turn) work the same on spilled charts. Samples replaced by a later resampling stay
+// in the file, unread. put and get may run on several threads at once.
+class ChartSpill {
+ public:
+  // Creates (or truncates) the file. Throws InputError naming it when it cannot.
+  ChartSpill(const std::filesystem::path& file, uint32_t chartSize, bool colours);
+  ~ChartSpill();  // closes and removes the file
+  ChartSpill(const ChartSpill&) = delete;
+  ChartSpill& operator=(const ChartSpill&) = delete;
+  // Appends the image's samples (chartSize^2 positions, normals and colours if the spill has
+  // them) and frees them. Throws std::invalid_argument when they do not match, InputError naming
+  // the file when it cannot be written (a full disk).
+  void put(GeometryImage& image);
+  // Reads a spilled image's samples back into it (spilled = -1 after); no-op for one held here.
+  void get(GeometryImage& image) const;
+  uint64_t bytes() const { return end_; }
+
+ private:
+  std::filesystem::path file_;
+  uint32_t chartSize_;
+  bool colours_;
+  int fd_ = -1;
+  std::atomic<uint64_t> end_{0};
+};
+
 
 struct PatchResampleStats {
   ParamQuality paramInitial;   // the mean-value embedding

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <fstream>
 #include <set>
 
 #include <tbb/global_control.h>
@@ -17,7 +18,9 @@
 #include "atlas/mesh_io.h"
 #include "atlas/patch_param.h"
 #include "atlas/layout_refine.h"
+#include "atlas/mesh_atlas.h"
 #include "tests/chart_layout_fixture.h"
+#include "tests/test_util.h"
 
 namespace gimlod {
 namespace {
@@ -260,6 +263,49 @@ TEST(PatchSplit, FlipRepairStopsWhenToldMemoryIsShort) {
   expectSameCharts(some, resampleLayout(partial, ro));
 }
 
+// Charts whose samples go to a spill file as they are measured: the repair (which moves charts and
+// reuses unchanged patches' charts) and the writer (which reads them back) give the same charts
+// and the same chart files, byte for byte, as with every sample held in memory.
+TEST(PatchSplit, FlipRepairWithSpilledChartsGivesTheSameAtlas) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 128;
+  const ChartLayout charted = buildChartLayout(mesh, copt);
+  test::TempDir tmp("gimlod-spill");
+  ResampleOptions ro;
+  ro.chartSize = 33;
+  ChartLayout held = charted, spilled = charted;
+  FlipRepairStats stHeld, stSpilled;
+  const GeometryImageSet setHeld = resampleWithoutFlips(held, ro, 2, &stHeld);
+  ChartSpill spill(tmp.path() / "samples.tmp", ro.chartSize, false);
+  ro.spill = &spill;
+  GeometryImageSet setSpilled = resampleWithoutFlips(spilled, ro, 2, &stSpilled);
+  EXPECT_GT(stHeld.patchesSplit, 0u) << "the bunny at 33^2 should need splits";
+  EXPECT_EQ(stHeld.patchesSplit, stSpilled.patchesSplit);
+  EXPECT_TRUE(sameLayout(held, spilled));
+  for (const GeometryImage& g : setSpilled.charts) {
+    EXPECT_GE(g.spilled, 0);
+    EXPECT_TRUE(g.positions.empty());
+  }
+  EXPECT_GE(spill.bytes(), setSpilled.charts.size() * 33 * 33 * 16);
+  // Written: the same files.
+  AtlasManifest mHeld, mSpilled;
+  writeGeometryCharts(setHeld, tmp.path() / "held", 8, mHeld);
+  writeGeometryCharts(setSpilled, tmp.path() / "spilled", 8, mSpilled, &spill);
+  EXPECT_THROW(writeGeometryCharts(setSpilled, tmp.path() / "nospill", 8, mSpilled), std::invalid_argument);
+  ASSERT_EQ(mHeld.charts.size(), mSpilled.charts.size());
+  auto bytes = [](const std::filesystem::path& f) {
+    std::ifstream in(f, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), {});
+  };
+  for (size_t c = 0; c < mHeld.charts.size(); ++c)
+    EXPECT_EQ(bytes(tmp.path() / "held" / mHeld.charts[c].file), bytes(tmp.path() / "spilled" / mSpilled.charts[c].file))
+        << "chart " << c;
+  // Read back: the same samples.
+  for (GeometryImage& g : setSpilled.charts) spill.get(g);
+  expectSameCharts(setHeld, setSpilled);
+}
+
 TEST(PatchSplit, FlipRepairDoesNotDependOnTheThreadCount) {
   // Batches of folds are searched and judged in parallel; the result must be that of one thread.
   const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
@@ -320,7 +366,9 @@ TEST(ResampleReuse, ReusedPatchesAreBitIdenticalAndOnlyChangedOnesAreRedone) {
   ASSERT_EQ(part.charts.size(), full.charts.size());
   for (size_t c = 0; c < part.charts.size(); ++c) {
     EXPECT_EQ(part.charts[c].positions.empty(), part.charts[c].patch != 0);
-    if (part.charts[c].patch == 0) EXPECT_EQ(part.charts[c].positions, full.charts[c].positions);
+    if (part.charts[c].patch == 0) {
+      EXPECT_EQ(part.charts[c].positions, full.charts[c].positions);
+    }
   }
   // A selection of the wrong size is refused.
   std::vector<uint8_t> wrong(1, 1);
