@@ -777,13 +777,13 @@ std::vector<Trial> disjointBatch(const ChartLayout& layout, std::vector<Fold>& f
 
 // Removes the patches flagged dead (nothing live may link to them) and renumbers the links;
 // `perPatch` is compacted alike.
-void removePatches(ChartLayout& layout, const std::vector<uint8_t>& dead, std::vector<uint32_t>& perPatch) {
+std::vector<int32_t> removePatches(ChartLayout& layout, const std::vector<uint8_t>& dead, std::vector<uint32_t>& perPatch) {
   std::vector<int32_t> index(layout.patches.size(), -1);
   uint32_t next = 0;
   for (uint32_t q = 0; q < layout.patches.size(); ++q) {
     if (!dead[q]) index[q] = int32_t(next++);
   }
-  if (next == layout.patches.size()) return;
+  if (next == layout.patches.size()) return index;
   for (uint32_t q = 0; q < layout.patches.size(); ++q) {
     if (dead[q]) continue;
     for (PatchSide& side : layout.patches[q].sides) {
@@ -795,6 +795,7 @@ void removePatches(ChartLayout& layout, const std::vector<uint8_t>& dead, std::v
   }
   layout.patches.resize(next);
   perPatch.resize(next);
+  return index;
 }
 
 }  // namespace
@@ -835,10 +836,11 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
   };
   // The full resampling of the current layout, from `earlier` (made from `earlierPatches`) where
   // patches are unchanged, and from `extra` (made from the current patches, possibly partial).
-  auto refresh = [&](const std::vector<Patch>& earlierPatches, GeometryImageSet* extra) {
+  auto refresh = [&](const std::vector<Patch>& earlierPatches, const std::vector<Patch>* extraPatches,
+                     GeometryImageSet* extra) {
     ResampleReuse reuse;
     reuse.normals = &normals;
-    if (extra) reuse.earlier.push_back({&layout.patches, extra});
+    if (extra) reuse.earlier.push_back({extraPatches, extra});
     reuse.earlier.push_back({&earlierPatches, &set});
     set = resampleLayout(layout, options, reuse);
     ++st.rounds;
@@ -890,7 +892,7 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
       ++st.rounds;
       break;
     }
-    refresh(saved, &trial);
+    refresh(saved, &layout.patches, &trial);
     st.patchesSplit += split;
   }
   // Then patch by patch, each split judged where it acts: kept only if it lowers the flipped
@@ -905,6 +907,10 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
     // Kept current as splits are kept (a later split's neighbours may be earlier ones' parts).
     std::vector<uint32_t> flippedOf = flippedPerPatch(set);
     const std::vector<Patch> roundStart = layout.patches;
+    // The charts of the patches kept trials changed, by patch, with the patches they were made
+    // from: the round's closing resampling takes them unless a later trial changed the patch again.
+    GeometryImageSet kept;
+    std::vector<Patch> keptPatches;
     uint32_t split = 0;
     st.patchesUnsplit = 0;
     while (!queue.empty() && grow()) {
@@ -946,7 +952,7 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
           for (size_t q = t.firstNew; q < t.endNew; ++q) now[k].push_back(uint32_t(q));
           for (uint32_t q : now[k]) only[q] = 1;
         }
-        const GeometryImageSet trial = resampleOnly(only);
+        GeometryImageSet trial = resampleOnly(only);
         std::vector<uint32_t> after(layout.patches.size(), 0);
         for (const GeometryImage& g : trial.charts) after[g.patch] += g.quality.flippedTexels;
         std::vector<uint8_t> dead(layout.patches.size(), 0);
@@ -962,7 +968,21 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
           for (size_t r = 0; r < t.rings.size(); ++r) layout.patches[t.rings[r]] = t.saved[r];
           for (size_t q = t.firstNew; q < t.endNew; ++q) dead[q] = 1;
         }
-        removePatches(layout, dead, flippedOf);
+        const std::vector<int32_t> index = removePatches(layout, dead, flippedOf);
+        // Removing the failed trials' new patches keeps the others' order, so every side keeps
+        // its owner and the kept patches' charts stay those of their new index.
+        for (size_t k = 0; k < open.size(); ++k) {
+          if (!open[k]->kept) continue;
+          for (uint32_t q : now[k]) {
+            const uint32_t at = uint32_t(index[q]);
+            const PatchResampleStats& ps = trial.patches[q];
+            if (kept.patches.size() <= at) kept.patches.resize(at + 1), keptPatches.resize(at + 1);
+            kept.patches[at] = ps;
+            kept.patches[at].firstChart = uint32_t(kept.charts.size());
+            for (uint32_t i = 0; i < ps.sides; ++i) kept.charts.push_back(std::move(trial.charts[ps.firstChart + i]));
+            keptPatches[at] = layout.patches[at];
+          }
+        }
       }
       for (const Trial& t : batch) {
         if (t.kept) {
@@ -974,7 +994,7 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
     }
     if (split == 0) break;
     st.patchesSplit += split;
-    refresh(roundStart, nullptr);
+    refresh(roundStart, &keptPatches, &kept);
   }
   return set;
 }

@@ -561,6 +561,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         for (uint32_t i = 0; i < n; ++i) {
           GeometryImage& img = set.charts[links.offsets[p] + i];
           img = std::move(src.charts[first + i]);
+          img.patch = p;
           img.neighbours = neighbours[links.offsets[p] + i];
         }
         return;
