@@ -1,6 +1,9 @@
 #include "apps/pipeline.h"
 
 #include <unistd.h>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include <chrono>
 #include <condition_variable>
@@ -73,6 +76,14 @@ nlohmann::json readStatsJson(const MeshReadStats& rs) {
           {"colours", rs.hasColours},
           {"warnings", rs.warnings},
           {"seconds", rs.seconds}};
+}
+
+// Hands freed heap memory back to the system between stages: glibc keeps the freed pages of its
+// worker arenas, which would count against --max-memory in the stages after.
+void releaseFreedMemory() {
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
 }
 
 double secondsSince(std::chrono::steady_clock::time_point t0) {
@@ -364,6 +375,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   stats["resample"]["spilled_bytes"] = spill->bytes();
   spill.reset();  // the file goes before the staging directory becomes the atlas
   set = GeometryImageSet{};
+  releaseFreedMemory();
   HierarchyStats hs;
   {
     std::vector<std::array<RootNeighbour, 4>> roots;
