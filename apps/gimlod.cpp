@@ -200,6 +200,10 @@ int main(int argc, char** argv) {
   build->add_option("--flip-repair-rounds", b.flipRepairRounds,
                     "Meshes: rounds of each flip repair (cutting patches whose charts have flipped texels); 0: none")
       ->capture_default_str();
+  build->add_option("--flip-repair-budget", b.flipRepairBudget,
+                    "Meshes: the flip repair stops once it has parameterized this many times the surface's triangles "
+                    "again (its time is about this many resamplings)")
+      ->capture_default_str();
   build->add_option("--max-memory", maxMemory, "Meshes: memory cap (e.g. 2G, 512M); larger meshes go through cell files")
       ->capture_default_str();
   build->add_option("--depth", b.depth, "Quadtree levels per chart")->capture_default_str();

@@ -203,6 +203,8 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
     throw InputError("--node-res and --min-node-res must be powers of two with 2 <= min <= node-res");
   if (o.depth < 1 || o.depth > 12) throw InputError("--depth must be in [1, 12]");
   if (o.flipRepairRounds > 16) throw InputError("--flip-repair-rounds must be in [0, 16]");
+  if (!(o.flipRepairBudget >= 0.0 && o.flipRepairBudget <= 100.0))
+    throw InputError("--flip-repair-budget must be in [0, 100] (times the surface's triangles)");
   if (o.meshChartSize > 8193)
     throw InputError("--chart-size " + std::to_string(o.meshChartSize) + " is above 8193, the largest mesh chart size");
   if (o.charts == 0 && !(o.maxChartError > 0.0 && std::isfinite(o.maxChartError)))
@@ -327,14 +329,23 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   FlipRepairStats flips;
   GeometryImageSet first = resampleLayout(layout, ro);
   meter.finish("resample");
-  // Each repair cut adds charts (held until written) and working memory: the repair stops
-  // cutting once the process holds 3/4 of --max-memory.
-  GeometryImageSet set = repairFlips(layout, std::move(first), ro, o.flipRepairRounds, &flips,
-                                           [&] { return procStatusBytes("VmRSS:") < o.maxMemory / 4 * 3; });
+  // Each repair cut adds working memory: the repair stops cutting once the process holds 3/4 of
+  // --max-memory, or once it has parameterized --flip-repair-budget times the triangles again.
+  const uint64_t layoutTriangles = layout.triangles.size();
+  GeometryImageSet set = repairFlips(
+      layout, std::move(first), ro, o.flipRepairRounds, &flips,
+      [&] { return procStatusBytes("VmRSS:") < o.maxMemory / 4 * 3; },
+      uint64_t(std::llround(o.flipRepairBudget * double(layoutTriangles))));
   if (flips.stoppedForMemory)
     spdlog::warn("{}: the flip repair stopped at 3/4 of --max-memory ({} flipped texels left); raise --max-memory "
                  "to repair more",
                  o.input.string(), set.image.flippedTexels);
+  if (flips.stoppedForWork)
+    spdlog::warn("{}: the flip repair stopped at its budget, {:.2f} times the surface's triangles parameterized again "
+                 "({} flipped texels left); raise --flip-repair-budget to repair more",
+                 o.input.string(),
+                 double(flips.trianglesWholeRounds + flips.trianglesTrials) / double(std::max<uint64_t>(layoutTriangles, 1)),
+                 set.image.flippedTexels);
   const size_t finalPatches = layout.patches.size();
   layout = ChartLayout{};
   meter.finish("flip_repair");
@@ -354,6 +365,11 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                        {"patches_unsplittable", flips.patchesUnsplit},
                        {"split_rounds", flips.rounds},
                        {"flip_repair_stopped_for_memory", flips.stoppedForMemory},
+                       {"flip_repair_stopped_for_work", flips.stoppedForWork},
+                       {"flip_repair_work", double(flips.trianglesWholeRounds + flips.trianglesTrials) /
+                                                double(std::max<uint64_t>(layoutTriangles, 1))},
+                       {"flip_repair_triangles_whole_rounds", flips.trianglesWholeRounds},
+                       {"flip_repair_triangles_trials", flips.trianglesTrials},
                        {"patches", finalPatches},
                        {"degenerate_texels", set.image.degenerateTexels}};
   // Per chart: its patch and quad, stretch of the sampled image, flipped and degenerate texels.

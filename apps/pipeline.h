@@ -30,6 +30,8 @@ struct BuildOptions {
   uint32_t straightenRounds = 2;        // rounds of straightening shared sides (atlas/layout_refine.h)
   uint32_t flipRepairRounds = 2;        // rounds of splitting patches whose charts have flipped
                                         // texels (atlas/layout_refine.h); 0 keeps the charting's
+  double flipRepairBudget = 1.5;        // the flip repair's work cap: layout triangles parameterized
+                                        // again, as a multiple of the layout's triangles
   uint64_t maxMemory = 4ull << 30;      // bytes; above a quarter of it the cells (out-of-core) path runs
   bool measureFidelity = true;          // two-sided Hausdorff distance input <-> atlas (out of core on that path)
 };

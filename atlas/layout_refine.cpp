@@ -801,17 +801,23 @@ std::vector<int32_t> removePatches(ChartLayout& layout, const std::vector<uint8_
 }  // namespace
 
 GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
-                             uint32_t maxRounds, FlipRepairStats* stats, const std::function<bool()>& mayGrow) {
+                             uint32_t maxRounds, FlipRepairStats* stats, const std::function<bool()>& mayGrow,
+                             uint64_t workBudget) {
   FlipRepairStats local;
   FlipRepairStats& st = stats ? *stats : local;
   st = FlipRepairStats{};
   st.flippedTexelsFirst = set.image.flippedTexels;
   if (set.image.flippedTexels == 0) return set;
   auto grow = [&] {
+    if (st.trianglesWholeRounds + st.trianglesTrials >= workBudget) {
+      st.stoppedForWork = true;
+      return false;
+    }
     if (!mayGrow || mayGrow()) return true;
     st.stoppedForMemory = true;
     return false;
   };
+  uint64_t* work = &st.trianglesWholeRounds;  // where the resamplings below count
   if (!grow()) return set;
   const std::vector<glm::dvec3> normals = layoutVertexNormals(layout);
   auto folding = [](const GeometryImageSet& s) {
@@ -832,7 +838,9 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
     ResampleReuse reuse;
     reuse.normals = &normals;
     reuse.only = &only;
-    return resampleLayout(layout, options, reuse);
+    GeometryImageSet r = resampleLayout(layout, options, reuse);
+    *work += r.trianglesParameterized;
+    return r;
   };
   // The full resampling of the current layout, from `earlier` (made from `earlierPatches`) where
   // patches are unchanged, and from `extra` (made from the current patches, possibly partial).
@@ -843,6 +851,7 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
     if (extra) reuse.earlier.push_back({extraPatches, extra});
     reuse.earlier.push_back({&earlierPatches, &set});
     set = resampleLayout(layout, options, reuse);
+    *work += set.trianglesParameterized;
     ++st.rounds;
   };
   // A cut may leave ears (moveSideEars) in the patches it touched; mending them stays within
@@ -902,7 +911,10 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
   // is then in a smaller patch, which the next round cuts again). Folds are taken in batches of
   // disjoint two rings (disjointBatch): cuts searched in parallel, made in turn, judged by one
   // resampling of every changed patch, the failures undone.
-  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0 && !st.stoppedForMemory; ++round) {
+  work = &st.trianglesTrials;
+  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0 && !st.stoppedForMemory &&
+                           !st.stoppedForWork;
+       ++round) {
     std::vector<Fold> queue = folding(set);
     // Kept current as splits are kept (a later split's neighbours may be earlier ones' parts).
     std::vector<uint32_t> flippedOf = flippedPerPatch(set);

@@ -77,6 +77,10 @@ struct FlipRepairStats {
   uint32_t patchesUnsplit = 0;  // folding patches of the last round no split helped
   uint32_t flippedTexelsFirst = 0;  // flipped texels of the first resampling
   bool stoppedForMemory = false;    // mayGrow said no before the repair was done
+  // Layout triangles parameterized again (a patch once per resampling of it): by whole rounds,
+  // and by patch trials (with the rounds' closing resamplings).
+  uint64_t trianglesWholeRounds = 0, trianglesTrials = 0;
+  bool stoppedForWork = false;      // the work budget ran out before the repair was done
 };
 
 // Two repairs of up to maxRounds rounds each, from `set`, the resampling of `layout`. Whole
@@ -88,10 +92,14 @@ struct FlipRepairStats {
 // a full resampling of the final layout. `layout` ends as the layout of the returned set.
 // mayGrow, if given, is asked before every round and batch of cuts (each adds charts and working
 // memory); once it says no, the repair stops there (stats->stoppedForMemory), with a valid
-// layout and its charts.
+// layout and its charts. Likewise once the triangles parameterized again reach workBudget
+// (stats->stoppedForWork): the repair's time is about that of parameterizing so many triangles,
+// so a budget of k times the layout's triangles bounds it by about k first resamplings. The
+// result depends on neither the thread count nor the machine.
 GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
                              uint32_t maxRounds = 2, FlipRepairStats* stats = nullptr,
-                             const std::function<bool()>& mayGrow = {});
+                             const std::function<bool()>& mayGrow = {},
+                             uint64_t workBudget = ~uint64_t(0));
 
 // resampleLayout, then repairFlips.
 GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions& options,

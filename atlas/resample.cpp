@@ -706,6 +706,9 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
     if (action[g.patch] != 0) images.push_back(g.quality);
   }
   set.image = combineImageQuality(images);
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    if (action[p] == 1) set.trianglesParameterized += layout.patches[p].triangles.size();
+  }
   set.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return set;
 }

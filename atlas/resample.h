@@ -120,6 +120,7 @@ struct GeometryImageSet {
   ParamQuality paramInitial;              // all patches combined (combineQuality)
   ParamQuality param;
   ImageQuality image;                     // all charts combined
+  uint64_t trianglesParameterized = 0;    // of the patches this resampling parameterized (not reused)
   double seconds = 0.0;
 };
 
