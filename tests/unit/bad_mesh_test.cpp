@@ -358,6 +358,8 @@ TEST_F(BadMesh, AbsurdOptions) {
   expectRejected(f, {"--threads"}, base + "--threads 100000", "--threads");
   expectRejected(f, {"--depth"}, "--chart-size 9 --depth 0", "--depth");
   expectRejected(f, {"--flip-repair-rounds"}, base + "--flip-repair-rounds 17", "--flip-repair-rounds");
+  expectRejected(f, {"--flip-repair-budget"}, base + "--flip-repair-budget -1", "--flip-repair-budget");
+  expectRejected(f, {"--flip-repair-budget"}, base + "--flip-repair-budget 101", "--flip-repair-budget");
   EXPECT_EQ(build(f, base + "--charts 8 --flip-repair-rounds 0"), 0) << output_;  // in range: builds
 
   // --charts 0 without --chart-error uses the default error target; --charts far above the

@@ -306,6 +306,43 @@ TEST(PatchSplit, FlipRepairWithSpilledChartsGivesTheSameAtlas) {
   expectSameCharts(setHeld, setSpilled);
 }
 
+// The work budget: counted in layout triangles parameterized again, checked before every round
+// and batch, so the repair stops after the batch that reaches it, with a valid layout and its
+// charts; a budget of 0 repairs nothing.
+TEST(PatchSplit, FlipRepairStopsAtItsWorkBudget) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 128;
+  const ChartLayout charted = buildChartLayout(mesh, copt);
+  ResampleOptions ro;
+  ro.chartSize = 33;
+  ChartLayout full = charted;
+  FlipRepairStats stFull;
+  resampleWithoutFlips(full, ro, 2, &stFull);
+  const uint64_t work = stFull.trianglesWholeRounds + stFull.trianglesTrials;
+  ASSERT_GT(stFull.trianglesWholeRounds, 0u);
+  EXPECT_FALSE(stFull.stoppedForWork);
+  // Nothing allowed: the charts it was given.
+  ChartLayout none = charted;
+  FlipRepairStats stNone;
+  const GeometryImageSet untouched = repairFlips(none, resampleLayout(none, ro), ro, 2, &stNone, {}, 0);
+  EXPECT_TRUE(stNone.stoppedForWork);
+  EXPECT_EQ(stNone.patchesSplit, 0u);
+  EXPECT_TRUE(sameLayout(none, charted));
+  EXPECT_EQ(untouched.image.flippedTexels, stNone.flippedTexelsFirst);
+  // A third of what the whole repair takes: it stops part way, past the budget by at most the
+  // batch that crossed it, and what it returns is the resampling of what it leaves.
+  ChartLayout part = charted;
+  FlipRepairStats stPart;
+  const GeometryImageSet some = repairFlips(part, resampleLayout(part, ro), ro, 2, &stPart, {}, work / 3);
+  EXPECT_TRUE(stPart.stoppedForWork);
+  const uint64_t used = stPart.trianglesWholeRounds + stPart.trianglesTrials;
+  EXPECT_GE(used, work / 3);
+  EXPECT_LT(used, work);
+  expectValid(part);
+  expectSameCharts(some, resampleLayout(part, ro));
+}
+
 TEST(PatchSplit, FlipRepairDoesNotDependOnTheThreadCount) {
   // Batches of folds are searched and judged in parallel; the result must be that of one thread.
   const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
