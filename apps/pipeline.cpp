@@ -110,7 +110,7 @@ uint64_t procStatusBytes(const char* key) {
 // size every 5 ms and keeps the largest since the stage began (the kernel's own peak, VmHWM, is
 // left alone: resetting it would also reset the rusage peak that /usr/bin/time reports). A
 // stage's figure is the larger of its sampled peak and VmHWM when VmHWM grew during the stage;
-// the whole build's peak is VmHWM.
+// the whole build's peak is the larger of VmHWM and the stages' peaks.
 class StageMeter {
  public:
   explicit StageMeter(nlohmann::json& stages) : stages_(stages) {
@@ -154,11 +154,14 @@ class StageMeter {
     }
     if (hwm > hwm0_) peak = std::max(peak, hwm);  // the process peak was reached in this stage
     stages_.push_back({{"stage", name}, {"seconds", wall}, {"cpu_seconds", cpu}, {"peak_rss_bytes", peak}});
+    largestStagePeak_ = std::max(largestStagePeak_, peak);
     spdlog::info("stage {:<10} {:8.2f} s wall {:8.2f} s cpu  peak RSS {:7.1f} MiB", name, wall, cpu,
                  double(peak) / (1 << 20));
     start();
   }
-  uint64_t peak() const { return procStatusBytes("VmHWM:"); }
+  // The build's peak: VmHWM, or a stage's sampled peak where that is higher (pages handed back
+  // with madvise, as malloc_trim does, leave before the kernel's high-water mark sees them).
+  uint64_t peak() const { return std::max(procStatusBytes("VmHWM:"), largestStagePeak_); }
 
  private:
   nlohmann::json& stages_;
@@ -169,6 +172,7 @@ class StageMeter {
   std::condition_variable wake_;
   bool stop_ = false;
   uint64_t stagePeak_ = 0;
+  uint64_t largestStagePeak_ = 0;
   std::thread sampler_;
 };
 
