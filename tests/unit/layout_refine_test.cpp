@@ -57,6 +57,14 @@ void expectSameCharts(const GeometryImageSet& a, const GeometryImageSet& b) {
   EXPECT_EQ(a.param.stretchL2, b.param.stretchL2);
 }
 
+// The shipped bunny charted to 128 patches: a real scan whose charts fold at 33^2 samples.
+ChartLayout chartedBunny() {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 128;
+  return buildChartLayout(mesh, copt);
+}
+
 bool sameLayout(const ChartLayout& a, const ChartLayout& b) {
   if (a.patches.size() != b.patches.size()) return false;
   for (size_t p = 0; p < a.patches.size(); ++p) {
@@ -205,10 +213,7 @@ TEST(LayoutRefine, StraightenedScanSidesAreShorterAndTheLayoutStaysValid) {
 }
 
 TEST(PatchSplit, FlipRepairOnARealScanNeverMakesThingsWorse) {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
-  ChartingOptions copt;
-  copt.targetCharts = 128;
-  ChartLayout layout = buildChartLayout(mesh, copt);
+  ChartLayout layout = chartedBunny();
   const size_t patchesBefore = layout.patches.size();
   ResampleOptions ro;
   ro.chartSize = 33;
@@ -235,10 +240,7 @@ TEST(PatchSplit, FlipRepairOnARealScanNeverMakesThingsWorse) {
 }
 
 TEST(PatchSplit, FlipRepairStopsWhenToldMemoryIsShort) {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
-  ChartingOptions copt;
-  copt.targetCharts = 128;
-  ChartLayout layout = buildChartLayout(mesh, copt);
+  ChartLayout layout = chartedBunny();
   ResampleOptions ro;
   ro.chartSize = 33;
   const ChartLayout before = layout;
@@ -267,10 +269,7 @@ TEST(PatchSplit, FlipRepairStopsWhenToldMemoryIsShort) {
 // reuses unchanged patches' charts) and the writer (which reads them back) give the same charts
 // and the same chart files, byte for byte, as with every sample held in memory.
 TEST(PatchSplit, FlipRepairWithSpilledChartsGivesTheSameAtlas) {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
-  ChartingOptions copt;
-  copt.targetCharts = 128;
-  const ChartLayout charted = buildChartLayout(mesh, copt);
+  const ChartLayout charted = chartedBunny();
   test::TempDir tmp("gimlod-spill");
   ResampleOptions ro;
   ro.chartSize = 33;
@@ -310,10 +309,7 @@ TEST(PatchSplit, FlipRepairWithSpilledChartsGivesTheSameAtlas) {
 // and batch, so the repair stops after the batch that reaches it, with a valid layout and its
 // charts; a budget of 0 repairs nothing.
 TEST(PatchSplit, FlipRepairStopsAtItsWorkBudget) {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
-  ChartingOptions copt;
-  copt.targetCharts = 128;
-  const ChartLayout charted = buildChartLayout(mesh, copt);
+  const ChartLayout charted = chartedBunny();
   ResampleOptions ro;
   ro.chartSize = 33;
   ChartLayout full = charted;
@@ -345,10 +341,7 @@ TEST(PatchSplit, FlipRepairStopsAtItsWorkBudget) {
 
 TEST(PatchSplit, FlipRepairDoesNotDependOnTheThreadCount) {
   // Batches of folds are searched and judged in parallel; the result must be that of one thread.
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
-  ChartingOptions copt;
-  copt.targetCharts = 128;
-  const ChartLayout charted = buildChartLayout(mesh, copt);
+  const ChartLayout charted = chartedBunny();
   ResampleOptions ro;
   ro.chartSize = 33;
   ChartLayout one = charted, many = charted;
