@@ -354,8 +354,9 @@ FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
 
 namespace {
 
-// Working memory per input triangle and per atlas sample of a block (the float triangles, their
-// boxes and tree nodes, the samples), as measured on the 18.7M-triangle sphere, with some slack.
+// Working memory per input triangle and per atlas sample of a block: the float triangles (two per
+// atlas sample), their boxes, tree nodes and samples, with some slack. The blocks are sized from
+// these before anything is read; the cell is the smallest block, so a cell's worth is the floor.
 constexpr uint64_t kBytesPerMeshTriangle = 220, kBytesPerAtlasSample = 160;
 
 struct Box {
