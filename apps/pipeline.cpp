@@ -344,12 +344,12 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
     spdlog::warn("{}: the flip repair stopped at 3/4 of --max-memory ({} flipped texels left); raise --max-memory "
                  "to repair more",
                  o.input.string(), set.image.flippedTexels);
+  const double repairWork =
+      double(flips.trianglesWholeRounds + flips.trianglesTrials) / double(std::max<uint64_t>(layoutTriangles, 1));
   if (flips.stoppedForWork)
     spdlog::warn("{}: the flip repair stopped at its budget, {:.2f} times the surface's triangles parameterized again "
                  "({} flipped texels left); raise --flip-repair-budget to repair more",
-                 o.input.string(),
-                 double(flips.trianglesWholeRounds + flips.trianglesTrials) / double(std::max<uint64_t>(layoutTriangles, 1)),
-                 set.image.flippedTexels);
+                 o.input.string(), repairWork, set.image.flippedTexels);
   const size_t finalPatches = layout.patches.size();
   layout = ChartLayout{};
   meter.finish("flip_repair");
@@ -370,8 +370,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
                        {"split_rounds", flips.rounds},
                        {"flip_repair_stopped_for_memory", flips.stoppedForMemory},
                        {"flip_repair_stopped_for_work", flips.stoppedForWork},
-                       {"flip_repair_work", double(flips.trianglesWholeRounds + flips.trianglesTrials) /
-                                                double(std::max<uint64_t>(layoutTriangles, 1))},
+                       {"flip_repair_work", repairWork},
                        {"flip_repair_triangles_whole_rounds", flips.trianglesWholeRounds},
                        {"flip_repair_triangles_trials", flips.trianglesTrials},
                        {"patches", finalPatches},
@@ -420,7 +419,6 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
     } else {
       const AtlasSurface surface = readAtlasSurface(stage.path(), 0);
       f = measureFidelity(mesh.positions, mesh.triangles, surface.positions, surface.triangles);
-      mesh = IndexedMesh{};
     }
     stats["fidelity"] = {{"hausdorff_percent_of_diagonal", f.hausdorffPercent},
                          {"mean_percent_of_diagonal", f.meanPercent},

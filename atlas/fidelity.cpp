@@ -292,6 +292,19 @@ Acc distances(const Forest& forest, size_t count, const Sample& sample,
   return acc;
 }
 
+// The figures from the two sides' maxima and sums (the sample counts and diagonal already set).
+void setFigures(FidelityStats& st, double atlasMax, double atlasSum, double meshMax, double meshSum,
+                std::chrono::steady_clock::time_point t0) {
+  st.maxAtlasToMesh = atlasMax;
+  st.meanAtlasToMesh = atlasSum / double(std::max<uint64_t>(st.atlasSamples, 1));
+  st.maxMeshToAtlas = meshMax;
+  st.meanMeshToAtlas = meshSum / double(std::max<uint64_t>(st.meshSamples, 1));
+  st.hausdorff = std::max(atlasMax, meshMax);
+  st.hausdorffPercent = st.diagonal > 0 ? 100.0 * st.hausdorff / st.diagonal : 0.0;
+  st.meanPercent = st.diagonal > 0 ? 100.0 * 0.5 * (st.meanAtlasToMesh + st.meanMeshToAtlas) / st.diagonal : 0.0;
+  st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
 }  // namespace
 
 FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
@@ -341,14 +354,7 @@ FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
   const Acc b = distances(*atlasForest, meshSamples.size(), [&](size_t i) { return meshSamples[i]; });
   st.meshSamples = meshSamples.size();
 
-  st.maxAtlasToMesh = a.max;
-  st.meanAtlasToMesh = a.sum / double(std::max<uint64_t>(st.atlasSamples, 1));
-  st.maxMeshToAtlas = b.max;
-  st.meanMeshToAtlas = b.sum / double(std::max<uint64_t>(st.meshSamples, 1));
-  st.hausdorff = std::max(a.max, b.max);
-  st.hausdorffPercent = st.diagonal > 0 ? 100.0 * st.hausdorff / st.diagonal : 0.0;
-  st.meanPercent = st.diagonal > 0 ? 100.0 * 0.5 * (st.meanAtlasToMesh + st.meanMeshToAtlas) / st.diagonal : 0.0;
-  st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  setFigures(st, a.max, a.sum, b.max, b.sum, t0);
   return st;
 }
 
@@ -648,45 +654,33 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
       }
     });
   };
+  // The other surface's non-degenerate triangles, item by item (cells or charts), in parts of
+  // about partTriangles.
   const uint64_t partTriangles = std::max<uint64_t>(options.memoryBytes / 2 / kBytesPerMeshTriangle, 1);
-  if (!atlasPending.q.empty()) {
+  auto resolveInParts = [&](Pending& p, size_t items, const auto& trianglesOf) {
+    if (p.q.empty()) return;
     std::vector<FloatTriangle> part;
-    for (size_t i = 0; i < gm.cells.size(); ++i) {
-      for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[i])) {
-        const FloatTriangle f = floatTriangle(t);
-        if (!f.triangle().is_degenerate()) part.push_back(f);
-      }
-      if (part.size() >= partTriangles || i + 1 == gm.cells.size()) {
-        resolve(atlasPending, part);
-        part.clear();
-      }
-    }
-  }
-  if (!meshPending.q.empty()) {
-    std::vector<FloatTriangle> part;
-    for (uint32_t c = 0; c < am.charts.size(); ++c) {
-      chartTriangles(readChart(c), s, [&](const FloatTriangle& t) {
+    for (size_t i = 0; i < items; ++i) {
+      trianglesOf(i, [&](const FloatTriangle& t) {
         if (!t.triangle().is_degenerate()) part.push_back(t);
       });
-      if (part.size() >= partTriangles || c + 1 == am.charts.size()) {
-        resolve(meshPending, part);
+      if (part.size() >= partTriangles || i + 1 == items) {
+        resolve(p, part);
         part.clear();
       }
     }
-  }
+  };
+  resolveInParts(atlasPending, gm.cells.size(), [&](size_t i, const auto& emit) {
+    for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[i])) emit(floatTriangle(t));
+  });
+  resolveInParts(meshPending, am.charts.size(),
+                 [&](size_t c, const auto& emit) { chartTriangles(readChart(uint32_t(c)), s, emit); });
   for (double d2 : atlasPending.d2) atlasMax = std::max(atlasMax, std::sqrt(d2)), atlasSum += std::sqrt(d2);
   for (double d2 : meshPending.d2) meshMax = std::max(meshMax, std::sqrt(d2)), meshSum += std::sqrt(d2);
   if (atlasPending.unresolved) atlasMax = std::max(atlasMax, margin), atlasSum += margin * atlasPending.unresolved;
   if (meshPending.unresolved) meshMax = std::max(meshMax, margin), meshSum += margin * meshPending.unresolved;
   st.exact = !atlasPending.unresolved && !meshPending.unresolved;
-  st.maxAtlasToMesh = atlasMax;
-  st.meanAtlasToMesh = atlasSum / double(std::max<uint64_t>(st.atlasSamples, 1));
-  st.maxMeshToAtlas = meshMax;
-  st.meanMeshToAtlas = meshSum / double(std::max<uint64_t>(st.meshSamples, 1));
-  st.hausdorff = std::max(atlasMax, meshMax);
-  st.hausdorffPercent = st.diagonal > 0 ? 100.0 * st.hausdorff / st.diagonal : 0.0;
-  st.meanPercent = st.diagonal > 0 ? 100.0 * 0.5 * (st.meanAtlasToMesh + st.meanMeshToAtlas) / st.diagonal : 0.0;
-  st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  setFigures(st, atlasMax, atlasSum, meshMax, meshSum, t0);
   return st;
 }
 
