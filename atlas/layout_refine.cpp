@@ -642,6 +642,63 @@ uint32_t straightenSides(ChartLayout& layout, uint32_t rounds) {
   return changed;
 }
 
+namespace {
+
+// What mendFirstSideEar did to a patch.
+enum class EarStep {
+  None,     // no ear it could mend
+  Mended,   // an ear moved to the neighbour, or its middle vertex became a corner
+  NeedsCut  // an ear on an open side of a patch with 8 sides: the patch must be cut first
+};
+
+// Mends the first side ear of patch p (see moveSideEars) on an open side, or on a shared side
+// from its reversed end (each shared side is looked at from one of its patches). Changes only
+// patch p and its neighbour across the side, never the number of patches, so the references it
+// holds stay valid. With mayCut, an ear on an open side that cannot take a corner (8 sides
+// already) is answered with NeedsCut, and the caller cuts the patch; else the search goes on.
+EarStep mendFirstSideEar(ChartLayout& layout, uint32_t p, bool mayCut) {
+  Patch& patch = layout.patches[p];
+  // Directed edge -> triangle of this patch (its boundary runs counter-clockwise, so the
+  // triangle inside along side edge a -> b holds a -> b).
+  std::unordered_map<uint64_t, uint32_t> inside;
+  for (uint32_t t : patch.triangles) {
+    const auto& tri = layout.triangles[t];
+    for (int c = 0; c < 3; ++c) inside[directed(tri[c], tri[(c + 1) % 3])] = t;
+  }
+  for (uint32_t s = 0; s < patch.sides.size(); ++s) {
+    PatchSide& side = patch.sides[s];
+    if (side.neighbourPatch == int32_t(p) || (side.neighbourPatch >= 0 && !side.reversed)) continue;
+    const std::vector<uint32_t>& v = side.vertices;
+    for (size_t k = 0; k + 2 < v.size(); ++k) {
+      const auto it = inside.find(directed(v[k], v[k + 1]));
+      if (it == inside.end()) continue;
+      const uint32_t t = it->second;
+      const auto& tri = layout.triangles[t];
+      if (tri[0] != v[k + 2] && tri[1] != v[k + 2] && tri[2] != v[k + 2]) continue;
+      // The third edge must be inside the patch (else the patch is this one triangle).
+      if (!inside.contains(directed(v[k], v[k + 2]))) continue;
+      if (side.neighbourPatch < 0) {
+        // No neighbour to take it: its middle vertex becomes a corner, so its vertices lie on
+        // two edges of the polygon.
+        if (insertCorner(layout, p, s, uint32_t(k + 1))) return EarStep::Mended;
+        if (mayCut) return EarStep::NeedsCut;
+        continue;
+      }
+      Patch& other = layout.patches[uint32_t(side.neighbourPatch)];
+      PatchSide& mirror = other.sides[side.neighbourSide];
+      const uint32_t middle = v[k + 1];
+      patch.triangles.erase(std::find(patch.triangles.begin(), patch.triangles.end(), t));
+      other.triangles.push_back(t);
+      side.vertices.erase(side.vertices.begin() + std::ptrdiff_t(k + 1));
+      mirror.vertices.erase(std::find(mirror.vertices.begin(), mirror.vertices.end(), middle));
+      return EarStep::Mended;
+    }
+  }
+  return EarStep::None;
+}
+
+}  // namespace
+
 uint32_t moveSideEars(ChartLayout& layout, const std::vector<uint32_t>& only, bool splitFull) {
   std::vector<uint32_t> patches = only;
   if (patches.empty()) {
@@ -652,60 +709,20 @@ uint32_t moveSideEars(ChartLayout& layout, const std::vector<uint32_t>& only, bo
     const uint32_t p = patches[w];
     if (p >= layout.patches.size()) continue;
     uint32_t splits = 0;
-    bool again = true;
-    while (again) {
-      again = false;
-      Patch& patch = layout.patches[p];
-      // Directed edge -> triangle of this patch (its boundary runs counter-clockwise, so the
-      // triangle inside along side edge a -> b holds a -> b).
-      std::unordered_map<uint64_t, uint32_t> inside;
-      for (uint32_t t : patch.triangles) {
-        const auto& tri = layout.triangles[t];
-        for (int c = 0; c < 3; ++c) inside[directed(tri[c], tri[(c + 1) % 3])] = t;
+    for (;;) {
+      const EarStep step = mendFirstSideEar(layout, p, splitFull && splits < 2);
+      if (step == EarStep::None) break;
+      if (step == EarStep::Mended) {
+        ++moved;
+        continue;
       }
-      for (uint32_t s = 0; s < patch.sides.size() && !again; ++s) {
-        PatchSide& side = patch.sides[s];
-        if (side.neighbourPatch == int32_t(p) || (side.neighbourPatch >= 0 && !side.reversed)) continue;
-        const std::vector<uint32_t>& v = side.vertices;
-        for (size_t k = 0; k + 2 < v.size(); ++k) {
-          const auto it = inside.find(directed(v[k], v[k + 1]));
-          if (it == inside.end()) continue;
-          const uint32_t t = it->second;
-          const auto& tri = layout.triangles[t];
-          if (tri[0] != v[k + 2] && tri[1] != v[k + 2] && tri[2] != v[k + 2]) continue;
-          // The third edge must be inside the patch (else the patch is this one triangle).
-          if (!inside.contains(directed(v[k], v[k + 2]))) continue;
-          if (side.neighbourPatch < 0) {
-            // No neighbour to take it: its middle vertex becomes a corner, so its vertices lie
-            // on two edges of the polygon. A patch with 8 sides already is first cut at its neck
-            // (at most twice), both parts looked at again.
-            if (insertCorner(layout, p, s, uint32_t(k + 1))) {
-              ++moved;
-              again = true;
-              break;
-            }
-            if (splitFull && splits < 2) {
-              ++splits;
-              const size_t count = layout.patches.size();
-              if (splitPatchAtNeck(layout, p)) {
-                for (size_t q = count; q < layout.patches.size(); ++q) patches.push_back(uint32_t(q));
-              }
-              again = true;  // look again: the patch changed, or a failed cut left it a corner
-              break;
-            }
-            continue;
-          }
-          Patch& other = layout.patches[uint32_t(side.neighbourPatch)];
-          PatchSide& mirror = other.sides[side.neighbourSide];
-          const uint32_t middle = v[k + 1];
-          patch.triangles.erase(std::find(patch.triangles.begin(), patch.triangles.end(), t));
-          other.triangles.push_back(t);
-          side.vertices.erase(side.vertices.begin() + std::ptrdiff_t(k + 1));
-          mirror.vertices.erase(std::find(mirror.vertices.begin(), mirror.vertices.end(), middle));
-          ++moved;
-          again = true;
-          break;
-        }
+      // A patch with 8 sides already is cut at its neck (at most twice), both parts looked at
+      // again; a failed cut may still have left it a corner, so the patch is looked at again
+      // either way. No reference into the layout is held here: the cut appends patches.
+      ++splits;
+      const size_t count = layout.patches.size();
+      if (splitPatchAtNeck(layout, p)) {
+        for (size_t q = count; q < layout.patches.size(); ++q) patches.push_back(uint32_t(q));
       }
     }
   }

@@ -466,6 +466,44 @@ TEST(SideEars, AnEarOnAnOpenSideGetsACorner) {
   EXPECT_EQ(resampleLayout(layout, ro).param.degenerateTriangles, 0u);
 }
 
+// An ear on an open side of a patch that has 8 sides already cannot take a corner: the patch is
+// cut at its neck first, which appends a patch (and so may move every patch in memory), and the
+// part with the ear then gets its corner. Built as a single patch so that the layout's patch
+// vector is full when the cut appends (run under AddressSanitizer, a reference held across the
+// cut is a use after free).
+TEST(SideEars, AnEarOnAnOpenSideOfAnEightSidedPatchIsMendedAfterANeckCut) {
+  ChartLayout layout = test::gridLayout(24, 3, 8.f, 1.f);
+  ASSERT_EQ(layout.patches.size(), 1u);
+  // An ear (a, m, b) hanging below the bottom grid edge a -> b at x = 12.
+  const uint32_t a = 12, b = 13, m = uint32_t(layout.positions.size());
+  layout.positions.push_back((layout.positions[a] + layout.positions[b]) * 0.5f + glm::vec3(0, -0.05f, 0));
+  layout.patches[0].triangles.push_back(uint32_t(layout.triangles.size()));
+  layout.triangles.push_back({a, m, b});
+  std::vector<uint32_t>& bottom = layout.patches[0].sides[0].vertices;
+  bottom.insert(std::find(bottom.begin(), bottom.end(), b), m);
+  // Four more corners on the bottom side, away from the ear: 8 sides.
+  for (const uint32_t x : {20u, 16u, 6u, 3u}) ASSERT_TRUE(insertCorner(layout, 0, 0, x));
+  ASSERT_EQ(layout.patches[0].sides.size(), 8u);
+  expectValid(layout);
+  ResampleOptions ro;
+  ro.chartSize = 17;
+  EXPECT_GT(resampleLayout(layout, ro).param.degenerateTriangles, 0u) << "the ear has no area in the polygon";
+  layout.patches.shrink_to_fit();
+
+  EXPECT_EQ(moveSideEars(layout), 1u);
+  expectValid(layout);
+  EXPECT_EQ(layout.patches.size(), 2u) << "cut once at the neck";
+  for (const Patch& patch : layout.patches) EXPECT_LE(patch.sides.size(), 8u);
+  // The ear's middle vertex is now a corner.
+  bool corner = false;
+  for (const Patch& patch : layout.patches) {
+    for (const PatchSide& side : patch.sides) corner = corner || side.vertices.front() == m;
+  }
+  EXPECT_TRUE(corner);
+  EXPECT_EQ(resampleLayout(layout, ro).param.degenerateTriangles, 0u);
+  EXPECT_EQ(moveSideEars(layout), 0u) << "nothing left to mend";
+}
+
 TEST(PatchSplit, RepairLeavesAFoldFreeLayoutUnchanged) {
   ChartLayout layout = test::cubeLayout(8, true);
   const ChartLayout before = layout;
