@@ -21,7 +21,7 @@ namespace gimlod::test {
 
 struct SharedScan {
   std::string name;  // test-name suffix
-  std::string file;  // under sharedData() / "meshes"
+  std::string file;  // under data/meshes (see sharedScanPath)
 };
 
 // Every shared scan: the bunny (5 holes), igea (triangle strips), turbine blade, horse, armadillo.
@@ -46,14 +46,13 @@ inline const SharedScan& sharedScan(const std::string& name) {
   throw std::invalid_argument("no shared scan " + name);
 }
 
+// The scan's file: the shipped copy for the bunny, else under ../shared/data/meshes.
 inline std::filesystem::path sharedScanPath(const std::string& name) {
-  return sharedData() / "meshes" / sharedScan(name).file;
+  return realData("meshes/" + sharedScan(name).file);
 }
 
-// True when the scan file is there (the shared data may be absent on a user's clone).
-inline bool haveSharedScan(const std::string& name) {
-  return haveSharedData() && std::filesystem::exists(sharedScanPath(name));
-}
+// True when the scan file is there (only the bunny is shipped; the others are shared data).
+inline bool haveSharedScan(const std::string& name) { return std::filesystem::exists(sharedScanPath(name)); }
 
 struct BuiltScanAtlas {
   std::filesystem::path dir;  // the atlas directory

@@ -2,6 +2,8 @@
 
 #include <array>
 #include <cstdio>
+#include <cstdlib>
+#include <string>
 #include <random>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -11,6 +13,21 @@ namespace gimlod::test {
 std::filesystem::path sharedData() { return GIMLOD_SHARED_DATA; }
 bool haveSharedData() { return std::filesystem::exists(sharedData() / "terrain"); }
 std::filesystem::path repoData() { return GIMLOD_REPO_DATA; }
+
+std::filesystem::path realData(const std::string& relative) {
+  const std::filesystem::path shipped = repoData() / relative;
+  return std::filesystem::exists(shipped) ? shipped : sharedData() / relative;
+}
+
+bool haveRealData(const std::string& relative) { return std::filesystem::exists(realData(relative)); }
+
+bool sharedDataRequired() {
+  for (const char* name : {"CI", "GIMLOD_REQUIRE_SHARED_DATA"}) {
+    const char* v = std::getenv(name);
+    if (v && *v && std::string(v) != "0" && std::string(v) != "false") return true;
+  }
+  return false;
+}
 std::filesystem::path appPath() { return GIMLOD_APP; }
 
 TempDir::TempDir(const std::string& tag) {

@@ -4,13 +4,33 @@
 #include <filesystem>
 #include <string>
 
+#include <gtest/gtest.h>
+
+// Skips the current test (fails it where sharedDataRequired()) unless `present` holds.
+#define GIMLOD_NEED_SHARED_DATA(present)                                                         \
+  do {                                                                                           \
+    if (!(present)) {                                                                            \
+      if (::gimlod::test::sharedDataRequired()) FAIL() << "missing shared data: " #present;      \
+      GTEST_SKIP() << "no ../shared/data (" #present ")";                                        \
+    }                                                                                            \
+  } while (0)
+
 namespace gimlod::test {
 
-// ../shared/data (may be absent on a user's clone: tests that need it skip).
+// ../shared/data (absent on a user's clone: tests that need it skip there, and fail in CI; see
+// GIMLOD_NEED_SHARED_DATA).
 std::filesystem::path sharedData();
 bool haveSharedData();
 // data/ inside the repository.
 std::filesystem::path repoData();
+// A real data file by its path under data/ (e.g. "meshes/bun_zipper.ply"): the copy shipped in
+// the repository when there is one (the bunny, the Rainier tile), so a clone without ../shared
+// runs the test too; else the one under ../shared/data.
+std::filesystem::path realData(const std::string& relative);
+bool haveRealData(const std::string& relative);
+// Whether missing shared data must fail a test rather than skip it: in CI (CI=true) or with
+// GIMLOD_REQUIRE_SHARED_DATA=1, so that real-data invariants never pass by being skipped.
+bool sharedDataRequired();
 // Path to the gimlod command-line app.
 std::filesystem::path appPath();
 

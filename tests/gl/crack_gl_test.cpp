@@ -53,7 +53,7 @@ std::unique_ptr<gl::EglContext> CrackTest::context_;
 
 // Hand-made cuts: neighbours 1..3 levels and several resolutions apart, across chart borders.
 TEST_F(CrackTest, HandMadeCutsAcrossChartBorders) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no ../shared/data";
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedData());
   const AtlasView atlas = build(test::sharedData() / "terrain/SainteHelens.dem", 129, 4, 32, 2);
   ASSERT_GE(atlas.hierarchy.chartCount(), 4u);
   gl::SceneOptions so;
@@ -91,7 +91,7 @@ TEST_F(CrackTest, HandMadeCutsAcrossChartBorders) {
 
 // Cuts adapted from several cameras over the real SRTM tiles.
 TEST_F(CrackTest, AdaptedCutsOverRealSrtmTiles) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no ../shared/data";
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedData());
   for (const char* tile : {"terrain/mt_rainier_90m.tif", "terrain/mt_fuji_90m.tif"}) {
     const AtlasView atlas = build(test::sharedData() / tile, 257, 5, 32, 2);
     gl::SceneOptions so;
@@ -130,7 +130,7 @@ TEST_F(CrackTest, AdaptedCutsOverRealSrtmTiles) {
 // The cuts of the coherent adapters (dual queue in error mode, quad queue under a triangle
 // budget) along a moving path over real SRTM, frame after frame: no stitching violation, no crack.
 TEST_F(CrackTest, CoherentAdapterCutsAlongAPathOverRealSrtm) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no ../shared/data";
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedData());
   const AtlasView atlas = build(test::sharedData() / "terrain/mt_fuji_90m.tif", 257, 5, 32, 2);
   gl::SceneOptions so;
   so.width = 160;

@@ -48,7 +48,7 @@ std::vector<Camera> spiralPath(const glm::dvec3& lo, const glm::dvec3& hi, uint3
 
 TEST_P(ScanCrackTest, DualQueueCutsAlongAPathHaveNoCracks) {
   const std::string name = GetParam();
-  if (!test::haveSharedScan(name)) GTEST_SKIP() << "no ../shared/data/meshes";
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedScan(name));
   const test::BuiltScanAtlas* built = nullptr;
   ASSERT_NO_THROW(built = &test::scanAtlas(name, false)) << "gimlod build " << test::sharedScanPath(name);
   const AtlasView atlas = openAtlas(built->dir);

@@ -21,7 +21,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-fs::path terrain(const char* name) { return test::sharedData() / "terrain" / name; }
+fs::path terrain(const char* name) { return test::realData(std::string("terrain/") + name); }
 
 // Raw band 1 of a raster, read independently of loadDem (GDAL row order: north first).
 struct RawBand {
@@ -84,7 +84,7 @@ bool allFinite(const std::vector<float>& v) {
 // ---- real data ----------------------------------------------------------------------------
 
 void checkSrtmTile(const char* name, uint64_t documentedVoids, double centreLat) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no shared data";
+  GIMLOD_NEED_SHARED_DATA(fs::exists(terrain(name)));
   const fs::path file = terrain(name);
   const RawBand raw = readRaw(file);
   ASSERT_FALSE(raw.v.empty());
@@ -140,7 +140,7 @@ TEST(AtlasDem, RainierSrtmVoidsFilled) { checkSrtmTile("mt_rainier_90m.tif", 903
 TEST(AtlasDem, FujiSrtmVoidsFilled) { checkSrtmTile("mt_fuji_90m.tif", 2437, 35.5); }
 
 TEST(AtlasDem, SaintHelensUsgsDemProjected) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no shared data";
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedData());
   const RawBand raw = readRaw(terrain("SainteHelens.dem"));
   ASSERT_TRUE(raw.hasNodata);  // USGS DEM: -32767 outside the quadrangle's rotated profiles
   const uint64_t nodataCount = uint64_t(std::count(raw.v.begin(), raw.v.end(), raw.nodata));
@@ -160,7 +160,7 @@ TEST(AtlasDem, SaintHelensUsgsDemProjected) {
 }
 
 TEST(AtlasDem, Etopo5NetcdfGeographic) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no shared data";
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedData());
   const auto t0 = std::chrono::steady_clock::now();
   const DemRaster dem = loadDem(terrain("etopo5.cdf"));
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -187,7 +187,7 @@ TEST(AtlasDem, Etopo5NetcdfGeographic) {
 }
 
 TEST(AtlasDem, ZScaleMultipliesHeights) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no shared data";
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedData());
   const DemRaster a = loadDem(terrain("SainteHelens.dem"));
   const DemRaster b = loadDem(terrain("SainteHelens.dem"), DemOptions{2.5, ""});
   ASSERT_EQ(a.heights.size(), b.heights.size());
@@ -299,7 +299,6 @@ TEST(AtlasFillVoids, DeterministicAndContracts) {
 // ---- bad input ----------------------------------------------------------------------------
 
 TEST(AtlasDemErrors, TruncatedGeoTiff) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no shared data";
   test::TempDir tmp("gimlod-dem");
   const fs::path src = terrain("mt_rainier_90m.tif");
   const fs::path dst = tmp.path() / "truncated_rainier.tif";
@@ -313,7 +312,6 @@ TEST(AtlasDemErrors, TruncatedGeoTiff) {
 // truncated or garbled: the failure then comes from RasterIO, and GDAL's message must end up in
 // the InputError instead of on stderr.
 TEST(AtlasDemErrors, DamagedTileDataFailsInRead) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no shared data";
   test::TempDir tmp("gimlod-dem");
   const fs::path full = tmp.path() / "deflate.tif";
   GDALAllRegister();
@@ -420,7 +418,7 @@ TEST(AtlasDemErrors, NanTokensInIntegerLookingAsciiGrid) {
 }
 
 TEST(AtlasDemErrors, BadZScale) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no shared data";
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedData());
   const fs::path f = terrain("SainteHelens.dem");
   expectInputErrorNaming(f, DemOptions{std::nan(""), ""});
   expectInputErrorNaming(f, DemOptions{0.0, ""});

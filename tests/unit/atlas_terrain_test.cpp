@@ -129,8 +129,7 @@ void expectSharedSideIdentical(const std::vector<T>& a, const std::vector<T>& b,
 }
 
 TEST(AtlasTerrain, RainierSeamsBitIdentical) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no shared data";
-  const DemRaster dem = loadDem(test::sharedData() / "terrain" / "mt_rainier_90m.tif");
+  const DemRaster dem = loadDem(test::realData("terrain/mt_rainier_90m.tif"));
   test::TempDir tmp("gimlod-terrain");
   AtlasManifest m;
   const TerrainAtlasStats st = writeTerrainCharts(dem, {129, 32}, tmp.path(), m);

@@ -2,6 +2,7 @@
 // per configuration, budgets hold, and bad options fail with a clear error.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -85,6 +86,7 @@ TEST_F(BenchCliTest, ErrorModeWritesEveryFrameOfEveryConfiguration) {
   // 4 frames x 2 node budgets x 3 algorithms.
   ASSERT_EQ(csv.rows.size(), 24u);
   std::map<std::string, int> perAlgo;
+  double adaptUs = 0.0;
   for (size_t i = 0; i < csv.rows.size(); ++i) {
     ASSERT_EQ(csv.rows[i].size(), csv.header.size()) << "row " << i;
     EXPECT_EQ(csv.rows[i][csv.col("mode")], "error");
@@ -93,10 +95,12 @@ TEST_F(BenchCliTest, ErrorModeWritesEveryFrameOfEveryConfiguration) {
     // The stitching constraint may split past the budget; each such split adds at most 3 nodes.
     EXPECT_LE(nodes, maxNodes + 3 * csv.num(i, "constraint_splits")) << "row " << i;
     EXPECT_GT(nodes, 0) << "row " << i;
-    EXPECT_GE(csv.num(i, "adapt_us"), 0.0);
+    EXPECT_TRUE(std::isfinite(csv.num(i, "adapt_us"))) << "row " << i;
+    adaptUs += csv.num(i, "adapt_us");
     EXPECT_GE(csv.num(i, "max_error_px"), csv.num(i, "mean_error_px"));
     EXPECT_EQ(csv.num(i, "triangles") > 0, true);
   }
+  EXPECT_GT(adaptUs, 0.0) << "the adapters' time was measured";
   EXPECT_EQ(perAlgo["ours"], 8);
   EXPECT_EQ(perAlgo["fixed"], 8);
   EXPECT_EQ(perAlgo["greedy"], 8);
@@ -120,8 +124,6 @@ TEST_F(BenchCliTest, ShippedBenchPathRuns) {
 TEST_F(BenchCliTest, BudgetModeKeepsTheTriangleBudget) {
   const fs::path out = dir_->path() / "budget";
   const int rc = bench(out, "--mode budget --orbit 4 --distance 0.5 --nodes 60,300 --triangles 50000,200000");
-  if (rc != 0 && output_.find("not available") != std::string::npos)
-    GTEST_SKIP() << "budget mode not built yet: " << output_;
   ASSERT_EQ(rc, 0) << output_;
   const Csv csv = readCsv(out / "bench.csv");
   ASSERT_EQ(csv.rows.size(), 4u * 4u * 3u);

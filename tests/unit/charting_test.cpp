@@ -250,8 +250,8 @@ struct MeshCase {
 class ChartingShared : public ::testing::TestWithParam<MeshCase> {};
 
 TEST_P(ChartingShared, LayoutValidNearTarget) {
-  const fs::path path = test::sharedData() / "meshes" / GetParam().file;
-  if (!fs::exists(path)) GTEST_SKIP() << "no shared data";
+  const fs::path path = test::realData(std::string("meshes/") + GetParam().file);
+  GIMLOD_NEED_SHARED_DATA(fs::exists(path));
   const IndexedMesh mesh = readMesh(path);
   for (uint32_t target : {50u, 200u}) {
     ChartingOptions o;
@@ -306,8 +306,7 @@ INSTANTIATE_TEST_SUITE_P(Charting, ChartingShared,
                          });
 
 TEST(Charting, ErrorTargetOnBunny) {
-  const fs::path path = test::sharedData() / "meshes" / "bun_zipper.ply";
-  if (!fs::exists(path)) GTEST_SKIP() << "no shared data";
+  const fs::path path = test::realData("meshes/bun_zipper.ply");
   const IndexedMesh mesh = readMesh(path);
   ChartingOptions o;
   o.maxError = 0.01;
@@ -322,8 +321,7 @@ TEST(Charting, ErrorTargetOnBunny) {
 }
 
 TEST(Charting, BlockedClusteringIsDeterministic) {
-  const fs::path path = test::sharedData() / "meshes" / "bun_zipper.ply";
-  if (!fs::exists(path)) GTEST_SKIP() << "no shared data";
+  const fs::path path = test::realData("meshes/bun_zipper.ply");
   const IndexedMesh mesh = readMesh(path);
   ChartingOptions o;
   o.targetCharts = 80;
@@ -343,8 +341,7 @@ TEST(Charting, BlockedClusteringIsDeterministic) {
 }
 
 TEST(Charting, CellsPathOnBunny) {
-  const fs::path path = test::sharedData() / "meshes" / "bun_zipper.ply";
-  if (!fs::exists(path)) GTEST_SKIP() << "no shared data";
+  const fs::path path = test::realData("meshes/bun_zipper.ply");
   test::TempDir dir("charting");
   GridifyOptions g;
   g.targetTrianglesPerCell = 4000;

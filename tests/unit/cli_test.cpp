@@ -120,9 +120,8 @@ namespace {
 // A mesh end to end through the tool: build (charting, quads, resampling, hierarchy), stats,
 // export of the welded surface, rendering, and bad mesh input.
 TEST_F(CliTest, MeshBuildExportAndBadMeshes) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no ../shared/data";
   const fs::path atlas = dir_.path() / "bunny.atlas";
-  ASSERT_EQ(build(test::sharedData() / "meshes/bun_zipper.ply", atlas, "--charts 24 --chart-size 17"), 0) << output_;
+  ASSERT_EQ(build(test::realData("meshes/bun_zipper.ply"), atlas, "--charts 24 --chart-size 17"), 0) << output_;
   const std::string stats = [&] {
     std::ifstream f(atlas / "stats.json");
     return std::string((std::istreambuf_iterator<char>(f)), {});
@@ -156,9 +155,9 @@ TEST_F(CliTest, MeshBuildExportAndBadMeshes) {
   EXPECT_NE(build(past, dir_.path() / "p.atlas"), 0);
   EXPECT_NE(output_.find("past.obj"), std::string::npos) << output_;
   expectNoAtlas(dir_.path(), "p.atlas");
-  EXPECT_NE(build(test::sharedData() / "meshes/bun_zipper.ply", dir_.path() / "c.atlas", "--chart-size 16"), 0);
+  EXPECT_NE(build(test::realData("meshes/bun_zipper.ply"), dir_.path() / "c.atlas", "--chart-size 16"), 0);
   EXPECT_NE(output_.find("--chart-size"), std::string::npos) << output_;
-  EXPECT_NE(build(test::sharedData() / "meshes/bun_zipper.ply", dir_.path() / "m.atlas", "--max-memory 12Q"), 0);
+  EXPECT_NE(build(test::realData("meshes/bun_zipper.ply"), dir_.path() / "m.atlas", "--max-memory 12Q"), 0);
   EXPECT_NE(output_.find("--max-memory"), std::string::npos) << output_;
   expectNoAtlas(dir_.path(), "m.atlas");
 }

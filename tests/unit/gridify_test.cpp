@@ -18,7 +18,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-fs::path meshPath(const char* name) { return test::sharedData() / "meshes" / name; }
+fs::path meshPath(const std::string& name) { return test::realData("meshes/" + name); }
 bool haveMeshes() { return fs::exists(test::sharedData() / "meshes"); }
 
 void writeFile(const fs::path& p, const std::string& text) {
@@ -90,7 +90,6 @@ void expectGridPartitionsMesh(const fs::path& mesh, const fs::path& grid,
 }
 
 TEST(Gridify, BunnyCellsPartitionTheReadersTriangles) {
-  if (!haveMeshes()) GTEST_SKIP() << "no ../shared/data/meshes";
   test::TempDir dir("gridify");
   GridifyOptions o;
   o.targetTrianglesPerCell = 5000;
@@ -112,7 +111,6 @@ TEST(Gridify, BunnyCellsPartitionTheReadersTriangles) {
 }
 
 TEST(Gridify, TinyBufferBudgetForcesManyFlushesAndStaysUnderIt) {
-  if (!haveMeshes()) GTEST_SKIP() << "no ../shared/data/meshes";
   test::TempDir dir("gridify");
   GridifyOptions o;
   o.maxMemoryBytes = 64ull << 20;
@@ -130,7 +128,7 @@ TEST(Gridify, TinyBufferBudgetForcesManyFlushesAndStaysUnderIt) {
 }
 
 TEST(Gridify, ColoursAndBigEndianInputSurviveTheCells) {
-  if (!haveMeshes()) GTEST_SKIP() << "no ../shared/data/meshes";
+  GIMLOD_NEED_SHARED_DATA(haveMeshes());
   test::TempDir dir("gridify");
   GridifyOptions o;
   o.targetTrianglesPerCell = 20000;
@@ -143,7 +141,7 @@ TEST(Gridify, ColoursAndBigEndianInputSurviveTheCells) {
 }
 
 TEST(Gridify, ObjAndStlUseABoundsPrePass) {
-  if (!haveMeshes()) GTEST_SKIP() << "no ../shared/data/meshes";
+  GIMLOD_NEED_SHARED_DATA(haveMeshes());
   test::TempDir dir("gridify");
   GridifyOptions o;
   o.targetTrianglesPerCell = 10000;
@@ -173,7 +171,7 @@ TEST(Gridify, ObjAndStlUseABoundsPrePass) {
 }
 
 TEST(Gridify, ReplacesAnEarlierGridButNotOtherDirectories) {
-  if (!haveMeshes()) GTEST_SKIP() << "no ../shared/data/meshes";
+  GIMLOD_NEED_SHARED_DATA(haveMeshes());
   test::TempDir dir("gridify");
   GridifyOptions o;
   o.targetTrianglesPerCell = 20000;
@@ -306,7 +304,6 @@ TEST(Gridify, ChooseGridDims) {
 }
 
 TEST(Gridify, ReadCellAndManifestRejectCorruption) {
-  if (!haveMeshes()) GTEST_SKIP() << "no ../shared/data/meshes";
   test::TempDir dir("gridify");
   const fs::path out = dir.path() / "grid";
   GridifyOptions o;

@@ -155,8 +155,7 @@ TEST(Hierarchy, InvalidParametersAreRejected) {
 }
 
 TEST(Hierarchy, InvariantsOnRealSrtmTile) {
-  if (!test::haveSharedData()) GTEST_SKIP() << "no ../shared/data";
-  const DemRaster dem = loadDem(test::sharedData() / "terrain/mt_rainier_90m.tif");
+  const DemRaster dem = loadDem(test::realData("terrain/mt_rainier_90m.tif"));
   AtlasManifest m = test::syntheticManifest(257, 5, 5, 4, 6, 2);
   m.samplesX = dem.width;
   m.samplesY = dem.height;

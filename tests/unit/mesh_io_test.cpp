@@ -20,7 +20,7 @@ namespace {
 namespace fs = std::filesystem;
 using Tri = std::array<uint32_t, 3>;
 
-fs::path meshPath(const char* name) { return test::sharedData() / "meshes" / name; }
+fs::path meshPath(const std::string& name) { return test::realData("meshes/" + name); }
 bool haveMeshes() { return fs::exists(test::sharedData() / "meshes"); }
 
 void writeFile(const fs::path& p, const std::string& text) {
@@ -768,7 +768,7 @@ const RealMesh kRealMeshes[] = {
 };
 
 TEST(MeshIoReal, EverySharedMeshReadsWithItsListedTriangleCount) {
-  if (!haveMeshes()) GTEST_SKIP() << "no ../shared/data/meshes";
+  GIMLOD_NEED_SHARED_DATA(haveMeshes());
   for (const RealMesh& r : kRealMeshes) {
     SCOPED_TRACE(r.file);
     const IndexedMesh m = readMesh(meshPath(r.file));
@@ -796,7 +796,7 @@ TEST(MeshIoReal, EverySharedMeshReadsWithItsListedTriangleCount) {
 }
 
 TEST(MeshIoReal, IgeaStripsDecodeToAConsistentlyOrientedGenusZeroSurface) {
-  if (!haveMeshes()) GTEST_SKIP() << "no ../shared/data/meshes";
+  GIMLOD_NEED_SHARED_DATA(haveMeshes());
   const IndexedMesh m = readMesh(meshPath("igea.ply"));
   EXPECT_EQ(m.stats.faces, 1u);        // one tristrips element instance ...
   EXPECT_EQ(m.stats.strips, 35048u);   // ... holding 35,048 strips separated by -1
@@ -819,7 +819,7 @@ TEST(MeshIoReal, IgeaStripsDecodeToAConsistentlyOrientedGenusZeroSurface) {
 }
 
 TEST(MeshIoReal, HorseIsBigEndianWithColoursBunnyIsAscii) {
-  if (!haveMeshes()) GTEST_SKIP() << "no ../shared/data/meshes";
+  GIMLOD_NEED_SHARED_DATA(haveMeshes());
   const MeshInfo horse = probeMesh(meshPath("horse.ply"));
   EXPECT_EQ(horse.formatName, "PLY binary big-endian");
   EXPECT_TRUE(horse.hasColours);
@@ -839,7 +839,7 @@ TEST(MeshIoReal, HorseIsBigEndianWithColoursBunnyIsAscii) {
 }
 
 TEST(MeshIoReal, ChunkedStreamEqualsWholeRead) {
-  if (!haveMeshes()) GTEST_SKIP() << "no ../shared/data/meshes";
+  GIMLOD_NEED_SHARED_DATA(haveMeshes());
   const fs::path f = meshPath("armadillo.obj");
   const IndexedMesh whole = readMesh(f);
   MeshReadOptions o;

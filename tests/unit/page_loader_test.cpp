@@ -2,6 +2,11 @@
 // cache budget with LRU eviction, and prompt shutdown with requests pending.
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <future>
+
 #include <memory>
 
 #include "apps/pipeline.h"
@@ -180,19 +185,35 @@ TEST_F(PageLoaderTest, DestructorWithPendingRequestsReturns) {
     for (uint32_t l = 0; l < h.params.depth; ++l)
       for (uint32_t y = 0; y < (1u << l); ++y)
         for (uint32_t x = 0; x < (1u << l); ++x) all.push_back({c, l, x, y});
-  {
-    PageLoader paused(*pages_, 1u << 20, true);
-    for (const NodeId& n : all) paused.request(n, 1.0);
-    EXPECT_EQ(paused.stats().inFlight, all.size());
-  }  // must not wait for the queue
-  {
-    PageLoader running(*pages_, 1u << 20);
-    for (const NodeId& n : all) running.request(n, double(n.level));
-  }  // stops after at most the read in progress
-  {
-    PageLoader idle(*pages_, 1u << 20);  // thread waiting on an empty queue
+  // Run on another thread so that a destructor that waits for the queue fails the test instead
+  // of hanging it (the bound is far above anything a working destructor takes).
+  auto destroyAll = [&] {
+    const uint64_t before = pages_->bytesRead();
+    {
+      PageLoader paused(*pages_, 1u << 20, true);
+      for (const NodeId& n : all) paused.request(n, 1.0);
+      EXPECT_EQ(paused.stats().inFlight, all.size());
+    }  // must not wait for the queue
+    EXPECT_EQ(pages_->bytesRead(), before) << "a paused loader read pages while being destroyed";
+    uint64_t atDestruction = 0;
+    {
+      PageLoader running(*pages_, 1u << 20);
+      for (const NodeId& n : all) running.request(n, double(n.level));
+    }  // stops after at most the read in progress
+    atDestruction = pages_->bytesRead();
+    {
+      PageLoader idle(*pages_, 1u << 20);  // thread waiting on an empty queue
+    }
+    // The loader threads are joined: nothing reads any more.
+    EXPECT_EQ(pages_->bytesRead(), atDestruction);
+  };
+  std::future<void> done = std::async(std::launch::async, destroyAll);
+  if (done.wait_for(std::chrono::seconds(120)) != std::future_status::ready) {
+    // The future's destructor would wait for the stuck thread: end the test process instead.
+    std::fprintf(stderr, "FAILED: a PageLoader destructor did not return within 120 s\n");
+    std::_Exit(1);
   }
-  SUCCEED();
+  done.get();
 }
 
 }  // namespace
