@@ -2,7 +2,7 @@
 // Based on: Greg Turk, "The PLY Polygon File Format" (1994); the Wavefront OBJ and Geomview OFF
 // format descriptions; the STL format of 3D Systems' "StereoLithography Interface Specification"
 // (1989). Triangle strips are decoded as in OpenGL GL_TRIANGLE_STRIP (alternating winding).
-#include "atlas/mesh_io.h"
+#include "atlas/mesh/mesh_io.h"
 
 #include <algorithm>
 #include <bit>

@@ -46,7 +46,7 @@ struct OutOfCoreFidelityOptions {
   uint32_t maxBlockCells = 0;         // at most this many grid cells per block side; 0 = as many as fit
 };
 
-// measureFidelity for a mesh held as gridify cell files (atlas/gridify.h) and the level-0 surface
+// measureFidelity for a mesh held as gridify cell files (atlas/mesh/gridify.h) and the level-0 surface
 // of a geometry atlas on disk (as readAtlasSurface triangulates it), without holding either
 // surface: space is cut into blocks of grid cells, as large as fit in options.memoryBytes. A
 // block's samples (the input's distinct vertex positions and its triangles' centroids, the atlas's

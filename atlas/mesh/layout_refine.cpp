@@ -1,5 +1,5 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5; Sander et al. 2001 (chart splitting).
-#include "atlas/layout_refine.h"
+#include "atlas/mesh/layout_refine.h"
 
 #include <algorithm>
 #include <cmath>

@@ -2,7 +2,7 @@
 // Based on: Garland, Willmott, Heckbert, "Hierarchical Face Clustering on Polygonal Surfaces",
 // I3D 2001 (dual-edge collapse, plane-fit quadric, compactness); Niski, Purnomo, Cohen, I3D
 // 2007, section 5 (per-cell then global clustering); Purnomo, Cohen, Kumar, SGP 2004 (patches).
-#include "atlas/charting.h"
+#include "atlas/mesh/charting.h"
 
 #include <algorithm>
 #include <atomic>
@@ -27,7 +27,7 @@
 #include <malloc.h>
 #endif
 
-#include "atlas/gridify.h"
+#include "atlas/mesh/gridify.h"
 
 namespace gimlod {
 namespace {

@@ -1,5 +1,5 @@
 // Mesh atlas stages 2-3: cluster a triangle mesh into a conforming chart layout of disk-shaped
-// patches with minSides..maxSides sides (atlas/chart_layout.h), ready for quadrangulation.
+// patches with minSides..maxSides sides (atlas/mesh/chart_layout.h), ready for quadrangulation.
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (per-cell then global clustering);
 // Garland, Willmott, Heckbert, "Hierarchical Face Clustering on Polygonal Surfaces", I3D 2001
 // (greedy dual-edge collapse on planarity plus compactness); Purnomo, Cohen, Kumar, "Seamless
@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "atlas/chart_layout.h"
-#include "atlas/mesh_io.h"
+#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/mesh_io.h"
 
 namespace gimlod {
 
@@ -104,7 +104,7 @@ struct ChartingStats {
 ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& options = {},
                              ChartingStats* stats = nullptr);
 
-// Clusters the cells written by gridify (atlas/gridify.h). Each cell is welded and clustered on
+// Clusters the cells written by gridify (atlas/mesh/gridify.h). Each cell is welded and clustered on
 // its own, in parallel, down to clusters of about a quarter of the final chart size; the global
 // stage then welds all cells together (recovering the boundaries between cells), keeps every
 // cell cluster that is still a disk, and merges on to the target as buildChartLayout does.
