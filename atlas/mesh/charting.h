@@ -117,13 +117,4 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
                                       const ChartingOptions& options = {},
                                       ChartingStats* stats = nullptr);
 
-// Checks a layout independently of how it was built; returns one line per violation (capped at
-// 100 lines), empty when valid: indices in range; every triangle in exactly one patch; each
-// patch a topological disk (V - E + F = 1 and one simple boundary loop); minSides..maxSides
-// sides; the sides chained, corner to corner, exactly along the patch's counter-clockwise
-// boundary loop; neighbour sides reciprocal with reversed vertex lists; open sides only on edges
-// with a single triangle in the whole mesh.
-std::vector<std::string> validateChartLayout(const ChartLayout& layout, uint32_t minSides = 3,
-                                             uint32_t maxSides = 8);
-
 }  // namespace gimlod
