@@ -5,13 +5,13 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
-#include <queue>
 #include <unordered_map>
 #include <utility>
 
 #include <glm/geometric.hpp>
 
 #include "atlas/mesh/charting_internal.h"
+#include "atlas/mesh/patch_topology.h"
 
 namespace gimlod::charting {
 namespace {
@@ -234,49 +234,59 @@ class LayoutBuilder {
     lverts_.clear();
   }
 
+  // shortestFrom's graph for shortestInteriorPaths: patch p's interior edges (a's excepted, so
+  // no path returns to it), with lengths in double, and the paths in the l* work arrays.
+  struct InteriorSearch {
+    LayoutBuilder& b;
+    uint32_t p, a, run;
+    void start(uint32_t source) {
+      const uint32_t l = b.local_[source];
+      b.ldist_[l] = 0;
+      b.lprev_[l] = kNone;
+      b.lvisit_[l] = run;
+    }
+    double distance(uint32_t v) const { return b.ldist_[b.local_[v]]; }
+    bool relax(uint32_t w, double d, uint32_t u) {
+      const uint32_t lw = b.local_[w];
+      if (b.lvisit_[lw] == run && !(d < b.ldist_[lw])) return false;
+      b.lvisit_[lw] = run;
+      b.ldist_[lw] = d;
+      b.lprev_[lw] = u;
+      return true;
+    }
+    template <class Fn>
+    void forNeighbours(uint32_t u, Fn&& fn) {
+      b.s_.facesAround(u, b.around_);
+      for (const uint32_t f : b.around_) {
+        if (b.label_[f] != p) continue;
+        for (uint32_t k = 0; k < 3; ++k) {
+          const uint32_t h = 3 * f + k;
+          uint32_t w;
+          if (b.s_.origin(h) == u) w = b.s_.dest(h);
+          else if (b.s_.dest(h) == u) w = b.s_.origin(h);
+          else continue;
+          const uint32_t t = b.s_.twin[h];
+          if (t == kNone || b.label_[t / 3] != p || w == a) continue;  // boundary edge
+          fn(w, b.length(h));
+        }
+      }
+    }
+  };
+
   // Shortest paths from boundary vertex a through the interior of patch p (interior vertices
   // and interior edges only) to every boundary vertex it reaches; returns those vertices.
   // ldist_ / lprev_ hold the paths for this run (lvisit_ == the returned run id).
   std::vector<uint32_t> shortestFrom(uint32_t p, uint32_t a, uint32_t& run) {
     run = ++lrun_;
-    using Item = std::pair<double, uint32_t>;
-    std::priority_queue<Item, std::vector<Item>, std::greater<Item>> q;
     std::vector<uint32_t> reached;
-    const uint32_t la = local_[a];
-    ldist_[la] = 0;
-    lprev_[la] = kNone;
-    lvisit_[la] = run;
-    q.push({0, a});
-    while (!q.empty()) {
-      const auto [d, u] = q.top();
-      q.pop();
-      if (d > ldist_[local_[u]]) continue;
+    InteriorSearch search{*this, p, a, run};
+    shortestInteriorPaths(search, a, [&](uint32_t u) {
       if (u != a && lpos_[local_[u]] != kNone) {  // boundary vertices end paths
         reached.push_back(u);
-        continue;
+        return PathStep::kEnd;
       }
-      s_.facesAround(u, around_);
-      for (const uint32_t f : around_) {
-        if (label_[f] != p) continue;
-        for (uint32_t k = 0; k < 3; ++k) {
-          const uint32_t h = 3 * f + k;
-          uint32_t w;
-          if (s_.origin(h) == u) w = s_.dest(h);
-          else if (s_.dest(h) == u) w = s_.origin(h);
-          else continue;
-          const uint32_t t = s_.twin[h];
-          if (t == kNone || label_[t / 3] != p || w == a) continue;  // boundary edge
-          const double nd = d + length(h);
-          const uint32_t lw = local_[w];
-          if (lvisit_[lw] != run || nd < ldist_[lw]) {
-            lvisit_[lw] = run;
-            ldist_[lw] = nd;
-            lprev_[lw] = u;
-            q.push({nd, w});
-          }
-        }
-      }
-    }
+      return PathStep::kThrough;
+    });
     return reached;
   }
 
