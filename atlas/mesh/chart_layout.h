@@ -1,6 +1,7 @@
 // The chart layout of a mesh atlas: the surface cut into disk-shaped patches with 3 to 8 sides,
 // each side shared with exactly one other patch (or open), as produced by clustering
-// (atlas/mesh/charting.h) and consumed by parameterization and resampling (atlas/mesh/patch_param.h).
+// (atlas/mesh/charting.h) and consumed by parameterization and resampling
+// (atlas/mesh/patch_param.h).
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5; Purnomo, Cohen, Kumar, "Seamless Texture
 // Atlases", SGP 2004 (patches, conforming quad layout, shared boundary sampling).
 #pragma once

@@ -104,10 +104,10 @@ struct ChartingStats {
 ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& options = {},
                              ChartingStats* stats = nullptr);
 
-// Clusters the cells written by gridify (atlas/mesh/gridify.h). Each cell is welded and clustered on
-// its own, in parallel, down to clusters of about a quarter of the final chart size; the global
-// stage then welds all cells together (recovering the boundaries between cells), keeps every
-// cell cluster that is still a disk, and merges on to the target as buildChartLayout does.
+// Clusters the cells written by gridify (atlas/mesh/gridify.h). Each cell is welded and clustered
+// on its own, in parallel, down to clusters of about a quarter of the final chart size; the global
+// stage then welds all cells together (recovering the boundaries between cells), keeps every cell
+// cluster that is still a disk, and merges on to the target as buildChartLayout does.
 // note: reduced out-of-core: the global stage holds all triangles (the ChartLayout returned
 // holds them anyway); only the per-cell clustering is cell-local. The global stage's peak is
 // about 2.3 times the returned layout (positions, triangles, half-edge twins, labels): 932 MiB

@@ -32,10 +32,10 @@ enum class PathStep : uint8_t {
 
 // Dijkstra from `source` over a patch's interior (the one shortest-path search of the cuts).
 // Graph provides:
-//   void start(uint32_t source);                    // distance 0, no predecessor
-//   double distance(uint32_t v);                    // of a vertex reached so far
-//   bool relax(uint32_t w, double d, uint32_t u);   // if w is new or d shorter: d and u stored, true
-//   void forNeighbours(uint32_t u, Fn fn);          // fn(w, edge length) over u's interior edges
+//   void start(uint32_t source);                   // distance 0, no predecessor
+//   double distance(uint32_t v);                   // of a vertex reached so far
+//   bool relax(uint32_t w, double d, uint32_t u);  // w new or d shorter: stores d and u, true
+//   void forNeighbours(uint32_t u, Fn fn);         // fn(w, edge length) over u's interior edges
 // visit(u) is called once for each settled vertex, in order of (distance, vertex), and says
 // whether paths go on through u. Ties keep the first predecessor found (strictly shorter
 // distances replace), so paths do not depend on the order in which neighbours are listed.
