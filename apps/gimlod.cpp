@@ -18,8 +18,8 @@
 
 #include "apps/bench_command.h"
 #include "apps/pipeline.h"
-#include "atlas/mesh_atlas.h"
 #include "apps/view_args.h"
+#include "atlas/mesh/mesh_atlas.h"
 #include "core/atlas_format.h"
 #include "runtime/adapt.h"
 #include "runtime/atlas_view.h"

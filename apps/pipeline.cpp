@@ -20,15 +20,15 @@
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
-#include "atlas/charting.h"
-#include "atlas/dem.h"
-#include "atlas/fidelity.h"
-#include "atlas/gridify.h"
-#include "atlas/mesh_atlas.h"
-#include "atlas/mesh_io.h"
-#include "atlas/layout_refine.h"
-#include "atlas/resample.h"
-#include "atlas/terrain_atlas.h"
+#include "atlas/fidelity/fidelity.h"
+#include "atlas/mesh/charting.h"
+#include "atlas/mesh/gridify.h"
+#include "atlas/mesh/layout_refine.h"
+#include "atlas/mesh/mesh_atlas.h"
+#include "atlas/mesh/mesh_io.h"
+#include "atlas/mesh/resample.h"
+#include "atlas/terrain/dem.h"
+#include "atlas/terrain/terrain_atlas.h"
 #include "core/atlas_format.h"
 #include "hierarchy/hierarchy.h"
 

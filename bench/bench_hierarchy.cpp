@@ -8,8 +8,8 @@
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 
-#include "atlas/dem.h"
-#include "atlas/terrain_atlas.h"
+#include "atlas/terrain/dem.h"
+#include "atlas/terrain/terrain_atlas.h"
 #include "hierarchy/hierarchy.h"
 
 using namespace gimlod;

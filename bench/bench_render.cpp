@@ -8,7 +8,7 @@
 #include <filesystem>
 
 #include "apps/pipeline.h"
-#include "atlas/dem.h"
+#include "atlas/terrain/dem.h"
 #include "runtime/atlas_view.h"
 #include "runtime/gl/egl_context.h"
 #include "runtime/gl/terrain_scene.h"

@@ -13,8 +13,8 @@
 #include <filesystem>
 #include <string>
 
-#include "atlas/charting.h"
-#include "atlas/gridify.h"
+#include "atlas/mesh/charting.h"
+#include "atlas/mesh/gridify.h"
 
 namespace {
 

@@ -28,7 +28,7 @@
 #include <string>
 #include <vector>
 
-#include "atlas/dem.h"
+#include "atlas/terrain/dem.h"
 
 namespace {
 

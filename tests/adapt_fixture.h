@@ -8,8 +8,8 @@
 #include <utility>
 #include <vector>
 
-#include "atlas/dem.h"
-#include "atlas/terrain_atlas.h"
+#include "atlas/terrain/dem.h"
+#include "atlas/terrain/terrain_atlas.h"
 #include "runtime/adapt.h"
 #include "runtime/camera.h"
 #include "tests/synthetic_terrain.h"

@@ -1,6 +1,6 @@
 // Hand-built chart layouts for the parameterization and resampling tests: flat grids, a cube (or
 // a sphere made from it) as six 4-sided patches, triangulated disks and hemisphere caps with n
-// sides. They depend on nothing but atlas/chart_layout.h.
+// sides. They depend on nothing but atlas/mesh/chart_layout.h.
 #pragma once
 
 #include <cmath>
@@ -12,7 +12,7 @@
 
 #include <glm/geometric.hpp>
 
-#include "atlas/chart_layout.h"
+#include "atlas/mesh/chart_layout.h"
 
 namespace gimlod::test {
 

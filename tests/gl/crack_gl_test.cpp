@@ -5,8 +5,8 @@
 #include <random>
 
 #include "apps/pipeline.h"
-#include "atlas/mesh_atlas.h"
-#include "atlas/resample.h"
+#include "atlas/mesh/mesh_atlas.h"
+#include "atlas/mesh/resample.h"
 #include "runtime/adapt.h"
 #include "runtime/adapt_dual_queue.h"
 #include "runtime/adapt_quad_queue.h"

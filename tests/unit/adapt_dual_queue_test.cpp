@@ -4,8 +4,8 @@
 #include <cmath>
 #include <random>
 
-#include "atlas/dem.h"
-#include "atlas/terrain_atlas.h"
+#include "atlas/terrain/dem.h"
+#include "atlas/terrain/terrain_atlas.h"
 #include "runtime/adapt_dual_queue.h"
 #include "runtime/baselines.h"
 #include "tests/adapt_fixture.h"

@@ -7,8 +7,8 @@
 #include <cstdio>
 #include <random>
 
-#include "atlas/dem.h"
-#include "atlas/terrain_atlas.h"
+#include "atlas/terrain/dem.h"
+#include "atlas/terrain/terrain_atlas.h"
 #include "runtime/adapt_quad_queue.h"
 #include "runtime/baselines.h"
 #include "runtime/camera.h"

@@ -13,7 +13,7 @@
 
 #include <gdal.h>
 
-#include "atlas/dem.h"
+#include "atlas/terrain/dem.h"
 #include "tests/test_util.h"
 
 namespace gimlod {

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "atlas/terrain_atlas.h"
+#include "atlas/terrain/terrain_atlas.h"
 #include "tests/test_util.h"
 
 namespace gimlod {

@@ -20,8 +20,8 @@
 #include <glm/vector_relational.hpp>
 #include <nlohmann/json.hpp>
 
-#include "atlas/mesh_atlas.h"
-#include "atlas/mesh_io.h"
+#include "atlas/mesh/mesh_atlas.h"
+#include "atlas/mesh/mesh_io.h"
 #include "tests/test_util.h"
 
 namespace gimlod {

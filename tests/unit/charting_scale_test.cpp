@@ -8,9 +8,9 @@
 #include <string>
 
 #include "apps/pipeline.h"
-#include "atlas/charting.h"
-#include "atlas/gridify.h"
-#include "atlas/mesh_atlas.h"
+#include "atlas/mesh/charting.h"
+#include "atlas/mesh/gridify.h"
+#include "atlas/mesh/mesh_atlas.h"
 #include "tests/test_util.h"
 
 namespace gimlod {

@@ -7,8 +7,8 @@
 #include <cstdio>
 #include <set>
 
-#include "atlas/charting.h"
-#include "atlas/gridify.h"
+#include "atlas/mesh/charting.h"
+#include "atlas/mesh/gridify.h"
 #include "tests/test_util.h"
 
 namespace gimlod {

@@ -10,10 +10,10 @@
 #include <tbb/task_arena.h>
 
 #include "apps/pipeline.h"
-#include "atlas/fidelity.h"
-#include "atlas/gridify.h"
-#include "atlas/mesh_atlas.h"
-#include "atlas/mesh_io.h"
+#include "atlas/fidelity/fidelity.h"
+#include "atlas/mesh/gridify.h"
+#include "atlas/mesh/mesh_atlas.h"
+#include "atlas/mesh/mesh_io.h"
 #include "tests/test_util.h"
 
 namespace gimlod {

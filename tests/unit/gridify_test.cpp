@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "atlas/gridify.h"
+#include "atlas/mesh/gridify.h"
 #include "tests/test_util.h"
 
 namespace gimlod {

@@ -3,8 +3,8 @@
 #include <cmath>
 #include <cstring>
 
-#include "atlas/dem.h"
-#include "atlas/terrain_atlas.h"
+#include "atlas/terrain/dem.h"
+#include "atlas/terrain/terrain_atlas.h"
 #include "hierarchy/hierarchy.h"
 #include "tests/synthetic_terrain.h"
 #include "tests/test_util.h"

@@ -14,11 +14,11 @@
 
 #include <glm/geometric.hpp>
 
-#include "atlas/charting.h"
-#include "atlas/mesh_io.h"
-#include "atlas/patch_param.h"
-#include "atlas/layout_refine.h"
-#include "atlas/mesh_atlas.h"
+#include "atlas/mesh/charting.h"
+#include "atlas/mesh/layout_refine.h"
+#include "atlas/mesh/mesh_atlas.h"
+#include "atlas/mesh/mesh_io.h"
+#include "atlas/mesh/patch_param.h"
 #include "tests/chart_layout_fixture.h"
 #include "tests/test_util.h"
 

@@ -5,8 +5,8 @@
 
 #include <map>
 
-#include "atlas/mesh_atlas.h"
-#include "atlas/mesh_io.h"
+#include "atlas/mesh/mesh_atlas.h"
+#include "atlas/mesh/mesh_io.h"
 #include "hierarchy/hierarchy.h"
 #include "tests/chart_layout_fixture.h"
 #include "tests/test_util.h"

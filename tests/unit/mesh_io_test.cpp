@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "atlas/mesh_io.h"
+#include "atlas/mesh/mesh_io.h"
 #include "tests/test_util.h"
 
 namespace gimlod {

@@ -10,7 +10,7 @@
 #include <numbers>
 #include <stdexcept>
 
-#include "atlas/patch_param.h"
+#include "atlas/mesh/patch_param.h"
 #include "tests/chart_layout_fixture.h"
 
 namespace gimlod {

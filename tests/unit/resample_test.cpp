@@ -15,8 +15,8 @@
 #include <stdexcept>
 #include <unordered_map>
 
-#include "atlas/mesh_io.h"
-#include "atlas/resample.h"
+#include "atlas/mesh/mesh_io.h"
+#include "atlas/mesh/resample.h"
 #include "tests/chart_layout_fixture.h"
 #include "tests/test_util.h"
 

@@ -24,8 +24,8 @@
 #include <numeric>
 #include <set>
 
-#include "atlas/mesh_atlas.h"
-#include "atlas/mesh_io.h"
+#include "atlas/mesh/mesh_atlas.h"
+#include "atlas/mesh/mesh_io.h"
 #include "core/atlas_format.h"
 #include "tests/scan_atlases.h"
 #include "tests/test_util.h"
@@ -351,7 +351,7 @@ TEST_P(ScanAtlasTest, Invariants) {
 }
 
 // Flipped texels: the build's own count (stats.json "resample" "flipped_texels", the image measure
-// of atlas/resample.h: texel quads that face away from every input face they sample), and the
+// of atlas/mesh/resample.h: texel quads that face away from every input face they sample), and the
 // parameterization's flipped triangles; both must be 0. The unrepaired layouts give tens per
 // scan (hundreds to thousands under earlier layouts); side ears, straightened sides and the flip
 // repair remove them all.

@@ -5,7 +5,7 @@
 // of Detail Using a Hierarchical Seamless Texture Atlas", I3D 2007, section 5 (and Lindstrom,
 // "Out-of-core simplification of large polygonal models", SIGGRAPH 2000, for the streamed
 // uniform-grid bucketing).
-#include "atlas/gridify.h"
+#include "atlas/mesh/gridify.h"
 
 #include <algorithm>
 #include <bit>

@@ -4,7 +4,7 @@
 // positive weights and a convex border give no flipped triangles), then optional stretch
 // reduction: iterative reweighting, which keeps the weights positive and so the embedding valid,
 // and local L2 stretch minimization, whose energy is infinite on a flipped triangle.
-// The quads of the conforming quad layout (atlas/resample.h) are kites of this polygon.
+// The quads of the conforming quad layout (atlas/mesh/resample.h) are kites of this polygon.
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (parameterize); Floater, "Mean value
 // coordinates", CAGD 2003; Sander, Snyder, Gortler, Hoppe, "Texture mapping progressive meshes",
 // SIGGRAPH 2001 (L2 / Linf stretch); Yoshizawa, Belyaev, Seidel, "A fast and simple
@@ -18,7 +18,7 @@
 
 #include <glm/vec2.hpp>
 
-#include "atlas/chart_layout.h"
+#include "atlas/mesh/chart_layout.h"
 
 namespace gimlod {
 

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "atlas/mesh_io.h"
+#include "atlas/mesh/mesh_io.h"
 
 namespace gimlod {
 

@@ -1,12 +1,14 @@
 // The chart layout of a mesh atlas: the surface cut into disk-shaped patches with 3 to 8 sides,
 // each side shared with exactly one other patch (or open), as produced by clustering
-// (atlas/charting.h) and consumed by parameterization and resampling (atlas/patch_param.h).
+// (atlas/mesh/charting.h) and consumed by parameterization and resampling
+// (atlas/mesh/patch_param.h).
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5; Purnomo, Cohen, Kumar, "Seamless Texture
 // Atlases", SGP 2004 (patches, conforming quad layout, shared boundary sampling).
 #pragma once
 
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include <glm/vec3.hpp>
@@ -39,5 +41,14 @@ struct ChartLayout {
   std::vector<std::array<uint32_t, 3>> triangles;   // counter-clockwise (outward normals)
   std::vector<Patch> patches;
 };
+
+// Checks a layout independently of how it was built; returns one line per violation (capped at
+// 100 lines), empty when valid: indices in range; every triangle in exactly one patch; each
+// patch a topological disk (V - E + F = 1 and one simple boundary loop); minSides..maxSides
+// sides; the sides chained, corner to corner, exactly along the patch's counter-clockwise
+// boundary loop; neighbour sides reciprocal with reversed vertex lists; open sides only on edges
+// with a single triangle in the whole mesh.
+std::vector<std::string> validateChartLayout(const ChartLayout& layout, uint32_t minSides = 3,
+                                             uint32_t maxSides = 8);
 
 }  // namespace gimlod

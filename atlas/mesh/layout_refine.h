@@ -13,8 +13,8 @@
 #include <cstdint>
 #include <functional>
 
-#include "atlas/chart_layout.h"
-#include "atlas/resample.h"
+#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/resample.h"
 
 namespace gimlod {
 

@@ -12,7 +12,7 @@
 
 #include <glm/vec3.hpp>
 
-#include "atlas/resample.h"
+#include "atlas/mesh/resample.h"
 #include "core/atlas_format.h"
 
 namespace gimlod {

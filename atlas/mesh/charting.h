@@ -1,5 +1,5 @@
 // Mesh atlas stages 2-3: cluster a triangle mesh into a conforming chart layout of disk-shaped
-// patches with minSides..maxSides sides (atlas/chart_layout.h), ready for quadrangulation.
+// patches with minSides..maxSides sides (atlas/mesh/chart_layout.h), ready for quadrangulation.
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (per-cell then global clustering);
 // Garland, Willmott, Heckbert, "Hierarchical Face Clustering on Polygonal Surfaces", I3D 2001
 // (greedy dual-edge collapse on planarity plus compactness); Purnomo, Cohen, Kumar, "Seamless
@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "atlas/chart_layout.h"
-#include "atlas/mesh_io.h"
+#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/mesh_io.h"
 
 namespace gimlod {
 
@@ -104,10 +104,10 @@ struct ChartingStats {
 ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& options = {},
                              ChartingStats* stats = nullptr);
 
-// Clusters the cells written by gridify (atlas/gridify.h). Each cell is welded and clustered on
-// its own, in parallel, down to clusters of about a quarter of the final chart size; the global
-// stage then welds all cells together (recovering the boundaries between cells), keeps every
-// cell cluster that is still a disk, and merges on to the target as buildChartLayout does.
+// Clusters the cells written by gridify (atlas/mesh/gridify.h). Each cell is welded and clustered
+// on its own, in parallel, down to clusters of about a quarter of the final chart size; the global
+// stage then welds all cells together (recovering the boundaries between cells), keeps every cell
+// cluster that is still a disk, and merges on to the target as buildChartLayout does.
 // note: reduced out-of-core: the global stage holds all triangles (the ChartLayout returned
 // holds them anyway); only the per-cell clustering is cell-local. The global stage's peak is
 // about 2.3 times the returned layout (positions, triangles, half-edge twins, labels): 932 MiB
@@ -116,14 +116,5 @@ ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& opt
 ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
                                       const ChartingOptions& options = {},
                                       ChartingStats* stats = nullptr);
-
-// Checks a layout independently of how it was built; returns one line per violation (capped at
-// 100 lines), empty when valid: indices in range; every triangle in exactly one patch; each
-// patch a topological disk (V - E + F = 1 and one simple boundary loop); minSides..maxSides
-// sides; the sides chained, corner to corner, exactly along the patch's counter-clockwise
-// boundary loop; neighbour sides reciprocal with reversed vertex lists; open sides only on edges
-// with a single triangle in the whole mesh.
-std::vector<std::string> validateChartLayout(const ChartLayout& layout, uint32_t minSides = 3,
-                                             uint32_t maxSides = 8);
 
 }  // namespace gimlod

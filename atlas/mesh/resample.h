@@ -1,12 +1,12 @@
 // Quadrangulation and resampling of a chart layout into seamless geometry images. Each n-sided
 // patch becomes n quad charts: quad i is the kite (corner i, midpoint of side i, patch centre,
-// midpoint of side i-1) of the patch's n-gon parameterization (atlas/patch_param.h), mapped from
-// the unit square bilinearly. Position, normal and colour are sampled into (2^k+1)^2 images.
+// midpoint of side i-1) of the patch's n-gon parameterization (atlas/mesh/patch_param.h), mapped
+// from the unit square bilinearly. Position, normal and colour are sampled into (2^k+1)^2 images.
 // Seams: every patch side is sampled once, by arc length along its 3D polyline in one canonical
 // direction, and written into both patches; side midpoints, corners and patch centres are single
 // values shared by every quad that meets there; the centre-to-midpoint edges inside a patch are
-// sampled once and written into both quads. So charts that share an edge hold bit-identical
-// samples there, and, since pyramid levels are 2^k+1 subsamplings, at every level.
+// sampled once and written into both quads. So charts that share an edge hold bit-identical samples
+// there, and, since pyramid levels are 2^k+1 subsamplings, at every level.
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (quadrangulate, resample); Purnomo, Cohen,
 // Kumar, "Seamless Texture Atlases", SGP 2004.
 #pragma once
@@ -20,8 +20,8 @@
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
 
-#include "atlas/chart_layout.h"
-#include "atlas/patch_param.h"
+#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/patch_param.h"
 #include "core/atlas_format.h"
 
 namespace gimlod {
@@ -148,7 +148,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
 
 // The layout's unit area-weighted vertex normals (zero where undefined), as resampleLayout
 // interpolates them. They depend on positions and triangles only, which layout refinement
-// (atlas/layout_refine.h) never changes, so a refinement loop computes them once.
+// (atlas/mesh/layout_refine.h) never changes, so a refinement loop computes them once.
 std::vector<glm::dvec3> layoutVertexNormals(const ChartLayout& layout);
 
 // What a resampling of a refined layout may take from earlier resamplings of the same surface.

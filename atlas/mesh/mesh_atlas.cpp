@@ -1,5 +1,5 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, sections 3 and 5.
-#include "atlas/mesh_atlas.h"
+#include "atlas/mesh/mesh_atlas.h"
 
 #include <algorithm>
 #include <bit>

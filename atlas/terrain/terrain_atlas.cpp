@@ -2,7 +2,7 @@
 // Based on: Niski, Purnomo, Cohen, "Multi-grained Level of Detail Using a Hierarchical Seamless
 // Texture Atlas", I3D 2007, sections 4 and 6 (height-field case: the terrain grid is cut into
 // (2^m+1)^2 charts sharing one row/column, and each chart is mip-mapped by subsampling).
-#include "atlas/terrain_atlas.h"
+#include "atlas/terrain/terrain_atlas.h"
 
 #include <algorithm>
 #include <atomic>

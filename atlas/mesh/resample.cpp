@@ -1,6 +1,6 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (quadrangulate, resample); Purnomo, Cohen,
 // Kumar, "Seamless Texture Atlases", SGP 2004 (shared boundary sampling).
-#include "atlas/resample.h"
+#include "atlas/mesh/resample.h"
 
 #include <fcntl.h>
 #include <unistd.h>

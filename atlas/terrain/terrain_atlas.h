@@ -9,7 +9,7 @@
 #include <functional>
 #include <string>
 
-#include "atlas/dem.h"
+#include "atlas/terrain/dem.h"
 #include "core/atlas_format.h"
 
 namespace gimlod {

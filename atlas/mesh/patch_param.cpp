@@ -1,6 +1,6 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (parameterize); Floater 2003 (mean-value
 // weights); Sander et al. 2001 (stretch); Yoshizawa, Belyaev, Seidel 2004 (stretch reweighting).
-#include "atlas/patch_param.h"
+#include "atlas/mesh/patch_param.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,5 +1,5 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5; Sander et al. 2001 (chart splitting).
-#include "atlas/layout_refine.h"
+#include "atlas/mesh/layout_refine.h"
 
 #include <algorithm>
 #include <cmath>
@@ -12,13 +12,10 @@
 #include <glm/geometric.hpp>
 #include <tbb/parallel_for.h>
 
+#include "atlas/mesh/patch_topology.h"
+
 namespace gimlod {
 namespace {
-
-uint64_t undirected(uint32_t a, uint32_t b) {
-  return a < b ? (uint64_t{a} << 32) | b : (uint64_t{b} << 32) | a;
-}
-uint64_t directed(uint32_t a, uint32_t b) { return (uint64_t{a} << 32) | b; }
 
 double sideLength(const ChartLayout& layout, const PatchSide& s) {
   double l = 0.0;
@@ -28,105 +25,11 @@ double sideLength(const ChartLayout& layout, const PatchSide& s) {
   return l;
 }
 
-// The patch's vertex graph restricted to what a cut may use: edges that are not on the patch
-// boundary, through vertices that are not on it (a cut only starts and ends at the boundary).
-// Flat sorted arrays (no node per entry): patches of tens of thousands of triangles are built
-// and searched thousands of times by straightening and the flip repair.
-struct PatchGraph {
-  std::vector<std::pair<uint32_t, uint32_t>> adjacency;  // (vertex, neighbour), sorted; global ids
-  std::unordered_set<uint32_t> onBoundary;
-  std::unordered_set<uint64_t> boundaryEdges;
-  std::vector<std::pair<uint64_t, uint32_t>> edgeTriangles;  // (directed edge, triangle), sorted
-
-  // The patch's triangle holding directed edge `key`, ~0u if none.
-  uint32_t triangleOf(uint64_t key) const {
-    const auto it = std::lower_bound(edgeTriangles.begin(), edgeTriangles.end(),
-                                     std::pair<uint64_t, uint32_t>{key, 0u});
-    return it != edgeTriangles.end() && it->first == key ? it->second : ~0u;
-  }
-  // The interior neighbours of vertex u, as a range of `adjacency`.
-  std::pair<const std::pair<uint32_t, uint32_t>*, const std::pair<uint32_t, uint32_t>*> neighboursOf(
-      uint32_t u) const {
-    const auto lo = std::lower_bound(adjacency.begin(), adjacency.end(), std::pair<uint32_t, uint32_t>{u, 0u});
-    auto hi = lo;
-    while (hi != adjacency.end() && hi->first == u) ++hi;
-    return {adjacency.data() + (lo - adjacency.begin()), adjacency.data() + (hi - adjacency.begin())};
-  }
-};
-
-PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch) {
-  PatchGraph g;
-  for (const PatchSide& s : patch.sides) {
-    for (size_t k = 0; k < s.vertices.size(); ++k) {
-      g.onBoundary.insert(s.vertices[k]);
-      if (k + 1 < s.vertices.size()) g.boundaryEdges.insert(undirected(s.vertices[k], s.vertices[k + 1]));
-    }
-  }
-  g.edgeTriangles.reserve(patch.triangles.size() * 3);
-  g.adjacency.reserve(patch.triangles.size() * 3);
-  for (uint32_t t : patch.triangles) {
-    const auto& tri = layout.triangles[t];
-    for (int c = 0; c < 3; ++c) {
-      const uint32_t a = tri[c], b = tri[(c + 1) % 3];
-      g.edgeTriangles.push_back({directed(a, b), t});
-      // Each interior edge is seen from both of its triangles: add it from one.
-      if (a < b && !g.boundaryEdges.contains(undirected(a, b))) {
-        g.adjacency.push_back({a, b});
-        g.adjacency.push_back({b, a});
-      }
-    }
-  }
-  std::sort(g.edgeTriangles.begin(), g.edgeTriangles.end());
-  std::sort(g.adjacency.begin(), g.adjacency.end());
-  return g;
-}
-
-// Shortest cut paths from `source`: distances and predecessors over interior vertices.
-struct Paths {
-  std::unordered_map<uint32_t, double> dist;
-  std::unordered_map<uint32_t, uint32_t> prev;
-};
-
-// Dijkstra from `source`. It may stop early, once `target` is settled, or once `boundaryEnds`
-// boundary vertices are: the paths to settled vertices are then final, and every other vertex
-// in `dist` is at least as far as any settled one (so the nearest ends are exactly known).
-Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t source,
-                   uint32_t target = ~0u, size_t boundaryEnds = std::numeric_limits<size_t>::max()) {
-  Paths r;
-  using Item = std::pair<double, uint32_t>;
-  std::priority_queue<Item, std::vector<Item>, std::greater<>> heap;
-  r.dist[source] = 0.0;
-  heap.push({0.0, source});
-  size_t ends = 0;
-  while (!heap.empty()) {
-    const auto [d, u] = heap.top();
-    heap.pop();
-    if (d > r.dist[u]) continue;
-    if (u == target) break;
-    if (u != source && g.onBoundary.contains(u)) {  // reached a boundary vertex: stop
-      if (++ends >= boundaryEnds) break;
-      continue;
-    }
-    const auto [first, last] = g.neighboursOf(u);
-    for (auto e = first; e != last; ++e) {
-      const uint32_t w = e->second;
-      const double nd = d + glm::length(layout.positions[w] - layout.positions[u]);
-      auto [dit, inserted] = r.dist.try_emplace(w, nd);
-      if (inserted || nd < dit->second) {
-        dit->second = nd;
-        r.prev[w] = u;
-        heap.push({nd, w});
-      }
-    }
-  }
-  return r;
-}
-
 // The triangles reached from the one inside `side`'s first edge, crossing no edge in `walls`
 // (undirected keys); empty if that triangle is not in the graph's patch.
 std::unordered_set<uint32_t> floodFrom(const ChartLayout& layout, const PatchGraph& g,
                                        const PatchSide& side, const std::unordered_set<uint64_t>& walls) {
-  const uint32_t seed = g.triangleOf(directed(side.vertices[0], side.vertices[1]));
+  const uint32_t seed = g.triangleOf(directedEdgeKey(side.vertices[0], side.vertices[1]));
   if (seed == ~0u) return {};
   std::unordered_set<uint32_t> part{seed};
   std::vector<uint32_t> stack{seed};
@@ -136,32 +39,12 @@ std::unordered_set<uint32_t> floodFrom(const ChartLayout& layout, const PatchGra
     const auto& tri = layout.triangles[t];
     for (int c = 0; c < 3; ++c) {
       const uint32_t a = tri[c], b = tri[(c + 1) % 3];
-      if (walls.contains(undirected(a, b))) continue;
-      const uint32_t o = g.triangleOf(directed(b, a));
+      if (walls.contains(undirectedEdgeKey(a, b))) continue;
+      const uint32_t o = g.triangleOf(directedEdgeKey(b, a));
       if (o != ~0u && part.insert(o).second) stack.push_back(o);
     }
   }
   return part;
-}
-
-// Euler characteristic V - E + F = 1 of a set of triangles (with connectivity, a disk).
-bool isDisk(const ChartLayout& layout, const std::vector<uint32_t>& tris) {
-  std::vector<uint32_t> verts;
-  std::vector<uint64_t> edges;
-  verts.reserve(tris.size() * 3);
-  edges.reserve(tris.size() * 3);
-  for (uint32_t t : tris) {
-    const auto& tri = layout.triangles[t];
-    for (int c = 0; c < 3; ++c) {
-      verts.push_back(tri[c]);
-      edges.push_back(undirected(tri[c], tri[(c + 1) % 3]));
-    }
-  }
-  std::sort(verts.begin(), verts.end());
-  std::sort(edges.begin(), edges.end());
-  const auto v = std::unique(verts.begin(), verts.end()) - verts.begin();
-  const auto e = std::unique(edges.begin(), edges.end()) - edges.begin();
-  return int64_t(v) - int64_t(e) + int64_t(tris.size()) == 1;
 }
 
 // Where an old side of a split patch goes: the part (patch index) and its side index there.
@@ -183,10 +66,10 @@ bool splitAlong(ChartLayout& layout, uint32_t p, uint32_t i, uint32_t j, const P
   for (size_t k = 0; k < path.size(); ++k) {
     if (!seenOnPath.insert(path[k]).second) return false;  // not simple
     if (k > 0 && k + 1 < path.size() && g.onBoundary.contains(path[k])) return false;
-    if (k + 1 < path.size() && g.boundaryEdges.contains(undirected(path[k], path[k + 1]))) return false;
+    if (k + 1 < path.size() && g.boundaryEdges.contains(undirectedEdgeKey(path[k], path[k + 1]))) return false;
   }
   std::unordered_set<uint64_t> cut;
-  for (size_t k = 0; k + 1 < path.size(); ++k) cut.insert(undirected(path[k], path[k + 1]));
+  for (size_t k = 0; k + 1 < path.size(); ++k) cut.insert(undirectedEdgeKey(path[k], path[k + 1]));
 
   // Triangles of the first part: flood from side i's first edge, never crossing the cut.
   const std::unordered_set<uint32_t> first = floodFrom(layout, g, patch.sides[i], cut);
@@ -194,7 +77,7 @@ bool splitAlong(ChartLayout& layout, uint32_t p, uint32_t i, uint32_t j, const P
   // Every side must border the part it goes to.
   for (uint32_t s = 0; s < n; ++s) {
     const PatchSide& side = patch.sides[s];
-    const uint32_t t = g.triangleOf(directed(side.vertices[0], side.vertices[1]));
+    const uint32_t t = g.triangleOf(directedEdgeKey(side.vertices[0], side.vertices[1]));
     if (t == ~0u) return false;
     const bool inFirst = (s + n - i) % n < d;
     if (first.contains(t) != inFirst) return false;
@@ -566,12 +449,12 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s) {
   if (!(paths.dist.at(b) < before * (1.0 - 1e-9))) return false;
   // p's part: flood from p's next side, never crossing the new side or any other side.
   std::unordered_set<uint64_t> walls(g.boundaryEdges.begin(), g.boundaryEdges.end());
-  for (size_t k = 0; k + 1 < path.size(); ++k) walls.insert(undirected(path[k], path[k + 1]));
+  for (size_t k = 0; k + 1 < path.size(); ++k) walls.insert(undirectedEdgeKey(path[k], path[k + 1]));
   const std::unordered_set<uint32_t> mine = floodFrom(layout, g, pp.sides[(s + 1) % pp.sides.size()], walls);
   if (mine.empty()) return false;
   // Every other side of p borders p's part, every other side of q does not.
   auto borders = [&](const PatchSide& x) {
-    const uint32_t t = g.triangleOf(directed(x.vertices[0], x.vertices[1]));
+    const uint32_t t = g.triangleOf(directedEdgeKey(x.vertices[0], x.vertices[1]));
     return t != ~0u && mine.contains(t);
   };
   for (uint32_t k = 0; k < pp.sides.size(); ++k) {
@@ -663,20 +546,20 @@ EarStep mendFirstSideEar(ChartLayout& layout, uint32_t p, bool mayCut) {
   std::unordered_map<uint64_t, uint32_t> inside;
   for (uint32_t t : patch.triangles) {
     const auto& tri = layout.triangles[t];
-    for (int c = 0; c < 3; ++c) inside[directed(tri[c], tri[(c + 1) % 3])] = t;
+    for (int c = 0; c < 3; ++c) inside[directedEdgeKey(tri[c], tri[(c + 1) % 3])] = t;
   }
   for (uint32_t s = 0; s < patch.sides.size(); ++s) {
     PatchSide& side = patch.sides[s];
     if (side.neighbourPatch == int32_t(p) || (side.neighbourPatch >= 0 && !side.reversed)) continue;
     const std::vector<uint32_t>& v = side.vertices;
     for (size_t k = 0; k + 2 < v.size(); ++k) {
-      const auto it = inside.find(directed(v[k], v[k + 1]));
+      const auto it = inside.find(directedEdgeKey(v[k], v[k + 1]));
       if (it == inside.end()) continue;
       const uint32_t t = it->second;
       const auto& tri = layout.triangles[t];
       if (tri[0] != v[k + 2] && tri[1] != v[k + 2] && tri[2] != v[k + 2]) continue;
       // The third edge must be inside the patch (else the patch is this one triangle).
-      if (!inside.contains(directed(v[k], v[k + 2]))) continue;
+      if (!inside.contains(directedEdgeKey(v[k], v[k + 2]))) continue;
       if (side.neighbourPatch < 0) {
         // No neighbour to take it: its middle vertex becomes a corner, so its vertices lie on
         // two edges of the polygon.

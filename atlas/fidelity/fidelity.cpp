@@ -1,4 +1,4 @@
-#include "atlas/fidelity.h"
+#include "atlas/fidelity/fidelity.h"
 
 #include <algorithm>
 #include <atomic>
@@ -19,7 +19,7 @@
 #include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
-#include "atlas/gridify.h"
+#include "atlas/mesh/gridify.h"
 #include "core/atlas_format.h"
 
 namespace gimlod {

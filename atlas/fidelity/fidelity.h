@@ -46,16 +46,16 @@ struct OutOfCoreFidelityOptions {
   uint32_t maxBlockCells = 0;         // at most this many grid cells per block side; 0 = as many as fit
 };
 
-// measureFidelity for a mesh held as gridify cell files (atlas/gridify.h) and the level-0 surface
-// of a geometry atlas on disk (as readAtlasSurface triangulates it), without holding either
+// measureFidelity for a mesh held as gridify cell files (atlas/mesh/gridify.h) and the level-0
+// surface of a geometry atlas on disk (as readAtlasSurface triangulates it), without holding either
 // surface: space is cut into blocks of grid cells, as large as fit in options.memoryBytes. A
 // block's samples (the input's distinct vertex positions and its triangles' centroids, the atlas's
-// distinct sample positions, each in the one block holding it) are measured against the
-// triangles of both surfaces within the margin around the block; a sample with nothing that close
-// is measured again in a second pass over the whole other surface. So the figures are exact, and
-// those of measureFidelity on the same surfaces (up to input vertices that share a position). Throws
-// InputError naming the file on a bad grid or atlas, std::invalid_argument when either surface
-// has no triangles or the options are absurd.
+// distinct sample positions, each in the one block holding it) are measured against the triangles
+// of both surfaces within the margin around the block; a sample with nothing that close is measured
+// again in a second pass over the whole other surface. So the figures are exact, and those of
+// measureFidelity on the same surfaces (up to input vertices that share a position). Throws
+// InputError naming the file on a bad grid or atlas, std::invalid_argument when either surface has
+// no triangles or the options are absurd.
 FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, const std::filesystem::path& atlasDir,
                                        const OutOfCoreFidelityOptions& options = {});
 

@@ -3,7 +3,7 @@
 // "The Lumigraph", SIGGRAPH 1996, section 3.4; Grossman and Dally, "Point Sample Rendering",
 // EGWR 1998), applied to DEM voids; degree-to-metre series from the WGS84 ellipsoid (as in
 // the USGS/NGA "length of a degree" formulas).
-#include "atlas/dem.h"
+#include "atlas/terrain/dem.h"
 
 #include <algorithm>
 #include <cmath>
