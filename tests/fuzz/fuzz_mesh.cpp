@@ -5,7 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "atlas/mesh_io.h"
+#include "atlas/mesh/mesh_io.h"
 #include "core/atlas_format.h"
 #include "tests/fuzz/fuzz_input.h"
 

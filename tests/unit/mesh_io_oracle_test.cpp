@@ -13,7 +13,7 @@
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
 
-#include "atlas/mesh_io.h"
+#include "atlas/mesh/mesh_io.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
