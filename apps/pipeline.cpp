@@ -226,7 +226,7 @@ nlohmann::json buildMeshAtlas(const BuildOptions& o) {
   if (o.threads)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.threads);
   const auto t0 = std::chrono::steady_clock::now();
-  nlohmann::json stats = {{"input", fs::absolute(o.input).string()}, {"kind", "geometry"}};
+  nlohmann::json stats = {{"input", fs::absolute(o.input).string()}, {"kind", atlasKindName(AtlasKind::Geometry)}};
   nlohmann::json stages = nlohmann::json::array();
   StageMeter meter(stages);
   meter.start();

@@ -117,7 +117,7 @@ void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& option
   validateTerrainAtlasOptions(options);
   const uint32_t cs = options.chartSize;
   const uint32_t cx = chartsAlong(dem.width, cs - 1), cy = chartsAlong(dem.height, cs - 1);
-  manifest.kind = "heightfield";
+  manifest.kind = AtlasKind::Heightfield;
   manifest.chartSize = cs;
   manifest.blockIntervals = options.blockIntervals;
   manifest.chartsX = cx;

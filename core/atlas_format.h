@@ -21,6 +21,12 @@ class InputError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// What an atlas's charts hold: heights over a terrain grid, or positions sampled from a mesh.
+enum class AtlasKind : uint8_t { Heightfield, Geometry };
+
+// The kind's name in the manifest: "heightfield" or "geometry".
+const char* atlasKindName(AtlasKind kind);
+
 inline constexpr uint32_t kAtlasFormatVersion = 1;
 inline constexpr const char* kManifestName = "atlas.json";
 
@@ -55,7 +61,7 @@ struct ChartInfo {
 // sample (gx, gy) are (gx * spacing[0], gy * spacing[1]); gy grows northwards.
 struct AtlasManifest {
   uint32_t version = kAtlasFormatVersion;
-  std::string kind = "heightfield";         // "heightfield" (1-channel), later "geometry"
+  AtlasKind kind = AtlasKind::Heightfield;  // "heightfield" (1-channel) or "geometry" on disk
   uint32_t chartSize = 513;                 // samples per chart side, 2^m + 1
   uint32_t blockIntervals = 64;             // block side in intervals (2^t); = max node res R
   uint32_t chartsX = 0, chartsY = 0;
