@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <random>
 #include <string>
 
@@ -53,6 +54,22 @@ uint64_t parseBytes(const std::string& option, const std::string& text) {
   else if (!suffix.empty()) throw InputError(option + " '" + text + "': unknown unit (use K, M or G)");
   if (!(v > 0.0) || !std::isfinite(v) || v * unit > 1e15) throw InputError(option + " '" + text + "' must be a positive size");
   return uint64_t(v * unit);
+}
+
+// The command-line flag that sets the library parameter `name` (InputError::message); the name
+// itself for one the command line does not set.
+std::string flagFor(std::string_view name) {
+  static const std::map<std::string_view, std::string_view> kFlags = {
+      {"chartSize", "--chart-size"},          {"blockIntervals", "--node-res"},
+      {"depth", "--depth"},                   {"nodeRes", "--node-res"},
+      {"minNodeRes", "--min-node-res"},       {"zScale", "--z-scale"},
+      {"subdataset", "--subdataset"},         {"threads", "--threads"},
+      {"charts", "--charts"},                 {"maxChartError", "--chart-error"},
+      {"flipRepairRounds", "--flip-repair-rounds"}, {"flipRepairBudget", "--flip-repair-budget"},
+      {"maxMemory", "--max-memory"},          {"measureFidelity", "--no-fidelity"},
+      {"output", "--output"}};
+  const auto it = kFlags.find(name);
+  return std::string(it == kFlags.end() ? name : it->second);
 }
 
 int runBuild(const BuildOptions& o) {
@@ -268,7 +285,7 @@ int main(int argc, char** argv) {
       return 0;
     }
   } catch (const InputError& e) {
-    spdlog::error("{}", e.what());
+    spdlog::error("{}", e.message(flagFor));
     return 2;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

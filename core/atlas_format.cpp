@@ -23,6 +23,48 @@ namespace gimlod {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
+namespace {
+
+// An option reference: kOptionOpen + parameter name + kOptionClose (control characters that no
+// message text holds).
+constexpr char kOptionOpen = '\x1e';
+constexpr char kOptionClose = '\x1f';
+
+std::string spellOptions(const std::string& marked, const std::function<std::string(std::string_view)>& spell) {
+  std::string out;
+  out.reserve(marked.size());
+  size_t i = 0;
+  while (i < marked.size()) {
+    const size_t open = marked.find(kOptionOpen, i);
+    const size_t close = open == std::string::npos ? open : marked.find(kOptionClose, open + 1);
+    if (close == std::string::npos) {
+      out.append(marked, i, std::string::npos);
+      break;
+    }
+    out.append(marked, i, open - i);
+    out += spell(std::string_view(marked).substr(open + 1, close - open - 1));
+    i = close + 1;
+  }
+  return out;
+}
+
+}  // namespace
+
+InputError::InputError(const std::string& message)
+    : std::runtime_error(spellOptions(message, [](std::string_view name) { return std::string(name); })),
+      marked_(message) {}
+
+std::string InputError::message(const std::function<std::string(std::string_view)>& spell) const {
+  return spellOptions(marked_, spell);
+}
+
+std::string optionRef(std::string_view name) {
+  std::string s(1, kOptionOpen);
+  s += name;
+  s += kOptionClose;
+  return s;
+}
+
 const char* atlasKindName(AtlasKind kind) {
   switch (kind) {
     case AtlasKind::Heightfield: return "heightfield";
