@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <random>
 #include <string>
 
@@ -17,10 +18,12 @@
 #include <spdlog/spdlog.h>
 
 #include "apps/bench_command.h"
-#include "apps/pipeline.h"
 #include "apps/view_args.h"
 #include "atlas/mesh/mesh_atlas.h"
 #include "core/atlas_format.h"
+#include "pipeline/build.h"
+#include "pipeline/build_report.h"
+#include "pipeline/input_kind.h"
 #include "runtime/adapt.h"
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
@@ -55,31 +58,29 @@ uint64_t parseBytes(const std::string& option, const std::string& text) {
   return uint64_t(v * unit);
 }
 
-int runBuild(const BuildOptions& o) {
-  const nlohmann::json st = buildAtlas(o);
-  std::cout << fmt::format(
-      "built {}\n  charts            {} ({}x{}, {} samples each side)\n  samples           {}\n"
-      "  voids filled      {}\n  hierarchy         {:.2f} M samples/s ({} threads, {:.3f} s)\n"
-      "  bytes on disk     {}\n  total             {:.2f} s\n",
-      o.output.string(), st["charts"].get<uint32_t>(), st["charts_grid"][0].get<uint32_t>(),
-      st["charts_grid"][1].get<uint32_t>(), st["chart_size"].get<uint32_t>(), st["samples"].get<uint64_t>(),
-      st["voids_filled"].get<uint64_t>(), st["hierarchy_samples_per_second"].get<double>() * 1e-6,
-      st["hierarchy_threads"].get<uint32_t>(), st["hierarchy_seconds"].get<double>(),
-      st["bytes_on_disk"].get<uint64_t>(), st["total_seconds"].get<double>());
-  if (st.contains("read") && st.contains("charting")) {
-    // Mesh input: what was repaired (README, "Mesh input").
-    const nlohmann::json& rd = st["read"];
-    const nlohmann::json& ch = st["charting"];
-    std::cout << fmt::format(
-        "  input             {} triangles read, {} kept; dropped: {} non-finite, {} degenerate, {} duplicate\n"
-        "  repaired          {} non-manifold edges, {} non-manifold vertices ({} vertex copies), "
-        "{} more triangles dropped after welding\n",
-        rd.value("triangles_read", uint64_t{0}), rd.value("triangles", uint64_t{0}),
-        rd.value("dropped_non_finite", uint64_t{0}), rd.value("dropped_degenerate", uint64_t{0}),
-        rd.value("dropped_duplicate", uint64_t{0}), ch.value("non_manifold_edges", uint64_t{0}),
-        ch.value("non_manifold_vertices", uint64_t{0}), ch.value("vertices_split", uint64_t{0}),
-        ch.value("dropped_degenerate", uint64_t{0}) + ch.value("dropped_duplicate", uint64_t{0}));
-  }
+// The command-line flag that sets the library parameter `name` (InputError::message); the name
+// itself for one the command line does not set.
+std::string flagFor(std::string_view name) {
+  static const std::map<std::string_view, std::string_view> kFlags = {
+      {"chartSize", "--chart-size"},          {"blockIntervals", "--node-res"},
+      {"depth", "--depth"},                   {"nodeRes", "--node-res"},
+      {"minNodeRes", "--min-node-res"},       {"zScale", "--z-scale"},
+      {"subdataset", "--subdataset"},         {"threads", "--threads"},
+      {"charts", "--charts"},                 {"maxChartError", "--chart-error"},
+      {"flipRepairRounds", "--flip-repair-rounds"}, {"flipRepairBudget", "--flip-repair-budget"},
+      {"maxMemory", "--max-memory"},          {"measureFidelity", "--no-fidelity"},
+      {"output", "--output"}};
+  const auto it = kFlags.find(name);
+  return std::string(it == kFlags.end() ? name : it->second);
+}
+
+int runBuild(const TerrainBuildOptions& o) {
+  std::cout << buildSummary(o.output, buildTerrainAtlas(o));
+  return 0;
+}
+
+int runBuild(const MeshBuildOptions& o) {
+  std::cout << buildSummary(o.output, buildMeshAtlas(o));
   return 0;
 }
 
@@ -182,36 +183,45 @@ int main(int argc, char** argv) {
   spdlog::set_default_logger(spdlog::stderr_color_mt("gimlod"));
   spdlog::set_pattern("[%l] %v");
 
-  BuildOptions b;
-  auto* build = app.add_subcommand("build", "Build an atlas (charts, pyramids, hierarchy) from a DEM");
-  build->add_option("input", b.input, "DEM: GeoTIFF, SRTM .hgt, USGS .dem, netCDF, ESRI ASCII, ...")->required();
-  build->add_option("-o,--output", b.output, "Atlas directory to create")->required();
+  // note: the shared options are parsed into `common`, the others into the struct of the input
+  // kind they apply to (told from the input's content when the command runs).
+  CommonBuildOptions common;
+  TerrainBuildOptions terrain;
+  MeshBuildOptions mesh;
+  auto* build =
+      app.add_subcommand("build", "Build an atlas (charts, pyramids, hierarchy) from a DEM or a mesh");
+  build
+      ->add_option("input", common.input,
+                   "DEM (GeoTIFF, SRTM .hgt, USGS .dem, netCDF, ESRI ASCII, ...) or mesh (PLY, OBJ, OFF, STL)")
+      ->required();
+  build->add_option("-o,--output", common.output, "Atlas directory to create")->required();
   auto* chartSizeOpt =
-      build->add_option("--chart-size", b.chartSize, "Chart side in samples, 2^m+1 (meshes: default 65)")
+      build->add_option("--chart-size", terrain.chartSize, "Chart side in samples, 2^m+1 (meshes: default 65)")
           ->capture_default_str();
-  build->add_option("--charts", b.charts, "Meshes: target patches (each becomes 3-8 quad charts); 0: --chart-error")
+  build->add_option("--charts", mesh.charts, "Meshes: target patches (each becomes 3-8 quad charts); 0: --chart-error")
       ->capture_default_str();
-  build->add_option("--chart-error", b.maxChartError,
+  build->add_option("--chart-error", mesh.maxChartError,
                     "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
       ->capture_default_str();
   std::string maxMemory = "4G";
   bool noFidelity = false;
   build->add_flag("--no-fidelity", noFidelity, "Meshes: skip the Hausdorff distance between the input and the atlas");
-  build->add_option("--flip-repair-rounds", b.flipRepairRounds,
+  build->add_option("--flip-repair-rounds", mesh.flipRepairRounds,
                     "Meshes: rounds of each flip repair (cutting patches whose charts have flipped texels); 0: none")
       ->capture_default_str();
-  build->add_option("--flip-repair-budget", b.flipRepairBudget,
+  build->add_option("--flip-repair-budget", mesh.flipRepairBudget,
                     "Meshes: the flip repair stops once it has parameterized this many times the surface's triangles "
                     "again (its time is about this many resamplings)")
       ->capture_default_str();
   build->add_option("--max-memory", maxMemory, "Meshes: memory cap (e.g. 2G, 512M); larger meshes go through cell files")
       ->capture_default_str();
-  build->add_option("--depth", b.depth, "Quadtree levels per chart")->capture_default_str();
-  build->add_option("--node-res", b.nodeRes, "Maximum node resolution R in intervals (power of two)")->capture_default_str();
-  build->add_option("--min-node-res", b.minNodeRes, "Minimum node resolution in intervals")->capture_default_str();
-  build->add_option("--z-scale", b.zScale, "Height multiplier")->capture_default_str();
-  build->add_option("--subdataset", b.subdataset, "netCDF variable / GDAL subdataset to read");
-  build->add_option("--threads", b.threads, "Worker threads (0: all cores)")->capture_default_str();
+  build->add_option("--depth", common.depth, "Quadtree levels per chart")->capture_default_str();
+  build->add_option("--node-res", common.nodeRes, "Maximum node resolution R in intervals (power of two)")
+      ->capture_default_str();
+  build->add_option("--min-node-res", common.minNodeRes, "Minimum node resolution in intervals")->capture_default_str();
+  build->add_option("--z-scale", terrain.zScale, "Height multiplier")->capture_default_str();
+  build->add_option("--subdataset", terrain.subdataset, "netCDF variable / GDAL subdataset to read");
+  build->add_option("--threads", common.threads, "Worker threads (0: all cores)")->capture_default_str();
 
   RenderArgs r;
   auto* render = app.add_subcommand("render", "Render an atlas headless (EGL) to PNG frames and stats.csv");
@@ -252,10 +262,17 @@ int main(int argc, char** argv) {
   }
   try {
     if (*build) {
-      if (chartSizeOpt->count() > 0) b.meshChartSize = b.chartSize;
-      b.maxMemory = parseBytes("--max-memory", maxMemory);
-      b.measureFidelity = !noFidelity;
-      return runBuild(b);
+      const uint64_t maxMemoryBytes = parseBytes("--max-memory", maxMemory);
+      common.spellOption = flagFor;
+      if (isMesh(detectInputKind(common.input))) {
+        static_cast<CommonBuildOptions&>(mesh) = common;
+        if (chartSizeOpt->count() > 0) mesh.chartSize = terrain.chartSize;
+        mesh.maxMemory = maxMemoryBytes;
+        mesh.measureFidelity = !noFidelity;
+        return runBuild(mesh);
+      }
+      static_cast<CommonBuildOptions&>(terrain) = common;
+      return runBuild(terrain);
     }
     if (*render) return runRender(r);
     if (*bench) return runBench(bn);
@@ -268,7 +285,7 @@ int main(int argc, char** argv) {
       return 0;
     }
   } catch (const InputError& e) {
-    spdlog::error("{}", e.what());
+    spdlog::error("{}", e.message(flagFor));
     return 2;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

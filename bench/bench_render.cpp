@@ -7,7 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "apps/pipeline.h"
+#include "pipeline/build.h"
 #include "atlas/terrain/dem.h"
 #include "runtime/atlas_view.h"
 #include "runtime/gl/egl_context.h"
@@ -21,7 +21,7 @@ int main(int argc, char** argv) {
   if (argc > 2) std::sscanf(argv[2], "%ux%u", &w, &h);
   const double tol = argc > 3 ? std::atof(argv[3]) : 1.0;
   const auto tmp = std::filesystem::temp_directory_path() / "gimlod_bench_render.atlas";
-  BuildOptions bo;
+  TerrainBuildOptions bo;
   bo.input = input;
   bo.output = tmp;
   buildAtlas(bo);

@@ -58,7 +58,7 @@ struct HeightGrid {
 
 HeightGrid readLevel0(const AtlasView& atlas) {
   const AtlasManifest& m = atlas.manifest;
-  if (m.kind == "geometry") return {};  // mesh atlases: see buildChartMesh
+  if (m.kind == AtlasKind::Geometry) return {};  // mesh atlases: see buildChartMesh
   const uint32_t n = m.chartSize, intervals = n - 1;
   HeightGrid g;
   g.width = m.samplesX;
@@ -197,7 +197,7 @@ Result runConfig(const AtlasView& atlas, const HeightGrid& grid, const Config& c
   // (a) The atlas's level-0 heights as one regular grid mesh of about meanTris triangles.
   std::vector<glm::vec3> positions;
   std::vector<uint32_t> indices;
-  if (atlas.manifest.kind == "geometry")
+  if (atlas.manifest.kind == AtlasKind::Geometry)
     buildChartMesh(atlas, uint64_t(r.meanTris), positions, indices);
   else
     buildGridMesh(grid, atlas.manifest.spacing, uint64_t(r.meanTris), positions, indices);

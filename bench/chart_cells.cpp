@@ -6,28 +6,14 @@
 //   chart_cells MESH_OR_GRID_DIR [--grid DIR] [--charts N] [--max-memory BYTES] [--threads N]
 //               [--check 1]
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
-#include <ctime>
-#include <chrono>
 #include <filesystem>
 #include <string>
 
 #include "atlas/mesh/charting.h"
 #include "atlas/mesh/gridify.h"
+#include "core/stage_meter.h"
 
 namespace {
-
-uint64_t peakRssBytes() {
-  std::FILE* f = std::fopen("/proc/self/status", "r");
-  if (!f) return 0;
-  char line[256];
-  uint64_t kb = 0;
-  while (std::fgets(line, sizeof line, f))
-    if (std::strncmp(line, "VmHWM:", 6) == 0) kb = std::strtoull(line + 6, nullptr, 10);
-  std::fclose(f);
-  return kb * 1024;
-}
 
 // FNV-1a over the layout's arrays.
 uint64_t digest(const gimlod::ChartLayout& l) {
@@ -83,28 +69,27 @@ int main(int argc, char** argv) {
     }
   }
   try {
-    using Clock = std::chrono::steady_clock;
+    gimlod::StageMeter meter;
     if (!fs::is_directory(input)) {
       resetPeak();
-      const auto t0 = Clock::now();
-      const std::clock_t c0 = std::clock();
+      meter.start();
       const gimlod::GridifyResult r = gimlod::gridify(input, grid, go);
-      std::printf("gridify   %8.2f s wall %8.2f s cpu  peak RSS %7.1f MiB  %llu cells, %llu triangles\n",
-                  std::chrono::duration<double>(Clock::now() - t0).count(), double(std::clock() - c0) / CLOCKS_PER_SEC,
-                  double(peakRssBytes()) / (1 << 20), (unsigned long long)r.cells, (unsigned long long)r.triangles);
+      const gimlod::StageTiming& s = meter.finish("gridify");
+      std::printf("gridify   %8.2f s wall %8.2f s cpu  peak RSS %7.1f MiB  %llu cells, %llu triangles\n", s.seconds,
+                  s.cpuSeconds, double(s.peakRssBytes) / (1 << 20), (unsigned long long)r.cells,
+                  (unsigned long long)r.triangles);
     } else {
       grid = input;
     }
     resetPeak();
-    const auto t0 = Clock::now();
-    const std::clock_t c0 = std::clock();
+    meter.start();
     gimlod::ChartingStats st;
     const gimlod::ChartLayout l = gimlod::buildChartLayoutFromCells(grid, co, &st);
+    const gimlod::StageTiming& s = meter.finish("charting");
     std::printf("charting  %8.2f s wall %8.2f s cpu  peak RSS %7.1f MiB  %zu patches (%u before fixing), "
                 "%u cells, %u cell clusters (%u dissolved)\n"
                 "          cells %.2f s, weld %.2f s, global cluster %.2f s, sides %.2f s; unfixed %u\n",
-                std::chrono::duration<double>(Clock::now() - t0).count(), double(std::clock() - c0) / CLOCKS_PER_SEC,
-                double(peakRssBytes()) / (1 << 20), l.patches.size(), st.chartsBeforeFixing, st.cells,
+                s.seconds, s.cpuSeconds, double(s.peakRssBytes) / (1 << 20), l.patches.size(), st.chartsBeforeFixing, st.cells,
                 st.cellClusters, st.cellClustersDissolved, st.cellSeconds, st.weldSeconds,
                 st.clusterSeconds - st.cellSeconds, st.sidesSeconds, st.patchesUnfixed);
     std::printf("          %llu triangles, %llu vertices (%llu split), %llu non-manifold edges, %llu open edges\n",

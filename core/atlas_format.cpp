@@ -25,6 +25,56 @@ using nlohmann::json;
 
 namespace {
 
+// An option reference: kOptionOpen + parameter name + kOptionClose (control characters that no
+// message text holds).
+constexpr char kOptionOpen = '\x1e';
+constexpr char kOptionClose = '\x1f';
+
+std::string spellOptions(const std::string& marked, const std::function<std::string(std::string_view)>& spell) {
+  std::string out;
+  out.reserve(marked.size());
+  size_t i = 0;
+  while (i < marked.size()) {
+    const size_t open = marked.find(kOptionOpen, i);
+    const size_t close = open == std::string::npos ? open : marked.find(kOptionClose, open + 1);
+    if (close == std::string::npos) {
+      out.append(marked, i, std::string::npos);
+      break;
+    }
+    out.append(marked, i, open - i);
+    out += spell(std::string_view(marked).substr(open + 1, close - open - 1));
+    i = close + 1;
+  }
+  return out;
+}
+
+}  // namespace
+
+InputError::InputError(const std::string& message)
+    : std::runtime_error(spellOptions(message, [](std::string_view name) { return std::string(name); })),
+      marked_(message) {}
+
+std::string InputError::message(const std::function<std::string(std::string_view)>& spell) const {
+  return spellOptions(marked_, spell);
+}
+
+std::string optionRef(std::string_view name) {
+  std::string s(1, kOptionOpen);
+  s += name;
+  s += kOptionClose;
+  return s;
+}
+
+const char* atlasKindName(AtlasKind kind) {
+  switch (kind) {
+    case AtlasKind::Heightfield: return "heightfield";
+    case AtlasKind::Geometry: return "geometry";
+  }
+  return "?";
+}
+
+namespace {
+
 constexpr const char* kFormatTag = "gimlod-atlas";
 constexpr char kChartMagic[4] = {'G', 'L', 'M', 'C'};
 constexpr uint32_t kChartFileVersion = 1;  // heights + normals
@@ -234,7 +284,7 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
   ojson j = {
       {"format", kFormatTag},
       {"version", m.version},
-      {"kind", m.kind},
+      {"kind", atlasKindName(m.kind)},
       {"chartSize", m.chartSize},
       {"blockIntervals", m.blockIntervals},
       {"chartsX", m.chartsX},
@@ -291,9 +341,10 @@ AtlasManifest readManifest(const fs::path& dir) {
     r.fail("unsupported atlas format version " + std::to_string(m.version) +
            " (this build reads version " + std::to_string(kAtlasFormatVersion) +
            "; rebuild the atlas)");
-  m.kind = r.string(r.field(j, "kind", ""), "kind");
-  if (m.kind != "heightfield" && m.kind != "geometry")
-    r.fail("unknown atlas kind '" + m.kind + "' (expected heightfield or geometry)");
+  const std::string kind = r.string(r.field(j, "kind", ""), "kind");
+  if (kind == atlasKindName(AtlasKind::Heightfield)) m.kind = AtlasKind::Heightfield;
+  else if (kind == atlasKindName(AtlasKind::Geometry)) m.kind = AtlasKind::Geometry;
+  else r.fail("unknown atlas kind '" + kind + "' (expected heightfield or geometry)");
   m.chartSize = r.u32(j, "chartSize");
   if (!isChartSizeValid(m.chartSize))
     r.fail("chartSize " + std::to_string(m.chartSize) + " is not 2^m+1 (3..65537)");
@@ -354,7 +405,7 @@ AtlasManifest readManifest(const fs::path& dir) {
   if (!cs.is_array()) r.fail("field 'charts' must be an array");
   if (cs.empty()) r.fail("inconsistent chart list: no charts");
   if (cs.size() > (size_t{1} << 24)) r.fail("inconsistent chart list: too many charts");
-  const bool grid = m.kind == "heightfield";
+  const bool grid = m.kind == AtlasKind::Heightfield;
   if (grid && static_cast<uint64_t>(m.chartsX) * m.chartsY != cs.size())
     r.fail("inconsistent chart list: " + std::to_string(cs.size()) + " charts but chartsX * chartsY = " +
            std::to_string(m.chartsX) + " * " + std::to_string(m.chartsY));

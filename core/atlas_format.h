@@ -6,9 +6,11 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <mutex>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <glm/vec3.hpp>
@@ -16,10 +18,27 @@
 namespace gimlod {
 
 // Error for bad user input or unreadable files; the message names the file and the problem.
+// A message may refer to options through optionRef(): what() names them by their parameter
+// names ("chartSize"), and a front end spells them its own way (a command-line flag) with
+// message(spell).
 class InputError : public std::runtime_error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit InputError(const std::string& message);
+  // The message with each option reference spelled as spell(parameter name).
+  std::string message(const std::function<std::string(std::string_view)>& spell) const;
+
+ private:
+  std::string marked_;  // the message with the option references marked
 };
+
+// A reference to the option parameter `name` (e.g. "chartSize") inside an InputError message.
+std::string optionRef(std::string_view name);
+
+// What an atlas's charts hold: heights over a terrain grid, or positions sampled from a mesh.
+enum class AtlasKind : uint8_t { Heightfield, Geometry };
+
+// The kind's name in the manifest: "heightfield" or "geometry".
+const char* atlasKindName(AtlasKind kind);
 
 inline constexpr uint32_t kAtlasFormatVersion = 1;
 inline constexpr const char* kManifestName = "atlas.json";
@@ -55,7 +74,7 @@ struct ChartInfo {
 // sample (gx, gy) are (gx * spacing[0], gy * spacing[1]); gy grows northwards.
 struct AtlasManifest {
   uint32_t version = kAtlasFormatVersion;
-  std::string kind = "heightfield";         // "heightfield" (1-channel), later "geometry"
+  AtlasKind kind = AtlasKind::Heightfield;  // "heightfield" (1-channel) or "geometry" on disk
   uint32_t chartSize = 513;                 // samples per chart side, 2^m + 1
   uint32_t blockIntervals = 64;             // block side in intervals (2^t); = max node res R
   uint32_t chartsX = 0, chartsY = 0;

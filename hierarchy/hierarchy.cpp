@@ -220,17 +220,17 @@ void putVec(std::vector<uint8_t>& b, const std::vector<T>& v) {
 }  // namespace
 
 void HierarchyParams::validate() const {
-  if (depth < 1) throw InputError("--depth must be at least 1");
+  if (depth < 1) throw InputError(optionRef("depth") + " must be at least 1");
   if (minNodeResLog2 > maxNodeResLog2)
     throw InputError("minimum node resolution exceeds the maximum node resolution");
   if (maxNodeResLog2 > intervalsLog2)
     throw InputError("maximum node resolution exceeds the chart resolution");
   if (depth - 1 + minNodeResLog2 > intervalsLog2)
-    throw InputError("--depth " + std::to_string(depth) + " is too deep for charts of " +
+    throw InputError(optionRef("depth") + " " + std::to_string(depth) + " is too deep for charts of " +
                      std::to_string((1u << intervalsLog2) + 1) + " samples: leaves would have fewer than 2^" +
                      std::to_string(minNodeResLog2) + " intervals (max depth " +
                      std::to_string(intervalsLog2 - minNodeResLog2 + 1) + ")");
-  if (depth > 12) throw InputError("--depth must be at most 12");
+  if (depth > 12) throw InputError(optionRef("depth") + " must be at most 12");
 }
 
 HierarchyParams hierarchyParams(const AtlasManifest& m) {

@@ -6,12 +6,12 @@ namespace gimlod {
 
 AtlasPages::AtlasPages(const std::filesystem::path& atlasDir, const AtlasManifest& manifest,
                        const HierarchyParams& params)
-    : params_(params), geometry_(manifest.kind == "geometry") {
+    : params_(params), geometry_(manifest.kind == AtlasKind::Geometry) {
   for (const ChartInfo& c : manifest.charts) {
     charts_.push_back(std::make_unique<ChartFileReader>(atlasDir / c.file));
     if (!charts_.back()->hasChannel(geometry_ ? kChannelPositions : kChannelHeights))
       throw InputError((atlasDir / c.file).string() + ": has no " + (geometry_ ? "positions" : "heights") +
-                       " for a " + manifest.kind + " atlas");
+                       " for a " + atlasKindName(manifest.kind) + " atlas");
   }
 }
 

@@ -14,7 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "apps/pipeline.h"
+#include "pipeline/build.h"
 #include "tests/test_util.h"
 
 namespace gimlod::test {
@@ -70,10 +70,10 @@ inline const BuiltScanAtlas& scanAtlas(const std::string& name, bool withFidelit
   static std::map<std::string, BuiltScanAtlas> built;
   auto it = built.find(name);
   if (it != built.end() && (it->second.fidelity || !withFidelity)) return it->second;
-  BuildOptions o;  // the defaults of `gimlod build` for meshes
+  MeshBuildOptions o;  // the defaults of `gimlod build` for meshes
   o.input = sharedScanPath(name);
   o.output = dir.path() / (name + (withFidelity ? "_fidelity" : "") + ".atlas");
-  o.meshChartSize = 65;
+  o.chartSize = 65;
   o.charts = 128;
   o.measureFidelity = withFidelity;
   BuiltScanAtlas b;

@@ -450,8 +450,9 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
     throw std::invalid_argument("measureFidelityOutOfCore: the margin must be in (0, 1) and the memory at least 16 MiB");
   const GridManifest gm = readGridManifest(gridDir);
   const AtlasManifest am = readManifest(atlasDir);
-  if (am.kind != "geometry")
-    throw InputError((atlasDir / kManifestName).string() + ": a " + am.kind + " atlas, not a geometry atlas");
+  if (am.kind != AtlasKind::Geometry)
+    throw InputError((atlasDir / kManifestName).string() + ": a " + atlasKindName(am.kind) +
+                     " atlas, not a geometry atlas");
   if (gm.triangles == 0 || gm.bounds.empty() || am.charts.empty())
     throw std::invalid_argument("measureFidelityOutOfCore: a surface has no triangles");
   FidelityStats st;

@@ -21,12 +21,10 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
-#if defined(__GLIBC__)
-#include <malloc.h>
-#endif
 
 #include "atlas/mesh/charting_internal.h"
 #include "atlas/mesh/gridify.h"
+#include "core/stage_meter.h"
 
 namespace gimlod {
 
@@ -41,15 +39,6 @@ constexpr double kTau = 0.01;
 // Weight of the normal-spread term 1 - |sum of area-weighted normals| / area (0 flat, 1 folded
 // shut); it keeps clusters from wrapping round thin parts, where the plane fit alone is small.
 constexpr double kNormalWeight = 4.0;
-
-// Hands freed heap memory back to the system. The cells' results are many small blocks spread
-// over the worker threads' malloc arenas; once they are freed, glibc keeps those pages (only
-// the top of an arena is trimmed), which would count against the memory cap in later stages.
-void releaseFreedMemory() {
-#if defined(__GLIBC__)
-  malloc_trim(0);
-#endif
-}
 
 // Smallest eigenvalue of a symmetric 3x3 matrix (xx xy xz yy yz zz), closed form.
 double minEigenvalue(const double c[6]) {

@@ -18,11 +18,10 @@
 
 #include <fcntl.h>
 #include <unistd.h>
-#if defined(__GLIBC__)
-#include <malloc.h>
-#endif
 
 #include <nlohmann/json.hpp>
+
+#include "core/stage_meter.h"
 
 namespace gimlod {
 
@@ -379,9 +378,7 @@ GridifyResult gridify(const fs::path& mesh, const fs::path& outDir, const Gridif
   GridifyResult result = gridifyStaged(mesh, outDir, options);
   // The cell buffers were many blocks of up to a few MiB in the heap; glibc keeps such freed
   // pages unless asked, and the next stage would start with them still counted in its RSS.
-#if defined(__GLIBC__)
-  malloc_trim(0);
-#endif
+  releaseFreedMemory();
   return result;
 }
 

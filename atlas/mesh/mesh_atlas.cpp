@@ -55,7 +55,7 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
   std::error_code ec;
   fs::create_directories(dir / "charts", ec);
   if (ec) throw InputError((dir / "charts").string() + ": cannot create directory (" + ec.message() + ")");
-  m.kind = "geometry";
+  m.kind = AtlasKind::Geometry;
   m.chartSize = set.chartSize;
   m.blockIntervals = blockIntervals;
   m.chartsX = uint32_t(set.charts.size());
@@ -105,8 +105,8 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
 
 AtlasSurface readAtlasSurface(const fs::path& atlasDir, uint32_t level) {
   const AtlasManifest m = readManifest(atlasDir);
-  if (m.kind != "geometry")
-    throw InputError((atlasDir / kManifestName).string() + ": a " + m.kind +
+  if (m.kind != AtlasKind::Geometry)
+    throw InputError((atlasDir / kManifestName).string() + ": a " + atlasKindName(m.kind) +
                      " atlas; export reads geometry (mesh) atlases");
   if (level >= m.pyramidLevels())
     throw InputError((atlasDir / kManifestName).string() + ": level " + std::to_string(level) +

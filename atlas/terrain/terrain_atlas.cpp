@@ -20,14 +20,15 @@ namespace fs = std::filesystem;
 void validateTerrainAtlasOptions(const TerrainAtlasOptions& o) {
   const uint32_t cs = o.chartSize;
   if (cs < 9 || cs > 8193 || !std::has_single_bit(cs - 1))
-    throw InputError("--chart-size " + std::to_string(cs) +
+    throw InputError(optionRef("chartSize") + " " + std::to_string(cs) +
                      " is not 2^m+1 between 9 and 8193 (e.g. 129, 257, 513, 1025)");
   const uint32_t b = o.blockIntervals;
   if (b < 4 || b > 1024 || !std::has_single_bit(b))
-    throw InputError("--block-intervals " + std::to_string(b) +
+    throw InputError(optionRef("blockIntervals") + " " + std::to_string(b) +
                      " is not a power of two between 4 and 1024 (e.g. 32, 64, 128)");
   if (b > cs - 1)
-    throw InputError("--block-intervals " + std::to_string(b) + " exceeds --chart-size - 1 (" +
+    throw InputError(optionRef("blockIntervals") + " " + std::to_string(b) + " exceeds " + optionRef("chartSize") +
+                     " - 1 (" +
                      std::to_string(cs - 1) + ")");
 }
 
@@ -117,7 +118,7 @@ void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& option
   validateTerrainAtlasOptions(options);
   const uint32_t cs = options.chartSize;
   const uint32_t cx = chartsAlong(dem.width, cs - 1), cy = chartsAlong(dem.height, cs - 1);
-  manifest.kind = "heightfield";
+  manifest.kind = AtlasKind::Heightfield;
   manifest.chartSize = cs;
   manifest.blockIntervals = options.blockIntervals;
   manifest.chartsX = cx;

@@ -28,7 +28,8 @@ struct TerrainAtlasStats {
 };
 
 // Throws InputError if chartSize is not 2^m+1 in 9..8193, or blockIntervals is not a power of
-// two in 4..1024 and <= chartSize-1. Messages use the command-line flag names.
+// two in 4..1024 and <= chartSize-1. Messages name the parameters (optionRef: "chartSize",
+// "blockIntervals").
 void validateTerrainAtlasOptions(const TerrainAtlasOptions& options);
 
 // Relative path of chart `id`'s file inside the atlas directory: "charts/chart_0007.bin".

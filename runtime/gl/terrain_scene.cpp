@@ -16,7 +16,7 @@ double msSince(std::chrono::steady_clock::time_point t0) {
 
 RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o) {
   RendererSetup s;
-  s.geometry = a.manifest.kind == "geometry";
+  s.geometry = a.manifest.kind == AtlasKind::Geometry;
   s.width = o.width;
   s.height = o.height;
   s.background = o.background;

@@ -3,7 +3,7 @@
 // desired cut. Cracks are measured on the real vertex shader (transform feedback).
 #include <gtest/gtest.h>
 
-#include "apps/pipeline.h"
+#include "pipeline/build.h"
 #include "runtime/adapt.h"
 #include "runtime/atlas_view.h"
 #include "runtime/gl/egl_context.h"
@@ -22,7 +22,7 @@ class AsyncLoadingTest : public ::testing::Test {
   static std::unique_ptr<gl::EglContext> context_;
 
   AtlasView build() {
-    BuildOptions o;
+    TerrainBuildOptions o;
     o.input = test::repoData() / "terrain/mt_rainier_90m.tif";
     o.output = dir_.path() / "atlas";
     o.chartSize = 129;

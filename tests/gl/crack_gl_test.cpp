@@ -4,7 +4,7 @@
 
 #include <random>
 
-#include "apps/pipeline.h"
+#include "pipeline/build.h"
 #include "atlas/mesh/mesh_atlas.h"
 #include "atlas/mesh/resample.h"
 #include "runtime/adapt.h"
@@ -30,7 +30,7 @@ class CrackTest : public ::testing::Test {
   // Builds an atlas of `dem` into the temp dir and opens it.
   AtlasView build(const std::filesystem::path& dem, uint32_t chartSize, uint32_t depth, uint32_t nodeRes,
                   uint32_t minNodeRes) {
-    BuildOptions o;
+    TerrainBuildOptions o;
     o.input = dem;
     o.output = dir_.path() / ("atlas_" + dem.stem().string() + "_" + std::to_string(chartSize));
     o.chartSize = chartSize;

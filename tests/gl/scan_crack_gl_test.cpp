@@ -53,7 +53,7 @@ TEST_P(ScanCrackTest, DualQueueCutsAlongAPathHaveNoCracks) {
   ASSERT_NO_THROW(built = &test::scanAtlas(name, false)) << "gimlod build " << test::sharedScanPath(name);
   const AtlasView atlas = openAtlas(built->dir);
   const Hierarchy& h = atlas.hierarchy;
-  ASSERT_EQ(atlas.manifest.kind, "geometry");
+  ASSERT_EQ(atlas.manifest.kind, AtlasKind::Geometry);
   // Small frames: CI renders on llvmpipe. The capture costs the cut's vertices, not the pixels.
   gl::SceneOptions so;
   so.width = 128;

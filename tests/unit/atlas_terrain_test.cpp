@@ -40,12 +40,12 @@ TEST(AtlasTerrain, OptionValidation) {
   EXPECT_NO_THROW(validateTerrainAtlasOptions({513, 64}));
   EXPECT_NO_THROW(validateTerrainAtlasOptions({9, 8}));
   EXPECT_NO_THROW(validateTerrainAtlasOptions({8193, 1024}));
-  expectOptionError(500, 64, "--chart-size 500 is not 2^m+1");
-  expectOptionError(5, 4, "--chart-size 5");
-  expectOptionError(16385, 64, "--chart-size 16385");
-  expectOptionError(513, 48, "--block-intervals 48");
-  expectOptionError(513, 2, "--block-intervals 2");
-  expectOptionError(513, 2048, "--block-intervals 2048");
+  expectOptionError(500, 64, "chartSize 500 is not 2^m+1");
+  expectOptionError(5, 4, "chartSize 5");
+  expectOptionError(16385, 64, "chartSize 16385");
+  expectOptionError(513, 48, "blockIntervals 48");
+  expectOptionError(513, 2, "blockIntervals 2");
+  expectOptionError(513, 2048, "blockIntervals 2048");
   expectOptionError(17, 32, "exceeds");
   EXPECT_EQ(chartFileName(7), "charts/chart_0007.bin");
   EXPECT_EQ(chartFileName(12345), "charts/chart_12345.bin");

@@ -7,7 +7,7 @@
 #include <set>
 #include <string>
 
-#include "apps/pipeline.h"
+#include "pipeline/build.h"
 #include "atlas/mesh/charting.h"
 #include "atlas/mesh/gridify.h"
 #include "atlas/mesh/mesh_atlas.h"
@@ -95,11 +95,11 @@ TEST(ChartingScale, MeshBuildReportsEveryStage) {
   test::TempDir dir("charting_scale");
   const IndexedMesh m = uvSphere(48, 30);
   writePly(dir.path() / "sphere.ply", m.positions, m.triangles);
-  BuildOptions b;
+  MeshBuildOptions b;
   b.input = dir.path() / "sphere.ply";
   b.output = dir.path() / "sphere.atlas";
   b.charts = 12;
-  b.meshChartSize = 17;
+  b.chartSize = 17;
   b.measureFidelity = false;
   const nlohmann::json stats = buildAtlas(b);
   ASSERT_TRUE(stats.contains("stages"));

@@ -9,7 +9,7 @@
 #include <glm/geometric.hpp>
 #include <tbb/task_arena.h>
 
-#include "apps/pipeline.h"
+#include "pipeline/build.h"
 #include "atlas/fidelity/fidelity.h"
 #include "atlas/mesh/gridify.h"
 #include "atlas/mesh/mesh_atlas.h"
@@ -165,10 +165,10 @@ class FidelityOutOfCore : public ::testing::Test {
     // The shipped bunny, built in memory at a small chart size (fast), and the same scan in cells
     // of about 3000 triangles (some 25 cells).
     const std::filesystem::path scan = test::repoData() / "meshes" / "bun_zipper.ply";
-    BuildOptions o;
+    MeshBuildOptions o;
     o.input = scan;
     o.output = atlas();
-    o.meshChartSize = 17;
+    o.chartSize = 17;
     o.charts = 64;
     o.measureFidelity = false;
     buildAtlas(o);

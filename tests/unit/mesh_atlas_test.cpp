@@ -33,7 +33,7 @@ TEST(MeshAtlas, ClosedSurfaceStaysWatertightAtEveryLevel) {
   EXPECT_NEAR(w.bounds[5], 1.f, 2e-3f);  // the triangulated sphere lies just inside radius 1
   writeManifest(dir, m);
   const AtlasManifest back = readManifest(dir);  // checks that the neighbours are symmetric
-  EXPECT_EQ(back.kind, "geometry");
+  EXPECT_EQ(back.kind, AtlasKind::Geometry);
   ASSERT_EQ(back.charts.size(), 24u);
   for (uint32_t level = 0; level < back.pyramidLevels(); ++level) {
     const AtlasSurface s = readAtlasSurface(dir, level);

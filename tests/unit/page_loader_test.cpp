@@ -9,7 +9,7 @@
 
 #include <memory>
 
-#include "apps/pipeline.h"
+#include "pipeline/build.h"
 #include "runtime/atlas_view.h"
 #include "runtime/page_loader.h"
 #include "tests/test_util.h"
@@ -21,7 +21,7 @@ class PageLoaderTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = std::make_unique<test::TempDir>("gimlod-loader");
-    BuildOptions o;
+    TerrainBuildOptions o;
     o.input = test::repoData() / "terrain/mt_rainier_90m.tif";
     o.output = dir_->path() / "atlas";
     o.chartSize = 129;

@@ -178,7 +178,7 @@ class ScanAtlasTest : public ::testing::TestWithParam<std::string> {};
 // Seams and corners, read back from the chart files the manifest lists.
 void checkSeams(const fs::path& dir) {
   const AtlasManifest m = readManifest(dir);  // also checks that neighbour links are symmetric
-  ASSERT_EQ(m.kind, "geometry");
+  ASSERT_EQ(m.kind, AtlasKind::Geometry);
   const uint32_t charts = uint32_t(m.charts.size());
   ASSERT_GT(charts, 0u);
   std::vector<std::unique_ptr<ChartFileReader>> readers;

@@ -1,0 +1,227 @@
+#include "pipeline/build_report.h"
+
+#include <fmt/format.h>
+
+#include "core/atlas_format.h"
+
+namespace gimlod {
+namespace {
+
+// What the mesh reader read, repaired and warned about (README, "Mesh input").
+nlohmann::json readJson(const MeshReadStats& rs) {
+  return {{"format", rs.info.formatName},
+          {"vertices", rs.vertices},
+          {"faces", rs.faces},
+          {"triangles_read", rs.trianglesRead},
+          {"triangles", rs.trianglesOut},
+          {"non_finite_vertices", rs.nonFiniteVertices},
+          {"dropped_non_finite", rs.droppedNonFinite},
+          {"dropped_degenerate", rs.droppedDegenerate},
+          {"dropped_duplicate", rs.droppedDuplicate},
+          {"duplicate_check_complete", rs.duplicateCheckComplete},
+          {"short_faces", rs.shortFaces},
+          {"polygons_fanned", rs.polygonsFanned},
+          {"strips", rs.strips},
+          {"colours", rs.hasColours},
+          {"warnings", rs.warnings},
+          {"seconds", rs.seconds}};
+}
+
+nlohmann::json gridifyJson(const GridifyResult& gr) {
+  return {{"cells", gr.cells},
+          {"triangles", gr.triangles},
+          {"max_cell_triangles", gr.maxCellTriangles},
+          {"peak_buffered_bytes", gr.peakBufferedBytes},
+          {"peak_tracked_bytes", gr.peakTrackedBytes},
+          {"bytes_written", gr.bytesWritten},
+          {"seconds", gr.seconds}};
+}
+
+nlohmann::json chartingJson(const ChartingStats& cst, bool outOfCore) {
+  return {{"triangles", cst.outputTriangles},     {"patches", cst.charts},
+          {"dropped_degenerate", cst.droppedDegenerate}, {"dropped_duplicate", cst.droppedDuplicate},
+          {"vertices_welded", cst.verticesWelded}, {"non_manifold_edges", cst.nonManifoldEdges},
+          {"non_manifold_vertices", cst.nonManifoldVertices}, {"vertices_split", cst.verticesSplit},
+          {"boundary_edges", cst.boundaryEdges},   {"corners_inserted", cst.cornersInserted},
+          {"patches_split", cst.patchesSplit},     {"max_planarity_error", cst.maxPlanarityError},
+          {"sides_histogram", cst.sidesHistogram}, {"out_of_core", outOfCore},
+          {"cells", cst.cells},                    {"cell_clusters", cst.cellClusters},
+          {"cell_clusters_dissolved", cst.cellClustersDissolved},
+          {"charts_before_fixing", cst.chartsBeforeFixing},
+          {"merges_refused_not_disk", cst.mergesRefusedNotDisk},
+          {"patches_unfixed", cst.patchesUnfixed},
+          {"weld_seconds", cst.weldSeconds},       {"cluster_seconds", cst.clusterSeconds},
+          {"cell_seconds", cst.cellSeconds},
+          {"sides_seconds", cst.sidesSeconds},     {"peak_bytes_estimate", cst.peakBytesEstimate},
+          {"seconds", cst.seconds}};
+}
+
+nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) {
+  const FlipRepairStats& flips = rs.flips;
+  nlohmann::json j = {{"charts", rs.charts},
+                      {"param_stretch_l2", rs.param.stretchL2},
+                      {"param_stretch_linf", rs.param.stretchLinf},
+                      {"param_flipped", rs.param.flippedTriangles},
+                      {"param_degenerate", rs.param.degenerateTriangles},
+                      {"image_stretch_l2", rs.image.stretchL2},
+                      {"image_stretch_linf", rs.image.stretchLinf},
+                      {"flipped_texels", rs.image.flippedTexels},
+                      {"texels_against_vertex_normals", rs.image.texelsAgainstNormals},
+                      {"sides_straightened", rs.sidesStraightened},
+                      {"side_ears_mended", rs.sideEarsMended},
+                      {"flipped_texels_before_splits", flips.flippedTexelsFirst},
+                      {"patches_split_for_flips", flips.patchesSplit},
+                      {"patches_unsplittable", flips.patchesUnsplit},
+                      {"split_rounds", flips.rounds},
+                      {"flip_repair_stopped_for_memory", flips.stoppedForMemory},
+                      {"flip_repair_stopped_for_work", flips.stoppedForWork},
+                      {"flip_repair_work", rs.repairWork},
+                      {"flip_repair_triangles_whole_rounds", flips.trianglesWholeRounds},
+                      {"flip_repair_triangles_trials", flips.trianglesTrials},
+                      {"patches", rs.patches},
+                      {"degenerate_texels", rs.image.degenerateTexels}};
+  // Per chart: its patch and quad, stretch of the sampled image, flipped and degenerate texels.
+  nlohmann::json perChart = nlohmann::json::array();
+  for (const ChartQuality& c : rs.perChart) {
+    perChart.push_back({{"patch", c.patch}, {"quad", c.quad}, {"stretch_l2", c.quality.stretchL2},
+                        {"stretch_linf", c.quality.stretchLinf}, {"flipped_texels", c.quality.flippedTexels},
+                        {"texels_against_vertex_normals", c.quality.texelsAgainstNormals},
+                        {"degenerate_texels", c.quality.degenerateTexels}});
+  }
+  j["per_chart"] = std::move(perChart);
+  j["spilled_bytes"] = spilledBytes;
+  return j;
+}
+
+nlohmann::json fidelityJson(const FidelityStats& f, bool outOfCore) {
+  nlohmann::json j = {{"hausdorff_percent_of_diagonal", f.hausdorffPercent},
+                      {"mean_percent_of_diagonal", f.meanPercent},
+                      {"max_atlas_to_mesh", f.maxAtlasToMesh},
+                      {"max_mesh_to_atlas", f.maxMeshToAtlas},
+                      {"diagonal", f.diagonal},
+                      {"atlas_samples", f.atlasSamples},
+                      {"mesh_samples", f.meshSamples},
+                      {"out_of_core", outOfCore},
+                      {"seconds", f.seconds}};
+  if (outOfCore) {
+    j["blocks"] = f.blocks;
+    j["samples_beyond_margin"] = f.samplesBeyondMargin;
+    j["exact"] = f.exact;
+  }
+  return j;
+}
+
+nlohmann::json stagesJson(const std::vector<StageTiming>& stages) {
+  nlohmann::json j = nlohmann::json::array();
+  for (const StageTiming& s : stages)
+    j.push_back({{"stage", s.stage}, {"seconds", s.seconds}, {"cpu_seconds", s.cpuSeconds},
+                 {"peak_rss_bytes", s.peakRssBytes}});
+  return j;
+}
+
+// The lines every build prints.
+std::string summaryLines(const std::filesystem::path& output, uint32_t charts, uint32_t chartsX, uint32_t chartsY,
+                         uint32_t chartSize, uint64_t samples, uint64_t voidsFilled, const HierarchyStats& hs,
+                         uint64_t bytesOnDisk, double totalSeconds) {
+  return fmt::format(
+      "built {}\n  charts            {} ({}x{}, {} samples each side)\n  samples           {}\n"
+      "  voids filled      {}\n  hierarchy         {:.2f} M samples/s ({} threads, {:.3f} s)\n"
+      "  bytes on disk     {}\n  total             {:.2f} s\n",
+      output.string(), charts, chartsX, chartsY, chartSize, samples, voidsFilled, hs.samplesPerSecond * 1e-6,
+      hs.threads, hs.seconds, bytesOnDisk, totalSeconds);
+}
+
+uint64_t meshSamples(const MeshWriteStats& w) { return uint64_t(w.charts) * w.chartSize * w.chartSize; }
+
+}  // namespace
+
+nlohmann::json statsJson(const TerrainBuildStats& s) {
+  const TerrainWriteStats& w = s.write;
+  const TerrainAtlasStats& cs = w.charts;
+  nlohmann::json stats = {
+      {"input", s.input},
+      {"charts", cs.charts},
+      {"charts_grid", {w.chartsX, w.chartsY}},
+      {"chart_size", w.chartSize},
+      {"samples", cs.samples},
+      {"stored_samples", cs.storedSamples},
+      {"voids_filled", s.read.voidsFilled},
+      {"void_fill_method", s.read.voidFillMethod},
+      {"spacing_m", s.read.spacing},
+      {"height_range_m", s.read.heightRange},
+      {"hierarchy_depth", w.depth},
+      {"hierarchy_nodes", uint64_t(nodesPerChart(w.depth)) * cs.charts},
+      {"hierarchy_samples", w.hierarchy.samples},
+      {"hierarchy_seconds", w.hierarchy.seconds},
+      {"hierarchy_samples_per_second", w.hierarchy.samplesPerSecond},
+      {"hierarchy_threads", w.hierarchy.threads},
+      {"load_seconds", s.read.seconds},
+      {"chart_seconds", cs.seconds},
+  };
+  stats["bytes_on_disk"] = s.bytesOnDisk;
+  stats["total_seconds"] = s.totalSeconds;
+  return stats;
+}
+
+nlohmann::json statsJson(const MeshBuildStats& s) {
+  const MeshChartStats& ch = s.chart;
+  const MeshWriteStats& w = s.write;
+  nlohmann::json stats = {{"input", s.input}, {"kind", atlasKindName(AtlasKind::Geometry)}};
+  if (ch.gridify) stats["gridify"] = gridifyJson(*ch.gridify);
+  stats["read"] = readJson(ch.read);
+  stats["charting"] = chartingJson(ch.charting, ch.outOfCore);
+  stats["resample"] = resampleJson(s.resample, w.spilledBytes);
+  if (s.fidelity) stats["fidelity"] = fidelityJson(*s.fidelity, ch.outOfCore);
+  else stats["fidelity"] = "not measured (--no-fidelity)";  // note: a stats.json value, read as such
+  stats["charts"] = w.charts;
+  stats["chart_size"] = w.chartSize;
+  stats["samples"] = meshSamples(w);
+  stats["bounds"] = w.bounds;
+  stats["hierarchy_depth"] = w.depth;
+  stats["hierarchy_samples_per_second"] = w.hierarchy.samplesPerSecond;
+  stats["hierarchy_seconds"] = w.hierarchy.seconds;
+  stats["hierarchy_threads"] = w.hierarchy.threads;
+  stats["voids_filled"] = 0;
+  stats["charting_seconds"] = ch.seconds;
+  stats["bytes_on_disk"] = s.bytesOnDisk;
+  stats["total_seconds"] = s.totalSeconds;
+  stats["charts_grid"] = {w.chartsX, w.chartsY};
+  stats["stages"] = stagesJson(s.stages);
+  stats["peak_rss_bytes"] = s.peakRssBytes;
+  return stats;
+}
+
+std::string buildSummary(const std::filesystem::path& output, const TerrainBuildStats& s) {
+  const TerrainWriteStats& w = s.write;
+  return summaryLines(output, w.charts.charts, w.chartsX, w.chartsY, w.chartSize, w.charts.samples,
+                      s.read.voidsFilled, w.hierarchy, s.bytesOnDisk, s.totalSeconds);
+}
+
+std::string buildSummary(const std::filesystem::path& output, const MeshBuildStats& s) {
+  const MeshWriteStats& w = s.write;
+  const MeshReadStats& rd = s.chart.read;
+  const ChartingStats& ch = s.chart.charting;
+  // Mesh input: what was repaired (README, "Mesh input").
+  return summaryLines(output, w.charts, w.chartsX, w.chartsY, w.chartSize, meshSamples(w), 0, w.hierarchy,
+                      s.bytesOnDisk, s.totalSeconds) +
+         fmt::format(
+             "  input             {} triangles read, {} kept; dropped: {} non-finite, {} degenerate, {} duplicate\n"
+             "  repaired          {} non-manifold edges, {} non-manifold vertices ({} vertex copies), "
+             "{} more triangles dropped after welding\n",
+             rd.trianglesRead, rd.trianglesOut, rd.droppedNonFinite, rd.droppedDegenerate, rd.droppedDuplicate,
+             ch.nonManifoldEdges, ch.nonManifoldVertices, ch.verticesSplit, ch.droppedDegenerate + ch.droppedDuplicate);
+}
+
+uint64_t directoryBytes(const std::filesystem::path& dir) {
+  uint64_t total = 0;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir))
+    if (e.is_regular_file()) total += e.file_size();
+  return total;
+}
+
+void writeStatsFile(const std::filesystem::path& dir, const nlohmann::json& json) {
+  const std::string text = json.dump(2) + "\n";
+  atomicWriteFile(dir / "stats.json", text.data(), text.size());
+}
+
+}  // namespace gimlod

@@ -1,0 +1,108 @@
+// What each build stage reports: plain structs, turned into stats.json and the printed summary
+// by pipeline/build_report.h.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "atlas/mesh/charting.h"
+#include "atlas/fidelity/fidelity.h"
+#include "atlas/mesh/gridify.h"
+#include "atlas/mesh/layout_refine.h"
+#include "atlas/mesh/mesh_io.h"
+#include "atlas/mesh/resample.h"
+#include "atlas/terrain/terrain_atlas.h"
+#include "core/stage_meter.h"
+#include "hierarchy/hierarchy.h"
+
+namespace gimlod {
+
+// ---- terrain --------------------------------------------------------------------------------
+
+// Read and fill: the DEM as loaded, its voids filled.
+struct TerrainReadStats {
+  uint32_t width = 0, height = 0;           // samples
+  std::array<double, 2> spacing{1.0, 1.0};  // metres between samples (x east, y north)
+  std::array<float, 2> heightRange{0.f, 0.f};  // metres, after z-scale
+  uint64_t voidsFilled = 0;
+  std::string voidFillMethod;
+  double seconds = 0.0;
+};
+
+// Chart and write: the chart files, and the hierarchy and manifest written after them.
+struct TerrainWriteStats {
+  TerrainAtlasStats charts;                   // chart files (atlas/terrain_atlas.h)
+  uint32_t chartsX = 0, chartsY = 0;          // the chart grid
+  uint32_t chartSize = 0;                     // samples per chart side
+  uint32_t depth = 0;                         // quadtree levels per chart
+  HierarchyStats hierarchy;
+};
+
+// A whole terrain build (stats.json).
+struct TerrainBuildStats {
+  std::string input;  // absolute path of the DEM
+  TerrainReadStats read;
+  TerrainWriteStats write;
+  uint64_t bytesOnDisk = 0;   // the atlas directory (stats.json aside)
+  double totalSeconds = 0.0;
+};
+
+// ---- meshes ---------------------------------------------------------------------------------
+
+// Read and chart: what the reader read and repaired, and the patch layout.
+struct MeshChartStats {
+  bool outOfCore = false;                // the mesh went through cell files
+  std::optional<GridifyResult> gridify;  // the cell files (out-of-core path; manifest left empty)
+  MeshReadStats read;
+  ChartingStats charting;
+  double seconds = 0.0;                  // wall, from the build's start to the end of the charting
+};
+
+// One quad chart's figures.
+struct ChartQuality {
+  uint32_t patch = 0;    // layout patch
+  uint32_t quad = 0;     // quad within the patch
+  ImageQuality quality;  // of its sampled image
+};
+
+// Resample and repair: layout checks, side straightening, resampling and the flip repair.
+struct MeshResampleStats {
+  uint64_t charts = 0;
+  ParamQuality param;                  // all patches' parameterizations
+  ImageQuality image;                  // all charts' sampled images
+  uint32_t sidesStraightened = 0;
+  uint32_t sideEarsMended = 0;
+  FlipRepairStats flips;
+  double repairWork = 0.0;             // layout triangles parameterized again / layout triangles
+  uint64_t patches = 0;                // after the repair
+  std::vector<ChartQuality> perChart;
+};
+
+// Write: the chart files, the hierarchy and the manifest.
+struct MeshWriteStats {
+  uint32_t charts = 0;
+  uint32_t chartsX = 0, chartsY = 0;
+  uint32_t chartSize = 0;
+  uint32_t depth = 0;                  // quadtree levels per chart
+  std::array<float, 6> bounds{};       // min x, y, z, max x, y, z over every sample
+  uint64_t spilledBytes = 0;           // of the chart spill (atlas/resample.h ChartSpill)
+  HierarchyStats hierarchy;
+};
+
+// A whole mesh build (stats.json).
+struct MeshBuildStats {
+  std::string input;  // absolute path of the mesh
+  MeshChartStats chart;
+  MeshResampleStats resample;
+  MeshWriteStats write;
+  std::optional<FidelityStats> fidelity;  // none: not measured
+  std::vector<StageTiming> stages;
+  uint64_t peakRssBytes = 0;
+  uint64_t bytesOnDisk = 0;   // the atlas directory (stats.json aside)
+  double totalSeconds = 0.0;
+};
+
+}  // namespace gimlod

@@ -1,0 +1,277 @@
+#include "pipeline/mesh_build.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <tbb/global_control.h>
+#include <tbb/task_arena.h>
+
+#include "atlas/mesh/charting.h"
+#include "atlas/fidelity/fidelity.h"
+#include "atlas/mesh/gridify.h"
+#include "atlas/mesh/layout_refine.h"
+#include "atlas/mesh/mesh_atlas.h"
+#include "core/atlas_format.h"
+#include "pipeline/build.h"
+#include "pipeline/build_report.h"
+
+namespace fs = std::filesystem;
+
+namespace gimlod {
+namespace {
+
+uint32_t log2u(uint32_t v) {
+  uint32_t l = 0;
+  while ((1u << l) < v) ++l;
+  return l;
+}
+
+double secondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Ends the meter's running stage as `name`, and logs it.
+void finishStage(StageMeter& meter, const std::string& name) {
+  const StageTiming& s = meter.finish(name);
+  spdlog::info("stage {:<10} {:8.2f} s wall {:8.2f} s cpu  peak RSS {:7.1f} MiB", name, s.seconds, s.cpuSeconds,
+               double(s.peakRssBytes) / (1 << 20));
+}
+
+// Refuses a chart size whose charts cannot be made: each chart's samples go to a spill file in
+// the staging directory once measured, and are read back one chart at a time per thread to be
+// written, so what must fit is a patch's charts (up to 8 quads) and their working arrays on every
+// thread at once in memory, and the spill plus the chart files (with their pyramids) on disk.
+void checkChartRoom(const ChartLayout& layout, const MeshBuildOptions& o, const fs::path& dir) {
+  uint64_t quads = 0;
+  for (const Patch& pa : layout.patches) quads += pa.sides.size();
+  const uint64_t samples = uint64_t(o.chartSize) * o.chartSize;
+  const uint64_t perSample = layout.colours.empty() ? 16 : 20;
+  const uint64_t threads = o.threads ? o.threads : uint64_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+  const uint64_t inFlight = threads * samples * (8 * perSample + 32);
+  if (inFlight > o.maxMemory)
+    throw InputError(fmt::format("{}: quad charts of {}^2 samples need {:.1f} GiB of geometry images at once "
+                                 "({} threads), more than {} ({:.1f} GiB): lower {} or {}, or raise {}",
+                                 o.input.string(), o.chartSize, double(inFlight) / double(1ull << 30), threads,
+                                 optionRef("maxMemory"), double(o.maxMemory) / double(1ull << 30),
+                                 optionRef("chartSize"), optionRef("threads"), optionRef("maxMemory")));
+  const uint64_t disk = quads * samples * perSample * 3;  // the spill, and chart files a third larger
+  std::error_code ec;
+  const fs::space_info space = fs::space(dir, ec);
+  if (!ec && disk > space.available)
+    throw InputError(fmt::format("{}: {} quad charts of {}^2 samples need about {:.1f} GiB of disk in {}, which has "
+                                 "{:.1f} GiB free: lower {} or {}",
+                                 o.input.string(), quads, o.chartSize, double(disk) / double(1ull << 30),
+                                 dir.parent_path().string(), double(space.available) / double(1ull << 30),
+                                 optionRef("chartSize"), optionRef("charts")));
+}
+
+}  // namespace
+
+HierarchyParams meshHierarchyParams(const MeshBuildOptions& o) {
+  if (!isChartSizeValid(o.chartSize) || o.chartSize < 9)
+    throw InputError(optionRef("chartSize") + " " + std::to_string(o.chartSize) +
+                     " must be 2^m + 1 with m >= 3 for meshes");
+  if (o.maxMemory < (64ull << 20)) throw InputError(optionRef("maxMemory") + " must be at least 64 MiB");
+  if (o.threads > 1024) throw InputError(optionRef("threads") + " must be at most 1024");
+  if (o.nodeRes < 4 || (o.nodeRes & (o.nodeRes - 1)) || o.minNodeRes < 2 || (o.minNodeRes & (o.minNodeRes - 1)) ||
+      o.minNodeRes > o.nodeRes)
+    throw InputError(optionRef("nodeRes") + " and " + optionRef("minNodeRes") +
+                     " must be powers of two with 2 <= min <= node-res");
+  if (o.depth < 1 || o.depth > 12) throw InputError(optionRef("depth") + " must be in [1, 12]");
+  if (o.flipRepairRounds > 16) throw InputError(optionRef("flipRepairRounds") + " must be in [0, 16]");
+  if (!(o.flipRepairBudget >= 0.0 && o.flipRepairBudget <= 100.0))
+    throw InputError(optionRef("flipRepairBudget") + " must be in [0, 100] (times the surface's triangles)");
+  if (o.chartSize > 8193)
+    throw InputError(optionRef("chartSize") + " " + std::to_string(o.chartSize) +
+                     " is above 8193, the largest mesh chart size");
+  if (o.charts == 0 && !(o.maxChartError > 0.0 && std::isfinite(o.maxChartError)))
+    throw InputError(optionRef("maxChartError") +
+                     " must be a positive fraction of the bounding-box diagonal (it is the target when " +
+                     optionRef("charts") + " is 0)");
+  HierarchyParams p;
+  p.intervalsLog2 = log2u(o.chartSize - 1);
+  p.maxNodeResLog2 = std::min(log2u(o.nodeRes), p.intervalsLog2);
+  p.minNodeResLog2 = std::min(log2u(o.minNodeRes), p.maxNodeResLog2);
+  p.depth = std::min(o.depth, p.intervalsLog2 - p.minNodeResLog2 + 1);
+  p.validate();
+  return p;
+}
+
+ChartedMesh chartMesh(const MeshBuildOptions& o, const MeshInfo& info, const fs::path& dir, StageMeter& meter) {
+  ChartingOptions copt;
+  copt.targetCharts = o.charts;
+  copt.maxError = o.maxChartError;
+  copt.threads = o.threads;
+  ChartedMesh c;
+  MeshChartStats& st = c.stats;
+  st.outOfCore = info.triangleEstimate * 256 > o.maxMemory / 4;
+  if (st.outOfCore) {
+    GridifyOptions g;
+    g.maxMemoryBytes = o.maxMemory;
+    const fs::path grid = dir / "grid.tmp";
+    GridifyResult gr = gridify(o.input, grid, g);
+    finishStage(meter, "gridify");
+    c.layout = buildChartLayoutFromCells(grid, copt, &st.charting);
+    if (o.measureFidelity) {
+      c.cells = grid;  // the input for the fidelity figure, removed after it
+    } else {
+      std::error_code ec;
+      fs::remove_all(grid, ec);
+    }
+    st.read = gr.read;
+    gr.manifest = GridManifest{};
+    st.gridify = std::move(gr);
+  } else {
+    c.mesh = readMesh(o.input);
+    st.read = c.mesh.stats;
+    for (const std::string& w : st.read.warnings) spdlog::warn("{}: {}", o.input.string(), w);
+    finishStage(meter, "read");
+    c.layout = buildChartLayout(c.mesh, copt, &st.charting);
+  }
+  finishStage(meter, "charting");
+  return c;
+}
+
+ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& o, const fs::path& dir, StageMeter& meter) {
+  const std::vector<std::string> bad = validateChartLayout(layout);
+  if (!bad.empty()) throw InputError(o.input.string() + ": the chart layout is invalid: " + bad.front());
+  finishStage(meter, "validate");
+  checkChartRoom(layout, o, dir);
+
+  // Quads, parameterization and resampling.
+  ResampledMesh r;
+  MeshResampleStats& st = r.stats;
+  r.spill = std::make_unique<ChartSpill>(dir / "samples.tmp", o.chartSize, !layout.colours.empty());
+  ResampleOptions ro;
+  ro.chartSize = o.chartSize;
+  ro.threads = o.threads;
+  ro.spill = r.spill.get();
+  st.sidesStraightened = o.straightenRounds ? straightenSides(layout, o.straightenRounds) : 0;
+  st.sideEarsMended = moveSideEars(layout);
+  finishStage(meter, "straighten");
+  GeometryImageSet first = resampleLayout(layout, ro);
+  finishStage(meter, "resample");
+  // Each repair cut adds working memory: the repair stops cutting once the process holds 3/4 of
+  // maxMemory, or once it has parameterized flipRepairBudget times the triangles again.
+  const uint64_t layoutTriangles = layout.triangles.size();
+  r.set = repairFlips(
+      layout, std::move(first), ro, o.flipRepairRounds, &st.flips,
+      [&] { return residentBytes() < o.maxMemory / 4 * 3; },
+      uint64_t(std::llround(o.flipRepairBudget * double(layoutTriangles))));
+  const GeometryImageSet& set = r.set;
+  if (st.flips.stoppedForMemory)
+    spdlog::warn("{}: the flip repair stopped at 3/4 of {} ({} flipped texels left); raise {} to repair more",
+                 o.input.string(), spelledOption(o, "maxMemory"), set.image.flippedTexels,
+                 spelledOption(o, "maxMemory"));
+  st.repairWork = double(st.flips.trianglesWholeRounds + st.flips.trianglesTrials) /
+                  double(std::max<uint64_t>(layoutTriangles, 1));
+  if (st.flips.stoppedForWork)
+    spdlog::warn("{}: the flip repair stopped at its budget, {:.2f} times the surface's triangles parameterized again "
+                 "({} flipped texels left); raise {} to repair more",
+                 o.input.string(), st.repairWork, set.image.flippedTexels, spelledOption(o, "flipRepairBudget"));
+  st.patches = layout.patches.size();
+  layout = ChartLayout{};
+  finishStage(meter, "flip_repair");
+  st.charts = set.charts.size();
+  st.param = set.param;
+  st.image = set.image;
+  st.perChart.reserve(set.charts.size());
+  for (const GeometryImage& g : set.charts) st.perChart.push_back({g.patch, g.quad, g.quality});
+  return r;
+}
+
+MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const MeshBuildOptions& o,
+                              const fs::path& dir, StageMeter& meter) {
+  AtlasManifest m;
+  m.depth = p.depth;
+  m.maxNodeResLog2 = p.maxNodeResLog2;
+  m.minNodeResLog2 = p.minNodeResLog2;
+  m.source = fs::absolute(o.input).string();
+  MeshWriteStats w;
+  w.bounds = writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get()).bounds;
+  w.spilledBytes = r.spill->bytes();
+  r.spill.reset();  // the file goes before the staging directory becomes the atlas
+  r.set = GeometryImageSet{};
+  releaseFreedMemory();
+  {
+    std::vector<std::array<RootNeighbour, 4>> roots;
+    for (const ChartInfo& c : m.charts) roots.push_back(c.neighbours);
+    std::vector<std::unique_ptr<ChartFileReader>> readers;
+    for (const ChartInfo& c : m.charts) readers.push_back(std::make_unique<ChartFileReader>(dir / c.file));
+    const Hierarchy h = buildGeometryHierarchy(p, roots, [&](uint32_t c) { return readers[c]->readLevelPositions(0); },
+                                               &w.hierarchy);
+    writeHierarchy(dir / m.hierarchyFile, h);
+  }
+  writeManifest(dir, m);
+  finishStage(meter, "write");
+  w.charts = uint32_t(m.charts.size());
+  w.chartsX = m.chartsX;
+  w.chartsY = m.chartsY;
+  w.chartSize = m.chartSize;
+  w.depth = m.depth;
+  return w;
+}
+
+FidelityStats measureMeshFidelity(ChartedMesh& c, const MeshBuildOptions& o, const fs::path& dir, StageMeter& meter) {
+  const bool outOfCore = c.stats.outOfCore;
+  FidelityStats f;
+  if (outOfCore) {
+    // Block by block, from the cell files and the charts just written, in half of maxMemory.
+    OutOfCoreFidelityOptions fo;
+    fo.memoryBytes = o.maxMemory / 2;
+    f = measureFidelityOutOfCore(c.cells, dir, fo);
+    std::error_code ec;
+    fs::remove_all(c.cells, ec);
+  } else {
+    const AtlasSurface surface = readAtlasSurface(dir, 0);
+    f = measureFidelity(c.mesh.positions, c.mesh.triangles, surface.positions, surface.triangles);
+  }
+  spdlog::info("atlas fidelity: Hausdorff {:.4f}% of the diagonal (mean {:.5f}%), {} atlas and {} mesh samples{}",
+               f.hausdorffPercent, f.meanPercent, f.atlasSamples, f.meshSamples,
+               outOfCore ? fmt::format(", {} blocks", f.blocks) : std::string());
+  if (!f.exact)
+    spdlog::warn("{}: too many samples lie far from the other surface to resolve them all within {}; the "
+                 "Hausdorff figure is a lower bound",
+                 o.input.string(), spelledOption(o, "maxMemory"));
+  finishStage(meter, "fidelity");
+  return f;
+}
+
+MeshBuildStats buildMeshAtlas(const MeshBuildOptions& o) {
+  std::error_code ec;
+  if (!fs::exists(o.input, ec)) throw InputError(o.input.string() + ": no such file");
+  const HierarchyParams p = meshHierarchyParams(o);
+  std::unique_ptr<tbb::global_control> threads;
+  if (o.threads)
+    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.threads);
+  const auto t0 = std::chrono::steady_clock::now();
+  MeshBuildStats stats;
+  stats.input = fs::absolute(o.input).string();
+  StageMeter meter;
+  meter.start();
+
+  const MeshInfo info = probeMesh(o.input);
+  StagedDirectory stage(o.output, kManifestName, "atlas");
+  ChartedMesh charted = chartMesh(o, info, stage.path(), meter);
+  stats.chart = charted.stats;
+  stats.chart.seconds = secondsSince(t0);
+  ResampledMesh resampled = resampleMesh(std::move(charted.layout), o, stage.path(), meter);
+  stats.resample = std::move(resampled.stats);
+  stats.write = writeMeshAtlas(std::move(resampled), p, o, stage.path(), meter);
+  if (o.measureFidelity) stats.fidelity = measureMeshFidelity(charted, o, stage.path(), meter);
+  charted = ChartedMesh{};
+  stats.stages = meter.stages();
+  stats.bytesOnDisk = directoryBytes(stage.path());
+  stats.totalSeconds = secondsSince(t0);
+  stats.peakRssBytes = meter.peak();
+  writeStatsFile(stage.path(), statsJson(stats));
+  stage.commit();
+  return stats;
+}
+
+}  // namespace gimlod

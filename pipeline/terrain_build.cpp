@@ -1,0 +1,127 @@
+#include "pipeline/terrain_build.h"
+
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <tbb/global_control.h>
+
+#include "core/atlas_format.h"
+#include "pipeline/build.h"
+#include "pipeline/build_report.h"
+
+namespace fs = std::filesystem;
+
+namespace gimlod {
+namespace {
+
+bool isPowerOfTwo(uint32_t v) { return std::has_single_bit(v); }
+
+uint32_t log2u(uint32_t v) {
+  uint32_t l = 0;
+  while ((1u << l) < v) ++l;
+  return l;
+}
+
+double secondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
+  if (!(o.chartSize >= 9 && o.chartSize <= 8193 && isPowerOfTwo(o.chartSize - 1)))
+    throw InputError(fmt::format("{} {} must be 2^m+1 between 9 and 8193 (e.g. 257, 513, 1025)",
+                                 optionRef("chartSize"), o.chartSize));
+  if (!isPowerOfTwo(o.nodeRes) || o.nodeRes < 4 || o.nodeRes > 1024 || o.nodeRes > o.chartSize - 1)
+    throw InputError(fmt::format("{} {} must be a power of two in [4, min(1024, {} - 1)]", optionRef("nodeRes"),
+                                 o.nodeRes, optionRef("chartSize")));
+  if (!isPowerOfTwo(o.minNodeRes) || o.minNodeRes > o.nodeRes)
+    throw InputError(fmt::format("{} {} must be a power of two in [1, {}]", optionRef("minNodeRes"), o.minNodeRes,
+                                 optionRef("nodeRes")));
+  if (!std::isfinite(o.zScale) || o.zScale == 0.0)
+    throw InputError(optionRef("zScale") + " must be finite and non-zero");
+  if (o.threads > 1024) throw InputError(optionRef("threads") + " must be at most 1024");
+  HierarchyParams p;
+  p.intervalsLog2 = log2u(o.chartSize - 1);
+  p.depth = o.depth;
+  p.maxNodeResLog2 = log2u(o.nodeRes);
+  p.minNodeResLog2 = log2u(o.minNodeRes);
+  p.validate();
+}
+
+DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
+  const auto t0 = std::chrono::steady_clock::now();
+  DemOptions dopt;
+  dopt.zScale = o.zScale;
+  dopt.subdataset = o.subdataset;
+  DemRaster dem = loadDem(o.input, dopt);
+  stats->seconds = secondsSince(t0);
+  stats->width = dem.width;
+  stats->height = dem.height;
+  stats->spacing = dem.spacing;
+  stats->heightRange = {dem.minHeight, dem.maxHeight};
+  stats->voidsFilled = dem.voidsFilled;
+  stats->voidFillMethod = dem.voidFillMethod;
+  spdlog::info("{}: {}x{} samples, spacing {:.3f} x {:.3f} m, heights {:.1f}..{:.1f} m, {} voids filled ({})",
+               o.input.string(), dem.width, dem.height, dem.spacing[0], dem.spacing[1], dem.minHeight,
+               dem.maxHeight, dem.voidsFilled, dem.voidFillMethod);
+  return dem;
+}
+
+TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& o, const fs::path& dir) {
+  AtlasManifest m;
+  m.chartSize = o.chartSize;
+  m.blockIntervals = o.nodeRes;
+  m.depth = o.depth;
+  m.maxNodeResLog2 = log2u(o.nodeRes);
+  m.minNodeResLog2 = log2u(o.minNodeRes);
+  m.zScale = o.zScale;
+  m.source = fs::absolute(o.input).string();
+  TerrainAtlasOptions topt;
+  topt.chartSize = o.chartSize;
+  topt.blockIntervals = o.nodeRes;
+  TerrainWriteStats w;
+  w.charts = writeTerrainCharts(dem, topt, dir, m);
+  dem = DemRaster{};
+
+  // The hierarchy stage reads level 0 of every chart file, as a restarted stage would.
+  std::vector<std::unique_ptr<ChartFileReader>> readers;
+  for (const ChartInfo& c : m.charts) readers.push_back(std::make_unique<ChartFileReader>(dir / c.file));
+  const Hierarchy h =
+      buildTerrainHierarchy(m, [&](uint32_t c) { return readers[c]->readLevelHeights(0); }, &w.hierarchy);
+  writeHierarchy(dir / m.hierarchyFile, h);
+  writeManifest(dir, m);
+  w.chartsX = m.chartsX;
+  w.chartsY = m.chartsY;
+  w.chartSize = m.chartSize;
+  w.depth = m.depth;
+  return w;
+}
+
+TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& o) {
+  std::error_code ec;
+  validateTerrainBuildOptions(o);
+  if (!fs::exists(o.input, ec)) throw InputError(o.input.string() + ": no such file");
+  std::unique_ptr<tbb::global_control> threads;
+  if (o.threads)
+    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.threads);
+
+  const auto t0 = std::chrono::steady_clock::now();
+  TerrainBuildStats stats;
+  DemRaster dem = readTerrain(o, &stats.read);
+  StagedDirectory stage(o.output, kManifestName, "atlas");
+  stats.write = writeTerrainAtlas(std::move(dem), o, stage.path());
+  stats.input = fs::absolute(o.input).string();
+  stats.bytesOnDisk = directoryBytes(stage.path());
+  stats.totalSeconds = secondsSince(t0);
+  writeStatsFile(stage.path(), statsJson(stats));
+  stage.commit();
+  return stats;
+}
+
+}  // namespace gimlod
