@@ -1,9 +1,13 @@
 // What runtime core hands to the GL renderer each frame: one record per drawn node plus the
-// per-node border stitching tables. Pure data; no GL.
+// per-node border stitching tables. Pure C++; no GL.
 #pragma once
 
 #include <cstdint>
 #include <vector>
+
+#include "core/atlas_format.h"
+#include "hierarchy/hierarchy.h"
+#include "runtime/cut.h"
 
 namespace gimlod {
 
@@ -35,5 +39,9 @@ struct StitchTables {
     return bytes.data() + (node * 4 + s) * entriesPerSide;
   }
 };
+
+// The draw record of a cut node whose page is in `layer`.
+DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n,
+                      uint32_t layer);
 
 }  // namespace gimlod
