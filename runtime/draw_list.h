@@ -11,7 +11,8 @@
 
 namespace gimlod {
 
-// One node to draw. All coordinates are in level-0 sample units of the terrain's global grid.
+// One node to draw. All coordinates are in level-0 sample units of the atlas's global grid (each
+// chart at its gridX, gridY).
 // The node covers [originX, originX + 2^sizeLog2] x [originY, originY + 2^sizeLog2] (closed).
 struct DrawNode {
   int32_t originX = 0, originY = 0;

@@ -27,7 +27,7 @@ namespace {
 constexpr GLuint kSamplesUnit = GIMLOD_SAMPLES_UNIT, kNormalsUnit = GIMLOD_NORMALS_UNIT;
 constexpr GLuint kStitchBinding = GIMLOD_STITCH_BINDING;
 constexpr GLuint kGridAttrib = GIMLOD_ATTRIB_GRID, kNodeAttribA = GIMLOD_ATTRIB_NODE_A,
-                 kNodeAttribB = GIMLOD_ATTRIB_NODE_B, kPositionAttrib = GIMLOD_ATTRIB_POSITION;
+                 kNodeAttribB = GIMLOD_ATTRIB_NODE_B;
 constexpr uint32_t kMaxGridResLog2 = 12;                 // (2^12+1)^2 vertices; ushort (i, j)
 
 // std430 layout of atlas.vert's NodeRecord.
@@ -73,7 +73,8 @@ GlObject linkAtlasProgram(bool geometry) {
     return s;
   };
   const std::string vert = variant(kShader_atlas_vert), frag = variant(kShader_atlas_frag);
-  GlObject program = linkProgram(geometry ? "atlas (geometry)" : "atlas", vert.c_str(), frag.c_str(), {"v_world"});
+  GlObject program =
+      linkProgram(geometry ? "atlas (mesh)" : "atlas", vert.c_str(), frag.c_str(), {"v_world"});
   setPagePoolUnits(program);
   return program;
 }

@@ -47,7 +47,7 @@ TEST_P(ShaderInterfaceGlTest, AtlasProgramMatchesTheSharedDefinitions) {
   EXPECT_EQ(binding, GIMLOD_STITCH_BINDING);
 
   for (const char* name : kAtlasUniforms)
-    EXPECT_GE(glGetUniformLocation(id, name), 0) << name << (geometry ? " (geometry)" : " (terrain)");
+    EXPECT_GE(glGetUniformLocation(id, name), 0) << name << (geometry ? " (mesh)" : " (terrain)");
   if (!geometry) {
     for (const char* name : kTerrainUniforms) EXPECT_GE(glGetUniformLocation(id, name), 0) << name;
   }
@@ -62,7 +62,7 @@ TEST_P(ShaderInterfaceGlTest, AtlasProgramMatchesTheSharedDefinitions) {
 
 TEST_P(ShaderInterfaceGlTest, MissingUniformIsAnErrorInDebugBuilds) {
   const gl::GlObject p = gl::linkAtlasProgram(GetParam());
-  EXPECT_EQ(gl::programName(p), GetParam() ? "atlas (geometry)" : "atlas");
+  EXPECT_EQ(gl::programName(p), GetParam() ? "atlas (mesh)" : "atlas");
   EXPECT_EQ(gl::optionalUniform(p, "u_noSuchUniform"), -1);
   EXPECT_GE(gl::uniform(p, "u_viewProj"), 0);
 #ifndef NDEBUG
