@@ -13,7 +13,7 @@
 // AtlasScene to 3/4 of the free page-pool layers (GL_MAX_ARRAY_TEXTURE_LAYERS, often 2048).
 //
 // Times, all per frame, means over the orbit after one warm-up orbit:
-//  adapt, stitch, upload: FrameResult's CPU wall times (upload = page-cache work; 0 once warm);
+//  adapt, stitch, upload: FrameResult's CPU wall times (upload = page-pool work; 0 once warm);
 //  draw (wall): DrawStats::drawMs, CPU wall time of AtlasRenderer::draw, i.e. node/stitch
 //    buffer packing and upload, one multi-draw-indirect, and glFinish;
 //  GPU: a GL_TIME_ELAPSED query around the whole renderFrame call. No GL command is issued
