@@ -31,8 +31,8 @@
 #include "runtime/atlas_view.h"
 #include "runtime/baselines.h"
 #include "runtime/camera.h"
+#include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
-#include "runtime/gl/terrain_scene.h"
 
 namespace gimlod {
 namespace {
@@ -321,14 +321,14 @@ int runBench(const BenchArgs& a) {
   if (::access(out.c_str(), W_OK) != 0) throw InputError(a.output + ": output directory is not writable");
 
   std::unique_ptr<gl::EglContext> context;
-  std::unique_ptr<gl::TerrainScene> scene;
+  std::unique_ptr<gl::AtlasScene> scene;
   if (a.render) {
     context = gl::EglContext::create();
     spdlog::info("OpenGL: {} ({})", context->renderer(), context->version());
     gl::SceneOptions so;
     so.width = w;
     so.height = h;
-    scene = std::make_unique<gl::TerrainScene>(atlas, so);
+    scene = std::make_unique<gl::AtlasScene>(atlas, so);
     if (*std::max_element(nodeBudgets.begin(), nodeBudgets.end()) > so.pageCapacity)
       spdlog::warn("--render: node budgets above the page pool ({} pages) draw some nodes with wrong data; "
                    "draw_ms is still comparable", so.pageCapacity);

@@ -28,7 +28,7 @@
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
 #include "runtime/gl/egl_context.h"
-#include "runtime/gl/terrain_scene.h"
+#include "runtime/gl/atlas_scene.h"
 
 namespace fs = std::filesystem;
 using namespace gimlod;
@@ -139,7 +139,7 @@ int runRender(const RenderArgs& a) {
   so.maxUploadsPerFrame = a.uploadsPerFrame;
   so.coherentAdaptation = !a.topDown;
   so.texelsPerPixel = a.texelRatio;
-  gl::TerrainScene scene(atlas, so);
+  gl::AtlasScene scene(atlas, so);
   if (scene.nodeBudget(a.maxNodes) != a.maxNodes)
     spdlog::warn("--max-nodes {} is above what the GPU page pool holds ({} pages): using {}", a.maxNodes,
                  scene.renderer().pageCapacity(), scene.nodeRoom());

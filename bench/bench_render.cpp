@@ -9,9 +9,10 @@
 
 #include "pipeline/build.h"
 #include "atlas/terrain/dem.h"
+#include "bench/gl/baseline_draws.h"
 #include "runtime/atlas_view.h"
+#include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
-#include "runtime/gl/terrain_scene.h"
 
 using namespace gimlod;
 
@@ -30,7 +31,7 @@ int main(int argc, char** argv) {
   gl::SceneOptions so;
   so.width = w;
   so.height = h;
-  gl::TerrainScene scene(atlas, so);
+  gl::AtlasScene scene(atlas, so);
   const auto path = orbitPath(atlas.lo, atlas.hi, 24, 0.7, 30.0);
   AdaptOptions ao;
   ao.tolerancePx = tol;
@@ -65,14 +66,15 @@ int main(int argc, char** argv) {
       const uint32_t a = j * (side + 1) + i, b = a + 1, c = b + side + 1, d = a + side + 1;
       indices.insert(indices.end(), {a, b, c, a, c, d});
     }
+  bench::BaselineDraws baselines(scene.renderer());
   double meshMs = 0.0;
   for (const Camera& c : path)
-    meshMs += scene.renderer().drawMeshMs(positions, indices, glm::mat4(scene.viewProjection(c)), glm::vec3(c.eye), 1);
+    meshMs += baselines.drawMeshMs(positions, indices, glm::mat4(scene.viewProjection(c)), glm::vec3(c.eye), 1);
   const uint64_t meshTris = uint64_t(indices.size() / 3);
 
   // (b) A plain grid with a trivial shader.
   uint64_t staticTris = 0;
-  const double staticMs = scene.renderer().drawStaticMeshMs(meanTris, uint32_t(path.size()), &staticTris);
+  const double staticMs = baselines.drawStaticMeshMs(meanTris, uint32_t(path.size()), &staticTris);
   const double engine = double(tris) / ms * 1e-3;
   const double same = double(meshTris) * path.size() / meshMs * 1e-3;
   const double plain = double(staticTris) / staticMs * 1e-3;

@@ -3,18 +3,18 @@
 // one static indexed mesh with the same triangle count, in the same run:
 // (a) the atlas's level-0 heights resampled to a regular grid mesh, same cameras, same fragment
 //     shader (equal work but for the vertex path: texture fetch, stitching, multi-draw);
-// (b) a plain flat-shaded grid (TerrainRenderer::drawStaticMeshMs).
+// (b) a plain flat-shaded grid (BaselineDraws::drawStaticMeshMs).
 //
 // Usage: bench_render_atlas ATLAS_DIR [WxH] [tolerance_px] [max_nodes] [frames]
 //        bench_render_atlas ATLAS_DIR --sweep [max_nodes] [frames] [tolerances]
 // --sweep runs, in one context, 640x480 at the first tolerance, 1920x1080 at each, and 3840x2160
 // at the last (tolerances: comma-separated px, default 1,0.5,0.25), then prints a summary table.
 // Defaults: 640x480, 1 px, 3000 nodes, 24 orbit frames. The node budget is further clamped by
-// TerrainScene to 3/4 of the free page-pool layers (GL_MAX_ARRAY_TEXTURE_LAYERS, often 2048).
+// AtlasScene to 3/4 of the free page-pool layers (GL_MAX_ARRAY_TEXTURE_LAYERS, often 2048).
 //
 // Times, all per frame, means over the orbit after one warm-up orbit:
-//  adapt, stitch, upload: FrameResult's CPU wall times (upload = page-cache work; 0 once warm);
-//  draw (wall): DrawStats::drawMs, CPU wall time of TerrainRenderer::draw, i.e. node/stitch
+//  adapt, stitch, upload: FrameResult's CPU wall times (upload = page-pool work; 0 once warm);
+//  draw (wall): DrawStats::drawMs, CPU wall time of AtlasRenderer::draw, i.e. node/stitch
 //    buffer packing and upload, one multi-draw-indirect, and glFinish;
 //  GPU: a GL_TIME_ELAPSED query around the whole renderFrame call. No GL command is issued
 //    before draw() in a warm frame, so this is the GPU time of draw() as long as the driver does
@@ -33,12 +33,14 @@
 #include <string>
 #include <vector>
 
+#include "bench/gl/baseline_draws.h"
+#include "bench/gl/gpu_timer.h"
 #include "core/atlas_format.h"
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
+#include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
 #include "runtime/gl/gl_objects.h"
-#include "runtime/gl/terrain_scene.h"
 
 using namespace gimlod;
 
@@ -158,13 +160,13 @@ Result runConfig(const AtlasView& atlas, const HeightGrid& grid, const Config& c
   gl::SceneOptions so;
   so.width = cfg.width;
   so.height = cfg.height;
-  gl::TerrainScene scene(atlas, so);
+  gl::AtlasScene scene(atlas, so);
   const std::vector<Camera> path = orbitPath(atlas.lo, atlas.hi, frames, 0.7, 30.0);
   r.frames = uint32_t(path.size());
   AdaptOptions ao;
   ao.tolerancePx = cfg.tolerancePx;
   ao.maxNodes = maxNodes;
-  gl::GpuTimer timer;
+  bench::GpuTimer timer;
   // Warm-up: pages resident, shaders compiled.
   for (const Camera& c : path) scene.renderFrame(c, ao);
   double tris = 0, nodes = 0;
@@ -202,14 +204,14 @@ Result runConfig(const AtlasView& atlas, const HeightGrid& grid, const Config& c
   else
     buildGridMesh(grid, atlas.manifest.spacing, uint64_t(r.meanTris), positions, indices);
   r.meshTris = indices.size() / 3;
+  bench::BaselineDraws baselines(scene.renderer());
   for (const Camera& c : path)
-    r.meshMs += scene.renderer().drawMeshMs(positions, indices, glm::mat4(scene.viewProjection(c)),
-                                            glm::vec3(c.eye), 1);
+    r.meshMs += baselines.drawMeshMs(positions, indices, glm::mat4(scene.viewProjection(c)), glm::vec3(c.eye), 1);
   r.meshMs /= n;
 
   // (b) A plain grid with a trivial shader; and the floor: clear + glFinish of 2 triangles.
-  r.staticMs = scene.renderer().drawStaticMeshMs(uint64_t(r.meanTris), r.frames, &r.staticTris);
-  r.floorMs = scene.renderer().drawStaticMeshMs(2, r.frames, nullptr);
+  r.staticMs = baselines.drawStaticMeshMs(uint64_t(r.meanTris), r.frames, &r.staticTris);
+  r.floorMs = baselines.drawStaticMeshMs(2, r.frames, nullptr);
   return r;
 }
 

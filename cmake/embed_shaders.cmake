@@ -1,10 +1,26 @@
 # Writes OUT, a header with one string constant per shader file in SHADERS (name: file name with
-# '.' replaced by '_', prefixed by kShader_).
+# '.' replaced by '_', prefixed by kShader_). A line `#include "FILE"` in a shader is replaced by
+# FILE, read from the shader's folder or else from INCLUDE_DIR (optional), so the GLSL and the C++
+# share headers (shaders/interface.h).
 set(content "// Generated from shaders/; do not edit.\n#pragma once\n")
 foreach(f ${SHADERS})
   get_filename_component(name ${f} NAME)
+  get_filename_component(dir ${f} DIRECTORY)
   string(REPLACE "." "_" name ${name})
   file(READ ${f} text)
+  string(REGEX MATCHALL "#include \"[^\"]+\"" includes "${text}")
+  foreach(line ${includes})
+    string(REGEX REPLACE "#include \"([^\"]+)\"" "\\1" included "${line}")
+    set(path ${dir}/${included})
+    if(NOT EXISTS ${path} AND DEFINED INCLUDE_DIR)
+      set(path ${INCLUDE_DIR}/${included})
+    endif()
+    if(NOT EXISTS ${path})
+      message(FATAL_ERROR "${f}: included file ${included} not found")
+    endif()
+    file(READ ${path} includedText)
+    string(REPLACE "${line}" "${includedText}" text "${text}")
+  endforeach()
   string(APPEND content "inline constexpr const char* kShader_${name} = R\"glsl(${text})glsl\";\n")
 endforeach()
 file(WRITE ${OUT}.tmp "${content}")

@@ -15,7 +15,7 @@ namespace gimlod {
 // Throws InputError naming the parameter (optionRef) for impossible options, before any work.
 void validateTerrainBuildOptions(const TerrainBuildOptions& options);
 
-// Read and fill: loads options.input (voids filled by pull-push, atlas/dem.h) and logs its
+// Read and fill: loads options.input (voids filled by pull-push, atlas/terrain/dem.h) and logs its
 // figures. Throws InputError naming the file.
 DemRaster readTerrain(const TerrainBuildOptions& options, TerrainReadStats* stats);
 

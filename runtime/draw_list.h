@@ -1,13 +1,18 @@
 // What runtime core hands to the GL renderer each frame: one record per drawn node plus the
-// per-node border stitching tables. Pure data; no GL.
+// per-node border stitching tables. Pure C++; no GL.
 #pragma once
 
 #include <cstdint>
 #include <vector>
 
+#include "core/atlas_format.h"
+#include "hierarchy/hierarchy.h"
+#include "runtime/cut.h"
+
 namespace gimlod {
 
-// One node to draw. All coordinates are in level-0 sample units of the terrain's global grid.
+// One node to draw. All coordinates are in level-0 sample units of the atlas's global grid (each
+// chart at its gridX, gridY).
 // The node covers [originX, originX + 2^sizeLog2] x [originY, originY + 2^sizeLog2] (closed).
 struct DrawNode {
   int32_t originX = 0, originY = 0;
@@ -35,5 +40,9 @@ struct StitchTables {
     return bytes.data() + (node * 4 + s) * entriesPerSide;
   }
 };
+
+// The draw record of a cut node whose page is in `layer`.
+DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n,
+                      uint32_t layer);
 
 }  // namespace gimlod

@@ -6,7 +6,7 @@
 
 namespace gimlod {
 
-PageLoader::PageLoader(const AtlasPages& pages, size_t ramBudgetBytes, bool startPaused)
+PageLoader::PageLoader(const PageReader& pages, size_t ramBudgetBytes, bool startPaused)
     : pages_(pages), ramBudget_(ramBudgetBytes), paused_(startPaused) {
   thread_ = std::thread([this] { run(); });
 }
@@ -61,13 +61,13 @@ std::vector<LoadedPage> PageLoader::takeCompleted(size_t max) {
   return out;
 }
 
-bool PageLoader::tryGetResident(const NodeId& n, std::vector<float>& heights,
+bool PageLoader::tryGetResident(const NodeId& n, std::vector<float>& samples,
                                 std::vector<PackedNormal>& normals) {
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = ramIndex_.find(n.key());
   if (it == ramIndex_.end()) return false;
   ram_.splice(ram_.begin(), ram_, it->second);
-  heights = it->second->heights;
+  samples = it->second->samples;
   normals = it->second->normals;
   return true;
 }
@@ -131,7 +131,7 @@ void PageLoader::run() {
     auto hit = ramIndex_.find(key);
     if (hit != ramIndex_.end()) {
       ram_.splice(ram_.begin(), ram_, hit->second);
-      page.heights = hit->second->heights;
+      page.samples = hit->second->samples;
       page.normals = hit->second->normals;
       page.fromRam = true;
       ++stats_.ramHits;
@@ -140,14 +140,14 @@ void PageLoader::run() {
       lock.unlock();
       bool ok = true;
       try {
-        pages_.read(q.id, page.heights, page.normals);
+        pages_.read(q.id, page.samples, page.normals);
       } catch (...) {
         ok = false;  // note: a failed read is counted and dropped; a later request retries it
       }
       lock.lock();
       if (ok) {
         ++stats_.loadedFromDisk;
-        insertRam(key, page.heights, page.normals);
+        insertRam(key, page.samples, page.normals);
       } else {
         ++stats_.failed;
       }

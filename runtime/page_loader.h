@@ -13,21 +13,21 @@
 #include <unordered_set>
 #include <vector>
 
-#include "runtime/page_cache.h"
+#include "runtime/page_reader.h"
 
 namespace gimlod {
 
 // A page read by the loader, waiting for the render thread to upload it.
 struct LoadedPage {
   NodeId id;
-  std::vector<float> heights;
+  std::vector<float> samples;
   std::vector<PackedNormal> normals;
   bool fromRam = false;  // served by the RAM cache, not the disk
 };
 
 struct PageLoaderStats {
   uint64_t requested = 0;       // distinct requests accepted (duplicates not counted)
-  uint64_t loadedFromDisk = 0;  // pages read through AtlasPages::read
+  uint64_t loadedFromDisk = 0;  // pages read through PageReader::read
   uint64_t ramHits = 0;         // requests served by the RAM cache
   uint64_t failed = 0;          // disk reads that threw (dropped)
   uint64_t ramEvictions = 0;    // pages dropped from the RAM cache for the budget
@@ -40,7 +40,7 @@ class PageLoader {
  public:
   // Starts the loader thread; `pages` must outlive the loader. ramBudgetBytes bounds the RAM
   // cache (0 disables it). With startPaused the thread serves nothing until resume().
-  PageLoader(const AtlasPages& pages, size_t ramBudgetBytes, bool startPaused = false);
+  PageLoader(const PageReader& pages, size_t ramBudgetBytes, bool startPaused = false);
   // Stops the thread promptly: pending requests are dropped, a read in progress finishes.
   ~PageLoader();
   PageLoader(const PageLoader&) = delete;
@@ -54,7 +54,7 @@ class PageLoader {
   // Moves up to `max` finished pages out, oldest first. For the render thread.
   std::vector<LoadedPage> takeCompleted(size_t max);
   // Copies n's page from the RAM cache; false (outputs untouched) when it is not there.
-  bool tryGetResident(const NodeId& n, std::vector<float>& heights,
+  bool tryGetResident(const NodeId& n, std::vector<float>& samples,
                       std::vector<PackedNormal>& normals);
 
   // Stops / restarts serving the queue (a read in progress finishes). For tests and throttling.
@@ -76,16 +76,16 @@ class PageLoader {
   };
   struct RamPage {
     uint64_t key;
-    std::vector<float> heights;
+    std::vector<float> samples;
     std::vector<PackedNormal> normals;
     size_t bytes() const {
-      return heights.size() * sizeof(float) + normals.size() * sizeof(PackedNormal);
+      return samples.size() * sizeof(float) + normals.size() * sizeof(PackedNormal);
     }
   };
   void run();
   void insertRam(uint64_t key, const std::vector<float>& h, const std::vector<PackedNormal>& n);
 
-  const AtlasPages& pages_;
+  const PageReader& pages_;
   const size_t ramBudget_;
   mutable std::mutex mutex_;
   std::condition_variable wake_;  // the loader thread waits here

@@ -109,19 +109,26 @@ GlObject linkProgram(const char* name, const char* vertexSource, const char* fra
   }
   glDetachShader(program.id(), vs.id());
   glDetachShader(program.id(), fs.id());
+  glObjectLabel(GL_PROGRAM, program.id(), -1, name);
   checkGl(name);
   return program;
 }
 
-GpuTimer::GpuTimer() : query_(makeQuery()) {}
+std::string programName(const GlObject& program) {
+  GLsizei length = 0;
+  char label[256] = {};
+  glGetObjectLabel(GL_PROGRAM, program.id(), GLsizei(sizeof label), &length, label);
+  return std::string(label, size_t(std::max<GLsizei>(length, 0)));
+}
 
-void GpuTimer::begin() { glBeginQuery(GL_TIME_ELAPSED, query_.id()); }
-
-double GpuTimer::endMs() {
-  glEndQuery(GL_TIME_ELAPSED);
-  GLuint64 ns = 0;
-  glGetQueryObjectui64v(query_.id(), GL_QUERY_RESULT, &ns);
-  return double(ns) * 1e-6;
+GLint uniform(const GlObject& program, const char* name) {
+  const GLint location = glGetUniformLocation(program.id(), name);
+#ifndef NDEBUG
+  if (location < 0)
+    throw std::logic_error(std::string("uniform ") + name + " is not an active uniform of program " +
+                           programName(program) + " (use optionalUniform for one a variant drops)");
+#endif
+  return location;
 }
 
 }  // namespace gimlod::gl

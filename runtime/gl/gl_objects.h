@@ -49,25 +49,24 @@ GlObject makeRenderbuffer();
 GlObject makeQuery();
 
 // Compiles and links vertex + fragment sources; `feedbackVaryings` (may be empty) are captured
-// interleaved. Throws std::runtime_error with the compile or link log.
+// interleaved. The program is labelled `name`. Throws std::runtime_error with the compile or
+// link log.
 GlObject linkProgram(const char* name, const char* vertexSource, const char* fragmentSource,
                      const std::vector<const char*>& feedbackVaryings = {});
 
-// Uniform location; -1 (silently ignored by glUniform*) when the linker removed it.
-// GPU time of the commands issued between begin() and endMs() (a GL_TIME_ELAPSED query);
-// endMs waits for the result. Needs a current context; one timer runs at a time.
-class GpuTimer {
- public:
-  GpuTimer();
-  void begin();
-  double endMs();
+// Location of the uniform `name` of `program`. In debug builds a name the program does not have
+// as an active uniform (a typo, or one the linker removed as unused) throws std::logic_error
+// naming the uniform and the program (linkProgram's name); release builds return -1, which
+// glUniform* ignores.
+GLint uniform(const GlObject& program, const char* name);
 
- private:
-  GlObject query_;
-};
-
-inline GLint uniform(const GlObject& program, const char* name) {
+// Location of a uniform that some variants of `program` legitimately do not use (the linker
+// removes it there): -1 when absent, in every build.
+inline GLint optionalUniform(const GlObject& program, const char* name) {
   return glGetUniformLocation(program.id(), name);
 }
+
+// The name linkProgram gave `program` (its GL object label); empty if none.
+std::string programName(const GlObject& program);
 
 }  // namespace gimlod::gl

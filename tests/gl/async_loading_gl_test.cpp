@@ -6,8 +6,8 @@
 #include "pipeline/build.h"
 #include "runtime/adapt.h"
 #include "runtime/atlas_view.h"
+#include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
-#include "runtime/gl/terrain_scene.h"
 #include "runtime/stitch.h"
 #include "tests/adapt_fixture.h"
 #include "tests/test_util.h"
@@ -80,7 +80,7 @@ TEST_F(AsyncLoadingTest, SubstitutesResidentAncestorsCrackFreeAndConverges) {
   so.height = 72;
   so.asyncLoads = true;
   so.maxUploadsPerFrame = 4;
-  gl::TerrainScene scene(atlas, so);
+  gl::AtlasScene scene(atlas, so);
   ASSERT_NE(scene.loader(), nullptr);
   AdaptOptions ao;
   ao.tolerancePx = 1.0;
@@ -154,7 +154,7 @@ TEST_F(AsyncLoadingTest, SynchronousDefaultDrawsDesiredCut) {
   gl::SceneOptions so;
   so.width = 96;
   so.height = 72;
-  gl::TerrainScene scene(atlas, so);
+  gl::AtlasScene scene(atlas, so);
   EXPECT_EQ(scene.loader(), nullptr);
   AdaptOptions ao;
   ao.maxNodes = 500;  // below the page pool's room, so the scene does not clamp it
@@ -172,7 +172,7 @@ TEST_F(AsyncLoadingTest, SynchronousDefaultDrawsDesiredCut) {
   EXPECT_EQ(test::sortedNodes(f.cut), test::sortedNodes(expected));
   // The stateless top-down greedy draws a valid cut too.
   so.coherentAdaptation = false;
-  gl::TerrainScene topDown(atlas, so);
+  gl::AtlasScene topDown(atlas, so);
   const gl::FrameResult g = topDown.renderFrame(cam, ao);
   EXPECT_EQ(test::sortedNodes(g.cut),
             test::sortedNodes(adaptErrorThreshold(atlas.hierarchy, makeViewParams(cam, so.width, so.height), ao)));

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "runtime/cut.h"
-#include "runtime/gl/terrain_scene.h"
+#include "runtime/gl/atlas_scene.h"
 #include "runtime/stitch.h"
 
 namespace gimlod::test {
@@ -17,7 +17,7 @@ namespace gimlod::test {
 // across that side. Checks that every node was captured at its resolution. With
 // expectControlToFail, the same cut captured without the stitching tables must crack, or the test
 // could not fail.
-inline CrackReport captureCracks(gl::TerrainScene& scene, const Cut& cut, bool expectControlToFail = true) {
+inline CrackReport captureCracks(gl::AtlasScene& scene, const Cut& cut, bool expectControlToFail = true) {
   const auto verts = scene.capture(cut);
   EXPECT_EQ(verts.size(), cut.nodes.size());
   for (size_t i = 0; i < verts.size() && i < cut.nodes.size(); ++i) {

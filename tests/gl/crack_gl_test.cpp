@@ -11,8 +11,8 @@
 #include "runtime/adapt_dual_queue.h"
 #include "runtime/adapt_quad_queue.h"
 #include "runtime/atlas_view.h"
+#include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
-#include "runtime/gl/terrain_scene.h"
 #include "runtime/stitch.h"
 #include "tests/chart_layout_fixture.h"
 #include "tests/gl/crack_check.h"
@@ -42,7 +42,7 @@ class CrackTest : public ::testing::Test {
   }
 
   // Crack count of a cut through the real shader; also checks the negative control.
-  CrackReport check(gl::TerrainScene& scene, const Cut& cut, bool expectControlToFail = true) {
+  CrackReport check(gl::AtlasScene& scene, const Cut& cut, bool expectControlToFail = true) {
     return test::captureCracks(scene, cut, expectControlToFail);
   }
 
@@ -59,7 +59,7 @@ TEST_F(CrackTest, HandMadeCutsAcrossChartBorders) {
   gl::SceneOptions so;
   so.width = 64;
   so.height = 48;
-  gl::TerrainScene scene(atlas, so);
+  gl::AtlasScene scene(atlas, so);
   const Hierarchy& h = atlas.hierarchy;
   const uint32_t cx = atlas.manifest.chartsX;
 
@@ -97,7 +97,7 @@ TEST_F(CrackTest, AdaptedCutsOverRealSrtmTiles) {
     gl::SceneOptions so;
     so.width = 160;
     so.height = 120;
-    gl::TerrainScene scene(atlas, so);
+    gl::AtlasScene scene(atlas, so);
     std::mt19937 rng(42);
     std::uniform_real_distribution<double> u(0.0, 1.0);
     const glm::dvec3 ext = atlas.hi - atlas.lo;
@@ -135,7 +135,7 @@ TEST_F(CrackTest, CoherentAdapterCutsAlongAPathOverRealSrtm) {
   gl::SceneOptions so;
   so.width = 160;
   so.height = 120;
-  gl::TerrainScene scene(atlas, so);
+  gl::AtlasScene scene(atlas, so);
   const Hierarchy& h = atlas.hierarchy;
   const auto path = orbitPath(atlas.lo, atlas.hi, 6, 0.4, 25.0);
   DualQueueAdapter dq(h);
@@ -194,7 +194,7 @@ TEST_F(CrackTest, MeshAtlasCutsAcrossChartsOfEveryOrientation) {
   so.width = 96;
   so.height = 72;
   so.pageCapacity = 512;
-  gl::TerrainScene scene(atlas, so);
+  gl::AtlasScene scene(atlas, so);
   const Hierarchy& h = atlas.hierarchy;
   uint64_t checked = 0, mixed = 0;
   int frame = 0;

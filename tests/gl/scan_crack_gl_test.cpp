@@ -15,8 +15,8 @@
 #include "runtime/adapt_dual_queue.h"
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
+#include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
-#include "runtime/gl/terrain_scene.h"
 #include "runtime/stitch.h"
 #include "tests/gl/crack_check.h"
 #include "tests/scan_atlases.h"
@@ -58,7 +58,7 @@ TEST_P(ScanCrackTest, DualQueueCutsAlongAPathHaveNoCracks) {
   gl::SceneOptions so;
   so.width = 128;
   so.height = 96;
-  gl::TerrainScene scene(atlas, so);
+  gl::AtlasScene scene(atlas, so);
   AdaptOptions ao;
   ao.tolerancePx = 0.5;
   // Every node of a cut must have a page in the GPU pool, or its captured data would be wrong. The

@@ -30,7 +30,7 @@ class PageLoaderTest : public ::testing::Test {
     o.minNodeRes = 4;
     buildAtlas(o);
     atlas_ = std::make_unique<AtlasView>(openAtlas(o.output));
-    pages_ = std::make_unique<AtlasPages>(atlas_->dir, atlas_->manifest, atlas_->hierarchy.params);
+    pages_ = std::make_unique<PageReader>(atlas_->dir, atlas_->manifest, atlas_->hierarchy.params);
   }
   static void TearDownTestSuite() {
     pages_.reset();
@@ -52,12 +52,12 @@ class PageLoaderTest : public ::testing::Test {
 
   static std::unique_ptr<test::TempDir> dir_;
   static std::unique_ptr<AtlasView> atlas_;
-  static std::unique_ptr<AtlasPages> pages_;
+  static std::unique_ptr<PageReader> pages_;
 };
 
 std::unique_ptr<test::TempDir> PageLoaderTest::dir_;
 std::unique_ptr<AtlasView> PageLoaderTest::atlas_;
-std::unique_ptr<AtlasPages> PageLoaderTest::pages_;
+std::unique_ptr<PageReader> PageLoaderTest::pages_;
 
 const NodeId kRoot{0, 0, 0, 0};
 
@@ -119,12 +119,12 @@ TEST_F(PageLoaderTest, DataEqualsDirectRead) {
   for (const LoadedPage& p : done) {
     EXPECT_FALSE(p.fromRam);
     const uint32_t s = pages_->pageSamples(p.id.level);
-    EXPECT_EQ(p.heights.size(), size_t(s) * s);
-    expectPageEquals(p.id, p.heights, p.normals);
+    EXPECT_EQ(p.samples.size(), size_t(s) * s);
+    expectPageEquals(p.id, p.samples, p.normals);
     std::vector<float> h2;
     std::vector<PackedNormal> n2;
     ASSERT_TRUE(loader.tryGetResident(p.id, h2, n2));
-    EXPECT_EQ(h2, p.heights);
+    EXPECT_EQ(h2, p.samples);
     EXPECT_EQ(n2, p.normals);
   }
   // A second request is served from RAM with the same data.
@@ -133,7 +133,7 @@ TEST_F(PageLoaderTest, DataEqualsDirectRead) {
   const std::vector<LoadedPage> again = loader.takeCompleted(10);
   ASSERT_EQ(again.size(), 1u);
   EXPECT_TRUE(again[0].fromRam);
-  expectPageEquals(again[0].id, again[0].heights, again[0].normals);
+  expectPageEquals(again[0].id, again[0].samples, again[0].normals);
   EXPECT_EQ(loader.stats().ramHits, 1u);
   EXPECT_EQ(loader.stats().loadedFromDisk, nodes.size());
 }

@@ -1,6 +1,7 @@
 #version 430 core
 // Baseline mesh for throughput comparisons: plain positions, no texture fetch.
-layout(location = 0) in vec3 a_position;
+#include "interface.h"
+layout(location = GIMLOD_ATTRIB_POSITION) in vec3 a_position;
 uniform mat4 u_viewProj;
 uniform vec2 u_heightRange;
 out float v_shade;

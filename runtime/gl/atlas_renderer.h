@@ -1,6 +1,7 @@
-// OpenGL 4.3 terrain renderer: reusable (u,v) grids drawn as strips, heights by vertex texture
-// fetch from a page pool (texture array), GPU border stitching (paper section 7.4), normal
-// maps in the fragment shader, and transform-feedback capture of the stitched positions.
+// OpenGL 4.3 renderer of terrain (height) and mesh (geometry image) atlases: reusable (u,v) grids
+// drawn as strips, heights or positions by vertex texture fetch from a page pool (texture array),
+// GPU border stitching (paper section 7.4), normal maps in the fragment shader, and
+// transform-feedback capture of the stitched positions.
 // Needs a current GL context (see egl_context.h).
 #pragma once
 
@@ -37,30 +38,44 @@ struct DrawStats {
   uint32_t drawCalls = 0;  // GL draw calls issued (one multi-draw for the whole cut)
 };
 
-// Mip `level` (>= 1) of a page's normal map of samplesPerSide^2 texels in a pageSide^2 pool layer:
-// each texel is the renormalised mean of the level-0 texels it covers. Writes side^2 normals
-// (row-major) to out and returns side, the texels of that level that cover the page's data.
-uint32_t normalMipLevel(const PackedNormal* normals, uint32_t samplesPerSide, uint32_t pageSide, uint32_t level,
-                        std::vector<PackedNormal>& out);
+class GlObject;
 
-class TerrainRenderer {
+// Points `program`'s samplers u_samples and u_normals at the page pool's texture units
+// (shaders/interface.h).
+void setPagePoolUnits(const GlObject& program);
+
+// Links atlas.vert + atlas.frag for terrain atlases or, with `geometry`, mesh atlases
+// (GIMLOD_GEOMETRY), with v_world captured by transform feedback and the samplers set
+// (setPagePoolUnits): the renderer's program. Needs a current context.
+GlObject linkAtlasProgram(bool geometry);
+
+class AtlasRenderer {
  public:
-  explicit TerrainRenderer(const RendererSetup& setup);
-  ~TerrainRenderer();
-  TerrainRenderer(const TerrainRenderer&) = delete;
-  TerrainRenderer& operator=(const TerrainRenderer&) = delete;
+  explicit AtlasRenderer(const RendererSetup& setup);
+  ~AtlasRenderer();
+  AtlasRenderer(const AtlasRenderer&) = delete;
+  AtlasRenderer& operator=(const AtlasRenderer&) = delete;
 
   uint32_t pageCapacity() const;
-  // Uploads one node page: (n+1)^2 heights and normals, n = 2^pageIntervalsLog2 at most.
+  const RendererSetup& setup() const;
+  // Uploads one node page: (n+1)^2 samples and normals, n = 2^pageIntervalsLog2 at most.
   // Smaller pages (deep nodes) occupy the lower-left corner of the layer.
   // The normals also get their mip chain (normalMipLevel), for DrawNode::texLod. With
-  // RendererSetup::geometry, `heights` holds 3 floats (x, y, z) per sample.
-  void uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* heights,
+  // RendererSetup::geometry, `samples` holds 3 floats (x, y, z) per sample.
+  void uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* samples,
                   const PackedNormal* normals);
 
   // Draws the nodes into the offscreen framebuffer (clears first) and waits for completion.
   DrawStats draw(const glm::mat4& viewProj, const glm::vec3& eye, std::span<const DrawNode> nodes,
                  const StitchTables& stitch);
+
+  // Binds the offscreen framebuffer, sets the draw state (depth test, no culling) and clears it,
+  // as draw() does first: for drawing other geometry into the same picture (bench baselines).
+  void beginFrame() const;
+  // Makes `program` current with the shading uniforms of atlas.frag (view, light, fog, extent;
+  // the terrain-only ones where the program has them) and binds the page pool's textures to its
+  // units. `program` is one whose fragment stage is atlas.frag (setPagePoolUnits done).
+  void setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const;
 
   // Reads the framebuffer as RGBA8, top row first.
   std::vector<uint8_t> readPixels() const;
@@ -69,16 +84,6 @@ class TerrainRenderer {
   // world position of every grid vertex, index j * (2^res + 1) + i.
   std::vector<std::vector<glm::vec3>> captureVertices(std::span<const DrawNode> nodes,
                                                       const StitchTables& stitch);
-
-  // Baseline for throughput: draws one static indexed mesh with about `triangles` triangles
-  // (a plain VBO of positions, no texture fetch) `frames` times; returns ms per frame.
-  double drawStaticMeshMs(uint64_t triangles, uint32_t frames, uint64_t* drawnTriangles);
-
-  // Baseline at equal work: draws one static indexed triangle mesh (plain positions, one draw,
-  // no texture fetch or stitching) with the terrain fragment shader, from the given camera,
-  // `frames` times; returns ms per frame (submission + glFinish, as draw()).
-  double drawMeshMs(std::span<const glm::vec3> positions, std::span<const uint32_t> triangles,
-                    const glm::mat4& viewProj, const glm::vec3& eye, uint32_t frames);
 
  private:
   struct Impl;

@@ -1,5 +1,5 @@
-// One frame of terrain rendering: adapt (runtime core), build stitching tables, make the cut's
-// pages resident in the GPU page pool, and draw. Also the transform-feedback capture used by the
+// One frame of atlas rendering (terrain or mesh): adapt (runtime core), build stitching tables,
+// make the cut's pages resident in the GPU page pool, and draw. Also the transform-feedback capture used by the
 // crack tests. Needs a current GL context.
 #pragma once
 
@@ -11,9 +11,11 @@
 #include "runtime/adapt_dual_queue.h"
 #include "runtime/adapt_quad_queue.h"
 #include "runtime/atlas_view.h"
-#include "runtime/gl/renderer.h"
-#include "runtime/page_cache.h"
+#include "runtime/draw_list.h"
+#include "runtime/gl/atlas_renderer.h"
 #include "runtime/page_loader.h"
+#include "runtime/page_pool.h"
+#include "runtime/page_reader.h"
 #include "runtime/stitch.h"
 
 namespace gimlod::gl {
@@ -54,9 +56,9 @@ struct FrameResult {
   uint32_t stitchUnfixable = 0;   // async: drawn nodes left violating the stitching constraint
 };
 
-class TerrainScene {
+class AtlasScene {
  public:
-  TerrainScene(const AtlasView& atlas, const SceneOptions& options);
+  AtlasScene(const AtlasView& atlas, const SceneOptions& options);
   const AtlasView& atlas() const { return atlas_; }
   // The largest node budget a frame gets such that the cut's pages fit the page pool (clamped to
   // GL_MAX_ARRAY_TEXTURE_LAYERS) beside the locked roots: the larger of 3/4 of the unlocked
@@ -64,7 +66,7 @@ class TerrainScene {
   uint32_t nodeRoom() const;
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
-  TerrainRenderer& renderer() { return *renderer_; }
+  AtlasRenderer& renderer() { return *renderer_; }
 
   // Adapts to the camera (error threshold, paper 7.1 problem 1) and draws; the picture is then in
   // renderer().readPixels().
@@ -90,15 +92,15 @@ class TerrainScene {
                    std::chrono::steady_clock::time_point t0);
   // Async: requests missing pages, uploads loaded ones, and returns the drawable cut: every
   // node's page resident, stitching constraint enforced. Starts the frame that prepare draws.
-  Cut substituteResident(const Cut& desired, const ViewParams& view, FrameResult* frame);
+  Cut streamPages(const Cut& desired, const ViewParams& view, FrameResult* frame);
   AtlasView atlas_;
   SceneOptions options_;
-  std::unique_ptr<TerrainRenderer> renderer_;
-  AtlasPages pages_;
-  PageCache cache_;
+  std::unique_ptr<AtlasRenderer> renderer_;
+  PageReader pages_;
+  PagePool pool_;
   uint64_t frame_ = 0;
-  bool frameStarted_ = false;  // substituteResident began frame_; prepare must not advance it
-  std::vector<float> heights_;
+  bool frameStarted_ = false;  // streamPages began frame_; prepare must not advance it
+  std::vector<float> samples_;
   std::vector<PackedNormal> normals_;
   std::vector<LoadedPage> ready_;        // loaded pages waiting for the per-frame upload budget
   std::unique_ptr<DualQueueAdapter> dualQueue_;

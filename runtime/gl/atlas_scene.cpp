@@ -1,4 +1,4 @@
-#include "runtime/gl/terrain_scene.h"
+#include "runtime/gl/atlas_scene.h"
 
 #include <algorithm>
 #include <cassert>
@@ -6,6 +6,9 @@
 #include <limits>
 #include <stdexcept>
 #include <unordered_set>
+#include <utility>
+
+#include "runtime/residency.h"
 
 namespace gimlod::gl {
 namespace {
@@ -32,60 +35,46 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o) {
 
 }  // namespace
 
-TerrainScene::TerrainScene(const AtlasView& atlas, const SceneOptions& options)
+AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
     : atlas_(atlas),
       options_(options),
-      renderer_(std::make_unique<TerrainRenderer>(rendererSetup(atlas, options))),
+      renderer_(std::make_unique<AtlasRenderer>(rendererSetup(atlas, options))),
       pages_(atlas.dir, atlas.manifest, atlas.hierarchy.params),
-      cache_(renderer_->pageCapacity()) {
+      pool_(renderer_->pageCapacity()) {
   // The roots' pages stay resident (paper 7.2), so every frame can be drawn.
-  if (atlas_.hierarchy.chartCount() > cache_.capacity())
+  if (atlas_.hierarchy.chartCount() > pool_.capacity())
     throw std::runtime_error("page pool too small for the root pages of every chart");
   for (uint32_t c = 0; c < atlas_.hierarchy.chartCount(); ++c) {
     const NodeId root{c, 0, 0, 0};
-    PageCache::Slot slot;
-    cache_.acquire(root.key(), frame_, &slot);
-    pages_.read(root, heights_, normals_);
-    renderer_->uploadPage(slot.layer, pages_.pageSamples(0), heights_.data(), normals_.data());
-    cache_.lock(root.key());
+    PagePool::Slot slot;
+    pool_.acquire(root.key(), frame_, &slot);
+    pages_.read(root, samples_, normals_);
+    renderer_->uploadPage(slot.layer, pages_.pageSamples(0), samples_.data(), normals_.data());
+    pool_.lock(root.key());
   }
   if (options_.asyncLoads)
     loader_ = std::make_unique<PageLoader>(pages_, options_.ramCacheBytes);
 }
 
-void TerrainScene::waitForLoads() {
+void AtlasScene::waitForLoads() {
   if (loader_) loader_->waitIdle();
 }
 
-Cut TerrainScene::substituteResident(const Cut& desired, const ViewParams& view, FrameResult* f) {
+Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, FrameResult* f) {
   ++frame_;
   frameStarted_ = true;
-  const Hierarchy& h = atlas_.hierarchy;
-  const HierarchyParams& p = h.params;
+  const auto resident = [this](uint64_t key) { return pool_.contains(key); };
   // 1. Touch the resident desired pages, so the uploads below cannot evict them; request the
-  // others (coarser levels first, then larger screen error). Requests for nodes no longer in the
-  // cut are dropped.
+  // others. Requests for nodes no longer in the cut are dropped.
   loader_->cancelPending();
-  std::unordered_set<uint64_t> missing, ready;
+  std::unordered_set<uint64_t> ready;
   for (const LoadedPage& pg : ready_) ready.insert(pg.id.key());
   for (const CutNode& n : desired.nodes) {
-    PageCache::Slot slot;
-    if (cache_.contains(n.id.key())) {
-      cache_.acquire(n.id.key(), frame_, &slot);
-      continue;
-    }
-    const double priority = double(p.depth - n.id.level) * 1e3 + std::min(double(n.errorPx), 999.0);
-    if (!ready.count(n.id.key())) loader_->request(n.id, priority);  // else loaded, waiting
-    missing.insert(n.id.key());
-    // Its missing ancestors too (coarser first by priority), so the stand-in for a missing node
-    // is soon its parent rather than a far ancestor.
-    for (NodeId a = n.id; a.level > 0;) {
-      a = a.parent();
-      if (cache_.contains(a.key())) break;
-      if (!missing.insert(a.key()).second) break;
-      if (!ready.count(a.key())) loader_->request(a, double(p.depth - a.level) * 1e3 + 999.0);
-    }
+    PagePool::Slot slot;
+    if (pool_.contains(n.id.key())) pool_.acquire(n.id.key(), frame_, &slot);
   }
+  const PageRequestPlan plan = planPageRequests(atlas_.hierarchy, desired, resident, ready);
+  for (const PageRequest& r : plan.requests) loader_->request(r.id, r.priority);
   // 2. Upload a bounded number of loaded pages that this cut still wants; the rest of the wanted
   // ones wait for later frames, unwanted ones are dropped (they stay in the RAM cache).
   for (LoadedPage& pg : loader_->takeCompleted(std::numeric_limits<size_t>::max()))
@@ -93,97 +82,36 @@ Cut TerrainScene::substituteResident(const Cut& desired, const ViewParams& view,
   uint32_t uploaded = 0;
   std::vector<LoadedPage> keep;
   for (LoadedPage& pg : ready_) {
-    if (!missing.count(pg.id.key())) continue;
+    if (!plan.wanted.count(pg.id.key())) continue;
     if (uploaded >= options_.maxUploadsPerFrame) {
       keep.push_back(std::move(pg));
       continue;
     }
-    PageCache::Slot slot;
+    PagePool::Slot slot;
     // note: when the pool is full this frame the page is dropped; it stays in the RAM cache.
-    if (!cache_.acquire(pg.id.key(), frame_, &slot) || !slot.needsUpload) continue;
-    renderer_->uploadPage(slot.layer, pages_.pageSamples(pg.id.level), pg.heights.data(),
+    if (!pool_.acquire(pg.id.key(), frame_, &slot) || !slot.needsUpload) continue;
+    renderer_->uploadPage(slot.layer, pages_.pageSamples(pg.id.level), pg.samples.data(),
                           pg.normals.data());
     ++uploaded;
   }
   ready_.swap(keep);
-  // 3. Every missing node draws as its nearest resident ancestor (roots are locked resident).
-  // Substitutes under another substitute are dropped, so the cut stays a partition.
-  std::unordered_set<uint64_t> substitutes;
-  std::vector<NodeId> candidates;
-  for (const CutNode& n : desired.nodes) {
-    if (cache_.contains(n.id.key())) continue;
-    NodeId a = n.id;
-    while (a.level > 0 && !cache_.contains(a.key())) a = a.parent();
-    assert(cache_.contains(a.key()) && "root pages must be resident");
-    if (substitutes.insert(a.key()).second) candidates.push_back(a);
-  }
-  constexpr uint32_t kUnplaced = ~0u;
-  std::unordered_map<uint64_t, uint32_t> outer;  // outermost substitute -> position in drawn
-  for (const NodeId& a : candidates) {
-    bool inner = false;
-    for (NodeId b = a; b.level > 0 && !inner;) {
-      b = b.parent();
-      inner = substitutes.count(b.key()) != 0;
-    }
-    if (!inner) outer[a.key()] = kUnplaced;
-  }
-  Cut drawn;
-  drawn.nodes.reserve(desired.nodes.size());
-  uint32_t substituted = 0;
-  for (const CutNode& n : desired.nodes) {
-    auto it = outer.end();
-    NodeId b = n.id;
-    while (b.level > 0 && it == outer.end()) {
-      b = b.parent();
-      it = outer.find(b.key());
-    }
-    if (it == outer.end()) {
-      drawn.nodes.push_back(n);
-      continue;
-    }
-    ++substituted;
-    if (it->second == kUnplaced) {
-      it->second = uint32_t(drawn.nodes.size());
-      drawn.nodes.push_back({b, p.minRes(b.level), 0.f});
-    }
-    CutNode& a = drawn.nodes[it->second];
-    a.res = std::max(a.res, std::min(n.res, p.maxRes(b.level)));
-  }
-  drawn.rebuildIndex();
-  // 4. Stitching constraint without splits: substitutes only coarsen the cut, so raising their
-  // resolution suffices whenever log2 R >= depth - 1; anything else is counted.
-  uint32_t unfixable = 0;
-  if (substituted > 0) {
-    std::vector<uint32_t> gaps;
-    stitchGaps(h, drawn, gaps);
-    for (size_t i = 0; i < drawn.nodes.size(); ++i) {
-      CutNode& n = drawn.nodes[i];
-      const uint32_t gap = gaps[i];
-      if (gap <= n.res) continue;
-      if (gap <= p.maxRes(n.id.level))
-        n.res = gap;
-      else
-        ++unfixable;
-    }
-    for (auto& [key, i] : outer)
-      if (i != kUnplaced)
-        drawn.nodes[i].errorPx = float(screenError(h, drawn.nodes[i].id, drawn.nodes[i].res, view));
-  }
-  assert(unfixable == 0 && "stitching constraint needs a split into a non-resident node");
+  // 3. Every missing node draws as its nearest resident ancestor, stitched.
+  ResidentCut drawn = substituteResident(atlas_.hierarchy, desired, view, resident);
+  assert(drawn.stitchUnfixable == 0 && "stitching constraint needs a split into a non-resident node");
   if (f) {
-    f->pagesRequested = uint32_t(missing.size());
+    f->pagesRequested = uint32_t(plan.wanted.size());
     f->pagesUploaded = uploaded;
-    f->nodesSubstituted = substituted;
-    f->stitchUnfixable = unfixable;
+    f->nodesSubstituted = drawn.nodesSubstituted;
+    f->stitchUnfixable = drawn.stitchUnfixable;
   }
-  return drawn;
+  return std::move(drawn.cut);
 }
 
-glm::dmat4 TerrainScene::viewProjection(const Camera& c) const {
+glm::dmat4 AtlasScene::viewProjection(const Camera& c) const {
   return projectionMatrix(c, double(options_.width) / double(options_.height)) * viewMatrix(c);
 }
 
-std::vector<DrawNode> TerrainScene::prepare(const Cut& cut, FrameResult* frame) {
+std::vector<DrawNode> AtlasScene::prepare(const Cut& cut, FrameResult* frame) {
   if (!frameStarted_) ++frame_;
   frameStarted_ = false;
   const auto t0 = std::chrono::steady_clock::now();
@@ -191,11 +119,11 @@ std::vector<DrawNode> TerrainScene::prepare(const Cut& cut, FrameResult* frame) 
   nodes.reserve(cut.nodes.size());
   uint32_t loaded = 0, missing = 0;
   for (const CutNode& n : cut.nodes) {
-    PageCache::Slot slot;
-    if (cache_.acquire(n.id.key(), frame_, &slot)) {
+    PagePool::Slot slot;
+    if (pool_.acquire(n.id.key(), frame_, &slot)) {
       if (slot.needsUpload) {
-        pages_.read(n.id, heights_, normals_);
-        renderer_->uploadPage(slot.layer, pages_.pageSamples(n.id.level), heights_.data(),
+        pages_.read(n.id, samples_, normals_);
+        renderer_->uploadPage(slot.layer, pages_.pageSamples(n.id.level), samples_.data(),
                               normals_.data());
         ++loaded;
       }
@@ -215,7 +143,7 @@ std::vector<DrawNode> TerrainScene::prepare(const Cut& cut, FrameResult* frame) 
   return nodes;
 }
 
-DrawStats TerrainScene::drawCut(const Camera& camera, const Cut& cut, FrameResult* frame) {
+DrawStats AtlasScene::drawCut(const Camera& camera, const Cut& cut, FrameResult* frame) {
   auto t0 = std::chrono::steady_clock::now();
   const StitchTables stitch = buildStitchTables(atlas_.hierarchy, cut);
   if (frame) frame->stitchMs = msSince(t0);
@@ -223,7 +151,7 @@ DrawStats TerrainScene::drawCut(const Camera& camera, const Cut& cut, FrameResul
   return renderer_->draw(glm::mat4(viewProjection(camera)), glm::vec3(camera.eye), nodes, stitch);
 }
 
-uint32_t TerrainScene::nodeRoom() const {
+uint32_t AtlasScene::nodeRoom() const {
   // Keep the cut's pages within the pool. The roots' pages are locked, so the cut's other nodes
   // must fit in the rest, `free` (3/4 of it: the stitching constraint may add nodes past the
   // budget). A cut of at most `free` nodes does; so does one of at most roots + 3/4 free: each
@@ -232,16 +160,16 @@ uint32_t TerrainScene::nodeRoom() const {
   // the larger one for atlases of many charts (a scan's hundreds), where the first would leave
   // almost no room to split.
   const uint32_t roots = atlas_.hierarchy.chartCount();
-  const uint32_t free = (cache_.capacity() - roots) * 3 / 4;
+  const uint32_t free = (pool_.capacity() - roots) * 3 / 4;
   return std::max(free, roots + free * 3 / 4);
 }
 
-uint32_t TerrainScene::nodeBudget(uint32_t maxNodes) const {
+uint32_t AtlasScene::nodeBudget(uint32_t maxNodes) const {
   const uint32_t room = nodeRoom();
   return maxNodes == 0 || maxNodes > room ? room : maxNodes;
 }
 
-FrameResult TerrainScene::renderFrame(const Camera& camera, const AdaptOptions& options) {
+FrameResult AtlasScene::renderFrame(const Camera& camera, const AdaptOptions& options) {
   FrameResult f;
   const auto t0 = std::chrono::steady_clock::now();
   const ViewParams view = makeViewParams(camera, options_.width, options_.height);
@@ -257,7 +185,7 @@ FrameResult TerrainScene::renderFrame(const Camera& camera, const AdaptOptions& 
   return f;
 }
 
-FrameResult TerrainScene::renderFrame(const Camera& camera, const BudgetOptions& options) {
+FrameResult AtlasScene::renderFrame(const Camera& camera, const BudgetOptions& options) {
   FrameResult f;
   const auto t0 = std::chrono::steady_clock::now();
   const ViewParams view = makeViewParams(camera, options_.width, options_.height);
@@ -275,7 +203,7 @@ FrameResult TerrainScene::renderFrame(const Camera& camera, const BudgetOptions&
   return f;
 }
 
-void TerrainScene::finishFrame(const Camera& camera, const ViewParams& view, FrameResult& f,
+void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, FrameResult& f,
                                std::chrono::steady_clock::time_point t0) {
   const Hierarchy& h = atlas_.hierarchy;
   if (options_.texelsPerPixel > 0.0)
@@ -295,7 +223,7 @@ void TerrainScene::finishFrame(const Camera& camera, const ViewParams& view, Fra
   const auto t1 = std::chrono::steady_clock::now();
   if (loader_) {
     f.desiredCut = std::move(f.cut);
-    f.cut = substituteResident(f.desiredCut, view, &f);
+    f.cut = streamPages(f.desiredCut, view, &f);
   }
   const double substituteMs = msSince(t1);
   f.maxErrorPx = 0.0;
@@ -308,7 +236,7 @@ void TerrainScene::finishFrame(const Camera& camera, const ViewParams& view, Fra
   f.uploadMs += substituteMs;
 }
 
-std::vector<std::vector<glm::vec3>> TerrainScene::capture(const Cut& cut, bool stitchOn) {
+std::vector<std::vector<glm::vec3>> AtlasScene::capture(const Cut& cut, bool stitchOn) {
   StitchTables stitch = buildStitchTables(atlas_.hierarchy, cut);
   if (!stitchOn) std::fill(stitch.bytes.begin(), stitch.bytes.end(), uint8_t(0));
   const std::vector<DrawNode> nodes = prepare(cut, nullptr);

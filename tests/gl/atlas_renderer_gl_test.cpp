@@ -1,4 +1,4 @@
-// TerrainRenderer on headless EGL (llvmpipe in CI): context, grid strips, GPU border stitching
+// AtlasRenderer on headless EGL (llvmpipe in CI): context, GPU border stitching
 // checked bit-exactly through transform feedback, and drawing into the offscreen framebuffer.
 #include <gtest/gtest.h>
 
@@ -12,76 +12,11 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 
+#include "runtime/gl/atlas_renderer.h"
 #include "runtime/gl/egl_context.h"
-#include "runtime/gl/grid_strips.h"
-#include "runtime/gl/renderer.h"
 
 namespace gimlod {
 namespace {
-
-using gl::Triangle;
-
-// ---------------------------------------------------------------------------------------------
-// Grid strips (no GL).
-
-// Rotates a triangle so its smallest index comes first (keeps the winding).
-Triangle canonical(Triangle t) {
-  std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
-  return t;
-}
-
-std::vector<Triangle> sortedCanonical(std::vector<Triangle> ts) {
-  for (Triangle& t : ts) t = canonical(t);
-  std::sort(ts.begin(), ts.end());
-  return ts;
-}
-
-TEST(GridStrips, TriangleSetIsTheDiagonalSplit) {
-  for (uint32_t res = 0; res <= 7; ++res) {
-    for (uint32_t band : {1u, 3u, gl::kStripBandQuads}) {
-      const std::vector<uint32_t> idx = gl::buildGridStripIndices(res, band);
-      const auto tris = gl::expandStrips(idx);
-      const uint32_t side = (1u << res) + 1;
-      EXPECT_EQ(tris.size(), size_t(2) << (2 * res)) << "res " << res << " band " << band;
-      EXPECT_EQ(sortedCanonical(tris), sortedCanonical(gl::expectedGridTriangles(res)))
-          << "res " << res << " band " << band;
-      std::vector<bool> used(size_t(side) * side, false);
-      for (uint32_t i : idx) {
-        if (i == gl::kPrimitiveRestartIndex) continue;
-        ASSERT_LT(i, used.size());
-        used[i] = true;
-      }
-      EXPECT_EQ(std::count(used.begin(), used.end(), false), 0) << "res " << res;
-    }
-  }
-}
-
-TEST(GridStrips, ExpectedSetDistinguishesTheOtherDiagonal) {
-  // The comparison above can fail: strips starting on the lower row split each quad along
-  // (i+1,j)-(i,j+1) and must not match.
-  const uint32_t res = 2, n = 4;
-  std::vector<uint32_t> other;
-  for (uint32_t j = 0; j < n; ++j) {
-    if (!other.empty()) other.push_back(gl::kPrimitiveRestartIndex);
-    for (uint32_t i = 0; i <= n; ++i) {
-      other.push_back(gl::gridVertexIndex(res, i, j));
-      other.push_back(gl::gridVertexIndex(res, i, j + 1));
-    }
-  }
-  const auto tris = gl::expandStrips(other);
-  EXPECT_EQ(tris.size(), size_t(32));
-  EXPECT_NE(sortedCanonical(tris), sortedCanonical(gl::expectedGridTriangles(res)));
-}
-
-TEST(GridStrips, StripsAreCounterClockwiseFromAbove) {
-  const uint32_t res = 3, side = 9;
-  for (const Triangle& t : gl::expandStrips(gl::buildGridStripIndices(res))) {
-    auto xy = [&](uint32_t v) { return glm::ivec2(int(v % side), int(v / side)); };
-    const glm::ivec2 a = xy(t[0]), b = xy(t[1]), c = xy(t[2]);
-    const int cross = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
-    EXPECT_GT(cross, 0);
-  }
-}
 
 // ---------------------------------------------------------------------------------------------
 // GL fixture: one context per test suite.
@@ -142,7 +77,7 @@ DrawNode makeNode(int32_t x, int32_t y, uint32_t sizeLog2, uint32_t res, uint32_
 }
 
 // Uploads each node's page, sampled from `h` at the node's page spacing.
-void uploadPages(gl::TerrainRenderer& r, const std::vector<DrawNode>& nodes, HeightFn h) {
+void uploadPages(gl::AtlasRenderer& r, const std::vector<DrawNode>& nodes, HeightFn h) {
   for (const DrawNode& n : nodes) {
     const uint32_t s = (1u << n.pageResLog2) + 1, ps = n.sizeLog2 - n.pageResLog2;
     std::vector<float> heights(size_t(s) * s);
@@ -261,7 +196,7 @@ gl::RendererSetup smallSetup(uint32_t pageIntervalsLog2) {
 
 // Captures with the given tables and with zeroed tables; checks the stitched run is exact, the
 // negative control cracks (when expected), and the captured layout is the grid order.
-void expectCrackFree(gl::TerrainRenderer& r, const Scene& s, bool controlMustCrack,
+void expectCrackFree(gl::AtlasRenderer& r, const Scene& s, bool controlMustCrack,
                      const std::string& label) {
   const auto verts = r.captureVertices(s.nodes, s.stitch);
   ASSERT_EQ(verts.size(), s.nodes.size());
@@ -279,7 +214,7 @@ void expectCrackFree(gl::TerrainRenderer& r, const Scene& s, bool controlMustCra
 }
 
 TEST_F(RendererGlTest, CapturedInteriorVerticesAreTheExactSamples) {
-  gl::TerrainRenderer r(smallSetup(4));
+  gl::AtlasRenderer r(smallSetup(4));
   const std::vector<DrawNode> nodes = {makeNode(16, 32, 4, 2, 3, 5), makeNode(-16, 0, 4, 4, 4, 9)};
   uploadPages(r, nodes, randomHeight);
   const StitchTables stitch = bruteForceStitch(nodes, 4, 1);
@@ -300,7 +235,7 @@ TEST_F(RendererGlTest, CapturedInteriorVerticesAreTheExactSamples) {
 }
 
 TEST_F(RendererGlTest, HandBuiltTablesStitchTwoResolutions) {
-  gl::TerrainRenderer r(smallSetup(4));
+  gl::AtlasRenderer r(smallSetup(4));
   // Same size (16 intervals), res 4 (spacing 1) left of res 2 (spacing 4).
   Scene s;
   s.nodes = {makeNode(0, 0, 4, 4, 4, 0), makeNode(16, 0, 4, 2, 4, 1)};
@@ -319,7 +254,7 @@ TEST_F(RendererGlTest, HandBuiltTablesStitchTwoResolutions) {
 }
 
 TEST_F(RendererGlTest, BigNodeAgainstTwoSmallerNodes) {
-  gl::TerrainRenderer r(smallSetup(5));
+  gl::AtlasRenderer r(smallSetup(5));
   for (uint32_t bigRes : {2u, 3u, 4u, 5u}) {
     Scene s;
     // Big node 32 wide (page mostly at half resolution) left of two 16-wide nodes, a level below.
@@ -334,7 +269,7 @@ TEST_F(RendererGlTest, BigNodeAgainstTwoSmallerNodes) {
 }
 
 TEST_F(RendererGlTest, BigNodeAgainstEightNodesThreeLevelsDown) {
-  gl::TerrainRenderer r(smallSetup(5));
+  gl::AtlasRenderer r(smallSetup(5));
   for (uint32_t bigRes : {3u, 4u, 5u}) {
     Scene s;
     s.nodes.push_back(makeNode(0, 0, 5, bigRes, 5, 0));
@@ -360,7 +295,7 @@ bool nearColour(const uint8_t* px, const std::array<float, 3>& c, int tolerance)
 }
 
 // 2x2 nodes over [0,64]^2 at mixed resolutions, smooth heights.
-Scene quadScene(gl::TerrainRenderer& r) {
+Scene quadScene(gl::AtlasRenderer& r) {
   Scene s;
   s.nodes = {makeNode(0, 0, 5, 5, 5, 0), makeNode(32, 0, 5, 3, 5, 1), makeNode(0, 32, 5, 4, 5, 2),
              makeNode(32, 32, 5, 2, 5, 3)};
@@ -373,7 +308,7 @@ TEST_F(RendererGlTest, DrawShowsTerrainBelowAndSkyAbove) {
   gl::RendererSetup setup = smallSetup(5);
   setup.spacing = {1.0, 1.0};
   setup.heightRange = {0.f, 12.f};
-  gl::TerrainRenderer r(setup);
+  gl::AtlasRenderer r(setup);
   const Scene s = quadScene(r);
   const glm::vec3 eye(32.f, -30.f, 20.f);
   const glm::mat4 viewProj =
@@ -403,7 +338,7 @@ TEST_F(RendererGlTest, FragmentsOutsideTheValidExtentAreDiscarded) {
   setup.spacing = {1.0, 1.0};
   setup.heightRange = {0.f, 12.f};
   setup.validSamples = {33, 65};  // x beyond sample 32 is padding
-  gl::TerrainRenderer r(setup);
+  gl::AtlasRenderer r(setup);
   const Scene s = quadScene(r);
   // Straight down onto [0,64]^2, x to the right, y up.
   const glm::mat4 viewProj = glm::ortho(0.f, 64.f, 0.f, 64.f, -100.f, 100.f);
@@ -416,49 +351,18 @@ TEST_F(RendererGlTest, FragmentsOutsideTheValidExtentAreDiscarded) {
   }
   // Same view without the limit: the right half is drawn.
   setup.validSamples = {0, 0};
-  gl::TerrainRenderer all(setup);
+  gl::AtlasRenderer all(setup);
   const Scene s2 = quadScene(all);
   all.draw(viewProj, glm::vec3(32.f, 32.f, 100.f), s2.nodes, s2.stitch);
   const std::vector<uint8_t> px2 = all.readPixels();
   EXPECT_FALSE(nearColour(px2.data() + (size_t(48) * 128 + 100) * 4, setup.background, 8));
 }
 
-TEST_F(RendererGlTest, StaticMeshBaselineDraws) {
-  gl::TerrainRenderer r(smallSetup(4));
-  uint64_t drawn = 0;
-  const double ms = r.drawStaticMeshMs(5000, 3, &drawn);
-  EXPECT_GT(ms, 0.0);
-  EXPECT_NEAR(double(drawn), 5000.0, 200.0);
-  const std::vector<uint8_t> px = r.readPixels();
-  EXPECT_FALSE(nearColour(px.data() + (size_t(48) * 128 + 64) * 4, smallSetup(4).background, 8))
-      << "the baseline mesh should cover the centre";
-}
-
-TEST(NormalMips, MeanOfCoveredTexelsRenormalised) {
-  // A 5x5 page in a 9-wide pool layer; left half tilted +x, right half tilted -x.
-  const uint32_t s = 5, pageSide = 9;
-  std::vector<PackedNormal> n(s * s);
-  for (uint32_t v = 0; v < s; ++v)
-    for (uint32_t u = 0; u < s; ++u) n[v * s + u] = u < 2 ? packNormal(0.6f, 0.f, 0.8f) : packNormal(-0.6f, 0.f, 0.8f);
-  std::vector<PackedNormal> mip;
-  // Level 1 of a 9-wide layer has 4 texels a side; the page's 5 samples cover 3 of them.
-  EXPECT_EQ(gl::normalMipLevel(n.data(), s, pageSide, 1, mip), 3u);
-  ASSERT_EQ(mip.size(), 9u);
-  // Texel 0 covers level-0 texels [0, 2): all +x.
-  EXPECT_NEAR(unpackNormal(mip[0])[0], 0.6f, 0.01f);
-  // The last level is one texel: the renormalised mean of everything, about straight up.
-  const uint32_t last = gl::normalMipLevel(n.data(), s, pageSide, 3, mip);
-  EXPECT_EQ(last, 1u);
-  const auto up = unpackNormal(mip[0]);
-  EXPECT_LT(std::abs(up[0]), 0.3f);
-  EXPECT_NEAR(std::sqrt(up[0] * up[0] + up[1] * up[1] + up[2] * up[2]), 1.f, 0.02f);
-}
-
 TEST_F(RendererGlTest, AttributeLevelChangesShadingNotGeometry) {
   gl::RendererSetup setup = smallSetup(5);
   setup.spacing = {1.0, 1.0};
   setup.heightRange = {0.f, 1.f};
-  gl::TerrainRenderer r(setup);
+  gl::AtlasRenderer r(setup);
   // A flat page whose normal map alternates tilts every texel: full detail at texLod 0, an even
   // mean at the coarsest level.
   const uint32_t side = 33;
@@ -499,7 +403,7 @@ TEST_F(RendererGlTest, AttributeLevelChangesShadingNotGeometry) {
 TEST_F(RendererGlTest, BadInputsThrowAndCapacityIsClamped) {
   gl::RendererSetup setup = smallSetup(4);
   setup.pageCapacity = 1u << 20;
-  gl::TerrainRenderer r(setup);
+  gl::AtlasRenderer r(setup);
   GLint maxLayers = 0;
   glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &maxLayers);
   EXPECT_EQ(r.pageCapacity(), uint32_t(maxLayers));

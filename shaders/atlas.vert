@@ -1,24 +1,27 @@
 #version 430 core
-// Terrain patch vertex shader (paper sections 7.3-7.4): a reusable (u,v) grid vertex becomes a
+// Atlas patch vertex shader (paper sections 7.3-7.4): a reusable (u,v) grid vertex becomes a
 // world position by integer sample arithmetic, border stitching against the neighbours' vertex
-// spacing, and a height fetch from the node's page in the page pool.
+// spacing, and a fetch from the node's page in the page pool: a height (terrain atlases) or the
+// position itself (mesh atlases, GIMLOD_GEOMETRY).
 
-layout(location = 0) in uvec2 a_ij;   // grid vertex (i, j), 0..2^res
+#include "interface.h"
+
+layout(location = GIMLOD_ATTRIB_GRID) in uvec2 a_ij;   // grid vertex (i, j), 0..2^res
 // The node record, per instance (divisor 1, selected by the draw's baseinstance):
 // a_nodeA = (origin.x, origin.y, sizeLog2, res), a_nodeB = (pageResLog2, pageLayer, index, texLod).
 // origin in level-0 samples; sizeLog2 = node side in level-0 intervals; the grid has 2^res
 // intervals per side; the page 2^pageResLog2.
-layout(location = 1) in ivec4 a_nodeA;
-layout(location = 2) in ivec4 a_nodeB;
+layout(location = GIMLOD_ATTRIB_NODE_A) in ivec4 a_nodeA;
+layout(location = GIMLOD_ATTRIB_NODE_B) in ivec4 a_nodeB;
 
 // Stitch tables bytes, (node * 4 + side) * entriesPerSide + entry, packed little-endian in words.
-layout(std430, binding = 1) readonly buffer Stitch { uint u_stitchWords[]; };
+layout(std430, binding = GIMLOD_STITCH_BINDING) readonly buffer Stitch { uint u_stitchWords[]; };
 
 uniform mat4 u_viewProj;
 uniform vec2 u_spacing;
 uniform int u_leafLog2;
 uniform int u_entriesPerSide;
-uniform sampler2DArray u_heights;  // R32F heights (RGB32F positions with GIMLOD_GEOMETRY), texelFetch only
+uniform sampler2DArray u_samples;  // R32F heights (RGB32F positions with GIMLOD_GEOMETRY), texelFetch only
 
 precise out vec3 v_world;  // captured by transform feedback
 out vec2 v_pageUv;
@@ -60,14 +63,14 @@ void main() {
   ivec2 texel = ivec2(sx >> ps, sy >> ps);
 #ifdef GIMLOD_GEOMETRY
   // Geometry image: the position is the sample itself (bit-identical across chart seams).
-  v_world = texelFetch(u_heights, ivec3(texel, pageLayer), 0).xyz;
+  v_world = texelFetch(u_samples, ivec3(texel, pageLayer), 0).xyz;
 #else
-  float height = texelFetch(u_heights, ivec3(texel, pageLayer), 0).r;
+  float height = texelFetch(u_samples, ivec3(texel, pageLayer), 0).r;
   // Integer sample first, one conversion, one multiply: bit-identical across nodes.
   v_world = vec3(float(origin.x + sx) * u_spacing.x, float(origin.y + sy) * u_spacing.y, height);
 #endif
   gl_Position = u_viewProj * vec4(v_world, 1.0);
-  v_pageUv = (vec2(texel) + 0.5) / float(textureSize(u_heights, 0).x);
+  v_pageUv = (vec2(texel) + 0.5) / float(textureSize(u_samples, 0).x);
   v_pageLayer = pageLayer;
   v_texLod = a_nodeB.w;
 }

@@ -1,6 +1,7 @@
 #version 430 core
-// Terrain fragment shader: valid-extent clipping, normal map, Lambert + ambient lighting with a
-// hypsometric colour ramp and light distance fog.
+// Atlas fragment shader: normal map and Lambert + ambient lighting with light distance fog;
+// terrain atlases also clip to the valid extent and colour with a hypsometric ramp, mesh atlases
+// (GIMLOD_GEOMETRY) are neutral clay.
 
 in vec3 v_world;
 in vec2 v_pageUv;
@@ -8,7 +9,7 @@ flat in int v_pageLayer;
 flat in int v_texLod;  // mip of the normal map: the node's attribute resolution (paper 7.1, 7.3)
 
 uniform sampler2DArray u_normals;  // RGBA8, n * 0.5 + 0.5, bilinear, with mips
-uniform sampler2DArray u_heights;  // R32F page heights, bilinear here (texelFetch in the vertex shader)
+uniform sampler2DArray u_samples;  // R32F page heights (terrain only here), bilinear (texelFetch in the vertex shader)
 uniform vec2 u_spacing;
 uniform vec2 u_validSamples;  // samples per axis; 0 = unlimited
 uniform vec2 u_heightRange;
@@ -57,7 +58,7 @@ void main() {
 #endif
   // Below sea level (only when the data goes below 0): bathymetric blues; above: the land ramp.
   // Colour follows the page heights (finer than the drawn grid), like the normal map.
-  float h = texture(u_heights, vec3(v_pageUv, float(v_pageLayer))).r;
+  float h = texture(u_samples, vec3(v_pageUv, float(v_pageLayer))).r;
   float landLow = max(u_heightRange.x, 0.0);
   float span = max(u_heightRange.y - landLow, 1e-6);
   vec3 base = hypsometric(clamp((h - landLow) / span, 0.0, 1.0));

@@ -1,9 +1,9 @@
 // Grid strip generation for the (u,v) grids of paper section 7.3.
-#include "runtime/gl/grid_strips.h"
+#include "runtime/grid_strips.h"
 
 #include <algorithm>
 
-namespace gimlod::gl {
+namespace gimlod {
 
 std::vector<uint32_t> buildGridStripIndices(uint32_t res, uint32_t bandQuads) {
   const uint32_t n = 1u << res;
@@ -56,4 +56,4 @@ std::vector<Triangle> expectedGridTriangles(uint32_t res) {
   return out;
 }
 
-}  // namespace gimlod::gl
+}  // namespace gimlod

@@ -1,7 +1,8 @@
 #version 430 core
 // Throughput baseline: the same surface as one static mesh of plain positions (no texture fetch,
-// no stitching), shaded by terrain.frag so only the vertex path differs.
-layout(location = 0) in vec3 a_position;
+// no stitching), shaded by atlas.frag so only the vertex path differs.
+#include "interface.h"
+layout(location = GIMLOD_ATTRIB_POSITION) in vec3 a_position;
 uniform mat4 u_viewProj;
 out vec3 v_world;
 out vec2 v_pageUv;

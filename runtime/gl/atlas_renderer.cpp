@@ -1,7 +1,7 @@
 // Based on Niski, Purnomo, Cohen, "Multi-grained Level of Detail Using a Hierarchical Seamless
 // Texture Atlas" (I3D 2007), section 7.3 (patch rendering with reusable (u,v) grids) and
 // section 7.4 (border stitching in the vertex program).
-#include "runtime/gl/renderer.h"
+#include "runtime/gl/atlas_renderer.h"
 
 #include <epoxy/gl.h>
 
@@ -9,28 +9,28 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include <limits>
 #include <stdexcept>
 #include <string>
 
-#include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/type_ptr.hpp>
 
 #include "gimlod_shaders.h"
 #include "runtime/gl/gl_objects.h"
-#include "runtime/gl/grid_strips.h"
+#include "runtime/grid_strips.h"
+#include "runtime/normal_mips.h"
+#include "shaders/interface.h"
 
 namespace gimlod::gl {
 namespace {
 
-constexpr GLuint kHeightsUnit = 0, kNormalsUnit = 1;
-constexpr GLuint kStitchBinding = 1;  // SSBO binding in terrain.vert
-// Vertex attribute locations in terrain.vert: the grid vertex, and the node record as two
-// per-instance ivec4s (divisor 1; the draw's baseinstance selects the node).
-constexpr GLuint kGridAttrib = 0, kNodeAttribA = 1, kNodeAttribB = 2;
+// The shader interface (shaders/interface.h, shared with the GLSL).
+constexpr GLuint kSamplesUnit = GIMLOD_SAMPLES_UNIT, kNormalsUnit = GIMLOD_NORMALS_UNIT;
+constexpr GLuint kStitchBinding = GIMLOD_STITCH_BINDING;
+constexpr GLuint kGridAttrib = GIMLOD_ATTRIB_GRID, kNodeAttribA = GIMLOD_ATTRIB_NODE_A,
+                 kNodeAttribB = GIMLOD_ATTRIB_NODE_B;
 constexpr uint32_t kMaxGridResLog2 = 12;                 // (2^12+1)^2 vertices; ushort (i, j)
 
-// std430 layout of terrain.vert's NodeRecord.
+// std430 layout of atlas.vert's NodeRecord.
 // Layout fixed by GL for glMultiDrawElementsIndirect.
 struct DrawElementsIndirectCommand {
   GLuint count, instanceCount, firstIndex;
@@ -56,51 +56,30 @@ double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
-// Mean wall time in ms of `frames` calls of frame() (each ends with glFinish); 0 for no frames.
-template <typename Frame>
-double meanFrameMs(uint32_t frames, Frame&& frame) {
-  double total = 0.0;
-  for (uint32_t f = 0; f < frames; ++f) {
-    const auto t0 = Clock::now();
-    frame();
-    total += msSince(t0);
-  }
-  return frames ? total / frames : 0.0;
-}
-
 }  // namespace
 
-uint32_t normalMipLevel(const PackedNormal* normals, uint32_t samplesPerSide, uint32_t pageSide, uint32_t level,
-                        std::vector<PackedNormal>& out) {
-  const uint32_t mipSide = std::max(1u, pageSide >> level);
-  // Texels of the level covering the page's data: level-0 texel t lies at (t + 0.5) / pageSide.
-  const uint32_t side = std::min(mipSide, (samplesPerSide * mipSide + pageSide - 1) / pageSide);
-  out.assign(size_t(side) * side, PackedNormal{});
-  auto range = [&](uint32_t m, uint32_t* a, uint32_t* b) {
-    *a = std::min(m * pageSide / mipSide, samplesPerSide - 1);
-    *b = std::clamp((m + 1) * pageSide / mipSide, *a + 1, samplesPerSide);
-  };
-  for (uint32_t j = 0; j < side; ++j) {
-    uint32_t y0, y1;
-    range(j, &y0, &y1);
-    for (uint32_t i = 0; i < side; ++i) {
-      uint32_t x0, x1;
-      range(i, &x0, &x1);
-      float sum[3] = {0.f, 0.f, 0.f};
-      for (uint32_t y = y0; y < y1; ++y)
-        for (uint32_t x = x0; x < x1; ++x) {
-          const std::array<float, 3> n = unpackNormal(normals[size_t(y) * samplesPerSide + x]);
-          for (int c = 0; c < 3; ++c) sum[c] += n[c];
-        }
-      const float len = std::sqrt(sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]);
-      out[size_t(j) * side + i] =
-          len > 1e-12f ? packNormal(sum[0] / len, sum[1] / len, sum[2] / len) : packNormal(0.f, 0.f, 1.f);
-    }
-  }
-  return side;
+void setPagePoolUnits(const GlObject& program) {
+  glUseProgram(program.id());
+  glUniform1i(uniform(program, "u_samples"), kSamplesUnit);
+  glUniform1i(uniform(program, "u_normals"), kNormalsUnit);
+  glUseProgram(0);
 }
 
-struct TerrainRenderer::Impl {
+GlObject linkAtlasProgram(bool geometry) {
+  // note: mesh atlases use the same shaders with GIMLOD_GEOMETRY defined after the #version line.
+  auto variant = [&](const char* source) {
+    std::string s = source;
+    if (geometry) s.insert(s.find('\n') + 1, "#define GIMLOD_GEOMETRY 1\n");
+    return s;
+  };
+  const std::string vert = variant(kShader_atlas_vert), frag = variant(kShader_atlas_frag);
+  GlObject program =
+      linkProgram(geometry ? "atlas (mesh)" : "atlas", vert.c_str(), frag.c_str(), {"v_world"});
+  setPagePoolUnits(program);
+  return program;
+}
+
+struct AtlasRenderer::Impl {
   // One reusable grid inside the shared vertex and index buffers.
   struct GridRange {
     GLint baseVertex = 0;
@@ -113,12 +92,12 @@ struct TerrainRenderer::Impl {
   uint32_t pageSide = 0;  // P = 2^pageIntervalsLog2 + 1
   uint32_t capacity = 0;
   GlObject colourBuffer, depthBuffer, framebuffer;
-  GlObject heights, normals;
+  GlObject samples, normals;  // page pool: heights or positions, and normals
   uint32_t normalLevels = 1;  // mip levels of the normal page pool
   GlObject gridVertices, gridIndices, vertexArray;
   std::vector<GridRange> grids;  // [res - minResLog2]
   GlObject nodeBuffer, stitchBuffer, indirectBuffer, feedbackBuffer, feedbackQuery;
-  GlObject terrainProgram, staticProgram, staticTerrainProgram;
+  GlObject atlasProgram;
 
   explicit Impl(const RendererSetup& s);
   void checkLimits() const;
@@ -133,19 +112,19 @@ struct TerrainRenderer::Impl {
   void uploadNodes(std::span<const DrawNode> nodes, const StitchTables& stitch,
                    std::span<const uint32_t> order = {});
   void setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const;
-  void bindTerrain(const glm::mat4& viewProj, const glm::vec3& eye, const StitchTables& stitch);
+  void bindAtlas(const glm::mat4& viewProj, const glm::vec3& eye, const StitchTables& stitch);
   void beginFrame() const;
 };
 
-TerrainRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
+AtlasRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   if (setup.width == 0 || setup.height == 0)
-    throw std::invalid_argument("TerrainRenderer: framebuffer size must be positive");
+    throw std::invalid_argument("AtlasRenderer: framebuffer size must be positive");
   if (setup.minResLog2 > setup.maxResLog2 || setup.maxResLog2 > kMaxGridResLog2)
-    throw std::invalid_argument("TerrainRenderer: need minResLog2 <= maxResLog2 <= " +
+    throw std::invalid_argument("AtlasRenderer: need minResLog2 <= maxResLog2 <= " +
                                 std::to_string(kMaxGridResLog2));
   if (setup.pageIntervalsLog2 > kMaxGridResLog2)
-    throw std::invalid_argument("TerrainRenderer: pageIntervalsLog2 too large");
-  checkGl("context before TerrainRenderer setup");
+    throw std::invalid_argument("AtlasRenderer: pageIntervalsLog2 too large");
+  checkGl("context before AtlasRenderer setup");
   checkLimits();
   pageSide = (1u << setup.pageIntervalsLog2) + 1;
   createFramebuffer();
@@ -153,42 +132,26 @@ TerrainRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   createGrids();
   nodeBuffer = makeBuffer();
   createVertexArray();
-  // note: mesh atlases use the same shaders with GIMLOD_GEOMETRY defined after the #version line.
-  auto variant = [&](const char* source) {
-    std::string s = source;
-    if (setup.geometry) s.insert(s.find('\n') + 1, "#define GIMLOD_GEOMETRY 1\n");
-    return s;
-  };
-  const std::string vert = variant(kShader_terrain_vert), frag = variant(kShader_terrain_frag);
-  terrainProgram = linkProgram("terrain", vert.c_str(), frag.c_str(), {"v_world"});
-  staticProgram = linkProgram("static_mesh", kShader_static_mesh_vert, kShader_static_mesh_frag);
-  staticTerrainProgram = linkProgram("static_terrain", kShader_static_terrain_vert, kShader_terrain_frag);
-  glUseProgram(terrainProgram.id());
-  glUniform1i(uniform(terrainProgram, "u_heights"), kHeightsUnit);
-  glUniform1i(uniform(terrainProgram, "u_normals"), kNormalsUnit);
-  glUseProgram(staticTerrainProgram.id());
-  glUniform1i(uniform(staticTerrainProgram, "u_heights"), kHeightsUnit);
-  glUniform1i(uniform(staticTerrainProgram, "u_normals"), kNormalsUnit);
-  glUseProgram(0);
+  atlasProgram = linkAtlasProgram(setup.geometry);
   stitchBuffer = makeBuffer();
   indirectBuffer = makeBuffer();
   feedbackBuffer = makeBuffer();
   feedbackQuery = makeQuery();
-  checkGl("TerrainRenderer setup");
+  checkGl("AtlasRenderer setup");
 }
 
-void TerrainRenderer::Impl::checkLimits() const {
+void AtlasRenderer::Impl::checkLimits() const {
   if (getInteger(GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS) < 2)
-    throw std::runtime_error("TerrainRenderer: the GL implementation offers fewer than 2 shader "
+    throw std::runtime_error("AtlasRenderer: the GL implementation offers fewer than 2 shader "
                              "storage blocks in the vertex stage");
   const GLint maxSide = getInteger(GL_MAX_TEXTURE_SIZE);
   if (static_cast<int64_t>(setup.width) > getInteger(GL_MAX_RENDERBUFFER_SIZE) ||
       static_cast<int64_t>(setup.height) > getInteger(GL_MAX_RENDERBUFFER_SIZE) ||
       (int64_t(1) << setup.pageIntervalsLog2) + 1 > maxSide)
-    throw std::runtime_error("TerrainRenderer: framebuffer or page size exceeds GL limits");
+    throw std::runtime_error("AtlasRenderer: framebuffer or page size exceeds GL limits");
 }
 
-void TerrainRenderer::Impl::createFramebuffer() {
+void AtlasRenderer::Impl::createFramebuffer() {
   colourBuffer = makeRenderbuffer();
   glBindRenderbuffer(GL_RENDERBUFFER, colourBuffer.id());
   glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, GLsizei(setup.width), GLsizei(setup.height));
@@ -206,12 +169,12 @@ void TerrainRenderer::Impl::createFramebuffer() {
   const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   if (status != GL_FRAMEBUFFER_COMPLETE)
-    throw std::runtime_error("TerrainRenderer: offscreen framebuffer incomplete (status 0x" +
+    throw std::runtime_error("AtlasRenderer: offscreen framebuffer incomplete (status 0x" +
                              std::to_string(status) + ")");
   checkGl("framebuffer creation");
 }
 
-void TerrainRenderer::Impl::createPagePool() {
+void AtlasRenderer::Impl::createPagePool() {
   capacity = std::clamp<uint32_t>(setup.pageCapacity, 1,
                                   static_cast<uint32_t>(getInteger(GL_MAX_ARRAY_TEXTURE_LAYERS)));
   auto makeArray = [&](GLenum format, GLint levels) {
@@ -227,17 +190,17 @@ void TerrainRenderer::Impl::createPagePool() {
     checkGl("page pool glTexStorage3D");
     return tex;
   };
-  // note: the vertex shader reads heights with texelFetch (no filtering); the fragment shader
-  // samples them bilinearly for colouring at page resolution, finer than the drawn grid. Normals
+  // note: the vertex shader reads samples with texelFetch (no filtering); the fragment shader
+  // samples heights bilinearly for colouring at page resolution, finer than the drawn grid. Normals
   // carry a mip chain so each node's normal map is read at its attribute resolution (texLod).
   normalLevels = 1;
   while ((pageSide >> normalLevels) >= 1) ++normalLevels;
-  heights = makeArray(setup.geometry ? GL_RGB32F : GL_R32F, 1);
+  samples = makeArray(setup.geometry ? GL_RGB32F : GL_R32F, 1);
   normals = makeArray(GL_RGBA8, GLint(normalLevels));
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
 }
 
-void TerrainRenderer::Impl::createGrids() {
+void AtlasRenderer::Impl::createGrids() {
   std::vector<uint16_t> vertices;  // (i, j) pairs of every grid, back to back
   std::vector<uint32_t> indices;   // grid-local indices; base vertex selects the grid
   for (uint32_t res = setup.minResLog2; res <= setup.maxResLog2; ++res) {
@@ -269,7 +232,7 @@ void TerrainRenderer::Impl::createGrids() {
   checkGl("grid buffers");
 }
 
-void TerrainRenderer::Impl::createVertexArray() {
+void AtlasRenderer::Impl::createVertexArray() {
   vertexArray = makeVertexArray();
   glBindVertexArray(vertexArray.id());
   glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, gridIndices.id());
@@ -288,7 +251,7 @@ void TerrainRenderer::Impl::createVertexArray() {
   checkGl("vertex array setup");
 }
 
-void TerrainRenderer::Impl::validate(std::span<const DrawNode> nodes,
+void AtlasRenderer::Impl::validate(std::span<const DrawNode> nodes,
                                      const StitchTables& stitch) const {
   if (stitch.entriesPerSide == 0) throw std::invalid_argument("StitchTables: entriesPerSide = 0");
   if (!stitch.bytes.empty() && stitch.bytes.size() < nodes.size() * 4 * stitch.entriesPerSide)
@@ -300,14 +263,14 @@ void TerrainRenderer::Impl::validate(std::span<const DrawNode> nodes,
                     n.texLod <= n.pageResLog2;
     if (!ok)
       throw std::invalid_argument(
-          "TerrainRenderer: bad DrawNode (origin " + std::to_string(n.originX) + "," +
+          "AtlasRenderer: bad DrawNode (origin " + std::to_string(n.originX) + "," +
           std::to_string(n.originY) + " sizeLog2 " + std::to_string(n.sizeLog2) + " res " +
           std::to_string(n.res) + " pageResLog2 " + std::to_string(n.pageResLog2) + " layer " +
           std::to_string(n.pageLayer) + ")");
   }
 }
 
-void TerrainRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
+void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
                                         const StitchTables& stitch, std::span<const uint32_t> order) {
   validate(nodes, stitch);
   std::vector<NodeRecord> records(std::max<size_t>(nodes.size(), 1), NodeRecord{});
@@ -333,7 +296,7 @@ void TerrainRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
   checkGl("node and stitch table upload");
 }
 
-void TerrainRenderer::Impl::setShading(const GlObject& p, const glm::mat4& viewProj,
+void AtlasRenderer::Impl::setShading(const GlObject& p, const glm::mat4& viewProj,
                                        const glm::vec3& eye) const {
   glUseProgram(p.id());
   const glm::vec2 spacing(float(setup.spacing[0]), float(setup.spacing[1]));
@@ -341,32 +304,33 @@ void TerrainRenderer::Impl::setShading(const GlObject& p, const glm::mat4& viewP
   const glm::vec3 light = lightDirection();
   glUniformMatrix4fv(uniform(p, "u_viewProj"), 1, GL_FALSE, glm::value_ptr(viewProj));
   glUniform3fv(uniform(p, "u_eye"), 1, glm::value_ptr(eye));
-  glUniform2fv(uniform(p, "u_spacing"), 1, glm::value_ptr(spacing));
-  glUniform2fv(uniform(p, "u_validSamples"), 1, glm::value_ptr(valid));
-  glUniform2f(uniform(p, "u_heightRange"), setup.heightRange[0], setup.heightRange[1]);
+  // note: terrain only; the mesh variant (GIMLOD_GEOMETRY) does not use them.
+  glUniform2fv(optionalUniform(p, "u_spacing"), 1, glm::value_ptr(spacing));
+  glUniform2fv(optionalUniform(p, "u_validSamples"), 1, glm::value_ptr(valid));
+  glUniform2f(optionalUniform(p, "u_heightRange"), setup.heightRange[0], setup.heightRange[1]);
   glUniform3fv(uniform(p, "u_lightDir"), 1, glm::value_ptr(light));
   glUniform3f(uniform(p, "u_background"), setup.background[0], setup.background[1],
               setup.background[2]);
   // note: fog scale from the valid extent; no fog when the extent is unknown.
   const float fog = 1.5f * glm::length(valid * spacing);
   glUniform1f(uniform(p, "u_fogDistance"), fog);
-  glActiveTexture(GL_TEXTURE0 + kHeightsUnit);
-  glBindTexture(GL_TEXTURE_2D_ARRAY, heights.id());
+  glActiveTexture(GL_TEXTURE0 + kSamplesUnit);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, samples.id());
   glActiveTexture(GL_TEXTURE0 + kNormalsUnit);
   glBindTexture(GL_TEXTURE_2D_ARRAY, normals.id());
   glActiveTexture(GL_TEXTURE0);
 }
 
-void TerrainRenderer::Impl::bindTerrain(const glm::mat4& viewProj, const glm::vec3& eye,
+void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& eye,
                                         const StitchTables& stitch) {
-  setShading(terrainProgram, viewProj, eye);
-  glUniform1i(uniform(terrainProgram, "u_leafLog2"), GLint(stitch.leafLog2));
-  glUniform1i(uniform(terrainProgram, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
+  setShading(atlasProgram, viewProj, eye);
+  glUniform1i(uniform(atlasProgram, "u_leafLog2"), GLint(stitch.leafLog2));
+  glUniform1i(uniform(atlasProgram, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
   glBindVertexArray(vertexArray.id());
-  checkGl("terrain state");
+  checkGl("atlas state");
 }
 
-void TerrainRenderer::Impl::beginFrame() const {
+void AtlasRenderer::Impl::beginFrame() const {
   glBindFramebuffer(GL_FRAMEBUFFER, framebuffer.id());
   glViewport(0, 0, GLsizei(setup.width), GLsizei(setup.height));
   glDisable(GL_RASTERIZER_DISCARD);
@@ -379,24 +343,32 @@ void TerrainRenderer::Impl::beginFrame() const {
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
 }
 
-TerrainRenderer::TerrainRenderer(const RendererSetup& setup)
+AtlasRenderer::AtlasRenderer(const RendererSetup& setup)
     : impl_(std::make_unique<Impl>(setup)) {}
 
-TerrainRenderer::~TerrainRenderer() = default;
+AtlasRenderer::~AtlasRenderer() = default;
 
-uint32_t TerrainRenderer::pageCapacity() const { return impl_->capacity; }
+uint32_t AtlasRenderer::pageCapacity() const { return impl_->capacity; }
 
-void TerrainRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* heights,
+const RendererSetup& AtlasRenderer::setup() const { return impl_->setup; }
+
+void AtlasRenderer::beginFrame() const { impl_->beginFrame(); }
+
+void AtlasRenderer::setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const {
+  impl_->setShading(program, viewProj, eye);
+}
+
+void AtlasRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* samples,
                                  const PackedNormal* normals) {
   if (layer >= impl_->capacity || samplesPerSide == 0 || samplesPerSide > impl_->pageSide ||
-      !heights)
-    throw std::invalid_argument("TerrainRenderer::uploadPage: layer " + std::to_string(layer) +
+      !samples)
+    throw std::invalid_argument("AtlasRenderer::uploadPage: layer " + std::to_string(layer) +
                                 " / side " + std::to_string(samplesPerSide) + " out of range");
   const GLsizei s = GLsizei(samplesPerSide);
   glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-  glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->heights.id());
+  glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->samples.id());
   glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, impl_->setup.geometry ? GL_RGB : GL_RED,
-                  GL_FLOAT, heights);
+                  GL_FLOAT, samples);
   if (normals) {
     glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->normals.id());
     glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, GL_RGBA,
@@ -412,7 +384,7 @@ void TerrainRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const 
   checkGl("uploadPage glTexSubImage3D");
 }
 
-DrawStats TerrainRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
+DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
                                 std::span<const DrawNode> nodes, const StitchTables& stitch) {
   Impl& m = *impl_;
   DrawStats stats;
@@ -427,7 +399,7 @@ DrawStats TerrainRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
     std::stable_sort(order.begin(), order.end(),
                      [&](uint32_t a, uint32_t b) { return nodes[a].res < nodes[b].res; });
     m.uploadNodes(nodes, stitch, order);
-    m.bindTerrain(viewProj, eye, stitch);
+    m.bindAtlas(viewProj, eye, stitch);
     glEnable(GL_PRIMITIVE_RESTART_FIXED_INDEX);  // 0xFFFFFFFF for 32-bit indices
     std::vector<DrawElementsIndirectCommand> commands;
     for (size_t j = 0; j < order.size();) {
@@ -452,11 +424,11 @@ DrawStats TerrainRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
   }
   glFinish();
   stats.drawMs = msSince(t0);
-  checkGl("TerrainRenderer::draw");
+  checkGl("AtlasRenderer::draw");
   return stats;
 }
 
-std::vector<uint8_t> TerrainRenderer::readPixels() const {
+std::vector<uint8_t> AtlasRenderer::readPixels() const {
   const uint32_t w = impl_->setup.width, h = impl_->setup.height;
   std::vector<uint8_t> bottomUp(size_t(w) * h * 4), out(bottomUp.size());
   glBindFramebuffer(GL_READ_FRAMEBUFFER, impl_->framebuffer.id());
@@ -471,13 +443,13 @@ std::vector<uint8_t> TerrainRenderer::readPixels() const {
   return out;
 }
 
-std::vector<std::vector<glm::vec3>> TerrainRenderer::captureVertices(
+std::vector<std::vector<glm::vec3>> AtlasRenderer::captureVertices(
     std::span<const DrawNode> nodes, const StitchTables& stitch) {
   Impl& m = *impl_;
   std::vector<std::vector<glm::vec3>> out(nodes.size());
   if (nodes.empty()) return out;
   m.uploadNodes(nodes, stitch);
-  m.bindTerrain(glm::mat4(1.0f), glm::vec3(0.0f), stitch);
+  m.bindAtlas(glm::mat4(1.0f), glm::vec3(0.0f), stitch);
   size_t total = 0;
   for (const DrawNode& n : nodes) total += size_t(m.grid(n.res).vertexCount);
   const GLsizeiptr bytes = GLsizeiptr(total * sizeof(glm::vec3));
@@ -523,122 +495,6 @@ std::vector<std::vector<glm::vec3>> TerrainRenderer::captureVertices(
   glBindBufferBase(GL_TRANSFORM_FEEDBACK_BUFFER, 0, 0);
   checkGl("captureVertices read back");
   return out;
-}
-
-namespace {
-
-// A plain indexed grid over [0,1]^2 with a smooth height field, for the throughput baseline.
-struct StaticMesh {
-  GlObject vertices, indices, vertexArray;
-  GLsizei indexCount = 0;
-  uint64_t triangles = 0;
-};
-
-float staticHeight(float x, float y) {
-  return 0.08f * std::sin(6.0f * x) * std::cos(5.0f * y) + 0.04f * std::sin(17.0f * x + 3.0f * y);
-}
-
-StaticMesh buildStaticMesh(uint64_t triangles) {
-  const uint32_t side = std::max<uint32_t>(
-      1, static_cast<uint32_t>(std::lround(std::sqrt(double(triangles) / 2.0))));
-  if (uint64_t(side) * side * 6 > uint64_t(std::numeric_limits<GLsizei>::max()))
-    throw std::invalid_argument("drawStaticMeshMs: too many triangles");
-  std::vector<glm::vec3> positions;
-  positions.reserve(size_t(side + 1) * (side + 1));
-  for (uint32_t j = 0; j <= side; ++j)
-    for (uint32_t i = 0; i <= side; ++i) {
-      const float x = float(i) / float(side), y = float(j) / float(side);
-      positions.emplace_back(x, y, staticHeight(x, y));
-    }
-  std::vector<uint32_t> idx;
-  idx.reserve(size_t(side) * side * 6);
-  for (uint32_t j = 0; j < side; ++j)
-    for (uint32_t i = 0; i < side; ++i) {
-      const uint32_t a = j * (side + 1) + i, b = a + 1, c = b + side + 1, d = a + side + 1;
-      idx.insert(idx.end(), {a, b, c, a, c, d});
-    }
-  StaticMesh mesh;
-  mesh.triangles = uint64_t(2) * side * side;
-  mesh.indexCount = GLsizei(idx.size());
-  mesh.vertexArray = makeVertexArray();
-  glBindVertexArray(mesh.vertexArray.id());
-  mesh.vertices = makeBuffer();
-  glBindBuffer(GL_ARRAY_BUFFER, mesh.vertices.id());
-  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(positions.size() * sizeof(glm::vec3)),
-               positions.data(), GL_STATIC_DRAW);
-  glEnableVertexAttribArray(0);
-  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(glm::vec3), nullptr);
-  mesh.indices = makeBuffer();
-  glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mesh.indices.id());
-  glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(idx.size() * sizeof(uint32_t)), idx.data(),
-               GL_STATIC_DRAW);
-  glBindVertexArray(0);
-  glBindBuffer(GL_ARRAY_BUFFER, 0);
-  checkGl("static mesh upload");
-  return mesh;
-}
-
-}  // namespace
-
-double TerrainRenderer::drawStaticMeshMs(uint64_t triangles, uint32_t frames,
-                                         uint64_t* drawnTriangles) {
-  Impl& m = *impl_;
-  const StaticMesh mesh = buildStaticMesh(triangles);
-  if (drawnTriangles) *drawnTriangles = mesh.triangles;
-  const float aspect = float(m.setup.width) / float(m.setup.height);
-  const glm::mat4 viewProj =
-      glm::perspective(glm::radians(50.0f), aspect, 0.01f, 10.0f) *
-      glm::lookAt(glm::vec3(0.5f, -0.55f, 0.75f), glm::vec3(0.5f, 0.45f, 0.0f),
-                  glm::vec3(0.0f, 0.0f, 1.0f));
-  glUseProgram(m.staticProgram.id());
-  glUniformMatrix4fv(uniform(m.staticProgram, "u_viewProj"), 1, GL_FALSE,
-                     glm::value_ptr(viewProj));
-  glUniform2f(uniform(m.staticProgram, "u_heightRange"), -0.12f, 0.12f);
-  auto frame = [&] {
-    m.beginFrame();
-    glUseProgram(m.staticProgram.id());
-    glBindVertexArray(mesh.vertexArray.id());
-    glDrawElements(GL_TRIANGLES, mesh.indexCount, GL_UNSIGNED_INT, nullptr);
-    glFinish();
-  };
-  frame();  // warm-up: first use compiles shader variants and faults in buffers
-  checkGl("drawStaticMeshMs warm-up");
-  const double ms = meanFrameMs(frames, frame);
-  glBindVertexArray(0);
-  glUseProgram(0);
-  checkGl("drawStaticMeshMs");
-  return ms;
-}
-
-double TerrainRenderer::drawMeshMs(std::span<const glm::vec3> positions,
-                                   std::span<const uint32_t> triangles, const glm::mat4& viewProj,
-                                   const glm::vec3& eye, uint32_t frames) {
-  Impl& m = *impl_;
-  if (triangles.size() % 3 != 0) throw std::invalid_argument("drawMeshMs: index count not a multiple of 3");
-  GlObject vao = makeVertexArray(), vbo = makeBuffer(), ibo = makeBuffer();
-  glBindVertexArray(vao.id());
-  glBindBuffer(GL_ARRAY_BUFFER, vbo.id());
-  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(positions.size_bytes()), positions.data(), GL_STATIC_DRAW);
-  glEnableVertexAttribArray(0);
-  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(glm::vec3), nullptr);
-  glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo.id());
-  glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(triangles.size_bytes()), triangles.data(), GL_STATIC_DRAW);
-  glBindVertexArray(0);
-  glBindBuffer(GL_ARRAY_BUFFER, 0);
-  checkGl("drawMeshMs upload");
-  auto frame = [&] {
-    m.beginFrame();
-    m.setShading(m.staticTerrainProgram, viewProj, eye);
-    glBindVertexArray(vao.id());
-    glDrawElements(GL_TRIANGLES, GLsizei(triangles.size()), GL_UNSIGNED_INT, nullptr);
-    glFinish();
-  };
-  frame();  // warm-up
-  const double ms = meanFrameMs(frames, frame);
-  glBindVertexArray(0);
-  glUseProgram(0);
-  checkGl("drawMeshMs");
-  return ms;
 }
 
 }  // namespace gimlod::gl

@@ -7,7 +7,7 @@
 #include <span>
 #include <vector>
 
-namespace gimlod::gl {
+namespace gimlod {
 
 inline constexpr uint32_t kPrimitiveRestartIndex = 0xFFFFFFFFu;  // GL_PRIMITIVE_RESTART_FIXED_INDEX
 inline constexpr uint32_t kStripBandQuads = 16;  // about half a post-transform vertex cache
@@ -33,4 +33,4 @@ std::vector<Triangle> expandStrips(std::span<const uint32_t> indices,
 // {(i,j),(i+1,j),(i+1,j+1)} and {(i,j),(i+1,j+1),(i,j+1)}.
 std::vector<Triangle> expectedGridTriangles(uint32_t res);
 
-}  // namespace gimlod::gl
+}  // namespace gimlod

@@ -1,0 +1,24 @@
+#include "runtime/draw_list.h"
+
+namespace gimlod {
+
+DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n,
+                      uint32_t layer) {
+  const ChartInfo& c = m.charts[n.id.chart];
+  const uint32_t L = p.intervalsLog2;
+  const int32_t M = int32_t(1u << L);
+  const int32_t size = int32_t(1u << (L - n.id.level));
+  DrawNode d;
+  d.originX = c.gridX * M + int32_t(n.id.x) * size;
+  d.originY = c.gridY * M + int32_t(n.id.y) * size;
+  d.sizeLog2 = L - n.id.level;
+  d.res = n.res;
+  d.pageResLog2 = p.maxRes(n.id.level);
+  d.pageLayer = layer;
+  // note: an attribute resolution above the page's is clamped to it (finer attribute pages are
+  // not loaded); AttributeStats::abovePage counts those nodes.
+  if (n.texRes != 0 && n.texRes < d.pageResLog2) d.texLod = d.pageResLog2 - n.texRes;
+  return d;
+}
+
+}  // namespace gimlod

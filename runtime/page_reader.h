@@ -1,0 +1,35 @@
+// Node pages read from the atlas blocks on disk (paper section 7.2). Pure C++.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <vector>
+
+#include "core/atlas_format.h"
+#include "hierarchy/hierarchy.h"
+
+namespace gimlod {
+
+// Reads node pages: a node's page is its finest-resolution window, (2^maxRes(level) + 1)^2
+// samples of pyramid level intervalsLog2 - level - maxRes(level); every coarser resolution of the
+// node is a subsampling of it. Thread-safe.
+class PageReader {
+ public:
+  PageReader(const std::filesystem::path& atlasDir, const AtlasManifest& manifest,
+             const HierarchyParams& params);
+  uint32_t pageSamples(uint32_t level) const { return (1u << params_.maxRes(level)) + 1; }
+  // samples: (pageSamples)^2 heights, or 3 floats (x, y, z) per sample for a geometry atlas.
+  void read(const NodeId& n, std::vector<float>& samples, std::vector<PackedNormal>& normals) const;
+  bool geometry() const { return geometry_; }
+  uint64_t bytesRead() const { return bytesRead_; }
+
+ private:
+  HierarchyParams params_;
+  bool geometry_ = false;
+  std::vector<std::unique_ptr<ChartFileReader>> charts_;
+  mutable std::atomic<uint64_t> bytesRead_{0};
+};
+
+}  // namespace gimlod

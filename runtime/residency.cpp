@@ -1,0 +1,100 @@
+// Based on Niski, Purnomo, Cohen, "Multi-grained Level of Detail Using a Hierarchical Seamless
+// Texture Atlas" (I3D 2007), section 7.2 (data management: missing nodes draw with an ancestor).
+#include "runtime/residency.h"
+
+#include <algorithm>
+#include <cassert>
+#include <unordered_map>
+
+namespace gimlod {
+
+PageRequestPlan planPageRequests(const Hierarchy& h, const Cut& desired, const ResidentFn& resident,
+                                 const std::unordered_set<uint64_t>& loaded) {
+  const HierarchyParams& p = h.params;
+  PageRequestPlan plan;
+  for (const CutNode& n : desired.nodes) {
+    if (resident(n.id.key())) continue;
+    const double priority = double(p.depth - n.id.level) * 1e3 + std::min(double(n.errorPx), 999.0);
+    if (!loaded.count(n.id.key())) plan.requests.push_back({n.id, priority});  // else loaded, waiting
+    plan.wanted.insert(n.id.key());
+    // Its missing ancestors too (coarser first by priority), so the stand-in for a missing node
+    // is soon its parent rather than a far ancestor.
+    for (NodeId a = n.id; a.level > 0;) {
+      a = a.parent();
+      if (resident(a.key())) break;
+      if (!plan.wanted.insert(a.key()).second) break;
+      if (!loaded.count(a.key())) plan.requests.push_back({a, double(p.depth - a.level) * 1e3 + 999.0});
+    }
+  }
+  return plan;
+}
+
+ResidentCut substituteResident(const Hierarchy& h, const Cut& desired, const ViewParams& view,
+                               const ResidentFn& resident) {
+  const HierarchyParams& p = h.params;
+  // Every missing node draws as its nearest resident ancestor (roots are locked resident).
+  // Substitutes under another substitute are dropped, so the cut stays a partition.
+  std::unordered_set<uint64_t> substitutes;
+  std::vector<NodeId> candidates;
+  for (const CutNode& n : desired.nodes) {
+    if (resident(n.id.key())) continue;
+    NodeId a = n.id;
+    while (a.level > 0 && !resident(a.key())) a = a.parent();
+    assert(resident(a.key()) && "substituteResident: root pages must be resident");
+    if (substitutes.insert(a.key()).second) candidates.push_back(a);
+  }
+  constexpr uint32_t kUnplaced = ~0u;
+  std::unordered_map<uint64_t, uint32_t> outer;  // outermost substitute -> position in drawn
+  for (const NodeId& a : candidates) {
+    bool inner = false;
+    for (NodeId b = a; b.level > 0 && !inner;) {
+      b = b.parent();
+      inner = substitutes.count(b.key()) != 0;
+    }
+    if (!inner) outer[a.key()] = kUnplaced;
+  }
+  ResidentCut out;
+  Cut& drawn = out.cut;
+  drawn.nodes.reserve(desired.nodes.size());
+  for (const CutNode& n : desired.nodes) {
+    auto it = outer.end();
+    NodeId b = n.id;
+    while (b.level > 0 && it == outer.end()) {
+      b = b.parent();
+      it = outer.find(b.key());
+    }
+    if (it == outer.end()) {
+      drawn.nodes.push_back(n);
+      continue;
+    }
+    ++out.nodesSubstituted;
+    if (it->second == kUnplaced) {
+      it->second = uint32_t(drawn.nodes.size());
+      drawn.nodes.push_back({b, p.minRes(b.level), 0.f});
+    }
+    CutNode& a = drawn.nodes[it->second];
+    a.res = std::max(a.res, std::min(n.res, p.maxRes(b.level)));
+  }
+  drawn.rebuildIndex();
+  // Stitching constraint without splits: substitutes only coarsen the cut, so raising their
+  // resolution suffices whenever log2 R >= depth - 1; anything else is counted.
+  if (out.nodesSubstituted > 0) {
+    std::vector<uint32_t> gaps;
+    stitchGaps(h, drawn, gaps);
+    for (size_t i = 0; i < drawn.nodes.size(); ++i) {
+      CutNode& n = drawn.nodes[i];
+      const uint32_t gap = gaps[i];
+      if (gap <= n.res) continue;
+      if (gap <= p.maxRes(n.id.level))
+        n.res = gap;
+      else
+        ++out.stitchUnfixable;
+    }
+    for (auto& [key, i] : outer)
+      if (i != kUnplaced)
+        drawn.nodes[i].errorPx = float(screenError(h, drawn.nodes[i].id, drawn.nodes[i].res, view));
+  }
+  return out;
+}
+
+}  // namespace gimlod
