@@ -346,8 +346,19 @@ Hierarchy readHierarchy(const std::filesystem::path& path) {
   get(&h.params.minNodeResLog2, 4);
   if (h.params.intervalsLog2 > 16 || h.params.depth > 12 || count > (1u << 24))
     throw InputError(path.string() + ": corrupt hierarchy header");
-  h.params.validate();
+  try {
+    h.params.validate();
+  } catch (const InputError& e) {
+    throw InputError(path.string() + ": " + e.what());
+  }
   const uint32_t nodes = nodesPerChart(h.params.depth);
+  // The header fixes the file's size: check it before allocating what a corrupt count claims.
+  const uint64_t perChart = 4 * (4 + 1 + 1) +
+                            uint64_t(nodes) * (sizeof(std::array<float, 6>) + 1 + sizeof(float) * h.params.resCount());
+  if (uint64_t(b.size() - pos) != uint64_t(count) * perChart)
+    throw InputError(path.string() + ": hierarchy file holds " + std::to_string(b.size()) + " bytes, its header (" +
+                     std::to_string(count) + " charts of depth " + std::to_string(h.params.depth) + ") needs " +
+                     std::to_string(pos + uint64_t(count) * perChart));
   h.charts.resize(count);
   h.roots.resize(count);
   for (uint32_t c = 0; c < count; ++c) {

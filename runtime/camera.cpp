@@ -112,6 +112,14 @@ std::vector<Camera> readCameraPath(const std::filesystem::path& path) {
       throw InputError(path.string() + ": frame " + std::to_string(i) + ": non-finite \"" + key + "\"");
     return v;
   };
+  // An optional finite number.
+  auto number = [&](const nlohmann::json& fr, const char* key, size_t i, double fallback) {
+    if (!fr.contains(key)) return fallback;
+    const auto& v = fr[key];
+    if (!v.is_number() || !std::isfinite(v.get<double>()))
+      throw InputError(path.string() + ": frame " + std::to_string(i) + ": \"" + key + "\" must be a finite number");
+    return v.get<double>();
+  };
   std::vector<Camera> cams;
   for (size_t i = 0; i < frames.size(); ++i) {
     const auto& fr = frames[i];
@@ -120,9 +128,11 @@ std::vector<Camera> readCameraPath(const std::filesystem::path& path) {
     c.eye = vec3(fr, "eye", i, true, {});
     c.target = vec3(fr, "target", i, true, {});
     c.up = vec3(fr, "up", i, false, {0.0, 0.0, 1.0});
-    c.fovYDeg = fr.value("fov_deg", 45.0);
-    c.nearPlane = fr.value("near", 0.0);
-    c.farPlane = fr.value("far", 0.0);
+    c.fovYDeg = number(fr, "fov_deg", i, 45.0);
+    c.nearPlane = number(fr, "near", i, 0.0);
+    c.farPlane = number(fr, "far", i, 0.0);
+    if (c.nearPlane < 0.0 || c.farPlane < 0.0 || (c.farPlane > 0.0 && c.farPlane <= c.nearPlane))
+      throw InputError(path.string() + ": frame " + std::to_string(i) + ": near and far must be 0 or 0 < near < far");
     if (!(c.fovYDeg > 1.0 && c.fovYDeg < 179.0))
       throw InputError(path.string() + ": frame " + std::to_string(i) + ": fov_deg must be in (1, 179)");
     if (glm::length(c.target - c.eye) <= 0.0)

@@ -38,8 +38,10 @@ for name in "${NAMES[@]}"; do
   for f in "${shared[@]}"; do
     [ -f "$SHARED/$f" ] && head -c 65536 "$SHARED/$f" > "$work/shared_$f"
   done
+  dict=()
+  case $name in fuzz_manifest|fuzz_camera_path) dict=(-dict=tests/fuzz/json.dict) ;; esac
   start=$(date +%s)
-  if ! ./build-fuzz/tests/fuzz/$name "$work" -runs="$RUNS" -max_len=65536 -timeout=30 -rss_limit_mb=2048 \
+  if ! ./build-fuzz/tests/fuzz/$name "$work" "${dict[@]}" -runs="$RUNS" -max_len=65536 -timeout=30 -rss_limit_mb=2048 \
       -artifact_prefix="$artifacts/" -print_final_stats=1 > "build-fuzz/$name.log" 2>&1; then
     echo "gimlod fuzz: $name FAILED; input in $artifacts/, log build-fuzz/$name.log"
     tail -40 "build-fuzz/$name.log"

@@ -46,7 +46,9 @@ void shortestInteriorPaths(Graph& g, uint32_t source, Visit&& visit) {
   g.start(source);
   heap.push({0.0, source});
   while (!heap.empty()) {
-    const auto [d, u] = heap.top();
+    // note: plain names, not a structured binding: the lambda below captures them (clang 14).
+    const double d = heap.top().first;
+    const uint32_t u = heap.top().second;
     heap.pop();
     if (d > g.distance(u)) continue;
     const PathStep step = visit(u);
