@@ -5,6 +5,7 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 // Skips the current test (fails it where sharedDataRequired()) unless `present` holds.
 #define GIMLOD_NEED_SHARED_DATA(present)                                                         \
@@ -33,6 +34,15 @@ bool haveRealData(const std::string& relative);
 bool sharedDataRequired();
 // Path to the gimlod command-line app.
 std::filesystem::path appPath();
+
+// Under ThreadSanitizer, TBB runs on the calling thread only while this lives: libtbb is not
+// built with the sanitizer, so its scheduler's own synchronisation looks like races. Fixtures
+// that build an atlas only to test other threads (the page loader) hold one. Elsewhere a no-op.
+class SerialTbbUnderTsan {
+#if defined(__SANITIZE_THREAD__)
+  tbb::global_control serial_{tbb::global_control::max_allowed_parallelism, 1};
+#endif
+};
 
 // A fresh empty directory, removed when the object goes out of scope.
 class TempDir {

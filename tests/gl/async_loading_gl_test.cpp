@@ -29,6 +29,7 @@ class AsyncLoadingTest : public ::testing::Test {
     o.depth = 4;
     o.nodeRes = 32;
     o.minNodeRes = 2;
+    const test::SerialTbbUnderTsan serial;
     buildAtlas(o);
     return openAtlas(o.output);
   }
