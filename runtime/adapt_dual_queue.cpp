@@ -527,6 +527,8 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   }
   for (const CutNode& n : out_.nodes) st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
   opsSinceSort_ += frame_.splits + frame_.merges;
+  st.rootFloor = countVisibleRoots(h_, view, options.frustumCull);
+  st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, st.rootFloor);
   st.splits = frame_.splits;
   st.triangles = out_.triangles();
   if (stats) *stats = st;
