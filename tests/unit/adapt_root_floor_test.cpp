@@ -190,6 +190,38 @@ TEST(RootFloor, TheFloorIsTheVisibleRoots) {
   }
 }
 
+// The coherent adapters cap their operations per frame, but not the merges that bring the drawn
+// nodes back within the budget: a budget that drops holds in the same frame.
+TEST(RootFloor, ABudgetDropHoldsInTheSameFrameDespiteTheOperationCap) {
+  const World w = makeWorld(129, 6, 4, 6);
+  const ViewParams v = viewAt(w, {384, -240, 480}, {384, 256, 0});
+  DualQueueAdapter dq(w.h, 16);
+  AdaptOptions ao;
+  ao.tolerancePx = 0.01;
+  ao.maxNodes = 0;
+  for (int i = 0; i < 40; ++i) dq.update(v, ao);
+  ASSERT_GT(dq.update(v, ao).nodes.size(), 16u * 3u + 30u) << "more merges needed than the cap allows";
+  QuadQueueAdapter qq(w.h);
+  BudgetOptions bo;
+  bo.maxTriangles = 100000000;
+  bo.maxNodes = 0;
+  bo.maxOpsPerFrame = 16;
+  for (int i = 0; i < 40; ++i) qq.update(v, bo);
+  ASSERT_GT(qq.update(v, bo).nodes.size(), 16u * 3u + 30u);
+  for (uint32_t budget : {30u, 10u}) {
+    SCOPED_TRACE("budget " + std::to_string(budget));
+    ao.maxNodes = bo.maxNodes = budget;
+    AdaptStats as;
+    const Cut& a = dq.update(v, ao, &as);
+    EXPECT_LE(a.nodes.size(), std::max(budget, as.rootFloor));
+    EXPECT_EQ(as.budgetBelowRoots, budget < 24);
+    BudgetStats bs;
+    const Cut& b = qq.update(v, bo, &bs);
+    EXPECT_LE(b.nodes.size(), std::max(budget, bs.rootFloor));
+    EXPECT_EQ(bs.budgetBelowRoots, budget < 24);
+  }
+}
+
 // The shipped scan, charted small (as the render test builds it): hundreds of tiny charts.
 class RootFloorScan : public ::testing::Test {
  protected:
