@@ -51,6 +51,8 @@ struct AdaptStats {
 
 // Chart roots drawn for this view: not empty and, when cull, with bounds that meet the frustum.
 // Every visible root puts at least one node in a cut, so this is the floor under any node budget.
+// note: a coherent adapter's kept cut may hold a visible root's descendants whose boxes are all
+// culled, and then draws nothing of that chart: fewer nodes than the floor.
 uint32_t countVisibleRoots(const Hierarchy& h, const ViewParams& v, bool cull);
 
 // Whether a node budget (0: no limit) is below the root floor. The adapters then draw exactly the
