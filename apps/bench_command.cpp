@@ -55,6 +55,8 @@ struct Row {
   uint32_t splits = 0, merges = 0, refines = 0, coarsens = 0;
   bool budgetBound = false;
   uint32_t constraintSplits = 0;
+  uint32_t rootFloor = 0;         // visible chart roots: no cut has fewer nodes
+  bool budgetBelowRoots = false;  // maxNodes < rootFloor: the visible roots are drawn, over the budget
   double drawMs = std::numeric_limits<double>::quiet_NaN();  // --render only
 };
 
@@ -139,6 +141,8 @@ Adapter makeErrorAdapter(const Hierarchy& h, const std::string& algo, uint32_t m
       r.merges = dq->frameStats().merges;
       r.budgetBound = st.nodeBudgetBound;
       r.constraintSplits = st.constraintSplits;
+      r.rootFloor = st.rootFloor;
+      r.budgetBelowRoots = st.budgetBelowRoots;
       return cut;
     };
   }
@@ -152,6 +156,8 @@ Adapter makeErrorAdapter(const Hierarchy& h, const std::string& algo, uint32_t m
     r.splits = st.splits;
     r.budgetBound = st.nodeBudgetBound;
     r.constraintSplits = st.constraintSplits;
+    r.rootFloor = st.rootFloor;
+    r.budgetBelowRoots = st.budgetBelowRoots;
     *held = std::move(cut);
     return *held;
   };
@@ -171,6 +177,8 @@ Adapter makeBudgetAdapter(const Hierarchy& h, const std::string& algo, uint32_t 
     r.splits = st.splits;
     r.merges = st.merges;
     r.constraintSplits = st.constraintSplits;
+    r.rootFloor = st.rootFloor;
+    r.budgetBelowRoots = st.budgetBelowRoots;
     r.budgetBound = cut.nodes.size() >= maxNodes || 4 * cut.triangles() >= 3 * maxTris;
   };
   if (algo == "ours") {
@@ -210,6 +218,8 @@ struct Summary {
   uint64_t maxTriangles = 0;
   size_t frames = 0;
   double adaptUs = 0, nodes = 0, triangles = 0, meanErr = 0, boundFrac = 0, drawMs = 0;
+  double belowRootsFrac = 0;  // frames whose node budget was below the visible roots
+  uint32_t rootFloorMax = 0;
   double errMean = 0, errP50 = 0, errP95 = 0, errMax = 0;
   uint32_t nodesMax = 0;
   uint64_t trianglesMax = 0;
@@ -228,6 +238,8 @@ Summary summarize(const std::vector<Row>& rows) {
     s.triangles += double(r.triangles);
     s.meanErr += r.meanErrorPx;
     s.boundFrac += r.budgetBound;
+    s.belowRootsFrac += r.budgetBelowRoots;
+    s.rootFloorMax = std::max(s.rootFloorMax, r.rootFloor);
     s.drawMs += std::isnan(r.drawMs) ? 0.0 : r.drawMs;
     s.errMean += r.maxErrorPx;
     s.nodesMax = std::max(s.nodesMax, r.nodes);
@@ -235,7 +247,9 @@ Summary summarize(const std::vector<Row>& rows) {
     err.push_back(r.maxErrorPx);
   }
   const double n = double(rows.size());
-  for (double* v : {&s.adaptUs, &s.nodes, &s.triangles, &s.meanErr, &s.boundFrac, &s.drawMs, &s.errMean}) *v /= n;
+  for (double* v : {&s.adaptUs, &s.nodes, &s.triangles, &s.meanErr, &s.boundFrac, &s.drawMs, &s.errMean,
+                    &s.belowRootsFrac})
+    *v /= n;
   s.errP50 = percentile(err, 0.5);
   s.errP95 = percentile(err, 0.95);
   s.errMax = *std::max_element(err.begin(), err.end());
@@ -341,6 +355,7 @@ int runBench(const BenchArgs& a) {
                                       : fmt::format(", tolerance {} px", a.tolerance),
                            a.algorithms);
   std::vector<std::vector<Row>> configs;
+  bool warnedBelowRoots = false;
   for (uint64_t maxNodes : nodeBudgets) {
     for (uint64_t maxTris : triBudgets) {
       for (const std::string& algo : algorithms) {
@@ -360,6 +375,13 @@ int runBench(const BenchArgs& a) {
             r.frame = uint32_t(i);
             const Cut& cut = adapt(views[i], r);
             measureCut(hier, cut, views[i], r);
+            if (r.budgetBelowRoots && !warnedBelowRoots) {
+              spdlog::warn("node budget {} is below the {} visible chart roots (frame {}): no cut has fewer "
+                           "nodes, so such frames draw the visible roots (root_floor, budget_below_roots in "
+                           "bench.csv)",
+                           maxNodes, r.rootFloor, i);
+              warnedBelowRoots = true;
+            }
             if (scene) r.drawMs = scene->drawCut(cams[i], cut).drawMs;
             rows.push_back(std::move(r));
           }
@@ -372,14 +394,16 @@ int runBench(const BenchArgs& a) {
   // bench.csv: one row per frame per configuration.
   std::string csv =
       "mode,algorithm,max_nodes,max_triangles,tolerance_px,frame,adapt_us,nodes,triangles,max_error_px,"
-      "mean_error_px,splits,merges,refines,coarsens,budget_bound,repeat,constraint_splits,draw_ms\n";
+      "mean_error_px,splits,merges,refines,coarsens,budget_bound,repeat,constraint_splits,draw_ms,root_floor,"
+      "budget_below_roots\n";
   for (const auto& rows : configs)
     for (const Row& r : rows)
-      csv += fmt::format("{},{},{},{},{},{},{:.3f},{},{},{:.5f},{:.5f},{},{},{},{},{},{},{},{}\n", a.mode, r.algorithm,
-                         r.maxNodes, budgetMode ? std::to_string(r.maxTriangles) : std::string(),
+      csv += fmt::format("{},{},{},{},{},{},{:.3f},{},{},{:.5f},{:.5f},{},{},{},{},{},{},{},{},{},{}\n", a.mode,
+                         r.algorithm, r.maxNodes, budgetMode ? std::to_string(r.maxTriangles) : std::string(),
                          optNum(!budgetMode, a.tolerance, "{}"), r.frame, r.adaptUs, r.nodes, r.triangles,
                          r.maxErrorPx, r.meanErrorPx, r.splits, r.merges, r.refines, r.coarsens, int(r.budgetBound),
-                         r.repeat, r.constraintSplits, optNum(!std::isnan(r.drawMs), r.drawMs));
+                         r.repeat, r.constraintSplits, optNum(!std::isnan(r.drawMs), r.drawMs), r.rootFloor,
+                         int(r.budgetBelowRoots));
   atomicWriteFile(out / "bench.csv", csv.data(), csv.size());
 
   // summary.csv: per configuration, means over frames.
@@ -388,13 +412,14 @@ int runBench(const BenchArgs& a) {
   std::string sum =
       "mode,algorithm,max_nodes,max_triangles,tolerance_px,frames,adapt_us_mean,nodes_mean,nodes_max,"
       "triangles_mean,triangles_max,max_error_px_mean,max_error_px_p50,max_error_px_p95,max_error_px_max,"
-      "mean_error_px_mean,budget_bound_frac,draw_ms_mean\n";
+      "mean_error_px_mean,budget_bound_frac,draw_ms_mean,root_floor_max,budget_below_roots_frac\n";
   for (const Summary& s : sums)
-    sum += fmt::format("{},{},{},{},{},{},{:.3f},{:.2f},{},{:.1f},{},{:.5f},{:.5f},{:.5f},{:.5f},{:.5f},{:.3f},{}\n",
+    sum += fmt::format("{},{},{},{},{},{},{:.3f},{:.2f},{},{:.1f},{},{:.5f},{:.5f},{:.5f},{:.5f},{:.5f},{:.3f},{},{},"
+                       "{:.3f}\n",
                        a.mode, s.algorithm, s.maxNodes, budgetMode ? std::to_string(s.maxTriangles) : std::string(),
                        optNum(!budgetMode, a.tolerance, "{}"), s.frames, s.adaptUs, s.nodes, s.nodesMax, s.triangles,
                        s.trianglesMax, s.errMean, s.errP50, s.errP95, s.errMax, s.meanErr, s.boundFrac,
-                       optNum(a.render, s.drawMs));
+                       optNum(a.render, s.drawMs), s.rootFloorMax, s.belowRootsFrac);
   atomicWriteFile(out / "summary.csv", sum.data(), sum.size());
 
   std::cout << fmt::format("{:>8} {:>10} {:>12} {:>10} {:>12} {:>10} {:>10} {:>10}\n", "algo", "max_nodes",

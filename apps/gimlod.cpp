@@ -152,17 +152,27 @@ int runRender(const RenderArgs& a) {
   bo.maxNodes = a.maxNodes;
   std::string csv = "frame,nodes,triangles,max_screen_error_px,adapt_ms,stitch_ms,upload_ms,draw_ms,"
                     "draw_calls,pages_loaded,pages_missing,pages_requested,nodes_substituted,node_budget_bound,"
-                    "constraint_raises,constraint_splits,attribute_texels,attribute_above_page\n";
+                    "constraint_raises,constraint_splits,attribute_texels,attribute_above_page,root_floor,"
+                    "budget_below_roots\n";
   double drawMsTotal = 0.0;
   uint64_t triTotal = 0;
+  bool warnedBelowRoots = false;
   for (size_t i = 0; i < cams.size(); ++i) {
     const gl::FrameResult f = a.triangles > 0 ? scene.renderFrame(cams[i], bo) : scene.renderFrame(cams[i], ao);
+    if (f.adapt.budgetBelowRoots && !warnedBelowRoots) {
+      spdlog::warn("--max-nodes {} is below the {} visible chart roots (frame {}): no cut has fewer nodes, so such "
+                   "frames draw the visible roots (root_floor, budget_below_roots in stats.csv)",
+                   a.maxNodes, f.adapt.rootFloor, i);
+      warnedBelowRoots = true;
+    }
     writePng(out / fmt::format("frame_{:04d}.png", i), w, h, scene.renderer().readPixels());
-    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{}\n", i, f.cut.nodes.size(),
+    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{}\n", i,
+                       f.cut.nodes.size(),
                        f.draw.triangles, f.maxErrorPx, f.adaptMs, f.stitchMs, f.uploadMs, f.draw.drawMs,
                        f.draw.drawCalls, f.pagesLoaded + f.pagesUploaded, f.pagesMissing, f.pagesRequested, f.nodesSubstituted,
                        int(f.adapt.nodeBudgetBound), f.adapt.constraintRaises,
-                       f.adapt.constraintSplits, f.attributes.texels, f.attributes.abovePage);
+                       f.adapt.constraintSplits, f.attributes.texels, f.attributes.abovePage, f.adapt.rootFloor,
+                       int(f.adapt.budgetBelowRoots));
     drawMsTotal += f.draw.drawMs;
     triTotal += f.draw.triangles;
     spdlog::info("frame {:4d}: {:5d} nodes, {:8d} triangles, max error {:.3f} px, adapt {:.3f} ms, draw {:.2f} ms",

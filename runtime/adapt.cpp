@@ -96,7 +96,7 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
 
   std::priority_queue<Candidate, std::vector<Candidate>, ByPriority> queue;
   std::vector<Candidate> done;
-  uint32_t count = 0;
+  uint32_t count = 0;  // drawn nodes; the visible roots after the loop below
   for (uint32_t c = 0; c < h.chartCount(); ++c) {
     const NodeId root{c, 0, 0, 0};
     if (!visible(h, root, view, options.frustumCull)) {
@@ -106,6 +106,8 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
     queue.push(makeCandidate(root));
     ++count;
   }
+  st.rootFloor = count;
+  st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, count);
   while (!queue.empty()) {
     Candidate c = queue.top();
     queue.pop();
@@ -143,6 +145,12 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
   st.triangles = cut.triangles();
   if (stats) *stats = st;
   return cut;
+}
+
+uint32_t countVisibleRoots(const Hierarchy& h, const ViewParams& v, bool cull) {
+  uint32_t n = 0;
+  for (uint32_t c = 0; c < h.chartCount(); ++c) n += visible(h, {c, 0, 0, 0}, v, cull);
+  return n;
 }
 
 uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i,

@@ -45,11 +45,24 @@ struct AdaptStats {
   bool nodeBudgetBound = false;   // some node stays above tolerance because of maxNodes
   double maxErrorPx = 0.0;
   uint64_t triangles = 0;
+  uint32_t rootFloor = 0;         // visible chart roots (countVisibleRoots): no cut has fewer nodes
+  bool budgetBelowRoots = false;  // maxNodes < rootFloor: the cut is the visible roots, over maxNodes
 };
+
+// Chart roots drawn for this view: not empty and, when cull, with bounds that meet the frustum.
+// Every visible root puts at least one node in a cut, so this is the floor under any node budget.
+// note: a coherent adapter's kept cut may hold a visible root's descendants whose boxes are all
+// culled, and then draws nothing of that chart: fewer nodes than the floor.
+uint32_t countVisibleRoots(const Hierarchy& h, const ViewParams& v, bool cull);
+
+// Whether a node budget (0: no limit) is below the root floor. The adapters then draw exactly the
+// visible roots (no split), and report it (AdaptStats::budgetBelowRoots, BudgetStats likewise).
+inline bool budgetBelowRoots(uint32_t maxNodes, uint32_t rootFloor) { return maxNodes != 0 && maxNodes < rootFloor; }
 
 // Error-threshold adaptation: each node gets the lowest resolution within tolerance; nodes are
 // split, best triangle saving first (nodes over tolerance before all others), while the node
-// budget allows. Then the stitching constraint is enforced (enforceStitchConstraint).
+// budget allows. Then the stitching constraint is enforced (enforceStitchConstraint). The cut has
+// at most max(maxNodes, rootFloor) nodes, plus at most 3 per constraint split (constraintSplits).
 Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptOptions& options,
                         AdaptStats* stats = nullptr);
 

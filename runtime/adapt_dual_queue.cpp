@@ -399,10 +399,12 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   bool changed = true;
   while (changed && !capped()) {
     changed = false;
-    // Merge phase: free merges, and any merges needed to get back under the budget.
-    while (validMergeTop() && !capped()) {
+    // Merge phase: free merges, and any merges needed to get back under the budget. note: the
+    // latter are not capped (as the quad queue's mandatory merges), so the budget holds every
+    // frame, also right after it drops or the view uncovers split culled regions.
+    while (validMergeTop()) {
       const Item top = mergeHeap_.front();
-      if (!(top.priority <= 0.0 || drawn_ > budget)) break;
+      if (drawn_ <= budget && (capped() || !(top.priority <= 0.0))) break;
       std::pop_heap(mergeHeap_.begin(), mergeHeap_.end(), Greater{});
       mergeHeap_.pop_back();
       if (top.overTol) st.nodeBudgetBound = true;
@@ -527,6 +529,8 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   }
   for (const CutNode& n : out_.nodes) st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
   opsSinceSort_ += frame_.splits + frame_.merges;
+  st.rootFloor = countVisibleRoots(h_, view, options.frustumCull);
+  st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, st.rootFloor);
   st.splits = frame_.splits;
   st.triangles = out_.triangles();
   if (stats) *stats = st;

@@ -49,7 +49,11 @@ struct DualQueueFrameStats {
 // while it saves > 0 triangles (or its node is over tolerance) and the budget allows, or a cheaper
 // merge can pay for it (a trade; an over-tolerance group is merged only to split a node with a
 // larger error); repeat until neither helps. A node split this frame is never
-// merged this frame and vice versa, and at most maxOpsPerFrame operations run per frame.
+// merged this frame and vice versa, and at most maxOpsPerFrame operations run per frame, apart
+// from the merges that bring the drawn nodes within maxNodes (never capped). The drawn cut has at
+// most max(maxNodes, rootFloor) nodes, plus at most 3 per constraint split; with maxNodes below
+// the root floor, the visible roots or fewer (a chart whose kept nodes are all culled draws none).
+// note: the root box of such a chart meets the frustum while its descendants' boxes do not.
 class DualQueueAdapter {
  public:
   // h must outlive the adapter. reusePriorities: keep split priorities across frames while they

@@ -707,6 +707,8 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   if (as.constraintSplits > 0) fitTriangleBudget(h_, s.out, view, options.maxTriangles);
   st.nodes = uint32_t(s.out.nodes.size());
   st.triangles = s.out.triangles();
+  st.rootFloor = countVisibleRoots(h_, view, options.frustumCull);
+  st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, st.rootFloor);
   double sum = 0.0;
   for (CutNode& n : s.out.nodes) {
     n.errorPx = float(screenError(h_, n.id, n.res, view));

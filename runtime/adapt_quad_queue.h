@@ -31,6 +31,8 @@ struct BudgetStats {
   double maxErrorPx = 0.0, meanErrorPx = 0.0;
   uint32_t constraintRaises = 0, constraintSplits = 0;
   uint32_t budgetMerges = 0;  // merges forced by maxNodes or by the triangle floor (in merges)
+  uint32_t rootFloor = 0;         // visible chart roots (countVisibleRoots): no cut has fewer nodes
+  bool budgetBelowRoots = false;  // maxNodes < rootFloor: the cut is the visible roots, over maxNodes
 };
 
 // Lowers resolutions of cut nodes (least error increase per removed triangle first, never below
@@ -43,7 +45,9 @@ class QuadQueueAdapter {
  public:
   explicit QuadQueueAdapter(const Hierarchy& h);
   // Adapts the kept cut to the view within the budgets; returns the drawn cut (stitching
-  // constraint enforced, triangles never above maxTriangles, nodes never above maxNodes).
+  // constraint enforced, triangles never above maxTriangles, nodes never above maxNodes except:
+  // the visible roots when maxNodes is below them (budgetBelowRoots), and up to 3 per constraint
+  // split (constraintSplits)).
   const Cut& update(const ViewParams& view, const BudgetOptions& options, BudgetStats* stats = nullptr);
   void reset();  // forget the kept cut (next update starts from the roots)
 

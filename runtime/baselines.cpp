@@ -35,6 +35,8 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
     queue.push(candidate(root));
     ++count;
   }
+  st.rootFloor = count;
+  st.budgetBelowRoots = budgetBelowRoots(maxNodes, count);
   while (!queue.empty()) {
     const Candidate c = queue.top();
     queue.pop();
@@ -181,6 +183,8 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
   std::priority_queue<ErrorItem> queue;
   uint64_t count = 0;
   for (uint32_t c = 0; c < h.chartCount(); ++c) count += nodeDrawable(h, {c, 0, 0, 0}, view, options.frustumCull);
+  st.rootFloor = uint32_t(count);
+  st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, st.rootFloor);
   uint32_t rootRes = h.params.maxRes(0);
   while (rootRes > h.params.minNodeResLog2 && count * budgetTris(rootRes) > options.maxTriangles) --rootRes;
   uint64_t triangles = count * budgetTris(rootRes);
@@ -251,6 +255,8 @@ Cut adaptGreedyBudget(const Hierarchy& h, const ViewParams& view, const BudgetOp
     }
   }
   st.splits = bestStats.splits;
+  st.rootFloor = bestStats.rootFloor;
+  st.budgetBelowRoots = bestStats.budgetBelowRoots;
   st.constraintRaises = bestStats.constraintRaises;
   st.constraintSplits = bestStats.constraintSplits;
   measureBudgetCut(h, view, best, st);

@@ -15,7 +15,7 @@ namespace gimlod {
 // detail only grows by splitting. Refines top-down, frustum culled (when frustumCull), splitting
 // the node with the largest screen error above tolerance first while the drawn node count stays
 // within maxNodes (0 = no limit); then enforces the stitching constraint, keeping every node at
-// its level's fixed resolution. Stats as for adaptErrorThreshold.
+// its level's fixed resolution. Stats and node bound as for adaptErrorThreshold.
 Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tolerancePx,
                           uint32_t maxNodes, AdaptStats* stats = nullptr, bool frustumCull = true);
 
@@ -27,8 +27,8 @@ Cut adaptTopDownGreedy(const Hierarchy& h, const ViewParams& view, double tolera
 // roots do not fit maxTriangles at maxRes(0), the roots take the highest common resolution that
 // fits). Refines top-down, largest screen error first, splitting while the triangles and drawn
 // nodes stay within maxTriangles and maxNodes; then enforces the stitching constraint, undoing the
-// last splits if the constraint pushed the cut over a budget. Fills refines (0), splits, nodes,
-// triangles, errors, constraint counts.
+// last splits if the constraint pushed the cut over a budget: at most max(maxNodes, rootFloor)
+// nodes. Fills refines (0), splits, nodes, triangles, errors, constraint counts and the root floor.
 Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options,
                                 BudgetStats* stats = nullptr);
 
@@ -36,8 +36,9 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
 // adaptErrorThreshold, maxNodes as its node budget) with its tolerance searched every frame, by
 // bisection in log(tolerance) over [1e-4, 1e4] px (20 adaptations), for the finest cut whose
 // triangles fit maxTriangles; the way a one-knob LOD is put under a triangle budget. When not
-// even the coarsest cut fits, its resolutions are lowered (fitTriangleBudget). Fills rounds (the
-// adaptations run), splits, nodes, triangles, errors and the constraint counts.
+// even the coarsest cut fits, its resolutions are lowered (fitTriangleBudget). Nodes as for
+// adaptErrorThreshold. Fills rounds (the adaptations run), splits, nodes, triangles, errors, the
+// constraint counts and the root floor.
 Cut adaptGreedyBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options,
                       BudgetStats* stats = nullptr);
 

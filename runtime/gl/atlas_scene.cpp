@@ -199,6 +199,8 @@ FrameResult AtlasScene::renderFrame(const Camera& camera, const BudgetOptions& o
   f.adapt.maxErrorPx = f.budget.maxErrorPx;
   f.adapt.triangles = f.budget.triangles;
   f.adapt.nodeBudgetBound = f.budget.nodes >= o.maxNodes;
+  f.adapt.rootFloor = f.budget.rootFloor;
+  f.adapt.budgetBelowRoots = f.budget.budgetBelowRoots;
   finishFrame(camera, view, f, t0);
   return f;
 }

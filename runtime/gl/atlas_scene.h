@@ -40,7 +40,7 @@ struct SceneOptions {
 struct FrameResult {
   Cut cut;         // the cut actually drawn (async: with resident ancestors substituted)
   Cut desiredCut;  // async: the cut the adaptation chose; empty without asyncLoads (`cut` is it)
-  AdaptStats adapt;        // of the desired cut
+  AdaptStats adapt;        // of the desired cut (rootFloor, budgetBelowRoots: in both modes)
   BudgetStats budget;      // budget mode: the quad-queue's stats (adapt holds its counts too)
   AttributeStats attributes;  // attribute resolutions of the desired cut (texelsPerPixel > 0)
   double maxErrorPx = 0.0;  // of the drawn cut: above the tolerance while ancestors stand in

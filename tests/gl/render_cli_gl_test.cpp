@@ -146,5 +146,51 @@ TEST(RenderCli, BuildAndRenderShippedScan) {
   EXPECT_TRUE(fs::exists(frames / "frame_0047.png"));
 }
 
+// A node budget below the scan's visible chart roots: every frame draws the roots, says so in
+// stats.csv (root_floor, budget_below_roots), and the tool warns once, in both adaptation modes.
+TEST(RenderCli, NodeBudgetBelowTheVisibleRootsIsReported) {
+  test::TempDir dir("gimlod-render-roots");
+  const std::string app = test::appPath().string();
+  const fs::path atlas = dir.path() / "bunny.atlas";
+  std::string out;
+  ASSERT_EQ(test::runCommand(app + " build '" + (test::repoData() / "meshes/bun_zipper.ply").string() + "' -o '" +
+                                 atlas.string() + "' --charts 24 --chart-size 17 --no-fidelity",
+                             &out),
+            0)
+      << out;
+  const size_t charts = nlohmann::json::parse(std::ifstream(atlas / "atlas.json"))["charts"].size();
+  ASSERT_GT(charts, 16u);
+  for (const std::string mode : {"", " --triangles 200000"}) {
+    SCOPED_TRACE(mode);
+    const fs::path frames = dir.path() / (mode.empty() ? "error" : "budget");
+    // From 3 bounding-box diagonals away every chart is in view.
+    ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + frames.string() +
+                                   "' --orbit 3 --distance 3 --size 32x24 --max-nodes 16" + mode,
+                               &out),
+              0)
+        << out;
+    const std::string warning = "visible chart roots";
+    size_t warnings = 0;
+    for (size_t at = out.find(warning); at != std::string::npos; at = out.find(warning, at + 1)) ++warnings;
+    EXPECT_EQ(warnings, 1u) << out;
+    EXPECT_NE(out.find("--max-nodes 16 is below the " + std::to_string(charts) + " visible chart roots"),
+              std::string::npos)
+        << out;
+    const auto rows = readCsv(frames / "stats.csv");
+    ASSERT_EQ(rows.size(), 4u);
+    const auto& head = rows[0];
+    auto col = [&](const std::string& name) {
+      return size_t(std::find(head.begin(), head.end(), name) - head.begin());
+    };
+    ASSERT_LT(col("root_floor"), head.size());
+    ASSERT_LT(col("budget_below_roots"), head.size());
+    for (size_t r = 1; r < rows.size(); ++r) {
+      EXPECT_EQ(rows[r][col("root_floor")], std::to_string(charts));
+      EXPECT_EQ(rows[r][col("budget_below_roots")], "1");
+      EXPECT_EQ(rows[r][col("nodes")], std::to_string(charts));
+    }
+  }
+}
+
 }  // namespace
 }  // namespace gimlod

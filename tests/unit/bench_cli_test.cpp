@@ -1,5 +1,6 @@
 // `gimlod bench` end to end on the shipped DEM: the CSVs have every column and one row per frame
-// per configuration, budgets hold, and bad options fail with a clear error.
+// per configuration, budgets hold, and bad options fail with a clear error. On the shipped scan:
+// node budgets below the visible chart roots are reported.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -7,6 +8,9 @@
 #include <map>
 #include <sstream>
 #include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
 
 #include "tests/test_util.h"
 
@@ -161,6 +165,85 @@ TEST_F(BenchCliTest, BadOptionsFailClearly) {
                              &output_),
             0);
   EXPECT_NE(output_.find("missing.atlas"), std::string::npos) << output_;
+}
+
+// Occurrences of `what` in `text`.
+size_t countOf(const std::string& text, const std::string& what) {
+  size_t n = 0;
+  for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + what.size())) ++n;
+  return n;
+}
+
+// A scan atlas has hundreds of charts, each a quadtree root, so a small node budget cannot hold:
+// every row says so (root_floor, budget_below_roots), such frames draw exactly the visible roots,
+// the others keep the budget, and the bench warns once.
+TEST(BenchCliRootFloor, BudgetsBelowTheVisibleRootsAreReported) {
+  test::TempDir dir("gimlod-bench-roots");
+  const fs::path atlas = dir.path() / "bunny.atlas";
+  std::string output;
+  ASSERT_EQ(test::runCommand(test::appPath().string() + " build '" +
+                                 test::realData("meshes/bun_zipper.ply").string() + "' -o '" + atlas.string() +
+                                 "' --charts 24 --chart-size 17 --no-fidelity",
+                             &output),
+            0)
+      << output;
+  const uint32_t charts = uint32_t(nlohmann::json::parse(std::ifstream(atlas / "atlas.json"))["charts"].size());
+  ASSERT_GT(charts, 20u);
+  // From 3 bounding-box diagonals away every chart is in view: the floor is the chart count.
+  const uint32_t low = charts / 8, justBelow = charts - 1, high = charts * 5;
+  for (const std::string mode : {"budget", "error"}) {
+    SCOPED_TRACE(mode);
+    const fs::path out = dir.path() / mode;
+    ASSERT_EQ(test::runCommand(test::appPath().string() + " bench '" + atlas.string() + "' -o '" + out.string() +
+                                   "' --orbit 3 --distance 3 --mode " + mode +
+                                   fmt::format(" --nodes {},{},{}", low, justBelow, high) +
+                                   (mode == "budget" ? " --triangles 200000" : " --tolerance 0.5"),
+                               &output),
+              0)
+        << output;
+    const Csv csv = readCsv(out / "bench.csv");
+    ASSERT_EQ(csv.rows.size(), 3u * 3u * 3u);
+    std::map<std::string, int> perAlgo;
+    for (size_t i = 0; i < csv.rows.size(); ++i) {
+      ASSERT_EQ(csv.rows[i].size(), csv.header.size()) << "row " << i;
+      ++perAlgo[csv.rows[i][csv.col("algorithm")]];
+      const double maxNodes = csv.num(i, "max_nodes"), nodes = csv.num(i, "nodes");
+      EXPECT_EQ(csv.num(i, "root_floor"), charts) << "row " << i;
+      const bool below = maxNodes < charts;
+      EXPECT_EQ(csv.num(i, "budget_below_roots"), below ? 1 : 0) << "row " << i;
+      if (below) {
+        EXPECT_EQ(nodes, charts) << "row " << i << ": the visible roots, unsplit";
+        if (mode == "budget") {
+          EXPECT_EQ(csv.num(i, "budget_bound"), 1) << "row " << i << ": at the node budget";
+        }
+      } else {
+        EXPECT_LE(nodes, maxNodes) << "row " << i;
+      }
+    }
+    EXPECT_EQ(perAlgo["ours"], 9);
+    EXPECT_EQ(perAlgo["fixed"], 9);
+    EXPECT_EQ(perAlgo["greedy"], 9);
+    const Csv sum = readCsv(out / "summary.csv");
+    ASSERT_EQ(sum.rows.size(), 9u);
+    for (size_t i = 0; i < sum.rows.size(); ++i) {
+      EXPECT_EQ(sum.num(i, "root_floor_max"), charts);
+      EXPECT_EQ(sum.num(i, "budget_below_roots_frac"), sum.num(i, "max_nodes") < charts ? 1.0 : 0.0);
+    }
+    // One warning, for the first budget below the roots, naming it and the floor.
+    EXPECT_EQ(countOf(output, "visible chart roots"), 1u) << output;
+    EXPECT_NE(output.find(fmt::format("node budget {} is below the {} visible chart roots", low, charts)),
+              std::string::npos)
+        << output;
+  }
+  // A budget above the roots: no warning.
+  ASSERT_EQ(test::runCommand(test::appPath().string() + " bench '" + atlas.string() + "' -o '" +
+                                 (dir.path() / "above").string() + "' --orbit 2 --distance 3 " +
+                                 fmt::format("--nodes {}", high),
+                             &output),
+            0)
+      << output;
+  EXPECT_EQ(countOf(output, "visible chart roots"), 0u) << output;
+  EXPECT_EQ(readCsv(dir.path() / "above" / "bench.csv").num(0, "budget_below_roots"), 0);
 }
 
 }  // namespace

@@ -1,0 +1,310 @@
+// The node budget's root floor: every chart is a quadtree root, so no cut has fewer nodes than the
+// visible roots. Every adapter (dual queue, quad queue, top-down greedy and the baselines) draws
+// exactly the visible roots when the budget is below them and says so (rootFloor,
+// budgetBelowRoots), and otherwise keeps the budget, on a hand-made forest and on the shipped scan.
+// Based on: Niski, Purnomo, Cohen, I3D 2007, section 7.1 (error-threshold and triangle-budget
+// problems with a maximum node count).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <functional>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "pipeline/build.h"
+#include "runtime/adapt.h"
+#include "runtime/adapt_dual_queue.h"
+#include "runtime/adapt_quad_queue.h"
+#include "runtime/atlas_view.h"
+#include "runtime/baselines.h"
+#include "runtime/camera.h"
+#include "tests/adapt_fixture.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+using test::makeWorld;
+using test::viewAt;
+using test::World;
+
+// The charts whose roots are drawn for v, by the frustum test itself (not by the adapters' code).
+std::set<uint32_t> visibleRootCharts(const Hierarchy& h, const ViewParams& v, bool cull) {
+  std::set<uint32_t> out;
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    const NodeId root{c, 0, 0, 0};
+    if (h.flags(root) & kNodeEmpty) continue;
+    const auto& b = h.bounds(root);
+    if (!cull || v.frustum.intersects({b[0], b[1], b[2]}, {b[3], b[4], b[5]})) out.insert(c);
+  }
+  return out;
+}
+
+// The cut is exactly the roots of `charts`.
+void expectExactlyRoots(const Cut& cut, const std::set<uint32_t>& charts) {
+  std::set<uint32_t> drawn;
+  for (const CutNode& n : cut.nodes) {
+    EXPECT_EQ(n.id.level, 0u) << "chart " << n.id.chart << " was split";
+    drawn.insert(n.id.chart);
+  }
+  EXPECT_EQ(cut.nodes.size(), charts.size());
+  EXPECT_EQ(drawn, charts);
+}
+
+// One adapter under test: adapts to a view with a node budget; returns the cut and fills the
+// root floor, the flag, and the constraint splits.
+struct Outcome {
+  Cut cut;
+  uint32_t rootFloor = 0;
+  bool budgetBelowRoots = false;
+  uint32_t constraintSplits = 0;
+};
+using Run = std::function<Outcome(const ViewParams&, uint32_t maxNodes)>;
+struct Named {
+  std::string name;
+  Run run;
+  bool coherent = false;  // keeps its cut across calls
+};
+
+Outcome fromAdapt(Cut cut, const AdaptStats& st) {
+  return {std::move(cut), st.rootFloor, st.budgetBelowRoots, st.constraintSplits};
+}
+Outcome fromBudget(Cut cut, const BudgetStats& st) {
+  return {std::move(cut), st.rootFloor, st.budgetBelowRoots, st.constraintSplits};
+}
+
+// Every adapter, in error-threshold mode at tolerancePx and in triangle-budget mode at
+// maxTriangles. The coherent adapters keep their state across calls (a camera path).
+std::vector<Named> allAdapters(const Hierarchy& h, double tolerancePx, uint64_t maxTriangles, bool cull) {
+  auto dq = std::make_shared<DualQueueAdapter>(h);
+  auto qq = std::make_shared<QuadQueueAdapter>(h);
+  auto adaptOpts = [=](uint32_t maxNodes) {
+    AdaptOptions o;
+    o.tolerancePx = tolerancePx;
+    o.maxNodes = maxNodes;
+    o.frustumCull = cull;
+    return o;
+  };
+  auto budgetOpts = [=](uint32_t maxNodes) {
+    BudgetOptions o;
+    o.maxTriangles = maxTriangles;
+    o.maxNodes = maxNodes;
+    o.frustumCull = cull;
+    return o;
+  };
+  const Hierarchy* hp = &h;
+  return {
+      {"dual queue", [=](const ViewParams& v, uint32_t n) {
+         AdaptStats st;
+         Cut cut = dq->update(v, adaptOpts(n), &st);
+         return fromAdapt(std::move(cut), st);
+       }, true},
+      {"top-down greedy", [=](const ViewParams& v, uint32_t n) {
+         AdaptStats st;
+         Cut cut = adaptTopDownGreedy(*hp, v, tolerancePx, n, &st, cull);
+         return fromAdapt(std::move(cut), st);
+       }},
+      {"fixed granularity", [=](const ViewParams& v, uint32_t n) {
+         AdaptStats st;
+         Cut cut = adaptFixedGranularity(*hp, v, tolerancePx, n, &st, cull);
+         return fromAdapt(std::move(cut), st);
+       }},
+      {"quad queue", [=](const ViewParams& v, uint32_t n) {
+         BudgetStats st;
+         Cut cut = qq->update(v, budgetOpts(n), &st);
+         return fromBudget(std::move(cut), st);
+       }, true},
+      {"fixed granularity (triangle budget)", [=](const ViewParams& v, uint32_t n) {
+         BudgetStats st;
+         Cut cut = adaptFixedGranularityBudget(*hp, v, budgetOpts(n), &st);
+         return fromBudget(std::move(cut), st);
+       }},
+      {"greedy (triangle budget)", [=](const ViewParams& v, uint32_t n) {
+         BudgetStats st;
+         Cut cut = adaptGreedyBudget(*hp, v, budgetOpts(n), &st);
+         return fromBudget(std::move(cut), st);
+       }},
+  };
+}
+
+// 24 charts (6 x 4) of 129 samples, three levels: more roots than the budgets below.
+World manyCharts() { return makeWorld(129, 6, 4, 3); }
+
+TEST(RootFloor, BudgetBelowTheRootsDrawsExactlyTheRoots) {
+  const World w = manyCharts();
+  ASSERT_EQ(w.h.chartCount(), 24u);
+  // Every chart in view, close enough that a 0.05 px tolerance wants splits.
+  const ViewParams all = viewAt(w, {384, -240, 480}, {384, 256, 0});
+  for (bool cull : {true, false}) {
+    SCOPED_TRACE(cull ? "culled" : "not culled");
+    const std::set<uint32_t> roots = visibleRootCharts(w.h, all, cull);
+    ASSERT_EQ(roots.size(), 24u) << "the view sees every chart";
+    EXPECT_EQ(countVisibleRoots(w.h, all, cull), 24u);
+    for (Named& a : allAdapters(w.h, 0.05, 1000000, cull)) {
+      SCOPED_TRACE(a.name);
+      // A first frame without a node budget splits (the coherent adapters keep that cut), then
+      // the budget drops below the roots: back to exactly the roots, in one frame.
+      const Outcome unlimited = a.run(all, 0);
+      EXPECT_GT(unlimited.cut.nodes.size(), 24u) << "the tolerance asks for splits";
+      EXPECT_EQ(unlimited.rootFloor, 24u);
+      EXPECT_FALSE(unlimited.budgetBelowRoots) << "0 means no limit";
+      for (uint32_t budget : {1u, 10u, 23u}) {
+        SCOPED_TRACE("budget " + std::to_string(budget));
+        const Outcome o = a.run(all, budget);
+        expectExactlyRoots(o.cut, roots);
+        EXPECT_EQ(o.rootFloor, 24u);
+        EXPECT_TRUE(o.budgetBelowRoots);
+      }
+      // At the floor the budget holds and is not below the roots.
+      const Outcome at = a.run(all, 24);
+      EXPECT_FALSE(at.budgetBelowRoots);
+      EXPECT_EQ(at.rootFloor, 24u);
+      EXPECT_LE(at.cut.nodes.size(), 24u);
+    }
+  }
+}
+
+TEST(RootFloor, TheFloorIsTheVisibleRoots) {
+  const World w = manyCharts();
+  // Low over one corner, looking across: part of the charts are outside the frustum.
+  const ViewParams part = viewAt(w, {40, 40, 48}, {240, 160, 0});
+  const std::set<uint32_t> roots = visibleRootCharts(w.h, part, true);
+  ASSERT_GT(roots.size(), 1u);
+  ASSERT_LT(roots.size(), 24u) << "some charts are culled";
+  const uint32_t floor = uint32_t(roots.size());
+  EXPECT_EQ(countVisibleRoots(w.h, part, true), floor);
+  for (Named& a : allAdapters(w.h, 0.05, 1000000, true)) {
+    SCOPED_TRACE(a.name);
+    const Outcome below = a.run(part, floor - 1);
+    expectExactlyRoots(below.cut, roots);
+    EXPECT_EQ(below.rootFloor, floor);
+    EXPECT_TRUE(below.budgetBelowRoots);
+    // The culled charts leave room: a budget of all 24 charts is above this view's floor.
+    const Outcome above = a.run(part, 24);
+    EXPECT_EQ(above.rootFloor, floor);
+    EXPECT_FALSE(above.budgetBelowRoots);
+    EXPECT_LE(above.cut.nodes.size(), 24u);
+    EXPECT_GT(above.cut.nodes.size(), floor) << "room above the floor is used";
+  }
+}
+
+// The coherent adapters cap their operations per frame, but not the merges that bring the drawn
+// nodes back within the budget: a budget that drops holds in the same frame.
+TEST(RootFloor, ABudgetDropHoldsInTheSameFrameDespiteTheOperationCap) {
+  const World w = makeWorld(129, 6, 4, 6);
+  const ViewParams v = viewAt(w, {384, -240, 480}, {384, 256, 0});
+  DualQueueAdapter dq(w.h, 16);
+  AdaptOptions ao;
+  ao.tolerancePx = 0.01;
+  ao.maxNodes = 0;
+  for (int i = 0; i < 40; ++i) dq.update(v, ao);
+  ASSERT_GT(dq.update(v, ao).nodes.size(), 16u * 3u + 30u) << "more merges needed than the cap allows";
+  QuadQueueAdapter qq(w.h);
+  BudgetOptions bo;
+  bo.maxTriangles = 100000000;
+  bo.maxNodes = 0;
+  bo.maxOpsPerFrame = 16;
+  for (int i = 0; i < 40; ++i) qq.update(v, bo);
+  ASSERT_GT(qq.update(v, bo).nodes.size(), 16u * 3u + 30u);
+  for (uint32_t budget : {30u, 10u}) {
+    SCOPED_TRACE("budget " + std::to_string(budget));
+    ao.maxNodes = bo.maxNodes = budget;
+    AdaptStats as;
+    const Cut& a = dq.update(v, ao, &as);
+    EXPECT_LE(a.nodes.size(), std::max(budget, as.rootFloor));
+    EXPECT_EQ(as.budgetBelowRoots, budget < 24);
+    BudgetStats bs;
+    const Cut& b = qq.update(v, bo, &bs);
+    EXPECT_LE(b.nodes.size(), std::max(budget, bs.rootFloor));
+    EXPECT_EQ(bs.budgetBelowRoots, budget < 24);
+  }
+}
+
+// The shipped scan, charted small (as the render test builds it): hundreds of tiny charts.
+class RootFloorScan : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = std::make_unique<test::TempDir>("gimlod-root-floor");
+    MeshBuildOptions o;
+    o.input = test::repoData() / "meshes/bun_zipper.ply";
+    o.output = dir_->path() / "bunny.atlas";
+    o.charts = 24;
+    o.chartSize = 17;
+    o.measureFidelity = false;
+    buildAtlas(o);
+    atlas_ = std::make_unique<AtlasView>(openAtlas(o.output));
+  }
+  static void TearDownTestSuite() {
+    atlas_.reset();
+    dir_.reset();
+  }
+  // The shipped orbit path, then a closer orbit whose views cut part of the scan away.
+  static std::vector<ViewParams> path() {
+    std::vector<Camera> cams =
+        readCameraPath(std::filesystem::path(GIMLOD_REPO_DATA).parent_path() / "scenes/bunny_orbit.json");
+    for (Camera& c : cams) fitClipPlanes(c, atlas_->lo, atlas_->hi);
+    for (const Camera& c : orbitPath(atlas_->lo, atlas_->hi, 16, 0.3, 20.0, 45.0)) cams.push_back(c);
+    std::vector<ViewParams> views;
+    for (const Camera& c : cams) views.push_back(makeViewParams(c, 640, 480));
+    return views;
+  }
+  static std::unique_ptr<test::TempDir> dir_;
+  static std::unique_ptr<AtlasView> atlas_;
+};
+std::unique_ptr<test::TempDir> RootFloorScan::dir_;
+std::unique_ptr<AtlasView> RootFloorScan::atlas_;
+
+TEST_F(RootFloorScan, NoAdapterDrawsMoreThanTheBudgetAboveTheFloor) {
+  const Hierarchy& h = atlas_->hierarchy;
+  const std::vector<ViewParams> views = path();
+  uint32_t minFloor = UINT32_MAX, maxFloor = 0;
+  for (const ViewParams& v : views) {
+    minFloor = std::min(minFloor, countVisibleRoots(h, v, true));
+    maxFloor = std::max(maxFloor, countVisibleRoots(h, v, true));
+  }
+  std::printf("bunny: %u charts, visible roots %u to %u over %zu frames\n", h.chartCount(), minFloor, maxFloor,
+              views.size());
+  ASSERT_GT(h.chartCount(), 64u) << "more charts than the smaller budgets";
+  for (uint32_t budget : {32u, 64u, 256u}) {
+    uint32_t checkedAbove = 0, checkedBelow = 0, constraintSplits = 0;
+    for (Named& a : allAdapters(h, 0.5, 100000, true)) {
+      for (size_t i = 0; i < views.size(); ++i) {
+        SCOPED_TRACE(a.name + ", budget " + std::to_string(budget) + ", frame " + std::to_string(i));
+        const uint32_t floor = uint32_t(visibleRootCharts(h, views[i], true).size());
+        const Outcome o = a.run(views[i], budget);
+        EXPECT_EQ(o.rootFloor, floor);
+        EXPECT_EQ(o.budgetBelowRoots, budget < floor);
+        constraintSplits += o.constraintSplits;
+        if (floor <= budget) {
+          EXPECT_LE(o.cut.nodes.size(), budget);
+          ++checkedAbove;
+          continue;
+        }
+        ++checkedBelow;
+        const std::set<uint32_t> roots = visibleRootCharts(h, views[i], true);
+        if (!a.coherent) {
+          expectExactlyRoots(o.cut, roots);
+          continue;
+        }
+        // note: a coherent adapter merges only until the budget holds, and a chart whose root
+        // box meets the frustum may have every node of its kept cut culled: then it draws at
+        // most the visible roots, perhaps fewer.
+        EXPECT_LE(o.cut.nodes.size(), floor);
+        for (const CutNode& n : o.cut.nodes) EXPECT_TRUE(roots.count(n.id.chart)) << "chart " << n.id.chart;
+      }
+    }
+    // The stitching constraint may split past the budget (documented); the strict bound above
+    // holds on this path, where it does not need to.
+    std::printf("budget %u: %u adapter frames at or above the floor, %u below, %u constraint splits\n", budget,
+                checkedAbove, checkedBelow, constraintSplits);
+    if (budget == 256) {
+      EXPECT_GT(checkedAbove, 0u) << "the largest budget is above the visible roots";
+    }
+  }
+}
+
+}  // namespace
+}  // namespace gimlod
