@@ -1,5 +1,5 @@
 // Atlas fidelity: the two-sided distance between the input mesh and the atlas surface, as the
-// issue's quality figure (a sampled Hausdorff distance, in units of the input's bounding-box
+// atlas's quality figure (a sampled Hausdorff distance, in units of the input's bounding-box
 // diagonal). Uses CGAL's AABB tree for the closest-point queries.
 #pragma once
 

@@ -1,4 +1,4 @@
-// Bad mesh input (issue 3, "Bad input"), through the reader API and through `gimlod build`:
+// Bad mesh input, through the reader API and through `gimlod build`:
 // every case is hand-made here, in a temporary directory, from a small UV sphere. Each one is
 // either repaired, with the repair counted (MeshReadStats, stats.json and the build's printout),
 // or rejected with exit code 2 (an InputError) and a message that names the file and the problem;

@@ -1,5 +1,5 @@
 // Every shared real scan through `gimlod build` at the default mesh options (--charts 128
-// --chart-size 65, fidelity on), then the atlas invariants of issue 3 checked on what the build
+// --chart-size 65, fidelity on), then the mesh atlas invariants checked on what the build
 // wrote, independently of the code that wrote it:
 //  - seams: every pair of charts the manifest joins (any of the 8 edge orientations) holds
 //    bit-identical positions along the shared edge, at every pyramid level; every corner sample is
@@ -9,7 +9,7 @@
 //    no non-manifold edge, and exactly the input's open boundary loops and Euler characteristic
 //    (the bunny's 5 holes stay holes; closed scans export closed);
 //  - flipped texels: none on most scans, bounded on all (see FlippedTexels);
-//  - two-sided Hausdorff distance within the issue's bound.
+//  - two-sided Hausdorff distance within 0.1% of the diagonal.
 // One atlas build per scan and process (tests/scan_atlases.h); ctest runs each test alone, so the
 // fidelity build happens once per scan in Invariants (45-65 s a scan with the checks on 2 busy
 // cores), and FlippedTexels builds without fidelity (about 10 s) unless the process already
@@ -334,7 +334,7 @@ TEST_P(ScanAtlasTest, Invariants) {
     std::cout << "  Hausdorff " << hausdorff << "% of the diagonal, mean " << mean << "%\n";
     EXPECT_GT(f["mesh_samples"].get<uint64_t>(), 0u);
     EXPECT_GT(f["atlas_samples"].get<uint64_t>(), 0u);
-    // Bound: the issue's goal, 0.1% of the bounding-box diagonal at the default chart size. It is
+    // Bound: the mesh atlas goal, 0.1% of the bounding-box diagonal at the default chart size. It is
     // the figure a 65 x 65 chart can be held to: about 700 quad charts of 64 x 64 intervals give
     // some 2.8M samples for surfaces of 35k-350k vertices, so every input triangle is covered by
     // several texels and what remains is interpolation error at ridges and sharp creases, of the
