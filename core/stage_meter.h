@@ -23,6 +23,11 @@ uint64_t peakResidentBytes();
 // which would count against a memory cap in the stages after); a no-op without glibc.
 void releaseFreedMemory();
 
+// Wall seconds on the steady clock since t0.
+inline double secondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
 // One finished stage.
 struct StageTiming {
   std::string stage;

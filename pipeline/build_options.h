@@ -9,6 +9,13 @@
 
 namespace gimlod {
 
+// The smallest l with 2^l >= v (log2 of a power of two; 0 for v <= 1).
+inline uint32_t log2u(uint32_t v) {
+  uint32_t l = 0;
+  while ((1u << l) < v) ++l;
+  return l;
+}
+
 // What every build takes.
 struct CommonBuildOptions {
   std::filesystem::path input;   // the DEM or mesh to read

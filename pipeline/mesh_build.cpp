@@ -25,16 +25,6 @@ namespace fs = std::filesystem;
 namespace gimlod {
 namespace {
 
-uint32_t log2u(uint32_t v) {
-  uint32_t l = 0;
-  while ((1u << l) < v) ++l;
-  return l;
-}
-
-double secondsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 // Ends the meter's running stage as `name`, and logs it.
 void finishStage(StageMeter& meter, const std::string& name) {
   const StageTiming& s = meter.finish(name);

@@ -21,16 +21,6 @@ namespace {
 
 bool isPowerOfTwo(uint32_t v) { return std::has_single_bit(v); }
 
-uint32_t log2u(uint32_t v) {
-  uint32_t l = 0;
-  while ((1u << l) < v) ++l;
-  return l;
-}
-
-double secondsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 }  // namespace
 
 void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
