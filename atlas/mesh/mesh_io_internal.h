@@ -55,7 +55,8 @@ class FileBuffer {
     }
     size_ = static_cast<uint64_t>(st.st_size);
     ::posix_fadvise(fd_, 0, 0, POSIX_FADV_SEQUENTIAL);
-    capacity_ = std::max<size_t>(capacity, 4096);
+    // No larger than the file needs: a small file costs no megabyte buffer.
+    capacity_ = static_cast<size_t>(std::max<uint64_t>(std::min<uint64_t>(capacity, size_ + 1), 4096));
     buf_.reset(new uint8_t[capacity_]);  // note: not zeroed; only bytes read are used
   }
   ~FileBuffer() { ::close(fd_); }
