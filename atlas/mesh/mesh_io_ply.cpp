@@ -379,7 +379,9 @@ class PlyReader {
             if (!f_.ensure(plySize(p.countType))) truncated(e, i);
             const int64_t n = plyInt(f_.data(), p.countType, swap_);
             f_.advance(plySize(p.countType));
-            if (n < 0 || !f_.skip(static_cast<uint64_t>(n) * plySize(p.type))) truncated(e, i);
+            if (n < 0 || static_cast<uint64_t>(n) > f_.remaining() / plySize(p.type) ||
+              !f_.skip(static_cast<uint64_t>(n) * plySize(p.type)))
+            truncated(e, i);
           } else {
             if (!f_.ensure(plySize(p.type))) truncated(e, i);
             v[k] = plyScalar(f_.data(), p.type, swap_);
@@ -476,6 +478,20 @@ class PlyReader {
   }
 
   void skipElement(const PlyElement& e) {
+    // An element without properties takes no bytes, whatever its count; a binary element of
+    // fixed-size records is skipped in one step, so a huge count is a truncated file at once.
+    if (e.props.empty()) {
+      if (e.count > 0) warn(stats_, "PLY element '" + e.name + "' ignored");
+      return;
+    }
+    if (!ascii_ && std::none_of(e.props.begin(), e.props.end(), [](const PlyProp& p) { return p.list; })) {
+      uint64_t record = 0;
+      for (const PlyProp& p : e.props) record += plySize(p.type);
+      if (e.count > f_.remaining() / record || !f_.skip(e.count * record))
+        truncated(e, std::min(e.count, f_.remaining() / record));
+      if (e.count > 0) warn(stats_, "PLY element '" + e.name + "' ignored");
+      return;
+    }
     for (uint64_t i = 0; i < e.count; ++i) {
       for (const PlyProp& p : e.props) {
         if (ascii_) {
@@ -489,7 +505,9 @@ class PlyReader {
           if (!f_.ensure(plySize(p.countType))) truncated(e, i);
           const int64_t n = plyInt(f_.data(), p.countType, swap_);
           f_.advance(plySize(p.countType));
-          if (n < 0 || !f_.skip(static_cast<uint64_t>(n) * plySize(p.type))) truncated(e, i);
+          if (n < 0 || static_cast<uint64_t>(n) > f_.remaining() / plySize(p.type) ||
+              !f_.skip(static_cast<uint64_t>(n) * plySize(p.type)))
+            truncated(e, i);
         } else if (!f_.skip(plySize(p.type))) {
           truncated(e, i);
         }
