@@ -6,6 +6,7 @@
 #include <chrono>
 #include <unordered_map>
 
+#include "atlas/mesh/mesh_format.h"
 #include "atlas/mesh/mesh_io_internal.h"
 
 namespace gimlod {
@@ -36,55 +37,6 @@ const char* meshFormatName(MeshFormat f) {
 
 namespace {
 
-std::string lower(std::string_view s) {
-  std::string r(s);
-  for (char& c : r) c = char(std::tolower(static_cast<unsigned char>(c)));
-  return r;
-}
-
-bool looksLikeOff(std::string_view head) {
-  size_t b = 0;
-  for (;;) {
-    while (b < head.size() && (isSpace(head[b]) || head[b] == '\n')) ++b;
-    if (b < head.size() && head[b] == '#') {
-      const size_t nl = head.find('\n', b);
-      if (nl == std::string_view::npos) return false;
-      b = nl + 1;
-      continue;
-    }
-    break;
-  }
-  size_t e = b;
-  while (e < head.size() && (std::isalnum(static_cast<unsigned char>(head[e])))) ++e;
-  const std::string_view kw = head.substr(b, e - b);
-  return kw.size() >= 3 && kw.size() <= 8 && kw.substr(kw.size() - 3) == "OFF" &&
-         kw.find_first_not_of("STCN4nOF") == std::string_view::npos;
-}
-
-MeshFormat detectFormat(FileBuffer& f) {
-  const fs::path& path = f.path();
-  if (f.size() == 0) fail(path, "empty file");
-  f.ensure(std::min<uint64_t>(f.size(), 512));
-  const std::string_view head(reinterpret_cast<const char*>(f.data()), f.available());
-  const std::string ext = lower(path.extension().string());
-  const bool plyMagic = head.size() >= 4 && startsWith(head, "ply") &&
-                        (head[3] == '\n' || head[3] == '\r');
-  if (ext == ".ply") {
-    if (!plyMagic) fail(path, "not a PLY file (it does not start with 'ply')");
-    return MeshFormat::kPly;
-  }
-  if (ext == ".off") {
-    if (!looksLikeOff(head)) fail(path, "not an OFF file (it does not start with 'OFF')");
-    return MeshFormat::kOff;
-  }
-  if (ext == ".obj") return MeshFormat::kObj;
-  if (ext == ".stl") return MeshFormat::kStl;
-  if (plyMagic) return MeshFormat::kPly;
-  if (looksLikeOff(head)) return MeshFormat::kOff;
-  if (startsWith(head, "solid")) return MeshFormat::kStl;
-  fail(path, "unsupported mesh format (expected .ply, .obj, .off or .stl)");
-}
-
 const char* genericName(MeshFormat f) {
   switch (f) {
     case MeshFormat::kPly: return "PLY";
@@ -94,6 +46,28 @@ const char* genericName(MeshFormat f) {
   }
   return "?";
 }
+
+// The format by content (atlas/mesh/mesh_format.h), else by extension. A file whose content
+// shows another format than its extension names is read as its content shows, with a warning.
+MeshFormat detectFormat(FileBuffer& f, MeshReadStats& stats) {
+  const fs::path& path = f.path();
+  if (f.size() == 0) fail(path, "empty file");
+  f.ensure(std::min<uint64_t>(f.size(), kMeshFormatHeadBytes));
+  const std::string_view head(reinterpret_cast<const char*>(f.data()), f.available());
+  const std::optional<MeshFormat> content = meshFormatOfContent(head, f.size());
+  const std::optional<MeshFormat> ext = meshFormatOfExtension(path);
+  if (content) {
+    if (ext && *ext != *content)
+      warn(stats, std::string("read as ") + genericName(*content) + " by its content, though its extension says ." +
+                      meshFormatName(*ext));
+    return *content;
+  }
+  if (ext == MeshFormat::kPly) fail(path, "not a PLY file (it does not start with 'ply')");
+  if (ext == MeshFormat::kOff) fail(path, "not an OFF file (it does not start with 'OFF')");
+  if (ext) return *ext;  // OBJ and STL name their own problems
+  fail(path, "unsupported mesh format (expected PLY, OBJ, OFF or STL content)");
+}
+
 
 void checkOptions(const fs::path& path, const MeshReadOptions& o) {
   if (o.chunkTriangles == 0) fail(path, "bad read options: chunkTriangles must be at least 1");
@@ -111,7 +85,7 @@ MeshReadStats streamImpl(const fs::path& path, TriangleSink& sink, const MeshRea
   checkOptions(path, o);
   FileBuffer f(path);
   MeshReadStats stats;
-  stats.info.format = detectFormat(f);
+  stats.info.format = detectFormat(f, stats);
   stats.info.formatName = genericName(stats.info.format);
   Emitter emit(sink, o, stats);
   switch (stats.info.format) {
@@ -150,7 +124,8 @@ MeshReadStats streamImpl(const fs::path& path, TriangleSink& sink, const MeshRea
 MeshInfo detectMesh(const fs::path& path) {
   FileBuffer f(path, 4096);
   MeshInfo info;
-  info.format = detectFormat(f);
+  MeshReadStats unused;
+  info.format = detectFormat(f, unused);
   info.formatName = genericName(info.format);
   return info;
 }

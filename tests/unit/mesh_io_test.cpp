@@ -363,6 +363,32 @@ TEST(MeshIoFormats, DetectsByMagicWhateverTheExtension) {
   expectReadError(x, {"unsupported mesh format"});
 }
 
+// Content decides over a misleading extension: an OBJ, a binary STL without "solid" and an ASCII
+// STL under names that say otherwise are read as what they are, with a warning naming both.
+TEST(MeshIoFormats, ContentWinsOverAMisleadingExtension) {
+  test::TempDir dir("mesh-io");
+  const fs::path obj = dir.path() / "scan.ply", bin = dir.path() / "part.obj", txt = dir.path() / "part.off";
+  writeFile(obj, "# exported\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  writeFile(bin, binaryStl(pyramidSoup()));
+  writeFile(txt, asciiStl(pyramidSoup()));
+  const IndexedMesh a = readMesh(obj);
+  EXPECT_EQ(a.stats.info.format, MeshFormat::kObj);
+  EXPECT_EQ(a.triangles.size(), 1u);
+  ASSERT_EQ(a.stats.warnings.size(), 1u);
+  EXPECT_NE(a.stats.warnings[0].find("read as OBJ by its content, though its extension says .ply"), std::string::npos)
+      << a.stats.warnings[0];
+  for (const fs::path& f : {bin, txt}) {
+    SCOPED_TRACE(f.string());
+    const IndexedMesh m = readMesh(f);
+    EXPECT_EQ(m.stats.info.format, MeshFormat::kStl);
+    EXPECT_EQ(m.triangles.size(), 6u);
+    ASSERT_FALSE(m.stats.warnings.empty());
+    EXPECT_NE(m.stats.warnings[0].find("read as STL"), std::string::npos) << m.stats.warnings[0];
+  }
+  EXPECT_EQ(detectMesh(bin).format, MeshFormat::kStl);
+  EXPECT_EQ(detectMesh(obj).format, MeshFormat::kObj);
+}
+
 TEST(MeshIoFormats, StreamsInChunksWithInfoFirst) {
   test::TempDir dir("mesh-io");
   const fs::path f = dir.path() / "pyramid.ply";
