@@ -567,6 +567,22 @@ inline bool startsWith(std::string_view s, std::string_view p) {
   return s.substr(0, p.size()) == p;
 }
 
+// What a reader of an indexed format (PLY, OFF, OBJ) works with: the file, where its triangles
+// go, its vertex array, the counts and the options.
+class IndexedReader {
+ public:
+  IndexedReader(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats, const MeshReadOptions& o)
+      : f_(f), path_(f.path()), emit_(emit), va_(va), stats_(stats), o_(o) {}
+
+ protected:
+  FileBuffer& f_;
+  fs::path path_;
+  Emitter& emit_;
+  VertexArray& va_;
+  MeshReadStats& stats_;
+  const MeshReadOptions& o_;
+};
+
 // The format readers, one per file (atlas/mesh/mesh_io_ply.cpp and so on). Each reads the file
 // from its start; the indexed formats fill va, and with verticesOnly stop after the vertices.
 void readPly(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats,

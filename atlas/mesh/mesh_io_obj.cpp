@@ -8,11 +8,9 @@ namespace {
 // "v x y z [w | r g b]" and "f a b c ..." with a = "i", "i/t", "i/t/n" or "i//n"; negative
 // indices count back from the last vertex so far. Other statements are ignored.
 // note: a face may only use vertices defined before it (true of every common exporter).
-class ObjReader {
+class ObjReader : IndexedReader {
  public:
-  ObjReader(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats,
-            const MeshReadOptions& o)
-      : f_(f), path_(f.path()), emit_(emit), va_(va), stats_(stats), o_(o) {}
+  using IndexedReader::IndexedReader;
 
   void run() {
     MeshInfo& info = stats_.info;
@@ -93,13 +91,6 @@ class ObjReader {
     info.hasColours = stats_.hasColours;
   }
 
- private:
-  FileBuffer& f_;
-  fs::path path_;
-  Emitter& emit_;
-  VertexArray& va_;
-  MeshReadStats& stats_;
-  const MeshReadOptions& o_;
 };
 
 }  // namespace

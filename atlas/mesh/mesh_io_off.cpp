@@ -7,11 +7,9 @@ namespace {
 
 // Geomview OFF: "[ST][C][N]OFF", counts "nv nf [ne]", then vertex lines
 // "x y z [nx ny nz] [r g b [a]] [s t]" and face lines "n i0 .. i(n-1) [colour]". '#' comments.
-class OffReader {
+class OffReader : IndexedReader {
  public:
-  OffReader(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats,
-            const MeshReadOptions& o)
-      : f_(f), path_(f.path()), emit_(emit), va_(va), stats_(stats), o_(o) {}
+  using IndexedReader::IndexedReader;
 
   void run(bool verticesOnly) {
     std::string_view line;
@@ -150,12 +148,6 @@ class OffReader {
     }
   }
 
-  FileBuffer& f_;
-  fs::path path_;
-  Emitter& emit_;
-  VertexArray& va_;
-  MeshReadStats& stats_;
-  const MeshReadOptions& o_;
   bool colours_ = false, normals_ = false;
 };
 

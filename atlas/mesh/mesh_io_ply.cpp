@@ -253,11 +253,10 @@ glm::u8vec4 plyColour(const double* v, const PlyElement& e, const PlyVertexLayou
   return colourFromInt(v[l.r] * scale, v[l.g] * scale, v[l.b] * scale, alpha * scale);
 }
 
-class PlyReader {
+class PlyReader : IndexedReader {
  public:
-  PlyReader(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats,
-            const MeshReadOptions& o)
-      : f_(f), path_(f.path()), emit_(emit), va_(va), stats_(stats), o_(o), tr_(f) {}
+  PlyReader(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats, const MeshReadOptions& o)
+      : IndexedReader(f, emit, va, stats, o), tr_(f) {}
 
   // Reads the header and the vertex element; with verticesOnly, stops there.
   void run(bool verticesOnly) {
@@ -525,12 +524,6 @@ class PlyReader {
     }
   }
 
-  FileBuffer& f_;
-  fs::path path_;
-  Emitter& emit_;
-  VertexArray& va_;
-  MeshReadStats& stats_;
-  const MeshReadOptions& o_;
   PlyHeader h_;
   bool ascii_ = false, swap_ = false;
   TokenReader tr_;
