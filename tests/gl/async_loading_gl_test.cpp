@@ -8,6 +8,7 @@
 #include "runtime/atlas_view.h"
 #include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
+#include "tests/gl/gl_context_test.h"
 #include "runtime/stitch.h"
 #include "tests/adapt_fixture.h"
 #include "tests/test_util.h"
@@ -15,12 +16,8 @@
 namespace gimlod {
 namespace {
 
-class AsyncLoadingTest : public ::testing::Test {
+class AsyncLoadingTest : public test::GlContextTest<> {
  protected:
-  static void SetUpTestSuite() { context_ = gl::EglContext::create(); }
-  static void TearDownTestSuite() { context_.reset(); }
-  static std::unique_ptr<gl::EglContext> context_;
-
   AtlasView build() {
     TerrainBuildOptions o;
     o.input = test::repoData() / "terrain/mt_rainier_90m.tif";
@@ -46,8 +43,6 @@ class AsyncLoadingTest : public ::testing::Test {
 
   test::TempDir dir_{"gimlod-async"};
 };
-
-std::unique_ptr<gl::EglContext> AsyncLoadingTest::context_;
 
 // The drawn cut is a coarsening of the desired one: every desired node is drawn itself (at its
 // resolution) or through exactly one drawn ancestor, and every drawn node covers a desired node.

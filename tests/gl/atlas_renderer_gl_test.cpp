@@ -14,6 +14,7 @@
 
 #include "runtime/gl/atlas_renderer.h"
 #include "runtime/gl/egl_context.h"
+#include "tests/gl/gl_context_test.h"
 
 namespace gimlod {
 namespace {
@@ -21,13 +22,7 @@ namespace {
 // ---------------------------------------------------------------------------------------------
 // GL fixture: one context per test suite.
 
-class RendererGlTest : public ::testing::Test {
- protected:
-  static void SetUpTestSuite() { context_ = gl::EglContext::create(); }
-  static void TearDownTestSuite() { context_.reset(); }
-  static std::unique_ptr<gl::EglContext> context_;
-};
-std::unique_ptr<gl::EglContext> RendererGlTest::context_;
+class RendererGlTest : public test::GlContextTest<> {};
 
 TEST_F(RendererGlTest, ContextIsCore43OrNewer) {
   ASSERT_NE(context_, nullptr);

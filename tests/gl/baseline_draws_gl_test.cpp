@@ -13,20 +13,14 @@
 #include "gimlod_bench_shaders.h"
 #include "runtime/gl/atlas_renderer.h"
 #include "runtime/gl/egl_context.h"
+#include "tests/gl/gl_context_test.h"
 #include "runtime/gl/gl_objects.h"
 #include "shaders/interface.h"
 
 namespace gimlod {
 namespace {
 
-class BaselineDrawsGlTest : public ::testing::Test {
- protected:
-  static void SetUpTestSuite() { context_ = gl::EglContext::create(); }
-  static void TearDownTestSuite() { context_.reset(); }
-  static std::unique_ptr<gl::EglContext> context_;
-};
-std::unique_ptr<gl::EglContext> BaselineDrawsGlTest::context_;
-
+class BaselineDrawsGlTest : public test::GlContextTest<> {};
 gl::RendererSetup smallSetup(uint32_t pageIntervalsLog2) {
   gl::RendererSetup s;
   s.width = 128;

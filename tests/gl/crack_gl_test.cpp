@@ -13,6 +13,7 @@
 #include "runtime/atlas_view.h"
 #include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
+#include "tests/gl/gl_context_test.h"
 #include "runtime/stitch.h"
 #include "tests/chart_layout_fixture.h"
 #include "tests/gl/crack_check.h"
@@ -21,12 +22,8 @@
 namespace gimlod {
 namespace {
 
-class CrackTest : public ::testing::Test {
+class CrackTest : public test::GlContextTest<> {
  protected:
-  static void SetUpTestSuite() { context_ = gl::EglContext::create(); }
-  static void TearDownTestSuite() { context_.reset(); }
-  static std::unique_ptr<gl::EglContext> context_;
-
   // Builds an atlas of `dem` into the temp dir and opens it.
   AtlasView build(const std::filesystem::path& dem, uint32_t chartSize, uint32_t depth, uint32_t nodeRes,
                   uint32_t minNodeRes) {
@@ -48,8 +45,6 @@ class CrackTest : public ::testing::Test {
 
   test::TempDir dir_{"gimlod-crack"};
 };
-
-std::unique_ptr<gl::EglContext> CrackTest::context_;
 
 // Hand-made cuts: neighbours 1..3 levels and several resolutions apart, across chart borders.
 TEST_F(CrackTest, HandMadeCutsAcrossChartBorders) {

@@ -17,6 +17,7 @@
 #include "runtime/camera.h"
 #include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
+#include "tests/gl/gl_context_test.h"
 #include "runtime/stitch.h"
 #include "tests/gl/crack_check.h"
 #include "tests/scan_atlases.h"
@@ -25,14 +26,7 @@
 namespace gimlod {
 namespace {
 
-class ScanCrackTest : public ::testing::TestWithParam<std::string> {
- protected:
-  static void SetUpTestSuite() { context_ = gl::EglContext::create(); }
-  static void TearDownTestSuite() { context_.reset(); }
-  static std::unique_ptr<gl::EglContext> context_;
-};
-
-std::unique_ptr<gl::EglContext> ScanCrackTest::context_;
+class ScanCrackTest : public test::GlContextTest<::testing::TestWithParam<std::string>> {};
 
 // A path spiralling in: frame i of `frames` circles the box centre at a distance going from
 // `far` to `near` times the diagonal (orbitPath's frame i at that distance).

@@ -10,20 +10,14 @@
 
 #include "runtime/gl/atlas_renderer.h"
 #include "runtime/gl/egl_context.h"
+#include "tests/gl/gl_context_test.h"
 #include "runtime/gl/gl_objects.h"
 #include "shaders/interface.h"
 
 namespace gimlod {
 namespace {
 
-class ShaderInterfaceGlTest : public ::testing::TestWithParam<bool> {
- protected:
-  static void SetUpTestSuite() { context_ = gl::EglContext::create(); }
-  static void TearDownTestSuite() { context_.reset(); }
-  static std::unique_ptr<gl::EglContext> context_;
-};
-std::unique_ptr<gl::EglContext> ShaderInterfaceGlTest::context_;
-
+class ShaderInterfaceGlTest : public test::GlContextTest<::testing::TestWithParam<bool>> {};
 // Uniforms AtlasRenderer sets on its program (setShading, bindAtlas, setPagePoolUnits).
 constexpr const char* kAtlasUniforms[] = {"u_viewProj", "u_eye",     "u_lightDir",  "u_background",
                                           "u_fogDistance", "u_samples", "u_normals", "u_leafLog2",
