@@ -103,9 +103,11 @@ class TriangleSink {
   virtual void consume(const MeshTriangle* tris, size_t n) = 0;
 };
 
-// Detects the format from the extension (.ply .obj .off .stl, any case) and the first bytes
-// (magic "ply", "OFF", STL "solid" or size). Throws InputError if the file cannot be opened, is
-// empty, or is not one of the supported formats.
+// Detects the format from the first bytes (atlas/mesh/mesh_format.h: "ply", "OFF", STL "solid"
+// and "facet" or its size, OBJ "v " lines), else from the extension (.ply .obj .off .stl, any
+// case); the readers read a file as its content shows and warn when its extension names another
+// format. Throws InputError if the file cannot be opened, is empty, or is not one of the
+// supported formats.
 MeshInfo detectMesh(const std::filesystem::path& path);
 
 // detectMesh plus the bounds and a triangle estimate. Cost: PLY and OFF read the header and the
