@@ -47,6 +47,20 @@ inline constexpr const char* kManifestName = "atlas.json";
 // 2 = top (v = max), 3 = left (u = 0). The edge parameter runs counter-clockwise.
 enum Edge : uint8_t { kEdgeBottom = 0, kEdgeRight = 1, kEdgeTop = 2, kEdgeLeft = 3 };
 
+// Index of sample k (0..chartSize-1) along edge `edge` of a chartSize^2 row-major image, in the
+// edge's counter-clockwise parameter direction: bottom (k, 0), right (M, k), top (M - k, M), left
+// (0, M - k), M = chartSize - 1. Across a shared edge with reversed = true, sample k here equals
+// sample chartSize-1-k of the neighbour's edge. Corner c is sample 0 of edge c.
+inline uint32_t edgeSampleIndex(uint32_t chartSize, uint32_t edge, uint32_t k) {
+  const uint32_t m = chartSize - 1;
+  switch (edge) {
+    case kEdgeBottom: return k;
+    case kEdgeRight: return k * chartSize + m;
+    case kEdgeTop: return m * chartSize + (m - k);
+    default: return (m - k) * chartSize;
+  }
+}
+
 // The chart across one edge of a root. chart < 0: open border (no neighbour).
 // reversed: the neighbour's edge parameter runs opposite to ours (always true for two
 // consistently oriented charts).

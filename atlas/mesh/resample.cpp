@@ -313,16 +313,6 @@ std::vector<std::array<RootNeighbour, 4>> neighboursFrom(const ChartLayout& layo
 
 }  // namespace
 
-uint32_t edgeSampleIndex(uint32_t chartSize, uint32_t edge, uint32_t k) {
-  const uint32_t m = chartSize - 1;
-  switch (edge) {
-    case kEdgeBottom: return k;
-    case kEdgeRight: return k * chartSize + m;
-    case kEdgeTop: return m * chartSize + (m - k);
-    default: return (m - k) * chartSize;
-  }
-}
-
 std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout) {
   std::vector<uint32_t> offsets(layout.patches.size());
   uint32_t next = 0;

@@ -124,12 +124,6 @@ struct GeometryImageSet {
   double seconds = 0.0;
 };
 
-// Index of sample k (0..chartSize-1) along edge `edge` of a chart, in the edge's counter-clockwise
-// parameter direction: bottom (k, 0), right (M, k), top (M - k, M), left (0, M - k), M =
-// chartSize - 1. Across a shared edge with reversed = true, sample k here equals sample
-// chartSize-1-k of the neighbour's edge.
-uint32_t edgeSampleIndex(uint32_t chartSize, uint32_t edge, uint32_t k);
-
 // Per patch, the chart id of its quad 0 (the sum of the sides of the patches before it): quad i
 // of patch p is chart offsets[p] + i.
 std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout);

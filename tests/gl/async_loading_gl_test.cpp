@@ -26,7 +26,7 @@ class AsyncLoadingTest : public test::GlContextTest<> {
     o.depth = 4;
     o.nodeRes = 32;
     o.minNodeRes = 2;
-    const test::SerialTbbUnderTsan serial;
+    [[maybe_unused]] const test::SerialTbbUnderTsan serial;
     buildAtlas(o);
     return openAtlas(o.output);
   }

@@ -28,7 +28,7 @@ class PageLoaderTest : public ::testing::Test {
     o.depth = 3;
     o.nodeRes = 32;
     o.minNodeRes = 4;
-    const test::SerialTbbUnderTsan serial;
+    [[maybe_unused]] const test::SerialTbbUnderTsan serial;
     buildAtlas(o);
     atlas_ = std::make_unique<AtlasView>(openAtlas(o.output));
     pages_ = std::make_unique<PageReader>(atlas_->dir, atlas_->manifest, atlas_->hierarchy.params);
