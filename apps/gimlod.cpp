@@ -21,6 +21,7 @@
 #include "apps/view_args.h"
 #include "atlas/mesh/mesh_atlas.h"
 #include "core/atlas_format.h"
+#include "inspect/report.h"
 #include "pipeline/build.h"
 #include "pipeline/build_report.h"
 #include "pipeline/input_kind.h"
@@ -69,7 +70,8 @@ std::string flagFor(std::string_view name) {
       {"charts", "--charts"},                 {"maxChartError", "--chart-error"},
       {"flipRepairRounds", "--flip-repair-rounds"}, {"flipRepairBudget", "--flip-repair-budget"},
       {"maxMemory", "--max-memory"},          {"measureFidelity", "--no-fidelity"},
-      {"output", "--output"}};
+      {"output", "--output"},                 {"worstCharts", "--worst"},
+      {"thumbnailSize", "--image-size"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }
@@ -265,6 +267,16 @@ int main(int argc, char** argv) {
   exportCmd->add_option("-o,--output", exportOut, "Output .ply")->required();
   exportCmd->add_option("--level", exportLevel, "Pyramid level (0: full resolution)")->capture_default_str();
 
+  InspectOptions inspect;
+  auto* inspectCmd = app.add_subcommand(
+      "inspect", "Write an inspection report of an atlas (index.html, report.json, images) that opens from disk");
+  inspectCmd->add_option("atlas", inspect.atlas, "Atlas directory")->required();
+  inspectCmd->add_option("-o,--output", inspect.output, "Report directory to create")->required();
+  inspectCmd->add_option("--worst", inspect.worstCharts, "Charts shown with images, the worst first (figures for all)")
+      ->capture_default_str();
+  inspectCmd->add_option("--image-size", inspect.thumbnailSize, "Largest chart image side in samples")
+      ->capture_default_str();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -283,6 +295,16 @@ int main(int argc, char** argv) {
       }
       static_cast<CommonBuildOptions&>(terrain) = common;
       return runBuild(terrain);
+    }
+    if (*inspectCmd) {
+      const InspectResult res = writeInspectReport(inspect);
+      const nlohmann::json& sum = res.figures["summary"];
+      std::cout << fmt::format("wrote {}: {} charts, seams {} ({} mismatches), {} images, {:.1f} MiB in {:.2f} s\n",
+                               (inspect.output / "index.html").string(), sum["charts"].get<uint64_t>(),
+                               sum["seams_bit_identical"].get<bool>() ? "bit-identical" : "broken",
+                               sum["seam_mismatches"].get<uint64_t>(), res.images, double(res.bytes) / (1 << 20),
+                               res.seconds);
+      return sum["seams_bit_identical"].get<bool>() ? 0 : 3;
     }
     if (*render) return runRender(r);
     if (*bench) return runBench(bn);

@@ -11,6 +11,7 @@ PACKAGES=(
   libtbb-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev
   libgtest-dev clang libclang-rt-dev
   python3-matplotlib
+  chromium
 )
 
 missing=()

@@ -1,0 +1,386 @@
+#include "inspect/report.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <numeric>
+#include <sstream>
+
+#include <OpenImageIO/imageio.h>
+#include <glm/geometric.hpp>
+#include <glm/vec3.hpp>
+
+#include "core/atlas_format.h"
+#include "inspect/seams.h"
+
+namespace gimlod {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+constexpr const char* kReportMarker = "report.json";
+
+void writePng(const fs::path& path, uint32_t w, uint32_t h, const std::vector<uint8_t>& rgb) {
+  auto out = OIIO::ImageOutput::create(path.string());
+  const OIIO::ImageSpec spec(int(w), int(h), 3, OIIO::TypeDesc::UINT8);
+  if (!out || !out->open(path.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT8, rgb.data()) || !out->close())
+    throw InputError(path.string() + ": cannot write the image");
+}
+
+uint8_t unit(double x) { return uint8_t(std::lround(std::clamp(x, 0.0, 1.0) * 255.0)); }
+
+// A colour ramp for stretch: 1 (no stretch) blue, 2 green, 4 and more red (log2 scale).
+std::array<uint8_t, 3> heat(double stretch) {
+  const double t = std::clamp(std::log2(std::max(stretch, 1.0)) / 2.0, 0.0, 1.0);
+  return {unit(t < 0.5 ? 0.0 : 2.0 * t - 1.0), unit(t < 0.5 ? 2.0 * t : 2.0 - 2.0 * t), unit(t < 0.5 ? 1.0 - 2.0 * t : 0.0)};
+}
+
+std::string html(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    switch (c) {
+      case '<': o += "&lt;"; break;
+      case '>': o += "&gt;"; break;
+      case '&': o += "&amp;"; break;
+      case '"': o += "&quot;"; break;
+      default: o += c;
+    }
+  }
+  return o;
+}
+
+std::string number(const json& v) {
+  if (v.is_number_float()) {
+    std::ostringstream s;
+    s.precision(4);
+    s << v.get<double>();
+    return s.str();
+  }
+  return v.is_string() ? html(v.get<std::string>()) : html(v.dump());
+}
+
+uint64_t directoryBytes(const fs::path& dir) {
+  uint64_t bytes = 0;
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.is_regular_file()) bytes += e.file_size();
+  return bytes;
+}
+
+// The images of one chart at the pyramid level whose side is at most maxSide samples.
+struct ChartImages {
+  json figures;
+  std::vector<std::string> files;
+};
+
+ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32_t chart, uint32_t maxSide,
+                        const fs::path& outDir, const std::array<float, 6>& bounds) {
+  const ChartFileReader r(atlasDir / m.charts[chart].file);
+  uint32_t level = 0;
+  while (level + 1 < r.levels() && ((m.chartSize - 1) >> level) + 1 > maxSide) ++level;
+  const uint32_t n = ((m.chartSize - 1) >> level) + 1;
+  ChartImages out;
+  const std::vector<PackedNormal> normals = r.readLevelNormals(level);
+  std::vector<uint8_t> rgb(size_t(n) * n * 3);
+  // Images are drawn with v up (row 0 of the PNG is v = n - 1).
+  auto at = [&](uint32_t u, uint32_t v) { return (size_t(n - 1 - v) * n + u) * 3; };
+  for (uint32_t v = 0; v < n; ++v)
+    for (uint32_t u = 0; u < n; ++u) {
+      const PackedNormal& p = normals[size_t(v) * n + u];
+      for (int c = 0; c < 3; ++c) rgb[at(u, v) + c] = p[c];
+    }
+  const std::string stem = "chart_" + std::to_string(chart);
+  writePng(outDir / (stem + "_normals.png"), n, n, rgb);
+  out.files.push_back(stem + "_normals.png");
+  out.figures["image_level"] = level;
+  if (m.kind == AtlasKind::Geometry) {
+    const std::vector<glm::vec3> pos = r.readLevelPositions(level);
+    for (uint32_t v = 0; v < n; ++v)
+      for (uint32_t u = 0; u < n; ++u)
+        for (int c = 0; c < 3; ++c) {
+          const double lo = bounds[c], hi = bounds[c + 3];
+          rgb[at(u, v) + c] = unit(hi > lo ? (pos[size_t(v) * n + u][c] - lo) / (hi - lo) : 0.5);
+        }
+    writePng(outDir / (stem + "_positions.png"), n, n, rgb);
+    out.files.push_back(stem + "_positions.png");
+    // Stretch per texel: the root mean square of its two edge lengths against the chart's mean,
+    // so 1 is even sampling; texels facing against their vertex normals in magenta.
+    std::vector<double> len((n - 1) * size_t(n - 1));
+    double sum = 0.0;
+    uint32_t backwards = 0;
+    for (uint32_t v = 0; v + 1 < n; ++v)
+      for (uint32_t u = 0; u + 1 < n; ++u) {
+        const size_t i = size_t(v) * n + u;
+        const glm::dvec3 du = glm::dvec3(pos[i + 1]) - glm::dvec3(pos[i]);
+        const glm::dvec3 dv = glm::dvec3(pos[i + n]) - glm::dvec3(pos[i]);
+        len[size_t(v) * (n - 1) + u] = std::sqrt(0.5 * (glm::dot(du, du) + glm::dot(dv, dv)));
+        sum += len[size_t(v) * (n - 1) + u];
+      }
+    const double mean = sum / double(len.size());
+    double worst = 0.0;
+    std::vector<uint8_t> heatRgb(size_t(n - 1) * (n - 1) * 3);
+    for (uint32_t v = 0; v + 1 < n; ++v)
+      for (uint32_t u = 0; u + 1 < n; ++u) {
+        const size_t i = size_t(v) * n + u;
+        const double s = mean > 0.0 ? len[size_t(v) * (n - 1) + u] / mean : 1.0;
+        worst = std::max(worst, s);
+        std::array<uint8_t, 3> c = heat(std::max(s, mean > 0.0 ? mean / std::max(len[size_t(v) * (n - 1) + u], 1e-30) : 1.0));
+        const glm::dvec3 d1 = glm::dvec3(pos[i + n + 1]) - glm::dvec3(pos[i]);
+        const glm::dvec3 d2 = glm::dvec3(pos[i + n]) - glm::dvec3(pos[i + 1]);
+        glm::dvec3 nsum(0.0);
+        for (const size_t k : {i, i + 1, i + n, i + n + 1}) {
+          const std::array<float, 3> un = unpackNormal(normals[k]);
+          nsum += glm::dvec3(un[0], un[1], un[2]);
+        }
+        if (glm::dot(glm::cross(d1, d2), nsum) < 0.0) {
+          c = {255, 0, 255};
+          ++backwards;
+        }
+        const size_t o = (size_t(n - 2 - v) * (n - 1) + u) * 3;
+        heatRgb[o] = c[0], heatRgb[o + 1] = c[1], heatRgb[o + 2] = c[2];
+      }
+    writePng(outDir / (stem + "_stretch.png"), n - 1, n - 1, heatRgb);
+    out.files.push_back(stem + "_stretch.png");
+    out.figures["texel_stretch_max"] = worst;
+    out.figures["texels_against_normals_at_image_level"] = backwards;
+  } else {
+    const std::vector<float> h = r.readLevelHeights(level);
+    const auto [lo, hi] = std::minmax_element(h.begin(), h.end());
+    for (uint32_t v = 0; v < n; ++v)
+      for (uint32_t u = 0; u < n; ++u) {
+        const uint8_t g = unit(*hi > *lo ? (h[size_t(v) * n + u] - *lo) / (*hi - *lo) : 0.5);
+        rgb[at(u, v)] = rgb[at(u, v) + 1] = rgb[at(u, v) + 2] = g;
+      }
+    writePng(outDir / (stem + "_heights.png"), n, n, rgb);
+    out.files.push_back(stem + "_heights.png");
+  }
+  return out;
+}
+
+// Every chart's figures, the worst first: from the build's per-chart quality (geometry), or the
+// height range of each chart (height fields).
+json chartTable(const AtlasManifest& m, const fs::path& atlasDir, const json& stats) {
+  json rows = json::array();
+  const json* perChart = stats.contains("resample") && stats["resample"].contains("per_chart")
+                             ? &stats["resample"]["per_chart"]
+                             : nullptr;
+  for (uint32_t c = 0; c < m.charts.size(); ++c) {
+    json row = {{"chart", c}, {"file", m.charts[c].file}};
+    int open = 0;
+    for (const RootNeighbour& nb : m.charts[c].neighbours) open += nb.chart < 0;
+    row["open_edges"] = open;
+    if (perChart && c < perChart->size()) {
+      for (const auto& [k, v] : (*perChart)[c].items()) row[k] = v;
+    } else if (m.kind == AtlasKind::Heightfield) {
+      const ChartFileReader r(atlasDir / m.charts[c].file);
+      const std::vector<float> h = r.readLevelHeights(r.levels() - 1);
+      const auto [lo, hi] = std::minmax_element(h.begin(), h.end());
+      row["grid_x"] = m.charts[c].gridX;
+      row["grid_y"] = m.charts[c].gridY;
+      row["height_min"] = *lo;
+      row["height_max"] = *hi;
+    }
+    rows.push_back(row);
+  }
+  const auto key = [](const json& r) {
+    const auto get = [&](const char* k) { return r.contains(k) ? r[k].get<double>() : 0.0; };
+    return std::make_tuple(get("flipped_texels"), get("degenerate_texels"), get("stretch_linf"),
+                           get("height_max") - get("height_min"));
+  };
+  std::stable_sort(rows.begin(), rows.end(), [&](const json& a, const json& b) { return key(a) > key(b); });
+  return rows;
+}
+
+json seamJson(const SeamReport& s) {
+  json levels = json::array(), offenders = json::array(), valence = json::object();
+  for (const SeamLevel& l : s.levels)
+    levels.push_back({{"level", l.level},
+                      {"edge_samples", l.edgeSamples},
+                      {"edge_mismatches", l.edgeMismatches},
+                      {"max_edge_difference", l.maxEdgeDifference},
+                      {"corner_samples", l.cornerSamples},
+                      {"corner_mismatches", l.cornerMismatches},
+                      {"max_corner_difference", l.maxCornerDifference}});
+  for (const SeamOffender& o : s.offenders)
+    offenders.push_back({{"level", o.level}, {"chart", o.chart}, {"edge", o.edge}, {"sample", o.sample},
+                         {"other_chart", o.otherChart}, {"other_edge", o.otherEdge}, {"other_sample", o.otherSample},
+                         {"corner", o.corner}, {"difference", o.difference}});
+  for (const auto& [charts, corners] : s.cornerValence) valence[std::to_string(charts)] = corners;
+  return {{"seamless", s.seamless()},   {"mismatches", s.mismatches()}, {"max_difference", s.maxDifference()},
+          {"shared_edges", s.sharedEdges}, {"open_edges", s.openEdges},  {"corner_valence", valence},
+          {"levels", levels},           {"offenders", offenders},      {"seconds", s.seconds}};
+}
+
+std::string pageHtml(const json& r) {
+  std::ostringstream h;
+  const json& sum = r["summary"];
+  h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>gimlod inspect: "
+    << html(sum["atlas"].get<std::string>()) << "</title>\n<style>\n"
+    << "body{font-family:sans-serif;margin:1.5em;color:#222}table{border-collapse:collapse;margin:.5em 0 1.5em}"
+    << "td,th{border:1px solid #bbb;padding:2px 8px;text-align:right}th{background:#eee;cursor:pointer}"
+    << "td:first-child,th:first-child{text-align:left}.bad{background:#fcc}.ok{background:#cfc}"
+    << "figure{display:inline-block;margin:4px;text-align:center}figure img{width:160px;image-rendering:pixelated}"
+    << ".view img{width:320px}</style></head>\n<body>\n";
+  h << "<h1>Atlas " << html(sum["atlas"].get<std::string>()) << "</h1>\n<h2>Summary</h2>\n<table id=\"summary\">";
+  for (const auto& [k, v] : sum.items())
+    h << "<tr><td>" << html(k) << "</td><td data-key=\"" << html(k) << "\">" << number(v) << "</td></tr>";
+  h << "</table>\n";
+  if (!r["views"].empty()) {
+    h << "<h2>Views</h2>\n";
+    for (const json& v : r["views"])
+      h << "<figure class=\"view\"><img src=\"" << html(v["file"].get<std::string>()) << "\" alt=\""
+        << html(v["caption"].get<std::string>()) << "\"><figcaption>" << html(v["caption"].get<std::string>())
+        << "</figcaption></figure>";
+  }
+  const json& seams = r["seams"];
+  h << "<h2>Seams</h2>\n<p id=\"seam-verdict\" class=\"" << (seams["seamless"].get<bool>() ? "ok" : "bad") << "\">"
+    << (seams["seamless"].get<bool>() ? "Every shared edge and corner is bit-identical at every level."
+                                      : std::to_string(seams["mismatches"].get<uint64_t>()) +
+                                            " shared samples differ; the largest offenders are listed below.")
+    << "</p>\n<table id=\"seams\"><tr><th>level</th><th>edge samples</th><th>edge mismatches</th><th>max edge "
+       "difference</th><th>corner samples</th><th>corner mismatches</th><th>max corner difference</th></tr>";
+  for (const json& l : seams["levels"])
+    h << "<tr" << (l["edge_mismatches"].get<uint64_t>() + l["corner_mismatches"].get<uint64_t>() ? " class=\"bad\"" : "")
+      << "><td>" << l["level"] << "</td><td>" << l["edge_samples"] << "</td><td>" << l["edge_mismatches"] << "</td><td>"
+      << number(l["max_edge_difference"]) << "</td><td>" << l["corner_samples"] << "</td><td>" << l["corner_mismatches"]
+      << "</td><td>" << number(l["max_corner_difference"]) << "</td></tr>";
+  h << "</table>\n";
+  if (!seams["offenders"].empty()) {
+    h << "<table id=\"seam-offenders\"><tr><th>level</th><th>chart</th><th>edge</th><th>sample</th><th>other "
+         "chart</th><th>other edge</th><th>other sample</th><th>corner</th><th>difference</th></tr>";
+    for (const json& o : seams["offenders"])
+      h << "<tr><td>" << o["level"] << "</td><td>" << o["chart"] << "</td><td>" << o["edge"] << "</td><td>" << o["sample"]
+        << "</td><td>" << o["other_chart"] << "</td><td>" << o["other_edge"] << "</td><td>" << o["other_sample"]
+        << "</td><td>" << o["corner"] << "</td><td>" << number(o["difference"]) << "</td></tr>";
+    h << "</table>\n";
+  }
+  h << "<h2>Worst charts</h2>\n";
+  for (const json& c : r["chart_images"]) {
+    h << "<div class=\"chart\" id=\"chart-" << c["chart"] << "\"><h3>Chart " << c["chart"] << "</h3>";
+    for (const json& f : c["files"])
+      h << "<figure><img src=\"" << html(f.get<std::string>()) << "\" alt=\"" << html(f.get<std::string>())
+        << "\"><figcaption>" << html(f.get<std::string>()) << "</figcaption></figure>";
+    h << "</div>\n";
+  }
+  h << "<h2>Charts</h2>\n<p>Click a heading to sort.</p>\n<table id=\"charts\"><thead><tr>";
+  std::vector<std::string> cols;
+  for (const json& row : r["charts"])
+    for (const auto& [k, v] : row.items())
+      if (std::find(cols.begin(), cols.end(), k) == cols.end()) cols.push_back(k);
+  for (const std::string& c : cols) h << "<th>" << html(c) << "</th>";
+  h << "</tr></thead><tbody>";
+  for (const json& row : r["charts"]) {
+    h << "<tr>";
+    for (const std::string& c : cols) h << "<td>" << (row.contains(c) ? number(row[c]) : "") << "</td>";
+    h << "</tr>";
+  }
+  h << "</tbody></table>\n<script>\n"
+    << "document.querySelectorAll('#charts th').forEach((th, i) => th.addEventListener('click', () => {\n"
+    << "  const body = document.querySelector('#charts tbody');\n"
+    << "  const rows = Array.from(body.rows), down = th.dataset.down !== '1';\n"
+    << "  const val = r => { const t = r.cells[i].textContent, n = parseFloat(t); return isNaN(n) ? t : n; };\n"
+    << "  rows.sort((a, b) => (val(a) > val(b) ? 1 : val(a) < val(b) ? -1 : 0) * (down ? -1 : 1));\n"
+    << "  th.dataset.down = down ? '1' : '0'; rows.forEach(r => body.appendChild(r));\n"
+    << "}));\n"
+    << "window.addEventListener('load', () => {\n"
+    << "  const imgs = Array.from(document.images);\n"
+    << "  document.body.dataset.images = imgs.length;\n"
+    << "  document.body.dataset.brokenImages = imgs.filter(i => !i.complete || i.naturalWidth === 0).length;\n"
+    << "});\n</script>\n</body></html>\n";
+  return h.str();
+}
+
+}  // namespace
+
+InspectResult writeInspectReport(const InspectOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (o.worstCharts > 10000) throw InputError(optionRef("worstCharts") + " must be at most 10000");
+  if (o.thumbnailSize < 3 || o.thumbnailSize > 1025) throw InputError(optionRef("thumbnailSize") + " must be in [3, 1025]");
+  const AtlasManifest m = readManifest(o.atlas);
+  json stats = json::object();
+  const fs::path statsFile = o.atlas / "stats.json";
+  if (fs::exists(statsFile)) {
+    std::ifstream in(statsFile);
+    try {
+      stats = json::parse(in);
+    } catch (const json::exception& e) {
+      throw InputError(statsFile.string() + ": not valid JSON (" + e.what() + ")");
+    }
+  }
+  StagedDirectory staged(o.output, kReportMarker, "report");
+  const fs::path dir = staged.path();
+
+  json report;
+  const uint64_t samples = uint64_t(m.charts.size()) * m.chartSize * m.chartSize;
+  const uint64_t bytes = directoryBytes(o.atlas);
+  uint64_t nodes = 0;
+  for (uint32_t l = 0; l < m.depth; ++l) nodes += uint64_t(m.charts.size()) << (2 * l);
+  json& sum = report["summary"];
+  sum["atlas"] = fs::absolute(o.atlas).lexically_normal().string();
+  sum["kind"] = atlasKindName(m.kind);
+  sum["charts"] = m.charts.size();
+  if (stats.contains("charting")) sum["patches"] = stats["resample"].value("patches", stats["charting"].value("patches", 0));
+  sum["chart_size"] = m.chartSize;
+  sum["samples"] = samples;
+  sum["bytes_on_disk"] = bytes;
+  sum["bytes_per_sample"] = double(bytes) / double(std::max<uint64_t>(samples, 1));
+  if (stats.contains("read") && stats["read"].contains("triangles"))
+    sum["bytes_per_input_triangle"] = double(bytes) / std::max(1.0, stats["read"]["triangles"].get<double>());
+  sum["hierarchy_depth"] = m.depth;
+  sum["hierarchy_nodes"] = nodes;
+  if (stats.contains("total_seconds")) sum["build_seconds"] = stats["total_seconds"];
+  if (stats.contains("peak_rss_bytes")) sum["build_peak_rss_bytes"] = stats["peak_rss_bytes"];
+  if (stats.contains("resample")) {
+    const json& rs = stats["resample"];
+    for (const char* k : {"image_stretch_l2", "image_stretch_linf", "flipped_texels", "degenerate_texels"})
+      if (rs.contains(k)) sum[k] = rs[k];
+  }
+  if (stats.contains("fidelity")) {
+    sum["hausdorff_percent_of_diagonal"] = stats["fidelity"]["hausdorff_percent_of_diagonal"];
+    sum["hausdorff_mean_percent_of_diagonal"] = stats["fidelity"]["mean_percent_of_diagonal"];
+  }
+  if (stats.contains("voids_filled")) sum["voids_filled"] = stats["voids_filled"];
+  if (stats.contains("stages")) report["stages"] = stats["stages"];
+
+  const SeamReport seams = validateSeams(o.atlas);
+  report["seams"] = seamJson(seams);
+  sum["seams_bit_identical"] = seams.seamless();
+  sum["seam_mismatches"] = seams.mismatches();
+
+  report["charts"] = chartTable(m, o.atlas, stats);
+  std::array<float, 6> bounds{0, 0, 0, 1, 1, 1};
+  if (stats.contains("bounds") && stats["bounds"].size() == 6)
+    for (int i = 0; i < 6; ++i) bounds[i] = stats["bounds"][i].get<float>();
+  InspectResult result;
+  report["chart_images"] = json::array();
+  for (size_t i = 0; i < report["charts"].size() && i < o.worstCharts; ++i) {
+    const uint32_t c = report["charts"][i]["chart"].get<uint32_t>();
+    ChartImages ci = chartImages(m, o.atlas, c, o.thumbnailSize, dir, bounds);
+    result.images += uint32_t(ci.files.size());
+    json entry = {{"chart", c}, {"files", ci.files}};
+    for (const auto& [k, v] : ci.figures.items()) entry[k] = v;
+    report["chart_images"].push_back(entry);
+  }
+  report["views"] = json::array();
+  for (size_t i = 0; i < o.views.size(); ++i) {
+    const std::string name = "view_" + std::to_string(i) + ".png";
+    std::error_code ec;
+    fs::copy_file(o.views[i].png, dir / name, ec);
+    if (ec) throw InputError(o.views[i].png.string() + ": cannot copy into the report (" + ec.message() + ")");
+    report["views"].push_back({{"file", name}, {"caption", o.views[i].caption}});
+    ++result.images;
+  }
+  report["build"] = stats;
+  const std::string text = report.dump(1);
+  atomicWriteFile(dir / kReportMarker, text.data(), text.size());
+  const std::string page = pageHtml(report);
+  atomicWriteFile(dir / "index.html", page.data(), page.size());
+  result.bytes = directoryBytes(dir);
+  staged.commit();
+  result.figures = std::move(report);
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return result;
+}
+
+}  // namespace gimlod
