@@ -28,6 +28,7 @@
 #include "runtime/adapt.h"
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
+#include "runtime/cut_mesh.h"
 #include "runtime/gl/egl_context.h"
 #include "runtime/gl/atlas_scene.h"
 
@@ -43,7 +44,26 @@ struct RenderArgs {
   bool asyncLoads = false, topDown = false;
   double tolerance = 1.0, texelRatio = 1.0;
   uint64_t triangles = 0;  // > 0: triangle-budget mode (quad queue)
+  std::vector<std::string> exportCut;  // "FRAME:FILE.ply"
+  bool noStitch = false;               // exported cuts without the stitching tables (a control)
 };
+
+// "FRAME:FILE" pairs of --export-cut; throws InputError naming a bad one.
+std::map<size_t, fs::path> parseCutExports(const std::vector<std::string>& specs, size_t frames) {
+  std::map<size_t, fs::path> out;
+  for (const std::string& s : specs) {
+    const size_t colon = s.find(':');
+    char* end = nullptr;
+    const unsigned long frame = colon == std::string::npos ? 0 : std::strtoul(s.c_str(), &end, 10);
+    if (colon == std::string::npos || colon == 0 || end != s.c_str() + colon || colon + 1 == s.size())
+      throw InputError("--export-cut '" + s + "': expected FRAME:FILE.ply");
+    if (frame >= frames)
+      throw InputError("--export-cut '" + s + "': frame " + std::to_string(frame) + " is past the path's " +
+                       std::to_string(frames) + " frames");
+    out[frame] = s.substr(colon + 1);
+  }
+  return out;
+}
 
 // "4G", "512M", "65536", ...; throws InputError naming the option.
 uint64_t parseBytes(const std::string& option, const std::string& text) {
@@ -125,6 +145,7 @@ int runRender(const RenderArgs& a) {
   const AtlasView atlas = openAtlas(a.atlas);
   const std::vector<Camera> cams = loadCameras(a.camera, atlas);
 
+  const std::map<size_t, fs::path> cutExports = parseCutExports(a.exportCut, cams.size());
   const fs::path out = a.output;
   std::error_code ec;
   fs::create_directories(out, ec);
@@ -168,6 +189,16 @@ int runRender(const RenderArgs& a) {
       warnedBelowRoots = true;
     }
     writePng(out / fmt::format("frame_{:04d}.png", i), w, h, scene.renderer().readPixels());
+    if (const auto ex = cutExports.find(i); ex != cutExports.end()) {
+      const std::array<glm::dvec2, 2> valid{glm::dvec2(atlas.lo), glm::dvec2(atlas.hi)};
+      const CutMesh mesh = buildCutMesh(atlas.hierarchy, f.cut, scene.capture(f.cut, !a.noStitch),
+                                        atlas.manifest.kind == AtlasKind::Heightfield ? &valid : nullptr);
+      writeCutMeshPly(ex->second, mesh);
+      spdlog::info("frame {}: wrote the cut as drawn to {}: {} vertices, {} triangles; {} boundary edges, {} on open "
+                   "chart borders, {} elsewhere (cracks, or the edge of what the view culled)",
+                   i, ex->second.string(), mesh.positions.size(), mesh.triangles.size(), mesh.boundaryEdges,
+                   mesh.openBorderEdges, mesh.otherBoundaryEdges);
+    }
     csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{}\n", i,
                        f.cut.nodes.size(),
                        f.draw.triangles, f.maxErrorPx, f.adaptMs, f.stitchMs, f.uploadMs, f.draw.drawMs,
@@ -253,6 +284,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   render->add_flag("--async-loads", r.asyncLoads,
                    "Load pages on a loader thread; missing nodes draw with a resident ancestor's data");
+  render->add_option("--export-cut", r.exportCut,
+                     "FRAME:FILE.ply: write the cut drawn at that frame as one welded mesh (stitched positions from "
+                     "the vertex shader, per-vertex chart, level, node and resolution); repeatable");
+  render->add_flag("--no-stitch", r.noStitch, "Export cuts without border stitching (a negative control: it cracks)");
   render->add_option("--uploads-per-frame", r.uploadsPerFrame, "With --async-loads: pages uploaded per frame")
       ->capture_default_str();
 
