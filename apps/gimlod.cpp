@@ -29,6 +29,7 @@
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
 #include "runtime/cut_mesh.h"
+#include "runtime/overlay.h"
 #include "runtime/gl/egl_context.h"
 #include "runtime/gl/atlas_scene.h"
 
@@ -44,6 +45,7 @@ struct RenderArgs {
   bool asyncLoads = false, topDown = false;
   double tolerance = 1.0, texelRatio = 1.0;
   uint64_t triangles = 0;  // > 0: triangle-budget mode (quad queue)
+  std::string overlay = "none";        // runtime/overlay.h: none, chart, level, res
   std::vector<std::string> exportCut;  // "FRAME:FILE.ply"
   bool noStitch = false;               // exported cuts without the stitching tables (a control)
 };
@@ -131,6 +133,69 @@ void writePng(const fs::path& path, uint32_t w, uint32_t h, const std::vector<ui
   if (ec) throw InputError(path.string() + ": " + ec.message());
 }
 
+OverlayMode overlayMode(const std::string& name) {
+  const std::optional<OverlayMode> m = parseOverlayMode(name);
+  if (!m) throw InputError("--overlay '" + name + "': expected none, chart, level or res");
+  return *m;
+}
+
+struct InspectArgs {
+  InspectOptions report;
+  bool views = true;
+  std::string viewSize = "480x360";
+};
+
+// Renders the six axis views of the atlas with the chart overlay into `dir` (headless EGL).
+std::vector<ReportImage> renderInspectViews(const fs::path& atlasDir, const std::string& size, const fs::path& dir) {
+  uint32_t w = 0, h = 0;
+  parseFrameSize(size, &w, &h);
+  const AtlasView atlas = openAtlas(atlasDir);
+  auto context = gl::EglContext::create();
+  gl::SceneOptions so;
+  so.width = w;
+  so.height = h;
+  so.overlay = OverlayMode::kChart;
+  gl::AtlasScene scene(atlas, so);
+  AdaptOptions ao;
+  ao.tolerancePx = 1.0;
+  ao.maxNodes = scene.nodeBudget(0);
+  std::vector<std::string> names;
+  const std::vector<Camera> cams = axisViews(atlas.lo, atlas.hi, 40.0, &names);
+  std::vector<ReportImage> views;
+  for (size_t i = 0; i < cams.size(); ++i) {
+    const gl::FrameResult f = scene.renderFrame(cams[i], ao);
+    const fs::path png = dir / fmt::format("view_{}.png", i);
+    writePng(png, w, h, scene.renderer().readPixels());
+    views.push_back({png, fmt::format("charts from {} ({} nodes, {} triangles; seams dark, open borders red), {}",
+                                      names[i], f.cut.nodes.size(), f.draw.triangles, context->renderer())});
+  }
+  return views;
+}
+
+int runInspect(InspectArgs a) {
+  // The views are rendered into a private directory and copied into the report.
+  struct ScratchDir {
+    fs::path path = fs::temp_directory_path() / fmt::format("gimlod-inspect-{}", ::getpid());
+    ScratchDir() { fs::create_directories(path); }
+    ~ScratchDir() {
+      std::error_code ec;
+      fs::remove_all(path, ec);
+    }
+  } scratch;
+  if (a.views) {
+    (void)readManifest(a.report.atlas);  // a bad atlas is named before a context is made
+    a.report.views = renderInspectViews(a.report.atlas, a.viewSize, scratch.path);
+  }
+  const InspectResult res = writeInspectReport(a.report);
+  const nlohmann::json& sum = res.figures["summary"];
+  std::cout << fmt::format("wrote {}: {} charts, seams {} ({} mismatches), {} images, {:.1f} MiB in {:.2f} s\n",
+                           (a.report.output / "index.html").string(), sum["charts"].get<uint64_t>(),
+                           sum["seams_bit_identical"].get<bool>() ? "bit-identical" : "broken",
+                           sum["seam_mismatches"].get<uint64_t>(), res.images, double(res.bytes) / (1 << 20),
+                           res.seconds);
+  return sum["seams_bit_identical"].get<bool>() ? 0 : 3;
+}
+
 int runRender(const RenderArgs& a) {
   uint32_t w = 0, h = 0;
   parseFrameSize(a.size, &w, &h);
@@ -162,6 +227,7 @@ int runRender(const RenderArgs& a) {
   so.maxUploadsPerFrame = a.uploadsPerFrame;
   so.coherentAdaptation = !a.topDown;
   so.texelsPerPixel = a.texelRatio;
+  so.overlay = overlayMode(a.overlay);
   gl::AtlasScene scene(atlas, so);
   if (scene.nodeBudget(a.maxNodes) != a.maxNodes)
     spdlog::warn("--max-nodes {} is above what the GPU page pool holds ({} pages): using {}", a.maxNodes,
@@ -284,6 +350,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   render->add_flag("--async-loads", r.asyncLoads,
                    "Load pages on a loader thread; missing nodes draw with a resident ancestor's data");
+  render->add_option("--overlay", r.overlay,
+                     "Draw over the shading: chart (each chart its colour, seams dark, open borders red), level, res")
+      ->capture_default_str();
   render->add_option("--export-cut", r.exportCut,
                      "FRAME:FILE.ply: write the cut drawn at that frame as one welded mesh (stitched positions from "
                      "the vertex shader, per-vertex chart, level, node and resolution); repeatable");
@@ -302,15 +371,18 @@ int main(int argc, char** argv) {
   exportCmd->add_option("-o,--output", exportOut, "Output .ply")->required();
   exportCmd->add_option("--level", exportLevel, "Pyramid level (0: full resolution)")->capture_default_str();
 
-  InspectOptions inspect;
+  InspectArgs inspect;
   auto* inspectCmd = app.add_subcommand(
       "inspect", "Write an inspection report of an atlas (index.html, report.json, images) that opens from disk");
-  inspectCmd->add_option("atlas", inspect.atlas, "Atlas directory")->required();
-  inspectCmd->add_option("-o,--output", inspect.output, "Report directory to create")->required();
-  inspectCmd->add_option("--worst", inspect.worstCharts, "Charts shown with images, the worst first (figures for all)")
+  inspectCmd->add_option("atlas", inspect.report.atlas, "Atlas directory")->required();
+  inspectCmd->add_option("-o,--output", inspect.report.output, "Report directory to create")->required();
+  inspectCmd->add_option("--worst", inspect.report.worstCharts, "Charts shown with images, the worst first (figures for all)")
       ->capture_default_str();
-  inspectCmd->add_option("--image-size", inspect.thumbnailSize, "Largest chart image side in samples")
+  inspectCmd->add_option("--image-size", inspect.report.thumbnailSize, "Largest chart image side in samples")
       ->capture_default_str();
+  inspectCmd->add_option("--view-size", inspect.viewSize, "Size WxH of the six rendered views")->capture_default_str();
+  inspectCmd->add_flag("--no-views", [&](int64_t) { inspect.views = false; },
+                       "Skip the rendered views (no GL needed)");
 
   try {
     app.parse(argc, argv);
@@ -331,16 +403,7 @@ int main(int argc, char** argv) {
       static_cast<CommonBuildOptions&>(terrain) = common;
       return runBuild(terrain);
     }
-    if (*inspectCmd) {
-      const InspectResult res = writeInspectReport(inspect);
-      const nlohmann::json& sum = res.figures["summary"];
-      std::cout << fmt::format("wrote {}: {} charts, seams {} ({} mismatches), {} images, {:.1f} MiB in {:.2f} s\n",
-                               (inspect.output / "index.html").string(), sum["charts"].get<uint64_t>(),
-                               sum["seams_bit_identical"].get<bool>() ? "bit-identical" : "broken",
-                               sum["seam_mismatches"].get<uint64_t>(), res.images, double(res.bytes) / (1 << 20),
-                               res.seconds);
-      return sum["seams_bit_identical"].get<bool>() ? 0 : 3;
-    }
+    if (*inspectCmd) return runInspect(inspect);
     if (*render) return runRender(r);
     if (*bench) return runBench(bn);
     if (*exportCmd) {

@@ -29,6 +29,8 @@ void writePng(const fs::path& path, uint32_t w, uint32_t h, const std::vector<ui
     throw InputError(path.string() + ": cannot write the image");
 }
 
+bool isObject(const json& j, const char* key) { return j.contains(key) && j[key].is_object(); }
+
 uint8_t unit(double x) { return uint8_t(std::lround(std::clamp(x, 0.0, 1.0) * 255.0)); }
 
 // A colour ramp for stretch: 1 (no stretch) blue, 2 green, 4 and more red (log2 scale).
@@ -162,7 +164,8 @@ ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32
 // height range of each chart (height fields).
 json chartTable(const AtlasManifest& m, const fs::path& atlasDir, const json& stats) {
   json rows = json::array();
-  const json* perChart = stats.contains("resample") && stats["resample"].contains("per_chart")
+  const json* perChart = isObject(stats, "resample") && stats["resample"].contains("per_chart") &&
+                                 stats["resample"]["per_chart"].is_array()
                              ? &stats["resample"]["per_chart"]
                              : nullptr;
   for (uint32_t c = 0; c < m.charts.size(); ++c) {
@@ -293,8 +296,11 @@ std::string pageHtml(const json& r) {
 
 }  // namespace
 
+namespace {
+InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const json& stats);
+}  // namespace
+
 InspectResult writeInspectReport(const InspectOptions& o) {
-  const auto t0 = std::chrono::steady_clock::now();
   if (o.worstCharts > 10000) throw InputError(optionRef("worstCharts") + " must be at most 10000");
   if (o.thumbnailSize < 3 || o.thumbnailSize > 1025) throw InputError(optionRef("thumbnailSize") + " must be in [3, 1025]");
   const AtlasManifest m = readManifest(o.atlas);
@@ -307,7 +313,20 @@ InspectResult writeInspectReport(const InspectOptions& o) {
     } catch (const json::exception& e) {
       throw InputError(statsFile.string() + ": not valid JSON (" + e.what() + ")");
     }
+    if (!stats.is_object()) throw InputError(statsFile.string() + ": not a JSON object");
   }
+  try {
+    return writeReport(o, m, stats);
+  } catch (const json::exception& e) {
+    // A figure of stats.json of an unexpected type (the file was edited or damaged).
+    throw InputError(statsFile.string() + ": unexpected content (" + e.what() + ")");
+  }
+}
+
+namespace {
+
+InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const json& stats) {
+  const auto t0 = std::chrono::steady_clock::now();
   StagedDirectory staged(o.output, kReportMarker, "report");
   const fs::path dir = staged.path();
 
@@ -320,25 +339,31 @@ InspectResult writeInspectReport(const InspectOptions& o) {
   sum["atlas"] = fs::absolute(o.atlas).lexically_normal().string();
   sum["kind"] = atlasKindName(m.kind);
   sum["charts"] = m.charts.size();
-  if (stats.contains("charting")) sum["patches"] = stats["resample"].value("patches", stats["charting"].value("patches", 0));
+  if (isObject(stats, "resample") && isObject(stats, "charting"))
+    sum["patches"] = stats["resample"].value("patches", stats["charting"].value("patches", 0));
   sum["chart_size"] = m.chartSize;
   sum["samples"] = samples;
   sum["bytes_on_disk"] = bytes;
   sum["bytes_per_sample"] = double(bytes) / double(std::max<uint64_t>(samples, 1));
-  if (stats.contains("read") && stats["read"].contains("triangles"))
+  if (isObject(stats, "read") && stats["read"].contains("triangles") && stats["read"]["triangles"].is_number())
     sum["bytes_per_input_triangle"] = double(bytes) / std::max(1.0, stats["read"]["triangles"].get<double>());
   sum["hierarchy_depth"] = m.depth;
   sum["hierarchy_nodes"] = nodes;
   if (stats.contains("total_seconds")) sum["build_seconds"] = stats["total_seconds"];
   if (stats.contains("peak_rss_bytes")) sum["build_peak_rss_bytes"] = stats["peak_rss_bytes"];
-  if (stats.contains("resample")) {
+  if (isObject(stats, "resample")) {
     const json& rs = stats["resample"];
     for (const char* k : {"image_stretch_l2", "image_stretch_linf", "flipped_texels", "degenerate_texels"})
       if (rs.contains(k)) sum[k] = rs[k];
   }
   if (stats.contains("fidelity")) {
-    sum["hausdorff_percent_of_diagonal"] = stats["fidelity"]["hausdorff_percent_of_diagonal"];
-    sum["hausdorff_mean_percent_of_diagonal"] = stats["fidelity"]["mean_percent_of_diagonal"];
+    const json& f = stats["fidelity"];
+    if (f.is_object()) {
+      sum["hausdorff_percent_of_diagonal"] = f.value("hausdorff_percent_of_diagonal", json());
+      sum["hausdorff_mean_percent_of_diagonal"] = f.value("mean_percent_of_diagonal", json());
+    } else {
+      sum["hausdorff_percent_of_diagonal"] = f;  // e.g. "not measured (--no-fidelity)"
+    }
   }
   if (stats.contains("voids_filled")) sum["voids_filled"] = stats["voids_filled"];
   if (stats.contains("stages")) report["stages"] = stats["stages"];
@@ -350,7 +375,7 @@ InspectResult writeInspectReport(const InspectOptions& o) {
 
   report["charts"] = chartTable(m, o.atlas, stats);
   std::array<float, 6> bounds{0, 0, 0, 1, 1, 1};
-  if (stats.contains("bounds") && stats["bounds"].size() == 6)
+  if (stats.contains("bounds") && stats["bounds"].is_array() && stats["bounds"].size() == 6)
     for (int i = 0; i < 6; ++i) bounds[i] = stats["bounds"][i].get<float>();
   InspectResult result;
   report["chart_images"] = json::array();
@@ -383,4 +408,5 @@ InspectResult writeInspectReport(const InspectOptions& o) {
   return result;
 }
 
+}  // namespace
 }  // namespace gimlod

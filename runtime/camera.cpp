@@ -1,5 +1,6 @@
 #include "runtime/camera.h"
 
+#include <array>
 #include <cmath>
 #include <fstream>
 #include <numbers>
@@ -82,6 +83,30 @@ std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32
     path.push_back(c);
   }
   return path;
+}
+
+std::vector<Camera> axisViews(const glm::dvec3& lo, const glm::dvec3& hi, double fovYDeg,
+                              std::vector<std::string>* names) {
+  const glm::dvec3 centre = (lo + hi) * 0.5;
+  const double radius = std::max(0.5 * glm::length(hi - lo), 1e-12);
+  const double distance = radius / std::sin(0.5 * glm::radians(fovYDeg));
+  static const std::array<std::pair<glm::dvec3, const char*>, 6> kAxes = {
+      {{{1, 0, 0}, "+x"}, {{-1, 0, 0}, "-x"}, {{0, 1, 0}, "+y"}, {{0, -1, 0}, "-y"}, {{0, 0, 1}, "+z"}, {{0, 0, -1}, "-z"}}};
+  std::vector<Camera> views;
+  if (names) names->clear();
+  for (const auto& [axis, name] : kAxes) {
+    Camera c;
+    c.eye = centre + distance * axis;
+    c.target = centre;
+    c.up = axis.z != 0.0 ? glm::dvec3(0.0, 1.0, 0.0) : glm::dvec3(0.0, 0.0, 1.0);
+    c.fovYDeg = fovYDeg;
+    c.nearPlane = 0.0;
+    c.farPlane = 0.0;
+    fitClipPlanes(c, lo, hi);
+    views.push_back(c);
+    if (names) names->push_back(name);
+  }
+  return views;
 }
 
 std::vector<Camera> readCameraPath(const std::filesystem::path& path) {

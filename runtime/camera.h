@@ -3,6 +3,7 @@
 
 #include <array>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -42,6 +43,12 @@ void fitClipPlanes(Camera& c, const glm::dvec3& lo, const glm::dvec3& hi);
 // N frames circling the box centre at distance = fraction * diagonal, elevation in degrees.
 std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames,
                               double distanceFraction, double elevationDeg, double fovYDeg = 45.0);
+
+// The six axis views of the box: from +x, -x, +y, -y, +z and -z, looking at its centre from the
+// distance at which its bounding sphere fills the vertical field of view (up: z, or y from +-z).
+// names, if given, receives "+x", "-x", ... in the same order.
+std::vector<Camera> axisViews(const glm::dvec3& lo, const glm::dvec3& hi, double fovYDeg = 45.0,
+                              std::vector<std::string>* names = nullptr);
 
 // Reads {"frames": [{"eye": [x,y,z], "target": [...], "up": [...], "fov_deg": 45}, ...]} or a bare
 // list of such frames. Throws InputError naming the file on malformed input.

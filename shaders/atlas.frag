@@ -1,12 +1,26 @@
 #version 430 core
 // Atlas fragment shader: normal map and Lambert + ambient lighting with light distance fog;
 // terrain atlases also clip to the valid extent and colour with a hypsometric ramp, mesh atlases
-// (GIMLOD_GEOMETRY) are neutral clay.
+// (GIMLOD_GEOMETRY) are neutral clay. With u_overlay, a per-node colour replaces the material and
+// chart borders are drawn over it: seams dark, open borders red (runtime/overlay.h).
+
+#include "interface.h"
 
 in vec3 v_world;
 in vec2 v_pageUv;
 flat in int v_pageLayer;
 flat in int v_texLod;  // mip of the normal map: the node's attribute resolution (paper 7.1, 7.3)
+flat in int v_node;
+in vec2 v_nodeUv;
+
+struct NodeOverlay {
+  uint rgba;              // RGBA8
+  uint chartBorderSides;  // bit s: side s (0 bottom, 1 right, 2 top, 3 left) on the chart border
+  uint openSides;         // of those, without a neighbouring chart
+  uint reserved;
+};
+layout(std430, binding = GIMLOD_OVERLAY_BINDING) readonly buffer Overlay { NodeOverlay u_overlays[]; };
+uniform int u_overlay;  // 0: none; else u_overlays[v_node] applies
 
 uniform sampler2DArray u_normals;  // RGBA8, n * 0.5 + 0.5, bilinear, with mips
 uniform sampler2DArray u_samples;  // R32F page heights (terrain only here), bilinear (texelFetch in the vertex shader)
@@ -19,6 +33,20 @@ uniform vec3 u_background;
 uniform float u_fogDistance;  // 0 = no fog
 
 out vec4 o_colour;
+
+// The overlay's colour for a fragment lit by `light` (0..1): the node's colour, and its chart
+// borders as lines: seams dark (about 1.5 pixels across both sides), open borders red (2 pixels).
+vec3 overlayColour(float light) {
+  NodeOverlay o = u_overlays[v_node];
+  vec3 c = unpackUnorm4x8(o.rgba).rgb * (0.35 + 0.65 * light);
+  vec2 w = max(fwidth(v_nodeUv), vec2(1e-6));
+  float d[4] = float[4](v_nodeUv.y / w.y, (1.0 - v_nodeUv.x) / w.x, (1.0 - v_nodeUv.y) / w.y, v_nodeUv.x / w.x);
+  for (int s = 0; s < 4; ++s) {
+    if (((o.openSides >> uint(s)) & 1u) != 0u && d[s] < 2.0) return vec3(0.9, 0.1, 0.1);
+    if (((o.chartBorderSides >> uint(s)) & 1u) != 0u && d[s] < 0.75) c = vec3(0.08);
+  }
+  return c;
+}
 
 vec3 hypsometric(float t) {
   const vec3 kLow = vec3(0.18, 0.42, 0.16);
@@ -48,7 +76,7 @@ void main() {
   // Mesh atlases: a neutral material, lit from both sides of the light (scans have no up).
   vec3 clay = vec3(0.78, 0.74, 0.68);
   float lambert = abs(dot(n, u_lightDir));
-  vec3 lit = clay * (0.25 + 0.75 * lambert);
+  vec3 lit = u_overlay != 0 ? overlayColour(lambert) : clay * (0.25 + 0.75 * lambert);
   if (u_fogDistance > 0.0) {
     float dm = length(v_world - u_eye) / u_fogDistance;
     lit = mix(lit, u_background, 0.6 * (1.0 - exp(-dm * dm)));
@@ -66,7 +94,8 @@ void main() {
     float depth = clamp(h / u_heightRange.x, 0.0, 1.0);
     base = mix(vec3(0.30, 0.55, 0.75), vec3(0.05, 0.12, 0.35), sqrt(depth));
   }
-  vec3 colour = base * (0.30 + 0.70 * max(dot(n, u_lightDir), 0.0));
+  float light = max(dot(n, u_lightDir), 0.0);
+  vec3 colour = u_overlay != 0 ? overlayColour(light) : base * (0.30 + 0.70 * light);
   if (u_fogDistance > 0.0) {
     float d = length(v_world - u_eye) / u_fogDistance;
     colour = mix(colour, u_background, 0.6 * (1.0 - exp(-d * d)));

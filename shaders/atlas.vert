@@ -27,6 +27,8 @@ precise out vec3 v_world;  // captured by transform feedback
 out vec2 v_pageUv;
 flat out int v_pageLayer;
 flat out int v_texLod;
+flat out int v_node;   // the node's index in the cut, for the overlays
+out vec2 v_nodeUv;     // (i, j) / 2^res: where in the node, for the overlays' border lines
 invariant gl_Position;
 
 const int kBottom = 0, kRight = 1, kTop = 2, kLeft = 3;
@@ -73,4 +75,6 @@ void main() {
   v_pageUv = (vec2(texel) + 0.5) / float(textureSize(u_samples, 0).x);
   v_pageLayer = pageLayer;
   v_texLod = a_nodeB.w;
+  v_node = node;
+  v_nodeUv = vec2(a_ij) / float(n);
 }

@@ -15,6 +15,8 @@
 
 // Shader storage binding of the stitching tables (atlas.vert, block Stitch).
 #define GIMLOD_STITCH_BINDING 1
+// Shader storage binding of the per-node overlays (atlas.frag, block Overlay; runtime/overlay.h).
+#define GIMLOD_OVERLAY_BINDING 2
 
 // Texture units of the page pool: u_samples (heights or positions) and u_normals.
 #define GIMLOD_SAMPLES_UNIT 0

@@ -8,10 +8,14 @@ out vec3 v_world;
 out vec2 v_pageUv;
 flat out int v_pageLayer;
 flat out int v_texLod;
+flat out int v_node;  // atlas.frag's overlay inputs, unused here (u_overlay is 0)
+out vec2 v_nodeUv;
 void main() {
   v_world = a_position;
   v_pageUv = vec2(0.5);
   v_pageLayer = 0;
   v_texLod = 0;
+  v_node = 0;
+  v_nodeUv = vec2(0.0);
   gl_Position = u_viewProj * vec4(a_position, 1.0);
 }

@@ -26,6 +26,7 @@ namespace {
 // The shader interface (shaders/interface.h, shared with the GLSL).
 constexpr GLuint kSamplesUnit = GIMLOD_SAMPLES_UNIT, kNormalsUnit = GIMLOD_NORMALS_UNIT;
 constexpr GLuint kStitchBinding = GIMLOD_STITCH_BINDING;
+constexpr GLuint kOverlayBinding = GIMLOD_OVERLAY_BINDING;
 constexpr GLuint kGridAttrib = GIMLOD_ATTRIB_GRID, kNodeAttribA = GIMLOD_ATTRIB_NODE_A,
                  kNodeAttribB = GIMLOD_ATTRIB_NODE_B;
 constexpr uint32_t kMaxGridResLog2 = 12;                 // (2^12+1)^2 vertices; ushort (i, j)
@@ -97,6 +98,8 @@ struct AtlasRenderer::Impl {
   GlObject gridVertices, gridIndices, vertexArray;
   std::vector<GridRange> grids;  // [res - minResLog2]
   GlObject nodeBuffer, stitchBuffer, indirectBuffer, feedbackBuffer, feedbackQuery;
+  GlObject overlayBuffer;
+  std::vector<NodeOverlay> overlay;  // per node of the next draw; empty: no overlay
   GlObject atlasProgram;
 
   explicit Impl(const RendererSetup& s);
@@ -134,6 +137,7 @@ AtlasRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   createVertexArray();
   atlasProgram = linkAtlasProgram(setup.geometry);
   stitchBuffer = makeBuffer();
+  overlayBuffer = makeBuffer();
   indirectBuffer = makeBuffer();
   feedbackBuffer = makeBuffer();
   feedbackQuery = makeQuery();
@@ -293,6 +297,17 @@ void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
                words.data(), GL_STREAM_DRAW);
   glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kStitchBinding, stitchBuffer.id());
+  // The overlays by node index (as the stitching tables); one empty record when there are none,
+  // so the binding always holds a buffer.
+  if (!overlay.empty() && overlay.size() != nodes.size())
+    throw std::invalid_argument("AtlasRenderer: " + std::to_string(overlay.size()) + " overlays for " +
+                                std::to_string(nodes.size()) + " nodes");
+  const NodeOverlay none{};
+  glBindBuffer(GL_SHADER_STORAGE_BUFFER, overlayBuffer.id());
+  glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(std::max<size_t>(overlay.size(), 1) * sizeof(NodeOverlay)),
+               overlay.empty() ? &none : overlay.data(), GL_STREAM_DRAW);
+  glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kOverlayBinding, overlayBuffer.id());
   checkGl("node and stitch table upload");
 }
 
@@ -326,6 +341,7 @@ void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& 
   setShading(atlasProgram, viewProj, eye);
   glUniform1i(uniform(atlasProgram, "u_leafLog2"), GLint(stitch.leafLog2));
   glUniform1i(uniform(atlasProgram, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
+  glUniform1i(uniform(atlasProgram, "u_overlay"), overlay.empty() ? 0 : 1);
   glBindVertexArray(vertexArray.id());
   checkGl("atlas state");
 }
@@ -353,6 +369,8 @@ uint32_t AtlasRenderer::pageCapacity() const { return impl_->capacity; }
 const RendererSetup& AtlasRenderer::setup() const { return impl_->setup; }
 
 void AtlasRenderer::beginFrame() const { impl_->beginFrame(); }
+
+void AtlasRenderer::setOverlay(std::vector<NodeOverlay> perNode) { impl_->overlay = std::move(perNode); }
 
 void AtlasRenderer::setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const {
   impl_->setShading(program, viewProj, eye);

@@ -15,6 +15,7 @@
 
 #include "core/atlas_format.h"
 #include "runtime/draw_list.h"
+#include "runtime/overlay.h"
 
 namespace gimlod::gl {
 
@@ -64,6 +65,10 @@ class AtlasRenderer {
   // RendererSetup::geometry, `samples` holds 3 floats (x, y, z) per sample.
   void uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* samples,
                   const PackedNormal* normals);
+
+  // The overlay of the next draws, one record per node in the order draw() gets them (empty:
+  // plain shading). draw() throws std::invalid_argument when the counts differ.
+  void setOverlay(std::vector<NodeOverlay> perNode);
 
   // Draws the nodes into the offscreen framebuffer (clears first) and waits for completion.
   DrawStats draw(const glm::mat4& viewProj, const glm::vec3& eye, std::span<const DrawNode> nodes,

@@ -16,6 +16,7 @@
 #include "runtime/page_loader.h"
 #include "runtime/page_pool.h"
 #include "runtime/page_reader.h"
+#include "runtime/overlay.h"
 #include "runtime/stitch.h"
 
 namespace gimlod::gl {
@@ -35,6 +36,9 @@ struct SceneOptions {
   // Pixel-to-texel ratio for the attribute (normal map) resolutions, in texels per pixel; 0
   // draws every node's normals at its page's resolution.
   double texelsPerPixel = 1.0;
+  // Drawn over the shading (runtime/overlay.h): charts, levels or resolutions told apart, seams
+  // and open borders marked. Capture is unaffected.
+  OverlayMode overlay = OverlayMode::kNone;
 };
 
 struct FrameResult {
@@ -67,6 +71,7 @@ class AtlasScene {
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
   AtlasRenderer& renderer() { return *renderer_; }
+  void setOverlay(OverlayMode mode) { options_.overlay = mode; }
 
   // Adapts to the camera (error threshold, paper 7.1 problem 1) and draws; the picture is then in
   // renderer().readPixels().

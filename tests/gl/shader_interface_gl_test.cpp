@@ -12,6 +12,7 @@
 #include "runtime/gl/egl_context.h"
 #include "tests/gl/gl_context_test.h"
 #include "runtime/gl/gl_objects.h"
+#include "runtime/overlay.h"
 #include "shaders/interface.h"
 
 namespace gimlod {
@@ -21,7 +22,7 @@ class ShaderInterfaceGlTest : public test::GlContextTest<::testing::TestWithPara
 // Uniforms AtlasRenderer sets on its program (setShading, bindAtlas, setPagePoolUnits).
 constexpr const char* kAtlasUniforms[] = {"u_viewProj", "u_eye",     "u_lightDir",  "u_background",
                                           "u_fogDistance", "u_samples", "u_normals", "u_leafLog2",
-                                          "u_entriesPerSide"};
+                                          "u_entriesPerSide", "u_overlay"};
 // Set through optionalUniform: used by terrain atlases only.
 constexpr const char* kTerrainUniforms[] = {"u_spacing", "u_validSamples", "u_heightRange"};
 
@@ -39,6 +40,18 @@ TEST_P(ShaderInterfaceGlTest, AtlasProgramMatchesTheSharedDefinitions) {
   GLint binding = -1;
   glGetProgramResourceiv(id, GL_SHADER_STORAGE_BLOCK, block, 1, &prop, 1, nullptr, &binding);
   EXPECT_EQ(binding, GIMLOD_STITCH_BINDING);
+  const GLuint overlayBlock = glGetProgramResourceIndex(id, GL_SHADER_STORAGE_BLOCK, "Overlay");
+  ASSERT_NE(overlayBlock, GL_INVALID_INDEX);
+  binding = -1;
+  glGetProgramResourceiv(id, GL_SHADER_STORAGE_BLOCK, overlayBlock, 1, &prop, 1, nullptr, &binding);
+  EXPECT_EQ(binding, GIMLOD_OVERLAY_BINDING);
+  // The shader's record is runtime/overlay.h's NodeOverlay: 16 bytes a node.
+  const GLuint member = glGetProgramResourceIndex(id, GL_BUFFER_VARIABLE, "u_overlays[0].rgba");
+  ASSERT_NE(member, GL_INVALID_INDEX);
+  const GLenum strideProp = GL_TOP_LEVEL_ARRAY_STRIDE;
+  GLint stride = 0;
+  glGetProgramResourceiv(id, GL_BUFFER_VARIABLE, member, 1, &strideProp, 1, nullptr, &stride);
+  EXPECT_EQ(stride, GLint(sizeof(NodeOverlay)));
 
   for (const char* name : kAtlasUniforms)
     EXPECT_GE(glGetUniformLocation(id, name), 0) << name << (geometry ? " (mesh)" : " (terrain)");

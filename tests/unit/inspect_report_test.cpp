@@ -170,6 +170,24 @@ TEST_F(InspectReportTest, BadInputLeavesNoReport) {
   EXPECT_THROW(writeInspectReport(o), InputError);
   EXPECT_TRUE(fs::exists(other / "notes.txt"));
 
+  // A damaged stats.json: not JSON, or figures of the wrong type.
+  const fs::path damaged = path("damaged.atlas");
+  fs::copy(path("bunny.atlas"), damaged, fs::copy_options::recursive);
+  o.atlas = damaged;
+  o.output = path("r4");
+  for (const std::string& text : {std::string("{\"charts\": "), std::string("[1, 2]"),
+                                 std::string(R"({"resample": {"per_chart": [{"flipped_texels": "many"}]}})")}) {
+    std::ofstream(damaged / "stats.json", std::ios::trunc) << text;
+    try {
+      writeInspectReport(o);
+      ADD_FAILURE() << "expected InputError for " << text;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("stats.json"), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(fs::exists(o.output));
+  }
+
+  o.atlas = path("bunny.atlas");
   o.output = path("r3");
   o.thumbnailSize = 2;
   EXPECT_THROW(writeInspectReport(o), InputError);

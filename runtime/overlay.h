@@ -1,0 +1,43 @@
+// Overlays of the drawn cut: per node, a colour that tells the charts (or levels, or resolutions)
+// apart and which of its sides lie on a chart border (a seam) or an open one (the input's own
+// border), for the fragment shader to draw over the shading. For atlas inspection and the viewer.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string_view>
+#include <vector>
+
+#include "hierarchy/hierarchy.h"
+#include "runtime/cut.h"
+
+namespace gimlod {
+
+enum class OverlayMode : uint8_t {
+  kNone,        // plain shading
+  kChart,       // each chart its own colour, seams dark, open borders red
+  kLevel,       // colour by quadtree level
+  kResolution,  // colour by drawn resolution
+};
+
+// "none", "chart", "level", "res".
+const char* overlayModeName(OverlayMode mode);
+std::optional<OverlayMode> parseOverlayMode(std::string_view name);
+
+// One node's overlay as the shader reads it (std430 uvec4). Sides: bit s for side s (0 bottom
+// v = 0, 1 right, 2 top, 3 left).
+struct NodeOverlay {
+  uint32_t rgba = 0;              // RGBA8, red in the low byte (GLSL unpackUnorm4x8)
+  uint32_t chartBorderSides = 0;  // sides on the chart's border
+  uint32_t openSides = 0;         // of those, the ones without a neighbouring chart
+  uint32_t reserved = 0;
+};
+static_assert(sizeof(NodeOverlay) == 16);
+
+// A colour for chart `chart`: hues spread by the golden angle, so neighbours differ.
+uint32_t chartColour(uint32_t chart);
+
+// The overlay of every cut node, in cut order; empty for kNone.
+std::vector<NodeOverlay> nodeOverlays(const Hierarchy& h, const Cut& cut, OverlayMode mode);
+
+}  // namespace gimlod
