@@ -4,15 +4,18 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <numeric>
 #include <sstream>
 
-#include <OpenImageIO/imageio.h>
 #include <glm/geometric.hpp>
 #include <glm/vec3.hpp>
 
 #include "core/atlas_format.h"
+#include "inspect/hierarchy_report.h"
+#include "inspect/png.h"
 #include "inspect/seams.h"
+#include "runtime/atlas_view.h"
 
 namespace gimlod {
 namespace {
@@ -22,22 +25,12 @@ using nlohmann::json;
 
 constexpr const char* kReportMarker = "report.json";
 
-void writePng(const fs::path& path, uint32_t w, uint32_t h, const std::vector<uint8_t>& rgb) {
-  auto out = OIIO::ImageOutput::create(path.string());
-  const OIIO::ImageSpec spec(int(w), int(h), 3, OIIO::TypeDesc::UINT8);
-  if (!out || !out->open(path.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT8, rgb.data()) || !out->close())
-    throw InputError(path.string() + ": cannot write the image");
-}
-
 bool isObject(const json& j, const char* key) { return j.contains(key) && j[key].is_object(); }
 
 uint8_t unit(double x) { return uint8_t(std::lround(std::clamp(x, 0.0, 1.0) * 255.0)); }
 
-// A colour ramp for stretch: 1 (no stretch) blue, 2 green, 4 and more red (log2 scale).
-std::array<uint8_t, 3> heat(double stretch) {
-  const double t = std::clamp(std::log2(std::max(stretch, 1.0)) / 2.0, 0.0, 1.0);
-  return {unit(t < 0.5 ? 0.0 : 2.0 * t - 1.0), unit(t < 0.5 ? 2.0 * t : 2.0 - 2.0 * t), unit(t < 0.5 ? 1.0 - 2.0 * t : 0.0)};
-}
+// The colour of stretch s (1: none): the heat ramp over log2 s in [0, 2] (1 blue, 2 green, 4 red).
+std::array<uint8_t, 3> heat(double stretch) { return heatColour(std::log2(std::max(stretch, 1.0)) / 2.0); }
 
 std::string html(const std::string& s) {
   std::string o;
@@ -93,7 +86,7 @@ ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32
       for (int c = 0; c < 3; ++c) rgb[at(u, v) + c] = p[c];
     }
   const std::string stem = "chart_" + std::to_string(chart);
-  writePng(outDir / (stem + "_normals.png"), n, n, rgb);
+  writePngRgb(outDir / (stem + "_normals.png"), n, n, rgb);
   out.files.push_back(stem + "_normals.png");
   out.figures["image_level"] = level;
   if (m.kind == AtlasKind::Geometry) {
@@ -104,7 +97,7 @@ ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32
           const double lo = bounds[c], hi = bounds[c + 3];
           rgb[at(u, v) + c] = unit(hi > lo ? (pos[size_t(v) * n + u][c] - lo) / (hi - lo) : 0.5);
         }
-    writePng(outDir / (stem + "_positions.png"), n, n, rgb);
+    writePngRgb(outDir / (stem + "_positions.png"), n, n, rgb);
     out.files.push_back(stem + "_positions.png");
     // Stretch per texel: the root mean square of its two edge lengths against the chart's mean,
     // so 1 is even sampling; texels facing against their vertex normals in magenta.
@@ -142,7 +135,7 @@ ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32
         const size_t o = (size_t(n - 2 - v) * (n - 1) + u) * 3;
         heatRgb[o] = c[0], heatRgb[o + 1] = c[1], heatRgb[o + 2] = c[2];
       }
-    writePng(outDir / (stem + "_stretch.png"), n - 1, n - 1, heatRgb);
+    writePngRgb(outDir / (stem + "_stretch.png"), n - 1, n - 1, heatRgb);
     out.files.push_back(stem + "_stretch.png");
     out.figures["texel_stretch_max"] = worst;
     out.figures["texels_against_normals_at_image_level"] = backwards;
@@ -154,7 +147,7 @@ ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32
         const uint8_t g = unit(*hi > *lo ? (h[size_t(v) * n + u] - *lo) / (*hi - *lo) : 0.5);
         rgb[at(u, v)] = rgb[at(u, v) + 1] = rgb[at(u, v) + 2] = g;
       }
-    writePng(outDir / (stem + "_heights.png"), n, n, rgb);
+    writePngRgb(outDir / (stem + "_heights.png"), n, n, rgb);
     out.files.push_back(stem + "_heights.png");
   }
   return out;
@@ -215,6 +208,81 @@ json seamJson(const SeamReport& s) {
           {"levels", levels},           {"offenders", offenders},      {"seconds", s.seconds}};
 }
 
+// The hierarchy: per level, the largest error against resolution as an SVG chart (log scale),
+// the figures as a table, and each level's heat map.
+std::string errorCurveHtml(const json& hr) {
+  std::ostringstream h;
+  h << "<h2>Hierarchy</h2>\n";
+  double lo = std::numeric_limits<double>::infinity(), hi = 0.0;
+  uint32_t resLo = 64, resHi = 0;
+  for (const json& l : hr["levels"])
+    for (const json& e : l["errors"]) {
+      const double v = e["max_error"].get<double>();
+      if (v > 0.0) lo = std::min(lo, v), hi = std::max(hi, v);
+      resLo = std::min(resLo, e["res"].get<uint32_t>()), resHi = std::max(resHi, e["res"].get<uint32_t>());
+    }
+  if (hi > 0.0 && resHi > resLo) {
+    const double W = 480, H = 240, pad = 40;
+    const double l0 = std::floor(std::log10(lo)), l1 = std::ceil(std::log10(hi)) + (lo == hi ? 1 : 0);
+    const auto X = [&](double res) { return pad + (res - resLo) / double(resHi - resLo) * (W - 2 * pad); };
+    const auto Y = [&](double v) { return H - pad - (std::log10(v) - l0) / (l1 - l0) * (H - 2 * pad); };
+    h << "<svg id=\"error-curve\" width=\"" << W << "\" height=\"" << H << "\" xmlns=\"http://www.w3.org/2000/svg\" "
+      << "style=\"border:1px solid #bbb\"><text x=\"" << W / 2 << "\" y=\"" << H - 8
+      << "\" text-anchor=\"middle\" font-size=\"12\">resolution (log2 intervals)</text>"
+      << "<text x=\"12\" y=\"" << H / 2 << "\" font-size=\"12\" transform=\"rotate(-90 12 " << H / 2
+      << ")\" text-anchor=\"middle\">largest error (log)</text>";
+    for (double d = l0; d <= l1; d += 1.0)
+      h << "<line x1=\"" << pad << "\" x2=\"" << W - pad << "\" y1=\"" << Y(std::pow(10.0, d)) << "\" y2=\""
+        << Y(std::pow(10.0, d)) << "\" stroke=\"#ddd\"/><text x=\"" << W - pad + 2 << "\" y=\"" << Y(std::pow(10.0, d)) + 4
+        << "\" font-size=\"10\">1e" << int(d) << "</text>";
+    static const char* kColours[] = {"#4477aa", "#228833", "#ccbb44", "#ee6677", "#aa3377", "#66ccee", "#bbbbbb", "#000000"};
+    for (const json& l : hr["levels"]) {
+      std::ostringstream pts;
+      for (const json& e : l["errors"])
+        if (e["max_error"].get<double>() > 0.0) pts << X(e["res"].get<double>()) << "," << Y(e["max_error"].get<double>()) << " ";
+      const uint32_t level = l["level"].get<uint32_t>();
+      h << "<polyline fill=\"none\" stroke-width=\"2\" stroke=\"" << kColours[level % 8] << "\" points=\"" << pts.str()
+        << "\"><title>level " << level << "</title></polyline>";
+    }
+    h << "</svg>\n";
+  }
+  h << "<table id=\"hierarchy\"><tr><th>level</th><th>nodes</th><th>resolution: largest / mean error</th></tr>";
+  for (const json& l : hr["levels"]) {
+    h << "<tr><td>" << l["level"] << "</td><td>" << l["nodes"] << "</td><td>";
+    for (const json& e : l["errors"])
+      h << e["res"] << ": " << number(e["max_error"]) << " / " << number(e["mean_error"]) << "&emsp;";
+    h << "</td></tr>";
+  }
+  h << "</table>\n<p>Heat maps: each node's error at the finest resolution it may use (blue: 10<sup>-4</sup> of the "
+       "largest error or less, red: the largest), charts tiled in a grid (a DEM's at their place).</p>\n";
+  for (const json& l : hr["levels"])
+    if (l.contains("heat_map"))
+      h << "<figure><img src=\"" << html(l["heat_map"].get<std::string>()) << "\" alt=\"level " << l["level"]
+        << " errors\"><figcaption>level " << l["level"] << "</figcaption></figure>";
+  h << "\n";
+  return h.str();
+}
+
+std::string streamingHtml(const json& s) {
+  std::ostringstream h;
+  h << "<h2>Memory and streaming</h2>\n<table id=\"pyramid-bytes\"><tr><th>pyramid level</th><th>samples a side</th>"
+       "<th>bytes</th></tr>";
+  for (const json& l : s["pyramid_levels"])
+    h << "<tr><td>" << l["pyramid_level"] << "</td><td>" << l["samples_per_side"] << "</td><td>" << l["bytes"] << "</td></tr>";
+  h << "</table>\n<table id=\"pages\"><tr><th>node level</th><th>page samples a side</th><th>page bytes</th></tr>";
+  for (const json& l : s["pages"])
+    h << "<tr><td>" << l["level"] << "</td><td>" << l["page_samples_per_side"] << "</td><td>" << l["page_bytes"] << "</td></tr>";
+  h << "</table>\n<p>The six axis views at " << html(s["view_size"].get<std::string>())
+    << ", 1-pixel tolerance, no node budget:</p>\n<table id=\"view-needs\"><tr><th>view</th><th>nodes (pages)</th>"
+       "<th>triangles</th><th>page bytes</th><th>stitching raises</th><th>stitching splits</th></tr>";
+  for (const json& v : s["views"])
+    h << "<tr><td>" << html(v["view"].get<std::string>()) << "</td><td>" << v["nodes"] << "</td><td>" << v["triangles"]
+      << "</td><td>" << v["page_bytes"] << "</td><td>" << v["constraint_raises"] << "</td><td>" << v["constraint_splits"]
+      << "</td></tr>";
+  h << "</table>\n";
+  return h.str();
+}
+
 std::string pageHtml(const json& r) {
   std::ostringstream h;
   const json& sum = r["summary"];
@@ -224,7 +292,8 @@ std::string pageHtml(const json& r) {
     << "td,th{border:1px solid #bbb;padding:2px 8px;text-align:right}th{background:#eee;cursor:pointer}"
     << "td:first-child,th:first-child{text-align:left}.bad{background:#fcc}.ok{background:#cfc}"
     << "figure{display:inline-block;margin:4px;text-align:center}figure img{width:160px;image-rendering:pixelated}"
-    << ".view img{width:320px}</style></head>\n<body>\n";
+    << "figure.view{width:324px;vertical-align:top}.view img{width:320px}figcaption{font-size:12px}"
+    << "</style></head>\n<body>\n";
   h << "<h1>Atlas " << html(sum["atlas"].get<std::string>()) << "</h1>\n<h2>Summary</h2>\n<table id=\"summary\">";
   for (const auto& [k, v] : sum.items())
     h << "<tr><td>" << html(k) << "</td><td data-key=\"" << html(k) << "\">" << number(v) << "</td></tr>";
@@ -258,6 +327,8 @@ std::string pageHtml(const json& r) {
         << "</td><td>" << o["corner"] << "</td><td>" << number(o["difference"]) << "</td></tr>";
     h << "</table>\n";
   }
+  h << errorCurveHtml(r["hierarchy"]);
+  h << streamingHtml(r["streaming"]);
   h << "<h2>Worst charts</h2>\n";
   for (const json& c : r["chart_images"]) {
     h << "<div class=\"chart\" id=\"chart-" << c["chart"] << "\"><h3>Chart " << c["chart"] << "</h3>";
@@ -373,11 +444,18 @@ InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const
   sum["seams_bit_identical"] = seams.seamless();
   sum["seam_mismatches"] = seams.mismatches();
 
+  const AtlasView view = openAtlas(o.atlas);
+  report["hierarchy"] = hierarchyFigures(view, dir);
+  report["streaming"] = streamingFigures(view);
+  sum["view_nodes_mean"] = report["streaming"]["view_nodes_mean"];
+  sum["view_page_bytes_mean"] = report["streaming"]["view_page_bytes_mean"];
+
   report["charts"] = chartTable(m, o.atlas, stats);
   std::array<float, 6> bounds{0, 0, 0, 1, 1, 1};
   if (stats.contains("bounds") && stats["bounds"].is_array() && stats["bounds"].size() == 6)
     for (int i = 0; i < 6; ++i) bounds[i] = stats["bounds"][i].get<float>();
   InspectResult result;
+  result.images += uint32_t(report["hierarchy"]["heat_maps"].size());
   report["chart_images"] = json::array();
   for (size_t i = 0; i < report["charts"].size() && i < o.worstCharts; ++i) {
     const uint32_t c = report["charts"][i]["chart"].get<uint32_t>();

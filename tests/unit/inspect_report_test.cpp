@@ -5,6 +5,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <fstream>
 #include <regex>
 #include <set>
@@ -102,7 +103,27 @@ TEST_F(InspectReportTest, ScanReportHoldsTheBuildsFiguresAndItsImages) {
     EXPECT_GE(key(a), key(b)) << "row " << i;
   }
   ASSERT_EQ(written["chart_images"].size(), 5u);
-  EXPECT_EQ(r.images, 15u);  // normals, positions and stretch of each
+  // Normals, positions and stretch of each, and a heat map of the errors per hierarchy level.
+  EXPECT_EQ(written["hierarchy"]["heat_maps"].size(), 3u);
+  EXPECT_EQ(r.images, 15u + 3u);
+  // The hierarchy's figures: errors never grow with resolution at a level, and its node counts.
+  for (const json& l : written["hierarchy"]["levels"]) {
+    EXPECT_EQ(l["nodes"], st["charts"].get<uint64_t>() << (2 * l["level"].get<uint32_t>()));
+    double previous = std::numeric_limits<double>::infinity();
+    for (const json& e : l["errors"]) {
+      EXPECT_LE(e["max_error"].get<double>(), previous) << "level " << l["level"] << " res " << e["res"];
+      EXPECT_LE(e["mean_error"].get<double>(), e["max_error"].get<double>());
+      previous = e["max_error"].get<double>();
+    }
+  }
+  // Streaming: every view needs at least its visible roots, and the bytes of its pages.
+  const json& streaming = written["streaming"];
+  ASSERT_EQ(streaming["views"].size(), 6u);
+  for (const json& v : streaming["views"]) {
+    EXPECT_GT(v["nodes"].get<uint64_t>(), 0u);
+    EXPECT_GE(v["page_bytes"].get<uint64_t>(), v["nodes"].get<uint64_t>() * streaming["pages"].back()["page_bytes"].get<uint64_t>());
+  }
+  EXPECT_EQ(streaming["pyramid_levels"][0]["bytes"].get<uint64_t>(), st["charts"].get<uint64_t>() * 17 * 17 * streaming["bytes_per_sample"].get<uint64_t>());
   expectImagesMatchFiles(o.output);
   EXPECT_GT(r.bytes, 0u);
 }
@@ -121,7 +142,8 @@ TEST_F(InspectReportTest, DemReportShowsHeightsAndReplacesAnEarlierReport) {
     EXPECT_LE(c["height_min"].get<double>(), c["height_max"].get<double>());
   }
   // Normals and heights of the worst (here: the most relief) charts, 24 by default.
-  EXPECT_EQ(r.images, 2 * std::min<size_t>(o.worstCharts, r.figures["charts"].size()));
+  EXPECT_EQ(r.images, 2 * std::min<size_t>(o.worstCharts, r.figures["charts"].size()) +
+                          r.figures["hierarchy"]["heat_maps"].size());
   EXPECT_GT(r.figures["charts"].size(), o.worstCharts);
   expectImagesMatchFiles(o.output);
 }
@@ -215,7 +237,7 @@ TEST_F(InspectReportTest, OpensInHeadlessChromium) {
   ASSERT_EQ(test::runCommand(chromium + flags + " --dump-dom '" + url + "' 2>/dev/null", &dom), 0) << dom;
   std::smatch m;
   ASSERT_TRUE(std::regex_search(dom, m, std::regex("data-images=\"(\\d+)\""))) << dom.substr(0, 2000);
-  EXPECT_EQ(std::stoi(m[1]), 12);  // 4 charts x 3 images
+  EXPECT_EQ(std::stoi(m[1]), 12 + 3);  // 4 charts x 3 images, 3 hierarchy levels' heat maps
   ASSERT_TRUE(std::regex_search(dom, m, std::regex("data-broken-images=\"(\\d+)\"")));
   EXPECT_EQ(std::stoi(m[1]), 0);
   const json st = stats("bunny.atlas");
