@@ -166,8 +166,20 @@ std::vector<ReportImage> renderInspectViews(const fs::path& atlasDir, const std:
     const gl::FrameResult f = scene.renderFrame(cams[i], ao);
     const fs::path png = dir / fmt::format("view_{}.png", i);
     writePng(png, w, h, scene.renderer().readPixels());
-    views.push_back({png, fmt::format("charts from {} ({} nodes, {} triangles; seams dark, open borders red), {}",
-                                      names[i], f.cut.nodes.size(), f.draw.triangles, context->renderer())});
+    // The cut as drawn, welded: its boundary edges off the open chart borders are cracks.
+    const std::array<glm::dvec2, 2> valid{glm::dvec2(atlas.lo), glm::dvec2(atlas.hi)};
+    const CutMesh mesh = buildCutMesh(atlas.hierarchy, f.cut, scene.capture(f.cut),
+                                      atlas.manifest.kind == AtlasKind::Heightfield ? &valid : nullptr);
+    const nlohmann::json figures = {{"view", names[i]},
+                                    {"nodes", f.cut.nodes.size()},
+                                    {"triangles", f.draw.triangles},
+                                    {"boundary_edges", mesh.boundaryEdges},
+                                    {"open_border_edges", mesh.openBorderEdges},
+                                    {"other_boundary_edges", mesh.otherBoundaryEdges}};
+    views.push_back({png,
+                     fmt::format("charts from {} ({} nodes, {} triangles; seams dark, open borders red), {}", names[i],
+                                 f.cut.nodes.size(), f.draw.triangles, context->renderer()),
+                     figures});
   }
   return views;
 }

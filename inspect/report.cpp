@@ -305,6 +305,22 @@ std::string pageHtml(const json& r) {
         << html(v["caption"].get<std::string>()) << "\"><figcaption>" << html(v["caption"].get<std::string>())
         << "</figcaption></figure>";
   }
+  bool crackTable = false;
+  for (const json& v : r["views"]) crackTable = crackTable || v.contains("other_boundary_edges");
+  if (crackTable) {
+    h << "<h2>Cracks</h2>\n<p>Each view's cut as drawn: the stitched positions captured from the vertex shader, "
+         "welded where bit-identical (gimlod render --export-cut). Boundary edges on open chart borders are the "
+         "input's own; any other is a crack.</p>\n<table id=\"cracks\"><tr><th>view</th><th>nodes</th><th>boundary "
+         "edges</th><th>on open chart borders</th><th>cracks</th></tr>";
+    for (const json& v : r["views"]) {
+      if (!v.contains("other_boundary_edges")) continue;
+      h << "<tr" << (v["other_boundary_edges"].get<uint64_t>() ? " class=\"bad\"" : "") << "><td>"
+        << html(v.value("view", v["file"].get<std::string>())) << "</td><td>" << v.value("nodes", 0) << "</td><td>"
+        << v["boundary_edges"] << "</td><td>" << v["open_border_edges"] << "</td><td>" << v["other_boundary_edges"]
+        << "</td></tr>";
+    }
+    h << "</table>\n";
+  }
   const json& seams = r["seams"];
   h << "<h2>Seams</h2>\n<p id=\"seam-verdict\" class=\"" << (seams["seamless"].get<bool>() ? "ok" : "bad") << "\">"
     << (seams["seamless"].get<bool>() ? "Every shared edge and corner is bit-identical at every level."
@@ -471,7 +487,11 @@ InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const
     std::error_code ec;
     fs::copy_file(o.views[i].png, dir / name, ec);
     if (ec) throw InputError(o.views[i].png.string() + ": cannot copy into the report (" + ec.message() + ")");
-    report["views"].push_back({{"file", name}, {"caption", o.views[i].caption}});
+    json entry = {{"file", name}, {"caption", o.views[i].caption}};
+    for (const auto& [k, v] : o.views[i].figures.items()) entry[k] = v;
+    if (entry.contains("other_boundary_edges"))
+      sum["crack_edges_in_views"] = sum.value("crack_edges_in_views", uint64_t(0)) + entry["other_boundary_edges"].get<uint64_t>();
+    report["views"].push_back(entry);
     ++result.images;
   }
   report["build"] = stats;

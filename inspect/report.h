@@ -18,6 +18,9 @@ namespace gimlod {
 struct ReportImage {
   std::filesystem::path png;
   std::string caption;
+  // Figures of the view, shown in the crack table when they hold "boundary_edges",
+  // "open_border_edges" and "other_boundary_edges" (runtime/cut_mesh.h: the drawn cut, welded).
+  nlohmann::json figures = nlohmann::json::object();
 };
 
 struct InspectOptions {

@@ -77,6 +77,12 @@ TEST_F(InspectCli, ReportHoldsSixRenderedViewsOfTheCharts) {
     axes.insert(caption.substr(caption.find("from ") + 5, 2));
   }
   EXPECT_EQ(axes, (std::set<std::string>{"+x", "-x", "+y", "-y", "+z", "-z"}));
+  // The crack table: every view's drawn cut is closed but for the bunny's holes.
+  for (const nlohmann::json& v : r["views"]) {
+    EXPECT_EQ(v["other_boundary_edges"], 0u) << v["view"];
+    EXPECT_GT(v["open_border_edges"].get<uint64_t>(), 0u) << v["view"];
+  }
+  EXPECT_EQ(r["summary"]["crack_edges_in_views"], 0u);
   EXPECT_EQ(r["chart_images"].size(), 3u);
 }
 
