@@ -15,6 +15,7 @@
 #include "inspect/hierarchy_report.h"
 #include "inspect/png.h"
 #include "inspect/seams.h"
+#include "inspect/source_report.h"
 #include "runtime/atlas_view.h"
 
 namespace gimlod {
@@ -263,6 +264,32 @@ std::string errorCurveHtml(const json& hr) {
   return h.str();
 }
 
+std::string sourceHtml(const json& s) {
+  std::ostringstream h;
+  h << "<h2>Source comparison</h2>\n<p>The atlas (level 0, every chart's grid as drawn) against "
+    << html(s["source"].get<std::string>()) << ", two-sided, sample by sample.</p>\n<table id=\"source\">";
+  for (const char* k : {"hausdorff_percent_of_diagonal", "mean_percent_of_diagonal", "hausdorff", "max_atlas_to_mesh",
+                        "max_mesh_to_atlas", "diagonal", "atlas_samples", "mesh_samples", "seconds"})
+    h << "<tr><td>" << k << "</td><td data-key=\"source_" << k << "\">" << number(s[k]) << "</td></tr>";
+  h << "</table>\n<table id=\"source-worst-atlas\"><tr><th>atlas sample: chart</th><th>u</th><th>v</th><th>position</th>"
+       "<th>distance to the input</th></tr>";
+  for (const json& w : s["worst_atlas_samples"])
+    h << "<tr><td>" << w["chart"] << "</td><td>" << w["u"] << "</td><td>" << w["v"] << "</td><td>" << number(w["position"])
+      << "</td><td>" << number(w["distance"]) << "</td></tr>";
+  h << "</table>\n<table id=\"source-worst-input\"><tr><th>input sample</th><th>position</th><th>distance to the "
+       "atlas</th><th>nearest chart</th><th>u</th><th>v</th></tr>";
+  for (const json& w : s["worst_input_samples"])
+    h << "<tr><td>" << w["sample"] << "</td><td>" << number(w["position"]) << "</td><td>" << number(w["distance"])
+      << "</td><td>" << w["chart"] << "</td><td>" << w["u"] << "</td><td>" << w["v"] << "</td></tr>";
+  h << "</table>\n<p>Distance of every sample of the farthest charts (blue: 10<sup>-4</sup> of the atlas's largest "
+       "distance or less, red: the largest).</p>\n";
+  for (const json& m : s["distance_maps"])
+    h << "<figure><img src=\"" << html(m["file"].get<std::string>()) << "\" alt=\"chart " << m["chart"]
+      << " distances\"><figcaption>chart " << m["chart"] << ": " << number(m["max_distance"]) << "</figcaption></figure>";
+  h << "\n";
+  return h.str();
+}
+
 std::string streamingHtml(const json& s) {
   std::ostringstream h;
   h << "<h2>Memory and streaming</h2>\n<table id=\"pyramid-bytes\"><tr><th>pyramid level</th><th>samples a side</th>"
@@ -343,6 +370,7 @@ std::string pageHtml(const json& r) {
         << "</td><td>" << o["corner"] << "</td><td>" << number(o["difference"]) << "</td></tr>";
     h << "</table>\n";
   }
+  if (r.contains("source")) h << sourceHtml(r["source"]);
   h << errorCurveHtml(r["hierarchy"]);
   h << streamingHtml(r["streaming"]);
   h << "<h2>Worst charts</h2>\n";
@@ -466,12 +494,19 @@ InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const
   sum["view_nodes_mean"] = report["streaming"]["view_nodes_mean"];
   sum["view_page_bytes_mean"] = report["streaming"]["view_page_bytes_mean"];
 
+  if (!o.source.empty()) {
+    report["source"] = sourceComparison(m, o.atlas, o.source, dir);
+    sum["source_hausdorff_percent_of_diagonal"] = report["source"]["hausdorff_percent_of_diagonal"];
+    sum["source_mean_percent_of_diagonal"] = report["source"]["mean_percent_of_diagonal"];
+  }
+
   report["charts"] = chartTable(m, o.atlas, stats);
   std::array<float, 6> bounds{0, 0, 0, 1, 1, 1};
   if (stats.contains("bounds") && stats["bounds"].is_array() && stats["bounds"].size() == 6)
     for (int i = 0; i < 6; ++i) bounds[i] = stats["bounds"][i].get<float>();
   InspectResult result;
   result.images += uint32_t(report["hierarchy"]["heat_maps"].size());
+  if (report.contains("source")) result.images += uint32_t(report["source"]["distance_maps"].size());
   report["chart_images"] = json::array();
   for (size_t i = 0; i < report["charts"].size() && i < o.worstCharts; ++i) {
     const uint32_t c = report["charts"][i]["chart"].get<uint32_t>();

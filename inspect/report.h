@@ -29,6 +29,9 @@ struct InspectOptions {
   uint32_t worstCharts = 24;     // charts shown with images (the worst first); figures for all
   uint32_t thumbnailSize = 129;  // at most this many samples a side in chart images (2^k + 1)
   std::vector<ReportImage> views;
+  // The mesh the atlas was built from: compared sample by sample (inspect/source_report.h); empty:
+  // no comparison.
+  std::filesystem::path source;
 };
 
 struct InspectResult {

@@ -262,7 +262,8 @@ class Nearest {
 // of counted: the forest may hold only the part of a surface within the margin around the samples.
 template <class Sample>
 Acc distances(const Forest& forest, size_t count, const Sample& sample,
-              double margin = std::numeric_limits<double>::infinity()) {
+              double margin = std::numeric_limits<double>::infinity(), float* perSample = nullptr,
+              glm::vec3* closestOut = nullptr) {
   Acc acc = tbb::parallel_reduce(
       tbb::blocked_range<size_t>(0, count, 1024), Acc{},
       [&](const tbb::blocked_range<size_t>& r, Acc a) {
@@ -273,6 +274,8 @@ Acc distances(const Forest& forest, size_t count, const Sample& sample,
           forest.traverse(q, n);
           hint = n.closest();
           const double d = std::sqrt(n.squaredDistance());
+          if (perSample) perSample[i] = float(d);
+          if (closestOut) closestOut[i] = glm::vec3(float(hint.x()), float(hint.y()), float(hint.z()));
           if (d > margin) {
             a.beyond.push_back(uint32_t(i));
             continue;
@@ -310,7 +313,7 @@ void setFigures(FidelityStats& st, double atlasMax, double atlasSum, double mesh
 FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
                               const std::vector<std::array<uint32_t, 3>>& meshTriangles,
                               const std::vector<glm::vec3>& atlasPositions,
-                              const std::vector<std::array<uint32_t, 3>>& atlasTriangles) {
+                              const std::vector<std::array<uint32_t, 3>>& atlasTriangles, FidelityDetail* detail) {
   const auto t0 = std::chrono::steady_clock::now();
   std::vector<FloatTriangle> mesh, atlas;
   tbb::parallel_invoke([&] { mesh = nonDegenerate(meshPositions, meshTriangles); },
@@ -339,6 +342,7 @@ FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
     for (const FloatTriangle& t : mesh) meshSamples.push_back(CGAL::centroid(t.triangle()));
   }
 
+  if (detail) detail->atlasDistances.assign(atlasPositions.size(), 0.f);
   // The atlas trees build while the mesh trees build and answer the atlas samples (one CGAL tree
   // builds on one thread, so this keeps both cores busy).
   std::unique_ptr<Forest> atlasForest;
@@ -346,12 +350,24 @@ FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
   tbb::parallel_invoke([&] { atlasForest = std::make_unique<Forest>(atlas); },
                        [&] {
                          const Forest meshForest(mesh);
-                         a = distances(meshForest, atlasPositions.size(), [&](size_t i) {
-                           return Point(atlasPositions[i].x, atlasPositions[i].y, atlasPositions[i].z);
-                         });
+                         a = distances(
+                             meshForest, atlasPositions.size(),
+                             [&](size_t i) {
+                               return Point(atlasPositions[i].x, atlasPositions[i].y, atlasPositions[i].z);
+                             },
+                             std::numeric_limits<double>::infinity(), detail ? detail->atlasDistances.data() : nullptr);
                        });
   st.atlasSamples = atlasPositions.size();
-  const Acc b = distances(*atlasForest, meshSamples.size(), [&](size_t i) { return meshSamples[i]; });
+  if (detail) {
+    detail->meshSamples.resize(meshSamples.size());
+    for (size_t i = 0; i < meshSamples.size(); ++i)
+      detail->meshSamples[i] = glm::vec3(float(meshSamples[i].x()), float(meshSamples[i].y()), float(meshSamples[i].z()));
+    detail->meshDistances.assign(meshSamples.size(), 0.f);
+    detail->meshClosest.assign(meshSamples.size(), glm::vec3(0.f));
+  }
+  const Acc b = distances(*atlasForest, meshSamples.size(), [&](size_t i) { return meshSamples[i]; },
+                          std::numeric_limits<double>::infinity(), detail ? detail->meshDistances.data() : nullptr,
+                          detail ? detail->meshClosest.data() : nullptr);
   st.meshSamples = meshSamples.size();
 
   setFigures(st, a.max, a.sum, b.max, b.sum, t0);

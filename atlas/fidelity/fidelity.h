@@ -32,13 +32,23 @@ struct FidelityStats {
                                     // maximum is a lower bound
 };
 
+// Where the distances lie, sample by sample (for inspection).
+struct FidelityDetail {
+  std::vector<float> atlasDistances;  // per atlas position: to the input surface
+  std::vector<glm::vec3> meshSamples; // the input's samples: its used vertices, then its triangles'
+                                      // centroids (non-degenerate ones, in order)
+  std::vector<float> meshDistances;   // per input sample: to the atlas surface
+  std::vector<glm::vec3> meshClosest; // per input sample: the closest point of the atlas surface
+};
+
 // Both surfaces as positions + triangles. The atlas side is sampled at its vertices (the chart
-// samples), the mesh side at its vertices and triangle centroids. Throws std::invalid_argument
-// when either surface has no triangles.
+// samples), the mesh side at its vertices and triangle centroids. detail, if given, receives
+// every sample's distance. Throws std::invalid_argument when either surface has no triangles.
 FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
                               const std::vector<std::array<uint32_t, 3>>& meshTriangles,
                               const std::vector<glm::vec3>& atlasPositions,
-                              const std::vector<std::array<uint32_t, 3>>& atlasTriangles);
+                              const std::vector<std::array<uint32_t, 3>>& atlasTriangles,
+                              FidelityDetail* detail = nullptr);
 
 struct OutOfCoreFidelityOptions {
   uint64_t memoryBytes = 1ull << 30;  // what one block's surfaces, trees and samples may take (estimated)

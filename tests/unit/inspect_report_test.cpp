@@ -128,6 +128,49 @@ TEST_F(InspectReportTest, ScanReportHoldsTheBuildsFiguresAndItsImages) {
   EXPECT_GT(r.bytes, 0u);
 }
 
+// With the source mesh: the comparison finds the build's own Hausdorff figures, says where the
+// largest distances lie, and maps the farthest charts; a DEM atlas or a missing source is refused.
+TEST_F(InspectReportTest, SourceComparisonFindsTheBuildsFidelityAndWhereItLies) {
+  InspectOptions o;
+  o.atlas = path("bunny.atlas");
+  o.output = path("bunny_source_report");
+  o.worstCharts = 2;
+  o.source = test::repoData() / "meshes/bun_zipper.ply";
+  const InspectResult r = writeInspectReport(o);
+  const json st = stats("bunny.atlas");
+  const json& src = r.figures["source"];
+  EXPECT_NEAR(src["hausdorff_percent_of_diagonal"].get<double>(), st["fidelity"]["hausdorff_percent_of_diagonal"].get<double>(),
+              1e-9 * st["fidelity"]["hausdorff_percent_of_diagonal"].get<double>());
+  EXPECT_NEAR(src["max_mesh_to_atlas"].get<double>(), st["fidelity"]["max_mesh_to_atlas"].get<double>(),
+              1e-9 * st["fidelity"]["max_mesh_to_atlas"].get<double>());
+  EXPECT_EQ(src["mesh_samples"], st["fidelity"]["mesh_samples"]);
+  EXPECT_EQ(src["atlas_samples"].get<uint64_t>(), st["charts"].get<uint64_t>() * 17 * 17);  // unwelded
+  ASSERT_EQ(src["worst_input_samples"].size(), 16u);
+  // The worst input sample is the Hausdorff maximum (float distances), and lies on a chart.
+  EXPECT_NEAR(src["worst_input_samples"][0]["distance"].get<double>(), src["max_mesh_to_atlas"].get<double>(),
+              1e-6 * src["max_mesh_to_atlas"].get<double>());
+  EXPECT_LT(src["worst_input_samples"][0]["chart"].get<uint32_t>(), st["charts"].get<uint32_t>());
+  for (size_t i = 1; i < src["worst_input_samples"].size(); ++i)
+    EXPECT_LE(src["worst_input_samples"][i]["distance"].get<double>(), src["worst_input_samples"][i - 1]["distance"].get<double>());
+  ASSERT_EQ(src["distance_maps"].size(), 6u);
+  EXPECT_EQ(r.figures["summary"]["source_hausdorff_percent_of_diagonal"], src["hausdorff_percent_of_diagonal"]);
+  expectImagesMatchFiles(o.output);
+
+  o.atlas = path("rainier.atlas");
+  o.output = path("rainier_source_report");
+  EXPECT_THROW(writeInspectReport(o), InputError);
+  EXPECT_FALSE(fs::exists(o.output));
+  o.atlas = path("bunny.atlas");
+  o.source = path("no_such_mesh.ply");
+  try {
+    writeInspectReport(o);
+    ADD_FAILURE() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no_such_mesh.ply"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(o.output));
+}
+
 TEST_F(InspectReportTest, DemReportShowsHeightsAndReplacesAnEarlierReport) {
   InspectOptions o;
   o.atlas = path("rainier.atlas");
