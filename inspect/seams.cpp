@@ -12,19 +12,10 @@
 #include <tbb/parallel_for.h>
 
 #include "core/atlas_format.h"
+#include "core/union_find.h"
 
 namespace gimlod {
 namespace {
-
-struct UnionFind {
-  std::vector<uint32_t> parent;
-  explicit UnionFind(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
-  uint32_t find(uint32_t a) {
-    while (parent[a] != a) a = parent[a] = parent[parent[a]];
-    return a;
-  }
-  void unite(uint32_t a, uint32_t b) { parent[find(a)] = find(b); }
-};
 
 bool bitEqual(const glm::vec3& a, const glm::vec3& b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 

@@ -7,26 +7,9 @@
 #include <utility>
 
 #include "atlas/mesh/charting_internal.h"
+#include "core/union_find.h"
 
 namespace gimlod::charting {
-namespace {
-
-struct UnionFind {
-  std::vector<uint32_t> parent;
-  explicit UnionFind(size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
-  uint32_t find(uint32_t x) {
-    while (parent[x] != x) x = parent[x] = parent[parent[x]];
-    return x;
-  }
-  // The root of a set is its smallest element, and parent[x] <= x throughout.
-  void unite(uint32_t a, uint32_t b) {
-    a = find(a);
-    b = find(b);
-    if (a != b) parent[std::max(a, b)] = std::min(a, b);
-  }
-};
-
-}  // namespace
 
 Surface repairWelded(Welder&& w, ChartingStats& st, std::vector<uint32_t>* perTriangle) {
   const char* fn = "buildChartLayout";

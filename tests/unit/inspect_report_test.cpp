@@ -17,6 +17,7 @@
 #include "core/atlas_format.h"
 #include "inspect/report.h"
 #include "pipeline/build.h"
+#include "tests/small_atlases.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -36,23 +37,8 @@ class InspectReportTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = new test::TempDir("gimlod-inspect");
-    MeshBuildOptions mo;
-    mo.input = test::repoData() / "meshes/bun_zipper.ply";
-    mo.output = dir_->path() / "bunny.atlas";
-    mo.charts = 24;
-    mo.chartSize = 17;
-    mo.depth = 3;
-    mo.nodeRes = 8;
-    mo.minNodeRes = 2;
-    buildAtlas(mo);
-    TerrainBuildOptions to;
-    to.input = test::repoData() / "terrain/mt_rainier_90m.tif";
-    to.output = dir_->path() / "rainier.atlas";
-    to.chartSize = 129;
-    to.depth = 3;
-    to.nodeRes = 32;
-    to.minNodeRes = 4;
-    buildAtlas(to);
+    test::buildSmallScanAtlas(dir_->path() / "bunny.atlas", true);
+    test::buildSmallDemAtlas(dir_->path() / "rainier.atlas");
   }
   static void TearDownTestSuite() { delete dir_; }
   static fs::path path(const std::string& name) { return dir_->path() / name; }
