@@ -117,9 +117,22 @@ json streamingFigures(const AtlasView& atlas, uint32_t width, uint32_t height) {
     const Cut cut = adaptErrorThreshold(atlas.hierarchy, v, o, &st);
     uint64_t bytes = 0;
     for (const CutNode& n : cut.nodes) bytes += pages[n.id.level]["page_bytes"].get<uint64_t>();
+    // The nodes drawn finer than their error needs: with no node budget, the stitching
+    // constraint raised them (to give a finer neighbour's corners a vertex).
+    json raised = json::array();
+    uint32_t raisedCount = 0;
+    for (const CutNode& n : cut.nodes) {
+      const uint32_t needed = std::max(neededResolution(atlas.hierarchy, n.id, v, o.tolerancePx), p.minNodeResLog2);
+      if (n.res <= needed) continue;
+      ++raisedCount;
+      if (raised.size() < 32)
+        raised.push_back({{"chart", n.id.chart}, {"level", n.id.level}, {"x", n.id.x}, {"y", n.id.y},
+                          {"needed_res", needed}, {"drawn_res", n.res}});
+    }
     views.push_back({{"view", names[i]}, {"nodes", cut.nodes.size()}, {"triangles", cut.triangles()},
                      {"page_bytes", bytes}, {"constraint_raises", st.constraintRaises},
-                     {"constraint_splits", st.constraintSplits}, {"max_error_px", st.maxErrorPx}});
+                     {"constraint_splits", st.constraintSplits}, {"max_error_px", st.maxErrorPx},
+                     {"nodes_raised", raisedCount}, {"raised", raised}});
     nodesSum += double(cut.nodes.size());
     bytesSum += double(bytes);
     nodesMax = std::max<uint64_t>(nodesMax, cut.nodes.size());

@@ -301,12 +301,24 @@ std::string streamingHtml(const json& s) {
     h << "<tr><td>" << l["level"] << "</td><td>" << l["page_samples_per_side"] << "</td><td>" << l["page_bytes"] << "</td></tr>";
   h << "</table>\n<p>The six axis views at " << html(s["view_size"].get<std::string>())
     << ", 1-pixel tolerance, no node budget:</p>\n<table id=\"view-needs\"><tr><th>view</th><th>nodes (pages)</th>"
-       "<th>triangles</th><th>page bytes</th><th>stitching raises</th><th>stitching splits</th></tr>";
+       "<th>triangles</th><th>page bytes</th><th>stitching raises</th><th>stitching splits</th><th>nodes drawn finer than "
+       "their error needs</th></tr>";
   for (const json& v : s["views"])
     h << "<tr><td>" << html(v["view"].get<std::string>()) << "</td><td>" << v["nodes"] << "</td><td>" << v["triangles"]
       << "</td><td>" << v["page_bytes"] << "</td><td>" << v["constraint_raises"] << "</td><td>" << v["constraint_splits"]
-      << "</td></tr>";
+      << "</td><td>" << v["nodes_raised"] << "</td></tr>";
   h << "</table>\n";
+  for (const json& v : s["views"]) {
+    if (v["raised"].empty()) continue;
+    h << "<p>Nodes the stitching constraint raised in the view from " << html(v["view"].get<std::string>())
+      << " (the first " << v["raised"].size() << "):</p>\n<table id=\"raised\"><tr><th>chart</th><th>level</th>"
+         "<th>x</th><th>y</th><th>resolution its error needs</th><th>drawn</th></tr>";
+    for (const json& n : v["raised"])
+      h << "<tr><td>" << n["chart"] << "</td><td>" << n["level"] << "</td><td>" << n["x"] << "</td><td>" << n["y"]
+        << "</td><td>" << n["needed_res"] << "</td><td>" << n["drawn_res"] << "</td></tr>";
+    h << "</table>\n";
+    break;
+  }
   return h.str();
 }
 

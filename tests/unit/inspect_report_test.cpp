@@ -108,6 +108,9 @@ TEST_F(InspectReportTest, ScanReportHoldsTheBuildsFiguresAndItsImages) {
   for (const json& v : streaming["views"]) {
     EXPECT_GT(v["nodes"].get<uint64_t>(), 0u);
     EXPECT_GE(v["page_bytes"].get<uint64_t>(), v["nodes"].get<uint64_t>() * streaming["pages"].back()["page_bytes"].get<uint64_t>());
+    // Every node listed as raised is drawn finer than its error needs; no more are listed than counted.
+    EXPECT_LE(v["raised"].size(), v["nodes_raised"].get<size_t>());
+    for (const json& n : v["raised"]) EXPECT_GT(n["drawn_res"].get<uint32_t>(), n["needed_res"].get<uint32_t>());
   }
   EXPECT_EQ(streaming["pyramid_levels"][0]["bytes"].get<uint64_t>(), st["charts"].get<uint64_t>() * 17 * 17 * streaming["bytes_per_sample"].get<uint64_t>());
   expectImagesMatchFiles(o.output);
