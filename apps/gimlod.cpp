@@ -393,7 +393,7 @@ int main(int argc, char** argv) {
   inspectCmd->add_option("--image-size", inspect.report.thumbnailSize, "Largest chart image side in samples")
       ->capture_default_str();
   inspectCmd->add_option("--source", inspect.report.source,
-                         "The mesh the atlas was built from: compare them sample by sample (where the distances lie)");
+                         "The mesh or DEM the atlas was built from: compare them sample by sample (where the distances lie)");
   inspectCmd->add_option("--view-size", inspect.viewSize, "Size WxH of the six rendered views")->capture_default_str();
   inspectCmd->add_flag("--no-views", [&](int64_t) { inspect.views = false; },
                        "Skip the rendered views (no GL needed)");

@@ -269,13 +269,16 @@ std::string sourceHtml(const json& s) {
   h << "<h2>Source comparison</h2>\n<p>The atlas (level 0, every chart's grid as drawn) against "
     << html(s["source"].get<std::string>()) << ", two-sided, sample by sample.</p>\n<table id=\"source\">";
   for (const char* k : {"hausdorff_percent_of_diagonal", "mean_percent_of_diagonal", "hausdorff", "max_atlas_to_mesh",
-                        "max_mesh_to_atlas", "diagonal", "atlas_samples", "mesh_samples", "seconds"})
-    h << "<tr><td>" << k << "</td><td data-key=\"source_" << k << "\">" << number(s[k]) << "</td></tr>";
-  h << "</table>\n<table id=\"source-worst-atlas\"><tr><th>atlas sample: chart</th><th>u</th><th>v</th><th>position</th>"
+                        "max_mesh_to_atlas", "diagonal", "atlas_samples", "mesh_samples", "max_vertical_distance",
+                        "mean_vertical_distance", "height_range", "samples_compared", "voids_filled_in_source", "seconds"})
+    if (s.contains(k)) h << "<tr><td>" << k << "</td><td data-key=\"source_" << k << "\">" << number(s[k]) << "</td></tr>";
+  h << "</table>\n<table id=\"source-worst-atlas\"><tr><th>atlas sample: chart</th><th>u</th><th>v</th><th>position "
+       "(a DEM: its sample)</th>"
        "<th>distance to the input</th></tr>";
   for (const json& w : s["worst_atlas_samples"])
-    h << "<tr><td>" << w["chart"] << "</td><td>" << w["u"] << "</td><td>" << w["v"] << "</td><td>" << number(w["position"])
-      << "</td><td>" << number(w["distance"]) << "</td></tr>";
+    h << "<tr><td>" << w["chart"] << "</td><td>" << w["u"] << "</td><td>" << w["v"] << "</td><td>"
+      << number(w.contains("position") ? w["position"] : json::array({w["gx"], w["gy"]})) << "</td><td>"
+      << number(w["distance"]) << "</td></tr>";
   h << "</table>\n<table id=\"source-worst-input\"><tr><th>input sample</th><th>position</th><th>distance to the "
        "atlas</th><th>nearest chart</th><th>u</th><th>v</th></tr>";
   for (const json& w : s["worst_input_samples"])

@@ -1,6 +1,7 @@
 #include "inspect/source_report.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -8,17 +9,110 @@
 
 #include "atlas/fidelity/fidelity.h"
 #include "atlas/mesh/mesh_io.h"
+#include "atlas/terrain/dem.h"
 #include "inspect/png.h"
 
 namespace gimlod {
 
 using nlohmann::json;
 
+namespace {
+
+// The largest `count` of values, as indices, largest first.
+std::vector<uint32_t> largest(const std::vector<float>& values, uint32_t count) {
+  std::vector<uint32_t> idx(values.size());
+  std::iota(idx.begin(), idx.end(), 0u);
+  const size_t k = std::min<size_t>(count, idx.size());
+  std::partial_sort(idx.begin(), idx.begin() + k, idx.end(), [&](uint32_t a, uint32_t b) { return values[a] > values[b]; });
+  idx.resize(k);
+  return idx;
+}
+
+// Maps of the per-sample distances (n^2 per chart, chart-major) of the `count` charts with the
+// largest; log scale over 4 decades below `top`.
+json distanceMaps(const std::vector<float>& distances, uint32_t n, uint32_t charts, uint32_t count, double top,
+                  const std::filesystem::path& dir) {
+  std::vector<float> chartMax(charts, 0.f);
+  for (size_t i = 0; i < distances.size(); ++i) chartMax[i / (size_t(n) * n)] = std::max(chartMax[i / (size_t(n) * n)], distances[i]);
+  json maps = json::array();
+  top = std::max(top, 1e-30);
+  for (uint32_t c : largest(chartMax, count)) {
+    std::vector<uint8_t> rgb(size_t(n) * n * 3);
+    for (uint32_t v = 0; v < n; ++v)
+      for (uint32_t u = 0; u < n; ++u) {
+        const double d = distances[size_t(c) * n * n + size_t(v) * n + u];
+        const double t = d > 0.0 ? std::clamp(1.0 + std::log10(d / top) / 4.0, 0.0, 1.0) : 0.0;
+        const auto col = heatColour(t);
+        const size_t o = (size_t(n - 1 - v) * n + u) * 3;
+        rgb[o] = col[0], rgb[o + 1] = col[1], rgb[o + 2] = col[2];
+      }
+    const std::string name = "source_distance_chart_" + std::to_string(c) + ".png";
+    writePngRgb(dir / name, n, n, rgb);
+    maps.push_back({{"chart", c}, {"max_distance", chartMax[c]}, {"file", name}});
+  }
+  return maps;
+}
+
+// A height-field atlas against its DEM: every level-0 sample inside the DEM against the DEM's
+// height there (after void filling and z-scale, as the build read it): vertical distances.
+json demComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir, const std::filesystem::path& source,
+                   const std::filesystem::path& dir, uint32_t mapCharts, uint32_t worstSamples) {
+  const auto t0 = std::chrono::steady_clock::now();
+  DemOptions o;
+  o.zScale = m.zScale;
+  const DemRaster dem = loadDem(source, o);
+  if (dem.width != m.samplesX || dem.height != m.samplesY)
+    throw InputError(source.string() + ": " + std::to_string(dem.width) + " x " + std::to_string(dem.height) +
+                     " samples, but the atlas was built from " + std::to_string(m.samplesX) + " x " +
+                     std::to_string(m.samplesY));
+  const uint32_t n = m.chartSize, step = n - 1;
+  std::vector<float> distances(size_t(m.charts.size()) * n * n, 0.f);
+  double sum = 0.0, mx = 0.0;
+  uint64_t compared = 0;
+  for (uint32_t c = 0; c < m.charts.size(); ++c) {
+    const ChartFileReader r(atlasDir / m.charts[c].file);
+    const std::vector<float> h = r.readLevelHeights(0);
+    for (uint32_t v = 0; v < n; ++v)
+      for (uint32_t u = 0; u < n; ++u) {
+        const int64_t gx = int64_t(m.charts[c].gridX) * step + u, gy = int64_t(m.charts[c].gridY) * step + v;
+        if (gx >= dem.width || gy >= dem.height) continue;  // padding past the DEM: never drawn
+        const double d = std::abs(double(h[size_t(v) * n + u]) - dem.heights[size_t(gy) * dem.width + size_t(gx)]);
+        distances[size_t(c) * n * n + size_t(v) * n + u] = float(d);
+        sum += d;
+        mx = std::max(mx, d);
+        ++compared;
+      }
+  }
+  const double range = std::max(double(dem.maxHeight) - dem.minHeight, 1e-30);
+  json worst = json::array();
+  for (uint32_t i : largest(distances, worstSamples)) {
+    const uint32_t c = i / (n * n), k = i % (n * n);
+    worst.push_back({{"chart", c}, {"u", k % n}, {"v", k / n},
+                     {"gx", int64_t(m.charts[c].gridX) * step + k % n}, {"gy", int64_t(m.charts[c].gridY) * step + k / n},
+                     {"distance", distances[i]}});
+  }
+  return {{"source", source.string()},
+          {"kind", "dem"},
+          {"max_vertical_distance", mx},
+          {"mean_vertical_distance", compared ? sum / double(compared) : 0.0},
+          {"hausdorff", mx},
+          {"hausdorff_percent_of_diagonal", mx / range * 100.0},  // of the height range, for a DEM
+          {"mean_percent_of_diagonal", compared ? sum / double(compared) / range * 100.0 : 0.0},
+          {"height_range", range},
+          {"samples_compared", compared},
+          {"voids_filled_in_source", dem.voidsFilled},
+          {"worst_atlas_samples", worst},
+          {"worst_input_samples", json::array()},
+          {"distance_maps", distanceMaps(distances, n, uint32_t(m.charts.size()), mapCharts, mx, dir)},
+          {"seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()}};
+}
+
+}  // namespace
+
 json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir,
                       const std::filesystem::path& source, const std::filesystem::path& dir, uint32_t mapCharts,
                       uint32_t worstSamples) {
-  if (m.kind != AtlasKind::Geometry)
-    throw InputError(source.string() + ": --source compares a mesh atlas with its mesh; this atlas is a height field");
+  if (m.kind == AtlasKind::Heightfield) return demComparison(m, atlasDir, source, dir, mapCharts, worstSamples);
   const IndexedMesh mesh = readMesh(source);
   // The atlas surface unwelded, chart by chart: sample k of chart c is position c * n^2 + k, so a
   // distance is found back on its chart; triangles as the renderer draws the grid.
@@ -51,23 +145,14 @@ json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlas
               {"atlas_samples", st.atlasSamples},
               {"mesh_samples", st.meshSamples},
               {"seconds", st.seconds}};
-  // The largest distances, each way.
-  const auto worst = [&](const std::vector<float>& d) {
-    std::vector<uint32_t> idx(d.size());
-    std::iota(idx.begin(), idx.end(), 0u);
-    const size_t k = std::min<size_t>(worstSamples, idx.size());
-    std::partial_sort(idx.begin(), idx.begin() + k, idx.end(), [&](uint32_t a, uint32_t b) { return d[a] > d[b]; });
-    idx.resize(k);
-    return idx;
-  };
   json atlasWorst = json::array(), meshWorst = json::array();
-  for (uint32_t i : worst(detail.atlasDistances)) {
+  for (uint32_t i : largest(detail.atlasDistances, worstSamples)) {
     const glm::vec3& p = positions[i];
     const uint32_t c = i / (n * n), k = i % (n * n);
     atlasWorst.push_back({{"chart", c}, {"u", k % n}, {"v", k / n}, {"position", {p.x, p.y, p.z}},
                           {"distance", detail.atlasDistances[i]}});
   }
-  for (uint32_t i : worst(detail.meshDistances)) {
+  for (uint32_t i : largest(detail.meshDistances, worstSamples)) {
     const glm::vec3& p = detail.meshSamples[i];
     // Where on the atlas: the chart sample nearest the closest point of the atlas surface.
     const glm::vec3& q = detail.meshClosest[i];
@@ -88,32 +173,9 @@ json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlas
   }
   out["worst_atlas_samples"] = atlasWorst;
   out["worst_input_samples"] = meshWorst;
-  // Per chart: the largest distance of its samples; maps of the farthest.
-  std::vector<double> chartMax(m.charts.size(), 0.0);
-  for (size_t i = 0; i < detail.atlasDistances.size(); ++i)
-    chartMax[i / (n * n)] = std::max(chartMax[i / (n * n)], double(detail.atlasDistances[i]));
-  std::vector<uint32_t> order(m.charts.size());
-  std::iota(order.begin(), order.end(), 0u);
-  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return chartMax[a] > chartMax[b]; });
-  json maps = json::array();
-  const double top = std::max(st.maxAtlasToMesh, 1e-30);
-  for (size_t j = 0; j < order.size() && j < mapCharts; ++j) {
-    const uint32_t c = order[j];
-    std::vector<uint8_t> rgb(size_t(n) * n * 3);
-    for (uint32_t v = 0; v < n; ++v)
-      for (uint32_t u = 0; u < n; ++u) {
-        const double d = detail.atlasDistances[size_t(c) * n * n + size_t(v) * n + u];
-        // log scale over 4 decades below the atlas's largest distance
-        const double t = d > 0.0 ? std::clamp(1.0 + std::log10(d / top) / 4.0, 0.0, 1.0) : 0.0;
-        const auto col = heatColour(t);
-        const size_t o = (size_t(n - 1 - v) * n + u) * 3;
-        rgb[o] = col[0], rgb[o + 1] = col[1], rgb[o + 2] = col[2];
-      }
-    const std::string name = "source_distance_chart_" + std::to_string(c) + ".png";
-    writePngRgb(dir / name, n, n, rgb);
-    maps.push_back({{"chart", c}, {"max_distance", chartMax[c]}, {"file", name}});
-  }
-  out["distance_maps"] = maps;
+  // Maps of the farthest charts.
+  out["distance_maps"] = distanceMaps(detail.atlasDistances, n, uint32_t(m.charts.size()), mapCharts, st.maxAtlasToMesh, dir);
+  out["kind"] = "mesh";
   return out;
 }
 

@@ -1,8 +1,9 @@
-// The source comparison of the inspection report (inspect/report.h, with --source): the atlas
-// against the mesh it was built from, two-sided, sample by sample (atlas/fidelity): the Hausdorff
-// figures, where the largest distances lie (atlas samples by chart and (u, v), input vertices and
-// triangle centroids by position) and, for the charts farthest from the input, maps of every
-// sample's distance.
+// The source comparison of the inspection report (inspect/report.h, with --source): a mesh atlas
+// against the mesh it was built from, two-sided, sample by sample (atlas/fidelity); a height-field
+// atlas against its DEM, every sample's vertical distance. The Hausdorff figures, where the
+// largest distances lie (atlas samples by chart and (u, v); input vertices and triangle centroids
+// by position and nearest chart sample) and, for the charts farthest from the input, maps of
+// every sample's distance.
 #pragma once
 
 #include <cstdint>
@@ -14,10 +15,12 @@
 
 namespace gimlod {
 
-// Compares the geometry atlas in atlasDir (level 0, every chart's grid as the renderer draws it)
-// with the mesh `source`; writes the distance maps of the `mapCharts` farthest charts into dir.
-// Throws InputError naming the source when it cannot be read or is not a mesh, or when the atlas
-// is a height field.
+// Compares the atlas in atlasDir with `source`: a geometry atlas (level 0, every chart's grid as the
+// renderer draws it) with its mesh, a height field with its DEM (read as the build read it, with
+// the atlas's z-scale; samples past the DEM, the charts' padding, are not compared; the Hausdorff
+// percentage is then of the height range). Writes the distance maps of the `mapCharts` farthest
+// charts into dir. Throws InputError naming the source when it cannot be read, is not of the
+// atlas's kind, or (a DEM) has another size than the atlas's.
 nlohmann::json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir,
                                 const std::filesystem::path& source, const std::filesystem::path& dir,
                                 uint32_t mapCharts = 6, uint32_t worstSamples = 16);

@@ -145,11 +145,46 @@ TEST_F(InspectReportTest, SourceComparisonFindsTheBuildsFidelityAndWhereItLies) 
   EXPECT_EQ(r.figures["summary"]["source_hausdorff_percent_of_diagonal"], src["hausdorff_percent_of_diagonal"]);
   expectImagesMatchFiles(o.output);
 
+  // A DEM atlas against its DEM: every sample inside the DEM is the DEM's (distance 0), and a
+  // mesh is not its source.
   o.atlas = path("rainier.atlas");
   o.output = path("rainier_source_report");
+  o.source = test::repoData() / "terrain/mt_rainier_90m.tif";
+  const InspectResult dem = writeInspectReport(o);
+  const json& ds = dem.figures["source"];
+  EXPECT_EQ(ds["kind"], "dem");
+  EXPECT_EQ(ds["max_vertical_distance"], 0.0);
+  const AtlasManifest rm = readManifest(o.atlas);
+  EXPECT_GE(ds["samples_compared"].get<uint64_t>(), uint64_t(rm.samplesX) * rm.samplesY);  // shared borders twice
+  expectImagesMatchFiles(o.output);
+  o.output = path("rainier_source_report_2");
+  o.source = test::repoData() / "meshes/bun_zipper.ply";
   EXPECT_THROW(writeInspectReport(o), InputError);
   EXPECT_FALSE(fs::exists(o.output));
+  // A DEM whose heights differ: a copy of the atlas with one sample raised by 5 m is found there.
+  const fs::path raised = path("raised.atlas");
+  fs::copy(path("rainier.atlas"), raised, fs::copy_options::recursive);
+  {
+    const fs::path file = raised / rm.charts[4].file;
+    ChartPyramid p;
+    const ChartFileReader r(file);
+    for (uint32_t level = 0; level < r.levels(); ++level) {
+      p.heights.push_back(r.readLevelHeights(level));
+      p.normals.push_back(r.readLevelNormals(level));
+    }
+    p.heights[0][10 * rm.chartSize + 20] += 5.0f;
+    writeChartFile(file, p, rm.chartSize, rm.blockIntervals);
+  }
+  o.atlas = raised;
+  o.output = path("raised_report");
+  o.source = test::repoData() / "terrain/mt_rainier_90m.tif";
+  const json rs = writeInspectReport(o).figures["source"];
+  EXPECT_NEAR(rs["max_vertical_distance"].get<double>(), 5.0, 1e-3);
+  EXPECT_EQ(rs["worst_atlas_samples"][0]["chart"], 4);
+  EXPECT_EQ(rs["worst_atlas_samples"][0]["u"], 20);
+  EXPECT_EQ(rs["worst_atlas_samples"][0]["v"], 10);
   o.atlas = path("bunny.atlas");
+  o.output = path("no_source_report");
   o.source = path("no_such_mesh.ply");
   try {
     writeInspectReport(o);
