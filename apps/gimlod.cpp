@@ -9,6 +9,7 @@
 #include <map>
 #include <random>
 #include <string>
+#include <unordered_map>
 
 #include <CLI/CLI.hpp>
 #include <OpenImageIO/imageio.h>
@@ -21,6 +22,7 @@
 #include "apps/view_args.h"
 #include "atlas/mesh/mesh_atlas.h"
 #include "core/atlas_format.h"
+#include "inspect/png.h"
 #include "inspect/report.h"
 #include "pipeline/build.h"
 #include "pipeline/build_report.h"
@@ -145,8 +147,29 @@ struct InspectArgs {
   std::string viewSize = "480x360";
 };
 
-// Renders the six axis views of the atlas with the chart overlay into `dir` (headless EGL).
-std::vector<ReportImage> renderInspectViews(const fs::path& atlasDir, const std::string& size, const fs::path& dir) {
+// A node's colour for the source-distance overlay: the largest distance of its samples, on the
+// heat ramp over 4 decades below the largest distance (blue: that or less, red: the largest).
+NodeColour sourceDistanceColour(const SourceDistances& d) {
+  auto cache = std::make_shared<std::unordered_map<uint64_t, uint32_t>>();
+  return [&d, cache](const NodeId& id) {
+    if (const auto it = cache->find(id.key()); it != cache->end()) return it->second;
+    const uint32_t n = d.chartSize, step = (n - 1) >> id.level;
+    float mx = 0.f;
+    for (uint32_t v = id.y * step; v <= (id.y + 1) * step; ++v)
+      for (uint32_t u = id.x * step; u <= (id.x + 1) * step; ++u)
+        mx = std::max(mx, d.perSample[size_t(id.chart) * n * n + size_t(v) * n + u]);
+    const double t = mx > 0.f && d.largest > 0.0 ? std::clamp(1.0 + std::log10(double(mx) / d.largest) / 4.0, 0.0, 1.0) : 0.0;
+    const std::array<uint8_t, 3> c = heatColour(t);
+    const uint32_t rgba = uint32_t(c[0]) | uint32_t(c[1]) << 8 | uint32_t(c[2]) << 16 | 0xFF000000u;
+    cache->emplace(id.key(), rgba);
+    return rgba;
+  };
+}
+
+// Renders the six axis views of the atlas with the chart overlay into `dir` (headless EGL), and,
+// given the source distances, the same six with each node coloured by its distance to the source.
+std::vector<ReportImage> renderInspectViews(const fs::path& atlasDir, const std::string& size, const fs::path& dir,
+                                            const SourceDistances* distances) {
   uint32_t w = 0, h = 0;
   parseFrameSize(size, &w, &h);
   const AtlasView atlas = openAtlas(atlasDir);
@@ -181,6 +204,17 @@ std::vector<ReportImage> renderInspectViews(const fs::path& atlasDir, const std:
                                  f.cut.nodes.size(), f.draw.triangles, context->renderer()),
                      figures});
   }
+  if (distances) {
+    scene.setOverlay(OverlayMode::kCustom, sourceDistanceColour(*distances));
+    for (size_t i = 0; i < cams.size(); ++i) {
+      scene.renderFrame(cams[i], ao);
+      const fs::path png = dir / fmt::format("source_view_{}.png", i);
+      writePng(png, w, h, scene.renderer().readPixels());
+      views.push_back({png, fmt::format("distance to the source from {} (each node its largest: blue 1e-4 of the "
+                                        "largest {:.3g} or less, red the largest)",
+                                        names[i], distances->largest)});
+    }
+  }
   return views;
 }
 
@@ -196,7 +230,9 @@ int runInspect(InspectArgs a) {
   } scratch;
   if (a.views) {
     (void)readManifest(a.report.atlas);  // a bad atlas is named before a context is made
-    a.report.views = renderInspectViews(a.report.atlas, a.viewSize, scratch.path);
+    a.report.renderViews = [&](const SourceDistances* d) {
+      return renderInspectViews(a.report.atlas, a.viewSize, scratch.path, d);
+    };
   }
   const InspectResult res = writeInspectReport(a.report);
   const nlohmann::json& sum = res.figures["summary"];

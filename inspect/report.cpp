@@ -509,8 +509,9 @@ InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const
   sum["view_nodes_mean"] = report["streaming"]["view_nodes_mean"];
   sum["view_page_bytes_mean"] = report["streaming"]["view_page_bytes_mean"];
 
+  SourceDistances distances;
   if (!o.source.empty()) {
-    report["source"] = sourceComparison(m, o.atlas, o.source, dir);
+    report["source"] = sourceComparison(m, o.atlas, o.source, dir, 6, 16, &distances);
     sum["source_hausdorff_percent_of_diagonal"] = report["source"]["hausdorff_percent_of_diagonal"];
     sum["source_mean_percent_of_diagonal"] = report["source"]["mean_percent_of_diagonal"];
   }
@@ -531,14 +532,19 @@ InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const
     for (const auto& [k, v] : ci.figures.items()) entry[k] = v;
     report["chart_images"].push_back(entry);
   }
+  std::vector<ReportImage> views = o.views;
+  if (o.renderViews) {
+    std::vector<ReportImage> more = o.renderViews(o.source.empty() ? nullptr : &distances);
+    views.insert(views.end(), more.begin(), more.end());
+  }
   report["views"] = json::array();
-  for (size_t i = 0; i < o.views.size(); ++i) {
+  for (size_t i = 0; i < views.size(); ++i) {
     const std::string name = "view_" + std::to_string(i) + ".png";
     std::error_code ec;
-    fs::copy_file(o.views[i].png, dir / name, ec);
-    if (ec) throw InputError(o.views[i].png.string() + ": cannot copy into the report (" + ec.message() + ")");
-    json entry = {{"file", name}, {"caption", o.views[i].caption}};
-    for (const auto& [k, v] : o.views[i].figures.items()) entry[k] = v;
+    fs::copy_file(views[i].png, dir / name, ec);
+    if (ec) throw InputError(views[i].png.string() + ": cannot copy into the report (" + ec.message() + ")");
+    json entry = {{"file", name}, {"caption", views[i].caption}};
+    for (const auto& [k, v] : views[i].figures.items()) entry[k] = v;
     if (entry.contains("other_boundary_edges"))
       sum["crack_edges_in_views"] = sum.value("crack_edges_in_views", uint64_t(0)) + entry["other_boundary_edges"].get<uint64_t>();
     report["views"].push_back(entry);

@@ -7,10 +7,13 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
+
+#include "inspect/source_report.h"
 
 namespace gimlod {
 
@@ -32,6 +35,9 @@ struct InspectOptions {
   // The mesh the atlas was built from: compared sample by sample (inspect/source_report.h); empty:
   // no comparison.
   std::filesystem::path source;
+  // Renders more views once the source comparison is done (the app draws them through the real
+  // renderer): given every sample's distance to the source, or null without a source.
+  std::function<std::vector<ReportImage>(const SourceDistances*)> renderViews;
 };
 
 struct InspectResult {

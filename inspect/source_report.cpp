@@ -5,7 +5,12 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <unordered_map>
 #include <vector>
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+#include <tbb/parallel_for.h>
 
 #include "atlas/fidelity/fidelity.h"
 #include "atlas/mesh/mesh_io.h"
@@ -56,7 +61,7 @@ json distanceMaps(const std::vector<float>& distances, uint32_t n, uint32_t char
 // A height-field atlas against its DEM: every level-0 sample inside the DEM against the DEM's
 // height there (after void filling and z-scale, as the build read it): vertical distances.
 json demComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir, const std::filesystem::path& source,
-                   const std::filesystem::path& dir, uint32_t mapCharts, uint32_t worstSamples) {
+                   const std::filesystem::path& dir, uint32_t mapCharts, uint32_t worstSamples, SourceDistances* out) {
   const auto t0 = std::chrono::steady_clock::now();
   DemOptions o;
   o.zScale = m.zScale;
@@ -83,6 +88,7 @@ json demComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir
         ++compared;
       }
   }
+  if (out) *out = {n, distances, mx};
   const double range = std::max(double(dem.maxHeight) - dem.minHeight, 1e-30);
   json worst = json::array();
   for (uint32_t i : largest(distances, worstSamples)) {
@@ -111,8 +117,8 @@ json demComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir
 
 json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir,
                       const std::filesystem::path& source, const std::filesystem::path& dir, uint32_t mapCharts,
-                      uint32_t worstSamples) {
-  if (m.kind == AtlasKind::Heightfield) return demComparison(m, atlasDir, source, dir, mapCharts, worstSamples);
+                      uint32_t worstSamples, SourceDistances* distances) {
+  if (m.kind == AtlasKind::Heightfield) return demComparison(m, atlasDir, source, dir, mapCharts, worstSamples, distances);
   const IndexedMesh mesh = readMesh(source);
   // The atlas surface unwelded, chart by chart: sample k of chart c is position c * n^2 + k, so a
   // distance is found back on its chart; triangles as the renderer draws the grid.
@@ -145,6 +151,50 @@ json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlas
               {"atlas_samples", st.atlasSamples},
               {"mesh_samples", st.meshSamples},
               {"seconds", st.seconds}};
+  // The chart sample nearest each input sample's closest atlas point: a hash grid of the samples
+  // (cells of about a sample spacing), searched ring by ring until a ring holds one no farther
+  // than the ring's inner radius.
+  std::vector<uint32_t> nearestSample(detail.meshClosest.size(), 0);
+  {
+    glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
+    for (const glm::vec3& p : positions) lo = glm::min(lo, p), hi = glm::max(hi, p);
+    const double cell = std::max(double(glm::length(hi - lo)) / std::max(1.0, std::cbrt(double(positions.size()))), 1e-12);
+    const auto key = [&](int64_t x, int64_t y, int64_t z) { return (uint64_t(x) * 73856093u) ^ (uint64_t(y) * 19349663u) ^ (uint64_t(z) * 83492791u); };
+    const auto cellOf = [&](const glm::vec3& p, int k) { return int64_t(std::floor((double(p[k]) - lo[k]) / cell)); };
+    std::unordered_map<uint64_t, std::vector<uint32_t>> grid;
+    grid.reserve(positions.size() / 4 + 1);
+    for (uint32_t i = 0; i < positions.size(); ++i)
+      grid[key(cellOf(positions[i], 0), cellOf(positions[i], 1), cellOf(positions[i], 2))].push_back(i);
+    tbb::parallel_for(size_t(0), detail.meshClosest.size(), [&](size_t j) {
+      const glm::vec3& q = detail.meshClosest[j];
+      const int64_t cx = cellOf(q, 0), cy = cellOf(q, 1), cz = cellOf(q, 2);
+      float best = std::numeric_limits<float>::infinity();
+      uint32_t bestIndex = 0;
+      for (int64_t r = 0; r < 64; ++r) {
+        for (int64_t x = cx - r; x <= cx + r; ++x)
+          for (int64_t y = cy - r; y <= cy + r; ++y)
+            for (int64_t z = cz - r; z <= cz + r; ++z) {
+              if (std::max({std::abs(x - cx), std::abs(y - cy), std::abs(z - cz)}) != r) continue;  // the ring only
+              const auto it = grid.find(key(x, y, z));
+              if (it == grid.end()) continue;
+              for (uint32_t i : it->second) {
+                const glm::vec3 d = positions[i] - q;
+                const float d2 = glm::dot(d, d);
+                if (d2 < best) best = d2, bestIndex = i;
+              }
+            }
+        if (best <= float(r * cell) * float(r * cell)) break;  // nothing nearer beyond this ring
+      }
+      nearestSample[j] = bestIndex;
+    });
+  }
+  if (distances) {
+    distances->chartSize = n;
+    distances->perSample = detail.atlasDistances;
+    for (size_t j = 0; j < nearestSample.size(); ++j)
+      distances->perSample[nearestSample[j]] = std::max(distances->perSample[nearestSample[j]], detail.meshDistances[j]);
+    distances->largest = st.hausdorff;
+  }
   json atlasWorst = json::array(), meshWorst = json::array();
   for (uint32_t i : largest(detail.atlasDistances, worstSamples)) {
     const glm::vec3& p = positions[i];
@@ -155,14 +205,7 @@ json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlas
   for (uint32_t i : largest(detail.meshDistances, worstSamples)) {
     const glm::vec3& p = detail.meshSamples[i];
     // Where on the atlas: the chart sample nearest the closest point of the atlas surface.
-    const glm::vec3& q = detail.meshClosest[i];
-    size_t nearest = 0;
-    float best = std::numeric_limits<float>::infinity();
-    for (size_t k = 0; k < positions.size(); ++k) {
-      const glm::vec3 d = positions[k] - q;
-      const float d2 = d.x * d.x + d.y * d.y + d.z * d.z;
-      if (d2 < best) best = d2, nearest = k;
-    }
+    const size_t nearest = nearestSample[i];
     const uint32_t c = uint32_t(nearest / (size_t(n) * n)), k = uint32_t(nearest % (size_t(n) * n));
     meshWorst.push_back({{"sample", i},
                          {"position", {p.x, p.y, p.z}},

@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -21,8 +22,18 @@ namespace gimlod {
 // percentage is then of the height range). Writes the distance maps of the `mapCharts` farthest
 // charts into dir. Throws InputError naming the source when it cannot be read, is not of the
 // atlas's kind, or (a DEM) has another size than the atlas's.
+// Every level-0 chart sample's distance to the source, for drawing on the model: a mesh atlas's
+// samples take the larger of their own distance to the input and that of every input sample whose
+// closest atlas point is nearest them; a DEM's samples their vertical distance.
+struct SourceDistances {
+  uint32_t chartSize = 0;
+  std::vector<float> perSample;  // chart-major, chartSize^2 a chart, row v
+  double largest = 0.0;
+};
+
 nlohmann::json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir,
                                 const std::filesystem::path& source, const std::filesystem::path& dir,
-                                uint32_t mapCharts = 6, uint32_t worstSamples = 16);
+                                uint32_t mapCharts = 6, uint32_t worstSamples = 16,
+                                SourceDistances* distances = nullptr);
 
 }  // namespace gimlod

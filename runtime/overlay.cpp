@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <stdexcept>
 
 #include "core/atlas_format.h"
 
@@ -44,6 +45,7 @@ const char* overlayModeName(OverlayMode mode) {
     case OverlayMode::kChart: return "chart";
     case OverlayMode::kLevel: return "level";
     case OverlayMode::kResolution: return "res";
+    case OverlayMode::kCustom: return "custom";
   }
   return "?";
 }
@@ -59,16 +61,18 @@ uint32_t chartColour(uint32_t chart) {
   return hsv(0.11 + kGolden * double(chart), 0.45 + 0.2 * double(chart % 3) / 2.0, 0.92 - 0.12 * double(chart % 2));
 }
 
-std::vector<NodeOverlay> nodeOverlays(const Hierarchy& h, const Cut& cut, OverlayMode mode) {
+std::vector<NodeOverlay> nodeOverlays(const Hierarchy& h, const Cut& cut, OverlayMode mode, const NodeColour& colour) {
   std::vector<NodeOverlay> out;
   if (mode == OverlayMode::kNone) return out;
+  if (mode == OverlayMode::kCustom && !colour) throw std::invalid_argument("nodeOverlays: kCustom needs a colour per node");
   out.reserve(cut.nodes.size());
   for (const CutNode& n : cut.nodes) {
     NodeOverlay o;
     const NodeId& id = n.id;
-    o.rgba = mode == OverlayMode::kChart ? chartColour(id.chart)
-             : mode == OverlayMode::kLevel ? paletteColour(id.level)
-                                           : paletteColour(n.res);
+    o.rgba = mode == OverlayMode::kChart    ? chartColour(id.chart)
+             : mode == OverlayMode::kLevel  ? paletteColour(id.level)
+             : mode == OverlayMode::kCustom ? colour(id)
+                                            : paletteColour(n.res);
     const uint32_t last = (1u << id.level) - 1;
     const std::array<bool, 4> onBorder = {id.y == 0, id.x == last, id.y == last, id.x == 0};
     for (uint32_t s = 0; s < 4; ++s) {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string_view>
 #include <vector>
@@ -18,9 +19,13 @@ enum class OverlayMode : uint8_t {
   kChart,       // each chart its own colour, seams dark, open borders red
   kLevel,       // colour by quadtree level
   kResolution,  // colour by drawn resolution
+  kCustom,      // a colour per node given by the caller (e.g. a heat map of some figure)
 };
 
-// "none", "chart", "level", "res".
+// A node's colour for kCustom (RGBA8, red in the low byte).
+using NodeColour = std::function<uint32_t(const NodeId&)>;
+
+// "none", "chart", "level", "res" ("custom" is not parsed: it needs colours).
 const char* overlayModeName(OverlayMode mode);
 std::optional<OverlayMode> parseOverlayMode(std::string_view name);
 
@@ -37,7 +42,9 @@ static_assert(sizeof(NodeOverlay) == 16);
 // A colour for chart `chart`: hues spread by the golden angle, so neighbours differ.
 uint32_t chartColour(uint32_t chart);
 
-// The overlay of every cut node, in cut order; empty for kNone.
-std::vector<NodeOverlay> nodeOverlays(const Hierarchy& h, const Cut& cut, OverlayMode mode);
+// The overlay of every cut node, in cut order; empty for kNone. kCustom takes its colours from
+// `colour` (std::invalid_argument without one).
+std::vector<NodeOverlay> nodeOverlays(const Hierarchy& h, const Cut& cut, OverlayMode mode,
+                                      const NodeColour& colour = {});
 
 }  // namespace gimlod

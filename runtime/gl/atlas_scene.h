@@ -39,6 +39,7 @@ struct SceneOptions {
   // Drawn over the shading (runtime/overlay.h): charts, levels or resolutions told apart, seams
   // and open borders marked. Capture is unaffected.
   OverlayMode overlay = OverlayMode::kNone;
+  NodeColour overlayColour;  // the colours of OverlayMode::kCustom
 };
 
 struct FrameResult {
@@ -71,7 +72,10 @@ class AtlasScene {
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
   AtlasRenderer& renderer() { return *renderer_; }
-  void setOverlay(OverlayMode mode) { options_.overlay = mode; }
+  void setOverlay(OverlayMode mode, NodeColour colour = {}) {
+    options_.overlay = mode;
+    options_.overlayColour = std::move(colour);
+  }
 
   // Adapts to the camera (error threshold, paper 7.1 problem 1) and draws; the picture is then in
   // renderer().readPixels().

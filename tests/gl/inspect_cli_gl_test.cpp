@@ -86,6 +86,32 @@ TEST_F(InspectCli, ReportHoldsSixRenderedViewsOfTheCharts) {
   EXPECT_EQ(r["chart_images"].size(), 3u);
 }
 
+// With the source mesh, six more views colour every node by its distance to the source: the
+// largest distances (red) are where the source comparison says they are.
+TEST_F(InspectCli, SourceDistancesAreDrawnOnTheModel) {
+  const fs::path report = dir_->path() / "source_report";
+  std::string out;
+  ASSERT_EQ(test::runCommand(test::appPath().string() + " inspect '" + (dir_->path() / "bunny.atlas").string() +
+                                 "' -o '" + report.string() + "' --view-size 160x120 --worst 1 --source '" +
+                                 (test::repoData() / "meshes/bun_zipper.ply").string() + "' 2>&1",
+                             &out),
+            0)
+      << out;
+  std::ifstream in(report / "report.json");
+  const nlohmann::json r = nlohmann::json::parse(in);
+  ASSERT_EQ(r["views"].size(), 12u);
+  size_t reddish = 0;
+  for (size_t i = 6; i < 12; ++i) {
+    const nlohmann::json& v = r["views"][i];
+    EXPECT_NE(v["caption"].get<std::string>().find("distance to the source"), std::string::npos);
+    const std::vector<uint8_t> rgb = readRgb(report / v["file"].get<std::string>());
+    EXPECT_NE(rgb, readRgb(report / r["views"][i - 6]["file"].get<std::string>())) << "same picture as the charts";
+    for (size_t k = 0; k + 2 < rgb.size(); k += 3) reddish += rgb[k] > 150 && rgb[k + 1] < 90 && rgb[k + 2] < 90;
+  }
+  EXPECT_GT(reddish, 0u) << "the largest distances are drawn red somewhere";
+  EXPECT_GT(r["source"]["hausdorff"].get<double>(), 0.0);
+}
+
 TEST_F(InspectCli, ChartOverlayChangesThePictureAndBadNamesAreRefused) {
   const std::string app = test::appPath().string(), atlas = (dir_->path() / "bunny.atlas").string();
   std::string out;

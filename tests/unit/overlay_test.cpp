@@ -30,6 +30,7 @@ CutNode node(uint32_t chart, uint32_t level, uint32_t x, uint32_t y, uint32_t re
 TEST(Overlay, ModesByName) {
   for (OverlayMode m : {OverlayMode::kNone, OverlayMode::kChart, OverlayMode::kLevel, OverlayMode::kResolution})
     EXPECT_EQ(parseOverlayMode(overlayModeName(m)), m);
+  EXPECT_EQ(parseOverlayMode("custom"), std::nullopt);
   EXPECT_EQ(parseOverlayMode("charts"), std::nullopt);
   EXPECT_EQ(parseOverlayMode(""), std::nullopt);
 }
@@ -78,6 +79,12 @@ TEST(Overlay, BorderAndOpenSidesFollowTheNodesPlaceInItsChart) {
   EXPECT_EQ(byRes[2].rgba, byRes[3].rgba);
   EXPECT_EQ(byRes[0].chartBorderSides, o[0].chartBorderSides);
   EXPECT_TRUE(nodeOverlays(h, cut, OverlayMode::kNone).empty());
+  // Custom colours come from the caller, node by node; none given is an error.
+  const std::vector<NodeOverlay> custom =
+      nodeOverlays(h, cut, OverlayMode::kCustom, [](const NodeId& id) { return 0xFF000000u | id.level; });
+  for (size_t i = 0; i < cut.nodes.size(); ++i) EXPECT_EQ(custom[i].rgba, 0xFF000000u | cut.nodes[i].id.level);
+  EXPECT_EQ(custom[3].openSides, o[3].openSides);
+  EXPECT_THROW(nodeOverlays(h, cut, OverlayMode::kCustom), std::invalid_argument);
 }
 
 }  // namespace
