@@ -45,13 +45,15 @@ json hierarchyFigures(const AtlasView& atlas, const std::filesystem::path& dir, 
       byRes.push_back({{"res", res}, {"max_error", mx}, {"mean_error", n ? sum / double(n) : 0.0}});
     }
     row["errors"] = byRes;
-    // The heat map: each node a cell of `scale` pixels, at least 256 pixels a side where possible.
+    // The heat maps, one per resolution: each node a cell of `scale` pixels, at least 256 pixels a
+    // side where possible.
     const uint32_t cellsX = cols * side, cellsY = rows * side;
     const uint32_t scale = std::max(1u, 256u / std::max(1u, std::max(cellsX, cellsY)));
     const uint32_t w = cellsX * scale, ht = cellsY * scale;
-    if (w > 0 && ht > 0 && w <= maxImageSide && ht <= maxImageSide) {
+    json rowMaps = json::array();
+    for (uint32_t res = p.minNodeResLog2; res <= p.maxRes(level); ++res) {
+      if (w == 0 || ht == 0 || w > maxImageSide || ht > maxImageSide) break;
       std::vector<uint8_t> rgb(size_t(w) * ht * 3, 40);
-      const uint32_t res = p.maxRes(level);
       for (uint32_t c = 0; c < charts; ++c) {
         const uint32_t cx = grid ? uint32_t(atlas.manifest.charts[c].gridX) : c % cols;
         const uint32_t cy = grid ? uint32_t(atlas.manifest.charts[c].gridY) : c / cols;
@@ -72,11 +74,12 @@ json hierarchyFigures(const AtlasView& atlas, const std::filesystem::path& dir, 
               }
           }
       }
-      const std::string name = "errors_level_" + std::to_string(level) + ".png";
+      const std::string name = "errors_level_" + std::to_string(level) + "_res_" + std::to_string(res) + ".png";
       writePngRgb(dir / name, w, ht, rgb);
-      row["heat_map"] = name;
+      rowMaps.push_back({{"res", res}, {"file", name}});
       maps.push_back(name);
     }
+    row["heat_maps"] = rowMaps;
     levels.push_back(row);
   }
   return {{"levels", levels}, {"heat_maps", maps}, {"largest_error", largest}, {"layout_columns", cols},

@@ -1,6 +1,6 @@
 // The hierarchy and streaming parts of the inspection report (inspect/report.h): per level, the
 // nodes' errors at every resolution (the error-against-resolution curve) and a heat map of the
-// errors over the chart layout; bytes per level and per node page; and what the six axis views
+// errors over the chart layout at each resolution; bytes per level and per node page; and what the six axis views
 // (runtime/camera.h) need at a 1-pixel tolerance: nodes, pages, triangles and the resolutions the
 // stitching constraint raised.
 #pragma once
@@ -15,8 +15,8 @@
 namespace gimlod {
 
 // Figures of the hierarchy: "levels" (per level: nodes, and per resolution the largest and mean
-// error in world units) and "heat_maps" (file names written into dir: one PNG per level, each
-// node a cell coloured by its error at the finest resolution it may use, log scale against the
+// error in world units) and "heat_maps" (file names written into dir: one PNG per level and
+// resolution, each node a cell coloured by its error there, log scale against the
 // largest error, charts tiled in a grid, a DEM's at their place). Levels whose map would exceed
 // maxImageSide pixels a side are listed without one.
 nlohmann::json hierarchyFigures(const AtlasView& atlas, const std::filesystem::path& dir, uint32_t maxImageSide = 2048);

@@ -104,7 +104,7 @@ ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32
     // so 1 is even sampling; texels facing against their vertex normals in magenta.
     std::vector<double> len((n - 1) * size_t(n - 1));
     double sum = 0.0;
-    uint32_t backwards = 0;
+    uint32_t backwards = 0, degenerate = 0;
     for (uint32_t v = 0; v + 1 < n; ++v)
       for (uint32_t u = 0; u + 1 < n; ++u) {
         const size_t i = size_t(v) * n + u;
@@ -129,7 +129,11 @@ ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32
           const std::array<float, 3> un = unpackNormal(normals[k]);
           nsum += glm::dvec3(un[0], un[1], un[2]);
         }
-        if (glm::dot(glm::cross(d1, d2), nsum) < 0.0) {
+        const glm::dvec3 cr = glm::cross(d1, d2);
+        if (!(glm::length(cr) > 1e-8 * (glm::dot(d1, d1) + glm::dot(d2, d2)))) {
+          c = {255, 255, 255};  // (near) zero area: a degenerate texel
+          ++degenerate;
+        } else if (glm::dot(cr, nsum) < 0.0) {
           c = {255, 0, 255};
           ++backwards;
         }
@@ -140,6 +144,7 @@ ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32
     out.files.push_back(stem + "_stretch.png");
     out.figures["texel_stretch_max"] = worst;
     out.figures["texels_against_normals_at_image_level"] = backwards;
+    out.figures["degenerate_texels_at_image_level"] = degenerate;
   } else {
     const std::vector<float> h = r.readLevelHeights(level);
     const auto [lo, hi] = std::minmax_element(h.begin(), h.end());
@@ -254,13 +259,16 @@ std::string errorCurveHtml(const json& hr) {
       h << e["res"] << ": " << number(e["max_error"]) << " / " << number(e["mean_error"]) << "&emsp;";
     h << "</td></tr>";
   }
-  h << "</table>\n<p>Heat maps: each node's error at the finest resolution it may use (blue: 10<sup>-4</sup> of the "
+  h << "</table>\n<p>Heat maps: each node's error at each resolution it may use (blue: 10<sup>-4</sup> of the "
        "largest error or less, red: the largest), charts tiled in a grid (a DEM's at their place).</p>\n";
-  for (const json& l : hr["levels"])
-    if (l.contains("heat_map"))
-      h << "<figure><img src=\"" << html(l["heat_map"].get<std::string>()) << "\" alt=\"level " << l["level"]
-        << " errors\"><figcaption>level " << l["level"] << "</figcaption></figure>";
-  h << "\n";
+  for (const json& l : hr["levels"]) {
+    if (l["heat_maps"].empty()) continue;
+    h << "<div class=\"level\">";
+    for (const json& m : l["heat_maps"])
+      h << "<figure><img src=\"" << html(m["file"].get<std::string>()) << "\" alt=\"level " << l["level"] << " res "
+        << m["res"] << " errors\"><figcaption>level " << l["level"] << ", resolution " << m["res"] << "</figcaption></figure>";
+    h << "</div>\n";
+  }
   return h.str();
 }
 
@@ -340,6 +348,15 @@ std::string pageHtml(const json& r) {
   for (const auto& [k, v] : sum.items())
     h << "<tr><td>" << html(k) << "</td><td data-key=\"" << html(k) << "\">" << number(v) << "</td></tr>";
   h << "</table>\n";
+  if (r.contains("stages") && r["stages"].is_array() && !r["stages"].empty()) {
+    h << "<h2>Build stages</h2>\n<table id=\"stages\"><tr><th>stage</th><th>seconds</th><th>CPU seconds</th><th>peak RSS "
+         "(bytes)</th></tr>";
+    for (const json& st : r["stages"])
+      h << "<tr><td>" << number(st.value("stage", json(""))) << "</td><td>" << number(st.value("seconds", json(0.0)))
+        << "</td><td>" << number(st.value("cpu_seconds", json(0.0))) << "</td><td>" << number(st.value("peak_rss_bytes", json(0)))
+        << "</td></tr>";
+    h << "</table>\n";
+  }
   if (!r["views"].empty()) {
     h << "<h2>Views</h2>\n";
     for (const json& v : r["views"])

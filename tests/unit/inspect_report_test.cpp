@@ -89,9 +89,10 @@ TEST_F(InspectReportTest, ScanReportHoldsTheBuildsFiguresAndItsImages) {
     EXPECT_GE(key(a), key(b)) << "row " << i;
   }
   ASSERT_EQ(written["chart_images"].size(), 5u);
-  // Normals, positions and stretch of each, and a heat map of the errors per hierarchy level.
-  EXPECT_EQ(written["hierarchy"]["heat_maps"].size(), 3u);
-  EXPECT_EQ(r.images, 15u + 3u);
+  // Normals, positions and stretch of each, and a heat map of the errors per hierarchy level and
+  // resolution: levels 0 and 1 draw at resolutions 1..3, level 2 at 1..2 (16-interval charts).
+  EXPECT_EQ(written["hierarchy"]["heat_maps"].size(), 3u + 3u + 2u);
+  EXPECT_EQ(r.images, 15u + 8u);
   // The hierarchy's figures: errors never grow with resolution at a level, and its node counts.
   for (const json& l : written["hierarchy"]["levels"]) {
     EXPECT_EQ(l["nodes"], st["charts"].get<uint64_t>() << (2 * l["level"].get<uint32_t>()));
@@ -304,7 +305,7 @@ TEST_F(InspectReportTest, OpensInHeadlessChromium) {
   ASSERT_EQ(test::runCommand(chromium + flags + " --dump-dom '" + url + "' 2>/dev/null", &dom), 0) << dom;
   std::smatch m;
   ASSERT_TRUE(std::regex_search(dom, m, std::regex("data-images=\"(\\d+)\""))) << dom.substr(0, 2000);
-  EXPECT_EQ(std::stoi(m[1]), 12 + 3);  // 4 charts x 3 images, 3 hierarchy levels' heat maps
+  EXPECT_EQ(std::stoi(m[1]), 12 + 8);  // 4 charts x 3 images, 8 (level, resolution) heat maps
   ASSERT_TRUE(std::regex_search(dom, m, std::regex("data-broken-images=\"(\\d+)\"")));
   EXPECT_EQ(std::stoi(m[1]), 0);
   const json st = stats("bunny.atlas");
