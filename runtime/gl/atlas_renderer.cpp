@@ -138,6 +138,12 @@ AtlasRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   atlasProgram = linkAtlasProgram(setup.geometry);
   stitchBuffer = makeBuffer();
   overlayBuffer = makeBuffer();
+  {
+    const NodeOverlay none{};
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, overlayBuffer.id());
+    glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(sizeof none), &none, GL_STREAM_DRAW);
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+  }
   indirectBuffer = makeBuffer();
   feedbackBuffer = makeBuffer();
   feedbackQuery = makeQuery();
@@ -297,16 +303,17 @@ void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
                words.data(), GL_STREAM_DRAW);
   glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kStitchBinding, stitchBuffer.id());
-  // The overlays by node index (as the stitching tables); one empty record when there are none,
-  // so the binding always holds a buffer.
-  if (!overlay.empty() && overlay.size() != nodes.size())
-    throw std::invalid_argument("AtlasRenderer: " + std::to_string(overlay.size()) + " overlays for " +
-                                std::to_string(nodes.size()) + " nodes");
-  const NodeOverlay none{};
-  glBindBuffer(GL_SHADER_STORAGE_BUFFER, overlayBuffer.id());
-  glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(std::max<size_t>(overlay.size(), 1) * sizeof(NodeOverlay)),
-               overlay.empty() ? &none : overlay.data(), GL_STREAM_DRAW);
-  glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+  // The overlays by node index (as the stitching tables), uploaded only when there are some: the
+  // shader reads them only with u_overlay set, and the buffer always holds at least one record.
+  if (!overlay.empty()) {
+    if (overlay.size() != nodes.size())
+      throw std::invalid_argument("AtlasRenderer: " + std::to_string(overlay.size()) + " overlays for " +
+                                  std::to_string(nodes.size()) + " nodes");
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, overlayBuffer.id());
+    glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(overlay.size() * sizeof(NodeOverlay)), overlay.data(),
+                 GL_STREAM_DRAW);
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+  }
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kOverlayBinding, overlayBuffer.id());
   checkGl("node and stitch table upload");
 }
