@@ -1,4 +1,5 @@
 // gimlod: build multi-grained LOD atlases, render them headless, and benchmark the adaptation.
+#include <charconv>
 #include <unistd.h>
 
 #include <chrono>
@@ -83,6 +84,16 @@ uint64_t parseBytes(const std::string& option, const std::string& text) {
   return uint64_t(v * unit);
 }
 
+// A whole number in [0, 2^32 - 2] ("auto" is told apart before); throws InputError naming the option.
+uint32_t parseCount(const std::string& option, const std::string& text) {
+  uint64_t v = 0;
+  const char* end = text.data() + text.size();
+  const auto [ptr, ec] = std::from_chars(text.data(), end, v);
+  if (text.empty() || ec != std::errc() || ptr != end || v >= 0xFFFFFFFFull)
+    throw InputError(option + " '" + text + "' must be a whole number (or auto)");
+  return uint32_t(v);
+}
+
 // The command-line flag that sets the library parameter `name` (InputError::message); the name
 // itself for one the command line does not set.
 std::string flagFor(std::string_view name) {
@@ -92,7 +103,8 @@ std::string flagFor(std::string_view name) {
       {"minNodeRes", "--min-node-res"},       {"zScale", "--z-scale"},
       {"subdataset", "--subdataset"},         {"threads", "--threads"},
       {"charts", "--charts"},                 {"maxChartError", "--chart-error"},
-      {"flipRepairRounds", "--flip-repair-rounds"}, {"flipRepairBudget", "--flip-repair-budget"},
+      {"repairRounds", "--repair-rounds"},    {"repairBudget", "--repair-budget"},
+      {"maxSampleError", "--sample-error"},
       {"maxMemory", "--max-memory"},          {"measureFidelity", "--no-fidelity"},
       {"output", "--output"},                 {"worstCharts", "--worst"},
       {"thumbnailSize", "--image-size"}};
@@ -353,9 +365,13 @@ int main(int argc, char** argv) {
       ->required();
   build->add_option("-o,--output", common.output, "Atlas directory to create")->required();
   auto* chartSizeOpt =
-      build->add_option("--chart-size", terrain.chartSize, "Chart side in samples, 2^m+1 (meshes: default 65)")
+      build->add_option("--chart-size", terrain.chartSize, "Chart side in samples, 2^m+1 (meshes: by default from the input's density, 65 to 1025)")
           ->capture_default_str();
-  build->add_option("--charts", mesh.charts, "Meshes: target patches (each becomes 3-8 quad charts); 0: --chart-error")
+  std::string chartsArg = "auto";
+  build
+      ->add_option("--charts", chartsArg,
+                   "Meshes: target patches (each becomes 3-8 quad charts, and the chart repair may cut more); auto: "
+                   "about sqrt(triangles) / 80, at least 48; 0: --chart-error")
       ->capture_default_str();
   build->add_option("--chart-error", mesh.maxChartError,
                     "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
@@ -363,12 +379,18 @@ int main(int argc, char** argv) {
   std::string maxMemory = "4G";
   bool noFidelity = false;
   build->add_flag("--no-fidelity", noFidelity, "Meshes: skip the Hausdorff distance between the input and the atlas");
-  build->add_option("--flip-repair-rounds", mesh.flipRepairRounds,
-                    "Meshes: rounds of each flip repair (cutting patches whose charts have flipped texels); 0: none")
+  build->add_option("--repair-rounds,--flip-repair-rounds", mesh.repairRounds,
+                    "Meshes: rounds of each chart repair (cutting patches whose charts have flipped texels or a "
+                    "sampling error over --sample-error); 0: none")
       ->capture_default_str();
-  build->add_option("--flip-repair-budget", mesh.flipRepairBudget,
-                    "Meshes: the flip repair stops once it has parameterized this many times the surface's triangles "
+  build->add_option("--repair-budget,--flip-repair-budget", mesh.repairBudget,
+                    "Meshes: the chart repair stops once it has parameterized this many times the surface's triangles "
                     "again (its time is about this many resamplings)")
+      ->capture_default_str();
+  double sampleErrorPercent = mesh.maxSampleError * 100.0;
+  build->add_option("--sample-error", sampleErrorPercent,
+                    "Meshes: the largest distance, in % of the bounding-box diagonal, from an input vertex to its "
+                    "chart's surface; patches whose charts exceed it are cut; 0: flips only")
       ->capture_default_str();
   build->add_option("--max-memory", maxMemory, "Meshes: memory cap (e.g. 2G, 512M); larger meshes go through cell files")
       ->capture_default_str();
@@ -446,6 +468,8 @@ int main(int argc, char** argv) {
       if (isMesh(detectInputKind(common.input))) {
         static_cast<CommonBuildOptions&>(mesh) = common;
         if (chartSizeOpt->count() > 0) mesh.chartSize = terrain.chartSize;
+        mesh.charts = chartsArg == "auto" ? kAutoCharts : parseCount("--charts", chartsArg);
+        mesh.maxSampleError = sampleErrorPercent / 100.0;
         mesh.maxMemory = maxMemoryBytes;
         mesh.measureFidelity = !noFidelity;
         return runBuild(mesh);

@@ -37,15 +37,25 @@ struct TerrainBuildOptions : CommonBuildOptions {
 };
 
 // A geometry atlas from a mesh (PLY, OBJ, OFF, STL).
+inline constexpr uint32_t kAutoCharts = ~0u;
+
 struct MeshBuildOptions : CommonBuildOptions {
-  uint32_t chartSize = 65;          // quad chart side in samples, 2^m + 1 in [9, 8193]
-  uint32_t charts = 128;            // target patches before quadrangulation; 0: maxChartError
+  // Quad chart side in samples, 2^m + 1 in [9, 8193]; 0: by the input's density
+  // (meshChartSizeForDensity, after the charting).
+  uint32_t chartSize = 0;
+  // Target patches before quadrangulation (each becomes 3 to 8 quad charts, and the repair may
+  // cut more); kAutoCharts: meshPatchTarget of the input's triangles; 0: maxChartError.
+  uint32_t charts = kAutoCharts;
   double maxChartError = 0.01;      // with charts = 0: RMS plane distance / bbox diagonal
   uint32_t straightenRounds = 2;    // rounds of straightening shared sides (atlas/layout_refine.h)
-  uint32_t flipRepairRounds = 2;    // rounds of splitting patches whose charts have flipped texels
-                                    // (atlas/layout_refine.h), in [0, 16]; 0 keeps the charting's
-  double flipRepairBudget = 1.5;    // the flip repair's work cap: layout triangles parameterized
-                                    // again, as a multiple of the layout's triangles, in [0, 100]
+  // Rounds of each repair (atlas/layout_refine.h repairCharts: cutting patches whose charts have
+  // flipped texels or a sampling error over maxSampleError), in [0, 16]; 0 keeps the charting's.
+  uint32_t repairRounds = 4;
+  double repairBudget = 4.0;        // the repair's work cap: layout triangles parameterized again,
+                                    // as a multiple of the layout's triangles, in [0, 100]
+  // The largest sampling error a chart may keep (ImageQuality::sampleError) as a fraction of the
+  // bounding-box diagonal, in [0, 0.1]; 0: only flips are repaired.
+  double maxSampleError = 0.0005;
   uint64_t maxMemory = 4ull << 30;  // bytes, at least 64 MiB; above a quarter of it the cells
                                     // (out-of-core) path runs
   bool measureFidelity = true;      // two-sided Hausdorff distance input <-> atlas (out of core on
@@ -53,6 +63,23 @@ struct MeshBuildOptions : CommonBuildOptions {
 };
 
 // The option's name as opts spell it in messages (CommonBuildOptions::spellOption).
+// The patches a mesh of `triangles` triangles is charted into by default: sqrt(triangles) / 80,
+// at least 48 (48 up to 14.7M triangles, 54 at 18.7M), so about 300 quad charts. The chart
+// repair then cuts the patches whose charts fold or sample the surface too coarsely. Fewer, larger
+// patches fold on scans with holes (the bunny: 795 flipped texels from 24 patches, which the
+// repair cannot all remove).
+uint32_t meshPatchTarget(uint64_t triangles);
+
+// Samples per input triangle that the default chart size aims at (the paper's scans: about 4 to 8).
+inline constexpr double kSamplesPerTriangle = 4.0;
+
+// The default quad chart size for `quads` charts of a mesh of `triangles` triangles: the smallest
+// 2^m + 1 in [65, kMaxDensityChartSize] whose quads * (size - 1)^2 samples reach
+// kSamplesPerTriangle * triangles. The build then doubles it (up to 32 samples per triangle) while
+// more than a tenth of the surface samples more coarsely than maxSampleError.
+inline constexpr uint32_t kMaxDensityChartSize = 1025;
+uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads);
+
 inline std::string spelledOption(const CommonBuildOptions& opts, std::string_view name) {
   return opts.spellOption ? opts.spellOption(name) : std::string(name);
 }

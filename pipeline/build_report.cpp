@@ -57,7 +57,7 @@ nlohmann::json chartingJson(const ChartingStats& cst, bool outOfCore) {
 }
 
 nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) {
-  const FlipRepairStats& flips = rs.flips;
+  const ChartRepairStats& flips = rs.repair;
   nlohmann::json j = {{"charts", rs.charts},
                       {"param_stretch_l2", rs.param.stretchL2},
                       {"param_stretch_linf", rs.param.stretchLinf},
@@ -67,17 +67,22 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"image_stretch_linf", rs.image.stretchLinf},
                       {"flipped_texels", rs.image.flippedTexels},
                       {"texels_against_vertex_normals", rs.image.texelsAgainstNormals},
+                      {"sample_error", rs.image.sampleError},
+                      {"max_sample_error", rs.maxSampleError},
+                      {"sample_error_before_splits", flips.sampleErrorFirst},
+                      {"patches_over_sample_error_before_splits", flips.patchesOverErrorFirst},
+                      {"chart_size_by_density", rs.chartSizeByDensity},
                       {"sides_straightened", rs.sidesStraightened},
                       {"side_ears_mended", rs.sideEarsMended},
                       {"flipped_texels_before_splits", flips.flippedTexelsFirst},
-                      {"patches_split_for_flips", flips.patchesSplit},
+                      {"patches_split_by_repair", flips.patchesSplit},
                       {"patches_unsplittable", flips.patchesUnsplit},
                       {"split_rounds", flips.rounds},
-                      {"flip_repair_stopped_for_memory", flips.stoppedForMemory},
-                      {"flip_repair_stopped_for_work", flips.stoppedForWork},
-                      {"flip_repair_work", rs.repairWork},
-                      {"flip_repair_triangles_whole_rounds", flips.trianglesWholeRounds},
-                      {"flip_repair_triangles_trials", flips.trianglesTrials},
+                      {"repair_stopped_for_memory", flips.stoppedForMemory},
+                      {"repair_stopped_for_work", flips.stoppedForWork},
+                      {"repair_work", rs.repairWork},
+                      {"repair_triangles_whole_rounds", flips.trianglesWholeRounds},
+                      {"repair_triangles_trials", flips.trianglesTrials},
                       {"patches", rs.patches},
                       {"degenerate_texels", rs.image.degenerateTexels}};
   // Per chart: its patch and quad, stretch of the sampled image, flipped and degenerate texels.
@@ -86,7 +91,8 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
     perChart.push_back({{"patch", c.patch}, {"quad", c.quad}, {"stretch_l2", c.quality.stretchL2},
                         {"stretch_linf", c.quality.stretchLinf}, {"flipped_texels", c.quality.flippedTexels},
                         {"texels_against_vertex_normals", c.quality.texelsAgainstNormals},
-                        {"degenerate_texels", c.quality.degenerateTexels}});
+                        {"degenerate_texels", c.quality.degenerateTexels},
+                        {"sample_error", c.quality.sampleError}});
   }
   j["per_chart"] = std::move(perChart);
   j["spilled_bytes"] = spilledBytes;

@@ -75,7 +75,10 @@ struct MeshResampleStats {
   ImageQuality image;                  // all charts' sampled images
   uint32_t sidesStraightened = 0;
   uint32_t sideEarsMended = 0;
-  FlipRepairStats flips;
+  ChartRepairStats repair;
+  uint32_t chartSize = 0;              // the quad charts' side in samples
+  bool chartSizeByDensity = false;     // chosen by meshChartSizeForDensity
+  double maxSampleError = 0.0;         // the repair's bound, in the input's units (0: none)
   double repairWork = 0.0;             // layout triangles parameterized again / layout triangles
   uint64_t patches = 0;                // after the repair
   std::vector<ChartQuality> perChart;

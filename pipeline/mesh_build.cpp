@@ -1,12 +1,15 @@
 #include "pipeline/mesh_build.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <string>
 #include <vector>
 
 #include <fmt/format.h>
+#include <glm/geometric.hpp>
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
@@ -30,6 +33,13 @@ void finishStage(StageMeter& meter, const std::string& name) {
   const StageTiming& s = meter.finish(name);
   spdlog::info("stage {:<10} {:8.2f} s wall {:8.2f} s cpu  peak RSS {:7.1f} MiB", name, s.seconds, s.cpuSeconds,
                double(s.peakRssBytes) / (1 << 20));
+}
+
+// The diagonal of the layout's bounding box.
+double layoutDiagonal(const ChartLayout& layout) {
+  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+  for (const glm::vec3& p : layout.positions) lo = glm::min(lo, glm::dvec3(p)), hi = glm::max(hi, glm::dvec3(p));
+  return layout.positions.empty() ? 0.0 : glm::length(hi - lo);
 }
 
 // Refuses a chart size whose charts cannot be made: each chart's samples go to a spill file in
@@ -62,7 +72,24 @@ void checkChartRoom(const ChartLayout& layout, const MeshBuildOptions& o, const 
 
 }  // namespace
 
+uint32_t meshPatchTarget(uint64_t triangles) {
+  return uint32_t(std::clamp<double>(std::round(std::sqrt(double(triangles)) / 80.0), 48.0, 4096.0));
+}
+
+uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads) {
+  const double wanted = kSamplesPerTriangle * double(triangles);
+  uint32_t intervals = 64;
+  while (intervals + 1 < kMaxDensityChartSize && double(std::max<uint64_t>(quads, 1)) * intervals * intervals < wanted) intervals *= 2;
+  return intervals + 1;
+}
+
 HierarchyParams meshHierarchyParams(const MeshBuildOptions& o) {
+  if (o.chartSize == 0) {  // chosen after the charting: check the rest with the smallest it can be
+    MeshBuildOptions probe = o;
+    probe.chartSize = 65;
+    meshHierarchyParams(probe);
+    return {};
+  }
   if (!isChartSizeValid(o.chartSize) || o.chartSize < 9)
     throw InputError(optionRef("chartSize") + " " + std::to_string(o.chartSize) +
                      " must be 2^m + 1 with m >= 3 for meshes");
@@ -73,9 +100,11 @@ HierarchyParams meshHierarchyParams(const MeshBuildOptions& o) {
     throw InputError(optionRef("nodeRes") + " and " + optionRef("minNodeRes") +
                      " must be powers of two with 2 <= min <= node-res");
   if (o.depth < 1 || o.depth > 12) throw InputError(optionRef("depth") + " must be in [1, 12]");
-  if (o.flipRepairRounds > 16) throw InputError(optionRef("flipRepairRounds") + " must be in [0, 16]");
-  if (!(o.flipRepairBudget >= 0.0 && o.flipRepairBudget <= 100.0))
-    throw InputError(optionRef("flipRepairBudget") + " must be in [0, 100] (times the surface's triangles)");
+  if (o.repairRounds > 16) throw InputError(optionRef("repairRounds") + " must be in [0, 16]");
+  if (!(o.repairBudget >= 0.0 && o.repairBudget <= 100.0))
+    throw InputError(optionRef("repairBudget") + " must be in [0, 100] (times the surface's triangles)");
+  if (!(o.maxSampleError >= 0.0 && o.maxSampleError <= 0.1))
+    throw InputError(optionRef("maxSampleError") + " must be between 0 and 10% of the bounding-box diagonal");
   if (o.chartSize > 8193)
     throw InputError(optionRef("chartSize") + " " + std::to_string(o.chartSize) +
                      " is above 8193, the largest mesh chart size");
@@ -94,7 +123,7 @@ HierarchyParams meshHierarchyParams(const MeshBuildOptions& o) {
 
 ChartedMesh chartMesh(const MeshBuildOptions& o, const MeshInfo& info, const fs::path& dir, StageMeter& meter) {
   ChartingOptions copt;
-  copt.targetCharts = o.charts;
+  copt.targetCharts = o.charts == kAutoCharts ? meshPatchTarget(info.triangleEstimate) : o.charts;
   copt.maxError = o.maxChartError;
   copt.threads = o.threads;
   ChartedMesh c;
@@ -127,15 +156,27 @@ ChartedMesh chartMesh(const MeshBuildOptions& o, const MeshInfo& info, const fs:
   return c;
 }
 
-ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& o, const fs::path& dir, StageMeter& meter) {
+ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options, const fs::path& dir,
+                           StageMeter& meter) {
   const std::vector<std::string> bad = validateChartLayout(layout);
-  if (!bad.empty()) throw InputError(o.input.string() + ": the chart layout is invalid: " + bad.front());
+  if (!bad.empty()) throw InputError(options.input.string() + ": the chart layout is invalid: " + bad.front());
   finishStage(meter, "validate");
+  ResampledMesh r;
+  MeshResampleStats& st = r.stats;
+  MeshBuildOptions o = options;
+  if (o.chartSize == 0) {
+    uint64_t quads = 0;
+    for (const Patch& pa : layout.patches) quads += pa.sides.size();
+    o.chartSize = meshChartSizeForDensity(layout.triangles.size(), quads);
+    st.chartSizeByDensity = true;
+    spdlog::info("chart size {} for {} quad charts of {} triangles ({:.1f} samples per triangle)", o.chartSize, quads,
+                 layout.triangles.size(),
+                 double(quads) * double(o.chartSize - 1) * (o.chartSize - 1) / double(std::max<size_t>(layout.triangles.size(), 1)));
+  }
+  st.chartSize = o.chartSize;
   checkChartRoom(layout, o, dir);
 
   // Quads, parameterization and resampling.
-  ResampledMesh r;
-  MeshResampleStats& st = r.stats;
   r.spill = std::make_unique<ChartSpill>(dir / "samples.tmp", o.chartSize, !layout.colours.empty());
   ResampleOptions ro;
   ro.chartSize = o.chartSize;
@@ -145,28 +186,60 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& o, cons
   st.sideEarsMended = moveSideEars(layout);
   finishStage(meter, "straighten");
   GeometryImageSet first = resampleLayout(layout, ro);
+  // A chart size chosen by density is doubled (and the layout resampled) while the patches whose
+  // charts sample the surface more coarsely than maxSampleError hold more than a tenth of its
+  // triangles, up to 32 samples per triangle: the repair then has a few patches to cut, not many.
+  const double maxError = o.maxSampleError * layoutDiagonal(layout);
+  while (st.chartSizeByDensity && maxError > 0.0 && o.chartSize < kMaxDensityChartSize) {
+    std::vector<uint8_t> over(layout.patches.size(), 0);
+    for (const GeometryImage& g : first.charts) over[g.patch] |= g.quality.sampleError > maxError;
+    uint64_t overTriangles = 0;
+    for (uint32_t p = 0; p < layout.patches.size(); ++p) overTriangles += over[p] ? layout.patches[p].triangles.size() : 0;
+    const double samplesPerTriangle = double(first.charts.size()) * double(o.chartSize - 1) * (o.chartSize - 1) /
+                                      double(std::max<size_t>(layout.triangles.size(), 1));
+    if (overTriangles * 10 <= layout.triangles.size() || samplesPerTriangle >= 32.0) break;
+    const uint32_t next = 2 * o.chartSize - 1;
+    spdlog::info("chart size {} -> {}: patches with {:.0f}% of the triangles sample the surface more coarsely than "
+                 "{:.4f}% of the diagonal",
+                 o.chartSize, next, 100.0 * double(overTriangles) / double(layout.triangles.size()),
+                 100.0 * o.maxSampleError);
+    o.chartSize = next;
+    checkChartRoom(layout, o, dir);
+    first = GeometryImageSet{};
+    r.spill.reset();  // (removes its file)
+    r.spill = std::make_unique<ChartSpill>(dir / "samples.tmp", o.chartSize, !layout.colours.empty());
+    ro.chartSize = o.chartSize;
+    ro.spill = r.spill.get();
+    first = resampleLayout(layout, ro);
+  }
+  st.chartSize = o.chartSize;
   finishStage(meter, "resample");
   // Each repair cut adds working memory: the repair stops cutting once the process holds 3/4 of
-  // maxMemory, or once it has parameterized flipRepairBudget times the triangles again.
+  // maxMemory, or once it has parameterized repairBudget times the triangles again.
   const uint64_t layoutTriangles = layout.triangles.size();
-  r.set = repairFlips(
-      layout, std::move(first), ro, o.flipRepairRounds, &st.flips,
-      [&] { return residentBytes() < o.maxMemory / 4 * 3; },
-      uint64_t(std::llround(o.flipRepairBudget * double(layoutTriangles))));
+  ChartRepairOptions repair;
+  repair.rounds = o.repairRounds;
+  repair.workBudget = uint64_t(std::llround(o.repairBudget * double(layoutTriangles)));
+  repair.maxSampleError = maxError;
+  st.maxSampleError = repair.maxSampleError;
+  r.set = repairCharts(layout, std::move(first), ro, repair, &st.repair,
+                       [&] { return residentBytes() < o.maxMemory / 4 * 3; });
   const GeometryImageSet& set = r.set;
-  if (st.flips.stoppedForMemory)
-    spdlog::warn("{}: the flip repair stopped at 3/4 of {} ({} flipped texels left); raise {} to repair more",
-                 o.input.string(), spelledOption(o, "maxMemory"), set.image.flippedTexels,
-                 spelledOption(o, "maxMemory"));
-  st.repairWork = double(st.flips.trianglesWholeRounds + st.flips.trianglesTrials) /
+  const std::string left = fmt::format("{} flipped texels left, largest sampling error {:.4f}% of the diagonal",
+                                       set.image.flippedTexels,
+                                       100.0 * set.image.sampleError / std::max(layoutDiagonal(layout), 1e-300));
+  if (st.repair.stoppedForMemory)
+    spdlog::warn("{}: the chart repair stopped at 3/4 of {} ({}); raise {} to repair more", o.input.string(),
+                 spelledOption(o, "maxMemory"), left, spelledOption(o, "maxMemory"));
+  st.repairWork = double(st.repair.trianglesWholeRounds + st.repair.trianglesTrials) /
                   double(std::max<uint64_t>(layoutTriangles, 1));
-  if (st.flips.stoppedForWork)
-    spdlog::warn("{}: the flip repair stopped at its budget, {:.2f} times the surface's triangles parameterized again "
-                 "({} flipped texels left); raise {} to repair more",
-                 o.input.string(), st.repairWork, set.image.flippedTexels, spelledOption(o, "flipRepairBudget"));
+  if (st.repair.stoppedForWork)
+    spdlog::warn("{}: the chart repair stopped at its budget, {:.2f} times the surface's triangles parameterized "
+                 "again ({}); raise {} to repair more",
+                 o.input.string(), st.repairWork, left, spelledOption(o, "repairBudget"));
   st.patches = layout.patches.size();
   layout = ChartLayout{};
-  finishStage(meter, "flip_repair");
+  finishStage(meter, "chart_repair");
   st.charts = set.charts.size();
   st.param = set.param;
   st.image = set.image;
@@ -235,7 +308,7 @@ FidelityStats measureMeshFidelity(ChartedMesh& c, const MeshBuildOptions& o, con
 MeshBuildStats buildMeshAtlas(const MeshBuildOptions& o) {
   std::error_code ec;
   if (!fs::exists(o.input, ec)) throw InputError(o.input.string() + ": no such file");
-  const HierarchyParams p = meshHierarchyParams(o);
+  meshHierarchyParams(o);  // checks the options before anything is read
   std::unique_ptr<tbb::global_control> threads;
   if (o.threads)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.threads);
@@ -252,7 +325,9 @@ MeshBuildStats buildMeshAtlas(const MeshBuildOptions& o) {
   stats.chart.seconds = secondsSince(t0);
   ResampledMesh resampled = resampleMesh(std::move(charted.layout), o, stage.path(), meter);
   stats.resample = std::move(resampled.stats);
-  stats.write = writeMeshAtlas(std::move(resampled), p, o, stage.path(), meter);
+  MeshBuildOptions chosen = o;
+  chosen.chartSize = stats.resample.chartSize;
+  stats.write = writeMeshAtlas(std::move(resampled), meshHierarchyParams(chosen), o, stage.path(), meter);
   if (o.measureFidelity) stats.fidelity = measureMeshFidelity(charted, o, stage.path(), meter);
   charted = ChartedMesh{};
   stats.stages = meter.stages();

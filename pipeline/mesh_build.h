@@ -46,10 +46,12 @@ struct ResampledMesh {
   MeshResampleStats stats;
 };
 
-// Resample and repair: checks the layout, and refuses a chart size whose geometry images exceed
-// options.maxMemory or the free disk in dir; straightens the shared sides, resamples, and
-// repairs flipped texels (until 3/4 of maxMemory is resident or flipRepairBudget is spent).
-// layout is freed. Stages "validate", "straighten", "resample", "flip_repair". Throws
+// Resample and repair: checks the layout, chooses the chart size if options.chartSize is 0
+// (meshChartSizeForDensity, reported in stats.chartSize), and refuses a chart size whose geometry
+// images exceed options.maxMemory or the free disk in dir; straightens the shared sides,
+// resamples, and repairs flipped texels and sampling errors over options.maxSampleError (until
+// 3/4 of maxMemory is resident or repairBudget is spent). layout is freed. Stages "validate",
+// "straighten", "resample", "chart_repair". Throws
 // InputError naming the file and the parameter to change.
 ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options, const std::filesystem::path& dir,
                            StageMeter& meter);

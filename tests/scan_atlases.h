@@ -1,5 +1,6 @@
 // The shared real scans (../shared/data/meshes) and their atlases, built through the same library
-// call as `gimlod build MESH -o ATLAS` at the default mesh options (--charts 128 --chart-size 65),
+// call as `gimlod build MESH -o ATLAS` at the default mesh options (patches by the triangle count,
+// chart size by the input's density, the chart repair to the default sampling error),
 // at most once per test process per scan and kind of build. Used by the CPU scan tests
 // (tests/unit/scan_atlas_test.cpp) and the GL crack tests (tests/gl/scan_crack_gl_test.cpp).
 #pragma once
@@ -73,8 +74,6 @@ inline const BuiltScanAtlas& scanAtlas(const std::string& name, bool withFidelit
   MeshBuildOptions o;  // the defaults of `gimlod build` for meshes
   o.input = sharedScanPath(name);
   o.output = dir.path() / (name + (withFidelity ? "_fidelity" : "") + ".atlas");
-  o.chartSize = 65;
-  o.charts = 128;
   o.measureFidelity = withFidelity;
   BuiltScanAtlas b;
   const auto t0 = std::chrono::steady_clock::now();

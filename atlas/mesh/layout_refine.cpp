@@ -237,7 +237,7 @@ namespace {
 // with no sources, through boundary vertices (at most 96, spread evenly): the neck. Empty if
 // none. Reads the layout only. See splitPatchThrough and splitPatchAtNeck.
 std::vector<uint32_t> findCut(const ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources,
-                              uint32_t maxSides) {
+                              uint32_t maxSides, double minShare = 0.0) {
   if (p >= layout.patches.size()) return {};
   const Patch& patch = layout.patches[p];
   const PatchGraph g = patchGraph(layout, patch);
@@ -279,6 +279,7 @@ std::vector<uint32_t> findCut(const ChartLayout& layout, uint32_t p, std::vector
     const uint32_t e1 = path.front(), e2 = path.back();
     if (e1 == e2 || !acceptable(e1, e2)) return;
     const double forward = std::fmod(arc.at(e2) - arc.at(e1) + perimeter, perimeter);
+    if (minShare > 0.0 && std::min(forward, perimeter - forward) < minShare * perimeter) return;
     const double smaller = std::min(forward, perimeter - forward) + length;
     double score = smaller > 0.0 ? length / smaller : std::numeric_limits<double>::infinity();
     // A new corner changes the neighbour's polygon too: prefer ends at corners.
@@ -293,15 +294,31 @@ std::vector<uint32_t> findCut(const ChartLayout& layout, uint32_t p, std::vector
     const size_t step = std::max<size_t>(1, loop.size() / 96);
     for (size_t k = 0; k < loop.size(); k += step) sources.push_back(loop[k]);
   }
+  // A balanced cut (minShare) may end anywhere on the border: 96 ends spread along it besides
+  // the nearest.
+  std::vector<uint32_t> spread;
+  if (minShare > 0.0) {
+    std::vector<uint32_t> loop;
+    for (const PatchSide& side : patch.sides) loop.insert(loop.end(), side.vertices.begin(), side.vertices.end() - 1);
+    const size_t step = std::max<size_t>(1, loop.size() / 96);
+    for (size_t k = 0; k < loop.size(); k += step) spread.push_back(loop[k]);
+  }
   for (const uint32_t v : sources) {
-    // The 48 nearest boundary vertices are all the search needs.
-    const Paths paths = shortestCuts(layout, g, v, ~0u, 48);
+    // The 48 nearest boundary vertices are all the search needs (and the spread ends).
+    const Paths paths = shortestCuts(layout, g, v, ~0u, spread.empty() ? 48 : std::numeric_limits<size_t>::max());
     std::vector<std::pair<double, uint32_t>> ends;  // reached boundary vertices by distance
     for (const auto& [w, dist] : paths.dist) {
       if (w != v && g.onBoundary.contains(w)) ends.push_back({dist, w});
     }
     std::sort(ends.begin(), ends.end());
-    if (ends.size() > 48) ends.resize(48);
+    if (ends.size() > 48) {
+      std::unordered_set<uint32_t> keep(spread.begin(), spread.end());
+      std::vector<std::pair<double, uint32_t>> kept(ends.begin(), ends.begin() + 48);
+      for (size_t k = 48; k < ends.size(); ++k) {
+        if (keep.contains(ends[k].second)) kept.push_back(ends[k]);
+      }
+      ends = std::move(kept);
+    }
     auto pathTo = [&](uint32_t w) {  // v .. w
       std::vector<uint32_t> path{w};
       while (path.back() != v) path.push_back(paths.prev.at(path.back()));
@@ -616,15 +633,32 @@ bool splitPatchAtNeck(ChartLayout& layout, uint32_t p) {
   return splitByCut(layout, p, {}, 8) || splitPatchAtCornerNeck(layout, p);
 }
 
-GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions& options,
-                                      uint32_t maxRounds, FlipRepairStats* stats) {
+GeometryImageSet resampleAndRepair(ChartLayout& layout, const ResampleOptions& options,
+                                   const ChartRepairOptions& repair, ChartRepairStats* stats) {
   GeometryImageSet set = resampleLayout(layout, options);
-  return repairFlips(layout, std::move(set), options, maxRounds, stats);
+  return repairCharts(layout, std::move(set), options, repair, stats);
 }
 
 namespace {
 
-using Fold = std::pair<uint32_t, uint32_t>;  // a folding patch, the triangle under its first fold
+using Fold = std::pair<uint32_t, uint32_t>;  // a patch to cut, the triangle where it is worst
+
+// What the repair weighs, per patch or summed over patches: flipped texels first, then by how much
+// the charts' sampling errors exceed the bound (in multiples of it, times the chart's area),
+// compared in that order.
+struct Badness {
+  uint64_t flips = 0;
+  double excess = 0.0;
+  Badness& operator+=(const Badness& o) {
+    flips += o.flips;
+    excess += o.excess;
+    return *this;
+  }
+  bool operator<(const Badness& o) const {
+    return flips != o.flips ? flips < o.flips : excess < o.excess * (1.0 - 1e-9);
+  }
+  bool any() const { return flips > 0 || excess > 0.0; }
+};
 
 // Patch p and its neighbours (ring 1), and their neighbours too (ring 2), sorted.
 std::vector<uint32_t> patchRing(const ChartLayout& layout, std::vector<uint32_t> from) {
@@ -677,7 +711,8 @@ std::vector<Trial> disjointBatch(const ChartLayout& layout, std::vector<Fold>& f
 
 // Removes the patches flagged dead (nothing live may link to them) and renumbers the links;
 // `perPatch` is compacted alike.
-std::vector<int32_t> removePatches(ChartLayout& layout, const std::vector<uint8_t>& dead, std::vector<uint32_t>& perPatch) {
+template <typename T>
+std::vector<int32_t> removePatches(ChartLayout& layout, const std::vector<uint8_t>& dead, std::vector<T>& perPatch) {
   std::vector<int32_t> index(layout.patches.size(), -1);
   uint32_t next = 0;
   for (uint32_t q = 0; q < layout.patches.size(); ++q) {
@@ -700,14 +735,39 @@ std::vector<int32_t> removePatches(ChartLayout& layout, const std::vector<uint8_
 
 }  // namespace
 
-GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
-                             uint32_t maxRounds, FlipRepairStats* stats, const std::function<bool()>& mayGrow,
-                             uint64_t workBudget) {
-  FlipRepairStats local;
-  FlipRepairStats& st = stats ? *stats : local;
-  st = FlipRepairStats{};
-  st.flippedTexelsFirst = set.image.flippedTexels;
-  if (set.image.flippedTexels == 0) return set;
+namespace {
+
+// One repair (see repairCharts): of the sampling errors alone (errorsOnly), or of the flipped
+// texels first and the sampling errors after.
+GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
+                            const ChartRepairOptions& repair, ChartRepairStats& st,
+                            const std::function<bool()>& mayGrow, bool errorsOnly) {
+  const uint32_t maxRounds = repair.rounds;
+  const uint64_t workBudget = repair.workBudget;
+  const double maxError = repair.maxSampleError;
+  // The repair of the sampling errors halves patches rather than clipping them: its cuts leave at
+  // least a quarter of the border on either side.
+  auto shareOf = [&](uint32_t) { return errorsOnly ? 0.25 : 0.0; };
+  auto badnessOf = [&](const GeometryImage& g) {
+    Badness b;
+    b.flips = errorsOnly ? 0 : g.quality.flippedTexels;
+    // Weighted by the chart's area, so that cutting a patch in two with the same errors is no
+    // worse, and no better.
+    if (maxError > 0.0 && g.quality.sampleError > maxError)
+      b.excess = (g.quality.sampleError / maxError - 1.0) * g.quality.area3D;
+    return b;
+  };
+  auto badnessPerPatch = [&](const GeometryImageSet& s) {
+    std::vector<Badness> f(layout.patches.size());
+    for (const GeometryImage& g : s.charts) f[g.patch] += badnessOf(g);
+    return f;
+  };
+  auto total = [&](const GeometryImageSet& s) {
+    Badness b;
+    for (const GeometryImage& g : s.charts) b += badnessOf(g);
+    return b;
+  };
+  if (!total(set).any()) return set;
   auto grow = [&] {
     if (st.trianglesWholeRounds + st.trianglesTrials >= workBudget) {
       st.stoppedForWork = true;
@@ -720,18 +780,27 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
   uint64_t* work = &st.trianglesWholeRounds;  // where the resamplings below count
   if (!grow()) return set;
   const std::vector<glm::dvec3> normals = layoutVertexNormals(layout);
-  auto folding = [](const GeometryImageSet& s) {
+  // A triangle of patch p at layout vertex v (the patch's first triangle if none is).
+  auto triangleAt = [&](uint32_t p, uint32_t v) {
+    for (uint32_t t : layout.patches[p].triangles) {
+      const auto& tri = layout.triangles[t];
+      if (tri[0] == v || tri[1] == v || tri[2] == v) return t;
+    }
+    return layout.patches[p].triangles.front();
+  };
+  // The patches to cut: those with a fold (where it is), else with a sampling error over the
+  // bound (at its worst vertex).
+  auto folding = [&](const GeometryImageSet& s) {
     std::vector<Fold> bad;
     for (const GeometryImage& g : s.charts) {
-      if (g.foldTriangles.empty() || (!bad.empty() && bad.back().first == g.patch)) continue;
-      bad.push_back({g.patch, g.foldTriangles.front()});
+      if (!bad.empty() && bad.back().first == g.patch) continue;
+      if (!errorsOnly && !g.foldTriangles.empty()) {
+        bad.push_back({g.patch, g.foldTriangles.front()});
+      } else if (badnessOf(g).excess > 0.0 && g.quality.sampleErrorVertex != ~0u) {
+        bad.push_back({g.patch, triangleAt(g.patch, g.quality.sampleErrorVertex)});
+      }
     }
     return bad;
-  };
-  auto flippedPerPatch = [&](const GeometryImageSet& s) {
-    std::vector<uint32_t> f(layout.patches.size(), 0);
-    for (const GeometryImage& g : s.charts) f[g.patch] += g.quality.flippedTexels;
-    return f;
   };
   // Resamples only the flagged patches.
   auto resampleOnly = [&](const std::vector<uint8_t>& only) {
@@ -764,14 +833,14 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
   // First, whole rounds: every folding patch cut at once (neck first, else through the fold),
   // kept while the flipped texels drop. Cheap (only the cut patches and their neighbours are
   // resampled) and it lets halves be cut again.
-  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0 && grow(); ++round) {
+  for (uint32_t round = 0; round < maxRounds && total(set).any() && grow(); ++round) {
     const std::vector<Patch> saved = layout.patches;
     uint32_t split = 0;
     std::vector<Fold> queue = folding(set);
     while (!queue.empty()) {
       std::vector<Trial> batch = disjointBatch(layout, queue);
       tbb::parallel_for(size_t{0}, batch.size(), [&](size_t k) {
-        batch[k].cut = findCut(layout, batch[k].patch, {}, 8);
+        batch[k].cut = findCut(layout, batch[k].patch, {}, 8, shareOf(batch[k].patch));
       });
       for (Trial& t : batch) {
         t.firstNew = layout.patches.size();
@@ -787,16 +856,16 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
       break;
     }
     // The patches the round changed, before and after.
-    const std::vector<uint32_t> was = flippedPerPatch(set);
+    const std::vector<Badness> was = badnessPerPatch(set);
     std::vector<uint8_t> changed(layout.patches.size(), 0);
-    uint32_t before = 0;
+    Badness before;
     for (uint32_t p = 0; p < layout.patches.size(); ++p) {
       if (p < saved.size() && patchSamplesAlike(saved[p], layout.patches[p], p)) continue;
       changed[p] = 1;
       if (p < saved.size()) before += was[p];
     }
     GeometryImageSet trial = resampleOnly(changed);
-    if (trial.image.flippedTexels >= before) {
+    if (!(total(trial) < before)) {
       layout.patches = saved;
       ++st.rounds;
       break;
@@ -812,12 +881,12 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
   // disjoint two rings (disjointBatch): cuts searched in parallel, made in turn, judged by one
   // resampling of every changed patch, the failures undone.
   work = &st.trianglesTrials;
-  for (uint32_t round = 0; round < maxRounds && set.image.flippedTexels > 0 && !st.stoppedForMemory &&
+  for (uint32_t round = 0; round < maxRounds && total(set).any() && !st.stoppedForMemory &&
                            !st.stoppedForWork;
        ++round) {
     std::vector<Fold> queue = folding(set);
     // Kept current as splits are kept (a later split's neighbours may be earlier ones' parts).
-    std::vector<uint32_t> flippedOf = flippedPerPatch(set);
+    std::vector<Badness> flippedOf = badnessPerPatch(set);
     const std::vector<Patch> roundStart = layout.patches;
     // The charts of the patches kept trials changed, by patch, with the patches they were made
     // from: the round's closing resampling takes them unless a later trial changed the patch again.
@@ -839,7 +908,8 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
         tbb::parallel_for(size_t{0}, open.size(), [&](size_t k) {
           Trial& t = *open[k];
           const auto& tri = layout.triangles[t.triangle];
-          t.cut = neck ? findCut(layout, t.patch, {}, 8) : findCut(layout, t.patch, {tri[0], tri[1], tri[2]}, 8);
+          t.cut = neck ? findCut(layout, t.patch, {}, 8, shareOf(t.patch))
+                       : findCut(layout, t.patch, {tri[0], tri[1], tri[2]}, 8, shareOf(t.patch));
         });
         for (Trial* t : open) {
           t->firstNew = layout.patches.size();
@@ -848,10 +918,10 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
           if (t->done) mendEars(*t);
         }
         std::vector<uint8_t> only(layout.patches.size(), 0);
-        flippedOf.resize(layout.patches.size(), 0);
+        flippedOf.resize(layout.patches.size());
         // Per trial, the patches it changed, and their flipped texels before.
         std::vector<std::vector<uint32_t>> now(open.size());
-        std::vector<uint32_t> before(open.size(), 0);
+        std::vector<Badness> before(open.size());
         for (size_t k = 0; k < open.size(); ++k) {
           const Trial& t = *open[k];
           if (!t.done) continue;
@@ -865,14 +935,14 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
           for (uint32_t q : now[k]) only[q] = 1;
         }
         GeometryImageSet trial = resampleOnly(only);
-        std::vector<uint32_t> after(layout.patches.size(), 0);
-        for (const GeometryImage& g : trial.charts) after[g.patch] += g.quality.flippedTexels;
+        std::vector<Badness> after(layout.patches.size());
+        for (const GeometryImage& g : trial.charts) after[g.patch] += badnessOf(g);
         std::vector<uint8_t> dead(layout.patches.size(), 0);
         for (size_t k = 0; k < open.size(); ++k) {
           Trial& t = *open[k];
-          uint32_t a = 0;
+          Badness a;
           for (uint32_t q : now[k]) a += after[q];
-          if (t.done && (a < before[k] || (neck && a == before[k]))) {
+          if (t.done && (a < before[k] || (neck && !(before[k] < a)))) {
             t.kept = true;
             for (uint32_t q : now[k]) flippedOf[q] = after[q];
             continue;
@@ -908,6 +978,33 @@ GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const Re
     st.patchesSplit += split;
     refresh(roundStart, &keptPatches, &kept);
   }
+  return set;
+}
+
+}  // namespace
+
+GeometryImageSet repairCharts(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
+                              const ChartRepairOptions& repair, ChartRepairStats* stats,
+                              const std::function<bool()>& mayGrow) {
+  ChartRepairStats local;
+  ChartRepairStats& st = stats ? *stats : local;
+  st = ChartRepairStats{};
+  st.flippedTexelsFirst = set.image.flippedTexels;
+  st.sampleErrorFirst = set.image.sampleError;
+  {
+    std::vector<uint8_t> over(layout.patches.size(), 0);
+    for (const GeometryImage& g : set.charts) {
+      if (repair.maxSampleError > 0.0 && g.quality.sampleError > repair.maxSampleError) over[g.patch] = 1;
+    }
+    for (uint8_t o : over) st.patchesOverErrorFirst += o;
+  }
+  // Patches too coarsely sampled are halved first, whatever folds that leaves or makes (a fold
+  // often sits where the sampling is coarsest, and goes with it); then the folds, with cuts that
+  // must not raise the sampling errors again.
+  if (repair.maxSampleError > 0.0) set = repairPass(layout, std::move(set), options, repair, st, mayGrow, true);
+  const uint32_t unsplitForErrors = st.patchesUnsplit;
+  set = repairPass(layout, std::move(set), options, repair, st, mayGrow, false);
+  st.patchesUnsplit += unsplitForErrors;
   return set;
 }
 

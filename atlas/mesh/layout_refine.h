@@ -5,7 +5,9 @@
 // surface that turns by more than a right angle, so the texel faces backwards (a flipped texel).
 // Such a patch is cut in two along the shortest interior path across its neck or through the
 // fold; the cut's ends become corners, so a neighbour there gains a side (within 8). A cut is
-// kept only if it lowers the flipped-texel count (repairFlips).
+// kept only if it lowers the flipped-texel count (repairCharts). Patches too large for their
+// charts' samples (the sampling error over a bound) are cut the same way, which is how a layout
+// of few large patches gets exactly the charts its surface needs.
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (patches split until they parameterize
 // well); Sander, Snyder, Gortler, Hoppe, SIGGRAPH 2001 (charts split where stretch is high).
 #pragma once
@@ -71,11 +73,24 @@ bool splitPatchThrough(ChartLayout& layout, uint32_t patch, uint32_t triangle, u
 // false if nothing could be split.
 bool splitPatchAtNeck(ChartLayout& layout, uint32_t patch);
 
-struct FlipRepairStats {
+struct ChartRepairOptions {
+  // Rounds of each of the two repairs (see repairCharts); 0: none.
+  uint32_t rounds = 2;
+  // The largest sampling error a chart may keep (ImageQuality::sampleError, in the input's
+  // units); 0: flips only.
+  double maxSampleError = 0.0;
+  // Stop once this many layout triangles have been parameterized again (about that many
+  // triangles' worth of resampling time).
+  uint64_t workBudget = ~uint64_t(0);
+};
+
+struct ChartRepairStats {
   uint32_t rounds = 0;          // resampling rounds after the first
   uint32_t patchesSplit = 0;
-  uint32_t patchesUnsplit = 0;  // folding patches of the last round no split helped
+  uint32_t patchesUnsplit = 0;  // patches of the last round still to repair that no split helped
   uint32_t flippedTexelsFirst = 0;  // flipped texels of the first resampling
+  double sampleErrorFirst = 0.0;    // largest sampling error of the first resampling
+  uint32_t patchesOverErrorFirst = 0;  // patches of the first resampling over maxSampleError
   bool stoppedForMemory = false;    // mayGrow said no before the repair was done
   // Layout triangles parameterized again (a patch once per resampling of it): by whole rounds,
   // and by patch trials (with the rounds' closing resamplings).
@@ -83,26 +98,28 @@ struct FlipRepairStats {
   bool stoppedForWork = false;      // the work budget ran out before the repair was done
 };
 
-// Two repairs of up to maxRounds rounds each, from `set`, the resampling of `layout`. Whole
-// rounds: every patch one of whose charts has flipped texels is split (splitPatchAtNeck, else
-// splitPatchThrough the fold), the round kept only if the changed patches' flipped texels drop.
-// Then patch by patch: the split through the fold is kept if it lowers the flipped texels of the
-// patches it changes, else the neck split if it does not raise them; others are undone. Each repair ends at the first round that keeps nothing. Only
-// patches a round changes are parameterized again (ResampleReuse), so the result is bit for bit
-// a full resampling of the final layout. `layout` ends as the layout of the returned set.
+// Two repairs of up to repair.rounds rounds each, from `set`, the resampling of `layout`, of the
+// patches whose charts fold (flipped texels) or sample the surface too coarsely (a chart's
+// sampling error over repair.maxSampleError): a patch is judged by its flipped texels first,
+// then by how far its errors exceed the bound. Whole rounds: every such patch is split
+// (splitPatchAtNeck, else splitPatchThrough the fold or the worst vertex), the round kept only if
+// the changed patches get better. Then patch by patch: the split through the fold (or worst
+// vertex) is kept if it makes the patches it changes better, else the neck split if it does not
+// make them worse; others are undone. Each repair ends at the first round that keeps nothing.
+// Only patches a round changes are parameterized again (ResampleReuse), so the result is bit for
+// bit a full resampling of the final layout. `layout` ends as the layout of the returned set.
 // mayGrow, if given, is asked before every round and batch of cuts (each adds charts and working
 // memory); once it says no, the repair stops there (stats->stoppedForMemory), with a valid
-// layout and its charts. Likewise once the triangles parameterized again reach workBudget
-// (stats->stoppedForWork): the repair's time is about that of parameterizing so many triangles,
-// so a budget of k times the layout's triangles bounds it by about k first resamplings. The
-// result depends on neither the thread count nor the machine.
-GeometryImageSet repairFlips(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
-                             uint32_t maxRounds = 2, FlipRepairStats* stats = nullptr,
-                             const std::function<bool()>& mayGrow = {},
-                             uint64_t workBudget = ~uint64_t(0));
+// layout and its charts. Likewise once the triangles parameterized again reach
+// repair.workBudget (stats->stoppedForWork): the repair's time is about that of parameterizing
+// so many triangles, so a budget of k times the layout's triangles bounds it by about k first
+// resamplings. The result depends on neither the thread count nor the machine.
+GeometryImageSet repairCharts(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
+                              const ChartRepairOptions& repair, ChartRepairStats* stats = nullptr,
+                              const std::function<bool()>& mayGrow = {});
 
-// resampleLayout, then repairFlips.
-GeometryImageSet resampleWithoutFlips(ChartLayout& layout, const ResampleOptions& options,
-                                      uint32_t maxRounds = 2, FlipRepairStats* stats = nullptr);
+// resampleLayout, then repairCharts.
+GeometryImageSet resampleAndRepair(ChartLayout& layout, const ResampleOptions& options,
+                                   const ChartRepairOptions& repair = {}, ChartRepairStats* stats = nullptr);
 
 }  // namespace gimlod

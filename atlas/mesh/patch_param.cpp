@@ -330,7 +330,8 @@ double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv,
 // ring's stretch energy (symmetric Dirichlet or L2), never accepting a step that flips a triangle. Gauss-Seidel sweeps
 // until the total energy stops dropping. Returns the sweeps run.
 uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>& isBoundary,
-                                uint32_t maxSweeps, bool symmetric, std::vector<glm::dvec2>& uv) {
+                                const std::vector<glm::dvec2>& slide, uint32_t maxSweeps,
+                                bool symmetric, std::vector<glm::dvec2>& uv) {
   std::vector<std::vector<uint32_t>> rings(lp.vertices.size());
   std::vector<double> area3D(lp.triangles.size());
   for (uint32_t t = 0; t < lp.triangles.size(); ++t) {
@@ -350,11 +351,13 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
   for (; sweeps < maxSweeps; ++sweeps) {
     double before = 0.0, after = 0.0;
     for (uint32_t v = 0; v < lp.vertices.size(); ++v) {
-      if (isBoundary[v]) continue;
+      const bool slides = isBoundary[v] && !slide.empty() && slide[v] != glm::dvec2(0.0);
+      if (isBoundary[v] && !slides) continue;
       const std::vector<uint32_t>& ring = rings[v];
       const glm::dvec2 p = uv[v];
       glm::dvec2 g(0.0);
       const double e0 = ringEnergy(lp, uv, ring, v, p, area3D, k2, &g);
+      if (slides) g = glm::dot(g, slide[v]) * slide[v];  // along its polygon edge only
       if (!std::isfinite(e0)) continue;  // a flipped start: leave it to the counts
       before += e0;
       double scale = 0.0;  // mean distance to the ring's vertices in the parameter domain
@@ -526,6 +529,8 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
 
   // Boundary: side i on the polygon edge from corner i to corner i+1, by normalized arc length.
   std::vector<uint8_t> isBoundary(lp.vertices.size(), 0);
+  // Open sides' inner vertices may slide along their polygon edge in the local optimization.
+  std::vector<glm::dvec2> slide(lp.vertices.size(), glm::dvec2(0.0));
   const size_t nb = lp.boundary.size();
   std::vector<std::vector<double>> arc(n);  // per side, cumulative 3D length at each vertex
   std::vector<double> sideLength(n);
@@ -557,6 +562,9 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
       const uint32_t v = lp.boundary[k];
       out.uv[v] = k == begin ? c0 : c0 + (c1 - c0) * f;
       isBoundary[v] = 1;
+      if (k != begin && options.slideOpenSides && layout.patches[patch].sides[i].neighbourPatch < 0) {
+        slide[v] = glm::normalize(c1 - c0);
+      }
     }
   }
 
@@ -588,7 +596,7 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
 
   if (options.stretchSweeps > 0) {
     trial = out.uv;
-    out.sweepsUsed = optimizeStretchLocally(lp, isBoundary, options.stretchSweeps,
+    out.sweepsUsed = optimizeStretchLocally(lp, isBoundary, slide, options.stretchSweeps,
                                             options.symmetricEnergy, trial);
     const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
     // The symmetric energy trades a little L2 stretch for no spread-out slivers; it only ever

@@ -44,6 +44,12 @@ struct ParamOptions {
   // lengths (clamped, see patchPolygon), so long and short sides get parameter length in
   // proportion; false gives the regular n-gon whatever the side lengths.
   bool proportionalPolygon = true;
+  // The inner vertices of open sides (hole rims, borders) slide along their polygon edge in the
+  // local sweeps instead of staying where their arc length puts them, and the resampler samples
+  // open sides through the parameterization (an open side has no neighbour to match). A scan's
+  // hole rim zigzags; pinned by arc length, its triangles are sheared flat against the straight
+  // edge, and the texels beside it fold.
+  bool slideOpenSides = true;
 };
 
 // Quality of a parameterization (param -> surface map), in the style of xatlas' per-chart

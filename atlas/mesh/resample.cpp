@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <limits>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -397,10 +398,98 @@ ImageQuality combineImageQuality(const std::vector<ImageQuality>& parts) {
     q.flippedTexels += p.flippedTexels;
     q.texelsAgainstNormals += p.texelsAgainstNormals;
     q.degenerateTexels += p.degenerateTexels;
+    if (p.sampleError > q.sampleError) q.sampleError = p.sampleError, q.sampleErrorVertex = p.sampleErrorVertex;
   });
 }
 
 namespace {
+
+// The kite of an n-gon parameterization holding domain point d (kite i lies between the spokes to
+// the midpoints of sides i-1 and i), and d's coordinates (s, t) in it: the inverse of the bilinear
+// map (0,0) corner i, (1,0) midpoint i, (1,1) centre, (0,1) midpoint i-1, by Newton's method
+// (the kites are convex, so it converges from the middle), clamped to the unit square.
+struct KitePoint {
+  uint32_t kite = 0;
+  glm::dvec2 st{0.0};
+};
+KitePoint kiteOf(const std::vector<glm::dvec2>& corner, const std::vector<glm::dvec2>& mid, const glm::dvec2& d) {
+  const uint32_t n = uint32_t(corner.size());
+  constexpr double kTwoPi = 6.283185307179586;
+  auto angle = [](const glm::dvec2& x) { return std::atan2(x.y, x.x); };
+  auto ccw = [&](double from, double to) {  // angle from `from` to `to`, counter-clockwise, in [0, 2pi)
+    double a = to - from;
+    while (a < 0.0) a += kTwoPi;
+    while (a >= kTwoPi) a -= kTwoPi;
+    return a;
+  };
+  const double ad = angle(d);
+  KitePoint out;
+  for (uint32_t i = 0; i < n; ++i) {
+    const double a0 = angle(mid[(i + n - 1) % n]);
+    if (ccw(a0, ad) <= ccw(a0, angle(mid[i]))) {
+      out.kite = i;
+      break;
+    }
+  }
+  const uint32_t i = out.kite, prev = (i + n - 1) % n;
+  const glm::dvec2 a = corner[i], b = mid[i], c(0.0), e = mid[prev];
+  glm::dvec2 st(0.5);
+  for (int it = 0; it < 20; ++it) {
+    const double s = st.x, t = st.y;
+    const glm::dvec2 f = (1 - s) * (1 - t) * a + s * (1 - t) * b + s * t * c + (1 - s) * t * e - d;
+    const glm::dvec2 ds = (1 - t) * (b - a) + t * (c - e), dt = (1 - s) * (e - a) + s * (c - b);
+    const double det = ds.x * dt.y - ds.y * dt.x;
+    if (!(std::abs(det) > 1e-300)) break;
+    const glm::dvec2 step((f.x * dt.y - f.y * dt.x) / det, (ds.x * f.y - ds.y * f.x) / det);
+    st -= step;
+    if (glm::dot(step, step) < 1e-28) break;
+  }
+  out.st = glm::clamp(st, glm::dvec2(0.0), glm::dvec2(1.0));
+  return out;
+}
+
+// The point of triangle abc closest to p (Ericson, Real-Time Collision Detection, 5.1.5).
+glm::dvec3 closestOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
+  const glm::dvec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return a;
+  const glm::dvec3 bp = p - b;
+  const double d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
+  if (d3 >= 0.0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return a + ab * (d1 / (d1 - d3));
+  const glm::dvec3 cp = p - c;
+  const double d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
+  if (d6 >= 0.0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return a + ac * (d2 / (d2 - d6));
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+  const double denom = va + vb + vc;
+  if (!(std::abs(denom) > 0.0)) return a;  // degenerate: any vertex
+  return a + ab * (vb / denom) + ac * (vc / denom);
+}
+
+// The distance from x to a chart's surface, as the renderer triangulates it (each texel split along
+// its (0,0)-(1,1) diagonal), near chart coordinates st in the unit square: the nearest of the
+// triangles of the texel holding st and of the eight texels round it. Where the parameterization
+// shifts x along the surface by less than a texel this is its distance across the surface.
+double chartSurfaceDistance(const std::vector<glm::vec3>& positions, uint32_t size, const glm::dvec2& st,
+                            const glm::dvec3& x) {
+  const int64_t m = int64_t(size) - 1;
+  const int64_t ix = std::min<int64_t>(int64_t(st.x * double(m)), m - 1);
+  const int64_t iy = std::min<int64_t>(int64_t(st.y * double(m)), m - 1);
+  auto at = [&](int64_t u, int64_t v) { return glm::dvec3(positions[size_t(v) * size + size_t(u)]); };
+  double best = std::numeric_limits<double>::infinity();
+  for (int64_t v = std::max<int64_t>(iy - 1, 0); v <= std::min<int64_t>(iy + 1, m - 1); ++v) {
+    for (int64_t u = std::max<int64_t>(ix - 1, 0); u <= std::min<int64_t>(ix + 1, m - 1); ++u) {
+      const glm::dvec3 p00 = at(u, v), p10 = at(u + 1, v), p01 = at(u, v + 1), p11 = at(u + 1, v + 1);
+      best = std::min({best, glm::length(x - closestOnTriangle(x, p00, p10, p11)),
+                       glm::length(x - closestOnTriangle(x, p00, p11, p01))});
+    }
+  }
+  return best;
+}
 
 // Whether side i of patch `patch`, at index p, is sampled in its own direction (it owns the
 // side): open sides, and shared sides whose (patch, side) is the smaller of the two.
@@ -564,8 +653,11 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       st.firstChart = links.offsets[p];
       st.sides = n;
 
+      // Samples of the open sides taken through the parameterization (below); empty for others.
+      std::vector<std::vector<Sample>> openSides(n);
       // Side sample k of side i in this patch's direction (0 = corner i, 2m = corner i+1).
       auto sideSample = [&](uint32_t i, uint32_t k) -> const Sample& {
+        if (!openSides[i].empty()) return openSides[i][k];
         const std::vector<Sample>& s = sides[sideIndex[p][i]];
         const bool flipped = owners[sideIndex[p][i]].patch != p ||
                              owners[sideIndex[p][i]].side != i;
@@ -586,6 +678,23 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       std::vector<glm::dvec2> corner(n), mid(n);
       for (uint32_t i = 0; i < n; ++i) corner[i] = pp.corners[i];
       for (uint32_t i = 0; i < n; ++i) mid[i] = 0.5 * (corner[i] + pp.corners[(i + 1) % n]);
+      // Open sides whose vertices slid in the parameterization are sampled through it, at even
+      // steps along their polygon edge; their ends are the corner vertices themselves, as every
+      // patch meeting there has them.
+      if (options.param.slideOpenSides) {
+        for (uint32_t i = 0; i < n; ++i) {
+          const PatchSide& side = patch.sides[i];
+          if (side.neighbourPatch >= 0) continue;
+          std::vector<Sample>& out = openSides[i];
+          out.resize(sideCount);
+          out.front() = vertexSample(surface, side.vertices.front());
+          out.back() = vertexSample(surface, side.vertices.back());
+          const glm::dvec2 c1 = corner[(i + 1) % n];
+          for (uint32_t k = 1; k + 1 < sideCount; ++k) {
+            out[k] = sampleAt(corner[i] + (c1 - corner[i]) * (double(k) / double(sideCount - 1)));
+          }
+        }
+      }
       const glm::dvec2 centre(0.0);
       const Sample centreSample = sampleAt(centre);
       // Spoke i: midpoint of side i (t = 0) to the centre (t = m), shared by quads i and i+1.
@@ -621,6 +730,20 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         const auto it = sideFace.find(undirectedKey(s.edgeA, s.edgeB));
         return it == sideFace.end() ? ~0u : it->second;
       };
+      // Every vertex of the patch but those of its shared sides, placed in its kite, for the
+      // sampling error. (A vertex of a shared side lies on the side's polyline, which both patches
+      // sample alike by arc length; the chart across covers it as much as this one, so neither
+      // alone tells its distance to the atlas.)
+      std::unordered_set<uint32_t> seamVertices;
+      for (const PatchSide& side : patch.sides) {
+        if (side.neighbourPatch >= 0) seamVertices.insert(side.vertices.begin(), side.vertices.end());
+      }
+      std::vector<std::vector<std::pair<uint32_t, glm::dvec2>>> kiteVertices(n);
+      for (uint32_t v = 0; v < pp.vertices.size(); ++v) {
+        if (seamVertices.contains(pp.vertices[v])) continue;
+        const KitePoint k = kiteOf(corner, mid, pp.uv[v]);
+        kiteVertices[k.kite].push_back({v, k.st});
+      }
       std::vector<glm::vec3> floatNormals(size_t(size) * size);
       std::vector<uint32_t> triangles(size_t(size) * size, ~0u);
       std::vector<glm::vec3> faceNormals(size_t(size) * size);
@@ -668,6 +791,14 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         }
         std::vector<uint32_t> flipped;
         img.quality = measureImage(img.positions, floatNormals, size, &flipped, &faceNormals);
+        // How far the chart's surface passes from the input vertices it stands for.
+        for (const auto& [v, st] : kiteVertices[i]) {
+          const double e = chartSurfaceDistance(img.positions, size, st, glm::dvec3(layout.positions[pp.vertices[v]]));
+          if (e > img.quality.sampleError) {
+            img.quality.sampleError = e;
+            img.quality.sampleErrorVertex = pp.vertices[v];
+          }
+        }
         // Where the chart folds, as layout triangles (one per flipped texel, a few per chart).
         for (uint32_t at : flipped) {
           for (const size_t k : {size_t(at), size_t(at) + 1, size_t(at) + size, size_t(at) + size + 1}) {

@@ -52,6 +52,14 @@ struct ImageQuality {
   // own vertex normals, as scans have), so it is >= flippedTexels less such texels.
   uint32_t texelsAgainstNormals = 0;
   uint32_t degenerateTexels = 0;  // texel quads of (near) zero 3D area
+  // The largest distance from an input vertex to the chart's surface (its texels as the renderer
+  // triangulates them) round the vertex's own chart coordinates (the 3 x 3 texels there): the
+  // sampling error the parameterization's texel sizes leave, an upper bound of the vertex's
+  // distance to the atlas. Vertices of the patch's interior and open sides count; those of its
+  // shared sides (sampled by arc length alike in both patches) are left to the fidelity figure.
+  // In the input's units; the worst vertex is a layout vertex id (~0u when none).
+  double sampleError = 0.0;
+  uint32_t sampleErrorVertex = ~0u;
   double area3D = 0.0;            // surface area of the sampled grid
 };
 

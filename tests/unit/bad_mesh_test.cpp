@@ -357,10 +357,15 @@ TEST_F(BadMesh, AbsurdOptions) {
   expectRejected(f, {"--max-memory", "GiB of geometry images"}, "--chart-size 8193 --charts 8", "sphere.ply");
   expectRejected(f, {"--threads"}, base + "--threads 100000", "--threads");
   expectRejected(f, {"--depth"}, "--chart-size 9 --depth 0", "--depth");
-  expectRejected(f, {"--flip-repair-rounds"}, base + "--flip-repair-rounds 17", "--flip-repair-rounds");
-  expectRejected(f, {"--flip-repair-budget"}, base + "--flip-repair-budget -1", "--flip-repair-budget");
-  expectRejected(f, {"--flip-repair-budget"}, base + "--flip-repair-budget 101", "--flip-repair-budget");
-  EXPECT_EQ(build(f, base + "--charts 8 --flip-repair-rounds 0"), 0) << output_;  // in range: builds
+  expectRejected(f, {"--repair-rounds"}, base + "--repair-rounds 17", "--repair-rounds");
+  expectRejected(f, {"--repair-budget"}, base + "--repair-budget -1", "--repair-budget");
+  expectRejected(f, {"--repair-budget"}, base + "--flip-repair-budget 101", "--repair-budget");  // the old name
+  expectRejected(f, {"--sample-error"}, base + "--sample-error -0.01", "--sample-error");
+  expectRejected(f, {"--sample-error"}, base + "--sample-error 50", "--sample-error");
+  expectRejected(f, {"--charts", "whole number"}, base + "--charts many", "--charts");
+  expectRejected(f, {"--charts", "whole number"}, base + "--charts -3", "--charts");
+  EXPECT_EQ(build(f, base + "--charts 8 --repair-rounds 0"), 0) << output_;  // in range: builds
+  EXPECT_EQ(build(f, base + "--charts auto --sample-error 0"), 0) << output_;
 
   // --charts 0 without --chart-error uses the default error target; --charts far above the
   // triangle count stops at what the mesh allows (every patch holds at least one triangle).

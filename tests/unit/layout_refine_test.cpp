@@ -217,8 +217,8 @@ TEST(PatchSplit, FlipRepairOnARealScanNeverMakesThingsWorse) {
   const size_t patchesBefore = layout.patches.size();
   ResampleOptions ro;
   ro.chartSize = 33;
-  FlipRepairStats st;
-  const GeometryImageSet set = resampleWithoutFlips(layout, ro, 3, &st);
+  ChartRepairStats st;
+  const GeometryImageSet set = resampleAndRepair(layout, ro, {3}, &st);
   std::printf("  bunny at 33^2: %u flipped texels before repair, %u after (%u patches split, %u rounds)\n",
               st.flippedTexelsFirst, set.image.flippedTexels, st.patchesSplit, st.rounds);
   EXPECT_LE(set.image.flippedTexels, st.flippedTexelsFirst);
@@ -248,18 +248,18 @@ TEST(PatchSplit, FlipRepairStopsWhenToldMemoryIsShort) {
   ASSERT_GT(first.image.flippedTexels, 0u);
   const GeometryImageSet reference = resampleLayout(layout, ro);
   // Refused from the start: nothing is cut, the charts are those it was given.
-  FlipRepairStats st;
-  const GeometryImageSet set = repairFlips(layout, std::move(first), ro, 2, &st, [] { return false; });
+  ChartRepairStats st;
+  const GeometryImageSet set = repairCharts(layout, std::move(first), ro, {2}, &st, [] { return false; });
   EXPECT_TRUE(st.stoppedForMemory);
   EXPECT_EQ(st.patchesSplit, 0u);
   EXPECT_TRUE(sameLayout(layout, before));
   expectSameCharts(set, reference);
   // Allowed a few batches: it stops part way with a valid layout whose charts match it.
   ChartLayout partial = before;
-  FlipRepairStats st2;
-  uint32_t left = 3;
+  ChartRepairStats st2;
+  uint32_t left = 1;
   const GeometryImageSet some =
-      repairFlips(partial, resampleLayout(partial, ro), ro, 2, &st2, [&] { return left-- > 0; });
+      repairCharts(partial, resampleLayout(partial, ro), ro, {2}, &st2, [&] { return left-- > 0; });
   EXPECT_TRUE(st2.stoppedForMemory);
   expectValid(partial);
   expectSameCharts(some, resampleLayout(partial, ro));
@@ -274,11 +274,11 @@ TEST(PatchSplit, FlipRepairWithSpilledChartsGivesTheSameAtlas) {
   ResampleOptions ro;
   ro.chartSize = 33;
   ChartLayout held = charted, spilled = charted;
-  FlipRepairStats stHeld, stSpilled;
-  const GeometryImageSet setHeld = resampleWithoutFlips(held, ro, 2, &stHeld);
+  ChartRepairStats stHeld, stSpilled;
+  const GeometryImageSet setHeld = resampleAndRepair(held, ro, {2}, &stHeld);
   ChartSpill spill(tmp.path() / "samples.tmp", ro.chartSize, false);
   ro.spill = &spill;
-  GeometryImageSet setSpilled = resampleWithoutFlips(spilled, ro, 2, &stSpilled);
+  GeometryImageSet setSpilled = resampleAndRepair(spilled, ro, {2}, &stSpilled);
   EXPECT_GT(stHeld.patchesSplit, 0u) << "the bunny at 33^2 should need splits";
   EXPECT_EQ(stHeld.patchesSplit, stSpilled.patchesSplit);
   EXPECT_TRUE(sameLayout(held, spilled));
@@ -313,15 +313,15 @@ TEST(PatchSplit, FlipRepairStopsAtItsWorkBudget) {
   ResampleOptions ro;
   ro.chartSize = 33;
   ChartLayout full = charted;
-  FlipRepairStats stFull;
-  resampleWithoutFlips(full, ro, 2, &stFull);
+  ChartRepairStats stFull;
+  resampleAndRepair(full, ro, {2}, &stFull);
   const uint64_t work = stFull.trianglesWholeRounds + stFull.trianglesTrials;
   ASSERT_GT(stFull.trianglesWholeRounds, 0u);
   EXPECT_FALSE(stFull.stoppedForWork);
   // Nothing allowed: the charts it was given.
   ChartLayout none = charted;
-  FlipRepairStats stNone;
-  const GeometryImageSet untouched = repairFlips(none, resampleLayout(none, ro), ro, 2, &stNone, {}, 0);
+  ChartRepairStats stNone;
+  const GeometryImageSet untouched = repairCharts(none, resampleLayout(none, ro), ro, {2, 0.0, 0}, &stNone);
   EXPECT_TRUE(stNone.stoppedForWork);
   EXPECT_EQ(stNone.patchesSplit, 0u);
   EXPECT_TRUE(sameLayout(none, charted));
@@ -329,8 +329,8 @@ TEST(PatchSplit, FlipRepairStopsAtItsWorkBudget) {
   // A third of what the whole repair takes: it stops part way, past the budget by at most the
   // batch that crossed it, and what it returns is the resampling of what it leaves.
   ChartLayout part = charted;
-  FlipRepairStats stPart;
-  const GeometryImageSet some = repairFlips(part, resampleLayout(part, ro), ro, 2, &stPart, {}, work / 3);
+  ChartRepairStats stPart;
+  const GeometryImageSet some = repairCharts(part, resampleLayout(part, ro), ro, {2, 0.0, work / 3}, &stPart);
   EXPECT_TRUE(stPart.stoppedForWork);
   const uint64_t used = stPart.trianglesWholeRounds + stPart.trianglesTrials;
   EXPECT_GE(used, work / 3);
@@ -345,15 +345,15 @@ TEST(PatchSplit, FlipRepairDoesNotDependOnTheThreadCount) {
   ResampleOptions ro;
   ro.chartSize = 33;
   ChartLayout one = charted, many = charted;
-  FlipRepairStats stOne, stMany;
+  ChartRepairStats stOne, stMany;
   GeometryImageSet setOne;
   {
     tbb::global_control single(tbb::global_control::max_allowed_parallelism, 1);
     straightenSides(one, 2);
-    setOne = resampleWithoutFlips(one, ro, 2, &stOne);
+    setOne = resampleAndRepair(one, ro, {2}, &stOne);
   }
   straightenSides(many, 2);
-  const GeometryImageSet setMany = resampleWithoutFlips(many, ro, 2, &stMany);
+  const GeometryImageSet setMany = resampleAndRepair(many, ro, {2}, &stMany);
   EXPECT_GT(stOne.patchesSplit, 0u) << "the bunny at 33^2 should need splits";
   EXPECT_TRUE(sameLayout(one, many));
   EXPECT_EQ(stOne.patchesSplit, stMany.patchesSplit);
@@ -504,13 +504,105 @@ TEST(SideEars, AnEarOnAnOpenSideOfAnEightSidedPatchIsMendedAfterANeckCut) {
   EXPECT_EQ(moveSideEars(layout), 0u) << "nothing left to mend";
 }
 
+// The sampling error: an input vertex's distance to its chart's surface round its own chart
+// coordinates. On a flat grid the charts are the plane itself (rounding only); on the cube sphere
+// (a polyhedron: it creases at every edge) it about halves each time the chart side doubles.
+TEST(SampleError, ZeroOnAPlaneAndFallingWithTheChartSize) {
+  ChartLayout flat = test::gridLayout(12, 12, 1.0f, 1.0f, {6}, true);
+  ResampleOptions ro;
+  ro.chartSize = 17;
+  const GeometryImageSet f = resampleLayout(flat, ro);
+  EXPECT_LT(f.image.sampleError, 1e-6);
+  double last = 0.0;
+  for (uint32_t size : {9u, 17u, 33u, 65u}) {
+    ChartLayout sphere = test::cubeLayout(16, true);
+    ro.chartSize = size;
+    const GeometryImageSet s = resampleLayout(sphere, ro);
+    std::printf("  sphere at %u^2: sampling error %.3g (radius 1)\n", size, s.image.sampleError);
+    EXPECT_GT(s.image.sampleError, 0.0);
+    EXPECT_NE(s.image.sampleErrorVertex, ~0u);
+    double worstChart = 0.0;
+    for (const GeometryImage& g : s.charts) worstChart = std::max(worstChart, g.quality.sampleError);
+    EXPECT_EQ(worstChart, s.image.sampleError);
+    if (last > 0.0) {
+      EXPECT_LT(s.image.sampleError, last * 0.6) << "chart size " << size;
+    }
+    last = s.image.sampleError;
+  }
+}
+
+// The repair cuts patches whose charts sample too coarsely until every chart is within the bound
+// (the cube sphere: six patches of 16 x 16 cells at 9^2 samples a chart), with no flipped texels,
+// and the charts are those of a full resampling of the final layout.
+TEST(PatchSplit, SamplingErrorRepairReachesItsBound) {
+  ChartLayout layout = test::cubeLayout(16, true);
+  ResampleOptions ro;
+  ro.chartSize = 9;
+  const GeometryImageSet first = resampleLayout(layout, ro);
+  ChartRepairOptions repair;
+  repair.rounds = 6;
+  repair.maxSampleError = first.image.sampleError / 3.0;
+  ChartRepairStats st;
+  const GeometryImageSet set = repairCharts(layout, resampleLayout(layout, ro), ro, repair, &st);
+  std::printf("  cube sphere at 9^2: sampling error %.3g -> %.3g (bound %.3g), %zu patches, %u split\n",
+              first.image.sampleError, set.image.sampleError, repair.maxSampleError, layout.patches.size(),
+              st.patchesSplit);
+  EXPECT_EQ(st.sampleErrorFirst, first.image.sampleError);
+  EXPECT_EQ(st.patchesOverErrorFirst, 6u);
+  EXPECT_GT(st.patchesSplit, 0u);
+  EXPECT_LE(set.image.sampleError, repair.maxSampleError);
+  EXPECT_EQ(set.image.flippedTexels, 0u);
+  expectValid(layout);
+  expectSameCharts(set, resampleLayout(layout, ro));
+  // Without a bound the same layout is left alone (it has no folds).
+  ChartLayout untouched = test::cubeLayout(16, true);
+  ChartRepairStats none;
+  repairCharts(untouched, resampleLayout(untouched, ro), ro, ChartRepairOptions{}, &none);
+  EXPECT_EQ(none.patchesSplit, 0u);
+  EXPECT_EQ(untouched.patches.size(), 6u);
+}
+
+// Open sides (the bunny's hole rims) whose vertices slide along their polygon edge, and are
+// sampled through the parameterization, fold less than sides pinned by arc length: the shipped
+// bunny in 24 patches at 129^2, before any repair.
+TEST(OpenSides, SlidingRimsFoldLessOnTheBunny) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 24;
+  ChartLayout layout = buildChartLayout(mesh, copt);
+  straightenSides(layout, 2);
+  moveSideEars(layout);
+  ResampleOptions ro;
+  ro.chartSize = 129;
+  const GeometryImageSet sliding = resampleLayout(layout, ro);
+  ro.param.slideOpenSides = false;
+  const GeometryImageSet pinned = resampleLayout(layout, ro);
+  std::printf("  bunny, 24 patches at 129^2: %u flipped texels with sliding rims, %u pinned\n",
+              sliding.image.flippedTexels, pinned.image.flippedTexels);
+  EXPECT_LT(sliding.image.flippedTexels, pinned.image.flippedTexels);
+  EXPECT_EQ(sliding.param.flippedTriangles, 0u);
+  // The open sides' ends are the corner vertices, bit for bit, as the neighbours sample them.
+  const auto offsets = quadChartOffsets(layout);
+  uint32_t checked = 0;
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    for (uint32_t i = 0; i < layout.patches[p].sides.size(); ++i) {
+      if (layout.patches[p].sides[i].neighbourPatch >= 0) continue;
+      const GeometryImage& g = sliding.charts[offsets[p] + i];  // quad i: (0,0) is corner i
+      const glm::vec3 corner = layout.positions[layout.patches[p].sides[i].vertices.front()];
+      EXPECT_EQ(std::memcmp(&g.positions[0], &corner, sizeof corner), 0) << "patch " << p << " side " << i;
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 0u);
+}
+
 TEST(PatchSplit, RepairLeavesAFoldFreeLayoutUnchanged) {
   ChartLayout layout = test::cubeLayout(8, true);
   const ChartLayout before = layout;
   ResampleOptions ro;
   ro.chartSize = 17;
-  FlipRepairStats st;
-  const GeometryImageSet set = resampleWithoutFlips(layout, ro, 4, &st);
+  ChartRepairStats st;
+  const GeometryImageSet set = resampleAndRepair(layout, ro, {4}, &st);
   EXPECT_EQ(set.image.flippedTexels, 0u);
   EXPECT_EQ(st.rounds, 0u);
   EXPECT_TRUE(sameLayout(layout, before));

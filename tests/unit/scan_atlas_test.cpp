@@ -286,7 +286,12 @@ TEST_P(ScanAtlasTest, Invariants) {
   ASSERT_TRUE(fs::exists(built->dir / "stats.json"));
   ASSERT_EQ(nlohmann::json::parse(std::ifstream(built->dir / "stats.json")), st);
   ASSERT_GT(st["charts"].get<uint32_t>(), 0u);
-  EXPECT_EQ(st["chart_size"].get<uint32_t>(), 65u);
+  {
+    // The chart size follows the input's density (then doubles where the surface needs it).
+    const uint32_t size = st["chart_size"].get<uint32_t>();
+    EXPECT_TRUE(size >= 65 && size <= 1025 && ((size - 1) & (size - 2)) == 0) << size;
+    EXPECT_TRUE(st["resample"]["chart_size_by_density"].get<bool>());
+  }
 
   {
     SCOPED_TRACE("seams");
@@ -369,6 +374,30 @@ TEST_P(ScanAtlasTest, FlippedTexels) {
             << " degenerate texels\n";
   EXPECT_EQ(r["param_flipped"].get<uint64_t>(), 0u);
   EXPECT_EQ(flipped, 0u) << name << ": " << flipped << " flipped texels";
+}
+
+// Few large charts at the defaults: the layout starts from meshPatchTarget patches (48 here) and
+// the repair cuts only where charts fold or sample too coarsely, so the atlas has about 300 quad
+// charts, under half of the old layout of 128 small patches at 65^2 (758 to 797 charts on these
+// scans), every chart within the sampling-error bound.
+TEST_P(ScanAtlasTest, FewChartsWithinTheSamplingBound) {
+  const std::string name = GetParam();
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedScan(name));
+  const test::BuiltScanAtlas* built = nullptr;
+  ASSERT_NO_THROW(built = &test::scanAtlas(name, false)) << "gimlod build " << test::sharedScanPath(name);
+  const nlohmann::json& st = built->stats;
+  const nlohmann::json& r = st["resample"];
+  const uint32_t charts = st["charts"].get<uint32_t>();
+  const double bound = r["max_sample_error"].get<double>(), error = r["sample_error"].get<double>();
+  std::cout << "  " << name << ": " << charts << " charts of " << st["chart_size"] << "^2 from "
+            << st["charting"]["patches"] << " patches (" << r["patches"] << " after the repair), sampling error "
+            << error << " (bound " << bound << ")\n";
+  EXPECT_EQ(st["charting"]["charts_before_fixing"].get<uint32_t>(),
+            meshPatchTarget(st["charting"]["triangles"].get<uint64_t>()));
+  EXPECT_LE(charts, 400u);
+  EXPECT_GT(bound, 0.0);
+  EXPECT_LE(error, bound);
+  EXPECT_FALSE(r["repair_stopped_for_work"].get<bool>());
 }
 
 INSTANTIATE_TEST_SUITE_P(SharedScans, ScanAtlasTest, ::testing::ValuesIn(test::sharedScanNames()),
