@@ -75,9 +75,10 @@ inline constexpr double kSamplesPerTriangle = 4.0;
 
 // The default quad chart size for `quads` charts of a mesh of `triangles` triangles: the smallest
 // 2^m + 1 in [65, kMaxDensityChartSize] whose quads * (size - 1)^2 samples reach
-// kSamplesPerTriangle * triangles. The build then doubles it (up to 32 samples per triangle) while
+// kSamplesPerTriangle * triangles. The build then doubles it (up to kMaxSamplesPerTriangle) while
 // more than a tenth of the surface samples more coarsely than maxSampleError.
 inline constexpr uint32_t kMaxDensityChartSize = 1025;
+inline constexpr double kMaxSamplesPerTriangle = 64.0;
 uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads);
 
 inline std::string spelledOption(const CommonBuildOptions& opts, std::string_view name) {

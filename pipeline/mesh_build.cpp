@@ -188,7 +188,7 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   GeometryImageSet first = resampleLayout(layout, ro);
   // A chart size chosen by density is doubled (and the layout resampled) while the patches whose
   // charts sample the surface more coarsely than maxSampleError hold more than a tenth of its
-  // triangles, up to 32 samples per triangle: the repair then has a few patches to cut, not many.
+  // triangles, up to kMaxSamplesPerTriangle: the repair then has a few patches to cut, not many.
   const double maxError = o.maxSampleError * layoutDiagonal(layout);
   while (st.chartSizeByDensity && maxError > 0.0 && o.chartSize < kMaxDensityChartSize) {
     std::vector<uint8_t> over(layout.patches.size(), 0);
@@ -197,7 +197,7 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
     for (uint32_t p = 0; p < layout.patches.size(); ++p) overTriangles += over[p] ? layout.patches[p].triangles.size() : 0;
     const double samplesPerTriangle = double(first.charts.size()) * double(o.chartSize - 1) * (o.chartSize - 1) /
                                       double(std::max<size_t>(layout.triangles.size(), 1));
-    if (overTriangles * 10 <= layout.triangles.size() || samplesPerTriangle >= 32.0) break;
+    if (overTriangles * 10 <= layout.triangles.size() || samplesPerTriangle >= kMaxSamplesPerTriangle) break;
     const uint32_t next = 2 * o.chartSize - 1;
     spdlog::info("chart size {} -> {}: patches with {:.0f}% of the triangles sample the surface more coarsely than "
                  "{:.4f}% of the diagonal",

@@ -750,7 +750,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
   auto shareOf = [&](uint32_t) { return errorsOnly ? 0.25 : 0.0; };
   auto badnessOf = [&](const GeometryImage& g) {
     Badness b;
-    b.flips = errorsOnly ? 0 : g.quality.flippedTexels;
+    b.flips = g.quality.flippedTexels;
     // Weighted by the chart's area, so that cutting a patch in two with the same errors is no
     // worse, and no better.
     if (maxError > 0.0 && g.quality.sampleError > maxError)
@@ -767,7 +767,19 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
     for (const GeometryImage& g : s.charts) b += badnessOf(g);
     return b;
   };
-  if (!total(set).any()) return set;
+  // What a repair of the sampling errors must do: lower them and add no flipped texel; what the
+  // repair of both does: lower the flipped texels, or keep them and lower the errors.
+  auto better = [&](const Badness& a, const Badness& b) {
+    return errorsOnly ? a.flips <= b.flips && a.excess < b.excess * (1.0 - 1e-9) : a < b;
+  };
+  auto notWorse = [&](const Badness& a, const Badness& b) {
+    return errorsOnly ? a.flips <= b.flips && a.excess <= b.excess : !(b < a);
+  };
+  auto toRepair = [&](const GeometryImageSet& s) {
+    const Badness b = total(s);
+    return errorsOnly ? b.excess > 0.0 : b.any();
+  };
+  if (!toRepair(set)) return set;
   auto grow = [&] {
     if (st.trianglesWholeRounds + st.trianglesTrials >= workBudget) {
       st.stoppedForWork = true;
@@ -833,7 +845,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
   // First, whole rounds: every folding patch cut at once (neck first, else through the fold),
   // kept while the flipped texels drop. Cheap (only the cut patches and their neighbours are
   // resampled) and it lets halves be cut again.
-  for (uint32_t round = 0; round < maxRounds && total(set).any() && grow(); ++round) {
+  for (uint32_t round = 0; round < maxRounds && toRepair(set) && grow(); ++round) {
     const std::vector<Patch> saved = layout.patches;
     uint32_t split = 0;
     std::vector<Fold> queue = folding(set);
@@ -865,7 +877,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
       if (p < saved.size()) before += was[p];
     }
     GeometryImageSet trial = resampleOnly(changed);
-    if (!(total(trial) < before)) {
+    if (!better(total(trial), before)) {
       layout.patches = saved;
       ++st.rounds;
       break;
@@ -881,7 +893,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
   // disjoint two rings (disjointBatch): cuts searched in parallel, made in turn, judged by one
   // resampling of every changed patch, the failures undone.
   work = &st.trianglesTrials;
-  for (uint32_t round = 0; round < maxRounds && total(set).any() && !st.stoppedForMemory &&
+  for (uint32_t round = 0; round < maxRounds && toRepair(set) && !st.stoppedForMemory &&
                            !st.stoppedForWork;
        ++round) {
     std::vector<Fold> queue = folding(set);
@@ -942,7 +954,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
           Trial& t = *open[k];
           Badness a;
           for (uint32_t q : now[k]) a += after[q];
-          if (t.done && (a < before[k] || (neck && !(before[k] < a)))) {
+          if (t.done && (better(a, before[k]) || (neck && notWorse(a, before[k])))) {
             t.kept = true;
             for (uint32_t q : now[k]) flippedOf[q] = after[q];
             continue;
@@ -1001,10 +1013,18 @@ GeometryImageSet repairCharts(ChartLayout& layout, GeometryImageSet set, const R
   // Patches too coarsely sampled are halved first, whatever folds that leaves or makes (a fold
   // often sits where the sampling is coarsest, and goes with it); then the folds, with cuts that
   // must not raise the sampling errors again.
-  if (repair.maxSampleError > 0.0) set = repairPass(layout, std::move(set), options, repair, st, mayGrow, true);
-  const uint32_t unsplitForErrors = st.patchesUnsplit;
-  set = repairPass(layout, std::move(set), options, repair, st, mayGrow, false);
-  st.patchesUnsplit += unsplitForErrors;
+  // Twice: the fold repair's cuts change the layout, and a patch that no halving could improve
+  // without a fold may then be cut.
+  for (int cycle = 0; cycle < 2; ++cycle) {
+    const uint32_t splitBefore = st.patchesSplit;
+    if (repair.maxSampleError > 0.0) set = repairPass(layout, std::move(set), options, repair, st, mayGrow, true);
+    const uint32_t unsplitForErrors = st.patchesUnsplit;
+    set = repairPass(layout, std::move(set), options, repair, st, mayGrow, false);
+    st.patchesUnsplit += unsplitForErrors;
+    if (repair.maxSampleError <= 0.0 || set.image.sampleError <= repair.maxSampleError ||
+        st.patchesSplit == splitBefore || st.stoppedForMemory || st.stoppedForWork)
+      break;
+  }
   return set;
 }
 
