@@ -387,11 +387,11 @@ int main(int argc, char** argv) {
                     "Meshes: the chart repair stops once it has parameterized this many times the surface's triangles "
                     "again (its time is about this many resamplings)")
       ->capture_default_str();
-  double sampleErrorPercent = mesh.maxSampleError * 100.0;
+  double sampleErrorPercent = -1.0;
   build->add_option("--sample-error", sampleErrorPercent,
                     "Meshes: the largest distance, in % of the bounding-box diagonal, from an input vertex to its "
-                    "chart's surface; patches whose charts exceed it are cut; 0: flips only")
-      ->capture_default_str();
+                    "chart's surface; patches whose charts exceed it are cut; 0: flips only (default: 0.05 when the "
+                    "chart size is chosen by density, else 0)");
   build->add_option("--max-memory", maxMemory, "Meshes: memory cap (e.g. 2G, 512M); larger meshes go through cell files")
       ->capture_default_str();
   build->add_option("--depth", common.depth, "Quadtree levels per chart")->capture_default_str();
@@ -469,7 +469,9 @@ int main(int argc, char** argv) {
         static_cast<CommonBuildOptions&>(mesh) = common;
         if (chartSizeOpt->count() > 0) mesh.chartSize = terrain.chartSize;
         mesh.charts = chartsArg == "auto" ? kAutoCharts : parseCount("--charts", chartsArg);
-        mesh.maxSampleError = sampleErrorPercent / 100.0;
+        mesh.maxSampleError = sampleErrorPercent < 0.0 && build->get_option("--sample-error")->count() == 0
+                                  ? kAutoSampleError
+                                  : sampleErrorPercent / 100.0;
         mesh.maxMemory = maxMemoryBytes;
         mesh.measureFidelity = !noFidelity;
         return runBuild(mesh);

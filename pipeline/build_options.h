@@ -38,6 +38,8 @@ struct TerrainBuildOptions : CommonBuildOptions {
 
 // A geometry atlas from a mesh (PLY, OBJ, OFF, STL).
 inline constexpr uint32_t kAutoCharts = ~0u;
+inline constexpr double kAutoSampleError = -1.0;
+inline constexpr double kDefaultSampleError = 0.0005;
 
 struct MeshBuildOptions : CommonBuildOptions {
   // Quad chart side in samples, 2^m + 1 in [9, 8193]; 0: by the input's density
@@ -54,8 +56,10 @@ struct MeshBuildOptions : CommonBuildOptions {
   double repairBudget = 4.0;        // the repair's work cap: layout triangles parameterized again,
                                     // as a multiple of the layout's triangles, in [0, 100]
   // The largest sampling error a chart may keep (ImageQuality::sampleError) as a fraction of the
-  // bounding-box diagonal, in [0, 0.1]; 0: only flips are repaired.
-  double maxSampleError = 0.0005;
+  // bounding-box diagonal, in [0, 0.1]; 0: only flips are repaired; kAutoSampleError:
+  // kDefaultSampleError when the chart size is chosen by density (chartSize 0), else 0 (a chart
+  // size given is kept as it is, with the patches it was given).
+  double maxSampleError = kAutoSampleError;
   uint64_t maxMemory = 4ull << 30;  // bytes, at least 64 MiB; above a quarter of it the cells
                                     // (out-of-core) path runs
   bool measureFidelity = true;      // two-sided Hausdorff distance input <-> atlas (out of core on

@@ -103,7 +103,7 @@ HierarchyParams meshHierarchyParams(const MeshBuildOptions& o) {
   if (o.repairRounds > 16) throw InputError(optionRef("repairRounds") + " must be in [0, 16]");
   if (!(o.repairBudget >= 0.0 && o.repairBudget <= 100.0))
     throw InputError(optionRef("repairBudget") + " must be in [0, 100] (times the surface's triangles)");
-  if (!(o.maxSampleError >= 0.0 && o.maxSampleError <= 0.1))
+  if (o.maxSampleError != kAutoSampleError && !(o.maxSampleError >= 0.0 && o.maxSampleError <= 0.1))
     throw InputError(optionRef("maxSampleError") + " must be between 0 and 10% of the bounding-box diagonal");
   if (o.chartSize > 8193)
     throw InputError(optionRef("chartSize") + " " + std::to_string(o.chartSize) +
@@ -164,6 +164,7 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   ResampledMesh r;
   MeshResampleStats& st = r.stats;
   MeshBuildOptions o = options;
+  if (o.maxSampleError == kAutoSampleError) o.maxSampleError = o.chartSize == 0 ? kDefaultSampleError : 0.0;
   if (o.chartSize == 0) {
     uint64_t quads = 0;
     for (const Patch& pa : layout.patches) quads += pa.sides.size();

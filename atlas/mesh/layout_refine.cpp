@@ -288,21 +288,17 @@ std::vector<uint32_t> findCut(const ChartLayout& layout, uint32_t p, std::vector
     }
     if (score < bestScore) bestScore = score, best = std::move(path);
   };
-  if (sources.empty()) {
-    std::vector<uint32_t> loop;
-    for (const PatchSide& side : patch.sides) loop.insert(loop.end(), side.vertices.begin(), side.vertices.end() - 1);
-    const size_t step = std::max<size_t>(1, loop.size() / 96);
-    for (size_t k = 0; k < loop.size(); k += step) sources.push_back(loop[k]);
-  }
-  // A balanced cut (minShare) may end anywhere on the border: 96 ends spread along it besides
-  // the nearest.
+  // At most 96 boundary vertices, spread evenly along the border: the sources of a neck search,
+  // and the far ends a balanced cut (minShare) may also reach besides the nearest.
   std::vector<uint32_t> spread;
-  if (minShare > 0.0) {
+  {
     std::vector<uint32_t> loop;
     for (const PatchSide& side : patch.sides) loop.insert(loop.end(), side.vertices.begin(), side.vertices.end() - 1);
     const size_t step = std::max<size_t>(1, loop.size() / 96);
     for (size_t k = 0; k < loop.size(); k += step) spread.push_back(loop[k]);
   }
+  if (sources.empty()) sources = spread;
+  if (!(minShare > 0.0)) spread.clear();
   for (const uint32_t v : sources) {
     // The 48 nearest boundary vertices are all the search needs (and the spread ends).
     const Paths paths = shortestCuts(layout, g, v, ~0u, spread.empty() ? 48 : std::numeric_limits<size_t>::max());
