@@ -1,7 +1,6 @@
 #include "pipeline/mesh_build.h"
 
 #include <algorithm>
-#include <cstdlib>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -199,13 +198,19 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
     const double samplesPerTriangle = double(first.charts.size()) * double(o.chartSize - 1) * (o.chartSize - 1) /
                                       double(std::max<size_t>(layout.triangles.size(), 1));
     if (overTriangles * 10 <= layout.triangles.size() || samplesPerTriangle >= kMaxSamplesPerTriangle) break;
-    const uint32_t next = 2 * o.chartSize - 1;
+    MeshBuildOptions larger = o;
+    larger.chartSize = 2 * o.chartSize - 1;
+    try {
+      checkChartRoom(layout, larger, dir);
+    } catch (const InputError& e) {
+      spdlog::info("chart size stays {}: {}", o.chartSize, o.spellOption ? e.message(o.spellOption) : std::string(e.what()));
+      break;
+    }
     spdlog::info("chart size {} -> {}: patches with {:.0f}% of the triangles sample the surface more coarsely than "
                  "{:.4f}% of the diagonal",
-                 o.chartSize, next, 100.0 * double(overTriangles) / double(layout.triangles.size()),
+                 o.chartSize, larger.chartSize, 100.0 * double(overTriangles) / double(layout.triangles.size()),
                  100.0 * o.maxSampleError);
-    o.chartSize = next;
-    checkChartRoom(layout, o, dir);
+    o.chartSize = larger.chartSize;
     first = GeometryImageSet{};
     r.spill.reset();  // (removes its file)
     r.spill = std::make_unique<ChartSpill>(dir / "samples.tmp", o.chartSize, !layout.colours.empty());
