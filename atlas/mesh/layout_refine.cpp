@@ -743,7 +743,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
   const double maxError = repair.maxSampleError;
   // The repair of the sampling errors halves patches rather than clipping them: its cuts leave at
   // least a quarter of the border on either side.
-  auto shareOf = [&](uint32_t) { return errorsOnly ? 0.25 : 0.0; };
+  const double share = errorsOnly ? 0.25 : 0.0;
   auto badnessOf = [&](const GeometryImage& g) {
     Badness b;
     b.flips = g.quality.flippedTexels;
@@ -848,7 +848,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
     while (!queue.empty()) {
       std::vector<Trial> batch = disjointBatch(layout, queue);
       tbb::parallel_for(size_t{0}, batch.size(), [&](size_t k) {
-        batch[k].cut = findCut(layout, batch[k].patch, {}, 8, shareOf(batch[k].patch));
+        batch[k].cut = findCut(layout, batch[k].patch, {}, 8, share);
       });
       for (Trial& t : batch) {
         t.firstNew = layout.patches.size();
@@ -916,8 +916,8 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
         tbb::parallel_for(size_t{0}, open.size(), [&](size_t k) {
           Trial& t = *open[k];
           const auto& tri = layout.triangles[t.triangle];
-          t.cut = neck ? findCut(layout, t.patch, {}, 8, shareOf(t.patch))
-                       : findCut(layout, t.patch, {tri[0], tri[1], tri[2]}, 8, shareOf(t.patch));
+          t.cut = neck ? findCut(layout, t.patch, {}, 8, share)
+                       : findCut(layout, t.patch, {tri[0], tri[1], tri[2]}, 8, share);
         });
         for (Trial* t : open) {
           t->firstNew = layout.patches.size();
