@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <limits>
 #include <string>
 #include <vector>
 
@@ -36,9 +35,15 @@ void finishStage(StageMeter& meter, const std::string& name) {
 
 // The diagonal of the layout's bounding box.
 double layoutDiagonal(const ChartLayout& layout) {
-  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
-  for (const glm::vec3& p : layout.positions) lo = glm::min(lo, glm::dvec3(p)), hi = glm::max(hi, glm::dvec3(p));
-  return layout.positions.empty() ? 0.0 : glm::length(hi - lo);
+  MeshBounds b;
+  for (const glm::vec3& p : layout.positions) b.extend(p);
+  return b.empty() ? 0.0 : glm::length(glm::dvec3(b.max) - glm::dvec3(b.min));
+}
+
+// Samples per layout triangle in `charts` charts of chartSize^2 samples (intervals squared).
+double samplesPerTriangle(const ChartLayout& layout, uint64_t charts, uint32_t chartSize) {
+  return double(charts) * double(chartSize - 1) * double(chartSize - 1) /
+         double(std::max<size_t>(layout.triangles.size(), 1));
 }
 
 // Refuses a chart size whose charts cannot be made: each chart's samples go to a spill file in
@@ -170,8 +175,7 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
     o.chartSize = meshChartSizeForDensity(layout.triangles.size(), quads);
     st.chartSizeByDensity = true;
     spdlog::info("chart size {} for {} quad charts of {} triangles ({:.1f} samples per triangle)", o.chartSize, quads,
-                 layout.triangles.size(),
-                 double(quads) * double(o.chartSize - 1) * (o.chartSize - 1) / double(std::max<size_t>(layout.triangles.size(), 1)));
+                 layout.triangles.size(), samplesPerTriangle(layout, quads, o.chartSize));
   }
   st.chartSize = o.chartSize;
   checkChartRoom(layout, o, dir);
@@ -189,15 +193,15 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   // A chart size chosen by density is doubled (and the layout resampled) while the patches whose
   // charts sample the surface more coarsely than maxSampleError hold more than a tenth of its
   // triangles, up to kMaxSamplesPerTriangle: the repair then has a few patches to cut, not many.
-  const double maxError = o.maxSampleError * layoutDiagonal(layout);
+  const double diagonal = layoutDiagonal(layout);
+  const double maxError = o.maxSampleError * diagonal;
   while (st.chartSizeByDensity && maxError > 0.0 && o.chartSize < kMaxDensityChartSize) {
-    std::vector<uint8_t> over(layout.patches.size(), 0);
-    for (const GeometryImage& g : first.charts) over[g.patch] |= g.quality.sampleError > maxError;
+    const std::vector<uint8_t> over = patchesOverSampleError(first, layout.patches.size(), maxError);
     uint64_t overTriangles = 0;
     for (uint32_t p = 0; p < layout.patches.size(); ++p) overTriangles += over[p] ? layout.patches[p].triangles.size() : 0;
-    const double samplesPerTriangle = double(first.charts.size()) * double(o.chartSize - 1) * (o.chartSize - 1) /
-                                      double(std::max<size_t>(layout.triangles.size(), 1));
-    if (overTriangles * 10 <= layout.triangles.size() || samplesPerTriangle >= kMaxSamplesPerTriangle) break;
+    if (overTriangles * 10 <= layout.triangles.size() ||
+        samplesPerTriangle(layout, first.charts.size(), o.chartSize) >= kMaxSamplesPerTriangle)
+      break;
     MeshBuildOptions larger = o;
     larger.chartSize = 2 * o.chartSize - 1;
     try {
@@ -233,7 +237,7 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   const GeometryImageSet& set = r.set;
   const std::string left = fmt::format("{} flipped texels left, largest sampling error {:.4f}% of the diagonal",
                                        set.image.flippedTexels,
-                                       100.0 * set.image.sampleError / std::max(layoutDiagonal(layout), 1e-300));
+                                       100.0 * set.image.sampleError / std::max(diagonal, 1e-300));
   if (st.repair.stoppedForMemory)
     spdlog::warn("{}: the chart repair stopped at 3/4 of {} ({}); raise {} to repair more", o.input.string(),
                  spelledOption(o, "maxMemory"), left, spelledOption(o, "maxMemory"));

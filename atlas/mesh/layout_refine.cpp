@@ -234,8 +234,9 @@ bool insertCorner(ChartLayout& layout, uint32_t p, uint32_t side, uint32_t k, ui
 namespace {
 
 // The best acceptable cut of patch p passing through one of `sources` (vertices of the patch);
-// with no sources, through boundary vertices (at most 96, spread evenly): the neck. Empty if
-// none. Reads the layout only. See splitPatchThrough and splitPatchAtNeck.
+// with no sources, through boundary vertices (at most 96, spread evenly): the neck. With
+// minShare > 0, only cuts that leave at least that share of the border on either side count.
+// Empty if none. Reads the layout only. See splitPatchThrough and splitPatchAtNeck.
 std::vector<uint32_t> findCut(const ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources,
                               uint32_t maxSides, double minShare = 0.0) {
   if (p >= layout.patches.size()) return {};
@@ -894,7 +895,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
        ++round) {
     std::vector<Fold> queue = folding(set);
     // Kept current as splits are kept (a later split's neighbours may be earlier ones' parts).
-    std::vector<Badness> flippedOf = badnessPerPatch(set);
+    std::vector<Badness> patchBadness = badnessPerPatch(set);
     const std::vector<Patch> roundStart = layout.patches;
     // The charts of the patches kept trials changed, by patch, with the patches they were made
     // from: the round's closing resampling takes them unless a later trial changed the patch again.
@@ -926,8 +927,8 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
           if (t->done) mendEars(*t);
         }
         std::vector<uint8_t> only(layout.patches.size(), 0);
-        flippedOf.resize(layout.patches.size());
-        // Per trial, the patches it changed, and their flipped texels before.
+        patchBadness.resize(layout.patches.size());
+        // Per trial, the patches it changed, and what they weighed before.
         std::vector<std::vector<uint32_t>> now(open.size());
         std::vector<Badness> before(open.size());
         for (size_t k = 0; k < open.size(); ++k) {
@@ -937,7 +938,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
             const uint32_t q = t.rings[r];
             if (patchSamplesAlike(t.saved[r], layout.patches[q], q)) continue;
             now[k].push_back(q);
-            before[k] += flippedOf[q];
+            before[k] += patchBadness[q];
           }
           for (size_t q = t.firstNew; q < t.endNew; ++q) now[k].push_back(uint32_t(q));
           for (uint32_t q : now[k]) only[q] = 1;
@@ -952,13 +953,13 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
           for (uint32_t q : now[k]) a += after[q];
           if (t.done && (better(a, before[k]) || (neck && notWorse(a, before[k])))) {
             t.kept = true;
-            for (uint32_t q : now[k]) flippedOf[q] = after[q];
+            for (uint32_t q : now[k]) patchBadness[q] = after[q];
             continue;
           }
           for (size_t r = 0; r < t.rings.size(); ++r) layout.patches[t.rings[r]] = t.saved[r];
           for (size_t q = t.firstNew; q < t.endNew; ++q) dead[q] = 1;
         }
-        const std::vector<int32_t> index = removePatches(layout, dead, flippedOf);
+        const std::vector<int32_t> index = removePatches(layout, dead, patchBadness);
         // Removing the failed trials' new patches keeps the others' order, so every side keeps
         // its owner and the kept patches' charts stay those of their new index.
         for (size_t k = 0; k < open.size(); ++k) {
@@ -999,16 +1000,12 @@ GeometryImageSet repairCharts(ChartLayout& layout, GeometryImageSet set, const R
   st = ChartRepairStats{};
   st.flippedTexelsFirst = set.image.flippedTexels;
   st.sampleErrorFirst = set.image.sampleError;
-  {
-    std::vector<uint8_t> over(layout.patches.size(), 0);
-    for (const GeometryImage& g : set.charts) {
-      if (repair.maxSampleError > 0.0 && g.quality.sampleError > repair.maxSampleError) over[g.patch] = 1;
-    }
-    for (uint8_t o : over) st.patchesOverErrorFirst += o;
+  if (repair.maxSampleError > 0.0) {
+    for (uint8_t o : patchesOverSampleError(set, layout.patches.size(), repair.maxSampleError))
+      st.patchesOverErrorFirst += o;
   }
-  // Patches too coarsely sampled are halved first, whatever folds that leaves or makes (a fold
-  // often sits where the sampling is coarsest, and goes with it); then the folds, with cuts that
-  // must not raise the sampling errors again.
+  // Patches too coarsely sampled are halved first, by cuts that add no flipped texel; then the
+  // folds, by cuts that must not raise the sampling errors again.
   // Twice: the fold repair's cuts change the layout, and a patch that no halving could improve
   // without a fold may then be cut.
   for (int cycle = 0; cycle < 2; ++cycle) {

@@ -351,7 +351,7 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
   for (; sweeps < maxSweeps; ++sweeps) {
     double before = 0.0, after = 0.0;
     for (uint32_t v = 0; v < lp.vertices.size(); ++v) {
-      const bool slides = isBoundary[v] && !slide.empty() && slide[v] != glm::dvec2(0.0);
+      const bool slides = isBoundary[v] && slide[v] != glm::dvec2(0.0);
       if (isBoundary[v] && !slides) continue;
       const std::vector<uint32_t>& ring = rings[v];
       const glm::dvec2 p = uv[v];

@@ -6,11 +6,11 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <limits>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -400,6 +400,12 @@ ImageQuality combineImageQuality(const std::vector<ImageQuality>& parts) {
     q.degenerateTexels += p.degenerateTexels;
     if (p.sampleError > q.sampleError) q.sampleError = p.sampleError, q.sampleErrorVertex = p.sampleErrorVertex;
   });
+}
+
+std::vector<uint8_t> patchesOverSampleError(const GeometryImageSet& set, size_t patches, double maxError) {
+  std::vector<uint8_t> over(patches, 0);
+  for (const GeometryImage& g : set.charts) over[g.patch] |= g.quality.sampleError > maxError;
+  return over;
 }
 
 namespace {

@@ -189,6 +189,10 @@ ImageQuality measureImage(const std::vector<glm::vec3>& positions,
                           std::vector<uint32_t>* flippedAt = nullptr,
                           const std::vector<glm::vec3>* faceNormals = nullptr);
 
+// One flag per patch (patches of them): whether one of its charts in set has a sampling error over
+// maxError.
+std::vector<uint8_t> patchesOverSampleError(const GeometryImageSet& set, size_t patches, double maxError);
+
 // Combines per-chart figures: 3D-area-weighted RMS of the per-chart L2, max Linf, summed counts.
 // note: each chart is normalized by its own area, so imbalance between charts (a large chart
 // gets as many texels as a small one) is not part of these figures.
