@@ -1010,8 +1010,14 @@ GeometryImageSet repairCharts(ChartLayout& layout, GeometryImageSet set, const R
   // without a fold may then be cut.
   for (int cycle = 0; cycle < 2; ++cycle) {
     const uint32_t splitBefore = st.patchesSplit;
-    if (repair.maxSampleError > 0.0) set = repairPass(layout, std::move(set), options, repair, st, mayGrow, true);
-    const uint32_t unsplitForErrors = st.patchesUnsplit;
+    // Each pass counts its own unsplit patches (a pass with nothing to do counts none).
+    uint32_t unsplitForErrors = 0;
+    if (repair.maxSampleError > 0.0) {
+      st.patchesUnsplit = 0;
+      set = repairPass(layout, std::move(set), options, repair, st, mayGrow, true);
+      unsplitForErrors = st.patchesUnsplit;
+    }
+    st.patchesUnsplit = 0;
     set = repairPass(layout, std::move(set), options, repair, st, mayGrow, false);
     st.patchesUnsplit += unsplitForErrors;
     if (repair.maxSampleError <= 0.0 || set.image.sampleError <= repair.maxSampleError ||
