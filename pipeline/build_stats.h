@@ -75,7 +75,6 @@ struct MeshResampleStats {
   ImageQuality image;                  // all charts' sampled images
   uint32_t sidesStraightened = 0;
   uint32_t sideEarsMended = 0;
-  uint32_t chordsSplit = 0;  // patch edges between two border vertices, halved (splitChords)
   ChartRepairStats repair;
   uint32_t chartSize = 0;              // the quad charts' side in samples
   bool chartSizeByDensity = false;     // chosen by meshChartSizeForDensity

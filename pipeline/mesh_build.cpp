@@ -188,7 +188,6 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   ro.spill = r.spill.get();
   st.sidesStraightened = o.straightenRounds ? straightenSides(layout, o.straightenRounds) : 0;
   st.sideEarsMended = moveSideEars(layout);
-  st.chordsSplit = splitChords(layout);
   finishStage(meter, "straighten");
   GeometryImageSet first = resampleLayout(layout, ro);
   // A chart size chosen by density is doubled (and the layout resampled) while the patches whose

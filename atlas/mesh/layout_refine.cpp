@@ -626,64 +626,6 @@ uint32_t moveSideEars(ChartLayout& layout, const std::vector<uint32_t>& only, bo
   return moved;
 }
 
-uint32_t splitChords(ChartLayout& layout, const std::vector<uint32_t>& only) {
-  std::vector<uint32_t> patches = only;
-  if (patches.empty()) {
-    for (uint32_t p = 0; p < layout.patches.size(); ++p) patches.push_back(p);
-  }
-  uint32_t split = 0;
-  std::unordered_set<uint32_t> border;
-  std::unordered_map<uint64_t, uint32_t> inside;  // directed edge -> triangle of the patch
-  for (const uint32_t p : patches) {
-    if (p >= layout.patches.size()) continue;
-    Patch& patch = layout.patches[p];
-    border.clear();
-    for (const PatchSide& side : patch.sides) border.insert(side.vertices.begin(), side.vertices.end());
-    inside.clear();
-    std::vector<uint64_t> chords;
-    for (const uint32_t t : patch.triangles) {
-      const auto& tri = layout.triangles[t];
-      for (int c = 0; c < 3; ++c) {
-        const uint32_t a = tri[c], b = tri[(c + 1) % 3];
-        inside[directedEdgeKey(a, b)] = t;
-        if (a < b && border.contains(a) && border.contains(b)) chords.push_back(directedEdgeKey(a, b));
-      }
-    }
-    for (const uint64_t key : chords) {
-      const uint32_t a = uint32_t(key >> 32), b = uint32_t(key);
-      const auto i1 = inside.find(directedEdgeKey(a, b)), i2 = inside.find(directedEdgeKey(b, a));
-      if (i1 == inside.end() || i2 == inside.end()) continue;  // a border edge
-      const uint32_t t1 = i1->second, t2 = i2->second;
-      const auto third = [&](uint32_t t) {
-        const auto& tri = layout.triangles[t];
-        return tri[0] != a && tri[0] != b ? tri[0] : tri[1] != a && tri[1] != b ? tri[1] : tri[2];
-      };
-      const uint32_t x = third(t1), y = third(t2);
-      const uint32_t m = uint32_t(layout.positions.size());
-      layout.positions.push_back(0.5f * (layout.positions[a] + layout.positions[b]));
-      if (!layout.colours.empty()) {
-        const glm::uvec4 sum = glm::uvec4(layout.colours[a]) + glm::uvec4(layout.colours[b]) + 1u;
-        layout.colours.push_back(glm::u8vec4(sum / 2u));
-      }
-      const uint32_t n1 = uint32_t(layout.triangles.size()), n2 = n1 + 1;
-      layout.triangles[t1] = {a, m, x};
-      layout.triangles[t2] = {b, m, y};
-      layout.triangles.push_back({m, b, x});
-      layout.triangles.push_back({m, a, y});
-      patch.triangles.push_back(n1);
-      patch.triangles.push_back(n2);
-      inside.erase(directedEdgeKey(a, b));
-      inside.erase(directedEdgeKey(b, a));
-      for (const auto& [t, tri] : {std::pair{t1, layout.triangles[t1]}, std::pair{t2, layout.triangles[t2]},
-                                   std::pair{n1, layout.triangles[n1]}, std::pair{n2, layout.triangles[n2]}}) {
-        for (int c = 0; c < 3; ++c) inside[directedEdgeKey(tri[c], tri[(c + 1) % 3])] = t;
-      }
-      ++split;
-    }
-  }
-  return split;
-}
-
 bool splitPatchAtNeck(ChartLayout& layout, uint32_t p) {
   return splitByCut(layout, p, {}, 8) || splitPatchAtCornerNeck(layout, p);
 }

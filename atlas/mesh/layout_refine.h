@@ -44,15 +44,6 @@ uint32_t straightenSides(ChartLayout& layout, uint32_t rounds = 2);
 // beyond its neighbours. Returns the ears mended.
 uint32_t moveSideEars(ChartLayout& layout, const std::vector<uint32_t>& patches = {}, bool splitFull = true);
 
-// Splits every chord of the given patches (all patches if empty) at its midpoint: an edge inside
-// a patch whose two ends both lie on the patch's border. The two triangles beside a chord have
-// all their vertices on the border, where the parameterization pins them, so where the border
-// turns (a corner, a winding hole rim) they map to slivers whatever the interior does, and the
-// texels over them fold. Split, each gets a free vertex that the parameterization places. The
-// surface is unchanged (the new vertex lies on the chord, each triangle is halved in its plane);
-// sides, corners and patches are unchanged. Returns the chords split.
-uint32_t splitChords(ChartLayout& layout, const std::vector<uint32_t>& patches = {});
-
 // Cuts patch `patch` along the shortest path of interior edges (through interior vertices only)
 // between its corners i and j, which must not be adjacent (2 <= (j - i) mod n <= n - 2). The
 // part with sides i..j-1 keeps the patch's index (its side 0 is the old side i); the other part

@@ -596,68 +596,6 @@ TEST(OpenSides, SlidingRimsFoldLessOnTheBunny) {
   EXPECT_GT(checked, 0u);
 }
 
-// The edges inside a patch with both ends on its border (see splitChords).
-uint32_t countChords(const ChartLayout& layout) {
-  uint32_t chords = 0;
-  for (const Patch& patch : layout.patches) {
-    std::set<uint32_t> border;
-    for (const PatchSide& side : patch.sides) border.insert(side.vertices.begin(), side.vertices.end());
-    std::set<std::pair<uint32_t, uint32_t>> edges;
-    for (uint32_t t : patch.triangles) {
-      const auto& tri = layout.triangles[t];
-      for (int c = 0; c < 3; ++c) edges.insert({tri[c], tri[(c + 1) % 3]});
-    }
-    for (const auto& [a, b] : edges) chords += a < b && edges.contains({b, a}) && border.contains(a) && border.contains(b);
-  }
-  return chords;
-}
-
-double surfaceArea(const ChartLayout& layout) {
-  double area = 0.0;
-  for (const auto& t : layout.triangles) {
-    const glm::dvec3 a(layout.positions[t[0]]), b(layout.positions[t[1]]), c(layout.positions[t[2]]);
-    area += 0.5 * glm::length(glm::cross(b - a, c - a));
-  }
-  return area;
-}
-
-// Splitting the chords of the shipped bunny's patches (24 patches, whose borders run beside hole
-// rims and round corners) leaves no chord, the same sides and surface, a valid layout, and fewer
-// flipped texels at 129^2 before any repair.
-TEST(Chords, SplitChordsKeepTheSurfaceAndFoldLess) {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
-  ChartingOptions copt;
-  copt.targetCharts = 24;
-  ChartLayout layout = buildChartLayout(mesh, copt);
-  straightenSides(layout, 2);
-  moveSideEars(layout);
-  ChartLayout split = layout;
-  const uint32_t chords = countChords(layout);
-  EXPECT_GT(chords, 0u);
-  EXPECT_EQ(splitChords(split), chords);
-  EXPECT_EQ(countChords(split), 0u);
-  EXPECT_EQ(splitChords(split), 0u);
-  expectValid(split);
-  EXPECT_EQ(split.positions.size(), layout.positions.size() + chords);
-  EXPECT_EQ(split.triangles.size(), layout.triangles.size() + 2 * chords);
-  EXPECT_NEAR(surfaceArea(split), surfaceArea(layout), 1e-5 * surfaceArea(layout));
-  ASSERT_EQ(split.patches.size(), layout.patches.size());
-  for (size_t p = 0; p < layout.patches.size(); ++p) {
-    ASSERT_EQ(split.patches[p].sides.size(), layout.patches[p].sides.size());
-    for (size_t s = 0; s < layout.patches[p].sides.size(); ++s) {
-      EXPECT_EQ(split.patches[p].sides[s].vertices, layout.patches[p].sides[s].vertices) << p << " " << s;
-    }
-  }
-  ResampleOptions ro;
-  ro.chartSize = 129;
-  const GeometryImageSet before = resampleLayout(layout, ro);
-  const GeometryImageSet after = resampleLayout(split, ro);
-  std::printf("  bunny, 24 patches at 129^2: %u chords; %u flipped texels, %u with them split\n", chords,
-              before.image.flippedTexels, after.image.flippedTexels);
-  EXPECT_LT(after.image.flippedTexels, before.image.flippedTexels);
-  EXPECT_EQ(after.param.flippedTriangles, 0u);
-}
-
 TEST(PatchSplit, RepairLeavesAFoldFreeLayoutUnchanged) {
   ChartLayout layout = test::cubeLayout(8, true);
   const ChartLayout before = layout;
