@@ -1,4 +1,5 @@
-// gimlod: build multi-grained LOD atlases, render them headless, and benchmark the adaptation.
+// gimlod: build multi-grained LOD atlases, render them headless or in a window, and benchmark the
+// adaptation.
 #include <charconv>
 #include <unistd.h>
 
@@ -20,6 +21,7 @@
 #include <spdlog/spdlog.h>
 
 #include "apps/bench_command.h"
+#include "apps/view_command.h"
 #include "apps/view_args.h"
 #include "atlas/mesh/mesh_atlas.h"
 #include "core/atlas_format.h"
@@ -122,31 +124,6 @@ int runBuild(const MeshBuildOptions& o) {
   return 0;
 }
 
-std::array<float, 3> parseBackground(const std::string& s) {
-  std::array<float, 3> c{};
-  char extra;
-  if (std::sscanf(s.c_str(), "%f,%f,%f%c", &c[0], &c[1], &c[2], &extra) != 3)
-    throw InputError("--background '" + s + "' must be R,G,B");
-  for (float& v : c) {
-    if (!std::isfinite(v) || v < 0.f) throw InputError("--background '" + s + "' must be R,G,B in [0,1] or [0,255]");
-  }
-  if (c[0] > 1.f || c[1] > 1.f || c[2] > 1.f)
-    for (float& v : c) v = std::min(v, 255.f) / 255.f;
-  return c;
-}
-
-void writePng(const fs::path& path, uint32_t w, uint32_t h, const std::vector<uint8_t>& rgba) {
-  const fs::path tmp = path.string() + ".tmp.png";
-  auto out = OIIO::ImageOutput::create(tmp.string());
-  if (!out) throw InputError(path.string() + ": cannot create PNG writer");
-  OIIO::ImageSpec spec(int(w), int(h), 4, OIIO::TypeDesc::UINT8);
-  if (!out->open(tmp.string(), spec) || !out->write_image(OIIO::TypeDesc::UINT8, rgba.data()) || !out->close())
-    throw InputError(path.string() + ": cannot write PNG: " + out->geterror());
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) throw InputError(path.string() + ": " + ec.message());
-}
-
 OverlayMode overlayMode(const std::string& name) {
   const std::optional<OverlayMode> m = parseOverlayMode(name);
   if (!m) throw InputError("--overlay '" + name + "': expected none, chart, level or res");
@@ -200,7 +177,7 @@ std::vector<ReportImage> renderInspectViews(const fs::path& atlasDir, const std:
   for (size_t i = 0; i < cams.size(); ++i) {
     const gl::FrameResult f = scene.renderFrame(cams[i], ao);
     const fs::path png = dir / fmt::format("view_{}.png", i);
-    writePng(png, w, h, scene.renderer().readPixels());
+    writePng(png, w, h, 4, scene.renderer().readPixels());
     // The cut as drawn, welded: its boundary edges off the open chart borders are cracks.
     const std::array<glm::dvec2, 2> valid{glm::dvec2(atlas.lo), glm::dvec2(atlas.hi)};
     const CutMesh mesh = buildCutMesh(atlas.hierarchy, f.cut, scene.capture(f.cut),
@@ -221,7 +198,7 @@ std::vector<ReportImage> renderInspectViews(const fs::path& atlasDir, const std:
     for (size_t i = 0; i < cams.size(); ++i) {
       scene.renderFrame(cams[i], ao);
       const fs::path png = dir / fmt::format("source_view_{}.png", i);
-      writePng(png, w, h, scene.renderer().readPixels());
+      writePng(png, w, h, 4, scene.renderer().readPixels());
       views.push_back({png, fmt::format("distance to the source from {} (each node its largest: blue 1e-4 of the "
                                         "largest {:.3g} or less, red the largest)",
                                         names[i], distances->largest)});
@@ -314,7 +291,7 @@ int runRender(const RenderArgs& a) {
                    a.maxNodes, f.adapt.rootFloor, i);
       warnedBelowRoots = true;
     }
-    writePng(out / fmt::format("frame_{:04d}.png", i), w, h, scene.renderer().readPixels());
+    writePng(out / fmt::format("frame_{:04d}.png", i), w, h, 4, scene.renderer().readPixels());
     if (const auto ex = cutExports.find(i); ex != cutExports.end()) {
       const std::array<glm::dvec2, 2> valid{glm::dvec2(atlas.lo), glm::dvec2(atlas.hi)};
       const CutMesh mesh = buildCutMesh(atlas.hierarchy, f.cut, scene.capture(f.cut, !a.noStitch),
@@ -456,6 +433,9 @@ int main(int argc, char** argv) {
   inspectCmd->add_flag("--no-views", [&](int64_t) { inspect.views = false; },
                        "Skip the rendered views (no GL needed)");
 
+  ViewArgs view;
+  auto* viewCmd = addViewCommand(app, view);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -482,6 +462,7 @@ int main(int argc, char** argv) {
     if (*inspectCmd) return runInspect(inspect);
     if (*render) return runRender(r);
     if (*bench) return runBench(bn);
+    if (*viewCmd) return runView(view);
     if (*exportCmd) {
       const AtlasSurface s = readAtlasSurface(exportAtlas, exportLevel);
       writePly(exportOut, s.positions, s.triangles);

@@ -2,6 +2,8 @@
 // the frame size.
 #pragma once
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -45,6 +47,20 @@ inline std::vector<Camera> loadCameras(const CameraArgs& a, const AtlasView& atl
   std::vector<Camera> cams = readCameraPath(a.path);
   for (Camera& c : cams) fitClipPlanes(c, atlas.lo, atlas.hi);
   return cams;
+}
+
+// Parses --background R,G,B (in [0, 1], or [0, 255] when any is above 1); throws InputError.
+inline std::array<float, 3> parseBackground(const std::string& s) {
+  std::array<float, 3> c{};
+  char extra;
+  if (std::sscanf(s.c_str(), "%f,%f,%f%c", &c[0], &c[1], &c[2], &extra) != 3)
+    throw InputError("--background '" + s + "' must be R,G,B");
+  for (float& v : c) {
+    if (!std::isfinite(v) || v < 0.f) throw InputError("--background '" + s + "' must be R,G,B in [0,1] or [0,255]");
+  }
+  if (c[0] > 1.f || c[1] > 1.f || c[2] > 1.f)
+    for (float& v : c) v = std::min(v, 255.f) / 255.f;
+  return c;
 }
 
 // Parses --size WxH (8 <= W, H <= 16384); throws InputError otherwise.

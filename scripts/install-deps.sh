@@ -8,6 +8,7 @@ PACKAGES=(
   libopenmesh-dev libcgal-dev libeigen3-dev libopenimageio-dev
   libgdal-dev gdal-bin
   libglfw3-dev libglm-dev libepoxy-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libgl-dev
+  libimgui-dev xvfb xdotool
   libtbb-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev
   libgtest-dev clang libclang-rt-dev
   python3-matplotlib

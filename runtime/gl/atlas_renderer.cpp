@@ -101,6 +101,7 @@ struct AtlasRenderer::Impl {
   GlObject overlayBuffer;
   std::vector<NodeOverlay> overlay;  // per node of the next draw; empty: no overlay
   GlObject atlasProgram;
+  bool wireframe = false;
 
   explicit Impl(const RendererSetup& s);
   void checkLimits() const;
@@ -440,7 +441,9 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
     glBindBuffer(GL_DRAW_INDIRECT_BUFFER, m.indirectBuffer.id());
     glBufferData(GL_DRAW_INDIRECT_BUFFER, GLsizeiptr(commands.size() * sizeof(commands[0])),
                  commands.data(), GL_STREAM_DRAW);
+    if (m.wireframe) glPolygonMode(GL_FRONT_AND_BACK, GL_LINE);
     glMultiDrawElementsIndirect(GL_TRIANGLE_STRIP, GL_UNSIGNED_INT, nullptr, GLsizei(commands.size()), 0);
+    if (m.wireframe) glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
     glBindBuffer(GL_DRAW_INDIRECT_BUFFER, 0);
     stats.drawCalls = 1;
     glDisable(GL_PRIMITIVE_RESTART_FIXED_INDEX);
@@ -452,6 +455,26 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
   checkGl("AtlasRenderer::draw");
   return stats;
 }
+
+void AtlasRenderer::resize(uint32_t width, uint32_t height) {
+  if (width == 0 || height == 0) throw std::invalid_argument("AtlasRenderer::resize: size must be positive");
+  if (width == impl_->setup.width && height == impl_->setup.height) return;
+  impl_->setup.width = width;
+  impl_->setup.height = height;
+  impl_->checkLimits();
+  impl_->createFramebuffer();
+}
+
+void AtlasRenderer::blitToDefaultFramebuffer() const {
+  const GLint w = GLint(impl_->setup.width), h = GLint(impl_->setup.height);
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, impl_->framebuffer.id());
+  glBindFramebuffer(GL_DRAW_FRAMEBUFFER, 0);
+  glBlitFramebuffer(0, 0, w, h, 0, 0, w, h, GL_COLOR_BUFFER_BIT, GL_NEAREST);
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  checkGl("blitToDefaultFramebuffer");
+}
+
+void AtlasRenderer::setWireframe(bool on) { impl_->wireframe = on; }
 
 std::vector<uint8_t> AtlasRenderer::readPixels() const {
   const uint32_t w = impl_->setup.width, h = impl_->setup.height;

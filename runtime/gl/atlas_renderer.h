@@ -82,6 +82,14 @@ class AtlasRenderer {
   // units. `program` is one whose fragment stage is atlas.frag (setPagePoolUnits done).
   void setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const;
 
+  // Resizes the offscreen framebuffer (a window's new size); the next draw clears it.
+  void resize(uint32_t width, uint32_t height);
+  // Copies the offscreen picture into framebuffer 0 (a window's back buffer) at (0, 0), pixel
+  // for pixel; leaves framebuffer 0 bound.
+  void blitToDefaultFramebuffer() const;
+  // Draws the triangles' edges instead of filling them (the wireframe view).
+  void setWireframe(bool on);
+
   // Reads the framebuffer as RGBA8, top row first.
   std::vector<uint8_t> readPixels() const;
 

@@ -107,6 +107,12 @@ Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, FrameRes
   return std::move(drawn.cut);
 }
 
+void AtlasScene::resize(uint32_t width, uint32_t height) {
+  renderer_->resize(width, height);
+  options_.width = width;
+  options_.height = height;
+}
+
 glm::dmat4 AtlasScene::viewProjection(const Camera& c) const {
   return projectionMatrix(c, double(options_.width) / double(options_.height)) * viewMatrix(c);
 }

@@ -72,6 +72,14 @@ class AtlasScene {
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
   AtlasRenderer& renderer() { return *renderer_; }
+  // A new frame size (a resized window): the projection and the screen-space errors follow.
+  void resize(uint32_t width, uint32_t height);
+  uint32_t width() const { return options_.width; }
+  uint32_t height() const { return options_.height; }
+  // Error mode: the coherent dual queue (true) or the stateless top-down greedy.
+  void setCoherentAdaptation(bool on) { options_.coherentAdaptation = on; }
+  void setTexelsPerPixel(double ratio) { options_.texelsPerPixel = ratio; }
+  void setMaxUploadsPerFrame(uint32_t n) { options_.maxUploadsPerFrame = n; }
   void setOverlay(OverlayMode mode, NodeColour colour = {}) {
     options_.overlay = mode;
     options_.overlayColour = std::move(colour);

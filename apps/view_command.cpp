@@ -1,0 +1,554 @@
+#include "apps/view_command.h"
+
+#include <epoxy/gl.h>
+// epoxy first: GLFW must not include the system GL header.
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
+#include <imgui.h>
+#include <backends/imgui_impl_glfw.h>
+#include <backends/imgui_impl_opengl3.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cfloat>
+#include <cmath>
+#include <cstdio>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "apps/view_args.h"
+#include "core/atlas_format.h"
+#include "inspect/png.h"
+#include "runtime/atlas_view.h"
+#include "runtime/camera.h"
+#include "runtime/camera_control.h"
+#include "runtime/overlay.h"
+#include "runtime/gl/atlas_scene.h"
+
+namespace fs = std::filesystem;
+
+namespace gimlod {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+// The last few seconds of one figure, for a live graph.
+struct Series {
+  static constexpr size_t kLength = 240;
+  std::deque<float> values;
+  void add(double v) {
+    values.push_back(float(v));
+    if (values.size() > kLength) values.pop_front();
+  }
+  std::vector<float> data() const { return {values.begin(), values.end()}; }
+  float last() const { return values.empty() ? 0.f : values.back(); }
+};
+
+// Everything the panel and the keys change.
+struct Controls {
+  bool budgetMode = false;
+  float tolerance = 1.f;
+  int maxNodes = 2048;
+  int maxTrianglesK = 1000;  // thousands
+  float texelRatio = 1.f;
+  bool asyncLoads = false;
+  int uploadsPerFrame = 64;
+  bool topDown = false;
+  int overlay = 0;  // index into kOverlays
+  bool wireframe = false;
+  bool freeze = false;
+  bool showUi = true;
+  bool playing = false;
+  bool loop = false;
+  bool recording = false;
+};
+
+constexpr std::array<OverlayMode, 4> kOverlays{OverlayMode::kNone, OverlayMode::kChart, OverlayMode::kLevel,
+                                               OverlayMode::kResolution};
+constexpr std::array<const char*, 4> kOverlayLabels{"none", "chart", "level", "resolution"};
+
+// Window state the GLFW callbacks reach through the user pointer.
+struct Viewer {
+  GLFWwindow* window = nullptr;
+  CameraControl* camera = nullptr;
+  Controls* controls = nullptr;
+  bool dragging[3] = {false, false, false};  // left, right, middle
+  double lastX = 0.0, lastY = 0.0;
+  double scroll = 0.0;
+  bool screenshotRequested = false;
+  bool recordToggled = false;
+  bool resetCamera = false;
+  bool cameraModeToggled = false;
+  bool cameraTouched = false;  // the user moved the camera this frame
+};
+
+Viewer* viewerOf(GLFWwindow* w) { return static_cast<Viewer*>(glfwGetWindowUserPointer(w)); }
+
+bool uiWantsMouse() { return ImGui::GetCurrentContext() && ImGui::GetIO().WantCaptureMouse; }
+bool uiWantsKeys() { return ImGui::GetCurrentContext() && ImGui::GetIO().WantCaptureKeyboard; }
+
+// Keys (also for xdotool in the tests): see the help text in the panel.
+void onKey(GLFWwindow* w, int key, int, int action, int mods) {
+  if (action != GLFW_PRESS && action != GLFW_REPEAT) return;
+  if (uiWantsKeys()) return;
+  Viewer& v = *viewerOf(w);
+  Controls& c = *v.controls;
+  const bool press = action == GLFW_PRESS;
+  switch (key) {
+    case GLFW_KEY_ESCAPE: glfwSetWindowShouldClose(w, GLFW_TRUE); break;
+    case GLFW_KEY_X: if (press) c.wireframe = !c.wireframe; break;
+    case GLFW_KEY_C:
+      if (press) c.overlay = (c.overlay + ((mods & GLFW_MOD_SHIFT) ? int(kOverlays.size()) - 1 : 1)) % int(kOverlays.size());
+      break;
+    case GLFW_KEY_F: if (press) c.freeze = !c.freeze; break;
+    case GLFW_KEY_M: if (press) c.budgetMode = !c.budgetMode; break;
+    case GLFW_KEY_G: if (press) c.topDown = !c.topDown; break;
+    case GLFW_KEY_H: if (press) c.showUi = !c.showUi; break;
+    case GLFW_KEY_P: if (press) v.screenshotRequested = true; break;
+    case GLFW_KEY_R: if (press) v.recordToggled = true; break;
+    case GLFW_KEY_SPACE: if (press) c.playing = !c.playing; break;
+    case GLFW_KEY_HOME: if (press) v.resetCamera = true; break;
+    case GLFW_KEY_TAB: if (press) v.cameraModeToggled = true; break;
+    case GLFW_KEY_LEFT_BRACKET:  // finer: lower tolerance, or more triangles
+      if (c.budgetMode) c.maxTrianglesK = std::min(c.maxTrianglesK * 2, 1 << 20);
+      else c.tolerance = std::max(c.tolerance / std::sqrt(2.f), 0.01f);
+      break;
+    case GLFW_KEY_RIGHT_BRACKET:  // coarser
+      if (c.budgetMode) c.maxTrianglesK = std::max(c.maxTrianglesK / 2, 1);
+      else c.tolerance = std::min(c.tolerance * std::sqrt(2.f), 1000.f);
+      break;
+    case GLFW_KEY_EQUAL: c.maxNodes = std::min(c.maxNodes * 2, 1 << 20); break;
+    case GLFW_KEY_MINUS: c.maxNodes = std::max(c.maxNodes / 2, 1); break;
+    default: break;
+  }
+}
+
+void onMouseButton(GLFWwindow* w, int button, int action, int) {
+  Viewer& v = *viewerOf(w);
+  if (button < 0 || button > 2) return;
+  if (action == GLFW_PRESS && uiWantsMouse()) return;
+  v.dragging[button] = action == GLFW_PRESS;
+  glfwGetCursorPos(w, &v.lastX, &v.lastY);
+}
+
+void onCursor(GLFWwindow* w, double x, double y) {
+  Viewer& v = *viewerOf(w);
+  const double dx = x - v.lastX, dy = y - v.lastY;
+  v.lastX = x;
+  v.lastY = y;
+  int width = 0, height = 0;
+  glfwGetFramebufferSize(w, &width, &height);
+  if (v.dragging[0]) v.camera->rotate(dx, dy, height);
+  if (v.dragging[1] || v.dragging[2]) v.camera->pan(dx, dy, height);
+  if (v.dragging[0] || v.dragging[1] || v.dragging[2]) v.cameraTouched = true;
+}
+
+void onScroll(GLFWwindow* w, double, double dy) {
+  if (uiWantsMouse()) return;
+  viewerOf(w)->scroll += dy;
+}
+
+// The window's pixels (framebuffer 0, the back buffer just drawn) as RGBA, top row first.
+std::vector<uint8_t> readWindow(uint32_t w, uint32_t h) {
+  std::vector<uint8_t> bottomUp(size_t(w) * h * 4), out(bottomUp.size());
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+  glReadBuffer(GL_BACK);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(0, 0, GLsizei(w), GLsizei(h), GL_RGBA, GL_UNSIGNED_BYTE, bottomUp.data());
+  const size_t row = size_t(w) * 4;
+  for (uint32_t y = 0; y < h; ++y) std::copy_n(bottomUp.data() + size_t(h - 1 - y) * row, row, out.data() + size_t(y) * row);
+  for (size_t i = 3; i < out.size(); i += 4) out[i] = 255;
+  return out;
+}
+
+void plot(const char* label, const Series& s, const char* unit) {
+  const std::vector<float> d = s.data();
+  const std::string overlay = fmt::format("{:.3g} {}", s.last(), unit);
+  ImGui::PlotLines(label, d.data(), int(d.size()), 0, overlay.c_str(), 0.f, FLT_MAX, ImVec2(0, 40));
+}
+
+struct FrameFigures {
+  size_t nodes = 0;
+  uint64_t triangles = 0;
+  double maxErrorPx = 0.0, adaptMs = 0.0, drawMs = 0.0, frameMs = 0.0;
+  uint32_t pagesLoaded = 0, pagesRequested = 0, rootFloor = 0;
+  bool belowRoots = false;
+};
+
+const char* kHelp =
+    "mouse: left drag rotate (fly: look), right/middle drag pan, wheel zoom (fly: speed)\n"
+    "Tab orbit/fly   WASD move, Q/E down/up   Home reset camera\n"
+    "[ ] finer/coarser (tolerance or triangles)   - = node budget\n"
+    "M error/budget mode   G top-down greedy   F freeze cut\n"
+    "C colouring (chart, level, resolution)   X wireframe   H hide panel\n"
+    "Space play/pause path   R record path   P screenshot   Esc quit";
+
+}  // namespace
+
+CLI::App* addViewCommand(CLI::App& app, ViewArgs& a) {
+  auto* v = app.add_subcommand("view", "Fly through an atlas in a window (GLFW), with live budgets and overlays");
+  v->add_option("atlas", a.atlas, "Atlas directory")->required();
+  v->add_option("--size", a.size, "Window size WxH")->capture_default_str();
+  v->add_option("--background", a.background, "Background colour R,G,B")->capture_default_str();
+  v->add_option("--up", a.up, "Up axis: auto (z for terrain, y for meshes), x, y, z, -x, -y or -z")
+      ->capture_default_str();
+  v->add_option("--fov", a.fov, "Vertical field of view, degrees")->capture_default_str();
+  v->add_option("--path", a.path, "Camera path JSON to play (as render and bench read)");
+  v->add_flag("--loop", a.loop, "Play the path again and again");
+  v->add_option("--record", a.record, "Where R writes the recorded camera path (JSON)");
+  v->add_option("--screenshot", a.screenshot,
+                "PNG of the last frame when the run ends (scripted runs); P writes there too");
+  v->add_option("--stats", a.stats, "CSV with one row per frame (nodes, triangles, error, times)");
+  v->add_option("--frames", a.frames, "Draw this many frames along --path (holding its last camera), then exit");
+  v->add_option("--exit-after", a.exitAfter, "Exit after this many frames");
+  v->add_flag("--hide-ui", a.hideUi, "Start without the panel (and keep it out of screenshots)");
+  v->add_option("--tolerance", a.tolerance, "Screen-space error threshold in pixels")->capture_default_str();
+  v->add_option("--triangles", a.triangles, "Triangle budget: start in budget mode (quad queue)");
+  v->add_option("--max-nodes", a.maxNodes, "Node budget")->capture_default_str();
+  v->add_option("--texel-ratio", a.texelRatio, "Normal-map texels per pixel (0: page resolution)")
+      ->capture_default_str();
+  v->add_flag("--async-loads", a.asyncLoads, "Load pages on a separate thread");
+  v->add_option("--uploads-per-frame", a.uploadsPerFrame, "Async: pages uploaded per frame")->capture_default_str();
+  v->add_flag("--top-down", a.topDown, "Error mode: the stateless top-down greedy instead of the dual queue");
+  v->add_option("--overlay", a.overlay, "Colouring: none, chart, level or res")->capture_default_str();
+  v->add_flag("--wireframe", a.wireframe, "Start in wireframe");
+  return v;
+}
+
+int runView(const ViewArgs& a) {
+  uint32_t width = 0, height = 0;
+  parseFrameSize(a.size, &width, &height);
+  if (!(a.tolerance > 0.0) || !std::isfinite(a.tolerance)) throw InputError("--tolerance must be > 0 pixels");
+  if (!(a.fov > 1.0 && a.fov < 179.0)) throw InputError("--fov must be in (1, 179) degrees");
+  if (a.uploadsPerFrame == 0) throw InputError("--uploads-per-frame must be at least 1");
+  if (!(a.texelRatio >= 0.0) || !std::isfinite(a.texelRatio) || a.texelRatio > 64.0)
+    throw InputError("--texel-ratio must be in [0, 64] texels per pixel (0: page resolution)");
+  if (a.triangles > 0 && a.topDown) throw InputError("--top-down applies to error mode; --triangles selects the quad queue");
+  if (a.frames > 0 && a.path.empty()) throw InputError("--frames needs --path");
+  const std::optional<OverlayMode> overlayMode = parseOverlayMode(a.overlay);
+  if (!overlayMode) throw InputError("--overlay '" + a.overlay + "': expected none, chart, level or res");
+  const auto background = parseBackground(a.background);
+
+  const AtlasView atlas = openAtlas(a.atlas);
+  UpAxis up{atlas.manifest.kind == AtlasKind::Heightfield ? 2 : 1, 1.0};
+  if (a.up != "auto") {
+    const std::optional<UpAxis> u = parseUpAxis(a.up);
+    if (!u) throw InputError("--up '" + a.up + "': expected auto, x, y, z, -x, -y or -z");
+    up = *u;
+  }
+  std::vector<Camera> path;
+  if (!a.path.empty()) {
+    path = readCameraPath(a.path);
+    for (Camera& c : path) fitClipPlanes(c, atlas.lo, atlas.hi);
+  }
+  std::ofstream stats;
+  if (!a.stats.empty()) {
+    stats.open(a.stats);
+    if (!stats) throw InputError(a.stats + ": cannot write the stats file");
+    stats << "frame,nodes,triangles,max_screen_error_px,adapt_ms,draw_ms,frame_ms,pages_loaded,pages_requested,"
+             "root_floor,budget_below_roots,mode,tolerance_px,max_nodes,max_triangles,frozen,overlay,wireframe\n";
+  }
+
+  glfwSetErrorCallback([](int code, const char* what) { spdlog::error("GLFW error {}: {}", code, what); });
+  if (!glfwInit()) throw std::runtime_error("gimlod view: cannot initialize GLFW (no display? set DISPLAY, or use xvfb-run)");
+  struct GlfwGuard {
+    ~GlfwGuard() { glfwTerminate(); }
+  } glfwGuard;
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 4);
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
+  glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+  glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
+  glfwWindowHint(GLFW_SAMPLES, 0);
+  const std::string title = fmt::format("gimlod view: {}", fs::path(a.atlas).filename().string());
+  GLFWwindow* window = glfwCreateWindow(int(width), int(height), title.c_str(), nullptr, nullptr);
+  if (!window) throw std::runtime_error("gimlod view: cannot open an OpenGL 4.3 core window");
+  struct WindowGuard {
+    GLFWwindow* w;
+    ~WindowGuard() { glfwDestroyWindow(w); }
+  } windowGuard{window};
+  glfwMakeContextCurrent(window);
+  const bool scripted = a.frames > 0;
+  glfwSwapInterval(scripted ? 0 : 1);
+  spdlog::info("OpenGL: {} ({})", reinterpret_cast<const char*>(glGetString(GL_RENDERER)),
+               reinterpret_cast<const char*>(glGetString(GL_VERSION)));
+
+  Controls c;
+  c.budgetMode = a.triangles > 0;
+  c.tolerance = float(a.tolerance);
+  c.maxNodes = int(std::min<uint32_t>(a.maxNodes, 1u << 20));
+  c.maxTrianglesK = int(std::clamp<uint64_t>(a.triangles > 0 ? a.triangles / 1000 : 1000, 1, 1 << 20));
+  c.texelRatio = float(a.texelRatio);
+  c.asyncLoads = a.asyncLoads;
+  c.uploadsPerFrame = int(a.uploadsPerFrame);
+  c.topDown = a.topDown;
+  c.overlay = int(std::find(kOverlays.begin(), kOverlays.end(), *overlayMode) - kOverlays.begin());
+  c.wireframe = a.wireframe;
+  c.showUi = !a.hideUi;
+  c.playing = !path.empty();
+  c.loop = a.loop;
+
+  CameraControl camera(atlas.lo, atlas.hi, up, a.fov);
+  if (!path.empty()) camera.setCamera(path.front());
+
+  // The scene is made again when async loading is switched (its page loader lives with it).
+  int fbw = 0, fbh = 0;
+  glfwGetFramebufferSize(window, &fbw, &fbh);
+  auto makeScene = [&](bool async) {
+    gl::SceneOptions so;
+    so.width = uint32_t(std::max(fbw, 8));
+    so.height = uint32_t(std::max(fbh, 8));
+    so.background = background;
+    so.asyncLoads = async;
+    so.maxUploadsPerFrame = uint32_t(c.uploadsPerFrame);
+    so.coherentAdaptation = !c.topDown;
+    so.texelsPerPixel = c.texelRatio;
+    return std::make_unique<gl::AtlasScene>(atlas, so);
+  };
+  std::unique_ptr<gl::AtlasScene> scene = makeScene(c.asyncLoads);
+  bool sceneAsync = c.asyncLoads;
+
+  Viewer viewer;
+  viewer.window = window;
+  viewer.camera = &camera;
+  viewer.controls = &c;
+  glfwSetWindowUserPointer(window, &viewer);
+  // Ours first: the ImGui backend chains to the callbacks installed before it.
+  glfwSetKeyCallback(window, onKey);
+  glfwSetMouseButtonCallback(window, onMouseButton);
+  glfwSetCursorPosCallback(window, onCursor);
+  glfwSetScrollCallback(window, onScroll);
+
+  IMGUI_CHECKVERSION();
+  ImGui::CreateContext();
+  struct ImGuiGuard {
+    ~ImGuiGuard() {
+      ImGui_ImplOpenGL3_Shutdown();
+      ImGui_ImplGlfw_Shutdown();
+      ImGui::DestroyContext();
+    }
+  };
+  ImGui::GetIO().IniFilename = nullptr;  // no imgui.ini next to the user's files
+  ImGui::StyleColorsDark();
+  if (!ImGui_ImplGlfw_InitForOpenGL(window, true) || !ImGui_ImplOpenGL3_Init("#version 430 core"))
+    throw std::runtime_error("gimlod view: cannot set up the panel (Dear ImGui)");
+  ImGuiGuard imguiGuard;
+
+  Series adaptMs, drawMs, frameMs, nodes, triangles, maxError, pagesLoaded;
+  std::vector<Camera> recorded;
+  Cut frozen;
+  bool haveFrozen = false;
+  size_t pathFrame = 0;
+  std::optional<Camera> pathCamera;  // the path's camera shown, held until the user moves on
+  uint32_t screenshots = 0;
+  bool warnedBelowRoots = false;
+  FrameFigures last;
+  auto previous = Clock::now();
+  const uint32_t lastFrame = scripted ? a.frames : a.exitAfter;
+  auto writeShot = [&](const fs::path& file, uint32_t w, uint32_t h) {
+    writePng(file, w, h, 4, readWindow(w, h));
+    spdlog::info("wrote {}", file.string());
+  };
+
+  for (uint64_t frame = 0; !glfwWindowShouldClose(window); ++frame) {
+    const auto t0 = Clock::now();
+    const double seconds = std::min(std::chrono::duration<double>(t0 - previous).count(), 0.25);
+    previous = t0;
+    glfwPollEvents();
+    glfwGetFramebufferSize(window, &fbw, &fbh);
+    if (fbw < 8 || fbh < 8) {  // minimized
+      glfwWaitEventsTimeout(0.1);
+      continue;
+    }
+    if (uint32_t(fbw) != scene->width() || uint32_t(fbh) != scene->height()) scene->resize(uint32_t(fbw), uint32_t(fbh));
+    if (c.asyncLoads != sceneAsync) {
+      scene = makeScene(c.asyncLoads);
+      sceneAsync = c.asyncLoads;
+      haveFrozen = false;
+    }
+    scene->setCoherentAdaptation(!c.topDown);
+    scene->setTexelsPerPixel(c.texelRatio);
+    scene->setMaxUploadsPerFrame(uint32_t(std::max(c.uploadsPerFrame, 1)));
+    scene->setOverlay(kOverlays[size_t(c.overlay)]);
+    scene->renderer().setWireframe(c.wireframe);
+
+    // Camera: the path while it plays, else the user's input.
+    if (viewer.resetCamera) camera.frame(), viewer.resetCamera = false, pathCamera.reset();
+    if (viewer.cameraModeToggled) {
+      pathCamera.reset();
+      camera.setMode(camera.mode() == CameraControl::Mode::kOrbit ? CameraControl::Mode::kFly
+                                                                   : CameraControl::Mode::kOrbit);
+      viewer.cameraModeToggled = false;
+    }
+    // A path's cameras are drawn as they are (render draws the same pictures), the last one held
+    // once the path ends, until the user moves the camera on from it.
+    if (c.playing && !path.empty()) {
+      if (pathFrame >= path.size()) {
+        if (c.loop) pathFrame = 0;
+        else c.playing = false;
+      }
+      pathCamera = path[std::min(pathFrame, path.size() - 1)];
+      camera.setCamera(*pathCamera);
+      if (c.playing) ++pathFrame;
+    } else if (!uiWantsKeys()) {
+      glm::dvec3 move(0.0);
+      if (glfwGetKey(window, GLFW_KEY_D) == GLFW_PRESS) move.x += 1.0;
+      if (glfwGetKey(window, GLFW_KEY_A) == GLFW_PRESS) move.x -= 1.0;
+      if (glfwGetKey(window, GLFW_KEY_E) == GLFW_PRESS) move.y += 1.0;
+      if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) move.y -= 1.0;
+      if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) move.z += 1.0;
+      if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) move.z -= 1.0;
+      if (move != glm::dvec3(0.0)) camera.move(move, seconds), viewer.cameraTouched = true;
+    }
+    if (viewer.scroll != 0.0) camera.zoom(viewer.scroll), viewer.scroll = 0.0, viewer.cameraTouched = true;
+    if (viewer.cameraTouched) pathCamera.reset(), viewer.cameraTouched = false;
+    const Camera cam = pathCamera ? *pathCamera : camera.camera();
+    if (viewer.recordToggled) {
+      viewer.recordToggled = false;
+      if (c.recording) {
+        c.recording = false;
+        if (a.record.empty()) {
+          spdlog::warn("recorded {} cameras; give --record FILE.json to keep them", recorded.size());
+        } else if (!recorded.empty()) {
+          writeCameraPath(a.record, recorded);
+          spdlog::info("wrote {} cameras to {}", recorded.size(), a.record);
+        }
+      } else {
+        c.recording = true;
+        recorded.clear();
+      }
+    }
+    if (c.recording) recorded.push_back(cam);
+
+    // Adapt (unless frozen) and draw into the scene's framebuffer, then into the window.
+    gl::FrameResult f;
+    if (c.freeze && haveFrozen) {
+      f.cut = frozen;
+      f.draw = scene->drawCut(cam, frozen, &f);
+      f.maxErrorPx = 0.0;
+    } else {
+      if (c.budgetMode) {
+        BudgetOptions bo;
+        bo.maxTriangles = uint64_t(c.maxTrianglesK) * 1000;
+        bo.maxNodes = uint32_t(c.maxNodes);
+        f = scene->renderFrame(cam, bo);
+      } else {
+        AdaptOptions ao;
+        ao.tolerancePx = c.tolerance;
+        ao.maxNodes = uint32_t(c.maxNodes);
+        f = scene->renderFrame(cam, ao);
+      }
+      frozen = f.cut;
+      haveFrozen = true;
+    }
+    if (f.adapt.budgetBelowRoots && !warnedBelowRoots) {
+      spdlog::warn("node budget {} is below the {} visible chart roots: such frames draw the visible roots",
+                   c.maxNodes, f.adapt.rootFloor);
+      warnedBelowRoots = true;
+    }
+    scene->renderer().blitToDefaultFramebuffer();
+    glViewport(0, 0, fbw, fbh);
+
+    last.nodes = f.cut.nodes.size();
+    last.triangles = f.draw.triangles;
+    last.maxErrorPx = f.maxErrorPx;
+    last.adaptMs = f.adaptMs;
+    last.drawMs = f.draw.drawMs;
+    last.pagesLoaded = f.pagesLoaded + f.pagesUploaded;
+    last.pagesRequested = f.pagesRequested;
+    last.rootFloor = f.adapt.rootFloor;
+    last.belowRoots = f.adapt.budgetBelowRoots;
+    adaptMs.add(last.adaptMs);
+    drawMs.add(last.drawMs);
+    nodes.add(double(last.nodes));
+    triangles.add(double(last.triangles));
+    maxError.add(last.maxErrorPx);
+    pagesLoaded.add(last.pagesLoaded);
+
+    // The panel.
+    ImGui_ImplOpenGL3_NewFrame();
+    ImGui_ImplGlfw_NewFrame();
+    ImGui::NewFrame();
+    if (c.showUi) {
+      ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
+      ImGui::SetNextWindowSize(ImVec2(340, 0), ImGuiCond_FirstUseEver);
+      ImGui::Begin("gimlod");
+      ImGui::Text("%s atlas, %u charts", atlas.manifest.kind == AtlasKind::Heightfield ? "terrain" : "mesh",
+                  atlas.hierarchy.chartCount());
+      int mode = c.budgetMode ? 1 : 0;
+      ImGui::RadioButton("error threshold", &mode, 0);
+      ImGui::SameLine();
+      ImGui::RadioButton("triangle budget", &mode, 1);
+      c.budgetMode = mode == 1;
+      if (c.budgetMode) {
+        ImGui::SliderInt("triangles (k)", &c.maxTrianglesK, 1, 20000, "%d", ImGuiSliderFlags_Logarithmic);
+      } else {
+        ImGui::SliderFloat("tolerance (px)", &c.tolerance, 0.05f, 64.f, "%.2f", ImGuiSliderFlags_Logarithmic);
+        ImGui::Checkbox("top-down greedy", &c.topDown);
+      }
+      ImGui::SliderInt("max nodes", &c.maxNodes, 1, 65536, "%d", ImGuiSliderFlags_Logarithmic);
+      ImGui::SliderFloat("texel ratio", &c.texelRatio, 0.f, 8.f, "%.2f");
+      ImGui::Checkbox("async loads", &c.asyncLoads);
+      if (c.asyncLoads) ImGui::SliderInt("uploads / frame", &c.uploadsPerFrame, 1, 512);
+      ImGui::Combo("colouring", &c.overlay, kOverlayLabels.data(), int(kOverlayLabels.size()));
+      ImGui::Checkbox("wireframe", &c.wireframe);
+      ImGui::SameLine();
+      ImGui::Checkbox("freeze cut", &c.freeze);
+      ImGui::Text("camera: %s%s%s", camera.mode() == CameraControl::Mode::kOrbit ? "orbit" : "fly",
+                  c.playing ? ", playing the path" : "", c.recording ? ", recording" : "");
+      ImGui::Separator();
+      ImGui::Text("nodes %zu (root floor %u%s)  triangles %llu", last.nodes, last.rootFloor,
+                  last.belowRoots ? ", above the budget" : "", static_cast<unsigned long long>(last.triangles));
+      ImGui::Text("max error %.3f px  frame %.2f ms", last.maxErrorPx, frameMs.last());
+      plot("adapt ms", adaptMs, "ms");
+      plot("draw ms", drawMs, "ms");
+      plot("frame ms", frameMs, "ms");
+      plot("nodes", nodes, "");
+      plot("triangles", triangles, "");
+      plot("max error", maxError, "px");
+      plot("pages loaded", pagesLoaded, "");
+      if (ImGui::CollapsingHeader("keys")) ImGui::TextUnformatted(kHelp);
+      ImGui::End();
+    }
+    ImGui::Render();
+    ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+
+    last.frameMs = msSince(t0);
+    frameMs.add(last.frameMs);
+    if (stats) {
+      stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{}\n", frame,
+                           last.nodes, last.triangles, last.maxErrorPx, last.adaptMs, last.drawMs, last.frameMs,
+                           last.pagesLoaded, last.pagesRequested, last.rootFloor, int(last.belowRoots),
+                           c.budgetMode ? "budget" : "error", c.tolerance, c.maxNodes, uint64_t(c.maxTrianglesK) * 1000,
+                           int(c.freeze), overlayModeName(kOverlays[size_t(c.overlay)]), int(c.wireframe))
+            << std::flush;
+    }
+    const bool lastOne = lastFrame > 0 && frame + 1 >= lastFrame;
+    if (viewer.screenshotRequested) {
+      viewer.screenshotRequested = false;
+      writeShot(a.screenshot.empty() ? fs::path(fmt::format("gimlod-view-{:03d}.png", screenshots++)) : fs::path(a.screenshot),
+                uint32_t(fbw), uint32_t(fbh));
+    } else if (lastOne && scripted && !a.screenshot.empty()) {
+      writeShot(a.screenshot, uint32_t(fbw), uint32_t(fbh));
+    }
+    glfwSwapBuffers(window);
+    if (lastOne) break;
+  }
+  if (c.recording && !a.record.empty() && !recorded.empty()) {
+    writeCameraPath(a.record, recorded);
+    spdlog::info("wrote {} cameras to {}", recorded.size(), a.record);
+  }
+  return 0;
+}
+
+}  // namespace gimlod
