@@ -50,7 +50,7 @@ struct RenderArgs {
   bool asyncLoads = false, topDown = false;
   double tolerance = 1.0, texelRatio = 1.0;
   uint64_t triangles = 0;  // > 0: triangle-budget mode (quad queue)
-  std::string overlay = "none";        // runtime/overlay.h: none, chart, level, res
+  std::string overlay = "none";        // runtime/overlay.h: none, chart, level, res, error
   std::vector<std::string> exportCut;  // "FRAME:FILE.ply"
   bool noStitch = false;               // exported cuts without the stitching tables (a control)
 };
@@ -126,7 +126,7 @@ int runBuild(const MeshBuildOptions& o) {
 
 OverlayMode overlayMode(const std::string& name) {
   const std::optional<OverlayMode> m = parseOverlayMode(name);
-  if (!m) throw InputError("--overlay '" + name + "': expected none, chart, level or res");
+  if (!m) throw InputError("--overlay '" + name + "': expected none, chart, level, res or error");
   return *m;
 }
 
@@ -265,6 +265,7 @@ int runRender(const RenderArgs& a) {
   so.coherentAdaptation = !a.topDown;
   so.texelsPerPixel = a.texelRatio;
   so.overlay = overlayMode(a.overlay);
+  so.overlayErrorPx = a.triangles > 0 ? 0.0 : a.tolerance;  // error colouring: red at the tolerance
   gl::AtlasScene scene(atlas, so);
   if (scene.nodeBudget(a.maxNodes) != a.maxNodes)
     spdlog::warn("--max-nodes {} is above what the GPU page pool holds ({} pages): using {}", a.maxNodes,
@@ -398,7 +399,8 @@ int main(int argc, char** argv) {
   render->add_flag("--async-loads", r.asyncLoads,
                    "Load pages on a loader thread; missing nodes draw with a resident ancestor's data");
   render->add_option("--overlay", r.overlay,
-                     "Draw over the shading: chart (each chart its colour, seams dark, open borders red), level, res")
+                     "Draw over the shading: chart (each chart its colour, seams dark, open borders red), level, res, "
+                     "error (heat map: blue 0, red at the tolerance, or the frame's largest error with --triangles)")
       ->capture_default_str();
   render->add_option("--export-cut", r.exportCut,
                      "FRAME:FILE.ply: write the cut drawn at that frame as one welded mesh (stitched positions from "

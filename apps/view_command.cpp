@@ -74,9 +74,10 @@ struct Controls {
   bool recording = false;
 };
 
-constexpr std::array<OverlayMode, 4> kOverlays{OverlayMode::kNone, OverlayMode::kChart, OverlayMode::kLevel,
-                                               OverlayMode::kResolution};
-constexpr std::array<const char*, 4> kOverlayLabels{"none", "chart", "level", "resolution"};
+constexpr std::array<OverlayMode, 5> kOverlays{OverlayMode::kNone, OverlayMode::kChart, OverlayMode::kLevel,
+                                               OverlayMode::kResolution, OverlayMode::kError};
+constexpr std::array<const char*, 5> kOverlayLabels{"none", "chart", "level", "resolution",
+                                                    "error (red: the tolerance)"};
 
 // Window state the GLFW callbacks reach through the user pointer.
 struct Viewer {
@@ -175,7 +176,7 @@ std::vector<uint8_t> readWindow(uint32_t w, uint32_t h) {
 void plot(const char* label, const Series& s, const char* unit) {
   const std::vector<float> d = s.data();
   const std::string overlay = fmt::format("{:.3g} {}", s.last(), unit);
-  ImGui::PlotLines(label, d.data(), int(d.size()), 0, overlay.c_str(), 0.f, FLT_MAX, ImVec2(0, 40));
+  ImGui::PlotLines(label, d.data(), int(d.size()), 0, overlay.c_str(), 0.f, FLT_MAX, ImVec2(0, 28));
 }
 
 struct FrameFigures {
@@ -191,7 +192,7 @@ const char* kHelp =
     "Tab orbit/fly   WASD move, Q/E down/up   Home reset camera\n"
     "[ ] finer/coarser (tolerance or triangles)   - = node budget\n"
     "M error/budget mode   G top-down greedy   F freeze cut\n"
-    "C colouring (chart, level, resolution)   X wireframe   H hide panel\n"
+    "C colouring (chart, level, resolution, error)   X wireframe   H hide panel\n"
     "Space play/pause path   R record path   P screenshot   Esc quit";
 
 }  // namespace
@@ -221,7 +222,7 @@ CLI::App* addViewCommand(CLI::App& app, ViewArgs& a) {
   v->add_flag("--async-loads", a.asyncLoads, "Load pages on a separate thread");
   v->add_option("--uploads-per-frame", a.uploadsPerFrame, "Async: pages uploaded per frame")->capture_default_str();
   v->add_flag("--top-down", a.topDown, "Error mode: the stateless top-down greedy instead of the dual queue");
-  v->add_option("--overlay", a.overlay, "Colouring: none, chart, level or res")->capture_default_str();
+  v->add_option("--overlay", a.overlay, "Colouring: none, chart, level, res or error")->capture_default_str();
   v->add_flag("--wireframe", a.wireframe, "Start in wireframe");
   return v;
 }
@@ -237,7 +238,7 @@ int runView(const ViewArgs& a) {
   if (a.triangles > 0 && a.topDown) throw InputError("--top-down applies to error mode; --triangles selects the quad queue");
   if (a.frames > 0 && a.path.empty()) throw InputError("--frames needs --path");
   const std::optional<OverlayMode> overlayMode = parseOverlayMode(a.overlay);
-  if (!overlayMode) throw InputError("--overlay '" + a.overlay + "': expected none, chart, level or res");
+  if (!overlayMode) throw InputError("--overlay '" + a.overlay + "': expected none, chart, level, res or error");
   const auto background = parseBackground(a.background);
 
   const AtlasView atlas = openAtlas(a.atlas);
@@ -379,7 +380,8 @@ int runView(const ViewArgs& a) {
     scene->setCoherentAdaptation(!c.topDown);
     scene->setTexelsPerPixel(c.texelRatio);
     scene->setMaxUploadsPerFrame(uint32_t(std::max(c.uploadsPerFrame, 1)));
-    scene->setOverlay(kOverlays[size_t(c.overlay)]);
+    // The error colouring is against the tolerance (error mode) or the frame's largest error.
+    scene->setOverlay(kOverlays[size_t(c.overlay)], {}, c.budgetMode ? 0.0 : double(c.tolerance));
     scene->renderer().setWireframe(c.wireframe);
 
     // Camera: the path while it plays, else the user's input.
@@ -481,8 +483,9 @@ int runView(const ViewArgs& a) {
     ImGui::NewFrame();
     if (c.showUi) {
       ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
-      ImGui::SetNextWindowSize(ImVec2(340, 0), ImGuiCond_FirstUseEver);
-      ImGui::Begin("gimlod");
+      ImGui::SetNextWindowSize(ImVec2(330, 0), ImGuiCond_FirstUseEver);
+      ImGui::SetNextWindowBgAlpha(0.7f);
+      ImGui::Begin("gimlod", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
       ImGui::Text("%s atlas, %u charts", atlas.manifest.kind == AtlasKind::Heightfield ? "terrain" : "mesh",
                   atlas.hierarchy.chartCount());
       int mode = c.budgetMode ? 1 : 0;
@@ -510,13 +513,15 @@ int runView(const ViewArgs& a) {
       ImGui::Text("nodes %zu (root floor %u%s)  triangles %llu", last.nodes, last.rootFloor,
                   last.belowRoots ? ", above the budget" : "", static_cast<unsigned long long>(last.triangles));
       ImGui::Text("max error %.3f px  frame %.2f ms", last.maxErrorPx, frameMs.last());
-      plot("adapt ms", adaptMs, "ms");
-      plot("draw ms", drawMs, "ms");
-      plot("frame ms", frameMs, "ms");
-      plot("nodes", nodes, "");
-      plot("triangles", triangles, "");
-      plot("max error", maxError, "px");
-      plot("pages loaded", pagesLoaded, "");
+      if (ImGui::CollapsingHeader("graphs", fbh >= 700 ? ImGuiTreeNodeFlags_DefaultOpen : 0)) {
+        plot("adapt ms", adaptMs, "ms");
+        plot("draw ms", drawMs, "ms");
+        plot("frame ms", frameMs, "ms");
+        plot("nodes", nodes, "");
+        plot("triangles", triangles, "");
+        plot("max error", maxError, "px");
+        plot("pages loaded", pagesLoaded, "");
+      }
       if (ImGui::CollapsingHeader("keys")) ImGui::TextUnformatted(kHelp);
       ImGui::End();
     }

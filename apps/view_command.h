@@ -31,7 +31,7 @@ struct ViewArgs {
   bool asyncLoads = false;
   uint32_t uploadsPerFrame = 64;
   bool topDown = false;
-  std::string overlay = "none";  // none, chart, level, res
+  std::string overlay = "none";  // none, chart, level, res, error
   bool wireframe = false;
   double fov = 45.0;
 };

@@ -27,10 +27,4 @@ void writePng(const std::filesystem::path& path, uint32_t width, uint32_t height
   if (ec) throw InputError(path.string() + ": " + ec.message());
 }
 
-std::array<uint8_t, 3> heatColour(double t) {
-  t = std::clamp(t, 0.0, 1.0);
-  const auto u = [](double x) { return uint8_t(std::lround(std::clamp(x, 0.0, 1.0) * 255.0)); };
-  return {u(t < 0.5 ? 0.0 : 2.0 * t - 1.0), u(t < 0.5 ? 2.0 * t : 2.0 - 2.0 * t), u(t < 0.5 ? 1.0 - 2.0 * t : 0.0)};
-}
-
 }  // namespace gimlod

@@ -1,10 +1,13 @@
-// Images of the inspection report: PNG writing and the colour ramp its heat maps share.
+// Images of the inspection report and the command-line tool: PNG writing (the heat ramp the
+// report's maps share is runtime/overlay.h heatColour).
 #pragma once
 
 #include <array>
 #include <cstdint>
 #include <filesystem>
 #include <vector>
+
+#include "runtime/overlay.h"
 
 namespace gimlod {
 
@@ -18,8 +21,5 @@ inline void writePngRgb(const std::filesystem::path& path, uint32_t width, uint3
                         const std::vector<uint8_t>& rgb) {
   writePng(path, width, height, 3, rgb);
 }
-
-// The heat ramp for t in [0, 1]: blue, green, red.
-std::array<uint8_t, 3> heatColour(double t);
 
 }  // namespace gimlod

@@ -45,15 +45,23 @@ const char* overlayModeName(OverlayMode mode) {
     case OverlayMode::kChart: return "chart";
     case OverlayMode::kLevel: return "level";
     case OverlayMode::kResolution: return "res";
+    case OverlayMode::kError: return "error";
     case OverlayMode::kCustom: return "custom";
   }
   return "?";
 }
 
 std::optional<OverlayMode> parseOverlayMode(std::string_view name) {
-  for (OverlayMode m : {OverlayMode::kNone, OverlayMode::kChart, OverlayMode::kLevel, OverlayMode::kResolution})
+  for (OverlayMode m :
+       {OverlayMode::kNone, OverlayMode::kChart, OverlayMode::kLevel, OverlayMode::kResolution, OverlayMode::kError})
     if (name == overlayModeName(m)) return m;
   return std::nullopt;
+}
+
+std::array<uint8_t, 3> heatColour(double t) {
+  t = std::clamp(t, 0.0, 1.0);
+  const auto u = [](double x) { return uint8_t(std::lround(std::clamp(x, 0.0, 1.0) * 255.0)); };
+  return {u(t < 0.5 ? 0.0 : 2.0 * t - 1.0), u(t < 0.5 ? 2.0 * t : 2.0 - 2.0 * t), u(t < 0.5 ? 1.0 - 2.0 * t : 0.0)};
 }
 
 uint32_t chartColour(uint32_t chart) {
@@ -61,10 +69,19 @@ uint32_t chartColour(uint32_t chart) {
   return hsv(0.11 + kGolden * double(chart), 0.45 + 0.2 * double(chart % 3) / 2.0, 0.92 - 0.12 * double(chart % 2));
 }
 
-std::vector<NodeOverlay> nodeOverlays(const Hierarchy& h, const Cut& cut, OverlayMode mode, const NodeColour& colour) {
+std::vector<NodeOverlay> nodeOverlays(const Hierarchy& h, const Cut& cut, OverlayMode mode, const NodeColour& colour,
+                                      double errorScalePx) {
   std::vector<NodeOverlay> out;
   if (mode == OverlayMode::kNone) return out;
   if (mode == OverlayMode::kCustom && !colour) throw std::invalid_argument("nodeOverlays: kCustom needs a colour per node");
+  if (mode == OverlayMode::kError && !(errorScalePx > 0.0)) {
+    errorScalePx = 0.0;
+    for (const CutNode& n : cut.nodes) errorScalePx = std::max(errorScalePx, double(n.errorPx));
+  }
+  const auto heat = [&](float errorPx) {
+    const std::array<uint8_t, 3> c = heatColour(errorScalePx > 0.0 ? double(errorPx) / errorScalePx : 0.0);
+    return uint32_t(c[0]) | uint32_t(c[1]) << 8 | uint32_t(c[2]) << 16 | 0xFF000000u;
+  };
   out.reserve(cut.nodes.size());
   for (const CutNode& n : cut.nodes) {
     NodeOverlay o;
@@ -72,6 +89,7 @@ std::vector<NodeOverlay> nodeOverlays(const Hierarchy& h, const Cut& cut, Overla
     o.rgba = mode == OverlayMode::kChart    ? chartColour(id.chart)
              : mode == OverlayMode::kLevel  ? paletteColour(id.level)
              : mode == OverlayMode::kCustom ? colour(id)
+             : mode == OverlayMode::kError  ? heat(n.errorPx)
                                             : paletteColour(n.res);
     const uint32_t last = (1u << id.level) - 1;
     const std::array<bool, 4> onBorder = {id.y == 0, id.x == last, id.y == last, id.x == 0};

@@ -3,6 +3,7 @@
 // border), for the fragment shader to draw over the shading. For atlas inspection and the viewer.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <optional>
@@ -19,13 +20,14 @@ enum class OverlayMode : uint8_t {
   kChart,       // each chart its own colour, seams dark, open borders red
   kLevel,       // colour by quadtree level
   kResolution,  // colour by drawn resolution
+  kError,       // screen-space error against a scale (heatColour: blue 0, green half, red at or above it)
   kCustom,      // a colour per node given by the caller (e.g. a heat map of some figure)
 };
 
 // A node's colour for kCustom (RGBA8, red in the low byte).
 using NodeColour = std::function<uint32_t(const NodeId&)>;
 
-// "none", "chart", "level", "res" ("custom" is not parsed: it needs colours).
+// "none", "chart", "level", "res", "error" ("custom" is not parsed: it needs colours).
 const char* overlayModeName(OverlayMode mode);
 std::optional<OverlayMode> parseOverlayMode(std::string_view name);
 
@@ -39,12 +41,16 @@ struct NodeOverlay {
 };
 static_assert(sizeof(NodeOverlay) == 16);
 
+// The heat ramp for t in [0, 1]: blue, green, red (t clamped).
+std::array<uint8_t, 3> heatColour(double t);
+
 // A colour for chart `chart`: hues spread by the golden angle, so neighbours differ.
 uint32_t chartColour(uint32_t chart);
 
 // The overlay of every cut node, in cut order; empty for kNone. kCustom takes its colours from
-// `colour` (std::invalid_argument without one).
+// `colour` (std::invalid_argument without one). kError colours each node by its CutNode::errorPx
+// over errorScalePx (the tolerance in error mode); errorScalePx <= 0 takes the cut's largest error.
 std::vector<NodeOverlay> nodeOverlays(const Hierarchy& h, const Cut& cut, OverlayMode mode,
-                                      const NodeColour& colour = {});
+                                      const NodeColour& colour = {}, double errorScalePx = 0.0);
 
 }  // namespace gimlod

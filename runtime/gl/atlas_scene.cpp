@@ -154,7 +154,8 @@ DrawStats AtlasScene::drawCut(const Camera& camera, const Cut& cut, FrameResult*
   const StitchTables stitch = buildStitchTables(atlas_.hierarchy, cut);
   if (frame) frame->stitchMs = msSince(t0);
   const std::vector<DrawNode> nodes = prepare(cut, frame);
-  renderer_->setOverlay(nodeOverlays(atlas_.hierarchy, cut, options_.overlay, options_.overlayColour));
+  renderer_->setOverlay(
+      nodeOverlays(atlas_.hierarchy, cut, options_.overlay, options_.overlayColour, options_.overlayErrorPx));
   const DrawStats stats = renderer_->draw(glm::mat4(viewProjection(camera)), glm::vec3(camera.eye), nodes, stitch);
   renderer_->setOverlay({});
   return stats;

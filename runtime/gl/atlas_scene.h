@@ -40,6 +40,7 @@ struct SceneOptions {
   // and open borders marked. Capture is unaffected.
   OverlayMode overlay = OverlayMode::kNone;
   NodeColour overlayColour;  // the colours of OverlayMode::kCustom
+  double overlayErrorPx = 0.0;  // OverlayMode::kError: the error drawn red (0: the cut's largest)
 };
 
 struct FrameResult {
@@ -80,9 +81,10 @@ class AtlasScene {
   void setCoherentAdaptation(bool on) { options_.coherentAdaptation = on; }
   void setTexelsPerPixel(double ratio) { options_.texelsPerPixel = ratio; }
   void setMaxUploadsPerFrame(uint32_t n) { options_.maxUploadsPerFrame = n; }
-  void setOverlay(OverlayMode mode, NodeColour colour = {}) {
+  void setOverlay(OverlayMode mode, NodeColour colour = {}, double errorPx = 0.0) {
     options_.overlay = mode;
     options_.overlayColour = std::move(colour);
+    options_.overlayErrorPx = errorPx;
   }
 
   // Adapts to the camera (error threshold, paper 7.1 problem 1) and draws; the picture is then in

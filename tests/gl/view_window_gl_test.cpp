@@ -253,8 +253,8 @@ TEST_F(ViewWindow, ScriptedRunDrawsWhatRenderDraws) {
   }
 }
 
-// The interactive window, driven like a person: keys toggle the wireframe and the colourings, a
-// lower tolerance draws more triangles, and a frozen cut stays while a drag turns the camera.
+// The interactive window, driven like a person: keys toggle the wireframe and the colourings
+// (chart, resolution, error), a lower tolerance draws more triangles, and a frozen cut stays while a drag turns the camera.
 class Session {
  public:
   Session(const std::string& env, const std::string& options, const fs::path& cwd) : env_(env), cwd_(cwd) {
@@ -370,6 +370,11 @@ TEST_F(ViewWindow, KeysAndDragsChangeWhatIsDrawn) {
   const Image res = s.screenshot();
   EXPECT_GT(differentFraction(res, plain, 8), 0.5 * plainCov.fraction);
   EXPECT_GT(differentFraction(res, charts, 8), 0.1 * plainCov.fraction);
+  // One more: the screen-space error as a heat map; then back to plain shading.
+  s.key("c");
+  ASSERT_TRUE(s.waitFor([](const auto& r) { return !r.empty() && r.back().at("overlay") == "error"; }));
+  s.settle();
+  EXPECT_GT(differentFraction(s.screenshot(), res, 8), 0.1 * plainCov.fraction);
   s.key("c");
   ASSERT_TRUE(s.waitFor([](const auto& r) { return !r.empty() && r.back().at("overlay") == "none"; }));
 

@@ -28,7 +28,8 @@ CutNode node(uint32_t chart, uint32_t level, uint32_t x, uint32_t y, uint32_t re
 }
 
 TEST(Overlay, ModesByName) {
-  for (OverlayMode m : {OverlayMode::kNone, OverlayMode::kChart, OverlayMode::kLevel, OverlayMode::kResolution})
+  for (OverlayMode m :
+       {OverlayMode::kNone, OverlayMode::kChart, OverlayMode::kLevel, OverlayMode::kResolution, OverlayMode::kError})
     EXPECT_EQ(parseOverlayMode(overlayModeName(m)), m);
   EXPECT_EQ(parseOverlayMode("custom"), std::nullopt);
   EXPECT_EQ(parseOverlayMode("charts"), std::nullopt);
@@ -85,6 +86,32 @@ TEST(Overlay, BorderAndOpenSidesFollowTheNodesPlaceInItsChart) {
   for (size_t i = 0; i < cut.nodes.size(); ++i) EXPECT_EQ(custom[i].rgba, 0xFF000000u | cut.nodes[i].id.level);
   EXPECT_EQ(custom[3].openSides, o[3].openSides);
   EXPECT_THROW(nodeOverlays(h, cut, OverlayMode::kCustom), std::invalid_argument);
+}
+
+// The error colouring: each node's screen-space error over the scale on the heat ramp (blue 0,
+// green half, red at or above the scale); no scale takes the cut's largest error.
+TEST(Overlay, ErrorColouringIsAHeatMapAgainstTheTolerance) {
+  const Hierarchy h = twoCharts();
+  Cut cut;
+  cut.nodes = {node(0, 0, 0, 0, 4), node(0, 1, 1, 0, 3), node(1, 2, 1, 1, 2), node(1, 2, 0, 3, 2)};
+  const float errors[4] = {0.f, 0.5f, 1.f, 3.f};
+  for (size_t i = 0; i < 4; ++i) cut.nodes[i].errorPx = errors[i];
+  const auto rgb = [](uint32_t c) { return std::array<int, 3>{int(c & 255), int((c >> 8) & 255), int((c >> 16) & 255)}; };
+  const std::vector<NodeOverlay> o = nodeOverlays(h, cut, OverlayMode::kError, {}, 1.0);
+  ASSERT_EQ(o.size(), 4u);
+  EXPECT_EQ(rgb(o[0].rgba), (std::array<int, 3>{0, 0, 255}));    // no error: blue
+  EXPECT_EQ(rgb(o[1].rgba), (std::array<int, 3>{0, 255, 0}));    // half the tolerance: green
+  EXPECT_EQ(rgb(o[2].rgba), (std::array<int, 3>{255, 0, 0}));    // at the tolerance: red
+  EXPECT_EQ(o[3].rgba, o[2].rgba);                               // above it: red too
+  for (const NodeOverlay& n : o) EXPECT_EQ(n.rgba >> 24, 255u);
+  EXPECT_EQ(o[3].chartBorderSides, 0b1100u);
+  // Without a scale, the largest error (3 px) is red and 1.5 px would be green.
+  const std::vector<NodeOverlay> own = nodeOverlays(h, cut, OverlayMode::kError);
+  EXPECT_EQ(rgb(own[3].rgba), (std::array<int, 3>{255, 0, 0}));
+  EXPECT_EQ(rgb(own[0].rgba), (std::array<int, 3>{0, 0, 255}));
+  EXPECT_NE(own[2].rgba, o[2].rgba);
+  EXPECT_EQ(heatColour(-1.0), heatColour(0.0));
+  EXPECT_EQ(heatColour(2.0), heatColour(1.0));
 }
 
 }  // namespace
