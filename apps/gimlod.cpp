@@ -34,6 +34,7 @@
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
 #include "runtime/cut_mesh.h"
+#include "runtime/frame_controller.h"
 #include "runtime/overlay.h"
 #include "runtime/gl/egl_context.h"
 #include "runtime/gl/atlas_scene.h"
@@ -50,6 +51,7 @@ struct RenderArgs {
   bool asyncLoads = false, topDown = false;
   double tolerance = 1.0, texelRatio = 1.0;
   uint64_t triangles = 0;  // > 0: triangle-budget mode (quad queue)
+  double frameMs = 0.0;    // > 0: the frame-time controller sets the budgets (budget mode)
   std::string overlay = "none";        // runtime/overlay.h: none, chart, level, res, error
   std::vector<std::string> exportCut;  // "FRAME:FILE.ply"
   bool noStitch = false;               // exported cuts without the stitching tables (a control)
@@ -242,6 +244,9 @@ int runRender(const RenderArgs& a) {
   if (!(a.texelRatio >= 0.0) || !std::isfinite(a.texelRatio) || a.texelRatio > 64.0)
     throw InputError("--texel-ratio must be in [0, 64] texels per pixel (0: page resolution)");
   if (a.triangles > 0 && a.topDown) throw InputError("--top-down applies to error mode; --triangles selects the quad queue");
+  if (a.frameMs < 0.0 || !std::isfinite(a.frameMs) || a.frameMs > 10000.0)
+    throw InputError("--frame-ms must be in (0, 10000] milliseconds");
+  if (a.frameMs > 0.0 && a.topDown) throw InputError("--frame-ms sets a triangle budget; --top-down is for error mode");
   const auto background = parseBackground(a.background);
 
   const AtlasView atlas = openAtlas(a.atlas);
@@ -277,15 +282,29 @@ int runRender(const RenderArgs& a) {
   BudgetOptions bo;
   bo.maxTriangles = a.triangles;
   bo.maxNodes = a.maxNodes;
+  // --frame-ms: budget mode, the budgets set frame by frame from the measured costs.
+  std::optional<FrameController> controller;
+  const bool budgetMode = a.triangles > 0 || a.frameMs > 0.0;
+  if (a.frameMs > 0.0) {
+    FrameControllerOptions fo;
+    fo.targetMs = a.frameMs;
+    controller.emplace(fo, a.maxNodes, a.triangles > 0 ? a.triangles : 1000000);
+  }
   std::string csv = "frame,nodes,triangles,max_screen_error_px,adapt_ms,stitch_ms,upload_ms,draw_ms,"
                     "draw_calls,pages_loaded,pages_missing,pages_requested,nodes_substituted,node_budget_bound,"
                     "constraint_raises,constraint_splits,attribute_texels,attribute_above_page,root_floor,"
-                    "budget_below_roots\n";
+                    "budget_below_roots,max_nodes,max_triangles,frame_ms\n";
   double drawMsTotal = 0.0;
   uint64_t triTotal = 0;
   bool warnedBelowRoots = false;
   for (size_t i = 0; i < cams.size(); ++i) {
-    const gl::FrameResult f = a.triangles > 0 ? scene.renderFrame(cams[i], bo) : scene.renderFrame(cams[i], ao);
+    if (controller) bo.maxNodes = controller->maxNodes(), bo.maxTriangles = controller->maxTriangles();
+    const auto frameStart = std::chrono::steady_clock::now();
+    const gl::FrameResult f = budgetMode ? scene.renderFrame(cams[i], bo) : scene.renderFrame(cams[i], ao);
+    const double frameMs =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - frameStart).count();
+    if (controller)
+      controller->update({uint32_t(f.cut.nodes.size()), f.draw.triangles, f.adaptMs, f.draw.drawMs, frameMs});
     if (f.adapt.budgetBelowRoots && !warnedBelowRoots) {
       spdlog::warn("--max-nodes {} is below the {} visible chart roots (frame {}): no cut has fewer nodes, so such "
                    "frames draw the visible roots (root_floor, budget_below_roots in stats.csv)",
@@ -303,13 +322,14 @@ int runRender(const RenderArgs& a) {
                    i, ex->second.string(), mesh.positions.size(), mesh.triangles.size(), mesh.boundaryEdges,
                    mesh.openBorderEdges, mesh.otherBoundaryEdges);
     }
-    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{}\n", i,
+    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f}\n", i,
                        f.cut.nodes.size(),
                        f.draw.triangles, f.maxErrorPx, f.adaptMs, f.stitchMs, f.uploadMs, f.draw.drawMs,
                        f.draw.drawCalls, f.pagesLoaded + f.pagesUploaded, f.pagesMissing, f.pagesRequested, f.nodesSubstituted,
                        int(f.adapt.nodeBudgetBound), f.adapt.constraintRaises,
                        f.adapt.constraintSplits, f.attributes.texels, f.attributes.abovePage, f.adapt.rootFloor,
-                       int(f.adapt.budgetBelowRoots));
+                       int(f.adapt.budgetBelowRoots), budgetMode ? bo.maxNodes : a.maxNodes,
+                       budgetMode ? bo.maxTriangles : 0, frameMs);
     drawMsTotal += f.draw.drawMs;
     triTotal += f.draw.triangles;
     spdlog::info("frame {:4d}: {:5d} nodes, {:8d} triangles, max error {:.3f} px, adapt {:.3f} ms, draw {:.2f} ms",
@@ -391,6 +411,9 @@ int main(int argc, char** argv) {
   render->add_option("--max-nodes", r.maxNodes, "Node budget")->capture_default_str();
   render->add_option("--triangles", r.triangles,
                      "Triangle budget: adapt with the quad queue (paper 7.1, problem 2) instead of --tolerance");
+  render->add_option("--frame-ms", r.frameMs,
+                     "Hold this frame time: the node and triangle budgets follow the measured costs frame by frame "
+                     "(budget mode; --triangles and --max-nodes are where they start)");
   render->add_flag("--top-down", r.topDown,
                    "Error mode with the stateless top-down greedy instead of the coherent dual queue");
   render->add_option("--texel-ratio", r.texelRatio,

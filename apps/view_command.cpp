@@ -31,6 +31,7 @@
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
 #include "runtime/camera_control.h"
+#include "runtime/frame_controller.h"
 #include "runtime/overlay.h"
 #include "runtime/gl/atlas_scene.h"
 
@@ -72,6 +73,8 @@ struct Controls {
   bool playing = false;
   bool loop = false;
   bool recording = false;
+  bool holdFrameTime = false;  // the frame-time controller sets the budgets (budget mode)
+  float targetMs = 33.3f;
 };
 
 constexpr std::array<OverlayMode, 5> kOverlays{OverlayMode::kNone, OverlayMode::kChart, OverlayMode::kLevel,
@@ -114,6 +117,7 @@ void onKey(GLFWwindow* w, int key, int, int action, int mods) {
       break;
     case GLFW_KEY_F: if (press) c.freeze = !c.freeze; break;
     case GLFW_KEY_M: if (press) c.budgetMode = !c.budgetMode; break;
+    case GLFW_KEY_T: if (press) c.holdFrameTime = !c.holdFrameTime; break;
     case GLFW_KEY_G: if (press) c.topDown = !c.topDown; break;
     case GLFW_KEY_H: if (press) c.showUi = !c.showUi; break;
     case GLFW_KEY_P: if (press) v.screenshotRequested = true; break;
@@ -191,7 +195,7 @@ const char* kHelp =
     "mouse: left drag rotate (fly: look), right/middle drag pan, wheel zoom (fly: speed)\n"
     "Tab orbit/fly   WASD move, Q/E down/up   Home reset camera\n"
     "[ ] finer/coarser (tolerance or triangles)   - = node budget\n"
-    "M error/budget mode   G top-down greedy   F freeze cut\n"
+    "M error/budget mode   T hold the frame time   G top-down greedy   F freeze cut\n"
     "C colouring (chart, level, resolution, error)   X wireframe   H hide panel\n"
     "Space play/pause path   R record path   P screenshot   Esc quit";
 
@@ -224,6 +228,8 @@ CLI::App* addViewCommand(CLI::App& app, ViewArgs& a) {
   v->add_flag("--top-down", a.topDown, "Error mode: the stateless top-down greedy instead of the dual queue");
   v->add_option("--overlay", a.overlay, "Colouring: none, chart, level, res or error")->capture_default_str();
   v->add_flag("--wireframe", a.wireframe, "Start in wireframe");
+  v->add_option("--frame-ms", a.frameMs,
+                "Hold this frame time: the node and triangle budgets follow the measured costs (budget mode)");
   return v;
 }
 
@@ -237,6 +243,9 @@ int runView(const ViewArgs& a) {
     throw InputError("--texel-ratio must be in [0, 64] texels per pixel (0: page resolution)");
   if (a.triangles > 0 && a.topDown) throw InputError("--top-down applies to error mode; --triangles selects the quad queue");
   if (a.frames > 0 && a.path.empty()) throw InputError("--frames needs --path");
+  if (a.frameMs < 0.0 || !std::isfinite(a.frameMs) || a.frameMs > 10000.0)
+    throw InputError("--frame-ms must be in (0, 10000] milliseconds");
+  if (a.frameMs > 0.0 && a.topDown) throw InputError("--frame-ms sets a triangle budget; --top-down is for error mode");
   const std::optional<OverlayMode> overlayMode = parseOverlayMode(a.overlay);
   if (!overlayMode) throw InputError("--overlay '" + a.overlay + "': expected none, chart, level, res or error");
   const auto background = parseBackground(a.background);
@@ -258,7 +267,8 @@ int runView(const ViewArgs& a) {
     stats.open(a.stats);
     if (!stats) throw InputError(a.stats + ": cannot write the stats file");
     stats << "frame,nodes,triangles,max_screen_error_px,adapt_ms,draw_ms,frame_ms,pages_loaded,pages_requested,"
-             "root_floor,budget_below_roots,mode,tolerance_px,max_nodes,max_triangles,frozen,overlay,wireframe\n";
+             "root_floor,budget_below_roots,mode,tolerance_px,max_nodes,max_triangles,frozen,overlay,wireframe,"
+             "target_ms\n";
   }
 
   glfwSetErrorCallback([](int code, const char* what) { spdlog::error("GLFW error {}: {}", code, what); });
@@ -298,6 +308,9 @@ int runView(const ViewArgs& a) {
   c.showUi = !a.hideUi;
   c.playing = !path.empty();
   c.loop = a.loop;
+  c.holdFrameTime = a.frameMs > 0.0;
+  if (c.holdFrameTime) c.targetMs = float(a.frameMs);
+  std::optional<FrameController> controller;
 
   CameraControl camera(atlas.lo, atlas.hi, up, a.fov);
   if (!path.empty()) camera.setCamera(path.front());
@@ -432,6 +445,21 @@ int runView(const ViewArgs& a) {
     }
     if (c.recording) recorded.push_back(cam);
 
+    // The frame-time controller sets the budgets (budget mode) while it holds the frame time.
+    if (c.holdFrameTime) {
+      c.budgetMode = true;
+      if (!controller) {
+        FrameControllerOptions fo;
+        fo.targetMs = c.targetMs;
+        controller.emplace(fo, uint32_t(c.maxNodes), uint64_t(c.maxTrianglesK) * 1000);
+      }
+      controller->setTarget(std::max(c.targetMs, 1.f));
+      c.maxNodes = int(std::min<uint32_t>(controller->maxNodes(), 1u << 20));
+      c.maxTrianglesK = int(std::clamp<uint64_t>(controller->maxTriangles() / 1000, 1, 1 << 20));
+    } else {
+      controller.reset();
+    }
+
     // Adapt (unless frozen) and draw into the scene's framebuffer, then into the window.
     gl::FrameResult f;
     if (c.freeze && haveFrozen) {
@@ -500,6 +528,12 @@ int runView(const ViewArgs& a) {
         ImGui::Checkbox("top-down greedy", &c.topDown);
       }
       ImGui::SliderInt("max nodes", &c.maxNodes, 1, 65536, "%d", ImGuiSliderFlags_Logarithmic);
+      ImGui::Checkbox("hold frame time", &c.holdFrameTime);
+      if (c.holdFrameTime) {
+        ImGui::SameLine();
+        ImGui::SetNextItemWidth(120);
+        ImGui::SliderFloat("ms", &c.targetMs, 2.f, 200.f, "%.1f", ImGuiSliderFlags_Logarithmic);
+      }
       ImGui::SliderFloat("texel ratio", &c.texelRatio, 0.f, 8.f, "%.2f");
       ImGui::Checkbox("async loads", &c.asyncLoads);
       if (c.asyncLoads) ImGui::SliderInt("uploads / frame", &c.uploadsPerFrame, 1, 512);
@@ -530,12 +564,15 @@ int runView(const ViewArgs& a) {
 
     last.frameMs = msSince(t0);
     frameMs.add(last.frameMs);
+    if (controller && !c.freeze)
+      controller->update({uint32_t(last.nodes), last.triangles, last.adaptMs, last.drawMs, last.frameMs});
     if (stats) {
-      stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{}\n", frame,
+      stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{},{}\n", frame,
                            last.nodes, last.triangles, last.maxErrorPx, last.adaptMs, last.drawMs, last.frameMs,
                            last.pagesLoaded, last.pagesRequested, last.rootFloor, int(last.belowRoots),
                            c.budgetMode ? "budget" : "error", c.tolerance, c.maxNodes, uint64_t(c.maxTrianglesK) * 1000,
-                           int(c.freeze), overlayModeName(kOverlays[size_t(c.overlay)]), int(c.wireframe))
+                           int(c.freeze), overlayModeName(kOverlays[size_t(c.overlay)]), int(c.wireframe),
+                           c.holdFrameTime ? fmt::format("{:.2f}", c.targetMs) : std::string())
             << std::flush;
     }
     const bool lastOne = lastFrame > 0 && frame + 1 >= lastFrame;

@@ -34,6 +34,7 @@ struct ViewArgs {
   std::string overlay = "none";  // none, chart, level, res, error
   bool wireframe = false;
   double fov = 45.0;
+  double frameMs = 0.0;  // > 0: the frame-time controller holds this (budget mode)
 };
 
 // Registers the `view` subcommand on app, parsing into args (which must outlive app's parse).
