@@ -156,6 +156,7 @@ std::vector<std::map<std::string, std::string>> readStats(const fs::path& p) {
     std::stringstream ss(line);
     std::string cell;
     while (std::getline(ss, cell, ',')) cells.push_back(cell);
+    if (!line.empty() && line.back() == ',') cells.emplace_back();  // an empty last cell
     if (head.empty()) {
       head = cells;
       continue;
@@ -254,7 +255,8 @@ TEST_F(ViewWindow, ScriptedRunDrawsWhatRenderDraws) {
 }
 
 // The interactive window, driven like a person: keys toggle the wireframe and the colourings
-// (chart, resolution, error), a lower tolerance draws more triangles, and a frozen cut stays while a drag turns the camera.
+// (chart, resolution, error), a lower tolerance draws more triangles, a frozen cut stays while a
+// drag turns the camera, and T hands the budgets to the frame-time controller.
 class Session {
  public:
   Session(const std::string& env, const std::string& options, const fs::path& cwd) : env_(env), cwd_(cwd) {
@@ -401,6 +403,14 @@ TEST_F(ViewWindow, KeysAndDragsChangeWhatIsDrawn) {
   s.key("f");
   ASSERT_TRUE(s.waitFor([](const auto& r) { return !r.empty() && r.back().at("frozen") == "0"; }));
   s.settle();
+
+  // T: the frame-time controller takes the budgets (budget mode) and moves them from where they
+  // were.
+  s.key("t");
+  ASSERT_TRUE(s.waitFor([](const auto& r) { return !r.empty() && !r.back().at("target_ms").empty(); }));
+  const auto held = s.settle(1);
+  EXPECT_EQ(held.at("mode"), "budget");
+  EXPECT_TRUE(s.waitFor([&](const auto& r) { return !r.empty() && r.back().at("max_triangles") != held.at("max_triangles"); }));
 
   s.key("Escape");
   ASSERT_TRUE(s.waitFor([&](const auto&) { return s.finished(); }));
