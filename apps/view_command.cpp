@@ -74,6 +74,7 @@ struct Controls {
   bool loop = false;
   bool recording = false;
   bool holdFrameTime = false;  // the frame-time controller sets the budgets (budget mode)
+  bool colours = true;         // a mesh's vertex colours, where the atlas has them
   float targetMs = 33.3f;
 };
 
@@ -396,6 +397,7 @@ int runView(const ViewArgs& a) {
     // The error colouring is against the tolerance (error mode) or the frame's largest error.
     scene->setOverlay(kOverlays[size_t(c.overlay)], {}, c.budgetMode ? 0.0 : double(c.tolerance));
     scene->renderer().setWireframe(c.wireframe);
+    scene->renderer().setColours(c.colours);
 
     // Camera: the path while it plays, else the user's input.
     if (viewer.resetCamera) camera.frame(), viewer.resetCamera = false, pathCamera.reset();
@@ -538,6 +540,7 @@ int runView(const ViewArgs& a) {
       ImGui::Checkbox("async loads", &c.asyncLoads);
       if (c.asyncLoads) ImGui::SliderInt("uploads / frame", &c.uploadsPerFrame, 1, 512);
       ImGui::Combo("colouring", &c.overlay, kOverlayLabels.data(), int(kOverlayLabels.size()));
+      if (scene->hasColours()) ImGui::Checkbox("vertex colours", &c.colours);
       ImGui::Checkbox("wireframe", &c.wireframe);
       ImGui::SameLine();
       ImGui::Checkbox("freeze cut", &c.freeze);

@@ -62,13 +62,14 @@ std::vector<LoadedPage> PageLoader::takeCompleted(size_t max) {
 }
 
 bool PageLoader::tryGetResident(const NodeId& n, std::vector<float>& samples,
-                                std::vector<PackedNormal>& normals) {
+                                std::vector<PackedNormal>& normals, std::vector<PackedColour>* colours) {
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = ramIndex_.find(n.key());
   if (it == ramIndex_.end()) return false;
   ram_.splice(ram_.begin(), ram_, it->second);
   samples = it->second->samples;
   normals = it->second->normals;
+  if (colours) *colours = it->second->colours;
   return true;
 }
 
@@ -98,10 +99,9 @@ PageLoaderStats PageLoader::stats() const {
   return s;
 }
 
-void PageLoader::insertRam(uint64_t key, const std::vector<float>& h,
-                           const std::vector<PackedNormal>& n) {
+void PageLoader::insertRam(uint64_t key, const LoadedPage& loaded) {
   // Caller holds mutex_.
-  RamPage page{key, h, n};
+  RamPage page{key, loaded.samples, loaded.normals, loaded.colours};
   const size_t bytes = page.bytes();
   if (bytes > ramBudget_ || ramIndex_.count(key)) return;
   while (stats_.ramBytes + bytes > ramBudget_ && !ram_.empty()) {
@@ -133,6 +133,7 @@ void PageLoader::run() {
       ram_.splice(ram_.begin(), ram_, hit->second);
       page.samples = hit->second->samples;
       page.normals = hit->second->normals;
+      page.colours = hit->second->colours;
       page.fromRam = true;
       ++stats_.ramHits;
     } else {
@@ -140,14 +141,14 @@ void PageLoader::run() {
       lock.unlock();
       bool ok = true;
       try {
-        pages_.read(q.id, page.samples, page.normals);
+        pages_.read(q.id, page.samples, page.normals, &page.colours);
       } catch (...) {
         ok = false;  // note: a failed read is counted and dropped; a later request retries it
       }
       lock.lock();
       if (ok) {
         ++stats_.loadedFromDisk;
-        insertRam(key, page.samples, page.normals);
+        insertRam(key, page);
       } else {
         ++stats_.failed;
       }

@@ -22,6 +22,7 @@ struct LoadedPage {
   NodeId id;
   std::vector<float> samples;
   std::vector<PackedNormal> normals;
+  std::vector<PackedColour> colours;  // empty unless the atlas has colours
   bool fromRam = false;  // served by the RAM cache, not the disk
 };
 
@@ -55,7 +56,7 @@ class PageLoader {
   std::vector<LoadedPage> takeCompleted(size_t max);
   // Copies n's page from the RAM cache; false (outputs untouched) when it is not there.
   bool tryGetResident(const NodeId& n, std::vector<float>& samples,
-                      std::vector<PackedNormal>& normals);
+                      std::vector<PackedNormal>& normals, std::vector<PackedColour>* colours = nullptr);
 
   // Stops / restarts serving the queue (a read in progress finishes). For tests and throttling.
   void pause();
@@ -78,12 +79,14 @@ class PageLoader {
     uint64_t key;
     std::vector<float> samples;
     std::vector<PackedNormal> normals;
+    std::vector<PackedColour> colours;
     size_t bytes() const {
-      return samples.size() * sizeof(float) + normals.size() * sizeof(PackedNormal);
+      return samples.size() * sizeof(float) + normals.size() * sizeof(PackedNormal) +
+             colours.size() * sizeof(PackedColour);
     }
   };
   void run();
-  void insertRam(uint64_t key, const std::vector<float>& h, const std::vector<PackedNormal>& n);
+  void insertRam(uint64_t key, const LoadedPage& page);
 
   const PageReader& pages_;
   const size_t ramBudget_;

@@ -11,10 +11,12 @@ PageReader::PageReader(const std::filesystem::path& atlasDir, const AtlasManifes
       throw InputError((atlasDir / c.file).string() + ": has no " + (geometry_ ? "positions" : "heights") +
                        " for a " + atlasKindName(manifest.kind) + " atlas");
   }
+  colours_ = !charts_.empty();
+  for (const auto& c : charts_) colours_ = colours_ && c->hasChannel(kChannelColours);
 }
 
-void PageReader::read(const NodeId& n, std::vector<float>& samples,
-                      std::vector<PackedNormal>& normals) const {
+void PageReader::read(const NodeId& n, std::vector<float>& samples, std::vector<PackedNormal>& normals,
+                      std::vector<PackedColour>* colours) const {
   const uint32_t L = params_.intervalsLog2;
   const uint32_t r = params_.maxRes(n.level);
   const uint32_t k = params_.pyramidLevel(n.level, r);
@@ -29,6 +31,14 @@ void PageReader::read(const NodeId& n, std::vector<float>& samples,
     charts_[n.chart]->readHeights(k, u0, v0, 1u << r, samples.data());
   charts_[n.chart]->readNormals(k, u0, v0, 1u << r, normals.data());
   bytesRead_ += samples.size() * sizeof(float) + normals.size() * sizeof(PackedNormal);
+  if (colours) {
+    colours->clear();
+    if (colours_) {
+      colours->resize(size_t(s) * s);
+      charts_[n.chart]->readColours(k, u0, v0, 1u << r, colours->data());
+      bytesRead_ += colours->size() * sizeof(PackedColour);
+    }
+  }
 }
 
 }  // namespace gimlod

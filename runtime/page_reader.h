@@ -21,13 +21,19 @@ class PageReader {
              const HierarchyParams& params);
   uint32_t pageSamples(uint32_t level) const { return (1u << params_.maxRes(level)) + 1; }
   // samples: (pageSamples)^2 heights, or 3 floats (x, y, z) per sample for a geometry atlas.
-  void read(const NodeId& n, std::vector<float>& samples, std::vector<PackedNormal>& normals) const;
+  // colours, if given, receives the page's RGBA8 colours when the atlas has them (colours()), and
+  // is cleared otherwise.
+  void read(const NodeId& n, std::vector<float>& samples, std::vector<PackedNormal>& normals,
+            std::vector<PackedColour>* colours = nullptr) const;
   bool geometry() const { return geometry_; }
+  // Every chart holds per-sample colours (a mesh with vertex colours).
+  bool colours() const { return colours_; }
   uint64_t bytesRead() const { return bytesRead_; }
 
  private:
   HierarchyParams params_;
   bool geometry_ = false;
+  bool colours_ = false;
   std::vector<std::unique_ptr<ChartFileReader>> charts_;
   mutable std::atomic<uint64_t> bytesRead_{0};
 };

@@ -23,6 +23,8 @@ layout(std430, binding = GIMLOD_OVERLAY_BINDING) readonly buffer Overlay { NodeO
 uniform int u_overlay;  // 0: none; else u_overlays[v_node] applies
 
 uniform sampler2DArray u_normals;  // RGBA8, n * 0.5 + 0.5, bilinear, with mips
+uniform sampler2DArray u_colours;  // mesh atlases with vertex colours: RGBA8, with mips
+uniform int u_hasColours;          // draw u_colours instead of the neutral material
 uniform sampler2DArray u_samples;  // R32F page heights (terrain only here), bilinear (texelFetch in the vertex shader)
 uniform vec2 u_spacing;
 uniform vec2 u_validSamples;  // samples per axis; 0 = unlimited
@@ -73,8 +75,10 @@ void main() {
   vec3 n = textureLod(u_normals, vec3(v_pageUv, float(v_pageLayer)), float(v_texLod)).rgb * 2.0 - 1.0;
   n = length(n) > 1e-4 ? normalize(n) : vec3(0.0, 0.0, 1.0);
 #ifdef GIMLOD_GEOMETRY
-  // Mesh atlases: a neutral material, lit from both sides of the light (scans have no up).
-  vec3 clay = vec3(0.78, 0.74, 0.68);
+  // Mesh atlases: the scan's own colours at the node's attribute resolution, or a neutral material;
+  // lit from both sides of the light (scans have no up).
+  vec3 clay = u_hasColours != 0 ? textureLod(u_colours, vec3(v_pageUv, float(v_pageLayer)), float(v_texLod)).rgb
+                                : vec3(0.78, 0.74, 0.68);
   float lambert = abs(dot(n, u_lightDir));
   vec3 lit = u_overlay != 0 ? overlayColour(lambert) : clay * (0.25 + 0.75 * lambert);
   if (u_fogDistance > 0.0) {

@@ -18,8 +18,9 @@
 // Shader storage binding of the per-node overlays (atlas.frag, block Overlay; runtime/overlay.h).
 #define GIMLOD_OVERLAY_BINDING 2
 
-// Texture units of the page pool: u_samples (heights or positions) and u_normals.
+// Texture units of the page pool: u_samples (heights or positions), u_normals and u_colours.
 #define GIMLOD_SAMPLES_UNIT 0
 #define GIMLOD_NORMALS_UNIT 1
+#define GIMLOD_COLOURS_UNIT 2
 
 #endif

@@ -24,7 +24,8 @@ namespace gimlod::gl {
 namespace {
 
 // The shader interface (shaders/interface.h, shared with the GLSL).
-constexpr GLuint kSamplesUnit = GIMLOD_SAMPLES_UNIT, kNormalsUnit = GIMLOD_NORMALS_UNIT;
+constexpr GLuint kSamplesUnit = GIMLOD_SAMPLES_UNIT, kNormalsUnit = GIMLOD_NORMALS_UNIT,
+                 kColoursUnit = GIMLOD_COLOURS_UNIT;
 constexpr GLuint kStitchBinding = GIMLOD_STITCH_BINDING;
 constexpr GLuint kOverlayBinding = GIMLOD_OVERLAY_BINDING;
 constexpr GLuint kGridAttrib = GIMLOD_ATTRIB_GRID, kNodeAttribA = GIMLOD_ATTRIB_NODE_A,
@@ -63,6 +64,7 @@ void setPagePoolUnits(const GlObject& program) {
   glUseProgram(program.id());
   glUniform1i(uniform(program, "u_samples"), kSamplesUnit);
   glUniform1i(uniform(program, "u_normals"), kNormalsUnit);
+  glUniform1i(optionalUniform(program, "u_colours"), kColoursUnit);
   glUseProgram(0);
 }
 
@@ -94,6 +96,8 @@ struct AtlasRenderer::Impl {
   uint32_t capacity = 0;
   GlObject colourBuffer, depthBuffer, framebuffer;
   GlObject samples, normals;  // page pool: heights or positions, and normals
+  GlObject colours;           // page pool: RGBA8 colours (RendererSetup::colours)
+  bool drawColours = true;
   uint32_t normalLevels = 1;  // mip levels of the normal page pool
   GlObject gridVertices, gridIndices, vertexArray;
   std::vector<GridRange> grids;  // [res - minResLog2]
@@ -208,6 +212,7 @@ void AtlasRenderer::Impl::createPagePool() {
   while ((pageSide >> normalLevels) >= 1) ++normalLevels;
   samples = makeArray(setup.geometry ? GL_RGB32F : GL_R32F, 1);
   normals = makeArray(GL_RGBA8, GLint(normalLevels));
+  if (setup.colours) colours = makeArray(GL_RGBA8, GLint(normalLevels));
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
 }
 
@@ -341,7 +346,10 @@ void AtlasRenderer::Impl::setShading(const GlObject& p, const glm::mat4& viewPro
   glBindTexture(GL_TEXTURE_2D_ARRAY, samples.id());
   glActiveTexture(GL_TEXTURE0 + kNormalsUnit);
   glBindTexture(GL_TEXTURE_2D_ARRAY, normals.id());
+  glActiveTexture(GL_TEXTURE0 + kColoursUnit);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, setup.colours ? colours.id() : 0);
   glActiveTexture(GL_TEXTURE0);
+  glUniform1i(optionalUniform(p, "u_hasColours"), setup.colours && drawColours ? 1 : 0);
 }
 
 void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& eye,
@@ -384,8 +392,10 @@ void AtlasRenderer::setShading(const GlObject& program, const glm::mat4& viewPro
   impl_->setShading(program, viewProj, eye);
 }
 
+void AtlasRenderer::setColours(bool on) { impl_->drawColours = on; }
+
 void AtlasRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* samples,
-                                 const PackedNormal* normals) {
+                                 const PackedNormal* normals, const PackedColour* colours) {
   if (layer >= impl_->capacity || samplesPerSide == 0 || samplesPerSide > impl_->pageSide ||
       !samples)
     throw std::invalid_argument("AtlasRenderer::uploadPage: layer " + std::to_string(layer) +
@@ -402,6 +412,16 @@ void AtlasRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const fl
     std::vector<PackedNormal> mip;
     for (uint32_t level = 1; level < impl_->normalLevels; ++level) {
       const uint32_t side = normalMipLevel(normals, samplesPerSide, impl_->pageSide, level, mip);
+      glTexSubImage3D(GL_TEXTURE_2D_ARRAY, GLint(level), 0, 0, GLint(layer), GLsizei(side), GLsizei(side), 1,
+                      GL_RGBA, GL_UNSIGNED_BYTE, mip.data());
+    }
+  }
+  if (colours && impl_->setup.colours) {
+    glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->colours.id());
+    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, GL_RGBA, GL_UNSIGNED_BYTE, colours);
+    std::vector<PackedColour> mip;
+    for (uint32_t level = 1; level < impl_->normalLevels; ++level) {
+      const uint32_t side = colourMipLevel(colours, samplesPerSide, impl_->pageSide, level, mip);
       glTexSubImage3D(GL_TEXTURE_2D_ARRAY, GLint(level), 0, 0, GLint(layer), GLsizei(side), GLsizei(side), 1,
                       GL_RGBA, GL_UNSIGNED_BYTE, mip.data());
     }

@@ -31,6 +31,9 @@ struct RendererSetup {
   // Geometry images (mesh atlases): pages hold x, y, z per sample (3 floats) instead of a height,
   // and the vertex shader takes the position from the page; stitching is the same.
   bool geometry = false;
+  // Mesh atlases with vertex colours: pages also carry RGBA8 colours (with mips, read at each
+  // node's attribute resolution like the normals), drawn instead of the neutral material.
+  bool colours = false;
 };
 
 struct DrawStats {
@@ -41,8 +44,8 @@ struct DrawStats {
 
 class GlObject;
 
-// Points `program`'s samplers u_samples and u_normals at the page pool's texture units
-// (shaders/interface.h).
+// Points `program`'s samplers u_samples, u_normals and (where it has it) u_colours at the page
+// pool's texture units (shaders/interface.h).
 void setPagePoolUnits(const GlObject& program);
 
 // Links atlas.vert + atlas.frag for terrain atlases or, with `geometry`, mesh atlases
@@ -62,9 +65,12 @@ class AtlasRenderer {
   // Uploads one node page: (n+1)^2 samples and normals, n = 2^pageIntervalsLog2 at most.
   // Smaller pages (deep nodes) occupy the lower-left corner of the layer.
   // The normals also get their mip chain (normalMipLevel), for DrawNode::texLod. With
-  // RendererSetup::geometry, `samples` holds 3 floats (x, y, z) per sample.
+  // RendererSetup::geometry, `samples` holds 3 floats (x, y, z) per sample. `colours` (with
+  // RendererSetup::colours; else ignored) get their mip chain too.
   void uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* samples,
-                  const PackedNormal* normals);
+                  const PackedNormal* normals, const PackedColour* colours = nullptr);
+  // Draws the pages' colours (RendererSetup::colours) or the neutral material.
+  void setColours(bool on);
 
   // The overlay of the next draws, one record per node in the order draw() gets them (empty:
   // plain shading). draw() throws std::invalid_argument when the counts differ.

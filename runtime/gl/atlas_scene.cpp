@@ -17,9 +17,10 @@ double msSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o) {
+RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o, const PageReader& pages) {
   RendererSetup s;
   s.geometry = a.manifest.kind == AtlasKind::Geometry;
+  s.colours = pages.colours();
   s.width = o.width;
   s.height = o.height;
   s.background = o.background;
@@ -38,8 +39,8 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o) {
 AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
     : atlas_(atlas),
       options_(options),
-      renderer_(std::make_unique<AtlasRenderer>(rendererSetup(atlas, options))),
       pages_(atlas.dir, atlas.manifest, atlas.hierarchy.params),
+      renderer_(std::make_unique<AtlasRenderer>(rendererSetup(atlas, options, pages_))),
       pool_(renderer_->pageCapacity()) {
   // The roots' pages stay resident (paper 7.2), so every frame can be drawn.
   if (atlas_.hierarchy.chartCount() > pool_.capacity())
@@ -48,8 +49,9 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
     const NodeId root{c, 0, 0, 0};
     PagePool::Slot slot;
     pool_.acquire(root.key(), frame_, &slot);
-    pages_.read(root, samples_, normals_);
-    renderer_->uploadPage(slot.layer, pages_.pageSamples(0), samples_.data(), normals_.data());
+    pages_.read(root, samples_, normals_, &colours_);
+    renderer_->uploadPage(slot.layer, pages_.pageSamples(0), samples_.data(), normals_.data(),
+                          colours_.empty() ? nullptr : colours_.data());
     pool_.lock(root.key());
   }
   if (options_.asyncLoads)
@@ -90,8 +92,8 @@ Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, FrameRes
     PagePool::Slot slot;
     // note: when the pool is full this frame the page is dropped; it stays in the RAM cache.
     if (!pool_.acquire(pg.id.key(), frame_, &slot) || !slot.needsUpload) continue;
-    renderer_->uploadPage(slot.layer, pages_.pageSamples(pg.id.level), pg.samples.data(),
-                          pg.normals.data());
+    renderer_->uploadPage(slot.layer, pages_.pageSamples(pg.id.level), pg.samples.data(), pg.normals.data(),
+                          pg.colours.empty() ? nullptr : pg.colours.data());
     ++uploaded;
   }
   ready_.swap(keep);
@@ -128,9 +130,9 @@ std::vector<DrawNode> AtlasScene::prepare(const Cut& cut, FrameResult* frame) {
     PagePool::Slot slot;
     if (pool_.acquire(n.id.key(), frame_, &slot)) {
       if (slot.needsUpload) {
-        pages_.read(n.id, samples_, normals_);
-        renderer_->uploadPage(slot.layer, pages_.pageSamples(n.id.level), samples_.data(),
-                              normals_.data());
+        pages_.read(n.id, samples_, normals_, &colours_);
+        renderer_->uploadPage(slot.layer, pages_.pageSamples(n.id.level), samples_.data(), normals_.data(),
+                              colours_.empty() ? nullptr : colours_.data());
         ++loaded;
       }
       nodes.push_back(makeDrawNode(atlas_.manifest, atlas_.hierarchy.params, n, slot.layer));

@@ -73,6 +73,8 @@ class AtlasScene {
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
   AtlasRenderer& renderer() { return *renderer_; }
+  // The atlas carries per-sample colours (a mesh with vertex colours), which are drawn.
+  bool hasColours() const { return pages_.colours(); }
   // A new frame size (a resized window): the projection and the screen-space errors follow.
   void resize(uint32_t width, uint32_t height);
   uint32_t width() const { return options_.width; }
@@ -114,13 +116,14 @@ class AtlasScene {
   Cut streamPages(const Cut& desired, const ViewParams& view, FrameResult* frame);
   AtlasView atlas_;
   SceneOptions options_;
-  std::unique_ptr<AtlasRenderer> renderer_;
   PageReader pages_;
+  std::unique_ptr<AtlasRenderer> renderer_;
   PagePool pool_;
   uint64_t frame_ = 0;
   bool frameStarted_ = false;  // streamPages began frame_; prepare must not advance it
   std::vector<float> samples_;
   std::vector<PackedNormal> normals_;
+  std::vector<PackedColour> colours_;
   std::vector<LoadedPage> ready_;        // loaded pages waiting for the per-frame upload budget
   std::unique_ptr<DualQueueAdapter> dualQueue_;
   std::unique_ptr<QuadQueueAdapter> quadQueue_;
