@@ -303,8 +303,10 @@ int runRender(const RenderArgs& a) {
     const gl::FrameResult f = budgetMode ? scene.renderFrame(cams[i], bo) : scene.renderFrame(cams[i], ao);
     const double frameMs =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - frameStart).count();
+    // Page reads and uploads are the loader's to bound (--uploads-per-frame), not the budgets'.
     if (controller)
-      controller->update({uint32_t(f.cut.nodes.size()), f.draw.triangles, f.adaptMs, f.draw.drawMs, frameMs});
+      controller->update(
+          {uint32_t(f.cut.nodes.size()), f.draw.triangles, f.adaptMs, f.draw.drawMs, std::max(frameMs - f.uploadMs, 0.0)});
     if (f.adapt.budgetBelowRoots && !warnedBelowRoots) {
       spdlog::warn("--max-nodes {} is below the {} visible chart roots (frame {}): no cut has fewer nodes, so such "
                    "frames draw the visible roots (root_floor, budget_below_roots in stats.csv)",

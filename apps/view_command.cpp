@@ -187,7 +187,7 @@ void plot(const char* label, const Series& s, const char* unit) {
 struct FrameFigures {
   size_t nodes = 0;
   uint64_t triangles = 0;
-  double maxErrorPx = 0.0, adaptMs = 0.0, drawMs = 0.0, frameMs = 0.0;
+  double maxErrorPx = 0.0, adaptMs = 0.0, drawMs = 0.0, frameMs = 0.0, uploadMs = 0.0;
   uint32_t pagesLoaded = 0, pagesRequested = 0, rootFloor = 0;
   bool belowRoots = false;
 };
@@ -496,6 +496,7 @@ int runView(const ViewArgs& a) {
     last.maxErrorPx = f.maxErrorPx;
     last.adaptMs = f.adaptMs;
     last.drawMs = f.draw.drawMs;
+    last.uploadMs = f.uploadMs;
     last.pagesLoaded = f.pagesLoaded + f.pagesUploaded;
     last.pagesRequested = f.pagesRequested;
     last.rootFloor = f.adapt.rootFloor;
@@ -567,8 +568,10 @@ int runView(const ViewArgs& a) {
 
     last.frameMs = msSince(t0);
     frameMs.add(last.frameMs);
+    // Page reads and uploads are the loader's to bound (uploads per frame), not the budgets'.
     if (controller && !c.freeze)
-      controller->update({uint32_t(last.nodes), last.triangles, last.adaptMs, last.drawMs, last.frameMs});
+      controller->update({uint32_t(last.nodes), last.triangles, last.adaptMs, last.drawMs,
+                          std::max(last.frameMs - last.uploadMs, 0.0)});
     if (stats) {
       stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{},{}\n", frame,
                            last.nodes, last.triangles, last.maxErrorPx, last.adaptMs, last.drawMs, last.frameMs,

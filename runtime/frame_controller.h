@@ -32,7 +32,7 @@ struct FrameSample {
   uint64_t triangles = 0;
   double adaptMs = 0.0;  // CPU: adaptation (and stitching tables)
   double drawMs = 0.0;   // GPU: drawing (or its CPU-side wait)
-  double frameMs = 0.0;  // the whole frame; the rest is overhead
+  double frameMs = 0.0;  // the whole frame, less page reads and uploads; the rest is overhead
 };
 
 class FrameController {
