@@ -75,6 +75,7 @@ struct Controls {
   bool recording = false;
   bool holdFrameTime = false;  // the frame-time controller sets the budgets (budget mode)
   bool colours = true;         // a mesh's vertex colours, where the atlas has them
+  gl::AtlasRenderer::InspectionViews views;  // node borders, normals as colours, snapped vertices
   float targetMs = 33.3f;
 };
 
@@ -119,6 +120,9 @@ void onKey(GLFWwindow* w, int key, int, int action, int mods) {
     case GLFW_KEY_F: if (press) c.freeze = !c.freeze; break;
     case GLFW_KEY_M: if (press) c.budgetMode = !c.budgetMode; break;
     case GLFW_KEY_T: if (press) c.holdFrameTime = !c.holdFrameTime; break;
+    case GLFW_KEY_B: if (press) c.views.nodeBorders = !c.views.nodeBorders; break;
+    case GLFW_KEY_N: if (press) c.views.normals = !c.views.normals; break;
+    case GLFW_KEY_K: if (press) c.views.snapped = !c.views.snapped; break;
     case GLFW_KEY_G: if (press) c.topDown = !c.topDown; break;
     case GLFW_KEY_H: if (press) c.showUi = !c.showUi; break;
     case GLFW_KEY_P: if (press) v.screenshotRequested = true; break;
@@ -198,6 +202,7 @@ const char* kHelp =
     "[ ] finer/coarser (tolerance or triangles)   - = node budget\n"
     "M error/budget mode   T hold the frame time   G top-down greedy   F freeze cut\n"
     "C colouring (chart, level, resolution, error)   X wireframe   H hide panel\n"
+    "B node borders   N normals as colours   K snapped border vertices\n"
     "Space play/pause path   R record path   P screenshot   Esc quit";
 
 }  // namespace
@@ -269,7 +274,7 @@ int runView(const ViewArgs& a) {
     if (!stats) throw InputError(a.stats + ": cannot write the stats file");
     stats << "frame,nodes,triangles,max_screen_error_px,adapt_ms,draw_ms,frame_ms,pages_loaded,pages_requested,"
              "root_floor,budget_below_roots,mode,tolerance_px,max_nodes,max_triangles,frozen,overlay,wireframe,"
-             "target_ms\n";
+             "target_ms,node_borders,normals,snapped\n";
   }
 
   glfwSetErrorCallback([](int code, const char* what) { spdlog::error("GLFW error {}: {}", code, what); });
@@ -398,6 +403,7 @@ int runView(const ViewArgs& a) {
     scene->setOverlay(kOverlays[size_t(c.overlay)], {}, c.budgetMode ? 0.0 : double(c.tolerance));
     scene->renderer().setWireframe(c.wireframe);
     scene->renderer().setColours(c.colours);
+    scene->renderer().setInspectionViews(c.views);
 
     // Camera: the path while it plays, else the user's input.
     if (viewer.resetCamera) camera.frame(), viewer.resetCamera = false, pathCamera.reset();
@@ -542,6 +548,11 @@ int runView(const ViewArgs& a) {
       if (c.asyncLoads) ImGui::SliderInt("uploads / frame", &c.uploadsPerFrame, 1, 512);
       ImGui::Combo("colouring", &c.overlay, kOverlayLabels.data(), int(kOverlayLabels.size()));
       if (scene->hasColours()) ImGui::Checkbox("vertex colours", &c.colours);
+      ImGui::Checkbox("node borders", &c.views.nodeBorders);
+      ImGui::SameLine();
+      ImGui::Checkbox("normals", &c.views.normals);
+      ImGui::SameLine();
+      ImGui::Checkbox("snapped", &c.views.snapped);
       ImGui::Checkbox("wireframe", &c.wireframe);
       ImGui::SameLine();
       ImGui::Checkbox("freeze cut", &c.freeze);
@@ -573,12 +584,13 @@ int runView(const ViewArgs& a) {
       controller->update({uint32_t(last.nodes), last.triangles, last.adaptMs, last.drawMs,
                           std::max(last.frameMs - last.uploadMs, 0.0)});
     if (stats) {
-      stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{},{}\n", frame,
+      stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{}\n", frame,
                            last.nodes, last.triangles, last.maxErrorPx, last.adaptMs, last.drawMs, last.frameMs,
                            last.pagesLoaded, last.pagesRequested, last.rootFloor, int(last.belowRoots),
                            c.budgetMode ? "budget" : "error", c.tolerance, c.maxNodes, uint64_t(c.maxTrianglesK) * 1000,
                            int(c.freeze), overlayModeName(kOverlays[size_t(c.overlay)]), int(c.wireframe),
-                           c.holdFrameTime ? fmt::format("{:.2f}", c.targetMs) : std::string())
+                           c.holdFrameTime ? fmt::format("{:.2f}", c.targetMs) : std::string(),
+                           int(c.views.nodeBorders), int(c.views.normals), int(c.views.snapped))
             << std::flush;
     }
     const bool lastOne = lastFrame > 0 && frame + 1 >= lastFrame;

@@ -12,6 +12,7 @@ flat in int v_pageLayer;
 flat in int v_texLod;  // mip of the normal map: the node's attribute resolution (paper 7.1, 7.3)
 flat in int v_node;
 in vec2 v_nodeUv;
+in float v_snapped;
 
 struct NodeOverlay {
   uint rgba;              // RGBA8
@@ -33,6 +34,9 @@ uniform vec3 u_lightDir;      // towards the light, normalized
 uniform vec3 u_eye;
 uniform vec3 u_background;
 uniform float u_fogDistance;  // 0 = no fog
+// Inspection views, bits: 1 node borders (thin dark lines), 2 normals as colours (n * 0.5 + 0.5
+// instead of the material), 4 the stitching's snapped border vertices (orange round each).
+uniform int u_views;
 
 out vec4 o_colour;
 
@@ -47,6 +51,18 @@ vec3 overlayColour(float light) {
     if (((o.openSides >> uint(s)) & 1u) != 0u && d[s] < 2.0) return vec3(0.9, 0.1, 0.1);
     if (((o.chartBorderSides >> uint(s)) & 1u) != 0u && d[s] < 0.75) c = vec3(0.08);
   }
+  return c;
+}
+
+// The inspection views over a lit colour `c` with normal `n`.
+vec3 inspectionViews(vec3 c, vec3 n) {
+  if ((u_views & 2) != 0) c = n * 0.5 + 0.5;
+  if ((u_views & 1) != 0) {
+    vec2 w = max(fwidth(v_nodeUv), vec2(1e-6));
+    vec2 d = min(v_nodeUv, 1.0 - v_nodeUv) / w;
+    if (min(d.x, d.y) < 0.6) c = mix(c, vec3(0.05), 0.8);
+  }
+  if ((u_views & 4) != 0 && v_snapped > 0.02) c = mix(c, vec3(1.0, 0.45, 0.0), 0.35 + 0.65 * v_snapped);
   return c;
 }
 
@@ -81,6 +97,7 @@ void main() {
                                 : vec3(0.78, 0.74, 0.68);
   float lambert = abs(dot(n, u_lightDir));
   vec3 lit = u_overlay != 0 ? overlayColour(lambert) : clay * (0.25 + 0.75 * lambert);
+  lit = inspectionViews(lit, n);
   if (u_fogDistance > 0.0) {
     float dm = length(v_world - u_eye) / u_fogDistance;
     lit = mix(lit, u_background, 0.6 * (1.0 - exp(-dm * dm)));
@@ -100,6 +117,7 @@ void main() {
   }
   float light = max(dot(n, u_lightDir), 0.0);
   vec3 colour = u_overlay != 0 ? overlayColour(light) : base * (0.30 + 0.70 * light);
+  colour = inspectionViews(colour, n);
   if (u_fogDistance > 0.0) {
     float d = length(v_world - u_eye) / u_fogDistance;
     colour = mix(colour, u_background, 0.6 * (1.0 - exp(-d * d)));

@@ -29,6 +29,7 @@ flat out int v_pageLayer;
 flat out int v_texLod;
 flat out int v_node;   // the node's index in the cut, for the overlays
 out vec2 v_nodeUv;     // (i, j) / 2^res: where in the node, for the overlays' border lines
+out float v_snapped;   // 1 at a border vertex the stitching moved onto a coarser neighbour's lattice
 invariant gl_Position;
 
 const int kBottom = 0, kRight = 1, kTop = 2, kLeft = 3;
@@ -77,4 +78,5 @@ void main() {
   v_texLod = a_nodeB.w;
   v_node = node;
   v_nodeUv = vec2(a_ij) / float(n);
+  v_snapped = sx != tx || sy != ty ? 1.0 : 0.0;
 }

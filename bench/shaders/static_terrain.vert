@@ -10,6 +10,7 @@ flat out int v_pageLayer;
 flat out int v_texLod;
 flat out int v_node;  // atlas.frag's overlay inputs, unused here (u_overlay is 0)
 out vec2 v_nodeUv;
+out float v_snapped;  // atlas.frag's inspection view of snapped vertices, unused here (u_views is 0)
 void main() {
   v_world = a_position;
   v_pageUv = vec2(0.5);
@@ -17,5 +18,6 @@ void main() {
   v_texLod = 0;
   v_node = 0;
   v_nodeUv = vec2(0.0);
+  v_snapped = 0.0;
   gl_Position = u_viewProj * vec4(a_position, 1.0);
 }

@@ -98,6 +98,7 @@ struct AtlasRenderer::Impl {
   GlObject samples, normals;  // page pool: heights or positions, and normals
   GlObject colours;           // page pool: RGBA8 colours (RendererSetup::colours)
   bool drawColours = true;
+  int views = 0;              // u_views bits (setInspectionViews)
   uint32_t normalLevels = 1;  // mip levels of the normal page pool
   GlObject gridVertices, gridIndices, vertexArray;
   std::vector<GridRange> grids;  // [res - minResLog2]
@@ -358,6 +359,7 @@ void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& 
   glUniform1i(uniform(atlasProgram, "u_leafLog2"), GLint(stitch.leafLog2));
   glUniform1i(uniform(atlasProgram, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
   glUniform1i(uniform(atlasProgram, "u_overlay"), overlay.empty() ? 0 : 1);
+  glUniform1i(uniform(atlasProgram, "u_views"), views);
   glBindVertexArray(vertexArray.id());
   checkGl("atlas state");
 }
@@ -495,6 +497,10 @@ void AtlasRenderer::blitToDefaultFramebuffer() const {
 }
 
 void AtlasRenderer::setWireframe(bool on) { impl_->wireframe = on; }
+
+void AtlasRenderer::setInspectionViews(const InspectionViews& v) {
+  impl_->views = (v.nodeBorders ? 1 : 0) | (v.normals ? 2 : 0) | (v.snapped ? 4 : 0);
+}
 
 std::vector<uint8_t> AtlasRenderer::readPixels() const {
   const uint32_t w = impl_->setup.width, h = impl_->setup.height;

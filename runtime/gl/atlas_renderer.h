@@ -95,6 +95,13 @@ class AtlasRenderer {
   void blitToDefaultFramebuffer() const;
   // Draws the triangles' edges instead of filling them (the wireframe view).
   void setWireframe(bool on);
+  // Inspection views drawn over the shading: node borders (thin dark lines round every node),
+  // normals as colours (n * 0.5 + 0.5 instead of the material), and the border vertices the
+  // stitching snapped onto a coarser neighbour (orange). Capture is unaffected.
+  struct InspectionViews {
+    bool nodeBorders = false, normals = false, snapped = false;
+  };
+  void setInspectionViews(const InspectionViews& views);
 
   // Reads the framebuffer as RGBA8, top row first.
   std::vector<uint8_t> readPixels() const;

@@ -380,6 +380,21 @@ TEST_F(ViewWindow, KeysAndDragsChangeWhatIsDrawn) {
   s.key("c");
   ASSERT_TRUE(s.waitFor([](const auto& r) { return !r.empty() && r.back().at("overlay") == "none"; }));
 
+  // B, N, K: node borders, normals as colours, the stitching's snapped vertices (there are some:
+  // the cut mixes levels); each changes the picture, and off again it is the plain one.
+  for (const char* k : {"b", "n", "k"}) {
+    SCOPED_TRACE(k);
+    const std::string column = k[0] == 'b' ? "node_borders" : k[0] == 'n' ? "normals" : "snapped";
+    s.key(k);
+    ASSERT_TRUE(s.waitFor([&](const auto& r) { return !r.empty() && r.back().at(column) == "1"; }));
+    s.settle();
+    EXPECT_GT(differentFraction(s.screenshot(), plain, 8), 0.02 * plainCov.fraction);
+    s.key(k);
+    ASSERT_TRUE(s.waitFor([&](const auto& r) { return !r.empty() && r.back().at(column) == "0"; }));
+  }
+  s.settle();
+  EXPECT_LT(differentFraction(s.screenshot(), plain), 0.005);
+
   // [ twice: the tolerance halves (4 to 2 px), and more triangles are drawn.
   const uint64_t before = std::stoull(plainRow.at("triangles"));
   s.key("bracketleft");
