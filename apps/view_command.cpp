@@ -13,7 +13,6 @@
 #include <chrono>
 #include <cfloat>
 #include <cmath>
-#include <cstdio>
 #include <deque>
 #include <filesystem>
 #include <fstream>
@@ -86,7 +85,6 @@ constexpr std::array<const char*, 5> kOverlayLabels{"none", "chart", "level", "r
 
 // Window state the GLFW callbacks reach through the user pointer.
 struct Viewer {
-  GLFWwindow* window = nullptr;
   CameraControl* camera = nullptr;
   Controls* controls = nullptr;
   bool dragging[3] = {false, false, false};  // left, right, middle
@@ -339,7 +337,6 @@ int runView(const ViewArgs& a) {
   bool sceneAsync = c.asyncLoads;
 
   Viewer viewer;
-  viewer.window = window;
   viewer.camera = &camera;
   viewer.controls = &c;
   glfwSetWindowUserPointer(window, &viewer);

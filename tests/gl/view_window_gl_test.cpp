@@ -256,7 +256,8 @@ TEST_F(ViewWindow, ScriptedRunDrawsWhatRenderDraws) {
 
 // The interactive window, driven like a person: keys toggle the wireframe and the colourings
 // (chart, resolution, error), a lower tolerance draws more triangles, a frozen cut stays while a
-// drag turns the camera, and T hands the budgets to the frame-time controller.
+// drag turns the camera, a resized window draws at its new size, and T hands the budgets to the
+// frame-time controller.
 class Session {
  public:
   Session(const std::string& env, const std::string& options, const fs::path& cwd) : env_(env), cwd_(cwd) {
@@ -288,6 +289,9 @@ class Session {
     return rc;
   }
   void key(const std::string& k) { test::runCommand(env_ + "xdotool key --window " + window_ + " " + k); }
+  void resize(int w, int h) {
+    test::runCommand(env_ + "xdotool windowsize " + window_ + " " + std::to_string(w) + " " + std::to_string(h));
+  }
   // A left-button drag across the window from (x0, y0) to (x1, y1), in steps.
   void drag(int x0, int y0, int x1, int y1) {
     std::string cmd = env_ + "xdotool mousemove --window " + window_ + " " + std::to_string(x0) + " " + std::to_string(y0) +
@@ -418,6 +422,18 @@ TEST_F(ViewWindow, KeysAndDragsChangeWhatIsDrawn) {
   s.key("f");
   ASSERT_TRUE(s.waitFor([](const auto& r) { return !r.empty() && r.back().at("frozen") == "0"; }));
   s.settle();
+
+  // A larger window: the picture follows its size, and the same tolerance takes more triangles.
+  const auto small = s.settle();
+  s.resize(720, 540);
+  ASSERT_TRUE(s.waitFor([&](const auto& r) {
+    return !r.empty() && std::stoull(r.back().at("triangles")) > std::stoull(small.at("triangles"));
+  }));
+  s.settle();
+  const Image large = s.screenshot();
+  EXPECT_EQ(large.width, 720);
+  EXPECT_EQ(large.height, 540);
+  EXPECT_GT(coverage(large, kBackground).fraction, 0.05);
 
   // T: the frame-time controller takes the budgets (budget mode) and moves them from where they
   // were.
