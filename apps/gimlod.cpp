@@ -126,12 +126,6 @@ int runBuild(const MeshBuildOptions& o) {
   return 0;
 }
 
-OverlayMode overlayMode(const std::string& name) {
-  const std::optional<OverlayMode> m = parseOverlayMode(name);
-  if (!m) throw InputError("--overlay '" + name + "': expected none, chart, level, res or error");
-  return *m;
-}
-
 struct InspectArgs {
   InspectOptions report;
   bool views = true;
@@ -238,15 +232,8 @@ int runInspect(InspectArgs a) {
 int runRender(const RenderArgs& a) {
   uint32_t w = 0, h = 0;
   parseFrameSize(a.size, &w, &h);
-  if (!(a.tolerance > 0.0) || !std::isfinite(a.tolerance)) throw InputError("--tolerance must be > 0 pixels");
+  validateViewOptions(a.tolerance, a.texelRatio, a.uploadsPerFrame, a.triangles > 0, a.topDown, a.frameMs);
   validateCameraArgs(a.camera);
-  if (a.uploadsPerFrame == 0) throw InputError("--uploads-per-frame must be at least 1");
-  if (!(a.texelRatio >= 0.0) || !std::isfinite(a.texelRatio) || a.texelRatio > 64.0)
-    throw InputError("--texel-ratio must be in [0, 64] texels per pixel (0: page resolution)");
-  if (a.triangles > 0 && a.topDown) throw InputError("--top-down applies to error mode; --triangles selects the quad queue");
-  if (a.frameMs < 0.0 || !std::isfinite(a.frameMs) || a.frameMs > 10000.0)
-    throw InputError("--frame-ms must be in (0, 10000] milliseconds");
-  if (a.frameMs > 0.0 && a.topDown) throw InputError("--frame-ms sets a triangle budget; --top-down is for error mode");
   const auto background = parseBackground(a.background);
 
   const AtlasView atlas = openAtlas(a.atlas);
@@ -269,7 +256,7 @@ int runRender(const RenderArgs& a) {
   so.maxUploadsPerFrame = a.uploadsPerFrame;
   so.coherentAdaptation = !a.topDown;
   so.texelsPerPixel = a.texelRatio;
-  so.overlay = overlayMode(a.overlay);
+  so.overlay = parseOverlayOption(a.overlay);
   so.overlayErrorPx = a.triangles > 0 ? 0.0 : a.tolerance;  // error colouring: red at the tolerance
   gl::AtlasScene scene(atlas, so);
   if (scene.nodeBudget(a.maxNodes) != a.maxNodes)

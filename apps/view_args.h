@@ -14,6 +14,7 @@
 
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
+#include "runtime/overlay.h"
 
 namespace gimlod {
 
@@ -47,6 +48,27 @@ inline std::vector<Camera> loadCameras(const CameraArgs& a, const AtlasView& atl
   std::vector<Camera> cams = readCameraPath(a.path);
   for (Camera& c : cams) fitClipPlanes(c, atlas.lo, atlas.hi);
   return cams;
+}
+
+// The adaptation and drawing options `render` and `view` share; throws InputError naming the
+// option that is out of range or that conflicts with another.
+inline void validateViewOptions(double tolerance, double texelRatio, uint32_t uploadsPerFrame, bool budgetGiven,
+                                bool topDown, double frameMs) {
+  if (!(tolerance > 0.0) || !std::isfinite(tolerance)) throw InputError("--tolerance must be > 0 pixels");
+  if (uploadsPerFrame == 0) throw InputError("--uploads-per-frame must be at least 1");
+  if (!(texelRatio >= 0.0) || !std::isfinite(texelRatio) || texelRatio > 64.0)
+    throw InputError("--texel-ratio must be in [0, 64] texels per pixel (0: page resolution)");
+  if (budgetGiven && topDown) throw InputError("--top-down applies to error mode; --triangles selects the quad queue");
+  if (frameMs < 0.0 || !std::isfinite(frameMs) || frameMs > 10000.0)
+    throw InputError("--frame-ms must be in (0, 10000] milliseconds");
+  if (frameMs > 0.0 && topDown) throw InputError("--frame-ms sets a triangle budget; --top-down is for error mode");
+}
+
+// Parses --overlay; throws InputError naming the option.
+inline OverlayMode parseOverlayOption(const std::string& name) {
+  const std::optional<OverlayMode> m = parseOverlayMode(name);
+  if (!m) throw InputError("--overlay '" + name + "': expected none, chart, level, res or error");
+  return *m;
 }
 
 // Parses --background R,G,B (in [0, 1], or [0, 255] when any is above 1); throws InputError.

@@ -13,7 +13,6 @@
 #include <chrono>
 #include <cfloat>
 #include <cmath>
-#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -43,16 +42,18 @@ using Clock = std::chrono::steady_clock;
 
 double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
-// The last few seconds of one figure, for a live graph.
+// The last few seconds of one figure, for a live graph: a ring of the latest kLength values.
 struct Series {
   static constexpr size_t kLength = 240;
-  std::deque<float> values;
+  std::array<float, kLength> values{};
+  size_t count = 0, next = 0;  // values held; where the next one goes (the oldest once full)
   void add(double v) {
-    values.push_back(float(v));
-    if (values.size() > kLength) values.pop_front();
+    values[next] = float(v);
+    next = (next + 1) % kLength;
+    count = std::min(count + 1, kLength);
   }
-  std::vector<float> data() const { return {values.begin(), values.end()}; }
-  float last() const { return values.empty() ? 0.f : values.back(); }
+  size_t oldest() const { return count < kLength ? 0 : next; }
+  float last() const { return count == 0 ? 0.f : values[(next + kLength - 1) % kLength]; }
 };
 
 // Everything the panel and the keys change.
@@ -167,23 +168,10 @@ void onScroll(GLFWwindow* w, double, double dy) {
   viewerOf(w)->scroll += dy;
 }
 
-// The window's pixels (framebuffer 0, the back buffer just drawn) as RGBA, top row first.
-std::vector<uint8_t> readWindow(uint32_t w, uint32_t h) {
-  std::vector<uint8_t> bottomUp(size_t(w) * h * 4), out(bottomUp.size());
-  glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
-  glReadBuffer(GL_BACK);
-  glPixelStorei(GL_PACK_ALIGNMENT, 1);
-  glReadPixels(0, 0, GLsizei(w), GLsizei(h), GL_RGBA, GL_UNSIGNED_BYTE, bottomUp.data());
-  const size_t row = size_t(w) * 4;
-  for (uint32_t y = 0; y < h; ++y) std::copy_n(bottomUp.data() + size_t(h - 1 - y) * row, row, out.data() + size_t(y) * row);
-  for (size_t i = 3; i < out.size(); i += 4) out[i] = 255;
-  return out;
-}
-
 void plot(const char* label, const Series& s, const char* unit) {
-  const std::vector<float> d = s.data();
   const std::string overlay = fmt::format("{:.3g} {}", s.last(), unit);
-  ImGui::PlotLines(label, d.data(), int(d.size()), 0, overlay.c_str(), 0.f, FLT_MAX, ImVec2(0, 28));
+  ImGui::PlotLines(label, s.values.data(), int(s.count), int(s.oldest()), overlay.c_str(), 0.f, FLT_MAX,
+                   ImVec2(0, 28));
 }
 
 struct FrameFigures {
@@ -240,18 +228,10 @@ CLI::App* addViewCommand(CLI::App& app, ViewArgs& a) {
 int runView(const ViewArgs& a) {
   uint32_t width = 0, height = 0;
   parseFrameSize(a.size, &width, &height);
-  if (!(a.tolerance > 0.0) || !std::isfinite(a.tolerance)) throw InputError("--tolerance must be > 0 pixels");
+  validateViewOptions(a.tolerance, a.texelRatio, a.uploadsPerFrame, a.triangles > 0, a.topDown, a.frameMs);
   if (!(a.fov > 1.0 && a.fov < 179.0)) throw InputError("--fov must be in (1, 179) degrees");
-  if (a.uploadsPerFrame == 0) throw InputError("--uploads-per-frame must be at least 1");
-  if (!(a.texelRatio >= 0.0) || !std::isfinite(a.texelRatio) || a.texelRatio > 64.0)
-    throw InputError("--texel-ratio must be in [0, 64] texels per pixel (0: page resolution)");
-  if (a.triangles > 0 && a.topDown) throw InputError("--top-down applies to error mode; --triangles selects the quad queue");
   if (a.frames > 0 && a.path.empty()) throw InputError("--frames needs --path");
-  if (a.frameMs < 0.0 || !std::isfinite(a.frameMs) || a.frameMs > 10000.0)
-    throw InputError("--frame-ms must be in (0, 10000] milliseconds");
-  if (a.frameMs > 0.0 && a.topDown) throw InputError("--frame-ms sets a triangle budget; --top-down is for error mode");
-  const std::optional<OverlayMode> overlayMode = parseOverlayMode(a.overlay);
-  if (!overlayMode) throw InputError("--overlay '" + a.overlay + "': expected none, chart, level, res or error");
+  const OverlayMode overlayMode = parseOverlayOption(a.overlay);
   const auto background = parseBackground(a.background);
 
   const AtlasView atlas = openAtlas(a.atlas);
@@ -307,7 +287,7 @@ int runView(const ViewArgs& a) {
   c.asyncLoads = a.asyncLoads;
   c.uploadsPerFrame = int(a.uploadsPerFrame);
   c.topDown = a.topDown;
-  c.overlay = int(std::find(kOverlays.begin(), kOverlays.end(), *overlayMode) - kOverlays.begin());
+  c.overlay = int(std::find(kOverlays.begin(), kOverlays.end(), overlayMode) - kOverlays.begin());
   c.wireframe = a.wireframe;
   c.showUi = !a.hideUi;
   c.playing = !path.empty();
@@ -363,8 +343,8 @@ int runView(const ViewArgs& a) {
 
   Series adaptMs, drawMs, frameMs, nodes, triangles, maxError, pagesLoaded;
   std::vector<Camera> recorded;
-  Cut frozen;
-  bool haveFrozen = false;
+  Cut lastCut;  // the cut drawn last: what a freeze keeps drawing
+  bool haveCut = false;
   size_t pathFrame = 0;
   std::optional<Camera> pathCamera;  // the path's camera shown, held until the user moves on
   uint32_t screenshots = 0;
@@ -373,7 +353,7 @@ int runView(const ViewArgs& a) {
   auto previous = Clock::now();
   const uint32_t lastFrame = scripted ? a.frames : a.exitAfter;
   auto writeShot = [&](const fs::path& file, uint32_t w, uint32_t h) {
-    writePng(file, w, h, 4, readWindow(w, h));
+    writePng(file, w, h, 4, gl::readWindowPixels(w, h));
     spdlog::info("wrote {}", file.string());
   };
 
@@ -391,7 +371,7 @@ int runView(const ViewArgs& a) {
     if (c.asyncLoads != sceneAsync) {
       scene = makeScene(c.asyncLoads);
       sceneAsync = c.asyncLoads;
-      haveFrozen = false;
+      haveCut = false;
     }
     scene->setCoherentAdaptation(!c.topDown);
     scene->setTexelsPerPixel(c.texelRatio);
@@ -465,12 +445,12 @@ int runView(const ViewArgs& a) {
       controller.reset();
     }
 
-    // Adapt (unless frozen) and draw into the scene's framebuffer, then into the window.
+    // Adapt (unless frozen) and draw into the scene's framebuffer, then into the window. The cut
+    // drawn is kept (moved, not copied) for a freeze.
     gl::FrameResult f;
-    if (c.freeze && haveFrozen) {
-      f.cut = frozen;
-      f.draw = scene->drawCut(cam, frozen, &f);
-      f.maxErrorPx = 0.0;
+    const bool drawFrozen = c.freeze && haveCut;
+    if (drawFrozen) {
+      f.draw = scene->drawCut(cam, lastCut, &f);
     } else {
       if (c.budgetMode) {
         BudgetOptions bo;
@@ -483,8 +463,6 @@ int runView(const ViewArgs& a) {
         ao.maxNodes = uint32_t(c.maxNodes);
         f = scene->renderFrame(cam, ao);
       }
-      frozen = f.cut;
-      haveFrozen = true;
     }
     if (f.adapt.budgetBelowRoots && !warnedBelowRoots) {
       spdlog::warn("node budget {} is below the {} visible chart roots: such frames draw the visible roots",
@@ -494,7 +472,11 @@ int runView(const ViewArgs& a) {
     scene->renderer().blitToDefaultFramebuffer();
     glViewport(0, 0, fbw, fbh);
 
-    last.nodes = f.cut.nodes.size();
+    if (!drawFrozen) {
+      lastCut = std::move(f.cut);
+      haveCut = true;
+    }
+    last.nodes = lastCut.nodes.size();
     last.triangles = f.draw.triangles;
     last.maxErrorPx = f.maxErrorPx;
     last.adaptMs = f.adaptMs;

@@ -407,27 +407,19 @@ void AtlasRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const fl
   glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->samples.id());
   glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, impl_->setup.geometry ? GL_RGB : GL_RED,
                   GL_FLOAT, samples);
-  if (normals) {
-    glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->normals.id());
-    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, GL_RGBA,
-                    GL_UNSIGNED_BYTE, normals);
-    std::vector<PackedNormal> mip;
+  // An RGBA8 attribute map and its mip chain (mipLevel: normalMipLevel or colourMipLevel).
+  const auto uploadAttribute = [&](const GlObject& texture, const auto* texels, auto mipLevel) {
+    glBindTexture(GL_TEXTURE_2D_ARRAY, texture.id());
+    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, GL_RGBA, GL_UNSIGNED_BYTE, texels);
+    std::vector<std::remove_cv_t<std::remove_pointer_t<decltype(texels)>>> mip;
     for (uint32_t level = 1; level < impl_->normalLevels; ++level) {
-      const uint32_t side = normalMipLevel(normals, samplesPerSide, impl_->pageSide, level, mip);
+      const uint32_t side = mipLevel(texels, samplesPerSide, impl_->pageSide, level, mip);
       glTexSubImage3D(GL_TEXTURE_2D_ARRAY, GLint(level), 0, 0, GLint(layer), GLsizei(side), GLsizei(side), 1,
                       GL_RGBA, GL_UNSIGNED_BYTE, mip.data());
     }
-  }
-  if (colours && impl_->setup.colours) {
-    glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->colours.id());
-    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, GL_RGBA, GL_UNSIGNED_BYTE, colours);
-    std::vector<PackedColour> mip;
-    for (uint32_t level = 1; level < impl_->normalLevels; ++level) {
-      const uint32_t side = colourMipLevel(colours, samplesPerSide, impl_->pageSide, level, mip);
-      glTexSubImage3D(GL_TEXTURE_2D_ARRAY, GLint(level), 0, 0, GLint(layer), GLsizei(side), GLsizei(side), 1,
-                      GL_RGBA, GL_UNSIGNED_BYTE, mip.data());
-    }
-  }
+  };
+  if (normals) uploadAttribute(impl_->normals, normals, normalMipLevel);
+  if (colours && impl_->setup.colours) uploadAttribute(impl_->colours, colours, colourMipLevel);
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
   checkGl("uploadPage glTexSubImage3D");
 }
@@ -502,11 +494,13 @@ void AtlasRenderer::setInspectionViews(const InspectionViews& v) {
   impl_->views = (v.nodeBorders ? 1 : 0) | (v.normals ? 2 : 0) | (v.snapped ? 4 : 0);
 }
 
-std::vector<uint8_t> AtlasRenderer::readPixels() const {
-  const uint32_t w = impl_->setup.width, h = impl_->setup.height;
+namespace {
+
+// RGBA8 pixels of `buffer` of framebuffer `framebuffer`, top row first.
+std::vector<uint8_t> readFramebuffer(GLuint framebuffer, GLenum buffer, uint32_t w, uint32_t h) {
   std::vector<uint8_t> bottomUp(size_t(w) * h * 4), out(bottomUp.size());
-  glBindFramebuffer(GL_READ_FRAMEBUFFER, impl_->framebuffer.id());
-  glReadBuffer(GL_COLOR_ATTACHMENT0);
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, framebuffer);
+  glReadBuffer(buffer);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
   glReadPixels(0, 0, GLsizei(w), GLsizei(h), GL_RGBA, GL_UNSIGNED_BYTE, bottomUp.data());
   glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
@@ -515,6 +509,18 @@ std::vector<uint8_t> AtlasRenderer::readPixels() const {
   for (uint32_t y = 0; y < h; ++y)
     std::memcpy(out.data() + size_t(y) * row, bottomUp.data() + size_t(h - 1 - y) * row, row);
   return out;
+}
+
+}  // namespace
+
+std::vector<uint8_t> AtlasRenderer::readPixels() const {
+  return readFramebuffer(impl_->framebuffer.id(), GL_COLOR_ATTACHMENT0, impl_->setup.width, impl_->setup.height);
+}
+
+std::vector<uint8_t> readWindowPixels(uint32_t width, uint32_t height) {
+  std::vector<uint8_t> rgba = readFramebuffer(0, GL_BACK, width, height);
+  for (size_t i = 3; i < rgba.size(); i += 4) rgba[i] = 255;  // a window's alpha means nothing
+  return rgba;
 }
 
 std::vector<std::vector<glm::vec3>> AtlasRenderer::captureVertices(

@@ -44,6 +44,10 @@ struct DrawStats {
 
 class GlObject;
 
+// The back buffer of the current context's window (framebuffer 0), as drawn so far this frame:
+// RGBA8, top row first, opaque.
+std::vector<uint8_t> readWindowPixels(uint32_t width, uint32_t height);
+
 // Points `program`'s samplers u_samples, u_normals and (where it has it) u_colours at the page
 // pool's texture units (shaders/interface.h).
 void setPagePoolUnits(const GlObject& program);
