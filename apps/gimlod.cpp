@@ -111,7 +111,8 @@ std::string flagFor(std::string_view name) {
       {"maxSampleError", "--sample-error"},
       {"maxMemory", "--max-memory"},          {"measureFidelity", "--no-fidelity"},
       {"output", "--output"},                 {"worstCharts", "--worst"},
-      {"thumbnailSize", "--image-size"}};
+      {"thumbnailSize", "--image-size"},      {"imageryScale", "--imagery-scale"},
+      {"imageryExtent", "--imagery-extent"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }
@@ -388,6 +389,19 @@ int main(int argc, char** argv) {
   build->add_option("--z-scale", terrain.zScale, "Height multiplier")->capture_default_str();
   build->add_option("--subdataset", terrain.subdataset, "netCDF variable / GDAL subdataset to read");
   build->add_option("--threads", common.threads, "Worker threads (0: all cores)")->capture_default_str();
+  build->add_option("--imagery", terrain.imagery,
+                    "DEMs: colour raster (RGB/RGBA/grey, any format GDAL reads) draped over the terrain, reprojected "
+                    "with GDAL onto the DEM's grid at its own resolution");
+  uint32_t imageryScale = 0;
+  build->add_option("--imagery-scale", imageryScale,
+                    "DEMs with --imagery: imagery samples per DEM sample interval, 1, 2 or 4 (default: the power of "
+                    "two nearest the two rasters' resolutions)");
+  std::vector<double> imageryExtent;
+  build->add_option("--imagery-extent", imageryExtent,
+                    "DEMs with --imagery: WEST,SOUTH,EAST,NORTH of imagery without a georeference, in the DEM's "
+                    "reference system (a whole-Earth image: -180,-90,180,90)")
+      ->delimiter(',')
+      ->expected(4);
 
   RenderArgs r;
   auto* render = app.add_subcommand("render", "Render an atlas headless (EGL) to PNG frames and stats.csv");
@@ -460,6 +474,9 @@ int main(int argc, char** argv) {
       const uint64_t maxMemoryBytes = parseBytes("--max-memory", maxMemory);
       common.spellOption = flagFor;
       if (isMesh(detectInputKind(common.input))) {
+        if (!terrain.imagery.empty())
+          throw InputError(common.input.string() + ": --imagery drapes a raster over a DEM; a mesh carries its own "
+                           "vertex colours");
         static_cast<CommonBuildOptions&>(mesh) = common;
         if (chartSizeOpt->count() > 0) mesh.chartSize = terrain.chartSize;
         mesh.charts = chartsArg == "auto" ? kAutoCharts : parseCount("--charts", chartsArg);
@@ -471,6 +488,16 @@ int main(int argc, char** argv) {
         return runBuild(mesh);
       }
       static_cast<CommonBuildOptions&>(terrain) = common;
+      if (build->get_option("--imagery-scale")->count() > 0) {
+        if (imageryScale != 1 && imageryScale != 2 && imageryScale != 4)
+          throw InputError("--imagery-scale " + std::to_string(imageryScale) + " must be 1, 2 or 4");
+        terrain.imageryScaleLog2 = int(log2u(imageryScale));
+      }
+      if (!imageryExtent.empty())
+        terrain.imageryExtent = std::array<double, 4>{imageryExtent[0], imageryExtent[1], imageryExtent[2],
+                                                      imageryExtent[3]};
+      if (terrain.imagery.empty() && (terrain.imageryExtent || terrain.imageryScaleLog2 >= 0))
+        throw InputError("--imagery-scale and --imagery-extent need --imagery");
       return runBuild(terrain);
     }
     if (*inspectCmd) return runInspect(inspect);

@@ -74,7 +74,7 @@ struct Controls {
   bool loop = false;
   bool recording = false;
   bool holdFrameTime = false;  // the frame-time controller sets the budgets (budget mode)
-  bool colours = true;         // a mesh's vertex colours, where the atlas has them
+  bool colours = true;         // vertex colours or terrain imagery, where the atlas has them
   gl::AtlasRenderer::InspectionViews views;  // node borders, normals as colours, snapped vertices
   float targetMs = 33.3f;
 };
@@ -526,7 +526,7 @@ int runView(const ViewArgs& a) {
       ImGui::Checkbox("async loads", &c.asyncLoads);
       if (c.asyncLoads) ImGui::SliderInt("uploads / frame", &c.uploadsPerFrame, 1, 512);
       ImGui::Combo("colouring", &c.overlay, kOverlayLabels.data(), int(kOverlayLabels.size()));
-      if (scene->hasColours()) ImGui::Checkbox("vertex colours", &c.colours);
+      if (scene->hasColours()) ImGui::Checkbox("colours (vertex colours or imagery)", &c.colours);
       ImGui::Checkbox("node borders", &c.views.nodeBorders);
       ImGui::SameLine();
       ImGui::Checkbox("normals", &c.views.normals);

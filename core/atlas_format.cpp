@@ -86,6 +86,7 @@ constexpr size_t kChannelBytes[kChannelCount] = {sizeof(float), sizeof(PackedNor
                                                  sizeof(PackedColour)};
 constexpr bool kChannelIsFloat[kChannelCount] = {true, false, true, false};
 constexpr uint32_t kHeightFieldMask = (1u << kChannelHeights) | (1u << kChannelNormals);
+constexpr uint32_t kAttributeMask = 1u << kChannelColours;  // an attribute chart: colours alone
 
 std::string quoted(const fs::path& p) { return p.string(); }  // path as shown in messages
 
@@ -275,11 +276,10 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
   for (const ChartInfo& c : m.charts) {
     ojson nb = ojson::array();
     for (const RootNeighbour& n : c.neighbours) nb.push_back(toJson(n));
-    charts.push_back(ojson{{"id", c.id},
-                          {"gridX", c.gridX},
-                          {"gridY", c.gridY},
-                          {"file", c.file},
-                          {"neighbours", nb}});
+    ojson chart{{"id", c.id}, {"gridX", c.gridX}, {"gridY", c.gridY}, {"file", c.file}};
+    if (!c.imageryFile.empty()) chart["imagery"] = c.imageryFile;
+    chart["neighbours"] = nb;
+    charts.push_back(std::move(chart));
   }
   ojson j = {
       {"format", kFormatTag},
@@ -302,13 +302,14 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
         {"geotransform", m.georef.geotransform},
         {"geographic", m.georef.geographic},
         {"centreLatitudeDeg", m.georef.centreLatitudeDeg}}},
-      {"hierarchy",
-       {{"file", m.hierarchyFile},
-        {"depth", m.depth},
-        {"maxNodeResLog2", m.maxNodeResLog2},
-        {"minNodeResLog2", m.minNodeResLog2}}},
-      {"charts", charts},
   };
+  if (m.imagery.present)
+    j["imagery"] = ojson{{"source", m.imagery.source}, {"scaleLog2", m.imagery.scaleLog2}, {"coverage", m.imagery.coverage}};
+  j["hierarchy"] = ojson{{"file", m.hierarchyFile},
+                         {"depth", m.depth},
+                         {"maxNodeResLog2", m.maxNodeResLog2},
+                         {"minNodeResLog2", m.minNodeResLog2}};
+  j["charts"] = std::move(charts);
   // note: dump() throws on invalid UTF-8 (e.g. a Latin-1 file name in `source`); replace instead.
   const std::string text = j.dump(2, ' ', false, ojson::error_handler_t::replace) + "\n";
   atomicWriteFile(dir / kManifestName, text.data(), text.size());
@@ -382,6 +383,16 @@ AtlasManifest readManifest(const fs::path& dir) {
     if (g.contains("centreLatitudeDeg"))
       m.georef.centreLatitudeDeg = r.number(g["centreLatitudeDeg"], "georef.centreLatitudeDeg");
   }
+  if (j.contains("imagery") && !j["imagery"].is_null()) {
+    const json& im = j["imagery"];
+    if (!im.is_object()) r.fail("field 'imagery' must be an object or null");
+    if (m.kind != AtlasKind::Heightfield) r.fail("field 'imagery' is for heightfield atlases only");
+    m.imagery.present = true;
+    m.imagery.scaleLog2 = uint32_t(r.integer(r.field(im, "scaleLog2", "imagery."), "imagery.scaleLog2", 0,
+                                             kMaxImageryScaleLog2));
+    if (im.contains("source")) m.imagery.source = r.string(im["source"], "imagery.source");
+    if (im.contains("coverage")) m.imagery.coverage = r.number(im["coverage"], "imagery.coverage");
+  }
   const uint32_t ilog = log2Exact(m.chartSize - 1);
   if (j.contains("hierarchy")) {
     const json& h = j["hierarchy"];
@@ -429,10 +440,17 @@ AtlasManifest readManifest(const fs::path& dir) {
              ", " + std::to_string(ci.gridY) + ") does not match its id in a " +
              std::to_string(m.chartsX) + " x " + std::to_string(m.chartsY) + " grid");
     ci.file = r.string(r.field(c, "file", ctx), ctx + "file");
-    const fs::path fp(ci.file);
-    if (ci.file.empty() || fp.is_absolute() ||
-        std::any_of(fp.begin(), fp.end(), [](const fs::path& e) { return e == ".."; }))
-      r.fail("field '" + ctx + "file' must be a relative path inside the atlas: '" + ci.file + "'");
+    const auto insideAtlas = [&](const std::string& file, const std::string& key) {
+      const fs::path fp(file);
+      if (file.empty() || fp.is_absolute() ||
+          std::any_of(fp.begin(), fp.end(), [](const fs::path& e) { return e == ".."; }))
+        r.fail("field '" + ctx + key + "' must be a relative path inside the atlas: '" + file + "'");
+    };
+    insideAtlas(ci.file, "file");
+    if (m.imagery.present) {
+      ci.imageryFile = r.string(r.field(c, "imagery", ctx), ctx + "imagery");
+      insideAtlas(ci.imageryFile, "imagery");
+    }
     const json& nb = r.field(c, "neighbours", ctx);
     if (!nb.is_array() || nb.size() != 4) r.fail("field '" + ctx + "neighbours' must have 4 entries");
     for (size_t e = 0; e < 4; ++e) {
@@ -476,15 +494,16 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
   add(kChannelNormals, pyramid.normals);
   add(kChannelPositions, pyramid.positions);
   add(kChannelColours, pyramid.colours);
-  const uint32_t levels = static_cast<uint32_t>(pyramid.normals.size());
   uint32_t mask = 0;
   for (uint32_t c = 0; c < kChannelCount; ++c)
     if (counts[c] != 0) mask |= 1u << c;
   const bool heightField = mask == kHeightFieldMask;
   const bool geometry = (mask & (1u << kChannelPositions)) && (mask & (1u << kChannelNormals)) &&
                         !(mask & (1u << kChannelHeights));
-  if (!heightField && !geometry)
-    throw std::invalid_argument("writeChartFile: a chart has heights and normals, or positions and normals (and colours)");
+  if (!heightField && !geometry && mask != kAttributeMask)
+    throw std::invalid_argument(
+        "writeChartFile: a chart has heights and normals, or positions and normals (and colours), or colours alone");
+  const uint32_t levels = static_cast<uint32_t>(mask == kAttributeMask ? pyramid.colours.size() : pyramid.normals.size());
   if (levels < 1 || levels > log2Exact(chartSize - 1) + 1)
     throw std::invalid_argument("writeChartFile: bad pyramid level count");
   for (uint32_t c = 0; c < kChannelCount; ++c)
@@ -586,8 +605,9 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
       fail("truncated chart file (no channel mask)");
     channelMask_ = getLe<uint32_t>(m);
     header = kChartHeaderBytesV2;
-    if (channelMask_ == 0 || channelMask_ >= (1u << kChannelCount) || !(channelMask_ & (1u << kChannelNormals)) ||
-        ((channelMask_ >> kChannelHeights) & 1u) == ((channelMask_ >> kChannelPositions) & 1u))
+    if (channelMask_ != kAttributeMask &&
+        (channelMask_ == 0 || channelMask_ >= (1u << kChannelCount) || !(channelMask_ & (1u << kChannelNormals)) ||
+         ((channelMask_ >> kChannelHeights) & 1u) == ((channelMask_ >> kChannelPositions) & 1u)))
       fail("corrupt chart header (channel mask " + std::to_string(channelMask_) + ")");
   }
   const size_t entryBytes = version == kChartFileVersion ? kDirEntryBytes : 8 * size_t(std::popcount(channelMask_));

@@ -81,8 +81,23 @@ struct ChartInfo {
   uint32_t id = 0;
   int32_t gridX = 0, gridY = 0;             // chart position in the terrain chart grid
   std::string file;                         // relative to the atlas directory
+  std::string imageryFile;                  // the chart's imagery (AtlasManifest::imagery), or empty
   std::array<RootNeighbour, 4> neighbours;  // indexed by Edge
 };
+
+// Colour imagery draped over a terrain atlas: per chart, an attribute chart file (colours alone)
+// whose sample lattice refines the chart's by 2^scaleLog2 (chart side (chartSize-1) * 2^scaleLog2
+// + 1, blocks of blockIntervals * 2^scaleLog2), so a node's imagery page covers exactly its
+// geometry page. Imagery level k pairs with pyramid level k. Alpha is 255 where the imagery covers
+// the terrain and 0 where it does not.
+struct ImageryInfo {
+  bool present = false;
+  uint32_t scaleLog2 = 0;      // 0..kMaxImageryScaleLog2
+  std::string source;          // the raster it came from
+  double coverage = 0.0;       // fraction of the terrain's samples the imagery covers
+  uint32_t chartSize(uint32_t geometryChartSize) const { return ((geometryChartSize - 1) << scaleLog2) + 1; }
+};
+inline constexpr uint32_t kMaxImageryScaleLog2 = 2;
 
 // The atlas manifest. Heights are in metres after z-scale; horizontal positions of terrain
 // sample (gx, gy) are (gx * spacing[0], gy * spacing[1]); gy grows northwards.
@@ -100,6 +115,7 @@ struct AtlasManifest {
   std::string voidFillMethod;
   std::string source;
   Georeference georef;
+  ImageryInfo imagery;                      // terrain imagery (heightfield atlases only)
   std::vector<ChartInfo> charts;
   // Hierarchy parameters (log2 values). depth = number of quadtree levels (root = level 0).
   std::string hierarchyFile = "hierarchy.bin";
@@ -183,7 +199,8 @@ struct ChartPyramid {
 };
 
 // Writes a chart file. A height-field pyramid (heights + normals) is written in version 1; a
-// pyramid with positions or colours in version 2: the same, but the header adds u32 channelMask
+// pyramid with positions or colours, or colours alone (an attribute chart: terrain imagery), in
+// version 2: the same, but the header adds u32 channelMask
 // (1 << ChartChannel) after the level count, each directory entry holds one u64 offset per
 // present channel (in ChartChannel order), and each block stores its channels in that order.
 // Version 1 (little-endian): magic "GLMC", u32 version (1), u32 chartSize,

@@ -1,9 +1,11 @@
 // Options of `gimlod build`: one struct per input kind, over the fields they share.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -34,6 +36,10 @@ struct TerrainBuildOptions : CommonBuildOptions {
   std::string subdataset;    // netCDF variable; empty: the first 2D one
   uint32_t chartSize = 513;  // samples per chart side, 2^m + 1 in [9, 8193]
   double zScale = 1.0;       // height multiplier; finite and non-zero
+  // Colour imagery draped over the DEM (atlas/terrain/imagery.h); empty path: none.
+  std::filesystem::path imagery;
+  int imageryScaleLog2 = -1;  // kAutoImageryScale, or 0..2
+  std::optional<std::array<double, 4>> imageryExtent;  // for imagery without a georeference
 };
 
 // A geometry atlas from a mesh (PLY, OBJ, OFF, STL).

@@ -164,6 +164,18 @@ nlohmann::json statsJson(const TerrainBuildStats& s) {
       {"load_seconds", s.read.seconds},
       {"chart_seconds", cs.seconds},
   };
+  if (w.imagery) {
+    const TerrainImageryStats& im = *w.imagery;
+    stats["imagery"] = {{"source", im.source},
+                        {"scale_log2", im.scaleLog2},
+                        {"size", {im.width, im.height}},
+                        {"coverage", im.coverage},
+                        {"resampling", im.resampling},
+                        {"stored_samples", im.storedSamples},
+                        {"bytes_on_disk", im.bytesOnDisk},
+                        {"read_seconds", im.readSeconds},
+                        {"write_seconds", im.writeSeconds}};
+  }
   stats["bytes_on_disk"] = s.bytesOnDisk;
   stats["total_seconds"] = s.totalSeconds;
   return stats;
@@ -199,8 +211,13 @@ nlohmann::json statsJson(const MeshBuildStats& s) {
 
 std::string buildSummary(const std::filesystem::path& output, const TerrainBuildStats& s) {
   const TerrainWriteStats& w = s.write;
-  return summaryLines(output, w.charts.charts, w.chartsX, w.chartsY, w.chartSize, w.charts.samples,
-                      s.read.voidsFilled, w.hierarchy, s.bytesOnDisk, s.totalSeconds);
+  std::string lines = summaryLines(output, w.charts.charts, w.chartsX, w.chartsY, w.chartSize, w.charts.samples,
+                                   s.read.voidsFilled, w.hierarchy, s.bytesOnDisk, s.totalSeconds);
+  if (w.imagery)
+    lines += fmt::format("  imagery           {} x {} samples ({} per DEM interval, {}), {:.1f}% covered, {} bytes\n",
+                         w.imagery->width, w.imagery->height, 1u << w.imagery->scaleLog2, w.imagery->resampling,
+                         100.0 * w.imagery->coverage, w.imagery->bytesOnDisk);
+  return lines;
 }
 
 std::string buildSummary(const std::filesystem::path& output, const MeshBuildStats& s) {

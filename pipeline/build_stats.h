@@ -33,8 +33,22 @@ struct TerrainReadStats {
 };
 
 // Chart and write: the chart files, and the hierarchy and manifest written after them.
+// The imagery draped over it (absent without --imagery).
+struct TerrainImageryStats {
+  std::string source;
+  uint32_t scaleLog2 = 0;      // imagery samples per DEM interval: 2^scaleLog2
+  uint32_t width = 0, height = 0;  // the reprojected imagery
+  double coverage = 0.0;       // fraction of the terrain covered
+  std::string resampling;
+  uint64_t storedSamples = 0;
+  uint64_t bytesOnDisk = 0;
+  double readSeconds = 0.0;    // read and reproject
+  double writeSeconds = 0.0;   // pyramid and chart files
+};
+
 struct TerrainWriteStats {
   TerrainAtlasStats charts;                   // chart files (atlas/terrain_atlas.h)
+  std::optional<TerrainImageryStats> imagery;
   uint32_t chartsX = 0, chartsY = 0;          // the chart grid
   uint32_t chartSize = 0;                     // samples per chart side
   uint32_t depth = 0;                         // quadtree levels per chart

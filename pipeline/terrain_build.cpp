@@ -10,6 +10,7 @@
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 
+#include "atlas/terrain/imagery.h"
 #include "core/atlas_format.h"
 #include "pipeline/build.h"
 #include "pipeline/build_report.h"
@@ -36,6 +37,10 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
   if (!std::isfinite(o.zScale) || o.zScale == 0.0)
     throw InputError(optionRef("zScale") + " must be finite and non-zero");
   if (o.threads > 1024) throw InputError(optionRef("threads") + " must be at most 1024");
+  ImageryOptions io;
+  io.scaleLog2 = o.imageryScaleLog2;
+  io.extent = o.imageryExtent;
+  validateImageryOptions(io);
   HierarchyParams p;
   p.intervalsLog2 = log2u(o.chartSize - 1);
   p.depth = o.depth;
@@ -77,6 +82,31 @@ TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& 
   topt.blockIntervals = o.nodeRes;
   TerrainWriteStats w;
   w.charts = writeTerrainCharts(dem, topt, dir, m);
+  if (!o.imagery.empty()) {
+    // Imagery: reprojected onto the DEM's lattice, then cut like the heights.
+    const auto t0 = std::chrono::steady_clock::now();
+    ImageryOptions io;
+    io.path = o.imagery;
+    io.scaleLog2 = o.imageryScaleLog2;
+    io.extent = o.imageryExtent;
+    ImageryRaster raster = loadImagery(dem, o.input, io);
+    for (const std::string& warning : raster.warnings) spdlog::warn("{}: {}", o.imagery.string(), warning);
+    TerrainImageryStats& im = w.imagery.emplace();
+    im.readSeconds = secondsSince(t0);
+    im.source = fs::absolute(o.imagery).string();
+    im.scaleLog2 = raster.scaleLog2;
+    im.width = raster.width;
+    im.height = raster.height;
+    im.coverage = raster.coverage;
+    im.resampling = raster.resampling;
+    const ImageryWriteStats ws = writeImageryCharts(raster, im.source, dir, m);
+    im.storedSamples = ws.storedSamples;
+    im.bytesOnDisk = ws.bytesOnDisk;
+    im.writeSeconds = ws.seconds;
+    spdlog::info("{}: {}x{} imagery samples ({} per DEM interval, {} resampling), {:.1f}% of the terrain covered",
+                 o.imagery.string(), raster.width, raster.height, 1u << raster.scaleLog2, raster.resampling,
+                 100.0 * raster.coverage);
+  }
   dem = DemRaster{};
 
   // The hierarchy stage reads level 0 of every chart file, as a restarted stage would.
@@ -97,6 +127,7 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& o) {
   std::error_code ec;
   validateTerrainBuildOptions(o);
   if (!fs::exists(o.input, ec)) throw InputError(o.input.string() + ": no such file");
+  if (!o.imagery.empty() && !fs::exists(o.imagery, ec)) throw InputError(o.imagery.string() + ": no such file");
   std::unique_ptr<tbb::global_control> threads;
   if (o.threads)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.threads);

@@ -11,6 +11,24 @@ PageReader::PageReader(const std::filesystem::path& atlasDir, const AtlasManifes
       throw InputError((atlasDir / c.file).string() + ": has no " + (geometry_ ? "positions" : "heights") +
                        " for a " + atlasKindName(manifest.kind) + " atlas");
   }
+  if (manifest.imagery.present) {
+    // Terrain imagery: one attribute file per chart on the refined lattice.
+    colourScaleLog2_ = manifest.imagery.scaleLog2;
+    const uint32_t size = manifest.imagery.chartSize(manifest.chartSize);
+    const uint32_t block = manifest.blockIntervals << colourScaleLog2_;
+    for (const ChartInfo& c : manifest.charts) {
+      const std::filesystem::path file = atlasDir / c.imageryFile;
+      imagery_.push_back(std::make_unique<ChartFileReader>(file));
+      const ChartFileReader& r = *imagery_.back();
+      if (!r.hasChannel(kChannelColours) || r.chartSize() != size || r.blockIntervals() != block ||
+          r.levels() < manifest.intervalsLog2() + 1)
+        throw InputError(file.string() + ": not the chart's imagery (expected colours, " + std::to_string(size) +
+                         " samples, blocks of " + std::to_string(block) + ", " +
+                         std::to_string(manifest.intervalsLog2() + 1) + " levels)");
+    }
+    colours_ = true;
+    return;
+  }
   colours_ = !charts_.empty();
   for (const auto& c : charts_) colours_ = colours_ && c->hasChannel(kChannelColours);
 }
@@ -34,8 +52,11 @@ void PageReader::read(const NodeId& n, std::vector<float>& samples, std::vector<
   if (colours) {
     colours->clear();
     if (colours_) {
-      colours->resize(size_t(s) * s);
-      charts_[n.chart]->readColours(k, u0, v0, 1u << r, colours->data());
+      const uint32_t d = colourScaleLog2_;
+      const size_t cs = (size_t(1) << (r + d)) + 1;
+      colours->resize(cs * cs);
+      const ChartFileReader& file = imagery_.empty() ? *charts_[n.chart] : *imagery_[n.chart];
+      file.readColours(k, u0 << d, v0 << d, 1u << (r + d), colours->data());
       bytesRead_ += colours->size() * sizeof(PackedColour);
     }
   }

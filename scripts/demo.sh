@@ -8,7 +8,7 @@ bash scripts/install-deps.sh
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j"$(nproc)" --target gimlod
 mkdir -p out
-./build/gimlod build data/terrain/mt_rainier_90m.tif -o out/rainier.atlas
+./build/gimlod build data/terrain/mt_rainier_90m.tif -o out/rainier.atlas --imagery data/terrain/mt_rainier_imagery.tif
 ./build/gimlod render out/rainier.atlas -o out/rainier_orbit --orbit 24 --size 640x480 --tolerance 1
 ./build/gimlod render out/rainier.atlas -o out/rainier_flyby --path scenes/rainier_flyby.json --size 640x480 --tolerance 1
 ./build/gimlod build data/meshes/bun_zipper.ply -o out/bunny.atlas

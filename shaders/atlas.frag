@@ -1,7 +1,7 @@
 #version 430 core
 // Atlas fragment shader: normal map and Lambert + ambient lighting with light distance fog;
-// terrain atlases also clip to the valid extent and colour with a hypsometric ramp, mesh atlases
-// (GIMLOD_GEOMETRY) are neutral clay. With u_overlay, a per-node colour replaces the material and
+// terrain atlases also clip to the valid extent and colour with their imagery where it covers,
+// else a hypsometric ramp; mesh atlases (GIMLOD_GEOMETRY) draw their vertex colours or neutral clay. With u_overlay, a per-node colour replaces the material and
 // chart borders are drawn over it: seams dark, open borders red (runtime/overlay.h).
 
 #include "interface.h"
@@ -24,8 +24,9 @@ layout(std430, binding = GIMLOD_OVERLAY_BINDING) readonly buffer Overlay { NodeO
 uniform int u_overlay;  // 0: none; else u_overlays[v_node] applies
 
 uniform sampler2DArray u_normals;  // RGBA8, n * 0.5 + 0.5, bilinear, with mips
-uniform sampler2DArray u_colours;  // mesh atlases with vertex colours: RGBA8, with mips
-uniform int u_hasColours;          // draw u_colours instead of the neutral material
+uniform sampler2DArray u_colours;  // vertex colours or terrain imagery: RGBA8, with mips
+uniform int u_hasColours;          // draw u_colours instead of the neutral material / height ramp
+uniform float u_colourScale;       // colour texels per page sample interval (terrain imagery: 1, 2 or 4)
 uniform sampler2DArray u_samples;  // R32F page heights (terrain only here), bilinear (texelFetch in the vertex shader)
 uniform vec2 u_spacing;
 uniform vec2 u_validSamples;  // samples per axis; 0 = unlimited
@@ -114,6 +115,14 @@ void main() {
   if (h < 0.0 && u_heightRange.x < 0.0) {
     float depth = clamp(h / u_heightRange.x, 0.0, 1.0);
     base = mix(vec3(0.30, 0.55, 0.75), vec3(0.05, 0.12, 0.35), sqrt(depth));
+  }
+  if (u_hasColours != 0) {
+    // Imagery: the page's sample position on the colour page's finer lattice; mip chosen by the
+    // hardware from the screen footprint. Alpha is the imagery's coverage.
+    vec2 t = v_pageUv * float(textureSize(u_samples, 0).x) - 0.5;
+    vec2 uv = (t * u_colourScale + 0.5) / vec2(textureSize(u_colours, 0).xy);
+    vec4 imagery = texture(u_colours, vec3(uv, float(v_pageLayer)));
+    base = mix(base, imagery.rgb, imagery.a);
   }
   float light = max(dot(n, u_lightDir), 0.0);
   vec3 colour = u_overlay != 0 ? overlayColour(light) : base * (0.30 + 0.70 * light);

@@ -100,6 +100,8 @@ struct AtlasRenderer::Impl {
   bool drawColours = true;
   int views = 0;              // u_views bits (setInspectionViews)
   uint32_t normalLevels = 1;  // mip levels of the normal page pool
+  uint32_t colourSide = 0;    // texels per side of a colour layer: ((pageSide - 1) << colourScaleLog2) + 1
+  uint32_t colourLevels = 1;  // mip levels of the colour page pool
   GlObject gridVertices, gridIndices, vertexArray;
   std::vector<GridRange> grids;  // [res - minResLog2]
   GlObject nodeBuffer, stitchBuffer, indirectBuffer, feedbackBuffer, feedbackQuery;
@@ -193,11 +195,10 @@ void AtlasRenderer::Impl::createFramebuffer() {
 void AtlasRenderer::Impl::createPagePool() {
   capacity = std::clamp<uint32_t>(setup.pageCapacity, 1,
                                   static_cast<uint32_t>(getInteger(GL_MAX_ARRAY_TEXTURE_LAYERS)));
-  auto makeArray = [&](GLenum format, GLint levels) {
+  auto makeArray = [&](GLenum format, GLint levels, uint32_t side) {
     GlObject tex = makeTexture();
     glBindTexture(GL_TEXTURE_2D_ARRAY, tex.id());
-    glTexStorage3D(GL_TEXTURE_2D_ARRAY, levels, format, GLsizei(pageSide), GLsizei(pageSide),
-                   GLsizei(capacity));
+    glTexStorage3D(GL_TEXTURE_2D_ARRAY, levels, format, GLsizei(side), GLsizei(side), GLsizei(capacity));
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, levels > 1 ? GL_LINEAR_MIPMAP_LINEAR : GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
@@ -209,11 +210,17 @@ void AtlasRenderer::Impl::createPagePool() {
   // note: the vertex shader reads samples with texelFetch (no filtering); the fragment shader
   // samples heights bilinearly for colouring at page resolution, finer than the drawn grid. Normals
   // carry a mip chain so each node's normal map is read at its attribute resolution (texLod).
-  normalLevels = 1;
-  while ((pageSide >> normalLevels) >= 1) ++normalLevels;
-  samples = makeArray(setup.geometry ? GL_RGB32F : GL_R32F, 1);
-  normals = makeArray(GL_RGBA8, GLint(normalLevels));
-  if (setup.colours) colours = makeArray(GL_RGBA8, GLint(normalLevels));
+  const auto mipLevels = [](uint32_t side) {
+    uint32_t levels = 1;
+    while ((side >> levels) >= 1) ++levels;
+    return levels;
+  };
+  normalLevels = mipLevels(pageSide);
+  colourSide = ((pageSide - 1) << setup.colourScaleLog2) + 1;
+  colourLevels = mipLevels(colourSide);
+  samples = makeArray(setup.geometry ? GL_RGB32F : GL_R32F, 1, pageSide);
+  normals = makeArray(GL_RGBA8, GLint(normalLevels), pageSide);
+  if (setup.colours) colours = makeArray(GL_RGBA8, GLint(colourLevels), colourSide);
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
 }
 
@@ -351,6 +358,7 @@ void AtlasRenderer::Impl::setShading(const GlObject& p, const glm::mat4& viewPro
   glBindTexture(GL_TEXTURE_2D_ARRAY, setup.colours ? colours.id() : 0);
   glActiveTexture(GL_TEXTURE0);
   glUniform1i(optionalUniform(p, "u_hasColours"), setup.colours && drawColours ? 1 : 0);
+  glUniform1f(optionalUniform(p, "u_colourScale"), float(1u << setup.colourScaleLog2));
 }
 
 void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& eye,
@@ -407,19 +415,25 @@ void AtlasRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const fl
   glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->samples.id());
   glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, impl_->setup.geometry ? GL_RGB : GL_RED,
                   GL_FLOAT, samples);
-  // An RGBA8 attribute map and its mip chain (mipLevel: normalMipLevel or colourMipLevel).
-  const auto uploadAttribute = [&](const GlObject& texture, const auto* texels, auto mipLevel) {
+  // An RGBA8 attribute map of `texelsPerSide`^2 in a layer of `layerSide`^2 and its mip chain
+  // (mipLevel: normalMipLevel or colourMipLevel).
+  const auto uploadAttribute = [&](const GlObject& texture, const auto* texels, uint32_t texelsPerSide,
+                                   uint32_t layerSide, uint32_t levels, auto mipLevel) {
     glBindTexture(GL_TEXTURE_2D_ARRAY, texture.id());
-    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, GL_RGBA, GL_UNSIGNED_BYTE, texels);
+    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), GLsizei(texelsPerSide), GLsizei(texelsPerSide), 1,
+                    GL_RGBA, GL_UNSIGNED_BYTE, texels);
     std::vector<std::remove_cv_t<std::remove_pointer_t<decltype(texels)>>> mip;
-    for (uint32_t level = 1; level < impl_->normalLevels; ++level) {
-      const uint32_t side = mipLevel(texels, samplesPerSide, impl_->pageSide, level, mip);
+    for (uint32_t level = 1; level < levels; ++level) {
+      const uint32_t side = mipLevel(texels, texelsPerSide, layerSide, level, mip);
       glTexSubImage3D(GL_TEXTURE_2D_ARRAY, GLint(level), 0, 0, GLint(layer), GLsizei(side), GLsizei(side), 1,
                       GL_RGBA, GL_UNSIGNED_BYTE, mip.data());
     }
   };
-  if (normals) uploadAttribute(impl_->normals, normals, normalMipLevel);
-  if (colours && impl_->setup.colours) uploadAttribute(impl_->colours, colours, colourMipLevel);
+  if (normals)
+    uploadAttribute(impl_->normals, normals, samplesPerSide, impl_->pageSide, impl_->normalLevels, normalMipLevel);
+  if (colours && impl_->setup.colours)
+    uploadAttribute(impl_->colours, colours, ((samplesPerSide - 1) << impl_->setup.colourScaleLog2) + 1,
+                    impl_->colourSide, impl_->colourLevels, colourMipLevel);
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
   checkGl("uploadPage glTexSubImage3D");
 }

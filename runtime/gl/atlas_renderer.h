@@ -31,9 +31,13 @@ struct RendererSetup {
   // Geometry images (mesh atlases): pages hold x, y, z per sample (3 floats) instead of a height,
   // and the vertex shader takes the position from the page; stitching is the same.
   bool geometry = false;
-  // Mesh atlases with vertex colours: pages also carry RGBA8 colours (with mips, read at each
-  // node's attribute resolution like the normals), drawn instead of the neutral material.
+  // Pages also carry RGBA8 colours with mips: a mesh's vertex colours (read at each node's
+  // attribute resolution like the normals), drawn instead of the neutral material; or terrain
+  // imagery, drawn over the height colouring where its alpha covers.
   bool colours = false;
+  // Colour texels per page sample interval, log2: a colour page has ((side - 1) << this) + 1
+  // texels per side (terrain imagery finer than the heights; 0 for meshes).
+  uint32_t colourScaleLog2 = 0;
 };
 
 struct DrawStats {
@@ -70,7 +74,8 @@ class AtlasRenderer {
   // Smaller pages (deep nodes) occupy the lower-left corner of the layer.
   // The normals also get their mip chain (normalMipLevel), for DrawNode::texLod. With
   // RendererSetup::geometry, `samples` holds 3 floats (x, y, z) per sample. `colours` (with
-  // RendererSetup::colours; else ignored) get their mip chain too.
+  // RendererSetup::colours; else ignored), ((samplesPerSide - 1) << colourScaleLog2) + 1 per side,
+  // get their mip chain too.
   void uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* samples,
                   const PackedNormal* normals, const PackedColour* colours = nullptr);
   // Draws the pages' colours (RendererSetup::colours) or the neutral material.

@@ -21,6 +21,7 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o, const Pag
   RendererSetup s;
   s.geometry = a.manifest.kind == AtlasKind::Geometry;
   s.colours = pages.colours();
+  s.colourScaleLog2 = pages.colourScaleLog2();
   s.width = o.width;
   s.height = o.height;
   s.background = o.background;

@@ -73,7 +73,7 @@ class AtlasScene {
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
   AtlasRenderer& renderer() { return *renderer_; }
-  // The atlas carries per-sample colours (a mesh with vertex colours), which are drawn.
+  // The atlas carries per-sample colours (a mesh's vertex colours or terrain imagery), which are drawn.
   bool hasColours() const { return pages_.colours(); }
   // A new frame size (a resized window): the projection and the screen-space errors follow.
   void resize(uint32_t width, uint32_t height);
