@@ -31,6 +31,7 @@
 #include "runtime/atlas_view.h"
 #include "runtime/baselines.h"
 #include "runtime/camera.h"
+#include "runtime/frame_controller.h"
 #include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
 
@@ -283,11 +284,107 @@ CLI::App* addBenchCommand(CLI::App& app, BenchArgs& a) {
   b->add_flag("--render", a.render, "Also draw each cut (headless EGL) and record draw_ms");
   b->add_option("--frame-ms", a.frameMs, "Cost model: target frame time in ms (needs --tri-rate)");
   b->add_option("--tri-rate", a.triRate, "Cost model: triangle throughput in triangles/s (e.g. from bench_render)");
+  b->add_option("--control-frames", a.controlFrames,
+                "Cost model, budget mode: frames the frame-time controller runs along the path (cycling it); 0: none")
+      ->capture_default_str();
+  b->add_option("--load-step", a.loadStep,
+                "Cost model, budget mode: the triangle rate is multiplied by this halfway through the controller's "
+                "run (a jump in load)")
+      ->capture_default_str();
   b->callback([&a, tris, tol] {
     a.trianglesGiven = tris->count() > 0;
     a.toleranceGiven = tol->count() > 0;
   });
   return b;
+}
+
+// The frame-time controller (runtime/frame_controller.h) along the path on the cost model: each
+// frame is adapted by 'ours' (the quad queue) at the controller's budgets; its time is the
+// measured adaptation plus triangles / rate (the drawing the cost model predicts). Halfway, the
+// rate is multiplied by --load-step: a jump in load the controller must absorb.
+struct ControlledRun {
+  std::string csv, report;
+  nlohmann::json summary;
+};
+
+// Frames from `from` until the frame time stays within 10% of the target for 5 frames in a row;
+// -1 if it never does before `to`.
+int settlingFrames(const std::vector<double>& ms, size_t from, size_t to, double target) {
+  int run = 0;
+  for (size_t i = from; i < to; ++i) {
+    run = std::abs(ms[i] - target) <= 0.1 * target ? run + 1 : 0;
+    if (run == 5) return int(i - 4 - from);
+  }
+  return -1;
+}
+
+ControlledRun runFrameController(const Hierarchy& hier, const std::vector<ViewParams>& views, const BenchArgs& a) {
+  FrameControllerOptions fo;
+  fo.targetMs = a.frameMs;
+  FrameController control(fo, 64, 100000);
+  QuadQueueAdapter adapter(hier);
+  const size_t n = a.controlFrames, step = n / 2;
+  std::vector<double> ms(n);
+  ControlledRun run;
+  run.csv = "frame,max_nodes,max_triangles,nodes,triangles,adapt_ms,draw_ms,frame_ms,target_ms,tri_rate,max_error_px\n";
+  for (size_t i = 0; i < n; ++i) {
+    const ViewParams& v = views[i % views.size()];
+    const double rate = i < step ? a.triRate : a.triRate * a.loadStep;
+    BudgetOptions o;
+    o.maxNodes = control.maxNodes();
+    o.maxTriangles = control.maxTriangles();
+    o.maxRounds = a.maxRounds;
+    const auto t0 = Clock::now();
+    const Cut& cut = adapter.update(v, o, nullptr);
+    FrameSample f;
+    f.adaptMs = microsSince(t0) * 1e-3;
+    f.nodes = uint32_t(cut.nodes.size());
+    f.triangles = cut.triangles();
+    f.drawMs = double(f.triangles) / rate * 1e3;
+    f.frameMs = f.adaptMs + f.drawMs;
+    ms[i] = f.frameMs;
+    Row r;
+    measureCut(hier, cut, v, r);
+    run.csv += fmt::format("{},{},{},{},{},{:.4f},{:.4f},{:.4f},{},{:.6g},{:.4f}\n", i, o.maxNodes, o.maxTriangles,
+                           f.nodes, f.triangles, f.adaptMs, f.drawMs, f.frameMs, a.frameMs, rate, r.maxErrorPx);
+    control.update(f);
+  }
+  const double t = a.frameMs;
+  const int settleStart = settlingFrames(ms, 0, step, t), settleStep = settlingFrames(ms, step, n, t);
+  // Overshoot: past the target on the far side once it was first reached (from below at the start,
+  // from above after the step), as a fraction of the target.
+  const auto overshoot = [&](size_t from, size_t to, bool fromBelow) {
+    size_t i = from;
+    while (i < to && (fromBelow ? ms[i] < t : ms[i] > t)) ++i;
+    double worst = 0.0;
+    for (; i < to; ++i) worst = std::max(worst, fromBelow ? ms[i] / t - 1.0 : 1.0 - ms[i] / t);
+    return worst;
+  };
+  const bool startBelow = ms.empty() || ms[0] < t;
+  const double overStart = overshoot(0, step, startBelow), overStep = overshoot(step, n, a.loadStep > 1.0);
+  double peak = 0.0;
+  for (size_t i = step; i < n; ++i) peak = std::max(peak, ms[i]);
+  // Steady state: the mean absolute deviation over the last quarter of each half.
+  const auto deviation = [&](size_t from, size_t to) {
+    double sum = 0.0;
+    for (size_t i = from; i < to; ++i) sum += std::abs(ms[i] - t) / t;
+    return to > from ? sum / double(to - from) : 0.0;
+  };
+  const double devStart = deviation(step - step / 4, step), devStep = deviation(n - (n - step) / 4, n);
+  run.summary = {{"target_ms", t},          {"frames", n},
+                 {"load_step_frame", step}, {"load_step_factor", a.loadStep},
+                 {"settling_frames_start", settleStart}, {"settling_frames_after_step", settleStep},
+                 {"overshoot_start", overStart}, {"overshoot_after_step", overStep},
+                 {"peak_ms_after_step", peak}, {"steady_deviation_start", devStart},
+                 {"steady_deviation_after_step", devStep}};
+  const auto frames = [](int f) { return f < 0 ? std::string("never") : fmt::format("{} frames", f); };
+  run.report = fmt::format(
+      "frame-time controller ({} frames, target {} ms, triangle rate x{} at frame {}): within 10% after {} from "
+      "the start (overshoot {:.1f}%) and {} after the step (peak {:.2f} ms, overshoot {:.1f}%); steady |error| "
+      "{:.1f}% and {:.1f}% (controller.csv)\n",
+      n, t, a.loadStep, step, frames(settleStart), 100.0 * overStart, frames(settleStep), peak, 100.0 * overStep,
+      100.0 * devStart, 100.0 * devStep);
+  return run;
 }
 
 int runBench(const BenchArgs& a) {
@@ -319,6 +416,8 @@ int runBench(const BenchArgs& a) {
     if (std::find(algorithms.begin(), algorithms.end(), "ours") == algorithms.end())
       throw InputError("the cost model (--frame-ms, --tri-rate) fits the adaptation cost of 'ours': add it to --algorithms");
   }
+  if (a.controlFrames > 100000) throw InputError("--control-frames must be at most 100000");
+  if (!(a.loadStep > 0.0) || !(a.loadStep <= 100.0)) throw InputError("--load-step must be in (0, 100]");
 
   // Inputs.
   const AtlasView atlas = openAtlas(a.atlas);
@@ -487,6 +586,12 @@ int runBench(const BenchArgs& a) {
     }
   } else {
     std::cout << "adaptation cost fit: skipped ('ours' not in --algorithms)\n";
+  }
+  if (budgetMode && costModel && a.controlFrames > 0) {
+    const ControlledRun run = runFrameController(hier, views, a);
+    atomicWriteFile(out / "controller.csv", run.csv.data(), run.csv.size());
+    cm["controller"] = run.summary;
+    std::cout << run.report;
   }
   const std::string json = cm.dump(1) + "\n";
   atomicWriteFile(out / "cost_model.json", json.data(), json.size());

@@ -25,6 +25,11 @@ struct BenchArgs {
   uint32_t maxRounds = 16;  // quad queue: split/merge rounds per frame (work cap; state persists)
   double tolerance = 1.0;
   double frameMs = 0.0, triRate = 0.0;
+  // The frame-time controller on the cost model (with --frame-ms and --tri-rate in budget mode):
+  // frames it runs (cycling the path), and the factor the triangle rate is multiplied by halfway
+  // (a jump in load).
+  uint32_t controlFrames = 240;
+  double loadStep = 0.5;
   bool render = false;
   // Set by the parser: which options were given explicitly.
   bool toleranceGiven = false, trianglesGiven = false;

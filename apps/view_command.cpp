@@ -122,6 +122,7 @@ void onKey(GLFWwindow* w, int key, int, int action, int mods) {
     case GLFW_KEY_B: if (press) c.views.nodeBorders = !c.views.nodeBorders; break;
     case GLFW_KEY_N: if (press) c.views.normals = !c.views.normals; break;
     case GLFW_KEY_K: if (press) c.views.snapped = !c.views.snapped; break;
+    case GLFW_KEY_L: if (press) c.views.loading = !c.views.loading; break;
     case GLFW_KEY_G: if (press) c.topDown = !c.topDown; break;
     case GLFW_KEY_H: if (press) c.showUi = !c.showUi; break;
     case GLFW_KEY_P: if (press) v.screenshotRequested = true; break;
@@ -179,6 +180,7 @@ struct FrameFigures {
   uint64_t triangles = 0;
   double maxErrorPx = 0.0, adaptMs = 0.0, drawMs = 0.0, frameMs = 0.0, uploadMs = 0.0;
   uint32_t pagesLoaded = 0, pagesRequested = 0, rootFloor = 0;
+  uint32_t standIns = 0;  // desired nodes drawn as a resident ancestor (pages still loading)
   bool belowRoots = false;
 };
 
@@ -188,7 +190,7 @@ const char* kHelp =
     "[ ] finer/coarser (tolerance or triangles)   - = node budget\n"
     "M error/budget mode   T hold the frame time   G top-down greedy   F freeze cut\n"
     "C colouring (chart, level, resolution, error)   X wireframe   H hide panel\n"
-    "B node borders   N normals as colours   K snapped border vertices\n"
+    "B node borders   N normals as colours   K snapped border vertices   L pages loading\n"
     "Space play/pause path   R record path   P screenshot   Esc quit";
 
 }  // namespace
@@ -252,7 +254,7 @@ int runView(const ViewArgs& a) {
     if (!stats) throw InputError(a.stats + ": cannot write the stats file");
     stats << "frame,nodes,triangles,max_screen_error_px,adapt_ms,draw_ms,frame_ms,pages_loaded,pages_requested,"
              "root_floor,budget_below_roots,mode,tolerance_px,max_nodes,max_triangles,frozen,overlay,wireframe,"
-             "target_ms,node_borders,normals,snapped\n";
+             "target_ms,node_borders,normals,snapped,pages_loading_view,nodes_waiting\n";
   }
 
   glfwSetErrorCallback([](int code, const char* what) { spdlog::error("GLFW error {}: {}", code, what); });
@@ -408,6 +410,7 @@ int runView(const ViewArgs& a) {
       if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) move.y -= 1.0;
       if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) move.z += 1.0;
       if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) move.z -= 1.0;
+      camera.setSurfaceDistance(distanceToSurface(atlas.hierarchy, camera.eye()));
       if (move != glm::dvec3(0.0)) camera.move(move, seconds), viewer.cameraTouched = true;
     }
     if (viewer.scroll != 0.0) camera.zoom(viewer.scroll), viewer.scroll = 0.0, viewer.cameraTouched = true;
@@ -484,6 +487,7 @@ int runView(const ViewArgs& a) {
     last.uploadMs = f.uploadMs;
     last.pagesLoaded = f.pagesLoaded + f.pagesUploaded;
     last.pagesRequested = f.pagesRequested;
+    last.standIns = f.nodesSubstituted;
     last.rootFloor = f.adapt.rootFloor;
     last.belowRoots = f.adapt.budgetBelowRoots;
     adaptMs.add(last.adaptMs);
@@ -532,6 +536,8 @@ int runView(const ViewArgs& a) {
       ImGui::Checkbox("normals", &c.views.normals);
       ImGui::SameLine();
       ImGui::Checkbox("snapped", &c.views.snapped);
+      ImGui::SameLine();
+      ImGui::Checkbox("pages loading", &c.views.loading);
       ImGui::Checkbox("wireframe", &c.wireframe);
       ImGui::SameLine();
       ImGui::Checkbox("freeze cut", &c.freeze);
@@ -541,6 +547,7 @@ int runView(const ViewArgs& a) {
       ImGui::Text("nodes %zu (root floor %u%s)  triangles %llu", last.nodes, last.rootFloor,
                   last.belowRoots ? ", above the budget" : "", static_cast<unsigned long long>(last.triangles));
       ImGui::Text("max error %.3f px  frame %.2f ms", last.maxErrorPx, frameMs.last());
+      if (c.asyncLoads) ImGui::Text("pages: %u requested, %u nodes waiting for theirs", last.pagesRequested, last.standIns);
       if (ImGui::CollapsingHeader("graphs", fbh >= 700 ? ImGuiTreeNodeFlags_DefaultOpen : 0)) {
         plot("adapt ms", adaptMs, "ms");
         plot("draw ms", drawMs, "ms");
@@ -563,13 +570,14 @@ int runView(const ViewArgs& a) {
       controller->update({uint32_t(last.nodes), last.triangles, last.adaptMs, last.drawMs,
                           std::max(last.frameMs - last.uploadMs, 0.0)});
     if (stats) {
-      stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{}\n", frame,
+      stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{}\n", frame,
                            last.nodes, last.triangles, last.maxErrorPx, last.adaptMs, last.drawMs, last.frameMs,
                            last.pagesLoaded, last.pagesRequested, last.rootFloor, int(last.belowRoots),
                            c.budgetMode ? "budget" : "error", c.tolerance, c.maxNodes, uint64_t(c.maxTrianglesK) * 1000,
                            int(c.freeze), overlayModeName(kOverlays[size_t(c.overlay)]), int(c.wireframe),
                            c.holdFrameTime ? fmt::format("{:.2f}", c.targetMs) : std::string(),
-                           int(c.views.nodeBorders), int(c.views.normals), int(c.views.snapped))
+                           int(c.views.nodeBorders), int(c.views.normals), int(c.views.snapped),
+                           int(c.views.loading), last.standIns)
             << std::flush;
     }
     const bool lastOne = lastFrame > 0 && frame + 1 >= lastFrame;

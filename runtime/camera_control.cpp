@@ -1,5 +1,9 @@
 #include "runtime/camera_control.h"
 
+#include <limits>
+#include <utility>
+#include <vector>
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -126,6 +130,7 @@ void CameraControl::move(const glm::dvec3& rightUpForward, double seconds) {
 
 double CameraControl::flySpeed() const {
   const double diag = glm::length(hi_ - lo_);
+  if (surfaceDistance_ >= 0.0) return std::max(surfaceDistance_, 0.001 * diag) * speedFactor_;
   const double gap = glm::length(glm::clamp(eye_, lo_, hi_) - eye_);
   return std::max(gap, 0.01 * diag) * speedFactor_;
 }
@@ -139,6 +144,8 @@ Camera CameraControl::camera() const {
   c.nearPlane = 0.0;
   c.farPlane = 0.0;
   fitClipPlanes(c, lo_, hi_);
+  if (surfaceDistance_ >= 0.0)
+    c.nearPlane = std::clamp(0.5 * surfaceDistance_, 1e-6 * glm::length(hi_ - lo_), c.nearPlane);
   return c;
 }
 
@@ -154,6 +161,36 @@ void CameraControl::setCamera(const Camera& c) {
   pitch_ = std::clamp(std::asin(std::clamp(glm::dot(d, up_.vector()), -1.0, 1.0)), -kMaxPitch, kMaxPitch);
   yaw_ = std::atan2(glm::dot(d, b), glm::dot(d, a));
   updateEye();
+}
+
+double distanceToSurface(const Hierarchy& h, const glm::dvec3& p) {
+  const auto boxDistance = [&](const NodeId& n) {
+    const std::array<float, 6>& b = h.bounds(n);
+    const glm::dvec3 lo(b[0], b[1], b[2]), hi(b[3], b[4], b[5]);
+    return glm::length(glm::clamp(p, lo, hi) - p);
+  };
+  double best = std::numeric_limits<double>::infinity();
+  std::vector<std::pair<double, NodeId>> stack;
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    const NodeId root{c, 0, 0, 0};
+    stack.emplace_back(boxDistance(root), root);
+  }
+  const uint32_t leaf = h.params.depth - 1;
+  while (!stack.empty()) {
+    const auto [d, n] = stack.back();
+    stack.pop_back();
+    if (d >= best) continue;
+    if (n.level == leaf) {
+      best = d;
+      continue;
+    }
+    for (uint32_t i = 0; i < 4; ++i) {
+      const NodeId k = n.child(i);
+      const double dk = boxDistance(k);
+      if (dk < best) stack.emplace_back(dk, k);
+    }
+  }
+  return best;
 }
 
 void writeCameraPath(const std::filesystem::path& path, const std::vector<Camera>& cameras) {

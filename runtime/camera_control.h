@@ -12,6 +12,7 @@
 
 #include <glm/glm.hpp>
 
+#include "hierarchy/hierarchy.h"
 #include "runtime/camera.h"
 
 namespace gimlod {
@@ -56,12 +57,17 @@ class CameraControl {
   // dollies, right and up pan.
   void move(const glm::dvec3& rightUpForward, double seconds);
 
-  // The flying speed in world units per second: the eye's distance to the box (its height above
-  // the data when outside it), at least 1% of the diagonal, times the user's speed factor.
+  // The eye's distance to the drawn surface (the viewer measures it to the boxes of the cut's
+  // nodes each frame: the height above a terrain, the gap to a scan); negative: unknown, the
+  // distance to the whole box is used instead.
+  void setSurfaceDistance(double d) { surfaceDistance_ = d; }
+  // The flying speed in world units per second: the eye's distance to the surface (or to the box),
+  // at least 0.1% of the diagonal (1% without a surface distance), times the user's speed factor.
   double flySpeed() const;
 
   // The camera for this view: near and far follow the distance to the box (near a small fraction
-  // of it, so close-ups do not clip; far beyond the farthest corner).
+  // of it, so close-ups do not clip; far beyond the farthest corner), and the near plane comes in
+  // to half the surface distance when that is closer (flying low inside the box).
   Camera camera() const;
   // Takes a camera's view (eye, target, up, fov) in orbit mode; the orbit centre is its target.
   void setCamera(const Camera& c);
@@ -80,7 +86,13 @@ class CameraControl {
   double distance_ = 1.0;
   double yaw_ = 0.0, pitch_ = 0.0;  // radians; pitch in (-pi/2, pi/2) above the horizon
   double speedFactor_ = 1.0;
+  double surfaceDistance_ = -1.0;
 };
+
+// The distance from p to the nearest leaf node's bounding box (0 inside one): the height above a
+// terrain's surface, the gap to a scan's, to within the leaves' size. Branch and bound over the
+// hierarchy's boxes.
+double distanceToSurface(const Hierarchy& h, const glm::dvec3& p);
 
 // Writes cameras as {"frames": [{"eye", "target", "up", "fov_deg"}, ...]}, the format of
 // readCameraPath, atomically (temporary file, then rename). Throws InputError naming the file.

@@ -37,9 +37,12 @@ struct NodeOverlay {
   uint32_t rgba = 0;              // RGBA8, red in the low byte (GLSL unpackUnorm4x8)
   uint32_t chartBorderSides = 0;  // sides on the chart's border
   uint32_t openSides = 0;         // of those, the ones without a neighbouring chart
-  uint32_t reserved = 0;
+  uint32_t flags = 0;             // kOverlayStandIn
 };
 static_assert(sizeof(NodeOverlay) == 16);
+// NodeOverlay::flags: the node is drawn from its own resident page, standing in for finer desired
+// nodes whose pages are still loading (asynchronous loading; the "pages loading" view).
+inline constexpr uint32_t kOverlayStandIn = 1;
 
 // The heat ramp for t in [0, 1]: blue, green, red (t clamped).
 std::array<uint8_t, 3> heatColour(double t);

@@ -18,10 +18,11 @@ struct NodeOverlay {
   uint rgba;              // RGBA8
   uint chartBorderSides;  // bit s: side s (0 bottom, 1 right, 2 top, 3 left) on the chart border
   uint openSides;         // of those, without a neighbouring chart
-  uint reserved;
+  uint flags;             // bit 0: the node stands in for finer pages still loading
 };
 layout(std430, binding = GIMLOD_OVERLAY_BINDING) readonly buffer Overlay { NodeOverlay u_overlays[]; };
-uniform int u_overlay;  // 0: none; else u_overlays[v_node] applies
+uniform int u_overlay;         // 0: none; else u_overlays[v_node]'s colour and borders apply
+uniform int u_overlayRecords;  // u_overlays holds a record per node (for their flags)
 
 uniform sampler2DArray u_normals;  // RGBA8, n * 0.5 + 0.5, bilinear, with mips
 uniform sampler2DArray u_colours;  // vertex colours or terrain imagery: RGBA8, with mips
@@ -36,7 +37,8 @@ uniform vec3 u_eye;
 uniform vec3 u_background;
 uniform float u_fogDistance;  // 0 = no fog
 // Inspection views, bits: 1 node borders (thin dark lines), 2 normals as colours (n * 0.5 + 0.5
-// instead of the material), 4 the stitching's snapped border vertices (orange round each).
+// instead of the material), 4 the stitching's snapped border vertices (orange round each), 8 nodes
+// standing in for pages still loading (magenta stripes).
 uniform int u_views;
 
 out vec4 o_colour;
@@ -64,6 +66,9 @@ vec3 inspectionViews(vec3 c, vec3 n) {
     if (min(d.x, d.y) < 0.6) c = mix(c, vec3(0.05), 0.8);
   }
   if ((u_views & 4) != 0 && v_snapped > 0.02) c = mix(c, vec3(1.0, 0.45, 0.0), 0.35 + 0.65 * v_snapped);
+  if ((u_views & 8) != 0 && u_overlayRecords != 0 && (u_overlays[v_node].flags & 1u) != 0u &&
+      mod(floor((gl_FragCoord.x + gl_FragCoord.y) / 6.0), 2.0) < 1.0)
+    c = mix(c, vec3(1.0, 0.0, 0.85), 0.6);
   return c;
 }
 

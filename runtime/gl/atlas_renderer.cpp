@@ -107,6 +107,8 @@ struct AtlasRenderer::Impl {
   GlObject nodeBuffer, stitchBuffer, indirectBuffer, feedbackBuffer, feedbackQuery;
   GlObject overlayBuffer;
   std::vector<NodeOverlay> overlay;  // per node of the next draw; empty: no overlay
+  bool overlayColours = false;       // the records colour the nodes (else only their flags count)
+  InspectionViews inspection;
   GlObject atlasProgram;
   bool wireframe = false;
 
@@ -366,7 +368,8 @@ void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& 
   setShading(atlasProgram, viewProj, eye);
   glUniform1i(uniform(atlasProgram, "u_leafLog2"), GLint(stitch.leafLog2));
   glUniform1i(uniform(atlasProgram, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
-  glUniform1i(uniform(atlasProgram, "u_overlay"), overlay.empty() ? 0 : 1);
+  glUniform1i(uniform(atlasProgram, "u_overlay"), overlay.empty() || !overlayColours ? 0 : 1);
+  glUniform1i(uniform(atlasProgram, "u_overlayRecords"), overlay.empty() ? 0 : 1);
   glUniform1i(uniform(atlasProgram, "u_views"), views);
   glBindVertexArray(vertexArray.id());
   checkGl("atlas state");
@@ -396,7 +399,10 @@ const RendererSetup& AtlasRenderer::setup() const { return impl_->setup; }
 
 void AtlasRenderer::beginFrame() const { impl_->beginFrame(); }
 
-void AtlasRenderer::setOverlay(std::vector<NodeOverlay> perNode) { impl_->overlay = std::move(perNode); }
+void AtlasRenderer::setOverlay(std::vector<NodeOverlay> perNode, bool colourNodes) {
+  impl_->overlay = std::move(perNode);
+  impl_->overlayColours = colourNodes;
+}
 
 void AtlasRenderer::setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const {
   impl_->setShading(program, viewProj, eye);
@@ -504,8 +510,11 @@ void AtlasRenderer::blitToDefaultFramebuffer() const {
 
 void AtlasRenderer::setWireframe(bool on) { impl_->wireframe = on; }
 
+const AtlasRenderer::InspectionViews& AtlasRenderer::inspectionViews() const { return impl_->inspection; }
+
 void AtlasRenderer::setInspectionViews(const InspectionViews& v) {
-  impl_->views = (v.nodeBorders ? 1 : 0) | (v.normals ? 2 : 0) | (v.snapped ? 4 : 0);
+  impl_->inspection = v;
+  impl_->views = (v.nodeBorders ? 1 : 0) | (v.normals ? 2 : 0) | (v.snapped ? 4 : 0) | (v.loading ? 8 : 0);
 }
 
 namespace {

@@ -82,8 +82,10 @@ class AtlasRenderer {
   void setColours(bool on);
 
   // The overlay of the next draws, one record per node in the order draw() gets them (empty:
-  // plain shading). draw() throws std::invalid_argument when the counts differ.
-  void setOverlay(std::vector<NodeOverlay> perNode);
+  // plain shading). With colourNodes the records' colours and chart borders replace the shading;
+  // without, only their flags are read (the "pages loading" view). draw() throws
+  // std::invalid_argument when the counts differ.
+  void setOverlay(std::vector<NodeOverlay> perNode, bool colourNodes = true);
 
   // Draws the nodes into the offscreen framebuffer (clears first) and waits for completion.
   DrawStats draw(const glm::mat4& viewProj, const glm::vec3& eye, std::span<const DrawNode> nodes,
@@ -105,12 +107,15 @@ class AtlasRenderer {
   // Draws the triangles' edges instead of filling them (the wireframe view).
   void setWireframe(bool on);
   // Inspection views drawn over the shading: node borders (thin dark lines round every node),
-  // normals as colours (n * 0.5 + 0.5 instead of the material), and the border vertices the
-  // stitching snapped onto a coarser neighbour (orange). Capture is unaffected.
+  // normals as colours (n * 0.5 + 0.5 instead of the material), the border vertices the
+  // stitching snapped onto a coarser neighbour (orange), and nodes standing in for pages still
+  // loading (magenta stripes; NodeOverlay::flags kOverlayStandIn, set through setOverlay).
+  // Capture is unaffected.
   struct InspectionViews {
-    bool nodeBorders = false, normals = false, snapped = false;
+    bool nodeBorders = false, normals = false, snapped = false, loading = false;
   };
   void setInspectionViews(const InspectionViews& views);
+  const InspectionViews& inspectionViews() const;
 
   // Reads the framebuffer as RGBA8, top row first.
   std::vector<uint8_t> readPixels() const;

@@ -101,6 +101,10 @@ Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, FrameRes
   // 3. Every missing node draws as its nearest resident ancestor, stitched.
   ResidentCut drawn = substituteResident(atlas_.hierarchy, desired, view, resident);
   assert(drawn.stitchUnfixable == 0 && "stitching constraint needs a split into a non-resident node");
+  standIns_.clear();
+  if (drawn.nodesSubstituted > 0)
+    for (const CutNode& n : drawn.cut.nodes)
+      if (desired.find(n.id) < 0) standIns_.insert(n.id.key());
   if (f) {
     f->pagesRequested = uint32_t(plan.wanted.size());
     f->pagesUploaded = uploaded;
@@ -157,8 +161,17 @@ DrawStats AtlasScene::drawCut(const Camera& camera, const Cut& cut, FrameResult*
   const StitchTables stitch = buildStitchTables(atlas_.hierarchy, cut);
   if (frame) frame->stitchMs = msSince(t0);
   const std::vector<DrawNode> nodes = prepare(cut, frame);
-  renderer_->setOverlay(
-      nodeOverlays(atlas_.hierarchy, cut, options_.overlay, options_.overlayColour, options_.overlayErrorPx));
+  // The overlay records: the colouring's, and the stand-in flags for the "pages loading" view.
+  const bool colourNodes = options_.overlay != OverlayMode::kNone;
+  std::vector<NodeOverlay> records =
+      colourNodes ? nodeOverlays(atlas_.hierarchy, cut, options_.overlay, options_.overlayColour, options_.overlayErrorPx)
+                  : std::vector<NodeOverlay>();
+  if (renderer_->inspectionViews().loading && !standIns_.empty()) {
+    records.resize(cut.nodes.size());
+    for (size_t i = 0; i < cut.nodes.size(); ++i)
+      if (standIns_.count(cut.nodes[i].id.key())) records[i].flags |= kOverlayStandIn;
+  }
+  renderer_->setOverlay(std::move(records), colourNodes);
   const DrawStats stats = renderer_->draw(glm::mat4(viewProjection(camera)), glm::vec3(camera.eye), nodes, stitch);
   renderer_->setOverlay({});
   return stats;
@@ -239,6 +252,8 @@ void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, Frame
   if (loader_) {
     f.desiredCut = std::move(f.cut);
     f.cut = streamPages(f.desiredCut, view, &f);
+  } else {
+    standIns_.clear();
   }
   const double substituteMs = msSince(t1);
   f.maxErrorPx = 0.0;

@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <memory>
+#include <unordered_set>
 #include <vector>
 
 #include "runtime/adapt.h"
@@ -121,6 +122,7 @@ class AtlasScene {
   PagePool pool_;
   uint64_t frame_ = 0;
   bool frameStarted_ = false;  // streamPages began frame_; prepare must not advance it
+  std::unordered_set<uint64_t> standIns_;  // async: drawn nodes standing in for pages still loading
   std::vector<float> samples_;
   std::vector<PackedNormal> normals_;
   std::vector<PackedColour> colours_;

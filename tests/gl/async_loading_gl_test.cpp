@@ -145,6 +145,45 @@ TEST_F(AsyncLoadingTest, SubstitutesResidentAncestorsCrackFreeAndConverges) {
   EXPECT_GT(s.loadedFromDisk, 0u);
 }
 
+// Pixels of the "pages loading" view's magenta stripes (mixed 60% over the shading).
+size_t magentaPixels(const std::vector<uint8_t>& rgba) {
+  size_t n = 0;
+  for (size_t i = 0; i + 3 < rgba.size(); i += 4) n += rgba[i] > 150 && rgba[i + 2] > 120 && rgba[i + 1] < 110;
+  return n;
+}
+
+// The "pages loading" view stripes the nodes standing in for pages still loading, only when it
+// is on, and nothing once every page has loaded.
+TEST_F(AsyncLoadingTest, PagesLoadingViewMarksTheStandInsUntilTheirPagesArrive) {
+  const AtlasView atlas = build();
+  gl::SceneOptions so;
+  so.width = 96;
+  so.height = 72;
+  so.asyncLoads = true;
+  so.maxUploadsPerFrame = 4;
+  AdaptOptions ao;
+  ao.tolerancePx = 1.0;
+  ao.maxNodes = 1500;
+  const Camera cam = camera(atlas, 0.5);
+  {
+    gl::AtlasScene plain(atlas, so);
+    const gl::FrameResult f = plain.renderFrame(cam, ao);
+    ASSERT_GT(f.nodesSubstituted, 0u);  // the first frame has only the roots resident
+    EXPECT_EQ(magentaPixels(plain.renderer().readPixels()), 0u) << "stripes with the view off";
+  }
+  gl::AtlasScene scene(atlas, so);
+  scene.renderer().setInspectionViews({.loading = true});
+  gl::FrameResult f = scene.renderFrame(cam, ao);
+  ASSERT_GT(f.nodesSubstituted, 0u);
+  EXPECT_GT(magentaPixels(scene.renderer().readPixels()), size_t(96 * 72 / 20)) << "no stripes while pages load";
+  for (int frames = 0; frames < 2000 && f.nodesSubstituted > 0; ++frames) {
+    scene.waitForLoads();
+    f = scene.renderFrame(cam, ao);
+  }
+  ASSERT_EQ(f.nodesSubstituted, 0u);
+  EXPECT_EQ(magentaPixels(scene.renderer().readPixels()), 0u) << "stripes left once every page is in";
+}
+
 TEST_F(AsyncLoadingTest, SynchronousDefaultDrawsDesiredCut) {
   const AtlasView atlas = build();
   gl::SceneOptions so;

@@ -138,6 +138,32 @@ TEST_F(BenchCliTest, BudgetModeKeepsTheTriangleBudget) {
   }
 }
 
+// The frame-time controller on the cost model: it brings the modelled frame time to the target,
+// and when the triangle rate halves it comes back to the target with about half the triangles.
+TEST_F(BenchCliTest, FrameTimeControllerHoldsTheTargetThroughALoadStep) {
+  const fs::path out = dir_->path() / "controller";
+  // 20 ms at 10M triangles/s: about 200k triangles, far above the adaptation's own time.
+  const int rc = bench(out, "--mode budget --orbit 6 --distance 0.5 --nodes 500 --triangles 100000 --algorithms ours "
+                            "--frame-ms 20 --tri-rate 1e7 --control-frames 160 --load-step 0.5");
+  ASSERT_EQ(rc, 0) << output_;
+  EXPECT_NE(output_.find("frame-time controller"), std::string::npos) << output_;
+  const Csv csv = readCsv(out / "controller.csv");
+  ASSERT_EQ(csv.rows.size(), 160u);
+  const auto meanOver = [&](const std::string& col, size_t from, size_t to) {
+    double sum = 0.0;
+    for (size_t i = from; i < to; ++i) sum += csv.num(i, col);
+    return sum / double(to - from);
+  };
+  EXPECT_NEAR(meanOver("frame_ms", 60, 80), 20.0, 2.0);    // settled before the step
+  EXPECT_NEAR(meanOver("frame_ms", 140, 160), 20.0, 2.0);  // and again after it
+  const double before = meanOver("triangles", 60, 80), after = meanOver("triangles", 140, 160);
+  EXPECT_NEAR(after / before, 0.5, 0.1);
+  EXPECT_LT(csv.num(0, "triangles"), before);  // it started below and grew
+  const nlohmann::json cm = nlohmann::json::parse(std::ifstream(out / "cost_model.json"));
+  EXPECT_GE(cm["controller"]["settling_frames_after_step"].get<int>(), 0);
+  EXPECT_GT(cm["controller"]["peak_ms_after_step"].get<double>(), 20.0 * 1.3);  // the step did hit it
+}
+
 TEST_F(BenchCliTest, BadOptionsFailClearly) {
   const fs::path out = dir_->path() / "bad";
   const std::vector<std::pair<std::string, std::string>> cases = {
@@ -152,6 +178,7 @@ TEST_F(BenchCliTest, BadOptionsFailClearly) {
       {"--orbit 2 --size 12", "--size"},
       {"--orbit 2 --repeat 0", "--repeat"},
       {"--orbit 2 --frame-ms 16", "--tri-rate"},
+      {"--orbit 2 --load-step 0", "--load-step"},
       {"--nodes 100", "--orbit N or --path"},
       {"--orbit 2 --path nope.json", "only one of"},
       {"--mode budget --orbit 2 --triangles 0", "> 0"},

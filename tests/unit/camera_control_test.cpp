@@ -9,6 +9,7 @@
 
 #include "core/atlas_format.h"
 #include "runtime/camera_control.h"
+#include "tests/adapt_fixture.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -117,6 +118,51 @@ TEST(CameraControl, FlyMovesAtItsSpeedAndClipPlanesFollow) {
   // Scroll in fly mode changes the speed.
   control.zoom(-3.0);
   EXPECT_LT(control.flySpeed(), 0.01 * glm::length(kHi - kLo) + 1e-12);
+}
+
+// Low over the surface (inside the box): the speed follows the height above the surface, and
+// the near plane comes in to half of it, so the close-up does not clip.
+TEST(CameraControl, SpeedAndNearPlaneFollowTheHeightAboveTheSurface) {
+  CameraControl control(kLo, kHi, *parseUpAxis("z"));
+  control.setMode(CameraControl::Mode::kFly);
+  const double diag = glm::length(kHi - kLo);
+  const double boxNear = control.camera().nearPlane;
+  control.setSurfaceDistance(0.2 * diag);
+  EXPECT_NEAR(control.flySpeed(), 0.2 * diag, 1e-12);
+  control.setSurfaceDistance(0.02 * diag);
+  EXPECT_NEAR(control.flySpeed(), 0.02 * diag, 1e-12);  // ten times lower, ten times slower
+  control.setSurfaceDistance(1e-9 * diag);
+  EXPECT_NEAR(control.flySpeed(), 0.001 * diag, 1e-12);  // the floor
+  control.setSurfaceDistance(1e-3 * diag);
+  EXPECT_NEAR(control.camera().nearPlane, std::min(0.5e-3 * diag, boxNear), 1e-12);
+  control.setSurfaceDistance(-1.0);  // unknown: the box again
+  EXPECT_NEAR(control.camera().nearPlane, boxNear, 1e-12);
+}
+
+// distanceToSurface is the nearest leaf box's distance (brute force over every leaf agrees), 0 on
+// the surface, and above a terrain it tracks the height above the ground below.
+TEST(CameraControl, DistanceToSurfaceIsTheNearestLeafBox) {
+  const test::World w = test::makeWorld(33, 3, 2, 4);
+  const uint32_t leaf = w.h.params.depth - 1;
+  const auto bruteForce = [&](const glm::dvec3& p) {
+    double best = std::numeric_limits<double>::infinity();
+    for (uint32_t c = 0; c < w.h.chartCount(); ++c)
+      for (uint32_t y = 0; y < (1u << leaf); ++y)
+        for (uint32_t x = 0; x < (1u << leaf); ++x) {
+          const auto& b = w.h.bounds(NodeId{c, leaf, x, y});
+          const glm::dvec3 lo(b[0], b[1], b[2]), hi(b[3], b[4], b[5]);
+          best = std::min(best, glm::length(glm::clamp(p, lo, hi) - p));
+        }
+    return best;
+  };
+  for (const glm::dvec3& p : {glm::dvec3(10.5, 20.25, 200.0), glm::dvec3(-40.0, 70.0, 5.0), glm::dvec3(50.0, 30.0, 21.0),
+                              glm::dvec3(90.0, 60.0, -80.0)})
+    EXPECT_DOUBLE_EQ(distanceToSurface(w.h, p), bruteForce(p)) << p.x << "," << p.y << "," << p.z;
+  const double ground = test::syntheticHeight(40, 20);
+  EXPECT_DOUBLE_EQ(distanceToSurface(w.h, {40.0, 20.0, ground}), 0.0);
+  const double high = distanceToSurface(w.h, {40.0, 20.0, ground + 500.0});
+  EXPECT_LE(high, 500.0);
+  EXPECT_GT(high, 500.0 - 45.0);  // no leaf box reaches above the relief (heights within +-21.5)
 }
 
 TEST(CameraControl, ACameraGivenBackIsTheSame) {
