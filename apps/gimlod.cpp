@@ -281,7 +281,7 @@ int runRender(const RenderArgs& a) {
   std::string csv = "frame,nodes,triangles,max_screen_error_px,adapt_ms,stitch_ms,upload_ms,draw_ms,"
                     "draw_calls,pages_loaded,pages_missing,pages_requested,nodes_substituted,node_budget_bound,"
                     "constraint_raises,constraint_splits,attribute_texels,attribute_above_page,root_floor,"
-                    "budget_below_roots,max_nodes,max_triangles,frame_ms\n";
+                    "budget_below_roots,max_nodes,max_triangles,frame_ms,gpu_ms\n";
   double drawMsTotal = 0.0;
   uint64_t triTotal = 0;
   bool warnedBelowRoots = false;
@@ -312,14 +312,14 @@ int runRender(const RenderArgs& a) {
                    i, ex->second.string(), mesh.positions.size(), mesh.triangles.size(), mesh.boundaryEdges,
                    mesh.openBorderEdges, mesh.otherBoundaryEdges);
     }
-    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f}\n", i,
+    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f}\n", i,
                        f.cut.nodes.size(),
                        f.draw.triangles, f.maxErrorPx, f.adaptMs, f.stitchMs, f.uploadMs, f.draw.drawMs,
                        f.draw.drawCalls, f.pagesLoaded + f.pagesUploaded, f.pagesMissing, f.pagesRequested, f.nodesSubstituted,
                        int(f.adapt.nodeBudgetBound), f.adapt.constraintRaises,
                        f.adapt.constraintSplits, f.attributes.texels, f.attributes.abovePage, f.adapt.rootFloor,
                        int(f.adapt.budgetBelowRoots), budgetMode ? bo.maxNodes : a.maxNodes,
-                       budgetMode ? bo.maxTriangles : 0, frameMs);
+                       budgetMode ? bo.maxTriangles : 0, frameMs, f.draw.gpuMs);
     drawMsTotal += f.draw.drawMs;
     triTotal += f.draw.triangles;
     spdlog::info("frame {:4d}: {:5d} nodes, {:8d} triangles, max error {:.3f} px, adapt {:.3f} ms, draw {:.2f} ms",

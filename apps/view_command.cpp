@@ -178,7 +178,7 @@ void plot(const char* label, const Series& s, const char* unit) {
 struct FrameFigures {
   size_t nodes = 0;
   uint64_t triangles = 0;
-  double maxErrorPx = 0.0, adaptMs = 0.0, drawMs = 0.0, frameMs = 0.0, uploadMs = 0.0;
+  double maxErrorPx = 0.0, adaptMs = 0.0, drawMs = 0.0, gpuMs = 0.0, frameMs = 0.0, uploadMs = 0.0;
   uint32_t pagesLoaded = 0, pagesRequested = 0, rootFloor = 0;
   uint32_t standIns = 0;  // desired nodes drawn as a resident ancestor (pages still loading)
   bool belowRoots = false;
@@ -254,7 +254,7 @@ int runView(const ViewArgs& a) {
     if (!stats) throw InputError(a.stats + ": cannot write the stats file");
     stats << "frame,nodes,triangles,max_screen_error_px,adapt_ms,draw_ms,frame_ms,pages_loaded,pages_requested,"
              "root_floor,budget_below_roots,mode,tolerance_px,max_nodes,max_triangles,frozen,overlay,wireframe,"
-             "target_ms,node_borders,normals,snapped,pages_loading_view,nodes_waiting\n";
+             "target_ms,node_borders,normals,snapped,pages_loading_view,nodes_waiting,gpu_ms\n";
   }
 
   glfwSetErrorCallback([](int code, const char* what) { spdlog::error("GLFW error {}: {}", code, what); });
@@ -343,7 +343,7 @@ int runView(const ViewArgs& a) {
     throw std::runtime_error("gimlod view: cannot set up the panel (Dear ImGui)");
   ImGuiGuard imguiGuard;
 
-  Series adaptMs, drawMs, frameMs, nodes, triangles, maxError, pagesLoaded;
+  Series adaptMs, drawMs, gpuMs, frameMs, nodes, triangles, maxError, pagesLoaded;
   std::vector<Camera> recorded;
   Cut lastCut;  // the cut drawn last: what a freeze keeps drawing
   bool haveCut = false;
@@ -484,6 +484,7 @@ int runView(const ViewArgs& a) {
     last.maxErrorPx = f.maxErrorPx;
     last.adaptMs = f.adaptMs;
     last.drawMs = f.draw.drawMs;
+    last.gpuMs = f.draw.gpuMs;
     last.uploadMs = f.uploadMs;
     last.pagesLoaded = f.pagesLoaded + f.pagesUploaded;
     last.pagesRequested = f.pagesRequested;
@@ -492,6 +493,7 @@ int runView(const ViewArgs& a) {
     last.belowRoots = f.adapt.budgetBelowRoots;
     adaptMs.add(last.adaptMs);
     drawMs.add(last.drawMs);
+    gpuMs.add(last.gpuMs);
     nodes.add(double(last.nodes));
     triangles.add(double(last.triangles));
     maxError.add(last.maxErrorPx);
@@ -551,6 +553,7 @@ int runView(const ViewArgs& a) {
       if (ImGui::CollapsingHeader("graphs", fbh >= 700 ? ImGuiTreeNodeFlags_DefaultOpen : 0)) {
         plot("adapt ms", adaptMs, "ms");
         plot("draw ms", drawMs, "ms");
+        plot("GPU ms (timer)", gpuMs, "ms");
         plot("frame ms", frameMs, "ms");
         plot("nodes", nodes, "");
         plot("triangles", triangles, "");
@@ -570,14 +573,14 @@ int runView(const ViewArgs& a) {
       controller->update({uint32_t(last.nodes), last.triangles, last.adaptMs, last.drawMs,
                           std::max(last.frameMs - last.uploadMs, 0.0)});
     if (stats) {
-      stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{}\n", frame,
+      stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{:.4f}\n", frame,
                            last.nodes, last.triangles, last.maxErrorPx, last.adaptMs, last.drawMs, last.frameMs,
                            last.pagesLoaded, last.pagesRequested, last.rootFloor, int(last.belowRoots),
                            c.budgetMode ? "budget" : "error", c.tolerance, c.maxNodes, uint64_t(c.maxTrianglesK) * 1000,
                            int(c.freeze), overlayModeName(kOverlays[size_t(c.overlay)]), int(c.wireframe),
                            c.holdFrameTime ? fmt::format("{:.2f}", c.targetMs) : std::string(),
                            int(c.views.nodeBorders), int(c.views.normals), int(c.views.snapped),
-                           int(c.views.loading), last.standIns)
+                           int(c.views.loading), last.standIns, last.gpuMs)
             << std::flush;
     }
     const bool lastOne = lastFrame > 0 && frame + 1 >= lastFrame;

@@ -6,6 +6,7 @@
 #include <epoxy/gl.h>
 
 #include <algorithm>
+#include <limits>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -105,6 +106,7 @@ struct AtlasRenderer::Impl {
   GlObject gridVertices, gridIndices, vertexArray;
   std::vector<GridRange> grids;  // [res - minResLog2]
   GlObject nodeBuffer, stitchBuffer, indirectBuffer, feedbackBuffer, feedbackQuery;
+  GlObject timerQuery;  // GL_TIME_ELAPSED round each draw
   GlObject overlayBuffer;
   std::vector<NodeOverlay> overlay;  // per node of the next draw; empty: no overlay
   bool overlayColours = false;       // the records colour the nodes (else only their flags count)
@@ -157,6 +159,7 @@ AtlasRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   indirectBuffer = makeBuffer();
   feedbackBuffer = makeBuffer();
   feedbackQuery = makeQuery();
+  timerQuery = makeQuery();
   checkGl("AtlasRenderer setup");
 }
 
@@ -449,6 +452,7 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
   Impl& m = *impl_;
   DrawStats stats;
   const auto t0 = Clock::now();
+  glBeginQuery(GL_TIME_ELAPSED, m.timerQuery.id());
   m.beginFrame();
   if (!nodes.empty()) {
     // Records grouped by resolution (stable: front to back within a group), so the whole cut is
@@ -484,8 +488,14 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
     glBindVertexArray(0);
     glUseProgram(0);
   }
+  glEndQuery(GL_TIME_ELAPSED);
   glFinish();
   stats.drawMs = msSince(t0);
+  GLuint64 gpuNs = 0;
+  glGetQueryObjectui64v(m.timerQuery.id(), GL_QUERY_RESULT, &gpuNs);
+  // note: a GPU time longer than the wall time round it is a driver's bad value (Mesa llvmpipe's
+  // first query); it is reported as unknown.
+  stats.gpuMs = double(gpuNs) * 1e-6 <= stats.drawMs ? double(gpuNs) * 1e-6 : std::numeric_limits<double>::quiet_NaN();
   checkGl("AtlasRenderer::draw");
   return stats;
 }

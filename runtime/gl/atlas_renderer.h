@@ -42,6 +42,7 @@ struct RendererSetup {
 
 struct DrawStats {
   double drawMs = 0.0;     // CPU wall time of submission + glFinish
+  double gpuMs = 0.0;      // the GPU's own time for the draw (GL_TIME_ELAPSED query); NaN: unknown
   uint64_t triangles = 0;  // triangles submitted (grids, excluding strip degenerates)
   uint32_t drawCalls = 0;  // GL draw calls issued (one multi-draw for the whole cut)
 };

@@ -2,6 +2,8 @@
 // shipped fly-by headless, and check the frames and per-frame statistics.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <sstream>
 
@@ -66,11 +68,12 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
         << out;
     const auto rows = readCsv(frames / "stats.csv");
     ASSERT_GE(rows.size(), 4u);
+    size_t timed = 0;
     const auto& head = rows[0];
     auto col = [&](const std::string& name) {
       return size_t(std::find(head.begin(), head.end(), name) - head.begin());
     };
-    for (const char* name : {"frame", "nodes", "triangles", "max_screen_error_px", "adapt_ms", "draw_ms"})
+    for (const char* name : {"frame", "nodes", "triangles", "max_screen_error_px", "adapt_ms", "draw_ms", "gpu_ms"})
       ASSERT_LT(col(name), head.size()) << name;
     for (size_t r = 1; r < rows.size(); ++r) {
       char name[32];
@@ -83,7 +86,16 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
         EXPECT_LE(std::stod(rows[r][col("max_screen_error_px")]), tolerance) << camera << " frame " << r - 1;
       }
       EXPECT_GT(std::stoull(rows[r][col("attribute_texels")]), 0u);
+      // The GPU timer measured the draw: more than nothing, and not more than the wall time round it
+      // (a driver's impossible value, llvmpipe's first, is written as nan).
+      const double gpu = std::stod(rows[r][col("gpu_ms")]);
+      if (!std::isnan(gpu)) {
+        EXPECT_GT(gpu, 0.0);
+        EXPECT_LE(gpu, std::stod(rows[r][col("draw_ms")]) + 0.001);
+        ++timed;
+      }
     }
+    EXPECT_GE(timed, rows.size() - 2) << "GPU timer unknown on more than one frame";
   }
 
   // Triangle-budget mode (quad queue): every frame within the budgets.

@@ -87,6 +87,29 @@ TEST_F(CliTest, InvalidOptions) {
   }
 }
 
+// Imagery options: each bad one is named, and nothing is left behind; a bad imagery file is named
+// after the DEM was read (the build stops before writing an atlas).
+TEST_F(CliTest, InvalidImageryOptions) {
+  const std::string imagery = (test::repoData() / "terrain/mt_rainier_imagery.tif").string();
+  const fs::path notImage = writeFile("not_an_image.tif", "no pixels here");
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"--imagery-scale 3 --imagery '" + imagery + "'", "--imagery-scale"},
+      {"--imagery-scale 2", "need --imagery"},
+      {"--imagery-extent=1,2,3,4", "need --imagery"},
+      {"--imagery '" + imagery + "' --imagery-extent=10,0,-10,5", "--imagery-extent"},
+      {"--imagery '" + (dir_.path() / "missing.tif").string() + "'", "missing.tif: no such file"},
+      {"--imagery '" + notImage.string() + "'", "not_an_image.tif: not a raster"},
+  };
+  for (const auto& [args, expect] : cases) {
+    EXPECT_NE(build(dem(), dir_.path() / "i.atlas", args), 0) << args;
+    EXPECT_NE(output_.find(expect), std::string::npos) << args << ": " << output_;
+    expectNoAtlas(dir_.path(), "i.atlas");
+  }
+  const fs::path bunny = test::repoData() / "meshes/bun_zipper.ply";
+  EXPECT_NE(build(bunny, dir_.path() / "b.atlas", "--imagery '" + imagery + "'"), 0);
+  EXPECT_NE(output_.find("--imagery drapes a raster over a DEM"), std::string::npos) << output_;
+}
+
 TEST_F(CliTest, UnwritableOutput) {
   EXPECT_NE(build(dem(), "/proc/gimlod_test.atlas"), 0);
   EXPECT_NE(output_.find("/proc/gimlod_test.atlas"), std::string::npos) << output_;
