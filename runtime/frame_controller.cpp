@@ -47,16 +47,20 @@ void FrameController::update(const FrameSample& f) {
   // Nodes: at most their share of the time, at the learned cost per node.
   const double available = std::max(target - overhead_, 0.1 * target);
   double wantNodes = perNode_ > 0.0 ? o_.nodeShare * available / perNode_ : double(o_.maxNodes);
-  if (f.nodes < uint32_t(0.9 * double(nodes_))) wantNodes = std::min(wantNodes, 1.25 * double(f.nodes));
+  // A budget the cut does not use cannot buy anything: while it goes unused it may not grow past a
+  // quarter over what was used (no wind-up), but it is not cut for that either (the adapter may
+  // still be converging on a moving view, and a cut budget would starve it).
+  if (f.nodes < uint32_t(0.9 * double(nodes_)))
+    wantNodes = std::min(wantNodes, std::max(1.25 * double(f.nodes), double(nodes_)));
   wantNodes = std::clamp(wantNodes, double(o_.minNodes), double(o_.maxNodes));
   // Triangles: the drawing gets the rest. Drawing time is not proportional to the triangles (a GPU
   // has a fixed cost per frame), so the budget is scaled by the ratio of the time the drawing may
   // take to the time it took, which converges on the target whatever that fixed cost.
   const double drawAvailable = std::max(available - perNode_ * wantNodes, 0.05 * target);
   double wantTriangles = f.drawMs > 0.0 ? double(f.triangles) * drawAvailable / f.drawMs : double(o_.maxTriangles);
-  // A budget the cut does not use cannot buy anything: grow it at most a quarter past what was
-  // used (no wind-up while the view needs less than the budget allows).
-  if (double(f.triangles) < 0.9 * double(triangles_)) wantTriangles = std::min(wantTriangles, 1.25 * double(f.triangles));
+  // The same for the triangles (no wind-up while the view needs less than the budget allows).
+  if (double(f.triangles) < 0.9 * double(triangles_))
+    wantTriangles = std::min(wantTriangles, std::max(1.25 * double(f.triangles), double(triangles_)));
   wantTriangles = std::clamp(wantTriangles, double(o_.minTriangles), double(o_.maxTriangles));
 
   // Part of the way there, in proportion (nodes) and in ratio (triangles).

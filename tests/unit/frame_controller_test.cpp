@@ -96,9 +96,32 @@ TEST(FrameController, DoesNotWindUpABudgetTheViewCannotUse) {
   FrameController c(o, 500, 100000);
   Plant p;
   p.viewTriangles = 200000;  // everything in view fits: the frame stays under the target
-  run(c, p, 60);
-  EXPECT_LE(c.maxTriangles(), uint64_t(1.25 * 200000) + 1);
-  EXPECT_GE(c.maxTriangles(), 200000u);
+  run(c, p, 30);
+  // Grown while it bound, then held: never far past what the view uses, and no longer growing.
+  const uint64_t held = c.maxTriangles();
+  EXPECT_LE(held, uint64_t(1.5 * 200000));
+  EXPECT_GE(held, 200000u);
+  run(c, p, 30);
+  EXPECT_EQ(c.maxTriangles(), held);
+}
+
+// An adapter still converging on a moving view uses part of its budgets: they are held, not cut
+// down to what it used (which would starve it, frame after frame, far below the target).
+TEST(FrameController, HoldsBudgetsALaggingAdapterDoesNotFill) {
+  FrameControllerOptions o;
+  o.targetMs = 20.0;
+  FrameController c(o, 400, 400000);
+  for (int i = 0; i < 100; ++i) {
+    FrameSample f;
+    f.nodes = uint32_t(0.7 * c.maxNodes());  // the adapter fills 70% of each budget
+    f.triangles = uint64_t(0.7 * double(c.maxTriangles()));
+    f.adaptMs = 0.002 * f.nodes;
+    f.drawMs = double(f.triangles) / 40000.0;  // 40k triangles per ms
+    f.frameMs = f.adaptMs + f.drawMs + 0.5;
+    c.update(f);
+  }
+  EXPECT_GE(c.maxTriangles(), 400000u);
+  EXPECT_GE(c.maxNodes(), 400u);
 }
 
 TEST(FrameController, RefusesAbsurdOptions) {
