@@ -13,6 +13,7 @@
 #include "runtime/camera.h"
 #include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
+#include "tests/colour_seams.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -76,23 +77,7 @@ TEST_F(ColouredMesh, SharedEdgesHoldBitIdenticalColours) {
     charts.push_back(std::make_unique<ChartFileReader>(atlas() / c.file));
     ASSERT_TRUE(charts.back()->hasChannel(kChannelColours)) << c.file;
   }
-  uint64_t compared = 0;
-  for (uint32_t level = 0; level < m.pyramidLevels(); ++level) {
-    const uint32_t n = ((m.chartSize - 1) >> level) + 1;
-    std::vector<std::vector<PackedColour>> colours;
-    for (const auto& r : charts) colours.push_back(r->readLevelColours(level));
-    for (uint32_t c = 0; c < m.charts.size(); ++c)
-      for (uint32_t e = 0; e < 4; ++e) {
-        const RootNeighbour& nb = m.charts[c].neighbours[e];
-        if (nb.chart < 0) continue;
-        for (uint32_t k = 0; k < n; ++k) {
-          const uint32_t kk = nb.reversed ? n - 1 - k : k;
-          EXPECT_EQ(colours[c][edgeSampleIndex(n, e, k)], colours[size_t(nb.chart)][edgeSampleIndex(n, nb.edge, kk)])
-              << "level " << level << " chart " << c << " edge " << e << " sample " << k;
-          ++compared;
-        }
-      }
-  }
+  const uint64_t compared = test::expectColourSeamsBitIdentical(m, charts, m.chartSize, m.pyramidLevels());
   EXPECT_GT(compared, 100u);
 }
 

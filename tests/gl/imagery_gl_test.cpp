@@ -14,6 +14,7 @@
 #include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
 #include "runtime/page_reader.h"
+#include "tests/colour_seams.h"
 #include "tests/imagery_fixture.h"
 #include "tests/test_util.h"
 
@@ -78,21 +79,8 @@ TEST_F(ImageryDrapedDem, SharedEdgesHoldBitIdenticalImagery) {
   ASSERT_GT(m.charts.size(), 4u);
   std::vector<std::unique_ptr<ChartFileReader>> charts;
   for (const ChartInfo& c : m.charts) charts.push_back(std::make_unique<ChartFileReader>(atlas() / c.imageryFile));
-  uint64_t compared = 0;
-  for (uint32_t level = 0; level < m.pyramidLevels(); ++level) {
-    const uint32_t n = ((m.imagery.chartSize(m.chartSize) - 1) >> level) + 1;
-    std::vector<std::vector<PackedColour>> colours;
-    for (const auto& r : charts) colours.push_back(r->readLevelColours(level));
-    for (uint32_t c = 0; c < m.charts.size(); ++c)
-      for (uint32_t e = 0; e < 4; ++e) {
-        const RootNeighbour& nb = m.charts[c].neighbours[e];
-        if (nb.chart < 0) continue;
-        for (uint32_t k = 0; k < n; ++k, ++compared)
-          ASSERT_EQ(colours[c][edgeSampleIndex(n, e, k)],
-                    colours[size_t(nb.chart)][edgeSampleIndex(n, nb.edge, nb.reversed ? n - 1 - k : k)])
-              << "level " << level << " chart " << c << " edge " << e << " sample " << k;
-      }
-  }
+  const uint64_t compared =
+      test::expectColourSeamsBitIdentical(m, charts, m.imagery.chartSize(m.chartSize), m.pyramidLevels());
   EXPECT_GT(compared, 5000u);
 }
 
