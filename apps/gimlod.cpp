@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -25,6 +26,7 @@
 #include "apps/view_args.h"
 #include "atlas/mesh/mesh_atlas.h"
 #include "core/atlas_format.h"
+#include "core/progress.h"
 #include "inspect/png.h"
 #include "inspect/report.h"
 #include "pipeline/build.h"
@@ -468,6 +470,23 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
+  }
+  // Long stages show their progress: a bar with an ETA on a terminal (redrawn 5 times a second),
+  // a log line every 10 s otherwise (GIMLOD_PROGRESS_SECONDS sets that interval).
+  {
+    const bool tty = ::isatty(STDERR_FILENO) == 1;
+    double interval = tty ? 0.2 : 10.0;
+    if (const char* env = std::getenv("GIMLOD_PROGRESS_SECONDS")) interval = std::max(std::atof(env), 0.0);
+    progress::setSink(
+        [tty, interval](const progress::Report& r) {
+          if (tty) {
+            std::fprintf(stderr, "\r%s\033[K%s", progress::format(r, 30).c_str(), r.finished ? "\n" : "");
+            std::fflush(stderr);
+          } else if (!r.finished || r.seconds >= interval) {
+            spdlog::info("progress: {}", progress::format(r, 0));
+          }
+        },
+        interval);
   }
   try {
     if (*build) {

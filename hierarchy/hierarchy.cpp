@@ -1,6 +1,7 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 6 (hierarchy creation): per-node bounds and
 // per-resolution maximum sample deviation, built in parallel.
 #include "hierarchy/hierarchy.h"
+#include "core/progress.h"
 
 #include <chrono>
 #include <cmath>
@@ -254,11 +255,13 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeight
 
   const uint32_t S = manifest.chartSize;
   const auto t0 = std::chrono::steady_clock::now();
+  const progress::ProgressStage stage("hierarchy", count);
   tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) {
     std::vector<float> h = source(c);
     if (h.size() != size_t(S) * S)
       throw InputError("chart " + std::to_string(c) + ": expected " + std::to_string(S) + "^2 heights");
     buildChart(hier.params, manifest, manifest.charts[c], h, hier.charts[c]);
+    progress::advance();
   });
   if (stats) {
     stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
@@ -280,6 +283,7 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
   hier.roots = roots;
   const uint32_t S = (1u << params.intervalsLog2) + 1;
   const auto t0 = std::chrono::steady_clock::now();
+  const progress::ProgressStage stage("hierarchy", count);
   tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) {
     const std::vector<glm::vec3> P = source(c);
     if (P.size() != size_t(S) * S)
@@ -289,6 +293,7 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
       if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z))
         throw InputError("chart " + std::to_string(c) + ": non-finite position in the geometry image");
     buildGeometryChart(hier.params, P, hier.charts[c]);
+    progress::advance();
   });
   if (stats) {
     stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());

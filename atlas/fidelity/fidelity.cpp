@@ -1,4 +1,5 @@
 #include "atlas/fidelity/fidelity.h"
+#include "core/progress.h"
 
 #include <algorithm>
 #include <atomic>
@@ -264,9 +265,11 @@ template <class Sample>
 Acc distances(const Forest& forest, size_t count, const Sample& sample,
               double margin = std::numeric_limits<double>::infinity(), float* perSample = nullptr,
               glm::vec3* closestOut = nullptr) {
+  const progress::ProgressStage stage("distances", count);
   Acc acc = tbb::parallel_reduce(
       tbb::blocked_range<size_t>(0, count, 1024), Acc{},
       [&](const tbb::blocked_range<size_t>& r, Acc a) {
+        progress::advance(r.size());
         Point hint(CGAL::ORIGIN);
         for (size_t i = r.begin(); i != r.end(); ++i) {
           const Point q = sample(i);

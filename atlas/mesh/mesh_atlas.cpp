@@ -1,5 +1,6 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, sections 3 and 5.
 #include "atlas/mesh/mesh_atlas.h"
+#include "core/progress.h"
 
 #include <algorithm>
 #include <bit>
@@ -64,6 +65,7 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
   m.charts.resize(set.charts.size());
   std::vector<uint64_t> bytes(set.charts.size(), 0);
   std::vector<std::array<float, 6>> boxes(set.charts.size());
+  const progress::ProgressStage stage("write charts", set.charts.size());
   tbb::parallel_for(size_t(0), set.charts.size(), [&](size_t i) {
     GeometryImage back;  // a spilled chart's samples, read back for this chart only
     if (set.charts[i].spilled >= 0) {
@@ -88,6 +90,7 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     }
     boxes[i] = {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z};
     bytes[i] = writeChartFile(dir / name, geometryPyramid(samples, set.chartSize), set.chartSize, blockIntervals);
+    progress::advance();
   });
   GeometryChartsWritten w;
   w.bounds = boxes[0];

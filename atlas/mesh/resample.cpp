@@ -1,6 +1,7 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (quadrangulate, resample); Purnomo, Cohen,
 // Kumar, "Seamless Texture Atlases", SGP 2004 (shared boundary sampling).
 #include "atlas/mesh/resample.h"
+#include "core/progress.h"
 
 #include <fcntl.h>
 #include <unistd.h>
@@ -625,7 +626,9 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
                             layout.patches[owners[k].patch].sides[owners[k].side].vertices,
                             sideCount);
     });
+    const progress::ProgressStage stage("resample", layout.patches.size());
     tbb::parallel_for(uint32_t{0}, uint32_t(layout.patches.size()), [&](uint32_t p) {
+      const progress::Tick tick;
       const Patch& patch = layout.patches[p];
       const uint32_t n = uint32_t(patch.sides.size());
       if (action[p] == 0) {

@@ -5,6 +5,7 @@
 // the USGS/NGA "length of a degree" formulas).
 #include "atlas/terrain/dem.h"
 #include "atlas/terrain/gdal_util.h"
+#include "core/progress.h"
 
 #include <algorithm>
 #include <cmath>
@@ -359,8 +360,19 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
                    " is too large to load into memory");
   }
   cap.clear();
-  CPLErr err = band->RasterIO(GF_Read, 0, 0, w, h, dem.heights.data(), w, h, GDT_Float32, 0, 0,
-                              nullptr);
+  // GDAL reports how much it has read: the "read DEM" stage in thousandths.
+  const progress::ProgressStage stage("read DEM", 1000);
+  uint64_t thousandths = 0;
+  GDALRasterIOExtraArg extra;
+  INIT_RASTERIO_EXTRA_ARG(extra);
+  extra.pfnProgress = [](double done, const char*, void* data) -> int {
+    auto* last = static_cast<uint64_t*>(data);
+    const uint64_t now = uint64_t(std::clamp(done, 0.0, 1.0) * 1000.0);
+    if (now > *last) progress::advance(now - *last), *last = now;
+    return TRUE;
+  };
+  extra.pProgressData = &thousandths;
+  CPLErr err = band->RasterIO(GF_Read, 0, 0, w, h, dem.heights.data(), w, h, GDT_Float32, 0, 0, &extra);
   if (err != CE_None || !cap.failures().empty())
     fail(path, withGdal("cannot read the raster data (truncated or corrupt file?)", cap));
 

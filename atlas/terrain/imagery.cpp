@@ -14,6 +14,7 @@
 #include <tbb/parallel_for.h>
 
 #include "atlas/terrain/gdal_util.h"
+#include "core/progress.h"
 
 namespace gimlod {
 
@@ -276,6 +277,7 @@ ImageryWriteStats writeImageryCharts(const ImageryRaster& raster, const std::str
   const uint32_t chartSize = m.imagery.chartSize(m.chartSize);
   const uint32_t blockIntervals = m.blockIntervals << raster.scaleLog2;
   std::atomic<uint64_t> bytes{0}, samples{0};
+  const progress::ProgressStage stage("imagery charts", m.charts.size());
   tbb::parallel_for(size_t{0}, m.charts.size(), [&](size_t i) {
     ChartInfo& c = m.charts[i];
     c.imageryFile = imageryFileName(c.id);
@@ -284,6 +286,7 @@ ImageryWriteStats writeImageryCharts(const ImageryRaster& raster, const std::str
     for (const auto& level : p.colours) n += level.size();
     samples += n;
     bytes += writeChartFile(dir / c.imageryFile, p, chartSize, blockIntervals);
+    progress::advance();
   });
   ImageryWriteStats st;
   st.bytesOnDisk = bytes.load();

@@ -3,6 +3,7 @@
 // Texture Atlas", I3D 2007, sections 4 and 6 (height-field case: the terrain grid is cut into
 // (2^m+1)^2 charts sharing one row/column, and each chart is mip-mapped by subsampling).
 #include "atlas/terrain/terrain_atlas.h"
+#include "core/progress.h"
 
 #include <algorithm>
 #include <atomic>
@@ -187,11 +188,13 @@ TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOpt
       static_cast<uint64_t>(tbb::this_task_arena::max_concurrency())));
   std::atomic<uint64_t> bytes{0};
   tbb::task_arena arena(concurrency);
+  const progress::ProgressStage stage("charts", manifest.charts.size());
   arena.execute([&] {
     tbb::parallel_for(size_t{0}, manifest.charts.size(), [&](size_t i) {
       const ChartInfo& c = manifest.charts[i];
       const ChartPyramid p = buildChartPyramid(dem, c.gridX, c.gridY, cs);
       bytes += writeChartFile(dir / c.file, p, cs, options.blockIntervals);
+      progress::advance();
     });
   });
 
