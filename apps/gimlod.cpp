@@ -382,7 +382,10 @@ int main(int argc, char** argv) {
                     "Meshes: the largest distance, in % of the bounding-box diagonal, from an input vertex to its "
                     "chart's surface; patches whose charts exceed it are cut; 0: flips only (default: 0.05 when the "
                     "chart size is chosen by density, else 0)");
-  build->add_option("--max-memory", maxMemory, "Meshes: memory cap (e.g. 2G, 512M); larger meshes go through cell files")
+  build->add_option("--max-memory", maxMemory,
+                    "Memory cap (e.g. 2G, 512M). Meshes: larger ones go through cell files. DEMs (built in memory): "
+                    "one whose build would exceed it is refused before reading (default for DEMs: 3/4 of the "
+                    "machine's memory)")
       ->capture_default_str();
   build->add_option("--depth", common.depth, "Quadtree levels per chart")->capture_default_str();
   build->add_option("--node-res", common.nodeRes, "Maximum node resolution R in intervals (power of two)")
@@ -507,6 +510,7 @@ int main(int argc, char** argv) {
         return runBuild(mesh);
       }
       static_cast<CommonBuildOptions&>(terrain) = common;
+      if (build->get_option("--max-memory")->count() > 0) terrain.maxMemory = maxMemoryBytes;
       if (build->get_option("--imagery-scale")->count() > 0) {
         if (imageryScale != 1 && imageryScale != 2 && imageryScale != 4)
           throw InputError("--imagery-scale " + std::to_string(imageryScale) + " must be 1, 2 or 4");

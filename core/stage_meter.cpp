@@ -1,5 +1,7 @@
 #include "core/stage_meter.h"
 
+#include <unistd.h>
+
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
@@ -33,6 +35,11 @@ uint64_t procStatusBytes(const char* key) {
 uint64_t residentBytes() { return procStatusBytes("VmRSS:"); }
 
 uint64_t peakResidentBytes() { return procStatusBytes("VmHWM:"); }
+
+uint64_t physicalMemoryBytes() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), size = ::sysconf(_SC_PAGE_SIZE);
+  return pages > 0 && size > 0 ? uint64_t(pages) * uint64_t(size) : 0;
+}
 
 void releaseFreedMemory() {
 #if defined(__GLIBC__)

@@ -19,6 +19,9 @@ uint64_t residentBytes();
 // The process's peak resident set size so far (VmHWM) in bytes; 0 where unavailable.
 uint64_t peakResidentBytes();
 
+// The machine's physical memory in bytes; 0 where unavailable.
+uint64_t physicalMemoryBytes();
+
 // Hands freed heap memory back to the system (glibc keeps the freed pages of its worker arenas,
 // which would count against a memory cap in the stages after); a no-op without glibc.
 void releaseFreedMemory();

@@ -12,6 +12,7 @@
 
 #include "atlas/terrain/imagery.h"
 #include "core/atlas_format.h"
+#include "core/stage_meter.h"
 #include "pipeline/build.h"
 #include "pipeline/build_report.h"
 
@@ -49,8 +50,27 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
   p.validate();
 }
 
+// Refuses, before reading it, a DEM whose in-memory build would exceed the memory cap.
+void checkTerrainMemory(const TerrainBuildOptions& o) {
+  const uint64_t cap = o.maxMemory ? o.maxMemory : physicalMemoryBytes() / 4 * 3;
+  const RasterSize size = rasterSize(o.input, o.subdataset);
+  double perSample = kTerrainBytesPerSample;
+  if (!o.imagery.empty()) {
+    const int s = o.imageryScaleLog2 >= 0 ? o.imageryScaleLog2 : int(kMaxImageryScaleLog2);
+    perSample += 4.0 * double(1u << (2 * s)) * 4.0 / 3.0;  // the refined imagery and its pyramid
+  }
+  const double need = double(size.width) * double(size.height) * perSample;
+  if (cap > 0 && need > double(cap))
+    throw InputError(fmt::format("{}: {} x {} samples need about {:.1f} GiB to build in memory, over the {:.1f} GiB "
+                                 "cap{}; give a larger {} (this build holds the whole DEM in memory)",
+                                 o.input.string(), size.width, size.height, need / double(1ull << 30),
+                                 double(cap) / double(1ull << 30), o.maxMemory ? "" : " (3/4 of this machine's memory)",
+                                 optionRef("maxMemory")));
+}
+
 DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   const auto t0 = std::chrono::steady_clock::now();
+  checkTerrainMemory(o);
   DemOptions dopt;
   dopt.zScale = o.zScale;
   dopt.subdataset = o.subdataset;

@@ -329,6 +329,19 @@ uint64_t fillVoids(std::vector<float>& heights, const std::vector<bool>& voidMas
   return voids;
 }
 
+RasterSize rasterSize(const fs::path& path, const std::string& subdataset) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) fail(path, "no such file");
+  if (fs::is_directory(path, ec)) fail(path, "is a directory, not a raster file");
+  registerGdalOnce();
+  GdalErrorCapture cap;
+  std::vector<std::string> warnings;
+  DemOptions options;
+  options.subdataset = subdataset;
+  const DatasetPtr ds = openDem(path, options, cap, warnings);
+  return {uint32_t(std::max(ds->GetRasterXSize(), 0)), uint32_t(std::max(ds->GetRasterYSize(), 0))};
+}
+
 DemRaster loadDem(const fs::path& path, const DemOptions& options) {
   if (!std::isfinite(options.zScale) || options.zScale == 0.0)
     fail(path, "z-scale " + formatNumber(options.zScale) + " must be finite and non-zero");

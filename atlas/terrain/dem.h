@@ -36,6 +36,13 @@ extern const char* const kVoidFillMethod;
 double metresPerDegreeLatitude(double phiDeg);
 double metresPerDegreeLongitude(double phiDeg);  // |phi| clamped to 89 degrees
 
+// The raster's size in samples (the subdataset's, for containers), without reading its data.
+// Throws InputError naming the file when it cannot be opened.
+struct RasterSize {
+  uint32_t width = 0, height = 0;
+};
+RasterSize rasterSize(const std::filesystem::path& path, const std::string& subdataset = {});
+
 // Loads and repairs a DEM. Throws InputError naming the file on: unreadable or truncated data,
 // not a raster, zero-size, all samples void, bad options.
 DemRaster loadDem(const std::filesystem::path& path, const DemOptions& options = {});

@@ -110,6 +110,21 @@ TEST_F(CliTest, InvalidImageryOptions) {
   EXPECT_NE(output_.find("--imagery drapes a raster over a DEM"), std::string::npos) << output_;
 }
 
+// The in-memory terrain build refuses a DEM over its memory cap before reading it, naming the
+// file, the estimate and the option; within the cap it builds.
+TEST_F(CliTest, DemOverTheMemoryCapIsRefusedBeforeReading) {
+  EXPECT_NE(build(dem(), dir_.path() / "m.atlas", "--max-memory 4M"), 0);
+  EXPECT_NE(output_.find("mt_rainier_90m.tif: 1201 x 1201 samples need about"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("--max-memory"), std::string::npos) << output_;
+  EXPECT_EQ(output_.find("voids filled"), std::string::npos) << output_;  // refused before the read
+  expectNoAtlas(dir_.path(), "m.atlas");
+  // With the imagery's refined lattice the estimate grows: 64M holds the heights, not imagery at 4x.
+  const std::string imagery = (test::repoData() / "terrain/mt_rainier_imagery.tif").string();
+  EXPECT_NE(build(dem(), dir_.path() / "m.atlas", "--max-memory 64M --imagery '" + imagery + "' --imagery-scale 4"), 0);
+  EXPECT_NE(output_.find("need about"), std::string::npos) << output_;
+  EXPECT_EQ(build(dem(), dir_.path() / "m.atlas", "--max-memory 64M"), 0) << output_;
+}
+
 TEST_F(CliTest, UnwritableOutput) {
   EXPECT_NE(build(dem(), "/proc/gimlod_test.atlas"), 0);
   EXPECT_NE(output_.find("/proc/gimlod_test.atlas"), std::string::npos) << output_;
