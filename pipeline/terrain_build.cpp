@@ -1,5 +1,6 @@
 #include "pipeline/terrain_build.h"
 
+#include <algorithm>
 #include <bit>
 #include <chrono>
 #include <cmath>
@@ -51,8 +52,10 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
 }
 
 // Refuses, before reading it, a DEM whose in-memory build would exceed the memory cap.
+uint64_t memoryCap(const TerrainBuildOptions& o) { return o.maxMemory ? o.maxMemory : physicalMemoryBytes() / 4 * 3; }
+
 void checkTerrainMemory(const TerrainBuildOptions& o) {
-  const uint64_t cap = o.maxMemory ? o.maxMemory : physicalMemoryBytes() / 4 * 3;
+  const uint64_t cap = memoryCap(o);
   const RasterSize size = rasterSize(o.input, o.subdataset);
   double perSample = kTerrainBytesPerSample;
   if (!o.imagery.empty()) {
@@ -74,6 +77,8 @@ DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   DemOptions dopt;
   dopt.zScale = o.zScale;
   dopt.subdataset = o.subdataset;
+  // The whole raster is read once into memory: GDAL's cache of its blocks only adds to the peak.
+  dopt.gdalCacheBytes = std::clamp<uint64_t>(memoryCap(o) / 32, uint64_t{8} << 20, uint64_t{64} << 20);
   DemRaster dem = loadDem(o.input, dopt);
   stats->seconds = secondsSince(t0);
   stats->width = dem.width;

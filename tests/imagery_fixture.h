@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <functional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -38,8 +39,9 @@ inline void writeTestRaster(const std::filesystem::path& path, int width, int he
   for (int b = 0; b < bands; ++b) {
     for (int y = 0; y < height; ++y)
       for (int x = 0; x < width; ++x) plane[size_t(y) * width + x] = colour(x, y)[size_t(std::min(b, 2))];
-    (void)ds->GetRasterBand(b + 1)->RasterIO(GF_Write, 0, 0, width, height, plane.data(), width, height, GDT_UInt16,
-                                             0, 0);
+    if (ds->GetRasterBand(b + 1)->RasterIO(GF_Write, 0, 0, width, height, plane.data(), width, height, GDT_UInt16,
+                                           0, 0) != CE_None)
+      throw std::runtime_error("writeTestRaster: cannot write " + path.string());
   }
   GDALClose(ds);
 }

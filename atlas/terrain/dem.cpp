@@ -350,6 +350,7 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
   if (fs::is_directory(path, ec)) fail(path, "is a directory, not a raster file");
 
   registerGdalOnce();
+  if (options.gdalCacheBytes > 0) GDALSetCacheMax64(GIntBig(options.gdalCacheBytes));
   GdalErrorCapture cap;
   DemRaster dem;
   DatasetPtr ds = openDem(path, options, cap, dem.warnings);

@@ -15,6 +15,9 @@ namespace gimlod {
 struct DemOptions {
   double zScale = 1.0;   // multiplies heights; must be finite and non-zero
   std::string subdataset;  // netCDF variable (empty: the first 2D one GDAL offers)
+  // GDAL's block cache for the read, bytes (it holds copies of the blocks read, by default 5% of
+  // the machine's memory); 0: GDAL's default. Process-wide: set before the read.
+  uint64_t gdalCacheBytes = 0;
 };
 
 // Heights in metres after z-scale, row-major with row 0 at the SOUTH edge (gy grows north).
