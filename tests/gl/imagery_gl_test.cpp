@@ -115,10 +115,11 @@ TEST_F(ImageryDrapedDem, RenderDrawsTheImageryAtItsGeographicPoints) {
     const uint8_t* p = &px[(size_t(h / 2) * w + w / 2) * ch];
     const auto& want = points[i].rgb;
     const size_t dominant = size_t(std::max_element(want.begin(), want.end()) - want.begin());
-    for (size_t c = 0; c < 3; ++c)
-      if (c != dominant)
-        EXPECT_GT(int(p[dominant]), int(p[c]) + 60) << "point " << i << ": pixel " << int(p[0]) << "," << int(p[1])
-                                                     << "," << int(p[2]);
+    for (size_t c = 0; c < 3; ++c) {
+      if (c == dominant) continue;
+      EXPECT_GT(int(p[dominant]), int(p[c]) + 60) << "point " << i << ": pixel " << int(p[0]) << "," << int(p[1])
+                                                   << "," << int(p[2]);
+    }
   }
 }
 
