@@ -99,16 +99,21 @@ std::vector<uint8_t> encodeHeights(std::span<const float> heights, uint32_t side
 HeightQuantization blockQuantization(std::span<const uint8_t> block) {
   if (block.size() < sizeof kMagic || std::memcmp(block.data(), kMagic, sizeof kMagic) != 0)
     throw CodecError("not a height block (bad magic)");
-  // The header is inside the frame (under its checksum): decode the whole block for it.
-  const unsigned long long size = ZSTD_getFrameContentSize(block.data() + sizeof kMagic, block.size() - sizeof kMagic);
-  if (size == ZSTD_CONTENTSIZE_ERROR || size == ZSTD_CONTENTSIZE_UNKNOWN || size < kHeaderBytes)
-    throw CodecError("corrupt height block (frame header)");
-  std::vector<uint8_t> raw(size);
-  const size_t n = ZSTD_decompressDCtx(decompressor(), raw.data(), raw.size(), block.data() + sizeof kMagic,
-                                       block.size() - sizeof kMagic);
-  if (ZSTD_isError(n)) throw CodecError(std::string("corrupt or truncated height block (") + ZSTD_getErrorName(n) + ")");
-  if (raw[0] > uint8_t(HeightQuantization::kPrecision)) throw CodecError("corrupt height block (quantization)");
-  return HeightQuantization(raw[0]);
+  // The header is the frame's first bytes: decode just those (the checksum is the decoder's).
+  ZSTD_DCtx* d = decompressor();
+  ZSTD_DCtx_reset(d, ZSTD_reset_session_only);
+  uint8_t head[kHeaderBytes];
+  ZSTD_outBuffer out{head, sizeof head, 0};
+  ZSTD_inBuffer in{block.data() + sizeof kMagic, block.size() - sizeof kMagic, 0};
+  while (out.pos < out.size) {
+    const size_t r = ZSTD_decompressStream(d, &out, &in);
+    if (ZSTD_isError(r)) throw CodecError(std::string("corrupt height block (") + ZSTD_getErrorName(r) + ")");
+    if (r == 0 || (in.pos == in.size && out.pos < out.size)) break;
+  }
+  ZSTD_DCtx_reset(d, ZSTD_reset_session_only);
+  if (out.pos < sizeof head || head[0] > uint8_t(HeightQuantization::kPrecision))
+    throw CodecError("corrupt or truncated height block (header)");
+  return HeightQuantization(head[0]);
 }
 
 void decodeHeights(std::span<const uint8_t> block, uint32_t side, std::span<float> out) {
