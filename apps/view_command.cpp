@@ -15,6 +15,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -299,6 +300,7 @@ int runView(const ViewArgs& a) {
   std::optional<FrameController> controller;
 
   CameraControl camera(atlas.lo, atlas.hi, up, a.fov);
+  glm::dvec3 surfaceEye(std::numeric_limits<double>::quiet_NaN());  // where the surface distance was measured
   if (!path.empty()) camera.setCamera(path.front());
 
   // The scene is made again when async loading is switched (its page loader lives with it).
@@ -410,7 +412,10 @@ int runView(const ViewArgs& a) {
       if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) move.y -= 1.0;
       if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) move.z += 1.0;
       if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) move.z -= 1.0;
-      camera.setSurfaceDistance(distanceToSurface(atlas.hierarchy, camera.eye()));
+      if (camera.eye() != surfaceEye) {  // measured again only when the eye has moved
+        surfaceEye = camera.eye();
+        camera.setSurfaceDistance(distanceToSurface(atlas.hierarchy, surfaceEye));
+      }
       if (move != glm::dvec3(0.0)) camera.move(move, seconds), viewer.cameraTouched = true;
     }
     if (viewer.scroll != 0.0) camera.zoom(viewer.scroll), viewer.scroll = 0.0, viewer.cameraTouched = true;

@@ -41,8 +41,8 @@ struct TerrainBuildOptions : CommonBuildOptions {
   int imageryScaleLog2 = -1;  // kAutoImageryScale, or 0..2
   std::optional<std::array<double, 4>> imageryExtent;  // for imagery without a georeference
   // The in-memory build's cap, bytes: a DEM whose estimated peak (kTerrainBytesPerSample per
-  // sample, plus the imagery's) exceeds it is refused before it is read. 0: three quarters of the
-  // machine's physical memory.
+  // sample, plus the imagery's) exceeds it is refused once opened, before its data is read (the
+  // message names the cap, not how it was chosen). 0: three quarters of the machine's memory.
   uint64_t maxMemory = 0;
 };
 // Peak resident bytes per DEM sample of the in-memory terrain build, measured: 6.7 at 268M

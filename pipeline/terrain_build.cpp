@@ -24,6 +24,18 @@ namespace {
 
 bool isPowerOfTwo(uint32_t v) { return std::has_single_bit(v); }
 
+// The imagery options of a build.
+ImageryOptions imageryOptions(const TerrainBuildOptions& o) {
+  ImageryOptions io;
+  io.path = o.imagery;
+  io.scaleLog2 = o.imageryScaleLog2;
+  io.extent = o.imageryExtent;
+  return io;
+}
+
+// The in-memory build's memory cap: --max-memory, or 3/4 of the machine's memory.
+uint64_t memoryCap(const TerrainBuildOptions& o) { return o.maxMemory ? o.maxMemory : physicalMemoryBytes() / 4 * 3; }
+
 }  // namespace
 
 void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
@@ -39,10 +51,7 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
   if (!std::isfinite(o.zScale) || o.zScale == 0.0)
     throw InputError(optionRef("zScale") + " must be finite and non-zero");
   if (o.threads > 1024) throw InputError(optionRef("threads") + " must be at most 1024");
-  ImageryOptions io;
-  io.scaleLog2 = o.imageryScaleLog2;
-  io.extent = o.imageryExtent;
-  validateImageryOptions(io);
+  validateImageryOptions(imageryOptions(o));
   HierarchyParams p;
   p.intervalsLog2 = log2u(o.chartSize - 1);
   p.depth = o.depth;
@@ -51,34 +60,20 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
   p.validate();
 }
 
-// Refuses, before reading it, a DEM whose in-memory build would exceed the memory cap.
-uint64_t memoryCap(const TerrainBuildOptions& o) { return o.maxMemory ? o.maxMemory : physicalMemoryBytes() / 4 * 3; }
-
-void checkTerrainMemory(const TerrainBuildOptions& o) {
-  const uint64_t cap = memoryCap(o);
-  const RasterSize size = rasterSize(o.input, o.subdataset);
-  double perSample = kTerrainBytesPerSample;
-  if (!o.imagery.empty()) {
-    const int s = o.imageryScaleLog2 >= 0 ? o.imageryScaleLog2 : int(kMaxImageryScaleLog2);
-    perSample += 4.0 * double(1u << (2 * s)) * 4.0 / 3.0;  // the refined imagery and its pyramid
-  }
-  const double need = double(size.width) * double(size.height) * perSample;
-  if (cap > 0 && need > double(cap))
-    throw InputError(fmt::format("{}: {} x {} samples need about {:.1f} GiB to build in memory, over the {:.1f} GiB "
-                                 "cap{}; give a larger {} (this build holds the whole DEM in memory)",
-                                 o.input.string(), size.width, size.height, need / double(1ull << 30),
-                                 double(cap) / double(1ull << 30), o.maxMemory ? "" : " (3/4 of this machine's memory)",
-                                 optionRef("maxMemory")));
-}
-
 DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   const auto t0 = std::chrono::steady_clock::now();
-  checkTerrainMemory(o);
   DemOptions dopt;
   dopt.zScale = o.zScale;
   dopt.subdataset = o.subdataset;
   // The whole raster is read once into memory: GDAL's cache of its blocks only adds to the peak.
   dopt.gdalCacheBytes = std::clamp<uint64_t>(memoryCap(o) / 32, uint64_t{8} << 20, uint64_t{64} << 20);
+  // A DEM whose build would exceed the cap is refused once opened, before it is read.
+  dopt.maxMemory = memoryCap(o);
+  dopt.buildBytesPerSample = kTerrainBytesPerSample;
+  if (!o.imagery.empty()) {
+    const int s = o.imageryScaleLog2 >= 0 ? o.imageryScaleLog2 : int(kMaxImageryScaleLog2);
+    dopt.buildBytesPerSample += 4.0 * double(1u << (2 * s)) * 4.0 / 3.0;  // the refined imagery and its pyramid
+  }
   DemRaster dem = loadDem(o.input, dopt);
   stats->seconds = secondsSince(t0);
   stats->width = dem.width;
@@ -110,11 +105,7 @@ TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& 
   if (!o.imagery.empty()) {
     // Imagery: reprojected onto the DEM's lattice, then cut like the heights.
     const auto t0 = std::chrono::steady_clock::now();
-    ImageryOptions io;
-    io.path = o.imagery;
-    io.scaleLog2 = o.imageryScaleLog2;
-    io.extent = o.imageryExtent;
-    ImageryRaster raster = loadImagery(dem, o.input, io);
+    ImageryRaster raster = loadImagery(dem, o.input, imageryOptions(o));
     for (const std::string& warning : raster.warnings) spdlog::warn("{}: {}", o.imagery.string(), warning);
     TerrainImageryStats& im = w.imagery.emplace();
     im.readSeconds = secondsSince(t0);

@@ -57,9 +57,9 @@ class CameraControl {
   // dollies, right and up pan.
   void move(const glm::dvec3& rightUpForward, double seconds);
 
-  // The eye's distance to the drawn surface (the viewer measures it to the boxes of the cut's
-  // nodes each frame: the height above a terrain, the gap to a scan); negative: unknown, the
-  // distance to the whole box is used instead.
+  // The eye's distance to the surface (the viewer measures it with distanceToSurface whenever the
+  // eye moves: the height above a terrain, the gap to a scan); negative: unknown, the distance to
+  // the whole box is used instead.
   void setSurfaceDistance(double d) { surfaceDistance_ = d; }
   // The flying speed in world units per second: the eye's distance to the surface (or to the box),
   // at least 0.1% of the diagonal (1% without a surface distance), times the user's speed factor.

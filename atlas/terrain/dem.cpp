@@ -329,19 +329,6 @@ uint64_t fillVoids(std::vector<float>& heights, const std::vector<bool>& voidMas
   return voids;
 }
 
-RasterSize rasterSize(const fs::path& path, const std::string& subdataset) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) fail(path, "no such file");
-  if (fs::is_directory(path, ec)) fail(path, "is a directory, not a raster file");
-  registerGdalOnce();
-  GdalErrorCapture cap;
-  std::vector<std::string> warnings;
-  DemOptions options;
-  options.subdataset = subdataset;
-  const DatasetPtr ds = openDem(path, options, cap, warnings);
-  return {uint32_t(std::max(ds->GetRasterXSize(), 0)), uint32_t(std::max(ds->GetRasterYSize(), 0))};
-}
-
 DemRaster loadDem(const fs::path& path, const DemOptions& options) {
   if (!std::isfinite(options.zScale) || options.zScale == 0.0)
     fail(path, "z-scale " + formatNumber(options.zScale) + " must be finite and non-zero");
@@ -365,6 +352,18 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
   dem.height = static_cast<uint32_t>(h);
   const size_t n = size_t{dem.width} * dem.height;
   GDALRasterBand* band = ds->GetRasterBand(1);
+  const double need = double(n) * options.buildBytesPerSample;
+  if (options.maxMemory > 0 && need > double(options.maxMemory)) {
+    const auto size = [](double bytes) {
+      char text[32];
+      if (bytes >= double(1ull << 30)) std::snprintf(text, sizeof text, "%.1f GiB", bytes / double(1ull << 30));
+      else std::snprintf(text, sizeof text, "%.1f MiB", bytes / double(1ull << 20));
+      return std::string(text);
+    };
+    fail(path, std::to_string(w) + " x " + std::to_string(h) + " samples need about " + size(need) +
+                   " to build in memory, over the " + size(double(options.maxMemory)) + " cap; give a larger " +
+                   optionRef("maxMemory") + " (this build holds the whole DEM in memory)");
+  }
 
   // Read band 1 as float.
   try {

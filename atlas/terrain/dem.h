@@ -18,6 +18,11 @@ struct DemOptions {
   // GDAL's block cache for the read, bytes (it holds copies of the blocks read, by default 5% of
   // the machine's memory); 0: GDAL's default. Process-wide: set before the read.
   uint64_t gdalCacheBytes = 0;
+  // The memory the whole build may use, bytes, and what it needs per sample: a raster over it is
+  // refused (InputError naming optionRef "maxMemory") once opened, before its data is read.
+  // 0: no cap.
+  uint64_t maxMemory = 0;
+  double buildBytesPerSample = 0.0;
 };
 
 // Heights in metres after z-scale, row-major with row 0 at the SOUTH edge (gy grows north).
@@ -38,13 +43,6 @@ extern const char* const kVoidFillMethod;
 // Converts one degree of latitude / longitude to metres at latitude phiDeg (WGS84 series).
 double metresPerDegreeLatitude(double phiDeg);
 double metresPerDegreeLongitude(double phiDeg);  // |phi| clamped to 89 degrees
-
-// The raster's size in samples (the subdataset's, for containers), without reading its data.
-// Throws InputError naming the file when it cannot be opened.
-struct RasterSize {
-  uint32_t width = 0, height = 0;
-};
-RasterSize rasterSize(const std::filesystem::path& path, const std::string& subdataset = {});
 
 // Loads and repairs a DEM. Throws InputError naming the file on: unreadable or truncated data,
 // not a raster, zero-size, all samples void, bad options.

@@ -99,7 +99,6 @@ struct AtlasRenderer::Impl {
   GlObject samples, normals;  // page pool: heights or positions, and normals
   GlObject colours;           // page pool: RGBA8 colours (RendererSetup::colours)
   bool drawColours = true;
-  int views = 0;              // u_views bits (setInspectionViews)
   uint32_t normalLevels = 1;  // mip levels of the normal page pool
   uint32_t colourSide = 0;    // texels per side of a colour layer: ((pageSide - 1) << colourScaleLog2) + 1
   uint32_t colourLevels = 1;  // mip levels of the colour page pool
@@ -110,7 +109,7 @@ struct AtlasRenderer::Impl {
   GlObject overlayBuffer;
   std::vector<NodeOverlay> overlay;  // per node of the next draw; empty: no overlay
   bool overlayColours = false;       // the records colour the nodes (else only their flags count)
-  InspectionViews inspection;
+  InspectionViews inspection;        // setInspectionViews; u_views holds them as bits
   GlObject atlasProgram;
   bool wireframe = false;
 
@@ -373,7 +372,9 @@ void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& 
   glUniform1i(uniform(atlasProgram, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
   glUniform1i(uniform(atlasProgram, "u_overlay"), overlay.empty() || !overlayColours ? 0 : 1);
   glUniform1i(uniform(atlasProgram, "u_overlayRecords"), overlay.empty() ? 0 : 1);
-  glUniform1i(uniform(atlasProgram, "u_views"), views);
+  const InspectionViews& v = inspection;
+  glUniform1i(uniform(atlasProgram, "u_views"),
+              (v.nodeBorders ? 1 : 0) | (v.normals ? 2 : 0) | (v.snapped ? 4 : 0) | (v.loading ? 8 : 0));
   glBindVertexArray(vertexArray.id());
   checkGl("atlas state");
 }
@@ -524,7 +525,6 @@ const AtlasRenderer::InspectionViews& AtlasRenderer::inspectionViews() const { r
 
 void AtlasRenderer::setInspectionViews(const InspectionViews& v) {
   impl_->inspection = v;
-  impl_->views = (v.nodeBorders ? 1 : 0) | (v.normals ? 2 : 0) | (v.snapped ? 4 : 0) | (v.loading ? 8 : 0);
 }
 
 namespace {
