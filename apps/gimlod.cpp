@@ -114,7 +114,8 @@ std::string flagFor(std::string_view name) {
       {"maxMemory", "--max-memory"},          {"measureFidelity", "--no-fidelity"},
       {"output", "--output"},                 {"worstCharts", "--worst"},
       {"thumbnailSize", "--image-size"},      {"imageryScale", "--imagery-scale"},
-      {"imageryExtent", "--imagery-extent"}};
+      {"imageryExtent", "--imagery-extent"},  {"heightPrecision", "--height-precision"},
+      {"compress", "--uncompressed"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }
@@ -408,6 +409,14 @@ int main(int argc, char** argv) {
       ->delimiter(',')
       ->expected(4);
 
+  build->add_option("--height-precision", terrain.heightPrecision,
+                    "DEMs: heights that are not whole metres are stored to this step, in metres; whole metres are "
+                    "stored exactly (default: 1 for a source of whole metres like SRTM, whose filled voids are "
+                    "rounded like it, else 0.01)");
+  bool uncompressed = false;
+  build->add_flag("--uncompressed", uncompressed,
+                  "DEMs: write raw float32 chart files (atlas format version 1) instead of compressed ones");
+
   RenderArgs r;
   auto* render = app.add_subcommand("render", "Render an atlas headless (EGL) to PNG frames and stats.csv");
   render->add_option("atlas", r.atlas, "Atlas directory")->required();
@@ -510,6 +519,7 @@ int main(int argc, char** argv) {
         return runBuild(mesh);
       }
       static_cast<CommonBuildOptions&>(terrain) = common;
+      terrain.compress = !uncompressed;
       if (build->get_option("--max-memory")->count() > 0) terrain.maxMemory = maxMemoryBytes;
       if (build->get_option("--imagery-scale")->count() > 0) {
         if (imageryScale != 1 && imageryScale != 2 && imageryScale != 4)

@@ -2,6 +2,7 @@
 // Based on: Niski, Purnomo, Cohen, "Multi-grained Level of Detail Using a Hierarchical Seamless
 // Texture Atlas", I3D 2007, section 6 (paging charts in blocks of the maximum node resolution).
 #include "core/atlas_format.h"
+#include "core/block_codec.h"
 
 #include <algorithm>
 #include <bit>
@@ -79,9 +80,11 @@ constexpr const char* kFormatTag = "gimlod-atlas";
 constexpr char kChartMagic[4] = {'G', 'L', 'M', 'C'};
 constexpr uint32_t kChartFileVersion = 1;  // heights + normals
 constexpr uint32_t kChartFileVersionChannels = 2;  // any channels, with a channel mask
+constexpr uint32_t kChartFileVersionCoded = 3;     // any channels, each block coded
 constexpr size_t kChartHeaderBytes = 4 + 4 * 4;
 constexpr size_t kChartHeaderBytesV2 = kChartHeaderBytes + 4;
 constexpr size_t kDirEntryBytes = 16;  // version 1
+constexpr size_t kCodedEntryBytes = 12;  // version 3, per channel: u64 offset, u32 bytes
 constexpr size_t kChannelBytes[kChannelCount] = {sizeof(float), sizeof(PackedNormal), 3 * sizeof(float),
                                                  sizeof(PackedColour)};
 constexpr bool kChannelIsFloat[kChannelCount] = {true, false, true, false};
@@ -283,7 +286,7 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
   }
   ojson j = {
       {"format", kFormatTag},
-      {"version", m.version},
+      {"version", m.compression.present ? kAtlasFormatVersion : 1u},
       {"kind", atlasKindName(m.kind)},
       {"chartSize", m.chartSize},
       {"blockIntervals", m.blockIntervals},
@@ -305,6 +308,10 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
   };
   if (m.imagery.present)
     j["imagery"] = ojson{{"source", m.imagery.source}, {"scaleLog2", m.imagery.scaleLog2}, {"coverage", m.imagery.coverage}};
+  if (m.compression.present)
+    j["compression"] = ojson{{"codec", "lorenzo-zstd"},
+                             {"heightPrecision", m.compression.heightPrecision},
+                             {"positionStep", m.compression.positionStep}};
   j["hierarchy"] = ojson{{"file", m.hierarchyFile},
                          {"depth", m.depth},
                          {"maxNodeResLog2", m.maxNodeResLog2},
@@ -393,6 +400,20 @@ AtlasManifest readManifest(const fs::path& dir) {
     if (im.contains("source")) m.imagery.source = r.string(im["source"], "imagery.source");
     if (im.contains("coverage")) m.imagery.coverage = r.number(im["coverage"], "imagery.coverage");
   }
+  if (j.contains("compression") && !j["compression"].is_null()) {
+    const json& c = j["compression"];
+    if (!c.is_object()) r.fail("field 'compression' must be an object or null");
+    const std::string codec = r.string(r.field(c, "codec", "compression."), "compression.codec");
+    if (codec != "lorenzo-zstd") r.fail("unknown compression codec '" + codec + "' (expected lorenzo-zstd)");
+    m.compression.present = true;
+    if (c.contains("heightPrecision")) m.compression.heightPrecision = r.number(c["heightPrecision"], "compression.heightPrecision");
+    if (c.contains("positionStep")) m.compression.positionStep = r.number(c["positionStep"], "compression.positionStep");
+    if (!(m.compression.heightPrecision >= 0.0) || !(m.compression.positionStep >= 0.0))
+      r.fail("compression steps must be >= 0");
+  }
+  if ((m.version >= 2) != m.compression.present)
+    r.fail(m.compression.present ? "field 'compression' needs format version 2"
+                                 : "format version 2 needs the field 'compression'");
   const uint32_t ilog = log2Exact(m.chartSize - 1);
   if (j.contains("hierarchy")) {
     const json& h = j["hierarchy"];
@@ -479,7 +500,7 @@ AtlasManifest readManifest(const fs::path& dir) {
 // ---- chart files ------------------------------------------------------------------------------
 
 uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint32_t chartSize,
-                        uint32_t blockIntervals) {
+                        uint32_t blockIntervals, const ChartCoding& coding) {
   if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) ||
       blockIntervals > chartSize - 1)
     throw std::invalid_argument("writeChartFile: bad chartSize/blockIntervals");
@@ -510,8 +531,11 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
     if (counts[c] != 0 && counts[c] != levels)
       throw std::invalid_argument("writeChartFile: channels have different level counts");
   const uint32_t channels = uint32_t(std::popcount(mask));
-  const size_t header = heightField ? kChartHeaderBytes : kChartHeaderBytesV2;
-  const size_t entryBytes = heightField ? kDirEntryBytes : 8 * channels;
+  const bool v1 = heightField && !coding.compressed;
+  const size_t header = v1 ? kChartHeaderBytes : kChartHeaderBytesV2;
+  const size_t entryBytes = coding.compressed ? kCodedEntryBytes * channels : v1 ? kDirEntryBytes : 8 * channels;
+  if (coding.compressed && (mask & (1u << kChannelPositions)) && !(coding.positionStep > 0.0))
+    throw std::invalid_argument("writeChartFile: compressed positions need a positionStep > 0");
 
   // Directory and total size.
   std::vector<LevelLayout> layouts(levels);
@@ -536,6 +560,56 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
                                     " has the wrong number of samples");
     dirEntries += size_t{layouts[k].blocksPerSide} * layouts[k].blocksPerSide;
   }
+  if (coding.compressed) {
+    // Version 3: each block of each channel coded on its own, appended after the directory.
+    std::vector<uint8_t> buf(header + dirEntries * entryBytes);
+    std::memcpy(buf.data(), kChartMagic, 4);
+    putLe<uint32_t>(buf, 4, kChartFileVersionCoded);
+    putLe<uint32_t>(buf, 8, chartSize);
+    putLe<uint32_t>(buf, 12, blockIntervals);
+    putLe<uint32_t>(buf, 16, levels);
+    putLe<uint32_t>(buf, 20, mask);
+    size_t dirAt = header;
+    std::vector<uint8_t> samples;  // one block of one channel, row-major
+    for (uint32_t k = 0; k < levels; ++k) {
+      const LevelLayout& l = layouts[k];
+      const uint32_t b = l.blockSamples - 1, bs = l.blockSamples;
+      for (uint32_t by = 0; by < l.blocksPerSide; ++by)
+        for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx)
+          for (uint32_t c = 0; c < kChannelCount; ++c) {
+            if (!(mask & (1u << c))) continue;
+            const size_t es = kChannelBytes[c];
+            samples.resize(size_t{bs} * bs * es);
+            for (uint32_t v = 0; v < bs; ++v)
+              std::memcpy(samples.data() + size_t{v} * bs * es,
+                          data[c][k] + (size_t{by * b + v} * l.samples + size_t{bx} * b) * es, size_t{bs} * es);
+            const size_t count = size_t{bs} * bs;
+            std::vector<uint8_t> code;
+            switch (c) {
+              case kChannelHeights:
+                code = encodeHeights({reinterpret_cast<const float*>(samples.data()), count}, bs, coding.heightPrecision);
+                break;
+              case kChannelPositions:
+                code = encodePositions({reinterpret_cast<const float*>(samples.data()), 3 * count}, bs,
+                                       coding.positionStep);
+                break;
+              case kChannelNormals:
+                code = encodeNormals({reinterpret_cast<const PackedNormal*>(samples.data()), count}, bs);
+                break;
+              default:
+                code = encodeColours({reinterpret_cast<const PackedColour*>(samples.data()), count}, bs);
+                break;
+            }
+            putLe<uint64_t>(buf, dirAt, buf.size());
+            putLe<uint32_t>(buf, dirAt + 8, uint32_t(code.size()));
+            dirAt += kCodedEntryBytes;
+            buf.insert(buf.end(), code.begin(), code.end());
+          }
+    }
+    atomicWriteFile(path, buf.data(), buf.size());
+    return buf.size();
+  }
+
   uint64_t offset = header + dirEntries * entryBytes;
   uint64_t total = offset;
   for (const LevelLayout& l : layouts) {
@@ -544,11 +618,11 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
   }
   std::vector<uint8_t> buf(total);
   std::memcpy(buf.data(), kChartMagic, 4);
-  putLe<uint32_t>(buf, 4, heightField ? kChartFileVersion : kChartFileVersionChannels);
+  putLe<uint32_t>(buf, 4, v1 ? kChartFileVersion : kChartFileVersionChannels);
   putLe<uint32_t>(buf, 8, chartSize);
   putLe<uint32_t>(buf, 12, blockIntervals);
   putLe<uint32_t>(buf, 16, levels);
-  if (!heightField) putLe<uint32_t>(buf, 20, mask);
+  if (!v1) putLe<uint32_t>(buf, 20, mask);
 
   size_t dirAt = header;
   for (uint32_t k = 0; k < levels; ++k) {
@@ -595,11 +669,12 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
     fail("truncated chart file (no header)");
   if (std::memcmp(hdr, kChartMagic, 4) != 0) fail("not a gimlod chart file (bad magic)");
   const uint32_t version = getLe<uint32_t>(hdr + 4);
-  if (version != kChartFileVersion && version != kChartFileVersionChannels)
+  if (version != kChartFileVersion && version != kChartFileVersionChannels && version != kChartFileVersionCoded)
     fail("unsupported chart file version " + std::to_string(version));
   channelMask_ = kHeightFieldMask;
+  compressed_ = version == kChartFileVersionCoded;
   size_t header = kChartHeaderBytes;
-  if (version == kChartFileVersionChannels) {
+  if (version != kChartFileVersion) {
     uint8_t m[4];
     if (fileSize < kChartHeaderBytesV2 || !file_.read(reinterpret_cast<char*>(m), 4))
       fail("truncated chart file (no channel mask)");
@@ -610,7 +685,9 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
          ((channelMask_ >> kChannelHeights) & 1u) == ((channelMask_ >> kChannelPositions) & 1u)))
       fail("corrupt chart header (channel mask " + std::to_string(channelMask_) + ")");
   }
-  const size_t entryBytes = version == kChartFileVersion ? kDirEntryBytes : 8 * size_t(std::popcount(channelMask_));
+  const size_t entryBytes = version == kChartFileVersion ? kDirEntryBytes
+                            : compressed_ ? kCodedEntryBytes * size_t(std::popcount(channelMask_))
+                                          : 8 * size_t(std::popcount(channelMask_));
   chartSize_ = getLe<uint32_t>(hdr + 8);
   blockIntervals_ = getLe<uint32_t>(hdr + 12);
   levels_ = getLe<uint32_t>(hdr + 16);
@@ -640,7 +717,15 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
         const uint64_t off = getLe<uint64_t>(dir.data() + at);
         at += 8;
         e.offset[c] = off;
-        const uint64_t bytes = bs2 * kChannelBytes[c];
+        uint64_t bytes = bs2 * kChannelBytes[c];
+        if (compressed_) {
+          bytes = e.bytes[c] = getLe<uint32_t>(dir.data() + at);
+          at += 4;
+          // A code is never empty, and never much larger than the raw samples it holds.
+          if (bytes == 0 || bytes > 2 * bs2 * kChannelBytes[c] + 1024)
+            fail("corrupt chart file (block size " + std::to_string(bytes) + " out of range at level " +
+                 std::to_string(k) + ")");
+        }
         if (off >= dirEnd && off <= fileSize && bytes <= fileSize - off) continue;
         if (off < dirEnd || off > (uint64_t{1} << 50))
           fail("corrupt chart file (block offset out of range at level " + std::to_string(k) + ")");
@@ -701,6 +786,39 @@ void ChartFileReader::readWindow(uint64_t offset, uint32_t bs, uint32_t du, uint
     throw InputError(quoted(path_) + ": read failed (file truncated or changed while in use)");
 }
 
+namespace {
+const char* channelName(ChartChannel c) {
+  static constexpr const char* kNames[kChannelCount] = {"heights", "normals", "positions", "colours"};
+  return kNames[c];
+}
+}  // namespace
+
+void ChartFileReader::decodeBlock(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by, uint32_t bs,
+                                  void* out) const {
+  const BlockEntry& e = block(level, bx, by);
+  thread_local std::vector<uint8_t> code;
+  code.resize(e.bytes[c]);
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    file_.clear();
+    file_.seekg(static_cast<std::streamoff>(e.offset[c]));
+    file_.read(reinterpret_cast<char*>(code.data()), static_cast<std::streamsize>(code.size()));
+    if (!file_) throw InputError(quoted(path_) + ": read failed (file truncated or changed while in use)");
+  }
+  const size_t count = size_t{bs} * bs;
+  try {
+    switch (c) {
+      case kChannelHeights: decodeHeights(code, bs, {static_cast<float*>(out), count}); break;
+      case kChannelPositions: decodePositions(code, bs, {static_cast<float*>(out), 3 * count}); break;
+      case kChannelNormals: decodeNormals(code, bs, {static_cast<PackedNormal*>(out), count}); break;
+      default: decodeColours(code, bs, {static_cast<PackedColour*>(out), count}); break;
+    }
+  } catch (const CodecError& err) {
+    throw InputError(quoted(path_) + ": level " + std::to_string(level) + " block (" + std::to_string(bx) + ", " +
+                     std::to_string(by) + ") " + channelName(c) + ": " + err.what());
+  }
+}
+
 void ChartFileReader::readChannel(ChartChannel c, size_t elem, uint32_t level, uint32_t u0, uint32_t v0,
                                   uint32_t n, void* out) const {
   if (!hasChannel(c))
@@ -709,6 +827,18 @@ void ChartFileReader::readChannel(ChartChannel c, size_t elem, uint32_t level, u
   locateWindow(level, u0, v0, n, bx, by);
   const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
   const uint32_t b = l.blockSamples - 1;
+  if (compressed_) {
+    // The whole block decoded, then the window copied out of it.
+    thread_local std::vector<uint8_t> decoded;
+    const uint32_t bs = l.blockSamples;
+    decoded.resize(size_t{bs} * bs * elem);
+    decodeBlock(c, level, bx, by, bs, decoded.data());
+    const uint32_t du = u0 - bx * b, dv = v0 - by * b;
+    const size_t rowBytes = size_t{n + 1} * elem;
+    for (uint32_t r = 0; r <= n; ++r)
+      std::memcpy(static_cast<char*>(out) + r * rowBytes, decoded.data() + (size_t{dv + r} * bs + du) * elem, rowBytes);
+    return;
+  }
   readWindow(block(level, bx, by).offset[c], l.blockSamples, u0 - bx * b, v0 - by * b, n, elem, out);
   if (kChannelIsFloat[c]) floatsFromLe(static_cast<float*>(out), size_t{n + 1} * (n + 1) * elem / sizeof(float));
 }

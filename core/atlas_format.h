@@ -40,7 +40,9 @@ enum class AtlasKind : uint8_t { Heightfield, Geometry };
 // The kind's name in the manifest: "heightfield" or "geometry".
 const char* atlasKindName(AtlasKind kind);
 
-inline constexpr uint32_t kAtlasFormatVersion = 1;
+// Version 2: chart files may be compressed (chart file version 3, AtlasManifest::compression).
+// Version 1 atlases (uncompressed chart files) are still read, and still written on request.
+inline constexpr uint32_t kAtlasFormatVersion = 2;
 inline constexpr const char* kManifestName = "atlas.json";
 
 // Chart edges, counter-clockwise in chart (u, v): 0 = bottom (v = 0), 1 = right (u = max),
@@ -99,6 +101,13 @@ struct ImageryInfo {
 };
 inline constexpr uint32_t kMaxImageryScaleLog2 = 2;
 
+// How an atlas's chart files store their blocks (ChartCoding), as the manifest records it.
+struct CompressionInfo {
+  bool present = false;         // chart files are coded (version 3); the manifest is version 2
+  double heightPrecision = 0.0; // metres: non-integer heights were quantized to it (0: none were)
+  double positionStep = 0.0;    // positions' lattice step (geometry atlases)
+};
+
 // The atlas manifest. Heights are in metres after z-scale; horizontal positions of terrain
 // sample (gx, gy) are (gx * spacing[0], gy * spacing[1]); gy grows northwards.
 struct AtlasManifest {
@@ -116,6 +125,7 @@ struct AtlasManifest {
   std::string source;
   Georeference georef;
   ImageryInfo imagery;                      // terrain imagery (heightfield atlases only)
+  CompressionInfo compression;              // coded chart files (version 2)
   std::vector<ChartInfo> charts;
   // Hierarchy parameters (log2 values). depth = number of quadtree levels (root = level 0).
   std::string hierarchyFile = "hierarchy.bin";
@@ -198,9 +208,21 @@ struct ChartPyramid {
   std::vector<std::vector<PackedColour>> colours;   // [level][v * samples + u]
 };
 
-// Writes a chart file. A height-field pyramid (heights + normals) is written in version 1; a
-// pyramid with positions or colours, or colours alone (an attribute chart: terrain imagery), in
-// version 2: the same, but the header adds u32 channelMask
+// How writeChartFile stores blocks. Uncompressed: raw samples (chart file version 1 or 2, below).
+// Compressed (version 3): every block of every channel is coded on its own by core/block_codec.h
+// (heights: integers losslessly, others quantized to heightPrecision; positions quantized to
+// positionStep on one lattice through the origin; normals and colours losslessly) and carries its
+// own checksum. Values already quantized to the same step decode to themselves, so a caller that
+// quantizes before measuring (quantizeToStep) measures exactly what is drawn.
+struct ChartCoding {
+  bool compressed = false;
+  double heightPrecision = 0.01;  // metres
+  double positionStep = 0.0;      // required (> 0) for compressed positions
+};
+
+// Writes a chart file. A height-field pyramid (heights + normals) is written uncompressed in
+// version 1; a pyramid with positions or colours, or colours alone (an attribute chart: terrain
+// imagery), in version 2: the same, but the header adds u32 channelMask
 // (1 << ChartChannel) after the level count, each directory entry holds one u64 offset per
 // present channel (in ChartChannel order), and each block stores its channels in that order.
 // Version 1 (little-endian): magic "GLMC", u32 version (1), u32 chartSize,
@@ -208,11 +230,13 @@ struct ChartPyramid {
 // (by * blocksPerSide + bx), of u64 heightOffset and u64 normalOffset; then per block its
 // blockSamples^2 float32 heights followed by its blockSamples^2 PackedNormal, row-major. Block
 // (bx, by) of level k holds samples u in [bx*B, bx*B+B], v in [by*B, by*B+B] with
-// B = min(blockIntervals, M >> k): neighbouring blocks share one row/column. Built in memory and
-// written atomically. Returns bytes written. Throws std::invalid_argument on a malformed pyramid,
-// InputError if the file cannot be written.
+// B = min(blockIntervals, M >> k): neighbouring blocks share one row/column.
+// Version 3 (coding.compressed): the version 2 header with version 3; each directory entry holds,
+// per present channel, u64 offset and u32 byte count of the block's code.
+// Built in memory and written atomically. Returns bytes written. Throws std::invalid_argument on a
+// malformed pyramid or one the coding cannot take, InputError if the file cannot be written.
 uint64_t writeChartFile(const std::filesystem::path& path, const ChartPyramid& pyramid,
-                        uint32_t chartSize, uint32_t blockIntervals);
+                        uint32_t chartSize, uint32_t blockIntervals, const ChartCoding& coding = {});
 
 // Random access to one chart file's blocks; reads only the requested block. Thread-safe.
 class ChartFileReader {
@@ -235,10 +259,14 @@ class ChartFileReader {
   std::vector<PackedColour> readLevelColours(uint32_t level) const;
   uint32_t channelMask() const { return channelMask_; }  // bits 1 << ChartChannel
   bool hasChannel(ChartChannel c) const { return (channelMask_ >> c) & 1u; }
+  bool compressed() const { return compressed_; }  // version 3: blocks decoded on read
   const std::filesystem::path& path() const { return path_; }
 
  private:
-  struct BlockEntry { std::array<uint64_t, kChannelCount> offset{}; };  // per ChartChannel
+  struct BlockEntry {  // per ChartChannel
+    std::array<uint64_t, kChannelCount> offset{};
+    std::array<uint32_t, kChannelCount> bytes{};  // coded bytes (version 3)
+  };
   const BlockEntry& block(uint32_t level, uint32_t bx, uint32_t by) const;
   // Block holding the window [u0, u0+n] x [v0, v0+n]; throws std::logic_error if none does.
   void locateWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, uint32_t& bx,
@@ -252,6 +280,9 @@ class ChartFileReader {
                    void* out) const;
   uint32_t chartSize_ = 0, blockIntervals_ = 0, levels_ = 0;
   uint32_t channelMask_ = 0;
+  bool compressed_ = false;
+  // Version 3: decodes the whole block (bx, by) of channel c into out (blockSamples^2 elements).
+  void decodeBlock(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by, uint32_t blockSamples, void* out) const;
   std::vector<std::vector<BlockEntry>> directory_;  // [level][by * blocksPerSide + bx]
   mutable std::mutex mutex_;
   mutable std::ifstream file_;

@@ -31,6 +31,11 @@ struct CommonBuildOptions {
   std::function<std::string(std::string_view)> spellOption;
 };
 
+// The step non-integer heights are quantized to in a compressed terrain atlas, metres: for a
+// source of whole metres (SRTM), 1 (the filled voids are rounded like the source), else 0.01.
+inline constexpr double kAutoHeightPrecision = 0.0;
+inline constexpr double kDefaultHeightPrecision = 0.01;
+
 // A terrain atlas from a DEM (any single-band raster GDAL reads).
 struct TerrainBuildOptions : CommonBuildOptions {
   std::string subdataset;    // netCDF variable; empty: the first 2D one
@@ -44,6 +49,11 @@ struct TerrainBuildOptions : CommonBuildOptions {
   // sample, plus the imagery's) exceeds it is refused once opened, before its data is read (the
   // message names the cap, not how it was chosen). 0: three quarters of the machine's memory.
   uint64_t maxMemory = 0;
+  // Compressed chart files (format version 2, core/block_codec.h): integer heights losslessly,
+  // others quantized to heightPrecision metres before anything is measured, so the hierarchy's
+  // errors bound the decoded surface. false: format version 1, raw float32 heights.
+  bool compress = true;
+  double heightPrecision = kAutoHeightPrecision;
 };
 // Peak resident bytes per DEM sample of the in-memory terrain build, measured: 6.7 at 268M
 // samples, 6.2 at 1.07G (heights, void mask and chart pyramids in flight).

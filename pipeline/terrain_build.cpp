@@ -4,6 +4,7 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -13,6 +14,7 @@
 
 #include "atlas/terrain/imagery.h"
 #include "core/atlas_format.h"
+#include "core/block_codec.h"
 #include "core/stage_meter.h"
 #include "pipeline/build.h"
 #include "pipeline/build_report.h"
@@ -36,6 +38,31 @@ ImageryOptions imageryOptions(const TerrainBuildOptions& o) {
 // The in-memory build's memory cap: --max-memory, or 3/4 of the machine's memory.
 uint64_t memoryCap(const TerrainBuildOptions& o) { return o.maxMemory ? o.maxMemory : physicalMemoryBytes() / 4 * 3; }
 
+// Compressed atlases: heights that are not integers are quantized to the precision before anything
+// is built from them, so the pyramids, normals and the hierarchy's errors are those of the decoded
+// surface (the codec gives quantized heights back exactly).
+// Returns the precision used.
+double quantizeHeights(DemRaster& dem, const TerrainBuildOptions& o) {
+  const double p = o.heightPrecision != kAutoHeightPrecision ? o.heightPrecision
+                   : dem.integerHeights                       ? 1.0
+                                                              : kDefaultHeightPrecision;
+  const double top = std::max(std::abs(double(dem.minHeight)), std::abs(double(dem.maxHeight)));
+  if (top / p > double(1u << 23))
+    throw InputError(fmt::format("{}: heights reach {:.1f} m, more than 2^23 steps of {} {} m; give a coarser "
+                                 "precision or {}",
+                                 o.input.string(), top, optionRef("heightPrecision"), p,
+                                 optionRef("compress")));
+  float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+  for (float& h : dem.heights) {
+    if (h != std::nearbyint(h)) h = quantizeToStep(h, p);
+    lo = std::min(lo, h);
+    hi = std::max(hi, h);
+  }
+  dem.minHeight = lo;
+  dem.maxHeight = hi;
+  return p;
+}
+
 }  // namespace
 
 void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
@@ -51,6 +78,9 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
   if (!std::isfinite(o.zScale) || o.zScale == 0.0)
     throw InputError(optionRef("zScale") + " must be finite and non-zero");
   if (o.threads > 1024) throw InputError(optionRef("threads") + " must be at most 1024");
+  if (o.compress && o.heightPrecision != kAutoHeightPrecision && !(o.heightPrecision >= 1e-6 && o.heightPrecision <= 1000.0))
+    throw InputError(fmt::format("{} {} must be between 1e-6 and 1000 metres", optionRef("heightPrecision"),
+                                 o.heightPrecision));
   validateImageryOptions(imageryOptions(o));
   HierarchyParams p;
   p.intervalsLog2 = log2u(o.chartSize - 1);
@@ -100,6 +130,8 @@ TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& 
   TerrainAtlasOptions topt;
   topt.chartSize = o.chartSize;
   topt.blockIntervals = o.nodeRes;
+  topt.coding.compressed = o.compress;
+  if (o.compress) topt.coding.heightPrecision = quantizeHeights(dem, o);
   TerrainWriteStats w;
   w.charts = writeTerrainCharts(dem, topt, dir, m);
   if (!o.imagery.empty()) {

@@ -521,6 +521,9 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
   }
 
   // Fill voids, then the height range.
+  dem.integerHeights = true;
+  for (size_t i = 0; i < dem.heights.size() && dem.integerHeights; ++i)
+    dem.integerHeights = voids[i] || dem.heights[i] == std::nearbyint(dem.heights[i]);
   dem.voidFillMethod = kVoidFillMethod;
   dem.voidsFilled = voidCount > 0 ? fillVoids(dem.heights, voids, dem.width, dem.height) : 0;
   const auto [mn, mx] = std::minmax_element(dem.heights.begin(), dem.heights.end());

@@ -34,6 +34,7 @@ struct DemRaster {
   uint64_t voidsFilled = 0;
   std::string voidFillMethod;
   float minHeight = 0.f, maxHeight = 0.f;
+  bool integerHeights = false;  // every sample the source gave (voids aside) is a whole number
   std::vector<std::string> warnings;  // non-fatal issues (extra bands, no georeference, ...)
 };
 

@@ -285,7 +285,9 @@ ImageryWriteStats writeImageryCharts(const ImageryRaster& raster, const std::str
     uint64_t n = 0;
     for (const auto& level : p.colours) n += level.size();
     samples += n;
-    bytes += writeChartFile(dir / c.imageryFile, p, chartSize, blockIntervals);
+    ChartCoding coding;
+    coding.compressed = m.compression.present;  // coded like the atlas's geometry
+    bytes += writeChartFile(dir / c.imageryFile, p, chartSize, blockIntervals, coding);
     progress::advance();
   });
   ImageryWriteStats st;

@@ -173,6 +173,11 @@ TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOpt
                      (ec ? ec.message() : std::string("not a directory")));
 
   fillTerrainManifest(dem, options, manifest);
+  manifest.compression = CompressionInfo{};
+  if (options.coding.compressed) {
+    manifest.compression.present = true;
+    manifest.compression.heightPrecision = options.coding.heightPrecision;
+  }
 
   uint64_t perChart = 0;  // samples in one chart's pyramid
   for (uint32_t k = 0; k <= manifest.intervalsLog2(); ++k) {
@@ -193,7 +198,7 @@ TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOpt
     tbb::parallel_for(size_t{0}, manifest.charts.size(), [&](size_t i) {
       const ChartInfo& c = manifest.charts[i];
       const ChartPyramid p = buildChartPyramid(dem, c.gridX, c.gridY, cs);
-      bytes += writeChartFile(dir / c.file, p, cs, options.blockIntervals);
+      bytes += writeChartFile(dir / c.file, p, cs, options.blockIntervals, options.coding);
       progress::advance();
     });
   });

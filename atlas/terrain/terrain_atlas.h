@@ -17,6 +17,7 @@ namespace gimlod {
 struct TerrainAtlasOptions {
   uint32_t chartSize = 513;      // samples per chart side; must be 2^m + 1, 9..8193
   uint32_t blockIntervals = 64;  // block / max node resolution R; power of two, 4..1024
+  ChartCoding coding;            // how chart files store blocks (compressed: format version 2)
 };
 
 struct TerrainAtlasStats {

@@ -29,7 +29,7 @@ DemRaster planeDem(uint32_t w, uint32_t h, double a, double b, std::array<double
 
 void expectOptionError(uint32_t cs, uint32_t bi, const std::string& what) {
   try {
-    validateTerrainAtlasOptions({cs, bi});
+    validateTerrainAtlasOptions({cs, bi, {}});
     FAIL() << "expected InputError for " << cs << "/" << bi;
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
@@ -37,9 +37,9 @@ void expectOptionError(uint32_t cs, uint32_t bi, const std::string& what) {
 }
 
 TEST(AtlasTerrain, OptionValidation) {
-  EXPECT_NO_THROW(validateTerrainAtlasOptions({513, 64}));
-  EXPECT_NO_THROW(validateTerrainAtlasOptions({9, 8}));
-  EXPECT_NO_THROW(validateTerrainAtlasOptions({8193, 1024}));
+  EXPECT_NO_THROW(validateTerrainAtlasOptions({513, 64, {}}));
+  EXPECT_NO_THROW(validateTerrainAtlasOptions({9, 8, {}}));
+  EXPECT_NO_THROW(validateTerrainAtlasOptions({8193, 1024, {}}));
   expectOptionError(500, 64, "chartSize 500 is not 2^m+1");
   expectOptionError(5, 4, "chartSize 5");
   expectOptionError(16385, 64, "chartSize 16385");
@@ -88,7 +88,7 @@ TEST(AtlasTerrain, SmallDemGridAndManifest) {
   test::TempDir tmp("gimlod-terrain");
   const DemRaster d = planeDem(40, 17, 0.1, 0.1, {10.0, 10.0});  // 39 x 16 intervals
   AtlasManifest m;
-  const TerrainAtlasStats st = writeTerrainCharts(d, {17, 8}, tmp.path(), m);
+  const TerrainAtlasStats st = writeTerrainCharts(d, {17, 8, {}}, tmp.path(), m);
   EXPECT_EQ(m.chartsX, 3u);  // ceil(39 / 16)
   EXPECT_EQ(m.chartsY, 1u);
   EXPECT_EQ(st.charts, 3u);
@@ -112,7 +112,7 @@ TEST(AtlasTerrain, SmallDemGridAndManifest) {
   writeManifest(tmp.path(), m);
   const AtlasManifest r = readManifest(tmp.path());  // validates neighbour symmetry
   EXPECT_EQ(r.charts.size(), 3u);
-  EXPECT_THROW(writeTerrainCharts(d, {500, 64}, tmp.path(), m), InputError);
+  EXPECT_THROW(writeTerrainCharts(d, {500, 64, {}}, tmp.path(), m), InputError);
 }
 
 // Shared side of two charts at one level: column u = s-1 of `a` vs u = 0 of `b` (horizontal
@@ -132,7 +132,7 @@ TEST(AtlasTerrain, RainierSeamsBitIdentical) {
   const DemRaster dem = loadDem(test::realData("terrain/mt_rainier_90m.tif"));
   test::TempDir tmp("gimlod-terrain");
   AtlasManifest m;
-  const TerrainAtlasStats st = writeTerrainCharts(dem, {129, 32}, tmp.path(), m);
+  const TerrainAtlasStats st = writeTerrainCharts(dem, {129, 32, {}}, tmp.path(), m);
   std::printf("[ timing   ] writeTerrainCharts(rainier, 129/32): %u charts, %.3f s, %.1f MB\n",
               st.charts, st.seconds, st.bytesOnDisk / 1e6);
   EXPECT_EQ(m.chartsX, 10u);  // ceil(1200 / 128)

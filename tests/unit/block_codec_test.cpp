@@ -1,4 +1,4 @@
-// The height block codec (core/height_codec.h) on the shipped SRTM tile: integer metres round-trip
+// The height block codec (core/block_codec.h) on the shipped SRTM tile: integer metres round-trip
 // exactly in every 65^2 block, float heights within half the precision, and every truncated block
 // and (but for frame-header hints zstd ignores) every corrupted one is detected (CodecError), never
 // decoded to wrong heights or a crash.
@@ -10,7 +10,7 @@
 #include <gdal_priv.h>
 
 #include "atlas/terrain/dem.h"
-#include "core/height_codec.h"
+#include "core/block_codec.h"
 #include "tests/test_util.h"
 
 namespace gimlod {

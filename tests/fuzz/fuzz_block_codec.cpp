@@ -4,7 +4,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "core/height_codec.h"
+#include "core/block_codec.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   for (uint32_t side : {65u, 17u, 3u}) {

@@ -1,6 +1,6 @@
-// Height block codec throughput (core/height_codec.h): encodes a DEM as 65^2 blocks (the atlas's
+// Height block codec throughput (core/block_codec.h): encodes a DEM as 65^2 blocks (the atlas's
 // block size) and prints bytes per sample and encode and decode samples per second on one core.
-// Usage: bench_height_codec [DEM] [precision]; default the shipped SRTM tile, lossless (integers).
+// Usage: bench_block_codec [DEM] [precision]; default the shipped SRTM tile, lossless (integers).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "atlas/terrain/dem.h"
-#include "core/height_codec.h"
+#include "core/block_codec.h"
 
 using namespace gimlod;
 using Clock = std::chrono::steady_clock;

@@ -1,0 +1,341 @@
+#include "core/block_codec.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <memory>
+
+#include <zstd.h>
+
+namespace gimlod {
+namespace {
+
+constexpr char kHeightMagic[4] = {'G', 'H', 'B', '1'};
+constexpr char kPositionMagic[4] = {'G', 'P', 'B', '1'};
+constexpr char kNormalMagic[4] = {'G', 'N', 'B', '1'};
+constexpr char kColourMagic[4] = {'G', 'C', 'B', '1'};
+constexpr size_t kMagicBytes = 4;
+constexpr size_t kIntHeaderBytes = 16;  // inside the frame: quantization, planes, channels, side, step
+constexpr size_t kByteHeaderBytes = 8;  // inside the frame: kind, channels, side
+// |quantized| bounds: integers (exact in float up to 2^24, and beyond on their own lattice) and
+// steps (float(q * step) / step rounds back to q below 2^23, so quantizing is idempotent).
+constexpr int64_t kMaxIntegerSteps = int64_t{1} << 28;
+constexpr int64_t kMaxSteps = int64_t{1} << 23;
+constexpr int kLevel = 3;
+
+struct CCtxFree { void operator()(ZSTD_CCtx* c) const { ZSTD_freeCCtx(c); } };
+struct DCtxFree { void operator()(ZSTD_DCtx* c) const { ZSTD_freeDCtx(c); } };
+
+ZSTD_CCtx* compressor() {
+  thread_local std::unique_ptr<ZSTD_CCtx, CCtxFree> c([] {
+    ZSTD_CCtx* x = ZSTD_createCCtx();
+    ZSTD_CCtx_setParameter(x, ZSTD_c_compressionLevel, kLevel);
+    ZSTD_CCtx_setParameter(x, ZSTD_c_checksumFlag, 1);
+    return x;
+  }());
+  return c.get();
+}
+
+ZSTD_DCtx* decompressor() {
+  thread_local std::unique_ptr<ZSTD_DCtx, DCtxFree> d(ZSTD_createDCtx());
+  return d.get();
+}
+
+// magic + one zstd frame (with its checksum) of raw.
+std::vector<uint8_t> frame(const char (&magic)[4], const std::vector<uint8_t>& raw) {
+  std::vector<uint8_t> out(kMagicBytes + ZSTD_compressBound(raw.size()));
+  std::memcpy(out.data(), magic, kMagicBytes);
+  const size_t written =
+      ZSTD_compress2(compressor(), out.data() + kMagicBytes, out.size() - kMagicBytes, raw.data(), raw.size());
+  if (ZSTD_isError(written)) throw std::runtime_error(std::string("block codec: zstd: ") + ZSTD_getErrorName(written));
+  out.resize(kMagicBytes + written);
+  return out;
+}
+
+// The raw bytes of a block made by frame(), checked against its magic, its frame checksum and a
+// size in [minSize, maxSize]. The buffer is the thread's own, valid until its next call.
+const std::vector<uint8_t>& unframe(std::span<const uint8_t> block, const char (&magic)[4], const char* what,
+                                    size_t minSize, size_t maxSize) {
+  if (block.size() < kMagicBytes || std::memcmp(block.data(), magic, kMagicBytes) != 0)
+    throw CodecError(std::string("not a ") + what + " block (bad magic)");
+  const uint8_t* f = block.data() + kMagicBytes;
+  const size_t fBytes = block.size() - kMagicBytes;
+  const unsigned long long size = ZSTD_getFrameContentSize(f, fBytes);
+  if (size == ZSTD_CONTENTSIZE_ERROR || size == ZSTD_CONTENTSIZE_UNKNOWN || size < minSize || size > maxSize)
+    throw CodecError(std::string("corrupt or truncated ") + what + " block (frame header)");
+  thread_local std::vector<uint8_t> raw;
+  raw.resize(size);
+  const size_t got = ZSTD_decompressDCtx(decompressor(), raw.data(), raw.size(), f, fBytes);
+  if (ZSTD_isError(got) || got != size)
+    throw CodecError(std::string("corrupt or truncated ") + what + " block (" +
+                     (ZSTD_isError(got) ? ZSTD_getErrorName(got) : "short") + ")");
+  return raw;
+}
+
+inline uint32_t zigzag(int32_t r) { return (uint32_t(r) << 1) ^ uint32_t(r >> 31); }
+inline int32_t unzigzag(uint32_t z) { return int32_t(z >> 1) ^ -int32_t(z & 1); }
+inline uint8_t zigzag8(uint8_t r) { const int8_t s = int8_t(r); return uint8_t((uint8_t(s) << 1) ^ uint8_t(s >> 7)); }
+inline uint8_t unzigzag8(uint8_t z) { return uint8_t((z >> 1) ^ uint8_t(-int(z & 1))); }
+
+// The Lorenzo prediction of sample (x, y) of an interleaved image (stride channels) from its
+// decoded neighbours (left, below, below-left); the first row and column use their one neighbour,
+// the first sample 0.
+inline int64_t predict(const int32_t* q, uint32_t side, uint32_t stride, uint32_t x, uint32_t y) {
+  const size_t row = size_t(side) * stride;
+  const size_t i = (size_t(y) * side + x) * stride;
+  if (x > 0 && y > 0) return int64_t(q[i - stride]) + q[i - row] - q[i - row - stride];
+  if (x > 0) return q[i - stride];
+  if (y > 0) return q[i - row];
+  return 0;
+}
+
+// The same for bytes, clamped to [0, 255]; the first sample 128.
+inline uint8_t predictByte(const uint8_t* b, uint32_t side, uint32_t stride, uint32_t x, uint32_t y) {
+  const size_t row = size_t(side) * stride;
+  const size_t i = (size_t(y) * side + x) * stride;
+  if (x > 0 && y > 0) return uint8_t(std::clamp(int(b[i - stride]) + b[i - row] - b[i - row - stride], 0, 255));
+  if (x > 0) return b[i - stride];
+  if (y > 0) return b[i - row];
+  return 128;
+}
+
+// ---- quantized integers (heights: 1 channel; positions: 3) ------------------------------------
+
+std::vector<uint8_t> encodeInts(const char (&magic)[4], const std::vector<int32_t>& q, uint32_t side,
+                                uint8_t channels, HeightQuantization mode, double step) {
+  const size_t n = size_t(side) * side;
+  // Residuals, zigzagged, as byte planes per channel (low bytes first); planes above the highest
+  // non-zero byte are left out.
+  std::vector<uint32_t> z(n * channels);
+  uint32_t all = 0;
+  for (uint32_t y = 0; y < side; ++y)
+    for (uint32_t x = 0; x < side; ++x)
+      for (uint32_t c = 0; c < channels; ++c) {
+        const size_t i = (size_t(y) * side + x) * channels + c;
+        z[i] = zigzag(int32_t(int64_t(q[i]) - predict(q.data() + c, side, channels, x, y)));
+        all |= z[i];
+      }
+  uint8_t planes = 1;
+  while (planes < 4 && (all >> (8 * planes)) != 0) ++planes;
+  std::vector<uint8_t> raw(kIntHeaderBytes + size_t(planes) * channels * n);
+  raw[0] = uint8_t(mode);
+  raw[1] = planes;
+  raw[2] = channels;
+  std::memcpy(raw.data() + 4, &side, 4);
+  std::memcpy(raw.data() + 8, &step, 8);
+  for (uint32_t c = 0; c < channels; ++c)
+    for (uint8_t p = 0; p < planes; ++p) {
+      uint8_t* plane = raw.data() + kIntHeaderBytes + (size_t(c) * planes + p) * n;
+      for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(z[i * channels + c] >> (8 * p));
+    }
+  return frame(magic, raw);
+}
+
+// Decodes into out (channels * side^2 floats); returns the quantization.
+HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic)[4], const char* what,
+                              uint32_t side, uint8_t channels, std::span<float> out) {
+  const size_t n = size_t(side) * side;
+  if (out.size() != n * channels) throw std::invalid_argument(std::string("decode ") + what + ": output size");
+  const std::vector<uint8_t>& raw = unframe(block, magic, what, kIntHeaderBytes, kIntHeaderBytes + 4 * channels * n);
+  const uint8_t mode = raw[0], planes = raw[1];
+  uint32_t blockSide = 0;
+  double step = 0.0;
+  std::memcpy(&blockSide, raw.data() + 4, 4);
+  std::memcpy(&step, raw.data() + 8, 8);
+  if (mode > uint8_t(HeightQuantization::kPrecision) || planes < 1 || planes > 4 || raw[2] != channels ||
+      !(step > 0.0) || !std::isfinite(step))
+    throw CodecError(std::string("corrupt ") + what + " block (header)");
+  if (blockSide != side || raw.size() != kIntHeaderBytes + size_t(planes) * channels * n)
+    throw CodecError(std::string(what) + " block of side " + std::to_string(blockSide) + ", expected " +
+                     std::to_string(side));
+  const int64_t bound = mode == uint8_t(HeightQuantization::kInteger) ? kMaxIntegerSteps : kMaxSteps;
+  // Residuals back, then the Lorenzo reconstruction in the encoder's order.
+  thread_local std::vector<int32_t> q;
+  q.resize(n * channels);
+  const uint8_t* base = raw.data() + kIntHeaderBytes;
+  for (uint32_t c = 0; c < channels; ++c) {
+    const uint8_t* planesOf = base + size_t(c) * planes * n;
+    for (uint32_t y = 0; y < side; ++y)
+      for (uint32_t x = 0; x < side; ++x) {
+        const size_t s = size_t(y) * side + x;
+        uint32_t z = 0;
+        for (uint8_t p = 0; p < planes; ++p) z |= uint32_t(planesOf[size_t(p) * n + s]) << (8 * p);
+        const int64_t v = predict(q.data() + c, side, channels, x, y) + unzigzag(z);
+        if (v < -bound || v > bound) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
+        q[s * channels + c] = int32_t(v);
+        out[s * channels + c] = float(double(v) * step);
+      }
+  }
+  return HeightQuantization(mode);
+}
+
+// ---- 8-bit samples (normals: x, y, z; colours: RGBA) ------------------------------------------
+
+using Byte4 = std::array<uint8_t, 4>;
+
+// The z byte of a unit normal with these x and y bytes (z >= 0), as packNormal rounds it.
+const std::array<uint8_t, 65536>& unitZ() {
+  static const std::array<uint8_t, 65536> table = [] {
+    std::array<uint8_t, 65536> t{};
+    for (int x = 0; x < 256; ++x)
+      for (int y = 0; y < 256; ++y) {
+        const double fx = x / 127.5 - 1.0, fy = y / 127.5 - 1.0;
+        const double s = 1.0 - fx * fx - fy * fy;
+        t[size_t(x) * 256 + size_t(y)] = uint8_t(std::lround((s > 0.0 ? std::sqrt(s) : 0.0) * 127.5 + 127.5));
+      }
+    return t;
+  }();
+  return table;
+}
+
+// The z prediction of a normal: unit length from its x and y, on the side (z above or below the
+// middle) of its left neighbour (first column: below; first sample: above).
+inline uint8_t predictZ(const uint8_t* b, uint32_t side, uint32_t x, uint32_t y, const std::array<uint8_t, 65536>& t) {
+  const size_t i = (size_t(y) * side + x) * 4;
+  const uint8_t up = t[size_t(b[i]) * 256 + b[i + 1]];
+  const uint8_t nb = x > 0 ? b[i - 4 + 2] : y > 0 ? b[i - size_t(side) * 4 + 2] : 255;
+  return nb >= 128 ? up : uint8_t(255 - up);
+}
+
+constexpr uint8_t kKindNormals = 0, kKindColours = 1;
+
+std::vector<uint8_t> encodeBytes(const char (&magic)[4], uint8_t kind, std::span<const Byte4> in, uint32_t side,
+                                 uint8_t channels) {
+  const size_t n = size_t(side) * side;
+  if (side == 0 || in.size() != n) throw std::invalid_argument("encode: expected side^2 samples");
+  const uint8_t* b = in.data()->data();
+  std::vector<uint8_t> raw(kByteHeaderBytes + size_t(channels) * n);
+  raw[0] = kind;
+  raw[1] = channels;
+  std::memcpy(raw.data() + 4, &side, 4);
+  const auto& t = unitZ();
+  for (uint32_t c = 0; c < channels; ++c) {
+    uint8_t* plane = raw.data() + kByteHeaderBytes + size_t(c) * n;
+    for (uint32_t y = 0; y < side; ++y)
+      for (uint32_t x = 0; x < side; ++x) {
+        const size_t s = size_t(y) * side + x;
+        const uint8_t p = kind == kKindNormals && c == 2 ? predictZ(b, side, x, y, t) : predictByte(b + c, side, 4, x, y);
+        plane[s] = zigzag8(uint8_t(b[s * 4 + c] - p));
+      }
+  }
+  return frame(magic, raw);
+}
+
+void decodeBytes(std::span<const uint8_t> block, const char (&magic)[4], const char* what, uint8_t kind,
+                 uint32_t side, uint8_t channels, std::span<Byte4> out) {
+  const size_t n = size_t(side) * side;
+  if (out.size() != n) throw std::invalid_argument(std::string("decode ") + what + ": output size");
+  const size_t expected = kByteHeaderBytes + size_t(channels) * n;
+  const std::vector<uint8_t>& raw = unframe(block, magic, what, kByteHeaderBytes, expected);
+  uint32_t blockSide = 0;
+  std::memcpy(&blockSide, raw.data() + 4, 4);
+  if (raw[0] != kind || raw[1] != channels) throw CodecError(std::string("corrupt ") + what + " block (header)");
+  if (blockSide != side || raw.size() != expected)
+    throw CodecError(std::string(what) + " block of side " + std::to_string(blockSide) + ", expected " +
+                     std::to_string(side));
+  uint8_t* b = out.data()->data();
+  const auto& t = unitZ();
+  const uint8_t* planes = raw.data() + kByteHeaderBytes;
+  for (uint32_t y = 0; y < side; ++y)
+    for (uint32_t x = 0; x < side; ++x) {
+      const size_t s = size_t(y) * side + x;
+      // x and y (or R, G, B, A) first: the normal's z prediction reads this sample's x and y.
+      for (uint32_t c = 0; c < channels; ++c) {
+        if (kind == kKindNormals && c == 2) continue;
+        b[s * 4 + c] = uint8_t(predictByte(b + c, side, 4, x, y) + unzigzag8(planes[size_t(c) * n + s]));
+      }
+      if (kind == kKindNormals) {
+        b[s * 4 + 2] = uint8_t(predictZ(b, side, x, y, t) + unzigzag8(planes[2 * n + s]));
+        b[s * 4 + 3] = 255;
+      }
+    }
+}
+
+}  // namespace
+
+float quantizeToStep(float v, double step) { return float(std::nearbyint(double(v) / step) * step); }
+
+std::vector<uint8_t> encodeHeights(std::span<const float> heights, uint32_t side, double precision) {
+  const size_t n = size_t(side) * side;
+  if (side == 0 || heights.size() != n) throw std::invalid_argument("encodeHeights: expected side^2 heights");
+  bool integer = true;
+  for (float h : heights) {
+    if (!std::isfinite(h)) throw std::invalid_argument("encodeHeights: non-finite height");
+    integer = integer && h == std::nearbyint(h) && std::abs(h) <= float(kMaxIntegerSteps);
+  }
+  const HeightQuantization mode = integer ? HeightQuantization::kInteger : HeightQuantization::kPrecision;
+  if (!integer && !(precision > 0.0 && std::isfinite(precision)))
+    throw std::invalid_argument("encodeHeights: non-integer heights need a precision > 0");
+  const double step = integer ? 1.0 : precision;
+  std::vector<int32_t> q(n);
+  for (size_t i = 0; i < n; ++i) {
+    const double v = std::nearbyint(double(heights[i]) / step);
+    if (std::abs(v) > double(integer ? kMaxIntegerSteps : kMaxSteps))
+      throw std::invalid_argument("encodeHeights: heights span more than 2^23 steps of the precision");
+    q[i] = int32_t(v);
+  }
+  return encodeInts(kHeightMagic, q, side, 1, mode, step);
+}
+
+HeightQuantization blockQuantization(std::span<const uint8_t> block) {
+  if (block.size() < kMagicBytes || std::memcmp(block.data(), kHeightMagic, kMagicBytes) != 0)
+    throw CodecError("not a height block (bad magic)");
+  // The header is the frame's first bytes: decode just those (the checksum is the decoder's).
+  ZSTD_DCtx* d = decompressor();
+  ZSTD_DCtx_reset(d, ZSTD_reset_session_only);
+  uint8_t head[kIntHeaderBytes];
+  ZSTD_outBuffer out{head, sizeof head, 0};
+  ZSTD_inBuffer in{block.data() + kMagicBytes, block.size() - kMagicBytes, 0};
+  while (out.pos < out.size) {
+    const size_t r = ZSTD_decompressStream(d, &out, &in);
+    if (ZSTD_isError(r)) throw CodecError(std::string("corrupt height block (") + ZSTD_getErrorName(r) + ")");
+    if (r == 0 || (in.pos == in.size && out.pos < out.size)) break;
+  }
+  ZSTD_DCtx_reset(d, ZSTD_reset_session_only);
+  if (out.pos < sizeof head || head[0] > uint8_t(HeightQuantization::kPrecision))
+    throw CodecError("corrupt or truncated height block (header)");
+  return HeightQuantization(head[0]);
+}
+
+void decodeHeights(std::span<const uint8_t> block, uint32_t side, std::span<float> out) {
+  decodeInts(block, kHeightMagic, "height", side, 1, out);
+}
+
+std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step) {
+  const size_t n = size_t(side) * side;
+  if (side == 0 || xyz.size() != 3 * n) throw std::invalid_argument("encodePositions: expected 3 side^2 floats");
+  if (!(step > 0.0) || !std::isfinite(step)) throw std::invalid_argument("encodePositions: step must be > 0");
+  std::vector<int32_t> q(3 * n);
+  for (size_t i = 0; i < 3 * n; ++i) {
+    if (!std::isfinite(xyz[i])) throw std::invalid_argument("encodePositions: non-finite coordinate");
+    const double v = std::nearbyint(double(xyz[i]) / step);
+    if (std::abs(v) > double(kMaxSteps))
+      throw std::invalid_argument("encodePositions: a coordinate lies beyond 2^23 steps of the lattice");
+    q[i] = int32_t(v);
+  }
+  return encodeInts(kPositionMagic, q, side, 3, HeightQuantization::kPrecision, step);
+}
+
+void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<float> out) {
+  decodeInts(block, kPositionMagic, "position", side, 3, out);
+}
+
+std::vector<uint8_t> encodeNormals(std::span<const Byte4> normals, uint32_t side) {
+  for (const Byte4& nrm : normals)
+    if (nrm[3] != 255) throw std::invalid_argument("encodeNormals: a packed normal's fourth byte is not 255");
+  return encodeBytes(kNormalMagic, kKindNormals, normals, side, 3);
+}
+
+void decodeNormals(std::span<const uint8_t> block, uint32_t side, std::span<Byte4> out) {
+  decodeBytes(block, kNormalMagic, "normal", kKindNormals, side, 3, out);
+}
+
+std::vector<uint8_t> encodeColours(std::span<const Byte4> colours, uint32_t side) {
+  return encodeBytes(kColourMagic, kKindColours, colours, side, 4);
+}
+
+void decodeColours(std::span<const uint8_t> block, uint32_t side, std::span<Byte4> out) {
+  decodeBytes(block, kColourMagic, "colour", kKindColours, side, 4, out);
+}
+
+}  // namespace gimlod
