@@ -1,19 +1,71 @@
-// Height block codec throughput (core/block_codec.h): encodes a DEM as 65^2 blocks (the atlas's
-// block size) and prints bytes per sample and encode and decode samples per second on one core.
-// Usage: bench_block_codec [DEM] [precision]; default the shipped SRTM tile, lossless (integers).
+// Block codec throughput (core/block_codec.h).
+// - bench_block_codec [DEM] [precision]: encodes a DEM as 65^2 blocks (the atlas's block size) and
+//   prints bytes per sample and encode and decode samples per second on one core; default the
+//   shipped SRTM tile, lossless (integers).
+// - bench_block_codec --atlas ATLAS: reads every level of every chart file of an atlas through
+//   ChartFileReader, as the page loader does, and prints its bytes per DEM sample by channel and
+//   the samples per second read on one core: heights (decoded), and normals (for a compressed
+//   terrain atlas derived from the decoded heights, decoding included).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
+#include <string>
 #include <vector>
 
 #include "atlas/terrain/dem.h"
+#include "core/atlas_format.h"
 #include "core/block_codec.h"
 
 using namespace gimlod;
 using Clock = std::chrono::steady_clock;
 
+namespace {
+
+int benchAtlas(const std::filesystem::path& dir) {
+  const AtlasManifest m = readManifest(dir);
+  std::vector<std::unique_ptr<ChartFileReader>> charts;
+  uint64_t fileBytes = 0;
+  for (const ChartInfo& c : m.charts) {
+    charts.push_back(std::make_unique<ChartFileReader>(dir / c.file));
+    fileBytes += std::filesystem::file_size(dir / c.file);
+  }
+  const uint64_t hierarchyBytes = std::filesystem::file_size(dir / m.hierarchyFile);
+  double samples = 0.0, heightS = 0.0, normalS = 0.0;
+  const bool geometry = m.kind == AtlasKind::Geometry;
+  for (int repeat = 0; repeat < 3; ++repeat) {
+    samples = 0.0;
+    for (const auto& r : charts) {
+      for (uint32_t k = 0; k < r->levels(); ++k) {
+        auto t0 = Clock::now();
+        const size_t n = geometry ? r->readLevelPositions(k).size() : r->readLevelHeights(k).size();
+        heightS += std::chrono::duration<double>(Clock::now() - t0).count();
+        t0 = Clock::now();
+        (void)r->readLevelNormals(k);
+        normalS += std::chrono::duration<double>(Clock::now() - t0).count();
+        samples += double(n);
+      }
+    }
+  }
+  heightS /= 3;
+  normalS /= 3;
+  const double demSamples = geometry ? samples : double(m.samplesX) * m.samplesY;
+  std::printf("%s: format version %u%s, %zu charts, %.0f stored samples; chart files %.3f bytes per %s sample, "
+              "hierarchy %.3f\n",
+              dir.string().c_str(), m.version, charts.front()->derivedNormals() ? " (normals derived)" : "",
+              charts.size(), samples, double(fileBytes) / demSamples, geometry ? "stored" : "DEM",
+              double(hierarchyBytes) / demSamples);
+  std::printf("read on one core: %s %.1f M samples/s; normals %.1f M samples/s; both %.1f M samples/s\n",
+              geometry ? "positions" : "heights", samples / heightS * 1e-6, samples / normalS * 1e-6,
+              samples / (heightS + normalS) * 1e-6);
+  return 0;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
+  if (argc > 2 && std::string(argv[1]) == "--atlas") return benchAtlas(argv[2]);
   const std::filesystem::path input = argc > 1 ? argv[1] : "data/terrain/mt_rainier_90m.tif";
   const double precision = argc > 2 ? std::atof(argv[2]) : 0.0;
   const DemRaster dem = loadDem(input);

@@ -5,6 +5,7 @@
 #include "core/block_codec.h"
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cerrno>
 #include <cmath>
@@ -85,6 +86,9 @@ constexpr size_t kChartHeaderBytes = 4 + 4 * 4;
 constexpr size_t kChartHeaderBytesV2 = kChartHeaderBytes + 4;
 constexpr size_t kDirEntryBytes = 16;  // version 1
 constexpr size_t kCodedEntryBytes = 12;  // version 3, per channel: u64 offset, u32 bytes
+constexpr size_t kChartHeaderBytesV3 = kChartHeaderBytesV2 + 4;  // + u32 flags
+constexpr size_t kFrameBytes = 4 * 8 + 2 * 8;                    // HeightFieldFrame
+constexpr uint32_t kFlagDerivedNormals = 1;
 constexpr size_t kChannelBytes[kChannelCount] = {sizeof(float), sizeof(PackedNormal), 3 * sizeof(float),
                                                  sizeof(PackedColour)};
 constexpr bool kChannelIsFloat[kChannelCount] = {true, false, true, false};
@@ -213,6 +217,28 @@ PackedNormal packNormal(float x, float y, float z) {
 
 std::array<float, 3> unpackNormal(const PackedNormal& n) {
   return {n[0] / 127.5f - 1.f, n[1] / 127.5f - 1.f, n[2] / 127.5f - 1.f};
+}
+
+void heightFieldNormals(const float* heights, size_t stride, uint32_t u0, uint32_t v0, uint32_t w, uint32_t h,
+                        uint32_t level, const HeightFieldFrame& f, PackedNormal* out) {
+  const int64_t step = int64_t{1} << level;
+  for (uint32_t v = 0; v < h; ++v) {
+    const int64_t gy = f.originY + (int64_t{v0 + v} << level);
+    const int64_t ya = std::clamp<int64_t>(gy - step, 0, f.maxY), yb = std::clamp<int64_t>(gy + step, 0, f.maxY);
+    const double dy = static_cast<double>(yb - ya) * f.spacing[1];
+    const float* row = heights + size_t{v} * stride;
+    for (uint32_t u = 0; u < w; ++u) {
+      const int64_t gx = f.originX + (int64_t{u0 + u} << level);
+      const int64_t xa = std::clamp<int64_t>(gx - step, 0, f.maxX), xb = std::clamp<int64_t>(gx + step, 0, f.maxX);
+      // The ring holds the heights at the clamped neighbours (xa, xb, ya, yb).
+      double dhdx = 0.0, dhdy = 0.0;
+      if (xb > xa) dhdx = (double{row[u + 1]} - row[ptrdiff_t(u) - 1]) / (static_cast<double>(xb - xa) * f.spacing[0]);
+      if (yb > ya) dhdy = (double{row[u + stride]} - row[ptrdiff_t(u) - ptrdiff_t(stride)]) / dy;
+      const double len = std::sqrt(dhdx * dhdx + dhdy * dhdy + 1.0);
+      out[size_t{v} * w + u] = packNormal(static_cast<float>(-dhdx / len), static_cast<float>(-dhdy / len),
+                                          static_cast<float>(1.0 / len));
+    }
+  }
 }
 
 uint32_t AtlasManifest::intervalsLog2() const {
@@ -532,8 +558,15 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
       throw std::invalid_argument("writeChartFile: channels have different level counts");
   const uint32_t channels = uint32_t(std::popcount(mask));
   const bool v1 = heightField && !coding.compressed;
-  const size_t header = v1 ? kChartHeaderBytes : kChartHeaderBytesV2;
-  const size_t entryBytes = coding.compressed ? kCodedEntryBytes * channels : v1 ? kDirEntryBytes : 8 * channels;
+  // Compressed height fields with their ring heights derive their normals on reading.
+  const bool derived = coding.compressed && heightField && pyramid.frame && pyramid.ringHeights.size() == levels;
+  const uint32_t stored = derived ? mask & ~(1u << kChannelNormals) : mask;
+  const size_t header = coding.compressed ? kChartHeaderBytesV3 + (derived ? kFrameBytes : 0)
+                        : v1              ? kChartHeaderBytes
+                                          : kChartHeaderBytesV2;
+  const size_t entryBytes = coding.compressed ? kCodedEntryBytes * size_t(std::popcount(stored))
+                            : v1              ? kDirEntryBytes
+                                              : 8 * channels;
   if (coding.compressed && (mask & (1u << kChannelPositions)) && !(coding.positionStep > 0.0))
     throw std::invalid_argument("writeChartFile: compressed positions need a positionStep > 0");
 
@@ -569,6 +602,19 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
     putLe<uint32_t>(buf, 12, blockIntervals);
     putLe<uint32_t>(buf, 16, levels);
     putLe<uint32_t>(buf, 20, mask);
+    putLe<uint32_t>(buf, 24, derived ? kFlagDerivedNormals : 0);
+    if (derived) {
+      const HeightFieldFrame& f = *pyramid.frame;
+      putLe<int64_t>(buf, 28, f.originX);
+      putLe<int64_t>(buf, 36, f.originY);
+      putLe<int64_t>(buf, 44, f.maxX);
+      putLe<int64_t>(buf, 52, f.maxY);
+      putLe<double>(buf, 60, f.spacing[0]);
+      putLe<double>(buf, 68, f.spacing[1]);
+      for (uint32_t k = 0; k < levels; ++k)
+        if (pyramid.ringHeights[k].size() != size_t{layouts[k].samples + 2} * (layouts[k].samples + 2))
+          throw std::invalid_argument("writeChartFile: level " + std::to_string(k) + " ring heights are not (samples+2)^2");
+    }
     size_t dirAt = header;
     std::vector<uint8_t> samples;  // one block of one channel, row-major
     for (uint32_t k = 0; k < levels; ++k) {
@@ -577,17 +623,24 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
       for (uint32_t by = 0; by < l.blocksPerSide; ++by)
         for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx)
           for (uint32_t c = 0; c < kChannelCount; ++c) {
-            if (!(mask & (1u << c))) continue;
+            if (!(stored & (1u << c))) continue;
             const size_t es = kChannelBytes[c];
-            samples.resize(size_t{bs} * bs * es);
-            for (uint32_t v = 0; v < bs; ++v)
-              std::memcpy(samples.data() + size_t{v} * bs * es,
-                          data[c][k] + (size_t{by * b + v} * l.samples + size_t{bx} * b) * es, size_t{bs} * es);
+            const bool ring = derived && c == kChannelHeights;  // (bs + 2)^2 from the ring heights
+            const uint32_t side = ring ? bs + 2 : bs;
+            samples.resize(size_t{side} * side * es);
+            for (uint32_t v = 0; v < side; ++v) {
+              const uint8_t* src =
+                  ring ? reinterpret_cast<const uint8_t*>(pyramid.ringHeights[k].data()) +
+                             (size_t{by * b + v} * (l.samples + 2) + size_t{bx} * b) * es
+                       : data[c][k] + (size_t{by * b + v} * l.samples + size_t{bx} * b) * es;
+              std::memcpy(samples.data() + size_t{v} * side * es, src, size_t{side} * es);
+            }
             const size_t count = size_t{bs} * bs;
             std::vector<uint8_t> code;
             switch (c) {
               case kChannelHeights:
-                code = encodeHeights({reinterpret_cast<const float*>(samples.data()), count}, bs, coding.heightPrecision);
+                code = encodeHeights({reinterpret_cast<const float*>(samples.data()), size_t{side} * side}, side,
+                                     coding.heightPrecision);
                 break;
               case kChannelPositions:
                 code = encodePositions({reinterpret_cast<const float*>(samples.data()), 3 * count}, bs,
@@ -658,6 +711,8 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
 }
 
 ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
+  static std::atomic<uint64_t> readers{0};
+  serial_ = ++readers;
   auto fail = [&](const std::string& what) { throw InputError(quoted(path_) + ": " + what); };
   std::error_code ec;
   const uint64_t fileSize = fs::file_size(path_, ec);
@@ -685,8 +740,37 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
          ((channelMask_ >> kChannelHeights) & 1u) == ((channelMask_ >> kChannelPositions) & 1u)))
       fail("corrupt chart header (channel mask " + std::to_string(channelMask_) + ")");
   }
+  uint32_t stored = channelMask_;  // channels with blocks in the file
+  if (compressed_) {
+    uint8_t fl[4];
+    if (fileSize < kChartHeaderBytesV3 || !file_.read(reinterpret_cast<char*>(fl), 4))
+      fail("truncated chart file (no flags)");
+    const uint32_t flags = getLe<uint32_t>(fl);
+    header = kChartHeaderBytesV3;
+    if (flags & ~kFlagDerivedNormals) fail("corrupt chart header (flags " + std::to_string(flags) + ")");
+    if (flags & kFlagDerivedNormals) {
+      if (channelMask_ != kHeightFieldMask) fail("corrupt chart header (derived normals without heights)");
+      uint8_t fr[kFrameBytes];
+      if (fileSize < kChartHeaderBytesV3 + kFrameBytes || !file_.read(reinterpret_cast<char*>(fr), kFrameBytes))
+        fail("truncated chart file (no height-field frame)");
+      HeightFieldFrame f;
+      f.originX = getLe<int64_t>(fr);
+      f.originY = getLe<int64_t>(fr + 8);
+      f.maxX = getLe<int64_t>(fr + 16);
+      f.maxY = getLe<int64_t>(fr + 24);
+      f.spacing = {getLe<double>(fr + 32), getLe<double>(fr + 40)};
+      constexpr int64_t kLimit = int64_t{1} << 40;
+      if (f.originX < 0 || f.originY < 0 || f.originX > kLimit || f.originY > kLimit || f.maxX < 0 || f.maxY < 0 ||
+          f.maxX > kLimit || f.maxY > kLimit || !(f.spacing[0] > 0.0) || !(f.spacing[1] > 0.0) ||
+          !std::isfinite(f.spacing[0]) || !std::isfinite(f.spacing[1]))
+        fail("corrupt chart header (height-field frame)");
+      frame_ = f;
+      header += kFrameBytes;
+      stored &= ~(1u << kChannelNormals);
+    }
+  }
   const size_t entryBytes = version == kChartFileVersion ? kDirEntryBytes
-                            : compressed_ ? kCodedEntryBytes * size_t(std::popcount(channelMask_))
+                            : compressed_ ? kCodedEntryBytes * size_t(std::popcount(stored))
                                           : 8 * size_t(std::popcount(channelMask_));
   chartSize_ = getLe<uint32_t>(hdr + 8);
   blockIntervals_ = getLe<uint32_t>(hdr + 12);
@@ -713,7 +797,7 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
     directory_[k].resize(size_t{l.blocksPerSide} * l.blocksPerSide);
     for (BlockEntry& e : directory_[k]) {
       for (uint32_t c = 0; c < kChannelCount; ++c) {
-        if (!hasChannel(ChartChannel(c))) continue;
+        if (!((stored >> c) & 1u)) continue;
         const uint64_t off = getLe<uint64_t>(dir.data() + at);
         at += 8;
         e.offset[c] = off;
@@ -722,7 +806,8 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
           bytes = e.bytes[c] = getLe<uint32_t>(dir.data() + at);
           at += 4;
           // A code is never empty, and never much larger than the raw samples it holds.
-          if (bytes == 0 || bytes > 2 * bs2 * kChannelBytes[c] + 1024)
+          const uint64_t side = l.blockSamples + 2;  // ring heights are the largest
+          if (bytes == 0 || bytes > 2 * side * side * kChannelBytes[c] + 1024)
             fail("corrupt chart file (block size " + std::to_string(bytes) + " out of range at level " +
                  std::to_string(k) + ")");
         }
@@ -793,8 +878,20 @@ const char* channelName(ChartChannel c) {
 }
 }  // namespace
 
-void ChartFileReader::decodeBlock(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by, uint32_t bs,
-                                  void* out) const {
+const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_t level, uint32_t bx,
+                                                        uint32_t by) const {
+  // The thread's last decoded block: a page's heights and then its derived normals decode once.
+  struct Decoded {
+    uint64_t serial = 0;
+    uint32_t channel = 0, level = 0, bx = 0, by = 0;
+    std::vector<uint8_t> samples;
+  };
+  thread_local Decoded last;
+  if (last.serial == serial_ && last.channel == c && last.level == level && last.bx == bx && last.by == by)
+    return last.samples;
+  last.serial = 0;
+  const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
+  const uint32_t side = l.blockSamples + (frame_ && c == kChannelHeights ? 2 : 0);
   const BlockEntry& e = block(level, bx, by);
   thread_local std::vector<uint8_t> code;
   code.resize(e.bytes[c]);
@@ -805,18 +902,26 @@ void ChartFileReader::decodeBlock(ChartChannel c, uint32_t level, uint32_t bx, u
     file_.read(reinterpret_cast<char*>(code.data()), static_cast<std::streamsize>(code.size()));
     if (!file_) throw InputError(quoted(path_) + ": read failed (file truncated or changed while in use)");
   }
-  const size_t count = size_t{bs} * bs;
+  const size_t count = size_t{side} * side;
+  last.samples.resize(count * kChannelBytes[c]);
+  void* out = last.samples.data();
   try {
     switch (c) {
-      case kChannelHeights: decodeHeights(code, bs, {static_cast<float*>(out), count}); break;
-      case kChannelPositions: decodePositions(code, bs, {static_cast<float*>(out), 3 * count}); break;
-      case kChannelNormals: decodeNormals(code, bs, {static_cast<PackedNormal*>(out), count}); break;
-      default: decodeColours(code, bs, {static_cast<PackedColour*>(out), count}); break;
+      case kChannelHeights: decodeHeights(code, side, {static_cast<float*>(out), count}); break;
+      case kChannelPositions: decodePositions(code, side, {static_cast<float*>(out), 3 * count}); break;
+      case kChannelNormals: decodeNormals(code, side, {static_cast<PackedNormal*>(out), count}); break;
+      default: decodeColours(code, side, {static_cast<PackedColour*>(out), count}); break;
     }
   } catch (const CodecError& err) {
     throw InputError(quoted(path_) + ": level " + std::to_string(level) + " block (" + std::to_string(bx) + ", " +
                      std::to_string(by) + ") " + channelName(c) + ": " + err.what());
   }
+  last.serial = serial_;
+  last.channel = c;
+  last.level = level;
+  last.bx = bx;
+  last.by = by;
+  return last.samples;
 }
 
 void ChartFileReader::readChannel(ChartChannel c, size_t elem, uint32_t level, uint32_t u0, uint32_t v0,
@@ -828,12 +933,22 @@ void ChartFileReader::readChannel(ChartChannel c, size_t elem, uint32_t level, u
   const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
   const uint32_t b = l.blockSamples - 1;
   if (compressed_) {
-    // The whole block decoded, then the window copied out of it.
-    thread_local std::vector<uint8_t> decoded;
-    const uint32_t bs = l.blockSamples;
-    decoded.resize(size_t{bs} * bs * elem);
-    decodeBlock(c, level, bx, by, bs, decoded.data());
+    // The whole block decoded, then the window copied out of it (or its normals derived).
     const uint32_t du = u0 - bx * b, dv = v0 - by * b;
+    if (frame_) {
+      const uint32_t side = l.blockSamples + 2;
+      const auto* ring = reinterpret_cast<const float*>(decodeBlock(kChannelHeights, level, bx, by).data()) +
+                         size_t{dv + 1} * side + du + 1;
+      if (c == kChannelNormals) {
+        heightFieldNormals(ring, side, u0, v0, n + 1, n + 1, level, *frame_, static_cast<PackedNormal*>(out));
+      } else {
+        for (uint32_t r = 0; r <= n; ++r)
+          std::memcpy(static_cast<float*>(out) + size_t{r} * (n + 1), ring + size_t{r} * side, size_t{n + 1} * elem);
+      }
+      return;
+    }
+    const std::vector<uint8_t>& decoded = decodeBlock(c, level, bx, by);
+    const uint32_t bs = l.blockSamples;
     const size_t rowBytes = size_t{n + 1} * elem;
     for (uint32_t r = 0; r <= n; ++r)
       std::memcpy(static_cast<char*>(out) + r * rowBytes, decoded.data() + (size_t{dv + r} * bs + du) * elem, rowBytes);

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -198,6 +199,24 @@ enum ChartChannel : uint32_t {
 };
 using PackedColour = std::array<uint8_t, 4>;
 
+// Where a terrain chart lies on its DEM's sample lattice. A height field's normal at a sample of
+// pyramid level k is the central difference of the heights 2^k samples away on either side, the
+// neighbours clamped to the DEM (one-sided differences at its edges, flat beyond them), divided by
+// the distance actually spanned. It depends only on global coordinates, so charts agree on shared
+// sides, and a compressed atlas derives the normals from its decoded heights instead of storing
+// them.
+struct HeightFieldFrame {
+  int64_t originX = 0, originY = 0;         // global sample of the chart's (0, 0)
+  int64_t maxX = 0, maxY = 0;               // the DEM's last column and row
+  std::array<double, 2> spacing{1.0, 1.0};  // metres between samples
+};
+
+// The normals of the window [u0, u0 + w) x [v0, v0 + h) of pyramid level `level` of the chart at
+// `frame`, from its heights with a one-sample ring: heights[0] is the height of (u0, v0), rows are
+// `stride` floats apart, and the ring lies at -1 and at w (h). out: w * h row-major.
+void heightFieldNormals(const float* heights, size_t stride, uint32_t u0, uint32_t v0, uint32_t w, uint32_t h,
+                        uint32_t level, const HeightFieldFrame& frame, PackedNormal* out);
+
 // One chart's pyramid in memory: level k is a (samples_k)^2 row-major image (row = v). A
 // height-field chart has heights and normals; a geometry chart has positions and normals, and
 // colours when the source had them. Absent channels are empty.
@@ -206,6 +225,11 @@ struct ChartPyramid {
   std::vector<std::vector<PackedNormal>> normals;   // [level][v * samples + u]
   std::vector<std::vector<glm::vec3>> positions;    // [level][v * samples + u]
   std::vector<std::vector<PackedColour>> colours;   // [level][v * samples + u]
+  // Height-field charts for a compressed file (writeChartFile): each level's heights with a
+  // one-sample ring from the neighbouring lattice ((samples + 2)^2, row-major), and where the chart
+  // lies. The file then stores these heights and derives the normals from them on reading.
+  std::vector<std::vector<float>> ringHeights;
+  std::optional<HeightFieldFrame> frame;
 };
 
 // How writeChartFile stores blocks. Uncompressed: raw samples (chart file version 1 or 2, below).
@@ -231,8 +255,11 @@ struct ChartCoding {
 // blockSamples^2 float32 heights followed by its blockSamples^2 PackedNormal, row-major. Block
 // (bx, by) of level k holds samples u in [bx*B, bx*B+B], v in [by*B, by*B+B] with
 // B = min(blockIntervals, M >> k): neighbouring blocks share one row/column.
-// Version 3 (coding.compressed): the version 2 header with version 3; each directory entry holds,
-// per present channel, u64 offset and u32 byte count of the block's code.
+// Version 3 (coding.compressed): the version 2 header with version 3, then u32 flags; with flag 1
+// (a height-field pyramid with ringHeights and frame) the normals are derived, not stored: the
+// header adds the frame (i64 originX, originY, maxX, maxY, f64 spacing x, y), and each heights
+// block holds its (blockSamples + 2)^2 heights with the ring. Each directory entry holds, per
+// stored channel, u64 offset and u32 byte count of the block's code.
 // Built in memory and written atomically. Returns bytes written. Throws std::invalid_argument on a
 // malformed pyramid or one the coding cannot take, InputError if the file cannot be written.
 uint64_t writeChartFile(const std::filesystem::path& path, const ChartPyramid& pyramid,
@@ -260,6 +287,7 @@ class ChartFileReader {
   uint32_t channelMask() const { return channelMask_; }  // bits 1 << ChartChannel
   bool hasChannel(ChartChannel c) const { return (channelMask_ >> c) & 1u; }
   bool compressed() const { return compressed_; }  // version 3: blocks decoded on read
+  bool derivedNormals() const { return frame_.has_value(); }  // from the decoded heights
   const std::filesystem::path& path() const { return path_; }
 
  private:
@@ -281,8 +309,11 @@ class ChartFileReader {
   uint32_t chartSize_ = 0, blockIntervals_ = 0, levels_ = 0;
   uint32_t channelMask_ = 0;
   bool compressed_ = false;
-  // Version 3: decodes the whole block (bx, by) of channel c into out (blockSamples^2 elements).
-  void decodeBlock(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by, uint32_t blockSamples, void* out) const;
+  std::optional<HeightFieldFrame> frame_;  // normals derived from the heights (version 3)
+  uint64_t serial_ = 0;                    // tells this reader's decoded blocks from another's
+  // Version 3: the whole block (bx, by) of stored channel c, decoded (side^2 elements, side the
+  // block's samples, plus 2 for ring heights); the thread's buffer, valid until its next call.
+  const std::vector<uint8_t>& decodeBlock(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by) const;
   std::vector<std::vector<BlockEntry>> directory_;  // [level][by * blocksPerSide + bx]
   mutable std::mutex mutex_;
   mutable std::ifstream file_;

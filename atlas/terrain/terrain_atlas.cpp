@@ -65,51 +65,45 @@ std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gri
 }
 
 ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t gridY,
-                               uint32_t chartSize) {
+                               uint32_t chartSize, bool keepRing) {
   if (chartSize < 3 || !std::has_single_bit(chartSize - 1))
     throw std::invalid_argument("buildChartPyramid: chartSize is not 2^m+1");
   if (dem.width == 0 || dem.height == 0 || dem.heights.size() != size_t{dem.width} * dem.height)
     throw std::invalid_argument("buildChartPyramid: empty or inconsistent DEM");
   const int64_t m = int64_t{chartSize} - 1;
   const uint32_t levels = static_cast<uint32_t>(std::countr_zero(chartSize - 1)) + 1;
-  const int64_t ox = gridX * m, oy = gridY * m;
-  const int64_t maxX = int64_t{dem.width} - 1, maxY = int64_t{dem.height} - 1;
+  HeightFieldFrame frame;
+  frame.originX = gridX * m;
+  frame.originY = gridY * m;
+  frame.maxX = int64_t{dem.width} - 1;
+  frame.maxY = int64_t{dem.height} - 1;
+  frame.spacing = dem.spacing;
   ChartPyramid p;
   p.heights.resize(levels);
   p.normals.resize(levels);
+  if (keepRing) {
+    p.ringHeights.resize(levels);
+    p.frame = frame;
+  }
+  std::vector<float> ring;
   for (uint32_t k = 0; k < levels; ++k) {
     const uint32_t s = static_cast<uint32_t>(m >> k) + 1;
-    const int64_t step = int64_t{1} << k;
-    auto& h = p.heights[k];
-    auto& nrm = p.normals[k];
-    h.resize(size_t{s} * s);
-    nrm.resize(size_t{s} * s);
-    for (uint32_t v = 0; v < s; ++v) {
-      const int64_t gy = oy + (int64_t{v} << k);
-      // note: neighbours are clamped to the DEM and the difference divided by the distance
-      // actually spanned, so borders get one-sided differences and the clamped region outside the
-      // DEM gets the flat slope of its edge-clamped heights. Both depend only on global
-      // coordinates, so two charts compute bit-identical normals on a shared side.
-      const int64_t ya = std::clamp<int64_t>(gy - step, 0, maxY);
-      const int64_t yb = std::clamp<int64_t>(gy + step, 0, maxY);
-      for (uint32_t u = 0; u < s; ++u) {
-        const int64_t gx = ox + (int64_t{u} << k);
-        h[size_t{v} * s + u] = clampedHeight(dem, gx, gy);
-        const int64_t xa = std::clamp<int64_t>(gx - step, 0, maxX);
-        const int64_t xb = std::clamp<int64_t>(gx + step, 0, maxX);
-        double dhdx = 0.0, dhdy = 0.0;
-        if (xb > xa)
-          dhdx = (double{clampedHeight(dem, xb, gy)} - clampedHeight(dem, xa, gy)) /
-                 (static_cast<double>(xb - xa) * dem.spacing[0]);
-        if (yb > ya)
-          dhdy = (double{clampedHeight(dem, gx, yb)} - clampedHeight(dem, gx, ya)) /
-                 (static_cast<double>(yb - ya) * dem.spacing[1]);
-        const double len = std::sqrt(dhdx * dhdx + dhdy * dhdy + 1.0);
-        nrm[size_t{v} * s + u] = packNormal(static_cast<float>(-dhdx / len),
-                                            static_cast<float>(-dhdy / len),
-                                            static_cast<float>(1.0 / len));
-      }
+    const size_t rs = size_t{s} + 2;
+    // The level's heights with a one-sample ring of the neighbouring lattice, edge-clamped to the
+    // DEM; the normals are differences over it (heightFieldNormals).
+    ring.resize(rs * rs);
+    for (size_t v = 0; v < rs; ++v) {
+      const int64_t gy = frame.originY + ((int64_t(v) - 1) * (int64_t{1} << k));
+      for (size_t u = 0; u < rs; ++u)
+        ring[v * rs + u] = clampedHeight(dem, frame.originX + (int64_t(u) - 1) * (int64_t{1} << k), gy);
     }
+    auto& h = p.heights[k];
+    h.resize(size_t{s} * s);
+    for (uint32_t v = 0; v < s; ++v)
+      std::copy_n(ring.data() + (v + 1) * rs + 1, s, h.data() + size_t{v} * s);
+    p.normals[k].resize(size_t{s} * s);
+    heightFieldNormals(ring.data() + rs + 1, rs, 0, 0, s, s, k, frame, p.normals[k].data());
+    if (keepRing) p.ringHeights[k] = ring;
   }
   return p;
 }
@@ -197,7 +191,7 @@ TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOpt
   arena.execute([&] {
     tbb::parallel_for(size_t{0}, manifest.charts.size(), [&](size_t i) {
       const ChartInfo& c = manifest.charts[i];
-      const ChartPyramid p = buildChartPyramid(dem, c.gridX, c.gridY, cs);
+      const ChartPyramid p = buildChartPyramid(dem, c.gridX, c.gridY, cs, options.coding.compressed);
       bytes += writeChartFile(dir / c.file, p, cs, options.blockIntervals, options.coding);
       progress::advance();
     });

@@ -42,9 +42,10 @@ std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gri
                                 uint32_t chartSize);
 
 // Builds the pyramid (subsampling) and normal maps of one chart. The normal at a sample comes from
-// central differences of the global DEM at that level's spacing, so shared borders match.
+// central differences of the global DEM at that level's spacing (heightFieldNormals), so shared
+// borders match. keepRing: also the ring heights and frame a compressed file derives normals from.
 ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t gridY,
-                               uint32_t chartSize);
+                               uint32_t chartSize, bool keepRing = false);
 
 // Fills the manifest's chart fields for `dem` (chart grid, files, root neighbours, spacing,
 // samples, height range, georeference, voids) without writing anything.

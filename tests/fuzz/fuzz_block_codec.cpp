@@ -1,5 +1,6 @@
-// libFuzzer harness for the height block decoder: any bytes end in decoded heights or a
-// CodecError, for every block side the atlas uses.
+// libFuzzer harness for the block decoders: any bytes end in decoded samples or a CodecError, for
+// every block side the atlas uses and every kind of block (heights, positions, normals, colours).
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -7,15 +8,30 @@
 #include "core/block_codec.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  for (uint32_t side : {65u, 17u, 3u}) {
-    std::vector<float> out(size_t(side) * side);
+  const std::span<const uint8_t> in(data, size);
+  for (uint32_t side : {67u, 65u, 17u, 3u}) {
+    const size_t n = size_t(side) * side;
+    std::vector<float> floats(3 * n);
+    std::vector<std::array<uint8_t, 4>> bytes(n);
     try {
-      gimlod::decodeHeights({data, size}, side, out);
+      gimlod::decodeHeights(in, side, std::span<float>(floats.data(), n));
+    } catch (const gimlod::CodecError&) {
+    }
+    try {
+      gimlod::decodePositions(in, side, floats);
+    } catch (const gimlod::CodecError&) {
+    }
+    try {
+      gimlod::decodeNormals(in, side, bytes);
+    } catch (const gimlod::CodecError&) {
+    }
+    try {
+      gimlod::decodeColours(in, side, bytes);
     } catch (const gimlod::CodecError&) {
     }
   }
   try {
-    (void)gimlod::blockQuantization({data, size});
+    (void)gimlod::blockQuantization(in);
   } catch (const gimlod::CodecError&) {
   }
   return 0;

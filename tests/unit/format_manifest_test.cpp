@@ -34,6 +34,8 @@ AtlasManifest sampleManifest() {
   m.georef.geotransform = {-122.0004166, 0.000833333, 0, 47.0004166, 0, -0.000833333};
   m.georef.geographic = true;
   m.georef.centreLatitudeDeg = 46.5;
+  m.compression.present = true;
+  m.compression.heightPrecision = 0.25;
   m.depth = 3;
   m.maxNodeResLog2 = 5;
   m.minNodeResLog2 = 2;
@@ -72,6 +74,8 @@ TEST(FormatManifest, RoundTrip) {
   EXPECT_EQ(b.georef.geotransform, a.georef.geotransform);
   EXPECT_EQ(b.georef.geographic, a.georef.geographic);
   EXPECT_EQ(b.georef.centreLatitudeDeg, a.georef.centreLatitudeDeg);
+  EXPECT_TRUE(b.compression.present);
+  EXPECT_EQ(b.compression.heightPrecision, 0.25);
   EXPECT_EQ(b.hierarchyFile, a.hierarchyFile);
   EXPECT_EQ(b.depth, a.depth);
   EXPECT_EQ(b.maxNodeResLog2, a.maxNodeResLog2);
@@ -92,6 +96,12 @@ TEST(FormatManifest, RoundTrip) {
   const json j = json::parse(in);
   EXPECT_EQ(j["format"], "gimlod-atlas");
   EXPECT_EQ(j["version"], kAtlasFormatVersion);
+  // Without compression the manifest is version 1, which earlier builds read.
+  AtlasManifest plain = sampleManifest();
+  plain.compression = CompressionInfo{};
+  writeManifest(tmp.path(), plain);
+  EXPECT_EQ(readManifest(tmp.path()).version, 1u);
+  EXPECT_FALSE(readManifest(tmp.path()).compression.present);
 }
 
 // Writes the sample manifest, edits its JSON, and expects readManifest to fail naming the
@@ -121,6 +131,10 @@ TEST(FormatManifest, ValidationErrors) {
   expectBad([](json& j) { j["format"] = "something-else"; }, "not a gimlod atlas manifest");
   expectBad([](json& j) { j.erase("format"); }, "not a gimlod atlas manifest");
   expectBad([](json& j) { j["version"] = 99; }, "unsupported atlas format version 99");
+  expectBad([](json& j) { j.erase("compression"); }, "format version 2 needs the field 'compression'");
+  expectBad([](json& j) { j["version"] = 1; }, "field 'compression' needs format version 2");
+  expectBad([](json& j) { j["compression"]["codec"] = "lzma"; }, "unknown compression codec 'lzma'");
+  expectBad([](json& j) { j["compression"]["heightPrecision"] = -1; }, "compression steps must be >= 0");
   expectBad([](json& j) { j["chartSize"] = 500; }, "chartSize 500 is not 2^m+1");
   expectBad([](json& j) { j["chartSize"] = -129; }, "chartSize");
   expectBad([](json& j) { j["blockIntervals"] = 256; }, "blockIntervals 256");

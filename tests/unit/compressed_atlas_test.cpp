@@ -1,0 +1,232 @@
+// Compressed atlases (chart file version 3, atlas format version 2) on the shipped SRTM tile:
+// every chart's heights and normals decode to exactly the pyramid they were built from (integer
+// metres losslessly, normals derived from the heights bit for bit), float heights stay within half
+// the precision, a corrupt or truncated block is reported naming the file and the block, and
+// version 1 atlases still open.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <iterator>
+
+#include <gdal_priv.h>
+
+#include "atlas/terrain/dem.h"
+#include "atlas/terrain/terrain_atlas.h"
+#include "core/atlas_format.h"
+#include "core/block_codec.h"
+#include "pipeline/build.h"
+#include "runtime/atlas_view.h"
+#include "runtime/page_reader.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path kTile = "terrain/mt_rainier_90m.tif";
+
+// The tile with its filled voids rounded to whole metres, as a compressed build of it stores them.
+DemRaster wholeMetreTile() {
+  DemRaster dem = loadDem(test::repoData() / kTile);
+  EXPECT_TRUE(dem.integerHeights);
+  for (float& h : dem.heights) h = quantizeToStep(h, 1.0);
+  return dem;
+}
+
+std::string bytesOf(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+void writeBytes(const fs::path& p, const std::string& bytes) {
+  std::ofstream out(p, std::ios::binary | std::ios::trunc);
+  out.write(bytes.data(), std::streamsize(bytes.size()));
+}
+
+TEST(CompressedAtlas, TerrainChartsDecodeToTheirPyramids) {
+  const DemRaster dem = wholeMetreTile();
+  test::TempDir tmp("gimlod-coded");
+  constexpr uint32_t kChartSize = 257, kBlock = 32;
+  ChartCoding coded;
+  coded.compressed = true;
+  coded.heightPrecision = 1.0;
+  uint64_t rawBytes = 0, codedBytes = 0;
+  for (int32_t gy = 0; gy * 256 < int32_t(dem.height) - 1; ++gy)
+    for (int32_t gx = 0; gx * 256 < int32_t(dem.width) - 1; ++gx) {
+      const ChartPyramid p = buildChartPyramid(dem, gx, gy, kChartSize, true);
+      const ChartPyramid plain = buildChartPyramid(dem, gx, gy, kChartSize);
+      ASSERT_EQ(plain.normals, p.normals);  // the ring does not change what is built
+      const fs::path raw = tmp.path() / "raw.bin", code = tmp.path() / "coded.bin";
+      rawBytes += writeChartFile(raw, plain, kChartSize, kBlock);
+      codedBytes += writeChartFile(code, p, kChartSize, kBlock, coded);
+      const ChartFileReader r(raw), c(code);
+      ASSERT_FALSE(r.compressed());
+      ASSERT_TRUE(c.compressed());
+      ASSERT_TRUE(c.derivedNormals());
+      for (uint32_t k = 0; k < c.levels(); ++k) {
+        ASSERT_EQ(c.readLevelHeights(k), p.heights[k]) << "chart " << gx << "," << gy << " level " << k;
+        ASSERT_EQ(c.readLevelHeights(k), r.readLevelHeights(k));
+        // Derived on reading, bit for bit the normals the builder computed and version 1 stores.
+        ASSERT_EQ(c.readLevelNormals(k), p.normals[k]) << "chart " << gx << "," << gy << " level " << k;
+        ASSERT_EQ(c.readLevelNormals(k), r.readLevelNormals(k));
+      }
+      // A window inside a block, as the page reader asks for one.
+      std::vector<float> hw(9 * 9), hr(9 * 9);
+      std::vector<PackedNormal> nw(9 * 9), nr(9 * 9);
+      c.readHeights(0, 40, 72, 8, hw.data());
+      r.readHeights(0, 40, 72, 8, hr.data());
+      c.readNormals(0, 40, 72, 8, nw.data());
+      r.readNormals(0, 40, 72, 8, nr.data());
+      EXPECT_EQ(hw, hr);
+      EXPECT_EQ(nw, nr);
+    }
+  std::printf("  chart files: %llu bytes raw, %llu compressed (%.1fx smaller)\n", (unsigned long long)rawBytes,
+              (unsigned long long)codedBytes, double(rawBytes) / double(codedBytes));
+  EXPECT_LT(codedBytes * 6, rawBytes);
+}
+
+TEST(CompressedAtlas, CorruptAndTruncatedBlocksAreNamed) {
+  const DemRaster dem = wholeMetreTile();
+  test::TempDir tmp("gimlod-coded-bad");
+  ChartCoding coded;
+  coded.compressed = true;
+  const fs::path good = tmp.path() / "chart_0004.bin";
+  writeChartFile(good, buildChartPyramid(dem, 1, 1, 129, true), 129, 32, coded);
+  const std::string bytes = bytesOf(good);
+  const fs::path bad = tmp.path() / "chart_bad.bin";
+  auto readAll = [&] {
+    const ChartFileReader r(bad);
+    for (uint32_t k = 0; k < r.levels(); ++k) {
+      (void)r.readLevelHeights(k);
+      (void)r.readLevelNormals(k);
+    }
+  };
+  // Every byte flipped past the header: an InputError naming the file, and for a block the level
+  // and the block; or (a zstd frame's unused hint bits) the same samples.
+  size_t named = 0, same = 0;
+  for (size_t at = 80; at < bytes.size(); at += 7) {
+    std::string b = bytes;
+    b[at] = char(b[at] ^ 0x5a);
+    writeBytes(bad, b);
+    try {
+      readAll();
+      const ChartFileReader r(bad), g(good);
+      for (uint32_t k = 0; k < r.levels(); ++k) ASSERT_EQ(r.readLevelHeights(k), g.readLevelHeights(k)) << at;
+      ++same;
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      ASSERT_NE(msg.find(bad.string()), std::string::npos) << msg;
+      if (msg.find(" block (") != std::string::npos) {
+        ASSERT_NE(msg.find("level "), std::string::npos) << msg;
+        ++named;
+      }
+    }
+  }
+  EXPECT_GT(named, (bytes.size() - 80) / 7 * 9 / 10);  // nearly every flip lands in a block's code
+  std::printf("  %zu flips: %zu named the block, %zu decoded the same samples\n", (bytes.size() - 80) / 7, named, same);
+  // Every truncation: an InputError naming the file.
+  for (size_t len = 0; len < bytes.size(); len += 13) {
+    writeBytes(bad, bytes.substr(0, len));
+    try {
+      readAll();
+      FAIL() << "truncated to " << len << " bytes and read";
+    } catch (const InputError& e) {
+      ASSERT_NE(std::string(e.what()).find(bad.string()), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST(CompressedAtlas, FloatHeightsStayWithinHalfThePrecision) {
+  // The tile in feet-like float metres: no height is whole.
+  test::TempDir tmp("gimlod-coded-float");
+  GDALAllRegister();
+  const DemRaster src = loadDem(test::repoData() / kTile);
+  const fs::path tif = tmp.path() / "float.tif";
+  {
+    GDALDataset* in = GDALDataset::FromHandle(GDALOpen((test::repoData() / kTile).c_str(), GA_ReadOnly));
+    ASSERT_NE(in, nullptr);
+    GDALDriver* gtiff = GetGDALDriverManager()->GetDriverByName("GTiff");
+    GDALDataset* out = gtiff->Create(tif.c_str(), int(src.width), int(src.height), 1, GDT_Float32, nullptr);
+    double gt[6];
+    in->GetGeoTransform(gt);
+    out->SetGeoTransform(gt);
+    out->SetSpatialRef(in->GetSpatialRef());
+    std::vector<float> rows(size_t(src.width) * src.height);
+    // loadDem's row 0 is the south edge; the GeoTIFF's is the north.
+    for (uint32_t y = 0; y < src.height; ++y)
+      for (uint32_t x = 0; x < src.width; ++x)
+        rows[size_t(src.height - 1 - y) * src.width + x] = src.heights[size_t(y) * src.width + x] * 0.3048f + 0.123f;
+    ASSERT_EQ(out->GetRasterBand(1)->RasterIO(GF_Write, 0, 0, int(src.width), int(src.height), rows.data(),
+                                              int(src.width), int(src.height), GDT_Float32, 0, 0),
+              CE_None);
+    GDALClose(out);
+    GDALClose(in);
+  }
+  const DemRaster fl = loadDem(tif);
+  ASSERT_FALSE(fl.integerHeights);
+  TerrainBuildOptions o;
+  o.input = tif;
+  o.output = tmp.path() / "atlas";
+  o.chartSize = 257;
+  o.heightPrecision = 0.05;
+  buildAtlas(o);
+  const AtlasManifest m = readManifest(o.output);
+  EXPECT_EQ(m.version, 2u);
+  ASSERT_TRUE(m.compression.present);
+  EXPECT_EQ(m.compression.heightPrecision, 0.05);
+  double worst = 0.0;
+  for (const ChartInfo& c : m.charts) {
+    const ChartFileReader r(o.output / c.file);
+    const std::vector<float> h = r.readLevelHeights(0);
+    for (uint32_t v = 0; v < m.chartSize; ++v)
+      for (uint32_t u = 0; u < m.chartSize; ++u) {
+        const int64_t gx = std::min<int64_t>(c.gridX * 256 + u, fl.width - 1);
+        const int64_t gy = std::min<int64_t>(c.gridY * 256 + v, fl.height - 1);
+        worst = std::max(worst, std::abs(double(h[size_t(v) * m.chartSize + u]) - fl.heights[size_t(gy) * fl.width + gx]));
+      }
+  }
+  EXPECT_GT(worst, 0.0);
+  EXPECT_LE(worst, 0.025 + 1e-3);  // half the precision, plus float rounding at 1,300 m
+}
+
+TEST(CompressedAtlas, Version1AtlasesStillOpen) {
+  test::TempDir tmp("gimlod-v1");
+  TerrainBuildOptions o;
+  o.input = test::repoData() / kTile;
+  o.chartSize = 257;
+  o.output = tmp.path() / "v1";
+  o.compress = false;
+  buildAtlas(o);
+  o.output = tmp.path() / "v2";
+  o.compress = true;
+  buildAtlas(o);
+  const AtlasView v1 = openAtlas(tmp.path() / "v1"), v2 = openAtlas(tmp.path() / "v2");
+  EXPECT_EQ(v1.manifest.version, 1u);
+  EXPECT_FALSE(v1.manifest.compression.present);
+  EXPECT_EQ(v2.manifest.version, 2u);
+  ASSERT_EQ(v1.hierarchy.chartCount(), v2.hierarchy.chartCount());
+  const PageReader p1(v1.dir, v1.manifest, v1.hierarchy.params), p2(v2.dir, v2.manifest, v2.hierarchy.params);
+  // The same pages, but for the filled voids, which version 2 rounds to whole metres like the tile.
+  size_t pages = 0;
+  double worst = 0.0;
+  std::vector<float> a, b;
+  std::vector<PackedNormal> na, nb;
+  for (uint32_t c = 0; c < v1.hierarchy.chartCount(); ++c)
+    for (uint32_t level = 0; level < v1.manifest.depth; ++level)
+      for (uint32_t y = 0; y < (1u << level); ++y)
+        for (uint32_t x = 0; x < (1u << level); ++x) {
+          p1.read(NodeId{c, level, x, y}, a, na);
+          p2.read(NodeId{c, level, x, y}, b, nb);
+          ASSERT_EQ(a.size(), b.size());
+          for (size_t i = 0; i < a.size(); ++i) worst = std::max(worst, double(std::abs(a[i] - b[i])));
+          ++pages;
+        }
+  EXPECT_GT(pages, 25u);
+  EXPECT_LE(worst, 0.5);
+  EXPECT_LT(fs::file_size(tmp.path() / "v2/charts/chart_0000.bin") * 5, fs::file_size(tmp.path() / "v1/charts/chart_0000.bin"));
+}
+
+}  // namespace
+}  // namespace gimlod
