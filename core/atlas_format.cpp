@@ -221,22 +221,33 @@ std::array<float, 3> unpackNormal(const PackedNormal& n) {
 
 void heightFieldNormals(const float* heights, size_t stride, uint32_t u0, uint32_t v0, uint32_t w, uint32_t h,
                         uint32_t level, const HeightFieldFrame& f, PackedNormal* out) {
+  // note: single precision, one reciprocal per row and column, and a truncating quantizer: this
+  // runs on the loader thread for every page of a compressed atlas, and the builder calls it too,
+  // so what is stored (version 1) and what is derived (version 3) agree bit for bit.
   const int64_t step = int64_t{1} << level;
+  // 1 / the distance spanned, per column and row: 2^(k+1) samples inside the DEM, 2^k at its edges
+  // (one-sided), 0 beyond it (flat).
+  auto inverseSpan = [&](int64_t g, int64_t max, double spacing) {
+    const int64_t a = std::clamp<int64_t>(g - step, 0, max), b = std::clamp<int64_t>(g + step, 0, max);
+    return b > a ? static_cast<float>(1.0 / (static_cast<double>(b - a) * spacing)) : 0.f;
+  };
+  thread_local std::vector<float> cx;
+  cx.resize(w);
+  for (uint32_t u = 0; u < w; ++u) cx[u] = inverseSpan(f.originX + (int64_t{u0 + u} << level), f.maxX, f.spacing[0]);
+  auto q = [](float c) { return static_cast<uint8_t>(c * 127.5f + 128.f); };  // c in [-1, 1]
+
   for (uint32_t v = 0; v < h; ++v) {
-    const int64_t gy = f.originY + (int64_t{v0 + v} << level);
-    const int64_t ya = std::clamp<int64_t>(gy - step, 0, f.maxY), yb = std::clamp<int64_t>(gy + step, 0, f.maxY);
-    const double dy = static_cast<double>(yb - ya) * f.spacing[1];
+    const float cy = inverseSpan(f.originY + (int64_t{v0 + v} << level), f.maxY, f.spacing[1]);
     const float* row = heights + size_t{v} * stride;
+    const float* below = row - stride;
+    const float* above = row + stride;
+    PackedNormal* o = out + size_t{v} * w;
     for (uint32_t u = 0; u < w; ++u) {
-      const int64_t gx = f.originX + (int64_t{u0 + u} << level);
-      const int64_t xa = std::clamp<int64_t>(gx - step, 0, f.maxX), xb = std::clamp<int64_t>(gx + step, 0, f.maxX);
-      // The ring holds the heights at the clamped neighbours (xa, xb, ya, yb).
-      double dhdx = 0.0, dhdy = 0.0;
-      if (xb > xa) dhdx = (double{row[u + 1]} - row[ptrdiff_t(u) - 1]) / (static_cast<double>(xb - xa) * f.spacing[0]);
-      if (yb > ya) dhdy = (double{row[u + stride]} - row[ptrdiff_t(u) - ptrdiff_t(stride)]) / dy;
-      const double len = std::sqrt(dhdx * dhdx + dhdy * dhdy + 1.0);
-      out[size_t{v} * w + u] = packNormal(static_cast<float>(-dhdx / len), static_cast<float>(-dhdy / len),
-                                          static_cast<float>(1.0 / len));
+      // The ring holds the heights at the clamped neighbours.
+      const float dx = (row[u + 1] - row[ptrdiff_t(u) - 1]) * cx[u];
+      const float dy = (above[u] - below[u]) * cy;
+      const float inv = 1.f / std::sqrt(dx * dx + dy * dy + 1.f);
+      o[u] = PackedNormal{q(-dx * inv), q(-dy * inv), q(inv), 255};
     }
   }
 }

@@ -149,22 +149,37 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
     throw CodecError(std::string(what) + " block of side " + std::to_string(blockSide) + ", expected " +
                      std::to_string(side));
   const int64_t bound = mode == uint8_t(HeightQuantization::kInteger) ? kMaxIntegerSteps : kMaxSteps;
-  // Residuals back, then the Lorenzo reconstruction in the encoder's order.
-  thread_local std::vector<int32_t> q;
-  q.resize(n * channels);
+  // Residuals back (plane by plane), then the Lorenzo reconstruction row by row in wrapping
+  // unsigned arithmetic (a crafted block cannot overflow), then the range check.
+  thread_local std::vector<uint32_t> q;
+  q.resize(n);
   const uint8_t* base = raw.data() + kIntHeaderBytes;
   for (uint32_t c = 0; c < channels; ++c) {
     const uint8_t* planesOf = base + size_t(c) * planes * n;
-    for (uint32_t y = 0; y < side; ++y)
-      for (uint32_t x = 0; x < side; ++x) {
-        const size_t s = size_t(y) * side + x;
-        uint32_t z = 0;
-        for (uint8_t p = 0; p < planes; ++p) z |= uint32_t(planesOf[size_t(p) * n + s]) << (8 * p);
-        const int64_t v = predict(q.data() + c, side, channels, x, y) + unzigzag(z);
-        if (v < -bound || v > bound) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
-        q[s * channels + c] = int32_t(v);
-        out[s * channels + c] = float(double(v) * step);
-      }
+    for (size_t i = 0; i < n; ++i) q[i] = planesOf[i];
+    for (uint8_t p = 1; p < planes; ++p) {
+      const uint8_t* plane = planesOf + size_t(p) * n;
+      for (size_t i = 0; i < n; ++i) q[i] |= uint32_t(plane[i]) << (8 * p);
+    }
+    for (size_t i = 0; i < n; ++i) q[i] = uint32_t(unzigzag(q[i]));
+    for (uint32_t x = 1; x < side; ++x) q[x] += q[x - 1];
+    for (uint32_t y = 1; y < side; ++y) {
+      uint32_t* row = q.data() + size_t(y) * side;
+      const uint32_t* prev = row - side;
+      row[0] += prev[0];
+      for (uint32_t x = 1; x < side; ++x) row[x] += row[x - 1] + prev[x] - prev[x - 1];
+    }
+    int32_t lo = 0, hi = 0;
+    for (size_t i = 0; i < n; ++i) {
+      lo = std::min(lo, int32_t(q[i]));
+      hi = std::max(hi, int32_t(q[i]));
+    }
+    if (lo < -bound || hi > bound) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
+    if (channels == 1) {
+      for (size_t i = 0; i < n; ++i) out[i] = float(double(int32_t(q[i])) * step);
+    } else {
+      for (size_t i = 0; i < n; ++i) out[i * channels + c] = float(double(int32_t(q[i])) * step);
+    }
   }
   return HeightQuantization(mode);
 }
