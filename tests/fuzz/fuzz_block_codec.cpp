@@ -9,7 +9,7 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::span<const uint8_t> in(data, size);
-  for (uint32_t side : {67u, 65u, 17u, 3u}) {
+  for (uint32_t side : {67u, 65u, 17u, 11u, 3u}) {
     const size_t n = size_t(side) * side;
     std::vector<float> floats(3 * n);
     std::vector<std::array<uint8_t, 4>> bytes(n);
