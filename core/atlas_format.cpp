@@ -234,7 +234,10 @@ void heightFieldNormals(const float* heights, size_t stride, uint32_t u0, uint32
   thread_local std::vector<float> cx;
   cx.resize(w);
   for (uint32_t u = 0; u < w; ++u) cx[u] = inverseSpan(f.originX + (int64_t{u0 + u} << level), f.maxX, f.spacing[0]);
-  auto q = [](float c) { return static_cast<uint8_t>(c * 127.5f + 128.f); };  // c in [-1, 1]
+  auto q = [](float c) {  // c in [-1, 1]; NaN (from a corrupt file's heights) to -1
+    c = c > -1.f ? (c < 1.f ? c : 1.f) : -1.f;
+    return static_cast<uint8_t>(c * 127.5f + 128.f);
+  };
 
   for (uint32_t v = 0; v < h; ++v) {
     const float cy = inverseSpan(f.originY + (int64_t{v0 + v} << level), f.maxY, f.spacing[1]);

@@ -143,7 +143,7 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
   std::memcpy(&blockSide, raw.data() + 4, 4);
   std::memcpy(&step, raw.data() + 8, 8);
   if (mode > uint8_t(HeightQuantization::kPrecision) || planes < 1 || planes > 4 || raw[2] != channels ||
-      !(step > 0.0) || !std::isfinite(step))
+      !(step > 0.0) || !(step <= 1e30))  // decoded values stay finite floats
     throw CodecError(std::string("corrupt ") + what + " block (header)");
   if (blockSide != side || raw.size() != kIntHeaderBytes + size_t(planes) * channels * n)
     throw CodecError(std::string(what) + " block of side " + std::to_string(blockSide) + ", expected " +
