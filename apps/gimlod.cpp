@@ -115,7 +115,7 @@ std::string flagFor(std::string_view name) {
       {"output", "--output"},                 {"worstCharts", "--worst"},
       {"thumbnailSize", "--image-size"},      {"imageryScale", "--imagery-scale"},
       {"imageryExtent", "--imagery-extent"},  {"heightPrecision", "--height-precision"},
-      {"compress", "--uncompressed"}};
+      {"compress", "--uncompressed"},         {"positionBits", "--position-bits"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }
@@ -415,7 +415,11 @@ int main(int argc, char** argv) {
                     "rounded like it, else 0.01)");
   bool uncompressed = false;
   build->add_flag("--uncompressed", uncompressed,
-                  "DEMs: write raw float32 chart files (atlas format version 1) instead of compressed ones");
+                  "Write raw chart files (atlas format version 1: float32 heights or positions, 4-byte normals) "
+                  "instead of compressed ones");
+  build->add_option("--position-bits", mesh.positionBits,
+                    "Meshes: positions are stored on a lattice of 2^B steps across the bounding-box diagonal")
+      ->capture_default_str();
 
   RenderArgs r;
   auto* render = app.add_subcommand("render", "Render an atlas headless (EGL) to PNG frames and stats.csv");
@@ -504,6 +508,7 @@ int main(int argc, char** argv) {
     if (*build) {
       const uint64_t maxMemoryBytes = parseBytes("--max-memory", maxMemory);
       common.spellOption = flagFor;
+      common.compress = !uncompressed;
       if (isMesh(detectInputKind(common.input))) {
         if (!terrain.imagery.empty())
           throw InputError(common.input.string() + ": --imagery drapes a raster over a DEM; a mesh carries its own "
@@ -519,7 +524,7 @@ int main(int argc, char** argv) {
         return runBuild(mesh);
       }
       static_cast<CommonBuildOptions&>(terrain) = common;
-      terrain.compress = !uncompressed;
+
       if (build->get_option("--max-memory")->count() > 0) terrain.maxMemory = maxMemoryBytes;
       if (build->get_option("--imagery-scale")->count() > 0) {
         if (imageryScale != 1 && imageryScale != 2 && imageryScale != 4)

@@ -26,6 +26,9 @@ struct CommonBuildOptions {
   uint32_t nodeRes = 64;         // maximum node resolution R (intervals, power of two)
   uint32_t minNodeRes = 4;       // minimum node resolution (intervals, power of two)
   uint32_t threads = 0;          // worker threads; 0: all cores
+  // Compressed chart files (atlas format version 2, core/block_codec.h); false: format version 1
+  // (raw samples).
+  bool compress = true;
   // Spells an option's parameter name ("maxMemory") in logged warnings, e.g. as the front end's
   // flag; empty: the parameter name itself.
   std::function<std::string(std::string_view)> spellOption;
@@ -49,10 +52,9 @@ struct TerrainBuildOptions : CommonBuildOptions {
   // sample, plus the imagery's) exceeds it is refused once opened, before its data is read (the
   // message names the cap, not how it was chosen). 0: three quarters of the machine's memory.
   uint64_t maxMemory = 0;
-  // Compressed chart files (format version 2, core/block_codec.h): integer heights losslessly,
-  // others quantized to heightPrecision metres before anything is measured, so the hierarchy's
-  // errors bound the decoded surface. false: format version 1, raw float32 heights.
-  bool compress = true;
+  // Compressed atlases: integer heights are stored losslessly, others quantized to
+  // heightPrecision metres before anything is measured, so the hierarchy's errors bound the
+  // decoded surface.
   double heightPrecision = kAutoHeightPrecision;
 };
 // Peak resident bytes per DEM sample of the in-memory terrain build, measured: 6.7 at 268M
@@ -60,6 +62,7 @@ struct TerrainBuildOptions : CommonBuildOptions {
 inline constexpr double kTerrainBytesPerSample = 7.0;
 
 // A geometry atlas from a mesh (PLY, OBJ, OFF, STL).
+inline constexpr uint32_t kDefaultPositionBits = 20;
 inline constexpr uint32_t kAutoCharts = ~0u;
 inline constexpr double kAutoSampleError = -1.0;
 inline constexpr double kDefaultSampleError = 0.0005;
@@ -87,6 +90,10 @@ struct MeshBuildOptions : CommonBuildOptions {
                                     // (out-of-core) path runs
   bool measureFidelity = true;      // two-sided Hausdorff distance input <-> atlas (out of core on
                                     // that path)
+  // Compressed atlases: positions are quantized on one lattice of 2^positionBits steps across the
+  // bounding-box diagonal (a power-of-two step), before the hierarchy and the fidelity are
+  // measured, so shared seams stay bit-identical and the errors bound what is drawn.
+  uint32_t positionBits = kDefaultPositionBits;
 };
 
 // The option's name as opts spell it in messages (CommonBuildOptions::spellOption).

@@ -99,6 +99,8 @@ HierarchyParams meshHierarchyParams(const MeshBuildOptions& o) {
                      " must be 2^m + 1 with m >= 3 for meshes");
   if (o.maxMemory < (64ull << 20)) throw InputError(optionRef("maxMemory") + " must be at least 64 MiB");
   if (o.threads > 1024) throw InputError(optionRef("threads") + " must be at most 1024");
+  if (o.positionBits < 8 || o.positionBits > 22)
+    throw InputError(optionRef("positionBits") + " " + std::to_string(o.positionBits) + " must be between 8 and 22");
   if (o.nodeRes < 4 || (o.nodeRes & (o.nodeRes - 1)) || o.minNodeRes < 2 || (o.minNodeRes & (o.minNodeRes - 1)) ||
       o.minNodeRes > o.nodeRes)
     throw InputError(optionRef("nodeRes") + " and " + optionRef("minNodeRes") +
@@ -160,6 +162,18 @@ ChartedMesh chartMesh(const MeshBuildOptions& o, const MeshInfo& info, const fs:
   return c;
 }
 
+double meshPositionStep(const MeshBounds& b, uint32_t positionBits) {
+  if (b.empty()) return 1.0;
+  const double diagonal = glm::length(glm::dvec3(b.max) - glm::dvec3(b.min));
+  double largest = 0.0;  // the largest coordinate's magnitude
+  for (int a = 0; a < 3; ++a) largest = std::max({largest, std::abs(double(b.min[a])), std::abs(double(b.max[a]))});
+  // A power of two, so lattice points are exact floats, and no finer than 2^-22 of the largest
+  // coordinate, so every coordinate is within 2^23 steps (float holds nothing finer there).
+  const double wanted = std::floor(std::log2(std::max(diagonal, 1e-30)) - double(positionBits));
+  const double floorExp = std::floor(std::log2(std::max(largest, 1e-30))) - 22.0;
+  return std::exp2(std::max(wanted, floorExp));
+}
+
 ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options, const fs::path& dir,
                            StageMeter& meter) {
   const std::vector<std::string> bad = validateChartLayout(layout);
@@ -194,6 +208,7 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   // charts sample the surface more coarsely than maxSampleError hold more than a tenth of its
   // triangles, up to kMaxSamplesPerTriangle: the repair then has a few patches to cut, not many.
   const double diagonal = layoutDiagonal(layout);
+  for (const glm::vec3& q : layout.positions) r.bounds.extend(q);
   const double maxError = o.maxSampleError * diagonal;
   while (st.chartSizeByDensity && maxError > 0.0 && o.chartSize < kMaxDensityChartSize) {
     const std::vector<uint8_t> over = patchesOverSampleError(first, layout.patches.size(), maxError);
@@ -266,7 +281,13 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
   m.minNodeResLog2 = p.minNodeResLog2;
   m.source = fs::absolute(o.input).string();
   MeshWriteStats w;
-  w.bounds = writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get()).bounds;
+  ChartCoding coding;
+  coding.compressed = o.compress;
+  coding.positionStep = meshPositionStep(r.bounds, o.positionBits);
+  if (o.compress)
+    spdlog::info("positions on a lattice of {:.4g} ({:.4g}% of the diagonal)", coding.positionStep,
+                 100.0 * coding.positionStep / std::max(glm::length(glm::dvec3(r.bounds.max) - glm::dvec3(r.bounds.min)), 1e-300));
+  w.bounds = writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get(), coding).bounds;
   w.spilledBytes = r.spill->bytes();
   r.spill.reset();  // the file goes before the staging directory becomes the atlas
   r.set = GeometryImageSet{};

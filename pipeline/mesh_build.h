@@ -39,11 +39,17 @@ struct ChartedMesh {
 ChartedMesh chartMesh(const MeshBuildOptions& options, const MeshInfo& info, const std::filesystem::path& dir,
                       StageMeter& meter);
 
+// The lattice step of a compressed mesh atlas's positions: the power of two at or below
+// diagonal / 2^positionBits, but no finer than 2^-22 of the largest coordinate (so every
+// coordinate is within 2^23 steps, and a lattice point is an exact float).
+double meshPositionStep(const MeshBounds& bounds, uint32_t positionBits);
+
 // A layout's charts, sampled.
 struct ResampledMesh {
   GeometryImageSet set;
   std::unique_ptr<ChartSpill> spill;  // where the charts' samples are, in dir
   MeshResampleStats stats;
+  MeshBounds bounds;  // of the layout
 };
 
 // Resample and repair: checks the layout, chooses the chart size if options.chartSize is 0

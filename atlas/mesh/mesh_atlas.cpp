@@ -1,5 +1,6 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, sections 3 and 5.
 #include "atlas/mesh/mesh_atlas.h"
+#include "core/block_codec.h"
 #include "core/progress.h"
 
 #include <algorithm>
@@ -17,7 +18,7 @@ namespace gimlod {
 
 namespace fs = std::filesystem;
 
-ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize) {
+ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, double positionStep) {
   const uint32_t M = chartSize - 1;
   if (!isChartSizeValid(chartSize) || image.positions.size() != size_t(chartSize) * chartSize ||
       image.normals.size() != image.positions.size() ||
@@ -33,6 +34,9 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize) {
       for (uint32_t u = 0; u < s; ++u) {
         const size_t src = size_t(v * step) * chartSize + u * step, dst = size_t(v) * s + u;
         pos[dst] = image.positions[src];
+        if (positionStep > 0.0)
+          pos[dst] = {quantizeToStep(pos[dst].x, positionStep), quantizeToStep(pos[dst].y, positionStep),
+                      quantizeToStep(pos[dst].z, positionStep)};
         nrm[dst] = image.normals[src];
         if (!col.empty()) {
           const glm::u8vec4 c = image.colours[src];
@@ -48,7 +52,8 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize) {
 }
 
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs::path& dir,
-                                          uint32_t blockIntervals, AtlasManifest& m, const ChartSpill* spill) {
+                                          uint32_t blockIntervals, AtlasManifest& m, const ChartSpill* spill,
+                                          const ChartCoding& coding) {
   const auto t0 = std::chrono::steady_clock::now();
   if (set.charts.empty()) throw std::invalid_argument("writeGeometryCharts: no charts");
   if (!std::has_single_bit(blockIntervals) || blockIntervals > set.chartSize - 1)
@@ -63,6 +68,13 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
   m.chartsY = 1;
   m.samplesX = m.samplesY = 0;
   m.charts.resize(set.charts.size());
+  m.compression = CompressionInfo{};
+  if (coding.compressed) {
+    if (!(coding.positionStep > 0.0)) throw std::invalid_argument("writeGeometryCharts: compressed positions need a step");
+    m.compression.present = true;
+    m.compression.positionStep = coding.positionStep;
+  }
+  const double step = coding.compressed ? coding.positionStep : 0.0;
   std::vector<uint64_t> bytes(set.charts.size(), 0);
   std::vector<std::array<float, 6>> boxes(set.charts.size());
   const progress::ProgressStage stage("write charts", set.charts.size());
@@ -83,13 +95,14 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     c.gridY = 0;
     c.file = name;
     c.neighbours = img.neighbours;
+    const ChartPyramid pyramid = geometryPyramid(samples, set.chartSize, step);
     glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
-    for (const glm::vec3& q : samples.positions) {
+    for (const glm::vec3& q : pyramid.positions[0]) {
       lo = {std::min(lo.x, q.x), std::min(lo.y, q.y), std::min(lo.z, q.z)};
       hi = {std::max(hi.x, q.x), std::max(hi.y, q.y), std::max(hi.z, q.z)};
     }
     boxes[i] = {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z};
-    bytes[i] = writeChartFile(dir / name, geometryPyramid(samples, set.chartSize), set.chartSize, blockIntervals);
+    bytes[i] = writeChartFile(dir / name, pyramid, set.chartSize, blockIntervals, coding);
     progress::advance();
   });
   GeometryChartsWritten w;

@@ -18,8 +18,9 @@
 namespace gimlod {
 
 // The pyramid of one geometry chart: level k keeps every 2^k-th sample of level 0 (so shared
-// borders stay bit-identical at every level), down to 2 intervals per side.
-ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize);
+// borders stay bit-identical at every level), down to 2 intervals per side. positionStep > 0:
+// positions quantized to that lattice (quantizeToStep), as a compressed chart file decodes them.
+ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, double positionStep = 0.0);
 
 struct GeometryChartsWritten {
   uint64_t bytes = 0;
@@ -30,11 +31,13 @@ struct GeometryChartsWritten {
 // Writes set's charts to dir/charts/chart_NNNN.bin (atomically, in parallel) and fills m's
 // kind ("geometry"), chart size, block size, chart list (file names, neighbours) and height
 // range (z of the bounds). blockIntervals: a power of two <= chartSize - 1. Charts whose samples
-// were spilled are read back from `spill`, one at a time per thread. Throws InputError when a file
-// cannot be written, std::invalid_argument on an empty or inconsistent set.
+// were spilled are read back from `spill`, one at a time per thread. Compressed coding quantizes
+// the positions first (the bounds are of the quantized ones) and records it in m.compression.
+// Throws InputError when a file cannot be written, std::invalid_argument on an empty or
+// inconsistent set.
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const std::filesystem::path& dir,
                                           uint32_t blockIntervals, AtlasManifest& m,
-                                          const ChartSpill* spill = nullptr);
+                                          const ChartSpill* spill = nullptr, const ChartCoding& coding = {});
 
 // The surface of a geometry atlas at pyramid level `level`: every chart's grid, triangulated as
 // the renderer draws it (split along the (0,0)-(1,1) diagonal, counter-clockwise in (u, v)), with
