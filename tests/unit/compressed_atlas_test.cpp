@@ -16,6 +16,7 @@
 #include "core/atlas_format.h"
 #include "core/block_codec.h"
 #include "pipeline/build.h"
+#include "pipeline/mesh_build.h"
 #include "runtime/atlas_view.h"
 #include "runtime/page_reader.h"
 #include "tests/test_util.h"
@@ -226,6 +227,80 @@ TEST(CompressedAtlas, Version1AtlasesStillOpen) {
   EXPECT_GT(pages, 25u);
   EXPECT_LE(worst, 0.5);
   EXPECT_LT(fs::file_size(tmp.path() / "v2/charts/chart_0000.bin") * 5, fs::file_size(tmp.path() / "v1/charts/chart_0000.bin"));
+}
+
+// The shipped bunny, compressed and not: the same layout, positions within half a lattice step
+// (and on the lattice), the same normals, shared chart sides bit-identical after decoding, and
+// the compressed atlas several times smaller.
+TEST(CompressedAtlas, MeshPositionsLieOnTheLatticeAndSeamsStayBitIdentical) {
+  test::TempDir tmp("gimlod-coded-mesh");
+  MeshBuildOptions o;
+  o.input = test::repoData() / "meshes/bun_zipper.ply";
+  o.charts = 24;
+  o.chartSize = 33;
+  o.measureFidelity = false;
+  o.output = tmp.path() / "v1";
+  o.compress = false;
+  buildAtlas(o);
+  o.output = tmp.path() / "v2";
+  o.compress = true;
+  buildAtlas(o);
+  const AtlasManifest m1 = readManifest(tmp.path() / "v1"), m2 = readManifest(tmp.path() / "v2");
+  ASSERT_EQ(m1.charts.size(), m2.charts.size());
+  EXPECT_EQ(m1.version, 1u);
+  EXPECT_EQ(m2.version, 2u);
+  const double step = m2.compression.positionStep;
+  ASSERT_GT(step, 0.0);
+  EXPECT_EQ(std::exp2(std::round(std::log2(step))), step);  // a power of two
+  uint64_t raw = 0, coded = 0;
+  std::vector<std::vector<glm::vec3>> level0(m2.charts.size());
+  for (size_t c = 0; c < m2.charts.size(); ++c) {
+    const ChartFileReader a(tmp.path() / "v1" / m1.charts[c].file), b(tmp.path() / "v2" / m2.charts[c].file);
+    raw += fs::file_size(a.path());
+    coded += fs::file_size(b.path());
+    ASSERT_TRUE(b.compressed());
+    for (uint32_t k = 0; k < b.levels(); ++k) {
+      const std::vector<glm::vec3> pa = a.readLevelPositions(k), pb = b.readLevelPositions(k);
+      ASSERT_EQ(pa.size(), pb.size());
+      for (size_t i = 0; i < pa.size(); ++i)
+        for (int x = 0; x < 3; ++x) {
+          ASSERT_LE(std::abs(double(pa[i][x]) - pb[i][x]), step / 2) << "chart " << c << " level " << k;
+          ASSERT_EQ(std::nearbyint(double(pb[i][x]) / step) * step, double(pb[i][x]));  // on the lattice
+        }
+      ASSERT_EQ(a.readLevelNormals(k), b.readLevelNormals(k));
+      if (k == 0) level0[c] = pb;
+    }
+  }
+  // Every shared side: the same samples, bit for bit, after decoding.
+  const uint32_t n = m2.chartSize;
+  size_t sides = 0;
+  for (size_t c = 0; c < m2.charts.size(); ++c)
+    for (uint32_t e = 0; e < 4; ++e) {
+      const RootNeighbour& nb = m2.charts[c].neighbours[e];
+      if (nb.chart < 0) continue;
+      for (uint32_t k = 0; k < n; ++k) {
+        const uint32_t j = nb.reversed ? n - 1 - k : k;
+        ASSERT_EQ(level0[c][edgeSampleIndex(n, e, k)], level0[size_t(nb.chart)][edgeSampleIndex(n, nb.edge, j)])
+            << "chart " << c << " edge " << e << " sample " << k;
+      }
+      ++sides;
+    }
+  EXPECT_GT(sides, m2.charts.size());
+  std::printf("  bunny chart files: %llu bytes raw, %llu compressed (%.1fx smaller), lattice step %.3g\n",
+              (unsigned long long)raw, (unsigned long long)coded, double(raw) / double(coded), step);
+  EXPECT_LT(coded * 2, raw);
+}
+
+TEST(CompressedAtlas, PositionLatticeIsNoFinerThanTheCoordinates) {
+  MeshBounds unit;
+  unit.extend(glm::vec3(0.f));
+  unit.extend(glm::vec3(1.f));
+  EXPECT_EQ(meshPositionStep(unit, 20), std::exp2(-20.0));  // diagonal sqrt(3): 2^0 / 2^20
+  // A unit scan 1000 units from the origin: float holds 2^-14 there, so the lattice is 2^-13.
+  MeshBounds far;
+  far.extend(glm::vec3(1000.f, 0.f, 0.f));
+  far.extend(glm::vec3(1001.f, 1.f, 1.f));
+  EXPECT_EQ(meshPositionStep(far, 20), std::exp2(9.0 - 22.0));
 }
 
 }  // namespace
