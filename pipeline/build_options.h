@@ -62,7 +62,7 @@ struct TerrainBuildOptions : CommonBuildOptions {
 inline constexpr double kTerrainBytesPerSample = 7.0;
 
 // A geometry atlas from a mesh (PLY, OBJ, OFF, STL).
-inline constexpr uint32_t kDefaultPositionBits = 20;
+inline constexpr uint32_t kDefaultPositionBits = 22;
 inline constexpr uint32_t kAutoCharts = ~0u;
 inline constexpr double kAutoSampleError = -1.0;
 inline constexpr double kDefaultSampleError = 0.0005;

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "atlas/terrain/void_fill.h"
 #include "core/atlas_format.h"
 
 namespace gimlod {
@@ -49,10 +50,6 @@ double metresPerDegreeLongitude(double phiDeg);  // |phi| clamped to 89 degrees
 // not a raster, zero-size, all samples void, bad options.
 DemRaster loadDem(const std::filesystem::path& path, const DemOptions& options = {});
 
-// Fills voids (mask == true) in place; returns the number filled. Method: multi-resolution
-// pull-push (see kVoidFillMethod and dem.cpp): deterministic, O(N), fills are convex combinations
-// of valid samples. Throws std::invalid_argument on size mismatch or when no sample is valid.
-uint64_t fillVoids(std::vector<float>& heights, const std::vector<bool>& voidMask, uint32_t width,
-                   uint32_t height);
+// fillVoids (atlas/terrain/void_fill.h) fills the voids loadDem finds.
 
 }  // namespace gimlod
