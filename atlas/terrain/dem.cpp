@@ -15,6 +15,7 @@
 #include <memory>
 #include <mutex>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 
 #include <cpl_conv.h>
@@ -151,7 +152,17 @@ double metresPerDegreeLongitude(double phiDeg) {
 }
 
 
-DemRaster loadDem(const fs::path& path, const DemOptions& options) {
+struct DemSource::Impl {
+  fs::path path;
+  DatasetPtr ds;
+  GDALRasterBand* band = nullptr;
+  bool nodataInFloat = false, nodataHuge = false, maskBand = false;
+  float nodataF = 0.f;
+  double scale = 1.0, offset = 0.0, zScale = 1.0;
+  bool flip = true;
+};
+
+DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(std::make_unique<Impl>()) {
   if (!std::isfinite(options.zScale) || options.zScale == 0.0)
     fail(path, "z-scale " + formatNumber(options.zScale) + " must be finite and non-zero");
   std::error_code ec;
@@ -161,8 +172,12 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
   registerGdalOnce();
   if (options.gdalCacheBytes > 0) GDALSetCacheMax64(GIntBig(options.gdalCacheBytes));
   GdalErrorCapture cap;
-  DemRaster dem;
-  DatasetPtr ds = openDem(path, options, cap, dem.warnings);
+  DemRaster& dem = info_;
+  Impl& im = *impl_;
+  im.path = path;
+  im.zScale = options.zScale;
+  im.ds = openDem(path, options, cap, dem.warnings);
+  const DatasetPtr& ds = im.ds;
 
   const int w = ds->GetRasterXSize(), h = ds->GetRasterYSize();
   if (w <= 0 || h <= 0) fail(path, "raster has zero size");
@@ -172,72 +187,17 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
                            " bands; using band 1 as heights");
   dem.width = static_cast<uint32_t>(w);
   dem.height = static_cast<uint32_t>(h);
-  const size_t n = size_t{dem.width} * dem.height;
-  GDALRasterBand* band = ds->GetRasterBand(1);
-  const double need = double(n) * options.buildBytesPerSample;
-  if (options.maxMemory > 0 && need > double(options.maxMemory)) {
-    const auto size = [](double bytes) {
-      char text[32];
-      if (bytes >= double(1ull << 30)) std::snprintf(text, sizeof text, "%.1f GiB", bytes / double(1ull << 30));
-      else std::snprintf(text, sizeof text, "%.1f MiB", bytes / double(1ull << 20));
-      return std::string(text);
-    };
-    fail(path, std::to_string(w) + " x " + std::to_string(h) + " samples need about " + size(need) +
-                   " to build in memory, over the " + size(double(options.maxMemory)) + " cap; give a larger " +
-                   optionRef("maxMemory") + " (this build holds the whole DEM in memory)");
-  }
+  GDALRasterBand* band = im.band = ds->GetRasterBand(1);
 
-  // Read band 1 as float.
-  try {
-    dem.heights.resize(n);
-  } catch (const std::bad_alloc&) {
-    fail(path, "raster " + std::to_string(w) + " x " + std::to_string(h) +
-                   " is too large to load into memory");
-  }
-  cap.clear();
-  // GDAL reports how much it has read: the "read DEM" stage in thousandths.
-  const progress::ProgressStage stage("read DEM", 1000);
-  uint64_t thousandths = 0;
-  GDALRasterIOExtraArg extra;
-  INIT_RASTERIO_EXTRA_ARG(extra);
-  extra.pfnProgress = [](double done, const char*, void* data) -> int {
-    auto* last = static_cast<uint64_t*>(data);
-    const uint64_t now = uint64_t(std::clamp(done, 0.0, 1.0) * 1000.0);
-    if (now > *last) progress::advance(now - *last), *last = now;
-    return TRUE;
-  };
-  extra.pProgressData = &thousandths;
-  CPLErr err = band->RasterIO(GF_Read, 0, 0, w, h, dem.heights.data(), w, h, GDT_Float32, 0, 0, &extra);
-  if (err != CE_None || !cap.failures().empty())
-    fail(path, withGdal("cannot read the raster data (truncated or corrupt file?)", cap));
-
-  // Void mask: declared nodata, NaN, inf, and an explicit mask band if the file has one.
-  std::vector<bool> voids(n, false);
+  // Voids: declared nodata, NaN, inf, and an explicit mask band if the file has one.
   int hasNodata = 0;
   const double nodata = band->GetNoDataValue(&hasNodata);
-  const bool nodataInFloat = hasNodata && std::isfinite(nodata) &&
-                             std::fabs(nodata) <= std::numeric_limits<float>::max();
-  const float nodataF = nodataInFloat ? static_cast<float>(nodata) : 0.f;
+  im.nodataInFloat = hasNodata && std::isfinite(nodata) && std::fabs(nodata) <= std::numeric_limits<float>::max();
+  im.nodataF = im.nodataInFloat ? static_cast<float>(nodata) : 0.f;
   // note: a double raster's nodata beyond float range reads back as +-FLT_MAX or inf.
-  const bool nodataHuge = hasNodata && std::isfinite(nodata) && !nodataInFloat;
+  im.nodataHuge = hasNodata && std::isfinite(nodata) && !im.nodataInFloat;
   const int maskFlags = band->GetMaskFlags();
-  std::vector<uint8_t> mask;
-  if (!(maskFlags & GMF_ALL_VALID) && !(maskFlags & GMF_NODATA)) {
-    mask.resize(n);
-    cap.clear();
-    if (band->GetMaskBand()->RasterIO(GF_Read, 0, 0, w, h, mask.data(), w, h, GDT_Byte, 0, 0,
-                                      nullptr) != CE_None ||
-        !cap.failures().empty())
-      fail(path, withGdal("cannot read the raster's mask band", cap));
-  }
-  for (size_t i = 0; i < n; ++i) {
-    const float v = dem.heights[i];
-    voids[i] = !std::isfinite(v) || (nodataInFloat && v == nodataF) ||
-               (nodataHuge && std::fabs(v) >= std::numeric_limits<float>::max()) ||
-               (!mask.empty() && mask[i] == 0);
-  }
-  const uint64_t voidCount = static_cast<uint64_t>(std::count(voids.begin(), voids.end(), true));
-  if (voidCount == n) fail(path, "every sample is nodata (" + std::to_string(n) + " samples)");
+  im.maskBand = !(maskFlags & GMF_ALL_VALID) && !(maskFlags & GMF_NODATA);
 
   // Height units: band scale/offset (packed data), vertical unit, user z-scale.
   int hasScale = 0, hasOffset = 0;
@@ -252,16 +212,8 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
     dem.warnings.push_back(std::string("vertical unit '") + band->GetUnitType() +
                            "' converted to metres");
   }
-  const double scale = (hasScale ? bandScale : 1.0) * unit * options.zScale;
-  const double offset = (hasOffset ? bandOffset : 0.0) * unit * options.zScale;
-  if (scale != 1.0 || offset != 0.0) {
-    for (size_t i = 0; i < n; ++i)
-      if (!voids[i]) dem.heights[i] = static_cast<float>(dem.heights[i] * scale + offset);
-  }
-  for (size_t i = 0; i < n; ++i)
-    if (!voids[i] && !std::isfinite(dem.heights[i]))
-      fail(path, "heights overflow after z-scale " + formatNumber(options.zScale));
-
+  im.scale = (hasScale ? bandScale : 1.0) * unit * options.zScale;
+  im.offset = (hasOffset ? bandOffset : 0.0) * unit * options.zScale;
   // Georeference and spacing.
   std::array<double, 6> gt{0, 1, 0, 0, 0, 1};
   const bool hasGt = ds->GetGeoTransform(gt.data()) == CE_None;
@@ -273,7 +225,6 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
     if (srs->exportToWkt(&wkt, wktOptions) == OGRERR_NONE && wkt) dem.georef.wkt = wkt;
     CPLFree(wkt);
   }
-  bool flip = true;
   if (!hasGt) {
     // note: without a geotransform the raster is treated as an image whose top row is north.
     dem.warnings.push_back("no geotransform: sample spacing set to 1 m, top row taken as north");
@@ -284,7 +235,7 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
       fail(path, "invalid geotransform (zero or non-finite pixel size)");
     if (gt[2] != 0.0 || gt[4] != 0.0)
       dem.warnings.push_back("rotated geotransform: rotation ignored");
-    flip = gt[5] < 0;  // GDAL row 0 is north for the usual north-up rasters
+    im.flip = gt[5] < 0;  // GDAL row 0 is north for the usual north-up rasters
     const double cxDeg = gt[0] + gt[1] * w * 0.5 + gt[2] * h * 0.5;
     const double cyDeg = gt[3] + gt[4] * w * 0.5 + gt[5] * h * 0.5;
     bool geographic = false;
@@ -329,18 +280,95 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
     }
   }
 
-  // Flip so that row 0 is the south edge.
-  if (flip && dem.height > 1) {
-    for (uint32_t r = 0; r < dem.height / 2; ++r) {
-      const uint32_t s = dem.height - 1 - r;
-      std::swap_ranges(dem.heights.begin() + size_t{r} * dem.width,
-                       dem.heights.begin() + size_t{r + 1} * dem.width,
-                       dem.heights.begin() + size_t{s} * dem.width);
-      for (uint32_t x = 0; x < dem.width; ++x) {
-        std::vector<bool>::swap(voids[size_t{r} * dem.width + x], voids[size_t{s} * dem.width + x]);
-      }
+  for (const std::string& wmsg : cap.warnings()) dem.warnings.push_back(wmsg);
+}
+
+DemSource::~DemSource() = default;
+
+void DemSource::readRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* valid, bool showProgress) const {
+  const Impl& im = *impl_;
+  const fs::path& path = im.path;
+  const uint32_t w = info_.width, h = info_.height;
+  if (rows == 0) return;
+  if (uint64_t{y0} + rows > h) throw std::logic_error("DemSource::readRows: rows beyond the raster");
+  // GDAL's rows run north to south when the raster is north-up (flip): ours south to north.
+  const int gy0 = im.flip ? int(h - y0 - rows) : int(y0);
+  const size_t n = size_t{w} * rows;
+  GdalErrorCapture cap;
+  // GDAL reports how much it has read: the "read DEM" stage in thousandths.
+  std::optional<progress::ProgressStage> stage;
+  if (showProgress) stage.emplace("read DEM", 1000);
+  uint64_t thousandths = 0;
+  GDALRasterIOExtraArg extra;
+  INIT_RASTERIO_EXTRA_ARG(extra);
+  extra.pfnProgress = [](double done, const char*, void* data) -> int {
+    auto* last = static_cast<uint64_t*>(data);
+    const uint64_t now = uint64_t(std::clamp(done, 0.0, 1.0) * 1000.0);
+    if (now > *last) progress::advance(now - *last), *last = now;
+    return TRUE;
+  };
+  extra.pProgressData = &thousandths;
+  CPLErr err = im.band->RasterIO(GF_Read, 0, gy0, int(w), int(rows), heights, int(w), int(rows), GDT_Float32, 0, 0,
+                                 showProgress ? &extra : nullptr);
+  if (err != CE_None || !cap.failures().empty())
+    fail(path, withGdal("cannot read the raster data (truncated or corrupt file?)", cap));
+  std::vector<uint8_t> mask;
+  if (im.maskBand) {
+    mask.resize(n);
+    cap.clear();
+    if (im.band->GetMaskBand()->RasterIO(GF_Read, 0, gy0, int(w), int(rows), mask.data(), int(w), int(rows), GDT_Byte,
+                                         0, 0, nullptr) != CE_None ||
+        !cap.failures().empty())
+      fail(path, withGdal("cannot read the raster's mask band", cap));
+  }
+  for (size_t i = 0; i < n; ++i) {
+    const float v = heights[i];
+    const bool isVoid = !std::isfinite(v) || (im.nodataInFloat && v == im.nodataF) ||
+                        (im.nodataHuge && std::fabs(v) >= std::numeric_limits<float>::max()) ||
+                        (!mask.empty() && mask[i] == 0);
+    valid[i] = isVoid ? 0 : 1;
+    if (!isVoid && (im.scale != 1.0 || im.offset != 0.0)) heights[i] = static_cast<float>(v * im.scale + im.offset);
+    if (!isVoid && !std::isfinite(heights[i]))
+      fail(path, "heights overflow after z-scale " + formatNumber(im.zScale));
+  }
+  if (im.flip && rows > 1) {
+    for (uint32_t r = 0; r < rows / 2; ++r) {
+      std::swap_ranges(heights + size_t{r} * w, heights + size_t{r + 1} * w, heights + size_t{rows - 1 - r} * w);
+      std::swap_ranges(valid + size_t{r} * w, valid + size_t{r + 1} * w, valid + size_t{rows - 1 - r} * w);
     }
   }
+}
+
+DemRaster loadDem(const fs::path& path, const DemOptions& options) {
+  const DemSource src(path, options);
+  DemRaster dem = src.info();
+  const int w = int(dem.width), h = int(dem.height);
+  const size_t n = size_t{dem.width} * dem.height;
+  const double need = double(n) * options.buildBytesPerSample;
+  if (options.maxMemory > 0 && need > double(options.maxMemory)) {
+    const auto size = [](double bytes) {
+      char text[32];
+      if (bytes >= double(1ull << 30)) std::snprintf(text, sizeof text, "%.1f GiB", bytes / double(1ull << 30));
+      else std::snprintf(text, sizeof text, "%.1f MiB", bytes / double(1ull << 20));
+      return std::string(text);
+    };
+    fail(path, std::to_string(w) + " x " + std::to_string(h) + " samples need about " + size(need) +
+                   " to build in memory, over the " + size(double(options.maxMemory)) + " cap; give a larger " +
+                   optionRef("maxMemory") + " (this build holds the whole DEM in memory)");
+  }
+  std::vector<uint8_t> valid;
+  try {
+    dem.heights.resize(n);
+    valid.resize(n);
+  } catch (const std::bad_alloc&) {
+    fail(path, "raster " + std::to_string(w) + " x " + std::to_string(h) + " is too large to load into memory");
+  }
+  src.readRows(0, dem.height, dem.heights.data(), valid.data(), true);
+  std::vector<bool> voids(n, false);
+  for (size_t i = 0; i < n; ++i) voids[i] = valid[i] == 0;
+  valid = {};
+  const uint64_t voidCount = static_cast<uint64_t>(std::count(voids.begin(), voids.end(), true));
+  if (voidCount == n) fail(path, "every sample is nodata (" + std::to_string(n) + " samples)");
 
   // Fill voids, then the height range.
   dem.integerHeights = true;
@@ -351,7 +379,6 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
   const auto [mn, mx] = std::minmax_element(dem.heights.begin(), dem.heights.end());
   dem.minHeight = *mn;
   dem.maxHeight = *mx;
-  for (const std::string& wmsg : cap.warnings()) dem.warnings.push_back(wmsg);
   return dem;
 }
 

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -49,6 +50,27 @@ double metresPerDegreeLongitude(double phiDeg);  // |phi| clamped to 89 degrees
 // Loads and repairs a DEM. Throws InputError naming the file on: unreadable or truncated data,
 // not a raster, zero-size, all samples void, bad options.
 DemRaster loadDem(const std::filesystem::path& path, const DemOptions& options = {});
+
+// A DEM opened for reading in rows, for builds larger than memory: the raster's size, spacing,
+// georeference and warnings (info(); its heights empty) once opened, and any rows on demand.
+class DemSource {
+ public:
+  // Opens the raster and reads its metadata; throws InputError naming the file.
+  DemSource(const std::filesystem::path& path, const DemOptions& options = {});
+  ~DemSource();
+  DemSource(const DemSource&) = delete;
+  DemSource& operator=(const DemSource&) = delete;
+  const DemRaster& info() const { return info_; }
+  // Rows [y0, y0 + rows), row 0 at the south edge, every column: heights in metres after z-scale
+  // and valid (0 at nodata, NaN, inf and masked samples, whose heights are undefined). Throws
+  // InputError naming the file. Not thread-safe. showProgress: a "read DEM" progress stage.
+  void readRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* valid, bool showProgress = false) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  DemRaster info_;
+};
 
 // fillVoids (atlas/terrain/void_fill.h) fills the voids loadDem finds.
 
