@@ -384,9 +384,9 @@ int main(int argc, char** argv) {
                     "chart's surface; patches whose charts exceed it are cut; 0: flips only (default: 0.05 when the "
                     "chart size is chosen by density, else 0)");
   build->add_option("--max-memory", maxMemory,
-                    "Memory cap (e.g. 2G, 512M). Meshes: larger ones go through cell files. DEMs (built in memory): "
-                    "one whose build would exceed it is refused before reading (default for DEMs: 3/4 of the "
-                    "machine's memory)")
+                    "Memory cap (e.g. 2G, 512M). Meshes: larger ones go through cell files. DEMs: one whose "
+                    "in-memory build would exceed it is built window by window within it (default for DEMs: 3/4 of "
+                    "the machine's memory)")
       ->capture_default_str();
   build->add_option("--depth", common.depth, "Quadtree levels per chart")->capture_default_str();
   build->add_option("--node-res", common.nodeRes, "Maximum node resolution R in intervals (power of two)")
@@ -413,6 +413,9 @@ int main(int argc, char** argv) {
                     "DEMs: heights that are not whole metres are stored to this step, in metres; whole metres are "
                     "stored exactly (default: 1 for a source of whole metres like SRTM, whose filled voids are "
                     "rounded like it, else 0.01)");
+  build->add_flag("--out-of-core", terrain.outOfCore,
+                  "DEMs: build window by window within --max-memory even when the DEM would fit in memory "
+                  "(a DEM that would not is built so anyway)");
   bool uncompressed = false;
   build->add_flag("--uncompressed", uncompressed,
                   "Write raw chart files (atlas format version 1: float32 heights or positions, 4-byte normals) "

@@ -176,7 +176,13 @@ nlohmann::json statsJson(const TerrainBuildStats& s) {
                         {"read_seconds", im.readSeconds},
                         {"write_seconds", im.writeSeconds}};
   }
+  if (w.windowed)
+    stats["windowed"] = {{"memory_bytes", w.windowed->memoryBytes},
+                         {"scratch_bytes", w.windowed->scratchBytes},
+                         {"band_rows", w.windowed->bandRows}};
   stats["bytes_on_disk"] = s.bytesOnDisk;
+  stats["bytes_per_sample"] = cs.samples ? double(s.bytesOnDisk) / double(cs.samples) : 0.0;
+  stats["samples_per_second"] = s.totalSeconds > 0 ? double(cs.samples) / s.totalSeconds : 0.0;
   stats["total_seconds"] = s.totalSeconds;
   return stats;
 }

@@ -46,8 +46,16 @@ struct TerrainImageryStats {
   double writeSeconds = 0.0;   // pyramid and chart files
 };
 
+// The window-by-window build (atlas/terrain/terrain_windowed.h), when it ran.
+struct TerrainWindowedStats {
+  uint64_t memoryBytes = 0;   // what its windows could use
+  uint64_t scratchBytes = 0;  // the scratch raster on disk while it ran
+  uint64_t bandRows = 0;      // the most DEM rows held at once
+};
+
 struct TerrainWriteStats {
   TerrainAtlasStats charts;                   // chart files (atlas/terrain_atlas.h)
+  std::optional<TerrainWindowedStats> windowed;
   std::optional<TerrainImageryStats> imagery;
   uint32_t chartsX = 0, chartsY = 0;          // the chart grid
   uint32_t chartSize = 0;                     // samples per chart side

@@ -13,6 +13,7 @@
 #include <tbb/global_control.h>
 
 #include "atlas/terrain/imagery.h"
+#include "atlas/terrain/terrain_windowed.h"
 #include "core/atlas_format.h"
 #include "core/block_codec.h"
 #include "core/stage_meter.h"
@@ -37,6 +38,16 @@ ImageryOptions imageryOptions(const TerrainBuildOptions& o) {
 
 // The in-memory build's memory cap: --max-memory, or 3/4 of the machine's memory.
 uint64_t memoryCap(const TerrainBuildOptions& o) { return o.maxMemory ? o.maxMemory : physicalMemoryBytes() / 4 * 3; }
+
+// The in-memory build's peak per DEM sample, with the imagery's.
+double inMemoryBytesPerSample(const TerrainBuildOptions& o) {
+  double b = kTerrainBytesPerSample;
+  if (!o.imagery.empty()) {
+    const int s = o.imageryScaleLog2 >= 0 ? o.imageryScaleLog2 : int(kMaxImageryScaleLog2);
+    b += 4.0 * double(1u << (2 * s)) * 4.0 / 3.0;  // the refined imagery and its pyramid
+  }
+  return b;
+}
 
 // Compressed atlases: heights that are not integers are quantized to the precision before anything
 // is built from them, so the pyramids, normals and the hierarchy's errors are those of the decoded
@@ -99,11 +110,7 @@ DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   dopt.gdalCacheBytes = std::clamp<uint64_t>(memoryCap(o) / 32, uint64_t{8} << 20, uint64_t{64} << 20);
   // A DEM whose build would exceed the cap is refused once opened, before it is read.
   dopt.maxMemory = memoryCap(o);
-  dopt.buildBytesPerSample = kTerrainBytesPerSample;
-  if (!o.imagery.empty()) {
-    const int s = o.imageryScaleLog2 >= 0 ? o.imageryScaleLog2 : int(kMaxImageryScaleLog2);
-    dopt.buildBytesPerSample += 4.0 * double(1u << (2 * s)) * 4.0 / 3.0;  // the refined imagery and its pyramid
-  }
+  dopt.buildBytesPerSample = inMemoryBytesPerSample(o);
   DemRaster dem = loadDem(o.input, dopt);
   stats->seconds = secondsSince(t0);
   stats->width = dem.width;
@@ -118,7 +125,10 @@ DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   return dem;
 }
 
-TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& o, const fs::path& dir) {
+namespace {
+
+// The manifest fields a build sets before its charts are written.
+AtlasManifest terrainManifest(const TerrainBuildOptions& o) {
   AtlasManifest m;
   m.chartSize = o.chartSize;
   m.blockIntervals = o.nodeRes;
@@ -127,10 +137,37 @@ TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& 
   m.minNodeResLog2 = log2u(o.minNodeRes);
   m.zScale = o.zScale;
   m.source = fs::absolute(o.input).string();
+  return m;
+}
+
+TerrainAtlasOptions terrainAtlasOptions(const TerrainBuildOptions& o) {
   TerrainAtlasOptions topt;
   topt.chartSize = o.chartSize;
   topt.blockIntervals = o.nodeRes;
   topt.coding.compressed = o.compress;
+  return topt;
+}
+
+// The hierarchy (from level 0 of every chart file, as a restarted stage would read it) and the
+// manifest, once the chart files are written.
+void finishTerrainAtlas(AtlasManifest& m, const fs::path& dir, TerrainWriteStats& w) {
+  std::vector<std::unique_ptr<ChartFileReader>> readers;
+  for (const ChartInfo& c : m.charts) readers.push_back(std::make_unique<ChartFileReader>(dir / c.file));
+  const Hierarchy h =
+      buildTerrainHierarchy(m, [&](uint32_t c) { return readers[c]->readLevelHeights(0); }, &w.hierarchy);
+  writeHierarchy(dir / m.hierarchyFile, h);
+  writeManifest(dir, m);
+  w.chartsX = m.chartsX;
+  w.chartsY = m.chartsY;
+  w.chartSize = m.chartSize;
+  w.depth = m.depth;
+}
+
+}  // namespace
+
+TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& o, const fs::path& dir) {
+  AtlasManifest m = terrainManifest(o);
+  TerrainAtlasOptions topt = terrainAtlasOptions(o);
   if (o.compress) topt.coding.heightPrecision = quantizeHeights(dem, o);
   TerrainWriteStats w;
   w.charts = writeTerrainCharts(dem, topt, dir, m);
@@ -156,18 +193,44 @@ TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& 
                  100.0 * raster.coverage);
   }
   dem = DemRaster{};
+  finishTerrainAtlas(m, dir, w);
+  return w;
+}
 
-  // The hierarchy stage reads level 0 of every chart file, as a restarted stage would.
-  std::vector<std::unique_ptr<ChartFileReader>> readers;
-  for (const ChartInfo& c : m.charts) readers.push_back(std::make_unique<ChartFileReader>(dir / c.file));
-  const Hierarchy h =
-      buildTerrainHierarchy(m, [&](uint32_t c) { return readers[c]->readLevelHeights(0); }, &w.hierarchy);
-  writeHierarchy(dir / m.hierarchyFile, h);
-  writeManifest(dir, m);
-  w.chartsX = m.chartsX;
-  w.chartsY = m.chartsY;
-  w.chartSize = m.chartSize;
-  w.depth = m.depth;
+TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const fs::path& dir, TerrainReadStats* read) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const uint64_t cap = memoryCap(o);
+  DemOptions dopt;
+  dopt.zScale = o.zScale;
+  dopt.subdataset = o.subdataset;
+  dopt.gdalCacheBytes = std::clamp<uint64_t>(cap / 32, uint64_t{8} << 20, uint64_t{64} << 20);
+  const DemSource source(o.input, dopt);
+  for (const std::string& warning : source.info().warnings) spdlog::warn("{}: {}", o.input.string(), warning);
+  AtlasManifest m = terrainManifest(o);
+  WindowedTerrainOptions wo;
+  wo.atlas = terrainAtlasOptions(o);
+  wo.heightPrecision = o.heightPrecision;
+  wo.defaultHeightPrecision = kDefaultHeightPrecision;
+  // What the process holds already (libraries, GDAL's block cache to come) stays out of the windows.
+  const uint64_t held = residentBytes() + dopt.gdalCacheBytes;
+  wo.memoryBytes = cap > held ? (cap - held) / 5 * 4 : 0;
+  spdlog::info("{}: {}x{} samples, built window by window in {} MiB of windows (memory cap {} MiB)", o.input.string(),
+               source.info().width, source.info().height, wo.memoryBytes >> 20, cap >> 20);
+  TerrainWriteStats w;
+  const WindowedTerrainResult r = writeTerrainChartsWindowed(source, dir, wo, m);
+  w.charts = r.charts;
+  w.windowed.emplace();
+  w.windowed->memoryBytes = wo.memoryBytes;
+  w.windowed->scratchBytes = r.scratchBytes;
+  w.windowed->bandRows = r.bandRows;
+  read->seconds = secondsSince(t0);
+  read->width = r.dem.width;
+  read->height = r.dem.height;
+  read->spacing = r.dem.spacing;
+  read->heightRange = {r.dem.minHeight, r.dem.maxHeight};
+  read->voidsFilled = r.dem.voidsFilled;
+  read->voidFillMethod = r.dem.voidFillMethod;
+  finishTerrainAtlas(m, dir, w);
   return w;
 }
 
@@ -182,9 +245,26 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& o) {
 
   const auto t0 = std::chrono::steady_clock::now();
   TerrainBuildStats stats;
-  DemRaster dem = readTerrain(o, &stats.read);
+  // In memory when the estimate fits the cap, else window by window (no imagery there yet).
+  bool windowed = o.outOfCore;
+  if (!windowed) {
+    DemOptions probe;
+    probe.subdataset = o.subdataset;
+    const DemSource source(o.input, probe);
+    windowed = double(source.info().width) * source.info().height * inMemoryBytesPerSample(o) +
+                   double(residentBytes()) >
+               double(memoryCap(o));
+  }
+  if (windowed && !o.imagery.empty())
+    throw InputError(o.input.string() + ": draping " + optionRef("imagery") + " needs the in-memory build, and this "
+                     "DEM's exceeds the memory cap; give a larger " + optionRef("maxMemory"));
   StagedDirectory stage(o.output, kManifestName, "atlas");
-  stats.write = writeTerrainAtlas(std::move(dem), o, stage.path());
+  if (windowed) {
+    stats.write = writeTerrainAtlasWindowed(o, stage.path(), &stats.read);
+  } else {
+    DemRaster dem = readTerrain(o, &stats.read);
+    stats.write = writeTerrainAtlas(std::move(dem), o, stage.path());
+  }
   stats.input = fs::absolute(o.input).string();
   stats.bytesOnDisk = directoryBytes(stage.path());
   stats.totalSeconds = secondsSince(t0);

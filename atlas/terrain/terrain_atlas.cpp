@@ -48,6 +48,13 @@ inline float clampedHeight(const DemRaster& dem, int64_t gx, int64_t gy) {
   return dem.heights[static_cast<size_t>(gy) * dem.width + static_cast<size_t>(gx)];
 }
 
+// The same over the rows held (buildChartPyramid checks they cover what a chart row reads).
+inline float clampedHeight(const DemRows& dem, int64_t gx, int64_t gy) {
+  gx = std::clamp<int64_t>(gx, 0, dem.width - 1);
+  gy = std::clamp<int64_t>(gy, 0, dem.height - 1);
+  return dem.heights[static_cast<size_t>(gy - dem.y0) * static_cast<size_t>(dem.width) + static_cast<size_t>(gx)];
+}
+
 uint32_t chartsAlong(uint32_t samples, uint32_t m) {
   return std::max<uint32_t>(1, (samples - 1 + m - 1) / m);  // ceil((samples-1)/m)
 }
@@ -64,12 +71,31 @@ std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gri
   return out;
 }
 
-ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t gridY,
-                               uint32_t chartSize, bool keepRing) {
-  if (chartSize < 3 || !std::has_single_bit(chartSize - 1))
-    throw std::invalid_argument("buildChartPyramid: chartSize is not 2^m+1");
+ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
+                               bool keepRing) {
   if (dem.width == 0 || dem.height == 0 || dem.heights.size() != size_t{dem.width} * dem.height)
     throw std::invalid_argument("buildChartPyramid: empty or inconsistent DEM");
+  DemRows rows;
+  rows.heights = dem.heights.data();
+  rows.rows = rows.height = dem.height;
+  rows.width = dem.width;
+  rows.spacing = dem.spacing;
+  return buildChartPyramid(rows, gridX, gridY, chartSize, keepRing);
+}
+
+std::array<int64_t, 2> chartRowSpan(int64_t gridY, uint32_t chartSize, int64_t height) {
+  const int64_t m = int64_t{chartSize} - 1;
+  return {std::max<int64_t>(0, gridY * m - m), std::min<int64_t>(height, gridY * m + 2 * m + 1)};
+}
+
+ChartPyramid buildChartPyramid(const DemRows& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
+                               bool keepRing) {
+  if (chartSize < 3 || !std::has_single_bit(chartSize - 1))
+    throw std::invalid_argument("buildChartPyramid: chartSize is not 2^m+1");
+  const auto span = chartRowSpan(gridY, chartSize, dem.height);
+  if (dem.width <= 0 || dem.height <= 0 || dem.y0 > span[0] || dem.y0 + dem.rows < span[1])
+    throw std::invalid_argument("buildChartPyramid: the rows held do not cover the chart row");
+
   const int64_t m = int64_t{chartSize} - 1;
   const uint32_t levels = static_cast<uint32_t>(std::countr_zero(chartSize - 1)) + 1;
   HeightFieldFrame frame;

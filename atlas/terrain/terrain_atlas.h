@@ -4,6 +4,7 @@
 // Texture Atlas", I3D 2007, sections 4 and 6 (height-field case).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -40,6 +41,21 @@ std::string chartFileName(uint32_t id);
 // the DEM. Shared by the writer and the tests.
 std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gridY,
                                 uint32_t chartSize);
+
+// Rows [y0, y0 + rows) of a DEM's heights, every column, row-major: what a chart row's pyramids
+// are built from when the DEM does not fit in memory. Access is edge-clamped to the whole DEM
+// (width x height), and must fall inside the rows held.
+struct DemRows {
+  const float* heights = nullptr;
+  int64_t y0 = 0, rows = 0;
+  int64_t width = 0, height = 0;  // the whole DEM
+  std::array<double, 2> spacing{1.0, 1.0};
+};
+// The rows a chart row needs (its own, and a chart's worth each side for the coarse levels'
+// normals): [max(0, gridY * m - m), min(height, gridY * m + 2m + 1)), m = chartSize - 1.
+std::array<int64_t, 2> chartRowSpan(int64_t gridY, uint32_t chartSize, int64_t height);
+ChartPyramid buildChartPyramid(const DemRows& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
+                               bool keepRing = false);
 
 // Builds the pyramid (subsampling) and normal maps of one chart. The normal at a sample comes from
 // central differences of the global DEM at that level's spacing (heightFieldNormals), so shared
