@@ -115,7 +115,8 @@ std::string flagFor(std::string_view name) {
       {"output", "--output"},                 {"worstCharts", "--worst"},
       {"thumbnailSize", "--image-size"},      {"imageryScale", "--imagery-scale"},
       {"imageryExtent", "--imagery-extent"},  {"heightPrecision", "--height-precision"},
-      {"compress", "--uncompressed"},         {"positionBits", "--position-bits"}};
+      {"compress", "--uncompressed"},         {"positionBits", "--position-bits"},
+      {"imagery", "--imagery"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }

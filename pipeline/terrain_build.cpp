@@ -245,7 +245,13 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& o) {
 
   const auto t0 = std::chrono::steady_clock::now();
   TerrainBuildStats stats;
-  // In memory when the estimate fits the cap, else window by window (no imagery there yet).
+  // In memory when the estimate fits the cap, else window by window (no imagery there yet). A cap
+  // below what the process holds, with room for windows, cannot be kept.
+  const uint64_t held = residentBytes();
+  if (memoryCap(o) < held + (uint64_t{32} << 20))
+    throw InputError(fmt::format("{} {} MiB is below the {} MiB this program holds before reading the DEM, plus 32 MiB "
+                                 "for the windows",
+                                 optionRef("maxMemory"), memoryCap(o) >> 20, held >> 20));
   bool windowed = o.outOfCore;
   if (!windowed) {
     DemOptions probe;
@@ -256,8 +262,8 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& o) {
                double(memoryCap(o));
   }
   if (windowed && !o.imagery.empty())
-    throw InputError(o.input.string() + ": draping " + optionRef("imagery") + " needs the in-memory build, and this "
-                     "DEM's exceeds the memory cap; give a larger " + optionRef("maxMemory"));
+    throw InputError(o.input.string() + ": " + optionRef("imagery") + " needs the in-memory build, and this DEM's "
+                     "exceeds the memory cap; give a larger " + optionRef("maxMemory"));
   StagedDirectory stage(o.output, kManifestName, "atlas");
   if (windowed) {
     stats.write = writeTerrainAtlasWindowed(o, stage.path(), &stats.read);

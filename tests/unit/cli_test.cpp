@@ -4,6 +4,8 @@
 
 #include <fstream>
 
+#include <nlohmann/json.hpp>
+
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -112,17 +114,24 @@ TEST_F(CliTest, InvalidImageryOptions) {
 
 // The in-memory terrain build refuses a DEM over its memory cap before reading it, naming the
 // file, the estimate and the option; within the cap it builds.
-TEST_F(CliTest, DemOverTheMemoryCapIsRefusedBeforeReading) {
+TEST_F(CliTest, DemBuildsWithinTheMemoryCapOrSaysWhyNot) {
+  // A cap below what the program itself holds is refused before the DEM is read.
   EXPECT_NE(build(dem(), dir_.path() / "m.atlas", "--max-memory 4M"), 0);
-  EXPECT_NE(output_.find("mt_rainier_90m.tif: 1201 x 1201 samples need about"), std::string::npos) << output_;
-  EXPECT_NE(output_.find("--max-memory"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("--max-memory 4 MiB is below"), std::string::npos) << output_;
   EXPECT_EQ(output_.find("voids filled"), std::string::npos) << output_;  // refused before the read
   expectNoAtlas(dir_.path(), "m.atlas");
-  // With the imagery's refined lattice the estimate grows: 64M holds the heights, not imagery at 4x.
+  // Imagery at 4x needs the in-memory build, which 200M does not hold: refused, naming both.
   const std::string imagery = (test::repoData() / "terrain/mt_rainier_imagery.tif").string();
-  EXPECT_NE(build(dem(), dir_.path() / "m.atlas", "--max-memory 64M --imagery '" + imagery + "' --imagery-scale 4"), 0);
-  EXPECT_NE(output_.find("need about"), std::string::npos) << output_;
-  EXPECT_EQ(build(dem(), dir_.path() / "m.atlas", "--max-memory 64M"), 0) << output_;
+  EXPECT_NE(build(dem(), dir_.path() / "m.atlas", "--max-memory 200M --imagery '" + imagery + "' --imagery-scale 4"), 0);
+  EXPECT_NE(output_.find("--imagery needs the in-memory build"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("--max-memory"), std::string::npos) << output_;
+  expectNoAtlas(dir_.path(), "m.atlas");
+  // The heights alone fit in memory; --out-of-core builds them window by window all the same.
+  EXPECT_EQ(build(dem(), dir_.path() / "m.atlas", "--max-memory 200M"), 0) << output_;
+  EXPECT_FALSE(nlohmann::json::parse(std::ifstream(dir_.path() / "m.atlas/stats.json")).contains("windowed"));
+  EXPECT_EQ(build(dem(), dir_.path() / "w.atlas", "--max-memory 200M --out-of-core"), 0) << output_;
+  EXPECT_TRUE(nlohmann::json::parse(std::ifstream(dir_.path() / "w.atlas/stats.json")).contains("windowed"));
+  EXPECT_NE(output_.find("built window by window"), std::string::npos) << output_;
 }
 
 TEST_F(CliTest, UnwritableOutput) {
