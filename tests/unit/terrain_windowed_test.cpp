@@ -129,10 +129,10 @@ TEST(WindowedTerrain, ADemSeveralTimesTheMemoryCapBuildsUnderIt) {
   }
   long rssKib = 0;
   const fs::path atlas = tmp.path() / "atlas";
-  ASSERT_EQ(runApp({"build", vrt.string(), "-o", atlas.string(), "--max-memory", cap, "--chart-size", "257",
-                    "--out-of-core"},
-                   &rssKib),
-            0);
+  // Over the cap, the build goes window by window by itself (under a sanitizer it is told to).
+  std::vector<std::string> args{"build", vrt.string(), "-o", atlas.string(), "--max-memory", cap, "--chart-size", "257"};
+  if (!kCheckCap) args.push_back("--out-of-core");
+  ASSERT_EQ(runApp(args, &rssKib), 0);
   std::printf("  %.0f samples under a %s cap: peak RSS %.1f MiB\n", samples, cap.c_str(), double(rssKib) / 1024.0);
   if (kCheckCap) {
     EXPECT_LT(uint64_t(rssKib) * 1024, kCap);
