@@ -1,5 +1,8 @@
 #include "tests/test_util.h"
 
+#include <fstream>
+#include <iterator>
+
 #include <array>
 #include <cstdio>
 #include <cstdlib>
@@ -40,6 +43,11 @@ TempDir::TempDir(const std::string& tag) {
 TempDir::~TempDir() {
   std::error_code ec;
   std::filesystem::remove_all(path_, ec);
+}
+
+std::string fileBytes(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
 int runCommand(const std::string& command, std::string* output) {

@@ -54,6 +54,9 @@ class TempDir {
   std::filesystem::path path_;
 };
 
+// A file's whole contents ("" if it cannot be read).
+std::string fileBytes(const std::filesystem::path& path);
+
 // Runs a shell command; returns its exit status and captures stdout+stderr into `output`.
 int runCommand(const std::string& command, std::string* output = nullptr);
 

@@ -36,9 +36,15 @@ DemRaster wholeMetreTile() {
   return dem;
 }
 
-std::string bytesOf(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
+// Builds options.input into dir/v1 (format version 1) and dir/v2 (compressed).
+template <typename Options>
+void buildBothWays(Options o, const fs::path& dir) {
+  o.output = dir / "v1";
+  o.compress = false;
+  buildAtlas(o);
+  o.output = dir / "v2";
+  o.compress = true;
+  buildAtlas(o);
 }
 
 void writeBytes(const fs::path& p, const std::string& bytes) {
@@ -95,7 +101,7 @@ TEST(CompressedAtlas, CorruptAndTruncatedBlocksAreNamed) {
   coded.compressed = true;
   const fs::path good = tmp.path() / "chart_0004.bin";
   writeChartFile(good, buildChartPyramid(dem, 1, 1, 129, true), 129, 32, coded);
-  const std::string bytes = bytesOf(good);
+  const std::string bytes = test::fileBytes(good);
   const fs::path bad = tmp.path() / "chart_bad.bin";
   auto readAll = [&] {
     const ChartFileReader r(bad);
@@ -197,12 +203,7 @@ TEST(CompressedAtlas, Version1AtlasesStillOpen) {
   TerrainBuildOptions o;
   o.input = test::repoData() / kTile;
   o.chartSize = 257;
-  o.output = tmp.path() / "v1";
-  o.compress = false;
-  buildAtlas(o);
-  o.output = tmp.path() / "v2";
-  o.compress = true;
-  buildAtlas(o);
+  buildBothWays(o, tmp.path());
   const AtlasView v1 = openAtlas(tmp.path() / "v1"), v2 = openAtlas(tmp.path() / "v2");
   EXPECT_EQ(v1.manifest.version, 1u);
   EXPECT_FALSE(v1.manifest.compression.present);
@@ -239,12 +240,7 @@ TEST(CompressedAtlas, MeshPositionsLieOnTheLatticeAndSeamsStayBitIdentical) {
   o.charts = 24;
   o.chartSize = 33;
   o.measureFidelity = false;
-  o.output = tmp.path() / "v1";
-  o.compress = false;
-  buildAtlas(o);
-  o.output = tmp.path() / "v2";
-  o.compress = true;
-  buildAtlas(o);
+  buildBothWays(o, tmp.path());
   const AtlasManifest m1 = readManifest(tmp.path() / "v1"), m2 = readManifest(tmp.path() / "v2");
   ASSERT_EQ(m1.charts.size(), m2.charts.size());
   EXPECT_EQ(m1.version, 1u);

@@ -19,11 +19,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string bytesOf(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
-
 TEST(Mosaic, FourTilesInAVrtBuildTheSameAtlasAsTheTile) {
   test::TempDir dir("gimlod-mosaic");
   const fs::path tile = test::repoData() / "terrain/mt_rainier_90m.tif";
@@ -65,12 +60,12 @@ TEST(Mosaic, FourTilesInAVrtBuildTheSameAtlasAsTheTile) {
   const AtlasManifest ma = readManifest(a), mb = readManifest(b);
   ASSERT_EQ(ma.charts.size(), mb.charts.size());
   for (size_t c = 0; c < ma.charts.size(); ++c)
-    EXPECT_TRUE(bytesOf(a / ma.charts[c].file) == bytesOf(b / mb.charts[c].file)) << ma.charts[c].file;
-  EXPECT_TRUE(bytesOf(a / ma.hierarchyFile) == bytesOf(b / mb.hierarchyFile));
+    EXPECT_TRUE(test::fileBytes(a / ma.charts[c].file) == test::fileBytes(b / mb.charts[c].file)) << ma.charts[c].file;
+  EXPECT_TRUE(test::fileBytes(a / ma.hierarchyFile) == test::fileBytes(b / mb.hierarchyFile));
   // The manifests differ only in the source they name, and in how GDAL spells the same reference
   // system (the tiles were written by GDAL, which spells EPSG:4326 without the datum ensemble).
-  nlohmann::json ja = nlohmann::json::parse(bytesOf(a / kManifestName));
-  nlohmann::json jb = nlohmann::json::parse(bytesOf(b / kManifestName));
+  nlohmann::json ja = nlohmann::json::parse(test::fileBytes(a / kManifestName));
+  nlohmann::json jb = nlohmann::json::parse(test::fileBytes(b / kManifestName));
   OGRSpatialReference sa, sb;
   ASSERT_EQ(sa.importFromWkt(ja["georef"]["wkt"].get<std::string>().c_str()), OGRERR_NONE);
   ASSERT_EQ(sb.importFromWkt(jb["georef"]["wkt"].get<std::string>().c_str()), OGRERR_NONE);

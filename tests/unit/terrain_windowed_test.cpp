@@ -28,11 +28,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string bytesOf(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
-
 void expectSameCharts(bool compressed) {
   test::TempDir tmp("gimlod-windowed");
   const fs::path tile = test::repoData() / "terrain/mt_rainier_90m.tif";
@@ -64,7 +59,7 @@ void expectSameCharts(bool compressed) {
   EXPECT_LT(r.bandRows, dem.height);
   ASSERT_EQ(a.charts.size(), b.charts.size());
   for (size_t i = 0; i < a.charts.size(); ++i)
-    EXPECT_EQ(bytesOf(tmp.path() / "memory" / a.charts[i].file), bytesOf(tmp.path() / "windows" / b.charts[i].file))
+    EXPECT_EQ(test::fileBytes(tmp.path() / "memory" / a.charts[i].file), test::fileBytes(tmp.path() / "windows" / b.charts[i].file))
         << a.charts[i].file;
   EXPECT_EQ(a.heightRange, b.heightRange);
   EXPECT_EQ(a.compression.present, b.compression.present);
