@@ -295,9 +295,9 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
   {
     std::vector<std::array<RootNeighbour, 4>> roots;
     for (const ChartInfo& c : m.charts) roots.push_back(c.neighbours);
-    std::vector<std::unique_ptr<ChartFileReader>> readers;
-    for (const ChartInfo& c : m.charts) readers.push_back(std::make_unique<ChartFileReader>(dir / c.file));
-    const Hierarchy h = buildGeometryHierarchy(p, roots, [&](uint32_t c) { return readers[c]->readLevelPositions(0); },
+    // Each chart file is opened only while it is read (more charts than open files may exist).
+    const Hierarchy h = buildGeometryHierarchy(
+        p, roots, [&](uint32_t c) { return ChartFileReader(dir / m.charts[c].file).readLevelPositions(0); },
                                                &w.hierarchy);
     writeHierarchy(dir / m.hierarchyFile, h);
   }

@@ -151,10 +151,10 @@ TerrainAtlasOptions terrainAtlasOptions(const TerrainBuildOptions& o) {
 // The hierarchy (from level 0 of every chart file, as a restarted stage would read it) and the
 // manifest, once the chart files are written.
 void finishTerrainAtlas(AtlasManifest& m, const fs::path& dir, TerrainWriteStats& w) {
-  std::vector<std::unique_ptr<ChartFileReader>> readers;
-  for (const ChartInfo& c : m.charts) readers.push_back(std::make_unique<ChartFileReader>(dir / c.file));
-  const Hierarchy h =
-      buildTerrainHierarchy(m, [&](uint32_t c) { return readers[c]->readLevelHeights(0); }, &w.hierarchy);
+  // Each chart file is opened only while it is read: an atlas may hold more charts than a process
+  // may have files open.
+  const Hierarchy h = buildTerrainHierarchy(
+      m, [&](uint32_t c) { return ChartFileReader(dir / m.charts[c].file).readLevelHeights(0); }, &w.hierarchy);
   writeHierarchy(dir / m.hierarchyFile, h);
   writeManifest(dir, m);
   w.chartsX = m.chartsX;

@@ -5,12 +5,38 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "core/atlas_format.h"
 #include "hierarchy/hierarchy.h"
 
 namespace gimlod {
+
+// Chart files opened on demand: at most maxOpen stay open (the least recently used is closed when
+// another must open), so an atlas may hold more charts than a process may have files open. A
+// reader in use stays valid while it is held. Thread-safe.
+class ChartFileSet {
+ public:
+  explicit ChartFileSet(size_t maxOpen);
+  void add(std::filesystem::path path);
+  size_t size() const { return paths_.size(); }
+  bool empty() const { return paths_.empty(); }
+  std::shared_ptr<const ChartFileReader> get(uint32_t i) const;  // throws InputError naming the file
+  size_t openFiles() const;
+
+ private:
+  std::vector<std::filesystem::path> paths_;
+  size_t maxOpen_;
+  mutable std::mutex mutex_;
+  mutable std::vector<std::shared_ptr<const ChartFileReader>> open_;
+  mutable std::vector<uint64_t> lastUse_;
+  mutable uint64_t clock_ = 0;
+  mutable size_t openCount_ = 0;
+};
+
+// The most chart files a PageReader keeps open: a quarter of the process's limit, at most 2048.
+size_t chartFilesKeptOpen();
 
 // Reads node pages: a node's page is its finest-resolution window, (2^maxRes(level) + 1)^2
 // samples of pyramid level intervalsLog2 - level - maxRes(level); every coarser resolution of the
@@ -38,8 +64,8 @@ class PageReader {
   bool geometry_ = false;
   bool colours_ = false;
   uint32_t colourScaleLog2_ = 0;
-  std::vector<std::unique_ptr<ChartFileReader>> charts_;
-  std::vector<std::unique_ptr<ChartFileReader>> imagery_;  // per chart, for terrain imagery
+  ChartFileSet charts_;
+  ChartFileSet imagery_;  // per chart, for terrain imagery
   mutable std::atomic<uint64_t> bytesRead_{0};
 };
 

@@ -45,7 +45,10 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
       pool_(renderer_->pageCapacity()) {
   // The roots' pages stay resident (paper 7.2), so every frame can be drawn.
   if (atlas_.hierarchy.chartCount() > pool_.capacity())
-    throw std::runtime_error("page pool too small for the root pages of every chart");
+    throw InputError(atlas_.dir.string() + ": " + std::to_string(atlas_.hierarchy.chartCount()) +
+                     " charts, but the page pool holds " + std::to_string(pool_.capacity()) +
+                     " pages (the GL limit on texture array layers), and every chart's root page stays resident; "
+                     "build the atlas with a larger chart size");
   for (uint32_t c = 0; c < atlas_.hierarchy.chartCount(); ++c) {
     const NodeId root{c, 0, 0, 0};
     PagePool::Slot slot;
