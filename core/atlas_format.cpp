@@ -234,10 +234,7 @@ void heightFieldNormals(const float* heights, size_t stride, uint32_t u0, uint32
   thread_local std::vector<float> cx;
   cx.resize(w);
   for (uint32_t u = 0; u < w; ++u) cx[u] = inverseSpan(f.originX + (int64_t{u0 + u} << level), f.maxX, f.spacing[0]);
-  auto q = [](float c) {  // c in [-1, 1]; NaN (from a corrupt file's heights) to -1
-    c = c > -1.f ? (c < 1.f ? c : 1.f) : -1.f;
-    return static_cast<uint8_t>(c * 127.5f + 128.f);
-  };
+  auto q = [](float c) { return static_cast<uint8_t>(c * 127.5f + 128.f); };  // c in [-1, 1]
 
   for (uint32_t v = 0; v < h; ++v) {
     const float cy = inverseSpan(f.originY + (int64_t{v0 + v} << level), f.maxY, f.spacing[1]);
@@ -249,7 +246,12 @@ void heightFieldNormals(const float* heights, size_t stride, uint32_t u0, uint32
       // The ring holds the heights at the clamped neighbours.
       const float dx = (row[u + 1] - row[ptrdiff_t(u) - 1]) * cx[u];
       const float dy = (above[u] - below[u]) * cy;
-      const float inv = 1.f / std::sqrt(dx * dx + dy * dy + 1.f);
+      const float length2 = dx * dx + dy * dy + 1.f;
+      if (!(length2 < std::numeric_limits<float>::infinity())) {  // slopes beyond float (a corrupt file)
+        o[u] = PackedNormal{128, 128, 255, 255};
+        continue;
+      }
+      const float inv = 1.f / std::sqrt(length2);
       o[u] = PackedNormal{q(-dx * inv), q(-dy * inv), q(inv), 255};
     }
   }
