@@ -39,6 +39,16 @@ ImageryOptions imageryOptions(const TerrainBuildOptions& o) {
 // The in-memory build's memory cap: --max-memory, or 3/4 of the machine's memory.
 uint64_t memoryCap(const TerrainBuildOptions& o) { return o.maxMemory ? o.maxMemory : physicalMemoryBytes() / 4 * 3; }
 
+// How the DEM is opened: GDAL's block cache capped from the memory cap (the raster is read once,
+// and its cached copies of blocks only add to the peak).
+DemOptions demOptions(const TerrainBuildOptions& o) {
+  DemOptions d;
+  d.zScale = o.zScale;
+  d.subdataset = o.subdataset;
+  d.gdalCacheBytes = std::clamp<uint64_t>(memoryCap(o) / 32, uint64_t{8} << 20, uint64_t{64} << 20);
+  return d;
+}
+
 // The in-memory build's peak per DEM sample, with the imagery's.
 double inMemoryBytesPerSample(const TerrainBuildOptions& o) {
   double b = kTerrainBytesPerSample;
@@ -54,18 +64,11 @@ double inMemoryBytesPerSample(const TerrainBuildOptions& o) {
 // surface (the codec gives quantized heights back exactly).
 // Returns the precision used.
 double quantizeHeights(DemRaster& dem, const TerrainBuildOptions& o) {
-  const double p = o.heightPrecision != kAutoHeightPrecision ? o.heightPrecision
-                   : dem.integerHeights                       ? 1.0
-                                                              : kDefaultHeightPrecision;
-  const double top = std::max(std::abs(double(dem.minHeight)), std::abs(double(dem.maxHeight)));
-  if (top / p > double(1u << 23))
-    throw InputError(fmt::format("{}: heights reach {:.1f} m, more than 2^23 steps of {} {} m; give a coarser "
-                                 "precision or {}",
-                                 o.input.string(), top, optionRef("heightPrecision"), p,
-                                 optionRef("compress")));
+  const double p = terrainHeightPrecision(o.input, o.heightPrecision, dem.integerHeights, kDefaultHeightPrecision,
+                                          dem.minHeight, dem.maxHeight);
   float lo = std::numeric_limits<float>::infinity(), hi = -lo;
   for (float& h : dem.heights) {
-    if (h != std::nearbyint(h)) h = quantizeToStep(h, p);
+    h = storedHeight(h, p);
     lo = std::min(lo, h);
     hi = std::max(hi, h);
   }
@@ -103,15 +106,8 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
 
 DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   const auto t0 = std::chrono::steady_clock::now();
-  DemOptions dopt;
-  dopt.zScale = o.zScale;
-  dopt.subdataset = o.subdataset;
-  // The whole raster is read once into memory: GDAL's cache of its blocks only adds to the peak.
-  dopt.gdalCacheBytes = std::clamp<uint64_t>(memoryCap(o) / 32, uint64_t{8} << 20, uint64_t{64} << 20);
-  // A DEM whose build would exceed the cap is refused once opened, before it is read.
-  dopt.maxMemory = memoryCap(o);
-  dopt.buildBytesPerSample = inMemoryBytesPerSample(o);
-  DemRaster dem = loadDem(o.input, dopt);
+  // buildTerrainAtlas has chosen this build because its estimate fits the cap.
+  DemRaster dem = loadDem(o.input, demOptions(o));
   stats->seconds = secondsSince(t0);
   stats->width = dem.width;
   stats->height = dem.height;
@@ -200,10 +196,7 @@ TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& 
 TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const fs::path& dir, TerrainReadStats* read) {
   const auto t0 = std::chrono::steady_clock::now();
   const uint64_t cap = memoryCap(o);
-  DemOptions dopt;
-  dopt.zScale = o.zScale;
-  dopt.subdataset = o.subdataset;
-  dopt.gdalCacheBytes = std::clamp<uint64_t>(cap / 32, uint64_t{8} << 20, uint64_t{64} << 20);
+  const DemOptions dopt = demOptions(o);
   const DemSource source(o.input, dopt);
   for (const std::string& warning : source.info().warnings) spdlog::warn("{}: {}", o.input.string(), warning);
   AtlasManifest m = terrainManifest(o);
@@ -254,9 +247,7 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& o) {
                                  optionRef("maxMemory"), memoryCap(o) >> 20, held >> 20));
   bool windowed = o.outOfCore;
   if (!windowed) {
-    DemOptions probe;
-    probe.subdataset = o.subdataset;
-    const DemSource source(o.input, probe);
+    const DemSource source(o.input, demOptions(o));
     windowed = double(source.info().width) * source.info().height * inMemoryBytesPerSample(o) +
                    double(residentBytes()) >
                double(memoryCap(o));

@@ -3,6 +3,7 @@
 // Texture Atlas", I3D 2007, sections 4 and 6 (height-field case: the terrain grid is cut into
 // (2^m+1)^2 charts sharing one row/column, and each chart is mip-mapped by subsampling).
 #include "atlas/terrain/terrain_atlas.h"
+#include "core/block_codec.h"
 #include "core/progress.h"
 
 #include <algorithm>
@@ -31,6 +32,23 @@ void validateTerrainAtlasOptions(const TerrainAtlasOptions& o) {
     throw InputError(optionRef("blockIntervals") + " " + std::to_string(b) + " exceeds " + optionRef("chartSize") +
                      " - 1 (" +
                      std::to_string(cs - 1) + ")");
+}
+
+double terrainHeightPrecision(const fs::path& input, double requested, bool integerHeights, double fallback,
+                              float lo, float hi) {
+  const double p = requested > 0.0 ? requested : integerHeights ? 1.0 : fallback;
+  const double top = std::max(std::abs(double(lo)), std::abs(double(hi)));
+  if (top / p > double(1u << 23)) {
+    char text[256];
+    std::snprintf(text, sizeof text, ": heights reach %.1f m, more than 2^23 steps of ", top);
+    throw InputError(input.string() + text + optionRef("heightPrecision") + " " + std::to_string(p) +
+                     " m; give a coarser precision or " + optionRef("compress"));
+  }
+  return p;
+}
+
+float storedHeight(float h, double precision) {
+  return h == std::nearbyint(h) ? h : quantizeToStep(h, precision);
 }
 
 std::string chartFileName(uint32_t id) {

@@ -34,6 +34,14 @@ struct TerrainAtlasStats {
 // "blockIntervals").
 void validateTerrainAtlasOptions(const TerrainAtlasOptions& options);
 
+// The step a compressed atlas quantizes a DEM's heights that are not whole to: `requested` if it
+// is > 0, else 1 for a DEM of whole metres and `fallback` otherwise. Throws InputError naming
+// `input` when heights in [lo, hi] span more than 2^23 steps of it.
+double terrainHeightPrecision(const std::filesystem::path& input, double requested, bool integerHeights,
+                              double fallback, float lo, float hi);
+// A height as a compressed atlas stores it: whole metres exactly, others quantized to `precision`.
+float storedHeight(float h, double precision);
+
 // Relative path of chart `id`'s file inside the atlas directory: "charts/chart_0007.bin".
 std::string chartFileName(uint32_t id);
 

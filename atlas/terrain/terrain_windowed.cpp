@@ -154,14 +154,10 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
   // 3. Heights as a compressed atlas stores them (quantized like the in-memory build), and their
   // range.
   const bool compressed = options.atlas.coding.compressed;
-  r.heightPrecision = options.heightPrecision > 0.0 ? options.heightPrecision
-                      : dem.integerHeights         ? 1.0
-                                                   : options.defaultHeightPrecision;
+  if (compressed)
+    r.heightPrecision = terrainHeightPrecision(input, options.heightPrecision, dem.integerHeights,
+                                               options.defaultHeightPrecision, lo, hi);
   {
-    const double top = std::max(std::abs(double(lo)), std::abs(double(hi)));
-    if (compressed && top / r.heightPrecision > double(1u << 23))
-      throw InputError(input.string() + ": heights reach " + std::to_string(top) + " m, more than 2^23 steps of " +
-                       optionRef("heightPrecision") + " " + std::to_string(r.heightPrecision) + " m");
     const uint64_t rowsPerBand = std::clamp<uint64_t>(budget / 4 / (width * 4), 1, height);
     std::vector<float> h(rowsPerBand * width);
     float qlo = std::numeric_limits<float>::infinity(), qhi = -qlo;
@@ -170,8 +166,7 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
       const size_t n = size_t(rows * width);
       heights.read(y0 * width * 4, h.data(), n * 4);
       if (compressed)
-        for (size_t i = 0; i < n; ++i)
-          if (h[i] != std::nearbyint(h[i])) h[i] = quantizeToStep(h[i], r.heightPrecision);
+        for (size_t i = 0; i < n; ++i) h[i] = storedHeight(h[i], r.heightPrecision);
       for (size_t i = 0; i < n; ++i) qlo = std::min(qlo, h[i]), qhi = std::max(qhi, h[i]);
       if (compressed) heights.write(y0 * width * 4, h.data(), n * 4);
     }

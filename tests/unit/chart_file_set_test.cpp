@@ -31,7 +31,6 @@ TEST(ChartFileSet, MoreChartsThanOpenFiles) {
     }
   // Closed for the others long ago, and still readable through the reader held.
   EXPECT_EQ(held->readLevelHeights(2), ChartFileReader(tmp.path() / m.charts[0].file).readLevelHeights(2));
-  EXPECT_GE(chartFilesKeptOpen(), 16u);
 }
 
 }  // namespace
