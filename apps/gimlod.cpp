@@ -116,7 +116,7 @@ std::string flagFor(std::string_view name) {
       {"thumbnailSize", "--image-size"},      {"imageryScale", "--imagery-scale"},
       {"imageryExtent", "--imagery-extent"},  {"heightPrecision", "--height-precision"},
       {"compress", "--uncompressed"},         {"positionBits", "--position-bits"},
-      {"imagery", "--imagery"}};
+      {"imagery", "--imagery"},              {"sideQuads", "--quads"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }
@@ -362,8 +362,14 @@ int main(int argc, char** argv) {
   std::string chartsArg = "auto";
   build
       ->add_option("--charts", chartsArg,
-                   "Meshes: target patches (each becomes 3-8 quad charts, and the chart repair may cut more); auto: "
+                   "Meshes: target patches (each becomes 1-5 quad charts, see --quads, and the chart repair may cut more); auto: "
                    "about sqrt(triangles) / 80, at least 48; 0: --chart-error")
+      ->capture_default_str();
+  std::string quadsArg = "kites";
+  build->add_option("--quads", quadsArg,
+                    "Meshes: how a patch becomes quad charts: sides (each chart edge a whole patch side, about n/2 "
+                    "charts an n-sided patch, one for 4 sides) or kites (each side halved, n charts)")
+      ->check(CLI::IsMember({"sides", "kites"}))
       ->capture_default_str();
   build->add_option("--chart-error", mesh.maxChartError,
                     "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
@@ -520,6 +526,7 @@ int main(int argc, char** argv) {
         static_cast<CommonBuildOptions&>(mesh) = common;
         if (chartSizeOpt->count() > 0) mesh.chartSize = terrain.chartSize;
         mesh.charts = chartsArg == "auto" ? kAutoCharts : parseCount("--charts", chartsArg);
+        mesh.sideQuads = quadsArg == "sides";
         mesh.maxSampleError = sampleErrorPercent < 0.0 && build->get_option("--sample-error")->count() == 0
                                   ? kAutoSampleError
                                   : sampleErrorPercent / 100.0;

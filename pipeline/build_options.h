@@ -75,8 +75,9 @@ struct MeshBuildOptions : CommonBuildOptions {
   // Quad chart side in samples, 2^m + 1 in [9, 8193]; 0: by the input's density
   // (meshChartSizeForDensity, after the charting).
   uint32_t chartSize = 0;
-  // Target patches before quadrangulation (each becomes 3 to 8 quad charts, and the repair may
-  // cut more); kAutoCharts: meshPatchTarget of the input's triangles; 0: maxChartError.
+  // Target patches before quadrangulation (each becomes 1 to 5 quad charts, or 3 to 8 kites, and
+  // the repair may cut more); kAutoCharts: meshPatchTarget of the input's triangles; 0:
+  // maxChartError.
   uint32_t charts = kAutoCharts;
   double maxChartError = 0.01;      // with charts = 0: RMS plane distance / bbox diagonal
   uint32_t straightenRounds = 2;    // rounds of straightening shared sides (atlas/layout_refine.h)
@@ -98,6 +99,9 @@ struct MeshBuildOptions : CommonBuildOptions {
   // bounding-box diagonal (a power-of-two step), before the hierarchy and the fidelity are
   // measured, so shared seams stay bit-identical and the errors bound what is drawn.
   uint32_t positionBits = kDefaultPositionBits;
+  // How patches become quad charts (atlas/mesh/resample.h QuadLayout): true, the sides layout
+  // (about n/2 charts an n-sided patch; side counts made even first); false, kites (n charts).
+  bool sideQuads = false;
 };
 
 // The option's name as opts spell it in messages (CommonBuildOptions::spellOption).

@@ -74,6 +74,8 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"chart_size_by_density", rs.chartSizeByDensity},
                       {"sides_straightened", rs.sidesStraightened},
                       {"side_ears_mended", rs.sideEarsMended},
+                      {"quads", rs.sideQuads ? "sides" : "kites"},
+                      {"even_side_corners", rs.evenSideCorners},
                       {"flipped_texels_before_splits", flips.flippedTexelsFirst},
                       {"patches_split_by_repair", flips.patchesSplit},
                       {"patches_unsplittable", flips.patchesUnsplit},

@@ -97,6 +97,8 @@ struct MeshResampleStats {
   ImageQuality image;                  // all charts' sampled images
   uint32_t sidesStraightened = 0;
   uint32_t sideEarsMended = 0;
+  bool sideQuads = false;              // the sides quad layout (else kites)
+  uint32_t evenSideCorners = 0;        // corners made so every patch has an even side count
   ChartRepairStats repair;
   uint32_t chartSize = 0;              // the quad charts' side in samples
   bool chartSizeByDensity = false;     // chosen by meshChartSizeForDensity

@@ -46,13 +46,18 @@ double samplesPerTriangle(const ChartLayout& layout, uint64_t charts, uint32_t c
          double(std::max<size_t>(layout.triangles.size(), 1));
 }
 
+// The quad charts of a layout (before any repair).
+uint64_t layoutQuadCount(const ChartLayout& layout, QuadLayout quads) {
+  uint64_t n = 0;
+  for (const Patch& pa : layout.patches) n += patchQuadCount(uint32_t(pa.sides.size()), quads);
+  return n;
+}
+
 // Refuses a chart size whose charts cannot be made: each chart's samples go to a spill file in
 // the staging directory once measured, and are read back one chart at a time per thread to be
 // written, so what must fit is a patch's charts (up to 8 quads) and their working arrays on every
 // thread at once in memory, and the spill plus the chart files (with their pyramids) on disk.
-void checkChartRoom(const ChartLayout& layout, const MeshBuildOptions& o, const fs::path& dir) {
-  uint64_t quads = 0;
-  for (const Patch& pa : layout.patches) quads += pa.sides.size();
+void checkChartRoom(const ChartLayout& layout, uint64_t quads, const MeshBuildOptions& o, const fs::path& dir) {
   const uint64_t samples = uint64_t(o.chartSize) * o.chartSize;
   const uint64_t perSample = layout.colours.empty() ? 16 : 20;
   const uint64_t threads = o.threads ? o.threads : uint64_t(std::max(1, tbb::this_task_arena::max_concurrency()));
@@ -183,16 +188,29 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   MeshResampleStats& st = r.stats;
   MeshBuildOptions o = options;
   if (o.maxSampleError == kAutoSampleError) o.maxSampleError = o.chartSize == 0 ? kDefaultSampleError : 0.0;
+  const QuadLayout quadLayout = o.sideQuads ? QuadLayout::kSides : QuadLayout::kKites;
+  st.sideQuads = o.sideQuads;
+  st.sidesStraightened = o.straightenRounds ? straightenSides(layout, o.straightenRounds) : 0;
+  st.sideEarsMended = moveSideEars(layout);
+  if (o.sideQuads) {
+    const EvenSidesResult even = evenSides(layout);
+    st.evenSideCorners = even.corners;
+    if (even.oddLeft > 0)
+      throw InputError(fmt::format("{}: {} patches cannot be given an even number of sides for the sides quad layout "
+                                   "(no chain of sides with inner vertices joins them to another such patch or to a "
+                                   "hole); build with {} kites",
+                                   options.input.string(), even.oddLeft, optionRef("sideQuads")));
+  }
+  finishStage(meter, "straighten");
+  const uint64_t quads = layoutQuadCount(layout, quadLayout);
   if (o.chartSize == 0) {
-    uint64_t quads = 0;
-    for (const Patch& pa : layout.patches) quads += pa.sides.size();
     o.chartSize = meshChartSizeForDensity(layout.triangles.size(), quads);
     st.chartSizeByDensity = true;
     spdlog::info("chart size {} for {} quad charts of {} triangles ({:.1f} samples per triangle)", o.chartSize, quads,
                  layout.triangles.size(), samplesPerTriangle(layout, quads, o.chartSize));
   }
   st.chartSize = o.chartSize;
-  checkChartRoom(layout, o, dir);
+  checkChartRoom(layout, quads, o, dir);
 
   // Quads, parameterization and resampling.
   r.spill = std::make_unique<ChartSpill>(dir / "samples.tmp", o.chartSize, !layout.colours.empty());
@@ -200,9 +218,7 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   ro.chartSize = o.chartSize;
   ro.threads = o.threads;
   ro.spill = r.spill.get();
-  st.sidesStraightened = o.straightenRounds ? straightenSides(layout, o.straightenRounds) : 0;
-  st.sideEarsMended = moveSideEars(layout);
-  finishStage(meter, "straighten");
+  ro.quads = quadLayout;
   GeometryImageSet first = resampleLayout(layout, ro);
   // A chart size chosen by density is doubled (and the layout resampled) while the patches whose
   // charts sample the surface more coarsely than maxSampleError hold more than a tenth of its
@@ -220,7 +236,7 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
     MeshBuildOptions larger = o;
     larger.chartSize = 2 * o.chartSize - 1;
     try {
-      checkChartRoom(layout, larger, dir);
+      checkChartRoom(layout, quads, larger, dir);
     } catch (const InputError& e) {
       spdlog::info("chart size stays {}: {}", o.chartSize, o.spellOption ? e.message(o.spellOption) : std::string(e.what()));
       break;

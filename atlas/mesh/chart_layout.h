@@ -1,4 +1,5 @@
-// The chart layout of a mesh atlas: the surface cut into disk-shaped patches with 3 to 8 sides,
+// The chart layout of a mesh atlas: the surface cut into disk-shaped patches with 3 to 8 sides
+// (up to kMaxPatchSides once made even for the sides quad layout, atlas/mesh/resample.h),
 // each side shared with exactly one other patch (or open), as produced by clustering
 // (atlas/mesh/charting.h) and consumed by parameterization and resampling
 // (atlas/mesh/patch_param.h).
@@ -16,6 +17,10 @@
 
 namespace gimlod {
 
+// The most sides a patch may have: clustering and cuts keep 3..8, and making the side counts even
+// (evenSides, atlas/mesh/layout_refine.h) may add two.
+inline constexpr uint32_t kMaxPatchSides = 10;
+
 // One side of a patch: the boundary run between two consecutive corners, as mesh vertex ids,
 // in the patch's counter-clockwise boundary order (outward normals, seen from outside).
 struct PatchSide {
@@ -30,7 +35,7 @@ struct PatchSide {
 // A topological disk of the input surface.
 struct Patch {
   std::vector<uint32_t> triangles;  // indices into ChartLayout::triangles
-  std::vector<PatchSide> sides;     // 3..8, counter-clockwise; side i ends where side i+1 starts
+  std::vector<PatchSide> sides;     // 3..kMaxPatchSides, counter-clockwise; side i ends where side i+1 starts
 };
 
 // The surface (welded, manifold, after repair) and its patches. Every triangle belongs to

@@ -233,12 +233,129 @@ bool insertCorner(ChartLayout& layout, uint32_t p, uint32_t side, uint32_t k, ui
 
 namespace {
 
+// The inner vertex of a side nearest its arc-length middle (0 if it has none).
+uint32_t sideMiddleVertex(const ChartLayout& layout, const PatchSide& side) {
+  if (side.vertices.size() < 3) return 0;
+  std::vector<double> cum(1, 0.0);
+  for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
+    cum.push_back(cum.back() + glm::length(glm::dvec3(layout.positions[side.vertices[k + 1]]) -
+                                           glm::dvec3(layout.positions[side.vertices[k]])));
+  }
+  uint32_t best = 1;
+  for (uint32_t k = 2; k + 1 < side.vertices.size(); ++k) {
+    if (std::abs(cum[k] - 0.5 * cum.back()) < std::abs(cum[best] - 0.5 * cum.back())) best = k;
+  }
+  return best;
+}
+
+double sideLength3D(const ChartLayout& layout, const PatchSide& side) {
+  double l = 0.0;
+  for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
+    l += glm::length(glm::dvec3(layout.positions[side.vertices[k + 1]]) - glm::dvec3(layout.positions[side.vertices[k]]));
+  }
+  return l;
+}
+
+}  // namespace
+
+EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& within, uint32_t maxSides) {
+  EvenSidesResult r;
+  const uint32_t np = uint32_t(layout.patches.size());
+  std::vector<uint8_t> allowed(np, within.empty() ? 1 : 0);
+  for (uint32_t p : within) {
+    if (p < np) allowed[p] = 1;
+  }
+  auto sidesOf = [&](uint32_t p) { return uint32_t(layout.patches[p].sides.size()); };
+  auto odd = [&](uint32_t p) { return allowed[p] && sidesOf(p) % 2 == 1; };
+  // The longest side of p towards `towards` (a patch, or -1: open) that can take a corner with
+  // both patches gaining one within `room` more sides; -1 if none.
+  auto sideTowards = [&](uint32_t p, int32_t towards, uint32_t roomP, uint32_t roomQ) {
+    int32_t best = -1;
+    double bestLength = -1.0;
+    if (sidesOf(p) + 1 > roomP) return best;
+    if (towards >= 0 && (!allowed[uint32_t(towards)] || uint32_t(towards) == p || sidesOf(uint32_t(towards)) + 1 > roomQ))
+      return best;
+    for (uint32_t i = 0; i < sidesOf(p); ++i) {
+      const PatchSide& side = layout.patches[p].sides[i];
+      if (side.neighbourPatch != towards || side.vertices.size() < 3) continue;
+      const double l = sideLength3D(layout, side);
+      if (l > bestLength) best = int32_t(i), bestLength = l;
+    }
+    return best;
+  };
+  auto split = [&](uint32_t p, uint32_t i) {
+    const uint32_t k = sideMiddleVertex(layout, layout.patches[p].sides[i]);
+    if (k != 0 && insertCorner(layout, p, i, k, maxSides)) ++r.corners;
+  };
+  // Odd pairs across one side, then open sides.
+  for (uint32_t p = 0; p < np; ++p) {
+    if (!odd(p)) continue;
+    int32_t bestSide = -1;
+    double bestLength = -1.0;
+    for (uint32_t i = 0; i < sidesOf(p); ++i) {
+      const PatchSide& side = layout.patches[p].sides[i];
+      if (side.neighbourPatch < 0 || !odd(uint32_t(side.neighbourPatch))) continue;
+      if (sideTowards(p, side.neighbourPatch, maxSides, maxSides) < 0 || side.vertices.size() < 3) continue;
+      const double l = sideLength3D(layout, side);
+      if (l > bestLength) bestSide = int32_t(i), bestLength = l;
+    }
+    if (bestSide >= 0) split(p, uint32_t(bestSide));
+  }
+  for (uint32_t p = 0; p < np; ++p) {
+    if (!odd(p)) continue;
+    const int32_t i = sideTowards(p, -1, maxSides, maxSides);
+    if (i >= 0) split(p, uint32_t(i));
+  }
+  // Chains: breadth first from an odd patch through patches that can gain two corners, to an odd
+  // patch or one with an open side that can take a corner.
+  for (uint32_t start = 0; start < np; ++start) {
+    if (!odd(start)) continue;
+    std::vector<int32_t> prev(np, -2);
+    std::vector<uint32_t> queue{start};
+    prev[start] = -1;
+    int32_t end = -1;
+    bool endOpen = false;
+    for (size_t at = 0; at < queue.size() && end < 0; ++at) {
+      const uint32_t x = queue[at];
+      // x gains one corner towards the next patch and (but for the start) one from the previous.
+      const uint32_t roomX = x == start ? maxSides : maxSides - 1;
+      for (const PatchSide& side : layout.patches[x].sides) {
+        if (side.neighbourPatch < 0) continue;
+        const uint32_t y = uint32_t(side.neighbourPatch);
+        if (prev[y] != -2 || !allowed[y] || sideTowards(x, int32_t(y), roomX, maxSides) < 0) continue;
+        prev[y] = int32_t(x);
+        if (odd(y)) {
+          end = int32_t(y);
+          break;
+        }
+        if (sideTowards(y, -1, maxSides - 1, maxSides) >= 0) {
+          end = int32_t(y);
+          endOpen = true;
+          break;
+        }
+        queue.push_back(y);
+      }
+    }
+    if (end < 0) continue;
+    if (endOpen) split(uint32_t(end), uint32_t(sideTowards(uint32_t(end), -1, maxSides, maxSides)));
+    for (uint32_t y = uint32_t(end); prev[y] >= 0; y = uint32_t(prev[y])) {
+      const uint32_t x = uint32_t(prev[y]);
+      const int32_t i = sideTowards(x, int32_t(y), maxSides, maxSides);
+      if (i >= 0) split(x, uint32_t(i));
+    }
+  }
+  for (uint32_t p = 0; p < np; ++p) r.oddLeft += odd(p);
+  return r;
+}
+
+namespace {
+
 // The best acceptable cut of patch p passing through one of `sources` (vertices of the patch);
 // with no sources, through boundary vertices (at most 96, spread evenly): the neck. With
 // minShare > 0, only cuts that leave at least that share of the border on either side count.
 // Empty if none. Reads the layout only. See splitPatchThrough and splitPatchAtNeck.
 std::vector<uint32_t> findCut(const ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources,
-                              uint32_t maxSides, double minShare = 0.0) {
+                              uint32_t maxSides, double minShare = 0.0, uint32_t minPartEdges = 0) {
   if (p >= layout.patches.size()) return {};
   const Patch& patch = layout.patches[p];
   const PatchGraph g = patchGraph(layout, patch);
@@ -253,12 +370,20 @@ std::vector<uint32_t> findCut(const ChartLayout& layout, uint32_t p, std::vector
     }
   }
   auto sidesOf = [&](uint32_t patchId) { return uint32_t(layout.patches[patchId].sides.size()); };
+  // Each boundary vertex's place along the loop, for the parts' boundary edges.
+  std::unordered_map<uint32_t, uint32_t> loopAt;
+  for (const PatchSide& side : patch.sides) {
+    for (size_t k = 0; k + 1 < side.vertices.size(); ++k) loopAt.emplace(side.vertices[k], uint32_t(loopAt.size()));
+  }
+  const uint32_t loopEdges = uint32_t(loopAt.size());
   // A cut between boundary vertices e1 and e2 is acceptable when both parts get 3..maxSides
   // sides and every neighbour that gains a corner stays within maxSides.
   auto acceptable = [&](uint32_t e1, uint32_t e2) {
     const auto a = places.at(e1), b = places.at(e2);
     const auto [s1, s2] = partSides(patch, a, b);
     if (s1 == 0 || s1 > maxSides || s2 > maxSides) return false;
+    const uint32_t forwardEdges = (loopAt.at(e2) + loopEdges - loopAt.at(e1)) % loopEdges;
+    if (std::min(forwardEdges, loopEdges - forwardEdges) < minPartEdges) return false;
     int32_t gained[2] = {-1, -1};  // neighbours gaining a corner (the same one may gain two)
     for (int e = 0; e < 2; ++e) {
       const auto& at = e == 0 ? a : b;
@@ -685,7 +810,9 @@ struct Trial {
 // The folds split into a batch, greedily in order, whose two rings are pairwise disjoint, and the
 // rest. A batch's splits touch disjoint patches, so they can be searched in parallel and made in
 // any order with the same result as one after another.
-std::vector<Trial> disjointBatch(const ChartLayout& layout, std::vector<Fold>& folds) {
+// With wide, the rings are three (making side counts even around a cut may put corners on the
+// second ring's sides, whose own neighbours' links follow).
+std::vector<Trial> disjointBatch(const ChartLayout& layout, std::vector<Fold>& folds, bool wide) {
   std::vector<uint8_t> busy(layout.patches.size(), 0);
   std::vector<Trial> batch;
   std::vector<Fold> rest;
@@ -695,6 +822,7 @@ std::vector<Trial> disjointBatch(const ChartLayout& layout, std::vector<Fold>& f
     t.triangle = f.second;
     t.touched = patchRing(layout, {f.first});
     t.rings = patchRing(layout, t.touched);
+    if (wide) t.rings = patchRing(layout, t.rings);
     if (std::any_of(t.rings.begin(), t.rings.end(), [&](uint32_t q) { return busy[q] != 0; })) {
       rest.push_back(f);
       continue;
@@ -833,11 +961,21 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
     ++st.rounds;
   };
   // A cut may leave ears (moveSideEars) in the patches it touched; mending them stays within
-  // the trial's two rings.
+  // the trial's two rings. For the sides quad layout, the side counts round the cut are then made
+  // even again within the second ring (its third is saved); false if that fails.
+  const bool sidesLayout = options.quads == QuadLayout::kSides;
+  // A part with few border edges has sides too short to take the corner that would make its side
+  // count even: the sides layout cuts off no such part.
+  const uint32_t minPartEdges = sidesLayout ? 4 : 0;
+  // The most sides a cut leaves a part or a neighbour: one below the most a patch may have in the
+  // sides layout (making the count even may add one), else the clustering's 8.
+  const uint32_t cutSides = sidesLayout ? kMaxPatchSides - 1 : 8;
   auto mendEars = [&](const Trial& t) {
     std::vector<uint32_t> patches = t.touched;
     for (size_t q = t.firstNew; q < t.endNew; ++q) patches.push_back(uint32_t(q));
     moveSideEars(layout, patches, false);
+    if (!sidesLayout) return true;
+    return evenSides(layout, patchRing(layout, patches)).oddLeft == 0;
   };
   // First, whole rounds: every folding patch cut at once (neck first, else through the fold),
   // kept while the flipped texels drop. Cheap (only the cut patches and their neighbours are
@@ -847,20 +985,20 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
     uint32_t split = 0;
     std::vector<Fold> queue = folding(set);
     while (!queue.empty()) {
-      std::vector<Trial> batch = disjointBatch(layout, queue);
+      std::vector<Trial> batch = disjointBatch(layout, queue, sidesLayout);
       tbb::parallel_for(size_t{0}, batch.size(), [&](size_t k) {
-        batch[k].cut = findCut(layout, batch[k].patch, {}, 8, share);
+        batch[k].cut = findCut(layout, batch[k].patch, {}, cutSides, share, minPartEdges);
       });
       for (Trial& t : batch) {
         t.firstNew = layout.patches.size();
-        const bool done = applyCut(layout, t.patch, t.cut, 8) || splitPatchAtCornerNeck(layout, t.patch) ||
+        const bool done = applyCut(layout, t.patch, t.cut, cutSides) || splitPatchAtCornerNeck(layout, t.patch) ||
                           splitPatchThrough(layout, t.patch, t.triangle);
         t.endNew = layout.patches.size();
         if (done) mendEars(t);
         split += done;
       }
     }
-    if (split == 0) {
+    if (split == 0 || (sidesLayout && evenSides(layout).oddLeft > 0)) {
       layout.patches = saved;  // a failed cut may still have left a corner
       break;
     }
@@ -904,7 +1042,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
     uint32_t split = 0;
     st.patchesUnsplit = 0;
     while (!queue.empty() && grow()) {
-      std::vector<Trial> batch = disjointBatch(layout, queue);
+      std::vector<Trial> batch = disjointBatch(layout, queue, sidesLayout);
       for (Trial& t : batch) {
         for (uint32_t q : t.rings) t.saved.push_back(layout.patches[q]);
       }
@@ -917,14 +1055,19 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
         tbb::parallel_for(size_t{0}, open.size(), [&](size_t k) {
           Trial& t = *open[k];
           const auto& tri = layout.triangles[t.triangle];
-          t.cut = neck ? findCut(layout, t.patch, {}, 8, share)
-                       : findCut(layout, t.patch, {tri[0], tri[1], tri[2]}, 8, share);
+          t.cut = neck ? findCut(layout, t.patch, {}, cutSides, share, minPartEdges)
+                       : findCut(layout, t.patch, {tri[0], tri[1], tri[2]}, cutSides, share, minPartEdges);
         });
         for (Trial* t : open) {
           t->firstNew = layout.patches.size();
-          t->done = applyCut(layout, t->patch, t->cut, 8) || (neck && splitPatchAtCornerNeck(layout, t->patch));
+          t->done = applyCut(layout, t->patch, t->cut, cutSides) || (neck && splitPatchAtCornerNeck(layout, t->patch));
           t->endNew = layout.patches.size();
-          if (t->done) mendEars(*t);
+          if (t->done) t->done = mendEars(*t);
+          if (!t->done) {  // undone at once (its new patches are the last), so every patch left resamples
+            for (size_t r = 0; r < t->rings.size(); ++r) layout.patches[t->rings[r]] = t->saved[r];
+            layout.patches.resize(t->firstNew);
+            t->endNew = t->firstNew;
+          }
         }
         std::vector<uint8_t> only(layout.patches.size(), 0);
         patchBadness.resize(layout.patches.size());
@@ -970,7 +1113,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
             if (kept.patches.size() <= at) kept.patches.resize(at + 1), keptPatches.resize(at + 1);
             kept.patches[at] = ps;
             kept.patches[at].firstChart = uint32_t(kept.charts.size());
-            for (uint32_t i = 0; i < ps.sides; ++i) kept.charts.push_back(std::move(trial.charts[ps.firstChart + i]));
+            for (uint32_t i = 0; i < ps.quads; ++i) kept.charts.push_back(std::move(trial.charts[ps.firstChart + i]));
             keptPatches[at] = layout.patches[at];
           }
         }

@@ -58,6 +58,21 @@ bool splitPatchAtCorners(ChartLayout& layout, uint32_t patch, uint32_t i, uint32
 bool insertCorner(ChartLayout& layout, uint32_t patch, uint32_t side, uint32_t k,
                   uint32_t maxSides = 8);
 
+// Makes every patch's side count even, as the sides quad layout needs (atlas/mesh/resample.h), by
+// making inner side vertices corners (insertCorner, the vertex nearest the side's arc-length
+// middle, on the longest side that can take one): first on sides shared by two odd patches (one
+// corner mends both), then on open sides (it mends its patch alone), then along the shortest
+// chain of shared sides from an odd patch to another odd patch or to a patch with an open side
+// (each patch between gains two corners). No patch passes maxSides. With `within` non-empty, only
+// those patches change sides (their neighbours' links still follow). Returns the corners made and
+// the patches left odd (0 unless no chain was found).
+struct EvenSidesResult {
+  uint32_t corners = 0;
+  uint32_t oddLeft = 0;
+};
+EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& within = {},
+                          uint32_t maxSides = kMaxPatchSides);
+
 // Splits `patch` by a cut through a vertex of layout triangle `triangle` (where its charts fold):
 // of the shortest interior paths from that vertex to the boundary, the pair (or, from a boundary
 // vertex, the single path) whose length is smallest relative to the smaller part's perimeter, such

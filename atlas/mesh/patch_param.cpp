@@ -67,7 +67,7 @@ LocalPatch buildLocalPatch(const ChartLayout& layout, uint32_t patchId) {
   if (patchId >= layout.patches.size()) fail(patchId, "no such patch");
   const Patch& patch = layout.patches[patchId];
   const uint32_t n = uint32_t(patch.sides.size());
-  if (n < 3 || n > 8) fail(patchId, std::to_string(n) + " sides (3..8 supported)");
+  if (n < 3 || n > kMaxPatchSides) fail(patchId, std::to_string(n) + " sides (3.." + std::to_string(kMaxPatchSides) + " supported)");
   if (patch.triangles.empty()) fail(patchId, "no triangles");
 
   LocalPatch lp;
@@ -439,22 +439,22 @@ glm::dvec2 polygonCorner(uint32_t n, uint32_t i) {
   return {std::cos(a), std::sin(a)};
 }
 
-std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths) {
-  const size_t n = sideLengths.size();
+namespace {
+
+// Central angles theta_i = clamp(s * 2 pi L_i / sum L, lo, hi), s chosen so they sum to 2 pi (then
+// made to close exactly).
+std::vector<double> proportionalAngles(const std::vector<double>& lengths, double lo, double hi) {
+  const size_t n = lengths.size();
   const double regular = 2.0 * std::numbers::pi / double(n);
-  const double lo = 0.4 * regular, hi = 1.8 * regular < 0.9 * std::numbers::pi
-                                            ? 1.8 * regular
-                                            : 0.9 * std::numbers::pi;
   double total = 0.0;
-  for (double l : sideLengths) total += l;
+  for (double l : lengths) total += l;
   std::vector<double> theta(n, regular);
   if (total > 0.0 && std::isfinite(total)) {
-    // theta_i = clamp(scale * L_i / total * 2 pi, lo, hi) with the scale found by bisection so
-    // the angles close the circle: the sum grows with the scale from n lo < 2 pi to n hi > 2 pi.
+    // The scale is found by bisection: the sum grows with it from n lo < 2 pi to n hi > 2 pi.
     auto angles = [&](double scale) {
       double sum = 0.0;
       for (size_t i = 0; i < n; ++i) {
-        theta[i] = std::clamp(scale * 2.0 * std::numbers::pi * sideLengths[i] / total, lo, hi);
+        theta[i] = std::clamp(scale * 2.0 * std::numbers::pi * lengths[i] / total, lo, hi);
         sum += theta[i];
       }
       return sum;
@@ -470,6 +470,33 @@ std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths) {
   double sum = 0.0;
   for (double t : theta) sum += t;
   for (double& t : theta) t *= 2.0 * std::numbers::pi / sum;  // exact closure
+  return theta;
+}
+
+}  // namespace
+
+std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths, bool paired) {
+  const size_t n = sideLengths.size();
+  std::vector<double> theta;
+  if (paired && n >= 6 && n % 2 == 0) {
+    // Each pair of sides (2j, 2j+1) is one quad with the centre: its angle there is the pair's,
+    // proportional to the pair's length within [0.4, 1.8] times the regular one and below 3/4 pi
+    // (a convex quad, not near a triangle); the middle corner splits it by the two sides' lengths
+    // within [0.2, 0.8] of it.
+    std::vector<double> pairs(n / 2);
+    for (size_t j = 0; j < n / 2; ++j) pairs[j] = sideLengths[2 * j] + sideLengths[2 * j + 1];
+    const double regular = 2.0 * std::numbers::pi / double(n / 2);
+    const std::vector<double> phi = proportionalAngles(pairs, 0.4 * regular, std::min(1.8 * regular, 0.75 * std::numbers::pi));
+    theta.resize(n);
+    for (size_t j = 0; j < n / 2; ++j) {
+      const double f = pairs[j] > 0.0 && std::isfinite(pairs[j]) ? std::clamp(sideLengths[2 * j] / pairs[j], 0.2, 0.8) : 0.5;
+      theta[2 * j] = phi[j] * f;
+      theta[2 * j + 1] = phi[j] - theta[2 * j];
+    }
+  } else {
+    const double regular = 2.0 * std::numbers::pi / double(n);
+    theta = proportionalAngles(sideLengths, 0.4 * regular, std::min(1.8 * regular, 0.9 * std::numbers::pi));
+  }
   std::vector<glm::dvec2> corners(n);
   double angle = 0.0;
   for (size_t i = 0; i < n; ++i) {
@@ -547,7 +574,7 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
     if (!(sideLength[i] > 0.0)) fail(patch, "side " + std::to_string(i) + " has zero length");
   }
   if (options.proportionalPolygon) {
-    out.corners = patchPolygon(sideLength);
+    out.corners = patchPolygon(sideLength, options.pairedSides);
   } else {
     for (uint32_t i = 0; i < n; ++i) out.corners.push_back(polygonCorner(n, i));
   }

@@ -50,6 +50,10 @@ struct ParamOptions {
   // hole rim zigzags; pinned by arc length, its triangles are sheared flat against the straight
   // edge, and the texels beside it fold.
   bool slideOpenSides = true;
+  // The polygon for the sides quad layout (atlas/mesh/resample.h): with an even n >= 6, sides 2j
+  // and 2j+1 bound one quad with the centre, so their corners are placed in pairs (patchPolygon).
+  // resampleLayout sets it from its quad layout.
+  bool pairedSides = false;
 };
 
 // Quality of a parameterization (param -> surface map), in the style of xatlas' per-chart
@@ -69,7 +73,7 @@ struct ParamQuality {
 // whose centre, the origin, is strictly inside.
 struct PatchParameterization {
   uint32_t patch = 0;
-  uint32_t sides = 0;                                 // n, 3..8
+  uint32_t sides = 0;                                 // n, 3..kMaxPatchSides
   std::vector<glm::dvec2> corners;                    // n domain corners, CCW
   std::vector<uint32_t> vertices;                     // local -> ChartLayout vertex id
   std::vector<glm::dvec2> uv;                         // per local vertex, in the n-gon
@@ -100,12 +104,15 @@ glm::dvec2 polygonCorner(uint32_t n, uint32_t i);
 // 0.4 * 2 pi / n, min(1.8 * 2 pi / n, 0.9 pi)) with s chosen so the angles sum to 2 pi. No angle
 // reaches pi, so the polygon is convex with the origin strictly inside, and every kite (corner i,
 // midpoint of side i, origin, midpoint of side i-1) is convex with right angles at the midpoints.
-// Equal lengths give the regular n-gon.
-std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths);
+// Equal lengths give the regular n-gon. With paired (an even n >= 6), the same rule gives each
+// pair of sides (2j, 2j+1) its angle phi_j, at most 3/4 pi, so every quad (corner 2j+1, corner
+// 2j+2, origin, corner 2j) is convex; the pair's middle corner splits phi_j in proportion to the
+// two sides' lengths, within [0.2, 0.8] of it.
+std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths, bool paired = false);
 
 // Parameterizes patch `patch` of `layout`. The patch must be a triangulated disk whose boundary
 // loop is exactly its sides' concatenation in order (side i ends where side i+1 starts, edges
-// oriented like the triangles), with 3..8 sides of non-zero length. Throws
+// oriented like the triangles), with 3..kMaxPatchSides sides of non-zero length. Throws
 // std::invalid_argument("parameterizePatch: patch P: <problem>") otherwise. Deterministic and
 // thread-safe (reads `layout` only).
 // note: sides are straight polygon edges, so a triangle with all three vertices on one side (an

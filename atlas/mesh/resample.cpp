@@ -238,6 +238,56 @@ class Locator {
   std::vector<uint32_t> tris_;
 };
 
+// How one patch is cut into quads (see QuadLayout): per quad, where each edge's samples come from.
+// A side run is m + 1 samples of side `index` from sample `offset` in the patch's direction; a
+// spoke runs from its target on the border to the centre.
+struct EdgeSource {
+  bool spoke = false;
+  uint32_t index = 0;
+  uint32_t offset = 0;
+};
+struct PatchQuads {
+  uint32_t n = 0, m = 0;
+  uint32_t sideSamples = 0;  // samples of a whole side: 2m + 1 (kites) or m + 1
+  bool single = false;       // one quad, all four edges sides (a 4-sided patch, sides layout)
+  std::vector<std::array<EdgeSource, 4>> quads;  // by Edge
+  std::vector<EdgeSource> spokeTargets;          // the border sample each spoke starts at
+};
+
+uint32_t quadCountOf(uint32_t n, QuadLayout mode) {
+  if (mode == QuadLayout::kKites) return n;
+  if (n % 2 != 0) throw std::invalid_argument("a patch of " + std::to_string(n) + " sides in the sides quad layout (which needs an even count)");
+  return n == 4 ? 1 : n / 2;
+}
+
+PatchQuads patchQuads(uint32_t n, uint32_t m, QuadLayout mode) {
+  PatchQuads pq;
+  pq.n = n;
+  pq.m = m;
+  const uint32_t count = quadCountOf(n, mode);
+  pq.quads.resize(count);
+  auto side = [](uint32_t i, uint32_t offset) { return EdgeSource{false, i, offset}; };
+  auto spoke = [](uint32_t k) { return EdgeSource{true, k, 0}; };
+  if (mode == QuadLayout::kKites) {
+    pq.sideSamples = 2 * m + 1;
+    for (uint32_t j = 0; j < n; ++j) {
+      pq.spokeTargets.push_back(side(j, m));
+      pq.quads[j] = {side(j, 0), spoke(j), spoke((j + n - 1) % n), side((j + n - 1) % n, m)};
+    }
+  } else if (n == 4) {
+    pq.sideSamples = m + 1;
+    pq.single = true;
+    pq.quads[0] = {side(0, 0), side(1, 0), side(2, 0), side(3, 0)};
+  } else {
+    pq.sideSamples = m + 1;
+    for (uint32_t j = 0; j < count; ++j) {
+      pq.spokeTargets.push_back(side(2 * j, 0));
+      pq.quads[j] = {side(2 * j + 1, 0), spoke((j + 1) % count), spoke(j), side(2 * j, 0)};
+    }
+  }
+  return pq;
+}
+
 // For each patch side: -1 if it has no neighbour, else whether its vertex run is the reverse of
 // the neighbour's. Validates the links.
 struct SideLinks {
@@ -245,13 +295,17 @@ struct SideLinks {
   std::vector<std::vector<uint8_t>> opposite;    // [patch][side]: runs opposite to the neighbour
 };
 
-SideLinks validateLinks(const ChartLayout& layout, const char* fn) {
+SideLinks validateLinks(const ChartLayout& layout, QuadLayout mode, const char* fn) {
   auto fail = [&](uint32_t p, uint32_t i, const std::string& what) {
     throw std::invalid_argument(std::string(fn) + ": patch " + std::to_string(p) + " side " +
                                 std::to_string(i) + ": " + what);
   };
   SideLinks links;
-  links.offsets = quadChartOffsets(layout);
+  try {
+    links.offsets = quadChartOffsets(layout, mode);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string(fn) + ": " + e.what());
+  }
   links.opposite.resize(layout.patches.size());
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     const Patch& patch = layout.patches[p];
@@ -280,33 +334,52 @@ SideLinks validateLinks(const ChartLayout& layout, const char* fn) {
   return links;
 }
 
-std::vector<std::array<RootNeighbour, 4>> neighboursFrom(const ChartLayout& layout,
-                                                         const SideLinks& links) {
-  std::vector<std::array<RootNeighbour, 4>> out(
-      layout.patches.empty() ? 0 : links.offsets.back() + layout.patches.back().sides.size());
+std::vector<std::array<RootNeighbour, 4>> neighboursFrom(const ChartLayout& layout, const SideLinks& links,
+                                                         QuadLayout mode) {
+  const uint32_t m = 2;  // any: only the runs' relative offsets matter here
+  std::vector<PatchQuads> plans;
+  plans.reserve(layout.patches.size());
+  size_t total = 0;
+  for (const Patch& patch : layout.patches) {
+    plans.push_back(patchQuads(uint32_t(patch.sides.size()), m, mode));
+    total += plans.back().quads.size();
+  }
+  // The chart edge holding each run of a side: [patch][side] -> (offset, chart, edge).
+  struct Run {
+    uint32_t offset, chart;
+    uint8_t edge;
+  };
+  std::vector<std::vector<std::vector<Run>>> runs(layout.patches.size());
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
-    const Patch& patch = layout.patches[p];
-    const uint32_t n = uint32_t(patch.sides.size());
-    for (uint32_t i = 0; i < n; ++i) {
-      auto& nb = out[links.offsets[p] + i];
-      nb[kEdgeRight] = {int32_t(links.offsets[p] + (i + 1) % n), kEdgeTop, true};
-      nb[kEdgeTop] = {int32_t(links.offsets[p] + (i + n - 1) % n), kEdgeRight, true};
-      // Bottom: first half of side i. Left: second half of side i-1.
-      const PatchSide& si = patch.sides[i];
-      if (si.neighbourPatch >= 0) {
-        const uint32_t q = uint32_t(si.neighbourPatch), j = si.neighbourSide;
-        const uint32_t nq = uint32_t(layout.patches[q].sides.size());
-        nb[kEdgeBottom] = si.reversed
-                              ? RootNeighbour{int32_t(links.offsets[q] + (j + 1) % nq), kEdgeLeft, true}
-                              : RootNeighbour{int32_t(links.offsets[q] + j), kEdgeBottom, false};
+    runs[p].resize(layout.patches[p].sides.size());
+    for (uint32_t j = 0; j < plans[p].quads.size(); ++j) {
+      for (uint8_t e = 0; e < 4; ++e) {
+        const EdgeSource& src = plans[p].quads[j][e];
+        if (!src.spoke) runs[p][src.index].push_back({src.offset, links.offsets[p] + j, e});
       }
-      const PatchSide& sp = patch.sides[(i + n - 1) % n];
-      if (sp.neighbourPatch >= 0) {
-        const uint32_t q = uint32_t(sp.neighbourPatch), j = sp.neighbourSide;
-        const uint32_t nq = uint32_t(layout.patches[q].sides.size());
-        nb[kEdgeLeft] = sp.reversed
-                            ? RootNeighbour{int32_t(links.offsets[q] + j), kEdgeBottom, true}
-                            : RootNeighbour{int32_t(links.offsets[q] + (j + 1) % nq), kEdgeLeft, false};
+    }
+  }
+  std::vector<std::array<RootNeighbour, 4>> out(total);
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    const PatchQuads& pq = plans[p];
+    const uint32_t count = uint32_t(pq.quads.size());
+    for (uint32_t j = 0; j < count; ++j) {
+      auto& nb = out[links.offsets[p] + j];
+      for (uint8_t e = 0; e < 4; ++e) {
+        const EdgeSource& src = pq.quads[j][e];
+        if (src.spoke) {
+          // The right edge's spoke is the top edge's of the next quad.
+          nb[e] = e == kEdgeRight ? RootNeighbour{int32_t(links.offsets[p] + (j + 1) % count), kEdgeTop, true}
+                                  : RootNeighbour{int32_t(links.offsets[p] + (j + count - 1) % count), kEdgeRight, true};
+          continue;
+        }
+        const PatchSide& side = layout.patches[p].sides[src.index];
+        if (side.neighbourPatch < 0) continue;
+        const uint32_t q = uint32_t(side.neighbourPatch);
+        const uint32_t offset = side.reversed ? plans[q].sideSamples - 1 - (src.offset + m) : src.offset;
+        for (const Run& r : runs[q][side.neighbourSide]) {
+          if (r.offset == offset) nb[e] = RootNeighbour{int32_t(r.chart), r.edge, side.reversed};
+        }
       }
     }
   }
@@ -315,18 +388,20 @@ std::vector<std::array<RootNeighbour, 4>> neighboursFrom(const ChartLayout& layo
 
 }  // namespace
 
-std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout) {
+uint32_t patchQuadCount(uint32_t sides, QuadLayout quads) { return quadCountOf(sides, quads); }
+
+std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout, QuadLayout quads) {
   std::vector<uint32_t> offsets(layout.patches.size());
   uint32_t next = 0;
   for (size_t p = 0; p < layout.patches.size(); ++p) {
     offsets[p] = next;
-    next += uint32_t(layout.patches[p].sides.size());
+    next += quadCountOf(uint32_t(layout.patches[p].sides.size()), quads);
   }
   return offsets;
 }
 
-std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layout) {
-  return neighboursFrom(layout, validateLinks(layout, "quadNeighbours"));
+std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layout, QuadLayout quads) {
+  return neighboursFrom(layout, validateLinks(layout, quads, "quadNeighbours"), quads);
 }
 
 ImageQuality measureImage(const std::vector<glm::vec3>& positions,
@@ -411,16 +486,18 @@ std::vector<uint8_t> patchesOverSampleError(const GeometryImageSet& set, size_t 
 
 namespace {
 
-// The kite of an n-gon parameterization holding domain point d (kite i lies between the spokes to
-// the midpoints of sides i-1 and i), and d's coordinates (s, t) in it: the inverse of the bilinear
-// map (0,0) corner i, (1,0) midpoint i, (1,1) centre, (0,1) midpoint i-1, by Newton's method
-// (the kites are convex, so it converges from the middle), clamped to the unit square.
-struct KitePoint {
-  uint32_t kite = 0;
+// The domain corners of a quad chart: (0,0) a, (1,0) b, (1,1) c, (0,1) e.
+using QuadCorners = std::array<glm::dvec2, 4>;
+
+// The quad of a patch's parameterization holding domain point d, and d's coordinates (s, t) in
+// it: the inverse of the bilinear map of its corners, by Newton's method (the quads are convex, so
+// it converges from the middle), clamped to the unit square. Quads round the centre lie between
+// the spokes to their corners e and b.
+struct QuadPoint {
+  uint32_t quad = 0;
   glm::dvec2 st{0.0};
 };
-KitePoint kiteOf(const std::vector<glm::dvec2>& corner, const std::vector<glm::dvec2>& mid, const glm::dvec2& d) {
-  const uint32_t n = uint32_t(corner.size());
+QuadPoint quadOf(const std::vector<QuadCorners>& quads, const glm::dvec2& d) {
   constexpr double kTwoPi = 6.283185307179586;
   auto angle = [](const glm::dvec2& x) { return std::atan2(x.y, x.x); };
   auto ccw = [&](double from, double to) {  // angle from `from` to `to`, counter-clockwise, in [0, 2pi)
@@ -429,17 +506,18 @@ KitePoint kiteOf(const std::vector<glm::dvec2>& corner, const std::vector<glm::d
     while (a >= kTwoPi) a -= kTwoPi;
     return a;
   };
-  const double ad = angle(d);
-  KitePoint out;
-  for (uint32_t i = 0; i < n; ++i) {
-    const double a0 = angle(mid[(i + n - 1) % n]);
-    if (ccw(a0, ad) <= ccw(a0, angle(mid[i]))) {
-      out.kite = i;
-      break;
+  QuadPoint out;
+  if (quads.size() > 1) {
+    const double ad = angle(d);
+    for (uint32_t i = 0; i < quads.size(); ++i) {
+      const double a0 = angle(quads[i][3]);
+      if (ccw(a0, ad) <= ccw(a0, angle(quads[i][1]))) {
+        out.quad = i;
+        break;
+      }
     }
   }
-  const uint32_t i = out.kite, prev = (i + n - 1) % n;
-  const glm::dvec2 a = corner[i], b = mid[i], c(0.0), e = mid[prev];
+  const auto& [a, b, c, e] = quads[out.quad];
   glm::dvec2 st(0.5);
   for (int it = 0; it < 20; ++it) {
     const double s = st.x, t = st.y;
@@ -542,16 +620,16 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
   if (reuse.normals && reuse.normals->size() != layout.positions.size()) {
     throw std::invalid_argument("resampleLayout: the vertex normals must be one per position");
   }
-  const SideLinks links = validateLinks(layout, "resampleLayout");
+  const SideLinks links = validateLinks(layout, options.quads, "resampleLayout");
   std::vector<glm::dvec3> ownNormals;
   if (!reuse.normals) ownNormals = layoutVertexNormals(layout);
   const Surface surface{layout, reuse.normals ? *reuse.normals : ownNormals, !layout.colours.empty()};
   const uint32_t m = size - 1;
-  const uint32_t sideCount = 2 * m + 1;
+  const uint32_t sideCount = options.quads == QuadLayout::kKites ? 2 * m + 1 : m + 1;
 
   GeometryImageSet set;
   set.chartSize = size;
-  const auto neighbours = neighboursFrom(layout, links);
+  const auto neighbours = neighboursFrom(layout, links, options.quads);
   set.charts.resize(neighbours.size());
   set.patches.resize(layout.patches.size());
 
@@ -570,7 +648,8 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       }
       if (p >= src.set->patches.size()) continue;
       const PatchResampleStats& st = src.set->patches[p];
-      if (st.sides != layout.patches[p].sides.size() || st.firstChart + st.sides > src.set->charts.size() ||
+      if (st.sides != layout.patches[p].sides.size() || st.quads != quadCountOf(st.sides, options.quads) ||
+          st.firstChart + st.quads > src.set->charts.size() ||
           !src.set->charts[st.firstChart].hasSamples(size)) {
         continue;
       }
@@ -631,10 +710,13 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       const progress::Tick tick;
       const Patch& patch = layout.patches[p];
       const uint32_t n = uint32_t(patch.sides.size());
+      const PatchQuads plan = patchQuads(n, m, options.quads);
+      const uint32_t nq = uint32_t(plan.quads.size());
       if (action[p] == 0) {
         set.patches[p].firstChart = links.offsets[p];
         set.patches[p].sides = n;
-        for (uint32_t i = 0; i < n; ++i) {
+        set.patches[p].quads = nq;
+        for (uint32_t i = 0; i < nq; ++i) {
           set.charts[links.offsets[p] + i].patch = p;
           set.charts[links.offsets[p] + i].quad = i;
           set.charts[links.offsets[p] + i].neighbours = neighbours[links.offsets[p] + i];
@@ -646,7 +728,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         set.patches[p] = src.patches[p];
         const uint32_t first = src.patches[p].firstChart;
         set.patches[p].firstChart = links.offsets[p];
-        for (uint32_t i = 0; i < n; ++i) {
+        for (uint32_t i = 0; i < nq; ++i) {
           GeometryImage& img = set.charts[links.offsets[p] + i];
           img = std::move(src.charts[first + i]);
           img.patch = p;
@@ -654,23 +736,26 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         }
         return;
       }
-      const PatchParameterization pp = parameterizePatch(layout, p, options.param);
+      ParamOptions paramOptions = options.param;
+      paramOptions.pairedSides = options.quads == QuadLayout::kSides;
+      const PatchParameterization pp = parameterizePatch(layout, p, paramOptions);
       PatchResampleStats& st = set.patches[p];
       st.paramInitial = pp.initial;
       st.param = pp.quality;
       st.stretchIterations = pp.iterationsUsed;
       st.firstChart = links.offsets[p];
       st.sides = n;
+      st.quads = nq;
 
       // Samples of the open sides taken through the parameterization (below); empty for others.
       std::vector<std::vector<Sample>> openSides(n);
-      // Side sample k of side i in this patch's direction (0 = corner i, 2m = corner i+1).
+      // Side sample k of side i in this patch's direction (0 = corner i, sideCount - 1 = corner i+1).
       auto sideSample = [&](uint32_t i, uint32_t k) -> const Sample& {
         if (!openSides[i].empty()) return openSides[i][k];
         const std::vector<Sample>& s = sides[sideIndex[p][i]];
         const bool flipped = owners[sideIndex[p][i]].patch != p ||
                              owners[sideIndex[p][i]].side != i;
-        return s[flipped && links.opposite[p][i] ? 2 * m - k : k];
+        return s[flipped && links.opposite[p][i] ? sideCount - 1 - k : k];
       };
 
       const Locator locator(pp);
@@ -684,9 +769,15 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         r.triangle = patch.triangles[hint];  // the parameterization keeps the patch's order
         return r;
       };
-      std::vector<glm::dvec2> corner(n), mid(n);
-      for (uint32_t i = 0; i < n; ++i) corner[i] = pp.corners[i];
-      for (uint32_t i = 0; i < n; ++i) mid[i] = 0.5 * (corner[i] + pp.corners[(i + 1) % n]);
+      const std::vector<glm::dvec2>& corner = pp.corners;
+      // The domain point of sample k of side i (as the side's samples run along its polygon edge).
+      auto sidePoint = [&](uint32_t i, uint32_t k) {
+        const glm::dvec2 c0 = corner[i], c1 = corner[(i + 1) % n];
+        if (k == 0) return c0;
+        if (k + 1 == sideCount) return c1;
+        if (2 * k + 1 == sideCount) return 0.5 * (c0 + c1);
+        return c0 + (c1 - c0) * (double(k) / double(sideCount - 1));
+      };
       // Open sides whose vertices slid in the parameterization are sampled through it, at even
       // steps along their polygon edge; their ends are the corner vertices themselves, as every
       // patch meeting there has them.
@@ -705,15 +796,28 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         }
       }
       const glm::dvec2 centre(0.0);
-      const Sample centreSample = sampleAt(centre);
-      // Spoke i: midpoint of side i (t = 0) to the centre (t = m), shared by quads i and i+1.
-      std::vector<std::vector<Sample>> spokes(n, std::vector<Sample>(m + 1));
-      for (uint32_t i = 0; i < n; ++i) {
-        spokes[i][0] = sideSample(i, m);
-        spokes[i][m] = centreSample;
-        for (uint32_t t = 1; t < m; ++t) {
-          spokes[i][t] = sampleAt(mid[i] + (centre - mid[i]) * (double(t) / m));
+      // Spoke j: from its border sample (t = 0) to the centre (t = m), shared by the two quads
+      // beside it.
+      const size_t spokeCount = plan.spokeTargets.size();
+      std::vector<std::vector<Sample>> spokes(spokeCount, std::vector<Sample>(m + 1));
+      if (spokeCount > 0) {
+        const Sample centreSample = sampleAt(centre);
+        for (size_t j = 0; j < spokeCount; ++j) {
+          const EdgeSource& target = plan.spokeTargets[j];
+          const glm::dvec2 from = sidePoint(target.index, target.offset);
+          spokes[j][0] = sideSample(target.index, target.offset);
+          spokes[j][m] = centreSample;
+          for (uint32_t t = 1; t < m; ++t) spokes[j][t] = sampleAt(from + (centre - from) * (double(t) / m));
         }
+      }
+      // Each quad's domain corners.
+      std::vector<QuadCorners> quadCorners(nq);
+      for (uint32_t j = 0; j < nq; ++j) {
+        const auto& e = plan.quads[j];
+        quadCorners[j] = {sidePoint(e[kEdgeBottom].index, e[kEdgeBottom].offset),
+                          sidePoint(e[kEdgeBottom].index, e[kEdgeBottom].offset + m),
+                          plan.single ? sidePoint(e[kEdgeTop].index, e[kEdgeTop].offset) : centre,
+                          sidePoint(e[kEdgeLeft].index, e[kEdgeLeft].offset)};
       }
 
       // The patch's triangle along each side segment: the input face a side sample lies on,
@@ -739,7 +843,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         const auto it = sideFace.find(undirectedKey(s.edgeA, s.edgeB));
         return it == sideFace.end() ? ~0u : it->second;
       };
-      // Every vertex of the patch but those of its shared sides, placed in its kite, for the
+      // Every vertex of the patch but those of its shared sides, placed in its quad, for the
       // sampling error. (A vertex of a shared side lies on the side's polyline, which both patches
       // sample alike by arc length; the chart across covers it as much as this one, so neither
       // alone tells its distance to the atlas.)
@@ -747,16 +851,16 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       for (const PatchSide& side : patch.sides) {
         if (side.neighbourPatch >= 0) seamVertices.insert(side.vertices.begin(), side.vertices.end());
       }
-      std::vector<std::vector<std::pair<uint32_t, glm::dvec2>>> kiteVertices(n);
+      std::vector<std::vector<std::pair<uint32_t, glm::dvec2>>> quadVertices(nq);
       for (uint32_t v = 0; v < pp.vertices.size(); ++v) {
         if (seamVertices.contains(pp.vertices[v])) continue;
-        const KitePoint k = kiteOf(corner, mid, pp.uv[v]);
-        kiteVertices[k.kite].push_back({v, k.st});
+        const QuadPoint k = quadOf(quadCorners, pp.uv[v]);
+        quadVertices[k.quad].push_back({v, k.st});
       }
       std::vector<glm::vec3> floatNormals(size_t(size) * size);
       std::vector<uint32_t> triangles(size_t(size) * size, ~0u);
       std::vector<glm::vec3> faceNormals(size_t(size) * size);
-      for (uint32_t i = 0; i < n; ++i) {
+      for (uint32_t i = 0; i < nq; ++i) {
         GeometryImage& img = set.charts[links.offsets[p] + i];
         img.patch = p;
         img.quad = i;
@@ -764,28 +868,34 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         img.positions.resize(size_t(size) * size);
         img.normals.resize(size_t(size) * size);
         if (surface.hasColours) img.colours.resize(size_t(size) * size);
-        const uint32_t prev = (i + n - 1) % n;
-        auto put = [&](uint32_t u, uint32_t v, const Sample& s) {
-          const size_t at = size_t(v) * size + u;
+        auto putAt = [&](size_t at, const Sample& s) {
           img.positions[at] = s.p;
           img.normals[at] = packNormal(s.n.x, s.n.y, s.n.z);
           floatNormals[at] = s.n;
           triangles[at] = faceOf(s);
           if (surface.hasColours) img.colours[at] = s.c;
         };
-        for (uint32_t k = 0; k <= m; ++k) {
-          put(k, 0, sideSample(i, k));             // bottom: corner i -> midpoint i
-          put(0, k, sideSample(prev, 2 * m - k));  // left: corner i -> midpoint i-1
-          put(m, k, spokes[i][k]);                 // right: midpoint i -> centre
-          put(k, m, spokes[prev][k]);              // top: midpoint i-1 -> centre
+        // The border: side runs along the edges' counter-clockwise parameter; spokes from the
+        // border to the centre ((1,0) -> (1,1) on the right, (0,1) -> (1,1) on the top).
+        for (uint8_t e = 0; e < 4; ++e) {
+          const EdgeSource& src = plan.quads[i][e];
+          for (uint32_t k = 0; k <= m; ++k) {
+            if (!src.spoke) {
+              putAt(edgeSampleIndex(size, e, k), sideSample(src.index, src.offset + k));
+            } else if (e == kEdgeRight) {
+              putAt(size_t(k) * size + m, spokes[src.index][k]);
+            } else {
+              putAt(size_t(m) * size + k, spokes[src.index][k]);
+            }
+          }
         }
+        const auto& [qa, qb, qc, qe] = quadCorners[i];
         for (uint32_t v = 1; v < m; ++v) {
           const double t = double(v) / m;
           for (uint32_t u = 1; u < m; ++u) {
             const double s = double(u) / m;
-            const glm::dvec2 d = (1 - s) * (1 - t) * corner[i] + s * (1 - t) * mid[i] +
-                                 s * t * centre + (1 - s) * t * mid[prev];
-            put(u, v, sampleAt(d));
+            const glm::dvec2 d = (1 - s) * (1 - t) * qa + s * (1 - t) * qb + s * t * qc + (1 - s) * t * qe;
+            putAt(size_t(v) * size + u, sampleAt(d));
           }
         }
         // The input faces under the samples (zero where none is known).
@@ -801,7 +911,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         std::vector<uint32_t> flipped;
         img.quality = measureImage(img.positions, floatNormals, size, &flipped, &faceNormals);
         // How far the chart's surface passes from the input vertices it stands for.
-        for (const auto& [v, st] : kiteVertices[i]) {
+        for (const auto& [v, st] : quadVertices[i]) {
           const double e = chartSurfaceDistance(img.positions, size, st, glm::dvec3(layout.positions[pp.vertices[v]]));
           if (e > img.quality.sampleError) {
             img.quality.sampleError = e;

@@ -1,12 +1,17 @@
-// Quadrangulation and resampling of a chart layout into seamless geometry images. Each n-sided
-// patch becomes n quad charts: quad i is the kite (corner i, midpoint of side i, patch centre,
-// midpoint of side i-1) of the patch's n-gon parameterization (atlas/mesh/patch_param.h), mapped
-// from the unit square bilinearly. Position, normal and colour are sampled into (2^k+1)^2 images.
-// Seams: every patch side is sampled once, by arc length along its 3D polyline in one canonical
-// direction, and written into both patches; side midpoints, corners and patch centres are single
-// values shared by every quad that meets there; the centre-to-midpoint edges inside a patch are
-// sampled once and written into both quads. So charts that share an edge hold bit-identical samples
-// there, and, since pyramid levels are 2^k+1 subsamplings, at every level.
+// Quadrangulation and resampling of a chart layout into seamless geometry images. Each patch of
+// the layout's n-gon parameterization (atlas/mesh/patch_param.h) is cut into quads around its
+// centre, each mapped from the unit square bilinearly, in one of two ways (QuadLayout):
+//   sides: each quad has two whole patch sides as edges, (corner 2j+1, corner 2j+2, centre,
+//     corner 2j) for j < n/2, and a 4-sided patch is one quad; the patches must have an even number
+//     of sides (evenSides in atlas/mesh/layout_refine.h makes them so). About n/2 charts a patch.
+//   kites: each side is halved at its midpoint and quad i is the kite (corner i, midpoint of side i,
+//     patch centre, midpoint of side i-1). n charts a patch, for any n.
+// Position, normal and colour are sampled into (2^k+1)^2 images. Seams: every patch side is
+// sampled once, by arc length along its 3D polyline in one canonical direction, and written into
+// both patches; corners, side midpoints and patch centres are single values shared by every quad
+// that meets there; the centre spokes inside a patch are sampled once and written into both quads.
+// So charts that share an edge hold bit-identical samples there, and, since pyramid levels are
+// 2^k+1 subsamplings, at every level.
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (quadrangulate, resample); Purnomo, Cohen,
 // Kumar, "Seamless Texture Atlases", SGP 2004.
 #pragma once
@@ -28,11 +33,19 @@ namespace gimlod {
 
 class ChartSpill;
 
+// How a patch is cut into quad charts (see above).
+enum class QuadLayout : uint8_t { kKites, kSides };
+
+// The quad charts of a patch with `sides` sides: kites n; sides n / 2, or 1 for n = 4. Throws
+// std::invalid_argument for an odd n in the sides layout.
+uint32_t patchQuadCount(uint32_t sides, QuadLayout quads);
+
 struct ResampleOptions {
   uint32_t chartSize = 513;  // samples per quad chart side; must be 2^k + 1 with k >= 1
   uint32_t threads = 0;      // worker threads for the per-patch work; 0 = all hardware threads
   ParamOptions param;        // per-patch parameterization
   ChartSpill* spill = nullptr;  // if set, every chart's samples go there once it is measured
+  QuadLayout quads = QuadLayout::kKites;
 };
 
 // Quality of a sampled image, seen as a map from the unit square to the sampled surface through
@@ -63,10 +76,14 @@ struct ImageQuality {
   double area3D = 0.0;            // surface area of the sampled grid
 };
 
-// One quad chart: a (chartSize)^2 row-major image, row = v, u = column.
-// Chart (u, v) -> kite: (0,0) corner i, (1,0) midpoint of side i, (1,1) patch centre,
-// (0,1) midpoint of side i-1. Edges (core/atlas_format.h Edge): bottom = first half of side i,
-// right = midpoint i -> centre, top = centre -> midpoint i-1, left = second half of side i-1.
+// One quad chart: a (chartSize)^2 row-major image, row = v, u = column. Each edge's
+// counter-clockwise parameter (core/atlas_format.h Edge) runs along the patch's boundary order.
+// Kite i: (0,0) corner i, (1,0) midpoint of side i, (1,1) patch centre, (0,1) midpoint of side
+// i-1; bottom = first half of side i, right = midpoint i -> centre, top = centre -> midpoint i-1,
+// left = second half of side i-1.
+// Sides quad j (n >= 6): (0,0) corner 2j+1, (1,0) corner 2j+2, (1,1) centre, (0,1) corner 2j;
+// bottom = side 2j+1, left = side 2j, right and top the spokes to corners 2j+2 and 2j.
+// Sides quad of a 4-sided patch: (0,0) .. (0,1) corners 0..3, edge e = side e.
 struct GeometryImage {
   uint32_t patch = 0;                        // ChartLayout patch
   uint32_t quad = 0;                         // i, 0..n-1 within the patch
@@ -117,8 +134,9 @@ struct PatchResampleStats {
   ParamQuality paramInitial;   // the mean-value embedding
   ParamQuality param;          // after stretch reduction
   uint32_t stretchIterations = 0;
-  uint32_t firstChart = 0;     // charts [firstChart, firstChart + sides) belong to this patch
+  uint32_t firstChart = 0;     // charts [firstChart, firstChart + quads) belong to this patch
   uint32_t sides = 0;
+  uint32_t quads = 0;
 };
 
 struct GeometryImageSet {
@@ -132,15 +150,16 @@ struct GeometryImageSet {
   double seconds = 0.0;
 };
 
-// Per patch, the chart id of its quad 0 (the sum of the sides of the patches before it): quad i
+// Per patch, the chart id of its quad 0 (the sum of the quads of the patches before it): quad i
 // of patch p is chart offsets[p] + i.
-std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout);
+std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout, QuadLayout quads = QuadLayout::kKites);
 
-// The four neighbours of every quad chart (by Edge): inside a patch from the kite structure,
+// The four neighbours of every quad chart (by Edge): inside a patch from the quads' structure,
 // across patches from PatchSide neighbourPatch / neighbourSide / reversed. Open sides give
 // chart = -1. Throws std::invalid_argument("quadNeighbours: ...") on side links that are not
-// reciprocal or whose vertex runs do not match.
-std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layout);
+// reciprocal or whose vertex runs do not match, or an odd patch in the sides layout.
+std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layout,
+                                                         QuadLayout quads = QuadLayout::kKites);
 
 // Parameterizes every patch and resamples its quads (patches in parallel). Normals are the
 // layout's area-weighted vertex normals, interpolated and normalized; colours are interpolated

@@ -1,0 +1,169 @@
+// Tests for the sides quad layout (atlas/mesh/resample.h QuadLayout::kSides) and evenSides
+// (atlas/mesh/layout_refine.h): quad counts; a cube and a sphere of six 4-sided patches are six
+// seamless charts; even n-gons (disks and hemispheres) resample without flipped texels, their
+// centre spokes seamless; an odd patch is refused; evenSides mends an odd patch on its open side
+// and pairs the odd patches of the real bunny, after which its sides layout is seamless with
+// reciprocal neighbours and about half the kites' charts.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+#include <stdexcept>
+
+#include "atlas/mesh/charting.h"
+#include "atlas/mesh/layout_refine.h"
+#include "atlas/mesh/mesh_io.h"
+#include "atlas/mesh/resample.h"
+#include "tests/chart_layout_fixture.h"
+
+namespace gimlod {
+namespace {
+
+bool sameBytes(const void* a, const void* b, size_t n) { return std::memcmp(a, b, n) == 0; }
+
+// Every chart edge with a neighbour: the neighbour's table points back, and at every pyramid
+// level sample k here is byte-identical to sample M-k there (position and normal). Returns the
+// samples compared.
+size_t expectSeamless(const GeometryImageSet& set) {
+  const uint32_t size = set.chartSize, m = size - 1;
+  size_t compared = 0;
+  for (uint32_t c = 0; c < set.charts.size(); ++c) {
+    const GeometryImage& a = set.charts[c];
+    for (uint32_t e = 0; e < 4; ++e) {
+      const RootNeighbour nb = a.neighbours[e];
+      if (nb.chart < 0) continue;
+      const GeometryImage& b = set.charts.at(uint32_t(nb.chart));
+      const RootNeighbour back = b.neighbours[nb.edge];
+      EXPECT_EQ(back.chart, int32_t(c));
+      EXPECT_EQ(back.edge, e);
+      EXPECT_EQ(back.reversed, nb.reversed);
+      for (uint32_t step = 1; step <= m; step *= 2) {
+        for (uint32_t k = 0; k <= m; k += step) {
+          const uint32_t ia = edgeSampleIndex(size, e, k);
+          const uint32_t ib = edgeSampleIndex(size, nb.edge, nb.reversed ? m - k : k);
+          EXPECT_TRUE(sameBytes(&a.positions[ia], &b.positions[ib], sizeof(glm::vec3)))
+              << "chart " << c << " edge " << e << " k " << k;
+          EXPECT_TRUE(sameBytes(&a.normals[ia], &b.normals[ib], sizeof(PackedNormal)));
+          ++compared;
+        }
+      }
+    }
+  }
+  return compared;
+}
+
+ResampleOptions sidesOptions(uint32_t chartSize) {
+  ResampleOptions o;
+  o.chartSize = chartSize;
+  o.quads = QuadLayout::kSides;
+  return o;
+}
+
+TEST(SideQuads, QuadCounts) {
+  EXPECT_EQ(patchQuadCount(4, QuadLayout::kSides), 1u);
+  EXPECT_EQ(patchQuadCount(6, QuadLayout::kSides), 3u);
+  EXPECT_EQ(patchQuadCount(8, QuadLayout::kSides), 4u);
+  EXPECT_EQ(patchQuadCount(10, QuadLayout::kSides), 5u);
+  EXPECT_EQ(patchQuadCount(5, QuadLayout::kKites), 5u);
+  EXPECT_THROW(patchQuadCount(5, QuadLayout::kSides), std::invalid_argument);
+}
+
+TEST(SideQuads, CubeAndSphereAreOneChartAPatch) {
+  for (const bool sphere : {false, true}) {
+    SCOPED_TRACE(sphere ? "sphere" : "cube");
+    const ChartLayout layout = test::cubeLayout(7, sphere);
+    const GeometryImageSet set = resampleLayout(layout, sidesOptions(33));
+    ASSERT_EQ(set.charts.size(), 6u);
+    for (const GeometryImage& g : set.charts) {
+      for (const RootNeighbour& nb : g.neighbours) EXPECT_GE(nb.chart, 0);  // closed surface
+      // The chart's corners are its patch's corners, in order.
+      const auto& sides = layout.patches[g.patch].sides;
+      for (uint32_t e = 0; e < 4; ++e) {
+        const glm::vec3 corner = layout.positions[sides[e].vertices.front()];
+        EXPECT_TRUE(sameBytes(&g.positions[edgeSampleIndex(33, e, 0)], &corner, sizeof(glm::vec3)));
+      }
+    }
+    EXPECT_EQ(expectSeamless(set), 6u * 4 * (33 + 17 + 9 + 5 + 3 + 2));
+    EXPECT_EQ(set.image.flippedTexels, 0u);
+    EXPECT_EQ(set.image.degenerateTexels, 0u);
+    if (!sphere) {
+      EXPECT_NEAR(set.image.stretchL2, 1.0, 1e-4);
+      EXPECT_NEAR(set.image.area3D, 6.0, 1e-4);
+    } else {
+      EXPECT_LT(set.image.stretchL2, 1.2);
+    }
+  }
+}
+
+TEST(SideQuads, EvenNGonsHaveNoFlippedTexels) {
+  for (const bool hemisphere : {false, true}) {
+    for (const uint32_t n : {4u, 6u, 8u, 10u}) {
+      SCOPED_TRACE(testing::Message() << "n=" << n << " hemisphere=" << hemisphere);
+      const ChartLayout layout = test::diskLayout(n, 12, 60, hemisphere, true);
+      const GeometryImageSet set = resampleLayout(layout, sidesOptions(33));
+      ASSERT_EQ(set.charts.size(), n == 4 ? 1u : n / 2);
+      EXPECT_EQ(set.image.flippedTexels, 0u);
+      EXPECT_EQ(set.image.degenerateTexels, 0u);
+      EXPECT_EQ(set.param.flippedTriangles, 0u);
+      EXPECT_LT(set.image.stretchL2, 2.0);
+      if (n > 4) {
+        EXPECT_GT(expectSeamless(set), 0u);  // the spokes from corners 2j to the centre
+        // The centre, chart sample (1,1), is one sample of every quad.
+        for (const GeometryImage& g : set.charts) {
+          EXPECT_TRUE(sameBytes(&g.positions.back(), &set.charts[0].positions.back(), sizeof(glm::vec3)));
+        }
+      }
+      for (const GeometryImage& g : set.charts) {
+        for (const glm::vec3& p : g.positions) EXPECT_LE(glm::length(p), 1.0f + 1e-5f);
+      }
+    }
+  }
+}
+
+TEST(SideQuads, AnOddPatchIsRefused) {
+  const ChartLayout layout = test::diskLayout(5, 4, 30, false);
+  EXPECT_THROW(resampleLayout(layout, sidesOptions(17)), std::invalid_argument);
+  EXPECT_THROW(quadNeighbours(layout, QuadLayout::kSides), std::invalid_argument);
+}
+
+TEST(EvenSides, AnOpenSideTakesTheCorner) {
+  ChartLayout layout = test::diskLayout(5, 4, 30, false);
+  const EvenSidesResult r = evenSides(layout);
+  EXPECT_EQ(r.corners, 1u);
+  EXPECT_EQ(r.oddLeft, 0u);
+  ASSERT_EQ(layout.patches[0].sides.size(), 6u);
+  EXPECT_TRUE(validateChartLayout(layout, 3, kMaxPatchSides).empty());
+  const GeometryImageSet set = resampleLayout(layout, sidesOptions(17));
+  EXPECT_EQ(set.charts.size(), 3u);
+  EXPECT_EQ(set.image.flippedTexels, 0u);
+  // Already even: nothing to do.
+  EXPECT_EQ(evenSides(layout).corners, 0u);
+}
+
+// The shipped bunny charted into 48 patches, as the build charts it.
+TEST(EvenSides, TheBunnysOddPatchesArePairedAndItsSidesLayoutIsSeamless) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 48;
+  ChartLayout layout = buildChartLayout(mesh, copt);
+  uint32_t oddBefore = 0, kites = 0;
+  for (const Patch& p : layout.patches) {
+    oddBefore += p.sides.size() % 2;
+    kites += uint32_t(p.sides.size());
+  }
+  ASSERT_GT(oddBefore, 1u);
+  const EvenSidesResult r = evenSides(layout);
+  EXPECT_EQ(r.oddLeft, 0u);
+  EXPECT_GE(r.corners, (oddBefore + 1) / 2);
+  for (const Patch& p : layout.patches) EXPECT_EQ(p.sides.size() % 2, 0u);
+  const std::vector<std::string> bad = validateChartLayout(layout, 3, kMaxPatchSides);
+  EXPECT_TRUE(bad.empty()) << bad.front();
+  const GeometryImageSet set = resampleLayout(layout, sidesOptions(9));
+  EXPECT_GT(expectSeamless(set), 0u);
+  EXPECT_LT(set.charts.size() * 10, size_t(kites) * 7) << set.charts.size() << " charts against " << kites << " kites";
+  std::printf("  bunny, 48 patches: %u odd, %u corners to even them, %zu charts (kites: %u)\n", oddBefore, r.corners,
+              set.charts.size(), kites);
+}
+
+}  // namespace
+}  // namespace gimlod
