@@ -258,6 +258,23 @@ double sideLength3D(const ChartLayout& layout, const PatchSide& side) {
 
 }  // namespace
 
+void rotatePatchSides(ChartLayout& layout, uint32_t p, uint32_t k) {
+  Patch& patch = layout.patches.at(p);
+  const uint32_t n = uint32_t(patch.sides.size());
+  if (n == 0 || k % n == 0) return;
+  auto moved = [&](uint32_t old) { return (old + n - k % n) % n; };  // new index of old side
+  for (uint32_t i = 0; i < n; ++i) {
+    PatchSide& side = patch.sides[i];
+    if (side.neighbourPatch < 0) continue;
+    if (uint32_t(side.neighbourPatch) == p) {
+      side.neighbourSide = moved(side.neighbourSide);
+    } else {
+      layout.patches[uint32_t(side.neighbourPatch)].sides[side.neighbourSide].neighbourSide = moved(i);
+    }
+  }
+  std::rotate(patch.sides.begin(), patch.sides.begin() + k % n, patch.sides.end());
+}
+
 EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& within, uint32_t maxSides) {
   EvenSidesResult r;
   const uint32_t np = uint32_t(layout.patches.size());
@@ -977,6 +994,31 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
     if (!sidesLayout) return true;
     return evenSides(layout, patchRing(layout, patches)).oddLeft == 0;
   };
+  // The sides layout pairs a patch's sides (2j, 2j+1) into quads; the other pairing (its sides
+  // rotated by one) puts the spokes at the other corners. Every folding patch of 6 or more sides
+  // tries it; kept where the patch gets better.
+  if (sidesLayout && !errorsOnly) {
+    const std::vector<Patch> saved = layout.patches;
+    const std::vector<Badness> was = badnessPerPatch(set);
+    std::vector<uint8_t> only(layout.patches.size(), 0);
+    std::vector<uint32_t> rotated;
+    for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+      if (was[p].flips == 0 || layout.patches[p].sides.size() < 6) continue;
+      rotatePatchSides(layout, p, 1);
+      only[p] = 1;
+      rotated.push_back(p);
+    }
+    if (!rotated.empty()) {
+      const std::vector<Patch> rotatedPatches = layout.patches;
+      GeometryImageSet trial = resampleOnly(only);
+      std::vector<Badness> after(layout.patches.size());
+      for (const GeometryImage& g : trial.charts) after[g.patch] += badnessOf(g);
+      for (uint32_t p : rotated) {
+        if (!(after[p] < was[p])) rotatePatchSides(layout, p, uint32_t(layout.patches[p].sides.size()) - 1);
+      }
+      refresh(saved, &rotatedPatches, &trial);
+    }
+  }
   // First, whole rounds: every folding patch cut at once (neck first, else through the fold),
   // kept while the flipped texels drop. Cheap (only the cut patches and their neighbours are
   // resampled) and it lets halves be cut again.

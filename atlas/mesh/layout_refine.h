@@ -58,6 +58,11 @@ bool splitPatchAtCorners(ChartLayout& layout, uint32_t patch, uint32_t i, uint32
 bool insertCorner(ChartLayout& layout, uint32_t patch, uint32_t side, uint32_t k,
                   uint32_t maxSides = 8);
 
+// Rotates the sides of patch p so that old side k becomes side 0 (the neighbours' links follow).
+// The patch and its sampling are the same; only which corners its quads pair differs in the sides
+// quad layout.
+void rotatePatchSides(ChartLayout& layout, uint32_t p, uint32_t k);
+
 // Makes every patch's side count even, as the sides quad layout needs (atlas/mesh/resample.h), by
 // making inner side vertices corners (insertCorner, the vertex nearest the side's arc-length
 // middle, on the longest side that can take one): first on sides shared by two odd patches (one

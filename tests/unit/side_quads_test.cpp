@@ -165,5 +165,29 @@ TEST(EvenSides, TheBunnysOddPatchesArePairedAndItsSidesLayoutIsSeamless) {
               set.charts.size(), kites);
 }
 
+// Rotating a patch's sides keeps the layout valid and every link reciprocal; rotating back
+// restores it exactly; in the sides layout the other pairing gives the same chart count and
+// still seamless charts.
+TEST(EvenSides, RotatedSidesKeepTheLayoutValid) {
+  ChartLayout layout = test::diskLayout(6, 6, 36, true);
+  ChartLayout two = test::gridLayout(12, 4, 3.f, 1.f, {6});
+  ASSERT_EQ(evenSides(two).oddLeft, 0u);
+  for (ChartLayout* l : {&layout, &two}) {
+    const ChartLayout before = *l;
+    rotatePatchSides(*l, 0, 1);
+    EXPECT_TRUE(validateChartLayout(*l, 3, kMaxPatchSides).empty());
+    EXPECT_EQ(l->patches[0].sides[0].vertices, before.patches[0].sides[1].vertices);
+    const GeometryImageSet set = resampleLayout(*l, sidesOptions(17));
+    EXPECT_GT(expectSeamless(set), 0u);
+    rotatePatchSides(*l, 0, uint32_t(l->patches[0].sides.size()) - 1);
+    for (size_t p = 0; p < l->patches.size(); ++p) {
+      for (size_t i = 0; i < l->patches[p].sides.size(); ++i) {
+        EXPECT_EQ(l->patches[p].sides[i].vertices, before.patches[p].sides[i].vertices);
+        EXPECT_EQ(l->patches[p].sides[i].neighbourSide, before.patches[p].sides[i].neighbourSide);
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace gimlod
