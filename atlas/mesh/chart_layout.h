@@ -17,9 +17,9 @@
 
 namespace gimlod {
 
-// The most sides a patch may have: clustering and cuts keep 3..8, and making the side counts even
-// (evenSides, atlas/mesh/layout_refine.h) may add two.
-inline constexpr uint32_t kMaxPatchSides = 10;
+// The most sides a patch may have: clustering keeps 3..8 and the chart repair's cuts 3..9; making
+// the side counts even (evenSides, atlas/mesh/layout_refine.h) may add corners up to this.
+inline constexpr uint32_t kMaxPatchSides = 12;
 
 // One side of a patch: the boundary run between two consecutive corners, as mesh vertex ids,
 // in the patch's counter-clockwise boundary order (outward normals, seen from outside).

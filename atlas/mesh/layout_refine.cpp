@@ -984,9 +984,9 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
   // A part with few border edges has sides too short to take the corner that would make its side
   // count even: the sides layout cuts off no such part.
   const uint32_t minPartEdges = sidesLayout ? 4 : 0;
-  // The most sides a cut leaves a part or a neighbour: one below the most a patch may have in the
-  // sides layout (making the count even may add one), else the clustering's 8.
-  const uint32_t cutSides = sidesLayout ? kMaxPatchSides - 1 : 8;
+  // The most sides a cut leaves a part or a neighbour: 9 in the sides layout (the count made even
+  // then stays within kMaxPatchSides, with room for chains of corners), else the clustering's 8.
+  const uint32_t cutSides = sidesLayout ? 9 : 8;
   auto mendEars = [&](const Trial& t) {
     std::vector<uint32_t> patches = t.touched;
     for (size_t q = t.firstNew; q < t.endNew; ++q) patches.push_back(uint32_t(q));

@@ -478,7 +478,11 @@ std::vector<double> proportionalAngles(const std::vector<double>& lengths, doubl
 std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths, bool paired) {
   const size_t n = sideLengths.size();
   std::vector<double> theta;
-  if (paired && n >= 6 && n % 2 == 0) {
+  if (paired && n == 4) {
+    // One quad, the chart itself: the square, so the bilinear map adds no distortion and the
+    // stretch the parameterization minimizes is the chart's.
+    theta.assign(4, 0.5 * std::numbers::pi);
+  } else if (paired && n >= 6 && n % 2 == 0) {
     // Each pair of sides (2j, 2j+1) is one quad with the centre: its angle there is the pair's,
     // proportional to the pair's length within [0.4, 1.8] times the regular one and below 3/4 pi
     // (a convex quad, not near a triangle); the middle corner splits it by the two sides' lengths

@@ -107,7 +107,8 @@ glm::dvec2 polygonCorner(uint32_t n, uint32_t i);
 // Equal lengths give the regular n-gon. With paired (an even n >= 6), the same rule gives each
 // pair of sides (2j, 2j+1) its angle phi_j, at most 3/4 pi, so every quad (corner 2j+1, corner
 // 2j+2, origin, corner 2j) is convex; the pair's middle corner splits phi_j in proportion to the
-// two sides' lengths, within [0.2, 0.8] of it.
+// two sides' lengths, within [0.2, 0.8] of it. With paired and n = 4 (one quad, the chart itself),
+// the square.
 std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths, bool paired = false);
 
 // Parameterizes patch `patch` of `layout`. The patch must be a triangulated disk whose boundary
