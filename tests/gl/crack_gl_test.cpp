@@ -51,7 +51,7 @@ class CrackTest : public test::GlContextTest<> {
     gl::SceneOptions so;
     so.width = 96;
     so.height = 72;
-    so.pageCapacity = 1024;
+    so.pageCapacity = 512;
     return so;
   }
 

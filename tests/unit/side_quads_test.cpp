@@ -3,54 +3,33 @@
 // seamless charts; even n-gons (disks and hemispheres) resample without flipped texels, their
 // centre spokes seamless; an odd patch is refused; evenSides mends an odd patch on its open side
 // and pairs the odd patches of the real bunny, after which its sides layout is seamless with
-// reciprocal neighbours and about half the kites' charts.
+// reciprocal neighbours and about half the kites' charts; the shipped bunny built with --quads
+// sides is seamless on disk with about half the charts.
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <fstream>
 #include <filesystem>
 #include <stdexcept>
+
+#include <nlohmann/json.hpp>
 
 #include "atlas/mesh/charting.h"
 #include "atlas/mesh/layout_refine.h"
 #include "atlas/mesh/mesh_io.h"
 #include "atlas/mesh/resample.h"
+#include "inspect/seams.h"
+#include "pipeline/build.h"
+#include "runtime/atlas_view.h"
 #include "tests/chart_layout_fixture.h"
+#include "tests/seam_check.h"
+#include "tests/test_util.h"
 
 namespace gimlod {
 namespace {
 
-bool sameBytes(const void* a, const void* b, size_t n) { return std::memcmp(a, b, n) == 0; }
-
-// Every chart edge with a neighbour: the neighbour's table points back, and at every pyramid
-// level sample k here is byte-identical to sample M-k there (position and normal). Returns the
-// samples compared.
-size_t expectSeamless(const GeometryImageSet& set) {
-  const uint32_t size = set.chartSize, m = size - 1;
-  size_t compared = 0;
-  for (uint32_t c = 0; c < set.charts.size(); ++c) {
-    const GeometryImage& a = set.charts[c];
-    for (uint32_t e = 0; e < 4; ++e) {
-      const RootNeighbour nb = a.neighbours[e];
-      if (nb.chart < 0) continue;
-      const GeometryImage& b = set.charts.at(uint32_t(nb.chart));
-      const RootNeighbour back = b.neighbours[nb.edge];
-      EXPECT_EQ(back.chart, int32_t(c));
-      EXPECT_EQ(back.edge, e);
-      EXPECT_EQ(back.reversed, nb.reversed);
-      for (uint32_t step = 1; step <= m; step *= 2) {
-        for (uint32_t k = 0; k <= m; k += step) {
-          const uint32_t ia = edgeSampleIndex(size, e, k);
-          const uint32_t ib = edgeSampleIndex(size, nb.edge, nb.reversed ? m - k : k);
-          EXPECT_TRUE(sameBytes(&a.positions[ia], &b.positions[ib], sizeof(glm::vec3)))
-              << "chart " << c << " edge " << e << " k " << k;
-          EXPECT_TRUE(sameBytes(&a.normals[ia], &b.normals[ib], sizeof(PackedNormal)));
-          ++compared;
-        }
-      }
-    }
-  }
-  return compared;
-}
+using test::expectSeamless;
+using test::sameBytes;
 
 ResampleOptions sidesOptions(uint32_t chartSize) {
   ResampleOptions o;
@@ -187,6 +166,36 @@ TEST(EvenSides, RotatedSidesKeepTheLayoutValid) {
       }
     }
   }
+}
+
+// `gimlod build --quads sides` on the shipped bunny: the atlas on disk (compressed) is seamless at
+// every level, has every patch's side count even, and about half the charts of kites from the same
+// patches; the chart repair leaves no more flipped texels than it does with kites at this size.
+TEST(SideQuads, TheShippedBunnyBuildsWithHalfTheCharts) {
+  test::TempDir dir("gimlod-side-quads");
+  uint32_t charts[2] = {0, 0}, flipped[2] = {0, 0};
+  for (const bool sides : {false, true}) {
+    MeshBuildOptions o;
+    o.input = test::repoData() / "meshes/bun_zipper.ply";
+    o.output = dir.path() / (sides ? "sides.atlas" : "kites.atlas");
+    o.charts = 24;
+    o.chartSize = 33;
+    o.measureFidelity = false;
+    o.sideQuads = sides;
+    buildAtlas(o);
+    const SeamReport seams = validateSeams(o.output);
+    EXPECT_TRUE(seams.seamless()) << seams.mismatches() << " seam mismatches";
+    EXPECT_GT(seams.sharedEdges, 0u);
+    const nlohmann::json stats = nlohmann::json::parse(std::ifstream(o.output / "stats.json"));
+    const nlohmann::json& r = stats.at("resample");
+    EXPECT_EQ(r.at("quads").get<std::string>(), sides ? "sides" : "kites");
+    if (sides) EXPECT_GT(r.at("even_side_corners").get<uint32_t>(), 0u);
+    charts[sides] = openAtlas(o.output).hierarchy.chartCount();
+    flipped[sides] = r.at("flipped_texels").get<uint32_t>();
+  }
+  std::printf("  bunny, 24 patches at 33^2: kites %u charts (%u flipped), sides %u charts (%u flipped)\n", charts[0],
+              flipped[0], charts[1], flipped[1]);
+  EXPECT_LT(charts[1] * 10, charts[0] * 7);
 }
 
 }  // namespace
