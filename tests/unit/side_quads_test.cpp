@@ -169,8 +169,8 @@ TEST(EvenSides, RotatedSidesKeepTheLayoutValid) {
 }
 
 // `gimlod build --quads sides` on the shipped bunny: the atlas on disk (compressed) is seamless at
-// every level, has every patch's side count even, and about half the charts of kites from the same
-// patches; the chart repair leaves no more flipped texels than it does with kites at this size.
+// every level, has corners added to even the side counts, and about half the charts of kites from
+// the same patches.
 TEST(SideQuads, TheShippedBunnyBuildsWithHalfTheCharts) {
   test::TempDir dir("gimlod-side-quads");
   uint32_t charts[2] = {0, 0}, flipped[2] = {0, 0};
