@@ -116,7 +116,7 @@ std::string flagFor(std::string_view name) {
       {"thumbnailSize", "--image-size"},      {"imageryScale", "--imagery-scale"},
       {"imageryExtent", "--imagery-extent"},  {"heightPrecision", "--height-precision"},
       {"compress", "--uncompressed"},         {"positionBits", "--position-bits"},
-      {"imagery", "--imagery"},              {"sideQuads", "--quads"}};
+      {"imagery", "--imagery"},              {"quads", "--quads"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }
@@ -368,8 +368,9 @@ int main(int argc, char** argv) {
   std::string quadsArg = "kites";
   build->add_option("--quads", quadsArg,
                     "Meshes: how a patch becomes quad charts: sides (each chart edge a whole patch side, about n/2 "
-                    "charts an n-sided patch, one for 4 sides) or kites (each side halved, n charts)")
-      ->check(CLI::IsMember({"sides", "kites"}))
+                    "charts an n-sided patch, one for 4 sides), kites (each side halved, n charts), or auto (sides, "
+                    "and kites too if sides leave flipped texels or two-chart corners, keeping whichever leaves fewer)")
+      ->check(CLI::IsMember({"auto", "sides", "kites"}))
       ->capture_default_str();
   build->add_option("--chart-error", mesh.maxChartError,
                     "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
@@ -526,7 +527,7 @@ int main(int argc, char** argv) {
         static_cast<CommonBuildOptions&>(mesh) = common;
         if (chartSizeOpt->count() > 0) mesh.chartSize = terrain.chartSize;
         mesh.charts = chartsArg == "auto" ? kAutoCharts : parseCount("--charts", chartsArg);
-        mesh.sideQuads = quadsArg == "sides";
+        mesh.quads = quadsArg == "sides" ? MeshQuads::kSides : quadsArg == "kites" ? MeshQuads::kKites : MeshQuads::kAuto;
         mesh.maxSampleError = sampleErrorPercent < 0.0 && build->get_option("--sample-error")->count() == 0
                                   ? kAutoSampleError
                                   : sampleErrorPercent / 100.0;

@@ -71,6 +71,8 @@ inline constexpr uint32_t kAutoCharts = ~0u;
 inline constexpr double kAutoSampleError = -1.0;
 inline constexpr double kDefaultSampleError = 0.0005;
 
+enum class MeshQuads : uint8_t { kAuto, kSides, kKites };
+
 struct MeshBuildOptions : CommonBuildOptions {
   // Quad chart side in samples, 2^m + 1 in [9, 8193]; 0: by the input's density
   // (meshChartSizeForDensity, after the charting).
@@ -99,14 +101,16 @@ struct MeshBuildOptions : CommonBuildOptions {
   // bounding-box diagonal (a power-of-two step), before the hierarchy and the fidelity are
   // measured, so shared seams stay bit-identical and the errors bound what is drawn.
   uint32_t positionBits = kDefaultPositionBits;
-  // How patches become quad charts (atlas/mesh/resample.h QuadLayout): true, the sides layout
-  // (about n/2 charts an n-sided patch; side counts made even first); false, kites (n charts).
-  bool sideQuads = false;
+  // How patches become quad charts (atlas/mesh/resample.h QuadLayout): kites (n charts an n-sided
+  // patch), sides (about n/2; side counts made even first), or auto: sides, and kites too if sides
+  // leave flipped texels or corners where only two charts meet, keeping whichever leaves fewer
+  // flipped texels (sides on a tie, if it has no such corner).
+  MeshQuads quads = MeshQuads::kKites;
 };
 
 // The option's name as opts spell it in messages (CommonBuildOptions::spellOption).
 // The patches a mesh of `triangles` triangles is charted into by default: sqrt(triangles) / 80,
-// at least 48 (48 up to 14.7M triangles, 54 at 18.7M), so about 300 quad charts. The chart
+// at least 48 (48 up to 14.7M triangles, 54 at 18.7M), so about 150 quad charts (sides) or 300 (kites). The chart
 // repair then cuts the patches whose charts fold or sample the surface too coarsely. Fewer, larger
 // patches fold on scans with holes (the bunny: 795 flipped texels from 24 patches, which the
 // repair cannot all remove).

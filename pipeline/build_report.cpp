@@ -76,6 +76,8 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"side_ears_mended", rs.sideEarsMended},
                       {"quads", rs.sideQuads ? "sides" : "kites"},
                       {"even_side_corners", rs.evenSideCorners},
+                      {"other_quads_flipped_texels", rs.alternativeFlippedTexels},
+                      {"two_quad_corners", rs.twoQuadCorners},
                       {"flipped_texels_before_splits", flips.flippedTexelsFirst},
                       {"patches_split_by_repair", flips.patchesSplit},
                       {"patches_unsplittable", flips.patchesUnsplit},

@@ -99,6 +99,8 @@ struct MeshResampleStats {
   uint32_t sideEarsMended = 0;
   bool sideQuads = false;              // the sides quad layout (else kites)
   uint32_t evenSideCorners = 0;        // corners made so every patch has an even side count
+  int64_t alternativeFlippedTexels = -1;  // auto: the other layout's flipped texels; -1: not built
+  uint32_t twoQuadCorners = 0;         // sides layout: corners where only two charts meet
   ChartRepairStats repair;
   uint32_t chartSize = 0;              // the quad charts' side in samples
   bool chartSizeByDensity = false;     // chosen by meshChartSizeForDensity

@@ -179,46 +179,45 @@ double meshPositionStep(const MeshBounds& b, uint32_t positionBits) {
   return std::exp2(std::max(wanted, floorExp));
 }
 
-ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options, const fs::path& dir,
-                           StageMeter& meter) {
-  const std::vector<std::string> bad = validateChartLayout(layout);
-  if (!bad.empty()) throw InputError(options.input.string() + ": the chart layout is invalid: " + bad.front());
-  finishStage(meter, "validate");
+namespace {
+
+// One resampling and repair of `layout` in quad layout `quads`: its patches change (side counts
+// made even for the sides layout, the repair's cuts). Stages "resample" and "chart_repair", named
+// with `suffix`. With the sides layout, false in `evened` (and nothing else done) when some patch
+// cannot be given an even side count.
+ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& options, QuadLayout quads,
+                               const fs::path& dir, StageMeter& meter, const std::string& suffix, bool* evened) {
   ResampledMesh r;
   MeshResampleStats& st = r.stats;
   MeshBuildOptions o = options;
   if (o.maxSampleError == kAutoSampleError) o.maxSampleError = o.chartSize == 0 ? kDefaultSampleError : 0.0;
-  const QuadLayout quadLayout = o.sideQuads ? QuadLayout::kSides : QuadLayout::kKites;
-  st.sideQuads = o.sideQuads;
-  st.sidesStraightened = o.straightenRounds ? straightenSides(layout, o.straightenRounds) : 0;
-  st.sideEarsMended = moveSideEars(layout);
-  if (o.sideQuads) {
+  st.sideQuads = quads == QuadLayout::kSides;
+  if (st.sideQuads) {
     const EvenSidesResult even = evenSides(layout);
     st.evenSideCorners = even.corners;
-    if (even.oddLeft > 0)
-      throw InputError(fmt::format("{}: {} patches cannot be given an even number of sides for the sides quad layout "
-                                   "(no chain of sides with inner vertices joins them to another such patch or to a "
-                                   "hole); build with {} kites",
-                                   options.input.string(), even.oddLeft, optionRef("sideQuads")));
+    *evened = even.oddLeft == 0;
+    if (!*evened) return r;
+    alignSpokes(layout);
   }
-  finishStage(meter, "straighten");
-  const uint64_t quads = layoutQuadCount(layout, quadLayout);
+  const uint64_t quadCharts = layoutQuadCount(layout, quads);
   if (o.chartSize == 0) {
-    o.chartSize = meshChartSizeForDensity(layout.triangles.size(), quads);
+    o.chartSize = meshChartSizeForDensity(layout.triangles.size(), quadCharts);
     st.chartSizeByDensity = true;
-    spdlog::info("chart size {} for {} quad charts of {} triangles ({:.1f} samples per triangle)", o.chartSize, quads,
-                 layout.triangles.size(), samplesPerTriangle(layout, quads, o.chartSize));
+    spdlog::info("chart size {} for {} quad charts ({}) of {} triangles ({:.1f} samples per triangle)", o.chartSize,
+                 quadCharts, st.sideQuads ? "sides" : "kites", layout.triangles.size(),
+                 samplesPerTriangle(layout, quadCharts, o.chartSize));
   }
   st.chartSize = o.chartSize;
-  checkChartRoom(layout, quads, o, dir);
+  checkChartRoom(layout, quadCharts, o, dir);
 
   // Quads, parameterization and resampling.
-  r.spill = std::make_unique<ChartSpill>(dir / "samples.tmp", o.chartSize, !layout.colours.empty());
+  const fs::path spillFile = dir / (st.sideQuads ? "samples_sides.tmp" : "samples_kites.tmp");
+  r.spill = std::make_unique<ChartSpill>(spillFile, o.chartSize, !layout.colours.empty());
   ResampleOptions ro;
   ro.chartSize = o.chartSize;
   ro.threads = o.threads;
   ro.spill = r.spill.get();
-  ro.quads = quadLayout;
+  ro.quads = quads;
   GeometryImageSet first = resampleLayout(layout, ro);
   // A chart size chosen by density is doubled (and the layout resampled) while the patches whose
   // charts sample the surface more coarsely than maxSampleError hold more than a tenth of its
@@ -236,7 +235,7 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
     MeshBuildOptions larger = o;
     larger.chartSize = 2 * o.chartSize - 1;
     try {
-      checkChartRoom(layout, quads, larger, dir);
+      checkChartRoom(layout, quadCharts, larger, dir);
     } catch (const InputError& e) {
       spdlog::info("chart size stays {}: {}", o.chartSize, o.spellOption ? e.message(o.spellOption) : std::string(e.what()));
       break;
@@ -248,13 +247,13 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
     o.chartSize = larger.chartSize;
     first = GeometryImageSet{};
     r.spill.reset();  // (removes its file)
-    r.spill = std::make_unique<ChartSpill>(dir / "samples.tmp", o.chartSize, !layout.colours.empty());
+    r.spill = std::make_unique<ChartSpill>(spillFile, o.chartSize, !layout.colours.empty());
     ro.chartSize = o.chartSize;
     ro.spill = r.spill.get();
     first = resampleLayout(layout, ro);
   }
   st.chartSize = o.chartSize;
-  finishStage(meter, "resample");
+  finishStage(meter, "resample" + suffix);
   // Each repair cut adds working memory: the repair stops cutting once the process holds 3/4 of
   // maxMemory, or once it has parameterized repairBudget times the triangles again.
   const uint64_t layoutTriangles = layout.triangles.size();
@@ -279,13 +278,78 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
                  "again ({}); raise {} to repair more",
                  o.input.string(), st.repairWork, left, spelledOption(o, "repairBudget"));
   st.patches = layout.patches.size();
-  layout = ChartLayout{};
-  finishStage(meter, "chart_repair");
+  if (st.sideQuads) {
+    st.twoQuadCorners = twoQuadCorners(layout);
+    if (st.twoQuadCorners > 0)
+      spdlog::warn("{}: {} corners of the sides quad layout have only two charts meeting (their corner texels fold "
+                   "flat onto each other)",
+                   o.input.string(), st.twoQuadCorners);
+  }
+  finishStage(meter, "chart_repair" + suffix);
   st.charts = set.charts.size();
   st.param = set.param;
   st.image = set.image;
   st.perChart.reserve(set.charts.size());
   for (const GeometryImage& g : set.charts) st.perChart.push_back({g.patch, g.quad, g.quality});
+  return r;
+}
+
+}  // namespace
+
+ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options, const fs::path& dir,
+                           StageMeter& meter) {
+  const std::vector<std::string> bad = validateChartLayout(layout);
+  if (!bad.empty()) throw InputError(options.input.string() + ": the chart layout is invalid: " + bad.front());
+  finishStage(meter, "validate");
+  const uint32_t straightened = options.straightenRounds ? straightenSides(layout, options.straightenRounds) : 0;
+  const uint32_t ears = moveSideEars(layout);
+  finishStage(meter, "straighten");
+  ResampledMesh r;
+  bool evened = true;
+  if (options.quads == MeshQuads::kKites) {
+    r = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, "", &evened);
+  } else if (options.quads == MeshQuads::kSides) {
+    r = resampleInLayout(layout, options, QuadLayout::kSides, dir, meter, "", &evened);
+    if (!evened)
+      throw InputError(fmt::format("{}: some patches cannot be given an even number of sides for the sides quad "
+                                   "layout (no chain of sides with inner vertices joins them to another such patch or "
+                                   "to a hole); build with {} kites",
+                                   options.input.string(), optionRef("quads")));
+  } else {
+    // Sides first (about half the charts); kites too if that leaves flipped texels or corners
+    // where only two charts meet, keeping whichever leaves fewer flipped texels (sides on a tie,
+    // if no such corner is left).
+    const std::vector<Patch> charted = layout.patches;
+    ResampledMesh sides = resampleInLayout(layout, options, QuadLayout::kSides, dir, meter, "", &evened);
+    if (evened && sides.set.image.flippedTexels == 0 && sides.stats.twoQuadCorners == 0) {
+      r = std::move(sides);
+    } else {
+      std::vector<Patch> sidesPatches = std::move(layout.patches);
+      layout.patches = charted;
+      ResampledMesh kites = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, " (kites)", &evened);
+      const bool keepSides = !sidesPatches.empty() && sides.spill && sides.stats.twoQuadCorners == 0 &&
+                             sides.set.image.flippedTexels <= kites.set.image.flippedTexels;
+      if (sides.spill) {
+        spdlog::info("quad layout: sides ({} charts) left {} flipped texels and {} two-chart corners, kites ({} charts) "
+                     "{} flipped texels: keeping {}",
+                     sides.set.charts.size(), sides.set.image.flippedTexels, sides.stats.twoQuadCorners,
+                     kites.set.charts.size(), kites.set.image.flippedTexels, keepSides ? "sides" : "kites");
+      } else {
+        spdlog::info("quad layout: kites (some patches cannot be given an even number of sides)");
+      }
+      if (keepSides) {
+        sides.stats.alternativeFlippedTexels = int64_t(kites.set.image.flippedTexels);
+        r = std::move(sides);
+        layout.patches = std::move(sidesPatches);
+      } else {
+        if (sides.spill) kites.stats.alternativeFlippedTexels = int64_t(sides.set.image.flippedTexels);
+        r = std::move(kites);
+      }
+    }
+  }
+  r.stats.sidesStraightened = straightened;
+  r.stats.sideEarsMended = ears;
+  layout = ChartLayout{};
   return r;
 }
 

@@ -258,6 +258,84 @@ double sideLength3D(const ChartLayout& layout, const PatchSide& side) {
 
 }  // namespace
 
+namespace {
+
+// Every corner vertex with its (patch, corner index) incidences.
+std::unordered_map<uint32_t, std::vector<std::pair<uint32_t, uint32_t>>> cornerIncidences(const ChartLayout& layout) {
+  std::unordered_map<uint32_t, std::vector<std::pair<uint32_t, uint32_t>>> at;
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    const auto& sides = layout.patches[p].sides;
+    for (uint32_t i = 0; i < sides.size(); ++i) at[sides[i].vertices.front()].push_back({p, i});
+  }
+  return at;
+}
+
+// Whether corner i of a patch of n sides starts spokes in the sides layout (two quads meet there).
+bool spokeCorner(uint32_t n, uint32_t i) { return n >= 6 && i % 2 == 0; }
+
+// Corners of two patches only, away from the border, where neither patch has spokes: one quad of
+// each meets there.
+bool foldedCorner(const ChartLayout& layout, const std::vector<std::pair<uint32_t, uint32_t>>& in) {
+  if (in.size() != 2) return false;
+  for (const auto& [p, i] : in) {
+    const auto& sides = layout.patches[p].sides;
+    const uint32_t n = uint32_t(sides.size());
+    if (sides[i].neighbourPatch < 0 || sides[(i + n - 1) % n].neighbourPatch < 0) return false;
+    if (spokeCorner(n, i)) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+uint32_t twoQuadCorners(const ChartLayout& layout) {
+  uint32_t count = 0;
+  for (const auto& [v, in] : cornerIncidences(layout)) count += foldedCorner(layout, in);
+  return count;
+}
+
+uint32_t alignSpokes(ChartLayout& layout, const std::vector<uint32_t>& only) {
+  // Each patch of 6 or more sides takes the pairing under which more of its two-patch corners
+  // start spokes (those the other patch leaves without), in two passes.
+  std::vector<uint32_t> patches = only;
+  if (only.empty()) {
+    for (uint32_t p = 0; p < layout.patches.size(); ++p) patches.push_back(p);
+  }
+  for (int pass = 0; pass < 2; ++pass) {
+    const auto at = cornerIncidences(layout);
+    for (const uint32_t p : patches) {
+      const uint32_t n = uint32_t(layout.patches[p].sides.size());
+      if (n < 6) continue;
+      int score[2] = {0, 0};
+      for (uint32_t i = 0; i < n; ++i) {
+        const auto& in = at.at(layout.patches[p].sides[i].vertices.front());
+        if (in.size() != 2) continue;
+        const auto& other = in[0].first == p && in[0].second == i ? in[1] : in[0];
+        if (other.first == p) continue;
+        const uint32_t on = uint32_t(layout.patches[other.first].sides.size());
+        if (spokeCorner(on, other.second)) continue;  // the other patch has spokes there
+        ++score[i % 2];
+      }
+      if (score[1] > score[0]) rotatePatchSides(layout, p, 1);
+    }
+  }
+  return twoQuadCorners(layout);
+}
+
+bool rotationFoldsNoCorner(ChartLayout& layout, uint32_t p) {
+  auto foldedAtP = [&] {
+    const auto at = cornerIncidences(layout);
+    uint32_t folded = 0;
+    for (const PatchSide& side : layout.patches[p].sides) folded += foldedCorner(layout, at.at(side.vertices.front()));
+    return folded;
+  };
+  const uint32_t before = foldedAtP();
+  rotatePatchSides(layout, p, 1);
+  const uint32_t after = foldedAtP();
+  rotatePatchSides(layout, p, uint32_t(layout.patches[p].sides.size()) - 1);
+  return after <= before;
+}
+
 void rotatePatchSides(ChartLayout& layout, uint32_t p, uint32_t k) {
   Patch& patch = layout.patches.at(p);
   const uint32_t n = uint32_t(patch.sides.size());
@@ -312,6 +390,9 @@ EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& with
     for (uint32_t i = 0; i < sidesOf(p); ++i) {
       const PatchSide& side = layout.patches[p].sides[i];
       if (side.neighbourPatch < 0 || !odd(uint32_t(side.neighbourPatch))) continue;
+      // Two triangles would become two single quads meeting at the new corner, with nothing to
+      // start spokes there: leave them to other pairs.
+      if (std::max(sidesOf(p), sidesOf(uint32_t(side.neighbourPatch))) < 5) continue;
       if (sideTowards(p, side.neighbourPatch, maxSides, maxSides) < 0 || side.vertices.size() < 3) continue;
       const double l = sideLength3D(layout, side);
       if (l > bestLength) bestSide = int32_t(i), bestLength = l;
@@ -987,12 +1068,18 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
   // The most sides a cut leaves a part or a neighbour: 9 in the sides layout (the count made even
   // then stays within kMaxPatchSides, with room for chains of corners), else the clustering's 8.
   const uint32_t cutSides = sidesLayout ? 9 : 8;
+  // The two-chart corners the repair started with (evenSides and alignSpokes leave none where they
+  // can); no cut may add to them.
+  const uint32_t cornersBefore = sidesLayout ? twoQuadCorners(layout) : 0;
   auto mendEars = [&](const Trial& t) {
     std::vector<uint32_t> patches = t.touched;
     for (size_t q = t.firstNew; q < t.endNew; ++q) patches.push_back(uint32_t(q));
     moveSideEars(layout, patches, false);
     if (!sidesLayout) return true;
-    return evenSides(layout, patchRing(layout, patches)).oddLeft == 0;
+    const std::vector<uint32_t> region = patchRing(layout, patches);
+    if (evenSides(layout, region).oddLeft > 0) return false;
+    // A cut whose corners leave two charts alone at a corner is not made.
+    return alignSpokes(layout, region) <= cornersBefore;
   };
   // The sides layout pairs a patch's sides (2j, 2j+1) into quads; the other pairing (its sides
   // rotated by one) puts the spokes at the other corners. Every folding patch of 6 or more sides
@@ -1003,7 +1090,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
     std::vector<uint8_t> only(layout.patches.size(), 0);
     std::vector<uint32_t> rotated;
     for (uint32_t p = 0; p < layout.patches.size(); ++p) {
-      if (was[p].flips == 0 || layout.patches[p].sides.size() < 6) continue;
+      if (was[p].flips == 0 || layout.patches[p].sides.size() < 6 || !rotationFoldsNoCorner(layout, p)) continue;
       rotatePatchSides(layout, p, 1);
       only[p] = 1;
       rotated.push_back(p);
@@ -1042,6 +1129,10 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
     }
     if (split == 0 || (sidesLayout && evenSides(layout).oddLeft > 0)) {
       layout.patches = saved;  // a failed cut may still have left a corner
+      break;
+    }
+    if (sidesLayout && alignSpokes(layout) > cornersBefore) {
+      layout.patches = saved;
       break;
     }
     // The patches the round changed, before and after.

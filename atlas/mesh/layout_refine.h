@@ -58,6 +58,17 @@ bool splitPatchAtCorners(ChartLayout& layout, uint32_t patch, uint32_t i, uint32
 bool insertCorner(ChartLayout& layout, uint32_t patch, uint32_t side, uint32_t k,
                   uint32_t maxSides = 8);
 
+// In the sides quad layout, a corner where only two patches meet (as evenSides makes them), away
+// from the border, where neither patch starts spokes has one quad of each: two charts meet there,
+// their corner texels span the surface's full turn flat and coincide. twoQuadCorners counts such
+// corners; alignSpokes rotates patches of 6 or more sides (rotatePatchSides) so that as many as
+// it can start spokes, and returns the count left.
+// With `only`, just those patches rotate. rotationFoldsNoCorner: whether rotating patch p by one
+// leaves no more such corners at its corners (the layout is left as it was).
+uint32_t twoQuadCorners(const ChartLayout& layout);
+uint32_t alignSpokes(ChartLayout& layout, const std::vector<uint32_t>& only = {});
+bool rotationFoldsNoCorner(ChartLayout& layout, uint32_t p);
+
 // Rotates the sides of patch p so that old side k becomes side 0 (the neighbours' links follow).
 // The patch and its sampling are the same; only which corners its quads pair differs in the sides
 // quad layout.

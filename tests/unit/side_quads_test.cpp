@@ -168,12 +168,12 @@ TEST(EvenSides, RotatedSidesKeepTheLayoutValid) {
   }
 }
 
-// `gimlod build --quads sides` on the shipped bunny: the atlas on disk (compressed) is seamless at
+// `gimlod build --quads sides|kites|auto` on the shipped bunny: the atlas on disk (compressed) is seamless at
 // every level, has corners added to even the side counts, and about half the charts of kites from
-// the same patches.
+// the same patches; auto keeps the one that leaves fewer flipped texels.
 TEST(SideQuads, TheShippedBunnyBuildsWithHalfTheCharts) {
   test::TempDir dir("gimlod-side-quads");
-  uint32_t charts[2] = {0, 0}, flipped[2] = {0, 0};
+  uint32_t charts[2] = {0, 0}, flipped[2] = {0, 0}, twoChartCorners = 0;
   for (const bool sides : {false, true}) {
     MeshBuildOptions o;
     o.input = test::repoData() / "meshes/bun_zipper.ply";
@@ -181,7 +181,7 @@ TEST(SideQuads, TheShippedBunnyBuildsWithHalfTheCharts) {
     o.charts = 24;
     o.chartSize = 33;
     o.measureFidelity = false;
-    o.sideQuads = sides;
+    o.quads = sides ? MeshQuads::kSides : MeshQuads::kKites;
     buildAtlas(o);
     const SeamReport seams = validateSeams(o.output);
     EXPECT_TRUE(seams.seamless()) << seams.mismatches() << " seam mismatches";
@@ -192,10 +192,27 @@ TEST(SideQuads, TheShippedBunnyBuildsWithHalfTheCharts) {
     if (sides) EXPECT_GT(r.at("even_side_corners").get<uint32_t>(), 0u);
     charts[sides] = openAtlas(o.output).hierarchy.chartCount();
     flipped[sides] = r.at("flipped_texels").get<uint32_t>();
+    if (sides) twoChartCorners = r.at("two_quad_corners").get<uint32_t>();
   }
   std::printf("  bunny, 24 patches at 33^2: kites %u charts (%u flipped), sides %u charts (%u flipped)\n", charts[0],
               flipped[0], charts[1], flipped[1]);
   EXPECT_LT(charts[1] * 10, charts[0] * 7);
+  // auto keeps the layout that leaves fewer flipped texels (sides on a tie, with no two-chart
+  // corner), and names the other's count.
+  MeshBuildOptions o;
+  o.input = test::repoData() / "meshes/bun_zipper.ply";
+  o.output = dir.path() / "auto.atlas";
+  o.charts = 24;
+  o.chartSize = 33;
+  o.measureFidelity = false;
+  o.quads = MeshQuads::kAuto;
+  buildAtlas(o);
+  const nlohmann::json r = nlohmann::json::parse(std::ifstream(o.output / "stats.json")).at("resample");
+  const bool sidesWin = flipped[1] <= flipped[0] && twoChartCorners == 0;
+  EXPECT_EQ(r.at("quads").get<std::string>(), sidesWin ? "sides" : "kites");
+  EXPECT_EQ(openAtlas(o.output).hierarchy.chartCount(), charts[sidesWin]);
+  EXPECT_EQ(r.at("flipped_texels").get<uint32_t>(), flipped[sidesWin]);
+  if (flipped[1] > 0 || twoChartCorners > 0) EXPECT_EQ(r.at("other_quads_flipped_texels").get<int64_t>(), int64_t(flipped[!sidesWin]));
 }
 
 }  // namespace
