@@ -48,4 +48,16 @@ inline size_t expectSeamless(const GeometryImageSet& set) {
   return compared;
 }
 
+// The image figures of a resampled test::cubeLayout: no degenerate texel; the cube's charts are
+// isometric (L2 stretch 1, area 6), the sphere's nearly so.
+inline void expectCubeImage(const GeometryImageSet& set, bool sphere) {
+  EXPECT_EQ(set.image.degenerateTexels, 0u);
+  if (!sphere) {
+    EXPECT_NEAR(set.image.stretchL2, 1.0, 1e-4);
+    EXPECT_NEAR(set.image.area3D, 6.0, 1e-4);
+  } else {
+    EXPECT_LT(set.image.stretchL2, 1.2);
+  }
+}
+
 }  // namespace gimlod::test
