@@ -235,30 +235,15 @@ namespace {
 
 // The inner vertex of a side nearest its arc-length middle (0 if it has none).
 uint32_t sideMiddleVertex(const ChartLayout& layout, const PatchSide& side) {
-  if (side.vertices.size() < 3) return 0;
-  std::vector<double> cum(1, 0.0);
-  for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
-    cum.push_back(cum.back() + glm::length(glm::dvec3(layout.positions[side.vertices[k + 1]]) -
-                                           glm::dvec3(layout.positions[side.vertices[k]])));
-  }
-  uint32_t best = 1;
-  for (uint32_t k = 2; k + 1 < side.vertices.size(); ++k) {
-    if (std::abs(cum[k] - 0.5 * cum.back()) < std::abs(cum[best] - 0.5 * cum.back())) best = k;
+  const double half = 0.5 * sideLength(layout, side);
+  uint32_t best = 0;
+  double at = 0.0, bestGap = std::numeric_limits<double>::infinity();
+  for (uint32_t k = 1; k + 1 < side.vertices.size(); ++k) {
+    at += glm::length(layout.positions[side.vertices[k]] - layout.positions[side.vertices[k - 1]]);
+    if (std::abs(at - half) < bestGap) best = k, bestGap = std::abs(at - half);
   }
   return best;
 }
-
-double sideLength3D(const ChartLayout& layout, const PatchSide& side) {
-  double l = 0.0;
-  for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
-    l += glm::length(glm::dvec3(layout.positions[side.vertices[k + 1]]) - glm::dvec3(layout.positions[side.vertices[k]]));
-  }
-  return l;
-}
-
-}  // namespace
-
-namespace {
 
 // Every corner vertex with its (patch, corner index) incidences.
 std::unordered_map<uint32_t, std::vector<std::pair<uint32_t, uint32_t>>> cornerIncidences(const ChartLayout& layout) {
@@ -373,7 +358,7 @@ EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& with
     for (uint32_t i = 0; i < sidesOf(p); ++i) {
       const PatchSide& side = layout.patches[p].sides[i];
       if (side.neighbourPatch != towards || side.vertices.size() < 3) continue;
-      const double l = sideLength3D(layout, side);
+      const double l = sideLength(layout, side);
       if (l > bestLength) best = int32_t(i), bestLength = l;
     }
     return best;
@@ -389,12 +374,12 @@ EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& with
     double bestLength = -1.0;
     for (uint32_t i = 0; i < sidesOf(p); ++i) {
       const PatchSide& side = layout.patches[p].sides[i];
-      if (side.neighbourPatch < 0 || !odd(uint32_t(side.neighbourPatch))) continue;
+      if (side.neighbourPatch < 0 || uint32_t(side.neighbourPatch) == p || side.vertices.size() < 3) continue;
+      const uint32_t q = uint32_t(side.neighbourPatch);
       // Two triangles would become two single quads meeting at the new corner, with nothing to
       // start spokes there: leave them to other pairs.
-      if (std::max(sidesOf(p), sidesOf(uint32_t(side.neighbourPatch))) < 5) continue;
-      if (sideTowards(p, side.neighbourPatch, maxSides, maxSides) < 0 || side.vertices.size() < 3) continue;
-      const double l = sideLength3D(layout, side);
+      if (!odd(q) || std::max(sidesOf(p), sidesOf(q)) < 5 || std::max(sidesOf(p), sidesOf(q)) + 1 > maxSides) continue;
+      const double l = sideLength(layout, side);
       if (l > bestLength) bestSide = int32_t(i), bestLength = l;
     }
     if (bestSide >= 0) split(p, uint32_t(bestSide));
@@ -1127,11 +1112,9 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
         split += done;
       }
     }
-    if (split == 0 || (sidesLayout && evenSides(layout).oddLeft > 0)) {
-      layout.patches = saved;  // a failed cut may still have left a corner
-      break;
-    }
-    if (sidesLayout && alignSpokes(layout) > cornersBefore) {
+    // (A failed cut may still have left a corner; the sides layout needs even side counts and
+    // no new two-chart corner.)
+    if (split == 0 || (sidesLayout && (evenSides(layout).oddLeft > 0 || alignSpokes(layout) > cornersBefore))) {
       layout.patches = saved;
       break;
     }

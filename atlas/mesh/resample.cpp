@@ -56,6 +56,13 @@ std::vector<glm::dvec3> layoutVertexNormals(const ChartLayout& layout) {
   return n;
 }
 
+uint32_t patchQuadCount(uint32_t sides, QuadLayout quads) {
+  if (quads == QuadLayout::kKites) return sides;
+  if (sides % 2 != 0)
+    throw std::invalid_argument("a patch of " + std::to_string(sides) + " sides in the sides quad layout (which needs an even count)");
+  return sides == 4 ? 1 : sides / 2;
+}
+
 namespace {
 
 // One surface sample before packing.
@@ -246,40 +253,32 @@ struct EdgeSource {
   uint32_t index = 0;
   uint32_t offset = 0;
 };
+// Samples of a whole patch side: kites halve it (2m + 1), sides take it whole (m + 1).
+uint32_t sideSampleCount(uint32_t m, QuadLayout mode) { return mode == QuadLayout::kKites ? 2 * m + 1 : m + 1; }
+
 struct PatchQuads {
-  uint32_t n = 0, m = 0;
-  uint32_t sideSamples = 0;  // samples of a whole side: 2m + 1 (kites) or m + 1
+  uint32_t sideSamples = 0;  // sideSampleCount
   bool single = false;       // one quad, all four edges sides (a 4-sided patch, sides layout)
   std::vector<std::array<EdgeSource, 4>> quads;  // by Edge
   std::vector<EdgeSource> spokeTargets;          // the border sample each spoke starts at
 };
 
-uint32_t quadCountOf(uint32_t n, QuadLayout mode) {
-  if (mode == QuadLayout::kKites) return n;
-  if (n % 2 != 0) throw std::invalid_argument("a patch of " + std::to_string(n) + " sides in the sides quad layout (which needs an even count)");
-  return n == 4 ? 1 : n / 2;
-}
-
 PatchQuads patchQuads(uint32_t n, uint32_t m, QuadLayout mode) {
   PatchQuads pq;
-  pq.n = n;
-  pq.m = m;
-  const uint32_t count = quadCountOf(n, mode);
+  const uint32_t count = patchQuadCount(n, mode);
+  pq.sideSamples = sideSampleCount(m, mode);
   pq.quads.resize(count);
   auto side = [](uint32_t i, uint32_t offset) { return EdgeSource{false, i, offset}; };
   auto spoke = [](uint32_t k) { return EdgeSource{true, k, 0}; };
   if (mode == QuadLayout::kKites) {
-    pq.sideSamples = 2 * m + 1;
     for (uint32_t j = 0; j < n; ++j) {
       pq.spokeTargets.push_back(side(j, m));
       pq.quads[j] = {side(j, 0), spoke(j), spoke((j + n - 1) % n), side((j + n - 1) % n, m)};
     }
   } else if (n == 4) {
-    pq.sideSamples = m + 1;
     pq.single = true;
     pq.quads[0] = {side(0, 0), side(1, 0), side(2, 0), side(3, 0)};
   } else {
-    pq.sideSamples = m + 1;
     for (uint32_t j = 0; j < count; ++j) {
       pq.spokeTargets.push_back(side(2 * j, 0));
       pq.quads[j] = {side(2 * j + 1, 0), spoke((j + 1) % count), spoke(j), side(2 * j, 0)};
@@ -388,14 +387,13 @@ std::vector<std::array<RootNeighbour, 4>> neighboursFrom(const ChartLayout& layo
 
 }  // namespace
 
-uint32_t patchQuadCount(uint32_t sides, QuadLayout quads) { return quadCountOf(sides, quads); }
 
 std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout, QuadLayout quads) {
   std::vector<uint32_t> offsets(layout.patches.size());
   uint32_t next = 0;
   for (size_t p = 0; p < layout.patches.size(); ++p) {
     offsets[p] = next;
-    next += quadCountOf(uint32_t(layout.patches[p].sides.size()), quads);
+    next += patchQuadCount(uint32_t(layout.patches[p].sides.size()), quads);
   }
   return offsets;
 }
@@ -625,7 +623,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
   if (!reuse.normals) ownNormals = layoutVertexNormals(layout);
   const Surface surface{layout, reuse.normals ? *reuse.normals : ownNormals, !layout.colours.empty()};
   const uint32_t m = size - 1;
-  const uint32_t sideCount = options.quads == QuadLayout::kKites ? 2 * m + 1 : m + 1;
+  const uint32_t sideCount = sideSampleCount(m, options.quads);
 
   GeometryImageSet set;
   set.chartSize = size;
@@ -648,7 +646,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       }
       if (p >= src.set->patches.size()) continue;
       const PatchResampleStats& st = src.set->patches[p];
-      if (st.sides != layout.patches[p].sides.size() || st.quads != quadCountOf(st.sides, options.quads) ||
+      if (st.sides != layout.patches[p].sides.size() || st.quads != patchQuadCount(st.sides, options.quads) ||
           st.firstChart + st.quads > src.set->charts.size() ||
           !src.set->charts[st.firstChart].hasSamples(size)) {
         continue;
