@@ -116,7 +116,8 @@ std::string flagFor(std::string_view name) {
       {"thumbnailSize", "--image-size"},      {"imageryScale", "--imagery-scale"},
       {"imageryExtent", "--imagery-extent"},  {"heightPrecision", "--height-precision"},
       {"compress", "--uncompressed"},         {"positionBits", "--position-bits"},
-      {"imagery", "--imagery"},              {"quads", "--quads"}};
+      {"imagery", "--imagery"},              {"quads", "--quads"},
+      {"stretchQuadMap", "--quad-map"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }
@@ -372,6 +373,12 @@ int main(int argc, char** argv) {
                     "and kites too if sides leave flipped texels or two-chart corners, keeping whichever leaves fewer)")
       ->check(CLI::IsMember({"auto", "sides", "kites"}))
       ->capture_default_str();
+  std::string quadMapArg = "bilinear";
+  build->add_option("--quad-map", quadMapArg,
+                    "Meshes: how a quad chart's square maps into its patch's parameterization: bilinear (of the "
+                    "quad's corners) or stretch (least stretch over the chart itself; the border samples are the same)")
+      ->check(CLI::IsMember({"stretch", "bilinear"}))
+      ->capture_default_str();
   build->add_option("--chart-error", mesh.maxChartError,
                     "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
       ->capture_default_str();
@@ -527,6 +534,7 @@ int main(int argc, char** argv) {
         static_cast<CommonBuildOptions&>(mesh) = common;
         if (chartSizeOpt->count() > 0) mesh.chartSize = terrain.chartSize;
         mesh.charts = chartsArg == "auto" ? kAutoCharts : parseCount("--charts", chartsArg);
+        mesh.stretchQuadMap = quadMapArg == "stretch";
         mesh.quads = quadsArg == "sides" ? MeshQuads::kSides : quadsArg == "kites" ? MeshQuads::kKites : MeshQuads::kAuto;
         mesh.maxSampleError = sampleErrorPercent < 0.0 && build->get_option("--sample-error")->count() == 0
                                   ? kAutoSampleError

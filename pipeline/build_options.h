@@ -106,6 +106,9 @@ struct MeshBuildOptions : CommonBuildOptions {
   // leave flipped texels or corners where only two charts meet, keeping whichever leaves fewer
   // flipped texels (sides on a tie, if it has no such corner).
   MeshQuads quads = MeshQuads::kKites;
+  // How each quad chart's square maps into its quad of the patch's domain (atlas/mesh/resample.h
+  // QuadMap): bilinear, or least stretch.
+  bool stretchQuadMap = false;
 };
 
 // The option's name as opts spell it in messages (CommonBuildOptions::spellOption).

@@ -646,4 +646,34 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
   return out;
 }
 
+ParamQuality mapDiskOntoDomain(const std::vector<glm::dvec3>& xyz,
+                               const std::vector<std::array<uint32_t, 3>>& triangles,
+                               const std::vector<uint8_t>& fixed, const ParamOptions& options,
+                               std::vector<glm::dvec2>& uv) {
+  if (fixed.size() != xyz.size() || uv.size() != xyz.size()) {
+    throw std::invalid_argument("mapDiskOntoDomain: xyz, fixed and uv must have one entry per vertex");
+  }
+  LocalPatch lp;
+  lp.vertices.resize(xyz.size());
+  for (uint32_t v = 0; v < lp.vertices.size(); ++v) lp.vertices[v] = v;
+  lp.triangles = triangles;
+  lp.xyz = xyz;
+  InteriorSolver solver(lp, fixed);
+  if (!solver.solve(meanValueWeights(lp), uv)) {
+    throw std::invalid_argument("mapDiskOntoDomain: the mean-value system could not be solved");
+  }
+  ParamQuality quality = measureStretch(uv, lp.xyz, lp.triangles);
+  if (options.stretchSweeps > 0) {
+    std::vector<glm::dvec2> trial = uv;
+    optimizeStretchLocally(lp, fixed, std::vector<glm::dvec2>(xyz.size(), glm::dvec2(0.0)),
+                           options.stretchSweeps, options.symmetricEnergy, trial);
+    const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
+    if (q.flippedTriangles <= quality.flippedTriangles) {
+      uv = std::move(trial);
+      quality = q;
+    }
+  }
+  return quality;
+}
+
 }  // namespace gimlod

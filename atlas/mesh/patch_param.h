@@ -122,6 +122,17 @@ std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths, boo
 PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patch,
                                         const ParamOptions& options = {});
 
+// A triangulated disk (surface points xyz, triangles counter-clockwise in the domain) mapped
+// onto a convex domain whose border vertices are given: `fixed` flags them and uv holds their
+// positions on entry. The others get the mean-value embedding (no flipped triangles), then the
+// local stretch sweeps of `options` (stretchSweeps, symmetricEnergy), kept unless they flip a
+// triangle. uv receives every vertex; returns the map's quality. Throws std::invalid_argument if
+// the sizes disagree or the system cannot be solved.
+ParamQuality mapDiskOntoDomain(const std::vector<glm::dvec3>& xyz,
+                               const std::vector<std::array<uint32_t, 3>>& triangles,
+                               const std::vector<uint8_t>& fixed, const ParamOptions& options,
+                               std::vector<glm::dvec2>& uv);
+
 // Sander et al. stretch of the map from parameter triangles `uv` to surface triangles `xyz`
 // (same indexing). Shared by the parameterization and the resampler's image quality.
 ParamQuality measureStretch(const std::vector<glm::dvec2>& uv, const std::vector<glm::dvec3>& xyz,

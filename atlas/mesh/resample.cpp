@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -150,13 +151,16 @@ std::vector<Sample> sampleSide(const Surface& s, const std::vector<uint32_t>& po
   return out;
 }
 
-// Point location in a patch's parameter triangulation through a uniform grid.
+// Point location in a planar triangulation (a patch's parameterization, a quad chart's map)
+// through a uniform grid.
 class Locator {
  public:
-  explicit Locator(const PatchParameterization& pp) : pp_(pp) {
+  explicit Locator(const PatchParameterization& pp) : Locator(pp.uv, pp.triangles) {}
+  Locator(const std::vector<glm::dvec2>& uv, const std::vector<std::array<uint32_t, 3>>& triangles)
+      : uv_(uv), triangles_(triangles) {
     glm::dvec2 lo(1e300), hi(-1e300);
-    for (const glm::dvec2& q : pp.uv) lo = glm::min(lo, q), hi = glm::max(hi, q);
-    const size_t nt = pp.triangles.size();
+    for (const glm::dvec2& q : uv) lo = glm::min(lo, q), hi = glm::max(hi, q);
+    const size_t nt = triangles.size();
     const uint32_t side = std::max<uint32_t>(1, uint32_t(std::sqrt(double(nt))));
     valid_.assign(nt, 0);
     lo_ = lo;
@@ -166,8 +170,8 @@ class Locator {
     ny_ = side;
     std::vector<std::vector<uint32_t>> cells(size_t(nx_) * ny_);
     for (uint32_t t = 0; t < nt; ++t) {
-      const auto& tri = pp.triangles[t];
-      const glm::dvec2 a = pp.uv[tri[0]], b = pp.uv[tri[1]], c = pp.uv[tri[2]];
+      const auto& tri = triangles[t];
+      const glm::dvec2 a = uv[tri[0]], b = uv[tri[1]], c = uv[tri[2]];
       const double twice = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
       if (!(twice > 0.0)) continue;  // degenerate or flipped: never returned
       valid_[t] = 1;
@@ -196,7 +200,7 @@ class Locator {
       const double m = std::min(b.x, std::min(b.y, b.z));
       if (m > best) best = m, bestTri = t, bestBary = b;
     };
-    if (hint < pp_.triangles.size() && valid_[hint]) test(hint);
+    if (hint < triangles_.size() && valid_[hint]) test(hint);
     constexpr double kInside = -1e-12;
     if (best < kInside) {
       const auto [cx, cy] = cellOf(p);
@@ -216,7 +220,7 @@ class Locator {
       }
     }
     hint = bestTri;
-    tri = pp_.triangles[bestTri];
+    tri = triangles_[bestTri];
     bary = glm::max(bestBary, glm::dvec3(0.0));
     bary /= bary.x + bary.y + bary.z;
   }
@@ -228,15 +232,16 @@ class Locator {
             uint32_t(std::clamp(fy, 0.0, double(ny_ - 1)))};
   }
   glm::dvec3 barycentric(uint32_t t, const glm::dvec2& p) const {
-    const auto& tri = pp_.triangles[t];
-    const glm::dvec2 a = pp_.uv[tri[0]], b = pp_.uv[tri[1]], c = pp_.uv[tri[2]];
+    const auto& tri = triangles_[t];
+    const glm::dvec2 a = uv_[tri[0]], b = uv_[tri[1]], c = uv_[tri[2]];
     const double d = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
     const double la = ((b.x - p.x) * (c.y - p.y) - (c.x - p.x) * (b.y - p.y)) / d;
     const double lb = ((c.x - p.x) * (a.y - p.y) - (a.x - p.x) * (c.y - p.y)) / d;
     return {la, lb, 1.0 - la - lb};
   }
 
-  const PatchParameterization& pp_;
+  const std::vector<glm::dvec2>& uv_;
+  const std::vector<std::array<uint32_t, 3>>& triangles_;
   glm::dvec2 lo_{0.0};
   double cell_ = 1.0;
   uint32_t nx_ = 1, ny_ = 1;
@@ -531,6 +536,175 @@ QuadPoint quadOf(const std::vector<QuadCorners>& quads, const glm::dvec2& d) {
   return out;
 }
 
+// A quad chart's least-stretch map (QuadMap::kStretch): the patch's triangles clipped to the quad,
+// as a mesh with a position in the unit square and one in the patch's domain per vertex.
+struct QuadWarp {
+  std::vector<glm::dvec2> square;
+  std::vector<glm::dvec2> domain;
+  std::vector<std::array<uint32_t, 3>> triangles;
+  std::vector<uint32_t> ofPatchVertex;  // per patch-local vertex: its warp vertex, ~0u if outside
+};
+
+// Builds quad q's warp from the patch's parameterization pp (surface points xyz per local vertex,
+// `locate` giving the surface point at a domain point). The quad is convex with its two border
+// edges on the patch's polygon, so clipping the patch's triangles against the half-planes of its
+// two spokes (edges b -> c and c -> e) gives it exactly. A vertex is shared between the pieces of
+// neighbouring triangles by its origin: a patch vertex, a patch edge crossing a spoke, or the
+// centre. Returns false (and the bilinear map stays) when the clip or the map is degenerate.
+template <typename SurfaceAt>
+bool buildQuadWarp(const PatchParameterization& pp, const std::vector<glm::dvec3>& xyz, const QuadCorners& q,
+                   const ParamOptions& options, SurfaceAt surfaceAt, QuadWarp& w) {
+  const auto& [qa, qb, qc, qe] = q;
+  const std::array<glm::dvec2, 2> from{qb, qc}, to{qc, qe};
+  const double scale = std::max({glm::length(qb - qa), glm::length(qc - qb), glm::length(qe - qc), glm::length(qa - qe)});
+  const double eps = 1e-10 * scale;
+  auto side = [&](int l, const glm::dvec2& p) {  // signed distance, > 0 inside; snapped to 0 near the line
+    const glm::dvec2 d = to[l] - from[l];
+    const double s = (d.x * (p.y - from[l].y) - d.y * (p.x - from[l].x)) / glm::length(d);
+    return std::abs(s) < eps ? 0.0 : s;
+  };
+  w = QuadWarp{};
+  w.ofPatchVertex.assign(pp.uv.size(), ~0u);
+  std::array<std::unordered_map<uint64_t, uint32_t>, 2> crossings;
+  uint32_t centre = ~0u;
+  std::vector<glm::dvec3> wxyz;
+  auto addVertex = [&](const glm::dvec2& d, const glm::dvec3& x) {
+    w.domain.push_back(d);
+    wxyz.push_back(x);
+    return uint32_t(w.domain.size() - 1);
+  };
+  // A point of a clipped piece: its warp vertex, domain point, and the support of the edge to
+  // the next point (a patch edge a < b, or spoke line `line` when b == ~0u).
+  struct Point {
+    uint32_t id;
+    glm::dvec2 d;
+    uint32_t a, b;
+  };
+  auto patchVertex = [&](uint32_t v) {
+    if (w.ofPatchVertex[v] == ~0u) w.ofPatchVertex[v] = addVertex(pp.uv[v], xyz[v]);
+    return w.ofPatchVertex[v];
+  };
+  auto crossing = [&](int l, const Point& p, const Point& nextPoint) -> Point {
+    if (p.b == ~0u) {  // along the other spoke: the centre
+      if (centre == ~0u) centre = addVertex(qc, surfaceAt(qc));
+      return {centre, qc, 0, 0};
+    }
+    const uint32_t a = std::min(p.a, p.b), b = std::max(p.a, p.b);
+    const uint64_t key = (uint64_t{a} << 32) | b;
+    auto [it, fresh] = crossings[l].try_emplace(key, 0u);
+    if (fresh) {
+      const double sa = side(l, pp.uv[a]), sb = side(l, pp.uv[b]);
+      glm::dvec2 d;
+      glm::dvec3 x;
+      if (sa != sb) {
+        const double t = sa / (sa - sb);
+        d = pp.uv[a] + (pp.uv[b] - pp.uv[a]) * t;
+        x = xyz[a] + (xyz[b] - xyz[a]) * t;
+      } else {  // only a rounding error can get here
+        const double sp = side(l, p.d), sn = side(l, nextPoint.d);
+        d = p.d + (nextPoint.d - p.d) * (sp / (sp - sn));
+        x = surfaceAt(d);
+      }
+      it->second = addVertex(d, x);
+    }
+    return {it->second, w.domain[it->second], 0, 0};
+  };
+  const glm::dvec2 lo = glm::min(glm::min(qa, qb), glm::min(qc, qe)) - glm::dvec2(eps);
+  const glm::dvec2 hi = glm::max(glm::max(qa, qb), glm::max(qc, qe)) + glm::dvec2(eps);
+  std::vector<Point> poly, next;
+  for (const auto& t : pp.triangles) {
+    const glm::dvec2 tlo = glm::min(pp.uv[t[0]], glm::min(pp.uv[t[1]], pp.uv[t[2]]));
+    const glm::dvec2 thi = glm::max(pp.uv[t[0]], glm::max(pp.uv[t[1]], pp.uv[t[2]]));
+    if (thi.x < lo.x || thi.y < lo.y || tlo.x > hi.x || tlo.y > hi.y) continue;
+    bool outside = false;
+    for (int l = 0; l < 2 && !outside; ++l) {
+      outside = side(l, pp.uv[t[0]]) < 0.0 && side(l, pp.uv[t[1]]) < 0.0 && side(l, pp.uv[t[2]]) < 0.0;
+    }
+    if (outside) continue;
+    poly.clear();
+    for (int c = 0; c < 3; ++c) poly.push_back({~0u, pp.uv[t[c]], t[c], t[(c + 1) % 3]});
+    for (int l = 0; l < 2 && poly.size() >= 3; ++l) {
+      next.clear();
+      for (size_t i = 0; i < poly.size(); ++i) {
+        const Point& p = poly[i];
+        const Point& r = poly[(i + 1) % poly.size()];
+        const double sp = side(l, p.d), sr = side(l, r.d);
+        if (sp >= 0.0) {
+          Point keep = p;
+          if (sp == 0.0 && sr < 0.0) keep.a = uint32_t(l), keep.b = ~0u;  // leaves along the spoke
+          next.push_back(keep);
+        }
+        if ((sp > 0.0 && sr < 0.0) || (sp < 0.0 && sr > 0.0)) {
+          Point x = crossing(l, p, r);
+          if (sp > 0.0) {
+            x.a = uint32_t(l), x.b = ~0u;  // leaving: on along the spoke
+          } else {
+            x.a = p.a, x.b = p.b;          // entering: on along the edge
+          }
+          next.push_back(x);
+        }
+      }
+      poly.swap(next);
+    }
+    if (poly.size() < 3) continue;
+    // Patch vertices get their warp vertex only now that they are known to be in the quad.
+    std::vector<uint32_t> ids;
+    for (const Point& p : poly) {
+      uint32_t id = p.id;
+      if (id == ~0u) {
+        for (int c = 0; c < 3; ++c) {
+          if (p.d == pp.uv[t[c]]) id = patchVertex(t[c]);
+        }
+      }
+      if (id == ~0u) return false;
+      if (ids.empty() || (ids.back() != id && ids.front() != id)) ids.push_back(id);
+    }
+    // A convex piece, fanned; slivers of no area (a spoke through a vertex) are left out.
+    for (size_t i = 1; i + 1 < ids.size(); ++i) {
+      const glm::dvec2 a = w.domain[ids[0]], b = w.domain[ids[i]], c = w.domain[ids[i + 1]];
+      const double twice = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
+      if (twice > eps * scale) w.triangles.push_back({ids[0], ids[i], ids[i + 1]});
+    }
+  }
+  if (w.triangles.empty()) return false;
+  // The border: vertices on an edge used once, placed on the square's edge where the bilinear
+  // map puts them (each quad edge is straight and evenly parameterized in the domain).
+  std::unordered_map<uint64_t, int> edgeUses;
+  for (const auto& t : w.triangles) {
+    for (int c = 0; c < 3; ++c) {
+      const uint32_t a = std::min(t[c], t[(c + 1) % 3]), b = std::max(t[c], t[(c + 1) % 3]);
+      ++edgeUses[(uint64_t{a} << 32) | b];
+    }
+  }
+  const size_t nv = w.domain.size();
+  std::vector<uint8_t> fixed(nv, 0);
+  w.square.assign(nv, glm::dvec2(0.5));
+  const std::array<glm::dvec2, 4> dom{qa, qb, qc, qe};
+  const std::array<glm::dvec2, 4> sq{glm::dvec2(0, 0), glm::dvec2(1, 0), glm::dvec2(1, 1), glm::dvec2(0, 1)};
+  for (const auto& [key, uses] : edgeUses) {
+    if (uses != 1) continue;
+    for (const uint32_t v : {uint32_t(key >> 32), uint32_t(key & 0xffffffffu)}) {
+      if (fixed[v]) continue;
+      double best = 1e300;
+      glm::dvec2 at(0.5);
+      for (int e = 0; e < 4; ++e) {
+        const glm::dvec2 a = dom[e], b = dom[(e + 1) % 4];
+        const double t = std::clamp(glm::dot(w.domain[v] - a, b - a) / glm::dot(b - a, b - a), 0.0, 1.0);
+        const double dist = glm::length(a + (b - a) * t - w.domain[v]);
+        if (dist < best) best = dist, at = sq[e] + (sq[(e + 1) % 4] - sq[e]) * t;
+      }
+      // note: an edge used once off the quad's border (a sliver left out) leaves its vertices free.
+      if (best < 1e-6 * scale) fixed[v] = 1, w.square[v] = at;
+    }
+  }
+  try {
+    const ParamQuality quality = mapDiskOntoDomain(wxyz, w.triangles, fixed, options, w.square);
+    return quality.flippedTriangles == 0;
+  } catch (const std::invalid_argument&) {
+    return false;
+  }
+}
+
 // The point of triangle abc closest to p (Ericson, Real-Time Collision Detection, 5.1.5).
 glm::dvec3 closestOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
   const glm::dvec3 ab = b - a, ac = c - a, ap = p - a;
@@ -818,6 +992,23 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
                           sidePoint(e[kEdgeLeft].index, e[kEdgeLeft].offset)};
       }
 
+      // Each quad's map from the unit square into its quad of the domain (QuadMap).
+      std::vector<QuadWarp> warps(nq);
+      std::vector<uint8_t> warped(nq, 0);
+      if (options.quadMap == QuadMap::kStretch && !plan.single) {
+        std::vector<glm::dvec3> xyz(pp.vertices.size());
+        for (size_t v = 0; v < xyz.size(); ++v) xyz[v] = glm::dvec3(layout.positions[pp.vertices[v]]);
+        auto surfaceAt = [&](const glm::dvec2& d) {
+          std::array<uint32_t, 3> tri;
+          glm::dvec3 b;
+          locator.locate(d, hint, tri, b);
+          return b.x * xyz[tri[0]] + b.y * xyz[tri[1]] + b.z * xyz[tri[2]];
+        };
+        for (uint32_t j = 0; j < nq; ++j) {
+          warped[j] = buildQuadWarp(pp, xyz, quadCorners[j], options.param, surfaceAt, warps[j]);
+        }
+      }
+
       // The patch's triangle along each side segment: the input face a side sample lies on,
       // seen from this patch (for the flipped-texel test).
       std::unordered_map<uint64_t, uint32_t> sideFace;
@@ -852,7 +1043,10 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       std::vector<std::vector<std::pair<uint32_t, glm::dvec2>>> quadVertices(nq);
       for (uint32_t v = 0; v < pp.vertices.size(); ++v) {
         if (seamVertices.contains(pp.vertices[v])) continue;
-        const QuadPoint k = quadOf(quadCorners, pp.uv[v]);
+        QuadPoint k = quadOf(quadCorners, pp.uv[v]);
+        if (warped[k.quad] && warps[k.quad].ofPatchVertex[v] != ~0u) {
+          k.st = warps[k.quad].square[warps[k.quad].ofPatchVertex[v]];
+        }
         quadVertices[k.quad].push_back({v, k.st});
       }
       std::vector<glm::vec3> floatNormals(size_t(size) * size);
@@ -888,11 +1082,22 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
           }
         }
         const auto& [qa, qb, qc, qe] = quadCorners[i];
+        std::optional<Locator> warpLocator;
+        if (warped[i]) warpLocator.emplace(warps[i].square, warps[i].triangles);
+        uint32_t warpHint = 0;
         for (uint32_t v = 1; v < m; ++v) {
           const double t = double(v) / m;
           for (uint32_t u = 1; u < m; ++u) {
             const double s = double(u) / m;
-            const glm::dvec2 d = (1 - s) * (1 - t) * qa + s * (1 - t) * qb + s * t * qc + (1 - s) * t * qe;
+            glm::dvec2 d;
+            if (warpLocator) {
+              std::array<uint32_t, 3> tri;
+              glm::dvec3 b;
+              warpLocator->locate(glm::dvec2(s, t), warpHint, tri, b);
+              d = b.x * warps[i].domain[tri[0]] + b.y * warps[i].domain[tri[1]] + b.z * warps[i].domain[tri[2]];
+            } else {
+              d = (1 - s) * (1 - t) * qa + s * (1 - t) * qb + s * t * qc + (1 - s) * t * qe;
+            }
             putAt(size_t(v) * size + u, sampleAt(d));
           }
         }

@@ -40,12 +40,25 @@ enum class QuadLayout : uint8_t { kKites, kSides };
 // std::invalid_argument for an odd n in the sides layout.
 uint32_t patchQuadCount(uint32_t sides, QuadLayout quads);
 
+// How a quad chart's unit square maps into its quad of the patch's domain. Both put the border
+// where the bilinear map does (every edge is straight and evenly sampled in the domain), so the
+// border samples, and the seams, are the same.
+//   bilinear: the bilinear map of the quad's corners.
+//   stretch: the patch's triangles clipped to the quad and mapped onto the square with the least
+//     stretch (mapDiskOntoDomain in atlas/mesh/patch_param.h). The bilinear map of a quad far from
+//     a square (a sides quad of a 10- or 12-sided patch has an angle near 150 degrees) adds its own
+//     stretch to the parameterization's, and the parameterization, which is made on the patch's
+//     polygon, does not see it; mapped this way, the stretch minimized is the chart's own.
+//     A quad whose map cannot be made (a degenerate clip) keeps the bilinear map.
+enum class QuadMap : uint8_t { kBilinear, kStretch };
+
 struct ResampleOptions {
   uint32_t chartSize = 513;  // samples per quad chart side; must be 2^k + 1 with k >= 1
   uint32_t threads = 0;      // worker threads for the per-patch work; 0 = all hardware threads
   ParamOptions param;        // per-patch parameterization
   ChartSpill* spill = nullptr;  // if set, every chart's samples go there once it is measured
   QuadLayout quads = QuadLayout::kKites;
+  QuadMap quadMap = QuadMap::kBilinear;
 };
 
 // Quality of a sampled image, seen as a map from the unit square to the sampled surface through

@@ -4,7 +4,8 @@
 // centre spokes seamless; an odd patch is refused; evenSides mends an odd patch on its open side
 // and pairs the odd patches of the real bunny, after which its sides layout is seamless with
 // reciprocal neighbours and about half the kites' charts; the shipped bunny built with --quads
-// sides is seamless on disk with about half the charts.
+// sides is seamless on disk with about half the charts; the least-stretch quad map keeps the
+// border samples and lowers the stretch of a wide n-gon's quads.
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -88,6 +89,45 @@ TEST(SideQuads, EvenNGonsHaveNoFlippedTexels) {
       }
       for (const GeometryImage& g : set.charts) {
         for (const glm::vec3& p : g.positions) EXPECT_LE(glm::length(p), 1.0f + 1e-5f);
+      }
+    }
+  }
+}
+
+// The least-stretch quad map (QuadMap::kStretch) of a wide n-gon's quads: the same border samples
+// as the bilinear map, byte for byte (so the seams do not change), no flipped texel, and less
+// stretch where the bilinear map of a quad with a near-straight corner adds its own.
+TEST(SideQuads, TheStretchQuadMapKeepsTheBorderAndLowersTheStretch) {
+  for (const bool hemisphere : {false, true}) {
+    for (const uint32_t n : {6u, 10u, 12u}) {
+      SCOPED_TRACE(testing::Message() << "n=" << n << " hemisphere=" << hemisphere);
+      const ChartLayout layout = test::diskLayout(n, 12, 60, hemisphere);
+      ResampleOptions o = sidesOptions(33);
+      const GeometryImageSet bilinear = resampleLayout(layout, o);
+      o.quadMap = QuadMap::kStretch;
+      const GeometryImageSet stretch = resampleLayout(layout, o);
+      ASSERT_EQ(stretch.charts.size(), n / 2);
+      EXPECT_EQ(stretch.image.flippedTexels, 0u);
+      EXPECT_EQ(stretch.image.degenerateTexels, 0u);
+      EXPECT_GT(expectSeamless(stretch), 0u);
+      uint32_t interiorChanged = 0;
+      for (size_t c = 0; c < stretch.charts.size(); ++c) {
+        const GeometryImage& a = bilinear.charts[c];
+        const GeometryImage& b = stretch.charts[c];
+        for (uint32_t e = 0; e < 4; ++e) {
+          for (uint32_t k = 0; k < 33; ++k) {
+            const size_t i = edgeSampleIndex(33, e, k);
+            ASSERT_TRUE(sameBytes(&a.positions[i], &b.positions[i], sizeof(glm::vec3))) << "chart " << c << " edge " << e;
+          }
+        }
+        interiorChanged += a.positions[16 * 33 + 16] != b.positions[16 * 33 + 16];
+      }
+      EXPECT_EQ(interiorChanged, n / 2);  // the map is not the bilinear one
+      if (n >= 10) {
+        EXPECT_LT(stretch.image.stretchL2, bilinear.image.stretchL2 - 0.005)
+            << "bilinear " << bilinear.image.stretchL2 << " stretch " << stretch.image.stretchL2;
+      } else {
+        EXPECT_LT(stretch.image.stretchL2, bilinear.image.stretchL2 + 0.005);
       }
     }
   }
