@@ -279,13 +279,101 @@ uint32_t twoQuadCorners(const ChartLayout& layout) {
   return count;
 }
 
+namespace {
+
+// The pairings (rotated by one or not) of `patches` under which every two-patch corner starts
+// spokes in one of its patches, as a 2-SAT problem: per patch of 6 or more sides, x_p = 1 rotates
+// it; corner i of such a patch then starts spokes iff x_p == i % 2 (a patch of 4 sides, or one not
+// in `patches`, is a constant), and each corner asks for one of its two. Solved by the strongly
+// connected components of the implication graph (Aspvall, Plass, Tarjan 1979). False, unchanged,
+// if no pairing satisfies every corner that some pairing of `patches` can change.
+bool alignSpokesExactly(ChartLayout& layout, const std::vector<uint32_t>& patches) {
+  std::vector<int32_t> var(layout.patches.size(), -1);
+  std::vector<uint32_t> patchOf;
+  for (const uint32_t p : patches) {
+    if (var[p] < 0 && layout.patches[p].sides.size() >= 6) {
+      var[p] = int32_t(patchOf.size());
+      patchOf.push_back(p);
+    }
+  }
+  const size_t nodes = 2 * patchOf.size();  // node 2v + b: x_v == b
+  std::vector<std::vector<uint32_t>> implies(nodes);
+  // A literal: a node, or a constant (kTrue / kFalse).
+  constexpr int64_t kTrue = -1, kFalse = -2;
+  for (const auto& [v, in] : cornerIncidences(layout)) {
+    if (in.size() != 2) continue;
+    bool open = false;
+    int64_t lit[2];
+    for (int k = 0; k < 2; ++k) {
+      const auto& [p, i] = in[k];
+      const auto& sides = layout.patches[p].sides;
+      const uint32_t n = uint32_t(sides.size());
+      open = open || sides[i].neighbourPatch < 0 || sides[(i + n - 1) % n].neighbourPatch < 0;
+      lit[k] = var[p] >= 0 ? int64_t(2 * var[p] + i % 2) : spokeCorner(n, i) ? kTrue : kFalse;
+    }
+    if (open || lit[0] == kTrue || lit[1] == kTrue) continue;
+    if (lit[0] == kFalse && lit[1] == kFalse) continue;  // no pairing of `patches` changes it
+    // (a or b): not a -> b, not b -> a; a constant false side leaves the unit clause (b or b).
+    const int64_t a = lit[0] == kFalse ? lit[1] : lit[0], b = lit[1] == kFalse ? lit[0] : lit[1];
+    implies[size_t(a ^ 1)].push_back(uint32_t(b));
+    implies[size_t(b ^ 1)].push_back(uint32_t(a));
+  }
+  // Tarjan's components, iteratively; they are numbered in reverse topological order.
+  std::vector<int32_t> index(nodes, -1), low(nodes, 0), comp(nodes, -1);
+  std::vector<uint32_t> stack, path;
+  std::vector<size_t> edge(nodes, 0);
+  int32_t counter = 0, comps = 0;
+  for (uint32_t root = 0; root < nodes; ++root) {
+    if (index[root] >= 0) continue;
+    path.push_back(root);
+    while (!path.empty()) {
+      const uint32_t u = path.back();
+      if (index[u] < 0) {
+        index[u] = low[u] = counter++;
+        stack.push_back(u);
+      }
+      if (edge[u] < implies[u].size()) {
+        const uint32_t w = implies[u][edge[u]++];
+        if (index[w] < 0) {
+          path.push_back(w);
+        } else if (comp[w] < 0) {
+          low[u] = std::min(low[u], index[w]);
+        }
+        continue;
+      }
+      path.pop_back();
+      if (!path.empty()) low[path.back()] = std::min(low[path.back()], low[u]);
+      if (low[u] == index[u]) {
+        uint32_t w;
+        do {
+          w = stack.back();
+          stack.pop_back();
+          comp[w] = comps;
+        } while (w != u);
+        ++comps;
+      }
+    }
+  }
+  for (size_t v = 0; v < patchOf.size(); ++v) {
+    if (comp[2 * v] == comp[2 * v + 1]) return false;
+  }
+  // x_v = 1 where its "true" node comes first in topological order (a lower Tarjan number).
+  for (size_t v = 0; v < patchOf.size(); ++v) {
+    if (comp[2 * v + 1] < comp[2 * v]) rotatePatchSides(layout, patchOf[v], 1);
+  }
+  return true;
+}
+
+}  // namespace
+
 uint32_t alignSpokes(ChartLayout& layout, const std::vector<uint32_t>& only) {
-  // Each patch of 6 or more sides takes the pairing under which more of its two-patch corners
-  // start spokes (those the other patch leaves without), in two passes.
   std::vector<uint32_t> patches = only;
   if (only.empty()) {
     for (uint32_t p = 0; p < layout.patches.size(); ++p) patches.push_back(p);
   }
+  if (alignSpokesExactly(layout, patches)) return twoQuadCorners(layout);
+  // Otherwise each patch of 6 or more sides takes the pairing under which more of its two-patch
+  // corners start spokes (those the other patch leaves without), in two passes.
   for (int pass = 0; pass < 2; ++pass) {
     const auto at = cornerIncidences(layout);
     for (const uint32_t p : patches) {

@@ -61,8 +61,9 @@ bool insertCorner(ChartLayout& layout, uint32_t patch, uint32_t side, uint32_t k
 // In the sides quad layout, a corner where only two patches meet (as evenSides makes them), away
 // from the border, where neither patch starts spokes has one quad of each: two charts meet there,
 // their corner texels span the surface's full turn flat and coincide. twoQuadCorners counts such
-// corners; alignSpokes rotates patches of 6 or more sides (rotatePatchSides) so that as many as
-// it can start spokes, and returns the count left.
+// corners; alignSpokes rotates patches of 6 or more sides (rotatePatchSides) so that every such
+// corner starts spokes in one of its patches where some choice of pairings allows it (solved
+// exactly, as 2-SAT), else so that as many as a greedy pass finds do, and returns the count left.
 // With `only`, just those patches rotate. rotationFoldsNoCorner: whether rotating patch p by one
 // leaves no more such corners at its corners (the layout is left as it was).
 uint32_t twoQuadCorners(const ChartLayout& layout);

@@ -205,6 +205,30 @@ TEST(EvenSides, RotatedSidesKeepTheLayoutValid) {
 // `gimlod build --quads sides|kites|auto` on the shipped bunny: the atlas on disk (compressed) is seamless at
 // every level, has corners added to even the side counts, and about half the charts of kites from
 // the same patches; auto keeps the one that leaves fewer flipped texels.
+// alignSpokes solves the pairings exactly: from any pairing of the bunny's evened patches it
+// finds one where every corner of two patches starts spokes in one of them.
+TEST(EvenSides, AlignSpokesFindsAPairingWithoutTwoChartCorners) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 48;
+  ChartLayout layout = buildChartLayout(mesh, copt);
+  ASSERT_EQ(evenSides(layout).oddLeft, 0u);
+  EXPECT_EQ(alignSpokes(layout), 0u);
+  uint32_t worstStart = 0;
+  for (uint32_t seed = 1; seed <= 8; ++seed) {
+    // Another pairing for some patches of 6 or more sides.
+    for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+      if (layout.patches[p].sides.size() >= 6 && ((p * 2654435761u) >> (seed % 24)) % 3 == 0) rotatePatchSides(layout, p, 1);
+    }
+    worstStart = std::max(worstStart, twoQuadCorners(layout));
+    EXPECT_EQ(alignSpokes(layout), 0u) << "seed " << seed;
+    EXPECT_EQ(twoQuadCorners(layout), 0u);
+    const std::vector<std::string> bad = validateChartLayout(layout, 3, kMaxPatchSides);
+    EXPECT_TRUE(bad.empty()) << bad.front();
+  }
+  EXPECT_GT(worstStart, 0u);  // the other pairings did leave such corners
+}
+
 TEST(SideQuads, TheShippedBunnyBuildsWithHalfTheCharts) {
   test::TempDir dir("gimlod-side-quads");
   uint32_t charts[2] = {0, 0}, flipped[2] = {0, 0}, twoChartCorners = 0;
