@@ -198,7 +198,15 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
     st.evenSideCorners = even.corners;
     *evened = even.oddLeft == 0;
     if (!*evened) return r;
-    alignSpokes(layout);
+    // Corners the mend adds split a side shared by two patches: one side more in each.
+    auto sideCount = [&] {
+      uint64_t n = 0;
+      for (const Patch& pa : layout.patches) n += pa.sides.size();
+      return n;
+    };
+    const uint64_t sidesBefore = sideCount();
+    mendTwoChartCorners(layout);
+    st.evenSideCorners += uint32_t((sideCount() - sidesBefore) / 2);
   }
   const uint64_t quadCharts = layoutQuadCount(layout, quads);
   if (o.chartSize == 0) {

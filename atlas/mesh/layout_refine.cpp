@@ -312,7 +312,7 @@ bool alignSpokesExactly(ChartLayout& layout, const std::vector<uint32_t>& patche
       lit[k] = var[p] >= 0 ? int64_t(2 * var[p] + i % 2) : spokeCorner(n, i) ? kTrue : kFalse;
     }
     if (open || lit[0] == kTrue || lit[1] == kTrue) continue;
-    if (lit[0] == kFalse && lit[1] == kFalse) continue;  // no pairing of `patches` changes it
+    if (lit[0] == kFalse && lit[1] == kFalse) continue;
     // (a or b): not a -> b, not b -> a; a constant false side leaves the unit clause (b or b).
     const int64_t a = lit[0] == kFalse ? lit[1] : lit[0], b = lit[1] == kFalse ? lit[0] : lit[1];
     implies[size_t(a ^ 1)].push_back(uint32_t(b));
@@ -393,6 +393,37 @@ uint32_t alignSpokes(ChartLayout& layout, const std::vector<uint32_t>& only) {
     }
   }
   return twoQuadCorners(layout);
+}
+
+uint32_t mendTwoChartCorners(ChartLayout& layout, uint32_t maxSides) {
+  uint32_t left = alignSpokes(layout);
+  // Each try is judged on the whole layout after alignSpokes: kept only if fewer corners are left.
+  for (uint32_t round = 0; round < 8 && left > 0; ++round) {
+    bool changed = false;
+    for (const auto& [x, in] : cornerIncidences(layout)) {
+      if (!foldedCorner(layout, in)) continue;
+      for (const auto& [p, i] : in) {
+        const std::vector<Patch> saved = layout.patches;
+        const uint32_t n = uint32_t(layout.patches[p].sides.size());
+        const uint32_t before = (i + n - 1) % n;
+        bool ok = true;
+        for (const uint32_t side : {std::max(i, before), std::min(i, before)}) {
+          const uint32_t k = sideMiddleVertex(layout, layout.patches[p].sides[side]);
+          ok = ok && k != 0 && insertCorner(layout, p, side, k, maxSides);
+        }
+        const uint32_t now = ok ? alignSpokes(layout) : left;
+        if (now < left) {
+          left = now;
+          changed = true;
+          break;
+        }
+        layout.patches = saved;
+      }
+      if (changed) break;  // the incidences changed
+    }
+    if (!changed) break;
+  }
+  return left;
 }
 
 bool rotationFoldsNoCorner(ChartLayout& layout, uint32_t p) {
@@ -494,6 +525,9 @@ EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& with
         if (side.neighbourPatch < 0) continue;
         const uint32_t y = uint32_t(side.neighbourPatch);
         if (prev[y] != -2 || !allowed[y] || sideTowards(x, int32_t(y), roomX, maxSides) < 0) continue;
+        // Two triangles paired directly would become two single quads alone at their new corner
+        // (as above); y may still end a longer chain.
+        if (x == start && odd(y) && std::max(sidesOf(x), sidesOf(y)) < 5) continue;
         prev[y] = int32_t(x);
         if (odd(y)) {
           end = int32_t(y);

@@ -68,6 +68,12 @@ bool insertCorner(ChartLayout& layout, uint32_t patch, uint32_t side, uint32_t k
 // leaves no more such corners at its corners (the layout is left as it was).
 uint32_t twoQuadCorners(const ChartLayout& layout);
 uint32_t alignSpokes(ChartLayout& layout, const std::vector<uint32_t>& only = {});
+// alignSpokes, then, while such corners are left, gives one of a corner's two patches a corner in
+// the middle of both its sides there (both shared with the other patch, which so gains two, and
+// every side count stays even), kept where alignSpokes then leaves fewer. A 4-sided patch wrapped
+// by one neighbour along three sides, as evening can leave it, has two such corners in a row that
+// no pairing serves; with 6 sides it starts spokes at one of them. Returns the count left.
+uint32_t mendTwoChartCorners(ChartLayout& layout, uint32_t maxSides = kMaxPatchSides);
 bool rotationFoldsNoCorner(ChartLayout& layout, uint32_t p);
 
 // Rotates the sides of patch p so that old side k becomes side 0 (the neighbours' links follow).

@@ -8,6 +8,7 @@
 // border samples and lowers the stretch of a wide n-gon's quads.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <filesystem>
@@ -227,6 +228,32 @@ TEST(EvenSides, AlignSpokesFindsAPairingWithoutTwoChartCorners) {
     EXPECT_TRUE(bad.empty()) << bad.front();
   }
   EXPECT_GT(worstStart, 0u);  // the other pairings did leave such corners
+}
+
+// Where no pairing serves every two-patch corner (a 4-sided patch wrapped by one neighbour, as
+// evening leaves some), mendTwoChartCorners adds corners until none is left; the layout stays
+// valid and even, and resamples seamlessly.
+TEST(EvenSides, MendTwoChartCornersLeavesNone) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  uint32_t alignedLeft = 0;
+  for (const uint32_t target : {16u, 24u}) {
+    SCOPED_TRACE(testing::Message() << target << " patches");
+    ChartingOptions copt;
+    copt.targetCharts = target;
+    ChartLayout layout = buildChartLayout(mesh, copt);
+    ASSERT_EQ(evenSides(layout).oddLeft, 0u);
+    const uint32_t aligned = alignSpokes(layout);
+    alignedLeft += aligned;
+    const uint32_t left = mendTwoChartCorners(layout);
+    std::printf("  %u patches: %u two-chart corners after alignSpokes, %u after the mend\n", target, aligned, left);
+    EXPECT_EQ(left, 0u);
+    EXPECT_EQ(twoQuadCorners(layout), left);
+    for (const Patch& p : layout.patches) EXPECT_EQ(p.sides.size() % 2, 0u);
+    const std::vector<std::string> bad = validateChartLayout(layout, 3, kMaxPatchSides);
+    EXPECT_TRUE(bad.empty()) << bad.front();
+    EXPECT_GT(expectSeamless(resampleLayout(layout, sidesOptions(9))), 0u);
+  }
+  EXPECT_GT(alignedLeft, 0u);  // some layout needed the mend
 }
 
 TEST(SideQuads, TheShippedBunnyBuildsWithHalfTheCharts) {
