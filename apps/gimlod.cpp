@@ -370,7 +370,8 @@ int main(int argc, char** argv) {
   build->add_option("--quads", quadsArg,
                     "Meshes: how a patch becomes quad charts: sides (each chart edge a whole patch side, about n/2 "
                     "charts an n-sided patch, one for 4 sides), kites (each side halved, n charts), or auto (sides, "
-                    "and kites too if sides leave flipped texels or two-chart corners, keeping whichever leaves fewer)")
+                    "and kites too if sides leave flipped texels, two-chart corners or a sampling error over the bound, "
+                    "keeping whichever leaves fewer flipped texels)")
       ->check(CLI::IsMember({"auto", "sides", "kites"}))
       ->capture_default_str();
   std::string quadMapArg = "bilinear";

@@ -103,8 +103,9 @@ struct MeshBuildOptions : CommonBuildOptions {
   uint32_t positionBits = kDefaultPositionBits;
   // How patches become quad charts (atlas/mesh/resample.h QuadLayout): kites (n charts an n-sided
   // patch), sides (about n/2; side counts made even first), or auto: sides, and kites too if sides
-  // leave flipped texels or corners where only two charts meet, keeping whichever leaves fewer
-  // flipped texels (sides on a tie, if it has no such corner).
+  // leave flipped texels, corners where only two charts meet or a sampling error over the bound,
+  // keeping whichever leaves fewer flipped texels (sides on a tie, if it has no such corner and is
+  // within the bound or kites are not either).
   MeshQuads quads = MeshQuads::kKites;
   // How each quad chart's square maps into its quad of the patch's domain (atlas/mesh/resample.h
   // QuadMap): bilinear, or least stretch.

@@ -326,24 +326,30 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
                                    "to a hole); build with {} kites",
                                    options.input.string(), optionRef("quads")));
   } else {
-    // Sides first (about half the charts); kites too if that leaves flipped texels or corners
-    // where only two charts meet, keeping whichever leaves fewer flipped texels (sides on a tie,
-    // if no such corner is left).
+    // Sides first (about half the charts); kites too if that leaves flipped texels, corners
+    // where only two charts meet or charts that sample the surface more coarsely than the bound,
+    // keeping whichever leaves fewer flipped texels (sides on a tie, if no such corner is left and
+    // it is within the bound or kites are not either).
+    auto withinBound = [](const ResampledMesh& m) {
+      return !(m.stats.maxSampleError > 0.0) || m.set.image.sampleError <= m.stats.maxSampleError;
+    };
     const std::vector<Patch> charted = layout.patches;
     ResampledMesh sides = resampleInLayout(layout, options, QuadLayout::kSides, dir, meter, "", &evened);
-    if (evened && sides.set.image.flippedTexels == 0 && sides.stats.twoQuadCorners == 0) {
+    if (evened && sides.set.image.flippedTexels == 0 && sides.stats.twoQuadCorners == 0 && withinBound(sides)) {
       r = std::move(sides);
     } else {
       std::vector<Patch> sidesPatches = std::move(layout.patches);
       layout.patches = charted;
       ResampledMesh kites = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, " (kites)", &evened);
       const bool keepSides = !sidesPatches.empty() && sides.spill && sides.stats.twoQuadCorners == 0 &&
-                             sides.set.image.flippedTexels <= kites.set.image.flippedTexels;
+                             sides.set.image.flippedTexels <= kites.set.image.flippedTexels &&
+                             (withinBound(sides) || !withinBound(kites));
       if (sides.spill) {
-        spdlog::info("quad layout: sides ({} charts) left {} flipped texels and {} two-chart corners, kites ({} charts) "
-                     "{} flipped texels: keeping {}",
+        spdlog::info("quad layout: sides ({} charts) left {} flipped texels, {} two-chart corners and a sampling error "
+                     "{:.3g}, kites ({} charts) {} flipped texels and {:.3g} (bound {:.3g}): keeping {}",
                      sides.set.charts.size(), sides.set.image.flippedTexels, sides.stats.twoQuadCorners,
-                     kites.set.charts.size(), kites.set.image.flippedTexels, keepSides ? "sides" : "kites");
+                     sides.set.image.sampleError, kites.set.charts.size(), kites.set.image.flippedTexels,
+                     kites.set.image.sampleError, sides.stats.maxSampleError, keepSides ? "sides" : "kites");
       } else {
         spdlog::info("quad layout: kites (some patches cannot be given an even number of sides)");
       }

@@ -170,6 +170,9 @@ class FidelityOutOfCore : public ::testing::Test {
     o.output = atlas();
     o.chartSize = 17;
     o.charts = 64;
+    // Kites: at 17^2 the sides layout's half as many samples leave the atlas farther than the
+    // 0.5% margin from the scan in places, which the block test below assumes it is not.
+    o.quads = MeshQuads::kKites;
     o.measureFidelity = false;
     buildAtlas(o);
     mesh_ = new IndexedMesh(readMesh(scan));
