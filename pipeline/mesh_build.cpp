@@ -272,8 +272,39 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
   repair.workBudget = uint64_t(std::llround(o.repairBudget * double(layoutTriangles)));
   repair.maxSampleError = maxError;
   st.maxSampleError = repair.maxSampleError;
-  r.set = repairCharts(layout, std::move(first), ro, repair, &st.repair,
-                       [&] { return residentBytes() < o.maxMemory / 4 * 3; });
+  // A chart size chosen by density is also doubled, and the layout resampled and repaired again,
+  // when the repair cannot bring every chart within maxSampleError by cutting (the sides layout's
+  // cuts must keep side counts even and leave no two-chart corner, so some patches cannot be cut).
+  const std::vector<Patch> unrepaired = layout.patches;
+  for (;;) {
+    r.set = repairCharts(layout, std::move(first), ro, repair, &st.repair,
+                         [&] { return residentBytes() < o.maxMemory / 4 * 3; });
+    if (!st.chartSizeByDensity || !(maxError > 0.0) || r.set.image.sampleError <= maxError ||
+        st.repair.stoppedForWork || st.repair.stoppedForMemory || o.chartSize >= kMaxDensityChartSize ||
+        samplesPerTriangle(layout, r.set.charts.size(), o.chartSize) >= kMaxSamplesPerTriangle)
+      break;
+    MeshBuildOptions larger = o;
+    larger.chartSize = 2 * o.chartSize - 1;
+    try {
+      checkChartRoom(layout, layoutQuadCount(layout, quads), larger, dir);
+    } catch (const InputError& e) {
+      spdlog::info("chart size stays {}: {}", o.chartSize, o.spellOption ? e.message(o.spellOption) : std::string(e.what()));
+      break;
+    }
+    spdlog::info("chart size {} -> {}: the repair left a sampling error of {:.4f}% of the diagonal (bound {:.4f}%)",
+                 o.chartSize, larger.chartSize, 100.0 * r.set.image.sampleError / std::max(diagonal, 1e-300),
+                 100.0 * o.maxSampleError);
+    o.chartSize = larger.chartSize;
+    layout.patches = unrepaired;
+    r.set = GeometryImageSet{};
+    r.spill.reset();
+    r.spill = std::make_unique<ChartSpill>(spillFile, o.chartSize, !layout.colours.empty());
+    ro.chartSize = o.chartSize;
+    ro.spill = r.spill.get();
+    st.repair = {};
+    first = resampleLayout(layout, ro);
+  }
+  st.chartSize = o.chartSize;
   const GeometryImageSet& set = r.set;
   const std::string left = fmt::format("{} flipped texels left, largest sampling error {:.4f}% of the diagonal",
                                        set.image.flippedTexels,
