@@ -117,7 +117,7 @@ std::string flagFor(std::string_view name) {
       {"imageryExtent", "--imagery-extent"},  {"heightPrecision", "--height-precision"},
       {"compress", "--uncompressed"},         {"positionBits", "--position-bits"},
       {"imagery", "--imagery"},              {"quads", "--quads"},
-      {"stretchQuadMap", "--quad-map"}};
+      {"quadMap", "--quad-map"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }
@@ -377,8 +377,9 @@ int main(int argc, char** argv) {
   std::string quadMapArg = "bilinear";
   build->add_option("--quad-map", quadMapArg,
                     "Meshes: how a quad chart's square maps into its patch's parameterization: bilinear (of the "
-                    "quad's corners) or stretch (least stretch over the chart itself; the border samples are the same)")
-      ->check(CLI::IsMember({"stretch", "bilinear"}))
+                    "quad's corners), stretch (least stretch over the chart itself; the border samples are the same), or "
+                    "folding (stretch for the charts that fold under bilinear, where they fold less)")
+      ->check(CLI::IsMember({"bilinear", "stretch", "folding"}))
       ->capture_default_str();
   build->add_option("--chart-error", mesh.maxChartError,
                     "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
@@ -535,7 +536,9 @@ int main(int argc, char** argv) {
         static_cast<CommonBuildOptions&>(mesh) = common;
         if (chartSizeOpt->count() > 0) mesh.chartSize = terrain.chartSize;
         mesh.charts = chartsArg == "auto" ? kAutoCharts : parseCount("--charts", chartsArg);
-        mesh.stretchQuadMap = quadMapArg == "stretch";
+        mesh.quadMap = quadMapArg == "stretch"   ? MeshQuadMap::kStretch
+                       : quadMapArg == "folding" ? MeshQuadMap::kFolding
+                                                 : MeshQuadMap::kBilinear;
         mesh.quads = quadsArg == "sides" ? MeshQuads::kSides : quadsArg == "kites" ? MeshQuads::kKites : MeshQuads::kAuto;
         mesh.maxSampleError = sampleErrorPercent < 0.0 && build->get_option("--sample-error")->count() == 0
                                   ? kAutoSampleError

@@ -72,6 +72,8 @@ inline constexpr double kAutoSampleError = -1.0;
 inline constexpr double kDefaultSampleError = 0.0005;
 
 enum class MeshQuads : uint8_t { kAuto, kSides, kKites };
+// How a quad chart's square maps into its patch's parameterization (atlas/mesh/resample.h QuadMap).
+enum class MeshQuadMap : uint8_t { kBilinear, kStretch, kFolding };
 
 struct MeshBuildOptions : CommonBuildOptions {
   // Quad chart side in samples, 2^m + 1 in [9, 8193]; 0: by the input's density
@@ -108,8 +110,8 @@ struct MeshBuildOptions : CommonBuildOptions {
   // within the bound or kites are not either).
   MeshQuads quads = MeshQuads::kKites;
   // How each quad chart's square maps into its quad of the patch's domain (atlas/mesh/resample.h
-  // QuadMap): bilinear, or least stretch.
-  bool stretchQuadMap = false;
+  // QuadMap): bilinear, least stretch, or least stretch for the charts that fold under bilinear.
+  MeshQuadMap quadMap = MeshQuadMap::kBilinear;
 };
 
 // The option's name as opts spell it in messages (CommonBuildOptions::spellOption).

@@ -75,7 +75,7 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"sides_straightened", rs.sidesStraightened},
                       {"side_ears_mended", rs.sideEarsMended},
                       {"quads", rs.sideQuads ? "sides" : "kites"},
-                      {"quad_map", rs.stretchQuadMap ? "stretch" : "bilinear"},
+                      {"quad_map", rs.quadMap},
                       {"even_side_corners", rs.evenSideCorners},
                       {"other_quads_flipped_texels", rs.alternativeFlippedTexels},
                       {"two_quad_corners", rs.twoQuadCorners},

@@ -192,7 +192,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
   MeshBuildOptions o = options;
   if (o.maxSampleError == kAutoSampleError) o.maxSampleError = o.chartSize == 0 ? kDefaultSampleError : 0.0;
   st.sideQuads = quads == QuadLayout::kSides;
-  st.stretchQuadMap = o.stretchQuadMap;
+  st.quadMap = o.quadMap == MeshQuadMap::kStretch ? "stretch" : o.quadMap == MeshQuadMap::kFolding ? "folding" : "bilinear";
   if (st.sideQuads) {
     const EvenSidesResult even = evenSides(layout);
     st.evenSideCorners = even.corners;
@@ -227,7 +227,9 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
   ro.threads = o.threads;
   ro.spill = r.spill.get();
   ro.quads = quads;
-  ro.quadMap = o.stretchQuadMap ? QuadMap::kStretch : QuadMap::kBilinear;
+  ro.quadMap = o.quadMap == MeshQuadMap::kStretch   ? QuadMap::kStretch
+               : o.quadMap == MeshQuadMap::kFolding ? QuadMap::kFolding
+                                                    : QuadMap::kBilinear;
   GeometryImageSet first = resampleLayout(layout, ro);
   // A chart size chosen by density is doubled (and the layout resampled) while the patches whose
   // charts sample the surface more coarsely than maxSampleError hold more than a tenth of its

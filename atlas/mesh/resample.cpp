@@ -992,22 +992,26 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
                           sidePoint(e[kEdgeLeft].index, e[kEdgeLeft].offset)};
       }
 
-      // Each quad's map from the unit square into its quad of the domain (QuadMap).
+      // Each quad's least-stretch map (QuadMap), made when first asked for.
       std::vector<QuadWarp> warps(nq);
-      std::vector<uint8_t> warped(nq, 0);
-      if (options.quadMap == QuadMap::kStretch && !plan.single) {
-        std::vector<glm::dvec3> xyz(pp.vertices.size());
-        for (size_t v = 0; v < xyz.size(); ++v) xyz[v] = glm::dvec3(layout.positions[pp.vertices[v]]);
+      std::vector<uint8_t> warpTried(nq, 0), warped(nq, 0);
+      std::vector<glm::dvec3> xyz;
+      auto ensureWarp = [&](uint32_t j) {
+        if (plan.single || warpTried[j]) return bool(warped[j]);
+        warpTried[j] = 1;
+        if (xyz.empty()) {
+          xyz.resize(pp.vertices.size());
+          for (size_t v = 0; v < xyz.size(); ++v) xyz[v] = glm::dvec3(layout.positions[pp.vertices[v]]);
+        }
         auto surfaceAt = [&](const glm::dvec2& d) {
           std::array<uint32_t, 3> tri;
           glm::dvec3 b;
           locator.locate(d, hint, tri, b);
           return b.x * xyz[tri[0]] + b.y * xyz[tri[1]] + b.z * xyz[tri[2]];
         };
-        for (uint32_t j = 0; j < nq; ++j) {
-          warped[j] = buildQuadWarp(pp, xyz, quadCorners[j], options.param, surfaceAt, warps[j]);
-        }
-      }
+        warped[j] = buildQuadWarp(pp, xyz, quadCorners[j], options.param, surfaceAt, warps[j]);
+        return bool(warped[j]);
+      };
 
       // The patch's triangle along each side segment: the input face a side sample lies on,
       // seen from this patch (for the flipped-texel test).
@@ -1043,10 +1047,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       std::vector<std::vector<std::pair<uint32_t, glm::dvec2>>> quadVertices(nq);
       for (uint32_t v = 0; v < pp.vertices.size(); ++v) {
         if (seamVertices.contains(pp.vertices[v])) continue;
-        QuadPoint k = quadOf(quadCorners, pp.uv[v]);
-        if (warped[k.quad] && warps[k.quad].ofPatchVertex[v] != ~0u) {
-          k.st = warps[k.quad].square[warps[k.quad].ofPatchVertex[v]];
-        }
+        const QuadPoint k = quadOf(quadCorners, pp.uv[v]);
         quadVertices[k.quad].push_back({v, k.st});
       }
       std::vector<glm::vec3> floatNormals(size_t(size) * size);
@@ -1082,43 +1083,71 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
           }
         }
         const auto& [qa, qb, qc, qe] = quadCorners[i];
-        std::optional<Locator> warpLocator;
-        if (warped[i]) warpLocator.emplace(warps[i].square, warps[i].triangles);
-        uint32_t warpHint = 0;
-        for (uint32_t v = 1; v < m; ++v) {
-          const double t = double(v) / m;
-          for (uint32_t u = 1; u < m; ++u) {
-            const double s = double(u) / m;
-            glm::dvec2 d;
-            if (warpLocator) {
-              std::array<uint32_t, 3> tri;
-              glm::dvec3 b;
-              warpLocator->locate(glm::dvec2(s, t), warpHint, tri, b);
-              d = b.x * warps[i].domain[tri[0]] + b.y * warps[i].domain[tri[1]] + b.z * warps[i].domain[tri[2]];
-            } else {
-              d = (1 - s) * (1 - t) * qa + s * (1 - t) * qb + s * t * qc + (1 - s) * t * qe;
+        // The inside, through the bilinear map or the quad's warp.
+        auto fillInside = [&](bool warp) {
+          std::optional<Locator> warpLocator;
+          if (warp) warpLocator.emplace(warps[i].square, warps[i].triangles);
+          uint32_t warpHint = 0;
+          for (uint32_t v = 1; v < m; ++v) {
+            const double t = double(v) / m;
+            for (uint32_t u = 1; u < m; ++u) {
+              const double s = double(u) / m;
+              glm::dvec2 d;
+              if (warpLocator) {
+                std::array<uint32_t, 3> tri;
+                glm::dvec3 b;
+                warpLocator->locate(glm::dvec2(s, t), warpHint, tri, b);
+                d = b.x * warps[i].domain[tri[0]] + b.y * warps[i].domain[tri[1]] + b.z * warps[i].domain[tri[2]];
+              } else {
+                d = (1 - s) * (1 - t) * qa + s * (1 - t) * qb + s * t * qc + (1 - s) * t * qe;
+              }
+              putAt(size_t(v) * size + u, sampleAt(d));
             }
-            putAt(size_t(v) * size + u, sampleAt(d));
           }
-        }
-        // The input faces under the samples (zero where none is known).
-        for (size_t k = 0; k < faceNormals.size(); ++k) {
-          faceNormals[k] = glm::vec3(0.f);
-          if (triangles[k] == ~0u) continue;
-          const auto& t = layout.triangles[triangles[k]];
-          const glm::dvec3 a(layout.positions[t[0]]), b(layout.positions[t[1]]), c(layout.positions[t[2]]);
-          const glm::dvec3 cr = glm::cross(b - a, c - a);
-          const double l = glm::length(cr);
-          if (l > 0.0 && std::isfinite(l)) faceNormals[k] = glm::vec3(cr / l);
-        }
+        };
+        auto measure = [&](bool warp, std::vector<uint32_t>& flipped) {
+          // The input faces under the samples (zero where none is known).
+          for (size_t k = 0; k < faceNormals.size(); ++k) {
+            faceNormals[k] = glm::vec3(0.f);
+            if (triangles[k] == ~0u) continue;
+            const auto& t = layout.triangles[triangles[k]];
+            const glm::dvec3 a(layout.positions[t[0]]), b(layout.positions[t[1]]), c(layout.positions[t[2]]);
+            const glm::dvec3 cr = glm::cross(b - a, c - a);
+            const double l = glm::length(cr);
+            if (l > 0.0 && std::isfinite(l)) faceNormals[k] = glm::vec3(cr / l);
+          }
+          flipped.clear();
+          ImageQuality q = measureImage(img.positions, floatNormals, size, &flipped, &faceNormals);
+          // How far the chart's surface passes from the input vertices it stands for, each at its
+          // chart coordinates under the map used.
+          for (auto [v, st] : quadVertices[i]) {
+            if (warp && warps[i].ofPatchVertex[v] != ~0u) st = warps[i].square[warps[i].ofPatchVertex[v]];
+            const double e = chartSurfaceDistance(img.positions, size, st, glm::dvec3(layout.positions[pp.vertices[v]]));
+            if (e > q.sampleError) {
+              q.sampleError = e;
+              q.sampleErrorVertex = pp.vertices[v];
+            }
+          }
+          return q;
+        };
+        const bool warp = options.quadMap == QuadMap::kStretch && ensureWarp(i);
+        fillInside(warp);
         std::vector<uint32_t> flipped;
-        img.quality = measureImage(img.positions, floatNormals, size, &flipped, &faceNormals);
-        // How far the chart's surface passes from the input vertices it stands for.
-        for (const auto& [v, st] : quadVertices[i]) {
-          const double e = chartSurfaceDistance(img.positions, size, st, glm::dvec3(layout.positions[pp.vertices[v]]));
-          if (e > img.quality.sampleError) {
-            img.quality.sampleError = e;
-            img.quality.sampleErrorVertex = pp.vertices[v];
+        img.quality = measure(warp, flipped);
+        // kFolding: a chart that folds under the bilinear map takes the warp if it folds less.
+        if (options.quadMap == QuadMap::kFolding && img.quality.flippedTexels > 0 && ensureWarp(i)) {
+          const GeometryImage bilinear = img;
+          const std::vector<glm::vec3> bilinearNormals = floatNormals;
+          const std::vector<uint32_t> bilinearTriangles = triangles, bilinearFlipped = flipped;
+          fillInside(true);
+          const ImageQuality q = measure(true, flipped);
+          if (q.flippedTexels < bilinear.quality.flippedTexels) {
+            img.quality = q;
+          } else {
+            img = bilinear;
+            floatNormals = bilinearNormals;
+            triangles = bilinearTriangles;
+            flipped = bilinearFlipped;
           }
         }
         // Where the chart folds, as layout triangles (one per flipped texel, a few per chart).

@@ -50,7 +50,9 @@ uint32_t patchQuadCount(uint32_t sides, QuadLayout quads);
 //     stretch to the parameterization's, and the parameterization, which is made on the patch's
 //     polygon, does not see it; mapped this way, the stretch minimized is the chart's own.
 //     A quad whose map cannot be made (a degenerate clip) keeps the bilinear map.
-enum class QuadMap : uint8_t { kBilinear, kStretch };
+//   folding: bilinear, and stretch for the charts that fold (flipped texels) under the bilinear map,
+//     kept where they fold less. Charts may mix maps since their borders are the same.
+enum class QuadMap : uint8_t { kBilinear, kStretch, kFolding };
 
 struct ResampleOptions {
   uint32_t chartSize = 513;  // samples per quad chart side; must be 2^k + 1 with k >= 1

@@ -134,6 +134,35 @@ TEST(SideQuads, TheStretchQuadMapKeepsTheBorderAndLowersTheStretch) {
   }
 }
 
+// QuadMap::kFolding on the bunny's evened layout: every chart folds no more than under the
+// bilinear map, some fold less, and the charts, mixing both maps, stay seamless.
+TEST(SideQuads, TheFoldingQuadMapFoldsLessAndStaysSeamless) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 24;
+  ChartLayout layout = buildChartLayout(mesh, copt);
+  ASSERT_EQ(evenSides(layout).oddLeft, 0u);
+  mendTwoChartCorners(layout);
+  ResampleOptions o = sidesOptions(33);
+  const GeometryImageSet bilinear = resampleLayout(layout, o);
+  o.quadMap = QuadMap::kFolding;
+  const GeometryImageSet folding = resampleLayout(layout, o);
+  ASSERT_EQ(folding.charts.size(), bilinear.charts.size());
+  std::printf("  bunny, %zu patches at 33^2: %u flipped texels bilinear, %u folding\n", layout.patches.size(),
+              bilinear.image.flippedTexels, folding.image.flippedTexels);
+  ASSERT_GT(bilinear.image.flippedTexels, 0u);
+  EXPECT_LT(folding.image.flippedTexels, bilinear.image.flippedTexels);
+  for (size_t c = 0; c < folding.charts.size(); ++c) {
+    EXPECT_LE(folding.charts[c].quality.flippedTexels, bilinear.charts[c].quality.flippedTexels) << "chart " << c;
+    if (bilinear.charts[c].quality.flippedTexels == 0) {
+      EXPECT_TRUE(sameBytes(folding.charts[c].positions.data(), bilinear.charts[c].positions.data(),
+                            folding.charts[c].positions.size() * sizeof(glm::vec3)))
+          << "chart " << c << " does not fold, so it keeps the bilinear map";
+    }
+  }
+  EXPECT_GT(expectSeamless(folding), 0u);
+}
+
 TEST(SideQuads, AnOddPatchIsRefused) {
   const ChartLayout layout = test::diskLayout(5, 4, 30, false);
   EXPECT_THROW(resampleLayout(layout, sidesOptions(17)), std::invalid_argument);
