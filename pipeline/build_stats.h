@@ -105,6 +105,7 @@ struct MeshResampleStats {
   ChartRepairStats repair;
   uint32_t chartSize = 0;              // the quad charts' side in samples
   bool chartSizeByDensity = false;     // chosen by meshChartSizeForDensity
+  uint32_t repairDoublings = 0;        // times it was doubled after a repair left the bound unmet
   double maxSampleError = 0.0;         // the repair's bound, in the input's units (0: none)
   double repairWork = 0.0;             // layout triangles parameterized again / layout triangles
   uint64_t patches = 0;                // after the repair

@@ -297,6 +297,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
                  o.chartSize, larger.chartSize, 100.0 * r.set.image.sampleError / std::max(diagonal, 1e-300),
                  100.0 * o.maxSampleError);
     o.chartSize = larger.chartSize;
+    ++st.repairDoublings;
     layout.patches = unrepaired;
     r.set = GeometryImageSet{};
     r.spill.reset();
