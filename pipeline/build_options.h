@@ -116,7 +116,8 @@ struct MeshBuildOptions : CommonBuildOptions {
 
 // The option's name as opts spell it in messages (CommonBuildOptions::spellOption).
 // The patches a mesh of `triangles` triangles is charted into by default: sqrt(triangles) / 80,
-// at least 48 (48 up to 14.7M triangles, 54 at 18.7M), so about 150 quad charts (sides) or 300 (kites). The chart
+// at least 48 (48 up to 14.7M triangles, 54 at 18.7M), so 150 to 190 quad charts (sides) or 280
+// to 350 (kites) on the shared scans. The chart
 // repair then cuts the patches whose charts fold or sample the surface too coarsely. Fewer, larger
 // patches fold on scans with holes (the bunny: 795 flipped texels from 24 patches, which the
 // repair cannot all remove).
