@@ -345,7 +345,12 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   const std::vector<std::string> bad = validateChartLayout(layout);
   if (!bad.empty()) throw InputError(options.input.string() + ": the chart layout is invalid: " + bad.front());
   finishStage(meter, "validate");
-  const uint32_t straightened = options.straightenRounds ? straightenSides(layout, options.straightenRounds) : 0;
+  // The sides layout makes a 4-sided patch a single chart, so no straightening may leave a patch
+  // a sliver of itself; kites keep the straightening they were measured with.
+  const uint32_t straightened =
+      options.straightenRounds
+          ? straightenSides(layout, options.straightenRounds, options.quads != MeshQuads::kKites)
+          : 0;
   const uint32_t ears = moveSideEars(layout);
   finishStage(meter, "straighten");
   ResampledMesh r;

@@ -762,7 +762,7 @@ bool splitPatchAtCornerNeck(ChartLayout& layout, uint32_t p) {
 
 }  // namespace
 
-bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s) {
+bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s, bool keepHalves) {
   if (p >= layout.patches.size() || s >= layout.patches[p].sides.size()) return false;
   const PatchSide side = layout.patches[p].sides[s];
   if (side.neighbourPatch < 0 || side.neighbourPatch == int32_t(p)) return false;
@@ -810,6 +810,7 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s) {
   std::vector<uint32_t> inP, inQ;
   for (uint32_t tri : u.triangles) (mine.contains(tri) ? inP : inQ).push_back(tri);
   if (inP.empty() || inQ.empty() || !isDisk(layout, inP) || !isDisk(layout, inQ)) return false;
+  if (keepHalves && (2 * inP.size() < pp.triangles.size() || 2 * inQ.size() < qq.triangles.size())) return false;
   layout.patches[p].triangles = std::move(inP);
   layout.patches[q].triangles = std::move(inQ);
   layout.patches[p].sides[s].vertices = path;
@@ -818,7 +819,7 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s) {
   return true;
 }
 
-uint32_t straightenSides(ChartLayout& layout, uint32_t rounds) {
+uint32_t straightenSides(ChartLayout& layout, uint32_t rounds, bool keepHalves) {
   uint32_t changed = 0;
   std::vector<uint8_t> changedBefore;
   for (uint32_t r = 0; r < rounds; ++r) {
@@ -852,7 +853,7 @@ uint32_t straightenSides(ChartLayout& layout, uint32_t rounds) {
       }
       std::vector<uint8_t> done(batch.size(), 0);
       tbb::parallel_for(size_t{0}, batch.size(), [&](size_t k) {
-        done[k] = straightenSide(layout, batch[k].first, batch[k].second) ? 1 : 0;
+        done[k] = straightenSide(layout, batch[k].first, batch[k].second, keepHalves) ? 1 : 0;
       });
       for (size_t k = 0; k < batch.size(); ++k) {
         if (!done[k]) continue;

@@ -26,12 +26,15 @@ namespace gimlod {
 // change patch. Jagged cluster borders (a side that wanders in and out of its neighbour) are
 // what a fixed polygon border squeezes hardest; a straight side gives both patches a rounder
 // shape. Returns false, unchanged, if the side is open or self-adjacent, no shorter path exists,
-// or a part would not be a disk bordered by its other sides.
-bool straightenSide(ChartLayout& layout, uint32_t patch, uint32_t side);
+// or a part would not be a disk bordered by its other sides. With keepHalves, also when either
+// patch would keep less than half its triangles: a side straightened across a patch's bulge can
+// leave a sliver of a few dozen triangles, which the sides quad layout makes a single chart (on
+// the armadillo, two 4-sided patches of 59 and 65 triangles, one with 154 flipped texels).
+bool straightenSide(ChartLayout& layout, uint32_t patch, uint32_t side, bool keepHalves = false);
 
 // straightenSide on every shared side once per round, until a round changes nothing; returns the
 // sides changed.
-uint32_t straightenSides(ChartLayout& layout, uint32_t rounds = 2);
+uint32_t straightenSides(ChartLayout& layout, uint32_t rounds = 2, bool keepHalves = false);
 
 // Moves every "ear" of the given patches (all patches if empty) to the neighbour across its side:
 // a triangle whose three vertices are consecutive vertices of one shared side. Its three

@@ -212,6 +212,42 @@ TEST(LayoutRefine, StraightenedScanSidesAreShorterAndTheLayoutStaysValid) {
   EXPECT_LE(resampleLayout(layout, ro).image.stretchL2, resampleLayout(raw, ro).image.stretchL2);
 }
 
+// With keepHalves, a straightening never leaves either patch less than half its triangles; on the
+// bunny some straightenings without it do (a side straightened across a patch's bulge).
+TEST(LayoutRefine, KeepHalvesStraightensNoPatchToASliver) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 48;
+  const ChartLayout layout = buildChartLayout(mesh, copt);
+  uint32_t shrunk = 0, kept = 0, refused = 0;
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    for (uint32_t s = 0; s < layout.patches[p].sides.size(); ++s) {
+      const int32_t q = layout.patches[p].sides[s].neighbourPatch;
+      if (q < 0 || uint32_t(q) < p) continue;  // each shared side once
+      const size_t np = layout.patches[p].triangles.size(), nq = layout.patches[uint32_t(q)].triangles.size();
+      ChartLayout free = layout, halves = layout;
+      const bool freeDone = straightenSide(free, p, s);
+      const bool shrinks = freeDone && (2 * free.patches[p].triangles.size() < np ||
+                                        2 * free.patches[uint32_t(q)].triangles.size() < nq);
+      shrunk += shrinks;
+      if (straightenSide(halves, p, s, true)) {
+        ++kept;
+        EXPECT_GE(2 * halves.patches[p].triangles.size(), np) << "patch " << p << " side " << s;
+        EXPECT_GE(2 * halves.patches[uint32_t(q)].triangles.size(), nq) << "patch " << q;
+        EXPECT_FALSE(shrinks);
+        expectValid(halves);
+      } else {
+        refused += freeDone;
+      }
+    }
+  }
+  std::printf("  bunny, 48 patches: %u sides straightened with keepHalves, %u refused, %u would shrink a patch below half\n",
+              kept, refused, shrunk);
+  EXPECT_GT(kept, 0u);
+  EXPECT_GT(shrunk, 0u);
+  EXPECT_EQ(refused, shrunk);
+}
+
 TEST(PatchSplit, FlipRepairOnARealScanNeverMakesThingsWorse) {
   ChartLayout layout = chartedBunny();
   const size_t patchesBefore = layout.patches.size();
