@@ -345,19 +345,24 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   const std::vector<std::string> bad = validateChartLayout(layout);
   if (!bad.empty()) throw InputError(options.input.string() + ": the chart layout is invalid: " + bad.front());
   finishStage(meter, "validate");
-  // The sides layout makes a 4-sided patch a single chart, so no straightening may leave a patch
-  // a sliver of itself; kites keep the straightening they were measured with.
-  const uint32_t straightened =
-      options.straightenRounds
-          ? straightenSides(layout, options.straightenRounds, options.quads != MeshQuads::kKites)
-          : 0;
-  const uint32_t ears = moveSideEars(layout);
-  finishStage(meter, "straighten");
+  // Shared sides straightened and side ears moved, for one quad layout. The sides layout makes a
+  // 4-sided patch a single chart, so there no straightening may leave a patch a sliver of itself;
+  // kites keep the straightening they were measured with.
+  uint32_t straightened = 0, ears = 0;
+  auto straighten = [&](QuadLayout quads, const std::string& suffix) {
+    straightened = options.straightenRounds
+                       ? straightenSides(layout, options.straightenRounds, quads == QuadLayout::kSides)
+                       : 0;
+    ears = moveSideEars(layout);
+    finishStage(meter, "straighten" + suffix);
+  };
   ResampledMesh r;
   bool evened = true;
   if (options.quads == MeshQuads::kKites) {
+    straighten(QuadLayout::kKites, "");
     r = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, "", &evened);
   } else if (options.quads == MeshQuads::kSides) {
+    straighten(QuadLayout::kSides, "");
     r = resampleInLayout(layout, options, QuadLayout::kSides, dir, meter, "", &evened);
     if (!evened)
       throw InputError(fmt::format("{}: some patches cannot be given an even number of sides for the sides quad "
@@ -368,17 +373,21 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
     // Sides first (about half the charts); kites too if that leaves flipped texels, corners
     // where only two charts meet or charts that sample the surface more coarsely than the bound,
     // keeping whichever leaves fewer flipped texels (sides on a tie, if no such corner is left and
-    // it is within the bound or kites are not either).
+    // it is within the bound or kites are not either). Each layout is straightened its own way
+    // from the charted patches.
     auto withinBound = [](const ResampledMesh& m) {
       return !(m.stats.maxSampleError > 0.0) || m.set.image.sampleError <= m.stats.maxSampleError;
     };
     const std::vector<Patch> charted = layout.patches;
+    straighten(QuadLayout::kSides, "");
     ResampledMesh sides = resampleInLayout(layout, options, QuadLayout::kSides, dir, meter, "", &evened);
     if (evened && sides.set.image.flippedTexels == 0 && sides.stats.twoQuadCorners == 0 && withinBound(sides)) {
       r = std::move(sides);
     } else {
       std::vector<Patch> sidesPatches = std::move(layout.patches);
       layout.patches = charted;
+      const uint32_t sidesStraightened = straightened, sidesEars = ears;
+      straighten(QuadLayout::kKites, " (kites)");
       ResampledMesh kites = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, " (kites)", &evened);
       const bool keepSides = !sidesPatches.empty() && sides.spill && sides.stats.twoQuadCorners == 0 &&
                              sides.set.image.flippedTexels <= kites.set.image.flippedTexels &&
@@ -396,6 +405,8 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
         sides.stats.alternativeFlippedTexels = int64_t(kites.set.image.flippedTexels);
         r = std::move(sides);
         layout.patches = std::move(sidesPatches);
+        straightened = sidesStraightened;
+        ears = sidesEars;
       } else {
         if (sides.spill) kites.stats.alternativeFlippedTexels = int64_t(sides.set.image.flippedTexels);
         r = std::move(kites);
