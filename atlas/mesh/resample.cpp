@@ -554,7 +554,9 @@ struct QuadWarp {
 template <typename SurfaceAt>
 bool buildQuadWarp(const PatchParameterization& pp, const std::vector<glm::dvec3>& xyz, const QuadCorners& q,
                    const ParamOptions& options, SurfaceAt surfaceAt, QuadWarp& w) {
-  const auto& [qa, qb, qc, qe] = q;
+  // note: named references, not a structured binding, since the lambdas below use them (clang
+  // before 16 cannot capture structured bindings).
+  const glm::dvec2 &qa = q[0], &qb = q[1], &qc = q[2], &qe = q[3];
   const std::array<glm::dvec2, 2> from{qb, qc}, to{qc, qe};
   const double scale = std::max({glm::length(qb - qa), glm::length(qc - qb), glm::length(qe - qc), glm::length(qa - qe)});
   const double eps = 1e-10 * scale;
@@ -1082,7 +1084,8 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
             }
           }
         }
-        const auto& [qa, qb, qc, qe] = quadCorners[i];
+        const glm::dvec2 &qa = quadCorners[i][0], &qb = quadCorners[i][1], &qc = quadCorners[i][2],
+                         &qe = quadCorners[i][3];
         // The inside, through the bilinear map or the quad's warp.
         auto fillInside = [&](bool warp) {
           std::optional<Locator> warpLocator;
