@@ -198,15 +198,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
     st.evenSideCorners = even.corners;
     *evened = even.oddLeft == 0;
     if (!*evened) return r;
-    // Corners the mend adds split a side shared by two patches: one side more in each.
-    auto sideCount = [&] {
-      uint64_t n = 0;
-      for (const Patch& pa : layout.patches) n += pa.sides.size();
-      return n;
-    };
-    const uint64_t sidesBefore = sideCount();
-    mendTwoChartCorners(layout);
-    st.evenSideCorners += uint32_t((sideCount() - sidesBefore) / 2);
+    st.evenSideCorners += mendTwoChartCorners(layout).corners;
   }
   const uint64_t quadCharts = layoutQuadCount(layout, quads);
   if (o.chartSize == 0) {
@@ -231,6 +223,29 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
                : o.quadMap == MeshQuadMap::kFolding ? QuadMap::kFolding
                                                     : QuadMap::kBilinear;
   GeometryImageSet first = resampleLayout(layout, ro);
+  // Doubles the chart size (saying `why`) and resamples the layout into `first`, its patches
+  // first set to `restore` if given; false, unchanged, when the larger charts do not fit
+  // (checkChartRoom with `charts` quad charts).
+  auto doubleChartSize = [&](uint64_t charts, const std::string& why, const std::vector<Patch>* restore) {
+    MeshBuildOptions larger = o;
+    larger.chartSize = 2 * o.chartSize - 1;
+    try {
+      checkChartRoom(layout, charts, larger, dir);
+    } catch (const InputError& e) {
+      spdlog::info("chart size stays {}: {}", o.chartSize, o.spellOption ? e.message(o.spellOption) : std::string(e.what()));
+      return false;
+    }
+    spdlog::info("chart size {} -> {}: {}", o.chartSize, larger.chartSize, why);
+    o.chartSize = larger.chartSize;
+    if (restore) layout.patches = *restore;
+    first = GeometryImageSet{};
+    r.spill.reset();  // (removes its file)
+    r.spill = std::make_unique<ChartSpill>(spillFile, o.chartSize, !layout.colours.empty());
+    ro.chartSize = o.chartSize;
+    ro.spill = r.spill.get();
+    first = resampleLayout(layout, ro);
+    return true;
+  };
   // A chart size chosen by density is doubled (and the layout resampled) while the patches whose
   // charts sample the surface more coarsely than maxSampleError hold more than a tenth of its
   // triangles, up to kMaxSamplesPerTriangle: the repair then has a few patches to cut, not many.
@@ -244,25 +259,10 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
     if (overTriangles * 10 <= layout.triangles.size() ||
         samplesPerTriangle(layout, first.charts.size(), o.chartSize) >= kMaxSamplesPerTriangle)
       break;
-    MeshBuildOptions larger = o;
-    larger.chartSize = 2 * o.chartSize - 1;
-    try {
-      checkChartRoom(layout, quadCharts, larger, dir);
-    } catch (const InputError& e) {
-      spdlog::info("chart size stays {}: {}", o.chartSize, o.spellOption ? e.message(o.spellOption) : std::string(e.what()));
-      break;
-    }
-    spdlog::info("chart size {} -> {}: patches with {:.0f}% of the triangles sample the surface more coarsely than "
-                 "{:.4f}% of the diagonal",
-                 o.chartSize, larger.chartSize, 100.0 * double(overTriangles) / double(layout.triangles.size()),
-                 100.0 * o.maxSampleError);
-    o.chartSize = larger.chartSize;
-    first = GeometryImageSet{};
-    r.spill.reset();  // (removes its file)
-    r.spill = std::make_unique<ChartSpill>(spillFile, o.chartSize, !layout.colours.empty());
-    ro.chartSize = o.chartSize;
-    ro.spill = r.spill.get();
-    first = resampleLayout(layout, ro);
+    const std::string why =
+        fmt::format("patches with {:.0f}% of the triangles sample the surface more coarsely than {:.4f}% of the diagonal",
+                    100.0 * double(overTriangles) / double(layout.triangles.size()), 100.0 * o.maxSampleError);
+    if (!doubleChartSize(quadCharts, why, nullptr)) break;
   }
   st.chartSize = o.chartSize;
   finishStage(meter, "resample" + suffix);
@@ -285,27 +285,12 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
         st.repair.stoppedForWork || st.repair.stoppedForMemory || o.chartSize >= kMaxDensityChartSize ||
         samplesPerTriangle(layout, r.set.charts.size(), o.chartSize) >= kMaxSamplesPerTriangle)
       break;
-    MeshBuildOptions larger = o;
-    larger.chartSize = 2 * o.chartSize - 1;
-    try {
-      checkChartRoom(layout, layoutQuadCount(layout, quads), larger, dir);
-    } catch (const InputError& e) {
-      spdlog::info("chart size stays {}: {}", o.chartSize, o.spellOption ? e.message(o.spellOption) : std::string(e.what()));
-      break;
-    }
-    spdlog::info("chart size {} -> {}: the repair left a sampling error of {:.4f}% of the diagonal (bound {:.4f}%)",
-                 o.chartSize, larger.chartSize, 100.0 * r.set.image.sampleError / std::max(diagonal, 1e-300),
-                 100.0 * o.maxSampleError);
-    o.chartSize = larger.chartSize;
+    const std::string why = fmt::format("the repair left a sampling error of {:.4f}% of the diagonal (bound {:.4f}%)",
+                                        100.0 * r.set.image.sampleError / std::max(diagonal, 1e-300),
+                                        100.0 * o.maxSampleError);
+    if (!doubleChartSize(layoutQuadCount(layout, quads), why, &unrepaired)) break;
     ++st.repairDoublings;
-    layout.patches = unrepaired;
-    r.set = GeometryImageSet{};
-    r.spill.reset();
-    r.spill = std::make_unique<ChartSpill>(spillFile, o.chartSize, !layout.colours.empty());
-    ro.chartSize = o.chartSize;
-    ro.spill = r.spill.get();
     st.repair = {};
-    first = resampleLayout(layout, ro);
   }
   st.chartSize = o.chartSize;
   const GeometryImageSet& set = r.set;

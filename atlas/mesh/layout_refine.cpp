@@ -9,6 +9,8 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include <boost/graph/adjacency_list.hpp>
+#include <boost/graph/strong_components.hpp>
 #include <glm/geometric.hpp>
 #include <tbb/parallel_for.h>
 
@@ -258,15 +260,19 @@ std::unordered_map<uint32_t, std::vector<std::pair<uint32_t, uint32_t>>> cornerI
 // Whether corner i of a patch of n sides starts spokes in the sides layout (two quads meet there).
 bool spokeCorner(uint32_t n, uint32_t i) { return n >= 6 && i % 2 == 0; }
 
+// Whether corner i of patch p is on the border (a side there is open).
+bool borderCorner(const ChartLayout& layout, uint32_t p, uint32_t i) {
+  const auto& sides = layout.patches[p].sides;
+  const uint32_t n = uint32_t(sides.size());
+  return sides[i].neighbourPatch < 0 || sides[(i + n - 1) % n].neighbourPatch < 0;
+}
+
 // Corners of two patches only, away from the border, where neither patch has spokes: one quad of
 // each meets there.
 bool foldedCorner(const ChartLayout& layout, const std::vector<std::pair<uint32_t, uint32_t>>& in) {
   if (in.size() != 2) return false;
   for (const auto& [p, i] : in) {
-    const auto& sides = layout.patches[p].sides;
-    const uint32_t n = uint32_t(sides.size());
-    if (sides[i].neighbourPatch < 0 || sides[(i + n - 1) % n].neighbourPatch < 0) return false;
-    if (spokeCorner(n, i)) return false;
+    if (borderCorner(layout, p, i) || spokeCorner(uint32_t(layout.patches[p].sides.size()), i)) return false;
   }
   return true;
 }
@@ -285,8 +291,9 @@ namespace {
 // spokes in one of its patches, as a 2-SAT problem: per patch of 6 or more sides, x_p = 1 rotates
 // it; corner i of such a patch then starts spokes iff x_p == i % 2 (a patch of 4 sides, or one not
 // in `patches`, is a constant), and each corner asks for one of its two. Solved by the strongly
-// connected components of the implication graph (Aspvall, Plass, Tarjan 1979). False, unchanged,
-// if no pairing satisfies every corner that some pairing of `patches` can change.
+// connected components of the implication graph (Aspvall, Plass, Tarjan 1979; Boost's
+// strong_components). False, unchanged, if no pairing satisfies every corner that some pairing of
+// `patches` can change.
 bool alignSpokesExactly(ChartLayout& layout, const std::vector<uint32_t>& patches) {
   std::vector<int32_t> var(layout.patches.size(), -1);
   std::vector<uint32_t> patchOf;
@@ -296,8 +303,8 @@ bool alignSpokesExactly(ChartLayout& layout, const std::vector<uint32_t>& patche
       patchOf.push_back(p);
     }
   }
-  const size_t nodes = 2 * patchOf.size();  // node 2v + b: x_v == b
-  std::vector<std::vector<uint32_t>> implies(nodes);
+  // Node 2v + b: x_v == b.
+  boost::adjacency_list<boost::vecS, boost::vecS, boost::directedS> implies(2 * patchOf.size());
   // A literal: a node, or a constant (kTrue / kFalse).
   constexpr int64_t kTrue = -1, kFalse = -2;
   for (const auto& [v, in] : cornerIncidences(layout)) {
@@ -306,54 +313,20 @@ bool alignSpokesExactly(ChartLayout& layout, const std::vector<uint32_t>& patche
     int64_t lit[2];
     for (int k = 0; k < 2; ++k) {
       const auto& [p, i] = in[k];
-      const auto& sides = layout.patches[p].sides;
-      const uint32_t n = uint32_t(sides.size());
-      open = open || sides[i].neighbourPatch < 0 || sides[(i + n - 1) % n].neighbourPatch < 0;
-      lit[k] = var[p] >= 0 ? int64_t(2 * var[p] + i % 2) : spokeCorner(n, i) ? kTrue : kFalse;
+      open = open || borderCorner(layout, p, i);
+      lit[k] = var[p] >= 0 ? int64_t(2 * var[p] + i % 2)
+                           : spokeCorner(uint32_t(layout.patches[p].sides.size()), i) ? kTrue : kFalse;
     }
     if (open || lit[0] == kTrue || lit[1] == kTrue) continue;
     if (lit[0] == kFalse && lit[1] == kFalse) continue;
     // (a or b): not a -> b, not b -> a; a constant false side leaves the unit clause (b or b).
     const int64_t a = lit[0] == kFalse ? lit[1] : lit[0], b = lit[1] == kFalse ? lit[0] : lit[1];
-    implies[size_t(a ^ 1)].push_back(uint32_t(b));
-    implies[size_t(b ^ 1)].push_back(uint32_t(a));
+    boost::add_edge(size_t(a ^ 1), size_t(b), implies);
+    boost::add_edge(size_t(b ^ 1), size_t(a), implies);
   }
-  // Tarjan's components, iteratively; they are numbered in reverse topological order.
-  std::vector<int32_t> index(nodes, -1), low(nodes, 0), comp(nodes, -1);
-  std::vector<uint32_t> stack, path;
-  std::vector<size_t> edge(nodes, 0);
-  int32_t counter = 0, comps = 0;
-  for (uint32_t root = 0; root < nodes; ++root) {
-    if (index[root] >= 0) continue;
-    path.push_back(root);
-    while (!path.empty()) {
-      const uint32_t u = path.back();
-      if (index[u] < 0) {
-        index[u] = low[u] = counter++;
-        stack.push_back(u);
-      }
-      if (edge[u] < implies[u].size()) {
-        const uint32_t w = implies[u][edge[u]++];
-        if (index[w] < 0) {
-          path.push_back(w);
-        } else if (comp[w] < 0) {
-          low[u] = std::min(low[u], index[w]);
-        }
-        continue;
-      }
-      path.pop_back();
-      if (!path.empty()) low[path.back()] = std::min(low[path.back()], low[u]);
-      if (low[u] == index[u]) {
-        uint32_t w;
-        do {
-          w = stack.back();
-          stack.pop_back();
-          comp[w] = comps;
-        } while (w != u);
-        ++comps;
-      }
-    }
-  }
+  // Tarjan's algorithm numbers the components in reverse topological order.
+  std::vector<int> comp(2 * patchOf.size());
+  boost::strong_components(implies, boost::make_iterator_property_map(comp.begin(), boost::get(boost::vertex_index, implies)));
   for (size_t v = 0; v < patchOf.size(); ++v) {
     if (comp[2 * v] == comp[2 * v + 1]) return false;
   }
@@ -395,8 +368,10 @@ uint32_t alignSpokes(ChartLayout& layout, const std::vector<uint32_t>& only) {
   return twoQuadCorners(layout);
 }
 
-uint32_t mendTwoChartCorners(ChartLayout& layout, uint32_t maxSides) {
-  uint32_t left = alignSpokes(layout);
+MendCornersResult mendTwoChartCorners(ChartLayout& layout, uint32_t maxSides) {
+  MendCornersResult r;
+  uint32_t& left = r.left;
+  left = alignSpokes(layout);
   // Each try is judged on the whole layout after alignSpokes: kept only if fewer corners are left.
   for (uint32_t round = 0; round < 8 && left > 0; ++round) {
     bool changed = false;
@@ -414,6 +389,7 @@ uint32_t mendTwoChartCorners(ChartLayout& layout, uint32_t maxSides) {
         const uint32_t now = ok ? alignSpokes(layout) : left;
         if (now < left) {
           left = now;
+          r.corners += 2;
           changed = true;
           break;
         }
@@ -423,7 +399,7 @@ uint32_t mendTwoChartCorners(ChartLayout& layout, uint32_t maxSides) {
     }
     if (!changed) break;
   }
-  return left;
+  return r;
 }
 
 bool rotationFoldsNoCorner(ChartLayout& layout, uint32_t p) {

@@ -75,8 +75,13 @@ uint32_t alignSpokes(ChartLayout& layout, const std::vector<uint32_t>& only = {}
 // the middle of both its sides there (both shared with the other patch, which so gains two, and
 // every side count stays even), kept where alignSpokes then leaves fewer. A 4-sided patch wrapped
 // by one neighbour along three sides, as evening can leave it, has two such corners in a row that
-// no pairing serves; with 6 sides it starts spokes at one of them. Returns the count left.
-uint32_t mendTwoChartCorners(ChartLayout& layout, uint32_t maxSides = kMaxPatchSides);
+// no pairing serves; with 6 sides it starts spokes at one of them. Returns the corners added and
+// the two-chart corners left.
+struct MendCornersResult {
+  uint32_t corners = 0;
+  uint32_t left = 0;
+};
+MendCornersResult mendTwoChartCorners(ChartLayout& layout, uint32_t maxSides = kMaxPatchSides);
 bool rotationFoldsNoCorner(ChartLayout& layout, uint32_t p);
 
 // Rotates the sides of patch p so that old side k becomes side 0 (the neighbours' links follow).

@@ -546,7 +546,7 @@ struct QuadWarp {
 };
 
 // Builds quad q's warp from the patch's parameterization pp (surface points xyz per local vertex,
-// `locate` giving the surface point at a domain point). The quad is convex with its two border
+// surfaceAt giving the surface point at a domain point). The quad is convex with its two border
 // edges on the patch's polygon, so clipping the patch's triangles against the half-planes of its
 // two spokes (edges b -> c and c -> e) gives it exactly. A vertex is shared between the pieces of
 // neighbouring triangles by its origin: a patch vertex, a patch edge crossing a spoke, or the

@@ -264,22 +264,19 @@ TEST(EvenSides, AlignSpokesFindsAPairingWithoutTwoChartCorners) {
 // evening leaves some), mendTwoChartCorners adds corners until none is left; the layout stays
 // valid and even, and resamples seamlessly.
 TEST(EvenSides, MendTwoChartCornersLeavesNone) {
-  uint32_t alignedLeft = 0;
-  for (const uint32_t target : {24u}) {
-    SCOPED_TRACE(testing::Message() << target << " patches");
-    ChartLayout layout = evenedBunny(target);
-    const uint32_t aligned = alignSpokes(layout);
-    alignedLeft += aligned;
-    const uint32_t left = mendTwoChartCorners(layout);
-    std::printf("  %u patches: %u two-chart corners after alignSpokes, %u after the mend\n", target, aligned, left);
-    EXPECT_EQ(left, 0u);
-    EXPECT_EQ(twoQuadCorners(layout), left);
-    for (const Patch& p : layout.patches) EXPECT_EQ(p.sides.size() % 2, 0u);
-    const std::vector<std::string> bad = validateChartLayout(layout, 3, kMaxPatchSides);
-    EXPECT_TRUE(bad.empty()) << bad.front();
-    EXPECT_GT(expectSeamless(resampleLayout(layout, sidesOptions(9))), 0u);
-  }
-  EXPECT_GT(alignedLeft, 0u);  // some layout needed the mend
+  ChartLayout layout = evenedBunny(24);
+  const uint32_t aligned = alignSpokes(layout);
+  ASSERT_GT(aligned, 0u);  // this layout needs the mend
+  const MendCornersResult mend = mendTwoChartCorners(layout);
+  std::printf("  24 patches: %u two-chart corners after alignSpokes, %u after the mend (%u corners added)\n",
+              aligned, mend.left, mend.corners);
+  EXPECT_EQ(mend.left, 0u);
+  EXPECT_EQ(twoQuadCorners(layout), 0u);
+  EXPECT_GT(mend.corners, 0u);
+  for (const Patch& p : layout.patches) EXPECT_EQ(p.sides.size() % 2, 0u);
+  const std::vector<std::string> bad = validateChartLayout(layout, 3, kMaxPatchSides);
+  EXPECT_TRUE(bad.empty()) << bad.front();
+  EXPECT_GT(expectSeamless(resampleLayout(layout, sidesOptions(9))), 0u);
 }
 
 // `gimlod build --quads sides --repair-rounds 0` on the shipped bunny: the chart size follows the
@@ -330,7 +327,9 @@ TEST(SideQuads, TheShippedBunnyBuildsWithHalfTheCharts) {
     const nlohmann::json stats = nlohmann::json::parse(std::ifstream(o.output / "stats.json"));
     const nlohmann::json& r = stats.at("resample");
     EXPECT_EQ(r.at("quads").get<std::string>(), sides ? "sides" : "kites");
-    if (sides) EXPECT_GT(r.at("even_side_corners").get<uint32_t>(), 0u);
+    if (sides) {
+      EXPECT_GT(r.at("even_side_corners").get<uint32_t>(), 0u);
+    }
     charts[sides] = openAtlas(o.output).hierarchy.chartCount();
     flipped[sides] = r.at("flipped_texels").get<uint32_t>();
     if (sides) twoChartCorners = r.at("two_quad_corners").get<uint32_t>();
@@ -353,7 +352,9 @@ TEST(SideQuads, TheShippedBunnyBuildsWithHalfTheCharts) {
   EXPECT_EQ(r.at("quads").get<std::string>(), sidesWin ? "sides" : "kites");
   EXPECT_EQ(openAtlas(o.output).hierarchy.chartCount(), charts[sidesWin]);
   EXPECT_EQ(r.at("flipped_texels").get<uint32_t>(), flipped[sidesWin]);
-  if (flipped[1] > 0 || twoChartCorners > 0) EXPECT_EQ(r.at("other_quads_flipped_texels").get<int64_t>(), int64_t(flipped[!sidesWin]));
+  if (flipped[1] > 0 || twoChartCorners > 0) {
+    EXPECT_EQ(r.at("other_quads_flipped_texels").get<int64_t>(), int64_t(flipped[!sidesWin]));
+  }
 }
 
 }  // namespace
