@@ -18,6 +18,7 @@
 #include <OpenImageIO/imageio.h>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
+#include <spdlog/cfg/env.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
@@ -344,6 +345,8 @@ int main(int argc, char** argv) {
   spdlog::set_pattern("[%l] %v");
   spdlog::set_default_logger(spdlog::stderr_color_mt("gimlod"));
   spdlog::set_pattern("[%l] %v");
+  // SPDLOG_LEVEL=debug (or warn, ...) sets the log level.
+  spdlog::cfg::load_env_levels();
 
   // note: the shared options are parsed into `common`, the others into the struct of the input
   // kind they apply to (told from the input's content when the command runs).
@@ -381,6 +384,9 @@ int main(int argc, char** argv) {
                     "folding (stretch for the charts that fold under bilinear, where they fold less)")
       ->check(CLI::IsMember({"bilinear", "stretch", "folding"}))
       ->capture_default_str();
+  build->add_flag("--no-unfold", [&](int64_t) { mesh.unfold = false; },
+                  "Meshes: keep every inner sample where the quad map puts it (no sliding of the samples round "
+                  "flipped texels over the surface to unfold them)");
   build->add_option("--chart-error", mesh.maxChartError,
                     "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
       ->capture_default_str();

@@ -112,6 +112,8 @@ struct MeshBuildOptions : CommonBuildOptions {
   // How each quad chart's square maps into its quad of the patch's domain (atlas/mesh/resample.h
   // QuadMap): bilinear, least stretch, or least stretch for the charts that fold under bilinear.
   MeshQuadMap quadMap = MeshQuadMap::kBilinear;
+  // Inner samples round flipped texels slide over the surface to unfold them (ResampleOptions::unfold).
+  bool unfold = true;
 };
 
 // The option's name as opts spell it in messages (CommonBuildOptions::spellOption).

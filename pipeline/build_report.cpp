@@ -77,6 +77,8 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"side_ears_mended", rs.sideEarsMended},
                       {"quads", rs.sideQuads ? "sides" : "kites"},
                       {"quad_map", rs.quadMap},
+                      {"unfold", rs.unfold},
+                      {"texels_unfolded", rs.image.texelsUnfolded},
                       {"even_side_corners", rs.evenSideCorners},
                       {"other_quads_flipped_texels", rs.alternativeFlippedTexels},
                       {"two_quad_corners", rs.twoQuadCorners},

@@ -99,6 +99,7 @@ struct MeshResampleStats {
   uint32_t sideEarsMended = 0;
   bool sideQuads = false;              // the sides quad layout (else kites)
   std::string quadMap = "bilinear";    // the quad map: bilinear, stretch or folding
+  bool unfold = true;                  // samples round flipped texels slid (ResampleOptions::unfold)
   uint32_t evenSideCorners = 0;        // corners made so every patch has an even side count
   int64_t alternativeFlippedTexels = -1;  // auto: the other layout's flipped texels; -1: not built
   uint32_t twoQuadCorners = 0;         // sides layout: corners where only two charts meet

@@ -181,6 +181,25 @@ double meshPositionStep(const MeshBounds& b, uint32_t positionBits) {
 
 namespace {
 
+// Logs (at debug level) every chart left with flipped texels: its patch's size and sides (edges
+// and length of each), so that where folds remain can be told apart.
+void logFoldingCharts(const ChartLayout& layout, const GeometryImageSet& set) {
+  for (const GeometryImage& g : set.charts) {
+    if (g.quality.flippedTexels == 0) continue;
+    const Patch& patch = layout.patches[g.patch];
+    std::string sides;
+    for (const PatchSide& side : patch.sides) {
+      double length = 0.0;
+      for (size_t k = 1; k < side.vertices.size(); ++k)
+        length += glm::distance(glm::dvec3(layout.positions[side.vertices[k - 1]]),
+                                glm::dvec3(layout.positions[side.vertices[k]]));
+      sides += fmt::format(" {}:{:.4g}{}", side.vertices.size() - 1, length, side.neighbourPatch < 0 ? "(open)" : "");
+    }
+    spdlog::debug("chart {} of patch {} ({} triangles, {} sides): {} flipped texels; sides (edges:length){}", g.quad,
+                  g.patch, patch.triangles.size(), patch.sides.size(), g.quality.flippedTexels, sides);
+  }
+}
+
 // One resampling and repair of `layout` in quad layout `quads`: its patches change (side counts
 // made even for the sides layout, the repair's cuts). Stages "resample" and "chart_repair", named
 // with `suffix`. With the sides layout, false in `evened` (and nothing else done) when some patch
@@ -192,6 +211,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
   MeshBuildOptions o = options;
   if (o.maxSampleError == kAutoSampleError) o.maxSampleError = o.chartSize == 0 ? kDefaultSampleError : 0.0;
   st.sideQuads = quads == QuadLayout::kSides;
+  st.unfold = o.unfold;
   st.quadMap = o.quadMap == MeshQuadMap::kStretch ? "stretch" : o.quadMap == MeshQuadMap::kFolding ? "folding" : "bilinear";
   if (st.sideQuads) {
     const EvenSidesResult even = evenSides(layout);
@@ -219,6 +239,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
   ro.threads = o.threads;
   ro.spill = r.spill.get();
   ro.quads = quads;
+  ro.unfold = o.unfold;
   ro.quadMap = o.quadMap == MeshQuadMap::kStretch   ? QuadMap::kStretch
                : o.quadMap == MeshQuadMap::kFolding ? QuadMap::kFolding
                                                     : QuadMap::kBilinear;
@@ -294,6 +315,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
   }
   st.chartSize = o.chartSize;
   const GeometryImageSet& set = r.set;
+  if (spdlog::should_log(spdlog::level::debug)) logFoldingCharts(layout, set);
   const std::string left = fmt::format("{} flipped texels left, largest sampling error {:.4f}% of the diagonal",
                                        set.image.flippedTexels,
                                        100.0 * set.image.sampleError / std::max(diagonal, 1e-300));

@@ -477,6 +477,7 @@ ImageQuality combineImageQuality(const std::vector<ImageQuality>& parts) {
     q.flippedTexels += p.flippedTexels;
     q.texelsAgainstNormals += p.texelsAgainstNormals;
     q.degenerateTexels += p.degenerateTexels;
+    q.texelsUnfolded += p.texelsUnfolded;
     if (p.sampleError > q.sampleError) q.sampleError = p.sampleError, q.sampleErrorVertex = p.sampleErrorVertex;
   });
 }
@@ -707,6 +708,13 @@ bool buildQuadWarp(const PatchParameterization& pp, const std::vector<glm::dvec3
   }
 }
 
+// The unfolding of flipped texels (resampleLayout): sweeps at most, how far a sample may slide
+// (in texels of the map), and the cosine between a texel's normal and its input faces that it is
+// pushed to reach.
+constexpr uint32_t kUnfoldSweeps = 24;
+constexpr double kUnfoldReach = 1.0;
+constexpr double kUnfoldMargin = 0.1;
+
 // The point of triangle abc closest to p (Ericson, Real-Time Collision Detection, 5.1.5).
 glm::dvec3 closestOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
   const glm::dvec3 ab = b - a, ac = c - a, ap = p - a;
@@ -731,17 +739,17 @@ glm::dvec3 closestOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm
 
 // The distance from x to a chart's surface, as the renderer triangulates it (each texel split along
 // its (0,0)-(1,1) diagonal), near chart coordinates st in the unit square: the nearest of the
-// triangles of the texel holding st and of the eight texels round it. Where the parameterization
+// triangles of the texel holding st and of the texels up to `reach` round it. Where the parameterization
 // shifts x along the surface by less than a texel this is its distance across the surface.
 double chartSurfaceDistance(const std::vector<glm::vec3>& positions, uint32_t size, const glm::dvec2& st,
-                            const glm::dvec3& x) {
+                            const glm::dvec3& x, int64_t reach) {
   const int64_t m = int64_t(size) - 1;
   const int64_t ix = std::min<int64_t>(int64_t(st.x * double(m)), m - 1);
   const int64_t iy = std::min<int64_t>(int64_t(st.y * double(m)), m - 1);
   auto at = [&](int64_t u, int64_t v) { return glm::dvec3(positions[size_t(v) * size + size_t(u)]); };
   double best = std::numeric_limits<double>::infinity();
-  for (int64_t v = std::max<int64_t>(iy - 1, 0); v <= std::min<int64_t>(iy + 1, m - 1); ++v) {
-    for (int64_t u = std::max<int64_t>(ix - 1, 0); u <= std::min<int64_t>(ix + 1, m - 1); ++u) {
+  for (int64_t v = std::max<int64_t>(iy - reach, 0); v <= std::min<int64_t>(iy + reach, m - 1); ++v) {
+    for (int64_t u = std::max<int64_t>(ix - reach, 0); u <= std::min<int64_t>(ix + reach, m - 1); ++u) {
       const glm::dvec3 p00 = at(u, v), p10 = at(u + 1, v), p01 = at(u, v + 1), p11 = at(u + 1, v + 1);
       best = std::min({best, glm::length(x - closestOnTriangle(x, p00, p10, p11)),
                        glm::length(x - closestOnTriangle(x, p00, p11, p01))});
@@ -1033,6 +1041,15 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
           }
         }
       }
+      // The unit normal of layout triangle t, or `otherwise` when t is ~0u or degenerate.
+      auto faceNormalOr = [&](uint32_t t, const glm::dvec3& otherwise) {
+        if (t == ~0u) return otherwise;
+        const auto& tri = layout.triangles[t];
+        const glm::dvec3 a(layout.positions[tri[0]]);
+        const glm::dvec3 cr = glm::cross(glm::dvec3(layout.positions[tri[1]]) - a, glm::dvec3(layout.positions[tri[2]]) - a);
+        const double l = glm::length(cr);
+        return l > 0.0 && std::isfinite(l) ? cr / l : otherwise;
+      };
       auto faceOf = [&](const Sample& s) {
         if (s.triangle != ~0u || s.edgeA == ~0u) return s.triangle;
         const auto it = sideFace.find(undirectedKey(s.edgeA, s.edgeB));
@@ -1054,6 +1071,8 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       }
       std::vector<glm::vec3> floatNormals(size_t(size) * size);
       std::vector<uint32_t> triangles(size_t(size) * size, ~0u);
+      // The domain point of each inner sample (for the unfolding below).
+      std::vector<glm::dvec2> domain(size_t(size) * size);
       std::vector<glm::vec3> faceNormals(size_t(size) * size);
       for (uint32_t i = 0; i < nq; ++i) {
         GeometryImage& img = set.charts[links.offsets[p] + i];
@@ -1104,28 +1123,23 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
               } else {
                 d = (1 - s) * (1 - t) * qa + s * (1 - t) * qb + s * t * qc + (1 - s) * t * qe;
               }
+              domain[size_t(v) * size + u] = d;
               putAt(size_t(v) * size + u, sampleAt(d));
             }
           }
         };
+        bool unfolded = false;  // some inner samples slid off the map (unfold below)
         auto measure = [&](bool warp, std::vector<uint32_t>& flipped) {
           // The input faces under the samples (zero where none is known).
-          for (size_t k = 0; k < faceNormals.size(); ++k) {
-            faceNormals[k] = glm::vec3(0.f);
-            if (triangles[k] == ~0u) continue;
-            const auto& t = layout.triangles[triangles[k]];
-            const glm::dvec3 a(layout.positions[t[0]]), b(layout.positions[t[1]]), c(layout.positions[t[2]]);
-            const glm::dvec3 cr = glm::cross(b - a, c - a);
-            const double l = glm::length(cr);
-            if (l > 0.0 && std::isfinite(l)) faceNormals[k] = glm::vec3(cr / l);
-          }
+          for (size_t k = 0; k < faceNormals.size(); ++k) faceNormals[k] = glm::vec3(faceNormalOr(triangles[k], glm::dvec3(0.0)));
           flipped.clear();
           ImageQuality q = measureImage(img.positions, floatNormals, size, &flipped, &faceNormals);
           // How far the chart's surface passes from the input vertices it stands for, each at its
           // chart coordinates under the map used.
           for (auto [v, st] : quadVertices[i]) {
             if (warp && warps[i].ofPatchVertex[v] != ~0u) st = warps[i].square[warps[i].ofPatchVertex[v]];
-            const double e = chartSurfaceDistance(img.positions, size, st, glm::dvec3(layout.positions[pp.vertices[v]]));
+            const double e = chartSurfaceDistance(img.positions, size, st, glm::dvec3(layout.positions[pp.vertices[v]]),
+                                                  unfolded ? 2 : 1);
             if (e > q.sampleError) {
               q.sampleError = e;
               q.sampleErrorVertex = pp.vertices[v];
@@ -1133,7 +1147,109 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
           }
           return q;
         };
-        const bool warp = options.quadMap == QuadMap::kStretch && ensureWarp(i);
+        // Unfolding (options.unfold): the inner samples round the flipped texels slide over the
+        // surface, through the patch's parameterization, each to where its four texels agree best
+        // with the input faces under their corners (a pattern search of 8 directions at 1/2, 1/4
+        // and 1/8 of a texel, in sweeps until none moves), at most kUnfoldReach texels from where
+        // the map put it. The samples stay on the input surface and the border does not move, so
+        // the seams are unchanged. Tried on a ring of 2 texels round the flipped ones, then 4,
+        // then 8; each kept if fewer texels fold.
+        auto unfold = [&](bool warp, std::vector<uint32_t>& flipped) {
+          const uint32_t flippedBefore = img.quality.flippedTexels;
+          const std::vector<glm::dvec2> start = domain;
+          // The domain's texel spacing at each inner sample, from the map.
+          auto spacing = [&](size_t k) {
+            return 0.25 * (glm::distance(start[k - 1], start[k]) + glm::distance(start[k + 1], start[k]) +
+                           glm::distance(start[k - size], start[k]) + glm::distance(start[k + size], start[k]));
+          };
+          // A texel's agreement with the input: the largest cosine between its normal (the cross of
+          // its diagonals) and the faces under its corners (below 0: flipped), with sample `moved`
+          // at x on face normal fn.
+          auto agreement = [&](size_t t00, size_t moved, const glm::dvec3& x, const glm::dvec3& fn) {
+            const size_t c[4] = {t00, t00 + 1, t00 + size, t00 + size + 1};
+            auto at = [&](int j) { return c[j] == moved ? x : glm::dvec3(img.positions[c[j]]); };
+            const glm::dvec3 cr = glm::cross(at(3) - at(0), at(2) - at(1));
+            const double l = glm::length(cr);
+            if (!(l > 0.0)) return -1.0;
+            double best = -1.0;
+            for (int j = 0; j < 4; ++j)
+              best = std::max(best, glm::dot(cr, c[j] == moved ? fn : faceNormalOr(triangles[c[j]], floatNormals[c[j]])) / l);
+            return best;
+          };
+          // What inner sample k at x (face normal fn) costs its four texels: their agreement short
+          // of kUnfoldMargin.
+          auto cost = [&](size_t k, const glm::dvec3& x, const glm::dvec3& fn) {
+            double e = 0.0;
+            for (const size_t t : {k, k - 1, k - size, k - size - 1})
+              e += std::max(0.0, kUnfoldMargin - agreement(t, k, x, fn));
+            return e;
+          };
+          for (const uint32_t ring : {2u, 4u, 8u}) {
+            const GeometryImage before = img;
+            const std::vector<glm::vec3> beforeNormals = floatNormals;
+            const std::vector<uint32_t> beforeTriangles = triangles, beforeFlipped = flipped;
+            const std::vector<glm::dvec2> beforeDomain = domain;
+            const bool beforeUnfolded = unfolded;
+            std::vector<uint8_t> mark(size_t(size) * size, 0);
+            std::vector<size_t> moving;
+            for (const uint32_t at : flipped) {
+              const int64_t u0 = at % size, v0 = at / size;
+              for (int64_t v = std::max<int64_t>(v0 - ring, 1); v <= std::min<int64_t>(v0 + 1 + ring, m - 1); ++v) {
+                for (int64_t u = std::max<int64_t>(u0 - ring, 1); u <= std::min<int64_t>(u0 + 1 + ring, m - 1); ++u) {
+                  const size_t k = size_t(v) * size + size_t(u);
+                  if (!mark[k]) mark[k] = 1, moving.push_back(k);
+                }
+              }
+            }
+            std::sort(moving.begin(), moving.end());
+            for (uint32_t sweep = 0; sweep < kUnfoldSweeps; ++sweep) {
+              bool any = false;
+              for (const size_t k : moving) {
+                const double h = spacing(k);
+                double best = cost(k, glm::dvec3(img.positions[k]), faceNormalOr(triangles[k], floatNormals[k]));
+                if (best == 0.0) continue;
+                glm::dvec2 bestAt = domain[k];
+                Sample bestSample;
+                bool found = false;
+                for (const double scale : {0.5, 0.25, 0.125}) {
+                  for (int dir = 0; dir < 8; ++dir) {
+                    const double angle = dir * (3.14159265358979323846 / 4.0);
+                    glm::dvec2 to = domain[k] + (scale * h) * glm::dvec2(std::cos(angle), std::sin(angle));
+                    const glm::dvec2 off = to - start[k];
+                    const double reach = kUnfoldReach * h, len = glm::length(off);
+                    if (len > reach) to = start[k] + off * (reach / len);
+                    const Sample cand = sampleAt(to);
+                    const double e = cost(k, cand.p, faceNormalOr(faceOf(cand), cand.n));
+                    if (e < best * (1.0 - 1e-6)) best = e, bestAt = to, bestSample = cand, found = true;
+                  }
+                  if (found) break;
+                }
+                if (!found) continue;
+                domain[k] = bestAt;
+                putAt(k, bestSample);
+                any = true;
+              }
+              if (!any) break;
+            }
+            unfolded = true;
+            std::vector<uint32_t> now;
+            const ImageQuality q = measure(warp, now);
+            if (q.flippedTexels < before.quality.flippedTexels) {
+              img.quality = q;
+              img.quality.texelsUnfolded = flippedBefore - q.flippedTexels;
+              flipped = now;
+              if (q.flippedTexels == 0) return;
+              continue;
+            }
+            img = before;
+            floatNormals = beforeNormals;
+            triangles = beforeTriangles;
+            flipped = beforeFlipped;
+            domain = beforeDomain;
+            unfolded = beforeUnfolded;
+          }
+        };
+        bool warp = options.quadMap == QuadMap::kStretch && ensureWarp(i);
         fillInside(warp);
         std::vector<uint32_t> flipped;
         img.quality = measure(warp, flipped);
@@ -1142,17 +1258,21 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
           const GeometryImage bilinear = img;
           const std::vector<glm::vec3> bilinearNormals = floatNormals;
           const std::vector<uint32_t> bilinearTriangles = triangles, bilinearFlipped = flipped;
+          const std::vector<glm::dvec2> bilinearDomain = domain;
           fillInside(true);
           const ImageQuality q = measure(true, flipped);
           if (q.flippedTexels < bilinear.quality.flippedTexels) {
             img.quality = q;
+            warp = true;
           } else {
             img = bilinear;
+            domain = bilinearDomain;
             floatNormals = bilinearNormals;
             triangles = bilinearTriangles;
             flipped = bilinearFlipped;
           }
         }
+        if (options.unfold && img.quality.flippedTexels > 0) unfold(warp, flipped);
         // Where the chart folds, as layout triangles (one per flipped texel, a few per chart).
         for (uint32_t at : flipped) {
           for (const size_t k : {size_t(at), size_t(at) + 1, size_t(at) + size, size_t(at) + size + 1}) {

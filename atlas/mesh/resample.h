@@ -61,6 +61,9 @@ struct ResampleOptions {
   ChartSpill* spill = nullptr;  // if set, every chart's samples go there once it is measured
   QuadLayout quads = QuadLayout::kKites;
   QuadMap quadMap = QuadMap::kBilinear;
+  // Inner samples round flipped texels slide over the surface toward their neighbours' mean, kept
+  // where fewer texels fold (the border, and so the seams, do not move).
+  bool unfold = true;
 };
 
 // Quality of a sampled image, seen as a map from the unit square to the sampled surface through
@@ -80,6 +83,7 @@ struct ImageQuality {
   // own vertex normals, as scans have), so it is >= flippedTexels less such texels.
   uint32_t texelsAgainstNormals = 0;
   uint32_t degenerateTexels = 0;  // texel quads of (near) zero 3D area
+  uint32_t texelsUnfolded = 0;    // flipped texels the unfolding (ResampleOptions::unfold) mended
   // The largest distance from an input vertex to the chart's surface (its texels as the renderer
   // triangulates them) round the vertex's own chart coordinates (the 3 x 3 texels there): the
   // sampling error the parameterization's texel sizes leave, an upper bound of the vertex's

@@ -18,6 +18,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "atlas/fidelity/fidelity.h"
 #include "atlas/mesh/charting.h"
 #include "atlas/mesh/layout_refine.h"
 #include "atlas/mesh/mesh_io.h"
@@ -147,11 +148,13 @@ TEST(SideQuads, TheStretchQuadMapKeepsTheBorderAndLowersTheStretch) {
 }
 
 // QuadMap::kFolding on the bunny's evened layout: every chart folds no more than under the
-// bilinear map, some fold less, and the charts, mixing both maps, stay seamless.
+// bilinear map, some fold less, and the charts, mixing both maps, stay seamless (the maps alone,
+// without the unfolding).
 TEST(SideQuads, TheFoldingQuadMapFoldsLessAndStaysSeamless) {
   ChartLayout layout = evenedBunny(24);
   mendTwoChartCorners(layout);
   ResampleOptions o = sidesOptions(33);
+  o.unfold = false;
   const GeometryImageSet bilinear = resampleLayout(layout, o);
   o.quadMap = QuadMap::kFolding;
   const GeometryImageSet folding = resampleLayout(layout, o);
@@ -169,6 +172,55 @@ TEST(SideQuads, TheFoldingQuadMapFoldsLessAndStaysSeamless) {
     }
   }
   EXPECT_GT(expectSeamless(folding), 0u);
+}
+
+// The unfolding on the bunny's evened layout at 33^2 (where a texel spans the most surface): it
+// mends most flipped texels; no chart folds more than without it; every chart keeps its border
+// bytes, so the charts stay seamless; a chart without flipped texels is untouched; and every
+// sample that slid still lies on the input surface.
+TEST(SideQuads, TheUnfoldingMendsFlippedTexelsOnTheSurfaceAndKeepsTheBorder) {
+  ChartLayout layout = evenedBunny(24);
+  mendTwoChartCorners(layout);
+  ResampleOptions o = sidesOptions(33);
+  o.unfold = false;
+  const GeometryImageSet mapped = resampleLayout(layout, o);
+  o.unfold = true;
+  const GeometryImageSet unfolded = resampleLayout(layout, o);
+  ASSERT_EQ(unfolded.charts.size(), mapped.charts.size());
+  std::printf("  bunny, %zu patches at 33^2: %u flipped texels as mapped, %u unfolded (%u mended)\n",
+              layout.patches.size(), mapped.image.flippedTexels, unfolded.image.flippedTexels,
+              unfolded.image.texelsUnfolded);
+  ASSERT_GT(mapped.image.flippedTexels, 20u);
+  EXPECT_LT(unfolded.image.flippedTexels * 4, mapped.image.flippedTexels);
+  EXPECT_EQ(unfolded.image.texelsUnfolded, mapped.image.flippedTexels - unfolded.image.flippedTexels);
+  std::vector<glm::vec3> slid;
+  for (size_t c = 0; c < unfolded.charts.size(); ++c) {
+    const GeometryImage& a = mapped.charts[c];
+    const GeometryImage& b = unfolded.charts[c];
+    EXPECT_LE(b.quality.flippedTexels, a.quality.flippedTexels) << "chart " << c;
+    for (uint32_t e = 0; e < 4; ++e) {
+      for (uint32_t k = 0; k < 33; ++k) {
+        const size_t i = edgeSampleIndex(33, e, k);
+        ASSERT_TRUE(sameBytes(&a.positions[i], &b.positions[i], sizeof(glm::vec3))) << "chart " << c << " edge " << e;
+      }
+    }
+    if (a.quality.flippedTexels == 0) {
+      EXPECT_TRUE(sameBytes(a.positions.data(), b.positions.data(), a.positions.size() * sizeof(glm::vec3)))
+          << "chart " << c << " does not fold, so nothing slides";
+    }
+    for (size_t i = 0; i < a.positions.size(); ++i) {
+      if (!sameBytes(&a.positions[i], &b.positions[i], sizeof(glm::vec3))) slid.push_back(b.positions[i]);
+    }
+  }
+  ASSERT_GE(slid.size(), 3u);
+  FidelityDetail detail;
+  const FidelityStats f = measureFidelity(layout.positions, layout.triangles, slid, {{0, 1, 2}}, &detail);
+  double farthest = 0.0;
+  for (const float d : detail.atlasDistances) farthest = std::max(farthest, double(d));
+  std::printf("  %zu samples slid, the farthest %.3g of the diagonal from the input surface\n", slid.size(),
+              farthest / f.diagonal);
+  EXPECT_LT(farthest, 1e-6 * f.diagonal);
+  EXPECT_GT(expectSeamless(unfolded), 0u);
 }
 
 TEST(SideQuads, AnOddPatchIsRefused) {
