@@ -369,7 +369,7 @@ int main(int argc, char** argv) {
                    "Meshes: target patches (each becomes 1-5 quad charts, see --quads, and the chart repair may cut more); auto: "
                    "about sqrt(triangles) / 80, at least 48; 0: --chart-error")
       ->capture_default_str();
-  std::string quadsArg = "kites";
+  std::string quadsArg = "sides";
   build->add_option("--quads", quadsArg,
                     "Meshes: how a patch becomes quad charts: sides (each chart edge a whole patch side, about n/2 "
                     "charts an n-sided patch, one for 4 sides), kites (each side halved, n charts), or auto (sides, "

@@ -108,7 +108,7 @@ struct MeshBuildOptions : CommonBuildOptions {
   // leave flipped texels, corners where only two charts meet or a sampling error over the bound,
   // keeping whichever leaves fewer flipped texels (sides on a tie, if it has no such corner and is
   // within the bound or kites are not either).
-  MeshQuads quads = MeshQuads::kKites;
+  MeshQuads quads = MeshQuads::kSides;
   // How each quad chart's square maps into its quad of the patch's domain (atlas/mesh/resample.h
   // QuadMap): bilinear, least stretch, or least stretch for the charts that fold under bilinear.
   MeshQuadMap quadMap = MeshQuadMap::kBilinear;

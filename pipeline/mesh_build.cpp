@@ -214,8 +214,9 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
   st.unfold = o.unfold;
   st.quadMap = o.quadMap == MeshQuadMap::kStretch ? "stretch" : o.quadMap == MeshQuadMap::kFolding ? "folding" : "bilinear";
   if (st.sideQuads) {
+    const uint32_t holeCorners = splitTwoSidedHoles(layout);
     const EvenSidesResult even = evenSides(layout);
-    st.evenSideCorners = even.corners;
+    st.evenSideCorners = holeCorners + even.corners;
     *evened = even.oddLeft == 0;
     if (!*evened) return r;
     st.evenSideCorners += mendTwoChartCorners(layout).corners;
@@ -369,13 +370,19 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
     straighten(QuadLayout::kKites, "");
     r = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, "", &evened);
   } else if (options.quads == MeshQuads::kSides) {
+    // A layout whose side counts cannot all be made even (a surface of a few triangles, whose
+    // sides have no inner vertex) is built in kites instead, from the charted patches.
+    const std::vector<Patch> charted = layout.patches;
     straighten(QuadLayout::kSides, "");
     r = resampleInLayout(layout, options, QuadLayout::kSides, dir, meter, "", &evened);
-    if (!evened)
-      throw InputError(fmt::format("{}: some patches cannot be given an even number of sides for the sides quad "
-                                   "layout (no chain of sides with inner vertices joins them to another such patch or "
-                                   "to a hole); build with {} kites",
-                                   options.input.string(), optionRef("quads")));
+    if (!evened) {
+      spdlog::warn("{}: some patches cannot be given an even number of sides for the sides quad layout (no chain of "
+                   "sides with inner vertices joins them to another such patch or to a hole); built with {} kites",
+                   options.input.string(), spelledOption(options, "quads"));
+      layout.patches = charted;
+      straighten(QuadLayout::kKites, "_kites");
+      r = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, "_kites", &evened);
+    }
   } else {
     // Sides first (about half the charts); kites too if that leaves flipped texels, corners
     // where only two charts meet or charts that sample the surface more coarsely than the bound,

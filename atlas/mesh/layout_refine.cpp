@@ -6,6 +6,7 @@
 #include <functional>
 #include <limits>
 #include <queue>
+#include <stdexcept>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -431,6 +432,82 @@ void rotatePatchSides(ChartLayout& layout, uint32_t p, uint32_t k) {
     }
   }
   std::rotate(patch.sides.begin(), patch.sides.begin() + k % n, patch.sides.end());
+}
+
+uint32_t splitTwoSidedHoles(ChartLayout& layout, uint32_t maxSides) {
+  struct SideAt {
+    uint32_t patch, side;
+  };
+  // The open side starting at each boundary vertex (one per vertex on a manifold boundary).
+  std::unordered_map<uint32_t, SideAt> startingAt;
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    for (uint32_t i = 0; i < layout.patches[p].sides.size(); ++i) {
+      const PatchSide& s = layout.patches[p].sides[i];
+      if (s.neighbourPatch < 0) startingAt.emplace(s.vertices.front(), SideAt{p, i});
+    }
+  }
+  auto sideLength = [&](const PatchSide& s) {
+    double l = 0.0;
+    for (size_t k = 1; k < s.vertices.size(); ++k)
+      l += glm::distance(glm::dvec3(layout.positions[s.vertices[k - 1]]), glm::dvec3(layout.positions[s.vertices[k]]));
+    return l;
+  };
+  // The holes of at most two sides, each as its longest side's start vertex (found before any
+  // change, since corners made change the side indices).
+  std::vector<uint32_t> holes;
+  std::unordered_set<uint32_t> seen;
+  for (const auto& [start, first] : startingAt) {
+    if (seen.contains(start)) continue;
+    std::vector<SideAt> loop;
+    for (SideAt at = first;;) {
+      loop.push_back(at);
+      seen.insert(layout.patches[at.patch].sides[at.side].vertices.front());
+      const auto next = startingAt.find(layout.patches[at.patch].sides[at.side].vertices.back());
+      if (next == startingAt.end() || loop.size() > 2) break;
+      if (next->first == start) break;
+      at = next->second;
+    }
+    if (loop.size() > 2) continue;
+    const SideAt longest = *std::max_element(loop.begin(), loop.end(), [&](const SideAt& a, const SideAt& b) {
+      return sideLength(layout.patches[a.patch].sides[a.side]) < sideLength(layout.patches[b.patch].sides[b.side]);
+    });
+    holes.push_back(layout.patches[longest.patch].sides[longest.side].vertices.front());
+  }
+  std::sort(holes.begin(), holes.end());  // (the map's order is not the input's)
+  uint32_t corners = 0;
+  for (const uint32_t start : holes) {
+    SideAt at{~0u, 0};
+    for (uint32_t p = 0; p < layout.patches.size() && at.patch == ~0u; ++p) {
+      for (uint32_t i = 0; i < layout.patches[p].sides.size(); ++i) {
+        const PatchSide& s = layout.patches[p].sides[i];
+        if (s.neighbourPatch < 0 && s.vertices.front() == start) at = {p, i};
+      }
+    }
+    if (at.patch == ~0u) continue;
+    const PatchSide s = layout.patches[at.patch].sides[at.side];
+    if (s.vertices.size() < 4 || layout.patches[at.patch].sides.size() + 2 > maxSides) continue;
+    // The inner vertices nearest a third and two thirds of the side's arc length, distinct.
+    std::vector<double> along(s.vertices.size(), 0.0);
+    for (size_t k = 1; k < s.vertices.size(); ++k)
+      along[k] = along[k - 1] + glm::distance(glm::dvec3(layout.positions[s.vertices[k - 1]]),
+                                              glm::dvec3(layout.positions[s.vertices[k]]));
+    auto nearest = [&](double target, size_t lo, size_t hi) {
+      size_t best = lo;
+      for (size_t k = lo; k <= hi; ++k) {
+        if (std::abs(along[k] - target) < std::abs(along[best] - target)) best = k;
+      }
+      return best;
+    };
+    const size_t last = s.vertices.size() - 1;
+    const size_t k1 = nearest(along.back() / 3.0, 1, last - 2);
+    const size_t k2 = nearest(2.0 * along.back() / 3.0, k1 + 1, last - 1);
+    if (!insertCorner(layout, at.patch, at.side, uint32_t(k1), maxSides)) continue;
+    if (!insertCorner(layout, at.patch, at.side + 1, uint32_t(k2 - k1), maxSides)) {
+      throw std::logic_error("splitTwoSidedHoles: the second corner of a side with room for it was refused");
+    }
+    corners += 2;
+  }
+  return corners;
 }
 
 EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& within, uint32_t maxSides) {

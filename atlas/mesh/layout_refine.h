@@ -89,6 +89,13 @@ bool rotationFoldsNoCorner(ChartLayout& layout, uint32_t p);
 // quad layout.
 void rotatePatchSides(ChartLayout& layout, uint32_t p, uint32_t k);
 
+// In the sides quad layout a hole bordered by only two sides is two chart edges between the same
+// two corners, and at a chart's coarsest level (its corners alone) they coincide: the hole closes.
+// Gives each such hole two more corners, on its longest side at a third and two thirds of its arc
+// length (its patch keeps its side count's parity), when that side has 3 or more edges and its
+// patch room for two more sides. Returns the corners made.
+uint32_t splitTwoSidedHoles(ChartLayout& layout, uint32_t maxSides = kMaxPatchSides);
+
 // Makes every patch's side count even, as the sides quad layout needs (atlas/mesh/resample.h), by
 // making inner side vertices corners (insertCorner, the vertex nearest the side's arc-length
 // middle, on the longest side that can take one): first on sides shared by two odd patches (one

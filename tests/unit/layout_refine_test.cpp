@@ -348,6 +348,7 @@ TEST(PatchSplit, FlipRepairStopsAtItsWorkBudget) {
   const ChartLayout charted = chartedBunny();
   ResampleOptions ro;
   ro.chartSize = 33;
+  ro.unfold = false;  // the folds as mapped: enough of them for several rounds of cuts
   ChartLayout full = charted;
   ChartRepairStats stFull;
   resampleAndRepair(full, ro, {2}, &stFull);

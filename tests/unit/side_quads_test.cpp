@@ -10,9 +10,12 @@
 // pairing serves.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <map>
+#include <set>
 #include <filesystem>
 #include <stdexcept>
 
@@ -266,6 +269,52 @@ TEST(EvenSides, TheBunnysOddPatchesArePairedAndItsSidesLayoutIsSeamless) {
   EXPECT_LT(set.charts.size() * 10, size_t(kites) * 7) << set.charts.size() << " charts against " << kites << " kites";
   std::printf("  bunny, 48 patches: %u odd, %u corners to even them, %zu charts (kites: %u)\n", oddBefore, r.corners,
               set.charts.size(), kites);
+}
+
+// The side count of every hole (loop of open sides) of a layout.
+std::vector<uint32_t> holeSideCounts(const ChartLayout& layout) {
+  std::map<uint32_t, uint32_t> next;  // open side: start vertex -> end vertex
+  for (const Patch& p : layout.patches) {
+    for (const PatchSide& s : p.sides) {
+      if (s.neighbourPatch < 0) next[s.vertices.front()] = s.vertices.back();
+    }
+  }
+  std::vector<uint32_t> counts;
+  std::set<uint32_t> seen;
+  for (const auto& [start, end] : next) {
+    if (seen.contains(start)) continue;
+    uint32_t n = 0;
+    for (uint32_t v = start; !seen.contains(v); v = next.at(v)) seen.insert(v), ++n;
+    counts.push_back(n);
+  }
+  return counts;
+}
+
+// The shipped bunny's holes, as charted into 48 patches: some are bordered by two sides alone,
+// which in the sides layout close at the charts' coarsest level. splitTwoSidedHoles gives each two
+// more corners on one side, so every hole has 3 or more sides and every patch keeps its side
+// count's parity.
+TEST(EvenSides, TwoSidedHolesGetTwoMoreCorners) {
+  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 48;
+  ChartLayout layout = buildChartLayout(mesh, copt);
+  straightenSides(layout, 2, true);
+  moveSideEars(layout);
+  const std::vector<uint32_t> before = holeSideCounts(layout);
+  std::vector<size_t> parity;
+  for (const Patch& p : layout.patches) parity.push_back(p.sides.size() % 2);
+  const uint32_t twoSided = uint32_t(std::count_if(before.begin(), before.end(), [](uint32_t n) { return n <= 2; }));
+  std::printf("  bunny, 48 patches: %zu holes, %u of them with two sides or fewer\n", before.size(), twoSided);
+  ASSERT_GT(twoSided, 0u);
+  EXPECT_EQ(splitTwoSidedHoles(layout), 2 * twoSided);
+  const std::vector<uint32_t> after = holeSideCounts(layout);
+  ASSERT_EQ(after.size(), before.size());
+  for (const uint32_t n : after) EXPECT_GE(n, 3u);
+  for (size_t p = 0; p < layout.patches.size(); ++p) EXPECT_EQ(layout.patches[p].sides.size() % 2, parity[p]) << p;
+  const std::vector<std::string> bad = validateChartLayout(layout, 3, kMaxPatchSides);
+  EXPECT_TRUE(bad.empty()) << bad.front();
+  EXPECT_EQ(splitTwoSidedHoles(layout), 0u);  // nothing left to do
 }
 
 // Rotating a patch's sides keeps the layout valid and every link reciprocal; rotating back
