@@ -709,11 +709,15 @@ bool buildQuadWarp(const PatchParameterization& pp, const std::vector<glm::dvec3
 }
 
 // The unfolding of flipped texels (resampleLayout): sweeps at most, how far a sample may slide
-// (in texels of the map), and the cosine between a texel's normal and its input faces that it is
-// pushed to reach.
+// (in texels of the map), the cosine between a texel's normal and its input faces that it is
+// pushed to reach, and how far from its neighbours a sample may end (times the farthest of them
+// as mapped). Without that last bound a sample in a squeezed fold can slide across it, far from
+// its neighbours in 3D: a texel across the fold, and a coarse node's error (the distance from the
+// fine samples to its grid) of tens of pixels on the turbine blade.
 constexpr uint32_t kUnfoldSweeps = 24;
 constexpr double kUnfoldReach = 1.0;
 constexpr double kUnfoldMargin = 0.1;
+constexpr double kUnfoldLength = 1.5;
 
 // The point of triangle abc closest to p (Ericson, Real-Time Collision Detection, 5.1.5).
 glm::dvec3 closestOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
@@ -1151,12 +1155,28 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         // surface, through the patch's parameterization, each to where its four texels agree best
         // with the input faces under their corners (a pattern search of 8 directions at 1/2, 1/4
         // and 1/8 of a texel, in sweeps until none moves), at most kUnfoldReach texels from where
-        // the map put it. The samples stay on the input surface and the border does not move, so
+        // the map put it and kUnfoldLength times its farthest neighbour as mapped from its
+        // neighbours. The samples stay on the input surface and the border does not move, so
         // the seams are unchanged. Tried on a ring of 2 texels round the flipped ones, then 4,
         // then 8; each kept if fewer texels fold.
         auto unfold = [&](bool warp, std::vector<uint32_t>& flipped) {
           const uint32_t flippedBefore = img.quality.flippedTexels;
           const std::vector<glm::dvec2> start = domain;
+          const std::vector<glm::vec3> startPositions = img.positions;
+          // How far from its four neighbours a sample may end: kUnfoldLength times the farthest
+          // of them as the map put them (so that no texel grows long across the surface).
+          auto longest = [&](size_t k) {
+            double l = 0.0;
+            for (const size_t j : {k - 1, k + 1, k - size, k + size})
+              l = std::max(l, glm::distance(glm::dvec3(startPositions[j]), glm::dvec3(startPositions[k])));
+            return kUnfoldLength * l;
+          };
+          auto within = [&](size_t k, const glm::dvec3& x, double l) {
+            for (const size_t j : {k - 1, k + 1, k - size, k + size}) {
+              if (glm::distance(glm::dvec3(img.positions[j]), x) > l) return false;
+            }
+            return true;
+          };
           // The domain's texel spacing at each inner sample, from the map.
           auto spacing = [&](size_t k) {
             return 0.25 * (glm::distance(start[k - 1], start[k]) + glm::distance(start[k + 1], start[k]) +
@@ -1205,7 +1225,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
             for (uint32_t sweep = 0; sweep < kUnfoldSweeps; ++sweep) {
               bool any = false;
               for (const size_t k : moving) {
-                const double h = spacing(k);
+                const double h = spacing(k), reach3D = longest(k);
                 double best = cost(k, glm::dvec3(img.positions[k]), faceNormalOr(triangles[k], floatNormals[k]));
                 if (best == 0.0) continue;
                 glm::dvec2 bestAt = domain[k];
@@ -1219,6 +1239,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
                     const double reach = kUnfoldReach * h, len = glm::length(off);
                     if (len > reach) to = start[k] + off * (reach / len);
                     const Sample cand = sampleAt(to);
+                    if (!within(k, cand.p, reach3D)) continue;
                     const double e = cost(k, cand.p, faceNormalOr(faceOf(cand), cand.n));
                     if (e < best * (1.0 - 1e-6)) best = e, bestAt = to, bestSample = cand, found = true;
                   }

@@ -179,8 +179,9 @@ TEST(SideQuads, TheFoldingQuadMapFoldsLessAndStaysSeamless) {
 
 // The unfolding on the bunny's evened layout at 33^2 (where a texel spans the most surface): it
 // mends most flipped texels; no chart folds more than without it; every chart keeps its border
-// bytes, so the charts stay seamless; a chart without flipped texels is untouched; and every
-// sample that slid still lies on the input surface.
+// bytes, so the charts stay seamless; a chart without flipped texels is untouched; no texel grows
+// long across the surface (a chart's largest stretch at most doubles); and every sample that slid
+// still lies on the input surface.
 TEST(SideQuads, TheUnfoldingMendsFlippedTexelsOnTheSurfaceAndKeepsTheBorder) {
   ChartLayout layout = evenedBunny(24);
   mendTwoChartCorners(layout);
@@ -201,6 +202,7 @@ TEST(SideQuads, TheUnfoldingMendsFlippedTexelsOnTheSurfaceAndKeepsTheBorder) {
     const GeometryImage& a = mapped.charts[c];
     const GeometryImage& b = unfolded.charts[c];
     EXPECT_LE(b.quality.flippedTexels, a.quality.flippedTexels) << "chart " << c;
+    EXPECT_LE(b.quality.stretchLinf, 2.0 * a.quality.stretchLinf) << "chart " << c;
     for (uint32_t e = 0; e < 4; ++e) {
       for (uint32_t k = 0; k < 33; ++k) {
         const size_t i = edgeSampleIndex(33, e, k);
