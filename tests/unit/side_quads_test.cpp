@@ -150,14 +150,24 @@ TEST(SideQuads, TheStretchQuadMapKeepsTheBorderAndLowersTheStretch) {
   }
 }
 
+// The bunny's evened 24-patch layout with its two-chart corners mended, and the sides options at
+// 33^2 without the unfolding (the charts as their quad map places them).
+struct MappedBunny {
+  ChartLayout layout;
+  ResampleOptions options;
+};
+MappedBunny mappedBunny() {
+  MappedBunny b{evenedBunny(24), sidesOptions(33)};
+  mendTwoChartCorners(b.layout);
+  b.options.unfold = false;
+  return b;
+}
+
 // QuadMap::kFolding on the bunny's evened layout: every chart folds no more than under the
 // bilinear map, some fold less, and the charts, mixing both maps, stay seamless (the maps alone,
 // without the unfolding).
 TEST(SideQuads, TheFoldingQuadMapFoldsLessAndStaysSeamless) {
-  ChartLayout layout = evenedBunny(24);
-  mendTwoChartCorners(layout);
-  ResampleOptions o = sidesOptions(33);
-  o.unfold = false;
+  auto [layout, o] = mappedBunny();
   const GeometryImageSet bilinear = resampleLayout(layout, o);
   o.quadMap = QuadMap::kFolding;
   const GeometryImageSet folding = resampleLayout(layout, o);
@@ -183,10 +193,7 @@ TEST(SideQuads, TheFoldingQuadMapFoldsLessAndStaysSeamless) {
 // long across the surface (a chart's largest stretch at most doubles); and every sample that slid
 // still lies on the input surface.
 TEST(SideQuads, TheUnfoldingMendsFlippedTexelsOnTheSurfaceAndKeepsTheBorder) {
-  ChartLayout layout = evenedBunny(24);
-  mendTwoChartCorners(layout);
-  ResampleOptions o = sidesOptions(33);
-  o.unfold = false;
+  auto [layout, o] = mappedBunny();
   const GeometryImageSet mapped = resampleLayout(layout, o);
   o.unfold = true;
   const GeometryImageSet unfolded = resampleLayout(layout, o);
