@@ -1177,6 +1177,34 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
             }
             return true;
           };
+          // Whether x keeps apart from every other sample a slide could bring it to (those up to
+          // two texels away): two samples at one point make a texel of no area.
+          auto apart = [&](size_t k, const glm::dvec3& x, double l) {
+            const int64_t u0 = int64_t(k % size), v0 = int64_t(k / size);
+            for (int64_t v = std::max<int64_t>(v0 - 2, 0); v <= std::min<int64_t>(v0 + 2, m); ++v) {
+              for (int64_t u = std::max<int64_t>(u0 - 2, 0); u <= std::min<int64_t>(u0 + 2, m); ++u) {
+                const size_t j = size_t(v) * size + size_t(u);
+                if (j != k && glm::distance(glm::dvec3(img.positions[j]), x) <= 1e-4 * l) return false;
+              }
+            }
+            return true;
+          };
+          // Whether domain point d lies inside the chart's quad (convex, its corners
+          // counter-clockwise or clockwise alike): a sample that left it would stand for the
+          // surface of the chart beside it.
+          const QuadCorners& quad = quadCorners[i];
+          auto inQuad = [&](const glm::dvec2& d) {
+            int sign = 0;
+            for (int e = 0; e < 4; ++e) {
+              const glm::dvec2 a = quad[e], b = quad[(e + 1) % 4];
+              const double c = (b.x - a.x) * (d.y - a.y) - (b.y - a.y) * (d.x - a.x);
+              const int s = c > 0.0 ? 1 : c < 0.0 ? -1 : 0;
+              if (s == 0) return false;
+              if (sign != 0 && s != sign) return false;
+              sign = s;
+            }
+            return true;
+          };
           // The domain's texel spacing at each inner sample, from the map.
           auto spacing = [&](size_t k) {
             return 0.25 * (glm::distance(start[k - 1], start[k]) + glm::distance(start[k + 1], start[k]) +
@@ -1238,8 +1266,9 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
                     const glm::dvec2 off = to - start[k];
                     const double reach = kUnfoldReach * h, len = glm::length(off);
                     if (len > reach) to = start[k] + off * (reach / len);
+                    if (!inQuad(to)) continue;
                     const Sample cand = sampleAt(to);
-                    if (!within(k, cand.p, reach3D)) continue;
+                    if (!within(k, cand.p, reach3D) || !apart(k, cand.p, reach3D)) continue;
                     const double e = cost(k, cand.p, faceNormalOr(faceOf(cand), cand.n));
                     if (e < best * (1.0 - 1e-6)) best = e, bestAt = to, bestSample = cand, found = true;
                   }
