@@ -79,6 +79,7 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"quad_map", rs.quadMap},
                       {"unfold", rs.unfold},
                       {"texels_unfolded", rs.image.texelsUnfolded},
+                      {"samples_unfolded_past_quad", rs.image.samplesPastQuad},
                       {"even_side_corners", rs.evenSideCorners},
                       {"other_quads_flipped_texels", rs.alternativeFlippedTexels},
                       {"two_quad_corners", rs.twoQuadCorners},

@@ -478,6 +478,7 @@ ImageQuality combineImageQuality(const std::vector<ImageQuality>& parts) {
     q.texelsAgainstNormals += p.texelsAgainstNormals;
     q.degenerateTexels += p.degenerateTexels;
     q.texelsUnfolded += p.texelsUnfolded;
+    q.samplesPastQuad += p.samplesPastQuad;
     if (p.sampleError > q.sampleError) q.sampleError = p.sampleError, q.sampleErrorVertex = p.sampleErrorVertex;
   });
 }
@@ -1190,8 +1191,9 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
             return true;
           };
           // Whether domain point d lies inside the chart's quad (convex, its corners
-          // counter-clockwise or clockwise alike): a sample that left it would stand for the
-          // surface of the chart beside it.
+          // counter-clockwise or clockwise alike). Where the map's texels are longer one way than
+          // the other, a sample next to the border may slide past it (less than a texel), where a
+          // fold runs along the border; such samples are counted (ImageQuality::samplesPastQuad).
           const QuadCorners& quad = quadCorners[i];
           auto inQuad = [&](const glm::dvec2& d) {
             int sign = 0;
@@ -1266,7 +1268,6 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
                     const glm::dvec2 off = to - start[k];
                     const double reach = kUnfoldReach * h, len = glm::length(off);
                     if (len > reach) to = start[k] + off * (reach / len);
-                    if (!inQuad(to)) continue;
                     const Sample cand = sampleAt(to);
                     if (!within(k, cand.p, reach3D) || !apart(k, cand.p, reach3D)) continue;
                     const double e = cost(k, cand.p, faceNormalOr(faceOf(cand), cand.n));
@@ -1287,6 +1288,9 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
             if (q.flippedTexels < before.quality.flippedTexels) {
               img.quality = q;
               img.quality.texelsUnfolded = flippedBefore - q.flippedTexels;
+              for (uint32_t v = 1; v < m; ++v) {
+                for (uint32_t u = 1; u < m; ++u) img.quality.samplesPastQuad += !inQuad(domain[size_t(v) * size + u]);
+              }
               flipped = now;
               if (q.flippedTexels == 0) return;
               continue;

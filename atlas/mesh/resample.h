@@ -84,6 +84,9 @@ struct ImageQuality {
   uint32_t texelsAgainstNormals = 0;
   uint32_t degenerateTexels = 0;  // texel quads of (near) zero 3D area
   uint32_t texelsUnfolded = 0;    // flipped texels the unfolding (ResampleOptions::unfold) mended
+  // Inner samples the unfolding slid past their chart's quad of the domain (by less than a texel,
+  // next to the border, where a fold runs along it): the chart overlaps its neighbour there.
+  uint32_t samplesPastQuad = 0;
   // The largest distance from an input vertex to the chart's surface (its texels as the renderer
   // triangulates them) round the vertex's own chart coordinates (the 3 x 3 texels there): the
   // sampling error the parameterization's texel sizes leave, an upper bound of the vertex's
