@@ -189,11 +189,8 @@ void logFoldingCharts(const ChartLayout& layout, const GeometryImageSet& set) {
     const Patch& patch = layout.patches[g.patch];
     std::string sides;
     for (const PatchSide& side : patch.sides) {
-      double length = 0.0;
-      for (size_t k = 1; k < side.vertices.size(); ++k)
-        length += glm::distance(glm::dvec3(layout.positions[side.vertices[k - 1]]),
-                                glm::dvec3(layout.positions[side.vertices[k]]));
-      sides += fmt::format(" {}:{:.4g}{}", side.vertices.size() - 1, length, side.neighbourPatch < 0 ? "(open)" : "");
+      sides += fmt::format(" {}:{:.4g}{}", side.vertices.size() - 1, sideLength(layout, side),
+                           side.neighbourPatch < 0 ? "(open)" : "");
     }
     spdlog::debug("chart {} of patch {} ({} triangles, {} sides): {} flipped texels; sides (edges:length){}", g.quad,
                   g.patch, patch.triangles.size(), patch.sides.size(), g.quality.flippedTexels, sides);
@@ -369,35 +366,28 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   if (options.quads == MeshQuads::kKites) {
     straighten(QuadLayout::kKites, "");
     r = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, "", &evened);
-  } else if (options.quads == MeshQuads::kSides) {
-    // A layout whose side counts cannot all be made even (a surface of a few triangles, whose
-    // sides have no inner vertex) is built in kites instead, from the charted patches.
-    const std::vector<Patch> charted = layout.patches;
-    straighten(QuadLayout::kSides, "");
-    r = resampleInLayout(layout, options, QuadLayout::kSides, dir, meter, "", &evened);
-    if (!evened) {
-      spdlog::warn("{}: some patches cannot be given an even number of sides for the sides quad layout (no chain of "
-                   "sides with inner vertices joins them to another such patch or to a hole); built with {} kites",
-                   options.input.string(), spelledOption(options, "quads"));
-      layout.patches = charted;
-      straighten(QuadLayout::kKites, "_kites");
-      r = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, "_kites", &evened);
-    }
   } else {
-    // Sides first (about half the charts); kites too if that leaves flipped texels, corners
-    // where only two charts meet or charts that sample the surface more coarsely than the bound,
-    // keeping whichever leaves fewer flipped texels (sides on a tie, if no such corner is left and
-    // it is within the bound or kites are not either). Each layout is straightened its own way
-    // from the charted patches.
+    // Sides first (about half the charts). The sides layout keeps them unless some patch cannot
+    // be given an even side count (a surface of a few triangles, whose sides have no inner
+    // vertex). Auto builds kites too if sides leave flipped texels, corners where only two charts
+    // meet or charts that sample the surface more coarsely than the bound, keeping whichever
+    // leaves fewer flipped texels (sides on a tie, if no such corner is left and it is within the
+    // bound or kites are not either). Each layout is straightened its own way from the charted
+    // patches.
     auto withinBound = [](const ResampledMesh& m) {
       return !(m.stats.maxSampleError > 0.0) || m.set.image.sampleError <= m.stats.maxSampleError;
     };
     const std::vector<Patch> charted = layout.patches;
     straighten(QuadLayout::kSides, "");
     ResampledMesh sides = resampleInLayout(layout, options, QuadLayout::kSides, dir, meter, "", &evened);
-    if (evened && sides.set.image.flippedTexels == 0 && sides.stats.twoQuadCorners == 0 && withinBound(sides)) {
+    if (evened && (options.quads == MeshQuads::kSides ||
+                   (sides.set.image.flippedTexels == 0 && sides.stats.twoQuadCorners == 0 && withinBound(sides)))) {
       r = std::move(sides);
     } else {
+      if (!evened)
+        spdlog::warn("{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
+                     "of sides with inner vertices joins them to another such patch or to a hole); built with {} kites",
+                     options.input.string(), spelledOption(options, "quads"));
       std::vector<Patch> sidesPatches = std::move(layout.patches);
       layout.patches = charted;
       const uint32_t sidesStraightened = straightened, sidesEars = ears;
@@ -412,8 +402,6 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
                      sides.set.charts.size(), sides.set.image.flippedTexels, sides.stats.twoQuadCorners,
                      sides.set.image.sampleError, kites.set.charts.size(), kites.set.image.flippedTexels,
                      kites.set.image.sampleError, sides.stats.maxSampleError, keepSides ? "sides" : "kites");
-      } else {
-        spdlog::info("quad layout: kites (some patches cannot be given an even number of sides)");
       }
       if (keepSides) {
         sides.stats.alternativeFlippedTexels = int64_t(kites.set.image.flippedTexels);

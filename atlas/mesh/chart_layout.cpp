@@ -5,9 +5,18 @@
 #include <string>
 #include <unordered_map>
 
+#include <glm/geometric.hpp>
 #include <tbb/parallel_for.h>
 
 namespace gimlod {
+
+double sideLength(const ChartLayout& layout, const PatchSide& side) {
+  double l = 0.0;
+  for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
+    l += glm::length(layout.positions[side.vertices[k + 1]] - layout.positions[side.vertices[k]]);
+  }
+  return l;
+}
 
 std::vector<std::string> validateChartLayout(const ChartLayout& L, uint32_t minSides,
                                              uint32_t maxSides) {

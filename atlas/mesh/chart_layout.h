@@ -47,6 +47,9 @@ struct ChartLayout {
   std::vector<Patch> patches;
 };
 
+// The length of a side's vertex run (the sum of its edges' lengths).
+double sideLength(const ChartLayout& layout, const PatchSide& side);
+
 // Checks a layout independently of how it was built; returns one line per violation (capped at
 // 100 lines), empty when valid: indices in range; every triangle in exactly one patch; each
 // patch a topological disk (V - E + F = 1 and one simple boundary loop); minSides..maxSides

@@ -20,14 +20,6 @@
 namespace gimlod {
 namespace {
 
-double sideLength(const ChartLayout& layout, const PatchSide& s) {
-  double l = 0.0;
-  for (size_t k = 0; k + 1 < s.vertices.size(); ++k) {
-    l += glm::length(layout.positions[s.vertices[k + 1]] - layout.positions[s.vertices[k]]);
-  }
-  return l;
-}
-
 // The triangles reached from the one inside `side`'s first edge, crossing no edge in `walls`
 // (undirected keys); empty if that triangle is not in the graph's patch.
 std::unordered_set<uint32_t> floodFrom(const ChartLayout& layout, const PatchGraph& g,
@@ -236,16 +228,24 @@ bool insertCorner(ChartLayout& layout, uint32_t p, uint32_t side, uint32_t k, ui
 
 namespace {
 
-// The inner vertex of a side nearest its arc-length middle (0 if it has none).
-uint32_t sideMiddleVertex(const ChartLayout& layout, const PatchSide& side) {
-  const double half = 0.5 * sideLength(layout, side);
+// Of a side's vertices first..last (inner ones by default), the one nearest `fraction` of its arc
+// length (0 if there is none).
+uint32_t sideVertexNear(const ChartLayout& layout, const PatchSide& side, double fraction, uint32_t first = 1,
+                        uint32_t last = ~0u) {
+  const double target = fraction * sideLength(layout, side);
+  last = std::min<uint32_t>(last, uint32_t(side.vertices.size()) - 2);
   uint32_t best = 0;
   double at = 0.0, bestGap = std::numeric_limits<double>::infinity();
-  for (uint32_t k = 1; k + 1 < side.vertices.size(); ++k) {
+  for (uint32_t k = 1; k <= last; ++k) {
     at += glm::length(layout.positions[side.vertices[k]] - layout.positions[side.vertices[k - 1]]);
-    if (std::abs(at - half) < bestGap) best = k, bestGap = std::abs(at - half);
+    if (k >= first && std::abs(at - target) < bestGap) best = k, bestGap = std::abs(at - target);
   }
   return best;
+}
+
+// The inner vertex of a side nearest its arc-length middle (0 if it has none).
+uint32_t sideMiddleVertex(const ChartLayout& layout, const PatchSide& side) {
+  return sideVertexNear(layout, side, 0.5);
 }
 
 // Every corner vertex with its (patch, corner index) incidences.
@@ -446,63 +446,41 @@ uint32_t splitTwoSidedHoles(ChartLayout& layout, uint32_t maxSides) {
       if (s.neighbourPatch < 0) startingAt.emplace(s.vertices.front(), SideAt{p, i});
     }
   }
-  auto sideLength = [&](const PatchSide& s) {
-    double l = 0.0;
-    for (size_t k = 1; k < s.vertices.size(); ++k)
-      l += glm::distance(glm::dvec3(layout.positions[s.vertices[k - 1]]), glm::dvec3(layout.positions[s.vertices[k]]));
-    return l;
-  };
-  // The holes of at most two sides, each as its longest side's start vertex (found before any
-  // change, since corners made change the side indices).
-  std::vector<uint32_t> holes;
+  auto sideOf = [&](const SideAt& at) -> const PatchSide& { return layout.patches[at.patch].sides[at.side]; };
+  // The holes of at most two sides, each as its longest side's patch and start vertex (found
+  // before any change, since the corners made renumber the sides).
+  std::vector<std::pair<uint32_t, uint32_t>> holes;
   std::unordered_set<uint32_t> seen;
   for (const auto& [start, first] : startingAt) {
     if (seen.contains(start)) continue;
     std::vector<SideAt> loop;
     for (SideAt at = first;;) {
       loop.push_back(at);
-      seen.insert(layout.patches[at.patch].sides[at.side].vertices.front());
-      const auto next = startingAt.find(layout.patches[at.patch].sides[at.side].vertices.back());
-      if (next == startingAt.end() || loop.size() > 2) break;
-      if (next->first == start) break;
+      seen.insert(sideOf(at).vertices.front());
+      const auto next = startingAt.find(sideOf(at).vertices.back());
+      if (next == startingAt.end() || loop.size() > 2 || next->first == start) break;
       at = next->second;
     }
     if (loop.size() > 2) continue;
     const SideAt longest = *std::max_element(loop.begin(), loop.end(), [&](const SideAt& a, const SideAt& b) {
-      return sideLength(layout.patches[a.patch].sides[a.side]) < sideLength(layout.patches[b.patch].sides[b.side]);
+      return sideLength(layout, sideOf(a)) < sideLength(layout, sideOf(b));
     });
-    holes.push_back(layout.patches[longest.patch].sides[longest.side].vertices.front());
+    holes.push_back({longest.patch, sideOf(longest).vertices.front()});
   }
   std::sort(holes.begin(), holes.end());  // (the map's order is not the input's)
   uint32_t corners = 0;
-  for (const uint32_t start : holes) {
-    SideAt at{~0u, 0};
-    for (uint32_t p = 0; p < layout.patches.size() && at.patch == ~0u; ++p) {
-      for (uint32_t i = 0; i < layout.patches[p].sides.size(); ++i) {
-        const PatchSide& s = layout.patches[p].sides[i];
-        if (s.neighbourPatch < 0 && s.vertices.front() == start) at = {p, i};
-      }
-    }
-    if (at.patch == ~0u) continue;
-    const PatchSide s = layout.patches[at.patch].sides[at.side];
-    if (s.vertices.size() < 4 || layout.patches[at.patch].sides.size() + 2 > maxSides) continue;
+  for (const auto& [p, start] : holes) {
+    const auto& sides = layout.patches[p].sides;
+    const auto it = std::find_if(sides.begin(), sides.end(),
+                                 [&](const PatchSide& s) { return s.neighbourPatch < 0 && s.vertices.front() == start; });
+    const uint32_t i = uint32_t(it - sides.begin());
+    if (it->vertices.size() < 4 || sides.size() + 2 > maxSides) continue;
     // The inner vertices nearest a third and two thirds of the side's arc length, distinct.
-    std::vector<double> along(s.vertices.size(), 0.0);
-    for (size_t k = 1; k < s.vertices.size(); ++k)
-      along[k] = along[k - 1] + glm::distance(glm::dvec3(layout.positions[s.vertices[k - 1]]),
-                                              glm::dvec3(layout.positions[s.vertices[k]]));
-    auto nearest = [&](double target, size_t lo, size_t hi) {
-      size_t best = lo;
-      for (size_t k = lo; k <= hi; ++k) {
-        if (std::abs(along[k] - target) < std::abs(along[best] - target)) best = k;
-      }
-      return best;
-    };
-    const size_t last = s.vertices.size() - 1;
-    const size_t k1 = nearest(along.back() / 3.0, 1, last - 2);
-    const size_t k2 = nearest(2.0 * along.back() / 3.0, k1 + 1, last - 1);
-    if (!insertCorner(layout, at.patch, at.side, uint32_t(k1), maxSides)) continue;
-    if (!insertCorner(layout, at.patch, at.side + 1, uint32_t(k2 - k1), maxSides)) {
+    const uint32_t last = uint32_t(it->vertices.size()) - 1;
+    const uint32_t k1 = sideVertexNear(layout, *it, 1.0 / 3.0, 1, last - 2);
+    const uint32_t k2 = sideVertexNear(layout, *it, 2.0 / 3.0, k1 + 1, last - 1);
+    if (!insertCorner(layout, p, i, k1, maxSides)) continue;
+    if (!insertCorner(layout, p, i + 1, k2 - k1, maxSides)) {
       throw std::logic_error("splitTwoSidedHoles: the second corner of a side with room for it was refused");
     }
     corners += 2;

@@ -1134,11 +1134,30 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
           }
         };
         bool unfolded = false;  // some inner samples slid off the map (unfold below)
-        auto measure = [&](bool warp, std::vector<uint32_t>& flipped) {
+        std::vector<uint32_t> flipped;  // the flipped texels, as their (0,0) samples
+        // The chart's samples and what is known of them, to try another placement and go back.
+        struct Placement {
+          GeometryImage img;
+          std::vector<glm::vec3> normals;
+          std::vector<uint32_t> triangles, flipped;
+          std::vector<glm::dvec2> domain;
+          bool unfolded;
+        };
+        auto keep = [&] { return Placement{img, floatNormals, triangles, flipped, domain, unfolded}; };
+        auto restore = [&](Placement&& s) {
+          img = std::move(s.img);
+          floatNormals = std::move(s.normals);
+          triangles = std::move(s.triangles);
+          flipped = std::move(s.flipped);
+          domain = std::move(s.domain);
+          unfolded = s.unfolded;
+        };
+        // The chart's quality as its samples stand; its flipped texels into flippedAt.
+        auto measure = [&](bool warp, std::vector<uint32_t>& flippedAt) {
           // The input faces under the samples (zero where none is known).
           for (size_t k = 0; k < faceNormals.size(); ++k) faceNormals[k] = glm::vec3(faceNormalOr(triangles[k], glm::dvec3(0.0)));
-          flipped.clear();
-          ImageQuality q = measureImage(img.positions, floatNormals, size, &flipped, &faceNormals);
+          flippedAt.clear();
+          ImageQuality q = measureImage(img.positions, floatNormals, size, &flippedAt, &faceNormals);
           // How far the chart's surface passes from the input vertices it stands for, each at its
           // chart coordinates under the map used.
           for (auto [v, st] : quadVertices[i]) {
@@ -1160,7 +1179,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
         // neighbours. The samples stay on the input surface and the border does not move, so
         // the seams are unchanged. Tried on a ring of 2 texels round the flipped ones, then 4,
         // then 8; each kept if fewer texels fold.
-        auto unfold = [&](bool warp, std::vector<uint32_t>& flipped) {
+        auto unfold = [&](bool warp) {
           const uint32_t flippedBefore = img.quality.flippedTexels;
           const std::vector<glm::dvec2> start = domain;
           const std::vector<glm::vec3> startPositions = img.positions;
@@ -1235,11 +1254,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
             return e;
           };
           for (const uint32_t ring : {2u, 4u, 8u}) {
-            const GeometryImage before = img;
-            const std::vector<glm::vec3> beforeNormals = floatNormals;
-            const std::vector<uint32_t> beforeTriangles = triangles, beforeFlipped = flipped;
-            const std::vector<glm::dvec2> beforeDomain = domain;
-            const bool beforeUnfolded = unfolded;
+            Placement before = keep();
             std::vector<uint8_t> mark(size_t(size) * size, 0);
             std::vector<size_t> moving;
             for (const uint32_t at : flipped) {
@@ -1285,7 +1300,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
             unfolded = true;
             std::vector<uint32_t> now;
             const ImageQuality q = measure(warp, now);
-            if (q.flippedTexels < before.quality.flippedTexels) {
+            if (q.flippedTexels < before.img.quality.flippedTexels) {
               img.quality = q;
               img.quality.texelsUnfolded = flippedBefore - q.flippedTexels;
               for (uint32_t v = 1; v < m; ++v) {
@@ -1295,38 +1310,25 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
               if (q.flippedTexels == 0) return;
               continue;
             }
-            img = before;
-            floatNormals = beforeNormals;
-            triangles = beforeTriangles;
-            flipped = beforeFlipped;
-            domain = beforeDomain;
-            unfolded = beforeUnfolded;
+            restore(std::move(before));
           }
         };
         bool warp = options.quadMap == QuadMap::kStretch && ensureWarp(i);
         fillInside(warp);
-        std::vector<uint32_t> flipped;
         img.quality = measure(warp, flipped);
         // kFolding: a chart that folds under the bilinear map takes the warp if it folds less.
         if (options.quadMap == QuadMap::kFolding && img.quality.flippedTexels > 0 && ensureWarp(i)) {
-          const GeometryImage bilinear = img;
-          const std::vector<glm::vec3> bilinearNormals = floatNormals;
-          const std::vector<uint32_t> bilinearTriangles = triangles, bilinearFlipped = flipped;
-          const std::vector<glm::dvec2> bilinearDomain = domain;
+          Placement bilinear = keep();
           fillInside(true);
           const ImageQuality q = measure(true, flipped);
-          if (q.flippedTexels < bilinear.quality.flippedTexels) {
+          if (q.flippedTexels < bilinear.img.quality.flippedTexels) {
             img.quality = q;
             warp = true;
           } else {
-            img = bilinear;
-            domain = bilinearDomain;
-            floatNormals = bilinearNormals;
-            triangles = bilinearTriangles;
-            flipped = bilinearFlipped;
+            restore(std::move(bilinear));
           }
         }
-        if (options.unfold && img.quality.flippedTexels > 0) unfold(warp, flipped);
+        if (options.unfold && img.quality.flippedTexels > 0) unfold(warp);
         // Where the chart folds, as layout triangles (one per flipped texel, a few per chart).
         for (uint32_t at : flipped) {
           for (const size_t k : {size_t(at), size_t(at) + 1, size_t(at) + size, size_t(at) + size + 1}) {

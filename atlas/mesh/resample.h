@@ -61,8 +61,9 @@ struct ResampleOptions {
   ChartSpill* spill = nullptr;  // if set, every chart's samples go there once it is measured
   QuadLayout quads = QuadLayout::kKites;
   QuadMap quadMap = QuadMap::kBilinear;
-  // Inner samples round flipped texels slide over the surface toward their neighbours' mean, kept
-  // where fewer texels fold (the border, and so the seams, do not move).
+  // Inner samples round flipped texels slide over the surface, through the parameterization, to
+  // where their texels agree best with the input faces, kept where fewer texels fold (the border,
+  // and so the seams, do not move; see resampleLayout).
   bool unfold = true;
 };
 
@@ -88,7 +89,8 @@ struct ImageQuality {
   // next to the border, where a fold runs along it): the chart overlaps its neighbour there.
   uint32_t samplesPastQuad = 0;
   // The largest distance from an input vertex to the chart's surface (its texels as the renderer
-  // triangulates them) round the vertex's own chart coordinates (the 3 x 3 texels there): the
+  // triangulates them) round the vertex's own chart coordinates (the 3 x 3 texels there, 5 x 5 in
+  // a chart whose samples the unfolding slid): the
   // sampling error the parameterization's texel sizes leave, an upper bound of the vertex's
   // distance to the atlas. Vertices of the patch's interior and open sides count; those of its
   // shared sides (sampled by arc length alike in both patches) are left to the fidelity figure.

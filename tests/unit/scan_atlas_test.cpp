@@ -1,6 +1,6 @@
 // Every shared real scan through `gimlod build` at the default mesh options (the sides quad
-// layout of about 48 patches, the chart size by density, fidelity on), then the mesh atlas invariants checked on what the build
-// wrote, independently of the code that wrote it:
+// layout of about 48 patches, the chart size by density, fidelity on), then the mesh atlas
+// invariants checked on what the build wrote, independently of the code that wrote it:
 //  - seams: every pair of charts the manifest joins (any of the 8 edge orientations) holds
 //    bit-identical positions along the shared edge, at every pyramid level; every corner sample is
 //    bit-identical in all the charts that meet there (corners grouped by walking the neighbour
