@@ -469,7 +469,10 @@ uint32_t splitTwoSidedHoles(ChartLayout& layout, uint32_t maxSides) {
   }
   std::sort(holes.begin(), holes.end());  // (the map's order is not the input's)
   uint32_t corners = 0;
-  for (const auto& [p, start] : holes) {
+  for (const auto& hole : holes) {
+    // note: named, not a structured binding, since the lambda below uses them (clang before 16
+    // cannot capture structured bindings).
+    const uint32_t p = hole.first, start = hole.second;
     const auto& sides = layout.patches[p].sides;
     const auto it = std::find_if(sides.begin(), sides.end(),
                                  [&](const PatchSide& s) { return s.neighbourPatch < 0 && s.vertices.front() == start; });
