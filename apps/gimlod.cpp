@@ -265,6 +265,7 @@ int runRender(const RenderArgs& a) {
   so.texelsPerPixel = a.texelRatio;
   so.overlay = parseOverlayOption(a.overlay);
   so.overlayErrorPx = a.triangles > 0 ? 0.0 : a.tolerance;  // error colouring: red at the tolerance
+  so.minNodeRoom = a.maxNodes;  // the page pool holds the budget's cuts
   gl::AtlasScene scene(atlas, so);
   if (scene.nodeBudget(a.maxNodes) != a.maxNodes)
     spdlog::warn("--max-nodes {} is above what the GPU page pool holds ({} pages): using {}", a.maxNodes,

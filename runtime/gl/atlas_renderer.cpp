@@ -6,6 +6,7 @@
 #include <epoxy/gl.h>
 
 #include <algorithm>
+#include <array>
 #include <limits>
 #include <chrono>
 #include <cmath>
@@ -94,10 +95,12 @@ struct AtlasRenderer::Impl {
 
   RendererSetup setup;
   uint32_t pageSide = 0;  // P = 2^pageIntervalsLog2 + 1
-  uint32_t capacity = 0;
+  uint32_t capacity = 0;        // pages in the pool
+  uint32_t layersPerArray = 0;  // page p is layer p % layersPerArray of array p / layersPerArray
   GlObject colourBuffer, depthBuffer, framebuffer;
-  GlObject samples, normals;  // page pool: heights or positions, and normals
-  GlObject colours;           // page pool: RGBA8 colours (RendererSetup::colours)
+  // The page pool's texture arrays: heights or positions, normals, and RGBA8 colours
+  // (RendererSetup::colours; else empty).
+  std::vector<GlObject> samples, normals, colours;
   bool drawColours = true;
   uint32_t normalLevels = 1;  // mip levels of the normal page pool
   uint32_t colourSide = 0;    // texels per side of a colour layer: ((pageSide - 1) << colourScaleLog2) + 1
@@ -128,6 +131,8 @@ struct AtlasRenderer::Impl {
   void setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const;
   void bindAtlas(const glm::mat4& viewProj, const glm::vec3& eye, const StitchTables& stitch);
   void beginFrame() const;
+  // Binds page-pool array `a`'s textures to the samplers' units.
+  void bindPageArray(uint32_t a) const;
 };
 
 AtlasRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
@@ -197,12 +202,20 @@ void AtlasRenderer::Impl::createFramebuffer() {
 }
 
 void AtlasRenderer::Impl::createPagePool() {
-  capacity = std::clamp<uint32_t>(setup.pageCapacity, 1,
-                                  static_cast<uint32_t>(getInteger(GL_MAX_ARRAY_TEXTURE_LAYERS)));
-  auto makeArray = [&](GLenum format, GLint levels, uint32_t side) {
+  capacity = std::max<uint32_t>(setup.pageCapacity, 1);
+  const uint32_t maxLayers = static_cast<uint32_t>(std::max<GLint>(getInteger(GL_MAX_ARRAY_TEXTURE_LAYERS), 1));
+  layersPerArray = std::min(setup.layersPerArray == 0 ? maxLayers : std::min(setup.layersPerArray, maxLayers), capacity);
+  const uint32_t arrays = (capacity + layersPerArray - 1) / layersPerArray;
+  auto makeArray = [&](GLenum format, GLint levels, uint32_t side, uint32_t a) {
+    const uint32_t layers = std::min(layersPerArray, capacity - a * layersPerArray);
     GlObject tex = makeTexture();
     glBindTexture(GL_TEXTURE_2D_ARRAY, tex.id());
-    glTexStorage3D(GL_TEXTURE_2D_ARRAY, levels, format, GLsizei(side), GLsizei(side), GLsizei(capacity));
+    glTexStorage3D(GL_TEXTURE_2D_ARRAY, levels, format, GLsizei(side), GLsizei(side), GLsizei(layers));
+    if (const GLenum e = glGetError(); e != GL_NO_ERROR)
+      throw std::runtime_error("AtlasRenderer: a page pool of " + std::to_string(capacity) + " pages of " +
+                               std::to_string(side) + "^2 samples: " +
+                               (e == GL_OUT_OF_MEMORY ? std::string("out of GPU memory")
+                                                      : "GL error " + std::to_string(e)));
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, levels > 1 ? GL_LINEAR_MIPMAP_LINEAR : GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
@@ -222,9 +235,11 @@ void AtlasRenderer::Impl::createPagePool() {
   normalLevels = mipLevels(pageSide);
   colourSide = ((pageSide - 1) << setup.colourScaleLog2) + 1;
   colourLevels = mipLevels(colourSide);
-  samples = makeArray(setup.geometry ? GL_RGB32F : GL_R32F, 1, pageSide);
-  normals = makeArray(GL_RGBA8, GLint(normalLevels), pageSide);
-  if (setup.colours) colours = makeArray(GL_RGBA8, GLint(colourLevels), colourSide);
+  for (uint32_t a = 0; a < arrays; ++a) {
+    samples.push_back(makeArray(setup.geometry ? GL_RGB32F : GL_R32F, 1, pageSide, a));
+    normals.push_back(makeArray(GL_RGBA8, GLint(normalLevels), pageSide, a));
+    if (setup.colours) colours.push_back(makeArray(GL_RGBA8, GLint(colourLevels), colourSide, a));
+  }
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
 }
 
@@ -305,8 +320,8 @@ void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
   for (size_t j = 0; j < nodes.size(); ++j) {
     const size_t k = order.empty() ? j : order[j];
     const DrawNode& n = nodes[k];
-    records[j] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.res),
-                  int32_t(n.pageResLog2), int32_t(n.pageLayer), int32_t(k), int32_t(n.texLod)};
+    records[j] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.res), int32_t(n.pageResLog2),
+                  int32_t(n.pageLayer % layersPerArray), int32_t(k), int32_t(n.texLod)};
   }
   glBindBuffer(GL_ARRAY_BUFFER, nodeBuffer.id());
   glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(records.size() * sizeof(NodeRecord)), records.data(),
@@ -354,13 +369,7 @@ void AtlasRenderer::Impl::setShading(const GlObject& p, const glm::mat4& viewPro
   // note: fog scale from the valid extent; no fog when the extent is unknown.
   const float fog = 1.5f * glm::length(valid * spacing);
   glUniform1f(uniform(p, "u_fogDistance"), fog);
-  glActiveTexture(GL_TEXTURE0 + kSamplesUnit);
-  glBindTexture(GL_TEXTURE_2D_ARRAY, samples.id());
-  glActiveTexture(GL_TEXTURE0 + kNormalsUnit);
-  glBindTexture(GL_TEXTURE_2D_ARRAY, normals.id());
-  glActiveTexture(GL_TEXTURE0 + kColoursUnit);
-  glBindTexture(GL_TEXTURE_2D_ARRAY, setup.colours ? colours.id() : 0);
-  glActiveTexture(GL_TEXTURE0);
+  bindPageArray(0);
   glUniform1i(optionalUniform(p, "u_hasColours"), setup.colours && drawColours ? 1 : 0);
   glUniform1f(optionalUniform(p, "u_colourScale"), float(1u << setup.colourScaleLog2));
 }
@@ -377,6 +386,16 @@ void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& 
               (v.nodeBorders ? 1 : 0) | (v.normals ? 2 : 0) | (v.snapped ? 4 : 0) | (v.loading ? 8 : 0));
   glBindVertexArray(vertexArray.id());
   checkGl("atlas state");
+}
+
+void AtlasRenderer::Impl::bindPageArray(uint32_t a) const {
+  glActiveTexture(GL_TEXTURE0 + kSamplesUnit);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, samples[a].id());
+  glActiveTexture(GL_TEXTURE0 + kNormalsUnit);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, normals[a].id());
+  glActiveTexture(GL_TEXTURE0 + kColoursUnit);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, setup.colours ? colours[a].id() : 0);
+  glActiveTexture(GL_TEXTURE0);
 }
 
 void AtlasRenderer::Impl::beginFrame() const {
@@ -399,6 +418,10 @@ AtlasRenderer::~AtlasRenderer() = default;
 
 uint32_t AtlasRenderer::pageCapacity() const { return impl_->capacity; }
 
+uint32_t AtlasRenderer::pageArrays() const { return uint32_t(impl_->samples.size()); }
+
+uint32_t AtlasRenderer::layersPerArray() const { return impl_->layersPerArray; }
+
 const RendererSetup& AtlasRenderer::setup() const { return impl_->setup; }
 
 void AtlasRenderer::beginFrame() const { impl_->beginFrame(); }
@@ -414,15 +437,16 @@ void AtlasRenderer::setShading(const GlObject& program, const glm::mat4& viewPro
 
 void AtlasRenderer::setColours(bool on) { impl_->drawColours = on; }
 
-void AtlasRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* samples,
+void AtlasRenderer::uploadPage(uint32_t page, uint32_t samplesPerSide, const float* samples,
                                  const PackedNormal* normals, const PackedColour* colours) {
-  if (layer >= impl_->capacity || samplesPerSide == 0 || samplesPerSide > impl_->pageSide ||
+  if (page >= impl_->capacity || samplesPerSide == 0 || samplesPerSide > impl_->pageSide ||
       !samples)
-    throw std::invalid_argument("AtlasRenderer::uploadPage: layer " + std::to_string(layer) +
+    throw std::invalid_argument("AtlasRenderer::uploadPage: page " + std::to_string(page) +
                                 " / side " + std::to_string(samplesPerSide) + " out of range");
+  const uint32_t array = page / impl_->layersPerArray, layer = page % impl_->layersPerArray;
   const GLsizei s = GLsizei(samplesPerSide);
   glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-  glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->samples.id());
+  glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->samples[array].id());
   glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, impl_->setup.geometry ? GL_RGB : GL_RED,
                   GL_FLOAT, samples);
   // An RGBA8 attribute map of `texelsPerSide`^2 in a layer of `layerSide`^2 and its mip chain
@@ -440,9 +464,10 @@ void AtlasRenderer::uploadPage(uint32_t layer, uint32_t samplesPerSide, const fl
     }
   };
   if (normals)
-    uploadAttribute(impl_->normals, normals, samplesPerSide, impl_->pageSide, impl_->normalLevels, normalMipLevel);
+    uploadAttribute(impl_->normals[array], normals, samplesPerSide, impl_->pageSide, impl_->normalLevels,
+                    normalMipLevel);
   if (colours && impl_->setup.colours)
-    uploadAttribute(impl_->colours, colours, ((samplesPerSide - 1) << impl_->setup.colourScaleLog2) + 1,
+    uploadAttribute(impl_->colours[array], colours, ((samplesPerSide - 1) << impl_->setup.colourScaleLog2) + 1,
                     impl_->colourSide, impl_->colourLevels, colourMipLevel);
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
   checkGl("uploadPage glTexSubImage3D");
@@ -456,24 +481,31 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
   glBeginQuery(GL_TIME_ELAPSED, m.timerQuery.id());
   m.beginFrame();
   if (!nodes.empty()) {
-    // Records grouped by resolution (stable: front to back within a group), so the whole cut is
-    // one multi-draw of one instanced command per resolution: the per-node cost on the GPU side
-    // is an instance, not a draw command.
+    // Records grouped by page-pool array, then by resolution (stable: front to back within a
+    // group), so the cut is one multi-draw per array (the arrays the cut's pages lie in; one for
+    // a pool within the GL's layer limit) of one instanced command per resolution: the per-node
+    // cost on the GPU side is an instance, not a draw command.
+    const uint32_t lpa = m.layersPerArray;
     std::vector<uint32_t> order(nodes.size());
     for (uint32_t k = 0; k < order.size(); ++k) order[k] = k;
-    std::stable_sort(order.begin(), order.end(),
-                     [&](uint32_t a, uint32_t b) { return nodes[a].res < nodes[b].res; });
+    std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+      const uint32_t arrayA = nodes[a].pageLayer / lpa, arrayB = nodes[b].pageLayer / lpa;
+      return arrayA != arrayB ? arrayA < arrayB : nodes[a].res < nodes[b].res;
+    });
     m.uploadNodes(nodes, stitch, order);
     m.bindAtlas(viewProj, eye, stitch);
     glEnable(GL_PRIMITIVE_RESTART_FIXED_INDEX);  // 0xFFFFFFFF for 32-bit indices
     std::vector<DrawElementsIndirectCommand> commands;
+    std::vector<std::array<uint32_t, 3>> draws;  // (array, first command, commands)
     for (size_t j = 0; j < order.size();) {
-      const uint32_t res = nodes[order[j]].res;
+      const uint32_t array = nodes[order[j]].pageLayer / lpa, res = nodes[order[j]].res;
+      if (draws.empty() || draws.back()[0] != array) draws.push_back({array, uint32_t(commands.size()), 0});
       size_t e = j;
-      while (e < order.size() && nodes[order[e]].res == res) ++e;
+      while (e < order.size() && nodes[order[e]].res == res && nodes[order[e]].pageLayer / lpa == array) ++e;
       const Impl::GridRange& g = m.grid(res);
       commands.push_back({GLuint(g.indexCount), GLuint(e - j), GLuint(g.indexOffsetBytes / sizeof(uint32_t)),
                           g.baseVertex, GLuint(j)});
+      ++draws.back()[2];
       stats.triangles += uint64_t(e - j) * (uint64_t(2) << (2 * res));
       j = e;
     }
@@ -481,10 +513,16 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
     glBufferData(GL_DRAW_INDIRECT_BUFFER, GLsizeiptr(commands.size() * sizeof(commands[0])),
                  commands.data(), GL_STREAM_DRAW);
     if (m.wireframe) glPolygonMode(GL_FRONT_AND_BACK, GL_LINE);
-    glMultiDrawElementsIndirect(GL_TRIANGLE_STRIP, GL_UNSIGNED_INT, nullptr, GLsizei(commands.size()), 0);
+    for (const auto& [array, first, count] : draws) {
+      m.bindPageArray(array);
+      glMultiDrawElementsIndirect(GL_TRIANGLE_STRIP, GL_UNSIGNED_INT,
+                                  reinterpret_cast<const void*>(size_t(first) * sizeof(DrawElementsIndirectCommand)),
+                                  GLsizei(count), 0);
+    }
     if (m.wireframe) glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
     glBindBuffer(GL_DRAW_INDIRECT_BUFFER, 0);
-    stats.drawCalls = 1;
+    m.bindPageArray(0);
+    stats.drawCalls = uint32_t(draws.size());
     glDisable(GL_PRIMITIVE_RESTART_FIXED_INDEX);
     glBindVertexArray(0);
     glUseProgram(0);
@@ -575,11 +613,15 @@ std::vector<std::vector<glm::vec3>> AtlasRenderer::captureVertices(
   glEnable(GL_RASTERIZER_DISCARD);
   glBeginQuery(GL_TRANSFORM_FEEDBACK_PRIMITIVES_WRITTEN, m.feedbackQuery.id());
   glBeginTransformFeedback(GL_POINTS);
+  uint32_t bound = 0;  // the page-pool array bound (bindAtlas binds the first)
   for (size_t k = 0; k < nodes.size(); ++k) {
+    const uint32_t array = nodes[k].pageLayer / m.layersPerArray;
+    if (array != bound) m.bindPageArray(bound = array);
     const Impl::GridRange& g = m.grid(nodes[k].res);
     glDrawArraysInstancedBaseInstance(GL_POINTS, g.baseVertex, g.vertexCount, 1, GLuint(k));
   }
   glEndTransformFeedback();
+  if (bound != 0) m.bindPageArray(0);
   glEndQuery(GL_TRANSFORM_FEEDBACK_PRIMITIVES_WRITTEN);
   glDisable(GL_RASTERIZER_DISCARD);
   glBindVertexArray(0);

@@ -23,7 +23,12 @@ struct RendererSetup {
   uint32_t width = 640, height = 480;          // offscreen framebuffer size
   std::array<float, 3> background{0.53f, 0.70f, 0.92f};
   uint32_t pageIntervalsLog2 = 6;              // page side = 2^this + 1 samples (= log2 R)
-  uint32_t pageCapacity = 1024;                // layers in the page pool
+  // Pages in the page pool. A texture array holds at most GL_MAX_ARRAY_TEXTURE_LAYERS (2048 on
+  // Mesa and NVIDIA), so the pool is as many arrays as it takes: page p is layer p % L of array
+  // p / L, and a cut whose pages lie in k arrays is k multi-draws (one per array, whose textures
+  // are bound for it).
+  uint32_t pageCapacity = 1024;
+  uint32_t layersPerArray = 0;                 // L; 0: the GL limit (smaller values are for tests)
   uint32_t minResLog2 = 0, maxResLog2 = 6;     // grids are built for these resolutions
   std::array<double, 2> spacing{1.0, 1.0};     // metres between samples (x, y)
   std::array<uint32_t, 2> validSamples{0, 0};  // fragments with gx > X-1 or gy > Y-1 are discarded
@@ -44,7 +49,7 @@ struct DrawStats {
   double drawMs = 0.0;     // CPU wall time of submission + glFinish
   double gpuMs = 0.0;      // the GPU's own time for the draw (GL_TIME_ELAPSED query); NaN: unknown
   uint64_t triangles = 0;  // triangles submitted (grids, excluding strip degenerates)
-  uint32_t drawCalls = 0;  // GL draw calls issued (one multi-draw for the whole cut)
+  uint32_t drawCalls = 0;  // GL draw calls issued (one multi-draw per page-pool array the cut uses)
 };
 
 class GlObject;
@@ -71,13 +76,17 @@ class AtlasRenderer {
 
   uint32_t pageCapacity() const;
   const RendererSetup& setup() const;
-  // Uploads one node page: (n+1)^2 samples and normals, n = 2^pageIntervalsLog2 at most.
+  // Texture arrays in the page pool (RendererSetup::pageCapacity) and layers in each.
+  uint32_t pageArrays() const;
+  uint32_t layersPerArray() const;
+  // Uploads one node page (page = its slot in the pool, 0..pageCapacity() - 1): (n+1)^2 samples
+  // and normals, n = 2^pageIntervalsLog2 at most.
   // Smaller pages (deep nodes) occupy the lower-left corner of the layer.
   // The normals also get their mip chain (normalMipLevel), for DrawNode::texLod. With
   // RendererSetup::geometry, `samples` holds 3 floats (x, y, z) per sample. `colours` (with
   // RendererSetup::colours; else ignored), ((samplesPerSide - 1) << colourScaleLog2) + 1 per side,
   // get their mip chain too.
-  void uploadPage(uint32_t layer, uint32_t samplesPerSide, const float* samples,
+  void uploadPage(uint32_t page, uint32_t samplesPerSide, const float* samples,
                   const PackedNormal* normals, const PackedColour* colours = nullptr);
   // Draws the pages' colours (RendererSetup::colours) or the neutral material.
   void setColours(bool on);
@@ -97,7 +106,8 @@ class AtlasRenderer {
   void beginFrame() const;
   // Makes `program` current with the shading uniforms of atlas.frag (view, light, fog, extent;
   // the terrain-only ones where the program has them) and binds the page pool's textures to its
-  // units. `program` is one whose fragment stage is atlas.frag (setPagePoolUnits done).
+  // units (the first array's). `program` is one whose fragment stage is atlas.frag
+  // (setPagePoolUnits done).
   void setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const;
 
   // Resizes the offscreen framebuffer (a window's new size); the next draw clears it.

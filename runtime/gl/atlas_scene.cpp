@@ -26,7 +26,8 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o, const Pag
   s.height = o.height;
   s.background = o.background;
   s.pageIntervalsLog2 = a.manifest.maxNodeResLog2;
-  s.pageCapacity = o.pageCapacity;
+  s.pageCapacity = AtlasScene::pagePoolPages(o, a.hierarchy.chartCount());
+  s.layersPerArray = o.layersPerArray;
   s.minResLog2 = a.manifest.minNodeResLog2;
   s.maxResLog2 = a.manifest.maxNodeResLog2;
   s.spacing = a.manifest.spacing;
@@ -43,12 +44,9 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
       pages_(atlas.dir, atlas.manifest, atlas.hierarchy.params),
       renderer_(std::make_unique<AtlasRenderer>(rendererSetup(atlas, options, pages_))),
       pool_(renderer_->pageCapacity()) {
-  // The roots' pages stay resident (paper 7.2), so every frame can be drawn.
-  if (atlas_.hierarchy.chartCount() > pool_.capacity())
-    throw InputError(atlas_.dir.string() + ": " + std::to_string(atlas_.hierarchy.chartCount()) +
-                     " charts, but the page pool holds " + std::to_string(pool_.capacity()) +
-                     " pages (the GL limit on texture array layers), and every chart's root page stays resident; "
-                     "build the atlas with a larger chart size");
+  // The roots' pages stay resident (paper 7.2), so every frame can be drawn; pagePoolPages
+  // leaves room for them.
+  assert(atlas_.hierarchy.chartCount() < pool_.capacity());
   for (uint32_t c = 0; c < atlas_.hierarchy.chartCount(); ++c) {
     const NodeId root{c, 0, 0, 0};
     PagePool::Slot slot;
@@ -180,6 +178,28 @@ DrawStats AtlasScene::drawCut(const Camera& camera, const Cut& cut, FrameResult*
   return stats;
 }
 
+namespace {
+
+// AtlasScene::nodeRoom of a pool of `pages` with `roots` locked.
+uint32_t nodeRoomOf(uint32_t pages, uint32_t roots) {
+  const uint32_t free = (pages - roots) * 3 / 4;
+  return std::max(free, roots + free * 3 / 4);
+}
+
+}  // namespace
+
+uint32_t AtlasScene::pagePoolPages(const SceneOptions& o, uint32_t charts) {
+  const uint64_t want = std::max<uint64_t>(o.pageCapacity, 1);
+  uint64_t pages = charts < want / 2 ? want : uint64_t(charts) + std::max<uint64_t>(want / 2, 1);
+  // nodeRoomOf(R + F, R) >= R + 9/16 F - 2, so F = 16/9 (N - R) + 4 free pages hold cuts of N
+  // nodes (with N <= R any pool does: the room is at least the roots).
+  if (o.minNodeRoom > charts) {
+    const uint64_t n = o.minNodeRoom;
+    pages = std::max(pages, uint64_t(charts) + (16 * (n - charts) + 8) / 9 + 4);
+  }
+  return uint32_t(std::min<uint64_t>(pages, UINT32_MAX));
+}
+
 uint32_t AtlasScene::nodeRoom() const {
   // Keep the cut's pages within the pool. The roots' pages are locked, so the cut's other nodes
   // must fit in the rest, `free` (3/4 of it: the stitching constraint may add nodes past the
@@ -188,9 +208,7 @@ uint32_t AtlasScene::nodeRoom() const {
   // N satisfy 4k <= N <= 3/4 free + k, hence k <= free / 4 and N <= free. The second bound is
   // the larger one for atlases of many charts (a scan's hundreds), where the first would leave
   // almost no room to split.
-  const uint32_t roots = atlas_.hierarchy.chartCount();
-  const uint32_t free = (pool_.capacity() - roots) * 3 / 4;
-  return std::max(free, roots + free * 3 / 4);
+  return nodeRoomOf(pool_.capacity(), atlas_.hierarchy.chartCount());
 }
 
 uint32_t AtlasScene::nodeBudget(uint32_t maxNodes) const {

@@ -25,7 +25,15 @@ namespace gimlod::gl {
 struct SceneOptions {
   uint32_t width = 640, height = 480;
   std::array<float, 3> background{0.53f, 0.70f, 0.92f};
-  uint32_t pageCapacity = 4096;  // GPU page pool layers (clamped by the GL limit)
+  // GPU page pool pages. The pool is made larger where the atlas needs it: every chart's root
+  // page stays resident, so an atlas of more charts than half of this gets the roots plus half
+  // of this; and minNodeRoom below. Past GL_MAX_ARRAY_TEXTURE_LAYERS the pool is several texture
+  // arrays (RendererSetup::pageCapacity).
+  uint32_t pageCapacity = 2048;
+  // The pool is made large enough for cuts of this many nodes (nodeRoom() >= it): a node budget
+  // the frames are to hold (render --max-nodes, bench's largest). 0: none.
+  uint32_t minNodeRoom = 0;
+  uint32_t layersPerArray = 0;  // RendererSetup::layersPerArray (0: the GL limit; tests set less)
   // Paper 7.2: pages load on a separate thread and missing nodes draw with a resident ancestor.
   // Off (the default): every page is read synchronously, so frames are deterministic.
   bool asyncLoads = false;
@@ -67,10 +75,12 @@ class AtlasScene {
  public:
   AtlasScene(const AtlasView& atlas, const SceneOptions& options);
   const AtlasView& atlas() const { return atlas_; }
-  // The largest node budget a frame gets such that the cut's pages fit the page pool (clamped to
-  // GL_MAX_ARRAY_TEXTURE_LAYERS) beside the locked roots: the larger of 3/4 of the unlocked
-  // layers and the root count plus 9/16 of them (see the .cpp); larger budgets are lowered to it.
+  // The largest node budget a frame gets such that the cut's pages fit the page pool beside the
+  // locked roots: the larger of 3/4 of the unlocked pages and the root count plus 9/16 of them
+  // (see the .cpp); larger budgets are lowered to it.
   uint32_t nodeRoom() const;
+  // The pages of the pool a scene of `options` makes for an atlas of `charts` charts.
+  static uint32_t pagePoolPages(const SceneOptions& options, uint32_t charts);
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
   AtlasRenderer& renderer() { return *renderer_; }

@@ -313,7 +313,7 @@ TEST_F(RendererGlTest, DrawShowsTerrainBelowAndSkyAbove) {
   uint64_t triangles = 0;
   for (const DrawNode& n : s.nodes) triangles += uint64_t(2) << (2 * n.res);
   EXPECT_EQ(stats.triangles, triangles);
-  EXPECT_EQ(stats.drawCalls, 1u);  // one multi-draw-indirect for the cut
+  EXPECT_EQ(stats.drawCalls, 1u);  // one multi-draw-indirect for the cut (its pages in one array)
   EXPECT_GT(stats.drawMs, 0.0);
   const std::vector<uint8_t> px = r.readPixels();
   ASSERT_EQ(px.size(), size_t(128) * 96 * 4);
@@ -395,14 +395,66 @@ TEST_F(RendererGlTest, AttributeLevelChangesShadingNotGeometry) {
   EXPECT_EQ(glGetError(), GLenum(GL_NO_ERROR));
 }
 
-TEST_F(RendererGlTest, BadInputsThrowAndCapacityIsClamped) {
+// A page pool of several texture arrays (RendererSetup::layersPerArray below the GL limit, as an
+// atlas of more pages than the limit gets): the quad scene with its four pages in three arrays
+// draws in one multi-draw per array, and its picture and stitched vertices are those of the same
+// pages in one array, bit for bit.
+TEST_F(RendererGlTest, PagesInSeveralTextureArraysDrawAsInOne) {
+  gl::RendererSetup setup = smallSetup(5);
+  setup.spacing = {1.0, 1.0};
+  setup.heightRange = {0.f, 12.f};
+  gl::AtlasRenderer one(setup);
+  setup.layersPerArray = 2;
+  setup.pageCapacity = 6;
+  gl::AtlasRenderer three(setup);
+  EXPECT_EQ(one.pageArrays(), 1u);
+  ASSERT_EQ(three.pageArrays(), 3u);
+  EXPECT_EQ(three.layersPerArray(), 2u);
+  Scene a = quadScene(one);
+  // The same pages at pages 5, 0, 3, 4 of the three-array pool: arrays 2, 0, 1, 2, so pages 5
+  // and 3 (and 4 and 0) share a layer index in different arrays and a draw that bound the wrong
+  // array would read another node's data.
+  Scene b = a;
+  const uint32_t pages[4] = {5, 0, 3, 4};
+  for (size_t k = 0; k < b.nodes.size(); ++k) b.nodes[k].pageLayer = pages[k];
+  uploadPages(three, b.nodes, smoothHeight);
+  const glm::vec3 eye(32.f, -30.f, 20.f);
+  const glm::mat4 viewProj = glm::perspective(glm::radians(50.f), 128.f / 96.f, 0.5f, 500.f) *
+                             glm::lookAt(eye, glm::vec3(32.f, 20.f, 0.f), glm::vec3(0.f, 0.f, 1.f));
+  const gl::DrawStats sa = one.draw(viewProj, eye, a.nodes, a.stitch);
+  const gl::DrawStats sb = three.draw(viewProj, eye, b.nodes, b.stitch);
+  EXPECT_EQ(sa.drawCalls, 1u);
+  EXPECT_EQ(sb.drawCalls, 3u);
+  EXPECT_EQ(sa.triangles, sb.triangles);
+  const std::vector<uint8_t> pa = one.readPixels(), pb = three.readPixels();
+  ASSERT_EQ(pa.size(), pb.size());
+  size_t differ = 0, terrain = 0;
+  for (size_t i = 0; i < pa.size(); i += 4) {
+    differ += std::memcmp(pa.data() + i, pb.data() + i, 4) != 0;
+    terrain += pa[i + 1] != uint8_t(setup.background[1] * 255.f + 0.5f);
+  }
+  EXPECT_EQ(differ, 0u);
+  EXPECT_GT(terrain, pa.size() / 4 / 4) << "the terrain should fill part of the picture";
+  const auto va = one.captureVertices(a.nodes, a.stitch), vb = three.captureVertices(b.nodes, b.stitch);
+  ASSERT_EQ(va.size(), vb.size());
+  for (size_t k = 0; k < va.size(); ++k) {
+    ASSERT_EQ(va[k].size(), vb[k].size());
+    EXPECT_EQ(0, std::memcmp(va[k].data(), vb[k].data(), va[k].size() * sizeof(glm::vec3))) << "node " << k;
+  }
+}
+
+TEST_F(RendererGlTest, BadInputsThrowAndThePoolSpansTextureArrays) {
   gl::RendererSetup setup = smallSetup(4);
-  setup.pageCapacity = 1u << 20;
-  gl::AtlasRenderer r(setup);
   GLint maxLayers = 0;
   glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &maxLayers);
-  EXPECT_EQ(r.pageCapacity(), uint32_t(maxLayers));
+  // One page past the GL's layer limit: two texture arrays, the second of one layer.
+  setup.pageCapacity = uint32_t(maxLayers) + 1;
+  gl::AtlasRenderer r(setup);
+  EXPECT_EQ(r.pageCapacity(), uint32_t(maxLayers) + 1);
+  EXPECT_EQ(r.layersPerArray(), uint32_t(maxLayers));
+  EXPECT_EQ(r.pageArrays(), 2u);
   std::vector<float> h(18 * 18, 0.f);
+  EXPECT_NO_THROW(r.uploadPage(r.pageCapacity() - 1, 17, h.data(), nullptr));
   EXPECT_THROW(r.uploadPage(r.pageCapacity(), 17, h.data(), nullptr), std::invalid_argument);
   EXPECT_THROW(r.uploadPage(0, 18, h.data(), nullptr), std::invalid_argument);
   EXPECT_NO_THROW(r.uploadPage(0, 5, h.data(), nullptr));
