@@ -388,6 +388,13 @@ int main(int argc, char** argv) {
   build->add_flag("--no-unfold", [&](int64_t) { mesh.unfold = false; },
                   "Meshes: keep every inner sample where the quad map puts it (no sliding of the samples round "
                   "flipped texels over the surface to unfold them)");
+  std::string chartMetricArg = "planar";
+  build->add_option("--chart-metric", chartMetricArg,
+                    "Meshes: what the patch clustering keeps patches: planar (plane fit and normal spread), or "
+                    "developable (cone fit: planes, cylinders and cones, so fewer, larger patches flatten with "
+                    "little stretch; for few charts, with --charts)")
+      ->check(CLI::IsMember({"planar", "developable"}))
+      ->capture_default_str();
   build->add_option("--chart-error", mesh.maxChartError,
                     "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
       ->capture_default_str();
@@ -543,6 +550,7 @@ int main(int argc, char** argv) {
         static_cast<CommonBuildOptions&>(mesh) = common;
         if (chartSizeOpt->count() > 0) mesh.chartSize = terrain.chartSize;
         mesh.charts = chartsArg == "auto" ? kAutoCharts : parseCount("--charts", chartsArg);
+        mesh.chartMetric = chartMetricArg == "developable" ? MeshChartMetric::kDevelopable : MeshChartMetric::kPlanar;
         mesh.quadMap = quadMapArg == "stretch"   ? MeshQuadMap::kStretch
                        : quadMapArg == "folding" ? MeshQuadMap::kFolding
                                                  : MeshQuadMap::kBilinear;

@@ -315,6 +315,7 @@ int runView(const ViewArgs& a) {
     so.maxUploadsPerFrame = uint32_t(c.uploadsPerFrame);
     so.coherentAdaptation = !c.topDown;
     so.texelsPerPixel = c.texelRatio;
+    so.minNodeRoom = uint32_t(c.maxNodes);  // the page pool holds cuts of the budget at start
     return std::make_unique<gl::AtlasScene>(atlas, so);
   };
   std::unique_ptr<gl::AtlasScene> scene = makeScene(c.asyncLoads);
@@ -527,6 +528,9 @@ int runView(const ViewArgs& a) {
         ImGui::Checkbox("top-down greedy", &c.topDown);
       }
       ImGui::SliderInt("max nodes", &c.maxNodes, 1, 65536, "%d", ImGuiSliderFlags_Logarithmic);
+      if (uint32_t(c.maxNodes) > scene->nodeRoom())
+        ImGui::TextColored(ImVec4(1.f, 0.7f, 0.3f, 1.f), "at most %u nodes: the GPU page pool holds %u pages",
+                           scene->nodeRoom(), scene->renderer().pageCapacity());
       ImGui::Checkbox("hold frame time", &c.holdFrameTime);
       if (c.holdFrameTime) {
         ImGui::SameLine();

@@ -75,6 +75,9 @@ enum class MeshQuads : uint8_t { kAuto, kSides, kKites };
 // How a quad chart's square maps into its patch's parameterization (atlas/mesh/resample.h QuadMap).
 enum class MeshQuadMap : uint8_t { kBilinear, kStretch, kFolding };
 
+// The shape term of the patch clustering (atlas/mesh/charting.h ChartMetric).
+enum class MeshChartMetric : uint8_t { kPlanar, kDevelopable };
+
 struct MeshBuildOptions : CommonBuildOptions {
   // Quad chart side in samples, 2^m + 1 in [9, 8193]; 0: by the input's density
   // (meshChartSizeForDensity, after the charting).
@@ -84,6 +87,9 @@ struct MeshBuildOptions : CommonBuildOptions {
   // maxChartError.
   uint32_t charts = kAutoCharts;
   double maxChartError = 0.01;      // with charts = 0: RMS plane distance / bbox diagonal
+  // Patches as planar as may be, or as developable (planes, cylinders, cones): fewer, larger
+  // patches that parameterize with less stretch.
+  MeshChartMetric chartMetric = MeshChartMetric::kPlanar;
   uint32_t straightenRounds = 2;    // rounds of straightening shared sides (atlas/layout_refine.h)
   // Rounds of each repair (atlas/layout_refine.h repairCharts: cutting patches whose charts have
   // flipped texels or a sampling error over maxSampleError), in [0, 16]; 0 keeps the charting's.

@@ -203,6 +203,7 @@ nlohmann::json statsJson(const MeshBuildStats& s) {
   if (ch.gridify) stats["gridify"] = gridifyJson(*ch.gridify);
   stats["read"] = readJson(ch.read);
   stats["charting"] = chartingJson(ch.charting, ch.outOfCore);
+  stats["charting"]["metric"] = ch.developable ? "developable" : "planar";
   stats["resample"] = resampleJson(s.resample, w.spilledBytes);
   if (s.fidelity) stats["fidelity"] = fidelityJson(*s.fidelity, ch.outOfCore);
   else stats["fidelity"] = "not measured (--no-fidelity)";  // note: a stats.json value, read as such

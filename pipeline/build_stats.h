@@ -77,6 +77,7 @@ struct TerrainBuildStats {
 // Read and chart: what the reader read and repaired, and the patch layout.
 struct MeshChartStats {
   bool outOfCore = false;                // the mesh went through cell files
+  bool developable = false;              // the patches were clustered by ChartMetric::kDevelopable
   std::optional<GridifyResult> gridify;  // the cell files (out-of-core path; manifest left empty)
   MeshReadStats read;
   ChartingStats charting;

@@ -136,9 +136,11 @@ ChartedMesh chartMesh(const MeshBuildOptions& o, const MeshInfo& info, const fs:
   ChartingOptions copt;
   copt.targetCharts = o.charts == kAutoCharts ? meshPatchTarget(info.triangleEstimate) : o.charts;
   copt.maxError = o.maxChartError;
+  copt.metric = o.chartMetric == MeshChartMetric::kDevelopable ? ChartMetric::kDevelopable : ChartMetric::kPlanar;
   copt.threads = o.threads;
   ChartedMesh c;
   MeshChartStats& st = c.stats;
+  st.developable = copt.metric == ChartMetric::kDevelopable;
   st.outOfCore = info.triangleEstimate * 256 > o.maxMemory / 4;
   if (st.outOfCore) {
     GridifyOptions g;

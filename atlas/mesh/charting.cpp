@@ -8,6 +8,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
 #include <numeric>
 #include <optional>
@@ -39,6 +40,12 @@ constexpr double kTau = 0.01;
 // Weight of the normal-spread term 1 - |sum of area-weighted normals| / area (0 flat, 1 folded
 // shut); it keeps clusters from wrapping round thin parts, where the plane fit alone is small.
 constexpr double kNormalWeight = 4.0;
+// ChartMetric::kDevelopable: the unit of the cone-fit variance (coneFitVariance; 0.01 is a normal
+// spread of about 0.1 rad off the best cone), and the spread's weight beside it (lower than
+// kNormalWeight: a half cylinder, spread 0.36, is fine; it still keeps clusters from closing round
+// a thin part, whose normals lie on a great circle and so fit a cone).
+constexpr double kConeUnit = 0.01;
+constexpr double kDevelopableSpreadWeight = 1.0;
 
 // Smallest eigenvalue of a symmetric 3x3 matrix (xx xy xz yy yz zz), closed form.
 double minEigenvalue(const double c[6]) {
@@ -78,6 +85,7 @@ Moments triangleMoments(const glm::dvec3& a, const glm::dvec3& b, const glm::dve
     double sum = 9.0 * g[ij[k][0]] * g[ij[k][1]];
     for (int t = 0; t < 3; ++t) sum += (*v[t])[ij[k][0]] * (*v[t])[ij[k][1]];
     r.s[k] = A / 12.0 * sum;
+    if (A > 0) r.nn[k] = r.n[ij[k][0]] * r.n[ij[k][1]] / A;
   }
   return r;
 }
@@ -87,6 +95,14 @@ double planeMsd(const Moments& M) {
   double c[6];
   const int ij[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
   for (int k = 0; k < 6; ++k) c[k] = M.s[k] - M.m[ij[k][0]] * M.m[ij[k][1]] / M.area;
+  return std::max(0.0, minEigenvalue(c) / M.area);
+}
+
+double coneFitVariance(const Moments& M) {
+  if (M.area <= 0) return 0;
+  double c[6];
+  const int ij[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
+  for (int k = 0; k < 6; ++k) c[k] = M.nn[k] - M.n[ij[k][0]] * M.n[ij[k][1]] / M.area;
   return std::max(0.0, minEigenvalue(c) / M.area);
 }
 
@@ -159,8 +175,9 @@ class Clusterer {
 
   // Merges until `target` clusters remain (0: no count target) or no allowed merge is left.
   // maxRms: largest RMS plane distance of a merged cluster (normalised units), or infinity.
-  void run(uint32_t target, double maxRms, double weight) {
+  void run(uint32_t target, double maxRms, double weight, ChartMetric metric) {
     weight_ = weight;
+    metric_ = metric;
     maxRms_ = maxRms;
     for (uint32_t c = 0; c < adj_.size(); ++c)
       for (const Adj& e : adj_[c])
@@ -295,8 +312,10 @@ class Clusterer {
     const double nlen = std::sqrt(M.n[0] * M.n[0] + M.n[1] * M.n[1] + M.n[2] * M.n[2]);
     const double spread = std::max(0.0, 1.0 - nlen / area);
     const double compact = perim * perim / (4.0 * kPi * area);
-    const double cost =
-        (area / totalArea_) * (msd / (kTau * kTau) + kNormalWeight * spread + weight_ * compact);
+    const double shape = metric_ == ChartMetric::kDevelopable
+                             ? coneFitVariance(M) / kConeUnit + kDevelopableSpreadWeight * spread
+                             : msd / (kTau * kTau) + kNormalWeight * spread;
+    const double cost = (area / totalArea_) * (shape + weight_ * compact);
     heap_.push_back({cost, a, b, version_[a], version_[b]});
     std::push_heap(heap_.begin(), heap_.end(), std::greater<Cand>());
     heapPeak_ = std::max(heapPeak_, heap_.size());
@@ -417,6 +436,7 @@ class Clusterer {
   size_t heapPeak_ = 0;
   uint32_t alive_ = 0, refused_ = 0, stamp_ = 0;
   double totalArea_ = 0, weight_ = 1, maxRms_ = std::numeric_limits<double>::infinity();
+  ChartMetric metric_ = ChartMetric::kPlanar;
 };
 
 void checkOptions(const ChartingOptions& o) {
@@ -539,7 +559,7 @@ std::vector<uint32_t> blockLabels(const Surface& s, const Frame& fr, const Chart
       std::iota(labels.begin(), labels.end(), 0u);
       Clusterer cl(sub, fr, std::move(labels));
       const auto target = static_cast<uint32_t>(std::ceil(double(sub.tris.size()) / clusterTris));
-      cl.run(std::max(1u, target), maxRms, o.compactnessWeight);
+      cl.run(std::max(1u, target), maxRms, o.compactnessWeight, o.metric);
       clusters[b] = cl.alive();
       bytes[b] = sub.bytes() + cl.bytes();
       local[b] = cl.labels();
@@ -580,7 +600,7 @@ ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& opt
   std::optional<Clusterer> cl(std::in_place, s, fr, std::move(labels));
   cl->run(options.targetCharts,
           options.targetCharts > 0 ? std::numeric_limits<double>::infinity() : options.maxError,
-          options.compactnessWeight);
+          options.compactnessWeight, options.metric);
   st.clusterSeconds = since(t1);
   st.chartsBeforeFixing = cl->alive();
   st.mergesRefusedNotDisk = cl->refused();
@@ -672,7 +692,7 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
     std::iota(labels.begin(), labels.end(), 0u);
     Clusterer cl(s, fr, std::move(labels));
     const auto target = static_cast<uint32_t>(std::ceil(double(s.tris.size()) / clusterTris));
-    cl.run(std::max(1u, target), maxRms, options.compactnessWeight);
+    cl.run(std::max(1u, target), maxRms, options.compactnessWeight, options.metric);
     r.clusters = cl.alive();
     r.bytes = s.bytes() + cl.bytes();
     // Hand on the kept triangles with their cluster (compact ids). The global weld joins
@@ -756,7 +776,7 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   const auto t1 = Clock::now();
   std::optional<Clusterer> cl(std::in_place, s, fr, std::move(labels));
   if (cl->dissolveNonDisks(st.cellClustersDissolved)) cl.emplace(s, fr, cl->takeLabels());
-  cl->run(options.targetCharts, maxRms, options.compactnessWeight);
+  cl->run(options.targetCharts, maxRms, options.compactnessWeight, options.metric);
   st.clusterSeconds += since(t1);
   st.chartsBeforeFixing = cl->alive();
   st.mergesRefusedNotDisk = cl->refused();

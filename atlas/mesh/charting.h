@@ -22,8 +22,16 @@ namespace gimlod {
 // msd: mean squared distance to the least-squares plane (smallest eigenvalue of the aggregated
 // covariance / area); spread: 1 - |sum of area-weighted normals| / area (0 flat, 1 folded shut);
 // compact: perimeter^2 / (4 pi area). The area factor makes small clusters merge first.
+// With ChartMetric::kDevelopable the planarity and spread terms become
+//   cone(AB) / 0.01 + spread(AB)
+// cone: the least variance of the unit normals along an axis (coneFitVariance in
+// charting_internal.h; the cone fit of D-Charts, Julius, Kraevoy, Sheffer, Eurographics 2005):
+// 0 on planes, cylinders and cones, so clusters may curve one way (a limb, a flank) as long as
+// they stay developable, which the n-gon parameterization flattens with little stretch.
 // A merge is made only if the union stays a closed topological disk: A and B must meet in
 // exactly one boundary arc (shared vertices = shared edges + 1).
+enum class ChartMetric : uint8_t { kPlanar, kDevelopable };
+
 struct ChartingOptions {
   // Stop merging at this many clusters. 0: merge until no merge keeps every chart within
   // maxError. Side fixing (splitting patches with more than maxSides sides) may add charts, and
@@ -35,6 +43,9 @@ struct ChartingOptions {
   // Weight of the compactness term perimeter^2 / (4 pi area) (1 for a disc) in the merge cost
   // above; >= 0. 0 ranks merges by planarity alone.
   double compactnessWeight = 1.0;
+  // The shape term of the merge cost: planarity (plane fit and normal spread) or developability
+  // (cone fit). maxError is a plane distance either way.
+  ChartMetric metric = ChartMetric::kPlanar;
   // Sides per patch, inclusive. minSides >= 3; maxSides >= max(4, 2 * minSides - 3) so that a
   // split of a patch with too many sides leaves two valid halves.
   uint32_t maxSides = 8;

@@ -161,10 +161,11 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
 // diagonal 1): area, first moment, second moment (xx xy xz yy yz zz), area-weighted normal.
 struct Moments {
   double area = 0, m[3] = {0, 0, 0}, s[6] = {0, 0, 0, 0, 0, 0}, n[3] = {0, 0, 0};
+  double nn[6] = {0, 0, 0, 0, 0, 0};  // sum of area * n n^T over the faces (unit normals n)
   void add(const Moments& o) {
     area += o.area;
     for (int i = 0; i < 3; ++i) m[i] += o.m[i], n[i] += o.n[i];
-    for (int i = 0; i < 6; ++i) s[i] += o.s[i];
+    for (int i = 0; i < 6; ++i) s[i] += o.s[i], nn[i] += o.nn[i];
   }
 };
 
@@ -173,6 +174,12 @@ Moments triangleMoments(const glm::dvec3& a, const glm::dvec3& b, const glm::dve
 
 // Mean squared distance to the least-squares plane (normalised units).
 double planeMsd(const Moments& M);
+
+// Developability: the least variance of the unit normals along an axis (area-weighted, about
+// their mean), min over unit a of mean (n.a - mean n.a)^2: the cone fit of D-Charts. 0 for a
+// plane, a cylinder or a cone (all normals at one angle to the axis), about theta^4 / 48 for a
+// spherical cap of half-angle theta (about its axis; a plane fit's normal spread is theta^2 / 4).
+double coneFitVariance(const Moments& M);
 
 // Normalised coordinates: bounding-box centre at 0, diagonal 1.
 struct Frame {

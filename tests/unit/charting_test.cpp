@@ -3,11 +3,16 @@
 // empty, triangles preserved, chart count near the target).
 #include <gtest/gtest.h>
 
+#include <glm/glm.hpp>
+
 #include <chrono>
+#include <cmath>
+#include <utility>
 #include <cstdio>
 #include <set>
 
 #include "atlas/mesh/charting.h"
+#include "atlas/mesh/charting_internal.h"
 #include "atlas/mesh/gridify.h"
 #include "tests/test_util.h"
 
@@ -361,6 +366,86 @@ TEST(Charting, CellsPathOnBunny) {
   EXPECT_EQ(st.boundaryEdges, 223u);
   EXPECT_GE(st.charts, o.targetCharts);
   EXPECT_LE(st.charts, o.targetCharts * 5 / 4);
+}
+
+
+// The cone fit of the developable metric, on faceted surfaces: 0 where every face normal makes
+// one angle with an axis (a plane, a half cylinder, a cone), and about theta^4 / 48 on a spherical
+// cap of half-angle theta (the variance of cos t, t the polar angle, over the cap; across the axis
+// the normals vary by theta^2 / 4).
+TEST(Charting, ConeFitVarianceIsZeroOnDevelopableSurfacesOnly) {
+  constexpr double kPi = 3.14159265358979323846;
+  // A grid of n x n quads (two triangles each) of surface(u, v), u, v in [0, 1].
+  auto moments = [](auto surface) {
+    charting::Moments m;
+    const int n = 24;
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        const glm::dvec3 a = surface(i / double(n), j / double(n)), b = surface((i + 1) / double(n), j / double(n)),
+                         c = surface((i + 1) / double(n), (j + 1) / double(n)),
+                         d = surface(i / double(n), (j + 1) / double(n));
+        m.add(charting::triangleMoments(a, b, c));
+        m.add(charting::triangleMoments(a, c, d));
+      }
+    return charting::coneFitVariance(m);
+  };
+  const double plane = moments([](double u, double v) { return glm::dvec3(u, 0.3 * v, 0.0); });
+  const double cylinder = moments([&](double u, double v) {
+    return glm::dvec3(std::cos(kPi * u), std::sin(kPi * u), 2.0 * v);  // half a turn
+  });
+  const double cone = moments([&](double u, double v) {
+    const double r = 0.2 + v;  // apex angle 45 degrees
+    return glm::dvec3(r * std::cos(1.5 * kPi * u), r * std::sin(1.5 * kPi * u), r);
+  });
+  const double theta = kPi / 6;
+  const double cap = moments([&](double u, double v) {
+    const double t = theta * v, p = 2 * kPi * u;  // polar angle t, azimuth p (a degenerate row at the pole)
+    return glm::dvec3(std::sin(t) * std::cos(p), std::sin(t) * std::sin(p), std::cos(t));
+  });
+  EXPECT_LT(plane, 1e-12);
+  EXPECT_LT(cylinder, 1e-12);
+  EXPECT_LT(cone, 1e-12);
+  const double theta4 = theta * theta * theta * theta;
+  EXPECT_GT(cap, 0.8 * theta4 / 48);
+  EXPECT_LT(cap, 1.2 * theta4 / 48);
+}
+
+// The developable metric clusters the shipped bunny into patches that fit cones better, which is
+// what it ranks merges by; the planar metric's patches fit planes better.
+TEST(Charting, DevelopableMetricMakesPatchesThatFitCones) {
+  const IndexedMesh mesh = readMesh(test::realData("meshes/bun_zipper.ply"));
+  // Area-weighted means over the patches of the cone-fit variance and of the plane fit (mean
+  // squared distance, in the bounding-box diagonal's units).
+  auto fits = [](const ChartLayout& l) {
+    glm::dvec3 lo(1e300), hi(-1e300);
+    for (const glm::vec3& p : l.positions) lo = glm::min(lo, glm::dvec3(p)), hi = glm::max(hi, glm::dvec3(p));
+    const double diag = glm::length(hi - lo);
+    double cone = 0, plane = 0, area = 0;
+    for (const Patch& p : l.patches) {
+      charting::Moments m;
+      for (uint32_t t : p.triangles) {
+        const auto& tri = l.triangles[t];
+        m.add(charting::triangleMoments(glm::dvec3(l.positions[tri[0]]) / diag, glm::dvec3(l.positions[tri[1]]) / diag,
+                                        glm::dvec3(l.positions[tri[2]]) / diag));
+      }
+      cone += m.area * charting::coneFitVariance(m);
+      plane += m.area * charting::planeMsd(m);
+      area += m.area;
+    }
+    return std::pair{cone / area, plane / area};
+  };
+  ChartingOptions o;
+  o.targetCharts = 24;
+  const ChartLayout planar = buildChartLayout(mesh, o);
+  o.metric = ChartMetric::kDevelopable;
+  const ChartLayout developable = buildChartLayout(mesh, o);
+  expectValid(developable, "bunny, developable metric");
+  const auto [planarCone, planarPlane] = fits(planar);
+  const auto [devCone, devPlane] = fits(developable);
+  std::printf("[charting] bunny, 24 patches: cone-fit variance %.4f planar, %.4f developable; plane msd %.3g, %.3g\n",
+              planarCone, devCone, planarPlane, devPlane);
+  EXPECT_LT(devCone, 0.8 * planarCone);
+  EXPECT_LT(planarPlane, devPlane);
 }
 
 }  // namespace

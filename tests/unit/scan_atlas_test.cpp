@@ -402,6 +402,31 @@ TEST_P(ScanAtlasTest, FewChartsWithinTheSamplingBound) {
   EXPECT_FALSE(r["repair_stopped_for_work"].get<bool>());
 }
 
+// Tens of charts: 24 patches clustered by developability (--charts 24 --chart-metric developable)
+// give 61 to 120 quad charts on these scans, with no flipped texel and within the fidelity goal of
+// 0.1% of the diagonal; planar patches at 24 leave flipped texels on the bunny and the armadillo.
+TEST_P(ScanAtlasTest, TensOfChartsFromDevelopablePatches) {
+  const std::string name = GetParam();
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedScan(name));
+  test::TempDir dir("gimlod-scan-developable");
+  MeshBuildOptions o;
+  o.input = test::sharedScanPath(name);
+  o.output = dir.path() / "atlas";
+  o.charts = 24;
+  o.chartMetric = MeshChartMetric::kDevelopable;
+  nlohmann::json st;
+  ASSERT_NO_THROW(st = buildAtlas(o)) << "gimlod build " << o.input << " --charts 24 --chart-metric developable";
+  const nlohmann::json& r = st["resample"];
+  const uint32_t charts = st["charts"].get<uint32_t>();
+  const double hausdorff = st["fidelity"]["hausdorff_percent_of_diagonal"].get<double>();
+  std::cout << "  " << name << ": " << charts << " charts of " << st["chart_size"] << "^2 from " << r["patches"]
+            << " patches, " << r["flipped_texels"] << " flipped texels, Hausdorff " << hausdorff << "%\n";
+  EXPECT_EQ(st["charting"]["metric"].get<std::string>(), "developable");
+  EXPECT_LT(charts, 125u);
+  EXPECT_EQ(r["flipped_texels"].get<uint64_t>(), 0u);
+  EXPECT_LE(hausdorff, 0.1);
+}
+
 INSTANTIATE_TEST_SUITE_P(SharedScans, ScanAtlasTest, ::testing::ValuesIn(test::sharedScanNames()),
                          [](const ::testing::TestParamInfo<std::string>& i) { return i.param; });
 
