@@ -90,21 +90,23 @@ Moments triangleMoments(const glm::dvec3& a, const glm::dvec3& b, const glm::dve
   return r;
 }
 
-double planeMsd(const Moments& M) {
-  if (M.area <= 0) return 0;
+namespace {
+
+// The least variance along an axis of a quantity whose area-weighted first and second moments
+// (sum of A x, sum of A x x^T as xx xy xz yy yz zz) over `area` are given.
+double leastVariance(const double first[3], const double second[6], double area) {
+  if (area <= 0) return 0;
   double c[6];
   const int ij[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
-  for (int k = 0; k < 6; ++k) c[k] = M.s[k] - M.m[ij[k][0]] * M.m[ij[k][1]] / M.area;
-  return std::max(0.0, minEigenvalue(c) / M.area);
+  for (int k = 0; k < 6; ++k) c[k] = second[k] - first[ij[k][0]] * first[ij[k][1]] / area;
+  return std::max(0.0, minEigenvalue(c) / area);
 }
 
-double coneFitVariance(const Moments& M) {
-  if (M.area <= 0) return 0;
-  double c[6];
-  const int ij[6][2] = {{0, 0}, {0, 1}, {0, 2}, {1, 1}, {1, 2}, {2, 2}};
-  for (int k = 0; k < 6; ++k) c[k] = M.nn[k] - M.n[ij[k][0]] * M.n[ij[k][1]] / M.area;
-  return std::max(0.0, minEigenvalue(c) / M.area);
-}
+}  // namespace
+
+double planeMsd(const Moments& M) { return leastVariance(M.m, M.s, M.area); }
+
+double coneFitVariance(const Moments& M) { return leastVariance(M.n, M.nn, M.area); }
 
 }  // namespace charting
 
