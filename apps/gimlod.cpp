@@ -267,6 +267,8 @@ int runRender(const RenderArgs& a) {
   so.overlayErrorPx = a.triangles > 0 ? 0.0 : a.tolerance;  // error colouring: red at the tolerance
   so.minNodeRoom = a.maxNodes;  // the page pool holds the budget's cuts
   gl::AtlasScene scene(atlas, so);
+  spdlog::info("GPU page pool: {} pages in {} texture array(s), room for cuts of {} nodes", scene.renderer().pageCapacity(),
+               scene.renderer().pageArrays(), scene.nodeRoom());
   if (scene.nodeBudget(a.maxNodes) != a.maxNodes)
     spdlog::warn("--max-nodes {} is above what the GPU page pool holds ({} pages): using {}", a.maxNodes,
                  scene.renderer().pageCapacity(), scene.nodeRoom());

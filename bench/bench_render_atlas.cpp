@@ -9,8 +9,8 @@
 //        bench_render_atlas ATLAS_DIR --sweep [max_nodes] [frames] [tolerances]
 // --sweep runs, in one context, 640x480 at the first tolerance, 1920x1080 at each, and 3840x2160
 // at the last (tolerances: comma-separated px, default 1,0.5,0.25), then prints a summary table.
-// Defaults: 640x480, 1 px, 3000 nodes, 24 orbit frames. The node budget is further clamped by
-// AtlasScene to 3/4 of the free page-pool layers (GL_MAX_ARRAY_TEXTURE_LAYERS, often 2048).
+// Defaults: 640x480, 1 px, 3000 nodes, 24 orbit frames. The page pool is made to hold cuts of the
+// node budget (SceneOptions::minNodeRoom), in as many texture arrays as it takes.
 //
 // Times, all per frame, means over the orbit after one warm-up orbit:
 //  adapt, stitch, upload: FrameResult's CPU wall times (upload = page-pool work; 0 once warm);
@@ -160,6 +160,7 @@ Result runConfig(const AtlasView& atlas, const HeightGrid& grid, const Config& c
   gl::SceneOptions so;
   so.width = cfg.width;
   so.height = cfg.height;
+  so.minNodeRoom = maxNodes;
   gl::AtlasScene scene(atlas, so);
   const std::vector<Camera> path = orbitPath(atlas.lo, atlas.hi, frames, 0.7, 30.0);
   r.frames = uint32_t(path.size());

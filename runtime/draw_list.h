@@ -19,7 +19,8 @@ struct DrawNode {
   uint32_t sizeLog2 = 0;     // node side in level-0 intervals
   uint32_t res = 0;          // drawn grid: 2^res intervals per side, (2^res + 1)^2 vertices
   uint32_t pageResLog2 = 0;  // page data holds 2^pageResLog2 intervals per side (res <= this)
-  uint32_t pageLayer = 0;    // layer of the GPU page pool holding this node's data
+  uint32_t pageLayer = 0;    // page of the GPU page pool holding this node's data (the renderer's
+                             // texture array pageLayer / L, layer pageLayer % L)
   // Mip level of the page's normal map the fragment shader samples: pageResLog2 minus the node's
   // attribute resolution when that is coarser (0: the page's full resolution).
   uint32_t texLod = 0;

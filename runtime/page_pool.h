@@ -1,5 +1,6 @@
 // The GPU page pool's bookkeeping: least-recently-used assignment of node pages to its layers
-// (paper section 7.2). Pure C++; the renderer owns the texture layers.
+// (paper section 7.2), numbered across the renderer's texture arrays. Pure C++; the renderer owns
+// the textures.
 #pragma once
 
 #include <cstdint>
