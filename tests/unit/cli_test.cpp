@@ -207,6 +207,9 @@ TEST_F(CliTest, MeshBuildExportAndBadMeshes) {
   EXPECT_NE(build(test::realData("meshes/bun_zipper.ply"), dir_.path() / "m.atlas", "--max-memory 12Q"), 0);
   EXPECT_NE(output_.find("--max-memory"), std::string::npos) << output_;
   expectNoAtlas(dir_.path(), "m.atlas");
+  EXPECT_NE(build(test::realData("meshes/bun_zipper.ply"), dir_.path() / "d.atlas", "--chart-metric curved"), 0);
+  EXPECT_NE(output_.find("--chart-metric"), std::string::npos) << output_;
+  expectNoAtlas(dir_.path(), "d.atlas");
 }
 
 }  // namespace
