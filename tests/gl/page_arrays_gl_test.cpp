@@ -5,6 +5,7 @@
 
 #include <epoxy/gl.h>
 
+#include <algorithm>
 #include <cstring>
 #include <iostream>
 
@@ -119,6 +120,23 @@ TEST_F(PageArraysTest, ManySmallArraysDrawTheFramesOfOne) {
       ASSERT_EQ(0, std::memcmp(va[k].data(), vb[k].data(), va[k].size() * sizeof(glm::vec3))) << "node " << k;
   }
   EXPECT_GT(multiDraws, 0u) << "no frame drew pages from more than one array";
+}
+
+// A node budget the frames are to hold (SceneOptions::minNodeRoom, what render --max-nodes sets)
+// sizes the pool: the budget fits beside the locked roots, with no more than twice its pages.
+TEST_F(PageArraysTest, ThePoolHoldsTheNodeBudget) {
+  const AtlasView atlas = buildRainier(65, 4, 16);
+  const uint32_t charts = atlas.hierarchy.chartCount();
+  for (uint32_t budget : {500u, 3000u, 9000u}) {
+    gl::SceneOptions so;
+    so.width = 32;
+    so.height = 24;
+    so.minNodeRoom = budget;
+    gl::AtlasScene scene(atlas, so);
+    EXPECT_GE(scene.nodeRoom(), budget);
+    EXPECT_EQ(scene.nodeBudget(budget), budget);
+    EXPECT_LE(scene.renderer().pageCapacity(), std::max(so.pageCapacity, charts + 2 * budget)) << budget;
+  }
 }
 
 }  // namespace
