@@ -2,6 +2,7 @@
 // (seam validation, the inspection report).
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 
 #include "pipeline/build.h"
@@ -23,16 +24,21 @@ inline void buildSmallScanAtlas(const std::filesystem::path& output, bool fideli
   buildAtlas(o);
 }
 
-// The shipped Rainier tile in 129^2-sample charts, 3 levels of 4..32 intervals.
-inline void buildSmallDemAtlas(const std::filesystem::path& output) {
+// The shipped Rainier tile (1201^2 samples) in chartSize^2-sample charts, `depth` levels of
+// minNodeRes..nodeRes intervals.
+inline void buildRainierAtlas(const std::filesystem::path& output, uint32_t chartSize, uint32_t depth,
+                              uint32_t nodeRes, uint32_t minNodeRes) {
   TerrainBuildOptions o;
   o.input = repoData() / "terrain/mt_rainier_90m.tif";
   o.output = output;
-  o.chartSize = 129;
-  o.depth = 3;
-  o.nodeRes = 32;
-  o.minNodeRes = 4;
+  o.chartSize = chartSize;
+  o.depth = depth;
+  o.nodeRes = nodeRes;
+  o.minNodeRes = minNodeRes;
   buildAtlas(o);
 }
+
+// The shipped Rainier tile in 129^2-sample charts, 3 levels of 4..32 intervals.
+inline void buildSmallDemAtlas(const std::filesystem::path& output) { buildRainierAtlas(output, 129, 3, 32, 4); }
 
 }  // namespace gimlod::test

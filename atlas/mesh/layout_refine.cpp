@@ -476,6 +476,7 @@ uint32_t splitTwoSidedHoles(ChartLayout& layout, uint32_t maxSides) {
     const auto& sides = layout.patches[p].sides;
     const auto it = std::find_if(sides.begin(), sides.end(),
                                  [&](const PatchSide& s) { return s.neighbourPatch < 0 && s.vertices.front() == start; });
+    if (it == sides.end()) continue;  // (not reached: corners made elsewhere keep its start)
     const uint32_t i = uint32_t(it - sides.begin());
     if (it->vertices.size() < 4 || sides.size() + 2 > maxSides) continue;
     // The inner vertices nearest a third and two thirds of the side's arc length, distinct.

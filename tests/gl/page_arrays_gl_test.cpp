@@ -9,12 +9,12 @@
 #include <cstring>
 #include <iostream>
 
-#include "pipeline/build.h"
 #include "runtime/atlas_view.h"
 #include "runtime/camera.h"
 #include "runtime/gl/atlas_scene.h"
 #include "tests/gl/crack_check.h"
 #include "tests/gl/gl_context_test.h"
+#include "tests/small_atlases.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -24,15 +24,9 @@ class PageArraysTest : public test::GlContextTest<> {
  protected:
   // The shipped Rainier tile (1201^2 samples) in charts of chartSize^2, opened.
   AtlasView buildRainier(uint32_t chartSize, uint32_t depth, uint32_t nodeRes) {
-    TerrainBuildOptions o;
-    o.input = test::realData("terrain/mt_rainier_90m.tif");
-    o.output = dir_.path() / ("rainier_" + std::to_string(chartSize));
-    o.chartSize = chartSize;
-    o.depth = depth;
-    o.nodeRes = nodeRes;
-    o.minNodeRes = 1;
-    buildAtlas(o);
-    return openAtlas(o.output);
+    const std::filesystem::path out = dir_.path() / ("rainier_" + std::to_string(chartSize));
+    test::buildRainierAtlas(out, chartSize, depth, nodeRes, 1);
+    return openAtlas(out);
   }
 
   static Camera overview(const AtlasView& atlas) {
