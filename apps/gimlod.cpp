@@ -370,7 +370,7 @@ int main(int argc, char** argv) {
   build
       ->add_option("--charts", chartsArg,
                    "Meshes: target patches (each becomes 1-5 quad charts, see --quads, and the chart repair may cut more); auto: "
-                   "about sqrt(triangles) / 80, at least 48; 0: --chart-error")
+                   "24 up to 4M triangles, above that about sqrt(triangles) / 80, at least 48; 0: --chart-error")
       ->capture_default_str();
   std::string quadsArg = "sides";
   build->add_option("--quads", quadsArg,
@@ -390,12 +390,12 @@ int main(int argc, char** argv) {
   build->add_flag("--no-unfold", [&](int64_t) { mesh.unfold = false; },
                   "Meshes: keep every inner sample where the quad map puts it (no sliding of the samples round "
                   "flipped texels over the surface to unfold them)");
-  std::string chartMetricArg = "planar";
+  std::string chartMetricArg = "auto";
   build->add_option("--chart-metric", chartMetricArg,
-                    "Meshes: what the patch clustering keeps patches: planar (plane fit and normal spread), or "
+                    "Meshes: what the patch clustering keeps patches: planar (plane fit and normal spread), "
                     "developable (cone fit: planes, cylinders and cones, so fewer, larger patches flatten with "
-                    "little stretch; for few charts, with --charts)")
-      ->check(CLI::IsMember({"planar", "developable"}))
+                    "little stretch), or auto (developable up to 4M triangles, planar above)")
+      ->check(CLI::IsMember({"auto", "planar", "developable"}))
       ->capture_default_str();
   build->add_option("--chart-error", mesh.maxChartError,
                     "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
@@ -552,7 +552,9 @@ int main(int argc, char** argv) {
         static_cast<CommonBuildOptions&>(mesh) = common;
         if (chartSizeOpt->count() > 0) mesh.chartSize = terrain.chartSize;
         mesh.charts = chartsArg == "auto" ? kAutoCharts : parseCount("--charts", chartsArg);
-        mesh.chartMetric = chartMetricArg == "developable" ? MeshChartMetric::kDevelopable : MeshChartMetric::kPlanar;
+        mesh.chartMetric = chartMetricArg == "developable" ? MeshChartMetric::kDevelopable
+                           : chartMetricArg == "planar"    ? MeshChartMetric::kPlanar
+                                                           : MeshChartMetric::kAuto;
         mesh.quadMap = quadMapArg == "stretch"   ? MeshQuadMap::kStretch
                        : quadMapArg == "folding" ? MeshQuadMap::kFolding
                                                  : MeshQuadMap::kBilinear;

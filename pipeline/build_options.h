@@ -76,7 +76,7 @@ enum class MeshQuads : uint8_t { kAuto, kSides, kKites };
 enum class MeshQuadMap : uint8_t { kBilinear, kStretch, kFolding };
 
 // The shape term of the patch clustering (atlas/mesh/charting.h ChartMetric).
-enum class MeshChartMetric : uint8_t { kPlanar, kDevelopable };
+enum class MeshChartMetric : uint8_t { kAuto, kPlanar, kDevelopable };
 
 struct MeshBuildOptions : CommonBuildOptions {
   // Quad chart side in samples, 2^m + 1 in [9, 8193]; 0: by the input's density
@@ -88,13 +88,13 @@ struct MeshBuildOptions : CommonBuildOptions {
   uint32_t charts = kAutoCharts;
   double maxChartError = 0.01;      // with charts = 0: RMS plane distance / bbox diagonal
   // Patches as planar as may be, or as developable (planes, cylinders, cones): fewer, larger
-  // patches that parameterize with less stretch.
-  MeshChartMetric chartMetric = MeshChartMetric::kPlanar;
+  // patches that parameterize with less stretch. kAuto: meshChartMetric of the input's triangles.
+  MeshChartMetric chartMetric = MeshChartMetric::kAuto;
   uint32_t straightenRounds = 2;    // rounds of straightening shared sides (atlas/layout_refine.h)
   // Rounds of each repair (atlas/layout_refine.h repairCharts: cutting patches whose charts have
   // flipped texels or a sampling error over maxSampleError), in [0, 16]; 0 keeps the charting's.
   uint32_t repairRounds = 4;
-  double repairBudget = 4.0;        // the repair's work cap: layout triangles parameterized again,
+  double repairBudget = 8.0;        // the repair's work cap: layout triangles parameterized again,
                                     // as a multiple of the layout's triangles, in [0, 100]
   // The largest sampling error a chart may keep (ImageQuality::sampleError) as a fraction of the
   // bounding-box diagonal, in [0, 0.1]; 0: only flips are repaired; kAutoSampleError:
@@ -122,14 +122,17 @@ struct MeshBuildOptions : CommonBuildOptions {
   bool unfold = true;
 };
 
-// The option's name as opts spell it in messages (CommonBuildOptions::spellOption).
-// The patches a mesh of `triangles` triangles is charted into by default: sqrt(triangles) / 80,
-// at least 48 (48 up to 14.7M triangles, 54 at 18.7M), so 150 to 190 quad charts (sides) or 280
-// to 350 (kites) on the shared scans. The chart
-// repair then cuts the patches whose charts fold or sample the surface too coarsely. Fewer, larger
-// patches fold on scans with holes (the bunny: 795 flipped texels from 24 patches, which the
-// repair cannot all remove).
+// The default charting of a mesh of `triangles` triangles: few large charts, on the order of the
+// paper's scans (30 charts on a 1M-triangle scan, 140 at 10M).
+// - Up to kFewPatchesTriangles: 24 developable patches (61 to 120 quad charts in the sides layout
+//   on the shared scans, after the repair's cuts). Planar patches that large fold on scans with
+//   holes and thin parts (the bunny: 5 flipped texels left after the repair, the armadillo 1).
+// - Above: planar patches, sqrt(triangles) / 80 of them, at least 48 (54 at 18.7M triangles: 171
+//   quad charts). The repair of developable patches that large ran past 50 minutes on the 18.7M
+//   sphere (single-threaded per patch), against 29 for planar ones.
+inline constexpr uint64_t kFewPatchesTriangles = 4'000'000;
 uint32_t meshPatchTarget(uint64_t triangles);
+MeshChartMetric meshChartMetric(uint64_t triangles);
 
 // Samples per input triangle that the default chart size aims at (the paper's scans: about 4 to 8).
 inline constexpr double kSamplesPerTriangle = 4.0;
@@ -137,11 +140,17 @@ inline constexpr double kSamplesPerTriangle = 4.0;
 // The default quad chart size for `quads` charts of a mesh of `triangles` triangles: the smallest
 // 2^m + 1 in [65, kMaxDensityChartSize] whose quads * (size - 1)^2 samples reach
 // kSamplesPerTriangle * triangles. The build then doubles it (up to kMaxSamplesPerTriangle) while
-// more than a tenth of the surface samples more coarsely than maxSampleError.
+// the patches whose charts sample the surface more coarsely than maxSampleError hold more than
+// kCoarseSurfaceToDouble of its triangles: below that, the repair cuts those patches, which costs
+// far fewer samples than doubling every chart (the shared scans: 27.0M samples in all against 57.2M
+// doubling past a tenth). Where the doubling stops at kMaxSamplesPerTriangle, a chart may keep a
+// sampling error past maxSampleError (0.086% of the diagonal on the bunny, within the 0.1% goal).
+inline constexpr double kCoarseSurfaceToDouble = 0.25;
 inline constexpr uint32_t kMaxDensityChartSize = 1025;
 inline constexpr double kMaxSamplesPerTriangle = 64.0;
 uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads);
 
+// The option's name as opts spell it in messages (CommonBuildOptions::spellOption).
 inline std::string spelledOption(const CommonBuildOptions& opts, std::string_view name) {
   return opts.spellOption ? opts.spellOption(name) : std::string(name);
 }

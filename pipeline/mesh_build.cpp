@@ -82,7 +82,12 @@ void checkChartRoom(const ChartLayout& layout, uint64_t quads, const MeshBuildOp
 }  // namespace
 
 uint32_t meshPatchTarget(uint64_t triangles) {
+  if (triangles <= kFewPatchesTriangles) return 24;
   return uint32_t(std::clamp<double>(std::round(std::sqrt(double(triangles)) / 80.0), 48.0, 4096.0));
+}
+
+MeshChartMetric meshChartMetric(uint64_t triangles) {
+  return triangles <= kFewPatchesTriangles ? MeshChartMetric::kDevelopable : MeshChartMetric::kPlanar;
 }
 
 uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads) {
@@ -136,7 +141,9 @@ ChartedMesh chartMesh(const MeshBuildOptions& o, const MeshInfo& info, const fs:
   ChartingOptions copt;
   copt.targetCharts = o.charts == kAutoCharts ? meshPatchTarget(info.triangleEstimate) : o.charts;
   copt.maxError = o.maxChartError;
-  copt.metric = o.chartMetric == MeshChartMetric::kDevelopable ? ChartMetric::kDevelopable : ChartMetric::kPlanar;
+  const MeshChartMetric metric =
+      o.chartMetric == MeshChartMetric::kAuto ? meshChartMetric(info.triangleEstimate) : o.chartMetric;
+  copt.metric = metric == MeshChartMetric::kDevelopable ? ChartMetric::kDevelopable : ChartMetric::kPlanar;
   copt.threads = o.threads;
   ChartedMesh c;
   MeshChartStats& st = c.stats;
@@ -268,8 +275,9 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
     return true;
   };
   // A chart size chosen by density is doubled (and the layout resampled) while the patches whose
-  // charts sample the surface more coarsely than maxSampleError hold more than a tenth of its
-  // triangles, up to kMaxSamplesPerTriangle: the repair then has a few patches to cut, not many.
+  // charts sample the surface more coarsely than maxSampleError hold more than
+  // kCoarseSurfaceToDouble of its triangles, up to kMaxSamplesPerTriangle: the repair then has a
+  // few patches to cut, not many.
   const double diagonal = layoutDiagonal(layout);
   for (const glm::vec3& q : layout.positions) r.bounds.extend(q);
   const double maxError = o.maxSampleError * diagonal;
@@ -277,7 +285,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
     const std::vector<uint8_t> over = patchesOverSampleError(first, layout.patches.size(), maxError);
     uint64_t overTriangles = 0;
     for (uint32_t p = 0; p < layout.patches.size(); ++p) overTriangles += over[p] ? layout.patches[p].triangles.size() : 0;
-    if (overTriangles * 10 <= layout.triangles.size() ||
+    if (double(overTriangles) <= kCoarseSurfaceToDouble * double(layout.triangles.size()) ||
         samplesPerTriangle(layout, first.charts.size(), o.chartSize) >= kMaxSamplesPerTriangle)
       break;
     const std::string why =

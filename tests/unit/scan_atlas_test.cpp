@@ -310,8 +310,12 @@ TEST_P(ScanAtlasTest, Invariants) {
       const uint64_t side = ((m.chartSize - 1) >> level) + 1;
       EXPECT_EQ(s.samples, m.charts.size() * side * side) << "level " << level;
       EXPECT_EQ(s.boundaryEdges, t.boundaryEdges) << "level " << level << ": the export's own count disagrees";
-      EXPECT_EQ(t.nonManifoldEdges, in.nonManifoldEdges) << "level " << level;
       EXPECT_EQ(t.boundaryLoops, in.boundaryLoops) << "level " << level << ": open boundaries other than the scan's";
+      // At the level where every chart is one quad (never drawn: nodes are drawn at minNodeRes,
+      // at least 2 intervals), two layout sides that join the same two corners are one edge, so
+      // the topology is checked down to 2 intervals (the horse has one such pair of sides).
+      if (side < 3) continue;
+      EXPECT_EQ(t.nonManifoldEdges, in.nonManifoldEdges) << "level " << level;
       EXPECT_EQ(t.euler(), in.euler()) << "level " << level << ": the welded surface changed topology";
     }
     // The same through the command line, at one level: `gimlod export --level 2` writes a PLY that
@@ -376,71 +380,73 @@ TEST_P(ScanAtlasTest, FlippedTexels) {
   EXPECT_EQ(flipped, 0u) << name << ": " << flipped << " flipped texels";
 }
 
-// Few large charts at the defaults: the layout starts from meshPatchTarget patches (48 here) and
-// the repair cuts only where charts fold or sample too coarsely; in the sides quad layout an
-// n-sided patch is n/2 charts, so the atlas has 150 to 200 quad charts, a quarter of the old
-// layout of 128 small patches at 65^2 (758 to 797 charts on these scans), every chart within the
-// sampling-error bound.
-TEST_P(ScanAtlasTest, FewChartsWithinTheSamplingBound) {
+// Tens of charts at the defaults: the layout starts from meshPatchTarget developable patches (24
+// here) and the repair cuts only where charts fold or sample too coarsely; in the sides quad
+// layout an n-sided patch is n/2 charts, so the atlas has 61 to 120 quad charts (the paper's 1M
+// triangle scan: 30), against 758 to 797 in the old layout of 128 small patches at 65^2. Every
+// chart is within the sampling-error bound, unless the chart size stopped doubling at
+// kMaxSamplesPerTriangle; the two-sided Hausdorff distance stays within 0.1% of the diagonal.
+TEST_P(ScanAtlasTest, TensOfChartsWithinTheBounds) {
   const std::string name = GetParam();
   GIMLOD_NEED_SHARED_DATA(test::haveSharedScan(name));
   const test::BuiltScanAtlas* built = nullptr;
-  ASSERT_NO_THROW(built = &test::scanAtlas(name, false)) << "gimlod build " << test::sharedScanPath(name);
+  ASSERT_NO_THROW(built = &test::scanAtlas(name, true)) << "gimlod build " << test::sharedScanPath(name);
   const nlohmann::json& st = built->stats;
   const nlohmann::json& r = st["resample"];
   const uint32_t charts = st["charts"].get<uint32_t>();
+  const uint64_t triangles = st["charting"]["triangles"].get<uint64_t>();
   const double bound = r["max_sample_error"].get<double>(), error = r["sample_error"].get<double>();
+  const double samplesPerTriangle = double(st["samples"].get<uint64_t>()) / double(triangles);
+  const double hausdorff = st["fidelity"]["hausdorff_percent_of_diagonal"].get<double>();
   std::cout << "  " << name << ": " << charts << " charts of " << st["chart_size"] << "^2 from "
-            << st["charting"]["patches"] << " patches (" << r["patches"] << " after the repair), sampling error "
-            << error << " (bound " << bound << ")\n";
-  EXPECT_EQ(st["charting"]["charts_before_fixing"].get<uint32_t>(),
-            meshPatchTarget(st["charting"]["triangles"].get<uint64_t>()));
+            << st["charting"]["patches"] << " patches (" << r["patches"] << " after the repair), "
+            << samplesPerTriangle << " samples per triangle, sampling error " << error << " (bound " << bound
+            << "), Hausdorff " << hausdorff << "%\n";
+  EXPECT_EQ(st["charting"]["charts_before_fixing"].get<uint32_t>(), meshPatchTarget(triangles));
+  EXPECT_EQ(st["charting"]["metric"].get<std::string>(), "developable");
   EXPECT_EQ(r["quads"].get<std::string>(), "sides");
-  EXPECT_LE(charts, 200u);
+  EXPECT_LT(charts, 125u);
   EXPECT_GT(bound, 0.0);
-  EXPECT_LE(error, bound);
-  EXPECT_FALSE(r["repair_stopped_for_work"].get<bool>());
+  if (error > bound) EXPECT_GE(samplesPerTriangle, kMaxSamplesPerTriangle) << "sampling error " << error;
+  EXPECT_LE(hausdorff, 0.1);
 }
 
 INSTANTIATE_TEST_SUITE_P(SharedScans, ScanAtlasTest, ::testing::ValuesIn(test::sharedScanNames()),
                          [](const ::testing::TestParamInfo<std::string>& i) { return i.param; });
 
-// Tens of charts: 24 patches clustered by developability (--charts 24 --chart-metric developable)
-// give 61 to 120 quad charts on these scans, with no flipped texel and within the fidelity goal of
-// 0.1% of the diagonal; planar patches at 24 leave flipped texels on the bunny and the armadillo.
-// Under the sanitizers (several times the time and memory) the two smaller builds run; the five
-// run in the Release tests.
-class DevelopableScanTest : public ::testing::TestWithParam<std::string> {};
+// The former default layout stays reachable: 48 planar patches (--charts 48 --chart-metric planar)
+// give 150 and 151 quad charts on igea and the turbine blade, every chart within the
+// sampling-error bound, with no flipped texel. (On the bunny, with its holes, 48 planar patches
+// leave 2 flipped texels since the chart size no longer doubles for a tenth of the surface.)
+class PlanarScanTest : public ::testing::TestWithParam<std::string> {};
 
-TEST_P(DevelopableScanTest, TensOfChartsWithinTheBounds) {
+TEST_P(PlanarScanTest, FortyEightPlanarPatchesWithinTheSamplingBound) {
   const std::string name = GetParam();
   GIMLOD_NEED_SHARED_DATA(test::haveSharedScan(name));
-  test::TempDir dir("gimlod-scan-developable");
+  test::TempDir dir("gimlod-scan-planar");
   MeshBuildOptions o;
   o.input = test::sharedScanPath(name);
   o.output = dir.path() / "atlas";
-  o.charts = 24;
-  o.chartMetric = MeshChartMetric::kDevelopable;
+  o.charts = 48;
+  o.chartMetric = MeshChartMetric::kPlanar;
+  o.measureFidelity = false;
   nlohmann::json st;
-  ASSERT_NO_THROW(st = buildAtlas(o)) << "gimlod build " << o.input << " --charts 24 --chart-metric developable";
+  ASSERT_NO_THROW(st = buildAtlas(o)) << "gimlod build " << o.input << " --charts 48 --chart-metric planar";
   const nlohmann::json& r = st["resample"];
   const uint32_t charts = st["charts"].get<uint32_t>();
-  const double hausdorff = st["fidelity"]["hausdorff_percent_of_diagonal"].get<double>();
+  const double bound = r["max_sample_error"].get<double>(), error = r["sample_error"].get<double>();
   std::cout << "  " << name << ": " << charts << " charts of " << st["chart_size"] << "^2 from " << r["patches"]
-            << " patches, " << r["flipped_texels"] << " flipped texels, Hausdorff " << hausdorff << "%\n";
-  EXPECT_EQ(st["charting"]["metric"].get<std::string>(), "developable");
-  EXPECT_LT(charts, 125u);
+            << " patches, " << r["flipped_texels"] << " flipped texels, sampling error " << error << " (bound "
+            << bound << ")\n";
+  EXPECT_EQ(st["charting"]["metric"].get<std::string>(), "planar");
+  EXPECT_GE(charts, 125u);
+  EXPECT_LE(charts, 200u);
   EXPECT_EQ(r["flipped_texels"].get<uint64_t>(), 0u);
-  EXPECT_LE(hausdorff, 0.1);
+  EXPECT_LE(error, bound);
 }
 
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-INSTANTIATE_TEST_SUITE_P(SharedScans, DevelopableScanTest, ::testing::Values("igea", "turbineblade"),
+INSTANTIATE_TEST_SUITE_P(SharedScans, PlanarScanTest, ::testing::Values("igea", "turbineblade"),
                          [](const ::testing::TestParamInfo<std::string>& i) { return i.param; });
-#else
-INSTANTIATE_TEST_SUITE_P(SharedScans, DevelopableScanTest, ::testing::ValuesIn(test::sharedScanNames()),
-                         [](const ::testing::TestParamInfo<std::string>& i) { return i.param; });
-#endif
 
 }  // namespace
 }  // namespace gimlod
