@@ -184,6 +184,10 @@ nlohmann::json statsJson(const TerrainBuildStats& s) {
                         {"bytes_on_disk", im.bytesOnDisk},
                         {"read_seconds", im.readSeconds},
                         {"write_seconds", im.writeSeconds}};
+    if (im.windows > 0) {
+      stats["imagery"]["windows"] = im.windows;
+      stats["imagery"]["window_samples"] = im.windowSamples;
+    }
   }
   if (w.windowed)
     stats["windowed"] = {{"memory_bytes", w.windowed->memoryBytes},

@@ -42,8 +42,10 @@ struct TerrainImageryStats {
   std::string resampling;
   uint64_t storedSamples = 0;
   uint64_t bytesOnDisk = 0;
-  double readSeconds = 0.0;    // read and reproject
+  double readSeconds = 0.0;    // read and reproject (window by window: 0, counted in writeSeconds)
   double writeSeconds = 0.0;   // pyramid and chart files
+  uint64_t windows = 0;        // window by window: the windows of charts reprojected
+  uint64_t windowSamples = 0;  // and the most imagery samples one held
 };
 
 // The window-by-window build (atlas/terrain/terrain_windowed.h), when it ran.

@@ -223,6 +223,29 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
   read->heightRange = {r.dem.minHeight, r.dem.maxHeight};
   read->voidsFilled = r.dem.voidsFilled;
   read->voidFillMethod = r.dem.voidFillMethod;
+  if (!o.imagery.empty()) {
+    // Imagery: reprojected and filtered window by window, in the windows' memory.
+    ImagerySource imagery(r.dem, o.input, imageryOptions(o));
+    TerrainImageryStats& im = w.imagery.emplace();
+    im.source = fs::absolute(o.imagery).string();
+    im.scaleLog2 = imagery.scaleLog2();
+    im.width = imagery.width();
+    im.height = imagery.height();
+    im.resampling = imagery.resampling();
+    ImageryWindowStats ws;
+    const ImageryWriteStats st = writeImageryChartsWindowed(imagery, im.source, dir, m, wo.memoryBytes, &ws);
+    for (const std::string& warning : imagery.warnings()) spdlog::warn("{}: {}", o.imagery.string(), warning);
+    im.coverage = ws.coverage;
+    im.storedSamples = st.storedSamples;
+    im.bytesOnDisk = st.bytesOnDisk;
+    im.writeSeconds = st.seconds;
+    im.windows = ws.windows;
+    im.windowSamples = ws.windowSamples;
+    spdlog::info("{}: {}x{} imagery samples ({} per DEM interval, {} resampling) in {} windows, {:.1f}% of the "
+                 "terrain covered",
+                 o.imagery.string(), im.width, im.height, 1u << im.scaleLog2, im.resampling, ws.windows,
+                 100.0 * im.coverage);
+  }
   finishTerrainAtlas(m, dir, w);
   return w;
 }
@@ -238,7 +261,7 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& o) {
 
   const auto t0 = std::chrono::steady_clock::now();
   TerrainBuildStats stats;
-  // In memory when the estimate fits the cap, else window by window (no imagery there yet). A cap
+  // In memory when the estimate fits the cap, else window by window. A cap
   // below what the process holds, with room for windows, cannot be kept.
   const uint64_t held = residentBytes();
   if (memoryCap(o) < held + (uint64_t{32} << 20))
@@ -252,9 +275,6 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& o) {
                    double(residentBytes()) >
                double(memoryCap(o));
   }
-  if (windowed && !o.imagery.empty())
-    throw InputError(o.input.string() + ": " + optionRef("imagery") + " needs the in-memory build, and this DEM's "
-                     "exceeds the memory cap; give a larger " + optionRef("maxMemory"));
   StagedDirectory stage(o.output, kManifestName, "atlas");
   if (windowed) {
     stats.write = writeTerrainAtlasWindowed(o, stage.path(), &stats.read);

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <list>
 
 #include <gdal_alg.h>
 #include <gdal_utils.h>
@@ -71,9 +72,87 @@ std::string imageryFileName(uint32_t id) {
   return buf;
 }
 
-ImageryRaster loadImagery(const DemRaster& dem, const fs::path& demPath, const ImageryOptions& o) {
+struct ImagerySource::Impl {
+  fs::path path;
+  DatasetPtr src, placed;
+  std::vector<DatasetPtr> wrapped;
+  std::vector<GDALDatasetH> sources;
+  std::string wkt;
+  std::array<double, 6> tgt{};  // the whole lattice's geotransform, GDAL row order
+  bool flip = false;            // GDAL row 0 is north (as loadDem: rows are turned south first)
+  int colourBands = 0;
+  uint32_t scaleLog2 = 0, width = 0, height = 0;
+  std::string resampling;
+  std::vector<std::string> warnings;
+
+  // Warped tiles kept for the next windows (GDAL row order, tw x th), least recently used first.
+  struct Tile {
+    uint64_t key = 0;
+    std::vector<PackedColour> rgba;
+  };
+  std::list<Tile> cache;
+  uint64_t cacheTiles = 0;  // the most tiles kept
+
+  // GDAL-order tile (tx, ty) of the lattice, tw x th samples, warped (or from the cache).
+  const std::vector<PackedColour>& tile(uint32_t tx, uint32_t ty, uint32_t tw, uint32_t th) {
+    const uint64_t key = (uint64_t(ty) << 32) | tx;
+    for (auto it = cache.begin(); it != cache.end(); ++it)
+      if (it->key == key) {
+        cache.splice(cache.end(), cache, it);
+        return cache.back().rgba;
+      }
+    std::vector<std::vector<uint8_t>> planes;
+    warpTile(tx, ty, tw, th, planes);
+    Tile t{key, std::vector<PackedColour>(size_t(tw) * th)};
+    const uint8_t* a = planes.back().data();
+    for (size_t i = 0; i < t.rgba.size(); ++i) {
+      const uint8_t r = planes[0][i];
+      t.rgba[i] = colourBands == 1 ? PackedColour{r, r, r, a[i]} : PackedColour{r, planes[1][i], planes[2][i], a[i]};
+    }
+    while (!cache.empty() && cache.size() >= std::max<uint64_t>(cacheTiles, 1)) cache.pop_front();
+    cache.push_back(std::move(t));
+    return cache.back().rgba;
+  }
+
+  // GDAL-order tile (tx, ty) of the lattice, warped into `planes` (its bands, row-major).
+  void warpTile(uint32_t tx, uint32_t ty, uint32_t tw, uint32_t th, std::vector<std::vector<uint8_t>>& planes) {
+    GdalErrorCapture cap;
+    const int targetBands = colourBands + 1;
+    GDALDriver* mem = GetGDALDriverManager()->GetDriverByName("MEM");
+    if (!mem) fail(path, "GDAL has no MEM driver");
+    DatasetPtr target(mem->Create("", int(tw), int(th), targetBands, GDT_Byte, nullptr));
+    if (!target) fail(path, withGdal("cannot allocate a reprojection tile", cap));
+    const double x = double(tx) * kImageryTile, y = double(ty) * kImageryTile;
+    double gt[6] = {tgt[0] + x * tgt[1] + y * tgt[2], tgt[1], tgt[2], tgt[3] + x * tgt[4] + y * tgt[5], tgt[4], tgt[5]};
+    target->SetGeoTransform(gt);
+    if (!wkt.empty()) target->SetProjection(wkt.c_str());
+    target->GetRasterBand(targetBands)->SetColorInterpretation(GCI_AlphaBand);
+    CPLStringList args;
+    for (const char* a : {"-r", resampling.c_str(), "-dstalpha", "-q"}) args.AddString(a);
+    GDALWarpAppOptions* wopts = GDALWarpAppOptionsNew(args.List(), nullptr);
+    int usageError = 0;
+    cap.clear();
+    GDALDatasetH done = GDALWarp(nullptr, GDALDataset::ToHandle(target.get()), int(sources.size()), sources.data(),
+                                 wopts, &usageError);
+    GDALWarpAppOptionsFree(wopts);
+    if (!done || usageError || !cap.failures().empty())
+      fail(path, withGdal("reprojection onto the DEM failed (unreadable or truncated imagery?)", cap));
+    planes.assign(size_t(targetBands), std::vector<uint8_t>(size_t(tw) * th, 0));
+    for (int b = 0; b < targetBands; ++b)
+      if (target->GetRasterBand(b + 1)->RasterIO(GF_Read, 0, 0, int(tw), int(th), planes[size_t(b)].data(), int(tw),
+                                                 int(th), GDT_Byte, 0, 0) != CE_None)
+        fail(path, withGdal("cannot read the reprojected imagery", cap));
+    for (const std::string& w : cap.warnings())
+      if (warnings.size() < 8 && std::find(warnings.begin(), warnings.end(), w) == warnings.end()) warnings.push_back(w);
+  }
+};
+
+ImagerySource::ImagerySource(const DemRaster& dem, const fs::path& demPath, const ImageryOptions& o)
+    : impl_(std::make_unique<Impl>()) {
   validateImageryOptions(o);
+  Impl& im = *impl_;
   const fs::path& path = o.path;
+  im.path = path;
   std::error_code ec;
   if (!fs::exists(path, ec)) fail(path, "no such file");
   if (fs::is_directory(path, ec)) fail(path, "is a directory, not a raster file");
@@ -82,62 +161,59 @@ ImageryRaster loadImagery(const DemRaster& dem, const fs::path& demPath, const I
     fail(demPath, "has no georeference, so imagery cannot be placed on it");
   registerGdalOnce();
   GdalErrorCapture cap;
-  DatasetPtr src(GDALDataset::FromHandle(
+  im.src.reset(GDALDataset::FromHandle(
       GDALOpenEx(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, nullptr, nullptr, nullptr)));
-  if (!src) fail(path, withGdal("not a raster GDAL can read", cap));
-  const int bands = src->GetRasterCount();
-  if (src->GetRasterXSize() < 1 || src->GetRasterYSize() < 1 || bands < 1) fail(path, "raster has no pixels");
+  if (!im.src) fail(path, withGdal("not a raster GDAL can read", cap));
+  const int bands = im.src->GetRasterCount();
+  if (im.src->GetRasterXSize() < 1 || im.src->GetRasterYSize() < 1 || bands < 1) fail(path, "raster has no pixels");
   for (int b = 1; b <= bands; ++b) {
-    GDALRasterBand* band = src->GetRasterBand(b);
+    GDALRasterBand* band = im.src->GetRasterBand(b);
     if (band->GetRasterDataType() != GDT_Byte)
       fail(path, std::string("band ") + std::to_string(b) + " is " + GDALGetDataTypeName(band->GetRasterDataType()) +
                      "; imagery must be 8-bit colour (convert with gdal_translate -ot Byte -scale)");
   }
-  if (src->GetRasterBand(1)->GetColorTable())
+  if (im.src->GetRasterBand(1)->GetColorTable())
     fail(path, "is a paletted image; expand it first (gdal_translate -expand rgba)");
-  const bool alpha = bands > 1 && src->GetRasterBand(bands)->GetColorInterpretation() == GCI_AlphaBand;
-  const int colourBands = bands - (alpha ? 1 : 0);
-  if (colourBands != 1 && colourBands != 3)
+  const bool alpha = bands > 1 && im.src->GetRasterBand(bands)->GetColorInterpretation() == GCI_AlphaBand;
+  im.colourBands = bands - (alpha ? 1 : 0);
+  if (im.colourBands != 1 && im.colourBands != 3)
     fail(path, std::to_string(bands) + " bands; imagery must be grey, grey + alpha, RGB or RGBA");
 
-  ImageryRaster out;
   // The source, or a virtual copy of it carrying the georeference it lacks.
-  GDALDataset* source = src.get();
-  DatasetPtr placed;
+  GDALDataset* source = im.src.get();
   double sgt[6];
   if (source->GetGeoTransform(sgt) != CE_None) {
     if (!o.extent)
       fail(path, "has no georeference (no geotransform or world file); give " + optionRef("imageryExtent") +
                      " WEST,SOUTH,EAST,NORTH in the DEM's reference system");
     const auto& e = *o.extent;
-    placed = virtualCopy(source, path, cap);
+    im.placed = virtualCopy(source, path, cap);
     const double gt[6] = {e[0], (e[2] - e[0]) / source->GetRasterXSize(), 0.0,
                           e[3], 0.0, -(e[3] - e[1]) / source->GetRasterYSize()};
-    placed->SetGeoTransform(const_cast<double*>(gt));
-    if (!dem.georef.wkt.empty()) placed->SetProjection(dem.georef.wkt.c_str());
-    source = placed.get();
+    im.placed->SetGeoTransform(const_cast<double*>(gt));
+    if (!dem.georef.wkt.empty()) im.placed->SetProjection(dem.georef.wkt.c_str());
+    source = im.placed.get();
     source->GetGeoTransform(sgt);
   } else if (!source->GetSpatialRef() && !dem.georef.wkt.empty()) {
-    out.warnings.push_back("imagery has no reference system; taken to be the DEM's");
-    placed = virtualCopy(source, path, cap);
-    placed->SetProjection(dem.georef.wkt.c_str());
-    source = placed.get();
+    im.warnings.push_back("imagery has no reference system; taken to be the DEM's");
+    im.placed = virtualCopy(source, path, cap);
+    im.placed->SetProjection(dem.georef.wkt.c_str());
+    source = im.placed.get();
   }
 
   // Scale: the power of two nearest the DEM spacing over the imagery's pixel size.
   const double demPixel = std::sqrt(std::abs(dgt[1] * dgt[5]));
   const double ratio = demPixel / pixelSizeInDemUnits(source, dem.georef.wkt, path, cap);
-  out.scaleLog2 = o.scaleLog2 != kAutoImageryScale
-                      ? uint32_t(o.scaleLog2)
-                      : uint32_t(std::clamp<long>(std::lround(std::log2(std::max(ratio, 1e-9))), 0,
-                                                  long(kMaxImageryScaleLog2)));
-  const double s = double(1u << out.scaleLog2);
-  out.resampling = ratio / s > 1.5 ? "average" : "bilinear";
+  im.scaleLog2 = o.scaleLog2 != kAutoImageryScale
+                     ? uint32_t(o.scaleLog2)
+                     : uint32_t(std::clamp<long>(std::lround(std::log2(std::max(ratio, 1e-9))), 0,
+                                                 long(kMaxImageryScaleLog2)));
+  const double s = double(1u << im.scaleLog2);
+  im.resampling = ratio / s > 1.5 ? "average" : "bilinear";
 
   // Geographic imagery spanning the globe is also placed 360 degrees east and west of itself, so
   // a DEM in 0..360 longitudes (or one crossing the antimeridian) finds it.
-  std::vector<DatasetPtr> wrapped;
-  std::vector<GDALDatasetH> sources{GDALDataset::ToHandle(source)};
+  im.sources.push_back(GDALDataset::ToHandle(source));
   const OGRSpatialReference* ssrs = source->GetSpatialRef();
   const bool geographic = dem.georef.geographic && (ssrs ? bool(ssrs->IsGeographic()) : true);
   if (geographic && sgt[2] == 0.0 && std::abs(sgt[1]) * source->GetRasterXSize() >= 360.0 - 1.5 * std::abs(sgt[1])) {
@@ -145,63 +221,70 @@ ImageryRaster loadImagery(const DemRaster& dem, const fs::path& demPath, const I
       DatasetPtr copy = virtualCopy(source, path, cap);
       double gt[6] = {sgt[0] + shift, sgt[1], sgt[2], sgt[3], sgt[4], sgt[5]};
       copy->SetGeoTransform(gt);
-      sources.push_back(GDALDataset::ToHandle(copy.get()));
-      wrapped.push_back(std::move(copy));
+      im.sources.push_back(GDALDataset::ToHandle(copy.get()));
+      im.wrapped.push_back(std::move(copy));
     }
   }
 
   // The target: the DEM's lattice refined by s, in the DEM's raster orientation (row 0 = the
   // source DEM's first row). Target pixel centre c lies at DEM pixel coordinate c / s + 0.5.
-  out.width = uint32_t((dem.width - 1) * uint64_t(s)) + 1;
-  out.height = uint32_t((dem.height - 1) * uint64_t(s)) + 1;
-  const int targetBands = colourBands + 1;
-  GDALDriver* mem = GetGDALDriverManager()->GetDriverByName("MEM");
-  if (!mem) fail(path, "GDAL has no MEM driver");
-  DatasetPtr target(mem->Create("", int(out.width), int(out.height), targetBands, GDT_Byte, nullptr));
-  if (!target) fail(path, withGdal("cannot allocate the reprojected imagery (" + std::to_string(out.width) + " x " +
-                                       std::to_string(out.height) + ")",
-                                   cap));
+  im.width = uint32_t((dem.width - 1) * uint64_t(s)) + 1;
+  im.height = uint32_t((dem.height - 1) * uint64_t(s)) + 1;
   const double off = 0.5 - 0.5 / s;
-  double tgt[6] = {dgt[0] + off * (dgt[1] + dgt[2]), dgt[1] / s, dgt[2] / s,
-                   dgt[3] + off * (dgt[4] + dgt[5]), dgt[4] / s, dgt[5] / s};
-  target->SetGeoTransform(tgt);
-  if (!dem.georef.wkt.empty()) target->SetProjection(dem.georef.wkt.c_str());
-  target->GetRasterBand(targetBands)->SetColorInterpretation(GCI_AlphaBand);
+  im.tgt = {dgt[0] + off * (dgt[1] + dgt[2]), dgt[1] / s, dgt[2] / s,
+            dgt[3] + off * (dgt[4] + dgt[5]), dgt[4] / s, dgt[5] / s};
+  im.wkt = dem.georef.wkt;
+  im.flip = dgt[5] < 0;
+  for (const std::string& w : cap.warnings()) im.warnings.push_back(w);
+}
 
-  CPLStringList args;
-  for (const char* a : {"-r", out.resampling.c_str(), "-dstalpha", "-q"}) args.AddString(a);
-  GDALWarpAppOptions* wopts = GDALWarpAppOptionsNew(args.List(), nullptr);
-  int usageError = 0;
-  cap.clear();
-  GDALDatasetH done = GDALWarp(nullptr, GDALDataset::ToHandle(target.get()), int(sources.size()), sources.data(),
-                               wopts, &usageError);
-  GDALWarpAppOptionsFree(wopts);
-  if (!done || usageError || !cap.failures().empty())
-    fail(path, withGdal("reprojection onto the DEM failed (unreadable or truncated imagery?)", cap));
+ImagerySource::~ImagerySource() = default;
+uint32_t ImagerySource::scaleLog2() const { return impl_->scaleLog2; }
+uint32_t ImagerySource::width() const { return impl_->width; }
+uint32_t ImagerySource::height() const { return impl_->height; }
+const std::string& ImagerySource::resampling() const { return impl_->resampling; }
+std::vector<std::string> ImagerySource::warnings() const { return impl_->warnings; }
+void ImagerySource::keepTiles(uint64_t bytes) {
+  impl_->cacheTiles = bytes / (uint64_t(kImageryTile) * kImageryTile * sizeof(PackedColour));
+  while (impl_->cache.size() > impl_->cacheTiles) impl_->cache.pop_front();
+}
 
-  // Read back, south row first.
-  const size_t n = size_t(out.width) * out.height;
-  std::vector<std::vector<uint8_t>> planes(static_cast<size_t>(targetBands), std::vector<uint8_t>(n, 0));
-  for (int b = 0; b < targetBands; ++b)
-    if (target->GetRasterBand(b + 1)->RasterIO(GF_Read, 0, 0, int(out.width), int(out.height), planes[b].data(),
-                                               int(out.width), int(out.height), GDT_Byte, 0, 0) != CE_None)
-      fail(path, withGdal("cannot read the reprojected imagery", cap));
-  const bool flip = dgt[5] < 0;  // as loadDem: GDAL row 0 is north for north-up rasters
-  out.rgba.resize(n);
-  uint64_t covered = 0;
-  for (uint32_t q = 0; q < out.height; ++q) {
-    const size_t row = size_t(flip ? out.height - 1 - q : q) * out.width;
-    for (uint32_t x = 0; x < out.width; ++x) {
-      const size_t i = size_t(q) * out.width + x;
-      const uint8_t a = planes[size_t(targetBands) - 1][i];
-      const uint8_t r = planes[0][i];
-      out.rgba[row + x] = colourBands == 1 ? PackedColour{r, r, r, a} : PackedColour{r, planes[1][i], planes[2][i], a};
-      covered += a > 0;
+std::vector<PackedColour> ImagerySource::window(uint32_t x0, uint32_t y0, uint32_t w, uint32_t h) const {
+  Impl& im = *impl_;
+  if (w == 0 || h == 0 || x0 + uint64_t(w) > im.width || y0 + uint64_t(h) > im.height)
+    throw std::invalid_argument("ImagerySource::window: outside the lattice");
+  std::vector<PackedColour> out(size_t(w) * h);
+  // GDAL rows of the window (row 0 of the lattice is south).
+  const uint32_t g0 = im.flip ? im.height - (y0 + h) : y0;
+  for (uint32_t ty = g0 / kImageryTile; ty * uint64_t(kImageryTile) < g0 + uint64_t(h); ++ty)
+    for (uint32_t tx = x0 / kImageryTile; tx * uint64_t(kImageryTile) < x0 + uint64_t(w); ++tx) {
+      const uint32_t tx0 = tx * kImageryTile, ty0 = ty * kImageryTile;
+      const uint32_t tw = std::min(kImageryTile, im.width - tx0), th = std::min(kImageryTile, im.height - ty0);
+      const std::vector<PackedColour>& t = im.tile(tx, ty, tw, th);
+      const uint32_t gx0 = std::max(tx0, x0), gx1 = std::min(tx0 + tw, x0 + w);
+      for (uint32_t gy = std::max(ty0, g0); gy < std::min(ty0 + th, g0 + h); ++gy) {
+        const uint32_t q = im.flip ? im.height - 1 - gy : gy;  // lattice row, south first
+        std::copy(t.begin() + std::ptrdiff_t(size_t(gy - ty0) * tw + (gx0 - tx0)),
+                  t.begin() + std::ptrdiff_t(size_t(gy - ty0) * tw + (gx1 - tx0)),
+                  out.begin() + std::ptrdiff_t(size_t(q - y0) * w + (gx0 - x0)));
+      }
     }
-  }
-  out.coverage = double(covered) / double(n);
-  if (covered == 0) fail(path, "does not overlap the DEM " + demPath.string());
-  for (const std::string& w : cap.warnings()) out.warnings.push_back(w);
+  return out;
+}
+
+ImageryRaster loadImagery(const DemRaster& dem, const fs::path& demPath, const ImageryOptions& o) {
+  const ImagerySource source(dem, demPath, o);
+  ImageryRaster out;
+  out.scaleLog2 = source.scaleLog2();
+  out.width = source.width();
+  out.height = source.height();
+  out.resampling = source.resampling();
+  out.rgba = source.window(0, 0, out.width, out.height);
+  const uint64_t covered =
+      uint64_t(std::count_if(out.rgba.begin(), out.rgba.end(), [](const PackedColour& c) { return c[3] > 0; }));
+  out.coverage = double(covered) / double(out.rgba.size());
+  if (covered == 0) fail(o.path, "does not overlap the DEM " + demPath.string());
+  out.warnings = source.warnings();
   return out;
 }
 
@@ -221,16 +304,45 @@ ImageryPyramid::ImageryPyramid(const ImageryRaster& raster, uint32_t chartsX, ui
     for (uint32_t x = 0; x < base.width; ++x)
       base.rgba[size_t(y) * base.width + x] = raster.rgba[src + std::min(x, raster.width - 1)];
   }
+  buildLevels(levels, base.width, base.height);
+}
+
+ImageryPyramid::ImageryPyramid(std::vector<PackedColour> rgba, uint32_t x0, uint32_t y0, uint32_t w, uint32_t h,
+                               uint32_t chartsX, uint32_t chartsY, uint32_t chartSize, uint32_t scaleLog2,
+                               uint32_t levels)
+    : chartIntervals_((chartSize - 1) << scaleLog2) {
+  const uint32_t align = levels == 0 ? 1 : 1u << (levels - 1);
+  if (levels == 0 || (chartIntervals_ >> (levels - 1)) == 0 || rgba.size() != size_t(w) * h || w == 0 || h == 0 ||
+      x0 % align || y0 % align || x0 + uint64_t(w) > uint64_t(chartsX) * chartIntervals_ + 1 ||
+      y0 + uint64_t(h) > uint64_t(chartsY) * chartIntervals_ + 1)
+    throw std::invalid_argument("ImageryPyramid: inconsistent window or levels");
+  levels_.resize(levels);
+  levels_[0] = {x0, y0, w, h, std::move(rgba)};
+  buildLevels(levels, chartsX * chartIntervals_ + 1, chartsY * chartIntervals_ + 1);
+}
+
+void ImageryPyramid::buildLevels(uint32_t levels, uint32_t gridWidth, uint32_t gridHeight) {
   for (uint32_t k = 1; k < levels; ++k) {
     const Level& f = levels_[k - 1];
     Level& c = levels_[k];
-    c.width = (f.width - 1) / 2 + 1;
-    c.height = (f.height - 1) / 2 + 1;
+    const uint32_t x0 = levels_[0].x0, y0 = levels_[0].y0;
+    c.x0 = x0 >> k;
+    c.y0 = y0 >> k;
+    c.width = ((x0 + levels_[0].width - 1) >> k) - c.x0 + 1;
+    c.height = ((y0 + levels_[0].height - 1) >> k) - c.y0 + 1;
+    // The whole finer level's last sample, and the window's: the filter clamps to both (the same
+    // on the whole grid).
+    const uint32_t fLastX = std::min((gridWidth - 1) >> (k - 1), f.x0 + f.width - 1);
+    const uint32_t fLastY = std::min((gridHeight - 1) >> (k - 1), f.y0 + f.height - 1);
     c.rgba.resize(size_t(c.width) * c.height);
     tbb::parallel_for(uint32_t(0), c.height, [&](uint32_t y) {
-      const uint32_t fy[3] = {y > 0 ? 2 * y - 1 : 0, 2 * y, std::min(2 * y + 1, f.height - 1)};
+      const uint32_t gy = c.y0 + y;
+      uint32_t fy[3] = {gy > 0 ? 2 * gy - 1 : 0, 2 * gy, std::min(2 * gy + 1, fLastY)};
+      for (uint32_t& v : fy) v = std::max(v, f.y0) - f.y0;
       for (uint32_t x = 0; x < c.width; ++x) {
-        const uint32_t fx[3] = {x > 0 ? 2 * x - 1 : 0, 2 * x, std::min(2 * x + 1, f.width - 1)};
+        const uint32_t gx = c.x0 + x;
+        uint32_t fx[3] = {gx > 0 ? 2 * gx - 1 : 0, 2 * gx, std::min(2 * gx + 1, fLastX)};
+        for (uint32_t& v : fx) v = std::max(v, f.x0) - f.x0;
         uint32_t sum[4] = {0, 0, 0, 0};
         for (int j = 0; j < 3; ++j)
           for (int i = 0; i < 3; ++i) {
@@ -251,7 +363,10 @@ ChartPyramid ImageryPyramid::chart(int32_t gridX, int32_t gridY) const {
   for (uint32_t k = 0; k < levels_.size(); ++k) {
     const Level& l = levels_[k];
     const uint32_t side = (chartIntervals_ >> k) + 1;
-    const size_t ox = (size_t(gridX) * chartIntervals_) >> k, oy = (size_t(gridY) * chartIntervals_) >> k;
+    const size_t gx = (size_t(gridX) * chartIntervals_) >> k, gy = (size_t(gridY) * chartIntervals_) >> k;
+    if (gx < l.x0 || gy < l.y0 || gx + side > size_t(l.x0) + l.width || gy + side > size_t(l.y0) + l.height)
+      throw std::invalid_argument("ImageryPyramid::chart: the chart is outside the window");
+    const size_t ox = gx - l.x0, oy = gy - l.y0;
     auto& c = p.colours[k];
     c.resize(size_t(side) * side);
     for (uint32_t v = 0; v < side; ++v)
@@ -260,36 +375,123 @@ ChartPyramid ImageryPyramid::chart(int32_t gridX, int32_t gridY) const {
   return p;
 }
 
-ImageryWriteStats writeImageryCharts(const ImageryRaster& raster, const std::string& source, const fs::path& dir,
-                                     AtlasManifest& m) {
-  const auto start = std::chrono::steady_clock::now();
+namespace {
+
+void makeImageryDir(const fs::path& dir) {
   std::error_code ec;
   fs::create_directories(dir / "imagery", ec);
   if (ec || !fs::is_directory(dir / "imagery"))
     throw InputError((dir / "imagery").string() + ": cannot create directory: " +
                      (ec ? ec.message() : std::string("not a directory")));
-  const uint32_t levels = m.intervalsLog2() + 1;
-  const ImageryPyramid pyramid(raster, m.chartsX, m.chartsY, m.chartSize, levels);
+}
+
+void setImageryInfo(AtlasManifest& m, uint32_t scaleLog2, const std::string& source, double coverage) {
   m.imagery.present = true;
-  m.imagery.scaleLog2 = raster.scaleLog2;
+  m.imagery.scaleLog2 = scaleLog2;
   m.imagery.source = source;
-  m.imagery.coverage = raster.coverage;
-  const uint32_t chartSize = m.imagery.chartSize(m.chartSize);
-  const uint32_t blockIntervals = m.blockIntervals << raster.scaleLog2;
+  m.imagery.coverage = coverage;
+}
+
+// Writes chart `c`'s imagery file, cut from `pyramid`; returns its bytes and adds its samples.
+uint64_t writeImageryChart(const ImageryPyramid& pyramid, const fs::path& dir, const AtlasManifest& m, ChartInfo& c,
+                           std::atomic<uint64_t>& samples) {
+  c.imageryFile = imageryFileName(c.id);
+  const ChartPyramid p = pyramid.chart(c.gridX, c.gridY);
+  uint64_t n = 0;
+  for (const auto& level : p.colours) n += level.size();
+  samples += n;
+  ChartCoding coding;
+  coding.compressed = m.compression.present;  // coded like the atlas's geometry
+  return writeChartFile(dir / c.imageryFile, p, m.imagery.chartSize(m.chartSize), m.blockIntervals << m.imagery.scaleLog2,
+                        coding);
+}
+
+}  // namespace
+
+ImageryWriteStats writeImageryCharts(const ImageryRaster& raster, const std::string& source, const fs::path& dir,
+                                     AtlasManifest& m) {
+  const auto start = std::chrono::steady_clock::now();
+  makeImageryDir(dir);
+  const ImageryPyramid pyramid(raster, m.chartsX, m.chartsY, m.chartSize, m.intervalsLog2() + 1);
+  setImageryInfo(m, raster.scaleLog2, source, raster.coverage);
   std::atomic<uint64_t> bytes{0}, samples{0};
   const progress::ProgressStage stage("imagery charts", m.charts.size());
   tbb::parallel_for(size_t{0}, m.charts.size(), [&](size_t i) {
-    ChartInfo& c = m.charts[i];
-    c.imageryFile = imageryFileName(c.id);
-    const ChartPyramid p = pyramid.chart(c.gridX, c.gridY);
-    uint64_t n = 0;
-    for (const auto& level : p.colours) n += level.size();
-    samples += n;
-    ChartCoding coding;
-    coding.compressed = m.compression.present;  // coded like the atlas's geometry
-    bytes += writeChartFile(dir / c.imageryFile, p, chartSize, blockIntervals, coding);
+    bytes += writeImageryChart(pyramid, dir, m, m.charts[i], samples);
     progress::advance();
   });
+  ImageryWriteStats st;
+  st.bytesOnDisk = bytes.load();
+  st.storedSamples = samples.load();
+  st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return st;
+}
+
+ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::string& source,
+                                             const fs::path& dir, AtlasManifest& m, uint64_t memoryBytes,
+                                             ImageryWindowStats* windowStats) {
+  const auto start = std::chrono::steady_clock::now();
+  makeImageryDir(dir);
+  const uint32_t levels = m.intervalsLog2() + 1;
+  const uint32_t s = imagery.scaleLog2();
+  const uint64_t ci = uint64_t(m.chartSize - 1) << s;  // imagery intervals per chart
+  const uint64_t margin = uint64_t(1) << (levels - 1);
+  const uint64_t gridW = m.chartsX * ci + 1, gridH = m.chartsY * ci + 1;
+  const uint32_t latW = imagery.width(), latH = imagery.height();
+  // A quarter of the memory keeps reprojected tiles (each window's margin is its neighbours'); the
+  // rest holds square blocks of n charts a side: the window, its lattice and its pyramid, in
+  // 2.5 x 4 bytes per level-0 sample.
+  imagery.keepTiles(memoryBytes / 4);
+  uint64_t n = 1;
+  auto windowBytes = [&](uint64_t k) { return (k * ci + 2 * margin + 1) * (k * ci + 2 * margin + 1) * 10; };
+  while (n < std::max(m.chartsX, m.chartsY) && windowBytes(n + 1) <= memoryBytes / 4 * 3) ++n;
+  // Charts by grid cell.
+  std::vector<int64_t> at(size_t(m.chartsX) * m.chartsY, -1);
+  for (size_t i = 0; i < m.charts.size(); ++i) at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
+  setImageryInfo(m, s, source, 0.0);
+  std::atomic<uint64_t> bytes{0}, samples{0};
+  uint64_t covered = 0, windows = 0, most = 0;
+  const progress::ProgressStage stage("imagery charts", m.charts.size());
+  for (uint64_t cy0 = 0; cy0 < m.chartsY; cy0 += n)
+    for (uint64_t cx0 = 0; cx0 < m.chartsX; cx0 += n) {
+      const uint64_t cx1 = std::min<uint64_t>(cx0 + n, m.chartsX), cy1 = std::min<uint64_t>(cy0 + n, m.chartsY);
+      std::vector<size_t> charts;
+      for (uint64_t cy = cy0; cy < cy1; ++cy)
+        for (uint64_t cx = cx0; cx < cx1; ++cx)
+          if (at[cy * m.chartsX + cx] >= 0) charts.push_back(size_t(at[cy * m.chartsX + cx]));
+      if (charts.empty()) continue;
+      // The grid's level-0 window (edge-clamped onto the lattice), the charts and their margin.
+      const uint64_t x0 = cx0 * ci > margin ? cx0 * ci - margin : 0, y0 = cy0 * ci > margin ? cy0 * ci - margin : 0;
+      const uint64_t x1 = std::min(gridW, cx1 * ci + margin + 1), y1 = std::min(gridH, cy1 * ci + margin + 1);
+      const uint32_t lx0 = uint32_t(std::min<uint64_t>(x0, latW - 1)), ly0 = uint32_t(std::min<uint64_t>(y0, latH - 1));
+      const uint32_t lx1 = uint32_t(std::min<uint64_t>(x1, latW)), ly1 = uint32_t(std::min<uint64_t>(y1, latH));
+      const std::vector<PackedColour> lattice =
+          imagery.window(lx0, ly0, std::max(lx1, lx0 + 1) - lx0, std::max(ly1, ly0 + 1) - ly0);
+      const uint32_t lw = std::max(lx1, lx0 + 1) - lx0;
+      // Coverage over the lattice samples these charts own (the last column and row with the
+      // last charts).
+      const uint64_t ox1 = cx1 == m.chartsX ? latW : std::min<uint64_t>(cx1 * ci, latW);
+      const uint64_t oy1 = cy1 == m.chartsY ? latH : std::min<uint64_t>(cy1 * ci, latH);
+      for (uint64_t y = cy0 * ci; y < oy1; ++y)
+        for (uint64_t x = cx0 * ci; x < ox1; ++x) covered += lattice[size_t(y - ly0) * lw + size_t(x - lx0)][3] > 0;
+      const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
+      std::vector<PackedColour> base(size_t(w) * h);
+      for (uint32_t y = 0; y < h; ++y) {
+        const size_t src = size_t(std::min<uint64_t>(y0 + y, latH - 1) - ly0) * lw;
+        for (uint32_t x = 0; x < w; ++x) base[size_t(y) * w + x] = lattice[src + (std::min<uint64_t>(x0 + x, latW - 1) - lx0)];
+      }
+      const ImageryPyramid pyramid(std::move(base), uint32_t(x0), uint32_t(y0), w, h, m.chartsX, m.chartsY, m.chartSize,
+                                   s, levels);
+      tbb::parallel_for(size_t{0}, charts.size(), [&](size_t i) {
+        bytes += writeImageryChart(pyramid, dir, m, m.charts[charts[i]], samples);
+        progress::advance();
+      });
+      ++windows;
+      most = std::max<uint64_t>(most, uint64_t(w) * h);
+    }
+  if (covered == 0) fail(m.imagery.source, "does not overlap the DEM");
+  m.imagery.coverage = double(covered) / (double(latW) * double(latH));
+  if (windowStats) *windowStats = {windows, most, m.imagery.coverage};
   ImageryWriteStats st;
   st.bytesOnDisk = bytes.load();
   st.storedSamples = samples.load();

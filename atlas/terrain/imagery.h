@@ -8,6 +8,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -47,11 +48,44 @@ struct ImageryRaster {
 // or an empty or inverted extent.
 void validateImageryOptions(const ImageryOptions& options);
 
-// Reads and reprojects the imagery onto `dem`'s lattice. `demPath` names the DEM in messages.
-// Geographic imagery that spans the whole globe wraps around the antimeridian (a -180..180 image
-// over a 0..360 DEM). Throws InputError naming the file for: unreadable data, no georeference
-// (and no extent), a band layout that is not grey, grey + alpha, RGB or RGBA bytes, a DEM without
-// a georeference, imagery that does not overlap the DEM.
+// The imagery opened and placed on a DEM's lattice refined by 2^scaleLog2, reprojected by GDAL in
+// fixed tiles of kImageryTile^2 lattice samples (aligned on the lattice, in GDAL's row order), so
+// that a sample's colour is the same whichever window asks for it: the whole lattice at once
+// (loadImagery) or window by window (writeImageryChartsWindowed). `demPath` names the DEM in
+// messages. Geographic imagery that spans the whole globe wraps around the antimeridian (a
+// -180..180 image over a 0..360 DEM). Throws InputError naming the file for: unreadable data, no
+// georeference (and no extent), a band layout that is not grey, grey + alpha, RGB or RGBA bytes,
+// a DEM without a georeference.
+inline constexpr uint32_t kImageryTile = 1024;
+
+class ImagerySource {
+ public:
+  // dem: its size and georeference (heights unused).
+  ImagerySource(const DemRaster& dem, const std::filesystem::path& demPath, const ImageryOptions& options);
+  ~ImagerySource();
+  ImagerySource(const ImagerySource&) = delete;
+  ImagerySource& operator=(const ImagerySource&) = delete;
+
+  uint32_t scaleLog2() const;
+  uint32_t width() const;   // (dem.width - 1) * 2^scaleLog2 + 1
+  uint32_t height() const;
+  const std::string& resampling() const;  // GDAL's method: "bilinear" or "average"
+  // GDAL's warnings so far.
+  std::vector<std::string> warnings() const;
+  // Keeps up to `bytes` of reprojected tiles for later windows (least recently used go first);
+  // 0 (the default): one.
+  void keepTiles(uint64_t bytes);
+  // Lattice samples [x0, x0 + w) x [y0, y0 + h) (row 0 south), row-major; alpha as ImageryRaster.
+  // Throws InputError naming the imagery when GDAL fails. Not thread-safe.
+  std::vector<PackedColour> window(uint32_t x0, uint32_t y0, uint32_t w, uint32_t h) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Reads and reprojects the imagery onto `dem`'s whole lattice (ImagerySource). Throws InputError
+// as ImagerySource does, and for imagery that does not overlap the DEM.
 ImageryRaster loadImagery(const DemRaster& dem, const std::filesystem::path& demPath,
                           const ImageryOptions& options);
 
@@ -67,15 +101,26 @@ class ImageryPyramid {
   // chartsX x chartsY charts of chartSize samples (the geometry's); `levels` pyramid levels.
   ImageryPyramid(const ImageryRaster& raster, uint32_t chartsX, uint32_t chartsY, uint32_t chartSize,
                  uint32_t levels);
+  // The same pyramid over a window of the chart grid: level-0 samples [x0, x0 + w) x [y0, y0 + h)
+  // of the whole grid's base (the lattice edge-clamped to chartsX * intervals + 1 samples a
+  // side), given in `rgba` (w * h, row 0 south), with x0 and y0 multiples of 2^(levels - 1). Its
+  // charts are the whole pyramid's, bit for bit, for charts at least 2^(levels - 1) level-0
+  // samples inside the window on every side that is not the grid's edge (each coarser level's
+  // filter reads one sample past the window, which the window clamps: one wrong sample at its
+  // edge on every level).
+  ImageryPyramid(std::vector<PackedColour> rgba, uint32_t x0, uint32_t y0, uint32_t w, uint32_t h,
+                 uint32_t chartsX, uint32_t chartsY, uint32_t chartSize, uint32_t scaleLog2, uint32_t levels);
   // Chart (gridX, gridY)'s attribute pyramid (colours only): level k has
   // (((chartSize - 1) << scaleLog2) >> k) + 1 samples per side.
   ChartPyramid chart(int32_t gridX, int32_t gridY) const;
 
  private:
   struct Level {
+    uint32_t x0 = 0, y0 = 0;  // the window's origin at this level, in the whole level's samples
     uint32_t width = 0, height = 0;
     std::vector<PackedColour> rgba;
   };
+  void buildLevels(uint32_t levels, uint32_t gridWidth, uint32_t gridHeight);
   uint32_t chartIntervals_ = 0;  // (chartSize - 1) << scaleLog2
   std::vector<Level> levels_;
 };
@@ -90,5 +135,20 @@ struct ImageryWriteStats {
 // imageryFile. The manifest's chart grid must already be filled (fillTerrainManifest).
 ImageryWriteStats writeImageryCharts(const ImageryRaster& raster, const std::string& source,
                                      const std::filesystem::path& dir, AtlasManifest& manifest);
+
+struct ImageryWindowStats {
+  uint64_t windows = 0;       // windows of charts reprojected
+  uint64_t windowSamples = 0; // the most level-0 samples one window held
+  double coverage = 0.0;      // as ImageryRaster::coverage
+};
+
+// The same files as writeImageryCharts of the whole raster, byte for byte, window by window: each
+// window a block of charts with a margin of 2^(levels - 1) level-0 samples round it, reprojected
+// from `imagery` and filtered into its pyramid, within memoryBytes (at least one chart and its
+// margin), a quarter of it keeping reprojected tiles for the next windows. Throws InputError naming
+// the imagery when it does not overlap the DEM.
+ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::string& source,
+                                             const std::filesystem::path& dir, AtlasManifest& manifest,
+                                             uint64_t memoryBytes, ImageryWindowStats* windowStats = nullptr);
 
 }  // namespace gimlod

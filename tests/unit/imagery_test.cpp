@@ -1,7 +1,8 @@
 // Terrain imagery (atlas/terrain/imagery.h): reprojection onto the DEM's lattice puts colours at
 // the right geographic points, the scale follows the imagery's resolution, a whole-Earth image
-// wraps around the antimeridian, the pyramid keeps shared chart borders bit-identical, and bad
-// imagery is named.
+// wraps around the antimeridian, the pyramid keeps shared chart borders bit-identical, a window of
+// the pyramid gives the whole pyramid's charts, the files written window by window are those of
+// the whole raster, and bad imagery is named.
 #include <gtest/gtest.h>
 
 #include <fstream>
@@ -9,6 +10,7 @@
 
 #include "atlas/terrain/dem.h"
 #include "atlas/terrain/imagery.h"
+#include "atlas/terrain/terrain_atlas.h"
 #include "tests/imagery_fixture.h"
 #include "tests/test_util.h"
 
@@ -228,6 +230,102 @@ TEST(ImageryPyramid, ChartsShareBitIdenticalBordersAtEveryLevel) {
   for (int j = -1; j <= 1; ++j)
     for (int i = -1; i <= 1; ++i) sum += uint32_t((i ? 1 : 2) * (j ? 1 : 2)) * f[size_t((10 + j) * 65 + 10 + i)][0];
   EXPECT_EQ(c[5 * 33 + 5][0], uint8_t((sum + 8) >> 4));
+}
+
+// Random colours on a 5 x 4 grid of 17-sample charts at 2 imagery samples per interval, the raster
+// narrower and shorter than the grid (the rest edge-clamped).
+ImageryRaster randomRaster(uint32_t chartsX, uint32_t chartsY, uint32_t intervals) {
+  ImageryRaster raster;
+  raster.scaleLog2 = 1;
+  raster.width = chartsX * intervals - 5;
+  raster.height = chartsY * intervals - 3;
+  std::mt19937 rng(11);
+  raster.rgba.resize(size_t(raster.width) * raster.height);
+  for (PackedColour& c : raster.rgba) c = {uint8_t(rng()), uint8_t(rng()), uint8_t(rng()), uint8_t(rng())};
+  return raster;
+}
+
+// The charts of a window whose margin is `margin` level-0 samples round the chart (gridX, gridY),
+// against the whole pyramid's: the number of differing samples over every level.
+uint64_t windowDifferences(const ImageryRaster& raster, const ImageryPyramid& whole, uint32_t chartsX,
+                           uint32_t chartsY, uint32_t chartSize, uint32_t levels, int32_t gridX, int32_t gridY,
+                           uint32_t margin) {
+  const uint32_t ci = (chartSize - 1) << raster.scaleLog2;
+  const uint32_t gridW = chartsX * ci + 1, gridH = chartsY * ci + 1;
+  const uint32_t x0 = std::max<int64_t>(int64_t(gridX) * ci - margin, 0);
+  const uint32_t y0 = std::max<int64_t>(int64_t(gridY) * ci - margin, 0);
+  const uint32_t x1 = std::min(gridW, uint32_t(gridX + 1) * ci + margin + 1);
+  const uint32_t y1 = std::min(gridH, uint32_t(gridY + 1) * ci + margin + 1);
+  std::vector<PackedColour> base(size_t(x1 - x0) * (y1 - y0));
+  for (uint32_t y = y0; y < y1; ++y)
+    for (uint32_t x = x0; x < x1; ++x)
+      base[size_t(y - y0) * (x1 - x0) + (x - x0)] =
+          raster.rgba[size_t(std::min(y, raster.height - 1)) * raster.width + std::min(x, raster.width - 1)];
+  const ImageryPyramid window(std::move(base), x0, y0, x1 - x0, y1 - y0, chartsX, chartsY, chartSize,
+                              raster.scaleLog2, levels);
+  const ChartPyramid a = whole.chart(gridX, gridY), b = window.chart(gridX, gridY);
+  uint64_t differ = 0;
+  for (uint32_t k = 0; k < levels; ++k)
+    for (size_t i = 0; i < a.colours[k].size(); ++i) differ += a.colours[k][i] != b.colours[k][i];
+  return differ;
+}
+
+// A window with a margin of 2^(levels - 1) level-0 samples round a chart (each coarser level's
+// filter reads one sample past it; a window starts on a multiple of it) gives that chart's pyramid
+// bit for bit; a window of the chart alone does not (so the comparison sees the margin).
+TEST(ImageryPyramid, AWindowWithItsMarginGivesTheWholePyramidsCharts) {
+  const uint32_t chartsX = 5, chartsY = 4, chartSize = 17, levels = 5;
+  const ImageryRaster raster = randomRaster(chartsX, chartsY, 32);
+  const ImageryPyramid whole(raster, chartsX, chartsY, chartSize, levels);
+  const uint32_t margin = 1u << (levels - 1);
+  uint64_t shortDifferences = 0;
+  for (int32_t y = 0; y < int32_t(chartsY); ++y)
+    for (int32_t x = 0; x < int32_t(chartsX); ++x) {
+      EXPECT_EQ(windowDifferences(raster, whole, chartsX, chartsY, chartSize, levels, x, y, margin), 0u) << x << "," << y;
+      shortDifferences += windowDifferences(raster, whole, chartsX, chartsY, chartSize, levels, x, y, 0);
+    }
+  EXPECT_GT(shortDifferences, 0u) << "a window without a margin gave every chart exactly";
+  // A window that does not hold the chart is refused.
+  const ImageryPyramid corner(std::vector<PackedColour>(size_t(49) * 49), 0, 0, 49, 49, chartsX, chartsY, chartSize,
+                              raster.scaleLog2, levels);
+  EXPECT_THROW(corner.chart(2, 0), std::invalid_argument);
+}
+
+// The shipped tile's imagery (on the DEM's own lattice, 1201^2) written window by window, in
+// windows of 8 x 8 charts and less, is the whole raster's, file for file; the coverage is the same.
+TEST_F(ImageryTest, WindowByWindowWritesTheWholeRastersFiles) {
+  TerrainAtlasOptions atlas;
+  atlas.chartSize = 129;
+  atlas.blockIntervals = 64;
+  AtlasManifest a;
+  fs::create_directories(dir_.path() / "whole");
+  fs::create_directories(dir_.path() / "windows");
+  writeTerrainCharts(*dem_, atlas, dir_.path() / "whole", a);
+  AtlasManifest b = a;
+  ImageryOptions o;
+  o.path = test::repoData() / "terrain" / "mt_rainier_imagery.tif";
+  o.scaleLog2 = 0;
+  const ImageryRaster raster = loadImagery(*dem_, rainier(), o);
+  writeImageryCharts(raster, "imagery", dir_.path() / "whole", a);
+  ImagerySource source(*dem_, rainier(), o);
+  ImageryWindowStats ws;
+  // 8 x 8 charts of 128 intervals and their margins in 3/4 of 24 MiB: (8 * 128 + 2 * 128 + 1)^2
+  // x 10 bytes; the rest keeps one reprojected tile.
+  writeImageryChartsWindowed(source, "imagery", dir_.path() / "windows", b, 24u << 20, &ws);
+  std::printf("  %zu charts, %u x %u imagery samples: %llu windows of at most %llu samples\n", a.charts.size(),
+              raster.width, raster.height, (unsigned long long)ws.windows, (unsigned long long)ws.windowSamples);
+  EXPECT_EQ(ws.windows, 4u);
+  EXPECT_LT(ws.windowSamples, uint64_t(raster.width) * raster.height);
+  EXPECT_EQ(ws.coverage, raster.coverage);
+  EXPECT_EQ(b.imagery.coverage, a.imagery.coverage);
+  EXPECT_EQ(b.imagery.scaleLog2, a.imagery.scaleLog2);
+  ASSERT_EQ(a.charts.size(), b.charts.size());
+  for (size_t i = 0; i < a.charts.size(); ++i) {
+    ASSERT_EQ(a.charts[i].imageryFile, b.charts[i].imageryFile);
+    EXPECT_EQ(test::fileBytes(dir_.path() / "whole" / a.charts[i].imageryFile),
+              test::fileBytes(dir_.path() / "windows" / b.charts[i].imageryFile))
+        << a.charts[i].imageryFile;
+  }
 }
 
 }  // namespace

@@ -407,7 +407,9 @@ TEST_P(ScanAtlasTest, TensOfChartsWithinTheBounds) {
   EXPECT_EQ(r["quads"].get<std::string>(), "sides");
   EXPECT_LT(charts, 125u);
   EXPECT_GT(bound, 0.0);
-  if (error > bound) EXPECT_GE(samplesPerTriangle, kMaxSamplesPerTriangle) << "sampling error " << error;
+  if (error > bound) {
+    EXPECT_GE(samplesPerTriangle, kMaxSamplesPerTriangle) << "sampling error " << error;
+  }
   EXPECT_LE(hausdorff, 0.1);
 }
 

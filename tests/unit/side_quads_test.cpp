@@ -413,8 +413,9 @@ TEST(SideQuads, TheBunnysSidesBuildMeetsTheSamplingBound) {
   EXPECT_GT(r.at("max_sample_error").get<double>(), 0.0);
   const double samplesPerTriangle =
       double(stats.at("samples").get<uint64_t>()) / double(stats.at("charting").at("triangles").get<uint64_t>());
-  if (r.at("sample_error").get<double>() > r.at("max_sample_error").get<double>())
+  if (r.at("sample_error").get<double>() > r.at("max_sample_error").get<double>()) {
     EXPECT_GE(samplesPerTriangle, kMaxSamplesPerTriangle) << "the doubling stopped over the bound below the cap";
+  }
   EXPECT_EQ(r.at("two_quad_corners").get<uint32_t>(), 0u);
   const SeamReport seams = validateSeams(o.output);
   EXPECT_TRUE(seams.seamless()) << seams.mismatches() << " seam mismatches";

@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""Mesh atlas bytes per input triangle against the Hausdorff distance (python3 only).
+
+Usage: python3 scripts/mesh_bytes_curve.py [--gimlod BIN] [--sizes 33,65,129,auto]
+                                           [--bits 22,16] [--work DIR] MESH [MESH ...]
+
+Builds each MESH with `gimlod build MESH -o ATLAS` once per chart size (`--chart-size N`; `auto`
+is the default chart size, chosen by density and doubled to the sampling bound) and per position
+lattice (`--position-bits B`), the other options at their defaults, one build after another.
+Prints one Markdown table: per build, charts, samples, bytes on disk per input triangle (the whole
+atlas: charts, hierarchy, manifest), flipped texels and the two-sided Hausdorff distance in % of
+the bounding-box diagonal, from each atlas's stats.json. The atlases go to a temporary directory
+(or --work) and are removed after their row is read.
+"""
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+
+def build(gimlod, mesh, size, bits, work):
+    out = os.path.join(work, "curve.atlas")
+    shutil.rmtree(out, ignore_errors=True)
+    cmd = [gimlod, "build", mesh, "-o", out, "--position-bits", str(bits)]
+    if size != "auto":
+        cmd += ["--chart-size", str(size)]
+    r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if r.returncode != 0:
+        sys.exit(f"{' '.join(cmd)} failed ({r.returncode}):\n{r.stdout[-2000:]}")
+    with open(os.path.join(out, "stats.json")) as f:
+        st = json.load(f)
+    shutil.rmtree(out, ignore_errors=True)
+    return st
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("meshes", nargs="+")
+    ap.add_argument("--gimlod", default=os.path.join(os.path.dirname(__file__), "..", "build", "gimlod"))
+    ap.add_argument("--sizes", default="33,65,129,auto")
+    ap.add_argument("--bits", default="22,16")
+    ap.add_argument("--work", default=None)
+    a = ap.parse_args()
+    sizes = [s.strip() for s in a.sizes.split(",") if s.strip()]
+    for s in sizes:
+        if s != "auto" and not s.isdigit():
+            sys.exit(f"--sizes: {s!r} is neither a chart size nor auto")
+    bits = [int(b) for b in a.bits.split(",") if b.strip()]
+    work = a.work or tempfile.mkdtemp(prefix="gimlod-bytes-curve-")
+    os.makedirs(work, exist_ok=True)
+    print("| mesh | triangles | chart size | position bits | charts | samples | bytes per triangle "
+          "| flipped texels | Hausdorff % of diagonal |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    try:
+        for mesh in a.meshes:
+            for size in sizes:
+                for b in bits:
+                    st = build(a.gimlod, mesh, size, b, work)
+                    tri = st["charting"]["triangles"]
+                    shown = f"{st['chart_size']}² (auto)" if size == "auto" else f"{st['chart_size']}²"
+                    print(f"| {os.path.basename(mesh)} | {tri} | {shown} | {b} | {st['charts']} "
+                          f"| {st['samples'] / 1e6:.2f}M | {st['bytes_on_disk'] / tri:.1f} "
+                          f"| {st['resample']['flipped_texels']} "
+                          f"| {st['fidelity']['hausdorff_percent_of_diagonal']:.4f} |", flush=True)
+    finally:
+        if a.work is None:
+            shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
