@@ -1,11 +1,13 @@
 // The shared real scans (../shared/data/meshes) and their atlases, built through the same library
 // call as `gimlod build MESH -o ATLAS` at the default mesh options (patches by the triangle count,
 // chart size by the input's density, the chart repair to the default sampling error),
-// at most once per test process per scan and kind of build. Used by the CPU scan tests
-// (tests/unit/scan_atlas_test.cpp) and the GL crack tests (tests/gl/scan_crack_gl_test.cpp).
+// at most once per test executable per scan and kind of build (kept across its processes in the
+// build folder). Used by the CPU scan tests (tests/unit/scan_atlas_test.cpp,
+// adapt_root_floor_test.cpp) and the GL crack tests (tests/gl/scan_crack_gl_test.cpp).
 #pragma once
 
 #include <chrono>
+#include <fstream>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -13,7 +15,10 @@
 #include <utility>
 #include <vector>
 
+#include <fcntl.h>
 #include <nlohmann/json.hpp>
+#include <sys/file.h>
+#include <unistd.h>
 
 #include "pipeline/build.h"
 #include "tests/test_util.h"
@@ -62,25 +67,79 @@ struct BuiltScanAtlas {
   double seconds = 0.0;       // build time
 };
 
-// The atlas of scan `name` at the default mesh options, built once per process into a temporary
-// directory that lives until exit. withFidelity: the build measures the two-sided Hausdorff
-// distance (about half the build time); a build without it is reused only when fidelity is not
-// asked for. Throws what buildAtlas throws.
+// Where a scan's atlas is kept for the other test processes of this executable: under
+// GIMLOD_TEST_CACHE, named for the scan, the kind of build and the executable's own size and
+// modification time (so a rebuilt test binary never reads an atlas an older build made).
+inline std::filesystem::path cachedScanAtlasPath(const std::string& name, bool withFidelity) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  const auto size = ec ? 0 : fs::file_size(exe, ec);
+  const auto stamp = ec ? 0 : fs::last_write_time(exe, ec).time_since_epoch().count();
+  return fs::path(GIMLOD_TEST_CACHE) /
+         (exe.filename().string() + "-" + std::to_string(size) + "-" + std::to_string(stamp)) /
+         (name + (withFidelity ? "_fidelity" : "") + ".atlas");
+}
+
+// The atlas of scan `name` at the default mesh options, built once per test executable: the first
+// process that asks builds it (others wait on a lock) into the cache (cachedScanAtlasPath), and
+// every later process of the same executable reads it there. withFidelity: the build measures the
+// two-sided Hausdorff distance (about half the build time); a build without it is reused only
+// when fidelity is not asked for, so the tests of one executable ask alike (the CPU tests with
+// it, the GL tests without). Throws what buildAtlas throws.
 inline const BuiltScanAtlas& scanAtlas(const std::string& name, bool withFidelity) {
-  static TempDir dir("gimlod-scan-atlases");
+  namespace fs = std::filesystem;
   static std::map<std::string, BuiltScanAtlas> built;
   auto it = built.find(name);
   if (it != built.end() && (it->second.fidelity || !withFidelity)) return it->second;
-  MeshBuildOptions o;  // the defaults of `gimlod build` for meshes
-  o.input = sharedScanPath(name);
-  o.output = dir.path() / (name + (withFidelity ? "_fidelity" : "") + ".atlas");
-  o.measureFidelity = withFidelity;
+  for (const bool fidelity : {true, false}) {
+    if (!fidelity && withFidelity) continue;
+    const fs::path dir = cachedScanAtlasPath(name, fidelity);
+    if (fs::exists(dir / "stats.json") && fs::exists(dir / "build_seconds")) {
+      BuiltScanAtlas b;
+      b.stats = nlohmann::json::parse(std::ifstream(dir / "stats.json"));
+      std::ifstream(dir / "build_seconds") >> b.seconds;
+      b.dir = dir;
+      b.fidelity = fidelity;
+      return built[name] = std::move(b);
+    }
+  }
+  const fs::path dir = cachedScanAtlasPath(name, withFidelity);
+  if (!fs::exists(dir.parent_path())) {
+    // What earlier builds of this executable kept is stale: removed.
+    std::error_code ec;
+    const std::string prefix = dir.parent_path().filename().string();
+    const std::string exeName = prefix.substr(0, prefix.find('-') + 1);
+    for (const auto& e : fs::directory_iterator(GIMLOD_TEST_CACHE, ec))
+      if (e.path().filename().string().rfind(exeName, 0) == 0 && e.path() != dir.parent_path()) fs::remove_all(e.path(), ec);
+  }
+  fs::create_directories(dir.parent_path());
+  // One builder at a time per atlas: the lock is released when the process exits, even by a crash.
+  const int lock = ::open((dir.string() + ".lock").c_str(), O_CREAT | O_RDWR, 0644);
+  if (lock >= 0) ::flock(lock, LOCK_EX);
   BuiltScanAtlas b;
-  const auto t0 = std::chrono::steady_clock::now();
-  b.stats = buildAtlas(o);
-  b.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  b.dir = o.output;
+  b.dir = dir;
   b.fidelity = withFidelity;
+  if (fs::exists(dir / "stats.json") && fs::exists(dir / "build_seconds")) {  // built while waiting
+    b.stats = nlohmann::json::parse(std::ifstream(dir / "stats.json"));
+    std::ifstream(dir / "build_seconds") >> b.seconds;
+  } else {
+    MeshBuildOptions o;  // the defaults of `gimlod build` for meshes
+    o.input = sharedScanPath(name);
+    o.output = dir;
+    o.measureFidelity = withFidelity;
+    const auto t0 = std::chrono::steady_clock::now();
+    try {
+      b.stats = buildAtlas(o);
+    } catch (...) {
+      if (lock >= 0) ::close(lock);
+      throw;
+    }
+    b.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    // Written last: an atlas without it (a build killed halfway) is built again.
+    std::ofstream(dir / "build_seconds") << b.seconds;
+  }
+  if (lock >= 0) ::close(lock);
   return built[name] = std::move(b);
 }
 

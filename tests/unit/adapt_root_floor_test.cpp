@@ -315,7 +315,7 @@ class RootFloorSharedScan : public ::testing::TestWithParam<std::string> {};
 TEST_P(RootFloorSharedScan, NoAdapterDrawsMoreThanTheBudgetAboveTheFloor) {
   const std::string name = GetParam();
   GIMLOD_NEED_SHARED_DATA(test::haveSharedScan(name));
-  const test::BuiltScanAtlas& built = test::scanAtlas(name, false);
+  const test::BuiltScanAtlas& built = test::scanAtlas(name, true);
   const AtlasView atlas = openAtlas(built.dir);
   std::vector<ViewParams> views;
   for (const Camera& c : orbitPath(atlas.lo, atlas.hi, 8, 0.9, 30.0, 45.0)) views.push_back(makeViewParams(c, 640, 480));

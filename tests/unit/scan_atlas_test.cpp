@@ -368,7 +368,7 @@ TEST_P(ScanAtlasTest, FlippedTexels) {
   const std::string name = GetParam();
   GIMLOD_NEED_SHARED_DATA(test::haveSharedScan(name));
   const test::BuiltScanAtlas* built = nullptr;
-  ASSERT_NO_THROW(built = &test::scanAtlas(name, false)) << "gimlod build " << test::sharedScanPath(name);
+  ASSERT_NO_THROW(built = &test::scanAtlas(name, true)) << "gimlod build " << test::sharedScanPath(name);
   const nlohmann::json& r = built->stats["resample"];
   ASSERT_TRUE(r.is_object());
   const uint64_t flipped = r["flipped_texels"].get<uint64_t>();
