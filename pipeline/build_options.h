@@ -66,7 +66,11 @@ struct TerrainBuildOptions : CommonBuildOptions {
 inline constexpr double kTerrainBytesPerSample = 17.0;
 
 // A geometry atlas from a mesh (PLY, OBJ, OFF, STL).
-inline constexpr uint32_t kDefaultPositionBits = 22;
+// 2^18 steps across the diagonal: a step of 0.0004% of it, a hundred-and-thirtieth of the default
+// sampling bound (0.05%). Against 2^22 steps the bunny's atlas takes 0.72 times the bytes and
+// igea's 0.70, with Hausdorff figures within 0.0002% of the diagonal. 2^16 steps take 0.61 times
+// the bunny's bytes but double its mean distance (0.00054% against 0.00027%).
+inline constexpr uint32_t kDefaultPositionBits = 18;
 inline constexpr uint32_t kAutoCharts = ~0u;
 inline constexpr double kAutoSampleError = -1.0;
 inline constexpr double kDefaultSampleError = 0.0005;
@@ -134,8 +138,9 @@ inline constexpr uint64_t kFewPatchesTriangles = 4'000'000;
 uint32_t meshPatchTarget(uint64_t triangles);
 MeshChartMetric meshChartMetric(uint64_t triangles);
 
-// Samples per input triangle that the default chart size aims at (the paper's scans: about 4 to 8).
-inline constexpr double kSamplesPerTriangle = 4.0;
+// Samples per input triangle the default chart size starts from; the sampling error then doubles it
+// where the surface needs it (the paper's scans hold about 4 to 8).
+inline constexpr double kSamplesPerTriangle = 2.0;
 
 // The default quad chart size for `quads` charts of a mesh of `triangles` triangles: the smallest
 // 2^m + 1 in [65, kMaxDensityChartSize] whose quads * (size - 1)^2 samples reach
