@@ -66,11 +66,11 @@ struct TerrainBuildOptions : CommonBuildOptions {
 inline constexpr double kTerrainBytesPerSample = 17.0;
 
 // A geometry atlas from a mesh (PLY, OBJ, OFF, STL).
-// 2^18 steps across the diagonal: a step of 0.0004% of it, a hundred-and-thirtieth of the default
-// sampling bound (0.05%). Against 2^22 steps the bunny's atlas takes 0.72 times the bytes and
-// igea's 0.70, with Hausdorff figures within 0.0002% of the diagonal. 2^16 steps take 0.61 times
-// the bunny's bytes but double its mean distance (0.00054% against 0.00027%).
-inline constexpr uint32_t kDefaultPositionBits = 18;
+// 2^22 steps across the diagonal. Fewer take fewer bytes (2^18: 0.72 times the bunny's, 0.70
+// igea's; scripts/mesh_bytes_curve.py) with the same Hausdorff figures, but where a chart's samples
+// lie closer than a step (the bunny at 257^2 in 24 patches: 522 of them at 2^18) neighbours fall on
+// one point and their texels lose their area.
+inline constexpr uint32_t kDefaultPositionBits = 22;
 inline constexpr uint32_t kAutoCharts = ~0u;
 inline constexpr double kAutoSampleError = -1.0;
 inline constexpr double kDefaultSampleError = 0.0005;
