@@ -159,6 +159,16 @@ void finishTerrainAtlas(AtlasManifest& m, const fs::path& dir, TerrainWriteStats
   w.depth = m.depth;
 }
 
+// The imagery's write figures into its stats, and the log line.
+void finishImagery(const TerrainBuildOptions& o, const ImageryWriteStats& ws, TerrainImageryStats& im) {
+  im.storedSamples = ws.storedSamples;
+  im.bytesOnDisk = ws.bytesOnDisk;
+  im.writeSeconds = ws.seconds;
+  spdlog::info("{}: {}x{} imagery samples ({} per DEM interval, {} resampling{}), {:.1f}% of the terrain covered",
+               o.imagery.string(), im.width, im.height, 1u << im.scaleLog2, im.resampling,
+               im.windows ? fmt::format(", {} windows", im.windows) : std::string(), 100.0 * im.coverage);
+}
+
 }  // namespace
 
 TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& o, const fs::path& dir) {
@@ -180,13 +190,7 @@ TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& 
     im.height = raster.height;
     im.coverage = raster.coverage;
     im.resampling = raster.resampling;
-    const ImageryWriteStats ws = writeImageryCharts(raster, im.source, dir, m);
-    im.storedSamples = ws.storedSamples;
-    im.bytesOnDisk = ws.bytesOnDisk;
-    im.writeSeconds = ws.seconds;
-    spdlog::info("{}: {}x{} imagery samples ({} per DEM interval, {} resampling), {:.1f}% of the terrain covered",
-                 o.imagery.string(), raster.width, raster.height, 1u << raster.scaleLog2, raster.resampling,
-                 100.0 * raster.coverage);
+    finishImagery(o, writeImageryCharts(raster, im.source, dir, m), im);
   }
   dem = DemRaster{};
   finishTerrainAtlas(m, dir, w);
@@ -236,15 +240,9 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
     const ImageryWriteStats st = writeImageryChartsWindowed(imagery, im.source, dir, m, wo.memoryBytes, &ws);
     for (const std::string& warning : imagery.warnings()) spdlog::warn("{}: {}", o.imagery.string(), warning);
     im.coverage = ws.coverage;
-    im.storedSamples = st.storedSamples;
-    im.bytesOnDisk = st.bytesOnDisk;
-    im.writeSeconds = st.seconds;
     im.windows = ws.windows;
     im.windowSamples = ws.windowSamples;
-    spdlog::info("{}: {}x{} imagery samples ({} per DEM interval, {} resampling) in {} windows, {:.1f}% of the "
-                 "terrain covered",
-                 o.imagery.string(), im.width, im.height, 1u << im.scaleLog2, im.resampling, ws.windows,
-                 100.0 * im.coverage);
+    finishImagery(o, st, im);
   }
   finishTerrainAtlas(m, dir, w);
   return w;
