@@ -128,7 +128,7 @@ struct MeshBuildOptions : CommonBuildOptions {
 
 // The default charting of a mesh of `triangles` triangles: few large charts, on the order of the
 // paper's scans (30 charts on a 1M-triangle scan, 140 at 10M).
-// - Up to kFewPatchesTriangles: 24 developable patches (61 to 120 quad charts in the sides layout
+// - Up to kFewPatchesTriangles: 24 developable patches (67 to 120 quad charts in the sides layout
 //   on the shared scans, after the repair's cuts). Planar patches that large fold on scans with
 //   holes and thin parts (the bunny: 5 flipped texels left after the repair, the armadillo 1).
 // - Above: planar patches, sqrt(triangles) / 80 of them, at least 48 (54 at 18.7M triangles: 171
@@ -147,8 +147,8 @@ inline constexpr double kSamplesPerTriangle = 2.0;
 // kSamplesPerTriangle * triangles. The build then doubles it (up to kMaxSamplesPerTriangle) while
 // the patches whose charts sample the surface more coarsely than maxSampleError hold more than
 // kCoarseSurfaceToDouble of its triangles: below that, the repair cuts those patches, which costs
-// far fewer samples than doubling every chart (the shared scans: 27.0M samples in all against 57.2M
-// doubling past a tenth). Where the doubling stops at kMaxSamplesPerTriangle, a chart may keep a
+// far fewer samples than doubling every chart (the shared scans: 24.1M samples in all against 57.2M
+// doubling past a tenth from 4 samples per triangle). Where the doubling stops at kMaxSamplesPerTriangle, a chart may keep a
 // sampling error past maxSampleError (0.086% of the diagonal on the bunny, within the 0.1% goal).
 inline constexpr double kCoarseSurfaceToDouble = 0.25;
 inline constexpr uint32_t kMaxDensityChartSize = 1025;

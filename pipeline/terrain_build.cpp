@@ -239,7 +239,7 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
     ImageryWindowStats ws;
     const ImageryWriteStats st = writeImageryChartsWindowed(imagery, im.source, dir, m, wo.memoryBytes, &ws);
     for (const std::string& warning : imagery.warnings()) spdlog::warn("{}: {}", o.imagery.string(), warning);
-    im.coverage = ws.coverage;
+    im.coverage = m.imagery.coverage;
     im.windows = ws.windows;
     im.windowSamples = ws.windowSamples;
     finishImagery(o, st, im);

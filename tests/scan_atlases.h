@@ -83,27 +83,27 @@ inline std::filesystem::path cachedScanAtlasPath(const std::string& name, bool w
 
 // The atlas of scan `name` at the default mesh options, built once per test executable: the first
 // process that asks builds it (others wait on a lock) into the cache (cachedScanAtlasPath), and
-// every later process of the same executable reads it there. withFidelity: the build measures the
-// two-sided Hausdorff distance (about half the build time); a build without it is reused only
-// when fidelity is not asked for, so the tests of one executable ask alike (the CPU tests with
-// it, the GL tests without). Throws what buildAtlas throws.
+// every later process of the same executable reads it there. What buildAtlas returned and the
+// build time are kept beside the atlas (dir/build.json, written last: an atlas without it, from a
+// build killed halfway, is built again), so `stats` is always buildAtlas's own return.
+// withFidelity: the build measures the two-sided Hausdorff distance (about half the build time);
+// a build without it is reused only when fidelity is not asked for, so the tests of one
+// executable ask alike (the CPU tests with it, the GL tests without). Throws what buildAtlas
+// throws.
 inline const BuiltScanAtlas& scanAtlas(const std::string& name, bool withFidelity) {
   namespace fs = std::filesystem;
   static std::map<std::string, BuiltScanAtlas> built;
   auto it = built.find(name);
   if (it != built.end() && (it->second.fidelity || !withFidelity)) return it->second;
-  for (const bool fidelity : {true, false}) {
-    if (!fidelity && withFidelity) continue;
-    const fs::path dir = cachedScanAtlasPath(name, fidelity);
-    if (fs::exists(dir / "stats.json") && fs::exists(dir / "build_seconds")) {
-      BuiltScanAtlas b;
-      b.stats = nlohmann::json::parse(std::ifstream(dir / "stats.json"));
-      std::ifstream(dir / "build_seconds") >> b.seconds;
-      b.dir = dir;
-      b.fidelity = fidelity;
-      return built[name] = std::move(b);
-    }
-  }
+  // The cached build at dir, if complete.
+  auto cached = [&](const fs::path& dir, bool fidelity) -> const BuiltScanAtlas* {
+    if (!fs::exists(dir / "build.json")) return nullptr;
+    const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir / "build.json"));
+    return &(built[name] = BuiltScanAtlas{dir, j.at("stats"), fidelity, j.at("seconds").get<double>()});
+  };
+  for (const bool fidelity : {true, false})
+    if (fidelity || !withFidelity)
+      if (const BuiltScanAtlas* b = cached(cachedScanAtlasPath(name, fidelity), fidelity)) return *b;
   const fs::path dir = cachedScanAtlasPath(name, withFidelity);
   if (!fs::exists(dir.parent_path())) {
     // What earlier builds of this executable kept is stale: removed.
@@ -114,33 +114,26 @@ inline const BuiltScanAtlas& scanAtlas(const std::string& name, bool withFidelit
       if (e.path().filename().string().rfind(exeName, 0) == 0 && e.path() != dir.parent_path()) fs::remove_all(e.path(), ec);
   }
   fs::create_directories(dir.parent_path());
-  // One builder at a time per atlas: the lock is released when the process exits, even by a crash.
-  const int lock = ::open((dir.string() + ".lock").c_str(), O_CREAT | O_RDWR, 0644);
-  if (lock >= 0) ::flock(lock, LOCK_EX);
-  BuiltScanAtlas b;
-  b.dir = dir;
-  b.fidelity = withFidelity;
-  if (fs::exists(dir / "stats.json") && fs::exists(dir / "build_seconds")) {  // built while waiting
-    b.stats = nlohmann::json::parse(std::ifstream(dir / "stats.json"));
-    std::ifstream(dir / "build_seconds") >> b.seconds;
-  } else {
-    MeshBuildOptions o;  // the defaults of `gimlod build` for meshes
-    o.input = sharedScanPath(name);
-    o.output = dir;
-    o.measureFidelity = withFidelity;
-    const auto t0 = std::chrono::steady_clock::now();
-    try {
-      b.stats = buildAtlas(o);
-    } catch (...) {
-      if (lock >= 0) ::close(lock);
-      throw;
+  // One builder at a time per atlas; the lock goes with the descriptor (and with the process, even
+  // by a crash).
+  struct Lock {
+    int fd;
+    ~Lock() {
+      if (fd >= 0) ::close(fd);
     }
-    b.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    // Written last: an atlas without it (a build killed halfway) is built again.
-    std::ofstream(dir / "build_seconds") << b.seconds;
-  }
-  if (lock >= 0) ::close(lock);
-  return built[name] = std::move(b);
+  } lock{::open((dir.string() + ".lock").c_str(), O_CREAT | O_RDWR, 0644)};
+  if (lock.fd >= 0) ::flock(lock.fd, LOCK_EX);
+  if (const BuiltScanAtlas* b = cached(dir, withFidelity)) return *b;  // built while waiting
+  MeshBuildOptions o;  // the defaults of `gimlod build` for meshes
+  o.input = sharedScanPath(name);
+  o.output = dir;
+  o.measureFidelity = withFidelity;
+  const auto t0 = std::chrono::steady_clock::now();
+  nlohmann::json j;
+  j["stats"] = buildAtlas(o);
+  j["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::ofstream(dir / "build.json") << j.dump();
+  return *cached(dir, withFidelity);
 }
 
 }  // namespace gimlod::test

@@ -491,7 +491,7 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
     }
   if (covered == 0) fail(m.imagery.source, "does not overlap the DEM");
   m.imagery.coverage = double(covered) / (double(latW) * double(latH));
-  if (windowStats) *windowStats = {windows, most, m.imagery.coverage};
+  if (windowStats) *windowStats = {windows, most};
   ImageryWriteStats st;
   st.bytesOnDisk = bytes.load();
   st.storedSamples = samples.load();

@@ -139,7 +139,6 @@ ImageryWriteStats writeImageryCharts(const ImageryRaster& raster, const std::str
 struct ImageryWindowStats {
   uint64_t windows = 0;       // windows of charts reprojected
   uint64_t windowSamples = 0; // the most level-0 samples one window held
-  double coverage = 0.0;      // as ImageryRaster::coverage
 };
 
 // The same files as writeImageryCharts of the whole raster, byte for byte, window by window: each

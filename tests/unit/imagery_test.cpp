@@ -316,7 +316,7 @@ TEST_F(ImageryTest, WindowByWindowWritesTheWholeRastersFiles) {
               raster.width, raster.height, (unsigned long long)ws.windows, (unsigned long long)ws.windowSamples);
   EXPECT_EQ(ws.windows, 4u);
   EXPECT_LT(ws.windowSamples, uint64_t(raster.width) * raster.height);
-  EXPECT_EQ(ws.coverage, raster.coverage);
+  EXPECT_EQ(b.imagery.coverage, raster.coverage);
   EXPECT_EQ(b.imagery.coverage, a.imagery.coverage);
   EXPECT_EQ(b.imagery.scaleLog2, a.imagery.scaleLog2);
   ASSERT_EQ(a.charts.size(), b.charts.size());
