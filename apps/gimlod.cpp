@@ -117,6 +117,7 @@ std::string flagFor(std::string_view name) {
       {"thumbnailSize", "--image-size"},      {"imageryScale", "--imagery-scale"},
       {"imageryExtent", "--imagery-extent"},  {"heightPrecision", "--height-precision"},
       {"compress", "--uncompressed"},         {"positionBits", "--position-bits"},
+      {"positionTolerance", "--position-tolerance"}, {"normalTolerance", "--normal-tolerance"},
       {"imagery", "--imagery"},              {"quads", "--quads"},
       {"quadMap", "--quad-map"}};
   const auto it = kFlags.find(name);
@@ -456,6 +457,16 @@ int main(int argc, char** argv) {
   build->add_option("--position-bits", mesh.positionBits,
                     "Meshes: positions are stored on a lattice of 2^B steps across the bounding-box diagonal")
       ->capture_default_str();
+  double positionTolerancePercent = 100.0 * kDefaultPositionTolerance;
+  build->add_option("--position-tolerance", positionTolerancePercent,
+                    "Meshes: positions inside a chart may move this far, in % of the bounding-box diagonal, to the "
+                    "lattice point their neighbours predict, so they code in fewer bytes; the Hausdorff distance "
+                    "grows by at most this much; 0: every position at its nearest lattice point")
+      ->capture_default_str();
+  build->add_option("--normal-tolerance", mesh.normalTolerance,
+                    "Meshes: normals inside a chart may move this many packed steps (1/127.5) per component to "
+                    "the value their neighbours predict; 0: normals stored as sampled")
+      ->capture_default_str();
 
   RenderArgs r;
   auto* render = app.add_subcommand("render", "Render an atlas headless (EGL) to PNG frames and stats.csv");
@@ -563,6 +574,7 @@ int main(int argc, char** argv) {
                                   ? kAutoSampleError
                                   : sampleErrorPercent / 100.0;
         mesh.maxMemory = maxMemoryBytes;
+        mesh.positionTolerance = positionTolerancePercent / 100.0;
         mesh.measureFidelity = !noFidelity;
         return runBuild(mesh);
       }

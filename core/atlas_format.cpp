@@ -353,7 +353,9 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
   if (m.compression.present)
     j["compression"] = ojson{{"codec", "lorenzo-zstd"},
                              {"heightPrecision", m.compression.heightPrecision},
-                             {"positionStep", m.compression.positionStep}};
+                             {"positionStep", m.compression.positionStep},
+                             {"positionTolerance", m.compression.positionTolerance},
+                             {"normalTolerance", m.compression.normalTolerance}};
   j["hierarchy"] = ojson{{"file", m.hierarchyFile},
                          {"depth", m.depth},
                          {"maxNodeResLog2", m.maxNodeResLog2},
@@ -450,8 +452,16 @@ AtlasManifest readManifest(const fs::path& dir) {
     m.compression.present = true;
     if (c.contains("heightPrecision")) m.compression.heightPrecision = r.number(c["heightPrecision"], "compression.heightPrecision");
     if (c.contains("positionStep")) m.compression.positionStep = r.number(c["positionStep"], "compression.positionStep");
-    if (!(m.compression.heightPrecision >= 0.0) || !(m.compression.positionStep >= 0.0))
-      r.fail("compression steps must be >= 0");
+    if (c.contains("positionTolerance"))
+      m.compression.positionTolerance = r.number(c["positionTolerance"], "compression.positionTolerance");
+    if (c.contains("normalTolerance")) {
+      const double t = r.number(c["normalTolerance"], "compression.normalTolerance");
+      if (!(t >= 0.0 && t <= 127.0) || t != std::floor(t)) r.fail("compression.normalTolerance must be a whole number in [0, 127]");
+      m.compression.normalTolerance = uint32_t(t);
+    }
+    if (!(m.compression.heightPrecision >= 0.0) || !(m.compression.positionStep >= 0.0) ||
+        !(m.compression.positionTolerance >= 0.0))
+      r.fail("compression steps and tolerances must be >= 0");
   }
   if ((m.version >= 2) != m.compression.present)
     r.fail(m.compression.present ? "field 'compression' needs format version 2"

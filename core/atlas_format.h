@@ -107,6 +107,10 @@ struct CompressionInfo {
   bool present = false;         // chart files are coded (version 3); the manifest is version 2
   double heightPrecision = 0.0; // metres: non-integer heights were quantized to it (0: none were)
   double positionStep = 0.0;    // positions' lattice step (geometry atlases)
+  // Geometry atlases: how far a position off its chart's border (same units) and a packed
+  // normal byte may have been settled from its input (settlePositions, settleNormals); 0: none.
+  double positionTolerance = 0.0;
+  uint32_t normalTolerance = 0;
 };
 
 // The atlas manifest. Heights are in metres after z-scale; horizontal positions of terrain
@@ -242,6 +246,10 @@ struct ChartCoding {
   bool compressed = false;
   double heightPrecision = 0.01;  // metres
   double positionStep = 0.0;      // required (> 0) for compressed positions
+  // Geometry charts, compressed: samples off a chart's border are settled on the lattice within
+  // these tolerances before they are coded (core/block_codec.h settlePositions, settleNormals).
+  double positionTolerance = 0.0;  // same units as positionStep
+  uint32_t normalTolerance = 0;    // packed normal steps
 };
 
 // Writes a chart file. A height-field pyramid (heights + normals) is written uncompressed in

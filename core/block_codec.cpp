@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <memory>
 
 #include <zstd.h>
@@ -14,6 +15,7 @@ constexpr char kHeightMagic[4] = {'G', 'H', 'B', '1'};
 constexpr char kPositionMagic[4] = {'G', 'P', 'B', '1'};
 constexpr char kNormalMagic[4] = {'G', 'N', 'B', '1'};
 constexpr char kColourMagic[4] = {'G', 'C', 'B', '1'};
+constexpr char kBytesMagic[4] = {'G', 'Z', 'B', '1'};
 constexpr size_t kMagicBytes = 4;
 constexpr size_t kIntHeaderBytes = 16;  // inside the frame: quantization, planes, channels, side, step
 constexpr size_t kByteHeaderBytes = 8;  // inside the frame: kind, channels, side
@@ -42,11 +44,13 @@ ZSTD_DCtx* decompressor() {
 }
 
 // magic + one zstd frame (with its checksum) of raw.
-std::vector<uint8_t> frame(const char (&magic)[4], const std::vector<uint8_t>& raw) {
+std::vector<uint8_t> frame(const char (&magic)[4], std::span<const uint8_t> raw, int level = kLevel) {
   std::vector<uint8_t> out(kMagicBytes + ZSTD_compressBound(raw.size()));
   std::memcpy(out.data(), magic, kMagicBytes);
-  const size_t written =
-      ZSTD_compress2(compressor(), out.data() + kMagicBytes, out.size() - kMagicBytes, raw.data(), raw.size());
+  ZSTD_CCtx* c = compressor();
+  if (level != kLevel) ZSTD_CCtx_setParameter(c, ZSTD_c_compressionLevel, level);
+  const size_t written = ZSTD_compress2(c, out.data() + kMagicBytes, out.size() - kMagicBytes, raw.data(), raw.size());
+  if (level != kLevel) ZSTD_CCtx_setParameter(c, ZSTD_c_compressionLevel, kLevel);
   if (ZSTD_isError(written)) throw std::runtime_error(std::string("block codec: zstd: ") + ZSTD_getErrorName(written));
   out.resize(kMagicBytes + written);
   return out;
@@ -335,6 +339,89 @@ void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<fl
   decodeInts(block, kPositionMagic, "position", side, 3, out);
 }
 
+std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, double step, double tolerance) {
+  const size_t n = size_t(side) * side;
+  if (side == 0 || xyz.size() != 3 * n) throw std::invalid_argument("settlePositions: expected 3 side^2 floats");
+  if (!(step > 0.0) || !std::isfinite(step)) throw std::invalid_argument("settlePositions: step must be > 0");
+  if (!(tolerance >= 0.0) || !std::isfinite(tolerance))
+    throw std::invalid_argument("settlePositions: the tolerance must be finite and >= 0");
+  std::vector<int64_t> q(3 * n);
+  for (size_t i = 0; i < 3 * n; ++i) {
+    if (!std::isfinite(xyz[i])) throw std::invalid_argument("settlePositions: non-finite coordinate");
+    const double v = std::nearbyint(double(xyz[i]) / step);
+    if (std::abs(v) > double(kMaxSteps))
+      throw std::invalid_argument("settlePositions: a coordinate lies beyond 2^23 steps of the lattice");
+    q[i] = int64_t(v);
+  }
+  auto distance = [&](size_t a, size_t b) {
+    const double dx = double(xyz[3 * a]) - xyz[3 * b], dy = double(xyz[3 * a + 1]) - xyz[3 * b + 1],
+                 dz = double(xyz[3 * a + 2]) - xyz[3 * b + 2];
+    return std::sqrt(dx * dx + dy * dy + dz * dz);
+  };
+  auto same = [&](size_t a, size_t b) { return q[3 * a] == q[3 * b] && q[3 * a + 1] == q[3 * b + 1] && q[3 * a + 2] == q[3 * b + 2]; };
+  // Per coordinate at most t / sqrt(3), so at most t in all.
+  const double perCoordinate = 2.0 / (std::sqrt(3.0) * step);
+  constexpr int kRing = 2;  // the window of grid neighbours kept apart: (2 kRing + 1)^2
+  for (uint32_t y = 1; y + 1 < side; ++y)
+    for (uint32_t x = 1; x + 1 < side; ++x) {
+      const size_t i = size_t(y) * side + x, below = i - side;
+      const uint32_t x0 = x >= kRing ? x - kRing : 0, x1 = std::min(x + kRing, side - 1);
+      const uint32_t y0 = y >= kRing ? y - kRing : 0, y1 = std::min(y + kRing, side - 1);
+      double d = std::numeric_limits<double>::infinity();
+      for (uint32_t v = y0; v <= y1; ++v)
+        for (uint32_t u = x0; u <= x1; ++u)
+          if (u != x || v != y) d = std::min(d, distance(i, size_t(v) * side + u));
+      const int64_t stride = int64_t(std::floor(std::min(tolerance, d / 4.0) * perCoordinate));
+      const std::array<int64_t, 3> nearest{q[3 * i], q[3 * i + 1], q[3 * i + 2]};
+      if (stride > 1) {
+        for (int c = 0; c < 3; ++c) {
+          const int64_t p = q[3 * (i - 1) + c] + q[3 * below + c] - q[3 * (below - 1) + c];
+          const int64_t k = int64_t(std::nearbyint((double(xyz[3 * i + c]) / step - double(p)) / double(stride)));
+          const int64_t v = p + k * stride;
+          if (std::abs(v) <= kMaxSteps) q[3 * i + c] = v;
+        }
+      }
+      // The window's samples settled before it (the rows below, and this row's left), which it
+      // must not meet.
+      auto meets = [&] {
+        for (uint32_t v = y0; v <= y; ++v)
+          for (uint32_t u = x0; u <= (v < y ? x1 : x - 1); ++u)
+            if (same(i, size_t(v) * side + u)) return true;
+        return false;
+      };
+      if (stride > 1 && meets()) std::copy(nearest.begin(), nearest.end(), q.begin() + 3 * i);
+      for (int c = 0; c < 6 && meets(); ++c) {  // beside the nearest point, as a last resort
+        std::copy(nearest.begin(), nearest.end(), q.begin() + 3 * i);
+        q[3 * i + c / 2] += c % 2 ? -1 : 1;
+      }
+    }
+  std::vector<float> out(3 * n);
+  for (size_t i = 0; i < 3 * n; ++i) out[i] = float(double(q[i]) * step);
+  return out;
+}
+
+void settleNormals(std::span<Byte4> normals, uint32_t side, uint32_t tolerance) {
+  if (side == 0 || normals.size() != size_t(side) * side)
+    throw std::invalid_argument("settleNormals: expected side^2 normals");
+  if (tolerance > 127) throw std::invalid_argument("settleNormals: a tolerance above 127 packed steps");
+  if (tolerance == 0) return;
+  uint8_t* b = normals.data()->data();
+  const int stride = 2 * int(tolerance) + 1, tol = int(tolerance);
+  const auto& t = unitZ();
+  for (uint32_t y = 1; y + 1 < side; ++y)
+    for (uint32_t x = 1; x + 1 < side; ++x) {
+      uint8_t* s = b + (size_t(y) * side + x) * 4;
+      for (uint32_t c = 0; c < 2; ++c) {
+        const int p = predictByte(b + c, side, 4, x, y), v = s[c];
+        const int k = int(std::lround(double(v - p) / stride));
+        const int settled = p + k * stride;
+        if (settled >= 0 && settled <= 255 && std::abs(settled - v) <= tol) s[c] = uint8_t(settled);
+      }
+      const int z = predictZ(b, side, x, y, t);
+      if (std::abs(z - int(s[2])) <= tol) s[2] = uint8_t(z);
+    }
+}
+
 std::vector<uint8_t> encodeNormals(std::span<const Byte4> normals, uint32_t side) {
   for (const Byte4& nrm : normals)
     if (nrm[3] != 255) throw std::invalid_argument("encodeNormals: a packed normal's fourth byte is not 255");
@@ -351,6 +438,15 @@ std::vector<uint8_t> encodeColours(std::span<const Byte4> colours, uint32_t side
 
 void decodeColours(std::span<const uint8_t> block, uint32_t side, std::span<Byte4> out) {
   decodeBytes(block, kColourMagic, "colour", kKindColours, side, 4, out);
+}
+
+std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw, int level) {
+  return frame(kBytesMagic, raw, std::clamp(level, 1, ZSTD_maxCLevel()));
+}
+
+std::vector<uint8_t> decompressBytes(std::span<const uint8_t> coded, size_t maxBytes) {
+  const std::vector<uint8_t>& raw = unframe(coded, kBytesMagic, "compressed", 0, maxBytes);
+  return raw;
 }
 
 }  // namespace gimlod

@@ -59,13 +59,44 @@ std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, 
 // Decodes a block made by encodePositions into out (3 side^2 floats). Throws CodecError.
 void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<float> out);
 
+// Error-bounded settling: picks the values a lossless Lorenzo coding codes cheaply. Quantizing each
+// coordinate to its nearest lattice point leaves the residuals of a smooth surface spread over
+// many values; choosing instead, for each sample off the image's border in row order, the lattice
+// point the predictor (left + below - below-left, from the samples already chosen) reaches in
+// whole multiples of S steps, with S as large as the sample's tolerance allows, makes most
+// residuals 0 where the surface is smooth. The coding itself stays lossless: readers decode
+// exactly the settled values, and whatever is measured on them (errors, distances) holds for what
+// is drawn.
+// - Border samples (first and last row and column) go to their nearest lattice point, as
+//   quantizeToStep puts them, so sides shared with other images stay bit-identical.
+// - Each other sample moves at most min(tolerance, d / 4) from its input (Euclidean), d its
+//   distance to the nearest other sample of its 5x5 grid window, so close samples are not merged;
+//   a sample whose choice would coincide with one settled before it in that window takes its
+//   nearest lattice point (or a lattice point beside that) instead.
+// side^2 positions (x, y, z interleaved, row-major) in, settled positions out (the input of
+// encodePositions). tolerance 0: every sample to its nearest lattice point. Throws
+// std::invalid_argument as encodePositions does, or on a negative tolerance.
+std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, double step, double tolerance);
+
 // Encodes side^2 packed unit normals (x, y, z bytes, n * 127.5 + 127.5; the fourth byte 255)
 // losslessly. Throws std::invalid_argument if a fourth byte is not 255.
 std::vector<uint8_t> encodeNormals(std::span<const std::array<uint8_t, 4>> normals, uint32_t side);
 void decodeNormals(std::span<const uint8_t> block, uint32_t side, std::span<std::array<uint8_t, 4>> out);
 
+// The same for side^2 packed unit normals (the input of encodeNormals), in place: each byte of a
+// sample off the border moves by at most `tolerance` (in packed steps of 1/127.5), the x and y
+// bytes towards the Lorenzo prediction in multiples of 2 tolerance + 1, z to the unit length
+// encodeNormals predicts from them when that is within the tolerance. tolerance 0 changes nothing.
+void settleNormals(std::span<std::array<uint8_t, 4>> normals, uint32_t side, uint32_t tolerance);
+
 // Encodes side^2 RGBA8 colours losslessly.
 std::vector<uint8_t> encodeColours(std::span<const std::array<uint8_t, 4>> colours, uint32_t side);
 void decodeColours(std::span<const uint8_t> block, uint32_t side, std::span<std::array<uint8_t, 4>> out);
+
+// A whole byte string (a file's body) as one self-checking zstd frame, and back. decompressBytes
+// throws CodecError on a corrupt or truncated frame, or one that would decode to more than
+// maxBytes.
+std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw, int level);
+std::vector<uint8_t> decompressBytes(std::span<const uint8_t> coded, size_t maxBytes);
 
 }  // namespace gimlod

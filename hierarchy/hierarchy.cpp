@@ -1,6 +1,7 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 6 (hierarchy creation): per-node bounds and
 // per-resolution maximum sample deviation, built in parallel.
 #include "hierarchy/hierarchy.h"
+#include "core/block_codec.h"
 #include "core/progress.h"
 
 #include <chrono>
@@ -15,7 +16,9 @@ namespace gimlod {
 namespace {
 
 constexpr char kMagic[4] = {'G', 'L', 'M', 'H'};
-constexpr uint32_t kHierarchyVersion = 1;
+constexpr uint32_t kHierarchyVersion = 1;            // raw
+constexpr uint32_t kCompressedHierarchyVersion = 2;  // the version-1 body regrouped and zstd-coded
+constexpr int kHierarchyZstdLevel = 9;
 
 // Reduces an n x n array of per-cell values by 2x2 blocks with `op` into an (n/2)^2 array.
 template <typename Op>
@@ -304,10 +307,65 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
   return hier;
 }
 
-void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h) {
+namespace {
+
+// Version 2 stores version 1's body (everything after magic and version) regrouped so that like
+// bytes lie together: the header and every chart's roots, then every chart's bounds, flags and
+// errors, each float array as four byte planes (least significant first); then zstd with its
+// checksum. Regrouping is a permutation of the body's bytes, so reading undoes it and parses
+// version 1.
+struct BodyLayout {
+  uint32_t count = 0, nodes = 0, resCount = 0;
+  static constexpr size_t kHeader = 5 * 4, kRoots = 4 * (4 + 1 + 1);
+  size_t boundsBytes() const { return size_t(nodes) * sizeof(std::array<float, 6>); }
+  size_t errorBytes() const { return size_t(nodes) * resCount * sizeof(float); }
+  size_t perChart() const { return kRoots + boundsBytes() + nodes + errorBytes(); }
+  size_t size() const { return kHeader + size_t(count) * perChart(); }
+};
+
+// Moves the body's bytes between the version-1 order (per chart: roots, bounds, flags, errors)
+// and the grouped order; forward: version 1 to grouped.
+std::vector<uint8_t> regroup(const std::vector<uint8_t>& in, const BodyLayout& l, bool forward) {
+  std::vector<uint8_t> out(in.size());
+  const size_t charts = l.count, bounds = l.boundsBytes(), errors = l.errorBytes();
+  const size_t rootsAt = BodyLayout::kHeader, boundsAt = rootsAt + charts * BodyLayout::kRoots,
+               flagsAt = boundsAt + charts * bounds, errorsAt = flagsAt + charts * l.nodes;
+  auto move = [&](size_t v1, size_t grouped, size_t n) {
+    if (forward) std::memcpy(out.data() + grouped, in.data() + v1, n);
+    else std::memcpy(out.data() + v1, in.data() + grouped, n);
+  };
+  // A float array of `bytes` at v1 offset `v1` as byte planes of the section at `section`,
+  // chart c's floats at float index `first`.
+  auto planes = [&](size_t v1, size_t section, size_t total, size_t first, size_t bytes) {
+    const size_t floats = total / 4;
+    for (size_t i = 0; i < bytes / 4; ++i)
+      for (size_t b = 0; b < 4; ++b) {
+        const size_t a = v1 + 4 * i + b, g = section + b * floats + first + i;
+        if (forward) out[g] = in[a];
+        else out[a] = in[g];
+      }
+  };
+  move(0, 0, BodyLayout::kHeader);
+  for (size_t c = 0; c < charts; ++c) {
+    const size_t v1 = BodyLayout::kHeader + c * l.perChart();
+    move(v1, rootsAt + c * BodyLayout::kRoots, BodyLayout::kRoots);
+    planes(v1 + BodyLayout::kRoots, boundsAt, charts * bounds, c * bounds / 4, bounds);
+    move(v1 + BodyLayout::kRoots + bounds, flagsAt + c * l.nodes, l.nodes);
+    planes(v1 + BodyLayout::kRoots + bounds + l.nodes, errorsAt, charts * errors, c * errors / 4, errors);
+  }
+  return out;
+}
+
+BodyLayout layoutOf(const HierarchyParams& p, uint32_t count) {
+  return {count, nodesPerChart(p.depth), p.resCount()};
+}
+
+}  // namespace
+
+void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool compressed) {
   std::vector<uint8_t> b;
   putBytes(b, kMagic, 4);
-  put(b, kHierarchyVersion);
+  put(b, compressed ? kCompressedHierarchyVersion : kHierarchyVersion);
   put(b, uint32_t(h.charts.size()));
   put(b, h.params.intervalsLog2);
   put(b, h.params.depth);
@@ -322,6 +380,13 @@ void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h) {
     putVec(b, h.charts[c].bounds);
     putVec(b, h.charts[c].flags);
     putVec(b, h.charts[c].errors);
+  }
+  if (compressed) {
+    const std::vector<uint8_t> body(b.begin() + 8, b.end());
+    const std::vector<uint8_t> coded = compressBytes(regroup(body, layoutOf(h.params, uint32_t(h.charts.size())), true),
+                                                     kHierarchyZstdLevel);
+    b.resize(8);
+    b.insert(b.end(), coded.begin(), coded.end());
   }
   atomicWriteFile(path, b.data(), b.size());
 }
@@ -341,8 +406,35 @@ Hierarchy readHierarchy(const std::filesystem::path& path) {
   if (std::memcmp(magic, kMagic, 4) != 0) throw InputError(path.string() + ": not a gimlod hierarchy file");
   uint32_t version, count;
   get(&version, 4);
-  if (version != kHierarchyVersion)
+  if (version != kHierarchyVersion && version != kCompressedHierarchyVersion)
     throw InputError(path.string() + ": unsupported hierarchy version " + std::to_string(version));
+  if (version == kCompressedHierarchyVersion) {
+    // Back to version 1's bytes; the checks below then hold for both versions.
+    std::vector<uint8_t> body;
+    try {
+      // No real body codes more than a few times smaller; a crafted frame header cannot claim more.
+      body = decompressBytes({b.data() + pos, b.size() - pos}, 4096 * (b.size() - pos) + (size_t(1) << 20));
+    } catch (const CodecError& e) {
+      throw InputError(path.string() + ": " + e.what());
+    }
+    HierarchyParams p;
+    if (body.size() < BodyLayout::kHeader) throw InputError(path.string() + ": hierarchy file is truncated");
+    std::memcpy(&count, body.data(), 4);
+    std::memcpy(&p.intervalsLog2, body.data() + 4, 4);
+    std::memcpy(&p.depth, body.data() + 8, 4);
+    std::memcpy(&p.maxNodeResLog2, body.data() + 12, 4);
+    std::memcpy(&p.minNodeResLog2, body.data() + 16, 4);
+    if (p.depth > 12 || p.maxNodeResLog2 > 16 || p.minNodeResLog2 > p.maxNodeResLog2 || count > (1u << 24))
+      throw InputError(path.string() + ": corrupt hierarchy header");
+    const BodyLayout l = layoutOf(p, count);
+    if (body.size() != l.size())
+      throw InputError(path.string() + ": hierarchy file holds " + std::to_string(body.size()) +
+                       " bytes once decoded, its header (" + std::to_string(count) + " charts of depth " +
+                       std::to_string(p.depth) + ") needs " + std::to_string(l.size()));
+    const std::vector<uint8_t> v1 = regroup(body, l, false);
+    b.resize(pos);
+    b.insert(b.end(), v1.begin(), v1.end());
+  }
   get(&count, 4);
   Hierarchy h;
   get(&h.params.intervalsLog2, 4);

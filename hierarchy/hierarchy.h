@@ -121,7 +121,9 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
                                  const std::vector<std::array<RootNeighbour, 4>>& roots,
                                  const ChartPositionSource& source, HierarchyStats* stats = nullptr);
 
-void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h);  // atomic
+// Atomic. compressed: version 2 (the arrays regrouped as byte planes, then zstd with its
+// checksum; about a third of version 1's bytes), else version 1 (raw). Both are read.
+void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool compressed = true);
 Hierarchy readHierarchy(const std::filesystem::path& path);  // throws InputError naming the file
 
 HierarchyParams hierarchyParams(const AtlasManifest& m);

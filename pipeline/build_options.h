@@ -66,11 +66,17 @@ struct TerrainBuildOptions : CommonBuildOptions {
 inline constexpr double kTerrainBytesPerSample = 17.0;
 
 // A geometry atlas from a mesh (PLY, OBJ, OFF, STL).
-// 2^22 steps across the diagonal. Fewer take fewer bytes (2^18: 0.72 times the bunny's, 0.70
-// igea's; scripts/mesh_bytes_curve.py) with the same Hausdorff figures, but where a chart's samples
-// lie closer than a step (the bunny at 257^2 in 24 patches: 522 of them at 2^18) neighbours fall on
-// one point and their texels lose their area.
-inline constexpr uint32_t kDefaultPositionBits = 22;
+// 2^18 steps across the diagonal (0.0004% of it). Settled positions (below) code in about 0.7
+// times the bytes at 2^18 that they take at 2^22, with the same Hausdorff figures; where a chart's
+// samples lie closer than a step, settling keeps grid neighbours apart (settlePositions).
+inline constexpr uint32_t kDefaultPositionBits = 18;
+// How far, as a fraction of the bounding-box diagonal, a position off its chart's border may be
+// settled from its lattice point so that it codes cheaply (core/block_codec.h settlePositions),
+// and by how many packed steps a normal byte may; the Hausdorff distance grows by at most the
+// former. Larger tolerances take more bytes, not fewer: the coarser pyramid levels subsample
+// level 0, and settling at level 0 adds noise to their residuals (scripts/mesh_bytes_curve.py).
+inline constexpr double kDefaultPositionTolerance = 0.00005;
+inline constexpr uint32_t kDefaultNormalTolerance = 1;
 inline constexpr uint32_t kAutoCharts = ~0u;
 inline constexpr double kAutoSampleError = -1.0;
 inline constexpr double kDefaultSampleError = 0.0005;
@@ -113,6 +119,11 @@ struct MeshBuildOptions : CommonBuildOptions {
   // bounding-box diagonal (a power-of-two step), before the hierarchy and the fidelity are
   // measured, so shared seams stay bit-identical and the errors bound what is drawn.
   uint32_t positionBits = kDefaultPositionBits;
+  // Compressed atlases: positions off a chart's border settle within this fraction of the
+  // diagonal, in [0, 0.01], normal bytes within normalTolerance packed steps, in [0, 16], where
+  // that makes their Lorenzo residuals 0 (kDefaultPositionTolerance).
+  double positionTolerance = kDefaultPositionTolerance;
+  uint32_t normalTolerance = kDefaultNormalTolerance;
   // How patches become quad charts (atlas/mesh/resample.h QuadLayout): kites (n charts an n-sided
   // patch), sides (about n/2; side counts made even first), or auto: sides, and kites too if sides
   // leave flipped texels, corners where only two charts meet or a sampling error over the bound,

@@ -111,6 +111,9 @@ HierarchyParams meshHierarchyParams(const MeshBuildOptions& o) {
   if (o.threads > 1024) throw InputError(optionRef("threads") + " must be at most 1024");
   if (o.positionBits < 8 || o.positionBits > 22)
     throw InputError(optionRef("positionBits") + " " + std::to_string(o.positionBits) + " must be between 8 and 22");
+  if (!(o.positionTolerance >= 0.0 && o.positionTolerance <= 0.01))
+    throw InputError(optionRef("positionTolerance") + " must be between 0 and 1% of the bounding-box diagonal");
+  if (o.normalTolerance > 16) throw InputError(optionRef("normalTolerance") + " must be between 0 and 16 packed steps");
   if (o.nodeRes < 4 || (o.nodeRes & (o.nodeRes - 1)) || o.minNodeRes < 2 || (o.minNodeRes & (o.minNodeRes - 1)) ||
       o.minNodeRes > o.nodeRes)
     throw InputError(optionRef("nodeRes") + " and " + optionRef("minNodeRes") +
@@ -442,9 +445,14 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
   ChartCoding coding;
   coding.compressed = o.compress;
   coding.positionStep = meshPositionStep(r.bounds, o.positionBits);
+  const double diagonal = r.bounds.empty() ? 0.0 : glm::length(glm::dvec3(r.bounds.max) - glm::dvec3(r.bounds.min));
+  coding.positionTolerance = o.positionTolerance * diagonal;
+  coding.normalTolerance = o.normalTolerance;
   if (o.compress)
-    spdlog::info("positions on a lattice of {:.4g} ({:.4g}% of the diagonal)", coding.positionStep,
-                 100.0 * coding.positionStep / std::max(glm::length(glm::dvec3(r.bounds.max) - glm::dvec3(r.bounds.min)), 1e-300));
+    spdlog::info("positions on a lattice of {:.4g} ({:.4g}% of the diagonal), settled within {:.4g}% of it; normals "
+                 "within {} packed steps",
+                 coding.positionStep, 100.0 * coding.positionStep / std::max(diagonal, 1e-300),
+                 100.0 * o.positionTolerance, o.normalTolerance);
   w.bounds = writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get(), coding).bounds;
   w.spilledBytes = r.spill->bytes();
   r.spill.reset();  // the file goes before the staging directory becomes the atlas
@@ -457,7 +465,7 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
     const Hierarchy h = buildGeometryHierarchy(
         p, roots, [&](uint32_t c) { return ChartFileReader(dir / m.charts[c].file).readLevelPositions(0); },
                                                &w.hierarchy);
-    writeHierarchy(dir / m.hierarchyFile, h);
+    writeHierarchy(dir / m.hierarchyFile, h, o.compress);
   }
   writeManifest(dir, m);
   finishStage(meter, "write");

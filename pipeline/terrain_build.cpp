@@ -151,7 +151,7 @@ void finishTerrainAtlas(AtlasManifest& m, const fs::path& dir, TerrainWriteStats
   // may have files open.
   const Hierarchy h = buildTerrainHierarchy(
       m, [&](uint32_t c) { return ChartFileReader(dir / m.charts[c].file).readLevelHeights(0); }, &w.hierarchy);
-  writeHierarchy(dir / m.hierarchyFile, h);
+  writeHierarchy(dir / m.hierarchyFile, h, m.compression.present);
   writeManifest(dir, m);
   w.chartsX = m.chartsX;
   w.chartsY = m.chartsY;

@@ -2,11 +2,14 @@
 """Mesh atlas bytes per input triangle against the Hausdorff distance (python3 only).
 
 Usage: python3 scripts/mesh_bytes_curve.py [--gimlod BIN] [--sizes 33,65,129,auto]
-                                           [--bits 22,16] [--work DIR] MESH [MESH ...]
+                                           [--bits 18,22] [--tolerances 0.005/1,0/0]
+                                           [--work DIR] MESH [MESH ...]
 
 Builds each MESH with `gimlod build MESH -o ATLAS` once per chart size (`--chart-size N`; `auto`
-is the default chart size, chosen by density and doubled to the sampling bound) and per position
-lattice (`--position-bits B`), the other options at their defaults, one build after another.
+is the default chart size, chosen by density and doubled to the sampling bound), per position
+lattice (`--position-bits B`) and per settling tolerance P/N (`--position-tolerance P`, in % of
+the diagonal, `--normal-tolerance N`; 0/0 stores the nearest lattice points and the normals as
+sampled), the other options at their defaults, one build after another.
 Prints one Markdown table: per build, charts, samples, bytes on disk per input triangle (the whole
 atlas: charts, hierarchy, manifest), flipped texels and the two-sided Hausdorff distance in % of
 the bounding-box diagonal, from each atlas's stats.json. The atlases go to a temporary directory
@@ -21,10 +24,11 @@ import sys
 import tempfile
 
 
-def build(gimlod, mesh, size, bits, work):
+def build(gimlod, mesh, size, bits, tolerance, work):
     out = os.path.join(work, "curve.atlas")
     shutil.rmtree(out, ignore_errors=True)
-    cmd = [gimlod, "build", mesh, "-o", out, "--position-bits", str(bits)]
+    cmd = [gimlod, "build", mesh, "-o", out, "--position-bits", str(bits),
+           "--position-tolerance", tolerance[0], "--normal-tolerance", tolerance[1]]
     if size != "auto":
         cmd += ["--chart-size", str(size)]
     r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -41,7 +45,8 @@ def main():
     ap.add_argument("meshes", nargs="+")
     ap.add_argument("--gimlod", default=os.path.join(os.path.dirname(__file__), "..", "build", "gimlod"))
     ap.add_argument("--sizes", default="33,65,129,auto")
-    ap.add_argument("--bits", default="22,16")
+    ap.add_argument("--bits", default="18,22")
+    ap.add_argument("--tolerances", default="0.005/1,0/0")
     ap.add_argument("--work", default=None)
     a = ap.parse_args()
     sizes = [s.strip() for s in a.sizes.split(",") if s.strip()]
@@ -49,22 +54,33 @@ def main():
         if s != "auto" and not s.isdigit():
             sys.exit(f"--sizes: {s!r} is neither a chart size nor auto")
     bits = [int(b) for b in a.bits.split(",") if b.strip()]
+    tolerances = []
+    for t in a.tolerances.split(","):
+        parts = t.strip().split("/")
+        if len(parts) != 2:
+            sys.exit(f"--tolerances: {t!r} is not POSITION/NORMAL")
+        try:
+            float(parts[0]), int(parts[1])
+        except ValueError:
+            sys.exit(f"--tolerances: {t!r} is not a number of % and a whole number of packed steps")
+        tolerances.append((parts[0], parts[1]))
     work = a.work or tempfile.mkdtemp(prefix="gimlod-bytes-curve-")
     os.makedirs(work, exist_ok=True)
-    print("| mesh | triangles | chart size | position bits | charts | samples | bytes per triangle "
-          "| flipped texels | Hausdorff % of diagonal |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| mesh | triangles | chart size | position bits | tolerance (% / steps) | charts | samples "
+          "| bytes per triangle | flipped texels | Hausdorff % of diagonal |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     try:
         for mesh in a.meshes:
             for size in sizes:
                 for b in bits:
-                    st = build(a.gimlod, mesh, size, b, work)
-                    tri = st["charting"]["triangles"]
-                    shown = f"{st['chart_size']}² (auto)" if size == "auto" else f"{st['chart_size']}²"
-                    print(f"| {os.path.basename(mesh)} | {tri} | {shown} | {b} | {st['charts']} "
-                          f"| {st['samples'] / 1e6:.2f}M | {st['bytes_on_disk'] / tri:.1f} "
-                          f"| {st['resample']['flipped_texels']} "
-                          f"| {st['fidelity']['hausdorff_percent_of_diagonal']:.4f} |", flush=True)
+                    for t in tolerances:
+                        st = build(a.gimlod, mesh, size, b, t, work)
+                        tri = st["charting"]["triangles"]
+                        shown = f"{st['chart_size']}² (auto)" if size == "auto" else f"{st['chart_size']}²"
+                        print(f"| {os.path.basename(mesh)} | {tri} | {shown} | {b} | {t[0]} / {t[1]} "
+                              f"| {st['charts']} | {st['samples'] / 1e6:.2f}M | {st['bytes_on_disk'] / tri:.1f} "
+                              f"| {st['resample']['flipped_texels']} "
+                              f"| {st['fidelity']['hausdorff_percent_of_diagonal']:.4f} |", flush=True)
     finally:
         if a.work is None:
             shutil.rmtree(work, ignore_errors=True)

@@ -18,12 +18,25 @@ namespace gimlod {
 
 namespace fs = std::filesystem;
 
-ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, double positionStep) {
+ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, const ChartCoding& coding) {
   const uint32_t M = chartSize - 1;
   if (!isChartSizeValid(chartSize) || image.positions.size() != size_t(chartSize) * chartSize ||
       image.normals.size() != image.positions.size() ||
       (!image.colours.empty() && image.colours.size() != image.positions.size()))
     throw std::invalid_argument("geometryPyramid: chart images do not match the chart size");
+  // Level 0 as it will be stored; the other levels subsample it.
+  std::vector<glm::vec3> settled;
+  std::vector<PackedNormal> normals(image.normals.begin(), image.normals.end());
+  const std::vector<glm::vec3>* positions = &image.positions;
+  if (coding.compressed) {
+    const std::vector<float> s = settlePositions({reinterpret_cast<const float*>(image.positions.data()),
+                                                  3 * image.positions.size()},
+                                                 chartSize, coding.positionStep, coding.positionTolerance);
+    settled.resize(image.positions.size());
+    std::memcpy(settled.data(), s.data(), s.size() * sizeof(float));
+    positions = &settled;
+    settleNormals(normals, chartSize, coding.normalTolerance);
+  }
   ChartPyramid p;
   for (uint32_t k = 0; (M >> k) >= 1; ++k) {
     const uint32_t s = (M >> k) + 1, step = 1u << k;
@@ -33,11 +46,8 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, dou
     for (uint32_t v = 0; v < s; ++v)
       for (uint32_t u = 0; u < s; ++u) {
         const size_t src = size_t(v * step) * chartSize + u * step, dst = size_t(v) * s + u;
-        pos[dst] = image.positions[src];
-        if (positionStep > 0.0)
-          pos[dst] = {quantizeToStep(pos[dst].x, positionStep), quantizeToStep(pos[dst].y, positionStep),
-                      quantizeToStep(pos[dst].z, positionStep)};
-        nrm[dst] = image.normals[src];
+        pos[dst] = (*positions)[src];
+        nrm[dst] = normals[src];
         if (!col.empty()) {
           const glm::u8vec4 c = image.colours[src];
           col[dst] = {c.r, c.g, c.b, c.a};
@@ -73,8 +83,9 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     if (!(coding.positionStep > 0.0)) throw std::invalid_argument("writeGeometryCharts: compressed positions need a step");
     m.compression.present = true;
     m.compression.positionStep = coding.positionStep;
+    m.compression.positionTolerance = coding.positionTolerance;
+    m.compression.normalTolerance = coding.normalTolerance;
   }
-  const double step = coding.compressed ? coding.positionStep : 0.0;
   std::vector<uint64_t> bytes(set.charts.size(), 0);
   std::vector<std::array<float, 6>> boxes(set.charts.size());
   const progress::ProgressStage stage("write charts", set.charts.size());
@@ -95,7 +106,7 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     c.gridY = 0;
     c.file = name;
     c.neighbours = img.neighbours;
-    const ChartPyramid pyramid = geometryPyramid(samples, set.chartSize, step);
+    const ChartPyramid pyramid = geometryPyramid(samples, set.chartSize, coding);
     glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
     for (const glm::vec3& q : pyramid.positions[0]) {
       lo = {std::min(lo.x, q.x), std::min(lo.y, q.y), std::min(lo.z, q.z)};

@@ -18,9 +18,11 @@
 namespace gimlod {
 
 // The pyramid of one geometry chart: level k keeps every 2^k-th sample of level 0 (so shared
-// borders stay bit-identical at every level), down to 2 intervals per side. positionStep > 0:
-// positions quantized to that lattice (quantizeToStep), as a compressed chart file decodes them.
-ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, double positionStep = 0.0);
+// borders stay bit-identical at every level), down to 2 intervals per side. Compressed coding:
+// level 0's positions are settled on the coding's lattice and its normals within the coding's
+// tolerances (settlePositions, settleNormals: the border to the nearest lattice point, the rest
+// within the tolerances), as a compressed chart file decodes them; the other levels subsample it.
+ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, const ChartCoding& coding = {});
 
 struct GeometryChartsWritten {
   uint64_t bytes = 0;
@@ -31,8 +33,9 @@ struct GeometryChartsWritten {
 // Writes set's charts to dir/charts/chart_NNNN.bin (atomically, in parallel) and fills m's
 // kind ("geometry"), chart size, block size, chart list (file names, neighbours) and height
 // range (z of the bounds). blockIntervals: a power of two <= chartSize - 1. Charts whose samples
-// were spilled are read back from `spill`, one at a time per thread. Compressed coding quantizes
-// the positions first (the bounds are of the quantized ones) and records it in m.compression.
+// were spilled are read back from `spill`, one at a time per thread. Compressed coding settles
+// the samples first (geometryPyramid; the bounds are of the settled positions) and records the
+// lattice and the tolerances in m.compression.
 // Throws InputError when a file cannot be written, std::invalid_argument on an empty or
 // inconsistent set.
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const std::filesystem::path& dir,

@@ -1,15 +1,19 @@
 // The height block codec (core/block_codec.h) on the shipped SRTM tile: integer metres round-trip
 // exactly in every 65^2 block, float heights within half the precision, and every truncated block
 // and (but for frame-header hints zstd ignores) every corrupted one is detected (CodecError), never
-// decoded to wrong heights or a crash.
+// decoded to wrong heights or a crash. Then the settling of positions and normals within their
+// tolerances, on a curved sheet, and whole byte strings.
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <random>
 
+#include <glm/geometric.hpp>
+
 #include <gdal_priv.h>
 
 #include "atlas/terrain/dem.h"
+#include "core/atlas_format.h"
 #include "core/block_codec.h"
 #include "tests/test_util.h"
 
@@ -113,6 +117,133 @@ TEST(HeightCodec, RefusesWhatItCannotCode) {
   block.assign(block.size(), 3.0e9f);
   EXPECT_THROW(encodeHeights(block, kSide, 0.01), std::invalid_argument);
   EXPECT_THROW(encodeHeights(block, kSide + 1, 0.01), std::invalid_argument);
+}
+
+// A smooth curved sheet, side^2 positions, samples `spacing` apart; rows from `squeezeRow` on
+// are squeezed to a hundredth of that, so grid neighbours there lie far closer than a tolerance.
+std::vector<float> sheet(uint32_t side, double spacing, uint32_t squeezeRow = ~0u) {
+  std::vector<float> xyz(3 * size_t(side) * side);
+  for (uint32_t v = 0; v < side; ++v)
+    for (uint32_t u = 0; u < side; ++u) {
+      const double x = u * spacing + 0.3;
+      const double y = v < squeezeRow ? v * spacing : (squeezeRow + (v - squeezeRow) * 0.01) * spacing;
+      float* p = xyz.data() + 3 * (size_t(v) * side + u);
+      p[0] = float(x);
+      p[1] = float(y);
+      p[2] = float(0.2 * std::sin(3 * x) * std::cos(2 * y) + 0.05 * x * y);
+    }
+  return xyz;
+}
+
+double distance3(const float* a, const float* b) {
+  return std::sqrt(double(a[0] - b[0]) * (a[0] - b[0]) + double(a[1] - b[1]) * (a[1] - b[1]) +
+                   double(a[2] - b[2]) * (a[2] - b[2]));
+}
+
+// Settled positions: the border at its nearest lattice point, every other sample on the lattice
+// within min(tolerance, d / 4) of its input (d: the distance to the nearest other sample of its
+// 5x5 grid window), no two samples of such a window merged, decoded exactly, and coded in fewer bytes than the nearest points.
+TEST(PositionSettling, WithinTheToleranceOnTheLatticeAndCheaper) {
+  const double step = std::exp2(-18.0), tolerance = 2e-4;
+  for (const uint32_t squeeze : {~0u, 40u}) {
+    const std::vector<float> in = sheet(kSide, 1.0 / 64, squeeze);
+    const std::vector<float> nearest = settlePositions(in, kSide, step, 0.0);
+    const std::vector<float> settled = settlePositions(in, kSide, step, tolerance);
+    size_t moved = 0;
+    for (uint32_t v = 0; v < kSide; ++v)
+      for (uint32_t u = 0; u < kSide; ++u) {
+        const size_t i = size_t(v) * kSide + u;
+        const bool border = u == 0 || v == 0 || u + 1 == kSide || v + 1 == kSide;
+        for (int c = 0; c < 3; ++c) {
+          ASSERT_EQ(nearest[3 * i + c], quantizeToStep(in[3 * i + c], step));
+          ASSERT_EQ(std::nearbyint(double(settled[3 * i + c]) / step) * step, double(settled[3 * i + c]));
+          if (border) ASSERT_EQ(settled[3 * i + c], nearest[3 * i + c]) << u << "," << v;
+        }
+        if (border) continue;
+        double d = 1e300;
+        for (uint32_t y = v >= 2 ? v - 2 : 0; y <= std::min(v + 2, kSide - 1); ++y)
+          for (uint32_t x = u >= 2 ? u - 2 : 0; x <= std::min(u + 2, kSide - 1); ++x) {
+            const size_t j = size_t(y) * kSide + x;
+            if (j == i) continue;
+            d = std::min(d, distance3(&in[3 * i], &in[3 * j]));
+            ASSERT_GT(distance3(&settled[3 * i], &settled[3 * j]), 0.0) << "samples merged at " << u << "," << v;
+          }
+        const double allowed = std::max(std::min(tolerance, d / 4), std::sqrt(3.0) * step / 2);
+        ASSERT_LE(distance3(&settled[3 * i], &in[3 * i]), allowed * (1 + 1e-6) + 1e-9) << u << "," << v;
+        moved += distance3(&settled[3 * i], &nearest[3 * i]) > 0;
+      }
+    EXPECT_GT(moved, size_t(kSide) * kSide / 4);
+    const std::vector<uint8_t> a = encodePositions(nearest, kSide, step), b = encodePositions(settled, kSide, step);
+    std::vector<float> back(settled.size());
+    decodePositions(b, kSide, back);
+    EXPECT_EQ(back, settled);
+    std::printf("  %s sheet: %zu bytes at the nearest lattice points, %zu settled within %g\n",
+                squeeze == ~0u ? "smooth" : "squeezed", a.size(), b.size(), tolerance);
+    EXPECT_LT(double(b.size()), 0.8 * double(a.size()));
+  }
+  EXPECT_THROW(settlePositions(sheet(kSide, 0.01), kSide, step, -1.0), std::invalid_argument);
+  EXPECT_THROW(settlePositions(sheet(kSide, 0.01), kSide - 1, step, 0.0), std::invalid_argument);
+}
+
+// Settled normals: the border unchanged, every byte within the tolerance, decoded exactly, coded
+// in fewer bytes; tolerance 0 changes nothing.
+TEST(NormalSettling, WithinTheToleranceAndCheaper) {
+  const std::vector<float> xyz = sheet(kSide, 1.0 / 64);
+  std::vector<PackedNormal> in(size_t(kSide) * kSide);
+  for (uint32_t v = 0; v < kSide; ++v)
+    for (uint32_t u = 0; u < kSide; ++u) {
+      const size_t i = size_t(v) * kSide + u;
+      const size_t r = u + 1 < kSide ? i + 1 : i - 1;
+      const size_t up = v + 1 < kSide ? i + kSide : i - kSide;
+      const glm::vec3 p(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
+      const glm::vec3 du = glm::vec3(xyz[3 * r], xyz[3 * r + 1], xyz[3 * r + 2]) - p;
+      const glm::vec3 dv = glm::vec3(xyz[3 * up], xyz[3 * up + 1], xyz[3 * up + 2]) - p;
+      glm::vec3 n = glm::normalize(glm::cross(du, dv));
+      if (n.z < 0) n = -n;
+      in[i] = packNormal(n.x, n.y, n.z);
+    }
+  std::vector<PackedNormal> same = in;
+  settleNormals(same, kSide, 0);
+  EXPECT_EQ(same, in);
+  for (const uint32_t tolerance : {1u, 2u}) {
+    std::vector<PackedNormal> settled = in;
+    settleNormals(settled, kSide, tolerance);
+    size_t moved = 0;
+    for (uint32_t v = 0; v < kSide; ++v)
+      for (uint32_t u = 0; u < kSide; ++u) {
+        const size_t i = size_t(v) * kSide + u;
+        const bool border = u == 0 || v == 0 || u + 1 == kSide || v + 1 == kSide;
+        for (int c = 0; c < 4; ++c) {
+          const int d = std::abs(int(settled[i][c]) - int(in[i][c]));
+          ASSERT_LE(d, border || c == 3 ? 0 : int(tolerance)) << u << "," << v << " byte " << c;
+          moved += d > 0;
+        }
+      }
+    EXPECT_GT(moved, 0u);
+    const std::vector<uint8_t> a = encodeNormals(in, kSide), b = encodeNormals(settled, kSide);
+    std::vector<PackedNormal> back(settled.size());
+    decodeNormals(b, kSide, back);
+    EXPECT_EQ(back, settled);
+    std::printf("  normals: %zu bytes as sampled, %zu settled within %u packed steps\n", a.size(), b.size(), tolerance);
+    EXPECT_LT(b.size(), a.size());
+  }
+  EXPECT_THROW(settleNormals(same, kSide, 128), std::invalid_argument);
+}
+
+// Whole byte strings: back exactly; corrupt or truncated frames, and frames that claim more
+// than the reader allows, are CodecError.
+TEST(ByteCodec, RoundTripsAndDetectsDamage) {
+  std::vector<uint8_t> raw(100000);
+  std::mt19937 rng(3);
+  for (size_t i = 0; i < raw.size(); ++i) raw[i] = uint8_t(i % 7 == 0 ? rng() : i / 1000);
+  const std::vector<uint8_t> coded = compressBytes(raw, 9);
+  EXPECT_LT(coded.size(), raw.size() / 2);
+  EXPECT_EQ(decompressBytes(coded, raw.size()), raw);
+  EXPECT_THROW(decompressBytes(coded, raw.size() - 1), CodecError);
+  EXPECT_THROW(decompressBytes({coded.data(), coded.size() / 2}, raw.size()), CodecError);
+  std::vector<uint8_t> bad = coded;
+  bad[bad.size() / 2] ^= 0x40;
+  EXPECT_THROW(decompressBytes(bad, raw.size()), CodecError);
 }
 
 }  // namespace

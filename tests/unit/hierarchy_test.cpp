@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <fstream>
+
 #include <cmath>
 #include <cstring>
 
@@ -124,20 +126,50 @@ TEST(Hierarchy, FileRoundTripAndCorruption) {
   const AtlasManifest m = test::syntheticManifest(33, 2, 2, 3, 4, 1);
   const Hierarchy hier = buildTerrainHierarchy(m, [&](uint32_t c) { return test::syntheticChart(m, c); });
   test::TempDir dir;
-  const auto path = dir.path() / "hierarchy.bin";
-  writeHierarchy(path, hier);
-  const Hierarchy back = readHierarchy(path);
-  ASSERT_EQ(back.chartCount(), hier.chartCount());
-  for (uint32_t c = 0; c < hier.chartCount(); ++c) {
-    // Bitwise: unavailable resolutions hold NaN.
-    ASSERT_EQ(back.charts[c].errors.size(), hier.charts[c].errors.size());
-    EXPECT_EQ(std::memcmp(back.charts[c].errors.data(), hier.charts[c].errors.data(),
-                          hier.charts[c].errors.size() * sizeof(float)), 0);
-    EXPECT_EQ(back.charts[c].bounds, hier.charts[c].bounds);
-    EXPECT_EQ(back.roots[c][1].chart, hier.roots[c][1].chart);
+  uintmax_t rawBytes = 0;
+  for (const bool compressed : {false, true}) {
+    SCOPED_TRACE(compressed ? "version 2 (compressed)" : "version 1");
+    const auto path = dir.path() / (compressed ? "hierarchy2.bin" : "hierarchy1.bin");
+    writeHierarchy(path, hier, compressed);
+    uint32_t version = 0;
+    std::ifstream(path, std::ios::binary).seekg(4).read(reinterpret_cast<char*>(&version), 4);
+    EXPECT_EQ(version, compressed ? 2u : 1u);
+    const Hierarchy back = readHierarchy(path);
+    ASSERT_EQ(back.chartCount(), hier.chartCount());
+    for (uint32_t c = 0; c < hier.chartCount(); ++c) {
+      // Bitwise: unavailable resolutions hold NaN.
+      ASSERT_EQ(back.charts[c].errors.size(), hier.charts[c].errors.size());
+      EXPECT_EQ(std::memcmp(back.charts[c].errors.data(), hier.charts[c].errors.data(),
+                            hier.charts[c].errors.size() * sizeof(float)), 0);
+      EXPECT_EQ(back.charts[c].bounds, hier.charts[c].bounds);
+      EXPECT_EQ(back.charts[c].flags, hier.charts[c].flags);
+      for (uint32_t e = 0; e < 4; ++e) {
+        EXPECT_EQ(back.roots[c][e].chart, hier.roots[c][e].chart);
+        EXPECT_EQ(back.roots[c][e].edge, hier.roots[c][e].edge);
+        EXPECT_EQ(back.roots[c][e].reversed, hier.roots[c][e].reversed);
+      }
+    }
+    const uintmax_t bytes = std::filesystem::file_size(path);
+    if (compressed) {
+      EXPECT_LT(bytes, rawBytes);
+      // A flipped byte anywhere past the header: the checksum (or the frame) catches it.
+      for (const uintmax_t at : {uintmax_t(12), bytes / 2, bytes - 2}) {
+        const auto bad = dir.path() / "bad.bin";
+        std::filesystem::copy_file(path, bad, std::filesystem::copy_options::overwrite_existing);
+        std::fstream f(bad, std::ios::binary | std::ios::in | std::ios::out);
+        char b = 0;
+        f.seekg(std::streamoff(at)).read(&b, 1);
+        b = char(b ^ 0x21);
+        f.seekp(std::streamoff(at)).write(&b, 1);
+        f.close();
+        EXPECT_THROW(readHierarchy(bad), InputError) << "byte " << at;
+      }
+    } else {
+      rawBytes = bytes;
+    }
+    std::filesystem::resize_file(path, bytes / 2);
+    EXPECT_THROW(readHierarchy(path), InputError);
   }
-  std::filesystem::resize_file(path, std::filesystem::file_size(path) / 2);
-  EXPECT_THROW(readHierarchy(path), InputError);
   EXPECT_THROW(readHierarchy(dir.path() / "missing.bin"), InputError);
 }
 
