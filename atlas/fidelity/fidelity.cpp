@@ -85,8 +85,12 @@ using Primitive = CGAL::AABB_primitive<uint32_t, GroupDatumMap, GroupCentreMap, 
 using Traits = CGAL::AABB_traits<Kernel, Primitive, GroupBoxMap>;
 using Tree = CGAL::AABB_tree<Traits>;
 
-// The non-degenerate triangles (as a stored Triangle_3 judges them), in input order.
-std::vector<FloatTriangle> nonDegenerate(const std::vector<glm::vec3>& p, const std::vector<Face>& t) {
+// The non-degenerate triangles (as a stored Triangle_3 judges them), in input order. keepSlots:
+// each degenerate triangle's slot takes a copy of the nearest non-degenerate one before it (after
+// it, for the first) instead of closing up, so runs of neighbouring triangles (a chart's grid
+// rows) stay aligned and the Forest's groups small; a copy changes no closest point.
+std::vector<FloatTriangle> nonDegenerate(const std::vector<glm::vec3>& p, const std::vector<Face>& t,
+                                         bool keepSlots = false) {
   std::vector<FloatTriangle> out(t.size());
   std::vector<uint8_t> keep(t.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, t.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
@@ -97,6 +101,16 @@ std::vector<FloatTriangle> nonDegenerate(const std::vector<glm::vec3>& p, const 
       keep[i] = !ft.triangle().is_degenerate();
     }
   });
+  if (keepSlots) {
+    const auto first = std::find(keep.begin(), keep.end(), uint8_t(1));
+    if (first == keep.end()) return {};
+    const FloatTriangle* last = &out[size_t(first - keep.begin())];
+    for (size_t i = 0; i < t.size(); ++i) {
+      if (keep[i]) last = &out[i];
+      else out[i] = *last;
+    }
+    return out;
+  }
   size_t n = 0;
   for (size_t i = 0; i < t.size(); ++i)
     if (keep[i]) out[n++] = out[i];
@@ -320,7 +334,7 @@ FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
   const auto t0 = std::chrono::steady_clock::now();
   std::vector<FloatTriangle> mesh, atlas;
   tbb::parallel_invoke([&] { mesh = nonDegenerate(meshPositions, meshTriangles); },
-                       [&] { atlas = nonDegenerate(atlasPositions, atlasTriangles); });
+                       [&] { atlas = nonDegenerate(atlasPositions, atlasTriangles, true); });
   if (mesh.empty() || atlas.empty()) throw std::invalid_argument("measureFidelity: a surface has no triangles");
   FidelityStats st;
   glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
