@@ -18,7 +18,7 @@ namespace {
 constexpr char kMagic[4] = {'G', 'L', 'M', 'H'};
 constexpr uint32_t kHierarchyVersion = 1;            // raw
 constexpr uint32_t kCompressedHierarchyVersion = 2;  // the version-1 body regrouped and zstd-coded
-constexpr int kHierarchyZstdLevel = 9;
+constexpr int kHierarchyZstdLevel = 3;
 
 // Reduces an n x n array of per-cell values by 2x2 blocks with `op` into an (n/2)^2 array.
 template <typename Op>
@@ -325,7 +325,7 @@ struct BodyLayout {
 
 // Moves the body's bytes between the version-1 order (per chart: roots, bounds, flags, errors)
 // and the grouped order; forward: version 1 to grouped.
-std::vector<uint8_t> regroup(const std::vector<uint8_t>& in, const BodyLayout& l, bool forward) {
+std::vector<uint8_t> regroup(std::span<const uint8_t> in, const BodyLayout& l, bool forward) {
   std::vector<uint8_t> out(in.size());
   const size_t charts = l.count, bounds = l.boundsBytes(), errors = l.errorBytes();
   const size_t rootsAt = BodyLayout::kHeader, boundsAt = rootsAt + charts * BodyLayout::kRoots,
@@ -382,9 +382,8 @@ void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool 
     putVec(b, h.charts[c].errors);
   }
   if (compressed) {
-    const std::vector<uint8_t> body(b.begin() + 8, b.end());
-    const std::vector<uint8_t> coded = compressBytes(regroup(body, layoutOf(h.params, uint32_t(h.charts.size())), true),
-                                                     kHierarchyZstdLevel);
+    const std::vector<uint8_t> coded = compressBytes(
+        regroup({b.data() + 8, b.size() - 8}, layoutOf(h.params, uint32_t(h.charts.size())), true), kHierarchyZstdLevel);
     b.resize(8);
     b.insert(b.end(), coded.begin(), coded.end());
   }

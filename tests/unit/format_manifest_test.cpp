@@ -134,7 +134,11 @@ TEST(FormatManifest, ValidationErrors) {
   expectBad([](json& j) { j.erase("compression"); }, "format version 2 needs the field 'compression'");
   expectBad([](json& j) { j["version"] = 1; }, "field 'compression' needs format version 2");
   expectBad([](json& j) { j["compression"]["codec"] = "lzma"; }, "unknown compression codec 'lzma'");
-  expectBad([](json& j) { j["compression"]["heightPrecision"] = -1; }, "compression steps must be >= 0");
+  expectBad([](json& j) { j["compression"]["heightPrecision"] = -1; }, "compression steps and tolerances must be >= 0");
+  expectBad([](json& j) { j["compression"]["positionTolerance"] = -0.5; },
+            "compression steps and tolerances must be >= 0");
+  expectBad([](json& j) { j["compression"]["normalTolerance"] = 1.5; }, "normalTolerance must be a whole number");
+  expectBad([](json& j) { j["compression"]["normalTolerance"] = 300; }, "normalTolerance must be a whole number");
   expectBad([](json& j) { j["chartSize"] = 500; }, "chartSize 500 is not 2^m+1");
   expectBad([](json& j) { j["chartSize"] = -129; }, "chartSize");
   expectBad([](json& j) { j["blockIntervals"] = 256; }, "blockIntervals 256");
