@@ -173,6 +173,27 @@ TEST(Hierarchy, FileRoundTripAndCorruption) {
   EXPECT_THROW(readHierarchy(dir.path() / "missing.bin"), InputError);
 }
 
+// The fuzz corpus's version-2 files were coded from its version-1 files by a separate
+// implementation of the format (a Python script, zstd's command line): they decode to the same
+// hierarchy, so the layout is the one documented, not merely what writeHierarchy happens to do.
+TEST(Hierarchy, Version2FilesOfTheFuzzCorpusDecodeLikeTheirVersion1Originals) {
+  const auto corpus = test::repoData().parent_path() / "tests/fuzz/corpus/fuzz_hierarchy";
+  for (const char* name : {"heightfield", "geometry"}) {
+    SCOPED_TRACE(name);
+    const Hierarchy a = readHierarchy(corpus / (std::string(name) + ".bin"));
+    const Hierarchy b = readHierarchy(corpus / (std::string(name) + "_v2.bin"));
+    ASSERT_EQ(a.chartCount(), b.chartCount());
+    ASSERT_GT(a.chartCount(), 0u);
+    for (uint32_t c = 0; c < a.chartCount(); ++c) {
+      ASSERT_EQ(a.charts[c].errors.size(), b.charts[c].errors.size());
+      EXPECT_EQ(std::memcmp(a.charts[c].errors.data(), b.charts[c].errors.data(), a.charts[c].errors.size() * 4), 0);
+      EXPECT_EQ(a.charts[c].bounds, b.charts[c].bounds);
+      EXPECT_EQ(a.charts[c].flags, b.charts[c].flags);
+      for (uint32_t e = 0; e < 4; ++e) EXPECT_EQ(a.roots[c][e].chart, b.roots[c][e].chart);
+    }
+  }
+}
+
 TEST(Hierarchy, InvalidParametersAreRejected) {
   HierarchyParams p;
   p.intervalsLog2 = 4;
