@@ -118,6 +118,7 @@ std::string flagFor(std::string_view name) {
       {"imageryExtent", "--imagery-extent"},  {"heightPrecision", "--height-precision"},
       {"compress", "--uncompressed"},         {"positionBits", "--position-bits"},
       {"positionTolerance", "--position-tolerance"}, {"normalTolerance", "--normal-tolerance"},
+      {"normals", "--normals"},
       {"imagery", "--imagery"},              {"quads", "--quads"},
       {"quadMap", "--quad-map"}};
   const auto it = kFlags.find(name);
@@ -381,6 +382,13 @@ int main(int argc, char** argv) {
                     "keeping whichever leaves fewer flipped texels)")
       ->check(CLI::IsMember({"auto", "sides", "kites"}))
       ->capture_default_str();
+  std::string normalsArg = "auto";
+  build->add_option("--normals", normalsArg,
+                    "Meshes: stored (every sample's normal is stored), derived (only block borders' normals are "
+                    "stored; readers derive the others from the positions), or auto (derived when the atlas holds at "
+                    "most 16 samples per input triangle)")
+      ->check(CLI::IsMember({"auto", "stored", "derived"}))
+      ->capture_default_str();
   std::string quadMapArg = "bilinear";
   build->add_option("--quad-map", quadMapArg,
                     "Meshes: how a quad chart's square maps into its patch's parameterization: bilinear (of the "
@@ -569,6 +577,9 @@ int main(int argc, char** argv) {
         mesh.quadMap = quadMapArg == "stretch"   ? MeshQuadMap::kStretch
                        : quadMapArg == "folding" ? MeshQuadMap::kFolding
                                                  : MeshQuadMap::kBilinear;
+        mesh.normals = normalsArg == "stored"    ? MeshNormals::kStored
+                       : normalsArg == "derived" ? MeshNormals::kDerived
+                                                 : MeshNormals::kAuto;
         mesh.quads = quadsArg == "sides" ? MeshQuads::kSides : quadsArg == "kites" ? MeshQuads::kKites : MeshQuads::kAuto;
         mesh.maxSampleError = sampleErrorPercent < 0.0 && build->get_option("--sample-error")->count() == 0
                                   ? kAutoSampleError

@@ -89,6 +89,7 @@ constexpr size_t kCodedEntryBytes = 12;  // version 3, per channel: u64 offset, 
 constexpr size_t kChartHeaderBytesV3 = kChartHeaderBytesV2 + 4;  // + u32 flags
 constexpr size_t kFrameBytes = 4 * 8 + 2 * 8;                    // HeightFieldFrame
 constexpr uint32_t kFlagDerivedNormals = 1;
+constexpr uint32_t kFlagBorderNormals = 2;  // geometry: normals of block borders stored, the rest derived
 constexpr size_t kChannelBytes[kChannelCount] = {sizeof(float), sizeof(PackedNormal), 3 * sizeof(float),
                                                  sizeof(PackedColour)};
 constexpr bool kChannelIsFloat[kChannelCount] = {true, false, true, false};
@@ -587,6 +588,8 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
   // Compressed height fields with their ring heights derive their normals on reading.
   const bool derived = coding.compressed && heightField && pyramid.frame && pyramid.ringHeights.size() == levels;
   const uint32_t stored = derived ? mask & ~(1u << kChannelNormals) : mask;
+  // Compressed geometry charts may store their normals on block borders only (deriveGeometryNormals).
+  const bool borderNormals = coding.compressed && geometry && coding.deriveGeometryNormals;
   const size_t header = coding.compressed ? kChartHeaderBytesV3 + (derived ? kFrameBytes : 0)
                         : v1              ? kChartHeaderBytes
                                           : kChartHeaderBytesV2;
@@ -628,7 +631,7 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
     putLe<uint32_t>(buf, 12, blockIntervals);
     putLe<uint32_t>(buf, 16, levels);
     putLe<uint32_t>(buf, 20, mask);
-    putLe<uint32_t>(buf, 24, derived ? kFlagDerivedNormals : 0);
+    putLe<uint32_t>(buf, 24, derived ? kFlagDerivedNormals : borderNormals ? kFlagBorderNormals : 0);
     if (derived) {
       const HeightFieldFrame& f = *pyramid.frame;
       putLe<int64_t>(buf, 28, f.originX);
@@ -673,7 +676,9 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
                                        coding.positionStep);
                 break;
               case kChannelNormals:
-                code = encodeNormals({reinterpret_cast<const PackedNormal*>(samples.data()), count}, bs);
+                code = borderNormals
+                           ? encodeBorderNormals({reinterpret_cast<const PackedNormal*>(samples.data()), count}, bs)
+                           : encodeNormals({reinterpret_cast<const PackedNormal*>(samples.data()), count}, bs);
                 break;
               default:
                 code = encodeColours({reinterpret_cast<const PackedColour*>(samples.data()), count}, bs);
@@ -773,7 +778,12 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
       fail("truncated chart file (no flags)");
     const uint32_t flags = getLe<uint32_t>(fl);
     header = kChartHeaderBytesV3;
-    if (flags & ~kFlagDerivedNormals) fail("corrupt chart header (flags " + std::to_string(flags) + ")");
+    if ((flags & ~(kFlagDerivedNormals | kFlagBorderNormals)) || flags == (kFlagDerivedNormals | kFlagBorderNormals))
+      fail("corrupt chart header (flags " + std::to_string(flags) + ")");
+    if (flags & kFlagBorderNormals) {
+      if (!(channelMask_ & (1u << kChannelPositions))) fail("corrupt chart header (border normals without positions)");
+      borderNormals_ = true;
+    }
     if (flags & kFlagDerivedNormals) {
       if (channelMask_ != kHeightFieldMask) fail("corrupt chart header (derived normals without heights)");
       uint8_t fr[kFrameBytes];
@@ -915,6 +925,14 @@ const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_
   thread_local Decoded last;
   if (last.serial == serial_ && last.channel == c && last.level == level && last.bx == bx && last.by == by)
     return last.samples;
+  // Border normals: the block's positions first (the thread's last block when a page's positions
+  // were just read), kept while the border decodes into the same buffer.
+  thread_local std::vector<float> positions;
+  if (borderNormals_ && c == kChannelNormals) {
+    const std::vector<uint8_t>& p = decodeBlock(kChannelPositions, level, bx, by);
+    positions.resize(p.size() / sizeof(float));
+    std::memcpy(positions.data(), p.data(), p.size());
+  }
   last.serial = 0;
   const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
   const uint32_t side = l.blockSamples + (frame_ && c == kChannelHeights ? 2 : 0);
@@ -935,13 +953,18 @@ const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_
     switch (c) {
       case kChannelHeights: decodeHeights(code, side, {static_cast<float*>(out), count}); break;
       case kChannelPositions: decodePositions(code, side, {static_cast<float*>(out), 3 * count}); break;
-      case kChannelNormals: decodeNormals(code, side, {static_cast<PackedNormal*>(out), count}); break;
+      case kChannelNormals:
+        if (borderNormals_) decodeBorderNormals(code, side, {static_cast<PackedNormal*>(out), count});
+        else decodeNormals(code, side, {static_cast<PackedNormal*>(out), count});
+        break;
       default: decodeColours(code, side, {static_cast<PackedColour*>(out), count}); break;
     }
   } catch (const CodecError& err) {
     throw InputError(quoted(path_) + ": level " + std::to_string(level) + " block (" + std::to_string(bx) + ", " +
                      std::to_string(by) + ") " + channelName(c) + ": " + err.what());
   }
+  if (borderNormals_ && c == kChannelNormals)
+    deriveGeometryNormals(positions.data(), side, static_cast<PackedNormal*>(out));
   last.serial = serial_;
   last.channel = c;
   last.level = level;

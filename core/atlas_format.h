@@ -250,6 +250,9 @@ struct ChartCoding {
   // these tolerances before they are coded (core/block_codec.h settlePositions, settleNormals).
   double positionTolerance = 0.0;  // same units as positionStep
   uint32_t normalTolerance = 0;    // packed normal steps
+  // Geometry charts, compressed: store the normals of block borders only and derive the others
+  // from the decoded positions on reading (deriveGeometryNormals; flag 2 of version 3).
+  bool deriveGeometryNormals = false;
 };
 
 // Writes a chart file. A height-field pyramid (heights + normals) is written uncompressed in
@@ -266,7 +269,9 @@ struct ChartCoding {
 // Version 3 (coding.compressed): the version 2 header with version 3, then u32 flags; with flag 1
 // (a height-field pyramid with ringHeights and frame) the normals are derived, not stored: the
 // header adds the frame (i64 originX, originY, maxX, maxY, f64 spacing x, y), and each heights
-// block holds its (blockSamples + 2)^2 heights with the ring. Each directory entry holds, per
+// block holds its (blockSamples + 2)^2 heights with the ring; with flag 2 (a geometry pyramid,
+// coding.deriveGeometryNormals) each normals block holds its border's normals only
+// (encodeBorderNormals) and the reader derives the others from the block's positions. Each directory entry holds, per
 // stored channel, u64 offset and u32 byte count of the block's code.
 // Built in memory and written atomically. Returns bytes written. Throws std::invalid_argument on a
 // malformed pyramid or one the coding cannot take, InputError if the file cannot be written.
@@ -295,7 +300,7 @@ class ChartFileReader {
   uint32_t channelMask() const { return channelMask_; }  // bits 1 << ChartChannel
   bool hasChannel(ChartChannel c) const { return (channelMask_ >> c) & 1u; }
   bool compressed() const { return compressed_; }  // version 3: blocks decoded on read
-  bool derivedNormals() const { return frame_.has_value(); }  // from the decoded heights
+  bool derivedNormals() const { return frame_.has_value() || borderNormals_; }  // from heights or positions
   const std::filesystem::path& path() const { return path_; }
 
  private:
@@ -318,6 +323,7 @@ class ChartFileReader {
   uint32_t channelMask_ = 0;
   bool compressed_ = false;
   std::optional<HeightFieldFrame> frame_;  // normals derived from the heights (version 3)
+  bool borderNormals_ = false;             // geometry: normals stored on block borders, the rest derived
   uint64_t serial_ = 0;                    // tells this reader's decoded blocks from another's
   // Version 3: the whole block (bx, by) of stored channel c, decoded (side^2 elements, side the
   // block's samples, plus 2 for ring heights); the thread's buffer, valid until its next call.

@@ -16,6 +16,7 @@ constexpr char kPositionMagic[4] = {'G', 'P', 'B', '1'};
 constexpr char kNormalMagic[4] = {'G', 'N', 'B', '1'};
 constexpr char kColourMagic[4] = {'G', 'C', 'B', '1'};
 constexpr char kBytesMagic[4] = {'G', 'Z', 'B', '1'};
+constexpr char kBorderNormalMagic[4] = {'G', 'N', 'R', '1'};
 constexpr size_t kMagicBytes = 4;
 constexpr size_t kIntHeaderBytes = 16;  // inside the frame: quantization, planes, channels, side, step
 constexpr size_t kByteHeaderBytes = 8;  // inside the frame: kind, channels, side
@@ -430,6 +431,86 @@ std::vector<uint8_t> encodeNormals(std::span<const Byte4> normals, uint32_t side
 
 void decodeNormals(std::span<const uint8_t> block, uint32_t side, std::span<Byte4> out) {
   decodeBytes(block, kNormalMagic, "normal", kKindNormals, side, 3, out);
+}
+
+namespace {
+
+// The index of the k-th border sample in ring order (see encodeBorderNormals).
+size_t borderSample(uint32_t side, uint32_t k) {
+  const uint32_t m = side - 1;
+  if (k < m) return k;                                                  // first row, left to right
+  if (k < 2 * m) return size_t(k - m) * side + m;                       // last column, upwards
+  if (k < 3 * m) return size_t(m) * side + (m - (k - 2 * m));           // last row, right to left
+  return size_t(m - (k - 3 * m)) * side;                                // first column, downwards
+}
+
+}  // namespace
+
+std::vector<uint8_t> encodeBorderNormals(std::span<const Byte4> normals, uint32_t side) {
+  if (side < 2 || normals.size() != size_t(side) * side)
+    throw std::invalid_argument("encodeBorderNormals: expected side^2 normals, side >= 2");
+  const uint32_t ring = 4 * (side - 1);
+  std::vector<uint8_t> raw(kByteHeaderBytes + 3 * size_t(ring));
+  raw[0] = kKindNormals;
+  raw[1] = 3;
+  std::memcpy(raw.data() + 4, &side, 4);
+  Byte4 prev{128, 128, 128, 255};
+  for (uint32_t k = 0; k < ring; ++k) {
+    const Byte4& nrm = normals[borderSample(side, k)];
+    if (nrm[3] != 255) throw std::invalid_argument("encodeBorderNormals: a packed normal's fourth byte is not 255");
+    for (uint32_t c = 0; c < 3; ++c) raw[kByteHeaderBytes + size_t(c) * ring + k] = zigzag8(uint8_t(nrm[c] - prev[c]));
+    prev = nrm;
+  }
+  return frame(kBorderNormalMagic, raw);
+}
+
+void decodeBorderNormals(std::span<const uint8_t> block, uint32_t side, std::span<Byte4> out) {
+  if (side < 2 || out.size() != size_t(side) * side)
+    throw std::invalid_argument("decodeBorderNormals: expected side^2 normals, side >= 2");
+  const uint32_t ring = 4 * (side - 1);
+  const size_t expected = kByteHeaderBytes + 3 * size_t(ring);
+  const std::vector<uint8_t>& raw = unframe(block, kBorderNormalMagic, "border normal", kByteHeaderBytes, expected);
+  uint32_t blockSide = 0;
+  std::memcpy(&blockSide, raw.data() + 4, 4);
+  if (raw[0] != kKindNormals || raw[1] != 3) throw CodecError("corrupt border normal block (header)");
+  if (blockSide != side || raw.size() != expected)
+    throw CodecError("border normal block of side " + std::to_string(blockSide) + ", expected " + std::to_string(side));
+  Byte4 prev{128, 128, 128, 255};
+  for (uint32_t k = 0; k < ring; ++k) {
+    Byte4& nrm = out[borderSample(side, k)];
+    for (uint32_t c = 0; c < 3; ++c) nrm[c] = uint8_t(prev[c] + unzigzag8(raw[kByteHeaderBytes + size_t(c) * ring + k]));
+    nrm[3] = 255;
+    prev = nrm;
+  }
+}
+
+void deriveGeometryNormals(const float* xyz, uint32_t side, Byte4* out) {
+  auto at = [&](uint32_t u, uint32_t v, int c) { return double(xyz[3 * (size_t(v) * side + u) + c]); };
+  auto diff = [&](uint32_t u1, uint32_t v1, uint32_t u0, uint32_t v0, double* d) {
+    for (int c = 0; c < 3; ++c) d[c] = at(u1, v1, c) - at(u0, v0, c);
+  };
+  for (uint32_t v = 1; v + 1 < side; ++v)
+    for (uint32_t u = 1; u + 1 < side; ++u) {
+      // Central differences first, then the four one-sided pairs.
+      const uint32_t pairs[5][8] = {{u + 1, v, u - 1, v, u, v + 1, u, v - 1}, {u + 1, v, u, v, u, v + 1, u, v},
+                                    {u, v, u - 1, v, u, v + 1, u, v},         {u, v, u - 1, v, u, v, u, v - 1},
+                                    {u + 1, v, u, v, u, v, u, v - 1}};
+      double n[3] = {0.0, 0.0, 1.0};
+      for (const auto& p : pairs) {
+        double a[3], b[3];
+        diff(p[0], p[1], p[2], p[3], a);
+        diff(p[4], p[5], p[6], p[7], b);
+        const double c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+        const double l = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+        if (l > 0.0 && std::isfinite(l)) {
+          for (int k = 0; k < 3; ++k) n[k] = c[k] / l;
+          break;
+        }
+      }
+      Byte4& o = out[size_t(v) * side + u];
+      for (int k = 0; k < 3; ++k) o[k] = uint8_t(std::lround((std::clamp(n[k], -1.0, 1.0) + 1.0) * 127.5));
+      o[3] = 255;
+    }
 }
 
 std::vector<uint8_t> encodeColours(std::span<const Byte4> colours, uint32_t side) {

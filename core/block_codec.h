@@ -89,6 +89,21 @@ void decodeNormals(std::span<const uint8_t> block, uint32_t side, std::span<std:
 // encodeNormals predicts from them when that is within the tolerance. tolerance 0 changes nothing.
 void settleNormals(std::span<std::array<uint8_t, 4>> normals, uint32_t side, uint32_t tolerance);
 
+// Geometry images whose normals are derived from their positions store only the normals of a
+// block's border (4 (side - 1) samples, which the neighbouring block shares), coded losslessly
+// in ring order: the first row left to right, the last column upwards, the last row right to
+// left, the first column downwards. side >= 2. encodeBorderNormals reads the border of side^2
+// packed normals; decodeBorderNormals writes it and leaves the other samples as they are.
+std::vector<uint8_t> encodeBorderNormals(std::span<const std::array<uint8_t, 4>> normals, uint32_t side);
+void decodeBorderNormals(std::span<const uint8_t> block, uint32_t side, std::span<std::array<uint8_t, 4>> out);
+
+// The normals of a geometry image's samples off its border, from its positions (x, y, z
+// interleaved, side^2, row-major): the cross product of the central differences along u and
+// along v (the orientation of the image's counter-clockwise triangles), packed; where that
+// vanishes, of one-sided differences; (0, 0, 1) where every one does. The border samples of out
+// are left as they are.
+void deriveGeometryNormals(const float* xyz, uint32_t side, std::array<uint8_t, 4>* out);
+
 // Encodes side^2 RGBA8 colours losslessly.
 std::vector<uint8_t> encodeColours(std::span<const std::array<uint8_t, 4>> colours, uint32_t side);
 void decodeColours(std::span<const uint8_t> block, uint32_t side, std::span<std::array<uint8_t, 4>> out);

@@ -82,6 +82,13 @@ inline constexpr double kAutoSampleError = -1.0;
 inline constexpr double kDefaultSampleError = 0.0005;
 
 enum class MeshQuads : uint8_t { kAuto, kSides, kKites };
+// Where a compressed mesh atlas's normals come from: stored with every sample, or derived from the
+// positions on reading (core/block_codec.h deriveGeometryNormals; block borders stored); auto:
+// derived where the atlas holds at most kDerivedNormalsSamplesPerTriangle samples per input
+// triangle. Sampled more densely, the derived normals show the input's flat triangles, which the
+// resampled (interpolated vertex) normals smooth over.
+enum class MeshNormals : uint8_t { kAuto, kStored, kDerived };
+inline constexpr double kDerivedNormalsSamplesPerTriangle = 16.0;
 // How a quad chart's square maps into its patch's parameterization (atlas/mesh/resample.h QuadMap).
 enum class MeshQuadMap : uint8_t { kBilinear, kStretch, kFolding };
 
@@ -124,6 +131,7 @@ struct MeshBuildOptions : CommonBuildOptions {
   // that makes their Lorenzo residuals 0 (kDefaultPositionTolerance).
   double positionTolerance = kDefaultPositionTolerance;
   uint32_t normalTolerance = kDefaultNormalTolerance;
+  MeshNormals normals = MeshNormals::kAuto;
   // How patches become quad charts (atlas/mesh/resample.h QuadLayout): kites (n charts an n-sided
   // patch), sides (about n/2; side counts made even first), or auto: sides, and kites too if sides
   // leave flipped texels, corners where only two charts meet or a sampling error over the bound,

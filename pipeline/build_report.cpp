@@ -219,6 +219,13 @@ nlohmann::json statsJson(const MeshBuildStats& s) {
   stats["hierarchy_samples_per_second"] = w.hierarchy.samplesPerSecond;
   stats["hierarchy_seconds"] = w.hierarchy.seconds;
   stats["hierarchy_threads"] = w.hierarchy.threads;
+  stats["normals"] = {{"derived", w.normalsDerived}, {"samples_per_triangle", w.samplesPerTriangle}};
+  if (w.normalsDerived)
+    stats["normals"]["degrees_from_resampled"] = {{"samples", w.normalAngles.samples},
+                                                  {"mean", w.normalAngles.mean},
+                                                  {"median", w.normalAngles.median},
+                                                  {"p99", w.normalAngles.p99},
+                                                  {"max", w.normalAngles.max}};
   stats["voids_filled"] = 0;
   stats["charting_seconds"] = ch.seconds;
   stats["bytes_on_disk"] = s.bytesOnDisk;

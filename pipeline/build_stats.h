@@ -12,6 +12,7 @@
 #include "atlas/fidelity/fidelity.h"
 #include "atlas/mesh/gridify.h"
 #include "atlas/mesh/layout_refine.h"
+#include "atlas/mesh/mesh_atlas.h"
 #include "atlas/mesh/mesh_io.h"
 #include "atlas/mesh/resample.h"
 #include "atlas/terrain/terrain_atlas.h"
@@ -125,6 +126,11 @@ struct MeshWriteStats {
   std::array<float, 6> bounds{};       // min x, y, z, max x, y, z over every sample
   uint64_t spilledBytes = 0;           // of the chart spill (atlas/resample.h ChartSpill)
   HierarchyStats hierarchy;
+  // Normals: stored, or derived from the positions on reading (block borders stored), with the
+  // angles between the derived normals and the resampled ones over the derived samples.
+  bool normalsDerived = false;
+  double samplesPerTriangle = 0.0;     // what the automatic choice went by
+  NormalAngles normalAngles;
 };
 
 // A whole mesh build (stats.json).

@@ -363,6 +363,7 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   const std::vector<std::string> bad = validateChartLayout(layout);
   if (!bad.empty()) throw InputError(options.input.string() + ": the chart layout is invalid: " + bad.front());
   finishStage(meter, "validate");
+  const uint64_t layoutTriangles = layout.triangles.size();
   // Shared sides straightened and side ears moved, for one quad layout. The sides layout makes a
   // 4-sided patch a single chart, so there no straightening may leave a patch a sliver of itself;
   // kites keep the straightening they were measured with.
@@ -430,6 +431,7 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   }
   r.stats.sidesStraightened = straightened;
   r.stats.sideEarsMended = ears;
+  r.triangles = layoutTriangles;
   layout = ChartLayout{};
   return r;
 }
@@ -448,12 +450,26 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
   const double diagonal = r.bounds.empty() ? 0.0 : glm::length(glm::dvec3(r.bounds.max) - glm::dvec3(r.bounds.min));
   coding.positionTolerance = o.positionTolerance * diagonal;
   coding.normalTolerance = o.normalTolerance;
+  const uint64_t triangles = std::max<uint64_t>(r.triangles, 1);
+  w.samplesPerTriangle = double(r.set.charts.size()) * r.set.chartSize * r.set.chartSize / double(triangles);
+  coding.deriveGeometryNormals =
+      o.compress && (o.normals == MeshNormals::kDerived ||
+                     (o.normals == MeshNormals::kAuto && w.samplesPerTriangle <= kDerivedNormalsSamplesPerTriangle));
   if (o.compress)
     spdlog::info("positions on a lattice of {:.4g} ({:.4g}% of the diagonal), settled within {:.4g}% of it; normals "
                  "within {} packed steps",
                  coding.positionStep, 100.0 * coding.positionStep / std::max(diagonal, 1e-300),
                  100.0 * o.positionTolerance, o.normalTolerance);
-  w.bounds = writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get(), coding).bounds;
+  {
+    const GeometryChartsWritten written = writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get(), coding);
+    w.bounds = written.bounds;
+    w.normalsDerived = coding.deriveGeometryNormals;
+    w.normalAngles = written.normalAngles;
+  }
+  if (w.normalsDerived)
+    spdlog::info("normals derived from the positions ({:.1f} samples per input triangle): {:.2f} degrees from the "
+                 "resampled ones at the median, {:.2f} at the 99th percentile, {:.1f} at most",
+                 w.samplesPerTriangle, w.normalAngles.median, w.normalAngles.p99, w.normalAngles.max);
   w.spilledBytes = r.spill->bytes();
   r.spill.reset();  // the file goes before the staging directory becomes the atlas
   r.set = GeometryImageSet{};

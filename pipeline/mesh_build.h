@@ -50,6 +50,7 @@ struct ResampledMesh {
   std::unique_ptr<ChartSpill> spill;  // where the charts' samples are, in dir
   MeshResampleStats stats;
   MeshBounds bounds;  // of the layout
+  uint64_t triangles = 0;  // of the layout
 };
 
 // Resample and repair: checks the layout, chooses the chart size if options.chartSize is 0

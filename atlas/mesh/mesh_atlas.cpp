@@ -6,12 +6,14 @@
 #include <algorithm>
 #include <bit>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <string>
 #include <unordered_map>
 
 #include <tbb/parallel_for.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_sort.h>
 
 namespace gimlod {
@@ -35,7 +37,7 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, con
     settled.resize(image.positions.size());
     std::memcpy(settled.data(), s.data(), s.size() * sizeof(float));
     positions = &settled;
-    settleNormals(normals, chartSize, coding.normalTolerance);
+    if (!coding.deriveGeometryNormals) settleNormals(normals, chartSize, coding.normalTolerance);
   }
   ChartPyramid p;
   for (uint32_t k = 0; (M >> k) >= 1; ++k) {
@@ -60,6 +62,52 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, con
   }
   return p;
 }
+
+namespace {
+
+constexpr double kAngleBin = 0.01;  // degrees
+constexpr size_t kAngleBins = size_t(180.0 / kAngleBin) + 1;
+
+// Adds to `bins` the angle, per sample off level 0's block borders, between the normal a reader
+// derives from the stored positions and the resampled normal.
+void addNormalAngles(const ChartPyramid& p, uint32_t chartSize, uint32_t blockIntervals, std::vector<uint64_t>& bins) {
+  const uint32_t side = chartSize;
+  std::vector<PackedNormal> derived(p.normals[0]);
+  deriveGeometryNormals(reinterpret_cast<const float*>(p.positions[0].data()), side, derived.data());
+  for (uint32_t v = 1; v + 1 < side; ++v)
+    for (uint32_t u = 1; u + 1 < side; ++u) {
+      if (u % blockIntervals == 0 || v % blockIntervals == 0) continue;  // stored on block borders
+      const size_t i = size_t(v) * side + u;
+      const auto a = unpackNormal(derived[i]), b = unpackNormal(p.normals[0][i]);
+      const double la = std::sqrt(double(a[0]) * a[0] + double(a[1]) * a[1] + double(a[2]) * a[2]);
+      const double lb = std::sqrt(double(b[0]) * b[0] + double(b[1]) * b[1] + double(b[2]) * b[2]);
+      const double c = la > 0 && lb > 0 ? (double(a[0]) * b[0] + double(a[1]) * b[1] + double(a[2]) * b[2]) / (la * lb) : 1.0;
+      const double deg = std::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
+      ++bins[std::min(kAngleBins - 1, size_t(deg / kAngleBin))];
+    }
+}
+
+NormalAngles summarize(const std::vector<uint64_t>& bins) {
+  NormalAngles a;
+  for (uint64_t b : bins) a.samples += b;
+  if (a.samples == 0) return a;
+  uint64_t seen = 0;
+  double sum = 0.0;
+  bool median = false, p99 = false;
+  for (size_t i = 0; i < bins.size(); ++i) {
+    if (!bins[i]) continue;
+    const double deg = (double(i) + 0.5) * kAngleBin;
+    seen += bins[i];
+    sum += deg * double(bins[i]);
+    if (!median && 2 * seen >= a.samples) a.median = deg, median = true;
+    if (!p99 && 100 * seen >= 99 * a.samples) a.p99 = deg, p99 = true;
+    a.max = deg;
+  }
+  a.mean = sum / double(a.samples);
+  return a;
+}
+
+}  // namespace
 
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs::path& dir,
                                           uint32_t blockIntervals, AtlasManifest& m, const ChartSpill* spill,
@@ -88,6 +136,9 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
   }
   std::vector<uint64_t> bytes(set.charts.size(), 0);
   std::vector<std::array<float, 6>> boxes(set.charts.size());
+  const bool measureNormals = coding.compressed && coding.deriveGeometryNormals;
+  tbb::enumerable_thread_specific<std::vector<uint64_t>> angleBins(
+      [&] { return std::vector<uint64_t>(measureNormals ? kAngleBins : 0, 0); });
   const progress::ProgressStage stage("write charts", set.charts.size());
   tbb::parallel_for(size_t(0), set.charts.size(), [&](size_t i) {
     GeometryImage back;  // a spilled chart's samples, read back for this chart only
@@ -114,6 +165,7 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     }
     boxes[i] = {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z};
     bytes[i] = writeChartFile(dir / name, pyramid, set.chartSize, blockIntervals, coding);
+    if (measureNormals) addNormalAngles(pyramid, set.chartSize, blockIntervals, angleBins.local());
     progress::advance();
   });
   GeometryChartsWritten w;
@@ -126,6 +178,12 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     }
   }
   m.heightRange = {w.bounds[2], w.bounds[5]};
+  if (measureNormals) {
+    std::vector<uint64_t> all(kAngleBins, 0);
+    for (const auto& b : angleBins)
+      for (size_t i = 0; i < kAngleBins; ++i) all[i] += b[i];
+    w.normalAngles = summarize(all);
+  }
   w.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return w;
 }

@@ -24,10 +24,18 @@ namespace gimlod {
 // within the tolerances), as a compressed chart file decodes them; the other levels subsample it.
 ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, const ChartCoding& coding = {});
 
+// The angles between the normals a reader derives (deriveGeometryNormals) and the resampled
+// ones, over the samples whose normals are derived (level 0, off block borders), in degrees.
+struct NormalAngles {
+  uint64_t samples = 0;
+  double mean = 0.0, median = 0.0, p99 = 0.0, max = 0.0;
+};
+
 struct GeometryChartsWritten {
   uint64_t bytes = 0;
   double seconds = 0.0;
   std::array<float, 6> bounds{};  // min x, y, z, max x, y, z over every sample
+  NormalAngles normalAngles;      // coding.deriveGeometryNormals only
 };
 
 // Writes set's charts to dir/charts/chart_NNNN.bin (atomically, in parallel) and fills m's
@@ -35,7 +43,8 @@ struct GeometryChartsWritten {
 // range (z of the bounds). blockIntervals: a power of two <= chartSize - 1. Charts whose samples
 // were spilled are read back from `spill`, one at a time per thread. Compressed coding settles
 // the samples first (geometryPyramid; the bounds are of the settled positions) and records the
-// lattice and the tolerances in m.compression.
+// lattice and the tolerances in m.compression; with coding.deriveGeometryNormals it stores the
+// normals of block borders only and measures the derived ones against the resampled ones.
 // Throws InputError when a file cannot be written, std::invalid_argument on an empty or
 // inconsistent set.
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const std::filesystem::path& dir,
