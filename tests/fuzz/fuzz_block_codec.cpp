@@ -1,5 +1,6 @@
 // libFuzzer harness for the block decoders: any bytes end in decoded samples or a CodecError, for
-// every block side the atlas uses and every kind of block (heights, positions, normals, colours).
+// every block side the atlas uses and every kind of block (heights, positions, normals, border
+// normals, colours).
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -27,6 +28,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     }
     try {
       gimlod::decodeColours(in, side, bytes);
+    } catch (const gimlod::CodecError&) {
+    }
+    try {
+      gimlod::decodeBorderNormals(in, side, bytes);
     } catch (const gimlod::CodecError&) {
     }
   }

@@ -246,5 +246,56 @@ TEST(ByteCodec, RoundTripsAndDetectsDamage) {
   EXPECT_THROW(decompressBytes(bad, raw.size()), CodecError);
 }
 
+// Border normals: the border back exactly, the rest untouched; damage detected.
+TEST(BorderNormals, RoundTripTheBorderAndDetectDamage) {
+  std::mt19937 rng(7);
+  for (const uint32_t side : {2u, 3u, kSide}) {
+    std::vector<PackedNormal> in(size_t(side) * side);
+    for (auto& n : in) n = {uint8_t(rng()), uint8_t(rng()), uint8_t(rng()), 255};
+    const std::vector<uint8_t> code = encodeBorderNormals(in, side);
+    std::vector<PackedNormal> out(in.size(), PackedNormal{1, 2, 3, 4});
+    decodeBorderNormals(code, side, out);
+    for (uint32_t v = 0; v < side; ++v)
+      for (uint32_t u = 0; u < side; ++u) {
+        const size_t i = size_t(v) * side + u;
+        if (u == 0 || v == 0 || u + 1 == side || v + 1 == side) {
+          EXPECT_EQ(out[i], in[i]) << side << ": " << u << "," << v;
+        } else {
+          EXPECT_EQ(out[i], (PackedNormal{1, 2, 3, 4}));
+        }
+      }
+    std::vector<PackedNormal> larger(size_t(side + 1) * (side + 1));
+    EXPECT_THROW(decodeBorderNormals(code, side + 1, larger), CodecError);  // another side
+    std::vector<uint8_t> bad = code;
+    bad[bad.size() - 1] ^= 0x10;
+    EXPECT_THROW(decodeBorderNormals(bad, side, out), CodecError);
+    EXPECT_THROW(decodeBorderNormals({code.data(), code.size() - 3}, side, out), CodecError);
+    EXPECT_THROW(decodeNormals(code, side, out), CodecError);  // another kind of block
+  }
+}
+
+// Derived normals of a sphere's grid (u eastwards, v northwards): outward, within a degree.
+TEST(BorderNormals, DerivedNormalsFollowTheSurface) {
+  std::vector<float> xyz(3 * size_t(kSide) * kSide);
+  for (uint32_t v = 0; v < kSide; ++v)
+    for (uint32_t u = 0; u < kSide; ++u) {
+      const double lon = 0.01 * u, lat = 0.01 * v - 0.3;
+      float* p = xyz.data() + 3 * (size_t(v) * kSide + u);
+      p[0] = float(std::cos(lat) * std::cos(lon));
+      p[1] = float(std::cos(lat) * std::sin(lon));
+      p[2] = float(std::sin(lat));
+    }
+  std::vector<PackedNormal> n(size_t(kSide) * kSide, PackedNormal{9, 9, 9, 9});
+  deriveGeometryNormals(xyz.data(), kSide, n.data());
+  EXPECT_EQ(n[0], (PackedNormal{9, 9, 9, 9}));  // the border is left alone
+  for (uint32_t v = 1; v + 1 < kSide; ++v)
+    for (uint32_t u = 1; u + 1 < kSide; ++u) {
+      const size_t i = size_t(v) * kSide + u;
+      const auto d = unpackNormal(n[i]);
+      const double c = d[0] * xyz[3 * i] + d[1] * xyz[3 * i + 1] + d[2] * xyz[3 * i + 2];
+      ASSERT_GT(c, std::cos(1.0 * 3.14159265358979 / 180.0) * 0.99) << u << "," << v;
+    }
+}
+
 }  // namespace
 }  // namespace gimlod

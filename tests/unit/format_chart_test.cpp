@@ -1,6 +1,7 @@
 // Tests for the chart file format (block layout, round trip, corrupt files) and atomic writes.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <atomic>
@@ -9,6 +10,7 @@
 #include <vector>
 
 #include "core/atlas_format.h"
+#include "core/block_codec.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -239,6 +241,101 @@ TEST(FormatChart, GeometryChannelsRoundTrip) {
   const fs::path bad = tmp.path() / "badmask.bin";
   std::ofstream(bad, std::ios::binary).write(b.data(), std::streamsize(b.size()));
   expectReaderError(bad, "channel mask");
+}
+
+// A geometry chart on a sphere, compressed with its normals stored on block borders only: the
+// reader gives the stored normals on every block's border (so blocks and charts meeting there
+// agree bit for bit) and, inside, the normals deriveGeometryNormals makes of the decoded
+// positions, within a degree of the sphere's own; a damaged border-normal block is an error
+// naming the file and the block.
+TEST(FormatChart, GeometryNormalsDerivedInsideBlocks) {
+  test::TempDir tmp("gimlod-chart");
+  const uint32_t cs = 65, bi = 16;
+  ChartPyramid p;
+  for (uint32_t k = 0; (64u >> k) >= 1; ++k) {
+    const uint32_t s = (64u >> k) + 1;
+    std::vector<glm::vec3> pos(size_t(s) * s);
+    std::vector<PackedNormal> nrm(pos.size());
+    for (uint32_t v = 0; v < s; ++v)
+      for (uint32_t u = 0; u < s; ++u) {
+        // A patch of the unit sphere, u eastwards and v northwards: outward normals.
+        const double lon = 0.8 * (double(u << k) / 64.0 - 0.5), lat = 0.8 * (double(v << k) / 64.0 - 0.5);
+        const glm::vec3 q(float(std::cos(lat) * std::cos(lon)), float(std::cos(lat) * std::sin(lon)), float(std::sin(lat)));
+        pos[size_t(v) * s + u] = q;
+        nrm[size_t(v) * s + u] = packNormal(q.x, q.y, q.z);
+      }
+    p.positions.push_back(std::move(pos));
+    p.normals.push_back(std::move(nrm));
+    if ((64u >> k) == 1) break;
+  }
+  ChartCoding coding;
+  coding.compressed = true;
+  coding.positionStep = std::exp2(-20.0);
+  coding.deriveGeometryNormals = true;
+  const fs::path f = tmp.path() / "derived.bin";
+  writeChartFile(f, p, cs, bi, coding);
+  coding.deriveGeometryNormals = false;
+  const fs::path g = tmp.path() / "stored.bin";
+  writeChartFile(g, p, cs, bi, coding);
+  EXPECT_LT(fs::file_size(f), fs::file_size(g));
+  const ChartFileReader r(f);
+  EXPECT_TRUE(r.derivedNormals());
+  EXPECT_FALSE(ChartFileReader(g).derivedNormals());
+  double worst = 0.0;
+  size_t derived = 0;
+  for (uint32_t k = 0; k < r.levels(); ++k) {
+    const LevelLayout l = levelLayout(cs, bi, k);
+    const uint32_t b = l.blockSamples - 1, s = l.samples;
+    const std::vector<glm::vec3> pos = r.readLevelPositions(k);
+    const std::vector<PackedNormal> nrm = r.readLevelNormals(k);
+    for (uint32_t by = 0; by < l.blocksPerSide; ++by)
+      for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx) {
+        // The block as the reader sees it, its normals derived anew from its positions.
+        std::vector<float> xyz(3 * size_t(l.blockSamples) * l.blockSamples);
+        std::vector<PackedNormal> mine(size_t(l.blockSamples) * l.blockSamples);
+        r.readPositions(k, bx * b, by * b, b, reinterpret_cast<glm::vec3*>(xyz.data()));
+        r.readNormals(k, bx * b, by * b, b, mine.data());
+        std::vector<PackedNormal> again = mine;
+        deriveGeometryNormals(xyz.data(), l.blockSamples, again.data());
+        EXPECT_EQ(again, mine) << "level " << k << " block " << bx << "," << by;
+        for (uint32_t v = 0; v <= b; ++v)
+          for (uint32_t u = 0; u <= b; ++u) {
+            const size_t i = size_t(by * b + v) * s + bx * b + u;
+            const bool border = u == 0 || v == 0 || u == b || v == b;
+            if (border) {
+              ASSERT_EQ(nrm[i], p.normals[k][i]) << "level " << k << " sample " << i;
+              continue;
+            }
+            const auto n = unpackNormal(nrm[i]);
+            const glm::vec3 q = pos[i];
+            const double c = (n[0] * q.x + n[1] * q.y + n[2] * q.z) /
+                             std::sqrt(double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2]);
+            worst = std::max(worst, std::acos(std::min(1.0, c)) * 180.0 / 3.14159265358979);
+            ++derived;
+          }
+      }
+  }
+  EXPECT_GT(derived, 2000u);
+  EXPECT_LT(worst, 1.0) << "degrees between a derived normal and the sphere's";
+  // A flipped byte in a border-normal block.
+  std::ifstream in(f, std::ios::binary);
+  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), {});
+  in.close();
+  bytes[bytes.size() - 10] = char(bytes[bytes.size() - 10] ^ 0x5a);
+  const fs::path bad = tmp.path() / "bad.bin";
+  std::ofstream(bad, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
+  const ChartFileReader rb(bad);
+  std::string message;
+  try {
+    for (uint32_t k = 0; k < rb.levels(); ++k) {
+      (void)rb.readLevelPositions(k);
+      (void)rb.readLevelNormals(k);
+    }
+  } catch (const InputError& e) {
+    message = e.what();
+  }
+  EXPECT_NE(message.find("bad.bin"), std::string::npos) << message;
+  EXPECT_NE(message.find("block"), std::string::npos) << message;
 }
 
 TEST(FormatChart, AtomicWriteFailsCleanly) {
