@@ -364,7 +364,13 @@ TEST_F(BadMesh, AbsurdOptions) {
   expectRejected(f, {"--sample-error"}, base + "--sample-error 50", "--sample-error");
   expectRejected(f, {"--charts", "whole number"}, base + "--charts many", "--charts");
   expectRejected(f, {"--charts", "whole number"}, base + "--charts -3", "--charts");
+  expectRejected(f, {"--position-bits"}, base + "--position-bits 23", "--position-bits");
+  expectRejected(f, {"--position-tolerance"}, base + "--position-tolerance -0.1", "--position-tolerance");
+  expectRejected(f, {"--position-tolerance"}, base + "--position-tolerance 5", "--position-tolerance");
+  expectRejected(f, {"--normal-tolerance"}, base + "--normal-tolerance 17", "--normal-tolerance");
+  expectRejected(f, {"--normals"}, base + "--normals maybe", "--normals");
   EXPECT_EQ(build(f, base + "--charts 8 --repair-rounds 0"), 0) << output_;  // in range: builds
+  EXPECT_EQ(build(f, base + "--charts 8 --position-tolerance 0 --normal-tolerance 0 --normals derived"), 0) << output_;
   EXPECT_EQ(build(f, base + "--charts auto --sample-error 0"), 0) << output_;
 
   // --charts 0 without --chart-error uses the default error target; --charts far above the
