@@ -485,32 +485,36 @@ void decodeBorderNormals(std::span<const uint8_t> block, uint32_t side, std::spa
 }
 
 void deriveGeometryNormals(const float* xyz, uint32_t side, Byte4* out) {
-  auto at = [&](uint32_t u, uint32_t v, int c) { return double(xyz[3 * (size_t(v) * side + u) + c]); };
-  auto diff = [&](uint32_t u1, uint32_t v1, uint32_t u0, uint32_t v0, double* d) {
-    for (int c = 0; c < 3; ++c) d[c] = at(u1, v1, c) - at(u0, v0, c);
+  const size_t row = 3 * size_t(side);
+  // The normal of the differences a (along u) and b (along v), packed; false where it vanishes.
+  auto pack = [](const float* a, const float* b, Byte4& o) {
+    const float c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+    const float l2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+    if (!(l2 > 0.f) || !std::isfinite(l2)) return false;
+    const float s = 127.5f / std::sqrt(l2);
+    for (int k = 0; k < 3; ++k) o[k] = uint8_t(std::clamp(c[k] * s + 127.5f, 0.f, 255.f) + 0.5f);
+    o[3] = 255;
+    return true;
   };
-  for (uint32_t v = 1; v + 1 < side; ++v)
+  for (uint32_t v = 1; v + 1 < side; ++v) {
+    const float* p = xyz + v * row;
     for (uint32_t u = 1; u + 1 < side; ++u) {
-      // Central differences first, then the four one-sided pairs.
-      const uint32_t pairs[5][8] = {{u + 1, v, u - 1, v, u, v + 1, u, v - 1}, {u + 1, v, u, v, u, v + 1, u, v},
-                                    {u, v, u - 1, v, u, v + 1, u, v},         {u, v, u - 1, v, u, v, u, v - 1},
-                                    {u + 1, v, u, v, u, v, u, v - 1}};
-      double n[3] = {0.0, 0.0, 1.0};
-      for (const auto& p : pairs) {
-        double a[3], b[3];
-        diff(p[0], p[1], p[2], p[3], a);
-        diff(p[4], p[5], p[6], p[7], b);
-        const double c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-        const double l = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-        if (l > 0.0 && std::isfinite(l)) {
-          for (int k = 0; k < 3; ++k) n[k] = c[k] / l;
-          break;
-        }
-      }
+      const float* q = p + 3 * size_t(u);
+      const float *l = q - 3, *r = q + 3, *d = q - row, *t = q + row;
+      float a[3], b[3];
+      for (int k = 0; k < 3; ++k) a[k] = r[k] - l[k], b[k] = t[k] - d[k];
       Byte4& o = out[size_t(v) * side + u];
-      for (int k = 0; k < 3; ++k) o[k] = uint8_t(std::lround((std::clamp(n[k], -1.0, 1.0) + 1.0) * 127.5));
-      o[3] = 255;
+      if (pack(a, b, o)) continue;
+      // One-sided differences where the central ones vanish.
+      const float* pairs[4][4] = {{r, q, t, q}, {q, l, t, q}, {q, l, q, d}, {r, q, q, d}};
+      bool done = false;
+      for (const auto& pr : pairs) {
+        for (int k = 0; k < 3; ++k) a[k] = pr[0][k] - pr[1][k], b[k] = pr[2][k] - pr[3][k];
+        if ((done = pack(a, b, o))) break;
+      }
+      if (!done) o = {128, 128, 255, 255};  // (0, 0, 1), as packNormal packs it
     }
+  }
 }
 
 std::vector<uint8_t> encodeColours(std::span<const Byte4> colours, uint32_t side) {
