@@ -273,6 +273,28 @@ void decodeBytes(std::span<const uint8_t> block, const char (&magic)[4], const c
 
 }  // namespace
 
+namespace {
+
+// Each coordinate of side^2 positions at its nearest lattice point, in steps; `what` names the
+// caller in the std::invalid_argument thrown for a wrong size, a bad step, a non-finite
+// coordinate or one beyond 2^23 steps.
+std::vector<int64_t> latticePoints(std::span<const float> xyz, uint32_t side, double step, const char* what) {
+  const size_t n = size_t(side) * side;
+  if (side == 0 || xyz.size() != 3 * n) throw std::invalid_argument(std::string(what) + ": expected 3 side^2 floats");
+  if (!(step > 0.0) || !std::isfinite(step)) throw std::invalid_argument(std::string(what) + ": step must be > 0");
+  std::vector<int64_t> q(3 * n);
+  for (size_t i = 0; i < 3 * n; ++i) {
+    if (!std::isfinite(xyz[i])) throw std::invalid_argument(std::string(what) + ": non-finite coordinate");
+    const double v = std::nearbyint(double(xyz[i]) / step);
+    if (std::abs(v) > double(kMaxSteps))
+      throw std::invalid_argument(std::string(what) + ": a coordinate lies beyond 2^23 steps of the lattice");
+    q[i] = int64_t(v);
+  }
+  return q;
+}
+
+}  // namespace
+
 float quantizeToStep(float v, double step) { return float(std::nearbyint(double(v) / step) * step); }
 
 std::vector<uint8_t> encodeHeights(std::span<const float> heights, uint32_t side, double precision) {
@@ -322,17 +344,8 @@ void decodeHeights(std::span<const uint8_t> block, uint32_t side, std::span<floa
 }
 
 std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step) {
-  const size_t n = size_t(side) * side;
-  if (side == 0 || xyz.size() != 3 * n) throw std::invalid_argument("encodePositions: expected 3 side^2 floats");
-  if (!(step > 0.0) || !std::isfinite(step)) throw std::invalid_argument("encodePositions: step must be > 0");
-  std::vector<int32_t> q(3 * n);
-  for (size_t i = 0; i < 3 * n; ++i) {
-    if (!std::isfinite(xyz[i])) throw std::invalid_argument("encodePositions: non-finite coordinate");
-    const double v = std::nearbyint(double(xyz[i]) / step);
-    if (std::abs(v) > double(kMaxSteps))
-      throw std::invalid_argument("encodePositions: a coordinate lies beyond 2^23 steps of the lattice");
-    q[i] = int32_t(v);
-  }
+  const std::vector<int64_t> points = latticePoints(xyz, side, step, "encodePositions");
+  const std::vector<int32_t> q(points.begin(), points.end());
   return encodeInts(kPositionMagic, q, side, 3, HeightQuantization::kPrecision, step);
 }
 
@@ -341,19 +354,10 @@ void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<fl
 }
 
 std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, double step, double tolerance) {
-  const size_t n = size_t(side) * side;
-  if (side == 0 || xyz.size() != 3 * n) throw std::invalid_argument("settlePositions: expected 3 side^2 floats");
-  if (!(step > 0.0) || !std::isfinite(step)) throw std::invalid_argument("settlePositions: step must be > 0");
   if (!(tolerance >= 0.0) || !std::isfinite(tolerance))
     throw std::invalid_argument("settlePositions: the tolerance must be finite and >= 0");
-  std::vector<int64_t> q(3 * n);
-  for (size_t i = 0; i < 3 * n; ++i) {
-    if (!std::isfinite(xyz[i])) throw std::invalid_argument("settlePositions: non-finite coordinate");
-    const double v = std::nearbyint(double(xyz[i]) / step);
-    if (std::abs(v) > double(kMaxSteps))
-      throw std::invalid_argument("settlePositions: a coordinate lies beyond 2^23 steps of the lattice");
-    q[i] = int64_t(v);
-  }
+  const size_t n = size_t(side) * side;
+  std::vector<int64_t> q = latticePoints(xyz, side, step, "settlePositions");
   auto distance = [&](size_t a, size_t b) {
     const double dx = double(xyz[3 * a]) - xyz[3 * b], dy = double(xyz[3 * a + 1]) - xyz[3 * b + 1],
                  dz = double(xyz[3 * a + 2]) - xyz[3 * b + 2];

@@ -2,16 +2,17 @@
 """Mesh atlas bytes per input triangle against the Hausdorff distance (python3 only).
 
 Usage: python3 scripts/mesh_bytes_curve.py [--gimlod BIN] [--sizes 33,65,129,auto]
-                                           [--bits 18,22] [--tolerances 0.005/1,0/0]
+                                           [--bits 18,22] [--tolerances 0.005/1,0/0/stored]
                                            [--work DIR] MESH [MESH ...]
 
 Builds each MESH with `gimlod build MESH -o ATLAS` once per chart size (`--chart-size N`; `auto`
 is the default chart size, chosen by density and doubled to the sampling bound), per position
-lattice (`--position-bits B`) and per settling tolerance P/N (`--position-tolerance P`, in % of
-the diagonal, `--normal-tolerance N`; 0/0 stores the nearest lattice points and the normals as
-sampled), the other options at their defaults (normals derived where the atlas holds at most 16
-samples per triangle; the table gives the derived normals' median and 99th-percentile angle from
-the resampled ones), one build after another.
+lattice (`--position-bits B`) and per settling tolerance P/N[/NORMALS] (`--position-tolerance P`,
+in % of the diagonal, `--normal-tolerance N`, and `--normals NORMALS` if given: auto, stored or
+derived; 0/0/stored stores the nearest lattice points and every sampled normal), the other options
+at their defaults (normals derived where the atlas holds at most 16 samples per triangle; the
+table gives the derived normals' median and 99th-percentile angle from the resampled ones), one
+build after another.
 Prints one Markdown table: per build, charts, samples, bytes on disk per input triangle (the whole
 atlas: charts, hierarchy, manifest), flipped texels and the two-sided Hausdorff distance in % of
 the bounding-box diagonal, from each atlas's stats.json. The atlases go to a temporary directory
@@ -30,7 +31,7 @@ def build(gimlod, mesh, size, bits, tolerance, work):
     out = os.path.join(work, "curve.atlas")
     shutil.rmtree(out, ignore_errors=True)
     cmd = [gimlod, "build", mesh, "-o", out, "--position-bits", str(bits),
-           "--position-tolerance", tolerance[0], "--normal-tolerance", tolerance[1]]
+           "--position-tolerance", tolerance[0], "--normal-tolerance", tolerance[1], "--normals", tolerance[2]]
     if size != "auto":
         cmd += ["--chart-size", str(size)]
     r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -48,7 +49,7 @@ def main():
     ap.add_argument("--gimlod", default=os.path.join(os.path.dirname(__file__), "..", "build", "gimlod"))
     ap.add_argument("--sizes", default="33,65,129,auto")
     ap.add_argument("--bits", default="18,22")
-    ap.add_argument("--tolerances", default="0.005/1,0/0")
+    ap.add_argument("--tolerances", default="0.005/1,0/0/stored")
     ap.add_argument("--work", default=None)
     a = ap.parse_args()
     sizes = [s.strip() for s in a.sizes.split(",") if s.strip()]
@@ -59,13 +60,15 @@ def main():
     tolerances = []
     for t in a.tolerances.split(","):
         parts = t.strip().split("/")
-        if len(parts) != 2:
-            sys.exit(f"--tolerances: {t!r} is not POSITION/NORMAL")
+        if len(parts) == 2:
+            parts.append("auto")
+        if len(parts) != 3 or parts[2] not in ("auto", "stored", "derived"):
+            sys.exit(f"--tolerances: {t!r} is not POSITION/NORMAL[/auto|stored|derived]")
         try:
             float(parts[0]), int(parts[1])
         except ValueError:
             sys.exit(f"--tolerances: {t!r} is not a number of % and a whole number of packed steps")
-        tolerances.append((parts[0], parts[1]))
+        tolerances.append(tuple(parts))
     work = a.work or tempfile.mkdtemp(prefix="gimlod-bytes-curve-")
     os.makedirs(work, exist_ok=True)
     print("| mesh | triangles | chart size | position bits | tolerance (% / steps) | normals | charts | samples "
