@@ -98,10 +98,11 @@ std::vector<uint8_t> encodeBorderNormals(std::span<const std::array<uint8_t, 4>>
 void decodeBorderNormals(std::span<const uint8_t> block, uint32_t side, std::span<std::array<uint8_t, 4>> out);
 
 // The normals of a geometry image's samples off its border, from its positions (x, y, z
-// interleaved, side^2, row-major): the cross product of the central differences along u and
-// along v (the orientation of the image's counter-clockwise triangles), packed; where that
-// vanishes, of one-sided differences; (0, 0, 1) where every one does. The border samples of out
-// are left as they are.
+// interleaved, side^2, row-major): the cross product of the differences along u and along v (the
+// orientation of the image's counter-clockwise triangles), packed. The differences are the
+// central ones over 2 and over 4 intervals summed where the image holds them (2 samples or more
+// from its border), else over 2; where the cross product vanishes, of one-sided differences;
+// (0, 0, 1) where every one does. The border samples of out are left as they are.
 void deriveGeometryNormals(const float* xyz, uint32_t side, std::array<uint8_t, 4>* out);
 
 // Encodes side^2 RGBA8 colours losslessly.
