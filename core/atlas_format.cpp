@@ -220,6 +220,48 @@ std::array<float, 3> unpackNormal(const PackedNormal& n) {
   return {n[0] / 127.5f - 1.f, n[1] / 127.5f - 1.f, n[2] / 127.5f - 1.f};
 }
 
+void geometryImageNormals(const float* xyz, uint32_t side, PackedNormal* out) {
+  const size_t row = 3 * size_t(side);
+  // The normal of the differences a (along u) and b (along v), packed; false where it vanishes.
+  // note: single precision and a truncating quantizer, as heightFieldNormals: this runs on the
+  // loader thread for every page of such an atlas.
+  auto pack = [](const float* a, const float* b, PackedNormal& o) {
+    const float c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+    const float l2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+    if (!(l2 > 0.f) || !std::isfinite(l2)) return false;
+    const float s = 127.5f / std::sqrt(l2);
+    for (int k = 0; k < 3; ++k) o[k] = uint8_t(std::clamp(c[k] * s + 127.5f, 0.f, 255.f) + 0.5f);
+    o[3] = 255;
+    return true;
+  };
+  for (uint32_t v = 1; v + 1 < side; ++v) {
+    const float* p = xyz + v * row;
+    for (uint32_t u = 1; u + 1 < side; ++u) {
+      const float* q = p + 3 * size_t(u);
+      const float *l = q - 3, *r = q + 3, *d = q - row, *t = q + row;
+      float a[3], b[3];
+      PackedNormal& o = out[size_t(v) * side + u];
+      // Differences over 2 and 4 intervals summed, where the block holds them: smoother than over
+      // 2 alone where the input's triangles span a few samples.
+      if (u >= 2 && v >= 2 && u + 2 < side && v + 2 < side) {
+        const float *l2 = q - 6, *r2 = q + 6, *d2 = q - 2 * row, *t2 = q + 2 * row;
+        for (int k = 0; k < 3; ++k) a[k] = r[k] - l[k] + r2[k] - l2[k], b[k] = t[k] - d[k] + t2[k] - d2[k];
+        if (pack(a, b, o)) continue;
+      }
+      for (int k = 0; k < 3; ++k) a[k] = r[k] - l[k], b[k] = t[k] - d[k];
+      if (pack(a, b, o)) continue;
+      // One-sided differences where the central ones vanish.
+      const float* pairs[4][4] = {{r, q, t, q}, {q, l, t, q}, {q, l, q, d}, {r, q, q, d}};
+      bool done = false;
+      for (const auto& pr : pairs) {
+        for (int k = 0; k < 3; ++k) a[k] = pr[0][k] - pr[1][k], b[k] = pr[2][k] - pr[3][k];
+        if ((done = pack(a, b, o))) break;
+      }
+      if (!done) o = {128, 128, 255, 255};  // (0, 0, 1), as packNormal packs it
+    }
+  }
+}
+
 void heightFieldNormals(const float* heights, size_t stride, uint32_t u0, uint32_t v0, uint32_t w, uint32_t h,
                         uint32_t level, const HeightFieldFrame& f, PackedNormal* out) {
   // note: single precision, one reciprocal per row and column, and a truncating quantizer: this
@@ -588,7 +630,7 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
   // Compressed height fields with their ring heights derive their normals on reading.
   const bool derived = coding.compressed && heightField && pyramid.frame && pyramid.ringHeights.size() == levels;
   const uint32_t stored = derived ? mask & ~(1u << kChannelNormals) : mask;
-  // Compressed geometry charts may store their normals on block borders only (deriveGeometryNormals).
+  // Compressed geometry charts may store their normals on block borders only (geometryImageNormals).
   const bool borderNormals = coding.compressed && geometry && coding.deriveGeometryNormals;
   const size_t header = coding.compressed ? kChartHeaderBytesV3 + (derived ? kFrameBytes : 0)
                         : v1              ? kChartHeaderBytes
@@ -964,7 +1006,7 @@ const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_
                      std::to_string(by) + ") " + channelName(c) + ": " + err.what());
   }
   if (borderNormals_ && c == kChannelNormals)
-    deriveGeometryNormals(positions.data(), side, static_cast<PackedNormal*>(out));
+    geometryImageNormals(positions.data(), side, static_cast<PackedNormal*>(out));
   last.serial = serial_;
   last.channel = c;
   last.level = level;

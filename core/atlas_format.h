@@ -215,6 +215,14 @@ struct HeightFieldFrame {
   std::array<double, 2> spacing{1.0, 1.0};  // metres between samples
 };
 
+// The normals of a geometry image's samples off its border, from its positions (x, y, z
+// interleaved, side^2, row-major): the cross product of the differences along u and along v (the
+// orientation of the image's counter-clockwise triangles), packed. The differences are the
+// central ones over 2 and over 4 intervals summed where the image holds them (2 samples or more
+// from its border), else over 2; where the cross product vanishes, of one-sided differences;
+// (0, 0, 1) where every one does. The border samples of out are left as they are.
+void geometryImageNormals(const float* xyz, uint32_t side, PackedNormal* out);
+
 // The normals of the window [u0, u0 + w) x [v0, v0 + h) of pyramid level `level` of the chart at
 // `frame`, from its heights with a one-sample ring: heights[0] is the height of (u0, v0), rows are
 // `stride` floats apart, and the ring lies at -1 and at w (h). out: w * h row-major.
@@ -251,7 +259,7 @@ struct ChartCoding {
   double positionTolerance = 0.0;  // same units as positionStep
   uint32_t normalTolerance = 0;    // packed normal steps
   // Geometry charts, compressed: store the normals of block borders only and derive the others
-  // from the decoded positions on reading (deriveGeometryNormals; flag 2 of version 3).
+  // from the decoded positions on reading (geometryImageNormals; flag 2 of version 3).
   bool deriveGeometryNormals = false;
 };
 
@@ -271,8 +279,9 @@ struct ChartCoding {
 // header adds the frame (i64 originX, originY, maxX, maxY, f64 spacing x, y), and each heights
 // block holds its (blockSamples + 2)^2 heights with the ring; with flag 2 (a geometry pyramid,
 // coding.deriveGeometryNormals) each normals block holds its border's normals only
-// (encodeBorderNormals) and the reader derives the others from the block's positions. Each directory entry holds, per
-// stored channel, u64 offset and u32 byte count of the block's code.
+// (encodeBorderNormals) and the reader derives the others from the block's positions
+// (geometryImageNormals). Each directory entry holds, per stored channel, u64 offset and u32
+// byte count of the block's code.
 // Built in memory and written atomically. Returns bytes written. Throws std::invalid_argument on a
 // malformed pyramid or one the coding cannot take, InputError if the file cannot be written.
 uint64_t writeChartFile(const std::filesystem::path& path, const ChartPyramid& pyramid,

@@ -45,13 +45,11 @@ ZSTD_DCtx* decompressor() {
 }
 
 // magic + one zstd frame (with its checksum) of raw.
-std::vector<uint8_t> frame(const char (&magic)[4], std::span<const uint8_t> raw, int level = kLevel) {
+std::vector<uint8_t> frame(const char (&magic)[4], std::span<const uint8_t> raw) {
   std::vector<uint8_t> out(kMagicBytes + ZSTD_compressBound(raw.size()));
   std::memcpy(out.data(), magic, kMagicBytes);
-  ZSTD_CCtx* c = compressor();
-  if (level != kLevel) ZSTD_CCtx_setParameter(c, ZSTD_c_compressionLevel, level);
-  const size_t written = ZSTD_compress2(c, out.data() + kMagicBytes, out.size() - kMagicBytes, raw.data(), raw.size());
-  if (level != kLevel) ZSTD_CCtx_setParameter(c, ZSTD_c_compressionLevel, kLevel);
+  const size_t written =
+      ZSTD_compress2(compressor(), out.data() + kMagicBytes, out.size() - kMagicBytes, raw.data(), raw.size());
   if (ZSTD_isError(written)) throw std::runtime_error(std::string("block codec: zstd: ") + ZSTD_getErrorName(written));
   out.resize(kMagicBytes + written);
   return out;
@@ -488,46 +486,6 @@ void decodeBorderNormals(std::span<const uint8_t> block, uint32_t side, std::spa
   }
 }
 
-void deriveGeometryNormals(const float* xyz, uint32_t side, Byte4* out) {
-  const size_t row = 3 * size_t(side);
-  // The normal of the differences a (along u) and b (along v), packed; false where it vanishes.
-  auto pack = [](const float* a, const float* b, Byte4& o) {
-    const float c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-    const float l2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
-    if (!(l2 > 0.f) || !std::isfinite(l2)) return false;
-    const float s = 127.5f / std::sqrt(l2);
-    for (int k = 0; k < 3; ++k) o[k] = uint8_t(std::clamp(c[k] * s + 127.5f, 0.f, 255.f) + 0.5f);
-    o[3] = 255;
-    return true;
-  };
-  for (uint32_t v = 1; v + 1 < side; ++v) {
-    const float* p = xyz + v * row;
-    for (uint32_t u = 1; u + 1 < side; ++u) {
-      const float* q = p + 3 * size_t(u);
-      const float *l = q - 3, *r = q + 3, *d = q - row, *t = q + row;
-      float a[3], b[3];
-      Byte4& o = out[size_t(v) * side + u];
-      // Differences over 2 and 4 intervals summed, where the block holds them: smoother than over
-      // 2 alone where the input's triangles span a few samples.
-      if (u >= 2 && v >= 2 && u + 2 < side && v + 2 < side) {
-        const float *l2 = q - 6, *r2 = q + 6, *d2 = q - 2 * row, *t2 = q + 2 * row;
-        for (int k = 0; k < 3; ++k) a[k] = r[k] - l[k] + r2[k] - l2[k], b[k] = t[k] - d[k] + t2[k] - d2[k];
-        if (pack(a, b, o)) continue;
-      }
-      for (int k = 0; k < 3; ++k) a[k] = r[k] - l[k], b[k] = t[k] - d[k];
-      if (pack(a, b, o)) continue;
-      // One-sided differences where the central ones vanish.
-      const float* pairs[4][4] = {{r, q, t, q}, {q, l, t, q}, {q, l, q, d}, {r, q, q, d}};
-      bool done = false;
-      for (const auto& pr : pairs) {
-        for (int k = 0; k < 3; ++k) a[k] = pr[0][k] - pr[1][k], b[k] = pr[2][k] - pr[3][k];
-        if ((done = pack(a, b, o))) break;
-      }
-      if (!done) o = {128, 128, 255, 255};  // (0, 0, 1), as packNormal packs it
-    }
-  }
-}
-
 std::vector<uint8_t> encodeColours(std::span<const Byte4> colours, uint32_t side) {
   return encodeBytes(kColourMagic, kKindColours, colours, side, 4);
 }
@@ -536,13 +494,10 @@ void decodeColours(std::span<const uint8_t> block, uint32_t side, std::span<Byte
   decodeBytes(block, kColourMagic, "colour", kKindColours, side, 4, out);
 }
 
-std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw, int level) {
-  return frame(kBytesMagic, raw, std::clamp(level, 1, ZSTD_maxCLevel()));
-}
+std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw) { return frame(kBytesMagic, raw); }
 
 std::vector<uint8_t> decompressBytes(std::span<const uint8_t> coded, size_t maxBytes) {
-  const std::vector<uint8_t>& raw = unframe(coded, kBytesMagic, "compressed", 0, maxBytes);
-  return raw;
+  return unframe(coded, kBytesMagic, "compressed", 0, maxBytes);
 }
 
 }  // namespace gimlod

@@ -97,22 +97,14 @@ void settleNormals(std::span<std::array<uint8_t, 4>> normals, uint32_t side, uin
 std::vector<uint8_t> encodeBorderNormals(std::span<const std::array<uint8_t, 4>> normals, uint32_t side);
 void decodeBorderNormals(std::span<const uint8_t> block, uint32_t side, std::span<std::array<uint8_t, 4>> out);
 
-// The normals of a geometry image's samples off its border, from its positions (x, y, z
-// interleaved, side^2, row-major): the cross product of the differences along u and along v (the
-// orientation of the image's counter-clockwise triangles), packed. The differences are the
-// central ones over 2 and over 4 intervals summed where the image holds them (2 samples or more
-// from its border), else over 2; where the cross product vanishes, of one-sided differences;
-// (0, 0, 1) where every one does. The border samples of out are left as they are.
-void deriveGeometryNormals(const float* xyz, uint32_t side, std::array<uint8_t, 4>* out);
-
 // Encodes side^2 RGBA8 colours losslessly.
 std::vector<uint8_t> encodeColours(std::span<const std::array<uint8_t, 4>> colours, uint32_t side);
 void decodeColours(std::span<const uint8_t> block, uint32_t side, std::span<std::array<uint8_t, 4>> out);
 
-// A whole byte string (a file's body) as one self-checking zstd frame, and back. decompressBytes
-// throws CodecError on a corrupt or truncated frame, or one that would decode to more than
-// maxBytes.
-std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw, int level);
+// A whole byte string (a file's body) as one self-checking zstd frame (at the blocks' level), and
+// back. decompressBytes throws CodecError on a corrupt or truncated frame, or one that would
+// decode to more than maxBytes.
+std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw);
 std::vector<uint8_t> decompressBytes(std::span<const uint8_t> coded, size_t maxBytes);
 
 }  // namespace gimlod

@@ -18,7 +18,6 @@ namespace {
 constexpr char kMagic[4] = {'G', 'L', 'M', 'H'};
 constexpr uint32_t kHierarchyVersion = 1;            // raw
 constexpr uint32_t kCompressedHierarchyVersion = 2;  // the version-1 body regrouped and zstd-coded
-constexpr int kHierarchyZstdLevel = 3;
 
 // Reduces an n x n array of per-cell values by 2x2 blocks with `op` into an (n/2)^2 array.
 template <typename Op>
@@ -382,8 +381,8 @@ void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool 
     putVec(b, h.charts[c].errors);
   }
   if (compressed) {
-    const std::vector<uint8_t> coded = compressBytes(
-        regroup({b.data() + 8, b.size() - 8}, layoutOf(h.params, uint32_t(h.charts.size())), true), kHierarchyZstdLevel);
+    const std::vector<uint8_t> coded =
+        compressBytes(regroup({b.data() + 8, b.size() - 8}, layoutOf(h.params, uint32_t(h.charts.size())), true));
     b.resize(8);
     b.insert(b.end(), coded.begin(), coded.end());
   }

@@ -122,7 +122,7 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
                                  const ChartPositionSource& source, HierarchyStats* stats = nullptr);
 
 // Atomic. compressed: version 2 (the arrays regrouped as byte planes, then zstd with its
-// checksum; about a third of version 1's bytes), else version 1 (raw). Both are read.
+// checksum; about 0.4 of version 1's bytes on mesh atlases), else version 1 (raw). Both are read.
 void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool compressed = true);
 Hierarchy readHierarchy(const std::filesystem::path& path);  // throws InputError naming the file
 

@@ -84,7 +84,7 @@ inline constexpr double kDefaultSampleError = 0.0005;
 
 enum class MeshQuads : uint8_t { kAuto, kSides, kKites };
 // Where a compressed mesh atlas's normals come from: stored with every sample, or derived from the
-// positions on reading (core/block_codec.h deriveGeometryNormals; block borders stored); auto:
+// positions on reading (core/atlas_format.h geometryImageNormals; block borders stored); auto:
 // derived where the atlas holds at most kDerivedNormalsSamplesPerTriangle samples per input
 // triangle. Sampled more densely, the derived normals show the input's flat triangles, which the
 // resampled (interpolated vertex) normals smooth over.
@@ -168,8 +168,9 @@ inline constexpr double kSamplesPerTriangle = 2.0;
 // the patches whose charts sample the surface more coarsely than maxSampleError hold more than
 // kCoarseSurfaceToDouble of its triangles: below that, the repair cuts those patches, which costs
 // far fewer samples than doubling every chart (the shared scans: 24.1M samples in all against 57.2M
-// doubling past a tenth from 4 samples per triangle). Where the doubling stops at kMaxSamplesPerTriangle, a chart may keep a
-// sampling error past maxSampleError (0.086% of the diagonal on the bunny, within the 0.1% goal).
+// doubling past a tenth from 4 samples per triangle). Where the doubling stops at
+// kMaxSamplesPerTriangle, a chart may keep a sampling error past maxSampleError (0.086% of the
+// diagonal on the bunny, within the 0.1% goal).
 inline constexpr double kCoarseSurfaceToDouble = 0.25;
 inline constexpr uint32_t kMaxDensityChartSize = 1025;
 inline constexpr double kMaxSamplesPerTriangle = 64.0;

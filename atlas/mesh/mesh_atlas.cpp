@@ -73,7 +73,7 @@ constexpr size_t kAngleBins = size_t(180.0 / kAngleBin) + 1;
 void addNormalAngles(const ChartPyramid& p, uint32_t chartSize, uint32_t blockIntervals, std::vector<uint64_t>& bins) {
   const uint32_t side = chartSize;
   std::vector<PackedNormal> derived(p.normals[0]);
-  deriveGeometryNormals(reinterpret_cast<const float*>(p.positions[0].data()), side, derived.data());
+  geometryImageNormals(reinterpret_cast<const float*>(p.positions[0].data()), side, derived.data());
   for (uint32_t v = 1; v + 1 < side; ++v)
     for (uint32_t u = 1; u + 1 < side; ++u) {
       if (u % blockIntervals == 0 || v % blockIntervals == 0) continue;  // stored on block borders

@@ -24,7 +24,7 @@ namespace gimlod {
 // within the tolerances), as a compressed chart file decodes them; the other levels subsample it.
 ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, const ChartCoding& coding = {});
 
-// The angles between the normals a reader derives (deriveGeometryNormals) and the resampled
+// The angles between the normals a reader derives (geometryImageNormals) and the resampled
 // ones, over the samples whose normals are derived (level 0, off block borders), in degrees.
 struct NormalAngles {
   uint64_t samples = 0;

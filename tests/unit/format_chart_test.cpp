@@ -243,9 +243,33 @@ TEST(FormatChart, GeometryChannelsRoundTrip) {
   expectReaderError(bad, "channel mask");
 }
 
+// Derived normals of a sphere's grid (u eastwards, v northwards): outward, within a degree.
+TEST(FormatChart, GeometryImageNormalsFollowTheSurface) {
+  constexpr uint32_t kSide = 65;
+  std::vector<float> xyz(3 * size_t(kSide) * kSide);
+  for (uint32_t v = 0; v < kSide; ++v)
+    for (uint32_t u = 0; u < kSide; ++u) {
+      const double lon = 0.01 * u, lat = 0.01 * v - 0.3;
+      float* p = xyz.data() + 3 * (size_t(v) * kSide + u);
+      p[0] = float(std::cos(lat) * std::cos(lon));
+      p[1] = float(std::cos(lat) * std::sin(lon));
+      p[2] = float(std::sin(lat));
+    }
+  std::vector<PackedNormal> n(size_t(kSide) * kSide, PackedNormal{9, 9, 9, 9});
+  geometryImageNormals(xyz.data(), kSide, n.data());
+  EXPECT_EQ(n[0], (PackedNormal{9, 9, 9, 9}));  // the border is left alone
+  for (uint32_t v = 1; v + 1 < kSide; ++v)
+    for (uint32_t u = 1; u + 1 < kSide; ++u) {
+      const size_t i = size_t(v) * kSide + u;
+      const auto d = unpackNormal(n[i]);
+      const double c = d[0] * xyz[3 * i] + d[1] * xyz[3 * i + 1] + d[2] * xyz[3 * i + 2];
+      ASSERT_GT(c, std::cos(1.0 * 3.14159265358979 / 180.0) * 0.99) << u << "," << v;
+    }
+}
+
 // A geometry chart on a sphere, compressed with its normals stored on block borders only: the
 // reader gives the stored normals on every block's border (so blocks and charts meeting there
-// agree bit for bit) and, inside, the normals deriveGeometryNormals makes of the decoded
+// agree bit for bit) and, inside, the normals geometryImageNormals makes of the decoded
 // positions, within a degree of the sphere's own; a damaged border-normal block is an error
 // naming the file and the block.
 TEST(FormatChart, GeometryNormalsDerivedInsideBlocks) {
@@ -296,7 +320,7 @@ TEST(FormatChart, GeometryNormalsDerivedInsideBlocks) {
         r.readPositions(k, bx * b, by * b, b, reinterpret_cast<glm::vec3*>(xyz.data()));
         r.readNormals(k, bx * b, by * b, b, mine.data());
         std::vector<PackedNormal> again = mine;
-        deriveGeometryNormals(xyz.data(), l.blockSamples, again.data());
+        geometryImageNormals(xyz.data(), l.blockSamples, again.data());
         EXPECT_EQ(again, mine) << "level " << k << " block " << bx << "," << by;
         for (uint32_t v = 0; v <= b; ++v)
           for (uint32_t u = 0; u <= b; ++u) {
