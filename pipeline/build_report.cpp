@@ -192,7 +192,9 @@ nlohmann::json statsJson(const TerrainBuildStats& s) {
   if (w.windowed)
     stats["windowed"] = {{"memory_bytes", w.windowed->memoryBytes},
                          {"scratch_bytes", w.windowed->scratchBytes},
-                         {"band_rows", w.windowed->bandRows}};
+                         {"scratch_tile", w.windowed->scratchTile},
+                         {"band_rows", w.windowed->bandRows},
+                         {"band_columns", w.windowed->bandColumns}};
   stats["bytes_on_disk"] = s.bytesOnDisk;
   stats["bytes_per_sample"] = cs.samples ? double(s.bytesOnDisk) / double(cs.samples) : 0.0;
   stats["samples_per_second"] = s.totalSeconds > 0 ? double(cs.samples) / s.totalSeconds : 0.0;

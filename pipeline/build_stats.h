@@ -52,8 +52,10 @@ struct TerrainImageryStats {
 // The window-by-window build (atlas/terrain/terrain_windowed.h), when it ran.
 struct TerrainWindowedStats {
   uint64_t memoryBytes = 0;   // what its windows could use
-  uint64_t scratchBytes = 0;  // the scratch raster on disk while it ran
-  uint64_t bandRows = 0;      // the most DEM rows held at once
+  uint64_t scratchBytes = 0;  // the most the compressed scratch raster took on disk
+  uint32_t scratchTile = 0;   // its tiles' side
+  uint64_t bandRows = 0;      // the most DEM rows a window of charts held
+  uint64_t bandColumns = 0;   // and the most columns
 };
 
 struct TerrainWriteStats {

@@ -219,7 +219,9 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
   w.windowed.emplace();
   w.windowed->memoryBytes = wo.memoryBytes;
   w.windowed->scratchBytes = r.scratchBytes;
+  w.windowed->scratchTile = r.scratchTile;
   w.windowed->bandRows = r.bandRows;
+  w.windowed->bandColumns = r.bandColumns;
   read->seconds = secondsSince(t0);
   read->width = r.dem.width;
   read->height = r.dem.height;

@@ -70,7 +70,8 @@ inline float clampedHeight(const DemRaster& dem, int64_t gx, int64_t gy) {
 inline float clampedHeight(const DemRows& dem, int64_t gx, int64_t gy) {
   gx = std::clamp<int64_t>(gx, 0, dem.width - 1);
   gy = std::clamp<int64_t>(gy, 0, dem.height - 1);
-  return dem.heights[static_cast<size_t>(gy - dem.y0) * static_cast<size_t>(dem.width) + static_cast<size_t>(gx)];
+  const int64_t cols = dem.cols > 0 ? dem.cols : dem.width;
+  return dem.heights[static_cast<size_t>(gy - dem.y0) * static_cast<size_t>(cols) + static_cast<size_t>(gx - dem.x0)];
 }
 
 uint32_t chartsAlong(uint32_t samples, uint32_t m) {
@@ -111,8 +112,11 @@ ChartPyramid buildChartPyramid(const DemRows& dem, int32_t gridX, int32_t gridY,
   if (chartSize < 3 || !std::has_single_bit(chartSize - 1))
     throw std::invalid_argument("buildChartPyramid: chartSize is not 2^m+1");
   const auto span = chartRowSpan(gridY, chartSize, dem.height);
-  if (dem.width <= 0 || dem.height <= 0 || dem.y0 > span[0] || dem.y0 + dem.rows < span[1])
-    throw std::invalid_argument("buildChartPyramid: the rows held do not cover the chart row");
+  const auto columns = chartRowSpan(gridX, chartSize, dem.width);
+  const int64_t cols = dem.cols > 0 ? dem.cols : dem.width;
+  if (dem.width <= 0 || dem.height <= 0 || dem.y0 > span[0] || dem.y0 + dem.rows < span[1] ||
+      dem.x0 > columns[0] || dem.x0 + cols < columns[1])
+    throw std::invalid_argument("buildChartPyramid: the window held does not cover the chart");
 
   const int64_t m = int64_t{chartSize} - 1;
   const uint32_t levels = static_cast<uint32_t>(std::countr_zero(chartSize - 1)) + 1;

@@ -50,17 +50,19 @@ std::string chartFileName(uint32_t id);
 std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gridY,
                                 uint32_t chartSize);
 
-// Rows [y0, y0 + rows) of a DEM's heights, every column, row-major: what a chart row's pyramids
-// are built from when the DEM does not fit in memory. Access is edge-clamped to the whole DEM
-// (width x height), and must fall inside the rows held.
+// Rows [y0, y0 + rows) and columns [x0, x0 + cols) of a DEM's heights, row-major: what a group
+// of charts' pyramids are built from when the DEM does not fit in memory. Access is edge-clamped
+// to the whole DEM (width x height), and must fall inside the window held.
 struct DemRows {
   const float* heights = nullptr;
   int64_t y0 = 0, rows = 0;
+  int64_t x0 = 0, cols = 0;       // cols 0: every column (cols = width)
   int64_t width = 0, height = 0;  // the whole DEM
   std::array<double, 2> spacing{1.0, 1.0};
 };
 // The rows a chart row needs (its own, and a chart's worth each side for the coarse levels'
-// normals): [max(0, gridY * m - m), min(height, gridY * m + 2m + 1)), m = chartSize - 1.
+// normals): [max(0, gridY * m - m), min(height, gridY * m + 2m + 1)), m = chartSize - 1. The
+// columns a chart column needs are the same span of gridX and the width.
 std::array<int64_t, 2> chartRowSpan(int64_t gridY, uint32_t chartSize, int64_t height);
 ChartPyramid buildChartPyramid(const DemRows& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
                                bool keepRing = false);

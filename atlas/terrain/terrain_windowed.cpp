@@ -1,20 +1,19 @@
 #include "atlas/terrain/terrain_windowed.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <limits>
 #include <string>
 #include <vector>
 
-#include <fcntl.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
-#include <unistd.h>
+#include <tbb/task_group.h>
 
+#include "atlas/terrain/scratch_raster.h"
 #include "atlas/terrain/void_fill.h"
 #include "core/block_codec.h"
 #include "core/progress.h"
@@ -22,59 +21,6 @@
 namespace gimlod {
 
 namespace fs = std::filesystem;
-
-namespace {
-
-// A raw scratch file of fixed-size elements in rows, read and written at any offset; removed when
-// destroyed.
-class ScratchFile {
- public:
-  ScratchFile(fs::path path, const fs::path& dem) : path_(std::move(path)), dem_(dem) {
-    fd_ = ::open(path_.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-    if (fd_ < 0) fail("cannot create the scratch file " + path_.string());
-  }
-  ~ScratchFile() {
-    if (fd_ >= 0) ::close(fd_);
-    std::error_code ec;
-    fs::remove(path_, ec);
-  }
-  ScratchFile(const ScratchFile&) = delete;
-  ScratchFile& operator=(const ScratchFile&) = delete;
-  void write(uint64_t offset, const void* data, size_t bytes) {
-    const char* p = static_cast<const char*>(data);
-    while (bytes > 0) {
-      const ssize_t n = ::pwrite(fd_, p, bytes, off_t(offset));
-      if (n <= 0) {
-        if (n < 0 && errno == EINTR) continue;
-        fail("cannot write the scratch file " + path_.string() + " (" + std::strerror(errno) + "; disk full?)");
-      }
-      p += n, offset += uint64_t(n), bytes -= size_t(n);
-    }
-  }
-  void read(uint64_t offset, void* data, size_t bytes) const {
-    char* p = static_cast<char*>(data);
-    while (bytes > 0) {
-      const ssize_t n = ::pread(fd_, p, bytes, off_t(offset));
-      if (n <= 0) {
-        if (n < 0 && errno == EINTR) continue;
-        fail("cannot read the scratch file " + path_.string());
-      }
-      p += n, offset += uint64_t(n), bytes -= size_t(n);
-    }
-  }
-  uint64_t size() const {
-    std::error_code ec;
-    const auto s = fs::file_size(path_, ec);
-    return ec ? 0 : uint64_t(s);
-  }
-
- private:
-  [[noreturn]] void fail(const std::string& what) const { throw InputError(dem_.string() + ": " + what); }
-  fs::path path_, dem_;
-  int fd_ = -1;
-};
-
-}  // namespace
 
 WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const fs::path& dir,
                                                  const WindowedTerrainOptions& options, AtlasManifest& manifest) {
@@ -87,94 +33,96 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
   const uint64_t width = dem.width, height = dem.height;
   const uint64_t budget = std::max<uint64_t>(options.memoryBytes, uint64_t{16} << 20);
 
-  // 1. Read: bands of rows into the scratch raster (heights, and a validity byte per sample).
-  ScratchFile heights(dir / ".dem_heights.scratch", input), valid(dir / ".dem_valid.scratch", input);
+  // 1. Read: a row of scratch tiles at a time (heights, and a validity byte per sample). The
+  // tile side is the largest power of two up to 256 whose row of tiles takes a quarter of the
+  // budget; coding a band runs while the next one is read.
+  uint32_t tile = 256;
+  while (tile > 8 && uint64_t(tile) * width * 5 * 2 > budget / 4) tile /= 2;
+  ScratchRaster scratch(dir / ".dem.scratch", input, width, height, tile);
   uint64_t voids = 0;
   float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+  // The range of the heights a compressed atlas stores, for the step chosen when the DEM is not
+  // all whole metres (a whole-metre DEM stores its heights as they are).
+  const double fallbackPrecision =
+      options.heightPrecision > 0 ? options.heightPrecision : options.defaultHeightPrecision;
+  float slo = lo, shi = hi;
   dem.integerHeights = true;
   {
-    const uint64_t rowsPerBand = std::clamp<uint64_t>(budget / 4 / (width * 5), 1, height);
-    std::vector<float> h(rowsPerBand * width);
-    std::vector<uint8_t> v(rowsPerBand * width);
+    const uint64_t rowsPerBand = std::min<uint64_t>(tile, height);
+    std::array<std::vector<float>, 2> h;
+    std::array<std::vector<uint8_t>, 2> v;
+    for (int i = 0; i < 2; ++i) h[i].resize(rowsPerBand * width), v[i].resize(rowsPerBand * width);
     const progress::ProgressStage stage("read DEM", height);
-    for (uint64_t y0 = 0; y0 < height; y0 += rowsPerBand) {
+    tbb::task_group coding;
+    // A failed read waits for the band being coded before the scratch goes.
+    struct Join {
+      tbb::task_group& g;
+      ~Join() {
+        try {
+          g.wait();
+        } catch (...) {
+        }
+      }
+    } join{coding};
+    int at = 0;
+    for (uint64_t y0 = 0; y0 < height; y0 += rowsPerBand, at ^= 1) {
       const uint64_t rows = std::min(rowsPerBand, height - y0);
       const size_t n = size_t(rows * width);
-      source.readRows(uint32_t(y0), uint32_t(rows), h.data(), v.data());
+      source.readRows(uint32_t(y0), uint32_t(rows), h[at].data(), v[at].data());
+      float* hb = h[at].data();
+      const uint8_t* vb = v[at].data();
       for (size_t i = 0; i < n; ++i) {
-        if (!v[i]) {
+        if (!vb[i]) {
           ++voids;
-          h[i] = 0.f;
+          hb[i] = 0.f;
           continue;
         }
-        lo = std::min(lo, h[i]);
-        hi = std::max(hi, h[i]);
-        dem.integerHeights = dem.integerHeights && h[i] == std::nearbyint(h[i]);
+        lo = std::min(lo, hb[i]);
+        hi = std::max(hi, hb[i]);
+        const float stored = storedHeight(hb[i], fallbackPrecision);
+        slo = std::min(slo, stored);
+        shi = std::max(shi, stored);
+        dem.integerHeights = dem.integerHeights && hb[i] == std::nearbyint(hb[i]);
       }
-      heights.write(y0 * width * 4, h.data(), n * 4);
-      valid.write(y0 * width, v.data(), n);
+      coding.wait();
+      coding.run([&scratch, hb, vb, y0, rows, width] {
+        scratch.write(CellWindow{0, int64_t(y0), int64_t(width), int64_t(y0 + rows)}, hb, vb);
+      });
       progress::advance(rows);
     }
+    coding.wait();
   }
   if (voids == width * height) throw InputError(input.string() + ": every sample is nodata (" +
                                                 std::to_string(voids) + " samples)");
-  r.scratchBytes = heights.size() + valid.size();
 
-  // 2. Voids, window by window.
-  dem.voidsFilled = voids;
-  dem.voidFillMethod = kVoidFillMethod;
-  if (voids > 0) {
-    WindowedFill io;
-    io.read = [&](const CellWindow& w, float* h, uint8_t* ok) {
-      const size_t ww = size_t(w.width());
-      for (int64_t y = w.y0; y < w.y1; ++y) {
-        const uint64_t at = uint64_t(y) * width + uint64_t(w.x0);
-        heights.read(at * 4, h + size_t(y - w.y0) * ww, ww * 4);
-        valid.read(at, ok + size_t(y - w.y0) * ww, ww);
-      }
-    };
-    io.write = [&](const CellWindow& w, const float* h) {
-      const size_t ww = size_t(w.width());
-      for (int64_t y = w.y0; y < w.y1; ++y)
-        heights.write((uint64_t(y) * width + uint64_t(w.x0)) * 4, h + size_t(y - w.y0) * ww, ww * 4);
-    };
-    std::vector<uint8_t> row;
-    io.hasVoids = [&](const CellWindow& w) {
-      row.resize(size_t(w.width()));
-      for (int64_t y = w.y0; y < w.y1; ++y) {
-        valid.read(uint64_t(y) * width + uint64_t(w.x0), row.data(), row.size());
-        if (std::find(row.begin(), row.end(), uint8_t{0}) != row.end()) return true;
-      }
-      return false;
-    };
-    // A window's levels, copies and flags take about 16 bytes per level-0 sample.
-    fillVoidsWindowed(dem.width, dem.height, lo, hi, io, std::max<uint64_t>(budget / 4 / 16, 1u << 18));
-  }
-
-  // 3. Heights as a compressed atlas stores them (quantized like the in-memory build), and their
-  // range.
+  // 2. The step a compressed atlas quantizes heights to, and the range of what it stores.
   const bool compressed = options.atlas.coding.compressed;
   if (compressed)
     r.heightPrecision = terrainHeightPrecision(input, options.heightPrecision, dem.integerHeights,
                                                options.defaultHeightPrecision, lo, hi);
-  {
-    const uint64_t rowsPerBand = std::clamp<uint64_t>(budget / 4 / (width * 4), 1, height);
-    std::vector<float> h(rowsPerBand * width);
-    float qlo = std::numeric_limits<float>::infinity(), qhi = -qlo;
-    for (uint64_t y0 = 0; y0 < height; y0 += rowsPerBand) {
-      const uint64_t rows = std::min(rowsPerBand, height - y0);
-      const size_t n = size_t(rows * width);
-      heights.read(y0 * width * 4, h.data(), n * 4);
-      if (compressed)
-        for (size_t i = 0; i < n; ++i) h[i] = storedHeight(h[i], r.heightPrecision);
-      for (size_t i = 0; i < n; ++i) qlo = std::min(qlo, h[i]), qhi = std::max(qhi, h[i]);
-      if (compressed) heights.write(y0 * width * 4, h.data(), n * 4);
-    }
-    dem.minHeight = qlo;
-    dem.maxHeight = qhi;
-  }
+  auto stored = [&](float x) { return compressed ? storedHeight(x, r.heightPrecision) : x; };
+  if (!compressed || r.heightPrecision != fallbackPrecision) slo = stored(lo), shi = stored(hi);
 
-  // 4. Charts, a chart row at a time, from the rows it reads.
+  // 3. Voids, window by window; the range takes in what they are filled with.
+  dem.voidsFilled = voids;
+  dem.voidFillMethod = kVoidFillMethod;
+  if (voids > 0) {
+    WindowedFill io;
+    io.read = [&](const CellWindow& w, float* h, uint8_t* ok) { scratch.read(w, h, ok); };
+    io.write = [&](const CellWindow& w, const float* h) {
+      for (size_t i = 0; i < w.cells(); ++i) slo = std::min(slo, stored(h[i])), shi = std::max(shi, stored(h[i]));
+      scratch.write(w, h, nullptr);
+    };
+    io.hasVoids = [&](const CellWindow& w) { return scratch.hasVoids(w); };
+    // A window's levels, copies and flags take about 16 bytes per level-0 sample.
+    fillVoidsWindowed(dem.width, dem.height, lo, hi, io, std::max<uint64_t>(budget / 4 / 16, 1u << 18));
+  }
+  dem.minHeight = slo;
+  dem.maxHeight = shi;
+  r.scratchBytes = scratch.peakBytes();
+  r.scratchTile = scratch.tileSide();
+
+  // 4. Charts, a chart row at a time, in groups of chart columns from the window they read.
   TerrainAtlasOptions atlas = options.atlas;
   atlas.coding.heightPrecision = r.heightPrecision;
   fillTerrainManifest(dem, atlas, manifest);
@@ -185,12 +133,16 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
   }
   fs::create_directories(dir / "charts");
   const uint32_t cs = atlas.chartSize;
-  const uint64_t bandRows = uint64_t(3) * (cs - 1) + 1;
-  if (bandRows * width * 4 > budget / 2)
-    throw InputError(input.string() + ": a chart row of " + std::to_string(width) + " x " + std::to_string(bandRows) +
-                     " samples needs " + std::to_string((bandRows * width * 4) >> 20) + " MiB, over half the " +
+  const uint64_t m = cs - 1, spanRows = 3 * m + 1;
+  // A window of g chart columns holds spanRows x ((g + 2) m + 1) heights; the charts in flight
+  // take the other half of the budget.
+  if (spanRows * spanRows * 4 > budget / 4)
+    throw InputError(input.string() + ": a chart and its neighbours' margins (" + std::to_string(spanRows) + "^2 samples) need " +
+                     std::to_string((spanRows * spanRows * 4) >> 20) + " MiB, over a quarter of the " +
                      std::to_string(budget >> 20) + " MiB the windows may use; give a smaller " +
                      optionRef("chartSize") + " or a larger " + optionRef("maxMemory"));
+  const uint64_t groupColumns =
+      std::clamp<uint64_t>((budget / 4 / (spanRows * 4) - 1) / m, 3, manifest.chartsX + 2) - 2;
   uint64_t perChart = 0;
   for (uint32_t k = 0; k <= manifest.intervalsLog2(); ++k) {
     const uint64_t s = ((cs - 1) >> k) + 1;
@@ -201,30 +153,39 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
   const int concurrency = int(std::clamp<uint64_t>((budget / 2) / std::max<uint64_t>(perChart * 20, 1), 1,
                                                    uint64_t(tbb::this_task_arena::max_concurrency())));
   tbb::task_arena arena(concurrency);
-  std::vector<float> band;
+  std::vector<float> window;
   std::atomic<uint64_t> bytes{0};
   const progress::ProgressStage stage("charts", manifest.charts.size());
   for (uint32_t gy = 0; gy < manifest.chartsY; ++gy) {
-    const auto span = chartRowSpan(gy, cs, int64_t(height));
-    const uint64_t rows = uint64_t(span[1] - span[0]);
-    r.bandRows = std::max(r.bandRows, rows);
-    band.resize(size_t(rows * width));
-    heights.read(uint64_t(span[0]) * width * 4, band.data(), band.size() * 4);
-    DemRows view;
-    view.heights = band.data();
-    view.y0 = span[0];
-    view.rows = int64_t(rows);
-    view.width = int64_t(width);
-    view.height = int64_t(height);
-    view.spacing = dem.spacing;
-    arena.execute([&] {
-      tbb::parallel_for(uint32_t{0}, manifest.chartsX, [&](uint32_t gx) {
-        const ChartInfo& c = manifest.charts[size_t(gy) * manifest.chartsX + gx];
-        const ChartPyramid p = buildChartPyramid(view, c.gridX, c.gridY, cs, compressed);
-        bytes += writeChartFile(dir / c.file, p, cs, atlas.blockIntervals, atlas.coding);
-        progress::advance();
+    const auto rowSpan = chartRowSpan(gy, cs, int64_t(height));
+    for (uint32_t g0 = 0; g0 < manifest.chartsX; g0 += uint32_t(groupColumns)) {
+      const uint32_t g1 = uint32_t(std::min<uint64_t>(g0 + groupColumns, manifest.chartsX));
+      const int64_t x0 = chartRowSpan(g0, cs, int64_t(width))[0], x1 = chartRowSpan(g1 - 1, cs, int64_t(width))[1];
+      const CellWindow w{x0, rowSpan[0], x1, rowSpan[1]};
+      r.bandRows = std::max<uint64_t>(r.bandRows, uint64_t(w.height()));
+      r.bandColumns = std::max<uint64_t>(r.bandColumns, uint64_t(w.width()));
+      window.resize(w.cells());
+      arena.execute([&] { scratch.read(w, window.data(), nullptr); });
+      if (compressed)
+        for (float& x : window) x = storedHeight(x, r.heightPrecision);
+      DemRows view;
+      view.heights = window.data();
+      view.y0 = w.y0;
+      view.rows = w.height();
+      view.x0 = w.x0;
+      view.cols = w.width();
+      view.width = int64_t(width);
+      view.height = int64_t(height);
+      view.spacing = dem.spacing;
+      arena.execute([&] {
+        tbb::parallel_for(g0, g1, [&](uint32_t gx) {
+          const ChartInfo& c = manifest.charts[size_t(gy) * manifest.chartsX + gx];
+          const ChartPyramid p = buildChartPyramid(view, c.gridX, c.gridY, cs, compressed);
+          bytes += writeChartFile(dir / c.file, p, cs, atlas.blockIntervals, atlas.coding);
+          progress::advance();
+        });
       });
-    });
+    }
   }
   r.charts.charts = uint32_t(manifest.charts.size());
   r.charts.samples = width * height;

@@ -1,8 +1,10 @@
 // The terrain atlas of a DEM larger than memory, built window by window within a memory budget:
-// the DEM is read through GDAL in bands of rows into a scratch raster beside the atlas, its voids
-// are filled window by window (atlas/terrain/void_fill.h, bit-identical to the whole-raster fill),
-// its heights quantized for a compressed atlas, and the charts built a chart row at a time from
-// the rows that row needs. A DEM that fits in memory gives byte-identical chart files either way.
+// the DEM is read through GDAL in bands of rows into a compressed scratch raster beside the atlas
+// (atlas/terrain/scratch_raster.h), its voids are filled window by window (atlas/terrain/
+// void_fill.h, bit-identical to the whole-raster fill), and the charts are built a chart row at a
+// time, in groups of chart columns, from the window of samples each group needs (quantized as a
+// compressed atlas stores them). Memory does not grow with the DEM's width or height. A DEM that
+// fits in memory gives byte-identical chart files either way.
 #pragma once
 
 #include <cstdint>
@@ -26,13 +28,15 @@ struct WindowedTerrainResult {
   DemRaster dem;               // the DEM's metadata, heights empty; voids, range, integerHeights
   TerrainAtlasStats charts;
   double heightPrecision = 0;  // the step used (compressed atlases)
-  uint64_t scratchBytes = 0;   // the scratch raster's size on disk (removed at the end)
-  uint64_t bandRows = 0;       // the most DEM rows held at once
+  uint64_t scratchBytes = 0;   // the most the scratch raster took on disk (removed at the end)
+  uint32_t scratchTile = 0;    // its tiles' side
+  uint64_t bandRows = 0;       // the most DEM rows a window of charts held
+  uint64_t bandColumns = 0;    // and the most columns
 };
 
 // Builds the chart files of `source` into dir (which must exist; the scratch raster lives there
 // while the build runs) and fills the manifest's chart fields, like writeTerrainCharts. Throws
-// InputError naming the DEM when a chart row's rows exceed the memory budget, or when every
+// InputError naming the DEM when one chart's window exceeds the memory budget, or when every
 // sample is a void.
 WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const std::filesystem::path& dir,
                                                  const WindowedTerrainOptions& options, AtlasManifest& manifest);
