@@ -326,34 +326,61 @@ LevelLayout levelLayout(uint32_t chartSize, uint32_t blockIntervals, uint32_t le
 
 // ---- atomic file writing ----------------------------------------------------------------------
 
-void atomicWriteFile(const fs::path& path, const void* data, size_t bytes) {
-  const fs::path tmp = fs::path(path.string() + ".tmp-" + std::to_string(::getpid()));
-  auto failWith = [&](const std::string& what, int err, bool removeTmp) {
-    if (removeTmp) ::unlink(tmp.c_str());
-    throw InputError(quoted(path) + ": " + what + ": " + std::strerror(err));
-  };
-  int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) failWith("cannot create " + tmp.filename().string(), errno, false);
+AtomicFileWriter::AtomicFileWriter(fs::path path)
+    : path_(std::move(path)), tmp_(path_.string() + ".tmp-" + std::to_string(::getpid())) {
+  fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) throw InputError(quoted(path_) + ": cannot create " + tmp_.filename().string() + ": " + std::strerror(errno));
+}
+
+AtomicFileWriter::~AtomicFileWriter() {
+  if (fd_ >= 0) {
+    ::close(fd_);
+    ::unlink(tmp_.c_str());
+  }
+}
+
+void AtomicFileWriter::fail(const std::string& what, int err) {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  ::unlink(tmp_.c_str());
+  throw InputError(quoted(path_) + ": " + what + ": " + std::strerror(err));
+}
+
+void AtomicFileWriter::write(const void* data, size_t bytes) {
+  if (fd_ < 0) throw std::logic_error("AtomicFileWriter: write after commit or failure");
   const auto* p = static_cast<const uint8_t*>(data);
-  size_t left = bytes;
-  while (left > 0) {
-    ssize_t w = ::write(fd, p, std::min<size_t>(left, size_t{1} << 30));
+  while (bytes > 0) {
+    const ssize_t w = ::write(fd_, p, std::min<size_t>(bytes, size_t{1} << 30));
     if (w < 0) {
       if (errno == EINTR) continue;
-      int err = errno;
-      ::close(fd);
-      failWith("write failed", err, true);
+      fail("write failed", errno);
     }
     p += w;
-    left -= static_cast<size_t>(w);
+    bytes -= static_cast<size_t>(w);
   }
-  if (::fdatasync(fd) != 0 && errno != EINVAL && errno != EROFS) {
-    int err = errno;
-    ::close(fd);
-    failWith("flush failed", err, true);
+}
+
+void AtomicFileWriter::commit() {
+  if (fd_ < 0) throw std::logic_error("AtomicFileWriter: commit after commit or failure");
+  if (::fdatasync(fd_) != 0 && errno != EINVAL && errno != EROFS) fail("flush failed", errno);
+  const int fd = fd_;
+  fd_ = -1;
+  if (::close(fd) != 0) {
+    const int err = errno;
+    ::unlink(tmp_.c_str());
+    throw InputError(quoted(path_) + ": close failed: " + std::strerror(err));
   }
-  if (::close(fd) != 0) failWith("close failed", errno, true);
-  if (::rename(tmp.c_str(), path.c_str()) != 0) failWith("rename failed", errno, true);
+  if (::rename(tmp_.c_str(), path_.c_str()) != 0) {
+    const int err = errno;
+    ::unlink(tmp_.c_str());
+    throw InputError(quoted(path_) + ": rename failed: " + std::strerror(err));
+  }
+}
+
+void atomicWriteFile(const fs::path& path, const void* data, size_t bytes) {
+  AtomicFileWriter w(path);
+  w.write(data, bytes);
+  w.commit();
 }
 
 // ---- manifest ---------------------------------------------------------------------------------

@@ -152,6 +152,23 @@ void writeManifest(const std::filesystem::path& dir, const AtlasManifest& m);
 // Writes bytes to path.tmp-<pid> and renames it over path. Throws InputError on failure.
 void atomicWriteFile(const std::filesystem::path& path, const void* data, size_t bytes);
 
+// The same, piece by piece: the pieces go to path.tmp-<pid>, which commit() flushes and renames
+// over path; a writer destroyed uncommitted removes it. Throws InputError naming path.
+class AtomicFileWriter {
+ public:
+  explicit AtomicFileWriter(std::filesystem::path path);
+  ~AtomicFileWriter();
+  AtomicFileWriter(const AtomicFileWriter&) = delete;
+  AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
+  void write(const void* data, size_t bytes);
+  void commit();
+
+ private:
+  [[noreturn]] void fail(const std::string& what, int err);
+  std::filesystem::path path_, tmp_;
+  int fd_ = -1;
+};
+
 // A sibling temporary directory (".<name>.partial-<pid>-<random>") for building a whole output
 // directory; removed unless committed, when it is renamed onto the target (replacing an earlier
 // output, which is restored if the rename fails). The target must not exist, be empty, or hold

@@ -497,7 +497,68 @@ void decodeColours(std::span<const uint8_t> block, uint32_t side, std::span<Byte
 std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw) { return frame(kBytesMagic, raw); }
 
 std::vector<uint8_t> decompressBytes(std::span<const uint8_t> coded, size_t maxBytes) {
-  return unframe(coded, kBytesMagic, "compressed", 0, maxBytes);
+  // Into a vector of its own (not unframe's buffer, which a thread keeps): a body may be large.
+  if (coded.size() < kMagicBytes || std::memcmp(coded.data(), kBytesMagic, kMagicBytes) != 0)
+    throw CodecError("not a compressed block (bad magic)");
+  const uint8_t* f = coded.data() + kMagicBytes;
+  const size_t fBytes = coded.size() - kMagicBytes;
+  const unsigned long long size = ZSTD_getFrameContentSize(f, fBytes);
+  if (size == ZSTD_CONTENTSIZE_ERROR || size == ZSTD_CONTENTSIZE_UNKNOWN || size > maxBytes)
+    throw CodecError("corrupt or truncated compressed block (frame header)");
+  std::vector<uint8_t> raw(size);
+  const size_t got = ZSTD_decompressDCtx(decompressor(), raw.data(), raw.size(), f, fBytes);
+  if (ZSTD_isError(got) || got != size)
+    throw CodecError(std::string("corrupt or truncated compressed block (") +
+                     (ZSTD_isError(got) ? ZSTD_getErrorName(got) : "short") + ")");
+  return raw;
+}
+
+struct BytesCompressor::State {
+  std::unique_ptr<ZSTD_CCtx, CCtxFree> cctx{ZSTD_createCCtx()};
+  std::function<void(const uint8_t*, size_t)> sink;
+  uint64_t total = 0, added = 0;
+  std::vector<uint8_t> out = std::vector<uint8_t>(ZSTD_CStreamOutSize());
+  bool finished = false;
+};
+
+BytesCompressor::BytesCompressor(uint64_t total, std::function<void(const uint8_t*, size_t)> sink)
+    : state_(std::make_unique<State>()) {
+  State& s = *state_;
+  if (!s.cctx) throw std::runtime_error("block codec: cannot create a zstd context");
+  s.sink = std::move(sink);
+  s.total = total;
+  ZSTD_CCtx_setParameter(s.cctx.get(), ZSTD_c_compressionLevel, kLevel);
+  ZSTD_CCtx_setParameter(s.cctx.get(), ZSTD_c_checksumFlag, 1);
+  ZSTD_CCtx_setPledgedSrcSize(s.cctx.get(), total);  // the frame header states the size
+  s.sink(reinterpret_cast<const uint8_t*>(kBytesMagic), kMagicBytes);
+}
+
+BytesCompressor::~BytesCompressor() = default;
+
+void BytesCompressor::drive(std::span<const uint8_t> piece, bool end) {
+  State& s = *state_;
+  ZSTD_inBuffer in{piece.data(), piece.size(), 0};
+  for (;;) {
+    ZSTD_outBuffer out{s.out.data(), s.out.size(), 0};
+    const size_t left = ZSTD_compressStream2(s.cctx.get(), &out, &in, end ? ZSTD_e_end : ZSTD_e_continue);
+    if (ZSTD_isError(left)) throw std::runtime_error(std::string("block codec: zstd: ") + ZSTD_getErrorName(left));
+    if (out.pos > 0) s.sink(s.out.data(), out.pos);
+    if (end ? left == 0 : in.pos == in.size) break;
+  }
+}
+
+void BytesCompressor::add(std::span<const uint8_t> piece) {
+  State& s = *state_;
+  if (s.finished || s.added + piece.size() > s.total) throw std::logic_error("BytesCompressor: more bytes than stated");
+  s.added += piece.size();
+  drive(piece, false);
+}
+
+void BytesCompressor::finish() {
+  State& s = *state_;
+  if (s.finished || s.added != s.total) throw std::logic_error("BytesCompressor: fewer bytes than stated");
+  s.finished = true;
+  drive({}, true);
 }
 
 }  // namespace gimlod

@@ -15,6 +15,8 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
+#include <memory>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -105,6 +107,23 @@ void decodeColours(std::span<const uint8_t> block, uint32_t side, std::span<std:
 // back. decompressBytes throws CodecError on a corrupt or truncated frame, or one that would
 // decode to more than maxBytes.
 std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw);
+// The same frame made piece by piece, for a body too large to hold twice: `total` bytes are added
+// in pieces, and the coded bytes go to `sink` as they are made (decompressBytes reads the whole).
+// finish() throws std::logic_error unless exactly `total` bytes were added.
+class BytesCompressor {
+ public:
+  BytesCompressor(uint64_t total, std::function<void(const uint8_t*, size_t)> sink);
+  ~BytesCompressor();
+  BytesCompressor(const BytesCompressor&) = delete;
+  BytesCompressor& operator=(const BytesCompressor&) = delete;
+  void add(std::span<const uint8_t> piece);
+  void finish();
+
+ private:
+  void drive(std::span<const uint8_t> piece, bool end);
+  struct State;
+  std::unique_ptr<State> state_;
+};
 std::vector<uint8_t> decompressBytes(std::span<const uint8_t> coded, size_t maxBytes);
 
 }  // namespace gimlod

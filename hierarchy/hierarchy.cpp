@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
 
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -311,8 +312,8 @@ namespace {
 // Version 2 stores version 1's body (everything after magic and version) regrouped so that like
 // bytes lie together: the header and every chart's roots, then every chart's bounds, flags and
 // errors, each float array as four byte planes (least significant first); then zstd with its
-// checksum. Regrouping is a permutation of the body's bytes, so reading undoes it and parses
-// version 1.
+// checksum. Regrouping is a permutation of the body's bytes: writeHierarchy writes the grouped
+// order directly, and reading undoes it and parses version 1.
 struct BodyLayout {
   uint32_t count = 0, nodes = 0, resCount = 0;
   static constexpr size_t kHeader = 5 * 4, kRoots = 4 * (4 + 1 + 1);
@@ -322,37 +323,30 @@ struct BodyLayout {
   size_t size() const { return kHeader + size_t(count) * perChart(); }
 };
 
-// Moves the body's bytes between the version-1 order (per chart: roots, bounds, flags, errors)
-// and the grouped order; forward: version 1 to grouped.
-std::vector<uint8_t> regroup(std::span<const uint8_t> in, const BodyLayout& l, bool forward) {
-  std::vector<uint8_t> out(in.size());
+// The version-1 order of a grouped body (per chart: roots, bounds, flags, errors), after `prefix`.
+std::vector<uint8_t> ungroup(std::span<const uint8_t> prefix, std::span<const uint8_t> in, const BodyLayout& l) {
+  std::vector<uint8_t> v1(prefix.size() + in.size());
+  std::memcpy(v1.data(), prefix.data(), prefix.size());
+  uint8_t* out = v1.data() + prefix.size();
   const size_t charts = l.count, bounds = l.boundsBytes(), errors = l.errorBytes();
   const size_t rootsAt = BodyLayout::kHeader, boundsAt = rootsAt + charts * BodyLayout::kRoots,
                flagsAt = boundsAt + charts * bounds, errorsAt = flagsAt + charts * l.nodes;
-  auto move = [&](size_t v1, size_t grouped, size_t n) {
-    if (forward) std::memcpy(out.data() + grouped, in.data() + v1, n);
-    else std::memcpy(out.data() + v1, in.data() + grouped, n);
-  };
-  // A float array of `bytes` at v1 offset `v1` as byte planes of the section at `section`,
+  // A float array of `bytes` at v1 offset `at` from the byte planes of the section at `section`,
   // chart c's floats at float index `first`.
-  auto planes = [&](size_t v1, size_t section, size_t total, size_t first, size_t bytes) {
+  auto planes = [&](size_t at, size_t section, size_t total, size_t first, size_t bytes) {
     const size_t floats = total / 4;
     for (size_t i = 0; i < bytes / 4; ++i)
-      for (size_t b = 0; b < 4; ++b) {
-        const size_t a = v1 + 4 * i + b, g = section + b * floats + first + i;
-        if (forward) out[g] = in[a];
-        else out[a] = in[g];
-      }
+      for (size_t b = 0; b < 4; ++b) out[at + 4 * i + b] = in[section + b * floats + first + i];
   };
-  move(0, 0, BodyLayout::kHeader);
+  std::memcpy(out, in.data(), BodyLayout::kHeader);
   for (size_t c = 0; c < charts; ++c) {
-    const size_t v1 = BodyLayout::kHeader + c * l.perChart();
-    move(v1, rootsAt + c * BodyLayout::kRoots, BodyLayout::kRoots);
-    planes(v1 + BodyLayout::kRoots, boundsAt, charts * bounds, c * bounds / 4, bounds);
-    move(v1 + BodyLayout::kRoots + bounds, flagsAt + c * l.nodes, l.nodes);
-    planes(v1 + BodyLayout::kRoots + bounds + l.nodes, errorsAt, charts * errors, c * errors / 4, errors);
+    const size_t at = BodyLayout::kHeader + c * l.perChart();
+    std::memcpy(out + at, in.data() + rootsAt + c * BodyLayout::kRoots, BodyLayout::kRoots);
+    planes(at + BodyLayout::kRoots, boundsAt, charts * bounds, c * bounds / 4, bounds);
+    std::memcpy(out + at + BodyLayout::kRoots + bounds, in.data() + flagsAt + c * l.nodes, l.nodes);
+    planes(at + BodyLayout::kRoots + bounds + l.nodes, errorsAt, charts * errors, c * errors / 4, errors);
   }
-  return out;
+  return v1;
 }
 
 BodyLayout layoutOf(const HierarchyParams& p, uint32_t count) {
@@ -362,31 +356,70 @@ BodyLayout layoutOf(const HierarchyParams& p, uint32_t count) {
 }  // namespace
 
 void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool compressed) {
-  std::vector<uint8_t> b;
-  putBytes(b, kMagic, 4);
-  put(b, compressed ? kCompressedHierarchyVersion : kHierarchyVersion);
-  put(b, uint32_t(h.charts.size()));
-  put(b, h.params.intervalsLog2);
-  put(b, h.params.depth);
-  put(b, h.params.maxNodeResLog2);
-  put(b, h.params.minNodeResLog2);
-  for (size_t c = 0; c < h.charts.size(); ++c) {
+  // Streamed in pieces of about 1 MiB (coded as they come): the body is never held whole, so an
+  // atlas's hierarchy takes about its own size in memory to write, however many charts it has.
+  AtomicFileWriter file(path);
+  std::vector<uint8_t> head;
+  putBytes(head, kMagic, 4);
+  put(head, compressed ? kCompressedHierarchyVersion : kHierarchyVersion);
+  file.write(head.data(), head.size());
+  const uint32_t count = uint32_t(h.charts.size());
+  const BodyLayout l = layoutOf(h.params, count);
+  for (const Hierarchy::ChartNodes& c : h.charts)
+    if (c.bounds.size() != l.nodes || c.flags.size() != l.nodes || c.errors.size() != size_t(l.nodes) * l.resCount)
+      throw std::invalid_argument("writeHierarchy: a chart's arrays do not match the parameters");
+  std::optional<BytesCompressor> coder;
+  if (compressed) coder.emplace(l.size(), [&](const uint8_t* p, size_t n) { file.write(p, n); });
+  std::vector<uint8_t> piece;
+  auto flush = [&] {
+    if (coder) coder->add(piece);
+    else file.write(piece.data(), piece.size());
+    piece.clear();
+  };
+  auto emit = [&](const void* p, size_t n) {
+    putBytes(piece, p, n);
+    if (piece.size() >= (size_t(1) << 20)) flush();
+  };
+  auto roots = [&](uint32_t c) {
     for (const RootNeighbour& n : h.roots[c]) {
-      put(b, n.chart);
-      put(b, n.edge);
-      put(b, uint8_t(n.reversed));
+      const uint8_t rev = n.reversed;
+      emit(&n.chart, 4);
+      emit(&n.edge, 1);
+      emit(&rev, 1);
     }
-    putVec(b, h.charts[c].bounds);
-    putVec(b, h.charts[c].flags);
-    putVec(b, h.charts[c].errors);
-  }
+  };
+  // Byte plane b of every chart's float array (the grouped order; see BodyLayout).
+  auto planes = [&](auto array) {
+    for (size_t b = 0; b < 4; ++b)
+      for (uint32_t c = 0; c < count; ++c) {
+        const auto& v = array(h.charts[c]);
+        const uint8_t* bytes = reinterpret_cast<const uint8_t*>(v.data());
+        const size_t floats = v.size() * sizeof(v[0]) / 4;
+        const size_t at = piece.size();
+        piece.resize(at + floats);
+        for (size_t i = 0; i < floats; ++i) piece[at + i] = bytes[4 * i + b];
+        if (piece.size() >= (size_t(1) << 20)) flush();
+      }
+  };
+  const uint32_t header[5] = {count, h.params.intervalsLog2, h.params.depth, h.params.maxNodeResLog2,
+                              h.params.minNodeResLog2};
+  emit(header, sizeof header);
   if (compressed) {
-    const std::vector<uint8_t> coded =
-        compressBytes(regroup({b.data() + 8, b.size() - 8}, layoutOf(h.params, uint32_t(h.charts.size())), true));
-    b.resize(8);
-    b.insert(b.end(), coded.begin(), coded.end());
+    for (uint32_t c = 0; c < count; ++c) roots(c);
+    planes([](const Hierarchy::ChartNodes& n) -> const auto& { return n.bounds; });
+    for (const Hierarchy::ChartNodes& n : h.charts) emit(n.flags.data(), n.flags.size());
+    planes([](const Hierarchy::ChartNodes& n) -> const auto& { return n.errors; });
+  } else {
+    for (uint32_t c = 0; c < count; ++c) {
+      roots(c);
+      emit(h.charts[c].bounds.data(), h.charts[c].bounds.size() * sizeof(h.charts[c].bounds[0]));
+      emit(h.charts[c].flags.data(), h.charts[c].flags.size());
+      emit(h.charts[c].errors.data(), h.charts[c].errors.size() * sizeof(float));
+    }
   }
-  atomicWriteFile(path, b.data(), b.size());
+  flush();
+  if (coder) coder->finish();
+  file.commit();
 }
 
 Hierarchy readHierarchy(const std::filesystem::path& path) {
@@ -429,9 +462,9 @@ Hierarchy readHierarchy(const std::filesystem::path& path) {
       throw InputError(path.string() + ": hierarchy file holds " + std::to_string(body.size()) +
                        " bytes once decoded, its header (" + std::to_string(count) + " charts of depth " +
                        std::to_string(p.depth) + ") needs " + std::to_string(l.size()));
-    const std::vector<uint8_t> v1 = regroup(body, l, false);
-    b.resize(pos);
-    b.insert(b.end(), v1.begin(), v1.end());
+    std::vector<uint8_t> v1 = ungroup({b.data(), pos}, body, l);
+    body = {};
+    b = std::move(v1);
   }
   get(&count, 4);
   Hierarchy h;

@@ -246,6 +246,40 @@ TEST(ByteCodec, RoundTripsAndDetectsDamage) {
   EXPECT_THROW(decompressBytes(bad, raw.size()), CodecError);
 }
 
+// The frame made piece by piece decodes like the one made at once; the stated size is held to.
+TEST(ByteCodec, PieceByPieceFramesDecodeAsAWhole) {
+  std::vector<uint8_t> raw(3'000'000);
+  std::mt19937 rng(5);
+  for (size_t i = 0; i < raw.size(); ++i) raw[i] = uint8_t(i % 5 == 0 ? rng() : i / 4096);
+  std::vector<uint8_t> coded;
+  size_t sinks = 0;
+  {
+    BytesCompressor c(raw.size(), [&](const uint8_t* p, size_t n) {
+      coded.insert(coded.end(), p, p + n);
+      ++sinks;
+    });
+    for (size_t at = 0; at < raw.size();) {
+      const size_t n = std::min<size_t>(raw.size() - at, 1 + rng() % 200000);
+      c.add({raw.data() + at, n});
+      at += n;
+    }
+    c.finish();
+    EXPECT_THROW(c.finish(), std::logic_error);
+  }
+  EXPECT_GT(sinks, 2u);  // handed on as it was made
+  EXPECT_LT(coded.size(), raw.size() / 2);
+  EXPECT_EQ(decompressBytes(coded, raw.size()), raw);
+  std::vector<uint8_t> bad = coded;
+  bad[bad.size() / 3] ^= 0x10;
+  EXPECT_THROW(decompressBytes(bad, raw.size()), CodecError);
+  // More or fewer bytes than stated.
+  BytesCompressor over(10, [](const uint8_t*, size_t) {});
+  EXPECT_THROW(over.add({raw.data(), 11}), std::logic_error);
+  BytesCompressor under(10, [](const uint8_t*, size_t) {});
+  under.add({raw.data(), 9});
+  EXPECT_THROW(under.finish(), std::logic_error);
+}
+
 // Border normals: the border back exactly, the rest untouched; damage detected.
 TEST(BorderNormals, RoundTripTheBorderAndDetectDamage) {
   std::mt19937 rng(7);
