@@ -152,37 +152,64 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
     throw CodecError(std::string(what) + " block of side " + std::to_string(blockSide) + ", expected " +
                      std::to_string(side));
   const int64_t bound = mode == uint8_t(HeightQuantization::kInteger) ? kMaxIntegerSteps : kMaxSteps;
-  // Residuals back (plane by plane), then the Lorenzo reconstruction row by row in wrapping
-  // unsigned arithmetic (a crafted block cannot overflow), then the range check.
+  // Residuals back (byte planes merged and unzigzagged), then the Lorenzo reconstruction in wrapping
+  // unsigned arithmetic (a crafted block cannot overflow), then the range check. The
+  // reconstruction of a row adds the row below's differences (a vector loop), then runs the prefix
+  // sum along the row with every channel's chain in flight together.
   thread_local std::vector<uint32_t> q;
-  q.resize(n);
+  q.resize(n * channels);
   const uint8_t* base = raw.data() + kIntHeaderBytes;
   for (uint32_t c = 0; c < channels; ++c) {
-    const uint8_t* planesOf = base + size_t(c) * planes * n;
-    for (size_t i = 0; i < n; ++i) q[i] = planesOf[i];
-    for (uint8_t p = 1; p < planes; ++p) {
-      const uint8_t* plane = planesOf + size_t(p) * n;
-      for (size_t i = 0; i < n; ++i) q[i] |= uint32_t(plane[i]) << (8 * p);
+    uint32_t* qc = q.data() + size_t(c) * n;
+    const uint8_t* p0 = base + size_t(c) * planes * n;
+    const uint8_t *p1 = p0 + n, *p2 = p1 + n, *p3 = p2 + n;
+    auto unz = [](uint32_t z) { return (z >> 1) ^ (0u - (z & 1u)); };
+    switch (planes) {
+      case 1: for (size_t i = 0; i < n; ++i) qc[i] = unz(p0[i]); break;
+      case 2: for (size_t i = 0; i < n; ++i) qc[i] = unz(p0[i] | uint32_t(p1[i]) << 8); break;
+      case 3: for (size_t i = 0; i < n; ++i) qc[i] = unz(p0[i] | uint32_t(p1[i]) << 8 | uint32_t(p2[i]) << 16); break;
+      default:
+        for (size_t i = 0; i < n; ++i)
+          qc[i] = unz(p0[i] | uint32_t(p1[i]) << 8 | uint32_t(p2[i]) << 16 | uint32_t(p3[i]) << 24);
     }
-    for (size_t i = 0; i < n; ++i) q[i] = uint32_t(unzigzag(q[i]));
-    for (uint32_t x = 1; x < side; ++x) q[x] += q[x - 1];
-    for (uint32_t y = 1; y < side; ++y) {
-      uint32_t* row = q.data() + size_t(y) * side;
+  }
+  auto prefix = [&](size_t at) {  // row starting at sample `at`, every channel
+    if (channels == 3) {
+      uint32_t *a = q.data() + at, *b = a + n, *c = b + n;
+      for (uint32_t x = 1; x < side; ++x) a[x] += a[x - 1], b[x] += b[x - 1], c[x] += c[x - 1];
+    } else {
+      for (uint32_t ch = 0; ch < channels; ++ch) {
+        uint32_t* r = q.data() + size_t(ch) * n + at;
+        for (uint32_t x = 1; x < side; ++x) r[x] += r[x - 1];
+      }
+    }
+  };
+  prefix(0);
+  for (uint32_t y = 1; y < side; ++y) {
+    for (uint32_t ch = 0; ch < channels; ++ch) {
+      uint32_t* row = q.data() + size_t(ch) * n + size_t(y) * side;
       const uint32_t* prev = row - side;
       row[0] += prev[0];
-      for (uint32_t x = 1; x < side; ++x) row[x] += row[x - 1] + prev[x] - prev[x - 1];
+      for (uint32_t x = 1; x < side; ++x) row[x] += prev[x] - prev[x - 1];
     }
-    int32_t lo = 0, hi = 0;
+    prefix(size_t(y) * side);
+  }
+  int32_t lo = 0, hi = 0;
+  for (size_t i = 0; i < n * channels; ++i) {
+    lo = std::min(lo, int32_t(q[i]));
+    hi = std::max(hi, int32_t(q[i]));
+  }
+  if (lo < -bound || hi > bound) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
+  if (channels == 3) {
+    const uint32_t *a = q.data(), *b = a + n, *c = b + n;
     for (size_t i = 0; i < n; ++i) {
-      lo = std::min(lo, int32_t(q[i]));
-      hi = std::max(hi, int32_t(q[i]));
+      out[3 * i] = float(double(int32_t(a[i])) * step);
+      out[3 * i + 1] = float(double(int32_t(b[i])) * step);
+      out[3 * i + 2] = float(double(int32_t(c[i])) * step);
     }
-    if (lo < -bound || hi > bound) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
-    if (channels == 1) {
-      for (size_t i = 0; i < n; ++i) out[i] = float(double(int32_t(q[i])) * step);
-    } else {
-      for (size_t i = 0; i < n; ++i) out[i * channels + c] = float(double(int32_t(q[i])) * step);
-    }
+  } else {
+    for (uint32_t ch = 0; ch < channels; ++ch)
+      for (size_t i = 0; i < n; ++i) out[i * channels + ch] = float(double(int32_t(q[size_t(ch) * n + i])) * step);
   }
   return HeightQuantization(mode);
 }

@@ -1,6 +1,6 @@
 // The terrain build window by window (atlas/terrain/terrain_windowed.h): on the shipped SRTM tile
-// it writes byte for byte the chart files the in-memory build writes, compressed or not, with
-// windows far smaller than the tile; and `gimlod build` of a DEM several times larger than a small
+// twice upsampled it writes byte for byte the chart files the in-memory build writes, compressed
+// or not, with windows far smaller than the DEM; and `gimlod build` of a DEM several times larger than a small
 // --max-memory (the tile upsampled by a GDAL VRT, voids and all) stays under the cap, measured
 // from the child's own peak resident set.
 #include <gtest/gtest.h>
@@ -28,30 +28,58 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// The shipped tile upsampled by a GDAL VRT (bilinear, whole metres; its voids come through as
+// nodata).
+fs::path upsampledTile(const fs::path& dir, const char* scale) {
+  const fs::path tile = test::repoData() / "terrain/mt_rainier_90m.tif";
+  const fs::path vrt = dir / "upsampled.vrt";
+  GDALAllRegister();
+  GDALDatasetH src = GDALOpen(tile.c_str(), GA_ReadOnly);
+  if (!src) throw std::runtime_error("cannot open " + tile.string());
+  const char* argv[] = {"-q", "-of", "VRT", "-outsize", scale, scale, "-r", "bilinear", nullptr};
+  GDALTranslateOptions* opts = GDALTranslateOptionsNew(const_cast<char**>(argv), nullptr);
+  GDALDatasetH out = GDALTranslate(vrt.c_str(), src, opts, nullptr);
+  GDALTranslateOptionsFree(opts);
+  if (out) GDALClose(out);  // before its source, which it refers to
+  GDALClose(src);
+  if (!out) throw std::runtime_error("cannot write " + vrt.string());
+  return vrt;
+}
+
+// The tile twice upsampled (2401^2 samples, voids and all): in 16 MiB the charts go in groups of
+// 3 chart columns, and the void fill in windows of about 500^2.
 void expectSameCharts(bool compressed) {
   test::TempDir tmp("gimlod-windowed");
-  const fs::path tile = test::repoData() / "terrain/mt_rainier_90m.tif";
+  const fs::path tile = upsampledTile(tmp.path(), "200%");
   TerrainAtlasOptions atlas;
   atlas.chartSize = 257;
   atlas.blockIntervals = 64;
   atlas.coding.compressed = compressed;
   // In memory, as the build does it: filled, then quantized for a compressed atlas.
   DemRaster dem = loadDem(tile);
+  // Whole metres, and voids filled with fractions: the scratch holds tiles of both kinds.
+  ASSERT_GT(dem.voidsFilled, 0u);
+  ASSERT_TRUE(dem.integerHeights);
   if (compressed) {
-    atlas.coding.heightPrecision = 1.0;  // the tile is whole metres
+    atlas.coding.heightPrecision = 1.0;
     for (float& h : dem.heights)
       if (h != std::nearbyint(h)) h = quantizeToStep(h, 1.0);
+    dem.minHeight = *std::min_element(dem.heights.begin(), dem.heights.end());
+    dem.maxHeight = *std::max_element(dem.heights.begin(), dem.heights.end());
   }
   AtlasManifest a, b;
   fs::create_directories(tmp.path() / "memory");
   fs::create_directories(tmp.path() / "windows");
   writeTerrainCharts(dem, atlas, tmp.path() / "memory", a);
-  // Window by window, in 16 MiB: bands of a few hundred rows, fill windows of about 500^2.
   const DemSource source(tile);
   WindowedTerrainOptions wo;
   wo.atlas = atlas;
   wo.memoryBytes = uint64_t{16} << 20;
   const WindowedTerrainResult r = writeTerrainChartsWindowed(source, tmp.path() / "windows", wo, b);
+  EXPECT_EQ(r.heightPrecision, compressed ? 1.0 : 0.0);
+  EXPECT_LT(r.bandColumns, dem.width);
+  EXPECT_GT(r.scratchBytes, 0u);
+  EXPECT_LT(r.scratchBytes, uint64_t(dem.width) * dem.height * 2);  // under 2 of the 5 raw bytes
   EXPECT_EQ(r.dem.voidsFilled, dem.voidsFilled);
   EXPECT_EQ(r.dem.minHeight, dem.minHeight);
   EXPECT_EQ(r.dem.maxHeight, dem.maxHeight);
@@ -90,7 +118,6 @@ int runApp(const std::vector<std::string>& args, long* maxRssKib) {
 
 TEST(WindowedTerrain, ADemSeveralTimesTheMemoryCapBuildsUnderIt) {
   test::TempDir tmp("gimlod-memcap");
-  const fs::path tile = test::repoData() / "terrain/mt_rainier_90m.tif";
   // The tile upsampled 8 times by a VRT (92M samples; its voids come through as nodata). Under a
   // sanitizer (whose shadow memory the cap does not cover) 4 times, and the cap is not checked.
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
@@ -102,19 +129,7 @@ TEST(WindowedTerrain, ADemSeveralTimesTheMemoryCapBuildsUnderIt) {
   constexpr bool kCheckCap = true;
   const std::string cap = "256M";
 #endif
-  const fs::path vrt = tmp.path() / "upsampled.vrt";
-  {
-    GDALAllRegister();
-    GDALDatasetH src = GDALOpen(tile.c_str(), GA_ReadOnly);
-    ASSERT_NE(src, nullptr);
-    const char* argv[] = {"-q", "-of", "VRT", "-outsize", scale, scale, "-r", "bilinear", nullptr};
-    GDALTranslateOptions* opts = GDALTranslateOptionsNew(const_cast<char**>(argv), nullptr);
-    GDALDatasetH out = GDALTranslate(vrt.c_str(), src, opts, nullptr);
-    GDALTranslateOptionsFree(opts);
-    ASSERT_NE(out, nullptr);
-    GDALClose(out);
-    GDALClose(src);
-  }
+  const fs::path vrt = upsampledTile(tmp.path(), scale);
   const DemSource source(vrt);
   const double samples = double(source.info().width) * source.info().height;
   constexpr uint64_t kCap = uint64_t{256} << 20;
@@ -134,6 +149,9 @@ TEST(WindowedTerrain, ADemSeveralTimesTheMemoryCapBuildsUnderIt) {
   }
   const nlohmann::json st = nlohmann::json::parse(std::ifstream(atlas / "stats.json"));
   ASSERT_TRUE(st.contains("windowed")) << st.dump();
+  // In chart columns narrower than the DEM, from a scratch raster under 2 of the 5 raw bytes.
+  EXPECT_LT(st["windowed"]["band_columns"].get<double>(), double(source.info().width));
+  EXPECT_LT(st["windowed"]["scratch_bytes"].get<double>(), 2.0 * samples);
   EXPECT_GT(st["voids_filled"].get<uint64_t>(), 0u);
   EXPECT_EQ(st["samples"].get<double>(), samples);
   const AtlasManifest m = readManifest(atlas);
