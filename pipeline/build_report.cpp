@@ -199,6 +199,7 @@ nlohmann::json statsJson(const TerrainBuildStats& s) {
   stats["bytes_per_sample"] = cs.samples ? double(s.bytesOnDisk) / double(cs.samples) : 0.0;
   stats["samples_per_second"] = s.totalSeconds > 0 ? double(cs.samples) / s.totalSeconds : 0.0;
   stats["total_seconds"] = s.totalSeconds;
+  stats["peak_rss_bytes"] = s.peakRssBytes;
   return stats;
 }
 

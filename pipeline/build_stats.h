@@ -75,6 +75,7 @@ struct TerrainBuildStats {
   TerrainWriteStats write;
   uint64_t bytesOnDisk = 0;   // the atlas directory (stats.json aside)
   double totalSeconds = 0.0;
+  uint64_t peakRssBytes = 0;  // the process's peak resident set (VmHWM) when the build ended
 };
 
 // ---- meshes ---------------------------------------------------------------------------------

@@ -285,6 +285,7 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& o) {
   stats.input = fs::absolute(o.input).string();
   stats.bytesOnDisk = directoryBytes(stage.path());
   stats.totalSeconds = secondsSince(t0);
+  stats.peakRssBytes = peakResidentBytes();
   writeStatsFile(stage.path(), statsJson(stats));
   stage.commit();
   return stats;

@@ -160,6 +160,10 @@ struct DemSource::Impl {
   float nodataF = 0.f;
   double scale = 1.0, offset = 0.0, zScale = 1.0;
   bool flip = true;
+  // The last chunk read (GDAL rows [chunk * kDemChunkRows, ...)), raw, with its mask.
+  int64_t chunk = -1;
+  std::vector<float> chunkHeights;
+  std::vector<uint8_t> chunkMask;
 };
 
 DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(std::make_unique<Impl>()) {
@@ -294,32 +298,41 @@ void DemSource::readRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* va
   // GDAL's rows run north to south when the raster is north-up (flip): ours south to north.
   const int gy0 = im.flip ? int(h - y0 - rows) : int(y0);
   const size_t n = size_t{w} * rows;
-  GdalErrorCapture cap;
-  // GDAL reports how much it has read: the "read DEM" stage in thousandths.
+  // GDAL resamples a VRT window by window, and a sample's last bits can depend on the window asked
+  // for: every read goes in the same chunks of kDemChunkRows GDAL rows, whoever asks and however
+  // many rows, so a DEM reads the same whichever path builds it. The last chunk is kept for the
+  // next call (bands of rows overlap chunks).
+  Impl& cache = *impl_;
   std::optional<progress::ProgressStage> stage;
-  if (showProgress) stage.emplace("read DEM", 1000);
-  uint64_t thousandths = 0;
-  GDALRasterIOExtraArg extra;
-  INIT_RASTERIO_EXTRA_ARG(extra);
-  extra.pfnProgress = [](double done, const char*, void* data) -> int {
-    auto* last = static_cast<uint64_t*>(data);
-    const uint64_t now = uint64_t(std::clamp(done, 0.0, 1.0) * 1000.0);
-    if (now > *last) progress::advance(now - *last), *last = now;
-    return TRUE;
-  };
-  extra.pProgressData = &thousandths;
-  CPLErr err = im.band->RasterIO(GF_Read, 0, gy0, int(w), int(rows), heights, int(w), int(rows), GDT_Float32, 0, 0,
-                                 showProgress ? &extra : nullptr);
-  if (err != CE_None || !cap.failures().empty())
-    fail(path, withGdal("cannot read the raster data (truncated or corrupt file?)", cap));
-  std::vector<uint8_t> mask;
-  if (im.maskBand) {
-    mask.resize(n);
-    cap.clear();
-    if (im.band->GetMaskBand()->RasterIO(GF_Read, 0, gy0, int(w), int(rows), mask.data(), int(w), int(rows), GDT_Byte,
-                                         0, 0, nullptr) != CE_None ||
-        !cap.failures().empty())
-      fail(path, withGdal("cannot read the raster's mask band", cap));
+  const int64_t first = gy0 / kDemChunkRows, last = (int64_t(gy0) + rows - 1) / kDemChunkRows;
+  if (showProgress) stage.emplace("read DEM", uint64_t(last - first + 1));
+  std::vector<uint8_t> mask(im.maskBand ? n : 0);
+  for (int64_t k = first; k <= last; ++k) {
+    const int64_t c0 = k * kDemChunkRows, c1 = std::min<int64_t>(c0 + kDemChunkRows, h);
+    if (cache.chunk != k) {
+      cache.chunk = -1;
+      const size_t cn = size_t(c1 - c0) * w;
+      cache.chunkHeights.resize(cn);
+      GdalErrorCapture cap;
+      CPLErr err = im.band->RasterIO(GF_Read, 0, int(c0), int(w), int(c1 - c0), cache.chunkHeights.data(), int(w),
+                                     int(c1 - c0), GDT_Float32, 0, 0, nullptr);
+      if (err != CE_None || !cap.failures().empty())
+        fail(path, withGdal("cannot read the raster data (truncated or corrupt file?)", cap));
+      if (im.maskBand) {
+        cache.chunkMask.resize(cn);
+        cap.clear();
+        if (im.band->GetMaskBand()->RasterIO(GF_Read, 0, int(c0), int(w), int(c1 - c0), cache.chunkMask.data(),
+                                             int(w), int(c1 - c0), GDT_Byte, 0, 0, nullptr) != CE_None ||
+            !cap.failures().empty())
+          fail(path, withGdal("cannot read the raster's mask band", cap));
+      }
+      cache.chunk = k;
+    }
+    const int64_t r0 = std::max<int64_t>(c0, gy0), r1 = std::min<int64_t>(c1, int64_t(gy0) + rows);
+    const size_t from = size_t(r0 - c0) * w, to = size_t(r0 - gy0) * w, count = size_t(r1 - r0) * w;
+    std::copy_n(cache.chunkHeights.data() + from, count, heights + to);
+    if (im.maskBand) std::copy_n(cache.chunkMask.data() + from, count, mask.data() + to);
+    if (stage) progress::advance();
   }
   for (size_t i = 0; i < n; ++i) {
     const float v = heights[i];

@@ -51,6 +51,10 @@ double metresPerDegreeLongitude(double phiDeg);  // |phi| clamped to 89 degrees
 // not a raster, zero-size, all samples void, bad options.
 DemRaster loadDem(const std::filesystem::path& path, const DemOptions& options = {});
 
+// GDAL is asked for a DEM's rows in chunks of this many (from the raster's first row), whatever
+// rows a caller reads.
+inline constexpr int64_t kDemChunkRows = 32;
+
 // A DEM opened for reading in rows, for builds larger than memory: the raster's size, spacing,
 // georeference and warnings (info(); its heights empty) once opened, and any rows on demand.
 class DemSource {

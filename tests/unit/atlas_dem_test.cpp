@@ -12,6 +12,7 @@
 #include <vector>
 
 #include <gdal.h>
+#include <gdal_utils.h>
 
 #include "atlas/terrain/dem.h"
 #include "tests/test_util.h"
@@ -157,6 +158,46 @@ TEST(AtlasDem, SaintHelensUsgsDemProjected) {
   EXPECT_GE(dem.minHeight, 682.f);
   EXPECT_LE(dem.maxHeight, 2543.f);
   EXPECT_GT(dem.maxHeight - dem.minHeight, 1000.f);
+}
+
+// GDAL resamples a VRT window by window, and far down a tall raster a sample's last bits depend
+// on the window asked for (ETOPO5 upsampled to 52,440 rows: rows 51,800.. read as part of rows
+// 51,712..51,967 and of rows 51,800..52,439 differ by up to 0.02 m). DemSource asks GDAL for the
+// same chunks whatever rows it is asked for, so every way of reading gives the same samples.
+TEST(AtlasDem, RowsReadTheSameWhateverTheBandsAsked) {
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedData());
+  test::TempDir tmp("gimlod-dem-rows");
+  const fs::path vrt = tmp.path() / "tall.vrt";
+  {
+    GDALAllRegister();
+    GDALDatasetH src = GDALOpen(terrain("etopo5.cdf").c_str(), GA_ReadOnly);
+    ASSERT_NE(src, nullptr);
+    const char* argv[] = {"-q", "-of", "VRT", "-outsize", "300", "52440", "-r", "bilinear", nullptr};
+    GDALTranslateOptions* opts = GDALTranslateOptionsNew(const_cast<char**>(argv), nullptr);
+    GDALDatasetH out = GDALTranslate(vrt.c_str(), src, opts, nullptr);
+    GDALTranslateOptionsFree(opts);
+    ASSERT_NE(out, nullptr);
+    GDALClose(out);
+    GDALClose(src);
+  }
+  const DemSource source(vrt);
+  ASSERT_EQ(source.info().height, 52440u);
+  const uint32_t w = source.info().width;
+  // Our rows run south to north: GDAL's rows 51,712.. are our rows ..728.
+  auto read = [&](uint32_t y0, uint32_t rows) {
+    std::vector<float> h(size_t(w) * rows);
+    std::vector<uint8_t> v(h.size());
+    source.readRows(y0, rows, h.data(), v.data());
+    return h;
+  };
+  const std::vector<float> whole = read(0, 1000);
+  for (const auto& [y0, rows] : std::vector<std::pair<uint32_t, uint32_t>>{{0, 640}, {472, 256}, {100, 37}, {640, 360}}) {
+    const std::vector<float> part = read(y0, rows);
+    size_t differ = 0;
+    for (size_t i = 0; i < part.size(); ++i)
+      differ += std::memcmp(&part[i], &whole[size_t(y0) * w + i], 4) != 0;
+    EXPECT_EQ(differ, 0u) << "rows " << y0 << " + " << rows;
+  }
 }
 
 TEST(AtlasDem, Etopo5NetcdfGeographic) {
