@@ -123,6 +123,14 @@ CellWindow overlap(const CellWindow& a, const CellWindow& b) {
   return {std::max(a.x0, b.x0), std::max(a.y0, b.y0), std::min(a.x1, b.x1), std::min(a.y1, b.y1)};
 }
 
+// Copies the samples of o (inside both windows) from a row-major image of window a to one of b.
+template <typename T>
+void copyOverlap(const T* from, const CellWindow& a, T* to, const CellWindow& b, const CellWindow& o) {
+  for (int64_t y = o.y0; y < o.y1; ++y)
+    std::copy_n(from + size_t(y - a.y0) * size_t(a.width()) + size_t(o.x0 - a.x0), o.width(),
+                to + size_t(y - b.y0) * size_t(b.width()) + size_t(o.x0 - b.x0));
+}
+
 }  // namespace
 
 struct ScratchRaster::Decoded {
@@ -168,6 +176,14 @@ std::vector<uint64_t> ScratchRaster::tilesOf(const CellWindow& w) const {
   return out;
 }
 
+void ScratchRaster::forEachTile(const CellWindow& w, const TileVisit& visit) const {
+  const std::vector<uint64_t> tiles = tilesOf(w);
+  tbb::parallel_for(size_t{0}, tiles.size(), [&](size_t k) {
+    const CellWindow tw = tileWindow(tiles[k]);
+    visit(tiles[k], tw, overlap(w, tw));
+  });
+}
+
 void ScratchRaster::decode(uint64_t t, Decoded& out) const {
   const CellWindow tw = tileWindow(t);
   const size_t n = tw.cells();
@@ -200,10 +216,7 @@ void ScratchRaster::decode(uint64_t t, Decoded& out) const {
 
 void ScratchRaster::write(const CellWindow& w, const float* heights, const uint8_t* valid) {
   check(w, "write");
-  const std::vector<uint64_t> tiles = tilesOf(w);
-  tbb::parallel_for(size_t{0}, tiles.size(), [&](size_t k) {
-    const uint64_t t = tiles[k];
-    const CellWindow tw = tileWindow(t), o = overlap(w, tw);
+  forEachTile(w, [&](uint64_t t, const CellWindow& tw, const CellWindow& o) {
     Decoded d;
     if (valid && o.x0 == tw.x0 && o.y0 == tw.y0 && o.x1 == tw.x1 && o.y1 == tw.y1) {
       d.h.resize(tw.cells());
@@ -211,12 +224,8 @@ void ScratchRaster::write(const CellWindow& w, const float* heights, const uint8
     } else {
       decode(t, d);
     }
-    for (int64_t y = o.y0; y < o.y1; ++y) {
-      const size_t from = size_t(y - w.y0) * size_t(w.width()) + size_t(o.x0 - w.x0);
-      const size_t to = size_t(y - tw.y0) * size_t(tw.width()) + size_t(o.x0 - tw.x0);
-      std::copy_n(heights + from, o.width(), d.h.data() + to);
-      if (valid) std::copy_n(valid + from, o.width(), d.v.data() + to);
-    }
+    copyOverlap(heights, w, d.h.data(), tw, o);
+    if (valid) copyOverlap(valid, w, d.v.data(), tw, o);
     uint8_t validity = 0;
     const std::vector<uint8_t> coded = encodeTile(d.h.data(), d.v.data(), uint32_t(tw.width()), uint32_t(tw.height()), &validity);
     const std::lock_guard lock(mutex_);
@@ -243,18 +252,11 @@ void ScratchRaster::write(const CellWindow& w, const float* heights, const uint8
 
 void ScratchRaster::read(const CellWindow& w, float* heights, uint8_t* valid) const {
   check(w, "read");
-  const std::vector<uint64_t> tiles = tilesOf(w);
-  tbb::parallel_for(size_t{0}, tiles.size(), [&](size_t k) {
-    const uint64_t t = tiles[k];
-    const CellWindow tw = tileWindow(t), o = overlap(w, tw);
+  forEachTile(w, [&](uint64_t t, const CellWindow& tw, const CellWindow& o) {
     Decoded d;
     decode(t, d);
-    for (int64_t y = o.y0; y < o.y1; ++y) {
-      const size_t from = size_t(y - tw.y0) * size_t(tw.width()) + size_t(o.x0 - tw.x0);
-      const size_t to = size_t(y - w.y0) * size_t(w.width()) + size_t(o.x0 - w.x0);
-      if (heights) std::copy_n(d.h.data() + from, o.width(), heights + to);
-      if (valid) std::copy_n(d.v.data() + from, o.width(), valid + to);
-    }
+    if (heights) copyOverlap(d.h.data(), tw, heights, w, o);
+    if (valid) copyOverlap(d.v.data(), tw, valid, w, o);
   });
 }
 

@@ -18,6 +18,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <mutex>
 #include <vector>
 
@@ -60,6 +61,9 @@ class ScratchRaster {
   struct Decoded;
   CellWindow tileWindow(uint64_t t) const;
   std::vector<uint64_t> tilesOf(const CellWindow& w) const;
+  // Calls visit(tile, its window, its overlap with w) for every tile w touches, in parallel.
+  using TileVisit = std::function<void(uint64_t, const CellWindow&, const CellWindow&)>;
+  void forEachTile(const CellWindow& w, const TileVisit& visit) const;
   void decode(uint64_t t, Decoded& out) const;
   void check(const CellWindow& w, const char* what) const;
   [[noreturn]] void fail(const std::string& what) const;
