@@ -142,14 +142,20 @@ TEST(ScratchRaster, TheShippedTileTakesUnderAByteASample) {
 
 TEST(ScratchRaster, ADamagedTileIsNamed) {
   test::TempDir tmp("gimlod-scratch");
-  ScratchRaster s(tmp.path() / "s.scratch", "dem.tif", 100, 100, 64);
-  std::vector<float> h(100 * 100, 12.5f);
+  ScratchRaster s(tmp.path() / "s.scratch", "dem.tif", 100, 100, 128);  // one tile
+  std::vector<float> h(100 * 100);
+  std::mt19937 rng(11);
+  for (float& x : h) x = float(rng() % 5000) * 0.25f;
   std::vector<uint8_t> v(100 * 100, 1);
   s.write({0, 0, 100, 100}, h.data(), v.data());
+  ASSERT_GT(s.liveBytes(), 1000u);
   {
+    // A byte in the middle of the tile's zstd blocks.
     std::fstream f(s.path(), std::ios::in | std::ios::out | std::ios::binary);
-    f.seekp(20);
-    f.put('\x5a');
+    f.seekg(std::streamoff(s.liveBytes() / 2));
+    const char c = char(f.get());
+    f.seekp(std::streamoff(s.liveBytes() / 2));
+    f.put(char(c ^ 0x5a));
   }
   float out[4];
   try {
