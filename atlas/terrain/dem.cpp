@@ -290,7 +290,7 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
 DemSource::~DemSource() = default;
 
 void DemSource::readRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* valid, bool showProgress) const {
-  const Impl& im = *impl_;
+  Impl& im = *impl_;  // its chunk cache changes
   const fs::path& path = im.path;
   const uint32_t w = info_.width, h = info_.height;
   if (rows == 0) return;
@@ -302,36 +302,35 @@ void DemSource::readRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* va
   // for: every read goes in the same chunks of kDemChunkRows GDAL rows, whoever asks and however
   // many rows, so a DEM reads the same whichever path builds it. The last chunk is kept for the
   // next call (bands of rows overlap chunks).
-  Impl& cache = *impl_;
   std::optional<progress::ProgressStage> stage;
   const int64_t first = gy0 / kDemChunkRows, last = (int64_t(gy0) + rows - 1) / kDemChunkRows;
   if (showProgress) stage.emplace("read DEM", uint64_t(last - first + 1));
   std::vector<uint8_t> mask(im.maskBand ? n : 0);
   for (int64_t k = first; k <= last; ++k) {
     const int64_t c0 = k * kDemChunkRows, c1 = std::min<int64_t>(c0 + kDemChunkRows, h);
-    if (cache.chunk != k) {
-      cache.chunk = -1;
+    if (im.chunk != k) {
+      im.chunk = -1;
       const size_t cn = size_t(c1 - c0) * w;
-      cache.chunkHeights.resize(cn);
+      im.chunkHeights.resize(cn);
       GdalErrorCapture cap;
-      CPLErr err = im.band->RasterIO(GF_Read, 0, int(c0), int(w), int(c1 - c0), cache.chunkHeights.data(), int(w),
+      CPLErr err = im.band->RasterIO(GF_Read, 0, int(c0), int(w), int(c1 - c0), im.chunkHeights.data(), int(w),
                                      int(c1 - c0), GDT_Float32, 0, 0, nullptr);
       if (err != CE_None || !cap.failures().empty())
         fail(path, withGdal("cannot read the raster data (truncated or corrupt file?)", cap));
       if (im.maskBand) {
-        cache.chunkMask.resize(cn);
+        im.chunkMask.resize(cn);
         cap.clear();
-        if (im.band->GetMaskBand()->RasterIO(GF_Read, 0, int(c0), int(w), int(c1 - c0), cache.chunkMask.data(),
+        if (im.band->GetMaskBand()->RasterIO(GF_Read, 0, int(c0), int(w), int(c1 - c0), im.chunkMask.data(),
                                              int(w), int(c1 - c0), GDT_Byte, 0, 0, nullptr) != CE_None ||
             !cap.failures().empty())
           fail(path, withGdal("cannot read the raster's mask band", cap));
       }
-      cache.chunk = k;
+      im.chunk = k;
     }
     const int64_t r0 = std::max<int64_t>(c0, gy0), r1 = std::min<int64_t>(c1, int64_t(gy0) + rows);
     const size_t from = size_t(r0 - c0) * w, to = size_t(r0 - gy0) * w, count = size_t(r1 - r0) * w;
-    std::copy_n(cache.chunkHeights.data() + from, count, heights + to);
-    if (im.maskBand) std::copy_n(cache.chunkMask.data() + from, count, mask.data() + to);
+    std::copy_n(im.chunkHeights.data() + from, count, heights + to);
+    if (im.maskBand) std::copy_n(im.chunkMask.data() + from, count, mask.data() + to);
     if (stage) progress::advance();
   }
   for (size_t i = 0; i < n; ++i) {
