@@ -374,12 +374,13 @@ int main(int argc, char** argv) {
                    "Meshes: target patches (each becomes 1-5 quad charts, see --quads, and the chart repair may cut more); auto: "
                    "24 up to 4M triangles, above that about sqrt(triangles) / 80, at least 48; 0: --chart-error")
       ->capture_default_str();
-  std::string quadsArg = "sides";
+  std::string quadsArg = "auto";
   build->add_option("--quads", quadsArg,
                     "Meshes: how a patch becomes quad charts: sides (each chart edge a whole patch side, about n/2 "
                     "charts an n-sided patch, one for 4 sides), kites (each side halved, n charts), or auto (sides, "
-                    "and kites too if sides leave flipped texels, two-chart corners or a sampling error over the bound, "
-                    "keeping whichever leaves fewer flipped texels)")
+                    "and kites too if sides leave flipped texels, two-chart corners or a sampling error over the bound; "
+                    "from the density's chart size up, doubled only while neither layout meets the bound; keeping "
+                    "the first that leaves nothing to repair, else whichever leaves fewer flipped texels)")
       ->check(CLI::IsMember({"auto", "sides", "kites"}))
       ->capture_default_str();
   std::string normalsArg = "auto";
@@ -430,7 +431,11 @@ int main(int argc, char** argv) {
                     "in-memory build would exceed it is built window by window within it (default for DEMs: 3/4 of "
                     "the machine's memory)")
       ->capture_default_str();
-  build->add_option("--depth", common.depth, "Quadtree levels per chart")->capture_default_str();
+  build
+      ->add_option("--depth", common.depth,
+                   "Quadtree levels per chart (default: 5 for DEMs; meshes: as many as leave the finest nodes 32 "
+                   "intervals wide, at most 5)")
+      ->check(CLI::Range(1u, 12u));
   build->add_option("--node-res", common.nodeRes, "Maximum node resolution R in intervals (power of two)")
       ->capture_default_str();
   build->add_option("--min-node-res", common.minNodeRes, "Minimum node resolution in intervals")->capture_default_str();

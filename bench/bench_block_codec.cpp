@@ -74,12 +74,7 @@ int benchAtlas(const std::filesystem::path& dir) {
   return 0;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  if (argc > 2 && std::string(argv[1]) == "--atlas") return benchAtlas(argv[2]);
-  const std::filesystem::path input = argc > 1 ? argv[1] : "data/terrain/mt_rainier_90m.tif";
-  const double precision = argc > 2 ? std::atof(argv[2]) : 0.0;
+int benchDem(const std::filesystem::path& input, double precision) {
   const DemRaster dem = loadDem(input);
   constexpr uint32_t kSide = 65;
   std::vector<std::vector<float>> blocks;
@@ -114,4 +109,23 @@ int main(int argc, char** argv) {
               input.string().c_str(), blocks.size(), precision > 0.0 ? "quantized" : "integer metres, lossless",
               double(bytes) / samples, samples / encodeS * 1e-6, samples / decodeS * 1e-6);
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc > 1 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h" ||
+                   (std::string(argv[1]) == "--atlas" && argc != 3) || argc > 3)) {
+    std::printf("usage: %s [DEM [PRECISION]]   heights coded as 65^2 blocks: bytes per sample, encode and decode\n"
+                "       %s --atlas ATLAS       an atlas read block by block: samples decoded per second\n",
+                argv[0], argv[0]);
+    return argc > 1 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h") ? 0 : 2;
+  }
+  try {
+    if (argc > 2 && std::string(argv[1]) == "--atlas") return benchAtlas(argv[2]);
+    return benchDem(argc > 1 ? argv[1] : "data/terrain/mt_rainier_90m.tif", argc > 2 ? std::atof(argv[2]) : 0.0);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
+    return 1;
+  }
 }

@@ -151,66 +151,71 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
   if (blockSide != side || raw.size() != kIntHeaderBytes + size_t(planes) * channels * n)
     throw CodecError(std::string(what) + " block of side " + std::to_string(blockSide) + ", expected " +
                      std::to_string(side));
-  const int64_t bound = mode == uint8_t(HeightQuantization::kInteger) ? kMaxIntegerSteps : kMaxSteps;
-  // Residuals back (byte planes merged and unzigzagged), then the Lorenzo reconstruction in wrapping
-  // unsigned arithmetic (a crafted block cannot overflow), then the range check. The
-  // reconstruction of a row adds the row below's differences (a vector loop), then runs the prefix
-  // sum along the row with every channel's chain in flight together.
+  // Row by row, every channel (so a row's work stays in the L1 cache): the residuals back (byte
+  // planes merged and unzigzagged) with the row below's differences added (a vector loop), then
+  // the prefix sum along the row with every channel's chain in flight together, in wrapping
+  // unsigned arithmetic (a crafted block cannot overflow); then the row's range check and its
+  // floats.
   thread_local std::vector<uint32_t> q;
   q.resize(n * channels);
   const uint8_t* base = raw.data() + kIntHeaderBytes;
-  for (uint32_t c = 0; c < channels; ++c) {
-    uint32_t* qc = q.data() + size_t(c) * n;
-    const uint8_t* p0 = base + size_t(c) * planes * n;
+  auto residuals = [&](uint32_t* r, const uint32_t* prev, size_t at, const uint8_t* p0) {
     const uint8_t *p1 = p0 + n, *p2 = p1 + n, *p3 = p2 + n;
     auto unz = [](uint32_t z) { return (z >> 1) ^ (0u - (z & 1u)); };
-    switch (planes) {
-      case 1: for (size_t i = 0; i < n; ++i) qc[i] = unz(p0[i]); break;
-      case 2: for (size_t i = 0; i < n; ++i) qc[i] = unz(p0[i] | uint32_t(p1[i]) << 8); break;
-      case 3: for (size_t i = 0; i < n; ++i) qc[i] = unz(p0[i] | uint32_t(p1[i]) << 8 | uint32_t(p2[i]) << 16); break;
-      default:
-        for (size_t i = 0; i < n; ++i)
-          qc[i] = unz(p0[i] | uint32_t(p1[i]) << 8 | uint32_t(p2[i]) << 16 | uint32_t(p3[i]) << 24);
+    auto load = [&](size_t i) {
+      switch (planes) {
+        case 1: return uint32_t(p0[at + i]);
+        case 2: return p0[at + i] | uint32_t(p1[at + i]) << 8;
+        case 3: return p0[at + i] | uint32_t(p1[at + i]) << 8 | uint32_t(p2[at + i]) << 16;
+        default: return p0[at + i] | uint32_t(p1[at + i]) << 8 | uint32_t(p2[at + i]) << 16 | uint32_t(p3[at + i]) << 24;
+      }
+    };
+    if (!prev) {
+      for (uint32_t x = 0; x < side; ++x) r[x] = unz(load(x));
+      return;
     }
-  }
-  auto prefix = [&](size_t at) {  // row starting at sample `at`, every channel
+    r[0] = unz(load(0)) + prev[0];
+    switch (planes) {  // one vector loop per plane count
+      case 1: for (uint32_t x = 1; x < side; ++x) r[x] = unz(p0[at + x]) + prev[x] - prev[x - 1]; break;
+      case 2: for (uint32_t x = 1; x < side; ++x) r[x] = unz(p0[at + x] | uint32_t(p1[at + x]) << 8) + prev[x] - prev[x - 1]; break;
+      default: for (uint32_t x = 1; x < side; ++x) r[x] = unz(load(x)) + prev[x] - prev[x - 1];
+    }
+  };
+  const int64_t bound = mode == uint8_t(HeightQuantization::kInteger) ? kMaxIntegerSteps : kMaxSteps;
+  int32_t lo = 0, hi = 0;
+  for (uint32_t y = 0; y < side; ++y) {
+    const size_t at = size_t(y) * side;
+    for (uint32_t ch = 0; ch < channels; ++ch) {
+      uint32_t* row = q.data() + size_t(ch) * n + at;
+      residuals(row, y > 0 ? row - side : nullptr, at, base + size_t(ch) * planes * n);
+    }
     if (channels == 3) {
       uint32_t *a = q.data() + at, *b = a + n, *c = b + n;
       for (uint32_t x = 1; x < side; ++x) a[x] += a[x - 1], b[x] += b[x - 1], c[x] += c[x - 1];
+      float* o = out.data() + 3 * at;
+      for (uint32_t x = 0; x < side; ++x) {
+        const int32_t va = int32_t(a[x]), vb = int32_t(b[x]), vc = int32_t(c[x]);
+        lo = std::min(lo, std::min(va, std::min(vb, vc)));
+        hi = std::max(hi, std::max(va, std::max(vb, vc)));
+        o[3 * x] = float(double(va) * step);
+        o[3 * x + 1] = float(double(vb) * step);
+        o[3 * x + 2] = float(double(vc) * step);
+      }
     } else {
       for (uint32_t ch = 0; ch < channels; ++ch) {
         uint32_t* r = q.data() + size_t(ch) * n + at;
         for (uint32_t x = 1; x < side; ++x) r[x] += r[x - 1];
+        for (uint32_t x = 0; x < side; ++x) {
+          const int32_t v = int32_t(r[x]);
+          lo = std::min(lo, v);
+          hi = std::max(hi, v);
+          out[(at + x) * channels + ch] = float(double(v) * step);
+        }
       }
     }
-  };
-  prefix(0);
-  for (uint32_t y = 1; y < side; ++y) {
-    for (uint32_t ch = 0; ch < channels; ++ch) {
-      uint32_t* row = q.data() + size_t(ch) * n + size_t(y) * side;
-      const uint32_t* prev = row - side;
-      row[0] += prev[0];
-      for (uint32_t x = 1; x < side; ++x) row[x] += prev[x] - prev[x - 1];
-    }
-    prefix(size_t(y) * side);
   }
-  int32_t lo = 0, hi = 0;
-  for (size_t i = 0; i < n * channels; ++i) {
-    lo = std::min(lo, int32_t(q[i]));
-    hi = std::max(hi, int32_t(q[i]));
-  }
+  // (A corrupt block has written values out of range before this throws; callers discard them.)
   if (lo < -bound || hi > bound) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
-  if (channels == 3) {
-    const uint32_t *a = q.data(), *b = a + n, *c = b + n;
-    for (size_t i = 0; i < n; ++i) {
-      out[3 * i] = float(double(int32_t(a[i])) * step);
-      out[3 * i + 1] = float(double(int32_t(b[i])) * step);
-      out[3 * i + 2] = float(double(int32_t(c[i])) * step);
-    }
-  } else {
-    for (uint32_t ch = 0; ch < channels; ++ch)
-      for (size_t i = 0; i < n; ++i) out[i * channels + ch] = float(double(int32_t(q[size_t(ch) * n + i])) * step);
-  }
   return HeightQuantization(mode);
 }
 
@@ -411,12 +416,16 @@ std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, do
           if (std::abs(v) <= kMaxSteps) q[3 * i + c] = v;
         }
       }
-      // The window's samples settled before it (the rows below, and this row's left), which it
-      // must not meet.
+      // The window's samples settled before it (the rows below, and this row's left) and its border
+      // samples (fixed at their nearest lattice points), which it must not meet: on a densely
+      // sampled chart the sample beside the border may round to the border's lattice point.
       auto meets = [&] {
-        for (uint32_t v = y0; v <= y; ++v)
-          for (uint32_t u = x0; u <= (v < y ? x1 : x - 1); ++u)
-            if (same(i, size_t(v) * side + u)) return true;
+        for (uint32_t v = y0; v <= y1; ++v)
+          for (uint32_t u = x0; u <= x1; ++u) {
+            const bool before = v < y || (v == y && u < x);
+            const bool border = u == 0 || v == 0 || u + 1 == side || v + 1 == side;
+            if ((before || border) && (u != x || v != y) && same(i, size_t(v) * side + u)) return true;
+          }
         return false;
       };
       if (stride > 1 && meets()) std::copy(nearest.begin(), nearest.end(), q.begin() + 3 * i);

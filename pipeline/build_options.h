@@ -1,6 +1,7 @@
 // Options of `gimlod build`: one struct per input kind, over the fields they share.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <filesystem>
@@ -18,11 +19,23 @@ inline uint32_t log2u(uint32_t v) {
   return l;
 }
 
+// Quadtree levels per chart when none is asked for: a DEM's charts take kDefaultDepth; a mesh's
+// take as many levels as leave its finest nodes 32 intervals wide, at most kDefaultDepth (the
+// leaves of a 513-sample chart at that depth). A mesh's charts follow its density and may be as
+// small as 65 samples: at depth 5 those would hold 341 nodes each, the finest 4 intervals wide,
+// and their bounds and errors would weigh a third of the atlas.
+inline constexpr uint32_t kAutoDepth = 0;
+inline constexpr uint32_t kDefaultDepth = 5;
+inline uint32_t terrainDepth(uint32_t depth) { return depth == kAutoDepth ? kDefaultDepth : depth; }
+inline uint32_t meshDepth(uint32_t depth, uint32_t intervalsLog2) {
+  return depth != kAutoDepth ? depth : uint32_t(std::clamp(int(intervalsLog2) - 4, 1, int(kDefaultDepth)));
+}
+
 // What every build takes.
 struct CommonBuildOptions {
   std::filesystem::path input;   // the DEM or mesh to read
   std::filesystem::path output;  // the atlas directory; an earlier atlas there is replaced
-  uint32_t depth = 5;            // quadtree levels per chart
+  uint32_t depth = kAutoDepth;   // quadtree levels per chart (kAutoDepth: see terrainDepth, meshDepth)
   uint32_t nodeRes = 64;         // maximum node resolution R (intervals, power of two)
   uint32_t minNodeRes = 4;       // minimum node resolution (intervals, power of two)
   uint32_t threads = 0;          // worker threads; 0: all cores
@@ -136,9 +149,9 @@ struct MeshBuildOptions : CommonBuildOptions {
   // How patches become quad charts (atlas/mesh/resample.h QuadLayout): kites (n charts an n-sided
   // patch), sides (about n/2; side counts made even first), or auto: sides, and kites too if sides
   // leave flipped texels, corners where only two charts meet or a sampling error over the bound,
-  // keeping whichever leaves fewer flipped texels (sides on a tie, if it has no such corner and is
-  // within the bound or kites are not either).
-  MeshQuads quads = MeshQuads::kSides;
+  // both at one chart size, from the density's up, doubled only while neither meets the bound
+  // (see resampleMesh in pipeline/mesh_build.cpp).
+  MeshQuads quads = MeshQuads::kAuto;
   // How each quad chart's square maps into its quad of the patch's domain (atlas/mesh/resample.h
   // QuadMap): bilinear, least stretch, or least stretch for the charts that fold under bilinear.
   MeshQuadMap quadMap = MeshQuadMap::kBilinear;
@@ -164,13 +177,14 @@ inline constexpr double kSamplesPerTriangle = 2.0;
 
 // The default quad chart size for `quads` charts of a mesh of `triangles` triangles: the smallest
 // 2^m + 1 in [65, kMaxDensityChartSize] whose quads * (size - 1)^2 samples reach
-// kSamplesPerTriangle * triangles. The build then doubles it (up to kMaxSamplesPerTriangle) while
-// the patches whose charts sample the surface more coarsely than maxSampleError hold more than
-// kCoarseSurfaceToDouble of its triangles: below that, the repair cuts those patches, which costs
-// far fewer samples than doubling every chart (the shared scans: 24.1M samples in all against 57.2M
-// doubling past a tenth from 4 samples per triangle). Where the doubling stops at
-// kMaxSamplesPerTriangle, a chart may keep a sampling error past maxSampleError (0.086% of the
-// diagonal on the bunny, within the 0.1% goal).
+// kSamplesPerTriangle * triangles. With the auto quad layout (the default) the build doubles it
+// only while neither layout's repair brings every chart within maxSampleError. With one layout
+// asked for, it doubles it (up to kMaxSamplesPerTriangle) before the repair while the patches whose
+// charts sample the surface more coarsely than maxSampleError hold more than
+// kCoarseSurfaceToDouble of its triangles (below that, the repair cuts those patches, which costs
+// far fewer samples than doubling every chart), and after it while the repair leaves the bound
+// unmet. Where the doubling stops at kMaxSamplesPerTriangle, a chart may keep a sampling error
+// past maxSampleError.
 inline constexpr double kCoarseSurfaceToDouble = 0.25;
 inline constexpr uint32_t kMaxDensityChartSize = 1025;
 inline constexpr double kMaxSamplesPerTriangle = 64.0;

@@ -72,6 +72,7 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"sample_error_before_splits", flips.sampleErrorFirst},
                       {"patches_over_sample_error_before_splits", flips.patchesOverErrorFirst},
                       {"chart_size_by_density", rs.chartSizeByDensity},
+                      {"chart_size_for_density", rs.densityChartSize},
                       {"chart_size_doublings_after_repair", rs.repairDoublings},
                       {"sides_straightened", rs.sidesStraightened},
                       {"side_ears_mended", rs.sideEarsMended},

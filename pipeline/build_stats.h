@@ -113,6 +113,7 @@ struct MeshResampleStats {
   ChartRepairStats repair;
   uint32_t chartSize = 0;              // the quad charts' side in samples
   bool chartSizeByDensity = false;     // chosen by meshChartSizeForDensity
+  uint32_t densityChartSize = 0;       // what meshChartSizeForDensity chose, before any doubling
   uint32_t repairDoublings = 0;        // times it was doubled after a repair left the bound unmet
   double maxSampleError = 0.0;         // the repair's bound, in the input's units (0: none)
   double repairWork = 0.0;             // layout triangles parameterized again / layout triangles

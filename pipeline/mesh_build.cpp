@@ -118,7 +118,7 @@ HierarchyParams meshHierarchyParams(const MeshBuildOptions& o) {
       o.minNodeRes > o.nodeRes)
     throw InputError(optionRef("nodeRes") + " and " + optionRef("minNodeRes") +
                      " must be powers of two with 2 <= min <= node-res");
-  if (o.depth < 1 || o.depth > 12) throw InputError(optionRef("depth") + " must be in [1, 12]");
+  if (o.depth > 12) throw InputError(optionRef("depth") + " must be in [1, 12]");
   if (o.repairRounds > 16) throw InputError(optionRef("repairRounds") + " must be in [0, 16]");
   if (!(o.repairBudget >= 0.0 && o.repairBudget <= 100.0))
     throw InputError(optionRef("repairBudget") + " must be in [0, 100] (times the surface's triangles)");
@@ -135,7 +135,7 @@ HierarchyParams meshHierarchyParams(const MeshBuildOptions& o) {
   p.intervalsLog2 = log2u(o.chartSize - 1);
   p.maxNodeResLog2 = std::min(log2u(o.nodeRes), p.intervalsLog2);
   p.minNodeResLog2 = std::min(log2u(o.minNodeRes), p.maxNodeResLog2);
-  p.depth = std::min(o.depth, p.intervalsLog2 - p.minNodeResLog2 + 1);
+  p.depth = std::min(meshDepth(o.depth, p.intervalsLog2), p.intervalsLog2 - p.minNodeResLog2 + 1);
   p.validate();
   return p;
 }
@@ -212,9 +212,11 @@ void logFoldingCharts(const ChartLayout& layout, const GeometryImageSet& set) {
 // One resampling and repair of `layout` in quad layout `quads`: its patches change (side counts
 // made even for the sides layout, the repair's cuts). Stages "resample" and "chart_repair", named
 // with `suffix`. With the sides layout, false in `evened` (and nothing else done) when some patch
-// cannot be given an even side count.
+// cannot be given an even side count. A chart size chosen by density is `size` when given (else
+// meshChartSizeForDensity's), and doubled where the bound asks it only with `grow`.
 ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& options, QuadLayout quads,
-                               const fs::path& dir, StageMeter& meter, const std::string& suffix, bool* evened) {
+                               const fs::path& dir, StageMeter& meter, const std::string& suffix, bool* evened,
+                               uint32_t size = 0, bool grow = true) {
   ResampledMesh r;
   MeshResampleStats& st = r.stats;
   MeshBuildOptions o = options;
@@ -234,7 +236,11 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
   if (o.chartSize == 0) {
     o.chartSize = meshChartSizeForDensity(layout.triangles.size(), quadCharts);
     st.chartSizeByDensity = true;
-    spdlog::info("chart size {} for {} quad charts ({}) of {} triangles ({:.1f} samples per triangle)", o.chartSize,
+    st.densityChartSize = o.chartSize;
+    if (size > 0) o.chartSize = size;
+    spdlog::info("chart size {}{} for {} quad charts ({}) of {} triangles ({:.1f} samples per triangle)", o.chartSize,
+                 o.chartSize != st.densityChartSize ? fmt::format(" (the density's {}, doubled)", st.densityChartSize)
+                                                    : std::string(),
                  quadCharts, st.sideQuads ? "sides" : "kites", layout.triangles.size(),
                  samplesPerTriangle(layout, quadCharts, o.chartSize));
   }
@@ -284,7 +290,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
   const double diagonal = layoutDiagonal(layout);
   for (const glm::vec3& q : layout.positions) r.bounds.extend(q);
   const double maxError = o.maxSampleError * diagonal;
-  while (st.chartSizeByDensity && maxError > 0.0 && o.chartSize < kMaxDensityChartSize) {
+  while (grow && st.chartSizeByDensity && maxError > 0.0 && o.chartSize < kMaxDensityChartSize) {
     const std::vector<uint8_t> over = patchesOverSampleError(first, layout.patches.size(), maxError);
     uint64_t overTriangles = 0;
     for (uint32_t p = 0; p < layout.patches.size(); ++p) overTriangles += over[p] ? layout.patches[p].triangles.size() : 0;
@@ -313,7 +319,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
   for (;;) {
     r.set = repairCharts(layout, std::move(first), ro, repair, &st.repair,
                          [&] { return residentBytes() < o.maxMemory / 4 * 3; });
-    if (!st.chartSizeByDensity || !(maxError > 0.0) || r.set.image.sampleError <= maxError ||
+    if (!grow || !st.chartSizeByDensity || !(maxError > 0.0) || r.set.image.sampleError <= maxError ||
         st.repair.stoppedForWork || st.repair.stoppedForMemory || o.chartSize >= kMaxDensityChartSize ||
         samplesPerTriangle(layout, r.set.charts.size(), o.chartSize) >= kMaxSamplesPerTriangle)
       break;
@@ -383,39 +389,109 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
   } else {
     // Sides first (about half the charts). The sides layout keeps them unless some patch cannot
     // be given an even side count (a surface of a few triangles, whose sides have no inner
-    // vertex). Auto builds kites too if sides leave flipped texels, corners where only two charts
-    // meet or charts that sample the surface more coarsely than the bound, keeping whichever
-    // leaves fewer flipped texels (sides on a tie, if no such corner is left and it is within the
-    // bound or kites are not either). Each layout is straightened its own way from the charted
-    // patches.
+    // vertex). Auto tries both layouts at one chart size, from the density's up, doubling it only
+    // while neither meets the sampling bound: kites (about twice as many charts) cut more freely
+    // than sides, whose cuts must keep side counts even, and often meet the bound at a size where
+    // sides would need every chart doubled. At the density's size it stops at sides if they leave
+    // no flipped texel, no two-chart corner and no chart over the bound; at a larger one it builds
+    // sides only where kites meet the bound. Of the layouts built at the last size it keeps
+    // whichever leaves fewer flipped texels; on a tie, the one within the bound; both within it,
+    // the fewer samples (sides on a tie); both over it, the smaller sampling error. Each layout is
+    // straightened its own way from the charted patches.
     auto withinBound = [](const ResampledMesh& m) {
       return !(m.stats.maxSampleError > 0.0) || m.set.image.sampleError <= m.stats.maxSampleError;
     };
+    auto samples = [](const ResampledMesh& m) {
+      return uint64_t(m.set.charts.size()) * m.set.chartSize * m.set.chartSize;
+    };
+    const bool automatic = options.quads == MeshQuads::kAuto;
     const std::vector<Patch> charted = layout.patches;
-    straighten(QuadLayout::kSides, "");
-    ResampledMesh sides = resampleInLayout(layout, options, QuadLayout::kSides, dir, meter, "", &evened);
-    if (evened && (options.quads == MeshQuads::kSides ||
-                   (sides.set.image.flippedTexels == 0 && sides.stats.twoQuadCorners == 0 && withinBound(sides)))) {
-      r = std::move(sides);
-    } else {
-      if (!evened)
-        spdlog::warn("{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
-                     "of sides with inner vertices joins them to another such patch or to a hole); built with {} kites",
-                     options.input.string(), spelledOption(options, "quads"));
-      std::vector<Patch> sidesPatches = std::move(layout.patches);
+    bool sidesPossible = true;
+    uint32_t size = 0;  // the density's
+    for (std::string suffix;;) {
+      const bool first = size == 0;
+      ResampledMesh sides;
+      std::vector<Patch> sidesPatches;
+      uint32_t sidesStraightened = 0, sidesEars = 0;
+      auto buildSides = [&] {
+        layout.patches = charted;
+        straighten(QuadLayout::kSides, suffix);
+        sides = resampleInLayout(layout, options, QuadLayout::kSides, dir, meter, suffix, &evened, size, !automatic);
+        if (!evened) {
+          sidesPossible = false;
+          spdlog::warn("{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
+                       "of sides with inner vertices joins them to another such patch or to a hole); built with {} "
+                       "kites",
+                       options.input.string(), spelledOption(options, "quads"));
+          return;
+        }
+        sidesPatches = layout.patches;
+        sidesStraightened = straightened, sidesEars = ears;
+      };
+      if (sidesPossible && first) {
+        buildSides();
+        if (sidesPossible && (!automatic || (sides.set.image.flippedTexels == 0 && sides.stats.twoQuadCorners == 0 &&
+                                             withinBound(sides)))) {
+          r = std::move(sides);
+          break;
+        }
+      }
       layout.patches = charted;
-      const uint32_t sidesStraightened = straightened, sidesEars = ears;
-      straighten(QuadLayout::kKites, " (kites)");
-      ResampledMesh kites = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, " (kites)", &evened);
-      const bool keepSides = !sidesPatches.empty() && sides.spill && sides.stats.twoQuadCorners == 0 &&
-                             sides.set.image.flippedTexels <= kites.set.image.flippedTexels &&
-                             (withinBound(sides) || !withinBound(kites));
-      if (sides.spill) {
-        spdlog::info("quad layout: sides ({} charts) left {} flipped texels, {} two-chart corners and a sampling error "
-                     "{:.3g}, kites ({} charts) {} flipped texels and {:.3g} (bound {:.3g}): keeping {}",
-                     sides.set.charts.size(), sides.set.image.flippedTexels, sides.stats.twoQuadCorners,
-                     sides.set.image.sampleError, kites.set.charts.size(), kites.set.image.flippedTexels,
-                     kites.set.image.sampleError, sides.stats.maxSampleError, keepSides ? "sides" : "kites");
+      straighten(QuadLayout::kKites, suffix + " (kites)");
+      ResampledMesh kites = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, suffix + " (kites)",
+                                             &evened, size, !automatic);
+      const bool kitesClean = kites.set.image.flippedTexels == 0 && withinBound(kites);
+      std::vector<Patch> kitesPatches = layout.patches;
+      const uint32_t kitesStraightened = straightened, kitesEars = ears;
+      // At a grown size, sides only where kites meet the bound, for their fewer samples: kites cut
+      // more freely, and on every shared scan they left the smaller sampling error at every size.
+      if (automatic && !first && kitesClean && sidesPossible) buildSides();
+      // Neither within the bound: the next size, unless the density did not choose it, a repair
+      // stopped for memory, or the charts reach their largest size, kMaxSamplesPerTriangle or the
+      // room checkChartRoom allows.
+      const bool sidesBuilt = static_cast<bool>(sides.spill);
+      const ResampledMesh& fewer = sidesBuilt && samples(sides) < samples(kites) ? sides : kites;
+      if (automatic && !kitesClean && !withinBound(kites) && !(sidesBuilt && withinBound(sides)) &&
+          kites.stats.chartSizeByDensity && !kites.stats.repair.stoppedForMemory &&
+          !(sidesBuilt && sides.stats.repair.stoppedForMemory) && kites.stats.chartSize < kMaxDensityChartSize &&
+          double(samples(fewer)) < kMaxSamplesPerTriangle * double(std::max<uint64_t>(layoutTriangles, 1))) {
+        MeshBuildOptions larger = options;
+        larger.chartSize = 2 * kites.stats.chartSize - 1;
+        bool room = true;
+        try {
+          checkChartRoom(layout, layoutQuadCount(layout, QuadLayout::kKites), larger, dir);
+        } catch (const InputError& e) {
+          room = false;
+          spdlog::info("chart size stays {}: {}", kites.stats.chartSize,
+                       options.spellOption ? e.message(options.spellOption) : std::string(e.what()));
+        }
+        if (room) {
+          const double percent = 100.0 / std::max(layoutDiagonal(layout), 1e-300);
+          spdlog::info("chart size {} -> {}: neither layout meets the sampling bound ({}kites {:.4f}% of the "
+                       "diagonal, bound {:.4f}%)",
+                       kites.stats.chartSize, larger.chartSize,
+                       sidesBuilt ? fmt::format("sides {:.4f}%, ", percent * sides.set.image.sampleError) : "",
+                       percent * kites.set.image.sampleError, percent * kites.stats.maxSampleError);
+          size = larger.chartSize;
+          suffix = fmt::format(" at {}", size);
+          continue;
+        }
+      }
+      bool keepSides = sidesBuilt && !sidesPatches.empty() && sides.stats.twoQuadCorners == 0 &&
+                       sides.set.image.flippedTexels <= kites.set.image.flippedTexels &&
+                       (withinBound(sides) || !withinBound(kites));
+      if (keepSides && sides.set.image.flippedTexels == kites.set.image.flippedTexels &&
+          withinBound(sides) == withinBound(kites))
+        keepSides = withinBound(sides) ? samples(sides) <= samples(kites)
+                                       : sides.set.image.sampleError <= kites.set.image.sampleError;
+      if (sidesBuilt) {
+        spdlog::info("quad layout: sides ({} charts of {}^2) left {} flipped texels, {} two-chart corners and a "
+                     "sampling error {:.3g}, kites ({} charts of {}^2) {} flipped texels and {:.3g} (bound {:.3g}): "
+                     "keeping {}",
+                     sides.set.charts.size(), sides.set.chartSize, sides.set.image.flippedTexels,
+                     sides.stats.twoQuadCorners, sides.set.image.sampleError, kites.set.charts.size(),
+                     kites.set.chartSize, kites.set.image.flippedTexels, kites.set.image.sampleError,
+                     sides.stats.maxSampleError, keepSides ? "sides" : "kites");
       }
       if (keepSides) {
         sides.stats.alternativeFlippedTexels = int64_t(kites.set.image.flippedTexels);
@@ -424,9 +500,13 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
         straightened = sidesStraightened;
         ears = sidesEars;
       } else {
-        if (sides.spill) kites.stats.alternativeFlippedTexels = int64_t(sides.set.image.flippedTexels);
+        if (sidesBuilt) kites.stats.alternativeFlippedTexels = int64_t(sides.set.image.flippedTexels);
         r = std::move(kites);
+        layout.patches = std::move(kitesPatches);
+        straightened = kitesStraightened;
+        ears = kitesEars;
       }
+      break;
     }
   }
   r.stats.sidesStraightened = straightened;

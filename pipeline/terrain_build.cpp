@@ -98,7 +98,7 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
   validateImageryOptions(imageryOptions(o));
   HierarchyParams p;
   p.intervalsLog2 = log2u(o.chartSize - 1);
-  p.depth = o.depth;
+  p.depth = terrainDepth(o.depth);
   p.maxNodeResLog2 = log2u(o.nodeRes);
   p.minNodeResLog2 = log2u(o.minNodeRes);
   p.validate();
@@ -128,7 +128,7 @@ AtlasManifest terrainManifest(const TerrainBuildOptions& o) {
   AtlasManifest m;
   m.chartSize = o.chartSize;
   m.blockIntervals = o.nodeRes;
-  m.depth = o.depth;
+  m.depth = terrainDepth(o.depth);
   m.maxNodeResLog2 = log2u(o.nodeRes);
   m.minNodeResLog2 = log2u(o.minNodeRes);
   m.zScale = o.zScale;

@@ -5,6 +5,7 @@
 // tolerances, on a curved sheet, and whole byte strings.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -183,6 +184,59 @@ TEST(PositionSettling, WithinTheToleranceOnTheLatticeAndCheaper) {
   }
   EXPECT_THROW(settlePositions(sheet(kSide, 0.01), kSide, step, -1.0), std::invalid_argument);
   EXPECT_THROW(settlePositions(sheet(kSide, 0.01), kSide - 1, step, 0.0), std::invalid_argument);
+}
+
+// Positions round-trip exactly to their lattice points whatever the residuals' width: random walks
+// whose residuals take 1, 2, 3 and 4 byte planes, at every block side the atlases use, and a
+// block whose coordinates reach the lattice's bound of 2^23 steps either way.
+TEST(PositionCodec, RoundTripsExactlyAtEveryResidualWidth) {
+  const double step = std::exp2(-18.0);
+  std::mt19937 rng(7);
+  for (const uint32_t side : {2u, 3u, 9u, 65u}) {
+    for (const int32_t spread : {3, 100, 30000, 3000000, 1 << 23}) {
+      std::uniform_int_distribution<int32_t> d(-spread, spread);
+      std::vector<float> in(size_t(3) * side * side);
+      for (float& v : in) v = float(double(std::clamp(d(rng), -(1 << 23), 1 << 23)) * step);
+      const std::vector<uint8_t> coded = encodePositions(in, side, step);
+      std::vector<float> back(in.size(), -1.0f);
+      decodePositions(coded, side, back);
+      ASSERT_EQ(back, in) << "side " << side << ", residuals up to " << spread << " steps";
+    }
+  }
+  // The bound itself, both ways, alternating (the largest residuals a block can hold).
+  std::vector<float> in(size_t(3) * kSide * kSide);
+  for (size_t i = 0; i < in.size(); ++i) in[i] = float(double((i & 1) ? (1 << 23) : -(1 << 23)) * step);
+  std::vector<float> back(in.size());
+  decodePositions(encodePositions(in, kSide, step), kSide, back);
+  EXPECT_EQ(back, in);
+}
+
+// A sample beside the border that rounds to its border neighbour's lattice point (a chart sampled
+// more densely than the lattice, as a thin limb's charts are) is kept apart from it, whatever the
+// tolerance: the border is fixed, and a merged pair would weld the chart's inside to its seam.
+TEST(PositionSettling, SamplesBesideTheBorderNeverMeetIt) {
+  const double step = std::exp2(-18.0);
+  constexpr uint32_t side = 9;
+  std::vector<float> in(size_t(3) * side * side);
+  for (uint32_t v = 0; v < side; ++v)
+    for (uint32_t u = 0; u < side; ++u) {
+      // Columns a step apart, but the last inner one 0.3 steps from the last (border) column.
+      const double x = u + 1 < side - 1 ? double(u) : double(side - 1) - 0.3;
+      float* p = &in[3 * (size_t(v) * side + u)];
+      p[0] = float(x * step);
+      p[1] = float(double(v) * step);
+      p[2] = float(0.25 * step);
+    }
+  for (const double tolerance : {0.0, 4 * step}) {
+    const std::vector<float> out = settlePositions(in, side, step, tolerance);
+    for (uint32_t v = 1; v + 1 < side; ++v) {
+      const size_t inner = size_t(v) * side + side - 2, border = inner + 1;
+      EXPECT_FALSE(out[3 * inner] == out[3 * border] && out[3 * inner + 1] == out[3 * border + 1] &&
+                   out[3 * inner + 2] == out[3 * border + 2])
+          << "row " << v << ", tolerance " << tolerance;
+      EXPECT_EQ(out[3 * border], quantizeToStep(in[3 * border], step));
+    }
+  }
 }
 
 // Settled normals: the border unchanged, every byte within the tolerance, decoded exactly, coded

@@ -277,7 +277,10 @@ uint64_t checkCodedBunny(double positionTolerance, uint32_t normalTolerance, con
         const uint32_t u = uint32_t(i % side), v = uint32_t(i / side);
         const bool border = u == 0 || v == 0 || u + 1 == side || v + 1 == side;
         for (int x = 0; x < 3; ++x) {
-          if (border) EXPECT_LE(std::abs(double(pa[i][x]) - pb[i][x]), step / 2) << "chart " << c << " level " << k << " at " << u << "," << v;
+          if (border) {
+            EXPECT_LE(std::abs(double(pa[i][x]) - pb[i][x]), step / 2)
+                << "chart " << c << " level " << k << " at " << u << "," << v;
+          }
           EXPECT_EQ(std::nearbyint(double(pb[i][x]) / step) * step, double(pb[i][x]));  // on the lattice
           const int dn = std::abs(int(na[i][x]) - int(nb[i][x]));
           EXPECT_LE(dn, border ? 0 : int(normalTolerance)) << "chart " << c << " level " << k << " sample " << i;
