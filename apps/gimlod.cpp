@@ -419,7 +419,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   build->add_option("--repair-budget,--flip-repair-budget", mesh.repairBudget,
                     "Meshes: the chart repair stops once it has parameterized this many times the surface's triangles "
-                    "again (its time is about this many resamplings)")
+                    "again (its time is about this many resamplings); with --quads auto, the two layouts' repairs at "
+                    "one chart size take half each")
       ->capture_default_str();
   double sampleErrorPercent = -1.0;
   build->add_option("--sample-error", sampleErrorPercent,
@@ -433,9 +434,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   build
       ->add_option("--depth", common.depth,
-                   "Quadtree levels per chart (default: 5 for DEMs; meshes: as many as leave the finest nodes 32 "
-                   "intervals wide, at most 5)")
-      ->check(CLI::Range(1u, 12u));
+                   "Quadtree levels per chart, 1 to 12 (default: 5 for DEMs; meshes: as many as leave the finest "
+                   "nodes 32 intervals wide, at most 5)");
   build->add_option("--node-res", common.nodeRes, "Maximum node resolution R in intervals (power of two)")
       ->capture_default_str();
   build->add_option("--min-node-res", common.minNodeRes, "Minimum node resolution in intervals")->capture_default_str();
@@ -567,6 +567,9 @@ int main(int argc, char** argv) {
   try {
     if (*build) {
       const uint64_t maxMemoryBytes = parseBytes("--max-memory", maxMemory);
+      // (0 is how the options say "not given".)
+      if (build->get_option("--depth")->count() > 0 && (common.depth < 1 || common.depth > 12))
+        throw InputError("--depth " + std::to_string(common.depth) + " must be in [1, 12]");
       common.spellOption = flagFor;
       common.compress = !uncompressed;
       if (isMesh(detectInputKind(common.input))) {

@@ -67,29 +67,31 @@ struct BuiltScanAtlas {
   double seconds = 0.0;       // build time
 };
 
-// Where a scan's atlas is kept for the other test processes of this executable: under
-// GIMLOD_TEST_CACHE, named for the scan, the kind of build and the executable's own size and
-// modification time (so a rebuilt test binary never reads an atlas an older build made).
+// Where a scan's atlas is kept for the other test processes: under GIMLOD_TEST_CACHE, named for
+// the scan, the kind of build and the size and modification time of the gimlod program
+// (GIMLOD_APP). Both test executables link the libraries that build atlases, as the program does,
+// and the build makes the program before either (add_dependencies): a change to those libraries
+// relinks it, so no test reads an atlas an older build made, and the two executables share one
+// build of each scan.
 inline std::filesystem::path cachedScanAtlasPath(const std::string& name, bool withFidelity) {
   namespace fs = std::filesystem;
   std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  const auto size = ec ? 0 : fs::file_size(exe, ec);
-  const auto stamp = ec ? 0 : fs::last_write_time(exe, ec).time_since_epoch().count();
+  const fs::path app = GIMLOD_APP;
+  const auto size = fs::file_size(app, ec);
+  const auto stamp = ec ? 0 : fs::last_write_time(app, ec).time_since_epoch().count();
   return fs::path(GIMLOD_TEST_CACHE) /
-         (exe.filename().string() + "-" + std::to_string(size) + "-" + std::to_string(stamp)) /
+         ("scans-" + std::to_string(ec ? 0 : size) + "-" + std::to_string(stamp)) /
          (name + (withFidelity ? "_fidelity" : "") + ".atlas");
 }
 
-// The atlas of scan `name` at the default mesh options, built once per test executable: the first
-// process that asks builds it (others wait on a lock) into the cache (cachedScanAtlasPath), and
-// every later process of the same executable reads it there. What buildAtlas returned and the
+// The atlas of scan `name` at the default mesh options, built once for the test executables: the
+// first process that asks builds it (others wait on a lock) into the cache (cachedScanAtlasPath),
+// and every later process reads it there. What buildAtlas returned and the
 // build time are kept beside the atlas (dir/build.json, written last: an atlas without it, from a
 // build killed halfway, is built again), so `stats` is always buildAtlas's own return.
 // withFidelity: the build measures the two-sided Hausdorff distance (about half the build time);
-// a build without it is reused only when fidelity is not asked for, so the tests of one
-// executable ask alike (the CPU tests with it, the GL tests without). Throws what buildAtlas
-// throws.
+// a build without it is reused only when fidelity is not asked for, so the tests ask alike (all
+// with it: one build serves both executables). Throws what buildAtlas throws.
 inline const BuiltScanAtlas& scanAtlas(const std::string& name, bool withFidelity) {
   namespace fs = std::filesystem;
   static std::map<std::string, BuiltScanAtlas> built;
@@ -106,12 +108,14 @@ inline const BuiltScanAtlas& scanAtlas(const std::string& name, bool withFidelit
       if (const BuiltScanAtlas* b = cached(cachedScanAtlasPath(name, fidelity), fidelity)) return *b;
   const fs::path dir = cachedScanAtlasPath(name, withFidelity);
   if (!fs::exists(dir.parent_path())) {
-    // What earlier builds of this executable kept is stale: removed.
+    // What earlier builds kept is stale: removed (and what the per-executable caches kept before).
     std::error_code ec;
-    const std::string prefix = dir.parent_path().filename().string();
-    const std::string exeName = prefix.substr(0, prefix.find('-') + 1);
-    for (const auto& e : fs::directory_iterator(GIMLOD_TEST_CACHE, ec))
-      if (e.path().filename().string().rfind(exeName, 0) == 0 && e.path() != dir.parent_path()) fs::remove_all(e.path(), ec);
+    for (const auto& e : fs::directory_iterator(GIMLOD_TEST_CACHE, ec)) {
+      const std::string entry = e.path().filename().string();
+      const bool ours = entry.rfind("scans-", 0) == 0 || entry.rfind("gimlod_tests-", 0) == 0 ||
+                        entry.rfind("gimlod_gl_tests-", 0) == 0;
+      if (ours && e.path() != dir.parent_path()) fs::remove_all(e.path(), ec);
+    }
   }
   fs::create_directories(dir.parent_path());
   // One builder at a time per atlas; the lock goes with the descriptor (and with the process, even

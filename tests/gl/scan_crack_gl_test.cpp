@@ -44,7 +44,8 @@ TEST_P(ScanCrackTest, DualQueueCutsAlongAPathHaveNoCracks) {
   const std::string name = GetParam();
   GIMLOD_NEED_SHARED_DATA(test::haveSharedScan(name));
   const test::BuiltScanAtlas* built = nullptr;
-  ASSERT_NO_THROW(built = &test::scanAtlas(name, false)) << "gimlod build " << test::sharedScanPath(name);
+  // With the fidelity measure, as the CPU tests ask: one build of the scan serves both.
+  ASSERT_NO_THROW(built = &test::scanAtlas(name, true)) << "gimlod build " << test::sharedScanPath(name);
   const AtlasView atlas = openAtlas(built->dir);
   const Hierarchy& h = atlas.hierarchy;
   ASSERT_EQ(atlas.manifest.kind, AtlasKind::Geometry);
@@ -98,7 +99,10 @@ TEST_P(ScanCrackTest, DualQueueCutsAlongAPathHaveNoCracks) {
             << ", " << checked << " border vertices checked\n";
   EXPECT_GT(checked, 10000u);
   EXPECT_GT(controls, 0u) << "no frame was mixed across chart borders, so the negative control never ran";
-  EXPECT_GE(maxLevel, 2u) << "the path never came close enough to refine charts";
+  // The deepest level a chart has (depth 2 at 65^2, where the finest nodes are 32 intervals wide),
+  // or at least level 2.
+  EXPECT_GE(maxLevel, std::min(2u, h.params.depth - 1)) << "the path never came close enough to refine charts";
+  EXPECT_GT(maxLevel, 0u) << "no chart was refined";
   EXPECT_GT(total.crossChartLevelDiff, 0u) << "no chart-border neighbours at different levels";
   EXPECT_GT(total.crossChartResDiff, 0u) << "no chart-border neighbours at different resolutions";
 }
