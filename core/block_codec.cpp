@@ -25,6 +25,10 @@ constexpr size_t kByteHeaderBytes = 8;  // inside the frame: kind, channels, sid
 constexpr int64_t kMaxIntegerSteps = int64_t{1} << 28;
 constexpr int64_t kMaxSteps = int64_t{1} << 23;
 constexpr int kLevel = 3;
+// Positions are coded once per mesh build, and their byte planes at level 9 take 5-6% fewer bytes
+// and decode 10% faster than at 3 (igea and the bunny's default atlases; at 12, 1% fewer still).
+// Heights keep level 3: a terrain build codes billions of samples, at about a third of the speed.
+constexpr int kPositionLevel = 9;
 
 struct CCtxFree { void operator()(ZSTD_CCtx* c) const { ZSTD_freeCCtx(c); } };
 struct DCtxFree { void operator()(ZSTD_DCtx* c) const { ZSTD_freeDCtx(c); } };
@@ -44,12 +48,13 @@ ZSTD_DCtx* decompressor() {
   return d.get();
 }
 
-// magic + one zstd frame (with its checksum) of raw.
-std::vector<uint8_t> frame(const char (&magic)[4], std::span<const uint8_t> raw) {
+// magic + one zstd frame (with its checksum) of raw, at zstd level `level`.
+std::vector<uint8_t> frame(const char (&magic)[4], std::span<const uint8_t> raw, int level = kLevel) {
   std::vector<uint8_t> out(kMagicBytes + ZSTD_compressBound(raw.size()));
   std::memcpy(out.data(), magic, kMagicBytes);
-  const size_t written =
-      ZSTD_compress2(compressor(), out.data() + kMagicBytes, out.size() - kMagicBytes, raw.data(), raw.size());
+  ZSTD_CCtx* c = compressor();
+  ZSTD_CCtx_setParameter(c, ZSTD_c_compressionLevel, level);
+  const size_t written = ZSTD_compress2(c, out.data() + kMagicBytes, out.size() - kMagicBytes, raw.data(), raw.size());
   if (ZSTD_isError(written)) throw std::runtime_error(std::string("block codec: zstd: ") + ZSTD_getErrorName(written));
   out.resize(kMagicBytes + written);
   return out;
@@ -131,7 +136,7 @@ std::vector<uint8_t> encodeInts(const char (&magic)[4], const std::vector<int32_
       uint8_t* plane = raw.data() + kIntHeaderBytes + (size_t(c) * planes + p) * n;
       for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(z[i * channels + c] >> (8 * p));
     }
-  return frame(magic, raw);
+  return frame(magic, raw, channels == 3 ? kPositionLevel : kLevel);
 }
 
 // Decodes into out (channels * side^2 floats); returns the quantization.
