@@ -419,8 +419,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   build->add_option("--repair-budget,--flip-repair-budget", mesh.repairBudget,
                     "Meshes: the chart repair stops once it has parameterized this many times the surface's triangles "
-                    "again (its time is about this many resamplings); with --quads auto, the two layouts' repairs at "
-                    "one chart size take half each")
+                    "again (its time is about this many resamplings); with --quads auto, each of its repairs (up to "
+                    "two layouts at each size it tries) takes a quarter")
       ->capture_default_str();
   double sampleErrorPercent = -1.0;
   build->add_option("--sample-error", sampleErrorPercent,

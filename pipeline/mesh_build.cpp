@@ -239,7 +239,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const MeshBuildOptions& opti
     st.densityChartSize = o.chartSize;
     if (size > 0) o.chartSize = size;
     spdlog::info("chart size {}{} for {} quad charts ({}) of {} triangles ({:.1f} samples per triangle)", o.chartSize,
-                 o.chartSize != st.densityChartSize ? fmt::format(" (the density's {}, doubled)", st.densityChartSize)
+                 o.chartSize != st.densityChartSize ? fmt::format(" (doubled from the density's {})", st.densityChartSize)
                                                     : std::string(),
                  quadCharts, st.sideQuads ? "sides" : "kites", layout.triangles.size(),
                  samplesPerTriangle(layout, quadCharts, o.chartSize));
@@ -405,11 +405,12 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
       return uint64_t(m.set.charts.size()) * m.set.chartSize * m.set.chartSize;
     };
     const bool automatic = options.quads == MeshQuads::kAuto;
-    // Auto's two layouts at one size share one repair's budget; a repair that cannot meet the bound
-    // spends all it has (the horse: 8 times its triangles at 65^2 in each layout), one that can
-    // seldom needs half (the bunny's kites: 1.9).
+    // Auto tries up to two layouts at each of several sizes: each repair takes a quarter of the
+    // budget. A repair that cannot meet the bound spends all it has (the horse: all 8 times its
+    // triangles at 65^2, in each layout); those that met it on the shared scans needed under a
+    // quarter (the bunny's kites: 1.9 times).
     MeshBuildOptions each = options;
-    if (automatic) each.repairBudget = options.repairBudget / 2;
+    if (automatic) each.repairBudget = options.repairBudget / 4;
     const std::vector<Patch> charted = layout.patches;
     bool sidesPossible = true;
     uint32_t size = 0;  // the density's
@@ -460,15 +461,35 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
           kites.stats.chartSizeByDensity && !kites.stats.repair.stoppedForMemory &&
           !(sidesBuilt && sides.stats.repair.stoppedForMemory) && kites.stats.chartSize < kMaxDensityChartSize &&
           double(samples(fewer)) < kMaxSamplesPerTriangle * double(std::max<uint64_t>(layoutTriangles, 1))) {
+        // As many doublings as the smaller error asks if each quarters it (a smooth surface's
+        // interpolation error goes with the spacing squared; on the shared scans a doubling took it
+        // down 2.2 to 2.6 times), at least one: a size that cannot meet the bound is not repaired
+        // in vain (the horse: 65^2 straight to 257^2). Then fewer while the charts would pass
+        // their largest size, kMaxSamplesPerTriangle (one doubling may cross it, as before) or the
+        // room checkChartRoom allows.
+        const double smaller = std::min(kites.set.image.sampleError,
+                                        sidesBuilt ? sides.set.image.sampleError : kites.set.image.sampleError);
+        const uint32_t asked = std::max(
+            1u, uint32_t(std::ceil(std::log(smaller / std::max(kites.stats.maxSampleError, 1e-300)) / std::log(4.0))));
         MeshBuildOptions larger = options;
-        larger.chartSize = 2 * kites.stats.chartSize - 1;
-        bool room = true;
-        try {
-          checkChartRoom(layout, layoutQuadCount(layout, QuadLayout::kKites), larger, dir);
-        } catch (const InputError& e) {
-          room = false;
-          spdlog::info("chart size stays {}: {}", kites.stats.chartSize,
-                       options.spellOption ? e.message(options.spellOption) : std::string(e.what()));
+        larger.chartSize = kites.stats.chartSize;
+        double larger4 = double(samples(fewer));  // the fewer layout's samples at larger.chartSize
+        for (uint32_t k = 0; k < asked && larger.chartSize < kMaxDensityChartSize &&
+                             (k == 0 || larger4 < kMaxSamplesPerTriangle * double(std::max<uint64_t>(layoutTriangles, 1)));
+             ++k) {
+          larger.chartSize = 2 * larger.chartSize - 1;
+          larger4 *= 4.0;
+        }
+        bool room = false;
+        for (; larger.chartSize > kites.stats.chartSize; larger.chartSize = (larger.chartSize + 1) / 2) {
+          try {
+            checkChartRoom(layout, layoutQuadCount(layout, QuadLayout::kKites), larger, dir);
+            room = true;
+            break;
+          } catch (const InputError& e) {
+            spdlog::info("chart size not {}: {}", larger.chartSize,
+                         options.spellOption ? e.message(options.spellOption) : std::string(e.what()));
+          }
         }
         if (room) {
           const double percent = 100.0 / std::max(layoutDiagonal(layout), 1e-300);
