@@ -36,8 +36,7 @@ struct DCtxFree { void operator()(ZSTD_DCtx* c) const { ZSTD_freeDCtx(c); } };
 ZSTD_CCtx* compressor() {
   thread_local std::unique_ptr<ZSTD_CCtx, CCtxFree> c([] {
     ZSTD_CCtx* x = ZSTD_createCCtx();
-    ZSTD_CCtx_setParameter(x, ZSTD_c_compressionLevel, kLevel);
-    ZSTD_CCtx_setParameter(x, ZSTD_c_checksumFlag, 1);
+    ZSTD_CCtx_setParameter(x, ZSTD_c_checksumFlag, 1);  // (frame() sets the level)
     return x;
   }());
   return c.get();
@@ -110,7 +109,7 @@ inline uint8_t predictByte(const uint8_t* b, uint32_t side, uint32_t stride, uin
 // ---- quantized integers (heights: 1 channel; positions: 3) ------------------------------------
 
 std::vector<uint8_t> encodeInts(const char (&magic)[4], const std::vector<int32_t>& q, uint32_t side,
-                                uint8_t channels, HeightQuantization mode, double step) {
+                                uint8_t channels, HeightQuantization mode, double step, int level) {
   const size_t n = size_t(side) * side;
   // Residuals, zigzagged, as byte planes per channel (low bytes first); planes above the highest
   // non-zero byte are left out.
@@ -136,7 +135,7 @@ std::vector<uint8_t> encodeInts(const char (&magic)[4], const std::vector<int32_
       uint8_t* plane = raw.data() + kIntHeaderBytes + (size_t(c) * planes + p) * n;
       for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(z[i * channels + c] >> (8 * p));
     }
-  return frame(magic, raw, channels == 3 ? kPositionLevel : kLevel);
+  return frame(magic, raw, level);
 }
 
 // Decodes into out (channels * side^2 floats); returns the quantization.
@@ -164,27 +163,21 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
   thread_local std::vector<uint32_t> q;
   q.resize(n * channels);
   const uint8_t* base = raw.data() + kIntHeaderBytes;
+  // Row `at` of one channel's residuals (its byte planes from p0), plus the row below's differences.
   auto residuals = [&](uint32_t* r, const uint32_t* prev, size_t at, const uint8_t* p0) {
-    const uint8_t *p1 = p0 + n, *p2 = p1 + n, *p3 = p2 + n;
+    const uint8_t *b0 = p0 + at, *b1 = b0 + n, *b2 = b1 + n, *b3 = b2 + n;
     auto unz = [](uint32_t z) { return (z >> 1) ^ (0u - (z & 1u)); };
-    auto load = [&](size_t i) {
-      switch (planes) {
-        case 1: return uint32_t(p0[at + i]);
-        case 2: return p0[at + i] | uint32_t(p1[at + i]) << 8;
-        case 3: return p0[at + i] | uint32_t(p1[at + i]) << 8 | uint32_t(p2[at + i]) << 16;
-        default: return p0[at + i] | uint32_t(p1[at + i]) << 8 | uint32_t(p2[at + i]) << 16 | uint32_t(p3[at + i]) << 24;
-      }
-    };
-    if (!prev) {
-      for (uint32_t x = 0; x < side; ++x) r[x] = unz(load(x));
-      return;
-    }
-    r[0] = unz(load(0)) + prev[0];
     switch (planes) {  // one vector loop per plane count
-      case 1: for (uint32_t x = 1; x < side; ++x) r[x] = unz(p0[at + x]) + prev[x] - prev[x - 1]; break;
-      case 2: for (uint32_t x = 1; x < side; ++x) r[x] = unz(p0[at + x] | uint32_t(p1[at + x]) << 8) + prev[x] - prev[x - 1]; break;
-      default: for (uint32_t x = 1; x < side; ++x) r[x] = unz(load(x)) + prev[x] - prev[x - 1];
+      case 1: for (uint32_t x = 0; x < side; ++x) r[x] = unz(b0[x]); break;
+      case 2: for (uint32_t x = 0; x < side; ++x) r[x] = unz(b0[x] | uint32_t(b1[x]) << 8); break;
+      case 3: for (uint32_t x = 0; x < side; ++x) r[x] = unz(b0[x] | uint32_t(b1[x]) << 8 | uint32_t(b2[x]) << 16); break;
+      default:
+        for (uint32_t x = 0; x < side; ++x)
+          r[x] = unz(b0[x] | uint32_t(b1[x]) << 8 | uint32_t(b2[x]) << 16 | uint32_t(b3[x]) << 24);
     }
+    if (!prev) return;
+    r[0] += prev[0];
+    for (uint32_t x = 1; x < side; ++x) r[x] += prev[x] - prev[x - 1];
   };
   const int64_t bound = mode == uint8_t(HeightQuantization::kInteger) ? kMaxIntegerSteps : kMaxSteps;
   int32_t lo = 0, hi = 0;
@@ -351,7 +344,7 @@ std::vector<uint8_t> encodeHeights(std::span<const float> heights, uint32_t side
       throw std::invalid_argument("encodeHeights: heights span more than 2^23 steps of the precision");
     q[i] = int32_t(v);
   }
-  return encodeInts(kHeightMagic, q, side, 1, mode, step);
+  return encodeInts(kHeightMagic, q, side, 1, mode, step, kLevel);
 }
 
 HeightQuantization blockQuantization(std::span<const uint8_t> block) {
@@ -381,7 +374,7 @@ void decodeHeights(std::span<const uint8_t> block, uint32_t side, std::span<floa
 std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step) {
   const std::vector<int64_t> points = latticePoints(xyz, side, step, "encodePositions");
   const std::vector<int32_t> q(points.begin(), points.end());
-  return encodeInts(kPositionMagic, q, side, 3, HeightQuantization::kPrecision, step);
+  return encodeInts(kPositionMagic, q, side, 3, HeightQuantization::kPrecision, step, kPositionLevel);
 }
 
 void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<float> out) {

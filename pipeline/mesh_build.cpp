@@ -209,6 +209,35 @@ void logFoldingCharts(const ChartLayout& layout, const GeometryImageSet& set) {
   }
 }
 
+// The chart size the auto quad layout goes on to when neither layout met the bound at `current`
+// (0: none). As many doublings as the smaller sampling error `error` asks of `bound` if each
+// quarters it (a smooth surface's interpolation error goes with the spacing squared; on the shared
+// scans a doubling took it down 2.2 to 2.6 times), at least one: a size that cannot meet the bound
+// is not repaired in vain (the horse: 65^2 straight to 257^2). Fewer while the charts would pass
+// kMaxDensityChartSize or kMaxSamplesPerTriangle (counted with `charts`, the fewer layout's; one
+// doubling may cross it, as the one-layout flow's), or the room checkChartRoom allows.
+uint32_t grownChartSize(const ChartLayout& layout, const MeshBuildOptions& options, uint32_t current, uint64_t charts,
+                        double error, double bound, const fs::path& dir) {
+  if (current >= kMaxDensityChartSize || samplesPerTriangle(layout, charts, current) >= kMaxSamplesPerTriangle) return 0;
+  const uint32_t asked = std::max(1u, uint32_t(std::ceil(std::log(error / std::max(bound, 1e-300)) / std::log(4.0))));
+  MeshBuildOptions larger = options;
+  larger.chartSize = current;
+  for (uint32_t k = 0; k < asked && larger.chartSize < kMaxDensityChartSize &&
+                       (k == 0 || samplesPerTriangle(layout, charts, larger.chartSize) < kMaxSamplesPerTriangle);
+       ++k)
+    larger.chartSize = 2 * larger.chartSize - 1;
+  for (; larger.chartSize > current; larger.chartSize = (larger.chartSize + 1) / 2) {
+    try {
+      checkChartRoom(layout, layoutQuadCount(layout, QuadLayout::kKites), larger, dir);
+      return larger.chartSize;
+    } catch (const InputError& e) {
+      spdlog::info("chart size not {}: {}", larger.chartSize,
+                   options.spellOption ? e.message(options.spellOption) : std::string(e.what()));
+    }
+  }
+  return 0;
+}
+
 // One resampling and repair of `layout` in quad layout `quads`: its patches change (side counts
 // made even for the sides layout, the repair's cuts). Stages "resample" and "chart_repair", named
 // with `suffix`. With the sides layout, false in `evened` (and nothing else done) when some patch
@@ -452,58 +481,29 @@ ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options
       // At a grown size, sides only where kites meet the bound, for their fewer samples: kites cut
       // more freely, and on every shared scan they left the smaller sampling error at every size.
       if (automatic && !first && kitesClean && sidesPossible) buildSides();
-      // Neither within the bound: the next size, unless the density did not choose it, a repair
-      // stopped for memory, or the charts reach their largest size, kMaxSamplesPerTriangle or the
-      // room checkChartRoom allows.
+      // Neither within the bound: the next size (grownChartSize), unless the density did not choose
+      // this one or a repair stopped for memory.
       const bool sidesBuilt = static_cast<bool>(sides.spill);
-      const ResampledMesh& fewer = sidesBuilt && samples(sides) < samples(kites) ? sides : kites;
-      if (automatic && !kitesClean && !withinBound(kites) && !(sidesBuilt && withinBound(sides)) &&
-          kites.stats.chartSizeByDensity && !kites.stats.repair.stoppedForMemory &&
-          !(sidesBuilt && sides.stats.repair.stoppedForMemory) && kites.stats.chartSize < kMaxDensityChartSize &&
-          double(samples(fewer)) < kMaxSamplesPerTriangle * double(std::max<uint64_t>(layoutTriangles, 1))) {
-        // As many doublings as the smaller error asks if each quarters it (a smooth surface's
-        // interpolation error goes with the spacing squared; on the shared scans a doubling took it
-        // down 2.2 to 2.6 times), at least one: a size that cannot meet the bound is not repaired
-        // in vain (the horse: 65^2 straight to 257^2). Then fewer while the charts would pass
-        // their largest size, kMaxSamplesPerTriangle (one doubling may cross it, as before) or the
-        // room checkChartRoom allows.
-        const double smaller = std::min(kites.set.image.sampleError,
-                                        sidesBuilt ? sides.set.image.sampleError : kites.set.image.sampleError);
-        const uint32_t asked = std::max(
-            1u, uint32_t(std::ceil(std::log(smaller / std::max(kites.stats.maxSampleError, 1e-300)) / std::log(4.0))));
-        MeshBuildOptions larger = options;
-        larger.chartSize = kites.stats.chartSize;
-        double larger4 = double(samples(fewer));  // the fewer layout's samples at larger.chartSize
-        for (uint32_t k = 0; k < asked && larger.chartSize < kMaxDensityChartSize &&
-                             (k == 0 || larger4 < kMaxSamplesPerTriangle * double(std::max<uint64_t>(layoutTriangles, 1)));
-             ++k) {
-          larger.chartSize = 2 * larger.chartSize - 1;
-          larger4 *= 4.0;
-        }
-        bool room = false;
-        for (; larger.chartSize > kites.stats.chartSize; larger.chartSize = (larger.chartSize + 1) / 2) {
-          try {
-            checkChartRoom(layout, layoutQuadCount(layout, QuadLayout::kKites), larger, dir);
-            room = true;
-            break;
-          } catch (const InputError& e) {
-            spdlog::info("chart size not {}: {}", larger.chartSize,
-                         options.spellOption ? e.message(options.spellOption) : std::string(e.what()));
-          }
-        }
-        if (room) {
+      if (automatic && !withinBound(kites) && !(sidesBuilt && withinBound(sides)) && kites.stats.chartSizeByDensity &&
+          !kites.stats.repair.stoppedForMemory && !(sidesBuilt && sides.stats.repair.stoppedForMemory)) {
+        const ResampledMesh& fewer = sidesBuilt && samples(sides) < samples(kites) ? sides : kites;
+        const double error = std::min(kites.set.image.sampleError,
+                                      sidesBuilt ? sides.set.image.sampleError : kites.set.image.sampleError);
+        const uint32_t next = grownChartSize(layout, options, kites.stats.chartSize, fewer.set.charts.size(), error,
+                                             kites.stats.maxSampleError, dir);
+        if (next > 0) {
           const double percent = 100.0 / std::max(layoutDiagonal(layout), 1e-300);
           spdlog::info("chart size {} -> {}: neither layout meets the sampling bound ({}kites {:.4f}% of the "
                        "diagonal, bound {:.4f}%)",
-                       kites.stats.chartSize, larger.chartSize,
+                       kites.stats.chartSize, next,
                        sidesBuilt ? fmt::format("sides {:.4f}%, ", percent * sides.set.image.sampleError) : "",
                        percent * kites.set.image.sampleError, percent * kites.stats.maxSampleError);
-          size = larger.chartSize;
+          size = next;
           suffix = fmt::format(" at {}", size);
           continue;
         }
       }
-      bool keepSides = sidesBuilt && !sidesPatches.empty() && sides.stats.twoQuadCorners == 0 &&
+      bool keepSides = sidesBuilt && sides.stats.twoQuadCorners == 0 &&
                        sides.set.image.flippedTexels <= kites.set.image.flippedTexels &&
                        (withinBound(sides) || !withinBound(kites));
       if (keepSides && sides.set.image.flippedTexels == kites.set.image.flippedTexels &&
