@@ -120,9 +120,10 @@ void buildChartMesh(const AtlasView& atlas, uint64_t triangles, std::vector<glm:
     ++level;
   positions.clear();
   indices.clear();
-  const uint32_t s = (M >> level) + 1;
   for (const ChartInfo& c : m.charts) {
-    const std::vector<glm::vec3> p = ChartFileReader(atlas.dir / c.file).readLevelPositions(level);
+    // A chart whose finest level is coarser gives its finest (ChartInfo::finestLevel).
+    const uint32_t own = std::max(level, c.finestLevel), s = (M >> own) + 1;
+    const std::vector<glm::vec3> p = ChartFileReader(atlas.dir / c.file).readLevelPositions(own - c.finestLevel);
     const uint32_t base = uint32_t(positions.size());
     positions.insert(positions.end(), p.begin(), p.end());
     for (uint32_t v = 0; v + 1 < s; ++v)

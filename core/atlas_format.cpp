@@ -393,6 +393,7 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
     for (const RootNeighbour& n : c.neighbours) nb.push_back(toJson(n));
     ojson chart{{"id", c.id}, {"gridX", c.gridX}, {"gridY", c.gridY}, {"file", c.file}};
     if (!c.imageryFile.empty()) chart["imagery"] = c.imageryFile;
+    if (c.finestLevel != 0) chart["finest_level"] = c.finestLevel;
     chart["neighbours"] = nb;
     charts.push_back(std::move(chart));
   }
@@ -593,6 +594,11 @@ AtlasManifest readManifest(const fs::path& dir) {
     if (m.imagery.present) {
       ci.imageryFile = r.string(r.field(c, "imagery", ctx), ctx + "imagery");
       insideAtlas(ci.imageryFile, "imagery");
+    }
+    if (c.contains("finest_level")) {
+      if (m.kind != AtlasKind::Geometry) r.fail("field '" + ctx + "finest_level' is for geometry atlases only");
+      ci.finestLevel = static_cast<uint32_t>(
+          r.integer(c["finest_level"], ctx + "finest_level", 0, int64_t(m.intervalsLog2())));
     }
     const json& nb = r.field(c, "neighbours", ctx);
     if (!nb.is_array() || nb.size() != 4) r.fail("field '" + ctx + "neighbours' must have 4 entries");

@@ -86,6 +86,13 @@ struct ChartInfo {
   std::string file;                         // relative to the atlas directory
   std::string imageryFile;                  // the chart's imagery (AtlasManifest::imagery), or empty
   std::array<RootNeighbour, 4> neighbours;  // indexed by Edge
+  // Geometry atlases: the pyramid level of the atlas that the chart file's level 0 is. A chart whose
+  // surface its coarser samples already follow within the build's bound keeps only those: its file
+  // holds ((chartSize - 1) >> finestLevel) + 1 samples a side, and its level j is the atlas's level
+  // finestLevel + j. Node coordinates, seams and stitching stay in the atlas's level-0 units, and
+  // the pyramid levels being subsamplings, the shared samples of two charts are the same whatever
+  // their finest levels. 0: the whole pyramid (every terrain chart).
+  uint32_t finestLevel = 0;
 };
 
 // Colour imagery draped over a terrain atlas: per chart, an attribute chart file (colours alone)
@@ -140,6 +147,8 @@ struct AtlasManifest {
 
   uint32_t intervalsLog2() const;           // log2(chartSize - 1)
   uint32_t pyramidLevels() const { return intervalsLog2() + 1; }
+  // Samples a side of chart c's file (ChartInfo::finestLevel).
+  uint32_t chartFileSize(uint32_t c) const { return ((chartSize - 1) >> charts[c].finestLevel) + 1; }
 };
 
 // Reads and validates dir/atlas.json ("format": "gimlod-atlas", version, chart size and block

@@ -4,11 +4,13 @@
 #include "core/block_codec.h"
 #include "core/progress.h"
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <optional>
+#include <stdexcept>
 
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -246,6 +248,20 @@ HierarchyParams hierarchyParams(const AtlasManifest& m) {
   return p;
 }
 
+std::vector<uint8_t> finestLevels(const AtlasManifest& m, const HierarchyParams& p) {
+  std::vector<uint8_t> out;
+  for (const ChartInfo& c : m.charts) {
+    if (c.finestLevel == 0) continue;
+    if (c.finestLevel > p.maxFinestLevel())
+      throw InputError("atlas manifest: chart " + std::to_string(c.id) + " has finest level " +
+                       std::to_string(c.finestLevel) + ", over " + std::to_string(p.maxFinestLevel()) +
+                       ", the most that leaves its leaves " + std::to_string(1u << p.minNodeResLog2) + " intervals");
+    out.resize(m.charts.size(), 0);
+    out[c.id] = uint8_t(c.finestLevel);
+  }
+  return out;
+}
+
 Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeightSource& source,
                                 HierarchyStats* stats) {
   Hierarchy hier;
@@ -277,17 +293,33 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeight
 
 Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
                                  const std::vector<std::array<RootNeighbour, 4>>& roots,
-                                 const ChartPositionSource& source, HierarchyStats* stats) {
+                                 const ChartPositionSource& source, HierarchyStats* stats,
+                                 const std::vector<uint8_t>& finestLevels) {
   Hierarchy hier;
   hier.params = params;
   hier.params.validate();
   const uint32_t count = uint32_t(roots.size());
   hier.charts.resize(count);
   hier.roots = roots;
-  const uint32_t S = (1u << params.intervalsLog2) + 1;
+  if (!finestLevels.empty()) {
+    if (finestLevels.size() != count)
+      throw std::invalid_argument("buildGeometryHierarchy: one finest level per chart expected");
+    hier.finestLevels = finestLevels;
+    for (uint32_t c = 0; c < count; ++c)
+      if (finestLevels[c] > params.maxFinestLevel())
+        throw InputError("chart " + std::to_string(c) + ": finest level " + std::to_string(finestLevels[c]) +
+                         " leaves its leaves under " + std::to_string(1u << params.minNodeResLog2) +
+                         " intervals (at most " + std::to_string(params.maxFinestLevel()) + ")");
+  }
+  std::atomic<uint64_t> samples{0};
   const auto t0 = std::chrono::steady_clock::now();
   const progress::ProgressStage stage("hierarchy", count);
   tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) {
+    // A chart with coarser finest samples is built as a chart of their size: the same nodes, in
+    // its own units.
+    HierarchyParams own = params;
+    own.intervalsLog2 -= hier.finestLevel(c);
+    const uint32_t S = (1u << own.intervalsLog2) + 1;
     const std::vector<glm::vec3> P = source(c);
     if (P.size() != size_t(S) * S)
       throw InputError("chart " + std::to_string(c) + ": expected " + std::to_string(S) + "^2 positions, got " +
@@ -295,12 +327,13 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
     for (const glm::vec3& q : P)
       if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z))
         throw InputError("chart " + std::to_string(c) + ": non-finite position in the geometry image");
-    buildGeometryChart(hier.params, P, hier.charts[c]);
+    buildGeometryChart(own, P, hier.charts[c]);
+    samples += P.size();
     progress::advance();
   });
   if (stats) {
     stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
-    stats->samples = uint64_t(count) * S * S;
+    stats->samples = samples;
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     stats->samplesPerSecond = stats->seconds > 0 ? double(stats->samples) / stats->seconds : 0.0;
   }

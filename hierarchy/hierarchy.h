@@ -51,13 +51,18 @@ struct HierarchyParams {
   uint32_t minNodeResLog2 = 2;
 
   // Paper eq. 1: the finest resolution (log2 intervals) a node of `level` may use.
-  uint32_t maxRes(uint32_t level) const {
-    return std::min(intervalsLog2 - level, maxNodeResLog2);
+  uint32_t maxRes(uint32_t level) const { return maxRes(level, 0); }
+  // The same in a chart whose finest samples are pyramid level finestLevel (ChartInfo).
+  uint32_t maxRes(uint32_t level, uint32_t finestLevel) const {
+    return std::min(intervalsLog2 - finestLevel - level, maxNodeResLog2);
   }
   uint32_t minRes(uint32_t) const { return minNodeResLog2; }
   uint32_t resCount() const { return maxNodeResLog2 - minNodeResLog2 + 1; }
   // Pyramid level a node of `level` reads at resolution `res`.
   uint32_t pyramidLevel(uint32_t level, uint32_t res) const { return intervalsLog2 - level - res; }
+  // The coarsest finest level a chart may have (ChartInfo::finestLevel): its leaves can still be
+  // drawn at the minimum resolution, so every node of every chart stays usable.
+  uint32_t maxFinestLevel() const { return intervalsLog2 - (depth - 1) - minNodeResLog2; }
   // Throws InputError when the combination is impossible.
   void validate() const;
 };
@@ -74,8 +79,14 @@ class Hierarchy {
     std::vector<float> errors;  // [node * resCount + (res - minNodeResLog2)]
   };
   std::vector<ChartNodes> charts;
+  // Per chart, its finest pyramid level (ChartInfo::finestLevel); empty: 0 for every chart. Not in
+  // the hierarchy file: set from the manifest (loadAtlasView) or by buildGeometryHierarchy.
+  std::vector<uint8_t> finestLevels;
 
   uint32_t chartCount() const { return uint32_t(charts.size()); }
+  uint32_t finestLevel(uint32_t chart) const { return finestLevels.empty() ? 0 : finestLevels[chart]; }
+  // The finest resolution node n may use: paper eq. 1 within its chart's finest level.
+  uint32_t maxRes(const NodeId& n) const { return params.maxRes(n.level, finestLevel(n.chart)); }
   const std::array<float, 6>& bounds(const NodeId& n) const {
     return charts[n.chart].bounds[nodeIndex(n.level, n.x, n.y)];
   }
@@ -105,8 +116,8 @@ using ChartHeightSource = std::function<std::vector<float>(uint32_t chart)>;
 Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeightSource& source,
                                 HierarchyStats* stats = nullptr);
 
-// Mesh-atlas input: chart id -> level-0 geometry image, chartSize^2 positions (row = v). Must be
-// thread-safe.
+// Mesh-atlas input: chart id -> its finest geometry image, side ((chartSize - 1) >> finest level)
+// + 1 positions (row = v). Must be thread-safe.
 using ChartPositionSource = std::function<std::vector<glm::vec3>(uint32_t chart)>;
 
 // Builds the hierarchy of a geometry-image atlas (section 5 charts; multithreaded over charts).
@@ -115,11 +126,14 @@ using ChartPositionSource = std::function<std::vector<glm::vec3>(uint32_t chart)
 // (Euclidean), where surface_k is the level-k grid drawn as the render grids draw it (split along
 // the (0,0)-(1,1) diagonal), interpolated at the sample's own (u,v), maximised over k' <= k: the
 // geometry-image analogue of the terrain's vertical error, and an upper bound on the distance
-// from each sample to the drawn surface. Same monotonicity as buildTerrainHierarchy. Throws
-// InputError for a wrong image size or a non-finite position.
+// from each sample to the drawn surface. Same monotonicity as buildTerrainHierarchy.
+// finestLevels: per chart (or empty: all 0), as ChartInfo::finestLevel; a chart's errors are those
+// of its own samples, and a node has none at resolutions finer than its chart holds. Throws
+// InputError for a wrong image size, a non-finite position or a finest level over maxFinestLevel.
 Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
                                  const std::vector<std::array<RootNeighbour, 4>>& roots,
-                                 const ChartPositionSource& source, HierarchyStats* stats = nullptr);
+                                 const ChartPositionSource& source, HierarchyStats* stats = nullptr,
+                                 const std::vector<uint8_t>& finestLevels = {});
 
 // Atomic. compressed: version 2 (the arrays regrouped as byte planes, then zstd with its
 // checksum; about 0.4 of version 1's bytes on mesh atlases), else version 1 (raw). Both are read.
@@ -127,5 +141,9 @@ void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool 
 Hierarchy readHierarchy(const std::filesystem::path& path);  // throws InputError naming the file
 
 HierarchyParams hierarchyParams(const AtlasManifest& m);
+
+// The charts' finest levels (ChartInfo::finestLevel) as Hierarchy::finestLevels: empty when every
+// one is 0. Throws InputError naming the manifest's chart when one is over p.maxFinestLevel().
+std::vector<uint8_t> finestLevels(const AtlasManifest& m, const HierarchyParams& p);
 
 }  // namespace gimlod

@@ -99,7 +99,10 @@ json streamingFigures(const AtlasView& atlas, uint32_t width, uint32_t height) {
   json levels = json::array();
   for (uint32_t l = 0; l < m.pyramidLevels(); ++l) {
     const uint64_t n = ((m.chartSize - 1) >> l) + 1;
-    levels.push_back({{"pyramid_level", l}, {"samples_per_side", n}, {"bytes", uint64_t(m.charts.size()) * n * n * perSample}});
+    // The charts whose finest samples are no coarser than the level hold it.
+    const uint64_t holding = uint64_t(std::count_if(m.charts.begin(), m.charts.end(),
+                                                    [&](const ChartInfo& c) { return c.finestLevel <= l; }));
+    levels.push_back({{"pyramid_level", l}, {"samples_per_side", n}, {"charts", holding}, {"bytes", holding * n * n * perSample}});
   }
   json pages = json::array();
   for (uint32_t l = 0; l < p.depth; ++l) {

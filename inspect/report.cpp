@@ -73,9 +73,11 @@ struct ChartImages {
 ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32_t chart, uint32_t maxSide,
                         const fs::path& outDir, const std::array<float, 6>& bounds) {
   const ChartFileReader r(atlasDir / m.charts[chart].file);
+  // Levels of the chart file (its level 0 is the chart's finest, ChartInfo::finestLevel).
+  const uint32_t size = m.chartFileSize(chart);
   uint32_t level = 0;
-  while (level + 1 < r.levels() && ((m.chartSize - 1) >> level) + 1 > maxSide) ++level;
-  const uint32_t n = ((m.chartSize - 1) >> level) + 1;
+  while (level + 1 < r.levels() && ((size - 1) >> level) + 1 > maxSide) ++level;
+  const uint32_t n = ((size - 1) >> level) + 1;
   ChartImages out;
   const std::vector<PackedNormal> normals = r.readLevelNormals(level);
   std::vector<uint8_t> rgb(size_t(n) * n * 3);
@@ -89,7 +91,7 @@ ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32
   const std::string stem = "chart_" + std::to_string(chart);
   writePngRgb(outDir / (stem + "_normals.png"), n, n, rgb);
   out.files.push_back(stem + "_normals.png");
-  out.figures["image_level"] = level;
+  out.figures["image_level"] = level + m.charts[chart].finestLevel;
   if (m.kind == AtlasKind::Geometry) {
     const std::vector<glm::vec3> pos = r.readLevelPositions(level);
     for (uint32_t v = 0; v < n; ++v)
@@ -478,7 +480,8 @@ InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const
   const fs::path dir = staged.path();
 
   json report;
-  const uint64_t samples = uint64_t(m.charts.size()) * m.chartSize * m.chartSize;
+  uint64_t samples = 0;  // the charts' finest samples (ChartInfo::finestLevel)
+  for (const ChartInfo& c : m.charts) samples += uint64_t(m.chartFileSize(c.id)) * m.chartFileSize(c.id);
   const uint64_t bytes = directoryBytes(o.atlas);
   uint64_t nodes = 0;
   for (uint32_t l = 0; l < m.depth; ++l) nodes += uint64_t(m.charts.size()) << (2 * l);

@@ -73,7 +73,7 @@ SeamReport validateSeams(const std::filesystem::path& atlasDir, uint32_t maxOffe
   std::vector<std::unique_ptr<ChartFileReader>> readers(charts);
   for (uint32_t c = 0; c < charts; ++c) {
     readers[c] = std::make_unique<ChartFileReader>(atlasDir / m.charts[c].file);
-    if (readers[c]->chartSize() != m.chartSize || readers[c]->levels() != m.pyramidLevels())
+    if (readers[c]->chartSize() != m.chartFileSize(c) || readers[c]->levels() != m.pyramidLevels() - m.charts[c].finestLevel)
       throw InputError((atlasDir / m.charts[c].file).string() + ": chart size or levels differ from the manifest's");
   }
   // Corner groups: corner i of chart c is where its edge i starts; across edge e to (d, f), the
@@ -99,16 +99,22 @@ SeamReport validateSeams(const std::filesystem::path& atlasDir, uint32_t maxOffe
   const auto difference = [&](const glm::vec3& a, const glm::vec3& b) {
     return double(glm::length(glm::dvec3(a) - glm::dvec3(b)));
   };
+  // Each level is compared between the charts that hold it (ChartInfo::finestLevel); a chart whose
+  // finest level is coarser meets its neighbours from there on.
+  const auto holds = [&](uint32_t c, uint32_t level) { return m.charts[c].finestLevel <= level; };
   for (uint32_t level = 0; level < m.pyramidLevels(); ++level) {
     const uint32_t n = ((m.chartSize - 1) >> level) + 1;
     std::vector<std::vector<glm::vec3>> borders(charts);
-    tbb::parallel_for(uint32_t(0), charts, [&](uint32_t c) { borders[c] = readBorders(*readers[c], geometry, level, n); });
+    tbb::parallel_for(uint32_t(0), charts, [&](uint32_t c) {
+      if (holds(c, level)) borders[c] = readBorders(*readers[c], geometry, level - m.charts[c].finestLevel, n);
+    });
     SeamLevel sl;
     sl.level = level;
     for (uint32_t c = 0; c < charts; ++c)
       for (uint32_t e = 0; e < 4; ++e) {
         const RootNeighbour& r = m.charts[c].neighbours[e];
         if (r.chart < 0 || std::make_pair(uint32_t(r.chart), uint32_t(r.edge)) < std::make_pair(c, e)) continue;
+        if (!holds(c, level) || !holds(uint32_t(r.chart), level)) continue;
         for (uint32_t k = 0; k < n; ++k) {
           const uint32_t k2 = r.reversed ? n - 1 - k : k;
           const glm::vec3& a = borders[c][size_t(e) * n + k];
@@ -124,7 +130,7 @@ SeamReport validateSeams(const std::filesystem::path& atlasDir, uint32_t maxOffe
     std::map<uint32_t, uint32_t> first;  // corner group -> its first corner
     for (uint32_t i = 0; i < charts * 4; ++i) {
       const uint32_t g = corners.find(i);
-      if (groupSize[g] < 2) continue;
+      if (groupSize[g] < 2 || !holds(i / 4, level)) continue;
       ++sl.cornerSamples;
       const auto [it, fresh] = first.emplace(g, i);
       if (fresh) continue;

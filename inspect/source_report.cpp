@@ -113,6 +113,25 @@ json demComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir
           {"seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()}};
 }
 
+// A chart's finest samples (side `side`) on the lattice of n samples a side: each point of the finer
+// lattice on the triangle the renderer draws there (cells split along their (0,0)-(1,1) diagonal),
+// so a coarser chart is compared as drawn, sample for sample with the others.
+std::vector<glm::vec3> onFullLattice(const std::vector<glm::vec3>& P, uint32_t side, uint32_t n) {
+  if (side == n) return P;
+  const uint32_t step = (n - 1) / (side - 1);
+  const float inv = 1.0f / float(step);
+  std::vector<glm::vec3> out(size_t(n) * n);
+  for (uint32_t v = 0; v < n; ++v)
+    for (uint32_t u = 0; u < n; ++u) {
+      const uint32_t cx = std::min(u / step, side - 2), cy = std::min(v / step, side - 2);
+      const float fx = float(u - cx * step) * inv, fy = float(v - cy * step) * inv;
+      const glm::vec3 p00 = P[size_t(cy) * side + cx], p10 = P[size_t(cy) * side + cx + 1];
+      const glm::vec3 p01 = P[size_t(cy + 1) * side + cx], p11 = P[size_t(cy + 1) * side + cx + 1];
+      out[size_t(v) * n + u] = fx >= fy ? p00 + fx * (p10 - p00) + fy * (p11 - p10) : p00 + fy * (p01 - p00) + fx * (p11 - p01);
+    }
+  return out;
+}
+
 }  // namespace
 
 json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir,
@@ -122,6 +141,7 @@ json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlas
   const IndexedMesh mesh = readMesh(source);
   // The atlas surface unwelded, chart by chart: sample k of chart c is position c * n^2 + k, so a
   // distance is found back on its chart; triangles as the renderer draws the grid.
+  // A chart with a coarser finest level (ChartInfo::finestLevel) is put on the full lattice as drawn.
   const uint32_t n = m.chartSize;
   std::vector<glm::vec3> positions;
   positions.reserve(size_t(m.charts.size()) * n * n);
@@ -129,7 +149,7 @@ json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlas
   triangles.reserve(size_t(m.charts.size()) * (n - 1) * (n - 1) * 2);
   for (uint32_t c = 0; c < m.charts.size(); ++c) {
     const ChartFileReader r(atlasDir / m.charts[c].file);
-    const std::vector<glm::vec3> p = r.readLevelPositions(0);
+    const std::vector<glm::vec3> p = onFullLattice(r.readLevelPositions(0), m.chartFileSize(c), n);
     const uint32_t base = uint32_t(positions.size());
     positions.insert(positions.end(), p.begin(), p.end());
     for (uint32_t v = 0; v + 1 < n; ++v)

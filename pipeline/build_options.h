@@ -157,6 +157,10 @@ struct MeshBuildOptions : CommonBuildOptions {
   MeshQuadMap quadMap = MeshQuadMap::kBilinear;
   // Inner samples round flipped texels slide over the surface to unfold them (ResampleOptions::unfold).
   bool unfold = true;
+  // Each chart keeps only the pyramid levels from the coarsest whose surface stays within
+  // maxSampleError of the input (atlas/mesh/mesh_atlas.h ChartCoarsening; ChartInfo::finestLevel),
+  // when maxSampleError is set; false: every chart keeps its whole pyramid.
+  bool coarsenCharts = true;
 };
 
 // The default charting of a mesh of `triangles` triangles: few large charts, on the order of the

@@ -135,6 +135,9 @@ struct MeshWriteStats {
   bool normalsDerived = false;
   double samplesPerTriangle = 0.0;     // what the automatic choice went by
   NormalAngles normalAngles;
+  // The charts' finest levels (ChartInfo::finestLevel): charts by level, and their samples summed.
+  std::vector<uint32_t> chartsByFinestLevel;
+  uint64_t finestSamples = 0;
 };
 
 // A whole mesh build (stats.json).

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <glm/geometric.hpp>
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
@@ -567,8 +568,22 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
                  coding.positionStep, 100.0 * coding.positionStep / std::max(diagonal, 1e-300),
                  100.0 * o.positionTolerance, o.normalTolerance);
   {
-    const GeometryChartsWritten written = writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get(), coding);
+    ChartCoarsening coarsen;
+    if (o.coarsenCharts) {
+      coarsen.bound = r.stats.maxSampleError;
+      coarsen.maxFinestLevel = std::min(p.maxFinestLevel(), p.intervalsLog2 - 1);
+    }
+    const GeometryChartsWritten written =
+        writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get(), coding, coarsen);
     w.bounds = written.bounds;
+    w.chartsByFinestLevel = written.chartsByFinestLevel;
+    w.finestSamples = written.finestSamples;
+    if (written.chartsByFinestLevel.size() > 1)
+      spdlog::info("charts by their finest level (0 = {}^2 samples): {}; {} samples ({:.1f} per input triangle, "
+                   "{:.2f} of the full charts')",
+                   r.set.chartSize, fmt::join(written.chartsByFinestLevel, ", "), written.finestSamples,
+                   double(written.finestSamples) / double(triangles),
+                   double(written.finestSamples) / (double(r.set.charts.size()) * r.set.chartSize * r.set.chartSize));
     w.normalsDerived = coding.deriveGeometryNormals;
     w.normalAngles = written.normalAngles;
   }
@@ -584,9 +599,11 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
     std::vector<std::array<RootNeighbour, 4>> roots;
     for (const ChartInfo& c : m.charts) roots.push_back(c.neighbours);
     // Each chart file is opened only while it is read (more charts than open files may exist).
+    std::vector<uint8_t> finest;
+    for (const ChartInfo& c : m.charts) finest.push_back(uint8_t(c.finestLevel));
     const Hierarchy h = buildGeometryHierarchy(
         p, roots, [&](uint32_t c) { return ChartFileReader(dir / m.charts[c].file).readLevelPositions(0); },
-                                               &w.hierarchy);
+        &w.hierarchy, finest);
     writeHierarchy(dir / m.hierarchyFile, h, o.compress);
   }
   writeManifest(dir, m);

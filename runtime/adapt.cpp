@@ -57,7 +57,7 @@ double screenError(const Hierarchy& h, const NodeId& n, uint32_t res, const View
 uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tolPx) {
   const double d = std::max(boxDistance(h.bounds(n), v.eye), v.minDistance);
   const double tolWorld = tolPx * d / v.pixelsPerRadian;
-  const uint32_t rmax = h.params.maxRes(n.level);
+  const uint32_t rmax = h.maxRes(n);
   for (uint32_t r = h.params.minNodeResLog2; r <= rmax; ++r)
     if (double(h.error(n, r)) <= tolWorld) return r;
   return rmax + 1;
@@ -71,7 +71,7 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
 
   auto makeCandidate = [&](const NodeId& n) {
     Candidate c{n, neededResolution(h, n, view, tol), false, 0.0};
-    const uint32_t rmax = h.params.maxRes(n.level);
+    const uint32_t rmax = h.maxRes(n);
     const bool leaf = n.level + 1 >= h.params.depth;
     if (c.res > rmax) {
       c.overTol = true;
@@ -88,7 +88,7 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
     for (uint32_t i = 0; i < 4; ++i) {
       const NodeId ch = n.child(i);
       if (!visible(h, ch, view, options.frustumCull)) continue;
-      childTris += tris(std::min(neededResolution(h, ch, view, tol), h.params.maxRes(ch.level)));
+      childTris += tris(std::min(neededResolution(h, ch, view, tol), h.maxRes(ch)));
     }
     c.priority = double(tris(c.res)) - double(childTris);  // triangles saved by splitting
     return c;
@@ -193,7 +193,7 @@ bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* vie
       CutNode& n = cut.nodes[i];
       const uint32_t gap = gaps[i];
       if (gap <= n.res) continue;
-      if (gap <= h.params.maxRes(n.id.level)) {
+      if (gap <= h.maxRes(n.id)) {
         n.res = gap;
         if (stats) ++stats->constraintRaises;
       } else {
@@ -210,7 +210,7 @@ bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* vie
         const NodeId ch = cut.nodes[i].id.child(c);
         if (h.flags(ch) & kNodeEmpty) continue;
         uint32_t r = h.params.minNodeResLog2;
-        if (view) r = std::min(neededResolution(h, ch, *view, tolerancePx), h.params.maxRes(ch.level));
+        if (view) r = std::min(neededResolution(h, ch, *view, tolerancePx), h.maxRes(ch));
         added.push_back({ch, r, 0.f});
       }
     }
@@ -230,7 +230,7 @@ uint32_t attributeResolution(const Hierarchy& h, const NodeId& n, const ViewPara
   const double diag = glm::length(boxHi(b) - boxLo(b));
   const double d = std::max(boxDistance(b, v.eye), v.minDistance);
   const double texels = diag * v.pixelsPerRadian / d * texelsPerPixel;
-  const uint32_t lo = h.params.minNodeResLog2, hi = h.params.intervalsLog2 - n.level;
+  const uint32_t lo = h.params.minNodeResLog2, hi = h.params.intervalsLog2 - h.finestLevel(n.chart) - n.level;
   if (!(texels > double(1u << lo))) return lo;  // also NaN
   const uint32_t r = uint32_t(std::ceil(std::log2(texels)));
   return std::clamp(r, lo, hi);
@@ -243,7 +243,7 @@ AttributeStats assignAttributeResolutions(const Hierarchy& h, Cut& cut, const Vi
     n.texRes = attributeResolution(h, n.id, v, texelsPerPixel);
     const uint64_t side = (1ull << n.texRes) + 1;
     st.texels += side * side;
-    const uint32_t page = h.params.maxRes(n.id.level);
+    const uint32_t page = h.maxRes(n.id);
     st.aboveGeometry += n.texRes > n.res;
     st.belowPage += n.texRes < page;
     st.abovePage += n.texRes > page;

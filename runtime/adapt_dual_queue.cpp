@@ -17,7 +17,7 @@ uint64_t tris(uint32_t res) { return 2ull << (2 * res); }
 // Needed resolution clamped to maxRes, and whether even maxRes is over tolerance.
 uint32_t clampedRes(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tol, bool* overTol) {
   const uint32_t need = neededResolution(h, n, v, tol);
-  const uint32_t rmax = h.params.maxRes(n.level);
+  const uint32_t rmax = h.maxRes(n);
   if (overTol) *overTol = need > rmax;
   return std::min(need, rmax);
 }
@@ -35,7 +35,7 @@ double childTriangles(const Hierarchy& h, const NodeId& n, const ViewParams& v, 
 double splitPriorityOf(const Hierarchy& h, const NodeId& n, uint32_t res, bool drawn, bool overTol,
                        const ViewParams& v, double tol, bool cull) {
   if (n.level + 1 >= h.params.depth) return -1.0;
-  if (drawn && overTol) return overTolerancePriority(screenError(h, n, h.params.maxRes(n.level), v));
+  if (drawn && overTol) return overTolerancePriority(screenError(h, n, h.maxRes(n), v));
   const double own = drawn ? double(tris(res)) : 0.0;
   return own - childTriangles(h, n, v, tol, cull);
 }
@@ -62,7 +62,7 @@ double dualQueueMergeCost(const Hierarchy& h, const NodeId& parent, const ViewPa
   const uint32_t res = clampedRes(h, parent, v, tolerancePx, &over);
   const bool drawn = nodeDrawable(h, parent, v, cull);
   if (parentOverTol) *parentOverTol = drawn && over;
-  if (drawn && over) return overTolerancePriority(screenError(h, parent, h.params.maxRes(parent.level), v));
+  if (drawn && over) return overTolerancePriority(screenError(h, parent, h.maxRes(parent), v));
   const double own = drawn ? double(tris(res)) : 0.0;
   return own - childTriangles(h, parent, v, tolerancePx, cull);
 }
@@ -115,10 +115,10 @@ DualQueueAdapter::Eval DualQueueAdapter::evalNode(const NodeId& n, bool parentIn
   const Hierarchy::ChartNodes& cn = h_.charts[n.chart];
   const uint32_t i = nodeIndex(n.level, n.x, n.y);
   if (cn.flags[i] & kNodeEmpty) return Eval{};
-  return evalBox(cn.bounds[i].data(), &cn.errors[size_t(i) * h_.params.resCount()], n.level, parentInside);
+  return evalBox(cn.bounds[i].data(), &cn.errors[size_t(i) * h_.params.resCount()], h_.maxRes(n), parentInside);
 }
 
-DualQueueAdapter::Eval DualQueueAdapter::evalBox(const float* b, const float* err, uint32_t level,
+DualQueueAdapter::Eval DualQueueAdapter::evalBox(const float* b, const float* err, uint32_t maxRes,
                                                  bool parentInside) const {
   Eval ev;
   const glm::dvec3 lo{b[0], b[1], b[2]}, hi{b[3], b[4], b[5]};
@@ -134,7 +134,7 @@ DualQueueAdapter::Eval DualQueueAdapter::evalBox(const float* b, const float* er
   const glm::dvec3 q = glm::clamp(view_.eye, lo, hi) - view_.eye;
   const double d = std::max(std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z), view_.minDistance);
   const double tolWorld = opt_.tolerancePx * d / view_.pixelsPerRadian;
-  const uint32_t rmin = h_.params.minNodeResLog2, rmax = h_.params.maxRes(level);
+  const uint32_t rmin = h_.params.minNodeResLog2, rmax = maxRes;
   uint32_t r = rmin;
   while (r <= rmax && !(double(err[r - rmin]) <= tolWorld)) ++r;
   ev.overTol = r > rmax;
@@ -153,7 +153,7 @@ DualQueueAdapter::Eval DualQueueAdapter::evalBox(const float* b, const float* er
 void DualQueueAdapter::evaluate(Entry& e) {
   // The entry keeps a copy of its bounds and errors: the per-frame pass then streams through
   // entries_ instead of gathering from the hierarchy's arrays.
-  const Eval ev = e.copied ? evalBox(e.box.data(), e.err.data(), e.id.level, false) : evalNode(e.id, false);
+  const Eval ev = e.copied ? evalBox(e.box.data(), e.err.data(), h_.maxRes(e.id), false) : evalNode(e.id, false);
   e.drawn = ev.drawn;
   e.inside = ev.inside;
   e.overTol = ev.drawn && ev.overTol;
@@ -512,7 +512,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
     const uint8_t gap = gaps_[e.g];
     if (gap <= e.res) {
       out_.nodes.push_back({e.id, e.res, float(e.errorPx)});
-    } else if (gap <= h_.params.maxRes(e.id.level)) {
+    } else if (gap <= h_.maxRes(e.id)) {
       ++st.constraintRaises;
       out_.nodes.push_back({e.id, gap, float(screenError(h_, e.id, gap, view_))});
     } else {

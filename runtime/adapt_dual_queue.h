@@ -128,7 +128,7 @@ class DualQueueAdapter {
   NodeId nodeOf(uint32_t g) const;
   // parentInside: the parent is known to lie entirely inside the frustum (skips the test).
   Eval evalNode(const NodeId& n, bool parentInside) const;
-  Eval evalBox(const float* bounds, const float* errors, uint32_t level, bool parentInside) const;
+  Eval evalBox(const float* bounds, const float* errors, uint32_t maxRes, bool parentInside) const;
   void evaluate(Entry& e);
   // slack (optional): lowered to the smallest eye movement that may change a child's resolution.
   double splitPriority(const Entry& e, int32_t* delta, double* slack = nullptr) const;

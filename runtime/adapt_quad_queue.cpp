@@ -150,7 +150,7 @@ struct QuadQueueAdapter::State {
   Cut out;
   std::vector<SideNeighbour> scratch;
 
-  uint32_t maxRes(const NodeId& n) const { return h->params.maxRes(n.level); }
+  uint32_t maxRes(const NodeId& n) const { return h->maxRes(n); }
   uint32_t minRes() const { return h->params.minNodeResLog2; }
   uint32_t nodeBudget() const { return opt.maxNodes == 0 ? UINT32_MAX : opt.maxNodes; }
   bool capped() {

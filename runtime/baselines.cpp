@@ -22,7 +22,7 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
   auto byError = [](const Candidate& a, const Candidate& b) { return a.errorPx < b.errorPx; };
   std::priority_queue<Candidate, std::vector<Candidate>, decltype(byError)> queue(byError);
   auto candidate = [&](const NodeId& n) {
-    return Candidate{screenError(h, n, h.params.maxRes(n.level), view), n};
+    return Candidate{screenError(h, n, h.maxRes(n), view), n};
   };
   std::vector<NodeId> done;
   uint32_t count = 0;
@@ -63,13 +63,13 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
   }
   Cut cut;
   cut.nodes.reserve(done.size());
-  for (const NodeId& n : done) cut.nodes.push_back({n, h.params.maxRes(n.level), 0.f});
+  for (const NodeId& n : done) cut.nodes.push_back({n, h.maxRes(n), 0.f});
   cut.rebuildIndex();
   enforceStitchConstraint(h, cut, &view, tolerancePx, &st);
   // Constraint splits give children their needed resolution: back to the fixed one (only raises,
   // so the constraint still holds).
   for (CutNode& n : cut.nodes) {
-    n.res = h.params.maxRes(n.id.level);
+    n.res = h.maxRes(n.id);
     n.errorPx = float(screenError(h, n.id, n.res, view));
     st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
   }
@@ -117,7 +117,7 @@ Cut replayOps(const Hierarchy& h, const ViewParams& view, bool cull, uint32_t ro
   std::unordered_map<uint64_t, CutNode> live;
   for (uint32_t c = 0; c < h.chartCount(); ++c) {
     const NodeId root{c, 0, 0, 0};
-    if (nodeDrawable(h, root, view, cull)) live[root.key()] = {root, rootRes, 0.f};
+    if (nodeDrawable(h, root, view, cull)) live[root.key()] = {root, std::min(rootRes, h.maxRes(root)), 0.f};
   }
   for (size_t i = 0; i < count; ++i) {
     const BudgetOp& op = ops[i];
@@ -128,7 +128,7 @@ Cut replayOps(const Hierarchy& h, const ViewParams& view, bool cull, uint32_t ro
     live.erase(op.id.key());
     for (uint32_t k = 0; k < 4; ++k) {
       const NodeId ch = op.id.child(k);
-      if (nodeDrawable(h, ch, view, cull)) live[ch.key()] = {ch, std::min(op.childRes, h.params.maxRes(ch.level)), 0.f};
+      if (nodeDrawable(h, ch, view, cull)) live[ch.key()] = {ch, std::min(op.childRes, h.maxRes(ch)), 0.f};
     }
   }
   Cut cut;
@@ -151,7 +151,7 @@ Cut finishBudgetCut(const Hierarchy& h, const ViewParams& view, const BudgetOpti
     AdaptStats as;
     enforceStitchConstraint(h, cut, &view, 1.0, &as);
     if (fixedRes && as.constraintSplits > 0)
-      for (CutNode& n : cut.nodes) n.res = std::max(n.res, h.params.maxRes(n.id.level));
+      for (CutNode& n : cut.nodes) n.res = std::max(n.res, h.maxRes(n.id));
     if (!fixedRes) fitTriangleBudget(h, cut, view, o.maxTriangles);
     st.constraintRaises = as.constraintRaises;
     st.constraintSplits = as.constraintSplits;
@@ -185,19 +185,29 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
   for (uint32_t c = 0; c < h.chartCount(); ++c) count += nodeDrawable(h, {c, 0, 0, 0}, view, options.frustumCull);
   st.rootFloor = uint32_t(count);
   st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, st.rootFloor);
+  // The roots' common resolution (each within its chart's finest).
+  auto rootTriangles = [&](uint32_t res) {
+    uint64_t t = 0;
+    for (uint32_t c = 0; c < h.chartCount(); ++c) {
+      const NodeId root{c, 0, 0, 0};
+      if (nodeDrawable(h, root, view, options.frustumCull)) t += budgetTris(std::min(res, h.maxRes(root)));
+    }
+    return t;
+  };
   uint32_t rootRes = h.params.maxRes(0);
-  while (rootRes > h.params.minNodeResLog2 && count * budgetTris(rootRes) > options.maxTriangles) --rootRes;
-  uint64_t triangles = count * budgetTris(rootRes);
+  while (rootRes > h.params.minNodeResLog2 && rootTriangles(rootRes) > options.maxTriangles) --rootRes;
+  uint64_t triangles = rootTriangles(rootRes);
   for (uint32_t c = 0; c < h.chartCount(); ++c) {
     const NodeId root{c, 0, 0, 0};
-    if (nodeDrawable(h, root, view, options.frustumCull)) queue.push({screenError(h, root, rootRes, view), root, rootRes});
+    const uint32_t res = std::min(rootRes, h.maxRes(root));
+    if (nodeDrawable(h, root, view, options.frustumCull)) queue.push({screenError(h, root, res, view), root, res});
   }
   std::vector<BudgetOp> ops;
   while (!queue.empty()) {
     const ErrorItem it = queue.top();
     queue.pop();
-    if (it.id.level + 1 >= h.params.depth || it.res != h.params.maxRes(it.id.level)) continue;
-    const uint32_t cres = h.params.maxRes(it.id.level + 1);
+    if (it.id.level + 1 >= h.params.depth || it.res != h.maxRes(it.id)) continue;
+    const uint32_t cres = h.maxRes(it.id.child(0));
     uint64_t children = 0;
     for (uint32_t i = 0; i < 4; ++i) children += nodeDrawable(h, it.id.child(i), view, options.frustumCull);
     const uint64_t t = triangles - budgetTris(it.res) + children * budgetTris(cres);

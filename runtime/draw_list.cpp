@@ -13,7 +13,7 @@ DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const Cu
   d.originY = c.gridY * M + int32_t(n.id.y) * size;
   d.sizeLog2 = L - n.id.level;
   d.res = n.res;
-  d.pageResLog2 = p.maxRes(n.id.level);
+  d.pageResLog2 = p.maxRes(n.id.level, c.finestLevel);
   d.pageLayer = layer;
   // note: an attribute resolution above the page's is clamped to it (finer attribute pages are
   // not loaded); AttributeStats::abovePage counts those nodes.

@@ -55,8 +55,14 @@ PageReader::PageReader(const std::filesystem::path& atlasDir, const AtlasManifes
   bool allColours = !manifest.charts.empty();
   for (const ChartInfo& c : manifest.charts) {
     charts_.add(atlasDir / c.file);
+    finest_.push_back(c.finestLevel);
     const auto reader = charts_.get(uint32_t(charts_.size() - 1));
     allColours = allColours && reader->hasChannel(kChannelColours);
+    const uint32_t size = manifest.chartFileSize(c.id);
+    if (reader->chartSize() != size || reader->levels() != manifest.pyramidLevels() - c.finestLevel)
+      throw InputError((atlasDir / c.file).string() + ": holds charts of " + std::to_string(reader->chartSize()) +
+                       " samples and " + std::to_string(reader->levels()) + " levels, the manifest says " +
+                       std::to_string(size) + " and " + std::to_string(manifest.pyramidLevels() - c.finestLevel));
     if (!reader->hasChannel(geometry_ ? kChannelPositions : kChannelHeights))
       throw InputError((atlasDir / c.file).string() + ": has no " + (geometry_ ? "positions" : "heights") +
                        " for a " + atlasKindName(manifest.kind) + " atlas");
@@ -85,10 +91,11 @@ PageReader::PageReader(const std::filesystem::path& atlasDir, const AtlasManifes
 
 void PageReader::read(const NodeId& n, std::vector<float>& samples, std::vector<PackedNormal>& normals,
                       std::vector<PackedColour>* colours) const {
-  const uint32_t L = params_.intervalsLog2;
-  const uint32_t r = params_.maxRes(n.level);
-  const uint32_t k = params_.pyramidLevel(n.level, r);
-  const uint32_t size = 1u << (L - n.level);  // level-0 intervals
+  // In the chart file's own units: its level 0 is the atlas's level finest_[chart].
+  const uint32_t L = params_.intervalsLog2 - finest_[n.chart];
+  const uint32_t r = pageResLog2(n);
+  const uint32_t k = L - n.level - r;
+  const uint32_t size = 1u << (L - n.level);  // the file's level-0 intervals
   const uint32_t u0 = (n.x * size) >> k, v0 = (n.y * size) >> k;
   const uint32_t s = (1u << r) + 1;
   samples.resize(size_t(s) * s * (geometry_ ? 3 : 1));

@@ -38,14 +38,16 @@ class ChartFileSet {
 // The most chart files a PageReader keeps open: a quarter of the process's limit, at most 2048.
 size_t chartFilesKeptOpen();
 
-// Reads node pages: a node's page is its finest-resolution window, (2^maxRes(level) + 1)^2
-// samples of pyramid level intervalsLog2 - level - maxRes(level); every coarser resolution of the
-// node is a subsampling of it. Thread-safe.
+// Reads node pages: a node's page is its finest-resolution window, (2^maxRes + 1)^2 samples of
+// pyramid level intervalsLog2 - level - maxRes (Hierarchy::maxRes: within its chart's finest
+// level, which the chart file's level 0 is); every coarser resolution of the node is a subsampling
+// of it. Thread-safe.
 class PageReader {
  public:
   PageReader(const std::filesystem::path& atlasDir, const AtlasManifest& manifest,
              const HierarchyParams& params);
-  uint32_t pageSamples(uint32_t level) const { return (1u << params_.maxRes(level)) + 1; }
+  uint32_t pageResLog2(const NodeId& n) const { return params_.maxRes(n.level, finest_[n.chart]); }
+  uint32_t pageSamples(const NodeId& n) const { return (1u << pageResLog2(n)) + 1; }
   // samples: (pageSamples)^2 heights, or 3 floats (x, y, z) per sample for a geometry atlas.
   // colours, if given, receives the page's RGBA8 colours when the atlas has them (colours()):
   // (colourPageSamples)^2 texels, and is cleared otherwise.
@@ -56,11 +58,12 @@ class PageReader {
   // attribute file per chart, at 2^colourScaleLog2 samples per geometry sample interval).
   bool colours() const { return colours_; }
   uint32_t colourScaleLog2() const { return colourScaleLog2_; }
-  uint32_t colourPageSamples(uint32_t level) const { return (1u << (params_.maxRes(level) + colourScaleLog2_)) + 1; }
+  uint32_t colourPageSamples(const NodeId& n) const { return (1u << (pageResLog2(n) + colourScaleLog2_)) + 1; }
   uint64_t bytesRead() const { return bytesRead_; }
 
  private:
   HierarchyParams params_;
+  std::vector<uint32_t> finest_;  // per chart, ChartInfo::finestLevel
   bool geometry_ = false;
   bool colours_ = false;
   uint32_t colourScaleLog2_ = 0;

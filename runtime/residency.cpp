@@ -73,7 +73,7 @@ ResidentCut substituteResident(const Hierarchy& h, const Cut& desired, const Vie
       drawn.nodes.push_back({b, p.minRes(b.level), 0.f});
     }
     CutNode& a = drawn.nodes[it->second];
-    a.res = std::max(a.res, std::min(n.res, p.maxRes(b.level)));
+    a.res = std::max(a.res, std::min(n.res, h.maxRes(b)));
   }
   drawn.rebuildIndex();
   // Stitching constraint without splits: substitutes only coarsen the cut, so raising their
@@ -85,7 +85,7 @@ ResidentCut substituteResident(const Hierarchy& h, const Cut& desired, const Vie
       CutNode& n = drawn.nodes[i];
       const uint32_t gap = gaps[i];
       if (gap <= n.res) continue;
-      if (gap <= p.maxRes(n.id.level))
+      if (gap <= h.maxRes(n.id))
         n.res = gap;
       else
         ++out.stitchUnfixable;

@@ -494,13 +494,14 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
     st.diagonal = std::sqrt(double(e.x) * e.x + double(e.y) * e.y + double(e.z) * e.z);
   }
   const double margin = options.marginFraction * st.diagonal;
-  const uint32_t s = am.chartSize;
   auto chartPath = [&](uint32_t c) { return atlasDir / am.charts[c].file; };
+  // A chart's finest samples (ChartInfo::finestLevel), am.chartFileSize(c) a side.
   auto readChart = [&](uint32_t c) {
     const ChartFileReader reader(chartPath(c));
     if (!reader.hasChannel(kChannelPositions))
       throw InputError(chartPath(c).string() + ": no positions in a geometry atlas chart");
-    if (reader.chartSize() != s) throw InputError(chartPath(c).string() + ": chart size differs from the manifest's");
+    if (reader.chartSize() != am.chartFileSize(c))
+      throw InputError(chartPath(c).string() + ": chart size differs from the manifest's");
     return reader.readLevelPositions(0);
   };
   // Points go to the cell holding them, clamped into the grid (as GridManifest::cellOf places a
@@ -640,7 +641,7 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
           const std::vector<glm::vec3> P = readChart(chartsNear[k]);
           for (const glm::vec3& q : P)
             if (blockOf(q.x, q.y, q.z) == block) atlasSampleParts[k].emplace_back(q.x, q.y, q.z);
-          chartTriangles(P, s, [&](const FloatTriangle& t) {
+          chartTriangles(P, am.chartFileSize(chartsNear[k]), [&](const FloatTriangle& t) {
             if (e.overlaps(boxOf(t)) && !t.triangle().is_degenerate()) atlasParts[k].push_back(t);
           });
         });
@@ -708,7 +709,7 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
     for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[i])) emit(floatTriangle(t));
   });
   resolveInParts(meshPending, am.charts.size(),
-                 [&](size_t c, const auto& emit) { chartTriangles(readChart(uint32_t(c)), s, emit); });
+                 [&](size_t c, const auto& emit) { chartTriangles(readChart(uint32_t(c)), am.chartFileSize(uint32_t(c)), emit); });
   for (double d2 : atlasPending.d2) atlasMax = std::max(atlasMax, std::sqrt(d2)), atlasSum += std::sqrt(d2);
   for (double d2 : meshPending.d2) meshMax = std::max(meshMax, std::sqrt(d2)), meshSum += std::sqrt(d2);
   if (atlasPending.unresolved) atlasMax = std::max(atlasMax, margin), atlasSum += margin * atlasPending.unresolved;

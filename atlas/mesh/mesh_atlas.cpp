@@ -109,9 +109,42 @@ NormalAngles summarize(const std::vector<uint64_t>& bins) {
 
 }  // namespace
 
+uint32_t chartFinestLevel(const std::vector<glm::vec3>& P, uint32_t chartSize, double sampleError,
+                          const ChartCoarsening& c) {
+  if (!(c.bound > 0.0) || c.maxFinestLevel == 0 || !(sampleError <= c.bound)) return 0;
+  const uint32_t M = chartSize - 1;
+  if (!isChartSizeValid(chartSize) || P.size() != size_t(chartSize) * chartSize)
+    throw std::invalid_argument("chartFinestLevel: positions do not match the chart size");
+  double levelError = 0.0;
+  uint32_t finest = 0;
+  for (uint32_t k = 1; k <= c.maxFinestLevel && (M >> k) >= 1; ++k) {
+    const uint32_t step = 1u << k;
+    const float inv = 1.0f / float(step);
+    for (uint32_t cy = 0; cy < (M >> k); ++cy)
+      for (uint32_t cx = 0; cx < (M >> k); ++cx) {
+        const glm::vec3 p00 = P[size_t(cy * step) * chartSize + cx * step];
+        const glm::vec3 p10 = P[size_t(cy * step) * chartSize + cx * step + step];
+        const glm::vec3 p01 = P[size_t(cy * step + step) * chartSize + cx * step];
+        const glm::vec3 p11 = P[size_t(cy * step + step) * chartSize + cx * step + step];
+        for (uint32_t dy = 0; dy <= step; ++dy)
+          for (uint32_t dx = 0; dx <= step; ++dx) {
+            const float fx = float(dx) * inv, fy = float(dy) * inv;
+            // The cell's two triangles, split along its (0,0)-(1,1) diagonal as drawn.
+            const glm::vec3 q = fx >= fy ? p00 + fx * (p10 - p00) + fy * (p11 - p10)
+                                         : p00 + fy * (p01 - p00) + fx * (p11 - p01);
+            const glm::vec3 d = q - P[size_t(cy * step + dy) * chartSize + cx * step + dx];
+            levelError = std::max(levelError, std::sqrt(double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z));
+          }
+      }
+    if (sampleError + levelError > c.bound) break;
+    finest = k;
+  }
+  return finest;
+}
+
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs::path& dir,
                                           uint32_t blockIntervals, AtlasManifest& m, const ChartSpill* spill,
-                                          const ChartCoding& coding) {
+                                          const ChartCoding& coding, const ChartCoarsening& coarsen) {
   const auto t0 = std::chrono::steady_clock::now();
   if (set.charts.empty()) throw std::invalid_argument("writeGeometryCharts: no charts");
   if (!std::has_single_bit(blockIntervals) || blockIntervals > set.chartSize - 1)
@@ -134,7 +167,7 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     m.compression.positionTolerance = coding.positionTolerance;
     m.compression.normalTolerance = coding.normalTolerance;
   }
-  std::vector<uint64_t> bytes(set.charts.size(), 0);
+  std::vector<uint64_t> bytes(set.charts.size(), 0), finestSamples(set.charts.size(), 0);
   std::vector<std::array<float, 6>> boxes(set.charts.size());
   const bool measureNormals = coding.compressed && coding.deriveGeometryNormals;
   tbb::enumerable_thread_specific<std::vector<uint64_t>> angleBins(
@@ -157,21 +190,45 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     c.gridY = 0;
     c.file = name;
     c.neighbours = img.neighbours;
-    const ChartPyramid pyramid = geometryPyramid(samples, set.chartSize, coding);
+    c.finestLevel = chartFinestLevel(samples.positions, set.chartSize, img.quality.sampleError, coarsen);
+    // The chart's finest level, subsampled before it is settled (settling then fits its own
+    // neighbours), and its pyramid from there.
+    const uint32_t size = ((set.chartSize - 1) >> c.finestLevel) + 1, step = 1u << c.finestLevel;
+    GeometryImage coarse;
+    if (c.finestLevel > 0) {
+      const size_t n = size_t(size) * size;
+      coarse.positions.resize(n);
+      coarse.normals.resize(n);
+      if (!samples.colours.empty()) coarse.colours.resize(n);
+      for (uint32_t v = 0; v < size; ++v)
+        for (uint32_t u = 0; u < size; ++u) {
+          const size_t src = size_t(v * step) * set.chartSize + u * step, dst = size_t(v) * size + u;
+          coarse.positions[dst] = samples.positions[src];
+          coarse.normals[dst] = samples.normals[src];
+          if (!coarse.colours.empty()) coarse.colours[dst] = samples.colours[src];
+        }
+    }
+    const ChartPyramid pyramid = geometryPyramid(c.finestLevel > 0 ? coarse : samples, size, coding);
+    finestSamples[i] = uint64_t(size) * size;
     glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
     for (const glm::vec3& q : pyramid.positions[0]) {
       lo = {std::min(lo.x, q.x), std::min(lo.y, q.y), std::min(lo.z, q.z)};
       hi = {std::max(hi.x, q.x), std::max(hi.y, q.y), std::max(hi.z, q.z)};
     }
     boxes[i] = {lo.x, lo.y, lo.z, hi.x, hi.y, hi.z};
-    bytes[i] = writeChartFile(dir / name, pyramid, set.chartSize, blockIntervals, coding);
-    if (measureNormals) addNormalAngles(pyramid, set.chartSize, blockIntervals, angleBins.local());
+    const uint32_t blocks = std::min(blockIntervals, size - 1);
+    bytes[i] = writeChartFile(dir / name, pyramid, size, blocks, coding);
+    if (measureNormals) addNormalAngles(pyramid, size, blocks, angleBins.local());
     progress::advance();
   });
   GeometryChartsWritten w;
   w.bounds = boxes[0];
   for (size_t i = 0; i < boxes.size(); ++i) {
     w.bytes += bytes[i];
+    w.finestSamples += finestSamples[i];
+    const uint32_t f = m.charts[i].finestLevel;
+    if (w.chartsByFinestLevel.size() <= f) w.chartsByFinestLevel.resize(f + 1, 0);
+    ++w.chartsByFinestLevel[f];
     for (int a = 0; a < 3; ++a) {
       w.bounds[a] = std::min(w.bounds[a], boxes[i][a]);
       w.bounds[3 + a] = std::max(w.bounds[3 + a], boxes[i][3 + a]);
@@ -207,21 +264,47 @@ AtlasSurface readAtlasSurface(const fs::path& atlasDir, uint32_t level) {
                     (uint64_t(k.z) * 0x165667B19E3779F9ull));
     }
   };
-  // Charts are read in parallel, then welded in chart order.
+  // Charts are read in parallel, then welded in chart order. A chart whose finest level is coarser
+  // than `level` gives its finest; its neighbours' border samples facing it are stitched onto its
+  // lattice, as the renderer stitches them (each moved to the lattice point below it).
+  const auto drawnLevel = [&](size_t i) { return std::max(level, m.charts[i].finestLevel); };
   std::vector<std::vector<glm::vec3>> levels(m.charts.size());
   tbb::parallel_for(size_t(0), m.charts.size(), [&](size_t i) {
     const ChartInfo& c = m.charts[i];
     const ChartFileReader reader(atlasDir / c.file);
     if (!reader.hasChannel(kChannelPositions))
       throw InputError((atlasDir / c.file).string() + ": no positions in a geometry atlas chart");
-    if (level >= reader.levels())
-      throw InputError((atlasDir / c.file).string() + ": has no level " + std::to_string(level));
-    levels[i] = reader.readLevelPositions(level);
+    if (reader.chartSize() != m.chartFileSize(c.id))
+      throw InputError((atlasDir / c.file).string() + ": chart size differs from the manifest's");
+    const uint32_t own = drawnLevel(i);
+    if (own - c.finestLevel >= reader.levels())
+      throw InputError((atlasDir / c.file).string() + ": has no level " + std::to_string(own - c.finestLevel));
+    std::vector<glm::vec3> P = reader.readLevelPositions(own - c.finestLevel);
+    const uint32_t n = (m.chartSize - 1) >> own;
+    for (uint32_t e = 0; e < 4; ++e) {
+      const int32_t other = c.neighbours[e].chart;
+      if (other < 0 || drawnLevel(size_t(other)) <= own) continue;
+      const uint32_t d = drawnLevel(size_t(other)) - own;
+      for (uint32_t t = 0; t <= n; ++t) {
+        const uint32_t snapped = (t >> d) << d;
+        // The edge's sample at coordinate t along +u (bottom, top) or +v (left, right).
+        const auto at = [&](uint32_t x) -> glm::vec3& {
+          switch (e) {
+            case kEdgeBottom: return P[x];
+            case kEdgeTop: return P[size_t(n) * (n + 1) + x];
+            case kEdgeLeft: return P[size_t(x) * (n + 1)];
+            default: return P[size_t(x) * (n + 1) + n];
+          }
+        };
+        at(t) = at(snapped);
+      }
+    }
+    levels[i] = std::move(P);
   });
   std::unordered_map<Key, uint32_t, KeyHash> weld;
-  for (std::vector<glm::vec3>& chartLevel : levels) {
-    const std::vector<glm::vec3> P = std::move(chartLevel);
-    const uint32_t s = ((m.chartSize - 1) >> level) + 1;
+  for (size_t chart = 0; chart < levels.size(); ++chart) {
+    const std::vector<glm::vec3> P = std::move(levels[chart]);
+    const uint32_t s = ((m.chartSize - 1) >> drawnLevel(chart)) + 1;
     std::vector<uint32_t> ids(P.size());
     for (size_t i = 0; i < P.size(); ++i) {
       Key k;

@@ -36,7 +36,25 @@ struct GeometryChartsWritten {
   double seconds = 0.0;
   std::array<float, 6> bounds{};  // min x, y, z, max x, y, z over every sample
   NormalAngles normalAngles;      // coding.deriveGeometryNormals only
+  std::vector<uint32_t> chartsByFinestLevel;  // [finest level]: charts that keep it (ChartInfo)
+  uint64_t finestSamples = 0;                 // the charts' finest levels' samples, summed
 };
+
+// How far writeGeometryCharts may coarsen each chart (ChartInfo::finestLevel): to the coarsest
+// pyramid level, at most maxFinestLevel, whose surface stays within `bound` of the input vertices:
+// the chart's sampling error (ImageQuality::sampleError, to its level 0) plus the farthest its
+// level-0 samples lie from that level's surface (as the renderer triangulates it). bound 0: none.
+struct ChartCoarsening {
+  double bound = 0.0;  // input units
+  uint32_t maxFinestLevel = 0;
+};
+
+// The finest level `c` allows a chart of chartSize^2 positions whose sampling error is
+// sampleError: the largest k <= c.maxFinestLevel with sampleError + levelError(k) <= c.bound,
+// levelError(k) the largest distance from a level-0 sample to the surface of level k' at its
+// (u, v), over k' <= k (so that it never drops as k grows).
+uint32_t chartFinestLevel(const std::vector<glm::vec3>& positions, uint32_t chartSize, double sampleError,
+                          const ChartCoarsening& c);
 
 // Writes set's charts to dir/charts/chart_NNNN.bin (atomically, in parallel) and fills m's
 // kind ("geometry"), chart size, block size, chart list (file names, neighbours) and height
@@ -46,10 +64,13 @@ struct GeometryChartsWritten {
 // lattice and the tolerances in m.compression; with coding.deriveGeometryNormals it stores the
 // normals of block borders only and measures the derived ones against the resampled ones.
 // Throws InputError when a file cannot be written, std::invalid_argument on an empty or
-// inconsistent set.
+// inconsistent set. With `coarsen`, each chart keeps only the levels from its finest
+// (chartFinestLevel), subsampled from its samples before they are settled, in a file of its own
+// size (blocks of at most its intervals), and m's chart records the level.
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const std::filesystem::path& dir,
                                           uint32_t blockIntervals, AtlasManifest& m,
-                                          const ChartSpill* spill = nullptr, const ChartCoding& coding = {});
+                                          const ChartSpill* spill = nullptr, const ChartCoding& coding = {},
+                                          const ChartCoarsening& coarsen = {});
 
 // The surface of a geometry atlas at pyramid level `level`: every chart's grid, triangulated as
 // the renderer draws it (split along the (0,0)-(1,1) diagonal, counter-clockwise in (u, v)), with

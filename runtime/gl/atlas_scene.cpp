@@ -52,7 +52,7 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
     PagePool::Slot slot;
     pool_.acquire(root.key(), frame_, &slot);
     pages_.read(root, samples_, normals_, &colours_);
-    renderer_->uploadPage(slot.layer, pages_.pageSamples(0), samples_.data(), normals_.data(),
+    renderer_->uploadPage(slot.layer, pages_.pageSamples(root), samples_.data(), normals_.data(),
                           colours_.empty() ? nullptr : colours_.data());
     pool_.lock(root.key());
   }
@@ -94,7 +94,7 @@ Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, FrameRes
     PagePool::Slot slot;
     // note: when the pool is full this frame the page is dropped; it stays in the RAM cache.
     if (!pool_.acquire(pg.id.key(), frame_, &slot) || !slot.needsUpload) continue;
-    renderer_->uploadPage(slot.layer, pages_.pageSamples(pg.id.level), pg.samples.data(), pg.normals.data(),
+    renderer_->uploadPage(slot.layer, pages_.pageSamples(pg.id), pg.samples.data(), pg.normals.data(),
                           pg.colours.empty() ? nullptr : pg.colours.data());
     ++uploaded;
   }
@@ -137,7 +137,7 @@ std::vector<DrawNode> AtlasScene::prepare(const Cut& cut, FrameResult* frame) {
     if (pool_.acquire(n.id.key(), frame_, &slot)) {
       if (slot.needsUpload) {
         pages_.read(n.id, samples_, normals_, &colours_);
-        renderer_->uploadPage(slot.layer, pages_.pageSamples(n.id.level), samples_.data(), normals_.data(),
+        renderer_->uploadPage(slot.layer, pages_.pageSamples(n.id), samples_.data(), normals_.data(),
                               colours_.empty() ? nullptr : colours_.data());
         ++loaded;
       }

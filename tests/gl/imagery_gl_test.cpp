@@ -68,7 +68,7 @@ TEST_F(ImageryDrapedDem, ManifestAndPagesCarryTheFinerImagery) {
   std::vector<PackedColour> colours;
   const NodeId root{0, 0, 0, 0};
   pages.read(root, samples, normals, &colours);
-  const size_t s = pages.pageSamples(0), cs = pages.colourPageSamples(0);
+  const size_t s = pages.pageSamples(root), cs = pages.colourPageSamples(root);
   EXPECT_EQ(cs, 2 * (s - 1) + 1);
   EXPECT_EQ(colours.size(), cs * cs);
   EXPECT_EQ(samples.size(), s * s);

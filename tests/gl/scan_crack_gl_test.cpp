@@ -69,6 +69,14 @@ TEST_P(ScanCrackTest, DualQueueCutsAlongAPathHaveNoCracks) {
   DualQueueAdapter dq(h);
   test::CutMix total;
   uint64_t checked = 0, nodes = 0;
+  // Charts keep their pyramids from different finest levels (ChartInfo::finestLevel): the drawn
+  // sides where two such charts meet, if the atlas has any.
+  bool mixedSeams = false;
+  for (const ChartInfo& c : atlas.manifest.charts)
+    for (const RootNeighbour& r : c.neighbours)
+      mixedSeams = mixedSeams || (r.chart >= 0 && atlas.manifest.charts[uint32_t(r.chart)].finestLevel != c.finestLevel);
+  uint64_t mixedSides = 0;
+  std::vector<SideNeighbour> across;
   uint32_t maxLevel = 0, controls = 0;
   const std::vector<Camera> path = spiralPath(atlas.lo, atlas.hi, 8, 1.0, 0.2, 25.0);
   for (size_t f = 0; f < path.size(); ++f) {
@@ -92,6 +100,15 @@ TEST_P(ScanCrackTest, DualQueueCutsAlongAPathHaveNoCracks) {
               << r.mismatches << " mismatches; across charts " << mix.crossChart << " sides, "
               << mix.crossChartLevelDiff << " level and " << mix.crossChartResDiff << " resolution differences\n";
     total += mix;
+    for (const CutNode& n : cut.nodes)
+      for (uint32_t s = 0; s < 4; ++s) {
+        across.clear();
+        sideNeighbours(h, cut, n.id, s, across);
+        for (const SideNeighbour& a : across) {
+          const uint32_t other = cut.nodes[a.cutIndex].id.chart;
+          mixedSides += other != n.id.chart && h.finestLevel(other) != h.finestLevel(n.id.chart);
+        }
+      }
     checked += r.borderVertices;
     nodes += cut.nodes.size();
   }
@@ -105,6 +122,10 @@ TEST_P(ScanCrackTest, DualQueueCutsAlongAPathHaveNoCracks) {
   EXPECT_GT(maxLevel, 0u) << "no chart was refined";
   EXPECT_GT(total.crossChartLevelDiff, 0u) << "no chart-border neighbours at different levels";
   EXPECT_GT(total.crossChartResDiff, 0u) << "no chart-border neighbours at different resolutions";
+  std::cout << "  " << mixedSides << " drawn sides between charts of different finest levels\n";
+  if (mixedSeams) {
+    EXPECT_GT(mixedSides, 0u) << "charts of different finest levels meet, but no frame drew such a seam";
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(SharedScans, ScanCrackTest, ::testing::ValuesIn(test::sharedScanNames()),

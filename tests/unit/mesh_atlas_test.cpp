@@ -8,6 +8,9 @@
 #include "atlas/mesh/mesh_atlas.h"
 #include "atlas/mesh/mesh_io.h"
 #include "hierarchy/hierarchy.h"
+#include "inspect/seams.h"
+#include "runtime/atlas_view.h"
+#include "runtime/page_reader.h"
 #include "tests/chart_layout_fixture.h"
 #include "tests/test_util.h"
 
@@ -67,6 +70,137 @@ TEST(MeshAtlas, ClosedSurfaceStaysWatertightAtEveryLevel) {
   EXPECT_EQ(mesh.positions.size(), s.positions.size());
   EXPECT_EQ(mesh.triangles.size(), s.triangles.size());
   EXPECT_EQ(mesh.stats.droppedDegenerate + mesh.stats.droppedDuplicate, 0u);
+}
+
+// The farthest a level-0 sample lies from the surface of level k at its (u, v), over k' <= k,
+// found the plain way: every sample against the two triangles of its level-k' cell.
+double levelErrorUpTo(const std::vector<glm::vec3>& P, uint32_t n, uint32_t k) {
+  double e = 0.0;
+  for (uint32_t j = 1; j <= k; ++j) {
+    const uint32_t s = 1u << j;
+    for (uint32_t v = 0; v < n; ++v)
+      for (uint32_t u = 0; u < n; ++u) {
+        const uint32_t cu = std::min(u / s, (n - 1) / s - 1), cv = std::min(v / s, (n - 1) / s - 1);
+        const double a = double(u - cu * s) / s, b = double(v - cv * s) / s;
+        const glm::dvec3 p00 = P[size_t(cv * s) * n + cu * s], p10 = P[size_t(cv * s) * n + cu * s + s];
+        const glm::dvec3 p01 = P[size_t(cv * s + s) * n + cu * s], p11 = P[size_t(cv * s + s) * n + cu * s + s];
+        const glm::dvec3 q = a >= b ? p00 + a * (p10 - p00) + b * (p11 - p10) : p00 + b * (p01 - p00) + a * (p11 - p01);
+        e = std::max(e, glm::length(q - glm::dvec3(P[size_t(v) * n + u])));
+      }
+  }
+  return e;
+}
+
+TEST(ChartCoarsening, KeepsTheCoarsestLevelWithinTheBound) {
+  const uint32_t n = 33;
+  // A plane keeps its coarsest allowed level; a paraboloid the coarsest within the bound.
+  std::vector<glm::vec3> plane(size_t(n) * n), bowl(plane.size());
+  for (uint32_t v = 0; v < n; ++v)
+    for (uint32_t u = 0; u < n; ++u) {
+      const float x = float(u) / (n - 1), y = float(v) / (n - 1);
+      plane[size_t(v) * n + u] = {x, y, 0.5f * x - 0.25f * y};
+      bowl[size_t(v) * n + u] = {x, y, 2.0f * (x * x + y * y)};
+    }
+  EXPECT_EQ(chartFinestLevel(plane, n, 0.0, {1e-6, 3}), 3u);
+  EXPECT_EQ(chartFinestLevel(plane, n, 0.0, {0.0, 3}), 0u);     // no bound: nothing dropped
+  EXPECT_EQ(chartFinestLevel(plane, n, 2e-6, {1e-6, 3}), 0u);   // the sampling alone is over it
+  for (const double sampleError : {0.0, 1e-3}) {
+    for (const double bound : {2e-3, 5e-3, 1e-2, 3e-2, 1e-1}) {
+      const uint32_t k = chartFinestLevel(bowl, n, sampleError, {bound, 4});
+      SCOPED_TRACE(::testing::Message() << "bound " << bound << ", sampling error " << sampleError << ", level " << k);
+      EXPECT_LE(sampleError + levelErrorUpTo(bowl, n, k), bound * (1 + 1e-5));
+      if (k < 4) {
+        EXPECT_GT(sampleError + levelErrorUpTo(bowl, n, k + 1), bound * (1 - 1e-5));
+      }
+    }
+  }
+  EXPECT_GT(chartFinestLevel(bowl, n, 0.0, {3e-2, 4}), chartFinestLevel(bowl, n, 0.0, {2e-3, 4}));
+}
+
+// Charts of different finest levels side by side: the files hold their own sizes, the seams stay
+// bit-identical where both charts hold a level, the export is stitched watertight at every level
+// as the renderer stitches, the hierarchy gives no coarse chart a resolution it does not hold, and
+// a coarse chart's pages are its own samples.
+TEST(MeshAtlas, ChartsOfDifferentFinestLevelsStayWatertight) {
+  test::TempDir tmp("gimlod-mesh-atlas");
+  GeometryImageSet set = resampleLayout(test::cubeLayout(6, true), ResampleOptions{33, 0, {}});
+  ASSERT_EQ(set.charts.size(), 24u);
+  // Every other chart is given a sampling error at the bound, so it keeps its finest samples.
+  const double bound = 0.02;
+  for (size_t i = 0; i < set.charts.size(); ++i) set.charts[i].quality.sampleError = i % 2 ? 0.0 : bound;
+  AtlasManifest m;
+  m.depth = 2;
+  m.maxNodeResLog2 = 3;
+  m.minNodeResLog2 = 1;
+  const HierarchyParams p{5, 2, 3, 1};
+  const fs::path dir = tmp.path() / "sphere.atlas";
+  const GeometryChartsWritten w = writeGeometryCharts(set, dir, 8, m, nullptr, {}, {bound, p.maxFinestLevel()});
+  writeManifest(dir, m);
+  const AtlasManifest back = readManifest(dir);
+  uint64_t finest = 0;
+  for (const ChartInfo& c : back.charts) {
+    SCOPED_TRACE(c.file);
+    if (c.id % 2 == 0) {
+      EXPECT_EQ(c.finestLevel, 0u);
+    } else {
+      EXPECT_GT(c.finestLevel, 0u);
+    }
+    EXPECT_LE(c.finestLevel, p.maxFinestLevel());
+    const ChartFileReader r(dir / c.file);
+    EXPECT_EQ(r.chartSize(), (32u >> c.finestLevel) + 1);
+    EXPECT_EQ(r.levels(), back.pyramidLevels() - c.finestLevel);
+    finest += uint64_t(r.chartSize()) * r.chartSize();
+  }
+  EXPECT_EQ(w.finestSamples, finest);
+  ASSERT_GE(w.chartsByFinestLevel.size(), 2u);
+  EXPECT_EQ(w.chartsByFinestLevel[0], 12u);
+  const SeamReport seams = validateSeams(dir);
+  EXPECT_EQ(seams.mismatches(), 0u);
+  for (uint32_t level = 0; level < back.pyramidLevels(); ++level) {
+    const AtlasSurface s = readAtlasSurface(dir, level);
+    EXPECT_EQ(s.boundaryEdges, 0u) << "level " << level << ": a coarse chart's seam is not stitched";
+    EXPECT_EQ(int64_t(s.positions.size()) - int64_t(s.triangles.size()) * 3 / 2 + int64_t(s.triangles.size()), 2)
+        << "level " << level;
+  }
+  // The hierarchy, as the runtime opens it.
+  std::vector<std::array<RootNeighbour, 4>> roots;
+  for (const ChartInfo& c : back.charts) roots.push_back(c.neighbours);
+  const Hierarchy h = buildGeometryHierarchy(hierarchyParams(back), roots, [&](uint32_t c) {
+    return ChartFileReader(dir / back.charts[c].file).readLevelPositions(0);
+  }, nullptr, finestLevels(back, hierarchyParams(back)));
+  writeHierarchy(dir / back.hierarchyFile, h);
+  const AtlasView view = openAtlas(dir);
+  const PageReader pages(dir, back, view.hierarchy.params);
+  for (const ChartInfo& c : back.charts) {
+    const NodeId leaf{c.id, 1, 1, 0};
+    EXPECT_EQ(view.hierarchy.maxRes(leaf), std::min(4 - c.finestLevel, 3u));
+    EXPECT_EQ(view.hierarchy.maxRes(leaf), h.maxRes(leaf));
+    // Finer than the chart holds: no error; its own finest samples: error 0.
+    const uint32_t r = h.maxRes(leaf);
+    if (r < p.maxNodeResLog2) {
+      EXPECT_TRUE(std::isnan(view.hierarchy.error(leaf, r + 1)));
+    }
+    if (c.finestLevel > 0) {
+      EXPECT_EQ(view.hierarchy.error(leaf, r), 0.f);
+    } else {
+      EXPECT_GT(view.hierarchy.error(leaf, r), 0.f);  // the page's level 1 on a sphere
+    }
+    std::vector<float> samples;
+    std::vector<PackedNormal> normals;
+    pages.read(leaf, samples, normals);
+    // The page: the leaf's window of the file's level intervals - level - res, in the file's units.
+    const uint32_t side = pages.pageSamples(leaf), fileSide = (32u >> c.finestLevel) + 1;
+    const uint32_t step = (fileSide - 1) / 2 / (side - 1);
+    ASSERT_EQ(samples.size(), size_t(side) * side * 3);
+    const std::vector<glm::vec3> level0 = ChartFileReader(dir / c.file).readLevelPositions(0);
+    const uint32_t x0 = (fileSide - 1) / 2;  // the leaf (1, 0) starts halfway along u
+    for (uint32_t j = 0; j < side; ++j)
+      for (uint32_t i = 0; i < side; ++i) {
+        const glm::vec3& q = level0[size_t(j * step) * fileSide + x0 + i * step];
+        ASSERT_EQ(samples[(size_t(j) * side + i) * 3 + 0], q.x) << c.file << " (" << i << ", " << j << ")";
+        ASSERT_EQ(samples[(size_t(j) * side + i) * 3 + 2], q.z) << c.file << " (" << i << ", " << j << ")";
+      }
+  }
 }
 
 TEST(MeshAtlas, BadInputsAreReported) {

@@ -39,7 +39,7 @@ class PageLoaderTest : public ::testing::Test {
     dir_.reset();
   }
   static size_t pageBytes(uint32_t level) {
-    const size_t s = pages_->pageSamples(level);
+    const size_t s = pages_->pageSamples({0, level, 0, 0});
     return s * s * (sizeof(float) + sizeof(PackedNormal));
   }
   static void expectPageEquals(const NodeId& n, const std::vector<float>& h,
@@ -119,7 +119,7 @@ TEST_F(PageLoaderTest, DataEqualsDirectRead) {
   ASSERT_EQ(done.size(), nodes.size());
   for (const LoadedPage& p : done) {
     EXPECT_FALSE(p.fromRam);
-    const uint32_t s = pages_->pageSamples(p.id.level);
+    const uint32_t s = pages_->pageSamples(p.id);
     EXPECT_EQ(p.samples.size(), size_t(s) * s);
     expectPageEquals(p.id, p.samples, p.normals);
     std::vector<float> h2;

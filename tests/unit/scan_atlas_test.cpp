@@ -185,8 +185,11 @@ void checkSeams(const fs::path& dir) {
   std::vector<std::unique_ptr<ChartFileReader>> readers;
   for (const ChartInfo& c : m.charts) {
     readers.push_back(std::make_unique<ChartFileReader>(dir / c.file));
-    ASSERT_EQ(readers.back()->levels(), m.pyramidLevels()) << c.file;
+    // A chart keeps the levels from its finest (ChartInfo::finestLevel).
+    ASSERT_EQ(readers.back()->levels(), m.pyramidLevels() - c.finestLevel) << c.file;
+    ASSERT_EQ(readers.back()->chartSize(), m.chartFileSize(c.id)) << c.file;
   }
+  const auto holds = [&](uint32_t c, uint32_t level) { return m.charts[c].finestLevel <= level; };
   // Corner groups: corner i of chart c is the start of its edge i; across edge e to (d, f), the
   // start of e meets the end of f (reversed) or its start (not reversed), and likewise the end.
   UnionFind corners(size_t(charts) * 4);
@@ -230,9 +233,11 @@ void checkSeams(const fs::path& dir) {
 
   for (uint32_t level = 0; level < m.pyramidLevels(); ++level) {
     const uint32_t n = ((m.chartSize - 1) >> level) + 1;
+    // The charts that hold the level (the others meet their neighbours from their finest level on).
     std::vector<std::vector<glm::vec3>> pos(charts);
     for (uint32_t c = 0; c < charts; ++c) {
-      pos[c] = readers[c]->readLevelPositions(level);
+      if (!holds(c, level)) continue;
+      pos[c] = readers[c]->readLevelPositions(level - m.charts[c].finestLevel);
       ASSERT_EQ(pos[c].size(), size_t(n) * n);
     }
     uint64_t edgeMismatches = 0, checked = 0;
@@ -240,7 +245,7 @@ void checkSeams(const fs::path& dir) {
     for (uint32_t c = 0; c < charts; ++c)
       for (uint32_t e = 0; e < 4; ++e) {
         const RootNeighbour& r = m.charts[c].neighbours[e];
-        if (r.chart < 0) continue;
+        if (r.chart < 0 || !holds(c, level) || !holds(uint32_t(r.chart), level)) continue;
         for (uint32_t k = 0; k < n; ++k) {
           const glm::vec3& a = pos[c][edgeSample(n, e, k)];
           const glm::vec3& b = pos[r.chart][edgeSample(n, r.edge, r.reversed ? n - 1 - k : k)];
@@ -257,6 +262,7 @@ void checkSeams(const fs::path& dir) {
     uint64_t cornerMismatches = 0;
     std::map<uint32_t, glm::vec3> groupPosition;
     for (uint32_t i = 0; i < charts * 4; ++i) {
+      if (!holds(i / 4, level)) continue;
       const glm::vec3& p = pos[i / 4][cornerSample(n, i % 4)];
       const auto [it, fresh] = groupPosition.emplace(corners.find(i), p);
       cornerMismatches += !fresh && !bitEqual(it->second, p);
@@ -309,7 +315,13 @@ TEST_P(ScanAtlasTest, Invariants) {
       const Topology t = topologyOf(s.positions, s.triangles);
       std::cout << "  level " << level << ": " << t << "\n";
       const uint64_t side = ((m.chartSize - 1) >> level) + 1;
-      EXPECT_EQ(s.samples, m.charts.size() * side * side) << "level " << level;
+      // A chart whose finest level is coarser gives its finest samples there (stitched to it).
+      uint64_t samples = 0;
+      for (const ChartInfo& c : m.charts) {
+        const uint64_t own = ((m.chartSize - 1) >> std::max(level, c.finestLevel)) + 1;
+        samples += own * own;
+      }
+      EXPECT_EQ(s.samples, samples) << "level " << level;
       EXPECT_EQ(s.boundaryEdges, t.boundaryEdges) << "level " << level << ": the export's own count disagrees";
       EXPECT_EQ(t.boundaryLoops, in.boundaryLoops) << "level " << level << ": open boundaries other than the scan's";
       // At the level where every chart is one quad (never drawn: nodes are drawn at minNodeRes,
