@@ -558,7 +558,20 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
   coding.positionTolerance = o.positionTolerance * diagonal;
   coding.normalTolerance = o.normalTolerance;
   const uint64_t triangles = std::max<uint64_t>(r.triangles, 1);
-  w.samplesPerTriangle = double(r.set.charts.size()) * r.set.chartSize * r.set.chartSize / double(triangles);
+  // Each chart's finest level first: the normals go by the samples the charts keep.
+  std::vector<uint32_t> finest;
+  if (o.coarsenCharts) {
+    ChartCoarsening coarsen;
+    coarsen.bound = r.stats.maxSampleError;
+    coarsen.maxFinestLevel = std::min(p.maxFinestLevel(), p.intervalsLog2 - 1);
+    finest = chartFinestLevels(r.set, r.spill.get(), coarsen);
+  }
+  uint64_t kept = 0;
+  for (size_t i = 0; i < r.set.charts.size(); ++i) {
+    const uint64_t side = ((r.set.chartSize - 1) >> (finest.empty() ? 0 : finest[i])) + 1;
+    kept += side * side;
+  }
+  w.samplesPerTriangle = double(kept) / double(triangles);
   coding.deriveGeometryNormals =
       o.compress && (o.normals == MeshNormals::kDerived ||
                      (o.normals == MeshNormals::kAuto && w.samplesPerTriangle <= kDerivedNormalsSamplesPerTriangle));
@@ -568,13 +581,8 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
                  coding.positionStep, 100.0 * coding.positionStep / std::max(diagonal, 1e-300),
                  100.0 * o.positionTolerance, o.normalTolerance);
   {
-    ChartCoarsening coarsen;
-    if (o.coarsenCharts) {
-      coarsen.bound = r.stats.maxSampleError;
-      coarsen.maxFinestLevel = std::min(p.maxFinestLevel(), p.intervalsLog2 - 1);
-    }
     const GeometryChartsWritten written =
-        writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get(), coding, coarsen);
+        writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get(), coding, finest);
     w.bounds = written.bounds;
     w.chartsByFinestLevel = written.chartsByFinestLevel;
     w.finestSamples = written.finestSamples;

@@ -142,11 +142,38 @@ uint32_t chartFinestLevel(const std::vector<glm::vec3>& P, uint32_t chartSize, d
   return finest;
 }
 
+namespace {
+
+// Chart i's samples: the set's own, or read back from the spill into `back`.
+const GeometryImage& chartSamples(const GeometryImageSet& set, size_t i, const ChartSpill* spill, GeometryImage& back) {
+  if (set.charts[i].spilled < 0) return set.charts[i];
+  if (!spill) throw std::invalid_argument("writeGeometryCharts: a chart's samples are spilled, but no spill is given");
+  back.spilled = set.charts[i].spilled;
+  spill->get(back);
+  return back;
+}
+
+}  // namespace
+
+std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const ChartSpill* spill, const ChartCoarsening& c) {
+  std::vector<uint32_t> out(set.charts.size(), 0);
+  if (!(c.bound > 0.0) || c.maxFinestLevel == 0) return out;
+  tbb::parallel_for(size_t(0), set.charts.size(), [&](size_t i) {
+    if (!(set.charts[i].quality.sampleError <= c.bound)) return;
+    GeometryImage back;
+    out[i] = chartFinestLevel(chartSamples(set, i, spill, back).positions, set.chartSize,
+                              set.charts[i].quality.sampleError, c);
+  });
+  return out;
+}
+
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs::path& dir,
                                           uint32_t blockIntervals, AtlasManifest& m, const ChartSpill* spill,
-                                          const ChartCoding& coding, const ChartCoarsening& coarsen) {
+                                          const ChartCoding& coding, const std::vector<uint32_t>& finestLevels) {
   const auto t0 = std::chrono::steady_clock::now();
   if (set.charts.empty()) throw std::invalid_argument("writeGeometryCharts: no charts");
+  if (!finestLevels.empty() && finestLevels.size() != set.charts.size())
+    throw std::invalid_argument("writeGeometryCharts: one finest level per chart expected");
   if (!std::has_single_bit(blockIntervals) || blockIntervals > set.chartSize - 1)
     throw std::invalid_argument("writeGeometryCharts: blockIntervals must be a power of two <= chartSize - 1");
   std::error_code ec;
@@ -175,13 +202,8 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
   const progress::ProgressStage stage("write charts", set.charts.size());
   tbb::parallel_for(size_t(0), set.charts.size(), [&](size_t i) {
     GeometryImage back;  // a spilled chart's samples, read back for this chart only
-    if (set.charts[i].spilled >= 0) {
-      if (!spill) throw std::invalid_argument("writeGeometryCharts: a chart's samples are spilled, but no spill is given");
-      back.spilled = set.charts[i].spilled;
-      spill->get(back);
-    }
     const GeometryImage& img = set.charts[i];
-    const GeometryImage& samples = set.charts[i].spilled >= 0 ? back : img;
+    const GeometryImage& samples = chartSamples(set, i, spill, back);
     char name[32];
     std::snprintf(name, sizeof(name), "charts/chart_%04zu.bin", i);
     ChartInfo& c = m.charts[i];
@@ -190,7 +212,9 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     c.gridY = 0;
     c.file = name;
     c.neighbours = img.neighbours;
-    c.finestLevel = chartFinestLevel(samples.positions, set.chartSize, img.quality.sampleError, coarsen);
+    c.finestLevel = finestLevels.empty() ? 0 : finestLevels[i];
+    if ((set.chartSize - 1) >> c.finestLevel == 0)
+      throw std::invalid_argument("writeGeometryCharts: a finest level past the chart's pyramid");
     // The chart's finest level, subsampled before it is settled (settling then fits its own
     // neighbours), and its pyramid from there.
     const uint32_t size = ((set.chartSize - 1) >> c.finestLevel) + 1, step = 1u << c.finestLevel;

@@ -55,6 +55,8 @@ struct ChartCoarsening {
 // (u, v), over k' <= k (so that it never drops as k grows).
 uint32_t chartFinestLevel(const std::vector<glm::vec3>& positions, uint32_t chartSize, double sampleError,
                           const ChartCoarsening& c);
+// chartFinestLevel of every chart of `set` (in parallel; spilled charts read back from `spill`).
+std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const ChartSpill* spill, const ChartCoarsening& c);
 
 // Writes set's charts to dir/charts/chart_NNNN.bin (atomically, in parallel) and fills m's
 // kind ("geometry"), chart size, block size, chart list (file names, neighbours) and height
@@ -64,13 +66,13 @@ uint32_t chartFinestLevel(const std::vector<glm::vec3>& positions, uint32_t char
 // lattice and the tolerances in m.compression; with coding.deriveGeometryNormals it stores the
 // normals of block borders only and measures the derived ones against the resampled ones.
 // Throws InputError when a file cannot be written, std::invalid_argument on an empty or
-// inconsistent set. With `coarsen`, each chart keeps only the levels from its finest
-// (chartFinestLevel), subsampled from its samples before they are settled, in a file of its own
-// size (blocks of at most its intervals), and m's chart records the level.
+// inconsistent set. With finestLevels (one per chart, as chartFinestLevels gives), each chart keeps
+// only the levels from its finest, subsampled from its samples before they are settled, in a file
+// of its own size (blocks of at most its intervals), and m's chart records the level.
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const std::filesystem::path& dir,
                                           uint32_t blockIntervals, AtlasManifest& m,
                                           const ChartSpill* spill = nullptr, const ChartCoding& coding = {},
-                                          const ChartCoarsening& coarsen = {});
+                                          const std::vector<uint32_t>& finestLevels = {});
 
 // The surface of a geometry atlas at pyramid level `level`: every chart's grid, triangulated as
 // the renderer draws it (split along the (0,0)-(1,1) diagonal, counter-clockwise in (u, v)), with

@@ -134,7 +134,8 @@ TEST(MeshAtlas, ChartsOfDifferentFinestLevelsStayWatertight) {
   m.minNodeResLog2 = 1;
   const HierarchyParams p{5, 2, 3, 1};
   const fs::path dir = tmp.path() / "sphere.atlas";
-  const GeometryChartsWritten w = writeGeometryCharts(set, dir, 8, m, nullptr, {}, {bound, p.maxFinestLevel()});
+  const std::vector<uint32_t> levels = chartFinestLevels(set, nullptr, {bound, p.maxFinestLevel()});
+  const GeometryChartsWritten w = writeGeometryCharts(set, dir, 8, m, nullptr, {}, levels);
   writeManifest(dir, m);
   const AtlasManifest back = readManifest(dir);
   uint64_t finest = 0;
