@@ -431,9 +431,17 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
                          {"depth", m.depth},
                          {"maxNodeResLog2", m.maxNodeResLog2},
                          {"minNodeResLog2", m.minNodeResLog2}};
-  j["charts"] = std::move(charts);
+  // One line per chart (a mesh atlas lists thousands; indented, each took 500 bytes).
+  j["charts"] = ojson::array();
   // note: dump() throws on invalid UTF-8 (e.g. a Latin-1 file name in `source`); replace instead.
-  const std::string text = j.dump(2, ' ', false, ojson::error_handler_t::replace) + "\n";
+  std::string text = j.dump(2, ' ', false, ojson::error_handler_t::replace) + "\n";
+  std::string list = "[";
+  for (size_t i = 0; i < charts.size(); ++i)
+    list += (i ? ",\n    " : "\n    ") + charts[i].dump(-1, ' ', false, ojson::error_handler_t::replace);
+  list += charts.empty() ? "]" : "\n  ]";
+  const std::string empty = "\"charts\": []";
+  const size_t at = text.rfind(empty);
+  text.replace(at, empty.size(), "\"charts\": " + list);
   atomicWriteFile(dir / kManifestName, text.data(), text.size());
 }
 

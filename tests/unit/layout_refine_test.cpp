@@ -323,10 +323,18 @@ TEST(PatchSplit, FlipRepairWithSpilledChartsGivesTheSameAtlas) {
     EXPECT_TRUE(g.positions.empty());
   }
   EXPECT_GE(spill.bytes(), setSpilled.charts.size() * 33 * 33 * 16);
-  // Written: the same files.
+  // Written, each chart from its finest level (within a bound some charts meet coarser and some do
+  // not): the same levels and the same files.
+  double largest = 0.0;
+  for (const GeometryImage& g : setHeld.charts) largest = std::max(largest, g.quality.sampleError);
+  const ChartCoarsening coarsen{2.0 * largest, 2};
+  const std::vector<uint32_t> finestHeld = chartFinestLevels(setHeld, nullptr, coarsen);
+  EXPECT_EQ(chartFinestLevels(setSpilled, &spill, coarsen), finestHeld);
+  EXPECT_THROW(chartFinestLevels(setSpilled, nullptr, coarsen), std::invalid_argument);
+  EXPECT_TRUE(std::any_of(finestHeld.begin(), finestHeld.end(), [](uint32_t f) { return f > 0; }));
   AtlasManifest mHeld, mSpilled;
-  writeGeometryCharts(setHeld, tmp.path() / "held", 8, mHeld);
-  writeGeometryCharts(setSpilled, tmp.path() / "spilled", 8, mSpilled, &spill);
+  writeGeometryCharts(setHeld, tmp.path() / "held", 8, mHeld, nullptr, {}, finestHeld);
+  writeGeometryCharts(setSpilled, tmp.path() / "spilled", 8, mSpilled, &spill, {}, finestHeld);
   EXPECT_THROW(writeGeometryCharts(setSpilled, tmp.path() / "nospill", 8, mSpilled), std::invalid_argument);
   ASSERT_EQ(mHeld.charts.size(), mSpilled.charts.size());
   auto bytes = [](const std::filesystem::path& f) {
