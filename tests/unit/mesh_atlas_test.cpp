@@ -19,6 +19,27 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// The atlas's export at every level is one closed genus-0 surface (a sphere's atlas): no edge is
+// open, so every seam is bit-identical or stitched.
+void expectClosedSphereAtEveryLevel(const fs::path& dir, uint32_t levels) {
+  for (uint32_t level = 0; level < levels; ++level) {
+    const AtlasSurface s = readAtlasSurface(dir, level);
+    EXPECT_EQ(s.boundaryEdges, 0u) << "level " << level << ": a seam is neither bit-identical nor stitched";
+    // V - E + F = 2, E = 3F/2.
+    EXPECT_EQ(int64_t(s.positions.size()) - int64_t(s.triangles.size()) * 3 / 2 + int64_t(s.triangles.size()), 2)
+        << "level " << level;
+  }
+}
+
+// The hierarchy over an atlas's written charts, each from its finest level.
+Hierarchy hierarchyOfCharts(const fs::path& dir, const AtlasManifest& m) {
+  std::vector<std::array<RootNeighbour, 4>> roots;
+  for (const ChartInfo& c : m.charts) roots.push_back(c.neighbours);
+  return buildGeometryHierarchy(
+      hierarchyParams(m), roots, [&](uint32_t c) { return ChartFileReader(dir / m.charts[c].file).readLevelPositions(0); },
+      nullptr, finestLevels(m, hierarchyParams(m)));
+}
+
 TEST(MeshAtlas, ClosedSurfaceStaysWatertightAtEveryLevel) {
   test::TempDir tmp("gimlod-mesh-atlas");
   const ChartLayout layout = test::cubeLayout(6, true);  // a sphere from six curved patches
@@ -38,21 +59,13 @@ TEST(MeshAtlas, ClosedSurfaceStaysWatertightAtEveryLevel) {
   const AtlasManifest back = readManifest(dir);  // checks that the neighbours are symmetric
   EXPECT_EQ(back.kind, AtlasKind::Geometry);
   ASSERT_EQ(back.charts.size(), 24u);
+  expectClosedSphereAtEveryLevel(dir, back.pyramidLevels());
   for (uint32_t level = 0; level < back.pyramidLevels(); ++level) {
-    const AtlasSurface s = readAtlasSurface(dir, level);
     const uint32_t side = (32u >> level) + 1;
-    EXPECT_EQ(s.samples, 24ull * side * side);
-    EXPECT_EQ(s.boundaryEdges, 0u) << "level " << level << ": seams are not bit-identical";
-    // Closed genus-0 surface: V - E + F = 2, E = 3F/2.
-    EXPECT_EQ(int64_t(s.positions.size()) - int64_t(s.triangles.size()) * 3 / 2 + int64_t(s.triangles.size()), 2)
-        << "level " << level;
+    EXPECT_EQ(readAtlasSurface(dir, level).samples, 24ull * side * side) << "level " << level;
   }
   // The hierarchy over the written charts: bounds hold every sample, finest errors are 0.
-  std::vector<std::array<RootNeighbour, 4>> roots;
-  for (const ChartInfo& c : back.charts) roots.push_back(c.neighbours);
-  const Hierarchy h = buildGeometryHierarchy(hierarchyParams(back), roots, [&](uint32_t c) {
-    return ChartFileReader(dir / back.charts[c].file).readLevelPositions(0);
-  });
+  const Hierarchy h = hierarchyOfCharts(dir, back);
   for (uint32_t c = 0; c < h.chartCount(); ++c) {
     const auto& b = h.bounds({c, 0, 0, 0});
     for (const glm::vec3& q : set.charts[c].positions) {
@@ -157,18 +170,9 @@ TEST(MeshAtlas, ChartsOfDifferentFinestLevelsStayWatertight) {
   EXPECT_EQ(w.chartsByFinestLevel[0], 12u);
   const SeamReport seams = validateSeams(dir);
   EXPECT_EQ(seams.mismatches(), 0u);
-  for (uint32_t level = 0; level < back.pyramidLevels(); ++level) {
-    const AtlasSurface s = readAtlasSurface(dir, level);
-    EXPECT_EQ(s.boundaryEdges, 0u) << "level " << level << ": a coarse chart's seam is not stitched";
-    EXPECT_EQ(int64_t(s.positions.size()) - int64_t(s.triangles.size()) * 3 / 2 + int64_t(s.triangles.size()), 2)
-        << "level " << level;
-  }
+  expectClosedSphereAtEveryLevel(dir, back.pyramidLevels());
   // The hierarchy, as the runtime opens it.
-  std::vector<std::array<RootNeighbour, 4>> roots;
-  for (const ChartInfo& c : back.charts) roots.push_back(c.neighbours);
-  const Hierarchy h = buildGeometryHierarchy(hierarchyParams(back), roots, [&](uint32_t c) {
-    return ChartFileReader(dir / back.charts[c].file).readLevelPositions(0);
-  }, nullptr, finestLevels(back, hierarchyParams(back)));
+  const Hierarchy h = hierarchyOfCharts(dir, back);
   writeHierarchy(dir / back.hierarchyFile, h);
   const AtlasView view = openAtlas(dir);
   const PageReader pages(dir, back, view.hierarchy.params);
