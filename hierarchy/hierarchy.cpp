@@ -253,7 +253,7 @@ std::vector<uint8_t> finestLevels(const AtlasManifest& m, const HierarchyParams&
   for (const ChartInfo& c : m.charts) {
     if (c.finestLevel == 0) continue;
     if (c.finestLevel > p.maxFinestLevel())
-      throw InputError("atlas manifest: chart " + std::to_string(c.id) + " has finest level " +
+      throw InputError("chart " + std::to_string(c.id) + " has finest level " +
                        std::to_string(c.finestLevel) + ", over " + std::to_string(p.maxFinestLevel()) +
                        ", the most that leaves its leaves " + std::to_string(1u << p.minNodeResLog2) + " intervals");
     out.resize(m.charts.size(), 0);

@@ -143,7 +143,7 @@ Hierarchy readHierarchy(const std::filesystem::path& path);  // throws InputErro
 HierarchyParams hierarchyParams(const AtlasManifest& m);
 
 // The charts' finest levels (ChartInfo::finestLevel) as Hierarchy::finestLevels: empty when every
-// one is 0. Throws InputError naming the manifest's chart when one is over p.maxFinestLevel().
+// one is 0. Throws InputError naming the chart when one is over p.maxFinestLevel().
 std::vector<uint8_t> finestLevels(const AtlasManifest& m, const HierarchyParams& p);
 
 }  // namespace gimlod

@@ -15,7 +15,11 @@ AtlasView openAtlas(const std::filesystem::path& dir) {
   if (p.intervalsLog2 != q.intervalsLog2 || p.depth != q.depth || p.maxNodeResLog2 != q.maxNodeResLog2 ||
       p.minNodeResLog2 != q.minNodeResLog2 || a.hierarchy.chartCount() != a.manifest.charts.size())
     throw InputError(hpath.string() + ": does not match " + (dir / kManifestName).string());
-  a.hierarchy.finestLevels = finestLevels(a.manifest, hierarchyParams(a.manifest));
+  try {
+    a.hierarchy.finestLevels = finestLevels(a.manifest, hierarchyParams(a.manifest));
+  } catch (const InputError& e) {
+    throw InputError((dir / kManifestName).string() + ": " + e.what());
+  }
   if (a.manifest.kind == AtlasKind::Geometry) {
     // A mesh atlas: the union of the chart roots' boxes.
     a.lo = glm::dvec3(std::numeric_limits<double>::infinity());

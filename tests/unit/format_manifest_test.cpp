@@ -159,6 +159,33 @@ TEST(FormatManifest, ValidationErrors) {
   expectBad([](json& j) { j["hierarchy"]["depth"] = 0; }, "hierarchy.depth");
   expectBad([](json& j) { j["zScale"] = "big"; }, "zScale");
   expectBad([](json& j) { j = json::array(); }, "not a JSON object");
+  // A chart's finest level: geometry atlases only, and within the pyramid.
+  expectBad([](json& j) { j["charts"][1]["finest_level"] = 1; }, "finest_level' is for geometry atlases only");
+  expectBad(
+      [](json& j) {
+        j["kind"] = "geometry";
+        j["charts"][1]["finest_level"] = 8;
+      },
+      "charts[1].finest_level");
+}
+
+// A geometry atlas's charts keep their pyramids from their own finest levels: written only where
+// not 0, read back as written, and the chart file's size follows.
+TEST(FormatManifest, FinestLevelsRoundTrip) {
+  test::TempDir tmp("gimlod-manifest");
+  AtlasManifest a = sampleManifest();
+  a.kind = AtlasKind::Geometry;
+  a.charts[1].finestLevel = 3;
+  writeManifest(tmp.path(), a);
+  std::ifstream in(tmp.path() / kManifestName);
+  const json j = json::parse(in);
+  EXPECT_FALSE(j["charts"][0].contains("finest_level"));
+  EXPECT_EQ(j["charts"][1]["finest_level"], 3);
+  const AtlasManifest b = readManifest(tmp.path());
+  EXPECT_EQ(b.charts[0].finestLevel, 0u);
+  EXPECT_EQ(b.charts[1].finestLevel, 3u);
+  EXPECT_EQ(b.chartFileSize(0), 129u);
+  EXPECT_EQ(b.chartFileSize(1), 17u);
 }
 
 TEST(FormatManifest, MissingAndMalformedFiles) {

@@ -3,6 +3,7 @@
 // input (the seams are bit-identical) and is a valid PLY.
 #include <gtest/gtest.h>
 
+#include <functional>
 #include <map>
 
 #include "atlas/mesh/mesh_atlas.h"
@@ -206,6 +207,27 @@ TEST(MeshAtlas, ChartsOfDifferentFinestLevelsStayWatertight) {
         ASSERT_EQ(samples[(size_t(j) * side + i) * 3 + 2], q.z) << c.file << " (" << i << ", " << j << ")";
       }
   }
+  // A manifest that disagrees with the files: a finest level past what the hierarchy allows, and
+  // one that is not the chart file's.
+  const fs::path manifest = dir / kManifestName;
+  auto expectError = [&](const std::function<void()>& open, const std::string& file, const std::string& what) {
+    try {
+      open();
+      ADD_FAILURE() << "expected an InputError naming " << file;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(file), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  };
+  AtlasManifest bad = back;
+  bad.charts[1].finestLevel = p.maxFinestLevel() + 1;
+  writeManifest(dir, bad);
+  expectError([&] { openAtlas(dir); }, manifest.string(), "finest level");
+  bad.charts[1].finestLevel = back.charts[1].finestLevel == 1 ? 2 : 1;
+  writeManifest(dir, bad);
+  expectError([&] { PageReader(dir, bad, hierarchyParams(bad)); }, (dir / bad.charts[1].file).string(), "the manifest says");
+  expectError([&] { readAtlasSurface(dir, 0); }, (dir / bad.charts[1].file).string(), "chart size differs");
+  expectError([&] { validateSeams(dir); }, (dir / bad.charts[1].file).string(), "chart size or levels differ");
 }
 
 TEST(MeshAtlas, BadInputsAreReported) {
