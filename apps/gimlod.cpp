@@ -386,7 +386,7 @@ int main(int argc, char** argv) {
   std::string normalsArg = "auto";
   build->add_option("--normals", normalsArg,
                     "Meshes: stored (every sample's normal is stored), derived (only block borders' normals are "
-                    "stored; readers derive the others from the positions), or auto (derived when the atlas holds at "
+                    "stored; readers derive the others from the positions), or auto (derived when the charts keep at "
                     "most 16 samples per input triangle)")
       ->check(CLI::IsMember({"auto", "stored", "derived"}))
       ->capture_default_str();

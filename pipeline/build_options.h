@@ -98,7 +98,7 @@ inline constexpr double kDefaultSampleError = 0.0005;
 enum class MeshQuads : uint8_t { kAuto, kSides, kKites };
 // Where a compressed mesh atlas's normals come from: stored with every sample, or derived from the
 // positions on reading (core/atlas_format.h geometryImageNormals; block borders stored); auto:
-// derived where the atlas holds at most kDerivedNormalsSamplesPerTriangle samples per input
+// derived where the charts keep at most kDerivedNormalsSamplesPerTriangle samples per input
 // triangle. Sampled more densely, the derived normals show the input's flat triangles, which the
 // resampled (interpolated vertex) normals smooth over.
 enum class MeshNormals : uint8_t { kAuto, kStored, kDerived };
