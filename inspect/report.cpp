@@ -92,6 +92,7 @@ ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32
   writePngRgb(outDir / (stem + "_normals.png"), n, n, rgb);
   out.files.push_back(stem + "_normals.png");
   out.figures["image_level"] = level + m.charts[chart].finestLevel;
+  out.figures["finest_level"] = m.charts[chart].finestLevel;
   if (m.kind == AtlasKind::Geometry) {
     const std::vector<glm::vec3> pos = r.readLevelPositions(level);
     for (uint32_t v = 0; v < n; ++v)
@@ -499,6 +500,15 @@ InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const
     sum["bytes_per_input_triangle"] = double(bytes) / std::max(1.0, stats["read"]["triangles"].get<double>());
   sum["hierarchy_depth"] = m.depth;
   sum["hierarchy_nodes"] = nodes;
+  if (m.kind == AtlasKind::Geometry) {
+    // Charts by the level their pyramid starts at (ChartInfo::finestLevel; 0: the chart size).
+    std::vector<uint32_t> byLevel;
+    for (const ChartInfo& c : m.charts) {
+      if (byLevel.size() <= c.finestLevel) byLevel.resize(c.finestLevel + 1, 0);
+      ++byLevel[c.finestLevel];
+    }
+    sum["charts_by_finest_level"] = byLevel;
+  }
   if (stats.contains("total_seconds")) sum["build_seconds"] = stats["total_seconds"];
   if (stats.contains("peak_rss_bytes")) sum["build_peak_rss_bytes"] = stats["peak_rss_bytes"];
   if (isObject(stats, "resample")) {

@@ -77,6 +77,9 @@ TEST_F(InspectReportTest, ScanReportHoldsTheBuildsFiguresAndItsImages) {
   EXPECT_EQ(sum["image_stretch_l2"], st["resample"]["image_stretch_l2"]);
   EXPECT_EQ(sum["hausdorff_percent_of_diagonal"], st["fidelity"]["hausdorff_percent_of_diagonal"]);
   EXPECT_EQ(sum["samples"], st["charts"].get<uint64_t>() * 17 * 17);
+  // The manifest's finest levels, as the build counted them (all 0: a given chart size sets no bound).
+  EXPECT_EQ(sum["charts_by_finest_level"], st["charts_by_finest_level"]);
+  EXPECT_EQ(sum["charts_by_finest_level"], json::array({st["charts"]}));
   EXPECT_EQ(sum["seams_bit_identical"], true);
   EXPECT_EQ(written["charts"].size(), st["charts"].get<size_t>());
   // Worst first: by flipped texels, then degenerate texels, then stretch Linf.
