@@ -248,14 +248,34 @@ HierarchyParams hierarchyParams(const AtlasManifest& m) {
   return p;
 }
 
+std::vector<float> geometryLevelErrors(const std::vector<glm::vec3>& positions, uint32_t side, uint32_t levels) {
+  if (!isChartSizeValid(side) || positions.size() != size_t(side) * side || (side - 1) >> levels == 0)
+    throw std::invalid_argument("geometryLevelErrors: positions do not match the side, or too many levels");
+  std::vector<float> out(levels + 1, 0.0f), running(positions.size(), 0.0f);
+  for (uint32_t k = 1; k <= levels; ++k) {
+    accumulateLevelError(positions, side, k, running, PointDistance{});
+    out[k] = *std::max_element(running.begin(), running.end());
+  }
+  return out;
+}
+
+namespace {
+
+// Throws InputError naming the chart when its finest level is over p.maxFinestLevel().
+void checkFinestLevel(const HierarchyParams& p, uint32_t chart, uint32_t finest) {
+  if (finest > p.maxFinestLevel())
+    throw InputError("chart " + std::to_string(chart) + " has finest level " + std::to_string(finest) + ", over " +
+                     std::to_string(p.maxFinestLevel()) + ", the most that leaves its leaves " +
+                     std::to_string(1u << p.minNodeResLog2) + " intervals");
+}
+
+}  // namespace
+
 std::vector<uint8_t> finestLevels(const AtlasManifest& m, const HierarchyParams& p) {
   std::vector<uint8_t> out;
   for (const ChartInfo& c : m.charts) {
     if (c.finestLevel == 0) continue;
-    if (c.finestLevel > p.maxFinestLevel())
-      throw InputError("chart " + std::to_string(c.id) + " has finest level " +
-                       std::to_string(c.finestLevel) + ", over " + std::to_string(p.maxFinestLevel()) +
-                       ", the most that leaves its leaves " + std::to_string(1u << p.minNodeResLog2) + " intervals");
+    checkFinestLevel(p, c.id, c.finestLevel);
     out.resize(m.charts.size(), 0);
     out[c.id] = uint8_t(c.finestLevel);
   }
@@ -305,11 +325,7 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
     if (finestLevels.size() != count)
       throw std::invalid_argument("buildGeometryHierarchy: one finest level per chart expected");
     hier.finestLevels = finestLevels;
-    for (uint32_t c = 0; c < count; ++c)
-      if (finestLevels[c] > params.maxFinestLevel())
-        throw InputError("chart " + std::to_string(c) + ": finest level " + std::to_string(finestLevels[c]) +
-                         " leaves its leaves under " + std::to_string(1u << params.minNodeResLog2) +
-                         " intervals (at most " + std::to_string(params.maxFinestLevel()) + ")");
+    for (uint32_t c = 0; c < count; ++c) checkFinestLevel(params, c, finestLevels[c]);
   }
   std::atomic<uint64_t> samples{0};
   const auto t0 = std::chrono::steady_clock::now();

@@ -135,6 +135,11 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
                                  const ChartPositionSource& source, HierarchyStats* stats = nullptr,
                                  const std::vector<uint8_t>& finestLevels = {});
 
+// For k = 0..levels: the largest distance from a sample of a side^2 geometry image (row = v) to
+// the surface of its level k', drawn as the render grids draw it, at the sample's own (u, v), over
+// k' <= k: the chart-wide form of buildGeometryHierarchy's node errors (out[0] = 0).
+std::vector<float> geometryLevelErrors(const std::vector<glm::vec3>& positions, uint32_t side, uint32_t levels);
+
 // Atomic. compressed: version 2 (the arrays regrouped as byte planes, then zstd with its
 // checksum; about 0.4 of version 1's bytes on mesh atlases), else version 1 (raw). Both are read.
 void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool compressed = true);

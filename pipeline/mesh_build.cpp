@@ -563,7 +563,7 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
   if (o.coarsenCharts) {
     ChartCoarsening coarsen;
     coarsen.bound = r.stats.maxSampleError;
-    coarsen.maxFinestLevel = std::min(p.maxFinestLevel(), p.intervalsLog2 - 1);
+    coarsen.maxFinestLevel = p.maxFinestLevel();
     finest = chartFinestLevels(r.set, r.spill.get(), coarsen);
   }
   uint64_t kept = 0;

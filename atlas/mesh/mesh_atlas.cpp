@@ -1,6 +1,7 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, sections 3 and 5.
 #include "atlas/mesh/mesh_atlas.h"
 #include "core/block_codec.h"
+#include "hierarchy/hierarchy.h"
 #include "core/progress.h"
 
 #include <algorithm>
@@ -20,44 +21,51 @@ namespace gimlod {
 
 namespace fs = std::filesystem;
 
-ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, const ChartCoding& coding) {
-  const uint32_t M = chartSize - 1;
+namespace {
+
+// Every step-th sample of a side^2 row-major image, both ways ((side - 1) / step + 1)^2; empty
+// stays empty.
+template <typename T>
+std::vector<T> subsampled(const std::vector<T>& image, uint32_t side, uint32_t step) {
+  if (image.empty()) return {};
+  const uint32_t s = (side - 1) / step + 1;
+  std::vector<T> out(size_t(s) * s);
+  for (uint32_t v = 0; v < s; ++v)
+    for (uint32_t u = 0; u < s; ++u) out[size_t(v) * s + u] = image[size_t(v * step) * side + u * step];
+  return out;
+}
+
+}  // namespace
+
+ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, const ChartCoding& coding,
+                             uint32_t finestLevel) {
   if (!isChartSizeValid(chartSize) || image.positions.size() != size_t(chartSize) * chartSize ||
       image.normals.size() != image.positions.size() ||
       (!image.colours.empty() && image.colours.size() != image.positions.size()))
     throw std::invalid_argument("geometryPyramid: chart images do not match the chart size");
-  // Level 0 as it will be stored; the other levels subsample it.
-  std::vector<glm::vec3> settled;
-  std::vector<PackedNormal> normals(image.normals.begin(), image.normals.end());
-  const std::vector<glm::vec3>* positions = &image.positions;
+  if (((chartSize - 1) >> finestLevel) == 0)
+    throw std::invalid_argument("geometryPyramid: a finest level past the chart's pyramid");
+  // The finest level kept, as it will be stored: subsampled before it is settled (the settling then
+  // fits its own neighbours); the other levels subsample it.
+  const uint32_t M = (chartSize - 1) >> finestLevel, size = M + 1;
+  std::vector<glm::vec3> positions = subsampled(image.positions, chartSize, 1u << finestLevel);
+  std::vector<PackedNormal> normals = subsampled(image.normals, chartSize, 1u << finestLevel);
+  const std::vector<glm::u8vec4> colours = subsampled(image.colours, chartSize, 1u << finestLevel);
   if (coding.compressed) {
-    const std::vector<float> s = settlePositions({reinterpret_cast<const float*>(image.positions.data()),
-                                                  3 * image.positions.size()},
-                                                 chartSize, coding.positionStep, coding.positionTolerance);
-    settled.resize(image.positions.size());
-    std::memcpy(settled.data(), s.data(), s.size() * sizeof(float));
-    positions = &settled;
-    if (!coding.deriveGeometryNormals) settleNormals(normals, chartSize, coding.normalTolerance);
+    const std::vector<float> s = settlePositions({reinterpret_cast<const float*>(positions.data()), 3 * positions.size()},
+                                                 size, coding.positionStep, coding.positionTolerance);
+    std::memcpy(positions.data(), s.data(), s.size() * sizeof(float));
+    if (!coding.deriveGeometryNormals) settleNormals(normals, size, coding.normalTolerance);
   }
   ChartPyramid p;
   for (uint32_t k = 0; (M >> k) >= 1; ++k) {
-    const uint32_t s = (M >> k) + 1, step = 1u << k;
-    std::vector<glm::vec3> pos(size_t(s) * s);
-    std::vector<PackedNormal> nrm(pos.size());
-    std::vector<PackedColour> col(image.colours.empty() ? 0 : pos.size());
-    for (uint32_t v = 0; v < s; ++v)
-      for (uint32_t u = 0; u < s; ++u) {
-        const size_t src = size_t(v * step) * chartSize + u * step, dst = size_t(v) * s + u;
-        pos[dst] = (*positions)[src];
-        nrm[dst] = normals[src];
-        if (!col.empty()) {
-          const glm::u8vec4 c = image.colours[src];
-          col[dst] = {c.r, c.g, c.b, c.a};
-        }
-      }
-    p.positions.push_back(std::move(pos));
-    p.normals.push_back(std::move(nrm));
-    if (!col.empty()) p.colours.push_back(std::move(col));
+    p.positions.push_back(subsampled(positions, size, 1u << k));
+    p.normals.push_back(subsampled(normals, size, 1u << k));
+    if (!colours.empty()) {
+      std::vector<PackedColour> col;
+      for (const glm::u8vec4& c : subsampled(colours, size, 1u << k)) col.push_back({c.r, c.g, c.b, c.a});
+      p.colours.push_back(std::move(col));
+    }
     if ((M >> k) == 1) break;
   }
   return p;
@@ -112,33 +120,13 @@ NormalAngles summarize(const std::vector<uint64_t>& bins) {
 uint32_t chartFinestLevel(const std::vector<glm::vec3>& P, uint32_t chartSize, double sampleError,
                           const ChartCoarsening& c) {
   if (!(c.bound > 0.0) || c.maxFinestLevel == 0 || !(sampleError <= c.bound)) return 0;
-  const uint32_t M = chartSize - 1;
   if (!isChartSizeValid(chartSize) || P.size() != size_t(chartSize) * chartSize)
     throw std::invalid_argument("chartFinestLevel: positions do not match the chart size");
-  double levelError = 0.0;
+  // The levels' errors as the hierarchy measures its nodes', over the whole chart.
+  const std::vector<float> levelError =
+      geometryLevelErrors(P, chartSize, std::min(c.maxFinestLevel, uint32_t(std::countr_zero(chartSize - 1))));
   uint32_t finest = 0;
-  for (uint32_t k = 1; k <= c.maxFinestLevel && (M >> k) >= 1; ++k) {
-    const uint32_t step = 1u << k;
-    const float inv = 1.0f / float(step);
-    for (uint32_t cy = 0; cy < (M >> k); ++cy)
-      for (uint32_t cx = 0; cx < (M >> k); ++cx) {
-        const glm::vec3 p00 = P[size_t(cy * step) * chartSize + cx * step];
-        const glm::vec3 p10 = P[size_t(cy * step) * chartSize + cx * step + step];
-        const glm::vec3 p01 = P[size_t(cy * step + step) * chartSize + cx * step];
-        const glm::vec3 p11 = P[size_t(cy * step + step) * chartSize + cx * step + step];
-        for (uint32_t dy = 0; dy <= step; ++dy)
-          for (uint32_t dx = 0; dx <= step; ++dx) {
-            const float fx = float(dx) * inv, fy = float(dy) * inv;
-            // The cell's two triangles, split along its (0,0)-(1,1) diagonal as drawn.
-            const glm::vec3 q = fx >= fy ? p00 + fx * (p10 - p00) + fy * (p11 - p10)
-                                         : p00 + fy * (p01 - p00) + fx * (p11 - p01);
-            const glm::vec3 d = q - P[size_t(cy * step + dy) * chartSize + cx * step + dx];
-            levelError = std::max(levelError, std::sqrt(double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z));
-          }
-      }
-    if (sampleError + levelError > c.bound) break;
-    finest = k;
-  }
+  while (finest + 1 < levelError.size() && sampleError + double(levelError[finest + 1]) <= c.bound) ++finest;
   return finest;
 }
 
@@ -147,7 +135,7 @@ namespace {
 // Chart i's samples: the set's own, or read back from the spill into `back`.
 const GeometryImage& chartSamples(const GeometryImageSet& set, size_t i, const ChartSpill* spill, GeometryImage& back) {
   if (set.charts[i].spilled < 0) return set.charts[i];
-  if (!spill) throw std::invalid_argument("writeGeometryCharts: a chart's samples are spilled, but no spill is given");
+  if (!spill) throw std::invalid_argument("a chart's samples are spilled, but no spill is given");
   back.spilled = set.charts[i].spilled;
   spill->get(back);
   return back;
@@ -213,26 +201,8 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     c.file = name;
     c.neighbours = img.neighbours;
     c.finestLevel = finestLevels.empty() ? 0 : finestLevels[i];
-    if ((set.chartSize - 1) >> c.finestLevel == 0)
-      throw std::invalid_argument("writeGeometryCharts: a finest level past the chart's pyramid");
-    // The chart's finest level, subsampled before it is settled (settling then fits its own
-    // neighbours), and its pyramid from there.
-    const uint32_t size = ((set.chartSize - 1) >> c.finestLevel) + 1, step = 1u << c.finestLevel;
-    GeometryImage coarse;
-    if (c.finestLevel > 0) {
-      const size_t n = size_t(size) * size;
-      coarse.positions.resize(n);
-      coarse.normals.resize(n);
-      if (!samples.colours.empty()) coarse.colours.resize(n);
-      for (uint32_t v = 0; v < size; ++v)
-        for (uint32_t u = 0; u < size; ++u) {
-          const size_t src = size_t(v * step) * set.chartSize + u * step, dst = size_t(v) * size + u;
-          coarse.positions[dst] = samples.positions[src];
-          coarse.normals[dst] = samples.normals[src];
-          if (!coarse.colours.empty()) coarse.colours[dst] = samples.colours[src];
-        }
-    }
-    const ChartPyramid pyramid = geometryPyramid(c.finestLevel > 0 ? coarse : samples, size, coding);
+    const ChartPyramid pyramid = geometryPyramid(samples, set.chartSize, coding, c.finestLevel);
+    const uint32_t size = ((set.chartSize - 1) >> c.finestLevel) + 1;
     finestSamples[i] = uint64_t(size) * size;
     glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
     for (const glm::vec3& q : pyramid.positions[0]) {
@@ -309,19 +279,16 @@ AtlasSurface readAtlasSurface(const fs::path& atlasDir, uint32_t level) {
       const int32_t other = c.neighbours[e].chart;
       if (other < 0 || drawnLevel(size_t(other)) <= own) continue;
       const uint32_t d = drawnLevel(size_t(other)) - own;
-      for (uint32_t t = 0; t <= n; ++t) {
-        const uint32_t snapped = (t >> d) << d;
-        // The edge's sample at coordinate t along +u (bottom, top) or +v (left, right).
-        const auto at = [&](uint32_t x) -> glm::vec3& {
-          switch (e) {
-            case kEdgeBottom: return P[x];
-            case kEdgeTop: return P[size_t(n) * (n + 1) + x];
-            case kEdgeLeft: return P[size_t(x) * (n + 1)];
-            default: return P[size_t(x) * (n + 1) + n];
-          }
-        };
-        at(t) = at(snapped);
-      }
+      // The edge's sample at coordinate t along +u (bottom, top) or +v (left, right).
+      const auto at = [&](uint32_t t) -> glm::vec3& {
+        switch (e) {
+          case kEdgeBottom: return P[t];
+          case kEdgeTop: return P[size_t(n) * (n + 1) + t];
+          case kEdgeLeft: return P[size_t(t) * (n + 1)];
+          default: return P[size_t(t) * (n + 1) + n];
+        }
+      };
+      for (uint32_t t = 0; t <= n; ++t) at(t) = at((t >> d) << d);
     }
     levels[i] = std::move(P);
   });

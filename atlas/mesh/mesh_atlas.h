@@ -22,7 +22,11 @@ namespace gimlod {
 // level 0's positions are settled on the coding's lattice and its normals within the coding's
 // tolerances (settlePositions, settleNormals: the border to the nearest lattice point, the rest
 // within the tolerances), as a compressed chart file decodes them; the other levels subsample it.
-ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, const ChartCoding& coding = {});
+// finestLevel (ChartInfo::finestLevel): the pyramid starts at the image's level finestLevel,
+// subsampled before it is settled. Throws std::invalid_argument on images that do not match
+// chartSize, or a finest level past its pyramid.
+ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, const ChartCoding& coding = {},
+                             uint32_t finestLevel = 0);
 
 // The angles between the normals a reader derives (geometryImageNormals) and the resampled
 // ones, over the samples whose normals are derived (level 0, off block borders), in degrees.
