@@ -108,31 +108,40 @@ inline uint8_t predictByte(const uint8_t* b, uint32_t side, uint32_t stride, uin
 
 // ---- quantized integers (heights: 1 channel; positions: 3) ------------------------------------
 
+// The body of an integer block (inside its zstd frame): a 16-byte header (u8 quantization, u8
+// planes, u8 channels, u8 flags, u32 side, f64 step); with flag 1, the first sample's channels as
+// i32 (kFirstSampleBytes); then the residuals as byte planes. Without flag 1 (blocks written before
+// it), the first sample is coded as a residual from 0, which takes a plane or two more.
+constexpr uint8_t kFlagFirstSample = 1;
+
 std::vector<uint8_t> encodeInts(const char (&magic)[4], const std::vector<int32_t>& q, uint32_t side,
                                 uint8_t channels, HeightQuantization mode, double step, int level) {
   const size_t n = size_t(side) * side;
   // Residuals, zigzagged, as byte planes per channel (low bytes first); planes above the highest
-  // non-zero byte are left out.
+  // non-zero byte are left out. The first sample goes to the header, its residual 0.
   std::vector<uint32_t> z(n * channels);
   uint32_t all = 0;
   for (uint32_t y = 0; y < side; ++y)
     for (uint32_t x = 0; x < side; ++x)
       for (uint32_t c = 0; c < channels; ++c) {
         const size_t i = (size_t(y) * side + x) * channels + c;
-        z[i] = zigzag(int32_t(int64_t(q[i]) - predict(q.data() + c, side, channels, x, y)));
+        z[i] = i < channels ? 0 : zigzag(int32_t(int64_t(q[i]) - predict(q.data() + c, side, channels, x, y)));
         all |= z[i];
       }
   uint8_t planes = 1;
   while (planes < 4 && (all >> (8 * planes)) != 0) ++planes;
-  std::vector<uint8_t> raw(kIntHeaderBytes + size_t(planes) * channels * n);
+  const size_t head = kIntHeaderBytes + 4 * size_t(channels);
+  std::vector<uint8_t> raw(head + size_t(planes) * channels * n);
   raw[0] = uint8_t(mode);
   raw[1] = planes;
   raw[2] = channels;
+  raw[3] = kFlagFirstSample;
   std::memcpy(raw.data() + 4, &side, 4);
   std::memcpy(raw.data() + 8, &step, 8);
+  std::memcpy(raw.data() + kIntHeaderBytes, q.data(), 4 * size_t(channels));
   for (uint32_t c = 0; c < channels; ++c)
     for (uint8_t p = 0; p < planes; ++p) {
-      uint8_t* plane = raw.data() + kIntHeaderBytes + (size_t(c) * planes + p) * n;
+      uint8_t* plane = raw.data() + head + (size_t(c) * planes + p) * n;
       for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(z[i * channels + c] >> (8 * p));
     }
   return frame(magic, raw, level);
@@ -143,77 +152,85 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
                               uint32_t side, uint8_t channels, std::span<float> out) {
   const size_t n = size_t(side) * side;
   if (out.size() != n * channels) throw std::invalid_argument(std::string("decode ") + what + ": output size");
-  const std::vector<uint8_t>& raw = unframe(block, magic, what, kIntHeaderBytes, kIntHeaderBytes + 4 * channels * n);
-  const uint8_t mode = raw[0], planes = raw[1];
+  const std::vector<uint8_t>& raw =
+      unframe(block, magic, what, kIntHeaderBytes, kIntHeaderBytes + 4 * channels + 4 * channels * n);
+  const uint8_t mode = raw[0], planes = raw[1], flags = raw[3];
   uint32_t blockSide = 0;
   double step = 0.0;
   std::memcpy(&blockSide, raw.data() + 4, 4);
   std::memcpy(&step, raw.data() + 8, 8);
   if (mode > uint8_t(HeightQuantization::kPrecision) || planes < 1 || planes > 4 || raw[2] != channels ||
-      !(step > 0.0) || !(step <= 1e30))  // decoded values stay finite floats
+      (flags & ~kFlagFirstSample) != 0 || !(step > 0.0) || !(step <= 1e30))  // decoded values stay finite floats
     throw CodecError(std::string("corrupt ") + what + " block (header)");
-  if (blockSide != side || raw.size() != kIntHeaderBytes + size_t(planes) * channels * n)
+  const size_t head = kIntHeaderBytes + ((flags & kFlagFirstSample) ? 4 * size_t(channels) : 0);
+  if (blockSide != side || raw.size() != head + size_t(planes) * channels * n)
     throw CodecError(std::string(what) + " block of side " + std::to_string(blockSide) + ", expected " +
                      std::to_string(side));
-  // Row by row, every channel (so a row's work stays in the L1 cache): the residuals back (byte
-  // planes merged and unzigzagged) with the row below's differences added (a vector loop), then
-  // the prefix sum along the row with every channel's chain in flight together, in wrapping
-  // unsigned arithmetic (a crafted block cannot overflow); then the row's range check and its
-  // floats.
-  thread_local std::vector<uint32_t> q;
+  // Row by row (so a row's work stays in the L1 cache), each channel: the residuals back (byte
+  // planes merged and unzigzagged, a vector loop), then q = the row below + the running sum of the
+  // row's residuals (Lorenzo: q(x,y) - q(x,y-1) = r(x,y) + q(x-1,y) - q(x-1,y-1)), kept in a
+  // register, in wrapping unsigned arithmetic (a crafted block cannot overflow); then the row's
+  // range check and its floats.
+  thread_local std::vector<uint32_t> q, r;
   q.resize(n * channels);
-  const uint8_t* base = raw.data() + kIntHeaderBytes;
-  // Row `at` of one channel's residuals (its byte planes from p0), plus the row below's differences.
-  auto residuals = [&](uint32_t* r, const uint32_t* prev, size_t at, const uint8_t* p0) {
-    const uint8_t *b0 = p0 + at, *b1 = b0 + n, *b2 = b1 + n, *b3 = b2 + n;
-    auto unz = [](uint32_t z) { return (z >> 1) ^ (0u - (z & 1u)); };
-    switch (planes) {  // one vector loop per plane count
-      case 1: for (uint32_t x = 0; x < side; ++x) r[x] = unz(b0[x]); break;
-      case 2: for (uint32_t x = 0; x < side; ++x) r[x] = unz(b0[x] | uint32_t(b1[x]) << 8); break;
-      case 3: for (uint32_t x = 0; x < side; ++x) r[x] = unz(b0[x] | uint32_t(b1[x]) << 8 | uint32_t(b2[x]) << 16); break;
-      default:
-        for (uint32_t x = 0; x < side; ++x)
-          r[x] = unz(b0[x] | uint32_t(b1[x]) << 8 | uint32_t(b2[x]) << 16 | uint32_t(b3[x]) << 24);
-    }
-    if (!prev) return;
-    r[0] += prev[0];
-    for (uint32_t x = 1; x < side; ++x) r[x] += prev[x] - prev[x - 1];
-  };
+  r.resize(3 * size_t(side));  // the residuals of a row, then its floats
+  uint32_t first[4] = {0, 0, 0, 0};
+  if (flags & kFlagFirstSample) std::memcpy(first, raw.data() + kIntHeaderBytes, 4 * size_t(channels));
+  const uint8_t* base = raw.data() + head;
+  auto unz = [](uint32_t z) { return (z >> 1) ^ (0u - (z & 1u)); };
   const int64_t bound = mode == uint8_t(HeightQuantization::kInteger) ? kMaxIntegerSteps : kMaxSteps;
-  int32_t lo = 0, hi = 0;
+  uint32_t lo = 0, hi = 0;  // range of q + bound (unsigned: one compare for both ends)
+  const uint32_t shift = uint32_t(bound), span = uint32_t(2 * bound);
   for (uint32_t y = 0; y < side; ++y) {
     const size_t at = size_t(y) * side;
     for (uint32_t ch = 0; ch < channels; ++ch) {
-      uint32_t* row = q.data() + size_t(ch) * n + at;
-      residuals(row, y > 0 ? row - side : nullptr, at, base + size_t(ch) * planes * n);
-    }
-    if (channels == 3) {
-      uint32_t *a = q.data() + at, *b = a + n, *c = b + n;
-      for (uint32_t x = 1; x < side; ++x) a[x] += a[x - 1], b[x] += b[x - 1], c[x] += c[x - 1];
-      float* o = out.data() + 3 * at;
-      for (uint32_t x = 0; x < side; ++x) {
-        const int32_t va = int32_t(a[x]), vb = int32_t(b[x]), vc = int32_t(c[x]);
-        lo = std::min(lo, std::min(va, std::min(vb, vc)));
-        hi = std::max(hi, std::max(va, std::max(vb, vc)));
-        o[3 * x] = float(double(va) * step);
-        o[3 * x + 1] = float(double(vb) * step);
-        o[3 * x + 2] = float(double(vc) * step);
+      const uint8_t *b0 = base + size_t(ch) * planes * n + at, *b1 = b0 + n, *b2 = b1 + n, *b3 = b2 + n;
+      uint32_t* rr = r.data();
+      switch (planes) {  // one vector loop per plane count
+        case 1: for (uint32_t x = 0; x < side; ++x) rr[x] = unz(b0[x]); break;
+        case 2: for (uint32_t x = 0; x < side; ++x) rr[x] = unz(b0[x] | uint32_t(b1[x]) << 8); break;
+        case 3: for (uint32_t x = 0; x < side; ++x) rr[x] = unz(b0[x] | uint32_t(b1[x]) << 8 | uint32_t(b2[x]) << 16); break;
+        default:
+          for (uint32_t x = 0; x < side; ++x)
+            rr[x] = unz(b0[x] | uint32_t(b1[x]) << 8 | uint32_t(b2[x]) << 16 | uint32_t(b3[x]) << 24);
       }
+      if (y == 0) rr[0] += first[ch];
+      uint32_t* row = q.data() + size_t(ch) * n + at;
+      const uint32_t* below = y > 0 ? row - side : nullptr;
+      uint32_t sum = 0;
+      if (below)
+        for (uint32_t x = 0; x < side; ++x) sum += rr[x], row[x] = below[x] + sum;
+      else
+        for (uint32_t x = 0; x < side; ++x) sum += rr[x], row[x] = sum;
+      uint32_t rowLo = ~0u, rowHi = 0;
+      for (uint32_t x = 0; x < side; ++x) {
+        const uint32_t v = row[x] + shift;
+        rowLo = std::min(rowLo, v);
+        rowHi = std::max(rowHi, v);
+      }
+      lo = y == 0 && ch == 0 ? rowLo : std::min(lo, rowLo);
+      hi = std::max(hi, rowHi);
+    }
+    float* o = out.data() + at * channels;
+    if (channels == 3) {
+      // Each channel's floats (a vector loop), then interleaved.
+      float* f = reinterpret_cast<float*>(r.data());
+      float *fa = f, *fb = fa + side, *fc = fb + side;
+      for (uint32_t ch = 0; ch < 3; ++ch) {
+        const int32_t* a = reinterpret_cast<const int32_t*>(q.data()) + size_t(ch) * n + at;
+        float* d = f + size_t(ch) * side;
+        for (uint32_t x = 0; x < side; ++x) d[x] = float(double(a[x]) * step);
+      }
+      for (uint32_t x = 0; x < side; ++x) o[3 * x] = fa[x], o[3 * x + 1] = fb[x], o[3 * x + 2] = fc[x];
     } else {
       for (uint32_t ch = 0; ch < channels; ++ch) {
-        uint32_t* r = q.data() + size_t(ch) * n + at;
-        for (uint32_t x = 1; x < side; ++x) r[x] += r[x - 1];
-        for (uint32_t x = 0; x < side; ++x) {
-          const int32_t v = int32_t(r[x]);
-          lo = std::min(lo, v);
-          hi = std::max(hi, v);
-          out[(at + x) * channels + ch] = float(double(v) * step);
-        }
+        const int32_t* a = reinterpret_cast<const int32_t*>(q.data()) + size_t(ch) * n + at;
+        for (uint32_t x = 0; x < side; ++x) o[x * channels + ch] = float(double(a[x]) * step);
       }
     }
   }
   // (A corrupt block has written values out of range before this throws; callers discard them.)
-  if (lo < -bound || hi > bound) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
+  if (lo > span || hi > span) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
   return HeightQuantization(mode);
 }
 

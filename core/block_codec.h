@@ -1,8 +1,9 @@
 // Block codecs for compressed atlases: one chart block of one channel in, a self-checking byte
 // string out. Every codec predicts each sample from its decoded neighbours by the 2D Lorenzo
-// predictor (left + below - below-left), maps the residuals to small unsigned values, splits them
-// into byte planes and entropy-codes the whole with zstd and its frame checksum, so a corrupt or
-// truncated block is detected, never decoded to wrong samples.
+// predictor (left + below - below-left; a block's first sample is stored as it is), maps the
+// residuals to small unsigned values, splits them into byte planes and entropy-codes the whole with
+// zstd and its frame checksum, so a corrupt or truncated block is detected, never decoded to wrong
+// samples.
 // - Heights and positions are quantized first (integers exactly, else to a stated step), and
 //   decoding reproduces the quantized values exactly: errors measured on decoded samples hold for
 //   what is drawn, and samples that were equal before coding (shared seams) stay equal.

@@ -7,11 +7,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <random>
 
 #include <glm/geometric.hpp>
 
 #include <gdal_priv.h>
+#include <zstd.h>
 
 #include "atlas/terrain/dem.h"
 #include "core/atlas_format.h"
@@ -211,6 +213,56 @@ TEST(PositionCodec, RoundTripsExactlyAtEveryResidualWidth) {
   std::vector<float> back(in.size());
   decodePositions(encodePositions(in, kSide, step), kSide, back);
   EXPECT_EQ(back, in);
+}
+
+// Blocks written before the first sample moved to the block's header (flags 0: every sample a
+// Lorenzo residual, the first from 0) still decode, built here byte by byte as that writer did.
+TEST(PositionCodec, BlocksWithoutTheFirstSampleInTheHeaderStillDecode) {
+  const double step = 0.25;
+  constexpr uint32_t side = 3;
+  std::vector<int32_t> q(3 * side * side);
+  for (size_t i = 0; i < q.size(); ++i) q[i] = int32_t(i * i) - 20 + (i % 3 == 2 ? 70000 : 0);
+  std::vector<uint32_t> z(q.size());
+  for (uint32_t y = 0; y < side; ++y)
+    for (uint32_t x = 0; x < side; ++x)
+      for (uint32_t c = 0; c < 3; ++c) {
+        auto at = [&](uint32_t u, uint32_t v) { return int64_t(q[(size_t(v) * side + u) * 3 + c]); };
+        const int64_t pred = x > 0 && y > 0 ? at(x - 1, y) + at(x, y - 1) - at(x - 1, y - 1)
+                             : x > 0        ? at(x - 1, y)
+                             : y > 0        ? at(x, y - 1)
+                                            : 0;
+        const int32_t r = int32_t(at(x, y) - pred);
+        z[(size_t(y) * side + x) * 3 + c] = (uint32_t(r) << 1) ^ uint32_t(r >> 31);
+      }
+  constexpr uint8_t planes = 3;  // the first z coordinate's 140,000-odd needs three
+  std::vector<uint8_t> raw(16 + size_t(planes) * z.size(), 0);
+  raw[0] = 1;  // quantized to a step
+  raw[1] = planes;
+  raw[2] = 3;  // channels; raw[3]: flags 0
+  std::memcpy(raw.data() + 4, &side, 4);
+  std::memcpy(raw.data() + 8, &step, 8);
+  const size_t n = size_t(side) * side;
+  for (uint32_t c = 0; c < 3; ++c)
+    for (uint32_t p = 0; p < planes; ++p)
+      for (size_t i = 0; i < n; ++i) raw[16 + (c * planes + p) * n + i] = uint8_t(z[i * 3 + c] >> (8 * p));
+  std::vector<uint8_t> block = {'G', 'P', 'B', '1'};
+  block.resize(4 + ZSTD_compressBound(raw.size()));
+  ZSTD_CCtx* cctx = ZSTD_createCCtx();
+  ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
+  const size_t written = ZSTD_compress2(cctx, block.data() + 4, block.size() - 4, raw.data(), raw.size());
+  ZSTD_freeCCtx(cctx);
+  ASSERT_FALSE(ZSTD_isError(written));
+  block.resize(4 + written);
+  std::vector<float> back(q.size());
+  decodePositions(block, side, back);
+  for (size_t i = 0; i < q.size(); ++i) EXPECT_EQ(back[i], float(q[i] * step)) << i;
+  // The same samples coded now (the first sample in the header) round-trip too, in another code.
+  std::vector<float> in(q.size());
+  for (size_t i = 0; i < q.size(); ++i) in[i] = float(q[i] * step);
+  const std::vector<uint8_t> now = encodePositions(in, side, step);
+  decodePositions(now, side, back);
+  EXPECT_EQ(back, in);
+  EXPECT_NE(now, block);
 }
 
 // A sample beside the border that rounds to its border neighbour's lattice point (a chart sampled

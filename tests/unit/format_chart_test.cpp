@@ -341,11 +341,12 @@ TEST(FormatChart, GeometryNormalsDerivedInsideBlocks) {
   }
   EXPECT_GT(derived, 2000u);
   EXPECT_LT(worst, 1.0) << "degrees between a derived normal and the sphere's";
-  // A flipped byte in a border-normal block.
+  // A flipped byte in the checksum of the file's last block (a flip inside a code may land on
+  // bits the decoder never reads, and then rightly decodes the same samples).
   std::ifstream in(f, std::ios::binary);
   std::vector<char> bytes((std::istreambuf_iterator<char>(in)), {});
   in.close();
-  bytes[bytes.size() - 10] = char(bytes[bytes.size() - 10] ^ 0x5a);
+  bytes[bytes.size() - 2] = char(bytes[bytes.size() - 2] ^ 0x5a);
   const fs::path bad = tmp.path() / "bad.bin";
   std::ofstream(bad, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
   const ChartFileReader rb(bad);
