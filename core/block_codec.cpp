@@ -110,7 +110,7 @@ inline uint8_t predictByte(const uint8_t* b, uint32_t side, uint32_t stride, uin
 
 // The body of an integer block (inside its zstd frame): a 16-byte header (u8 quantization, u8
 // planes, u8 channels, u8 flags, u32 side, f64 step); with flag 1, the first sample's channels as
-// i32 (kFirstSampleBytes); then the residuals as byte planes. Without flag 1 (blocks written before
+// i32; then the residuals as byte planes. Without flag 1 (blocks written before
 // it), the first sample is coded as a residual from 0, which takes a plane or two more.
 constexpr uint8_t kFlagFirstSample = 1;
 
@@ -163,9 +163,11 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
       (flags & ~kFlagFirstSample) != 0 || !(step > 0.0) || !(step <= 1e30))  // decoded values stay finite floats
     throw CodecError(std::string("corrupt ") + what + " block (header)");
   const size_t head = kIntHeaderBytes + ((flags & kFlagFirstSample) ? 4 * size_t(channels) : 0);
-  if (blockSide != side || raw.size() != head + size_t(planes) * channels * n)
+  if (blockSide != side)
     throw CodecError(std::string(what) + " block of side " + std::to_string(blockSide) + ", expected " +
                      std::to_string(side));
+  if (raw.size() != head + size_t(planes) * channels * n)
+    throw CodecError(std::string("corrupt ") + what + " block (size)");
   // Row by row (so a row's work stays in the L1 cache), each channel: the residuals back (byte
   // planes merged and unzigzagged, a vector loop), then q = the row below + the running sum of the
   // row's residuals (Lorenzo: q(x,y) - q(x,y-1) = r(x,y) + q(x-1,y) - q(x-1,y-1)), kept in a
@@ -173,13 +175,14 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
   // range check and its floats.
   thread_local std::vector<uint32_t> q, r;
   q.resize(n * channels);
-  r.resize(3 * size_t(side));  // the residuals of a row, then its floats
+  r.resize(side);
   uint32_t first[4] = {0, 0, 0, 0};
   if (flags & kFlagFirstSample) std::memcpy(first, raw.data() + kIntHeaderBytes, 4 * size_t(channels));
   const uint8_t* base = raw.data() + head;
   auto unz = [](uint32_t z) { return (z >> 1) ^ (0u - (z & 1u)); };
   const int64_t bound = mode == uint8_t(HeightQuantization::kInteger) ? kMaxIntegerSteps : kMaxSteps;
-  uint32_t lo = 0, hi = 0;  // range of q + bound (unsigned: one compare for both ends)
+  // The largest q + bound, unsigned: a value below -bound wraps past 2 bound too.
+  uint32_t hi = 0;
   const uint32_t shift = uint32_t(bound), span = uint32_t(2 * bound);
   for (uint32_t y = 0; y < side; ++y) {
     const size_t at = size_t(y) * side;
@@ -202,35 +205,16 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
         for (uint32_t x = 0; x < side; ++x) sum += rr[x], row[x] = below[x] + sum;
       else
         for (uint32_t x = 0; x < side; ++x) sum += rr[x], row[x] = sum;
-      uint32_t rowLo = ~0u, rowHi = 0;
-      for (uint32_t x = 0; x < side; ++x) {
-        const uint32_t v = row[x] + shift;
-        rowLo = std::min(rowLo, v);
-        rowHi = std::max(rowHi, v);
-      }
-      lo = y == 0 && ch == 0 ? rowLo : std::min(lo, rowLo);
-      hi = std::max(hi, rowHi);
+      for (uint32_t x = 0; x < side; ++x) hi = std::max(hi, row[x] + shift);
     }
     float* o = out.data() + at * channels;
-    if (channels == 3) {
-      // Each channel's floats (a vector loop), then interleaved.
-      float* f = reinterpret_cast<float*>(r.data());
-      float *fa = f, *fb = fa + side, *fc = fb + side;
-      for (uint32_t ch = 0; ch < 3; ++ch) {
-        const int32_t* a = reinterpret_cast<const int32_t*>(q.data()) + size_t(ch) * n + at;
-        float* d = f + size_t(ch) * side;
-        for (uint32_t x = 0; x < side; ++x) d[x] = float(double(a[x]) * step);
-      }
-      for (uint32_t x = 0; x < side; ++x) o[3 * x] = fa[x], o[3 * x + 1] = fb[x], o[3 * x + 2] = fc[x];
-    } else {
-      for (uint32_t ch = 0; ch < channels; ++ch) {
-        const int32_t* a = reinterpret_cast<const int32_t*>(q.data()) + size_t(ch) * n + at;
-        for (uint32_t x = 0; x < side; ++x) o[x * channels + ch] = float(double(a[x]) * step);
-      }
+    for (uint32_t ch = 0; ch < channels; ++ch) {
+      const int32_t* a = reinterpret_cast<const int32_t*>(q.data()) + size_t(ch) * n + at;
+      for (uint32_t x = 0; x < side; ++x) o[x * channels + ch] = float(double(a[x]) * step);
     }
   }
   // (A corrupt block has written values out of range before this throws; callers discard them.)
-  if (lo > span || hi > span) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
+  if (hi > span) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
   return HeightQuantization(mode);
 }
 
