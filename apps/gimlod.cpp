@@ -398,8 +398,10 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"bilinear", "stretch", "folding"}))
       ->capture_default_str();
   build->add_flag("--full-charts", [&](int64_t) { mesh.coarsenCharts = false; },
-                  "Meshes: every chart keeps its finest samples (by default a chart keeps only the levels from the "
-                  "coarsest whose surface stays within --sample-error of the input vertices)");
+                  "Meshes: every chart keeps its finest samples, each where it was resampled (by default a chart "
+                  "keeps only the levels from the coarsest whose surface stays within --sample-error of the input "
+                  "vertices, and the squares of that level that the two triangles of their corners follow within it "
+                  "move onto them, their corners alone stored)");
   build->add_flag("--no-unfold", [&](int64_t) { mesh.unfold = false; },
                   "Meshes: keep every inner sample where the quad map puts it (no sliding of the samples round "
                   "flipped texels over the surface to unfold them)");

@@ -756,7 +756,10 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
                 break;
               case kChannelPositions:
                 code = encodePositions({reinterpret_cast<const float*>(samples.data()), 3 * count}, bs,
-                                       coding.positionStep);
+                                       coding.positionStep,
+                                       (by == 0 ? kChartBorderBottom : 0) | (bx == 0 ? kChartBorderLeft : 0) |
+                                           (by + 1 == l.blocksPerSide ? kChartBorderTop : 0) |
+                                           (bx + 1 == l.blocksPerSide ? kChartBorderRight : 0));
                 break;
               case kChannelNormals:
                 code = borderNormals

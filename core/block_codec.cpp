@@ -1,6 +1,7 @@
 #include "core/block_codec.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -106,6 +107,97 @@ inline uint8_t predictByte(const uint8_t* b, uint32_t side, uint32_t stride, uin
   return 128;
 }
 
+// ---- position blocks with planar squares ----------------------------------------------------
+
+// A position block may hold planar squares: squares of s intervals (s = side - 1, its halves, ...
+// down to 2, on the grid of multiples of s) whose samples all lie where the render grids' two
+// triangles of the square's corners put them, rounded on the lattice (planarSquareSample). Their
+// corners are coded; their other samples are not, but interpolated. Squares are taken largest
+// first, and a square's samples that a larger one already placed, or that lie on a block edge on
+// the chart's border, are not its to place. Body (flag kFlagPlanar): the header (flags 1 | 2), the
+// first sample, u8 chart border sides, the squares' bits (largest first, row order within a size,
+// one per square not inside a planar one, low bit first), then the residuals: per size, largest
+// first, the corners of that size's planar squares not yet known, in row order, each predicted by
+// Lorenzo on its size's grid (from the neighbours known, else fewer); then every sample still
+// unknown, in row order, by Lorenzo.
+constexpr uint8_t kFlagPlanar = 2;
+
+// Which squares are planar: per size level l (squares of (side - 1) >> l intervals, 2^l a side),
+// row-major: 1 planar, 0 not, 2 inside a planar square of a larger size.
+using PlanarSquares = std::vector<std::vector<uint8_t>>;
+
+inline uint32_t squareLevels(uint32_t side) { return side >= 3 ? uint32_t(std::countr_zero(side - 1)) : 0; }
+
+// The traversal both coders share. q: 3 interleaved channels of side^2 samples (the encoder's
+// values, or the decoder's so far). decide(l, x, y) settles an uncovered square at level l before
+// anything of that size is coded; code(i, spacing) codes sample i from its neighbours at that
+// spacing (the caller predicts with predictPlanar); the planar squares' samples are filled in q.
+template <typename Decide, typename Code>
+void planarPasses(uint32_t side, uint8_t chartBorderSides, std::vector<uint32_t>& q, std::vector<uint8_t>& known,
+                  PlanarSquares& squares, Decide&& decide, Code&& code) {
+  const uint32_t levels = squareLevels(side), last = side - 1;
+  known.assign(size_t(side) * side, 0);
+  known[0] = 1;  // the first sample: in the header
+  squares.assign(levels, {});
+  auto onBorder = [&](uint32_t x, uint32_t y) {
+    return ((chartBorderSides & kChartBorderBottom) && y == 0) || ((chartBorderSides & kChartBorderRight) && x == last) ||
+           ((chartBorderSides & kChartBorderTop) && y == last) || ((chartBorderSides & kChartBorderLeft) && x == 0);
+  };
+  for (uint32_t l = 0; l < levels; ++l) {
+    const uint32_t n = 1u << l, s = last >> l;
+    std::vector<uint8_t>& sq = squares[l];
+    sq.assign(size_t(n) * n, 0);
+    for (uint32_t y = 0; y < n; ++y)
+      for (uint32_t x = 0; x < n; ++x) {
+        const uint8_t parent = l == 0 ? 0 : squares[l - 1][size_t(y / 2) * (n / 2) + x / 2];
+        sq[size_t(y) * n + x] = parent != 0 ? 2 : decide(l, x, y) ? 1 : 0;
+      }
+    auto planar = [&](int64_t x, int64_t y) {
+      return x >= 0 && y >= 0 && x < n && y < n && sq[size_t(y) * n + size_t(x)] == 1;
+    };
+    for (uint32_t gy = 0; gy <= n; ++gy)
+      for (uint32_t gx = 0; gx <= n; ++gx) {
+        const uint32_t i = gy * s * side + gx * s;
+        if (known[i] || !(planar(gx - 1, gy - 1) || planar(gx, gy - 1) || planar(gx - 1, gy) || planar(gx, gy))) continue;
+        code(i, s);
+        known[i] = 1;
+      }
+    for (uint32_t y = 0; y < n; ++y)
+      for (uint32_t x = 0; x < n; ++x) {
+        if (sq[size_t(y) * n + x] != 1) continue;
+        const uint32_t x0 = x * s, y0 = y * s;
+        for (uint32_t dy = 0; dy <= s; ++dy)
+          for (uint32_t dx = 0; dx <= s; ++dx) {
+            const uint32_t i = (y0 + dy) * side + x0 + dx;
+            if (known[i] || onBorder(x0 + dx, y0 + dy)) continue;
+            for (uint32_t c = 0; c < 3; ++c) {
+              auto at = [&](uint32_t u, uint32_t v) { return int64_t(int32_t(q[(size_t(v) * side + u) * 3 + c])); };
+              q[size_t(i) * 3 + c] = uint32_t(planarSquareSample(at(x0, y0), at(x0 + s, y0), at(x0, y0 + s),
+                                                                 at(x0 + s, y0 + s), s, dx, dy));
+            }
+            known[i] = 1;
+          }
+      }
+  }
+  for (uint32_t i = 0; i < side * side; ++i)
+    if (!known[i]) code(i, 1), known[i] = 1;
+}
+
+// The prediction of channel c of sample i coded at `spacing` (planarPasses): Lorenzo on that
+// spacing's grid from the neighbours known, else the left one, else the one below, else the first
+// sample. In wrapping unsigned arithmetic.
+inline uint32_t predictPlanar(const std::vector<uint32_t>& q, const std::vector<uint8_t>& known, uint32_t side, uint32_t i,
+                              uint32_t spacing, uint32_t c) {
+  const uint32_t x = i % side, y = i / side;
+  const bool l = x >= spacing && known[i - spacing], b = y >= spacing && known[i - spacing * side];
+  const bool lb = l && b && known[i - spacing - spacing * side];
+  auto v = [&](uint32_t j) { return q[size_t(j) * 3 + c]; };
+  if (lb) return v(i - spacing) + v(i - spacing * side) - v(i - spacing - spacing * side);
+  if (l) return v(i - spacing);
+  if (b) return v(i - spacing * side);
+  return v(0);
+}
+
 // ---- quantized integers (heights: 1 channel; positions: 3) ------------------------------------
 
 // The body of an integer block (inside its zstd frame): a 16-byte header (u8 quantization, u8
@@ -147,6 +239,111 @@ std::vector<uint8_t> encodeInts(const char (&magic)[4], const std::vector<int32_
   return frame(magic, raw, level);
 }
 
+// The body of a position block with planar squares (chartBorderSides: kChartBorder* bits), or
+// empty when it has none.
+std::vector<uint8_t> planarBody(const std::vector<int32_t>& q, uint32_t side, double step, uint8_t chartBorderSides) {
+  if (squareLevels(side) == 0 || !std::has_single_bit(side - 1)) return {};
+  std::vector<uint32_t> v(q.begin(), q.end());
+  std::vector<uint8_t> known, bits;
+  PlanarSquares squares;
+  size_t nbits = 0;
+  bool any = false;
+  std::vector<uint32_t> z;
+  const uint32_t last = side - 1;
+  auto decide = [&](uint32_t l, uint32_t x, uint32_t y) {
+    const uint32_t s = last >> l, x0 = x * s, y0 = y * s;
+    bool flat = true;
+    for (uint32_t dy = 0; dy <= s && flat; ++dy)
+      for (uint32_t dx = 0; dx <= s && flat; ++dx) {
+        const uint32_t u = x0 + dx, w = y0 + dy, i = w * side + u;
+        if (known[i] || (dx % s == 0 && dy % s == 0)) continue;
+        if (((chartBorderSides & kChartBorderBottom) && w == 0) || ((chartBorderSides & kChartBorderRight) && u == last) ||
+            ((chartBorderSides & kChartBorderTop) && w == last) || ((chartBorderSides & kChartBorderLeft) && u == 0))
+          continue;
+        for (uint32_t c = 0; c < 3 && flat; ++c) {
+          auto at = [&](uint32_t a, uint32_t b) { return int64_t(q[(size_t(b) * side + a) * 3 + c]); };
+          flat = at(u, w) == planarSquareSample(at(x0, y0), at(x0 + s, y0), at(x0, y0 + s), at(x0 + s, y0 + s), s, dx, dy);
+        }
+      }
+    if (bits.size() * 8 <= nbits) bits.push_back(0);
+    bits[nbits / 8] |= uint8_t(flat) << (nbits % 8);
+    ++nbits;
+    any |= flat;
+    return flat;
+  };
+  auto code = [&](uint32_t i, uint32_t spacing) {
+    for (uint32_t c = 0; c < 3; ++c)
+      z.push_back(zigzag(int32_t(v[size_t(i) * 3 + c] - predictPlanar(v, known, side, i, spacing, c))));
+  };
+  planarPasses(side, chartBorderSides, v, known, squares, decide, code);
+  if (!any) return {};
+  const size_t m = z.size() / 3;
+  uint32_t all = 0;
+  for (uint32_t r : z) all |= r;
+  uint8_t planes = 1;
+  while (planes < 4 && (all >> (8 * planes)) != 0) ++planes;
+  const size_t head = kIntHeaderBytes + 12;
+  std::vector<uint8_t> raw(head + 1 + bits.size() + size_t(planes) * 3 * m);
+  raw[0] = uint8_t(HeightQuantization::kPrecision);
+  raw[1] = planes;
+  raw[2] = 3;
+  raw[3] = kFlagFirstSample | kFlagPlanar;
+  std::memcpy(raw.data() + 4, &side, 4);
+  std::memcpy(raw.data() + 8, &step, 8);
+  std::memcpy(raw.data() + kIntHeaderBytes, q.data(), 12);
+  raw[head] = chartBorderSides;
+  std::memcpy(raw.data() + head + 1, bits.data(), bits.size());
+  uint8_t* body = raw.data() + head + 1 + bits.size();
+  for (uint32_t c = 0; c < 3; ++c)
+    for (uint8_t p = 0; p < planes; ++p) {
+      uint8_t* plane = body + (size_t(c) * planes + p) * m;
+      for (size_t j = 0; j < m; ++j) plane[j] = uint8_t(z[j * 3 + c] >> (8 * p));
+    }
+  return raw;
+}
+
+// Decodes a position block body with planar squares (raw: its whole body; head: where its chart
+// border byte is) into out.
+void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, double step, std::span<float> out) {
+  if (squareLevels(side) == 0 || !std::has_single_bit(side - 1) || raw.size() <= head || raw[head] > 15)
+    throw CodecError("corrupt position block (planar squares)");
+  const uint8_t border = raw[head], planes = raw[1];
+  const size_t bitsAt = head + 1;
+  std::vector<uint32_t> q(size_t(side) * side * 3, 0);
+  std::vector<uint8_t> known;
+  PlanarSquares squares;
+  // First the squares alone (the decisions do not depend on the values): the bits' length and the
+  // number of coded samples.
+  size_t nbits = 0, m = 0;
+  auto bit = [&](size_t k) {
+    if (bitsAt + k / 8 >= raw.size()) throw CodecError("truncated position block (planar squares)");
+    return ((raw[bitsAt + k / 8] >> (k % 8)) & 1u) != 0;
+  };
+  planarPasses(side, border, q, known, squares, [&](uint32_t, uint32_t, uint32_t) { return bit(nbits++); },
+               [&](uint32_t, uint32_t) { ++m; });
+  const size_t body = bitsAt + (nbits + 7) / 8;
+  if (raw.size() != body + size_t(planes) * 3 * m) throw CodecError("corrupt position block (size)");
+  std::fill(q.begin(), q.end(), 0u);
+  std::memcpy(q.data(), raw.data() + kIntHeaderBytes, 12);
+  size_t k = 0, j = 0;
+  auto residual = [&](uint32_t c) {
+    const uint8_t* p = raw.data() + body + size_t(c) * planes * m + j;
+    uint32_t z = 0;
+    for (uint32_t b = 0; b < planes; ++b) z |= uint32_t(p[b * m]) << (8 * b);
+    return (z >> 1) ^ (0u - (z & 1u));
+  };
+  planarPasses(side, border, q, known, squares, [&](uint32_t, uint32_t, uint32_t) { return bit(k++); },
+               [&](uint32_t i, uint32_t spacing) {
+                 for (uint32_t c = 0; c < 3; ++c) q[size_t(i) * 3 + c] = residual(c) + predictPlanar(q, known, side, i, spacing, c);
+                 ++j;
+               });
+  for (size_t i = 0; i < q.size(); ++i) {
+    const int32_t v = int32_t(q[i]);
+    if (v < -kMaxSteps || v > kMaxSteps) throw CodecError("corrupt position block (value out of range)");
+    out[i] = float(double(v) * step);
+  }
+}
+
 // Decodes into out (channels * side^2 floats); returns the quantization.
 HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic)[4], const char* what,
                               uint32_t side, uint8_t channels, std::span<float> out) {
@@ -160,9 +357,15 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
   std::memcpy(&blockSide, raw.data() + 4, 4);
   std::memcpy(&step, raw.data() + 8, 8);
   if (mode > uint8_t(HeightQuantization::kPrecision) || planes < 1 || planes > 4 || raw[2] != channels ||
-      (flags & ~kFlagFirstSample) != 0 || !(step > 0.0) || !(step <= 1e30))  // decoded values stay finite floats
+      (flags & ~(kFlagFirstSample | kFlagPlanar)) != 0 || !(step > 0.0) || !(step <= 1e30))  // decoded values stay finite floats
     throw CodecError(std::string("corrupt ") + what + " block (header)");
   const size_t head = kIntHeaderBytes + ((flags & kFlagFirstSample) ? 4 * size_t(channels) : 0);
+  if (blockSide == side && (flags & kFlagPlanar)) {
+    if (channels != 3 || !(flags & kFlagFirstSample) || mode != uint8_t(HeightQuantization::kPrecision))
+      throw CodecError(std::string("corrupt ") + what + " block (header)");
+    decodePlanar(raw, head, side, step, out);
+    return HeightQuantization(mode);
+  }
   if (blockSide != side)
     throw CodecError(std::string(what) + " block of side " + std::to_string(blockSide) + ", expected " +
                      std::to_string(side));
@@ -372,10 +575,26 @@ void decodeHeights(std::span<const uint8_t> block, uint32_t side, std::span<floa
   decodeInts(block, kHeightMagic, "height", side, 1, out);
 }
 
-std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step) {
+std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step, int chartBorderSides) {
+  if (chartBorderSides > 15) throw std::invalid_argument("encodePositions: the chart border sides are 4 bits");
   const std::vector<int64_t> points = latticePoints(xyz, side, step, "encodePositions");
   const std::vector<int32_t> q(points.begin(), points.end());
-  return encodeInts(kPositionMagic, q, side, 3, HeightQuantization::kPrecision, step, kPositionLevel);
+  std::vector<uint8_t> all = encodeInts(kPositionMagic, q, side, 3, HeightQuantization::kPrecision, step, kPositionLevel);
+  if (chartBorderSides >= 0) {  // the planar squares' code where it is the smaller
+    const std::vector<uint8_t> raw = planarBody(q, side, step, uint8_t(chartBorderSides));
+    if (!raw.empty()) {
+      std::vector<uint8_t> planar = frame(kPositionMagic, raw, kPositionLevel);
+      if (planar.size() < all.size()) return planar;
+    }
+  }
+  return all;
+}
+
+int32_t planarSquareSample(int64_t q00, int64_t q10, int64_t q01, int64_t q11, uint32_t s, uint32_t dx, uint32_t dy) {
+  const int64_t si = s;
+  const int64_t v = dx >= dy ? si * q00 + int64_t(dx) * (q10 - q00) + int64_t(dy) * (q11 - q10)
+                             : si * q00 + int64_t(dy) * (q01 - q00) + int64_t(dx) * (q11 - q01);
+  return int32_t((v + si / 2) >> std::countr_zero(s));  // floor((v + s / 2) / s): s is a power of two
 }
 
 void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<float> out) {

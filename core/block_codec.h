@@ -58,7 +58,22 @@ HeightQuantization blockQuantization(std::span<const uint8_t> block);
 // Encodes side^2 positions (x, y, z interleaved, row-major), each coordinate quantized to `step`
 // (> 0) on one lattice through the origin. Throws std::invalid_argument on a non-finite
 // coordinate, step <= 0, or a coordinate beyond 2^28 steps.
-std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step);
+// Planar squares: with chartBorderSides >= 0 (the block's edges on its chart's border, bits
+// kChartBorder*), the encoder also finds the squares of the block (its whole side, its halves, ...
+// down to 2 intervals, on the grid of their own size) whose samples all lie where the render
+// grids' two triangles of the square's corners put them (planarSquareSample), the largest first.
+// It codes their corners and none of their other samples, and the decoder interpolates those, so
+// the block still decodes to exactly its samples; samples on a chart-border edge are always coded.
+// That code is kept where it is smaller than every sample's.
+// A writer that moves samples there (geometryPyramid) stores fewer. -1: every sample coded.
+std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step, int chartBorderSides = -1);
+inline constexpr uint8_t kChartBorderBottom = 1, kChartBorderRight = 2, kChartBorderTop = 4, kChartBorderLeft = 8;
+// Where a planar square of s intervals (a power of two) puts its sample (x0 + dx, y0 + dy),
+// 0 <= dx, dy <= s, from its corners' lattice points q00 (x0, y0), q10 (x0 + s, y0), q01
+// (x0, y0 + s), q11 (x0 + s, y0 + s), per coordinate: on the two triangles split along
+// (0,0)-(1,1), rounded half up, in exact integer arithmetic. The two squares of an edge agree on
+// it, and a square's subsampling puts its samples where the half-size square would.
+int32_t planarSquareSample(int64_t q00, int64_t q10, int64_t q01, int64_t q11, uint32_t s, uint32_t dx, uint32_t dy);
 // Decodes a block made by encodePositions into out (3 side^2 floats). Throws CodecError.
 void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<float> out);
 

@@ -49,11 +49,11 @@ void cellReduce(const std::vector<float>& s, uint32_t S, std::vector<float>& out
   }
 }
 
-// running[i] = max(running[i], dist(p_i, surface_k(u_i, v_i))) for every level-0 sample, where
-// surface_k is the piecewise-linear interpolation of the level-k subsampled grid split along
-// (0,0)-(1,1). T is float (heights, dist = |a - b|) or glm::vec3 (geometry images, Euclidean).
-template <typename T, typename Dist>
-void accumulateLevelError(const std::vector<T>& h, uint32_t S, uint32_t k, std::vector<float>& running, Dist dist) {
+// fn(i, surface_k(u_i, v_i)) for every level-0 sample i (row-major), where surface_k is the
+// piecewise-linear interpolation of the level-k subsampled grid split along (0,0)-(1,1), as the
+// render grids draw it. T is float (heights) or glm::vec3 (geometry images).
+template <typename T, typename Fn>
+void forEachLevelSample(const std::vector<T>& h, uint32_t S, uint32_t k, Fn&& fn) {
   const uint32_t M = S - 1;
   const uint32_t n = M >> k;
   const uint32_t s = 1u << k;
@@ -63,20 +63,25 @@ void accumulateLevelError(const std::vector<T>& h, uint32_t S, uint32_t k, std::
     const float fy = float(y - cy * s) * inv;
     const T* row0 = &h[size_t(cy * s) * S];
     const T* row1 = &h[size_t((cy + 1) * s) * S];
-    const T* src = &h[size_t(y) * S];
-    float* run = &running[size_t(y) * S];
+    const size_t at = size_t(y) * S;
     for (uint32_t cx = 0; cx < n; ++cx) {
       const uint32_t x0 = cx * s;
       const T h00 = row0[x0], h10 = row0[x0 + s], h01 = row1[x0], h11 = row1[x0 + s];
       const uint32_t xend = (cx == n - 1) ? s : s - 1;
       for (uint32_t dx = 0; dx <= xend; ++dx) {
         const float fx = float(dx) * inv;
-        const T interp = fx >= fy ? h00 + fx * (h10 - h00) + fy * (h11 - h10)   // lower triangle
-                                  : h00 + fy * (h01 - h00) + fx * (h11 - h01);  // upper triangle
-        run[x0 + dx] = std::max(run[x0 + dx], dist(src[x0 + dx], interp));
+        fn(at + x0 + dx, fx >= fy ? h00 + fx * (h10 - h00) + fy * (h11 - h10)    // lower triangle
+                                  : h00 + fy * (h01 - h00) + fx * (h11 - h01));  // upper triangle
       }
     }
   }
+}
+
+// running[i] = max(running[i], dist(p_i, surface_k(u_i, v_i))) for every level-0 sample
+// (forEachLevelSample). Dist: |a - b| for heights, Euclidean for geometry images.
+template <typename T, typename Dist>
+void accumulateLevelError(const std::vector<T>& h, uint32_t S, uint32_t k, std::vector<float>& running, Dist dist) {
+  forEachLevelSample(h, S, k, [&](size_t i, const T& interp) { running[i] = std::max(running[i], dist(h[i], interp)); });
 }
 
 // note: function objects, not functions: a function pointer as Dist would be an indirect call
@@ -256,6 +261,14 @@ std::vector<float> geometryLevelErrors(const std::vector<glm::vec3>& positions, 
     accumulateLevelError(positions, side, k, running, PointDistance{});
     out[k] = *std::max_element(running.begin(), running.end());
   }
+  return out;
+}
+
+std::vector<glm::vec3> geometryLevelSurface(const std::vector<glm::vec3>& positions, uint32_t side, uint32_t k) {
+  if (!isChartSizeValid(side) || positions.size() != size_t(side) * side || (side - 1) >> k == 0)
+    throw std::invalid_argument("geometryLevelSurface: positions do not match the side, or a level past the pyramid");
+  std::vector<glm::vec3> out(positions.size());
+  forEachLevelSample(positions, side, k, [&](size_t i, const glm::vec3& p) { out[i] = p; });
   return out;
 }
 

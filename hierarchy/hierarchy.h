@@ -140,6 +140,10 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
 // k' <= k: the chart-wide form of buildGeometryHierarchy's node errors (out[0] = 0).
 std::vector<float> geometryLevelErrors(const std::vector<glm::vec3>& positions, uint32_t side, uint32_t levels);
 
+// The surface of level k of a side^2 geometry image (row = v), drawn as the render grids draw it,
+// at every level-0 sample's (u, v): side^2 positions, the level's own samples where they lie.
+std::vector<glm::vec3> geometryLevelSurface(const std::vector<glm::vec3>& positions, uint32_t side, uint32_t k);
+
 // Atomic. compressed: version 2 (the arrays regrouped as byte planes, then zstd with its
 // checksum; about 0.4 of version 1's bytes on mesh atlases), else version 1 (raw). Both are read.
 void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool compressed = true);

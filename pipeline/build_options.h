@@ -159,7 +159,10 @@ struct MeshBuildOptions : CommonBuildOptions {
   bool unfold = true;
   // Each chart keeps only the pyramid levels from the coarsest whose surface stays within
   // maxSampleError of the input (atlas/mesh/mesh_atlas.h ChartCoarsening; ChartInfo::finestLevel),
-  // when maxSampleError is set; false: every chart keeps its whole pyramid.
+  // when maxSampleError is set, and the squares of each chart's finest level whose surface the two
+  // triangles of their corners follow within what maxSampleError leaves move onto them, for the
+  // block codec to store their corners alone (geometryPyramid's PlanarPlacement); false: every
+  // chart keeps its whole pyramid, every sample where it was resampled.
   bool coarsenCharts = true;
 };
 

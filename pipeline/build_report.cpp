@@ -222,6 +222,7 @@ nlohmann::json statsJson(const MeshBuildStats& s) {
   stats["hierarchy_depth"] = w.depth;
   stats["charts_by_finest_level"] = w.chartsByFinestLevel;
   stats["finest_samples"] = w.finestSamples;
+  stats["planar_samples"] = w.planarSamples;
   stats["hierarchy_samples_per_second"] = w.hierarchy.samplesPerSecond;
   stats["hierarchy_seconds"] = w.hierarchy.seconds;
   stats["hierarchy_threads"] = w.hierarchy.threads;

@@ -138,6 +138,7 @@ struct MeshWriteStats {
   // The charts' finest levels (ChartInfo::finestLevel): charts by level, and their samples summed.
   std::vector<uint32_t> chartsByFinestLevel;
   uint64_t finestSamples = 0;
+  uint64_t planarSamples = 0;  // of those, moved onto planar squares (geometryPyramid)
 };
 
 // A whole mesh build (stats.json).

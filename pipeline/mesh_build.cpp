@@ -582,10 +582,15 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
                  100.0 * o.positionTolerance, o.normalTolerance);
   {
     const GeometryChartsWritten written =
-        writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get(), coding, finest);
+        writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get(), coding, finest,
+                            o.coarsenCharts ? r.stats.maxSampleError : 0.0);
     w.bounds = written.bounds;
     w.chartsByFinestLevel = written.chartsByFinestLevel;
     w.finestSamples = written.finestSamples;
+    w.planarSamples = written.planarSamples;
+    if (written.planarSamples > 0)
+      spdlog::info("{} of those samples ({:.2f}) moved onto planar squares, whose corners alone are coded",
+                   written.planarSamples, double(written.planarSamples) / double(std::max<uint64_t>(written.finestSamples, 1)));
     if (written.chartsByFinestLevel.size() > 1)
       spdlog::info("charts by their finest level (0 = {}^2 samples): {}; {} samples ({:.1f} per input triangle, "
                    "{:.2f} of the full charts')",

@@ -4,6 +4,9 @@
 #include "hierarchy/hierarchy.h"
 #include "core/progress.h"
 
+#include <glm/geometric.hpp>
+#include <glm/gtc/type_precision.hpp>
+
 #include <algorithm>
 #include <bit>
 #include <chrono>
@@ -35,10 +38,127 @@ std::vector<T> subsampled(const std::vector<T>& image, uint32_t side, uint32_t s
   return out;
 }
 
+// The surface drawn from a chart's stored finest level (side^2 samples, level finestLevel of the
+// chart) at its level-0 sample (u, v), as the render grids triangulate it.
+glm::vec3 drawnAt(const std::vector<glm::vec3>& stored, uint32_t side, uint32_t finestLevel, uint32_t u, uint32_t v) {
+  const uint32_t s = 1u << finestLevel, n = side - 1;
+  const uint32_t cx = std::min(u >> finestLevel, n - 1), cy = std::min(v >> finestLevel, n - 1);
+  const float inv = 1.0f / float(s);
+  const float fx = float(u - cx * s) * inv, fy = float(v - cy * s) * inv;
+  const glm::vec3 h00 = stored[size_t(cy) * side + cx], h10 = stored[size_t(cy) * side + cx + 1],
+                  h01 = stored[size_t(cy + 1) * side + cx], h11 = stored[size_t(cy + 1) * side + cx + 1];
+  return fx >= fy ? h00 + fx * (h10 - h00) + fy * (h11 - h10) : h00 + fy * (h01 - h00) + fx * (h11 - h01);
+}
+
+// geometryPyramid's planar squares: moves the samples of the squares of `stored` (the settled
+// finest level, finestLevel of the chartSize^2 level 0 `P0`) that may move onto their squares'
+// triangles.
+uint64_t placeOnPlanarSquares(const std::vector<glm::vec3>& P0, uint32_t chartSize, uint32_t finestLevel, double step,
+                              const PlanarPlacement& planar, std::vector<glm::vec3>& stored) {
+  const uint32_t M = (chartSize - 1) >> finestLevel, side = M + 1, scale = 1u << finestLevel;
+  const uint32_t B = std::min(planar.blockIntervals, M);
+  if (B < 2 || !std::has_single_bit(B)) return 0;
+  const uint32_t sizes = uint32_t(std::countr_zero(B));  // squares of B >> l intervals, l < sizes
+  auto drawnEverywhere = [&](const std::vector<glm::vec3>& image) {
+    std::vector<glm::vec3> d(P0.size());
+    for (uint32_t v = 0; v < chartSize; ++v)
+      for (uint32_t u = 0; u < chartSize; ++u) d[size_t(v) * chartSize + u] = drawnAt(image, side, finestLevel, u, v);
+    return d;
+  };
+  std::vector<float> allowed(P0.size());
+  {
+    const std::vector<glm::vec3> d = drawnEverywhere(stored);
+    for (size_t i = 0; i < P0.size(); ++i)
+      allowed[i] = std::max(float(planar.budget), glm::length(P0[i] - d[i]));
+  }
+  std::vector<glm::i64vec3> q(stored.size());
+  for (size_t i = 0; i < stored.size(); ++i)
+    for (int c = 0; c < 3; ++c) q[i][c] = std::llround(double(stored[i][c]) / step);
+  std::vector<std::vector<uint8_t>> forbidden(sizes), isPlanar(sizes);
+  for (uint32_t l = 0; l < sizes; ++l) forbidden[l].assign(size_t(M / (B >> l)) * (M / (B >> l)), 0);
+  for (;;) {
+    std::vector<glm::vec3> G = stored;
+    std::vector<glm::i64vec3> g = q;
+    std::vector<uint8_t> known(stored.size(), 0);
+    for (uint32_t y = 0; y <= M; ++y)
+      for (uint32_t x = 0; x <= M; ++x) known[size_t(y) * side + x] = x == 0 || y == 0 || x == M || y == M;
+    for (uint32_t l = 0; l < sizes; ++l) {
+      const uint32_t s = B >> l, n = M / s;
+      isPlanar[l].assign(size_t(n) * n, 0);
+      for (uint32_t sy = 0; sy < n; ++sy)
+        for (uint32_t sx = 0; sx < n; ++sx) {
+          const size_t k = size_t(sy) * n + sx;
+          if (l > 0 && isPlanar[l - 1][size_t(sy / 2) * (n / 2) + sx / 2] != 0) {
+            isPlanar[l][k] = 2;  // inside a planar square
+            continue;
+          }
+          if (forbidden[l][k]) continue;
+          const uint32_t x0 = sx * s, y0 = sy * s;
+          std::vector<std::pair<size_t, glm::vec3>> moved;
+          for (uint32_t dy = 0; dy <= s; ++dy)
+            for (uint32_t dx = 0; dx <= s; ++dx) {
+              const size_t i = size_t(y0 + dy) * side + x0 + dx;
+              if (known[i] || (dx % s == 0 && dy % s == 0)) continue;
+              glm::i64vec3 v;
+              for (int c = 0; c < 3; ++c)
+                v[c] = planarSquareSample(g[size_t(y0) * side + x0][c], g[size_t(y0) * side + x0 + s][c],
+                                          g[size_t(y0 + s) * side + x0][c], g[size_t(y0 + s) * side + x0 + s][c], s, dx, dy);
+              moved.emplace_back(i, G[i]);
+              G[i] = glm::vec3(float(double(v.x) * step), float(double(v.y) * step), float(double(v.z) * step));
+              g[i] = v;
+            }
+          // The square's footprint, drawn from the moved samples.
+          bool within = true;
+          for (uint32_t v = y0 * scale; v <= (y0 + s) * scale && within; ++v)
+            for (uint32_t u = x0 * scale; u <= (x0 + s) * scale; ++u) {
+              const size_t i = size_t(v) * chartSize + u;
+              if (glm::length(P0[i] - drawnAt(G, side, finestLevel, u, v)) > allowed[i]) {
+                within = false;
+                break;
+              }
+            }
+          if (!within) {
+            for (const auto& [i, old] : moved) G[i] = old, g[i] = q[i];
+            continue;
+          }
+          isPlanar[l][k] = 1;
+          for (const auto& [i, old] : moved) known[i] = 1;
+        }
+    }
+    // The whole result: squares beside a sample over its allowance stay as they were.
+    const std::vector<glm::vec3> d = drawnEverywhere(G);
+    bool over = false;
+    for (uint32_t v = 0; v < chartSize; ++v)
+      for (uint32_t u = 0; u < chartSize; ++u) {
+        const size_t i = size_t(v) * chartSize + u;
+        if (glm::length(P0[i] - d[i]) <= allowed[i]) continue;
+        // Every planar square that placed a stored sample the surface there is drawn from stays as
+        // it was: the sample itself at the finest level 0, else the corners of its stored cell.
+        const uint32_t cx = std::min(u >> finestLevel, M - 1), cy = std::min(v >> finestLevel, M - 1);
+        for (uint32_t k = 0; k < 4; ++k) {
+          const uint32_t x = finestLevel == 0 ? u : cx + (k & 1), y = finestLevel == 0 ? v : cy + (k >> 1);
+          for (uint32_t l = 0; l < sizes; ++l) {
+            const uint32_t span = B >> l, n = M / span;
+            for (uint32_t sy = y > 0 ? (y - 1) / span : 0; sy <= std::min(y / span, n - 1); ++sy)
+              for (uint32_t sx = x > 0 ? (x - 1) / span : 0; sx <= std::min(x / span, n - 1); ++sx)
+                if (isPlanar[l][size_t(sy) * n + sx] == 1) forbidden[l][size_t(sy) * n + sx] = 1, over = true;
+          }
+        }
+      }
+    if (!over) {
+      uint64_t moved = 0;
+      for (size_t i = 0; i < G.size(); ++i) moved += G[i] != stored[i];
+      stored = std::move(G);
+      return moved;
+    }
+  }
+}
+
 }  // namespace
 
 ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, const ChartCoding& coding,
-                             uint32_t finestLevel) {
+                             uint32_t finestLevel, const PlanarPlacement& planar, uint64_t* planarSamples) {
+  if (planarSamples) *planarSamples = 0;
   if (!isChartSizeValid(chartSize) || image.positions.size() != size_t(chartSize) * chartSize ||
       image.normals.size() != image.positions.size() ||
       (!image.colours.empty() && image.colours.size() != image.positions.size()))
@@ -56,6 +176,10 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, con
                                                  size, coding.positionStep, coding.positionTolerance);
     std::memcpy(positions.data(), s.data(), s.size() * sizeof(float));
     if (!coding.deriveGeometryNormals) settleNormals(normals, size, coding.normalTolerance);
+    if (planar.budget > 0.0) {
+      const uint64_t moved = placeOnPlanarSquares(image.positions, chartSize, finestLevel, coding.positionStep, planar, positions);
+      if (planarSamples) *planarSamples = moved;
+    }
   }
   ChartPyramid p;
   for (uint32_t k = 0; (M >> k) >= 1; ++k) {
@@ -157,7 +281,8 @@ std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const Chart
 
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs::path& dir,
                                           uint32_t blockIntervals, AtlasManifest& m, const ChartSpill* spill,
-                                          const ChartCoding& coding, const std::vector<uint32_t>& finestLevels) {
+                                          const ChartCoding& coding, const std::vector<uint32_t>& finestLevels,
+                                          double planarBound) {
   const auto t0 = std::chrono::steady_clock::now();
   if (set.charts.empty()) throw std::invalid_argument("writeGeometryCharts: no charts");
   if (!finestLevels.empty() && finestLevels.size() != set.charts.size())
@@ -182,7 +307,8 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     m.compression.positionTolerance = coding.positionTolerance;
     m.compression.normalTolerance = coding.normalTolerance;
   }
-  std::vector<uint64_t> bytes(set.charts.size(), 0), finestSamples(set.charts.size(), 0);
+  std::vector<uint64_t> bytes(set.charts.size(), 0), finestSamples(set.charts.size(), 0),
+      planarSamples(set.charts.size(), 0);
   std::vector<std::array<float, 6>> boxes(set.charts.size());
   const bool measureNormals = coding.compressed && coding.deriveGeometryNormals;
   tbb::enumerable_thread_specific<std::vector<uint64_t>> angleBins(
@@ -201,7 +327,10 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     c.file = name;
     c.neighbours = img.neighbours;
     c.finestLevel = finestLevels.empty() ? 0 : finestLevels[i];
-    const ChartPyramid pyramid = geometryPyramid(samples, set.chartSize, coding, c.finestLevel);
+    PlanarPlacement planar;
+    planar.budget = std::max(0.0, planarBound - img.quality.sampleError);
+    planar.blockIntervals = blockIntervals;
+    const ChartPyramid pyramid = geometryPyramid(samples, set.chartSize, coding, c.finestLevel, planar, &planarSamples[i]);
     const uint32_t size = ((set.chartSize - 1) >> c.finestLevel) + 1;
     finestSamples[i] = uint64_t(size) * size;
     glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
@@ -220,6 +349,7 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
   for (size_t i = 0; i < boxes.size(); ++i) {
     w.bytes += bytes[i];
     w.finestSamples += finestSamples[i];
+    w.planarSamples += planarSamples[i];
     const uint32_t f = m.charts[i].finestLevel;
     if (w.chartsByFinestLevel.size() <= f) w.chartsByFinestLevel.resize(f + 1, 0);
     ++w.chartsByFinestLevel[f];

@@ -23,10 +23,24 @@ namespace gimlod {
 // tolerances (settlePositions, settleNormals: the border to the nearest lattice point, the rest
 // within the tolerances), as a compressed chart file decodes them; the other levels subsample it.
 // finestLevel (ChartInfo::finestLevel): the pyramid starts at the image's level finestLevel,
-// subsampled before it is settled. Throws std::invalid_argument on images that do not match
-// chartSize, or a finest level past its pyramid.
+// subsampled before it is settled.
+// Planar squares (compressed coding, planar.budget > 0): then the settled finest level's squares
+// (blocks of planar.blockIntervals samples, their halves, ... down to 2 intervals, largest first,
+// never a chart-border sample) whose samples may move onto the two triangles of their corners, as
+// the block codec's planar squares put them (planarSquareSample), do: where the surface drawn from
+// that level then stays within planar.budget of every level-0 sample of the square's footprint, or
+// no farther than it did before. Measured again on the whole result: squares beside a sample over
+// it stay as they were. The codec then stores their corners alone. planarSamples, if given,
+// receives the number of samples moved.
+// Throws std::invalid_argument on images that do not match chartSize, or a finest level past its
+// pyramid.
+struct PlanarPlacement {
+  double budget = 0.0;  // input units; 0: none
+  uint32_t blockIntervals = 64;
+};
 ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, const ChartCoding& coding = {},
-                             uint32_t finestLevel = 0);
+                             uint32_t finestLevel = 0, const PlanarPlacement& planar = {},
+                             uint64_t* planarSamples = nullptr);
 
 // The angles between the normals a reader derives (geometryImageNormals) and the resampled
 // ones, over the samples whose normals are derived (level 0, off block borders), in degrees.
@@ -42,6 +56,7 @@ struct GeometryChartsWritten {
   NormalAngles normalAngles;      // coding.deriveGeometryNormals only
   std::vector<uint32_t> chartsByFinestLevel;  // [finest level]: charts that keep it (ChartInfo)
   uint64_t finestSamples = 0;                 // the charts' finest levels' samples, summed
+  uint64_t planarSamples = 0;                 // of those, the ones moved onto planar squares
 };
 
 // How far writeGeometryCharts may coarsen each chart (ChartInfo::finestLevel): to the coarsest
@@ -72,11 +87,13 @@ std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const Chart
 // Throws InputError when a file cannot be written, std::invalid_argument on an empty or
 // inconsistent set. With finestLevels (one per chart, as chartFinestLevels gives), each chart keeps
 // only the levels from its finest, subsampled from its samples before they are settled, in a file
-// of its own size (blocks of at most its intervals), and m's chart records the level.
+// of its own size (blocks of at most its intervals), and m's chart records the level. planarBound
+// (input units, > 0; compressed coding): each chart's finest level moves its planar squares within
+// planarBound less the chart's sampling error (geometryPyramid's PlanarPlacement).
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const std::filesystem::path& dir,
                                           uint32_t blockIntervals, AtlasManifest& m,
                                           const ChartSpill* spill = nullptr, const ChartCoding& coding = {},
-                                          const std::vector<uint32_t>& finestLevels = {});
+                                          const std::vector<uint32_t>& finestLevels = {}, double planarBound = 0.0);
 
 // The surface of a geometry atlas at pyramid level `level`: every chart's grid, triangulated as
 // the renderer draws it (split along the (0,0)-(1,1) diagonal, counter-clockwise in (u, v)), with

@@ -131,6 +131,68 @@ TEST(ChartCoarsening, KeepsTheCoarsestLevelWithinTheBound) {
   EXPECT_GT(chartFinestLevel(bowl, n, 0.0, {3e-2, 4}), chartFinestLevel(bowl, n, 0.0, {2e-3, 4}));
 }
 
+// Planar squares (geometryPyramid's PlanarPlacement) on a wavy chart: the surface drawn from the
+// stored finest level stays within the budget of every level-0 sample (or no farther than without
+// them), the chart's border never moves, the moved samples are counted, and the chart file is
+// smaller; no budget moves nothing.
+TEST(PlanarSquares, MoveWithinTheBudgetNeverTheBorderAndStoreFewerBytes) {
+  test::TempDir tmp("gimlod-planar");
+  const uint32_t n = 65;
+  GeometryImage img;
+  for (uint32_t v = 0; v < n; ++v)
+    for (uint32_t u = 0; u < n; ++u) {
+      const float x = float(u) / (n - 1), y = float(v) / (n - 1);
+      const float bump = std::exp(-60.0f * ((x - 0.7f) * (x - 0.7f) + (y - 0.3f) * (y - 0.3f)));
+      img.positions.push_back({x, y, 0.05f * std::sin(3.0f * x) * std::cos(2.0f * y) + 0.08f * bump});
+      img.normals.push_back(packNormal(0.0f, 0.0f, 1.0f));
+    }
+  ChartCoding coding;
+  coding.compressed = true;
+  coding.positionStep = std::exp2(-18.0);
+  coding.deriveGeometryNormals = true;
+  for (const uint32_t finest : {0u, 1u})
+    for (const double budget : {0.0, 2e-4, 2e-3}) {
+      SCOPED_TRACE(::testing::Message() << "finest level " << finest << ", budget " << budget);
+      const ChartPyramid base = geometryPyramid(img, n, coding, finest);
+      uint64_t moved = 1;
+      const ChartPyramid planar = geometryPyramid(img, n, coding, finest, {budget, 16}, &moved);
+      const uint32_t side = ((n - 1) >> finest) + 1, M = side - 1;
+      uint64_t differ = 0;
+      for (uint32_t y = 0; y <= M; ++y)
+        for (uint32_t x = 0; x <= M; ++x) {
+          const size_t i = size_t(y) * side + x;
+          differ += planar.positions[0][i] != base.positions[0][i];
+          if (x == 0 || y == 0 || x == M || y == M) EXPECT_EQ(planar.positions[0][i], base.positions[0][i]) << x << ", " << y;
+        }
+      EXPECT_EQ(moved, differ);
+      // The drawn surfaces at every level-0 sample, each level subsampling the stored finest one.
+      auto drawn = [&](const std::vector<glm::vec3>& stored) {
+        std::vector<glm::vec3> h(img.positions.size());
+        for (uint32_t v = 0; v < side; ++v)
+          for (uint32_t u = 0; u < side; ++u) h[size_t(v << finest) * n + (u << finest)] = stored[size_t(v) * side + u];
+        return finest == 0 ? h : geometryLevelSurface(h, n, finest);
+      };
+      const std::vector<glm::vec3> before = drawn(base.positions[0]), after = drawn(planar.positions[0]);
+      for (size_t i = 0; i < img.positions.size(); ++i)
+        EXPECT_LE(glm::length(after[i] - img.positions[i]),
+                  std::max(budget, double(glm::length(before[i] - img.positions[i]))) + 1e-6) << i;
+      for (size_t k = 1; k < planar.positions.size(); ++k)
+        for (uint32_t y = 0; y < (M >> k) + 1; ++y)
+          for (uint32_t x = 0; x < (M >> k) + 1; ++x)
+            EXPECT_EQ(planar.positions[k][size_t(y) * ((M >> k) + 1) + x], planar.positions[0][size_t(y << k) * side + (x << k)]);
+      if (budget == 0.0) {
+        EXPECT_EQ(moved, 0u);
+        continue;
+      }
+      EXPECT_GT(moved, uint64_t(side) * side / (budget > 1e-3 ? 2 : 8));
+      const uint64_t baseBytes = writeChartFile(tmp.path() / "base.bin", base, side, std::min(16u, M), coding);
+      const uint64_t planarBytes = writeChartFile(tmp.path() / "planar.bin", planar, side, std::min(16u, M), coding);
+      EXPECT_LE(planarBytes, budget > 1e-3 ? baseBytes * 3 / 4 : baseBytes) << "moved " << moved;
+      // The file decodes to the samples placed.
+      EXPECT_EQ(ChartFileReader(tmp.path() / "planar.bin").readLevelPositions(0), planar.positions[0]);
+    }
+}
+
 // Charts of different finest levels side by side: the files hold their own sizes, the seams stay
 // bit-identical where both charts hold a level, the export is stitched watertight at every level
 // as the renderer stitches, the hierarchy gives no coarse chart a resolution it does not hold, and
