@@ -131,18 +131,23 @@ inline uint32_t squareLevels(uint32_t side) { return side >= 3 ? uint32_t(std::c
 // The traversal both coders share. q: 3 interleaved channels of side^2 samples (the encoder's
 // values, or the decoder's so far). decide(l, x, y) settles an uncovered square at level l before
 // anything of that size is coded; code(i, spacing) codes sample i from its neighbours at that
-// spacing (the caller predicts with predictPlanar); the planar squares' samples are filled in q.
-template <typename Decide, typename Code>
+// spacing (predictPlanar) while squares are coded, then, with spacing 1, every sample still
+// unknown in row order (all its Lorenzo neighbours known by then). With fill, the planar squares'
+// samples are placed in q; without, only `known` follows them (to count the coded samples).
+template <bool fill, typename Decide, typename Code>
 void planarPasses(uint32_t side, uint8_t chartBorderSides, std::vector<uint32_t>& q, std::vector<uint8_t>& known,
-                  PlanarSquares& squares, Decide&& decide, Code&& code) {
+                  PlanarSquares& squares, Decide&& decide, Code&& code, const std::vector<uint32_t>* rest = nullptr) {
   const uint32_t levels = squareLevels(side), last = side - 1;
   known.assign(size_t(side) * side, 0);
   known[0] = 1;  // the first sample: in the header
-  squares.assign(levels, {});
-  auto onBorder = [&](uint32_t x, uint32_t y) {
-    return ((chartBorderSides & kChartBorderBottom) && y == 0) || ((chartBorderSides & kChartBorderRight) && x == last) ||
-           ((chartBorderSides & kChartBorderTop) && y == last) || ((chartBorderSides & kChartBorderLeft) && x == 0);
-  };
+  // Bit 1: known. Bit 2: on the chart's border, never placed by a square (coded in row order).
+  for (uint32_t t = 0; t < side; ++t) {
+    if (chartBorderSides & kChartBorderBottom) known[t] |= 2;
+    if (chartBorderSides & kChartBorderTop) known[size_t(last) * side + t] |= 2;
+    if (chartBorderSides & kChartBorderLeft) known[size_t(t) * side] |= 2;
+    if (chartBorderSides & kChartBorderRight) known[size_t(t) * side + last] |= 2;
+  }
+  squares.resize(levels);
   for (uint32_t l = 0; l < levels; ++l) {
     const uint32_t n = 1u << l, s = last >> l;
     std::vector<uint8_t>& sq = squares[l];
@@ -158,40 +163,60 @@ void planarPasses(uint32_t side, uint8_t chartBorderSides, std::vector<uint32_t>
     for (uint32_t gy = 0; gy <= n; ++gy)
       for (uint32_t gx = 0; gx <= n; ++gx) {
         const uint32_t i = gy * s * side + gx * s;
-        if (known[i] || !(planar(gx - 1, gy - 1) || planar(gx, gy - 1) || planar(gx - 1, gy) || planar(gx, gy))) continue;
+        if ((known[i] & 1) || !(planar(gx - 1, gy - 1) || planar(gx, gy - 1) || planar(gx - 1, gy) || planar(gx, gy)))
+          continue;
         code(i, s);
-        known[i] = 1;
+        known[i] |= 1;
       }
     for (uint32_t y = 0; y < n; ++y)
       for (uint32_t x = 0; x < n; ++x) {
         if (sq[size_t(y) * n + x] != 1) continue;
         const uint32_t x0 = x * s, y0 = y * s;
-        for (uint32_t dy = 0; dy <= s; ++dy)
-          for (uint32_t dx = 0; dx <= s; ++dx) {
-            const uint32_t i = (y0 + dy) * side + x0 + dx;
-            if (known[i] || onBorder(x0 + dx, y0 + dy)) continue;
-            for (uint32_t c = 0; c < 3; ++c) {
-              auto at = [&](uint32_t u, uint32_t v) { return int64_t(int32_t(q[(size_t(v) * side + u) * 3 + c])); };
-              q[size_t(i) * 3 + c] = uint32_t(planarSquareSample(at(x0, y0), at(x0 + s, y0), at(x0, y0 + s),
-                                                                 at(x0 + s, y0 + s), s, dx, dy));
-            }
-            known[i] = 1;
+        const size_t c00 = size_t(y0) * side + x0, c10 = c00 + s, c01 = c00 + size_t(s) * side, c11 = c01 + s;
+        int64_t corner[3][4];
+        if constexpr (fill)
+          for (uint32_t c = 0; c < 3; ++c) {
+            corner[c][0] = int32_t(q[c00 * 3 + c]), corner[c][1] = int32_t(q[c10 * 3 + c]);
+            corner[c][2] = int32_t(q[c01 * 3 + c]), corner[c][3] = int32_t(q[c11 * 3 + c]);
           }
+        for (uint32_t dy = 0; dy <= s; ++dy) {
+          uint8_t* k = known.data() + size_t(y0 + dy) * side + x0;
+          for (uint32_t dx = 0; dx <= s; ++dx) {
+            if (k[dx]) continue;
+            if constexpr (fill) {
+              uint32_t* o = q.data() + (size_t(y0 + dy) * side + x0 + dx) * 3;
+              for (uint32_t c = 0; c < 3; ++c)
+                o[c] = uint32_t(planarSquareSample(corner[c][0], corner[c][1], corner[c][2], corner[c][3], s, dx, dy));
+            }
+            k[dx] = 1;
+          }
+        }
       }
   }
-  for (uint32_t i = 0; i < side * side; ++i)
-    if (!known[i]) code(i, 1), known[i] = 1;
+  // The rest in row order, each from its left, lower and lower-left neighbours, known by now
+  // (`rest`, if given: those samples, as an earlier traversal of the same squares found them).
+  if (rest) {
+    for (uint32_t i : *rest) code(i, 1);
+    return;
+  }
+  for (uint32_t i = 1; i < side * side; ++i)
+    if (!(known[i] & 1)) code(i, 1), known[i] = 1;
 }
 
 // The prediction of channel c of sample i coded at `spacing` (planarPasses): Lorenzo on that
 // spacing's grid from the neighbours known, else the left one, else the one below, else the first
-// sample. In wrapping unsigned arithmetic.
+// sample; at spacing 1 (every neighbour known by then) Lorenzo as predict() has it. In wrapping
+// unsigned arithmetic.
 inline uint32_t predictPlanar(const std::vector<uint32_t>& q, const std::vector<uint8_t>& known, uint32_t side, uint32_t i,
                               uint32_t spacing, uint32_t c) {
   const uint32_t x = i % side, y = i / side;
-  const bool l = x >= spacing && known[i - spacing], b = y >= spacing && known[i - spacing * side];
-  const bool lb = l && b && known[i - spacing - spacing * side];
   auto v = [&](uint32_t j) { return q[size_t(j) * 3 + c]; };
+  if (spacing == 1) {
+    if (x > 0 && y > 0) return v(i - 1) + v(i - side) - v(i - 1 - side);
+    return x > 0 ? v(i - 1) : v(i - side);
+  }
+  const bool l = x >= spacing && (known[i - spacing] & 1), b = y >= spacing && (known[i - spacing * side] & 1);
+  const bool lb = l && b && (known[i - spacing - spacing * side] & 1);
   if (lb) return v(i - spacing) + v(i - spacing * side) - v(i - spacing - spacing * side);
   if (l) return v(i - spacing);
   if (b) return v(i - spacing * side);
@@ -275,7 +300,7 @@ std::vector<uint8_t> planarBody(const std::vector<int32_t>& q, uint32_t side, do
     for (uint32_t c = 0; c < 3; ++c)
       z.push_back(zigzag(int32_t(v[size_t(i) * 3 + c] - predictPlanar(v, known, side, i, spacing, c))));
   };
-  planarPasses(side, chartBorderSides, v, known, squares, decide, code);
+  planarPasses<true>(side, chartBorderSides, v, known, squares, decide, code);
   if (!any) return {};
   const size_t m = z.size() / 3;
   uint32_t all = 0;
@@ -319,8 +344,13 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
     if (bitsAt + k / 8 >= raw.size()) throw CodecError("truncated position block (planar squares)");
     return ((raw[bitsAt + k / 8] >> (k % 8)) & 1u) != 0;
   };
-  planarPasses(side, border, q, known, squares, [&](uint32_t, uint32_t, uint32_t) { return bit(nbits++); },
-               [&](uint32_t, uint32_t) { ++m; });
+  thread_local std::vector<uint32_t> rest;
+  rest.clear();
+  planarPasses<false>(side, border, q, known, squares, [&](uint32_t, uint32_t, uint32_t) { return bit(nbits++); },
+                      [&](uint32_t i, uint32_t spacing) {
+                        ++m;
+                        if (spacing == 1) rest.push_back(i);
+                      });
   const size_t body = bitsAt + (nbits + 7) / 8;
   if (raw.size() != body + size_t(planes) * 3 * m) throw CodecError("corrupt position block (size)");
   std::fill(q.begin(), q.end(), 0u);
@@ -332,11 +362,13 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
     for (uint32_t b = 0; b < planes; ++b) z |= uint32_t(p[b * m]) << (8 * b);
     return (z >> 1) ^ (0u - (z & 1u));
   };
-  planarPasses(side, border, q, known, squares, [&](uint32_t, uint32_t, uint32_t) { return bit(k++); },
-               [&](uint32_t i, uint32_t spacing) {
-                 for (uint32_t c = 0; c < 3; ++c) q[size_t(i) * 3 + c] = residual(c) + predictPlanar(q, known, side, i, spacing, c);
-                 ++j;
-               });
+  planarPasses<true>(
+      side, border, q, known, squares, [&](uint32_t, uint32_t, uint32_t) { return bit(k++); },
+      [&](uint32_t i, uint32_t spacing) {
+        for (uint32_t c = 0; c < 3; ++c) q[size_t(i) * 3 + c] = residual(c) + predictPlanar(q, known, side, i, spacing, c);
+        ++j;
+      },
+      &rest);
   for (size_t i = 0; i < q.size(); ++i) {
     const int32_t v = int32_t(q[i]);
     if (v < -kMaxSteps || v > kMaxSteps) throw CodecError("corrupt position block (value out of range)");
@@ -590,12 +622,6 @@ std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, 
   return all;
 }
 
-int32_t planarSquareSample(int64_t q00, int64_t q10, int64_t q01, int64_t q11, uint32_t s, uint32_t dx, uint32_t dy) {
-  const int64_t si = s;
-  const int64_t v = dx >= dy ? si * q00 + int64_t(dx) * (q10 - q00) + int64_t(dy) * (q11 - q10)
-                             : si * q00 + int64_t(dy) * (q01 - q00) + int64_t(dx) * (q11 - q01);
-  return int32_t((v + si / 2) >> std::countr_zero(s));  // floor((v + s / 2) / s): s is a power of two
-}
 
 void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<float> out) {
   decodeInts(block, kPositionMagic, "position", side, 3, out);
