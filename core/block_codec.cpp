@@ -281,10 +281,8 @@ std::vector<uint8_t> planarBody(const std::vector<int32_t>& q, uint32_t side, do
     for (uint32_t dy = 0; dy <= s && flat; ++dy)
       for (uint32_t dx = 0; dx <= s && flat; ++dx) {
         const uint32_t u = x0 + dx, w = y0 + dy, i = w * side + u;
+        // Samples placed before, on the chart's border (planarPasses' known), and the corners.
         if (known[i] || (dx % s == 0 && dy % s == 0)) continue;
-        if (((chartBorderSides & kChartBorderBottom) && w == 0) || ((chartBorderSides & kChartBorderRight) && u == last) ||
-            ((chartBorderSides & kChartBorderTop) && w == last) || ((chartBorderSides & kChartBorderLeft) && u == 0))
-          continue;
         for (uint32_t c = 0; c < 3 && flat; ++c) {
           auto at = [&](uint32_t a, uint32_t b) { return int64_t(q[(size_t(b) * side + a) * 3 + c]); };
           flat = at(u, w) == planarSquareSample(at(x0, y0), at(x0 + s, y0), at(x0, y0 + s), at(x0 + s, y0 + s), s, dx, dy);
@@ -334,9 +332,10 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
     throw CodecError("corrupt position block (planar squares)");
   const uint8_t border = raw[head], planes = raw[1];
   const size_t bitsAt = head + 1;
-  std::vector<uint32_t> q(size_t(side) * side * 3, 0);
-  std::vector<uint8_t> known;
-  PlanarSquares squares;
+  thread_local std::vector<uint32_t> q;
+  thread_local std::vector<uint8_t> known;
+  thread_local PlanarSquares squares;
+  q.assign(size_t(side) * side * 3, 0);
   // First the squares alone (the decisions do not depend on the values): the bits' length and the
   // number of coded samples.
   size_t nbits = 0, m = 0;
