@@ -203,6 +203,18 @@ void planarPasses(uint32_t side, uint8_t chartBorderSides, std::vector<uint32_t>
     if (!(known[i] & 1)) code(i, 1), known[i] = 1;
 }
 
+// The samples planarPasses codes last (in row order: those still unknown after the squares), as
+// its values-free traversal leaves `known`, without a branch per sample.
+void listRest(const std::vector<uint8_t>& known, std::vector<uint32_t>& rest) {
+  rest.resize(known.size());
+  size_t n = 0;
+  for (uint32_t i = 1; i < known.size(); ++i) {
+    rest[n] = i;
+    n += (known[i] & 1) ^ 1;
+  }
+  rest.resize(n);
+}
+
 // The prediction of channel c of sample i coded at `spacing` (planarPasses): Lorenzo on that
 // spacing's grid from the neighbours known, else the left one, else the one below, else the first
 // sample; at spacing 1 (every neighbour known by then) Lorenzo as predict() has it. In wrapping
@@ -344,12 +356,11 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
     return ((raw[bitsAt + k / 8] >> (k % 8)) & 1u) != 0;
   };
   thread_local std::vector<uint32_t> rest;
-  rest.clear();
+  const std::vector<uint32_t> none;
   planarPasses<false>(side, border, q, known, squares, [&](uint32_t, uint32_t, uint32_t) { return bit(nbits++); },
-                      [&](uint32_t i, uint32_t spacing) {
-                        ++m;
-                        if (spacing == 1) rest.push_back(i);
-                      });
+                      [&](uint32_t, uint32_t) { ++m; }, &none);
+  listRest(known, rest);
+  m += rest.size();
   const size_t body = bitsAt + (nbits + 7) / 8;
   if (raw.size() != body + size_t(planes) * 3 * m) throw CodecError("corrupt position block (size)");
   std::fill(q.begin(), q.end(), 0u);
