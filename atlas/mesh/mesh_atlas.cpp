@@ -59,11 +59,14 @@ uint64_t placeOnPlanarSquares(const std::vector<glm::vec3>& P0, uint32_t chartSi
   const uint32_t B = std::min(planar.blockIntervals, M);
   if (B < 2 || !std::has_single_bit(B)) return 0;
   const uint32_t sizes = uint32_t(std::countr_zero(B));  // squares of B >> l intervals, l < sizes
+  // The whole chart's drawn surface, as the hierarchy measures it (the squares' own check below
+  // evaluates it sample by sample, drawnAt).
   auto drawnEverywhere = [&](const std::vector<glm::vec3>& image) {
-    std::vector<glm::vec3> d(P0.size());
-    for (uint32_t v = 0; v < chartSize; ++v)
-      for (uint32_t u = 0; u < chartSize; ++u) d[size_t(v) * chartSize + u] = drawnAt(image, side, finestLevel, u, v);
-    return d;
+    if (finestLevel == 0) return image;
+    std::vector<glm::vec3> h(P0.size());
+    for (uint32_t v = 0; v < side; ++v)
+      for (uint32_t u = 0; u < side; ++u) h[size_t(v * scale) * chartSize + u * scale] = image[size_t(v) * side + u];
+    return geometryLevelSurface(h, chartSize, finestLevel);
   };
   std::vector<float> allowed(P0.size());
   {
