@@ -355,6 +355,7 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
     if (bitsAt + k / 8 >= raw.size()) throw CodecError("truncated position block (planar squares)");
     return ((raw[bitsAt + k / 8] >> (k % 8)) & 1u) != 0;
   };
+  // (An empty `rest` keeps the traversal from its branchy scan; listRest reads `known` instead.)
   thread_local std::vector<uint32_t> rest;
   const std::vector<uint32_t> none;
   planarPasses<false>(side, border, q, known, squares, [&](uint32_t, uint32_t, uint32_t) { return bit(nbits++); },

@@ -70,8 +70,7 @@ void forEachLevelSample(const std::vector<T>& h, uint32_t S, uint32_t k, Fn&& fn
       const uint32_t xend = (cx == n - 1) ? s : s - 1;
       for (uint32_t dx = 0; dx <= xend; ++dx) {
         const float fx = float(dx) * inv;
-        fn(at + x0 + dx, fx >= fy ? h00 + fx * (h10 - h00) + fy * (h11 - h10)    // lower triangle
-                                  : h00 + fy * (h01 - h00) + fx * (h11 - h01));  // upper triangle
+        fn(at + x0 + dx, cellSurface(h00, h10, h01, h11, fx, fy));
       }
     }
   }

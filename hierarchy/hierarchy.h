@@ -135,6 +135,15 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
                                  const ChartPositionSource& source, HierarchyStats* stats = nullptr,
                                  const std::vector<uint8_t>& finestLevels = {});
 
+// A grid cell's surface at (fx, fy) in [0, 1]^2 from its corners h00 (0, 0), h10 (1, 0), h01
+// (0, 1) and h11 (1, 1), split along (0,0)-(1,1) as the render grids draw it. T: float (heights)
+// or glm::vec3 (geometry images).
+template <typename T>
+inline T cellSurface(const T& h00, const T& h10, const T& h01, const T& h11, float fx, float fy) {
+  return fx >= fy ? h00 + fx * (h10 - h00) + fy * (h11 - h10)   // lower triangle
+                  : h00 + fy * (h01 - h00) + fx * (h11 - h01);  // upper triangle
+}
+
 // For k = 0..levels: the largest distance from a sample of a side^2 geometry image (row = v) to
 // the surface of its level k', drawn as the render grids draw it, at the sample's own (u, v), over
 // k' <= k: the chart-wide form of buildGeometryHierarchy's node errors (out[0] = 0).

@@ -588,15 +588,15 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
     w.chartsByFinestLevel = written.chartsByFinestLevel;
     w.finestSamples = written.finestSamples;
     w.planarSamples = written.planarSamples;
-    if (written.planarSamples > 0)
-      spdlog::info("{} of those samples ({:.2f}) moved onto planar squares, whose corners alone are coded",
-                   written.planarSamples, double(written.planarSamples) / double(std::max<uint64_t>(written.finestSamples, 1)));
     if (written.chartsByFinestLevel.size() > 1)
       spdlog::info("charts by their finest level (0 = {}^2 samples): {}; {} samples ({:.1f} per input triangle, "
                    "{:.2f} of the full charts')",
                    r.set.chartSize, fmt::join(written.chartsByFinestLevel, ", "), written.finestSamples,
                    double(written.finestSamples) / double(triangles),
                    double(written.finestSamples) / (double(r.set.charts.size()) * r.set.chartSize * r.set.chartSize));
+    if (written.planarSamples > 0)
+      spdlog::info("{} of the charts' finest samples ({:.2f}) moved onto planar squares, whose corners alone are coded",
+                   written.planarSamples, double(written.planarSamples) / double(std::max<uint64_t>(written.finestSamples, 1)));
     w.normalsDerived = coding.deriveGeometryNormals;
     w.normalAngles = written.normalAngles;
   }

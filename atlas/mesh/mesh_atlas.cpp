@@ -5,7 +5,6 @@
 #include "core/progress.h"
 
 #include <glm/geometric.hpp>
-#include <glm/gtc/type_precision.hpp>
 
 #include <algorithm>
 #include <bit>
@@ -45,9 +44,8 @@ glm::vec3 drawnAt(const std::vector<glm::vec3>& stored, uint32_t side, uint32_t 
   const uint32_t cx = std::min(u >> finestLevel, n - 1), cy = std::min(v >> finestLevel, n - 1);
   const float inv = 1.0f / float(s);
   const float fx = float(u - cx * s) * inv, fy = float(v - cy * s) * inv;
-  const glm::vec3 h00 = stored[size_t(cy) * side + cx], h10 = stored[size_t(cy) * side + cx + 1],
-                  h01 = stored[size_t(cy + 1) * side + cx], h11 = stored[size_t(cy + 1) * side + cx + 1];
-  return fx >= fy ? h00 + fx * (h10 - h00) + fy * (h11 - h10) : h00 + fy * (h01 - h00) + fx * (h11 - h01);
+  return cellSurface(stored[size_t(cy) * side + cx], stored[size_t(cy) * side + cx + 1],
+                     stored[size_t(cy + 1) * side + cx], stored[size_t(cy + 1) * side + cx + 1], fx, fy);
 }
 
 // geometryPyramid's planar squares: moves the samples of the squares of `stored` (the settled
@@ -74,14 +72,12 @@ uint64_t placeOnPlanarSquares(const std::vector<glm::vec3>& P0, uint32_t chartSi
     for (size_t i = 0; i < P0.size(); ++i)
       allowed[i] = std::max(float(planar.budget), glm::length(P0[i] - d[i]));
   }
-  std::vector<glm::i64vec3> q(stored.size());
-  for (size_t i = 0; i < stored.size(); ++i)
-    for (int c = 0; c < 3; ++c) q[i][c] = std::llround(double(stored[i][c]) / step);
+  // A sample's lattice point (the samples, settled, lie on the lattice).
+  auto lattice = [&](const glm::vec3& p, int c) { return int64_t(std::llround(double(p[c]) / step)); };
   std::vector<std::vector<uint8_t>> forbidden(sizes), isPlanar(sizes);
   for (uint32_t l = 0; l < sizes; ++l) forbidden[l].assign(size_t(M / (B >> l)) * (M / (B >> l)), 0);
   for (;;) {
     std::vector<glm::vec3> G = stored;
-    std::vector<glm::i64vec3> g = q;
     std::vector<uint8_t> known(stored.size(), 0);
     for (uint32_t y = 0; y <= M; ++y)
       for (uint32_t x = 0; x <= M; ++x) known[size_t(y) * side + x] = x == 0 || y == 0 || x == M || y == M;
@@ -97,18 +93,17 @@ uint64_t placeOnPlanarSquares(const std::vector<glm::vec3>& P0, uint32_t chartSi
           }
           if (forbidden[l][k]) continue;
           const uint32_t x0 = sx * s, y0 = sy * s;
-          std::vector<std::pair<size_t, glm::vec3>> moved;
+          const glm::vec3 c00 = G[size_t(y0) * side + x0], c10 = G[size_t(y0) * side + x0 + s],
+                          c01 = G[size_t(y0 + s) * side + x0], c11 = G[size_t(y0 + s) * side + x0 + s];
+          std::vector<size_t> moved;  // unknown until now, so `stored` holds what they were
           for (uint32_t dy = 0; dy <= s; ++dy)
             for (uint32_t dx = 0; dx <= s; ++dx) {
               const size_t i = size_t(y0 + dy) * side + x0 + dx;
               if (known[i] || (dx % s == 0 && dy % s == 0)) continue;
-              glm::i64vec3 v;
               for (int c = 0; c < 3; ++c)
-                v[c] = planarSquareSample(g[size_t(y0) * side + x0][c], g[size_t(y0) * side + x0 + s][c],
-                                          g[size_t(y0 + s) * side + x0][c], g[size_t(y0 + s) * side + x0 + s][c], s, dx, dy);
-              moved.emplace_back(i, G[i]);
-              G[i] = glm::vec3(float(double(v.x) * step), float(double(v.y) * step), float(double(v.z) * step));
-              g[i] = v;
+                G[i][c] = float(double(planarSquareSample(lattice(c00, c), lattice(c10, c), lattice(c01, c),
+                                                          lattice(c11, c), s, dx, dy)) * step);
+              moved.push_back(i);
             }
           // The square's footprint, drawn from the moved samples.
           bool within = true;
@@ -121,11 +116,11 @@ uint64_t placeOnPlanarSquares(const std::vector<glm::vec3>& P0, uint32_t chartSi
               }
             }
           if (!within) {
-            for (const auto& [i, old] : moved) G[i] = old, g[i] = q[i];
+            for (const size_t i : moved) G[i] = stored[i];
             continue;
           }
           isPlanar[l][k] = 1;
-          for (const auto& [i, old] : moved) known[i] = 1;
+          for (const size_t i : moved) known[i] = 1;
         }
     }
     // The whole result: squares beside a sample over its allowance stay as they were.

@@ -162,7 +162,9 @@ TEST(PlanarSquares, MoveWithinTheBudgetNeverTheBorderAndStoreFewerBytes) {
         for (uint32_t x = 0; x <= M; ++x) {
           const size_t i = size_t(y) * side + x;
           differ += planar.positions[0][i] != base.positions[0][i];
-          if (x == 0 || y == 0 || x == M || y == M) EXPECT_EQ(planar.positions[0][i], base.positions[0][i]) << x << ", " << y;
+          if (x == 0 || y == 0 || x == M || y == M) {
+            EXPECT_EQ(planar.positions[0][i], base.positions[0][i]) << x << ", " << y;
+          }
         }
       EXPECT_EQ(moved, differ);
       // The drawn surfaces at every level-0 sample, each level subsampling the stored finest one.
