@@ -128,15 +128,41 @@ using PlanarSquares = std::vector<std::vector<uint8_t>>;
 
 inline uint32_t squareLevels(uint32_t side) { return side >= 3 ? uint32_t(std::countr_zero(side - 1)) : 0; }
 
-// The traversal both coders share. q: 3 interleaved channels of side^2 samples (the encoder's
-// values, or the decoder's so far). decide(l, x, y) settles an uncovered square at level l before
-// anything of that size is coded; code(i, spacing) codes sample i from its neighbours at that
-// spacing (predictPlanar) while squares are coded, then, with spacing 1, every sample still
-// unknown in row order (all its Lorenzo neighbours known by then). With fill, the planar squares'
-// samples are placed in q; without, only `known` follows them (to count the coded samples).
-template <bool fill, typename Decide, typename Code>
+// Settles level l's squares (the larger ones settled): inside a planar one, else decide(x, y).
+template <typename Decide>
+void settleLevel(PlanarSquares& squares, uint32_t l, Decide&& decide) {
+  const uint32_t n = 1u << l;
+  squares.resize(std::max<size_t>(squares.size(), l + 1));
+  std::vector<uint8_t>& sq = squares[l];
+  sq.assign(size_t(n) * n, 0);
+  for (uint32_t y = 0; y < n; ++y)
+    for (uint32_t x = 0; x < n; ++x) {
+      const uint8_t parent = l == 0 ? 0 : squares[l - 1][size_t(y / 2) * (n / 2) + x / 2];
+      sq[size_t(y) * n + x] = parent != 0 ? 2 : decide(x, y) ? 1 : 0;
+    }
+}
+
+// The prediction of sample i coded at `spacing` from the neighbours on that spacing's grid known
+// by then (bit 1 the left one, 2 the one below, 4 the lower-left one too): Lorenzo from all three,
+// else the left one, else the one below, else the first sample; at spacing 1, where every earlier
+// sample is known, Lorenzo as predict() has it. In wrapping unsigned arithmetic; v(j) reads
+// sample j's value.
+template <typename Value>
+inline uint32_t predictFrom(uint8_t neighbours, uint32_t side, uint32_t i, uint32_t spacing, Value&& v) {
+  if (neighbours & 4) return v(i - spacing) + v(i - spacing * side) - v(i - spacing - spacing * side);
+  if (neighbours & 1) return v(i - spacing);
+  if (neighbours & 2) return v(i - spacing * side);
+  return v(0);
+}
+
+// The encoder's traversal (decodePlanar follows it). q: 3 interleaved channels of side^2 samples.
+// decide(l, x, y) settles an uncovered square at level l before anything of that size is coded;
+// code(i, spacing) codes sample i from its neighbours at that spacing (predictPlanar) while
+// squares are coded, then, with spacing 1, every sample still unknown in row order (all its
+// Lorenzo neighbours known by then). The planar squares' samples are placed in q.
+template <typename Decide, typename Code>
 void planarPasses(uint32_t side, uint8_t chartBorderSides, std::vector<uint32_t>& q, std::vector<uint8_t>& known,
-                  PlanarSquares& squares, Decide&& decide, Code&& code, const std::vector<uint32_t>* rest = nullptr) {
+                  PlanarSquares& squares, Decide&& decide, Code&& code) {
   const uint32_t levels = squareLevels(side), last = side - 1;
   known.assign(size_t(side) * side, 0);
   known[0] = 1;  // the first sample: in the header
@@ -147,16 +173,11 @@ void planarPasses(uint32_t side, uint8_t chartBorderSides, std::vector<uint32_t>
     if (chartBorderSides & kChartBorderLeft) known[size_t(t) * side] |= 2;
     if (chartBorderSides & kChartBorderRight) known[size_t(t) * side + last] |= 2;
   }
-  squares.resize(levels);
+  squares.clear();
   for (uint32_t l = 0; l < levels; ++l) {
     const uint32_t n = 1u << l, s = last >> l;
-    std::vector<uint8_t>& sq = squares[l];
-    sq.assign(size_t(n) * n, 0);
-    for (uint32_t y = 0; y < n; ++y)
-      for (uint32_t x = 0; x < n; ++x) {
-        const uint8_t parent = l == 0 ? 0 : squares[l - 1][size_t(y / 2) * (n / 2) + x / 2];
-        sq[size_t(y) * n + x] = parent != 0 ? 2 : decide(l, x, y) ? 1 : 0;
-      }
+    settleLevel(squares, l, [&](uint32_t x, uint32_t y) { return decide(l, x, y); });
+    const std::vector<uint8_t>& sq = squares[l];
     auto planar = [&](int64_t x, int64_t y) {
       return x >= 0 && y >= 0 && x < n && y < n && sq[size_t(y) * n + size_t(x)] == 1;
     };
@@ -174,65 +195,35 @@ void planarPasses(uint32_t side, uint8_t chartBorderSides, std::vector<uint32_t>
         const uint32_t x0 = x * s, y0 = y * s;
         const size_t c00 = size_t(y0) * side + x0, c10 = c00 + s, c01 = c00 + size_t(s) * side, c11 = c01 + s;
         int64_t corner[3][4];
-        if constexpr (fill)
-          for (uint32_t c = 0; c < 3; ++c) {
-            corner[c][0] = int32_t(q[c00 * 3 + c]), corner[c][1] = int32_t(q[c10 * 3 + c]);
-            corner[c][2] = int32_t(q[c01 * 3 + c]), corner[c][3] = int32_t(q[c11 * 3 + c]);
-          }
+        for (uint32_t c = 0; c < 3; ++c) {
+          corner[c][0] = int32_t(q[c00 * 3 + c]), corner[c][1] = int32_t(q[c10 * 3 + c]);
+          corner[c][2] = int32_t(q[c01 * 3 + c]), corner[c][3] = int32_t(q[c11 * 3 + c]);
+        }
         for (uint32_t dy = 0; dy <= s; ++dy) {
           uint8_t* k = known.data() + size_t(y0 + dy) * side + x0;
           for (uint32_t dx = 0; dx <= s; ++dx) {
             if (k[dx]) continue;
-            if constexpr (fill) {
-              uint32_t* o = q.data() + (size_t(y0 + dy) * side + x0 + dx) * 3;
-              for (uint32_t c = 0; c < 3; ++c)
-                o[c] = uint32_t(planarSquareSample(corner[c][0], corner[c][1], corner[c][2], corner[c][3], s, dx, dy));
-            }
+            uint32_t* o = q.data() + (size_t(y0 + dy) * side + x0 + dx) * 3;
+            for (uint32_t c = 0; c < 3; ++c)
+              o[c] = uint32_t(planarSquareSample(corner[c][0], corner[c][1], corner[c][2], corner[c][3], s, dx, dy));
             k[dx] = 1;
           }
         }
       }
   }
-  // The rest in row order, each from its left, lower and lower-left neighbours, known by now
-  // (`rest`, if given: those samples, as an earlier traversal of the same squares found them).
-  if (rest) {
-    for (uint32_t i : *rest) code(i, 1);
-    return;
-  }
+  // The rest in row order, each from its left, lower and lower-left neighbours, known by now.
   for (uint32_t i = 1; i < side * side; ++i)
     if (!(known[i] & 1)) code(i, 1), known[i] = 1;
 }
 
-// The samples planarPasses codes last (in row order: those still unknown after the squares), as
-// its values-free traversal leaves `known`, without a branch per sample.
-void listRest(const std::vector<uint8_t>& known, std::vector<uint32_t>& rest) {
-  rest.resize(known.size());
-  size_t n = 0;
-  for (uint32_t i = 1; i < known.size(); ++i) {
-    rest[n] = i;
-    n += (known[i] & 1) ^ 1;
-  }
-  rest.resize(n);
-}
-
-// The prediction of channel c of sample i coded at `spacing` (planarPasses): Lorenzo on that
-// spacing's grid from the neighbours known, else the left one, else the one below, else the first
-// sample; at spacing 1 (every neighbour known by then) Lorenzo as predict() has it. In wrapping
-// unsigned arithmetic.
+// The prediction of channel c of sample i coded at `spacing` (planarPasses), from the neighbours
+// `known` then.
 inline uint32_t predictPlanar(const std::vector<uint32_t>& q, const std::vector<uint8_t>& known, uint32_t side, uint32_t i,
                               uint32_t spacing, uint32_t c) {
   const uint32_t x = i % side, y = i / side;
-  auto v = [&](uint32_t j) { return q[size_t(j) * 3 + c]; };
-  if (spacing == 1) {
-    if (x > 0 && y > 0) return v(i - 1) + v(i - side) - v(i - 1 - side);
-    return x > 0 ? v(i - 1) : v(i - side);
-  }
   const bool l = x >= spacing && (known[i - spacing] & 1), b = y >= spacing && (known[i - spacing * side] & 1);
   const bool lb = l && b && (known[i - spacing - spacing * side] & 1);
-  if (lb) return v(i - spacing) + v(i - spacing * side) - v(i - spacing - spacing * side);
-  if (l) return v(i - spacing);
-  if (b) return v(i - spacing * side);
-  return v(0);
+  return predictFrom(uint8_t(l | b << 1 | lb << 2), side, i, spacing, [&](uint32_t j) { return q[size_t(j) * 3 + c]; });
 }
 
 // ---- quantized integers (heights: 1 channel; positions: 3) ------------------------------------
@@ -310,7 +301,7 @@ std::vector<uint8_t> planarBody(const std::vector<int32_t>& q, uint32_t side, do
     for (uint32_t c = 0; c < 3; ++c)
       z.push_back(zigzag(int32_t(v[size_t(i) * 3 + c] - predictPlanar(v, known, side, i, spacing, c))));
   };
-  planarPasses<true>(side, chartBorderSides, v, known, squares, decide, code);
+  planarPasses(side, chartBorderSides, v, known, squares, decide, code);
   if (!any) return {};
   const size_t m = z.size() / 3;
   uint32_t all = 0;
@@ -337,54 +328,232 @@ std::vector<uint8_t> planarBody(const std::vector<int32_t>& q, uint32_t side, do
   return raw;
 }
 
+// Checks side^2 decoded values per channel (channel c at q + c n; at most `bound` from 0) of
+// samples [at, at + count) and stores them as interleaved floats: hi gathers the largest q + bound,
+// unsigned (a value below -bound wraps past 2 bound too), for the caller's one check.
+inline void storeFloats(const uint32_t* q, size_t n, uint32_t channels, size_t at, size_t count, double step,
+                        uint32_t bound, uint32_t& hi, float* out) {
+  float* o = out + at * channels;
+  uint32_t h = hi;
+  if (channels == 3) {  // (one loop for the three: a third fewer cycles)
+    const uint32_t *a0 = q + at, *a1 = a0 + n, *a2 = a1 + n;
+    for (size_t x = 0; x < count; ++x) {
+      h = std::max(h, a0[x] + bound), h = std::max(h, a1[x] + bound), h = std::max(h, a2[x] + bound);
+      o[3 * x] = float(double(int32_t(a0[x])) * step);
+      o[3 * x + 1] = float(double(int32_t(a1[x])) * step);
+      o[3 * x + 2] = float(double(int32_t(a2[x])) * step);
+    }
+  } else {
+    for (uint32_t ch = 0; ch < channels; ++ch) {
+      const uint32_t* a = q + size_t(ch) * n + at;
+      for (size_t x = 0; x < count; ++x) {
+        h = std::max(h, a[x] + bound);
+        o[x * channels + ch] = float(double(int32_t(a[x])) * step);
+      }
+    }
+  }
+  hi = h;
+}
+
+// c ? a : b without a branch, in a form the compiler vectorizes (a select it would not).
+inline uint32_t pick(bool c, uint32_t a, uint32_t b) {
+  const uint32_t m = 0u - uint32_t(c);
+  return (a & m) | (b & ~m);
+}
+
+// Places the samples of level l's squares of 2 intervals in q (3 channels, channel c at q + c n)
+// where cls[] is l: each lies halfway between two corners, rounded half up, as planarSquareSample
+// puts it: on a square's edge between the edge's ends, inside it between the corners (0, 0) and
+// (2, 2). Whole rows at a time, in loops without a branch per sample.
+void placeMidpoints(uint32_t* q, size_t n, const uint32_t* cls, uint32_t side, uint32_t l) {
+  auto mid = [](uint32_t a, uint32_t b) { return uint32_t(int32_t(a + b + 1) >> 1); };
+  thread_local std::vector<uint32_t> between;
+  between.resize(side);
+  uint32_t* t = between.data();
+  for (uint32_t y = 0; y < side; ++y) {
+    const uint32_t* lv = cls + size_t(y) * side;
+    if (std::find(lv, lv + side, l) == lv + side) continue;
+    for (uint32_t c = 0; c < 3; ++c) {
+      uint32_t* row = q + size_t(c) * n + size_t(y) * side;
+      if (y % 2 == 0) {  // a row of corners: between the two beside
+        for (uint32_t x = 1; x + 1 < side; ++x) t[x] = mid(row[x - 1], row[x + 1]);
+      } else {  // between two rows of corners: below and above on their columns, else diagonally
+        const uint32_t *below = row - side, *above = row + side;
+        t[0] = mid(below[0], above[0]);
+        t[side - 1] = mid(below[side - 1], above[side - 1]);
+        for (uint32_t x = 1; x + 1 < side; ++x) {
+          const uint32_t odd = 0u - (x & 1u);
+          t[x] = (mid(below[x - 1], above[x + 1]) & odd) | (mid(below[x], above[x]) & ~odd);
+        }
+      }
+      for (uint32_t x = 0; x < side; ++x) row[x] = pick(lv[x] == l, t[x], row[x]);
+    }
+  }
+}
+
 // Decodes a position block body with planar squares (raw: its whole body; head: where its chart
-// border byte is) into out.
+// border byte is) into out. The encoder's traversal (planarPasses) follows from the level of the
+// largest planar square whose closed footprint holds a sample (for a sample on the chart's border,
+// only as the square's corner): a sample on that level's grid is a corner, coded at that level and
+// known to the corners after it; any other is placed there; a sample in no planar square is coded
+// with the rest. So the decoder classes the samples first, painting runs of planar squares row by
+// row, then decodes the values, each channel on its own, in loops without a branch per sample.
 void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, double step, std::span<float> out) {
   if (squareLevels(side) == 0 || !std::has_single_bit(side - 1) || raw.size() <= head || raw[head] > 15)
     throw CodecError("corrupt position block (planar squares)");
   const uint8_t border = raw[head], planes = raw[1];
-  const size_t bitsAt = head + 1;
-  thread_local std::vector<uint32_t> q;
-  thread_local std::vector<uint8_t> known;
+  const uint32_t levels = squareLevels(side), last = side - 1;
+  const size_t n = size_t(side) * side, bitsAt = head + 1;
+  // A sample's class: its level, with kCorner for a corner coded at it; kRest in no planar square.
+  constexpr uint32_t kRest = 0xff, kCorner = 0x40, kLevel = 0x3f;
+  thread_local std::vector<uint32_t> cls, corner;  // (32-bit: selects by them vectorize)
   thread_local PlanarSquares squares;
-  q.assign(size_t(side) * side * 3, 0);
-  // First the squares alone (the decisions do not depend on the values): the bits' length and the
-  // number of coded samples.
-  size_t nbits = 0, m = 0;
-  auto bit = [&](size_t k) {
-    if (bitsAt + k / 8 >= raw.size()) throw CodecError("truncated position block (planar squares)");
-    return ((raw[bitsAt + k / 8] >> (k % 8)) & 1u) != 0;
+  thread_local std::vector<uint32_t> q, r, zeros;
+  size_t nbits = 0;
+  squares.clear();
+  for (uint32_t l = 0; l < levels; ++l)
+    settleLevel(squares, l, [&](uint32_t, uint32_t) {
+      if (bitsAt + nbits / 8 >= raw.size()) throw CodecError("truncated position block (planar squares)");
+      const bool planar = ((raw[bitsAt + nbits / 8] >> (nbits % 8)) & 1u) != 0;
+      ++nbits;
+      return planar;
+    });
+  // Calls f(first, end) for each run of planar squares [first, end) of row y of level l's squares.
+  auto eachRun = [&](uint32_t l, uint32_t y, auto&& f) {
+    const uint32_t m = 1u << l;
+    const uint8_t* sq = squares[l].data() + size_t(y) * m;
+    for (uint32_t x = 0; x < m;) {
+      if (sq[x] != 1) { ++x; continue; }
+      uint32_t e = x + 1;
+      while (e < m && sq[e] == 1) ++e;
+      f(x, e);
+      x = e;
+    }
   };
-  // (An empty `rest` keeps the traversal from its branchy scan; listRest reads `known` instead.)
-  thread_local std::vector<uint32_t> rest;
-  const std::vector<uint32_t> none;
-  planarPasses<false>(side, border, q, known, squares, [&](uint32_t, uint32_t, uint32_t) { return bit(nbits++); },
-                      [&](uint32_t, uint32_t) { ++m; }, &none);
-  listRest(known, rest);
-  m += rest.size();
+  // cls: the largest level whose squares' footprints hold the sample; corner: whose corners.
+  cls.assign(n, kRest);
+  corner.assign(n, kRest);
+  for (uint32_t l = 0; l < levels; ++l) {
+    const uint32_t s = last >> l;
+    for (uint32_t y = 0; y < (1u << l); ++y)
+      eachRun(l, y, [&](uint32_t a, uint32_t e) {
+        const size_t x0 = size_t(a) * s, x1 = size_t(e) * s;
+        for (uint32_t dy = 0; dy <= s; ++dy) {
+          uint32_t* row = cls.data() + size_t(y * s + dy) * side;
+          for (size_t x = x0; x <= x1; ++x) row[x] = std::min(row[x], l);
+        }
+        for (uint32_t dy = 0; dy <= s; dy += s) {
+          uint32_t* row = corner.data() + size_t(y * s + dy) * side;
+          for (size_t x = x0; x <= x1; x += s) row[x] = std::min(row[x], l);
+        }
+      });
+  }
+  for (uint32_t t = 0; t < side; ++t) {  // the chart's border: only as a corner
+    if (border & kChartBorderBottom) cls[t] = corner[t];
+    if (border & kChartBorderTop) cls[size_t(last) * side + t] = corner[size_t(last) * side + t];
+    if (border & kChartBorderLeft) cls[size_t(t) * side] = corner[size_t(t) * side];
+    if (border & kChartBorderRight) cls[size_t(t) * side + last] = corner[size_t(t) * side + last];
+  }
+  size_t corners = 0, rest = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t c = cls[i] | (corner[i] == cls[i] ? kCorner : 0);
+    cls[i] = c;
+    corners += (c & kCorner) && c != kRest;
+    rest += c == kRest;
+  }
+  // The first sample, in the header: known to every level, never coded or placed.
+  corners -= (cls[0] & kCorner) && cls[0] != kRest;
+  rest -= cls[0] == kRest;
+  cls[0] = kCorner;
+  const size_t m = corners + rest;
   const size_t body = bitsAt + (nbits + 7) / 8;
   if (raw.size() != body + size_t(planes) * 3 * m) throw CodecError("corrupt position block (size)");
-  std::fill(q.begin(), q.end(), 0u);
-  std::memcpy(q.data(), raw.data() + kIntHeaderBytes, 12);
-  size_t k = 0, j = 0;
-  auto residual = [&](uint32_t c) {
-    const uint8_t* p = raw.data() + body + size_t(c) * planes * m + j;
-    uint32_t z = 0;
-    for (uint32_t b = 0; b < planes; ++b) z |= uint32_t(p[b * m]) << (8 * b);
-    return (z >> 1) ^ (0u - (z & 1u));
-  };
-  planarPasses<true>(
-      side, border, q, known, squares, [&](uint32_t, uint32_t, uint32_t) { return bit(k++); },
-      [&](uint32_t i, uint32_t spacing) {
-        for (uint32_t c = 0; c < 3; ++c) q[size_t(i) * 3 + c] = residual(c) + predictPlanar(q, known, side, i, spacing, c);
-        ++j;
-      },
-      &rest);
-  for (size_t i = 0; i < q.size(); ++i) {
-    const int32_t v = int32_t(q[i]);
-    if (v < -kMaxSteps || v > kMaxSteps) throw CodecError("corrupt position block (value out of range)");
-    out[i] = float(double(v) * step);
+
+  // The residuals back, per channel (one more, so the rest's loop may read one past its last).
+  r.resize(3 * m + 1);
+  r[3 * m] = 0;
+  for (uint32_t c = 0; c < 3; ++c) {
+    const uint8_t* b0 = raw.data() + body + size_t(c) * planes * m;
+    uint32_t* rc = r.data() + size_t(c) * m;
+    for (size_t j = 0; j < m; ++j) rc[j] = b0[j];
+    for (uint32_t p = 1; p < planes; ++p)
+      for (size_t j = 0; j < m; ++j) rc[j] |= uint32_t(b0[size_t(p) * m + j]) << (8 * p);
+    for (size_t j = 0; j < m; ++j) rc[j] = (rc[j] >> 1) ^ (0u - (rc[j] & 1u));
   }
+  q.resize(3 * n);
+  for (uint32_t c = 0; c < 3; ++c) std::memcpy(q.data() + size_t(c) * n, raw.data() + kIntHeaderBytes + 4 * c, 4);
+  size_t j = 0;
+  for (uint32_t l = 0; l < levels; ++l) {
+    // The level's corners, in row order, each from its neighbours on the level's grid known by
+    // then: those of a level up to l (this level's corners before it, in row order).
+    const uint32_t s = last >> l;
+    const uint32_t here = l | kCorner;
+    for (uint32_t y = 0; y <= last; y += s)
+      for (uint32_t x = 0; x <= last; x += s) {
+        const uint32_t i = y * side + x;
+        if (i == 0 || cls[i] != here) continue;
+        const auto known = [&](uint32_t k) { return (cls[k] & kLevel) <= l; };
+        const bool left = x > 0 && known(i - s), below = y > 0 && known(i - s * side);
+        const uint8_t neighbours = uint8_t(left | below << 1 | (left && below && known(i - s - s * side)) << 2);
+        for (uint32_t c = 0; c < 3; ++c) {
+          uint32_t* qc = q.data() + size_t(c) * n;
+          qc[i] = r[size_t(c) * m + j] + predictFrom(neighbours, side, i, s, [&](uint32_t a) { return qc[a]; });
+        }
+        ++j;
+      }
+    // The samples the level's squares placed, as planarSquareSample puts them, in wrapping 32-bit
+    // arithmetic: the corners of a valid block lie within 2^23 steps, so every sum of the two
+    // triangles' weights (s in all) does within s 2^23 <= 2^31, and comes out exact. Squares of 2
+    // intervals, the most frequent, row by row.
+    if (s == 2) {
+      placeMidpoints(q.data(), n, cls.data(), side, l);
+      continue;
+    }
+    const uint32_t shift = uint32_t(std::countr_zero(s)), half = s / 2;
+    for (uint32_t sy = 0; sy < (1u << l); ++sy)
+      eachRun(l, sy, [&](uint32_t a, uint32_t e) {
+        for (uint32_t sx = a; sx < e; ++sx) {
+          const size_t c00 = size_t(sy) * s * side + sx * s, up = size_t(s) * side;
+          for (uint32_t c = 0; c < 3; ++c) {
+            uint32_t* qc = q.data() + size_t(c) * n + c00;
+            const uint32_t q00 = qc[0], q10 = qc[s], q01 = qc[up], q11 = qc[up + s];
+            for (uint32_t dy = 0; dy <= s; ++dy) {
+              const uint32_t* lv = cls.data() + c00 + size_t(dy) * side;
+              uint32_t* row = qc + size_t(dy) * side;
+              uint32_t v = s * q00 + dy * (q01 - q00) + half;  // dx < dy: up the left edge, then along
+              for (uint32_t dx = 0; dx < dy; ++dx, v += q11 - q01) row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
+              v = s * q00 + dy * (q11 - q10) + dy * (q10 - q00) + half;  // dx >= dy: along, then up
+              for (uint32_t dx = dy; dx <= s; ++dx, v += q10 - q00) row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
+            }
+          }
+        }
+      });
+  }
+  if (j != corners) throw CodecError("corrupt position block (planar squares)");
+  // The rest, row by row: along a row, d = q - (the sample below; 0 on the first row) is the
+  // running sum of the residuals (Lorenzo), restarted at each sample known before.
+  zeros.assign(side, 0u);
+  const uint32_t *r0 = r.data() + j, *r1 = r0 + m, *r2 = r1 + m;
+  for (uint32_t y = 0; y < side; ++y) {
+    const size_t at = size_t(y) * side;
+    const uint32_t* lv = cls.data() + at;
+    uint32_t *a0 = q.data() + at, *a1 = a0 + n, *a2 = a1 + n;
+    const uint32_t* b0 = y > 0 ? a0 - side : zeros.data();
+    const uint32_t* b1 = y > 0 ? a1 - side : zeros.data();
+    const uint32_t* b2 = y > 0 ? a2 - side : zeros.data();
+    uint32_t d0 = 0, d1 = 0, d2 = 0;
+    for (uint32_t x = 0; x < side; ++x) {
+      const bool coded = lv[x] == kRest;
+      d0 = coded ? d0 + *r0 : a0[x] - b0[x];
+      d1 = coded ? d1 + *r1 : a1[x] - b1[x];
+      d2 = coded ? d2 + *r2 : a2[x] - b2[x];
+      r0 += coded, r1 += coded, r2 += coded;
+      a0[x] = b0[x] + d0, a1[x] = b1[x] + d1, a2[x] = b2[x] + d2;
+    }
+  }
+  uint32_t hi = 0;
+  storeFloats(q.data(), n, 3, 0, n, step, uint32_t(kMaxSteps), hi, out.data());
+  if (hi > uint32_t(2 * kMaxSteps)) throw CodecError("corrupt position block (value out of range)");
 }
 
 // Decodes into out (channels * side^2 floats); returns the quantization.
@@ -451,13 +620,8 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
         for (uint32_t x = 0; x < side; ++x) sum += rr[x], row[x] = below[x] + sum;
       else
         for (uint32_t x = 0; x < side; ++x) sum += rr[x], row[x] = sum;
-      for (uint32_t x = 0; x < side; ++x) hi = std::max(hi, row[x] + shift);
     }
-    float* o = out.data() + at * channels;
-    for (uint32_t ch = 0; ch < channels; ++ch) {
-      const int32_t* a = reinterpret_cast<const int32_t*>(q.data()) + size_t(ch) * n + at;
-      for (uint32_t x = 0; x < side; ++x) o[x * channels + ch] = float(double(a[x]) * step);
-    }
+    storeFloats(q.data(), n, channels, at, side, step, shift, hi, out.data());
   }
   // (A corrupt block has written values out of range before this throws; callers discard them.)
   if (hi > span) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");

@@ -266,84 +266,90 @@ TEST(PositionCodec, BlocksWithoutTheFirstSampleInTheHeaderStillDecode) {
 }
 
 // Blocks whose squares a writer placed on their corners' triangles, largest first, nested at
-// every size and against every set of chart-border edges (whose samples stay put): each decodes to
-// exactly its samples, codes in fewer bytes than with every sample coded, and a block with no
-// planar square codes exactly as without them.
+// every size and against every set of chart-border edges (whose samples stay put), with
+// coordinates near 0 and across the whole lattice: each decodes to exactly its samples, codes in
+// fewer bytes than with every sample coded, and a block with no planar square codes exactly as
+// without them.
 TEST(PositionCodec, PlanarSquaresRoundTripExactlyAndCodeFewerBytes) {
   const double step = 1.0 / 1024;
   std::mt19937 rng(5);
-  std::uniform_int_distribution<int> value(-1000, 1000);
   size_t planarBlocks = 0;
-  for (const uint32_t side : {3u, 5u, 17u, 65u})
-    for (const uint8_t border : {uint8_t(0), uint8_t(15), uint8_t(kChartBorderBottom | kChartBorderTop),
-                                 uint8_t(kChartBorderLeft | kChartBorderRight)})
-      for (const double share : {0.0, 0.3, 0.7}) {
-        SCOPED_TRACE(::testing::Message() << "side " << side << ", border " << int(border) << ", share " << share);
-        const uint32_t M = side - 1;
-        std::vector<int64_t> q(size_t(side) * side * 3);
-        for (int64_t& v : q) v = value(rng);
-        std::vector<uint8_t> placed(size_t(side) * side, 0);
-        std::bernoulli_distribution take(share);
-        std::vector<uint8_t> parent;  // the previous size's squares: 1 planar or inside one
-        for (uint32_t s = M; s >= 2; s /= 2) {
-          const uint32_t n = M / s;
-          std::vector<uint8_t> here(size_t(n) * n, 0);
-          for (uint32_t sy = 0; sy < n; ++sy)
-            for (uint32_t sx = 0; sx < n; ++sx) {
-              if (!parent.empty() && parent[size_t(sy / 2) * (n / 2) + sx / 2]) {
-                here[size_t(sy) * n + sx] = 1;
-                continue;
-              }
-              if (!take(rng)) continue;
-              here[size_t(sy) * n + sx] = 1;
-              const uint32_t x0 = sx * s, y0 = sy * s;
-              for (uint32_t dy = 0; dy <= s; ++dy)
-                for (uint32_t dx = 0; dx <= s; ++dx) {
-                  const uint32_t x = x0 + dx, y = y0 + dy;
-                  const size_t i = size_t(y) * side + x;
-                  const bool onBorder = ((border & kChartBorderBottom) && y == 0) || ((border & kChartBorderRight) && x == M) ||
-                                        ((border & kChartBorderTop) && y == M) || ((border & kChartBorderLeft) && x == 0);
-                  if (placed[i] || (dx % s == 0 && dy % s == 0) || onBorder) continue;
-                  for (int c = 0; c < 3; ++c) {
-                    auto at = [&](uint32_t a, uint32_t b) { return q[(size_t(b) * side + a) * 3 + c]; };
-                    q[i * 3 + c] = planarSquareSample(at(x0, y0), at(x0 + s, y0), at(x0, y0 + s), at(x0 + s, y0 + s), s, dx, dy);
-                  }
-                  placed[i] = 1;
+  for (const int range : {1000, 1 << 23})
+    for (const uint32_t side : {3u, 5u, 9u, 17u, 33u, 65u})
+      for (const uint8_t border : {uint8_t(0), uint8_t(15), uint8_t(kChartBorderBottom | kChartBorderTop),
+                                   uint8_t(kChartBorderLeft | kChartBorderRight)})
+        for (const double share : {0.0, 0.3, 0.7}) {
+          SCOPED_TRACE(::testing::Message()
+                       << "side " << side << ", border " << int(border) << ", share " << share << ", range " << range);
+          std::uniform_int_distribution<int> value(-range, range);
+          const uint32_t M = side - 1;
+          std::vector<int64_t> q(size_t(side) * side * 3);
+          for (int64_t& v : q) v = value(rng);
+          std::vector<uint8_t> placed(size_t(side) * side, 0);
+          std::bernoulli_distribution take(share);
+          std::vector<uint8_t> parent;  // the previous size's squares: 1 planar or inside one
+          for (uint32_t s = M; s >= 2; s /= 2) {
+            const uint32_t n = M / s;
+            std::vector<uint8_t> here(size_t(n) * n, 0);
+            for (uint32_t sy = 0; sy < n; ++sy)
+              for (uint32_t sx = 0; sx < n; ++sx) {
+                if (!parent.empty() && parent[size_t(sy / 2) * (n / 2) + sx / 2]) {
+                  here[size_t(sy) * n + sx] = 1;
+                  continue;
                 }
-            }
-          parent = here;
-        }
-        std::vector<float> in(q.size());
-        for (size_t i = 0; i < q.size(); ++i) in[i] = float(double(q[i]) * step);
-        const std::vector<uint8_t> all = encodePositions(in, side, step), planar = encodePositions(in, side, step, border);
-        std::vector<float> back(in.size(), -1.0f);
-        decodePositions(planar, side, back);
-        ASSERT_EQ(back, in);
-        if (share == 0.0) {
-          EXPECT_EQ(planar, all);  // no planar square: coded as before
-        } else if (std::count(placed.begin(), placed.end(), 1) > 4) {
-          EXPECT_LT(planar.size(), all.size());
-          ++planarBlocks;
-        }
-        // Damage is detected, never decoded to other samples.
-        for (size_t at = 4; at < planar.size(); at += 7) {
-          std::vector<uint8_t> bad = planar;
-          bad[at] ^= 0x24;
-          try {
-            decodePositions(bad, side, back);
-            EXPECT_EQ(back, in) << "byte " << at;
-          } catch (const CodecError&) {
+                if (!take(rng)) continue;
+                here[size_t(sy) * n + sx] = 1;
+                const uint32_t x0 = sx * s, y0 = sy * s;
+                for (uint32_t dy = 0; dy <= s; ++dy)
+                  for (uint32_t dx = 0; dx <= s; ++dx) {
+                    const uint32_t x = x0 + dx, y = y0 + dy;
+                    const size_t i = size_t(y) * side + x;
+                    const bool onBorder =
+                        ((border & kChartBorderBottom) && y == 0) || ((border & kChartBorderRight) && x == M) ||
+                        ((border & kChartBorderTop) && y == M) || ((border & kChartBorderLeft) && x == 0);
+                    if (placed[i] || (dx % s == 0 && dy % s == 0) || onBorder) continue;
+                    for (int c = 0; c < 3; ++c) {
+                      auto at = [&](uint32_t a, uint32_t b) { return q[(size_t(b) * side + a) * 3 + c]; };
+                      q[i * 3 + c] =
+                          planarSquareSample(at(x0, y0), at(x0 + s, y0), at(x0, y0 + s), at(x0 + s, y0 + s), s, dx, dy);
+                    }
+                    placed[i] = 1;
+                  }
+              }
+            parent = here;
           }
+          std::vector<float> in(q.size());
+          for (size_t i = 0; i < q.size(); ++i) in[i] = float(double(q[i]) * step);
+          const std::vector<uint8_t> all = encodePositions(in, side, step),
+                                     planar = encodePositions(in, side, step, border);
+          std::vector<float> back(in.size(), -1.0f);
+          decodePositions(planar, side, back);
+          ASSERT_EQ(back, in);
+          if (share == 0.0) {
+            EXPECT_EQ(planar, all);  // no planar square: coded as before
+          } else if (std::count(placed.begin(), placed.end(), 1) > 4) {
+            EXPECT_LT(planar.size(), all.size());
+            ++planarBlocks;
+          }
+          // Damage is detected, never decoded to other samples.
+          for (size_t at = 4; at < planar.size(); at += 7) {
+            std::vector<uint8_t> bad = planar;
+            bad[at] ^= 0x24;
+            try {
+              decodePositions(bad, side, back);
+              EXPECT_EQ(back, in) << "byte " << at;
+            } catch (const CodecError&) {
+            }
+          }
+          EXPECT_THROW(decodePositions(std::span(planar).first(planar.size() - 3), side, back), CodecError);
         }
-        EXPECT_THROW(decodePositions(std::span(planar).first(planar.size() - 3), side, back), CodecError);
-      }
   EXPECT_GT(planarBlocks, 10u);
   // Where the squares put a sample: on the two triangles, rounded half up, and the half-size square
   // of a subsampling puts it at the same place.
   EXPECT_EQ(planarSquareSample(0, 8, 0, 8, 8, 3, 1), 3);
   EXPECT_EQ(planarSquareSample(0, 0, 8, 8, 8, 1, 3), 3);
-  EXPECT_EQ(planarSquareSample(0, 3, 0, 3, 2, 1, 0), 2);   // 1.5 rounds up
-  EXPECT_EQ(planarSquareSample(0, -3, 0, -3, 2, 1, 0), -1); // -1.5 rounds up
+  EXPECT_EQ(planarSquareSample(0, 3, 0, 3, 2, 1, 0), 2);     // 1.5 rounds up
+  EXPECT_EQ(planarSquareSample(0, -3, 0, -3, 2, 1, 0), -1);  // -1.5 rounds up
   for (uint32_t d = 0; d <= 4; ++d)
     EXPECT_EQ(planarSquareSample(5, -17, 40, 9, 8, 2 * d, 2 * (d / 2)), planarSquareSample(5, -17, 40, 9, 4, d, d / 2));
 }
