@@ -355,10 +355,43 @@ inline void storeFloats(const uint32_t* q, size_t n, uint32_t channels, size_t a
   hi = h;
 }
 
+
 // c ? a : b without a branch, in a form the compiler vectorizes (a select it would not).
 inline uint32_t pick(bool c, uint32_t a, uint32_t b) {
   const uint32_t m = 0u - uint32_t(c);
   return (a & m) | (b & ~m);
+}
+
+// Per planar square of s intervals with corner c00, s a constant S where one is given (the
+// compiler then unrolls the loops of the small squares, the most frequent): paintSquare marks its
+// footprint and its corners with level l where they hold a larger level (cls, corner);
+// placeSquare places its samples where cls[] is l in q (3 channels, channel c at q + c n), as
+// planarSquareSample puts them, in wrapping 32-bit arithmetic: the corners of a valid block lie
+// within 2^23 steps, so every sum of the two triangles' weights (s in all) does within
+// s 2^23 <= 2^31, and comes out exact.
+template <uint32_t S>
+inline void paintSquare(uint32_t* cls, uint32_t* corner, uint32_t side, size_t c00, uint32_t l, uint32_t sRun = S) {
+  const uint32_t s = S ? S : sRun;
+  for (uint32_t dy = 0; dy <= s; ++dy)
+    for (uint32_t dx = 0; dx <= s; ++dx) cls[c00 + size_t(dy) * side + dx] = std::min(cls[c00 + size_t(dy) * side + dx], l);
+  for (const size_t c : {c00, c00 + s, c00 + size_t(s) * side, c00 + size_t(s) * side + s}) corner[c] = std::min(corner[c], l);
+}
+template <uint32_t S>
+inline void placeSquare(uint32_t* q, size_t n, const uint32_t* cls, uint32_t side, size_t c00, uint32_t l, uint32_t sRun = S) {
+  const uint32_t s = S ? S : sRun, shift = uint32_t(std::countr_zero(s)), half = s / 2;
+  const size_t up = size_t(s) * side;
+  for (uint32_t c = 0; c < 3; ++c) {
+    uint32_t* qc = q + size_t(c) * n + c00;
+    const uint32_t q00 = qc[0], q10 = qc[s], q01 = qc[up], q11 = qc[up + s];
+    for (uint32_t dy = 0; dy <= s; ++dy) {
+      const uint32_t* lv = cls + c00 + size_t(dy) * side;
+      uint32_t* row = qc + size_t(dy) * side;
+      uint32_t v = s * q00 + dy * (q01 - q00) + half;  // dx < dy: up the left edge, then along
+      for (uint32_t dx = 0; dx < dy; ++dx, v += q11 - q01) row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
+      v = s * q00 + dy * (q11 - q00) + half;  // dx >= dy: along the diagonal, then along
+      for (uint32_t dx = dy; dx <= s; ++dx, v += q10 - q00) row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
+    }
+  }
 }
 
 // Places the samples of level l's squares of 2 intervals in q (3 channels, channel c at q + c n)
@@ -418,35 +451,24 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
       ++nbits;
       return planar;
     });
-  // Calls f(first, end) for each run of planar squares [first, end) of row y of level l's squares.
-  auto eachRun = [&](uint32_t l, uint32_t y, auto&& f) {
-    const uint32_t m = 1u << l;
-    const uint8_t* sq = squares[l].data() + size_t(y) * m;
-    for (uint32_t x = 0; x < m;) {
-      if (sq[x] != 1) { ++x; continue; }
-      uint32_t e = x + 1;
-      while (e < m && sq[e] == 1) ++e;
-      f(x, e);
-      x = e;
-    }
+  // Calls f(c00) for each planar square of level l, c00 its corner (0, 0).
+  auto eachSquare = [&](uint32_t l, auto&& f) {
+    const uint32_t m = 1u << l, s = last >> l;
+    const uint8_t* sq = squares[l].data();
+    for (uint32_t y = 0; y < m; ++y)
+      for (uint32_t x = 0; x < m; ++x)
+        if (sq[size_t(y) * m + x] == 1) f(size_t(y) * s * side + size_t(x) * s);
   };
   // cls: the largest level whose squares' footprints hold the sample; corner: whose corners.
   cls.assign(n, kRest);
   corner.assign(n, kRest);
   for (uint32_t l = 0; l < levels; ++l) {
     const uint32_t s = last >> l;
-    for (uint32_t y = 0; y < (1u << l); ++y)
-      eachRun(l, y, [&](uint32_t a, uint32_t e) {
-        const size_t x0 = size_t(a) * s, x1 = size_t(e) * s;
-        for (uint32_t dy = 0; dy <= s; ++dy) {
-          uint32_t* row = cls.data() + size_t(y * s + dy) * side;
-          for (size_t x = x0; x <= x1; ++x) row[x] = std::min(row[x], l);
-        }
-        for (uint32_t dy = 0; dy <= s; dy += s) {
-          uint32_t* row = corner.data() + size_t(y * s + dy) * side;
-          for (size_t x = x0; x <= x1; x += s) row[x] = std::min(row[x], l);
-        }
-      });
+    eachSquare(l, [&](size_t c00) {
+      if (s == 2) paintSquare<2>(cls.data(), corner.data(), side, c00, l);
+      else if (s == 4) paintSquare<4>(cls.data(), corner.data(), side, c00, l);
+      else paintSquare<0>(cls.data(), corner.data(), side, c00, l, s);
+    });
   }
   for (uint32_t t = 0; t < side; ++t) {  // the chart's border: only as a corner
     if (border & kChartBorderBottom) cls[t] = corner[t];
@@ -501,33 +523,16 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
         }
         ++j;
       }
-    // The samples the level's squares placed, as planarSquareSample puts them, in wrapping 32-bit
-    // arithmetic: the corners of a valid block lie within 2^23 steps, so every sum of the two
-    // triangles' weights (s in all) does within s 2^23 <= 2^31, and comes out exact. Squares of 2
-    // intervals, the most frequent, row by row.
+    // The samples the level's squares placed; squares of 2 intervals, the most frequent, by rows.
     if (s == 2) {
       placeMidpoints(q.data(), n, cls.data(), side, l);
       continue;
     }
-    const uint32_t shift = uint32_t(std::countr_zero(s)), half = s / 2;
-    for (uint32_t sy = 0; sy < (1u << l); ++sy)
-      eachRun(l, sy, [&](uint32_t a, uint32_t e) {
-        for (uint32_t sx = a; sx < e; ++sx) {
-          const size_t c00 = size_t(sy) * s * side + sx * s, up = size_t(s) * side;
-          for (uint32_t c = 0; c < 3; ++c) {
-            uint32_t* qc = q.data() + size_t(c) * n + c00;
-            const uint32_t q00 = qc[0], q10 = qc[s], q01 = qc[up], q11 = qc[up + s];
-            for (uint32_t dy = 0; dy <= s; ++dy) {
-              const uint32_t* lv = cls.data() + c00 + size_t(dy) * side;
-              uint32_t* row = qc + size_t(dy) * side;
-              uint32_t v = s * q00 + dy * (q01 - q00) + half;  // dx < dy: up the left edge, then along
-              for (uint32_t dx = 0; dx < dy; ++dx, v += q11 - q01) row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
-              v = s * q00 + dy * (q11 - q10) + dy * (q10 - q00) + half;  // dx >= dy: along, then up
-              for (uint32_t dx = dy; dx <= s; ++dx, v += q10 - q00) row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
-            }
-          }
-        }
-      });
+    eachSquare(l, [&](size_t c00) {
+      if (s == 4) placeSquare<4>(q.data(), n, cls.data(), side, c00, l);
+      else if (s == 8) placeSquare<8>(q.data(), n, cls.data(), side, c00, l);
+      else placeSquare<0>(q.data(), n, cls.data(), side, c00, l, s);
+    });
   }
   if (j != corners) throw CodecError("corrupt position block (planar squares)");
   // The rest, row by row: along a row, d = q - (the sample below; 0 on the first row) is the
