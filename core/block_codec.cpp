@@ -372,7 +372,9 @@ inline uint32_t pick(bool c, uint32_t a, uint32_t b) {
 template <uint32_t S>
 inline void paintSquare(uint32_t* cls, uint32_t* corner, uint32_t side, size_t c00, uint32_t l, uint32_t sRun = S) {
   const uint32_t s = S ? S : sRun;
+#pragma GCC unroll 9
   for (uint32_t dy = 0; dy <= s; ++dy)
+#pragma GCC unroll 9
     for (uint32_t dx = 0; dx <= s; ++dx) cls[c00 + size_t(dy) * side + dx] = std::min(cls[c00 + size_t(dy) * side + dx], l);
   for (const size_t c : {c00, c00 + s, c00 + size_t(s) * side, c00 + size_t(s) * side + s}) corner[c] = std::min(corner[c], l);
 }
@@ -383,12 +385,15 @@ inline void placeSquare(uint32_t* q, size_t n, const uint32_t* cls, uint32_t sid
   for (uint32_t c = 0; c < 3; ++c) {
     uint32_t* qc = q + size_t(c) * n + c00;
     const uint32_t q00 = qc[0], q10 = qc[s], q01 = qc[up], q11 = qc[up + s];
+#pragma GCC unroll 9
     for (uint32_t dy = 0; dy <= s; ++dy) {
       const uint32_t* lv = cls + c00 + size_t(dy) * side;
       uint32_t* row = qc + size_t(dy) * side;
       uint32_t v = s * q00 + dy * (q01 - q00) + half;  // dx < dy: up the left edge, then along
+#pragma GCC unroll 9
       for (uint32_t dx = 0; dx < dy; ++dx, v += q11 - q01) row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
       v = s * q00 + dy * (q11 - q00) + half;  // dx >= dy: along the diagonal, then along
+#pragma GCC unroll 9
       for (uint32_t dx = dy; dx <= s; ++dx, v += q10 - q00) row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
     }
   }
