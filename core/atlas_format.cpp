@@ -221,7 +221,7 @@ std::array<float, 3> unpackNormal(const PackedNormal& n) {
 }
 
 void geometryImageNormals(const float* xyz, uint32_t side, PackedNormal* out) {
-  const size_t row = 3 * size_t(side);
+  const size_t row = 3 * size_t(side), n = size_t(side) * side;
   // The normal of the differences a (along u) and b (along v), packed; false where it vanishes.
   // note: single precision and a truncating quantizer, as heightFieldNormals: this runs on the
   // loader thread for every page of such an atlas.
@@ -234,30 +234,59 @@ void geometryImageNormals(const float* xyz, uint32_t side, PackedNormal* out) {
     o[3] = 255;
     return true;
   };
+  // Samples 2 or more from the border first, channel by channel, in a vector loop per row (the
+  // arithmetic of pack, the clamp in integers after the truncation, which gives the same bytes:
+  // c s lies within 127.5 of 0): the differences over 2 and 4 intervals summed. Where the cross
+  // product vanishes (or is not finite) the row gets 0, which no packed normal is (its fourth
+  // byte is 255), and the samples left go on below.
+  static_assert(std::endian::native == std::endian::little, "a packed normal's bytes as one 32-bit word");
+  thread_local std::vector<float> channels;
+  thread_local std::vector<uint32_t> packedRow;
+  channels.resize(3 * n);
+  packedRow.assign(side, 0u);
+  float *X = channels.data(), *Y = X + n, *Z = Y + n;
+  for (size_t i = 0; i < n; ++i) X[i] = xyz[3 * i], Y[i] = xyz[3 * i + 1], Z[i] = xyz[3 * i + 2];
+  auto placed = [&](uint32_t u, uint32_t v) {
+    return u >= 2 && v >= 2 && u + 2 < side && v + 2 < side && out[size_t(v) * side + u][3] == 255;
+  };
+  for (uint32_t v = 2; v + 2 < side; ++v) {
+    const size_t at = size_t(v) * side, s1 = side, s2 = 2 * size_t(side);
+    uint32_t* o = packedRow.data();
+    for (uint32_t u = 2; u + 2 < side; ++u) {
+      const size_t i = at + u;
+      const float ax = X[i + 1] - X[i - 1] + X[i + 2] - X[i - 2], bx = X[i + s1] - X[i - s1] + X[i + s2] - X[i - s2];
+      const float ay = Y[i + 1] - Y[i - 1] + Y[i + 2] - Y[i - 2], by = Y[i + s1] - Y[i - s1] + Y[i + s2] - Y[i - s2];
+      const float az = Z[i + 1] - Z[i - 1] + Z[i + 2] - Z[i - 2], bz = Z[i + s1] - Z[i - s1] + Z[i + s2] - Z[i - s2];
+      const float cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
+      const uint32_t l2 = std::bit_cast<uint32_t>(cx * cx + cy * cy + cz * cz);
+      const uint32_t good = 0u - uint32_t(l2 - 1u < 0x7f7fffffu);  // > 0 and finite: all ones
+      const float s = 127.5f / std::sqrt(std::bit_cast<float>((l2 & good) | (0x3f800000u & ~good)));  // else 1
+      auto q = [&](float c) {
+        const int32_t t = int32_t(std::bit_cast<float>(std::bit_cast<uint32_t>(c) & good) * s + 127.5f + 0.5f);
+        return uint32_t(std::clamp(t, 0, 255));
+      };
+      o[u] = (q(cx) | q(cy) << 8 | q(cz) << 16 | 0xff000000u) & good;  // a PackedNormal's bytes, in order
+    }
+    if (side > 4) std::memcpy(out + at + 2, o + 2, (size_t(side) - 4) * sizeof(uint32_t));
+  }
   for (uint32_t v = 1; v + 1 < side; ++v) {
     const float* p = xyz + v * row;
     for (uint32_t u = 1; u + 1 < side; ++u) {
+      if (placed(u, v)) continue;
       const float* q = p + 3 * size_t(u);
       const float *l = q - 3, *r = q + 3, *d = q - row, *t = q + row;
       float a[3], b[3];
       PackedNormal& o = out[size_t(v) * side + u];
-      // Differences over 2 and 4 intervals summed, where the block holds them: smoother than over
-      // 2 alone where the input's triangles span a few samples.
-      if (u >= 2 && v >= 2 && u + 2 < side && v + 2 < side) {
-        const float *l2 = q - 6, *r2 = q + 6, *d2 = q - 2 * row, *t2 = q + 2 * row;
-        for (int k = 0; k < 3; ++k) a[k] = r[k] - l[k] + r2[k] - l2[k], b[k] = t[k] - d[k] + t2[k] - d2[k];
-        if (pack(a, b, o)) continue;
-      }
       for (int k = 0; k < 3; ++k) a[k] = r[k] - l[k], b[k] = t[k] - d[k];
       if (pack(a, b, o)) continue;
       // One-sided differences where the central ones vanish.
       const float* pairs[4][4] = {{r, q, t, q}, {q, l, t, q}, {q, l, q, d}, {r, q, q, d}};
-      bool done = false;
+      bool found = false;
       for (const auto& pr : pairs) {
         for (int k = 0; k < 3; ++k) a[k] = pr[0][k] - pr[1][k], b[k] = pr[2][k] - pr[3][k];
-        if ((done = pack(a, b, o))) break;
+        if ((found = pack(a, b, o))) break;
       }
-      if (!done) o = {128, 128, 255, 255};  // (0, 0, 1), as packNormal packs it
+      if (!found) o = {128, 128, 255, 255};  // (0, 0, 1), as packNormal packs it
     }
   }
 }
