@@ -1,6 +1,7 @@
 // Tests for the chart file format (block layout, round trip, corrupt files) and atomic writes.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -265,6 +266,63 @@ TEST(FormatChart, GeometryImageNormalsFollowTheSurface) {
       const double c = d[0] * xyz[3 * i] + d[1] * xyz[3 * i + 1] + d[2] * xyz[3 * i + 2];
       ASSERT_GT(c, std::cos(1.0 * 3.14159265358979 / 180.0) * 0.99) << u << "," << v;
     }
+}
+
+// Derived normals as their definition has them, sample by sample (the first difference pair whose
+// cross product is not 0 and finite, packed with a truncating quantizer), on images made to hit
+// every case: random, flat, collapsed to a few points, huge, and holding NaNs and infinities.
+TEST(FormatChart, GeometryImageNormalsMatchTheirDefinitionBitForBit) {
+  auto pack = [](const float* a, const float* b, PackedNormal& o) {
+    const float c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+    const float l2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+    if (!(l2 > 0.f) || !std::isfinite(l2)) return false;
+    for (int k = 0; k < 3; ++k) o[k] = uint8_t(std::clamp(c[k] * (127.5f / std::sqrt(l2)) + 127.5f, 0.f, 255.f) + 0.5f);
+    o[3] = 255;
+    return true;
+  };
+  std::mt19937 rng(3);
+  size_t fallbacks = 0;
+  for (const uint32_t side : {3u, 5u, 6u, 17u, 65u})
+    for (int kind = 0; kind < 5; ++kind) {
+      std::vector<float> xyz(3 * size_t(side) * side);
+      std::uniform_real_distribution<float> unit(-1.f, 1.f);
+      std::uniform_int_distribution<int> few(-1, 1);
+      for (uint32_t i = 0; i < side * side; ++i) {
+        float* p = xyz.data() + 3 * size_t(i);
+        const float u = float(i % side), v = float(i / side);
+        if (kind == 0) p[0] = unit(rng), p[1] = unit(rng), p[2] = unit(rng);
+        if (kind == 1) p[0] = u, p[1] = v, p[2] = 0.f;
+        if (kind == 2) p[0] = float(few(rng)), p[1] = float(few(rng)), p[2] = 0.f;
+        if (kind == 3) p[0] = u * 1e19f, p[1] = v * 1e19f, p[2] = unit(rng) * 1e19f;
+        if (kind == 4) p[0] = unit(rng) > 0.6f ? NAN : u, p[1] = unit(rng) > 0.8f ? INFINITY : v, p[2] = 0.f;
+      }
+      std::vector<PackedNormal> n(size_t(side) * side, PackedNormal{9, 9, 9, 9});
+      geometryImageNormals(xyz.data(), side, n.data());
+      const size_t row = 3 * size_t(side);
+      for (uint32_t v = 1; v + 1 < side; ++v)
+        for (uint32_t u = 1; u + 1 < side; ++u) {
+          const float* q = xyz.data() + v * row + 3 * size_t(u);
+          const float *l = q - 3, *r = q + 3, *d = q - row, *t = q + row;
+          float a[3], b[3];
+          PackedNormal expected{128, 128, 255, 255};  // (0, 0, 1) where every pair vanishes
+          bool found = false;
+          if (u >= 2 && v >= 2 && u + 2 < side && v + 2 < side) {
+            for (int k = 0; k < 3; ++k)
+              a[k] = r[k] - l[k] + q[6 + k] - q[k - 6], b[k] = t[k] - d[k] + q[2 * row + k] - q[k - 2 * row];
+            found = pack(a, b, expected);
+          }
+          const float* pairs[5][4] = {{r, l, t, d}, {r, q, t, q}, {q, l, t, q}, {q, l, q, d}, {r, q, q, d}};
+          for (const auto& pr : pairs) {
+            if (found) break;
+            for (int k = 0; k < 3; ++k) a[k] = pr[0][k] - pr[1][k], b[k] = pr[2][k] - pr[3][k];
+            found = pack(a, b, expected);
+            ++fallbacks;
+          }
+          ASSERT_EQ(n[size_t(v) * side + u], expected) << "side " << side << ", kind " << kind << ", at " << u << "," << v;
+        }
+      EXPECT_EQ(n[0], (PackedNormal{9, 9, 9, 9}));  // the border is left alone
+    }
+  EXPECT_GT(fallbacks, 1000u);
 }
 
 // A geometry chart on a sphere, compressed with its normals stored on block borders only: the
