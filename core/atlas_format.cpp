@@ -3,6 +3,7 @@
 // Texture Atlas", I3D 2007, section 6 (paging charts in blocks of the maximum node resolution).
 #include "core/atlas_format.h"
 #include "core/block_codec.h"
+#include "core/vector_clones.h"
 
 #include <algorithm>
 #include <atomic>
@@ -220,6 +221,7 @@ std::array<float, 3> unpackNormal(const PackedNormal& n) {
   return {n[0] / 127.5f - 1.f, n[1] / 127.5f - 1.f, n[2] / 127.5f - 1.f};
 }
 
+GIMLOD_VECTOR_CLONES
 void geometryImageNormals(const float* xyz, uint32_t side, PackedNormal* out) {
   const size_t row = 3 * size_t(side), n = size_t(side) * side;
   // The normal of the differences a (along u) and b (along v), packed; false where it vanishes.

@@ -1,4 +1,5 @@
 #include "core/block_codec.h"
+#include "core/vector_clones.h"
 
 #include <algorithm>
 #include <bit>
@@ -567,6 +568,7 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
 }
 
 // Decodes into out (channels * side^2 floats); returns the quantization.
+GIMLOD_VECTOR_CLONES
 HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic)[4], const char* what,
                               uint32_t side, uint8_t channels, std::span<float> out) {
   const size_t n = size_t(side) * side;
