@@ -236,16 +236,17 @@ void geometryImageNormals(const float* xyz, uint32_t side, PackedNormal* out) {
     o[3] = 255;
     return true;
   };
-  // Samples 2 or more from the border first, channel by channel, in a vector loop per row (the
-  // arithmetic of pack, the clamp in integers after the truncation, which gives the same bytes:
-  // c s lies within 127.5 of 0): the differences over 2 and 4 intervals summed. Where the cross
-  // product vanishes (or is not finite) the row gets 0, which no packed normal is (its fourth
-  // byte is 255), and the samples left go on below.
+  // Samples 2 or more from the border first: the differences over 2 and 4 intervals summed,
+  // smoother than over 2 alone where the input's triangles span a few samples. Channel by channel,
+  // in a vector loop per row: the arithmetic of pack, the clamp in integers after the truncation
+  // (the same bytes: c s lies within 127.5 of 0). Where the cross product vanishes (or is not
+  // finite) the row gets 0, which no packed normal is (its fourth byte is 255), and the sample
+  // goes on below.
   static_assert(std::endian::native == std::endian::little, "a packed normal's bytes as one 32-bit word");
   thread_local std::vector<float> channels;
   thread_local std::vector<uint32_t> packedRow;
   channels.resize(3 * n);
-  packedRow.assign(side, 0u);
+  packedRow.resize(side);
   float *X = channels.data(), *Y = X + n, *Z = Y + n;
   for (size_t i = 0; i < n; ++i) X[i] = xyz[3 * i], Y[i] = xyz[3 * i + 1], Z[i] = xyz[3 * i + 2];
   auto placed = [&](uint32_t u, uint32_t v) {
@@ -283,12 +284,12 @@ void geometryImageNormals(const float* xyz, uint32_t side, PackedNormal* out) {
       if (pack(a, b, o)) continue;
       // One-sided differences where the central ones vanish.
       const float* pairs[4][4] = {{r, q, t, q}, {q, l, t, q}, {q, l, q, d}, {r, q, q, d}};
-      bool found = false;
+      bool done = false;
       for (const auto& pr : pairs) {
         for (int k = 0; k < 3; ++k) a[k] = pr[0][k] - pr[1][k], b[k] = pr[2][k] - pr[3][k];
-        if ((found = pack(a, b, o))) break;
+        if ((done = pack(a, b, o))) break;
       }
-      if (!found) o = {128, 128, 255, 255};  // (0, 0, 1), as packNormal packs it
+      if (!done) o = {128, 128, 255, 255};  // (0, 0, 1), as packNormal packs it
     }
   }
 }

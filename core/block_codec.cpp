@@ -356,7 +356,6 @@ inline void storeFloats(const uint32_t* q, size_t n, uint32_t channels, size_t a
   hi = h;
 }
 
-
 // c ? a : b without a branch, in a form the compiler vectorizes (a select it would not).
 inline uint32_t pick(bool c, uint32_t a, uint32_t b) {
   const uint32_t m = 0u - uint32_t(c);
@@ -435,8 +434,8 @@ void placeMidpoints(uint32_t* q, size_t n, const uint32_t* cls, uint32_t side, u
 // largest planar square whose closed footprint holds a sample (for a sample on the chart's border,
 // only as the square's corner): a sample on that level's grid is a corner, coded at that level and
 // known to the corners after it; any other is placed there; a sample in no planar square is coded
-// with the rest. So the decoder classes the samples first, painting runs of planar squares row by
-// row, then decodes the values, each channel on its own, in loops without a branch per sample.
+// with the rest. So the decoder classes the samples first, painting the planar squares one by one,
+// then decodes the values, each channel on its own, in loops without a branch per sample.
 void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, double step, std::span<float> out) {
   if (squareLevels(side) == 0 || !std::has_single_bit(side - 1) || raw.size() <= head || raw[head] > 15)
     throw CodecError("corrupt position block (planar squares)");
@@ -465,7 +464,8 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
       for (uint32_t x = 0; x < m; ++x)
         if (sq[size_t(y) * m + x] == 1) f(size_t(y) * s * side + size_t(x) * s);
   };
-  // cls: the largest level whose squares' footprints hold the sample; corner: whose corners.
+  // cls: the level of the largest planar square whose footprint holds the sample; corner: of the
+  // largest whose corner it is.
   cls.assign(n, kRest);
   corner.assign(n, kRest);
   for (uint32_t l = 0; l < levels; ++l) {
