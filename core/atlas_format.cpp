@@ -1032,6 +1032,28 @@ const char* channelName(ChartChannel c) {
 }
 }  // namespace
 
+void ChartFileReader::readCode(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by,
+                               std::vector<uint8_t>& code) const {
+  const BlockEntry& e = block(level, bx, by);
+  code.resize(e.bytes[c]);
+  std::lock_guard<std::mutex> lock(mutex_);
+  file_.clear();
+  file_.seekg(static_cast<std::streamoff>(e.offset[c]));
+  file_.read(reinterpret_cast<char*>(code.data()), static_cast<std::streamsize>(code.size()));
+  if (!file_) throw InputError(quoted(path_) + ": read failed (file truncated or changed while in use)");
+}
+
+std::vector<uint8_t> ChartFileReader::readCodedBlock(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by) const {
+  if (!compressed_ || !hasChannel(c))
+    throw std::logic_error("ChartFileReader: " + path_.string() + " has no coded blocks of channel " + std::to_string(c));
+  if (level >= levels_ || std::max(bx, by) >= levelLayout(chartSize_, blockIntervals_, level).blocksPerSide)
+    throw std::logic_error("ChartFileReader: " + path_.string() + " has no block (" + std::to_string(bx) + ", " +
+                           std::to_string(by) + ") at level " + std::to_string(level));
+  std::vector<uint8_t> code;
+  readCode(c, level, bx, by, code);
+  return code;
+}
+
 const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_t level, uint32_t bx,
                                                         uint32_t by) const {
   // The thread's last decoded block: a page's heights and then its derived normals decode once.
@@ -1054,16 +1076,8 @@ const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_
   last.serial = 0;
   const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
   const uint32_t side = l.blockSamples + (frame_ && c == kChannelHeights ? 2 : 0);
-  const BlockEntry& e = block(level, bx, by);
   thread_local std::vector<uint8_t> code;
-  code.resize(e.bytes[c]);
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    file_.clear();
-    file_.seekg(static_cast<std::streamoff>(e.offset[c]));
-    file_.read(reinterpret_cast<char*>(code.data()), static_cast<std::streamsize>(code.size()));
-    if (!file_) throw InputError(quoted(path_) + ": read failed (file truncated or changed while in use)");
-  }
+  readCode(c, level, bx, by, code);
   const size_t count = size_t{side} * side;
   last.samples.resize(count * kChannelBytes[c]);
   void* out = last.samples.data();

@@ -337,6 +337,10 @@ class ChartFileReader {
   bool compressed() const { return compressed_; }  // version 3: blocks decoded on read
   bool derivedNormals() const { return frame_.has_value() || borderNormals_; }  // from heights or positions
   const std::filesystem::path& path() const { return path_; }
+  // Version 3: the code of block (bx, by) of level `level`'s channel c as stored, undecoded (for
+  // inspection and benchmarks; the read functions decode it). Throws std::logic_error on an
+  // uncompressed file, a channel it lacks or a block it does not have; InputError if the read fails.
+  std::vector<uint8_t> readCodedBlock(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by) const;
 
  private:
   struct BlockEntry {  // per ChartChannel
@@ -363,6 +367,8 @@ class ChartFileReader {
   // Version 3: the whole block (bx, by) of stored channel c, decoded (side^2 elements, side the
   // block's samples, plus 2 for ring heights); the thread's buffer, valid until its next call.
   const std::vector<uint8_t>& decodeBlock(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by) const;
+  // Version 3: the stored code of block (bx, by) of channel c into `code`.
+  void readCode(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by, std::vector<uint8_t>& code) const;
   std::vector<std::vector<BlockEntry>> directory_;  // [level][by * blocksPerSide + bx]
   mutable std::mutex mutex_;
   mutable std::ifstream file_;

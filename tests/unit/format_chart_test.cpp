@@ -363,6 +363,9 @@ TEST(FormatChart, GeometryNormalsDerivedInsideBlocks) {
   const ChartFileReader r(f);
   EXPECT_TRUE(r.derivedNormals());
   EXPECT_FALSE(ChartFileReader(g).derivedNormals());
+  EXPECT_THROW(r.readCodedBlock(kChannelPositions, r.levels(), 0, 0), std::logic_error);
+  EXPECT_THROW(r.readCodedBlock(kChannelPositions, 0, 4, 0), std::logic_error);  // 4 blocks a side
+  EXPECT_THROW(r.readCodedBlock(kChannelHeights, 0, 0, 0), std::logic_error);
   double worst = 0.0;
   size_t derived = 0;
   for (uint32_t k = 0; k < r.levels(); ++k) {
@@ -380,6 +383,10 @@ TEST(FormatChart, GeometryNormalsDerivedInsideBlocks) {
         std::vector<PackedNormal> again = mine;
         geometryImageNormals(xyz.data(), l.blockSamples, again.data());
         EXPECT_EQ(again, mine) << "level " << k << " block " << bx << "," << by;
+        // The block's code as stored decodes to what the reader gave.
+        std::vector<float> coded(xyz.size());
+        decodePositions(r.readCodedBlock(kChannelPositions, k, bx, by), l.blockSamples, coded);
+        EXPECT_EQ(coded, xyz) << "level " << k << " block " << bx << "," << by;
         for (uint32_t v = 0; v <= b; ++v)
           for (uint32_t u = 0; u <= b; ++u) {
             const size_t i = size_t(by * b + v) * s + bx * b + u;
