@@ -482,17 +482,15 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
     if (border & kChartBorderLeft) cls[size_t(t) * side] = corner[size_t(t) * side];
     if (border & kChartBorderRight) cls[size_t(t) * side + last] = corner[size_t(t) * side + last];
   }
+  // The first sample, in the header: known to every level, never coded or placed.
+  cls[0] = kCorner;
   size_t corners = 0, rest = 0;
-  for (size_t i = 0; i < n; ++i) {
+  for (size_t i = 1; i < n; ++i) {
     const uint32_t c = cls[i] | (corner[i] == cls[i] ? kCorner : 0);
     cls[i] = c;
     corners += (c & kCorner) && c != kRest;
     rest += c == kRest;
   }
-  // The first sample, in the header: known to every level, never coded or placed.
-  corners -= (cls[0] & kCorner) && cls[0] != kRest;
-  rest -= cls[0] == kRest;
-  cls[0] = kCorner;
   const size_t m = corners + rest;
   const size_t body = bitsAt + (nbits + 7) / 8;
   if (raw.size() != body + size_t(planes) * 3 * m) throw CodecError("corrupt position block (size)");
