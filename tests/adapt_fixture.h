@@ -8,9 +8,10 @@
 #include <utility>
 #include <vector>
 
-#include "atlas/terrain/dem.h"
-#include "atlas/terrain/terrain_atlas.h"
 #include "runtime/adapt.h"
+#include "runtime/adapt_dual_queue.h"
+#include "runtime/adapt_quad_queue.h"
+#include "runtime/stitch.h"
 #include "runtime/camera.h"
 #include "tests/synthetic_terrain.h"
 
@@ -43,32 +44,6 @@ inline ViewParams viewAt(const World& w, glm::dvec3 eye, glm::dvec3 target) {
   return makeViewParams(c, 320, 240);
 }
 
-// A real DEM's hierarchy built in memory (no files), as `gimlod build` would with this chart size
-// and depth (R = 64, minimum node resolution 4), with the world bounds of its valid data.
-struct DemWorld {
-  DemRaster dem;
-  AtlasManifest m;
-  Hierarchy h;
-  glm::dvec3 lo, hi;
-};
-
-inline DemWorld loadDemWorld(const std::filesystem::path& file, uint32_t chartSize, uint32_t depth = 5) {
-  DemWorld w;
-  w.dem = loadDem(file);
-  w.m.depth = depth;
-  w.m.maxNodeResLog2 = 6;
-  w.m.minNodeResLog2 = 2;
-  TerrainAtlasOptions topt;
-  topt.chartSize = chartSize;
-  fillTerrainManifest(w.dem, topt, w.m);
-  w.h = buildTerrainHierarchy(w.m, [&](uint32_t c) {
-    return extractChart(w.dem, w.m.charts[c].gridX, w.m.charts[c].gridY, chartSize);
-  });
-  w.lo = {0, 0, w.dem.minHeight};
-  w.hi = {(w.dem.width - 1) * w.dem.spacing[0], (w.dem.height - 1) * w.dem.spacing[1], w.dem.maxHeight};
-  return w;
-}
-
 // No node together with an ancestor; when full (no culling, no empty nodes), the cut's area is
 // all chart area.
 inline void expectPartition(const Hierarchy& h, const Cut& cut, bool full = true) {
@@ -92,6 +67,32 @@ inline std::vector<std::pair<uint64_t, uint32_t>> sortedNodes(const Cut& cut) {
   for (const CutNode& n : cut.nodes) v.push_back({n.id.key(), n.res});
   std::sort(v.begin(), v.end());
   return v;
+}
+
+// Updates until a frame ends without hitting the operation cap.
+inline const Cut& converge(DualQueueAdapter& a, const ViewParams& v, const AdaptOptions& o, AdaptStats* st) {
+  for (int i = 0; i < 1000; ++i) {
+    const Cut& c = a.update(v, o, st);
+    if (!a.frameStats().opCapBound) return c;
+  }
+  ADD_FAILURE() << "did not converge";
+  return a.update(v, o, st);
+}
+
+inline bool withinToleranceOrFinest(const Hierarchy& h, const CutNode& n, double tol) {
+  const bool finest = n.res == h.params.maxRes(n.id.level) && n.id.level + 1 == h.params.depth;
+  return finest || n.errorPx <= tol + 1e-9;
+}
+
+// Within the triangle budget, the stats agree with the cut, stitched; within the node budget
+// unless the stitching constraint forced splits.
+inline void expectWithinBudget(const Hierarchy& h, const Cut& cut, const BudgetOptions& o, const BudgetStats& st) {
+  EXPECT_LE(cut.triangles(), o.maxTriangles);
+  EXPECT_EQ(st.triangles, cut.triangles());
+  EXPECT_EQ(countStitchViolations(h, cut), 0u);
+  if (st.constraintSplits == 0) {
+    EXPECT_LE(cut.nodes.size(), o.maxNodes);
+  }
 }
 
 }  // namespace gimlod::test

@@ -2,11 +2,15 @@
 // call as `gimlod build MESH -o ATLAS` at the default mesh options (patches by the triangle count,
 // chart size by the input's density, the chart repair to the default sampling error),
 // at most once per test executable per scan and kind of build (kept across its processes in the
-// build folder). Used by the CPU scan tests (tests/unit/scan_atlas_test.cpp,
-// adapt_root_floor_test.cpp) and the GL crack tests (tests/gl/scan_crack_gl_test.cpp).
+// build folder). Used by the pipeline's scan tests (tests/pipeline/scan_atlas_test.cpp,
+// adapt_root_floor_test.cpp), the GL crack tests (tests/gl/scan_crack_gl_test.cpp) and the export
+// command's (tests/cli/scan_export_cli_test.cpp).
 #pragma once
 
+#include <algorithm>
 #include <chrono>
+#include <cstdint>
+#include <cstdio>
 #include <fstream>
 #include <filesystem>
 #include <map>
@@ -68,19 +72,27 @@ struct BuiltScanAtlas {
 };
 
 // Where a scan's atlas is kept for the other test processes: under GIMLOD_TEST_CACHE, named for
-// the scan, the kind of build and the size and modification time of the gimlod program
-// (GIMLOD_APP). Both test executables link the libraries that build atlases, as the program does,
-// and the build makes the program before either (add_dependencies): a change to those libraries
-// relinks it, so no test reads an atlas an older build made, and the two executables share one
-// build of each scan.
+// the scan, the kind of build and the sizes and modification times of the libraries that build
+// atlases (GIMLOD_ATLAS_LIBRARIES). Every test binary that builds scan atlases links those same
+// library files, so the binaries share one build of each scan, and a change to the libraries
+// renames the folder: no test reads an atlas that older code made.
 inline std::filesystem::path cachedScanAtlasPath(const std::string& name, bool withFidelity) {
   namespace fs = std::filesystem;
-  std::error_code ec;
-  const fs::path app = GIMLOD_APP;
-  const auto size = fs::file_size(app, ec);
-  const auto stamp = ec ? 0 : fs::last_write_time(app, ec).time_since_epoch().count();
-  return fs::path(GIMLOD_TEST_CACHE) /
-         ("scans-" + std::to_string(ec ? 0 : size) + "-" + std::to_string(stamp)) /
+  uint64_t stamp = 1469598103934665603ull;  // FNV-1a over (size, time) of each library
+  const std::string libraries = GIMLOD_ATLAS_LIBRARIES;
+  for (size_t begin = 0; begin <= libraries.size();) {
+    const size_t end = std::min(libraries.find('|', begin), libraries.size());
+    std::error_code ec;
+    const fs::path lib = libraries.substr(begin, end - begin);
+    const uint64_t size = fs::file_size(lib, ec);
+    const uint64_t time = ec ? 0 : uint64_t(fs::last_write_time(lib, ec).time_since_epoch().count());
+    for (const uint64_t v : {ec ? 0 : size, time})
+      for (int byte = 0; byte < 8; ++byte) stamp = (stamp ^ ((v >> (8 * byte)) & 0xff)) * 1099511628211ull;
+    begin = end + 1;
+  }
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(stamp));
+  return fs::path(GIMLOD_TEST_CACHE) / ("scans-" + std::string(hex)) /
          (name + (withFidelity ? "_fidelity" : "") + ".atlas");
 }
 

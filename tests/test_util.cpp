@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <string>
 #include <random>
+#include <stdexcept>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -31,7 +32,13 @@ bool sharedDataRequired() {
   }
   return false;
 }
-std::filesystem::path appPath() { return GIMLOD_APP; }
+std::filesystem::path appPath() {
+#ifdef GIMLOD_APP
+  return GIMLOD_APP;
+#else
+  throw std::logic_error("this build has no gimlod program (GIMLOD_RUNTIME_ONLY)");
+#endif
+}
 
 TempDir::TempDir(const std::string& tag) {
   std::random_device rd;

@@ -32,7 +32,7 @@ bool haveRealData(const std::string& relative);
 // Whether missing shared data must fail a test rather than skip it: in CI (CI=true) or with
 // GIMLOD_REQUIRE_SHARED_DATA=1, so that real-data invariants never pass by being skipped.
 bool sharedDataRequired();
-// Path to the gimlod command-line app.
+// Path to the gimlod command-line app (for the cli and window tiers, whose binaries depend on it).
 std::filesystem::path appPath();
 
 // Under ThreadSanitizer, TBB runs on the calling thread only while this lives: libtbb is not

@@ -4,8 +4,6 @@
 #include <cmath>
 #include <random>
 
-#include "atlas/terrain/dem.h"
-#include "atlas/terrain/terrain_atlas.h"
 #include "runtime/adapt_dual_queue.h"
 #include "runtime/baselines.h"
 #include "tests/adapt_fixture.h"
@@ -20,24 +18,12 @@ using test::makeWorld;
 using test::sortedNodes;
 using test::viewAt;
 using test::World;
+using test::converge;
+using test::withinToleranceOrFinest;
 
 
 
 
-// Updates until a frame ends without hitting the operation cap.
-const Cut& converge(DualQueueAdapter& a, const ViewParams& v, const AdaptOptions& o, AdaptStats* st) {
-  for (int i = 0; i < 1000; ++i) {
-    const Cut& c = a.update(v, o, st);
-    if (!a.frameStats().opCapBound) return c;
-  }
-  ADD_FAILURE() << "did not converge";
-  return a.update(v, o, st);
-}
-
-bool withinToleranceOrFinest(const Hierarchy& h, const CutNode& n, double tol) {
-  const bool finest = n.res == h.params.maxRes(n.id.level) && n.id.level + 1 == h.params.depth;
-  return finest || n.errorPx <= tol + 1e-9;
-}
 
 TEST(DualQueue, ErrorModeWithinToleranceAndPartitionAcrossRandomViews) {
   const World w = makeWorld(65, 3, 2, 4);
@@ -324,49 +310,6 @@ TEST(DualQueue, HandMadePrioritiesAndCuts) {
   ASSERT_EQ(merged.nodes.size(), 1u);
   EXPECT_EQ(merged.nodes[0].id, root);
   EXPECT_EQ(merged.nodes[0].res, 2u);
-}
-
-TEST(DualQueue, NoMoreTrianglesThanFixedGranularityOnRainier) {
-  const test::DemWorld world = test::loadDemWorld(test::repoData() / "terrain/mt_rainier_90m.tif", 257);
-  const Hierarchy& h = world.h;
-  const glm::dvec3 lo = world.lo, hi = world.hi;
-  const auto path = orbitPath(lo, hi, 24, 0.35, 20.0);
-  AdaptOptions o;
-  o.tolerancePx = 1.0;
-  o.maxNodes = 400;
-  DualQueueAdapter adapter(h);
-  uint64_t dq = 0, fixed = 0, greedy = 0;
-  int bound = 0, fixedBound = 0, greedyBound = 0;
-  double err = 0, ferr = 0, gerr = 0;
-  for (const Camera& cam : path) {
-    const ViewParams v = makeViewParams(cam, 1280, 720);
-    AdaptStats st, fs, gs;
-    const Cut& cut = converge(adapter, v, o, &st);
-    EXPECT_EQ(countStitchViolations(h, cut), 0u);
-    EXPECT_LE(adapter.frameStats().drawnNodes, o.maxNodes);
-    if (!st.nodeBudgetBound) {
-      for (const CutNode& n : cut.nodes) EXPECT_TRUE(withinToleranceOrFinest(h, n, o.tolerancePx));
-    }
-    for (const CutNode& n : cut.nodes)
-      for (NodeId a = n.id; a.level > 0;) {
-        a = a.parent();
-        ASSERT_LT(cut.find(a), 0);
-      }
-    const Cut f = adaptFixedGranularity(h, v, o.tolerancePx, o.maxNodes, &fs);
-    adaptTopDownGreedy(h, v, o.tolerancePx, o.maxNodes, &gs);
-    EXPECT_EQ(countStitchViolations(h, f), 0u);
-    // The paper's claim: decoupling resolution from node size never costs triangles here.
-    EXPECT_LE(st.triangles, fs.triangles);
-    dq += st.triangles, fixed += fs.triangles, greedy += gs.triangles;
-    bound += st.nodeBudgetBound, fixedBound += fs.nodeBudgetBound, greedyBound += gs.nodeBudgetBound;
-    err = std::max(err, st.maxErrorPx), ferr = std::max(ferr, fs.maxErrorPx), gerr = std::max(gerr, gs.maxErrorPx);
-
-  }
-  std::printf("rainier orbit, 24 frames, 1 px, 400 nodes: triangles/frame (budget-bound frames, max "
-              "error px): dual-queue %llu (%d, %.2f), top-down greedy %llu (%d, %.2f), fixed "
-              "granularity %llu (%d, %.2f)\n",
-              (unsigned long long)(dq / 24), bound, err, (unsigned long long)(greedy / 24), greedyBound,
-              gerr, (unsigned long long)(fixed / 24), fixedBound, ferr);
 }
 
 }  // namespace

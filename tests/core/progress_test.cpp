@@ -1,6 +1,6 @@
 // Build progress (core/progress.h): reports reach the sink with the work done, an ETA and a last
 // report per stage; stages nest; advances from many threads all count; the interval limits the
-// reports. And end to end: `gimlod build` draws a bar on a terminal and logs lines otherwise.
+// reports. (`gimlod build`'s bar and lines: tests/cli/build_progress_cli_test.cpp.)
 #include <gtest/gtest.h>
 
 #include <mutex>
@@ -87,30 +87,6 @@ TEST(Progress, FormatsABarAPercentageAndTheEta) {
   EXPECT_NE(s.find("ETA 1m50s"), std::string::npos) << s;
   r.finished = true;
   EXPECT_NE(progress::format(r, 0).find("done"), std::string::npos);
-}
-
-// `gimlod build` on a terminal (a pseudo-terminal from script(1)) redraws a bar; into a pipe it logs
-// lines at the interval asked for.
-TEST(Progress, BuildShowsABarOnATerminalAndLinesOtherwise) {
-  test::TempDir dir("gimlod-progress");
-  const std::string dem = (test::repoData() / "terrain/mt_rainier_90m.tif").string();
-  std::string out;
-  ASSERT_EQ(test::runCommand("script -qec \"" + test::appPath().string() + " build '" + dem + "' -o '" +
-                                 (dir.path() / "a.atlas").string() + "'\" /dev/null",
-                             &out),
-            0)
-      << out;
-  EXPECT_NE(out.find("\rcharts ["), std::string::npos) << out;
-  EXPECT_NE(out.find("100% 9/9"), std::string::npos) << out;
-  EXPECT_NE(out.find("hierarchy ["), std::string::npos) << out;
-  ASSERT_EQ(test::runCommand("GIMLOD_PROGRESS_SECONDS=0 " + test::appPath().string() + " build '" + dem + "' -o '" +
-                                 (dir.path() / "b.atlas").string() + "'",
-                             &out),
-            0)
-      << out;
-  EXPECT_EQ(out.find('\r'), std::string::npos) << out;
-  EXPECT_NE(out.find("progress: charts"), std::string::npos) << out;
-  EXPECT_NE(out.find("progress: read DEM"), std::string::npos) << out;
 }
 
 }  // namespace
