@@ -16,8 +16,9 @@ NAMES=("$@")
 [ ${#NAMES[@]} -eq 0 ] && NAMES=("${ALL[@]}")
 
 bash scripts/install-deps.sh
+source scripts/build-env.sh
 CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DGIMLOD_FUZZ=ON \
-  -DGIMLOD_BUILD_BENCHMARKS=OFF >/dev/null
+  -DGIMLOD_BUILD_BENCHMARKS=OFF "${GIMLOD_CMAKE_CACHE_ARGS[@]}" >/dev/null
 cmake --build build-fuzz -j"$(nproc)" --target "${NAMES[@]}"
 
 SHARED=../shared/data/meshes

@@ -1,21 +1,45 @@
 #!/usr/bin/env bash
 # The tests again under sanitizers, each in its own build folder:
-#   bash scripts/sanitize.sh address   AddressSanitizer + UndefinedBehaviorSanitizer (build-asan):
-#                                      every test; leaks detected, the GL driver's own leaks
-#                                      suppressed (tests/sanitizers/lsan.supp)
-#   bash scripts/sanitize.sh thread    ThreadSanitizer (build-tsan): the page loader and the
-#                                      asynchronous loading tests
-# Any report stops the program, so the test fails.
+#   bash scripts/sanitize.sh address [TIER...]
+#       The Debug build (build-asan): assertions on (no NDEBUG, libstdc++'s own checks), warnings
+#       are errors in project code (-Werror), at -O1, under AddressSanitizer + UndefinedBehavior-
+#       Sanitizer. Tiers (default: cpu cli gl window): every CPU test, every command-line test,
+#       and the GL and window tests. Leaks detected, the GL driver's own leaks suppressed
+#       (tests/sanitizers/lsan.supp).
+#   bash scripts/sanitize.sh thread
+#       ThreadSanitizer (build-tsan): the tests that run threads of the project's own (the page
+#       loader, asynchronous loading, progress from many threads, the TBB build stages that run
+#       under it, the runtime's tests).
+# Any report stops the program, so the test fails. Each tier's time is printed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 kind=${1:-address}
+shift || true
 bash scripts/install-deps.sh
+source scripts/build-env.sh
 root=$(pwd)
+
+# ctest over the tiers in $@ of build folder $1, each timed; non-zero if any failed.
+run_tiers() {
+  local dir=$1 failed=0 tier t
+  shift
+  for tier in "$@"; do
+    t=$(date +%s)
+    ctest --test-dir "$dir" --output-on-failure -j"$(nproc)" -L "^${tier}\$" || failed=1
+    echo "gimlod sanitize: $dir tier $tier in $(( $(date +%s) - t )) s"
+  done
+  return $failed
+}
+
 case $kind in
   address)
-    cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DGIMLOD_SANITIZE=ON \
-      -DGIMLOD_BUILD_BENCHMARKS=OFF >/dev/null
+    tiers=("$@")
+    [ ${#tiers[@]} -eq 0 ] && tiers=(cpu cli gl window)
+    t=$(date +%s)
+    cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-g -O1 -D_GLIBCXX_ASSERTIONS" \
+      -DGIMLOD_SANITIZE=ON -DGIMLOD_WERROR=ON -DGIMLOD_BUILD_BENCHMARKS=OFF "${GIMLOD_CMAKE_CACHE_ARGS[@]}" >/dev/null
     cmake --build build-asan -j"$(nproc)"
+    echo "gimlod sanitize: build-asan built in $(( $(date +%s) - t )) s"
     # note: Mesa unloads its GL driver when the EGL display goes, and memory the driver still
     # held then looks leaked from an "<unknown module>". Preloading the driver keeps it mapped,
     # so LeakSanitizer sees what it references (and could name it, for the suppressions).
@@ -28,17 +52,24 @@ case $kind in
     export ASAN_OPTIONS=halt_on_error=1:detect_leaks=1:verify_asan_link_order=0:strict_string_checks=1:detect_stack_use_after_return=1
     export LSAN_OPTIONS=suppressions=$root/tests/sanitizers/lsan.supp:print_suppressions=0
     export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1
-    ctest --test-dir build-asan --output-on-failure -j"$(nproc)"
+    run_tiers build-asan "${tiers[@]}"
     ;;
   thread)
+    t=$(date +%s)
     cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DGIMLOD_SANITIZE=thread \
-      -DGIMLOD_BUILD_BENCHMARKS=OFF >/dev/null
-    cmake --build build-tsan -j"$(nproc)" --target gimlod_tests gimlod_gl_tests
+      -DGIMLOD_BUILD_BENCHMARKS=OFF "${GIMLOD_CMAKE_CACHE_ARGS[@]}" >/dev/null
+    cmake --build build-tsan -j"$(nproc)" --target gimlod_runtime_tests gimlod_core_tests gimlod_pipeline_tests gimlod_gl_tests
+    echo "gimlod sanitize: build-tsan built in $(( $(date +%s) - t )) s"
     export TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1:suppressions=$root/tests/sanitizers/tsan.supp
-    ctest --test-dir build-tsan --output-on-failure -j"$(nproc)" -R 'PageLoader|AsyncLoading'
+    t=$(date +%s)
+    failed=0
+    ctest --test-dir build-tsan --output-on-failure -j"$(nproc)" -L '^runtime$' || failed=1
+    ctest --test-dir build-tsan --output-on-failure -j"$(nproc)" -R '^(PageLoader|AsyncLoading|Progress)\.' || failed=1
+    echo "gimlod sanitize: build-tsan threaded tests in $(( $(date +%s) - t )) s"
+    exit $failed
     ;;
   *)
-    echo "usage: scripts/sanitize.sh address|thread" >&2
+    echo "usage: scripts/sanitize.sh address [TIER...] | thread" >&2
     exit 2
     ;;
 esac

@@ -5,10 +5,14 @@
 
 #include <array>
 #include <cstdio>
+#include <cerrno>
 #include <cstdlib>
+#include <cstring>
 #include <string>
 #include <random>
 #include <stdexcept>
+#include <poll.h>
+#include <sys/inotify.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -50,6 +54,39 @@ TempDir::TempDir(const std::string& tag) {
 TempDir::~TempDir() {
   std::error_code ec;
   std::filesystem::remove_all(path_, ec);
+}
+
+bool waitForFiles(const std::filesystem::path& dir, const std::function<bool()>& ready,
+                  std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  const int fd = ::inotify_init1(IN_CLOEXEC | IN_NONBLOCK);
+  if (fd < 0) throw std::runtime_error("inotify_init1: " + std::string(std::strerror(errno)));
+  struct Closer {
+    int fd;
+    ~Closer() { ::close(fd); }
+  } closer{fd};
+  if (::inotify_add_watch(fd, dir.c_str(), IN_CREATE | IN_MODIFY | IN_CLOSE_WRITE | IN_MOVED_TO) < 0)
+    throw std::runtime_error("inotify_add_watch " + dir.string() + ": " + std::strerror(errno));
+  // Checked after the watch is in place, so a write between the check and the wait is seen.
+  while (!ready()) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) return false;
+    pollfd p{fd, POLLIN, 0};
+    if (::poll(&p, 1, int(left.count())) < 0 && errno != EINTR)
+      throw std::runtime_error("poll: " + std::string(std::strerror(errno)));
+    alignas(inotify_event) char events[4096];
+    while (::read(fd, events, sizeof events) > 0) {
+    }
+  }
+  return true;
+}
+
+// Appended, not prefixed: GCC 12 warns, wrongly, about string literal + std::string.
+std::string quoted(const std::filesystem::path& path) {
+  std::string s = "'";
+  s += path.string();
+  s += "'";
+  return s;
 }
 
 std::string fileBytes(const std::filesystem::path& path) {

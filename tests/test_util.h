@@ -1,7 +1,9 @@
 // Helpers shared by the tests: data locations and temporary directories.
 #pragma once
 
+#include <chrono>
 #include <filesystem>
+#include <functional>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -53,6 +55,15 @@ class TempDir {
  private:
   std::filesystem::path path_;
 };
+
+// Waits until `ready()` holds: checks it now, then again each time a file in `dir` is created,
+// written or moved in (inotify; a program that writes a row per frame wakes it each frame).
+// Returns false when `timeout` passes first.
+bool waitForFiles(const std::filesystem::path& dir, const std::function<bool()>& ready,
+                  std::chrono::milliseconds timeout);
+
+// A path in single quotes for the shell.
+std::string quoted(const std::filesystem::path& path);
 
 // A file's whole contents ("" if it cannot be read).
 std::string fileBytes(const std::filesystem::path& path);

@@ -42,7 +42,18 @@ TEST(Progress, ReportsWorkDoneWithAnEtaAndAFinalReport) {
     EXPECT_GE(r.done, last);
     last = r.done;
   }
-  EXPECT_GE(c.reports.front().etaSeconds, 0.0);
+  // The ETA is unknown before any work is done, then the time left at the rate so far: the time
+  // taken and the ETA add up to the whole stage at that rate; the final report has none left.
+  for (const progress::Report& r : c.reports) {
+    if (r.finished) {
+      EXPECT_EQ(r.etaSeconds, 0.0);
+    } else if (r.done == 0) {
+      EXPECT_LT(r.etaSeconds, 0.0);
+    } else {
+      EXPECT_GE(r.etaSeconds, 0.0);
+      EXPECT_NEAR(r.seconds + r.etaSeconds, r.seconds * double(r.total) / double(r.done), 1e-9 + 1e-12 * r.seconds);
+    }
+  }
   EXPECT_FALSE(c.reports.front().finished);
   EXPECT_TRUE(c.reports.back().finished);
   EXPECT_EQ(c.reports.back().done, 10u);

@@ -5,6 +5,7 @@
 #include <epoxy/gl.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <set>
@@ -309,12 +310,21 @@ TEST_F(RendererGlTest, DrawShowsTerrainBelowAndSkyAbove) {
   const glm::mat4 viewProj =
       glm::perspective(glm::radians(50.f), 128.f / 96.f, 0.5f, 500.f) *
       glm::lookAt(eye, glm::vec3(32.f, 20.f, 0.f), glm::vec3(0.f, 0.f, 1.f));
+  const auto t0 = std::chrono::steady_clock::now();
   const gl::DrawStats stats = r.draw(viewProj, eye, s.nodes, s.stitch);
+  const double callMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   uint64_t triangles = 0;
   for (const DrawNode& n : s.nodes) triangles += uint64_t(2) << (2 * n.res);
   EXPECT_EQ(stats.triangles, triangles);
   EXPECT_EQ(stats.drawCalls, 1u);  // one multi-draw-indirect for the cut (its pages in one array)
+  // The draw's own time (submission and glFinish) is within the call; the GPU's, when the timer
+  // query answers, within that.
   EXPECT_GT(stats.drawMs, 0.0);
+  EXPECT_LE(stats.drawMs, callMs);
+  if (!std::isnan(stats.gpuMs)) {
+    EXPECT_GE(stats.gpuMs, 0.0);
+    EXPECT_LE(stats.gpuMs, stats.drawMs);
+  }
   const std::vector<uint8_t> px = r.readPixels();
   ASSERT_EQ(px.size(), size_t(128) * 96 * 4);
   auto at = [&](int x, int y) { return px.data() + (size_t(y) * 128 + x) * 4; };

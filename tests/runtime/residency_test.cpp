@@ -48,6 +48,22 @@ ResidentFn residentSet(const std::unordered_set<uint64_t>& keys) {
   return [&keys](uint64_t k) { return keys.count(k) != 0; };
 }
 
+// The order pages are served in: every request for a coarser level before every request for a
+// finer one, whatever their screen errors; within a level, the larger error first.
+void expectCoarserThenLargerErrorFirst(const PageRequestPlan& plan, const Cut& desired) {
+  for (const PageRequest& a : plan.requests)
+    for (const PageRequest& b : plan.requests) {
+      if (a.id.level < b.id.level) {
+        EXPECT_GT(a.priority, b.priority) << "level " << a.id.level << " after level " << b.id.level;
+      }
+      const int ia = desired.find(a.id), ib = desired.find(b.id);
+      if (a.id.level == b.id.level && ia >= 0 && ib >= 0 &&
+          desired.nodes[size_t(ia)].errorPx > desired.nodes[size_t(ib)].errorPx) {
+        EXPECT_GT(a.priority, b.priority) << "a larger error after a smaller one on level " << a.id.level;
+      }
+    }
+}
+
 std::unordered_set<uint64_t> roots(const test::World& w) {
   std::unordered_set<uint64_t> r;
   for (uint32_t c = 0; c < w.h.chartCount(); ++c) r.insert(node(c, 0, 0, 0).key());
@@ -88,8 +104,17 @@ TEST(Residency, MissingChildrenAreRequestedAndDrawnAsTheirRoot) {
   EXPECT_EQ(plan.requests[1].id, nodes[2].id);
   EXPECT_EQ(plan.requests[2].id, nodes[3].id);
   EXPECT_DOUBLE_EQ(plan.requests[0].priority, 2e3 + 2.5);  // (depth - level) * 1e3 + error
-  EXPECT_DOUBLE_EQ(plan.requests[2].priority, 2e3 + 999.0);
+  expectCoarserThenLargerErrorFirst(plan, desired);
   EXPECT_EQ(plan.wanted.size(), 4u);
+  {
+    // With chart 1's root missing too, it comes before the child whose error is far above the
+    // others (5000 px): no error lifts a finer page ahead of a coarser one.
+    std::unordered_set<uint64_t> chart0 = {node(0, 0, 0, 0).key()};
+    const PageRequestPlan both = planPageRequests(w.h, desired, residentSet(chart0), loaded);
+    ASSERT_EQ(both.requests.size(), 4u);
+    EXPECT_EQ(both.requests.back().id, node(1, 0, 0, 0));
+    expectCoarserThenLargerErrorFirst(both, desired);
+  }
   for (uint32_t i = 0; i < 4; ++i) EXPECT_TRUE(plan.wanted.count(nodes[i].id.key()));
 
   const ViewParams view = overview(w);
@@ -121,8 +146,7 @@ TEST(Residency, MissingAncestorsAreRequestedOnceAndCoarserFirst) {
   ASSERT_EQ(plan.requests.size(), 7u);
   EXPECT_EQ(plan.requests[0].id, nodes[0].id);
   EXPECT_EQ(plan.requests[1].id, node(0, 1, 0, 0));
-  EXPECT_DOUBLE_EQ(plan.requests[1].priority, 2e3 + 999.0);
-  EXPECT_DOUBLE_EQ(plan.requests[0].priority, 1e3 + 1.0);
+  expectCoarserThenLargerErrorFirst(plan, desired);
   EXPECT_EQ(plan.requests[2].id, nodes[1].id);
   EXPECT_EQ(plan.requests[4].id, nodes[3].id);
   EXPECT_EQ(plan.requests[5].id, node(0, 1, 0, 1));

@@ -15,7 +15,6 @@
 #include <fstream>
 #include <functional>
 #include <sstream>
-#include <thread>
 
 #include <OpenImageIO/imageio.h>
 #include <nlohmann/json.hpp>
@@ -31,14 +30,7 @@ namespace {
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
-// A path in single quotes for the shell (appended, not prefixed: GCC 12 warns, wrongly, about
-// string literal + std::string).
-std::string quoted(const fs::path& p) {
-  std::string s = "'";
-  s += p.string();
-  s += "'";
-  return s;
-}
+using test::quoted;
 
 // An Xvfb server on a free display number (Xvfb picks it: -displayfd), stopped at the end.
 class VirtualDisplay {
@@ -277,7 +269,7 @@ class Session {
   ~Session() {
     if (!finished()) {
       key("Escape");
-      for (int i = 0; i < 100 && !finished(); ++i) std::this_thread::sleep_for(100ms);
+      test::waitForFiles(cwd_, [&] { return finished(); }, 10s);
     }
   }
   bool ok() const { return ok_; }
@@ -292,24 +284,23 @@ class Session {
   void resize(int w, int h) {
     test::runCommand(env_ + "xdotool windowsize " + window_ + " " + std::to_string(w) + " " + std::to_string(h));
   }
-  // A left-button drag across the window from (x0, y0) to (x1, y1), in steps.
+  // A left-button drag across the window from (x0, y0) to (x1, y1), in steps, each seen by a frame
+  // of its own.
   void drag(int x0, int y0, int x1, int y1) {
-    std::string cmd = env_ + "xdotool mousemove --window " + window_ + " " + std::to_string(x0) + " " + std::to_string(y0) +
-                      " mousedown 1";
-    for (int s = 1; s <= 8; ++s)
-      cmd += " mousemove --window " + window_ + " " + std::to_string(x0 + (x1 - x0) * s / 8) + " " +
-             std::to_string(y0 + (y1 - y0) * s / 8) + " sleep 0.05";
-    test::runCommand(cmd + " mouseup 1");
+    const std::string move = env_ + "xdotool mousemove --window " + window_ + " ";
+    test::runCommand(move + std::to_string(x0) + " " + std::to_string(y0) + " mousedown 1");
+    for (int s = 1; s <= 8; ++s) {
+      test::runCommand(move + std::to_string(x0 + (x1 - x0) * s / 8) + " " + std::to_string(y0 + (y1 - y0) * s / 8));
+      settle(1);
+    }
+    test::runCommand(env_ + "xdotool mouseup 1");
   }
   // Waits (up to 60 s: llvmpipe under a sanitizer is slow) until the stats rows so far satisfy
-  // `done`; false on time-out.
+  // `done`, rechecking at each row the window writes (one a frame); false on time-out, or when
+  // the program ended without satisfying it.
   bool waitFor(const std::function<bool(const std::vector<std::map<std::string, std::string>>&)>& done) const {
-    for (int i = 0; i < 600; ++i) {
-      if (done(readStats(stats_))) return true;
-      if (finished()) return done(readStats(stats_));
-      std::this_thread::sleep_for(100ms);
-    }
-    return false;
+    test::waitForFiles(cwd_, [&] { return finished() || done(readStats(stats_)); }, 60s);
+    return done(readStats(stats_));
   }
   // The row of the latest frame drawn after `after` more frames than now.
   std::map<std::string, std::string> settle(size_t after = 3) const {
@@ -322,7 +313,7 @@ class Session {
   Image screenshot() {
     const fs::path file = cwd_ / fmt(shots_++);
     key("p");
-    for (int i = 0; i < 600 && !fs::exists(file); ++i) std::this_thread::sleep_for(100ms);
+    test::waitForFiles(cwd_, [&] { return fs::exists(file); }, 60s);
     return readImage(file);
   }
 
@@ -464,7 +455,7 @@ TEST_F(ViewWindow, RecordedPathReplaysThroughRender) {
     s.drag(160, 120, 230, 150);
     s.settle();
     s.key("r");
-    for (int i = 0; i < 600 && !fs::exists(path); ++i) std::this_thread::sleep_for(100ms);
+    test::waitForFiles(cwd, [&] { return fs::exists(path); }, 60s);
     ASSERT_TRUE(fs::exists(path));
     s.settle();
     const Image window = s.screenshot();
@@ -484,31 +475,6 @@ TEST_F(ViewWindow, RecordedPathReplaysThroughRender) {
                 100.0 * diff);
     EXPECT_LT(diff, 0.005);
   }
-}
-
-// Bad options are named before any window opens (no display needed).
-TEST(ViewCli, BadOptionsAreNamed) {
-  test::TempDir dir("gimlod-view-cli");
-  test::buildSmallScanAtlas(dir.path() / "bunny.atlas", false);
-  const std::string app = test::appPath().string() + " view ";
-  const std::string atlas = quoted(dir.path() / "bunny.atlas");
-  const std::vector<std::pair<std::string, std::string>> cases = {
-      {atlas + " --up w", "--up 'w'"},
-      {atlas + " --frames 3", "--frames needs --path"},
-      {atlas + " --size 4x4", "--size '4x4'"},
-      {atlas + " --tolerance 0", "--tolerance"},
-      {atlas + " --overlay plaid", "--overlay 'plaid'"},
-      {atlas + " --path '" + (dir.path() / "none.json").string() + "'", "none.json"},
-      {quoted(dir.path() / "missing.atlas"), "missing.atlas"}};
-  for (const auto& [args, message] : cases) {
-    std::string out;
-    EXPECT_EQ(test::runCommand("env -u DISPLAY " + app + args, &out), 2) << args << "\n" << out;
-    EXPECT_NE(out.find(message), std::string::npos) << args << "\n" << out;
-  }
-  // Without a display: a clear error, not a crash.
-  std::string out;
-  EXPECT_EQ(test::runCommand("env -u DISPLAY -u WAYLAND_DISPLAY " + app + atlas + " --exit-after 1", &out), 1) << out;
-  EXPECT_NE(out.find("no display"), std::string::npos) << out;
 }
 
 }  // namespace
