@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <filesystem>
 #include <map>
@@ -103,7 +104,9 @@ inline std::filesystem::path cachedScanAtlasPath(const std::string& name, bool w
 // build killed halfway, is built again), so `stats` is always buildAtlas's own return.
 // withFidelity: the build measures the two-sided Hausdorff distance (about half the build time);
 // a build without it is reused only when fidelity is not asked for, so the tests ask alike (all
-// with it: one build serves both executables). Throws what buildAtlas throws.
+// with it: one build serves both executables). With GIMLOD_TEST_SCAN_ATLASES set, a complete
+// atlas in that folder (another build folder's scans-* cache of the same sources) is used rather
+// than built. Throws what buildAtlas throws.
 inline const BuiltScanAtlas& scanAtlas(const std::string& name, bool withFidelity) {
   namespace fs = std::filesystem;
   static std::map<std::string, BuiltScanAtlas> built;
@@ -118,6 +121,15 @@ inline const BuiltScanAtlas& scanAtlas(const std::string& name, bool withFidelit
   for (const bool fidelity : {true, false})
     if (fidelity || !withFidelity)
       if (const BuiltScanAtlas* b = cached(cachedScanAtlasPath(name, fidelity), fidelity)) return *b;
+  // Atlases another build folder made of the same sources (GIMLOD_TEST_SCAN_ATLASES: .ci/run
+  // points the sanitizer builds at the Release build's, made moments before from the same clone).
+  if (const char* shared = std::getenv("GIMLOD_TEST_SCAN_ATLASES"); shared && *shared) {
+    for (const bool fidelity : {true, false})
+      if (fidelity || !withFidelity)
+        if (const BuiltScanAtlas* b =
+                cached(fs::path(shared) / (name + (fidelity ? "_fidelity" : "") + ".atlas"), fidelity))
+          return *b;
+  }
   const fs::path dir = cachedScanAtlasPath(name, withFidelity);
   if (!fs::exists(dir.parent_path())) {
     // What earlier builds kept is stale: removed (and what the per-executable caches kept before).

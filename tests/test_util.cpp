@@ -89,6 +89,12 @@ std::string quoted(const std::filesystem::path& path) {
   return s;
 }
 
+std::filesystem::path TempDir::write(const std::string& name, const std::string& bytes) const {
+  const std::filesystem::path p = path_ / name;
+  std::ofstream(p, std::ios::binary) << bytes;
+  return p;
+}
+
 std::string fileBytes(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   return std::string(std::istreambuf_iterator<char>(in), {});

@@ -52,6 +52,8 @@ class TempDir {
   explicit TempDir(const std::string& tag = "gimlod");
   ~TempDir();
   const std::filesystem::path& path() const { return path_; }
+  // Writes `bytes` to the file `name` in it; returns the file's path.
+  std::filesystem::path write(const std::string& name, const std::string& bytes) const;
  private:
   std::filesystem::path path_;
 };

@@ -316,7 +316,7 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     GeometryImage back;  // a spilled chart's samples, read back for this chart only
     const GeometryImage& img = set.charts[i];
     const GeometryImage& samples = chartSamples(set, i, spill, back);
-    char name[32];
+    char name[48];  // "charts/chart_" + up to 20 digits + ".bin"
     std::snprintf(name, sizeof(name), "charts/chart_%04zu.bin", i);
     ChartInfo& c = m.charts[i];
     c.id = uint32_t(i);

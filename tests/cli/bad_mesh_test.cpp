@@ -152,11 +152,7 @@ std::string stlAscii(const Mesh& m) {
 
 class BadMesh : public ::testing::Test {
  protected:
-  fs::path write(const std::string& name, const std::string& bytes) {
-    const fs::path p = dir_.path() / name;
-    std::ofstream(p, std::ios::binary) << bytes;
-    return p;
-  }
+  fs::path write(const std::string& name, const std::string& bytes) { return dir_.write(name, bytes); }
 
   // `timeout 60 gimlod build IN -o DIR/out.atlas ARGS`; the exit status (124: it hung).
   int build(const fs::path& in, const std::string& args = "--charts 8 --chart-size 9 --depth 2") {

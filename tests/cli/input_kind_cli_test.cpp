@@ -15,11 +15,7 @@ namespace fs = std::filesystem;
 
 class InputKindTest : public ::testing::Test {
  protected:
-  fs::path write(const std::string& name, const std::string& bytes) {
-    const fs::path p = dir_.path() / name;
-    std::ofstream(p, std::ios::binary) << bytes;
-    return p;
-  }
+  fs::path write(const std::string& name, const std::string& bytes) { return dir_.write(name, bytes); }
   test::TempDir dir_{"gimlod-input-kind-cli"};
 };
 

@@ -16,11 +16,7 @@ namespace fs = std::filesystem;
 
 class InputKindTest : public ::testing::Test {
  protected:
-  fs::path write(const std::string& name, const std::string& bytes) {
-    const fs::path p = dir_.path() / name;
-    std::ofstream(p, std::ios::binary) << bytes;
-    return p;
-  }
+  fs::path write(const std::string& name, const std::string& bytes) { return dir_.write(name, bytes); }
   // A binary STL of n triangles: an 80-byte header starting with `header`, the count, 50 bytes each.
   static std::string binaryStl(uint32_t n, const std::string& header) {
     std::string s(80, ' ');
