@@ -72,15 +72,15 @@ struct BuiltScanAtlas {
   double seconds = 0.0;       // build time
 };
 
-// Where a scan's atlas is kept for the other test processes: under GIMLOD_TEST_CACHE, named for
+// Where a scan's atlas is kept for the other test processes: under testCache(), named for
 // the scan, the kind of build and the sizes and modification times of the libraries that build
-// atlases (GIMLOD_ATLAS_LIBRARIES). Every test binary that builds scan atlases links those same
+// atlases (atlasLibraries()). Every test binary that builds scan atlases links those same
 // library files, so the binaries share one build of each scan, and a change to the libraries
 // renames the folder: no test reads an atlas that older code made.
 inline std::filesystem::path cachedScanAtlasPath(const std::string& name, bool withFidelity) {
   namespace fs = std::filesystem;
   uint64_t stamp = 1469598103934665603ull;  // FNV-1a over (size, time) of each library
-  const std::string libraries = GIMLOD_ATLAS_LIBRARIES;
+  const std::string libraries = atlasLibraries();
   for (size_t begin = 0; begin <= libraries.size();) {
     const size_t end = std::min(libraries.find('|', begin), libraries.size());
     std::error_code ec;
@@ -93,7 +93,7 @@ inline std::filesystem::path cachedScanAtlasPath(const std::string& name, bool w
   }
   char hex[17];
   std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(stamp));
-  return fs::path(GIMLOD_TEST_CACHE) / ("scans-" + std::string(hex)) /
+  return testCache() / ("scans-" + std::string(hex)) /
          (name + (withFidelity ? "_fidelity" : "") + ".atlas");
 }
 
@@ -134,7 +134,7 @@ inline const BuiltScanAtlas& scanAtlas(const std::string& name, bool withFidelit
   if (!fs::exists(dir.parent_path())) {
     // What earlier builds kept is stale: removed (and what the per-executable caches kept before).
     std::error_code ec;
-    for (const auto& e : fs::directory_iterator(GIMLOD_TEST_CACHE, ec)) {
+    for (const auto& e : fs::directory_iterator(testCache(), ec)) {
       const std::string entry = e.path().filename().string();
       const bool ours = entry.rfind("scans-", 0) == 0 || entry.rfind("gimlod_tests-", 0) == 0 ||
                         entry.rfind("gimlod_gl_tests-", 0) == 0;

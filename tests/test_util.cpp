@@ -36,6 +36,16 @@ bool sharedDataRequired() {
   }
   return false;
 }
+std::filesystem::path testCache() { return GIMLOD_TEST_CACHE; }
+
+std::string atlasLibraries() {
+#ifdef GIMLOD_ATLAS_LIBRARIES
+  return GIMLOD_ATLAS_LIBRARIES;
+#else
+  throw std::logic_error("this build has no atlas libraries (GIMLOD_RUNTIME_ONLY)");
+#endif
+}
+
 std::filesystem::path appPath() {
 #ifdef GIMLOD_APP
   return GIMLOD_APP;

@@ -34,6 +34,10 @@ bool haveRealData(const std::string& relative);
 // Whether missing shared data must fail a test rather than skip it: in CI (CI=true) or with
 // GIMLOD_REQUIRE_SHARED_DATA=1, so that real-data invariants never pass by being skipped.
 bool sharedDataRequired();
+// The build folder's cache of test atlases (build/test-cache), and the files of the libraries that
+// build atlases, '|'-separated (their sizes and times name the cached scan atlases).
+std::filesystem::path testCache();
+std::string atlasLibraries();
 // Path to the gimlod command-line app (for the cli and window tiers, whose binaries depend on it).
 std::filesystem::path appPath();
 

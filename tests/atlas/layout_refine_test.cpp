@@ -59,7 +59,7 @@ void expectSameCharts(const GeometryImageSet& a, const GeometryImageSet& b) {
 
 // The shipped bunny charted to 128 patches: a real scan whose charts fold at 33^2 samples.
 ChartLayout chartedBunny() {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
   copt.targetCharts = 128;
   return buildChartLayout(mesh, copt);
@@ -177,7 +177,7 @@ TEST(LayoutRefine, StraightSidesStayAsTheyAre) {
 }
 
 TEST(LayoutRefine, StraightenedScanSidesAreShorterAndTheLayoutStaysValid) {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
   copt.targetCharts = 64;
   ChartLayout layout = buildChartLayout(mesh, copt);
@@ -215,7 +215,7 @@ TEST(LayoutRefine, StraightenedScanSidesAreShorterAndTheLayoutStaysValid) {
 // With keepHalves, a straightening never leaves either patch less than half its triangles; on the
 // bunny some straightenings without it do (a side straightened across a patch's bulge).
 TEST(LayoutRefine, KeepHalvesStraightensNoPatchToASliver) {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
   copt.targetCharts = 48;
   const ChartLayout layout = buildChartLayout(mesh, copt);
@@ -611,7 +611,7 @@ TEST(PatchSplit, SamplingErrorRepairReachesItsBound) {
 // sampled through the parameterization, fold less than sides pinned by arc length: the shipped
 // bunny in 24 patches at 129^2, before any repair or unfolding.
 TEST(OpenSides, SlidingRimsFoldLessOnTheBunny) {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
   copt.targetCharts = 24;
   ChartLayout layout = buildChartLayout(mesh, copt);

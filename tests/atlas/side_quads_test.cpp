@@ -48,7 +48,7 @@ ResampleOptions sidesOptions(uint32_t chartSize) {
 
 // The shipped bunny charted into `patches` patches, with its side counts made even.
 ChartLayout evenedBunny(uint32_t patches) {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
   copt.targetCharts = patches;
   ChartLayout layout = buildChartLayout(mesh, copt);
@@ -257,7 +257,7 @@ TEST(EvenSides, AnOpenSideTakesTheCorner) {
 
 // The shipped bunny charted into 48 patches, as the build charts it.
 TEST(EvenSides, TheBunnysOddPatchesArePairedAndItsSidesLayoutIsSeamless) {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
   copt.targetCharts = 48;
   ChartLayout layout = buildChartLayout(mesh, copt);
@@ -304,7 +304,7 @@ std::vector<uint32_t> holeSideCounts(const ChartLayout& layout) {
 // more corners on one side, so every hole has 3 or more sides and every patch keeps its side
 // count's parity.
 TEST(EvenSides, TwoSidedHolesGetTwoMoreCorners) {
-  const IndexedMesh mesh = readMesh(std::filesystem::path(GIMLOD_REPO_DATA) / "meshes/bun_zipper.ply");
+  const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
   copt.targetCharts = 48;
   ChartLayout layout = buildChartLayout(mesh, copt);

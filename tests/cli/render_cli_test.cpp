@@ -58,7 +58,7 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
     EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos) << e.path();
 
   const double tolerance = 1.5;
-  for (const std::string& camera : {std::string("--orbit 3"), "--path '" + (fs::path(GIMLOD_REPO_DATA).parent_path() / "scenes/rainier_flyby.json").string() + "'"}) {
+  for (const std::string& camera : {std::string("--orbit 3"), "--path '" + (test::repoData().parent_path() / "scenes/rainier_flyby.json").string() + "'"}) {
     const fs::path frames = dir.path() / "frames";
     fs::remove_all(frames);
     ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + frames.string() + "' " + camera +
@@ -139,7 +139,7 @@ TEST(RenderCli, BuildAndRenderShippedScan) {
       << out;
   const fs::path frames = dir.path() / "frames";
   ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + frames.string() + "' --path '" +
-                                 (fs::path(GIMLOD_REPO_DATA).parent_path() / "scenes/bunny_orbit.json").string() +
+                                 (test::repoData().parent_path() / "scenes/bunny_orbit.json").string() +
                                  "' --size 48x36 --tolerance 2",
                              &out),
             0)

@@ -245,7 +245,7 @@ class RootFloorScan : public ::testing::Test {
   // The shipped orbit path, then a closer orbit whose views cut part of the scan away.
   static std::vector<ViewParams> path() {
     std::vector<Camera> cams =
-        readCameraPath(std::filesystem::path(GIMLOD_REPO_DATA).parent_path() / "scenes/bunny_orbit.json");
+        readCameraPath(test::repoData().parent_path() / "scenes/bunny_orbit.json");
     for (Camera& c : cams) fitClipPlanes(c, atlas_->lo, atlas_->hi);
     for (const Camera& c : orbitPath(atlas_->lo, atlas_->hi, 16, 0.3, 20.0, 45.0)) cams.push_back(c);
     std::vector<ViewParams> views;
