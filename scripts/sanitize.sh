@@ -78,7 +78,7 @@ case $kind in
     t=$(date +%s)
     failed=0
     ctest --test-dir build-tsan --output-on-failure -j"$(nproc)" -L '^runtime$' || failed=1
-    ctest --test-dir build-tsan --output-on-failure -j"$(nproc)" -R '^(PageLoader|AsyncLoading|Progress)\.' || failed=1
+    ctest --test-dir build-tsan --output-on-failure -j"$(nproc)" -R '^(PageLoaderTest|AsyncLoadingTest|Progress)\.' || failed=1
     echo "gimlod sanitize: build-tsan threaded tests in $(( $(date +%s) - t )) s"
     exit $failed
     ;;
