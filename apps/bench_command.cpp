@@ -410,7 +410,6 @@ int runBench(const BenchArgs& a) {
   uint32_t w = 0, h = 0;
   parseFrameSize(a.size, &w, &h);
   validateCameraArgs(a.camera);
-  if (a.camera.orbit > 0 && !a.camera.path.empty()) throw InputError("give only one of --orbit and --path");
   if (a.repeat == 0 || a.repeat > 1000) throw InputError("--repeat must be in [1, 1000]");
   if (a.maxRounds > 1000) throw InputError("--max-rounds must be in [0, 1000]");
   const bool costModel = a.frameMs != 0.0 || a.triRate != 0.0;

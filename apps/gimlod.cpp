@@ -109,6 +109,8 @@ std::string flagFor(std::string_view name) {
       {"depth", "--depth"},                   {"nodeRes", "--node-res"},
       {"minNodeRes", "--min-node-res"},       {"zScale", "--z-scale"},
       {"subdataset", "--subdataset"},         {"threads", "--threads"},
+      {"band", "--band"},                     {"spacing", "--spacing"},
+      {"imagery", "--imagery"},
       {"charts", "--charts"},                 {"maxChartError", "--chart-error"},
       {"repairRounds", "--repair-rounds"},    {"repairBudget", "--repair-budget"},
       {"maxSampleError", "--sample-error"},
@@ -366,8 +368,8 @@ int main(int argc, char** argv) {
       ->required();
   build->add_option("-o,--output", common.output, "Atlas directory to create")->required();
   auto* chartSizeOpt =
-      build->add_option("--chart-size", terrain.chartSize, "Chart side in samples, 2^m+1 (meshes: by default from the input's density, 65 to 1025)")
-          ->capture_default_str();
+      build->add_option("--chart-size", terrain.chartSize, "Chart side in samples, 2^m+1 (DEMs: by default the smallest from 513 that gives at most 64 charts, "
+                    "up to 32769, 2049 with imagery; meshes: from the input's density, 65 to 1025)");
   std::string chartsArg = "auto";
   build
       ->add_option("--charts", chartsArg,
@@ -439,13 +441,22 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   build
       ->add_option("--depth", common.depth,
-                   "Quadtree levels per chart, 1 to 12 (default: 5 for DEMs; meshes: as many as leave the finest "
-                   "nodes 32 intervals wide, at most 5)");
+                   "Quadtree levels per chart, 1 to 12 (default: as many as leave the finest nodes 32 intervals wide; "
+                   "DEMs at least 5, meshes at most 5)");
   build->add_option("--node-res", common.nodeRes, "Maximum node resolution R in intervals (power of two)")
       ->capture_default_str();
   build->add_option("--min-node-res", common.minNodeRes, "Minimum node resolution in intervals")->capture_default_str();
   build->add_option("--z-scale", terrain.zScale, "Height multiplier")->capture_default_str();
   build->add_option("--subdataset", terrain.subdataset, "netCDF variable / GDAL subdataset to read");
+  build->add_option("--band", terrain.band,
+                    "DEMs: the band holding the heights, from 1 (default: band 1; a 3- or 4-band byte image is "
+                    "refused as colour)");
+  std::vector<double> spacingArg;
+  build->add_option("--spacing", spacingArg,
+                    "DEMs: metres between samples, X[,Y] (east, north; Y defaults to X), in place of the georeference's "
+                    "(a raster without one is otherwise taken as 1 m)")
+      ->delimiter(',')
+      ->expected(1, 2);
   build->add_option("--threads", common.threads, "Worker threads (0: all cores)")->capture_default_str();
   build->add_option("--imagery", terrain.imagery,
                     "DEMs: colour raster (RGB/RGBA/grey, any format GDAL reads) draped over the terrain, reprojected "
@@ -609,6 +620,12 @@ int main(int argc, char** argv) {
         if (imageryScale != 1 && imageryScale != 2 && imageryScale != 4)
           throw InputError("--imagery-scale " + std::to_string(imageryScale) + " must be 1, 2 or 4");
         terrain.imageryScaleLog2 = int(log2u(imageryScale));
+      }
+      if (!spacingArg.empty()) {
+        for (double v : spacingArg)
+          if (!(v > 0.0) || !std::isfinite(v))
+            throw InputError("--spacing " + std::to_string(v) + " must be a positive number of metres");
+        terrain.spacing = {spacingArg[0], spacingArg.back()};
       }
       if (!imageryExtent.empty())
         terrain.imageryExtent = std::array<double, 4>{imageryExtent[0], imageryExtent[1], imageryExtent[2],

@@ -21,6 +21,7 @@ namespace gimlod {
 struct CameraArgs {
   std::string path;   // camera path JSON; empty: orbit
   uint32_t orbit = 0; // orbit frames
+  uint32_t descent = 0;  // fly-down frames (descentPath)
   double distance = 0.9, elevation = 35.0, fov = 45.0;
 };
 
@@ -28,6 +29,8 @@ struct CameraArgs {
 inline void addCameraOptions(CLI::App* cmd, CameraArgs& a) {
   cmd->add_option("--path", a.path, "Camera path JSON: frames of eye, target, up, fov_deg");
   cmd->add_option("--orbit", a.orbit, "Frames of an orbit around the bounding-box centre");
+  cmd->add_option("--descent", a.descent,
+                  "Frames of a fly-down onto a terrain: from a diagonal above it to 1/500 of it, towards the centre");
   cmd->add_option("--distance", a.distance, "Orbit distance as a fraction of the bounding-box diagonal")
       ->capture_default_str();
   cmd->add_option("--elevation", a.elevation, "Orbit elevation in degrees")->capture_default_str();
@@ -38,12 +41,16 @@ inline void addCameraOptions(CLI::App* cmd, CameraArgs& a) {
 inline void validateCameraArgs(const CameraArgs& a) {
   if (!(a.distance > 0.0) || !std::isfinite(a.distance)) throw InputError("--distance must be > 0");
   if (!(a.fov > 1.0 && a.fov < 179.0)) throw InputError("--fov must be in (1, 179) degrees");
-  if (a.orbit == 0 && a.path.empty()) throw InputError("give --orbit N or --path FILE.json");
+  if ((a.orbit > 0) + (a.descent > 0) + !a.path.empty() != 1)
+    throw InputError("give one of --orbit N, --descent N and --path FILE.json");
   if (a.orbit > 100000) throw InputError("--orbit must be at most 100000 frames");
+  if (a.descent > 100000) throw InputError("--descent must be at most 100000 frames");
 }
 
-// The cameras: the JSON path (clip planes fitted to the atlas) if given, else the orbit.
+// The cameras: the JSON path (clip planes fitted to the atlas) if given, else the orbit or the
+// descent.
 inline std::vector<Camera> loadCameras(const CameraArgs& a, const AtlasView& atlas) {
+  if (a.descent > 0) return descentPath(atlas.lo, atlas.hi, a.descent, a.fov);
   if (a.path.empty()) return orbitPath(atlas.lo, atlas.hi, a.orbit, a.distance, a.elevation, a.fov);
   std::vector<Camera> cams = readCameraPath(a.path);
   for (Camera& c : cams) fitClipPlanes(c, atlas.lo, atlas.hi);

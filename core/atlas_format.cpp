@@ -392,6 +392,21 @@ void AtomicFileWriter::write(const void* data, size_t bytes) {
   }
 }
 
+void AtomicFileWriter::writeAt(uint64_t offset, const void* data, size_t bytes) {
+  if (fd_ < 0) throw std::logic_error("AtomicFileWriter: write after commit or failure");
+  const auto* p = static_cast<const uint8_t*>(data);
+  while (bytes > 0) {
+    const ssize_t w = ::pwrite(fd_, p, std::min<size_t>(bytes, size_t{1} << 30), off_t(offset));
+    if (w < 0) {
+      if (errno == EINTR) continue;
+      fail("write failed", errno);
+    }
+    p += w;
+    offset += uint64_t(w);
+    bytes -= static_cast<size_t>(w);
+  }
+}
+
 void AtomicFileWriter::commit() {
   if (fd_ < 0) throw std::logic_error("AtomicFileWriter: commit after commit or failure");
   if (::fdatasync(fd_) != 0 && errno != EINVAL && errno != EROFS) fail("flush failed", errno);
@@ -667,17 +682,198 @@ AtlasManifest readManifest(const fs::path& dir) {
 
 // ---- chart files ------------------------------------------------------------------------------
 
+struct ChartFileWriter::Impl {
+  uint32_t chartSize = 0, blockIntervals = 0, levels = 0;
+  uint32_t mask = 0;    // channels of the chart
+  uint32_t stored = 0;  // channels stored (a derived height field stores no normals)
+  ChartCoding coding;
+  bool v1 = false, derived = false, borderNormals = false;
+  size_t entryBytes = 0;
+  std::vector<LevelLayout> layouts;
+  std::vector<size_t> levelEntry;  // directory entry of each level's first block
+  std::vector<uint8_t> directory;  // entries, filled as blocks come
+  std::vector<uint8_t> written;    // per block
+  size_t header = 0;
+  std::mutex mutex;
+  AtomicFileWriter file;
+  uint64_t end = 0;  // bytes so far
+
+  explicit Impl(const fs::path& path) : file(path) {}
+
+  // One block's channel c, gathered row by row into `out` and coded (version 3) or made little-endian.
+  void blockBytes(uint32_t c, const LevelLayout& l, uint32_t bx, uint32_t by, const BlockChannel& in,
+                  std::vector<uint8_t>& raw, std::vector<uint8_t>& out) const {
+    const size_t es = kChannelBytes[c];
+    const uint32_t bs = l.blockSamples;
+    const bool ring = derived && c == kChannelHeights;  // (bs + 2)^2 from the ring heights
+    const uint32_t side = ring ? bs + 2 : bs;
+    if (!in.data || in.stride < side) throw std::invalid_argument("ChartFileWriter: a block lacks a channel's samples");
+    raw.resize(size_t{side} * side * es);
+    for (uint32_t v = 0; v < side; ++v)
+      std::memcpy(raw.data() + size_t{v} * side * es, static_cast<const uint8_t*>(in.data) + size_t{v} * in.stride * es,
+                  size_t{side} * es);
+    const size_t count = size_t{bs} * bs;
+    if (!coding.compressed) {
+      if (kChannelIsFloat[c])
+        for (size_t i = 0; i < raw.size() / sizeof(float); ++i) {
+          float f;
+          std::memcpy(&f, raw.data() + i * sizeof(float), sizeof(float));
+          f = toLittle(f);
+          std::memcpy(raw.data() + i * sizeof(float), &f, sizeof(float));
+        }
+      out.swap(raw);
+      return;
+    }
+    switch (c) {
+      case kChannelHeights:
+        out = encodeHeights({reinterpret_cast<const float*>(raw.data()), size_t{side} * side}, side,
+                            coding.heightPrecision);
+        break;
+      case kChannelPositions:
+        out = encodePositions({reinterpret_cast<const float*>(raw.data()), 3 * count}, bs, coding.positionStep,
+                              (by == 0 ? kChartBorderBottom : 0) | (bx == 0 ? kChartBorderLeft : 0) |
+                                  (by + 1 == l.blocksPerSide ? kChartBorderTop : 0) |
+                                  (bx + 1 == l.blocksPerSide ? kChartBorderRight : 0));
+        break;
+      case kChannelNormals:
+        out = borderNormals ? encodeBorderNormals({reinterpret_cast<const PackedNormal*>(raw.data()), count}, bs)
+                            : encodeNormals({reinterpret_cast<const PackedNormal*>(raw.data()), count}, bs);
+        break;
+      default:
+        out = encodeColours({reinterpret_cast<const PackedColour*>(raw.data()), count}, bs);
+        break;
+    }
+  }
+};
+
+ChartFileWriter::ChartFileWriter(fs::path path, uint32_t chartSize, uint32_t blockIntervals, uint32_t levels,
+                                 uint32_t channelMask, const ChartCoding& coding, std::optional<HeightFieldFrame> frame)
+    : path_(std::move(path)) {
+  if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) || blockIntervals > chartSize - 1)
+    throw std::invalid_argument("ChartFileWriter: bad chartSize/blockIntervals");
+  const uint32_t mask = channelMask;
+  const bool heightField = mask == kHeightFieldMask;
+  const bool geometry = (mask & (1u << kChannelPositions)) && (mask & (1u << kChannelNormals)) &&
+                        !(mask & (1u << kChannelHeights));
+  if (!heightField && !geometry && mask != kAttributeMask)
+    throw std::invalid_argument(
+        "ChartFileWriter: a chart has heights and normals, or positions and normals (and colours), or colours alone");
+  if (levels < 1 || levels > log2Exact(chartSize - 1) + 1)
+    throw std::invalid_argument("ChartFileWriter: bad pyramid level count");
+  if (coding.compressed && (mask & (1u << kChannelPositions)) && !(coding.positionStep > 0.0))
+    throw std::invalid_argument("ChartFileWriter: compressed positions need a positionStep > 0");
+  if (frame && !(coding.compressed && heightField))
+    throw std::invalid_argument("ChartFileWriter: only a compressed height field derives its normals");
+  impl_ = std::make_unique<Impl>(path_);
+  Impl& w = *impl_;
+  w.chartSize = chartSize;
+  w.blockIntervals = blockIntervals;
+  w.levels = levels;
+  w.mask = mask;
+  w.coding = coding;
+  w.v1 = heightField && !coding.compressed;
+  w.derived = frame.has_value();
+  w.stored = w.derived ? mask & ~(1u << kChannelNormals) : mask;
+  w.borderNormals = coding.compressed && geometry && coding.deriveGeometryNormals;
+  w.header = coding.compressed ? kChartHeaderBytesV3 + (w.derived ? kFrameBytes : 0)
+             : w.v1            ? kChartHeaderBytes
+                               : kChartHeaderBytesV2;
+  w.entryBytes = coding.compressed ? kCodedEntryBytes * size_t(std::popcount(w.stored))
+                 : w.v1            ? kDirEntryBytes
+                                   : 8 * size_t(std::popcount(mask));
+  size_t entries = 0;
+  for (uint32_t k = 0; k < levels; ++k) {
+    w.layouts.push_back(levelLayout(chartSize, blockIntervals, k));
+    w.levelEntry.push_back(entries);
+    entries += size_t{w.layouts[k].blocksPerSide} * w.layouts[k].blocksPerSide;
+  }
+  w.written.assign(entries, 0);
+  // The header, then the directory as it will be.
+  w.directory.assign(w.header + entries * w.entryBytes, 0);
+  std::vector<uint8_t>& buf = w.directory;
+  std::memcpy(buf.data(), kChartMagic, 4);
+  putLe<uint32_t>(buf, 4, coding.compressed ? kChartFileVersionCoded : w.v1 ? kChartFileVersion : kChartFileVersionChannels);
+  putLe<uint32_t>(buf, 8, chartSize);
+  putLe<uint32_t>(buf, 12, blockIntervals);
+  putLe<uint32_t>(buf, 16, levels);
+  if (!w.v1) putLe<uint32_t>(buf, 20, mask);
+  if (coding.compressed) {
+    putLe<uint32_t>(buf, 24, w.derived ? kFlagDerivedNormals : w.borderNormals ? kFlagBorderNormals : 0);
+    if (w.derived) {
+      putLe<int64_t>(buf, 28, frame->originX);
+      putLe<int64_t>(buf, 36, frame->originY);
+      putLe<int64_t>(buf, 44, frame->maxX);
+      putLe<int64_t>(buf, 52, frame->maxY);
+      putLe<double>(buf, 60, frame->spacing[0]);
+      putLe<double>(buf, 68, frame->spacing[1]);
+    }
+  }
+  w.file.write(buf.data(), buf.size());
+  w.end = buf.size();
+}
+
+ChartFileWriter::~ChartFileWriter() = default;
+uint32_t ChartFileWriter::chartSize() const { return impl_->chartSize; }
+uint32_t ChartFileWriter::blockIntervals() const { return impl_->blockIntervals; }
+
+ChartFileWriter::CodedBlock ChartFileWriter::code(uint32_t level, uint32_t bx, uint32_t by, const BlockData& data) const {
+  const Impl& w = *impl_;
+  if (level >= w.levels || bx >= w.layouts[level].blocksPerSide || by >= w.layouts[level].blocksPerSide)
+    throw std::logic_error("ChartFileWriter: no block (" + std::to_string(bx) + ", " + std::to_string(by) +
+                           ") on level " + std::to_string(level));
+  CodedBlock out{level, bx, by, {}};
+  std::vector<uint8_t> raw;
+  for (uint32_t c = 0; c < kChannelCount; ++c)
+    if (w.stored & (1u << c)) w.blockBytes(c, w.layouts[level], bx, by, data[c], raw, out.bytes[c]);
+  return out;
+}
+
+void ChartFileWriter::append(const CodedBlock& block) {
+  Impl& w = *impl_;
+  const LevelLayout& l = w.layouts.at(block.level);
+  const size_t entry = w.levelEntry[block.level] + size_t{block.by} * l.blocksPerSide + block.bx;
+  const std::lock_guard<std::mutex> lock(w.mutex);
+  if (w.written.at(entry)) throw std::logic_error("ChartFileWriter: block written twice");
+  w.written[entry] = 1;
+  size_t at = w.header + entry * w.entryBytes;
+  for (uint32_t c = 0; c < kChannelCount; ++c) {
+    if (!(w.stored & (1u << c))) continue;
+    putLe<uint64_t>(w.directory, at, w.end);
+    at += 8;
+    if (w.coding.compressed) {
+      putLe<uint32_t>(w.directory, at, uint32_t(block.bytes[c].size()));
+      at += 4;
+    }
+    w.file.write(block.bytes[c].data(), block.bytes[c].size());
+    w.end += block.bytes[c].size();
+  }
+}
+
+uint64_t ChartFileWriter::commit() {
+  Impl& w = *impl_;
+  const std::lock_guard<std::mutex> lock(w.mutex);
+  if (std::find(w.written.begin(), w.written.end(), 0) != w.written.end())
+    throw std::logic_error("ChartFileWriter: " + path_.string() + ": a block was not written");
+  w.file.writeAt(0, w.directory.data(), w.directory.size());
+  w.file.commit();
+  return w.end;
+}
+
 uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint32_t chartSize,
                         uint32_t blockIntervals, const ChartCoding& coding) {
   if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) ||
       blockIntervals > chartSize - 1)
     throw std::invalid_argument("writeChartFile: bad chartSize/blockIntervals");
-  // Channels present, as byte images per level.
+  // Channels present, as levels of samples.
   std::array<std::vector<const uint8_t*>, kChannelCount> data;
   std::array<size_t, kChannelCount> counts{};
+  std::array<std::vector<size_t>, kChannelCount> sizes;
   auto add = [&](ChartChannel c, const auto& levels) {
     counts[c] = levels.size();
-    for (const auto& l : levels) data[c].push_back(reinterpret_cast<const uint8_t*>(l.data()));
+    for (const auto& l : levels) {
+      data[c].push_back(reinterpret_cast<const uint8_t*>(l.data()));
+      sizes[c].push_back(l.size());
+    }
   };
   add(kChannelHeights, pyramid.heights);
   add(kChannelNormals, pyramid.normals);
@@ -686,177 +882,45 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
   uint32_t mask = 0;
   for (uint32_t c = 0; c < kChannelCount; ++c)
     if (counts[c] != 0) mask |= 1u << c;
-  const bool heightField = mask == kHeightFieldMask;
-  const bool geometry = (mask & (1u << kChannelPositions)) && (mask & (1u << kChannelNormals)) &&
-                        !(mask & (1u << kChannelHeights));
-  if (!heightField && !geometry && mask != kAttributeMask)
-    throw std::invalid_argument(
-        "writeChartFile: a chart has heights and normals, or positions and normals (and colours), or colours alone");
   const uint32_t levels = static_cast<uint32_t>(mask == kAttributeMask ? pyramid.colours.size() : pyramid.normals.size());
-  if (levels < 1 || levels > log2Exact(chartSize - 1) + 1)
-    throw std::invalid_argument("writeChartFile: bad pyramid level count");
   for (uint32_t c = 0; c < kChannelCount; ++c)
     if (counts[c] != 0 && counts[c] != levels)
       throw std::invalid_argument("writeChartFile: channels have different level counts");
-  const uint32_t channels = uint32_t(std::popcount(mask));
-  const bool v1 = heightField && !coding.compressed;
   // Compressed height fields with their ring heights derive their normals on reading.
-  const bool derived = coding.compressed && heightField && pyramid.frame && pyramid.ringHeights.size() == levels;
-  const uint32_t stored = derived ? mask & ~(1u << kChannelNormals) : mask;
-  // Compressed geometry charts may store their normals on block borders only (geometryImageNormals).
-  const bool borderNormals = coding.compressed && geometry && coding.deriveGeometryNormals;
-  const size_t header = coding.compressed ? kChartHeaderBytesV3 + (derived ? kFrameBytes : 0)
-                        : v1              ? kChartHeaderBytes
-                                          : kChartHeaderBytesV2;
-  const size_t entryBytes = coding.compressed ? kCodedEntryBytes * size_t(std::popcount(stored))
-                            : v1              ? kDirEntryBytes
-                                              : 8 * channels;
-  if (coding.compressed && (mask & (1u << kChannelPositions)) && !(coding.positionStep > 0.0))
-    throw std::invalid_argument("writeChartFile: compressed positions need a positionStep > 0");
-
-  // Directory and total size.
-  std::vector<LevelLayout> layouts(levels);
-  size_t dirEntries = 0;
-  size_t sampleBytes = 0;
-  for (uint32_t c = 0; c < kChannelCount; ++c)
-    if (mask & (1u << c)) sampleBytes += kChannelBytes[c];
+  const bool derived = coding.compressed && mask == kHeightFieldMask && pyramid.frame &&
+                       pyramid.ringHeights.size() == levels;
+  if (levels < 1 || levels > log2Exact(chartSize - 1) + 1)
+    throw std::invalid_argument("writeChartFile: bad pyramid level count");
   for (uint32_t k = 0; k < levels; ++k) {
-    layouts[k] = levelLayout(chartSize, blockIntervals, k);
-    const size_t s = layouts[k].samples;
-    auto sizeOf = [&](uint32_t c) {
-      switch (c) {
-        case kChannelHeights: return pyramid.heights[k].size();
-        case kChannelNormals: return pyramid.normals[k].size();
-        case kChannelPositions: return pyramid.positions[k].size();
-        default: return pyramid.colours[k].size();
-      }
-    };
+    const size_t s = levelLayout(chartSize, blockIntervals, k).samples;
     for (uint32_t c = 0; c < kChannelCount; ++c)
-      if ((mask & (1u << c)) && sizeOf(c) != s * s)
-        throw std::invalid_argument("writeChartFile: level " + std::to_string(k) +
-                                    " has the wrong number of samples");
-    dirEntries += size_t{layouts[k].blocksPerSide} * layouts[k].blocksPerSide;
+      if ((mask & (1u << c)) && sizes[c][k] != s * s)
+        throw std::invalid_argument("writeChartFile: level " + std::to_string(k) + " has the wrong number of samples");
+    if (derived && pyramid.ringHeights[k].size() != (s + 2) * (s + 2))
+      throw std::invalid_argument("writeChartFile: level " + std::to_string(k) + " ring heights are not (samples+2)^2");
   }
-  if (coding.compressed) {
-    // Version 3: each block of each channel coded on its own, appended after the directory.
-    std::vector<uint8_t> buf(header + dirEntries * entryBytes);
-    std::memcpy(buf.data(), kChartMagic, 4);
-    putLe<uint32_t>(buf, 4, kChartFileVersionCoded);
-    putLe<uint32_t>(buf, 8, chartSize);
-    putLe<uint32_t>(buf, 12, blockIntervals);
-    putLe<uint32_t>(buf, 16, levels);
-    putLe<uint32_t>(buf, 20, mask);
-    putLe<uint32_t>(buf, 24, derived ? kFlagDerivedNormals : borderNormals ? kFlagBorderNormals : 0);
-    if (derived) {
-      const HeightFieldFrame& f = *pyramid.frame;
-      putLe<int64_t>(buf, 28, f.originX);
-      putLe<int64_t>(buf, 36, f.originY);
-      putLe<int64_t>(buf, 44, f.maxX);
-      putLe<int64_t>(buf, 52, f.maxY);
-      putLe<double>(buf, 60, f.spacing[0]);
-      putLe<double>(buf, 68, f.spacing[1]);
-      for (uint32_t k = 0; k < levels; ++k)
-        if (pyramid.ringHeights[k].size() != size_t{layouts[k].samples + 2} * (layouts[k].samples + 2))
-          throw std::invalid_argument("writeChartFile: level " + std::to_string(k) + " ring heights are not (samples+2)^2");
-    }
-    size_t dirAt = header;
-    std::vector<uint8_t> samples;  // one block of one channel, row-major
-    for (uint32_t k = 0; k < levels; ++k) {
-      const LevelLayout& l = layouts[k];
-      const uint32_t b = l.blockSamples - 1, bs = l.blockSamples;
-      for (uint32_t by = 0; by < l.blocksPerSide; ++by)
-        for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx)
-          for (uint32_t c = 0; c < kChannelCount; ++c) {
-            if (!(stored & (1u << c))) continue;
-            const size_t es = kChannelBytes[c];
-            const bool ring = derived && c == kChannelHeights;  // (bs + 2)^2 from the ring heights
-            const uint32_t side = ring ? bs + 2 : bs;
-            samples.resize(size_t{side} * side * es);
-            for (uint32_t v = 0; v < side; ++v) {
-              const uint8_t* src =
-                  ring ? reinterpret_cast<const uint8_t*>(pyramid.ringHeights[k].data()) +
-                             (size_t{by * b + v} * (l.samples + 2) + size_t{bx} * b) * es
-                       : data[c][k] + (size_t{by * b + v} * l.samples + size_t{bx} * b) * es;
-              std::memcpy(samples.data() + size_t{v} * side * es, src, size_t{side} * es);
-            }
-            const size_t count = size_t{bs} * bs;
-            std::vector<uint8_t> code;
-            switch (c) {
-              case kChannelHeights:
-                code = encodeHeights({reinterpret_cast<const float*>(samples.data()), size_t{side} * side}, side,
-                                     coding.heightPrecision);
-                break;
-              case kChannelPositions:
-                code = encodePositions({reinterpret_cast<const float*>(samples.data()), 3 * count}, bs,
-                                       coding.positionStep,
-                                       (by == 0 ? kChartBorderBottom : 0) | (bx == 0 ? kChartBorderLeft : 0) |
-                                           (by + 1 == l.blocksPerSide ? kChartBorderTop : 0) |
-                                           (bx + 1 == l.blocksPerSide ? kChartBorderRight : 0));
-                break;
-              case kChannelNormals:
-                code = borderNormals
-                           ? encodeBorderNormals({reinterpret_cast<const PackedNormal*>(samples.data()), count}, bs)
-                           : encodeNormals({reinterpret_cast<const PackedNormal*>(samples.data()), count}, bs);
-                break;
-              default:
-                code = encodeColours({reinterpret_cast<const PackedColour*>(samples.data()), count}, bs);
-                break;
-            }
-            putLe<uint64_t>(buf, dirAt, buf.size());
-            putLe<uint32_t>(buf, dirAt + 8, uint32_t(code.size()));
-            dirAt += kCodedEntryBytes;
-            buf.insert(buf.end(), code.begin(), code.end());
-          }
-    }
-    atomicWriteFile(path, buf.data(), buf.size());
-    return buf.size();
-  }
-
-  uint64_t offset = header + dirEntries * entryBytes;
-  uint64_t total = offset;
-  for (const LevelLayout& l : layouts) {
-    const uint64_t bs2 = uint64_t{l.blockSamples} * l.blockSamples;
-    total += uint64_t{l.blocksPerSide} * l.blocksPerSide * bs2 * sampleBytes;
-  }
-  std::vector<uint8_t> buf(total);
-  std::memcpy(buf.data(), kChartMagic, 4);
-  putLe<uint32_t>(buf, 4, v1 ? kChartFileVersion : kChartFileVersionChannels);
-  putLe<uint32_t>(buf, 8, chartSize);
-  putLe<uint32_t>(buf, 12, blockIntervals);
-  putLe<uint32_t>(buf, 16, levels);
-  if (!v1) putLe<uint32_t>(buf, 20, mask);
-
-  size_t dirAt = header;
+  std::optional<HeightFieldFrame> frame;
+  if (derived) frame = pyramid.frame;
+  ChartFileWriter writer(path, chartSize, blockIntervals, levels, mask, coding, frame);
   for (uint32_t k = 0; k < levels; ++k) {
-    const LevelLayout& l = layouts[k];
+    const LevelLayout l = levelLayout(chartSize, blockIntervals, k);
     const uint32_t b = l.blockSamples - 1;
-    const uint32_t bs = l.blockSamples;
-    for (uint32_t by = 0; by < l.blocksPerSide; ++by) {
+    for (uint32_t by = 0; by < l.blocksPerSide; ++by)
       for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx) {
+        BlockData block;
         for (uint32_t c = 0; c < kChannelCount; ++c) {
           if (!(mask & (1u << c))) continue;
-          const size_t es = kChannelBytes[c];
-          putLe<uint64_t>(buf, dirAt, offset);
-          dirAt += 8;
-          for (uint32_t v = 0; v < bs; ++v) {
-            const size_t src = size_t{by * b + v} * l.samples + size_t{bx} * b;
-            uint8_t* dst = buf.data() + offset + size_t{v} * bs * es;
-            std::memcpy(dst, data[c][k] + src * es, size_t{bs} * es);
-            if (kChannelIsFloat[c])
-              for (size_t i = 0; i < size_t{bs} * es / sizeof(float); ++i) {
-                float f;
-                std::memcpy(&f, dst + i * sizeof(float), sizeof(float));
-                f = toLittle(f);
-                std::memcpy(dst + i * sizeof(float), &f, sizeof(float));
-              }
-          }
-          offset += uint64_t{bs} * bs * es;
+          const size_t at = size_t{by * b} * l.samples + size_t{bx} * b;
+          block[c] = {data[c][k] + at * kChannelBytes[c], l.samples};
         }
+        if (derived) {
+          const size_t rs = size_t{l.samples} + 2;
+          block[kChannelHeights] = {pyramid.ringHeights[k].data() + size_t{by * b} * rs + size_t{bx} * b, rs};
+        }
+        writer.writeBlock(k, bx, by, block);
       }
-    }
   }
-  atomicWriteFile(path, buf.data(), buf.size());
-  return total;
+  return writer.commit();
 }
 
 ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
@@ -1181,6 +1245,25 @@ std::vector<float> ChartFileReader::readLevelHeights(uint32_t level) const {
                               [&](uint32_t u0, uint32_t v0, uint32_t n, float* out) {
                                 readHeights(level, u0, v0, n, out);
                               });
+}
+
+std::vector<float> ChartFileReader::readHeightsWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n) const {
+  if (level >= levels_) throw std::logic_error("ChartFileReader: level out of range");
+  const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
+  const uint32_t b = l.blockSamples - 1;
+  if (n == 0 || u0 % b || v0 % b || n % b || u0 + n > l.samples - 1 || v0 + n > l.samples - 1)
+    throw std::logic_error("ChartFileReader: a window of whole blocks inside the level expected");
+  const uint32_t side = n + 1;
+  std::vector<float> out(size_t{side} * side);
+  std::vector<float> blk(size_t{l.blockSamples} * l.blockSamples);
+  for (uint32_t v = v0; v < v0 + n; v += b)
+    for (uint32_t u = u0; u < u0 + n; u += b) {
+      readHeights(level, u, v, b, blk.data());
+      for (uint32_t r = 0; r <= b; ++r)
+        std::copy_n(blk.data() + size_t{r} * l.blockSamples, l.blockSamples,
+                    out.data() + size_t{v - v0 + r} * side + (u - u0));
+    }
+  return out;
 }
 
 std::vector<PackedNormal> ChartFileReader::readLevelNormals(uint32_t level) const {

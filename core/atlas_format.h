@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <stdexcept>
@@ -170,6 +171,8 @@ class AtomicFileWriter {
   AtomicFileWriter(const AtomicFileWriter&) = delete;
   AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
   void write(const void* data, size_t bytes);
+  // Overwrites bytes already written at `offset` (a header filled in last).
+  void writeAt(uint64_t offset, const void* data, size_t bytes);
   void commit();
 
  private:
@@ -308,10 +311,59 @@ struct ChartCoding {
 // (encodeBorderNormals) and the reader derives the others from the block's positions
 // (geometryImageNormals). Each directory entry holds, per stored channel, u64 offset and u32
 // byte count of the block's code.
-// Built in memory and written atomically. Returns bytes written. Throws std::invalid_argument on a
-// malformed pyramid or one the coding cannot take, InputError if the file cannot be written.
+// Written block by block in level order (ChartFileWriter) and renamed into place. Returns bytes
+// written. Throws std::invalid_argument on a malformed pyramid or one the coding cannot take,
+// InputError if the file cannot be written.
 uint64_t writeChartFile(const std::filesystem::path& path, const ChartPyramid& pyramid,
                         uint32_t chartSize, uint32_t blockIntervals, const ChartCoding& coding = {});
+
+// One channel of one block as a writer takes it: element (0, 0) of the block (of its ring, for the
+// ring heights of a height field whose normals are derived), rows `stride` elements apart.
+struct BlockChannel {
+  const void* data = nullptr;
+  size_t stride = 0;
+};
+using BlockData = std::array<BlockChannel, kChannelCount>;
+
+// A chart file written a block at a time, in any order and from any thread, so that a chart's
+// size does not bound the memory that writes it: the header and the directory are reserved
+// first, each block is coded (or made little-endian) by the calling thread and appended, and
+// commit() fills the directory in and renames the file into place (AtomicFileWriter). Written in
+// level order (level, then rows of blocks), the file is byte for byte what writeChartFile made
+// when it built whole files in memory. channelMask: as writeChartFile derives it (heights and
+// normals, positions and normals with or without colours, or colours alone); frame: a compressed
+// height field's, whose normals are then derived (its blocks give ring heights, no normals).
+class ChartFileWriter {
+ public:
+  // Throws std::invalid_argument for a bad size, level count, mask or coding; InputError if the
+  // file cannot be created.
+  ChartFileWriter(std::filesystem::path path, uint32_t chartSize, uint32_t blockIntervals, uint32_t levels,
+                  uint32_t channelMask, const ChartCoding& coding, std::optional<HeightFieldFrame> frame = {});
+  ~ChartFileWriter();
+  ChartFileWriter(const ChartFileWriter&) = delete;
+  ChartFileWriter& operator=(const ChartFileWriter&) = delete;
+  // A block coded as the file stores it, not yet placed.
+  struct CodedBlock {
+    uint32_t level = 0, bx = 0, by = 0;
+    std::array<std::vector<uint8_t>, kChannelCount> bytes;  // per stored channel
+  };
+  // Block (bx, by) of `level`, from a pointer for each channel the file stores, coded. Thread-safe.
+  CodedBlock code(uint32_t level, uint32_t bx, uint32_t by, const BlockData& data) const;
+  // Appends a coded block. Thread-safe; a block is written once (std::logic_error otherwise). The
+  // file's bytes follow the order of the calls.
+  void append(const CodedBlock& block);
+  void writeBlock(uint32_t level, uint32_t bx, uint32_t by, const BlockData& data) { append(code(level, bx, by, data)); }
+  // Throws std::logic_error when a block is missing. Returns the file's bytes.
+  uint64_t commit();
+  const std::filesystem::path& path() const { return path_; }
+  uint32_t chartSize() const;
+  uint32_t blockIntervals() const;
+
+ private:
+  struct Impl;
+  std::filesystem::path path_;
+  std::unique_ptr<Impl> impl_;
+};
 
 // Random access to one chart file's blocks; reads only the requested block. Thread-safe.
 class ChartFileReader {
@@ -326,6 +378,9 @@ class ChartFileReader {
   void readNormals(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, PackedNormal* out) const;
   // Reads a whole level (all blocks).
   std::vector<float> readLevelHeights(uint32_t level) const;
+  // The (n+1)^2 heights of level `level` from (u0, v0), a window of whole blocks (u0, v0 and n
+  // multiples of the level's block intervals), row-major.
+  std::vector<float> readHeightsWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n) const;
   std::vector<PackedNormal> readLevelNormals(uint32_t level) const;
   // Geometry charts (version 2). Throw std::logic_error when the file lacks the channel.
   void readPositions(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, glm::vec3* out) const;

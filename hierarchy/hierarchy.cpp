@@ -5,6 +5,7 @@
 #include "core/progress.h"
 
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -106,8 +107,9 @@ void initChartNodes(const HierarchyParams& p, Hierarchy::ChartNodes& out) {
 
 // Writes the per-node values of an M x M per-cell array (and its 2x2 reductions) for every level
 // that has a node: out(level, x, y, value).
+// Returns the value of the whole array (level 0's).
 template <typename Op, typename Out>
-void forEachNodeReduction(std::vector<float> cells, uint32_t L, uint32_t depth, Op op, Out out) {
+float forEachNodeReduction(std::vector<float> cells, uint32_t L, uint32_t depth, Op op, Out out) {
   std::vector<float> tmp;
   for (uint32_t n = 1u << L, l = L;; n /= 2, --l) {
     if (l < depth)
@@ -117,6 +119,7 @@ void forEachNodeReduction(std::vector<float> cells, uint32_t L, uint32_t depth, 
     reduce2x2(cells, n, tmp, op);
     cells.swap(tmp);
   }
+  return cells[0];
 }
 
 // Node errors for every usable (level, res): 0 at the source resolution; above it the max over
@@ -147,44 +150,136 @@ void fillErrors(const HierarchyParams& p, const std::vector<T>& samples, Dist di
   }
 }
 
-void buildChart(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart,
-                const std::vector<float>& h, Hierarchy::ChartNodes& out) {
-  const uint32_t L = p.intervalsLog2;
-  const uint32_t M = 1u << L;
-  const uint32_t S = M + 1;
-  initChartNodes(p, out);
+// running[i] = max(running[i], |h_i - surface_k|) for every sample of a tile of 2^t intervals at
+// chart sample (ox, oy), for a level k > t whose cells are larger than the tile: their corners are
+// samples of the chart's level t (`coarse`, `coarseSide` a side). The cells and the weights are
+// forEachLevelSample's over the whole chart.
+void accumulateCoarseError(const std::vector<float>& h, uint32_t t, uint32_t ox, uint32_t oy, uint32_t L, uint32_t k,
+                           const std::vector<float>& coarse, uint32_t coarseSide, std::vector<float>& running) {
+  const uint32_t S = (1u << t) + 1, n = (1u << L) >> k, s = 1u << k, step = 1u << (k - t);
+  const float inv = 1.0f / float(s);
+  for (uint32_t y = 0; y < S; ++y) {
+    const uint32_t Y = oy + y, cy = std::min(Y >> k, n - 1);
+    const float fy = float(Y - cy * s) * inv;
+    const float* row0 = &coarse[size_t(cy * step) * coarseSide];
+    const float* row1 = &coarse[size_t((cy + 1) * step) * coarseSide];
+    for (uint32_t x = 0; x < S; ++x) {
+      const uint32_t X = ox + x, cx = std::min(X >> k, n - 1);
+      const float fx = float(X - cx * s) * inv;
+      const uint32_t c0 = cx * step, c1 = (cx + 1) * step;
+      const float surface = cellSurface(row0[c0], row0[c1], row1[c0], row1[c1], fx, fy);
+      float& r = running[size_t(y) * S + x];
+      r = std::max(r, std::fabs(h[size_t(y) * S + x] - surface));
+    }
+  }
+}
 
+// What the nodes above a tile need of it: its heights' range and, per pyramid level k, the largest
+// running error (fillErrors) over its samples.
+struct TileSummary {
+  float lo = 0, hi = 0;
+  std::vector<float> levelError;  // [k], k = 0 .. intervalsLog2 - minNodeResLog2
+};
+
+// A node's bounds and flag, from its place in the chart and its heights' range.
+void setNodeBounds(const AtlasManifest& m, const ChartInfo& chart, uint32_t L, uint32_t l, uint32_t x, uint32_t y,
+                   float lo, float hi, Hierarchy::ChartNodes& out) {
+  const uint32_t idx = nodeIndex(l, x, y), size = (1u << L) >> l;
+  const int64_t ox = (int64_t(chart.gridX) << L) + int64_t(x) * size, oy = (int64_t(chart.gridY) << L) + int64_t(y) * size;
+  out.bounds[idx] = {float(double(ox) * m.spacing[0]), float(double(oy) * m.spacing[1]), lo,
+                     float(double(ox + size) * m.spacing[0]), float(double(oy + size) * m.spacing[1]), hi};
+  out.flags[idx] = ox >= int64_t(m.samplesX) - 1 || oy >= int64_t(m.samplesY) - 1 ? kNodeEmpty : 0;
+}
+
+// Bounds, flags and errors of the nodes inside tile (tx, ty) of 2^t level-0 intervals of a terrain
+// chart, from the tile's heights h ((2^t + 1)^2, row = v); coarse: the chart's pyramid level t, for
+// the levels whose cells are larger than the tile (t < intervalsLog2). A whole chart is its one
+// tile (t = intervalsLog2). Node error at res r = max over the node's samples of the running level
+// error (accumulateLevelError), so errors never decrease as resolution drops. Writes only the
+// tile's own nodes; returns what the nodes above it need.
+TileSummary buildTerrainTile(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart,
+                             const std::vector<float>& h, uint32_t t, uint32_t tx, uint32_t ty,
+                             const std::vector<float>& coarse, Hierarchy::ChartNodes& out) {
+  const uint32_t L = p.intervalsLog2, S = (1u << t) + 1, shift = L - t, rc = p.resCount();
+  const uint32_t depth = p.depth > shift ? p.depth - shift : 0;  // the tile's own levels
   auto fmax = [](float a, float b) { return std::max(a, b); };
   auto fmin = [](float a, float b) { return std::min(a, b); };
-
+  TileSummary sum;
   // Bounds: min/max mips over cells.
   std::vector<float> mn, mx, tmp;
   cellReduce(h, S, mn, fmin);
   cellReduce(h, S, mx, fmax);
-  const int64_t gx0 = int64_t(chart.gridX) * M, gy0 = int64_t(chart.gridY) * M;
-  for (uint32_t n = M, l = L;; n /= 2, --l) {
-    if (l < p.depth) {
-      const uint32_t size = M >> l;
+  for (uint32_t n = 1u << t, l = t;; n /= 2, --l) {
+    if (l < depth)
       for (uint32_t y = 0; y < n; ++y)
-        for (uint32_t x = 0; x < n; ++x) {
-          const uint32_t idx = nodeIndex(l, x, y);
-          const int64_t ox = gx0 + int64_t(x) * size, oy = gy0 + int64_t(y) * size;
-          out.bounds[idx] = {float(double(ox) * m.spacing[0]), float(double(oy) * m.spacing[1]),
-                             mn[size_t(y) * n + x],
-                             float(double(ox + size) * m.spacing[0]),
-                             float(double(oy + size) * m.spacing[1]), mx[size_t(y) * n + x]};
-          const bool empty = ox >= int64_t(m.samplesX) - 1 || oy >= int64_t(m.samplesY) - 1;
-          out.flags[idx] = empty ? kNodeEmpty : 0;
-        }
-    }
+        for (uint32_t x = 0; x < n; ++x)
+          setNodeBounds(m, chart, L, l + shift, (tx << l) + x, (ty << l) + y, mn[size_t(y) * n + x],
+                        mx[size_t(y) * n + x], out);
     if (n == 1) break;
     reduce2x2(mn, n, tmp, fmin);
     mn.swap(tmp);
     reduce2x2(mx, n, tmp, fmax);
     mx.swap(tmp);
   }
+  sum.lo = mn[0];
+  sum.hi = mx[0];
+  // Errors: 0 at the source resolution, then level by level.
+  for (uint32_t l = 0; l < depth; ++l) {
+    const uint32_t r = L - l - shift;
+    if (r > p.maxRes(l + shift) || r < p.minNodeResLog2) continue;
+    for (uint32_t y = 0; y < (1u << l); ++y)
+      for (uint32_t x = 0; x < (1u << l); ++x)
+        out.errors[size_t(nodeIndex(l + shift, (tx << l) + x, (ty << l) + y)) * rc + (r - p.minNodeResLog2)] = 0.0f;
+  }
+  const uint32_t kmax = L - p.minNodeResLog2;
+  sum.levelError.assign(kmax + 1, 0.0f);
+  std::vector<float> running(size_t(S) * S, 0.0f), cells;
+  for (uint32_t k = 1; k <= kmax; ++k) {
+    if (k <= t)
+      accumulateLevelError(h, S, k, running, HeightDistance{});
+    else
+      accumulateCoarseError(h, t, tx << t, ty << t, L, k, coarse, (1u << shift) + 1, running);
+    cellReduce(running, S, cells, fmax);
+    sum.levelError[k] = forEachNodeReduction(cells, t, depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
+      if (L < l + shift + k) return;
+      const uint32_t r = L - l - shift - k;
+      if (r >= p.minNodeResLog2 && r <= p.maxRes(l + shift))
+        out.errors[size_t(nodeIndex(l + shift, (tx << l) + x, (ty << l) + y)) * rc + (r - p.minNodeResLog2)] = v;
+    });
+  }
+  return sum;
+}
 
-  fillErrors(p, h, HeightDistance{}, out);
+// The nodes of a tiled chart above its tiles (levels below intervalsLog2 - t), from the tiles'
+// summaries (tiles x tiles, row-major).
+void buildAboveTiles(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart, uint32_t t,
+                     std::vector<TileSummary> grid, Hierarchy::ChartNodes& out) {
+  const uint32_t L = p.intervalsLog2, rc = p.resCount();
+  std::vector<TileSummary> up;
+  for (uint32_t n = 1u << (L - t), l = L - t; n > 1;) {
+    n /= 2;
+    --l;
+    up.assign(size_t(n) * n, {});
+    for (uint32_t y = 0; y < n; ++y)
+      for (uint32_t x = 0; x < n; ++x) {
+        TileSummary& u = up[size_t(y) * n + x];
+        u = grid[size_t(2 * y) * 2 * n + 2 * x];
+        for (uint32_t i = 1; i < 4; ++i) {
+          const TileSummary& c = grid[size_t(2 * y + (i >> 1)) * 2 * n + 2 * x + (i & 1)];
+          u.lo = std::min(u.lo, c.lo);
+          u.hi = std::max(u.hi, c.hi);
+          for (size_t k = 0; k < u.levelError.size(); ++k) u.levelError[k] = std::max(u.levelError[k], c.levelError[k]);
+        }
+        if (l >= p.depth) continue;
+        setNodeBounds(m, chart, L, l, x, y, u.lo, u.hi, out);
+        for (uint32_t k = 0; k < u.levelError.size() && k <= L - l; ++k) {
+          const uint32_t r = L - l - k;
+          if (r >= p.minNodeResLog2 && r <= p.maxRes(l))
+            out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] = u.levelError[k];
+        }
+      }
+    grid.swap(up);
+  }
 }
 
 void buildGeometryChart(const HierarchyParams& p, const std::vector<glm::vec3>& P, Hierarchy::ChartNodes& out) {
@@ -296,6 +391,19 @@ std::vector<uint8_t> finestLevels(const AtlasManifest& m, const HierarchyParams&
 
 Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeightSource& source,
                                 HierarchyStats* stats) {
+  const uint32_t M = manifest.chartSize - 1;
+  return buildTerrainHierarchy(
+      manifest,
+      [&](uint32_t c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n) {
+        if (level != 0 || u0 != 0 || v0 != 0 || n != M)
+          throw std::logic_error("buildTerrainHierarchy: a whole chart's heights expected");
+        return source(c);
+      },
+      stats, M);
+}
+
+Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindowSource& source,
+                                HierarchyStats* stats, uint32_t maxTile) {
   Hierarchy hier;
   hier.params = hierarchyParams(manifest);
   hier.params.validate();
@@ -303,20 +411,36 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeight
   hier.charts.resize(count);
   hier.roots.resize(count);
   for (uint32_t c = 0; c < count; ++c) hier.roots[c] = manifest.charts[c].neighbours;
+  if (!std::has_single_bit(maxTile) || maxTile < 2)
+    throw std::invalid_argument("buildTerrainHierarchy: the tile must be a power of two");
 
-  const uint32_t S = manifest.chartSize;
+  const uint32_t L = hier.params.intervalsLog2, M = 1u << L;
+  const uint32_t t = std::min(L, uint32_t(std::countr_zero(maxTile))), T = 1u << t, tiles = M / T;
+  const uint32_t perChart = tiles * tiles;
   const auto t0 = std::chrono::steady_clock::now();
-  const progress::ProgressStage stage("hierarchy", count);
+  const progress::ProgressStage stage("hierarchy", uint64_t(count) * perChart);
+  // Each chart's level t, for the levels whose cells span several tiles.
+  std::vector<std::vector<float>> coarse(count);
+  std::vector<std::vector<TileSummary>> summaries(count, std::vector<TileSummary>(perChart));
   tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) {
-    std::vector<float> h = source(c);
-    if (h.size() != size_t(S) * S)
-      throw InputError("chart " + std::to_string(c) + ": expected " + std::to_string(S) + "^2 heights");
-    buildChart(hier.params, manifest, manifest.charts[c], h, hier.charts[c]);
+    initChartNodes(hier.params, hier.charts[c]);
+    if (tiles > 1) coarse[c] = source(c, t, 0, 0, M >> t);
+  });
+  tbb::parallel_for(uint64_t(0), uint64_t(count) * perChart, [&](uint64_t i) {
+    const uint32_t c = uint32_t(i / perChart), tile = uint32_t(i % perChart), tx = tile % tiles, ty = tile / tiles;
+    const std::vector<float> h = source(c, 0, tx * T, ty * T, T);
+    if (h.size() != size_t(T + 1) * (T + 1))
+      throw InputError("chart " + std::to_string(c) + ": expected " + std::to_string(T + 1) + "^2 heights");
+    summaries[c][tile] = buildTerrainTile(hier.params, manifest, manifest.charts[c], h, t, tx, ty, coarse[c], hier.charts[c]);
     progress::advance();
   });
+  if (tiles > 1)
+    tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) {
+      buildAboveTiles(hier.params, manifest, manifest.charts[c], t, std::move(summaries[c]), hier.charts[c]);
+    });
   if (stats) {
     stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
-    stats->samples = uint64_t(count) * S * S;
+    stats->samples = uint64_t(count) * (M + 1) * (M + 1);
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     stats->samplesPerSecond = stats->seconds > 0 ? double(stats->samples) / stats->seconds : 0.0;
   }

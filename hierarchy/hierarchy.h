@@ -116,6 +116,19 @@ using ChartHeightSource = std::function<std::vector<float>(uint32_t chart)>;
 Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeightSource& source,
                                 HierarchyStats* stats = nullptr);
 
+// Terrain input by windows: the (n+1)^2 heights of pyramid level `level` of chart `chart` from
+// (u0, v0), row = v (a window of whole blocks). Must be thread-safe.
+using ChartWindowSource =
+    std::function<std::vector<float>(uint32_t chart, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n)>;
+inline constexpr uint32_t kHierarchyTile = 1024;
+// The same hierarchy, a chart larger than maxTile intervals (a power of two) read in tiles of
+// maxTile: each tile's level-0 heights, and the chart's pyramid level log2(maxTile) for the
+// levels whose cells span several tiles. A node above the tiles takes the largest error and the
+// range of its tiles. Memory: a few tiles' worth a thread, whatever the chart's size. A chart of
+// maxTile intervals or fewer is read whole, and its nodes are those of the overload above.
+Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindowSource& source, HierarchyStats* stats,
+                                uint32_t maxTile = kHierarchyTile);
+
 // Mesh-atlas input: chart id -> its finest geometry image, side ((chartSize - 1) >> finest level)
 // + 1 positions (row = v). Must be thread-safe.
 using ChartPositionSource = std::function<std::vector<glm::vec3>(uint32_t chart)>;

@@ -31,6 +31,8 @@ inline uint32_t meshDepth(uint32_t depth, uint32_t intervalsLog2) {
   return depth != kAutoDepth ? depth : uint32_t(std::clamp(int(intervalsLog2) - 4, 1, int(kDefaultDepth)));
 }
 
+inline constexpr uint32_t kAutoChartSize = 0;
+
 // What every build takes.
 struct CommonBuildOptions {
   std::filesystem::path input;   // the DEM or mesh to read
@@ -55,7 +57,11 @@ inline constexpr double kDefaultHeightPrecision = 0.01;
 // A terrain atlas from a DEM (any single-band raster GDAL reads).
 struct TerrainBuildOptions : CommonBuildOptions {
   std::string subdataset;    // netCDF variable; empty: the first 2D one
-  uint32_t chartSize = 513;  // samples per chart side, 2^m + 1 in [9, 8193]
+  uint32_t band = 0;         // the heights' band, from 1 (DemOptions::band); 0: band 1, refusing an RGB image
+  std::array<double, 2> spacing{0.0, 0.0};  // metres between samples, east and north; 0: from the georeference
+  // Samples per chart side, 2^m + 1 in [9, kMaxTerrainChartSize]; kAutoChartSize: from the DEM's
+  // size (planTerrain).
+  uint32_t chartSize = kAutoChartSize;
   double zScale = 1.0;       // height multiplier; finite and non-zero
   // Colour imagery draped over the DEM (atlas/terrain/imagery.h); empty path: none.
   std::filesystem::path imagery;

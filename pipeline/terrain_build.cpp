@@ -27,6 +27,12 @@ namespace {
 
 bool isPowerOfTwo(uint32_t v) { return std::has_single_bit(v); }
 
+// A message that may name options (optionRef), each spelled as the options spell it.
+std::string spelledMessage(const CommonBuildOptions& opts, const std::string& marked) {
+  const InputError e(marked);
+  return opts.spellOption ? e.message(opts.spellOption) : std::string(e.what());
+}
+
 // The imagery options of a build.
 ImageryOptions imageryOptions(const TerrainBuildOptions& o) {
   ImageryOptions io;
@@ -45,6 +51,8 @@ DemOptions demOptions(const TerrainBuildOptions& o) {
   DemOptions d;
   d.zScale = o.zScale;
   d.subdataset = o.subdataset;
+  d.band = o.band;
+  d.spacing = o.spacing;
   d.gdalCacheBytes = std::clamp<uint64_t>(memoryCap(o) / 32, uint64_t{8} << 20, uint64_t{64} << 20);
   return d;
 }
@@ -79,10 +87,53 @@ double quantizeHeights(DemRaster& dem, const TerrainBuildOptions& o) {
 
 }  // namespace
 
-void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
-  if (!(o.chartSize >= 9 && o.chartSize <= 8193 && isPowerOfTwo(o.chartSize - 1)))
-    throw InputError(fmt::format("{} {} must be 2^m+1 between 9 and 8193 (e.g. 257, 513, 1025)",
-                                 optionRef("chartSize"), o.chartSize));
+TerrainPlan planTerrain(const fs::path& input, uint64_t width, uint64_t height, const TerrainBuildOptions& o) {
+  if (width < 2 || height < 2)
+    throw InputError(fmt::format("{}: {} x {} samples; a DEM needs at least 2 x 2", input.string(), width, height));
+  TerrainPlan plan;
+  plan.autoChartSize = o.chartSize == kAutoChartSize;
+  plan.autoDepth = o.depth == kAutoDepth;
+  auto along = [](uint64_t samples, uint64_t m) { return std::max<uint64_t>(1, (samples - 1 + m - 1) / m); };
+  uint32_t cs = o.chartSize;
+  if (plan.autoChartSize) {
+    const uint32_t top = o.imagery.empty() ? kMaxTerrainChartSize : kMaxChartTile + 1;
+    cs = 513;
+    while (cs < top && along(width, cs - 1) * along(height, cs - 1) > kTargetTerrainCharts) cs = 2 * cs - 1;
+  }
+  plan.chartSize = cs;
+  plan.chartsX = uint32_t(along(width, cs - 1));
+  plan.chartsY = uint32_t(along(height, cs - 1));
+  // The finest nodes 32 intervals wide, as 513-sample charts have at kDefaultDepth.
+  const uint32_t L = log2u(cs - 1);
+  plan.depth = plan.autoDepth ? std::clamp<uint32_t>(L > 5 ? L - 4 : 1, kDefaultDepth, 12) : o.depth;
+  if (plan.autoDepth) plan.depth = std::min(plan.depth, L - log2u(o.minNodeRes ? o.minNodeRes : 1) + 1);
+  return plan;
+}
+
+TerrainBuildOptions plannedOptions(const TerrainBuildOptions& options, const TerrainPlan& plan) {
+  TerrainBuildOptions o = options;
+  o.chartSize = plan.chartSize;
+  o.depth = plan.depth;
+  return o;
+}
+
+void validateTerrainBuildOptions(const TerrainBuildOptions& options) {
+  if (options.chartSize == kAutoChartSize) {
+    // What holds for some chart size (planTerrain's, checked again once it is chosen).
+    TerrainBuildOptions o = options;
+    o.chartSize = kMaxTerrainChartSize;
+    o.imagery.clear();
+    validateTerrainBuildOptions(o);
+    validateImageryOptions(imageryOptions(options));
+    return;
+  }
+  const TerrainBuildOptions& o = options;
+  if (!o.imagery.empty() && o.chartSize > kMaxChartTile + 1)
+    throw InputError(fmt::format("{} {}: imagery is draped on charts of at most {} samples", optionRef("chartSize"),
+                                 o.chartSize, kMaxChartTile + 1));
+  if (!(o.chartSize >= 9 && o.chartSize <= kMaxTerrainChartSize && isPowerOfTwo(o.chartSize - 1)))
+    throw InputError(fmt::format("{} {} must be 2^m+1 between 9 and {} (e.g. 257, 513, 1025)",
+                                 optionRef("chartSize"), o.chartSize, kMaxTerrainChartSize));
   if (!isPowerOfTwo(o.nodeRes) || o.nodeRes < 4 || o.nodeRes > 1024 || o.nodeRes > o.chartSize - 1)
     throw InputError(fmt::format("{} {} must be a power of two in [4, min(1024, {} - 1)]", optionRef("nodeRes"),
                                  o.nodeRes, optionRef("chartSize")));
@@ -104,10 +155,29 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& o) {
   p.validate();
 }
 
+namespace {
+
+// ", N voids filled (P% of the samples)", or nothing; the fill itself is described in the docs.
+std::string voidsFilledText(uint64_t voids, uint64_t samples) {
+  if (voids == 0) return {};
+  return fmt::format(", {} voids filled ({:.3g}% of the samples)", voids, 100.0 * double(voids) / double(samples));
+}
+
+void logPlan(const TerrainBuildOptions& o, const TerrainPlan& plan) {
+  spdlog::info("{}: {} x {} charts of {} samples{}, {} quadtree levels{}", o.input.string(), plan.chartsX, plan.chartsY,
+               plan.chartSize,
+               plan.autoChartSize ? fmt::format(" (the smallest from 513 giving at most {} charts)", kTargetTerrainCharts)
+                                  : std::string(),
+               plan.depth, plan.autoDepth ? " (finest nodes 32 intervals wide)" : "");
+}
+
+}  // namespace
+
 DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   const auto t0 = std::chrono::steady_clock::now();
   // buildTerrainAtlas has chosen this build because its estimate fits the cap.
   DemRaster dem = loadDem(o.input, demOptions(o));
+  for (const std::string& warning : dem.warnings) spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
   stats->seconds = secondsSince(t0);
   stats->width = dem.width;
   stats->height = dem.height;
@@ -115,9 +185,9 @@ DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   stats->heightRange = {dem.minHeight, dem.maxHeight};
   stats->voidsFilled = dem.voidsFilled;
   stats->voidFillMethod = dem.voidFillMethod;
-  spdlog::info("{}: {}x{} samples, spacing {:.3f} x {:.3f} m, heights {:.1f}..{:.1f} m, {} voids filled ({})",
-               o.input.string(), dem.width, dem.height, dem.spacing[0], dem.spacing[1], dem.minHeight,
-               dem.maxHeight, dem.voidsFilled, dem.voidFillMethod);
+  spdlog::info("{}: {}x{} samples, spacing {:.3f} x {:.3f} m, heights {:.1f}..{:.1f} m{}", o.input.string(), dem.width,
+               dem.height, dem.spacing[0], dem.spacing[1], dem.minHeight, dem.maxHeight,
+               voidsFilledText(dem.voidsFilled, uint64_t{dem.width} * dem.height));
   return dem;
 }
 
@@ -150,7 +220,11 @@ void finishTerrainAtlas(AtlasManifest& m, const fs::path& dir, TerrainWriteStats
   // Each chart file is opened only while it is read: an atlas may hold more charts than a process
   // may have files open.
   const Hierarchy h = buildTerrainHierarchy(
-      m, [&](uint32_t c) { return ChartFileReader(dir / m.charts[c].file).readLevelHeights(0); }, &w.hierarchy);
+      m,
+      [&](uint32_t c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n) {
+        return ChartFileReader(dir / m.charts[c].file).readHeightsWindow(level, u0, v0, n);
+      },
+      &w.hierarchy);
   writeHierarchy(dir / m.hierarchyFile, h, m.compression.present);
   writeManifest(dir, m);
   w.chartsX = m.chartsX;
@@ -171,7 +245,9 @@ void finishImagery(const TerrainBuildOptions& o, const ImageryWriteStats& ws, Te
 
 }  // namespace
 
-TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& o, const fs::path& dir) {
+TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& options, const fs::path& dir) {
+  const TerrainBuildOptions o = plannedOptions(options, planTerrain(options.input, dem.width, dem.height, options));
+  validateTerrainBuildOptions(o);
   AtlasManifest m = terrainManifest(o);
   TerrainAtlasOptions topt = terrainAtlasOptions(o);
   if (o.compress) topt.coding.heightPrecision = quantizeHeights(dem, o);
@@ -202,7 +278,8 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
   const uint64_t cap = memoryCap(o);
   const DemOptions dopt = demOptions(o);
   const DemSource source(o.input, dopt);
-  for (const std::string& warning : source.info().warnings) spdlog::warn("{}: {}", o.input.string(), warning);
+  for (const std::string& warning : source.info().warnings)
+    spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
   AtlasManifest m = terrainManifest(o);
   WindowedTerrainOptions wo;
   wo.atlas = terrainAtlasOptions(o);
@@ -250,11 +327,22 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
   return w;
 }
 
-TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& o) {
+TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& options) {
   std::error_code ec;
+  validateTerrainBuildOptions(options);
+  if (!fs::exists(options.input, ec)) throw InputError(options.input.string() + ": no such file");
+  if (!options.imagery.empty() && !fs::exists(options.imagery, ec))
+    throw InputError(options.imagery.string() + ": no such file");
+  TerrainPlan plan;
+  double samples = 0;
+  {
+    const DemSource source(options.input, demOptions(options));
+    plan = planTerrain(options.input, source.info().width, source.info().height, options);
+    samples = double(source.info().width) * double(source.info().height);
+  }
+  const TerrainBuildOptions o = plannedOptions(options, plan);
   validateTerrainBuildOptions(o);
-  if (!fs::exists(o.input, ec)) throw InputError(o.input.string() + ": no such file");
-  if (!o.imagery.empty() && !fs::exists(o.imagery, ec)) throw InputError(o.imagery.string() + ": no such file");
+  logPlan(o, plan);
   std::unique_ptr<tbb::global_control> threads;
   if (o.threads)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.threads);
@@ -269,12 +357,8 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& o) {
                                  "for the windows",
                                  optionRef("maxMemory"), memoryCap(o) >> 20, held >> 20));
   bool windowed = o.outOfCore;
-  if (!windowed) {
-    const DemSource source(o.input, demOptions(o));
-    windowed = double(source.info().width) * source.info().height * inMemoryBytesPerSample(o) +
-                   double(residentBytes()) >
-               double(memoryCap(o));
-  }
+  if (!windowed)
+    windowed = samples * inMemoryBytesPerSample(o) + double(residentBytes()) > double(memoryCap(o));
   StagedDirectory stage(o.output, kManifestName, "atlas");
   if (windowed) {
     stats.write = writeTerrainAtlasWindowed(o, stage.path(), &stats.read);

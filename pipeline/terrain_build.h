@@ -12,8 +12,28 @@
 
 namespace gimlod {
 
-// Throws InputError naming the parameter (optionRef) for impossible options, before any work.
+// Throws InputError naming the parameter (optionRef) for impossible options, before any work. An
+// automatic chart size (kAutoChartSize) passes; planTerrain chooses it.
 void validateTerrainBuildOptions(const TerrainBuildOptions& options);
+
+// The chart grid of a terrain atlas. Each chart is a quadtree root, so a cut never has fewer nodes
+// than the charts in view: when the size is not given, a DEM gets the smallest chart from 513
+// samples up that keeps its charts at most kTargetTerrainCharts (tens of trees, as the paper's
+// terrains have, from 1M to 21.6G samples), up to kMaxTerrainChartSize (kMaxChartTile + 1 with
+// imagery, which is draped on whole charts). The depth, when not given, leaves the finest nodes 32
+// intervals wide (kDefaultDepth at least).
+struct TerrainPlan {
+  uint32_t chartSize = 0;
+  uint32_t depth = 0;
+  uint32_t chartsX = 0, chartsY = 0;
+  bool autoChartSize = false, autoDepth = false;
+};
+inline constexpr uint32_t kTargetTerrainCharts = 64;
+// Throws InputError naming `input` for a DEM under 2 x 2 samples.
+TerrainPlan planTerrain(const std::filesystem::path& input, uint64_t width, uint64_t height,
+                        const TerrainBuildOptions& options);
+// The options with the plan's chart size and depth in place of the automatic ones.
+TerrainBuildOptions plannedOptions(const TerrainBuildOptions& options, const TerrainPlan& plan);
 
 // Read and fill: loads options.input (voids filled by pull-push, atlas/terrain/dem.h) and logs its
 // figures. Throws InputError naming the file.

@@ -85,6 +85,32 @@ std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32
   return path;
 }
 
+std::vector<Camera> descentPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames, double fovYDeg) {
+  const glm::dvec3 centre = (lo + hi) * 0.5, ext = hi - lo;
+  const double diagonal = std::max(glm::length(ext), 1e-12);
+  const glm::dvec2 start(lo.x + 0.1 * ext.x, lo.y + 0.1 * ext.y);
+  const glm::dvec2 end(centre.x, centre.y);
+  std::vector<Camera> path;
+  for (uint32_t i = 0; i < frames; ++i) {
+    const double s = frames > 1 ? double(i) / double(frames - 1) : 0.0;
+    const double height = diagonal * std::pow(0.002, s);
+    const glm::dvec2 at = start + s * (end - start);
+    glm::dvec2 ahead = end - start;
+    ahead = glm::length(ahead) > 0 ? ahead / glm::length(ahead) : glm::dvec2(1.0, 0.0);
+    Camera c;
+    c.eye = {at.x, at.y, hi.z + height};
+    const glm::dvec2 look = at + ahead * (1.5 * height);
+    c.target = {look.x, look.y, centre.z};
+    c.up = {0.0, 0.0, 1.0};
+    c.fovYDeg = fovYDeg;
+    c.nearPlane = 0.0;
+    c.farPlane = 0.0;
+    fitClipPlanes(c, lo, hi);
+    path.push_back(c);
+  }
+  return path;
+}
+
 std::vector<Camera> axisViews(const glm::dvec3& lo, const glm::dvec3& hi, double fovYDeg,
                               std::vector<std::string>* names) {
   const glm::dvec3 centre = (lo + hi) * 0.5;

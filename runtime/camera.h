@@ -44,6 +44,12 @@ void fitClipPlanes(Camera& c, const glm::dvec3& lo, const glm::dvec3& hi);
 std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames,
                               double distanceFraction, double elevationDeg, double fovYDeg = 45.0);
 
+// N frames flying down onto a terrain (z up): from the box's south-west, a diagonal above its top,
+// towards its centre, the height above the top falling geometrically to 1/500 of the diagonal,
+// looking ahead and down at the mid height: the view goes from the whole atlas to its finest
+// nodes.
+std::vector<Camera> descentPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames, double fovYDeg = 45.0);
+
 // The six axis views of the box: from +x, -x, +y, -y, +z and -z, looking at its centre from the
 // distance at which its bounding sphere fills the vertical field of view (up: z, or y from +-z).
 // names, if given, receives "+x", "-x", ... in the same order.

@@ -169,6 +169,9 @@ struct DemSource::Impl {
 DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(std::make_unique<Impl>()) {
   if (!std::isfinite(options.zScale) || options.zScale == 0.0)
     fail(path, "z-scale " + formatNumber(options.zScale) + " must be finite and non-zero");
+  for (double s : options.spacing)
+    if (!(s == 0.0 && options.spacing[0] == 0.0 && options.spacing[1] == 0.0) && !(s > 0.0 && std::isfinite(s) && s < 1e9))
+      fail(path, optionRef("spacing") + " " + formatNumber(s) + " m must be positive and finite");
   std::error_code ec;
   if (!fs::exists(path, ec)) fail(path, "no such file");
   if (fs::is_directory(path, ec)) fail(path, "is a directory, not a raster file");
@@ -186,12 +189,22 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
   const int w = ds->GetRasterXSize(), h = ds->GetRasterYSize();
   if (w <= 0 || h <= 0) fail(path, "raster has zero size");
   if (ds->GetRasterCount() < 1) fail(path, "not a raster GDAL can read (no bands)");
-  if (ds->GetRasterCount() > 1)
-    dem.warnings.push_back(std::to_string(ds->GetRasterCount()) +
-                           " bands; using band 1 as heights");
+  const int bands = ds->GetRasterCount();
+  if (options.band > uint32_t(bands))
+    fail(path, optionRef("band") + " " + std::to_string(options.band) + ": the raster has " + std::to_string(bands) + " band" +
+                   (bands == 1 ? "" : "s"));
+  if (options.band == 0 && bands > 1) {
+    bool bytes = true;
+    for (int b = 1; b <= bands; ++b) bytes = bytes && ds->GetRasterBand(b)->GetRasterDataType() == GDT_Byte;
+    if (bytes && (bands == 3 || bands == 4))
+      fail(path, std::to_string(bands) + " bands of bytes: a colour image (" + (bands == 3 ? "RGB" : "RGBA") +
+                     "), not heights; drape it over a DEM with " + optionRef("imagery") + ", or give " + optionRef("band") +
+                     " N to read one band as heights");
+    dem.warnings.push_back(std::to_string(bands) + " bands; using band 1 as heights (" + optionRef("band") + " N chooses another)");
+  }
   dem.width = static_cast<uint32_t>(w);
   dem.height = static_cast<uint32_t>(h);
-  GDALRasterBand* band = im.band = ds->GetRasterBand(1);
+  GDALRasterBand* band = im.band = ds->GetRasterBand(options.band == 0 ? 1 : int(options.band));
 
   // Voids: declared nodata, NaN, inf, and an explicit mask band if the file has one.
   int hasNodata = 0;
@@ -231,7 +244,11 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
   }
   if (!hasGt) {
     // note: without a geotransform the raster is treated as an image whose top row is north.
-    dem.warnings.push_back("no geotransform: sample spacing set to 1 m, top row taken as north");
+    if (options.spacing[0] > 0)
+      dem.warnings.push_back("no geotransform: top row taken as north");
+    else
+      dem.warnings.push_back("no geotransform: sample spacing taken as 1 m (" + optionRef("spacing") +
+                             " X[,Y] gives it in metres), top row taken as north");
     dem.spacing = {1.0, 1.0};
   } else {
     const double sx = std::hypot(gt[1], gt[4]), sy = std::hypot(gt[2], gt[5]);
@@ -284,6 +301,13 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
     }
   }
 
+  if (options.spacing[0] > 0) {
+    if (hasGt)
+      dem.warnings.push_back("spacing " + formatNumber(options.spacing[0]) + " x " + formatNumber(options.spacing[1]) +
+                             " m given, in place of the georeference's " + formatNumber(dem.spacing[0]) + " x " +
+                             formatNumber(dem.spacing[1]) + " m");
+    dem.spacing = options.spacing;
+  }
   for (const std::string& wmsg : cap.warnings()) dem.warnings.push_back(wmsg);
 }
 

@@ -25,6 +25,12 @@ struct DemOptions {
   // 0: no cap.
   uint64_t maxMemory = 0;
   double buildBytesPerSample = 0.0;
+  // The band holding the heights, from 1; 0: band 1 of a single-band raster, and of a raster of
+  // several bands with a warning, except an image of 3 or 4 byte bands (RGB, RGBA), which is refused.
+  uint32_t band = 0;
+  // Metres between samples in x (east) and y (north), replacing what the georeference gives; 0:
+  // from the georeference (a raster without one is taken as 1 m, with a warning).
+  std::array<double, 2> spacing{0.0, 0.0};
 };
 
 // Heights in metres after z-scale, row-major with row 0 at the SOUTH edge (gy grows north).

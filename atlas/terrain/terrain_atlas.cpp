@@ -12,6 +12,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
+#include <mutex>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -21,9 +23,9 @@ namespace fs = std::filesystem;
 
 void validateTerrainAtlasOptions(const TerrainAtlasOptions& o) {
   const uint32_t cs = o.chartSize;
-  if (cs < 9 || cs > 8193 || !std::has_single_bit(cs - 1))
-    throw InputError(optionRef("chartSize") + " " + std::to_string(cs) +
-                     " is not 2^m+1 between 9 and 8193 (e.g. 129, 257, 513, 1025)");
+  if (cs < 9 || cs > kMaxTerrainChartSize || !std::has_single_bit(cs - 1))
+    throw InputError(optionRef("chartSize") + " " + std::to_string(cs) + " is not 2^m+1 between 9 and " +
+                     std::to_string(kMaxTerrainChartSize) + " (e.g. 129, 257, 513, 1025)");
   const uint32_t b = o.blockIntervals;
   if (b < 4 || b > 1024 || !std::has_single_bit(b))
     throw InputError(optionRef("blockIntervals") + " " + std::to_string(b) +
@@ -66,8 +68,16 @@ inline float clampedHeight(const DemRaster& dem, int64_t gx, int64_t gy) {
   return dem.heights[static_cast<size_t>(gy) * dem.width + static_cast<size_t>(gx)];
 }
 
-// The same over the rows held (buildChartPyramid checks they cover what a chart row reads).
+// The same over the rows held (buildChartPyramid checks they cover what a chart row reads), or
+// over a lattice of the DEM (DemRows::stride).
 inline float clampedHeight(const DemRows& dem, int64_t gx, int64_t gy) {
+  const int64_t s = dem.stride;
+  if (s > 1) {
+    const int64_t i = std::clamp<int64_t>(gx, 0, (dem.width - 2 + s) / s * s) / s;
+    const int64_t j = std::clamp<int64_t>(gy, 0, (dem.height - 2 + s) / s * s) / s;
+    return dem.heights[static_cast<size_t>(j - dem.y0 / s) * static_cast<size_t>(dem.cols) +
+                       static_cast<size_t>(i - dem.x0 / s)];
+  }
   gx = std::clamp<int64_t>(gx, 0, dem.width - 1);
   gy = std::clamp<int64_t>(gy, 0, dem.height - 1);
   const int64_t cols = dem.cols > 0 ? dem.cols : dem.width;
@@ -114,28 +124,35 @@ ChartPyramid buildChartPyramid(const DemRows& dem, int32_t gridX, int32_t gridY,
   const auto span = chartRowSpan(gridY, chartSize, dem.height);
   const auto columns = chartRowSpan(gridX, chartSize, dem.width);
   const int64_t cols = dem.cols > 0 ? dem.cols : dem.width;
-  if (dem.width <= 0 || dem.height <= 0 || dem.y0 > span[0] || dem.y0 + dem.rows < span[1] ||
+  if (dem.width <= 0 || dem.height <= 0 || dem.stride != 1 || dem.y0 > span[0] || dem.y0 + dem.rows < span[1] ||
       dem.x0 > columns[0] || dem.x0 + cols < columns[1])
     throw std::invalid_argument("buildChartPyramid: the window held does not cover the chart");
-
   const int64_t m = int64_t{chartSize} - 1;
-  const uint32_t levels = static_cast<uint32_t>(std::countr_zero(chartSize - 1)) + 1;
+  return buildPyramidLevels(dem, gridX * m, gridY * m, chartSize - 1, 0, uint32_t(std::countr_zero(chartSize - 1)),
+                            keepRing);
+}
+
+ChartPyramid buildPyramidLevels(const DemRows& dem, int64_t originX, int64_t originY, uint32_t intervals,
+                                uint32_t first, uint32_t last, bool keepRing) {
+  if (!std::has_single_bit(intervals) || last > uint32_t(std::countr_zero(intervals)) || first > last ||
+      (dem.stride > 1 && (!std::has_single_bit(uint64_t(dem.stride)) || dem.stride > (int64_t{1} << first))))
+    throw std::invalid_argument("buildPyramidLevels: bad levels or lattice");
   HeightFieldFrame frame;
-  frame.originX = gridX * m;
-  frame.originY = gridY * m;
+  frame.originX = originX;
+  frame.originY = originY;
   frame.maxX = int64_t{dem.width} - 1;
   frame.maxY = int64_t{dem.height} - 1;
   frame.spacing = dem.spacing;
   ChartPyramid p;
-  p.heights.resize(levels);
-  p.normals.resize(levels);
+  p.heights.resize(last + 1);
+  p.normals.resize(last + 1);
   if (keepRing) {
-    p.ringHeights.resize(levels);
+    p.ringHeights.resize(last + 1);
     p.frame = frame;
   }
   std::vector<float> ring;
-  for (uint32_t k = 0; k < levels; ++k) {
-    const uint32_t s = static_cast<uint32_t>(m >> k) + 1;
+  for (uint32_t k = first; k <= last; ++k) {
+    const uint32_t s = (intervals >> k) + 1;
     const size_t rs = size_t{s} + 2;
     // The level's heights with a one-sample ring of the neighbouring lattice, edge-clamped to the
     // DEM; the normals are differences over it (heightFieldNormals).
@@ -154,6 +171,96 @@ ChartPyramid buildChartPyramid(const DemRows& dem, int32_t gridX, int32_t gridY,
     if (keepRing) p.ringHeights[k] = ring;
   }
   return p;
+}
+
+ChartTiling chartTiling(uint32_t chartSize, uint32_t blockIntervals, uint32_t maxTile) {
+  const uint32_t m = chartSize - 1;
+  if (!std::has_single_bit(m) || !std::has_single_bit(blockIntervals) || !std::has_single_bit(maxTile) ||
+      maxTile < 2 * blockIntervals)
+    throw std::invalid_argument("chartTiling: sizes must be powers of two, the tile at least two blocks");
+  ChartTiling t;
+  t.tile = std::min(m, maxTile);
+  t.tilesPerSide = m / t.tile;
+  const uint32_t levels = uint32_t(std::countr_zero(m)) + 1;
+  t.coarseLevel = t.tiled() ? uint32_t(std::countr_zero(t.tile)) - uint32_t(std::countr_zero(blockIntervals)) + 1
+                            : levels;
+  return t;
+}
+
+std::array<int64_t, 4> tileSpan(const ChartTiling& t, uint32_t chartSize, int32_t gridX, int32_t gridY, uint32_t tx,
+                                uint32_t ty, int64_t width, int64_t height) {
+  const int64_t m = int64_t{chartSize} - 1, margin = t.margin();
+  const int64_t ox = gridX * m + int64_t{tx} * t.tile, oy = gridY * m + int64_t{ty} * t.tile;
+  auto span = [&](int64_t o, int64_t n) {
+    const int64_t lo = std::clamp<int64_t>(o - margin, 0, n - 1);
+    return std::array<int64_t, 2>{lo, std::clamp<int64_t>(o + t.tile + margin + 1, lo + 1, n)};
+  };
+  const auto x = span(ox, width), y = span(oy, height);
+  return {x[0], y[0], x[1], y[1]};
+}
+
+namespace {
+
+// Codes level k's blocks of a pyramid whose level k has `side` samples a side and starts at block
+// (bx0, by0) of the chart's level, appending them to `out`.
+void codePyramidLevel(const ChartPyramid& p, uint32_t k, uint32_t side, uint32_t bx0, uint32_t by0,
+                      uint32_t blockIntervals, const ChartFileWriter& file, bool ring,
+                      std::vector<ChartFileWriter::CodedBlock>& out) {
+  const uint32_t b = std::min(blockIntervals, side - 1);
+  const uint32_t blocks = (side - 1) / b;
+  const size_t rs = size_t{side} + 2;
+  for (uint32_t by = 0; by < blocks; ++by)
+    for (uint32_t bx = 0; bx < blocks; ++bx) {
+      const size_t at = size_t{by * b} * side + size_t{bx} * b;
+      BlockData d;
+      d[kChannelHeights] = {p.heights[k].data() + at, side};
+      d[kChannelNormals] = {p.normals[k].data() + at, side};
+      if (ring) d[kChannelHeights] = {p.ringHeights[k].data() + size_t{by * b} * rs + size_t{bx} * b, rs};
+      out.push_back(file.code(k, bx0 + bx, by0 + by, d));
+    }
+}
+
+}  // namespace
+
+std::vector<ChartFileWriter::CodedBlock> codeChartTile(const DemRows& dem, int32_t gridX, int32_t gridY,
+                                                       uint32_t chartSize, const ChartTiling& t, uint32_t tx,
+                                                       uint32_t ty, const ChartFileWriter& file, bool ring) {
+  const int64_t m = int64_t{chartSize} - 1;
+  const ChartPyramid p = buildPyramidLevels(dem, gridX * m + int64_t{tx} * t.tile, gridY * m + int64_t{ty} * t.tile,
+                                            t.tile, 0, t.coarseLevel - 1, ring);
+  const uint32_t blockIntervals = file.blockIntervals();
+  std::vector<ChartFileWriter::CodedBlock> out;
+  for (uint32_t k = 0; k < t.coarseLevel; ++k) {
+    const uint32_t perTile = (t.tile >> k) / blockIntervals;
+    codePyramidLevel(p, k, (t.tile >> k) + 1, tx * perTile, ty * perTile, blockIntervals, file, ring, out);
+  }
+  return out;
+}
+
+void writeChartCoarseLevels(const DemRows& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
+                            const ChartTiling& t, ChartFileWriter& file, bool ring) {
+  const int64_t m = int64_t{chartSize} - 1;
+  const uint32_t last = uint32_t(std::countr_zero(chartSize - 1));
+  if (t.coarseLevel > last) return;
+  const ChartPyramid p = buildPyramidLevels(dem, gridX * m, gridY * m, chartSize - 1, t.coarseLevel, last, ring);
+  std::vector<ChartFileWriter::CodedBlock> blocks;
+  for (uint32_t k = t.coarseLevel; k <= last; ++k) {
+    blocks.clear();
+    codePyramidLevel(p, k, uint32_t(m >> k) + 1, 0, 0, file.blockIntervals(), file, ring, blocks);
+    for (const auto& b : blocks) file.append(b);
+  }
+}
+
+std::unique_ptr<ChartFileWriter> openTerrainChart(const fs::path& path, int32_t gridX, int32_t gridY,
+                                                  uint32_t chartSize, const TerrainAtlasOptions& o, int64_t width,
+                                                  int64_t height, const std::array<double, 2>& spacing) {
+  std::optional<HeightFieldFrame> frame;
+  if (o.coding.compressed) {
+    const int64_t m = int64_t{chartSize} - 1;
+    frame = HeightFieldFrame{gridX * m, gridY * m, width - 1, height - 1, spacing};
+  }
+  return std::make_unique<ChartFileWriter>(path, chartSize, o.blockIntervals, uint32_t(std::countr_zero(chartSize - 1)) + 1,
+                                           (1u << kChannelHeights) | (1u << kChannelNormals), o.coding, frame);
 }
 
 void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& options,
@@ -199,6 +306,79 @@ void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& option
   }
 }
 
+struct TiledChartWriter::Chart {
+  std::unique_ptr<ChartFileWriter> file;
+  std::mutex mutex;
+  uint32_t next = 0;  // the tile to append next
+  std::map<uint32_t, std::vector<ChartFileWriter::CodedBlock>> waiting;
+};
+
+TiledChartWriter::TiledChartWriter(const fs::path& dir, const AtlasManifest& manifest,
+                                   const TerrainAtlasOptions& options, const ChartTiling& tiling)
+    : manifest_(manifest), options_(options), tiling_(tiling) {
+  for (const ChartInfo& c : manifest.charts) {
+    charts_.push_back(std::make_unique<Chart>());
+    charts_.back()->file = openTerrainChart(dir / c.file, c.gridX, c.gridY, manifest.chartSize, options,
+                                            manifest.samplesX, manifest.samplesY, manifest.spacing);
+  }
+}
+
+TiledChartWriter::~TiledChartWriter() = default;
+
+void TiledChartWriter::writeTile(const DemRows& dem, uint32_t chart, uint32_t tx, uint32_t ty) {
+  const ChartInfo& c = manifest_.charts.at(chart);
+  Chart& out = *charts_[chart];
+  std::vector<ChartFileWriter::CodedBlock> blocks =
+      codeChartTile(dem, c.gridX, c.gridY, manifest_.chartSize, tiling_, tx, ty, *out.file, options_.coding.compressed);
+  const std::lock_guard<std::mutex> lock(out.mutex);
+  out.waiting.emplace(ty * tiling_.tilesPerSide + tx, std::move(blocks));
+  for (auto it = out.waiting.begin(); it != out.waiting.end() && it->first == out.next; it = out.waiting.erase(it)) {
+    for (const auto& b : it->second) out.file->append(b);
+    ++out.next;
+  }
+}
+
+uint64_t TiledChartWriter::finish(const DemRows& coarse) {
+  std::atomic<uint64_t> bytes{0};
+  tbb::parallel_for(size_t{0}, charts_.size(), [&](size_t i) {
+    const ChartInfo& c = manifest_.charts[i];
+    Chart& out = *charts_[i];
+    if (out.next != tiling_.tilesPerSide * tiling_.tilesPerSide)
+      throw std::logic_error("TiledChartWriter: chart " + std::to_string(i) + " lacks tiles");
+    writeChartCoarseLevels(coarse, c.gridX, c.gridY, manifest_.chartSize, tiling_, *out.file,
+                           options_.coding.compressed);
+    bytes += out.file->commit();
+    out.file.reset();
+  });
+  return bytes.load();
+}
+
+uint64_t writeTiledCharts(const DemRaster& dem, const fs::path& dir, const AtlasManifest& manifest,
+                          const TerrainAtlasOptions& options, const ChartTiling& tiling, int concurrency) {
+  DemRows rows;
+  rows.heights = dem.heights.data();
+  rows.rows = rows.height = dem.height;
+  rows.width = dem.width;
+  rows.spacing = dem.spacing;
+  TiledChartWriter writer(dir, manifest, options, tiling);
+  const uint32_t perChart = tiling.tilesPerSide * tiling.tilesPerSide;
+  const size_t total = manifest.charts.size() * perChart;
+  // Workers take the tiles in order, so a chart's tiles arrive nearly in turn.
+  std::atomic<size_t> next{0};
+  tbb::task_arena arena(concurrency);
+  const progress::ProgressStage stage("chart tiles", total);
+  arena.execute([&] {
+    tbb::parallel_for(0, concurrency, [&](int) {
+      for (size_t i; (i = next++) < total;) {
+        const uint32_t tile = uint32_t(i % perChart);
+        writer.writeTile(rows, uint32_t(i / perChart), tile % tiling.tilesPerSide, tile / tiling.tilesPerSide);
+        progress::advance();
+      }
+    });
+  });
+  return arena.execute([&] { return writer.finish(rows); });
+}
+
 TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOptions& options,
                                      const fs::path& dir, AtlasManifest& manifest) {
   const auto start = std::chrono::steady_clock::now();
@@ -234,16 +414,27 @@ TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOpt
       kMemoryBudget / perChartBytes, 1,
       static_cast<uint64_t>(tbb::this_task_arena::max_concurrency())));
   std::atomic<uint64_t> bytes{0};
-  tbb::task_arena arena(concurrency);
-  const progress::ProgressStage stage("charts", manifest.charts.size());
-  arena.execute([&] {
-    tbb::parallel_for(size_t{0}, manifest.charts.size(), [&](size_t i) {
-      const ChartInfo& c = manifest.charts[i];
-      const ChartPyramid p = buildChartPyramid(dem, c.gridX, c.gridY, cs, options.coding.compressed);
-      bytes += writeChartFile(dir / c.file, p, cs, options.blockIntervals, options.coding);
-      progress::advance();
+  const ChartTiling tiling = chartTiling(cs, options.blockIntervals);
+  if (tiling.tiled()) {
+    // A tile in flight holds its pyramid with ring heights and its coded blocks: about 24 bytes per
+    // level-0 sample.
+    const uint64_t perTile = uint64_t{tiling.tile + 1} * (tiling.tile + 1) * 24;
+    bytes = writeTiledCharts(dem, dir, manifest, options, tiling,
+                             int(std::clamp<uint64_t>(kMemoryBudget / perTile, 1,
+                                                      uint64_t(tbb::this_task_arena::max_concurrency()))));
+  }
+  else {
+    tbb::task_arena arena(concurrency);
+    const progress::ProgressStage stage("charts", manifest.charts.size());
+    arena.execute([&] {
+      tbb::parallel_for(size_t{0}, manifest.charts.size(), [&](size_t i) {
+        const ChartInfo& c = manifest.charts[i];
+        const ChartPyramid p = buildChartPyramid(dem, c.gridX, c.gridY, cs, options.coding.compressed);
+        bytes += writeChartFile(dir / c.file, p, cs, options.blockIntervals, options.coding);
+        progress::advance();
+      });
     });
-  });
+  }
 
   TerrainAtlasStats st;
   st.charts = uint32_t(manifest.charts.size());

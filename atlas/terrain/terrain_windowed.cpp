@@ -22,6 +22,105 @@ namespace gimlod {
 
 namespace fs = std::filesystem;
 
+namespace {
+
+// Charts over kMaxChartTile + 1 samples, or whose window (a chart and a chart's margin each side)
+// exceeds a quarter of the budget, are built in tiles: the largest that fit, a tile's window in a
+// quarter of the budget and the tiles in flight in half of it.
+ChartTiling windowTiling(uint32_t chartSize, uint32_t blockIntervals, uint64_t budget) {
+  const uint64_t m = chartSize - 1;
+  auto fits = [&](uint64_t t) {
+    const uint64_t w = t + 2 * (t / blockIntervals) + 1;
+    return w * w * 4 <= budget / 4 && (t + 1) * (t + 1) * 24 <= budget / 2;
+  };
+  uint32_t tile = kMaxChartTile;
+  while (tile > 2 * blockIntervals && !fits(tile)) tile /= 2;
+  if (m <= tile && (3 * m + 1) * (3 * m + 1) * 4 > budget / 4 && m / 2 >= 2 * blockIntervals)
+    tile = uint32_t(m / 2);
+  return chartTiling(chartSize, blockIntervals, tile);
+}
+
+// Lattice indices (DemRows::stride) whose samples lie in [lo, hi) of a side of `samples`.
+std::vector<int64_t> latticeIndices(int64_t lo, int64_t hi, int64_t samples, int64_t stride) {
+  std::vector<int64_t> out;
+  const int64_t n = latticeSamples(samples, stride);
+  // A lattice sample's column min(i * stride, samples - 1) grows with i and is at most i * stride.
+  for (int64_t i = (lo + stride - 1) / stride; i < n && std::min(i * stride, samples - 1) < hi; ++i) out.push_back(i);
+  return out;
+}
+
+// The tiled charts of a DEM held in the scratch raster: rows of tiles across the chart grid, in
+// groups of tiles from the window they read, then every chart's coarse levels from the DEM's lattice
+// (gathered from the windows as they pass). Returns the files' bytes.
+uint64_t writeTiledChartsWindowed(ScratchRaster& scratch, const fs::path& dir, const AtlasManifest& manifest,
+                                  const TerrainAtlasOptions& atlas, const ChartTiling& tiling, uint64_t budget,
+                                  WindowedTerrainResult& r) {
+  const int64_t width = manifest.samplesX, height = manifest.samplesY;
+  const uint32_t cs = manifest.chartSize, tps = tiling.tilesPerSide;
+  const uint64_t tilesX = uint64_t(manifest.chartsX) * tps, tilesY = uint64_t(manifest.chartsY) * tps;
+  const uint64_t t = tiling.tile, margin = tiling.margin(), windowRows = t + 2 * margin + 1;
+  const uint64_t groupTiles = std::clamp<uint64_t>((budget / 4 / (windowRows * 4) - 2 * margin - 1) / t, 1, tilesX);
+  const int concurrency = int(std::clamp<uint64_t>(budget / 2 / ((t + 1) * (t + 1) * 24), 1,
+                                                   uint64_t(tbb::this_task_arena::max_concurrency())));
+  const int64_t stride = int64_t{1} << tiling.coarseLevel;
+  const int64_t nx = latticeSamples(width, stride), ny = latticeSamples(height, stride);
+  std::vector<float> lattice(size_t(nx * ny));
+  TiledChartWriter writer(dir, manifest, atlas, tiling);
+  tbb::task_arena arena(concurrency);
+  std::vector<float> window;
+  const progress::ProgressStage stage("chart tiles", tilesX * tilesY);
+  for (uint64_t gty = 0; gty < tilesY; ++gty) {
+    const uint32_t chartY = uint32_t(gty / tps), ty = uint32_t(gty % tps);
+    for (uint64_t g0 = 0; g0 < tilesX; g0 += groupTiles) {
+      const uint64_t g1 = std::min(g0 + groupTiles, tilesX);
+      const auto first = tileSpan(tiling, cs, int32_t(g0 / tps), int32_t(chartY), uint32_t(g0 % tps), ty, width, height);
+      const auto last =
+          tileSpan(tiling, cs, int32_t((g1 - 1) / tps), int32_t(chartY), uint32_t((g1 - 1) % tps), ty, width, height);
+      const CellWindow w{first[0], first[1], last[2], last[3]};
+      r.bandRows = std::max<uint64_t>(r.bandRows, uint64_t(w.height()));
+      r.bandColumns = std::max<uint64_t>(r.bandColumns, uint64_t(w.width()));
+      window.resize(w.cells());
+      arena.execute([&] { scratch.read(w, window.data(), nullptr); });
+      if (atlas.coding.compressed)
+        for (float& x : window) x = storedHeight(x, r.heightPrecision);
+      for (int64_t j : latticeIndices(w.y0, w.y1, height, stride)) {
+        const int64_t y = std::min(j * stride, height - 1) - w.y0;
+        for (int64_t i : latticeIndices(w.x0, w.x1, width, stride))
+          lattice[size_t(j * nx + i)] = window[size_t(y * w.width() + std::min(i * stride, width - 1) - w.x0)];
+      }
+      DemRows view;
+      view.heights = window.data();
+      view.y0 = w.y0;
+      view.rows = w.height();
+      view.x0 = w.x0;
+      view.cols = w.width();
+      view.width = width;
+      view.height = height;
+      view.spacing = manifest.spacing;
+      std::atomic<uint64_t> next{g0};
+      arena.execute([&] {
+        tbb::parallel_for(0, concurrency, [&](int) {
+          for (uint64_t g; (g = next++) < g1;) {
+            writer.writeTile(view, chartY * manifest.chartsX + uint32_t(g / tps), uint32_t(g % tps), ty);
+            progress::advance();
+          }
+        });
+      });
+    }
+  }
+  DemRows coarse;
+  coarse.heights = lattice.data();
+  coarse.rows = ny;
+  coarse.cols = nx;
+  coarse.width = width;
+  coarse.height = height;
+  coarse.spacing = manifest.spacing;
+  coarse.stride = stride;
+  return arena.execute([&] { return writer.finish(coarse); });
+}
+
+}  // namespace
+
 WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const fs::path& dir,
                                                  const WindowedTerrainOptions& options, AtlasManifest& manifest) {
   const auto start = std::chrono::steady_clock::now();
@@ -134,6 +233,16 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
   fs::create_directories(dir / "charts");
   const uint32_t cs = atlas.chartSize;
   const uint64_t m = cs - 1, spanRows = 3 * m + 1;
+  const ChartTiling tiling = windowTiling(cs, atlas.blockIntervals, budget);
+  if (tiling.tiled()) {
+    r.charts.bytesOnDisk = writeTiledChartsWindowed(scratch, dir, manifest, atlas, tiling, budget, r);
+    r.charts.charts = uint32_t(manifest.charts.size());
+    r.charts.samples = width * height;
+    for (uint32_t k = 0; k <= manifest.intervalsLog2(); ++k) r.charts.storedSamples += ((m >> k) + 1) * ((m >> k) + 1);
+    r.charts.storedSamples *= r.charts.charts;
+    r.charts.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return r;
+  }
   // A window of g chart columns holds spanRows x ((g + 2) m + 1) heights; the charts in flight
   // take the other half of the budget.
   if (spanRows * spanRows * 4 > budget / 4)

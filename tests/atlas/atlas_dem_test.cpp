@@ -467,6 +467,65 @@ TEST(AtlasDemErrors, BadZScale) {
   expectInputErrorNaming(f, DemOptions{1e300, ""});  // heights overflow float
 }
 
+// The shipped imagery, three bands of bytes, is a colour image: refused as a DEM unless a band is
+// named, and a band past the raster's is an error naming the file.
+TEST(AtlasDemErrors, ColourImageNeedsABand) {
+  const fs::path rgb = test::repoData() / "terrain/mt_rainier_imagery.tif";
+  try {
+    loadDem(rgb);
+    FAIL() << "an RGB image read as heights";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("mt_rainier_imagery.tif"), std::string::npos) << what;
+    EXPECT_NE(what.find("RGB"), std::string::npos) << what;
+    EXPECT_NE(what.find("band"), std::string::npos) << what;
+  }
+  DemOptions green;
+  green.band = 2;
+  const DemRaster dem = loadDem(rgb, green);
+  EXPECT_GT(dem.maxHeight, dem.minHeight);
+  EXPECT_LE(dem.maxHeight, 255.f);
+  DemOptions fourth;
+  fourth.band = 4;
+  expectInputErrorNaming(rgb, fourth);
+}
+
+// A raster without a georeference is taken as 1 m apart, with a warning naming the spacing option;
+// the option gives the spacing in metres (and replaces a georeference's, with a warning).
+TEST(AtlasDem, SpacingOfARasterWithoutGeoreference) {
+  test::TempDir tmp("gimlod-dem-spacing");
+  const fs::path f = tmp.path() / "plain.tif";
+  GDALAllRegister();
+  GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GTiff"), f.c_str(), 8, 6, 1, GDT_Int16, nullptr);
+  ASSERT_NE(ds, nullptr);
+  std::vector<int16_t> h(48);
+  for (size_t i = 0; i < h.size(); ++i) h[i] = int16_t(i * 3);
+  ASSERT_EQ(GDALRasterIO(GDALGetRasterBand(ds, 1), GF_Write, 0, 0, 8, 6, h.data(), 8, 6, GDT_Int16, 0, 0), CE_None);
+  GDALClose(ds);
+  auto warned = [](const DemRaster& d, const char* what) {
+    for (const std::string& w : d.warnings)
+      if (w.find(what) != std::string::npos) return true;
+    return false;
+  };
+  const DemRaster plain = loadDem(f);
+  EXPECT_EQ(plain.spacing, (std::array<double, 2>{1.0, 1.0}));
+  EXPECT_TRUE(warned(plain, "spacing taken as 1 m")) << ::testing::PrintToString(plain.warnings);
+  DemOptions o;
+  o.spacing = {30.0, 20.0};
+  const DemRaster given = loadDem(f, o);
+  EXPECT_EQ(given.spacing, (std::array<double, 2>{30.0, 20.0}));
+  EXPECT_FALSE(warned(given, "1 m"));
+  o.spacing = {-5.0, 20.0};
+  expectInputErrorNaming(f, o);
+  o.spacing = {5.0, std::nan("")};
+  expectInputErrorNaming(f, o);
+  // A georeferenced DEM's spacing replaced, and said so.
+  o.spacing = {45.0, 45.0};
+  const DemRaster rainier = loadDem(test::repoData() / "terrain/mt_rainier_90m.tif", o);
+  EXPECT_EQ(rainier.spacing, (std::array<double, 2>{45.0, 45.0}));
+  EXPECT_TRUE(warned(rainier, "in place of the georeference"));
+}
+
 TEST(AtlasDem, DegreeLengths) {
   EXPECT_NEAR(metresPerDegreeLatitude(0), 110574.0, 2.0);
   EXPECT_NEAR(metresPerDegreeLatitude(90), 111694.0, 2.0);

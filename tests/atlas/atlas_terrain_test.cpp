@@ -40,9 +40,10 @@ TEST(AtlasTerrain, OptionValidation) {
   EXPECT_NO_THROW(validateTerrainAtlasOptions({513, 64, {}}));
   EXPECT_NO_THROW(validateTerrainAtlasOptions({9, 8, {}}));
   EXPECT_NO_THROW(validateTerrainAtlasOptions({8193, 1024, {}}));
+  EXPECT_NO_THROW(validateTerrainAtlasOptions({kMaxTerrainChartSize, 64, {}}));
   expectOptionError(500, 64, "chartSize 500 is not 2^m+1");
   expectOptionError(5, 4, "chartSize 5");
-  expectOptionError(16385, 64, "chartSize 16385");
+  expectOptionError(65537, 64, "chartSize 65537");
   expectOptionError(513, 48, "blockIntervals 48");
   expectOptionError(513, 2, "blockIntervals 2");
   expectOptionError(513, 2048, "blockIntervals 2048");

@@ -179,8 +179,9 @@ TEST_F(BenchCliTest, BadOptionsFailClearly) {
       {"--orbit 2 --repeat 0", "--repeat"},
       {"--orbit 2 --frame-ms 16", "--tri-rate"},
       {"--orbit 2 --load-step 0", "--load-step"},
-      {"--nodes 100", "--orbit N or --path"},
-      {"--orbit 2 --path nope.json", "only one of"},
+      {"--nodes 100", "one of --orbit N, --descent N and --path"},
+      {"--orbit 2 --path nope.json", "one of --orbit N"},
+      {"--orbit 2 --descent 5", "one of --orbit N"},
       {"--mode budget --orbit 2 --triangles 0", "> 0"},
   };
   for (const auto& [args, expect] : cases) {

@@ -122,6 +122,82 @@ TEST(FormatChart, RoundTripBlocksAndWindows) {
   EXPECT_THROW(r.readHeights(7, 0, 0, 1, buf), std::logic_error);    // no such level
 }
 
+// A chart file written block by block in any order, from several threads, reads back as the one
+// written in level order; the level-order file is byte for byte what writeChartFile writes, a
+// block is written once, and a file missing a block is not committed.
+TEST(FormatChart, BlocksWrittenInAnyOrderReadBackTheSame) {
+  test::TempDir tmp("gimlod-chart-writer");
+  const uint32_t cs = 129, bi = 16;
+  const ChartPyramid p = makePyramid(cs, 11);
+  const uint32_t levels = uint32_t(p.heights.size()), mask = (1u << kChannelHeights) | (1u << kChannelNormals);
+  struct Block {
+    uint32_t level, bx, by;
+  };
+  std::vector<Block> blocks;
+  for (uint32_t k = 0; k < levels; ++k) {
+    const LevelLayout l = levelLayout(cs, bi, k);
+    for (uint32_t by = 0; by < l.blocksPerSide; ++by)
+      for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx) blocks.push_back({k, bx, by});
+  }
+  auto data = [&](const Block& b) {
+    const LevelLayout l = levelLayout(cs, bi, b.level);
+    const size_t at = size_t(b.by) * (l.blockSamples - 1) * l.samples + size_t(b.bx) * (l.blockSamples - 1);
+    BlockData d;
+    d[kChannelHeights] = {p.heights[b.level].data() + at, l.samples};
+    d[kChannelNormals] = {p.normals[b.level].data() + at, l.samples};
+    return d;
+  };
+  for (const bool compressed : {false, true}) {
+    ChartCoding coding;
+    coding.compressed = compressed;
+    coding.heightPrecision = 0.01;
+    const fs::path whole = tmp.path() / "whole.bin", ordered = tmp.path() / "ordered.bin",
+                   shuffled = tmp.path() / "shuffled.bin";
+    writeChartFile(whole, p, cs, bi, coding);
+    {
+      ChartFileWriter w(ordered, cs, bi, levels, mask, coding);
+      for (const Block& b : blocks) w.writeBlock(b.level, b.bx, b.by, data(b));
+      const uint64_t bytes = w.commit();
+      EXPECT_EQ(bytes, fs::file_size(ordered));
+    }
+    EXPECT_EQ(test::fileBytes(whole), test::fileBytes(ordered)) << "compressed " << compressed;
+    std::vector<Block> order = blocks;
+    std::shuffle(order.begin(), order.end(), std::mt19937(5));
+    {
+      ChartFileWriter w(shuffled, cs, bi, levels, mask, coding);
+      std::atomic<size_t> next{0};
+      std::vector<std::thread> threads;
+      for (int t = 0; t < 3; ++t)
+        threads.emplace_back([&] {
+          for (size_t i; (i = next++) < order.size();) w.writeBlock(order[i].level, order[i].bx, order[i].by, data(order[i]));
+        });
+      for (std::thread& t : threads) t.join();
+      EXPECT_THROW(w.writeBlock(0, 0, 0, data(blocks[0])), std::logic_error);
+      w.commit();
+    }
+    EXPECT_NE(test::fileBytes(whole), test::fileBytes(shuffled));
+    const ChartFileReader a(whole), b(shuffled);
+    for (uint32_t k = 0; k < levels; ++k) {
+      EXPECT_EQ(a.readLevelHeights(k), b.readLevelHeights(k)) << "level " << k;
+      EXPECT_EQ(a.readLevelNormals(k), b.readLevelNormals(k)) << "level " << k;
+    }
+    // A window of whole blocks, across blocks.
+    const std::vector<float> level1 = a.readLevelHeights(1);
+    const std::vector<float> window = b.readHeightsWindow(1, 16, 32, 32);
+    ASSERT_EQ(window.size(), 33u * 33u);
+    for (uint32_t v = 0; v <= 32; ++v)
+      for (uint32_t u = 0; u <= 32; ++u) ASSERT_EQ(window[v * 33 + u], level1[size_t(32 + v) * 65 + 16 + u]);
+    EXPECT_THROW(b.readHeightsWindow(1, 8, 0, 16), std::logic_error);  // not on a block
+  }
+  {
+    const fs::path partial = tmp.path() / "partial.bin";
+    ChartFileWriter w(partial, cs, bi, levels, mask, {});
+    for (size_t i = 1; i < blocks.size(); ++i) w.writeBlock(blocks[i].level, blocks[i].bx, blocks[i].by, data(blocks[i]));
+    EXPECT_THROW(w.commit(), std::logic_error);
+  }
+  EXPECT_FALSE(fs::exists(tmp.path() / "partial.bin"));
+}
+
 TEST(FormatChart, ConcurrentReads) {
   test::TempDir tmp("gimlod-chart");
   const ChartPyramid p = makePyramid(129, 3);

@@ -21,6 +21,7 @@
 #include "tests/chart_layout_fixture.h"
 #include "tests/gl/crack_check.h"
 #include "tests/test_util.h"
+#include "tests/upsampled_tile.h"
 
 namespace gimlod {
 namespace {
@@ -181,6 +182,49 @@ TEST_F(CrackTest, AdaptedCutsOverRealSrtmTiles) {
     }
     EXPECT_GT(crossChart, 0u) << "no cut crossed a chart border";
   }
+}
+
+// Deep trees, as the build plans them for large DEMs: the shipped tile upsampled twice, in 3 x 3
+// charts of 1025 samples at depth 8 (leaves 8 intervals wide), adapted from low cameras so that
+// neighbours meet many levels apart, within and across charts: 0 cracks.
+TEST_F(CrackTest, AdaptedCutsOnDeepTrees) {
+  const std::filesystem::path vrt = test::upsampledTile(dir_.path(), "200%");
+  const AtlasView atlas = build(vrt, 1025, 8, 64, 4);
+  ASSERT_EQ(atlas.hierarchy.chartCount(), 9u);
+  gl::SceneOptions so;
+  so.width = 160;
+  so.height = 120;
+  so.pageCapacity = 4096;
+  gl::AtlasScene scene(atlas, so);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const glm::dvec3 ext = atlas.hi - atlas.lo;
+  uint32_t deepest = 0, levelGap = 0;
+  uint64_t crossChart = 0;
+  for (int i = 0; i < 6; ++i) {
+    Camera cam;
+    cam.eye = atlas.lo + glm::dvec3(u(rng) * ext.x, u(rng) * ext.y, atlas.hi.z + (0.005 + 0.05 * u(rng)) * ext.x);
+    cam.target = atlas.lo + glm::dvec3(u(rng) * ext.x, u(rng) * ext.y, atlas.lo.z);
+    cam.nearPlane = cam.farPlane = 0.0;
+    fitClipPlanes(cam, atlas.lo, atlas.hi);
+    AdaptOptions o;
+    o.tolerancePx = 0.5;
+    o.maxNodes = 3000;
+    const Cut cut = adaptErrorThreshold(atlas.hierarchy, makeViewParams(cam, so.width, so.height), o);
+    ASSERT_EQ(countStitchViolations(atlas.hierarchy, cut), 0u);
+    uint32_t lo = 99, hi = 0;
+    for (const CutNode& n : cut.nodes) lo = std::min(lo, n.id.level), hi = std::max(hi, n.id.level);
+    deepest = std::max(deepest, hi);
+    levelGap = std::max(levelGap, hi - lo);
+    const test::CutMix mix = test::cutMix(atlas.hierarchy, cut);
+    crossChart += mix.crossChart;
+    const CrackReport r = check(scene, cut, mix.mixed > 0);
+    EXPECT_EQ(r.mismatches, 0u) << "camera " << i << ": " << r.mismatches << " of " << r.borderVertices;
+    EXPECT_GT(r.borderVertices, 0u);
+  }
+  EXPECT_GE(deepest, 6u) << "no cut reached the deep levels";
+  EXPECT_GE(levelGap, 4u);
+  EXPECT_GT(crossChart, 0u);
 }
 
 // The cuts of the coherent adapters (dual queue in error mode, quad queue under a triangle

@@ -14,6 +14,8 @@
 #include "tests/adapt_fixture.h"
 #include "tests/dem_world.h"
 #include "tests/test_util.h"
+#include "tests/upsampled_tile.h"
+#include "pipeline/terrain_build.h"
 
 namespace gimlod {
 namespace {
@@ -150,6 +152,50 @@ TEST(QuadQueue, RainierBenchPathSmallNodeBudgetNoWorseThanFixedPerFrame) {
                 "quad-queue worse in %d frames, budget unused with error left in %d frames\n",
                 (unsigned long long)triangles, qMax, fMax, worse, unused);
   }
+}
+
+// A node budget of 100 holds in every frame of an orbit and of the bench path on the shipped tile
+// upsampled four times (4801^2 samples), at the chart size and depth the build chooses for it:
+// 5 x 5 charts of 1025 samples at depth 6, where 513-sample charts would put 100 roots (the whole
+// budget) in view.
+TEST(QuadQueue, HundredNodesHoldOnALargerDemAtTheBuildsPlan) {
+  test::TempDir tmp("gimlod-plan-budget");
+  const std::filesystem::path vrt = test::upsampledTile(tmp.path(), "400%");
+  TerrainPlan plan;
+  {
+    const DemSource source(vrt);
+    plan = planTerrain(vrt, source.info().width, source.info().height, TerrainBuildOptions{});
+  }
+  EXPECT_EQ(plan.chartSize, 1025u);
+  EXPECT_EQ(plan.chartsX * plan.chartsY, 25u);
+  EXPECT_EQ(plan.depth, 6u);
+  const test::DemWorld world = test::loadDemWorld(vrt, plan.chartSize, plan.depth);
+  const Hierarchy& h = world.h;
+  std::vector<Camera> path = orbitPath(world.lo, world.hi, 24, 0.35, 20.0);
+  std::vector<Camera> bench = readCameraPath(test::repoData().parent_path() / "scenes/rainier_bench.json");
+  for (Camera& c : bench) fitClipPlanes(c, world.lo, world.hi);
+  path.insert(path.end(), bench.begin(), bench.end());
+  BudgetOptions o;
+  o.maxTriangles = 400000;
+  o.maxNodes = 100;
+  QuadQueueAdapter adapter(h);
+  size_t most = 0, mostFixed = 0;
+  uint32_t floor = 0;
+  for (size_t f = 0; f < path.size(); ++f) {
+    const ViewParams v = makeViewParams(path[f], 1280, 720);
+    BudgetStats st, fs;
+    const Cut& cut = adapter.update(v, o, &st);
+    EXPECT_FALSE(st.budgetBelowRoots) << "frame " << f;
+    EXPECT_LE(cut.nodes.size(), o.maxNodes) << "frame " << f << ": " << st.constraintSplits << " constraint splits";
+    expectWithinBudget(h, cut, o, st);
+    const Cut fixed = adaptFixedGranularityBudget(h, v, o, &fs);
+    EXPECT_LE(fixed.nodes.size(), o.maxNodes) << "frame " << f;
+    most = std::max(most, cut.nodes.size()), mostFixed = std::max(mostFixed, fixed.nodes.size());
+    floor = std::max(floor, st.rootFloor);
+  }
+  std::printf("rainier x4 (%u x %u charts of %u, depth %u), orbit and bench path, 100 nodes, 400k triangles: most "
+              "nodes drawn quad-queue %zu, fixed %zu; most visible roots %u\n",
+              plan.chartsX, plan.chartsY, plan.chartSize, plan.depth, most, mostFixed, floor);
 }
 
 }  // namespace

@@ -208,5 +208,30 @@ TEST(CameraControl, RecordedPathsReadBackAsWritten) {
   EXPECT_THROW(writeCameraPath(dir.path() / "missing" / "path.json", cams), InputError);
 }
 
+// The fly-down path: from a diagonal above the box's top to 1/500 of it, always lower, over the
+// box, towards its centre, looking ahead and down.
+TEST(CameraPaths, DescentFliesDownFromTheWholeBoxToNearItsTop) {
+  const glm::dvec3 lo(0, 0, -100), hi(40000, 20000, 4000);
+  const double diagonal = glm::length(hi - lo);
+  const std::vector<Camera> path = descentPath(lo, hi, 50);
+  ASSERT_EQ(path.size(), 50u);
+  EXPECT_NEAR(path.front().eye.z - hi.z, diagonal, 1e-6 * diagonal);
+  EXPECT_NEAR(path.back().eye.z - hi.z, 0.002 * diagonal, 1e-6 * diagonal);
+  EXPECT_NEAR(path.back().eye.x, 20000, 1e-6);
+  EXPECT_NEAR(path.back().eye.y, 10000, 1e-6);
+  for (size_t i = 0; i < path.size(); ++i) {
+    const Camera& c = path[i];
+    if (i > 0) {
+      EXPECT_LT(c.eye.z, path[i - 1].eye.z) << i;
+    }
+    EXPECT_GE(c.eye.x, lo.x);
+    EXPECT_LE(c.eye.x, hi.x);
+    EXPECT_LT(c.target.z, c.eye.z);
+    EXPECT_GT(c.farPlane, c.nearPlane);
+    EXPECT_GT(c.nearPlane, 0.0);
+  }
+  EXPECT_TRUE(descentPath(lo, hi, 0).empty());
+}
+
 }  // namespace
 }  // namespace gimlod
