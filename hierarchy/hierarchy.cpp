@@ -250,6 +250,28 @@ TileSummary buildTerrainTile(const HierarchyParams& p, const AtlasManifest& m, c
   return sum;
 }
 
+// A tile past the DEM's last sample (padding of the chart grid): its nodes are empty, never drawn,
+// and take no reading; their bounds are flat at the lowest height and their errors 0. Its summary
+// leaves the nodes above it to the tiles that hold data.
+TileSummary emptyTerrainTile(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart, uint32_t t,
+                             uint32_t tx, uint32_t ty, Hierarchy::ChartNodes& out) {
+  const uint32_t L = p.intervalsLog2, shift = L - t, rc = p.resCount();
+  const float z = m.heightRange[0];
+  for (uint32_t l = 0; l + shift < p.depth && l <= t; ++l)
+    for (uint32_t y = 0; y < (1u << l); ++y)
+      for (uint32_t x = 0; x < (1u << l); ++x) {
+        const uint32_t gx = (tx << l) + x, gy = (ty << l) + y;
+        setNodeBounds(m, chart, L, l + shift, gx, gy, z, z, out);
+        for (uint32_t r = p.minNodeResLog2; r <= p.maxRes(l + shift); ++r)
+          out.errors[size_t(nodeIndex(l + shift, gx, gy)) * rc + (r - p.minNodeResLog2)] = 0.0f;
+      }
+  TileSummary sum;
+  sum.lo = std::numeric_limits<float>::infinity();
+  sum.hi = -sum.lo;
+  sum.levelError.assign(L - p.minNodeResLog2 + 1, 0.0f);
+  return sum;
+}
+
 // The nodes of a tiled chart above its tiles (levels below intervalsLog2 - t), from the tiles'
 // summaries (tiles x tiles, row-major).
 void buildAboveTiles(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart, uint32_t t,
@@ -271,7 +293,9 @@ void buildAboveTiles(const HierarchyParams& p, const AtlasManifest& m, const Cha
           for (size_t k = 0; k < u.levelError.size(); ++k) u.levelError[k] = std::max(u.levelError[k], c.levelError[k]);
         }
         if (l >= p.depth) continue;
-        setNodeBounds(m, chart, L, l, x, y, u.lo, u.hi, out);
+        // (Under empty tiles alone: flat at the lowest height, as they are.)
+        setNodeBounds(m, chart, L, l, x, y, u.lo <= u.hi ? u.lo : m.heightRange[0], u.lo <= u.hi ? u.hi : m.heightRange[0],
+                      out);
         for (uint32_t k = 0; k < u.levelError.size() && k <= L - l; ++k) {
           const uint32_t r = L - l - k;
           if (r >= p.minNodeResLog2 && r <= p.maxRes(l))
@@ -428,10 +452,17 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindow
   });
   tbb::parallel_for(uint64_t(0), uint64_t(count) * perChart, [&](uint64_t i) {
     const uint32_t c = uint32_t(i / perChart), tile = uint32_t(i % perChart), tx = tile % tiles, ty = tile / tiles;
+    const ChartInfo& chart = manifest.charts[c];
+    if (tiles > 1 && ((int64_t(chart.gridX) << L) + int64_t(tx) * T >= int64_t(manifest.samplesX) - 1 ||
+                      (int64_t(chart.gridY) << L) + int64_t(ty) * T >= int64_t(manifest.samplesY) - 1)) {
+      summaries[c][tile] = emptyTerrainTile(hier.params, manifest, chart, t, tx, ty, hier.charts[c]);
+      progress::advance();
+      return;
+    }
     const std::vector<float> h = source(c, 0, tx * T, ty * T, T);
     if (h.size() != size_t(T + 1) * (T + 1))
       throw InputError("chart " + std::to_string(c) + ": expected " + std::to_string(T + 1) + "^2 heights");
-    summaries[c][tile] = buildTerrainTile(hier.params, manifest, manifest.charts[c], h, t, tx, ty, coarse[c], hier.charts[c]);
+    summaries[c][tile] = buildTerrainTile(hier.params, manifest, chart, h, t, tx, ty, coarse[c], hier.charts[c]);
     progress::advance();
   });
   if (tiles > 1)

@@ -124,8 +124,10 @@ inline constexpr uint32_t kHierarchyTile = 1024;
 // The same hierarchy, a chart larger than maxTile intervals (a power of two) read in tiles of
 // maxTile: each tile's level-0 heights, and the chart's pyramid level log2(maxTile) for the
 // levels whose cells span several tiles. A node above the tiles takes the largest error and the
-// range of its tiles. Memory: a few tiles' worth a thread, whatever the chart's size. A chart of
-// maxTile intervals or fewer is read whole, and its nodes are those of the overload above.
+// range of its tiles. A tile past the DEM's last sample (padding of the chart grid) is not read: its
+// nodes are empty (never drawn), flat at the lowest height with errors 0, and the nodes above it
+// take the tiles that hold data. Memory: a few tiles' worth a thread, whatever the chart's size. A
+// chart of maxTile intervals or fewer is read whole, and its nodes are those of the overload above.
 Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindowSource& source, HierarchyStats* stats,
                                 uint32_t maxTile = kHierarchyTile);
 
