@@ -64,6 +64,24 @@ void fitClipPlanes(Camera& c, const glm::dvec3& lo, const glm::dvec3& hi) {
   if (c.nearPlane <= 0) c.nearPlane = std::max({dist * 0.5, diag * 1e-4, 1e-3});
 }
 
+namespace {
+
+// A camera at eye looking at target, z up, its clip planes fitted to the box.
+Camera zUpCamera(const glm::dvec3& eye, const glm::dvec3& target, double fovYDeg, const glm::dvec3& lo,
+                 const glm::dvec3& hi) {
+  Camera c;
+  c.eye = eye;
+  c.target = target;
+  c.up = {0.0, 0.0, 1.0};
+  c.fovYDeg = fovYDeg;
+  c.nearPlane = 0.0;
+  c.farPlane = 0.0;
+  fitClipPlanes(c, lo, hi);
+  return c;
+}
+
+}  // namespace
+
 std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames,
                               double distanceFraction, double elevationDeg, double fovYDeg) {
   const glm::dvec3 centre = (lo + hi) * 0.5;
@@ -72,15 +90,9 @@ std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32
   std::vector<Camera> path;
   for (uint32_t i = 0; i < frames; ++i) {
     const double a = 2.0 * std::numbers::pi * double(i) / double(std::max(frames, 1u));
-    Camera c;
-    c.eye = centre + radius * glm::dvec3(std::cos(el) * std::cos(a), std::cos(el) * std::sin(a), std::sin(el));
-    c.target = centre;
-    c.up = {0.0, 0.0, 1.0};
-    c.fovYDeg = fovYDeg;
-    c.nearPlane = 0.0;
-    c.farPlane = 0.0;
-    fitClipPlanes(c, lo, hi);
-    path.push_back(c);
+    path.push_back(zUpCamera(centre + radius * glm::dvec3(std::cos(el) * std::cos(a), std::cos(el) * std::sin(a),
+                                                          std::sin(el)),
+                             centre, fovYDeg, lo, hi));
   }
   return path;
 }
@@ -97,16 +109,8 @@ std::vector<Camera> descentPath(const glm::dvec3& lo, const glm::dvec3& hi, uint
     const glm::dvec2 at = start + s * (end - start);
     glm::dvec2 ahead = end - start;
     ahead = glm::length(ahead) > 0 ? ahead / glm::length(ahead) : glm::dvec2(1.0, 0.0);
-    Camera c;
-    c.eye = {at.x, at.y, hi.z + height};
     const glm::dvec2 look = at + ahead * (1.5 * height);
-    c.target = {look.x, look.y, centre.z};
-    c.up = {0.0, 0.0, 1.0};
-    c.fovYDeg = fovYDeg;
-    c.nearPlane = 0.0;
-    c.farPlane = 0.0;
-    fitClipPlanes(c, lo, hi);
-    path.push_back(c);
+    path.push_back(zUpCamera({at.x, at.y, hi.z + height}, {look.x, look.y, centre.z}, fovYDeg, lo, hi));
   }
   return path;
 }

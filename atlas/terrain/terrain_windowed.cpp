@@ -40,6 +40,21 @@ ChartTiling windowTiling(uint32_t chartSize, uint32_t blockIntervals, uint64_t b
   return chartTiling(chartSize, blockIntervals, tile);
 }
 
+// The heights of window w of a width x height DEM, as DemRows.
+DemRows heldRows(const std::vector<float>& heights, const CellWindow& w, int64_t width, int64_t height,
+                   const std::array<double, 2>& spacing) {
+  DemRows rows;
+  rows.heights = heights.data();
+  rows.y0 = w.y0;
+  rows.rows = w.height();
+  rows.x0 = w.x0;
+  rows.cols = w.width();
+  rows.width = width;
+  rows.height = height;
+  rows.spacing = spacing;
+  return rows;
+}
+
 // Lattice indices (DemRows::stride) whose samples lie in [lo, hi) of a side of `samples`.
 std::vector<int64_t> latticeIndices(int64_t lo, int64_t hi, int64_t samples, int64_t stride) {
   std::vector<int64_t> out;
@@ -88,15 +103,7 @@ uint64_t writeTiledChartsWindowed(ScratchRaster& scratch, const fs::path& dir, c
         for (int64_t i : latticeIndices(w.x0, w.x1, width, stride))
           lattice[size_t(j * nx + i)] = window[size_t(y * w.width() + std::min(i * stride, width - 1) - w.x0)];
       }
-      DemRows view;
-      view.heights = window.data();
-      view.y0 = w.y0;
-      view.rows = w.height();
-      view.x0 = w.x0;
-      view.cols = w.width();
-      view.width = width;
-      view.height = height;
-      view.spacing = manifest.spacing;
+      const DemRows view = heldRows(window, w, width, height, manifest.spacing);
       std::atomic<uint64_t> next{g0};
       arena.execute([&] {
         tbb::parallel_for(0, concurrency, [&](int) {
@@ -277,15 +284,7 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
       arena.execute([&] { scratch.read(w, window.data(), nullptr); });
       if (compressed)
         for (float& x : window) x = storedHeight(x, r.heightPrecision);
-      DemRows view;
-      view.heights = window.data();
-      view.y0 = w.y0;
-      view.rows = w.height();
-      view.x0 = w.x0;
-      view.cols = w.width();
-      view.width = int64_t(width);
-      view.height = int64_t(height);
-      view.spacing = dem.spacing;
+      const DemRows view = heldRows(window, w, int64_t(width), int64_t(height), dem.spacing);
       arena.execute([&] {
         tbb::parallel_for(g0, g1, [&](uint32_t gx) {
           const ChartInfo& c = manifest.charts[size_t(gy) * manifest.chartsX + gx];
