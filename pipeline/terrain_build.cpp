@@ -5,12 +5,15 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <list>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include "atlas/terrain/imagery.h"
 #include "atlas/terrain/terrain_windowed.h"
@@ -96,9 +99,8 @@ TerrainPlan planTerrain(const fs::path& input, uint64_t width, uint64_t height, 
   auto along = [](uint64_t samples, uint64_t m) { return std::max<uint64_t>(1, (samples - 1 + m - 1) / m); };
   uint32_t cs = o.chartSize;
   if (plan.autoChartSize) {
-    const uint32_t top = o.imagery.empty() ? kMaxTerrainChartSize : kMaxChartTile + 1;
     cs = 513;
-    while (cs < top && along(width, cs - 1) * along(height, cs - 1) > kTargetTerrainCharts) cs = 2 * cs - 1;
+    while (cs < kMaxTerrainChartSize && along(width, cs - 1) * along(height, cs - 1) > kTargetTerrainCharts) cs = 2 * cs - 1;
   }
   plan.chartSize = cs;
   plan.chartsX = uint32_t(along(width, cs - 1));
@@ -122,15 +124,10 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& options) {
     // What holds for some chart size (planTerrain's, checked again once it is chosen).
     TerrainBuildOptions o = options;
     o.chartSize = kMaxTerrainChartSize;
-    o.imagery.clear();
     validateTerrainBuildOptions(o);
-    validateImageryOptions(imageryOptions(options));
     return;
   }
   const TerrainBuildOptions& o = options;
-  if (!o.imagery.empty() && o.chartSize > kMaxChartTile + 1)
-    throw InputError(fmt::format("{} {}: imagery is draped on charts of at most {} samples", optionRef("chartSize"),
-                                 o.chartSize, kMaxChartTile + 1));
   if (!(o.chartSize >= 9 && o.chartSize <= kMaxTerrainChartSize && isPowerOfTwo(o.chartSize - 1)))
     throw InputError(fmt::format("{} {} must be 2^m+1 between 9 and {} (e.g. 257, 513, 1025)",
                                  optionRef("chartSize"), o.chartSize, kMaxTerrainChartSize));
@@ -216,13 +213,42 @@ TerrainAtlasOptions terrainAtlasOptions(const TerrainBuildOptions& o) {
 
 // The hierarchy (from level 0 of every chart file, as a restarted stage would read it) and the
 // manifest, once the chart files are written.
+// The chart files the hierarchy reads, the last few kept open: it reads a chart's tiles one after
+// another (each open parses the file's directory), and an atlas may hold more charts than a
+// process may have files open.
+class OpenCharts {
+ public:
+  OpenCharts(const AtlasManifest& m, const fs::path& dir, size_t keep) : m_(m), dir_(dir), keep_(keep) {}
+  std::shared_ptr<const ChartFileReader> get(uint32_t chart) {
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      for (auto it = open_.begin(); it != open_.end(); ++it)
+        if (it->first == chart) {
+          open_.splice(open_.begin(), open_, it);
+          return it->second;
+        }
+    }
+    auto reader = std::make_shared<const ChartFileReader>(dir_ / m_.charts[chart].file);
+    const std::lock_guard<std::mutex> lock(mutex_);
+    open_.emplace_front(chart, reader);
+    if (open_.size() > keep_) open_.pop_back();
+    return reader;
+  }
+
+ private:
+  const AtlasManifest& m_;
+  fs::path dir_;
+  size_t keep_;
+  std::mutex mutex_;
+  std::list<std::pair<uint32_t, std::shared_ptr<const ChartFileReader>>> open_;
+};
+
 void finishTerrainAtlas(AtlasManifest& m, const fs::path& dir, TerrainWriteStats& w) {
-  // Each chart file is opened only while it is read: an atlas may hold more charts than a process
-  // may have files open.
+  OpenCharts charts(m, dir, 2 * size_t(tbb::this_task_arena::max_concurrency()) + 2);
   const Hierarchy h = buildTerrainHierarchy(
       m,
       [&](uint32_t c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n) {
-        return ChartFileReader(dir / m.charts[c].file).readHeightsWindow(level, u0, v0, n);
+        return charts.get(c)->readHeightsWindow(level, u0, v0, n);
       },
       &w.hierarchy);
   writeHierarchy(dir / m.hierarchyFile, h, m.compression.present);
@@ -243,6 +269,28 @@ void finishImagery(const TerrainBuildOptions& o, const ImageryWriteStats& ws, Te
                im.windows ? fmt::format(", {} windows", im.windows) : std::string(), 100.0 * im.coverage);
 }
 
+// Imagery reprojected and filtered window by window (or tile by tile, for tiled charts) in
+// memoryBytes.
+void writeImageryWindowed(const TerrainBuildOptions& o, const DemRaster& dem, const fs::path& dir, AtlasManifest& m,
+                          uint64_t memoryBytes, TerrainWriteStats& w) {
+  const auto t0 = std::chrono::steady_clock::now();
+  ImagerySource imagery(dem, o.input, imageryOptions(o));
+  TerrainImageryStats& im = w.imagery.emplace();
+  im.readSeconds = secondsSince(t0);
+  im.source = fs::absolute(o.imagery).string();
+  im.scaleLog2 = imagery.scaleLog2();
+  im.width = imagery.width();
+  im.height = imagery.height();
+  im.resampling = imagery.resampling();
+  ImageryWindowStats ws;
+  const ImageryWriteStats st = writeImageryChartsWindowed(imagery, im.source, dir, m, memoryBytes, &ws);
+  for (const std::string& warning : imagery.warnings()) spdlog::warn("{}: {}", o.imagery.string(), warning);
+  im.coverage = m.imagery.coverage;
+  im.windows = ws.windows;
+  im.windowSamples = ws.windowSamples;
+  finishImagery(o, st, im);
+}
+
 }  // namespace
 
 TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& options, const fs::path& dir) {
@@ -253,7 +301,10 @@ TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& 
   if (o.compress) topt.coding.heightPrecision = quantizeHeights(dem, o);
   TerrainWriteStats w;
   w.charts = writeTerrainCharts(dem, topt, dir, m);
-  if (!o.imagery.empty()) {
+  if (!o.imagery.empty() && chartTiling(m.chartSize, m.blockIntervals).tiled()) {
+    // Charts too large to hold whole take their imagery in tiles, as their geometry.
+    writeImageryWindowed(o, dem, dir, m, memoryCap(o) / 2, w);
+  } else if (!o.imagery.empty()) {
     // Imagery: reprojected onto the DEM's lattice, then cut like the heights.
     const auto t0 = std::chrono::steady_clock::now();
     ImageryRaster raster = loadImagery(dem, o.input, imageryOptions(o));
@@ -306,23 +357,7 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
   read->heightRange = {r.dem.minHeight, r.dem.maxHeight};
   read->voidsFilled = r.dem.voidsFilled;
   read->voidFillMethod = r.dem.voidFillMethod;
-  if (!o.imagery.empty()) {
-    // Imagery: reprojected and filtered window by window, in the windows' memory.
-    ImagerySource imagery(r.dem, o.input, imageryOptions(o));
-    TerrainImageryStats& im = w.imagery.emplace();
-    im.source = fs::absolute(o.imagery).string();
-    im.scaleLog2 = imagery.scaleLog2();
-    im.width = imagery.width();
-    im.height = imagery.height();
-    im.resampling = imagery.resampling();
-    ImageryWindowStats ws;
-    const ImageryWriteStats st = writeImageryChartsWindowed(imagery, im.source, dir, m, wo.memoryBytes, &ws);
-    for (const std::string& warning : imagery.warnings()) spdlog::warn("{}: {}", o.imagery.string(), warning);
-    im.coverage = m.imagery.coverage;
-    im.windows = ws.windows;
-    im.windowSamples = ws.windowSamples;
-    finishImagery(o, st, im);
-  }
+  if (!o.imagery.empty()) writeImageryWindowed(o, r.dem, dir, m, wo.memoryBytes, w);
   finishTerrainAtlas(m, dir, w);
   return w;
 }

@@ -15,6 +15,7 @@
 #include <tbb/parallel_for.h>
 
 #include "atlas/terrain/gdal_util.h"
+#include "atlas/terrain/terrain_atlas.h"
 #include "core/progress.h"
 
 namespace gimlod {
@@ -375,6 +376,13 @@ ChartPyramid ImageryPyramid::chart(int32_t gridX, int32_t gridY) const {
   return p;
 }
 
+const PackedColour* ImageryPyramid::at(uint32_t k, uint64_t x, uint64_t y) const {
+  const Level& l = levels_.at(k);
+  if (x < l.x0 || y < l.y0 || x >= uint64_t(l.x0) + l.width || y >= uint64_t(l.y0) + l.height)
+    throw std::invalid_argument("ImageryPyramid::at: outside the window");
+  return l.rgba.data() + (y - l.y0) * l.width + (x - l.x0);
+}
+
 namespace {
 
 void makeImageryDir(const fs::path& dir) {
@@ -392,18 +400,82 @@ void setImageryInfo(AtlasManifest& m, uint32_t scaleLog2, const std::string& sou
   m.imagery.coverage = coverage;
 }
 
+// A square of one pyramid level that a chart file's level holds: its sample (0, 0) at `origin`,
+// rows `stride` apart, `intervals` a side, in the file's blocks from (bx0, by0).
+struct ColourSquare {
+  const PackedColour* origin = nullptr;
+  size_t stride = 0;
+  uint32_t intervals = 0, fileLevel = 0, bx0 = 0, by0 = 0;
+};
+
+// The square's blocks of `file` (of min(blockIntervals, intervals) a side), coded in parallel, in
+// the file's order (rows of blocks); returns their samples.
+uint64_t writeColourSquare(const ColourSquare& sq, ChartFileWriter& file) {
+  const uint32_t b = std::min(file.blockIntervals(), sq.intervals);
+  const uint32_t n = sq.intervals / b;
+  std::vector<ChartFileWriter::CodedBlock> blocks(size_t(n) * n);
+  tbb::parallel_for(size_t{0}, blocks.size(), [&](size_t i) {
+    const uint32_t bx = uint32_t(i % n), by = uint32_t(i / n);
+    BlockData d;
+    d[kChannelColours] = {sq.origin + size_t(by) * b * sq.stride + size_t(bx) * b, sq.stride};
+    blocks[i] = file.code(sq.fileLevel, sq.bx0 + bx, sq.by0 + by, d);
+  });
+  for (const auto& block : blocks) file.append(block);
+  return uint64_t(sq.intervals + 1) * (sq.intervals + 1);
+}
+
+std::unique_ptr<ChartFileWriter> openImageryChart(const fs::path& dir, const AtlasManifest& m, ChartInfo& c) {
+  c.imageryFile = imageryFileName(c.id);
+  ChartCoding coding;
+  coding.compressed = m.compression.present;  // coded like the atlas's geometry
+  return std::make_unique<ChartFileWriter>(dir / c.imageryFile, m.imagery.chartSize(m.chartSize),
+                                           m.blockIntervals << m.imagery.scaleLog2, m.pyramidLevels(),
+                                           1u << kChannelColours, coding);
+}
+
+// Levels [first, last] of chart `c`'s file, cut from `pyramid` whose level 0 is the file's level
+// `first`; returns their samples.
+uint64_t writeChartLevels(const ImageryPyramid& pyramid, uint32_t first, const AtlasManifest& m, const ChartInfo& c,
+                          ChartFileWriter& file) {
+  const uint64_t ci = uint64_t(m.chartSize - 1) << m.imagery.scaleLog2;
+  uint64_t samples = 0;
+  for (uint32_t k = first; k < m.pyramidLevels(); ++k) {
+    const uint32_t j = k - first;
+    const uint64_t x = (uint64_t(c.gridX) * ci) >> k, y = (uint64_t(c.gridY) * ci) >> k;
+    samples += writeColourSquare({pyramid.at(j, x, y), pyramid.stride(j), uint32_t(ci >> k), k, 0, 0}, file);
+  }
+  return samples;
+}
+
 // Writes chart `c`'s imagery file, cut from `pyramid`; returns its bytes and adds its samples.
 uint64_t writeImageryChart(const ImageryPyramid& pyramid, const fs::path& dir, const AtlasManifest& m, ChartInfo& c,
                            std::atomic<uint64_t>& samples) {
-  c.imageryFile = imageryFileName(c.id);
-  const ChartPyramid p = pyramid.chart(c.gridX, c.gridY);
-  uint64_t n = 0;
-  for (const auto& level : p.colours) n += level.size();
-  samples += n;
-  ChartCoding coding;
-  coding.compressed = m.compression.present;  // coded like the atlas's geometry
-  return writeChartFile(dir / c.imageryFile, p, m.imagery.chartSize(m.chartSize), m.blockIntervals << m.imagery.scaleLog2,
-                        coding);
+  const auto file = openImageryChart(dir, m, c);
+  samples += writeChartLevels(pyramid, 0, m, c, *file);
+  return file->commit();
+}
+
+// The grid's level-0 samples [x0, x1) x [y0, y1) (the lattice edge-clamped onto the chart grid),
+// reprojected by `imagery`; adds to `covered` the lattice samples with alpha > 0 in the owned part
+// [ox0, ox1) x [oy0, oy1).
+std::vector<PackedColour> gridWindow(const ImagerySource& imagery, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1,
+                                     const std::array<uint64_t, 4>& owned, uint64_t& covered) {
+  const uint32_t latW = imagery.width(), latH = imagery.height();
+  const uint32_t lx0 = uint32_t(std::min<uint64_t>(x0, latW - 1)), ly0 = uint32_t(std::min<uint64_t>(y0, latH - 1));
+  const uint32_t lx1 = std::max(uint32_t(std::min<uint64_t>(x1, latW)), lx0 + 1);
+  const uint32_t ly1 = std::max(uint32_t(std::min<uint64_t>(y1, latH)), ly0 + 1);
+  const std::vector<PackedColour> lattice = imagery.window(lx0, ly0, lx1 - lx0, ly1 - ly0);
+  const uint32_t lw = lx1 - lx0;
+  for (uint64_t y = owned[1]; y < std::min<uint64_t>(owned[3], latH); ++y)
+    for (uint64_t x = owned[0]; x < std::min<uint64_t>(owned[2], latW); ++x)
+      covered += lattice[size_t(y - ly0) * lw + size_t(x - lx0)][3] > 0;
+  const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
+  std::vector<PackedColour> base(size_t(w) * h);
+  for (uint32_t y = 0; y < h; ++y) {
+    const size_t src = size_t(std::min<uint64_t>(y0 + y, latH - 1) - ly0) * lw;
+    for (uint32_t x = 0; x < w; ++x) base[size_t(y) * w + x] = lattice[src + (std::min<uint64_t>(x0 + x, latW - 1) - lx0)];
+  }
+  return base;
 }
 
 }  // namespace
@@ -427,11 +499,92 @@ ImageryWriteStats writeImageryCharts(const ImageryRaster& raster, const std::str
   return st;
 }
 
+namespace {
+
+// Samples in every level of a chart's imagery of `ci` level-0 intervals.
+uint64_t chartSamples(uint64_t ci, uint32_t levels) {
+  uint64_t n = 0;
+  for (uint32_t k = 0; k < levels; ++k) n += ((ci >> k) + 1) * ((ci >> k) + 1);
+  return n;
+}
+
+// writeImageryChartsWindowed for charts built in tiles (imagery.h says how).
+ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& source, const fs::path& dir,
+                                    AtlasManifest& m, uint64_t memoryBytes, const ChartTiling& t,
+                                    ImageryWindowStats* windowStats) {
+  const auto start = std::chrono::steady_clock::now();
+  const uint32_t s = imagery.scaleLog2(), levels = m.pyramidLevels(), kc = t.coarseLevel, per = t.tilesPerSide;
+  const uint64_t ci = uint64_t(m.chartSize - 1) << s, tile = uint64_t(t.tile) << s, margin = uint64_t(1) << kc;
+  const uint64_t gridW = m.chartsX * ci + 1, gridH = m.chartsY * ci + 1;
+  const uint64_t latW = imagery.width(), latH = imagery.height();
+  imagery.keepTiles(memoryBytes / 4);
+  setImageryInfo(m, s, source, 0.0);
+  std::vector<int64_t> at(size_t(m.chartsX) * m.chartsY, -1);
+  for (size_t i = 0; i < m.charts.size(); ++i) at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
+  // The whole grid's level kc, gathered from the tiles.
+  const uint64_t cw = ((gridW - 1) >> kc) + 1, ch = ((gridH - 1) >> kc) + 1;
+  std::vector<PackedColour> coarse(cw * ch);
+  std::vector<std::unique_ptr<ChartFileWriter>> files(m.charts.size());
+  uint64_t covered = 0, windows = 0, most = 0;
+  const progress::ProgressStage stage("imagery tiles", uint64_t(m.chartsX) * m.chartsY * per * per);
+  for (uint32_t cy = 0; cy < m.chartsY; ++cy)
+    for (uint32_t cx = 0; cx < m.chartsX; ++cx) {
+      const int64_t chart = at[size_t(cy) * m.chartsX + cx];
+      if (chart >= 0) files[size_t(chart)] = openImageryChart(dir, m, m.charts[size_t(chart)]);
+      for (uint32_t ty = 0; ty < per; ++ty)
+        for (uint32_t tx = 0; tx < per; ++tx) {
+          const uint64_t ox = cx * ci + tx * tile, oy = cy * ci + ty * tile;
+          const uint64_t x0 = ox > margin ? ox - margin : 0, y0 = oy > margin ? oy - margin : 0;
+          const uint64_t x1 = std::min(gridW, ox + tile + margin + 1), y1 = std::min(gridH, oy + tile + margin + 1);
+          const bool lastX = cx + 1 == m.chartsX && tx + 1 == per, lastY = cy + 1 == m.chartsY && ty + 1 == per;
+          const std::array<uint64_t, 4> owned{ox, oy, lastX ? latW : ox + tile, lastY ? latH : oy + tile};
+          const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
+          const ImageryPyramid pyramid(gridWindow(imagery, x0, y0, x1, y1, owned, covered), uint32_t(x0), uint32_t(y0),
+                                       w, h, m.chartsX, m.chartsY, m.chartSize, s, kc + 1);
+          if (chart >= 0)
+            for (uint32_t k = 0; k < kc; ++k) {
+              const uint32_t perTile = uint32_t((tile >> k) / (uint64_t(m.blockIntervals) << s));
+              writeColourSquare({pyramid.at(k, ox >> k, oy >> k), pyramid.stride(k), uint32_t(tile >> k), k,
+                                 tx * perTile, ty * perTile},
+                                *files[size_t(chart)]);
+            }
+          const uint64_t n = (tile >> kc) + 1;
+          for (uint64_t v = 0; v < n; ++v)
+            std::copy_n(pyramid.at(kc, ox >> kc, (oy >> kc) + v), n,
+                        coarse.begin() + std::ptrdiff_t(((oy >> kc) + v) * cw + (ox >> kc)));
+          ++windows;
+          most = std::max<uint64_t>(most, uint64_t(w) * h);
+          progress::advance();
+        }
+    }
+  if (covered == 0) fail(m.imagery.source, "does not overlap the DEM");
+  m.imagery.coverage = double(covered) / (double(latW) * double(latH));
+  // The levels from kc up, from the grid's level kc.
+  const ImageryPyramid top(std::move(coarse), 0, 0, uint32_t(cw), uint32_t(ch), m.chartsX, m.chartsY,
+                           uint32_t(ci >> kc) + 1, 0, levels - kc);
+  std::atomic<uint64_t> bytes{0};
+  tbb::parallel_for(size_t{0}, m.charts.size(), [&](size_t i) {
+    writeChartLevels(top, kc, m, m.charts[i], *files[i]);
+    bytes += files[i]->commit();
+    files[i].reset();
+  });
+  if (windowStats) *windowStats = {windows, most};
+  ImageryWriteStats st;
+  st.bytesOnDisk = bytes.load();
+  st.storedSamples = chartSamples(ci, levels) * m.charts.size();
+  st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return st;
+}
+
+}  // namespace
+
 ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::string& source,
                                              const fs::path& dir, AtlasManifest& m, uint64_t memoryBytes,
-                                             ImageryWindowStats* windowStats) {
+                                             ImageryWindowStats* windowStats, uint32_t maxTile) {
   const auto start = std::chrono::steady_clock::now();
   makeImageryDir(dir);
+  const ChartTiling tiling = chartTiling(m.chartSize, m.blockIntervals, maxTile);
+  if (tiling.tiled()) return writeImageryTiles(imagery, source, dir, m, memoryBytes, tiling, windowStats);
   const uint32_t levels = m.intervalsLog2() + 1;
   const uint32_t s = imagery.scaleLog2();
   const uint64_t ci = uint64_t(m.chartSize - 1) << s;  // imagery intervals per chart
@@ -460,26 +613,15 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
         for (uint64_t cx = cx0; cx < cx1; ++cx)
           if (at[cy * m.chartsX + cx] >= 0) charts.push_back(size_t(at[cy * m.chartsX + cx]));
       if (charts.empty()) continue;
-      // The grid's level-0 window (edge-clamped onto the lattice), the charts and their margin.
+      // The grid's level-0 window (edge-clamped onto the lattice), the charts and their margin; the
+      // coverage over the lattice samples these charts own (the last column and row with the last
+      // charts).
       const uint64_t x0 = cx0 * ci > margin ? cx0 * ci - margin : 0, y0 = cy0 * ci > margin ? cy0 * ci - margin : 0;
       const uint64_t x1 = std::min(gridW, cx1 * ci + margin + 1), y1 = std::min(gridH, cy1 * ci + margin + 1);
-      const uint32_t lx0 = uint32_t(std::min<uint64_t>(x0, latW - 1)), ly0 = uint32_t(std::min<uint64_t>(y0, latH - 1));
-      const uint32_t lx1 = uint32_t(std::min<uint64_t>(x1, latW)), ly1 = uint32_t(std::min<uint64_t>(y1, latH));
-      const std::vector<PackedColour> lattice =
-          imagery.window(lx0, ly0, std::max(lx1, lx0 + 1) - lx0, std::max(ly1, ly0 + 1) - ly0);
-      const uint32_t lw = std::max(lx1, lx0 + 1) - lx0;
-      // Coverage over the lattice samples these charts own (the last column and row with the
-      // last charts).
-      const uint64_t ox1 = cx1 == m.chartsX ? latW : std::min<uint64_t>(cx1 * ci, latW);
-      const uint64_t oy1 = cy1 == m.chartsY ? latH : std::min<uint64_t>(cy1 * ci, latH);
-      for (uint64_t y = cy0 * ci; y < oy1; ++y)
-        for (uint64_t x = cx0 * ci; x < ox1; ++x) covered += lattice[size_t(y - ly0) * lw + size_t(x - lx0)][3] > 0;
+      const std::array<uint64_t, 4> owned{cx0 * ci, cy0 * ci, cx1 == m.chartsX ? latW : cx1 * ci,
+                                          cy1 == m.chartsY ? latH : cy1 * ci};
+      std::vector<PackedColour> base = gridWindow(imagery, x0, y0, x1, y1, owned, covered);
       const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
-      std::vector<PackedColour> base(size_t(w) * h);
-      for (uint32_t y = 0; y < h; ++y) {
-        const size_t src = size_t(std::min<uint64_t>(y0 + y, latH - 1) - ly0) * lw;
-        for (uint32_t x = 0; x < w; ++x) base[size_t(y) * w + x] = lattice[src + (std::min<uint64_t>(x0 + x, latW - 1) - lx0)];
-      }
       const ImageryPyramid pyramid(std::move(base), uint32_t(x0), uint32_t(y0), w, h, m.chartsX, m.chartsY, m.chartSize,
                                    s, levels);
       tbb::parallel_for(size_t{0}, charts.size(), [&](size_t i) {

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "atlas/terrain/dem.h"
+#include "atlas/terrain/terrain_atlas.h"
 #include "core/atlas_format.h"
 
 namespace gimlod {
@@ -113,6 +114,11 @@ class ImageryPyramid {
   // Chart (gridX, gridY)'s attribute pyramid (colours only): level k has
   // (((chartSize - 1) << scaleLog2) >> k) + 1 samples per side.
   ChartPyramid chart(int32_t gridX, int32_t gridY) const;
+  // Level k's sample (x, y), in the whole level's samples (inside the window), and the level's
+  // row stride: what a chart file's blocks are coded from.
+  const PackedColour* at(uint32_t k, uint64_t x, uint64_t y) const;
+  size_t stride(uint32_t k) const { return levels_.at(k).width; }
+  uint32_t levels() const { return uint32_t(levels_.size()); }
 
  private:
   struct Level {
@@ -146,8 +152,16 @@ struct ImageryWindowStats {
 // from `imagery` and filtered into its pyramid, within memoryBytes (at least one chart and its
 // margin), a quarter of it keeping reprojected tiles for the next windows. Throws InputError naming
 // the imagery when it does not overlap the DEM.
+// Charts the geometry builds in tiles (chartTiling(chartSize, blockIntervals, maxTile).tiled():
+// over maxTile + 1 samples) take their imagery in the same tiles, scaled by 2^scaleLog2: each
+// tile, with a margin of 2^coarseLevel level-0 samples, gives its levels below coarseLevel exactly
+// (the whole pyramid's samples); the tiles' level coarseLevel, gathered over the whole grid
+// (1/4^coarseLevel of the samples), gives the levels above. A chart's colours are those of the
+// whole pyramid, so shared borders stay bit-identical; its file holds its tiles' blocks in the
+// tiles' order, then the coarse levels, whatever memoryBytes is.
 ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::string& source,
                                              const std::filesystem::path& dir, AtlasManifest& manifest,
-                                             uint64_t memoryBytes, ImageryWindowStats* windowStats = nullptr);
+                                             uint64_t memoryBytes, ImageryWindowStats* windowStats = nullptr,
+                                             uint32_t maxTile = kMaxChartTile);
 
 }  // namespace gimlod

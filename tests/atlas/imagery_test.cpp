@@ -328,5 +328,38 @@ TEST_F(ImageryTest, WindowByWindowWritesTheWholeRastersFiles) {
   }
 }
 
+// Charts built in tiles take their imagery tile by tile (here 257-sample charts in tiles of 64
+// intervals, blocks of 16, imagery at twice the DEM's lattice: 4 x 4 tiles of 128 imagery
+// intervals a chart, the levels from 3 up from the grid's level 3): every level of every chart
+// decodes to the whole raster's pyramid, bit for bit, so shared borders stay identical; the
+// coverage is the whole raster's.
+TEST_F(ImageryTest, TiledChartsTakeTheWholePyramidsColours) {
+  TerrainAtlasOptions atlas;
+  atlas.chartSize = 257;
+  atlas.blockIntervals = 16;
+  AtlasManifest a;
+  fs::create_directories(dir_.path() / "tiles");
+  writeTerrainCharts(*dem_, atlas, dir_.path() / "tiles", a);
+  ImageryOptions o;
+  o.path = test::repoData() / "terrain" / "mt_rainier_imagery.tif";
+  o.scaleLog2 = 1;
+  const ImageryRaster raster = loadImagery(*dem_, rainier(), o);
+  ImagerySource source(*dem_, rainier(), o);
+  ImageryWindowStats ws;
+  // A quarter of 256 MiB keeps every reprojected tile of the 2401^2 lattice.
+  writeImageryChartsWindowed(source, "imagery", dir_.path() / "tiles", a, 256u << 20, &ws, 64);
+  EXPECT_EQ(ws.windows, uint64_t(a.chartsX) * a.chartsY * 16);
+  EXPECT_EQ(a.imagery.coverage, raster.coverage);
+  const ImageryPyramid whole(raster, a.chartsX, a.chartsY, a.chartSize, a.pyramidLevels());
+  for (const ChartInfo& c : a.charts) {
+    const ChartFileReader file(dir_.path() / "tiles" / c.imageryFile);
+    ASSERT_EQ(file.chartSize(), 513u);
+    ASSERT_EQ(file.levels(), a.pyramidLevels());
+    const ChartPyramid want = whole.chart(c.gridX, c.gridY);
+    for (uint32_t k = 0; k < file.levels(); ++k)
+      ASSERT_TRUE(file.readLevelColours(k) == want.colours[k]) << c.imageryFile << " level " << k;
+  }
+}
+
 }  // namespace
 }  // namespace gimlod

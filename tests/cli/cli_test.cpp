@@ -154,6 +154,38 @@ TEST_F(CliTest, DemBuildsWithinTheMemoryCapOrSaysWhyNot) {
   EXPECT_NE(output_.find("built window by window"), std::string::npos) << output_;
 }
 
+// Imagery on charts built in tiles (the shipped tile in one chart of 4097 samples, tiles of 2048
+// intervals; the imagery at twice the DEM's lattice, tiles of 4096): the in-memory build and the
+// window-by-window one write the same imagery, tile by tile, and the same manifest.
+TEST_F(CliTest, ImageryOnTiledChartsIsTheSameInMemoryAndWindowByWindow) {
+  const std::string imagery = (test::repoData() / "terrain/mt_rainier_imagery.tif").string();
+  const std::string options = "--chart-size 4097 --imagery '" + imagery + "' --imagery-scale 2";
+  ASSERT_EQ(build(dem(), dir_.path() / "im.atlas", options), 0) << output_;
+  ASSERT_EQ(build(dem(), dir_.path() / "iw.atlas", options + " --out-of-core"), 0) << output_;
+  const nlohmann::json im = nlohmann::json::parse(std::ifstream(dir_.path() / "im.atlas/stats.json"));
+  EXPECT_FALSE(im.contains("windowed"));
+  EXPECT_EQ(im["imagery"]["windows"].get<uint64_t>(), 4u) << im["imagery"];  // one chart, 2 x 2 tiles
+  EXPECT_EQ(test::fileBytes(dir_.path() / "im.atlas/atlas.json"), test::fileBytes(dir_.path() / "iw.atlas/atlas.json"));
+  const AtlasManifest m = readManifest(dir_.path() / "im.atlas");
+  ASSERT_TRUE(m.imagery.present);
+  ASSERT_EQ(m.charts.size(), 1u);
+  EXPECT_EQ(m.imagery.chartSize(m.chartSize), 8193u);
+  const fs::path file = dir_.path() / "im.atlas" / m.charts[0].imageryFile;
+  EXPECT_EQ(test::fileBytes(file), test::fileBytes(dir_.path() / "iw.atlas" / m.charts[0].imageryFile));
+  // Level 0 holds the reprojected colours inside the DEM (covered, and not one flat colour), and
+  // past its last column (2400 on the imagery's lattice) the last column's, edge-clamped.
+  const ChartFileReader reader(file);
+  std::array<PackedColour, 81> inside, edge, past;
+  reader.readColours(0, 1200, 1200, 8, inside.data());
+  reader.readColours(0, 2392, 1200, 8, edge.data());
+  reader.readColours(0, 4800, 1200, 8, past.data());
+  EXPECT_EQ(inside[0][3], 255);
+  EXPECT_EQ(inside[80][3], 255);
+  EXPECT_NE(inside[0], inside[80]);
+  for (int v = 0; v <= 8; ++v)
+    for (int u = 0; u <= 8; ++u) EXPECT_EQ(past[size_t(v) * 9 + size_t(u)], edge[size_t(v) * 9 + 8]) << u << " " << v;
+}
+
 TEST_F(CliTest, UnwritableOutput) {
   EXPECT_NE(build(dem(), "/proc/gimlod_test.atlas"), 0);
   EXPECT_NE(output_.find("/proc/gimlod_test.atlas"), std::string::npos) << output_;

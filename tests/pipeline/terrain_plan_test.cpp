@@ -64,12 +64,19 @@ TEST(TerrainPlan, TensOfTreesFromOneMillionToTwentyBillionSamples) {
   EXPECT_EQ(planTerrain("dem.tif", 4320, 2160, o).chartSize, 513u);
 }
 
-TEST(TerrainPlan, ImageryKeepsChartsItCanDrape) {
+// Imagery is draped on tiled charts as on whole ones: it changes neither the plan nor what
+// validates.
+TEST(TerrainPlan, ImageryTakesTheHeightsPlan) {
   TerrainBuildOptions o;
+  const TerrainPlan bare = planTerrain("dem.tif", 104000, 52000, o);
   o.imagery = "imagery.tif";
   const TerrainPlan p = planTerrain("dem.tif", 104000, 52000, o);
-  EXPECT_EQ(p.chartSize, kMaxChartTile + 1);
+  EXPECT_EQ(p.chartSize, bare.chartSize);
+  EXPECT_EQ(p.chartSize, 16385u);
+  EXPECT_EQ(p.depth, bare.depth);
   o.chartSize = 4097;
+  EXPECT_NO_THROW(validateTerrainBuildOptions(o));
+  o.chartSize = 4096;
   EXPECT_THROW(validateTerrainBuildOptions(o), InputError);
 }
 
