@@ -23,43 +23,55 @@ constexpr char kMagic[4] = {'G', 'L', 'M', 'H'};
 constexpr uint32_t kHierarchyVersion = 1;            // raw
 constexpr uint32_t kCompressedHierarchyVersion = 2;  // the version-1 body regrouped and zstd-coded
 
-// Reduces an n x n array of per-cell values by 2x2 blocks with `op` into an (n/2)^2 array.
+// Reduces a w x rows array of per-cell values by 2x2 blocks with `op` into a (w/2) x (rows/2) array.
 template <typename Op>
-void reduce2x2(const std::vector<float>& in, uint32_t n, std::vector<float>& out, Op op) {
-  const uint32_t h = n / 2;
-  out.resize(size_t(h) * h);
-  for (uint32_t y = 0; y < h; ++y) {
-    const float* r0 = &in[size_t(2 * y) * n];
-    const float* r1 = r0 + n;
+void reduceRects2x2(const std::vector<float>& in, uint32_t w, uint32_t rows, std::vector<float>& out, Op op) {
+  const uint32_t h = w / 2;
+  out.resize(size_t(h) * (rows / 2));
+  for (uint32_t y = 0; y < rows / 2; ++y) {
+    const float* r0 = &in[size_t(2 * y) * w];
+    const float* r1 = r0 + w;
     float* o = &out[size_t(y) * h];
     for (uint32_t x = 0; x < h; ++x)
       o[x] = op(op(r0[2 * x], r0[2 * x + 1]), op(r1[2 * x], r1[2 * x + 1]));
   }
 }
-
-// Per-cell max (or min) of the four corner samples of each level-0 cell: M x M from S x S.
+// The same for an n x n array.
 template <typename Op>
-void cellReduce(const std::vector<float>& s, uint32_t S, std::vector<float>& out, Op op) {
+void reduce2x2(const std::vector<float>& in, uint32_t n, std::vector<float>& out, Op op) {
+  reduceRects2x2(in, n, n, out, op);
+}
+
+// Per-cell max (or min) of the four corner samples of each level-0 cell: M x rows from S x (rows + 1)
+// (rows = M: the whole square).
+template <typename Op>
+void cellReduce(const float* s, uint32_t S, uint32_t rows, std::vector<float>& out, Op op) {
   const uint32_t M = S - 1;
-  out.resize(size_t(M) * M);
-  for (uint32_t y = 0; y < M; ++y) {
-    const float* r0 = &s[size_t(y) * S];
+  out.resize(size_t(M) * rows);
+  for (uint32_t y = 0; y < rows; ++y) {
+    const float* r0 = s + size_t(y) * S;
     const float* r1 = r0 + S;
     float* o = &out[size_t(y) * M];
     for (uint32_t x = 0; x < M; ++x) o[x] = op(op(r0[x], r0[x + 1]), op(r1[x], r1[x + 1]));
   }
 }
+template <typename Op>
+void cellReduce(const std::vector<float>& s, uint32_t S, std::vector<float>& out, Op op) {
+  cellReduce(s.data(), S, S - 1, out, op);
+}
 
-// fn(i, surface_k(u_i, v_i)) for every level-0 sample i (row-major), where surface_k is the
-// piecewise-linear interpolation of the level-k subsampled grid split along (0,0)-(1,1), as the
-// render grids draw it. T is float (heights) or glm::vec3 (geometry images).
+// fn(i, surface_k(u_i, v_i)) for every level-0 sample i (row-major) of rows [y0, y1] (all rows by
+// default), where surface_k is the piecewise-linear interpolation of the level-k subsampled grid
+// split along (0,0)-(1,1), as the render grids draw it. T is float (heights) or glm::vec3
+// (geometry images).
 template <typename T, typename Fn>
-void forEachLevelSample(const std::vector<T>& h, uint32_t S, uint32_t k, Fn&& fn) {
+void forEachLevelSample(const std::vector<T>& h, uint32_t S, uint32_t k, Fn&& fn, uint32_t y0 = 0,
+                        uint32_t y1 = std::numeric_limits<uint32_t>::max()) {
   const uint32_t M = S - 1;
   const uint32_t n = M >> k;
   const uint32_t s = 1u << k;
   const float inv = 1.0f / float(s);
-  for (uint32_t y = 0; y <= M; ++y) {
+  for (uint32_t y = y0; y <= std::min(M, y1); ++y) {
     const uint32_t cy = std::min(y >> k, n - 1);
     const float fy = float(y - cy * s) * inv;
     const T* row0 = &h[size_t(cy * s) * S];
@@ -150,15 +162,16 @@ void fillErrors(const HierarchyParams& p, const std::vector<T>& samples, Dist di
   }
 }
 
-// running[i] = max(running[i], |h_i - surface_k|) for every sample of a tile of 2^t intervals at
-// chart sample (ox, oy), for a level k > t whose cells are larger than the tile: their corners are
-// samples of the chart's level t (`coarse`, `coarseSide` a side). The cells and the weights are
-// forEachLevelSample's over the whole chart.
+// running[(y - y0) * S + x] = max(itself, |h_i - surface_k|) for the samples of rows [y0, y1] of a
+// tile of 2^t intervals at chart sample (ox, oy), for a level k > t whose cells are larger than the
+// tile: their corners are samples of the chart's level t (`coarse`, `coarseSide` a side). The cells
+// and the weights are forEachLevelSample's over the whole chart.
 void accumulateCoarseError(const std::vector<float>& h, uint32_t t, uint32_t ox, uint32_t oy, uint32_t L, uint32_t k,
-                           const std::vector<float>& coarse, uint32_t coarseSide, std::vector<float>& running) {
+                           const std::vector<float>& coarse, uint32_t coarseSide, uint32_t y0, uint32_t y1,
+                           float* running) {
   const uint32_t S = (1u << t) + 1, n = (1u << L) >> k, s = 1u << k, step = 1u << (k - t);
   const float inv = 1.0f / float(s);
-  for (uint32_t y = 0; y < S; ++y) {
+  for (uint32_t y = y0; y <= y1; ++y) {
     const uint32_t Y = oy + y, cy = std::min(Y >> k, n - 1);
     const float fy = float(Y - cy * s) * inv;
     const float* row0 = &coarse[size_t(cy * step) * coarseSide];
@@ -168,7 +181,7 @@ void accumulateCoarseError(const std::vector<float>& h, uint32_t t, uint32_t ox,
       const float fx = float(X - cx * s) * inv;
       const uint32_t c0 = cx * step, c1 = (cx + 1) * step;
       const float surface = cellSurface(row0[c0], row0[c1], row1[c0], row1[c1], fx, fy);
-      float& r = running[size_t(y) * S + x];
+      float& r = running[size_t(y - y0) * S + x];
       r = std::max(r, std::fabs(h[size_t(y) * S + x] - surface));
     }
   }
@@ -233,20 +246,49 @@ TileSummary buildTerrainTile(const HierarchyParams& p, const AtlasManifest& m, c
   }
   const uint32_t kmax = L - p.minNodeResLog2;
   sum.levelError.assign(kmax + 1, 0.0f);
-  std::vector<float> running(size_t(S) * S, 0.0f), cells;
-  for (uint32_t k = 1; k <= kmax; ++k) {
-    if (k <= t)
-      accumulateLevelError(h, S, k, running, HeightDistance{});
-    else
-      accumulateCoarseError(h, t, tx << t, ty << t, L, k, coarse, (1u << shift) + 1, running);
-    cellReduce(running, S, cells, fmax);
-    sum.levelError[k] = forEachNodeReduction(cells, t, depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
-      if (L < l + shift + k) return;
-      const uint32_t r = L - l - shift - k;
-      if (r >= p.minNodeResLog2 && r <= p.maxRes(l + shift))
-        out.errors[size_t(nodeIndex(l + shift, (tx << l) + x, (ty << l) + y)) * rc + (r - p.minNodeResLog2)] = v;
-    });
+  // Node (l, x, y) of the tile at res r = L - l - shift - k takes v, the largest running error of
+  // level k over its samples.
+  auto put = [&](uint32_t k, uint32_t l, uint32_t x, uint32_t y, float v) {
+    if (l >= depth || L < l + shift + k) return;
+    const uint32_t r = L - l - shift - k;
+    if (r >= p.minNodeResLog2 && r <= p.maxRes(l + shift))
+      out.errors[size_t(nodeIndex(l + shift, (tx << l) + x, (ty << l) + y)) * rc + (r - p.minNodeResLog2)] = v;
+  };
+  // Band by band of B cell rows, every level k in turn, so that a band's running errors and cells
+  // stay in cache: the nodes of B cells or fewer a side are finished in their band, the larger
+  // ones from each level's blocks of B x B cells (W x W of them).
+  const uint32_t b = std::min(t, 5u), B = 1u << b, W = (1u << t) >> b;
+  std::vector<std::vector<float>> blocks(kmax + 1, std::vector<float>(size_t(W) * W));
+  std::vector<float> running(size_t(B + 1) * S), cells;
+  for (uint32_t band = 0; band < W; ++band) {
+    const uint32_t y0 = band * B;
+    std::fill(running.begin(), running.end(), 0.0f);
+    for (uint32_t k = 1; k <= kmax; ++k) {
+      if (k <= t)
+        forEachLevelSample(
+            h, S, k,
+            [&](size_t i, float surface) {
+              float& r = running[i - size_t(y0) * S];
+              r = std::max(r, std::fabs(h[i] - surface));
+            },
+            y0, y0 + B);
+      else
+        accumulateCoarseError(h, t, tx << t, ty << t, L, k, coarse, (1u << shift) + 1, y0, y0 + B, running.data());
+      cellReduce(running.data(), S, B, cells, fmax);
+      for (uint32_t w = S - 1, rows = B, l = t;; w /= 2, rows /= 2, --l) {
+        for (uint32_t y = 0; y < rows; ++y)
+          for (uint32_t x = 0; x < w; ++x) put(k, l, x, band * rows + y, cells[size_t(y) * w + x]);
+        if (rows == 1) break;
+        reduceRects2x2(cells, w, rows, tmp, fmax);
+        cells.swap(tmp);
+      }
+      std::copy(cells.begin(), cells.end(), blocks[k].begin() + std::ptrdiff_t(size_t(band) * W));
+    }
   }
+  for (uint32_t k = 1; k <= kmax; ++k)
+    sum.levelError[k] = forEachNodeReduction(blocks[k], t - b, depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
+      if (l < t - b) put(k, l, x, y, v);
+    });
   return sum;
 }
 
