@@ -60,18 +60,16 @@ void cellReduce(const std::vector<float>& s, uint32_t S, std::vector<float>& out
   cellReduce(s.data(), S, S - 1, out, op);
 }
 
-// fn(i, surface_k(u_i, v_i)) for every level-0 sample i (row-major) of rows [y0, y1] (all rows by
-// default), where surface_k is the piecewise-linear interpolation of the level-k subsampled grid
-// split along (0,0)-(1,1), as the render grids draw it. T is float (heights) or glm::vec3
-// (geometry images).
+// fn(i, surface_k(u_i, v_i)) for every level-0 sample i (row-major), where surface_k is the
+// piecewise-linear interpolation of the level-k subsampled grid split along (0,0)-(1,1), as the
+// render grids draw it. T is float (heights) or glm::vec3 (geometry images).
 template <typename T, typename Fn>
-void forEachLevelSample(const std::vector<T>& h, uint32_t S, uint32_t k, Fn&& fn, uint32_t y0 = 0,
-                        uint32_t y1 = std::numeric_limits<uint32_t>::max()) {
+void forEachLevelSample(const std::vector<T>& h, uint32_t S, uint32_t k, Fn&& fn) {
   const uint32_t M = S - 1;
   const uint32_t n = M >> k;
   const uint32_t s = 1u << k;
   const float inv = 1.0f / float(s);
-  for (uint32_t y = y0; y <= std::min(M, y1); ++y) {
+  for (uint32_t y = 0; y <= M; ++y) {
     const uint32_t cy = std::min(y >> k, n - 1);
     const float fy = float(y - cy * s) * inv;
     const T* row0 = &h[size_t(cy * s) * S];
@@ -159,6 +157,38 @@ void fillErrors(const HierarchyParams& p, const std::vector<T>& samples, Dist di
       const uint32_t r = L - l - k;
       if (r >= p.minNodeResLog2 && r <= p.maxRes(l)) out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] = v;
     });
+  }
+}
+
+// running[(y - y0) * S + x] = max(itself, |h_i - surface_k|) for rows [y0, y1] of an S x S height
+// tile, level k's surface as forEachLevelSample gives it, the same floats: each cell's row is split
+// where it crosses the diagonal (dx = dy), so that the loops run without a branch a sample.
+void accumulateHeightError(const std::vector<float>& h, uint32_t S, uint32_t k, uint32_t y0, uint32_t y1,
+                           float* running) {
+  const uint32_t M = S - 1, n = M >> k, s = 1u << k;
+  const float inv = 1.0f / float(s);
+  for (uint32_t y = y0; y <= y1; ++y) {
+    const uint32_t cy = std::min(y >> k, n - 1), dy = y - cy * s;
+    const float fy = float(dy) * inv;
+    const float* row0 = &h[size_t(cy * s) * S];
+    const float* row1 = &h[size_t((cy + 1) * s) * S];
+    const float* hy = &h[size_t(y) * S];
+    float* ry = running + size_t(y - y0) * S;
+    for (uint32_t cx = 0; cx < n; ++cx) {
+      const uint32_t x0 = cx * s, xend = (cx == n - 1) ? s : s - 1;
+      const float h00 = row0[x0], h10 = row0[x0 + s], h01 = row1[x0], h11 = row1[x0 + s];
+      const float upper = h00 + fy * (h01 - h00), du = h11 - h01;  // dx < dy
+      const float dl = h10 - h00, lower = fy * (h11 - h10);       // dx >= dy
+      const uint32_t split = std::min(dy, xend + 1);
+      for (uint32_t dx = 0; dx < split; ++dx) {
+        const float surface = upper + float(dx) * inv * du;
+        ry[x0 + dx] = std::max(ry[x0 + dx], std::fabs(hy[x0 + dx] - surface));
+      }
+      for (uint32_t dx = split; dx <= xend; ++dx) {
+        const float surface = h00 + float(dx) * inv * dl + lower;
+        ry[x0 + dx] = std::max(ry[x0 + dx], std::fabs(hy[x0 + dx] - surface));
+      }
+    }
   }
 }
 
@@ -265,13 +295,7 @@ TileSummary buildTerrainTile(const HierarchyParams& p, const AtlasManifest& m, c
     std::fill(running.begin(), running.end(), 0.0f);
     for (uint32_t k = 1; k <= kmax; ++k) {
       if (k <= t)
-        forEachLevelSample(
-            h, S, k,
-            [&](size_t i, float surface) {
-              float& r = running[i - size_t(y0) * S];
-              r = std::max(r, std::fabs(h[i] - surface));
-            },
-            y0, y0 + B);
+        accumulateHeightError(h, S, k, y0, y0 + B, running.data());
       else
         accumulateCoarseError(h, t, tx << t, ty << t, L, k, coarse, (1u << shift) + 1, y0, y0 + B, running.data());
       cellReduce(running.data(), S, B, cells, fmax);
