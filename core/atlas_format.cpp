@@ -882,19 +882,24 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
   uint32_t mask = 0;
   for (uint32_t c = 0; c < kChannelCount; ++c)
     if (counts[c] != 0) mask |= 1u << c;
-  const uint32_t levels = static_cast<uint32_t>(mask == kAttributeMask ? pyramid.colours.size() : pyramid.normals.size());
+  // Compressed height fields with their ring heights derive their normals on reading (the pyramid
+  // may then hold none).
+  const bool ringed = coding.compressed && !pyramid.heights.empty() && pyramid.frame &&
+                      pyramid.ringHeights.size() == pyramid.heights.size();
+  if (ringed && mask == (1u << kChannelHeights)) mask = kHeightFieldMask;
+  const uint32_t levels = static_cast<uint32_t>(mask == kAttributeMask ? pyramid.colours.size()
+                                                : mask == kHeightFieldMask ? pyramid.heights.size()
+                                                                           : pyramid.normals.size());
   for (uint32_t c = 0; c < kChannelCount; ++c)
     if (counts[c] != 0 && counts[c] != levels)
       throw std::invalid_argument("writeChartFile: channels have different level counts");
-  // Compressed height fields with their ring heights derive their normals on reading.
-  const bool derived = coding.compressed && mask == kHeightFieldMask && pyramid.frame &&
-                       pyramid.ringHeights.size() == levels;
+  const bool derived = ringed && mask == kHeightFieldMask;
   if (levels < 1 || levels > log2Exact(chartSize - 1) + 1)
     throw std::invalid_argument("writeChartFile: bad pyramid level count");
   for (uint32_t k = 0; k < levels; ++k) {
     const size_t s = levelLayout(chartSize, blockIntervals, k).samples;
     for (uint32_t c = 0; c < kChannelCount; ++c)
-      if ((mask & (1u << c)) && sizes[c][k] != s * s)
+      if (counts[c] != 0 && sizes[c][k] != s * s)
         throw std::invalid_argument("writeChartFile: level " + std::to_string(k) + " has the wrong number of samples");
     if (derived && pyramid.ringHeights[k].size() != (s + 2) * (s + 2))
       throw std::invalid_argument("writeChartFile: level " + std::to_string(k) + " ring heights are not (samples+2)^2");
@@ -909,7 +914,7 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
       for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx) {
         BlockData block;
         for (uint32_t c = 0; c < kChannelCount; ++c) {
-          if (!(mask & (1u << c))) continue;
+          if (counts[c] == 0) continue;
           const size_t at = size_t{by * b} * l.samples + size_t{bx} * b;
           block[c] = {data[c][k] + at * kChannelBytes[c], l.samples};
         }

@@ -145,10 +145,12 @@ ChartPyramid buildPyramidLevels(const DemRows& dem, int64_t originX, int64_t ori
   frame.spacing = dem.spacing;
   ChartPyramid p;
   p.heights.resize(last + 1);
-  p.normals.resize(last + 1);
+  // With the ring, a compressed file derives the normals on reading: none are computed.
   if (keepRing) {
     p.ringHeights.resize(last + 1);
     p.frame = frame;
+  } else {
+    p.normals.resize(last + 1);
   }
   std::vector<float> ring;
   for (uint32_t k = first; k <= last; ++k) {
@@ -166,9 +168,13 @@ ChartPyramid buildPyramidLevels(const DemRows& dem, int64_t originX, int64_t ori
     h.resize(size_t{s} * s);
     for (uint32_t v = 0; v < s; ++v)
       std::copy_n(ring.data() + (v + 1) * rs + 1, s, h.data() + size_t{v} * s);
-    p.normals[k].resize(size_t{s} * s);
-    heightFieldNormals(ring.data() + rs + 1, rs, 0, 0, s, s, k, frame, p.normals[k].data());
-    if (keepRing) p.ringHeights[k] = ring;
+    if (keepRing) {
+      p.ringHeights[k] = std::move(ring);
+      ring = {};
+    } else {
+      p.normals[k].resize(size_t{s} * s);
+      heightFieldNormals(ring.data() + rs + 1, rs, 0, 0, s, s, k, frame, p.normals[k].data());
+    }
   }
   return p;
 }
@@ -214,8 +220,10 @@ void codePyramidLevel(const ChartPyramid& p, uint32_t k, uint32_t side, uint32_t
       const size_t at = size_t{by * b} * side + size_t{bx} * b;
       BlockData d;
       d[kChannelHeights] = {p.heights[k].data() + at, side};
-      d[kChannelNormals] = {p.normals[k].data() + at, side};
-      if (ring) d[kChannelHeights] = {p.ringHeights[k].data() + size_t{by * b} * rs + size_t{bx} * b, rs};
+      if (ring)
+        d[kChannelHeights] = {p.ringHeights[k].data() + size_t{by * b} * rs + size_t{bx} * b, rs};
+      else
+        d[kChannelNormals] = {p.normals[k].data() + at, side};
       out.push_back(file.code(k, bx0 + bx, by0 + by, d));
     }
 }

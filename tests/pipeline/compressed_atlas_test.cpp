@@ -68,7 +68,9 @@ TEST(CompressedAtlas, TerrainChartsDecodeToTheirPyramids) {
     for (int32_t gx = 0; gx * 256 < int32_t(dem.width) - 1; ++gx) {
       const ChartPyramid p = buildChartPyramid(dem, gx, gy, kChartSize, true);
       const ChartPyramid plain = buildChartPyramid(dem, gx, gy, kChartSize);
-      ASSERT_EQ(plain.normals, p.normals);  // the ring does not change what is built
+      // The ring does not change the heights; the normals are left to the reader to derive.
+      ASSERT_EQ(plain.heights, p.heights);
+      ASSERT_TRUE(p.normals.empty());
       const fs::path raw = tmp.path() / "raw.bin", code = tmp.path() / "coded.bin";
       rawBytes += writeChartFile(raw, plain, kChartSize, kBlock);
       codedBytes += writeChartFile(code, p, kChartSize, kBlock, coded);
@@ -80,7 +82,7 @@ TEST(CompressedAtlas, TerrainChartsDecodeToTheirPyramids) {
         ASSERT_EQ(c.readLevelHeights(k), p.heights[k]) << "chart " << gx << "," << gy << " level " << k;
         ASSERT_EQ(c.readLevelHeights(k), r.readLevelHeights(k));
         // Derived on reading, bit for bit the normals the builder computed and version 1 stores.
-        ASSERT_EQ(c.readLevelNormals(k), p.normals[k]) << "chart " << gx << "," << gy << " level " << k;
+        ASSERT_EQ(c.readLevelNormals(k), plain.normals[k]) << "chart " << gx << "," << gy << " level " << k;
         ASSERT_EQ(c.readLevelNormals(k), r.readLevelNormals(k));
       }
       // A window inside a block, as the page reader asks for one.
