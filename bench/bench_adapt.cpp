@@ -21,7 +21,9 @@
 using namespace gimlod;
 using Clock = std::chrono::steady_clock;
 
-int main(int argc, char** argv) {
+namespace {
+
+int run(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr, "usage: bench_adapt ATLAS_DIR [tolerance_px] [frames] [WxH]\n");
     return 2;
@@ -92,4 +94,15 @@ int main(int argc, char** argv) {
                 ops / n, err / n);
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
+    return 1;
+  }
 }

@@ -14,7 +14,9 @@
 
 using namespace gimlod;
 
-int main(int argc, char** argv) {
+namespace {
+
+int run(int argc, char** argv) {
   const std::filesystem::path input = argc > 1 ? argv[1] : "../shared/data/terrain/etopo5.cdf";
   const uint32_t chartSize = argc > 2 ? uint32_t(std::atoi(argv[2])) : 513;
   const int repeats = 3;
@@ -52,4 +54,15 @@ int main(int argc, char** argv) {
   }
   if (cores > 1) std::printf("speed-up %d threads vs 1: %.2fx\n", cores, perThread[0] / perThread[1]);
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
+    return 1;
+  }
 }

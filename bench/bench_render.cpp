@@ -16,7 +16,9 @@
 
 using namespace gimlod;
 
-int main(int argc, char** argv) {
+namespace {
+
+int run(int argc, char** argv) {
   const std::filesystem::path input = argc > 1 ? argv[1] : "data/terrain/mt_rainier_90m.tif";
   uint32_t w = 640, h = 480;
   if (argc > 2) std::sscanf(argv[2], "%ux%u", &w, &h);
@@ -89,4 +91,15 @@ int main(int argc, char** argv) {
   std::printf("engine / (a) = %.2f, engine / (b) = %.2f\n", engine / same, engine / plain);
   std::filesystem::remove_all(tmp);
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
+    return 1;
+  }
 }
