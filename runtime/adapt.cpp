@@ -138,6 +138,7 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
   for (const Candidate& c : done) cut.nodes.push_back({c.id, c.res, 0.f});
   cut.rebuildIndex();
   enforceStitchConstraint(h, cut, &view, tol, &st);
+  if (st.constraintSplits > 0) holdNodeBudget(h, cut, view, options.maxNodes);
   for (CutNode& n : cut.nodes) {
     n.errorPx = float(screenError(h, n.id, n.res, view));
     st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
@@ -223,6 +224,61 @@ bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* vie
     cut.rebuildIndex();
   }
   return countStitchViolations(h, cut) == 0;
+}
+
+uint32_t holdNodeBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, uint32_t maxNodes) {
+  struct Group {
+    NodeId parent;
+    uint32_t res = 0;
+    double errorPx = 0.0;
+  };
+  std::vector<SideNeighbour> scratch;
+  uint32_t merges = 0;
+  while (maxNodes != 0 && cut.nodes.size() > maxNodes) {
+    // The complete groups, smallest parent error first.
+    std::vector<NodeId> parents;
+    for (const CutNode& n : cut.nodes)
+      if (n.id.level > 0) parents.push_back(n.id.parent());
+    std::sort(parents.begin(), parents.end(), [](const NodeId& a, const NodeId& b) { return a.key() < b.key(); });
+    parents.erase(std::unique(parents.begin(), parents.end()), parents.end());
+    std::vector<Group> groups;
+    for (const NodeId& p : parents) {
+      uint32_t finest = 0;
+      bool complete = true;
+      for (uint32_t c = 0; c < 4 && complete; ++c) {
+        const NodeId ch = p.child(c);
+        if (h.flags(ch) & kNodeEmpty) continue;
+        const int32_t i = cut.find(ch);
+        complete = i >= 0;
+        if (complete) finest = std::max(finest, cut.nodes[size_t(i)].res);
+      }
+      if (!complete) continue;
+      const uint32_t res = std::min(finest + 1, h.maxRes(p));
+      groups.push_back({p, res, screenError(h, p, res, view)});
+    }
+    std::sort(groups.begin(), groups.end(), [](const Group& a, const Group& b) {
+      return a.errorPx != b.errorPx ? a.errorPx < b.errorPx : a.parent.key() < b.parent.key();
+    });
+    bool merged = false;
+    for (const Group& g : groups) {
+      const std::vector<CutNode> before = cut.nodes;
+      std::erase_if(cut.nodes, [&](const CutNode& n) { return n.id.level > 0 && n.id.parent() == g.parent; });
+      cut.nodes.push_back({g.parent, g.res, float(g.errorPx)});
+      cut.rebuildIndex();
+      const uint32_t gap = finestNeighbourGap(h, cut, uint32_t(cut.nodes.size() - 1), scratch);
+      if (gap <= h.maxRes(g.parent)) {
+        cut.nodes.back().res = std::max(g.res, gap);
+        cut.nodes.back().errorPx = float(screenError(h, g.parent, cut.nodes.back().res, view));
+        merged = true;
+        ++merges;
+        break;
+      }
+      cut.nodes = before;
+      cut.rebuildIndex();
+    }
+    if (!merged) break;
+  }
+  return merges;
 }
 
 uint32_t attributeResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double texelsPerPixel) {

@@ -62,7 +62,8 @@ inline bool budgetBelowRoots(uint32_t maxNodes, uint32_t rootFloor) { return max
 // Error-threshold adaptation: each node gets the lowest resolution within tolerance; nodes are
 // split, best triangle saving first (nodes over tolerance before all others), while the node
 // budget allows. Then the stitching constraint is enforced (enforceStitchConstraint). The cut has
-// at most max(maxNodes, rootFloor) nodes, plus at most 3 per constraint split (constraintSplits).
+// at most max(maxNodes, rootFloor) nodes: constraint splits (constraintSplits) merge back
+// (holdNodeBudget), unless no group of siblings can.
 Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptOptions& options,
                         AdaptStats* stats = nullptr);
 
@@ -75,6 +76,14 @@ uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams&
 // could not be fixed (never for a valid hierarchy).
 bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* view,
                              double tolerancePx, AdaptStats* stats = nullptr);
+
+// The node budget held after the stitching constraint split past it: while the cut has more than
+// maxNodes nodes (0: no limit), merges a complete group of sibling nodes (every child that is not
+// empty) into their parent, the parent of smallest screen error first, where the parent can meet
+// the constraint at its maxRes. The parent takes one level above its children's finest
+// resolution (capped at its maxRes), raised to the constraint's. Best effort: stops when no group
+// can merge. Returns the merges.
+uint32_t holdNodeBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, uint32_t maxNodes);
 
 // Largest level difference between cut node i and a finer drawn neighbour on any of its sides:
 // the lowest resolution the stitching constraint allows it. scratch is reused storage.

@@ -525,6 +525,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   frame_.drawnNodes = uint32_t(out_.nodes.size());
   if (needSplit) {
     enforceStitchConstraint(h_, out_, &view_, options.tolerancePx, &st);
+    holdNodeBudget(h_, out_, view_, options.maxNodes);
     for (CutNode& n : out_.nodes) n.errorPx = float(screenError(h_, n.id, n.res, view_));
   }
   for (const CutNode& n : out_.nodes) st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));

@@ -51,7 +51,7 @@ struct DualQueueFrameStats {
 // larger error); repeat until neither helps. A node split this frame is never
 // merged this frame and vice versa, and at most maxOpsPerFrame operations run per frame, apart
 // from the merges that bring the drawn nodes within maxNodes (never capped). The drawn cut has at
-// most max(maxNodes, rootFloor) nodes, plus at most 3 per constraint split; with maxNodes below
+// most max(maxNodes, rootFloor) nodes (constraint splits merged back, holdNodeBudget); with maxNodes below
 // the root floor, the visible roots or fewer (a chart whose kept nodes are all culled draws none).
 // note: the root box of such a chart meets the frustum while its descendants' boxes do not.
 class DualQueueAdapter {

@@ -697,14 +697,17 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   }
 
   // The drawn cut; the floors already satisfy the stitching constraint unless a node would need
-  // a resolution above its maxRes (then enforceStitchConstraint splits it: the rare exception
-  // that may exceed maxNodes, reported as constraintSplits).
+  // a resolution above its maxRes (then enforceStitchConstraint splits it, reported as
+  // constraintSplits, and groups elsewhere merge back into the node budget).
   s.out = s.drawnCut();
   AdaptStats as;
   enforceStitchConstraint(h_, s.out, &view, 1.0, &as);
   st.constraintSplits = as.constraintSplits;
   st.constraintRaises += as.constraintRaises;
-  if (as.constraintSplits > 0) fitTriangleBudget(h_, s.out, view, options.maxTriangles);
+  if (as.constraintSplits > 0) {
+    holdNodeBudget(h_, s.out, view, options.maxNodes);
+    fitTriangleBudget(h_, s.out, view, options.maxTriangles);
+  }
   st.nodes = uint32_t(s.out.nodes.size());
   st.triangles = s.out.triangles();
   st.rootFloor = countVisibleRoots(h_, view, options.frustumCull);

@@ -46,8 +46,8 @@ class QuadQueueAdapter {
   explicit QuadQueueAdapter(const Hierarchy& h);
   // Adapts the kept cut to the view within the budgets; returns the drawn cut (stitching
   // constraint enforced, triangles never above maxTriangles, nodes never above maxNodes except:
-  // the visible roots when maxNodes is below them (budgetBelowRoots), and up to 3 per constraint
-  // split (constraintSplits)).
+  // the visible roots when maxNodes is below them (budgetBelowRoots); constraint splits
+  // (constraintSplits) merge back, holdNodeBudget).
   const Cut& update(const ViewParams& view, const BudgetOptions& options, BudgetStats* stats = nullptr);
   void reset();  // forget the kept cut (next update starts from the roots)
 

@@ -66,6 +66,7 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
   for (const NodeId& n : done) cut.nodes.push_back({n, h.maxRes(n), 0.f});
   cut.rebuildIndex();
   enforceStitchConstraint(h, cut, &view, tolerancePx, &st);
+  if (st.constraintSplits > 0) holdNodeBudget(h, cut, view, maxNodes);
   // Constraint splits give children their needed resolution: back to the fixed one (only raises,
   // so the constraint still holds).
   for (CutNode& n : cut.nodes) {

@@ -295,8 +295,7 @@ uint32_t checkBudgetsAlongPath(const std::string& name, const Hierarchy& h, cons
         for (const CutNode& n : o.cut.nodes) EXPECT_TRUE(roots.count(n.id.chart)) << "chart " << n.id.chart;
       }
     }
-    // The stitching constraint may split past the budget (documented); the strict bound above
-    // holds on these paths, where it does not need to.
+    // Constraint splits merge back into the budget (holdNodeBudget): the strict bound above.
     std::printf("budget %u: %u adapter frames at or above the floor, %u below, %u constraint splits\n", budget,
                 checkedAbove, checkedBelow, constraintSplits);
     checkedAboveAll += budget == 256 ? checkedAbove : 0;

@@ -111,7 +111,7 @@ TEST(DualQueue, NodeBudgetBindsAndIsReported) {
   EXPECT_TRUE(st.nodeBudgetBound);
   EXPECT_GT(st.maxErrorPx, o.tolerancePx);
   EXPECT_LE(adapter.frameStats().drawnNodes, o.maxNodes);
-  EXPECT_LE(cut.nodes.size(), o.maxNodes + 3 * st.constraintSplits);
+  EXPECT_LE(cut.nodes.size(), o.maxNodes);
   EXPECT_EQ(countStitchViolations(w.h, cut), 0u);
   expectPartition(w.h, cut);
   // Lowering the budget merges back under it in one frame.
@@ -185,7 +185,7 @@ TEST(DualQueue, PathAndBackReturnsToTheFreshCut) {
       for (const CutNode& n : back.nodes) EXPECT_TRUE(withinToleranceOrFinest(w.h, n, o.tolerancePx));
       EXPECT_NEAR(double(back.triangles()), double(start.triangles()), 0.05 * double(start.triangles()));
     } else {
-      EXPECT_LE(back.nodes.size(), budget + 3 * backStats.constraintSplits);
+      EXPECT_LE(back.nodes.size(), budget);
       EXPECT_LE(backStats.maxErrorPx, fs.maxErrorPx * 1.05);
     }
   }

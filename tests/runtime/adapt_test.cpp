@@ -81,9 +81,38 @@ TEST(Adapt, NodeBudgetBindsAndIsReported) {
   const Cut cut = adaptErrorThreshold(w.h, makeViewParams(cam, 320, 240), o, &st);
   EXPECT_TRUE(st.nodeBudgetBound);
   EXPECT_GT(st.maxErrorPx, o.tolerancePx);
-  // The stitching constraint may add a few splits beyond the budget; they are counted.
-  EXPECT_LE(cut.nodes.size(), o.maxNodes + 3 * st.constraintSplits);
+  EXPECT_LE(cut.nodes.size(), o.maxNodes);
   EXPECT_EQ(countStitchViolations(w.h, cut), 0u);
+  expectPartition(w, cut);
+}
+
+// A cut seven levels deep at chart 0's right border, beside chart 1's root: the stitching
+// constraint must split nodes whose maxRes (2^5) is below their level difference to the deep
+// nodes, past the node budget; groups merge back until the budget holds, every constraint still
+// met and the charts still tiled.
+TEST(Adapt, ConstraintSplitsMergeBackIntoTheNodeBudget) {
+  const World w = makeWorld(1025, 2, 1, 8);
+  Cut cut;
+  cut.nodes.push_back({NodeId{1, 0, 0, 0}, 2, 0.f});
+  NodeId deep{0, 0, 0, 0};
+  for (uint32_t l = 0; l < 7; ++l) {
+    for (uint32_t c = 0; c < 4; ++c)
+      if (c != 1) cut.nodes.push_back({deep.child(c), 2, 0.f});
+    deep = deep.child(1);  // the bottom-right child, along the border with chart 1
+  }
+  cut.nodes.push_back({deep, 2, 0.f});
+  cut.rebuildIndex();
+  const uint32_t budget = uint32_t(cut.nodes.size());
+  const ViewParams view = makeViewParams(lookAt({1024, -600, 900}, {1024, 512, 0}, w), 320, 240);
+  AdaptStats st;
+  ASSERT_TRUE(enforceStitchConstraint(w.h, cut, &view, 1.0, &st));
+  EXPECT_GT(st.constraintSplits, 0u);
+  ASSERT_GT(cut.nodes.size(), budget);
+  const uint32_t merges = holdNodeBudget(w.h, cut, view, budget);
+  EXPECT_GT(merges, 0u);
+  EXPECT_LE(cut.nodes.size(), budget);
+  EXPECT_EQ(countStitchViolations(w.h, cut), 0u);
+  for (const CutNode& n : cut.nodes) EXPECT_LE(n.res, w.h.maxRes(n.id));
   expectPartition(w, cut);
 }
 
