@@ -109,7 +109,16 @@ TerrainPlan planTerrain(const fs::path& input, uint64_t width, uint64_t height, 
   const uint32_t L = log2u(cs - 1);
   plan.depth = plan.autoDepth ? std::clamp<uint32_t>(L > 5 ? L - 4 : 1, kDefaultDepth, 12) : o.depth;
   if (plan.autoDepth) plan.depth = std::min(plan.depth, L - log2u(o.minNodeRes ? o.minNodeRes : 1) + 1);
+  const uint32_t resCount = log2u(std::max(o.nodeRes, 1u)) - log2u(std::max(o.minNodeRes, 1u)) + 1;
+  while (plan.autoDepth && plan.depth > kDefaultDepth &&
+         terrainHierarchyBytes(uint64_t(plan.chartsX) * plan.chartsY, plan.depth, resCount) > memoryCap(o) / 4)
+    --plan.depth;
   return plan;
+}
+
+uint64_t terrainHierarchyBytes(uint64_t charts, uint32_t depth, uint32_t resCount) {
+  const uint64_t perNode = sizeof(std::array<float, 6>) + sizeof(uint8_t) + sizeof(float) * resCount;
+  return charts * ((uint64_t(1) << (2 * depth)) - 1) / 3 * perNode;
 }
 
 TerrainBuildOptions plannedOptions(const TerrainBuildOptions& options, const TerrainPlan& plan) {

@@ -19,9 +19,10 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& options);
 // The chart grid of a terrain atlas. Each chart is a quadtree root, so a cut never has fewer nodes
 // than the charts in view: when the size is not given, a DEM gets the smallest chart from 513
 // samples up that keeps its charts at most kTargetTerrainCharts (tens of trees, as the paper's
-// terrains have, from 1M to 21.6G samples), up to kMaxTerrainChartSize (kMaxChartTile + 1 with
-// imagery, which is draped on whole charts). The depth, when not given, leaves the finest nodes 32
-// intervals wide (kDefaultDepth at least).
+// terrains have, from 1M to 21.6G samples), up to kMaxTerrainChartSize. The depth, when not
+// given, leaves the finest nodes 32 intervals wide (kDefaultDepth at least), one level less while
+// the hierarchy, which the build holds whole, would take over a quarter of the memory cap
+// (terrainHierarchyBytes; --max-memory, or three quarters of the machine's).
 struct TerrainPlan {
   uint32_t chartSize = 0;
   uint32_t depth = 0;
@@ -29,6 +30,9 @@ struct TerrainPlan {
   bool autoChartSize = false, autoDepth = false;
 };
 inline constexpr uint32_t kTargetTerrainCharts = 64;
+// The bytes a terrain hierarchy of `charts` trees of `depth` levels holds in memory (bounds, flags
+// and an error for each of resCount resolutions, per node).
+uint64_t terrainHierarchyBytes(uint64_t charts, uint32_t depth, uint32_t resCount);
 // Throws InputError naming `input` for a DEM under 2 x 2 samples.
 TerrainPlan planTerrain(const std::filesystem::path& input, uint64_t width, uint64_t height,
                         const TerrainBuildOptions& options);

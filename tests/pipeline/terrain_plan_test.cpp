@@ -26,6 +26,7 @@ uint64_t chartsOf(uint64_t w, uint64_t h, uint32_t chartSize) {
 
 TEST(TerrainPlan, TensOfTreesFromOneMillionToTwentyBillionSamples) {
   TerrainBuildOptions o;
+  o.maxMemory = uint64_t{16} << 30;  // room for every hierarchy here (the next test lowers it)
   for (const double samples : {1e6, 5.8e6, 1e8, 1.84e8, 2.68e8, 1e9, 5.5e9, 2.16e10}) {
     for (const double aspect : {1.0, 2.0, 0.5, 4.0}) {
       const uint64_t w = uint64_t(std::sqrt(samples * aspect)), h = uint64_t(samples / double(w));
@@ -78,6 +79,31 @@ TEST(TerrainPlan, ImageryTakesTheHeightsPlan) {
   EXPECT_NO_THROW(validateTerrainBuildOptions(o));
   o.chartSize = 4096;
   EXPECT_THROW(validateTerrainBuildOptions(o), InputError);
+}
+
+// The build holds the hierarchy whole: the automatic depth drops a level while it would take over
+// a quarter of the memory cap (the Earth's 21.6G samples: 28 trees of 11 levels take 1.76 GB).
+TEST(TerrainPlan, TheHierarchyTakesAtMostAQuarterOfTheMemoryCap) {
+  TerrainBuildOptions o;
+  o.maxMemory = uint64_t{2} << 30;
+  const TerrainPlan earth = planTerrain("dem.tif", 207872, 103936, o);
+  EXPECT_EQ(earth.chartSize, 32769u);
+  EXPECT_EQ(earth.depth, 10u);
+  const uint64_t charts = uint64_t(earth.chartsX) * earth.chartsY;
+  EXPECT_LE(terrainHierarchyBytes(charts, earth.depth, 5), o.maxMemory / 4);
+  EXPECT_GT(terrainHierarchyBytes(charts, earth.depth + 1, 5), o.maxMemory / 4);
+  std::printf("terrain plan: 21.6G samples under a 2 GiB cap: depth %u, hierarchy %.0f MB (depth %u: %.0f MB)\n",
+              earth.depth, double(terrainHierarchyBytes(charts, earth.depth, 5)) / 1e6, earth.depth + 1,
+              double(terrainHierarchyBytes(charts, earth.depth + 1, 5)) / 1e6);
+  o.maxMemory = uint64_t{8} << 30;
+  EXPECT_EQ(planTerrain("dem.tif", 207872, 103936, o).depth, 11u);
+  // Never below kDefaultDepth, and a depth given is kept.
+  o.maxMemory = uint64_t{64} << 20;
+  EXPECT_EQ(planTerrain("dem.tif", 207872, 103936, o).depth, 7u);
+  o.maxMemory = uint64_t{1} << 20;
+  EXPECT_EQ(planTerrain("dem.tif", 207872, 103936, o).depth, 5u);
+  o.depth = 11;
+  EXPECT_EQ(planTerrain("dem.tif", 207872, 103936, o).depth, 11u);
 }
 
 TEST(TerrainPlan, GivenSizeAndDepthAreKept) {
