@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <vector>
 
+#include "bench/guarded_main.h"
 #include "runtime/adapt.h"
 #include "runtime/adapt_dual_queue.h"
 #include "runtime/adapt_quad_queue.h"
@@ -98,11 +99,4 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return guardedMain(argc, argv, run); }

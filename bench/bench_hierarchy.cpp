@@ -8,6 +8,7 @@
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 
+#include "bench/guarded_main.h"
 #include "atlas/terrain/dem.h"
 #include "atlas/terrain/terrain_atlas.h"
 #include "hierarchy/hierarchy.h"
@@ -58,11 +59,4 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return guardedMain(argc, argv, run); }

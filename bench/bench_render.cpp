@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "bench/guarded_main.h"
 #include "pipeline/build.h"
 #include "atlas/terrain/dem.h"
 #include "bench/gl/baseline_draws.h"
@@ -95,11 +96,4 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return guardedMain(argc, argv, run); }
