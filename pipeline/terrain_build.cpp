@@ -174,7 +174,7 @@ void logPlan(const TerrainBuildOptions& o, const TerrainPlan& plan) {
                plan.chartSize,
                plan.autoChartSize ? fmt::format(" (the smallest from 513 giving at most {} charts)", kTargetTerrainCharts)
                                   : std::string(),
-               plan.depth, plan.autoDepth ? " (finest nodes 32 intervals wide)" : "");
+               plan.depth, fmt::format(" (finest nodes {} intervals wide)", (plan.chartSize - 1) >> (plan.depth - 1)));
 }
 
 }  // namespace
