@@ -220,8 +220,6 @@ TerrainAtlasOptions terrainAtlasOptions(const TerrainBuildOptions& o) {
   return topt;
 }
 
-// The hierarchy (from level 0 of every chart file, as a restarted stage would read it) and the
-// manifest, once the chart files are written.
 // The chart files the hierarchy reads, the last few kept open: it reads a chart's tiles one after
 // another (each open parses the file's directory), and an atlas may hold more charts than a
 // process may have files open.
@@ -252,6 +250,8 @@ class OpenCharts {
   std::list<std::pair<uint32_t, std::shared_ptr<const ChartFileReader>>> open_;
 };
 
+// The hierarchy (from level 0 of every chart file, as a restarted stage would read it) and the
+// manifest, once the chart files are written.
 void finishTerrainAtlas(AtlasManifest& m, const fs::path& dir, TerrainWriteStats& w) {
   OpenCharts charts(m, dir, 2 * size_t(tbb::this_task_arena::max_concurrency()) + 2);
   const Hierarchy h = buildTerrainHierarchy(

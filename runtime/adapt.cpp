@@ -259,10 +259,17 @@ uint32_t holdNodeBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, ui
     std::sort(groups.begin(), groups.end(), [](const Group& a, const Group& b) {
       return a.errorPx != b.errorPx ? a.errorPx < b.errorPx : a.parent.key() < b.parent.key();
     });
+    // Merged in that order while over the budget (merging one group leaves the others complete);
+    // a parent whose neighbours are too fine for its maxRes gets its children back.
     bool merged = false;
     for (const Group& g : groups) {
-      const std::vector<CutNode> before = cut.nodes;
-      std::erase_if(cut.nodes, [&](const CutNode& n) { return n.id.level > 0 && n.id.parent() == g.parent; });
+      if (cut.nodes.size() <= maxNodes) break;
+      std::vector<CutNode> children;
+      std::erase_if(cut.nodes, [&](const CutNode& n) {
+        const bool child = n.id.level > 0 && n.id.parent() == g.parent;
+        if (child) children.push_back(n);
+        return child;
+      });
       cut.nodes.push_back({g.parent, g.res, float(g.errorPx)});
       cut.rebuildIndex();
       const uint32_t gap = finestNeighbourGap(h, cut, uint32_t(cut.nodes.size() - 1), scratch);
@@ -271,9 +278,10 @@ uint32_t holdNodeBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, ui
         cut.nodes.back().errorPx = float(screenError(h, g.parent, cut.nodes.back().res, view));
         merged = true;
         ++merges;
-        break;
+        continue;
       }
-      cut.nodes = before;
+      cut.nodes.pop_back();
+      cut.nodes.insert(cut.nodes.end(), children.begin(), children.end());
       cut.rebuildIndex();
     }
     if (!merged) break;

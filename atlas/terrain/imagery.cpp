@@ -433,7 +433,7 @@ std::unique_ptr<ChartFileWriter> openImageryChart(const fs::path& dir, const Atl
                                            1u << kChannelColours, coding);
 }
 
-// Levels [first, last] of chart `c`'s file, cut from `pyramid` whose level 0 is the file's level
+// Levels first and up of chart `c`'s file, cut from `pyramid` whose level 0 is the file's level
 // `first`; returns their samples.
 uint64_t writeChartLevels(const ImageryPyramid& pyramid, uint32_t first, const AtlasManifest& m, const ChartInfo& c,
                           ChartFileWriter& file) {
@@ -456,8 +456,8 @@ uint64_t writeImageryChart(const ImageryPyramid& pyramid, const fs::path& dir, c
 }
 
 // The grid's level-0 samples [x0, x1) x [y0, y1) (the lattice edge-clamped onto the chart grid),
-// reprojected by `imagery`; adds to `covered` the lattice samples with alpha > 0 in the owned part
-// [ox0, ox1) x [oy0, oy1).
+// reprojected by `imagery`; adds to `covered` the lattice samples with alpha > 0 in the part the
+// caller owns, owned = {x0, y0, x1, y1} (half-open).
 std::vector<PackedColour> gridWindow(const ImagerySource& imagery, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1,
                                      const std::array<uint64_t, 4>& owned, uint64_t& covered) {
   const uint32_t latW = imagery.width(), latH = imagery.height();
