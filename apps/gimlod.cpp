@@ -420,6 +420,14 @@ int main(int argc, char** argv) {
   std::string maxMemory = "4G";
   bool noFidelity = false;
   build->add_flag("--no-fidelity", noFidelity, "Meshes: skip the Hausdorff distance between the input and the atlas");
+  std::string fidelityArg = "fast";
+  build->add_option("--fidelity", fidelityArg,
+                    "Meshes: how the Hausdorff distance is measured: fast (the atlas read a chart at a time: every "
+                    "input vertex and triangle centroid measured exactly, the atlas side on about a million samples "
+                    "with the confidence stated) or full (the whole atlas surface welded and every sample measured; "
+                    "memory grows with the atlas)")
+      ->check(CLI::IsMember({"fast", "full"}))
+      ->capture_default_str();
   build->add_option("--repair-rounds,--flip-repair-rounds", mesh.repairRounds,
                     "Meshes: rounds of each chart repair (cutting patches whose charts have flipped texels or a "
                     "sampling error over --sample-error); 0: none")
@@ -611,6 +619,7 @@ int main(int argc, char** argv) {
         mesh.maxMemory = maxMemoryBytes;
         mesh.positionTolerance = positionTolerancePercent / 100.0;
         mesh.measureFidelity = !noFidelity;
+        mesh.fidelity = fidelityArg == "full" ? MeshFidelity::kFull : MeshFidelity::kFast;
         return runBuild(mesh);
       }
       static_cast<CommonBuildOptions&>(terrain) = common;

@@ -10,6 +10,8 @@
 #include <string>
 #include <string_view>
 
+#include "atlas/fidelity/fidelity.h"
+
 namespace gimlod {
 
 // The smallest l with 2^l >= v (log2 of a power of two; 0 for v <= 1).
@@ -142,6 +144,7 @@ struct MeshBuildOptions : CommonBuildOptions {
                                     // (out-of-core) path runs
   bool measureFidelity = true;      // two-sided Hausdorff distance input <-> atlas (out of core on
                                     // that path)
+  MeshFidelity fidelity = MeshFidelity::kFast;  // how, in memory (the out-of-core path measures by blocks)
   // Compressed atlases: positions are quantized on one lattice of 2^positionBits steps across the
   // bounding-box diagonal (a power-of-two step), before the hierarchy and the fidelity are
   // measured, so shared seams stay bit-identical and the errors bound what is drawn.

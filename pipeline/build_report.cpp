@@ -109,7 +109,7 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
   return j;
 }
 
-nlohmann::json fidelityJson(const FidelityStats& f, bool outOfCore) {
+nlohmann::json fidelityJson(const FidelityStats& f, bool outOfCore, MeshFidelity mode) {
   nlohmann::json j = {{"hausdorff_percent_of_diagonal", f.hausdorffPercent},
                       {"mean_percent_of_diagonal", f.meanPercent},
                       {"max_atlas_to_mesh", f.maxAtlasToMesh},
@@ -119,6 +119,12 @@ nlohmann::json fidelityJson(const FidelityStats& f, bool outOfCore) {
                       {"mesh_samples", f.meshSamples},
                       {"out_of_core", outOfCore},
                       {"seconds", f.seconds}};
+  j["mode"] = outOfCore ? "blocks" : mode == MeshFidelity::kFast ? "fast" : "full";
+  if (!outOfCore && mode == MeshFidelity::kFast) {
+    j["atlas_samples_total"] = f.atlasSamplesTotal;
+    j["atlas_fraction_above"] = f.atlasFractionAbove;
+    j["samples_beyond_margin"] = f.samplesBeyondMargin;
+  }
   if (outOfCore) {
     j["blocks"] = f.blocks;
     j["samples_beyond_margin"] = f.samplesBeyondMargin;
@@ -213,7 +219,7 @@ nlohmann::json statsJson(const MeshBuildStats& s) {
   stats["charting"] = chartingJson(ch.charting, ch.outOfCore);
   stats["charting"]["metric"] = ch.developable ? "developable" : "planar";
   stats["resample"] = resampleJson(s.resample, w.spilledBytes);
-  if (s.fidelity) stats["fidelity"] = fidelityJson(*s.fidelity, ch.outOfCore);
+  if (s.fidelity) stats["fidelity"] = fidelityJson(*s.fidelity, ch.outOfCore, s.fidelityMode);
   else stats["fidelity"] = "not measured (--no-fidelity)";  // note: a stats.json value, read as such
   stats["charts"] = w.charts;
   stats["chart_size"] = w.chartSize;

@@ -148,6 +148,7 @@ struct MeshBuildStats {
   MeshResampleStats resample;
   MeshWriteStats write;
   std::optional<FidelityStats> fidelity;  // none: not measured
+  MeshFidelity fidelityMode = MeshFidelity::kFast;
   std::vector<StageTiming> stages;
   uint64_t peakRssBytes = 0;
   uint64_t bytesOnDisk = 0;   // the atlas directory (stats.json aside)

@@ -640,12 +640,20 @@ FidelityStats measureMeshFidelity(ChartedMesh& c, const MeshBuildOptions& o, con
     std::error_code ec;
     fs::remove_all(c.cells, ec);
   } else {
-    const AtlasSurface surface = readAtlasSurface(dir, 0);
-    f = measureFidelity(c.mesh.positions, c.mesh.triangles, surface.positions, surface.triangles);
+    if (o.fidelity == MeshFidelity::kFast) {
+      f = measureFidelityByCharts(c.mesh.positions, c.mesh.triangles, dir);
+    } else {
+      const AtlasSurface surface = readAtlasSurface(dir, 0);
+      f = measureFidelity(c.mesh.positions, c.mesh.triangles, surface.positions, surface.triangles);
+    }
   }
-  spdlog::info("atlas fidelity: Hausdorff {:.4f}% of the diagonal (mean {:.5f}%), {} atlas and {} mesh samples{}",
+  spdlog::info("atlas fidelity: Hausdorff {:.4f}% of the diagonal (mean {:.5f}%), {} atlas and {} mesh samples{}{}",
                f.hausdorffPercent, f.meanPercent, f.atlasSamples, f.meshSamples,
-               outOfCore ? fmt::format(", {} blocks", f.blocks) : std::string());
+               outOfCore ? fmt::format(", {} blocks", f.blocks) : std::string(),
+               f.atlasFractionAbove > 0.0
+                   ? fmt::format(" (atlas samples: {} of {}; with 99% confidence at most {:.4f}% of them lie farther)",
+                                 f.atlasSamples, f.atlasSamplesTotal, 100.0 * f.atlasFractionAbove)
+                   : std::string());
   if (!f.exact)
     spdlog::warn("{}: too many samples lie far from the other surface to resolve them all within {}; the "
                  "Hausdorff figure is a lower bound",
@@ -677,6 +685,7 @@ MeshBuildStats buildMeshAtlas(const MeshBuildOptions& o) {
   MeshBuildOptions chosen = o;
   chosen.chartSize = stats.resample.chartSize;
   stats.write = writeMeshAtlas(std::move(resampled), meshHierarchyParams(chosen), o, stage.path(), meter);
+  stats.fidelityMode = o.fidelity;
   if (o.measureFidelity) stats.fidelity = measureMeshFidelity(charted, o, stage.path(), meter);
   charted = ChartedMesh{};
   stats.stages = meter.stages();

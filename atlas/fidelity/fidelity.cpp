@@ -18,9 +18,11 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/task_arena.h>
 
 #include "atlas/mesh/gridify.h"
+#include "atlas/mesh/mesh_atlas.h"
 #include "core/atlas_format.h"
 
 namespace gimlod {
@@ -219,6 +221,8 @@ class Nearest {
   explicit Nearest(const Forest& f) : f_(f), closest_(CGAL::ORIGIN), d2_(std::numeric_limits<double>::infinity()) {}
   Nearest(const Forest& f, const Point& q, const Point& hint)
       : f_(f), closest_(hint), d2_(CGAL::squared_distance(q, hint)) {}
+  // Only points closer than sqrt(bound2) are sought (closest() stays the origin if none is).
+  Nearest(const Forest& f, double bound2) : f_(f), closest_(CGAL::ORIGIN), d2_(bound2) {}
   bool go_further() const { return true; }
   template <class P>
   void intersection(const Point& q, const P& primitive) {
@@ -243,6 +247,16 @@ class Nearest {
   }
   const Point& closest() const { return closest_; }
   double squaredDistance() const { return d2_; }
+
+  static double boxDistance2(const Point& q, const FloatBox& b) {
+    double d2 = 0.0;
+    for (int k = 0; k < 3; ++k) {
+      const double lo = b.lo[k] - q[k], hi = q[k] - b.hi[k];
+      const double d = lo > 0.0 ? lo : (hi > 0.0 ? hi : 0.0);
+      d2 += d * d;
+    }
+    return d2;
+  }
 
  private:
   static double triangleBoxDistance2(const Point& q, const FloatTriangle& t) {
@@ -325,6 +339,33 @@ void setFigures(FidelityStats& st, double atlasMax, double atlasSum, double mesh
   st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+// The diagonal of the box of the vertices the triangles use.
+double usedDiagonal(const std::vector<glm::vec3>& p, const std::vector<Face>& t) {
+  glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
+  for (const auto& f : t)
+    for (uint32_t i : f) {
+      lo = {std::min(lo.x, p[i].x), std::min(lo.y, p[i].y), std::min(lo.z, p[i].z)};
+      hi = {std::max(hi.x, p[i].x), std::max(hi.y, p[i].y), std::max(hi.z, p[i].z)};
+    }
+  return std::sqrt(double(hi.x - lo.x) * (hi.x - lo.x) + double(hi.y - lo.y) * (hi.y - lo.y) +
+                   double(hi.z - lo.z) * (hi.z - lo.z));
+}
+
+// The mesh side's samples: every vertex a triangle uses, then every non-degenerate triangle's
+// centroid (`mesh`), in input order (coherent, for the hints).
+std::vector<Point> meshSamplePoints(const std::vector<glm::vec3>& p, const std::vector<Face>& t,
+                                    const std::vector<FloatTriangle>& mesh) {
+  std::vector<Point> out;
+  std::vector<bool> used(p.size(), false);
+  for (const auto& f : t)
+    for (uint32_t i : f) used[i] = true;
+  out.reserve(p.size() + mesh.size());
+  for (size_t i = 0; i < p.size(); ++i)
+    if (used[i]) out.emplace_back(p[i].x, p[i].y, p[i].z);
+  for (const FloatTriangle& f : mesh) out.push_back(CGAL::centroid(f.triangle()));
+  return out;
+}
+
 }  // namespace
 
 FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
@@ -337,27 +378,8 @@ FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
                        [&] { atlas = nonDegenerate(atlasPositions, atlasTriangles, true); });
   if (mesh.empty() || atlas.empty()) throw std::invalid_argument("measureFidelity: a surface has no triangles");
   FidelityStats st;
-  glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
-  for (const auto& f : meshTriangles)
-    for (uint32_t i : f) {
-      lo = {std::min(lo.x, meshPositions[i].x), std::min(lo.y, meshPositions[i].y), std::min(lo.z, meshPositions[i].z)};
-      hi = {std::max(hi.x, meshPositions[i].x), std::max(hi.y, meshPositions[i].y), std::max(hi.z, meshPositions[i].z)};
-    }
-  st.diagonal = std::sqrt(double(hi.x - lo.x) * (hi.x - lo.x) + double(hi.y - lo.y) * (hi.y - lo.y) +
-                          double(hi.z - lo.z) * (hi.z - lo.z));
-
-  // The mesh side's samples: every vertex a triangle uses, then every non-degenerate triangle's
-  // centroid, in input order (coherent, for the hints).
-  std::vector<Point> meshSamples;
-  {
-    std::vector<bool> used(meshPositions.size(), false);
-    for (const auto& f : meshTriangles)
-      for (uint32_t i : f) used[i] = true;
-    meshSamples.reserve(meshPositions.size() + mesh.size());
-    for (size_t i = 0; i < meshPositions.size(); ++i)
-      if (used[i]) meshSamples.emplace_back(meshPositions[i].x, meshPositions[i].y, meshPositions[i].z);
-    for (const FloatTriangle& t : mesh) meshSamples.push_back(CGAL::centroid(t.triangle()));
-  }
+  st.diagonal = usedDiagonal(meshPositions, meshTriangles);
+  const std::vector<Point> meshSamples = meshSamplePoints(meshPositions, meshTriangles, mesh);
 
   if (detail) detail->atlasDistances.assign(atlasPositions.size(), 0.f);
   // The atlas trees build while the mesh trees build and answer the atlas samples (one CGAL tree
@@ -716,6 +738,204 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
   if (meshPending.unresolved) meshMax = std::max(meshMax, margin), meshSum += margin * meshPending.unresolved;
   st.exact = !atlasPending.unresolved && !meshPending.unresolved;
   setFigures(st, atlasMax, atlasSum, meshMax, meshSum, t0);
+  return st;
+}
+
+namespace {
+
+// Mesh samples bucketed in a uniform grid over their box, to find those within a box quickly.
+class SampleGrid {
+ public:
+  explicit SampleGrid(const std::vector<Point>& p) : p_(p) {
+    for (int k = 0; k < 3; ++k) lo_[k] = std::numeric_limits<double>::infinity(), hi_[k] = -lo_[k];
+    for (const Point& q : p)
+      for (int k = 0; k < 3; ++k) lo_[k] = std::min(lo_[k], q[k]), hi_[k] = std::max(hi_[k], q[k]);
+    // No more cells than samples: the cells along the box's longest side grow with the cube root
+    // of the count (samples spread over a surface fill a few cells of each column, a few tens a cell).
+    const double longest = std::max({hi_[0] - lo_[0], hi_[1] - lo_[1], hi_[2] - lo_[2], 1e-300});
+    const double cells = std::clamp(std::cbrt(double(p.size())), 1.0, 1024.0);
+    for (int k = 0; k < 3; ++k) {
+      dims_[k] = uint32_t(std::clamp(std::ceil(cells * (hi_[k] - lo_[k]) / longest), 1.0, 1024.0));
+      step_[k] = std::max((hi_[k] - lo_[k]) / dims_[k], 1e-300);
+    }
+    std::vector<uint32_t> cellOf(p.size());
+    start_.assign(size_t(dims_[0]) * dims_[1] * dims_[2] + 1, 0);
+    for (size_t i = 0; i < p.size(); ++i) {
+      cellOf[i] = cell(axis(p[i][0], 0), axis(p[i][1], 1), axis(p[i][2], 2));
+      ++start_[cellOf[i] + 1];
+    }
+    for (size_t c = 1; c < start_.size(); ++c) start_[c] += start_[c - 1];
+    order_.resize(p.size());
+    std::vector<uint32_t> fill(start_.begin(), start_.end() - 1);
+    for (size_t i = 0; i < p.size(); ++i) order_[fill[cellOf[i]]++] = uint32_t(i);
+  }
+  // Calls f(i) for every sample i in the cells that meet box b widened by margin.
+  template <class F>
+  void forEachNear(const FloatBox& b, double margin, F&& f) const {
+    uint32_t from[3], to[3];
+    for (int k = 0; k < 3; ++k) {
+      if (double(b.lo[k]) - margin > hi_[k] || double(b.hi[k]) + margin < lo_[k]) return;
+      from[k] = axis(double(b.lo[k]) - margin, k), to[k] = axis(double(b.hi[k]) + margin, k);
+    }
+    for (uint32_t z = from[2]; z <= to[2]; ++z)
+      for (uint32_t y = from[1]; y <= to[1]; ++y) {
+        const size_t row = cell(0, y, z);
+        for (uint32_t i = start_[row + from[0]]; i < start_[row + to[0] + 1]; ++i) f(order_[i]);
+      }
+  }
+
+ private:
+  uint32_t axis(double x, int k) const {
+    const double c = std::floor((x - lo_[k]) / step_[k]);
+    return c <= 0.0 ? 0u : c >= dims_[k] - 1 ? dims_[k] - 1 : uint32_t(c);
+  }
+  size_t cell(uint32_t x, uint32_t y, uint32_t z) const { return x + size_t(dims_[0]) * (y + size_t(dims_[1]) * z); }
+  const std::vector<Point>& p_;
+  double lo_[3], hi_[3], step_[3];
+  uint32_t dims_[3];
+  std::vector<uint32_t> start_, order_;
+};
+
+// A chart's drawn samples (side s a side) as the renderer triangulates its texels.
+std::vector<FloatTriangle> chartFloatTriangles(const std::vector<glm::vec3>& P, uint32_t s) {
+  std::vector<Face> faces;
+  faces.reserve(size_t(s - 1) * (s - 1) * 2);
+  for (uint32_t v = 0; v + 1 < s; ++v)
+    for (uint32_t u = 0; u + 1 < s; ++u) {
+      const uint32_t a = v * s + u, b = a + 1, c = a + s + 1, d = a + s;
+      faces.push_back({a, b, c});
+      faces.push_back({a, c, d});
+    }
+  return nonDegenerate(P, faces, true);
+}
+
+// Whether sample `i` of chart c is among those measured when a fraction `keep` (in 2^-64 units)
+// of them are.
+bool sampleKept(uint32_t c, size_t i, uint64_t keep) {
+  uint64_t x = (uint64_t(c) << 40) ^ uint64_t(i);  // splitmix64
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return (x ^ (x >> 31)) < keep;
+}
+
+void atomicMin(std::atomic<double>& a, double v) {
+  double cur = a.load(std::memory_order_relaxed);
+  while (v < cur && !a.compare_exchange_weak(cur, v, std::memory_order_relaxed)) {
+  }
+}
+
+}  // namespace
+
+FidelityStats measureFidelityByCharts(const std::vector<glm::vec3>& meshPositions,
+                                      const std::vector<std::array<uint32_t, 3>>& meshTriangles,
+                                      const std::filesystem::path& atlasDir, const ChartFidelityOptions& options) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!(options.marginFraction > 0.0 && options.marginFraction < 1.0) || options.atlasSamples == 0)
+    throw std::invalid_argument("measureFidelityByCharts: the margin must be in (0, 1) and some atlas samples measured");
+  const AtlasManifest am = readManifest(atlasDir);
+  if (am.kind != AtlasKind::Geometry)
+    throw InputError((atlasDir / kManifestName).string() + ": a " + atlasKindName(am.kind) +
+                     " atlas, not a geometry atlas");
+  const std::vector<FloatTriangle> mesh = nonDegenerate(meshPositions, meshTriangles);
+  if (mesh.empty() || am.charts.empty())
+    throw std::invalid_argument("measureFidelityByCharts: a surface has no triangles");
+  FidelityStats st;
+  st.diagonal = usedDiagonal(meshPositions, meshTriangles);
+  const std::vector<Point> meshSamples = meshSamplePoints(meshPositions, meshTriangles, mesh);
+  st.meshSamples = meshSamples.size();
+  const double margin = options.marginFraction * st.diagonal;
+  for (const ChartInfo& c : am.charts) {
+    const uint64_t side = ((am.chartSize - 1) >> c.finestLevel) + 1;
+    st.atlasSamplesTotal += side * side;
+  }
+  const bool all = st.atlasSamplesTotal <= options.atlasSamples;
+  const uint64_t keep =
+      all ? ~0ull : uint64_t(std::ldexp(double(options.atlasSamples) / double(st.atlasSamplesTotal), 64));
+
+  const Forest meshForest(mesh);
+  const SampleGrid grid(meshSamples);
+  std::vector<std::atomic<double>> best(meshSamples.size());
+  for (auto& b : best) b.store(std::numeric_limits<double>::infinity(), std::memory_order_relaxed);
+  std::vector<FloatBox> chartBoxes(am.charts.size(), emptyBox());
+  struct AtlasSide {
+    double max = 0.0, sum = 0.0;
+    uint64_t count = 0;
+  };
+  tbb::enumerable_thread_specific<AtlasSide> atlasSide;
+  // Measures the mesh samples `near` chart c's triangles could be closest to (those nearer its
+  // box than their best so far) against them.
+  auto meshSide = [&](const Forest& chart, const FloatBox& box, auto&& near) {
+    near([&](uint32_t i) {
+      const Point& q = meshSamples[i];
+      const double b = best[i].load(std::memory_order_relaxed);
+      const double b2 = b * b;
+      if (Nearest::boxDistance2(q, box) >= b2) return;
+      Nearest n(chart, b2);
+      chart.traverse(q, n);
+      if (n.squaredDistance() < b2) atomicMin(best[i], std::sqrt(n.squaredDistance()));
+    });
+  };
+  const progress::ProgressStage stage("fidelity charts", am.charts.size());
+  tbb::parallel_for(size_t(0), am.charts.size(), [&](size_t c) {
+    const std::vector<glm::vec3> P = readDrawnChartLevel(atlasDir, am, c, 0);
+    const uint32_t s = uint32_t(std::lround(std::sqrt(double(P.size()))));
+    AtlasSide& a = atlasSide.local();
+    Point hint(CGAL::ORIGIN);
+    bool first = true;
+    for (size_t i = 0; i < P.size(); ++i) {
+      for (int k = 0; k < 3; ++k)
+        chartBoxes[c].lo[k] = std::min(chartBoxes[c].lo[k], P[i][k]), chartBoxes[c].hi[k] = std::max(chartBoxes[c].hi[k], P[i][k]);
+      if (!all && !sampleKept(uint32_t(c), i, keep)) continue;
+      const Point q(P[i].x, P[i].y, P[i].z);
+      Nearest n = first ? Nearest(meshForest) : Nearest(meshForest, q, hint);
+      first = false;
+      meshForest.traverse(q, n);
+      hint = n.closest();
+      const double d = std::sqrt(n.squaredDistance());
+      a.max = std::max(a.max, d), a.sum += d, ++a.count;
+    }
+    // Isolated: a thread waiting inside the chart's tree build takes no other chart meanwhile, so
+    // only as many charts as threads are held at once.
+    tbb::this_task_arena::isolate([&] {
+      const std::vector<FloatTriangle> tris = chartFloatTriangles(P, s);
+      if (tris.empty()) return;
+      const Forest chart(tris);
+      meshSide(chart, chartBoxes[c], [&](auto&& f) { grid.forEachNear(chartBoxes[c], margin, f); });
+    });
+    progress::advance();
+  });
+  // Samples with nothing within the margin of a chart's box: against every chart nearer than
+  // their best.
+  std::vector<uint32_t> far;
+  for (size_t i = 0; i < best.size(); ++i)
+    if (!(best[i].load(std::memory_order_relaxed) <= margin)) far.push_back(uint32_t(i));
+  st.samplesBeyondMargin = far.size();
+  if (!far.empty()) {
+    tbb::parallel_for(size_t(0), am.charts.size(), [&](size_t c) {
+      tbb::this_task_arena::isolate([&] {
+        const std::vector<glm::vec3> P = readDrawnChartLevel(atlasDir, am, c, 0);
+        const std::vector<FloatTriangle> tris =
+            chartFloatTriangles(P, uint32_t(std::lround(std::sqrt(double(P.size())))));
+        if (tris.empty()) return;
+        const Forest chart(tris);
+        meshSide(chart, chartBoxes[c], [&](auto&& f) {
+          for (uint32_t i : far) f(i);
+        });
+      });
+    });
+  }
+  double meshMax = 0.0, meshSum = 0.0;
+  for (const auto& b : best) {
+    const double d = b.load(std::memory_order_relaxed);
+    if (!std::isfinite(d)) throw std::invalid_argument("measureFidelityByCharts: the atlas has no triangles");
+    meshMax = std::max(meshMax, d), meshSum += d;
+  }
+  AtlasSide a;
+  for (const AtlasSide& t : atlasSide) a.max = std::max(a.max, t.max), a.sum += t.sum, a.count += t.count;
+  st.atlasSamples = a.count;
+  st.atlasFractionAbove = all ? 0.0 : std::log(100.0) / double(std::max<uint64_t>(a.count, 1));
+  setFigures(st, a.max, a.sum, meshMax, meshSum, t0);
   return st;
 }
 

@@ -30,6 +30,11 @@ struct FidelityStats {
   bool exact = true;                // false: some samples beyond the margin were not resolved
                                     // (too many to hold); they count at the margin, so the
                                     // maximum is a lower bound
+  // Chart by chart (measureFidelityByCharts) only:
+  uint64_t atlasSamplesTotal = 0;   // the atlas's samples, of which atlasSamples were measured
+  // With a subset measured: with 99% confidence, at most this fraction of the atlas samples lie
+  // farther from the input than maxAtlasToMesh (ln(100) / atlasSamples); 0 when all were.
+  double atlasFractionAbove = 0.0;
 };
 
 // Where the distances lie, sample by sample (for inspection).
@@ -49,6 +54,33 @@ FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
                               const std::vector<glm::vec3>& atlasPositions,
                               const std::vector<std::array<uint32_t, 3>>& atlasTriangles,
                               FidelityDetail* detail = nullptr);
+
+// How the atlas fidelity is measured: fast reads the atlas a chart at a time (the input side exact,
+// the atlas side on about a million samples, with the confidence stated; measureFidelityByCharts),
+// full welds the whole atlas surface and measures every sample of both (measureFidelity).
+enum class MeshFidelity : uint8_t { kFast, kFull };
+
+struct ChartFidelityOptions {
+  // Atlas samples measured against the input: every one when the atlas has at most this many,
+  // else a subset of about this many, each sample kept or not by a hash of its chart and index
+  // (independent draws, so the maximum over them bounds all but a stated fraction; see
+  // FidelityStats::atlasFractionAbove).
+  uint64_t atlasSamples = 1ull << 20;
+  // A mesh sample is measured against the charts whose box, widened by this fraction of the
+  // diagonal, holds it; one left with nothing that close is measured again against every chart.
+  double marginFraction = 0.005;
+};
+
+// measureFidelity against the geometry atlas in atlasDir as it is drawn at level 0 (each chart at
+// its finest level, stitched to its neighbours as readAtlasSurface stitches them), read a chart at
+// a time (its samples and a tree of its triangles on one thread; the whole atlas is never held):
+// the mesh side is exact, every input vertex and triangle centroid against every chart that could
+// be closest; the atlas side measures every sample, or the subset options.atlasSamples chooses.
+// Throws InputError naming the atlas or chart file on a bad atlas, std::invalid_argument when
+// either surface has no triangles or the options are absurd.
+FidelityStats measureFidelityByCharts(const std::vector<glm::vec3>& meshPositions,
+                                      const std::vector<std::array<uint32_t, 3>>& meshTriangles,
+                                      const std::filesystem::path& atlasDir, const ChartFidelityOptions& options = {});
 
 struct OutOfCoreFidelityOptions {
   uint64_t memoryBytes = 1ull << 30;  // what one block's surfaces, trees and samples may take (estimated)

@@ -367,6 +367,41 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
   return w;
 }
 
+std::vector<glm::vec3> readDrawnChartLevel(const fs::path& atlasDir, const AtlasManifest& m, size_t i,
+                                           uint32_t level) {
+  // A chart whose finest level is coarser than `level` gives its finest; its neighbours' border
+  // samples facing it are stitched onto its lattice, as the renderer stitches them (each moved to
+  // the lattice point below it).
+  const auto drawnLevel = [&](size_t c) { return std::max(level, m.charts[c].finestLevel); };
+  const ChartInfo& c = m.charts[i];
+  const ChartFileReader reader(atlasDir / c.file);
+  if (!reader.hasChannel(kChannelPositions))
+    throw InputError((atlasDir / c.file).string() + ": no positions in a geometry atlas chart");
+  if (reader.chartSize() != m.chartFileSize(c.id))
+    throw InputError((atlasDir / c.file).string() + ": chart size differs from the manifest's");
+  const uint32_t own = drawnLevel(i);
+  if (own - c.finestLevel >= reader.levels())
+    throw InputError((atlasDir / c.file).string() + ": has no level " + std::to_string(own - c.finestLevel));
+  std::vector<glm::vec3> P = reader.readLevelPositions(own - c.finestLevel);
+  const uint32_t n = (m.chartSize - 1) >> own;
+  for (uint32_t e = 0; e < 4; ++e) {
+    const int32_t other = c.neighbours[e].chart;
+    if (other < 0 || drawnLevel(size_t(other)) <= own) continue;
+    const uint32_t d = drawnLevel(size_t(other)) - own;
+    // The edge's sample at coordinate t along +u (bottom, top) or +v (left, right).
+    const auto at = [&](uint32_t t) -> glm::vec3& {
+      switch (e) {
+        case kEdgeBottom: return P[t];
+        case kEdgeTop: return P[size_t(n) * (n + 1) + t];
+        case kEdgeLeft: return P[size_t(t) * (n + 1)];
+        default: return P[size_t(t) * (n + 1) + n];
+      }
+    };
+    for (uint32_t t = 0; t <= n; ++t) at(t) = at((t >> d) << d);
+  }
+  return P;
+}
+
 AtlasSurface readAtlasSurface(const fs::path& atlasDir, uint32_t level) {
   const AtlasManifest m = readManifest(atlasDir);
   if (m.kind != AtlasKind::Geometry)
@@ -386,40 +421,11 @@ AtlasSurface readAtlasSurface(const fs::path& atlasDir, uint32_t level) {
                     (uint64_t(k.z) * 0x165667B19E3779F9ull));
     }
   };
-  // Charts are read in parallel, then welded in chart order. A chart whose finest level is coarser
-  // than `level` gives its finest; its neighbours' border samples facing it are stitched onto its
-  // lattice, as the renderer stitches them (each moved to the lattice point below it).
+  // Charts are read in parallel, then welded in chart order.
   const auto drawnLevel = [&](size_t i) { return std::max(level, m.charts[i].finestLevel); };
   std::vector<std::vector<glm::vec3>> levels(m.charts.size());
-  tbb::parallel_for(size_t(0), m.charts.size(), [&](size_t i) {
-    const ChartInfo& c = m.charts[i];
-    const ChartFileReader reader(atlasDir / c.file);
-    if (!reader.hasChannel(kChannelPositions))
-      throw InputError((atlasDir / c.file).string() + ": no positions in a geometry atlas chart");
-    if (reader.chartSize() != m.chartFileSize(c.id))
-      throw InputError((atlasDir / c.file).string() + ": chart size differs from the manifest's");
-    const uint32_t own = drawnLevel(i);
-    if (own - c.finestLevel >= reader.levels())
-      throw InputError((atlasDir / c.file).string() + ": has no level " + std::to_string(own - c.finestLevel));
-    std::vector<glm::vec3> P = reader.readLevelPositions(own - c.finestLevel);
-    const uint32_t n = (m.chartSize - 1) >> own;
-    for (uint32_t e = 0; e < 4; ++e) {
-      const int32_t other = c.neighbours[e].chart;
-      if (other < 0 || drawnLevel(size_t(other)) <= own) continue;
-      const uint32_t d = drawnLevel(size_t(other)) - own;
-      // The edge's sample at coordinate t along +u (bottom, top) or +v (left, right).
-      const auto at = [&](uint32_t t) -> glm::vec3& {
-        switch (e) {
-          case kEdgeBottom: return P[t];
-          case kEdgeTop: return P[size_t(n) * (n + 1) + t];
-          case kEdgeLeft: return P[size_t(t) * (n + 1)];
-          default: return P[size_t(t) * (n + 1) + n];
-        }
-      };
-      for (uint32_t t = 0; t <= n; ++t) at(t) = at((t >> d) << d);
-    }
-    levels[i] = std::move(P);
-  });
+  tbb::parallel_for(size_t(0), m.charts.size(),
+                    [&](size_t i) { levels[i] = readDrawnChartLevel(atlasDir, m, i, level); });
   std::unordered_map<Key, uint32_t, KeyHash> weld;
   for (size_t chart = 0; chart < levels.size(); ++chart) {
     const std::vector<glm::vec3> P = std::move(levels[chart]);

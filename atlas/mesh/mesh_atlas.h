@@ -109,6 +109,13 @@ struct AtlasSurface {
 // atlas, or a level the charts do not have.
 AtlasSurface readAtlasSurface(const std::filesystem::path& atlasDir, uint32_t level);
 
+// Chart i of the atlas in atlasDir (manifest m) at `level` as the renderer draws it, side
+// ((m.chartSize - 1) >> max(level, finestLevel)) + 1 samples: at its own finest level where that
+// is coarser, and its border samples facing a neighbour drawn coarser moved onto that
+// neighbour's lattice. Throws InputError naming the chart file as readAtlasSurface does.
+std::vector<glm::vec3> readDrawnChartLevel(const std::filesystem::path& atlasDir, const AtlasManifest& m, size_t i,
+                                           uint32_t level);
+
 // Writes a binary little-endian PLY (float x y z, uchar-list int vertex_indices), atomically.
 void writePly(const std::filesystem::path& path, const std::vector<glm::vec3>& positions,
               const std::vector<std::array<uint32_t, 3>>& triangles);

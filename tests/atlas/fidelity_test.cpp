@@ -273,4 +273,71 @@ TEST_F(FidelityOutOfCore, BadInputIsNamed) {
 }
 
 }  // namespace
+// Chart by chart: the input side is exact (every input sample against every chart that could be
+// closest, those beyond the margin of every chart's box measured again against all), and so is
+// the atlas side when every sample is measured; a subset of the atlas samples gives a maximum no
+// larger than the whole's, with the confidence it states.
+TEST_F(FidelityOutOfCore, ByChartsMatchesTheWholeSurface) {
+  const AtlasSurface surface = readAtlasSurface(atlas(), 0);
+  const FidelityStats ref = measureFidelity(mesh_->positions, mesh_->triangles, surface.positions, surface.triangles);
+  ASSERT_GT(ref.hausdorff, 0.0);
+  auto expectSameMeshSide = [&](const FidelityStats& s) {
+    EXPECT_EQ(s.meshSamples, ref.meshSamples);
+    EXPECT_NEAR(s.diagonal, ref.diagonal, 1e-9 * ref.diagonal);
+    EXPECT_NEAR(s.maxMeshToAtlas, ref.maxMeshToAtlas, 1e-9 * ref.diagonal);
+    EXPECT_NEAR(s.meanMeshToAtlas, ref.meanMeshToAtlas, 1e-9 * ref.diagonal);
+  };
+  ChartFidelityOptions fo;
+  fo.atlasSamples = 1ull << 40;
+  const FidelityStats all = measureFidelityByCharts(mesh_->positions, mesh_->triangles, atlas(), fo);
+  expectSameMeshSide(all);
+  // Every chart sample, seams counted in each chart that holds them: the same maximum.
+  EXPECT_EQ(all.atlasSamples, all.atlasSamplesTotal);
+  EXPECT_GT(all.atlasSamples, ref.atlasSamples);
+  EXPECT_NEAR(all.maxAtlasToMesh, ref.maxAtlasToMesh, 1e-9 * ref.diagonal);
+  EXPECT_NEAR(all.hausdorffPercent, ref.hausdorffPercent, 1e-7);
+  EXPECT_EQ(all.atlasFractionAbove, 0.0);
+  EXPECT_EQ(all.samplesBeyondMargin, 0u);
+
+  fo.atlasSamples = 3000;
+  const FidelityStats some = measureFidelityByCharts(mesh_->positions, mesh_->triangles, atlas(), fo);
+  expectSameMeshSide(some);
+  EXPECT_EQ(some.atlasSamplesTotal, all.atlasSamplesTotal);
+  EXPECT_GT(some.atlasSamples, 2500u);
+  EXPECT_LT(some.atlasSamples, 3500u);
+  EXPECT_LE(some.maxAtlasToMesh, ref.maxAtlasToMesh * (1 + 1e-9));
+  EXPECT_GT(some.maxAtlasToMesh, 0.0);
+  EXPECT_NEAR(some.atlasFractionAbove, std::log(100.0) / double(some.atlasSamples), 1e-12);
+
+  // A margin far below the distances: the input samples go to the second pass, which finds the
+  // same closest points.
+  fo.marginFraction = 1e-9;
+  const FidelityStats narrow = measureFidelityByCharts(mesh_->positions, mesh_->triangles, atlas(), fo);
+  expectSameMeshSide(narrow);
+  EXPECT_GT(narrow.samplesBeyondMargin, ref.meshSamples / 2);
+}
+
+TEST_F(FidelityOutOfCore, ByChartsFarApartAndBadInput) {
+  std::vector<glm::vec3> moved = mesh_->positions;
+  for (glm::vec3& p : moved) p.x += 0.05f;
+  const AtlasSurface surface = readAtlasSurface(atlas(), 0);
+  const FidelityStats ref = measureFidelity(moved, mesh_->triangles, surface.positions, surface.triangles);
+  ASSERT_GT(ref.hausdorffPercent, 5.0);
+  ChartFidelityOptions fo;
+  fo.atlasSamples = 1ull << 40;
+  const FidelityStats s = measureFidelityByCharts(moved, mesh_->triangles, atlas(), fo);
+  EXPECT_NEAR(s.maxMeshToAtlas, ref.maxMeshToAtlas, 1e-9 * ref.diagonal);
+  EXPECT_NEAR(s.maxAtlasToMesh, ref.maxAtlasToMesh, 1e-9 * ref.diagonal);
+  EXPECT_GT(s.samplesBeyondMargin, 0u);
+  try {
+    measureFidelityByCharts(mesh_->positions, mesh_->triangles, tmp_->path() / "no.atlas");
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no.atlas"), std::string::npos) << e.what();
+  }
+  fo.marginFraction = 0.0;
+  EXPECT_THROW(measureFidelityByCharts(mesh_->positions, mesh_->triangles, atlas(), fo), std::invalid_argument);
+  EXPECT_THROW(measureFidelityByCharts(mesh_->positions, {}, atlas()), std::invalid_argument);
+}
+
 }  // namespace gimlod
