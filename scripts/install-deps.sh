@@ -11,7 +11,7 @@ PACKAGES=(
   libimgui-dev xvfb xdotool
   libtbb-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev libzstd-dev
   libgtest-dev clang libclang-rt-dev
-  python3-matplotlib
+  python3-matplotlib libmeshoptimizer-dev
   chromium
 )
 
