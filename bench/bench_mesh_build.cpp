@@ -222,12 +222,12 @@ int run(int argc, char** argv) {
   const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
   std::vector<Row> rows;
   for (const fs::path& in : inputs) rows.push_back(benchOne(self, gimlod, in, work, buildArgs));
-  std::printf("\n| input | M triangles | gimlod s | CPU s | M tri/s/core | peak MiB | charts | samples/tri | B/tri | "
+  std::printf("\n| input | triangles | gimlod s | CPU s | M tri/s/core | peak MiB | charts | samples/tri | B/tri | "
               "Hausdorff %% | flipped | meshopt chain s | peak MiB | B/tri | gimlod / chain |\n"
               "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const Row& r : rows)
-    std::printf("| %s | %.3f | %.2f | %.2f | %.3f | %.0f | %u | %.1f | %.1f | %.4f | %llu | %.2f | %.0f | %.2f | %.2f |\n",
-                r.name.c_str(), double(r.triangles) / 1e6, r.seconds, r.cpuSeconds,
+    std::printf("| %s | %llu | %.2f | %.2f | %.3f | %.0f | %u | %.1f | %.1f | %.4f | %llu | %.2f | %.0f | %.2f | %.2f |\n",
+                r.name.c_str(), static_cast<unsigned long long>(r.triangles), r.seconds, r.cpuSeconds,
                 double(r.triangles) / 1e6 / std::max(r.cpuSeconds, 1e-9), r.peakMiB, r.charts, r.samplesPerTriangle,
                 r.bytesPerTriangle, r.hausdorff, static_cast<unsigned long long>(r.flipped), r.baseSeconds,
                 r.basePeakMiB, r.baseBytesPerTriangle, r.seconds / std::max(r.baseSeconds, 1e-9));
