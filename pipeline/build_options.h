@@ -11,6 +11,7 @@
 #include <string_view>
 
 #include "atlas/fidelity/fidelity.h"
+#include "atlas/mesh/quad_charts.h"
 
 namespace gimlod {
 
@@ -100,10 +101,7 @@ inline constexpr uint32_t kDefaultPositionBits = 18;
 inline constexpr double kDefaultPositionTolerance = 0.00005;
 inline constexpr uint32_t kDefaultNormalTolerance = 1;
 inline constexpr uint32_t kAutoCharts = ~0u;
-inline constexpr double kAutoSampleError = -1.0;
-inline constexpr double kDefaultSampleError = 0.0005;
 
-enum class MeshQuads : uint8_t { kAuto, kSides, kKites };
 // Where a compressed mesh atlas's normals come from: stored with every sample, or derived from the
 // positions on reading (core/atlas_format.h geometryImageNormals; block borders stored); auto:
 // derived where the charts keep at most kDerivedNormalsSamplesPerTriangle samples per input
@@ -111,8 +109,6 @@ enum class MeshQuads : uint8_t { kAuto, kSides, kKites };
 // resampled (interpolated vertex) normals smooth over.
 enum class MeshNormals : uint8_t { kAuto, kStored, kDerived };
 inline constexpr double kDerivedNormalsSamplesPerTriangle = 16.0;
-// How a quad chart's square maps into its patch's parameterization (atlas/mesh/resample.h QuadMap).
-enum class MeshQuadMap : uint8_t { kBilinear, kStretch, kFolding };
 
 // The shape term of the patch clustering (atlas/mesh/charting.h ChartMetric).
 enum class MeshChartMetric : uint8_t { kAuto, kPlanar, kDevelopable };
@@ -187,24 +183,6 @@ inline constexpr uint64_t kFewPatchesTriangles = 4'000'000;
 uint32_t meshPatchTarget(uint64_t triangles);
 MeshChartMetric meshChartMetric(uint64_t triangles);
 
-// Samples per input triangle the default chart size starts from; the sampling error then doubles it
-// where the surface needs it (the paper's scans hold about 4 to 8).
-inline constexpr double kSamplesPerTriangle = 2.0;
-
-// The default quad chart size for `quads` charts of a mesh of `triangles` triangles: the smallest
-// 2^m + 1 in [65, kMaxDensityChartSize] whose quads * (size - 1)^2 samples reach
-// kSamplesPerTriangle * triangles. With the auto quad layout (the default) the build doubles it
-// only while neither layout's repair brings every chart within maxSampleError. With one layout
-// asked for, it doubles it (up to kMaxSamplesPerTriangle) before the repair while the patches whose
-// charts sample the surface more coarsely than maxSampleError hold more than
-// kCoarseSurfaceToDouble of its triangles (below that, the repair cuts those patches, which costs
-// far fewer samples than doubling every chart), and after it while the repair leaves the bound
-// unmet. Where the doubling stops at kMaxSamplesPerTriangle, a chart may keep a sampling error
-// past maxSampleError.
-inline constexpr double kCoarseSurfaceToDouble = 0.25;
-inline constexpr uint32_t kMaxDensityChartSize = 1025;
-inline constexpr double kMaxSamplesPerTriangle = 64.0;
-uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads);
 
 // The option's name as opts spell it in messages (CommonBuildOptions::spellOption).
 inline std::string spelledOption(const CommonBuildOptions& opts, std::string_view name) {

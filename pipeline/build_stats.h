@@ -14,6 +14,7 @@
 #include "atlas/mesh/layout_refine.h"
 #include "atlas/mesh/mesh_atlas.h"
 #include "atlas/mesh/mesh_io.h"
+#include "atlas/mesh/quad_charts.h"
 #include "atlas/mesh/resample.h"
 #include "atlas/terrain/terrain_atlas.h"
 #include "core/stage_meter.h"
@@ -88,37 +89,6 @@ struct MeshChartStats {
   MeshReadStats read;
   ChartingStats charting;
   double seconds = 0.0;                  // wall, from the build's start to the end of the charting
-};
-
-// One quad chart's figures.
-struct ChartQuality {
-  uint32_t patch = 0;    // layout patch
-  uint32_t quad = 0;     // quad within the patch
-  ImageQuality quality;  // of its sampled image
-};
-
-// Resample and repair: layout checks, side straightening, resampling and the flip repair.
-struct MeshResampleStats {
-  uint64_t charts = 0;
-  ParamQuality param;                  // all patches' parameterizations
-  ImageQuality image;                  // all charts' sampled images
-  uint32_t sidesStraightened = 0;
-  uint32_t sideEarsMended = 0;
-  bool sideQuads = false;              // the sides quad layout (else kites)
-  std::string quadMap = "bilinear";    // the quad map: bilinear, stretch or folding
-  bool unfold = true;                  // samples round flipped texels slid (ResampleOptions::unfold)
-  uint32_t evenSideCorners = 0;        // corners made so every patch has an even side count
-  int64_t alternativeFlippedTexels = -1;  // auto: the other layout's flipped texels; -1: not built
-  uint32_t twoQuadCorners = 0;         // sides layout: corners where only two charts meet
-  ChartRepairStats repair;
-  uint32_t chartSize = 0;              // the quad charts' side in samples
-  bool chartSizeByDensity = false;     // chosen by meshChartSizeForDensity
-  uint32_t densityChartSize = 0;       // what meshChartSizeForDensity chose, before any doubling
-  uint32_t repairDoublings = 0;        // times it was doubled after a repair left the bound unmet
-  double maxSampleError = 0.0;         // the repair's bound, in the input's units (0: none)
-  double repairWork = 0.0;             // layout triangles parameterized again / layout triangles
-  uint64_t patches = 0;                // after the repair
-  std::vector<ChartQuality> perChart;
 };
 
 // Write: the chart files, the hierarchy and the manifest.

@@ -12,6 +12,7 @@
 
 #include "atlas/mesh/chart_layout.h"
 #include "atlas/mesh/mesh_io.h"
+#include "atlas/mesh/quad_charts.h"
 #include "atlas/mesh/resample.h"
 #include "core/stage_meter.h"
 #include "hierarchy/hierarchy.h"
@@ -44,24 +45,9 @@ ChartedMesh chartMesh(const MeshBuildOptions& options, const MeshInfo& info, con
 // coordinate is within 2^23 steps, and a lattice point is an exact float).
 double meshPositionStep(const MeshBounds& bounds, uint32_t positionBits);
 
-// A layout's charts, sampled.
-struct ResampledMesh {
-  GeometryImageSet set;
-  std::unique_ptr<ChartSpill> spill;  // where the charts' samples are, in dir
-  MeshResampleStats stats;
-  MeshBounds bounds;  // of the layout
-  uint64_t triangles = 0;  // of the layout
-};
-
-// Resample and repair: checks the layout, chooses the chart size if options.chartSize is 0
-// (meshChartSizeForDensity, reported in stats.chartSize), and refuses a chart size whose geometry
-// images exceed options.maxMemory or the free disk in dir; straightens the shared sides,
-// resamples, and repairs flipped texels and sampling errors over options.maxSampleError (until
-// 3/4 of maxMemory is resident or repairBudget is spent). layout is freed. Stages "validate",
-// "straighten", "resample", "chart_repair". Throws
-// InputError naming the file and the parameter to change.
-ResampledMesh resampleMesh(ChartLayout&& layout, const MeshBuildOptions& options, const std::filesystem::path& dir,
-                           StageMeter& meter);
+// The layout's quad charts, made by makeQuadCharts (atlas/mesh/quad_charts.h) with the options'
+// quad layout, chart size, quad map and repair.
+QuadChartOptions quadChartOptions(const MeshBuildOptions& options);
 
 // Write: the chart files, hierarchy and manifest into dir; the samples and the spill are freed.
 // Stage "write". Throws InputError when a file cannot be written.

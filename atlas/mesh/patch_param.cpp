@@ -11,8 +11,6 @@
 #include <unordered_map>
 
 #include <Eigen/Sparse>
-#include <Eigen/IterativeLinearSolvers>
-#include <Eigen/SparseCholesky>
 #include <Eigen/SparseLU>
 #include <glm/geometric.hpp>
 
@@ -229,12 +227,10 @@ class InteriorSolver {
     }
   }
 
-  // Returns false if the factorization failed. preconditioned: by solvePreconditioned, falling
-  // back to the LU factorization where it does not converge.
-  bool solve(const std::vector<WeightRow>& rows, std::vector<glm::dvec2>& uv, bool preconditioned) {
+  // Returns false if the factorization failed.
+  bool solve(const std::vector<WeightRow>& rows, std::vector<glm::dvec2>& uv) {
     const Eigen::Index m = Eigen::Index(interior_.size());
     if (m == 0) return true;
-    if (preconditioned && solvePreconditioned(rows, uv)) return true;
     std::vector<Eigen::Triplet<double>> trip;
     Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(m, 2);
     for (Eigen::Index r = 0; r < m; ++r) {
@@ -270,87 +266,11 @@ class InteriorSolver {
   }
 
  private:
-  // The weight row i gives neighbour j (0 if none).
-  static double weightOf(const WeightRow& row, uint32_t j) {
-    const auto it = std::lower_bound(row.j.begin(), row.j.end(), j);
-    return it != row.j.end() && *it == j ? row.w[size_t(it - row.j.begin())] : 0.0;
-  }
-
-  // The one-sided system (D - W) x = b by BiCGSTAB, preconditioned with a sparse Cholesky
-  // factorization of its symmetric part (each pair of neighbours weighed by the mean of its two
-  // weights) and started from that part's solution: the two are close, so a few iterations reach
-  // the one-sided solution (to a residual of 1e-9), for less than an LU factorization. False when it
-  // does not converge (the caller then factorizes the system itself).
-  bool solvePreconditioned(const std::vector<WeightRow>& rows, std::vector<glm::dvec2>& uv) {
-    const Eigen::Index m = Eigen::Index(interior_.size());
-    std::vector<Eigen::Triplet<double>> full, lower;
-    Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(m, 2);
-    for (Eigen::Index r = 0; r < m; ++r) {
-      const uint32_t i = interior_[size_t(r)];
-      const WeightRow& row = rows[i];
-      double diag = 0.0, symDiag = 0.0;
-      for (size_t k = 0; k < row.j.size(); ++k) {
-        const uint32_t j = row.j[k];
-        const double w = row.w[k], sym = 0.5 * (w + weightOf(rows[j], i));
-        diag += w, symDiag += sym;
-        if (isBoundary_[j]) {
-          rhs(r, 0) += w * uv[j].x;
-          rhs(r, 1) += w * uv[j].y;
-        } else {
-          full.emplace_back(r, Eigen::Index(unknown_[j]), -w);
-          if (unknown_[j] < uint32_t(r)) lower.emplace_back(r, Eigen::Index(unknown_[j]), -sym);
-        }
-      }
-      full.emplace_back(r, r, diag);
-      lower.emplace_back(r, r, symDiag);
-    }
-    Eigen::SparseMatrix<double> a(m, m), s(m, m);
-    a.setFromTriplets(full.begin(), full.end());
-    s.setFromTriplets(lower.begin(), lower.end());
-    a.makeCompressed();
-    s.makeCompressed();
-    if (!symAnalyzed_) {
-      ldlt_.analyzePattern(s);
-      symAnalyzed_ = true;
-    }
-    ldlt_.factorize(s);
-    if (ldlt_.info() != Eigen::Success) return false;
-    Eigen::BiCGSTAB<Eigen::SparseMatrix<double>, FactorPreconditioner> solver;
-    solver.preconditioner().factor = &ldlt_;
-    solver.setTolerance(1e-9);
-    solver.setMaxIterations(100);
-    solver.compute(a);
-    Eigen::MatrixXd x(m, 2);
-    for (int c = 0; c < 2; ++c) {
-      const Eigen::VectorXd guess = ldlt_.solve(rhs.col(c));
-      x.col(c) = solver.solveWithGuess(rhs.col(c), guess);
-      if (solver.info() != Eigen::Success) return false;
-    }
-    if (!x.allFinite()) return false;
-    for (Eigen::Index r = 0; r < m; ++r) uv[interior_[size_t(r)]] = {x(r, 0), x(r, 1)};
-    return true;
-  }
-
   const std::vector<uint8_t>& isBoundary_;
   std::vector<uint32_t> unknown_;
   std::vector<uint32_t> interior_;
   Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu_;
-  using Ldlt = Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::AMDOrdering<int>>;
-  // BiCGSTAB's preconditioner: the symmetric part's factorization, made by solvePreconditioned.
-  struct FactorPreconditioner {
-    const Ldlt* factor = nullptr;
-    template <typename M>
-    FactorPreconditioner& analyzePattern(const M&) { return *this; }
-    template <typename M>
-    FactorPreconditioner& factorize(const M&) { return *this; }
-    template <typename M>
-    FactorPreconditioner& compute(const M&) { return *this; }
-    template <typename Rhs>
-    Eigen::VectorXd solve(const Rhs& b) const { return factor->solve(b); }
-    Eigen::ComputationInfo info() const { return Eigen::Success; }
-  };
-  Ldlt ldlt_;
-  bool analyzed_ = false, symAnalyzed_ = false;
+  bool analyzed_ = false;
 };
 
 // Area-weighted RMS of the triangles' L2 stretch around each vertex, divided by its mean.
@@ -681,14 +601,8 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
 
   std::vector<WeightRow> weights = meanValueWeights(lp);
   InteriorSolver solver(lp, isBoundary);
-  if (!solver.solve(weights, out.uv, options.preconditionedSolve)) fail(patch, "mean-value system could not be solved");
+  if (!solver.solve(weights, out.uv)) fail(patch, "mean-value system could not be solved");
   out.initial = measureStretch(out.uv, lp.xyz, lp.triangles);
-  // The iteration stops at a residual of 1e-9: where that leaves a triangle folded (one nearly
-  // flat in the embedding), the exact factorization decides.
-  if (options.preconditionedSolve && out.initial.flippedTriangles > 0) {
-    if (!solver.solve(weights, out.uv, false)) fail(patch, "mean-value system could not be solved");
-    out.initial = measureStretch(out.uv, lp.xyz, lp.triangles);
-  }
   out.quality = out.initial;
 
   // Stretch reduction: w_ij <- w_ij / sigma_j^eta; keep the best pass, stop when it stops helping.
@@ -700,7 +614,7 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
         row.w[k] /= std::pow(sigma[row.j[k]], options.stretchExponent);
       }
     }
-    if (!solver.solve(weights, trial, options.preconditionedSolve)) break;
+    if (!solver.solve(weights, trial)) break;
     const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
     const bool better = q.flippedTriangles <= out.quality.flippedTriangles &&
                         q.degenerateTriangles <= out.quality.degenerateTriangles &&
@@ -745,18 +659,10 @@ ParamQuality mapDiskOntoDomain(const std::vector<glm::dvec3>& xyz,
   lp.triangles = triangles;
   lp.xyz = xyz;
   InteriorSolver solver(lp, fixed);
-  const std::vector<WeightRow> weights = meanValueWeights(lp);
-  const std::vector<glm::dvec2> border = uv;
-  if (!solver.solve(weights, uv, options.preconditionedSolve)) {
+  if (!solver.solve(meanValueWeights(lp), uv)) {
     throw std::invalid_argument("mapDiskOntoDomain: the mean-value system could not be solved");
   }
   ParamQuality quality = measureStretch(uv, lp.xyz, lp.triangles);
-  if (options.preconditionedSolve && quality.flippedTriangles > 0) {  // as in parameterizePatch
-    uv = border;
-    if (!solver.solve(weights, uv, false))
-      throw std::invalid_argument("mapDiskOntoDomain: the mean-value system could not be solved");
-    quality = measureStretch(uv, lp.xyz, lp.triangles);
-  }
   if (options.stretchSweeps > 0) {
     std::vector<glm::dvec2> trial = uv;
     optimizeStretchLocally(lp, fixed, std::vector<glm::dvec2>(xyz.size(), glm::dvec2(0.0)),

@@ -26,11 +26,6 @@ struct ParamOptions {
   // Global stretch reweighting passes after the mean-value solve (Yoshizawa et al.; each one a
   // sparse solve); stops at the first pass that does not lower the L2 stretch. 0 skips it.
   uint32_t stretchIterations = 4;
-  // The solves run BiCGSTAB preconditioned with a sparse Cholesky factorization of the system's
-  // symmetric part (each pair of neighbours weighed by the mean of its two weights), to a residual
-  // of 1e-9, instead of factorizing the one-sided system by LU (the same embedding, faster); LU
-  // still where the iteration does not converge or leaves a triangle folded.
-  bool preconditionedSolve = true;
   // Reweighting exponent eta in w_ij <- w_ij / sigma_j^eta; 0 < eta <= 1 (smaller is steadier).
   double stretchExponent = 0.5;
   // Local L2 stretch minimization sweeps (Sander et al.: per-vertex line searches that never

@@ -786,13 +786,11 @@ bool patchSamplesAlike(const Patch& x, const Patch& y, uint32_t p) {
   return true;
 }
 
-GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options) {
-  return resampleLayout(layout, options, ResampleReuse{});
-}
+namespace {
 
-GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options,
-                                const ResampleReuse& reuse) {
-  const auto start = std::chrono::steady_clock::now();
+// Throws std::invalid_argument where resampleLayout's input is malformed (the side links are
+// checked by validateLinks).
+void checkResampleInput(const ChartLayout& layout, const ResampleOptions& options, const ResampleReuse& reuse) {
   const uint32_t size = options.chartSize;
   if (!isChartSizeValid(size)) {
     throw std::invalid_argument("resampleLayout: chart size " + std::to_string(size) +
@@ -807,20 +805,12 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
   if (reuse.normals && reuse.normals->size() != layout.positions.size()) {
     throw std::invalid_argument("resampleLayout: the vertex normals must be one per position");
   }
-  const SideLinks links = validateLinks(layout, options.quads, "resampleLayout");
-  std::vector<glm::dvec3> ownNormals;
-  if (!reuse.normals) ownNormals = layoutVertexNormals(layout);
-  const Surface surface{layout, reuse.normals ? *reuse.normals : ownNormals, !layout.colours.empty()};
-  const uint32_t m = size - 1;
-  const uint32_t sideCount = sideSampleCount(m, options.quads);
+}
 
-  GeometryImageSet set;
-  set.chartSize = size;
-  const auto neighbours = neighboursFrom(layout, links, options.quads);
-  set.charts.resize(neighbours.size());
-  set.patches.resize(layout.patches.size());
-
-  // What each patch does: 0 skip (not selected), 1 resample, 2 + k take from source k.
+// What each patch does: 0 skip (not selected), 1 resample, 2 + k take from source k.
+std::vector<uint32_t> patchActions(const ChartLayout& layout, const ResampleOptions& options,
+                                   const ResampleReuse& reuse) {
+  const uint32_t size = options.chartSize;
   std::vector<uint32_t> action(layout.patches.size(), 1);
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     if (reuse.only && !(*reuse.only)[p]) {
@@ -844,14 +834,27 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       break;
     }
   }
+  return action;
+}
 
-  // Canonical owner of each side: the (patch, side) with the smaller ids; sampled in its order.
-  struct SideRef {
-    uint32_t patch, side;
-  };
+// Canonical owner of each side: the (patch, side) with the smaller ids; sampled in its order.
+struct SideRef {
+  uint32_t patch, side;
+};
+struct SideOwners {
   std::vector<SideRef> owners;
   std::vector<uint8_t> ownerNeeded;  // some patch that resamples holds it
-  std::vector<std::vector<uint32_t>> sideIndex(layout.patches.size());
+  std::vector<std::vector<uint32_t>> sideIndex;  // [patch][side]: its owner, an index into owners
+};
+
+// Finds the owner of every patch side, and which owners the patches that resample (action 1)
+// need. Throws std::invalid_argument on a side with a vertex out of range or fewer than 2.
+SideOwners sideOwners(const ChartLayout& layout, const std::vector<uint32_t>& action) {
+  SideOwners so;
+  std::vector<SideRef>& owners = so.owners;
+  std::vector<uint8_t>& ownerNeeded = so.ownerNeeded;
+  std::vector<std::vector<uint32_t>>& sideIndex = so.sideIndex;
+  sideIndex.resize(layout.patches.size());
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     const Patch& patch = layout.patches[p];
     sideIndex[p].resize(patch.sides.size());
@@ -880,470 +883,642 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
       if (action[p] == 1) ownerNeeded[sideIndex[p][i]] = 1;
     }
   }
+  return so;
+}
 
-  const int concurrency =
-      options.threads ? int(options.threads) : tbb::this_task_arena::max_concurrency();
-  tbb::task_arena arena(concurrency);
-  std::vector<std::vector<Sample>> sides(owners.size());
-  arena.execute([&] {
-    tbb::parallel_for(size_t{0}, owners.size(), [&](size_t k) {
-      if (!ownerNeeded[k]) return;
-      sides[k] = sampleSide(surface,
-                            layout.patches[owners[k].patch].sides[owners[k].side].vertices,
-                            sideCount);
-    });
-    const progress::ProgressStage stage("resample", layout.patches.size());
-    tbb::parallel_for(uint32_t{0}, uint32_t(layout.patches.size()), [&](uint32_t p) {
-      const progress::Tick tick;
-      const Patch& patch = layout.patches[p];
-      const uint32_t n = uint32_t(patch.sides.size());
-      const PatchQuads plan = patchQuads(n, m, options.quads);
-      const uint32_t nq = uint32_t(plan.quads.size());
-      if (action[p] == 0) {
-        set.patches[p].firstChart = links.offsets[p];
-        set.patches[p].sides = n;
-        set.patches[p].quads = nq;
-        for (uint32_t i = 0; i < nq; ++i) {
-          set.charts[links.offsets[p] + i].patch = p;
-          set.charts[links.offsets[p] + i].quad = i;
-          set.charts[links.offsets[p] + i].neighbours = neighbours[links.offsets[p] + i];
-        }
-        return;
-      }
-      if (action[p] >= 2) {
-        GeometryImageSet& src = *reuse.earlier[action[p] - 2].set;
-        set.patches[p] = src.patches[p];
-        const uint32_t first = src.patches[p].firstChart;
-        set.patches[p].firstChart = links.offsets[p];
-        for (uint32_t i = 0; i < nq; ++i) {
-          GeometryImage& img = set.charts[links.offsets[p] + i];
-          img = std::move(src.charts[first + i]);
-          img.patch = p;
-          img.neighbours = neighbours[links.offsets[p] + i];
-        }
-        return;
-      }
-      ParamOptions paramOptions = options.param;
-      paramOptions.pairedSides = options.quads == QuadLayout::kSides;
-      const PatchParameterization pp = parameterizePatch(layout, p, paramOptions);
-      PatchResampleStats& st = set.patches[p];
-      st.paramInitial = pp.initial;
-      st.param = pp.quality;
-      st.stretchIterations = pp.iterationsUsed;
-      st.firstChart = links.offsets[p];
-      st.sides = n;
-      st.quads = nq;
+// What the patches of one resampleLayout call share: its input, the samples of the patch sides
+// (by owner), and the set the patches fill (each its own charts and stats).
+struct ResampleContext {
+  const ChartLayout& layout;
+  const ResampleOptions& options;
+  const ResampleReuse& reuse;
+  const Surface& surface;
+  const SideLinks& links;
+  const SideOwners& owners;
+  const std::vector<std::array<RootNeighbour, 4>>& neighbours;  // by chart
+  const std::vector<std::vector<Sample>>& sides;                // by owner
+  uint32_t size;       // options.chartSize
+  uint32_t m;          // size - 1
+  uint32_t sideCount;  // samples of a whole patch side (sideSampleCount)
+  GeometryImageSet& set;
+};
 
-      // Samples of the open sides taken through the parameterization (below); empty for others.
-      std::vector<std::vector<Sample>> openSides(n);
-      // Side sample k of side i in this patch's direction (0 = corner i, sideCount - 1 = corner i+1).
-      auto sideSample = [&](uint32_t i, uint32_t k) -> const Sample& {
-        if (!openSides[i].empty()) return openSides[i][k];
-        const std::vector<Sample>& s = sides[sideIndex[p][i]];
-        const bool flipped = owners[sideIndex[p][i]].patch != p ||
-                             owners[sideIndex[p][i]].side != i;
-        return s[flipped && links.opposite[p][i] ? sideCount - 1 - k : k];
-      };
+// A patch not selected (action 0): its stats and charts get their ids and neighbours, no samples.
+void keepUnsampled(const ResampleContext& c, uint32_t p, uint32_t n, uint32_t nq) {
+  GeometryImageSet& set = c.set;
+  const SideLinks& links = c.links;
+  set.patches[p].firstChart = links.offsets[p];
+  set.patches[p].sides = n;
+  set.patches[p].quads = nq;
+  for (uint32_t i = 0; i < nq; ++i) {
+    set.charts[links.offsets[p] + i].patch = p;
+    set.charts[links.offsets[p] + i].quad = i;
+    set.charts[links.offsets[p] + i].neighbours = c.neighbours[links.offsets[p] + i];
+  }
+}
 
-      const Locator locator(pp);
-      uint32_t hint = 0;
-      auto sampleAt = [&](const glm::dvec2& d) {
-        std::array<uint32_t, 3> tri;
-        glm::dvec3 b;
-        locator.locate(d, hint, tri, b);
-        Sample r = interpolate(surface, {pp.vertices[tri[0]], pp.vertices[tri[1]], pp.vertices[tri[2]]},
-                               b);
-        r.triangle = patch.triangles[hint];  // the parameterization keeps the patch's order
-        return r;
-      };
-      const std::vector<glm::dvec2>& corner = pp.corners;
-      // The domain point of sample k of side i (as the side's samples run along its polygon edge).
-      auto sidePoint = [&](uint32_t i, uint32_t k) {
-        const glm::dvec2 c0 = corner[i], c1 = corner[(i + 1) % n];
-        if (k == 0) return c0;
-        if (k + 1 == sideCount) return c1;
-        if (2 * k + 1 == sideCount) return 0.5 * (c0 + c1);
-        return c0 + (c1 - c0) * (double(k) / double(sideCount - 1));
-      };
-      // Open sides whose vertices slid in the parameterization are sampled through it, at even
-      // steps along their polygon edge; their ends are the corner vertices themselves, as every
-      // patch meeting there has them.
-      if (options.param.slideOpenSides) {
-        for (uint32_t i = 0; i < n; ++i) {
-          const PatchSide& side = patch.sides[i];
-          if (side.neighbourPatch >= 0) continue;
-          std::vector<Sample>& out = openSides[i];
-          out.resize(sideCount);
-          out.front() = vertexSample(surface, side.vertices.front());
-          out.back() = vertexSample(surface, side.vertices.back());
-          const glm::dvec2 c1 = corner[(i + 1) % n];
-          for (uint32_t k = 1; k + 1 < sideCount; ++k) {
-            out[k] = sampleAt(corner[i] + (c1 - corner[i]) * (double(k) / double(sideCount - 1)));
-          }
-        }
-      }
-      const glm::dvec2 centre(0.0);
-      // Spoke j: from its border sample (t = 0) to the centre (t = m), shared by the two quads
-      // beside it.
-      const size_t spokeCount = plan.spokeTargets.size();
-      std::vector<std::vector<Sample>> spokes(spokeCount, std::vector<Sample>(m + 1));
-      if (spokeCount > 0) {
-        const Sample centreSample = sampleAt(centre);
-        for (size_t j = 0; j < spokeCount; ++j) {
-          const EdgeSource& target = plan.spokeTargets[j];
-          const glm::dvec2 from = sidePoint(target.index, target.offset);
-          spokes[j][0] = sideSample(target.index, target.offset);
-          spokes[j][m] = centreSample;
-          for (uint32_t t = 1; t < m; ++t) spokes[j][t] = sampleAt(from + (centre - from) * (double(t) / m));
-        }
-      }
-      // Each quad's domain corners.
-      std::vector<QuadCorners> quadCorners(nq);
-      for (uint32_t j = 0; j < nq; ++j) {
-        const auto& e = plan.quads[j];
-        quadCorners[j] = {sidePoint(e[kEdgeBottom].index, e[kEdgeBottom].offset),
-                          sidePoint(e[kEdgeBottom].index, e[kEdgeBottom].offset + m),
-                          plan.single ? sidePoint(e[kEdgeTop].index, e[kEdgeTop].offset) : centre,
-                          sidePoint(e[kEdgeLeft].index, e[kEdgeLeft].offset)};
-      }
+// A patch that samples as in earlier resampling `source` (action 2 + source): its stats and
+// charts are moved from there, with their ids and neighbours set anew.
+void takeEarlierCharts(const ResampleContext& c, uint32_t p, uint32_t source, uint32_t nq) {
+  GeometryImageSet& set = c.set;
+  const SideLinks& links = c.links;
+  GeometryImageSet& src = *c.reuse.earlier[source].set;
+  set.patches[p] = src.patches[p];
+  const uint32_t first = src.patches[p].firstChart;
+  set.patches[p].firstChart = links.offsets[p];
+  for (uint32_t i = 0; i < nq; ++i) {
+    GeometryImage& img = set.charts[links.offsets[p] + i];
+    img = std::move(src.charts[first + i]);
+    img.patch = p;
+    img.neighbours = c.neighbours[links.offsets[p] + i];
+  }
+}
 
-      // Each quad's least-stretch map (QuadMap), made when first asked for.
-      std::vector<QuadWarp> warps(nq);
-      std::vector<uint8_t> warpTried(nq, 0), warped(nq, 0);
-      std::vector<glm::dvec3> xyz;
-      auto ensureWarp = [&](uint32_t j) {
-        if (plan.single || warpTried[j]) return bool(warped[j]);
-        warpTried[j] = 1;
-        if (xyz.empty()) {
-          xyz.resize(pp.vertices.size());
-          for (size_t v = 0; v < xyz.size(); ++v) xyz[v] = glm::dvec3(layout.positions[pp.vertices[v]]);
+// The parameterization options of every patch: options.param, with paired sides for the sides
+// layout.
+ParamOptions patchParamOptions(const ResampleOptions& options) {
+  ParamOptions paramOptions = options.param;
+  paramOptions.pairedSides = options.quads == QuadLayout::kSides;
+  return paramOptions;
+}
+
+// A patch being resampled (action 1): its parameterization, and what its quad charts share: the
+// samples of its sides and spokes, its quads' domain corners and least-stretch maps, the faces
+// along its sides and the input vertices each quad stands for. Built step by step by
+// resamplePatch; sampleAt keeps one locator hint for the whole patch, so the order of the steps
+// is part of the result.
+struct PatchSampler {
+  PatchSampler(const ResampleContext& context, uint32_t patchId, const PatchQuads& quads)
+      : c(context), p(patchId), patch(context.layout.patches[patchId]), n(uint32_t(patch.sides.size())),
+        plan(quads), nq(uint32_t(quads.quads.size())),
+        pp(parameterizePatch(context.layout, patchId, patchParamOptions(context.options))),
+        openSides(n), locator(pp) {}
+  PatchSampler(const PatchSampler&) = delete;
+  PatchSampler& operator=(const PatchSampler&) = delete;
+
+  const ResampleContext& c;
+  const uint32_t p;
+  const Patch& patch;
+  const uint32_t n;  // sides
+  const PatchQuads& plan;
+  const uint32_t nq;  // quads
+  const PatchParameterization pp;
+  // Samples of the open sides taken through the parameterization (sampleOpenSides); empty for
+  // others.
+  std::vector<std::vector<Sample>> openSides;
+  const Locator locator;
+  uint32_t hint = 0;
+  std::vector<std::vector<Sample>> spokes;  // by spoke, from its border sample to the centre
+  std::vector<QuadCorners> quadCorners;     // by quad
+  // Each quad's least-stretch map (QuadMap), made when first asked for (ensureWarp).
+  std::vector<QuadWarp> warps;
+  std::vector<uint8_t> warpTried, warped;
+  std::vector<glm::dvec3> xyz;
+  std::unordered_map<uint64_t, uint32_t> sideFace;  // findSideFaces
+  std::vector<std::vector<std::pair<uint32_t, glm::dvec2>>> quadVertices;  // placeVertices
+
+  // Side sample k of side i in this patch's direction (0 = corner i, sideCount - 1 = corner i+1).
+  const Sample& sideSample(uint32_t i, uint32_t k) const {
+    const uint32_t sideCount = c.sideCount;
+    const std::vector<std::vector<uint32_t>>& sideIndex = c.owners.sideIndex;
+    const std::vector<SideRef>& owners = c.owners.owners;
+    if (!openSides[i].empty()) return openSides[i][k];
+    const std::vector<Sample>& s = c.sides[sideIndex[p][i]];
+    const bool flipped = owners[sideIndex[p][i]].patch != p ||
+                         owners[sideIndex[p][i]].side != i;
+    return s[flipped && c.links.opposite[p][i] ? sideCount - 1 - k : k];
+  }
+
+  // The surface sample at domain point d.
+  Sample sampleAt(const glm::dvec2& d) {
+    std::array<uint32_t, 3> tri;
+    glm::dvec3 b;
+    locator.locate(d, hint, tri, b);
+    Sample r = interpolate(c.surface, {pp.vertices[tri[0]], pp.vertices[tri[1]], pp.vertices[tri[2]]},
+                           b);
+    r.triangle = patch.triangles[hint];  // the parameterization keeps the patch's order
+    return r;
+  }
+
+  // The domain point of sample k of side i (as the side's samples run along its polygon edge).
+  glm::dvec2 sidePoint(uint32_t i, uint32_t k) const {
+    const uint32_t sideCount = c.sideCount;
+    const std::vector<glm::dvec2>& corner = pp.corners;
+    const glm::dvec2 c0 = corner[i], c1 = corner[(i + 1) % n];
+    if (k == 0) return c0;
+    if (k + 1 == sideCount) return c1;
+    if (2 * k + 1 == sideCount) return 0.5 * (c0 + c1);
+    return c0 + (c1 - c0) * (double(k) / double(sideCount - 1));
+  }
+
+  // Open sides whose vertices slid in the parameterization are sampled through it, at even
+  // steps along their polygon edge; their ends are the corner vertices themselves, as every
+  // patch meeting there has them.
+  void sampleOpenSides() {
+    const uint32_t sideCount = c.sideCount;
+    const std::vector<glm::dvec2>& corner = pp.corners;
+    if (c.options.param.slideOpenSides) {
+      for (uint32_t i = 0; i < n; ++i) {
+        const PatchSide& side = patch.sides[i];
+        if (side.neighbourPatch >= 0) continue;
+        std::vector<Sample>& out = openSides[i];
+        out.resize(sideCount);
+        out.front() = vertexSample(c.surface, side.vertices.front());
+        out.back() = vertexSample(c.surface, side.vertices.back());
+        const glm::dvec2 c1 = corner[(i + 1) % n];
+        for (uint32_t k = 1; k + 1 < sideCount; ++k) {
+          out[k] = sampleAt(corner[i] + (c1 - corner[i]) * (double(k) / double(sideCount - 1)));
         }
-        auto surfaceAt = [&](const glm::dvec2& d) {
+      }
+    }
+  }
+
+  // Spoke j: from its border sample (t = 0) to the centre (t = m), shared by the two quads
+  // beside it.
+  void sampleSpokes() {
+    const uint32_t m = c.m;
+    const glm::dvec2 centre(0.0);
+    const size_t spokeCount = plan.spokeTargets.size();
+    spokes.assign(spokeCount, std::vector<Sample>(m + 1));
+    if (spokeCount > 0) {
+      const Sample centreSample = sampleAt(centre);
+      for (size_t j = 0; j < spokeCount; ++j) {
+        const EdgeSource& target = plan.spokeTargets[j];
+        const glm::dvec2 from = sidePoint(target.index, target.offset);
+        spokes[j][0] = sideSample(target.index, target.offset);
+        spokes[j][m] = centreSample;
+        for (uint32_t t = 1; t < m; ++t) spokes[j][t] = sampleAt(from + (centre - from) * (double(t) / m));
+      }
+    }
+  }
+
+  // Each quad's domain corners.
+  void placeQuads() {
+    const uint32_t m = c.m;
+    const glm::dvec2 centre(0.0);
+    quadCorners.resize(nq);
+    for (uint32_t j = 0; j < nq; ++j) {
+      const auto& e = plan.quads[j];
+      quadCorners[j] = {sidePoint(e[kEdgeBottom].index, e[kEdgeBottom].offset),
+                        sidePoint(e[kEdgeBottom].index, e[kEdgeBottom].offset + m),
+                        plan.single ? sidePoint(e[kEdgeTop].index, e[kEdgeTop].offset) : centre,
+                        sidePoint(e[kEdgeLeft].index, e[kEdgeLeft].offset)};
+    }
+    warps.resize(nq);
+    warpTried.assign(nq, 0);
+    warped.assign(nq, 0);
+  }
+
+  // Whether quad j has its least-stretch map, making it on the first call.
+  bool ensureWarp(uint32_t j) {
+    const ChartLayout& layout = c.layout;
+    if (plan.single || warpTried[j]) return bool(warped[j]);
+    warpTried[j] = 1;
+    if (xyz.empty()) {
+      xyz.resize(pp.vertices.size());
+      for (size_t v = 0; v < xyz.size(); ++v) xyz[v] = glm::dvec3(layout.positions[pp.vertices[v]]);
+    }
+    auto surfaceAt = [&](const glm::dvec2& d) {
+      std::array<uint32_t, 3> tri;
+      glm::dvec3 b;
+      locator.locate(d, hint, tri, b);
+      return b.x * xyz[tri[0]] + b.y * xyz[tri[1]] + b.z * xyz[tri[2]];
+    };
+    warped[j] = buildQuadWarp(pp, xyz, quadCorners[j], c.options.param, surfaceAt, warps[j]);
+    return bool(warped[j]);
+  }
+
+  // The patch's triangle along each side segment: the input face a side sample lies on,
+  // seen from this patch (for the flipped-texel test).
+  void findSideFaces() {
+    const ChartLayout& layout = c.layout;
+    std::unordered_set<uint64_t> sideEdges;
+    for (const PatchSide& side : patch.sides) {
+      for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
+        sideEdges.insert(undirectedKey(side.vertices[k], side.vertices[k + 1]));
+      }
+    }
+    for (uint32_t t : patch.triangles) {
+      const auto& tri = layout.triangles[t];
+      for (int c = 0; c < 3; ++c) {
+        const uint64_t key = undirectedKey(tri[c], tri[(c + 1) % 3]);
+        if (sideEdges.contains(key)) sideFace.emplace(key, t);
+      }
+    }
+  }
+
+  // The unit normal of layout triangle t, or `otherwise` when t is ~0u or degenerate.
+  glm::dvec3 faceNormalOr(uint32_t t, const glm::dvec3& otherwise) const {
+    const ChartLayout& layout = c.layout;
+    if (t == ~0u) return otherwise;
+    const auto& tri = layout.triangles[t];
+    const glm::dvec3 a(layout.positions[tri[0]]);
+    const glm::dvec3 cr = glm::cross(glm::dvec3(layout.positions[tri[1]]) - a, glm::dvec3(layout.positions[tri[2]]) - a);
+    const double l = glm::length(cr);
+    return l > 0.0 && std::isfinite(l) ? cr / l : otherwise;
+  }
+
+  // The layout triangle sample s lies on: where it was located, or for a side sample the
+  // patch's face along its side segment (~0u when none is known).
+  uint32_t faceOf(const Sample& s) const {
+    if (s.triangle != ~0u || s.edgeA == ~0u) return s.triangle;
+    const auto it = sideFace.find(undirectedKey(s.edgeA, s.edgeB));
+    return it == sideFace.end() ? ~0u : it->second;
+  }
+
+  // Every vertex of the patch but those of its shared sides, placed in its quad, for the
+  // sampling error. (A vertex of a shared side lies on the side's polyline, which both patches
+  // sample alike by arc length; the chart across covers it as much as this one, so neither
+  // alone tells its distance to the atlas.)
+  void placeVertices() {
+    std::unordered_set<uint32_t> seamVertices;
+    for (const PatchSide& side : patch.sides) {
+      if (side.neighbourPatch >= 0) seamVertices.insert(side.vertices.begin(), side.vertices.end());
+    }
+    quadVertices.resize(nq);
+    for (uint32_t v = 0; v < pp.vertices.size(); ++v) {
+      if (seamVertices.contains(pp.vertices[v])) continue;
+      const QuadPoint k = quadOf(quadCorners, pp.uv[v]);
+      quadVertices[k.quad].push_back({v, k.st});
+    }
+  }
+};
+
+// What is known of a chart's samples beside its image, one entry a sample; the charts of a
+// patch take turns with one set.
+struct ChartBuffers {
+  explicit ChartBuffers(uint32_t size)
+      : floatNormals(size_t(size) * size), triangles(size_t(size) * size, ~0u), domain(size_t(size) * size),
+        faceNormals(size_t(size) * size) {}
+  std::vector<glm::vec3> floatNormals;
+  std::vector<uint32_t> triangles;
+  // The domain point of each inner sample (for the unfolding).
+  std::vector<glm::dvec2> domain;
+  std::vector<glm::vec3> faceNormals;
+};
+
+// One quad chart of a patch being sampled: its image, what is known of its samples, and the ways
+// of placing them (the bilinear map or the quad's warp, the unfolding) tried on it.
+struct ChartSampler {
+  ChartSampler(PatchSampler& patchSampler, ChartBuffers& buffers, uint32_t quad, GeometryImage& image)
+      : ps(patchSampler), i(quad), size(patchSampler.c.size), m(patchSampler.c.m), img(image),
+        floatNormals(buffers.floatNormals), triangles(buffers.triangles), domain(buffers.domain),
+        faceNormals(buffers.faceNormals) {}
+
+  PatchSampler& ps;
+  const uint32_t i;  // the quad
+  const uint32_t size, m;
+  GeometryImage& img;
+  std::vector<glm::vec3>& floatNormals;
+  std::vector<uint32_t>& triangles;
+  std::vector<glm::dvec2>& domain;
+  std::vector<glm::vec3>& faceNormals;
+  bool unfolded = false;  // some inner samples slid off the map (unfold below)
+  std::vector<uint32_t> flipped;  // the flipped texels, as their (0,0) samples
+
+  // The chart's samples and what is known of them, to try another placement and go back.
+  struct Placement {
+    GeometryImage img;
+    std::vector<glm::vec3> normals;
+    std::vector<uint32_t> triangles, flipped;
+    std::vector<glm::dvec2> domain;
+    bool unfolded;
+  };
+  Placement keep() const { return Placement{img, floatNormals, triangles, flipped, domain, unfolded}; }
+  void restore(Placement&& s) {
+    img = std::move(s.img);
+    floatNormals = std::move(s.normals);
+    triangles = std::move(s.triangles);
+    flipped = std::move(s.flipped);
+    domain = std::move(s.domain);
+    unfolded = s.unfolded;
+  }
+
+  // Writes sample s at index `at` of the image and of what is known of it.
+  void putAt(size_t at, const Sample& s) {
+    img.positions[at] = s.p;
+    img.normals[at] = packNormal(s.n.x, s.n.y, s.n.z);
+    floatNormals[at] = s.n;
+    triangles[at] = ps.faceOf(s);
+    if (ps.c.surface.hasColours) img.colours[at] = s.c;
+  }
+
+  // The border: side runs along the edges' counter-clockwise parameter; spokes from the
+  // border to the centre ((1,0) -> (1,1) on the right, (0,1) -> (1,1) on the top).
+  void fillBorder() {
+    for (uint8_t e = 0; e < 4; ++e) {
+      const EdgeSource& src = ps.plan.quads[i][e];
+      for (uint32_t k = 0; k <= m; ++k) {
+        if (!src.spoke) {
+          putAt(edgeSampleIndex(size, e, k), ps.sideSample(src.index, src.offset + k));
+        } else if (e == kEdgeRight) {
+          putAt(size_t(k) * size + m, ps.spokes[src.index][k]);
+        } else {
+          putAt(size_t(m) * size + k, ps.spokes[src.index][k]);
+        }
+      }
+    }
+  }
+
+  // The inside, through the bilinear map or the quad's warp.
+  void fillInside(bool warp) {
+    const std::vector<QuadWarp>& warps = ps.warps;
+    const glm::dvec2 &qa = ps.quadCorners[i][0], &qb = ps.quadCorners[i][1], &qc = ps.quadCorners[i][2],
+                     &qe = ps.quadCorners[i][3];
+    std::optional<Locator> warpLocator;
+    if (warp) warpLocator.emplace(warps[i].square, warps[i].triangles);
+    uint32_t warpHint = 0;
+    for (uint32_t v = 1; v < m; ++v) {
+      const double t = double(v) / m;
+      for (uint32_t u = 1; u < m; ++u) {
+        const double s = double(u) / m;
+        glm::dvec2 d;
+        if (warpLocator) {
           std::array<uint32_t, 3> tri;
           glm::dvec3 b;
-          locator.locate(d, hint, tri, b);
-          return b.x * xyz[tri[0]] + b.y * xyz[tri[1]] + b.z * xyz[tri[2]];
-        };
-        warped[j] = buildQuadWarp(pp, xyz, quadCorners[j], options.param, surfaceAt, warps[j]);
-        return bool(warped[j]);
-      };
+          warpLocator->locate(glm::dvec2(s, t), warpHint, tri, b);
+          d = b.x * warps[i].domain[tri[0]] + b.y * warps[i].domain[tri[1]] + b.z * warps[i].domain[tri[2]];
+        } else {
+          d = (1 - s) * (1 - t) * qa + s * (1 - t) * qb + s * t * qc + (1 - s) * t * qe;
+        }
+        domain[size_t(v) * size + u] = d;
+        putAt(size_t(v) * size + u, ps.sampleAt(d));
+      }
+    }
+  }
 
-      // The patch's triangle along each side segment: the input face a side sample lies on,
-      // seen from this patch (for the flipped-texel test).
-      std::unordered_map<uint64_t, uint32_t> sideFace;
-      {
-        std::unordered_set<uint64_t> sideEdges;
-        for (const PatchSide& side : patch.sides) {
-          for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
-            sideEdges.insert(undirectedKey(side.vertices[k], side.vertices[k + 1]));
-          }
-        }
-        for (uint32_t t : patch.triangles) {
-          const auto& tri = layout.triangles[t];
-          for (int c = 0; c < 3; ++c) {
-            const uint64_t key = undirectedKey(tri[c], tri[(c + 1) % 3]);
-            if (sideEdges.contains(key)) sideFace.emplace(key, t);
-          }
-        }
+  // The chart's quality as its samples stand; its flipped texels into flippedAt.
+  ImageQuality measure(bool warp, std::vector<uint32_t>& flippedAt) {
+    const ChartLayout& layout = ps.c.layout;
+    const std::vector<QuadWarp>& warps = ps.warps;
+    const PatchParameterization& pp = ps.pp;
+    // The input faces under the samples (zero where none is known).
+    for (size_t k = 0; k < faceNormals.size(); ++k) faceNormals[k] = glm::vec3(ps.faceNormalOr(triangles[k], glm::dvec3(0.0)));
+    flippedAt.clear();
+    ImageQuality q = measureImage(img.positions, floatNormals, size, &flippedAt, &faceNormals);
+    // How far the chart's surface passes from the input vertices it stands for, each at its
+    // chart coordinates under the map used.
+    for (auto [v, st] : ps.quadVertices[i]) {
+      if (warp && warps[i].ofPatchVertex[v] != ~0u) st = warps[i].square[warps[i].ofPatchVertex[v]];
+      const double e = chartSurfaceDistance(img.positions, size, st, glm::dvec3(layout.positions[pp.vertices[v]]),
+                                            unfolded ? 2 : 1);
+      if (e > q.sampleError) {
+        q.sampleError = e;
+        q.sampleErrorVertex = pp.vertices[v];
       }
-      // The unit normal of layout triangle t, or `otherwise` when t is ~0u or degenerate.
-      auto faceNormalOr = [&](uint32_t t, const glm::dvec3& otherwise) {
-        if (t == ~0u) return otherwise;
-        const auto& tri = layout.triangles[t];
-        const glm::dvec3 a(layout.positions[tri[0]]);
-        const glm::dvec3 cr = glm::cross(glm::dvec3(layout.positions[tri[1]]) - a, glm::dvec3(layout.positions[tri[2]]) - a);
-        const double l = glm::length(cr);
-        return l > 0.0 && std::isfinite(l) ? cr / l : otherwise;
-      };
-      auto faceOf = [&](const Sample& s) {
-        if (s.triangle != ~0u || s.edgeA == ~0u) return s.triangle;
-        const auto it = sideFace.find(undirectedKey(s.edgeA, s.edgeB));
-        return it == sideFace.end() ? ~0u : it->second;
-      };
-      // Every vertex of the patch but those of its shared sides, placed in its quad, for the
-      // sampling error. (A vertex of a shared side lies on the side's polyline, which both patches
-      // sample alike by arc length; the chart across covers it as much as this one, so neither
-      // alone tells its distance to the atlas.)
-      std::unordered_set<uint32_t> seamVertices;
-      for (const PatchSide& side : patch.sides) {
-        if (side.neighbourPatch >= 0) seamVertices.insert(side.vertices.begin(), side.vertices.end());
-      }
-      std::vector<std::vector<std::pair<uint32_t, glm::dvec2>>> quadVertices(nq);
-      for (uint32_t v = 0; v < pp.vertices.size(); ++v) {
-        if (seamVertices.contains(pp.vertices[v])) continue;
-        const QuadPoint k = quadOf(quadCorners, pp.uv[v]);
-        quadVertices[k.quad].push_back({v, k.st});
-      }
-      std::vector<glm::vec3> floatNormals(size_t(size) * size);
-      std::vector<uint32_t> triangles(size_t(size) * size, ~0u);
-      // The domain point of each inner sample (for the unfolding below).
-      std::vector<glm::dvec2> domain(size_t(size) * size);
-      std::vector<glm::vec3> faceNormals(size_t(size) * size);
-      for (uint32_t i = 0; i < nq; ++i) {
-        GeometryImage& img = set.charts[links.offsets[p] + i];
-        img.patch = p;
-        img.quad = i;
-        img.neighbours = neighbours[links.offsets[p] + i];
-        img.positions.resize(size_t(size) * size);
-        img.normals.resize(size_t(size) * size);
-        if (surface.hasColours) img.colours.resize(size_t(size) * size);
-        auto putAt = [&](size_t at, const Sample& s) {
-          img.positions[at] = s.p;
-          img.normals[at] = packNormal(s.n.x, s.n.y, s.n.z);
-          floatNormals[at] = s.n;
-          triangles[at] = faceOf(s);
-          if (surface.hasColours) img.colours[at] = s.c;
-        };
-        // The border: side runs along the edges' counter-clockwise parameter; spokes from the
-        // border to the centre ((1,0) -> (1,1) on the right, (0,1) -> (1,1) on the top).
-        for (uint8_t e = 0; e < 4; ++e) {
-          const EdgeSource& src = plan.quads[i][e];
-          for (uint32_t k = 0; k <= m; ++k) {
-            if (!src.spoke) {
-              putAt(edgeSampleIndex(size, e, k), sideSample(src.index, src.offset + k));
-            } else if (e == kEdgeRight) {
-              putAt(size_t(k) * size + m, spokes[src.index][k]);
-            } else {
-              putAt(size_t(m) * size + k, spokes[src.index][k]);
-            }
-          }
-        }
-        const glm::dvec2 &qa = quadCorners[i][0], &qb = quadCorners[i][1], &qc = quadCorners[i][2],
-                         &qe = quadCorners[i][3];
-        // The inside, through the bilinear map or the quad's warp.
-        auto fillInside = [&](bool warp) {
-          std::optional<Locator> warpLocator;
-          if (warp) warpLocator.emplace(warps[i].square, warps[i].triangles);
-          uint32_t warpHint = 0;
-          for (uint32_t v = 1; v < m; ++v) {
-            const double t = double(v) / m;
-            for (uint32_t u = 1; u < m; ++u) {
-              const double s = double(u) / m;
-              glm::dvec2 d;
-              if (warpLocator) {
-                std::array<uint32_t, 3> tri;
-                glm::dvec3 b;
-                warpLocator->locate(glm::dvec2(s, t), warpHint, tri, b);
-                d = b.x * warps[i].domain[tri[0]] + b.y * warps[i].domain[tri[1]] + b.z * warps[i].domain[tri[2]];
-              } else {
-                d = (1 - s) * (1 - t) * qa + s * (1 - t) * qb + s * t * qc + (1 - s) * t * qe;
-              }
-              domain[size_t(v) * size + u] = d;
-              putAt(size_t(v) * size + u, sampleAt(d));
-            }
-          }
-        };
-        bool unfolded = false;  // some inner samples slid off the map (unfold below)
-        std::vector<uint32_t> flipped;  // the flipped texels, as their (0,0) samples
-        // The chart's samples and what is known of them, to try another placement and go back.
-        struct Placement {
-          GeometryImage img;
-          std::vector<glm::vec3> normals;
-          std::vector<uint32_t> triangles, flipped;
-          std::vector<glm::dvec2> domain;
-          bool unfolded;
-        };
-        auto keep = [&] { return Placement{img, floatNormals, triangles, flipped, domain, unfolded}; };
-        auto restore = [&](Placement&& s) {
-          img = std::move(s.img);
-          floatNormals = std::move(s.normals);
-          triangles = std::move(s.triangles);
-          flipped = std::move(s.flipped);
-          domain = std::move(s.domain);
-          unfolded = s.unfolded;
-        };
-        // The chart's quality as its samples stand; its flipped texels into flippedAt.
-        auto measure = [&](bool warp, std::vector<uint32_t>& flippedAt) {
-          // The input faces under the samples (zero where none is known).
-          for (size_t k = 0; k < faceNormals.size(); ++k) faceNormals[k] = glm::vec3(faceNormalOr(triangles[k], glm::dvec3(0.0)));
-          flippedAt.clear();
-          ImageQuality q = measureImage(img.positions, floatNormals, size, &flippedAt, &faceNormals);
-          // How far the chart's surface passes from the input vertices it stands for, each at its
-          // chart coordinates under the map used.
-          for (auto [v, st] : quadVertices[i]) {
-            if (warp && warps[i].ofPatchVertex[v] != ~0u) st = warps[i].square[warps[i].ofPatchVertex[v]];
-            const double e = chartSurfaceDistance(img.positions, size, st, glm::dvec3(layout.positions[pp.vertices[v]]),
-                                                  unfolded ? 2 : 1);
-            if (e > q.sampleError) {
-              q.sampleError = e;
-              q.sampleErrorVertex = pp.vertices[v];
-            }
-          }
-          return q;
-        };
-        // Unfolding (options.unfold): the inner samples round the flipped texels slide over the
-        // surface, through the patch's parameterization, each to where its four texels agree best
-        // with the input faces under their corners (a pattern search of 8 directions at 1/2, 1/4
-        // and 1/8 of a texel, in sweeps until none moves), at most kUnfoldReach texels from where
-        // the map put it and kUnfoldLength times its farthest neighbour as mapped from its
-        // neighbours. The samples stay on the input surface and the border does not move, so
-        // the seams are unchanged. Tried on a ring of 2 texels round the flipped ones, then 4,
-        // then 8; each kept if fewer texels fold.
-        auto unfold = [&](bool warp) {
-          const uint32_t flippedBefore = img.quality.flippedTexels;
-          const std::vector<glm::dvec2> start = domain;
-          const std::vector<glm::vec3> startPositions = img.positions;
-          // How far from its four neighbours a sample may end: kUnfoldLength times the farthest
-          // of them as the map put them (so that no texel grows long across the surface).
-          auto longest = [&](size_t k) {
-            double l = 0.0;
-            for (const size_t j : {k - 1, k + 1, k - size, k + size})
-              l = std::max(l, glm::distance(glm::dvec3(startPositions[j]), glm::dvec3(startPositions[k])));
-            return kUnfoldLength * l;
-          };
-          auto within = [&](size_t k, const glm::dvec3& x, double l) {
-            for (const size_t j : {k - 1, k + 1, k - size, k + size}) {
-              if (glm::distance(glm::dvec3(img.positions[j]), x) > l) return false;
-            }
-            return true;
-          };
-          // Whether x keeps apart from every other sample a slide could bring it to (those up to
-          // two texels away): two samples at one point make a texel of no area.
-          auto apart = [&](size_t k, const glm::dvec3& x, double l) {
-            const int64_t u0 = int64_t(k % size), v0 = int64_t(k / size);
-            for (int64_t v = std::max<int64_t>(v0 - 2, 0); v <= std::min<int64_t>(v0 + 2, m); ++v) {
-              for (int64_t u = std::max<int64_t>(u0 - 2, 0); u <= std::min<int64_t>(u0 + 2, m); ++u) {
-                const size_t j = size_t(v) * size + size_t(u);
-                if (j != k && glm::distance(glm::dvec3(img.positions[j]), x) <= 1e-4 * l) return false;
-              }
-            }
-            return true;
-          };
-          // Whether domain point d lies inside the chart's quad (convex, its corners
-          // counter-clockwise or clockwise alike). Where the map's texels are longer one way than
-          // the other, a sample next to the border may slide past it (less than a texel), where a
-          // fold runs along the border; such samples are counted (ImageQuality::samplesPastQuad).
-          const QuadCorners& quad = quadCorners[i];
-          auto inQuad = [&](const glm::dvec2& d) {
-            int sign = 0;
-            for (int e = 0; e < 4; ++e) {
-              const glm::dvec2 a = quad[e], b = quad[(e + 1) % 4];
-              const double c = (b.x - a.x) * (d.y - a.y) - (b.y - a.y) * (d.x - a.x);
-              const int s = c > 0.0 ? 1 : c < 0.0 ? -1 : 0;
-              if (s == 0) return false;
-              if (sign != 0 && s != sign) return false;
-              sign = s;
-            }
-            return true;
-          };
-          // The domain's texel spacing at each inner sample, from the map.
-          auto spacing = [&](size_t k) {
-            return 0.25 * (glm::distance(start[k - 1], start[k]) + glm::distance(start[k + 1], start[k]) +
-                           glm::distance(start[k - size], start[k]) + glm::distance(start[k + size], start[k]));
-          };
-          // A texel's agreement with the input: the largest cosine between its normal (the cross of
-          // its diagonals) and the faces under its corners (below 0: flipped), with sample `moved`
-          // at x on face normal fn.
-          auto agreement = [&](size_t t00, size_t moved, const glm::dvec3& x, const glm::dvec3& fn) {
-            const size_t c[4] = {t00, t00 + 1, t00 + size, t00 + size + 1};
-            auto at = [&](int j) { return c[j] == moved ? x : glm::dvec3(img.positions[c[j]]); };
-            const glm::dvec3 cr = glm::cross(at(3) - at(0), at(2) - at(1));
-            const double l = glm::length(cr);
-            if (!(l > 0.0)) return -1.0;
-            double best = -1.0;
-            for (int j = 0; j < 4; ++j)
-              best = std::max(best, glm::dot(cr, c[j] == moved ? fn : faceNormalOr(triangles[c[j]], floatNormals[c[j]])) / l);
-            return best;
-          };
-          // What inner sample k at x (face normal fn) costs its four texels: their agreement short
-          // of kUnfoldMargin.
-          auto cost = [&](size_t k, const glm::dvec3& x, const glm::dvec3& fn) {
-            double e = 0.0;
-            for (const size_t t : {k, k - 1, k - size, k - size - 1})
-              e += std::max(0.0, kUnfoldMargin - agreement(t, k, x, fn));
-            return e;
-          };
-          for (const uint32_t ring : {2u, 4u, 8u}) {
-            Placement before = keep();
-            std::vector<uint8_t> mark(size_t(size) * size, 0);
-            std::vector<size_t> moving;
-            for (const uint32_t at : flipped) {
-              const int64_t u0 = at % size, v0 = at / size;
-              for (int64_t v = std::max<int64_t>(v0 - ring, 1); v <= std::min<int64_t>(v0 + 1 + ring, m - 1); ++v) {
-                for (int64_t u = std::max<int64_t>(u0 - ring, 1); u <= std::min<int64_t>(u0 + 1 + ring, m - 1); ++u) {
-                  const size_t k = size_t(v) * size + size_t(u);
-                  if (!mark[k]) mark[k] = 1, moving.push_back(k);
-                }
-              }
-            }
-            std::sort(moving.begin(), moving.end());
-            for (uint32_t sweep = 0; sweep < kUnfoldSweeps; ++sweep) {
-              bool any = false;
-              for (const size_t k : moving) {
-                const double h = spacing(k), reach3D = longest(k);
-                double best = cost(k, glm::dvec3(img.positions[k]), faceNormalOr(triangles[k], floatNormals[k]));
-                if (best == 0.0) continue;
-                glm::dvec2 bestAt = domain[k];
-                Sample bestSample;
-                bool found = false;
-                for (const double scale : {0.5, 0.25, 0.125}) {
-                  for (int dir = 0; dir < 8; ++dir) {
-                    const double angle = dir * (3.14159265358979323846 / 4.0);
-                    glm::dvec2 to = domain[k] + (scale * h) * glm::dvec2(std::cos(angle), std::sin(angle));
-                    const glm::dvec2 off = to - start[k];
-                    const double reach = kUnfoldReach * h, len = glm::length(off);
-                    if (len > reach) to = start[k] + off * (reach / len);
-                    const Sample cand = sampleAt(to);
-                    if (!within(k, cand.p, reach3D) || !apart(k, cand.p, reach3D)) continue;
-                    const double e = cost(k, cand.p, faceNormalOr(faceOf(cand), cand.n));
-                    if (e < best * (1.0 - 1e-6)) best = e, bestAt = to, bestSample = cand, found = true;
-                  }
-                  if (found) break;
-                }
-                if (!found) continue;
-                domain[k] = bestAt;
-                putAt(k, bestSample);
-                any = true;
-              }
-              if (!any) break;
-            }
-            unfolded = true;
-            std::vector<uint32_t> now;
-            const ImageQuality q = measure(warp, now);
-            if (q.flippedTexels < before.img.quality.flippedTexels) {
-              img.quality = q;
-              img.quality.texelsUnfolded = flippedBefore - q.flippedTexels;
-              for (uint32_t v = 1; v < m; ++v) {
-                for (uint32_t u = 1; u < m; ++u) img.quality.samplesPastQuad += !inQuad(domain[size_t(v) * size + u]);
-              }
-              flipped = now;
-              if (q.flippedTexels == 0) return;
-              continue;
-            }
-            restore(std::move(before));
-          }
-        };
-        bool warp = options.quadMap == QuadMap::kStretch && ensureWarp(i);
-        fillInside(warp);
-        img.quality = measure(warp, flipped);
-        // kFolding: a chart that folds under the bilinear map takes the warp if it folds less.
-        if (options.quadMap == QuadMap::kFolding && img.quality.flippedTexels > 0 && ensureWarp(i)) {
-          Placement bilinear = keep();
-          fillInside(true);
-          const ImageQuality q = measure(true, flipped);
-          if (q.flippedTexels < bilinear.img.quality.flippedTexels) {
-            img.quality = q;
-            warp = true;
-          } else {
-            restore(std::move(bilinear));
-          }
-        }
-        if (options.unfold && img.quality.flippedTexels > 0) unfold(warp);
-        // Where the chart folds, as layout triangles (one per flipped texel, a few per chart).
-        for (uint32_t at : flipped) {
-          for (const size_t k : {size_t(at), size_t(at) + 1, size_t(at) + size, size_t(at) + size + 1}) {
-            if (triangles[k] != ~0u) {
-              img.foldTriangles.push_back(triangles[k]);
-              break;
-            }
-          }
-          if (img.foldTriangles.size() >= 8) break;
-        }
-        if (options.spill) options.spill->put(img);
-      }
-    });
-  });
+    }
+    return q;
+  }
 
+  // Places the samples through the map options.quadMap asks for and measures the chart.
+  // Returns whether the quad's warp was used.
+  bool placeByMap() {
+    const ResampleOptions& options = ps.c.options;
+    bool warp = options.quadMap == QuadMap::kStretch && ps.ensureWarp(i);
+    fillInside(warp);
+    img.quality = measure(warp, flipped);
+    // kFolding: a chart that folds under the bilinear map takes the warp if it folds less.
+    if (options.quadMap == QuadMap::kFolding && img.quality.flippedTexels > 0 && ps.ensureWarp(i)) {
+      Placement bilinear = keep();
+      fillInside(true);
+      const ImageQuality q = measure(true, flipped);
+      if (q.flippedTexels < bilinear.img.quality.flippedTexels) {
+        img.quality = q;
+        warp = true;
+      } else {
+        restore(std::move(bilinear));
+      }
+    }
+    return warp;
+  }
+
+  void unfold(bool warp);  // below (Unfolding)
+
+  // Where the chart folds, as layout triangles (one per flipped texel, a few per chart).
+  void findFoldTriangles() {
+    for (uint32_t at : flipped) {
+      for (const size_t k : {size_t(at), size_t(at) + 1, size_t(at) + size, size_t(at) + size + 1}) {
+        if (triangles[k] != ~0u) {
+          img.foldTriangles.push_back(triangles[k]);
+          break;
+        }
+      }
+      if (img.foldTriangles.size() >= 8) break;
+    }
+  }
+};
+
+// One unfolding of a chart (ChartSampler::unfold): where its samples stood when it began, and the
+// measures a sample's slide is judged by.
+struct Unfolding {
+  explicit Unfolding(ChartSampler& chart)
+      : ch(chart), size(chart.size), m(chart.m), start(chart.domain), startPositions(chart.img.positions) {}
+
+  ChartSampler& ch;
+  const uint32_t size, m;
+  const std::vector<glm::dvec2> start;
+  const std::vector<glm::vec3> startPositions;
+
+  // How far from its four neighbours a sample may end: kUnfoldLength times the farthest
+  // of them as the map put them (so that no texel grows long across the surface).
+  double longest(size_t k) const {
+    double l = 0.0;
+    for (const size_t j : {k - 1, k + 1, k - size, k + size})
+      l = std::max(l, glm::distance(glm::dvec3(startPositions[j]), glm::dvec3(startPositions[k])));
+    return kUnfoldLength * l;
+  }
+  // Whether x is within l of the sample's four neighbours as they now stand.
+  bool within(size_t k, const glm::dvec3& x, double l) const {
+    for (const size_t j : {k - 1, k + 1, k - size, k + size}) {
+      if (glm::distance(glm::dvec3(ch.img.positions[j]), x) > l) return false;
+    }
+    return true;
+  }
+  // Whether x keeps apart from every other sample a slide could bring it to (those up to
+  // two texels away): two samples at one point make a texel of no area.
+  bool apart(size_t k, const glm::dvec3& x, double l) const {
+    const int64_t u0 = int64_t(k % size), v0 = int64_t(k / size);
+    for (int64_t v = std::max<int64_t>(v0 - 2, 0); v <= std::min<int64_t>(v0 + 2, m); ++v) {
+      for (int64_t u = std::max<int64_t>(u0 - 2, 0); u <= std::min<int64_t>(u0 + 2, m); ++u) {
+        const size_t j = size_t(v) * size + size_t(u);
+        if (j != k && glm::distance(glm::dvec3(ch.img.positions[j]), x) <= 1e-4 * l) return false;
+      }
+    }
+    return true;
+  }
+  // Whether domain point d lies inside the chart's quad (convex, its corners
+  // counter-clockwise or clockwise alike). Where the map's texels are longer one way than
+  // the other, a sample next to the border may slide past it (less than a texel), where a
+  // fold runs along the border; such samples are counted (ImageQuality::samplesPastQuad).
+  bool inQuad(const glm::dvec2& d) const {
+    const QuadCorners& quad = ch.ps.quadCorners[ch.i];
+    int sign = 0;
+    for (int e = 0; e < 4; ++e) {
+      const glm::dvec2 a = quad[e], b = quad[(e + 1) % 4];
+      const double c = (b.x - a.x) * (d.y - a.y) - (b.y - a.y) * (d.x - a.x);
+      const int s = c > 0.0 ? 1 : c < 0.0 ? -1 : 0;
+      if (s == 0) return false;
+      if (sign != 0 && s != sign) return false;
+      sign = s;
+    }
+    return true;
+  }
+  // The domain's texel spacing at each inner sample, from the map.
+  double spacing(size_t k) const {
+    return 0.25 * (glm::distance(start[k - 1], start[k]) + glm::distance(start[k + 1], start[k]) +
+                   glm::distance(start[k - size], start[k]) + glm::distance(start[k + size], start[k]));
+  }
+  // A texel's agreement with the input: the largest cosine between its normal (the cross of
+  // its diagonals) and the faces under its corners (below 0: flipped), with sample `moved`
+  // at x on face normal fn.
+  double agreement(size_t t00, size_t moved, const glm::dvec3& x, const glm::dvec3& fn) const {
+    const size_t c[4] = {t00, t00 + 1, t00 + size, t00 + size + 1};
+    auto at = [&](int j) { return c[j] == moved ? x : glm::dvec3(ch.img.positions[c[j]]); };
+    const glm::dvec3 cr = glm::cross(at(3) - at(0), at(2) - at(1));
+    const double l = glm::length(cr);
+    if (!(l > 0.0)) return -1.0;
+    double best = -1.0;
+    for (int j = 0; j < 4; ++j)
+      best = std::max(best, glm::dot(cr, c[j] == moved ? fn : ch.ps.faceNormalOr(ch.triangles[c[j]], ch.floatNormals[c[j]])) / l);
+    return best;
+  }
+  // What inner sample k at x (face normal fn) costs its four texels: their agreement short
+  // of kUnfoldMargin.
+  double cost(size_t k, const glm::dvec3& x, const glm::dvec3& fn) const {
+    double e = 0.0;
+    for (const size_t t : {k, k - 1, k - size, k - size - 1})
+      e += std::max(0.0, kUnfoldMargin - agreement(t, k, x, fn));
+    return e;
+  }
+
+  // The inner samples within `ring` texels of the flipped texels, in index order.
+  std::vector<size_t> samplesRound(uint32_t ring) const {
+    std::vector<uint8_t> mark(size_t(size) * size, 0);
+    std::vector<size_t> moving;
+    for (const uint32_t at : ch.flipped) {
+      const int64_t u0 = at % size, v0 = at / size;
+      for (int64_t v = std::max<int64_t>(v0 - ring, 1); v <= std::min<int64_t>(v0 + 1 + ring, m - 1); ++v) {
+        for (int64_t u = std::max<int64_t>(u0 - ring, 1); u <= std::min<int64_t>(u0 + 1 + ring, m - 1); ++u) {
+          const size_t k = size_t(v) * size + size_t(u);
+          if (!mark[k]) mark[k] = 1, moving.push_back(k);
+        }
+      }
+    }
+    std::sort(moving.begin(), moving.end());
+    return moving;
+  }
+
+  // Slides the samples `moving` (a pattern search, in sweeps until none moves).
+  void slide(const std::vector<size_t>& moving) {
+    std::vector<glm::dvec2>& domain = ch.domain;
+    for (uint32_t sweep = 0; sweep < kUnfoldSweeps; ++sweep) {
+      bool any = false;
+      for (const size_t k : moving) {
+        const double h = spacing(k), reach3D = longest(k);
+        double best = cost(k, glm::dvec3(ch.img.positions[k]), ch.ps.faceNormalOr(ch.triangles[k], ch.floatNormals[k]));
+        if (best == 0.0) continue;
+        glm::dvec2 bestAt = domain[k];
+        Sample bestSample;
+        bool found = false;
+        for (const double scale : {0.5, 0.25, 0.125}) {
+          for (int dir = 0; dir < 8; ++dir) {
+            const double angle = dir * (3.14159265358979323846 / 4.0);
+            glm::dvec2 to = domain[k] + (scale * h) * glm::dvec2(std::cos(angle), std::sin(angle));
+            const glm::dvec2 off = to - start[k];
+            const double reach = kUnfoldReach * h, len = glm::length(off);
+            if (len > reach) to = start[k] + off * (reach / len);
+            const Sample cand = ch.ps.sampleAt(to);
+            if (!within(k, cand.p, reach3D) || !apart(k, cand.p, reach3D)) continue;
+            const double e = cost(k, cand.p, ch.ps.faceNormalOr(ch.ps.faceOf(cand), cand.n));
+            if (e < best * (1.0 - 1e-6)) best = e, bestAt = to, bestSample = cand, found = true;
+          }
+          if (found) break;
+        }
+        if (!found) continue;
+        domain[k] = bestAt;
+        ch.putAt(k, bestSample);
+        any = true;
+      }
+      if (!any) break;
+    }
+  }
+};
+
+// Unfolding (options.unfold): the inner samples round the flipped texels slide over the
+// surface, through the patch's parameterization, each to where its four texels agree best
+// with the input faces under their corners (a pattern search of 8 directions at 1/2, 1/4
+// and 1/8 of a texel, in sweeps until none moves), at most kUnfoldReach texels from where
+// the map put it and kUnfoldLength times its farthest neighbour as mapped from its
+// neighbours. The samples stay on the input surface and the border does not move, so
+// the seams are unchanged. Tried on a ring of 2 texels round the flipped ones, then 4,
+// then 8; each kept if fewer texels fold.
+void ChartSampler::unfold(bool warp) {
+  const uint32_t flippedBefore = img.quality.flippedTexels;
+  Unfolding unfolding(*this);
+  for (const uint32_t ring : {2u, 4u, 8u}) {
+    Placement before = keep();
+    unfolding.slide(unfolding.samplesRound(ring));
+    unfolded = true;
+    std::vector<uint32_t> now;
+    const ImageQuality q = measure(warp, now);
+    if (q.flippedTexels < before.img.quality.flippedTexels) {
+      img.quality = q;
+      img.quality.texelsUnfolded = flippedBefore - q.flippedTexels;
+      for (uint32_t v = 1; v < m; ++v) {
+        for (uint32_t u = 1; u < m; ++u) img.quality.samplesPastQuad += !unfolding.inQuad(domain[size_t(v) * size + u]);
+      }
+      flipped = now;
+      if (q.flippedTexels == 0) return;
+      continue;
+    }
+    restore(std::move(before));
+  }
+}
+
+// Samples quad chart i of a patch: its border from the shared side and spoke samples, its inside
+// through the chosen map, unfolded where it folds, measured; then hands it to the spill, if any.
+void sampleChart(PatchSampler& ps, ChartBuffers& buffers, uint32_t i) {
+  const ResampleContext& c = ps.c;
+  const uint32_t size = c.size;
+  GeometryImage& img = c.set.charts[c.links.offsets[ps.p] + i];
+  img.patch = ps.p;
+  img.quad = i;
+  img.neighbours = c.neighbours[c.links.offsets[ps.p] + i];
+  img.positions.resize(size_t(size) * size);
+  img.normals.resize(size_t(size) * size);
+  if (c.surface.hasColours) img.colours.resize(size_t(size) * size);
+  ChartSampler chart(ps, buffers, i, img);
+  chart.fillBorder();
+  const bool warp = chart.placeByMap();
+  if (c.options.unfold && img.quality.flippedTexels > 0) chart.unfold(warp);
+  chart.findFoldTriangles();
+  if (c.options.spill) c.options.spill->put(img);
+}
+
+// Resamples patch p (action 1): parameterizes it, samples what its quads share, then each quad
+// chart.
+void resamplePatch(const ResampleContext& c, uint32_t p, const PatchQuads& plan) {
+  PatchSampler ps(c, p, plan);
+  PatchResampleStats& st = c.set.patches[p];
+  st.paramInitial = ps.pp.initial;
+  st.param = ps.pp.quality;
+  st.stretchIterations = ps.pp.iterationsUsed;
+  st.firstChart = c.links.offsets[p];
+  st.sides = ps.n;
+  st.quads = ps.nq;
+
+  ps.sampleOpenSides();
+  ps.sampleSpokes();
+  ps.placeQuads();
+  ps.findSideFaces();
+  ps.placeVertices();
+  ChartBuffers buffers(c.size);
+  for (uint32_t i = 0; i < ps.nq; ++i) sampleChart(ps, buffers, i);
+}
+
+// The set's figures: the parameterizations and charts of the patches it holds (action != 0)
+// combined, and the triangles this resampling parameterized.
+void combineSetFigures(const ChartLayout& layout, const std::vector<uint32_t>& action, GeometryImageSet& set) {
   std::vector<ParamQuality> initial, final;
   for (uint32_t p = 0; p < set.patches.size(); ++p) {
     if (action[p] == 0) continue;
@@ -1360,6 +1535,65 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     if (action[p] == 1) set.trianglesParameterized += layout.patches[p].triangles.size();
   }
+}
+
+}  // namespace
+
+GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options) {
+  return resampleLayout(layout, options, ResampleReuse{});
+}
+
+GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options,
+                                const ResampleReuse& reuse) {
+  const auto start = std::chrono::steady_clock::now();
+  checkResampleInput(layout, options, reuse);
+  const uint32_t size = options.chartSize;
+  const SideLinks links = validateLinks(layout, options.quads, "resampleLayout");
+  std::vector<glm::dvec3> ownNormals;
+  if (!reuse.normals) ownNormals = layoutVertexNormals(layout);
+  const Surface surface{layout, reuse.normals ? *reuse.normals : ownNormals, !layout.colours.empty()};
+  const uint32_t m = size - 1;
+  const uint32_t sideCount = sideSampleCount(m, options.quads);
+
+  GeometryImageSet set;
+  set.chartSize = size;
+  const auto neighbours = neighboursFrom(layout, links, options.quads);
+  set.charts.resize(neighbours.size());
+  set.patches.resize(layout.patches.size());
+
+  const std::vector<uint32_t> action = patchActions(layout, options, reuse);
+  const SideOwners owners = sideOwners(layout, action);
+
+  const int concurrency =
+      options.threads ? int(options.threads) : tbb::this_task_arena::max_concurrency();
+  tbb::task_arena arena(concurrency);
+  std::vector<std::vector<Sample>> sides(owners.owners.size());
+  const ResampleContext context{layout, options, reuse, surface, links, owners, neighbours, sides,
+                                size, m, sideCount, set};
+  arena.execute([&] {
+    tbb::parallel_for(size_t{0}, owners.owners.size(), [&](size_t k) {
+      if (!owners.ownerNeeded[k]) return;
+      sides[k] = sampleSide(surface,
+                            layout.patches[owners.owners[k].patch].sides[owners.owners[k].side].vertices,
+                            sideCount);
+    });
+    const progress::ProgressStage stage("resample", layout.patches.size());
+    tbb::parallel_for(uint32_t{0}, uint32_t(layout.patches.size()), [&](uint32_t p) {
+      const progress::Tick tick;
+      const uint32_t n = uint32_t(layout.patches[p].sides.size());
+      const PatchQuads plan = patchQuads(n, m, options.quads);
+      const uint32_t nq = uint32_t(plan.quads.size());
+      if (action[p] == 0) {
+        keepUnsampled(context, p, n, nq);
+      } else if (action[p] >= 2) {
+        takeEarlierCharts(context, p, action[p] - 2, nq);
+      } else {
+        resamplePatch(context, p, plan);
+      }
+    });
+  });
+
+  combineSetFigures(layout, action, set);
   set.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return set;
 }
