@@ -23,12 +23,14 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include <CLI/CLI.hpp>
+#include <glm/common.hpp>
 #include <fmt/format.h>
 #include <meshoptimizer.h>
 #include <nlohmann/json.hpp>
@@ -82,13 +84,23 @@ ChildRun runChild(const std::vector<std::string>& argv, const fs::path& outFile)
 
 // The baseline: read, then a chain of levels each half the triangles of the one before (the
 // input first), down to under 1% of the input, each coded as meshoptimizer codes a mesh for
-// transmission. Prints {"triangles", "levels", "bytes", "seconds"} on one line.
+// transmission: positions quantized on a lattice of 2^18 steps across the bounding box's largest
+// side (gimlod's default lattice is 2^18 steps across the diagonal), as integers. Prints
+// {"triangles", "levels", "bytes", "seconds"} on one line.
 int runBaseline(const fs::path& input) {
   const auto t0 = std::chrono::steady_clock::now();
   const gimlod::IndexedMesh mesh = gimlod::readMesh(input);
   std::vector<float> xyz;
   xyz.reserve(mesh.positions.size() * 3);
-  for (const glm::vec3& p : mesh.positions) xyz.insert(xyz.end(), {p.x, p.y, p.z});
+  glm::vec3 lo(std::numeric_limits<float>::max()), hi(-std::numeric_limits<float>::max());
+  for (const glm::vec3& p : mesh.positions) {
+    xyz.insert(xyz.end(), {p.x, p.y, p.z});
+    lo = glm::min(lo, p), hi = glm::max(hi, p);
+  }
+  const float extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z, 1e-30f});
+  std::vector<uint32_t> lattice(xyz.size());
+  for (size_t i = 0; i < xyz.size(); ++i)
+    lattice[i] = uint32_t(std::lround(double(xyz[i] - lo[int(i % 3)]) / extent * double((1u << 18) - 1)));
   std::vector<uint32_t> indices;
   indices.reserve(mesh.triangles.size() * 3);
   for (const auto& t : mesh.triangles) indices.insert(indices.end(), t.begin(), t.end());
@@ -101,14 +113,14 @@ int runBaseline(const fs::path& input) {
     std::vector<uint32_t> lod = level;
     meshopt_optimizeVertexCache(lod.data(), lod.data(), lod.size(), vertices);
     std::vector<uint32_t> remap(vertices);
-    std::vector<float> packed(vertices * 3);
+    std::vector<uint32_t> packed(vertices * 3);
     const size_t used = meshopt_optimizeVertexFetchRemap(remap.data(), lod.data(), lod.size(), vertices);
     meshopt_remapIndexBuffer(lod.data(), lod.data(), lod.size(), remap.data());
-    meshopt_remapVertexBuffer(packed.data(), xyz.data(), vertices, sizeof(float) * 3, remap.data());
+    meshopt_remapVertexBuffer(packed.data(), lattice.data(), vertices, sizeof(uint32_t) * 3, remap.data());
     std::vector<unsigned char> ib(meshopt_encodeIndexBufferBound(lod.size(), used));
-    std::vector<unsigned char> vb(meshopt_encodeVertexBufferBound(used, sizeof(float) * 3));
+    std::vector<unsigned char> vb(meshopt_encodeVertexBufferBound(used, sizeof(uint32_t) * 3));
     bytes += meshopt_encodeIndexBuffer(ib.data(), ib.size(), lod.data(), lod.size());
-    bytes += meshopt_encodeVertexBuffer(vb.data(), vb.size(), packed.data(), used, sizeof(float) * 3);
+    bytes += meshopt_encodeVertexBuffer(vb.data(), vb.size(), packed.data(), used, sizeof(uint32_t) * 3);
     ++levels;
     if (level.size() <= floor) break;
     std::vector<uint32_t> next(level.size());
