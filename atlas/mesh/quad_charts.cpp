@@ -27,6 +27,10 @@ void finishStage(StageMeter& meter, const std::string& name) {
 }
 
 
+double meshSampleCap(uint64_t triangles) {
+  return std::max(kMaxSamplesPerTriangle * double(triangles), kMinSampleCap);
+}
+
 uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads) {
   const double wanted = kSamplesPerTriangle * double(triangles);
   uint32_t intervals = 64;
@@ -49,6 +53,12 @@ double layoutDiagonal(const ChartLayout& layout) {
 }
 
 // Samples per layout triangle in `charts` charts of chartSize^2 samples (intervals squared).
+// Whether `charts` charts of chartSize^2 samples reach the samples a layout may grow to
+// (meshSampleCap).
+bool atSampleCap(const ChartLayout& layout, uint64_t charts, uint32_t chartSize) {
+  return double(charts) * double(chartSize - 1) * double(chartSize - 1) >= meshSampleCap(layout.triangles.size());
+}
+
 double samplesPerTriangle(const ChartLayout& layout, uint64_t charts, uint32_t chartSize) {
   return double(charts) * double(chartSize - 1) * double(chartSize - 1) /
          double(std::max<size_t>(layout.triangles.size(), 1));
@@ -113,12 +123,12 @@ void logFoldingCharts(const ChartLayout& layout, const GeometryImageSet& set) {
 // doubling may cross it, as the one-layout flow's), or the room checkChartRoom allows.
 uint32_t grownChartSize(const ChartLayout& layout, const QuadChartOptions& options, uint32_t current, uint64_t charts,
                         double error, double bound, const fs::path& dir) {
-  if (current >= kMaxDensityChartSize || samplesPerTriangle(layout, charts, current) >= kMaxSamplesPerTriangle) return 0;
+  if (current >= kMaxDensityChartSize || atSampleCap(layout, charts, current)) return 0;
   const uint32_t asked = std::max(1u, uint32_t(std::ceil(std::log(error / std::max(bound, 1e-300)) / std::log(4.0))));
   QuadChartOptions larger = options;
   larger.chartSize = current;
   for (uint32_t k = 0; k < asked && larger.chartSize < kMaxDensityChartSize &&
-                       (k == 0 || samplesPerTriangle(layout, charts, larger.chartSize) < kMaxSamplesPerTriangle);
+                       (k == 0 || !atSampleCap(layout, charts, larger.chartSize));
        ++k)
     larger.chartSize = 2 * larger.chartSize - 1;
   for (; larger.chartSize > current; larger.chartSize = (larger.chartSize + 1) / 2) {
@@ -219,7 +229,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const QuadChartOptions& opti
     uint64_t overTriangles = 0;
     for (uint32_t p = 0; p < layout.patches.size(); ++p) overTriangles += over[p] ? layout.patches[p].triangles.size() : 0;
     if (double(overTriangles) <= kCoarseSurfaceToDouble * double(layout.triangles.size()) ||
-        samplesPerTriangle(layout, first.charts.size(), o.chartSize) >= kMaxSamplesPerTriangle)
+        atSampleCap(layout, first.charts.size(), o.chartSize))
       break;
     const std::string why =
         fmt::format("patches with {:.0f}% of the triangles sample the surface more coarsely than {:.4f}% of the diagonal",
@@ -245,7 +255,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const QuadChartOptions& opti
                          [&] { return residentBytes() < o.maxMemory / 4 * 3; });
     if (!grow || !st.chartSizeByDensity || !(maxError > 0.0) || r.set.image.sampleError <= maxError ||
         st.repair.stoppedForWork || st.repair.stoppedForMemory || o.chartSize >= kMaxDensityChartSize ||
-        samplesPerTriangle(layout, r.set.charts.size(), o.chartSize) >= kMaxSamplesPerTriangle)
+        atSampleCap(layout, r.set.charts.size(), o.chartSize))
       break;
     const std::string why = fmt::format("the repair left a sampling error of {:.4f}% of the diagonal (bound {:.4f}%)",
                                         100.0 * r.set.image.sampleError / std::max(diagonal, 1e-300),

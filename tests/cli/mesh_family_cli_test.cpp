@@ -1,0 +1,82 @@
+// The generated family of meshes (bench/mesh_family: genus 1 and 3, six holes, thin parts, noise,
+// a CAD part of slivers, 201 separate pieces over an open floor, triangles 32 times larger on one
+// side, an open terrain patch), each through `gimlod build` at the defaults, then the invariants
+// of the shared scans' tests read back from the atlas: seams bit-identical at every level, the
+// exported surface welded with the input's topology, no flipped parameterization triangle, and
+// the two-sided Hausdorff distance within 0.1% of the diagonal. Charts, flipped texels and bytes
+// per triangle are printed, not bounded here.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <iostream>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "tests/atlas_invariants.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+namespace fs = std::filesystem;
+
+#ifdef GIMLOD_MESH_FAMILY
+class MeshFamilyTest : public ::testing::TestWithParam<std::string> {
+ protected:
+  // The family at about 6,000 triangles a mesh (a few seconds a build), written once per process.
+  static void SetUpTestSuite() {
+    tmp_ = new test::TempDir("gimlod-mesh-family");
+    std::string output;
+    ASSERT_EQ(test::runCommand(std::string(GIMLOD_MESH_FAMILY) + " " + test::quoted(tmp_->path()) +
+                                   " --triangles 6000",
+                               &output),
+              0)
+        << output;
+  }
+  static void TearDownTestSuite() {
+    delete tmp_;
+    tmp_ = nullptr;
+  }
+  static test::TempDir* tmp_;
+};
+test::TempDir* MeshFamilyTest::tmp_ = nullptr;
+
+TEST_P(MeshFamilyTest, AtTheDefaultsWithinTheBounds) {
+  const fs::path mesh = tmp_->path() / (GetParam() + ".ply");
+  const fs::path atlas = tmp_->path() / (GetParam() + ".atlas");
+  ASSERT_TRUE(fs::exists(mesh)) << mesh;
+  std::string output;
+  ASSERT_EQ(test::runCommand(test::appPath().string() + " build " + test::quoted(mesh) + " -o " + test::quoted(atlas),
+                             &output),
+            0)
+      << output;
+  const nlohmann::json st = nlohmann::json::parse(std::ifstream(atlas / "stats.json"));
+  const nlohmann::json& r = st["resample"];
+  const double triangles = double(st["charting"]["triangles"].get<uint64_t>());
+  const double hausdorff = st["fidelity"]["hausdorff_percent_of_diagonal"].get<double>();
+  std::cout << "  " << GetParam() << ": " << st["charts"] << " charts of " << st["chart_size"] << "^2 ("
+            << r["quads"].get<std::string>() << "), " << r["flipped_texels"] << " flipped texels, "
+            << double(st["samples"].get<uint64_t>()) / triangles << " samples and "
+            << double(st["bytes_on_disk"].get<uint64_t>()) / triangles << " bytes per triangle, Hausdorff "
+            << hausdorff << "%\n";
+  {
+    SCOPED_TRACE("seams");
+    test::checkSeams(atlas);
+  }
+  {
+    SCOPED_TRACE("exported surface");
+    test::checkExportedTopology(atlas, mesh);
+  }
+  EXPECT_EQ(r["param_flipped"].get<uint64_t>(), 0u);
+  EXPECT_LT(hausdorff, 0.1) << GetParam() << ": Hausdorff distance above 0.1% of the diagonal";
+}
+
+INSTANTIATE_TEST_SUITE_P(Generated, MeshFamilyTest,
+                         ::testing::Values("torus", "genus3", "holes_sphere", "thin_parts", "noisy_sphere",
+                                           "cad_bracket", "many_pieces", "uneven", "wavy_terrain_patch"),
+                         [](const ::testing::TestParamInfo<std::string>& i) { return i.param; });
+#endif
+
+}  // namespace
+}  // namespace gimlod
