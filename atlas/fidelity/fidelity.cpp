@@ -249,13 +249,7 @@ class Nearest {
   double squaredDistance() const { return d2_; }
 
   static double boxDistance2(const Point& q, const FloatBox& b) {
-    double d2 = 0.0;
-    for (int k = 0; k < 3; ++k) {
-      const double lo = b.lo[k] - q[k], hi = q[k] - b.hi[k];
-      const double d = lo > 0.0 ? lo : (hi > 0.0 ? hi : 0.0);
-      d2 += d * d;
-    }
-    return d2;
+    return boxDistance2(q, CGAL::Bbox_3(b.lo[0], b.lo[1], b.lo[2], b.hi[0], b.hi[1], b.hi[2]));
   }
 
  private:
@@ -442,6 +436,10 @@ void extend(FloatBox& b, const FloatBox& o) {
   for (int c = 0; c < 3; ++c) b.lo[c] = std::min(b.lo[c], o.lo[c]), b.hi[c] = std::max(b.hi[c], o.hi[c]);
 }
 
+void extend(FloatBox& b, const glm::vec3& p) {
+  for (int c = 0; c < 3; ++c) b.lo[c] = std::min(b.lo[c], p[c]), b.hi[c] = std::max(b.hi[c], p[c]);
+}
+
 FloatTriangle floatTriangle(const MeshTriangle& t) {
   FloatTriangle f;
   for (int k = 0; k < 3; ++k)
@@ -548,8 +546,7 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
     const std::vector<glm::vec3> P = readChart(c);
     std::vector<uint32_t> cells(P.size());
     for (size_t i = 0; i < P.size(); ++i) {
-      for (int k = 0; k < 3; ++k)
-        chartBoxes[c].lo[k] = std::min(chartBoxes[c].lo[k], P[i][k]), chartBoxes[c].hi[k] = std::max(chartBoxes[c].hi[k], P[i][k]);
+      extend(chartBoxes[c], P[i]);
       cells[i] = cellIdOf(P[i].x, P[i].y, P[i].z);
     }
     std::sort(cells.begin(), cells.end());
@@ -746,7 +743,7 @@ namespace {
 // Mesh samples bucketed in a uniform grid over their box, to find those within a box quickly.
 class SampleGrid {
  public:
-  explicit SampleGrid(const std::vector<Point>& p) : p_(p) {
+  explicit SampleGrid(const std::vector<Point>& p) {
     for (int k = 0; k < 3; ++k) lo_[k] = std::numeric_limits<double>::infinity(), hi_[k] = -lo_[k];
     for (const Point& q : p)
       for (int k = 0; k < 3; ++k) lo_[k] = std::min(lo_[k], q[k]), hi_[k] = std::max(hi_[k], q[k]);
@@ -790,7 +787,6 @@ class SampleGrid {
     return c <= 0.0 ? 0u : c >= dims_[k] - 1 ? dims_[k] - 1 : uint32_t(c);
   }
   size_t cell(uint32_t x, uint32_t y, uint32_t z) const { return x + size_t(dims_[0]) * (y + size_t(dims_[1]) * z); }
-  const std::vector<Point>& p_;
   double lo_[3], hi_[3], step_[3];
   uint32_t dims_[3];
   std::vector<uint32_t> start_, order_;
@@ -884,8 +880,7 @@ FidelityStats measureFidelityByCharts(const std::vector<glm::vec3>& meshPosition
     Point hint(CGAL::ORIGIN);
     bool first = true;
     for (size_t i = 0; i < P.size(); ++i) {
-      for (int k = 0; k < 3; ++k)
-        chartBoxes[c].lo[k] = std::min(chartBoxes[c].lo[k], P[i][k]), chartBoxes[c].hi[k] = std::max(chartBoxes[c].hi[k], P[i][k]);
+      extend(chartBoxes[c], P[i]);
       if (!all && !sampleKept(uint32_t(c), i, keep)) continue;
       const Point q(P[i].x, P[i].y, P[i].z);
       Nearest n = first ? Nearest(meshForest) : Nearest(meshForest, q, hint);
