@@ -56,7 +56,7 @@ struct Row {
   uint32_t splits = 0, merges = 0, refines = 0, coarsens = 0;
   bool budgetBound = false;
   uint32_t constraintSplits = 0;
-  uint32_t rootFloor = 0;         // visible chart roots: no cut has fewer nodes
+  uint32_t rootFloor = 0;         // visible top groups, or chart roots: no cut has fewer nodes
   bool budgetBelowRoots = false;  // maxNodes < rootFloor: the visible roots are drawn, over the budget
   double drawMs = std::numeric_limits<double>::quiet_NaN();  // --render only
 };
@@ -120,7 +120,7 @@ void measureCut(const Hierarchy& h, const Cut& cut, const ViewParams& v, Row& r)
     maxE = std::max(maxE, e);
     sum += e;
   }
-  r.nodes = uint32_t(cut.nodes.size());
+  r.nodes = cut.nodeCount();
   r.triangles = cut.triangles();
   r.maxErrorPx = maxE;
   r.meanErrorPx = cut.nodes.empty() ? 0.0 : sum / double(cut.nodes.size());
@@ -180,7 +180,7 @@ Adapter makeBudgetAdapter(const Hierarchy& h, const std::string& algo, uint32_t 
     r.constraintSplits = st.constraintSplits;
     r.rootFloor = st.rootFloor;
     r.budgetBelowRoots = st.budgetBelowRoots;
-    r.budgetBound = cut.nodes.size() >= maxNodes || 4 * cut.triangles() >= 3 * maxTris;
+    r.budgetBound = cut.nodeCount() >= maxNodes || 4 * cut.triangles() >= 3 * maxTris;
   };
   if (algo == "ours") {
     auto qq = std::make_shared<QuadQueueAdapter>(h);
@@ -341,7 +341,7 @@ ControlledRun runFrameController(const Hierarchy& hier, const std::vector<ViewPa
     const Cut& cut = adapter.update(v, o, nullptr);
     FrameSample f;
     f.adaptMs = microsSince(t0) * 1e-3;
-    f.nodes = uint32_t(cut.nodes.size());
+    f.nodes = cut.nodeCount();
     f.triangles = cut.triangles();
     f.drawMs = double(f.triangles) / rate * 1e3;
     f.frameMs = f.adaptMs + f.drawMs;
@@ -424,7 +424,7 @@ int runBench(const BenchArgs& a) {
   if (!(a.loadStep > 0.0) || !(a.loadStep <= 100.0)) throw InputError("--load-step must be in (0, 100]");
 
   // Inputs.
-  const AtlasView atlas = openAtlas(a.atlas);
+  const AtlasView atlas = openAtlas(a.atlas, a.camera.maxRoots);
   const Hierarchy& hier = atlas.hierarchy;
   const std::vector<Camera> cams = loadCameras(a.camera, atlas);
   if (cams.empty()) throw InputError(a.camera.path + ": the camera path has no frames");
@@ -479,10 +479,10 @@ int runBench(const BenchArgs& a) {
             const Cut& cut = adapt(views[i], r);
             measureCut(hier, cut, views[i], r);
             if (r.budgetBelowRoots && !warnedBelowRoots) {
-              spdlog::warn("node budget {} is below the {} visible chart roots (frame {}): no cut has fewer "
+              spdlog::warn("node budget {} is below the {} visible {} (frame {}): no cut has fewer "
                            "nodes, so such frames draw the visible roots (root_floor, budget_below_roots in "
                            "bench.csv)",
-                           maxNodes, r.rootFloor, i);
+                           maxNodes, r.rootFloor, hier.groups.empty() ? "chart roots" : "top groups", i);
               warnedBelowRoots = true;
             }
             if (scene) r.drawMs = scene->drawCut(cams[i], cut).drawMs;

@@ -190,14 +190,14 @@ std::vector<ReportImage> renderInspectViews(const fs::path& atlasDir, const std:
     const CutMesh mesh = buildCutMesh(atlas.hierarchy, f.cut, scene.capture(f.cut),
                                       atlas.manifest.kind == AtlasKind::Heightfield ? &valid : nullptr);
     const nlohmann::json figures = {{"view", names[i]},
-                                    {"nodes", f.cut.nodes.size()},
+                                    {"nodes", f.cut.nodeCount()},
                                     {"triangles", f.draw.triangles},
                                     {"boundary_edges", mesh.boundaryEdges},
                                     {"open_border_edges", mesh.openBorderEdges},
                                     {"other_boundary_edges", mesh.otherBoundaryEdges}};
     views.push_back({png,
                      fmt::format("charts from {} ({} nodes, {} triangles; seams dark, open borders red), {}", names[i],
-                                 f.cut.nodes.size(), f.draw.triangles, context->renderer()),
+                                 f.cut.nodeCount(), f.draw.triangles, context->renderer()),
                      figures});
   }
   if (distances) {
@@ -247,7 +247,7 @@ int runRender(const RenderArgs& a) {
   validateCameraArgs(a.camera);
   const auto background = parseBackground(a.background);
 
-  const AtlasView atlas = openAtlas(a.atlas);
+  const AtlasView atlas = openAtlas(a.atlas, a.camera.maxRoots);
   const std::vector<Camera> cams = loadCameras(a.camera, atlas);
 
   const std::map<size_t, fs::path> cutExports = parseCutExports(a.exportCut, cams.size());
@@ -294,7 +294,7 @@ int runRender(const RenderArgs& a) {
   std::string csv = "frame,nodes,triangles,max_screen_error_px,adapt_ms,stitch_ms,upload_ms,draw_ms,"
                     "draw_calls,pages_loaded,pages_missing,pages_requested,nodes_substituted,node_budget_bound,"
                     "constraint_raises,constraint_splits,attribute_texels,attribute_above_page,root_floor,"
-                    "budget_below_roots,max_nodes,max_triangles,frame_ms,gpu_ms\n";
+                    "budget_below_roots,max_nodes,max_triangles,frame_ms,gpu_ms,closed_groups,grouped_roots\n";
   double drawMsTotal = 0.0;
   uint64_t triTotal = 0;
   bool warnedBelowRoots = false;
@@ -307,11 +307,11 @@ int runRender(const RenderArgs& a) {
     // Page reads and uploads are the loader's to bound (--uploads-per-frame), not the budgets'.
     if (controller)
       controller->update(
-          {uint32_t(f.cut.nodes.size()), f.draw.triangles, f.adaptMs, f.draw.drawMs, std::max(frameMs - f.uploadMs, 0.0)});
+          {f.cut.nodeCount(), f.draw.triangles, f.adaptMs, f.draw.drawMs, std::max(frameMs - f.uploadMs, 0.0)});
     if (f.adapt.budgetBelowRoots && !warnedBelowRoots) {
-      spdlog::warn("--max-nodes {} is below the {} visible chart roots (frame {}): no cut has fewer nodes, so such "
-                   "frames draw the visible roots (root_floor, budget_below_roots in stats.csv)",
-                   a.maxNodes, f.adapt.rootFloor, i);
+      spdlog::warn("--max-nodes {} is below the {} visible {} (frame {}): no cut has fewer nodes, so such frames "
+                   "draw the visible roots (root_floor, budget_below_roots in stats.csv)",
+                   a.maxNodes, f.adapt.rootFloor, atlas.hierarchy.groups.empty() ? "chart roots" : "top groups", i);
       warnedBelowRoots = true;
     }
     writePng(out / fmt::format("frame_{:04d}.png", i), w, h, 4, scene.renderer().readPixels());
@@ -325,18 +325,19 @@ int runRender(const RenderArgs& a) {
                    i, ex->second.string(), mesh.positions.size(), mesh.triangles.size(), mesh.boundaryEdges,
                    mesh.openBorderEdges, mesh.otherBoundaryEdges);
     }
-    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f}\n", i,
-                       f.cut.nodes.size(),
+    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{},{}\n", i,
+                       f.cut.nodeCount(),
                        f.draw.triangles, f.maxErrorPx, f.adaptMs, f.stitchMs, f.uploadMs, f.draw.drawMs,
                        f.draw.drawCalls, f.pagesLoaded + f.pagesUploaded, f.pagesMissing, f.pagesRequested, f.nodesSubstituted,
                        int(f.adapt.nodeBudgetBound), f.adapt.constraintRaises,
                        f.adapt.constraintSplits, f.attributes.texels, f.attributes.abovePage, f.adapt.rootFloor,
                        int(f.adapt.budgetBelowRoots), budgetMode ? bo.maxNodes : a.maxNodes,
-                       budgetMode ? bo.maxTriangles : 0, frameMs, f.draw.gpuMs);
+                       budgetMode ? bo.maxTriangles : 0, frameMs, f.draw.gpuMs, f.adapt.closedGroups,
+                       f.adapt.groupedRoots);
     drawMsTotal += f.draw.drawMs;
     triTotal += f.draw.triangles;
     spdlog::info("frame {:4d}: {:5d} nodes, {:8d} triangles, max error {:.3f} px, adapt {:.3f} ms, draw {:.2f} ms",
-                 i, f.cut.nodes.size(), f.draw.triangles, f.maxErrorPx, f.adaptMs, f.draw.drawMs);
+                 i, f.cut.nodeCount(), f.draw.triangles, f.maxErrorPx, f.adaptMs, f.draw.drawMs);
   }
   atomicWriteFile(out / "stats.csv", csv.data(), csv.size());
   std::cout << fmt::format("rendered {} frames to {} on {}: {:.2f} M triangles/s\n", cams.size(), a.output,

@@ -23,7 +23,17 @@ struct CameraArgs {
   uint32_t orbit = 0; // orbit frames
   uint32_t descent = 0;  // fly-down frames (descentPath)
   double distance = 0.9, elevation = 35.0, fov = 45.0;
+  // Top groups above the charts at most (openAtlas, hierarchy/root_groups.h); 0: none.
+  uint32_t maxRoots = kDefaultMaxRoots;
 };
+
+// Registers --max-roots on cmd.
+inline void addMaxRootsOption(CLI::App* cmd, uint32_t& maxRoots) {
+  cmd->add_option("--max-roots", maxRoots,
+                  "Gather the chart roots into groups, and those into groups, until at most this many top groups "
+                  "remain: a closed group is one node of the budget; 0: no groups (every chart root a root)")
+      ->capture_default_str();
+}
 
 // Registers --path, --orbit, --distance, --elevation and --fov on cmd.
 inline void addCameraOptions(CLI::App* cmd, CameraArgs& a) {
@@ -35,6 +45,7 @@ inline void addCameraOptions(CLI::App* cmd, CameraArgs& a) {
       ->capture_default_str();
   cmd->add_option("--elevation", a.elevation, "Orbit elevation in degrees")->capture_default_str();
   cmd->add_option("--fov", a.fov, "Vertical field of view for --orbit, degrees")->capture_default_str();
+  addMaxRootsOption(cmd, a.maxRoots);
 }
 
 // Throws InputError for impossible camera options.

@@ -216,6 +216,7 @@ CLI::App* addViewCommand(CLI::App& app, ViewArgs& a) {
   v->add_option("--tolerance", a.tolerance, "Screen-space error threshold in pixels")->capture_default_str();
   v->add_option("--triangles", a.triangles, "Triangle budget: start in budget mode (quad queue)");
   v->add_option("--max-nodes", a.maxNodes, "Node budget")->capture_default_str();
+  addMaxRootsOption(v, a.maxRoots);
   v->add_option("--texel-ratio", a.texelRatio, "Normal-map texels per pixel (0: page resolution)")
       ->capture_default_str();
   v->add_flag("--async-loads", a.asyncLoads, "Load pages on a separate thread");
@@ -237,7 +238,7 @@ int runView(const ViewArgs& a) {
   const OverlayMode overlayMode = parseOverlayOption(a.overlay);
   const auto background = parseBackground(a.background);
 
-  const AtlasView atlas = openAtlas(a.atlas);
+  const AtlasView atlas = openAtlas(a.atlas, a.maxRoots);
   UpAxis up{atlas.manifest.kind == AtlasKind::Heightfield ? 2 : 1, 1.0};
   if (a.up != "auto") {
     const std::optional<UpAxis> u = parseUpAxis(a.up);
@@ -474,8 +475,8 @@ int runView(const ViewArgs& a) {
       }
     }
     if (f.adapt.budgetBelowRoots && !warnedBelowRoots) {
-      spdlog::warn("node budget {} is below the {} visible chart roots: such frames draw the visible roots",
-                   c.maxNodes, f.adapt.rootFloor);
+      spdlog::warn("node budget {} is below the {} visible {}: such frames draw the visible roots", c.maxNodes,
+                   f.adapt.rootFloor, atlas.hierarchy.groups.empty() ? "chart roots" : "top groups");
       warnedBelowRoots = true;
     }
     scene->renderer().blitToDefaultFramebuffer();
@@ -485,7 +486,7 @@ int runView(const ViewArgs& a) {
       lastCut = std::move(f.cut);
       haveCut = true;
     }
-    last.nodes = lastCut.nodes.size();
+    last.nodes = lastCut.nodeCount();
     last.triangles = f.draw.triangles;
     last.maxErrorPx = f.maxErrorPx;
     last.adaptMs = f.adaptMs;

@@ -9,6 +9,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "hierarchy/root_groups.h"
+
 namespace gimlod {
 
 struct ViewArgs {
@@ -27,6 +29,7 @@ struct ViewArgs {
   double tolerance = 1.0;       // px
   uint64_t triangles = 0;       // > 0: triangle-budget mode
   uint32_t maxNodes = 2048;
+  uint32_t maxRoots = kDefaultMaxRoots;  // top groups above the charts at most (openAtlas); 0: none
   double texelRatio = 1.0;
   bool asyncLoads = false;
   uint32_t uploadsPerFrame = 64;

@@ -59,7 +59,7 @@ int run(int argc, char** argv) {
       auto t0 = Clock::now();
       const Cut& cut = ours.update(v, o, &st);
       us += std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
-      nodes += double(cut.nodes.size());
+      nodes += double(cut.nodeCount());
       ops += ours.frameStats().splits + ours.frameStats().merges;
       reused += ours.frameStats().priorityReuses;
       err = std::max(err, st.maxErrorPx);
@@ -85,7 +85,7 @@ int run(int argc, char** argv) {
       const auto t0 = Clock::now();
       const Cut& cut = ours.update(v, o, &st);
       us += std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
-      nodes += double(cut.nodes.size());
+      nodes += double(cut.nodeCount());
       rounds += st.rounds;
       ops += st.refines + st.coarsens + st.splits + st.merges + st.undoneOps;
       err += st.maxErrorPx;

@@ -13,6 +13,7 @@
 #include <glm/vec3.hpp>
 
 #include "core/atlas_format.h"
+#include "hierarchy/root_groups.h"
 
 namespace gimlod {
 
@@ -82,6 +83,9 @@ class Hierarchy {
   // Per chart, its finest pyramid level (ChartInfo::finestLevel); empty: 0 for every chart. Not in
   // the hierarchy file: set from the manifest (loadAtlasView) or by buildGeometryHierarchy.
   std::vector<uint8_t> finestLevels;
+  // The nodes above the charts (buildRootGroups); empty: every chart root is a root of the forest.
+  // Not in the hierarchy file: built when an atlas is opened (openAtlas) or by the caller.
+  RootGroups groups;
 
   uint32_t chartCount() const { return uint32_t(charts.size()); }
   uint32_t finestLevel(uint32_t chart) const { return finestLevels.empty() ? 0 : finestLevels[chart]; }

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <queue>
 
+#include "runtime/group_select.h"
+
 namespace gimlod {
 namespace {
 
@@ -67,12 +69,17 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
                         AdaptStats* stats) {
   AdaptStats st;
   const double tol = options.tolerancePx;
-  const uint32_t budget = options.maxNodes == 0 ? UINT32_MAX : options.maxNodes;
+  GroupSelection groups;
+  selectRootGroups(h, view, options.maxNodes, tol, options.frustumCull, groups);
+  // Every root counts as a node here; the closed groups' roots, which never split, count once a
+  // group in the returned cut.
+  const uint32_t chartBudget = groups.chartBudget(options.maxNodes);
+  const uint32_t budget = chartBudget == 0 ? UINT32_MAX : chartBudget;
 
   auto makeCandidate = [&](const NodeId& n) {
     Candidate c{n, neededResolution(h, n, view, tol), false, 0.0};
     const uint32_t rmax = h.maxRes(n);
-    const bool leaf = n.level + 1 >= h.params.depth;
+    const bool leaf = n.level + 1 >= h.params.depth || groups.frozen(n.chart);
     if (c.res > rmax) {
       c.overTol = true;
       c.res = rmax;
@@ -106,8 +113,8 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
     queue.push(makeCandidate(root));
     ++count;
   }
-  st.rootFloor = count;
-  st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, count);
+  st.rootFloor = groups.rootFloor;
+  st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, st.rootFloor);
   while (!queue.empty()) {
     Candidate c = queue.top();
     queue.pop();
@@ -135,17 +142,30 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
 
   Cut cut;
   cut.nodes.reserve(done.size());
-  for (const Candidate& c : done) cut.nodes.push_back({c.id, c.res, 0.f});
+  for (const Candidate& c : done) {
+    cut.nodes.push_back({c.id, c.res, 0.f});
+    // A root held in a closed group for the node budget, over tolerance even at its maxRes.
+    if (c.overTol && groups.frozen(c.id.chart) && c.id.level + 1 < h.params.depth) st.nodeBudgetBound = true;
+  }
   cut.rebuildIndex();
   enforceStitchConstraint(h, cut, &view, tol, &st);
-  if (st.constraintSplits > 0) holdNodeBudget(h, cut, view, options.maxNodes);
+  if (st.constraintSplits > 0) holdNodeBudget(h, cut, view, chartBudget);
   for (CutNode& n : cut.nodes) {
     n.errorPx = float(screenError(h, n.id, n.res, view));
     st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
   }
+  markGroupedRoots(groups, cut);
+  setCutCounts(cut, st);
   st.triangles = cut.triangles();
   if (stats) *stats = st;
   return cut;
+}
+
+void setCutCounts(const Cut& cut, AdaptStats& st) {
+  st.nodes = cut.nodeCount();
+  st.groupedRoots = 0;
+  for (const CutNode& n : cut.nodes) st.groupedRoots += n.group >= 0;
+  st.closedGroups = st.nodes - (uint32_t(cut.nodes.size()) - st.groupedRoots);
 }
 
 uint32_t countVisibleRoots(const Hierarchy& h, const ViewParams& v, bool cull) {

@@ -45,8 +45,13 @@ struct AdaptStats {
   bool nodeBudgetBound = false;   // some node stays above tolerance because of maxNodes
   double maxErrorPx = 0.0;
   uint64_t triangles = 0;
-  uint32_t rootFloor = 0;         // visible chart roots (countVisibleRoots): no cut has fewer nodes
+  // The smallest cut: the visible top groups (hierarchy/root_groups.h), or the visible chart roots
+  // of an atlas without groups (countVisibleRoots). No cut has fewer nodes.
+  uint32_t rootFloor = 0;
   bool budgetBelowRoots = false;  // maxNodes < rootFloor: the cut is the visible roots, over maxNodes
+  uint32_t nodes = 0;             // nodes of the cut (Cut::nodeCount: a closed group's roots once)
+  uint32_t closedGroups = 0;      // closed groups drawn (each a node: its chart roots, unsplit)
+  uint32_t groupedRoots = 0;      // chart roots those groups draw
 };
 
 // Chart roots drawn for this view: not empty and, when cull, with bounds that meet the frustum.
@@ -54,6 +59,10 @@ struct AdaptStats {
 // note: a coherent adapter's kept cut may hold a visible root's descendants whose boxes are all
 // culled, and then draws nothing of that chart: fewer nodes than the floor.
 uint32_t countVisibleRoots(const Hierarchy& h, const ViewParams& v, bool cull);
+
+// Sets st.nodes, st.closedGroups and st.groupedRoots from a cut whose grouped roots are marked
+// (CutNode::group).
+void setCutCounts(const Cut& cut, AdaptStats& st);
 
 // Whether a node budget (0: no limit) is below the root floor. The adapters then draw exactly the
 // visible roots (no split), and report it (AdaptStats::budgetBelowRoots, BudgetStats likewise).

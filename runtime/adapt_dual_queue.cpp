@@ -164,6 +164,10 @@ void DualQueueAdapter::evaluate(Entry& e) {
 // Paper 7.1 split priority (see dualQueueSplitPriority), from the entry's evaluation; *delta is
 // the drawn-node change of the split.
 double DualQueueAdapter::cachedSplitPriority(Entry& e, int32_t* delta) {
+  if (e.id.level == 0 && groups_.frozen(e.id.chart)) {  // a closed group's root: never split
+    *delta = 0;
+    return -1.0;
+  }
   if (!e.drawn || e.overTol || e.id.level + 1 >= h_.params.depth) return splitPriority(e, delta);
   if (reuse_ && e.cacheSlack >= 0.0 && e.cacheEpoch == epoch_ && e.cacheRes == e.res && e.inside) {
     const glm::dvec3 m = view_.eye - e.cacheEye;
@@ -326,13 +330,37 @@ bool DualQueueAdapter::validMergeTop() {
   return false;
 }
 
+void DualQueueAdapter::collapseClosedCharts() {
+  if (!groups_.active) return;
+  std::vector<uint32_t> drop, charts;
+  for (const Entry& e : entries_)
+    if (e.id.level > 0 && groups_.frozen(e.id.chart)) drop.push_back(e.g);
+  for (uint32_t g : drop) {
+    charts.push_back(nodeOf(g).chart);
+    removeEntry(g);
+  }
+  std::sort(charts.begin(), charts.end());
+  charts.erase(std::unique(charts.begin(), charts.end()), charts.end());
+  for (uint32_t c : charts) {
+    Entry e;
+    e.id = {c, 0, 0, 0};
+    e.g = globalIndex(e.id);
+    if (slot_[e.g] < 0) addEntry(e);
+  }
+  opsSinceSort_ += uint32_t(drop.size());
+}
+
 const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& options, AdaptStats* stats) {
   AdaptStats st;
   frame_ = {};
   view_ = view;
   opt_ = options;
   ++frameNo_;
-  const uint32_t budget = options.maxNodes == 0 ? UINT32_MAX : options.maxNodes;
+  selectRootGroups(h_, view, options.maxNodes, options.tolerancePx, options.frustumCull, groups_);
+  // Every root counts as a node in the partition; the closed groups' roots count once a group in
+  // the returned cut.
+  const uint32_t chartBudget = groups_.chartBudget(options.maxNodes);
+  const uint32_t budget = chartBudget == 0 ? UINT32_MAX : chartBudget;
 
   if (entries_.empty())
     for (uint32_t c = 0; c < h_.chartCount(); ++c) {
@@ -344,6 +372,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
       addEntry(e);
     }
 
+  collapseClosedCharts();
   // Partition order follows the forest order, so the per-frame pass reads the hierarchy's
   // arrays nearly sequentially; re-sorted once the operations since the last sort reach 1/8.
   if (opsSinceSort_ * 8 > entries_.size()) {
@@ -483,6 +512,9 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
     const int32_t s = slot_[d.g];
     if (s >= 0 && entries_[s].overTol) st.nodeBudgetBound = true;
   }
+  if (groups_.active)  // a closed group's root over tolerance even at its maxRes
+    for (const Entry& e : entries_)
+      if (e.overTol && e.id.level + 1 < h_.params.depth && groups_.frozen(e.id.chart)) st.nodeBudgetBound = true;
 
   // The drawn cut (in partition order, which the operation history determines), with the
   // stitching constraint: gaps from the dense partition index (no hashing), raising resolutions
@@ -525,13 +557,15 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   frame_.drawnNodes = uint32_t(out_.nodes.size());
   if (needSplit) {
     enforceStitchConstraint(h_, out_, &view_, options.tolerancePx, &st);
-    holdNodeBudget(h_, out_, view_, options.maxNodes);
+    holdNodeBudget(h_, out_, view_, chartBudget);
     for (CutNode& n : out_.nodes) n.errorPx = float(screenError(h_, n.id, n.res, view_));
   }
   for (const CutNode& n : out_.nodes) st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
   opsSinceSort_ += frame_.splits + frame_.merges;
-  st.rootFloor = countVisibleRoots(h_, view, options.frustumCull);
+  st.rootFloor = groups_.rootFloor;
   st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, st.rootFloor);
+  markGroupedRoots(groups_, out_);
+  setCutCounts(out_, st);
   st.splits = frame_.splits;
   st.triangles = out_.triangles();
   if (stats) *stats = st;

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "runtime/adapt.h"
+#include "runtime/group_select.h"
 
 namespace gimlod {
 
@@ -165,6 +166,9 @@ class DualQueueAdapter {
   // Per forest node: 0 not in the partition, 1 in it but culled, 2 drawn; and the stitching level
   // gap to the finest drawn neighbour (valid for partition nodes after update).
   std::vector<uint8_t> drawnState_, gaps_;
+  GroupSelection groups_;  // this frame's closed groups (their roots never split)
+  // Replaces the kept nodes of every chart in a closed group by the chart's root.
+  void collapseClosedCharts();
   uint32_t opsSinceSort_ = 0;
 };
 

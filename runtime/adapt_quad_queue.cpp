@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "runtime/adapt_dual_queue.h"
+#include "runtime/group_select.h"
 
 namespace gimlod {
 namespace {
@@ -149,6 +150,7 @@ struct QuadQueueAdapter::State {
   BudgetStats st;
   Cut out;
   std::vector<SideNeighbour> scratch;
+  GroupSelection groups;  // this frame's closed groups (their roots never split)
 
   uint32_t maxRes(const NodeId& n) const { return h->maxRes(n); }
   uint32_t minRes() const { return h->params.minNodeResLog2; }
@@ -356,6 +358,7 @@ struct QuadQueueAdapter::State {
   // the triangle floor, and zero-effect merges of culled groups. Returns whether anything changed.
   double splitPriority(const Entry& e) const {
     if (!e.drawn || e.id.level + 1 >= h->params.depth) return -1.0;
+    if (e.id.level == 0 && groups.frozen(e.id.chart)) return -1.0;  // a closed group's root
     if (e.res >= maxRes(e.id)) return kStuckPriority * (1.0 + e.err);
     double t = double(tris(e.res));
     for (uint32_t i = 0; i < 4; ++i) {
@@ -609,6 +612,24 @@ struct QuadQueueAdapter::State {
     }
     return changed;
   }
+  // Replaces the kept nodes of every chart in a closed group by the chart's root.
+  void collapseClosedCharts() {
+    if (!groups.active) return;
+    std::vector<uint64_t> drop;
+    std::vector<uint32_t> charts;
+    for (const auto& [k, e] : cut)
+      if (e.id.level > 0 && groups.frozen(e.id.chart)) drop.push_back(k);
+    for (uint64_t k : drop) {
+      charts.push_back(NodeId::fromKey(k).chart);
+      cut.erase(k);
+    }
+    std::sort(charts.begin(), charts.end());
+    charts.erase(std::unique(charts.begin(), charts.end()), charts.end());
+    for (uint32_t c : charts) {
+      const NodeId root{c, 0, 0, 0};
+      if (!cut.count(root.key())) cut[root.key()].id = root;
+    }
+  }
   // Triangle floor of the drawn nodes at minRes (floors are recomputed after the round).
   uint64_t floorTrisNow() const { return uint64_t(drawn) * tris(minRes()); }
   // Drawn nodes a merge of the group under p removes (drawn children minus the drawn parent).
@@ -646,7 +667,12 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   s.st = {};
   BudgetStats& st = s.st;
 
+  selectRootGroups(h_, view, options.maxNodes, 0.0, options.frustumCull, s.groups);
+  // Every root counts as a node in the kept cut; the closed groups' roots count once a group in
+  // the returned cut.
+  s.opt.maxNodes = s.groups.chartBudget(options.maxNodes);
   s.cut.init(h_);
+  s.collapseClosedCharts();
   if (s.cut.empty())
     for (uint32_t c = 0; c < h_.chartCount(); ++c) {
       const NodeId root{c, 0, 0, 0};
@@ -705,12 +731,17 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   st.constraintSplits = as.constraintSplits;
   st.constraintRaises += as.constraintRaises;
   if (as.constraintSplits > 0) {
-    holdNodeBudget(h_, s.out, view, options.maxNodes);
+    holdNodeBudget(h_, s.out, view, s.opt.maxNodes);
     fitTriangleBudget(h_, s.out, view, options.maxTriangles);
   }
-  st.nodes = uint32_t(s.out.nodes.size());
+  markGroupedRoots(s.groups, s.out);
+  AdaptStats counts;
+  setCutCounts(s.out, counts);
+  st.nodes = counts.nodes;
+  st.closedGroups = counts.closedGroups;
+  st.groupedRoots = counts.groupedRoots;
   st.triangles = s.out.triangles();
-  st.rootFloor = countVisibleRoots(h_, view, options.frustumCull);
+  st.rootFloor = s.groups.rootFloor;
   st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, st.rootFloor);
   double sum = 0.0;
   for (CutNode& n : s.out.nodes) {

@@ -26,13 +26,15 @@ struct BudgetStats {
   uint32_t tieUndos = 0;      // rounds undone because the max error did not improve (tie rule)
   uint32_t undoneOps = 0;     // operations of undone rounds (not in refines..merges)
   bool opCapBound = false;    // maxOpsPerFrame stopped the frame early
-  uint32_t nodes = 0;         // drawn nodes
+  uint32_t nodes = 0;         // drawn nodes (Cut::nodeCount: a closed group's roots once)
   uint64_t triangles = 0;     // drawn triangles (<= maxTriangles)
   double maxErrorPx = 0.0, meanErrorPx = 0.0;
   uint32_t constraintRaises = 0, constraintSplits = 0;
   uint32_t budgetMerges = 0;  // merges forced by maxNodes or by the triangle floor (in merges)
-  uint32_t rootFloor = 0;         // visible chart roots (countVisibleRoots): no cut has fewer nodes
+  uint32_t rootFloor = 0;         // the smallest cut (AdaptStats::rootFloor): no cut has fewer nodes
   bool budgetBelowRoots = false;  // maxNodes < rootFloor: the cut is the visible roots, over maxNodes
+  uint32_t closedGroups = 0;      // closed groups drawn (AdaptStats::closedGroups)
+  uint32_t groupedRoots = 0;      // chart roots those groups draw
 };
 
 // Lowers resolutions of cut nodes (least error increase per removed triangle first, never below

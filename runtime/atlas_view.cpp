@@ -4,7 +4,7 @@
 
 namespace gimlod {
 
-AtlasView openAtlas(const std::filesystem::path& dir) {
+AtlasView openAtlas(const std::filesystem::path& dir, uint32_t maxRoots) {
   AtlasView a;
   a.dir = dir;
   a.manifest = readManifest(dir);
@@ -20,6 +20,7 @@ AtlasView openAtlas(const std::filesystem::path& dir) {
   } catch (const InputError& e) {
     throw InputError((dir / kManifestName).string() + ": " + e.what());
   }
+  a.hierarchy.groups = buildRootGroups(a.hierarchy, maxRoots);
   if (a.manifest.kind == AtlasKind::Geometry) {
     // A mesh atlas: the union of the chart roots' boxes.
     a.lo = glm::dvec3(std::numeric_limits<double>::infinity());

@@ -8,13 +8,17 @@
 #include <unordered_map>
 
 #include "runtime/adapt_dual_queue.h"
+#include "runtime/group_select.h"
 
 namespace gimlod {
 
 Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tolerancePx,
                           uint32_t maxNodes, AdaptStats* stats, bool frustumCull) {
   AdaptStats st;
-  const uint32_t budget = maxNodes == 0 ? UINT32_MAX : maxNodes;
+  GroupSelection groups;
+  selectRootGroups(h, view, maxNodes, tolerancePx, frustumCull, groups);
+  const uint32_t chartBudget = groups.chartBudget(maxNodes);  // every root a node (group_select.h)
+  const uint32_t budget = chartBudget == 0 ? UINT32_MAX : chartBudget;
   struct Candidate {
     double errorPx;
     NodeId id;
@@ -35,12 +39,17 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
     queue.push(candidate(root));
     ++count;
   }
-  st.rootFloor = count;
-  st.budgetBelowRoots = budgetBelowRoots(maxNodes, count);
+  st.rootFloor = groups.rootFloor;
+  st.budgetBelowRoots = budgetBelowRoots(maxNodes, st.rootFloor);
   while (!queue.empty()) {
     const Candidate c = queue.top();
     queue.pop();
     if (c.errorPx <= tolerancePx || c.id.level + 1 >= h.params.depth) {
+      done.push_back(c.id);
+      continue;
+    }
+    if (groups.frozen(c.id.chart)) {  // a closed group's root: held for the node budget
+      st.nodeBudgetBound = true;
       done.push_back(c.id);
       continue;
     }
@@ -66,7 +75,7 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
   for (const NodeId& n : done) cut.nodes.push_back({n, h.maxRes(n), 0.f});
   cut.rebuildIndex();
   enforceStitchConstraint(h, cut, &view, tolerancePx, &st);
-  if (st.constraintSplits > 0) holdNodeBudget(h, cut, view, maxNodes);
+  if (st.constraintSplits > 0) holdNodeBudget(h, cut, view, chartBudget);
   // Constraint splits give children their needed resolution: back to the fixed one (only raises,
   // so the constraint still holds).
   for (CutNode& n : cut.nodes) {
@@ -74,6 +83,8 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
     n.errorPx = float(screenError(h, n.id, n.res, view));
     st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
   }
+  markGroupedRoots(groups, cut);
+  setCutCounts(cut, st);
   st.triangles = cut.triangles();
   if (stats) *stats = st;
   return cut;
@@ -94,7 +105,11 @@ uint64_t budgetTris(uint32_t res) { return 2ull << (2 * res); }
 
 // Sets every node's errorPx and the cut's nodes, triangles and max/mean error in st.
 void measureBudgetCut(const Hierarchy& h, const ViewParams& view, Cut& cut, BudgetStats& st) {
-  st.nodes = uint32_t(cut.nodes.size());
+  AdaptStats counts;
+  setCutCounts(cut, counts);
+  st.nodes = counts.nodes;
+  st.closedGroups = counts.closedGroups;
+  st.groupedRoots = counts.groupedRoots;
   st.triangles = cut.triangles();
   double sum = 0.0;
   for (CutNode& n : cut.nodes) {
@@ -180,11 +195,15 @@ struct ErrorItem {
 Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options,
                                 BudgetStats* stats) {
   BudgetStats st;
-  const uint64_t nodeBudget = options.maxNodes == 0 ? UINT64_MAX : options.maxNodes;
+  GroupSelection groups;
+  selectRootGroups(h, view, options.maxNodes, 0.0, options.frustumCull, groups);
+  BudgetOptions o = options;
+  o.maxNodes = groups.chartBudget(options.maxNodes);  // every root a node (group_select.h)
+  const uint64_t nodeBudget = o.maxNodes == 0 ? UINT64_MAX : o.maxNodes;
   std::priority_queue<ErrorItem> queue;
   uint64_t count = 0;
   for (uint32_t c = 0; c < h.chartCount(); ++c) count += nodeDrawable(h, {c, 0, 0, 0}, view, options.frustumCull);
-  st.rootFloor = uint32_t(count);
+  st.rootFloor = groups.rootFloor;
   st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, st.rootFloor);
   // The roots' common resolution (each within its chart's finest).
   auto rootTriangles = [&](uint32_t res) {
@@ -208,6 +227,7 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
     const ErrorItem it = queue.top();
     queue.pop();
     if (it.id.level + 1 >= h.params.depth || it.res != h.maxRes(it.id)) continue;
+    if (it.id.level == 0 && groups.frozen(it.id.chart)) continue;  // a closed group's root
     const uint32_t cres = h.maxRes(it.id.child(0));
     uint64_t children = 0;
     for (uint32_t i = 0; i < 4; ++i) children += nodeDrawable(h, it.id.child(i), view, options.frustumCull);
@@ -221,7 +241,9 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
       if (nodeDrawable(h, ch, view, options.frustumCull)) queue.push({screenError(h, ch, cres, view), ch, cres});
     }
   }
-  Cut cut = finishBudgetCut(h, view, options, rootRes, ops, true, st);
+  Cut cut = finishBudgetCut(h, view, o, rootRes, ops, true, st);
+  markGroupedRoots(groups, cut);
+  measureBudgetCut(h, view, cut, st);
   if (stats) *stats = st;
   return cut;
 }

@@ -1,5 +1,7 @@
 #include "runtime/cut.h"
 
+#include <algorithm>
+
 namespace gimlod {
 namespace {
 
@@ -78,6 +80,19 @@ uint64_t Cut::triangles() const {
   uint64_t t = 0;
   for (const CutNode& n : nodes) t += 2ull << (2 * n.res);
   return t;
+}
+
+uint32_t Cut::nodeCount() const {
+  std::vector<int32_t> groups;
+  uint32_t count = 0;
+  for (const CutNode& n : nodes) {
+    if (n.group < 0)
+      ++count;
+    else
+      groups.push_back(n.group);
+  }
+  std::sort(groups.begin(), groups.end());
+  return count + uint32_t(std::unique(groups.begin(), groups.end()) - groups.begin());
 }
 
 bool adjacentNode(const Hierarchy& h, const NodeId& n, uint32_t side, NodeId* adj,

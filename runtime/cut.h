@@ -16,6 +16,9 @@ struct CutNode {
   // Attribute (normal, colour) texture resolution, log2 texels per side (assignAttributeResolutions);
   // 0 means unassigned: the page's own resolution.
   uint32_t texRes = 0;
+  // The closed group (hierarchy/root_groups.h) this chart root is drawn for, or -1: the roots of
+  // one closed group are one node of the cut (nodeCount).
+  int32_t group = -1;
 };
 
 // Open-addressing map from NodeId::key() to a position (linear probing, load <= 1/2): the cut is
@@ -58,6 +61,9 @@ struct Cut {
   // Position of node n in `nodes`, or -1.
   int32_t find(const NodeId& n) const { return index.find(n.key()); }
   uint64_t triangles() const;
+  // Nodes of the cut as a node budget counts them: each node, except that the roots of one closed
+  // group count once together.
+  uint32_t nodeCount() const;
 };
 
 // A neighbour drawn across one side of a node, with the span of that side it covers, in the

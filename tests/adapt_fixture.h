@@ -90,7 +90,8 @@ inline void expectWithinBudget(const Hierarchy& h, const Cut& cut, const BudgetO
   EXPECT_LE(cut.triangles(), o.maxTriangles);
   EXPECT_EQ(st.triangles, cut.triangles());
   EXPECT_EQ(countStitchViolations(h, cut), 0u);
-  EXPECT_LE(cut.nodes.size(), o.maxNodes) << st.constraintSplits << " constraint splits";
+  EXPECT_LE(cut.nodeCount(), o.maxNodes) << st.constraintSplits << " constraint splits";
+  EXPECT_EQ(st.nodes, cut.nodeCount());
 }
 
 }  // namespace gimlod::test

@@ -5,6 +5,9 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <vector>
+#include <sstream>
+#include <fstream>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -76,5 +79,37 @@ std::string fileBytes(const std::filesystem::path& path);
 
 // Runs a shell command; returns its exit status and captures stdout+stderr into `output`.
 int runCommand(const std::string& command, std::string* output = nullptr);
+
+// A CSV file as the commands write it: a header row, then rows of comma-separated fields.
+struct Csv {
+  std::vector<std::string> header;
+  std::vector<std::vector<std::string>> rows;
+  size_t col(const std::string& name) const {
+    for (size_t i = 0; i < header.size(); ++i)
+      if (header[i] == name) return i;
+    ADD_FAILURE() << "no column " << name;
+    return 0;
+  }
+  double num(size_t row, const std::string& name) const { return std::stod(rows[row][col(name)]); }
+};
+
+inline std::vector<std::string> splitComma(const std::string& line) {
+  std::vector<std::string> out;
+  std::stringstream ss(line);
+  std::string item;
+  while (std::getline(ss, item, ',')) out.push_back(item);
+  if (!line.empty() && line.back() == ',') out.push_back("");
+  return out;
+}
+
+inline Csv readCsv(const std::filesystem::path& p) {
+  Csv c;
+  std::ifstream in(p);
+  std::string line;
+  if (std::getline(in, line)) c.header = splitComma(line);
+  while (std::getline(in, line))
+    if (!line.empty()) c.rows.push_back(splitComma(line));
+  return c;
+}
 
 }  // namespace gimlod::test

@@ -26,7 +26,7 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o, const Pag
   s.height = o.height;
   s.background = o.background;
   s.pageIntervalsLog2 = a.manifest.maxNodeResLog2;
-  s.pageCapacity = AtlasScene::pagePoolPages(o, a.hierarchy.chartCount());
+  s.pageCapacity = AtlasScene::pagePoolPages(o, a.hierarchy.chartCount(), !a.hierarchy.groups.empty());
   s.layersPerArray = o.layersPerArray;
   s.minResLog2 = a.manifest.minNodeResLog2;
   s.maxResLog2 = a.manifest.maxNodeResLog2;
@@ -180,17 +180,24 @@ DrawStats AtlasScene::drawCut(const Camera& camera, const Cut& cut, FrameResult*
 
 namespace {
 
-// AtlasScene::nodeRoom of a pool of `pages` with `roots` locked.
-uint32_t nodeRoomOf(uint32_t pages, uint32_t roots) {
+// AtlasScene::nodeRoom of a pool of `pages` with `roots` locked. grouped: the hierarchy has
+// groups above the charts (hierarchy/root_groups.h); a closed group's roots count once against the
+// budget, so only the bound by the free pages holds (every non-root node counts against the budget).
+uint32_t nodeRoomOf(uint32_t pages, uint32_t roots, bool grouped) {
   const uint32_t free = (pages - roots) * 3 / 4;
-  return std::max(free, roots + free * 3 / 4);
+  return grouped ? free : std::max(free, roots + free * 3 / 4);
 }
 
 }  // namespace
 
-uint32_t AtlasScene::pagePoolPages(const SceneOptions& o, uint32_t charts) {
+uint32_t AtlasScene::pagePoolPages(const SceneOptions& o, uint32_t charts, bool grouped) {
   const uint64_t want = std::max<uint64_t>(o.pageCapacity, 1);
   uint64_t pages = charts < want / 2 ? want : uint64_t(charts) + std::max<uint64_t>(want / 2, 1);
+  // With groups, F = 4/3 N + 4 free pages hold cuts of N nodes (nodeRoomOf(R + F, R, true) >= N).
+  if (grouped && o.minNodeRoom > 0) {
+    const uint64_t n = o.minNodeRoom;
+    return uint32_t(std::min<uint64_t>(std::max(pages, uint64_t(charts) + (4 * n + 2) / 3 + 4), UINT32_MAX));
+  }
   // nodeRoomOf(R + F, R) >= R + 9/16 F - 2, so F = 16/9 (N - R) + 4 free pages hold cuts of N
   // nodes (with N <= R any pool does: the room is at least the roots).
   if (o.minNodeRoom > charts) {
@@ -208,7 +215,7 @@ uint32_t AtlasScene::nodeRoom() const {
   // N satisfy 4k <= N <= 3/4 free + k, hence k <= free / 4 and N <= free. The second bound is
   // the larger one for atlases of many charts (a scan's hundreds), where the first would leave
   // almost no room to split.
-  return nodeRoomOf(pool_.capacity(), atlas_.hierarchy.chartCount());
+  return nodeRoomOf(pool_.capacity(), atlas_.hierarchy.chartCount(), !atlas_.hierarchy.groups.empty());
 }
 
 uint32_t AtlasScene::nodeBudget(uint32_t maxNodes) const {
@@ -248,6 +255,9 @@ FrameResult AtlasScene::renderFrame(const Camera& camera, const BudgetOptions& o
   f.adapt.nodeBudgetBound = f.budget.nodes >= o.maxNodes;
   f.adapt.rootFloor = f.budget.rootFloor;
   f.adapt.budgetBelowRoots = f.budget.budgetBelowRoots;
+  f.adapt.nodes = f.budget.nodes;
+  f.adapt.closedGroups = f.budget.closedGroups;
+  f.adapt.groupedRoots = f.budget.groupedRoots;
   finishFrame(camera, view, f, t0);
   return f;
 }

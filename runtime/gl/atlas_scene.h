@@ -80,7 +80,7 @@ class AtlasScene {
   // (see the .cpp); larger budgets are lowered to it.
   uint32_t nodeRoom() const;
   // The pages of the pool a scene of `options` makes for an atlas of `charts` charts.
-  static uint32_t pagePoolPages(const SceneOptions& options, uint32_t charts);
+  static uint32_t pagePoolPages(const SceneOptions& options, uint32_t charts, bool grouped = false);
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
   AtlasRenderer& renderer() { return *renderer_; }

@@ -19,36 +19,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct Csv {
-  std::vector<std::string> header;
-  std::vector<std::vector<std::string>> rows;
-  size_t col(const std::string& name) const {
-    for (size_t i = 0; i < header.size(); ++i)
-      if (header[i] == name) return i;
-    ADD_FAILURE() << "no column " << name;
-    return 0;
-  }
-  double num(size_t row, const std::string& name) const { return std::stod(rows[row][col(name)]); }
-};
-
-std::vector<std::string> splitComma(const std::string& line) {
-  std::vector<std::string> out;
-  std::stringstream ss(line);
-  std::string item;
-  while (std::getline(ss, item, ',')) out.push_back(item);
-  if (!line.empty() && line.back() == ',') out.push_back("");
-  return out;
-}
-
-Csv readCsv(const fs::path& p) {
-  Csv c;
-  std::ifstream in(p);
-  std::string line;
-  if (std::getline(in, line)) c.header = splitComma(line);
-  while (std::getline(in, line))
-    if (!line.empty()) c.rows.push_back(splitComma(line));
-  return c;
-}
+using test::Csv;
+using test::readCsv;
 
 class BenchCliTest : public ::testing::Test {
  protected:
@@ -223,7 +195,7 @@ TEST(BenchCliRootFloor, BudgetsBelowTheVisibleRootsAreReported) {
     SCOPED_TRACE(mode);
     const fs::path out = dir.path() / mode;
     ASSERT_EQ(test::runCommand(test::appPath().string() + " bench '" + atlas.string() + "' -o '" + out.string() +
-                                   "' --orbit 3 --distance 3 --mode " + mode +
+                                   "' --orbit 3 --distance 3 --max-roots 0 --mode " + mode +
                                    fmt::format(" --nodes {},{},{}", low, justBelow, high) +
                                    (mode == "budget" ? " --triangles 200000" : " --tolerance 0.5"),
                                &output),
@@ -265,13 +237,33 @@ TEST(BenchCliRootFloor, BudgetsBelowTheVisibleRootsAreReported) {
   }
   // A budget above the roots: no warning.
   ASSERT_EQ(test::runCommand(test::appPath().string() + " bench '" + atlas.string() + "' -o '" +
-                                 (dir.path() / "above").string() + "' --orbit 2 --distance 3 " +
+                                 (dir.path() / "above").string() + "' --orbit 2 --distance 3 --max-roots 0 " +
                                  fmt::format("--nodes {}", high),
                              &output),
             0)
       << output;
   EXPECT_EQ(countOf(output, "visible chart roots"), 0u) << output;
   EXPECT_EQ(readCsv(dir.path() / "above" / "bench.csv").num(0, "budget_below_roots"), 0);
+  // The charts' roots in groups (the default): every algorithm holds budgets far below the chart
+  // count, and no frame is below the floor.
+  for (const std::string mode : {"budget", "error"}) {
+    SCOPED_TRACE("grouped, " + mode);
+    const fs::path out = dir.path() / ("grouped-" + mode);
+    ASSERT_EQ(test::runCommand(test::appPath().string() + " bench '" + atlas.string() + "' -o '" + out.string() +
+                                   "' --orbit 3 --distance 3 --mode " + mode + fmt::format(" --nodes {},{}", low, 16) +
+                                   (mode == "budget" ? " --triangles 200000" : " --tolerance 0.5"),
+                               &output),
+              0)
+        << output;
+    EXPECT_EQ(countOf(output, "visible"), 0u) << output;
+    const Csv csv = readCsv(out / "bench.csv");
+    ASSERT_EQ(csv.rows.size(), 2u * 3u * 3u);
+    for (size_t i = 0; i < csv.rows.size(); ++i) {
+      EXPECT_LE(csv.num(i, "nodes"), csv.num(i, "max_nodes")) << "row " << i;
+      EXPECT_LE(csv.num(i, "root_floor"), low) << "row " << i;
+      EXPECT_EQ(csv.num(i, "budget_below_roots"), 0) << "row " << i;
+    }
+  }
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 // per triangle are printed, not bounded here.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <fstream>
 #include <iostream>
 #include <string>
@@ -70,6 +71,30 @@ TEST_P(MeshFamilyTest, AtTheDefaultsWithinTheBounds) {
   }
   EXPECT_EQ(r["param_flipped"].get<uint64_t>(), 0u);
   EXPECT_LT(hausdorff, 0.1) << GetParam() << ": Hausdorff distance above 0.1% of the diagonal";
+  // A node budget of 100 holds in every frame, for every adapter in both modes, from an orbit that
+  // sees the whole mesh and one close enough to see a part: the chart roots are in groups.
+  for (const std::string mode : {"error --tolerance 0.5", "budget --triangles 200000"}) {
+    for (const std::string distance : {"1.5", "0.3"}) {
+      SCOPED_TRACE(mode + ", distance " + distance);
+      const fs::path out = tmp_->path() / (GetParam() + "-bench");
+      ASSERT_EQ(test::runCommand(test::appPath().string() + " bench " + test::quoted(atlas) + " -o " +
+                                     test::quoted(out) + " --orbit 6 --distance " + distance +
+                                     " --nodes 100 --mode " + mode,
+                                 &output),
+                0)
+          << output;
+      const test::Csv csv = test::readCsv(out / "bench.csv");
+      ASSERT_EQ(csv.rows.size(), 18u);
+      double floor = 0.0;
+      for (size_t i = 0; i < csv.rows.size(); ++i) {
+        EXPECT_LE(csv.num(i, "nodes"), 100.0) << csv.rows[i][csv.col("algorithm")] << ", frame " << i % 6;
+        EXPECT_EQ(csv.num(i, "budget_below_roots"), 0.0);
+        floor = std::max(floor, csv.num(i, "root_floor"));
+      }
+      std::cout << "  " << GetParam() << ", " << mode << ", distance " << distance << ": root floor at most "
+                << floor << "\n";
+    }
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Generated, MeshFamilyTest,

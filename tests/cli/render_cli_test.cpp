@@ -177,7 +177,7 @@ TEST(RenderCli, NodeBudgetBelowTheVisibleRootsIsReported) {
     const fs::path frames = dir.path() / (mode.empty() ? "error" : "budget");
     // From 3 bounding-box diagonals away every chart is in view.
     ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + frames.string() +
-                                   "' --orbit 3 --distance 3 --size 32x24 --max-nodes 16" + mode,
+                                   "' --orbit 3 --distance 3 --size 32x24 --max-nodes 16 --max-roots 0" + mode,
                                &out),
               0)
         << out;
@@ -200,6 +200,30 @@ TEST(RenderCli, NodeBudgetBelowTheVisibleRootsIsReported) {
       EXPECT_EQ(rows[r][col("root_floor")], std::to_string(charts));
       EXPECT_EQ(rows[r][col("budget_below_roots")], "1");
       EXPECT_EQ(rows[r][col("nodes")], std::to_string(charts));
+    }
+    // With the charts' roots in groups (the default), the same budget holds: closed groups are a
+    // node each, and no frame is below the floor.
+    const fs::path grouped = dir.path() / (mode.empty() ? "error-grouped" : "budget-grouped");
+    ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + grouped.string() +
+                                   "' --orbit 3 --distance 3 --size 32x24 --max-nodes 16" + mode,
+                               &out),
+              0)
+        << out;
+    EXPECT_EQ(out.find("visible"), std::string::npos) << out;
+    const auto g = readCsv(grouped / "stats.csv");
+    ASSERT_EQ(g.size(), 4u);
+    const auto& gh = g[0];
+    auto gcol = [&](const std::string& name) {
+      const size_t c = size_t(std::find(gh.begin(), gh.end(), name) - gh.begin());
+      EXPECT_LT(c, gh.size()) << name;
+      return c;
+    };
+    for (size_t r = 1; r < g.size(); ++r) {
+      EXPECT_LE(std::stoul(g[r][gcol("nodes")]), 16u);
+      EXPECT_LE(std::stoul(g[r][gcol("root_floor")]), 16u);
+      EXPECT_EQ(g[r][gcol("budget_below_roots")], "0");
+      EXPECT_GT(std::stoul(g[r][gcol("closed_groups")]), 0u);
+      EXPECT_GT(std::stoul(g[r][gcol("grouped_roots")]), std::stoul(g[r][gcol("closed_groups")]));
     }
   }
 }

@@ -23,10 +23,11 @@ namespace {
 class PageArraysTest : public test::GlContextTest<> {
  protected:
   // The shipped Rainier tile (1201^2 samples) in charts of chartSize^2, opened.
-  AtlasView buildRainier(uint32_t chartSize, uint32_t depth, uint32_t nodeRes) {
+  // maxRoots: as openAtlas (0: no groups above the charts).
+  AtlasView buildRainier(uint32_t chartSize, uint32_t depth, uint32_t nodeRes, uint32_t maxRoots = kDefaultMaxRoots) {
     const std::filesystem::path out = dir_.path() / ("rainier_" + std::to_string(chartSize));
-    test::buildRainierAtlas(out, chartSize, depth, nodeRes, 1);
-    return openAtlas(out);
+    if (!std::filesystem::exists(out)) test::buildRainierAtlas(out, chartSize, depth, nodeRes, 1);
+    return openAtlas(out, maxRoots);
   }
 
   static Camera overview(const AtlasView& atlas) {
@@ -39,9 +40,9 @@ class PageArraysTest : public test::GlContextTest<> {
 };
 
 // Charts of 17^2 make 75 x 75 = 5,625 charts, every one's root page resident: more pages than a
-// texture array holds.
+// texture array holds. Every chart root a root of the forest (no groups): the room holds them all.
 TEST_F(PageArraysTest, AnAtlasOfMoreChartsThanATextureArrayHoldsIsDrawn) {
-  const AtlasView atlas = buildRainier(17, 2, 8);
+  const AtlasView atlas = buildRainier(17, 2, 8, 0);
   GLint maxLayers = 0;
   glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &maxLayers);
   const uint32_t charts = atlas.hierarchy.chartCount();
@@ -78,6 +79,36 @@ TEST_F(PageArraysTest, AnAtlasOfMoreChartsThanATextureArrayHoldsIsDrawn) {
   const CrackReport r = test::captureCracks(scene, f.cut);
   EXPECT_GT(r.borderVertices, 10000u);
   EXPECT_EQ(r.mismatches, 0u);
+}
+
+// The same 5,625 charts with their roots in groups: a budget of 100 nodes holds, closed groups draw
+// their roots from every array with no missing page, and the stitched borders have no crack.
+TEST_F(PageArraysTest, GroupsOfManyChartsHoldABudgetOfAHundredNodes) {
+  const AtlasView atlas = buildRainier(17, 2, 8);
+  ASSERT_FALSE(atlas.hierarchy.groups.empty());
+  gl::SceneOptions so;
+  so.width = 192;
+  so.height = 144;
+  gl::AtlasScene scene(atlas, so);
+  for (const double distance : {0.7, 0.2}) {
+    SCOPED_TRACE(distance);
+    Camera cam = orbitPath(atlas.lo, atlas.hi, 1, distance, 35.0)[0];
+    fitClipPlanes(cam, atlas.lo, atlas.hi);
+    AdaptOptions o;
+    o.tolerancePx = 0.5;
+    o.maxNodes = 100;
+    const gl::FrameResult f = scene.renderFrame(cam, o);
+    EXPECT_LE(f.cut.nodeCount(), 100u);
+    EXPECT_GT(f.adapt.closedGroups, 0u);
+    EXPECT_FALSE(f.adapt.budgetBelowRoots);
+    EXPECT_EQ(f.pagesMissing, 0u);
+    const CrackReport r = test::captureCracks(scene, f.cut);
+    std::cout << "  distance " << distance << ": " << f.cut.nodeCount() << " nodes (" << f.adapt.closedGroups
+              << " closed groups of " << f.adapt.groupedRoots << " roots), " << f.cut.nodes.size()
+              << " drawn, max error " << f.maxErrorPx << " px; " << r.borderVertices << " border vertices\n";
+    EXPECT_GT(r.borderVertices, 1000u);
+    EXPECT_EQ(r.mismatches, 0u);
+  }
 }
 
 // The same atlas and frames with the pool in arrays of 50 layers (eight or more arrays) and in one:

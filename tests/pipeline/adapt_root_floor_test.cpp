@@ -1,7 +1,9 @@
-// The node budget's root floor: every chart is a quadtree root, so no cut has fewer nodes than the
-// visible roots. Every adapter (dual queue, quad queue, top-down greedy and the baselines) draws
-// exactly the visible roots when the budget is below them and says so (rootFloor,
-// budgetBelowRoots), and otherwise keeps the budget, on a hand-made forest and on the shipped scan.
+// The node budget's root floor: without groups above the charts every chart is a quadtree root, so
+// no cut has fewer nodes than the visible roots. Every adapter (dual queue, quad queue, top-down
+// greedy and the baselines) draws exactly the visible roots when the budget is below them and says
+// so (rootFloor, budgetBelowRoots), and otherwise keeps the budget, on a hand-made forest and on the
+// shipped scan. With the chart roots in groups (as openAtlas opens an atlas), the floor is the
+// visible top groups, and the budgets hold on the scans in every frame.
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 7.1 (error-threshold and triangle-budget
 // problems with a maximum node count).
 #include <gtest/gtest.h>
@@ -258,16 +260,31 @@ class RootFloorScan : public ::testing::Test {
 std::unique_ptr<test::TempDir> RootFloorScan::dir_;
 std::unique_ptr<AtlasView> RootFloorScan::atlas_;
 
+// The smallest cut for v, by the frustum test itself: the visible top groups of a hierarchy with
+// groups above its charts, else the visible chart roots.
+uint32_t visibleFloor(const Hierarchy& h, const ViewParams& v) {
+  if (h.groups.empty()) return uint32_t(visibleRootCharts(h, v, true).size());
+  uint32_t n = 0;
+  for (uint32_t t : h.groups.tops) {
+    const auto& b = h.groups.groups[t].bounds;
+    n += v.frustum.intersects({b[0], b[1], b[2]}, {b[3], b[4], b[5]});
+  }
+  return n;
+}
+
 // Along `views`, every adapter at node budgets 32, 64 and 256: at most the budget whenever the
-// visible roots are fewer, else the roots (flagged). Returns the frames checked above the floor.
-uint32_t checkBudgetsAlongPath(const std::string& name, const Hierarchy& h, const std::vector<ViewParams>& views) {
+// floor (visibleFloor) is lower, else the visible roots (flagged). Returns the frames checked at or
+// above the floor; *below, the frames below it.
+uint32_t checkBudgetsAlongPath(const std::string& name, const Hierarchy& h, const std::vector<ViewParams>& views,
+                               uint32_t* below = nullptr) {
   uint32_t minFloor = UINT32_MAX, maxFloor = 0;
   for (const ViewParams& v : views) {
-    minFloor = std::min(minFloor, countVisibleRoots(h, v, true));
-    maxFloor = std::max(maxFloor, countVisibleRoots(h, v, true));
+    minFloor = std::min(minFloor, visibleFloor(h, v));
+    maxFloor = std::max(maxFloor, visibleFloor(h, v));
   }
-  std::printf("%s: %u charts, visible roots %u to %u over %zu frames\n", name.c_str(), h.chartCount(), minFloor,
-              maxFloor, views.size());
+  std::printf("%s: %u charts, %zu top groups, floor %u to %u over %zu frames\n", name.c_str(), h.chartCount(),
+              h.groups.tops.size(), minFloor, maxFloor, views.size());
+  uint32_t belowAll = 0;
   EXPECT_GT(h.chartCount(), 32u) << "more charts than the smallest budget";
   uint32_t checkedAboveAll = 0;
   for (uint32_t budget : {32u, 64u, 256u}) {
@@ -275,17 +292,19 @@ uint32_t checkBudgetsAlongPath(const std::string& name, const Hierarchy& h, cons
     for (Named& a : allAdapters(h, 0.5, 100000, true)) {
       for (size_t i = 0; i < views.size(); ++i) {
         SCOPED_TRACE(name + ": " + a.name + ", budget " + std::to_string(budget) + ", frame " + std::to_string(i));
-        const uint32_t floor = uint32_t(visibleRootCharts(h, views[i], true).size());
+        const uint32_t floor = visibleFloor(h, views[i]);
         const Outcome o = a.run(views[i], budget);
         EXPECT_EQ(o.rootFloor, floor);
         EXPECT_EQ(o.budgetBelowRoots, budget < floor);
         constraintSplits += o.constraintSplits;
         if (floor <= budget) {
-          EXPECT_LE(o.cut.nodes.size(), budget);
+          EXPECT_LE(o.cut.nodeCount(), budget);
+          EXPECT_EQ(countStitchViolations(h, o.cut), 0u);
           ++checkedAbove;
           continue;
         }
         ++checkedBelow;
+        ++belowAll;
         const std::set<uint32_t> roots = visibleRootCharts(h, views[i], true);
         // note: a coherent adapter merges only until the budget holds, and a chart whose root
         // box meets the frustum may have every node of its kept cut culled; the top-down greedy
@@ -300,11 +319,22 @@ uint32_t checkBudgetsAlongPath(const std::string& name, const Hierarchy& h, cons
                 checkedAbove, checkedBelow, constraintSplits);
     checkedAboveAll += budget == 256 ? checkedAbove : 0;
   }
+  if (below) *below = belowAll;
   return checkedAboveAll;
 }
 
 TEST_F(RootFloorScan, NoAdapterDrawsMoreThanTheBudgetAboveTheFloor) {
-  EXPECT_GT(checkBudgetsAlongPath("bunny", atlas_->hierarchy, path()), 0u) << "the largest budget is above the visible roots";
+  // Every chart root a root of the forest (no groups).
+  Hierarchy forest = atlas_->hierarchy;
+  forest.groups = {};
+  uint32_t below = 0;
+  EXPECT_GT(checkBudgetsAlongPath("bunny", forest, path(), &below), 0u) << "the largest budget is above the visible roots";
+  EXPECT_GT(below, 0u) << "more visible chart roots than the smallest budget";
+  // The roots in groups (as openAtlas opens it): every budget holds in every frame.
+  ASSERT_FALSE(atlas_->hierarchy.groups.empty());
+  EXPECT_LE(atlas_->hierarchy.groups.tops.size(), kDefaultMaxRoots);
+  checkBudgetsAlongPath("bunny, grouped", atlas_->hierarchy, path(), &below);
+  EXPECT_EQ(below, 0u);
 }
 
 // Every shared scan at the default build options (61 to 120 charts): the same along an orbit
@@ -319,7 +349,14 @@ TEST_P(RootFloorSharedScan, NoAdapterDrawsMoreThanTheBudgetAboveTheFloor) {
   std::vector<ViewParams> views;
   for (const Camera& c : orbitPath(atlas.lo, atlas.hi, 8, 0.9, 30.0, 45.0)) views.push_back(makeViewParams(c, 640, 480));
   for (const Camera& c : orbitPath(atlas.lo, atlas.hi, 16, 0.2, 20.0, 45.0)) views.push_back(makeViewParams(c, 640, 480));
-  checkBudgetsAlongPath(name, atlas.hierarchy, views);
+  Hierarchy forest = atlas.hierarchy;
+  forest.groups = {};
+  checkBudgetsAlongPath(name, forest, views);
+  // In groups (as openAtlas opens it): a budget of 32 holds in every frame, on every scan.
+  ASSERT_FALSE(atlas.hierarchy.groups.empty());
+  uint32_t below = 0;
+  checkBudgetsAlongPath(name + ", grouped", atlas.hierarchy, views, &below);
+  EXPECT_EQ(below, 0u);
 }
 
 INSTANTIATE_TEST_SUITE_P(SharedScans, RootFloorSharedScan, ::testing::ValuesIn(test::sharedScanNames()),
