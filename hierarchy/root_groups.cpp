@@ -74,7 +74,14 @@ RootGroups buildRootGroups(const Hierarchy& h, uint32_t maxRoots) {
   for (uint32_t c : order)
     if (h.maxRes({c, 0, 0, 0}) + 1 < h.params.depth) return out;  // a root could need a split
 
-  const uint32_t minRes = h.params.minNodeResLog2;
+  const uint32_t minRes = h.params.minNodeResLog2, resCount = h.params.resCount();
+  out.minRes = minRes;
+  out.resCount = resCount;
+  auto growErrors = [&](uint32_t g, auto&& errorAt) {
+    out.errors.resize(size_t(g + 1) * resCount, 0.f);
+    for (uint32_t r = 0; r < resCount; ++r)
+      out.errors[size_t(g) * resCount + r] = std::max(out.errors[size_t(g) * resCount + r], errorAt(minRes + r));
+  };
   // First level: runs of kGroupFanout charts.
   for (uint32_t i = 0; i < order.size(); i += kGroupFanout) {
     RootGroups::Group g;
@@ -88,6 +95,7 @@ RootGroups buildRootGroups(const Hierarchy& h, uint32_t maxRoots) {
       growBox(g.bounds, h.bounds(root));
       g.errorMin = std::max(g.errorMin, h.error(root, minRes));
       g.errorMax = std::max(g.errorMax, h.error(root, h.maxRes(root)));
+      growErrors(uint32_t(out.groups.size()), [&](uint32_t r) { return h.error(root, std::min(r, h.maxRes(root))); });
     }
     out.groups.push_back(g);
   }
@@ -109,6 +117,7 @@ RootGroups buildRootGroups(const Hierarchy& h, uint32_t maxRoots) {
         growBox(g.bounds, child.bounds);
         g.errorMin = std::max(g.errorMin, child.errorMin);
         g.errorMax = std::max(g.errorMax, child.errorMax);
+        growErrors(uint32_t(self), [&](uint32_t r) { return out.error(k, r); });
       }
       out.groups.push_back(g);
     }

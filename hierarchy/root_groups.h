@@ -7,6 +7,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -36,6 +37,11 @@ struct RootGroups {
   std::vector<Group> groups;       // first-level groups first, then each level above in turn
   std::vector<uint32_t> tops;      // the groups without a parent, ascending
   std::vector<int32_t> chartGroup; // per chart: its first-level group; -1 for an empty chart
+  // Per group and resolution r in [minRes, minRes + resCount): the largest error of a member root
+  // drawn at r, or at its maxRes where that is lower (world units).
+  std::vector<float> errors;
+  uint32_t minRes = 0, resCount = 0;
+  float error(uint32_t g, uint32_t r) const { return errors[size_t(g) * resCount + (r - minRes)]; }
 
   bool empty() const { return groups.empty(); }
   bool chartsBelow(uint32_t g) const { return groups[g].level == 0; }

@@ -77,27 +77,8 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
   const uint32_t budget = chartBudget == 0 ? UINT32_MAX : chartBudget;
 
   auto makeCandidate = [&](const NodeId& n) {
-    Candidate c{n, neededResolution(h, n, view, tol), false, 0.0};
-    const uint32_t rmax = h.maxRes(n);
-    const bool leaf = n.level + 1 >= h.params.depth || groups.frozen(n.chart);
-    if (c.res > rmax) {
-      c.overTol = true;
-      c.res = rmax;
-      // Over tolerance: split first, worst error first.
-      c.priority = leaf ? -1.0 : overTolerancePriority(screenError(h, n, rmax, view));
-      return c;
-    }
-    if (leaf) {
-      c.priority = -1.0;
-      return c;
-    }
-    uint64_t childTris = 0;
-    for (uint32_t i = 0; i < 4; ++i) {
-      const NodeId ch = n.child(i);
-      if (!visible(h, ch, view, options.frustumCull)) continue;
-      childTris += tris(std::min(neededResolution(h, ch, view, tol), h.maxRes(ch)));
-    }
-    c.priority = double(tris(c.res)) - double(childTris);  // triangles saved by splitting
+    Candidate c{n, 0, false, 0.0};
+    c.priority = topDownSplitPriority(h, n, view, tol, options.frustumCull, groups.frozen(n.chart), &c.res, &c.overTol);
     return c;
   };
 
@@ -166,6 +147,24 @@ void setCutCounts(const Cut& cut, AdaptStats& st) {
   st.groupedRoots = 0;
   for (const CutNode& n : cut.nodes) st.groupedRoots += n.group >= 0;
   st.closedGroups = st.nodes - (uint32_t(cut.nodes.size()) - st.groupedRoots);
+}
+
+double topDownSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParams& view, double tolPx, bool cull,
+                            bool held, uint32_t* res, bool* overTol) {
+  const uint32_t rmax = h.maxRes(n);
+  const uint32_t need = neededResolution(h, n, view, tolPx);
+  const bool leaf = held || n.level + 1 >= h.params.depth;
+  *overTol = need > rmax;
+  *res = std::min(need, rmax);
+  if (leaf) return -1.0;
+  if (*overTol) return overTolerancePriority(screenError(h, n, rmax, view));  // the worst error first
+  uint64_t childTris = 0;
+  for (uint32_t i = 0; i < 4; ++i) {
+    const NodeId ch = n.child(i);
+    if (!visible(h, ch, view, cull)) continue;
+    childTris += tris(std::min(neededResolution(h, ch, view, tolPx), h.maxRes(ch)));
+  }
+  return double(tris(*res)) - double(childTris);  // triangles saved by splitting
 }
 
 uint32_t countVisibleRoots(const Hierarchy& h, const ViewParams& v, bool cull) {

@@ -76,6 +76,14 @@ inline bool budgetBelowRoots(uint32_t maxNodes, uint32_t rootFloor) { return max
 Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptOptions& options,
                         AdaptStats* stats = nullptr);
 
+// The top-down greedy's split priority of node n (adaptErrorThreshold, paper 7.1): the triangles
+// saved by drawing its visible children, each at its needed resolution, instead of n at its own;
+// for a node over tolerance even at its maxRes, overTolerancePriority of that error (those split
+// first, the worst first); -1 for a leaf or a held node (held: a closed group's root). Sets *res to
+// n's needed resolution clamped to its maxRes, and *overTol.
+double topDownSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParams& view, double tolPx, bool cull,
+                            bool held, uint32_t* res, bool* overTol);
+
 // Lowest resolution of n whose screen error is within tolerance, or maxRes + 1 if none.
 uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tolPx);
 

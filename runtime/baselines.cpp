@@ -196,7 +196,7 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
                                 BudgetStats* stats) {
   BudgetStats st;
   GroupSelection groups;
-  selectRootGroups(h, view, options.maxNodes, 0.0, options.frustumCull, groups);
+  selectRootGroups(h, view, options.maxNodes, 0.0, options.frustumCull, groups, options.maxTriangles);
   BudgetOptions o = options;
   o.maxNodes = groups.chartBudget(options.maxNodes);  // every root a node (group_select.h)
   const uint64_t nodeBudget = o.maxNodes == 0 ? UINT64_MAX : o.maxNodes;

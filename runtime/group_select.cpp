@@ -27,8 +27,107 @@ struct Candidate {
 
 }  // namespace
 
+namespace {
+
+// Opens the closed groups of the frontier that a top-down pass opens with groups as nodes. An item
+// is a closed group or a node of an open chart, and the best goes first while the cut's nodes fit
+// maxNodes (and, in budget mode, their triangles at the minimum resolution fit maxTriangles); the
+// chart nodes are split only to spend the budget as the adapters will. tolerancePx > 0: the
+// top-down greedy (adaptErrorThreshold): a closed group goes only when it holds a chart root over
+// tolerance even at its maxRes (overTolerancePriority of that error seen from its box), a node by
+// topDownSplitPriority. Else (triangle budget): the worst error first, groups and nodes alike, each
+// drawn at the resolution the budgets leave a node (maxTriangles / maxNodes triangles).
+void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes, double tolerancePx,
+                       uint64_t maxTriangles, bool cull, std::vector<uint8_t>& open) {
+  const bool threshold = tolerancePx > 0.0;
+  // Budget mode: the cut's nodes at the minimum resolution stay within the triangle budget.
+  const uint64_t maxCount =
+      threshold ? maxNodes : std::min<uint64_t>(maxNodes, maxTriangles / (2ull << (2 * h.params.minNodeResLog2)));
+  const RootGroups& rg = h.groups;
+  struct Item {
+    double priority;
+    int64_t group;  // >= 0: a group; else the chart node `node`
+    NodeId node;
+    bool operator<(const Item& o) const { return priority < o.priority; }
+  };
+  // Budget mode: errors at the resolution a node of the budgets gets, maxTriangles / maxCount
+  // triangles, within the nodes' resolutions.
+  uint32_t budgetRes = h.params.minNodeResLog2;
+  while (budgetRes < h.params.maxNodeResLog2 && maxCount > 0 && (2ull << (2 * (budgetRes + 1))) * maxCount <= maxTriangles)
+    ++budgetRes;
+  std::priority_queue<Item> queue;
+  uint64_t count = 0;
+  auto pushGroup = [&](uint32_t g) {
+    const RootGroups::Group& gr = rg.groups[g];
+    if (!boxVisible(gr.bounds, v, cull)) return;
+    ++count;
+    const double scale = v.pixelsPerRadian / std::max(boxDistance(gr.bounds, v.eye), v.minDistance);
+    if (threshold) {
+      const double px = double(gr.errorMax) * scale;
+      if (px > tolerancePx) queue.push({overTolerancePriority(px), g, {}});
+    } else {
+      queue.push({double(rg.error(g, budgetRes)) * scale, g, {}});
+    }
+  };
+  auto pushNode = [&](const NodeId& n) {
+    if (!nodeDrawable(h, n, v, cull)) return;
+    ++count;
+    if (!threshold) {  // the worst error first
+      if (n.level + 1 < h.params.depth) queue.push({screenError(h, n, std::min(budgetRes, h.maxRes(n)), v), -1, n});
+      return;
+    }
+    uint32_t res = 0;
+    bool over = false;
+    const double p = topDownSplitPriority(h, n, v, tolerancePx, cull, false, &res, &over);
+    if (p > 0.0) queue.push({p, -1, n});
+  };
+  // The frontier: top-down, open groups hand their children on.
+  std::vector<uint8_t> reached(rg.groups.size(), 0);
+  for (uint32_t t : rg.tops) reached[t] = 1;
+  for (uint32_t g = uint32_t(rg.groups.size()); g-- > 0;) {
+    if (!reached[g]) continue;
+    const RootGroups::Group& gr = rg.groups[g];
+    if (!open[g]) {
+      pushGroup(g);
+    } else if (gr.level > 0) {
+      for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) reached[c] = 1;
+    } else {
+      for (uint32_t i = gr.begin; i < gr.end; ++i) pushNode({rg.order[i], 0, 0, 0});
+    }
+  }
+  while (!queue.empty()) {
+    const Item it = queue.top();
+    queue.pop();
+    uint64_t k = 0;  // visible children
+    if (it.group >= 0) {
+      const RootGroups::Group& gr = rg.groups[size_t(it.group)];
+      if (gr.level == 0) {
+        for (uint32_t i = gr.begin; i < gr.end; ++i) k += nodeDrawable(h, {rg.order[i], 0, 0, 0}, v, cull);
+      } else {
+        for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) k += boxVisible(rg.groups[c].bounds, v, cull);
+      }
+      if (count - 1 + k > maxCount) continue;
+      open[size_t(it.group)] = 1;
+      --count;
+      if (gr.level == 0) {
+        for (uint32_t i = gr.begin; i < gr.end; ++i) pushNode({rg.order[i], 0, 0, 0});
+      } else {
+        for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) pushGroup(c);
+      }
+      continue;
+    }
+    for (uint32_t i = 0; i < 4; ++i) k += nodeDrawable(h, it.node.child(i), v, cull);
+    // A node none of whose children is drawn stays: the coherent adapters keep it in the cut.
+    if (k == 0 || count - 1 + k > maxCount) continue;
+    --count;
+    for (uint32_t i = 0; i < 4; ++i) pushNode(it.node.child(i));
+  }
+}
+
+}  // namespace
+
 void selectRootGroups(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes, double tolerancePx, bool cull,
-                      GroupSelection& out) {
+                      GroupSelection& out, uint64_t maxTriangles) {
   const RootGroups& rg = h.groups;
   out.closedGroups = out.frozenRoots = out.opened = out.rootFloor = 0;
   out.active = !rg.empty() && maxNodes != 0;
@@ -37,97 +136,45 @@ void selectRootGroups(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes
     out.rootFloor = countVisibleRoots(h, v, cull);
     return;
   }
-  auto visibleChildren = [&](uint32_t g) {
-    uint32_t n = 0;
-    const RootGroups::Group& gr = rg.groups[g];
-    if (gr.level == 0) {
-      for (uint32_t k = gr.begin; k < gr.end; ++k) n += nodeDrawable(h, {rg.order[k], 0, 0, 0}, v, cull);
-    } else {
-      for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) n += boxVisible(rg.groups[c].bounds, v, cull);
-    }
-    return n;
-  };
-  auto scaleAt = [&](const std::array<float, 6>& b) {
-    return v.pixelsPerRadian / std::max(boxDistance(b, v.eye), v.minDistance);
-  };
-  const bool threshold = tolerancePx > 0.0;
-  // Over tolerance even at its maxRes: only a split can hold the tolerance.
-  auto groupNeedsSplit = [&](uint32_t g) {
-    return threshold && double(rg.groups[g].errorMax) * scaleAt(rg.groups[g].bounds) > tolerancePx;
-  };
-  auto chartNeedsSplit = [&](uint32_t c) {
-    const NodeId root{c, 0, 0, 0};
-    return double(h.error(root, h.maxRes(root))) * scaleAt(h.bounds(root)) > tolerancePx;
-  };
-  uint32_t count = 0;  // roots of the cut: closed groups and open charts (visible)
-  for (uint32_t t : rg.tops) count += boxVisible(rg.groups[t].bounds, v, cull);
-  out.rootFloor = count;
+  for (uint32_t t : rg.tops) out.rootFloor += boxVisible(rg.groups[t].bounds, v, cull);
   std::vector<uint8_t> open(rg.groups.size(), out.active ? 0 : 1);
-  // Opens g if the roots, plus three nodes for one split of each reserved open chart, still fit the
-  // budget. reserveAll: every open chart reserves a split; else only those over tolerance at maxRes.
-  uint64_t reserved = 0;  // open charts with a split reserved
-  auto tryOpen = [&](uint32_t g, bool reserveAll) {
-    const RootGroups::Group& gr = rg.groups[g];
-    uint32_t k = 0, r = 0;
-    if (gr.level == 0) {
-      for (uint32_t i = gr.begin; i < gr.end; ++i) {
-        const uint32_t c = rg.order[i];
-        if (!nodeDrawable(h, {c, 0, 0, 0}, v, cull)) continue;
-        ++k;
-        r += reserveAll || chartNeedsSplit(c);
+  if (out.active) {
+    // First every group, the largest error at the minimum resolution first, while the cut's roots
+    // (closed groups and open charts) and three nodes for a split of each open chart fit the
+    // budget: with four nodes a chart within it, every group opens, and the cut is the one the
+    // forest gives without groups.
+    auto errorMinPx = [&](uint32_t g) {
+      const RootGroups::Group& gr = rg.groups[g];
+      return double(gr.errorMin) * v.pixelsPerRadian / std::max(boxDistance(gr.bounds, v.eye), v.minDistance);
+    };
+    std::priority_queue<Candidate> queue;
+    uint64_t count = 0, openCharts = 0;
+    for (uint32_t t : rg.tops)
+      if (boxVisible(rg.groups[t].bounds, v, cull)) {
+        ++count;
+        queue.push({errorMinPx(t), t});
       }
-    } else {
-      for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) k += boxVisible(rg.groups[c].bounds, v, cull);
-    }
-    if (uint64_t(count) - 1 + k + 3 * (reserved + r) > maxNodes) return false;
-    count = count - 1 + k;
-    reserved += r;
-    open[g] = 1;
-    ++out.opened;
-    return true;
-  };
-  // Pops the queue, opening while tryOpen allows; an opened group's child groups that pass `admit`
-  // join the queue.
-  auto openFrom = [&](std::priority_queue<Candidate>& queue, bool reserveAll, auto&& admit, auto&& priority) {
     while (!queue.empty()) {
       const uint32_t g = queue.top().group;
       queue.pop();
-      if (!tryOpen(g, reserveAll) || rg.groups[g].level == 0) continue;
-      for (uint32_t c = rg.groups[g].childBegin; c < rg.groups[g].childEnd; ++c)
-        if (boxVisible(rg.groups[c].bounds, v, cull) && admit(c)) queue.push({priority(c), c});
-    }
-  };
-  if (out.active) {
-    // First the groups that hold a chart over tolerance even at its maxRes, the worst first: each
-    // open chart in that state keeps room for a split.
-    if (threshold) {
-      std::priority_queue<Candidate> queue;
-      auto errorMaxPx = [&](uint32_t g) { return double(rg.groups[g].errorMax) * scaleAt(rg.groups[g].bounds); };
-      for (uint32_t t : rg.tops)
-        if (boxVisible(rg.groups[t].bounds, v, cull) && groupNeedsSplit(t)) queue.push({errorMaxPx(t), t});
-      openFrom(queue, false, groupNeedsSplit, errorMaxPx);
-    }
-    // Then any group, the largest error at the minimum resolution first, while every open chart can
-    // still split once: with few enough charts (4 of them and their splits within the budget) every
-    // group opens, and the cut is the one the forest gives without groups.
-    reserved = 0;
-    for (uint32_t g = 0; g < rg.groups.size() && rg.groups[g].level == 0; ++g)
-      if (open[g])
-        for (uint32_t i = rg.groups[g].begin; i < rg.groups[g].end; ++i)
-          reserved += nodeDrawable(h, {rg.order[i], 0, 0, 0}, v, cull);
-    auto errorMinPx = [&](uint32_t g) { return double(rg.groups[g].errorMin) * scaleAt(rg.groups[g].bounds); };
-    std::priority_queue<Candidate> queue;
-    std::vector<uint8_t> reached(rg.groups.size(), 0);
-    for (uint32_t t : rg.tops) reached[t] = 1;
-    for (uint32_t g = uint32_t(rg.groups.size()); g-- > 0;) {
-      if (!reached[g] || !boxVisible(rg.groups[g].bounds, v, cull)) continue;
-      if (!open[g]) {
-        queue.push({errorMinPx(g), g});
-      } else if (rg.groups[g].level > 0) {
-        for (uint32_t c = rg.groups[g].childBegin; c < rg.groups[g].childEnd; ++c) reached[c] = 1;
+      const RootGroups::Group& gr = rg.groups[g];
+      uint64_t k = 0, charts = 0;
+      if (gr.level == 0) {
+        for (uint32_t i = gr.begin; i < gr.end; ++i) charts += nodeDrawable(h, {rg.order[i], 0, 0, 0}, v, cull);
+        k = charts;
+      } else {
+        for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) k += boxVisible(rg.groups[c].bounds, v, cull);
       }
+      if (count - 1 + k + 3 * (openCharts + charts) > maxNodes) continue;
+      count = count - 1 + k;
+      openCharts += charts;
+      open[g] = 1;
+      if (gr.level > 0)
+        for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c)
+          if (boxVisible(rg.groups[c].bounds, v, cull)) queue.push({errorMinPx(c), c});
     }
-    openFrom(queue, true, [](uint32_t) { return true; }, errorMinPx);
+    // Then the groups a top-down pass opens for their errors.
+    openGroupsTopDown(h, v, maxNodes, tolerancePx, maxTriangles, cull, open);
   }
   // A group is closed when it is not open and every group above it is: top-down, groups above first.
   out.closedOf.assign(h.chartCount(), -1);
@@ -136,6 +183,7 @@ void selectRootGroups(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes
   for (uint32_t g = uint32_t(rg.groups.size()); g-- > 0;) {
     if (!reached[g]) continue;
     const RootGroups::Group& gr = rg.groups[g];
+    out.opened += open[g];
     if (open[g]) {
       if (gr.level > 0)
         for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) reached[c] = 1;

@@ -30,18 +30,22 @@ struct GroupSelection {
 };
 
 // Chooses the closed groups for a view and a node budget. With no groups or no limit (maxNodes 0)
-// every group is open (active false). Otherwise it starts from the visible top groups, closed, and
-// opens groups while the roots of the cut (closed groups and open charts), plus three nodes for one
-// split of each open chart that may need one, fit maxNodes:
-// - tolerancePx > 0 (error threshold) first opens the groups holding a chart root over tolerance
-//   even at its maxRes, the worst first; only such charts keep room for a split;
-// - then any group, the largest error at the minimum resolution first, every open chart keeping
-//   room for a split. With four nodes a chart within the budget, every group opens.
-// Errors are a group's largest root errors seen from the group's box. A closed group's roots need
-// no split to hold the tolerance when they are within it at their maxRes: they raise their
-// resolution instead, which costs no node.
+// every group is open (active false). Otherwise, from the visible top groups, closed:
+// - it opens groups, the largest error at the minimum resolution first, while the cut's roots
+//   (closed groups and open charts) and three nodes for a split of each open chart fit maxNodes:
+//   with four nodes a chart within the budget every group opens, and the cut is the forest's;
+// - then it opens the groups that a top-down pass with groups as nodes opens. With tolerancePx > 0
+//   (the error-threshold adapters) that is the paper's top-down greedy: a closed group that holds a
+//   chart root over tolerance even at its maxRes competes, by that error, with the split priorities
+//   of the open charts' nodes (topDownSplitPriority), the best first while the cut fits maxNodes.
+//   Else (triangle-budget adapters, tolerancePx <= 0) the worst error goes first, groups and nodes
+//   alike, each drawn at the resolution the budgets leave a node (maxTriangles / maxNodes
+//   triangles), while the cut fits maxNodes and its nodes at the minimum resolution fit
+//   maxTriangles.
+// A closed group's roots within tolerance at their maxRes need no split: they raise their
+// resolution, which costs no node. Errors of a group are its roots' largest, seen from its box.
 void selectRootGroups(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes, double tolerancePx, bool cull,
-                      GroupSelection& out);
+                      GroupSelection& out, uint64_t maxTriangles = 0);
 
 // Marks the cut's nodes that are roots of closed groups (CutNode::group), which Cut::nodeCount then
 // counts once per group.
