@@ -5,12 +5,16 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <functional>
+#include <memory>
+#include <string>
 #include <utility>
 #include <vector>
 
 #include "runtime/adapt.h"
 #include "runtime/adapt_dual_queue.h"
 #include "runtime/adapt_quad_queue.h"
+#include "runtime/baselines.h"
 #include "runtime/stitch.h"
 #include "runtime/camera.h"
 #include "tests/synthetic_terrain.h"
@@ -92,6 +96,82 @@ inline void expectWithinBudget(const Hierarchy& h, const Cut& cut, const BudgetO
   EXPECT_EQ(countStitchViolations(h, cut), 0u);
   EXPECT_LE(cut.nodeCount(), o.maxNodes) << st.constraintSplits << " constraint splits";
   EXPECT_EQ(st.nodes, cut.nodeCount());
+}
+
+// One adapter under test: adapts to a view with a node budget; returns the cut with its counts.
+struct Outcome {
+  Cut cut;
+  uint32_t rootFloor = 0;
+  bool budgetBelowRoots = false;
+  uint32_t constraintSplits = 0;
+  uint32_t nodes = 0, closedGroups = 0, groupedRoots = 0;  // the adapter's stats
+};
+using Run = std::function<Outcome(const ViewParams&, uint32_t maxNodes)>;
+struct NamedAdapter {
+  std::string name;
+  Run run;
+  bool coherent = false;  // keeps its cut across calls
+};
+
+inline Outcome outcomeOf(Cut cut, const AdaptStats& st) {
+  return {std::move(cut), st.rootFloor, st.budgetBelowRoots, st.constraintSplits, st.nodes, st.closedGroups, st.groupedRoots};
+}
+inline Outcome outcomeOf(Cut cut, const BudgetStats& st) {
+  return {std::move(cut), st.rootFloor, st.budgetBelowRoots, st.constraintSplits, st.nodes, st.closedGroups, st.groupedRoots};
+}
+
+// Every adapter, in error-threshold mode at tolerancePx and in triangle-budget mode at
+// maxTriangles. The coherent adapters keep their state across calls (a camera path).
+inline std::vector<NamedAdapter> allAdapters(const Hierarchy& h, double tolerancePx, uint64_t maxTriangles, bool cull) {
+  auto dq = std::make_shared<DualQueueAdapter>(h);
+  auto qq = std::make_shared<QuadQueueAdapter>(h);
+  auto adaptOpts = [=](uint32_t maxNodes) {
+    AdaptOptions o;
+    o.tolerancePx = tolerancePx;
+    o.maxNodes = maxNodes;
+    o.frustumCull = cull;
+    return o;
+  };
+  auto budgetOpts = [=](uint32_t maxNodes) {
+    BudgetOptions o;
+    o.maxTriangles = maxTriangles;
+    o.maxNodes = maxNodes;
+    o.frustumCull = cull;
+    return o;
+  };
+  const Hierarchy* hp = &h;
+  return {
+      {"dual queue", [=](const ViewParams& v, uint32_t n) {
+         AdaptStats st;
+         Cut cut = dq->update(v, adaptOpts(n), &st);
+         return outcomeOf(std::move(cut), st);
+       }, true},
+      {"top-down greedy", [=](const ViewParams& v, uint32_t n) {
+         AdaptStats st;
+         Cut cut = adaptTopDownGreedy(*hp, v, tolerancePx, n, &st, cull);
+         return outcomeOf(std::move(cut), st);
+       }},
+      {"fixed granularity", [=](const ViewParams& v, uint32_t n) {
+         AdaptStats st;
+         Cut cut = adaptFixedGranularity(*hp, v, tolerancePx, n, &st, cull);
+         return outcomeOf(std::move(cut), st);
+       }},
+      {"quad queue", [=](const ViewParams& v, uint32_t n) {
+         BudgetStats st;
+         Cut cut = qq->update(v, budgetOpts(n), &st);
+         return outcomeOf(std::move(cut), st);
+       }, true},
+      {"fixed granularity (triangle budget)", [=](const ViewParams& v, uint32_t n) {
+         BudgetStats st;
+         Cut cut = adaptFixedGranularityBudget(*hp, v, budgetOpts(n), &st);
+         return outcomeOf(std::move(cut), st);
+       }},
+      {"greedy (triangle budget)", [=](const ViewParams& v, uint32_t n) {
+         BudgetStats st;
+         Cut cut = adaptGreedyBudget(*hp, v, budgetOpts(n), &st);
+         return outcomeOf(std::move(cut), st);
+       }},
+  };
 }
 
 }  // namespace gimlod::test

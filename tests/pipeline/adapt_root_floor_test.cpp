@@ -57,81 +57,9 @@ void expectExactlyRoots(const Cut& cut, const std::set<uint32_t>& charts) {
   EXPECT_EQ(drawn, charts);
 }
 
-// One adapter under test: adapts to a view with a node budget; returns the cut and fills the
-// root floor, the flag, and the constraint splits.
-struct Outcome {
-  Cut cut;
-  uint32_t rootFloor = 0;
-  bool budgetBelowRoots = false;
-  uint32_t constraintSplits = 0;
-};
-using Run = std::function<Outcome(const ViewParams&, uint32_t maxNodes)>;
-struct Named {
-  std::string name;
-  Run run;
-  bool coherent = false;  // keeps its cut across calls
-};
-
-Outcome fromAdapt(Cut cut, const AdaptStats& st) {
-  return {std::move(cut), st.rootFloor, st.budgetBelowRoots, st.constraintSplits};
-}
-Outcome fromBudget(Cut cut, const BudgetStats& st) {
-  return {std::move(cut), st.rootFloor, st.budgetBelowRoots, st.constraintSplits};
-}
-
-// Every adapter, in error-threshold mode at tolerancePx and in triangle-budget mode at
-// maxTriangles. The coherent adapters keep their state across calls (a camera path).
-std::vector<Named> allAdapters(const Hierarchy& h, double tolerancePx, uint64_t maxTriangles, bool cull) {
-  auto dq = std::make_shared<DualQueueAdapter>(h);
-  auto qq = std::make_shared<QuadQueueAdapter>(h);
-  auto adaptOpts = [=](uint32_t maxNodes) {
-    AdaptOptions o;
-    o.tolerancePx = tolerancePx;
-    o.maxNodes = maxNodes;
-    o.frustumCull = cull;
-    return o;
-  };
-  auto budgetOpts = [=](uint32_t maxNodes) {
-    BudgetOptions o;
-    o.maxTriangles = maxTriangles;
-    o.maxNodes = maxNodes;
-    o.frustumCull = cull;
-    return o;
-  };
-  const Hierarchy* hp = &h;
-  return {
-      {"dual queue", [=](const ViewParams& v, uint32_t n) {
-         AdaptStats st;
-         Cut cut = dq->update(v, adaptOpts(n), &st);
-         return fromAdapt(std::move(cut), st);
-       }, true},
-      {"top-down greedy", [=](const ViewParams& v, uint32_t n) {
-         AdaptStats st;
-         Cut cut = adaptTopDownGreedy(*hp, v, tolerancePx, n, &st, cull);
-         return fromAdapt(std::move(cut), st);
-       }},
-      {"fixed granularity", [=](const ViewParams& v, uint32_t n) {
-         AdaptStats st;
-         Cut cut = adaptFixedGranularity(*hp, v, tolerancePx, n, &st, cull);
-         return fromAdapt(std::move(cut), st);
-       }},
-      {"quad queue", [=](const ViewParams& v, uint32_t n) {
-         BudgetStats st;
-         Cut cut = qq->update(v, budgetOpts(n), &st);
-         return fromBudget(std::move(cut), st);
-       }, true},
-      {"fixed granularity (triangle budget)", [=](const ViewParams& v, uint32_t n) {
-         BudgetStats st;
-         Cut cut = adaptFixedGranularityBudget(*hp, v, budgetOpts(n), &st);
-         return fromBudget(std::move(cut), st);
-       }},
-      {"greedy (triangle budget)", [=](const ViewParams& v, uint32_t n) {
-         BudgetStats st;
-         Cut cut = adaptGreedyBudget(*hp, v, budgetOpts(n), &st);
-         return fromBudget(std::move(cut), st);
-       }},
-  };
-}
+using test::allAdapters;
+using test::NamedAdapter;
+using test::Outcome;
 
 // 24 charts (6 x 4) of 129 samples, three levels: more roots than the budgets below.
 World manyCharts() { return makeWorld(129, 6, 4, 3); }
@@ -146,7 +74,7 @@ TEST(RootFloor, BudgetBelowTheRootsDrawsExactlyTheRoots) {
     const std::set<uint32_t> roots = visibleRootCharts(w.h, all, cull);
     ASSERT_EQ(roots.size(), 24u) << "the view sees every chart";
     EXPECT_EQ(countVisibleRoots(w.h, all, cull), 24u);
-    for (Named& a : allAdapters(w.h, 0.05, 1000000, cull)) {
+    for (NamedAdapter& a : allAdapters(w.h, 0.05, 1000000, cull)) {
       SCOPED_TRACE(a.name);
       // A first frame without a node budget splits (the coherent adapters keep that cut), then
       // the budget drops below the roots: back to exactly the roots, in one frame.
@@ -179,7 +107,7 @@ TEST(RootFloor, TheFloorIsTheVisibleRoots) {
   ASSERT_LT(roots.size(), 24u) << "some charts are culled";
   const uint32_t floor = uint32_t(roots.size());
   EXPECT_EQ(countVisibleRoots(w.h, part, true), floor);
-  for (Named& a : allAdapters(w.h, 0.05, 1000000, true)) {
+  for (NamedAdapter& a : allAdapters(w.h, 0.05, 1000000, true)) {
     SCOPED_TRACE(a.name);
     const Outcome below = a.run(part, floor - 1);
     expectExactlyRoots(below.cut, roots);
@@ -289,7 +217,7 @@ uint32_t checkBudgetsAlongPath(const std::string& name, const Hierarchy& h, cons
   uint32_t checkedAboveAll = 0;
   for (uint32_t budget : {32u, 64u, 256u}) {
     uint32_t checkedAbove = 0, checkedBelow = 0, constraintSplits = 0;
-    for (Named& a : allAdapters(h, 0.5, 100000, true)) {
+    for (NamedAdapter& a : allAdapters(h, 0.5, 100000, true)) {
       for (size_t i = 0; i < views.size(); ++i) {
         SCOPED_TRACE(name + ": " + a.name + ", budget " + std::to_string(budget) + ", frame " + std::to_string(i));
         const uint32_t floor = visibleFloor(h, views[i]);

@@ -95,71 +95,8 @@ TEST(RootGroups, NoGroupsWhereTheRootsAreFewOrCouldNotStitch) {
   EXPECT_TRUE(buildRootGroups(deep.h, 4).empty());
 }
 
-// One adapter under test.
-struct Outcome {
-  Cut cut;
-  uint32_t nodes = 0, rootFloor = 0, closedGroups = 0, groupedRoots = 0;
-  bool budgetBelowRoots = false;
-};
-using Run = std::function<Outcome(const ViewParams&, uint32_t maxNodes)>;
-
-std::vector<std::pair<std::string, Run>> adapters(const Hierarchy& h, double tol, uint64_t maxTris, bool cull) {
-  auto dq = std::make_shared<DualQueueAdapter>(h);
-  auto qq = std::make_shared<QuadQueueAdapter>(h);
-  const Hierarchy* hp = &h;
-  auto ao = [=](uint32_t n) {
-    AdaptOptions o;
-    o.tolerancePx = tol;
-    o.maxNodes = n;
-    o.frustumCull = cull;
-    return o;
-  };
-  auto bo = [=](uint32_t n) {
-    BudgetOptions o;
-    o.maxTriangles = maxTris;
-    o.maxNodes = n;
-    o.frustumCull = cull;
-    return o;
-  };
-  auto fromA = [](Cut c, const AdaptStats& s) {
-    return Outcome{std::move(c), s.nodes, s.rootFloor, s.closedGroups, s.groupedRoots, s.budgetBelowRoots};
-  };
-  auto fromB = [](Cut c, const BudgetStats& s) {
-    return Outcome{std::move(c), s.nodes, s.rootFloor, s.closedGroups, s.groupedRoots, s.budgetBelowRoots};
-  };
-  return {
-      {"top-down", [=](const ViewParams& v, uint32_t n) {
-         AdaptStats s;
-         Cut c = adaptErrorThreshold(*hp, v, ao(n), &s);
-         return fromA(std::move(c), s);
-       }},
-      {"dual queue", [=](const ViewParams& v, uint32_t n) {
-         AdaptStats s;
-         Cut c = dq->update(v, ao(n), &s);
-         return fromA(std::move(c), s);
-       }},
-      {"fixed granularity", [=](const ViewParams& v, uint32_t n) {
-         AdaptStats s;
-         Cut c = adaptFixedGranularity(*hp, v, tol, n, &s, cull);
-         return fromA(std::move(c), s);
-       }},
-      {"quad queue", [=](const ViewParams& v, uint32_t n) {
-         BudgetStats s;
-         Cut c = qq->update(v, bo(n), &s);
-         return fromB(std::move(c), s);
-       }},
-      {"fixed granularity (triangle budget)", [=](const ViewParams& v, uint32_t n) {
-         BudgetStats s;
-         Cut c = adaptFixedGranularityBudget(*hp, v, bo(n), &s);
-         return fromB(std::move(c), s);
-       }},
-      {"greedy (triangle budget)", [=](const ViewParams& v, uint32_t n) {
-         BudgetStats s;
-         Cut c = adaptGreedyBudget(*hp, v, bo(n), &s);
-         return fromB(std::move(c), s);
-       }},
-  };
-}
+using test::allAdapters;
+using test::Outcome;
 
 // The visible top groups, by the frustum test itself.
 uint32_t visibleTops(const Hierarchy& h, const ViewParams& v, bool cull) {
@@ -204,7 +141,7 @@ TEST(RootGroups, EveryAdapterHoldsABudgetBelowTheChartCount) {
     SCOPED_TRACE(cull ? "culled" : "not culled");
     ASSERT_EQ(countVisibleRoots(w.h, all, cull), 64u) << "the view sees every chart";
     const uint32_t tops = visibleTops(w.h, all, cull);
-    for (auto& [name, run] : adapters(w.h, 0.05, 1000000, cull)) {
+    for (auto& [name, run, coherent] : allAdapters(w.h, 0.05, 1000000, cull)) {
       SCOPED_TRACE(name);
       const Outcome unlimited = run(all, 0);
       EXPECT_GT(unlimited.cut.nodes.size(), 64u) << "the tolerance asks for splits";
@@ -229,7 +166,7 @@ TEST(RootGroups, EveryAdapterHoldsABudgetBelowTheChartCount) {
 TEST(RootGroups, GroupsOpenWhereTheErrorIs) {
   const World w = groupedWorld();
   const ViewParams corner = viewAt(w, {20, 20, 40}, {300, 300, 0});
-  for (auto& [name, run] : adapters(w.h, 0.5, 200000, true)) {
+  for (auto& [name, run, coherent] : allAdapters(w.h, 0.5, 200000, true)) {
     SCOPED_TRACE(name);
     const Outcome o = run(corner, 40);
     EXPECT_LE(o.cut.nodeCount(), 40u);
@@ -252,12 +189,12 @@ TEST(RootGroups, ARoomyBudgetGivesTheCutWithoutGroups) {
   const World grouped = groupedWorld();
   World plain = makeWorld(129, 8, 8, 3);
   const ViewParams v = viewAt(plain, {300, -100, 200}, {400, 400, 0});
-  auto a = adapters(grouped.h, 0.3, 300000, true);
-  auto b = adapters(plain.h, 0.3, 300000, true);
+  auto a = allAdapters(grouped.h, 0.3, 300000, true);
+  auto b = allAdapters(plain.h, 0.3, 300000, true);
   for (size_t i = 0; i < a.size(); ++i) {
-    SCOPED_TRACE(a[i].first);
+    SCOPED_TRACE(a[i].name);
     for (uint32_t budget : {256u, 1000u}) {
-      const Outcome x = a[i].second(v, budget), y = b[i].second(v, budget);
+      const Outcome x = a[i].run(v, budget), y = b[i].run(v, budget);
       EXPECT_EQ(x.closedGroups, 0u);
       EXPECT_EQ(test::sortedNodes(x.cut), test::sortedNodes(y.cut));
     }
@@ -282,7 +219,7 @@ TEST(RootGroups, CoherentAdaptersAlongAPath) {
     const Cut& a = dq.update(v, ao, &as);
     EXPECT_LE(a.nodeCount(), std::max(budget, as.rootFloor));
     EXPECT_EQ(countStitchViolations(w.h, a), 0u);
-    expectGroupsWhole(w.h, v, true, {a, as.nodes, as.rootFloor, as.closedGroups, as.groupedRoots, as.budgetBelowRoots});
+    expectGroupsWhole(w.h, v, true, test::outcomeOf(a, as));
     BudgetOptions bo;
     bo.maxTriangles = 150000;
     bo.maxNodes = budget;
@@ -291,7 +228,7 @@ TEST(RootGroups, CoherentAdaptersAlongAPath) {
     EXPECT_LE(b.nodeCount(), std::max(budget, bs.rootFloor));
     EXPECT_LE(b.triangles(), bo.maxTriangles);
     EXPECT_EQ(countStitchViolations(w.h, b), 0u);
-    expectGroupsWhole(w.h, v, true, {b, bs.nodes, bs.rootFloor, bs.closedGroups, bs.groupedRoots, bs.budgetBelowRoots});
+    expectGroupsWhole(w.h, v, true, test::outcomeOf(b, bs));
   }
 }
 
