@@ -534,6 +534,11 @@ InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const
   sum["seam_mismatches"] = seams.mismatches();
 
   const AtlasView view = openAtlas(o.atlas);
+  // The roots of the forest: the top groups above the charts (hierarchy/root_groups.h), or the
+  // charts where there are none; the smallest cut of a view that takes in the whole atlas.
+  const RootGroups& groups = view.hierarchy.groups;
+  sum["groups"] = groups.groups.size();
+  sum["roots"] = groups.empty() ? m.charts.size() : groups.tops.size();
   report["hierarchy"] = hierarchyFigures(view, dir);
   report["streaming"] = streamingFigures(view);
   sum["view_nodes_mean"] = report["streaming"]["view_nodes_mean"];

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/atlas_format.h"
+#include "hierarchy/root_groups.h"
 #include "inspect/report.h"
 #include "pipeline/build.h"
 #include "tests/small_atlases.h"
@@ -72,6 +73,11 @@ TEST_F(InspectReportTest, ScanReportHoldsTheBuildsFiguresAndItsImages) {
   const json& sum = written["summary"];
   EXPECT_EQ(sum["kind"], "geometry");
   EXPECT_EQ(sum["charts"], st["charts"]);
+  // The forest's roots: the top groups above the charts (at most 16), or every chart.
+  const uint64_t charts = st["charts"].get<uint64_t>();
+  EXPECT_LE(sum["roots"].get<uint64_t>(), std::min<uint64_t>(charts, kDefaultMaxRoots));
+  EXPECT_GE(sum["roots"].get<uint64_t>(), 1u);
+  EXPECT_EQ(sum["groups"].get<uint64_t>() > 0, charts > kDefaultMaxRoots);
   EXPECT_EQ(sum["chart_size"], 17);
   EXPECT_EQ(sum["flipped_texels"], st["resample"]["flipped_texels"]);
   EXPECT_EQ(sum["image_stretch_l2"], st["resample"]["image_stretch_l2"]);
