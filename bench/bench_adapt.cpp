@@ -4,6 +4,7 @@
 // Then the same curve for the quad-queue adapter under a triangle budget (the setting of the
 // paper's figure 6: 4M triangles), with the mean of the per-frame max error.
 // Usage: bench_adapt ATLAS_DIR [tolerance_px=0.02] [frames=240] [WxH=1280x720] [triangles=4000000]
+//        [max_roots=16] (top groups above the charts, openAtlas; 0: every chart root a root)
 // Reads a built atlas only (no GDAL), e.g. `gimlod build ../shared/data/terrain/etopo5.cdf
 // -o out/etopo.atlas --depth 6`.
 #include <algorithm>
@@ -26,10 +27,10 @@ namespace {
 
 int run(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: bench_adapt ATLAS_DIR [tolerance_px] [frames] [WxH]\n");
+    std::fprintf(stderr, "usage: bench_adapt ATLAS_DIR [tolerance_px] [frames] [WxH] [triangles] [max_roots]\n");
     return 2;
   }
-  const AtlasView atlas = openAtlas(argv[1]);
+  const AtlasView atlas = openAtlas(argv[1], argc > 6 ? uint32_t(std::atoi(argv[6])) : kDefaultMaxRoots);
   const Hierarchy& h = atlas.hierarchy;
   const double tolerance = argc > 2 ? std::atof(argv[2]) : 0.02;
   const uint32_t frames = argc > 3 ? uint32_t(std::atoi(argv[3])) : 240;
@@ -42,9 +43,9 @@ int run(int argc, char** argv) {
   }
   std::vector<ViewParams> views;
   for (Camera c : orbitPath(atlas.lo, atlas.hi, frames, 0.35, 20.0)) views.push_back(makeViewParams(c, w, hgt));
-  std::printf("%s: %u charts, depth %u, %u nodes in the forest; %u-frame orbit, %ux%u, tolerance %.3f px\n",
-              argv[1], h.chartCount(), h.params.depth, h.chartCount() * nodesPerChart(h.params.depth), frames, w, hgt,
-              tolerance);
+  std::printf("%s: %u charts, %zu top groups, depth %u, %u nodes in the forest; %u-frame orbit, %ux%u, tolerance %.3f px\n",
+              argv[1], h.chartCount(), h.groups.tops.size(), h.params.depth, h.chartCount() * nodesPerChart(h.params.depth),
+              frames, w, hgt, tolerance);
   std::printf("%9s %8s %10s %10s %8s %8s %11s %10s %9s\n", "max_nodes", "nodes", "ours_us", "us/node", "ops",
               "reused", "greedy_us", "greedy/us", "err_px");
   for (uint32_t budget : {100u, 250u, 500u, 1000u, 2000u, 5000u, 10000u, 20000u}) {
