@@ -71,7 +71,9 @@ TEST(RootGroups, ATreeOverEveryChartWithFewTops) {
       for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) {
         EXPECT_EQ(g.groups[c].parent, int32_t(i));
         EXPECT_EQ(g.groups[c].level + 1, gr.level);
-        if (c > gr.childBegin) EXPECT_EQ(g.groups[c - 1].end, g.groups[c].begin);
+        if (c > gr.childBegin) {
+          EXPECT_EQ(g.groups[c - 1].end, g.groups[c].begin);
+        }
       }
     }
     EXPECT_EQ(gr.parent < 0, std::count(g.tops.begin(), g.tops.end(), i) == 1);
@@ -156,7 +158,9 @@ TEST(RootGroups, EveryAdapterHoldsABudgetBelowTheChartCount) {
         EXPECT_EQ(countStitchViolations(w.h, o.cut), 0u);
         if (!cull) test::expectPartition(w.h, o.cut);
         expectGroupsWhole(w.h, all, cull, o);
-        if (budget < 64) EXPECT_GT(o.closedGroups, 0u) << "fewer nodes than charts need closed groups";
+        if (budget < 64) {
+          EXPECT_GT(o.closedGroups, 0u) << "fewer nodes than charts need closed groups";
+        }
       }
     }
   }
