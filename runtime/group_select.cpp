@@ -57,6 +57,7 @@ void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNode
     ++budgetRes;
   std::priority_queue<Item> queue;
   uint64_t count = 0;
+  uint32_t groupItems = 0;  // groups in the queue: the pass ends when none is left
   auto pushGroup = [&](uint32_t g) {
     const RootGroups::Group& gr = rg.groups[g];
     if (!boxVisible(gr.bounds, v, cull)) return;
@@ -64,10 +65,12 @@ void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNode
     const double scale = v.pixelsPerRadian / std::max(boxDistance(gr.bounds, v.eye), v.minDistance);
     if (threshold) {
       const double px = double(gr.errorMax) * scale;
-      if (px > tolerancePx) queue.push({overTolerancePriority(px), g, {}});
+      if (!(px > tolerancePx)) return;
+      queue.push({overTolerancePriority(px), g, {}});
     } else {
       queue.push({double(rg.error(g, budgetRes)) * scale, g, {}});
     }
+    ++groupItems;
   };
   auto pushNode = [&](const NodeId& n) {
     if (!nodeDrawable(h, n, v, cull)) return;
@@ -95,11 +98,12 @@ void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNode
       for (uint32_t i = gr.begin; i < gr.end; ++i) pushNode({rg.order[i], 0, 0, 0});
     }
   }
-  while (!queue.empty()) {
+  while (!queue.empty() && groupItems > 0) {
     const Item it = queue.top();
     queue.pop();
     uint64_t k = 0;  // visible children
     if (it.group >= 0) {
+      --groupItems;
       const RootGroups::Group& gr = rg.groups[size_t(it.group)];
       if (gr.level == 0) {
         for (uint32_t i = gr.begin; i < gr.end; ++i) k += nodeDrawable(h, {rg.order[i], 0, 0, 0}, v, cull);
