@@ -181,6 +181,7 @@ struct FrameFigures {
   uint64_t triangles = 0;
   double maxErrorPx = 0.0, adaptMs = 0.0, drawMs = 0.0, gpuMs = 0.0, frameMs = 0.0, uploadMs = 0.0;
   uint32_t pagesLoaded = 0, pagesRequested = 0, rootFloor = 0;
+  uint32_t closedGroups = 0, groupedRoots = 0;  // groups above the charts kept closed, their roots
   uint32_t standIns = 0;  // desired nodes drawn as a resident ancestor (pages still loading)
   bool belowRoots = false;
 };
@@ -498,6 +499,8 @@ int runView(const ViewArgs& a) {
     last.standIns = f.nodesSubstituted;
     last.rootFloor = f.adapt.rootFloor;
     last.belowRoots = f.adapt.budgetBelowRoots;
+    last.closedGroups = f.adapt.closedGroups;
+    last.groupedRoots = f.adapt.groupedRoots;
     adaptMs.add(last.adaptMs);
     drawMs.add(last.drawMs);
     gpuMs.add(last.gpuMs);
@@ -558,6 +561,8 @@ int runView(const ViewArgs& a) {
       ImGui::Separator();
       ImGui::Text("nodes %zu (root floor %u%s)  triangles %llu", last.nodes, last.rootFloor,
                   last.belowRoots ? ", above the budget" : "", static_cast<unsigned long long>(last.triangles));
+      if (last.closedGroups > 0)
+        ImGui::Text("%u closed groups drawing %u chart roots", last.closedGroups, last.groupedRoots);
       ImGui::Text("max error %.3f px  frame %.2f ms", last.maxErrorPx, frameMs.last());
       if (c.asyncLoads) ImGui::Text("pages: %u requested, %u nodes waiting for theirs", last.pagesRequested, last.standIns);
       if (ImGui::CollapsingHeader("graphs", fbh >= 700 ? ImGuiTreeNodeFlags_DefaultOpen : 0)) {
