@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <functional>
 #include <map>
+#include <random>
 #include <memory>
 #include <set>
 #include <string>
@@ -233,6 +234,39 @@ TEST(RootGroups, CoherentAdaptersAlongAPath) {
     EXPECT_LE(b.triangles(), bo.maxTriangles);
     EXPECT_EQ(countStitchViolations(w.h, b), 0u);
     expectGroupsWhole(w.h, v, true, test::outcomeOf(b, bs));
+  }
+}
+
+// Random views, budgets, tolerances and group trees: every adapter keeps its budget (or draws the
+// floor when the budget is below it), a partition without stitching violations, whole closed groups,
+// and counts that agree with the cut; the coherent adapters carry their state from view to view.
+TEST(RootGroups, RandomViewsAndBudgetsKeepTheInvariants) {
+  std::mt19937 rng(20261129);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (uint32_t maxRoots : {2u, 5u, 16u}) {
+    const World w = groupedWorld(maxRoots);
+    ASSERT_FALSE(w.h.groups.empty());
+    for (bool cull : {true, false}) {
+      const double tol = 0.1 + 2.0 * unit(rng);
+      auto adapters = allAdapters(w.h, tol, 20000 + uint64_t(400000 * unit(rng)), cull);
+      for (int i = 0; i < 40; ++i) {
+        const glm::dvec3 eye{-200 + 1400 * unit(rng), -200 + 1400 * unit(rng), 10 + 600 * unit(rng)};
+        const glm::dvec3 target{1024 * unit(rng), 1024 * unit(rng), 0};
+        const ViewParams v = viewAt(w, eye, target);
+        const uint32_t budget = uint32_t(1 + 150 * unit(rng) * unit(rng));
+        for (auto& [name, run, coherent] : adapters) {
+          SCOPED_TRACE(name + ", max roots " + std::to_string(maxRoots) + (cull ? ", culled" : "") + ", view " +
+                       std::to_string(i) + ", budget " + std::to_string(budget));
+          const Outcome o = run(v, budget);
+          EXPECT_EQ(o.rootFloor, visibleTops(w.h, v, cull));
+          EXPECT_EQ(o.budgetBelowRoots, budget < o.rootFloor);
+          EXPECT_LE(o.cut.nodeCount(), std::max(budget, o.rootFloor));
+          EXPECT_EQ(countStitchViolations(w.h, o.cut), 0u);
+          if (!cull) test::expectPartition(w.h, o.cut);
+          expectGroupsWhole(w.h, v, cull, o);
+        }
+      }
+    }
   }
 }
 
