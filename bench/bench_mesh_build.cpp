@@ -37,6 +37,7 @@
 
 #include "atlas/mesh/mesh_io.h"
 #include "bench/guarded_main.h"
+#include "runtime/atlas_view.h"
 
 extern char** environ;
 
@@ -145,6 +146,7 @@ struct Row {
   uint64_t triangles = 0;
   double seconds = 0, cpuSeconds = 0, peakMiB = 0;
   uint32_t charts = 0;
+  uint32_t roots = 0;  // the forest's roots once opened: top groups above the charts, or the charts
   double samplesPerTriangle = 0, bytesPerTriangle = 0, hausdorff = -1;
   uint64_t flipped = 0;
   double baseSeconds = 0, basePeakMiB = 0, baseBytesPerTriangle = 0;
@@ -192,6 +194,10 @@ Row benchOne(const fs::path& self, const fs::path& gimlod, const fs::path& mesh,
     std::printf("| %s | %.2f | %.2f | %.0f |\n", s["stage"].get<std::string>().c_str(), s["seconds"].get<double>(),
                 s["cpu_seconds"].get<double>(), double(s["peak_rss_bytes"].get<uint64_t>()) / (1 << 20));
   std::fflush(stdout);
+  {
+    const gimlod::AtlasView view = gimlod::openAtlas(atlas);
+    row.roots = view.hierarchy.groups.empty() ? view.hierarchy.chartCount() : uint32_t(view.hierarchy.groups.tops.size());
+  }
   fs::remove_all(atlas);
   return row;
 }
@@ -234,13 +240,13 @@ int run(int argc, char** argv) {
   const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
   std::vector<Row> rows;
   for (const fs::path& in : inputs) rows.push_back(benchOne(self, gimlod, in, work, buildArgs));
-  std::printf("\n| input | triangles | gimlod s | CPU s | M tri/s/core | peak MiB | charts | samples/tri | B/tri | "
+  std::printf("\n| input | triangles | gimlod s | CPU s | M tri/s/core | peak MiB | charts | roots | samples/tri | B/tri | "
               "Hausdorff %% | flipped | meshopt chain s | peak MiB | B/tri | gimlod / chain |\n"
-              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const Row& r : rows)
-    std::printf("| %s | %llu | %.2f | %.2f | %.3f | %.0f | %u | %.1f | %.1f | %.4f | %llu | %.2f | %.0f | %.2f | %.2f |\n",
+    std::printf("| %s | %llu | %.2f | %.2f | %.3f | %.0f | %u | %u | %.1f | %.1f | %.4f | %llu | %.2f | %.0f | %.2f | %.2f |\n",
                 r.name.c_str(), static_cast<unsigned long long>(r.triangles), r.seconds, r.cpuSeconds,
-                double(r.triangles) / 1e6 / std::max(r.cpuSeconds, 1e-9), r.peakMiB, r.charts, r.samplesPerTriangle,
+                double(r.triangles) / 1e6 / std::max(r.cpuSeconds, 1e-9), r.peakMiB, r.charts, r.roots, r.samplesPerTriangle,
                 r.bytesPerTriangle, r.hausdorff, static_cast<unsigned long long>(r.flipped), r.baseSeconds,
                 r.basePeakMiB, r.baseBytesPerTriangle, r.seconds / std::max(r.baseSeconds, 1e-9));
   std::printf("\n%u cores\n", cores);
