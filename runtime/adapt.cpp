@@ -51,9 +51,13 @@ ViewParams makeViewParams(const Camera& c, uint32_t width, uint32_t height) {
   return v;
 }
 
+double boxScreenError(const std::array<float, 6>& box, double error, const ViewParams& v) {
+  const double d = std::max(boxDistance(box, v.eye), v.minDistance);
+  return error * v.pixelsPerRadian / d;
+}
+
 double screenError(const Hierarchy& h, const NodeId& n, uint32_t res, const ViewParams& v) {
-  const double d = std::max(boxDistance(h.bounds(n), v.eye), v.minDistance);
-  return double(h.error(n, res)) * v.pixelsPerRadian / d;
+  return boxScreenError(h.bounds(n), double(h.error(n, res)), v);
 }
 
 uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tolPx) {

@@ -83,16 +83,19 @@ uint64_t Cut::triangles() const {
 }
 
 uint32_t Cut::nodeCount() const {
-  std::vector<int32_t> groups;
+  int32_t last = -1;
+  for (const CutNode& n : nodes) last = std::max(last, n.group);
+  std::vector<uint8_t> seen(size_t(last + 1), 0);
   uint32_t count = 0;
   for (const CutNode& n : nodes) {
-    if (n.group < 0)
+    if (n.group < 0) {
       ++count;
-    else
-      groups.push_back(n.group);
+    } else if (!seen[size_t(n.group)]) {
+      seen[size_t(n.group)] = 1;
+      ++count;
+    }
   }
-  std::sort(groups.begin(), groups.end());
-  return count + uint32_t(std::unique(groups.begin(), groups.end()) - groups.begin());
+  return count;
 }
 
 bool adjacentNode(const Hierarchy& h, const NodeId& n, uint32_t side, NodeId* adj,

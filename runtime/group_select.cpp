@@ -12,9 +12,36 @@ bool boxVisible(const std::array<float, 6>& b, const ViewParams& v, bool cull) {
   return !cull || v.frustum.intersects({b[0], b[1], b[2]}, {b[3], b[4], b[5]});
 }
 
-double boxDistance(const std::array<float, 6>& b, const glm::dvec3& p) {
-  const glm::dvec3 q = glm::clamp(p, glm::dvec3{b[0], b[1], b[2]}, glm::dvec3{b[3], b[4], b[5]});
-  return glm::length(q - p);
+bool rootDrawable(const Hierarchy& h, uint32_t chart, const ViewParams& v, bool cull) {
+  return nodeDrawable(h, {chart, 0, 0, 0}, v, cull);
+}
+
+// The children of group g drawn for the view: chart roots of a first-level group, else groups.
+uint32_t visibleChildren(const Hierarchy& h, uint32_t g, const ViewParams& v, bool cull) {
+  const RootGroups& rg = h.groups;
+  const RootGroups::Group& gr = rg.groups[g];
+  uint32_t k = 0;
+  if (gr.level == 0) {
+    for (uint32_t i = gr.begin; i < gr.end; ++i) k += rootDrawable(h, rg.order[i], v, cull);
+  } else {
+    for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) k += boxVisible(rg.groups[c].bounds, v, cull);
+  }
+  return k;
+}
+
+// Calls visit(g) for every group that is a top or a child of an open group, each after the group
+// above it (groups above lie later in RootGroups::groups).
+template <typename Visit>
+void forEachReached(const RootGroups& rg, const std::vector<uint8_t>& open, Visit&& visit) {
+  std::vector<uint8_t> reached(rg.groups.size(), 0);
+  for (uint32_t t : rg.tops) reached[t] = 1;
+  for (uint32_t g = uint32_t(rg.groups.size()); g-- > 0;) {
+    if (!reached[g]) continue;
+    const RootGroups::Group& gr = rg.groups[g];
+    if (open[g] && gr.level > 0)
+      for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) reached[c] = 1;
+    visit(g);
+  }
 }
 
 struct Candidate {
@@ -24,10 +51,6 @@ struct Candidate {
     return priority < o.priority || (priority == o.priority && group > o.group);
   }
 };
-
-}  // namespace
-
-namespace {
 
 // Opens the closed groups of the frontier that a top-down pass opens with groups as nodes. An item
 // is a closed group or a node of an open chart, and the best goes first while the cut's nodes fit
@@ -62,15 +85,20 @@ void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNode
     const RootGroups::Group& gr = rg.groups[g];
     if (!boxVisible(gr.bounds, v, cull)) return;
     ++count;
-    const double scale = v.pixelsPerRadian / std::max(boxDistance(gr.bounds, v.eye), v.minDistance);
     if (threshold) {
-      const double px = double(gr.errorMax) * scale;
+      const double px = boxScreenError(gr.bounds, double(gr.errorMax), v);
       if (!(px > tolerancePx)) return;
       queue.push({overTolerancePriority(px), g, {}});
     } else {
-      queue.push({double(rg.error(g, budgetRes)) * scale, g, {}});
+      queue.push({boxScreenError(gr.bounds, double(rg.error(g, budgetRes)), v), g, {}});
     }
     ++groupItems;
+  };
+  // Whether closed group g enters the queue (pushGroup): without one, nothing can open.
+  auto mayOpen = [&](uint32_t g) {
+    const RootGroups::Group& gr = rg.groups[g];
+    return boxVisible(gr.bounds, v, cull) &&
+           (!threshold || boxScreenError(gr.bounds, double(gr.errorMax), v) > tolerancePx);
   };
   auto pushNode = [&](const NodeId& n) {
     if (!nodeDrawable(h, n, v, cull)) return;
@@ -84,20 +112,19 @@ void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNode
     const double p = topDownSplitPriority(h, n, v, tolerancePx, cull, false, &res, &over);
     if (p > 0.0) queue.push({p, -1, n});
   };
-  // The frontier: top-down, open groups hand their children on.
-  std::vector<uint8_t> reached(rg.groups.size(), 0);
-  for (uint32_t t : rg.tops) reached[t] = 1;
-  for (uint32_t g = uint32_t(rg.groups.size()); g-- > 0;) {
-    if (!reached[g]) continue;
+  // The frontier: its closed groups, and the open charts' roots. No group to open: nothing to do
+  // (a roomy budget opened them all), and the open charts' priorities are not computed.
+  bool any = false;
+  forEachReached(rg, open, [&](uint32_t g) { any = any || (!open[g] && mayOpen(g)); });
+  if (!any) return;
+  forEachReached(rg, open, [&](uint32_t g) {
     const RootGroups::Group& gr = rg.groups[g];
     if (!open[g]) {
       pushGroup(g);
-    } else if (gr.level > 0) {
-      for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) reached[c] = 1;
-    } else {
+    } else if (gr.level == 0) {
       for (uint32_t i = gr.begin; i < gr.end; ++i) pushNode({rg.order[i], 0, 0, 0});
     }
-  }
+  });
   while (!queue.empty() && groupItems > 0) {
     const Item it = queue.top();
     queue.pop();
@@ -105,11 +132,7 @@ void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNode
     if (it.group >= 0) {
       --groupItems;
       const RootGroups::Group& gr = rg.groups[size_t(it.group)];
-      if (gr.level == 0) {
-        for (uint32_t i = gr.begin; i < gr.end; ++i) k += nodeDrawable(h, {rg.order[i], 0, 0, 0}, v, cull);
-      } else {
-        for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) k += boxVisible(rg.groups[c].bounds, v, cull);
-      }
+      k = visibleChildren(h, uint32_t(it.group), v, cull);
       if (count - 1 + k > maxCount) continue;
       open[size_t(it.group)] = 1;
       --count;
@@ -133,75 +156,54 @@ void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNode
 void selectRootGroups(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes, double tolerancePx, bool cull,
                       GroupSelection& out, uint64_t maxTriangles) {
   const RootGroups& rg = h.groups;
-  out.closedGroups = out.frozenRoots = out.opened = out.rootFloor = 0;
+  out.closedGroups = out.frozenRoots = out.rootFloor = 0;
   out.active = !rg.empty() && maxNodes != 0;
+  out.closedOf.clear();
   if (rg.empty()) {
-    out.closedOf.clear();
     out.rootFloor = countVisibleRoots(h, v, cull);
     return;
   }
   for (uint32_t t : rg.tops) out.rootFloor += boxVisible(rg.groups[t].bounds, v, cull);
-  std::vector<uint8_t> open(rg.groups.size(), out.active ? 0 : 1);
-  if (out.active) {
-    // First every group, the largest error at the minimum resolution first, while the cut's roots
-    // (closed groups and open charts) and three nodes for a split of each open chart fit the
-    // budget: with four nodes a chart within it, every group opens, and the cut is the one the
-    // forest gives without groups.
-    auto errorMinPx = [&](uint32_t g) {
-      const RootGroups::Group& gr = rg.groups[g];
-      return double(gr.errorMin) * v.pixelsPerRadian / std::max(boxDistance(gr.bounds, v.eye), v.minDistance);
-    };
-    std::priority_queue<Candidate> queue;
-    uint64_t count = 0, openCharts = 0;
-    for (uint32_t t : rg.tops)
-      if (boxVisible(rg.groups[t].bounds, v, cull)) {
-        ++count;
-        queue.push({errorMinPx(t), t});
-      }
-    while (!queue.empty()) {
-      const uint32_t g = queue.top().group;
-      queue.pop();
-      const RootGroups::Group& gr = rg.groups[g];
-      uint64_t k = 0, charts = 0;
-      if (gr.level == 0) {
-        for (uint32_t i = gr.begin; i < gr.end; ++i) charts += nodeDrawable(h, {rg.order[i], 0, 0, 0}, v, cull);
-        k = charts;
-      } else {
-        for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) k += boxVisible(rg.groups[c].bounds, v, cull);
-      }
-      if (count - 1 + k + 3 * (openCharts + charts) > maxNodes) continue;
-      count = count - 1 + k;
-      openCharts += charts;
-      open[g] = 1;
-      if (gr.level > 0)
-        for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c)
-          if (boxVisible(rg.groups[c].bounds, v, cull)) queue.push({errorMinPx(c), c});
+  if (!out.active) return;  // every group open
+  // First every group, the largest error at the minimum resolution first, while the cut's roots
+  // (closed groups and open charts) and three nodes for a split of each open chart fit the budget:
+  // with four nodes a chart within it, every group opens, and the cut is the one the forest gives
+  // without groups.
+  std::vector<uint8_t> open(rg.groups.size(), 0);
+  auto errorMinPx = [&](uint32_t g) { return boxScreenError(rg.groups[g].bounds, double(rg.groups[g].errorMin), v); };
+  std::priority_queue<Candidate> queue;
+  uint64_t count = 0, openCharts = 0;
+  for (uint32_t t : rg.tops)
+    if (boxVisible(rg.groups[t].bounds, v, cull)) {
+      ++count;
+      queue.push({errorMinPx(t), t});
     }
-    // Then the groups a top-down pass opens for their errors.
-    openGroupsTopDown(h, v, maxNodes, tolerancePx, maxTriangles, cull, open);
-  }
-  // A group is closed when it is not open and every group above it is: top-down, groups above first.
-  out.closedOf.assign(h.chartCount(), -1);
-  std::vector<uint8_t> reached(rg.groups.size(), 0);
-  for (uint32_t t : rg.tops) reached[t] = 1;
-  for (uint32_t g = uint32_t(rg.groups.size()); g-- > 0;) {
-    if (!reached[g]) continue;
+  while (!queue.empty()) {
+    const uint32_t g = queue.top().group;
+    queue.pop();
     const RootGroups::Group& gr = rg.groups[g];
-    out.opened += open[g];
-    if (open[g]) {
-      if (gr.level > 0)
-        for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c) reached[c] = 1;
-      continue;
-    }
-    uint32_t drawable = 0;
+    const uint64_t k = visibleChildren(h, g, v, cull), charts = gr.level == 0 ? k : 0;
+    if (count - 1 + k + 3 * (openCharts + charts) > maxNodes) continue;
+    count = count - 1 + k;
+    openCharts += charts;
+    open[g] = 1;
+    if (gr.level > 0)
+      for (uint32_t c = gr.childBegin; c < gr.childEnd; ++c)
+        if (boxVisible(rg.groups[c].bounds, v, cull)) queue.push({errorMinPx(c), c});
+  }
+  // Then the groups a top-down pass opens for their errors.
+  openGroupsTopDown(h, v, maxNodes, tolerancePx, maxTriangles, cull, open);
+  // A group is closed when it is not open and every group above it is.
+  out.closedOf.assign(h.chartCount(), -1);
+  forEachReached(rg, open, [&](uint32_t g) {
+    if (open[g]) return;
+    const RootGroups::Group& gr = rg.groups[g];
     for (uint32_t k = gr.begin; k < gr.end; ++k) {
       out.closedOf[rg.order[k]] = int32_t(g);
-      drawable += nodeDrawable(h, {rg.order[k], 0, 0, 0}, v, cull);
+      out.frozenRoots += rootDrawable(h, rg.order[k], v, cull);
     }
-    out.frozenRoots += drawable;
     out.closedGroups += boxVisible(gr.bounds, v, cull) ? 1u : 0u;
-  }
-  if (!out.active) out.closedOf.clear();
+  });
 }
 
 void markGroupedRoots(const GroupSelection& s, Cut& cut) {

@@ -16,7 +16,6 @@ struct GroupSelection {
   std::vector<int32_t> closedOf;  // per chart: the closed group that draws its root, or -1
   uint32_t closedGroups = 0;      // closed groups whose box meets the view: a node each
   uint32_t frozenRoots = 0;       // drawable roots of the charts in closed groups
-  uint32_t opened = 0;            // groups opened for this view
   uint32_t rootFloor = 0;         // the smallest cut: visible top groups, or visible chart roots
   bool active = false;            // the hierarchy has groups and the budget is limited
   bool frozen(uint32_t chart) const { return active && closedOf[chart] >= 0; }
