@@ -122,7 +122,7 @@ std::string flagFor(std::string_view name) {
       {"positionTolerance", "--position-tolerance"}, {"normalTolerance", "--normal-tolerance"},
       {"normals", "--normals"},
       {"imagery", "--imagery"},              {"quads", "--quads"},
-      {"quadMap", "--quad-map"}};
+      {"quadMap", "--quad-map"},              {"sizing", "--sizing"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }
@@ -393,6 +393,15 @@ int main(int argc, char** argv) {
                     "most 16 samples per input triangle)")
       ->check(CLI::IsMember({"auto", "stored", "derived"}))
       ->capture_default_str();
+  std::string sizingArg = "patch";
+  build->add_option("--sizing", sizingArg,
+                    "Meshes: patch (each patch's charts at their own size: from the density's, doubled while they "
+                    "fold or sample the surface more coarsely than --sample-error; one quad layout, sides unless "
+                    "--quads kites, no patch cut) or layout (every chart at one size, the chart repair cutting the "
+                    "patches whose charts fold or sample too coarsely, and with --quads auto both layouts tried); "
+                    "--chart-size asks for one size")
+      ->check(CLI::IsMember({"patch", "layout"}))
+      ->capture_default_str();
   std::string quadMapArg = "bilinear";
   build->add_option("--quad-map", quadMapArg,
                     "Meshes: how a quad chart's square maps into its patch's parameterization: bilinear (of the "
@@ -613,6 +622,7 @@ int main(int argc, char** argv) {
         mesh.normals = normalsArg == "stored"    ? MeshNormals::kStored
                        : normalsArg == "derived" ? MeshNormals::kDerived
                                                  : MeshNormals::kAuto;
+        mesh.sizing = sizingArg == "layout" ? MeshSizing::kLayout : MeshSizing::kPatch;
         mesh.quads = quadsArg == "sides" ? MeshQuads::kSides : quadsArg == "kites" ? MeshQuads::kKites : MeshQuads::kAuto;
         mesh.maxSampleError = sampleErrorPercent < 0.0 && build->get_option("--sample-error")->count() == 0
                                   ? kAutoSampleError

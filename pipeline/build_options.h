@@ -157,6 +157,11 @@ struct MeshBuildOptions : CommonBuildOptions {
   // both at one chart size, from the density's up, doubled only while neither meets the bound
   // (see resampleMesh in pipeline/mesh_build.cpp).
   MeshQuads quads = MeshQuads::kAuto;
+  // Each patch's charts at their own size, doubled where they fold or sample the surface more
+  // coarsely than maxSampleError (one quad layout, no repair), or one size for every chart with the
+  // repair and the layout search (atlas/mesh/quad_charts.h MeshSizing). A chartSize given asks for
+  // one size.
+  MeshSizing sizing = MeshSizing::kPatch;
   // How each quad chart's square maps into its quad of the patch's domain (atlas/mesh/resample.h
   // QuadMap): bilinear, least stretch, or least stretch for the charts that fold under bilinear.
   MeshQuadMap quadMap = MeshQuadMap::kBilinear;

@@ -94,11 +94,20 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"repair_triangles_whole_rounds", flips.trianglesWholeRounds},
                       {"repair_triangles_trials", flips.trianglesTrials},
                       {"patches", rs.patches},
-                      {"degenerate_texels", rs.image.degenerateTexels}};
-  // Per chart: its patch and quad, stretch of the sampled image, flipped and degenerate texels.
+                      {"degenerate_texels", rs.image.degenerateTexels},
+                      {"sizing", rs.perPatchSize ? "patch" : "layout"},
+                      {"sizing_rounds", rs.sizeRounds},
+                      {"patches_doubled", rs.patchesDoubled},
+                      {"patches_by_size", rs.patchesBySize},
+                      {"patches_over_bound_at_largest_size", rs.patchesAtLargestSize},
+                      {"patches_over_bound_at_sample_cap", rs.patchesAtSampleCap},
+                      {"patches_over_bound_at_lattice", rs.patchesAtLattice},
+                      {"patches_over_bound_at_memory", rs.patchesAtMemory}};
+  // Per chart: its patch and quad, its side in samples, stretch of the sampled image, flipped and
+  // degenerate texels.
   nlohmann::json perChart = nlohmann::json::array();
   for (const ChartQuality& c : rs.perChart) {
-    perChart.push_back({{"patch", c.patch}, {"quad", c.quad}, {"stretch_l2", c.quality.stretchL2},
+    perChart.push_back({{"patch", c.patch}, {"quad", c.quad}, {"side", c.side}, {"stretch_l2", c.quality.stretchL2},
                         {"stretch_linf", c.quality.stretchLinf}, {"flipped_texels", c.quality.flippedTexels},
                         {"texels_against_vertex_normals", c.quality.texelsAgainstNormals},
                         {"degenerate_texels", c.quality.degenerateTexels},
@@ -153,7 +162,7 @@ std::string summaryLines(const std::filesystem::path& output, uint32_t charts, u
       hs.threads, hs.seconds, bytesOnDisk, totalSeconds);
 }
 
-uint64_t meshSamples(const MeshWriteStats& w) { return uint64_t(w.charts) * w.chartSize * w.chartSize; }
+uint64_t meshSamples(const MeshWriteStats& w) { return w.resampledSamples; }
 
 }  // namespace
 

@@ -99,6 +99,8 @@ struct MeshWriteStats {
   uint32_t depth = 0;                  // quadtree levels per chart
   std::array<float, 6> bounds{};       // min x, y, z, max x, y, z over every sample
   uint64_t spilledBytes = 0;           // of the chart spill (atlas/resample.h ChartSpill)
+  // The samples the charts were resampled with, each at its own size (GeometryImage::level).
+  uint64_t resampledSamples = 0;
   HierarchyStats hierarchy;
   // Normals: stored, or derived from the positions on reading (block borders stored), with the
   // angles between the derived normals and the resampled ones over the derived samples.

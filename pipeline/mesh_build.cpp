@@ -141,6 +141,13 @@ QuadChartOptions quadChartOptions(const MeshBuildOptions& o) {
   q.quads = o.quads;
   q.quadMap = o.quadMap;
   q.unfold = o.unfold;
+  q.sizing = o.sizing;
+  if (o.compress) q.positionStep = [bits = o.positionBits](const MeshBounds& b) { return meshPositionStep(b, bits); };
+  q.coarsestLevel = [o](uint32_t chartSize) {
+    MeshBuildOptions at = o;
+    at.chartSize = chartSize;
+    return meshHierarchyParams(at).maxFinestLevel();
+  };
   return q;
 }
 
@@ -168,8 +175,9 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
     finest = chartFinestLevels(r.set, r.spill.get(), coarsen);
   }
   uint64_t kept = 0;
+  for (const GeometryImage& g : r.set.charts) w.resampledSamples += uint64_t(g.side(r.set.chartSize)) * g.side(r.set.chartSize);
   for (size_t i = 0; i < r.set.charts.size(); ++i) {
-    const uint64_t side = ((r.set.chartSize - 1) >> (finest.empty() ? 0 : finest[i])) + 1;
+    const uint64_t side = ((r.set.chartSize - 1) >> (finest.empty() ? r.set.charts[i].level : finest[i])) + 1;
     kept += side * side;
   }
   w.samplesPerTriangle = double(kept) / double(triangles);
@@ -191,10 +199,10 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
     w.planarSamples = written.planarSamples;
     if (written.chartsByFinestLevel.size() > 1)
       spdlog::info("charts by their finest level (0 = {}^2 samples): {}; {} samples ({:.1f} per input triangle, "
-                   "{:.2f} of the full charts')",
+                   "{:.2f} of the resampled charts')",
                    r.set.chartSize, fmt::join(written.chartsByFinestLevel, ", "), written.finestSamples,
                    double(written.finestSamples) / double(triangles),
-                   double(written.finestSamples) / (double(r.set.charts.size()) * r.set.chartSize * r.set.chartSize));
+                   double(written.finestSamples) / double(std::max<uint64_t>(w.resampledSamples, 1)));
     if (written.planarSamples > 0)
       spdlog::info("{} of the charts' finest samples ({:.2f}) moved onto planar squares, whose corners alone are coded",
                    written.planarSamples, double(written.planarSamples) / double(std::max<uint64_t>(written.finestSamples, 1)));

@@ -733,6 +733,10 @@ bool splitByCut(ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources, 
 
 }  // namespace
 
+bool halvePatch(ChartLayout& layout, uint32_t p, uint32_t maxSides, uint32_t minPartEdges) {
+  return applyCut(layout, p, findCut(layout, p, {}, maxSides, 0.25, minPartEdges), maxSides);
+}
+
 bool splitPatchThrough(ChartLayout& layout, uint32_t p, uint32_t triangle, uint32_t maxSides) {
   if (triangle >= layout.triangles.size()) return false;
   const auto& t = layout.triangles[triangle];

@@ -119,6 +119,14 @@ EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& with
 // qualifies (the layout may then have gained a corner, still valid).
 bool splitPatchThrough(ChartLayout& layout, uint32_t patch, uint32_t triangle, uint32_t maxSides = 8);
 
+// Halves `patch`: of the shortest interior paths between boundary vertices (as splitPatchAtNeck
+// takes them), the one whose length is smallest against the smaller part's perimeter among those
+// that leave at least a quarter of the border on either side, so that neither part is a sliver;
+// parts with fewer than minPartEdges border edges do not count. Both parts and any neighbour that
+// gains a corner keep 3..maxSides sides. False if none qualifies (the layout may then have gained
+// a corner, still valid).
+bool halvePatch(ChartLayout& layout, uint32_t patch, uint32_t maxSides = 8, uint32_t minPartEdges = 0);
+
 // Splits `patch` at its best neck: of the shortest interior paths between boundary vertices (at
 // most 96 start vertices, spread evenly), the one whose length is smallest against the smaller
 // part's perimeter, a new corner at an end costing a factor 1.25; both parts and any neighbour

@@ -48,6 +48,20 @@ glm::vec3 drawnAt(const std::vector<glm::vec3>& stored, uint32_t side, uint32_t 
                      stored[size_t(cy + 1) * side + cx], stored[size_t(cy + 1) * side + cx + 1], fx, fy);
 }
 
+// Whether the (s + 1)^2 samples of the square at (x0, y0) of an image `side` samples wide are all
+// at distinct positions.
+bool distinctSamples(const std::vector<glm::vec3>& image, uint32_t side, uint32_t x0, uint32_t y0, uint32_t s) {
+  std::vector<std::array<float, 3>> p;
+  p.reserve(size_t(s + 1) * (s + 1));
+  for (uint32_t dy = 0; dy <= s; ++dy)
+    for (uint32_t dx = 0; dx <= s; ++dx) {
+      const glm::vec3& q = image[size_t(y0 + dy) * side + x0 + dx];
+      p.push_back({q.x, q.y, q.z});
+    }
+  std::sort(p.begin(), p.end());
+  return std::adjacent_find(p.begin(), p.end()) == p.end();
+}
+
 // geometryPyramid's planar squares: moves the samples of the squares of `stored` (the settled
 // finest level, finestLevel of the chartSize^2 level 0 `P0`) that may move onto their squares'
 // triangles.
@@ -105,9 +119,11 @@ uint64_t placeOnPlanarSquares(const std::vector<glm::vec3>& P0, uint32_t chartSi
                                                           lattice(c11, c), s, dx, dy)) * step);
               moved.push_back(i);
             }
+          // No two samples of the square may round to one lattice point (a square a few lattice
+          // steps wide, in a densely sampled chart): two samples of the chart welded into one.
+          bool within = distinctSamples(G, side, x0, y0, s);
           // The square's footprint, drawn from the moved samples.
-          bool within = true;
-          for (uint32_t v = y0 * scale; v <= (y0 + s) * scale && within; ++v)
+          for (uint32_t v = y0 * scale; within && v <= (y0 + s) * scale; ++v)
             for (uint32_t u = x0 * scale; u <= (x0 + s) * scale; ++u) {
               const size_t i = size_t(v) * chartSize + u;
               if (glm::length(P0[i] - drawnAt(G, side, finestLevel, u, v)) > allowed[i]) {
@@ -259,6 +275,7 @@ const GeometryImage& chartSamples(const GeometryImageSet& set, size_t i, const C
   if (set.charts[i].spilled < 0) return set.charts[i];
   if (!spill) throw std::invalid_argument("a chart's samples are spilled, but no spill is given");
   back.spilled = set.charts[i].spilled;
+  back.level = set.charts[i].level;
   spill->get(back);
   return back;
 }
@@ -267,12 +284,17 @@ const GeometryImage& chartSamples(const GeometryImageSet& set, size_t i, const C
 
 std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const ChartSpill* spill, const ChartCoarsening& c) {
   std::vector<uint32_t> out(set.charts.size(), 0);
+  for (size_t i = 0; i < set.charts.size(); ++i) out[i] = set.charts[i].level;
   if (!(c.bound > 0.0) || c.maxFinestLevel == 0) return out;
   tbb::parallel_for(size_t(0), set.charts.size(), [&](size_t i) {
-    if (!(set.charts[i].quality.sampleError <= c.bound)) return;
+    const uint32_t own = set.charts[i].level;
+    out[i] = own;
+    if (!(set.charts[i].quality.sampleError <= c.bound) || own >= c.maxFinestLevel) return;
     GeometryImage back;
-    out[i] = chartFinestLevel(chartSamples(set, i, spill, back).positions, set.chartSize,
-                              set.charts[i].quality.sampleError, c);
+    ChartCoarsening rest = c;
+    rest.maxFinestLevel = c.maxFinestLevel - own;
+    out[i] = own + chartFinestLevel(chartSamples(set, i, spill, back).positions, set.charts[i].side(set.chartSize),
+                                    set.charts[i].quality.sampleError, rest);
   });
   return out;
 }
@@ -324,11 +346,14 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     c.gridY = 0;
     c.file = name;
     c.neighbours = img.neighbours;
-    c.finestLevel = finestLevels.empty() ? 0 : finestLevels[i];
+    c.finestLevel = finestLevels.empty() ? img.level : finestLevels[i];
+    if (c.finestLevel < img.level)
+      throw std::invalid_argument("writeGeometryCharts: a finest level finer than the chart's samples");
     PlanarPlacement planar;
     planar.budget = std::max(0.0, planarBound - img.quality.sampleError);
     planar.blockIntervals = blockIntervals;
-    const ChartPyramid pyramid = geometryPyramid(samples, set.chartSize, coding, c.finestLevel, planar, &planarSamples[i]);
+    const ChartPyramid pyramid = geometryPyramid(samples, img.side(set.chartSize), coding, c.finestLevel - img.level,
+                                                 planar, &planarSamples[i]);
     const uint32_t size = ((set.chartSize - 1) >> c.finestLevel) + 1;
     finestSamples[i] = uint64_t(size) * size;
     glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());

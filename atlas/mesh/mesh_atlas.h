@@ -74,7 +74,9 @@ struct ChartCoarsening {
 // (u, v), over k' <= k (so that it never drops as k grows).
 uint32_t chartFinestLevel(const std::vector<glm::vec3>& positions, uint32_t chartSize, double sampleError,
                           const ChartCoarsening& c);
-// chartFinestLevel of every chart of `set` (in parallel; spilled charts read back from `spill`).
+// chartFinestLevel of every chart of `set` (in parallel; spilled charts read back from `spill`),
+// as a level of set.chartSize: a chart sampled at its own size (GeometryImage::level) keeps at
+// least that level, and is coarsened from there.
 std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const ChartSpill* spill, const ChartCoarsening& c);
 
 // Writes set's charts to dir/charts/chart_NNNN.bin (atomically, in parallel) and fills m's
@@ -86,7 +88,8 @@ std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const Chart
 // normals of block borders only and measures the derived ones against the resampled ones.
 // Throws InputError when a file cannot be written, std::invalid_argument on an empty or
 // inconsistent set. With finestLevels (one per chart, as chartFinestLevels gives), each chart keeps
-// only the levels from its finest, subsampled from its samples before they are settled, in a file
+// only the levels from its finest (never finer than its own samples, GeometryImage::level; without
+// finestLevels, its own), subsampled from its samples before they are settled, in a file
 // of its own size (blocks of at most its intervals), and m's chart records the level. planarBound
 // (input units, > 0; compressed coding): each chart's finest level moves its planar squares within
 // planarBound less the chart's sampling error (geometryPyramid's PlanarPlacement).

@@ -3,6 +3,9 @@
 #include "atlas/mesh/quad_charts.h"
 
 #include <algorithm>
+#include <bit>
+#include <functional>
+#include <limits>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -143,6 +146,47 @@ uint32_t grownChartSize(const ChartLayout& layout, const QuadChartOptions& optio
   return 0;
 }
 
+// The stats' quad map name.
+std::string quadMapName(MeshQuadMap m) {
+  return m == MeshQuadMap::kStretch ? "stretch" : m == MeshQuadMap::kFolding ? "folding" : "bilinear";
+}
+
+// The resampler's options for `quads` from the quad chart options (the chart size set by the
+// caller), for a layout of `bounds`.
+ResampleOptions resampleOptions(const QuadChartOptions& o, QuadLayout quads, ChartSpill* spill, const MeshBounds& bounds) {
+  ResampleOptions ro;
+  if (o.positionStep) ro.minSampleGap = 2.0 * o.positionStep(bounds);
+  ro.threads = o.threads;
+  ro.spill = spill;
+  ro.quads = quads;
+  ro.unfold = o.unfold;
+  ro.quadMap = o.quadMap == MeshQuadMap::kStretch   ? QuadMap::kStretch
+               : o.quadMap == MeshQuadMap::kFolding ? QuadMap::kFolding
+                                                    : QuadMap::kBilinear;
+  return ro;
+}
+
+// Makes every patch's side count even for the sides quad layout (st.evenSideCorners the corners
+// added); false when some patch cannot have one.
+bool evenLayout(ChartLayout& layout, MeshResampleStats& st) {
+  const uint32_t holeCorners = splitTwoSidedHoles(layout);
+  const EvenSidesResult even = evenSides(layout);
+  st.evenSideCorners = holeCorners + even.corners;
+  if (even.oddLeft != 0) return false;
+  st.evenSideCorners += mendTwoChartCorners(layout).corners;
+  return true;
+}
+
+// The figures a build reports of its charts, from the set.
+void setChartFigures(const GeometryImageSet& set, MeshResampleStats& st) {
+  st.charts = set.charts.size();
+  st.param = set.param;
+  st.image = set.image;
+  st.perChart.clear();
+  st.perChart.reserve(set.charts.size());
+  for (const GeometryImage& g : set.charts) st.perChart.push_back({g.patch, g.quad, g.side(set.chartSize), g.quality});
+}
+
 // One resampling and repair of `layout` in quad layout `quads`: its patches change (side counts
 // made even for the sides layout, the repair's cuts). Stages "resample" and "chart_repair", named
 // with `suffix`. With the sides layout, false in `evened` (and nothing else done) when some patch
@@ -157,15 +201,8 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const QuadChartOptions& opti
   if (o.maxSampleError == kAutoSampleError) o.maxSampleError = o.chartSize == 0 ? kDefaultSampleError : 0.0;
   st.sideQuads = quads == QuadLayout::kSides;
   st.unfold = o.unfold;
-  st.quadMap = o.quadMap == MeshQuadMap::kStretch ? "stretch" : o.quadMap == MeshQuadMap::kFolding ? "folding" : "bilinear";
-  if (st.sideQuads) {
-    const uint32_t holeCorners = splitTwoSidedHoles(layout);
-    const EvenSidesResult even = evenSides(layout);
-    st.evenSideCorners = holeCorners + even.corners;
-    *evened = even.oddLeft == 0;
-    if (!*evened) return r;
-    st.evenSideCorners += mendTwoChartCorners(layout).corners;
-  }
+  st.quadMap = quadMapName(o.quadMap);
+  if (st.sideQuads && !(*evened = evenLayout(layout, st))) return r;
   const uint64_t quadCharts = layoutQuadCount(layout, quads);
   if (o.chartSize == 0) {
     o.chartSize = meshChartSizeForDensity(layout.triangles.size(), quadCharts);
@@ -183,16 +220,10 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const QuadChartOptions& opti
 
   // Quads, parameterization and resampling.
   const fs::path spillFile = dir / (st.sideQuads ? "samples_sides.tmp" : "samples_kites.tmp");
-  r.spill = std::make_unique<ChartSpill>(spillFile, o.chartSize, !layout.colours.empty());
-  ResampleOptions ro;
+  r.spill = std::make_unique<ChartSpill>(spillFile, !layout.colours.empty());
+  for (const glm::vec3& q : layout.positions) r.bounds.extend(q);
+  ResampleOptions ro = resampleOptions(o, quads, r.spill.get(), r.bounds);
   ro.chartSize = o.chartSize;
-  ro.threads = o.threads;
-  ro.spill = r.spill.get();
-  ro.quads = quads;
-  ro.unfold = o.unfold;
-  ro.quadMap = o.quadMap == MeshQuadMap::kStretch   ? QuadMap::kStretch
-               : o.quadMap == MeshQuadMap::kFolding ? QuadMap::kFolding
-                                                    : QuadMap::kBilinear;
   GeometryImageSet first = resampleLayout(layout, ro);
   // Doubles the chart size (saying `why`) and resamples the layout into `first`, its patches
   // first set to `restore` if given; false, unchanged, when the larger charts do not fit
@@ -211,7 +242,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const QuadChartOptions& opti
     if (restore) layout.patches = *restore;
     first = GeometryImageSet{};
     r.spill.reset();  // (removes its file)
-    r.spill = std::make_unique<ChartSpill>(spillFile, o.chartSize, !layout.colours.empty());
+    r.spill = std::make_unique<ChartSpill>(spillFile, !layout.colours.empty());
     ro.chartSize = o.chartSize;
     ro.spill = r.spill.get();
     first = resampleLayout(layout, ro);
@@ -222,7 +253,6 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const QuadChartOptions& opti
   // kCoarseSurfaceToDouble of its triangles, up to kMaxSamplesPerTriangle: the repair then has a
   // few patches to cut, not many.
   const double diagonal = layoutDiagonal(layout);
-  for (const glm::vec3& q : layout.positions) r.bounds.extend(q);
   const double maxError = o.maxSampleError * diagonal;
   while (grow && st.chartSizeByDensity && maxError > 0.0 && o.chartSize < kMaxDensityChartSize) {
     const std::vector<uint8_t> over = patchesOverSampleError(first, layout.patches.size(), maxError);
@@ -288,11 +318,404 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const QuadChartOptions& opti
                    o.input.string(), st.twoQuadCorners);
   }
   finishStage(meter, "chart_repair" + suffix);
-  st.charts = set.charts.size();
-  st.param = set.param;
-  st.image = set.image;
-  st.perChart.reserve(set.charts.size());
-  for (const GeometryImage& g : set.charts) st.perChart.push_back({g.patch, g.quad, g.quality});
+  setChartFigures(set, st);
+  return r;
+}
+
+// Per-patch sizing (MeshSizing::kPatch): each patch's charts and size, and the rounds that
+// resample them.
+struct PatchSizing {
+  struct Entry {
+    uint32_t size = 0;                  // its charts' side
+    std::vector<GeometryImage> charts;  // its quads' charts, at that size
+    PatchResampleStats stats;
+    // Before its last doubling (previousSize 0: none), to go back to where the doubling made
+    // folds: its size, charts and stats.
+    uint32_t previousSize = 0;
+    std::vector<GeometryImage> previousCharts;
+    PatchResampleStats previousStats;
+    bool todo = false;        // to be resampled at `size`
+    bool settled = false;     // neither doubled nor cut again
+    bool uncuttable = false;  // no cut was found, or none that folds less
+    bool cutAsked = false;    // it cannot grow: cut it next round
+    uint32_t cuts = 0;     // cuts on the way from a charted patch
+  };
+  ChartLayout& layout;
+  ResampleOptions ro;
+  std::vector<glm::dvec3> normals;  // layoutVertexNormals, once
+  std::vector<Entry> patches;
+  uint64_t trianglesParameterized = 0;
+
+  // The worst sampling error of patch p's charts.
+  double error(uint32_t p) const { return worstError(patches[p].charts); }
+  // The samples the charts hold, (size - 1)^2 a chart.
+  double samples() const {
+    double n = 0.0;
+    for (const Entry& e : patches) n += double(e.charts.size()) * double(e.size - 1) * double(e.size - 1);
+    return n;
+  }
+  // Takes patch p's charts (and stats) out of `set`, a resampling of the current layout.
+  void take(GeometryImageSet& set, uint32_t p) {
+    Entry& e = patches[p];
+    e.stats = set.patches[p];
+    e.charts.clear();
+    for (uint32_t i = 0; i < e.stats.quads; ++i) e.charts.push_back(std::move(set.charts[e.stats.firstChart + i]));
+  }
+  // Resamples the patches marked todo, a resampling per size.
+  void resampleTodo() {
+    std::vector<uint32_t> sizes;
+    for (const Entry& e : patches)
+      if (e.todo) sizes.push_back(e.size);
+    std::sort(sizes.begin(), sizes.end());
+    sizes.erase(std::unique(sizes.begin(), sizes.end()), sizes.end());
+    for (const uint32_t s : sizes) {
+      std::vector<uint8_t> only(patches.size(), 0);
+      for (uint32_t p = 0; p < patches.size(); ++p) only[p] = patches[p].todo && patches[p].size == s;
+      ResampleReuse reuse;
+      reuse.normals = &normals;
+      reuse.only = &only;
+      ro.chartSize = s;
+      GeometryImageSet part = resampleLayout(layout, ro, reuse);
+      trianglesParameterized += part.trianglesParameterized;
+      for (uint32_t p = 0; p < patches.size(); ++p)
+        if (only[p]) take(part, p);
+    }
+    for (Entry& e : patches) e.todo = false;
+  }
+  // The worst sampling error and the flipped texels of charts.
+  static double worstError(const std::vector<GeometryImage>& charts) {
+    double worst = 0.0;
+    for (const GeometryImage& g : charts) worst = std::max(worst, g.quality.sampleError);
+    return worst;
+  }
+  static uint64_t flips(const std::vector<GeometryImage>& charts) {
+    uint64_t n = 0;
+    for (const GeometryImage& g : charts) n += g.quality.flippedTexels;
+    return n;
+  }
+  // Doubles patch p's size, keeping its charts to go back to.
+  void grow(uint32_t p) {
+    Entry& e = patches[p];
+    e.previousSize = e.size;
+    e.previousCharts = std::move(e.charts);
+    e.previousStats = e.stats;
+    e.size = 2 * e.size - 1;
+    e.todo = true;
+  }
+  // Puts patch p back at the size before its last doubling.
+  void shrink(uint32_t p) {
+    Entry& e = patches[p];
+    e.size = e.previousSize;
+    e.charts = std::move(e.previousCharts);
+    e.stats = e.previousStats;
+    e.previousSize = 0;
+  }
+  // Cuts patch p through the first layout triangle its charts fold over (splitPatchThrough), or
+  // where they do not fold in halves (halvePatch), or where no such cut exists at its neck
+  // (splitPatchAtNeck); its side counts
+  // are made even again for the sides layout without a new two-chart corner. The parts start at
+  // `base` and every patch the cut changed is marked to be resampled. False, the layout as it
+  // was, when no such cut exists.
+  bool cut(uint32_t p, uint32_t base, bool sides) {
+    const std::vector<Patch> saved = layout.patches;
+    const uint32_t cornersBefore = sides ? twoQuadCorners(layout) : 0;
+    uint32_t fold = ~0u;
+    for (const GeometryImage& g : patches[p].charts)
+      if (fold == ~0u && !g.foldTriangles.empty()) fold = g.foldTriangles.front();
+    // As the repair cuts (repairCharts): 9 sides at most in the sides layout, whose side counts
+    // are made even after, and no part there with fewer than 4 border edges.
+    const uint32_t maxSides = sides ? 9 : 8;
+    bool done = fold != ~0u ? splitPatchThrough(layout, p, fold, maxSides) : halvePatch(layout, p, maxSides, sides ? 4 : 0);
+    if (!done) layout.patches = saved;  // (a failed cut may have left a corner)
+    done = done || splitPatchAtNeck(layout, p);
+    if (done) {
+      std::vector<uint32_t> parts{p};
+      for (uint32_t q = uint32_t(saved.size()); q < layout.patches.size(); ++q) parts.push_back(q);
+      moveSideEars(layout, parts, false);
+      done = !sides || (evenSides(layout).oddLeft == 0 && alignSpokes(layout) <= cornersBefore);
+    }
+    if (!done) {
+      layout.patches = saved;
+      return false;
+    }
+    const uint32_t cuts = patches[p].cuts + 1;
+    patches.resize(layout.patches.size());
+    for (uint32_t q = 0; q < layout.patches.size(); ++q) {
+      if (q < saved.size() && q != p && patchSamplesAlike(saved[q], layout.patches[q], q)) continue;
+      Entry& e = patches[q];
+      if (q == p || q >= saved.size()) {
+        e.size = base;
+        e.cuts = cuts;
+      }
+      e.previousSize = 0;
+      e.previousCharts.clear();
+      e.settled = e.uncuttable = e.cutAsked = false;
+      e.todo = true;
+    }
+    return true;
+  }
+  // The flipped texels of the patches flagged in `which`.
+  uint64_t flipsOf(const std::vector<uint8_t>& which) const {
+    uint64_t n = 0;
+    for (uint32_t q = 0; q < which.size() && q < patches.size(); ++q)
+      if (which[q]) n += flips(patches[q].charts);
+    return n;
+  }
+  // cut(p), kept only if the patches it changed, resampled at once, fold less than they did (where
+  // `folding`), or no more (else). False, the layout and the charts as they were, otherwise.
+  bool tryCut(uint32_t p, uint32_t base, bool sides, bool folding) {
+    const std::vector<Patch> saved = layout.patches;
+    const std::vector<Entry> was = patches;
+    if (!cut(p, base, sides)) return false;
+    std::vector<uint8_t> before(was.size(), 0), after(patches.size(), 0);
+    for (uint32_t q = 0; q < patches.size(); ++q) {
+      after[q] = patches[q].todo;
+      if (q < was.size()) before[q] = patches[q].todo;
+    }
+    uint64_t flipsBefore = 0;
+    for (uint32_t q = 0; q < was.size(); ++q)
+      if (before[q]) flipsBefore += flips(was[q].charts);
+    resampleTodo();
+    const uint64_t flipsAfter = flipsOf(after);
+    if (folding ? flipsAfter < flipsBefore : flipsAfter <= flipsBefore) return true;
+    layout.patches = saved;
+    patches = was;
+    return false;
+  }
+  // The charts gathered into one set of chartSize `top`, patch by patch, each at its level.
+  GeometryImageSet gather(uint32_t top, QuadLayout quads) {
+    GeometryImageSet set;
+    set.chartSize = top;
+    const std::vector<std::array<RootNeighbour, 4>> neighbours = quadNeighbours(layout, quads);
+    std::vector<ParamQuality> initial, final;
+    std::vector<ImageQuality> images;
+    for (uint32_t p = 0; p < patches.size(); ++p) {
+      Entry& e = patches[p];
+      e.stats.firstChart = uint32_t(set.charts.size());
+      set.patches.push_back(e.stats);
+      initial.push_back(e.stats.paramInitial);
+      final.push_back(e.stats.param);
+      const uint8_t level = uint8_t(std::countr_zero(top - 1) - std::countr_zero(e.size - 1));
+      for (GeometryImage& g : e.charts) {
+        g.patch = p;
+        g.level = level;
+        g.neighbours = neighbours[set.charts.size()];
+        images.push_back(g.quality);
+        set.charts.push_back(std::move(g));
+      }
+      e.charts.clear();
+    }
+    set.paramInitial = combineQuality(initial);
+    set.param = combineQuality(final);
+    set.image = combineImageQuality(images);
+    set.trianglesParameterized = trianglesParameterized;
+    return set;
+  }
+};
+
+// At most this many cuts lead from a charted patch to any of its parts under per-patch sizing.
+constexpr uint32_t kMaxSizingCuts = 4;
+
+// Per-patch sizing, after the first resampling. Each patch whose charts sample the surface more
+// coarsely than `bound` is resampled at twice the size, up to kMaxDensityChartSize, the samples
+// `cap`, and texel sides of ResampleOptions::minSampleGap. A patch is cut at its neck instead, its parts starting again at `base`, where:
+//   - a doubling did not halve its sampling error (a smooth surface's drops about four times: this
+//     one's parameterization squeezes it), or it cannot grow;
+//   - its charts fold, or a doubling made them fold more (the finer texels resolve a fold of the
+//     parameterization); where no cut is found, it goes back to the size before if that one met
+//     the bound.
+// Each cut is resampled at once and kept only where the patches it changed fold less than before
+// (a cut for folds) or no more (a cut for the sampling error).
+// Where no cut is found it goes on growing while it can: the sampling bound (and so the Hausdorff
+// distance) goes before the folds. Returns the sizing rounds.
+uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, double bound, double cap, bool sides,
+                     MeshResampleStats& st, const fs::path& dir) {
+  QuadChartOptions room = o;
+  uint32_t rounds = 0;
+  auto mayCut = [&](const PatchSizing::Entry& e) { return !e.uncuttable && e.cuts < kMaxSizingCuts; };
+  for (bool any = true; any; ++rounds) {
+    any = false;
+    std::vector<std::pair<double, uint32_t>> asking, squeezed;
+    for (uint32_t p = 0; p < z.patches.size(); ++p) {
+      PatchSizing::Entry& e = z.patches[p];
+      if (e.settled) continue;
+      const double err = z.error(p);
+      const uint64_t flips = PatchSizing::flips(e.charts);
+      const bool doubled = e.previousSize > 0;
+      const bool foldedMore = doubled && flips > PatchSizing::flips(e.previousCharts);
+      if (foldedMore && !mayCut(e) && PatchSizing::worstError(e.previousCharts) <= bound) {
+        z.shrink(p);
+        e.settled = true;
+        continue;
+      }
+      const bool squeezing = doubled && err > bound && err > 0.5 * PatchSizing::worstError(e.previousCharts);
+      if ((flips > 0 || squeezing || e.cutAsked) && mayCut(e))
+        squeezed.push_back({double(flips) + err / bound, p});
+      else if (err > bound)
+        asking.push_back({err / bound, p});
+    }
+    // Cuts first, each kept only where it folds less (or, for the sampling error, no more).
+    std::sort(squeezed.begin(), squeezed.end(), std::greater<>());
+    std::vector<uint8_t> cutNow(z.patches.size(), 0);
+    for (const auto& [n, p] : squeezed) {
+      const bool folding = PatchSizing::flips(z.patches[p].charts) > 0;
+      z.patches[p].cutAsked = false;
+      if (z.tryCut(p, base, sides, folding)) {
+        ++st.repair.patchesSplit;
+        cutNow[p] = 1;
+      } else {
+        PatchSizing::Entry& e = z.patches[p];
+        e.uncuttable = true;
+        if (e.previousSize > 0 && PatchSizing::flips(e.charts) > PatchSizing::flips(e.previousCharts) &&
+            PatchSizing::worstError(e.previousCharts) <= bound) {
+          z.shrink(p);
+          e.settled = true;
+        }
+      }
+      any = true;
+    }
+    // Then the doublings, of the patches no cut changed this round.
+    std::sort(asking.begin(), asking.end(), std::greater<>());
+    double samples = z.samples();
+    for (const auto& [n, p] : asking) {
+      if (p < cutNow.size() && cutNow[p]) continue;
+      const PatchSizing::Entry& e = z.patches[p];
+      const double m = double(e.size - 1);
+      const double growth = 3.0 * double(e.charts.size()) * m * m;
+      room.chartSize = 2 * e.size - 1;
+      // Halved texel sides must stay ResampleOptions::minSampleGap long: the coding's lattice
+      // would merge closer samples.
+      double shortest = std::numeric_limits<double>::infinity();
+      for (const GeometryImage& g : e.charts) shortest = std::min(shortest, g.quality.shortestTexelSide);
+      uint32_t* stop = e.size >= kMaxDensityChartSize         ? &st.patchesAtLargestSize
+                       : samples + growth > cap                ? &st.patchesAtSampleCap
+                       : 0.5 * shortest < z.ro.minSampleGap    ? &st.patchesAtLattice
+                                                               : nullptr;
+      if (!stop) {
+        try {
+          checkChartRoom(z.layout, e.charts.size(), room, dir);
+        } catch (const InputError&) {
+          stop = &st.patchesAtMemory;
+        }
+      }
+      if (stop) {
+        // Cut next round where it may be; else it stays.
+        if (mayCut(e)) {
+          z.patches[p].cutAsked = true;
+          any = true;
+        } else {
+          z.patches[p].settled = true;
+          ++*stop;
+        }
+        continue;
+      }
+      z.grow(p);
+      samples += growth;
+      ++st.patchesDoubled;
+      any = true;
+    }
+    if (spdlog::should_log(spdlog::level::debug))
+      spdlog::debug("sizing round {}: {} patches doubled or cut, {} of them cut", rounds + 1,
+                    asking.size() + squeezed.size(), squeezed.size());
+    z.resampleTodo();
+  }
+  return rounds;
+}
+
+// Resamples `layout` (straightened, its side counts even for the sides layout) with each patch's
+// charts at their own size (MeshSizing::kPatch), from the density's size up: every patch at that
+// size, the folds there cut (repairCharts, flips only: a fold that stays as the texels shrink is
+// the parameterization's, not the sampling's), then sizePatches. Stage "resample".
+ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, QuadLayout quads, const fs::path& dir,
+                               StageMeter& meter) {
+  ResampledMesh r;
+  MeshResampleStats& st = r.stats;
+  st.perPatchSize = true;
+  st.sideQuads = quads == QuadLayout::kSides;
+  st.unfold = o.unfold;
+  st.quadMap = quadMapName(o.quadMap);
+  const uint64_t quadCharts = layoutQuadCount(layout, quads);
+  const uint32_t base = meshChartSizeForDensity(layout.triangles.size(), quadCharts);
+  st.chartSizeByDensity = true;
+  st.densityChartSize = base;
+  QuadChartOptions room = o;
+  room.chartSize = base;
+  checkChartRoom(layout, quadCharts, room, dir);
+  const double diagonal = layoutDiagonal(layout);
+  for (const glm::vec3& q : layout.positions) r.bounds.extend(q);
+  const double bound = (o.maxSampleError == kAutoSampleError ? kDefaultSampleError : o.maxSampleError) * diagonal;
+  st.maxSampleError = bound;
+  spdlog::info("charts from {}^2 for {} quad charts ({}) of {} triangles ({:.1f} samples per triangle), each patch's "
+               "doubled while they sample the surface more coarsely than {:.4f}% of the diagonal",
+               base, quadCharts, st.sideQuads ? "sides" : "kites", layout.triangles.size(),
+               samplesPerTriangle(layout, quadCharts, base), 100.0 * bound / std::max(diagonal, 1e-300));
+
+  r.spill = std::make_unique<ChartSpill>(dir / "samples.tmp", !layout.colours.empty());
+  PatchSizing z{layout, resampleOptions(o, quads, r.spill.get(), r.bounds), layoutVertexNormals(layout), {}};
+  z.ro.chartSize = base;
+  {
+    ResampleReuse all;
+    all.normals = &z.normals;
+    GeometryImageSet first = resampleLayout(layout, z.ro, all);
+    if (first.image.flippedTexels > 0 && o.repairRounds > 0) {
+      ChartRepairOptions repair;
+      repair.rounds = o.repairRounds;
+      repair.workBudget = uint64_t(std::llround(o.repairBudget * double(layout.triangles.size())));
+      first = repairCharts(layout, std::move(first), z.ro, repair, &st.repair,
+                           [&] { return residentBytes() < o.maxMemory / 4 * 3; });
+    }
+    z.trianglesParameterized = first.trianglesParameterized;
+    z.patches.resize(layout.patches.size());
+    for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+      z.patches[p].size = base;
+      z.take(first, p);
+    }
+  }
+  const double cap = meshSampleCap(layout.triangles.size());
+  st.sizeRounds = sizePatches(z, o, base, bound, cap, st.sideQuads, st, dir);
+  // The largest size is the set's; a patch sampled coarser than the hierarchy lets a chart be is
+  // resampled at the coarsest it allows.
+  uint32_t top = base;
+  for (const PatchSizing::Entry& e : z.patches) top = std::max(top, e.size);
+  const uint32_t coarsest = o.coarsestLevel ? o.coarsestLevel(top) : 31;
+  for (PatchSizing::Entry& e : z.patches) {
+    if (uint32_t(std::countr_zero(top - 1) - std::countr_zero(e.size - 1)) <= coarsest) continue;
+    e.size = ((top - 1) >> coarsest) + 1;
+    e.todo = true;
+  }
+  z.resampleTodo();
+  for (const PatchSizing::Entry& e : z.patches) {
+    const uint32_t doublings = uint32_t(std::countr_zero(e.size - 1) - std::countr_zero(base - 1));
+    if (st.patchesBySize.size() <= doublings) st.patchesBySize.resize(doublings + 1, 0);
+    ++st.patchesBySize[doublings];
+  }
+  const double samples = z.samples();
+  r.set = z.gather(top, quads);
+  GeometryImageSet& set = r.set;
+  st.chartSize = top;
+  st.patches = layout.patches.size();
+  spdlog::info("patches by chart size from {}^2 up, doubling: {} ({} rounds, {} patch doublings, {} cuts, {:.1f} "
+               "samples per triangle)",
+               base, fmt::join(st.patchesBySize, ", "), st.sizeRounds, st.patchesDoubled, st.repair.patchesSplit,
+               samples / double(std::max<size_t>(layout.triangles.size(), 1)));
+  if (set.image.flippedTexels > 0 || set.image.sampleError > bound)
+    spdlog::warn("{}: {} flipped texels and a sampling error of {:.4f}% of the diagonal (bound {:.4f}%) are left; "
+                 "patches over the bound that could not grow: {} at {}^2, {} at the samples' cap ({:.0f} per "
+                 "triangle), {} at texels as short as the position lattice allows, {} at {}",
+                 o.input.string(), set.image.flippedTexels, 100.0 * set.image.sampleError / std::max(diagonal, 1e-300),
+                 100.0 * bound / std::max(diagonal, 1e-300), st.patchesAtLargestSize, kMaxDensityChartSize,
+                 st.patchesAtSampleCap, cap / double(std::max<size_t>(layout.triangles.size(), 1)), st.patchesAtLattice,
+                 st.patchesAtMemory, spelled(o, "maxMemory"));
+  if (st.sideQuads) {
+    st.twoQuadCorners = twoQuadCorners(layout);
+    if (st.twoQuadCorners > 0)
+      spdlog::warn("{}: {} corners of the sides quad layout have only two charts meeting (their corner texels fold "
+                   "flat onto each other)",
+                   o.input.string(), st.twoQuadCorners);
+  }
+  if (spdlog::should_log(spdlog::level::debug)) logFoldingCharts(layout, set);
+  finishStage(meter, "resample");
+  setChartFigures(set, st);
   return r;
 }
 
@@ -317,7 +740,26 @@ ResampledMesh makeQuadCharts(ChartLayout&& layout, const QuadChartOptions& optio
   };
   ResampledMesh r;
   bool evened = true;
-  if (options.quads == MeshQuads::kKites) {
+  if (options.sizing == MeshSizing::kPatch && options.chartSize == 0) {
+    // One quad layout, each patch's charts at their own size.
+    QuadLayout quads = options.quads == MeshQuads::kKites ? QuadLayout::kKites : QuadLayout::kSides;
+    const std::vector<Patch> charted = layout.patches;
+    MeshResampleStats even;
+    if (quads == QuadLayout::kSides) {
+      straighten(QuadLayout::kSides, "");
+      if (!evenLayout(layout, even)) {
+        spdlog::warn("{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
+                     "of sides with inner vertices joins them to another such patch or to a hole); built with kites",
+                     options.input.string());
+        layout.patches = charted;
+        quads = QuadLayout::kKites;
+        even = {};
+      }
+    }
+    if (quads == QuadLayout::kKites) straighten(QuadLayout::kKites, "");
+    r = resamplePerPatch(layout, options, quads, dir, meter);
+    r.stats.evenSideCorners = even.evenSideCorners;
+  } else if (options.quads == MeshQuads::kKites) {
     straighten(QuadLayout::kKites, "");
     r = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, "", &evened);
   } else {

@@ -34,6 +34,19 @@ inline constexpr double kDefaultSampleError = 0.0005;
 enum class MeshQuads : uint8_t { kAuto, kSides, kKites };
 // How a quad chart's square maps into its patch's parameterization (atlas/mesh/resample.h QuadMap).
 enum class MeshQuadMap : uint8_t { kBilinear, kStretch, kFolding };
+// How big the charts are.
+//   patch: each patch's charts at a size of their own. Every patch is parameterized and resampled
+//     at the density's size; a patch whose charts sample the surface more coarsely than the
+//     sampling bound, or fold, is resampled at twice the size, again while that does not mend it,
+//     up to kMaxDensityChartSize and the samples meshSampleCap allows. No patch is cut, and one
+//     quad layout is built: sides (kites where some patch cannot have an even side count, or if
+//     asked for). A shared side is sampled by arc length at each patch's own count, and those
+//     counts differ by powers of two, so the coarser patch's samples are the finer one's, bit for
+//     bit (sampleSide in atlas/mesh/resample.cpp). Charts of a patch sampled coarser than the
+//     largest size keep that as their finest pyramid level (ChartInfo::finestLevel).
+//   layout: every chart at one size, with the chart repair cutting the patches whose charts fold
+//     or sample too coarsely, and, with the auto quad layout, both layouts tried (makeQuadCharts).
+enum class MeshSizing : uint8_t { kPatch, kLayout };
 
 // Samples per input triangle the default chart size starts from; the sampling error then doubles it
 // where the surface needs it (the paper's scans hold about 4 to 8).
@@ -81,12 +94,21 @@ struct QuadChartOptions {
   MeshQuads quads = MeshQuads::kAuto;
   MeshQuadMap quadMap = MeshQuadMap::kBilinear;
   bool unfold = true;  // ResampleOptions::unfold
+  // Per-patch sizes (the default) unless chartSize is given, which asks for one size.
+  MeshSizing sizing = MeshSizing::kPatch;
+  // The coding's position lattice step for a surface of these bounds (ResampleOptions::minSampleGap
+  // is two of them); none: no lattice.
+  std::function<double(const MeshBounds&)> positionStep;
+  // Under patch sizing: the coarsest pyramid level a chart may be sampled at when the largest
+  // chart size is the argument (HierarchyParams::maxFinestLevel); none: no limit.
+  std::function<uint32_t(uint32_t)> coarsestLevel;
 };
 
 // One quad chart's figures.
 struct ChartQuality {
   uint32_t patch = 0;    // layout patch
   uint32_t quad = 0;     // quad within the patch
+  uint32_t side = 0;     // samples a side of its image
   ImageQuality quality;  // of its sampled image
 };
 
@@ -111,6 +133,14 @@ struct MeshResampleStats {
   double maxSampleError = 0.0;         // the repair's bound, in the input's units (0: none)
   double repairWork = 0.0;             // layout triangles parameterized again / layout triangles
   uint64_t patches = 0;                // after the repair
+  bool perPatchSize = false;           // MeshSizing::kPatch: charts at their patches' own sizes
+  uint32_t sizeRounds = 0;             // per-patch sizing: resampling rounds
+  uint32_t patchesDoubled = 0;         // per-patch sizing: patch resamplings at a doubled size
+  std::vector<uint32_t> patchesBySize; // per-patch sizing: [k] patches of (density size - 1) * 2^k + 1
+  // Per-patch sizing: patches left over the sampling bound, by what stopped their growth: the
+  // largest chart size (kMaxDensityChartSize), the samples cap (meshSampleCap), texels as short as
+  // the coding's lattice allows (ResampleOptions::minSampleGap), or the memory.
+  uint32_t patchesAtLargestSize = 0, patchesAtSampleCap = 0, patchesAtLattice = 0, patchesAtMemory = 0;
   std::vector<ChartQuality> perChart;
 };
 

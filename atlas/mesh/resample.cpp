@@ -430,6 +430,7 @@ ImageQuality measureImage(const std::vector<glm::vec3>& positions,
       const glm::dvec3 p00(positions[i00]), p10(positions[i10]), p01(positions[i01]),
           p11(positions[i11]);
       // Triangles (00, 10, 11) and (00, 11, 01), each of parameter area 1 / (2 m^2).
+      q.shortestTexelSide = std::min({q.shortestTexelSide, glm::length(p10 - p00), glm::length(p01 - p00)});
       triangle((p10 - p00) * scale, (p11 - p10) * scale);
       triangle((p11 - p01) * scale, (p01 - p00) * scale);
       const glm::dvec3 d1 = p11 - p00, d2 = p01 - p10;
@@ -479,6 +480,7 @@ ImageQuality combineImageQuality(const std::vector<ImageQuality>& parts) {
     q.degenerateTexels += p.degenerateTexels;
     q.texelsUnfolded += p.texelsUnfolded;
     q.samplesPastQuad += p.samplesPastQuad;
+    q.shortestTexelSide = std::min(q.shortestTexelSide, p.shortestTexelSide);
     if (p.sampleError > q.sampleError) q.sampleError = p.sampleError, q.sampleErrorVertex = p.sampleErrorVertex;
   });
 }
@@ -1312,10 +1314,12 @@ struct ChartSampler {
 // measures a sample's slide is judged by.
 struct Unfolding {
   explicit Unfolding(ChartSampler& chart)
-      : ch(chart), size(chart.size), m(chart.m), start(chart.domain), startPositions(chart.img.positions) {}
+      : ch(chart), size(chart.size), m(chart.m), gap(chart.ps.c.options.minSampleGap), start(chart.domain),
+        startPositions(chart.img.positions) {}
 
   ChartSampler& ch;
   const uint32_t size, m;
+  const double gap;  // ResampleOptions::minSampleGap
   const std::vector<glm::dvec2> start;
   const std::vector<glm::vec3> startPositions;
 
@@ -1335,13 +1339,17 @@ struct Unfolding {
     return true;
   }
   // Whether x keeps apart from every other sample a slide could bring it to (those up to
-  // two texels away): two samples at one point make a texel of no area.
+  // two texels away): two samples at one point make a texel of no area. Also as stored (single
+  // precision), and as coded (ResampleOptions::minSampleGap).
   bool apart(size_t k, const glm::dvec3& x, double l) const {
     const int64_t u0 = int64_t(k % size), v0 = int64_t(k / size);
+    const glm::vec3 stored(x);
     for (int64_t v = std::max<int64_t>(v0 - 2, 0); v <= std::min<int64_t>(v0 + 2, m); ++v) {
       for (int64_t u = std::max<int64_t>(u0 - 2, 0); u <= std::min<int64_t>(u0 + 2, m); ++u) {
         const size_t j = size_t(v) * size + size_t(u);
-        if (j != k && glm::distance(glm::dvec3(ch.img.positions[j]), x) <= 1e-4 * l) return false;
+        if (j != k && (ch.img.positions[j] == stored ||
+                       glm::distance(glm::dvec3(ch.img.positions[j]), x) <= std::max(1e-4 * l, gap)))
+          return false;
       }
     }
     return true;
@@ -1598,8 +1606,7 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
   return set;
 }
 
-ChartSpill::ChartSpill(const std::filesystem::path& file, uint32_t chartSize, bool colours)
-    : file_(file), chartSize_(chartSize), colours_(colours) {
+ChartSpill::ChartSpill(const std::filesystem::path& file, bool colours) : file_(file), colours_(colours) {
   fd_ = ::open(file.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd_ < 0) throw InputError(file.string() + ": cannot create (" + std::strerror(errno) + ")");
 }
@@ -1611,16 +1618,22 @@ ChartSpill::~ChartSpill() {
 }
 
 void ChartSpill::put(GeometryImage& image) {
-  const size_t n = size_t(chartSize_) * chartSize_;
-  if (image.positions.size() != n || image.normals.size() != n || image.colours.size() != (colours_ ? n : 0))
-    throw std::invalid_argument("ChartSpill::put: the image's samples do not match the spill's chart size and colours");
-  const size_t bytes = n * (sizeof(glm::vec3) + sizeof(PackedNormal) + (colours_ ? sizeof(glm::u8vec4) : 0));
+  const uint32_t side = uint32_t(std::llround(std::sqrt(double(image.positions.size()))));
+  const size_t n = size_t(side) * side;
+  if (!isChartSizeValid(side) || image.positions.size() != n || image.normals.size() != n ||
+      image.colours.size() != (colours_ ? n : 0))
+    throw std::invalid_argument("ChartSpill::put: the image's samples are not a (2^k+1)^2 image with the spill's colours");
+  const size_t bytes =
+      sizeof(uint32_t) + n * (sizeof(glm::vec3) + sizeof(PackedNormal) + (colours_ ? sizeof(glm::u8vec4) : 0));
   const uint64_t at = end_.fetch_add(bytes);
   std::vector<uint8_t> buf(bytes);
-  std::memcpy(buf.data(), image.positions.data(), n * sizeof(glm::vec3));
-  std::memcpy(buf.data() + n * sizeof(glm::vec3), image.normals.data(), n * sizeof(PackedNormal));
+  uint8_t* out = buf.data();
+  std::memcpy(out, &side, sizeof(uint32_t));
+  out += sizeof(uint32_t);
+  std::memcpy(out, image.positions.data(), n * sizeof(glm::vec3));
+  std::memcpy(out + n * sizeof(glm::vec3), image.normals.data(), n * sizeof(PackedNormal));
   if (colours_)
-    std::memcpy(buf.data() + n * (sizeof(glm::vec3) + sizeof(PackedNormal)), image.colours.data(), n * sizeof(glm::u8vec4));
+    std::memcpy(out + n * (sizeof(glm::vec3) + sizeof(PackedNormal)), image.colours.data(), n * sizeof(glm::u8vec4));
   for (size_t done = 0; done < bytes;) {
     const ssize_t w = ::pwrite(fd_, buf.data() + done, bytes - done, off_t(at + done));
     if (w <= 0) {
@@ -1637,10 +1650,6 @@ void ChartSpill::put(GeometryImage& image) {
 
 void ChartSpill::get(GeometryImage& image) const {
   if (image.spilled < 0) return;
-  const size_t n = size_t(chartSize_) * chartSize_;
-  image.positions.resize(n);
-  image.normals.resize(n);
-  image.colours.resize(colours_ ? n : 0);
   auto read = [&](void* out, size_t bytes, uint64_t at) {
     for (size_t done = 0; done < bytes;) {
       const ssize_t r = ::pread(fd_, static_cast<uint8_t*>(out) + done, bytes - done, off_t(at + done));
@@ -1651,7 +1660,14 @@ void ChartSpill::get(GeometryImage& image) const {
       done += size_t(r);
     }
   };
-  const uint64_t at = uint64_t(image.spilled);
+  uint32_t side = 0;
+  read(&side, sizeof(uint32_t), uint64_t(image.spilled));
+  if (!isChartSizeValid(side)) throw InputError(file_.string() + ": a chart record with a bad size");
+  const size_t n = size_t(side) * side;
+  image.positions.resize(n);
+  image.normals.resize(n);
+  image.colours.resize(colours_ ? n : 0);
+  const uint64_t at = uint64_t(image.spilled) + sizeof(uint32_t);
   read(image.positions.data(), n * sizeof(glm::vec3), at);
   read(image.normals.data(), n * sizeof(PackedNormal), at + n * sizeof(glm::vec3));
   if (colours_) read(image.colours.data(), n * sizeof(glm::u8vec4), at + n * (sizeof(glm::vec3) + sizeof(PackedNormal)));

@@ -19,6 +19,7 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <limits>
 #include <filesystem>
 #include <vector>
 
@@ -65,6 +66,10 @@ struct ResampleOptions {
   // where their texels agree best with the input faces, kept where fewer texels fold (the border,
   // and so the seams, do not move; see resampleLayout).
   bool unfold = true;
+  // The unfolding leaves every slid sample at least this far from the samples within two texels
+  // of it (in the input's units; 0: any distance above none): two lattice steps of the coding's
+  // positions, so that settling them on it never merges two samples.
+  double minSampleGap = 0.0;
 };
 
 // Quality of a sampled image, seen as a map from the unit square to the sampled surface through
@@ -98,6 +103,9 @@ struct ImageQuality {
   double sampleError = 0.0;
   uint32_t sampleErrorVertex = ~0u;
   double area3D = 0.0;            // surface area of the sampled grid
+  // The shortest side of a texel (in the input's units; infinite without texels): how far apart
+  // the closest neighbouring samples lie, where the map squeezes the surface most.
+  double shortestTexelSide = std::numeric_limits<double>::infinity();
 };
 
 // One quad chart: a (chartSize)^2 row-major image, row = v, u = column. Each edge's
@@ -118,10 +126,15 @@ struct GeometryImage {
   ImageQuality quality;
   std::vector<uint32_t> foldTriangles;       // layout triangles under flipped texels (<= 8)
   int64_t spilled = -1;                      // where a ChartSpill holds the samples; -1: here
+  // The pyramid level of the set's chart size that the image holds: ((chartSize - 1) >> level) + 1
+  // samples a side (charts sampled at their own size; core/atlas_format.h ChartInfo::finestLevel).
+  uint8_t level = 0;
 
+  // The samples a side of this image in a set of charts of chartSize^2 samples.
+  uint32_t side(uint32_t chartSize) const { return ((chartSize - 1) >> level) + 1; }
   // Whether the chart's samples exist, here or in a spill.
   bool hasSamples(uint32_t chartSize) const {
-    return spilled >= 0 || positions.size() == size_t(chartSize) * chartSize;
+    return spilled >= 0 || positions.size() == size_t(side(chartSize)) * side(chartSize);
   }
 };
 
@@ -129,17 +142,18 @@ struct GeometryImage {
 // geometry images are not all held in memory until they are written: refinement (which moves
 // charts, reads only their figures and resamples a few patches again) and writing (which reads
 // each back in turn) work the same on spilled charts. Samples replaced by a later resampling stay
-// in the file, unread. put and get may run on several threads at once.
+// in the file, unread. Each record starts with its image's side in samples, so images of
+// different sizes share one spill. put and get may run on several threads at once.
 class ChartSpill {
  public:
   // Creates (or truncates) the file. Throws InputError naming it when it cannot.
-  ChartSpill(const std::filesystem::path& file, uint32_t chartSize, bool colours);
+  ChartSpill(const std::filesystem::path& file, bool colours);
   ~ChartSpill();  // closes and removes the file
   ChartSpill(const ChartSpill&) = delete;
   ChartSpill& operator=(const ChartSpill&) = delete;
-  // Appends the image's samples (chartSize^2 positions, normals and colours if the spill has
-  // them) and frees them. Throws std::invalid_argument when they do not match, InputError naming
-  // the file when it cannot be written (a full disk).
+  // Appends the image's samples (s^2 positions and normals, s = 2^k + 1, and colours if the spill
+  // has them) and frees them. Throws std::invalid_argument when they do not match, InputError
+  // naming the file when it cannot be written (a full disk).
   void put(GeometryImage& image);
   // Reads a spilled image's samples back into it (spilled = -1 after); no-op for one held here.
   void get(GeometryImage& image) const;
@@ -147,7 +161,6 @@ class ChartSpill {
 
  private:
   std::filesystem::path file_;
-  uint32_t chartSize_;
   bool colours_;
   int fd_ = -1;
   std::atomic<uint64_t> end_{0};

@@ -312,7 +312,7 @@ TEST(PatchSplit, FlipRepairWithSpilledChartsGivesTheSameAtlas) {
   ChartLayout held = charted, spilled = charted;
   ChartRepairStats stHeld, stSpilled;
   const GeometryImageSet setHeld = resampleAndRepair(held, ro, {2}, &stHeld);
-  ChartSpill spill(tmp.path() / "samples.tmp", ro.chartSize, false);
+  ChartSpill spill(tmp.path() / "samples.tmp", false);
   ro.spill = &spill;
   GeometryImageSet setSpilled = resampleAndRepair(spilled, ro, {2}, &stSpilled);
   EXPECT_GT(stHeld.patchesSplit, 0u) << "the bunny at 33^2 should need splits";

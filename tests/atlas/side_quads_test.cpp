@@ -389,7 +389,7 @@ TEST(EvenSides, MendTwoChartCornersLeavesNone) {
   EXPECT_GT(expectSeamless(resampleLayout(layout, sidesOptions(9))), 0u);
 }
 
-// `gimlod build --quads sides --repair-rounds 0` on the shipped bunny: the chart size follows the
+// `gimlod build --sizing layout --quads sides --repair-rounds 0` on the shipped bunny: the chart size follows the
 // density, and is doubled again when the repair (here none; in the sides layout, one whose cuts
 // must keep side counts even) leaves charts over the sampling bound (the bunny: 0.12% of the
 // diagonal at 129^2, so 257^2), until the atlas meets it or holds kMaxSamplesPerTriangle (the
@@ -401,6 +401,7 @@ TEST(SideQuads, TheBunnysSidesBuildMeetsTheSamplingBound) {
   o.output = dir.path() / "sides.atlas";
   o.measureFidelity = false;
   o.quads = MeshQuads::kSides;
+  o.sizing = MeshSizing::kLayout;
   o.repairRounds = 0;
   buildAtlas(o);
   const nlohmann::json stats = nlohmann::json::parse(std::ifstream(o.output / "stats.json"));
