@@ -95,8 +95,9 @@ void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<fl
 //   quantizeToStep puts them, so sides shared with other images stay bit-identical.
 // - Each other sample moves at most min(tolerance, d / 4) from its input (Euclidean), d its
 //   distance to the nearest other sample of its 5x5 grid window, so close samples are not merged;
-//   a sample whose choice would coincide with one settled before it or a border sample in that
-//   window takes its nearest lattice point (or a lattice point beside that) instead.
+//   a sample whose choice would coincide with a border sample or one settled before it, anywhere
+//   in the image, takes its nearest lattice point, or else the free lattice point closest to its
+//   input within 3 steps of that (per coordinate).
 // side^2 positions (x, y, z interleaved, row-major) in, settled positions out (the input of
 // encodePositions). tolerance 0: every sample to its nearest lattice point. Throws
 // std::invalid_argument as encodePositions does, or on a negative tolerance.

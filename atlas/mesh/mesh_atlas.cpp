@@ -62,6 +62,24 @@ bool distinctSamples(const std::vector<glm::vec3>& image, uint32_t side, uint32_
   return std::adjacent_find(p.begin(), p.end()) == p.end();
 }
 
+// The samples of `placed` that moved (they differ from `before`) onto the position of another
+// sample of `placed`.
+std::vector<size_t> movedOntoOthers(const std::vector<glm::vec3>& placed, const std::vector<glm::vec3>& before) {
+  std::vector<std::pair<std::array<float, 3>, size_t>> p(placed.size());
+  for (size_t i = 0; i < placed.size(); ++i) p[i] = {{placed[i].x, placed[i].y, placed[i].z}, i};
+  std::sort(p.begin(), p.end());
+  std::vector<size_t> out;
+  for (size_t a = 0; a < p.size();) {
+    size_t b = a + 1;
+    while (b < p.size() && p[b].first == p[a].first) ++b;
+    if (b - a > 1)
+      for (size_t k = a; k < b; ++k)
+        if (placed[p[k].second] != before[p[k].second]) out.push_back(p[k].second);
+    a = b;
+  }
+  return out;
+}
+
 // geometryPyramid's planar squares: moves the samples of the squares of `stored` (the settled
 // finest level, finestLevel of the chartSize^2 level 0 `P0`) that may move onto their squares'
 // triangles.
@@ -142,6 +160,15 @@ uint64_t placeOnPlanarSquares(const std::vector<glm::vec3>& P0, uint32_t chartSi
     // The whole result: squares beside a sample over its allowance stay as they were.
     const std::vector<glm::vec3> d = drawnEverywhere(G);
     bool over = false;
+    // Every planar square holding stored sample (x, y) stays as it was.
+    auto keepSquaresAt = [&](uint32_t x, uint32_t y) {
+      for (uint32_t l = 0; l < sizes; ++l) {
+        const uint32_t span = B >> l, n = M / span;
+        for (uint32_t sy = y > 0 ? (y - 1) / span : 0; sy <= std::min(y / span, n - 1); ++sy)
+          for (uint32_t sx = x > 0 ? (x - 1) / span : 0; sx <= std::min(x / span, n - 1); ++sx)
+            if (isPlanar[l][size_t(sy) * n + sx] == 1) forbidden[l][size_t(sy) * n + sx] = 1, over = true;
+      }
+    };
     for (uint32_t v = 0; v < chartSize; ++v)
       for (uint32_t u = 0; u < chartSize; ++u) {
         const size_t i = size_t(v) * chartSize + u;
@@ -149,16 +176,12 @@ uint64_t placeOnPlanarSquares(const std::vector<glm::vec3>& P0, uint32_t chartSi
         // Every planar square that placed a stored sample the surface there is drawn from stays as
         // it was: the sample itself at the finest level 0, else the corners of its stored cell.
         const uint32_t cx = std::min(u >> finestLevel, M - 1), cy = std::min(v >> finestLevel, M - 1);
-        for (uint32_t k = 0; k < 4; ++k) {
-          const uint32_t x = finestLevel == 0 ? u : cx + (k & 1), y = finestLevel == 0 ? v : cy + (k >> 1);
-          for (uint32_t l = 0; l < sizes; ++l) {
-            const uint32_t span = B >> l, n = M / span;
-            for (uint32_t sy = y > 0 ? (y - 1) / span : 0; sy <= std::min(y / span, n - 1); ++sy)
-              for (uint32_t sx = x > 0 ? (x - 1) / span : 0; sx <= std::min(x / span, n - 1); ++sx)
-                if (isPlanar[l][size_t(sy) * n + sx] == 1) forbidden[l][size_t(sy) * n + sx] = 1, over = true;
-          }
-        }
+        for (uint32_t k = 0; k < 4; ++k)
+          keepSquaresAt(finestLevel == 0 ? u : cx + (k & 1), finestLevel == 0 ? v : cy + (k >> 1));
       }
+    // And every square that moved a sample onto another sample of the chart (a square squeezed
+    // to a few lattice steps, or one over a fold of the chart): two samples welded into one.
+    for (const size_t i : movedOntoOthers(G, stored)) keepSquaresAt(uint32_t(i % side), uint32_t(i / side));
     if (!over) {
       uint64_t moved = 0;
       for (size_t i = 0; i < G.size(); ++i) moved += G[i] != stored[i];
