@@ -837,7 +837,6 @@ std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, do
       return size_t(h ^ (h >> 29));
     }
   };
-  auto pack = [](const Point& c) { return c; };
   auto key = [&](size_t i) { return Point{q[3 * i], q[3 * i + 1], q[3 * i + 2]}; };
   std::unordered_set<Point, PointHash> taken;
   taken.reserve(n);
@@ -869,8 +868,27 @@ std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, do
       // sample beside the border may round to the border's lattice point, and where a chart folds
       // back over itself, or its texels are barely a lattice step wide, samples farther apart in
       // the grid may too. Then its nearest lattice point, else the nearest free one beside it.
-      if (stride > 1 && taken.count(key(i))) std::copy(nearest.begin(), nearest.end(), q.begin() + 3 * i);
-      for (int64_t r = 1; taken.count(key(i)) && r <= kSettleReach; ++r) {
+      // Nor may it close a triangle of no area (three samples on one line) with the samples settled
+      // before it, in the texel whose last corner it is, at any level (stride) that keeps it.
+      auto flat = [&](const Point& c) {
+        auto p = [&](uint32_t u, uint32_t v) {
+          const size_t j = size_t(v) * side + u;
+          return j == i ? c : Point{q[3 * j], q[3 * j + 1], q[3 * j + 2]};
+        };
+        auto line = [](const Point& a, const Point& b, const Point& d) {
+          const int64_t ux = b[0] - a[0], uy = b[1] - a[1], uz = b[2] - a[2];
+          const int64_t vx = d[0] - a[0], vy = d[1] - a[1], vz = d[2] - a[2];
+          return uy * vz == uz * vy && uz * vx == ux * vz && ux * vy == uy * vx;
+        };
+        for (uint32_t t = 1; t <= x && t <= y && x % t == 0 && y % t == 0; t *= 2) {
+          const Point p00 = p(x - t, y - t), p10 = p(x, y - t), p01 = p(x - t, y);
+          if (line(p00, p10, c) || line(p00, c, p01)) return true;
+        }
+        return false;
+      };
+      auto blocked = [&](const Point& c) { return taken.count(c) > 0 || flat(c); };
+      if (stride > 1 && blocked(key(i))) std::copy(nearest.begin(), nearest.end(), q.begin() + 3 * i);
+      for (int64_t r = 1; blocked(key(i)) && r <= kSettleReach; ++r) {
         // The free lattice points at Chebyshev distance r from the nearest, the closest to the input.
         double best = std::numeric_limits<double>::infinity();
         std::array<int64_t, 3> chosen = nearest;
@@ -879,7 +897,7 @@ std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, do
             for (int64_t dx = -r; dx <= r; ++dx) {
               if (std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) != r) continue;
               const std::array<int64_t, 3> c{nearest[0] + dx, nearest[1] + dy, nearest[2] + dz};
-              if (taken.count(pack(c))) continue;
+              if (blocked(c)) continue;
               double d2 = 0.0;
               for (int k = 0; k < 3; ++k) {
                 const double e = double(c[k]) - double(xyz[3 * i + k]) / step;

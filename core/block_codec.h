@@ -96,8 +96,9 @@ void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<fl
 // - Each other sample moves at most min(tolerance, d / 4) from its input (Euclidean), d its
 //   distance to the nearest other sample of its 5x5 grid window, so close samples are not merged;
 //   a sample whose choice would coincide with a border sample or one settled before it, anywhere
-//   in the image, takes its nearest lattice point, or else the free lattice point closest to its
-//   input within 3 steps of that (per coordinate).
+//   in the image, or close a triangle of no area (three samples on one line) in the texel whose
+//   last corner it is, at any level that keeps it, takes its nearest lattice point, or else the
+//   free lattice point closest to its input within 3 steps of that (per coordinate).
 // side^2 positions (x, y, z interleaved, row-major) in, settled positions out (the input of
 // encodePositions). tolerance 0: every sample to its nearest lattice point. Throws
 // std::invalid_argument as encodePositions does, or on a negative tolerance.

@@ -62,6 +62,25 @@ bool distinctSamples(const std::vector<glm::vec3>& image, uint32_t side, uint32_
   return std::adjacent_find(p.begin(), p.end()) == p.end();
 }
 
+// Whether a triangle of the square at (x0, y0), s intervals wide, has no area (three samples on one
+// line, as the lattice's rounding may put them in a square a few steps wide), as the renderer draws
+// it at this level or at a coarser one within the square: each texel split along its (0,0)-(1,1)
+// diagonal, at strides 1, 2, ... s.
+bool flatTriangles(const std::vector<glm::vec3>& image, uint32_t side, uint32_t x0, uint32_t y0, uint32_t s) {
+  auto at = [&](uint32_t x, uint32_t y) { return glm::dvec3(image[size_t(y0 + y) * side + x0 + x]); };
+  auto flat = [](const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
+    const glm::dvec3 n = glm::cross(b - a, c - a);
+    return n.x == 0.0 && n.y == 0.0 && n.z == 0.0;
+  };
+  for (uint32_t t = 1; t <= s; t *= 2)
+    for (uint32_t y = 0; y < s; y += t)
+      for (uint32_t x = 0; x < s; x += t) {
+        const glm::dvec3 p00 = at(x, y), p10 = at(x + t, y), p01 = at(x, y + t), p11 = at(x + t, y + t);
+        if (flat(p00, p10, p11) || flat(p00, p11, p01)) return true;
+      }
+  return false;
+}
+
 // The samples of `placed` that moved (they differ from `before`) onto the position of another
 // sample of `placed`.
 std::vector<size_t> movedOntoOthers(const std::vector<glm::vec3>& placed, const std::vector<glm::vec3>& before) {
@@ -137,9 +156,10 @@ uint64_t placeOnPlanarSquares(const std::vector<glm::vec3>& P0, uint32_t chartSi
                                                           lattice(c11, c), s, dx, dy)) * step);
               moved.push_back(i);
             }
-          // No two samples of the square may round to one lattice point (a square a few lattice
-          // steps wide, in a densely sampled chart): two samples of the chart welded into one.
-          bool within = distinctSamples(G, side, x0, y0, s);
+          // No two samples of the square may round to one lattice point, nor three onto one line (a
+          // square a few lattice steps wide, in a densely sampled chart): two samples of the chart
+          // welded into one, or a triangle of no area.
+          bool within = distinctSamples(G, side, x0, y0, s) && !flatTriangles(G, side, x0, y0, s);
           // The square's footprint, drawn from the moved samples.
           for (uint32_t v = y0 * scale; within && v <= (y0 + s) * scale; ++v)
             for (uint32_t u = x0 * scale; u <= (x0 + s) * scale; ++u) {

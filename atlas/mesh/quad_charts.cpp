@@ -583,13 +583,14 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
       const double m = double(e.size - 1);
       const double growth = 3.0 * double(e.charts.size()) * m * m;
       room.chartSize = 2 * e.size - 1;
-      // Halved texel sides must stay a lattice step of the coding long (ResampleOptions::minSampleGap
-      // is two): it would merge closer samples.
+      // Halved texel sides must stay ResampleOptions::minSampleGap (two lattice steps of the coding)
+      // long: on texels of a step or so, the coding's rounding puts samples on one point or three
+      // on one line.
       double shortest = std::numeric_limits<double>::infinity();
       for (const GeometryImage& g : e.charts) shortest = std::min(shortest, g.quality.shortestTexelSide);
       uint32_t* stop = e.size >= kMaxDensityChartSize         ? &st.patchesAtLargestSize
                        : samples + growth > cap                ? &st.patchesAtSampleCap
-                       : shortest < z.ro.minSampleGap    ? &st.patchesAtLattice
+                       : 0.5 * shortest < z.ro.minSampleGap ? &st.patchesAtLattice
                                                                : nullptr;
       if (!stop) {
         try {
