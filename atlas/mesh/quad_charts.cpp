@@ -177,6 +177,16 @@ bool evenLayout(ChartLayout& layout, MeshResampleStats& st) {
   return true;
 }
 
+// In the sides layout, the corners where only two charts meet (st.twoQuadCorners), with a warning.
+void countTwoQuadCorners(const ChartLayout& layout, const QuadChartOptions& o, MeshResampleStats& st) {
+  if (!st.sideQuads) return;
+  st.twoQuadCorners = twoQuadCorners(layout);
+  if (st.twoQuadCorners > 0)
+    spdlog::warn("{}: {} corners of the sides quad layout have only two charts meeting (their corner texels fold "
+                 "flat onto each other)",
+                 o.input.string(), st.twoQuadCorners);
+}
+
 // The figures a build reports of its charts, from the set.
 void setChartFigures(const GeometryImageSet& set, MeshResampleStats& st) {
   st.charts = set.charts.size();
@@ -310,13 +320,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const QuadChartOptions& opti
                  "again ({}); raise {} to repair more",
                  o.input.string(), st.repairWork, left, spelled(o, "repairBudget"));
   st.patches = layout.patches.size();
-  if (st.sideQuads) {
-    st.twoQuadCorners = twoQuadCorners(layout);
-    if (st.twoQuadCorners > 0)
-      spdlog::warn("{}: {} corners of the sides quad layout have only two charts meeting (their corner texels fold "
-                   "flat onto each other)",
-                   o.input.string(), st.twoQuadCorners);
-  }
+  countTwoQuadCorners(layout, o, st);
   finishStage(meter, "chart_repair" + suffix);
   setChartFigures(set, st);
   return r;
@@ -707,13 +711,7 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
                  100.0 * bound / std::max(diagonal, 1e-300), st.patchesAtLargestSize, kMaxDensityChartSize,
                  st.patchesAtSampleCap, cap / double(std::max<size_t>(layout.triangles.size(), 1)), st.patchesAtLattice,
                  st.patchesAtMemory, spelled(o, "maxMemory"));
-  if (st.sideQuads) {
-    st.twoQuadCorners = twoQuadCorners(layout);
-    if (st.twoQuadCorners > 0)
-      spdlog::warn("{}: {} corners of the sides quad layout have only two charts meeting (their corner texels fold "
-                   "flat onto each other)",
-                   o.input.string(), st.twoQuadCorners);
-  }
+  countTwoQuadCorners(layout, o, st);
   if (spdlog::should_log(spdlog::level::debug)) logFoldingCharts(layout, set);
   finishStage(meter, "resample");
   setChartFigures(set, st);
