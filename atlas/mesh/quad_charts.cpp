@@ -718,6 +718,30 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
   return r;
 }
 
+// Per-patch sizing in one quad layout: sides (straightened by `straighten`, their side counts made
+// even), or kites where some patch cannot have an even side count or with --quads kites.
+ResampledMesh quadChartsPerPatch(ChartLayout& layout, const QuadChartOptions& options, const fs::path& dir,
+                                 StageMeter& meter, const std::function<void(QuadLayout)>& straighten) {
+  QuadLayout quads = options.quads == MeshQuads::kKites ? QuadLayout::kKites : QuadLayout::kSides;
+  const std::vector<Patch> charted = layout.patches;
+  MeshResampleStats even;
+  if (quads == QuadLayout::kSides) {
+    straighten(QuadLayout::kSides);
+    if (!evenLayout(layout, even)) {
+      spdlog::warn("{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
+                   "of sides with inner vertices joins them to another such patch or to a hole); built with kites",
+                   options.input.string());
+      layout.patches = charted;
+      quads = QuadLayout::kKites;
+      even = {};
+    }
+  }
+  if (quads == QuadLayout::kKites) straighten(QuadLayout::kKites);
+  ResampledMesh r = resamplePerPatch(layout, options, quads, dir, meter);
+  r.stats.evenSideCorners = even.evenSideCorners;
+  return r;
+}
+
 }  // namespace
 
 ResampledMesh makeQuadCharts(ChartLayout&& layout, const QuadChartOptions& options, const fs::path& dir,
@@ -740,24 +764,7 @@ ResampledMesh makeQuadCharts(ChartLayout&& layout, const QuadChartOptions& optio
   ResampledMesh r;
   bool evened = true;
   if (options.sizing == MeshSizing::kPatch && options.chartSize == 0) {
-    // One quad layout, each patch's charts at their own size.
-    QuadLayout quads = options.quads == MeshQuads::kKites ? QuadLayout::kKites : QuadLayout::kSides;
-    const std::vector<Patch> charted = layout.patches;
-    MeshResampleStats even;
-    if (quads == QuadLayout::kSides) {
-      straighten(QuadLayout::kSides, "");
-      if (!evenLayout(layout, even)) {
-        spdlog::warn("{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
-                     "of sides with inner vertices joins them to another such patch or to a hole); built with kites",
-                     options.input.string());
-        layout.patches = charted;
-        quads = QuadLayout::kKites;
-        even = {};
-      }
-    }
-    if (quads == QuadLayout::kKites) straighten(QuadLayout::kKites, "");
-    r = resamplePerPatch(layout, options, quads, dir, meter);
-    r.stats.evenSideCorners = even.evenSideCorners;
+    r = quadChartsPerPatch(layout, options, dir, meter, [&](QuadLayout quads) { straighten(quads, ""); });
   } else if (options.quads == MeshQuads::kKites) {
     straighten(QuadLayout::kKites, "");
     r = resampleInLayout(layout, options, QuadLayout::kKites, dir, meter, "", &evened);
