@@ -349,6 +349,7 @@ struct PatchSizing {
   std::vector<glm::dvec3> normals;  // layoutVertexNormals, once
   std::vector<Entry> patches;
   uint64_t trianglesParameterized = 0;
+  uint64_t cutWork = 0;  // layout triangles the cuts' trials parameterized
 
   // The worst sampling error of patch p's charts.
   double error(uint32_t p) const { return worstError(patches[p].charts); }
@@ -479,6 +480,8 @@ struct PatchSizing {
     uint64_t flipsBefore = 0;
     for (uint32_t q = 0; q < was.size(); ++q)
       if (before[q]) flipsBefore += flips(was[q].charts);
+    for (uint32_t q = 0; q < patches.size(); ++q)
+      if (after[q]) cutWork += layout.patches[q].triangles.size();
     resampleTodo();
     const uint64_t flipsAfter = flipsOf(after);
     if (folding ? flipsAfter < flipsBefore : flipsAfter <= flipsBefore) return true;
@@ -531,7 +534,9 @@ constexpr uint32_t kMaxSizingCuts = 4;
 // Each cut is resampled at once and kept only where the patches it changed fold less than before
 // (a cut for folds) or no more (a cut for the sampling error).
 // Where no cut is found it goes on growing while it can: the sampling bound (and so the Hausdorff
-// distance) goes before the folds. Returns the sizing rounds.
+// distance) goes before the folds. The cuts stop once their trials have parameterized
+// --repair-budget times the layout's triangles (st.repair.stoppedForWork), as the repair's do.
+// Returns the sizing rounds.
 uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, double bound, double cap, bool sides,
                      MeshResampleStats& st, const fs::path& dir) {
   QuadChartOptions room = o;
@@ -561,9 +566,15 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
     // Cuts first, each kept only where it folds less (or, for the sampling error, no more).
     std::sort(squeezed.begin(), squeezed.end(), std::greater<>());
     std::vector<uint8_t> cutNow(z.patches.size(), 0);
+    const uint64_t cutBudget = uint64_t(std::llround(o.repairBudget * double(z.layout.triangles.size())));
     for (const auto& [n, p] : squeezed) {
       const bool folding = PatchSizing::flips(z.patches[p].charts) > 0;
       z.patches[p].cutAsked = false;
+      if (z.cutWork >= cutBudget) {
+        st.repair.stoppedForWork = true;
+        z.patches[p].uncuttable = true;
+        continue;
+      }
       if (z.tryCut(p, base, sides, folding)) {
         ++st.repair.patchesSplit;
         cutNow[p] = 1;
@@ -711,6 +722,10 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
                  100.0 * bound / std::max(diagonal, 1e-300), st.patchesAtLargestSize, kMaxDensityChartSize,
                  st.patchesAtSampleCap, cap / double(std::max<size_t>(layout.triangles.size(), 1)), st.patchesAtLattice,
                  st.patchesAtMemory, spelled(o, "maxMemory"));
+  if (st.repair.stoppedForWork)
+    spdlog::warn("{}: the cuts stopped at their budget, {} times the surface's triangles parameterized again; raise {} "
+                 "to cut more",
+                 o.input.string(), o.repairBudget, spelled(o, "repairBudget"));
   countTwoQuadCorners(layout, o, st);
   if (spdlog::should_log(spdlog::level::debug)) logFoldingCharts(layout, set);
   finishStage(meter, "resample");
