@@ -420,9 +420,8 @@ struct PatchSizing {
   // (splitPatchAtNeck); its side counts
   // are made even again for the sides layout without a new two-chart corner. The parts start at
   // `base` and every patch the cut changed is marked to be resampled. False, the layout as it
-  // was, when no such cut exists.
-  bool cut(uint32_t p, uint32_t base, bool sides) {
-    const std::vector<Patch> saved = layout.patches;
+  // was (`saved`, the patches before it), when no such cut exists.
+  bool cut(uint32_t p, uint32_t base, bool sides, const std::vector<Patch>& saved) {
     const uint32_t cornersBefore = sides ? twoQuadCorners(layout) : 0;
     uint32_t fold = ~0u;
     for (const GeometryImage& g : patches[p].charts)
@@ -471,7 +470,7 @@ struct PatchSizing {
   bool tryCut(uint32_t p, uint32_t base, bool sides, bool folding) {
     const std::vector<Patch> saved = layout.patches;
     const std::vector<Entry> was = patches;
-    if (!cut(p, base, sides)) return false;
+    if (!cut(p, base, sides, saved)) return false;
     std::vector<uint8_t> before(was.size(), 0), after(patches.size(), 0);
     for (uint32_t q = 0; q < patches.size(); ++q) {
       after[q] = patches[q].todo;
