@@ -5,8 +5,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <unordered_map>
-#include <unordered_set>
 #include <vector>
 
 #include "runtime/adapt_dual_queue.h"
@@ -30,10 +28,22 @@ struct Entry {
   uint32_t res = 0;
   uint32_t floor = 0;  // lowest allowed resolution: minRes, or the stitching gap
   uint32_t gap = 0;    // stitching level gap to the finest drawn neighbour (computeFloors)
+  uint32_t maxRes = 0;
   bool drawn = false;
+  bool prioValid = false;  // splitPrio holds this frame's split priority at res and err
   double err = 0.0;    // screen error at res; 0 when not drawn
   double dist = 1.0;   // eye distance to the bounds this frame (as screenError clamps it)
+  double splitPrio = 0.0;
+  const float* errs = nullptr;  // the node's errors, [res - minRes] (Hierarchy::error)
   uint32_t splitRound = 0, mergedRound = 0;
+};
+
+// A node's view-dependent data, computed at most once per frame (NodeCache).
+struct NodeEval {
+  double dist = 1.0;  // eye distance to the bounds, at least the view's minDistance
+  const float* errs = nullptr;
+  uint32_t maxRes = 0;
+  bool drawable = false;  // nodeDrawable
 };
 
 // Heap item; all heaps are max-heaps on priority, ties broken by key (deterministic).
@@ -59,8 +69,9 @@ Item heapPop(std::vector<Item>& h) {
 }
 
 // The kept cut: entries in a vector, found through a dense per-forest-node slot array (no
-// hashing), with the subset of std::unordered_map's interface the adapter uses. Erasing moves the
-// last entry into the hole, so iterators and pointers are valid only until the next change.
+// hashing). Erasing moves the last entry into the hole, so iterators and pointers are valid only
+// until the next change. While a round runs, every change is logged so that undo() puts the
+// entries back exactly (values and order) in the time the round took, not in O(cut).
 class EntryMap {
  public:
   using value_type = std::pair<uint64_t, Entry>;
@@ -81,62 +92,149 @@ class EntryMap {
   const_iterator end() const { return items_.end(); }
   bool empty() const { return items_.empty(); }
   size_t size() const { return items_.size(); }
-  iterator find(uint64_t key) {
-    const int32_t s = slot_[index(key)];
-    return s < 0 ? items_.end() : items_.begin() + s;
+  size_t index(const NodeId& n) const { return size_t(n.chart) * perChart_ + nodeIndex(n.level, n.x, n.y); }
+  size_t forestSize() const { return slot_.size(); }
+  Entry* find(const NodeId& n) {
+    const int32_t s = slot_[index(n)];
+    return s < 0 ? nullptr : &items_[size_t(s)].second;
   }
-  const_iterator find(uint64_t key) const {
-    const int32_t s = slot_[index(key)];
-    return s < 0 ? items_.end() : items_.begin() + s;
+  const Entry* find(const NodeId& n) const {
+    const int32_t s = slot_[index(n)];
+    return s < 0 ? nullptr : &items_[size_t(s)].second;
   }
-  size_t count(uint64_t key) const { return slot_[index(key)] >= 0 ? 1 : 0; }
-  Entry& operator[](uint64_t key) {
-    const size_t i = index(key);
-    if (slot_[i] < 0) {
-      slot_[i] = int32_t(items_.size());
-      items_.push_back({key, Entry{}});
-    }
-    return items_[size_t(slot_[i])].second;
+  Entry* find(uint64_t key) { return find(NodeId::fromKey(key)); }
+  bool count(const NodeId& n) const { return slot_[index(n)] >= 0; }
+  // Adds e (its node must not be in the map).
+  Entry& insert(const Entry& e) {
+    const size_t i = index(e.id);
+    slot_[i] = int32_t(items_.size());
+    items_.push_back({e.id.key(), e});
+    if (logging_) log_.push_back({Op::kInsert, 0, {}});
+    return items_.back().second;
   }
-  void erase(iterator it) { eraseAt(size_t(it - items_.begin())); }
-  void erase(uint64_t key) {
-    const int32_t s = slot_[index(key)];
+  void erase(const NodeId& n) {
+    const int32_t s = slot_[index(n)];
     if (s >= 0) eraseAt(size_t(s));
   }
+  // Call before changing an entry in place while logging.
+  void willModify(const Entry& e) {
+    if (logging_) log_.push_back({Op::kModify, 0, e});
+  }
   void clear() {
-    for (const value_type& v : items_) slot_[index(v.first)] = -1;
+    for (const value_type& v : items_) slot_[index(v.second.id)] = -1;
     items_.clear();
   }
-  // A copy of the entries for undo; restore puts them back (O(size), not O(forest)).
-  std::vector<value_type> snapshot() const { return items_; }
-  void restore(const std::vector<value_type>& saved) {
-    clear();
-    items_ = saved;
-    for (size_t i = 0; i < items_.size(); ++i) slot_[index(items_[i].first)] = int32_t(i);
+  void beginLog() {
+    log_.clear();
+    logging_ = true;
+  }
+  void endLog() { logging_ = false; }
+  // Reverts the logged changes, newest first.
+  void undo() {
+    logging_ = false;
+    for (size_t k = log_.size(); k-- > 0;) {
+      const Logged& l = log_[k];
+      switch (l.op) {
+        case Op::kInsert:
+          slot_[index(items_.back().second.id)] = -1;
+          items_.pop_back();
+          break;
+        case Op::kErase: {
+          if (l.slot < items_.size()) {  // the last entry had moved into the hole
+            items_.push_back(std::move(items_[l.slot]));
+            slot_[index(items_.back().second.id)] = int32_t(items_.size() - 1);
+            items_[l.slot] = {l.entry.id.key(), l.entry};
+          } else {
+            items_.push_back({l.entry.id.key(), l.entry});
+          }
+          slot_[index(l.entry.id)] = int32_t(l.slot);
+          break;
+        }
+        case Op::kModify:
+          *find(l.entry.id) = l.entry;
+          break;
+      }
+    }
+    log_.clear();
   }
 
  private:
-  size_t index(uint64_t key) const {
-    const NodeId n = NodeId::fromKey(key);
-    return size_t(n.chart) * perChart_ + nodeIndex(n.level, n.x, n.y);
-  }
+  enum class Op : uint8_t { kInsert, kErase, kModify };
+  struct Logged {
+    Op op;
+    uint32_t slot;
+    Entry entry;
+  };
   void eraseAt(size_t s) {
-    slot_[index(items_[s].first)] = -1;
+    if (logging_) log_.push_back({Op::kErase, uint32_t(s), items_[s].second});
+    slot_[index(items_[s].second.id)] = -1;
     if (s + 1 != items_.size()) {
       items_[s] = std::move(items_.back());
-      slot_[index(items_[s].first)] = int32_t(s);
+      slot_[index(items_[s].second.id)] = int32_t(s);
     }
     items_.pop_back();
   }
   uint32_t perChart_ = 0;
   std::vector<int32_t> slot_;
   std::vector<value_type> items_;
+  bool logging_ = false;
+  std::vector<Logged> log_;
+};
+
+// Per-frame cache of NodeEval, found through dense per-forest-node stamps.
+class NodeCache {
+ public:
+  void init(const Hierarchy& h) {
+    perChart_ = nodesPerChart(h.params.depth);
+    const size_t n = size_t(perChart_) * h.chartCount();
+    if (stamp_.size() != n) {
+      stamp_.assign(n, 0);
+      at_.assign(n, 0);
+      frame_ = 0;
+    }
+  }
+  void newFrame(const Hierarchy& h, const ViewParams& v, bool cull) {
+    h_ = &h;
+    view_ = &v;
+    cull_ = cull;
+    evals_.clear();
+    if (++frame_ == 0) {  // wrapped: forget every stamp
+      std::fill(stamp_.begin(), stamp_.end(), 0u);
+      frame_ = 1;
+    }
+  }
+  NodeEval operator()(const NodeId& n) {
+    const size_t g = size_t(n.chart) * perChart_ + nodeIndex(n.level, n.x, n.y);
+    if (stamp_[g] == frame_) return evals_[at_[g]];
+    stamp_[g] = frame_;
+    at_[g] = uint32_t(evals_.size());
+    NodeEval& e = evals_.emplace_back();
+    const Hierarchy::ChartNodes& cn = h_->charts[n.chart];
+    const uint32_t i = nodeIndex(n.level, n.x, n.y);
+    const auto& b = cn.bounds[i];
+    const glm::dvec3 lo{b[0], b[1], b[2]}, hi{b[3], b[4], b[5]};
+    // The same arithmetic as nodeDrawable, neededResolution and screenError.
+    e.drawable = !(cn.flags[i] & kNodeEmpty) && (!cull_ || view_->frustum.intersects(lo, hi));
+    e.dist = std::max(glm::length(glm::clamp(view_->eye, lo, hi) - view_->eye), view_->minDistance);
+    e.errs = &cn.errors[size_t(i) * h_->params.resCount()];
+    e.maxRes = h_->maxRes(n);
+    return e;
+  }
+
+ private:
+  const Hierarchy* h_ = nullptr;
+  const ViewParams* view_ = nullptr;
+  bool cull_ = true;
+  uint32_t perChart_ = 0, frame_ = 0;
+  std::vector<uint32_t> stamp_, at_;
+  std::vector<NodeEval> evals_;
 };
 
 }  // namespace
 
 struct QuadQueueAdapter::State {
   EntryMap cut;  // partition of the non-empty chart area
+  NodeCache node;  // this frame's view-dependent node data
   uint32_t drawn = 0;
   uint64_t triangles = 0;  // drawn
   uint64_t floorTris = 0;  // drawn, each at its floor
@@ -149,10 +247,14 @@ struct QuadQueueAdapter::State {
   uint32_t ops = 0;
   BudgetStats st;
   Cut out;
-  std::vector<SideNeighbour> scratch;
   GroupSelection groups;  // this frame's closed groups (their roots never split)
+  // Per forest node: the round in which phase 2 reserved its split (reserveMark), and the phase-2
+  // scratch heaps, kept from frame to frame (no allocation once warm).
+  std::vector<uint32_t> reserved;
+  uint32_t reserveMark = 0;
+  std::vector<Item> splitH, mergeH, coarsenH, errH;
+  std::vector<std::vector<Item>> refineB;
 
-  uint32_t maxRes(const NodeId& n) const { return h->maxRes(n); }
   uint32_t minRes() const { return h->params.minNodeResLog2; }
   uint32_t nodeBudget() const { return opt.maxNodes == 0 ? UINT32_MAX : opt.maxNodes; }
   bool capped() {
@@ -161,27 +263,33 @@ struct QuadQueueAdapter::State {
     return true;
   }
   // screenError(h, e.id, r, view) with the distance evaluated once per frame.
-  double errAt(const Entry& e, uint32_t r) const {
-    return double(h->error(e.id, r)) * view.pixelsPerRadian / e.dist;
+  double errAt(const Entry& e, uint32_t r) const { return double(e.errs[r - minRes()]) * view.pixelsPerRadian / e.dist; }
+  // Resolution a node needs to hold `tolPx`, clamped to its maxRes (neededResolution's arithmetic).
+  uint32_t resFor(const NodeEval& n, double tolPx) const {
+    const double tolWorld = tolPx * n.dist / view.pixelsPerRadian;
+    for (uint32_t r = minRes(); r <= n.maxRes; ++r)
+      if (double(n.errs[r - minRes()]) <= tolWorld) return r;
+    return n.maxRes;
   }
-  // Resolution a node needs to hold `tolPx`, clamped to its maxRes.
-  uint32_t resFor(const NodeId& n, double tolPx) const {
-    return std::min(neededResolution(*h, n, view, tolPx), maxRes(n));
-  }
+  bool reservedNow(const NodeId& n) const { return reserved[cut.index(n)] == reserveMark; }
 
   void setRes(Entry& e, uint32_t r) {
+    cut.willModify(e);
     if (e.drawn) triangles = triangles - tris(e.res) + tris(r);
     e.res = r;
     e.err = e.drawn ? errAt(e, r) : 0.0;
+    e.prioValid = false;
   }
   void evaluate(Entry& e) {
-    e.drawn = nodeDrawable(*h, e.id, view, opt.frustumCull);
-    const auto& b = h->bounds(e.id);
-    const glm::dvec3 q = glm::clamp(view.eye, glm::dvec3{b[0], b[1], b[2]}, glm::dvec3{b[3], b[4], b[5]}) - view.eye;
-    e.dist = std::max(glm::length(q), view.minDistance);
-    e.res = e.drawn ? std::clamp(e.res, minRes(), maxRes(e.id)) : minRes();
+    const NodeEval n = node(e.id);
+    e.drawn = n.drawable;
+    e.dist = n.dist;
+    e.errs = n.errs;
+    e.maxRes = n.maxRes;
+    e.res = e.drawn ? std::clamp(e.res, minRes(), e.maxRes) : minRes();
     e.floor = minRes();
     e.err = e.drawn ? errAt(e, e.res) : 0.0;
+    e.prioValid = false;
   }
   void recount() {
     drawn = 0;
@@ -226,22 +334,91 @@ struct QuadQueueAdapter::State {
     for (const auto& [k, m] : cut) {
       if (!m.drawn || m.id.level == 0) continue;
       walkToCoarserNeighbours(*h, m.id, [&](const NodeId& a, uint32_t up) {
-        auto f = cut.find(a.key());
-        if (f == cut.end()) return false;
-        if (f->second.drawn) f->second.gap = std::max(f->second.gap, up);
+        Entry* f = cut.find(a);
+        if (!f) return false;
+        if (f->drawn) f->gap = std::max(f->gap, up);
         return true;
       });
     }
     floorTris = 0;
     for (auto& [k, e] : cut) {
       if (!e.drawn) continue;
-      if (e.gap > maxRes(e.id)) needsConstraintSplit = true;
-      e.floor = std::clamp(e.gap, minRes(), maxRes(e.id));
+      if (e.gap > e.maxRes) needsConstraintSplit = true;
+      e.floor = std::clamp(e.gap, minRes(), e.maxRes);
       floorTris += tris(e.floor);
     }
   }
 
   // ---- Phase 1: refine/coarsen dual queue. False when the floors exceed the triangle budget.
+  void pushPhase1(const Entry& e, bool heapify) {
+    if (!e.drawn) return;
+    const uint64_t k = e.id.key();
+    if (e.res < e.maxRes) {
+      const double gain = (e.err - errAt(e, e.res + 1)) / double(tris(e.res + 1) - tris(e.res));
+      std::vector<Item>& b = refineB[e.res];
+      b.push_back({gain, k, e.res});
+      if (heapify) std::push_heap(b.begin(), b.end(), ItemLess{});
+    }
+    if (e.res > e.floor) {
+      const double loss = (errAt(e, e.res - 1) - e.err) / double(tris(e.res) - tris(e.res - 1));
+      coarsenH.push_back({-loss, k, e.res});
+      if (heapify) std::push_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
+    }
+    errH.push_back({e.err, k, e.res});
+    if (heapify) std::push_heap(errH.begin(), errH.end(), ItemLess{});
+  }
+  Entry* validPhase1(const Item& it) {
+    Entry* f = cut.find(it.key);
+    if (!f || !f->drawn || f->res != it.res) return nullptr;
+    return f;
+  }
+  // (c) Balance: lower the max error by coarsening others (each staying below it), least error
+  // increase per removed triangle first. Every trade lowers the sorted error vector
+  // lexicographically, so this ends. Returns whether anything changed.
+  bool balance(uint64_t budget) {
+    bool progress = false;
+    std::vector<Item> popped;
+    std::vector<Entry*> chosen;
+    while (!capped()) {
+      Entry* m = nullptr;
+      while (!errH.empty() && !(m = validPhase1(errH.front()))) heapPop(errH);
+      if (!m || m->res >= m->maxRes) break;
+      const uint64_t need = tris(m->res + 1) - tris(m->res);
+      const uint64_t free = budget - triangles;
+      popped.clear();
+      chosen.clear();
+      uint64_t freed = 0;
+      while (free + freed < need && !coarsenH.empty()) {
+        const Item it = heapPop(coarsenH);
+        Entry* c = validPhase1(it);
+        if (!c) continue;
+        if (c == m || std::find(chosen.begin(), chosen.end(), c) != chosen.end()) {
+          popped.push_back(it);
+          continue;
+        }
+        // note: dropped for good: the max error only falls during the balance, so a node whose
+        // coarsening would reach it now never qualifies later (its own refinement pushes a new
+        // item).
+        if (errAt(*c, c->res - 1) >= m->err - kEps) continue;
+        popped.push_back(it);
+        chosen.push_back(c);
+        freed += tris(c->res) - tris(c->res - 1);
+      }
+      for (const Item& it : popped) heapPush(coarsenH, it);
+      if (free + freed < need) break;
+      // note: by key, not pointer: a setRes may log, but never moves entries.
+      for (Entry* c : chosen) {
+        setRes(*c, c->res - 1);
+        ++st.coarsens, ++ops;
+        pushPhase1(*c, true);
+      }
+      setRes(*m, m->res + 1);
+      ++st.refines, ++ops;
+      pushPhase1(*m, true);
+      progress = true;
+    }
+    return progress;
+  }
   bool phase1() {
     for (auto& [k, e] : cut)
       if (e.drawn && e.res < e.floor) {
@@ -251,44 +428,24 @@ struct QuadQueueAdapter::State {
     // The refine queue is kept per resolution: a refinement's cost (added triangles) depends on
     // the resolution alone, so the refinements that fit the remaining budget are whole buckets,
     // and the best fitting one is the best of their tops (no popping of the ones that don't fit).
-    std::vector<std::vector<Item>> refineB(h->params.maxNodeResLog2 + 1);
-    std::vector<Item> coarsenH, errH;
-    auto push = [&](const Entry& e, bool heapify) {
-      if (!e.drawn) return;
-      const uint64_t k = e.id.key();
-      if (e.res < maxRes(e.id)) {
-        const double gain = (e.err - errAt(e, e.res + 1)) / double(tris(e.res + 1) - tris(e.res));
-        std::vector<Item>& b = refineB[e.res];
-        b.push_back({gain, k, e.res});
-        if (heapify) std::push_heap(b.begin(), b.end(), ItemLess{});
-      }
-      if (e.res > e.floor) {
-        const double loss = (errAt(e, e.res - 1) - e.err) / double(tris(e.res) - tris(e.res - 1));
-        coarsenH.push_back({-loss, k, e.res});
-        if (heapify) std::push_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
-      }
-      errH.push_back({e.err, k, e.res});
-      if (heapify) std::push_heap(errH.begin(), errH.end(), ItemLess{});
-    };
-    for (const auto& [k, e] : cut) push(e, false);
+    refineB.resize(h->params.maxNodeResLog2 + 1);
+    for (auto& b : refineB) b.clear();
+    coarsenH.clear();
+    errH.clear();
+    for (const auto& [k, e] : cut) pushPhase1(e, false);
     for (auto& b : refineB) std::make_heap(b.begin(), b.end(), ItemLess{});
     std::make_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
     std::make_heap(errH.begin(), errH.end(), ItemLess{});
-    auto valid = [&](const Item& it) -> Entry* {
-      auto f = cut.find(it.key);
-      if (f == cut.end() || !f->second.drawn || f->second.res != it.res) return nullptr;
-      return &f->second;
-    };
     const uint64_t budget = opt.maxTriangles;
     // (a) Within the triangle budget (never capped).
     while (triangles > budget) {
       Entry* e = nullptr;
-      while (!coarsenH.empty() && !(e = valid(coarsenH.front()))) heapPop(coarsenH);
+      while (!coarsenH.empty() && !(e = validPhase1(coarsenH.front()))) heapPop(coarsenH);
       if (!e) return false;
       heapPop(coarsenH);
       setRes(*e, e->res - 1);
       ++st.coarsens, ++ops;
-      push(*e, true);
+      pushPhase1(*e, true);
     }
     for (;;) {
       bool progress = false;
@@ -298,56 +455,17 @@ struct QuadQueueAdapter::State {
         for (uint32_t r = 0; r < refineB.size(); ++r) {
           std::vector<Item>& b = refineB[r];
           if (triangles + tris(r + 1) - tris(r) > budget) continue;
-          while (!b.empty() && !valid(b.front())) heapPop(b);
+          while (!b.empty() && !validPhase1(b.front())) heapPop(b);
           if (!b.empty() && (!best || ItemLess{}(best->front(), b.front()))) best = &b;
         }
         if (!best) break;
-        Entry* e = valid(heapPop(*best));
+        Entry* e = validPhase1(heapPop(*best));
         setRes(*e, e->res + 1);
         ++st.refines, ++ops;
-        push(*e, true);
+        pushPhase1(*e, true);
         progress = true;
       }
-      // (c) Balance: lower the max error by coarsening others (each staying below it), least
-      // error increase per removed triangle first. Every trade lowers the sorted error vector
-      // lexicographically, so this ends.
-      while (!capped()) {
-        Entry* m = nullptr;
-        while (!errH.empty() && !(m = valid(errH.front()))) heapPop(errH);
-        if (!m || m->res >= maxRes(m->id)) break;
-        const uint64_t need = tris(m->res + 1) - tris(m->res);
-        const uint64_t free = budget - triangles;
-        std::vector<Item> popped;
-        std::vector<Entry*> chosen;
-        uint64_t freed = 0;
-        while (free + freed < need && !coarsenH.empty()) {
-          const Item it = heapPop(coarsenH);
-          Entry* c = valid(it);
-          if (!c) continue;
-          if (c == m || std::find(chosen.begin(), chosen.end(), c) != chosen.end()) {
-            popped.push_back(it);
-            continue;
-          }
-          // note: dropped for good: the max error only falls during the balance, so a node whose
-          // coarsening would reach it now never qualifies later (its own refinement pushes a new
-          // item).
-          if (errAt(*c, c->res - 1) >= m->err - kEps) continue;
-          popped.push_back(it);
-          chosen.push_back(c);
-          freed += tris(c->res) - tris(c->res - 1);
-        }
-        for (const Item& it : popped) heapPush(coarsenH, it);
-        if (free + freed < need) break;
-        for (Entry* c : chosen) {
-          setRes(*c, c->res - 1);
-          ++st.coarsens, ++ops;
-          push(*c, true);
-        }
-        setRes(*m, m->res + 1);
-        ++st.refines, ++ops;
-        push(*m, true);
-        progress = true;
-      }
+      progress = balance(budget) || progress;
       if (!progress || capped()) break;
     }
     return true;
@@ -356,58 +474,78 @@ struct QuadQueueAdapter::State {
   // ---- Phase 2: split/merge proposals (an error-threshold adaptation with each node's current
   // error as its local threshold). mandatoryOnly: only the merges needed for the node budget and
   // the triangle floor, and zero-effect merges of culled groups. Returns whether anything changed.
-  double splitPriority(const Entry& e) const {
+  double splitPriority(Entry& e) {
+    if (e.prioValid) return e.splitPrio;
+    e.prioValid = true;
+    return e.splitPrio = splitPriorityNow(e);
+  }
+  double splitPriorityNow(const Entry& e) {
     if (!e.drawn || e.id.level + 1 >= h->params.depth) return -1.0;
     if (e.id.level == 0 && groups.frozen(e.id.chart)) return -1.0;  // a closed group's root
-    if (e.res >= maxRes(e.id)) return kStuckPriority * (1.0 + e.err);
+    if (e.res >= e.maxRes) return kStuckPriority * (1.0 + e.err);
     double t = double(tris(e.res));
     for (uint32_t i = 0; i < 4; ++i) {
-      const NodeId ch = e.id.child(i);
-      if (nodeDrawable(*h, ch, view, opt.frustumCull)) t -= double(tris(resFor(ch, e.err)));
+      const NodeEval ch = node(e.id.child(i));
+      if (ch.drawable) t -= double(tris(resFor(ch, e.err)));
     }
     return t;
   }
   // Merge cost (added triangles) of the group under p, and the parent's resolution.
-  double mergeCost(const NodeId& p, uint32_t* parentRes) const {
+  double mergeCost(const NodeId& p, uint32_t* parentRes) {
     double tol = -1.0, childTris = 0.0;
     for (uint32_t i = 0; i < 4; ++i) {
-      auto f = cut.find(p.child(i).key());
-      if (f == cut.end() || !f->second.drawn) continue;
-      tol = std::max(tol, f->second.err);
-      childTris += double(tris(f->second.res));
+      const Entry* f = cut.find(p.child(i));
+      if (!f || !f->drawn) continue;
+      tol = std::max(tol, f->err);
+      childTris += double(tris(f->res));
     }
     *parentRes = minRes();
-    if (!nodeDrawable(*h, p, view, opt.frustumCull)) return -childTris;
+    const NodeEval pe = node(p);
+    if (!pe.drawable) return -childTris;
     if (tol < 0.0) return double(tris(minRes()));
-    const uint32_t need = neededResolution(*h, p, view, tol);
-    if (need > maxRes(p)) {
-      *parentRes = maxRes(p);
-      return kOverCost * (1.0 + screenError(*h, p, maxRes(p), view));
+    const double tolWorld = tol * pe.dist / view.pixelsPerRadian;
+    uint32_t need = minRes();
+    while (need <= pe.maxRes && !(double(pe.errs[need - minRes()]) <= tolWorld)) ++need;
+    if (need > pe.maxRes) {
+      *parentRes = pe.maxRes;
+      return kOverCost * (1.0 + parentErrorAtMax(pe));
     }
     *parentRes = need;
     return double(tris(need)) - childTris;
   }
-  int64_t drawnDelta(const NodeId& n) const {
-    int64_t d = -int64_t(nodeDrawable(*h, n, view, opt.frustumCull));
-    for (uint32_t i = 0; i < 4; ++i) d += int64_t(nodeDrawable(*h, n.child(i), view, opt.frustumCull));
+  double parentErrorAtMax(const NodeEval& pe) const {
+    return double(pe.errs[pe.maxRes - minRes()]) * view.pixelsPerRadian / pe.dist;
+  }
+  int64_t drawnDelta(const NodeId& n) {
+    int64_t d = -int64_t(node(n).drawable);
+    for (uint32_t i = 0; i < 4; ++i) d += int64_t(node(n.child(i)).drawable);
     return d;
   }
-  bool groupMergeable(const NodeId& p, uint32_t r, const std::unordered_set<uint64_t>& reserved) const {
+  bool groupMergeable(const NodeId& p, uint32_t r) const {
     bool any = false;
     for (uint32_t i = 0; i < 4; ++i) {
       const NodeId ch = p.child(i);
       if (h->flags(ch) & kNodeEmpty) continue;
-      auto f = cut.find(ch.key());
-      if (f == cut.end() || f->second.splitRound == r || reserved.count(ch.key())) return false;
+      const Entry* f = cut.find(ch);
+      if (!f || f->splitRound == r || reservedNow(ch)) return false;
       any = true;
     }
     return any;
   }
-  void doSplit(NodeId n, uint32_t r, std::vector<Item>* splitH) {
-    auto it = cut.find(n.key());
-    const double tol = it->second.err;
-    removeCounts(it->second);
-    cut.erase(it);
+  // Whether e is the first non-empty child of its parent: the one that lists the parent's group.
+  bool firstOfGroup(const Entry& e) const {
+    const NodeId par = e.id.parent();
+    for (uint32_t i = 0; i < 4; ++i) {
+      const NodeId ch = par.child(i);
+      if (!(h->flags(ch) & kNodeEmpty)) return ch == e.id;
+    }
+    return false;
+  }
+  void doSplit(NodeId n, uint32_t r, std::vector<Item>* splitHeap) {
+    Entry* it = cut.find(n);
+    const double tol = it->err;
+    removeCounts(*it);
+    cut.erase(n);
     for (uint32_t i = 0; i < 4; ++i) {
       const NodeId ch = n.child(i);
       if (h->flags(ch) & kNodeEmpty) continue;
@@ -416,14 +554,14 @@ struct QuadQueueAdapter::State {
       e.splitRound = r;
       evaluate(e);
       if (e.drawn) {
-        e.res = resFor(ch, tol);
+        e.res = resFor(node(ch), tol);
         e.err = errAt(e, e.res);
       }
       addCounts(e);
-      cut[ch.key()] = e;
-      if (splitH) {
-        const double p = splitPriority(e);
-        if (p > 0.0) heapPush(*splitH, {p, ch.key(), e.res});
+      Entry& added = cut.insert(e);
+      if (splitHeap) {
+        const double p = splitPriority(added);
+        if (p > 0.0) heapPush(*splitHeap, {p, ch.key(), added.res});
       }
     }
     ++st.splits, ++ops;
@@ -432,10 +570,11 @@ struct QuadQueueAdapter::State {
     uint32_t pres = 0;
     mergeCost(p, &pres);
     for (uint32_t i = 0; i < 4; ++i) {
-      auto f = cut.find(p.child(i).key());
-      if (f == cut.end()) continue;
-      removeCounts(f->second);
-      cut.erase(f);
+      const NodeId ch = p.child(i);
+      const Entry* f = cut.find(ch);
+      if (!f) continue;
+      removeCounts(*f);
+      cut.erase(ch);
     }
     Entry e;
     e.id = p;
@@ -443,33 +582,68 @@ struct QuadQueueAdapter::State {
     e.res = pres;
     evaluate(e);
     addCounts(e);
-    cut[p.key()] = e;
+    cut.insert(e);
     ++st.merges, ++ops;
   }
 
-  bool phase2(bool mandatoryOnly) {
-    const uint32_t r = ++round;
-    std::vector<Item> splitH, mergeH;
-    std::unordered_set<uint64_t> reserved, seen;
-    for (const auto& [k, e] : cut) {
-      if (!mandatoryOnly) {
+  // The groups of phase 2's merge queue at the start of round r: one item per mergeable group.
+  void listMerges(uint32_t r, bool splits) {
+    splitH.clear();
+    mergeH.clear();
+    for (auto& [k, e] : cut) {
+      if (splits) {
         const double p = splitPriority(e);
         if (p > 0.0) splitH.push_back({p, k, e.res});
       }
-      if (e.id.level == 0) continue;
+      if (e.id.level == 0 || !firstOfGroup(e)) continue;
       const NodeId par = e.id.parent();
-      if (!seen.insert(par.key()).second || !groupMergeable(par, r, reserved)) continue;
+      if (!groupMergeable(par, r)) continue;
       uint32_t pres = 0;
       mergeH.push_back({-mergeCost(par, &pres), par.key(), 0});
     }
     std::make_heap(splitH.begin(), splitH.end(), ItemLess{});
     std::make_heap(mergeH.begin(), mergeH.end(), ItemLess{});
+  }
+  // The mandatory phase when the budgets hold: only groups with every node culled collapse (no
+  // drawn node changes). As phase2(true) would, in its order (by key, their costs are all 0),
+  // found from the culled nodes alone. Returns whether anything changed.
+  bool collapseCulled(uint32_t r) {
+    std::vector<Item>& heap = mergeH;
+    heap.clear();
+    auto collapsible = [&](const NodeId& p) {
+      return !node(p).drawable && groupMergeable(p, r) && groupUndrawn(p);
+    };
+    for (const auto& [k, e] : cut)
+      if (!e.drawn && e.id.level > 0 && firstOfGroup(e) && collapsible(e.id.parent()))
+        heap.push_back({0.0, e.id.parent().key(), 0});
+    std::make_heap(heap.begin(), heap.end(), ItemLess{});
+    bool changed = false;
+    while (!heap.empty()) {
+      const NodeId p = keyToNode(heapPop(heap).key);
+      if (cut.count(p) || !collapsible(p)) continue;
+      doMerge(p, r);
+      --st.merges, --ops;  // free bookkeeping, not an adaptation operation
+      changed = true;
+      if (p.level > 0 && collapsible(p.parent())) heapPush(heap, {0.0, p.parent().key(), 0});
+    }
+    return changed;
+  }
+
+  bool phase2(bool mandatoryOnly) {
+    const uint32_t r = ++round;
+    ++reserveMark;
+    const int64_t nodeBudget_ = int64_t(nodeBudget());
+    const int64_t triBudget = int64_t(opt.maxTriangles);
+    int64_t availNodes = nodeBudget_ - int64_t(drawn);
+    int64_t availFloor = triBudget - int64_t(std::max(floorTris, floorTrisNow()));
+    if (mandatoryOnly && availNodes >= 0 && availFloor >= 0) return collapseCulled(r);
+    listMerges(r, !mandatoryOnly);
     // Valid merge top (the cost is recomputed: child resolutions may have changed).
     auto mergeTop = [&]() -> const Item* {
       while (!mergeH.empty()) {
         const Item& t = mergeH.front();
         const NodeId p = keyToNode(t.key);
-        if (!cut.count(t.key) && groupMergeable(p, r, reserved)) {
+        if (!cut.count(p) && groupMergeable(p, r)) {
           uint32_t pres = 0;
           const double c = -mergeCost(p, &pres);
           if (c == t.priority) return &mergeH.front();
@@ -485,10 +659,8 @@ struct QuadQueueAdapter::State {
     auto splitTop = [&]() -> Entry* {
       while (!splitH.empty()) {
         const Item& t = splitH.front();
-        auto f = cut.find(t.key);
-        if (f != cut.end() && f->second.drawn && f->second.res == t.res && f->second.mergedRound != r &&
-            !reserved.count(t.key))
-          return &f->second;
+        Entry* f = cut.find(t.key);
+        if (f && f->drawn && f->res == t.res && f->mergedRound != r && !reservedNow(f->id)) return f;
         heapPop(splitH);
       }
       return nullptr;
@@ -496,15 +668,11 @@ struct QuadQueueAdapter::State {
     auto afterMerge = [&](const NodeId& p) {
       if (p.level == 0) return;
       const NodeId pp = p.parent();
-      if (groupMergeable(pp, r, reserved)) {
+      if (groupMergeable(pp, r)) {
         uint32_t pres = 0;
         heapPush(mergeH, {-mergeCost(pp, &pres), pp.key(), 0});
       }
     };
-    const int64_t nodeBudget_ = int64_t(nodeBudget());
-    const int64_t triBudget = int64_t(opt.maxTriangles);
-    int64_t availNodes = nodeBudget_ - int64_t(drawn);
-    int64_t availFloor = triBudget - int64_t(std::max(floorTris, floorTrisNow()));
     bool changed = false;
     std::vector<Item> reservedOrder;
     int64_t reservedFloorSum = 0;  // floor triangles of the reserved splits' extra nodes
@@ -529,8 +697,7 @@ struct QuadQueueAdapter::State {
       }
       if (mandatoryOnly) {
         // Culled groups collapse (no drawn node changes).
-        if (m && !nodeDrawable(*h, keyToNode(m->key), view, opt.frustumCull) && -m->priority <= 0.0 &&
-            groupUndrawn(keyToNode(m->key))) {
+        if (m && !node(keyToNode(m->key)).drawable && -m->priority <= 0.0 && groupUndrawn(keyToNode(m->key))) {
           const NodeId p = keyToNode(m->key);
           heapPop(mergeH);
           doMerge(p, r);
@@ -559,7 +726,7 @@ struct QuadQueueAdapter::State {
       const int64_t df = d * int64_t(tris(minRes()));
       if (d <= availNodes && df <= availFloor) {
         const Item it = heapPop(splitH);
-        reserved.insert(it.key);
+        reserved[cut.index(s->id)] = reserveMark;
         reservedOrder.push_back(it);
         reservedFloorSum += df;
         availNodes -= d;
@@ -576,14 +743,13 @@ struct QuadQueueAdapter::State {
       // groups to split the worst node at maxRes is the trade a full node budget needs.
       const NodeId mp = m ? keyToNode(m->key) : NodeId{};
       const bool pays = m && (-m->priority < kOverCost ? -m->priority < sp
-                                                       : screenError(*h, mp, maxRes(mp), view) < s->err - kEps);
+                                                       : parentErrorAtMax(node(mp)) < s->err - kEps);
       if (pays && !(s->id.level > 0 && s->id.parent() == mp)) {
-        const NodeId p = mp;
-        if (mergeFreedNodes(p) <= 0) {
+        if (mergeFreedNodes(mp) <= 0) {
           mergeAside.push_back(heapPop(mergeH));
           continue;
         }
-        mergeTopAndAccount(p);
+        mergeTopAndAccount(mp);
         continue;
       }
       heapPop(splitH);  // does not fit, and no merge pays for it
@@ -591,22 +757,20 @@ struct QuadQueueAdapter::State {
     for (const Item& it : mergeAside) heapPush(mergeH, it);
     if (mandatoryOnly) return changed;
     // Split: the reserved splits, then any further split that still fits.
-    reserved.clear();
+    ++reserveMark;
     for (const Item& it : reservedOrder) {
-      auto f = cut.find(it.key);
-      if (f == cut.end()) continue;
-      doSplit(f->second.id, r, &splitH);
+      const Entry* f = cut.find(it.key);
+      if (!f) continue;
+      doSplit(f->id, r, &splitH);
       changed = true;
     }
     while (!capped()) {
       Entry* s = splitTop();
       if (!s) break;
-      const Item it = heapPop(splitH);
+      heapPop(splitH);
       const int64_t d = drawnDelta(s->id);
-      if (int64_t(drawn) + d > nodeBudget_ ||
-          int64_t(floorTrisNow()) + d * int64_t(tris(minRes())) > triBudget)
+      if (int64_t(drawn) + d > nodeBudget_ || int64_t(floorTrisNow()) + d * int64_t(tris(minRes())) > triBudget)
         continue;
-      (void)it;
       doSplit(s->id, r, &splitH);
       changed = true;
     }
@@ -615,36 +779,37 @@ struct QuadQueueAdapter::State {
   // Replaces the kept nodes of every chart in a closed group by the chart's root.
   void collapseClosedCharts() {
     if (!groups.active) return;
-    std::vector<uint64_t> drop;
+    std::vector<NodeId> drop;
     std::vector<uint32_t> charts;
     for (const auto& [k, e] : cut)
-      if (e.id.level > 0 && groups.frozen(e.id.chart)) drop.push_back(k);
-    for (uint64_t k : drop) {
-      charts.push_back(NodeId::fromKey(k).chart);
-      cut.erase(k);
+      if (e.id.level > 0 && groups.frozen(e.id.chart)) drop.push_back(e.id);
+    for (const NodeId& n : drop) {
+      charts.push_back(n.chart);
+      cut.erase(n);
     }
     std::sort(charts.begin(), charts.end());
     charts.erase(std::unique(charts.begin(), charts.end()), charts.end());
     for (uint32_t c : charts) {
-      const NodeId root{c, 0, 0, 0};
-      if (!cut.count(root.key())) cut[root.key()].id = root;
+      Entry root;
+      root.id = {c, 0, 0, 0};
+      if (!cut.count(root.id)) cut.insert(root);
     }
   }
   // Triangle floor of the drawn nodes at minRes (floors are recomputed after the round).
   uint64_t floorTrisNow() const { return uint64_t(drawn) * tris(minRes()); }
   // Drawn nodes a merge of the group under p removes (drawn children minus the drawn parent).
-  int64_t mergeFreedNodes(const NodeId& p) const {
-    int64_t n = -int64_t(nodeDrawable(*h, p, view, opt.frustumCull));
+  int64_t mergeFreedNodes(const NodeId& p) {
+    int64_t n = -int64_t(node(p).drawable);
     for (uint32_t i = 0; i < 4; ++i) {
-      auto f = cut.find(p.child(i).key());
-      if (f != cut.end() && f->second.drawn) ++n;
+      const Entry* f = cut.find(p.child(i));
+      if (f && f->drawn) ++n;
     }
     return n;
   }
   bool groupUndrawn(const NodeId& p) const {
     for (uint32_t i = 0; i < 4; ++i) {
-      auto f = cut.find(p.child(i).key());
-      if (f != cut.end() && f->second.drawn) return false;
+      const Entry* f = cut.find(p.child(i));
+      if (f && f->drawn) return false;
     }
     return true;
   }
@@ -672,14 +837,18 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   // the returned cut.
   s.opt.maxNodes = s.groups.chartBudget(options.maxNodes);
   s.cut.init(h_);
+  s.node.init(h_);
+  s.node.newFrame(h_, s.view, options.frustumCull);
+  if (s.reserved.size() != s.cut.forestSize() || ++s.reserveMark > UINT32_MAX - 4096) {
+    s.reserved.assign(s.cut.forestSize(), 0);  // (re)start the marks
+    s.reserveMark = 1;
+  }
   s.collapseClosedCharts();
   if (s.cut.empty())
     for (uint32_t c = 0; c < h_.chartCount(); ++c) {
-      const NodeId root{c, 0, 0, 0};
-      if (h_.flags(root) & kNodeEmpty) continue;
       Entry e;
-      e.id = root;
-      s.cut[root.key()] = e;
+      e.id = {c, 0, 0, 0};
+      if (!(h_.flags(e.id) & kNodeEmpty)) s.cut.insert(e);
     }
   for (auto& [k, e] : s.cut) s.evaluate(e);
   s.recount();
@@ -694,7 +863,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   s.phase1();
 
   for (uint32_t r = 0; r < options.maxRounds && !s.capped(); ++r) {
-    const auto saved = s.cut.snapshot();
+    s.cut.beginLog();
     const BudgetStats savedStats = st;
     const double savedMax = s.maxError();
     if (!s.phase2(false)) break;
@@ -708,7 +877,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
       // is undone too, so a static view reaches a fixed point.
       const uint32_t done = st.refines + st.coarsens + st.splits + st.merges;
       const uint32_t kept = savedStats.refines + savedStats.coarsens + savedStats.splits + savedStats.merges;
-      s.cut.restore(saved);
+      s.cut.undo();
       s.recount();
       st.refines = savedStats.refines, st.coarsens = savedStats.coarsens;
       st.splits = savedStats.splits, st.merges = savedStats.merges;
@@ -720,6 +889,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
         ++st.tieUndos;
       break;
     }
+    s.cut.endLog();
   }
 
   // The drawn cut; the floors already satisfy the stitching constraint unless a node would need
