@@ -7,10 +7,29 @@
 #include <cmath>
 #include <limits>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 namespace gimlod {
 namespace {
 
 constexpr double kOverTolPriority = kOverTolerancePriority;
+// Entries per parallel task of the per-frame passes; below kParallelMin entries they run on the
+// calling thread (waking the workers costs more than the pass: measured with bench_adapt).
+constexpr size_t kGrain = 1024;
+constexpr size_t kParallelMin = 8192;
+
+// f(i) for i in [0, n): in parallel for large n. Each call must touch its own data only.
+template <typename F>
+void forEachEntry(size_t n, F&& f) {
+  if (n < kParallelMin) {
+    for (size_t i = 0; i < n; ++i) f(i);
+    return;
+  }
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, kGrain), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) f(i);
+  });
+}
 
 uint64_t tris(uint32_t res) { return 2ull << (2 * res); }
 
@@ -163,7 +182,7 @@ void DualQueueAdapter::evaluate(Entry& e) {
 
 // Paper 7.1 split priority (see dualQueueSplitPriority), from the entry's evaluation; *delta is
 // the drawn-node change of the split.
-double DualQueueAdapter::cachedSplitPriority(Entry& e, int32_t* delta) {
+double DualQueueAdapter::cachedSplitPriority(Entry& e, int32_t* delta, bool* reused) {
   if (e.id.level == 0 && groups_.frozen(e.id.chart)) {  // a closed group's root: never split
     *delta = 0;
     return -1.0;
@@ -172,7 +191,7 @@ double DualQueueAdapter::cachedSplitPriority(Entry& e, int32_t* delta) {
   if (reuse_ && e.cacheSlack >= 0.0 && e.cacheEpoch == epoch_ && e.cacheRes == e.res && e.inside) {
     const glm::dvec3 m = view_.eye - e.cacheEye;
     if (m.x * m.x + m.y * m.y + m.z * m.z < e.cacheSlack * e.cacheSlack) {
-      ++frame_.priorityReuses;
+      *reused = true;
       *delta = e.cacheDelta;
       return e.cachePriority;
     }
@@ -247,7 +266,9 @@ bool DualQueueAdapter::groupInCut(const NodeId& parent) const {
 void DualQueueAdapter::pushSplit(Entry& e) {
   if (e.mergedFrame == frameNo_) return;  // merged this frame: not split again this frame
   int32_t delta = 0;
-  const double p = cachedSplitPriority(e, &delta);
+  bool reused = false;
+  const double p = cachedSplitPriority(e, &delta, &reused);
+  frame_.priorityReuses += uint32_t(reused);
   if (p <= 0.0) return;  // never useful this frame: the view is fixed within a frame
   splitHeap_.push_back({p, e.g, false, delta});
   std::push_heap(splitHeap_.begin(), splitHeap_.end(), Less{});
@@ -331,7 +352,8 @@ bool DualQueueAdapter::validMergeTop() {
 }
 
 void DualQueueAdapter::collapseClosedCharts() {
-  if (!groups_.active) return;
+  if (!groups_.active || std::none_of(groups_.closedOf.begin(), groups_.closedOf.end(), [](int32_t g) { return g >= 0; }))
+    return;
   std::vector<uint32_t> drop, charts;
   for (const Entry& e : entries_)
     if (e.id.level > 0 && groups_.frozen(e.id.chart)) drop.push_back(e.g);
@@ -348,6 +370,23 @@ void DualQueueAdapter::collapseClosedCharts() {
     if (slot_[e.g] < 0) addEntry(e);
   }
   opsSinceSort_ += uint32_t(drop.size());
+}
+
+void DualQueueAdapter::queueItems(Entry& e, PassItems& q) {
+  q = PassItems{};
+  q.split = cachedSplitPriority(e, &q.delta, &q.reused);
+  if (e.id.level == 0) return;
+  // One merge item per group: listed by its first non-empty child.
+  const NodeId par = e.id.parent();
+  for (uint32_t i = 0; i < 4; ++i) {
+    const NodeId ch = par.child(i);
+    if (h_.flags(ch) & kNodeEmpty) continue;
+    if (ch == e.id && groupInCut(par)) {
+      q.hasMerge = true;
+      q.merge = mergeCost(par, &q.mergeOverTol, &q.freed);
+    }
+    break;
+  }
 }
 
 const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& options, AdaptStats* stats) {
@@ -380,14 +419,13 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
     for (uint32_t i = 0; i < entries_.size(); ++i) slot_[entries_[i].g] = int32_t(i);
     opsSinceSort_ = 0;
   }
-  // Re-evaluate the persistent cut for this view; rebuild both queues in O(cut).
+  // Re-evaluate the persistent cut for this view; rebuild both queues in O(cut). Each entry is
+  // evaluated on its own (in parallel), then the queues are filled in partition order, so the
+  // queues, and the cut, do not depend on the thread count.
+  const size_t n = entries_.size();
+  forEachEntry(n, [&](size_t i) { evaluate(entries_[i]); });
   drawn_ = 0;
-  splitHeap_.clear();
-  mergeHeap_.clear();
-  for (Entry& e : entries_) {
-    evaluate(e);
-    drawn_ += uint32_t(e.drawn);
-  }
+  for (const Entry& e : entries_) drawn_ += uint32_t(e.drawn);
   if (options.tolerancePx != epochTol_ || view.pixelsPerRadian != epochPpr_ ||
       view.minDistance != epochMinDist_ || options.frustumCull != epochCull_) {
     ++epoch_;
@@ -396,24 +434,15 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
     epochMinDist_ = view.minDistance;
     epochCull_ = options.frustumCull;
   }
-  for (Entry& e : entries_) {
-    int32_t delta = 0;
-    const double p = cachedSplitPriority(e, &delta);
-    if (p > 0.0) splitHeap_.push_back({p, e.g, false, delta});
-    if (e.id.level == 0) continue;
-    // One merge item per group: pushed by its first non-empty child.
-    const NodeId par = e.id.parent();
-    for (uint32_t i = 0; i < 4; ++i) {
-      const NodeId ch = par.child(i);
-      if (h_.flags(ch) & kNodeEmpty) continue;
-      if (ch == e.id && groupInCut(par)) {
-        bool over = false;
-        int32_t freed = 0;
-        const double c = mergeCost(par, &over, &freed);
-        mergeHeap_.push_back({c, globalIndex(par), over, freed});
-      }
-      break;
-    }
+  pass_.resize(n);
+  forEachEntry(n, [&](size_t i) { queueItems(entries_[i], pass_[i]); });
+  splitHeap_.clear();
+  mergeHeap_.clear();
+  for (size_t i = 0; i < n; ++i) {
+    const PassItems& q = pass_[i];
+    frame_.priorityReuses += uint32_t(q.reused);
+    if (q.split > 0.0) splitHeap_.push_back({q.split, entries_[i].g, false, q.delta});
+    if (q.hasMerge) mergeHeap_.push_back({q.merge, globalIndex(entries_[i].id.parent()), q.mergeOverTol, q.freed});
   }
   std::make_heap(splitHeap_.begin(), splitHeap_.end(), Less{});
   std::make_heap(mergeHeap_.begin(), mergeHeap_.end(), Greater{});

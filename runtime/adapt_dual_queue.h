@@ -133,7 +133,14 @@ class DualQueueAdapter {
   void evaluate(Entry& e);
   // slack (optional): lowered to the smallest eye movement that may change a child's resolution.
   double splitPriority(const Entry& e, int32_t* delta, double* slack = nullptr) const;
-  double cachedSplitPriority(Entry& e, int32_t* delta);
+  double cachedSplitPriority(Entry& e, int32_t* delta, bool* reused);
+  // One entry's queue items for this frame (the per-frame pass; entries_ evaluated).
+  struct PassItems {
+    double split = -1.0, merge = 0.0;
+    int32_t delta = 0, freed = 0;
+    bool reused = false, hasMerge = false, mergeOverTol = false;
+  };
+  void queueItems(Entry& e, PassItems& q);
   bool childDrawn(const Entry& e, uint32_t i) const;
   double mergeCost(const NodeId& parent, bool* overTol, int32_t* freed) const;
   bool groupInCut(const NodeId& parent) const;
@@ -154,6 +161,7 @@ class DualQueueAdapter {
   std::vector<int32_t> slot_;    // per forest node: position in entries_, or -1
   std::vector<Entry> entries_;   // the persistent cut (a partition of the non-empty area)
   std::vector<Item> splitHeap_, mergeHeap_;
+  std::vector<PassItems> pass_;
   // Per-frame context.
   ViewParams view_;
   AdaptOptions opt_;

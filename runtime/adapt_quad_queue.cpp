@@ -778,7 +778,8 @@ struct QuadQueueAdapter::State {
   }
   // Replaces the kept nodes of every chart in a closed group by the chart's root.
   void collapseClosedCharts() {
-    if (!groups.active) return;
+    if (!groups.active || std::none_of(groups.closedOf.begin(), groups.closedOf.end(), [](int32_t g) { return g >= 0; }))
+      return;
     std::vector<NodeId> drop;
     std::vector<uint32_t> charts;
     for (const auto& [k, e] : cut)
