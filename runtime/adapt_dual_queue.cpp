@@ -14,19 +14,16 @@ namespace gimlod {
 namespace {
 
 constexpr double kOverTolPriority = kOverTolerancePriority;
-// Entries per parallel task of the per-frame passes; below kParallelMin entries they run on the
-// calling thread (waking the workers costs more than the pass: measured with bench_adapt).
-constexpr size_t kGrain = 1024;
-constexpr size_t kParallelMin = 8192;
-
-// f(i) for i in [0, n): in parallel for large n. Each call must touch its own data only.
+// f(i) for i in [0, n): in parallel, in tasks of parallelMin / 8 entries, when n >= parallelMin
+// (0: never). Each call must touch its own data only.
 template <typename F>
-void forEachEntry(size_t n, F&& f) {
-  if (n < kParallelMin) {
+void forEachEntry(size_t n, size_t parallelMin, F&& f) {
+  if (parallelMin == 0 || n < parallelMin) {
     for (size_t i = 0; i < n; ++i) f(i);
     return;
   }
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, kGrain), [&](const tbb::blocked_range<size_t>& r) {
+  const size_t grain = std::max<size_t>(parallelMin / 8, 1);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, grain), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i) f(i);
   });
 }
@@ -86,8 +83,10 @@ double dualQueueMergeCost(const Hierarchy& h, const NodeId& parent, const ViewPa
   return own - childTriangles(h, parent, v, tolerancePx, cull);
 }
 
-DualQueueAdapter::DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame, bool reusePriorities)
-    : h_(h), maxOps_(std::max(maxOpsPerFrame, 1u)), reuse_(reusePriorities), perChart_(nodesPerChart(h.params.depth)) {
+DualQueueAdapter::DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame, bool reusePriorities,
+                                   uint32_t parallelMin)
+    : h_(h), maxOps_(std::max(maxOpsPerFrame, 1u)), reuse_(reusePriorities), parallelMin_(parallelMin),
+      perChart_(nodesPerChart(h.params.depth)) {
   local_.resize(perChart_);
   for (uint32_t l = 0; l < h.params.depth; ++l)
     for (uint32_t y = 0; y < (1u << l); ++y)
@@ -423,7 +422,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   // evaluated on its own (in parallel), then the queues are filled in partition order, so the
   // queues, and the cut, do not depend on the thread count.
   const size_t n = entries_.size();
-  forEachEntry(n, [&](size_t i) { evaluate(entries_[i]); });
+  forEachEntry(n, parallelMin_, [&](size_t i) { evaluate(entries_[i]); });
   drawn_ = 0;
   for (const Entry& e : entries_) drawn_ += uint32_t(e.drawn);
   if (options.tolerancePx != epochTol_ || view.pixelsPerRadian != epochPpr_ ||
@@ -435,7 +434,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
     epochCull_ = options.frustumCull;
   }
   pass_.resize(n);
-  forEachEntry(n, [&](size_t i) { queueItems(entries_[i], pass_[i]); });
+  forEachEntry(n, parallelMin_, [&](size_t i) { queueItems(entries_[i], pass_[i]); });
   splitHeap_.clear();
   mergeHeap_.clear();
   for (size_t i = 0; i < n; ++i) {

@@ -59,7 +59,12 @@ class DualQueueAdapter {
  public:
   // h must outlive the adapter. reusePriorities: keep split priorities across frames while they
   // provably cannot change (see Entry); false recomputes them every frame (same cuts, slower).
-  explicit DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame = 1024, bool reusePriorities = true);
+  // parallelMin: partitions of at least this many nodes are evaluated in parallel (TBB), below it
+  // on the calling thread (0: always); waking the workers costs more than a smaller pass (measured
+  // with bench_adapt on 2 cores). The cuts do not depend on it nor on the thread count.
+  explicit DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame = 1024, bool reusePriorities = true,
+                            uint32_t parallelMin = kDefaultParallelMin);
+  static constexpr uint32_t kDefaultParallelMin = 8192;
 
   // Adapts the persistent cut to the view and returns the drawn cut (frustum-culled nodes removed,
   // stitching constraint enforced on a copy, errorPx set). Valid until the next update/reset.
@@ -155,6 +160,7 @@ class DualQueueAdapter {
   const Hierarchy& h_;
   uint32_t maxOps_;
   bool reuse_;
+  uint32_t parallelMin_;
   uint32_t perChart_;
   uint32_t frameNo_ = 0;
   std::vector<NodeId> local_;    // chart-local node of each level-order index

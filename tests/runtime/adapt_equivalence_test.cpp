@@ -1,0 +1,163 @@
+// The adapters against their references (tests/reference: each adapter as it was before its
+// per-frame work was made incremental): on random small forests, random camera paths and random
+// budgets, every frame's cut is the same, node for node and resolution for resolution, with the
+// same errors and counts. And the dual queue's parallel pass gives the same cuts on 1 thread as
+// on several.
+#include <gtest/gtest.h>
+
+#include <tbb/global_control.h>
+#include <tbb/task_arena.h>
+
+#include <random>
+
+#include "hierarchy/root_groups.h"
+#include "tests/adapt_fixture.h"
+#include "tests/reference/adapt_dual_queue.h"
+#include "tests/reference/adapt_quad_queue.h"
+
+namespace gimlod::test {
+namespace {
+
+// A random forest: 1 to 4 x 1 to 3 charts of 33 to 129 samples, depth 3 to 5, with top groups
+// above the charts in half of them.
+World randomWorld(std::mt19937& rng) {
+  const uint32_t sizes[] = {33, 65, 129};
+  const uint32_t size = sizes[rng() % 3];
+  const uint32_t maxDepth = size == 33 ? 4 : 5;
+  World w = makeWorld(size, 1 + rng() % 4, 1 + rng() % 3, 3 + rng() % (maxDepth - 2));
+  if (rng() % 2 == 0) w.h.groups = buildRootGroups(w.h, 2 + rng() % 3);
+  return w;
+}
+
+// A camera path: from a random eye, moving a random step per frame towards and around the
+// world, looking at random points over it (near views, far views, views with most charts culled).
+std::vector<ViewParams> randomPath(const World& w, std::mt19937& rng, uint32_t frames) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const glm::dvec3 size = w.hi - w.lo;
+  auto inside = [&]() { return w.lo + glm::dvec3(u(rng), u(rng), u(rng)) * size; };
+  glm::dvec3 eye = inside() + glm::dvec3(0, 0, size.z + u(rng) * glm::length(size));
+  const glm::dvec3 step = (inside() - eye) * (0.02 + 0.1 * u(rng));
+  std::vector<ViewParams> views;
+  for (uint32_t f = 0; f < frames; ++f) {
+    glm::dvec3 target = inside();
+    if (glm::length(target - eye) < 1e-6) target.x += 1.0;
+    views.push_back(viewAt(w, eye, target));
+    eye += step + glm::dvec3(u(rng) - 0.5, u(rng) - 0.5, 0.0) * 0.05 * glm::length(size);
+  }
+  return views;
+}
+
+void expectSameCut(const Cut& a, const Cut& b, const std::string& where) {
+  ASSERT_EQ(sortedNodes(a), sortedNodes(b)) << where;
+  std::vector<float> ea, eb;
+  for (const CutNode& n : a.nodes) ea.push_back(n.errorPx);
+  for (const CutNode& n : b.nodes) eb.push_back(n.errorPx);
+  std::sort(ea.begin(), ea.end());
+  std::sort(eb.begin(), eb.end());
+  EXPECT_EQ(ea, eb) << where;
+}
+
+TEST(AdaptEquivalence, TheQuadQueueCutsAreTheReferencesOnRandomForests) {
+  std::mt19937 rng(20261129);
+  uint32_t frames = 0, split = 0;
+  for (int world = 0; world < 60; ++world) {
+    const World w = randomWorld(rng);
+    const Hierarchy& h = w.h;
+    BudgetOptions o;
+    o.maxNodes = rng() % 4 == 0 ? 0 : 1 + rng() % 120;
+    o.maxTriangles = (uint64_t(h.chartCount()) * 32) << (2 * (rng() % 6));
+    o.maxOpsPerFrame = rng() % 3 == 0 ? 8 + rng() % 64 : 4096;
+    o.maxRounds = rng() % 18;
+    o.frustumCull = rng() % 5 != 0;
+    QuadQueueAdapter ours(h);
+    reference::QuadQueueAdapter ref(h);
+    for (const ViewParams& v : randomPath(w, rng, 16)) {
+      BudgetStats st, rst;
+      const Cut& a = ours.update(v, o, &st);
+      const Cut& b = ref.update(v, o, &rst);
+      const std::string where = "world " + std::to_string(world) + ", frame " + std::to_string(frames);
+      expectSameCut(a, b, where);
+      EXPECT_EQ(st.maxErrorPx, rst.maxErrorPx) << where;
+      EXPECT_EQ(st.triangles, rst.triangles) << where;
+      EXPECT_EQ(st.nodes, rst.nodes) << where;
+      EXPECT_EQ(st.rounds, rst.rounds) << where;
+      EXPECT_EQ(st.undos + st.tieUndos, rst.undos + rst.tieUndos) << where;
+      EXPECT_EQ(st.refines + st.coarsens + st.splits + st.merges, rst.refines + rst.coarsens + rst.splits + rst.merges)
+          << where;
+      if (HasFatalFailure()) return;
+      ++frames;
+      split += uint32_t(st.splits > 0);
+    }
+  }
+  // The paths adapt: the cuts change, not only the resolutions.
+  EXPECT_GT(split, frames / 8);
+}
+
+TEST(AdaptEquivalence, TheDualQueueCutsAreTheReferencesOnRandomForests) {
+  std::mt19937 rng(1129);
+  uint32_t frames = 0, split = 0;
+  for (int world = 0; world < 60; ++world) {
+    const World w = randomWorld(rng);
+    const Hierarchy& h = w.h;
+    AdaptOptions o;
+    o.tolerancePx = std::pow(10.0, -2.0 + 3.0 * double(rng() % 1000) / 1000.0);
+    o.maxNodes = rng() % 4 == 0 ? 0 : 1 + rng() % 120;
+    o.frustumCull = rng() % 5 != 0;
+    const uint32_t maxOps = rng() % 3 == 0 ? 4 + rng() % 32 : 1024;
+    const bool reuse = rng() % 4 != 0;
+    DualQueueAdapter ours(h, maxOps, reuse);
+    reference::DualQueueAdapter ref(h, maxOps, reuse);
+    for (const ViewParams& v : randomPath(w, rng, 16)) {
+      AdaptStats st, rst;
+      const Cut& a = ours.update(v, o, &st);
+      const Cut& b = ref.update(v, o, &rst);
+      const std::string where = "world " + std::to_string(world) + ", frame " + std::to_string(frames);
+      expectSameCut(a, b, where);
+      EXPECT_EQ(st.maxErrorPx, rst.maxErrorPx) << where;
+      EXPECT_EQ(st.nodes, rst.nodes) << where;
+      EXPECT_EQ(ours.frameStats().splits, ref.frameStats().splits) << where;
+      EXPECT_EQ(ours.frameStats().merges, ref.frameStats().merges) << where;
+      EXPECT_EQ(ours.frameStats().priorityReuses, ref.frameStats().priorityReuses) << where;
+      if (HasFatalFailure()) return;
+      ++frames;
+      split += uint32_t(st.splits > 0);
+    }
+  }
+  EXPECT_GT(split, frames / 8);
+}
+
+// The parallel pass on a partition of thousands of nodes, in tasks of 32 (parallelMin 256).
+TEST(AdaptEquivalence, TheDualQueueCutsDoNotDependOnTheThreadCount) {
+  const World w = makeWorld(513, 3, 2, 5);
+  AdaptOptions o;
+  o.tolerancePx = 0.01;
+  o.maxNodes = 30000;
+  // Low over the world, looking along it: near nodes and far ones, some culled.
+  std::vector<ViewParams> path;
+  for (uint32_t f = 0; f < 12; ++f) {
+    const glm::dvec3 eye = w.lo + (w.hi - w.lo) * glm::dvec3(0.1 + 0.02 * f, 0.3, 1.5);
+    path.push_back(viewAt(w, eye, eye + glm::dvec3(1.0, 0.3 + 0.05 * f, -0.4)));
+  }
+  // Up to 4 threads even on a machine with fewer cores.
+  const tbb::global_control most(tbb::global_control::max_allowed_parallelism, 4);
+  auto run = [&](int threads) {
+    std::vector<std::vector<std::pair<uint64_t, uint32_t>>> cuts;
+    uint32_t largest = 0;
+    tbb::task_arena arena(threads);
+    arena.execute([&] {
+      DualQueueAdapter a(w.h, 1024, true, 256);
+      for (const ViewParams& v : path) {
+        cuts.push_back(sortedNodes(a.update(v, o)));
+        largest = std::max(largest, a.frameStats().partitionNodes);
+      }
+    });
+    EXPECT_GT(largest, 1024u) << "too small a partition for the parallel pass";
+    return cuts;
+  };
+  const auto one = run(1);
+  EXPECT_EQ(one, run(2));
+  EXPECT_EQ(one, run(4));
+}
+
+}  // namespace
+}  // namespace gimlod::test
