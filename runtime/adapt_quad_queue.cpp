@@ -30,6 +30,7 @@ struct Entry {
   uint32_t gap = 0;    // stitching level gap to the finest drawn neighbour (computeFloors)
   uint32_t maxRes = 0;
   bool drawn = false;
+  bool inside = false;  // the bounds entirely inside the frustum (NodeEval::inside)
   bool prioValid = false;  // splitPrio holds this frame's split priority at res and err
   double err = 0.0;    // screen error at res; 0 when not drawn
   double dist = 1.0;   // eye distance to the bounds this frame (as screenError clamps it)
@@ -44,6 +45,7 @@ struct NodeEval {
   const float* errs = nullptr;
   uint32_t maxRes = 0;
   bool drawable = false;  // nodeDrawable
+  bool inside = false;    // drawable, and the bounds entirely inside the frustum (or no culling)
 };
 
 // Heap item; all heaps are max-heaps on priority, ties broken by key (deterministic).
@@ -203,7 +205,9 @@ class NodeCache {
       frame_ = 1;
     }
   }
-  NodeEval operator()(const NodeId& n) {
+  // parentInside: n's parent is inside the frustum, so n is too (its bounds lie in the parent's),
+  // and no plane need be tested.
+  NodeEval operator()(const NodeId& n, bool parentInside = false) {
     const size_t g = size_t(n.chart) * perChart_ + nodeIndex(n.level, n.x, n.y);
     if (stamp_[g] == frame_) return evals_[at_[g]];
     stamp_[g] = frame_;
@@ -214,7 +218,15 @@ class NodeCache {
     const auto& b = cn.bounds[i];
     const glm::dvec3 lo{b[0], b[1], b[2]}, hi{b[3], b[4], b[5]};
     // The same arithmetic as nodeDrawable, neededResolution and screenError.
-    e.drawable = !(cn.flags[i] & kNodeEmpty) && (!cull_ || view_->frustum.intersects(lo, hi));
+    if (cn.flags[i] & kNodeEmpty) {
+      e.drawable = e.inside = false;
+    } else if (!cull_ || parentInside) {
+      e.drawable = e.inside = true;
+    } else {
+      const int c = view_->frustum.classify(lo, hi);  // 0 exactly when intersects is false
+      e.drawable = c != 0;
+      e.inside = c == 2;
+    }
     e.dist = std::max(glm::length(glm::clamp(view_->eye, lo, hi) - view_->eye), view_->minDistance);
     e.errs = &cn.errors[size_t(i) * h_->params.resCount()];
     e.maxRes = h_->maxRes(n);
@@ -283,6 +295,7 @@ struct QuadQueueAdapter::State {
   void evaluate(Entry& e) {
     const NodeEval n = node(e.id);
     e.drawn = n.drawable;
+    e.inside = n.inside;
     e.dist = n.dist;
     e.errs = n.errs;
     e.maxRes = n.maxRes;
@@ -485,7 +498,7 @@ struct QuadQueueAdapter::State {
     if (e.res >= e.maxRes) return kStuckPriority * (1.0 + e.err);
     double t = double(tris(e.res));
     for (uint32_t i = 0; i < 4; ++i) {
-      const NodeEval ch = node(e.id.child(i));
+      const NodeEval ch = node(e.id.child(i), e.inside);
       if (ch.drawable) t -= double(tris(resFor(ch, e.err)));
     }
     return t;
@@ -517,8 +530,9 @@ struct QuadQueueAdapter::State {
     return double(pe.errs[pe.maxRes - minRes()]) * view.pixelsPerRadian / pe.dist;
   }
   int64_t drawnDelta(const NodeId& n) {
-    int64_t d = -int64_t(node(n).drawable);
-    for (uint32_t i = 0; i < 4; ++i) d += int64_t(node(n.child(i)).drawable);
+    const NodeEval ne = node(n);
+    int64_t d = -int64_t(ne.drawable);
+    for (uint32_t i = 0; i < 4; ++i) d += int64_t(node(n.child(i), ne.inside).drawable);
     return d;
   }
   bool groupMergeable(const NodeId& p, uint32_t r) const {
@@ -554,7 +568,7 @@ struct QuadQueueAdapter::State {
       e.splitRound = r;
       evaluate(e);
       if (e.drawn) {
-        e.res = resFor(node(ch), tol);
+        e.res = resFor(node(ch, e.inside), tol);
         e.err = errAt(e, e.res);
       }
       addCounts(e);
@@ -866,6 +880,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   for (uint32_t r = 0; r < options.maxRounds && !s.capped(); ++r) {
     s.cut.beginLog();
     const BudgetStats savedStats = st;
+    const bool savedNeedsSplit = s.needsConstraintSplit;
     const double savedMax = s.maxError();
     if (!s.phase2(false)) break;
     ++st.rounds;
@@ -880,6 +895,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
       const uint32_t kept = savedStats.refines + savedStats.coarsens + savedStats.splits + savedStats.merges;
       s.cut.undo();
       s.recount();
+      s.needsConstraintSplit = savedNeedsSplit;  // the floors the kept entries were fitted to
       st.refines = savedStats.refines, st.coarsens = savedStats.coarsens;
       st.splits = savedStats.splits, st.merges = savedStats.merges;
       st.constraintRaises = savedStats.constraintRaises;
@@ -896,14 +912,20 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   // The drawn cut; the floors already satisfy the stitching constraint unless a node would need
   // a resolution above its maxRes (then enforceStitchConstraint splits it, reported as
   // constraintSplits, and groups elsewhere merge back into the node budget).
+  // Every drawn node is at or above its floor, so without such a node the constraint holds as it
+  // is (enforceStitchConstraint would change nothing) and each node's errorPx is already
+  // screenError's.
   s.out = s.drawnCut();
-  AdaptStats as;
-  enforceStitchConstraint(h_, s.out, &view, 1.0, &as);
-  st.constraintSplits = as.constraintSplits;
-  st.constraintRaises += as.constraintRaises;
-  if (as.constraintSplits > 0) {
-    holdNodeBudget(h_, s.out, view, s.opt.maxNodes);
-    fitTriangleBudget(h_, s.out, view, options.maxTriangles);
+  if (s.needsConstraintSplit) {
+    AdaptStats as;
+    enforceStitchConstraint(h_, s.out, &view, 1.0, &as);
+    st.constraintSplits = as.constraintSplits;
+    st.constraintRaises += as.constraintRaises;
+    if (as.constraintSplits > 0) {
+      holdNodeBudget(h_, s.out, view, s.opt.maxNodes);
+      fitTriangleBudget(h_, s.out, view, options.maxTriangles);
+    }
+    for (CutNode& n : s.out.nodes) n.errorPx = float(screenError(h_, n.id, n.res, view));
   }
   markGroupedRoots(s.groups, s.out);
   AdaptStats counts;
@@ -915,8 +937,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   st.rootFloor = s.groups.rootFloor;
   st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, st.rootFloor);
   double sum = 0.0;
-  for (CutNode& n : s.out.nodes) {
-    n.errorPx = float(screenError(h_, n.id, n.res, view));
+  for (const CutNode& n : s.out.nodes) {
     st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
     sum += n.errorPx;
   }
