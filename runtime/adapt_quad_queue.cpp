@@ -266,6 +266,13 @@ struct QuadQueueAdapter::State {
   uint32_t reserveMark = 0;
   std::vector<Item> splitH, mergeH, coarsenH, errH;
   std::vector<std::vector<Item>> refineB;
+  // Phase 1's queues are built once a frame and then kept up to date from round to round: the
+  // entries phase 2 added (fresh), those whose floor changed (refloored), those below their floor
+  // (raise), and the coarsenings the balance set aside (dropped) are what a fresh build would
+  // have that the kept queues lack. Stale items are skipped as they surface.
+  bool phase1Ready = false;
+  std::vector<NodeId> fresh, refloored, raise;
+  std::vector<Item> dropped;
 
   uint32_t minRes() const { return h->params.minNodeResLog2; }
   uint32_t nodeBudget() const { return opt.maxNodes == 0 ? UINT32_MAX : opt.maxNodes; }
@@ -314,11 +321,6 @@ struct QuadQueueAdapter::State {
         floorTris += tris(e.floor);
       }
   }
-  double maxError() const {
-    double m = 0.0;
-    for (const auto& [k, e] : cut) m = std::max(m, e.err);
-    return m;
-  }
   Cut drawnCut() const {
     Cut c;
     c.nodes.reserve(drawn);
@@ -354,11 +356,15 @@ struct QuadQueueAdapter::State {
       });
     }
     floorTris = 0;
+    raise.clear();
     for (auto& [k, e] : cut) {
       if (!e.drawn) continue;
       if (e.gap > e.maxRes) needsConstraintSplit = true;
+      const uint32_t was = e.floor;
       e.floor = std::clamp(e.gap, minRes(), e.maxRes);
       floorTris += tris(e.floor);
+      if (phase1Ready && e.floor != was) refloored.push_back(e.id);
+      if (e.res < e.floor) raise.push_back(e.id);
     }
   }
 
@@ -385,6 +391,15 @@ struct QuadQueueAdapter::State {
     if (!f || !f->drawn || f->res != it.res) return nullptr;
     return f;
   }
+  Entry* validCoarsen(const Item& it) {
+    Entry* f = validPhase1(it);
+    return f && f->res > f->floor ? f : nullptr;
+  }
+  // The largest error of the cut (maxError), from the top of phase 1's error queue.
+  double maxErrorNow() {
+    while (!errH.empty() && !validPhase1(errH.front())) heapPop(errH);
+    return errH.empty() ? 0.0 : std::max(0.0, errH.front().priority);
+  }
   // (c) Balance: lower the max error by coarsening others (each staying below it), least error
   // increase per removed triangle first. Every trade lowers the sorted error vector
   // lexicographically, so this ends. Returns whether anything changed.
@@ -403,7 +418,7 @@ struct QuadQueueAdapter::State {
       uint64_t freed = 0;
       while (free + freed < need && !coarsenH.empty()) {
         const Item it = heapPop(coarsenH);
-        Entry* c = validPhase1(it);
+        Entry* c = validCoarsen(it);
         if (!c) continue;
         if (c == m || std::find(chosen.begin(), chosen.end(), c) != chosen.end()) {
           popped.push_back(it);
@@ -412,7 +427,10 @@ struct QuadQueueAdapter::State {
         // note: dropped for good: the max error only falls during the balance, so a node whose
         // coarsening would reach it now never qualifies later (its own refinement pushes a new
         // item).
-        if (errAt(*c, c->res - 1) >= m->err - kEps) continue;
+        if (errAt(*c, c->res - 1) >= m->err - kEps) {
+          dropped.push_back(it);  // back in the queue for the next phase 1
+          continue;
+        }
         popped.push_back(it);
         chosen.push_back(c);
         freed += tris(c->res) - tris(c->res - 1);
@@ -433,27 +451,55 @@ struct QuadQueueAdapter::State {
     return progress;
   }
   bool phase1() {
-    for (auto& [k, e] : cut)
-      if (e.drawn && e.res < e.floor) {
-        setRes(e, e.floor);
-        ++st.constraintRaises;
+    const bool ok = phase1Run();
+    for (const Item& it : dropped) heapPush(coarsenH, it);
+    dropped.clear();
+    return ok;
+  }
+  // The queues as a fresh build would have them: built once a frame, then brought up to date.
+  void phase1Queues() {
+    for (const NodeId& n : raise) {
+      Entry* e = cut.find(n);
+      if (!e || e->res >= e->floor) continue;
+      setRes(*e, e->floor);
+      ++st.constraintRaises;
+      if (phase1Ready) pushPhase1(*e, true);
+    }
+    raise.clear();
+    if (phase1Ready) {
+      for (const NodeId& n : fresh)
+        if (const Entry* e = cut.find(n)) pushPhase1(*e, true);
+      for (const NodeId& n : refloored) {
+        const Entry* e = cut.find(n);
+        if (!e || !e->drawn || e->res <= e->floor) continue;
+        const double loss = (errAt(*e, e->res - 1) - e->err) / double(tris(e->res) - tris(e->res - 1));
+        heapPush(coarsenH, {-loss, n.key(), e->res});
       }
-    // The refine queue is kept per resolution: a refinement's cost (added triangles) depends on
-    // the resolution alone, so the refinements that fit the remaining budget are whole buckets,
-    // and the best fitting one is the best of their tops (no popping of the ones that don't fit).
-    refineB.resize(h->params.maxNodeResLog2 + 1);
-    for (auto& b : refineB) b.clear();
-    coarsenH.clear();
-    errH.clear();
-    for (const auto& [k, e] : cut) pushPhase1(e, false);
-    for (auto& b : refineB) std::make_heap(b.begin(), b.end(), ItemLess{});
-    std::make_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
-    std::make_heap(errH.begin(), errH.end(), ItemLess{});
+    } else {
+      // The refine queue is kept per resolution: a refinement's cost (added triangles) depends
+      // on the resolution alone, so the refinements that fit the remaining budget are whole
+      // buckets, and the best fitting one is the best of their tops (no popping of the ones that
+      // don't fit).
+      refineB.resize(h->params.maxNodeResLog2 + 1);
+      for (auto& b : refineB) b.clear();
+      coarsenH.clear();
+      errH.clear();
+      for (const auto& [k, e] : cut) pushPhase1(e, false);
+      for (auto& b : refineB) std::make_heap(b.begin(), b.end(), ItemLess{});
+      std::make_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
+      std::make_heap(errH.begin(), errH.end(), ItemLess{});
+      phase1Ready = true;
+    }
+    fresh.clear();
+    refloored.clear();
+  }
+  bool phase1Run() {
+    phase1Queues();
     const uint64_t budget = opt.maxTriangles;
     // (a) Within the triangle budget (never capped).
     while (triangles > budget) {
       Entry* e = nullptr;
-      while (!coarsenH.empty() && !(e = validPhase1(coarsenH.front()))) heapPop(coarsenH);
+      while (!coarsenH.empty() && !(e = validCoarsen(coarsenH.front()))) heapPop(coarsenH);
       if (!e) return false;
       heapPop(coarsenH);
       setRes(*e, e->res - 1);
@@ -573,6 +619,7 @@ struct QuadQueueAdapter::State {
       }
       addCounts(e);
       Entry& added = cut.insert(e);
+      if (phase1Ready) fresh.push_back(ch);
       if (splitHeap) {
         const double p = splitPriority(added);
         if (p > 0.0) heapPush(*splitHeap, {p, ch.key(), added.res});
@@ -597,6 +644,7 @@ struct QuadQueueAdapter::State {
     evaluate(e);
     addCounts(e);
     cut.insert(e);
+    if (phase1Ready) fresh.push_back(p);
     ++st.merges, ++ops;
   }
 
@@ -858,6 +906,9 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
     s.reserved.assign(s.cut.forestSize(), 0);  // (re)start the marks
     s.reserveMark = 1;
   }
+  s.phase1Ready = false;
+  s.fresh.clear();
+  s.refloored.clear();
   s.collapseClosedCharts();
   if (s.cut.empty())
     for (uint32_t c = 0; c < h_.chartCount(); ++c) {
@@ -881,12 +932,12 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
     s.cut.beginLog();
     const BudgetStats savedStats = st;
     const bool savedNeedsSplit = s.needsConstraintSplit;
-    const double savedMax = s.maxError();
+    const double savedMax = s.maxErrorNow();
     if (!s.phase2(false)) break;
     ++st.rounds;
     s.computeFloors();
     const bool ok = s.phase1();
-    const double now = s.maxError();
+    const double now = s.maxErrorNow();
     const bool worse = !ok || now > savedMax + kEps;
     if (worse || now >= savedMax - kEps) {
       // Undo-based termination (paper 7.1); a round that does not strictly lower the max error
