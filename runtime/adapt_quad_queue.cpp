@@ -273,6 +273,22 @@ struct QuadQueueAdapter::State {
   bool phase1Ready = false;
   std::vector<NodeId> fresh, refloored, raise;
   std::vector<Item> dropped;
+  // Phase 2's queues likewise, from the first round of a frame on: the splits a round popped but
+  // did not do (splitAside), the nodes whose split priority is new (splitRecheck: a changed
+  // resolution, a merge's parent) and the groups whose cost or mergeability may be new
+  // (groupRecheck), each listed once a round (listedSplit, listedGroup == listMark).
+  // The floors likewise, from the first computeFloors of a frame on: the nodes that joined or left
+  // the cut since (cutChanged) mark the entries beside them, whose gaps are found again.
+  bool floorsReady = false;
+  uint32_t overMaxRes = 0;  // drawn entries whose gap is above their maxRes
+  std::vector<NodeId> cutChanged, dirty;
+  std::vector<uint32_t> dirtyMark;
+  uint32_t dirtyRound = 1;
+  bool phase2Ready = false;
+  std::vector<Item> splitAside;
+  std::vector<NodeId> splitRecheck, groupRecheck;
+  std::vector<uint32_t> listedSplit, listedGroup;
+  uint32_t listMark = 1;
 
   uint32_t minRes() const { return h->params.minNodeResLog2; }
   uint32_t nodeBudget() const { return opt.maxNodes == 0 ? UINT32_MAX : opt.maxNodes; }
@@ -292,7 +308,19 @@ struct QuadQueueAdapter::State {
   }
   bool reservedNow(const NodeId& n) const { return reserved[cut.index(n)] == reserveMark; }
 
+  void recheckSplit(const NodeId& n) {
+    uint32_t& l = listedSplit[cut.index(n)];
+    if (l != listMark) l = listMark, splitRecheck.push_back(n);
+  }
+  void recheckGroup(const NodeId& p) {
+    uint32_t& l = listedGroup[cut.index(p)];
+    if (l != listMark) l = listMark, groupRecheck.push_back(p);
+  }
   void setRes(Entry& e, uint32_t r) {
+    if (phase2Ready) {
+      recheckSplit(e.id);
+      if (e.id.level > 0) recheckGroup(e.id.parent());
+    }
     cut.willModify(e);
     if (e.drawn) triangles = triangles - tris(e.res) + tris(r);
     e.res = r;
@@ -330,20 +358,29 @@ struct QuadQueueAdapter::State {
     return c;
   }
   void addCounts(const Entry& e) {
+    if (floorsReady) cutChanged.push_back(e.id);
     if (!e.drawn) return;
     ++drawn;
     triangles += tris(e.res);
     floorTris += tris(e.floor);
   }
   void removeCounts(const Entry& e) {
+    if (floorsReady) cutChanged.push_back(e.id);
     if (!e.drawn) return;
     --drawn;
     triangles -= tris(e.res);
     floorTris -= tris(e.floor);
+    if (e.gap > e.maxRes) --overMaxRes;
   }
   // Stitching floors of the drawn nodes (paper 7.4): resolution >= level gap to finer neighbours.
   // As stitchGaps: each drawn node raises the gap of its equal-or-coarser drawn neighbours.
   void computeFloors() {
+    // The update costs a few walks per change, the full pass a walk per entry: past a quarter of
+    // the cut in changes, the full pass is cheaper (bench_adapt on the shared scans).
+    if (floorsReady && cutChanged.size() * 4 < cut.size()) return updateFloors();
+    floorsReady = true;
+    cutChanged.clear();
+    overMaxRes = 0;
     needsConstraintSplit = false;
     for (auto& [k, e] : cut) e.gap = 0;
     for (const auto& [k, m] : cut) {
@@ -359,13 +396,91 @@ struct QuadQueueAdapter::State {
     raise.clear();
     for (auto& [k, e] : cut) {
       if (!e.drawn) continue;
-      if (e.gap > e.maxRes) needsConstraintSplit = true;
+      if (e.gap > e.maxRes) needsConstraintSplit = true, ++overMaxRes;
       const uint32_t was = e.floor;
       e.floor = std::clamp(e.gap, minRes(), e.maxRes);
       floorTris += tris(e.floor);
       if (phase1Ready && e.floor != was) refloored.push_back(e.id);
       if (e.res < e.floor) raise.push_back(e.id);
     }
+  }
+
+  // The cut entry at or above node b, or null (b's area is split finer, or empty).
+  Entry* covering(NodeId b) {
+    for (;;) {
+      if (Entry* e = cut.find(b)) return e;
+      if (b.level == 0) return nullptr;
+      b = b.parent();
+    }
+  }
+  // f(entry) for every cut entry inside node b that touches b's side `side` (b not in the cut).
+  template <typename F>
+  void alongSide(const NodeId& b, uint32_t side, F&& f) {
+    if (h->flags(b) & kNodeEmpty) return;  // no entry lies in an empty node
+    if (Entry* e = cut.find(b)) return f(*e);
+    if (b.level + 1 >= h->params.depth) return;
+    static constexpr uint32_t kChildren[4][2] = {{0, 1}, {1, 3}, {2, 3}, {0, 2}};  // bottom, right, top, left
+    for (uint32_t c : kChildren[side]) alongSide(b.child(c), side, f);
+  }
+  // f(entry) for every cut entry across the sides of node n (n in the cut or not): the coarser or
+  // equal one covering each same-level neighbour, or the finer ones along the shared side.
+  template <typename F>
+  void besides(const NodeId& n, F&& f) {
+    for (uint32_t side = 0; side < 4; ++side) {
+      NodeId b;
+      uint32_t bSide = 0;
+      if (!adjacentNode(*h, n, side, &b, &bSide)) continue;
+      if (Entry* c = covering(b))
+        f(*c);
+      else
+        alongSide(b, bSide, f);
+    }
+  }
+  // The stitching gap of a drawn entry a (computeFloors' value): the largest level difference to a
+  // finer drawn entry across one of its sides. Such an entry's walk (walkToCoarserNeighbours)
+  // ends at a: its same-level neighbour lies in a, whose ancestors are not in the cut.
+  uint32_t gapOf(const Entry& a) {
+    uint32_t gap = 0;
+    for (uint32_t side = 0; side < 4; ++side) {
+      NodeId b;
+      uint32_t bSide = 0;
+      if (!adjacentNode(*h, a.id, side, &b, &bSide) || covering(b)) continue;  // equal or coarser
+      alongSide(b, bSide, [&](const Entry& m) {
+        if (m.drawn) gap = std::max(gap, m.id.level - a.id.level);
+      });
+    }
+    return gap;
+  }
+  // computeFloors after the cut changed by cutChanged: only the entries beside a node that
+  // joined or left the cut (and those that joined) can have a new gap.
+  void updateFloors() {
+    if (++dirtyRound == 0) {
+      std::fill(dirtyMark.begin(), dirtyMark.end(), 0u);
+      dirtyRound = 1;
+    }
+    dirty.clear();
+    auto mark = [&](const Entry& e) {
+      uint32_t& m = dirtyMark[cut.index(e.id)];
+      if (m != dirtyRound) m = dirtyRound, dirty.push_back(e.id);
+    };
+    for (const NodeId& x : cutChanged) {
+      if (const Entry* e = cut.find(x)) mark(*e);
+      besides(x, mark);
+    }
+    cutChanged.clear();
+    raise.clear();
+    for (const NodeId& n : dirty) {
+      Entry& e = *cut.find(n);
+      if (!e.drawn) continue;
+      const uint32_t gap = gapOf(e), was = e.floor;
+      overMaxRes = overMaxRes - uint32_t(e.gap > e.maxRes) + uint32_t(gap > e.maxRes);
+      e.gap = gap;
+      e.floor = std::clamp(gap, minRes(), e.maxRes);
+      floorTris = floorTris - tris(was) + tris(e.floor);
+      if (phase1Ready && e.floor != was) refloored.push_back(e.id);
+      if (e.res < e.floor) raise.push_back(e.id);
+    }
+    needsConstraintSplit = overMaxRes > 0;
   }
 
   // ---- Phase 1: refine/coarsen dual queue. False when the floors exceed the triangle budget.
@@ -602,6 +717,7 @@ struct QuadQueueAdapter::State {
     return false;
   }
   void doSplit(NodeId n, uint32_t r, std::vector<Item>* splitHeap) {
+    if (phase2Ready) recheckGroup(n);  // its children: mergeable again from the next round
     Entry* it = cut.find(n);
     const double tol = it->err;
     removeCounts(*it);
@@ -645,6 +761,10 @@ struct QuadQueueAdapter::State {
     addCounts(e);
     cut.insert(e);
     if (phase1Ready) fresh.push_back(p);
+    if (phase2Ready) {
+      recheckSplit(p);  // splittable again from the next round
+      if (p.level > 0) recheckGroup(p.parent());
+    }
     ++st.merges, ++ops;
   }
 
@@ -665,6 +785,32 @@ struct QuadQueueAdapter::State {
     }
     std::make_heap(splitH.begin(), splitH.end(), ItemLess{});
     std::make_heap(mergeH.begin(), mergeH.end(), ItemLess{});
+  }
+  void startRecheckLists() {
+    splitAside.clear();
+    splitRecheck.clear();
+    groupRecheck.clear();
+    if (++listMark == 0) {  // wrapped: forget every mark
+      std::fill(listedSplit.begin(), listedSplit.end(), 0u);
+      std::fill(listedGroup.begin(), listedGroup.end(), 0u);
+      listMark = 1;
+    }
+  }
+  // Phase 2's queues at the start of round r as listMerges would build them, from the kept ones.
+  void refreshPhase2(uint32_t r) {
+    for (const Item& it : splitAside) heapPush(splitH, it);
+    for (const NodeId& n : splitRecheck) {
+      Entry* e = cut.find(n);
+      if (!e) continue;
+      const double p = splitPriority(*e);
+      if (p > 0.0) heapPush(splitH, {p, n.key(), e->res});
+    }
+    for (const NodeId& p : groupRecheck) {
+      if (cut.count(p) || !groupMergeable(p, r)) continue;
+      uint32_t pres = 0;
+      heapPush(mergeH, {-mergeCost(p, &pres), p.key(), 0});
+    }
+    startRecheckLists();
   }
   // The mandatory phase when the budgets hold: only groups with every node culled collapse (no
   // drawn node changes). As phase2(true) would, in its order (by key, their costs are all 0),
@@ -699,7 +845,13 @@ struct QuadQueueAdapter::State {
     int64_t availNodes = nodeBudget_ - int64_t(drawn);
     int64_t availFloor = triBudget - int64_t(std::max(floorTris, floorTrisNow()));
     if (mandatoryOnly && availNodes >= 0 && availFloor >= 0) return collapseCulled(r);
-    listMerges(r, !mandatoryOnly);
+    if (mandatoryOnly || !phase2Ready) {
+      listMerges(r, !mandatoryOnly);
+      phase2Ready = !mandatoryOnly;
+      startRecheckLists();
+    } else {
+      refreshPhase2(r);
+    }
     // Valid merge top (the cost is recomputed: child resolutions may have changed).
     auto mergeTop = [&]() -> const Item* {
       while (!mergeH.empty()) {
@@ -814,7 +966,9 @@ struct QuadQueueAdapter::State {
         mergeTopAndAccount(mp);
         continue;
       }
-      heapPop(splitH);  // does not fit, and no merge pays for it
+      // Does not fit, and no merge pays for it: set aside for this round.
+      if (phase2Ready) splitAside.push_back(splitH.front());
+      heapPop(splitH);
     }
     for (const Item& it : mergeAside) heapPush(mergeH, it);
     if (mandatoryOnly) return changed;
@@ -829,10 +983,12 @@ struct QuadQueueAdapter::State {
     while (!capped()) {
       Entry* s = splitTop();
       if (!s) break;
-      heapPop(splitH);
+      const Item it = heapPop(splitH);
       const int64_t d = drawnDelta(s->id);
-      if (int64_t(drawn) + d > nodeBudget_ || int64_t(floorTrisNow()) + d * int64_t(tris(minRes())) > triBudget)
+      if (int64_t(drawn) + d > nodeBudget_ || int64_t(floorTrisNow()) + d * int64_t(tris(minRes())) > triBudget) {
+        splitAside.push_back(it);
         continue;
+      }
       doSplit(s->id, r, &splitH);
       changed = true;
     }
@@ -906,9 +1062,14 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
     s.reserved.assign(s.cut.forestSize(), 0);  // (re)start the marks
     s.reserveMark = 1;
   }
-  s.phase1Ready = false;
+  s.phase1Ready = s.phase2Ready = s.floorsReady = false;
+  if (s.dirtyMark.size() != s.cut.forestSize()) s.dirtyMark.assign(s.cut.forestSize(), 0);
   s.fresh.clear();
   s.refloored.clear();
+  if (s.listedSplit.size() != s.cut.forestSize()) {
+    s.listedSplit.assign(s.cut.forestSize(), 0);
+    s.listedGroup.assign(s.cut.forestSize(), 0);
+  }
   s.collapseClosedCharts();
   if (s.cut.empty())
     for (uint32_t c = 0; c < h_.chartCount(); ++c) {
