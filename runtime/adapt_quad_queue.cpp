@@ -189,32 +189,36 @@ class NodeCache {
   void init(const Hierarchy& h) {
     perChart_ = nodesPerChart(h.params.depth);
     const size_t n = size_t(perChart_) * h.chartCount();
-    if (stamp_.size() != n) {
-      stamp_.assign(n, 0);
-      at_.assign(n, 0);
+    if (slot_.size() != n) {
+      slot_.assign(n, {});
       frame_ = 0;
     }
   }
-  void newFrame(const Hierarchy& h, const ViewParams& v, bool cull) {
+  void newFrame(const Hierarchy& h, const ViewParams& v, bool cull, size_t expected) {
     h_ = &h;
     view_ = &v;
     cull_ = cull;
     evals_.clear();
+    evals_.reserve(expected);
     if (++frame_ == 0) {  // wrapped: forget every stamp
-      std::fill(stamp_.begin(), stamp_.end(), 0u);
+      std::fill(slot_.begin(), slot_.end(), Slot{});
       frame_ = 1;
     }
   }
   // parentInside: n's parent is inside the frustum, so n is too (its bounds lie in the parent's),
   // and no plane need be tested.
   NodeEval operator()(const NodeId& n, bool parentInside = false) {
-    const size_t g = size_t(n.chart) * perChart_ + nodeIndex(n.level, n.x, n.y);
-    if (stamp_[g] == frame_) return evals_[at_[g]];
-    stamp_[g] = frame_;
-    at_[g] = uint32_t(evals_.size());
-    NodeEval& e = evals_.emplace_back();
-    const Hierarchy::ChartNodes& cn = h_->charts[n.chart];
     const uint32_t i = nodeIndex(n.level, n.x, n.y);
+    Slot& s = slot_[size_t(n.chart) * perChart_ + i];
+    if (s.frame == frame_) return evals_[s.at];
+    s = {frame_, uint32_t(evals_.size())};
+    NodeEval& e = evals_.emplace_back(evaluate(n, i, parentInside));
+    return e;
+  }
+  // The node's NodeEval, not cached.
+  NodeEval evaluate(const NodeId& n, uint32_t i, bool parentInside) const {
+    NodeEval e;
+    const Hierarchy::ChartNodes& cn = h_->charts[n.chart];
     const auto& b = cn.bounds[i];
     const glm::dvec3 lo{b[0], b[1], b[2]}, hi{b[3], b[4], b[5]};
     // The same arithmetic as nodeDrawable, neededResolution and screenError.
@@ -238,7 +242,10 @@ class NodeCache {
   const ViewParams* view_ = nullptr;
   bool cull_ = true;
   uint32_t perChart_ = 0, frame_ = 0;
-  std::vector<uint32_t> stamp_, at_;
+  struct Slot {
+    uint32_t frame = 0, at = 0;  // evals_[at] is the node's when frame is this frame's
+  };
+  std::vector<Slot> slot_;
   std::vector<NodeEval> evals_;
 };
 
@@ -328,7 +335,7 @@ struct QuadQueueAdapter::State {
     e.prioValid = false;
   }
   void evaluate(Entry& e) {
-    const NodeEval n = node(e.id);
+    const NodeEval n = node.evaluate(e.id, nodeIndex(e.id.level, e.id.x, e.id.y), false);
     e.drawn = n.drawable;
     e.inside = n.inside;
     e.dist = n.dist;
@@ -659,7 +666,8 @@ struct QuadQueueAdapter::State {
     if (e.res >= e.maxRes) return kStuckPriority * (1.0 + e.err);
     double t = double(tris(e.res));
     for (uint32_t i = 0; i < 4; ++i) {
-      const NodeEval ch = node(e.id.child(i), e.inside);
+      const NodeId c = e.id.child(i);
+      const NodeEval ch = node.evaluate(c, nodeIndex(c.level, c.x, c.y), e.inside);  // seldom needed twice
       if (ch.drawable) t -= double(tris(resFor(ch, e.err)));
     }
     return t;
@@ -1057,7 +1065,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   s.opt.maxNodes = s.groups.chartBudget(options.maxNodes);
   s.cut.init(h_);
   s.node.init(h_);
-  s.node.newFrame(h_, s.view, options.frustumCull);
+  s.node.newFrame(h_, s.view, options.frustumCull, 4 * s.cut.size());
   if (s.reserved.size() != s.cut.forestSize() || ++s.reserveMark > UINT32_MAX - 4096) {
     s.reserved.assign(s.cut.forestSize(), 0);  // (re)start the marks
     s.reserveMark = 1;
