@@ -3,6 +3,7 @@
 // error-threshold problem with a maximum node count) and 7.4 (the stitching constraint).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 
 #include <glm/glm.hpp>
@@ -135,6 +136,61 @@ void walkToCoarserNeighbours(const Hierarchy& h, const NodeId& m, Stop&& stop) {
       if (stop(a, up) || a.level == 0) break;
     }
   }
+}
+
+// The same gaps found from the coarse side, for adapters that keep them from frame to frame and
+// update only the nodes beside a change. `find(n)` gives the kept node n (anything with a `drawn`
+// flag), or null when n is not kept; the kept nodes tile the non-empty area (no node with an
+// ancestor).
+//
+// The kept node at or above node b, or null (b's area is kept finer, or is empty).
+template <typename Find>
+auto keptCovering(NodeId b, Find&& find) -> decltype(find(b)) {
+  for (;;) {
+    if (auto* e = find(b)) return e;
+    if (b.level == 0) return nullptr;
+    b = b.parent();
+  }
+}
+// f(node) for every kept node inside node b (b not kept) that touches b's side `side`.
+template <typename Find, typename F>
+void keptAlongSide(const Hierarchy& h, const NodeId& b, uint32_t side, Find&& find, F&& f) {
+  if (h.flags(b) & kNodeEmpty) return;  // nothing is kept inside an empty node
+  if (auto* e = find(b)) return f(*e);
+  if (b.level + 1 >= h.params.depth) return;
+  static constexpr uint32_t kChildren[4][2] = {{0, 1}, {1, 3}, {2, 3}, {0, 2}};  // bottom, right, top, left
+  for (uint32_t c : kChildren[side]) keptAlongSide(h, b.child(c), side, find, f);
+}
+// f(node) for every kept node across the sides of node n (kept or not): the coarser or equal one
+// covering each same-level neighbour, or the finer ones along the shared side. Every node whose
+// stitching gap can change when n joins or leaves the kept nodes.
+template <typename Find, typename F>
+void keptBeside(const Hierarchy& h, const NodeId& n, Find&& find, F&& f) {
+  for (uint32_t side = 0; side < 4; ++side) {
+    NodeId b;
+    uint32_t bSide = 0;
+    if (!adjacentNode(h, n, side, &b, &bSide)) continue;
+    if (auto* c = keptCovering(b, find))
+      f(*c);
+    else
+      keptAlongSide(h, b, bSide, find, f);
+  }
+}
+// The stitching gap of a drawn kept node a (stitchGaps' value): the largest level difference to a
+// finer drawn kept node across one of its sides. Such a node's walk (walkToCoarserNeighbours)
+// ends at a: its same-level neighbour lies in a, whose ancestors are not kept.
+template <typename Find>
+uint32_t keptGap(const Hierarchy& h, const NodeId& a, Find&& find) {
+  uint32_t gap = 0;
+  for (uint32_t side = 0; side < 4; ++side) {
+    NodeId b;
+    uint32_t bSide = 0;
+    if (!adjacentNode(h, a, side, &b, &bSide) || keptCovering(b, find)) continue;  // equal or coarser
+    keptAlongSide(h, b, bSide, find, [&](const auto& m) {
+      if (m.drawn) gap = std::max(gap, m.id.level - a.level);
+    });
+  }
+  return gap;
 }
 
 // For every cut node, the largest level difference to a finer drawn neighbour on any side: the

@@ -94,9 +94,12 @@ DualQueueAdapter::DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame, 
   slot_.assign(size_t(perChart_) * h.chartCount(), -1);
   drawnState_.assign(slot_.size(), 0);
   gaps_.assign(slot_.size(), 0);
+  dirtyMark_.assign(slot_.size(), 0);
 }
 
 void DualQueueAdapter::reset() {
+  gapsValid_ = false;
+  changed_.clear();
   for (const Entry& e : entries_) slot_[e.g] = -1, drawnState_[e.g] = 0;
   entries_.clear();
   out_ = Cut{};
@@ -172,6 +175,7 @@ void DualQueueAdapter::evaluate(Entry& e) {
   // The entry keeps a copy of its bounds and errors: the per-frame pass then streams through
   // entries_ instead of gathering from the hierarchy's arrays.
   const Eval ev = e.copied ? evalBox(e.box.data(), e.err.data(), h_.maxRes(e.id), false) : evalNode(e.id, false);
+  e.drawnFlipped = e.drawn != ev.drawn;
   e.drawn = ev.drawn;
   e.inside = ev.inside;
   e.overTol = ev.drawn && ev.overTol;
@@ -282,6 +286,7 @@ void DualQueueAdapter::pushMerge(const NodeId& parent) {
 }
 
 void DualQueueAdapter::addEntry(const Entry& e) {
+  if (gapsValid_) changed_.push_back(e.id);
   slot_[e.g] = int32_t(entries_.size());
   entries_.push_back(e);
   Entry& a = entries_.back();
@@ -298,6 +303,7 @@ void DualQueueAdapter::addEntry(const Entry& e) {
 
 void DualQueueAdapter::removeEntry(uint32_t g) {
   const int32_t s = slot_[g];
+  if (gapsValid_) changed_.push_back(entries_[s].id);
   drawn_ -= uint32_t(entries_[s].drawn);
   slot_[g] = -1;
   drawnState_[g] = 0;
@@ -371,6 +377,52 @@ void DualQueueAdapter::collapseClosedCharts() {
   opsSinceSort_ += uint32_t(drop.size());
 }
 
+void DualQueueAdapter::updateGaps() {
+  // The update costs a few walks per change, the full pass a walk per entry: past a quarter of
+  // the partition in changes, the full pass is cheaper.
+  if (!gapsValid_ || changed_.size() * 4 > entries_.size()) {
+    for (const Entry& e : entries_) {
+      drawnState_[e.g] = e.drawn ? 2 : 1;
+      gaps_[e.g] = 0;
+    }
+    for (const Entry& m : entries_) {
+      if (!m.drawn || m.id.level == 0) continue;
+      walkToCoarserNeighbours(h_, m.id, [&](const NodeId& a, uint32_t up) {
+        const uint32_t g = globalIndex(a);
+        if (!drawnState_[g]) return false;
+        if (drawnState_[g] == 2) gaps_[g] = std::max<uint8_t>(gaps_[g], uint8_t(up));
+        return true;
+      });
+    }
+    gapsValid_ = true;
+    changed_.clear();
+    return;
+  }
+  // Only the entries beside a node that joined or left the partition, or was culled or uncovered,
+  // can have a new gap.
+  if (++dirtyRound_ == 0) {
+    std::fill(dirtyMark_.begin(), dirtyMark_.end(), 0u);
+    dirtyRound_ = 1;
+  }
+  dirty_.clear();
+  auto mark = [&](const Entry& e) {
+    if (dirtyMark_[e.g] != dirtyRound_) dirtyMark_[e.g] = dirtyRound_, dirty_.push_back(e.g);
+  };
+  auto find = [&](const NodeId& n) -> const Entry* {
+    const int32_t at = slot_[globalIndex(n)];
+    return at < 0 ? nullptr : &entries_[size_t(at)];
+  };
+  for (const NodeId& x : changed_) {
+    if (const Entry* e = find(x)) mark(*e);
+    keptBeside(h_, x, find, mark);
+  }
+  changed_.clear();
+  for (uint32_t g : dirty_) {
+    const Entry& e = entries_[size_t(slot_[g])];
+    gaps_[g] = e.drawn ? uint8_t(keptGap(h_, e.id, find)) : 0;
+  }
+}
+
 void DualQueueAdapter::queueItems(Entry& e, PassItems& q) {
   q = PassItems{};
   q.split = cachedSplitPriority(e, &q.delta, &q.reused);
@@ -438,6 +490,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   splitHeap_.clear();
   mergeHeap_.clear();
   for (size_t i = 0; i < n; ++i) {
+    if (gapsValid_ && entries_[i].drawnFlipped) changed_.push_back(entries_[i].id);
     const PassItems& q = pass_[i];
     frame_.priorityReuses += uint32_t(q.reused);
     if (q.split > 0.0) splitHeap_.push_back({q.split, entries_[i].g, false, q.delta});
@@ -547,19 +600,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   // The drawn cut (in partition order, which the operation history determines), with the
   // stitching constraint: gaps from the dense partition index (no hashing), raising resolutions
   // in place; only when a node would need more than its maxRes does the generic pass split it.
-  for (const Entry& e : entries_) {
-    drawnState_[e.g] = e.drawn ? 2 : 1;
-    gaps_[e.g] = 0;
-  }
-  for (const Entry& m : entries_) {
-    if (!m.drawn || m.id.level == 0) continue;
-    walkToCoarserNeighbours(h_, m.id, [&](const NodeId& a, uint32_t up) {
-      const uint32_t g = globalIndex(a);
-      if (!drawnState_[g]) return false;
-      if (drawnState_[g] == 2) gaps_[g] = std::max<uint8_t>(gaps_[g], uint8_t(up));
-      return true;
-    });
-  }
+  updateGaps();
   out_.nodes.clear();
   out_.nodes.reserve(drawn_);
   bool needSplit = false;

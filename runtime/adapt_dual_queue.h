@@ -91,6 +91,7 @@ class DualQueueAdapter {
     bool drawn = false;
     bool inside = false;       // bounds entirely inside the frustum (so are the children's)
     bool overTol = false;
+    bool drawnFlipped = false;  // drawn changed in this frame's evaluation
     double errorPx = 0.0;      // screen error at res (drawn nodes)
     uint32_t splitFrame = 0;   // frame in which a split created this node
     uint32_t mergedFrame = 0;  // frame in which a merge created this node
@@ -180,6 +181,14 @@ class DualQueueAdapter {
   // Per forest node: 0 not in the partition, 1 in it but culled, 2 drawn; and the stitching level
   // gap to the finest drawn neighbour (valid for partition nodes after update).
   std::vector<uint8_t> drawnState_, gaps_;
+  // The gaps are kept from frame to frame: the nodes that joined or left the partition, or whose
+  // drawn state changed, since the last update (changed_) mark the entries beside them (dirty_,
+  // dirtyMark_ == dirtyRound_), whose gaps are found again (keptGap).
+  bool gapsValid_ = false;
+  std::vector<NodeId> changed_;
+  std::vector<uint32_t> dirty_, dirtyMark_;
+  uint32_t dirtyRound_ = 0;
+  void updateGaps();
   GroupSelection groups_;  // this frame's closed groups (their roots never split)
   // Replaces the kept nodes of every chart in a closed group by the chart's root.
   void collapseClosedCharts();

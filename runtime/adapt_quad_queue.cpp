@@ -412,52 +412,6 @@ struct QuadQueueAdapter::State {
     }
   }
 
-  // The cut entry at or above node b, or null (b's area is split finer, or empty).
-  Entry* covering(NodeId b) {
-    for (;;) {
-      if (Entry* e = cut.find(b)) return e;
-      if (b.level == 0) return nullptr;
-      b = b.parent();
-    }
-  }
-  // f(entry) for every cut entry inside node b that touches b's side `side` (b not in the cut).
-  template <typename F>
-  void alongSide(const NodeId& b, uint32_t side, F&& f) {
-    if (h->flags(b) & kNodeEmpty) return;  // no entry lies in an empty node
-    if (Entry* e = cut.find(b)) return f(*e);
-    if (b.level + 1 >= h->params.depth) return;
-    static constexpr uint32_t kChildren[4][2] = {{0, 1}, {1, 3}, {2, 3}, {0, 2}};  // bottom, right, top, left
-    for (uint32_t c : kChildren[side]) alongSide(b.child(c), side, f);
-  }
-  // f(entry) for every cut entry across the sides of node n (n in the cut or not): the coarser or
-  // equal one covering each same-level neighbour, or the finer ones along the shared side.
-  template <typename F>
-  void besides(const NodeId& n, F&& f) {
-    for (uint32_t side = 0; side < 4; ++side) {
-      NodeId b;
-      uint32_t bSide = 0;
-      if (!adjacentNode(*h, n, side, &b, &bSide)) continue;
-      if (Entry* c = covering(b))
-        f(*c);
-      else
-        alongSide(b, bSide, f);
-    }
-  }
-  // The stitching gap of a drawn entry a (computeFloors' value): the largest level difference to a
-  // finer drawn entry across one of its sides. Such an entry's walk (walkToCoarserNeighbours)
-  // ends at a: its same-level neighbour lies in a, whose ancestors are not in the cut.
-  uint32_t gapOf(const Entry& a) {
-    uint32_t gap = 0;
-    for (uint32_t side = 0; side < 4; ++side) {
-      NodeId b;
-      uint32_t bSide = 0;
-      if (!adjacentNode(*h, a.id, side, &b, &bSide) || covering(b)) continue;  // equal or coarser
-      alongSide(b, bSide, [&](const Entry& m) {
-        if (m.drawn) gap = std::max(gap, m.id.level - a.id.level);
-      });
-    }
-    return gap;
-  }
   // computeFloors after the cut changed by cutChanged: only the entries beside a node that
   // joined or left the cut (and those that joined) can have a new gap.
   void updateFloors() {
@@ -470,16 +424,17 @@ struct QuadQueueAdapter::State {
       uint32_t& m = dirtyMark[cut.index(e.id)];
       if (m != dirtyRound) m = dirtyRound, dirty.push_back(e.id);
     };
+    auto find = [&](const NodeId& n) { return cut.find(n); };
     for (const NodeId& x : cutChanged) {
       if (const Entry* e = cut.find(x)) mark(*e);
-      besides(x, mark);
+      keptBeside(*h, x, find, mark);
     }
     cutChanged.clear();
     raise.clear();
     for (const NodeId& n : dirty) {
       Entry& e = *cut.find(n);
       if (!e.drawn) continue;
-      const uint32_t gap = gapOf(e), was = e.floor;
+      const uint32_t gap = keptGap(*h, e.id, find), was = e.floor;
       overMaxRes = overMaxRes - uint32_t(e.gap > e.maxRes) + uint32_t(gap > e.maxRes);
       e.gap = gap;
       e.floor = std::clamp(gap, minRes(), e.maxRes);
