@@ -57,6 +57,46 @@ void expectSameCut(const Cut& a, const Cut& b, const std::string& where) {
   EXPECT_EQ(ea, eb) << where;
 }
 
+// keptGap (from the coarse side, over kept nodes some of which are not drawn) equals stitchGaps
+// (from the fine side, over the drawn cut) on random partitions.
+TEST(AdaptEquivalence, TheGapsFromTheCoarseSideAreStitchGaps) {
+  std::mt19937 rng(5);
+  uint32_t raised = 0;
+  for (int world = 0; world < 20; ++world) {
+    const World w = randomWorld(rng);
+    const Hierarchy& h = w.h;
+    struct Kept {
+      NodeId id;
+      bool drawn;
+    };
+    std::vector<Kept> kept;
+    for (uint32_t c = 0; c < h.chartCount(); ++c) kept.push_back({{c, 0, 0, 0}, true});
+    for (int split = 0; split < 40; ++split) {  // split random nodes, deeper ones more often
+      const size_t i = rng() % kept.size();
+      const NodeId n = kept[i].id;
+      if (n.level + 1 >= h.params.depth) continue;
+      kept.erase(kept.begin() + long(i));
+      for (uint32_t c = 0; c < 4; ++c) kept.push_back({n.child(c), rng() % 6 != 0});
+    }
+    auto find = [&](const NodeId& n) -> const Kept* {
+      for (const Kept& k : kept)
+        if (k.id == n) return &k;
+      return nullptr;
+    };
+    Cut cut;
+    for (const Kept& k : kept)
+      if (k.drawn) cut.nodes.push_back({k.id, 0, 0.f});
+    cut.rebuildIndex();
+    std::vector<uint32_t> gaps;
+    stitchGaps(h, cut, gaps);
+    for (uint32_t i = 0; i < cut.nodes.size(); ++i) {
+      EXPECT_EQ(keptGap(h, cut.nodes[i].id, find), gaps[i]) << "world " << world << ", node " << i;
+      raised += uint32_t(gaps[i] > 1);
+    }
+  }
+  EXPECT_GT(raised, 0u) << "no gap of two levels or more";
+}
+
 TEST(AdaptEquivalence, TheQuadQueueCutsAreTheReferencesOnRandomForests) {
   std::mt19937 rng(20261129);
   uint32_t frames = 0, split = 0;
