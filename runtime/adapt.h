@@ -35,6 +35,11 @@ double boxScreenError(const std::array<float, 6>& box, double error, const ViewP
 inline constexpr double kOverTolerancePriority = 1e30;
 inline double overTolerancePriority(double errorPx) { return kOverTolerancePriority * (1.0 + errorPx); }
 
+// The kept-node count from which the coherent adapters' per-frame passes run in parallel (TBB):
+// below it, waking the workers costs more than the pass saves (bench_adapt on 2 cores). Their
+// cuts do not depend on it, nor on the thread count.
+inline constexpr uint32_t kDefaultParallelMin = 8192;
+
 struct AdaptOptions {
   double tolerancePx = 1.0;  // screen-space error threshold in pixels; must be > 0
   uint32_t maxNodes = 4096;  // node budget; 0 means no limit

@@ -7,27 +7,12 @@
 #include <cmath>
 #include <limits>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
+#include "runtime/parallel_pass.h"
 
 namespace gimlod {
 namespace {
 
 constexpr double kOverTolPriority = kOverTolerancePriority;
-// f(i) for i in [0, n): in parallel, in tasks of parallelMin / 8 entries, when n >= parallelMin
-// (0: never). Each call must touch its own data only.
-template <typename F>
-void forEachEntry(size_t n, size_t parallelMin, F&& f) {
-  if (parallelMin == 0 || n < parallelMin) {
-    for (size_t i = 0; i < n; ++i) f(i);
-    return;
-  }
-  const size_t grain = std::max<size_t>(parallelMin / 8, 1);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, grain), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i != r.end(); ++i) f(i);
-  });
-}
-
 uint64_t tris(uint32_t res) { return 2ull << (2 * res); }
 
 // Needed resolution clamped to maxRes, and whether even maxRes is over tolerance.
@@ -474,7 +459,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   // evaluated on its own (in parallel), then the queues are filled in partition order, so the
   // queues, and the cut, do not depend on the thread count.
   const size_t n = entries_.size();
-  forEachEntry(n, parallelMin_, [&](size_t i) { evaluate(entries_[i]); });
+  parallelPass(n, parallelMin_, [&](size_t i) { evaluate(entries_[i]); });
   drawn_ = 0;
   for (const Entry& e : entries_) drawn_ += uint32_t(e.drawn);
   if (options.tolerancePx != epochTol_ || view.pixelsPerRadian != epochPpr_ ||
@@ -486,7 +471,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
     epochCull_ = options.frustumCull;
   }
   pass_.resize(n);
-  forEachEntry(n, parallelMin_, [&](size_t i) { queueItems(entries_[i], pass_[i]); });
+  parallelPass(n, parallelMin_, [&](size_t i) { queueItems(entries_[i], pass_[i]); });
   splitHeap_.clear();
   mergeHeap_.clear();
   for (size_t i = 0; i < n; ++i) {

@@ -64,7 +64,6 @@ class DualQueueAdapter {
   // with bench_adapt on 2 cores). The cuts do not depend on it nor on the thread count.
   explicit DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame = 1024, bool reusePriorities = true,
                             uint32_t parallelMin = kDefaultParallelMin);
-  static constexpr uint32_t kDefaultParallelMin = 8192;
 
   // Adapts the persistent cut to the view and returns the drawn cut (frustum-culled nodes removed,
   // stitching constraint enforced on a copy, errorPx set). Valid until the next update/reset.

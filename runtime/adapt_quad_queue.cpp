@@ -9,6 +9,7 @@
 
 #include "runtime/adapt_dual_queue.h"
 #include "runtime/group_select.h"
+#include "runtime/parallel_pass.h"
 
 namespace gimlod {
 namespace {
@@ -272,6 +273,12 @@ struct QuadQueueAdapter::State {
   std::vector<uint32_t> reserved;
   uint32_t reserveMark = 0;
   std::vector<Item> splitH, mergeH, coarsenH, errH;
+  struct Listed {  // one entry's phase-2 items (listMerges)
+    double split = -1.0, cost = 0.0;
+    bool merge = false;
+  };
+  std::vector<Listed> listed;
+  uint32_t parallelMin = kDefaultParallelMin;
   std::vector<std::vector<Item>> refineB;
   // Phase 1's queues are built once a frame and then kept up to date from round to round: the
   // entries phase 2 added (fresh), those whose floor changed (refloored), those below their floor
@@ -628,7 +635,9 @@ struct QuadQueueAdapter::State {
     return t;
   }
   // Merge cost (added triangles) of the group under p, and the parent's resolution.
-  double mergeCost(const NodeId& p, uint32_t* parentRes) {
+  double mergeCost(const NodeId& p, uint32_t* parentRes) { return mergeCostWith(p, node(p), parentRes); }
+  // The same with the parent's view data pe given.
+  double mergeCostWith(const NodeId& p, const NodeEval& pe, uint32_t* parentRes) const {
     double tol = -1.0, childTris = 0.0;
     for (uint32_t i = 0; i < 4; ++i) {
       const Entry* f = cut.find(p.child(i));
@@ -637,7 +646,6 @@ struct QuadQueueAdapter::State {
       childTris += double(tris(f->res));
     }
     *parentRes = minRes();
-    const NodeEval pe = node(p);
     if (!pe.drawable) return -childTris;
     if (tol < 0.0) return double(tris(minRes()));
     const double tolWorld = tol * pe.dist / view.pixelsPerRadian;
@@ -732,19 +740,30 @@ struct QuadQueueAdapter::State {
   }
 
   // The groups of phase 2's merge queue at the start of round r: one item per mergeable group.
+  // Each entry's items are found on their own (in parallel: entry-local writes, reads of the
+  // cut), then gathered in entry order.
   void listMerges(uint32_t r, bool splits) {
     splitH.clear();
     mergeH.clear();
-    for (auto& [k, e] : cut) {
-      if (splits) {
-        const double p = splitPriority(e);
-        if (p > 0.0) splitH.push_back({p, k, e.res});
-      }
-      if (e.id.level == 0 || !firstOfGroup(e)) continue;
+    const size_t n = cut.size();
+    listed.resize(n);
+    auto* items = &*cut.begin();
+    parallelPass(n, parallelMin, [&](size_t i) {
+      Entry& e = items[i].second;
+      Listed& q = listed[i];
+      q.split = splits ? splitPriority(e) : -1.0;
+      q.merge = false;
+      if (e.id.level == 0 || !firstOfGroup(e)) return;
       const NodeId par = e.id.parent();
-      if (!groupMergeable(par, r)) continue;
+      if (!groupMergeable(par, r)) return;
       uint32_t pres = 0;
-      mergeH.push_back({-mergeCost(par, &pres), par.key(), 0});
+      q.merge = true;
+      q.cost = mergeCostWith(par, node.evaluate(par, nodeIndex(par.level, par.x, par.y), false), &pres);
+    });
+    for (size_t i = 0; i < n; ++i) {
+      const Entry& e = items[i].second;
+      if (listed[i].split > 0.0) splitH.push_back({listed[i].split, items[i].first, e.res});
+      if (listed[i].merge) mergeH.push_back({-listed[i].cost, e.id.parent().key(), 0});
     }
     std::make_heap(splitH.begin(), splitH.end(), ItemLess{});
     std::make_heap(mergeH.begin(), mergeH.end(), ItemLess{});
@@ -997,7 +1016,10 @@ struct QuadQueueAdapter::State {
   }
 };
 
-QuadQueueAdapter::QuadQueueAdapter(const Hierarchy& h) : h_(h), state_(std::make_shared<State>()) {}
+QuadQueueAdapter::QuadQueueAdapter(const Hierarchy& h, uint32_t parallelMin)
+    : h_(h), state_(std::make_shared<State>()) {
+  state_->parallelMin = parallelMin;
+}
 
 void QuadQueueAdapter::reset() {
   state_->cut.clear();
@@ -1040,7 +1062,10 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
       e.id = {c, 0, 0, 0};
       if (!(h_.flags(e.id) & kNodeEmpty)) s.cut.insert(e);
     }
-  for (auto& [k, e] : s.cut) s.evaluate(e);
+  {
+    auto* items = &*s.cut.begin();
+    parallelPass(s.cut.size(), s.parallelMin, [&](size_t i) { s.evaluate(items[i].second); });
+  }
   s.recount();
 
   // Mandatory: node budget, triangle floor (with the stitching floors), culled groups collapse.

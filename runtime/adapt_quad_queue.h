@@ -45,7 +45,9 @@ bool fitTriangleBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, uin
 // Stateful adapter: keeps its cut and queues from frame to frame.
 class QuadQueueAdapter {
  public:
-  explicit QuadQueueAdapter(const Hierarchy& h);
+  // parallelMin: kept cuts of at least this many nodes are evaluated in parallel (TBB), below it
+  // on the calling thread (0: always); the cuts do not depend on it nor on the thread count.
+  explicit QuadQueueAdapter(const Hierarchy& h, uint32_t parallelMin = kDefaultParallelMin);
   // Adapts the kept cut to the view within the budgets; returns the drawn cut (stitching
   // constraint enforced, triangles never above maxTriangles, nodes never above maxNodes except:
   // the visible roots when maxNodes is below them (budgetBelowRoots); constraint splits

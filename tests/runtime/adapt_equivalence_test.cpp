@@ -199,5 +199,36 @@ TEST(AdaptEquivalence, TheDualQueueCutsDoNotDependOnTheThreadCount) {
   EXPECT_EQ(one, run(4));
 }
 
+// The quad queue's parallel passes likewise (parallelMin 256), under budgets that keep it busy.
+TEST(AdaptEquivalence, TheQuadQueueCutsDoNotDependOnTheThreadCount) {
+  const World w = makeWorld(513, 3, 2, 5);
+  BudgetOptions o;
+  o.maxNodes = 3000;
+  o.maxTriangles = 400000;
+  std::vector<ViewParams> path;
+  for (uint32_t f = 0; f < 12; ++f) {
+    const glm::dvec3 eye = w.lo + (w.hi - w.lo) * glm::dvec3(0.1 + 0.02 * f, 0.3, 1.5);
+    path.push_back(viewAt(w, eye, eye + glm::dvec3(1.0, 0.3 + 0.05 * f, -0.4)));
+  }
+  const tbb::global_control most(tbb::global_control::max_allowed_parallelism, 4);
+  auto run = [&](int threads) {
+    std::vector<std::vector<std::pair<uint64_t, uint32_t>>> cuts;
+    uint32_t largest = 0;
+    tbb::task_arena arena(threads);
+    arena.execute([&] {
+      QuadQueueAdapter a(w.h, 256);
+      for (const ViewParams& v : path) {
+        cuts.push_back(sortedNodes(a.update(v, o)));
+        largest = std::max(largest, uint32_t(cuts.back().size()));
+      }
+    });
+    EXPECT_GT(largest, 512u) << "too small a cut for the parallel passes (256 nodes, in tasks of 32)";
+    return cuts;
+  };
+  const auto one = run(1);
+  EXPECT_EQ(one, run(2));
+  EXPECT_EQ(one, run(4));
+}
+
 }  // namespace
 }  // namespace gimlod::test
