@@ -31,7 +31,6 @@ struct Entry {
   uint32_t gap = 0;    // stitching level gap to the finest drawn neighbour (computeFloors)
   uint32_t maxRes = 0;
   bool drawn = false;
-  bool inside = false;  // the bounds entirely inside the frustum (NodeEval::inside)
   bool prioValid = false;  // splitPrio holds this frame's split priority at res and err
   double err = 0.0;    // screen error at res; 0 when not drawn
   double dist = 1.0;   // eye distance to the bounds this frame (as screenError clamps it)
@@ -46,7 +45,6 @@ struct NodeEval {
   const float* errs = nullptr;
   uint32_t maxRes = 0;
   bool drawable = false;  // nodeDrawable
-  bool inside = false;    // drawable, and the bounds entirely inside the frustum (or no culling)
 };
 
 // Heap item; all heaps are max-heaps on priority, ties broken by key (deterministic).
@@ -206,32 +204,25 @@ class NodeCache {
       frame_ = 1;
     }
   }
-  // parentInside: n's parent is inside the frustum, so n is too (its bounds lie in the parent's),
-  // and no plane need be tested.
-  NodeEval operator()(const NodeId& n, bool parentInside = false) {
+  // note: every node's planes are tested, even below a node inside the frustum: a node's bounds
+  // need not lie in its parent's (a terrain's nodes past the raster's edge lie flat at the lowest
+  // height).
+  NodeEval operator()(const NodeId& n) {
     const uint32_t i = nodeIndex(n.level, n.x, n.y);
     Slot& s = slot_[size_t(n.chart) * perChart_ + i];
     if (s.frame == frame_) return evals_[s.at];
     s = {frame_, uint32_t(evals_.size())};
-    NodeEval& e = evals_.emplace_back(evaluate(n, i, parentInside));
+    NodeEval& e = evals_.emplace_back(evaluate(n, i));
     return e;
   }
   // The node's NodeEval, not cached.
-  NodeEval evaluate(const NodeId& n, uint32_t i, bool parentInside) const {
+  NodeEval evaluate(const NodeId& n, uint32_t i) const {
     NodeEval e;
     const Hierarchy::ChartNodes& cn = h_->charts[n.chart];
     const auto& b = cn.bounds[i];
     const glm::dvec3 lo{b[0], b[1], b[2]}, hi{b[3], b[4], b[5]};
     // The same arithmetic as nodeDrawable, neededResolution and screenError.
-    if (cn.flags[i] & kNodeEmpty) {
-      e.drawable = e.inside = false;
-    } else if (!cull_ || parentInside) {
-      e.drawable = e.inside = true;
-    } else {
-      const int c = view_->frustum.classify(lo, hi);  // 0 exactly when intersects is false
-      e.drawable = c != 0;
-      e.inside = c == 2;
-    }
+    e.drawable = !(cn.flags[i] & kNodeEmpty) && (!cull_ || view_->frustum.intersects(lo, hi));
     e.dist = std::max(glm::length(glm::clamp(view_->eye, lo, hi) - view_->eye), view_->minDistance);
     e.errs = &cn.errors[size_t(i) * h_->params.resCount()];
     e.maxRes = h_->maxRes(n);
@@ -299,6 +290,16 @@ struct QuadQueueAdapter::State {
   std::vector<uint32_t> dirtyMark;
   uint32_t dirtyRound = 1;
   bool phase2Ready = false;
+  // A group's merge items carry a number (Item::res) and only the one of its latest is valid: the
+  // kept queue then holds one item per group, as a fresh listing does (an item set aside must
+  // leave no copy behind in the queue).
+  std::vector<uint32_t> mergeSeq;
+  uint32_t mergeSeqNext = 0;
+  Item mergeItem(const NodeId& p, double priority) {
+    uint32_t& q = mergeSeq[cut.index(p)];
+    q = ++mergeSeqNext;
+    return {priority, p.key(), q};
+  }
   std::vector<Item> splitAside;
   std::vector<NodeId> splitRecheck, groupRecheck;
   std::vector<uint32_t> listedSplit, listedGroup;
@@ -342,9 +343,8 @@ struct QuadQueueAdapter::State {
     e.prioValid = false;
   }
   void evaluate(Entry& e) {
-    const NodeEval n = node.evaluate(e.id, nodeIndex(e.id.level, e.id.x, e.id.y), false);
+    const NodeEval n = node.evaluate(e.id, nodeIndex(e.id.level, e.id.x, e.id.y));
     e.drawn = n.drawable;
-    e.inside = n.inside;
     e.dist = n.dist;
     e.errs = n.errs;
     e.maxRes = n.maxRes;
@@ -629,7 +629,7 @@ struct QuadQueueAdapter::State {
     double t = double(tris(e.res));
     for (uint32_t i = 0; i < 4; ++i) {
       const NodeId c = e.id.child(i);
-      const NodeEval ch = node.evaluate(c, nodeIndex(c.level, c.x, c.y), e.inside);  // seldom needed twice
+      const NodeEval ch = node.evaluate(c, nodeIndex(c.level, c.x, c.y));  // seldom needed twice
       if (ch.drawable) t -= double(tris(resFor(ch, e.err)));
     }
     return t;
@@ -664,7 +664,7 @@ struct QuadQueueAdapter::State {
   int64_t drawnDelta(const NodeId& n) {
     const NodeEval ne = node(n);
     int64_t d = -int64_t(ne.drawable);
-    for (uint32_t i = 0; i < 4; ++i) d += int64_t(node(n.child(i), ne.inside).drawable);
+    for (uint32_t i = 0; i < 4; ++i) d += int64_t(node(n.child(i)).drawable);
     return d;
   }
   bool groupMergeable(const NodeId& p, uint32_t r) const {
@@ -701,7 +701,7 @@ struct QuadQueueAdapter::State {
       e.splitRound = r;
       evaluate(e);
       if (e.drawn) {
-        e.res = resFor(node(ch, e.inside), tol);
+        e.res = resFor(node(ch), tol);
         e.err = errAt(e, e.res);
       }
       addCounts(e);
@@ -758,12 +758,12 @@ struct QuadQueueAdapter::State {
       if (!groupMergeable(par, r)) return;
       uint32_t pres = 0;
       q.merge = true;
-      q.cost = mergeCostWith(par, node.evaluate(par, nodeIndex(par.level, par.x, par.y), false), &pres);
+      q.cost = mergeCostWith(par, node.evaluate(par, nodeIndex(par.level, par.x, par.y)), &pres);
     });
     for (size_t i = 0; i < n; ++i) {
       const Entry& e = items[i].second;
       if (listed[i].split > 0.0) splitH.push_back({listed[i].split, items[i].first, e.res});
-      if (listed[i].merge) mergeH.push_back({-listed[i].cost, e.id.parent().key(), 0});
+      if (listed[i].merge) mergeH.push_back(mergeItem(e.id.parent(), -listed[i].cost));
     }
     std::make_heap(splitH.begin(), splitH.end(), ItemLess{});
     std::make_heap(mergeH.begin(), mergeH.end(), ItemLess{});
@@ -790,7 +790,7 @@ struct QuadQueueAdapter::State {
     for (const NodeId& p : groupRecheck) {
       if (cut.count(p) || !groupMergeable(p, r)) continue;
       uint32_t pres = 0;
-      heapPush(mergeH, {-mergeCost(p, &pres), p.key(), 0});
+      heapPush(mergeH, mergeItem(p, -mergeCost(p, &pres)));
     }
     startRecheckLists();
   }
@@ -839,13 +839,12 @@ struct QuadQueueAdapter::State {
       while (!mergeH.empty()) {
         const Item& t = mergeH.front();
         const NodeId p = keyToNode(t.key);
-        if (!cut.count(p) && groupMergeable(p, r)) {
+        if (t.res == mergeSeq[cut.index(p)] && !cut.count(p) && groupMergeable(p, r)) {
           uint32_t pres = 0;
           const double c = -mergeCost(p, &pres);
           if (c == t.priority) return &mergeH.front();
-          const Item re{c, t.key, 0};
           heapPop(mergeH);
-          heapPush(mergeH, re);
+          heapPush(mergeH, mergeItem(p, c));
           continue;
         }
         heapPop(mergeH);
@@ -866,7 +865,7 @@ struct QuadQueueAdapter::State {
       const NodeId pp = p.parent();
       if (groupMergeable(pp, r)) {
         uint32_t pres = 0;
-        heapPush(mergeH, {-mergeCost(pp, &pres), pp.key(), 0});
+        heapPush(mergeH, mergeItem(pp, -mergeCost(pp, &pres)));
       }
     };
     bool changed = false;
@@ -1051,6 +1050,11 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   if (s.dirtyMark.size() != s.cut.forestSize()) s.dirtyMark.assign(s.cut.forestSize(), 0);
   s.fresh.clear();
   s.refloored.clear();
+  if (s.mergeSeq.size() != s.cut.forestSize()) s.mergeSeq.assign(s.cut.forestSize(), 0);
+  if (s.mergeSeqNext > UINT32_MAX - (1u << 24)) {  // restart the numbers (no queue holds one now)
+    std::fill(s.mergeSeq.begin(), s.mergeSeq.end(), 0u);
+    s.mergeSeqNext = 0;
+  }
   if (s.listedSplit.size() != s.cut.forestSize()) {
     s.listedSplit.assign(s.cut.forestSize(), 0);
     s.listedGroup.assign(s.cut.forestSize(), 0);

@@ -133,6 +133,44 @@ TEST(AdaptEquivalence, TheQuadQueueCutsAreTheReferencesOnRandomForests) {
   EXPECT_GT(split, frames / 8);
 }
 
+// Deep forests (7 levels) on an orbit, with node budgets in the thousands and triangles to spare:
+// many rounds a frame, with trades of splits for merges whose parents cannot hold their
+// children's errors, and undone rounds.
+TEST(AdaptEquivalence, TheQuadQueueCutsAreTheReferencesOnDeepForests) {
+  struct Case {
+    uint32_t chartsX, nodes;
+  };
+  uint32_t frames = 0, rounds = 0, undone = 0;
+  for (const Case& c : {Case{2, 1335}, Case{3, 1669}}) {
+    const World w = makeWorld(1025, c.chartsX, 2, 7);
+    BudgetOptions o;
+    o.maxNodes = c.nodes;
+    o.maxTriangles = 1600000;
+    QuadQueueAdapter ours(w.h);
+    reference::QuadQueueAdapter ref(w.h);
+    const glm::dvec3 centre = (w.lo + w.hi) * 0.5;
+    const double radius = glm::length(w.hi - w.lo) * 0.35;
+    for (uint32_t f = 0; f < 24; ++f) {
+      const double a = 2.0 * M_PI * f / 60.0;
+      const ViewParams v = viewAt(w, centre + radius * glm::dvec3(std::cos(a), std::sin(a), 0.4), centre);
+      BudgetStats st, rst;
+      const Cut& x = ours.update(v, o, &st);
+      const Cut& y = ref.update(v, o, &rst);
+      const std::string where = std::to_string(c.chartsX) + " charts, frame " + std::to_string(f);
+      expectSameCut(x, y, where);
+      EXPECT_EQ(st.refines + st.coarsens + st.splits + st.merges + st.undoneOps,
+                rst.refines + rst.coarsens + rst.splits + rst.merges + rst.undoneOps)
+          << where;
+      if (HasFatalFailure()) return;
+      ++frames;
+      rounds += st.rounds;
+      undone += st.undoneOps;
+    }
+  }
+  EXPECT_GT(rounds, 2 * frames) << "too few rounds a frame to check the kept queues";
+  EXPECT_GT(undone, 0u) << "no round undone";
+}
+
 TEST(AdaptEquivalence, TheDualQueueCutsAreTheReferencesOnRandomForests) {
   std::mt19937 rng(1129);
   uint32_t frames = 0, split = 0;
