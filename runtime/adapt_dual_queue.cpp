@@ -425,65 +425,9 @@ void DualQueueAdapter::queueItems(Entry& e, PassItems& q) {
   }
 }
 
-const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& options, AdaptStats* stats) {
-  AdaptStats st;
-  frame_ = {};
-  view_ = view;
-  opt_ = options;
-  ++frameNo_;
-  selectRootGroups(h_, view, options.maxNodes, options.tolerancePx, options.frustumCull, groups_);
-  // Every root counts as a node in the partition; the closed groups' roots count once a group in
-  // the returned cut.
-  const uint32_t chartBudget = groups_.chartBudget(options.maxNodes);
-  const uint32_t budget = chartBudget == 0 ? UINT32_MAX : chartBudget;
-
-  if (entries_.empty())
-    for (uint32_t c = 0; c < h_.chartCount(); ++c) {
-      const NodeId root{c, 0, 0, 0};
-      if (h_.flags(root) & kNodeEmpty) continue;
-      Entry e;
-      e.id = root;
-      e.g = globalIndex(root);
-      addEntry(e);
-    }
-
-  collapseClosedCharts();
-  // Partition order follows the forest order, so the per-frame pass reads the hierarchy's
-  // arrays nearly sequentially; re-sorted once the operations since the last sort reach 1/8.
-  if (opsSinceSort_ * 8 > entries_.size()) {
-    std::sort(entries_.begin(), entries_.end(), [](const Entry& a, const Entry& b) { return a.g < b.g; });
-    for (uint32_t i = 0; i < entries_.size(); ++i) slot_[entries_[i].g] = int32_t(i);
-    opsSinceSort_ = 0;
-  }
-  // Re-evaluate the persistent cut for this view; rebuild both queues in O(cut). Each entry is
-  // evaluated on its own (in parallel), then the queues are filled in partition order, so the
-  // queues, and the cut, do not depend on the thread count.
-  const size_t n = entries_.size();
-  parallelPass(n, parallelMin_, [&](size_t i) { evaluate(entries_[i]); });
-  drawn_ = 0;
-  for (const Entry& e : entries_) drawn_ += uint32_t(e.drawn);
-  if (options.tolerancePx != epochTol_ || view.pixelsPerRadian != epochPpr_ ||
-      view.minDistance != epochMinDist_ || options.frustumCull != epochCull_) {
-    ++epoch_;
-    epochTol_ = options.tolerancePx;
-    epochPpr_ = view.pixelsPerRadian;
-    epochMinDist_ = view.minDistance;
-    epochCull_ = options.frustumCull;
-  }
-  pass_.resize(n);
-  parallelPass(n, parallelMin_, [&](size_t i) { queueItems(entries_[i], pass_[i]); });
-  splitHeap_.clear();
-  mergeHeap_.clear();
-  for (size_t i = 0; i < n; ++i) {
-    if (gapsValid_ && entries_[i].drawnFlipped) changed_.push_back(entries_[i].id);
-    const PassItems& q = pass_[i];
-    frame_.priorityReuses += uint32_t(q.reused);
-    if (q.split > 0.0) splitHeap_.push_back({q.split, entries_[i].g, false, q.delta});
-    if (q.hasMerge) mergeHeap_.push_back({q.merge, globalIndex(entries_[i].id.parent()), q.mergeOverTol, q.freed});
-  }
-  std::make_heap(splitHeap_.begin(), splitHeap_.end(), Less{});
-  std::make_heap(mergeHeap_.begin(), mergeHeap_.end(), Greater{});
-
+// The split and merge phases of one update (merge, then split, until neither changes the
+// partition or the operation cap is reached), from queues filled for this view.
+void DualQueueAdapter::runQueues(uint32_t budget, AdaptStats& st) {
   uint32_t ops = 0;
   auto capped = [&]() {
     if (ops < maxOps_) return false;
@@ -578,6 +522,68 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
     const int32_t s = slot_[d.g];
     if (s >= 0 && entries_[s].overTol) st.nodeBudgetBound = true;
   }
+}
+
+const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& options, AdaptStats* stats) {
+  AdaptStats st;
+  frame_ = {};
+  view_ = view;
+  opt_ = options;
+  ++frameNo_;
+  selectRootGroups(h_, view, options.maxNodes, options.tolerancePx, options.frustumCull, groups_);
+  // Every root counts as a node in the partition; the closed groups' roots count once a group in
+  // the returned cut.
+  const uint32_t chartBudget = groups_.chartBudget(options.maxNodes);
+  const uint32_t budget = chartBudget == 0 ? UINT32_MAX : chartBudget;
+
+  if (entries_.empty())
+    for (uint32_t c = 0; c < h_.chartCount(); ++c) {
+      const NodeId root{c, 0, 0, 0};
+      if (h_.flags(root) & kNodeEmpty) continue;
+      Entry e;
+      e.id = root;
+      e.g = globalIndex(root);
+      addEntry(e);
+    }
+
+  collapseClosedCharts();
+  // Partition order follows the forest order, so the per-frame pass reads the hierarchy's
+  // arrays nearly sequentially; re-sorted once the operations since the last sort reach 1/8.
+  if (opsSinceSort_ * 8 > entries_.size()) {
+    std::sort(entries_.begin(), entries_.end(), [](const Entry& a, const Entry& b) { return a.g < b.g; });
+    for (uint32_t i = 0; i < entries_.size(); ++i) slot_[entries_[i].g] = int32_t(i);
+    opsSinceSort_ = 0;
+  }
+  // Re-evaluate the persistent cut for this view; rebuild both queues in O(cut). Each entry is
+  // evaluated on its own (in parallel), then the queues are filled in partition order, so the
+  // queues, and the cut, do not depend on the thread count.
+  const size_t n = entries_.size();
+  parallelPass(n, parallelMin_, [&](size_t i) { evaluate(entries_[i]); });
+  drawn_ = 0;
+  for (const Entry& e : entries_) drawn_ += uint32_t(e.drawn);
+  if (options.tolerancePx != epochTol_ || view.pixelsPerRadian != epochPpr_ ||
+      view.minDistance != epochMinDist_ || options.frustumCull != epochCull_) {
+    ++epoch_;
+    epochTol_ = options.tolerancePx;
+    epochPpr_ = view.pixelsPerRadian;
+    epochMinDist_ = view.minDistance;
+    epochCull_ = options.frustumCull;
+  }
+  pass_.resize(n);
+  parallelPass(n, parallelMin_, [&](size_t i) { queueItems(entries_[i], pass_[i]); });
+  splitHeap_.clear();
+  mergeHeap_.clear();
+  for (size_t i = 0; i < n; ++i) {
+    if (gapsValid_ && entries_[i].drawnFlipped) changed_.push_back(entries_[i].id);
+    const PassItems& q = pass_[i];
+    frame_.priorityReuses += uint32_t(q.reused);
+    if (q.split > 0.0) splitHeap_.push_back({q.split, entries_[i].g, false, q.delta});
+    if (q.hasMerge) mergeHeap_.push_back({q.merge, globalIndex(entries_[i].id.parent()), q.mergeOverTol, q.freed});
+  }
+  std::make_heap(splitHeap_.begin(), splitHeap_.end(), Less{});
+  std::make_heap(mergeHeap_.begin(), mergeHeap_.end(), Greater{});
+
+  runQueues(budget, st);
   if (groups_.active)  // a closed group's root over tolerance even at its maxRes
     for (const Entry& e : entries_)
       if (e.overTol && e.id.level + 1 < h_.params.depth && groups_.frozen(e.id.chart)) st.nodeBudgetBound = true;

@@ -188,6 +188,7 @@ class DualQueueAdapter {
   std::vector<uint32_t> dirty_, dirtyMark_;
   uint32_t dirtyRound_ = 0;
   void updateGaps();
+  void runQueues(uint32_t budget, AdaptStats& st);
   GroupSelection groups_;  // this frame's closed groups (their roots never split)
   // Replaces the kept nodes of every chart in a closed group by the chart's root.
   void collapseClosedCharts();
