@@ -8,6 +8,7 @@
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
+#include <memory>
 #include <random>
 
 #include "hierarchy/root_groups.h"
@@ -204,37 +205,50 @@ TEST(AdaptEquivalence, TheDualQueueCutsAreTheReferencesOnRandomForests) {
   EXPECT_GT(split, frames / 8);
 }
 
+// Low over a 3 x 2 world of 513-sample charts, looking along it: near nodes and far ones, some
+// culled.
+std::vector<ViewParams> lowPath(const World& w) {
+  std::vector<ViewParams> path;
+  for (uint32_t f = 0; f < 12; ++f) {
+    const glm::dvec3 eye = w.lo + (w.hi - w.lo) * glm::dvec3(0.1 + 0.02 * f, 0.3, 1.5);
+    path.push_back(viewAt(w, eye, eye + glm::dvec3(1.0, 0.3 + 0.05 * f, -0.4)));
+  }
+  return path;
+}
+
+// The cuts of makeAdapter()'s adapter along path, run in an arena of `threads` threads (up to 4
+// even on a machine with fewer cores); kept: the largest cut the adapter held.
+template <typename Make, typename Update>
+std::vector<std::vector<std::pair<uint64_t, uint32_t>>> cutsOnThreads(int threads, const std::vector<ViewParams>& path,
+                                                                      Make&& makeAdapter, Update&& update,
+                                                                      uint32_t* kept) {
+  const tbb::global_control most(tbb::global_control::max_allowed_parallelism, 4);
+  std::vector<std::vector<std::pair<uint64_t, uint32_t>>> cuts;
+  tbb::task_arena arena(threads);
+  arena.execute([&] {
+    auto a = makeAdapter();
+    for (const ViewParams& v : path) cuts.push_back(sortedNodes(update(*a, v, kept)));
+  });
+  return cuts;
+}
+
 // The parallel pass on a partition of thousands of nodes, in tasks of 32 (parallelMin 256).
 TEST(AdaptEquivalence, TheDualQueueCutsDoNotDependOnTheThreadCount) {
   const World w = makeWorld(513, 3, 2, 5);
   AdaptOptions o;
   o.tolerancePx = 0.01;
   o.maxNodes = 30000;
-  // Low over the world, looking along it: near nodes and far ones, some culled.
-  std::vector<ViewParams> path;
-  for (uint32_t f = 0; f < 12; ++f) {
-    const glm::dvec3 eye = w.lo + (w.hi - w.lo) * glm::dvec3(0.1 + 0.02 * f, 0.3, 1.5);
-    path.push_back(viewAt(w, eye, eye + glm::dvec3(1.0, 0.3 + 0.05 * f, -0.4)));
-  }
-  // Up to 4 threads even on a machine with fewer cores.
-  const tbb::global_control most(tbb::global_control::max_allowed_parallelism, 4);
-  auto run = [&](int threads) {
-    std::vector<std::vector<std::pair<uint64_t, uint32_t>>> cuts;
-    uint32_t largest = 0;
-    tbb::task_arena arena(threads);
-    arena.execute([&] {
-      DualQueueAdapter a(w.h, 1024, true, 256);
-      for (const ViewParams& v : path) {
-        cuts.push_back(sortedNodes(a.update(v, o)));
-        largest = std::max(largest, a.frameStats().partitionNodes);
-      }
-    });
-    EXPECT_GT(largest, 1024u) << "too small a partition for the parallel pass";
-    return cuts;
+  uint32_t kept = 0;
+  auto make = [&] { return std::make_unique<DualQueueAdapter>(w.h, 1024, true, 256); };
+  auto update = [&](DualQueueAdapter& a, const ViewParams& v, uint32_t* largest) -> const Cut& {
+    const Cut& c = a.update(v, o);
+    *largest = std::max(*largest, a.frameStats().partitionNodes);
+    return c;
   };
-  const auto one = run(1);
-  EXPECT_EQ(one, run(2));
-  EXPECT_EQ(one, run(4));
+  const auto one = cutsOnThreads(1, lowPath(w), make, update, &kept);
+  EXPECT_GT(kept, 1024u) << "too small a partition for the parallel pass";
+  EXPECT_EQ(one, cutsOnThreads(2, lowPath(w), make, update, &kept));
+  EXPECT_EQ(one, cutsOnThreads(4, lowPath(w), make, update, &kept));
 }
 
 // The quad queue's parallel passes likewise (parallelMin 256), under budgets that keep it busy.
@@ -243,29 +257,17 @@ TEST(AdaptEquivalence, TheQuadQueueCutsDoNotDependOnTheThreadCount) {
   BudgetOptions o;
   o.maxNodes = 3000;
   o.maxTriangles = 400000;
-  std::vector<ViewParams> path;
-  for (uint32_t f = 0; f < 12; ++f) {
-    const glm::dvec3 eye = w.lo + (w.hi - w.lo) * glm::dvec3(0.1 + 0.02 * f, 0.3, 1.5);
-    path.push_back(viewAt(w, eye, eye + glm::dvec3(1.0, 0.3 + 0.05 * f, -0.4)));
-  }
-  const tbb::global_control most(tbb::global_control::max_allowed_parallelism, 4);
-  auto run = [&](int threads) {
-    std::vector<std::vector<std::pair<uint64_t, uint32_t>>> cuts;
-    uint32_t largest = 0;
-    tbb::task_arena arena(threads);
-    arena.execute([&] {
-      QuadQueueAdapter a(w.h, 256);
-      for (const ViewParams& v : path) {
-        cuts.push_back(sortedNodes(a.update(v, o)));
-        largest = std::max(largest, uint32_t(cuts.back().size()));
-      }
-    });
-    EXPECT_GT(largest, 512u) << "too small a cut for the parallel passes (256 nodes, in tasks of 32)";
-    return cuts;
+  uint32_t drawn = 0;
+  auto make = [&] { return std::make_unique<QuadQueueAdapter>(w.h, 256); };
+  auto update = [&](QuadQueueAdapter& a, const ViewParams& v, uint32_t* largest) -> const Cut& {
+    const Cut& c = a.update(v, o);
+    *largest = std::max(*largest, uint32_t(c.nodes.size()));
+    return c;
   };
-  const auto one = run(1);
-  EXPECT_EQ(one, run(2));
-  EXPECT_EQ(one, run(4));
+  const auto one = cutsOnThreads(1, lowPath(w), make, update, &drawn);
+  EXPECT_GT(drawn, 512u) << "too small a cut for the parallel passes (256 nodes, in tasks of 32)";
+  EXPECT_EQ(one, cutsOnThreads(2, lowPath(w), make, update, &drawn));
+  EXPECT_EQ(one, cutsOnThreads(4, lowPath(w), make, update, &drawn));
 }
 
 }  // namespace
