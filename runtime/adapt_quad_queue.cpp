@@ -31,6 +31,7 @@ struct Entry {
   uint32_t gap = 0;    // stitching level gap to the finest drawn neighbour (computeFloors)
   uint32_t maxRes = 0;
   bool drawn = false;
+  bool drawnFlipped = false;  // drawn changed in this frame's evaluation
   bool prioValid = false;  // splitPrio holds this frame's split priority at res and err
   double err = 0.0;    // screen error at res; 0 when not drawn
   double dist = 1.0;   // eye distance to the bounds this frame (as screenError clamps it)
@@ -105,6 +106,7 @@ class EntryMap {
   }
   Entry* find(uint64_t key) { return find(NodeId::fromKey(key)); }
   bool count(const NodeId& n) const { return slot_[index(n)] >= 0; }
+  int32_t slotOf(const NodeId& n) const { return slot_[index(n)]; }
   // Adds e (its node must not be in the map).
   Entry& insert(const Entry& e) {
     const size_t i = index(e.id);
@@ -287,6 +289,10 @@ struct QuadQueueAdapter::State {
   bool floorsReady = false;
   uint32_t overMaxRes = 0;  // drawn entries whose gap is above their maxRes
   std::vector<NodeId> cutChanged, dirty;
+  std::vector<uint32_t> newGap;  // scratch of the full pass, per entry
+  // After a frame's evaluation, until its first computeFloors: the floors are last frame's, and
+  // the mandatory merges count every drawn node at minRes (as a fresh set of floors would).
+  bool floorsStale = false;
   std::vector<uint32_t> dirtyMark;
   uint32_t dirtyRound = 1;
   bool phase2Ready = false;
@@ -344,23 +350,24 @@ struct QuadQueueAdapter::State {
   }
   void evaluate(Entry& e) {
     const NodeEval n = node.evaluate(e.id, nodeIndex(e.id.level, e.id.x, e.id.y));
+    e.drawnFlipped = e.drawn != n.drawable;
     e.drawn = n.drawable;
     e.dist = n.dist;
     e.errs = n.errs;
     e.maxRes = n.maxRes;
     e.res = e.drawn ? std::clamp(e.res, minRes(), e.maxRes) : minRes();
-    e.floor = minRes();
     e.err = e.drawn ? errAt(e, e.res) : 0.0;
     e.prioValid = false;
   }
   void recount() {
-    drawn = 0;
+    drawn = overMaxRes = 0;
     triangles = floorTris = 0;
     for (const auto& [k, e] : cut)
       if (e.drawn) {
         ++drawn;
         triangles += tris(e.res);
         floorTris += tris(e.floor);
+        overMaxRes += uint32_t(e.gap > e.maxRes);
       }
   }
   Cut drawnCut() const {
@@ -389,38 +396,46 @@ struct QuadQueueAdapter::State {
   // Stitching floors of the drawn nodes (paper 7.4): resolution >= level gap to finer neighbours.
   // As stitchGaps: each drawn node raises the gap of its equal-or-coarser drawn neighbours.
   void computeFloors() {
+    floorsStale = false;
     // The update costs a few walks per change, the full pass a walk per entry: past a quarter of
     // the cut in changes, the full pass is cheaper (bench_adapt on the shared scans).
     if (floorsReady && cutChanged.size() * 4 < cut.size()) return updateFloors();
     floorsReady = true;
     cutChanged.clear();
-    overMaxRes = 0;
-    needsConstraintSplit = false;
-    for (auto& [k, e] : cut) e.gap = 0;
-    for (const auto& [k, m] : cut) {
+    auto* items = &*cut.begin();
+    newGap.assign(cut.size(), 0);
+    for (size_t i = 0; i < cut.size(); ++i) {
+      const Entry& m = items[i].second;
       if (!m.drawn || m.id.level == 0) continue;
       walkToCoarserNeighbours(*h, m.id, [&](const NodeId& a, uint32_t up) {
-        Entry* f = cut.find(a);
-        if (!f) return false;
-        if (f->drawn) f->gap = std::max(f->gap, up);
+        const int32_t at = cut.slotOf(a);
+        if (at < 0) return false;
+        if (items[at].second.drawn) newGap[size_t(at)] = std::max(newGap[size_t(at)], up);
         return true;
       });
     }
     floorTris = 0;
+    overMaxRes = 0;
     raise.clear();
-    for (auto& [k, e] : cut) {
-      if (!e.drawn) continue;
-      if (e.gap > e.maxRes) needsConstraintSplit = true, ++overMaxRes;
-      const uint32_t was = e.floor;
-      e.floor = std::clamp(e.gap, minRes(), e.maxRes);
-      floorTris += tris(e.floor);
-      if (phase1Ready && e.floor != was) refloored.push_back(e.id);
-      if (e.res < e.floor) raise.push_back(e.id);
+    for (size_t i = 0; i < cut.size(); ++i) setGap(items[i].second, newGap[i]);
+    needsConstraintSplit = overMaxRes > 0;
+  }
+  // Sets an entry's gap and floor (an undrawn entry: 0 and minRes), logged while a round runs;
+  // counts a drawn entry in floorTris and overMaxRes, and lists it to raise or to refloor.
+  void setGap(Entry& e, uint32_t gap) {
+    const uint32_t floor = e.drawn ? std::clamp(gap, minRes(), e.maxRes) : minRes();
+    if (gap != e.gap || floor != e.floor) {
+      cut.willModify(e);
+      if (phase1Ready && e.drawn && floor != e.floor) refloored.push_back(e.id);
+      e.gap = gap;
+      e.floor = floor;
     }
+    if (!e.drawn) return;
+    floorTris += tris(floor);
+    overMaxRes += uint32_t(gap > e.maxRes);
+    if (e.res < floor) raise.push_back(e.id);
   }
 
-  // computeFloors after the cut changed by cutChanged: only the entries beside a node that
-  // joined or left the cut (and those that joined) can have a new gap.
   void updateFloors() {
     if (++dirtyRound == 0) {
       std::fill(dirtyMark.begin(), dirtyMark.end(), 0u);
@@ -440,14 +455,11 @@ struct QuadQueueAdapter::State {
     raise.clear();
     for (const NodeId& n : dirty) {
       Entry& e = *cut.find(n);
-      if (!e.drawn) continue;
-      const uint32_t gap = keptGap(*h, e.id, find), was = e.floor;
-      overMaxRes = overMaxRes - uint32_t(e.gap > e.maxRes) + uint32_t(gap > e.maxRes);
-      e.gap = gap;
-      e.floor = std::clamp(gap, minRes(), e.maxRes);
-      floorTris = floorTris - tris(was) + tris(e.floor);
-      if (phase1Ready && e.floor != was) refloored.push_back(e.id);
-      if (e.res < e.floor) raise.push_back(e.id);
+      if (e.drawn) {  // out of the counts, back in by setGap
+        floorTris -= tris(e.floor);
+        overMaxRes -= uint32_t(e.gap > e.maxRes);
+      }
+      setGap(e, e.drawn ? keptGap(*h, e.id, find) : 0);
     }
     needsConstraintSplit = overMaxRes > 0;
   }
@@ -479,7 +491,7 @@ struct QuadQueueAdapter::State {
     Entry* f = validPhase1(it);
     return f && f->res > f->floor ? f : nullptr;
   }
-  // The largest error of the cut (maxError), from the top of phase 1's error queue.
+  // The largest error of the cut (0 without a drawn node), from the top of phase 1's error queue.
   double maxErrorNow() {
     while (!errH.empty() && !validPhase1(errH.front())) heapPop(errH);
     return errH.empty() ? 0.0 : std::max(0.0, errH.front().priority);
@@ -699,6 +711,7 @@ struct QuadQueueAdapter::State {
       Entry e;
       e.id = ch;
       e.splitRound = r;
+      e.floor = minRes();
       evaluate(e);
       if (e.drawn) {
         e.res = resFor(node(ch), tol);
@@ -728,6 +741,7 @@ struct QuadQueueAdapter::State {
     e.id = p;
     e.mergedRound = r;
     e.res = pres;
+    e.floor = minRes();
     evaluate(e);
     addCounts(e);
     cut.insert(e);
@@ -825,7 +839,7 @@ struct QuadQueueAdapter::State {
     const int64_t nodeBudget_ = int64_t(nodeBudget());
     const int64_t triBudget = int64_t(opt.maxTriangles);
     int64_t availNodes = nodeBudget_ - int64_t(drawn);
-    int64_t availFloor = triBudget - int64_t(std::max(floorTris, floorTrisNow()));
+    int64_t availFloor = triBudget - int64_t(std::max(floorsStale ? 0 : floorTris, floorTrisNow()));
     if (mandatoryOnly && availNodes >= 0 && availFloor >= 0) return collapseCulled(r);
     if (mandatoryOnly || !phase2Ready) {
       listMerges(r, !mandatoryOnly);
@@ -986,13 +1000,17 @@ struct QuadQueueAdapter::State {
     for (const NodeId& n : drop) {
       charts.push_back(n.chart);
       cut.erase(n);
+      if (floorsReady) cutChanged.push_back(n);
     }
     std::sort(charts.begin(), charts.end());
     charts.erase(std::unique(charts.begin(), charts.end()), charts.end());
     for (uint32_t c : charts) {
       Entry root;
       root.id = {c, 0, 0, 0};
-      if (!cut.count(root.id)) cut.insert(root);
+      root.floor = minRes();
+      if (cut.count(root.id)) continue;
+      cut.insert(root);
+      if (floorsReady) cutChanged.push_back(root.id);
     }
   }
   // Triangle floor of the drawn nodes at minRes (floors are recomputed after the round).
@@ -1021,6 +1039,7 @@ QuadQueueAdapter::QuadQueueAdapter(const Hierarchy& h, uint32_t parallelMin)
 }
 
 void QuadQueueAdapter::reset() {
+  state_->floorsReady = false;
   state_->cut.clear();
   state_->out = Cut{};
 }
@@ -1046,7 +1065,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
     s.reserved.assign(s.cut.forestSize(), 0);  // (re)start the marks
     s.reserveMark = 1;
   }
-  s.phase1Ready = s.phase2Ready = s.floorsReady = false;
+  s.phase1Ready = s.phase2Ready = false;
   if (s.dirtyMark.size() != s.cut.forestSize()) s.dirtyMark.assign(s.cut.forestSize(), 0);
   s.fresh.clear();
   s.refloored.clear();
@@ -1064,12 +1083,18 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
     for (uint32_t c = 0; c < h_.chartCount(); ++c) {
       Entry e;
       e.id = {c, 0, 0, 0};
+      e.floor = s.minRes();
       if (!(h_.flags(e.id) & kNodeEmpty)) s.cut.insert(e);
     }
   {
     auto* items = &*s.cut.begin();
     parallelPass(s.cut.size(), s.parallelMin, [&](size_t i) { s.evaluate(items[i].second); });
+    // The floors are kept from frame to frame: a node culled or uncovered changes its neighbours'.
+    if (s.floorsReady)
+      for (size_t i = 0; i < s.cut.size(); ++i)
+        if (items[i].second.drawnFlipped) s.cutChanged.push_back(items[i].second.id);
   }
+  s.floorsStale = true;
   s.recount();
 
   // Mandatory: node budget, triangle floor (with the stitching floors), culled groups collapse.
@@ -1097,7 +1122,8 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
       // is undone too, so a static view reaches a fixed point.
       const uint32_t done = st.refines + st.coarsens + st.splits + st.merges;
       const uint32_t kept = savedStats.refines + savedStats.coarsens + savedStats.splits + savedStats.merges;
-      s.cut.undo();
+      s.cut.undo();  // the entries, their gaps and floors included, as before the round
+      s.cutChanged.clear();
       s.recount();
       s.needsConstraintSplit = savedNeedsSplit;  // the floors the kept entries were fitted to
       st.refines = savedStats.refines, st.coarsens = savedStats.coarsens;
