@@ -348,8 +348,8 @@ struct QuadQueueAdapter::State {
     e.err = e.drawn ? errAt(e, r) : 0.0;
     e.prioValid = false;
   }
-  void evaluate(Entry& e) {
-    const NodeEval n = node.evaluate(e.id, nodeIndex(e.id.level, e.id.x, e.id.y));
+  void evaluate(Entry& e) { evaluateWith(e, node.evaluate(e.id, nodeIndex(e.id.level, e.id.x, e.id.y))); }
+  void evaluateWith(Entry& e, const NodeEval& n) {
     e.drawnFlipped = e.drawn != n.drawable;
     e.drawn = n.drawable;
     e.dist = n.dist;
@@ -629,19 +629,21 @@ struct QuadQueueAdapter::State {
   // ---- Phase 2: split/merge proposals (an error-threshold adaptation with each node's current
   // error as its local threshold). mandatoryOnly: only the merges needed for the node budget and
   // the triangle floor, and zero-effect merges of culled groups. Returns whether anything changed.
-  double splitPriority(Entry& e) {
+  // cached: the children's view data through the frame's cache (single-threaded callers; a child
+  // split or listed later in the frame finds it there), else computed directly.
+  double splitPriority(Entry& e, bool cached = true) {
     if (e.prioValid) return e.splitPrio;
     e.prioValid = true;
-    return e.splitPrio = splitPriorityNow(e);
+    return e.splitPrio = splitPriorityNow(e, cached);
   }
-  double splitPriorityNow(const Entry& e) {
+  double splitPriorityNow(const Entry& e, bool cached) {
     if (!e.drawn || e.id.level + 1 >= h->params.depth) return -1.0;
     if (e.id.level == 0 && groups.frozen(e.id.chart)) return -1.0;  // a closed group's root
     if (e.res >= e.maxRes) return kStuckPriority * (1.0 + e.err);
     double t = double(tris(e.res));
     for (uint32_t i = 0; i < 4; ++i) {
       const NodeId c = e.id.child(i);
-      const NodeEval ch = node.evaluate(c, nodeIndex(c.level, c.x, c.y));  // seldom needed twice
+      const NodeEval ch = cached ? node(c) : node.evaluate(c, nodeIndex(c.level, c.x, c.y));
       if (ch.drawable) t -= double(tris(resFor(ch, e.err)));
     }
     return t;
@@ -712,9 +714,10 @@ struct QuadQueueAdapter::State {
       e.id = ch;
       e.splitRound = r;
       e.floor = minRes();
-      evaluate(e);
+      const NodeEval ne = node(ch);
+      evaluateWith(e, ne);
       if (e.drawn) {
-        e.res = resFor(node(ch), tol);
+        e.res = resFor(ne, tol);
         e.err = errAt(e, e.res);
       }
       addCounts(e);
@@ -742,7 +745,7 @@ struct QuadQueueAdapter::State {
     e.mergedRound = r;
     e.res = pres;
     e.floor = minRes();
-    evaluate(e);
+    evaluateWith(e, node(p));
     addCounts(e);
     cut.insert(e);
     if (phase1Ready) fresh.push_back(p);
@@ -765,7 +768,7 @@ struct QuadQueueAdapter::State {
     parallelPass(n, parallelMin, [&](size_t i) {
       Entry& e = items[i].second;
       Listed& q = listed[i];
-      q.split = splits ? splitPriority(e) : -1.0;
+      q.split = splits ? splitPriority(e, false) : -1.0;
       q.merge = false;
       if (e.id.level == 0 || !firstOfGroup(e)) return;
       const NodeId par = e.id.parent();
