@@ -80,6 +80,7 @@ DualQueueAdapter::DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame, 
   drawnState_.assign(slot_.size(), 0);
   gaps_.assign(slot_.size(), 0);
   dirtyMark_.assign(slot_.size(), 0);
+  belowRoot_.assign(h.chartCount(), 0);
 }
 
 void DualQueueAdapter::reset() {
@@ -87,6 +88,7 @@ void DualQueueAdapter::reset() {
   changed_.clear();
   for (const Entry& e : entries_) slot_[e.g] = -1, drawnState_[e.g] = 0;
   entries_.clear();
+  std::fill(belowRoot_.begin(), belowRoot_.end(), 0u);
   out_ = Cut{};
   frame_ = {};
 }
@@ -271,6 +273,7 @@ void DualQueueAdapter::pushMerge(const NodeId& parent) {
 }
 
 void DualQueueAdapter::addEntry(const Entry& e) {
+  belowRoot_[e.id.chart] += uint32_t(e.id.level > 0);
   if (gapsValid_) changed_.push_back(e.id);
   slot_[e.g] = int32_t(entries_.size());
   entries_.push_back(e);
@@ -288,6 +291,7 @@ void DualQueueAdapter::addEntry(const Entry& e) {
 
 void DualQueueAdapter::removeEntry(uint32_t g) {
   const int32_t s = slot_[g];
+  belowRoot_[entries_[s].id.chart] -= uint32_t(entries_[s].id.level > 0);
   if (gapsValid_) changed_.push_back(entries_[s].id);
   drawn_ -= uint32_t(entries_[s].drawn);
   slot_[g] = -1;
@@ -342,8 +346,10 @@ bool DualQueueAdapter::validMergeTop() {
 }
 
 void DualQueueAdapter::collapseClosedCharts() {
-  if (!groups_.active || std::none_of(groups_.closedOf.begin(), groups_.closedOf.end(), [](int32_t g) { return g >= 0; }))
-    return;
+  if (!groups_.active) return;
+  bool any = false;  // a closed chart that keeps nodes below its root
+  for (uint32_t c = 0; c < h_.chartCount() && !any; ++c) any = groups_.frozen(c) && belowRoot_[c] > 0;
+  if (!any) return;
   std::vector<uint32_t> drop, charts;
   for (const Entry& e : entries_)
     if (e.id.level > 0 && groups_.frozen(e.id.chart)) drop.push_back(e.g);

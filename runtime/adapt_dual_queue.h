@@ -183,6 +183,7 @@ class DualQueueAdapter {
   // The gaps are kept from frame to frame: the nodes that joined or left the partition, or whose
   // drawn state changed, since the last update (changed_) mark the entries beside them (dirty_,
   // dirtyMark_ == dirtyRound_), whose gaps are found again (keptGap).
+  std::vector<uint32_t> belowRoot_;  // per chart: its entries below the root
   bool gapsValid_ = false;
   std::vector<NodeId> changed_;
   std::vector<uint32_t> dirty_, dirtyMark_;
