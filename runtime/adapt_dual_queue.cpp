@@ -565,8 +565,6 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   // queues, and the cut, do not depend on the thread count.
   const size_t n = entries_.size();
   parallelPass(n, parallelMin_, [&](size_t i) { evaluate(entries_[i]); });
-  drawn_ = 0;
-  for (const Entry& e : entries_) drawn_ += uint32_t(e.drawn);
   if (options.tolerancePx != epochTol_ || view.pixelsPerRadian != epochPpr_ ||
       view.minDistance != epochMinDist_ || options.frustumCull != epochCull_) {
     ++epoch_;
@@ -579,7 +577,9 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   parallelPass(n, parallelMin_, [&](size_t i) { queueItems(entries_[i], pass_[i]); });
   splitHeap_.clear();
   mergeHeap_.clear();
+  drawn_ = 0;
   for (size_t i = 0; i < n; ++i) {
+    drawn_ += uint32_t(entries_[i].drawn);
     if (gapsValid_ && entries_[i].drawnFlipped) changed_.push_back(entries_[i].id);
     const PassItems& q = pass_[i];
     frame_.priorityReuses += uint32_t(q.reused);

@@ -59,9 +59,9 @@ class DualQueueAdapter {
  public:
   // h must outlive the adapter. reusePriorities: keep split priorities across frames while they
   // provably cannot change (see Entry); false recomputes them every frame (same cuts, slower).
-  // parallelMin: partitions of at least this many nodes are evaluated in parallel (TBB), below it
-  // on the calling thread (0: always); waking the workers costs more than a smaller pass (measured
-  // with bench_adapt on 2 cores). The cuts do not depend on it nor on the thread count.
+  // parallelMin: partitions of at least this many nodes are evaluated in parallel (TBB), smaller
+  // ones on the calling thread, and every one with 0; waking the workers costs more than a smaller
+  // pass (measured with bench_adapt on 2 cores). The cuts do not depend on it nor on the threads.
   explicit DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame = 1024, bool reusePriorities = true,
                             uint32_t parallelMin = kDefaultParallelMin);
 

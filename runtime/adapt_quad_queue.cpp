@@ -40,7 +40,7 @@ struct Entry {
   uint32_t splitRound = 0, mergedRound = 0;
 };
 
-// A node's view-dependent data, computed at most once per frame (NodeCache).
+// A node's view-dependent data: cached for the frame by NodeCache, or computed directly.
 struct NodeEval {
   double dist = 1.0;  // eye distance to the bounds, at least the view's minDistance
   const float* errs = nullptr;
@@ -214,8 +214,7 @@ class NodeCache {
     Slot& s = slot_[size_t(n.chart) * perChart_ + i];
     if (s.frame == frame_) return evals_[s.at];
     s = {frame_, uint32_t(evals_.size())};
-    NodeEval& e = evals_.emplace_back(evaluate(n, i));
-    return e;
+    return evals_.emplace_back(evaluate(n, i));
   }
   // The node's NodeEval, not cached.
   NodeEval evaluate(const NodeId& n, uint32_t i) const {
@@ -280,10 +279,6 @@ struct QuadQueueAdapter::State {
   bool phase1Ready = false;
   std::vector<NodeId> fresh, refloored, raise;
   std::vector<Item> dropped;
-  // Phase 2's queues likewise, from the first round of a frame on: the splits a round popped but
-  // did not do (splitAside), the nodes whose split priority is new (splitRecheck: a changed
-  // resolution, a merge's parent) and the groups whose cost or mergeability may be new
-  // (groupRecheck), each listed once a round (listedSplit, listedGroup == listMark).
   // The floors likewise, from the first computeFloors of a frame on: the nodes that joined or left
   // the cut since (cutChanged) mark the entries beside them, whose gaps are found again.
   bool floorsReady = false;
@@ -295,6 +290,10 @@ struct QuadQueueAdapter::State {
   bool floorsStale = false;
   std::vector<uint32_t> dirtyMark;
   uint32_t dirtyRound = 1;
+  // Phase 2's queues likewise, from the first round of a frame on: the splits a round popped but
+  // did not do (splitAside), the nodes whose split priority is new (splitRecheck: a changed
+  // resolution, a merge's parent) and the groups whose cost or mergeability may be new
+  // (groupRecheck), each listed once a round (listedSplit, listedGroup == listMark).
   bool phase2Ready = false;
   // A group's merge items carry a number (Item::res) and only the one of its latest is valid: the
   // kept queue then holds one item per group, as a fresh listing does (an item set aside must
@@ -533,7 +532,7 @@ struct QuadQueueAdapter::State {
       }
       for (const Item& it : popped) heapPush(coarsenH, it);
       if (free + freed < need) break;
-      // note: by key, not pointer: a setRes may log, but never moves entries.
+      // note: setRes logs, but never moves an entry, so the pointers stay valid.
       for (Entry* c : chosen) {
         setRes(*c, c->res - 1);
         ++st.coarsens, ++ops;

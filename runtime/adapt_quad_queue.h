@@ -45,8 +45,8 @@ bool fitTriangleBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, uin
 // Stateful adapter: keeps its cut and queues from frame to frame.
 class QuadQueueAdapter {
  public:
-  // parallelMin: kept cuts of at least this many nodes are evaluated in parallel (TBB), below it
-  // on the calling thread (0: always); the cuts do not depend on it nor on the thread count.
+  // parallelMin: kept cuts of at least this many nodes are evaluated in parallel (TBB), smaller
+  // ones on the calling thread, and every one with 0; the cuts do not depend on it nor on the threads.
   explicit QuadQueueAdapter(const Hierarchy& h, uint32_t parallelMin = kDefaultParallelMin);
   // Adapts the kept cut to the view within the budgets; returns the drawn cut (stitching
   // constraint enforced, triangles never above maxTriangles, nodes never above maxNodes except:

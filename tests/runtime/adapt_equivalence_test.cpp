@@ -58,6 +58,23 @@ void expectSameCut(const Cut& a, const Cut& b, const std::string& where) {
   EXPECT_EQ(ea, eb) << where;
 }
 
+// One quad-queue frame against the reference's: the same cut, errors and counts.
+void expectSameQuadFrame(const Cut& a, const BudgetStats& st, const Cut& b, const BudgetStats& rst,
+                         const std::string& where) {
+  expectSameCut(a, b, where);
+  EXPECT_EQ(st.maxErrorPx, rst.maxErrorPx) << where;
+  EXPECT_EQ(st.triangles, rst.triangles) << where;
+  EXPECT_EQ(st.nodes, rst.nodes) << where;
+  EXPECT_EQ(st.rounds, rst.rounds) << where;
+  EXPECT_EQ(st.undos + st.tieUndos, rst.undos + rst.tieUndos) << where;
+  EXPECT_EQ(st.constraintSplits, rst.constraintSplits) << where;
+  EXPECT_EQ(st.refines + st.coarsens + st.splits + st.merges + st.undoneOps,
+            rst.refines + rst.coarsens + rst.splits + rst.merges + rst.undoneOps)
+      << where;
+  EXPECT_EQ(st.refines + st.coarsens + st.splits + st.merges, rst.refines + rst.coarsens + rst.splits + rst.merges)
+      << where;
+}
+
 // keptGap (from the coarse side, over kept nodes some of which are not drawn) equals stitchGaps
 // (from the fine side, over the drawn cut) on random partitions.
 TEST(AdaptEquivalence, TheGapsFromTheCoarseSideAreStitchGaps) {
@@ -116,15 +133,7 @@ TEST(AdaptEquivalence, TheQuadQueueCutsAreTheReferencesOnRandomForests) {
       BudgetStats st, rst;
       const Cut& a = ours.update(v, o, &st);
       const Cut& b = ref.update(v, o, &rst);
-      const std::string where = "world " + std::to_string(world) + ", frame " + std::to_string(frames);
-      expectSameCut(a, b, where);
-      EXPECT_EQ(st.maxErrorPx, rst.maxErrorPx) << where;
-      EXPECT_EQ(st.triangles, rst.triangles) << where;
-      EXPECT_EQ(st.nodes, rst.nodes) << where;
-      EXPECT_EQ(st.rounds, rst.rounds) << where;
-      EXPECT_EQ(st.undos + st.tieUndos, rst.undos + rst.tieUndos) << where;
-      EXPECT_EQ(st.refines + st.coarsens + st.splits + st.merges, rst.refines + rst.coarsens + rst.splits + rst.merges)
-          << where;
+      expectSameQuadFrame(a, st, b, rst, "world " + std::to_string(world) + ", frame " + std::to_string(frames));
       if (HasFatalFailure()) return;
       ++frames;
       split += uint32_t(st.splits > 0);
@@ -157,11 +166,7 @@ TEST(AdaptEquivalence, TheQuadQueueCutsAreTheReferencesOnDeepForests) {
       BudgetStats st, rst;
       const Cut& x = ours.update(v, o, &st);
       const Cut& y = ref.update(v, o, &rst);
-      const std::string where = std::to_string(c.chartsX) + " charts, frame " + std::to_string(f);
-      expectSameCut(x, y, where);
-      EXPECT_EQ(st.refines + st.coarsens + st.splits + st.merges + st.undoneOps,
-                rst.refines + rst.coarsens + rst.splits + rst.merges + rst.undoneOps)
-          << where;
+      expectSameQuadFrame(x, st, y, rst, std::to_string(c.chartsX) + " charts, frame " + std::to_string(f));
       if (HasFatalFailure()) return;
       ++frames;
       rounds += st.rounds;
