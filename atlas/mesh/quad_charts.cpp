@@ -350,6 +350,8 @@ struct PatchSizing {
   std::vector<Entry> patches;
   uint64_t trianglesParameterized = 0;
   uint64_t cutWork = 0;  // layout triangles the cuts' trials parameterized
+  // The patches' parameterizations, kept for their next resampling (a doubling) when they fit.
+  std::unique_ptr<ParamCache> params;
 
   // The worst sampling error of patch p's charts.
   double error(uint32_t p) const { return worstError(patches[p].charts); }
@@ -379,6 +381,7 @@ struct PatchSizing {
       ResampleReuse reuse;
       reuse.normals = &normals;
       reuse.only = &only;
+      reuse.params = params.get();
       ro.chartSize = s;
       GeometryImageSet part = resampleLayout(layout, ro, reuse);
       trianglesParameterized += part.trianglesParameterized;
@@ -666,11 +669,14 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
                samplesPerTriangle(layout, quadCharts, base), 100.0 * bound / std::max(diagonal, 1e-300));
 
   r.spill = std::make_unique<ChartSpill>(dir / "samples.tmp", !layout.colours.empty());
-  PatchSizing z{layout, resampleOptions(o, quads, r.spill.get(), r.bounds), layoutVertexNormals(layout), {}};
+  PatchSizing z{layout, resampleOptions(o, quads, r.spill.get(), r.bounds), layoutVertexNormals(layout), {}, 0, 0, nullptr};
   z.ro.chartSize = base;
+  // A patch is parameterized once for all its sizes, within an eighth of the memory.
+  z.params = std::make_unique<ParamCache>(o.maxMemory / 8);
   {
     ResampleReuse all;
     all.normals = &z.normals;
+    all.params = z.params.get();
     GeometryImageSet first = resampleLayout(layout, z.ro, all);
     if (first.image.flippedTexels > 0 && o.repairRounds > 0) {
       ChartRepairOptions repair;

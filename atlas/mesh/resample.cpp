@@ -944,6 +944,19 @@ ParamOptions patchParamOptions(const ResampleOptions& options) {
   return paramOptions;
 }
 
+// Patch p's parameterization: from the reuse's cache where it holds one of a patch alike, else
+// made, and put there.
+std::shared_ptr<const PatchParameterization> parameterization(const ResampleContext& c, uint32_t p) {
+  const Patch& patch = c.layout.patches[p];
+  if (c.reuse.params) {
+    if (auto pp = c.reuse.params->find(patch, p)) return pp;
+  }
+  auto pp = std::make_shared<const PatchParameterization>(
+      parameterizePatch(c.layout, p, patchParamOptions(c.options)));
+  if (c.reuse.params) c.reuse.params->put(patch, p, pp);
+  return pp;
+}
+
 // A patch being resampled (action 1): its parameterization, and what its quad charts share: the
 // samples of its sides and spokes, its quads' domain corners and least-stretch maps, the faces
 // along its sides and the input vertices each quad stands for. Built step by step by
@@ -952,8 +965,7 @@ ParamOptions patchParamOptions(const ResampleOptions& options) {
 struct PatchSampler {
   PatchSampler(const ResampleContext& context, uint32_t patchId, const PatchQuads& quads)
       : c(context), p(patchId), patch(context.layout.patches[patchId]), n(uint32_t(patch.sides.size())),
-        plan(quads), nq(uint32_t(quads.quads.size())),
-        pp(parameterizePatch(context.layout, patchId, patchParamOptions(context.options))),
+        plan(quads), nq(uint32_t(quads.quads.size())), held(parameterization(context, patchId)), pp(*held),
         openSides(n), locator(pp) {}
   PatchSampler(const PatchSampler&) = delete;
   PatchSampler& operator=(const PatchSampler&) = delete;
@@ -964,7 +976,8 @@ struct PatchSampler {
   const uint32_t n;  // sides
   const PatchQuads& plan;
   const uint32_t nq;  // quads
-  const PatchParameterization pp;
+  const std::shared_ptr<const PatchParameterization> held;
+  const PatchParameterization& pp;
   // Samples of the open sides taken through the parameterization (sampleOpenSides); empty for
   // others.
   std::vector<std::vector<Sample>> openSides;
@@ -1549,6 +1562,46 @@ void combineSetFigures(const ChartLayout& layout, const std::vector<uint32_t>& a
 
 GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options) {
   return resampleLayout(layout, options, ResampleReuse{});
+}
+
+bool patchParamAlike(const Patch& a, const Patch& b) {
+  if (a.triangles != b.triangles || a.sides.size() != b.sides.size()) return false;
+  for (size_t i = 0; i < a.sides.size(); ++i) {
+    if (a.sides[i].vertices != b.sides[i].vertices ||
+        (a.sides[i].neighbourPatch < 0) != (b.sides[i].neighbourPatch < 0)) {
+      return false;
+    }
+  }
+  return true;
+}
+
+std::shared_ptr<const PatchParameterization> ParamCache::find(const Patch& patch, uint32_t p) const {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const auto it = entries_.find(p);
+  if (it == entries_.end() || !patchParamAlike(it->second.patch, patch)) return nullptr;
+  ++hits_;
+  return it->second.pp;
+}
+
+void ParamCache::put(const Patch& patch, uint32_t p, std::shared_ptr<const PatchParameterization> pp) {
+  uint64_t bytes = sizeof(Entry) + patch.triangles.size() * sizeof(uint32_t) +
+                   pp->uv.size() * sizeof(glm::dvec2) + pp->vertices.size() * sizeof(uint32_t) +
+                   pp->triangles.size() * sizeof(pp->triangles[0]) + pp->boundary.size() * sizeof(uint32_t);
+  for (const PatchSide& s : patch.sides) bytes += sizeof(PatchSide) + s.vertices.size() * sizeof(uint32_t);
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const auto it = entries_.find(p);
+  if (it != entries_.end()) {
+    bytes_ -= it->second.bytes;
+    entries_.erase(it);
+  }
+  if (bytes_ + bytes > maxBytes_) return;
+  entries_.emplace(p, Entry{patch, std::move(pp), bytes});
+  bytes_ += bytes;
+}
+
+uint64_t ParamCache::bytes() const {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  return bytes_;
 }
 
 GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options,

@@ -21,6 +21,9 @@
 #include <cstdint>
 #include <limits>
 #include <filesystem>
+#include <memory>
+#include <mutex>
+#include <unordered_map>
 #include <vector>
 
 #include <glm/vec3.hpp>
@@ -209,6 +212,39 @@ GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions
 // (atlas/mesh/layout_refine.h) never changes, so a refinement loop computes them once.
 std::vector<glm::dvec3> layoutVertexNormals(const ChartLayout& layout);
 
+// Patch parameterizations kept from one resampling of a layout to the next, so that a patch
+// resampled at another chart size, its triangles and sides unchanged (patchParamAlike), is
+// parameterized once. A patch's parameterization depends on nothing else but the options (the
+// quad layout's paired polygon), which one cache is used with throughout, so its charts are bit
+// for bit those of a fresh parameterization. Holds at most maxBytes of parameterizations (a put
+// past it is dropped); find and put may run on several threads at once.
+class ParamCache {
+ public:
+  explicit ParamCache(uint64_t maxBytes) : maxBytes_(maxBytes) {}
+  // Patch p's parameterization if one was put for a patch alike; null otherwise.
+  std::shared_ptr<const PatchParameterization> find(const Patch& patch, uint32_t p) const;
+  // Keeps pp as patch p's parameterization, in place of any earlier one of p.
+  void put(const Patch& patch, uint32_t p, std::shared_ptr<const PatchParameterization> pp);
+  uint64_t hits() const { return hits_; }
+  uint64_t bytes() const;
+
+ private:
+  struct Entry {
+    Patch patch;
+    std::shared_ptr<const PatchParameterization> pp;
+    uint64_t bytes = 0;
+  };
+  mutable std::mutex mutex_;
+  std::unordered_map<uint32_t, Entry> entries_;
+  uint64_t bytes_ = 0;
+  const uint64_t maxBytes_;
+  mutable std::atomic<uint64_t> hits_{0};
+};
+
+// Whether two versions of a patch parameterize identically: the same triangles in the same order,
+// and the same sides (vertex runs, and which are open).
+bool patchParamAlike(const Patch& a, const Patch& b);
+
 // What a resampling of a refined layout may take from earlier resamplings of the same surface.
 struct ResampleReuse {
   const std::vector<glm::dvec3>* normals = nullptr;  // layoutVertexNormals(layout), if known
@@ -226,6 +262,8 @@ struct ResampleReuse {
   // If set (one flag per patch), only the flagged patches are resampled; the others' charts
   // keep no samples and default quality, so the set's figures are those of the flagged patches.
   const std::vector<uint8_t>* only = nullptr;
+  // If set, parameterizations are taken from it where a patch is alike, and put there.
+  ParamCache* params = nullptr;
 };
 
 // Whether two versions of the patch at index p of a layout sample identically (see

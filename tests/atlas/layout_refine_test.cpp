@@ -405,6 +405,50 @@ TEST(PatchSplit, FlipRepairDoesNotDependOnTheThreadCount) {
   expectSameCharts(setOne, setMany);
 }
 
+// A patch's parameterization, kept in a ParamCache, serves its resampling at another size: the
+// charts are bit for bit a fresh resampling's, and a patch that changed is parameterized anew.
+TEST(ResampleReuse, CachedParameterizationsGiveTheSameChartsAtEverySize) {
+  ChartLayout layout = test::cubeLayout(8, true);
+  ResampleOptions ro;
+  ro.chartSize = 17;
+  ParamCache cache(uint64_t(1) << 30);
+  ResampleReuse reuse;
+  reuse.params = &cache;
+  const GeometryImageSet first = resampleLayout(layout, ro, reuse);
+  expectSameCharts(first, resampleLayout(layout, ro));
+  EXPECT_EQ(cache.hits(), 0u);
+  ASSERT_GT(cache.bytes(), 0u);
+  ro.chartSize = 33;
+  const GeometryImageSet doubled = resampleLayout(layout, ro, reuse);
+  EXPECT_EQ(cache.hits(), layout.patches.size());
+  expectSameCharts(doubled, resampleLayout(layout, ro));
+
+  // A cut changes some patches: only the unchanged ones are taken from the cache.
+  const std::vector<Patch> before = layout.patches;
+  ASSERT_TRUE(splitPatchAtCorners(layout, 0, 0, 2));
+  uint64_t alike = 0;
+  for (uint32_t p = 0; p < before.size(); ++p) alike += patchParamAlike(before[p], layout.patches[p]);
+  ASSERT_LT(alike, before.size());
+  const uint64_t hitsBefore = cache.hits();
+  expectSameCharts(resampleLayout(layout, ro, reuse), resampleLayout(layout, ro));
+  EXPECT_EQ(cache.hits() - hitsBefore, alike);
+
+  // A side that opens changes the parameterization (its vertices slide), so the patch is not alike.
+  Patch opened = layout.patches[1];
+  opened.sides[0].neighbourPatch = -1;
+  EXPECT_FALSE(patchParamAlike(opened, layout.patches[1]));
+  EXPECT_EQ(cache.find(opened, 1), nullptr);
+  EXPECT_NE(cache.find(layout.patches[1], 1), nullptr);
+
+  // Past its bytes, the cache keeps nothing more, and the charts are the same.
+  ParamCache tiny(1);
+  ResampleReuse small;
+  small.params = &tiny;
+  expectSameCharts(resampleLayout(layout, ro, small), resampleLayout(layout, ro));
+  EXPECT_EQ(tiny.bytes(), 0u);
+  EXPECT_EQ(tiny.find(layout.patches[1], 1), nullptr);
+}
+
 TEST(ResampleReuse, ReusedPatchesAreBitIdenticalAndOnlyChangedOnesAreRedone) {
   ChartLayout layout = test::cubeLayout(8, true);
   ResampleOptions ro;
