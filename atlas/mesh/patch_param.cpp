@@ -333,6 +333,21 @@ double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv,
   return e;
 }
 
+// ringEnergy without the gradient, from the triangles' Gram matrices.
+double ringEnergyFast(const LocalPatch& lp, const std::vector<glm::dvec2>& uv, const std::vector<uint32_t>& ring,
+                      uint32_t v, const glm::dvec2& at, const std::vector<TriangleGram>& grams, double k2) {
+  double e = 0.0;
+  for (uint32_t t : ring) {
+    const auto& tri = lp.triangles[t];
+    const glm::dvec2 p0 = tri[0] == v ? at : uv[tri[0]];
+    const glm::dvec2 p1 = tri[1] == v ? at : uv[tri[1]];
+    const glm::dvec2 p2 = tri[2] == v ? at : uv[tri[2]];
+    e += gramStretchEnergy(grams[t], p0, p1, p2, k2);
+    if (!std::isfinite(e)) return std::numeric_limits<double>::infinity();
+  }
+  return e;
+}
+
 // Sander et al. 2001 style: per interior vertex, a line search along the negative gradient of the
 // ring's stretch energy (symmetric Dirichlet or L2), never accepting a step that flips a triangle. Gauss-Seidel sweeps
 // until the total energy stops dropping. Returns the sweeps run.
@@ -341,10 +356,11 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
                                 bool symmetric, std::vector<glm::dvec2>& uv) {
   std::vector<std::vector<uint32_t>> rings(lp.vertices.size());
   std::vector<double> area3D(lp.triangles.size());
+  std::vector<TriangleGram> grams(lp.triangles.size());
   for (uint32_t t = 0; t < lp.triangles.size(); ++t) {
     const auto& tri = lp.triangles[t];
-    area3D[t] = 0.5 * glm::length(glm::cross(lp.xyz[tri[1]] - lp.xyz[tri[0]],
-                                             lp.xyz[tri[2]] - lp.xyz[tri[0]]));
+    grams[t] = triangleGram(lp.xyz[tri[0]], lp.xyz[tri[1]], lp.xyz[tri[2]]);
+    area3D[t] = grams[t].area3D;
     for (uint32_t v : tri) rings[v].push_back(t);
   }
   // k^2 scales 3D lengths to the domain's (parameter area over surface area), for the symmetric
@@ -363,7 +379,9 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
       const std::vector<uint32_t>& ring = rings[v];
       const glm::dvec2 p = uv[v];
       glm::dvec2 g(0.0);
-      const double e0 = ringEnergy(lp, uv, ring, v, p, area3D, k2, &g);
+      ringEnergy(lp, uv, ring, v, p, area3D, k2, &g);
+      // The energies the line search compares are all of one formula (the Gram form).
+      const double e0 = ringEnergyFast(lp, uv, ring, v, p, grams, k2);
       if (slides) g = glm::dot(g, slide[v]) * slide[v];  // along its polygon edge only
       if (!std::isfinite(e0)) continue;  // a flipped start: leave it to the counts
       before += e0;
@@ -378,7 +396,7 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
         const glm::dvec2 d = -g / gl;
         for (double step = 0.25 * scale; step > 1e-4 * scale; step *= 0.5) {
           const glm::dvec2 q = p + d * step;
-          const double e = ringEnergy(lp, uv, ring, v, q, area3D, k2);
+          const double e = ringEnergyFast(lp, uv, ring, v, q, grams, k2);
           if (e < best) {
             best = e;
             uv[v] = q;
@@ -439,6 +457,30 @@ double triangleStretchEnergy(const glm::dvec2 p[3], const glm::dvec3 q[3], doubl
     *gradient = area3D * glm::dvec2(glm::dot(ss, ssx) + glm::dot(st, stx), glm::dot(ss, ssy) + glm::dot(st, sty));
   }
   return area3D * 0.5 * (glm::dot(ss, ss) + glm::dot(st, st));
+}
+
+TriangleGram triangleGram(const glm::dvec3& q0, const glm::dvec3& q1, const glm::dvec3& q2) {
+  const glm::dvec3 e1 = q1 - q0, e2 = q2 - q0;
+  const double cross = glm::length(glm::cross(e1, e2));
+  return {glm::dot(e1, e1), glm::dot(e1, e2), glm::dot(e2, e2), cross * cross, 0.5 * cross};
+}
+
+// With d1, d2 the parameter edges and T = det [d1 d2], the metric's
+// tr M = (g11 |d2|^2 - 2 g12 d1.d2 + g22 |d1|^2) / T^2 and det M = det G / T^2.
+double gramStretchEnergy(const TriangleGram& g, const glm::dvec2& p0, const glm::dvec2& p1, const glm::dvec2& p2,
+                         double k2) {
+  const glm::dvec2 d1 = p1 - p0, d2 = p2 - p0;
+  const double l1 = glm::dot(d1, d1), l2 = glm::dot(d2, d2);
+  const double twice = d1.x * d2.y - d2.x * d1.y;
+  if (!(twice > 1e-14 * (l1 + l2))) return std::numeric_limits<double>::infinity();
+  const double t2 = twice * twice;
+  const double tr = (g.g11 * l2 - 2.0 * g.g12 * glm::dot(d1, d2) + g.g22 * l1) / t2;
+  if (k2 > 0.0) {
+    const double det = k2 * k2 * g.det / t2;
+    if (!(det > 0.0)) return std::numeric_limits<double>::infinity();
+    return g.area3D * (k2 * tr + k2 * tr / det);
+  }
+  return g.area3D * 0.5 * tr;
 }
 
 glm::dvec2 polygonCorner(uint32_t n, uint32_t i) {

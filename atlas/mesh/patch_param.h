@@ -17,6 +17,7 @@
 #include <vector>
 
 #include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
 
 #include "atlas/mesh/chart_layout.h"
 
@@ -95,6 +96,21 @@ struct PatchParameterization {
 // derivative with respect to p[moving] (exact, not differenced).
 double triangleStretchEnergy(const glm::dvec2 p[3], const glm::dvec3 q[3], double area3D, double k2,
                              int moving = 0, glm::dvec2* gradient = nullptr);
+
+// A triangle's 3D edges from its first vertex, e1 = q1 - q0 and e2 = q2 - q0, as their Gram
+// matrix G: all the stretch energy needs of them (the map's metric is P^-T G P^-1, P the
+// parameter edges).
+struct TriangleGram {
+  double g11 = 0.0, g12 = 0.0, g22 = 0.0;  // e1.e1, e1.e2, e2.e2
+  double det = 0.0;                        // det G = |e1 x e2|^2
+  double area3D = 0.0;                     // |e1 x e2| / 2
+};
+TriangleGram triangleGram(const glm::dvec3& q0, const glm::dvec3& q1, const glm::dvec3& q2);
+
+// triangleStretchEnergy(p, q, area3D(q), k2) from q's Gram matrix, without the gradient: the
+// same energy up to rounding in about a fifth of the arithmetic (the local sweeps' line search).
+double gramStretchEnergy(const TriangleGram& g, const glm::dvec2& p0, const glm::dvec2& p1, const glm::dvec2& p2,
+                         double k2);
 
 // Corner i of the regular n-gon domain.
 glm::dvec2 polygonCorner(uint32_t n, uint32_t i);

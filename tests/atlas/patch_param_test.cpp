@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <numbers>
+#include <random>
 #include <stdexcept>
 
 #include "atlas/mesh/patch_param.h"
@@ -87,6 +88,39 @@ TEST(PatchParam, TriangleEnergyGradientMatchesDifferences) {
   // A flipped triangle has no finite energy.
   const glm::dvec2 flipped[3] = {{0.0, 0.0}, {0.0, 1.0}, {1.0, 0.0}};
   EXPECT_TRUE(std::isinf(triangleStretchEnergy(flipped, q, area, 0.37)));
+}
+
+TEST(PatchParam, GramEnergyEqualsTheTriangleEnergy) {
+  // The line search's energy from the 3D edges' Gram matrix must be the triangle energy, for both
+  // energies, on random triangles in 3D and in the plane (slivers included), and infinite where
+  // the parameter triangle is flipped or flat.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 400; ++trial) {
+    const glm::dvec3 q[3] = {{u(rng), u(rng), u(rng)}, {u(rng), u(rng), u(rng)},
+                             {u(rng), u(rng), trial % 4 == 0 ? 0.0 : u(rng)}};
+    glm::dvec2 p[3] = {{u(rng), u(rng)}, {u(rng), u(rng)}, {u(rng), u(rng)}};
+    if (trial % 7 == 0) p[2] = p[0] + 1e-3 * (p[1] - p[0]) + glm::dvec2(1e-4 * u(rng), 1e-4 * u(rng));  // a sliver
+    const TriangleGram g = triangleGram(q[0], q[1], q[2]);
+    const double area = 0.5 * glm::length(glm::cross(q[1] - q[0], q[2] - q[0]));
+    EXPECT_NEAR(g.area3D, area, 1e-12 * std::max(1.0, area));
+    for (const double k2 : {0.0, 0.37, 2.5}) {
+      const double reference = triangleStretchEnergy(p, q, area, k2);
+      const double gram = gramStretchEnergy(g, p[0], p[1], p[2], k2);
+      if (std::isinf(reference)) {
+        EXPECT_TRUE(std::isinf(gram)) << "trial " << trial << " k2 " << k2;
+      } else {
+        EXPECT_NEAR(gram, reference, 1e-8 * std::abs(reference)) << "trial " << trial << " k2 " << k2;
+      }
+    }
+  }
+  const glm::dvec3 q0(0.0), q1(1.0, 0.0, 0.0), q2(0.0, 1.0, 0.0);
+  const TriangleGram g = triangleGram(q0, q1, q2);
+  // An isometry: symmetric Dirichlet 4 (k2 = 1) and L2 1, times the area.
+  EXPECT_NEAR(gramStretchEnergy(g, {0, 0}, {1, 0}, {0, 1}, 1.0), 4.0 * 0.5, 1e-12);
+  EXPECT_NEAR(gramStretchEnergy(g, {0, 0}, {1, 0}, {0, 1}, 0.0), 1.0 * 0.5, 1e-12);
+  EXPECT_TRUE(std::isinf(gramStretchEnergy(g, {0, 0}, {0, 1}, {1, 0}, 1.0)));
+  EXPECT_TRUE(std::isinf(gramStretchEnergy(g, {0, 0}, {1, 0}, {2, 0}, 0.0)));
 }
 
 TEST(PatchParam, MeasureStretchOfKnownMaps) {
