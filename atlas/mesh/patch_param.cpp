@@ -307,43 +307,25 @@ std::vector<double> vertexStretch(const LocalPatch& lp, const std::vector<glm::d
   return sigma;
 }
 
-// The stretch energy (triangleStretchEnergy) of the triangles around vertex v with v at `at`;
+
+// The stretch energy of the triangles around vertex v with v at `at`, from their Gram matrices;
 // infinite if a parameter triangle would flip or collapse (Sander's barrier). With `gradient`,
 // also its exact derivative there.
-double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv,
-                  const std::vector<uint32_t>& ring, uint32_t v, const glm::dvec2& at,
-                  const std::vector<double>& area3D, double k2, glm::dvec2* gradient = nullptr) {
+double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv, const std::vector<uint32_t>& ring,
+                  uint32_t v, const glm::dvec2& at, const std::vector<TriangleGram>& grams, double k2,
+                  glm::dvec2* gradient = nullptr) {
   double e = 0.0;
   if (gradient) *gradient = glm::dvec2(0.0);
   for (uint32_t t : ring) {
     const auto& tri = lp.triangles[t];
-    glm::dvec2 p[3];
-    glm::dvec3 q[3];
-    int moving = 0;
-    for (int c = 0; c < 3; ++c) {
-      p[c] = tri[c] == v ? at : uv[tri[c]];
-      if (tri[c] == v) moving = c;
-      q[c] = lp.xyz[tri[c]];
-    }
+    const int moving = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
+    const glm::dvec2 p0 = moving == 0 ? at : uv[tri[0]];
+    const glm::dvec2 p1 = moving == 1 ? at : uv[tri[1]];
+    const glm::dvec2 p2 = moving == 2 ? at : uv[tri[2]];
     glm::dvec2 g(0.0);
-    e += triangleStretchEnergy(p, q, area3D[t], k2, moving, gradient ? &g : nullptr);
+    e += gramStretchEnergy(grams[t], p0, p1, p2, k2, moving, gradient ? &g : nullptr);
     if (!std::isfinite(e)) return std::numeric_limits<double>::infinity();
     if (gradient) *gradient += g;
-  }
-  return e;
-}
-
-// ringEnergy without the gradient, from the triangles' Gram matrices.
-double ringEnergyFast(const LocalPatch& lp, const std::vector<glm::dvec2>& uv, const std::vector<uint32_t>& ring,
-                      uint32_t v, const glm::dvec2& at, const std::vector<TriangleGram>& grams, double k2) {
-  double e = 0.0;
-  for (uint32_t t : ring) {
-    const auto& tri = lp.triangles[t];
-    const glm::dvec2 p0 = tri[0] == v ? at : uv[tri[0]];
-    const glm::dvec2 p1 = tri[1] == v ? at : uv[tri[1]];
-    const glm::dvec2 p2 = tri[2] == v ? at : uv[tri[2]];
-    e += gramStretchEnergy(grams[t], p0, p1, p2, k2);
-    if (!std::isfinite(e)) return std::numeric_limits<double>::infinity();
   }
   return e;
 }
@@ -355,12 +337,10 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
                                 const std::vector<glm::dvec2>& slide, uint32_t maxSweeps,
                                 bool symmetric, std::vector<glm::dvec2>& uv) {
   std::vector<std::vector<uint32_t>> rings(lp.vertices.size());
-  std::vector<double> area3D(lp.triangles.size());
   std::vector<TriangleGram> grams(lp.triangles.size());
   for (uint32_t t = 0; t < lp.triangles.size(); ++t) {
     const auto& tri = lp.triangles[t];
     grams[t] = triangleGram(lp.xyz[tri[0]], lp.xyz[tri[1]], lp.xyz[tri[2]]);
-    area3D[t] = grams[t].area3D;
     for (uint32_t v : tri) rings[v].push_back(t);
   }
   // k^2 scales 3D lengths to the domain's (parameter area over surface area), for the symmetric
@@ -379,9 +359,7 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
       const std::vector<uint32_t>& ring = rings[v];
       const glm::dvec2 p = uv[v];
       glm::dvec2 g(0.0);
-      ringEnergy(lp, uv, ring, v, p, area3D, k2, &g);
-      // The energies the line search compares are all of one formula (the Gram form).
-      const double e0 = ringEnergyFast(lp, uv, ring, v, p, grams, k2);
+      const double e0 = ringEnergy(lp, uv, ring, v, p, grams, k2, &g);
       if (slides) g = glm::dot(g, slide[v]) * slide[v];  // along its polygon edge only
       if (!std::isfinite(e0)) continue;  // a flipped start: leave it to the counts
       before += e0;
@@ -396,7 +374,7 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
         const glm::dvec2 d = -g / gl;
         for (double step = 0.25 * scale; step > 1e-4 * scale; step *= 0.5) {
           const glm::dvec2 q = p + d * step;
-          const double e = ringEnergyFast(lp, uv, ring, v, q, grams, k2);
+          const double e = ringEnergy(lp, uv, ring, v, q, grams, k2);
           if (e < best) {
             best = e;
             uv[v] = q;
@@ -468,18 +446,27 @@ TriangleGram triangleGram(const glm::dvec3& q0, const glm::dvec3& q1, const glm:
 // With d1, d2 the parameter edges and T = det [d1 d2], the metric's
 // tr M = (g11 |d2|^2 - 2 g12 d1.d2 + g22 |d1|^2) / T^2 and det M = det G / T^2.
 double gramStretchEnergy(const TriangleGram& g, const glm::dvec2& p0, const glm::dvec2& p1, const glm::dvec2& p2,
-                         double k2) {
+                         double k2, int moving, glm::dvec2* gradient) {
   const glm::dvec2 d1 = p1 - p0, d2 = p2 - p0;
-  const double l1 = glm::dot(d1, d1), l2 = glm::dot(d2, d2);
+  const double l1 = glm::dot(d1, d1), l2 = glm::dot(d2, d2), d12 = glm::dot(d1, d2);
   const double twice = d1.x * d2.y - d2.x * d1.y;
   if (!(twice > 1e-14 * (l1 + l2))) return std::numeric_limits<double>::infinity();
   const double t2 = twice * twice;
-  const double tr = (g.g11 * l2 - 2.0 * g.g12 * glm::dot(d1, d2) + g.g22 * l1) / t2;
-  if (k2 > 0.0) {
-    const double det = k2 * k2 * g.det / t2;
-    if (!(det > 0.0)) return std::numeric_limits<double>::infinity();
-    return g.area3D * (k2 * tr + k2 * tr / det);
+  // N = T^2 tr M; the symmetric energy is area (k2 N / T^2 + N / (k2 det G)), L2 area N / (2 T^2).
+  const double n = g.g11 * l2 - 2.0 * g.g12 * d12 + g.g22 * l1;
+  const double tr = n / t2;
+  if (k2 > 0.0 && !(k2 * k2 * g.det / t2 > 0.0)) return std::numeric_limits<double>::infinity();
+  if (gradient) {
+    // d N and d T along d1 and d2; the moving corner's derivative is the one of its edge (corner 0
+    // moves both edges, backwards).
+    const glm::dvec2 dn1 = 2.0 * (g.g22 * d1 - g.g12 * d2), dn2 = 2.0 * (g.g11 * d2 - g.g12 * d1);
+    const glm::dvec2 dt1(d2.y, -d2.x), dt2(-d1.y, d1.x);
+    const glm::dvec2 dn = moving == 1 ? dn1 : moving == 2 ? dn2 : -(dn1 + dn2);
+    const glm::dvec2 dt = moving == 1 ? dt1 : moving == 2 ? dt2 : -(dt1 + dt2);
+    const glm::dvec2 dtr = dn / t2 - 2.0 * n * dt / (t2 * twice);
+    *gradient = k2 > 0.0 ? g.area3D * (k2 * dtr + dn / (k2 * g.det)) : g.area3D * 0.5 * dtr;
   }
+  if (k2 > 0.0) return g.area3D * (k2 * tr + n / (k2 * g.det));
   return g.area3D * 0.5 * tr;
 }
 

@@ -107,10 +107,10 @@ struct TriangleGram {
 };
 TriangleGram triangleGram(const glm::dvec3& q0, const glm::dvec3& q1, const glm::dvec3& q2);
 
-// triangleStretchEnergy(p, q, area3D(q), k2) from q's Gram matrix, without the gradient: the
-// same energy up to rounding in about a fifth of the arithmetic (the local sweeps' line search).
+// triangleStretchEnergy(p, q, area3D(q), k2, moving, gradient) from q's Gram matrix: the same
+// energy and gradient up to rounding in about a fifth of the arithmetic (the local sweeps).
 double gramStretchEnergy(const TriangleGram& g, const glm::dvec2& p0, const glm::dvec2& p1, const glm::dvec2& p2,
-                         double k2);
+                         double k2, int moving = 0, glm::dvec2* gradient = nullptr);
 
 // Corner i of the regular n-gon domain.
 glm::dvec2 polygonCorner(uint32_t n, uint32_t i);

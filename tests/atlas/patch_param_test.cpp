@@ -91,9 +91,9 @@ TEST(PatchParam, TriangleEnergyGradientMatchesDifferences) {
 }
 
 TEST(PatchParam, GramEnergyEqualsTheTriangleEnergy) {
-  // The line search's energy from the 3D edges' Gram matrix must be the triangle energy, for both
-  // energies, on random triangles in 3D and in the plane (slivers included), and infinite where
-  // the parameter triangle is flipped or flat.
+  // The local sweeps' energy and gradient from the 3D edges' Gram matrix must be the triangle
+  // energy's, for both energies, on random triangles in 3D and in the plane (slivers included),
+  // and infinite where the parameter triangle is flipped or flat.
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (int trial = 0; trial < 400; ++trial) {
@@ -109,8 +109,17 @@ TEST(PatchParam, GramEnergyEqualsTheTriangleEnergy) {
       const double gram = gramStretchEnergy(g, p[0], p[1], p[2], k2);
       if (std::isinf(reference)) {
         EXPECT_TRUE(std::isinf(gram)) << "trial " << trial << " k2 " << k2;
-      } else {
-        EXPECT_NEAR(gram, reference, 1e-8 * std::abs(reference)) << "trial " << trial << " k2 " << k2;
+        continue;
+      }
+      EXPECT_NEAR(gram, reference, 1e-8 * std::abs(reference)) << "trial " << trial << " k2 " << k2;
+      // And the gradient, whichever corner moves.
+      for (int moving = 0; moving < 3; ++moving) {
+        glm::dvec2 want, got;
+        triangleStretchEnergy(p, q, area, k2, moving, &want);
+        EXPECT_EQ(gramStretchEnergy(g, p[0], p[1], p[2], k2, moving, &got), gram);
+        const double scale = std::max(1e-12, glm::length(want));
+        EXPECT_NEAR(got.x, want.x, 1e-7 * scale) << "trial " << trial << " k2 " << k2 << " corner " << moving;
+        EXPECT_NEAR(got.y, want.y, 1e-7 * scale) << "trial " << trial << " k2 " << k2 << " corner " << moving;
       }
     }
   }
