@@ -260,10 +260,13 @@ class InteriorSolver {
       // takes about half the time.
       Eigen::AMDOrdering<int> amd;
       amd(a, order_);
-      lu_.analyzePattern(Eigen::SparseMatrix<double>(order_.transpose() * a * order_));
+    }
+    const Eigen::SparseMatrix<double> ordered = order_.transpose() * a * order_;
+    if (!analyzed_) {
+      lu_.analyzePattern(ordered);
       analyzed_ = true;
     }
-    lu_.factorize(Eigen::SparseMatrix<double>(order_.transpose() * a * order_));
+    lu_.factorize(ordered);
     if (lu_.info() != Eigen::Success) return false;
     const Eigen::MatrixXd x = order_ * lu_.solve(Eigen::MatrixXd(order_.transpose() * rhs));
     if (lu_.info() != Eigen::Success || !x.allFinite()) return false;
@@ -306,7 +309,6 @@ std::vector<double> vertexStretch(const LocalPatch& lp, const std::vector<glm::d
   for (double& s : sigma) s = s > 0.0 && mean > 0.0 ? s / mean : 1.0;
   return sigma;
 }
-
 
 // The stretch energy of the triangles around vertex v with v at `at`, from their Gram matrices;
 // infinite if a parameter triangle would flip or collapse (Sander's barrier). With `gradient`,
@@ -393,49 +395,6 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
 }
 
 }  // namespace
-
-double triangleStretchEnergy(const glm::dvec2 p[3], const glm::dvec3 q[3], double area3D, double k2,
-                             int moving, glm::dvec2* gradient) {
-  const double inf = std::numeric_limits<double>::infinity();
-  const glm::dvec2 e1 = p[1] - p[0], e2 = p[2] - p[0];
-  const double twice = e1.x * e2.y - e2.x * e1.y;
-  if (!(twice > 1e-14 * (glm::dot(e1, e1) + glm::dot(e2, e2)))) return inf;
-  // J = [ss st]: ss = sum q_i (y_{i+1} - y_{i+2}) / T, st = sum q_i (x_{i+2} - x_{i+1}) / T,
-  // T = twice the parameter area.
-  const glm::dvec3 ss = (q[0] * (p[1].y - p[2].y) + q[1] * (p[2].y - p[0].y) + q[2] * (p[0].y - p[1].y)) / twice;
-  const glm::dvec3 st = (q[0] * (p[2].x - p[1].x) + q[1] * (p[0].x - p[2].x) + q[2] * (p[1].x - p[0].x)) / twice;
-  // Derivatives of ss and st with respect to the moving point's x and y.
-  glm::dvec3 ssx(0.0), ssy(0.0), stx(0.0), sty(0.0);
-  if (gradient) {
-    const int n1 = (moving + 1) % 3, n2 = (moving + 2) % 3;
-    const double tx = p[n1].y - p[n2].y, ty = p[n2].x - p[n1].x;  // dT/dx, dT/dy
-    ssx = -ss * (tx / twice);
-    ssy = (q[n2] - q[n1]) / twice - ss * (ty / twice);
-    stx = (q[n1] - q[n2]) / twice - st * (tx / twice);
-    sty = -st * (ty / twice);
-  }
-  if (k2 > 0.0) {
-    // Symmetric Dirichlet: tr(M) + tr(M^-1) of the scaled metric M = k^2 J^T J, which grows
-    // without bound as a triangle is squeezed or spread in any direction (isometry: 4).
-    const double a = glm::dot(ss, ss) * k2, b = glm::dot(ss, st) * k2, cc = glm::dot(st, st) * k2;
-    const double det = a * cc - b * b;
-    if (!(det > 0.0)) return inf;
-    if (gradient) {
-      auto d = [&](const glm::dvec3& sd, const glm::dvec3& td) {
-        const double da = 2.0 * k2 * glm::dot(ss, sd), dc = 2.0 * k2 * glm::dot(st, td);
-        const double db = k2 * (glm::dot(sd, st) + glm::dot(ss, td));
-        const double ddet = da * cc + a * dc - 2.0 * b * db;
-        return area3D * ((da + dc) * (1.0 + 1.0 / det) - (a + cc) * ddet / (det * det));
-      };
-      *gradient = glm::dvec2(d(ssx, stx), d(ssy, sty));
-    }
-    return area3D * ((a + cc) + (a + cc) / det);
-  }
-  if (gradient) {
-    *gradient = area3D * glm::dvec2(glm::dot(ss, ssx) + glm::dot(st, stx), glm::dot(ss, ssy) + glm::dot(st, sty));
-  }
-  return area3D * 0.5 * (glm::dot(ss, ss) + glm::dot(st, st));
-}
 
 TriangleGram triangleGram(const glm::dvec3& q0, const glm::dvec3& q1, const glm::dvec3& q2) {
   const glm::dvec3 e1 = q1 - q0, e2 = q2 - q0;

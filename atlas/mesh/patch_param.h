@@ -88,15 +88,6 @@ struct PatchParameterization {
   uint32_t sweepsUsed = 0;                            // local optimization sweeps run
 };
 
-// The stretch energy of one triangle with parameter points p[0..2] and surface points q[0..2]
-// (area3D its surface area), as the local sweeps minimize it: with k2 > 0 the symmetric
-// Dirichlet energy area3D * (tr M + tr M^-1) of the scaled metric M = k2 J^T J (J the map's
-// Jacobian), else Sander's L2 energy area3D * (|J_s|^2 + |J_t|^2) / 2. Infinite for a triangle
-// flipped or squeezed flat in the parameter plane. If gradient is given, it receives the
-// derivative with respect to p[moving] (exact, not differenced).
-double triangleStretchEnergy(const glm::dvec2 p[3], const glm::dvec3 q[3], double area3D, double k2,
-                             int moving = 0, glm::dvec2* gradient = nullptr);
-
 // A triangle's 3D edges from its first vertex, e1 = q1 - q0 and e2 = q2 - q0, as their Gram
 // matrix G: all the stretch energy needs of them (the map's metric is P^-T G P^-1, P the
 // parameter edges).
@@ -107,8 +98,13 @@ struct TriangleGram {
 };
 TriangleGram triangleGram(const glm::dvec3& q0, const glm::dvec3& q1, const glm::dvec3& q2);
 
-// triangleStretchEnergy(p, q, area3D(q), k2, moving, gradient) from q's Gram matrix: the same
-// energy and gradient up to rounding in about a fifth of the arithmetic (the local sweeps).
+// The stretch energy of one triangle with parameter points p0..p2 and surface points q0..q2 (g
+// their Gram matrix), as the local sweeps minimize it: with k2 > 0 the symmetric Dirichlet energy
+// area3D * (tr M + tr M^-1) of the scaled metric M = k2 J^T J (J the map's Jacobian), else
+// Sander's L2 energy area3D * (|J_s|^2 + |J_t|^2) / 2. Infinite for a triangle flipped or
+// squeezed flat in the parameter plane. If gradient is given, it receives the derivative with
+// respect to corner `moving` (exact, not differenced). From G alone it takes about a fifth of the
+// arithmetic of the Jacobian's 3D columns.
 double gramStretchEnergy(const TriangleGram& g, const glm::dvec2& p0, const glm::dvec2& p1, const glm::dvec2& p2,
                          double k2, int moving = 0, glm::dvec2* gradient = nullptr);
 

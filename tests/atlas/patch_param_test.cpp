@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numbers>
 #include <random>
 #include <stdexcept>
@@ -21,6 +22,51 @@ namespace {
 double leftOf(const std::vector<glm::dvec2>& corners, uint32_t i, const glm::dvec2& p) {
   const glm::dvec2 a = corners[i], b = corners[(i + 1) % corners.size()];
   return (b.x - a.x) * (p.y - a.y) - (b.y - a.y) * (p.x - a.x);
+}
+
+// The stretch energy computed another way, as the reference for gramStretchEnergy: from the map's
+// Jacobian J = [ss st], its columns in 3D, with the gradient from their derivatives.
+double jacobianStretchEnergy(const glm::dvec2 p[3], const glm::dvec3 q[3], double area3D, double k2,
+                             int moving = 0, glm::dvec2* gradient = nullptr) {
+  const double inf = std::numeric_limits<double>::infinity();
+  const glm::dvec2 e1 = p[1] - p[0], e2 = p[2] - p[0];
+  const double twice = e1.x * e2.y - e2.x * e1.y;
+  if (!(twice > 1e-14 * (glm::dot(e1, e1) + glm::dot(e2, e2)))) return inf;
+  // J = [ss st]: ss = sum q_i (y_{i+1} - y_{i+2}) / T, st = sum q_i (x_{i+2} - x_{i+1}) / T,
+  // T = twice the parameter area.
+  const glm::dvec3 ss = (q[0] * (p[1].y - p[2].y) + q[1] * (p[2].y - p[0].y) + q[2] * (p[0].y - p[1].y)) / twice;
+  const glm::dvec3 st = (q[0] * (p[2].x - p[1].x) + q[1] * (p[0].x - p[2].x) + q[2] * (p[1].x - p[0].x)) / twice;
+  // Derivatives of ss and st with respect to the moving point's x and y.
+  glm::dvec3 ssx(0.0), ssy(0.0), stx(0.0), sty(0.0);
+  if (gradient) {
+    const int n1 = (moving + 1) % 3, n2 = (moving + 2) % 3;
+    const double tx = p[n1].y - p[n2].y, ty = p[n2].x - p[n1].x;  // dT/dx, dT/dy
+    ssx = -ss * (tx / twice);
+    ssy = (q[n2] - q[n1]) / twice - ss * (ty / twice);
+    stx = (q[n1] - q[n2]) / twice - st * (tx / twice);
+    sty = -st * (ty / twice);
+  }
+  if (k2 > 0.0) {
+    // Symmetric Dirichlet: tr(M) + tr(M^-1) of the scaled metric M = k^2 J^T J, which grows
+    // without bound as a triangle is squeezed or spread in any direction (isometry: 4).
+    const double a = glm::dot(ss, ss) * k2, b = glm::dot(ss, st) * k2, cc = glm::dot(st, st) * k2;
+    const double det = a * cc - b * b;
+    if (!(det > 0.0)) return inf;
+    if (gradient) {
+      auto d = [&](const glm::dvec3& sd, const glm::dvec3& td) {
+        const double da = 2.0 * k2 * glm::dot(ss, sd), dc = 2.0 * k2 * glm::dot(st, td);
+        const double db = k2 * (glm::dot(sd, st) + glm::dot(ss, td));
+        const double ddet = da * cc + a * dc - 2.0 * b * db;
+        return area3D * ((da + dc) * (1.0 + 1.0 / det) - (a + cc) * ddet / (det * det));
+      };
+      *gradient = glm::dvec2(d(ssx, stx), d(ssy, sty));
+    }
+    return area3D * ((a + cc) + (a + cc) / det);
+  }
+  if (gradient) {
+    *gradient = area3D * glm::dvec2(glm::dot(ss, ssx) + glm::dot(st, stx), glm::dot(ss, ssy) + glm::dot(st, sty));
+  }
+  return area3D * 0.5 * (glm::dot(ss, ss) + glm::dot(st, st));
 }
 
 TEST(PatchParam, DomainPolygonFollowsSideLengths) {
@@ -64,21 +110,24 @@ TEST(PatchParam, TriangleEnergyGradientMatchesDifferences) {
   // The local sweeps descend along the exact gradient: it must agree with central differences
   // of the energy, for both energies, whichever corner moves, on a skewed triangle in 3D.
   const glm::dvec3 q[3] = {{0.0, 0.0, 0.0}, {2.0, 0.3, 0.5}, {0.4, 1.5, -0.7}};
-  const double area = 0.5 * glm::length(glm::cross(q[1] - q[0], q[2] - q[0]));
+  const TriangleGram gram = triangleGram(q[0], q[1], q[2]);
+  auto energy = [&](const glm::dvec2 p[3], double k2, int moving = 0, glm::dvec2* g = nullptr) {
+    return gramStretchEnergy(gram, p[0], p[1], p[2], k2, moving, g);
+  };
   for (const double k2 : {0.0, 0.37}) {
     for (int moving = 0; moving < 3; ++moving) {
       glm::dvec2 p[3] = {{0.1, 0.05}, {0.9, 0.2}, {0.3, 0.8}};
       glm::dvec2 g;
-      const double e = triangleStretchEnergy(p, q, area, k2, moving, &g);
+      const double e = energy(p, k2, moving, &g);
       ASSERT_TRUE(std::isfinite(e));
-      EXPECT_EQ(e, triangleStretchEnergy(p, q, area, k2));  // the gradient does not change it
+      EXPECT_EQ(e, energy(p, k2));  // the gradient does not change it
       const double h = 1e-6;
       glm::dvec2 fd;
       for (int axis = 0; axis < 2; ++axis) {
         glm::dvec2 plus[3] = {p[0], p[1], p[2]}, minus[3] = {p[0], p[1], p[2]};
         plus[moving][axis] += h;
         minus[moving][axis] -= h;
-        fd[axis] = (triangleStretchEnergy(plus, q, area, k2) - triangleStretchEnergy(minus, q, area, k2)) / (2 * h);
+        fd[axis] = (energy(plus, k2) - energy(minus, k2)) / (2 * h);
       }
       EXPECT_NEAR(g.x, fd.x, 1e-6 * std::max(1.0, std::abs(fd.x))) << "k2 " << k2 << " corner " << moving;
       EXPECT_NEAR(g.y, fd.y, 1e-6 * std::max(1.0, std::abs(fd.y))) << "k2 " << k2 << " corner " << moving;
@@ -87,12 +136,12 @@ TEST(PatchParam, TriangleEnergyGradientMatchesDifferences) {
   }
   // A flipped triangle has no finite energy.
   const glm::dvec2 flipped[3] = {{0.0, 0.0}, {0.0, 1.0}, {1.0, 0.0}};
-  EXPECT_TRUE(std::isinf(triangleStretchEnergy(flipped, q, area, 0.37)));
+  EXPECT_TRUE(std::isinf(energy(flipped, 0.37)));
 }
 
-TEST(PatchParam, GramEnergyEqualsTheTriangleEnergy) {
-  // The local sweeps' energy and gradient from the 3D edges' Gram matrix must be the triangle
-  // energy's, for both energies, on random triangles in 3D and in the plane (slivers included),
+TEST(PatchParam, GramEnergyEqualsTheJacobianEnergy) {
+  // The local sweeps' energy and gradient from the 3D edges' Gram matrix must be those of the
+  // map's Jacobian, for both energies, on random triangles in 3D and in the plane (slivers included),
   // and infinite where the parameter triangle is flipped or flat.
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -105,7 +154,7 @@ TEST(PatchParam, GramEnergyEqualsTheTriangleEnergy) {
     const double area = 0.5 * glm::length(glm::cross(q[1] - q[0], q[2] - q[0]));
     EXPECT_NEAR(g.area3D, area, 1e-12 * std::max(1.0, area));
     for (const double k2 : {0.0, 0.37, 2.5}) {
-      const double reference = triangleStretchEnergy(p, q, area, k2);
+      const double reference = jacobianStretchEnergy(p, q, area, k2);
       const double gram = gramStretchEnergy(g, p[0], p[1], p[2], k2);
       if (std::isinf(reference)) {
         EXPECT_TRUE(std::isinf(gram)) << "trial " << trial << " k2 " << k2;
@@ -115,7 +164,7 @@ TEST(PatchParam, GramEnergyEqualsTheTriangleEnergy) {
       // And the gradient, whichever corner moves.
       for (int moving = 0; moving < 3; ++moving) {
         glm::dvec2 want, got;
-        triangleStretchEnergy(p, q, area, k2, moving, &want);
+        jacobianStretchEnergy(p, q, area, k2, moving, &want);
         EXPECT_EQ(gramStretchEnergy(g, p[0], p[1], p[2], k2, moving, &got), gram);
         const double scale = std::max(1e-12, glm::length(want));
         EXPECT_NEAR(got.x, want.x, 1e-7 * scale) << "trial " << trial << " k2 " << k2 << " corner " << moving;
