@@ -99,6 +99,7 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"sizing_rounds", rs.sizeRounds},
                       {"patches_doubled", rs.patchesDoubled},
                       {"patches_by_size", rs.patchesBySize},
+                      {"patches_below_density_size", rs.patchesBelowDensitySize},
                       {"patches_over_bound_at_largest_size", rs.patchesAtLargestSize},
                       {"patches_over_bound_at_sample_cap", rs.patchesAtSampleCap},
                       {"patches_over_bound_at_lattice", rs.patchesAtLattice},

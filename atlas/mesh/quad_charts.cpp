@@ -41,6 +41,13 @@ uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads) {
   return intervals + 1;
 }
 
+uint32_t patchChartSizeForDensity(uint64_t triangles, uint64_t quads, uint32_t smallest, uint32_t largest) {
+  const double wanted = kSamplesPerTriangle * double(triangles);
+  uint32_t intervals = smallest - 1;
+  while (intervals + 1 < largest && double(std::max<uint64_t>(quads, 1)) * intervals * intervals < wanted) intervals *= 2;
+  return intervals + 1;
+}
+
 namespace {
 
 // The option's name as the options' front end spells it in messages.
@@ -352,6 +359,16 @@ struct PatchSizing {
   uint64_t cutWork = 0;  // layout triangles the cuts' trials parameterized
   // The patches' parameterizations, kept for their next resampling (a doubling) when they fit.
   std::unique_ptr<ParamCache> params;
+  // The smallest size a patch starts at, and the quad layout (for a patch's own start size).
+  uint32_t smallest = 0;
+  QuadLayout quads = QuadLayout::kSides;
+
+  // The size patch p starts at: its own density's, from `smallest` up to `base`.
+  uint32_t startSize(uint32_t p, uint32_t base) const {
+    const Patch& patch = layout.patches[p];
+    return patchChartSizeForDensity(patch.triangles.size(), patchQuadCount(uint32_t(patch.sides.size()), quads),
+                                    std::min(smallest ? smallest : base, base), base);
+  }
 
   // The worst sampling error of patch p's charts.
   double error(uint32_t p) const { return worstError(patches[p].charts); }
@@ -559,7 +576,11 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
         e.settled = true;
         continue;
       }
-      const bool squeezing = doubled && err > bound && err > 0.5 * PatchSizing::worstError(e.previousCharts);
+      // Below the layout's density size a patch's error comes from its creases and kinked sides as
+      // much as from its map, and falls only with the texel size: there a doubling that does not
+      // halve it is no squeeze.
+      const bool squeezing = doubled && err > bound && e.previousSize >= base &&
+                             err > 0.5 * PatchSizing::worstError(e.previousCharts);
       if ((flips > 0 || squeezing || e.cutAsked) && mayCut(e))
         squeezed.push_back({double(flips) + err / bound, p});
       else if (err > bound)
@@ -640,6 +661,16 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
   return rounds;
 }
 
+// The smallest size a patch's charts start at when the layout's density asks `base`: the coarsest
+// finest level the hierarchy lets a chart of `base` samples have, at most 3 levels down, and at
+// least 9 samples.
+uint32_t startSizeFloor(uint32_t base, const QuadChartOptions& o) {
+  const uint32_t intervalsLog2 = uint32_t(std::countr_zero(base - 1));
+  uint32_t levels = std::min<uint32_t>(3, intervalsLog2 > 3 ? intervalsLog2 - 3 : 0);
+  if (o.coarsestLevel) levels = std::min(levels, o.coarsestLevel(base));
+  return ((base - 1) >> levels) + 1;
+}
+
 // Resamples `layout` (straightened, its side counts even for the sides layout) with each patch's
 // charts at their own size (MeshSizing::kPatch), from the density's size up: every patch at that
 // size, the folds there cut (repairCharts, flips only: a fold that stays as the texels shrink is
@@ -671,8 +702,15 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
   r.spill = std::make_unique<ChartSpill>(dir / "samples.tmp", !layout.colours.empty());
   PatchSizing z{layout, resampleOptions(o, quads, r.spill.get(), r.bounds), layoutVertexNormals(layout), {}, 0, 0, nullptr};
   z.ro.chartSize = base;
+  // Charts below the density's size are charged for the chords they cut across their shared sides.
+  z.ro.chordsBelow = base;
   // A patch is parameterized once for all its sizes, within an eighth of the memory.
   z.params = std::make_unique<ParamCache>(o.maxMemory / 8);
+  // Each patch starts at its own density's size: the layout's, or less for a patch with fewer
+  // triangles than its quads' share (a small piece, a sliver between large patches), down to the
+  // coarsest finest level the hierarchy leaves a chart of the layout's size.
+  z.smallest = startSizeFloor(base, o);
+  z.quads = quads;
   {
     ResampleReuse all;
     all.normals = &z.normals;
@@ -687,9 +725,26 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
     }
     z.trianglesParameterized = first.trianglesParameterized;
     z.patches.resize(layout.patches.size());
+    std::vector<std::vector<GeometryImage>> atBase(layout.patches.size());
+    std::vector<PatchResampleStats> statsAtBase(layout.patches.size());
     for (uint32_t p = 0; p < layout.patches.size(); ++p) {
       z.patches[p].size = base;
       z.take(first, p);
+      const uint32_t own = z.startSize(p, base);
+      if (own < base && PatchSizing::flips(z.patches[p].charts) == 0) {
+        atBase[p] = std::move(z.patches[p].charts);
+        statsAtBase[p] = z.patches[p].stats;
+        z.patches[p].size = own;
+        z.patches[p].todo = true;
+      }
+    }
+    z.resampleTodo();
+    // A patch that folds at its own size keeps the layout's, where it did not.
+    for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+      if (atBase[p].empty() || PatchSizing::flips(z.patches[p].charts) == 0) continue;
+      z.patches[p].size = base;
+      z.patches[p].charts = std::move(atBase[p]);
+      z.patches[p].stats = statsAtBase[p];
     }
   }
   const double cap = meshSampleCap(layout.triangles.size());
@@ -706,6 +761,10 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
   }
   z.resampleTodo();
   for (const PatchSizing::Entry& e : z.patches) {
+    if (e.size < base) {
+      ++st.patchesBelowDensitySize;
+      continue;
+    }
     const uint32_t doublings = uint32_t(std::countr_zero(e.size - 1) - std::countr_zero(base - 1));
     if (st.patchesBySize.size() <= doublings) st.patchesBySize.resize(doublings + 1, 0);
     ++st.patchesBySize[doublings];
@@ -715,9 +774,10 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
   GeometryImageSet& set = r.set;
   st.chartSize = top;
   st.patches = layout.patches.size();
-  spdlog::info("patches by chart size from {}^2 up, doubling: {} ({} rounds, {} patch doublings, {} cuts, {:.1f} "
-               "samples per triangle)",
-               base, fmt::join(st.patchesBySize, ", "), st.sizeRounds, st.patchesDoubled, st.repair.patchesSplit,
+  spdlog::info("patches by chart size from {}^2 up, doubling: {}, and {} below it ({} rounds, {} patch doublings, {} "
+               "cuts, {:.1f} samples per triangle)",
+               base, fmt::join(st.patchesBySize, ", "), st.patchesBelowDensitySize, st.sizeRounds, st.patchesDoubled,
+               st.repair.patchesSplit,
                samples / double(std::max<size_t>(layout.triangles.size(), 1)));
   if (set.image.flippedTexels > 0 || set.image.sampleError > bound)
     spdlog::warn("{}: {} flipped texels and a sampling error of {:.4f}% of the diagonal (bound {:.4f}%) are left; "

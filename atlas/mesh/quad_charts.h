@@ -36,11 +36,16 @@ enum class MeshQuads : uint8_t { kAuto, kSides, kKites };
 enum class MeshQuadMap : uint8_t { kBilinear, kStretch, kFolding };
 // How big the charts are.
 //   patch: each patch's charts at a size of their own. Every patch is parameterized and resampled
-//     at the density's size; a patch whose charts sample the surface more coarsely than the
-//     sampling bound, or fold, is resampled at twice the size, again while that does not mend it,
-//     up to kMaxDensityChartSize and the samples meshSampleCap allows. No patch is cut, and one
-//     quad layout is built: sides (kites where some patch cannot have an even side count, or if
-//     asked for). A shared side is sampled by arc length at each patch's own count, and those
+//     at the density's size, and the folds there are cut (repairCharts). Then a patch with fewer
+//     triangles than its quads' share of the density's samples (a small piece, a sliver between
+//     large patches) is resampled at its own density's size (patchChartSizeForDensity, down to
+//     the coarsest finest level the hierarchy allows a chart of the density's size, at most 3
+//     levels down), kept unless it folds there. A patch whose charts sample the surface more
+//     coarsely than the sampling bound, or fold, is resampled at twice the size, again while that
+//     does not mend it, up to kMaxDensityChartSize and the samples meshSampleCap allows, or cut
+//     where it folds or a doubling from the density's size up does not halve its error
+//     (sizePatches). One quad layout is built: sides (kites where some patch cannot have an even
+//     side count, or if asked for). A shared side is sampled by arc length at each patch's own count, and those
 //     counts differ by powers of two, so the coarser patch's samples are the finer one's, bit for
 //     bit (sampleSide in atlas/mesh/resample.cpp). Charts of a patch sampled coarser than the
 //     largest size keep that as their finest pyramid level (ChartInfo::finestLevel).
@@ -74,6 +79,9 @@ inline constexpr double kMaxSamplesPerTriangle = 64.0;
 inline constexpr double kMinSampleCap = double(1u << 22);
 double meshSampleCap(uint64_t triangles);
 uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads);
+// A patch's own start size under per-patch sizing: the smallest 2^m + 1 in [smallest, largest]
+// whose quads * (size - 1)^2 samples reach kSamplesPerTriangle * triangles.
+uint32_t patchChartSizeForDensity(uint64_t triangles, uint64_t quads, uint32_t smallest, uint32_t largest);
 
 struct QuadChartOptions {
   std::filesystem::path input;  // the mesh, named in messages
@@ -137,6 +145,7 @@ struct MeshResampleStats {
   uint32_t sizeRounds = 0;             // per-patch sizing: resampling rounds
   uint32_t patchesDoubled = 0;         // per-patch sizing: patch resamplings at a doubled size
   std::vector<uint32_t> patchesBySize; // per-patch sizing: [k] patches of (density size - 1) * 2^k + 1
+  uint32_t patchesBelowDensitySize = 0;  // per-patch sizing: patches at their own size below the density's
   // Per-patch sizing: patches left over the sampling bound, by what stopped their growth: the
   // largest chart size (kMaxDensityChartSize), the samples cap (meshSampleCap), texels as short as
   // the coding's lattice allows (ResampleOptions::minSampleGap), or the memory.

@@ -1282,7 +1282,43 @@ struct ChartSampler {
         q.sampleErrorVertex = pp.vertices[v];
       }
     }
+    if (size < ps.c.options.chordsBelow) measureSharedSides(q);
     return q;
+  }
+
+  // How far the vertices of the chart's shared sides lie from the side's samples (the polyline
+  // through them) at this chart's count (ResampleOptions::chordsBelow). A side's vertices are
+  // left out of quadVertices since both patches sample the side alike; where they sample it at
+  // different counts the seam is stitched to the coarser one's, whose own charts so carry the
+  // error, and a chart of few samples along a curved or kinked side (a small patch) cuts chords
+  // across the vertices between them.
+  void measureSharedSides(ImageQuality& q) const {
+    const ChartLayout& layout = ps.c.layout;
+    const double last = double(ps.c.sideCount - 1);
+    for (uint8_t e = 0; e < 4; ++e) {
+      const EdgeSource& src = ps.plan.quads[i][e];
+      if (src.spoke || ps.patch.sides[src.index].neighbourPatch < 0) continue;
+      const std::vector<uint32_t>& run = ps.patch.sides[src.index].vertices;
+      std::vector<double> arc(run.size(), 0.0);
+      for (size_t k = 1; k < run.size(); ++k)
+        arc[k] = arc[k - 1] + glm::length(glm::dvec3(layout.positions[run[k]]) - glm::dvec3(layout.positions[run[k - 1]]));
+      if (!(arc.back() > 0.0)) continue;
+      for (size_t k = 1; k + 1 < run.size(); ++k) {
+        const double t = arc[k] / arc.back() * last;  // where the vertex lies among the side's samples
+        if (t < double(src.offset) || t > double(src.offset + m)) continue;
+        const uint32_t a = std::min(uint32_t(t), ps.c.sideCount - 2);
+        const glm::dvec3 x(layout.positions[run[k]]);
+        const glm::dvec3 p0(ps.sideSample(src.index, a).p), p1(ps.sideSample(src.index, a + 1).p);
+        const glm::dvec3 d = p1 - p0;
+        const double len2 = glm::dot(d, d);
+        const double f = len2 > 0.0 ? std::clamp(glm::dot(x - p0, d) / len2, 0.0, 1.0) : 0.0;
+        const double dist = glm::length(x - (p0 + f * d));
+        if (dist > q.sampleError) {
+          q.sampleError = dist;
+          q.sampleErrorVertex = run[k];
+        }
+      }
+    }
   }
 
   // Places the samples through the map options.quadMap asks for and measures the chart.

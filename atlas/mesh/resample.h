@@ -73,6 +73,10 @@ struct ResampleOptions {
   // of it (in the input's units; 0: any distance above none): two lattice steps of the coding's
   // positions, so that settling them on it never merges two samples.
   double minSampleGap = 0.0;
+  // Charts of fewer samples a side than this also count, in their sampling error, how far the
+  // input vertices of their shared sides lie from the polyline through the side's samples (the
+  // chords they cut across a curved or kinked side); 0: none do.
+  uint32_t chordsBelow = 0;
 };
 
 // Quality of a sampled image, seen as a map from the unit square to the sampled surface through

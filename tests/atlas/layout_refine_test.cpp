@@ -620,6 +620,36 @@ TEST(SampleError, ZeroOnAPlaneAndFallingWithTheChartSize) {
   }
 }
 
+// Charts smaller than ResampleOptions::chordsBelow also count how far the input vertices of their
+// shared sides lie from the polyline through the side's samples. A flat 12 x 12 grid of two
+// patches whose shared side zigzags up and down (its vertices at z = +-0.02, the others flat),
+// sampled at 5^2 (kites: 9 samples along the side's 13 vertices): counted, the worst vertex is on
+// the shared side and the error is the zigzag's; not counted, or with the charts at the threshold,
+// it is the flat interior's.
+TEST(SampleError, SmallChartsCountTheChordsOfTheirSharedSides) {
+  ChartLayout layout = test::gridLayout(12, 12, 1.0f, 1.0f, {6});
+  std::set<uint32_t> side;
+  for (uint32_t y = 0; y <= 12; ++y) {
+    const uint32_t v = y * 13 + 6;
+    side.insert(v);
+    if (y > 0 && y < 12) layout.positions[v].z = (y % 2 ? 0.02f : -0.02f);
+  }
+  ResampleOptions ro;
+  ro.chartSize = 5;
+  const GeometryImageSet off = resampleLayout(layout, ro);
+  ro.chordsBelow = 5;
+  const GeometryImageSet at = resampleLayout(layout, ro);
+  ro.chordsBelow = 9;
+  const GeometryImageSet on = resampleLayout(layout, ro);
+  std::printf("  zigzag side at 5^2: sampling error %.3g without its chords, %.3g with them\n", off.image.sampleError,
+              on.image.sampleError);
+  EXPECT_EQ(at.image.sampleError, off.image.sampleError);
+  EXPECT_GT(on.image.sampleError, 0.01);
+  EXPECT_GT(on.image.sampleError, 2.0 * off.image.sampleError);
+  EXPECT_TRUE(side.contains(on.image.sampleErrorVertex)) << on.image.sampleErrorVertex;
+  EXPECT_FALSE(side.contains(off.image.sampleErrorVertex));
+}
+
 // The repair cuts patches whose charts sample too coarsely until every chart is within the bound
 // (the cube sphere: six patches of 16 x 16 cells at 9^2 samples a chart), with no flipped texels,
 // and the charts are those of a full resampling of the final layout.

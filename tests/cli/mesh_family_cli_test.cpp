@@ -4,12 +4,14 @@
 // of the shared scans' tests read back from the atlas: seams bit-identical at every level, the
 // exported surface welded with the input's topology, no flipped parameterization triangle, and
 // the two-sided Hausdorff distance within 0.1% of the diagonal. Charts, flipped texels and bytes
-// per triangle are printed, not bounded here.
+// per triangle are printed, not bounded here; patches smaller than the density asks keep charts
+// of their own, smaller size.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -71,6 +73,18 @@ TEST_P(MeshFamilyTest, AtTheDefaultsWithinTheBounds) {
   }
   EXPECT_EQ(r["param_flipped"].get<uint64_t>(), 0u);
   EXPECT_LT(hausdorff, 0.1) << GetParam() << ": Hausdorff distance above 0.1% of the diagonal";
+  // A patch with fewer triangles than its quads' share of the density's samples keeps charts of
+  // its own, smaller size: the patches the stats count below the density's size are exactly those
+  // whose charts are smaller than it, and the separate pieces (a few dozen triangles each) are such.
+  const uint32_t density = r["chart_size_for_density"].get<uint32_t>();
+  std::map<uint32_t, uint32_t> patchSide;
+  for (const nlohmann::json& c : r["per_chart"]) patchSide[c["patch"].get<uint32_t>()] = c["side"].get<uint32_t>();
+  const auto smaller = uint32_t(std::count_if(patchSide.begin(), patchSide.end(),
+                                              [&](const auto& ps) { return ps.second < density; }));
+  EXPECT_EQ(smaller, r["patches_below_density_size"].get<uint32_t>());
+  std::cout << "  " << GetParam() << ": " << smaller << " of " << patchSide.size() << " patches below the density's "
+            << density << "^2\n";
+  if (GetParam() == "many_pieces") EXPECT_GT(2 * smaller, uint32_t(patchSide.size())) << "most pieces at their own size";
   // A node budget of 100 holds in every frame, for every adapter in both modes, from an orbit that
   // sees the whole mesh and one close enough to see a part: the chart roots are in groups.
   for (const std::string mode : {"error --tolerance 0.5", "budget --triangles 200000"}) {
