@@ -84,7 +84,9 @@ TEST_P(MeshFamilyTest, AtTheDefaultsWithinTheBounds) {
   EXPECT_EQ(smaller, r["patches_below_density_size"].get<uint32_t>());
   std::cout << "  " << GetParam() << ": " << smaller << " of " << patchSide.size() << " patches below the density's "
             << density << "^2\n";
-  if (GetParam() == "many_pieces") EXPECT_GT(2 * smaller, uint32_t(patchSide.size())) << "most pieces at their own size";
+  if (GetParam() == "many_pieces") {
+    EXPECT_GT(2 * smaller, uint32_t(patchSide.size())) << "most pieces at their own size";
+  }
   // A node budget of 100 holds in every frame, for every adapter in both modes, from an orbit that
   // sees the whole mesh and one close enough to see a part: the chart roots are in groups.
   for (const std::string mode : {"error --tolerance 0.5", "budget --triangles 200000"}) {
