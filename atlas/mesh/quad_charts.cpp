@@ -435,13 +435,30 @@ struct PatchSizing {
     e.stats = e.previousStats;
     e.previousSize = 0;
   }
+  // Where a cut of a patch goes: through a fold of its charts, else across in halves, else at its
+  // neck (kFirst); or through the input vertex farthest from its charts (kWorstVertex).
+  enum class CutAt { kFirst, kWorstVertex };
+  // A layout triangle of patch p at the input vertex farthest from its charts' surface (~0u when
+  // none is known).
+  uint32_t worstTriangle(uint32_t p) const {
+    const GeometryImage* worst = nullptr;
+    for (const GeometryImage& g : patches[p].charts)
+      if (g.quality.sampleErrorVertex != ~0u && (!worst || g.quality.sampleError > worst->quality.sampleError)) worst = &g;
+    if (!worst) return ~0u;
+    const uint32_t v = worst->quality.sampleErrorVertex;
+    for (const uint32_t t : layout.patches[p].triangles) {
+      const auto& tri = layout.triangles[t];
+      if (tri[0] == v || tri[1] == v || tri[2] == v) return t;
+    }
+    return ~0u;
+  }
   // Cuts patch p through the first layout triangle its charts fold over (splitPatchThrough), or
   // where they do not fold in halves (halvePatch), or where no such cut exists at its neck
   // (splitPatchAtNeck); its side counts
   // are made even again for the sides layout without a new two-chart corner. The parts start at
   // `base` and every patch the cut changed is marked to be resampled. False, the layout as it
   // was (`saved`, the patches before it), when no such cut exists.
-  bool cut(uint32_t p, uint32_t base, bool sides, const std::vector<Patch>& saved) {
+  bool cut(uint32_t p, uint32_t base, bool sides, const std::vector<Patch>& saved, CutAt at) {
     const uint32_t cornersBefore = sides ? twoQuadCorners(layout) : 0;
     uint32_t fold = ~0u;
     for (const GeometryImage& g : patches[p].charts)
@@ -449,9 +466,17 @@ struct PatchSizing {
     // As the repair cuts (repairCharts): 9 sides at most in the sides layout, whose side counts
     // are made even after, and no part there with fewer than 4 border edges.
     const uint32_t maxSides = sides ? 9 : 8;
-    bool done = fold != ~0u ? splitPatchThrough(layout, p, fold, maxSides) : halvePatch(layout, p, maxSides, sides ? 4 : 0);
-    if (!done) layout.patches = saved;  // (a failed cut may have left a corner)
-    done = done || splitPatchAtNeck(layout, p);
+    bool done = false;
+    if (at == CutAt::kWorstVertex) {
+      const uint32_t worst = worstTriangle(p);
+      if (worst == ~0u) return false;
+      done = splitPatchThrough(layout, p, worst, maxSides);
+    } else {
+      done = fold != ~0u ? splitPatchThrough(layout, p, fold, maxSides) : halvePatch(layout, p, maxSides, sides ? 4 : 0);
+      if (!done) layout.patches = saved;  // (a failed cut may have left a corner)
+      done = done || splitPatchAtNeck(layout, p);
+    }
+    if (!done) layout.patches = saved;
     if (done) {
       std::vector<uint32_t> parts{p};
       for (uint32_t q = uint32_t(saved.size()); q < layout.patches.size(); ++q) parts.push_back(q);
@@ -486,11 +511,23 @@ struct PatchSizing {
     return n;
   }
   // cut(p), kept only if the patches it changed, resampled at once, fold less than they did (where
-  // `folding`), or no more (else). False, the layout and the charts as they were, otherwise.
-  bool tryCut(uint32_t p, uint32_t base, bool sides, bool folding) {
+  // `folding`), or no more (else). A patch whose sampling error is over twice the bound (the
+  // Hausdorff distance's) is missing surface, not detail: there a cut is also kept where the
+  // patches it changed halve that error, folds or not (their folds are cut or grown out in the
+  // rounds after), and if the first cut is not kept, the cut through its worst vertex is tried.
+  // False, the layout and the charts as they were, otherwise.
+  bool tryCut(uint32_t p, uint32_t base, bool sides, bool folding, double bound) {
+    const double before = error(p);
+    const bool missing = before > 2.0 * bound;
+    if (tryCutAt(p, base, sides, folding, CutAt::kFirst, missing ? 0.5 * before : 0.0)) return true;
+    return missing && tryCutAt(p, base, sides, folding, CutAt::kWorstVertex, 0.5 * before);
+  }
+  // One cut of tryCut, also kept where the changed patches' worst error falls below `halved` (0:
+  // never).
+  bool tryCutAt(uint32_t p, uint32_t base, bool sides, bool folding, CutAt at, double halved) {
     const std::vector<Patch> saved = layout.patches;
     const std::vector<Entry> was = patches;
-    if (!cut(p, base, sides, saved)) return false;
+    if (!cut(p, base, sides, saved, at)) return false;
     std::vector<uint8_t> before(was.size(), 0), after(patches.size(), 0);
     for (uint32_t q = 0; q < patches.size(); ++q) {
       after[q] = patches[q].todo;
@@ -504,6 +541,12 @@ struct PatchSizing {
     resampleTodo();
     const uint64_t flipsAfter = flipsOf(after);
     if (folding ? flipsAfter < flipsBefore : flipsAfter <= flipsBefore) return true;
+    if (halved > 0.0) {
+      double worst = 0.0;
+      for (uint32_t q = 0; q < patches.size(); ++q)
+        if (after[q]) worst = std::max(worst, error(q));
+      if (worst < halved) return true;
+    }
     layout.patches = saved;
     patches = was;
     return false;
@@ -598,7 +641,7 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
         z.patches[p].uncuttable = true;
         continue;
       }
-      if (z.tryCut(p, base, sides, folding)) {
+      if (z.tryCut(p, base, sides, folding, bound)) {
         ++st.repair.patchesSplit;
         cutNow[p] = 1;
       } else {
