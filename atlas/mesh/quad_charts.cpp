@@ -452,10 +452,11 @@ struct PatchSizing {
     }
     return ~0u;
   }
-  // Cuts patch p through the first layout triangle its charts fold over (splitPatchThrough), or
-  // where they do not fold in halves (halvePatch), or where no such cut exists at its neck
-  // (splitPatchAtNeck); its side counts
-  // are made even again for the sides layout without a new two-chart corner. The parts start at
+  // Cuts patch p (kFirst) through the first layout triangle its charts fold over
+  // (splitPatchThrough), or where they do not fold in halves (halvePatch), or where no such cut
+  // exists at its neck (splitPatchAtNeck); or (kWorstVertex) through a triangle at the input vertex
+  // farthest from its charts. Its side counts are made even again for the sides layout without a
+  // new two-chart corner. The parts start at
   // `base` and every patch the cut changed is marked to be resampled. False, the layout as it
   // was (`saved`, the patches before it), when no such cut exists.
   bool cut(uint32_t p, uint32_t base, bool sides, const std::vector<Patch>& saved, CutAt at) {
