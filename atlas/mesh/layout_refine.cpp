@@ -737,6 +737,14 @@ bool halvePatch(ChartLayout& layout, uint32_t p, uint32_t maxSides, uint32_t min
   return applyCut(layout, p, findCut(layout, p, {}, maxSides, 0.25, minPartEdges), maxSides);
 }
 
+uint32_t patchTriangleAt(const ChartLayout& layout, uint32_t p, uint32_t v) {
+  for (const uint32_t t : layout.patches[p].triangles) {
+    const auto& tri = layout.triangles[t];
+    if (tri[0] == v || tri[1] == v || tri[2] == v) return t;
+  }
+  return ~0u;
+}
+
 bool splitPatchThrough(ChartLayout& layout, uint32_t p, uint32_t triangle, uint32_t maxSides) {
   if (triangle >= layout.triangles.size()) return false;
   const auto& t = layout.triangles[triangle];
@@ -1164,11 +1172,8 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
   const std::vector<glm::dvec3> normals = layoutVertexNormals(layout);
   // A triangle of patch p at layout vertex v (the patch's first triangle if none is).
   auto triangleAt = [&](uint32_t p, uint32_t v) {
-    for (uint32_t t : layout.patches[p].triangles) {
-      const auto& tri = layout.triangles[t];
-      if (tri[0] == v || tri[1] == v || tri[2] == v) return t;
-    }
-    return layout.patches[p].triangles.front();
+    const uint32_t t = patchTriangleAt(layout, p, v);
+    return t != ~0u ? t : layout.patches[p].triangles.front();
   };
   // The patches to cut: those with a fold (where it is), else with a sampling error over the
   // bound (at its worst vertex).

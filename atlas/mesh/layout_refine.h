@@ -111,6 +111,9 @@ struct EvenSidesResult {
 EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& within = {},
                           uint32_t maxSides = kMaxPatchSides);
 
+// The first of patch p's triangles with layout vertex v as a corner; ~0u if none has it.
+uint32_t patchTriangleAt(const ChartLayout& layout, uint32_t p, uint32_t v);
+
 // Splits `patch` by a cut through a vertex of layout triangle `triangle` (where its charts fold):
 // of the shortest interior paths from that vertex to the boundary, the pair (or, from a boundary
 // vertex, the single path) whose length is smallest relative to the smaller part's perimeter, such

@@ -34,18 +34,15 @@ double meshSampleCap(uint64_t triangles) {
   return std::max(kMaxSamplesPerTriangle * double(triangles), kMinSampleCap);
 }
 
-uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads) {
-  const double wanted = kSamplesPerTriangle * double(triangles);
-  uint32_t intervals = 64;
-  while (intervals + 1 < kMaxDensityChartSize && double(std::max<uint64_t>(quads, 1)) * intervals * intervals < wanted) intervals *= 2;
-  return intervals + 1;
-}
-
 uint32_t patchChartSizeForDensity(uint64_t triangles, uint64_t quads, uint32_t smallest, uint32_t largest) {
   const double wanted = kSamplesPerTriangle * double(triangles);
   uint32_t intervals = smallest - 1;
   while (intervals + 1 < largest && double(std::max<uint64_t>(quads, 1)) * intervals * intervals < wanted) intervals *= 2;
   return intervals + 1;
+}
+
+uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads) {
+  return patchChartSizeForDensity(triangles, quads, 65, kMaxDensityChartSize);
 }
 
 namespace {
@@ -445,12 +442,7 @@ struct PatchSizing {
     for (const GeometryImage& g : patches[p].charts)
       if (g.quality.sampleErrorVertex != ~0u && (!worst || g.quality.sampleError > worst->quality.sampleError)) worst = &g;
     if (!worst) return ~0u;
-    const uint32_t v = worst->quality.sampleErrorVertex;
-    for (const uint32_t t : layout.patches[p].triangles) {
-      const auto& tri = layout.triangles[t];
-      if (tri[0] == v || tri[1] == v || tri[2] == v) return t;
-    }
-    return ~0u;
+    return patchTriangleAt(layout, p, worst->quality.sampleErrorVertex);
   }
   // Cuts patch p (kFirst) through the first layout triangle its charts fold over
   // (splitPatchThrough), or where they do not fold in halves (halvePatch), or where no such cut
