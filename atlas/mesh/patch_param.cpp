@@ -10,10 +10,13 @@
 #include <string>
 #include <unordered_map>
 
+#include <chrono>
+
 #include <Eigen/Sparse>
 #include <Eigen/OrderingMethods>
 #include <Eigen/SparseLU>
 #include <glm/geometric.hpp>
+#include <spdlog/spdlog.h>
 
 namespace gimlod {
 namespace {
@@ -545,6 +548,8 @@ ParamQuality combineQuality(const std::vector<ParamQuality>& parts) {
 
 PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patch,
                                         const ParamOptions& options) {
+  using Clock = std::chrono::steady_clock;
+  const Clock::time_point start = Clock::now();
   LocalPatch lp = buildLocalPatch(layout, patch);
   const uint32_t n = uint32_t(layout.patches[patch].sides.size());
 
@@ -620,6 +625,7 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
     out.iterationsUsed = it + 1;
   }
 
+  const Clock::time_point solved = Clock::now();
   if (options.stretchSweeps > 0) {
     trial = out.uv;
     out.sweepsUsed = optimizeStretchLocally(lp, isBoundary, slide, options.stretchSweeps,
@@ -634,6 +640,11 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
     }
   }
 
+  const auto seconds = [](Clock::duration d) { return std::chrono::duration<double>(d).count(); };
+  spdlog::debug("parameterized patch {} ({} triangles, {} sides): solves {:.2f} s ({} reweightings), "
+                "{} sweeps {:.2f} s, L2 stretch {:.3f} -> {:.3f}", patch, lp.triangles.size(), n,
+                seconds(solved - start), out.iterationsUsed, out.sweepsUsed, seconds(Clock::now() - solved),
+                out.initial.stretchL2, out.quality.stretchL2);
   out.vertices = std::move(lp.vertices);
   out.triangles = std::move(lp.triangles);
   out.boundary = std::move(lp.boundary);

@@ -204,16 +204,28 @@ class Locator {
     constexpr double kInside = -1e-12;
     if (best < kInside) {
       const auto [cx, cy] = cellOf(p);
-      // note: a point of the domain lies in a triangle listed in its own cell; the rings only
-      // catch points a rounding error outside the polygon.
-      for (uint32_t ring = 0; ring <= std::max(nx_, ny_) && best < kInside; ++ring) {
+      // note: a point of the domain lies in a triangle listed in its own cell; the rings catch
+      // points outside the polygon (a rounding error, or a sample the unfolding slides past
+      // the border). Those take the best of the two rings past the first that lists a triangle:
+      // a cell farther out is farther from the point than the triangle found, and searching on
+      // to the grid's edge made every such point cost the whole patch.
+      uint32_t lastRing = std::max(nx_, ny_);
+      for (uint32_t ring = 0; ring <= lastRing && best < kInside; ++ring) {
         const int64_t x0 = int64_t(cx) - ring, x1 = int64_t(cx) + ring;
         const int64_t y0 = int64_t(cy) - ring, y1 = int64_t(cy) + ring;
+        auto cell = [&](int64_t x, int64_t y) {
+          if (x < 0 || x >= int64_t(nx_)) return;
+          const size_t c = size_t(y) * nx_ + size_t(x);
+          for (uint32_t k = start_[c]; k < start_[c + 1]; ++k) test(tris_[k]);
+          if (start_[c + 1] > start_[c] && lastRing == std::max(nx_, ny_)) lastRing = ring + 2;
+        };
+        // The ring's cells only: whole rows at its top and bottom, its two ends between.
         for (int64_t y = std::max<int64_t>(y0, 0); y <= std::min<int64_t>(y1, ny_ - 1); ++y) {
-          for (int64_t x = std::max<int64_t>(x0, 0); x <= std::min<int64_t>(x1, nx_ - 1); ++x) {
-            if (x != x0 && x != x1 && y != y0 && y != y1) continue;  // ring cells only
-            const size_t c = size_t(y) * nx_ + size_t(x);
-            for (uint32_t k = start_[c]; k < start_[c + 1]; ++k) test(tris_[k]);
+          if (y == y0 || y == y1) {
+            for (int64_t x = std::max<int64_t>(x0, 0); x <= std::min<int64_t>(x1, nx_ - 1); ++x) cell(x, y);
+          } else {
+            cell(x0, y);
+            cell(x1, y);
           }
         }
         if (ring >= 1 && best > -1e-6) break;  // near the border: the closest is good enough
