@@ -74,33 +74,52 @@ std::vector<std::string> validateChartLayout(const ChartLayout& L, uint32_t minS
       fail(name + ": no triangles");
       return;
     }
-    // Directed edges inside the patch; boundary = directed edges whose reverse is absent.
-    std::unordered_map<uint64_t, uint32_t> directed;  // (a<<32|b) -> count
-    std::unordered_map<uint32_t, uint32_t> verts;
+    // Directed edges inside the patch, sorted; boundary = directed edges whose reverse is absent.
+    // Sorted arrays, not hash maps: a patch of a 100M-triangle mesh has millions of edges.
+    std::vector<uint64_t> directed;
+    std::vector<uint32_t> verts;
+    directed.reserve(3 * P.triangles.size());
+    verts.reserve(3 * P.triangles.size());
     for (uint32_t f : P.triangles) {
       if (f >= nt) continue;
       const auto& t = L.triangles[f];
       for (int k = 0; k < 3; ++k) {
-        ++directed[uint64_t{t[k]} << 32 | t[(k + 1) % 3]];
-        verts[t[k]] = 0;
+        directed.push_back(uint64_t{t[k]} << 32 | t[(k + 1) % 3]);
+        verts.push_back(t[k]);
       }
     }
-    std::unordered_map<uint32_t, uint32_t> nextB;  // boundary: origin -> dest
+    std::sort(directed.begin(), directed.end());
+    std::sort(verts.begin(), verts.end());
+    const size_t vertexCount = size_t(std::unique(verts.begin(), verts.end()) - verts.begin());
+    std::vector<uint32_t>().swap(verts);
+    std::vector<std::pair<uint32_t, uint32_t>> nextB;  // boundary: origin -> dest, sorted by origin
     size_t undirected2 = 0, bcount = 0;
     bool bad = false;
-    for (const auto& [k, c] : directed) {
-      if (c > 1) bad = true;
+    for (size_t i = 0; i < directed.size(); ++i) {
+      const uint64_t k = directed[i];
+      if (i > 0 && directed[i - 1] == k) {
+        bad = true;
+        continue;
+      }
       const uint32_t a = static_cast<uint32_t>(k >> 32), b = static_cast<uint32_t>(k);
-      const bool hasRev = directed.count(uint64_t{b} << 32 | a) > 0;
+      const bool hasRev = std::binary_search(directed.begin(), directed.end(), uint64_t{b} << 32 | a);
       undirected2 += hasRev ? 1 : 2;
       if (!hasRev) {
         ++bcount;
-        if (!nextB.emplace(a, b).second) bad = true;  // vertex on the loop twice
+        nextB.emplace_back(a, b);
       }
     }
+    // (directed is sorted by origin, so nextB is too; an origin twice is a vertex on the loop twice.)
+    for (size_t i = 1; i < nextB.size(); ++i) bad = bad || nextB[i - 1].first == nextB[i].first;
     if (bad) fail(name + ": repeated directed edge or boundary vertex visited twice");
-    const int64_t chi = int64_t(verts.size()) - int64_t(undirected2 / 2) + int64_t(P.triangles.size());
+    std::vector<uint64_t>().swap(directed);
+    const int64_t chi = int64_t(vertexCount) - int64_t(undirected2 / 2) + int64_t(P.triangles.size());
     if (chi != 1) fail(name + ": Euler characteristic " + std::to_string(chi) + ", not 1");
+    // The boundary edge from vertex a, nextB.end() if none.
+    auto boundaryFrom = [&](uint32_t a) {
+      const auto it = std::lower_bound(nextB.begin(), nextB.end(), std::pair<uint32_t, uint32_t>{a, 0u});
+      return it != nextB.end() && it->first == a ? it : nextB.end();
+    };
     // One loop.
     if (nextB.empty()) {
       fail(name + ": no boundary");
@@ -110,7 +129,7 @@ std::vector<std::string> validateChartLayout(const ChartLayout& L, uint32_t minS
       uint32_t v = nextB.begin()->first;
       size_t len = 0;
       do {
-        auto it = nextB.find(v);
+        auto it = boundaryFrom(v);
         if (it == nextB.end()) break;
         v = it->second;
         ++len;
@@ -132,7 +151,7 @@ std::vector<std::string> validateChartLayout(const ChartLayout& L, uint32_t minS
       if (!N.vertices.empty() && N.vertices.front() != S.vertices.back())
         fail(sn + ": does not end where the next side starts");
       for (size_t i = 0; i + 1 < S.vertices.size(); ++i) {
-        auto it = nextB.find(S.vertices[i]);
+        auto it = boundaryFrom(S.vertices[i]);
         if (it == nextB.end() || it->second != S.vertices[i + 1]) {
           fail(sn + ": edge " + std::to_string(i) + " is not a boundary edge in loop order");
           break;

@@ -247,6 +247,39 @@ TEST(Charting, ValidatorCatchesBrokenLayouts) {
   EXPECT_FALSE(validateChartLayout(l, 3, 3).empty());  // 4 sides > 3
 }
 
+// Within one patch: a hole (an inner triangle taken out) and a triangle listed twice.
+TEST(Charting, ValidatorCatchesBrokenPatches) {
+  ChartingOptions o;
+  o.targetCharts = 6;
+  const ChartLayout l = buildChartLayout(gridCube(4), o);
+  ASSERT_TRUE(validateChartLayout(l).empty());
+  auto says = [](const std::vector<std::string>& errs, const std::string& what) {
+    for (const std::string& e : errs) {
+      if (e.find(what) != std::string::npos) return true;
+    }
+    return false;
+  };
+  // The first triangle of patch 0 with no vertex on its sides.
+  const Patch& p0 = l.patches[0];
+  std::vector<uint32_t> onSides;
+  for (const PatchSide& s : p0.sides) onSides.insert(onSides.end(), s.vertices.begin(), s.vertices.end());
+  auto inner = std::find_if(p0.triangles.begin(), p0.triangles.end(), [&](uint32_t t) {
+    for (uint32_t v : l.triangles[t]) {
+      if (std::find(onSides.begin(), onSides.end(), v) != onSides.end()) return false;
+    }
+    return true;
+  });
+  ASSERT_NE(inner, p0.triangles.end());
+  ChartLayout holed = l;
+  holed.patches[0].triangles.erase(holed.patches[0].triangles.begin() + (inner - p0.triangles.begin()));
+  const std::vector<std::string> h = validateChartLayout(holed);
+  EXPECT_TRUE(says(h, "patch 0: Euler characteristic 0, not 1")) << (h.empty() ? "" : h.front());
+  EXPECT_TRUE(says(h, "patch 0: boundary is not a single loop"));
+  ChartLayout twice = l;
+  twice.patches[0].triangles.push_back(twice.patches[0].triangles.front());
+  EXPECT_TRUE(says(validateChartLayout(twice), "patch 0: repeated directed edge"));
+}
+
 struct MeshCase {
   const char* file;
   uint64_t boundaryEdges;  // known open edges (bunny: 5 holes)
