@@ -825,19 +825,37 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s, bool keepHalves
   for (uint32_t k = 0; k < qq.sides.size(); ++k) {
     if (k != t) u.sides.push_back(qq.sides[k]);
   }
-  const PatchGraph g = patchGraph(layout, u);
   const uint32_t a = side.vertices.front(), b = side.vertices.back();
-  const Paths paths = shortestCuts(layout, g, a, b);
-  if (!paths.dist.contains(b)) return false;
-  std::vector<uint32_t> path{b};
-  while (path.back() != a) path.push_back(paths.prev.at(path.back()));
-  std::reverse(path.begin(), path.end());
-  if (path == side.vertices) return false;
   double before = 0.0;
   for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
     before += glm::length(layout.positions[side.vertices[k + 1]] - layout.positions[side.vertices[k]]);
   }
-  if (!(paths.dist.at(b) < before * (1.0 - 1e-9))) return false;
+  // The shortest path between the corners, searched only where a path shorter than the side
+  // can run: the triangles with a vertex closer to both corners together than the side is long
+  // (shortestCutWithin; the margins cover the float lengths' rounding). A side that is already
+  // straight leaves a thin ellipse, and most of the second round's sides are.
+  const double bound = before * (1.0 + 1e-5);
+  Patch near;
+  near.sides = u.sides;
+  const glm::vec3 pa = layout.positions[a], pb = layout.positions[b];
+  for (const uint32_t tri : u.triangles) {
+    for (const uint32_t v : layout.triangles[tri]) {
+      const glm::vec3 x = layout.positions[v];
+      if (double(glm::length(x - pa)) + double(glm::length(x - pb)) < bound * (1.0 + 1e-5)) {
+        near.triangles.push_back(tri);
+        break;
+      }
+    }
+  }
+  std::vector<uint32_t> path{b};
+  {
+    const Paths paths = shortestCutWithin(layout, patchGraph(layout, near), a, b, bound);
+    if (!paths.dist.contains(b) || !(paths.dist.at(b) < before * (1.0 - 1e-9))) return false;
+    while (path.back() != a) path.push_back(paths.prev.at(path.back()));
+  }
+  std::reverse(path.begin(), path.end());
+  if (path == side.vertices) return false;
+  const PatchGraph g = patchGraph(layout, u);
   // p's part: flood from p's next side, never crossing the new side or any other side.
   std::unordered_set<uint64_t> walls(g.boundaryEdges.begin(), g.boundaryEdges.end());
   for (size_t k = 0; k + 1 < path.size(); ++k) walls.insert(undirectedEdgeKey(path[k], path[k + 1]));

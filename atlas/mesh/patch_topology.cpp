@@ -90,6 +90,20 @@ Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t sour
   return std::move(search.r);
 }
 
+Paths shortestCutWithin(const ChartLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target,
+                        double bound) {
+  CutSearch search{layout, g, {}};
+  const glm::vec3 end = layout.positions[target];
+  shortestInteriorPaths(search, source, [&](uint32_t u) {
+    if (u == target) return PathStep::kStop;
+    if (u != source && g.onBoundary.contains(u)) return PathStep::kEnd;
+    // (The straight distance as the edges' lengths are taken, from float positions.)
+    if (search.r.dist[u] + double(glm::length(layout.positions[u] - end)) >= bound) return PathStep::kEnd;
+    return PathStep::kThrough;
+  });
+  return std::move(search.r);
+}
+
 int64_t eulerCharacteristic(const ChartLayout& layout, const std::vector<uint32_t>& tris) {
   std::vector<uint32_t> verts;
   std::vector<uint64_t> edges;

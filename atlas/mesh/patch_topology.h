@@ -94,6 +94,17 @@ struct Paths {
 Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t source,
                    uint32_t target = ~0u, size_t boundaryEnds = std::numeric_limits<size_t>::max());
 
+// The shortest interior path from `source` to `target`, if one is shorter than `bound`: the
+// search of shortestCuts(layout, g, source, target), but a vertex u whose distance plus its
+// straight distance to the target is `bound` or more is not gone through (no path through it can
+// be shorter). Where a path shorter than `bound` exists, its distances and predecessors are
+// those of shortestCuts, ties included: a vertex left out could only have offered a vertex of
+// that path a distance longer than its own. So g need only hold the triangles with a vertex u
+// closer to both ends than `bound` (|source - u| + |u - target| < bound): every edge of every
+// vertex the search goes through.
+Paths shortestCutWithin(const ChartLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target,
+                        double bound);
+
 // Euler characteristic V - E + F of a set of the layout's triangles.
 int64_t eulerCharacteristic(const ChartLayout& layout, const std::vector<uint32_t>& triangles);
 
