@@ -855,7 +855,7 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s, bool keepHalves
   }
   std::reverse(path.begin(), path.end());
   if (path == side.vertices) return false;
-  const PatchGraph g = patchGraph(layout, u);
+  const PatchGraph g = patchGraph(layout, u, false);  // for the flood below, no more paths
   // p's part: flood from p's next side, never crossing the new side or any other side.
   std::unordered_set<uint64_t> walls(g.boundaryEdges.begin(), g.boundaryEdges.end());
   for (size_t k = 0; k + 1 < path.size(); ++k) walls.insert(undirectedEdgeKey(path[k], path[k + 1]));

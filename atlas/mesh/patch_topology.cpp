@@ -49,7 +49,7 @@ std::pair<const std::pair<uint32_t, uint32_t>*, const std::pair<uint32_t, uint32
   return {adjacency.data() + (lo - adjacency.begin()), adjacency.data() + (hi - adjacency.begin())};
 }
 
-PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch) {
+PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch, bool withPaths) {
   PatchGraph g;
   for (const PatchSide& s : patch.sides) {
     for (size_t k = 0; k < s.vertices.size(); ++k) {
@@ -58,14 +58,14 @@ PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch) {
     }
   }
   g.edgeTriangles.reserve(patch.triangles.size() * 3);
-  g.adjacency.reserve(patch.triangles.size() * 3);
+  if (withPaths) g.adjacency.reserve(patch.triangles.size() * 3);
   for (uint32_t t : patch.triangles) {
     const auto& tri = layout.triangles[t];
     for (int c = 0; c < 3; ++c) {
       const uint32_t a = tri[c], b = tri[(c + 1) % 3];
       g.edgeTriangles.push_back({directedEdgeKey(a, b), t});
       // Each interior edge is seen from both of its triangles: add it from one.
-      if (a < b && !g.boundaryEdges.contains(undirectedEdgeKey(a, b))) {
+      if (withPaths && a < b && !g.boundaryEdges.contains(undirectedEdgeKey(a, b))) {
         g.adjacency.push_back({a, b});
         g.adjacency.push_back({b, a});
       }

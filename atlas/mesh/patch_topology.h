@@ -78,8 +78,9 @@ struct PatchGraph {
       uint32_t u) const;
 };
 
-// The graph of `patch` (its triangles and sides) in `layout`.
-PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch);
+// The graph of `patch` (its triangles and sides) in `layout`. Without withPaths, no adjacency:
+// enough for triangleOf and the boundary, not for the path searches.
+PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch, bool withPaths = true);
 
 // Shortest cut paths from `source`: distances and predecessors over interior vertices.
 struct Paths {
