@@ -19,6 +19,7 @@
 #include "atlas/mesh/mesh_atlas.h"
 #include "atlas/mesh/mesh_io.h"
 #include "atlas/mesh/patch_param.h"
+#include "atlas/mesh/patch_topology.h"
 #include "tests/chart_layout_fixture.h"
 #include "tests/test_util.h"
 
@@ -210,6 +211,72 @@ TEST(LayoutRefine, StraightenedScanSidesAreShorterAndTheLayoutStaysValid) {
   ro.chartSize = 17;
   ChartLayout raw = before;
   EXPECT_LE(resampleLayout(layout, ro).image.stretchL2, resampleLayout(raw, ro).image.stretchL2);
+}
+
+// The straightening's search (shortestCutWithin on the triangles of the ellipse where a path
+// shorter than the bound can run) finds the path of the search through the whole of both
+// patches wherever that one is shorter than the bound, and nothing shorter where it is not.
+TEST(LayoutRefine, BoundedSearchInTheEllipseFindsTheWholeSearchsPath) {
+  const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
+  ChartingOptions copt;
+  copt.targetCharts = 64;
+  const ChartLayout layout = buildChartLayout(mesh, copt);
+  auto pathTo = [](const Paths& paths, uint32_t a, uint32_t b) {
+    std::vector<uint32_t> path{b};
+    while (path.back() != a) path.push_back(paths.prev.at(path.back()));
+    return path;
+  };
+  uint32_t shorter = 0, straight = 0, smaller = 0;
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    for (uint32_t s = 0; s < layout.patches[p].sides.size(); ++s) {
+      const PatchSide& side = layout.patches[p].sides[s];
+      if (side.neighbourPatch < 0 || uint32_t(side.neighbourPatch) < p) continue;
+      const Patch& q = layout.patches[uint32_t(side.neighbourPatch)];
+      Patch u;
+      u.triangles = layout.patches[p].triangles;
+      u.triangles.insert(u.triangles.end(), q.triangles.begin(), q.triangles.end());
+      for (uint32_t k = 0; k < layout.patches[p].sides.size(); ++k) {
+        if (k != s) u.sides.push_back(layout.patches[p].sides[k]);
+      }
+      for (uint32_t k = 0; k < q.sides.size(); ++k) {
+        if (k != side.neighbourSide) u.sides.push_back(q.sides[k]);
+      }
+      const uint32_t a = side.vertices.front(), b = side.vertices.back();
+      const Paths whole = shortestCuts(layout, patchGraph(layout, u), a, b);
+      ASSERT_TRUE(whole.dist.contains(b));
+      const double shortest = whole.dist.at(b), length = runLength(layout, side.vertices);
+      // Bounds above the side's length (the straightening's), and just below the shortest path.
+      for (const double bound : {length * (1.0 + 1e-5), shortest * 0.999}) {
+        Patch near;
+        near.sides = u.sides;
+        for (const uint32_t t : u.triangles) {
+          for (const uint32_t v : layout.triangles[t]) {
+            const glm::vec3 x = layout.positions[v];
+            if (glm::length(x - layout.positions[a]) + glm::length(x - layout.positions[b]) < bound * (1.0 + 1e-5)) {
+              near.triangles.push_back(t);
+              break;
+            }
+          }
+        }
+        const Paths within = shortestCutWithin(layout, patchGraph(layout, near), a, b, bound);
+        if (shortest < bound) {
+          ASSERT_TRUE(within.dist.contains(b)) << "patch " << p << " side " << s;
+          EXPECT_EQ(within.dist.at(b), shortest);
+          EXPECT_EQ(pathTo(within, a, b), pathTo(whole, a, b)) << "patch " << p << " side " << s;
+          shorter += shortest < length * (1.0 - 1e-9);
+          straight += !(shortest < length * (1.0 - 1e-9));
+        } else {
+          EXPECT_FALSE(within.dist.contains(b) && within.dist.at(b) < bound);
+          ++smaller;
+        }
+        EXPECT_LE(near.triangles.size(), u.triangles.size());
+      }
+    }
+  }
+  std::printf("  bunny, 64 patches: %u sides with a shorter path, %u straight, %u bounds below the path\n", shorter,
+              straight, smaller);
+  EXPECT_GT(shorter, 0u);
+  EXPECT_GT(smaller, 0u);
 }
 
 // With keepHalves, a straightening never leaves either patch less than half its triangles; on the
