@@ -832,21 +832,12 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s, bool keepHalves
   }
   // The shortest path between the corners, searched only where a path shorter than the side
   // can run: the triangles with a vertex closer to both corners together than the side is long
-  // (shortestCutWithin; the margins cover the float lengths' rounding). A side that is already
-  // straight leaves a thin ellipse, and most of the second round's sides are.
+  // (shortestCutWithin, trianglesWithin; the margin covers the float lengths' rounding). A side
+  // that is already straight leaves a thin ellipse, and most of the second round's sides are.
   const double bound = before * (1.0 + 1e-5);
   Patch near;
   near.sides = u.sides;
-  const glm::vec3 pa = layout.positions[a], pb = layout.positions[b];
-  for (const uint32_t tri : u.triangles) {
-    for (const uint32_t v : layout.triangles[tri]) {
-      const glm::vec3 x = layout.positions[v];
-      if (double(glm::length(x - pa)) + double(glm::length(x - pb)) < bound * (1.0 + 1e-5)) {
-        near.triangles.push_back(tri);
-        break;
-      }
-    }
-  }
+  near.triangles = trianglesWithin(layout, u.triangles, a, b, bound);
   std::vector<uint32_t> path{b};
   {
     const Paths paths = shortestCutWithin(layout, patchGraph(layout, near), a, b, bound);

@@ -3,14 +3,13 @@
 #include "atlas/mesh/patch_param.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numbers>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
-
-#include <chrono>
 
 #include <Eigen/Sparse>
 #include <Eigen/OrderingMethods>

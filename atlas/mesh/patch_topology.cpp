@@ -98,10 +98,26 @@ Paths shortestCutWithin(const ChartLayout& layout, const PatchGraph& g, uint32_t
     if (u == target) return PathStep::kStop;
     if (u != source && g.onBoundary.contains(u)) return PathStep::kEnd;
     // (The straight distance as the edges' lengths are taken, from float positions.)
-    if (search.r.dist[u] + double(glm::length(layout.positions[u] - end)) >= bound) return PathStep::kEnd;
+    if (search.distance(u) + double(glm::length(layout.positions[u] - end)) >= bound) return PathStep::kEnd;
     return PathStep::kThrough;
   });
   return std::move(search.r);
+}
+
+std::vector<uint32_t> trianglesWithin(const ChartLayout& layout, const std::vector<uint32_t>& triangles,
+                                      uint32_t source, uint32_t target, double bound) {
+  const glm::vec3 pa = layout.positions[source], pb = layout.positions[target];
+  std::vector<uint32_t> out;
+  for (const uint32_t t : triangles) {
+    for (const uint32_t v : layout.triangles[t]) {
+      const glm::vec3 x = layout.positions[v];
+      if (double(glm::length(x - pa)) + double(glm::length(x - pb)) < bound * (1.0 + 1e-5)) {
+        out.push_back(t);
+        break;
+      }
+    }
+  }
+  return out;
 }
 
 int64_t eulerCharacteristic(const ChartLayout& layout, const std::vector<uint32_t>& tris) {

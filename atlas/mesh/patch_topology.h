@@ -106,6 +106,12 @@ Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t sour
 Paths shortestCutWithin(const ChartLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target,
                         double bound);
 
+// The triangles of `triangles` (layout ids, in their order) with a vertex u closer to both
+// `source` and `target` together than `bound` (|source - u| + |u - target| < bound, with a margin
+// for the float lengths' rounding): what shortestCutWithin's graph needs.
+std::vector<uint32_t> trianglesWithin(const ChartLayout& layout, const std::vector<uint32_t>& triangles,
+                                      uint32_t source, uint32_t target, double bound);
+
 // Euler characteristic V - E + F of a set of the layout's triangles.
 int64_t eulerCharacteristic(const ChartLayout& layout, const std::vector<uint32_t>& triangles);
 

@@ -210,6 +210,7 @@ class Locator {
       // a cell farther out is farther from the point than the triangle found, and searching on
       // to the grid's edge made every such point cost the whole patch.
       uint32_t lastRing = std::max(nx_, ny_);
+      bool listed = false;  // some ring so far lists a triangle
       for (uint32_t ring = 0; ring <= lastRing && best < kInside; ++ring) {
         const int64_t x0 = int64_t(cx) - ring, x1 = int64_t(cx) + ring;
         const int64_t y0 = int64_t(cy) - ring, y1 = int64_t(cy) + ring;
@@ -217,7 +218,7 @@ class Locator {
           if (x < 0 || x >= int64_t(nx_)) return;
           const size_t c = size_t(y) * nx_ + size_t(x);
           for (uint32_t k = start_[c]; k < start_[c + 1]; ++k) test(tris_[k]);
-          if (start_[c + 1] > start_[c] && lastRing == std::max(nx_, ny_)) lastRing = ring + 2;
+          if (start_[c + 1] > start_[c] && !listed) listed = true, lastRing = ring + 2;
         };
         // The ring's cells only: whole rows at its top and bottom, its two ends between.
         for (int64_t y = std::max<int64_t>(y0, 0); y <= std::min<int64_t>(y1, ny_ - 1); ++y) {

@@ -249,15 +249,7 @@ TEST(LayoutRefine, BoundedSearchInTheEllipseFindsTheWholeSearchsPath) {
       for (const double bound : {length * (1.0 + 1e-5), shortest * 0.999}) {
         Patch near;
         near.sides = u.sides;
-        for (const uint32_t t : u.triangles) {
-          for (const uint32_t v : layout.triangles[t]) {
-            const glm::vec3 x = layout.positions[v];
-            if (glm::length(x - layout.positions[a]) + glm::length(x - layout.positions[b]) < bound * (1.0 + 1e-5)) {
-              near.triangles.push_back(t);
-              break;
-            }
-          }
-        }
+        near.triangles = trianglesWithin(layout, u.triangles, a, b, bound);
         const Paths within = shortestCutWithin(layout, patchGraph(layout, near), a, b, bound);
         if (shortest < bound) {
           ASSERT_TRUE(within.dist.contains(b)) << "patch " << p << " side " << s;
