@@ -82,11 +82,22 @@ uint64_t layoutQuadCount(const ChartLayout& layout, QuadLayout quads) {
 // the staging directory once measured, and are read back one chart at a time per thread to be
 // written, so what must fit is a patch's charts (up to 8 quads) and their working arrays on every
 // thread at once in memory, and the spill plus the chart files (with their pyramids) on disk.
+uint64_t threadCount(const QuadChartOptions& o) {
+  return o.threads ? o.threads : uint64_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+}
+
+uint64_t bytesPerSample(const ChartLayout& layout) { return layout.colours.empty() ? 16 : 20; }
+
+// A patch's charts (up to 8 quads) and their working arrays at o.chartSize, on every thread.
+uint64_t chartsInFlightBytes(const ChartLayout& layout, const QuadChartOptions& o) {
+  return threadCount(o) * uint64_t(o.chartSize) * o.chartSize * (8 * bytesPerSample(layout) + 32);
+}
+
 void checkChartRoom(const ChartLayout& layout, uint64_t quads, const QuadChartOptions& o, const fs::path& dir) {
   const uint64_t samples = uint64_t(o.chartSize) * o.chartSize;
-  const uint64_t perSample = layout.colours.empty() ? 16 : 20;
-  const uint64_t threads = o.threads ? o.threads : uint64_t(std::max(1, tbb::this_task_arena::max_concurrency()));
-  const uint64_t inFlight = threads * samples * (8 * perSample + 32);
+  const uint64_t perSample = bytesPerSample(layout);
+  const uint64_t threads = threadCount(o);
+  const uint64_t inFlight = chartsInFlightBytes(layout, o);
   if (inFlight > o.maxMemory)
     throw InputError(fmt::format("{}: quad charts of {}^2 samples need {:.1f} GiB of geometry images at once "
                                  "({} threads), more than {} ({:.1f} GiB): lower {} or {}, or raise {}",
@@ -104,6 +115,15 @@ void checkChartRoom(const ChartLayout& layout, uint64_t quads, const QuadChartOp
                                  optionRef("chartSize"), optionRef("charts")));
 }
 
+
+// What the patches' parameterizations may hold at once (ParamGate): maxMemory less what the
+// process holds now (once the heap has handed freed pages back), the parameterization cache's
+// share (maxMemory / 8) and the charts in flight at o.chartSize.
+uint64_t paramGateBudget(const ChartLayout& layout, const QuadChartOptions& o) {
+  releaseFreedMemory();
+  const uint64_t taken = residentBytes() + o.maxMemory / 8 + chartsInFlightBytes(layout, o);
+  return o.maxMemory > taken ? o.maxMemory - taken : 0;
+}
 
 // Logs (at debug level) every chart left with flipped texels: its patch's size and sides (edges
 // and length of each), so that where folds remain can be told apart.
@@ -238,6 +258,8 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const QuadChartOptions& opti
   for (const glm::vec3& q : layout.positions) r.bounds.extend(q);
   ResampleOptions ro = resampleOptions(o, quads, r.spill.get(), r.bounds);
   ro.chartSize = o.chartSize;
+  ParamGate gate(paramGateBudget(layout, o));
+  ro.gate = &gate;
   GeometryImageSet first = resampleLayout(layout, ro);
   // Doubles the chart size (saying `why`) and resamples the layout into `first`, its patches
   // first set to `restore` if given; false, unchanged, when the larger charts do not fit
@@ -742,6 +764,10 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
   z.ro.chordsBelow = base;
   // A patch is parameterized once for all its sizes, within an eighth of the memory.
   z.params = std::make_unique<ParamCache>(o.maxMemory / 8);
+  QuadChartOptions baseSize = o;
+  baseSize.chartSize = base;
+  ParamGate gate(paramGateBudget(layout, baseSize));
+  z.ro.gate = &gate;
   // Each patch starts at its own density's size: the layout's, or less for a patch with fewer
   // triangles than its quads' share (a small piece, a sliver between large patches), down to the
   // coarsest finest level the hierarchy leaves a chart of the layout's size.
@@ -806,6 +832,10 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
     ++st.patchesBySize[doublings];
   }
   const double samples = z.samples();
+  if (gate.waits() > 0)
+    spdlog::info("{} patches waited for others to be resampled, to keep their working memory within {:.0f} MiB "
+                 "(of {})",
+                 gate.waits(), double(gate.budget()) / double(1 << 20), spelled(o, "maxMemory"));
   r.set = z.gather(top, quads);
   GeometryImageSet& set = r.set;
   st.chartSize = top;

@@ -1567,7 +1567,18 @@ void sampleChart(PatchSampler& ps, ChartBuffers& buffers, uint32_t i) {
 
 // Resamples patch p (action 1): parameterizes it, samples what its quads share, then each quad
 // chart.
+// The working memory of resampling patch p (held at the gate through its parameterization and
+// sampling): its parameterization's where none is cached, and the point location's grid, about
+// 64 bytes a triangle while it is built.
+uint64_t patchWorkingBytes(const ResampleContext& c, uint32_t p) {
+  const Patch& patch = c.layout.patches[p];
+  const bool cached = c.reuse.params && c.reuse.params->holds(patch, p);
+  return (cached ? 0 : paramWorkingBytes(patch.triangles.size())) + 64 * uint64_t(patch.triangles.size());
+}
+
 void resamplePatch(const ResampleContext& c, uint32_t p, const PatchQuads& plan) {
+  std::optional<ParamGate::Hold> hold;
+  if (c.options.gate) hold.emplace(*c.options.gate, patchWorkingBytes(c, p));
   PatchSampler ps(c, p, plan);
   PatchResampleStats& st = c.set.patches[p];
   st.paramInitial = ps.pp.initial;
@@ -1646,6 +1657,37 @@ void ParamCache::put(const Patch& patch, uint32_t p, std::shared_ptr<const Patch
   if (bytes_ + bytes > maxBytes_) return;
   entries_.emplace(p, Entry{patch, std::move(pp), bytes});
   bytes_ += bytes;
+}
+
+uint64_t paramWorkingBytes(uint64_t triangles) {
+  const double n = double(triangles / 2 + 1);
+  return uint64_t(n * (12.0 * 6.0 * std::log2(std::max(n, 2.0)) + 640.0));
+}
+
+ParamGate::Hold::Hold(ParamGate& gate, uint64_t bytes) : gate_(gate), bytes_(bytes) {
+  std::unique_lock<std::mutex> lock(gate_.mutex_);
+  const auto fits = [&] { return gate_.running_ == 0 || gate_.held_ + bytes_ <= gate_.budget_; };
+  if (!fits()) {
+    ++gate_.waits_;
+    gate_.freed_.wait(lock, fits);
+  }
+  gate_.held_ += bytes_;
+  ++gate_.running_;
+}
+
+ParamGate::Hold::~Hold() {
+  {
+    const std::lock_guard<std::mutex> lock(gate_.mutex_);
+    gate_.held_ -= bytes_;
+    --gate_.running_;
+  }
+  gate_.freed_.notify_all();
+}
+
+bool ParamCache::holds(const Patch& patch, uint32_t p) const {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const auto it = entries_.find(p);
+  return it != entries_.end() && patchParamAlike(it->second.patch, patch);
 }
 
 uint64_t ParamCache::bytes() const {

@@ -18,6 +18,7 @@
 
 #include <array>
 #include <atomic>
+#include <condition_variable>
 #include <cstdint>
 #include <limits>
 #include <filesystem>
@@ -36,6 +37,7 @@
 namespace gimlod {
 
 class ChartSpill;
+class ParamGate;
 
 // How a patch is cut into quad charts (see above).
 enum class QuadLayout : uint8_t { kKites, kSides };
@@ -77,6 +79,9 @@ struct ResampleOptions {
   // input vertices of their shared sides lie from the polyline through the side's samples (the
   // chords they cut across a curved or kinked side); 0: none do.
   uint32_t chordsBelow = 0;
+  // If set, each patch's parameterization and sampling wait there until their working memory
+  // fits beside those running (see ParamGate).
+  ParamGate* gate = nullptr;
 };
 
 // Quality of a sampled image, seen as a map from the unit square to the sampled surface through
@@ -227,6 +232,8 @@ class ParamCache {
   explicit ParamCache(uint64_t maxBytes) : maxBytes_(maxBytes) {}
   // Patch p's parameterization if one was put for a patch alike; null otherwise.
   std::shared_ptr<const PatchParameterization> find(const Patch& patch, uint32_t p) const;
+  // Whether find would return one (not counted as a hit).
+  bool holds(const Patch& patch, uint32_t p) const;
   // Keeps pp as patch p's parameterization, in place of any earlier one of p.
   void put(const Patch& patch, uint32_t p, std::shared_ptr<const PatchParameterization> pp);
   uint64_t hits() const { return hits_; }
@@ -243,6 +250,50 @@ class ParamCache {
   uint64_t bytes_ = 0;
   const uint64_t maxBytes_;
   mutable std::atomic<uint64_t> hits_{0};
+};
+
+// Estimated working memory of parameterizing a patch of `triangles` triangles (n = triangles / 2
+// vertices), mostly its sparse LU's factors: their fill under the AMD ordering is 5 to 7 n log2 n
+// entries (the spheres' patches of 13k to 335k vertices), at about 11 bytes an entry in single
+// precision with the supernodes' indices, taken as 72 n log2 n bytes; and the local arrays
+// (weights, matrices, coordinates), about 640 bytes a vertex.
+uint64_t paramWorkingBytes(uint64_t triangles);
+
+// Lets patches be parameterized and sampled at once only while their working memory (mostly
+// paramWorkingBytes) fits in a budget together; one always runs, whatever its estimate, so a
+// budget of 0 runs them one at a time. Waiting threads sleep; Holds may be taken and given back
+// on several threads at once. On two cores, two patches of the 18.7M-triangle sphere do not fit
+// beside the layout within 2 GiB, so the gate trades time for memory there.
+class ParamGate {
+ public:
+  explicit ParamGate(uint64_t budget) : budget_(budget) {}
+  ParamGate(const ParamGate&) = delete;
+  ParamGate& operator=(const ParamGate&) = delete;
+
+  // Held working memory, given back when it goes out of scope.
+  class Hold {
+   public:
+    Hold(ParamGate& gate, uint64_t bytes);
+    ~Hold();
+    Hold(const Hold&) = delete;
+    Hold& operator=(const Hold&) = delete;
+
+   private:
+    ParamGate& gate_;
+    const uint64_t bytes_;
+  };
+
+  uint64_t budget() const { return budget_; }
+  // Holds that had to wait for others to be given back.
+  uint64_t waits() const { return waits_; }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable freed_;
+  uint64_t held_ = 0;
+  uint32_t running_ = 0;
+  const uint64_t budget_;
+  std::atomic<uint64_t> waits_{0};
 };
 
 // Whether two versions of a patch parameterize identically: the same triangles in the same order,

@@ -6,9 +6,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstring>
 #include <fstream>
+#include <mutex>
 #include <set>
+#include <thread>
 
 #include <tbb/global_control.h>
 
@@ -506,6 +509,53 @@ TEST(ResampleReuse, CachedParameterizationsGiveTheSameChartsAtEverySize) {
   expectSameCharts(resampleLayout(layout, ro, small), resampleLayout(layout, ro));
   EXPECT_EQ(tiny.bytes(), 0u);
   EXPECT_EQ(tiny.find(layout.patches[1], 1), nullptr);
+}
+
+// The gate holds a parameterization back while those running and it would need more than its
+// budget, and lets one run alone whatever it needs; the charts are those of an ungated resampling.
+TEST(ParamGate, HoldsWithinTheBudgetAndOneAlwaysRuns) {
+  for (const uint64_t budget : {uint64_t(0), uint64_t(100), uint64_t(250)}) {
+    SCOPED_TRACE(testing::Message() << "budget " << budget);
+    ParamGate gate(budget);
+    std::mutex m;
+    uint64_t held = 0, mostHeld = 0, running = 0, mostRunning = 0;
+    bool overBudget = false;
+    const std::vector<uint64_t> needs{60, 60, 60, 60, 120, 300, 40, 40, 90, 10, 10, 10};
+    std::vector<std::thread> threads;
+    for (const uint64_t need : needs) {
+      threads.emplace_back([&, need] {
+        const ParamGate::Hold hold(gate, need);
+        {
+          const std::lock_guard<std::mutex> lock(m);
+          held += need;
+          ++running;
+          mostHeld = std::max(mostHeld, held);
+          mostRunning = std::max(mostRunning, running);
+          overBudget = overBudget || (running > 1 && held > budget);
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        const std::lock_guard<std::mutex> lock(m);
+        held -= need;
+        --running;
+      });
+    }
+    for (std::thread& t : threads) t.join();
+    EXPECT_FALSE(overBudget) << "most held " << mostHeld;
+    EXPECT_EQ(held, 0u);
+    if (budget == 0) EXPECT_EQ(mostRunning, 1u);
+    if (budget == 250) EXPECT_GT(mostRunning, 1u);
+    EXPECT_GT(gate.waits(), 0u);
+  }
+
+  ChartLayout layout = test::cubeLayout(8, true);
+  ResampleOptions ro;
+  ro.chartSize = 17;
+  ro.threads = 4;
+  ParamGate oneAtATime(0);
+  ro.gate = &oneAtATime;
+  const GeometryImageSet gated = resampleLayout(layout, ro);
+  ro.gate = nullptr;
+  expectSameCharts(gated, resampleLayout(layout, ro));
 }
 
 TEST(ResampleReuse, ReusedPatchesAreBitIdenticalAndOnlyChangedOnesAreRedone) {
