@@ -221,7 +221,7 @@ std::vector<WeightRow> meanValueWeights(const LocalPatch& lp) {
 // Solves the barycentric system with the boundary fixed; writes interior uv.
 class InteriorSolver {
  public:
-  InteriorSolver(const LocalPatch& lp, const std::vector<uint8_t>& isBoundary)
+  InteriorSolver(const LocalPatch& lp, const std::vector<uint8_t>& isBoundary, uint32_t singlePrecisionFrom)
       : isBoundary_(isBoundary), unknown_(lp.vertices.size(), ~0u) {
     for (uint32_t i = 0; i < lp.vertices.size(); ++i) {
       if (!isBoundary[i]) {
@@ -229,6 +229,7 @@ class InteriorSolver {
         interior_.push_back(i);
       }
     }
+    single_ = interior_.size() >= singlePrecisionFrom;
   }
 
   // Returns false if the factorization failed.
@@ -274,7 +275,7 @@ class InteriorSolver {
     }
     const Eigen::MatrixXd b = order_.transpose() * rhs;
     Eigen::MatrixXd x;
-    bool solved = !double_ && solveRefined(ordered, b, x);
+    bool solved = single_ && solveRefined(ordered, b, x);
     if (!solved) solved = solveDouble(ordered, b, x);
     if (!solved) return false;
     const Eigen::MatrixXd inPatchOrder = order_ * x;
@@ -285,7 +286,7 @@ class InteriorSolver {
   size_t unknowns() const { return interior_.size(); }
   // Entries of the last factorization's L and U, and whether it was in double precision.
   uint64_t factorEntries() const { return factorEntries_; }
-  bool inDouble() const { return double_ != nullptr; }
+  bool inDouble() const { return !single_; }
 
  private:
   // The LU in single precision, which holds the factors in about 0.6 times the memory, then
@@ -294,14 +295,14 @@ class InteriorSolver {
   // is as accurate as a double factorization's. False when the refinement stalls short of that.
   bool solveRefined(const Eigen::SparseMatrix<double>& a, const Eigen::MatrixXd& b, Eigen::MatrixXd& x) {
     const Eigen::SparseMatrix<float> af = a.cast<float>();
-    if (!single_) {
-      single_ = std::make_unique<Eigen::SparseLU<Eigen::SparseMatrix<float>, Eigen::NaturalOrdering<int>>>();
-      single_->analyzePattern(af);
+    if (!float_) {
+      float_ = std::make_unique<Eigen::SparseLU<Eigen::SparseMatrix<float>, Eigen::NaturalOrdering<int>>>();
+      float_->analyzePattern(af);
     }
-    single_->factorize(af);
-    if (single_->info() != Eigen::Success) return false;
-    factorEntries_ = uint64_t(single_->nnzL() + single_->nnzU());
-    x = Eigen::MatrixXf(single_->solve(Eigen::MatrixXf(b.cast<float>()))).cast<double>();
+    float_->factorize(af);
+    if (float_->info() != Eigen::Success) return false;
+    factorEntries_ = uint64_t(float_->nnzL() + float_->nnzU());
+    x = Eigen::MatrixXf(float_->solve(Eigen::MatrixXf(b.cast<float>()))).cast<double>();
     double last = std::numeric_limits<double>::infinity();
     for (uint32_t step = 0; step < kRefinementSteps; ++step) {
       const Eigen::MatrixXd r = b - a * x;
@@ -309,15 +310,17 @@ class InteriorSolver {
       if (!std::isfinite(residual) || residual > last * 0.5) break;
       if (residual <= kResidual) return x.allFinite();
       last = residual;
-      x += Eigen::MatrixXf(single_->solve(Eigen::MatrixXf(r.cast<float>()))).cast<double>();
+      x += Eigen::MatrixXf(float_->solve(Eigen::MatrixXf(r.cast<float>()))).cast<double>();
     }
     return false;
   }
 
-  // The LU in double precision, for this and the later solves, once the refinement has stalled.
+  // The LU in double precision: for a small patch, and for this and the later solves once the
+  // refinement has stalled.
   bool solveDouble(const Eigen::SparseMatrix<double>& a, const Eigen::MatrixXd& b, Eigen::MatrixXd& x) {
     if (!double_) {
-      single_.reset();
+      single_ = false;
+      float_.reset();
       double_ = std::make_unique<Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::NaturalOrdering<int>>>();
       double_->analyzePattern(a);
     }
@@ -337,7 +340,8 @@ class InteriorSolver {
   std::vector<uint32_t> unknown_;
   std::vector<uint32_t> interior_;
   Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> order_;
-  std::unique_ptr<Eigen::SparseLU<Eigen::SparseMatrix<float>, Eigen::NaturalOrdering<int>>> single_;
+  bool single_ = false;  // factored in single precision and refined
+  std::unique_ptr<Eigen::SparseLU<Eigen::SparseMatrix<float>, Eigen::NaturalOrdering<int>>> float_;
   std::unique_ptr<Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::NaturalOrdering<int>>> double_;
   bool analyzed_ = false;
   uint64_t factorEntries_ = 0;
@@ -657,7 +661,7 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
   }
 
   std::vector<WeightRow> weights = meanValueWeights(lp);
-  InteriorSolver solver(lp, isBoundary);
+  InteriorSolver solver(lp, isBoundary, options.singlePrecisionFrom);
   if (!solver.solve(weights, out.uv)) fail(patch, "mean-value system could not be solved");
   out.initial = measureStretch(out.uv, lp.xyz, lp.triangles);
   out.quality = out.initial;
@@ -722,7 +726,7 @@ ParamQuality mapDiskOntoDomain(const std::vector<glm::dvec3>& xyz,
   for (uint32_t v = 0; v < lp.vertices.size(); ++v) lp.vertices[v] = v;
   lp.triangles = triangles;
   lp.xyz = xyz;
-  InteriorSolver solver(lp, fixed);
+  InteriorSolver solver(lp, fixed, options.singlePrecisionFrom);
   if (!solver.solve(meanValueWeights(lp), uv)) {
     throw std::invalid_argument("mapDiskOntoDomain: the mean-value system could not be solved");
   }

@@ -55,6 +55,10 @@ struct ParamOptions {
   // and 2j+1 bound one quad with the centre, so their corners are placed in pairs (patchPolygon).
   // resampleLayout sets it from its quad layout.
   bool pairedSides = false;
+  // Patches with at least this many inner vertices are factored in single precision and the
+  // solution refined in double (as exact as a double factorization, in about 0.6 times the
+  // memory); smaller ones in double precision, whose factors are under about 100 MiB.
+  uint32_t singlePrecisionFrom = 100000;
 };
 
 // Quality of a parameterization (param -> surface map), in the style of xatlas' per-chart

@@ -1573,7 +1573,8 @@ void sampleChart(PatchSampler& ps, ChartBuffers& buffers, uint32_t i) {
 uint64_t patchWorkingBytes(const ResampleContext& c, uint32_t p) {
   const Patch& patch = c.layout.patches[p];
   const bool cached = c.reuse.params && c.reuse.params->holds(patch, p);
-  return (cached ? 0 : paramWorkingBytes(patch.triangles.size())) + 64 * uint64_t(patch.triangles.size());
+  return (cached ? 0 : paramWorkingBytes(patch.triangles.size(), c.options.param.singlePrecisionFrom)) +
+         64 * uint64_t(patch.triangles.size());
 }
 
 void resamplePatch(const ResampleContext& c, uint32_t p, const PatchQuads& plan) {
@@ -1659,9 +1660,10 @@ void ParamCache::put(const Patch& patch, uint32_t p, std::shared_ptr<const Patch
   bytes_ += bytes;
 }
 
-uint64_t paramWorkingBytes(uint64_t triangles) {
+uint64_t paramWorkingBytes(uint64_t triangles, uint32_t singlePrecisionFrom) {
   const double n = double(triangles / 2 + 1);
-  return uint64_t(n * (12.0 * 6.0 * std::log2(std::max(n, 2.0)) + 640.0));
+  const double perEntry = n >= double(singlePrecisionFrom) ? 72.0 : 110.0;
+  return uint64_t(n * (perEntry * std::log2(std::max(n, 2.0)) + 640.0));
 }
 
 ParamGate::Hold::Hold(ParamGate& gate, uint64_t bytes) : gate_(gate), bytes_(bytes) {

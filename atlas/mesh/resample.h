@@ -255,9 +255,10 @@ class ParamCache {
 // Estimated working memory of parameterizing a patch of `triangles` triangles (n = triangles / 2
 // vertices), mostly its sparse LU's factors: their fill under the AMD ordering is 5 to 7 n log2 n
 // entries (the spheres' patches of 13k to 335k vertices), at about 11 bytes an entry in single
-// precision with the supernodes' indices, taken as 72 n log2 n bytes; and the local arrays
-// (weights, matrices, coordinates), about 640 bytes a vertex.
-uint64_t paramWorkingBytes(uint64_t triangles);
+// precision and 17 in double with the supernodes' indices (ParamOptions::singlePrecisionFrom),
+// taken as 72 or 110 n log2 n bytes; and the local arrays (weights, matrices, coordinates),
+// about 640 bytes a vertex.
+uint64_t paramWorkingBytes(uint64_t triangles, uint32_t singlePrecisionFrom);
 
 // Lets patches be parameterized and sampled at once only while their working memory (mostly
 // paramWorkingBytes) fits in a budget together; one always runs, whatever its estimate, so a

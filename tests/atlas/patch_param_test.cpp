@@ -222,15 +222,16 @@ TEST(PatchParam, FlatSquareIsAffine) {
   EXPECT_EQ(pp.cornerIndex, (std::vector<uint32_t>{0, 10, 20, 30}));
 }
 
-// The mean-value system is factored in single precision and refined with double-precision
-// residuals: on a flat patch, which the weights map affinely, the solve alone (no reweighting, no
-// sweeps) is as exact as a double factorization. A single-precision solve unrefined is off by
-// about 1e-7 here.
+// A large patch's mean-value system is factored in single precision and refined with
+// double-precision residuals: on a flat patch, which the weights map affinely, the solve alone (no
+// reweighting, no sweeps) is as exact as a double factorization. A single-precision solve
+// unrefined is off by about 1e-7 here.
 TEST(PatchParam, TheSolveIsExactToDoublePrecision) {
   const ChartLayout layout = test::gridLayout(80, 80, 2.f, 2.f);
   ParamOptions o;
   o.stretchIterations = 0;
   o.stretchSweeps = 0;
+  o.singlePrecisionFrom = 0;
   const PatchParameterization pp = parameterizePatch(layout, 0, o);
   ASSERT_EQ(pp.sides, 4u);
   const glm::dvec2 c0 = polygonCorner(4, 0), c1 = polygonCorner(4, 1), c3 = polygonCorner(4, 3);
