@@ -2,7 +2,6 @@
 // Kumar, "Seamless Texture Atlases", SGP 2004 (shared boundary sampling).
 #include "atlas/mesh/resample.h"
 #include "core/progress.h"
-#include "core/stage_meter.h"
 
 #include <fcntl.h>
 #include <unistd.h>
@@ -1679,10 +1678,6 @@ ParamGate::Hold::Hold(ParamGate& gate, uint64_t bytes) : gate_(gate), bytes_(byt
 }
 
 ParamGate::Hold::~Hold() {
-  // What the patch freed goes back to the system before the next one counts on it: the weights'
-  // and the sweeps' many small blocks stay in this thread's heap arena otherwise, where no other
-  // thread reuses them.
-  releaseFreedMemory();
   {
     const std::lock_guard<std::mutex> lock(gate_.mutex_);
     gate_.held_ -= bytes_;
