@@ -542,8 +542,12 @@ TEST(ParamGate, HoldsWithinTheBudgetAndOneAlwaysRuns) {
     for (std::thread& t : threads) t.join();
     EXPECT_FALSE(overBudget) << "most held " << mostHeld;
     EXPECT_EQ(held, 0u);
-    if (budget == 0) EXPECT_EQ(mostRunning, 1u);
-    if (budget == 250) EXPECT_GT(mostRunning, 1u);
+    if (budget == 0) {
+      EXPECT_EQ(mostRunning, 1u);
+    }
+    if (budget == 250) {
+      EXPECT_GT(mostRunning, 1u);
+    }
     EXPECT_GT(gate.waits(), 0u);
   }
 
