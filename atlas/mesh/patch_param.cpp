@@ -263,13 +263,13 @@ class InteriorSolver {
       a.setFromTriplets(trip.begin(), trip.end());
       std::vector<Eigen::Triplet<double>>().swap(trip);
       a.makeCompressed();
-      if (!analyzed_) {
+      if (!orderFound_) {
         // The weights' pattern is the mesh's edges, so symmetric: AMD on it orders the unknowns
         // with about 0.6 times the fill of the LU's own column ordering (COLAMD), and the
         // factorization takes about half the time.
         Eigen::AMDOrdering<int> amd;
         amd(a, order_);
-        analyzed_ = true;
+        orderFound_ = true;
       }
       ordered = order_.transpose() * a * order_;
     }
@@ -343,7 +343,7 @@ class InteriorSolver {
   bool single_ = false;  // factored in single precision and refined
   std::unique_ptr<Eigen::SparseLU<Eigen::SparseMatrix<float>, Eigen::NaturalOrdering<int>>> float_;
   std::unique_ptr<Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::NaturalOrdering<int>>> double_;
-  bool analyzed_ = false;
+  bool orderFound_ = false;
   uint64_t factorEntries_ = 0;
 };
 

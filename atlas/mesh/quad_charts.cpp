@@ -78,10 +78,6 @@ uint64_t layoutQuadCount(const ChartLayout& layout, QuadLayout quads) {
   return n;
 }
 
-// Refuses a chart size whose charts cannot be made: each chart's samples go to a spill file in
-// the staging directory once measured, and are read back one chart at a time per thread to be
-// written, so what must fit is a patch's charts (up to 8 quads) and their working arrays on every
-// thread at once in memory, and the spill plus the chart files (with their pyramids) on disk.
 uint64_t threadCount(const QuadChartOptions& o) {
   return o.threads ? o.threads : uint64_t(std::max(1, tbb::this_task_arena::max_concurrency()));
 }
@@ -93,6 +89,10 @@ uint64_t chartsInFlightBytes(const ChartLayout& layout, const QuadChartOptions& 
   return threadCount(o) * uint64_t(o.chartSize) * o.chartSize * (8 * bytesPerSample(layout) + 32);
 }
 
+// Refuses a chart size whose charts cannot be made: each chart's samples go to a spill file in
+// the staging directory once measured, and are read back one chart at a time per thread to be
+// written, so what must fit is a patch's charts (up to 8 quads) and their working arrays on every
+// thread at once in memory, and the spill plus the chart files (with their pyramids) on disk.
 void checkChartRoom(const ChartLayout& layout, uint64_t quads, const QuadChartOptions& o, const fs::path& dir) {
   const uint64_t samples = uint64_t(o.chartSize) * o.chartSize;
   const uint64_t perSample = bytesPerSample(layout);

@@ -1565,8 +1565,6 @@ void sampleChart(PatchSampler& ps, ChartBuffers& buffers, uint32_t i) {
   if (c.options.spill) c.options.spill->put(img);
 }
 
-// Resamples patch p (action 1): parameterizes it, samples what its quads share, then each quad
-// chart.
 // The working memory of resampling patch p (held at the gate through its parameterization and
 // sampling): its parameterization's where none is cached, and the point location's grid, about
 // 64 bytes a triangle while it is built.
@@ -1577,6 +1575,8 @@ uint64_t patchWorkingBytes(const ResampleContext& c, uint32_t p) {
          64 * uint64_t(patch.triangles.size());
 }
 
+// Resamples patch p (action 1): parameterizes it, samples what its quads share, then each quad
+// chart.
 void resamplePatch(const ResampleContext& c, uint32_t p, const PatchQuads& plan) {
   std::optional<ParamGate::Hold> hold;
   if (c.options.gate) hold.emplace(*c.options.gate, patchWorkingBytes(c, p));
@@ -1636,12 +1636,17 @@ bool patchParamAlike(const Patch& a, const Patch& b) {
   return true;
 }
 
+const ParamCache::Entry* ParamCache::entryFor(const Patch& patch, uint32_t p) const {
+  const auto it = entries_.find(p);
+  return it == entries_.end() || !patchParamAlike(it->second.patch, patch) ? nullptr : &it->second;
+}
+
 std::shared_ptr<const PatchParameterization> ParamCache::find(const Patch& patch, uint32_t p) const {
   const std::lock_guard<std::mutex> lock(mutex_);
-  const auto it = entries_.find(p);
-  if (it == entries_.end() || !patchParamAlike(it->second.patch, patch)) return nullptr;
+  const Entry* e = entryFor(patch, p);
+  if (!e) return nullptr;
   ++hits_;
-  return it->second.pp;
+  return e->pp;
 }
 
 void ParamCache::put(const Patch& patch, uint32_t p, std::shared_ptr<const PatchParameterization> pp) {
@@ -1688,8 +1693,7 @@ ParamGate::Hold::~Hold() {
 
 bool ParamCache::holds(const Patch& patch, uint32_t p) const {
   const std::lock_guard<std::mutex> lock(mutex_);
-  const auto it = entries_.find(p);
-  return it != entries_.end() && patchParamAlike(it->second.patch, patch);
+  return entryFor(patch, p) != nullptr;
 }
 
 uint64_t ParamCache::bytes() const {

@@ -245,6 +245,8 @@ class ParamCache {
     std::shared_ptr<const PatchParameterization> pp;
     uint64_t bytes = 0;
   };
+  // Patch p's entry if it is for a patch alike; null otherwise. The caller holds mutex_.
+  const Entry* entryFor(const Patch& patch, uint32_t p) const;
   mutable std::mutex mutex_;
   std::unordered_map<uint32_t, Entry> entries_;
   uint64_t bytes_ = 0;
