@@ -444,8 +444,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   build->add_option("--repair-budget,--flip-repair-budget", mesh.repairBudget,
                     "Meshes: the chart repair stops once it has parameterized this many times the surface's triangles "
-                    "again (its time is about this many resamplings); with --quads auto, each of its repairs (up to "
-                    "two layouts at each size it tries) takes a quarter")
+                    "again, counting at most 2^20 of them (its time is about this many resamplings up to a million "
+                    "triangles); with --quads auto, each of its repairs (up to two layouts at each size it tries) "
+                    "takes a quarter")
       ->capture_default_str();
   double sampleErrorPercent = -1.0;
   build->add_option("--sample-error", sampleErrorPercent,

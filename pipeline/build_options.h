@@ -130,7 +130,8 @@ struct MeshBuildOptions : CommonBuildOptions {
   // flipped texels or a sampling error over maxSampleError), in [0, 16]; 0 keeps the charting's.
   uint32_t repairRounds = 4;
   double repairBudget = 8.0;        // the repair's work cap: layout triangles parameterized again,
-                                    // as a multiple of the layout's triangles, in [0, 100]
+                                    // as a multiple of the layout's triangles (counting at most
+                                    // kRepairTrianglesCounted of them), in [0, 100]
   // The largest sampling error a chart may keep (ImageQuality::sampleError) as a fraction of the
   // bounding-box diagonal, in [0, 0.1]; 0: only flips are repaired; kAutoSampleError:
   // kDefaultSampleError when the chart size is chosen by density (chartSize 0), else 0 (a chart

@@ -1178,7 +1178,9 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
   };
   uint64_t* work = &st.trianglesWholeRounds;  // where the resamplings below count
   if (!grow()) return set;
-  const std::vector<glm::dvec3> normals = layoutVertexNormals(layout);
+  std::vector<glm::dvec3> ownNormals;
+  if (!repair.normals) ownNormals = layoutVertexNormals(layout);
+  const std::vector<glm::dvec3>& normals = repair.normals ? *repair.normals : ownNormals;
   // A triangle of patch p at layout vertex v (the patch's first triangle if none is).
   auto triangleAt = [&](uint32_t p, uint32_t v) {
     const uint32_t t = patchTriangleAt(layout, p, v);

@@ -146,6 +146,9 @@ struct ChartRepairOptions {
   // Stop once this many layout triangles have been parameterized again (about that many
   // triangles' worth of resampling time).
   uint64_t workBudget = ~uint64_t(0);
+  // layoutVertexNormals(layout), if the caller holds them (positions and triangles never change in
+  // a repair); computed once by the repair otherwise.
+  const std::vector<glm::dvec3>* normals = nullptr;
 };
 
 struct ChartRepairStats {

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <span>
 #include <numbers>
 #include <stdexcept>
 #include <string>
@@ -97,22 +98,23 @@ LocalPatch buildLocalPatch(const ChartLayout& layout, uint32_t patchId) {
   lp.xyz.reserve(lp.vertices.size());
   for (uint32_t v : lp.vertices) lp.xyz.emplace_back(layout.positions[v]);
 
-  // Directed edges: each at most once (manifold, consistently oriented).
-  std::unordered_map<uint64_t, uint32_t> directed;
+  // Directed edges, sorted: each at most once (manifold, consistently oriented).
+  std::vector<uint64_t> directed;
   directed.reserve(lp.triangles.size() * 3);
   for (const auto& t : lp.triangles) {
-    for (int c = 0; c < 3; ++c) {
-      if (!directed.emplace(edgeKey(t[c], t[(c + 1) % 3]), 0).second) {
-        fail(patchId, "non-manifold or inconsistently oriented edge " +
-                          std::to_string(lp.vertices[t[c]]) + "-" +
-                          std::to_string(lp.vertices[t[(c + 1) % 3]]));
-      }
-    }
+    for (int c = 0; c < 3; ++c) directed.push_back(edgeKey(t[c], t[(c + 1) % 3]));
   }
+  std::sort(directed.begin(), directed.end());
+  if (auto twice = std::adjacent_find(directed.begin(), directed.end()); twice != directed.end()) {
+    fail(patchId, "non-manifold or inconsistently oriented edge " + std::to_string(lp.vertices[*twice >> 32]) + "-" +
+                      std::to_string(lp.vertices[uint32_t(*twice)]));
+  }
+  const auto hasEdge = [&](uint32_t a, uint32_t b) {
+    return std::binary_search(directed.begin(), directed.end(), edgeKey(a, b));
+  };
   uint32_t boundaryEdges = 0;
-  for (const auto& kv : directed) {
-    const uint64_t k = kv.first;
-    if (!directed.contains((k << 32) | (k >> 32))) ++boundaryEdges;
+  for (const uint64_t k : directed) {
+    if (!hasEdge(uint32_t(k), uint32_t(k >> 32))) ++boundaryEdges;
   }
 
   // The boundary loop from the sides.
@@ -141,7 +143,7 @@ LocalPatch buildLocalPatch(const ChartLayout& layout, uint32_t patchId) {
   const size_t nb = lp.boundary.size();
   for (size_t k = 0; k < nb; ++k) {
     const uint32_t a = lp.boundary[k], b = lp.boundary[(k + 1) % nb];
-    if (!directed.contains(edgeKey(a, b)) || directed.contains(edgeKey(b, a))) {
+    if (!hasEdge(a, b) || hasEdge(b, a)) {
       fail(patchId, "sides do not follow the boundary (edge " + std::to_string(lp.vertices[a]) +
                         "-" + std::to_string(lp.vertices[b]) + ")");
     }
@@ -171,51 +173,77 @@ LocalPatch buildLocalPatch(const ChartLayout& layout, uint32_t patchId) {
   return lp;
 }
 
-// Per-vertex row of weights to neighbours (sorted by neighbour).
-struct WeightRow {
+// The weights to each vertex's neighbours, in compressed rows: row i's neighbours are
+// j[begin[i]] .. j[begin[i + 1] - 1], sorted, with their weights in w. One array each, so a patch
+// of n vertices holds about 76 n bytes of them.
+struct Weights {
+  std::vector<uint32_t> begin;  // one per vertex, and the end
   std::vector<uint32_t> j;
   std::vector<double> w;
 };
 
 // Floater's mean-value weights w_ij = (tan(a/2) + tan(b/2)) / |x_j - x_i|, from 3D angles.
-std::vector<WeightRow> meanValueWeights(const LocalPatch& lp) {
-  std::vector<std::vector<std::pair<uint32_t, double>>> acc(lp.vertices.size());
+Weights meanValueWeights(const LocalPatch& lp) {
+  const size_t n = lp.vertices.size();
+  // Each corner of a triangle gives its vertex two entries, one per neighbour in the triangle;
+  // a neighbour in two triangles is listed twice and summed below.
+  std::vector<uint32_t> at(n + 1, 0);
   for (const auto& t : lp.triangles) {
-    for (int c = 0; c < 3; ++c) {
-      const uint32_t i = t[c], j = t[(c + 1) % 3], k = t[(c + 2) % 3];
-      const glm::dvec3 e1 = lp.xyz[j] - lp.xyz[i], e2 = lp.xyz[k] - lp.xyz[i];
-      const double l1 = glm::length(e1), l2 = glm::length(e2);
-      const double sinPart = glm::length(glm::cross(e1, e2));
-      const double denom = l1 * l2 + glm::dot(e1, e2);  // tan(theta/2) = |e1 x e2| / denom
-      double tanHalf = denom > 1e-300 ? sinPart / denom : 0.0;
-      if (!std::isfinite(tanHalf)) tanHalf = 0.0;
-      acc[i].emplace_back(j, l1 > 0 ? tanHalf / l1 : 0.0);
-      acc[i].emplace_back(k, l2 > 0 ? tanHalf / l2 : 0.0);
+    for (uint32_t v : t) at[v + 1] += 2;
+  }
+  for (size_t i = 0; i < n; ++i) at[i + 1] += at[i];
+  std::vector<std::pair<uint32_t, double>> acc(at[n]);
+  {
+    std::vector<uint32_t> next(at.begin(), at.end() - 1);
+    for (const auto& t : lp.triangles) {
+      for (int c = 0; c < 3; ++c) {
+        const uint32_t i = t[c], j = t[(c + 1) % 3], k = t[(c + 2) % 3];
+        const glm::dvec3 e1 = lp.xyz[j] - lp.xyz[i], e2 = lp.xyz[k] - lp.xyz[i];
+        const double l1 = glm::length(e1), l2 = glm::length(e2);
+        const double sinPart = glm::length(glm::cross(e1, e2));
+        const double denom = l1 * l2 + glm::dot(e1, e2);  // tan(theta/2) = |e1 x e2| / denom
+        double tanHalf = denom > 1e-300 ? sinPart / denom : 0.0;
+        if (!std::isfinite(tanHalf)) tanHalf = 0.0;
+        acc[next[i]++] = {j, l1 > 0 ? tanHalf / l1 : 0.0};
+        acc[next[i]++] = {k, l2 > 0 ? tanHalf / l2 : 0.0};
+      }
     }
   }
-  std::vector<WeightRow> rows(lp.vertices.size());
-  for (size_t i = 0; i < acc.size(); ++i) {
-    auto& a = acc[i];
-    std::sort(a.begin(), a.end());
-    WeightRow& r = rows[i];
+  // Row by row: sorted, repeats summed in place at the row's start; then compacted.
+  Weights out;
+  out.begin.assign(n + 1, 0);
+  for (size_t i = 0; i < n; ++i) {
+    const auto first = acc.begin() + at[i], last = acc.begin() + at[i + 1];
+    std::sort(first, last);
+    auto kept = first;  // one past the last merged entry
     double sum = 0.0;
-    for (const auto& [j, w] : a) {
-      if (!r.j.empty() && r.j.back() == j) {
-        r.w.back() += w;
+    for (auto e = first; e != last; ++e) {
+      if (kept != first && (kept - 1)->first == e->first) {
+        (kept - 1)->second += e->second;
       } else {
-        r.j.push_back(j);
-        r.w.push_back(w);
+        *kept++ = *e;
       }
-      sum += w;
+      sum += e->second;
     }
     // note: a vertex whose triangles are all degenerate in 3D has no meaningful angles; it
     // falls back to uniform (Tutte) weights, still positive.
-    if (!(sum > 0.0) || !std::isfinite(sum)) std::fill(r.w.begin(), r.w.end(), 1.0);
+    if (!(sum > 0.0) || !std::isfinite(sum)) {
+      for (auto e = first; e != kept; ++e) e->second = 1.0;
+    }
     // A tiny uniform floor keeps every weight strictly positive (slivers give tan(theta/2) = 0).
-    const double floor = 1e-9 * (sum > 0 && std::isfinite(sum) ? sum / double(r.w.size()) : 1.0);
-    for (double& w : r.w) w = std::max(w, floor);
+    const double floor = 1e-9 * (sum > 0 && std::isfinite(sum) ? sum / double(kept - first) : 1.0);
+    for (auto e = first; e != kept; ++e) e->second = std::max(e->second, floor);
+    out.begin[i + 1] = out.begin[i] + uint32_t(kept - first);
   }
-  return rows;
+  out.j.resize(out.begin[n]);
+  out.w.resize(out.begin[n]);
+  for (size_t i = 0; i < n; ++i) {
+    for (uint32_t e = out.begin[i], k = at[i]; e < out.begin[i + 1]; ++e, ++k) {
+      out.j[e] = acc[k].first;
+      out.w[e] = acc[k].second;
+    }
+  }
+  return out;
 }
 
 // Solves the barycentric system with the boundary fixed; writes interior uv.
@@ -233,35 +261,50 @@ class InteriorSolver {
   }
 
   // Returns false if the factorization failed.
-  bool solve(const std::vector<WeightRow>& rows, std::vector<glm::dvec2>& uv) {
+  bool solve(const Weights& weights, std::vector<glm::dvec2>& uv) {
     const Eigen::Index m = Eigen::Index(interior_.size());
     if (m == 0) return true;
-    std::vector<Eigen::Triplet<double>> trip;
+    // Rows are scaled to sum to 1, so the matrix is well conditioned whatever the weights' scale.
+    // The matrix is written row by row, then copied into columns (sorted, as the LU wants them).
+    Eigen::SparseMatrix<double, Eigen::RowMajor> rows(m, m);
     Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(m, 2);
+    {
+      Eigen::Index entries = m;
+      for (const uint32_t i : interior_) {
+        for (uint32_t e = weights.begin[i]; e < weights.begin[i + 1]; ++e) entries += !isBoundary_[weights.j[e]];
+      }
+      rows.reserve(entries);
+    }
     for (Eigen::Index r = 0; r < m; ++r) {
-      const WeightRow& row = rows[interior_[size_t(r)]];
+      const uint32_t i = interior_[size_t(r)];
       double diag = 0.0;
-      for (double w : row.w) diag += w;
-      // Rows are scaled to sum to 1, so the matrix is well conditioned whatever the weights' scale.
-      for (size_t k = 0; k < row.j.size(); ++k) {
-        const uint32_t j = row.j[k];
-        const double w = row.w[k] / diag;
+      for (uint32_t e = weights.begin[i]; e < weights.begin[i + 1]; ++e) diag += weights.w[e];
+      rows.startVec(r);
+      bool diagonalPlaced = false;
+      for (uint32_t e = weights.begin[i]; e < weights.begin[i + 1]; ++e) {
+        const uint32_t j = weights.j[e];
+        const double w = weights.w[e] / diag;
         if (isBoundary_[j]) {
           rhs(r, 0) += w * uv[j].x;
           rhs(r, 1) += w * uv[j].y;
-        } else {
-          trip.emplace_back(r, Eigen::Index(unknown_[j]), -w);
+          continue;
         }
+        const Eigen::Index c = Eigen::Index(unknown_[j]);
+        if (!diagonalPlaced && c > r) {
+          rows.insertBack(r, r) = 1.0;
+          diagonalPlaced = true;
+        }
+        rows.insertBack(r, c) = -w;
       }
-      trip.emplace_back(r, r, 1.0);
+      if (!diagonalPlaced) rows.insertBack(r, r) = 1.0;
     }
-    // The ordered matrix only is kept through the factorization (the triplets and the matrix in
-    // the patch's order are freed first).
+    rows.finalize();
+    // The ordered matrix only is kept through the factorization (the matrix in the patch's order
+    // is freed first).
     Eigen::SparseMatrix<double> ordered;
     {
-      Eigen::SparseMatrix<double> a(m, m);
-      a.setFromTriplets(trip.begin(), trip.end());
-      std::vector<Eigen::Triplet<double>>().swap(trip);
+      Eigen::SparseMatrix<double> a = rows;
+      rows = Eigen::SparseMatrix<double, Eigen::RowMajor>();
       a.makeCompressed();
       if (!orderFound_) {
         // The weights' pattern is the mesh's edges, so symmetric: AMD on it orders the unknowns
@@ -377,7 +420,7 @@ std::vector<double> vertexStretch(const LocalPatch& lp, const std::vector<glm::d
 // The stretch energy of the triangles around vertex v with v at `at`, from their Gram matrices;
 // infinite if a parameter triangle would flip or collapse (Sander's barrier). With `gradient`,
 // also its exact derivative there.
-double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv, const std::vector<uint32_t>& ring,
+double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv, std::span<const uint32_t> ring,
                   uint32_t v, const glm::dvec2& at, const std::vector<TriangleGram>& grams, double k2,
                   glm::dvec2* gradient = nullptr) {
   double e = 0.0;
@@ -402,12 +445,20 @@ double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv, const
 uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>& isBoundary,
                                 const std::vector<glm::dvec2>& slide, uint32_t maxSweeps,
                                 bool symmetric, std::vector<glm::dvec2>& uv) {
-  std::vector<std::vector<uint32_t>> rings(lp.vertices.size());
+  // Each vertex's triangles, in compressed rows: ring v is rings[ringAt[v]] .. rings[ringAt[v + 1] - 1].
+  std::vector<uint32_t> ringAt(lp.vertices.size() + 1, 0), rings(3 * lp.triangles.size());
   std::vector<TriangleGram> grams(lp.triangles.size());
-  for (uint32_t t = 0; t < lp.triangles.size(); ++t) {
-    const auto& tri = lp.triangles[t];
-    grams[t] = triangleGram(lp.xyz[tri[0]], lp.xyz[tri[1]], lp.xyz[tri[2]]);
-    for (uint32_t v : tri) rings[v].push_back(t);
+  for (const auto& tri : lp.triangles) {
+    for (uint32_t v : tri) ++ringAt[v + 1];
+  }
+  for (size_t v = 0; v < lp.vertices.size(); ++v) ringAt[v + 1] += ringAt[v];
+  {
+    std::vector<uint32_t> next(ringAt.begin(), ringAt.end() - 1);
+    for (uint32_t t = 0; t < lp.triangles.size(); ++t) {
+      const auto& tri = lp.triangles[t];
+      grams[t] = triangleGram(lp.xyz[tri[0]], lp.xyz[tri[1]], lp.xyz[tri[2]]);
+      for (uint32_t v : tri) rings[next[v]++] = t;
+    }
   }
   // k^2 scales 3D lengths to the domain's (parameter area over surface area), for the symmetric
   // energy; 0 selects Sander's L2 energy.
@@ -422,7 +473,7 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
     for (uint32_t v = 0; v < lp.vertices.size(); ++v) {
       const bool slides = isBoundary[v] && slide[v] != glm::dvec2(0.0);
       if (isBoundary[v] && !slides) continue;
-      const std::vector<uint32_t>& ring = rings[v];
+      const std::span<const uint32_t> ring(rings.data() + ringAt[v], ringAt[v + 1] - ringAt[v]);
       const glm::dvec2 p = uv[v];
       glm::dvec2 g(0.0);
       const double e0 = ringEnergy(lp, uv, ring, v, p, grams, k2, &g);
@@ -607,6 +658,51 @@ ParamQuality combineQuality(const std::vector<ParamQuality>& parts) {
   });
 }
 
+namespace {
+
+// What solveMeanValue did, for the debug line.
+struct SolveFigures {
+  bool solved = false;
+  size_t unknowns = 0;
+  uint64_t factorEntries = 0;
+  bool inDouble = true;
+};
+
+// The mean-value map of the patch onto its polygon (out.uv holds the boundary's places), then up
+// to options.stretchIterations reweightings w_ij <- w_ij / sigma_j^eta, keeping the best pass and
+// stopping when one stops helping. Sets out's uv, initial, quality and iterationsUsed. Its
+// weights and factors are freed on return, before the local sweeps need their own arrays.
+SolveFigures solveMeanValue(const LocalPatch& lp, const std::vector<uint8_t>& isBoundary, const ParamOptions& options,
+                            PatchParameterization& out) {
+  Weights weights = meanValueWeights(lp);
+  InteriorSolver solver(lp, isBoundary, options.singlePrecisionFrom);
+  SolveFigures figures;
+  if (!solver.solve(weights, out.uv)) return figures;
+  figures.solved = true;
+  out.initial = measureStretch(out.uv, lp.xyz, lp.triangles);
+  out.quality = out.initial;
+  std::vector<glm::dvec2> trial = out.uv;
+  for (uint32_t it = 0; it < options.stretchIterations; ++it) {
+    const std::vector<double> sigma = vertexStretch(lp, trial);
+    for (size_t e = 0; e < weights.w.size(); ++e) weights.w[e] /= std::pow(sigma[weights.j[e]], options.stretchExponent);
+    if (!solver.solve(weights, trial)) break;
+    const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
+    const bool better = q.flippedTriangles <= out.quality.flippedTriangles &&
+                        q.degenerateTriangles <= out.quality.degenerateTriangles &&
+                        q.stretchL2 < out.quality.stretchL2 * (1.0 - 1e-4);
+    if (!better) break;
+    out.uv = trial;
+    out.quality = q;
+    out.iterationsUsed = it + 1;
+  }
+  figures.unknowns = solver.unknowns();
+  figures.factorEntries = solver.factorEntries();
+  figures.inDouble = solver.inDouble();
+  return figures;
+}
+
+}  // namespace
+
 PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patch,
                                         const ParamOptions& options) {
   using Clock = std::chrono::steady_clock;
@@ -660,35 +756,12 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
     }
   }
 
-  std::vector<WeightRow> weights = meanValueWeights(lp);
-  InteriorSolver solver(lp, isBoundary, options.singlePrecisionFrom);
-  if (!solver.solve(weights, out.uv)) fail(patch, "mean-value system could not be solved");
-  out.initial = measureStretch(out.uv, lp.xyz, lp.triangles);
-  out.quality = out.initial;
-
-  // Stretch reduction: w_ij <- w_ij / sigma_j^eta; keep the best pass, stop when it stops helping.
-  std::vector<glm::dvec2> trial = out.uv;
-  for (uint32_t it = 0; it < options.stretchIterations; ++it) {
-    const std::vector<double> sigma = vertexStretch(lp, trial);
-    for (WeightRow& row : weights) {
-      for (size_t k = 0; k < row.j.size(); ++k) {
-        row.w[k] /= std::pow(sigma[row.j[k]], options.stretchExponent);
-      }
-    }
-    if (!solver.solve(weights, trial)) break;
-    const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
-    const bool better = q.flippedTriangles <= out.quality.flippedTriangles &&
-                        q.degenerateTriangles <= out.quality.degenerateTriangles &&
-                        q.stretchL2 < out.quality.stretchL2 * (1.0 - 1e-4);
-    if (!better) break;
-    out.uv = trial;
-    out.quality = q;
-    out.iterationsUsed = it + 1;
-  }
+  const SolveFigures solve = solveMeanValue(lp, isBoundary, options, out);
+  if (!solve.solved) fail(patch, "mean-value system could not be solved");
 
   const Clock::time_point solved = Clock::now();
   if (options.stretchSweeps > 0) {
-    trial = out.uv;
+    std::vector<glm::dvec2> trial = out.uv;
     out.sweepsUsed = optimizeStretchLocally(lp, isBoundary, slide, options.stretchSweeps,
                                             options.symmetricEnergy, trial);
     const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
@@ -704,8 +777,8 @@ PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patc
   const auto seconds = [](Clock::duration d) { return std::chrono::duration<double>(d).count(); };
   spdlog::debug("parameterized patch {} ({} triangles, {} sides): solves {:.2f} s ({} reweightings; LU of {} "
                 "unknowns, {} entries in {} precision), {} sweeps {:.2f} s, L2 stretch {:.3f} -> {:.3f}",
-                patch, lp.triangles.size(), n, seconds(solved - start), out.iterationsUsed, solver.unknowns(),
-                solver.factorEntries(), solver.inDouble() ? "double" : "single", out.sweepsUsed,
+                patch, lp.triangles.size(), n, seconds(solved - start), out.iterationsUsed, solve.unknowns,
+                solve.factorEntries, solve.inDouble ? "double" : "single", out.sweepsUsed,
                 seconds(Clock::now() - solved), out.initial.stretchL2, out.quality.stretchL2);
   out.vertices = std::move(lp.vertices);
   out.triangles = std::move(lp.triangles);

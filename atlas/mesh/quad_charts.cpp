@@ -30,6 +30,10 @@ void finishStage(StageMeter& meter, const std::string& name) {
 }
 
 
+uint64_t meshRepairWorkBudget(double repairBudget, uint64_t layoutTriangles) {
+  return uint64_t(std::llround(repairBudget * double(std::min(layoutTriangles, kRepairTrianglesCounted))));
+}
+
 double meshSampleCap(uint64_t triangles) {
   return std::max(kMaxSamplesPerTriangle * double(triangles), kMinSampleCap);
 }
@@ -309,7 +313,7 @@ ResampledMesh resampleInLayout(ChartLayout& layout, const QuadChartOptions& opti
   const uint64_t layoutTriangles = layout.triangles.size();
   ChartRepairOptions repair;
   repair.rounds = o.repairRounds;
-  repair.workBudget = uint64_t(std::llround(o.repairBudget * double(layoutTriangles)));
+  repair.workBudget = meshRepairWorkBudget(o.repairBudget, layoutTriangles);
   repair.maxSampleError = maxError;
   st.maxSampleError = repair.maxSampleError;
   // A chart size chosen by density is also doubled, and the layout resampled and repaired again,
@@ -647,7 +651,7 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
     // Cuts first, each kept only where it folds less (or, for the sampling error, no more).
     std::sort(squeezed.begin(), squeezed.end(), std::greater<>());
     std::vector<uint8_t> cutNow(z.patches.size(), 0);
-    const uint64_t cutBudget = uint64_t(std::llround(o.repairBudget * double(z.layout.triangles.size())));
+    const uint64_t cutBudget = meshRepairWorkBudget(o.repairBudget, z.layout.triangles.size());
     for (const auto& [n, p] : squeezed) {
       const bool folding = PatchSizing::flips(z.patches[p].charts) > 0;
       z.patches[p].cutAsked = false;
@@ -781,9 +785,12 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
     if (first.image.flippedTexels > 0 && o.repairRounds > 0) {
       ChartRepairOptions repair;
       repair.rounds = o.repairRounds;
-      repair.workBudget = uint64_t(std::llround(o.repairBudget * double(layout.triangles.size())));
-      first = repairCharts(layout, std::move(first), z.ro, repair, &st.repair,
-                           [&] { return residentBytes() < o.maxMemory / 4 * 3; });
+      repair.workBudget = meshRepairWorkBudget(o.repairBudget, layout.triangles.size());
+      repair.normals = &z.normals;
+      // No stop for memory: the gate keeps the cut patches' working memory within --max-memory,
+      // and their charts go to the spill, so the work budget alone ends the repair, and where it
+      // ends depends on neither the machine nor what the heap holds.
+      first = repairCharts(layout, std::move(first), z.ro, repair, &st.repair);
     }
     z.trianglesParameterized = first.trianglesParameterized;
     z.patches.resize(layout.patches.size());
@@ -869,15 +876,17 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
 ResampledMesh quadChartsPerPatch(ChartLayout& layout, const QuadChartOptions& options, const fs::path& dir,
                                  StageMeter& meter, const std::function<void(QuadLayout)>& straighten) {
   QuadLayout quads = options.quads == MeshQuads::kKites ? QuadLayout::kKites : QuadLayout::kSides;
-  const std::vector<Patch> charted = layout.patches;
   MeshResampleStats even;
   if (quads == QuadLayout::kSides) {
+    // The charted patches are kept only until the sides are known to be possible (a copy of every
+    // patch's triangle list: 75 MB at 18.7M triangles, freed before the resampling).
+    std::vector<Patch> charted = layout.patches;
     straighten(QuadLayout::kSides);
     if (!evenLayout(layout, even)) {
       spdlog::warn("{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
                    "of sides with inner vertices joins them to another such patch or to a hole); built with kites",
                    options.input.string());
-      layout.patches = charted;
+      layout.patches = std::move(charted);
       quads = QuadLayout::kKites;
       even = {};
     }

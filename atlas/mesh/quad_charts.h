@@ -78,6 +78,13 @@ inline constexpr double kMaxSamplesPerTriangle = 64.0;
 // finest levels when written (ChartCoarsening), so the cap bounds the resampling, not the atlas.
 inline constexpr double kMinSampleCap = double(1u << 22);
 double meshSampleCap(uint64_t triangles);
+// The triangles the repair (and the sizing's cuts) may parameterize again: repairBudget times the
+// layout's triangles, counting at most kRepairTrianglesCounted of them. Past a million triangles
+// the repair's work stops growing with the surface: its cuts mend folds of a few texels, each at
+// the cost of parameterizing a patch again, and on the 18.7M-triangle sphere those patches hold
+// 350k to 670k triangles each.
+inline constexpr uint64_t kRepairTrianglesCounted = uint64_t(1) << 20;
+uint64_t meshRepairWorkBudget(double repairBudget, uint64_t layoutTriangles);
 uint32_t meshChartSizeForDensity(uint64_t triangles, uint64_t quads);
 // A patch's own start size under per-patch sizing: the smallest 2^m + 1 in [smallest, largest]
 // whose quads * (size - 1)^2 samples reach kSamplesPerTriangle * triangles.
@@ -93,7 +100,7 @@ struct QuadChartOptions {
   uint64_t maxMemory = 4ull << 30;  // the charts' samples and the repair's working memory
   uint32_t straightenRounds = 2;    // rounds of straightening shared sides (layout_refine.h)
   // Rounds of each repair (repairCharts), and its work cap: layout triangles parameterized again,
-  // as a multiple of the layout's triangles.
+  // as a multiple of the layout's triangles, counting at most kRepairTrianglesCounted of them.
   uint32_t repairRounds = 4;
   double repairBudget = 8.0;
   // The largest sampling error a chart may keep, a fraction of the diagonal; kAutoSampleError:

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "atlas/mesh/mesh_atlas.h"
+#include "atlas/mesh/quad_charts.h"
 #include "atlas/mesh/resample.h"
 #include "core/atlas_format.h"
 #include "inspect/seams.h"
@@ -132,6 +133,17 @@ TEST(PatchSizing, TheShippedBunnysPatchesTakeTheirOwnSizesAndStaySeamless) {
   const SeamReport seams = validateSeams(o.output);
   EXPECT_TRUE(seams.seamless()) << seams.mismatches() << " seam mismatches";
   test::checkSeams(o.output);
+}
+
+// The repair's work cap follows the surface up to a million triangles and stays there: on the
+// 18.7M-triangle sphere every cut parameterizes a patch of hundreds of thousands of triangles
+// again, and eight times the surface would be about eight first resamplings.
+TEST(PatchSizing, TheRepairsWorkStopsGrowingPastAMillionTriangles) {
+  EXPECT_EQ(meshRepairWorkBudget(8.0, 40000), 320000u);
+  EXPECT_EQ(meshRepairWorkBudget(8.0, kRepairTrianglesCounted), 8 * kRepairTrianglesCounted);
+  EXPECT_EQ(meshRepairWorkBudget(8.0, 18690048), 8 * kRepairTrianglesCounted);
+  EXPECT_EQ(meshRepairWorkBudget(0.5, 100017228), kRepairTrianglesCounted / 2);
+  EXPECT_EQ(meshRepairWorkBudget(0.0, 18690048), 0u);
 }
 
 }  // namespace
