@@ -241,6 +241,7 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
 FidelityStats measureMeshFidelity(ChartedMesh& c, const MeshBuildOptions& o, const fs::path& dir, StageMeter& meter) {
   const bool outOfCore = c.stats.outOfCore;
   FidelityStats f;
+  releaseFreedMemory();  // what the write freed, before the blocks take their share
   if (outOfCore) {
     // Block by block, from the cell files and the charts just written, in half of maxMemory.
     OutOfCoreFidelityOptions fo;

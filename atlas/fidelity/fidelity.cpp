@@ -24,6 +24,7 @@
 #include "atlas/mesh/gridify.h"
 #include "atlas/mesh/mesh_atlas.h"
 #include "core/atlas_format.h"
+#include "core/stage_meter.h"
 
 namespace gimlod {
 namespace {
@@ -694,6 +695,9 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
         measure(meshTris, atlasSamples, atlasMax, atlasSum, atlasPending);
         std::vector<FloatTriangle>().swap(meshTris);
         measure(atlasTris, meshSamples, meshMax, meshSum, meshPending);
+        // The next block's surfaces are as large: the heap hands this one's pages back first, or
+        // the blocks' arrays, freed on several threads, pile up past options.memoryBytes.
+        releaseFreedMemory();
       }
 
   // Second pass: samples with nothing near, against the whole other surface, a part at a time.
