@@ -182,16 +182,23 @@ struct Weights {
   std::vector<double> w;
 };
 
+// Where each vertex's row starts in compressed rows holding `perCorner` entries for every triangle
+// corner at the vertex; one start per vertex and the end.
+std::vector<uint32_t> cornerRowStarts(const LocalPatch& lp, uint32_t perCorner) {
+  std::vector<uint32_t> starts(lp.vertices.size() + 1, 0);
+  for (const auto& t : lp.triangles) {
+    for (uint32_t v : t) starts[v + 1] += perCorner;
+  }
+  for (size_t v = 0; v < lp.vertices.size(); ++v) starts[v + 1] += starts[v];
+  return starts;
+}
+
 // Floater's mean-value weights w_ij = (tan(a/2) + tan(b/2)) / |x_j - x_i|, from 3D angles.
 Weights meanValueWeights(const LocalPatch& lp) {
   const size_t n = lp.vertices.size();
   // Each corner of a triangle gives its vertex two entries, one per neighbour in the triangle;
   // a neighbour in two triangles is listed twice and summed below.
-  std::vector<uint32_t> at(n + 1, 0);
-  for (const auto& t : lp.triangles) {
-    for (uint32_t v : t) at[v + 1] += 2;
-  }
-  for (size_t i = 0; i < n; ++i) at[i + 1] += at[i];
+  const std::vector<uint32_t> at = cornerRowStarts(lp, 2);
   std::vector<std::pair<uint32_t, double>> acc(at[n]);
   {
     std::vector<uint32_t> next(at.begin(), at.end() - 1);
@@ -446,12 +453,9 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
                                 const std::vector<glm::dvec2>& slide, uint32_t maxSweeps,
                                 bool symmetric, std::vector<glm::dvec2>& uv) {
   // Each vertex's triangles, in compressed rows: ring v is rings[ringAt[v]] .. rings[ringAt[v + 1] - 1].
-  std::vector<uint32_t> ringAt(lp.vertices.size() + 1, 0), rings(3 * lp.triangles.size());
+  const std::vector<uint32_t> ringAt = cornerRowStarts(lp, 1);
+  std::vector<uint32_t> rings(ringAt.back());
   std::vector<TriangleGram> grams(lp.triangles.size());
-  for (const auto& tri : lp.triangles) {
-    for (uint32_t v : tri) ++ringAt[v + 1];
-  }
-  for (size_t v = 0; v < lp.vertices.size(); ++v) ringAt[v + 1] += ringAt[v];
   {
     std::vector<uint32_t> next(ringAt.begin(), ringAt.end() - 1);
     for (uint32_t t = 0; t < lp.triangles.size(); ++t) {

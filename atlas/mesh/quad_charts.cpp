@@ -29,7 +29,6 @@ void finishStage(StageMeter& meter, const std::string& name) {
                double(s.peakRssBytes) / (1 << 20));
 }
 
-
 uint64_t meshRepairWorkBudget(double repairBudget, uint64_t layoutTriangles) {
   return uint64_t(std::llround(repairBudget * double(std::min(layoutTriangles, kRepairTrianglesCounted))));
 }
