@@ -13,6 +13,7 @@
 #include <boost/graph/adjacency_list.hpp>
 #include <boost/graph/strong_components.hpp>
 #include <glm/geometric.hpp>
+#include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
 
 #include "atlas/mesh/patch_topology.h"
@@ -873,6 +874,116 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s, bool keepHalves
   layout.patches[q].sides[t].vertices =
       side.reversed ? std::vector<uint32_t>(path.rbegin(), path.rend()) : path;
   return true;
+}
+
+bool lengthenSide(ChartLayout& layout, uint32_t a, uint32_t s, double by) {
+  if (a >= layout.patches.size() || s >= layout.patches[a].sides.size() || !(by > 0.0)) return false;
+  const uint32_t na = uint32_t(layout.patches[a].sides.size()), sn = (s + 1) % na;
+  const PatchSide S = layout.patches[a].sides[s], N = layout.patches[a].sides[sn];
+  if (S.neighbourPatch < 0 || N.neighbourPatch < 0 || !S.reversed || !N.reversed) return false;
+  const uint32_t b = uint32_t(S.neighbourPatch), c = uint32_t(N.neighbourPatch);
+  if (b == a || c == a || b == c) return false;
+  const uint32_t nb = uint32_t(layout.patches[b].sides.size()), nc = uint32_t(layout.patches[c].sides.size());
+  const uint32_t t = S.neighbourSide, tp = (t + nb - 1) % nb;  // B's side ending at the corner
+  const uint32_t cn = N.neighbourSide, cb = (cn + 1) % nc;     // C's sides with A, then with B
+  const PatchSide &bc = layout.patches[b].sides[tp], &cbSide = layout.patches[c].sides[cb];
+  const uint32_t corner = S.vertices.back();
+  if (bc.neighbourPatch != int32_t(c) || bc.neighbourSide != cb || !bc.reversed || cbSide.vertices.size() < 3 ||
+      N.vertices.size() < 3 || N.vertices.front() != corner || cbSide.vertices.front() != corner) {
+    return false;
+  }
+  // The new corner: the inner vertex of N nearest `by` along it, within its first half.
+  const double half = 0.5 * sideLength(layout, N);
+  size_t k = 1;
+  {
+    double arc = 0.0, best = std::numeric_limits<double>::infinity();
+    for (size_t i = 1; i + 1 < N.vertices.size(); ++i) {
+      arc += glm::length(layout.positions[N.vertices[i]] - layout.positions[N.vertices[i - 1]]);
+      if (i > 1 && arc > half) break;
+      if (std::abs(arc - by) < best) best = std::abs(arc - by), k = i;
+    }
+  }
+  const uint32_t moved = N.vertices[k];
+  // The path from it through C's interior to the nearest inner vertex of C's side with B,
+  // searched among C's triangles near the corner.
+  const Patch& C = layout.patches[c];
+  const double reach = glm::length(layout.positions[moved] - layout.positions[corner]);
+  Patch near;
+  near.sides = C.sides;
+  near.triangles = trianglesWithin(layout, C.triangles, corner, moved, 6.0 * std::max(reach, 1e-30) + 1e-30);
+  const Paths paths = shortestCuts(layout, patchGraph(layout, near), moved);
+  size_t j = 0;
+  double nearest = std::numeric_limits<double>::infinity();
+  for (size_t i = 1; i + 1 < cbSide.vertices.size(); ++i) {
+    const auto it = paths.dist.find(cbSide.vertices[i]);
+    if (it != paths.dist.end() && it->second < nearest) nearest = it->second, j = i;
+  }
+  if (j == 0) return false;
+  std::vector<uint32_t> path{cbSide.vertices[j]};
+  while (path.back() != moved) path.push_back(paths.prev.at(path.back()));
+  std::reverse(path.begin(), path.end());  // new corner -> C's side with B
+  // The triangles C gives: flooded from the corner, crossing neither C's border nor the path.
+  const PatchGraph g = patchGraph(layout, C, false);
+  std::unordered_set<uint64_t> walls(g.boundaryEdges.begin(), g.boundaryEdges.end());
+  for (size_t i = 0; i + 1 < path.size(); ++i) walls.insert(undirectedEdgeKey(path[i], path[i + 1]));
+  const std::unordered_set<uint32_t> given = floodFrom(layout, g, cbSide, walls);
+  if (given.empty() || given.size() >= C.triangles.size()) return false;
+  auto inside = [&](const PatchSide& x, bool last) {
+    const size_t e = last ? x.vertices.size() - 2 : 0;
+    const uint32_t tri = g.triangleOf(directedEdgeKey(x.vertices[e], x.vertices[e + 1]));
+    return tri != ~0u && given.contains(tri);
+  };
+  for (uint32_t x = 0; x < nc; ++x) {
+    if (x != cb && inside(C.sides[x], false)) return false;
+  }
+  if (inside(cbSide, true)) return false;
+  std::vector<uint32_t> rest, gained = layout.patches[b].triangles;
+  for (const uint32_t tri : C.triangles) (given.contains(tri) ? gained : rest).push_back(tri);
+  if (!isDisk(layout, rest) || !isDisk(layout, gained)) return false;
+
+  std::vector<uint32_t> longer = S.vertices;
+  longer.insert(longer.end(), N.vertices.begin() + 1, N.vertices.begin() + ptrdiff_t(k) + 1);
+  std::vector<uint32_t> shorter(N.vertices.begin() + ptrdiff_t(k), N.vertices.end());
+  std::vector<uint32_t> rerouted = path;
+  rerouted.insert(rerouted.end(), cbSide.vertices.begin() + ptrdiff_t(j) + 1, cbSide.vertices.end());
+  layout.patches[c].triangles = std::move(rest);
+  layout.patches[b].triangles = std::move(gained);
+  layout.patches[b].sides[t].vertices.assign(longer.rbegin(), longer.rend());
+  layout.patches[b].sides[tp].vertices.assign(rerouted.rbegin(), rerouted.rend());
+  layout.patches[c].sides[cn].vertices.assign(shorter.rbegin(), shorter.rend());
+  layout.patches[c].sides[cb].vertices = std::move(rerouted);
+  layout.patches[a].sides[s].vertices = std::move(longer);
+  layout.patches[a].sides[sn].vertices = std::move(shorter);
+  return true;
+}
+
+uint32_t lengthenShortSides(ChartLayout& layout, double fraction) {
+  auto meanSide = [&](uint32_t p) {
+    double sum = 0.0;
+    for (const PatchSide& x : layout.patches[p].sides) sum += sideLength(layout, x);
+    return sum / double(layout.patches[p].sides.size());
+  };
+  uint32_t lengthened = 0;
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    for (uint32_t s = 0; s < layout.patches[p].sides.size(); ++s) {
+      const PatchSide& side = layout.patches[p].sides[s];
+      if (side.neighbourPatch <= int32_t(p)) continue;  // each shared side once
+      const uint32_t q = uint32_t(side.neighbourPatch), t = side.neighbourSide;
+      const double want = fraction * std::min(meanSide(p), meanSide(q)), length = sideLength(layout, side);
+      if (!(length < want)) continue;
+      // From the end on the longer next side first (p's next side at one end, q's at the other).
+      const double nextP = sideLength(layout, layout.patches[p].sides[(s + 1) % layout.patches[p].sides.size()]);
+      const double nextQ = sideLength(layout, layout.patches[q].sides[(t + 1) % layout.patches[q].sides.size()]);
+      const bool done = nextP >= nextQ ? lengthenSide(layout, p, s, 2.0 * want - length) ||
+                                             lengthenSide(layout, q, t, 2.0 * want - length)
+                                       : lengthenSide(layout, q, t, 2.0 * want - length) ||
+                                             lengthenSide(layout, p, s, 2.0 * want - length);
+      lengthened += done ? 1 : 0;
+      spdlog::debug("side {} of patch {} ({} edges, {:.4g} long, {:.3f} of the shorter mean side): {}", s, p,
+                    side.vertices.size() - 1, length, length / (want / fraction), done ? "lengthened" : "left");
+    }
+  }
+  return lengthened;
 }
 
 uint32_t straightenSides(ChartLayout& layout, uint32_t rounds, bool keepHalves) {

@@ -32,6 +32,23 @@ namespace gimlod {
 // the armadillo, two 4-sided patches of 59 and 65 triangles, one with 154 flipped texels).
 bool straightenSide(ChartLayout& layout, uint32_t patch, uint32_t side, bool keepHalves = false);
 
+// Lengthens shared side `side` of patch `patch` by about `by` (in the input's units): its last
+// corner (where patch A's next side starts, shared with a third patch C, which also borders the
+// neighbour B there: three patches meet) moves along A's next side to the inner vertex nearest
+// `by` of its arc length, at most half of it. C gives B the triangles between the two runs from
+// the old corner and the shortest path through C's interior from the new corner to C's side with
+// B. Every side count and link stays; A keeps its triangles. Returns false, unchanged, when the
+// corner is not such a three-patch corner, the next side has no inner vertex, no path exists, or
+// C's rest or B with its gain would not be a disk.
+bool lengthenSide(ChartLayout& layout, uint32_t patch, uint32_t side, double by);
+
+// A shared side much shorter than the other sides of its patches (three patches meeting twice a
+// few edges apart, as clusters often do) is a whole chart edge in both quad layouts: its charts
+// are squeezed towards triangles there, and their texels fold. Lengthens, with lengthenSide,
+// every shared side shorter than `fraction` of the mean side of either of its patches to twice
+// that, from whichever end lies on the longer next side. Returns the sides lengthened.
+uint32_t lengthenShortSides(ChartLayout& layout, double fraction = 0.125);
+
 // straightenSide on every shared side once per round, until a round changes nothing; returns the
 // sides changed.
 uint32_t straightenSides(ChartLayout& layout, uint32_t rounds = 2, bool keepHalves = false);

@@ -907,8 +907,9 @@ ResampledMesh makeQuadCharts(ChartLayout&& layout, const QuadChartOptions& optio
   // Shared sides straightened and side ears moved, for one quad layout. The sides layout makes a
   // 4-sided patch a single chart, so there no straightening may leave a patch a sliver of itself;
   // kites keep the straightening they were measured with.
-  uint32_t straightened = 0, ears = 0;
+  uint32_t lengthened = 0, straightened = 0, ears = 0;
   auto straighten = [&](QuadLayout quads, const std::string& suffix) {
+    lengthened = lengthenShortSides(layout);
     straightened = options.straightenRounds
                        ? straightenSides(layout, options.straightenRounds, quads == QuadLayout::kSides)
                        : 0;
@@ -1042,6 +1043,7 @@ ResampledMesh makeQuadCharts(ChartLayout&& layout, const QuadChartOptions& optio
       break;
     }
   }
+  r.stats.sidesLengthened = lengthened;
   r.stats.sidesStraightened = straightened;
   r.stats.sideEarsMended = ears;
   r.triangles = layoutTriangles;

@@ -132,6 +132,7 @@ struct MeshResampleStats {
   uint64_t charts = 0;
   ParamQuality param;                  // all patches' parameterizations
   ImageQuality image;                  // all charts' sampled images
+  uint32_t sidesLengthened = 0;        // short sides lengthened (lengthenShortSides)
   uint32_t sidesStraightened = 0;
   uint32_t sideEarsMended = 0;
   bool sideQuads = false;              // the sides quad layout (else kites)

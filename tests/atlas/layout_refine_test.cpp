@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <mutex>
 #include <set>
 #include <thread>
@@ -170,6 +171,69 @@ double runLength(const ChartLayout& layout, const std::vector<uint32_t>& run) {
     l += glm::length(layout.positions[run[k + 1]] - layout.positions[run[k]]);
   }
   return l;
+}
+
+// Every shared side of every patch's every shared side: ratio of its length to the smaller mean
+// side of its two patches.
+double shortestSideRatio(const ChartLayout& layout) {
+  auto meanSide = [&](uint32_t p) {
+    double sum = 0.0;
+    for (const PatchSide& s : layout.patches[p].sides) sum += sideLength(layout, s);
+    return sum / double(layout.patches[p].sides.size());
+  };
+  double ratio = std::numeric_limits<double>::infinity();
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    for (const PatchSide& s : layout.patches[p].sides) {
+      if (s.neighbourPatch < 0) continue;
+      ratio = std::min(ratio, sideLength(layout, s) / std::min(meanSide(p), meanSide(uint32_t(s.neighbourPatch))));
+    }
+  }
+  return ratio;
+}
+
+TEST(ShortSides, LengthenedSideMovesItsCornerAndKeepsEverySideCount) {
+  // Every shared side of a cube of 8 x 8 cells a face: its end corner moves 3 cells along the next
+  // side; the third patch there gives the triangles between to the neighbour.
+  const ChartLayout cube = test::cubeLayout(8);
+  uint32_t tried = 0;
+  for (uint32_t p = 0; p < cube.patches.size(); ++p) {
+    for (uint32_t s = 0; s < 4; ++s) {
+      ChartLayout layout = cube;
+      const PatchSide side = layout.patches[p].sides[s];
+      const uint32_t q = uint32_t(side.neighbourPatch);
+      const double before = sideLength(layout, side);
+      ASSERT_TRUE(lengthenSide(layout, p, s, 3.0 / 8.0)) << "patch " << p << " side " << s;
+      ++tried;
+      expectValid(layout);
+      EXPECT_NEAR(sideLength(layout, layout.patches[p].sides[s]), before + 3.0 / 8.0, 1e-5);
+      EXPECT_EQ(layout.patches[p].triangles, cube.patches[p].triangles);  // A keeps its triangles
+      EXPECT_GT(layout.patches[q].triangles.size(), cube.patches[q].triangles.size());
+      size_t total = 0;
+      for (uint32_t x = 0; x < layout.patches.size(); ++x) {
+        EXPECT_EQ(layout.patches[x].sides.size(), 4u);
+        total += layout.patches[x].triangles.size();
+      }
+      EXPECT_EQ(total, cube.triangles.size());
+    }
+  }
+  EXPECT_EQ(tried, 24u);
+}
+
+TEST(ShortSides, ShortSidesAreLengthenedAndLongOnesLeftAlone) {
+  ChartLayout layout = test::cubeLayout(16);
+  // Nothing is short on the cube.
+  ChartLayout same = layout;
+  EXPECT_EQ(lengthenShortSides(same), 0u);
+  EXPECT_EQ(same.patches[0].triangles, layout.patches[0].triangles);
+  // Moving one corner four times along the same side leaves that side 1 cell long of 16.
+  const uint32_t sn = 1;
+  for (int k = 0; k < 4; ++k) ASSERT_TRUE(lengthenSide(layout, 0, 0, 1.0));
+  expectValid(layout);
+  EXPECT_NEAR(sideLength(layout, layout.patches[0].sides[sn]), 1.0 / 16.0, 1e-5);
+  EXPECT_LT(shortestSideRatio(layout), 0.125);
+  EXPECT_EQ(lengthenShortSides(layout), 1u);
+  expectValid(layout);
+  EXPECT_GE(shortestSideRatio(layout), 0.125);
 }
 
 TEST(LayoutRefine, StraightSidesStayAsTheyAre) {
