@@ -74,6 +74,7 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"chart_size_by_density", rs.chartSizeByDensity},
                       {"chart_size_for_density", rs.densityChartSize},
                       {"chart_size_doublings_after_repair", rs.repairDoublings},
+                      {"sides_lengthened", rs.sidesLengthened},
                       {"sides_straightened", rs.sidesStraightened},
                       {"side_ears_mended", rs.sideEarsMended},
                       {"quads", rs.sideQuads ? "sides" : "kites"},
