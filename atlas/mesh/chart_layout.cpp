@@ -18,6 +18,13 @@ double sideLength(const ChartLayout& layout, const PatchSide& side) {
   return l;
 }
 
+double meanSideLength(const ChartLayout& layout, uint32_t patch) {
+  const Patch& p = layout.patches[patch];
+  double sum = 0.0;
+  for (const PatchSide& s : p.sides) sum += sideLength(layout, s);
+  return sum / double(p.sides.size());
+}
+
 std::vector<std::string> validateChartLayout(const ChartLayout& L, uint32_t minSides,
                                              uint32_t maxSides) {
   std::vector<std::string> errs;

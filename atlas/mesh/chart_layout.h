@@ -49,6 +49,8 @@ struct ChartLayout {
 
 // The length of a side's vertex run (the sum of its edges' lengths).
 double sideLength(const ChartLayout& layout, const PatchSide& side);
+// The mean of patch `patch`'s side lengths.
+double meanSideLength(const ChartLayout& layout, uint32_t patch);
 
 // Checks a layout independently of how it was built; returns one line per violation (capped at
 // 100 lines), empty when valid: indices in range; every triangle in exactly one patch; each

@@ -910,7 +910,7 @@ bool lengthenSide(ChartLayout& layout, uint32_t a, uint32_t s, double by) {
   const double reach = glm::length(layout.positions[moved] - layout.positions[corner]);
   Patch near;
   near.sides = C.sides;
-  near.triangles = trianglesWithin(layout, C.triangles, corner, moved, 6.0 * std::max(reach, 1e-30) + 1e-30);
+  near.triangles = trianglesWithin(layout, C.triangles, corner, moved, 6.0 * reach);
   const Paths paths = shortestCuts(layout, patchGraph(layout, near), moved);
   size_t j = 0;
   double nearest = std::numeric_limits<double>::infinity();
@@ -958,18 +958,13 @@ bool lengthenSide(ChartLayout& layout, uint32_t a, uint32_t s, double by) {
 }
 
 uint32_t lengthenShortSides(ChartLayout& layout, double fraction) {
-  auto meanSide = [&](uint32_t p) {
-    double sum = 0.0;
-    for (const PatchSide& x : layout.patches[p].sides) sum += sideLength(layout, x);
-    return sum / double(layout.patches[p].sides.size());
-  };
   uint32_t lengthened = 0;
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     for (uint32_t s = 0; s < layout.patches[p].sides.size(); ++s) {
       const PatchSide& side = layout.patches[p].sides[s];
       if (side.neighbourPatch <= int32_t(p)) continue;  // each shared side once
       const uint32_t q = uint32_t(side.neighbourPatch), t = side.neighbourSide;
-      const double want = fraction * std::min(meanSide(p), meanSide(q)), length = sideLength(layout, side);
+      const double want = fraction * std::min(meanSideLength(layout, p), meanSideLength(layout, q)), length = sideLength(layout, side);
       if (!(length < want)) continue;
       // From the end on the longer next side first (p's next side at one end, q's at the other).
       const double nextP = sideLength(layout, layout.patches[p].sides[(s + 1) % layout.patches[p].sides.size()]);

@@ -173,19 +173,14 @@ double runLength(const ChartLayout& layout, const std::vector<uint32_t>& run) {
   return l;
 }
 
-// Every shared side of every patch's every shared side: ratio of its length to the smaller mean
-// side of its two patches.
+// The smallest ratio, over the shared sides, of a side's length to the smaller mean side of its
+// two patches.
 double shortestSideRatio(const ChartLayout& layout) {
-  auto meanSide = [&](uint32_t p) {
-    double sum = 0.0;
-    for (const PatchSide& s : layout.patches[p].sides) sum += sideLength(layout, s);
-    return sum / double(layout.patches[p].sides.size());
-  };
   double ratio = std::numeric_limits<double>::infinity();
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     for (const PatchSide& s : layout.patches[p].sides) {
       if (s.neighbourPatch < 0) continue;
-      ratio = std::min(ratio, sideLength(layout, s) / std::min(meanSide(p), meanSide(uint32_t(s.neighbourPatch))));
+      ratio = std::min(ratio, sideLength(layout, s) / std::min(meanSideLength(layout, p), meanSideLength(layout, uint32_t(s.neighbourPatch))));
     }
   }
   return ratio;
