@@ -7,7 +7,7 @@
 // incremental) on the same frames: ref/ours is the speed-up, same the frames with identical cuts.
 // Usage: bench_adapt ATLAS_DIR [tolerance_px=0.02] [frames=240] [WxH=1280x720] [triangles=4000000]
 //        [max_roots=16] (top groups above the charts, openAtlas; 0: every chart root a root)
-//        [--budgets 100,1000,...] [--only dual|quad]
+//        [--budgets 100,1000,...] [--only dual|quad] [--ours-only]
 // Reads a built atlas only (no GDAL), e.g. `gimlod build ../shared/data/terrain/etopo5.cdf
 // -o out/etopo.atlas --depth 6`.
 #include <CLI/CLI.hpp>
@@ -42,6 +42,7 @@ struct Args {
   uint32_t maxRoots = kDefaultMaxRoots;
   std::vector<uint32_t> budgets{100u, 250u, 500u, 1000u, 2000u, 5000u, 10000u, 20000u};
   std::string only;
+  bool oursOnly = false;  // skip the references and the greedy (for profiles of the adapters alone)
 };
 
 // (key, resolution) of every node, sorted: equal for equal cuts.
@@ -67,7 +68,10 @@ void benchDual(const Hierarchy& h, const std::vector<ViewParams>& views, const A
     o.maxNodes = budget;
     DualQueueAdapter ours(h);
     reference::DualQueueAdapter ref(h);
-    for (const ViewParams& v : views) ours.update(v, o), ref.update(v, o);  // warm-up: a coherent state
+    for (const ViewParams& v : views) {  // warm-up: a coherent state
+      ours.update(v, o);
+      if (!a.oursOnly) ref.update(v, o);
+    }
     double us = 0.0, nodes = 0.0, ops = 0.0, reused = 0.0, refUs = 0.0, greedyUs = 0.0, err = 0.0, refErr = 0.0;
     uint32_t same = 0;
     for (const ViewParams& v : views) {
@@ -79,6 +83,7 @@ void benchDual(const Hierarchy& h, const std::vector<ViewParams>& views, const A
       ops += ours.frameStats().splits + ours.frameStats().merges;
       reused += ours.frameStats().priorityReuses;
       err = std::max(err, st.maxErrorPx);
+      if (a.oursOnly) continue;
       t0 = Clock::now();
       const Cut& rcut = ref.update(v, o, &rst);
       refUs += since(t0);
@@ -106,7 +111,10 @@ void benchQuad(const Hierarchy& h, const std::vector<ViewParams>& views, const A
     o.maxNodes = budget;
     QuadQueueAdapter ours(h);
     reference::QuadQueueAdapter ref(h);
-    for (const ViewParams& v : views) ours.update(v, o), ref.update(v, o);  // warm-up pass
+    for (const ViewParams& v : views) {  // warm-up pass
+      ours.update(v, o);
+      if (!a.oursOnly) ref.update(v, o);
+    }
     double us = 0.0, nodes = 0.0, rounds = 0.0, ops = 0.0, err = 0.0, refUs = 0.0, refErr = 0.0;
     uint32_t same = 0;
     for (const ViewParams& v : views) {
@@ -118,6 +126,7 @@ void benchQuad(const Hierarchy& h, const std::vector<ViewParams>& views, const A
       rounds += st.rounds;
       ops += st.refines + st.coarsens + st.splits + st.merges + st.undoneOps;
       err += st.maxErrorPx;
+      if (a.oursOnly) continue;
       t0 = Clock::now();
       const Cut& rcut = ref.update(v, o, &rst);
       refUs += since(t0);
@@ -141,6 +150,7 @@ int run(int argc, char** argv) {
   app.add_option("max_roots", a.maxRoots, "top groups above the charts (0: every chart root a root)");
   app.add_option("--budgets", a.budgets, "node budgets")->delimiter(',');
   app.add_option("--only", a.only, "one adapter")->check(CLI::IsMember({"dual", "quad"}));
+  app.add_flag("--ours-only", a.oursOnly, "time the adapters alone: no reference, no greedy (ref and same columns 0)");
   CLI11_PARSE(app, argc, argv);
   uint32_t w = 0, hgt = 0;
   if (std::sscanf(a.size.c_str(), "%ux%u", &w, &hgt) != 2 || w == 0 || hgt == 0) {
