@@ -1,15 +1,32 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 7.2 (Data Management): pages are requested
-// by priority, read by a separate thread into a RAM cache, and uploaded by the render thread.
+// by priority, read by separate threads into a RAM cache, and uploaded by the render thread.
 #include "runtime/page_loader.h"
 
 #include <algorithm>
+#include <chrono>
+#include <exception>
+#include <random>
 
 namespace gimlod {
 
-PageLoader::PageLoader(const PageReader& pages, size_t ramBudgetBytes, bool startPaused)
-    : pages_(pages), ramBudget_(ramBudgetBytes), paused_(startPaused) {
-  thread_ = std::thread([this] { run(); });
+PageLoader::PageLoader(const PageReader& pages, const PageLoaderOptions& options)
+    : pages_(pages), options_(options), paused_(options.startPaused) {
+  const uint32_t n = std::max(options_.threads, 1u);
+  threads_.reserve(n);
+  for (uint32_t t = 0; t < n; ++t) threads_.emplace_back([this, t] { run(t); });
 }
+
+namespace {
+PageLoaderOptions singleThread(size_t ramBudgetBytes, bool startPaused) {
+  PageLoaderOptions o;
+  o.ramBytes = ramBudgetBytes;
+  o.startPaused = startPaused;
+  return o;
+}
+}  // namespace
+
+PageLoader::PageLoader(const PageReader& pages, size_t ramBudgetBytes, bool startPaused)
+    : PageLoader(pages, singleThread(ramBudgetBytes, startPaused)) {}
 
 PageLoader::~PageLoader() {
   {
@@ -17,14 +34,14 @@ PageLoader::~PageLoader() {
     stop_ = true;
   }
   wake_.notify_all();
-  thread_.join();
+  for (std::thread& t : threads_) t.join();
 }
 
 void PageLoader::request(const NodeId& n, double priority) {
   const uint64_t key = n.key();
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    if ((reading_ && readingKey_ == key) || completedKeys_.count(key)) return;
+    if (reading_.count(key) || completedKeys_.count(key) || failedKeys_.count(key)) return;
     auto it = queued_.find(key);
     if (it != queued_.end()) {
       if (it->second->priority == priority) return;
@@ -40,24 +57,55 @@ void PageLoader::request(const NodeId& n, double priority) {
 }
 
 void PageLoader::cancelPending() {
+  retainOnly([](uint64_t) { return false; });
+}
+
+void PageLoader::retainOnly(const std::function<bool(uint64_t key)>& keep) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    queue_.clear();
-    queued_.clear();
+    for (auto it = queue_.begin(); it != queue_.end();) {
+      const uint64_t key = it->id.key();
+      if (keep(key)) {
+        ++it;
+        continue;
+      }
+      queued_.erase(key);
+      it = queue_.erase(it);
+      ++stats_.cancelled;
+    }
   }
   idle_.notify_all();
 }
 
 std::vector<LoadedPage> PageLoader::takeCompleted(size_t max) {
-  std::lock_guard<std::mutex> lock(mutex_);
+  return takeCompleted([](uint64_t) { return true; }, max, SIZE_MAX);
+}
+
+std::vector<LoadedPage> PageLoader::takeCompleted(const std::function<bool(uint64_t key)>& wanted, size_t maxPages,
+                                                  size_t maxBytes) {
   std::vector<LoadedPage> out;
-  const size_t n = std::min(max, completed_.size());
-  out.reserve(n);
-  for (size_t i = 0; i < n; ++i) {
-    completedKeys_.erase(completed_.front().id.key());
-    out.push_back(std::move(completed_.front()));
-    completed_.pop_front();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    size_t bytes = 0;
+    std::deque<LoadedPage> kept;
+    for (LoadedPage& pg : completed_) {
+      const size_t b = pg.bytes();
+      const uint64_t key = pg.id.key();
+      if (!wanted(key)) {
+        ++stats_.unwanted;
+      } else if (out.size() < maxPages && (out.empty() || bytes + b <= maxBytes)) {
+        bytes += b;
+        out.push_back(std::move(pg));
+      } else {
+        kept.push_back(std::move(pg));
+        continue;
+      }
+      completedKeys_.erase(key);
+      stats_.stagedBytes -= b;
+    }
+    completed_.swap(kept);
   }
+  wake_.notify_all();  // room for reads held back by the staged bytes
   return out;
 }
 
@@ -88,23 +136,45 @@ void PageLoader::resume() {
 
 void PageLoader::waitIdle() {
   std::unique_lock<std::mutex> lock(mutex_);
-  idle_.wait(lock, [this] { return !reading_ && (queue_.empty() || paused_ || stop_); });
+  idle_.wait(lock, [this] { return reading_.empty() && (stop_ || !canStart()); });
 }
 
 PageLoaderStats PageLoader::stats() const {
   std::lock_guard<std::mutex> lock(mutex_);
   PageLoaderStats s = stats_;
-  s.inFlight = uint32_t(queue_.size()) + (reading_ ? 1u : 0u);
+  s.inFlight = uint32_t(queue_.size() + reading_.size());
   s.completed = uint32_t(completed_.size());
   return s;
 }
 
+std::vector<PageFailure> PageLoader::failures() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return failures_;
+}
+
+size_t PageLoader::cacheBudget() const {
+  if (options_.stagedBytes == 0) return options_.ramBytes;
+  return options_.ramBytes > options_.stagedBytes ? options_.ramBytes - options_.stagedBytes : 0;
+}
+
+bool PageLoader::canStart() const {
+  if (paused_ || queue_.empty()) return false;
+  if (options_.stagedBytes == 0) return true;
+  // The reads in progress count as staged already (their bytes are known before the read); one
+  // read may always run when nothing waits, so a cap below one page still makes progress.
+  size_t ahead = stats_.stagedBytes;
+  for (uint64_t key : reading_) ahead += pages_.pageBytes(NodeId::fromKey(key));
+  if (ahead == 0) return true;
+  return ahead + pages_.pageBytes(queue_.begin()->id) <= options_.stagedBytes;
+}
+
 void PageLoader::insertRam(uint64_t key, const LoadedPage& loaded) {
   // Caller holds mutex_.
+  const size_t budget = cacheBudget();
   RamPage page{key, loaded.samples, loaded.normals, loaded.colours};
   const size_t bytes = page.bytes();
-  if (bytes > ramBudget_ || ramIndex_.count(key)) return;
-  while (stats_.ramBytes + bytes > ramBudget_ && !ram_.empty()) {
+  if (bytes > budget || ramIndex_.count(key)) return;
+  while (stats_.ramBytes + bytes > budget && !ram_.empty()) {
     stats_.ramBytes -= ram_.back().bytes();
     ramIndex_.erase(ram_.back().key);
     ram_.pop_back();
@@ -115,17 +185,25 @@ void PageLoader::insertRam(uint64_t key, const LoadedPage& loaded) {
   stats_.ramBytes += bytes;
 }
 
-void PageLoader::run() {
+void PageLoader::finish(LoadedPage&& page) {
+  // Caller holds mutex_.
+  completedKeys_.insert(page.id.key());
+  stats_.stagedBytes += page.bytes();
+  completed_.push_back(std::move(page));
+}
+
+void PageLoader::run(uint32_t thread) {
+  std::mt19937 random(thread + 1);  // the simulated latency's jitter, per thread
+  std::uniform_real_distribution<double> share(0.0, 1.0);
   std::unique_lock<std::mutex> lock(mutex_);
   for (;;) {
-    wake_.wait(lock, [this] { return stop_ || (!paused_ && !queue_.empty()); });
+    wake_.wait(lock, [this] { return stop_ || canStart(); });
     if (stop_) break;
     const Queued q = *queue_.begin();
     const uint64_t key = q.id.key();
     queue_.erase(queue_.begin());
     queued_.erase(key);
-    reading_ = true;
-    readingKey_ = key;
+    reading_.insert(key);
     LoadedPage page;
     page.id = q.id;
     auto hit = ramIndex_.find(key);
@@ -136,34 +214,48 @@ void PageLoader::run() {
       page.colours = hit->second->colours;
       page.fromRam = true;
       ++stats_.ramHits;
-    } else {
-      // note: the disk read runs unlocked, so request()/takeCompleted() never wait on the disk.
-      lock.unlock();
-      bool ok = true;
-      try {
-        pages_.read(q.id, page.samples, page.normals, &page.colours);
-      } catch (...) {
-        ok = false;  // note: a failed read is counted and dropped; a later request retries it
-      }
-      lock.lock();
-      if (ok) {
-        ++stats_.loadedFromDisk;
-        insertRam(key, page);
-      } else {
-        ++stats_.failed;
-      }
-      if (!ok) {
-        reading_ = false;
-        idle_.notify_all();
-        continue;
+      reading_.erase(key);
+      finish(std::move(page));
+      idle_.notify_all();
+      continue;
+    }
+    const double waitMs = options_.ioLatencyMs + options_.ioJitterMs * share(random);
+    if (waitMs > 0.0) {  // the simulated storage; a stop ends the wait
+      wake_.wait_for(lock, std::chrono::duration<double, std::milli>(waitMs), [this] { return stop_; });
+      if (stop_) {
+        reading_.erase(key);
+        break;
       }
     }
-    completedKeys_.insert(key);
-    completed_.push_back(std::move(page));
-    reading_ = false;
+    // note: the disk read and its decoding run unlocked, so request()/takeCompleted() never wait
+    // on the disk.
+    lock.unlock();
+    std::string error;
+    try {
+      pages_.read(q.id, page.samples, page.normals, &page.colours);
+    } catch (const std::exception& e) {
+      error = e.what();
+      if (error.empty()) error = "unreadable page";
+    } catch (...) {
+      error = "unreadable page";
+    }
+    if (!error.empty() && options_.onFailure) options_.onFailure({q.id, error});
+    lock.lock();
+    reading_.erase(key);
+    if (error.empty()) {
+      ++stats_.loadedFromDisk;
+      insertRam(key, page);
+      finish(std::move(page));
+    } else {
+      // note: a failed page is not read again (the node stays on a coarser stand-in); a request
+      // for it is ignored.
+      ++stats_.failed;
+      failedKeys_.insert(key);
+      failures_.push_back({q.id, std::move(error)});
+    }
     idle_.notify_all();
+    wake_.notify_all();
   }
-  reading_ = false;
   idle_.notify_all();
 }
 

@@ -59,6 +59,11 @@ class PageReader {
   bool colours() const { return colours_; }
   uint32_t colourScaleLog2() const { return colourScaleLog2_; }
   uint32_t colourPageSamples(const NodeId& n) const { return (1u << (pageResLog2(n) + colourScaleLog2_)) + 1; }
+  // The bytes read() gives for n: samples, normals and colours (LoadedPage::bytes).
+  size_t pageBytes(const NodeId& n) const {
+    const size_t s = pageSamples(n), c = colours_ ? colourPageSamples(n) : 0;
+    return s * s * ((geometry_ ? 3 : 1) * sizeof(float) + sizeof(PackedNormal)) + c * c * sizeof(PackedColour);
+  }
   uint64_t bytesRead() const { return bytesRead_; }
 
  private:

@@ -5,7 +5,11 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <future>
+#include <mutex>
+#include <unordered_set>
 
 #include <memory>
 
@@ -177,6 +181,203 @@ TEST_F(PageLoaderTest, RamBudgetEvictsLeastRecentlyUsed) {
   none.waitIdle();
   EXPECT_EQ(none.takeCompleted(10).size(), 1u);
   EXPECT_FALSE(none.tryGetResident(x, h, nr));
+}
+
+// Several threads read every page once, with the data of a direct read and the bytes PageReader
+// says a page has.
+TEST_F(PageLoaderTest, SeveralThreadsServeEveryRequestWithTheDirectData) {
+  PageLoaderOptions o;
+  o.threads = 3;
+  o.ramBytes = 64u << 20;
+  PageLoader loader(*pages_, o);
+  const Hierarchy& h = atlas_->hierarchy;
+  std::vector<NodeId> nodes;
+  for (uint32_t c = 0; c < h.chartCount(); ++c)
+    for (uint32_t l = 0; l < std::min(h.params.depth, 3u); ++l)
+      for (uint32_t y = 0; y < (1u << l); ++y)
+        for (uint32_t x = 0; x < (1u << l); ++x) nodes.push_back({c, l, x, y});
+  for (size_t i = 0; i < nodes.size(); ++i) loader.request(nodes[i], double(i % 5));
+  loader.waitIdle();
+  const std::vector<LoadedPage> done = loader.takeCompleted(nodes.size());
+  ASSERT_EQ(done.size(), nodes.size());
+  std::unordered_set<uint64_t> seen;
+  for (const LoadedPage& p : done) {
+    EXPECT_TRUE(seen.insert(p.id.key()).second) << "a page served twice";
+    EXPECT_EQ(p.bytes(), pages_->pageBytes(p.id));
+    expectPageEquals(p.id, p.samples, p.normals);
+  }
+  const PageLoaderStats s = loader.stats();
+  EXPECT_EQ(s.loadedFromDisk, nodes.size());
+  EXPECT_EQ(s.inFlight, 0u);
+  EXPECT_EQ(s.stagedBytes, 0u);
+}
+
+// A request the frame no longer wants is dropped before its read: the pages read are the kept ones.
+TEST_F(PageLoaderTest, RetainOnlyCancelsRequestsBeforeTheirRead) {
+  PageLoaderOptions o;
+  o.threads = 2;
+  o.startPaused = true;
+  PageLoader loader(*pages_, o);
+  std::vector<NodeId> nodes;
+  for (uint32_t i = 0; i < 4; ++i) {
+    nodes.push_back(kRoot.child(i));
+    nodes.push_back(kRoot.child(i).child(3 - i));
+  }
+  for (size_t i = 0; i < nodes.size(); ++i) loader.request(nodes[i], double(i));
+  std::unordered_set<uint64_t> keep{nodes[1].key(), nodes[4].key(), nodes[6].key()};
+  loader.retainOnly([&](uint64_t key) { return keep.count(key) != 0; });
+  PageLoaderStats s = loader.stats();
+  EXPECT_EQ(s.cancelled, nodes.size() - keep.size());
+  EXPECT_EQ(s.inFlight, keep.size());
+  const uint64_t before = pages_->bytesRead();
+  loader.resume();
+  loader.waitIdle();
+  const std::vector<LoadedPage> done = loader.takeCompleted(nodes.size());
+  ASSERT_EQ(done.size(), keep.size());
+  for (const LoadedPage& p : done) EXPECT_TRUE(keep.count(p.id.key())) << "a cancelled page was read";
+  s = loader.stats();
+  EXPECT_EQ(s.loadedFromDisk, keep.size());
+  EXPECT_GT(pages_->bytesRead(), before);
+  // Cancelling everything leaves nothing to read.
+  loader.pause();
+  for (const NodeId& n : nodes) loader.request(n, 1.0);
+  loader.cancelPending();
+  EXPECT_EQ(loader.stats().inFlight, 0u);
+}
+
+// The finished pages waiting for the render thread stay within stagedBytes, and with the cache
+// within ramBytes; taking pages lets the threads read on.
+TEST_F(PageLoaderTest, StagedBytesBoundTheReadAhead) {
+  const Hierarchy& h = atlas_->hierarchy;
+  std::vector<NodeId> nodes;
+  for (uint32_t c = 0; c < h.chartCount(); ++c)
+    for (uint32_t i = 0; i < 4; ++i) nodes.push_back(NodeId{c, 0, 0, 0}.child(i));
+  const size_t page = pages_->pageBytes(nodes[0]);
+  PageLoaderOptions o;
+  o.threads = 2;
+  o.stagedBytes = 3 * page;
+  o.ramBytes = 5 * page;
+  PageLoader loader(*pages_, o);
+  for (size_t i = 0; i < nodes.size(); ++i) loader.request(nodes[i], double(nodes.size() - i));
+  size_t taken = 0;
+  for (int round = 0; round < 1000 && taken < nodes.size(); ++round) {
+    loader.waitIdle();
+    const PageLoaderStats s = loader.stats();
+    EXPECT_LE(s.stagedBytes, o.stagedBytes);
+    EXPECT_LE(s.ramBytes + s.stagedBytes, o.ramBytes);
+    if (s.inFlight > 0) {
+      EXPECT_GT(s.stagedBytes + page, o.stagedBytes) << "held back with room to read";
+    }
+    taken += loader.takeCompleted(1).size();
+  }
+  EXPECT_EQ(taken, nodes.size());
+  // Below one page, one read at a time still runs.
+  PageLoaderOptions tiny = o;
+  tiny.stagedBytes = page / 2;
+  PageLoader slow(*pages_, tiny);
+  slow.request(nodes[0], 1.0);
+  slow.request(nodes[1], 1.0);
+  slow.waitIdle();
+  EXPECT_EQ(slow.stats().completed, 1u);
+  EXPECT_EQ(slow.takeCompleted(4).size(), 1u);
+  slow.waitIdle();
+  EXPECT_EQ(slow.takeCompleted(4).size(), 1u);
+}
+
+// takeCompleted with a filter drops the finished pages no longer wanted and keeps within its byte
+// limit (at least one page).
+TEST_F(PageLoaderTest, TakeCompletedDropsUnwantedPagesAndKeepsToItsBytes) {
+  PageLoader loader(*pages_, 64u << 20);
+  std::vector<NodeId> nodes;
+  for (uint32_t i = 0; i < 4; ++i) nodes.push_back(kRoot.child(i));
+  for (const NodeId& n : nodes) loader.request(n, 1.0);
+  loader.waitIdle();
+  const size_t page = pages_->pageBytes(nodes[0]);
+  auto notFirst = [&](uint64_t key) { return key != nodes[0].key(); };
+  std::vector<LoadedPage> got = loader.takeCompleted(notFirst, 10, page / 2);
+  ASSERT_EQ(got.size(), 1u);  // one page even past the bytes
+  EXPECT_NE(got[0].id.key(), nodes[0].key());
+  EXPECT_EQ(loader.stats().unwanted, 1u);
+  got = loader.takeCompleted(notFirst, 10, 2 * page);
+  EXPECT_EQ(got.size(), 2u);
+  EXPECT_EQ(loader.stats().completed, 0u);
+}
+
+// Simulated slow storage: each disk read waits at least the latency; RAM hits do not read.
+TEST_F(PageLoaderTest, SimulatedLatencyDelaysEveryDiskRead) {
+  PageLoaderOptions o;
+  o.threads = 1;
+  o.ioLatencyMs = 25.0;
+  o.ioJitterMs = 10.0;
+  PageLoader loader(*pages_, o);
+  const auto t0 = std::chrono::steady_clock::now();
+  for (uint32_t i = 0; i < 3; ++i) loader.request(kRoot.child(i), 1.0);
+  loader.waitIdle();
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_GE(ms, 3 * o.ioLatencyMs);
+  EXPECT_EQ(loader.takeCompleted(10).size(), 3u);
+  loader.request(kRoot.child(0), 1.0);
+  loader.waitIdle();
+  const std::vector<LoadedPage> again = loader.takeCompleted(10);
+  ASSERT_EQ(again.size(), 1u);
+  EXPECT_TRUE(again[0].fromRam);
+}
+
+// A page whose block is corrupt on disk is reported once, with the file's name, is not read again,
+// and does not stop the other pages.
+TEST_F(PageLoaderTest, ACorruptPageIsReportedOnceAndNotReadAgain) {
+  test::TempDir copy("gimlod-loader-corrupt");
+  std::filesystem::copy(atlas_->dir, copy.path() / "atlas", std::filesystem::copy_options::recursive);
+  const AtlasView atlas = openAtlas(copy.path() / "atlas");
+  PageReader reader(atlas.dir, atlas.manifest, atlas.hierarchy.params);
+  // Every byte past the chart file's first quarter becomes garbage: some blocks cannot decode.
+  std::filesystem::path chart;
+  for (const auto& e : std::filesystem::directory_iterator(atlas.dir / "charts")) {
+    if (chart.empty() || e.path() < chart) chart = e.path();
+  }
+  ASSERT_FALSE(chart.empty());
+  {
+    const auto size = std::filesystem::file_size(chart);
+    std::fstream f(chart, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(std::streamoff(size / 4));
+    for (uint64_t i = size / 4; i < size; ++i) f.put(char(0xA5 ^ (i * 131)));
+  }
+  const uint32_t c = 0;
+  std::vector<NodeId> nodes;
+  for (uint32_t l = 0; l < atlas.hierarchy.params.depth; ++l)
+    for (uint32_t y = 0; y < (1u << l); ++y)
+      for (uint32_t x = 0; x < (1u << l); ++x) nodes.push_back({c, l, x, y});
+  nodes.push_back({atlas.hierarchy.chartCount() - 1, 1, 0, 0});  // another chart's page reads
+  std::vector<PageFailure> told;
+  std::mutex toldMutex;
+  PageLoaderOptions o;
+  o.threads = 2;
+  o.onFailure = [&](const PageFailure& f) {
+    std::lock_guard<std::mutex> lock(toldMutex);
+    told.push_back(f);
+  };
+  PageLoader loader(reader, o);
+  for (const NodeId& n : nodes) loader.request(n, 1.0);
+  loader.waitIdle();
+  const std::vector<PageFailure> failures = loader.failures();
+  ASSERT_GT(failures.size(), 0u) << "garbage in the chart file went unnoticed";
+  EXPECT_EQ(told.size(), failures.size());
+  for (const PageFailure& f : failures) {
+    EXPECT_EQ(f.id.chart, c);
+    EXPECT_NE(f.message.find(chart.filename().string()), std::string::npos) << f.message;
+  }
+  const std::vector<LoadedPage> done = loader.takeCompleted(nodes.size());
+  EXPECT_EQ(done.size() + failures.size(), nodes.size());
+  bool otherChart = false;
+  for (const LoadedPage& p : done) otherChart = otherChart || p.id.chart != c;
+  EXPECT_TRUE(otherChart);
+  // Asked again, the failed pages are not read again, nor reported again.
+  const uint64_t before = reader.bytesRead();
+  for (const PageFailure& f : failures) loader.request(f.id, 2.0);
+  loader.waitIdle();
+  EXPECT_EQ(reader.bytesRead(), before);
+  EXPECT_EQ(loader.failures().size(), failures.size());
+  EXPECT_EQ(loader.stats().failed, failures.size());
 }
 
 TEST_F(PageLoaderTest, DestructorWithPendingRequestsReturns) {
