@@ -60,7 +60,31 @@ double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
+// Mip levels of a texture of side `side` down to 1x1.
+uint32_t mipLevels(uint32_t side) {
+  uint32_t levels = 1;
+  while ((side >> levels) >= 1) ++levels;
+  return levels;
+}
+
+// Bytes of one square layer of side `side` with `levels` mip levels, bytesPerTexel each.
+uint64_t layerBytes(uint32_t side, uint32_t levels, uint64_t bytesPerTexel) {
+  uint64_t b = 0;
+  for (uint32_t l = 0; l < levels; ++l) {
+    const uint64_t t = std::max<uint32_t>(side >> l, 1);
+    b += t * t * bytesPerTexel;
+  }
+  return b;
+}
+
 }  // namespace
+
+uint64_t pagePoolPageBytes(const RendererSetup& setup) {
+  const uint32_t side = (1u << setup.pageIntervalsLog2) + 1;
+  const uint32_t colourSide = ((side - 1) << setup.colourScaleLog2) + 1;
+  return layerBytes(side, 1, setup.geometry ? 12 : 4) + layerBytes(side, mipLevels(side), 4) +
+         (setup.colours ? layerBytes(colourSide, mipLevels(colourSide), 4) : 0);
+}
 
 void setPagePoolUnits(const GlObject& program) {
   glUseProgram(program.id());
@@ -227,11 +251,6 @@ void AtlasRenderer::Impl::createPagePool() {
   // note: the vertex shader reads samples with texelFetch (no filtering); the fragment shader
   // samples heights bilinearly for colouring at page resolution, finer than the drawn grid. Normals
   // carry a mip chain so each node's normal map is read at its attribute resolution (texLod).
-  const auto mipLevels = [](uint32_t side) {
-    uint32_t levels = 1;
-    while ((side >> levels) >= 1) ++levels;
-    return levels;
-  };
   normalLevels = mipLevels(pageSide);
   colourSide = ((pageSide - 1) << setup.colourScaleLog2) + 1;
   colourLevels = mipLevels(colourSide);

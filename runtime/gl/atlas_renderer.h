@@ -45,6 +45,11 @@ struct RendererSetup {
   uint32_t colourScaleLog2 = 0;
 };
 
+// GPU bytes of one page of a pool made for `setup`: its samples (R32F, or RGB32F for geometry),
+// its normals (RGBA8 with the mip chain) and its colours (RGBA8 with the mip chain, where the
+// atlas has them). The pool's textures hold pageCapacity such pages. No GL needed.
+uint64_t pagePoolPageBytes(const RendererSetup& setup);
+
 struct DrawStats {
   double drawMs = 0.0;     // CPU wall time of submission + glFinish
   double gpuMs = 0.0;      // the GPU's own time for the draw (GL_TIME_ELAPSED query); NaN: unknown

@@ -26,14 +26,37 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o, const Pag
   s.height = o.height;
   s.background = o.background;
   s.pageIntervalsLog2 = a.manifest.maxNodeResLog2;
-  s.pageCapacity = AtlasScene::pagePoolPages(o, a.hierarchy.chartCount(), !a.hierarchy.groups.empty());
   s.layersPerArray = o.layersPerArray;
   s.minResLog2 = a.manifest.minNodeResLog2;
   s.maxResLog2 = a.manifest.maxNodeResLog2;
   s.spacing = a.manifest.spacing;
   s.validSamples = {a.manifest.samplesX, a.manifest.samplesY};  // {0, 0} for mesh atlases: nothing discarded
   s.heightRange = a.manifest.heightRange;
+  const uint64_t pageBytes = pagePoolPageBytes(s);
+  const uint32_t charts = a.hierarchy.chartCount();
+  s.pageCapacity = AtlasScene::pagePoolPages(o, charts, !a.hierarchy.groups.empty(), pageBytes);
+  // The roots stay resident, and a cut needs room to split one of them.
+  if (o.gpuCacheBytes > 0 && s.pageCapacity < uint64_t(charts) + 4)
+    throw InputError("a GPU page cache of " + std::to_string(o.gpuCacheBytes) + " bytes holds " +
+                     std::to_string(s.pageCapacity) + " pages of " + std::to_string(pageBytes) + " bytes; the atlas's " +
+                     std::to_string(charts) + " chart roots stay resident and a cut needs " +
+                     std::to_string(uint64_t(charts) + 4) + " pages at least (" +
+                     std::to_string((uint64_t(charts) + 4) * pageBytes) + " bytes)");
   return s;
+}
+
+PageLoaderOptions loaderOptions(const SceneOptions& o, uint64_t largestPage) {
+  PageLoaderOptions l;
+  l.ramBytes = o.ramCacheBytes;
+  // Pages read ahead of their upload: two frames' worth, within half the RAM.
+  const uint64_t frame = o.uploadBytesPerFrame > 0 ? o.uploadBytesPerFrame
+                                                   : uint64_t(std::max(o.maxUploadsPerFrame, 1u)) * largestPage;
+  l.stagedBytes = size_t(std::max<uint64_t>(std::min<uint64_t>(2 * frame, o.ramCacheBytes / 2), 1));
+  l.threads = std::max(o.loaderThreads, 1u);
+  l.ioLatencyMs = o.ioLatencyMs;
+  l.ioJitterMs = o.ioJitterMs;
+  l.onFailure = o.onPageFailure;
+  return l;
 }
 
 }  // namespace
@@ -43,7 +66,8 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
       options_(options),
       pages_(atlas.dir, atlas.manifest, atlas.hierarchy.params),
       renderer_(std::make_unique<AtlasRenderer>(rendererSetup(atlas, options, pages_))),
-      pool_(renderer_->pageCapacity()) {
+      pool_(renderer_->pageCapacity()),
+      pageBytes_(pagePoolPageBytes(renderer_->setup())) {
   // The roots' pages stay resident (paper 7.2), so every frame can be drawn; pagePoolPages
   // leaves room for them.
   assert(atlas_.hierarchy.chartCount() < pool_.capacity());
@@ -56,51 +80,84 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
                           colours_.empty() ? nullptr : colours_.data());
     pool_.lock(root.key());
   }
-  if (options_.asyncLoads)
-    loader_ = std::make_unique<PageLoader>(pages_, options_.ramCacheBytes);
+  if (options_.asyncLoads) {
+    uint64_t largest = 0;
+    for (uint32_t c = 0; c < atlas_.hierarchy.chartCount(); ++c) largest = std::max<uint64_t>(largest, pages_.pageBytes({c, 0, 0, 0}));
+    loader_ = std::make_unique<PageLoader>(pages_, loaderOptions(options_, largest));
+  }
 }
 
 void AtlasScene::waitForLoads() {
   if (loader_) loader_->waitIdle();
 }
 
-Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, FrameResult* f) {
+bool AtlasScene::predictedView(const Camera& camera, ViewParams* view) const {
+  if (!hasLastCamera_ || !(options_.prefetchSeconds > 0.0) || !(options_.frameSeconds > 0.0)) return false;
+  // Linear: the eye and the target keep the last frame's motion.
+  const double k = options_.prefetchSeconds / options_.frameSeconds;
+  Camera ahead = camera;
+  ahead.eye += (camera.eye - lastCamera_.eye) * k;
+  ahead.target += (camera.target - lastCamera_.target) * k;
+  if (ahead.eye == camera.eye && ahead.target == camera.target) return false;  // standing still
+  if (glm::length(ahead.target - ahead.eye) <= 0.0) return false;
+  *view = makeViewParams(ahead, options_.width, options_.height);
+  return true;
+}
+
+bool AtlasScene::uploadLoaded(const LoadedPage& pg) {
+  PagePool::Slot slot;
+  if (!pool_.acquire(pg.id.key(), frame_, &slot)) return false;
+  if (!slot.needsUpload) return true;
+  renderer_->uploadPage(slot.layer, pages_.pageSamples(pg.id), pg.samples.data(), pg.normals.data(),
+                        pg.colours.empty() ? nullptr : pg.colours.data());
+  uploadBytes_ += pageBytes_;
+  return true;
+}
+
+Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, const Camera& camera, double prefetchTolPx,
+                            uint32_t maxNodes, FrameResult* f) {
   ++frame_;
   frameStarted_ = true;
+  const Hierarchy& h = atlas_.hierarchy;
   const auto resident = [this](uint64_t key) { return pool_.contains(key); };
-  // 1. Touch the resident desired pages, so the uploads below cannot evict them; request the
-  // others. Requests for nodes no longer in the cut are dropped.
-  loader_->cancelPending();
-  std::unordered_set<uint64_t> ready;
-  for (const LoadedPage& pg : ready_) ready.insert(pg.id.key());
+  // 1. Touch the resident desired pages, so the uploads below cannot evict them.
+  uint32_t residentNow = 0;
   for (const CutNode& n : desired.nodes) {
     PagePool::Slot slot;
-    if (pool_.contains(n.id.key())) pool_.acquire(n.id.key(), frame_, &slot);
+    if (!pool_.contains(n.id.key())) continue;
+    pool_.acquire(n.id.key(), frame_, &slot);
+    ++residentNow;
   }
-  const PageRequestPlan plan = planPageRequests(atlas_.hierarchy, desired, resident, ready);
+  // 2. The pages this cut wants, then those of the view predicted ahead (below every page this
+  // frame needs); queued requests for anything else are cancelled before they are read.
+  const PageRequestPlan plan = planPageRequests(h, desired, resident, {});
+  PageRequestPlan ahead;
+  ViewParams aheadView;
+  if (prefetchTolPx > 0.0 && predictedView(camera, &aheadView)) {
+    AdaptOptions o;
+    o.tolerancePx = prefetchTolPx;
+    o.maxNodes = maxNodes;
+    ahead = planPageRequests(h, adaptErrorThreshold(h, aheadView, o), resident, {});
+  }
+  constexpr double kPrefetchBelow = 1e6;  // request priorities stay below 1e5 (planPageRequests)
+  const auto wanted = [&](uint64_t key) { return plan.wanted.count(key) != 0 || ahead.wanted.count(key) != 0; };
+  loader_->retainOnly(wanted);
   for (const PageRequest& r : plan.requests) loader_->request(r.id, r.priority);
-  // 2. Upload a bounded number of loaded pages that this cut still wants; the rest of the wanted
-  // ones wait for later frames, unwanted ones are dropped (they stay in the RAM cache).
-  for (LoadedPage& pg : loader_->takeCompleted(std::numeric_limits<size_t>::max()))
-    ready_.push_back(std::move(pg));
+  uint32_t prefetches = 0;
+  for (const PageRequest& r : ahead.requests)
+    if (!plan.wanted.count(r.id.key())) loader_->request(r.id, r.priority - kPrefetchBelow), ++prefetches;
+  // 3. Upload loaded pages still wanted, within the frame's upload budget; the loader drops the
+  // others (they stay in its RAM cache). The pool never evicts a page this frame touched, so a
+  // page that finds no layer is dropped too.
+  // An upload counts a whole pool page (pagePoolPageBytes), whatever the node's page size; one
+  // page a frame at least.
+  size_t maxPages = std::max(options_.maxUploadsPerFrame, 1u);
+  if (options_.uploadBytesPerFrame > 0)
+    maxPages = std::min<size_t>(maxPages, std::max<uint64_t>(options_.uploadBytesPerFrame / pageBytes_, 1));
   uint32_t uploaded = 0;
-  std::vector<LoadedPage> keep;
-  for (LoadedPage& pg : ready_) {
-    if (!plan.wanted.count(pg.id.key())) continue;
-    if (uploaded >= options_.maxUploadsPerFrame) {
-      keep.push_back(std::move(pg));
-      continue;
-    }
-    PagePool::Slot slot;
-    // note: when the pool is full this frame the page is dropped; it stays in the RAM cache.
-    if (!pool_.acquire(pg.id.key(), frame_, &slot) || !slot.needsUpload) continue;
-    renderer_->uploadPage(slot.layer, pages_.pageSamples(pg.id), pg.samples.data(), pg.normals.data(),
-                          pg.colours.empty() ? nullptr : pg.colours.data());
-    ++uploaded;
-  }
-  ready_.swap(keep);
-  // 3. Every missing node draws as its nearest resident ancestor, stitched.
-  ResidentCut drawn = substituteResident(atlas_.hierarchy, desired, view, resident);
+  for (const LoadedPage& pg : loader_->takeCompleted(wanted, maxPages, SIZE_MAX)) uploaded += uint32_t(uploadLoaded(pg));
+  // 4. Every missing node draws as its nearest resident ancestor, stitched.
+  ResidentCut drawn = substituteResident(h, desired, view, resident);
   assert(drawn.stitchUnfixable == 0 && "stitching constraint needs a split into a non-resident node");
   standIns_.clear();
   if (drawn.nodesSubstituted > 0)
@@ -111,6 +168,9 @@ Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, FrameRes
     f->pagesUploaded = uploaded;
     f->nodesSubstituted = drawn.nodesSubstituted;
     f->stitchUnfixable = drawn.stitchUnfixable;
+    f->pagesNeeded = uint32_t(desired.nodes.size());
+    f->pagesResident = residentNow;
+    f->prefetchRequests = prefetches;
   }
   return std::move(drawn.cut);
 }
@@ -139,6 +199,7 @@ std::vector<DrawNode> AtlasScene::prepare(const Cut& cut, FrameResult* frame) {
         pages_.read(n.id, samples_, normals_, &colours_);
         renderer_->uploadPage(slot.layer, pages_.pageSamples(n.id), samples_.data(), normals_.data(),
                               colours_.empty() ? nullptr : colours_.data());
+        uploadBytes_ += pageBytes_;
         ++loaded;
       }
       nodes.push_back(makeDrawNode(atlas_.manifest, atlas_.hierarchy.params, n, slot.layer));
@@ -190,7 +251,8 @@ uint32_t nodeRoomOf(uint32_t pages, uint32_t roots, bool grouped) {
 
 }  // namespace
 
-uint32_t AtlasScene::pagePoolPages(const SceneOptions& o, uint32_t charts, bool grouped) {
+uint32_t AtlasScene::pagePoolPages(const SceneOptions& o, uint32_t charts, bool grouped, uint64_t pageBytes) {
+  if (o.gpuCacheBytes > 0 && pageBytes > 0) return uint32_t(std::min<uint64_t>(o.gpuCacheBytes / pageBytes, UINT32_MAX));
   const uint64_t want = std::max<uint64_t>(o.pageCapacity, 1);
   uint64_t pages = charts < want / 2 ? want : uint64_t(charts) + std::max<uint64_t>(want / 2, 1);
   // With groups, F = 4/3 N + 4 free pages hold cuts of N nodes (nodeRoomOf(R + F, R, true) >= N).
@@ -235,7 +297,7 @@ FrameResult AtlasScene::renderFrame(const Camera& camera, const AdaptOptions& op
   } else {
     f.cut = adaptErrorThreshold(atlas_.hierarchy, view, o, &f.adapt);
   }
-  finishFrame(camera, view, f, t0);
+  finishFrame(camera, view, o.tolerancePx, o.maxNodes, f, t0);
   return f;
 }
 
@@ -258,13 +320,15 @@ FrameResult AtlasScene::renderFrame(const Camera& camera, const BudgetOptions& o
   f.adapt.nodes = f.budget.nodes;
   f.adapt.closedGroups = f.budget.closedGroups;
   f.adapt.groupedRoots = f.budget.groupedRoots;
-  finishFrame(camera, view, f, t0);
+  // Prefetch: the predicted view's cut at the error this frame reached.
+  finishFrame(camera, view, std::max(f.budget.maxErrorPx, 0.25), o.maxNodes, f, t0);
   return f;
 }
 
-void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, FrameResult& f,
-                               std::chrono::steady_clock::time_point t0) {
+void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, double prefetchTolPx, uint32_t maxNodes,
+                             FrameResult& f, std::chrono::steady_clock::time_point t0) {
   const Hierarchy& h = atlas_.hierarchy;
+  uploadBytes_ = 0;
   if (options_.texelsPerPixel > 0.0)
     f.attributes = assignAttributeResolutions(h, f.cut, view, options_.texelsPerPixel);
   // Front to back, so early depth testing rejects hidden fragments.
@@ -282,7 +346,7 @@ void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, Frame
   const auto t1 = std::chrono::steady_clock::now();
   if (loader_) {
     f.desiredCut = std::move(f.cut);
-    f.cut = streamPages(f.desiredCut, view, &f);
+    f.cut = streamPages(f.desiredCut, view, camera, prefetchTolPx, maxNodes, &f);
   } else {
     standIns_.clear();
   }
@@ -295,6 +359,25 @@ void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, Frame
   }
   f.draw = drawCut(camera, f.cut, &f);
   f.uploadMs += substituteMs;
+  // What the caches hold now, and this frame's loads.
+  f.residentGpuBytes = uint64_t(pool_.resident()) * pageBytes_;
+  f.gpuBudgetBytes = uint64_t(pool_.capacity()) * pageBytes_;
+  f.uploadBytes = uploadBytes_;
+  if (loader_) {
+    const PageLoaderStats s = loader_->stats();
+    f.residentRamBytes = s.ramBytes + s.stagedBytes;
+    f.loadsIssued = uint32_t(s.requested - lastLoads_.requested);
+    f.loadsDone = uint32_t(s.loadedFromDisk + s.ramHits - lastLoads_.loadedFromDisk - lastLoads_.ramHits);
+    f.loadsCancelled = uint32_t(s.cancelled - lastLoads_.cancelled);
+    f.loadsFailed = uint32_t(s.failed - lastLoads_.failed);
+    lastLoads_ = s;
+  } else {
+    f.pagesNeeded = uint32_t(f.cut.nodes.size());
+    f.pagesResident = f.pagesNeeded - f.pagesLoaded;
+  }
+  f.incomplete = f.pagesMissing > 0 || f.stitchUnfixable > 0;
+  lastCamera_ = camera;
+  hasLastCamera_ = true;
 }
 
 std::vector<std::vector<glm::vec3>> AtlasScene::capture(const Cut& cut, bool stitchOn) {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <chrono>
+#include <functional>
 #include <memory>
 #include <unordered_set>
 #include <vector>
@@ -34,11 +35,27 @@ struct SceneOptions {
   // the frames are to hold (render --max-nodes, bench's largest). 0: none.
   uint32_t minNodeRoom = 0;
   uint32_t layersPerArray = 0;  // RendererSetup::layersPerArray (0: the GL limit; tests set less)
-  // Paper 7.2: pages load on a separate thread and missing nodes draw with a resident ancestor.
+  // The GPU page pool by its bytes (0: by pageCapacity and minNodeRoom): as many pages as fit
+  // (AtlasRenderer's pagePoolPageBytes: samples, normals and colours alike). The chart roots stay
+  // resident, so it must hold them and room to split (InputError otherwise, naming the least).
+  uint64_t gpuCacheBytes = 0;
+  // Paper 7.2: pages load on loader threads and missing nodes draw with a resident ancestor.
   // Off (the default): every page is read synchronously, so frames are deterministic.
   bool asyncLoads = false;
   uint32_t maxUploadsPerFrame = 64;            // async: loaded pages uploaded per frame
-  size_t ramCacheBytes = size_t(256) << 20;    // async: RAM page cache budget
+  uint64_t uploadBytesPerFrame = 0;            // async: and their bytes (0: no limit; one page always)
+  // async: the RAM the loader holds, its cache of read pages and the pages read for upload
+  // (PageLoaderOptions::ramBytes; those may take at most half, and twice a frame's uploads).
+  size_t ramCacheBytes = size_t(256) << 20;
+  uint32_t loaderThreads = 2;                  // async: loader threads
+  double ioLatencyMs = 0.0, ioJitterMs = 0.0;  // async: simulated slow storage (PageLoaderOptions)
+  // async: prefetch the cut of the view this many seconds ahead, the camera extrapolated from the
+  // last two frames at frameSeconds apart, at a priority below every page the frame needs (0: off).
+  double prefetchSeconds = 0.0;
+  double frameSeconds = 1.0 / 60.0;
+  // async: called once for each page that cannot be read (on a loader thread); the node stays on
+  // its resident ancestor.
+  std::function<void(const PageFailure&)> onPageFailure;
   // Error mode: the coherent dual-queue adapter (paper 7.1); false: the stateless top-down
   // greedy (adaptErrorThreshold). Budget mode always uses the quad-queue adapter.
   bool coherentAdaptation = true;
@@ -69,6 +86,19 @@ struct FrameResult {
   uint32_t pagesUploaded = 0;     // async: loaded pages uploaded this frame
   uint32_t nodesSubstituted = 0;  // async: desired nodes drawn as a resident ancestor
   uint32_t stitchUnfixable = 0;   // async: drawn nodes left violating the stitching constraint
+  // Streaming (async): what the caches hold after the frame, against their budgets.
+  uint64_t residentGpuBytes = 0;  // pages in the GPU pool times a page's bytes (both modes)
+  uint64_t gpuBudgetBytes = 0;    // the pool's pages times a page's bytes (both modes)
+  uint64_t residentRamBytes = 0;  // the loader's cache and staged pages
+  uint64_t uploadBytes = 0;       // bytes uploaded this frame (both modes)
+  // The pages the desired cut needs and those of them already in the GPU pool as the frame began
+  // (the hit rate is their ratio).
+  uint32_t pagesNeeded = 0, pagesResident = 0;
+  uint32_t loadsIssued = 0, loadsDone = 0, loadsCancelled = 0, loadsFailed = 0;  // this frame's
+  uint32_t prefetchRequests = 0;  // pages of the predicted view's cut requested this frame
+  // Drawn nodes without their page's data (pagesMissing or stitchUnfixable): the frame is not
+  // complete. Always false unless the pool is too small for the cut.
+  bool incomplete = false;
 };
 
 class AtlasScene {
@@ -80,7 +110,9 @@ class AtlasScene {
   // (see the .cpp); larger budgets are lowered to it.
   uint32_t nodeRoom() const;
   // The pages of the pool a scene of `options` makes for an atlas of `charts` charts.
-  static uint32_t pagePoolPages(const SceneOptions& options, uint32_t charts, bool grouped = false);
+  // With gpuCacheBytes, as many pages of pageBytes as it holds.
+  static uint32_t pagePoolPages(const SceneOptions& options, uint32_t charts, bool grouped = false,
+                                uint64_t pageBytes = 0);
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
   AtlasRenderer& renderer() { return *renderer_; }
@@ -120,11 +152,18 @@ class AtlasScene {
  private:
   std::vector<DrawNode> prepare(const Cut& cut, FrameResult* frame);
   // Everything after adaptation: attribute resolutions, ordering, loads, drawing.
-  void finishFrame(const Camera& camera, const ViewParams& view, FrameResult& f,
+  // prefetchTolPx, maxNodes: the predicted view's cut (streamPages).
+  void finishFrame(const Camera& camera, const ViewParams& view, double prefetchTolPx, uint32_t maxNodes, FrameResult& f,
                    std::chrono::steady_clock::time_point t0);
-  // Async: requests missing pages, uploads loaded ones, and returns the drawable cut: every
-  // node's page resident, stitching constraint enforced. Starts the frame that prepare draws.
-  Cut streamPages(const Cut& desired, const ViewParams& view, FrameResult* frame);
+  // Async: requests missing pages (and the predicted view's, prefetchTolPx > 0), uploads loaded
+  // ones, and returns the drawable cut: every node's page resident, stitching constraint
+  // enforced. Starts the frame that prepare draws.
+  Cut streamPages(const Cut& desired, const ViewParams& view, const Camera& camera, double prefetchTolPx,
+                  uint32_t maxNodes, FrameResult* frame);
+  // The view prefetchSeconds ahead, from the last two cameras; false without a previous one.
+  bool predictedView(const Camera& camera, ViewParams* view) const;
+  // Uploads a loaded page into the pool; false when no layer is free this frame.
+  bool uploadLoaded(const LoadedPage& page);
   AtlasView atlas_;
   SceneOptions options_;
   PageReader pages_;
@@ -136,7 +175,11 @@ class AtlasScene {
   std::vector<float> samples_;
   std::vector<PackedNormal> normals_;
   std::vector<PackedColour> colours_;
-  std::vector<LoadedPage> ready_;        // loaded pages waiting for the per-frame upload budget
+  uint64_t pageBytes_ = 0;               // GPU bytes of one pool page
+  uint64_t uploadBytes_ = 0;             // this frame's
+  PageLoaderStats lastLoads_;            // the loader's counts at the end of the last frame
+  bool hasLastCamera_ = false;           // prefetch: the last frame's camera
+  Camera lastCamera_;
   std::unique_ptr<DualQueueAdapter> dualQueue_;
   std::unique_ptr<QuadQueueAdapter> quadQueue_;
   std::unique_ptr<PageLoader> loader_;  // last: its thread reads pages_
