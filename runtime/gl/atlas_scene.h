@@ -116,6 +116,8 @@ class AtlasScene {
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
   AtlasRenderer& renderer() { return *renderer_; }
+  // GPU bytes of one page of the pool (pagePoolPageBytes); the pool holds renderer().pageCapacity().
+  uint64_t pageBytes() const { return pageBytes_; }
   // The atlas carries per-sample colours (a mesh's vertex colours or terrain imagery), which are drawn.
   bool hasColours() const { return pages_.colours(); }
   // A new frame size (a resized window): the projection and the screen-space errors follow.

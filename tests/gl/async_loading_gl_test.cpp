@@ -3,6 +3,11 @@
 // desired cut. Cracks are measured on the real vertex shader (transform feedback).
 #include <gtest/gtest.h>
 
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+
 #include "pipeline/build.h"
 #include "runtime/adapt.h"
 #include "runtime/atlas_view.h"
@@ -182,6 +187,151 @@ TEST_F(AsyncLoadingTest, PagesLoadingViewMarksTheStandInsUntilTheirPagesArrive) 
   }
   ASSERT_EQ(f.nodesSubstituted, 0u);
   EXPECT_EQ(magentaPixels(scene.renderer().readPixels()), 0u) << "stripes left once every page is in";
+}
+
+// The byte budgets hold in every frame, on budgets below one level of pages: the GPU pool holds
+// the roots and a dozen pages, the RAM three loaded pages, one frame's uploads two pool pages. Every
+// frame stays complete. The same GPU budget holds without the loader, and one below the roots is
+// refused with the least it needs.
+TEST_F(AsyncLoadingTest, ByteBudgetsHoldInEveryFrame) {
+  const AtlasView atlas = build();
+  const Hierarchy& h = atlas.hierarchy;
+  gl::SceneOptions so;
+  so.width = 96;
+  so.height = 72;
+  uint64_t pageBytes = 0;
+  {
+    gl::AtlasScene probe(atlas, so);
+    pageBytes = probe.pageBytes();
+  }
+  ASSERT_GT(pageBytes, 0u);
+  const uint32_t roots = h.chartCount();
+  ASSERT_GT(4 * roots, 12u) << "the pool must hold less than one level of pages";
+  so.gpuCacheBytes = (roots + 12) * pageBytes + pageBytes / 2;
+  PageReader reader(atlas.dir, atlas.manifest, h.params);
+  const size_t loadedBytes = reader.pageBytes({0, 1, 0, 0});
+  AdaptOptions ao;
+  ao.tolerancePx = 1.0;
+  ao.maxNodes = 1500;
+  for (const bool async : {true, false}) {
+    SCOPED_TRACE(async ? "loader" : "synchronous");
+    so.asyncLoads = async;
+    so.ramCacheBytes = 3 * loadedBytes;
+    so.uploadBytesPerFrame = 2 * pageBytes;
+    so.loaderThreads = 2;
+    gl::AtlasScene scene(atlas, so);
+    ASSERT_EQ(scene.renderer().pageCapacity(), roots + 12);
+    uint32_t substituted = 0;
+    for (int i = 0; i < 24; ++i) {
+      const gl::FrameResult f = scene.renderFrame(camera(atlas, double(std::min(i, 16)) / 16), ao);
+      EXPECT_LE(f.residentGpuBytes, so.gpuCacheBytes) << "frame " << i;
+      EXPECT_LE(f.gpuBudgetBytes, so.gpuCacheBytes) << "frame " << i;
+      EXPECT_LE(f.residentRamBytes, so.ramCacheBytes) << "frame " << i;
+      if (async) {
+        EXPECT_LE(f.uploadBytes, so.uploadBytesPerFrame) << "frame " << i;
+      }
+      EXPECT_FALSE(f.incomplete) << "frame " << i;
+      EXPECT_EQ(f.pagesMissing, 0u) << "frame " << i;
+      EXPECT_LE(f.cut.nodeCount(), scene.nodeRoom()) << "frame " << i;
+      EXPECT_EQ(countStitchViolations(h, f.cut), 0u) << "frame " << i;
+      substituted += f.nodesSubstituted;
+      if (async && i % 3 == 2) scene.waitForLoads();
+    }
+    if (async) {
+      EXPECT_GT(substituted, 0u) << "the budgets never held a page back";
+    }
+  }
+  so.gpuCacheBytes = (roots + 3) * pageBytes;
+  try {
+    gl::AtlasScene tooSmall(atlas, so);
+    ADD_FAILURE() << "a GPU cache below the roots was taken";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("chart roots"), std::string::npos) << e.what();
+  }
+}
+
+// Blocks that turn corrupt on disk while the scene runs: their pages fail once each (reported
+// once), their nodes stay on resident stand-ins, and every frame is complete and crack-free.
+TEST_F(AsyncLoadingTest, ACorruptBlockAtRunTimeLeavesItsNodeOnAStandIn) {
+  const AtlasView atlas = build();
+  const Hierarchy& h = atlas.hierarchy;
+  std::mutex toldMutex;
+  std::vector<PageFailure> told;
+  gl::SceneOptions so;
+  so.width = 96;
+  so.height = 72;
+  so.asyncLoads = true;
+  so.onPageFailure = [&](const PageFailure& f) {
+    std::lock_guard<std::mutex> lock(toldMutex);
+    told.push_back(f);
+  };
+  gl::AtlasScene scene(atlas, so);  // the roots are read now
+  for (const auto& e : std::filesystem::directory_iterator(atlas.dir / "charts")) {
+    const auto size = std::filesystem::file_size(e.path());
+    std::fstream file(e.path(), std::ios::in | std::ios::out | std::ios::binary);
+    file.seekp(std::streamoff(size / 4));
+    for (uint64_t i = size / 4; i < size; ++i) file.put(char(0x5A ^ (i * 167)));
+  }
+  AdaptOptions ao;
+  ao.tolerancePx = 0.5;
+  ao.maxNodes = 1500;
+  gl::FrameResult f;
+  for (int i = 0; i < 12; ++i) {
+    f = scene.renderFrame(camera(atlas, 0.5), ao);
+    EXPECT_FALSE(f.incomplete) << "frame " << i;
+    EXPECT_EQ(f.pagesMissing, 0u) << "frame " << i;
+    EXPECT_EQ(countStitchViolations(h, f.cut), 0u) << "frame " << i;
+    expectDrawnCoversDesired(f.cut, f.desiredCut, i);
+    if (i % 4 == 3) {
+      const CrackReport r = countCracks(h, f.cut, scene.capture(f.cut));
+      EXPECT_EQ(r.mismatches, 0u) << "frame " << i;
+    }
+    scene.waitForLoads();
+  }
+  const std::vector<PageFailure> failures = scene.loader()->failures();
+  ASSERT_GT(failures.size(), 0u) << "no page read the garbage";
+  EXPECT_GT(f.nodesSubstituted, 0u) << "failed pages left no stand-in";
+  std::lock_guard<std::mutex> lock(toldMutex);
+  EXPECT_EQ(told.size(), failures.size()) << "a failure reported twice, or not at all";
+  for (const PageFailure& p : told) EXPECT_NE(p.message.find("charts"), std::string::npos) << p.message;
+}
+
+// Prefetching the view half a second ahead loads the pages a moving camera is about to need, so
+// more of each frame's pages are resident as it begins (the hit rate) than without: at least a
+// tenth fewer misses. One loader
+// thread and a wait for its loads after each frame make both runs deterministic.
+TEST_F(AsyncLoadingTest, PrefetchRaisesTheHitRate) {
+  const AtlasView atlas = build();
+  AdaptOptions ao;
+  ao.tolerancePx = 0.5;
+  ao.maxNodes = 1500;
+  auto hitRate = [&](double prefetchSeconds, uint32_t* prefetched) {
+    gl::SceneOptions so;
+    so.width = 96;
+    so.height = 72;
+    so.asyncLoads = true;
+    so.loaderThreads = 1;
+    so.prefetchSeconds = prefetchSeconds;
+    so.frameSeconds = 0.1;  // five frames ahead
+    gl::AtlasScene scene(atlas, so);
+    uint64_t needed = 0, resident = 0;
+    *prefetched = 0;
+    for (int i = 0; i < 30; ++i) {
+      const gl::FrameResult f = scene.renderFrame(camera(atlas, double(i) / 30), ao);
+      EXPECT_FALSE(f.incomplete);
+      if (i >= 5) needed += f.pagesNeeded, resident += f.pagesResident;
+      *prefetched += f.prefetchRequests;
+      scene.waitForLoads();
+    }
+    return double(resident) / double(std::max<uint64_t>(needed, 1));
+  };
+  uint32_t none = 0, ahead = 0;
+  const double without = hitRate(0.0, &none), with = hitRate(0.5, &ahead);
+  EXPECT_EQ(none, 0u);
+  EXPECT_GT(ahead, 0u);
+  // At least a tenth of the misses go (0.765 against 0.701 when this was written: a fifth).
+  EXPECT_LE(1.0 - with, 0.9 * (1.0 - without)) << "hit rate " << with << " with prefetch, " << without << " without";
+  std::printf("hit rate along the path: %.3f with prefetch, %.3f without\n", with, without);
 }
 
 TEST_F(AsyncLoadingTest, SynchronousDefaultDrawsDesiredCut) {
