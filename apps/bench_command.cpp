@@ -3,6 +3,7 @@
 // problems, the dual- and quad-queue adapters against fixed granularity and top-down greedy) and
 // figure 6 (adaptation time and error against the node count).
 #include "apps/bench_command.h"
+#include "apps/streaming_args.h"
 
 #include <unistd.h>
 
@@ -282,6 +283,10 @@ CLI::App* addBenchCommand(CLI::App& app, BenchArgs& a) {
                 "Budget mode: quad-queue split/merge rounds per frame (the per-frame work cap)")
       ->capture_default_str();
   b->add_flag("--render", a.render, "Also draw each cut (headless EGL) and record draw_ms");
+  b->add_option("--gpu-cache", a.gpuCache,
+                "With --render: the GPU page pool in bytes (K, M, G), the chart roots resident; auto: a pool that "
+                "holds the largest node budget's cuts")
+      ->capture_default_str();
   b->add_option("--frame-ms", a.frameMs, "Cost model: target frame time in ms (needs --tri-rate)");
   b->add_option("--tri-rate", a.triRate, "Cost model: triangle throughput in triangles/s (e.g. from bench_render)");
   b->add_option("--control-frames", a.controlFrames,
@@ -446,9 +451,13 @@ int runBench(const BenchArgs& a) {
     so.width = w;
     so.height = h;
     so.minNodeRoom = *std::max_element(nodeBudgets.begin(), nodeBudgets.end());  // the pool holds every budget's cuts
+    so.gpuCacheBytes = a.gpuCache == "auto" ? 0 : parseBytes("--gpu-cache", a.gpuCache);
     scene = std::make_unique<gl::AtlasScene>(atlas, so);
     spdlog::info("--render: a page pool of {} pages in {} texture array(s), room for cuts of {} nodes",
                  scene->renderer().pageCapacity(), scene->renderer().pageArrays(), scene->nodeRoom());
+    if (so.gpuCacheBytes > 0 && scene->nodeRoom() < so.minNodeRoom)
+      spdlog::warn("--gpu-cache {} holds cuts of {} nodes: the cuts of larger node budgets draw without some of their "
+                   "pages (their draw_ms is not a full frame's)", a.gpuCache, scene->nodeRoom());
   }
 
   // Runs.

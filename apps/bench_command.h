@@ -31,6 +31,7 @@ struct BenchArgs {
   uint32_t controlFrames = 240;
   double loadStep = 0.5;
   bool render = false;
+  std::string gpuCache = "auto";  // --render: the GPU page pool in bytes (StreamingArgs::gpuCache)
   // Set by the parser: which options were given explicitly.
   bool toleranceGiven = false, trianglesGiven = false;
 };

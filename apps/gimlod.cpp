@@ -24,6 +24,7 @@
 
 #include "apps/bench_command.h"
 #include "apps/view_command.h"
+#include "apps/streaming_args.h"
 #include "apps/view_args.h"
 #include "atlas/mesh/mesh_atlas.h"
 #include "core/atlas_format.h"
@@ -50,8 +51,9 @@ namespace {
 struct RenderArgs {
   std::string atlas, output, size = "640x480", background = "0.53,0.70,0.92";
   CameraArgs camera;
-  uint32_t maxNodes = 2048, uploadsPerFrame = 64;
-  bool asyncLoads = false, topDown = false;
+  uint32_t maxNodes = 2048;
+  StreamingArgs streaming;
+  bool topDown = false;
   double tolerance = 1.0, texelRatio = 1.0;
   uint64_t triangles = 0;  // > 0: triangle-budget mode (quad queue)
   double frameMs = 0.0;    // > 0: the frame-time controller sets the budgets (budget mode)
@@ -75,20 +77,6 @@ std::map<size_t, fs::path> parseCutExports(const std::vector<std::string>& specs
     out[frame] = s.substr(colon + 1);
   }
   return out;
-}
-
-// "4G", "512M", "65536", ...; throws InputError naming the option.
-uint64_t parseBytes(const std::string& option, const std::string& text) {
-  char* end = nullptr;
-  const double v = std::strtod(text.c_str(), &end);
-  double unit = 1.0;
-  const std::string suffix = end ? std::string(end) : std::string();
-  if (suffix == "K" || suffix == "k") unit = 1024.0;
-  else if (suffix == "M" || suffix == "m") unit = 1024.0 * 1024.0;
-  else if (suffix == "G" || suffix == "g") unit = 1024.0 * 1024.0 * 1024.0;
-  else if (!suffix.empty()) throw InputError(option + " '" + text + "': unknown unit (use K, M or G)");
-  if (!(v > 0.0) || !std::isfinite(v) || v * unit > 1e15) throw InputError(option + " '" + text + "' must be a positive size");
-  return uint64_t(v * unit);
 }
 
 // A whole number in [0, 2^32 - 2] ("auto" is told apart before); throws InputError naming the option.
@@ -243,9 +231,11 @@ int runInspect(InspectArgs a) {
 int runRender(const RenderArgs& a) {
   uint32_t w = 0, h = 0;
   parseFrameSize(a.size, &w, &h);
-  validateViewOptions(a.tolerance, a.texelRatio, a.uploadsPerFrame, a.triangles > 0, a.topDown, a.frameMs);
+  validateViewOptions(a.tolerance, a.texelRatio, a.streaming.uploadsPerFrame, a.triangles > 0, a.topDown, a.frameMs);
   validateCameraArgs(a.camera);
   const auto background = parseBackground(a.background);
+  gl::SceneOptions so;
+  applyStreamingArgs(a.streaming, so);
 
   const AtlasView atlas = openAtlas(a.atlas, a.camera.maxRoots);
   const std::vector<Camera> cams = loadCameras(a.camera, atlas);
@@ -259,20 +249,21 @@ int runRender(const RenderArgs& a) {
 
   auto context = gl::EglContext::create();
   spdlog::info("OpenGL: {} ({})", context->renderer(), context->version());
-  gl::SceneOptions so;
   so.width = w;
   so.height = h;
   so.background = background;
-  so.asyncLoads = a.asyncLoads;
-  so.maxUploadsPerFrame = a.uploadsPerFrame;
+  so.onPageFailure = [](const PageFailure& f) {
+    spdlog::warn("page of chart {} level {} ({}, {}) cannot be read, its node stays on a coarser one: {}", f.id.chart,
+                 f.id.level, f.id.x, f.id.y, f.message);
+  };
   so.coherentAdaptation = !a.topDown;
   so.texelsPerPixel = a.texelRatio;
   so.overlay = parseOverlayOption(a.overlay);
   so.overlayErrorPx = a.triangles > 0 ? 0.0 : a.tolerance;  // error colouring: red at the tolerance
   so.minNodeRoom = a.maxNodes;  // the page pool holds the budget's cuts
   gl::AtlasScene scene(atlas, so);
-  spdlog::info("GPU page pool: {} pages in {} texture array(s), room for cuts of {} nodes", scene.renderer().pageCapacity(),
-               scene.renderer().pageArrays(), scene.nodeRoom());
+  spdlog::info("GPU page pool: {} pages of {} bytes in {} texture array(s), room for cuts of {} nodes",
+               scene.renderer().pageCapacity(), scene.pageBytes(), scene.renderer().pageArrays(), scene.nodeRoom());
   if (scene.nodeBudget(a.maxNodes) != a.maxNodes)
     spdlog::warn("--max-nodes {} is above what the GPU page pool holds ({} pages): using {}", a.maxNodes,
                  scene.renderer().pageCapacity(), scene.nodeRoom());
@@ -294,7 +285,10 @@ int runRender(const RenderArgs& a) {
   std::string csv = "frame,nodes,triangles,max_screen_error_px,adapt_ms,stitch_ms,upload_ms,draw_ms,"
                     "draw_calls,pages_loaded,pages_missing,pages_requested,nodes_substituted,node_budget_bound,"
                     "constraint_raises,constraint_splits,attribute_texels,attribute_above_page,root_floor,"
-                    "budget_below_roots,max_nodes,max_triangles,frame_ms,gpu_ms,closed_groups,grouped_roots\n";
+                    "budget_below_roots,max_nodes,max_triangles,frame_ms,gpu_ms,closed_groups,grouped_roots,"
+                    "resident_gpu_bytes,gpu_budget_bytes,resident_ram_bytes,ram_budget_bytes,upload_bytes,"
+                    "loads_issued,loads_done,loads_cancelled,loads_failed,prefetch_requests,pages_needed,"
+                    "pages_resident,incomplete\n";
   double drawMsTotal = 0.0;
   uint64_t triTotal = 0;
   bool warnedBelowRoots = false;
@@ -334,6 +328,11 @@ int runRender(const RenderArgs& a) {
                        int(f.adapt.budgetBelowRoots), budgetMode ? bo.maxNodes : a.maxNodes,
                        budgetMode ? bo.maxTriangles : 0, frameMs, f.draw.gpuMs, f.adapt.closedGroups,
                        f.adapt.groupedRoots);
+    csv.pop_back();  // the streaming columns follow
+    csv += fmt::format(",{},{},{},{},{},{},{},{},{},{},{},{},{}\n", f.residentGpuBytes, f.gpuBudgetBytes,
+                       f.residentRamBytes, so.asyncLoads ? so.ramCacheBytes : 0, f.uploadBytes, f.loadsIssued,
+                       f.loadsDone, f.loadsCancelled, f.loadsFailed, f.prefetchRequests, f.pagesNeeded,
+                       f.pagesResident, int(f.incomplete));
     drawMsTotal += f.draw.drawMs;
     triTotal += f.draw.triangles;
     spdlog::info("frame {:4d}: {:5d} nodes, {:8d} triangles, max error {:.3f} px, adapt {:.3f} ms, draw {:.2f} ms",
@@ -535,8 +534,7 @@ int main(int argc, char** argv) {
   render->add_option("--texel-ratio", r.texelRatio,
                      "Normal-map texels per pixel of a node's projected size (0: page resolution)")
       ->capture_default_str();
-  render->add_flag("--async-loads", r.asyncLoads,
-                   "Load pages on a loader thread; missing nodes draw with a resident ancestor's data");
+  addStreamingOptions(render, r.streaming);
   render->add_option("--overlay", r.overlay,
                      "Draw over the shading: chart (each chart its colour, seams dark, open borders red), level, res, "
                      "error (heat map: blue 0, red at the tolerance, or the frame's largest error with --triangles)")
@@ -545,8 +543,6 @@ int main(int argc, char** argv) {
                      "FRAME:FILE.ply: write the cut drawn at that frame as one welded mesh (stitched positions from "
                      "the vertex shader, per-vertex chart, level, node and resolution); repeatable");
   render->add_flag("--no-stitch", r.noStitch, "Export cuts without border stitching (a negative control: it cracks)");
-  render->add_option("--uploads-per-frame", r.uploadsPerFrame, "With --async-loads: pages uploaded per frame")
-      ->capture_default_str();
 
   BenchArgs bn;
   auto* bench = addBenchCommand(app, bn);

@@ -184,6 +184,11 @@ struct FrameFigures {
   uint32_t closedGroups = 0, groupedRoots = 0;  // groups above the charts kept closed, their roots
   uint32_t standIns = 0;  // desired nodes drawn as a resident ancestor (pages still loading)
   bool belowRoots = false;
+  // Streaming: the caches' bytes after the frame, its uploads, and the pages it needed and found.
+  uint64_t residentGpuBytes = 0, gpuBudgetBytes = 0, residentRamBytes = 0, uploadBytes = 0;
+  uint32_t pagesNeeded = 0, pagesResident = 0, loadsIssued = 0, loadsDone = 0, loadsCancelled = 0, loadsFailed = 0;
+  uint32_t prefetchRequests = 0;
+  bool incomplete = false;
 };
 
 const char* kHelp =
@@ -220,8 +225,7 @@ CLI::App* addViewCommand(CLI::App& app, ViewArgs& a) {
   addMaxRootsOption(v, a.maxRoots);
   v->add_option("--texel-ratio", a.texelRatio, "Normal-map texels per pixel (0: page resolution)")
       ->capture_default_str();
-  v->add_flag("--async-loads", a.asyncLoads, "Load pages on a separate thread");
-  v->add_option("--uploads-per-frame", a.uploadsPerFrame, "Async: pages uploaded per frame")->capture_default_str();
+  addStreamingOptions(v, a.streaming);
   v->add_flag("--top-down", a.topDown, "Error mode: the stateless top-down greedy instead of the dual queue");
   v->add_option("--overlay", a.overlay, "Colouring: none, chart, level, res or error")->capture_default_str();
   v->add_flag("--wireframe", a.wireframe, "Start in wireframe");
@@ -233,7 +237,9 @@ CLI::App* addViewCommand(CLI::App& app, ViewArgs& a) {
 int runView(const ViewArgs& a) {
   uint32_t width = 0, height = 0;
   parseFrameSize(a.size, &width, &height);
-  validateViewOptions(a.tolerance, a.texelRatio, a.uploadsPerFrame, a.triangles > 0, a.topDown, a.frameMs);
+  validateViewOptions(a.tolerance, a.texelRatio, a.streaming.uploadsPerFrame, a.triangles > 0, a.topDown, a.frameMs);
+  gl::SceneOptions streaming;  // the streaming options, checked before a window opens
+  applyStreamingArgs(a.streaming, streaming);
   if (!(a.fov > 1.0 && a.fov < 179.0)) throw InputError("--fov must be in (1, 179) degrees");
   if (a.frames > 0 && a.path.empty()) throw InputError("--frames needs --path");
   const OverlayMode overlayMode = parseOverlayOption(a.overlay);
@@ -257,7 +263,9 @@ int runView(const ViewArgs& a) {
     if (!stats) throw InputError(a.stats + ": cannot write the stats file");
     stats << "frame,nodes,triangles,max_screen_error_px,adapt_ms,draw_ms,frame_ms,pages_loaded,pages_requested,"
              "root_floor,budget_below_roots,mode,tolerance_px,max_nodes,max_triangles,frozen,overlay,wireframe,"
-             "target_ms,node_borders,normals,snapped,pages_loading_view,nodes_waiting,gpu_ms\n";
+             "target_ms,node_borders,normals,snapped,pages_loading_view,nodes_waiting,gpu_ms,resident_gpu_bytes,"
+             "gpu_budget_bytes,resident_ram_bytes,ram_budget_bytes,upload_bytes,loads_issued,loads_done,"
+             "loads_cancelled,loads_failed,prefetch_requests,pages_needed,pages_resident,incomplete\n";
   }
 
   glfwSetErrorCallback([](int code, const char* what) { spdlog::error("GLFW error {}: {}", code, what); });
@@ -289,8 +297,8 @@ int runView(const ViewArgs& a) {
   c.maxNodes = int(std::min<uint32_t>(a.maxNodes, 1u << 20));
   c.maxTrianglesK = int(std::clamp<uint64_t>(a.triangles > 0 ? a.triangles / 1000 : 1000, 1, 1 << 20));
   c.texelRatio = float(a.texelRatio);
-  c.asyncLoads = a.asyncLoads;
-  c.uploadsPerFrame = int(a.uploadsPerFrame);
+  c.asyncLoads = streaming.asyncLoads;
+  c.uploadsPerFrame = int(a.streaming.uploadsPerFrame);
   c.topDown = a.topDown;
   c.overlay = int(std::find(kOverlays.begin(), kOverlays.end(), overlayMode) - kOverlays.begin());
   c.wireframe = a.wireframe;
@@ -309,7 +317,7 @@ int runView(const ViewArgs& a) {
   int fbw = 0, fbh = 0;
   glfwGetFramebufferSize(window, &fbw, &fbh);
   auto makeScene = [&](bool async) {
-    gl::SceneOptions so;
+    gl::SceneOptions so = streaming;
     so.width = uint32_t(std::max(fbw, 8));
     so.height = uint32_t(std::max(fbh, 8));
     so.background = background;
@@ -318,6 +326,10 @@ int runView(const ViewArgs& a) {
     so.coherentAdaptation = !c.topDown;
     so.texelsPerPixel = c.texelRatio;
     so.minNodeRoom = uint32_t(c.maxNodes);  // the page pool holds cuts of the budget at start
+    so.onPageFailure = [](const PageFailure& f) {
+      spdlog::warn("page of chart {} level {} ({}, {}) cannot be read, its node stays on a coarser one: {}", f.id.chart,
+                   f.id.level, f.id.x, f.id.y, f.message);
+    };
     return std::make_unique<gl::AtlasScene>(atlas, so);
   };
   std::unique_ptr<gl::AtlasScene> scene = makeScene(c.asyncLoads);
@@ -349,6 +361,7 @@ int runView(const ViewArgs& a) {
   ImGuiGuard imguiGuard;
 
   Series adaptMs, drawMs, gpuMs, frameMs, nodes, triangles, maxError, pagesLoaded;
+  Series gpuMiB, ramMiB, uploadMiB, hitRate;  // streaming
   std::vector<Camera> recorded;
   Cut lastCut;  // the cut drawn last: what a freeze keeps drawing
   bool haveCut = false;
@@ -501,6 +514,18 @@ int runView(const ViewArgs& a) {
     last.belowRoots = f.adapt.budgetBelowRoots;
     last.closedGroups = f.adapt.closedGroups;
     last.groupedRoots = f.adapt.groupedRoots;
+    last.residentGpuBytes = f.residentGpuBytes;
+    last.gpuBudgetBytes = f.gpuBudgetBytes;
+    last.residentRamBytes = f.residentRamBytes;
+    last.uploadBytes = f.uploadBytes;
+    last.pagesNeeded = f.pagesNeeded;
+    last.pagesResident = f.pagesResident;
+    last.loadsIssued = f.loadsIssued;
+    last.loadsDone = f.loadsDone;
+    last.loadsCancelled = f.loadsCancelled;
+    last.loadsFailed = f.loadsFailed;
+    last.prefetchRequests = f.prefetchRequests;
+    last.incomplete = f.incomplete;
     adaptMs.add(last.adaptMs);
     drawMs.add(last.drawMs);
     gpuMs.add(last.gpuMs);
@@ -508,6 +533,10 @@ int runView(const ViewArgs& a) {
     triangles.add(double(last.triangles));
     maxError.add(last.maxErrorPx);
     pagesLoaded.add(last.pagesLoaded);
+    gpuMiB.add(double(last.residentGpuBytes) / (1 << 20));
+    ramMiB.add(double(last.residentRamBytes) / (1 << 20));
+    uploadMiB.add(double(last.uploadBytes) / (1 << 20));
+    hitRate.add(last.pagesNeeded > 0 ? 100.0 * last.pagesResident / last.pagesNeeded : 100.0);
 
     // The panel.
     ImGui_ImplOpenGL3_NewFrame();
@@ -565,6 +594,13 @@ int runView(const ViewArgs& a) {
         ImGui::Text("%u closed groups drawing %u chart roots", last.closedGroups, last.groupedRoots);
       ImGui::Text("max error %.3f px  frame %.2f ms", last.maxErrorPx, frameMs.last());
       if (c.asyncLoads) ImGui::Text("pages: %u requested, %u nodes waiting for theirs", last.pagesRequested, last.standIns);
+      ImGui::Text("GPU pool %.1f of %.1f MiB", double(last.residentGpuBytes) / (1 << 20),
+                  double(last.gpuBudgetBytes) / (1 << 20));
+      if (c.asyncLoads)
+        ImGui::Text("RAM %.1f of %.1f MiB  uploads %.2f of %.2f MiB  hit %.0f%%", double(last.residentRamBytes) / (1 << 20),
+                    double(streaming.ramCacheBytes) / (1 << 20), double(last.uploadBytes) / (1 << 20),
+                    double(streaming.uploadBytesPerFrame) / (1 << 20),
+                    last.pagesNeeded > 0 ? 100.0 * last.pagesResident / last.pagesNeeded : 100.0);
       if (ImGui::CollapsingHeader("graphs", fbh >= 700 ? ImGuiTreeNodeFlags_DefaultOpen : 0)) {
         plot("adapt ms", adaptMs, "ms");
         plot("draw ms", drawMs, "ms");
@@ -574,6 +610,12 @@ int runView(const ViewArgs& a) {
         plot("triangles", triangles, "");
         plot("max error", maxError, "px");
         plot("pages loaded", pagesLoaded, "");
+        plot("GPU pool", gpuMiB, "MiB");
+        if (c.asyncLoads) {
+          plot("loader RAM", ramMiB, "MiB");
+          plot("uploads", uploadMiB, "MiB");
+          plot("hit rate", hitRate, "%");
+        }
       }
       if (ImGui::CollapsingHeader("keys")) ImGui::TextUnformatted(kHelp);
       ImGui::End();
@@ -588,7 +630,7 @@ int runView(const ViewArgs& a) {
       controller->update({uint32_t(last.nodes), last.triangles, last.adaptMs, last.drawMs,
                           std::max(last.frameMs - last.uploadMs, 0.0)});
     if (stats) {
-      stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{:.4f}\n", frame,
+      stats << fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{:.4f}", frame,
                            last.nodes, last.triangles, last.maxErrorPx, last.adaptMs, last.drawMs, last.frameMs,
                            last.pagesLoaded, last.pagesRequested, last.rootFloor, int(last.belowRoots),
                            c.budgetMode ? "budget" : "error", c.tolerance, c.maxNodes, uint64_t(c.maxTrianglesK) * 1000,
@@ -596,6 +638,10 @@ int runView(const ViewArgs& a) {
                            c.holdFrameTime ? fmt::format("{:.2f}", c.targetMs) : std::string(),
                            int(c.views.nodeBorders), int(c.views.normals), int(c.views.snapped),
                            int(c.views.loading), last.standIns, last.gpuMs)
+            << fmt::format(",{},{},{},{},{},{},{},{},{},{},{},{},{}\n", last.residentGpuBytes, last.gpuBudgetBytes,
+                           last.residentRamBytes, c.asyncLoads ? streaming.ramCacheBytes : 0, last.uploadBytes,
+                           last.loadsIssued, last.loadsDone, last.loadsCancelled, last.loadsFailed,
+                           last.prefetchRequests, last.pagesNeeded, last.pagesResident, int(last.incomplete))
             << std::flush;
     }
     const bool lastOne = lastFrame > 0 && frame + 1 >= lastFrame;

@@ -9,6 +9,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "apps/streaming_args.h"
 #include "hierarchy/root_groups.h"
 
 namespace gimlod {
@@ -31,8 +32,7 @@ struct ViewArgs {
   uint32_t maxNodes = 2048;
   uint32_t maxRoots = kDefaultMaxRoots;  // top groups above the charts at most (openAtlas); 0: none
   double texelRatio = 1.0;
-  bool asyncLoads = false;
-  uint32_t uploadsPerFrame = 64;
+  StreamingArgs streaming;  // the loader and the caches' byte budgets
   bool topDown = false;
   std::string overlay = "none";  // none, chart, level, res, error
   bool wireframe = false;
