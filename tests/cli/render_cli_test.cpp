@@ -125,6 +125,70 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
   }
 }
 
+// The shipped DEM flown along the shipped fly-by with the loader under small byte budgets and a
+// simulated slow disk: every frame complete, every cache within its budget; bad streaming options
+// name themselves.
+TEST(RenderCli, StreamingKeepsItsByteBudgets) {
+  test::TempDir dir("gimlod-stream");
+  const std::string app = test::appPath().string();
+  const fs::path atlas = dir.path() / "rainier.atlas";
+  std::string out;
+  ASSERT_EQ(test::runCommand(app + " build '" + (test::repoData() / "terrain/mt_rainier_90m.tif").string() +
+                                 "' -o '" + atlas.string() + "'",
+                             &out),
+            0)
+      << out;
+  const fs::path frames = dir.path() / "frames";
+  const std::string path = (test::repoData().parent_path() / "scenes/rainier_flyby.json").string();
+  ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + frames.string() + "' --path '" + path +
+                                 "' --size 96x64 --gpu-cache 2M --ram-cache 1M --upload-budget 256K --io-latency 2,1 "
+                                 "--loader-threads 2 --prefetch 0.5",
+                             &out),
+            0)
+      << out;
+  const auto rows = readCsv(frames / "stats.csv");
+  ASSERT_GE(rows.size(), 4u);
+  const auto& head = rows[0];
+  auto col = [&](const std::string& name) { return size_t(std::find(head.begin(), head.end(), name) - head.begin()); };
+  for (const char* name : {"resident_gpu_bytes", "gpu_budget_bytes", "resident_ram_bytes", "ram_budget_bytes",
+                           "upload_bytes", "loads_issued", "loads_done", "loads_cancelled", "loads_failed",
+                           "prefetch_requests", "pages_needed", "pages_resident", "incomplete"})
+    ASSERT_LT(col(name), head.size()) << name;
+  uint64_t issued = 0, done = 0;
+  for (size_t r = 1; r < rows.size(); ++r) {
+    const auto& row = rows[r];
+    ASSERT_EQ(row.size(), head.size()) << "frame " << r - 1;
+    EXPECT_LE(std::stoull(row[col("resident_gpu_bytes")]), std::stoull(row[col("gpu_budget_bytes")]));
+    EXPECT_LE(std::stoull(row[col("gpu_budget_bytes")]), 2u << 20);
+    EXPECT_LE(std::stoull(row[col("resident_ram_bytes")]), 1u << 20);
+    EXPECT_EQ(std::stoull(row[col("ram_budget_bytes")]), 1u << 20);
+    EXPECT_LE(std::stoull(row[col("pages_resident")]), std::stoull(row[col("pages_needed")]));
+    EXPECT_EQ(row[col("incomplete")], "0") << "frame " << r - 1;
+    EXPECT_EQ(row[col("pages_missing")], "0") << "frame " << r - 1;
+    EXPECT_EQ(row[col("loads_failed")], "0") << "frame " << r - 1;
+    issued += std::stoull(row[col("loads_issued")]);
+    done += std::stoull(row[col("loads_done")]);
+  }
+  EXPECT_GT(issued, 0u);
+  EXPECT_GT(done, 0u);
+  // Bad streaming options name themselves or what they cannot hold.
+  for (const auto& [bad, named] : std::vector<std::pair<std::string, std::string>>{
+           {"--gpu-cache 10K", "GPU page cache"},
+           {"--ram-cache 2K", "loader's RAM"},
+           {"--ram-cache lots", "--ram-cache"},
+           {"--io-latency fast", "--io-latency"},
+           {"--io-latency 5,-1", "--io-latency"},
+           {"--prefetch -1", "--prefetch"},
+           {"--loader-threads 0", "--loader-threads"}}) {
+    EXPECT_NE(test::runCommand(app + " render '" + atlas.string() + "' -o '" + (dir.path() / "bad").string() +
+                                   "' --orbit 1 --size 32x32 " + bad,
+                               &out),
+              0)
+        << bad;
+    EXPECT_NE(out.find(named), std::string::npos) << bad << ": " << out;
+  }
+}
+
 // The shipped scan through the tool, as the demo runs it (smaller): build, then render the shipped
 // orbit path; every frame drawn, no page missing, within tolerance unless the node budget bound.
 TEST(RenderCli, BuildAndRenderShippedScan) {
