@@ -59,26 +59,6 @@ struct ItemLess {
     return a.priority < b.priority || (a.priority == b.priority && a.key < b.key);
   }
 };
-// A coarsen item of phase 1 with the error its node would have one resolution lower: the balance
-// passes over the coarsenings that would reach the max error by this alone, without finding the
-// node's entry (scattered reads that were most of its time).
-struct CoarsenItem {
-  Item item;
-  double low;
-};
-struct CoarsenLess {
-  bool operator()(const CoarsenItem& a, const CoarsenItem& b) const { return ItemLess{}(a.item, b.item); }
-};
-void heapPush(std::vector<CoarsenItem>& h, const CoarsenItem& it) {
-  h.push_back(it);
-  std::push_heap(h.begin(), h.end(), CoarsenLess{});
-}
-CoarsenItem heapPop(std::vector<CoarsenItem>& h) {
-  std::pop_heap(h.begin(), h.end(), CoarsenLess{});
-  const CoarsenItem it = h.back();
-  h.pop_back();
-  return it;
-}
 void heapPush(std::vector<Item>& h, const Item& it) {
   h.push_back(it);
   std::push_heap(h.begin(), h.end(), ItemLess{});
@@ -284,8 +264,7 @@ struct QuadQueueAdapter::State {
   // scratch heaps, kept from frame to frame (no allocation once warm).
   std::vector<uint32_t> reserved;
   uint32_t reserveMark = 0;
-  std::vector<Item> splitH, mergeH, errH;
-  std::vector<CoarsenItem> coarsenH;
+  std::vector<Item> splitH, mergeH, coarsenH, errH;
   struct Listed {  // one entry's phase-2 items (listMerges)
     double split = -1.0, cost = 0.0;
     bool merge = false;
@@ -299,8 +278,7 @@ struct QuadQueueAdapter::State {
   // have that the kept queues lack. Stale items are skipped as they surface.
   bool phase1Ready = false;
   std::vector<NodeId> fresh, refloored, raise;
-  std::vector<CoarsenItem> dropped, balancePopped;
-  std::vector<Entry*> balanceChosen;
+  std::vector<Item> dropped;
   // The floors likewise, from the first computeFloors of a frame on: the nodes that joined or left
   // the cut since (cutChanged) mark the entries beside them, whose gaps are found again.
   bool floorsReady = false;
@@ -496,10 +474,9 @@ struct QuadQueueAdapter::State {
       if (heapify) std::push_heap(b.begin(), b.end(), ItemLess{});
     }
     if (e.res > e.floor) {
-      const double low = errAt(e, e.res - 1);
-      const double loss = (low - e.err) / double(tris(e.res) - tris(e.res - 1));
-      coarsenH.push_back({{-loss, k, e.res}, low});
-      if (heapify) std::push_heap(coarsenH.begin(), coarsenH.end(), CoarsenLess{});
+      const double loss = (errAt(e, e.res - 1) - e.err) / double(tris(e.res) - tris(e.res - 1));
+      coarsenH.push_back({-loss, k, e.res});
+      if (heapify) std::push_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
     }
     errH.push_back({e.err, k, e.res});
     if (heapify) std::push_heap(errH.begin(), errH.end(), ItemLess{});
@@ -523,8 +500,8 @@ struct QuadQueueAdapter::State {
   // lexicographically, so this ends. Returns whether anything changed.
   bool balance(uint64_t budget) {
     bool progress = false;
-    std::vector<CoarsenItem>& popped = balancePopped;
-    std::vector<Entry*>& chosen = balanceChosen;
+    std::vector<Item> popped;
+    std::vector<Entry*> chosen;
     while (!capped()) {
       Entry* m = nullptr;
       while (!errH.empty() && !(m = validPhase1(errH.front()))) heapPop(errH);
@@ -535,26 +512,25 @@ struct QuadQueueAdapter::State {
       chosen.clear();
       uint64_t freed = 0;
       while (free + freed < need && !coarsenH.empty()) {
-        const CoarsenItem it = heapPop(coarsenH);
-        // note: dropped for good: the max error only falls during the balance, so a node whose
-        // coarsening would reach it now never qualifies later (its own refinement pushes a new
-        // item). A stale item dropped here is back in the queue for the next phase 1, where it
-        // is skipped as it surfaces: an entry whose item is valid again has pushed a twin of it.
-        if (it.low >= m->err - kEps) {
-          dropped.push_back(it);  // back in the queue for the next phase 1
-          continue;
-        }
-        Entry* c = validCoarsen(it.item);
+        const Item it = heapPop(coarsenH);
+        Entry* c = validCoarsen(it);
         if (!c) continue;
         if (c == m || std::find(chosen.begin(), chosen.end(), c) != chosen.end()) {
           popped.push_back(it);
+          continue;
+        }
+        // note: dropped for good: the max error only falls during the balance, so a node whose
+        // coarsening would reach it now never qualifies later (its own refinement pushes a new
+        // item).
+        if (errAt(*c, c->res - 1) >= m->err - kEps) {
+          dropped.push_back(it);  // back in the queue for the next phase 1
           continue;
         }
         popped.push_back(it);
         chosen.push_back(c);
         freed += tris(c->res) - tris(c->res - 1);
       }
-      for (const CoarsenItem& it : popped) heapPush(coarsenH, it);
+      for (const Item& it : popped) heapPush(coarsenH, it);
       if (free + freed < need) break;
       // note: setRes logs, but never moves an entry, so the pointers stay valid.
       for (Entry* c : chosen) {
@@ -571,13 +547,7 @@ struct QuadQueueAdapter::State {
   }
   bool phase1() {
     const bool ok = phase1Run();
-    // Many dropped items go back in one heap construction, a few one by one.
-    if (dropped.size() * 8 > coarsenH.size()) {
-      coarsenH.insert(coarsenH.end(), dropped.begin(), dropped.end());
-      std::make_heap(coarsenH.begin(), coarsenH.end(), CoarsenLess{});
-    } else {
-      for (const CoarsenItem& it : dropped) heapPush(coarsenH, it);
-    }
+    for (const Item& it : dropped) heapPush(coarsenH, it);
     dropped.clear();
     return ok;
   }
@@ -597,9 +567,8 @@ struct QuadQueueAdapter::State {
       for (const NodeId& n : refloored) {
         const Entry* e = cut.find(n);
         if (!e || !e->drawn || e->res <= e->floor) continue;
-        const double low = errAt(*e, e->res - 1);
-        const double loss = (low - e->err) / double(tris(e->res) - tris(e->res - 1));
-        heapPush(coarsenH, {{-loss, n.key(), e->res}, low});
+        const double loss = (errAt(*e, e->res - 1) - e->err) / double(tris(e->res) - tris(e->res - 1));
+        heapPush(coarsenH, {-loss, n.key(), e->res});
       }
     } else {
       // The refine queue is kept per resolution: a refinement's cost (added triangles) depends
@@ -612,7 +581,7 @@ struct QuadQueueAdapter::State {
       errH.clear();
       for (const auto& [k, e] : cut) pushPhase1(e, false);
       for (auto& b : refineB) std::make_heap(b.begin(), b.end(), ItemLess{});
-      std::make_heap(coarsenH.begin(), coarsenH.end(), CoarsenLess{});
+      std::make_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
       std::make_heap(errH.begin(), errH.end(), ItemLess{});
       phase1Ready = true;
     }
@@ -625,7 +594,7 @@ struct QuadQueueAdapter::State {
     // (a) Within the triangle budget (never capped).
     while (triangles > budget) {
       Entry* e = nullptr;
-      while (!coarsenH.empty() && !(e = validCoarsen(coarsenH.front().item))) heapPop(coarsenH);
+      while (!coarsenH.empty() && !(e = validCoarsen(coarsenH.front()))) heapPop(coarsenH);
       if (!e) return false;
       heapPop(coarsenH);
       setRes(*e, e->res - 1);

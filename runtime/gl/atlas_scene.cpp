@@ -51,7 +51,7 @@ PageLoaderOptions loaderOptions(const SceneOptions& o, uint64_t largestPage) {
   // Pages read ahead of their upload: two frames' worth, within half the RAM.
   const uint64_t frame = o.uploadBytesPerFrame > 0 ? o.uploadBytesPerFrame
                                                    : uint64_t(std::max(o.maxUploadsPerFrame, 1u)) * largestPage;
-  l.stagedBytes = size_t(std::max<uint64_t>(std::min<uint64_t>(2 * frame, o.ramCacheBytes / 2), 1));
+  l.stagedBytes = size_t(std::max<uint64_t>(std::min<uint64_t>(2 * frame, o.ramCacheBytes / 2), largestPage));
   l.threads = std::max(o.loaderThreads, 1u);
   l.ioLatencyMs = o.ioLatencyMs;
   l.ioJitterMs = o.ioJitterMs;
@@ -83,6 +83,10 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
   if (options_.asyncLoads) {
     uint64_t largest = 0;
     for (uint32_t c = 0; c < atlas_.hierarchy.chartCount(); ++c) largest = std::max<uint64_t>(largest, pages_.pageBytes({c, 0, 0, 0}));
+    // A page waiting for its upload and one in the cache at least.
+    if (options_.ramCacheBytes < 2 * largest)
+      throw InputError("the loader's RAM of " + std::to_string(options_.ramCacheBytes) + " bytes must hold two of the "
+                       "atlas's pages, " + std::to_string(2 * largest) + " bytes");
     loader_ = std::make_unique<PageLoader>(pages_, loaderOptions(options_, largest));
   }
 }

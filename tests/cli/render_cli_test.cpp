@@ -30,16 +30,24 @@ std::vector<std::vector<std::string>> readCsv(const fs::path& p) {
   return rows;
 }
 
+// Builds the shipped DEM at the defaults into DIR/rainier.atlas; gtest-fails on error.
+fs::path buildShippedDem(const test::TempDir& dir, std::string* out) {
+  const fs::path atlas = dir.path() / "rainier.atlas";
+  EXPECT_EQ(test::runCommand(test::appPath().string() + " build '" +
+                                 (test::repoData() / "terrain/mt_rainier_90m.tif").string() + "' -o '" +
+                                 atlas.string() + "'",
+                             out),
+            0)
+      << *out;
+  return atlas;
+}
+
 TEST(RenderCli, BuildAndRenderShippedDem) {
   test::TempDir dir("gimlod-render");
   const std::string app = test::appPath().string();
-  const fs::path atlas = dir.path() / "rainier.atlas";
   std::string out;
-  ASSERT_EQ(test::runCommand(app + " build '" + (test::repoData() / "terrain/mt_rainier_90m.tif").string() +
-                                 "' -o '" + atlas.string() + "'",
-                             &out),
-            0)
-      << out;
+  const fs::path atlas = buildShippedDem(dir, &out);
+  ASSERT_FALSE(::testing::Test::HasFailure());
   const auto stats = nlohmann::json::parse(std::ifstream(atlas / "stats.json"));
   EXPECT_EQ(stats["charts"].get<int>(), 9);
   EXPECT_EQ(stats["voids_filled"].get<int>(), 9033);
@@ -131,13 +139,9 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
 TEST(RenderCli, StreamingKeepsItsByteBudgets) {
   test::TempDir dir("gimlod-stream");
   const std::string app = test::appPath().string();
-  const fs::path atlas = dir.path() / "rainier.atlas";
   std::string out;
-  ASSERT_EQ(test::runCommand(app + " build '" + (test::repoData() / "terrain/mt_rainier_90m.tif").string() +
-                                 "' -o '" + atlas.string() + "'",
-                             &out),
-            0)
-      << out;
+  const fs::path atlas = buildShippedDem(dir, &out);
+  ASSERT_FALSE(::testing::Test::HasFailure());
   const fs::path frames = dir.path() / "frames";
   const std::string path = (test::repoData().parent_path() / "scenes/rainier_flyby.json").string();
   ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + frames.string() + "' --path '" + path +
