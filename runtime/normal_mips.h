@@ -20,4 +20,26 @@ uint32_t normalMipLevel(const PackedNormal* normals, uint32_t samplesPerSide, ui
 uint32_t colourMipLevel(const PackedColour* colours, uint32_t samplesPerSide, uint32_t pageSide, uint32_t level,
                         std::vector<PackedColour>& out);
 
+// A page's attribute mip chains from level 1 on, as a pool of pageSide^2 layers takes them:
+// level l's texels (row-major) at [l - 1], with their side. Made before the upload where the
+// render thread should not (the page loader's threads).
+struct PageMips {
+  std::vector<std::vector<PackedNormal>> normals;
+  std::vector<std::vector<PackedColour>> colours;
+  std::vector<uint32_t> normalSides, colourSides;
+  size_t bytes() const {
+    size_t b = 0;
+    for (const auto& l : normals) b += l.size() * sizeof(PackedNormal);
+    for (const auto& l : colours) b += l.size() * sizeof(PackedColour);
+    return b;
+  }
+};
+
+// The mips of a page's normals (samplesPerSide^2) for layers of pageSide^2 with normalLevels
+// levels, and of its colours (colourSamplesPerSide^2; none when colours is null) for layers of
+// colourSide^2 with colourLevels levels: normalMipLevel and colourMipLevel of each level.
+PageMips pageMips(const PackedNormal* normals, uint32_t samplesPerSide, uint32_t pageSide, uint32_t normalLevels,
+                  const PackedColour* colours, uint32_t colourSamplesPerSide, uint32_t colourSide,
+                  uint32_t colourLevels);
+
 }  // namespace gimlod

@@ -163,15 +163,19 @@ bool PageLoader::canStart() const {
   // The reads in progress count as staged already (their bytes are known before the read); one
   // read may always run when nothing waits, so a cap below one page still makes progress.
   size_t ahead = stats_.stagedBytes;
-  for (uint64_t key : reading_) ahead += pages_.pageBytes(NodeId::fromKey(key));
+  for (uint64_t key : reading_) ahead += stagedBytesOf(NodeId::fromKey(key));
   if (ahead == 0) return true;
-  return ahead + pages_.pageBytes(queue_.begin()->id) <= options_.stagedBytes;
+  return ahead + stagedBytesOf(queue_.begin()->id) <= options_.stagedBytes;
 }
 
-void PageLoader::insertRam(uint64_t key, const LoadedPage& loaded) {
+size_t PageLoader::stagedBytesOf(const NodeId& n) const {
+  return pages_.pageBytes(n) + (options_.preparedBytes ? options_.preparedBytes(n) : 0);
+}
+
+void PageLoader::insertRam(RamPage&& page) {
   // Caller holds mutex_.
   const size_t budget = cacheBudget();
-  RamPage page{key, loaded.samples, loaded.normals, loaded.colours};
+  const uint64_t key = page.key;
   const size_t bytes = page.bytes();
   if (bytes > budget || ramIndex_.count(key)) return;
   while (stats_.ramBytes + bytes > budget && !ram_.empty()) {
@@ -214,6 +218,11 @@ void PageLoader::run(uint32_t thread) {
       page.colours = hit->second->colours;
       page.fromRam = true;
       ++stats_.ramHits;
+      if (options_.prepare) {
+        lock.unlock();
+        options_.prepare(page);
+        lock.lock();
+      }
       reading_.erase(key);
       finish(std::move(page));
       idle_.notify_all();
@@ -240,11 +249,19 @@ void PageLoader::run(uint32_t thread) {
       error = "unreadable page";
     }
     if (!error.empty() && options_.onFailure) options_.onFailure({q.id, error});
+    RamPage cached;  // the page as read, for the cache (without what prepare adds)
+    if (error.empty() && options_.prepare) {
+      cached = {key, page.samples, page.normals, page.colours};
+      options_.prepare(page);
+    }
     lock.lock();
     reading_.erase(key);
     if (error.empty()) {
       ++stats_.loadedFromDisk;
-      insertRam(key, page);
+      if (options_.prepare)
+        insertRam(std::move(cached));
+      else
+        insertRam({key, page.samples, page.normals, page.colours});
       finish(std::move(page));
     } else {
       // note: a failed page is not read again (the node stays on a coarser stand-in); a request

@@ -17,6 +17,7 @@
 #include <unordered_set>
 #include <vector>
 
+#include "runtime/normal_mips.h"
 #include "runtime/page_reader.h"
 
 namespace gimlod {
@@ -27,10 +28,11 @@ struct LoadedPage {
   std::vector<float> samples;
   std::vector<PackedNormal> normals;
   std::vector<PackedColour> colours;  // empty unless the atlas has colours
+  PageMips mips;  // made by PageLoaderOptions::prepare, if set
   bool fromRam = false;  // served by the RAM cache, not the disk
   size_t bytes() const {
     return samples.size() * sizeof(float) + normals.size() * sizeof(PackedNormal) +
-           colours.size() * sizeof(PackedColour);
+           colours.size() * sizeof(PackedColour) + mips.bytes();
   }
 };
 
@@ -57,6 +59,11 @@ struct PageLoaderOptions {
   // Called once for each page whose read fails, on the loader thread that read it (no lock
   // held): where the caller logs it.
   std::function<void(const PageFailure&)> onFailure;
+  // Work on a page before the render thread takes it, on the loader thread that read it (no lock
+  // held): making its mips. preparedBytes, if set, is what it adds to a page's bytes, so the
+  // staged bytes are known before the read.
+  std::function<void(LoadedPage&)> prepare;
+  std::function<size_t(const NodeId&)> preparedBytes;
 };
 
 struct PageLoaderStats {
@@ -134,8 +141,9 @@ class PageLoader {
   };
   void run(uint32_t thread);
   bool canStart() const;  // mutex_ held
+  size_t stagedBytesOf(const NodeId& n) const;  // a page's bytes once read and prepared
   size_t cacheBudget() const;
-  void insertRam(uint64_t key, const LoadedPage& page);
+  void insertRam(RamPage&& page);
   void finish(LoadedPage&& page);
 
   const PageReader& pages_;

@@ -79,6 +79,22 @@ uint64_t layerBytes(uint32_t side, uint32_t levels, uint64_t bytesPerTexel) {
 
 }  // namespace
 
+PageMips pagePoolMips(const RendererSetup& setup, uint32_t samplesPerSide, const PackedNormal* normals,
+                      const PackedColour* colours) {
+  const uint32_t side = (1u << setup.pageIntervalsLog2) + 1;
+  const uint32_t colourSide = ((side - 1) << setup.colourScaleLog2) + 1;
+  const bool withColours = colours && setup.colours;
+  return pageMips(normals, samplesPerSide, side, mipLevels(side), withColours ? colours : nullptr,
+                  ((samplesPerSide - 1) << setup.colourScaleLog2) + 1, colourSide, mipLevels(colourSide));
+}
+
+uint64_t pagePoolMipBytes(const RendererSetup& setup) {
+  const uint32_t side = (1u << setup.pageIntervalsLog2) + 1;
+  const uint32_t colourSide = ((side - 1) << setup.colourScaleLog2) + 1;
+  return layerBytes(side, mipLevels(side), 4) - layerBytes(side, 1, 4) +
+         (setup.colours ? layerBytes(colourSide, mipLevels(colourSide), 4) - layerBytes(colourSide, 1, 4) : 0);
+}
+
 uint64_t pagePoolPageBytes(const RendererSetup& setup) {
   const uint32_t side = (1u << setup.pageIntervalsLog2) + 1;
   const uint32_t colourSide = ((side - 1) << setup.colourScaleLog2) + 1;
@@ -457,7 +473,7 @@ void AtlasRenderer::setShading(const GlObject& program, const glm::mat4& viewPro
 void AtlasRenderer::setColours(bool on) { impl_->drawColours = on; }
 
 void AtlasRenderer::uploadPage(uint32_t page, uint32_t samplesPerSide, const float* samples,
-                                 const PackedNormal* normals, const PackedColour* colours) {
+                                 const PackedNormal* normals, const PackedColour* colours, const PageMips* mips) {
   if (page >= impl_->capacity || samplesPerSide == 0 || samplesPerSide > impl_->pageSide ||
       !samples)
     throw std::invalid_argument("AtlasRenderer::uploadPage: page " + std::to_string(page) +
@@ -468,26 +484,22 @@ void AtlasRenderer::uploadPage(uint32_t page, uint32_t samplesPerSide, const flo
   glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->samples[array].id());
   glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), s, s, 1, impl_->setup.geometry ? GL_RGB : GL_RED,
                   GL_FLOAT, samples);
-  // An RGBA8 attribute map of `texelsPerSide`^2 in a layer of `layerSide`^2 and its mip chain
-  // (mipLevel: normalMipLevel or colourMipLevel).
+  // An RGBA8 attribute map of `texelsPerSide`^2 and its mip chain (levels 1 and up, with their sides).
   const auto uploadAttribute = [&](const GlObject& texture, const auto* texels, uint32_t texelsPerSide,
-                                   uint32_t layerSide, uint32_t levels, auto mipLevel) {
+                                   const auto& levels, const std::vector<uint32_t>& sides) {
     glBindTexture(GL_TEXTURE_2D_ARRAY, texture.id());
     glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, GLint(layer), GLsizei(texelsPerSide), GLsizei(texelsPerSide), 1,
                     GL_RGBA, GL_UNSIGNED_BYTE, texels);
-    std::vector<std::remove_cv_t<std::remove_pointer_t<decltype(texels)>>> mip;
-    for (uint32_t level = 1; level < levels; ++level) {
-      const uint32_t side = mipLevel(texels, texelsPerSide, layerSide, level, mip);
-      glTexSubImage3D(GL_TEXTURE_2D_ARRAY, GLint(level), 0, 0, GLint(layer), GLsizei(side), GLsizei(side), 1,
-                      GL_RGBA, GL_UNSIGNED_BYTE, mip.data());
-    }
+    for (size_t l = 0; l < levels.size(); ++l)
+      glTexSubImage3D(GL_TEXTURE_2D_ARRAY, GLint(l + 1), 0, 0, GLint(layer), GLsizei(sides[l]), GLsizei(sides[l]), 1,
+                      GL_RGBA, GL_UNSIGNED_BYTE, levels[l].data());
   };
-  if (normals)
-    uploadAttribute(impl_->normals[array], normals, samplesPerSide, impl_->pageSide, impl_->normalLevels,
-                    normalMipLevel);
+  const PageMips made = mips ? PageMips{} : pagePoolMips(impl_->setup, samplesPerSide, normals, colours);
+  const PageMips& m = mips ? *mips : made;
+  if (normals) uploadAttribute(impl_->normals[array], normals, samplesPerSide, m.normals, m.normalSides);
   if (colours && impl_->setup.colours)
     uploadAttribute(impl_->colours[array], colours, ((samplesPerSide - 1) << impl_->setup.colourScaleLog2) + 1,
-                    impl_->colourSide, impl_->colourLevels, colourMipLevel);
+                    m.colours, m.colourSides);
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
   checkGl("uploadPage glTexSubImage3D");
 }

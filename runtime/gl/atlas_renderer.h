@@ -15,6 +15,7 @@
 
 #include "core/atlas_format.h"
 #include "runtime/draw_list.h"
+#include "runtime/normal_mips.h"
 #include "runtime/overlay.h"
 
 namespace gimlod::gl {
@@ -49,6 +50,13 @@ struct RendererSetup {
 // its normals (RGBA8 with the mip chain) and its colours (RGBA8 with the mip chain, where the
 // atlas has them). The pool's textures hold pageCapacity such pages. No GL needed.
 uint64_t pagePoolPageBytes(const RendererSetup& setup);
+
+// The mips uploadPage makes for a page of samplesPerSide^2 samples (its normals, and its colours
+// where the pool has them), made beforehand: on the page loader's threads. No GL needed.
+PageMips pagePoolMips(const RendererSetup& setup, uint32_t samplesPerSide, const PackedNormal* normals,
+                      const PackedColour* colours);
+// The most bytes pagePoolMips gives for a page (a whole layer's mips).
+uint64_t pagePoolMipBytes(const RendererSetup& setup);
 
 struct DrawStats {
   double drawMs = 0.0;     // CPU wall time of submission + glFinish
@@ -91,8 +99,9 @@ class AtlasRenderer {
   // RendererSetup::geometry, `samples` holds 3 floats (x, y, z) per sample. `colours` (with
   // RendererSetup::colours; else ignored), ((samplesPerSide - 1) << colourScaleLog2) + 1 per side,
   // get their mip chain too.
+  // mips, if given, are the page's (pagePoolMips), uploaded instead of made here.
   void uploadPage(uint32_t page, uint32_t samplesPerSide, const float* samples,
-                  const PackedNormal* normals, const PackedColour* colours = nullptr);
+                  const PackedNormal* normals, const PackedColour* colours = nullptr, const PageMips* mips = nullptr);
   // Draws the pages' colours (RendererSetup::colours) or the neutral material.
   void setColours(bool on);
 

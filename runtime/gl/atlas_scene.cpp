@@ -45,8 +45,15 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o, const Pag
   return s;
 }
 
-PageLoaderOptions loaderOptions(const SceneOptions& o, uint64_t largestPage) {
+PageLoaderOptions loaderOptions(const SceneOptions& o, const RendererSetup& setup, const PageReader& pages,
+                                uint64_t largestPage) {
   PageLoaderOptions l;
+  // The normals' and colours' mips are made on the loader threads, not at upload.
+  l.prepare = [setup, &pages](LoadedPage& p) {
+    p.mips = pagePoolMips(setup, pages.pageSamples(p.id), p.normals.data(), p.colours.empty() ? nullptr : p.colours.data());
+  };
+  const uint64_t mipBytes = pagePoolMipBytes(setup);
+  l.preparedBytes = [mipBytes](const NodeId&) { return size_t(mipBytes); };
   l.ramBytes = o.ramCacheBytes;
   // Pages read ahead of their upload: two frames' worth, within half the RAM.
   const uint64_t frame = o.uploadBytesPerFrame > 0 ? o.uploadBytesPerFrame
@@ -83,11 +90,12 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
   if (options_.asyncLoads) {
     uint64_t largest = 0;
     for (uint32_t c = 0; c < atlas_.hierarchy.chartCount(); ++c) largest = std::max<uint64_t>(largest, pages_.pageBytes({c, 0, 0, 0}));
+    largest += pagePoolMipBytes(renderer_->setup());  // a page waits for its upload with its mips
     // A page waiting for its upload and one in the cache at least.
     if (options_.ramCacheBytes < 2 * largest)
       throw InputError("the loader's RAM of " + std::to_string(options_.ramCacheBytes) + " bytes must hold two of the "
                        "atlas's pages, " + std::to_string(2 * largest) + " bytes");
-    loader_ = std::make_unique<PageLoader>(pages_, loaderOptions(options_, largest));
+    loader_ = std::make_unique<PageLoader>(pages_, loaderOptions(options_, renderer_->setup(), pages_, largest));
   }
 }
 
@@ -113,7 +121,7 @@ bool AtlasScene::uploadLoaded(const LoadedPage& pg) {
   if (!pool_.acquire(pg.id.key(), frame_, &slot)) return false;
   if (!slot.needsUpload) return true;
   renderer_->uploadPage(slot.layer, pages_.pageSamples(pg.id), pg.samples.data(), pg.normals.data(),
-                        pg.colours.empty() ? nullptr : pg.colours.data());
+                        pg.colours.empty() ? nullptr : pg.colours.data(), &pg.mips);
   uploadBytes_ += pageBytes_;
   return true;
 }

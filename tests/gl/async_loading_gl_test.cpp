@@ -148,6 +148,14 @@ TEST_F(AsyncLoadingTest, SubstitutesResidentAncestorsCrackFreeAndConverges) {
   const PageLoaderStats s = scene.loader()->stats();
   EXPECT_GT(s.requested, 0u);
   EXPECT_GT(s.loadedFromDisk, 0u);
+  // The pages uploaded with the mips the loader's threads made draw as those the scene reads and
+  // uploads itself.
+  const std::vector<uint8_t> streamed = scene.renderer().readPixels();
+  gl::SceneOptions direct = so;
+  direct.asyncLoads = false;
+  gl::AtlasScene sync(atlas, direct);
+  sync.drawCut(still, f.cut);
+  EXPECT_TRUE(sync.renderer().readPixels() == streamed) << "the loader's mips draw otherwise";
 }
 
 // Pixels of the "pages loading" view's magenta stripes (mixed 60% over the shading).
