@@ -56,6 +56,12 @@ double boxScreenError(const std::array<float, 6>& box, double error, const ViewP
   return error * v.pixelsPerRadian / d;
 }
 
+double geomorphFactor(const Hierarchy& h, const CutNode& n, const ViewParams& v, double tolerancePx, double range) {
+  if (n.res <= h.params.minNodeResLog2 || !(tolerancePx > 0.0) || !(range > 0.0)) return 0.0;
+  const double coarser = screenError(h, n.id, n.res - 1, v);
+  return std::clamp(1.0 - (coarser - tolerancePx) / (range * tolerancePx), 0.0, 1.0);
+}
+
 double screenError(const Hierarchy& h, const NodeId& n, uint32_t res, const ViewParams& v) {
   return boxScreenError(h.bounds(n), double(h.error(n, res)), v);
 }

@@ -25,6 +25,14 @@ ViewParams makeViewParams(const Camera& c, uint32_t width, uint32_t height);
 // Projected size in pixels of a world-space error seen from the closest point of the node's
 // bounds: error * pixelsPerRadian / distance.
 double screenError(const Hierarchy& h, const NodeId& n, uint32_t res, const ViewParams& v);
+
+// Geomorph factor of a drawn node (CutNode::morph): how far its inner vertices move onto its next
+// coarser resolution, so the switch to that resolution does not pop. 0 while that resolution's
+// screen error is (1 + range) times the tolerance or more, rising linearly to 1 as it comes down
+// to the tolerance, where the adapter would switch to it (CDLOD morphs over a third of each
+// range; range 0.5 morphs over the last third of the error's way down). 0 at the coarsest
+// resolution.
+double geomorphFactor(const Hierarchy& h, const CutNode& n, const ViewParams& v, double tolerancePx, double range);
 // The same for a world-space error seen from the closest point of a box (minx, miny, minz, maxx,
 // maxy, maxz): a node's bounds, or a group's above the charts.
 double boxScreenError(const std::array<float, 6>& box, double error, const ViewParams& v);

@@ -19,6 +19,10 @@ struct CutNode {
   // The closed group (hierarchy/root_groups.h) this chart root is drawn for, or -1: the roots of
   // one closed group are one node of the cut (nodeCount).
   int32_t group = -1;
+  // Geomorph: how far the node's inner vertices move onto the surface of its next coarser
+  // resolution, in [0, 1] (0: as sampled; 1: on the coarser grid's triangles). Its border does not
+  // move, so borders stay stitched whatever the factors.
+  float morph = 0.f;
 };
 
 // Open-addressing map from NodeId::key() to a position (linear probing, load <= 1/2): the cut is

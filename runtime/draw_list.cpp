@@ -1,5 +1,8 @@
 #include "runtime/draw_list.h"
 
+#include <algorithm>
+#include <cmath>
+
 namespace gimlod {
 
 DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n,
@@ -18,6 +21,8 @@ DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const Cu
   // note: an attribute resolution above the page's is clamped to it (finer attribute pages are
   // not loaded); AttributeStats::abovePage counts those nodes.
   if (n.texRes != 0 && n.texRes < d.pageResLog2) d.texLod = d.pageResLog2 - n.texRes;
+  // The coarsest resolution has no coarser one to move onto.
+  if (n.res > p.minNodeResLog2) d.morph = uint32_t(std::lround(std::clamp(double(n.morph), 0.0, 1.0) * 255.0));
   return d;
 }
 

@@ -24,6 +24,7 @@ struct DrawNode {
   // Mip level of the page's normal map the fragment shader samples: pageResLog2 minus the node's
   // attribute resolution when that is coarser (0: the page's full resolution).
   uint32_t texLod = 0;
+  uint32_t morph = 0;  // CutNode::morph in 1/255 steps (0..255)
 };
 
 // Border stitching tables, as in paper section 7.4. For every node and each side

@@ -8,7 +8,8 @@
 
 layout(location = GIMLOD_ATTRIB_GRID) in uvec2 a_ij;   // grid vertex (i, j), 0..2^res
 // The node record, per instance (divisor 1, selected by the draw's baseinstance):
-// a_nodeA = (origin.x, origin.y, sizeLog2, res), a_nodeB = (pageResLog2, pageLayer, index, texLod).
+// a_nodeA = (origin.x, origin.y, sizeLog2, res), a_nodeB = (pageResLog2, pageLayer, index,
+// texLod | morph << 8), morph the geomorph factor in 1/255 steps.
 // origin in level-0 samples; sizeLog2 = node side in level-0 intervals; the grid has 2^res
 // intervals per side; the page 2^pageResLog2.
 layout(location = GIMLOD_ATTRIB_NODE_A) in ivec4 a_nodeA;
@@ -48,6 +49,32 @@ int snapToNeighbour(int node, int side, int t, int ownSpacing, int sizeLog2) {
   return s > ownSpacing ? (t >> s) << s : t;
 }
 
+// Grid vertex (i, j) of a node of 2^res = n intervals per side, vertex spacing 2^so: its position
+// in level-0 intervals from the node origin, a border vertex moved onto a coarser neighbour's
+// lattice.
+ivec2 stitched(int node, int i, int j, int n, int so, int sizeLog2) {
+  int tx = i << so, ty = j << so;
+  int sx = tx, sy = ty;
+  if (j == 0) sx = snapToNeighbour(node, kBottom, tx, so, sizeLog2);
+  if (j == n) sx = snapToNeighbour(node, kTop, tx, so, sizeLog2);
+  if (i == 0) sy = snapToNeighbour(node, kLeft, ty, so, sizeLog2);
+  if (i == n) sy = snapToNeighbour(node, kRight, ty, so, sizeLog2);
+  return ivec2(sx, sy);
+}
+
+// The world position of the node's sample at t (level-0 intervals from its origin).
+vec3 samplePosition(ivec2 origin, ivec2 t, int ps, int pageLayer) {
+  ivec2 texel = t >> ps;
+#ifdef GIMLOD_GEOMETRY
+  // Geometry image: the position is the sample itself (bit-identical across chart seams).
+  return texelFetch(u_samples, ivec3(texel, pageLayer), 0).xyz;
+#else
+  float height = texelFetch(u_samples, ivec3(texel, pageLayer), 0).r;
+  // Integer sample first, one conversion, one multiply: bit-identical across nodes.
+  return vec3(float(origin.x + t.x) * u_spacing.x, float(origin.y + t.y) * u_spacing.y, height);
+#endif
+}
+
 void main() {
   int node = a_nodeB.z;
   ivec2 origin = a_nodeA.xy;
@@ -56,26 +83,29 @@ void main() {
   int i = int(a_ij.x), j = int(a_ij.y);
   int so = sizeLog2 - res;
   int tx = i << so, ty = j << so;
-  int sx = tx, sy = ty;
-  if (j == 0) sx = snapToNeighbour(node, kBottom, tx, so, sizeLog2);
-  if (j == n) sx = snapToNeighbour(node, kTop, tx, so, sizeLog2);
-  if (i == 0) sy = snapToNeighbour(node, kLeft, ty, so, sizeLog2);
-  if (i == n) sy = snapToNeighbour(node, kRight, ty, so, sizeLog2);
+  ivec2 st = stitched(node, i, j, n, so, sizeLog2);
+  int sx = st.x, sy = st.y;
 
   int ps = sizeLog2 - pageResLog2;
   ivec2 texel = ivec2(sx >> ps, sy >> ps);
-#ifdef GIMLOD_GEOMETRY
-  // Geometry image: the position is the sample itself (bit-identical across chart seams).
-  v_world = texelFetch(u_samples, ivec3(texel, pageLayer), 0).xyz;
-#else
-  float height = texelFetch(u_samples, ivec3(texel, pageLayer), 0).r;
-  // Integer sample first, one conversion, one multiply: bit-identical across nodes.
-  v_world = vec3(float(origin.x + sx) * u_spacing.x, float(origin.y + sy) * u_spacing.y, height);
-#endif
+  v_world = samplePosition(origin, ivec2(sx, sy), ps, pageLayer);
+  // Geomorph: an inner vertex that the next coarser grid lacks moves towards the point of that
+  // grid's surface under it: the middle of the coarse edge it halves (odd in one direction), or of
+  // the coarse quad's diagonal from (i-1, j-1) to (i+1, j+1) (odd in both, the grids' diagonal).
+  // Border vertices stay, so the stitching holds at every factor.
+  float morph = float((a_nodeB.w >> 8) & 0xFF) / 255.0;
+  bool inner = i > 0 && i < n && j > 0 && j < n;
+  ivec2 odd = ivec2(i & 1, j & 1);
+  if (morph > 0.0 && inner && (odd.x | odd.y) != 0) {
+    // The two ends as drawn (an end on the border stitched as it is).
+    vec3 a = samplePosition(origin, stitched(node, i - odd.x, j - odd.y, n, so, sizeLog2), ps, pageLayer);
+    vec3 b = samplePosition(origin, stitched(node, i + odd.x, j + odd.y, n, so, sizeLog2), ps, pageLayer);
+    v_world = mix(v_world, 0.5 * (a + b), morph);
+  }
   gl_Position = u_viewProj * vec4(v_world, 1.0);
   v_pageUv = (vec2(texel) + 0.5) / float(textureSize(u_samples, 0).x);
   v_pageLayer = pageLayer;
-  v_texLod = a_nodeB.w;
+  v_texLod = a_nodeB.w & 0xFF;
   v_node = node;
   v_nodeUv = vec2(a_ij) / float(n);
   v_snapped = sx != tx || sy != ty ? 1.0 : 0.0;

@@ -338,7 +338,7 @@ void AtlasRenderer::Impl::validate(std::span<const DrawNode> nodes,
     const bool ok = n.res >= setup.minResLog2 && n.res <= setup.maxResLog2 &&
                     n.res <= n.pageResLog2 && n.pageResLog2 <= setup.pageIntervalsLog2 &&
                     n.pageResLog2 <= n.sizeLog2 && n.sizeLog2 < 30 && n.pageLayer < capacity &&
-                    n.texLod <= n.pageResLog2;
+                    n.texLod <= n.pageResLog2 && n.morph <= 255;
     if (!ok)
       throw std::invalid_argument(
           "AtlasRenderer: bad DrawNode (origin " + std::to_string(n.originX) + "," +
@@ -356,7 +356,7 @@ void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
     const size_t k = order.empty() ? j : order[j];
     const DrawNode& n = nodes[k];
     records[j] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.res), int32_t(n.pageResLog2),
-                  int32_t(n.pageLayer % layersPerArray), int32_t(k), int32_t(n.texLod)};
+                  int32_t(n.pageLayer % layersPerArray), int32_t(k), int32_t(n.texLod | (n.morph << 8))};
   }
   glBindBuffer(GL_ARRAY_BUFFER, nodeBuffer.id());
   glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(records.size() * sizeof(NodeRecord)), records.data(),

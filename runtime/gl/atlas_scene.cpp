@@ -332,12 +332,12 @@ FrameResult AtlasScene::renderFrame(const Camera& camera, const BudgetOptions& o
   f.adapt.nodes = f.budget.nodes;
   f.adapt.closedGroups = f.budget.closedGroups;
   f.adapt.groupedRoots = f.budget.groupedRoots;
-  // Prefetch: the predicted view's cut at the error this frame reached.
+  // Prefetch and geomorphs: at the error this frame reached.
   finishFrame(camera, view, std::max(f.budget.maxErrorPx, 0.25), o.maxNodes, f, t0);
   return f;
 }
 
-void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, double prefetchTolPx, uint32_t maxNodes,
+void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, double tolPx, uint32_t maxNodes,
                              FrameResult& f, std::chrono::steady_clock::time_point t0) {
   const Hierarchy& h = atlas_.hierarchy;
   uploadBytes_ = 0;
@@ -358,7 +358,7 @@ void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, doubl
   const auto t1 = std::chrono::steady_clock::now();
   if (loader_) {
     f.desiredCut = std::move(f.cut);
-    f.cut = streamPages(f.desiredCut, view, camera, prefetchTolPx, maxNodes, &f);
+    f.cut = streamPages(f.desiredCut, view, camera, tolPx, maxNodes, &f);
   } else {
     standIns_.clear();
   }
@@ -368,6 +368,7 @@ void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, doubl
     // The adapters set errorPx; substitution changes nodes and resolutions.
     if (loader_) n.errorPx = float(screenError(h, n.id, n.res, view));
     f.maxErrorPx = std::max(f.maxErrorPx, double(n.errorPx));
+    if (options_.geomorph > 0.0) n.morph = float(geomorphFactor(h, n, view, tolPx, options_.geomorph));
   }
   f.draw = drawCut(camera, f.cut, &f);
   f.uploadMs += substituteMs;

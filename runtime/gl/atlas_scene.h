@@ -53,6 +53,10 @@ struct SceneOptions {
   // last two frames at frameSeconds apart, at a priority below every page the frame needs (0: off).
   double prefetchSeconds = 0.0;
   double frameSeconds = 1.0 / 60.0;
+  // Geomorphs (geomorphFactor): each node's inner vertices move onto its next coarser resolution
+  // as that resolution's error comes within (1 + geomorph) times the tolerance (budget mode: the
+  // frame's largest error). 0: off.
+  double geomorph = 0.0;
   // async: called once for each page that cannot be read (on a loader thread); the node stays on
   // its resident ancestor.
   std::function<void(const PageFailure&)> onPageFailure;
@@ -127,6 +131,7 @@ class AtlasScene {
   // Error mode: the coherent dual queue (true) or the stateless top-down greedy.
   void setCoherentAdaptation(bool on) { options_.coherentAdaptation = on; }
   void setTexelsPerPixel(double ratio) { options_.texelsPerPixel = ratio; }
+  void setGeomorph(double range) { options_.geomorph = range; }
   void setMaxUploadsPerFrame(uint32_t n) { options_.maxUploadsPerFrame = n; }
   void setOverlay(OverlayMode mode, NodeColour colour = {}, double errorPx = 0.0) {
     options_.overlay = mode;
@@ -154,8 +159,9 @@ class AtlasScene {
  private:
   std::vector<DrawNode> prepare(const Cut& cut, FrameResult* frame);
   // Everything after adaptation: attribute resolutions, ordering, loads, drawing.
-  // prefetchTolPx, maxNodes: the predicted view's cut (streamPages).
-  void finishFrame(const Camera& camera, const ViewParams& view, double prefetchTolPx, uint32_t maxNodes, FrameResult& f,
+  // tolPx: the tolerance the frame's cut meets (prefetch of the predicted view's cut, geomorphs);
+  // maxNodes: the predicted view's node budget.
+  void finishFrame(const Camera& camera, const ViewParams& view, double tolPx, uint32_t maxNodes, FrameResult& f,
                    std::chrono::steady_clock::time_point t0);
   // Async: requests missing pages (and the predicted view's, prefetchTolPx > 0), uploads loaded
   // ones, and returns the drawable cut: every node's page resident, stitching constraint
