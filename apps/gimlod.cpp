@@ -55,6 +55,7 @@ struct RenderArgs {
   StreamingArgs streaming;
   bool topDown = false;
   double tolerance = 1.0, texelRatio = 1.0;
+  double geomorph = 0.0;  // SceneOptions::geomorph
   uint64_t triangles = 0;  // > 0: triangle-budget mode (quad queue)
   double frameMs = 0.0;    // > 0: the frame-time controller sets the budgets (budget mode)
   std::string overlay = "none";        // runtime/overlay.h: none, chart, level, res, error
@@ -232,6 +233,7 @@ int runRender(const RenderArgs& a) {
   uint32_t w = 0, h = 0;
   parseFrameSize(a.size, &w, &h);
   validateViewOptions(a.tolerance, a.texelRatio, a.streaming.uploadsPerFrame, a.triangles > 0, a.topDown, a.frameMs);
+  validateGeomorph(a.geomorph);
   validateCameraArgs(a.camera);
   const auto background = parseBackground(a.background);
   gl::SceneOptions so;
@@ -258,6 +260,7 @@ int runRender(const RenderArgs& a) {
   };
   so.coherentAdaptation = !a.topDown;
   so.texelsPerPixel = a.texelRatio;
+  so.geomorph = a.geomorph;
   so.overlay = parseOverlayOption(a.overlay);
   so.overlayErrorPx = a.triangles > 0 ? 0.0 : a.tolerance;  // error colouring: red at the tolerance
   so.minNodeRoom = a.maxNodes;  // the page pool holds the budget's cuts
@@ -531,6 +534,7 @@ int main(int argc, char** argv) {
                      "(budget mode; --triangles and --max-nodes are where they start)");
   render->add_flag("--top-down", r.topDown,
                    "Error mode with the stateless top-down greedy instead of the coherent dual queue");
+  addGeomorphOption(render, r.geomorph);
   render->add_option("--texel-ratio", r.texelRatio,
                      "Normal-map texels per pixel of a node's projected size (0: page resolution)")
       ->capture_default_str();

@@ -82,6 +82,18 @@ inline void validateViewOptions(double tolerance, double texelRatio, uint32_t up
   if (frameMs > 0.0 && topDown) throw InputError("--frame-ms sets a triangle budget; --top-down is for error mode");
 }
 
+// Registers --geomorph on cmd (SceneOptions::geomorph).
+inline void addGeomorphOption(CLI::App* cmd, double& range) {
+  cmd->add_option("--geomorph", range,
+                  "Geomorphs: a node's inner vertices move onto its next coarser resolution as that resolution's "
+                  "error comes within (1 + RANGE) times the tolerance, so resolution switches do not pop; 0: off")
+      ->capture_default_str();
+}
+
+inline void validateGeomorph(double range) {
+  if (!(range >= 0.0) || !std::isfinite(range) || range > 8.0) throw InputError("--geomorph must be in [0, 8]");
+}
+
 // Parses --overlay; throws InputError naming the option.
 inline OverlayMode parseOverlayOption(const std::string& name) {
   const std::optional<OverlayMode> m = parseOverlayMode(name);

@@ -64,6 +64,7 @@ struct Controls {
   int maxNodes = 2048;
   int maxTrianglesK = 1000;  // thousands
   float texelRatio = 1.f;
+  float geomorph = 0.f;
   bool asyncLoads = false;
   int uploadsPerFrame = 64;
   bool topDown = false;
@@ -223,6 +224,7 @@ CLI::App* addViewCommand(CLI::App& app, ViewArgs& a) {
   v->add_option("--triangles", a.triangles, "Triangle budget: start in budget mode (quad queue)");
   v->add_option("--max-nodes", a.maxNodes, "Node budget")->capture_default_str();
   addMaxRootsOption(v, a.maxRoots);
+  addGeomorphOption(v, a.geomorph);
   v->add_option("--texel-ratio", a.texelRatio, "Normal-map texels per pixel (0: page resolution)")
       ->capture_default_str();
   addStreamingOptions(v, a.streaming);
@@ -238,6 +240,7 @@ int runView(const ViewArgs& a) {
   uint32_t width = 0, height = 0;
   parseFrameSize(a.size, &width, &height);
   validateViewOptions(a.tolerance, a.texelRatio, a.streaming.uploadsPerFrame, a.triangles > 0, a.topDown, a.frameMs);
+  validateGeomorph(a.geomorph);
   gl::SceneOptions streaming;  // the streaming options, checked before a window opens
   applyStreamingArgs(a.streaming, streaming);
   if (!(a.fov > 1.0 && a.fov < 179.0)) throw InputError("--fov must be in (1, 179) degrees");
@@ -297,6 +300,7 @@ int runView(const ViewArgs& a) {
   c.maxNodes = int(std::min<uint32_t>(a.maxNodes, 1u << 20));
   c.maxTrianglesK = int(std::clamp<uint64_t>(a.triangles > 0 ? a.triangles / 1000 : 1000, 1, 1 << 20));
   c.texelRatio = float(a.texelRatio);
+  c.geomorph = float(a.geomorph);
   c.asyncLoads = streaming.asyncLoads;
   c.uploadsPerFrame = int(a.streaming.uploadsPerFrame);
   c.topDown = a.topDown;
@@ -395,6 +399,7 @@ int runView(const ViewArgs& a) {
     }
     scene->setCoherentAdaptation(!c.topDown);
     scene->setTexelsPerPixel(c.texelRatio);
+    scene->setGeomorph(c.geomorph);
     scene->setMaxUploadsPerFrame(uint32_t(std::max(c.uploadsPerFrame, 1)));
     // The error colouring is against the tolerance (error mode) or the frame's largest error.
     scene->setOverlay(kOverlays[size_t(c.overlay)], {}, c.budgetMode ? 0.0 : double(c.tolerance));
@@ -571,6 +576,7 @@ int runView(const ViewArgs& a) {
         ImGui::SliderFloat("ms", &c.targetMs, 2.f, 200.f, "%.1f", ImGuiSliderFlags_Logarithmic);
       }
       ImGui::SliderFloat("texel ratio", &c.texelRatio, 0.f, 8.f, "%.2f");
+      ImGui::SliderFloat("geomorph range", &c.geomorph, 0.f, 2.f, "%.2f");
       ImGui::Checkbox("async loads", &c.asyncLoads);
       if (c.asyncLoads) ImGui::SliderInt("uploads / frame", &c.uploadsPerFrame, 1, 512);
       ImGui::Combo("colouring", &c.overlay, kOverlayLabels.data(), int(kOverlayLabels.size()));

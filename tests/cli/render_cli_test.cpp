@@ -123,7 +123,7 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
     EXPECT_LE(std::stoul(rows[r][col("nodes")]), 60u);
   }
   // Bad options name themselves.
-  for (const char* bad : {"--texel-ratio -1", "--texel-ratio nan", "--triangles 1000 --top-down"}) {
+  for (const char* bad : {"--texel-ratio -1", "--texel-ratio nan", "--triangles 1000 --top-down", "--geomorph -1"}) {
     EXPECT_NE(test::runCommand(app + " render '" + atlas.string() + "' -o '" + (dir.path() / "bad").string() +
                                    "' --orbit 1 --size 32x32 " + bad,
                                &out),
@@ -133,9 +133,9 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
   }
 }
 
-// The shipped DEM flown along the shipped fly-by with the loader under small byte budgets and a
-// simulated slow disk: every frame complete, every cache within its budget; bad streaming options
-// name themselves.
+// The shipped DEM flown along the shipped fly-by with the loader under small byte budgets, a
+// simulated slow disk and geomorphs: every frame complete, every cache within its budget; bad
+// streaming options name themselves.
 TEST(RenderCli, StreamingKeepsItsByteBudgets) {
   test::TempDir dir("gimlod-stream");
   const std::string app = test::appPath().string();
@@ -146,7 +146,7 @@ TEST(RenderCli, StreamingKeepsItsByteBudgets) {
   const std::string path = (test::repoData().parent_path() / "scenes/rainier_flyby.json").string();
   ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + frames.string() + "' --path '" + path +
                                  "' --size 96x64 --gpu-cache 2M --ram-cache 1M --upload-budget 256K --io-latency 2,1 "
-                                 "--loader-threads 2 --prefetch 0.5",
+                                 "--loader-threads 2 --prefetch 0.5 --geomorph 0.5",
                              &out),
             0)
       << out;
