@@ -14,6 +14,7 @@
 #include "runtime/gl/atlas_scene.h"
 #include "runtime/gl/egl_context.h"
 #include "tests/gl/gl_context_test.h"
+#include "tests/small_atlases.h"
 #include "runtime/stitch.h"
 #include "tests/adapt_fixture.h"
 #include "tests/test_util.h"
@@ -24,16 +25,9 @@ namespace {
 class AsyncLoadingTest : public test::GlContextTest<> {
  protected:
   AtlasView build() {
-    TerrainBuildOptions o;
-    o.input = test::repoData() / "terrain/mt_rainier_90m.tif";
-    o.output = dir_.path() / "atlas";
-    o.chartSize = 129;
-    o.depth = 4;
-    o.nodeRes = 32;
-    o.minNodeRes = 2;
     [[maybe_unused]] const test::SerialTbbUnderTsan serial;
-    buildAtlas(o);
-    return openAtlas(o.output);
+    test::buildRainierAtlas(dir_.path() / "atlas", 129, 4, 32, 2);
+    return openAtlas(dir_.path() / "atlas");
   }
 
   static Camera camera(const AtlasView& a, double t) {

@@ -9,7 +9,6 @@
 #include <cmath>
 #include <random>
 
-#include "pipeline/build.h"
 #include "runtime/adapt.h"
 #include "runtime/adapt_dual_queue.h"
 #include "runtime/atlas_view.h"
@@ -17,6 +16,7 @@
 #include "runtime/stitch.h"
 #include "tests/gl/crack_check.h"
 #include "tests/gl/gl_context_test.h"
+#include "tests/small_atlases.h"
 #include "tests/scan_atlases.h"
 #include "tests/test_util.h"
 
@@ -86,15 +86,8 @@ class GeomorphTest : public test::GlContextTest<> {
 
 TEST_F(GeomorphTest, ShippedDemCutsStayCrackFreeAtEveryMorphFactor) {
   test::TempDir dir("gimlod-geomorph");
-  TerrainBuildOptions o;
-  o.input = test::repoData() / "terrain/mt_rainier_90m.tif";
-  o.output = dir.path() / "atlas";
-  o.chartSize = 129;
-  o.depth = 4;
-  o.nodeRes = 32;
-  o.minNodeRes = 2;
-  buildAtlas(o);
-  const AtlasView atlas = openAtlas(o.output);
+  test::buildRainierAtlas(dir.path() / "atlas", 129, 4, 32, 2);
+  const AtlasView atlas = openAtlas(dir.path() / "atlas");
   gl::SceneOptions so;
   so.width = 96;
   so.height = 72;
@@ -138,15 +131,8 @@ TEST_F(GeomorphTest, BunnyCutsStayCrackFreeAtEveryMorphFactor) {
 // nodes part way, along a path.
 TEST_F(GeomorphTest, SceneFactorsFollowTheCoarserError) {
   test::TempDir dir("gimlod-geomorph-scene");
-  TerrainBuildOptions o;
-  o.input = test::repoData() / "terrain/mt_rainier_90m.tif";
-  o.output = dir.path() / "atlas";
-  o.chartSize = 129;
-  o.depth = 4;
-  o.nodeRes = 32;
-  o.minNodeRes = 2;
-  buildAtlas(o);
-  const AtlasView atlas = openAtlas(o.output);
+  test::buildRainierAtlas(dir.path() / "atlas", 129, 4, 32, 2);
+  const AtlasView atlas = openAtlas(dir.path() / "atlas");
   const Hierarchy& h = atlas.hierarchy;
   gl::SceneOptions so;
   so.width = 96;
