@@ -1,9 +1,10 @@
 // `gimlod render --export-cut`: the cut as drawn, captured from the real vertex shader and welded,
 // is watertight on the shipped scan and DEM (boundary edges only along the input's own holes and
 // rims) and cracks without the stitching tables (the negative control); the PLY reads back with
-// the counts the tool printed.
+// the counts the tool printed. With geomorphs too.
 #include <gtest/gtest.h>
 
+#include <fstream>
 #include <map>
 #include <regex>
 
@@ -87,6 +88,20 @@ TEST(ExportCut, ShippedDemViewIsWatertightButForItsRimAndCracksWithoutStitching)
   expectFileMatches(dir.path() / "cut.ply", s);
   const Exported n = exportCut(atlas, dir.path() / "cut_unstitched.ply", view, false);
   EXPECT_GT(n.elsewhere, 0u);
+  // With geomorphs the inner vertices move and the cut stays as watertight: the same welded mesh,
+  // other positions.
+  const auto bytes = [](const fs::path& p) {
+    std::ifstream f(p, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(f)), {});
+  };
+  for (const char* range : {"0.5", "2"}) {
+    const fs::path ply = dir.path() / (std::string("cut_geomorph_") + range + ".ply");
+    const Exported g = exportCut(atlas, ply, view + " --geomorph " + range, true);
+    EXPECT_EQ(g.elsewhere, 0u) << "cracks with --geomorph " << range;
+    EXPECT_EQ(g.vertices, s.vertices) << range;
+    EXPECT_EQ(g.triangles, s.triangles) << range;
+    EXPECT_NE(bytes(ply), bytes(dir.path() / "cut.ply")) << "--geomorph " << range << " moved nothing";
+  }
 }
 
 TEST(ExportCut, BadSpecsAreErrorsNamingTheOption) {
