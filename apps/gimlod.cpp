@@ -254,10 +254,6 @@ int runRender(const RenderArgs& a) {
   so.width = w;
   so.height = h;
   so.background = background;
-  so.onPageFailure = [](const PageFailure& f) {
-    spdlog::warn("page of chart {} level {} ({}, {}) cannot be read, its node stays on a coarser one: {}", f.id.chart,
-                 f.id.level, f.id.x, f.id.y, f.message);
-  };
   so.coherentAdaptation = !a.topDown;
   so.texelsPerPixel = a.texelRatio;
   so.geomorph = a.geomorph;
@@ -322,7 +318,7 @@ int runRender(const RenderArgs& a) {
                    i, ex->second.string(), mesh.positions.size(), mesh.triangles.size(), mesh.boundaryEdges,
                    mesh.openBorderEdges, mesh.otherBoundaryEdges);
     }
-    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{},{}\n", i,
+    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{},{}", i,
                        f.cut.nodeCount(),
                        f.draw.triangles, f.maxErrorPx, f.adaptMs, f.stitchMs, f.uploadMs, f.draw.drawMs,
                        f.draw.drawCalls, f.pagesLoaded + f.pagesUploaded, f.pagesMissing, f.pagesRequested, f.nodesSubstituted,
@@ -331,7 +327,6 @@ int runRender(const RenderArgs& a) {
                        int(f.adapt.budgetBelowRoots), budgetMode ? bo.maxNodes : a.maxNodes,
                        budgetMode ? bo.maxTriangles : 0, frameMs, f.draw.gpuMs, f.adapt.closedGroups,
                        f.adapt.groupedRoots);
-    csv.pop_back();  // the streaming columns follow
     csv += fmt::format(",{},{},{},{},{},{},{},{},{},{},{},{},{}\n", f.residentGpuBytes, f.gpuBudgetBytes,
                        f.residentRamBytes, so.asyncLoads ? so.ramCacheBytes : 0, f.uploadBytes, f.loadsIssued,
                        f.loadsDone, f.loadsCancelled, f.loadsFailed, f.prefetchRequests, f.pagesNeeded,

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
 
 #include "core/atlas_format.h"
 #include "runtime/gl/atlas_scene.h"
@@ -80,14 +81,18 @@ inline bool streamingAsync(const StreamingArgs& a) {
   return false;
 }
 
-// Sets so's streaming fields from a; throws InputError naming a bad option.
+// Sets so's streaming fields from a, pages that cannot be read logged as warnings; throws
+// InputError naming a bad option.
 inline void applyStreamingArgs(const StreamingArgs& a, gl::SceneOptions& so) {
+  so.onPageFailure = [](const PageFailure& f) {
+    spdlog::warn("page of chart {} level {} ({}, {}) cannot be read, its node stays on a coarser one: {}", f.id.chart,
+                 f.id.level, f.id.x, f.id.y, f.message);
+  };
   so.gpuCacheBytes = a.gpuCache == "auto" ? 0 : parseBytes("--gpu-cache", a.gpuCache);
   so.asyncLoads = streamingAsync(a);
   so.ramCacheBytes = size_t(parseBytes("--ram-cache", a.ramCache));
   so.uploadBytesPerFrame = parseBytes("--upload-budget", a.uploadBudget);
-  if (a.uploadsPerFrame == 0) throw InputError("--uploads-per-frame must be at least 1");
-  so.maxUploadsPerFrame = a.uploadsPerFrame;
+  so.maxUploadsPerFrame = a.uploadsPerFrame;  // at least 1: validateViewOptions
   if (a.loaderThreads == 0 || a.loaderThreads > 64) throw InputError("--loader-threads must be in [1, 64]");
   so.loaderThreads = a.loaderThreads;
   if (!(a.prefetch >= 0.0) || !std::isfinite(a.prefetch) || a.prefetch > 60.0)

@@ -330,10 +330,6 @@ int runView(const ViewArgs& a) {
     so.coherentAdaptation = !c.topDown;
     so.texelsPerPixel = c.texelRatio;
     so.minNodeRoom = uint32_t(c.maxNodes);  // the page pool holds cuts of the budget at start
-    so.onPageFailure = [](const PageFailure& f) {
-      spdlog::warn("page of chart {} level {} ({}, {}) cannot be read, its node stays on a coarser one: {}", f.id.chart,
-                   f.id.level, f.id.x, f.id.y, f.message);
-    };
     return std::make_unique<gl::AtlasScene>(atlas, so);
   };
   std::unique_ptr<gl::AtlasScene> scene = makeScene(c.asyncLoads);

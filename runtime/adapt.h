@@ -25,6 +25,9 @@ ViewParams makeViewParams(const Camera& c, uint32_t width, uint32_t height);
 // Projected size in pixels of a world-space error seen from the closest point of the node's
 // bounds: error * pixelsPerRadian / distance.
 double screenError(const Hierarchy& h, const NodeId& n, uint32_t res, const ViewParams& v);
+// The same for a world-space error seen from the closest point of a box (minx, miny, minz, maxx,
+// maxy, maxz): a node's bounds, or a group's above the charts.
+double boxScreenError(const std::array<float, 6>& box, double error, const ViewParams& v);
 
 // Geomorph factor of a drawn node (CutNode::morph): how far its inner vertices move onto its next
 // coarser resolution, so the switch to that resolution does not pop. 0 while that resolution's
@@ -33,9 +36,6 @@ double screenError(const Hierarchy& h, const NodeId& n, uint32_t res, const View
 // range; range 0.5 morphs over the last third of the error's way down). 0 at the coarsest
 // resolution.
 double geomorphFactor(const Hierarchy& h, const CutNode& n, const ViewParams& v, double tolerancePx, double range);
-// The same for a world-space error seen from the closest point of a box (minx, miny, minz, maxx,
-// maxy, maxz): a node's bounds, or a group's above the charts.
-double boxScreenError(const std::array<float, 6>& box, double error, const ViewParams& v);
 
 // Priority tier of a node that cannot meet the tolerance even at its finest resolution: above
 // every triangle-count priority, ordered by its error. note: scaled, not added: 1e30 + err would

@@ -172,15 +172,15 @@ size_t PageLoader::stagedBytesOf(const NodeId& n) const {
   return pages_.pageBytes(n) + (options_.preparedBytes ? options_.preparedBytes(n) : 0);
 }
 
-void PageLoader::insertRam(RamPage&& page) {
+void PageLoader::insertRam(LoadedPage&& page) {
   // Caller holds mutex_.
   const size_t budget = cacheBudget();
-  const uint64_t key = page.key;
+  const uint64_t key = page.id.key();
   const size_t bytes = page.bytes();
   if (bytes > budget || ramIndex_.count(key)) return;
   while (stats_.ramBytes + bytes > budget && !ram_.empty()) {
     stats_.ramBytes -= ram_.back().bytes();
-    ramIndex_.erase(ram_.back().key);
+    ramIndex_.erase(ram_.back().id.key());
     ram_.pop_back();
     ++stats_.ramEvictions;
   }
@@ -213,9 +213,7 @@ void PageLoader::run(uint32_t thread) {
     auto hit = ramIndex_.find(key);
     if (hit != ramIndex_.end()) {
       ram_.splice(ram_.begin(), ram_, hit->second);
-      page.samples = hit->second->samples;
-      page.normals = hit->second->normals;
-      page.colours = hit->second->colours;
+      page = *hit->second;
       page.fromRam = true;
       ++stats_.ramHits;
       if (options_.prepare) {
@@ -249,19 +247,16 @@ void PageLoader::run(uint32_t thread) {
       error = "unreadable page";
     }
     if (!error.empty() && options_.onFailure) options_.onFailure({q.id, error});
-    RamPage cached;  // the page as read, for the cache (without what prepare adds)
-    if (error.empty() && options_.prepare) {
-      cached = {key, page.samples, page.normals, page.colours};
-      options_.prepare(page);
+    LoadedPage cached;  // the page as read, for the cache (without what prepare adds), copied unlocked
+    if (error.empty()) {
+      cached = page;
+      if (options_.prepare) options_.prepare(page);
     }
     lock.lock();
     reading_.erase(key);
     if (error.empty()) {
       ++stats_.loadedFromDisk;
-      if (options_.prepare)
-        insertRam(std::move(cached));
-      else
-        insertRam({key, page.samples, page.normals, page.colours});
+      insertRam(std::move(cached));
       finish(std::move(page));
     } else {
       // note: a failed page is not read again (the node stays on a coarser stand-in); a request

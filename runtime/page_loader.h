@@ -129,21 +129,11 @@ class PageLoader {
       return priority != o.priority ? priority > o.priority : seq < o.seq;
     }
   };
-  struct RamPage {
-    uint64_t key;
-    std::vector<float> samples;
-    std::vector<PackedNormal> normals;
-    std::vector<PackedColour> colours;
-    size_t bytes() const {
-      return samples.size() * sizeof(float) + normals.size() * sizeof(PackedNormal) +
-             colours.size() * sizeof(PackedColour);
-    }
-  };
   void run(uint32_t thread);
   bool canStart() const;  // mutex_ held
   size_t stagedBytesOf(const NodeId& n) const;  // a page's bytes once read and prepared
   size_t cacheBudget() const;
-  void insertRam(RamPage&& page);
+  void insertRam(LoadedPage&& page);  // a page as read (no mips)
   void finish(LoadedPage&& page);
 
   const PageReader& pages_;
@@ -158,8 +148,8 @@ class PageLoader {
   std::unordered_set<uint64_t> reading_;  // keys being read
   std::deque<LoadedPage> completed_;
   std::unordered_set<uint64_t> completedKeys_;
-  std::list<RamPage> ram_;  // front = most recent
-  std::unordered_map<uint64_t, std::list<RamPage>::iterator> ramIndex_;
+  std::list<LoadedPage> ram_;  // front = most recent
+  std::unordered_map<uint64_t, std::list<LoadedPage>::iterator> ramIndex_;
   std::unordered_set<uint64_t> failedKeys_;
   std::vector<PageFailure> failures_;
   PageLoaderStats stats_;

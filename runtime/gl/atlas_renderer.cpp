@@ -96,10 +96,11 @@ uint64_t pagePoolMipBytes(const RendererSetup& setup) {
 }
 
 uint64_t pagePoolPageBytes(const RendererSetup& setup) {
-  const uint32_t side = (1u << setup.pageIntervalsLog2) + 1;
-  const uint32_t colourSide = ((side - 1) << setup.colourScaleLog2) + 1;
-  return layerBytes(side, 1, setup.geometry ? 12 : 4) + layerBytes(side, mipLevels(side), 4) +
-         (setup.colours ? layerBytes(colourSide, mipLevels(colourSide), 4) : 0);
+  // Level 0 of the samples, the normals and the colours, then their mips.
+  const uint64_t side = (1u << setup.pageIntervalsLog2) + 1;
+  const uint64_t colourSide = ((side - 1) << setup.colourScaleLog2) + 1;
+  return side * side * ((setup.geometry ? 12 : 4) + 4) + (setup.colours ? colourSide * colourSide * 4 : 0) +
+         pagePoolMipBytes(setup);
 }
 
 void setPagePoolUnits(const GlObject& program) {

@@ -83,8 +83,7 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
     PagePool::Slot slot;
     pool_.acquire(root.key(), frame_, &slot);
     pages_.read(root, samples_, normals_, &colours_);
-    renderer_->uploadPage(slot.layer, pages_.pageSamples(root), samples_.data(), normals_.data(),
-                          colours_.empty() ? nullptr : colours_.data());
+    upload(slot.layer, root, samples_, normals_, colours_);
     pool_.lock(root.key());
   }
   if (options_.asyncLoads) {
@@ -119,11 +118,16 @@ bool AtlasScene::predictedView(const Camera& camera, ViewParams* view) const {
 bool AtlasScene::uploadLoaded(const LoadedPage& pg) {
   PagePool::Slot slot;
   if (!pool_.acquire(pg.id.key(), frame_, &slot)) return false;
-  if (!slot.needsUpload) return true;
-  renderer_->uploadPage(slot.layer, pages_.pageSamples(pg.id), pg.samples.data(), pg.normals.data(),
-                        pg.colours.empty() ? nullptr : pg.colours.data(), &pg.mips);
-  uploadBytes_ += pageBytes_;
+  if (slot.needsUpload) upload(slot.layer, pg.id, pg.samples, pg.normals, pg.colours, &pg.mips);
   return true;
+}
+
+void AtlasScene::upload(uint32_t layer, const NodeId& n, const std::vector<float>& samples,
+                        const std::vector<PackedNormal>& normals, const std::vector<PackedColour>& colours,
+                        const PageMips* mips) {
+  renderer_->uploadPage(layer, pages_.pageSamples(n), samples.data(), normals.data(),
+                        colours.empty() ? nullptr : colours.data(), mips);
+  uploadBytes_ += pageBytes_;
 }
 
 Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, const Camera& camera, double prefetchTolPx,
@@ -209,9 +213,7 @@ std::vector<DrawNode> AtlasScene::prepare(const Cut& cut, FrameResult* frame) {
     if (pool_.acquire(n.id.key(), frame_, &slot)) {
       if (slot.needsUpload) {
         pages_.read(n.id, samples_, normals_, &colours_);
-        renderer_->uploadPage(slot.layer, pages_.pageSamples(n.id), samples_.data(), normals_.data(),
-                              colours_.empty() ? nullptr : colours_.data());
-        uploadBytes_ += pageBytes_;
+        upload(slot.layer, n.id, samples_, normals_, colours_);
         ++loaded;
       }
       nodes.push_back(makeDrawNode(atlas_.manifest, atlas_.hierarchy.params, n, slot.layer));

@@ -172,6 +172,10 @@ class AtlasScene {
   bool predictedView(const Camera& camera, ViewParams* view) const;
   // Uploads a loaded page into the pool; false when no layer is free this frame.
   bool uploadLoaded(const LoadedPage& page);
+  // Uploads n's page into pool layer `layer` (mips: made beforehand, or null) and counts its bytes.
+  void upload(uint32_t layer, const NodeId& n, const std::vector<float>& samples,
+              const std::vector<PackedNormal>& normals, const std::vector<PackedColour>& colours,
+              const PageMips* mips = nullptr);
   AtlasView atlas_;
   SceneOptions options_;
   PageReader pages_;
