@@ -56,6 +56,7 @@ struct RenderArgs {
   bool topDown = false;
   double tolerance = 1.0, texelRatio = 1.0;
   double geomorph = 0.0;  // SceneOptions::geomorph
+  uint32_t msaa = 1;      // SceneOptions::samples
   uint64_t triangles = 0;  // > 0: triangle-budget mode (quad queue)
   double frameMs = 0.0;    // > 0: the frame-time controller sets the budgets (budget mode)
   std::string overlay = "none";        // runtime/overlay.h: none, chart, level, res, error
@@ -257,6 +258,7 @@ int runRender(const RenderArgs& a) {
   so.coherentAdaptation = !a.topDown;
   so.texelsPerPixel = a.texelRatio;
   so.geomorph = a.geomorph;
+  so.samples = a.msaa;
   so.overlay = parseOverlayOption(a.overlay);
   so.overlayErrorPx = a.triangles > 0 ? 0.0 : a.tolerance;  // error colouring: red at the tolerance
   so.minNodeRoom = a.maxNodes;  // the page pool holds the budget's cuts
@@ -530,6 +532,7 @@ int main(int argc, char** argv) {
   render->add_flag("--top-down", r.topDown,
                    "Error mode with the stateless top-down greedy instead of the coherent dual queue");
   addGeomorphOption(render, r.geomorph);
+  addMsaaOption(render, r.msaa);
   render->add_option("--texel-ratio", r.texelRatio,
                      "Normal-map texels per pixel of a node's projected size (0: page resolution)")
       ->capture_default_str();

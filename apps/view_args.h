@@ -90,6 +90,14 @@ inline void addGeomorphOption(CLI::App* cmd, double& range) {
       ->capture_default_str();
 }
 
+inline void addMsaaOption(CLI::App* cmd, uint32_t& samples) {
+  cmd->add_option("--msaa", samples,
+                  "Samples per pixel (multisampling, shaded per sample, so the terrain's edge is smoothed too); "
+                  "1: none")
+      ->check(CLI::Range(1u, 32u))
+      ->capture_default_str();
+}
+
 inline void validateGeomorph(double range) {
   if (!(range >= 0.0) || !std::isfinite(range) || range > 8.0) throw InputError("--geomorph must be in [0, 8]");
 }

@@ -225,6 +225,7 @@ CLI::App* addViewCommand(CLI::App& app, ViewArgs& a) {
   v->add_option("--max-nodes", a.maxNodes, "Node budget")->capture_default_str();
   addMaxRootsOption(v, a.maxRoots);
   addGeomorphOption(v, a.geomorph);
+  addMsaaOption(v, a.msaa);
   v->add_option("--texel-ratio", a.texelRatio, "Normal-map texels per pixel (0: page resolution)")
       ->capture_default_str();
   addStreamingOptions(v, a.streaming);
@@ -329,6 +330,7 @@ int runView(const ViewArgs& a) {
     so.maxUploadsPerFrame = uint32_t(c.uploadsPerFrame);
     so.coherentAdaptation = !c.topDown;
     so.texelsPerPixel = c.texelRatio;
+    so.samples = a.msaa;
     so.minNodeRoom = uint32_t(c.maxNodes);  // the page pool holds cuts of the budget at start
     return std::make_unique<gl::AtlasScene>(atlas, so);
   };

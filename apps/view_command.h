@@ -33,6 +33,7 @@ struct ViewArgs {
   uint32_t maxRoots = kDefaultMaxRoots;  // top groups above the charts at most (openAtlas); 0: none
   double texelRatio = 1.0;
   double geomorph = 0.0;  // SceneOptions::geomorph
+  uint32_t msaa = 1;  // SceneOptions::samples
   StreamingArgs streaming;  // the loader and the caches' byte budgets
   bool topDown = false;
   std::string overlay = "none";  // none, chart, level, res, error

@@ -6,8 +6,12 @@
 // percentile, and the pixels that changed by more than 16.
 //
 // Usage: bench_popping ATLAS_DIR [--frames 240] [--distance 0.6] [--size 320x240] [--tolerance 1]
-//        [--max-nodes 2000] [--geomorph 0,0.5] [--descent] (a fly-down on a terrain instead of an
-//        orbit spiralling in)
+//        [--max-nodes 2000] [--geomorph 0,0.5] [--attribute-blend 1] [--msaa 1] [--descent] (a fly-down on a
+//        terrain instead of an orbit spiralling in); --attribute-blend 0,1 compares the normals and
+//        colours switching between mips with their blending between them (CutNode::texBlend);
+//        --msaa 4 draws 4 samples per pixel, shaded per sample, so that a silhouette moving part of
+//        a pixel changes it part way rather than all (without it, the largest change is a pixel
+//        going from sky to ground whatever moved it)
 // Reads a built atlas; renders headless (EGL).
 #include <CLI/CLI.hpp>
 
@@ -33,6 +37,8 @@ struct Args {
   double distance = 0.6, tolerance = 1.0;
   std::vector<double> geomorphs{0.0, 0.5};
   bool descent = false;
+  std::vector<int> blends{1};  // attribute blending (CutNode::texBlend) on, off or both
+  uint32_t samples = 1;        // multisampling: a silhouette that moves part of a pixel changes it part way
 };
 
 // The largest per-channel difference of two RGBA8 pictures, and the pixels differing by more than 16.
@@ -58,6 +64,10 @@ int run(int argc, char** argv) {
   app.add_option("--tolerance", a.tolerance, "screen-space tolerance, px")->check(CLI::PositiveNumber);
   app.add_option("--max-nodes", a.maxNodes, "node budget");
   app.add_option("--geomorph", a.geomorphs, "geomorph ranges to compare (0: off)")->delimiter(',');
+  app.add_option("--attribute-blend", a.blends, "attribute blending between mips to compare (1 on, 0 off)")
+      ->delimiter(',')
+      ->check(CLI::Range(0, 1));
+  app.add_option("--msaa", a.samples, "samples per pixel")->check(CLI::Range(1u, 32u));
   app.add_flag("--descent", a.descent, "a fly-down onto a terrain instead of an orbit");
   CLI11_PARSE(app, argc, argv);
   uint32_t w = 0, h = 0;
@@ -79,9 +89,12 @@ int run(int argc, char** argv) {
   auto context = gl::EglContext::create();
   std::printf("%s: %zu frames of a slow %s, %ux%u, tolerance %.2f px, %u nodes at most, on %s\n", a.atlas.c_str(),
               path.size(), a.descent ? "fly-down" : "spiral", w, h, a.tolerance, a.maxNodes, context->renderer().c_str());
-  std::printf("%9s %9s %9s %9s %12s %9s\n", "geomorph", "max", "mean", "p99", "pixels>16", "switches");
+  std::printf("%9s %6s %9s %9s %9s %12s %9s\n", "geomorph", "blend", "max", "mean", "p99", "pixels>16", "switches");
+  for (const int blend : a.blends)
   for (const double g : a.geomorphs) {
     gl::SceneOptions so;
+    so.blendAttributes = blend != 0;
+    so.samples = a.samples;
     so.width = w;
     so.height = h;
     so.geomorph = g;
@@ -111,7 +124,7 @@ int run(int argc, char** argv) {
     double mean = 0.0;
     for (int d : largest) mean += d;
     mean /= double(largest.size());
-    std::printf("%9.2f %9d %9.2f %9d %12llu %9llu\n", g, sorted.back(), mean,
+    std::printf("%9.2f %6d %9d %9.2f %9d %12llu %9llu\n", g, blend, sorted.back(), mean,
                 sorted[std::min(sorted.size() - 1, size_t(std::ceil(0.99 * double(sorted.size()))) - 1)],
                 (unsigned long long)over, (unsigned long long)switches);
   }

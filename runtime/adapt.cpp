@@ -318,7 +318,9 @@ uint32_t holdNodeBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, ui
   return merges;
 }
 
-uint32_t attributeResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double texelsPerPixel) {
+uint32_t attributeResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double texelsPerPixel,
+                             float* blend) {
+  if (blend) *blend = 0.f;
   const auto& b = h.bounds(n);
   const double diag = glm::length(boxHi(b) - boxLo(b));
   const double d = std::max(boxDistance(b, v.eye), v.minDistance);
@@ -326,14 +328,17 @@ uint32_t attributeResolution(const Hierarchy& h, const NodeId& n, const ViewPara
   const uint32_t lo = h.params.minNodeResLog2, hi = h.params.intervalsLog2 - h.finestLevel(n.chart) - n.level;
   if (!(texels > double(1u << lo))) return lo;  // also NaN
   const uint32_t r = uint32_t(std::ceil(std::log2(texels)));
-  return std::clamp(r, lo, hi);
+  const uint32_t res = std::clamp(r, lo, hi);
+  // Between lo and hi the need lies in (res - 1, res]: the blend is how far it is from res.
+  if (blend) *blend = res == r ? float(double(r) - std::log2(texels)) : 0.f;
+  return res;
 }
 
 AttributeStats assignAttributeResolutions(const Hierarchy& h, Cut& cut, const ViewParams& v,
                                           double texelsPerPixel) {
   AttributeStats st;
   for (CutNode& n : cut.nodes) {
-    n.texRes = attributeResolution(h, n.id, v, texelsPerPixel);
+    n.texRes = attributeResolution(h, n.id, v, texelsPerPixel, &n.texBlend);
     const uint64_t side = (1ull << n.texRes) + 1;
     st.texels += side * side;
     const uint32_t page = h.maxRes(n.id);

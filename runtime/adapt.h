@@ -217,8 +217,12 @@ void stitchGaps(const Hierarchy& h, const Cut& cut, std::vector<uint32_t>& gaps)
 // pixel-to-texel ratio. Returns log2 texels per node side: the lowest that puts at least
 // texelsPerPixel texels on each pixel of the bounds' projected diagonal (diagonal *
 // pixelsPerRadian / distance), clamped to [minNodeResLog2, intervalsLog2 - level] (the finest
-// data the pyramid holds for the node). texelsPerPixel must be > 0.
-uint32_t attributeResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double texelsPerPixel);
+// data the pyramid holds for the node). texelsPerPixel must be > 0. blend, when given, gets how far
+// the need is below that resolution, towards the next coarser, in [0, 1) (0 where clamped), so the
+// attributes can be sampled between the two mips (CutNode::texBlend): continuous as the view
+// moves, and across a split, whose children need one resolution less of their finer pages.
+uint32_t attributeResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double texelsPerPixel,
+                             float* blend = nullptr);
 
 struct AttributeStats {
   uint64_t texels = 0;        // sum over nodes of (2^texRes + 1)^2: attribute data the cut uses

@@ -16,6 +16,9 @@ struct CutNode {
   // Attribute (normal, colour) texture resolution, log2 texels per side (assignAttributeResolutions);
   // 0 means unassigned: the page's own resolution.
   uint32_t texRes = 0;
+  // How far the attributes go on towards texRes - 1, in [0, 1): the screen's need lies between the
+  // two, so the normals and colours blend between mips as the view moves rather than switch.
+  float texBlend = 0.f;
   // The closed group (hierarchy/root_groups.h) this chart root is drawn for, or -1: the roots of
   // one closed group are one node of the cut (nodeCount).
   int32_t group = -1;

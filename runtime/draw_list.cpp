@@ -21,9 +21,16 @@ DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const Cu
   // note: an attribute resolution above the page's is clamped to it (finer attribute pages are
   // not loaded); AttributeStats::abovePage counts those nodes.
   if (n.texRes != 0 && n.texRes < d.pageResLog2) d.texLod = d.pageResLog2 - n.texRes;
-  // The coarsest resolution has no coarser one to move onto.
-  if (n.res > p.minNodeResLog2) d.morph = uint32_t(std::lround(std::clamp(double(n.morph), 0.0, 1.0) * 255.0));
+  // The blend towards the next coarser mip, while there is one below the page's.
+  if (n.texRes != 0 && n.texRes <= d.pageResLog2 && n.texRes > p.minNodeResLog2)
+    d.texLodFrac = uint32_t(std::lround(std::clamp(double(n.texBlend), 0.0, 1.0) * 255.0));
+  d.morph = morphByte(n, p.minNodeResLog2);
   return d;
+}
+
+uint8_t morphByte(const CutNode& n, uint32_t minNodeResLog2) {
+  if (n.res <= minNodeResLog2) return 0;
+  return uint8_t(std::lround(std::clamp(double(n.morph), 0.0, 1.0) * 255.0));
 }
 
 }  // namespace gimlod

@@ -24,6 +24,7 @@ struct DrawNode {
   // Mip level of the page's normal map the fragment shader samples: pageResLog2 minus the node's
   // attribute resolution when that is coarser (0: the page's full resolution).
   uint32_t texLod = 0;
+  uint32_t texLodFrac = 0;  // CutNode::texBlend in 1/255 steps: the shader samples mip texLod + this
   uint32_t morph = 0;  // CutNode::morph in 1/255 steps (0..255)
 };
 
@@ -33,15 +34,22 @@ struct DrawNode {
 // the node origin along +u (bottom/top) or +v (left/right). Each entry is the log2 vertex
 // spacing, in level-0 intervals, of the neighbour drawn there, or 0 where there is no neighbour.
 // A border vertex at t whose own spacing is finer snaps to (t >> s) << s with s that entry.
+// morphs, laid out as bytes, holds the neighbour's geomorph byte there (morphByte), so that both
+// sides of a border move its vertices alike (empty: no border moves).
 struct StitchTables {
   uint32_t leafLog2 = 0;        // log2 of a leaf node's side in level-0 intervals
   uint32_t entriesPerSide = 1;  // 2^(depth - 1)
   std::vector<uint8_t> bytes;   // nodes * 4 * entriesPerSide
+  std::vector<uint8_t> morphs;  // as bytes, or empty
   uint8_t* side(size_t node, uint32_t s) { return bytes.data() + (node * 4 + s) * entriesPerSide; }
   const uint8_t* side(size_t node, uint32_t s) const {
     return bytes.data() + (node * 4 + s) * entriesPerSide;
   }
 };
+
+// A cut node's geomorph factor in 1/255 steps (DrawNode::morph): 0 at the coarsest resolution,
+// which has none coarser to move onto.
+uint8_t morphByte(const CutNode& n, uint32_t minNodeResLog2);
 
 // The draw record of a cut node whose page is in `layer`.
 DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n,

@@ -33,24 +33,40 @@ void sideVertices(const std::vector<glm::vec3>& v, uint32_t res, uint32_t s, std
 
 }  // namespace
 
-StitchTables buildStitchTables(const Hierarchy& h, const Cut& cut) {
+StitchTables buildStitchTables(const Hierarchy& h, const Cut& cut, bool geomorphs) {
   StitchTables t;
   const uint32_t L = h.params.intervalsLog2;
   t.leafLog2 = L - (h.params.depth - 1);
   t.entriesPerSide = 1u << (h.params.depth - 1);
   t.bytes.assign(cut.nodes.size() * 4 * t.entriesPerSide, 0);
+  const uint32_t minRes = h.params.minNodeResLog2;
+  const bool morphs = geomorphs && std::any_of(cut.nodes.begin(), cut.nodes.end(),
+                                               [&](const CutNode& n) { return morphByte(n, minRes) != 0; });
+  if (morphs) t.morphs.assign(t.bytes.size(), 0);
   std::vector<SideNeighbour> ns;
   for (size_t i = 0; i < cut.nodes.size(); ++i) {
     for (uint32_t s = 0; s < 4; ++s) {
       ns.clear();
       sideNeighbours(h, cut, cut.nodes[i].id, s, ns);
       uint8_t* side = t.side(i, s);
+      uint8_t* m = morphs ? t.morphs.data() + (side - t.bytes.data()) : nullptr;
+      const uint32_t ownSpacing = L - cut.nodes[i].id.level - cut.nodes[i].res;
+      // Where nothing is drawn across, the node's own factor (the shader's rules then give it).
+      if (m) std::fill(m, m + t.entriesPerSide, morphByte(cut.nodes[i], minRes));
       for (const SideNeighbour& n : ns) {
         const CutNode& nb = cut.nodes[n.cutIndex];
         const uint8_t spacing = uint8_t(L - nb.id.level - nb.res);
         const uint32_t e0 = n.t0 >> t.leafLog2;
         const uint32_t e1 = std::min(n.t1 >> t.leafLog2, t.entriesPerSide);
         for (uint32_t e = e0; e < e1; ++e) side[e] = spacing;
+        if (!m) continue;
+        // A coarser or alike neighbour: its factor. A finer one: a cap on the node's own, 0 where
+        // the neighbour's side is no longer than the node's vertex spacing (its corners may then be
+        // odd vertices of the node's lattice, and a node's corners never move), else none.
+        const uint8_t value = spacing >= ownSpacing ? morphByte(nb, minRes)
+                              : L - nb.id.level <= ownSpacing ? uint8_t(0)
+                                                              : uint8_t(255);
+        std::fill(m + e0, m + std::max(e0, e1), value);
       }
     }
   }

@@ -8,10 +8,12 @@ and 99th-percentile frame time, the hit rate (pages the frames needed that were 
 began), and how many frames after the camera stops the error is back at the no-latency run's.
 
   python3 scripts/streaming_flight.py ATLAS [--gimlod build/gimlod] [--frames 120] [--hold 30]
-      [--latency 20] [--cache-share 0.02] [--max-nodes 1000] [--size 640x360] [--out DIR]
+      [--latency 20] [--cache-share 0.02] [--cache-of pages|disk] [--max-nodes 1000] [--size 640x360]
+      [--out DIR]
 
 The caches are cache-share of the atlas's pages as the GPU pool holds them: every node of every
-chart, one pool page each (render's log gives a page's bytes).
+chart, one pool page each (render's log gives a page's bytes); with --cache-of disk, of the atlas's
+bytes on disk (its files, compressed), which is far less.
 """
 import argparse
 import csv
@@ -106,6 +108,7 @@ def main():
     ap.add_argument("--hold", type=int, default=30, help="frames still at the bottom")
     ap.add_argument("--latency", default="20", help="--io-latency MS[,JITTER]")
     ap.add_argument("--cache-share", type=float, default=0.02)
+    ap.add_argument("--cache-of", choices=["pages", "disk"], default="pages")
     ap.add_argument("--max-nodes", type=int, default=1000)
     ap.add_argument("--size", default="640x360")
     ap.add_argument("--out", default=None)
@@ -120,9 +123,10 @@ def main():
     stats = json.load(open(os.path.join(args.atlas, "stats.json")))
     charts, depth, hierarchy_nodes = stats["charts"], stats["hierarchy_depth"], stats["hierarchy_nodes"]
     _, page = render(args.gimlod, args.atlas, path, os.path.join(out, "probe"), args, ["--async-loads"])
-    cache = int(args.cache_share * hierarchy_nodes * page)
-    print(f"{args.atlas}: {charts} charts, depth {depth}, {hierarchy_nodes} nodes, pages of {page} bytes: "
-          f"caches of {cache} bytes ({args.cache_share:.0%}); {len(cams)} frames ({args.frames} down, {args.hold} "
+    disk = sum(os.path.getsize(os.path.join(d, f)) for d, _, fs in os.walk(args.atlas) for f in fs)
+    cache = int(args.cache_share * (hierarchy_nodes * page if args.cache_of == "pages" else disk))
+    print(f"{args.atlas}: {charts} charts, depth {depth}, {hierarchy_nodes} nodes, pages of {page} bytes, {disk} bytes "
+          f"on disk: caches of {cache} bytes ({args.cache_share:.0%} of the {args.cache_of}); {len(cams)} frames ({args.frames} down, {args.hold} "
           f"still, {args.frames} up), --io-latency {args.latency}, --max-nodes {args.max_nodes}")
     common = ["--gpu-cache", str(cache), "--ram-cache", str(cache)]
     stop = args.frames  # the first still frame

@@ -9,7 +9,8 @@
 in vec3 v_world;
 in vec2 v_pageUv;
 flat in int v_pageLayer;
-flat in int v_texLod;  // mip of the normal map: the node's attribute resolution (paper 7.1, 7.3)
+flat in float v_texLod;  // mip of the normal map: the node's attribute resolution (paper 7.1, 7.3),
+                         // between two mips as the need moves between them
 flat in int v_node;
 in vec2 v_nodeUv;
 in float v_snapped;
@@ -94,12 +95,12 @@ void main() {
   if (outsideValid(g.x, u_validSamples.x) || outsideValid(g.y, u_validSamples.y)) discard;
 #endif
 
-  vec3 n = textureLod(u_normals, vec3(v_pageUv, float(v_pageLayer)), float(v_texLod)).rgb * 2.0 - 1.0;
+  vec3 n = textureLod(u_normals, vec3(v_pageUv, float(v_pageLayer)), v_texLod).rgb * 2.0 - 1.0;
   n = length(n) > 1e-4 ? normalize(n) : vec3(0.0, 0.0, 1.0);
 #ifdef GIMLOD_GEOMETRY
   // Mesh atlases: the scan's own colours at the node's attribute resolution, or a neutral material;
   // lit from both sides of the light (scans have no up).
-  vec3 clay = u_hasColours != 0 ? textureLod(u_colours, vec3(v_pageUv, float(v_pageLayer)), float(v_texLod)).rgb
+  vec3 clay = u_hasColours != 0 ? textureLod(u_colours, vec3(v_pageUv, float(v_pageLayer)), v_texLod).rgb
                                 : vec3(0.78, 0.74, 0.68);
   float lambert = abs(dot(n, u_lightDir));
   vec3 lit = u_overlay != 0 ? overlayColour(lambert) : clay * (0.25 + 0.75 * lambert);

@@ -9,7 +9,8 @@
 layout(location = GIMLOD_ATTRIB_GRID) in uvec2 a_ij;   // grid vertex (i, j), 0..2^res
 // The node record, per instance (divisor 1, selected by the draw's baseinstance):
 // a_nodeA = (origin.x, origin.y, sizeLog2, res), a_nodeB = (pageResLog2, pageLayer, index,
-// texLod | morph << 8), morph the geomorph factor in 1/255 steps.
+// texLod | morph << 8 | texLodFrac << 16), morph the geomorph factor and texLodFrac the blend
+// towards the next coarser attribute mip, both in 1/255 steps.
 // origin in level-0 samples; sizeLog2 = node side in level-0 intervals; the grid has 2^res
 // intervals per side; the page 2^pageResLog2.
 layout(location = GIMLOD_ATTRIB_NODE_A) in ivec4 a_nodeA;
@@ -22,12 +23,13 @@ uniform mat4 u_viewProj;
 uniform vec2 u_spacing;
 uniform int u_leafLog2;
 uniform int u_entriesPerSide;
+uniform int u_morphWords;  // where the neighbours' morph bytes begin in u_stitchWords; -1: none
 uniform sampler2DArray u_samples;  // R32F heights (RGB32F positions with GIMLOD_GEOMETRY), texelFetch only
 
 precise out vec3 v_world;  // captured by transform feedback
 out vec2 v_pageUv;
 flat out int v_pageLayer;
-flat out int v_texLod;
+flat out float v_texLod;  // the attributes' mip: texLod + texLodFrac / 255
 flat out int v_node;   // the node's index in the cut, for the overlays
 out vec2 v_nodeUv;     // (i, j) / 2^res: where in the node, for the overlays' border lines
 out float v_snapped;   // 1 at a border vertex the stitching moved onto a coarser neighbour's lattice
@@ -35,12 +37,16 @@ invariant gl_Position;
 
 const int kBottom = 0, kRight = 1, kTop = 2, kLeft = 3;
 
-// log2 spacing of the neighbour drawn at position t (level-0 intervals from the node origin).
-int neighbourSpacing(int node, int side, int t) {
+// Byte `table` (0: spacings, else the morphs from word u_morphWords) of the neighbour drawn at
+// position t (level-0 intervals from the node origin).
+int stitchByte(int node, int side, int t, int table) {
   int e = min(t >> u_leafLog2, u_entriesPerSide - 1);
   int b = (node * 4 + side) * u_entriesPerSide + e;
-  return int((u_stitchWords[b >> 2] >> uint((b & 3) * 8)) & 0xFFu);
+  return int((u_stitchWords[table + (b >> 2)] >> uint((b & 3) * 8)) & 0xFFu);
 }
+
+// log2 spacing of the neighbour drawn at position t.
+int neighbourSpacing(int node, int side, int t) { return stitchByte(node, side, t, 0); }
 
 // Moves a border coordinate onto the neighbour's coarser vertex lattice.
 int snapToNeighbour(int node, int side, int t, int ownSpacing, int sizeLog2) {
@@ -75,6 +81,27 @@ vec3 samplePosition(ivec2 origin, ivec2 t, int ps, int pageLayer) {
 #endif
 }
 
+// Geomorph of a border vertex (not a corner) at stitched position t along `side`, own position
+// tOwn: a vertex odd on the border's drawn lattice (the coarser side's, spacing s) moves towards
+// the middle of its two lattice neighbours, by the coarser side's factor, or where both are alike
+// by the larger of the two (the vertex goes when either side coarsens). Across a finer neighbour
+// the morph byte caps the node's own factor (0 where that neighbour's corners could be odd on the
+// node's lattice; StitchTables::morphs). Both sides compute it from the same samples, factor and
+// arithmetic, so the border stays bit-identical at every factor.
+vec3 borderMorph(vec3 p, int node, int side, int tOwn, int t, int across, int so, int sizeLog2, float own,
+                 ivec2 origin, int ps, int pageLayer) {
+  if (u_morphWords < 0) return p;
+  int sn = min(neighbourSpacing(node, side, tOwn), sizeLog2);
+  float theirs = float(stitchByte(node, side, tOwn, u_morphWords)) / 255.0;
+  int s = max(so, sn);
+  float f = sn > so ? theirs : (sn < so ? min(own, theirs) : max(own, theirs));
+  if (!(f > 0.0) || s >= sizeLog2 || ((t >> s) & 1) == 0) return p;
+  bool alongX = side == kBottom || side == kTop;
+  ivec2 a = alongX ? ivec2(t - (1 << s), across) : ivec2(across, t - (1 << s));
+  ivec2 b = alongX ? ivec2(t + (1 << s), across) : ivec2(across, t + (1 << s));
+  return mix(p, 0.5 * (samplePosition(origin, a, ps, pageLayer) + samplePosition(origin, b, ps, pageLayer)), f);
+}
+
 void main() {
   int node = a_nodeB.z;
   ivec2 origin = a_nodeA.xy;
@@ -92,9 +119,16 @@ void main() {
   // Geomorph: an inner vertex that the next coarser grid lacks moves towards the point of that
   // grid's surface under it: the middle of the coarse edge it halves (odd in one direction), or of
   // the coarse quad's diagonal from (i-1, j-1) to (i+1, j+1) (odd in both, the grids' diagonal).
-  // Border vertices stay, so the stitching holds at every factor.
+  // Border vertices move with their neighbour's (borderMorph).
   float morph = float((a_nodeB.w >> 8) & 0xFF) / 255.0;
   bool inner = i > 0 && i < n && j > 0 && j < n;
+  bool corner = (i == 0 || i == n) && (j == 0 || j == n);
+  if (!inner && !corner) {
+    int side = j == 0 ? kBottom : (j == n ? kTop : (i == 0 ? kLeft : kRight));
+    bool alongX = side == kBottom || side == kTop;
+    v_world = borderMorph(v_world, node, side, alongX ? tx : ty, alongX ? sx : sy, alongX ? sy : sx, so, sizeLog2,
+                          morph, origin, ps, pageLayer);
+  }
   ivec2 odd = ivec2(i & 1, j & 1);
   if (morph > 0.0 && inner && (odd.x | odd.y) != 0) {
     // The two ends as drawn (an end on the border stitched as it is).
@@ -105,7 +139,7 @@ void main() {
   gl_Position = u_viewProj * vec4(v_world, 1.0);
   v_pageUv = (vec2(texel) + 0.5) / float(textureSize(u_samples, 0).x);
   v_pageLayer = pageLayer;
-  v_texLod = a_nodeB.w & 0xFF;
+  v_texLod = float(a_nodeB.w & 0xFF) + float((a_nodeB.w >> 16) & 0xFF) / 255.0;
   v_node = node;
   v_nodeUv = vec2(a_ij) / float(n);
   v_snapped = sx != tx || sy != ty ? 1.0 : 0.0;

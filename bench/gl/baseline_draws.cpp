@@ -114,6 +114,7 @@ double BaselineDraws::drawStaticMeshMs(uint64_t triangles, uint32_t frames, uint
     glUseProgram(staticProgram_.id());
     glBindVertexArray(mesh.vertexArray.id());
     glDrawElements(GL_TRIANGLES, mesh.indexCount, GL_UNSIGNED_INT, nullptr);
+    renderer_.endFrame();
     glFinish();
   };
   frame();  // warm-up: first use compiles shader variants and faults in buffers
@@ -144,6 +145,7 @@ double BaselineDraws::drawMeshMs(std::span<const glm::vec3> positions, std::span
     renderer_.setShading(staticTerrainProgram_, viewProj, eye);
     glBindVertexArray(vao.id());
     glDrawElements(GL_TRIANGLES, GLsizei(triangles.size()), GL_UNSIGNED_INT, nullptr);
+    renderer_.endFrame();
     glFinish();
   };
   frame();  // warm-up

@@ -139,6 +139,9 @@ struct AtlasRenderer::Impl {
   uint32_t capacity = 0;        // pages in the pool
   uint32_t layersPerArray = 0;  // page p is layer p % layersPerArray of array p / layersPerArray
   GlObject colourBuffer, depthBuffer, framebuffer;
+  // With setup.samples > 1: the multisampled target the frame is drawn into, resolved into
+  // framebuffer at the end of each draw.
+  GlObject msColourBuffer, msDepthBuffer, msFramebuffer;
   // The page pool's texture arrays: heights or positions, normals, and RGBA8 colours
   // (RendererSetup::colours; else empty).
   std::vector<GlObject> samples, normals, colours;
@@ -149,6 +152,7 @@ struct AtlasRenderer::Impl {
   GlObject gridVertices, gridIndices, vertexArray;
   std::vector<GridRange> grids;  // [res - minResLog2]
   GlObject nodeBuffer, stitchBuffer, indirectBuffer, feedbackBuffer, feedbackQuery;
+  GLint morphWords = -1;  // the word of the stitch buffer where the neighbours' morph bytes begin; -1: none
   GlObject timerQuery;  // GL_TIME_ELAPSED round each draw
   GlObject overlayBuffer;
   std::vector<NodeOverlay> overlay;  // per node of the next draw; empty: no overlay
@@ -172,6 +176,7 @@ struct AtlasRenderer::Impl {
   void setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const;
   void bindAtlas(const glm::mat4& viewProj, const glm::vec3& eye, const StitchTables& stitch);
   void beginFrame() const;
+  void resolve() const;  // the multisampled frame into framebuffer (nothing with one sample)
   // Binds page-pool array `a`'s textures to the samplers' units.
   void bindPageArray(uint32_t a) const;
 };
@@ -217,29 +222,57 @@ void AtlasRenderer::Impl::checkLimits() const {
       static_cast<int64_t>(setup.height) > getInteger(GL_MAX_RENDERBUFFER_SIZE) ||
       (int64_t(1) << setup.pageIntervalsLog2) + 1 > maxSide)
     throw std::runtime_error("AtlasRenderer: framebuffer or page size exceeds GL limits");
+  if (setup.samples > 1 && int64_t(setup.samples) > getInteger(GL_MAX_SAMPLES))
+    throw std::runtime_error("AtlasRenderer: " + std::to_string(setup.samples) + " samples per pixel asked; the GL "
+                             "implementation offers " + std::to_string(getInteger(GL_MAX_SAMPLES)) + " at most");
 }
 
-void AtlasRenderer::Impl::createFramebuffer() {
-  colourBuffer = makeRenderbuffer();
-  glBindRenderbuffer(GL_RENDERBUFFER, colourBuffer.id());
-  glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, GLsizei(setup.width), GLsizei(setup.height));
-  depthBuffer = makeRenderbuffer();
-  glBindRenderbuffer(GL_RENDERBUFFER, depthBuffer.id());
-  glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT32F, GLsizei(setup.width),
-                        GLsizei(setup.height));
+namespace {
+
+// A framebuffer of an RGBA8 colour and a 32-bit float depth renderbuffer of `samples` samples
+// (1: not multisampled).
+void makeTarget(uint32_t width, uint32_t height, uint32_t samples, GlObject& colour, GlObject& depth,
+                GlObject& framebuffer) {
+  auto storage = [&](GLenum format) {
+    if (samples > 1)
+      glRenderbufferStorageMultisample(GL_RENDERBUFFER, GLsizei(samples), format, GLsizei(width), GLsizei(height));
+    else
+      glRenderbufferStorage(GL_RENDERBUFFER, format, GLsizei(width), GLsizei(height));
+  };
+  colour = makeRenderbuffer();
+  glBindRenderbuffer(GL_RENDERBUFFER, colour.id());
+  storage(GL_RGBA8);
+  depth = makeRenderbuffer();
+  glBindRenderbuffer(GL_RENDERBUFFER, depth.id());
+  storage(GL_DEPTH_COMPONENT32F);
   glBindRenderbuffer(GL_RENDERBUFFER, 0);
   framebuffer = makeFramebuffer();
   glBindFramebuffer(GL_FRAMEBUFFER, framebuffer.id());
-  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER,
-                            colourBuffer.id());
-  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER,
-                            depthBuffer.id());
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, colour.id());
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth.id());
   const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   if (status != GL_FRAMEBUFFER_COMPLETE)
-    throw std::runtime_error("AtlasRenderer: offscreen framebuffer incomplete (status 0x" +
-                             std::to_string(status) + ")");
+    throw std::runtime_error("AtlasRenderer: offscreen framebuffer of " + std::to_string(samples) +
+                             " samples incomplete (status 0x" + std::to_string(status) + ")");
+}
+
+}  // namespace
+
+void AtlasRenderer::Impl::createFramebuffer() {
+  makeTarget(setup.width, setup.height, 1, colourBuffer, depthBuffer, framebuffer);
+  if (setup.samples > 1)
+    makeTarget(setup.width, setup.height, setup.samples, msColourBuffer, msDepthBuffer, msFramebuffer);
   checkGl("framebuffer creation");
+}
+
+void AtlasRenderer::Impl::resolve() const {
+  if (setup.samples <= 1) return;
+  const GLint w = GLint(setup.width), h = GLint(setup.height);
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, msFramebuffer.id());
+  glBindFramebuffer(GL_DRAW_FRAMEBUFFER, framebuffer.id());
+  glBlitFramebuffer(0, 0, w, h, 0, 0, w, h, GL_COLOR_BUFFER_BIT, GL_NEAREST);
+  glBindFramebuffer(GL_FRAMEBUFFER, framebuffer.id());
 }
 
 void AtlasRenderer::Impl::createPagePool() {
@@ -335,11 +368,13 @@ void AtlasRenderer::Impl::validate(std::span<const DrawNode> nodes,
   if (stitch.entriesPerSide == 0) throw std::invalid_argument("StitchTables: entriesPerSide = 0");
   if (!stitch.bytes.empty() && stitch.bytes.size() < nodes.size() * 4 * stitch.entriesPerSide)
     throw std::invalid_argument("StitchTables: fewer bytes than nodes * 4 * entriesPerSide");
+  if (!stitch.morphs.empty() && stitch.morphs.size() != stitch.bytes.size())
+    throw std::invalid_argument("StitchTables: morphs and bytes differ in size");
   for (const DrawNode& n : nodes) {
     const bool ok = n.res >= setup.minResLog2 && n.res <= setup.maxResLog2 &&
                     n.res <= n.pageResLog2 && n.pageResLog2 <= setup.pageIntervalsLog2 &&
                     n.pageResLog2 <= n.sizeLog2 && n.sizeLog2 < 30 && n.pageLayer < capacity &&
-                    n.texLod <= n.pageResLog2 && n.morph <= 255;
+                    n.texLod <= n.pageResLog2 && n.texLodFrac <= 255 && n.morph <= 255;
     if (!ok)
       throw std::invalid_argument(
           "AtlasRenderer: bad DrawNode (origin " + std::to_string(n.originX) + "," +
@@ -357,16 +392,21 @@ void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
     const size_t k = order.empty() ? j : order[j];
     const DrawNode& n = nodes[k];
     records[j] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.res), int32_t(n.pageResLog2),
-                  int32_t(n.pageLayer % layersPerArray), int32_t(k), int32_t(n.texLod | (n.morph << 8))};
+                  int32_t(n.pageLayer % layersPerArray), int32_t(k), int32_t(n.texLod | (n.morph << 8) | (n.texLodFrac << 16))};
   }
   glBindBuffer(GL_ARRAY_BUFFER, nodeBuffer.id());
   glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(records.size() * sizeof(NodeRecord)), records.data(),
                GL_STREAM_DRAW);
   glBindBuffer(GL_ARRAY_BUFFER, 0);
   // note: an empty table means "no neighbours anywhere"; the shader still needs the words.
+  // The neighbours' morph bytes follow, from the next whole word (u_morphWords).
   const size_t tableBytes = nodes.size() * 4 * stitch.entriesPerSide;
-  std::vector<uint32_t> words(std::max<size_t>((tableBytes + 3) / 4, 1), 0u);
+  const size_t tableWords = (tableBytes + 3) / 4;
+  const bool morphs = !stitch.morphs.empty() && tableBytes > 0;
+  std::vector<uint32_t> words(std::max<size_t>(morphs ? 2 * tableWords : tableWords, 1), 0u);
   if (!stitch.bytes.empty()) std::memcpy(words.data(), stitch.bytes.data(), tableBytes);
+  if (morphs) std::memcpy(words.data() + tableWords, stitch.morphs.data(), tableBytes);
+  morphWords = morphs ? GLint(tableWords) : -1;
   glBindBuffer(GL_SHADER_STORAGE_BUFFER, stitchBuffer.id());
   glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(words.size() * sizeof(uint32_t)),
                words.data(), GL_STREAM_DRAW);
@@ -415,6 +455,7 @@ void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& 
   setShading(atlasProgram, viewProj, eye);
   glUniform1i(uniform(atlasProgram, "u_leafLog2"), GLint(stitch.leafLog2));
   glUniform1i(uniform(atlasProgram, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
+  glUniform1i(uniform(atlasProgram, "u_morphWords"), morphWords);
   glUniform1i(uniform(atlasProgram, "u_overlay"), overlay.empty() || !overlayColours ? 0 : 1);
   glUniform1i(uniform(atlasProgram, "u_overlayRecords"), overlay.empty() ? 0 : 1);
   const InspectionViews& v = inspection;
@@ -435,7 +476,7 @@ void AtlasRenderer::Impl::bindPageArray(uint32_t a) const {
 }
 
 void AtlasRenderer::Impl::beginFrame() const {
-  glBindFramebuffer(GL_FRAMEBUFFER, framebuffer.id());
+  glBindFramebuffer(GL_FRAMEBUFFER, setup.samples > 1 ? msFramebuffer.id() : framebuffer.id());
   glViewport(0, 0, GLsizei(setup.width), GLsizei(setup.height));
   glDisable(GL_RASTERIZER_DISCARD);
   glDisable(GL_CULL_FACE);
@@ -445,6 +486,14 @@ void AtlasRenderer::Impl::beginFrame() const {
   glClearColor(setup.background[0], setup.background[1], setup.background[2], 1.0f);
   glClearDepth(1.0);
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  // Multisampled: shaded per sample, so that the terrain's edge, where fragments are discarded
+  // past the DEM's last samples, is smoothed like the triangles' edges.
+  if (setup.samples > 1) {
+    glEnable(GL_SAMPLE_SHADING);
+    glMinSampleShading(1.0f);
+  } else {
+    glDisable(GL_SAMPLE_SHADING);
+  }
 }
 
 AtlasRenderer::AtlasRenderer(const RendererSetup& setup)
@@ -461,6 +510,8 @@ uint32_t AtlasRenderer::layersPerArray() const { return impl_->layersPerArray; }
 const RendererSetup& AtlasRenderer::setup() const { return impl_->setup; }
 
 void AtlasRenderer::beginFrame() const { impl_->beginFrame(); }
+
+void AtlasRenderer::endFrame() const { impl_->resolve(); }
 
 void AtlasRenderer::setOverlay(std::vector<NodeOverlay> perNode, bool colourNodes) {
   impl_->overlay = std::move(perNode);
@@ -559,6 +610,7 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
     glBindVertexArray(0);
     glUseProgram(0);
   }
+  m.resolve();
   glEndQuery(GL_TIME_ELAPSED);
   glFinish();
   stats.drawMs = msSince(t0);

@@ -22,6 +22,7 @@ namespace gimlod::gl {
 
 struct RendererSetup {
   uint32_t width = 640, height = 480;          // offscreen framebuffer size
+  uint32_t samples = 1;                        // samples per pixel (multisampling); 1: none
   std::array<float, 3> background{0.53f, 0.70f, 0.92f};
   uint32_t pageIntervalsLog2 = 6;              // page side = 2^this + 1 samples (= log2 R)
   // Pages in the page pool. A texture array holds at most GL_MAX_ARRAY_TEXTURE_LAYERS (2048 on
@@ -117,7 +118,9 @@ class AtlasRenderer {
 
   // Binds the offscreen framebuffer, sets the draw state (depth test, no culling) and clears it,
   // as draw() does first: for drawing other geometry into the same picture (bench baselines).
+  // endFrame, as draw() does last, resolves a multisampled picture for readPixels and the window.
   void beginFrame() const;
+  void endFrame() const;
   // Makes `program` current with the shading uniforms of atlas.frag (view, light, fog, extent;
   // the terrain-only ones where the program has them) and binds the page pool's textures to its
   // units (the first array's). `program` is one whose fragment stage is atlas.frag

@@ -24,6 +24,7 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o, const Pag
   s.colourScaleLog2 = pages.colourScaleLog2();
   s.width = o.width;
   s.height = o.height;
+  s.samples = o.samples;
   s.background = o.background;
   s.pageIntervalsLog2 = a.manifest.maxNodeResLog2;
   s.layersPerArray = o.layersPerArray;
@@ -343,8 +344,11 @@ void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, doubl
                              FrameResult& f, std::chrono::steady_clock::time_point t0) {
   const Hierarchy& h = atlas_.hierarchy;
   uploadBytes_ = 0;
-  if (options_.texelsPerPixel > 0.0)
+  if (options_.texelsPerPixel > 0.0) {
     f.attributes = assignAttributeResolutions(h, f.cut, view, options_.texelsPerPixel);
+    if (!options_.blendAttributes)
+      for (CutNode& n : f.cut.nodes) n.texBlend = 0.f;
+  }
   // Front to back, so early depth testing rejects hidden fragments.
   auto distance2 = [&](const CutNode& n) {
     const auto& b = h.bounds(n.id);

@@ -25,6 +25,7 @@ namespace gimlod::gl {
 
 struct SceneOptions {
   uint32_t width = 640, height = 480;
+  uint32_t samples = 1;  // samples per pixel (multisampling); 1: none
   std::array<float, 3> background{0.53f, 0.70f, 0.92f};
   // GPU page pool pages. The pool is made larger where the atlas needs it: every chart's root
   // page stays resident, so an atlas of more charts than half of this gets the roots plus half
@@ -66,6 +67,9 @@ struct SceneOptions {
   // Pixel-to-texel ratio for the attribute (normal map) resolutions, in texels per pixel; 0
   // draws every node's normals at its page's resolution.
   double texelsPerPixel = 1.0;
+  // Sample the attributes between the two mips the need lies between (CutNode::texBlend); false:
+  // at the finer one, so they switch as the need crosses a mip.
+  bool blendAttributes = true;
   // Drawn over the shading (runtime/overlay.h): charts, levels or resolutions told apart, seams
   // and open borders marked. Capture is unaffected.
   OverlayMode overlay = OverlayMode::kNone;

@@ -1,11 +1,14 @@
 // Geomorphs on the real vertex shader (transform feedback): at every morph factor, and with
 // factors that differ from node to node, the cut stays crack-free; at factor 0 every vertex is
 // where it was, at 1 every inner vertex the coarser grid lacks lies on that grid's surface (the
-// middle of the coarse edge or diagonal it halves), in between on the way; borders never move.
+// middle of the coarse edge or diagonal it halves), in between on the way. Corners never move; on a
+// side with nothing drawn across, the odd vertices move as inner ones do; on a shared side, the
+// border's vertices move with the neighbour's (their positions stay bit-identical: no cracks).
 // On the shipped DEM and on the bunny's atlas.
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <random>
 
@@ -37,13 +40,22 @@ class GeomorphTest : public test::GlContextTest<> {
   }
 
   // Checks a cut at morph factors 0, 0.25, 0.5, 0.75 and 1, and at random factors per node.
-  static void checkCut(gl::AtlasScene& scene, const Cut& cut) {
+  static void checkCut(gl::AtlasScene& scene, const Cut& cut, bool openBorders) {
     const Hierarchy& h = scene.atlas().hierarchy;
     // No factor set: as before geomorphs, crack-free, and cracked without the stitching tables.
     EXPECT_EQ(test::captureCracks(scene, cut).mismatches, 0u);
     const auto base = scene.capture(cut);
     const double extent = glm::length(scene.atlas().hi - scene.atlas().lo);
-    uint64_t moved = 0;
+    uint64_t moved = 0, openMoved = 0, sharedMoved = 0;
+    // Per node, the sides with nothing drawn across.
+    std::vector<std::array<bool, 4>> open(cut.nodes.size());
+    std::vector<SideNeighbour> across;
+    for (size_t k = 0; k < cut.nodes.size(); ++k)
+      for (uint32_t side = 0; side < 4; ++side) {
+        across.clear();
+        sideNeighbours(h, cut, cut.nodes[k].id, side, across);
+        open[k][side] = across.empty();
+      }
     for (const float f : {0.f, 0.25f, 0.5f, 0.75f, 1.f}) {
       SCOPED_TRACE("morph " + std::to_string(f));
       const auto verts = captureWith(scene, cut, [f](size_t) { return f; });
@@ -57,7 +69,27 @@ class GeomorphTest : public test::GlContextTest<> {
           for (uint32_t i = 0; i <= n; ++i) {
             const size_t v = size_t(j) * (n + 1) + i;
             const bool inner = i > 0 && i < n && j > 0 && j < n;
+            const bool corner = (i == 0 || i == n) && (j == 0 || j == n);
             const uint32_t di = i & 1, dj = j & 1;
+            if (!inner && !corner && f > 0.f) {
+              const uint32_t side = j == 0 ? kEdgeBottom : j == n ? kEdgeTop : i == 0 ? kEdgeLeft : kEdgeRight;
+              const bool alongX = side == kEdgeBottom || side == kEdgeTop;
+              const uint32_t along = alongX ? i : j;
+              if (!open[k][side]) {
+                sharedMoved += verts[k][v] != base[k][v];
+                continue;  // the crack check holds it to its neighbour's
+              }
+              if ((along & 1) == 0) {
+                ASSERT_EQ(verts[k][v], base[k][v]) << "node " << k << " open border vertex " << i << "," << j << " moved";
+                continue;
+              }
+              const size_t step = alongX ? 1 : n + 1;
+              const glm::vec3 want = glm::mix(base[k][v], 0.5f * (base[k][v - step] + base[k][v + step]), q);
+              ASSERT_LE(glm::length(verts[k][v] - want), 1e-5 * extent)
+                  << "node " << k << " open border vertex " << i << "," << j << " morph " << q;
+              openMoved += verts[k][v] != base[k][v];
+              continue;
+            }
             if (!inner || (di | dj) == 0 || q == 0.f) {
               ASSERT_EQ(verts[k][v], base[k][v]) << "node " << k << " vertex " << i << "," << j << " moved";
               continue;
@@ -71,7 +103,11 @@ class GeomorphTest : public test::GlContextTest<> {
           }
       }
     }
-    EXPECT_GT(moved, 0u) << "no vertex moved";
+    EXPECT_GT(moved, 0u) << "no inner vertex moved";
+    EXPECT_GT(sharedMoved, 0u) << "no vertex of a shared border moved";
+    if (openBorders) {
+      EXPECT_GT(openMoved, 0u) << "no vertex of an open border moved";
+    }
     // Neighbours at other factors, each node its own.
     std::mt19937 random(7);
     std::uniform_real_distribution<float> factor(0.f, 1.f);
@@ -104,7 +140,7 @@ TEST_F(GeomorphTest, ShippedDemCutsStayCrackFreeAtEveryMorphFactor) {
   const Cut cut = adaptErrorThreshold(atlas.hierarchy, makeViewParams(c, so.width, so.height), ao);
   const test::CutMix mix = test::cutMix(atlas.hierarchy, cut);
   ASSERT_GT(mix.mixed, 0u) << "the cut should join nodes of different levels or resolutions";
-  checkCut(scene, cut);
+  checkCut(scene, cut, true);
 }
 
 TEST_F(GeomorphTest, BunnyCutsStayCrackFreeAtEveryMorphFactor) {
@@ -123,7 +159,7 @@ TEST_F(GeomorphTest, BunnyCutsStayCrackFreeAtEveryMorphFactor) {
   ao.maxNodes = scene.nodeBudget(400);
   const Cut cut = adaptErrorThreshold(atlas.hierarchy, makeViewParams(c, so.width, so.height), ao);
   ASSERT_GT(test::cutMix(atlas.hierarchy, cut).crossChart, 0u);
-  checkCut(scene, cut);
+  checkCut(scene, cut, false);
 }
 
 // The scene's factors: 0 without geomorphs; with them, geomorphFactor of each drawn node: 0 while

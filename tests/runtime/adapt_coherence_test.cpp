@@ -183,5 +183,46 @@ TEST(AttributeResolution, FromProjectedDiagonalAndRatio) {
   EXPECT_EQ(st.texels, texels);
 }
 
+// The attributes' mip, resolution and blend together (CutNode::texBlend): continuous as the camera
+// moves away, where the resolution alone steps a whole mip; the blend in [0, 1), 0 where clamped.
+TEST(AttributeResolution, TheBlendMakesTheMipContinuous) {
+  const World w = makeWorld(129, 3, 2, 5);
+  const NodeId n{1, 2, 1, 2};
+  const auto& b = w.h.bounds(n);
+  const glm::dvec3 centre{0.5 * (b[0] + b[3]), 0.5 * (b[1] + b[4]), b[5]};
+  const uint32_t lo = w.h.params.minNodeResLog2, hi = w.h.params.intervalsLog2 - n.level;
+  ViewParams v;
+  v.pixelsPerRadian = 500.0;
+  v.minDistance = 1e-3;
+  uint32_t switches = 0, blended = 0;
+  double lastLod = -1.0;
+  uint32_t lastRes = 0;
+  for (double dist = 1.0; dist < 1e5; dist *= 1.01) {
+    v.eye = centre + glm::dvec3(0.0, 0.0, dist);
+    float blend = -1.f;
+    const uint32_t res = attributeResolution(w.h, n, v, 1.0, &blend);
+    EXPECT_EQ(res, attributeResolution(w.h, n, v, 1.0));
+    ASSERT_GE(blend, 0.f);
+    ASSERT_LT(blend, 1.f);
+    if (res == lo || res == hi) {
+      // Clamped at either end, or exactly on a mip.
+      EXPECT_TRUE(blend == 0.f || (res == hi && blend < 1.f)) << dist;
+    }
+    blended += blend > 0.f;
+    // The mip sampled: below the finest (hi) by (hi - res) and the blend.
+    const double lod = double(hi - res) + double(blend);
+    if (lastLod >= 0.0) {
+      switches += res != lastRes;
+      // 1% farther: log2(1.01) = 0.0144 of a mip, never a whole one.
+      EXPECT_NEAR(lod, lastLod, 0.02) << dist << ": resolution " << lastRes << " -> " << res;
+      EXPECT_GE(lod, lastLod - 1e-9) << "the mip never gets finer as the camera goes away";
+    }
+    lastLod = lod;
+    lastRes = res;
+  }
+  EXPECT_GE(switches, hi - lo) << "the path crosses every resolution";
+  EXPECT_GT(blended, 0u);
+}
+
 }  // namespace
 }  // namespace gimlod
