@@ -278,11 +278,15 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
                                  "horizontal units taken as its linear units");
       }
     } else {
-      // No SRS: degrees if the pixel extent fits the globe and pixels are under a degree.
+      // No SRS: degrees if the pixel extent fits the globe and pixels are under a degree. The
+      // globe's bounds get half a degree of slack at least: a global grid's pixels are often
+      // centred on the poles and the meridian, so its extent passes them by half a pixel of the
+      // grid it was made at, however finely it was resampled since (ETOPO5 through a VRT).
       const double x0 = std::min(gt[0], gt[0] + gt[1] * w), x1 = std::max(gt[0], gt[0] + gt[1] * w);
       const double y0 = std::min(gt[3], gt[3] + gt[5] * h), y1 = std::max(gt[3], gt[3] + gt[5] * h);
-      geographic = sx < 1.0 && sy < 1.0 && x0 >= -180.0 - sx && x1 <= 360.0 + sx &&
-                   y0 >= -90.0 - sy && y1 <= 90.0 + sy;
+      const double slackX = std::max(sx, 0.5), slackY = std::max(sy, 0.5);
+      geographic = sx < 1.0 && sy < 1.0 && x0 >= -180.0 - slackX && x1 <= 360.0 + slackX &&
+                   y0 >= -90.0 - slackY && y1 <= 90.0 + slackY;
       if (geographic) {
         dem.warnings.push_back("no spatial reference; extent fits longitude/latitude, so units "
                                "are taken as degrees");

@@ -7,7 +7,7 @@ uniform mat4 u_viewProj;
 out vec3 v_world;
 out vec2 v_pageUv;
 flat out int v_pageLayer;
-flat out int v_texLod;
+flat out float v_texLod;
 flat out int v_node;  // atlas.frag's overlay inputs, unused here (u_overlay is 0)
 out vec2 v_nodeUv;
 out float v_snapped;  // atlas.frag's inspection view of snapped vertices, unused here (u_views is 0)
@@ -15,7 +15,7 @@ void main() {
   v_world = a_position;
   v_pageUv = vec2(0.5);
   v_pageLayer = 0;
-  v_texLod = 0;
+  v_texLod = 0.0;
   v_node = 0;
   v_nodeUv = vec2(0.0);
   v_snapped = 0.0;

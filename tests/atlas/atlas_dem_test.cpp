@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -53,14 +54,14 @@ RawBand readRaw(const fs::path& path) {
 
 // Writes a single-band GeoTIFF (north-up, 1-degree-free projected-less geotransform).
 void writeTiff(const fs::path& path, int w, int h, GDALDataType type, const std::vector<double>& v,
-               const double* nodata) {
+               const double* nodata, const std::array<double, 6>& geotransform = {500000, 10, 0, 5000000, 0, -10}) {
   GDALAllRegister();
   GDALDriverH drv = GDALGetDriverByName("GTiff");
   ASSERT_NE(drv, nullptr);
   GDALDatasetH ds = GDALCreate(drv, path.c_str(), w, h, 1, type, nullptr);
   ASSERT_NE(ds, nullptr);
-  double gt[6] = {500000, 10, 0, 5000000, 0, -10};
-  GDALSetGeoTransform(ds, gt);
+  std::array<double, 6> gt = geotransform;
+  GDALSetGeoTransform(ds, gt.data());
   GDALRasterBandH b = GDALGetRasterBand(ds, 1);
   if (nodata) GDALSetRasterNoDataValue(b, *nodata);
   std::vector<double> copy = v;
@@ -410,6 +411,25 @@ TEST(AtlasDemErrors, AllNodataRaster) {
     EXPECT_NE(std::string(e.what()).find("all_nodata.tif"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("every sample is nodata"), std::string::npos) << e.what();
   }
+}
+
+// Without an SRS, a raster whose extent fits the globe is taken as degrees. A global grid of
+// pixels centred on the pole passes 90 degrees by half of one of its pixels, and keeps doing so
+// when resampled finer (ETOPO5 at 5 arc minutes, upsampled by a VRT): its north-west corner, in
+// pixels of 0.0034 degrees, is still geographic. A raster a degree past the pole is not.
+TEST(AtlasDem, AFinelyResampledGlobalGridIsStillDegrees) {
+  test::TempDir tmp("gimlod-dem");
+  const int w = 12, h = 10;
+  std::vector<double> v(w * h, 100.0);
+  const double half = 0.5 * 5.0 / 60.0;  // half a pixel of 5 arc minutes
+  writeTiff(tmp.path() / "corner.tif", w, h, GDT_Float32, v, nullptr, {-half, 0.0034, 0, 90.0 + half, 0, -0.0034});
+  const DemRaster corner = loadDem(tmp.path() / "corner.tif");
+  EXPECT_TRUE(corner.georef.geographic);
+  EXPECT_NEAR(corner.spacing[1], 0.0034 * 111000.0, 0.0034 * 2000.0) << "metres per degree of latitude";
+  writeTiff(tmp.path() / "past.tif", w, h, GDT_Float32, v, nullptr, {0.0, 0.0034, 0, 91.0, 0, -0.0034});
+  const DemRaster past = loadDem(tmp.path() / "past.tif");
+  EXPECT_FALSE(past.georef.geographic);
+  EXPECT_DOUBLE_EQ(past.spacing[1], 0.0034);
 }
 
 TEST(AtlasDemErrors, NanAndNodataInFloatRasterAreFilled) {
