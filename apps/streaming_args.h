@@ -44,12 +44,13 @@ struct StreamingArgs {
   std::string uploadBudget = "32M";  // a frame's uploads (vk_lod_clusters: 32 MiB of transfer a frame)
   uint32_t loaderThreads = 2;
   std::string ioLatency;  // MS[,JITTER]
+  uint32_t ioDepth = 32;  // reads the simulated storage serves at once
   double prefetch = 0.5;  // seconds ahead (P-BDAM: half a second)
   std::vector<CLI::Option*> loaderOnly;  // given, they switch the loader on
 };
 
 // Registers --async-loads, --uploads-per-frame, --gpu-cache, --ram-cache, --upload-budget,
-// --loader-threads, --io-latency and --prefetch on cmd.
+// --loader-threads, --io-latency, --io-depth and --prefetch on cmd.
 inline void addStreamingOptions(CLI::App* cmd, StreamingArgs& a) {
   cmd->add_flag("--async-loads", a.asyncLoads,
                 "Load pages on loader threads; missing nodes draw with a resident ancestor's data (implied by the "
@@ -68,6 +69,10 @@ inline void addStreamingOptions(CLI::App* cmd, StreamingArgs& a) {
       cmd->add_option("--loader-threads", a.loaderThreads, "Threads that read and decode pages")->capture_default_str(),
       cmd->add_option("--io-latency", a.ioLatency,
                       "MS[,JITTER]: simulate slow storage, every disk read waiting MS milliseconds plus up to JITTER"),
+      cmd->add_option("--io-depth", a.ioDepth,
+                      "Reads the simulated storage serves at once, as an asynchronous reader keeps them in flight "
+                      "(1: each loader thread waits for its own)")
+          ->capture_default_str(),
       cmd->add_option("--prefetch", a.prefetch,
                       "Seconds ahead: also load the cut of the view the camera's motion reaches then (0: off)")
           ->capture_default_str()};
@@ -95,6 +100,8 @@ inline void applyStreamingArgs(const StreamingArgs& a, gl::SceneOptions& so) {
   so.maxUploadsPerFrame = a.uploadsPerFrame;  // at least 1: validateViewOptions
   if (a.loaderThreads == 0 || a.loaderThreads > 64) throw InputError("--loader-threads must be in [1, 64]");
   so.loaderThreads = a.loaderThreads;
+  if (a.ioDepth == 0 || a.ioDepth > 4096) throw InputError("--io-depth must be in [1, 4096]");
+  so.ioDepth = a.ioDepth;
   if (!(a.prefetch >= 0.0) || !std::isfinite(a.prefetch) || a.prefetch > 60.0)
     throw InputError("--prefetch must be in [0, 60] seconds");
   so.prefetchSeconds = a.prefetch;

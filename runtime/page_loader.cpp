@@ -199,76 +199,99 @@ void PageLoader::finish(LoadedPage&& page) {
 void PageLoader::run(uint32_t thread) {
   std::mt19937 random(thread + 1);  // the simulated latency's jitter, per thread
   std::uniform_real_distribution<double> share(0.0, 1.0);
+  using Clock = std::chrono::steady_clock;
+  const bool slow = options_.ioLatencyMs > 0.0 || options_.ioJitterMs > 0.0;
+  const size_t depth = std::max<uint32_t>(options_.ioDepth, 1);
   std::unique_lock<std::mutex> lock(mutex_);
   for (;;) {
-    wake_.wait(lock, [this] { return stop_ || canStart(); });
     if (stop_) break;
-    const Queued q = *queue_.begin();
-    const uint64_t key = q.id.key();
-    queue_.erase(queue_.begin());
-    queued_.erase(key);
-    reading_.insert(key);
-    LoadedPage page;
-    page.id = q.id;
-    auto hit = ramIndex_.find(key);
-    if (hit != ramIndex_.end()) {
-      ram_.splice(ram_.begin(), ram_, hit->second);
-      page = *hit->second;
-      page.fromRam = true;
-      ++stats_.ramHits;
-      if (options_.prepare) {
-        lock.unlock();
-        options_.prepare(page);
-        lock.lock();
-      }
-      reading_.erase(key);
-      finish(std::move(page));
-      idle_.notify_all();
+    // 1. A read the simulated storage has answered: decode it.
+    if (!issued_.empty() && issued_.begin()->first <= Clock::now()) {
+      const Queued q = issued_.begin()->second;
+      issued_.erase(issued_.begin());
+      readPage(q, lock);
       continue;
     }
-    const double waitMs = options_.ioLatencyMs + options_.ioJitterMs * share(random);
-    if (waitMs > 0.0) {  // the simulated storage; a stop ends the wait
-      wake_.wait_for(lock, std::chrono::duration<double, std::milli>(waitMs), [this] { return stop_; });
-      if (stop_) {
+    // 2. The next request: a RAM hit is served now; a disk read starts now, or with the simulated
+    // storage is issued to it while it has room.
+    if (canStart() && (!slow || issued_.size() < depth)) {
+      const Queued q = *queue_.begin();
+      const uint64_t key = q.id.key();
+      queue_.erase(queue_.begin());
+      queued_.erase(key);
+      reading_.insert(key);
+      auto hit = ramIndex_.find(key);
+      if (hit != ramIndex_.end()) {
+        ram_.splice(ram_.begin(), ram_, hit->second);
+        LoadedPage page = *hit->second;
+        page.fromRam = true;
+        ++stats_.ramHits;
+        if (options_.prepare) {
+          lock.unlock();
+          options_.prepare(page);
+          lock.lock();
+        }
         reading_.erase(key);
-        break;
+        finish(std::move(page));
+        idle_.notify_all();
+      } else if (slow) {
+        const double waitMs = options_.ioLatencyMs + options_.ioJitterMs * share(random);
+        issued_.emplace(Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                           std::chrono::duration<double, std::milli>(waitMs)),
+                        q);
+        stats_.ioPeak = std::max(stats_.ioPeak, uint32_t(issued_.size()));
+        wake_.notify_all();  // another thread may sleep until a later answer
+      } else {
+        readPage(q, lock);
       }
+      continue;
     }
-    // note: the disk read and its decoding run unlocked, so request()/takeCompleted() never wait
-    // on the disk.
-    lock.unlock();
-    std::string error;
-    try {
-      pages_.read(q.id, page.samples, page.normals, &page.colours);
-    } catch (const std::exception& e) {
-      error = e.what();
-      if (error.empty()) error = "unreadable page";
-    } catch (...) {
-      error = "unreadable page";
-    }
-    if (!error.empty() && options_.onFailure) options_.onFailure({q.id, error});
-    LoadedPage cached;  // the page as read, for the cache (without what prepare adds), copied unlocked
-    if (error.empty()) {
-      cached = page;
-      if (options_.prepare) options_.prepare(page);
-    }
-    lock.lock();
-    reading_.erase(key);
-    if (error.empty()) {
-      ++stats_.loadedFromDisk;
-      insertRam(std::move(cached));
-      finish(std::move(page));
-    } else {
-      // note: a failed page is not read again (the node stays on a coarser stand-in); a request
-      // for it is ignored.
-      ++stats_.failed;
-      failedKeys_.insert(key);
-      failures_.push_back({q.id, std::move(error)});
-    }
-    idle_.notify_all();
-    wake_.notify_all();
+    // 3. Nothing to do now: wait for a request, a stop, or the storage's next answer.
+    if (issued_.empty())
+      wake_.wait(lock);
+    else
+      wake_.wait_until(lock, issued_.begin()->first);
   }
   idle_.notify_all();
+}
+
+void PageLoader::readPage(const Queued& q, std::unique_lock<std::mutex>& lock) {
+  const uint64_t key = q.id.key();
+  LoadedPage page;
+  page.id = q.id;
+  // note: the disk read and its decoding run unlocked, so request()/takeCompleted() never wait
+  // on the disk.
+  lock.unlock();
+  std::string error;
+  try {
+    pages_.read(q.id, page.samples, page.normals, &page.colours);
+  } catch (const std::exception& e) {
+    error = e.what();
+    if (error.empty()) error = "unreadable page";
+  } catch (...) {
+    error = "unreadable page";
+  }
+  if (!error.empty() && options_.onFailure) options_.onFailure({q.id, error});
+  LoadedPage cached;  // the page as read, for the cache (without what prepare adds), copied unlocked
+  if (error.empty()) {
+    cached = page;
+    if (options_.prepare) options_.prepare(page);
+  }
+  lock.lock();
+  reading_.erase(key);
+  if (error.empty()) {
+    ++stats_.loadedFromDisk;
+    insertRam(std::move(cached));
+    finish(std::move(page));
+  } else {
+    // note: a failed page is not read again (the node stays on a coarser stand-in); a request
+    // for it is ignored.
+    ++stats_.failed;
+    failedKeys_.insert(key);
+    failures_.push_back({q.id, std::move(error)});
+  }
+  idle_.notify_all();
+  wake_.notify_all();
 }
 
 }  // namespace gimlod

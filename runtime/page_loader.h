@@ -4,11 +4,13 @@
 // C++, no GL.
 #pragma once
 
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
 #include <functional>
 #include <list>
+#include <map>
 #include <mutex>
 #include <set>
 #include <string>
@@ -53,8 +55,11 @@ struct PageLoaderOptions {
   size_t stagedBytes = 0;
   uint32_t threads = 1;  // loader threads (at least 1)
   // Simulated slow storage: every disk read first waits latency plus a uniform random share of
-  // jitter (milliseconds). RAM hits do not wait.
+  // jitter (milliseconds). RAM hits do not wait. The storage serves up to ioDepth requests at
+  // once, as an asynchronous reader keeps that many in flight against a slow disk or a network
+  // (the threads decode what arrives); 1: each thread waits for its own read.
   double ioLatencyMs = 0.0, ioJitterMs = 0.0;
+  uint32_t ioDepth = 32;
   bool startPaused = false;  // serve nothing until resume()
   // Called once for each page whose read fails, on the loader thread that read it (no lock
   // held): where the caller logs it.
@@ -78,6 +83,7 @@ struct PageLoaderStats {
   uint64_t stagedBytes = 0;     // bytes of finished pages waiting in takeCompleted
   uint32_t inFlight = 0;        // requests queued or being read
   uint32_t completed = 0;       // pages waiting in takeCompleted
+  uint32_t ioPeak = 0;          // the most reads the simulated storage served at once
 };
 
 class PageLoader {
@@ -130,6 +136,9 @@ class PageLoader {
     }
   };
   void run(uint32_t thread);
+  // Reads and decodes q's page (whose key is in reading_), unlocking `lock` meanwhile, and files
+  // it as finished or failed.
+  void readPage(const Queued& q, std::unique_lock<std::mutex>& lock);
   bool canStart() const;  // mutex_ held
   size_t stagedBytesOf(const NodeId& n) const;  // a page's bytes once read and prepared
   size_t cacheBudget() const;
@@ -145,7 +154,9 @@ class PageLoader {
   std::set<Queued> queue_;
   std::unordered_map<uint64_t, std::set<Queued>::iterator> queued_;
   uint64_t seq_ = 0;
-  std::unordered_set<uint64_t> reading_;  // keys being read
+  std::unordered_set<uint64_t> reading_;  // keys being read (issued to the simulated storage too)
+  // Requests the simulated storage is serving, by the time their data arrives.
+  std::multimap<std::chrono::steady_clock::time_point, Queued> issued_;
   std::deque<LoadedPage> completed_;
   std::unordered_set<uint64_t> completedKeys_;
   std::list<LoadedPage> ram_;  // front = most recent

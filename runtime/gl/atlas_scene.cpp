@@ -63,6 +63,7 @@ PageLoaderOptions loaderOptions(const SceneOptions& o, const RendererSetup& setu
   l.threads = std::max(o.loaderThreads, 1u);
   l.ioLatencyMs = o.ioLatencyMs;
   l.ioJitterMs = o.ioJitterMs;
+  l.ioDepth = o.ioDepth;
   l.onFailure = o.onPageFailure;
   return l;
 }

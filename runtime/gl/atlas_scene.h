@@ -50,6 +50,7 @@ struct SceneOptions {
   size_t ramCacheBytes = size_t(256) << 20;
   uint32_t loaderThreads = 2;                  // async: loader threads
   double ioLatencyMs = 0.0, ioJitterMs = 0.0;  // async: simulated slow storage (PageLoaderOptions)
+  uint32_t ioDepth = 32;  // async: reads the simulated storage serves at once (PageLoaderOptions)
   // async: prefetch the cut of the view this many seconds ahead, the camera extrapolated from the
   // last two frames at frameSeconds apart, at a priority below every page the frame needs (0: off).
   double prefetchSeconds = 0.0;

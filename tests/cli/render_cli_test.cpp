@@ -106,10 +106,10 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
     EXPECT_GE(timed, rows.size() - 2) << "GPU timer unknown on more than one frame";
   }
 
-  // Triangle-budget mode (quad queue): every frame within the budgets.
+  // Triangle-budget mode (quad queue), multisampled: every frame within the budgets.
   const fs::path budget = dir.path() / "budget";
   ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + budget.string() +
-                                 "' --orbit 3 --size 96x64 --triangles 30000 --max-nodes 60 --texel-ratio 2",
+                                 "' --orbit 3 --size 96x64 --triangles 30000 --max-nodes 60 --texel-ratio 2 --msaa 4",
                              &out),
             0)
       << out;
@@ -123,7 +123,8 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
     EXPECT_LE(std::stoul(rows[r][col("nodes")]), 60u);
   }
   // Bad options name themselves.
-  for (const char* bad : {"--texel-ratio -1", "--texel-ratio nan", "--triangles 1000 --top-down", "--geomorph -1"}) {
+  for (const char* bad : {"--texel-ratio -1", "--texel-ratio nan", "--triangles 1000 --top-down", "--geomorph -1",
+                          "--msaa 0", "--msaa 64"}) {
     EXPECT_NE(test::runCommand(app + " render '" + atlas.string() + "' -o '" + (dir.path() / "bad").string() +
                                    "' --orbit 1 --size 32x32 " + bad,
                                &out),
@@ -183,7 +184,8 @@ TEST(RenderCli, StreamingKeepsItsByteBudgets) {
            {"--io-latency fast", "--io-latency"},
            {"--io-latency 5,-1", "--io-latency"},
            {"--prefetch -1", "--prefetch"},
-           {"--loader-threads 0", "--loader-threads"}}) {
+           {"--loader-threads 0", "--loader-threads"},
+           {"--io-depth 0", "--io-depth"}}) {
     EXPECT_NE(test::runCommand(app + " render '" + atlas.string() + "' -o '" + (dir.path() / "bad").string() +
                                    "' --orbit 1 --size 32x32 " + bad,
                                &out),
