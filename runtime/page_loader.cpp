@@ -82,28 +82,32 @@ std::vector<LoadedPage> PageLoader::takeCompleted(size_t max) {
 }
 
 std::vector<LoadedPage> PageLoader::takeCompleted(const std::function<bool(uint64_t key)>& wanted, size_t maxPages,
-                                                  size_t maxBytes) {
+                                                  size_t maxBytes, const std::function<bool(uint64_t key)>& first) {
   std::vector<LoadedPage> out;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     size_t bytes = 0;
-    std::deque<LoadedPage> kept;
-    for (LoadedPage& pg : completed_) {
-      const size_t b = pg.bytes();
-      const uint64_t key = pg.id.key();
-      if (!wanted(key)) {
-        ++stats_.unwanted;
-      } else if (out.size() < maxPages && (out.empty() || bytes + b <= maxBytes)) {
-        bytes += b;
-        out.push_back(std::move(pg));
-      } else {
-        kept.push_back(std::move(pg));
-        continue;
+    // With `first`: its pages in a first pass, the other wanted ones in a second.
+    for (int pass = 0; pass < (first ? 2 : 1); ++pass) {
+      std::deque<LoadedPage> kept;
+      for (LoadedPage& pg : completed_) {
+        const size_t b = pg.bytes();
+        const uint64_t key = pg.id.key();
+        const bool now = !first || pass == 1 || first(key);
+        if (!wanted(key)) {
+          ++stats_.unwanted;
+        } else if (now && out.size() < maxPages && (out.empty() || bytes + b <= maxBytes)) {
+          bytes += b;
+          out.push_back(std::move(pg));
+        } else {
+          kept.push_back(std::move(pg));
+          continue;
+        }
+        completedKeys_.erase(key);
+        stats_.stagedBytes -= b;
       }
-      completedKeys_.erase(key);
-      stats_.stagedBytes -= b;
+      completed_.swap(kept);
     }
-    completed_.swap(kept);
   }
   wake_.notify_all();  // room for reads held back by the staged bytes
   return out;

@@ -108,9 +108,10 @@ class PageLoader {
   std::vector<LoadedPage> takeCompleted(size_t max);
   // The same, dropping the finished pages `wanted` rejects (counted in unwanted) and stopping
   // before a page would take the bytes past maxBytes (but always taking one wanted page); the
-  // others wait.
+  // others wait. With `first`, the wanted pages it accepts are taken before the rest (a frame's
+  // own pages before prefetched ones).
   std::vector<LoadedPage> takeCompleted(const std::function<bool(uint64_t key)>& wanted, size_t maxPages,
-                                        size_t maxBytes);
+                                        size_t maxBytes, const std::function<bool(uint64_t key)>& first = {});
   // Copies n's page from the RAM cache; false (outputs untouched) when it is not there.
   bool tryGetResident(const NodeId& n, std::vector<float>& samples,
                       std::vector<PackedNormal>& normals, std::vector<PackedColour>* colours = nullptr);

@@ -1,5 +1,6 @@
 #include "runtime/page_pool.h"
 
+#include <algorithm>
 #include <cassert>
 #include <iterator>
 
@@ -7,7 +8,7 @@ namespace gimlod {
 
 PagePool::PagePool(uint32_t capacity) : capacity_(capacity) {}
 
-bool PagePool::acquire(uint64_t key, uint64_t frame, Slot* slot) {
+bool PagePool::acquire(uint64_t key, uint64_t frame, Slot* slot, uint64_t keepFrom) {
   auto it = map_.find(key);
   if (it != map_.end()) {
     it->second->frame = frame;
@@ -19,10 +20,11 @@ bool PagePool::acquire(uint64_t key, uint64_t frame, Slot* slot) {
   if (map_.size() < capacity_) {
     layer = uint32_t(map_.size());
   } else {
-    // Least recent evictable entry: not locked, not used this frame.
+    // Least recent evictable entry: not locked, not used this frame (nor since keepFrom).
+    const uint64_t keep = keepFrom > 0 ? std::min(keepFrom, frame) : frame;
     auto victim = lru_.end();
     for (auto r = lru_.rbegin(); r != lru_.rend(); ++r)
-      if (!r->locked && r->frame != frame) {
+      if (!r->locked && r->frame < keep) {
         victim = std::prev(r.base());
         break;
       }

@@ -19,7 +19,9 @@ class PagePool {
     bool needsUpload = false;
   };
   // Finds or assigns a layer for key in `frame`; false when every layer is in use this frame.
-  bool acquire(uint64_t key, uint64_t frame, Slot* slot);
+  // keepFrom > 0: a new key evicts only a page last used before that frame (a prefetched page
+  // takes a stale layer or none, never one the recent frames drew from).
+  bool acquire(uint64_t key, uint64_t frame, Slot* slot, uint64_t keepFrom = 0);
   void lock(uint64_t key);  // never evict key (it must be resident)
   // Whether key holds a layer now (does not touch the LRU order).
   bool contains(uint64_t key) const { return map_.count(key) != 0; }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cassert>
 #include <chrono>
+#include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <unordered_set>
@@ -117,9 +118,9 @@ bool AtlasScene::predictedView(const Camera& camera, ViewParams* view) const {
   return true;
 }
 
-bool AtlasScene::uploadLoaded(const LoadedPage& pg) {
+bool AtlasScene::uploadLoaded(const LoadedPage& pg, uint64_t keepFrom) {
   PagePool::Slot slot;
-  if (!pool_.acquire(pg.id.key(), frame_, &slot)) return false;
+  if (!pool_.acquire(pg.id.key(), frame_, &slot, keepFrom)) return false;
   if (slot.needsUpload) upload(slot.layer, pg.id, pg.samples, pg.normals, pg.colours, &pg.mips);
   return true;
 }
@@ -173,7 +174,13 @@ Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, const Ca
   if (options_.uploadBytesPerFrame > 0)
     maxPages = std::min<size_t>(maxPages, std::max<uint64_t>(options_.uploadBytesPerFrame / pageBytes_, 1));
   uint32_t uploaded = 0;
-  for (const LoadedPage& pg : loader_->takeCompleted(wanted, maxPages, SIZE_MAX)) uploaded += uint32_t(uploadLoaded(pg));
+  // A prefetched page takes a free layer, or one no frame drew from over the prefetch horizon:
+  // never one the cut may go back to (it then waits in the loader's RAM cache until needed).
+  const uint64_t horizon = uint64_t(std::ceil(options_.prefetchSeconds / std::max(options_.frameSeconds, 1e-6)));
+  const uint64_t keepFrom = frame_ > horizon ? frame_ - horizon : 1;
+  const auto thisFrame = [&](uint64_t key) { return plan.wanted.count(key) != 0; };
+  for (const LoadedPage& pg : loader_->takeCompleted(wanted, maxPages, SIZE_MAX, thisFrame))
+    uploaded += uint32_t(uploadLoaded(pg, thisFrame(pg.id.key()) ? 0 : keepFrom));
   // 4. Every missing node draws as its nearest resident ancestor, stitched.
   ResidentCut drawn = substituteResident(h, desired, view, resident);
   assert(drawn.stitchUnfixable == 0 && "stitching constraint needs a split into a non-resident node");

@@ -175,8 +175,9 @@ class AtlasScene {
                   uint32_t maxNodes, FrameResult* frame);
   // The view prefetchSeconds ahead, from the last two cameras; false without a previous one.
   bool predictedView(const Camera& camera, ViewParams* view) const;
-  // Uploads a loaded page into the pool; false when no layer is free this frame.
-  bool uploadLoaded(const LoadedPage& page);
+  // Uploads a loaded page into the pool; false when no layer is free this frame (keepFrom:
+  // PagePool::acquire's).
+  bool uploadLoaded(const LoadedPage& page, uint64_t keepFrom = 0);
   // Uploads n's page into pool layer `layer` (mips: made beforehand, or null) and counts its bytes.
   void upload(uint32_t layer, const NodeId& n, const std::vector<float>& samples,
               const std::vector<PackedNormal>& normals, const std::vector<PackedColour>& colours,

@@ -45,5 +45,26 @@ TEST(PagePool, NeverEvictsPagesOfThisFrameOrLockedPages) {
   EXPECT_FALSE(pool.contains(2));
 }
 
+// keepFrom: a page (a prefetched one) takes a free layer, or a layer last used before keepFrom;
+// a layer used since stays.
+TEST(PagePool, KeepFromSparesRecentlyUsedLayers) {
+  PagePool pool(3);
+  PagePool::Slot s;
+  ASSERT_TRUE(pool.acquire(1, 2, &s));
+  ASSERT_TRUE(pool.acquire(2, 8, &s));
+  // A free layer is taken whatever keepFrom says.
+  ASSERT_TRUE(pool.acquire(3, 10, &s, 9));
+  EXPECT_EQ(pool.evictions(), 0u);
+  // Full: 1 (used at frame 2) is older than frame 5, so it may go; then 2 (frame 8) may not.
+  ASSERT_TRUE(pool.acquire(4, 10, &s, 5));
+  EXPECT_FALSE(pool.contains(1));
+  EXPECT_FALSE(pool.acquire(5, 10, &s, 5));
+  EXPECT_TRUE(pool.contains(2));
+  // Without keepFrom, 2 goes (not used this frame).
+  ASSERT_TRUE(pool.acquire(5, 10, &s));
+  EXPECT_FALSE(pool.contains(2));
+  EXPECT_EQ(pool.evictions(), 2u);
+}
+
 }  // namespace
 }  // namespace gimlod
