@@ -210,8 +210,8 @@ constexpr std::array<int, 3> kBackground{20, 30, 40};
 const std::string kBackgroundArg = " --background 20,30,40";
 
 // A scripted run (--path, --frames, --hide-ui, --screenshot) draws, pixel for pixel within
-// rounding, what `render` draws from the same camera, on the shipped bunny and the shipped DEM,
-// and the model covers the middle of the window.
+// rounding, what `render` draws from the same camera, on the shipped bunny and the shipped DEM
+// (multisampled, --msaa 4), and the model covers the middle of the window.
 TEST_F(ViewWindow, ScriptedRunDrawsWhatRenderDraws) {
   const std::string app = test::appPath().string();
   for (const char* name : {"bunny", "rainier"}) {
@@ -219,15 +219,16 @@ TEST_F(ViewWindow, ScriptedRunDrawsWhatRenderDraws) {
     const fs::path atlas = dir() / (std::string(name) + ".atlas");
     const fs::path path = writeTwoCameras(dir() / (std::string(name) + "_path.json"), atlas, name[0] == 'b');
     const fs::path shot = dir() / (std::string(name) + "_view.png"), frames = dir() / (std::string(name) + "_render");
+    const std::string msaa = name[0] == 'r' ? " --msaa 4" : "";
     std::string out;
     ASSERT_EQ(test::runCommand(env() + app + " view '" + atlas.string() + "' --path '" + path.string() +
                                    "' --frames 4 --size 320x240 --hide-ui --screenshot '" + shot.string() + "'" +
-                                   kBackgroundArg,
+                                   kBackgroundArg + msaa,
                                &out),
               0)
         << out;
     ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' --path '" + path.string() + "' --size 320x240 -o '" +
-                                   frames.string() + "'" + kBackgroundArg,
+                                   frames.string() + "'" + kBackgroundArg + msaa,
                                &out),
               0)
         << out;
