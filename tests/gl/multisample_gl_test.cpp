@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <memory>
+#include <string>
 #include <vector>
 
 #include "runtime/atlas_view.h"
@@ -18,7 +20,20 @@
 namespace gimlod {
 namespace {
 
-class MultisampleTest : public test::GlContextTest<> {};
+class MultisampleTest : public test::GlContextTest<> {
+ protected:
+  static void SetUpTestSuite() {
+    test::GlContextTest<>::SetUpTestSuite();
+    dir_ = std::make_unique<test::TempDir>("gimlod-msaa");
+    test::buildRainierAtlas(dir_->path() / "atlas", 129, 4, 32, 2);
+  }
+  static void TearDownTestSuite() {
+    dir_.reset();
+    test::GlContextTest<>::TearDownTestSuite();
+  }
+  static AtlasView atlas() { return openAtlas(dir_->path() / "atlas"); }
+  static inline std::unique_ptr<test::TempDir> dir_;
+};
 
 std::vector<uint8_t> renderCorner(const AtlasView& atlas, uint32_t samples) {
   gl::SceneOptions so;
@@ -42,9 +57,7 @@ std::vector<uint8_t> renderCorner(const AtlasView& atlas, uint32_t samples) {
 }
 
 TEST_F(MultisampleTest, TheDemsEdgeBlendsWithTheBackground) {
-  test::TempDir dir("gimlod-msaa");
-  test::buildRainierAtlas(dir.path() / "atlas", 129, 4, 32, 2);
-  const AtlasView atlas = openAtlas(dir.path() / "atlas");
+  const AtlasView atlas = this->atlas();
   const std::vector<uint8_t> one = renderCorner(atlas, 1), four = renderCorner(atlas, 4);
   ASSERT_EQ(one.size(), four.size());
   const gl::SceneOptions defaults;
@@ -75,9 +88,7 @@ TEST_F(MultisampleTest, TheDemsEdgeBlendsWithTheBackground) {
 }
 
 TEST_F(MultisampleTest, MoreSamplesThanTheGlOffersIsAClearError) {
-  test::TempDir dir("gimlod-msaa-limit");
-  test::buildRainierAtlas(dir.path() / "atlas", 129, 4, 32, 2);
-  const AtlasView atlas = openAtlas(dir.path() / "atlas");
+  const AtlasView atlas = this->atlas();
   gl::SceneOptions so;
   so.width = 32;
   so.height = 32;
