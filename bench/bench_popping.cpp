@@ -6,7 +6,7 @@
 // percentile, and the pixels that changed by more than 16.
 //
 // Usage: bench_popping ATLAS_DIR [--frames 240] [--distance 0.6] [--size 320x240] [--tolerance 1]
-//        [--max-nodes 2000] [--geomorph 0,0.5] [--attribute-blend 1] [--msaa 1] [--descent] (a fly-down on a
+//        [--max-nodes 2000] [--geomorph 0,0.5] [--attribute-blend 1] [--msaa 1] [--cull] [--descent] (a fly-down on a
 //        terrain instead of an orbit spiralling in); --attribute-blend 0,1 compares the normals and
 //        colours switching between mips with their blending between them (CutNode::texBlend);
 //        --msaa 4 draws 4 samples per pixel, shaded per sample, so that a silhouette moving part of
@@ -39,6 +39,9 @@ struct Args {
   bool descent = false;
   std::vector<int> blends{1};  // attribute blending (CutNode::texBlend) on, off or both
   uint32_t samples = 1;        // multisampling: a silhouette that moves part of a pixel changes it part way
+  // Frustum culling: off by default, so frame k's cut covers what frame k+1 sees (with it, the
+  // ground newly in view at the picture's edges is sky in the frozen cut's picture: not a pop).
+  bool cull = false;
 };
 
 // The largest per-channel difference of two RGBA8 pictures, and the pixels differing by more than 16.
@@ -68,6 +71,7 @@ int run(int argc, char** argv) {
       ->delimiter(',')
       ->check(CLI::Range(0, 1));
   app.add_option("--msaa", a.samples, "samples per pixel")->check(CLI::Range(1u, 32u));
+  app.add_flag("--cull", a.cull, "cull nodes outside the view (the frozen cut then lacks what comes into view)");
   app.add_flag("--descent", a.descent, "a fly-down onto a terrain instead of an orbit");
   CLI11_PARSE(app, argc, argv);
   uint32_t w = 0, h = 0;
@@ -103,6 +107,7 @@ int run(int argc, char** argv) {
     AdaptOptions o;
     o.tolerancePx = a.tolerance;
     o.maxNodes = a.maxNodes;
+    o.frustumCull = a.cull;
     std::vector<int> largest;
     uint64_t over = 0, switches = 0;
     Cut previous = scene.renderFrame(path[0], o).cut;
