@@ -19,6 +19,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "bench/guarded_main.h"
@@ -94,8 +95,10 @@ int run(int argc, char** argv) {
   std::printf("%s: %zu frames of a slow %s, %ux%u, tolerance %.2f px, %u nodes at most, on %s\n", a.atlas.c_str(),
               path.size(), a.descent ? "fly-down" : "spiral", w, h, a.tolerance, a.maxNodes, context->renderer().c_str());
   std::printf("%9s %6s %9s %9s %9s %12s %9s\n", "geomorph", "blend", "max", "mean", "p99", "pixels>16", "switches");
+  std::vector<std::pair<int, double>> settings;  // (attribute blend, geomorph range)
   for (const int blend : a.blends)
-  for (const double g : a.geomorphs) {
+    for (const double g : a.geomorphs) settings.emplace_back(blend, g);
+  for (const auto& [blend, g] : settings) {
     gl::SceneOptions so;
     so.blendAttributes = blend != 0;
     so.samples = a.samples;

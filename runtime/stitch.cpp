@@ -33,15 +33,15 @@ void sideVertices(const std::vector<glm::vec3>& v, uint32_t res, uint32_t s, std
 
 }  // namespace
 
-StitchTables buildStitchTables(const Hierarchy& h, const Cut& cut, bool geomorphs) {
+StitchTables buildStitchTables(const Hierarchy& h, const Cut& cut) {
   StitchTables t;
   const uint32_t L = h.params.intervalsLog2;
   t.leafLog2 = L - (h.params.depth - 1);
   t.entriesPerSide = 1u << (h.params.depth - 1);
   t.bytes.assign(cut.nodes.size() * 4 * t.entriesPerSide, 0);
   const uint32_t minRes = h.params.minNodeResLog2;
-  const bool morphs = geomorphs && std::any_of(cut.nodes.begin(), cut.nodes.end(),
-                                               [&](const CutNode& n) { return morphByte(n, minRes) != 0; });
+  const bool morphs = std::any_of(cut.nodes.begin(), cut.nodes.end(),
+                                  [&](const CutNode& n) { return morphByte(n, minRes) != 0; });
   if (morphs) t.morphs.assign(t.bytes.size(), 0);
   std::vector<SideNeighbour> ns;
   for (size_t i = 0; i < cut.nodes.size(); ++i) {

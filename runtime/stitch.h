@@ -14,9 +14,9 @@ namespace gimlod {
 
 // Fills, for every cut node and side, the log2 vertex spacing of the neighbour drawn there.
 // Nodes are in cut order. See StitchTables for the layout.
-// geomorphs: also fill StitchTables::morphs with the neighbours' morph bytes, where any node of the
-// cut has a factor above 0.
-StitchTables buildStitchTables(const Hierarchy& h, const Cut& cut, bool geomorphs = true);
+// Where any node of the cut has a geomorph factor above 0, also fills StitchTables::morphs with the
+// neighbours' morph bytes.
+StitchTables buildStitchTables(const Hierarchy& h, const Cut& cut);
 
 struct CrackReport {
   uint64_t borderVertices = 0;  // border vertices checked (sides with a drawn neighbour)

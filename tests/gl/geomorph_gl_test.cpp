@@ -27,7 +27,7 @@ namespace gimlod {
 namespace {
 
 class GeomorphTest : public test::GlContextTest<> {
- protected:
+ public:  // the shared scans' suite (ScanGeomorphTest) checks its cuts too
   // The cut captured with every node's morph factor from `factor` (node index -> factor).
   template <class F>
   static std::vector<std::vector<glm::vec3>> captureWith(gl::AtlasScene& scene, Cut cut, F factor) {
@@ -143,10 +143,14 @@ TEST_F(GeomorphTest, ShippedDemCutsStayCrackFreeAtEveryMorphFactor) {
   checkCut(scene, cut, true);
 }
 
-TEST_F(GeomorphTest, BunnyCutsStayCrackFreeAtEveryMorphFactor) {
-  GIMLOD_NEED_SHARED_DATA(test::haveSharedScan("bunny"));
+// Every shared scan (the atlases the crack tests build), across its chart seams.
+class ScanGeomorphTest : public test::GlContextTest<::testing::TestWithParam<std::string>> {};
+
+TEST_P(ScanGeomorphTest, CutsStayCrackFreeAtEveryMorphFactor) {
+  const std::string name = GetParam();
+  GIMLOD_NEED_SHARED_DATA(test::haveSharedScan(name));
   const test::BuiltScanAtlas* built = nullptr;
-  ASSERT_NO_THROW(built = &test::scanAtlas("bunny", true));
+  ASSERT_NO_THROW(built = &test::scanAtlas(name, true));
   const AtlasView atlas = openAtlas(built->dir);
   gl::SceneOptions so;
   so.width = 96;
@@ -159,8 +163,11 @@ TEST_F(GeomorphTest, BunnyCutsStayCrackFreeAtEveryMorphFactor) {
   ao.maxNodes = scene.nodeBudget(400);
   const Cut cut = adaptErrorThreshold(atlas.hierarchy, makeViewParams(c, so.width, so.height), ao);
   ASSERT_GT(test::cutMix(atlas.hierarchy, cut).crossChart, 0u);
-  checkCut(scene, cut, false);
+  GeomorphTest::checkCut(scene, cut, false);
 }
+
+INSTANTIATE_TEST_SUITE_P(SharedScans, ScanGeomorphTest, ::testing::ValuesIn(test::sharedScanNames()),
+                         [](const ::testing::TestParamInfo<std::string>& i) { return i.param; });
 
 // The scene's factors: 0 without geomorphs; with them, geomorphFactor of each drawn node: 0 while
 // the coarser resolution's error is 1.5 times the tolerance or more, 1 at the tolerance, and some
