@@ -112,7 +112,8 @@ std::string flagFor(std::string_view name) {
       {"positionTolerance", "--position-tolerance"}, {"normalTolerance", "--normal-tolerance"},
       {"normals", "--normals"},
       {"imagery", "--imagery"},              {"quads", "--quads"},
-      {"quadMap", "--quad-map"},              {"sizing", "--sizing"}};
+      {"quadMap", "--quad-map"},              {"sizing", "--sizing"},
+      {"outOfCore", "--out-of-core"},         {"planet", "--planet"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }
@@ -497,6 +498,11 @@ int main(int argc, char** argv) {
   build->add_flag("--out-of-core", terrain.outOfCore,
                   "DEMs: build window by window within --max-memory even when the DEM would fit in memory "
                   "(a DEM that would not is built so anyway)");
+  build->add_flag("--planet", terrain.planet,
+                  "DEMs in longitude and latitude: draw the terrain on a sphere (a DEM circling the planet wraps at "
+                  "the antimeridian and closes at the poles)");
+  build->add_option("--radius", terrain.planetRadius, "DEMs with --planet: the sphere's radius, metres")
+      ->capture_default_str();
   bool uncompressed = false;
   build->add_flag("--uncompressed", uncompressed,
                   "Write raw chart files (atlas format version 1: float32 heights or positions, 4-byte normals) "
@@ -553,7 +559,7 @@ int main(int argc, char** argv) {
   uint32_t exportLevel = 0;
   auto* exportCmd = app.add_subcommand(
       "export", "Write a mesh atlas's surface at one pyramid level as one PLY, welded along the seams");
-  exportCmd->add_option("atlas", exportAtlas, "Atlas directory (a mesh atlas)")->required();
+  exportCmd->add_option("atlas", exportAtlas, "Atlas directory (a mesh or planet atlas)")->required();
   exportCmd->add_option("-o,--output", exportOut, "Output .ply")->required();
   exportCmd->add_option("--level", exportLevel, "Pyramid level (0: full resolution)")->capture_default_str();
 
@@ -609,6 +615,9 @@ int main(int argc, char** argv) {
         if (!terrain.imagery.empty())
           throw InputError(common.input.string() + ": --imagery drapes a raster over a DEM; a mesh carries its own "
                            "vertex colours");
+        if (terrain.planet)
+          throw InputError(common.input.string() + ": --planet draws a longitude/latitude DEM on a sphere; a mesh "
+                           "is drawn as it is");
         static_cast<CommonBuildOptions&>(mesh) = common;
         if (chartSizeOpt->count() > 0) mesh.chartSize = terrain.chartSize;
         mesh.charts = chartsArg == "auto" ? kAutoCharts : parseCount("--charts", chartsArg);
@@ -651,6 +660,9 @@ int main(int argc, char** argv) {
                                                       imageryExtent[3]};
       if (terrain.imagery.empty() && (terrain.imageryExtent || terrain.imageryScaleLog2 >= 0))
         throw InputError("--imagery-scale and --imagery-extent need --imagery");
+      if (build->get_option("--radius")->count() > 0 && !terrain.planet) throw InputError("--radius needs --planet");
+      if (!(terrain.planetRadius >= 1.0 && terrain.planetRadius <= 1e9))
+        throw InputError("--radius " + std::to_string(terrain.planetRadius) + " must be between 1 and 1e9 metres");
       return runBuild(terrain);
     }
     if (*inspectCmd) return runInspect(inspect);

@@ -466,6 +466,10 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
         {"geographic", m.georef.geographic},
         {"centreLatitudeDeg", m.georef.centreLatitudeDeg}}},
   };
+  if (m.planet.present)
+    j["planet"] = ojson{{"radius", m.planet.radius},   {"lon0Deg", m.planet.lon0Deg},
+                        {"lat0Deg", m.planet.lat0Deg}, {"dlonDeg", m.planet.dlonDeg},
+                        {"dlatDeg", m.planet.dlatDeg}, {"wrapColumns", m.planet.wrapColumns}};
   if (m.imagery.present)
     j["imagery"] = ojson{{"source", m.imagery.source}, {"scaleLog2", m.imagery.scaleLog2}, {"coverage", m.imagery.coverage}};
   if (m.compression.present)
@@ -559,6 +563,24 @@ AtlasManifest readManifest(const fs::path& dir) {
     if (g.contains("geographic")) m.georef.geographic = r.boolean(g["geographic"], "georef.geographic");
     if (g.contains("centreLatitudeDeg"))
       m.georef.centreLatitudeDeg = r.number(g["centreLatitudeDeg"], "georef.centreLatitudeDeg");
+  }
+  if (j.contains("planet") && !j["planet"].is_null()) {
+    const json& pl = j["planet"];
+    if (!pl.is_object()) r.fail("field 'planet' must be an object or null");
+    if (m.kind != AtlasKind::Heightfield) r.fail("field 'planet' is for heightfield atlases only");
+    PlanetInfo& p = m.planet;
+    p.present = true;
+    p.radius = r.number(r.field(pl, "radius", "planet."), "planet.radius");
+    p.lon0Deg = r.number(r.field(pl, "lon0Deg", "planet."), "planet.lon0Deg");
+    p.lat0Deg = r.number(r.field(pl, "lat0Deg", "planet."), "planet.lat0Deg");
+    p.dlonDeg = r.number(r.field(pl, "dlonDeg", "planet."), "planet.dlonDeg");
+    p.dlatDeg = r.number(r.field(pl, "dlatDeg", "planet."), "planet.dlatDeg");
+    p.wrapColumns = uint32_t(r.integer(r.field(pl, "wrapColumns", "planet."), "planet.wrapColumns", 0, INT32_MAX));
+    if (!(p.radius >= 1.0 && p.radius <= 1e9)) r.fail("planet.radius must be between 1 m and 1e9 m");
+    if (!(p.dlonDeg > 0.0 && p.dlonDeg <= 360.0 && p.dlatDeg > 0.0 && p.dlatDeg <= 180.0))
+      r.fail("planet.dlonDeg and planet.dlatDeg must be positive (at most 360 and 180 degrees)");
+    if (!(std::fabs(p.lon0Deg) <= 720.0 && std::fabs(p.lat0Deg) <= 180.0))
+      r.fail("planet.lon0Deg or planet.lat0Deg is out of range");
   }
   if (j.contains("imagery") && !j["imagery"].is_null()) {
     const json& im = j["imagery"];

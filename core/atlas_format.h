@@ -17,6 +17,8 @@
 
 #include <glm/vec3.hpp>
 
+#include "core/planet.h"
+
 namespace gimlod {
 
 // Error for bad user input or unreadable files; the message names the file and the problem.
@@ -138,6 +140,7 @@ struct AtlasManifest {
   std::string source;
   Georeference georef;
   ImageryInfo imagery;                      // terrain imagery (heightfield atlases only)
+  PlanetInfo planet;                        // a height field on a sphere (heightfield atlases only)
   CompressionInfo compression;              // coded chart files (version 2)
   std::vector<ChartInfo> charts;
   // Hierarchy parameters (log2 values). depth = number of quadtree levels (root = level 0).

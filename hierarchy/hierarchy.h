@@ -135,6 +135,17 @@ inline constexpr uint32_t kHierarchyTile = 1024;
 Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindowSource& source, HierarchyStats* stats,
                                 uint32_t maxTile = kHierarchyTile);
 
+// The hierarchy of a planet atlas (manifest.planet, core/planet.h): each chart's samples placed on
+// the sphere (PlanetFrame::position) and measured as a geometry image (buildGeometryHierarchy), so
+// bounds are planet-centred boxes and errors Euclidean distances in metres, the sphere's curvature
+// included. The positions are measured relative to the chart's centre in float, and each error
+// grows by four float steps of the chart's extent (bounds round outwards), so both still hold.
+// Nodes past the DEM's last samples are empty, as on flat terrain. Throws InputError for charts of
+// more than kMaxPlanetChartIntervals intervals.
+inline constexpr uint32_t kMaxPlanetChartIntervals = 4096;
+Hierarchy buildPlanetHierarchy(const AtlasManifest& manifest, const ChartWindowSource& source,
+                               HierarchyStats* stats = nullptr);
+
 // Mesh-atlas input: chart id -> its finest geometry image, side ((chartSize - 1) >> finest level)
 // + 1 positions (row = v). Must be thread-safe.
 using ChartPositionSource = std::function<std::vector<glm::vec3>(uint32_t chart)>;

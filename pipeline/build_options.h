@@ -81,6 +81,11 @@ struct TerrainBuildOptions : CommonBuildOptions {
   // Build window by window within maxMemory (atlas/terrain/terrain_windowed.h) even when the DEM
   // would fit in memory; without it that happens only when it would not.
   bool outOfCore = false;
+  // A planet atlas (core/planet.h): the DEM, in longitude and latitude, drawn on a sphere of
+  // planetRadius metres; a DEM circling the planet wraps at the antimeridian and closes at the
+  // poles (atlas/terrain/planet_grid.h).
+  bool planet = false;
+  double planetRadius = kEarthRadius;
 };
 // Peak resident bytes per DEM sample of the in-memory terrain build, above what the process holds
 // before it, measured: 16.9 on the shipped tile upsampled 4 times (23M samples, 144k voids: the

@@ -16,6 +16,7 @@
 #include <tbb/task_arena.h>
 
 #include "atlas/terrain/imagery.h"
+#include "atlas/terrain/planet_grid.h"
 #include "atlas/terrain/terrain_windowed.h"
 #include "core/atlas_format.h"
 #include "core/block_codec.h"
@@ -254,12 +255,11 @@ class OpenCharts {
 // manifest, once the chart files are written.
 void finishTerrainAtlas(AtlasManifest& m, const fs::path& dir, TerrainWriteStats& w) {
   OpenCharts charts(m, dir, 2 * size_t(tbb::this_task_arena::max_concurrency()) + 2);
-  const Hierarchy h = buildTerrainHierarchy(
-      m,
-      [&](uint32_t c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n) {
-        return charts.get(c)->readHeightsWindow(level, u0, v0, n);
-      },
-      &w.hierarchy);
+  const ChartWindowSource source = [&](uint32_t c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n) {
+    return charts.get(c)->readHeightsWindow(level, u0, v0, n);
+  };
+  const Hierarchy h =
+      m.planet.present ? buildPlanetHierarchy(m, source, &w.hierarchy) : buildTerrainHierarchy(m, source, &w.hierarchy);
   writeHierarchy(dir / m.hierarchyFile, h, m.compression.present);
   writeManifest(dir, m);
   w.chartsX = m.chartsX;
@@ -303,13 +303,28 @@ void writeImageryWindowed(const TerrainBuildOptions& o, const DemRaster& dem, co
 }  // namespace
 
 TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& options, const fs::path& dir) {
-  const TerrainBuildOptions o = plannedOptions(options, planTerrain(options.input, dem.width, dem.height, options));
+  PlanetInfo planet;
+  TerrainBuildOptions po = options;
+  if (options.planet) {
+    // Planet charts are measured whole on the sphere (buildPlanetHierarchy), and the antimeridian
+    // is a chart border: the chart size first, then the lattice.
+    if (po.chartSize == kAutoChartSize)
+      po.chartSize = std::min(planTerrain(options.input, dem.width, dem.height, options).chartSize,
+                              kMaxPlanetChartIntervals + 1);
+    planet = preparePlanetGrid(dem, options.input, options.planetRadius, po.chartSize - 1);
+    spdlog::info("{}: on a sphere of radius {:.1f} m, {}x{} samples{}", options.input.string(), planet.radius,
+                 dem.width, dem.height,
+                 planet.wrapColumns ? fmt::format(", {} columns round the planet", planet.wrapColumns) : std::string());
+  }
+  const TerrainBuildOptions o = plannedOptions(po, planTerrain(options.input, dem.width, dem.height, po));
   validateTerrainBuildOptions(o);
   AtlasManifest m = terrainManifest(o);
+  m.planet = planet;
   TerrainAtlasOptions topt = terrainAtlasOptions(o);
   if (o.compress) topt.coding.heightPrecision = quantizeHeights(dem, o);
   TerrainWriteStats w;
   w.charts = writeTerrainCharts(dem, topt, dir, m);
+  linkPlanetSeam(m);
   if (!o.imagery.empty() && chartTiling(m.chartSize, m.blockIntervals).tiled()) {
     // Charts too large to hold whole take their imagery in tiles, as their geometry.
     writeImageryWindowed(o, dem, dir, m, memoryCap(o) / 2, w);
@@ -403,6 +418,11 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& options) {
   bool windowed = o.outOfCore;
   if (!windowed)
     windowed = samples * inMemoryBytesPerSample(o) + double(residentBytes()) > double(memoryCap(o));
+  if (windowed && o.planet)
+    throw InputError(fmt::format("{}: --planet atlases are built in memory, and this DEM's {:.0f} samples need about "
+                                 "{} MiB, over the {} MiB cap ({})",
+                                 o.input.string(), samples, uint64_t(samples * inMemoryBytesPerSample(o)) >> 20,
+                                 memoryCap(o) >> 20, o.outOfCore ? optionRef("outOfCore") : optionRef("maxMemory")));
   StagedDirectory stage(o.output, kManifestName, "atlas");
   if (windowed) {
     stats.write = writeTerrainAtlasWindowed(o, stage.path(), &stats.read);

@@ -21,8 +21,8 @@ AtlasView openAtlas(const std::filesystem::path& dir, uint32_t maxRoots) {
     throw InputError((dir / kManifestName).string() + ": " + e.what());
   }
   a.hierarchy.groups = buildRootGroups(a.hierarchy, maxRoots);
-  if (a.manifest.kind == AtlasKind::Geometry) {
-    // A mesh atlas: the union of the chart roots' boxes.
+  if (a.manifest.kind == AtlasKind::Geometry || a.manifest.planet.present) {
+    // A mesh or planet atlas: the union of the chart roots' boxes.
     a.lo = glm::dvec3(std::numeric_limits<double>::infinity());
     a.hi = -a.lo;
     for (uint32_t c = 0; c < a.hierarchy.chartCount(); ++c) {

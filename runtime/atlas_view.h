@@ -14,7 +14,7 @@ struct AtlasView {
   std::filesystem::path dir;
   AtlasManifest manifest;
   Hierarchy hierarchy;
-  glm::dvec3 lo{0.0}, hi{0.0};  // world bounds of the valid data (mesh atlases: of the charts)
+  glm::dvec3 lo{0.0}, hi{0.0};  // world bounds of the valid data (mesh and planet atlases: of the charts)
 };
 
 // Reads dir/atlas.json and the hierarchy, and gathers the chart roots into groups of at most

@@ -12,7 +12,29 @@
 
 namespace gimlod {
 
+void Frustum::setHorizon(const glm::dvec3& eye, double radius) {
+  horizonEye = eye;
+  occluderRadius = radius;
+}
+
+int Frustum::horizonClass(const glm::dvec3& lo, const glm::dvec3& hi) const {
+  const double e = glm::length(horizonEye), r = occluderRadius;
+  if (!(r > 0.0) || !(e > r)) return 2;
+  const glm::dvec3 n = horizonEye / e;
+  const double plane = r * r / e, cosCone = std::sqrt(e * e - r * r) / e;
+  bool allHidden = true, allFront = true;
+  for (int i = 0; i < 8; ++i) {
+    const glm::dvec3 x{(i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z};
+    const double along = glm::dot(n, x);
+    if (along <= plane) allFront = false;
+    const glm::dvec3 d = x - horizonEye;
+    if (!(along <= plane && -glm::dot(d, n) >= glm::length(d) * cosCone)) allHidden = false;
+  }
+  return allHidden ? 0 : allFront ? 2 : 1;
+}
+
 bool Frustum::intersects(const glm::dvec3& lo, const glm::dvec3& hi) const {
+  if (occluderRadius > 0.0 && horizonClass(lo, hi) == 0) return false;
   for (const glm::dvec4& p : planes) {
     const glm::dvec3 v{p.x >= 0 ? hi.x : lo.x, p.y >= 0 ? hi.y : lo.y, p.z >= 0 ? hi.z : lo.z};
     if (p.x * v.x + p.y * v.y + p.z * v.z + p.w < 0) return false;
@@ -21,7 +43,8 @@ bool Frustum::intersects(const glm::dvec3& lo, const glm::dvec3& hi) const {
 }
 
 int Frustum::classify(const glm::dvec3& lo, const glm::dvec3& hi) const {
-  int result = 2;
+  int result = occluderRadius > 0.0 ? horizonClass(lo, hi) : 2;
+  if (result == 0) return 0;
   for (const glm::dvec4& p : planes) {
     const glm::dvec3 v{p.x >= 0 ? hi.x : lo.x, p.y >= 0 ? hi.y : lo.y, p.z >= 0 ? hi.z : lo.z};
     if (p.x * v.x + p.y * v.y + p.z * v.z + p.w < 0) return 0;
@@ -35,6 +58,16 @@ glm::dmat4 viewMatrix(const Camera& c) { return glm::lookAt(c.eye, c.target, c.u
 
 glm::dmat4 projectionMatrix(const Camera& c, double aspect) {
   return glm::perspective(glm::radians(c.fovYDeg), aspect, c.nearPlane, c.farPlane);
+}
+
+glm::dmat4 reversedProjectionMatrix(const Camera& c, double aspect) {
+  const double f = 1.0 / std::tan(glm::radians(c.fovYDeg) / 2.0);
+  glm::dmat4 m(0.0);
+  m[0][0] = f / aspect;
+  m[1][1] = f;
+  m[2][3] = -1.0;
+  m[3][2] = c.nearPlane;
+  return m;
 }
 
 Frustum frustumFromMatrix(const glm::dmat4& m) {

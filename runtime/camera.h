@@ -22,15 +22,31 @@ struct Camera {
 // Six planes (a, b, c, d), inside where a x + b y + c z + d >= 0.
 struct Frustum {
   std::array<glm::dvec4, 6> planes;
-  // True when the box [lo, hi] may intersect the frustum.
+  // Planets (occluderRadius > 0): a box behind the horizon of the sphere of occluderRadius round
+  // the origin, seen from horizonEye, is outside too: every corner beyond the horizon's plane and
+  // inside the sphere's shadow cone, a convex part of what the sphere hides. No culling while the
+  // eye is inside the sphere.
+  double occluderRadius = 0.0;
+  glm::dvec3 horizonEye{0.0};
+  void setHorizon(const glm::dvec3& eye, double radius);
+  // True when the box [lo, hi] may intersect the frustum (and lies not wholly behind the horizon).
   bool intersects(const glm::dvec3& lo, const glm::dvec3& hi) const;
-  // 0: the box is outside (exactly when intersects is false), 2: entirely inside every plane,
-  // 1: otherwise. A box inside a box classified 0 or 2 gets the same class.
+  // 0: the box is outside (exactly when intersects is false), 2: entirely inside every plane (and
+  // in front of the horizon's plane), 1: otherwise. A box inside a box classified 0 or 2 gets the
+  // same class.
   int classify(const glm::dvec3& lo, const glm::dvec3& hi) const;
+  // The horizon's part of classify: 0 hidden, 2 wholly in front of the horizon's plane, 1 otherwise.
+  int horizonClass(const glm::dvec3& lo, const glm::dvec3& hi) const;
 };
 
 glm::dmat4 viewMatrix(const Camera& c);
 glm::dmat4 projectionMatrix(const Camera& c, double aspect);
+// The same with the depth reversed (1 at the near plane, 0 at infinity: no far plane) for a
+// [0, 1] clip depth (glClipControl): a float depth buffer then resolves centimetres near the eye
+// and the planet's far side alike.
+glm::dmat4 reversedProjectionMatrix(const Camera& c, double aspect);
+// The near plane of planet views: reversed depth keeps it small at every height.
+inline constexpr double kPlanetNearPlane = 0.05;
 Frustum frustumFromMatrix(const glm::dmat4& viewProj);
 
 // Pixels covered by one world unit seen face-on at unit distance: height / (2 tan(fovy / 2)).

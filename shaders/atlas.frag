@@ -14,6 +14,10 @@ flat in float v_texLod;  // mip of the normal map: the node's attribute resoluti
 flat in int v_node;
 in vec2 v_nodeUv;
 in float v_snapped;
+#ifdef GIMLOD_PLANET
+in vec3 v_east;
+in vec3 v_up;
+#endif
 
 struct NodeOverlay {
   uint rgba;              // RGBA8
@@ -90,13 +94,23 @@ bool outsideValid(float g, float valid) {
 }
 
 void main() {
-#ifndef GIMLOD_GEOMETRY
+#if !defined(GIMLOD_GEOMETRY) && !defined(GIMLOD_PLANET)
+  // (A planet's samples past the DEM's last fold onto it: nothing to discard.)
   vec2 g = v_world.xy / u_spacing;
   if (outsideValid(g.x, u_validSamples.x) || outsideValid(g.y, u_validSamples.y)) discard;
 #endif
 
   vec3 n = textureLod(u_normals, vec3(v_pageUv, float(v_pageLayer)), v_texLod).rgb * 2.0 - 1.0;
   n = length(n) > 1e-4 ? normalize(n) : vec3(0.0, 0.0, 1.0);
+  vec3 lightDir = u_lightDir;
+#ifdef GIMLOD_PLANET
+  // The height field's normal in the local east, north and up; its east slope measured at the
+  // equator's spacing is steeper by 1 / cos(latitude). The light keeps its place in the local sky.
+  vec3 up = normalize(v_up), east = normalize(v_east - dot(v_east, up) * up), north = cross(up, east);
+  float cosLat = max(length(up.xy), 0.05);
+  n = normalize(east * (n.x / cosLat) + north * n.y + up * n.z);
+  lightDir = normalize(east * u_lightDir.x + north * u_lightDir.y + up * u_lightDir.z);
+#endif
 #ifdef GIMLOD_GEOMETRY
   // Mesh atlases: the scan's own colours at the node's attribute resolution, or a neutral material;
   // lit from both sides of the light (scans have no up).
@@ -130,7 +144,7 @@ void main() {
     vec4 imagery = texture(u_colours, vec3(uv, float(v_pageLayer)));
     base = mix(base, imagery.rgb, imagery.a);
   }
-  float light = max(dot(n, u_lightDir), 0.0);
+  float light = max(dot(n, lightDir), 0.0);
   vec3 colour = u_overlay != 0 ? overlayColour(light) : base * (0.30 + 0.70 * light);
   colour = inspectionViews(colour, n);
   if (u_fogDistance > 0.0) {

@@ -34,6 +34,58 @@ flat out int v_node;   // the node's index in the cut, for the overlays
 out vec2 v_nodeUv;     // (i, j) / 2^res: where in the node, for the overlays' border lines
 out float v_snapped;   // 1 at a border vertex the stitching moved onto a coarser neighbour's lattice
 invariant gl_Position;
+#ifdef GIMLOD_PLANET
+out vec3 v_east;      // planet atlases: the local east and up at the vertex (the normals' frame)
+out vec3 v_up;
+
+// Planet atlases (core/planet.h): positions relative to an anchor sample near the eye, from the
+// integer offsets to it, so that float keeps its precision near the eye at the planet's scale.
+uniform ivec2 u_anchor;         // the anchor's column (wrapped) and row
+uniform vec4 u_anchorTrig;      // its sin lat, cos lat, sin lon, cos lon
+uniform vec2 u_anchorPoles;     // radians from its latitude to the south and north poles
+uniform ivec3 u_planetLattice;  // the last column and row, the columns a turn (0: no wrap)
+uniform ivec2 u_poleRows;       // the last row on the south pole (-1: none), the first on the north
+uniform vec3 u_planetStep;      // radians between columns and rows, the sphere's radius
+
+// sin x to float precision relative to x for small x (a GPU's sin has an absolute error near 1e-6).
+float planetSin(float x) {
+  if (abs(x) > 0.25) return sin(x);
+  float x2 = x * x;
+  return x * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0))));
+}
+
+// sin(a + d) - sin a and cos(a + d) - cos a, from sin a, cos a and d, without cancellation.
+vec2 angleDifferences(float sa, float ca, float d) {
+  float h = planetSin(0.5 * d), s = planetSin(d);
+  float v = 2.0 * h * h;
+  return vec2(ca * s - sa * v, -(sa * s) - ca * v);
+}
+
+// Sample g's position at height h minus the anchor's (PlanetFrame::position; planetOffset in
+// core/planet.cpp is the same arithmetic).
+vec3 planetOffset(ivec2 g, float h) {
+  int c = clamp(g.x, 0, u_planetLattice.x), r = clamp(g.y, 0, u_planetLattice.y);
+  int w = u_planetLattice.z;
+  if (w > 0) c = c % w;  // (both non-negative: GLSL leaves % of negatives undefined)
+  int dx = c - u_anchor.x;
+  if (w > 0 && 2 * dx > w) dx -= w;
+  if (w > 0 && 2 * dx < -w) dx += w;
+  bool south = r <= u_poleRows.x, north = r >= u_poleRows.y;
+  float sLat = u_anchorTrig.x, cLat = u_anchorTrig.y, sLon = u_anchorTrig.z, cLon = u_anchorTrig.w;
+  float dp = south ? -u_anchorPoles.x : (north ? u_anchorPoles.y : float(r - u_anchor.y) * u_planetStep.y);
+  vec2 lat = angleDifferences(sLat, cLat, dp);
+  vec3 d;
+  if (south || north) {
+    d = vec3(-(cLat * cLon), -(cLat * sLon), lat.x);
+  } else {
+    vec2 lon = angleDifferences(sLon, cLon, float(dx) * u_planetStep.x);
+    float cosLat = cLat + lat.y;
+    d = vec3(cosLat * lon.y + cLon * lat.y, cosLat * lon.x + sLon * lat.y, lat.x);
+  }
+  float rho = u_planetStep.z + h;
+  return rho * d + h * vec3(cLat * cLon, cLat * sLon, sLat);
+}
+#endif
 
 const int kBottom = 0, kRight = 1, kTop = 2, kLeft = 3;
 
@@ -74,6 +126,8 @@ vec3 samplePosition(ivec2 origin, ivec2 t, int ps, int pageLayer) {
 #ifdef GIMLOD_GEOMETRY
   // Geometry image: the position is the sample itself (bit-identical across chart seams).
   return texelFetch(u_samples, ivec3(texel, pageLayer), 0).xyz;
+#elif defined(GIMLOD_PLANET)
+  return planetOffset(origin + t, texelFetch(u_samples, ivec3(texel, pageLayer), 0).r);
 #else
   float height = texelFetch(u_samples, ivec3(texel, pageLayer), 0).r;
   // Integer sample first, one conversion, one multiply: bit-identical across nodes.
@@ -137,6 +191,14 @@ void main() {
     v_world = mix(v_world, 0.5 * (a + b), morph);
   }
   gl_Position = u_viewProj * vec4(v_world, 1.0);
+#ifdef GIMLOD_PLANET
+  // The local frame: up from the planet's centre (the anchor's direction plus the vertex's offset
+  // from it, at unit radius), east along the circle of latitude (the anchor's at a pole).
+  vec3 dA = vec3(u_anchorTrig.y * u_anchorTrig.w, u_anchorTrig.y * u_anchorTrig.z, u_anchorTrig.x);
+  v_up = normalize(dA + v_world / u_planetStep.z);
+  float cosLat = length(v_up.xy);
+  v_east = cosLat > 1e-6 ? vec3(-v_up.y, v_up.x, 0.0) / cosLat : vec3(-u_anchorTrig.z, u_anchorTrig.w, 0.0);
+#endif
   v_pageUv = (vec2(texel) + 0.5) / float(textureSize(u_samples, 0).x);
   v_pageLayer = pageLayer;
   v_texLod = float(a_nodeB.w & 0xFF) + float((a_nodeB.w >> 16) & 0xFF) / 255.0;

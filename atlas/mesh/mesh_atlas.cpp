@@ -470,11 +470,33 @@ std::vector<glm::vec3> readDrawnChartLevel(const fs::path& atlasDir, const Atlas
   return P;
 }
 
+// Chart i of a planet atlas at `level`: its heights placed on the sphere (PlanetFrame::position),
+// so that samples shared by charts (their borders, the antimeridian, the poles) are identical.
+std::vector<glm::vec3> readPlanetChartLevel(const fs::path& atlasDir, const AtlasManifest& m, size_t i,
+                                            uint32_t level) {
+  const ChartInfo& c = m.charts[i];
+  const ChartFileReader reader(atlasDir / c.file);
+  if (!reader.hasChannel(kChannelHeights) || reader.chartSize() != m.chartSize || level >= reader.levels())
+    throw InputError((atlasDir / c.file).string() + ": not a chart of the planet atlas's size and levels");
+  const uint32_t n = (m.chartSize - 1) >> level;
+  const std::vector<float> h = reader.readHeightsWindow(level, 0, 0, n);
+  const PlanetFrame frame(m.planet, m.samplesX, m.samplesY);
+  const int64_t M = m.chartSize - 1, step = int64_t(1) << level;
+  std::vector<glm::vec3> P(h.size());
+  for (uint32_t v = 0; v <= n; ++v)
+    for (uint32_t u = 0; u <= n; ++u) {
+      const size_t k = size_t(v) * (n + 1) + u;
+      P[k] = glm::vec3(frame.position(c.gridX * M + u * step, c.gridY * M + v * step, h[k]));
+    }
+  return P;
+}
+
 AtlasSurface readAtlasSurface(const fs::path& atlasDir, uint32_t level) {
   const AtlasManifest m = readManifest(atlasDir);
-  if (m.kind != AtlasKind::Geometry)
+  const bool planet = m.kind == AtlasKind::Heightfield && m.planet.present;
+  if (m.kind != AtlasKind::Geometry && !planet)
     throw InputError((atlasDir / kManifestName).string() + ": a " + atlasKindName(m.kind) +
-                     " atlas; export reads geometry (mesh) atlases");
+                     " atlas; export reads geometry (mesh) and planet atlases");
   if (level >= m.pyramidLevels())
     throw InputError((atlasDir / kManifestName).string() + ": level " + std::to_string(level) +
                      " does not exist (charts have levels 0.." + std::to_string(m.pyramidLevels() - 1) + ")");
@@ -493,7 +515,10 @@ AtlasSurface readAtlasSurface(const fs::path& atlasDir, uint32_t level) {
   const auto drawnLevel = [&](size_t i) { return std::max(level, m.charts[i].finestLevel); };
   std::vector<std::vector<glm::vec3>> levels(m.charts.size());
   tbb::parallel_for(size_t(0), m.charts.size(),
-                    [&](size_t i) { levels[i] = readDrawnChartLevel(atlasDir, m, i, level); });
+                    [&](size_t i) {
+                      levels[i] = planet ? readPlanetChartLevel(atlasDir, m, i, level)
+                                         : readDrawnChartLevel(atlasDir, m, i, level);
+                    });
   std::unordered_map<Key, uint32_t, KeyHash> weld;
   for (size_t chart = 0; chart < levels.size(); ++chart) {
     const std::vector<glm::vec3> P = std::move(levels[chart]);

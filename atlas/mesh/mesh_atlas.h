@@ -98,7 +98,8 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const std
                                           const ChartSpill* spill = nullptr, const ChartCoding& coding = {},
                                           const std::vector<uint32_t>& finestLevels = {}, double planarBound = 0.0);
 
-// The surface of a geometry atlas at pyramid level `level`: every chart's grid, triangulated as
+// The surface of a geometry atlas (or a planet atlas, its heights on the sphere) at pyramid level
+// `level`: every chart's grid, triangulated as
 // the renderer draws it (split along the (0,0)-(1,1) diagonal, counter-clockwise in (u, v)), with
 // vertices of bit-identical positions welded into one (the seams), so a seamless atlas gives a
 // watertight mesh wherever the input was closed.
@@ -108,7 +109,7 @@ struct AtlasSurface {
   uint64_t samples = 0;        // chart samples read (before welding)
   uint64_t boundaryEdges = 0;  // edges used by one triangle only (0 for a closed input)
 };
-// Throws InputError naming the atlas or chart file on a missing or corrupt atlas, a height-field
+// Throws InputError naming the atlas or chart file on a missing or corrupt atlas, a flat height-field
 // atlas, or a level the charts do not have.
 AtlasSurface readAtlasSurface(const std::filesystem::path& atlasDir, uint32_t level);
 

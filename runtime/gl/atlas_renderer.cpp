@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <numbers>
 #include <stdexcept>
 #include <string>
 
@@ -111,16 +112,19 @@ void setPagePoolUnits(const GlObject& program) {
   glUseProgram(0);
 }
 
-GlObject linkAtlasProgram(bool geometry) {
-  // note: mesh atlases use the same shaders with GIMLOD_GEOMETRY defined after the #version line.
+GlObject linkAtlasProgram(bool geometry, bool planet) {
+  // note: mesh and planet atlases use the same shaders with GIMLOD_GEOMETRY or GIMLOD_PLANET
+  // defined after the #version line.
+  if (geometry && planet) throw std::invalid_argument("linkAtlasProgram: a planet atlas is a height field");
   auto variant = [&](const char* source) {
     std::string s = source;
     if (geometry) s.insert(s.find('\n') + 1, "#define GIMLOD_GEOMETRY 1\n");
+    if (planet) s.insert(s.find('\n') + 1, "#define GIMLOD_PLANET 1\n");
     return s;
   };
   const std::string vert = variant(kShader_atlas_vert), frag = variant(kShader_atlas_frag);
-  GlObject program =
-      linkProgram(geometry ? "atlas (mesh)" : "atlas", vert.c_str(), frag.c_str(), {"v_world"});
+  GlObject program = linkProgram(geometry ? "atlas (mesh)" : planet ? "atlas (planet)" : "atlas", vert.c_str(),
+                                 frag.c_str(), {"v_world"});
   setPagePoolUnits(program);
   return program;
 }
@@ -160,6 +164,7 @@ struct AtlasRenderer::Impl {
   InspectionViews inspection;        // setInspectionViews; u_views holds them as bits
   GlObject atlasProgram;
   bool wireframe = false;
+  PlanetAnchor anchor;  // planet atlases: where positions are measured from (setPlanetAnchor)
 
   explicit Impl(const RendererSetup& s);
   void checkLimits() const;
@@ -175,6 +180,7 @@ struct AtlasRenderer::Impl {
                    std::span<const uint32_t> order = {});
   void setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const;
   void bindAtlas(const glm::mat4& viewProj, const glm::vec3& eye, const StitchTables& stitch);
+  void setPlanetUniforms() const;
   void beginFrame() const;
   void resolve() const;  // the multisampled frame into framebuffer (nothing with one sample)
   // Binds page-pool array `a`'s textures to the samplers' units.
@@ -197,7 +203,7 @@ AtlasRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   createGrids();
   nodeBuffer = makeBuffer();
   createVertexArray();
-  atlasProgram = linkAtlasProgram(setup.geometry);
+  atlasProgram = linkAtlasProgram(setup.geometry, setup.planet.present);
   stitchBuffer = makeBuffer();
   overlayBuffer = makeBuffer();
   {
@@ -213,7 +219,12 @@ AtlasRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   checkGl("AtlasRenderer setup");
 }
 
+// glClipControl (OpenGL 4.5, or ARB_clip_control), which the reversed depth of planets needs.
+bool hasClipControl() { return epoxy_gl_version() >= 45 || epoxy_has_gl_extension("GL_ARB_clip_control"); }
+
 void AtlasRenderer::Impl::checkLimits() const {
+  if (setup.planet.present && !hasClipControl())
+    throw std::runtime_error("AtlasRenderer: planet atlases need glClipControl (OpenGL 4.5 or ARB_clip_control)");
   if (getInteger(GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS) < 2)
     throw std::runtime_error("AtlasRenderer: the GL implementation offers fewer than 2 shader "
                              "storage blocks in the vertex stage");
@@ -456,6 +467,7 @@ void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& 
   glUniform1i(uniform(atlasProgram, "u_leafLog2"), GLint(stitch.leafLog2));
   glUniform1i(uniform(atlasProgram, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
   glUniform1i(uniform(atlasProgram, "u_morphWords"), morphWords);
+  if (setup.planet.present) setPlanetUniforms();
   glUniform1i(uniform(atlasProgram, "u_overlay"), overlay.empty() || !overlayColours ? 0 : 1);
   glUniform1i(uniform(atlasProgram, "u_overlayRecords"), overlay.empty() ? 0 : 1);
   const InspectionViews& v = inspection;
@@ -463,6 +475,21 @@ void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& 
               (v.nodeBorders ? 1 : 0) | (v.normals ? 2 : 0) | (v.snapped ? 4 : 0) | (v.loading ? 8 : 0));
   glBindVertexArray(vertexArray.id());
   checkGl("atlas state");
+}
+
+void AtlasRenderer::Impl::setPlanetUniforms() const {
+  const GlObject& p = atlasProgram;
+  const PlanetInfo& info = setup.planet;
+  const PlanetFrame frame(info, setup.validSamples[0], setup.validSamples[1]);
+  const double deg = std::numbers::pi / 180.0;
+  glUniform2i(uniform(p, "u_anchor"), GLint(anchor.gx), GLint(anchor.gy));
+  glUniform4f(uniform(p, "u_anchorTrig"), float(anchor.sinLat), float(anchor.cosLat), float(anchor.sinLon),
+              float(anchor.cosLon));
+  glUniform2f(uniform(p, "u_anchorPoles"), float(anchor.latBelow), float(anchor.latAbove));
+  glUniform3i(uniform(p, "u_planetLattice"), GLint(setup.validSamples[0]) - 1, GLint(setup.validSamples[1]) - 1,
+              GLint(info.wrapColumns));
+  glUniform2i(uniform(p, "u_poleRows"), GLint(frame.southPoleRow()), GLint(frame.northPoleRow()));
+  glUniform3f(uniform(p, "u_planetStep"), float(info.dlonDeg * deg), float(info.dlatDeg * deg), float(info.radius));
 }
 
 void AtlasRenderer::Impl::bindPageArray(uint32_t a) const {
@@ -481,10 +508,14 @@ void AtlasRenderer::Impl::beginFrame() const {
   glDisable(GL_RASTERIZER_DISCARD);
   glDisable(GL_CULL_FACE);
   glEnable(GL_DEPTH_TEST);
-  glDepthFunc(GL_LESS);
   glDepthMask(GL_TRUE);
   glClearColor(setup.background[0], setup.background[1], setup.background[2], 1.0f);
-  glClearDepth(1.0);
+  // Planets: reversed depth (camera.h reversedProjectionMatrix) in a [0, 1] clip depth; the float
+  // depth buffer then holds its precision from the near plane to infinity.
+  const bool reversed = setup.planet.present;
+  if (hasClipControl()) glClipControl(GL_LOWER_LEFT, reversed ? GL_ZERO_TO_ONE : GL_NEGATIVE_ONE_TO_ONE);
+  glDepthFunc(reversed ? GL_GREATER : GL_LESS);
+  glClearDepth(reversed ? 0.0 : 1.0);
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
   // Multisampled: shaded per sample, so that the terrain's edge, where fragments are discarded
   // past the DEM's last samples, is smoothed like the triangles' edges.
@@ -512,6 +543,10 @@ const RendererSetup& AtlasRenderer::setup() const { return impl_->setup; }
 void AtlasRenderer::beginFrame() const { impl_->beginFrame(); }
 
 void AtlasRenderer::endFrame() const { impl_->resolve(); }
+
+void AtlasRenderer::setPlanetAnchor(const PlanetAnchor& anchor) { impl_->anchor = anchor; }
+
+const PlanetAnchor& AtlasRenderer::planetAnchor() const { return impl_->anchor; }
 
 void AtlasRenderer::setOverlay(std::vector<NodeOverlay> perNode, bool colourNodes) {
   impl_->overlay = std::move(perNode);

@@ -45,6 +45,9 @@ struct RendererSetup {
   // Colour texels per page sample interval, log2: a colour page has ((side - 1) << this) + 1
   // texels per side (terrain imagery finer than the heights; 0 for meshes).
   uint32_t colourScaleLog2 = 0;
+  // A planet atlas (core/planet.h; validSamples its lattice): heights drawn on the sphere, every
+  // position relative to the anchor (setPlanetAnchor), so viewProj and eye are too.
+  PlanetInfo planet;
 };
 
 // GPU bytes of one page of a pool made for `setup`: its samples (R32F, or RGB32F for geometry),
@@ -77,9 +80,10 @@ std::vector<uint8_t> readWindowPixels(uint32_t width, uint32_t height);
 void setPagePoolUnits(const GlObject& program);
 
 // Links atlas.vert + atlas.frag for terrain atlases or, with `geometry`, mesh atlases
-// (GIMLOD_GEOMETRY), with v_world captured by transform feedback and the samplers set
-// (setPagePoolUnits): the renderer's program. Needs a current context.
-GlObject linkAtlasProgram(bool geometry);
+// (GIMLOD_GEOMETRY), or with `planet` planet atlases (GIMLOD_PLANET), with v_world captured by
+// transform feedback and the samplers set (setPagePoolUnits): the renderer's program. Needs a
+// current context.
+GlObject linkAtlasProgram(bool geometry, bool planet = false);
 
 class AtlasRenderer {
  public:
@@ -121,6 +125,11 @@ class AtlasRenderer {
   // endFrame, as draw() does last, resolves a multisampled picture for readPixels and the window.
   void beginFrame() const;
   void endFrame() const;
+  // Planet atlases: the lattice sample positions are measured from in the next draws and captures
+  // (v_world is the position minus anchor.position); the view and eye given to draw() must be
+  // relative to it too.
+  void setPlanetAnchor(const PlanetAnchor& anchor);
+  const PlanetAnchor& planetAnchor() const;
   // Makes `program` current with the shading uniforms of atlas.frag (view, light, fog, extent;
   // the terrain-only ones where the program has them) and binds the page pool's textures to its
   // units (the first array's). `program` is one whose fragment stage is atlas.frag

@@ -34,6 +34,7 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o, const Pag
   s.spacing = a.manifest.spacing;
   s.validSamples = {a.manifest.samplesX, a.manifest.samplesY};  // {0, 0} for mesh atlases: nothing discarded
   s.heightRange = a.manifest.heightRange;
+  s.planet = a.manifest.planet;
   const uint64_t pageBytes = pagePoolPageBytes(s);
   const uint32_t charts = a.hierarchy.chartCount();
   s.pageCapacity = AtlasScene::pagePoolPages(o, charts, !a.hierarchy.groups.empty(), pageBytes);
@@ -114,7 +115,7 @@ bool AtlasScene::predictedView(const Camera& camera, ViewParams* view) const {
   ahead.target += (camera.target - lastCamera_.target) * k;
   if (ahead.eye == camera.eye && ahead.target == camera.target) return false;  // standing still
   if (glm::length(ahead.target - ahead.eye) <= 0.0) return false;
-  *view = makeViewParams(ahead, options_.width, options_.height);
+  *view = viewParams(ahead);
   return true;
 }
 
@@ -207,7 +208,41 @@ void AtlasScene::resize(uint32_t width, uint32_t height) {
 }
 
 glm::dmat4 AtlasScene::viewProjection(const Camera& c) const {
-  return projectionMatrix(c, double(options_.width) / double(options_.height)) * viewMatrix(c);
+  const double aspect = double(options_.width) / double(options_.height);
+  if (!atlas_.manifest.planet.present) return projectionMatrix(c, aspect) * viewMatrix(c);
+  const glm::dvec3 a = renderer_->planetAnchor().position;
+  Camera r = sceneCamera(c);
+  r.eye -= a;
+  r.target -= a;
+  return reversedProjectionMatrix(r, aspect) * viewMatrix(r);
+}
+
+Camera AtlasScene::sceneCamera(const Camera& camera) const {
+  if (!atlas_.manifest.planet.present) return camera;
+  Camera c = camera;
+  c.nearPlane = kPlanetNearPlane;
+  c.farPlane = glm::length(c.eye) + atlas_.manifest.planet.radius + std::max(0.0f, atlas_.manifest.heightRange[1]);
+  return c;
+}
+
+ViewParams AtlasScene::viewParams(const Camera& camera) const {
+  const Camera c = sceneCamera(camera);
+  ViewParams v = makeViewParams(c, options_.width, options_.height);
+  if (atlas_.manifest.planet.present)
+    v.frustum.setHorizon(c.eye, atlas_.manifest.planet.radius + std::min(0.0f, atlas_.manifest.heightRange[0]));
+  return v;
+}
+
+void AtlasScene::anchorAt(const Camera& camera) {
+  const AtlasManifest& m = atlas_.manifest;
+  if (!m.planet.present) return;
+  const PlanetFrame frame(m.planet, m.samplesX, m.samplesY);
+  const auto g = frame.sampleUnder(camera.eye);
+  renderer_->setPlanetAnchor(planetAnchor(frame, g[0], g[1]));
+}
+
+glm::dvec3 AtlasScene::captureOrigin() const {
+  return atlas_.manifest.planet.present ? renderer_->planetAnchor().position : glm::dvec3(0.0);
 }
 
 std::vector<DrawNode> AtlasScene::prepare(const Cut& cut, FrameResult* frame) {
@@ -257,7 +292,9 @@ DrawStats AtlasScene::drawCut(const Camera& camera, const Cut& cut, FrameResult*
       if (standIns_.count(cut.nodes[i].id.key())) records[i].flags |= kOverlayStandIn;
   }
   renderer_->setOverlay(std::move(records), colourNodes);
-  const DrawStats stats = renderer_->draw(glm::mat4(viewProjection(camera)), glm::vec3(camera.eye), nodes, stitch);
+  anchorAt(camera);
+  const DrawStats stats =
+      renderer_->draw(glm::mat4(viewProjection(camera)), glm::vec3(camera.eye - captureOrigin()), nodes, stitch);
   renderer_->setOverlay({});
   return stats;
 }
@@ -311,7 +348,7 @@ uint32_t AtlasScene::nodeBudget(uint32_t maxNodes) const {
 FrameResult AtlasScene::renderFrame(const Camera& camera, const AdaptOptions& options) {
   FrameResult f;
   const auto t0 = std::chrono::steady_clock::now();
-  const ViewParams view = makeViewParams(camera, options_.width, options_.height);
+  const ViewParams view = viewParams(camera);
   AdaptOptions o = options;
   o.maxNodes = nodeBudget(options.maxNodes);
   if (options_.coherentAdaptation) {
@@ -327,7 +364,7 @@ FrameResult AtlasScene::renderFrame(const Camera& camera, const AdaptOptions& op
 FrameResult AtlasScene::renderFrame(const Camera& camera, const BudgetOptions& options) {
   FrameResult f;
   const auto t0 = std::chrono::steady_clock::now();
-  const ViewParams view = makeViewParams(camera, options_.width, options_.height);
+  const ViewParams view = viewParams(camera);
   BudgetOptions o = options;
   o.maxNodes = nodeBudget(options.maxNodes);
   if (!quadQueue_) quadQueue_ = std::make_unique<QuadQueueAdapter>(atlas_.hierarchy);

@@ -155,7 +155,17 @@ class AtlasScene {
   // stitch = false zeroes the stitching tables (a negative control for the crack tests).
   std::vector<std::vector<glm::vec3>> capture(const Cut& cut, bool stitch = true);
 
+  // The camera's view and projection as draw() takes them: planet atlases relative to the
+  // renderer's anchor (setPlanetAnchor), with a reversed depth to infinity.
   glm::dmat4 viewProjection(const Camera& camera) const;
+  // Planet atlases: the camera as the scene draws it (near plane a few centimetres, far beyond the
+  // planet: the depth is reversed), and its view with horizon culling; other atlases: as they are.
+  Camera sceneCamera(const Camera& camera) const;
+  ViewParams viewParams(const Camera& camera) const;
+  // Planet atlases: measures positions from the lattice sample under the eye (no-op otherwise).
+  void anchorAt(const Camera& camera);
+  // Planet atlases: the planet-centred point captured positions are relative to ({0} otherwise).
+  glm::dvec3 captureOrigin() const;
   // Blocks until the page loader has nothing queued or being read (no-op without asyncLoads).
   void waitForLoads();
   // The page loader, or null without asyncLoads.

@@ -1,0 +1,154 @@
+// Planet atlases through the real vertex shader: the shipped global DEM on a sphere, crack-free
+// across chart borders, the antimeridian and the poles; a closed surface; positions near the eye
+// exact to millimetres at the planet's scale.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "pipeline/build.h"
+#include "runtime/atlas_view.h"
+#include "runtime/cut_mesh.h"
+#include "runtime/gl/atlas_scene.h"
+#include "tests/gl/crack_check.h"
+#include "tests/gl/gl_context_test.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+class PlanetTest : public test::GlContextTest<> {
+ protected:
+  static void SetUpTestSuite() {
+    test::GlContextTest<>::SetUpTestSuite();
+    dir_ = std::make_unique<test::TempDir>("planet");
+    TerrainBuildOptions o;
+    o.input = test::repoData() / "terrain/etopo_30min.tif";
+    o.output = dir_->path() / "earth.atlas";
+    o.planet = true;
+    o.chartSize = 129;
+    o.depth = 4;
+    o.nodeRes = 16;
+    o.minNodeRes = 2;
+    buildAtlas(o);
+    atlas_ = std::make_unique<AtlasView>(openAtlas(o.output));
+  }
+  static void TearDownTestSuite() {
+    atlas_.reset();
+    dir_.reset();
+    test::GlContextTest<>::TearDownTestSuite();
+  }
+
+  static gl::SceneOptions sceneOptions() {
+    gl::SceneOptions so;
+    so.width = 160;
+    so.height = 120;
+    return so;
+  }
+
+  // A camera `altitude` metres above (lon, lat), looking `ahead` degrees north along the surface.
+  static Camera cameraAbove(double lonDeg, double latDeg, double altitude, double aheadDeg) {
+    const double r = atlas_->manifest.planet.radius;
+    auto dir = [](double lon, double lat) {
+      return glm::dvec3(std::cos(lat * kDeg) * std::cos(lon * kDeg), std::cos(lat * kDeg) * std::sin(lon * kDeg),
+                        std::sin(lat * kDeg));
+    };
+    Camera c;
+    c.eye = (r + altitude) * dir(lonDeg, latDeg);
+    c.target = r * dir(lonDeg, std::clamp(latDeg + aheadDeg, -89.9, 89.9));
+    c.up = dir(lonDeg, latDeg);
+    c.fovYDeg = 60.0;
+    return c;
+  }
+
+  static inline std::unique_ptr<test::TempDir> dir_;
+  static inline std::unique_ptr<AtlasView> atlas_;
+};
+
+TEST_F(PlanetTest, TheGlobalDemWrapsAndClosesAtThePoles) {
+  const AtlasManifest& m = atlas_->manifest;
+  ASSERT_TRUE(m.planet.present);
+  // 720 columns a turn, made 6 charts of 128 intervals, plus the wrap column.
+  EXPECT_EQ(m.planet.wrapColumns, 768u);
+  EXPECT_EQ(m.samplesX, 769u);
+  EXPECT_EQ(m.chartsX, 6u);
+  // Cell-centred rows: a pole row added each side.
+  EXPECT_EQ(m.samplesY, 362u);
+  const PlanetFrame frame(m.planet, m.samplesX, m.samplesY);
+  EXPECT_EQ(frame.pole(0), -1);
+  EXPECT_EQ(frame.pole(1), 0);
+  EXPECT_EQ(frame.pole(361), 1);
+  EXPECT_EQ(frame.pole(400), 1);  // padding past the pole folds onto it
+  // The last chart column's right edge meets the first's left.
+  for (uint32_t y = 0; y < m.chartsY; ++y) {
+    const ChartInfo& last = m.charts[y * m.chartsX + m.chartsX - 1];
+    EXPECT_EQ(last.neighbours[kEdgeRight].chart, int32_t(y * m.chartsX));
+  }
+}
+
+TEST_F(PlanetTest, CutsAreCrackFreeAcrossChartsTheAntimeridianAndThePoles) {
+  gl::AtlasScene scene(*atlas_, sceneOptions());
+  const Hierarchy& h = atlas_->hierarchy;
+  const AtlasManifest& m = atlas_->manifest;
+  AdaptOptions ao;
+  ao.tolerancePx = 0.5;
+  ao.maxNodes = scene.nodeBudget(0);
+  test::CutMix mix;
+  uint64_t seamSides = 0, poleNodes = 0, checked = 0;
+  std::vector<uint32_t> levels(h.params.depth, 0);
+  const double views[][4] = {{180.0, 0.0, 2.0e6, 20.0},   {-179.0, 10.0, 4.0e5, 15.0}, {0.0, 88.0, 1.5e6, -10.0},
+                             {179.5, -87.0, 8.0e5, 5.0},  {60.0, 30.0, 2.0e7, 0.0},    {-90.0, 89.9, 3.0e5, -30.0}};
+  for (const auto& v : views) {
+    const gl::FrameResult f = scene.renderFrame(cameraAbove(v[0], v[1], v[2], v[3]), ao);
+    ASSERT_FALSE(f.cut.nodes.empty());
+    const CrackReport r = test::captureCracks(scene, f.cut);
+    EXPECT_EQ(r.mismatches, 0u) << "view at " << v[0] << ", " << v[1];
+    EXPECT_GT(r.borderVertices, 0u);
+    checked += r.borderVertices;
+    mix += test::cutMix(h, f.cut);
+    std::vector<SideNeighbour> ns;
+    for (const CutNode& n : f.cut.nodes) {
+      ++levels[n.id.level];
+      const uint32_t size = (m.chartSize - 1) >> n.id.level;
+      const int64_t y0 = int64_t(m.charts[n.id.chart].gridY) * (m.chartSize - 1) + int64_t(n.id.y) * size;
+      poleNodes += y0 == 0 || (y0 <= 361 && y0 + size >= 361);
+      ns.clear();
+      sideNeighbours(h, f.cut, n.id, kEdgeRight, ns);
+      for (const SideNeighbour& sn : ns)
+        seamSides += m.charts[n.id.chart].gridX == int32_t(m.chartsX - 1) &&
+                     m.charts[f.cut.nodes[sn.cutIndex].id.chart].gridX == 0;
+    }
+  }
+  EXPECT_GT(checked, 1000u);
+  EXPECT_GT(seamSides, 0u) << "no cut crossed the antimeridian";
+  EXPECT_GT(poleNodes, 0u) << "no cut reached a pole";
+  EXPECT_GT(mix.crossChartLevelDiff, 0u) << "no chart border between levels";
+  EXPECT_GT(mix.crossChartResDiff, 0u);
+  uint32_t used = 0;
+  for (uint32_t c : levels) used += c > 0;
+  EXPECT_GE(used, 3u);
+}
+
+TEST_F(PlanetTest, TheWholePlanetIsAClosedSurface) {
+  gl::AtlasScene scene(*atlas_, sceneOptions());
+  AdaptOptions ao;
+  ao.tolerancePx = 0.5;
+  ao.maxNodes = scene.nodeBudget(0);
+  ao.frustumCull = false;
+  for (const double altitude : {3.0e6, 3.0e7}) {
+    const gl::FrameResult f = scene.renderFrame(cameraAbove(-179.5, 45.0, altitude, -20.0), ao);
+    const CutMesh mesh = buildCutMesh(atlas_->hierarchy, f.cut, scene.capture(f.cut), nullptr);
+    EXPECT_EQ(mesh.boundaryEdges, 0u) << "altitude " << altitude;
+    EXPECT_GT(mesh.triangles.size(), 500u);
+    // Without the stitching, the near view's cut (of mixed resolutions) opens.
+    if (altitude < 1e7) {
+      const CutMesh open = buildCutMesh(atlas_->hierarchy, f.cut, scene.capture(f.cut, false), nullptr);
+      EXPECT_GT(open.boundaryEdges, 0u);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace gimlod
