@@ -178,8 +178,8 @@ std::vector<ReportImage> renderInspectViews(const fs::path& atlasDir, const std:
     writePng(png, w, h, 4, scene.renderer().readPixels());
     // The cut as drawn, welded: its boundary edges off the open chart borders are cracks.
     const std::array<glm::dvec2, 2> valid{glm::dvec2(atlas.lo), glm::dvec2(atlas.hi)};
-    const CutMesh mesh = buildCutMesh(atlas.hierarchy, f.cut, scene.capture(f.cut),
-                                      atlas.manifest.kind == AtlasKind::Heightfield ? &valid : nullptr);
+    const bool flat = atlas.manifest.kind == AtlasKind::Heightfield && !atlas.manifest.planet.present;
+    const CutMesh mesh = buildCutMesh(atlas.hierarchy, f.cut, scene.capture(f.cut), flat ? &valid : nullptr);
     const nlohmann::json figures = {{"view", names[i]},
                                     {"nodes", f.cut.nodeCount()},
                                     {"triangles", f.draw.triangles},
@@ -313,8 +313,11 @@ int runRender(const RenderArgs& a) {
     writePng(out / fmt::format("frame_{:04d}.png", i), w, h, 4, scene.renderer().readPixels());
     if (const auto ex = cutExports.find(i); ex != cutExports.end()) {
       const std::array<glm::dvec2, 2> valid{glm::dvec2(atlas.lo), glm::dvec2(atlas.hi)};
-      const CutMesh mesh = buildCutMesh(atlas.hierarchy, f.cut, scene.capture(f.cut, !a.noStitch),
-                                        atlas.manifest.kind == AtlasKind::Heightfield ? &valid : nullptr);
+      // (A planet's cut has no DEM rectangle, and its positions are written planet-centred.)
+      const bool flat = atlas.manifest.kind == AtlasKind::Heightfield && !atlas.manifest.planet.present;
+      CutMesh mesh = buildCutMesh(atlas.hierarchy, f.cut, scene.capture(f.cut, !a.noStitch), flat ? &valid : nullptr);
+      const glm::dvec3 origin = scene.captureOrigin();
+      for (glm::vec3& p : mesh.positions) p = glm::vec3(glm::dvec3(p) + origin);
       writeCutMeshPly(ex->second, mesh);
       spdlog::info("frame {}: wrote the cut as drawn to {}: {} vertices, {} triangles; {} boundary edges, {} on open "
                    "chart borders, {} elsewhere (cracks, or the edge of what the view culled)",

@@ -1,0 +1,139 @@
+// A longitude/latitude DEM made ready for the sphere (atlas/terrain/planet_grid.h).
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "atlas/terrain/planet_grid.h"
+#include "atlas/mesh/mesh_atlas.h"
+#include "pipeline/build.h"
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+// A geographic DEM of w x h samples of `step` degrees from (west, north) (GDAL's corner), heights
+// from f(column, row from the south).
+template <typename F>
+DemRaster geographicDem(uint32_t w, uint32_t h, double west, double north, double step, F f) {
+  DemRaster d;
+  d.width = w;
+  d.height = h;
+  d.georef.geographic = true;
+  d.georef.geotransform = {west, step, 0.0, north, 0.0, -step};
+  d.integerHeights = true;
+  d.heights.resize(size_t(w) * h);
+  d.minHeight = 1e30f;
+  d.maxHeight = -1e30f;
+  for (uint32_t y = 0; y < h; ++y)
+    for (uint32_t x = 0; x < w; ++x) {
+      const float v = f(x, y);
+      d.heights[size_t(y) * w + x] = v;
+      d.minHeight = std::min(d.minHeight, v);
+      d.maxHeight = std::max(d.maxHeight, v);
+    }
+  return d;
+}
+
+float at(const DemRaster& d, uint32_t x, uint32_t y) { return d.heights[size_t(y) * d.width + x]; }
+
+TEST(PlanetGrid, CellCentredGlobeWrapsOnChartBordersAndGainsPoleRows) {
+  // 40 x 20 cells of 9 degrees: 40 columns a turn, made 48 (3 charts of 16), plus the wrap column.
+  DemRaster d = geographicDem(40, 20, -180.0, 90.0, 9.0, [](uint32_t x, uint32_t y) { return float(x * 10 + y); });
+  const DemRaster before = d;
+  const PlanetInfo p = preparePlanetGrid(d, "globe.tif", kEarthRadius, 16);
+  EXPECT_EQ(p.wrapColumns, 48u);
+  EXPECT_DOUBLE_EQ(p.dlonDeg, 7.5);
+  EXPECT_DOUBLE_EQ(p.lon0Deg, -175.5);
+  EXPECT_EQ(d.width, 49u);
+  EXPECT_EQ(d.height, 22u);
+  EXPECT_DOUBLE_EQ(p.lat0Deg, -94.5);  // the added row, clamped onto the pole
+  for (uint32_t y = 0; y < d.height; ++y) EXPECT_EQ(at(d, 48, y), at(d, 0, y)) << y;
+  // The pole rows: uniform, at the mean of the row next to them.
+  double south = 0, north = 0;
+  for (uint32_t x = 0; x < 48; ++x) {
+    south += at(d, x, 1);
+    north += at(d, x, 20);
+  }
+  for (uint32_t x = 0; x < 49; ++x) {
+    EXPECT_EQ(at(d, x, 0), std::nearbyint(south / 48.0));
+    EXPECT_EQ(at(d, x, 21), std::nearbyint(north / 48.0));
+  }
+  // Resampled linearly round the circle: column 0 kept, a column between two source ones between
+  // their heights, whole metres kept.
+  for (uint32_t y = 0; y < 20; ++y) {
+    EXPECT_EQ(at(d, 0, y + 1), at(before, 0, y));
+    const float mid = at(d, 5, y + 1);  // 5 * 40 / 48 = 4.17 source columns
+    EXPECT_GE(mid, std::min(at(before, 4, y), at(before, 5, y)));
+    EXPECT_LE(mid, std::max(at(before, 4, y), at(before, 5, y)));
+    EXPECT_EQ(mid, std::nearbyint(mid));
+    // The last source column wraps onto column 0: (47 * 40 / 48 = 39.17) between 39 and 0.
+    const float last = at(d, 47, y + 1);
+    EXPECT_GE(last, std::min(at(before, 39, y), at(before, 0, y)));
+    EXPECT_LE(last, std::max(at(before, 39, y), at(before, 0, y)));
+  }
+  EXPECT_NEAR(d.spacing[0], kEarthRadius * 7.5 * M_PI / 180.0, 1e-6);
+}
+
+TEST(PlanetGrid, GridRegisteredGlobeKeepsItsSamples) {
+  // 41 x 21 samples of 9 degrees on the meridians and parallels: the last column repeats the
+  // first, the first and last rows lie on the poles.
+  DemRaster d = geographicDem(41, 21, -184.5, 94.5, 9.0, [](uint32_t x, uint32_t y) { return float((x % 40) + 100 * y); });
+  const DemRaster before = d;
+  const PlanetInfo p = preparePlanetGrid(d, "grid.tif", 1000.0, 8);
+  EXPECT_EQ(p.wrapColumns, 40u);
+  EXPECT_EQ(d.width, 41u);
+  EXPECT_EQ(d.height, 21u);
+  EXPECT_DOUBLE_EQ(p.lat0Deg, -90.0);
+  EXPECT_DOUBLE_EQ(p.radius, 1000.0);
+  for (uint32_t y = 1; y < 20; ++y)
+    for (uint32_t x = 0; x < 41; ++x) EXPECT_EQ(at(d, x, y), at(before, x % 40, y));
+  for (uint32_t x = 0; x < 41; ++x) {
+    EXPECT_EQ(at(d, x, 0), at(d, 0, 0));
+    EXPECT_EQ(at(d, x, 20), at(d, 0, 20));
+  }
+}
+
+TEST(PlanetGrid, ARegionalDemIsLeftAsItIs) {
+  DemRaster d = geographicDem(100, 80, 10.0, 50.0, 0.01, [](uint32_t x, uint32_t y) { return float(x + y); });
+  const DemRaster before = d;
+  const PlanetInfo p = preparePlanetGrid(d, "alps.tif", kEarthRadius, 64);
+  EXPECT_EQ(p.wrapColumns, 0u);
+  EXPECT_EQ(d.width, 100u);
+  EXPECT_EQ(d.height, 80u);
+  EXPECT_EQ(d.heights, before.heights);
+  EXPECT_DOUBLE_EQ(p.lon0Deg, 10.005);
+  EXPECT_NEAR(p.lat0Deg, 49.205, 1e-9);
+}
+
+TEST(PlanetGrid, AProjectedDemIsRefusedByName) {
+  DemRaster d = geographicDem(10, 10, 500000.0, 5200000.0, 30.0, [](uint32_t, uint32_t) { return 0.0f; });
+  d.georef.geographic = false;
+  try {
+    preparePlanetGrid(d, "utm.tif", kEarthRadius, 8);
+    FAIL() << "a projected DEM was taken";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("utm.tif"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("longitude and latitude"), std::string::npos);
+  }
+}
+
+// The shipped global DEM as a planet atlas: the whole surface, every pyramid level, is closed.
+TEST(PlanetGrid, TheShippedGlobeExportsAsAClosedSurfaceAtEveryLevel) {
+  test::TempDir dir("planet_export");
+  TerrainBuildOptions o;
+  o.input = test::repoData() / "terrain/etopo_30min.tif";
+  o.output = dir.path() / "earth.atlas";
+  o.planet = true;
+  o.chartSize = 257;
+  buildAtlas(o);
+  for (uint32_t level = 0; level <= 8; level += 2) {
+    const AtlasSurface s = readAtlasSurface(o.output, level);
+    EXPECT_EQ(s.boundaryEdges, 0u) << "level " << level;
+    // A closed surface of genus 0: V - E + F = 2.
+    const int64_t faces = int64_t(s.triangles.size()), edges = faces * 3 / 2;
+    EXPECT_EQ(int64_t(s.positions.size()) - edges + faces, 2) << "level " << level;
+  }
+}
+
+}  // namespace
+}  // namespace gimlod

@@ -1,0 +1,72 @@
+// `gimlod build --planet` on the shipped global DEM: the atlas renders, exports as a closed
+// surface, and the options that do not apply are refused by name.
+#include <gtest/gtest.h>
+
+#include <regex>
+
+#include "tests/test_util.h"
+
+namespace gimlod {
+namespace {
+
+namespace fs = std::filesystem;
+
+TEST(PlanetCli, TheShippedGlobeBuildsRendersAndExportsClosed) {
+  test::TempDir dir("gimlod-planet-cli");
+  const std::string app = test::appPath().string();
+  const fs::path dem = test::repoData() / "terrain/etopo_30min.tif";
+  const fs::path atlas = dir.path() / "earth.atlas";
+  std::string out;
+  ASSERT_EQ(test::runCommand(app + " build " + test::quoted(dem) + " -o " + test::quoted(atlas) + " --planet 2>&1", &out), 0)
+      << out;
+  EXPECT_NE(out.find("columns round the planet"), std::string::npos) << out;
+  ASSERT_EQ(test::runCommand(app + " export " + test::quoted(atlas) + " -o " + test::quoted(dir.path() / "earth.ply") +
+                                 " --level 1 2>&1",
+                             &out),
+            0)
+      << out;
+  EXPECT_NE(out.find("; 0 boundary edges"), std::string::npos) << out;
+  const fs::path frames = dir.path() / "frames";
+  ASSERT_EQ(test::runCommand(app + " render " + test::quoted(atlas) + " -o " + test::quoted(frames) +
+                                 " --orbit 3 --size 160x120 2>&1",
+                             &out),
+            0)
+      << out;
+  const test::Csv csv = test::readCsv(frames / "stats.csv");
+  ASSERT_EQ(csv.rows.size(), 3u);
+  for (size_t i = 0; i < csv.rows.size(); ++i) {
+    EXPECT_GT(csv.num(i, "nodes"), 1.0);
+    EXPECT_LE(csv.num(i, "max_screen_error_px"), 1.0);
+  }
+}
+
+TEST(PlanetCli, OptionsThatDoNotApplyAreRefused) {
+  test::TempDir dir("gimlod-planet-cli-bad");
+  const std::string app = test::appPath().string();
+  std::string out;
+  const std::string dem = test::quoted(test::repoData() / "terrain/etopo_30min.tif");
+  EXPECT_NE(test::runCommand(app + " build " + dem + " -o " + test::quoted(dir.path() / "a") + " --radius 1000 2>&1",
+                             &out),
+            0);
+  EXPECT_NE(out.find("--radius needs --planet"), std::string::npos) << out;
+  EXPECT_NE(test::runCommand(app + " build " + dem + " -o " + test::quoted(dir.path() / "b") +
+                                 " --planet --radius -5 2>&1",
+                             &out),
+            0);
+  EXPECT_NE(out.find("--radius"), std::string::npos) << out;
+  EXPECT_NE(test::runCommand(app + " build " + test::quoted(test::repoData() / "meshes/bun_zipper.ply") + " -o " +
+                                 test::quoted(dir.path() / "c") + " --planet 2>&1",
+                             &out),
+            0);
+  EXPECT_NE(out.find("--planet"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir.path() / "c"));
+  // An atlas too large to build in memory under the cap is refused, naming the cap.
+  EXPECT_NE(test::runCommand(app + " build " + dem + " -o " + test::quoted(dir.path() / "d") +
+                                 " --planet --out-of-core 2>&1",
+                             &out),
+            0);
+  EXPECT_NE(out.find("--out-of-core"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace gimlod
