@@ -13,6 +13,8 @@ mkdir -p out
 ./build/gimlod render out/rainier.atlas -o out/rainier_flyby --path scenes/rainier_flyby.json --size 640x480 --tolerance 1
 ./build/gimlod build data/meshes/bun_zipper.ply -o out/bunny.atlas
 ./build/gimlod render out/bunny.atlas -o out/bunny_orbit --path scenes/bunny_orbit.json --size 640x480 --tolerance 1
+./build/gimlod build data/terrain/etopo_30min.tif -o out/earth.atlas --planet
+./build/gimlod render out/earth.atlas -o out/earth_orbit --orbit 24 --distance 0.6 --size 640x480 --tolerance 1
 xvfb-run -a -s "-screen 0 1280x1024x24" ./build/gimlod view out/rainier.atlas --path scenes/rainier_flyby.json \
   --frames 12 --size 960x540 --screenshot out/view_rainier.png
 xvfb-run -a -s "-screen 0 1280x1024x24" ./build/gimlod view out/bunny.atlas --path scenes/bunny_orbit.json \
