@@ -1,0 +1,135 @@
+// The hierarchy of a planet atlas bounds the drawn surface on the sphere: every node's error at
+// every resolution is at least the distance, measured in double precision, from each of its samples
+// to its grid drawn at that resolution; every box holds its samples.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "hierarchy/hierarchy.h"
+
+namespace gimlod {
+namespace {
+
+constexpr uint32_t kM = 32;  // chart intervals
+
+// A whole planet of 64 columns a turn (5.625 degrees) and 34 rows, the first and last on the poles,
+// in 2 x 2 charts of 33 samples; heights with kilometres of relief.
+struct TinyPlanet {
+  AtlasManifest m;
+  std::vector<float> heights;  // samplesX x samplesY
+  TinyPlanet(double radius) {
+    m.chartSize = kM + 1;
+    m.blockIntervals = 16;
+    m.depth = 3;
+    m.maxNodeResLog2 = 4;
+    m.minNodeResLog2 = 1;
+    m.samplesX = 65;
+    m.samplesY = 34;
+    m.chartsX = 2;
+    m.chartsY = 2;
+    m.planet.present = true;
+    m.planet.radius = radius;
+    m.planet.wrapColumns = 64;
+    m.planet.dlonDeg = 5.625;
+    m.planet.dlatDeg = 180.0 / 33.0;
+    m.planet.lon0Deg = -180.0;
+    m.planet.lat0Deg = -90.0;
+    for (uint32_t y = 0; y < 2; ++y)
+      for (uint32_t x = 0; x < 2; ++x) {
+        ChartInfo c;
+        c.id = y * 2 + x;
+        c.gridX = int32_t(x);
+        c.gridY = int32_t(y);
+        c.neighbours[kEdgeRight] = {int32_t(y * 2 + 1 - x), uint8_t(kEdgeLeft), true};
+        c.neighbours[kEdgeLeft] = {int32_t(y * 2 + 1 - x), uint8_t(kEdgeRight), true};
+        c.neighbours[kEdgeTop] = y == 0 ? RootNeighbour{int32_t(2 + x), uint8_t(kEdgeBottom), true} : RootNeighbour{};
+        c.neighbours[kEdgeBottom] = y == 1 ? RootNeighbour{int32_t(x), uint8_t(kEdgeTop), true} : RootNeighbour{};
+        m.charts.push_back(c);
+      }
+    heights.resize(size_t(m.samplesX) * m.samplesY);
+    for (uint32_t y = 0; y < m.samplesY; ++y)
+      for (uint32_t x = 0; x < m.samplesX; ++x) {
+        const uint32_t c = x % 64;
+        float h = float(3000.0 * std::sin(0.7 * c) * std::cos(0.45 * y) + 2500.0 * std::sin(1.9 * c + 0.3 * y));
+        if (y == 0 || y + 1 == m.samplesY) h = y == 0 ? -4000.0f : 2800.0f;  // uniform pole rows
+        heights[size_t(y) * m.samplesX + x] = h;
+      }
+    for (uint32_t y = 0; y < m.samplesY; ++y) height(64, y) = height(0, y);  // the wrap column
+  }
+  float& height(int64_t x, int64_t y) { return heights[size_t(y) * m.samplesX + size_t(x)]; }
+  float clamped(int64_t x, int64_t y) {
+    return height(std::clamp<int64_t>(x, 0, m.samplesX - 1), std::clamp<int64_t>(y, 0, m.samplesY - 1));
+  }
+  ChartWindowSource source() {
+    return [this](uint32_t c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n) {
+      std::vector<float> out(size_t(n + 1) * (n + 1));
+      const ChartInfo& ch = m.charts[c];
+      for (uint32_t v = 0; v <= n; ++v)
+        for (uint32_t u = 0; u <= n; ++u)
+          out[size_t(v) * (n + 1) + u] = clamped(int64_t(ch.gridX) * kM + (int64_t(u0 + u) << level),
+                                                 int64_t(ch.gridY) * kM + (int64_t(v0 + v) << level));
+      return out;
+    };
+  }
+};
+
+void checkBounds(double radius) {
+  TinyPlanet t(radius);
+  const Hierarchy h = buildPlanetHierarchy(t.m, t.source());
+  const PlanetFrame frame(t.m.planet, t.m.samplesX, t.m.samplesY);
+  const HierarchyParams& p = h.params;
+  uint64_t checked = 0, tight = 0;
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    const ChartInfo& ch = t.m.charts[c];
+    auto P = [&](int64_t u, int64_t v) {  // chart sample (u, v), planet-centred
+      const int64_t gx = int64_t(ch.gridX) * kM + u, gy = int64_t(ch.gridY) * kM + v;
+      return frame.position(gx, gy, t.clamped(gx, gy));
+    };
+    for (uint32_t l = 0; l < p.depth; ++l)
+      for (uint32_t y = 0; y < (1u << l); ++y)
+        for (uint32_t x = 0; x < (1u << l); ++x) {
+          const NodeId n{c, l, x, y};
+          const uint32_t size = kM >> l;
+          const auto& b = h.bounds(n);
+          for (uint32_t v = 0; v <= size; ++v)
+            for (uint32_t u = 0; u <= size; ++u) {
+              const glm::dvec3 q = P(x * size + u, y * size + v);
+              for (int k = 0; k < 3; ++k) {
+                EXPECT_LE(double(b[k]), q[k]);
+                EXPECT_GE(double(b[3 + k]), q[k]);
+              }
+            }
+          for (uint32_t r = p.minNodeResLog2; r <= h.maxRes(n); ++r) {
+            const uint32_t s = size >> r;  // level-0 intervals between the grid's vertices
+            double worst = 0.0;
+            for (uint32_t v = 0; v <= size; ++v)
+              for (uint32_t u = 0; u <= size; ++u) {
+                const uint32_t cx = std::min(u / s, (1u << r) - 1), cy = std::min(v / s, (1u << r) - 1);
+                const float fx = float(u - cx * s) / float(s), fy = float(v - cy * s) / float(s);
+                auto corner = [&](uint32_t i, uint32_t j) { return P(x * size + i * s, y * size + j * s); };
+                // The grid's triangles split along (0,0)-(1,1), as cellSurface and the renderer.
+                const glm::dvec3 h00 = corner(cx, cy), h10 = corner(cx + 1, cy), h01 = corner(cx, cy + 1),
+                                 h11 = corner(cx + 1, cy + 1);
+                const double dx = fx, dy = fy;
+                const glm::dvec3 drawn = dx >= dy ? h00 + dx * (h10 - h00) + dy * (h11 - h10)
+                                                  : h00 + dy * (h01 - h00) + dx * (h11 - h01);
+                worst = std::max(worst, glm::length(drawn - P(x * size + u, y * size + v)));
+              }
+            const double stored = h.error(n, r);
+            EXPECT_GE(stored, worst - 1e-6) << "chart " << c << " node " << l << "," << x << "," << y << " res " << r;
+            tight += stored <= 1.01 * worst + 1.0;
+            ++checked;
+          }
+        }
+  }
+  EXPECT_GT(checked, 100u);
+  // The bound is the measure itself, not a loose one: most are within 1% of it.
+  EXPECT_GT(tight, checked / 2);
+}
+
+TEST(PlanetHierarchy, ErrorsBoundTheDrawnSurfaceOnTheSphere) { checkBounds(kEarthRadius); }
+
+TEST(PlanetHierarchy, ErrorsBoundTheDrawnSurfaceOnASmallPlanet) { checkBounds(1.5e5); }
+
+}  // namespace
+}  // namespace gimlod
