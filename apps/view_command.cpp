@@ -315,6 +315,7 @@ int runView(const ViewArgs& a) {
   std::optional<FrameController> controller;
 
   CameraControl camera(atlas.lo, atlas.hi, up, a.fov);
+  camera.setRadialUp(atlas.manifest.planet.present);
   glm::dvec3 surfaceEye(std::numeric_limits<double>::quiet_NaN());  // where the surface distance was measured
   if (!path.empty()) camera.setCamera(path.front());
 

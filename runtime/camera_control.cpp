@@ -62,18 +62,48 @@ void CameraControl::frame() {
   updateEye();
 }
 
+void CameraControl::basis(glm::dvec3* a, glm::dvec3* b, glm::dvec3* up) const {
+  const double r = glm::length(eye_);
+  if (radialUp_ && mode_ == Mode::kFly && r > 0.0) {
+    // The local east, north and up of a planet: up away from its centre.
+    *up = eye_ / r;
+    const glm::dvec3 e = glm::cross(glm::dvec3(0.0, 0.0, 1.0), *up);
+    *a = glm::length(e) > 1e-9 ? glm::normalize(e) : glm::dvec3(1.0, 0.0, 0.0);
+    *b = glm::cross(*up, *a);
+    return;
+  }
+  horizontal(up_, a, b);
+  *up = up_.vector();
+}
+
+glm::dvec3 CameraControl::upVector() const {
+  glm::dvec3 a, b, up;
+  basis(&a, &b, &up);
+  return up;
+}
+
 glm::dvec3 CameraControl::forward() const {
-  glm::dvec3 a, b;
-  horizontal(up_, &a, &b);
-  const glm::dvec3 d = std::cos(pitch_) * (std::cos(yaw_) * a + std::sin(yaw_) * b) + std::sin(pitch_) * up_.vector();
+  glm::dvec3 a, b, up;
+  basis(&a, &b, &up);
+  const glm::dvec3 d = std::cos(pitch_) * (std::cos(yaw_) * a + std::sin(yaw_) * b) + std::sin(pitch_) * up;
   return -d;
+}
+
+void CameraControl::lookAlong(const glm::dvec3& f) {
+  glm::dvec3 a, b, up;
+  basis(&a, &b, &up);
+  const glm::dvec3 d = -glm::normalize(f);
+  pitch_ = std::clamp(std::asin(std::clamp(glm::dot(d, up), -1.0, 1.0)), -kMaxPitch, kMaxPitch);
+  yaw_ = std::atan2(glm::dot(d, b), glm::dot(d, a));
 }
 
 void CameraControl::updateEye() { eye_ = centre_ - distance_ * forward(); }
 
 void CameraControl::setMode(Mode m) {
   if (m == mode_) return;
+  const glm::dvec3 f = forward();
   mode_ = m;
+  lookAlong(f);  // the same view in the new mode's frame (a planet's local one when flying)
   centre_ = eye_ + distance_ * forward();
 }
 
@@ -90,7 +120,7 @@ void CameraControl::rotate(double dxPx, double dyPx, double heightPx) {
 
 void CameraControl::pan(double dxPx, double dyPx, double heightPx) {
   const glm::dvec3 f = forward();
-  const glm::dvec3 right = glm::normalize(glm::cross(f, up_.vector()));
+  const glm::dvec3 right = glm::normalize(glm::cross(f, upVector()));
   const glm::dvec3 up = glm::cross(right, f);
   const double scale = mode_ == Mode::kOrbit
                            ? 2.0 * distance_ * std::tan(0.5 * glm::radians(fov_)) / std::max(heightPx, 1.0)
@@ -113,12 +143,13 @@ void CameraControl::zoom(double steps) {
 
 void CameraControl::move(const glm::dvec3& rightUpForward, double seconds) {
   const glm::dvec3 f = forward();
-  const glm::dvec3 right = glm::normalize(glm::cross(f, up_.vector()));
+  const glm::dvec3 right = glm::normalize(glm::cross(f, upVector()));
   const double step = flySpeed() * seconds;
   if (mode_ == Mode::kFly) {
-    const glm::dvec3 shift = (rightUpForward.x * right + rightUpForward.y * up_.vector() + rightUpForward.z * f) * step;
+    const glm::dvec3 shift = (rightUpForward.x * right + rightUpForward.y * upVector() + rightUpForward.z * f) * step;
     eye_ += shift;
-    centre_ = eye_ + distance_ * f;
+    // On a planet the local frame turns with the eye: the heading and pitch stay, the horizon level.
+    centre_ = eye_ + distance_ * forward();
     return;
   }
   const double diag = glm::length(hi_ - lo_);
@@ -139,7 +170,7 @@ Camera CameraControl::camera() const {
   Camera c;
   c.eye = eye_;
   c.target = eye_ + distance_ * forward();
-  c.up = up_.vector();
+  c.up = upVector();
   c.fovYDeg = fov_;
   c.nearPlane = 0.0;
   c.farPlane = 0.0;

@@ -75,7 +75,18 @@ class CameraControl {
   const glm::dvec3& eye() const { return eye_; }
   double distance() const { return distance_; }
 
+  // Planets: flying, up is away from the planet's centre (the origin), and the heading and pitch are
+  // the local ones (from east, north and up under the eye), so the horizon stays level as the eye
+  // moves round the planet; orbiting keeps the up axis.
+  void setRadialUp(bool on) { radialUp_ = on; }
+  // The camera's up: the up axis, or away from the planet's centre when flying over one.
+  glm::dvec3 upVector() const;
+
  private:
+  // The horizontal axes (a, b) and the up of the current frame, a x b = up.
+  void basis(glm::dvec3* a, glm::dvec3* b, glm::dvec3* up) const;
+  // Sets yaw and pitch to look along f in the current frame.
+  void lookAlong(const glm::dvec3& f);
   glm::dvec3 forward() const;
   void updateEye();  // orbit: eye from centre, distance, yaw, pitch
   glm::dvec3 lo_, hi_;
@@ -87,6 +98,7 @@ class CameraControl {
   double yaw_ = 0.0, pitch_ = 0.0;  // radians; pitch in (-pi/2, pi/2) above the horizon
   double speedFactor_ = 1.0;
   double surfaceDistance_ = -1.0;
+  bool radialUp_ = false;
 };
 
 // The distance from p to the nearest leaf node's bounding box (0 inside one): the height above a

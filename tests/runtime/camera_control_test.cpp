@@ -235,3 +235,43 @@ TEST(CameraPaths, DescentFliesDownFromTheWholeBoxToNearItsTop) {
 
 }  // namespace
 }  // namespace gimlod
+
+namespace gimlod {
+namespace {
+
+// Flying round a planet: up stays away from its centre, and a heading held while the eye moves a
+// quarter of the way round keeps the view level (its pitch against the local horizon).
+TEST(CameraControl, FlyingOverAPlanetKeepsUpRadialAndTheHorizonLevel) {
+  const double R = 6.371e6;
+  CameraControl c(glm::dvec3(-R), glm::dvec3(R), UpAxis{2, 1.0});
+  c.setRadialUp(true);
+  Camera start;
+  start.eye = {R + 1000.0, 0.0, 0.0};
+  start.target = {R + 900.0, 5000.0, 0.0};  // east, a little down
+  start.fovYDeg = 45.0;
+  c.setCamera(start);
+  c.setMode(CameraControl::Mode::kFly);
+  auto pitch = [&]() {
+    const Camera k = c.camera();
+    const glm::dvec3 f = glm::normalize(k.target - k.eye), up = glm::normalize(k.eye);
+    return std::asin(glm::dot(f, up));
+  };
+  const double before = pitch();
+  EXPECT_NEAR(glm::dot(glm::normalize(c.camera().up), glm::normalize(c.camera().eye)), 1.0, 1e-12);
+  // The view kept across the switch.
+  EXPECT_NEAR(glm::dot(glm::normalize(c.camera().target - c.camera().eye), glm::normalize(start.target - start.eye)),
+              1.0, 1e-9);
+  c.setSurfaceDistance(1000.0);
+  auto longitude = [&]() { return std::atan2(c.eye().y, c.eye().x); };
+  for (int i = 0; i < 2000 && longitude() < 1.0; ++i) c.move({0.0, 0.0, 1.0}, 1.0);  // forward, east
+  EXPECT_GE(longitude(), 1.0);  // flown a sixth of the way round
+  EXPECT_LT(std::fabs(c.eye().z), 1.0);  // along the equator
+  EXPECT_NEAR(glm::dot(glm::normalize(c.camera().up), glm::normalize(c.camera().eye)), 1.0, 1e-12);
+  EXPECT_NEAR(pitch(), before, 1e-6);
+  // Orbiting keeps the axis up.
+  c.setMode(CameraControl::Mode::kOrbit);
+  EXPECT_EQ(c.camera().up, glm::dvec3(0.0, 0.0, 1.0));
+}
+
+}  // namespace
+}  // namespace gimlod
