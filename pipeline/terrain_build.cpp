@@ -58,6 +58,11 @@ DemOptions demOptions(const TerrainBuildOptions& o) {
   d.band = o.band;
   d.spacing = o.spacing;
   d.gdalCacheBytes = std::clamp<uint64_t>(memoryCap(o) / 32, uint64_t{8} << 20, uint64_t{64} << 20);
+  if (o.planet) {
+    if (o.chartSize == kAutoChartSize) throw std::logic_error("demOptions: a planet's chart size is planned first");
+    d.planetRadius = o.planetRadius;
+    d.planetChartIntervals = o.chartSize - 1;
+  }
   return d;
 }
 
@@ -180,11 +185,24 @@ void logPlan(const TerrainBuildOptions& o, const TerrainPlan& plan) {
 
 }  // namespace
 
+namespace {
+
+// The planet lattice a DEM was laid on (DemOptions::planetRadius), in the log.
+void logPlanet(const std::filesystem::path& input, const DemRaster& dem) {
+  const PlanetInfo& p = dem.planet;
+  if (!p.present) return;
+  spdlog::info("{}: on a sphere of radius {:.1f} m, {}x{} samples{}", input.string(), p.radius, dem.width, dem.height,
+               p.wrapColumns ? fmt::format(", {} columns round the planet", p.wrapColumns) : std::string(", regional"));
+}
+
+}  // namespace
+
 DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   const auto t0 = std::chrono::steady_clock::now();
   // buildTerrainAtlas has chosen this build because its estimate fits the cap.
   DemRaster dem = loadDem(o.input, demOptions(o));
   for (const std::string& warning : dem.warnings) spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
+  logPlanet(o.input, dem);
   stats->seconds = secondsSince(t0);
   stats->width = dem.width;
   stats->height = dem.height;
@@ -303,27 +321,14 @@ void writeImageryWindowed(const TerrainBuildOptions& o, const DemRaster& dem, co
 }  // namespace
 
 TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& options, const fs::path& dir) {
-  PlanetInfo planet;
-  TerrainBuildOptions po = options;
-  if (options.planet) {
-    // Planet charts are measured whole on the sphere (buildPlanetHierarchy), and the antimeridian
-    // is a chart border: the chart size first, then the lattice.
-    if (po.chartSize == kAutoChartSize)
-      po.chartSize = std::min(planTerrain(options.input, dem.width, dem.height, options).chartSize,
-                              kMaxPlanetChartIntervals + 1);
-    planet = preparePlanetGrid(dem, options.input, options.planetRadius, po.chartSize - 1);
-    spdlog::info("{}: on a sphere of radius {:.1f} m, {}x{} samples{}", options.input.string(), planet.radius,
-                 dem.width, dem.height,
-                 planet.wrapColumns ? fmt::format(", {} columns round the planet", planet.wrapColumns) : std::string());
-  }
-  const TerrainBuildOptions o = plannedOptions(po, planTerrain(options.input, dem.width, dem.height, po));
+  const TerrainBuildOptions o = plannedOptions(options, planTerrain(options.input, dem.width, dem.height, options));
   validateTerrainBuildOptions(o);
   AtlasManifest m = terrainManifest(o);
-  m.planet = planet;
   TerrainAtlasOptions topt = terrainAtlasOptions(o);
   if (o.compress) topt.coding.heightPrecision = quantizeHeights(dem, o);
   TerrainWriteStats w;
   w.charts = writeTerrainCharts(dem, topt, dir, m);
+  m.planet = dem.planet;
   linkPlanetSeam(m);
   if (!o.imagery.empty() && chartTiling(m.chartSize, m.blockIntervals).tiled()) {
     // Charts too large to hold whole take their imagery in tiles, as their geometry.
@@ -355,6 +360,7 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
   const DemSource source(o.input, dopt);
   for (const std::string& warning : source.info().warnings)
     spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
+  logPlanet(o.input, source.info());
   AtlasManifest m = terrainManifest(o);
   WindowedTerrainOptions wo;
   wo.atlas = terrainAtlasOptions(o);
@@ -367,6 +373,8 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
                source.info().width, source.info().height, wo.memoryBytes >> 20, cap >> 20);
   TerrainWriteStats w;
   const WindowedTerrainResult r = writeTerrainChartsWindowed(source, dir, wo, m);
+  m.planet = r.dem.planet;
+  linkPlanetSeam(m);
   w.charts = r.charts;
   w.windowed.emplace();
   w.windowed->memoryBytes = wo.memoryBytes;
@@ -394,12 +402,21 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& options) {
     throw InputError(options.imagery.string() + ": no such file");
   TerrainPlan plan;
   double samples = 0;
+  TerrainBuildOptions po = options;
   {
-    const DemSource source(options.input, demOptions(options));
-    plan = planTerrain(options.input, source.info().width, source.info().height, options);
-    samples = double(source.info().width) * double(source.info().height);
+    TerrainBuildOptions raw = options;
+    raw.planet = false;  // the DEM's own size first
+    raw.chartSize = kMaxTerrainChartSize;
+    const DemSource source(options.input, demOptions(raw));
+    const uint64_t w = source.info().width, h = source.info().height;
+    // Planet charts are measured whole on the sphere (buildPlanetHierarchy), and the antimeridian is
+    // laid on a chart border: the chart size first, then the lattice.
+    if (options.planet && options.chartSize == kAutoChartSize)
+      po.chartSize = std::min(planTerrain(options.input, w, h, options).chartSize, kMaxPlanetChartIntervals + 1);
+    plan = planTerrain(options.input, w, h, po);
+    samples = double(w) * double(h);
   }
-  const TerrainBuildOptions o = plannedOptions(options, plan);
+  const TerrainBuildOptions o = plannedOptions(po, plan);
   validateTerrainBuildOptions(o);
   logPlan(o, plan);
   std::unique_ptr<tbb::global_control> threads;
@@ -418,11 +435,6 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& options) {
   bool windowed = o.outOfCore;
   if (!windowed)
     windowed = samples * inMemoryBytesPerSample(o) + double(residentBytes()) > double(memoryCap(o));
-  if (windowed && o.planet)
-    throw InputError(fmt::format("{}: --planet atlases are built in memory, and this DEM's {:.0f} samples need about "
-                                 "{} MiB, over the {} MiB cap ({})",
-                                 o.input.string(), samples, uint64_t(samples * inMemoryBytesPerSample(o)) >> 20,
-                                 memoryCap(o) >> 20, o.outOfCore ? optionRef("outOfCore") : optionRef("maxMemory")));
   StagedDirectory stage(o.output, kManifestName, "atlas");
   if (windowed) {
     stats.write = writeTerrainAtlasWindowed(o, stage.path(), &stats.read);

@@ -4,6 +4,7 @@
 // EGWR 1998), applied to DEM voids; degree-to-metre series from the WGS84 ellipsoid (as in
 // the USGS/NGA "length of a degree" formulas).
 #include "atlas/terrain/dem.h"
+#include "atlas/terrain/planet_grid.h"
 #include "atlas/terrain/gdal_util.h"
 #include "core/progress.h"
 
@@ -160,6 +161,10 @@ struct DemSource::Impl {
   float nodataF = 0.f;
   double scale = 1.0, offset = 0.0, zScale = 1.0;
   bool flip = true;
+  // A planet build: how the rows read are laid from the raster's (DemOptions::planetRadius).
+  std::optional<PlanetGrid> planet;
+  std::vector<float> rowHeights;
+  std::vector<uint8_t> rowValid;
   // The last chunk read (GDAL rows [chunk * kDemChunkRows, ...)), raw, with its mask.
   int64_t chunk = -1;
   std::vector<float> chunkHeights;
@@ -313,14 +318,64 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
     dem.spacing = options.spacing;
   }
   for (const std::string& wmsg : cap.warnings()) dem.warnings.push_back(wmsg);
+  if (options.planetRadius > 0.0) {
+    // Whole metres stay whole (an integer raster, a whole scale and offset).
+    const bool integer = GDALDataTypeIsInteger(im.band->GetRasterDataType()) && im.scale == std::nearbyint(im.scale) &&
+                         im.offset == std::nearbyint(im.offset);
+    PlanetGrid g = planPlanetGrid(dem.georef, dem.width, dem.height, path, options.planetRadius,
+                                  options.planetChartIntervals, integer);
+    std::vector<float> row(dem.width);
+    std::vector<uint8_t> valid(dem.width);
+    if (g.southPole) {
+      readSourceRows(0, 1, row.data(), valid.data(), false);
+      g.southMean = poleRowMean(g, row.data(), valid.data(), path);
+    }
+    if (g.northPole) {
+      readSourceRows(dem.height - 1, 1, row.data(), valid.data(), false);
+      g.northMean = poleRowMean(g, row.data(), valid.data(), path);
+    }
+    dem.width = g.width();
+    dem.height = g.height();
+    dem.georef = planetGridGeoref(g, dem.georef);
+    dem.spacing = planetGridSpacing(g);
+    dem.planet = g.info;
+    im.planet = g;
+  }
 }
 
 DemSource::~DemSource() = default;
 
 void DemSource::readRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* valid, bool showProgress) const {
+  Impl& im = *impl_;
+  if (!im.planet) return readSourceRows(y0, rows, heights, valid, showProgress);
+  const PlanetGrid& g = *im.planet;
+  if (rows == 0) return;
+  if (uint64_t{y0} + rows > g.height()) throw std::logic_error("DemSource::readRows: rows beyond the raster");
+  // The source rows these rows come from, read at once (the chunks' order as the plain reads').
+  int64_t s0 = -1, s1 = -1;
+  for (uint32_t y = y0; y < y0 + rows; ++y)
+    if (const int64_t s = g.sourceRow(y); s >= 0) {
+      if (s0 < 0) s0 = s;
+      s1 = s;
+    }
+  const size_t sw = g.sourceWidth, w = g.width();
+  if (s0 >= 0) {
+    im.rowHeights.resize(size_t(s1 - s0 + 1) * sw);
+    im.rowValid.resize(im.rowHeights.size());
+    readSourceRows(uint32_t(s0), uint32_t(s1 - s0 + 1), im.rowHeights.data(), im.rowValid.data(), showProgress);
+  }
+  for (uint32_t y = y0; y < y0 + rows; ++y) {
+    const int64_t s = g.sourceRow(y);
+    const size_t at = s < 0 ? 0 : size_t(s - s0) * sw;
+    planetGridRow(g, y, s < 0 ? nullptr : im.rowHeights.data() + at, s < 0 ? nullptr : im.rowValid.data() + at,
+                  heights + size_t(y - y0) * w, valid + size_t(y - y0) * w);
+  }
+}
+
+void DemSource::readSourceRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* valid, bool showProgress) const {
   Impl& im = *impl_;  // its chunk cache changes
   const fs::path& path = im.path;
-  const uint32_t w = info_.width, h = info_.height;
+  const uint32_t w = im.planet ? im.planet->sourceWidth : info_.width, h = im.planet ? im.planet->sourceHeight : info_.height;
   if (rows == 0) return;
   if (uint64_t{y0} + rows > h) throw std::logic_error("DemSource::readRows: rows beyond the raster");
   // GDAL's rows run north to south when the raster is north-up (flip): ours south to north.

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "atlas/terrain/void_fill.h"
+#include "core/planet.h"
 #include "core/atlas_format.h"
 
 namespace gimlod {
@@ -31,6 +32,11 @@ struct DemOptions {
   // Metres between samples in x (east) and y (north), replacing what the georeference gives; 0:
   // from the georeference (a raster without one is taken as 1 m, with a warning).
   std::array<double, 2> spacing{0.0, 0.0};
+  // A planet build (atlas/terrain/planet_grid.h; > 0: the sphere's radius in metres): the raster
+  // read is the planet lattice laid from the DEM's rows, its antimeridian on a multiple of
+  // planetChartIntervals columns, whichever build reads it. The DEM must be geographic.
+  double planetRadius = 0.0;
+  uint32_t planetChartIntervals = 1;
 };
 
 // Heights in metres after z-scale, row-major with row 0 at the SOUTH edge (gy grows north).
@@ -44,6 +50,7 @@ struct DemRaster {
   float minHeight = 0.f, maxHeight = 0.f;
   bool integerHeights = false;  // every sample the source gave (voids aside) is a whole number
   std::vector<std::string> warnings;  // non-fatal issues (extra bands, no georeference, ...)
+  PlanetInfo planet;  // read as a planet lattice (DemOptions::planetRadius)
 };
 
 // Human-readable name of the void-fill method (stored in DemRaster::voidFillMethod).
@@ -77,6 +84,8 @@ class DemSource {
   void readRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* valid, bool showProgress = false) const;
 
  private:
+  // The raster's own rows (readRows without the planet lattice).
+  void readSourceRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* valid, bool showProgress) const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
   DemRaster info_;

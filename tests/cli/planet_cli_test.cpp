@@ -60,12 +60,6 @@ TEST(PlanetCli, OptionsThatDoNotApplyAreRefused) {
             0);
   EXPECT_NE(out.find("--planet"), std::string::npos) << out;
   EXPECT_FALSE(fs::exists(dir.path() / "c"));
-  // An atlas too large to build in memory under the cap is refused, naming the cap.
-  EXPECT_NE(test::runCommand(app + " build " + dem + " -o " + test::quoted(dir.path() / "d") +
-                                 " --planet --out-of-core 2>&1",
-                             &out),
-            0);
-  EXPECT_NE(out.find("--out-of-core"), std::string::npos) << out;
 }
 
 }  // namespace

@@ -14,7 +14,7 @@ namespace {
 
 bool sameBits(const glm::dvec3& a, const glm::dvec3& b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 
-// A whole planet of 1-degree cells, cell-centred, with pole rows added (as preparePlanetGrid makes).
+// A whole planet of 1-degree cells, cell-centred, with pole rows added (as atlas/terrain/planet_grid.h lays a cell-centred DEM).
 PlanetInfo wholeDegrees() {
   PlanetInfo p;
   p.present = true;
