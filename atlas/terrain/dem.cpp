@@ -326,12 +326,12 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
                                   options.planetChartIntervals, integer);
     std::vector<float> row(dem.width);
     std::vector<uint8_t> valid(dem.width);
-    if (g.southPole) {
-      readSourceRows(0, 1, row.data(), valid.data(), false);
+    if (g.southRows > 0) {
+      readSourceRows(g.southMeanRow, 1, row.data(), valid.data(), false);
       g.southMean = poleRowMean(g, row.data(), valid.data(), path);
     }
-    if (g.northPole) {
-      readSourceRows(dem.height - 1, 1, row.data(), valid.data(), false);
+    if (g.northFrom < g.height()) {
+      readSourceRows(g.northMeanRow, 1, row.data(), valid.data(), false);
       g.northMean = poleRowMean(g, row.data(), valid.data(), path);
     }
     dem.width = g.width();

@@ -55,19 +55,26 @@ PlanetGrid planPlanetGrid(const Georeference& georef, uint32_t W, uint32_t H, co
     south = -90.0 + 0.5 * p.dlatDeg;
   }
   const double north = south + double(H - 1) * p.dlatDeg;
-  if (south < -90.0 - 0.5 * p.dlatDeg || north > 90.0 + 0.5 * p.dlatDeg || std::fabs(p.lon0Deg) > 540.0) {
+  // How far past a pole a grid may reach: half a row, or half a degree (a global grid resampled
+  // finer keeps the half cell its coarser grid passed the poles by, as DEM input allows).
+  const double slack = std::max(0.5 * p.dlatDeg, 0.5);
+  if (south < -90.0 - slack || north > 90.0 + slack || std::fabs(p.lon0Deg) > 540.0) {
     char text[160];
     std::snprintf(text, sizeof text, ": --planet: latitudes %.4f to %.4f or longitude %.4f lie off the sphere; is the "
                   "grid in degrees?", south, north, p.lon0Deg);
     throw InputError(input.string() + text);
   }
   const double tol = 0.01 * p.dlatDeg;
-  const bool southOn = std::fabs(south + 90.0) < tol, northOn = std::fabs(north - 90.0) < tol;
-  g.southAdded = !southOn && south < -90.0 + p.dlatDeg - tol ? 1 : 0;
-  g.northAdded = !northOn && north > 90.0 - p.dlatDeg + tol ? 1 : 0;
-  g.southPole = southOn || g.southAdded;
-  g.northPole = northOn || g.northAdded;
-  p.lat0Deg = southOn ? -90.0 : g.southAdded ? south - p.dlatDeg : south;
+  g.southAdded = south > -90.0 + tol && south < -90.0 + p.dlatDeg - tol ? 1 : 0;
+  g.northAdded = north < 90.0 - tol && north > 90.0 - p.dlatDeg + tol ? 1 : 0;
+  p.lat0Deg = g.southAdded ? south - p.dlatDeg : south;
+  // The rows on a pole, as the frame places them.
+  const PlanetFrame frame(p, g.width(), g.height());
+  g.southRows = uint32_t(frame.southPoleRow() + 1);
+  g.northFrom = uint32_t(std::min<int64_t>(frame.northPoleRow(), g.height()));
+  if (g.southRows > 0) g.southMeanRow = uint32_t(std::max<int64_t>(g.sourceRow(g.southRows - 1), 0));
+  if (g.northFrom < g.height())
+    g.northMeanRow = uint32_t(g.sourceRow(g.northFrom) >= 0 ? g.sourceRow(g.northFrom) : int64_t(H) - 1);
   return g;
 }
 
@@ -88,7 +95,7 @@ float poleRowMean(const PlanetGrid& g, const float* heights, const uint8_t* vali
 void planetGridRow(const PlanetGrid& g, uint32_t y, const float* source, const uint8_t* sourceValid, float* out,
                    uint8_t* outValid) {
   const uint32_t w = g.width();
-  const bool south = g.southPole && y == 0, north = g.northPole && y + 1 == g.height();
+  const bool south = y < g.southRows, north = y >= g.northFrom;
   if (south || north) {
     std::fill_n(out, w, south ? g.southMean : g.northMean);
     std::fill_n(outValid, w, uint8_t(1));

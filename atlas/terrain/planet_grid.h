@@ -17,16 +17,20 @@ namespace gimlod {
 //   linearly round the circle to the next multiple of chartIntervals columns a turn, so that the
 //   antimeridian is a chart border (a resampled sample is void where either source sample is), and
 //   a last column repeats column 0 (column W is column 0).
-// - A DEM whose first (last) row lies within a row of the south (north) pole closes there: a row
-//   on the pole is made uniform, at the mean of its valid heights, or, where the row lies off the
-//   pole (cell-centred rows), a pole row of its mean is added.
+// - A DEM whose first (last) row lies within a row of the south (north) pole closes there: where
+//   the row lies off the pole (cell-centred rows), a pole row is added; the rows on or past the pole
+//   (a grid resampled finer may pass it by half a coarse row, up to half a degree), which all
+//   meet in its point, are made uniform at the mean of the valid heights of the one nearest it.
 // A regional DEM is left as it is. Heights of an integer raster stay whole metres (rounded).
 struct PlanetGrid {
   PlanetInfo info;
   uint32_t sourceWidth = 0, sourceHeight = 0;
   uint32_t turn = 0;         // distinct source columns a turn (0: no wrap)
   uint32_t southAdded = 0, northAdded = 0;  // pole rows added (0 or 1)
-  bool southPole = false, northPole = false;  // the first (last) row is a pole row, uniform
+  // Rows [0, southRows) and [northFrom, height()) lie on a pole: uniform, at the mean of source
+  // row southMeanRow (northMeanRow). southRows 0 and northFrom height(): no pole.
+  uint32_t southRows = 0, northFrom = 0;
+  uint32_t southMeanRow = 0, northMeanRow = 0;
   bool round = false;        // heights rounded to whole metres
   float southMean = 0.0f, northMean = 0.0f;  // the pole rows' height
   uint32_t width() const { return info.wrapColumns ? info.wrapColumns + 1 : sourceWidth; }

@@ -40,8 +40,8 @@ float at(const DemRaster& d, uint32_t x, uint32_t y) { return d.heights[size_t(y
 PlanetInfo preparePlanetGrid(DemRaster& d, const std::filesystem::path& input, double radius, uint32_t m) {
   PlanetGrid g = planPlanetGrid(d.georef, d.width, d.height, input, radius, m, d.integerHeights);
   const std::vector<uint8_t> valid(d.heights.size(), 1);
-  g.southMean = poleRowMean(g, d.heights.data(), valid.data(), input);
-  g.northMean = poleRowMean(g, &d.heights[size_t(d.height - 1) * d.width], valid.data(), input);
+  g.southMean = poleRowMean(g, &d.heights[size_t(g.southMeanRow) * d.width], valid.data(), input);
+  g.northMean = poleRowMean(g, &d.heights[size_t(g.northMeanRow) * d.width], valid.data(), input);
   std::vector<float> out(size_t(g.width()) * g.height());
   std::vector<uint8_t> outValid(out.size());
   for (uint32_t y = 0; y < g.height(); ++y) {
@@ -111,6 +111,33 @@ TEST(PlanetGrid, GridRegisteredGlobeKeepsItsSamples) {
     EXPECT_EQ(at(d, x, 0), at(d, 0, 0));
     EXPECT_EQ(at(d, x, 20), at(d, 0, 20));
   }
+}
+
+TEST(PlanetGrid, RowsPastThePolesMeetThere) {
+  // A globe resampled finer whose rows pass the poles by a third of a degree (as an upsampled
+  // ETOPO5 does): the rows on or past each pole are uniform, at the mean of the one nearest it.
+  const double step = 0.25;
+  DemRaster d = geographicDem(1440, 724, -180.0, 90.0 + 0.375 + 0.125, step,
+                              [](uint32_t x, uint32_t y) { return float((x * 7 + y * 3) % 1000); });
+  const DemRaster before = d;
+  const PlanetInfo p = preparePlanetGrid(d, "fine.tif", kEarthRadius, 64);
+  EXPECT_EQ(p.wrapColumns, 1472u);
+  EXPECT_EQ(d.height, 724u);
+  const PlanetFrame f(p, d.width, d.height);
+  ASSERT_GE(f.southPoleRow(), 1);  // rows 0 and 1 lie on or past the south pole
+  ASSERT_LE(f.northPoleRow(), 722);  // rows 722 and 723 on or past the north pole
+  for (int64_t y = 0; y <= f.southPoleRow(); ++y)
+    for (uint32_t x = 0; x < d.width; ++x) EXPECT_EQ(at(d, x, uint32_t(y)), at(d, 0, 0));
+  for (int64_t y = f.northPoleRow(); y < 724; ++y)
+    for (uint32_t x = 0; x < d.width; ++x) EXPECT_EQ(at(d, x, uint32_t(y)), at(d, 0, 723));
+  double mean = 0.0;
+  for (uint32_t x = 0; x < 1440; ++x) mean += at(before, x, uint32_t(f.southPoleRow()));
+  EXPECT_EQ(at(d, 0, 0), std::nearbyint(mean / 1440.0));
+  // The next row is the DEM's own, resampled.
+  EXPECT_EQ(at(d, 0, uint32_t(f.southPoleRow() + 1)), at(before, 0, uint32_t(f.southPoleRow() + 1)));
+  // Past the slack: refused.
+  DemRaster far = geographicDem(1440, 727, -180.0, 91.0, step, [](uint32_t, uint32_t) { return 0.0f; });
+  EXPECT_THROW(preparePlanetGrid(far, "far.tif", kEarthRadius, 64), InputError);
 }
 
 TEST(PlanetGrid, ARegionalDemIsLeftAsItIs) {
