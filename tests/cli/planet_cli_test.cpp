@@ -38,6 +38,25 @@ TEST(PlanetCli, TheShippedGlobeBuildsRendersAndExportsClosed) {
     EXPECT_GT(csv.num(i, "nodes"), 1.0);
     EXPECT_LE(csv.num(i, "max_screen_error_px"), 1.0);
   }
+  // Under node and triangle budgets (the quad queue), along a flight from orbit to 100 m and back.
+  const fs::path path = dir.path() / "flight.json", budget = dir.path() / "budget";
+  ASSERT_EQ(test::runCommand("python3 " + test::quoted(test::repoData().parent_path() / "scripts/planet_flight.py") +
+                                 " --lon 85.1 --lat 25.6 --ground 60 --frames 24 -o " + test::quoted(path) + " 2>&1",
+                             &out),
+            0)
+      << out;
+  ASSERT_EQ(test::runCommand(app + " render " + test::quoted(atlas) + " -o " + test::quoted(budget) + " --path " +
+                                 test::quoted(path) + " --size 160x120 --triangles 6000 --max-nodes 24 2>&1",
+                             &out),
+            0)
+      << out;
+  const test::Csv b = test::readCsv(budget / "stats.csv");
+  ASSERT_EQ(b.rows.size(), 24u);
+  for (size_t i = 0; i < b.rows.size(); ++i) {
+    EXPECT_LE(b.num(i, "triangles"), 6000.0) << i;
+    EXPECT_LE(b.num(i, "nodes"), 24.0) << i;
+    EXPECT_EQ(b.num(i, "incomplete"), 0.0) << i;
+  }
 }
 
 TEST(PlanetCli, OptionsThatDoNotApplyAreRefused) {
