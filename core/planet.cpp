@@ -30,11 +30,12 @@ void angleDifferences(float sa, float ca, float d, float* dsin, float* dcos) {
 PlanetFrame::PlanetFrame(const PlanetInfo& info, uint32_t samplesX, uint32_t samplesY)
     : info_(info), lastX_(int64_t(samplesX) - 1), lastY_(int64_t(samplesY) - 1) {
   const double tol = 1e-6 * info.dlatDeg;
-  // Rows y with lat0 + y dlat <= -90 + tol, and >= 90 - tol.
-  southRow_ = std::min<int64_t>(int64_t(std::floor((-90.0 + tol - info.lat0Deg) / info.dlatDeg)), lastY_);
-  southRow_ = std::max<int64_t>(southRow_, -1);
-  const int64_t n = int64_t(std::ceil((90.0 - tol - info.lat0Deg) / info.dlatDeg));
-  northRow_ = n <= lastY_ ? std::max<int64_t>(n, 0) : INT32_MAX;
+  // Rows y with lat0 + y dlat <= -90 + tol, and >= 90 - tol (clamped to the lattice before any
+  // conversion: a manifest may hold any step).
+  const double rows = double(lastY_) + 1.0;
+  southRow_ = int64_t(std::clamp(std::floor((-90.0 + tol - info.lat0Deg) / info.dlatDeg), -1.0, double(lastY_)));
+  const double n = std::clamp(std::ceil((90.0 - tol - info.lat0Deg) / info.dlatDeg), 0.0, rows);
+  northRow_ = n <= double(lastY_) ? int64_t(n) : INT32_MAX;
 }
 
 int PlanetFrame::pole(int64_t gy) const {
