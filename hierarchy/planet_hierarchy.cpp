@@ -35,13 +35,23 @@ Hierarchy buildPlanetHierarchy(const AtlasManifest& m, const ChartWindowSource& 
         const std::vector<float> heights = source(c, 0, 0, 0, M);
         const glm::dvec3 centre = chartCentre(m, frame, c);
         const ChartInfo& chart = m.charts[c];
+        // The directions are separable: a column's longitude and a row's latitude, each once.
+        std::vector<glm::dvec2> lon(M + 1);
+        for (uint32_t u = 0; u <= M; ++u) {
+          const double a = frame.longitude(int64_t(chart.gridX) * M + u);
+          lon[u] = {std::cos(a), std::sin(a)};
+        }
         std::vector<glm::vec3> p(heights.size());
-        for (uint32_t v = 0; v <= M; ++v)
+        for (uint32_t v = 0; v <= M; ++v) {
+          const int64_t gy = int64_t(chart.gridY) * M + v;
+          const double lat = frame.latitude(gy), cl = frame.pole(gy) ? 0.0 : std::cos(lat), sl = std::sin(lat);
+          const double z = frame.pole(gy) ? double(frame.pole(gy)) : sl;
           for (uint32_t u = 0; u <= M; ++u) {
             const size_t i = size_t(v) * (M + 1) + u;
-            p[i] = glm::vec3(frame.position(int64_t(chart.gridX) * M + u, int64_t(chart.gridY) * M + v, heights[i]) -
-                             centre);
+            const double r = m.planet.radius + double(heights[i]);
+            p[i] = glm::vec3(glm::dvec3(r * cl * lon[u].x, r * cl * lon[u].y, r * z) - centre);
           }
+        }
         return p;
       },
       stats);
