@@ -318,32 +318,39 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
     dem.spacing = options.spacing;
   }
   for (const std::string& wmsg : cap.warnings()) dem.warnings.push_back(wmsg);
-  if (options.planetRadius > 0.0) {
-    // Whole metres stay whole (an integer raster, a whole scale and offset).
-    const bool integer = GDALDataTypeIsInteger(im.band->GetRasterDataType()) && im.scale == std::nearbyint(im.scale) &&
-                         im.offset == std::nearbyint(im.offset);
-    PlanetGrid g = planPlanetGrid(dem.georef, dem.width, dem.height, path, options.planetRadius,
-                                  options.planetChartIntervals, integer);
-    std::vector<float> row(dem.width);
-    std::vector<uint8_t> valid(dem.width);
-    if (g.southRows > 0) {
-      readSourceRows(g.southMeanRow, 1, row.data(), valid.data(), false);
-      g.southMean = poleRowMean(g, row.data(), valid.data(), path);
-    }
-    if (g.northFrom < g.height()) {
-      readSourceRows(g.northMeanRow, 1, row.data(), valid.data(), false);
-      g.northMean = poleRowMean(g, row.data(), valid.data(), path);
-    }
-    dem.width = g.width();
-    dem.height = g.height();
-    dem.georef = planetGridGeoref(g, dem.georef);
-    dem.spacing = planetGridSpacing(g);
-    dem.planet = g.info;
-    im.planet = g;
-  }
+  if (options.planetRadius > 0.0) layPlanetGrid(options);
 }
 
 DemSource::~DemSource() = default;
+
+// A planet build: what the rows read are laid from (atlas/terrain/planet_grid.h), and the raster
+// they make.
+void DemSource::layPlanetGrid(const DemOptions& options) {
+  Impl& im = *impl_;
+  DemRaster& dem = info_;
+  const fs::path& path = im.path;
+  // Whole metres stay whole (an integer raster, a whole scale and offset).
+  const bool integer = GDALDataTypeIsInteger(im.band->GetRasterDataType()) && im.scale == std::nearbyint(im.scale) &&
+                       im.offset == std::nearbyint(im.offset);
+  PlanetGrid g = planPlanetGrid(dem.georef, dem.width, dem.height, path, options.planetRadius,
+                                options.planetChartIntervals, integer);
+  std::vector<float> row(dem.width);
+  std::vector<uint8_t> valid(dem.width);
+  if (g.southRows > 0) {
+    readSourceRows(g.southMeanRow, 1, row.data(), valid.data(), false);
+    g.southMean = poleRowMean(g, row.data(), valid.data(), path);
+  }
+  if (g.northFrom < g.height()) {
+    readSourceRows(g.northMeanRow, 1, row.data(), valid.data(), false);
+    g.northMean = poleRowMean(g, row.data(), valid.data(), path);
+  }
+  dem.width = g.width();
+  dem.height = g.height();
+  dem.georef = planetGridGeoref(g, dem.georef);
+  dem.spacing = planetGridSpacing(g);
+  dem.planet = g.info;
+  im.planet = g;
+}
 
 void DemSource::readRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* valid, bool showProgress) const {
   Impl& im = *impl_;

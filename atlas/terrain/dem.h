@@ -84,6 +84,8 @@ class DemSource {
   void readRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* valid, bool showProgress = false) const;
 
  private:
+  // A planet build (DemOptions::planetRadius): the lattice the rows are laid on, and info_'s.
+  void layPlanetGrid(const DemOptions& options);
   // The raster's own rows (readRows without the planet lattice).
   void readSourceRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* valid, bool showProgress) const;
   struct Impl;
