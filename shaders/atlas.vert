@@ -66,7 +66,8 @@ vec2 angleDifferences(float sa, float ca, float d) {
 vec3 planetOffset(ivec2 g, float h) {
   int c = clamp(g.x, 0, u_planetLattice.x), r = clamp(g.y, 0, u_planetLattice.y);
   int w = u_planetLattice.z;
-  if (w > 0) c = c % w;  // (both non-negative: GLSL leaves % of negatives undefined)
+  // The offset wraps round the turn (no %: GLSL leaves it undefined for negatives), so column W
+  // gives column 0's offset.
   int dx = c - u_anchor.x;
   if (w > 0 && 2 * dx > w) dx -= w;
   if (w > 0 && 2 * dx < -w) dx += w;
