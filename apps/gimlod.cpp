@@ -33,6 +33,8 @@
 #include "inspect/report.h"
 #include "pipeline/build.h"
 #include "pipeline/build_report.h"
+#include "pipeline/sharded_build.h"
+#include "apps/shard_command.h"
 #include "pipeline/input_kind.h"
 #include "runtime/adapt.h"
 #include "runtime/atlas_view.h"
@@ -113,7 +115,8 @@ std::string flagFor(std::string_view name) {
       {"normals", "--normals"},
       {"imagery", "--imagery"},              {"quads", "--quads"},
       {"quadMap", "--quad-map"},              {"sizing", "--sizing"},
-      {"outOfCore", "--out-of-core"},         {"planet", "--planet"}};
+      {"outOfCore", "--out-of-core"},         {"planet", "--planet"},
+      {"shard", "--shard"},                   {"shards", "--shards"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
 }
@@ -523,6 +526,32 @@ int main(int argc, char** argv) {
                     "Meshes: normals inside a chart may move this many packed steps (1/127.5) per component to "
                     "the value their neighbours predict; 0: normals stored as sampled")
       ->capture_default_str();
+  ShardArgs shardArgs;
+  build->add_flag("--prepare", shardArgs.prepare,
+                  "DEMs, a build across processes: the step that reads the whole DEM, once, into the shard area "
+                  "beside the atlas (ATLAS.shards, on a file system every node sees); then --shard, then merge");
+  build->add_option("--shard", shardArgs.shard,
+                    "DEMs, a build across processes: build shard I of N (I from 0) after --prepare; each shard can be "
+                    "run again alone")
+      ->excludes("--prepare");
+  build->add_flag("--mpi", shardArgs.mpi,
+                  "DEMs: under mpirun, rank 0 prepares and merges and every rank takes shards from a work list")
+      ->excludes("--prepare")
+      ->excludes("--shard");
+  build->add_option("--shards", shardArgs.shards, "With --mpi or --emit-slurm: the number of shards (default: the "
+                    "ranks, or 8)");
+  build->add_option("--emit-slurm", shardArgs.slurmDir,
+                    "DEMs: write Slurm batch scripts for this build into DIR (prepare, a job array of shards, the "
+                    "merge, and submit.sh chaining them with --dependency=afterok) instead of building")
+      ->excludes("--prepare")
+      ->excludes("--shard")
+      ->excludes("--mpi");
+  fs::path mergeAtlas;
+  uint32_t mergeShardCount = 0;
+  auto* mergeCmd = app.add_subcommand(
+      "merge", "Merge the shards of a build across processes (gimlod build --prepare, then --shard I/N) into the atlas");
+  mergeCmd->add_option("atlas", mergeAtlas, "The atlas directory the shards were built for")->required();
+  mergeCmd->add_option("--shards", mergeShardCount, "The N the shards were run with (default: the one N present)");
 
   RenderArgs r;
   auto* render = app.add_subcommand("render", "Render an atlas headless (EGL) to PNG frames and stats.csv");
@@ -615,6 +644,9 @@ int main(int argc, char** argv) {
       common.spellOption = flagFor;
       common.compress = !uncompressed;
       if (isMesh(detectInputKind(common.input))) {
+        if (shardArgs.any())
+          throw InputError(common.input.string() + ": builds across processes (--prepare, --shard, --mpi, "
+                           "--emit-slurm) take DEMs; a mesh is built in one process");
         if (!terrain.imagery.empty())
           throw InputError(common.input.string() + ": --imagery drapes a raster over a DEM; a mesh carries its own "
                            "vertex colours");
@@ -666,7 +698,12 @@ int main(int argc, char** argv) {
       if (build->get_option("--radius")->count() > 0 && !terrain.planet) throw InputError("--radius needs --planet");
       if (!(terrain.planetRadius >= 1.0 && terrain.planetRadius <= 1e9))
         throw InputError("--radius " + std::to_string(terrain.planetRadius) + " must be between 1 and 1e9 metres");
+      if (shardArgs.any()) return runShardedBuild(terrain, shardArgs, argc, argv);
       return runBuild(terrain);
+    }
+    if (*mergeCmd) {
+      std::cout << shardSummary(mergeShards(mergeAtlas, mergeShardCount), mergeAtlas);
+      return 0;
     }
     if (*inspectCmd) return runInspect(inspect);
     if (*render) return runRender(r);

@@ -424,6 +424,14 @@ void AtomicFileWriter::commit() {
   }
 }
 
+std::vector<uint8_t> readFileBytes(const std::filesystem::path& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw InputError(path.string() + ": cannot open (" + std::strerror(errno) + ")");
+  std::vector<uint8_t> b((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  if (f.bad()) throw InputError(path.string() + ": cannot read it");
+  return b;
+}
+
 void atomicWriteFile(const fs::path& path, const void* data, size_t bytes) {
   AtomicFileWriter w(path);
   w.write(data, bytes);

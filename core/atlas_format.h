@@ -162,6 +162,9 @@ AtlasManifest readManifest(const std::filesystem::path& dir);
 // Writes dir/atlas.json atomically.
 void writeManifest(const std::filesystem::path& dir, const AtlasManifest& m);
 
+// A whole file's bytes. Throws InputError naming the file when it cannot be read.
+std::vector<uint8_t> readFileBytes(const std::filesystem::path& path);
+
 // Writes bytes to path.tmp-<pid> and renames it over path. Throws InputError on failure.
 void atomicWriteFile(const std::filesystem::path& path, const void* data, size_t bytes);
 

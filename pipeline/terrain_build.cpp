@@ -49,9 +49,9 @@ ImageryOptions imageryOptions(const TerrainBuildOptions& o) {
 // The in-memory build's memory cap: --max-memory, or 3/4 of the machine's memory.
 uint64_t memoryCap(const TerrainBuildOptions& o) { return o.maxMemory ? o.maxMemory : physicalMemoryBytes() / 4 * 3; }
 
-// How the DEM is opened: GDAL's block cache capped from the memory cap (the raster is read once,
-// and its cached copies of blocks only add to the peak).
-DemOptions demOptions(const TerrainBuildOptions& o) {
+}  // namespace
+
+DemOptions terrainDemOptions(const TerrainBuildOptions& o) {
   DemOptions d;
   d.zScale = o.zScale;
   d.subdataset = o.subdataset;
@@ -65,6 +65,8 @@ DemOptions demOptions(const TerrainBuildOptions& o) {
   }
   return d;
 }
+
+namespace {
 
 // The in-memory build's peak per DEM sample, with the imagery's.
 double inMemoryBytesPerSample(const TerrainBuildOptions& o) {
@@ -109,6 +111,8 @@ TerrainPlan planTerrain(const fs::path& input, uint64_t width, uint64_t height, 
     while (cs < kMaxTerrainChartSize && along(width, cs - 1) * along(height, cs - 1) > kTargetTerrainCharts) cs = 2 * cs - 1;
   }
   plan.chartSize = cs;
+  plan.samplesX = width;
+  plan.samplesY = height;
   plan.chartsX = uint32_t(along(width, cs - 1));
   plan.chartsY = uint32_t(along(height, cs - 1));
   // The finest nodes 32 intervals wide, as 513-sample charts have at kDefaultDepth.
@@ -200,7 +204,7 @@ void logPlanet(const std::filesystem::path& input, const DemRaster& dem) {
 DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   const auto t0 = std::chrono::steady_clock::now();
   // buildTerrainAtlas has chosen this build because its estimate fits the cap.
-  DemRaster dem = loadDem(o.input, demOptions(o));
+  DemRaster dem = loadDem(o.input, terrainDemOptions(o));
   for (const std::string& warning : dem.warnings) spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
   logPlanet(o.input, dem);
   stats->seconds = secondsSince(t0);
@@ -216,9 +220,6 @@ DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   return dem;
 }
 
-namespace {
-
-// The manifest fields a build sets before its charts are written.
 AtlasManifest terrainManifest(const TerrainBuildOptions& o) {
   AtlasManifest m;
   m.chartSize = o.chartSize;
@@ -238,6 +239,8 @@ TerrainAtlasOptions terrainAtlasOptions(const TerrainBuildOptions& o) {
   topt.coding.compressed = o.compress;
   return topt;
 }
+
+namespace {
 
 // The chart files the hierarchy reads, the last few kept open: it reads a chart's tiles one after
 // another (each open parses the file's directory), and an atlas may hold more charts than a
@@ -269,15 +272,22 @@ class OpenCharts {
   std::list<std::pair<uint32_t, std::shared_ptr<const ChartFileReader>>> open_;
 };
 
-// The hierarchy (from level 0 of every chart file, as a restarted stage would read it) and the
-// manifest, once the chart files are written.
-void finishTerrainAtlas(AtlasManifest& m, const fs::path& dir, TerrainWriteStats& w) {
+}  // namespace
+
+Hierarchy measureTerrainHierarchy(const AtlasManifest& m, const fs::path& dir, HierarchyStats* stats) {
   OpenCharts charts(m, dir, 2 * size_t(tbb::this_task_arena::max_concurrency()) + 2);
   const ChartWindowSource source = [&](uint32_t c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n) {
     return charts.get(c)->readHeightsWindow(level, u0, v0, n);
   };
-  const Hierarchy h =
-      m.planet.present ? buildPlanetHierarchy(m, source, &w.hierarchy) : buildTerrainHierarchy(m, source, &w.hierarchy);
+  return m.planet.present ? buildPlanetHierarchy(m, source, stats) : buildTerrainHierarchy(m, source, stats);
+}
+
+namespace {
+
+// The hierarchy (from level 0 of every chart file, as a restarted stage would read it) and the
+// manifest, once the chart files are written.
+void finishTerrainAtlas(AtlasManifest& m, const fs::path& dir, TerrainWriteStats& w) {
+  const Hierarchy h = measureTerrainHierarchy(m, dir, &w.hierarchy);
   writeHierarchy(dir / m.hierarchyFile, h, m.compression.present);
   writeManifest(dir, m);
   w.chartsX = m.chartsX;
@@ -353,22 +363,27 @@ TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& 
   return w;
 }
 
-TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const fs::path& dir, TerrainReadStats* read) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const uint64_t cap = memoryCap(o);
-  const DemOptions dopt = demOptions(o);
-  const DemSource source(o.input, dopt);
-  for (const std::string& warning : source.info().warnings)
-    spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
-  logPlanet(o.input, source.info());
-  AtlasManifest m = terrainManifest(o);
+WindowedTerrainOptions windowedTerrainOptions(const TerrainBuildOptions& o) {
   WindowedTerrainOptions wo;
   wo.atlas = terrainAtlasOptions(o);
   wo.heightPrecision = o.heightPrecision;
   wo.defaultHeightPrecision = kDefaultHeightPrecision;
   // What the process holds already (libraries, GDAL's block cache to come) stays out of the windows.
-  const uint64_t held = residentBytes() + dopt.gdalCacheBytes;
+  const uint64_t cap = memoryCap(o), held = residentBytes() + terrainDemOptions(o).gdalCacheBytes;
   wo.memoryBytes = cap > held ? (cap - held) / 5 * 4 : 0;
+  return wo;
+}
+
+TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const fs::path& dir, TerrainReadStats* read) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const uint64_t cap = memoryCap(o);
+  const DemOptions dopt = terrainDemOptions(o);
+  const DemSource source(o.input, dopt);
+  for (const std::string& warning : source.info().warnings)
+    spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
+  logPlanet(o.input, source.info());
+  AtlasManifest m = terrainManifest(o);
+  const WindowedTerrainOptions wo = windowedTerrainOptions(o);
   spdlog::info("{}: {}x{} samples, built window by window in {} MiB of windows (memory cap {} MiB)", o.input.string(),
                source.info().width, source.info().height, wo.memoryBytes >> 20, cap >> 20);
   TerrainWriteStats w;
@@ -394,31 +409,37 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
   return w;
 }
 
-TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& options) {
+TerrainBuildOptions plannedTerrainBuild(const TerrainBuildOptions& options, TerrainPlan* planOut) {
   std::error_code ec;
   validateTerrainBuildOptions(options);
   if (!fs::exists(options.input, ec)) throw InputError(options.input.string() + ": no such file");
   if (!options.imagery.empty() && !fs::exists(options.imagery, ec))
     throw InputError(options.imagery.string() + ": no such file");
   TerrainPlan plan;
-  double samples = 0;
   TerrainBuildOptions po = options;
   {
     TerrainBuildOptions raw = options;
     raw.planet = false;  // the DEM's own size first
     raw.chartSize = kMaxTerrainChartSize;
-    const DemSource source(options.input, demOptions(raw));
+    const DemSource source(options.input, terrainDemOptions(raw));
     const uint64_t w = source.info().width, h = source.info().height;
     // Planet charts are measured whole on the sphere (buildPlanetHierarchy), and the antimeridian is
     // laid on a chart border: the chart size first, then the lattice.
     if (options.planet && options.chartSize == kAutoChartSize)
       po.chartSize = std::min(planTerrain(options.input, w, h, options).chartSize, kMaxPlanetChartIntervals + 1);
     plan = planTerrain(options.input, w, h, po);
-    samples = double(w) * double(h);
   }
   const TerrainBuildOptions o = plannedOptions(po, plan);
   validateTerrainBuildOptions(o);
   logPlan(o, plan);
+  if (planOut) *planOut = plan;
+  return o;
+}
+
+TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& options) {
+  TerrainPlan plan;
+  const TerrainBuildOptions o = plannedTerrainBuild(options, &plan);
+  const double samples = double(plan.samplesX) * double(plan.samplesY);
   std::unique_ptr<tbb::global_control> threads;
   if (o.threads)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.threads);

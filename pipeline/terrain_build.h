@@ -7,6 +7,8 @@
 #include <filesystem>
 
 #include "atlas/terrain/dem.h"
+#include "atlas/terrain/terrain_windowed.h"
+#include "hierarchy/hierarchy.h"
 #include "pipeline/build_options.h"
 #include "pipeline/build_stats.h"
 
@@ -27,6 +29,7 @@ struct TerrainPlan {
   uint32_t chartSize = 0;
   uint32_t depth = 0;
   uint32_t chartsX = 0, chartsY = 0;
+  uint64_t samplesX = 0, samplesY = 0;  // the DEM's own size
   bool autoChartSize = false, autoDepth = false;
 };
 inline constexpr uint32_t kTargetTerrainCharts = 64;
@@ -38,6 +41,24 @@ TerrainPlan planTerrain(const std::filesystem::path& input, uint64_t width, uint
                         const TerrainBuildOptions& options);
 // The options with the plan's chart size and depth in place of the automatic ones.
 TerrainBuildOptions plannedOptions(const TerrainBuildOptions& options, const TerrainPlan& plan);
+
+// Checks the options and the input (throws InputError naming the file or the parameter), plans the
+// chart size and depth from the DEM's size and logs them: the options every stage of the build
+// takes.
+TerrainBuildOptions plannedTerrainBuild(const TerrainBuildOptions& options, TerrainPlan* plan = nullptr);
+
+// How the stages open the DEM (GDAL's block cache capped from the memory cap; a planet's lattice).
+// The chart size must be planned.
+DemOptions terrainDemOptions(const TerrainBuildOptions& options);
+// The manifest fields a build sets before its charts are written.
+AtlasManifest terrainManifest(const TerrainBuildOptions& options);
+TerrainAtlasOptions terrainAtlasOptions(const TerrainBuildOptions& options);
+// The window-by-window build's options: its windows take 4/5 of the memory cap above what the
+// process holds.
+WindowedTerrainOptions windowedTerrainOptions(const TerrainBuildOptions& options);
+// The hierarchy of the charts m lists, read from their files in dir (level 0 of each, window by
+// window, as a restarted stage would read it); a planet's on the sphere.
+Hierarchy measureTerrainHierarchy(const AtlasManifest& m, const std::filesystem::path& dir, HierarchyStats* stats);
 
 // Read and fill: loads options.input (voids filled by pull-push, atlas/terrain/dem.h) and logs its
 // figures. Throws InputError naming the file.

@@ -149,10 +149,78 @@ ScratchRaster::ScratchRaster(fs::path file, fs::path dem, uint64_t width, uint64
   if (fd_ < 0) fail(std::string("cannot create the scratch file (") + std::strerror(errno) + ")");
 }
 
+namespace {
+
+// The index of a kept raster: a magic, the raster's size and tile side, then each tile's entry.
+constexpr char kIndexMagic[8] = {'G', 'L', 'S', 'C', 'R', 'X', '0', '1'};
+
+}  // namespace
+
+ScratchRaster::ScratchRaster(fs::path file, fs::path dem, const fs::path& indexFile)
+    : path_(std::move(file)), dem_(std::move(dem)), width_(0), height_(0), tile_(0), kept_(true), readOnly_(true) {
+  const std::vector<uint8_t> bytes = readFileBytes(indexFile);
+  auto damaged = [&](const std::string& what) {
+    throw InputError(dem_.string() + ": scratch index " + indexFile.string() + ": " + what);
+  };
+  size_t at = 0;
+  auto take = [&](void* out, size_t n) {
+    if (bytes.size() - at < n) damaged("truncated");
+    std::memcpy(out, bytes.data() + at, n);
+    at += n;
+  };
+  char magic[8];
+  take(magic, 8);
+  if (std::memcmp(magic, kIndexMagic, 8) != 0) damaged("not a scratch index");
+  uint64_t end = 0;
+  take(&width_, 8);
+  take(&height_, 8);
+  take(&tile_, 4);
+  take(&end, 8);
+  if (width_ == 0 || height_ == 0 || width_ > (uint64_t{1} << 32) || height_ > (uint64_t{1} << 32) || tile_ < 8 ||
+      tile_ > 4096)
+    damaged("impossible raster size");
+  tilesX_ = (width_ + tile_ - 1) / tile_;
+  tilesY_ = (height_ + tile_ - 1) / tile_;
+  const size_t entry = 8 + 4 + 1;
+  if (bytes.size() - at != tilesX_ * tilesY_ * entry) damaged("the tiles' entries do not match the raster's size");
+  tiles_.resize(size_t(tilesX_ * tilesY_));
+  for (Tile& t : tiles_) {
+    take(&t.offset, 8);
+    take(&t.bytes, 4);
+    take(&t.validity, 1);
+    if (t.validity > kMixed || t.offset + t.bytes > end) damaged("a tile lies past the file's end");
+  }
+  end_ = end;
+  fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0) fail(std::string("cannot open the scratch file (") + std::strerror(errno) + ")");
+  const off_t size = ::lseek(fd_, 0, SEEK_END);
+  if (size < 0 || uint64_t(size) < end_) fail("shorter than its index says (damaged or truncated)");
+}
+
 ScratchRaster::~ScratchRaster() {
   if (fd_ >= 0) ::close(fd_);
+  if (kept_) return;
   std::error_code ec;
   fs::remove(path_, ec);
+}
+
+void ScratchRaster::keep(const fs::path& indexFile) {
+  if (readOnly_) throw std::logic_error("ScratchRaster::keep: the raster is read-only");
+  if (::fsync(fd_) != 0) fail(std::string("cannot flush it (") + std::strerror(errno) + ")");
+  std::vector<uint8_t> out(kIndexMagic, kIndexMagic + 8);
+  auto put = [&](const void* p, size_t n) { out.insert(out.end(), (const uint8_t*)p, (const uint8_t*)p + n); };
+  const std::lock_guard lock(mutex_);
+  put(&width_, 8);
+  put(&height_, 8);
+  put(&tile_, 4);
+  put(&end_, 8);
+  for (const Tile& t : tiles_) {
+    put(&t.offset, 8);
+    put(&t.bytes, 4);
+    put(&t.validity, 1);
+  }
+  atomicWriteFile(indexFile, out.data(), out.size());
+  kept_ = true;
 }
 
 void ScratchRaster::fail(const std::string& what) const {
@@ -216,6 +284,7 @@ void ScratchRaster::decode(uint64_t t, Decoded& out) const {
 
 void ScratchRaster::write(const CellWindow& w, const float* heights, const uint8_t* valid) {
   check(w, "write");
+  if (readOnly_) throw std::logic_error("ScratchRaster::write: the raster was opened read-only");
   forEachTile(w, [&](uint64_t t, const CellWindow& tw, const CellWindow& o) {
     Decoded d;
     if (valid && o.x0 == tw.x0 && o.y0 == tw.y0 && o.x1 == tw.x1 && o.y1 == tw.y1) {

@@ -14,6 +14,8 @@
 // - Every sample is void with height 0 until written. Reads and writes take any window; tiles
 //   are coded and decoded in parallel (TBB). A damaged tile is an InputError naming the scratch
 //   file, the DEM and the tile.
+// - A raster may be kept (keep) and opened again, read-only, by other processes: a sharded build's
+//   prepare step fills it once and every shard reads its windows from it.
 #pragma once
 
 #include <cstdint>
@@ -33,6 +35,10 @@ class ScratchRaster {
   // created, std::invalid_argument on an empty raster or a tile side outside 8..4096.
   ScratchRaster(std::filesystem::path file, std::filesystem::path dem, uint64_t width, uint64_t height,
                 uint32_t tile = 256);
+  // Opens a raster kept by keep(indexFile), read-only; it stays on disk when destroyed. Throws
+  // InputError naming the file when the index is missing or damaged or the file is shorter than it
+  // says.
+  ScratchRaster(std::filesystem::path file, std::filesystem::path dem, const std::filesystem::path& indexFile);
   ~ScratchRaster();
   ScratchRaster(const ScratchRaster&) = delete;
   ScratchRaster& operator=(const ScratchRaster&) = delete;
@@ -45,6 +51,9 @@ class ScratchRaster {
   void read(const CellWindow& w, float* heights, uint8_t* valid) const;
   // Whether a window holds a void (tiles flagged all valid are not decoded).
   bool hasVoids(const CellWindow& w) const;
+  // Flushes the file, writes the tiles' index to indexFile (atomically) and leaves both on disk
+  // when the raster is destroyed. Throws InputError naming the file on failure.
+  void keep(const std::filesystem::path& indexFile);
 
   uint32_t tileSide() const { return tile_; }
   // The bytes the file holds now (every tile's latest version), and the most it ever held.
@@ -73,6 +82,8 @@ class ScratchRaster {
   uint32_t tile_;
   uint64_t tilesX_, tilesY_;
   int fd_ = -1;
+  bool kept_ = false;      // left on disk when destroyed
+  bool readOnly_ = false;  // opened from an index
   std::vector<Tile> tiles_;
   uint64_t end_ = 0, live_ = 0, peak_ = 0;
   mutable std::mutex mutex_;

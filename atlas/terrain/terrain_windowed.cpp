@@ -64,56 +64,106 @@ std::vector<int64_t> latticeIndices(int64_t lo, int64_t hi, int64_t samples, int
   return out;
 }
 
-// The tiled charts of a DEM held in the scratch raster: rows of tiles across the chart grid, in
-// groups of tiles from the window they read, then every chart's coarse levels from the DEM's lattice
-// (gathered from the windows as they pass). Returns the files' bytes.
-uint64_t writeTiledChartsWindowed(ScratchRaster& scratch, const fs::path& dir, const AtlasManifest& manifest,
-                                  const TerrainAtlasOptions& atlas, const ChartTiling& tiling, uint64_t budget,
-                                  WindowedTerrainResult& r) {
+// Runs of consecutive selected chart columns [first, last) in chart row gy, each at most `group`
+// long.
+std::vector<std::array<uint32_t, 2>> selectedRuns(const std::vector<uint8_t>& selected, uint32_t chartsX, uint32_t gy,
+                                                  uint64_t group) {
+  std::vector<std::array<uint32_t, 2>> runs;
+  for (uint32_t g0 = 0; g0 < chartsX;) {
+    if (!selected[size_t(gy) * chartsX + g0]) {
+      ++g0;
+      continue;
+    }
+    uint32_t g1 = g0 + 1;
+    while (g1 < chartsX && g1 - g0 < group && selected[size_t(gy) * chartsX + g1]) ++g1;
+    runs.push_back({g0, g1});
+    g0 = g1;
+  }
+  return runs;
+}
+
+// The stored height of a scratch sample (quantized as a compressed atlas stores it).
+float storedOf(float h, const WindowedTerrainResult& r, bool compressed) {
+  return compressed ? storedHeight(h, r.heightPrecision) : h;
+}
+
+// The tiled charts of a DEM held in the scratch raster: rows of tiles across the selected charts,
+// in groups of tiles from the window they read, then every selected chart's coarse levels from the
+// DEM's lattice (gathered from the windows as they pass; the points the windows did not hold, the
+// lattice a chart's coarse normals reach into round it, read one by one). Returns the files' bytes.
+uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& dir, const AtlasManifest& manifest,
+                                  const std::vector<uint8_t>& selected, const TerrainAtlasOptions& atlas,
+                                  const ChartTiling& tiling, uint64_t budget, WindowedTerrainResult& r) {
   const int64_t width = manifest.samplesX, height = manifest.samplesY;
   const uint32_t cs = manifest.chartSize, tps = tiling.tilesPerSide;
-  const uint64_t tilesX = uint64_t(manifest.chartsX) * tps, tilesY = uint64_t(manifest.chartsY) * tps;
+  const uint64_t tilesX = uint64_t(manifest.chartsX) * tps;
   const uint64_t t = tiling.tile, margin = tiling.margin(), windowRows = t + 2 * margin + 1;
   const uint64_t groupTiles = std::clamp<uint64_t>((budget / 4 / (windowRows * 4) - 2 * margin - 1) / t, 1, tilesX);
   const int concurrency = int(std::clamp<uint64_t>(budget / 2 / ((t + 1) * (t + 1) * 24), 1,
                                                    uint64_t(tbb::this_task_arena::max_concurrency())));
   const int64_t stride = int64_t{1} << tiling.coarseLevel;
   const int64_t nx = latticeSamples(width, stride), ny = latticeSamples(height, stride);
+  const bool compressed = atlas.coding.compressed;
   std::vector<float> lattice(size_t(nx * ny));
-  TiledChartWriter writer(dir, manifest, atlas, tiling);
+  std::vector<uint8_t> gathered(lattice.size(), 0);
+  // The writer opens the selected charts' files, in the manifest's order.
+  AtlasManifest mine = manifest;
+  mine.charts.clear();
+  std::vector<uint32_t> local(manifest.charts.size(), 0);
+  for (size_t c = 0; c < manifest.charts.size(); ++c)
+    if (selected[c]) local[c] = uint32_t(mine.charts.size()), mine.charts.push_back(manifest.charts[c]);
+  TiledChartWriter writer(dir, mine, atlas, tiling);
   tbb::task_arena arena(concurrency);
   std::vector<float> window;
-  const progress::ProgressStage stage("chart tiles", tilesX * tilesY);
-  for (uint64_t gty = 0; gty < tilesY; ++gty) {
-    const uint32_t chartY = uint32_t(gty / tps), ty = uint32_t(gty % tps);
-    for (uint64_t g0 = 0; g0 < tilesX; g0 += groupTiles) {
-      const uint64_t g1 = std::min(g0 + groupTiles, tilesX);
-      const auto first = tileSpan(tiling, cs, int32_t(g0 / tps), int32_t(chartY), uint32_t(g0 % tps), ty, width, height);
-      const auto last =
-          tileSpan(tiling, cs, int32_t((g1 - 1) / tps), int32_t(chartY), uint32_t((g1 - 1) % tps), ty, width, height);
-      const CellWindow w{first[0], first[1], last[2], last[3]};
-      r.bandRows = std::max<uint64_t>(r.bandRows, uint64_t(w.height()));
-      r.bandColumns = std::max<uint64_t>(r.bandColumns, uint64_t(w.width()));
-      window.resize(w.cells());
-      arena.execute([&] { scratch.read(w, window.data(), nullptr); });
-      if (atlas.coding.compressed)
-        for (float& x : window) x = storedHeight(x, r.heightPrecision);
-      for (int64_t j : latticeIndices(w.y0, w.y1, height, stride)) {
-        const int64_t y = std::min(j * stride, height - 1) - w.y0;
-        for (int64_t i : latticeIndices(w.x0, w.x1, width, stride))
-          lattice[size_t(j * nx + i)] = window[size_t(y * w.width() + std::min(i * stride, width - 1) - w.x0)];
-      }
-      const DemRows view = heldRows(window, w, width, height, manifest.spacing);
-      std::atomic<uint64_t> next{g0};
-      arena.execute([&] {
-        tbb::parallel_for(0, concurrency, [&](int) {
-          for (uint64_t g; (g = next++) < g1;) {
-            writer.writeTile(view, chartY * manifest.chartsX + uint32_t(g / tps), uint32_t(g % tps), ty);
-            progress::advance();
+  const progress::ProgressStage stage("chart tiles", uint64_t(mine.charts.size()) * tps * tps);
+  for (uint32_t chartY = 0; chartY < manifest.chartsY; ++chartY)
+    for (const auto& run : selectedRuns(selected, manifest.chartsX, chartY, std::max<uint64_t>(groupTiles / tps, 1)))
+      for (uint32_t ty = 0; ty < tps; ++ty)
+        for (uint64_t g0 = uint64_t(run[0]) * tps; g0 < uint64_t(run[1]) * tps; g0 += groupTiles) {
+          const uint64_t g1 = std::min(g0 + groupTiles, uint64_t(run[1]) * tps);
+          const auto first =
+              tileSpan(tiling, cs, int32_t(g0 / tps), int32_t(chartY), uint32_t(g0 % tps), ty, width, height);
+          const auto last =
+              tileSpan(tiling, cs, int32_t((g1 - 1) / tps), int32_t(chartY), uint32_t((g1 - 1) % tps), ty, width, height);
+          const CellWindow w{first[0], first[1], last[2], last[3]};
+          r.bandRows = std::max<uint64_t>(r.bandRows, uint64_t(w.height()));
+          r.bandColumns = std::max<uint64_t>(r.bandColumns, uint64_t(w.width()));
+          window.resize(w.cells());
+          arena.execute([&] { scratch.read(w, window.data(), nullptr); });
+          for (float& x : window) x = storedOf(x, r, compressed);
+          for (int64_t j : latticeIndices(w.y0, w.y1, height, stride)) {
+            const int64_t y = std::min(j * stride, height - 1) - w.y0;
+            for (int64_t i : latticeIndices(w.x0, w.x1, width, stride)) {
+              lattice[size_t(j * nx + i)] = window[size_t(y * w.width() + std::min(i * stride, width - 1) - w.x0)];
+              gathered[size_t(j * nx + i)] = 1;
+            }
           }
-        });
-      });
-    }
+          const DemRows view = heldRows(window, w, width, height, manifest.spacing);
+          std::atomic<uint64_t> next{g0};
+          arena.execute([&] {
+            tbb::parallel_for(0, concurrency, [&](int) {
+              for (uint64_t g; (g = next++) < g1;) {
+                writer.writeTile(view, local[chartY * manifest.chartsX + uint32_t(g / tps)], uint32_t(g % tps), ty);
+                progress::advance();
+              }
+            });
+          });
+        }
+  // The lattice a selected chart's coarse levels read: the chart and a chart each side.
+  const int64_t m = cs - 1;
+  for (const ChartInfo& c : mine.charts) {
+    const auto xs = latticeIndices(std::max<int64_t>(0, (c.gridX - 1) * m), std::min(width, (c.gridX + 2) * m + 1), width, stride);
+    const auto ys = latticeIndices(std::max<int64_t>(0, (c.gridY - 1) * m), std::min(height, (c.gridY + 2) * m + 1), height, stride);
+    for (int64_t j : ys)
+      for (int64_t i : xs) {
+        const size_t k = size_t(j * nx + i);
+        if (gathered[k]) continue;
+        const int64_t x = std::min(i * stride, width - 1), y = std::min(j * stride, height - 1);
+        float h = 0.f;
+        scratch.read(CellWindow{x, y, x + 1, y + 1}, &h, nullptr);
+        lattice[k] = storedOf(h, r, compressed);
+        gathered[k] = 1;
+      }
   }
   DemRows coarse;
   coarse.heights = lattice.data();
@@ -128,11 +178,11 @@ uint64_t writeTiledChartsWindowed(ScratchRaster& scratch, const fs::path& dir, c
 
 }  // namespace
 
-WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const fs::path& dir,
-                                                 const WindowedTerrainOptions& options, AtlasManifest& manifest) {
-  const auto start = std::chrono::steady_clock::now();
+PreparedTerrainWindows prepareTerrainWindows(const DemSource& source, const fs::path& scratchFile,
+                                             const WindowedTerrainOptions& options, AtlasManifest& manifest) {
   validateTerrainAtlasOptions(options.atlas);
-  WindowedTerrainResult r;
+  PreparedTerrainWindows prepared;
+  WindowedTerrainResult& r = prepared.result;
   r.dem = source.info();
   DemRaster& dem = r.dem;
   const fs::path input = manifest.source.empty() ? fs::path("DEM") : fs::path(manifest.source);
@@ -144,7 +194,8 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
   // budget; coding a band runs while the next one is read.
   uint32_t tile = 256;
   while (tile > 8 && uint64_t(tile) * width * 5 * 2 > budget / 4) tile /= 2;
-  ScratchRaster scratch(dir / ".dem.scratch", input, width, height, tile);
+  prepared.scratch = std::make_unique<ScratchRaster>(scratchFile, input, width, height, tile);
+  ScratchRaster& scratch = *prepared.scratch;
   uint64_t voids = 0;
   float lo = std::numeric_limits<float>::infinity(), hi = -lo;
   // The range of the heights a compressed atlas stores, for the step chosen when the DEM is not
@@ -228,7 +279,7 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
   r.scratchBytes = scratch.peakBytes();
   r.scratchTile = scratch.tileSide();
 
-  // 4. Charts, a chart row at a time, in groups of chart columns from the window they read.
+  // 4. The manifest's chart fields.
   TerrainAtlasOptions atlas = options.atlas;
   atlas.coding.heightPrecision = r.heightPrecision;
   fillTerrainManifest(dem, atlas, manifest);
@@ -237,18 +288,44 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
     manifest.compression.present = true;
     manifest.compression.heightPrecision = r.heightPrecision;
   }
+  return prepared;
+}
+
+WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const fs::path& dir,
+                                                 const WindowedTerrainOptions& options, AtlasManifest& manifest) {
+  const auto start = std::chrono::steady_clock::now();
+  PreparedTerrainWindows prepared = prepareTerrainWindows(source, dir / ".dem.scratch", options, manifest);
+  WindowedTerrainResult& r = prepared.result;
+  writeTerrainChartWindows(*prepared.scratch, dir, options, manifest, {}, r);
+  r.charts.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return std::move(r);
+}
+
+void writeTerrainChartWindows(const ScratchRaster& scratch, const fs::path& dir, const WindowedTerrainOptions& options,
+                              const AtlasManifest& manifest, const std::vector<uint32_t>& charts,
+                              WindowedTerrainResult& r) {
+  const auto start = std::chrono::steady_clock::now();
+  const uint64_t width = manifest.samplesX, height = manifest.samplesY;
+  const uint64_t budget = std::max<uint64_t>(options.memoryBytes, uint64_t{16} << 20);
+  const bool compressed = options.atlas.coding.compressed;
+  TerrainAtlasOptions atlas = options.atlas;
+  atlas.coding.heightPrecision = r.heightPrecision;
+  const fs::path input = manifest.source.empty() ? fs::path("DEM") : fs::path(manifest.source);
+  std::vector<uint8_t> selected(manifest.charts.size(), charts.empty() ? 1 : 0);
+  for (uint32_t c : charts) selected.at(c) = 1;
+  const uint32_t count = charts.empty() ? uint32_t(manifest.charts.size()) : uint32_t(charts.size());
   fs::create_directories(dir / "charts");
   const uint32_t cs = atlas.chartSize;
   const uint64_t m = cs - 1, spanRows = 3 * m + 1;
   const ChartTiling tiling = windowTiling(cs, atlas.blockIntervals, budget);
   if (tiling.tiled()) {
-    r.charts.bytesOnDisk = writeTiledChartsWindowed(scratch, dir, manifest, atlas, tiling, budget, r);
-    r.charts.charts = uint32_t(manifest.charts.size());
+    r.charts.bytesOnDisk = writeTiledChartsWindowed(scratch, dir, manifest, selected, atlas, tiling, budget, r);
+    r.charts.charts = count;
     r.charts.samples = width * height;
     for (uint32_t k = 0; k <= manifest.intervalsLog2(); ++k) r.charts.storedSamples += ((m >> k) + 1) * ((m >> k) + 1);
     r.charts.storedSamples *= r.charts.charts;
     r.charts.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return r;
+    return;
   }
   // A window of g chart columns holds spanRows x ((g + 2) m + 1) heights; the charts in flight
   // take the other half of the budget.
@@ -271,11 +348,10 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
   tbb::task_arena arena(concurrency);
   std::vector<float> window;
   std::atomic<uint64_t> bytes{0};
-  const progress::ProgressStage stage("charts", manifest.charts.size());
+  const progress::ProgressStage stage("charts", count);
   for (uint32_t gy = 0; gy < manifest.chartsY; ++gy) {
     const auto rowSpan = chartRowSpan(gy, cs, int64_t(height));
-    for (uint32_t g0 = 0; g0 < manifest.chartsX; g0 += uint32_t(groupColumns)) {
-      const uint32_t g1 = uint32_t(std::min<uint64_t>(g0 + groupColumns, manifest.chartsX));
+    for (const auto& [g0, g1] : selectedRuns(selected, manifest.chartsX, gy, groupColumns)) {
       const int64_t x0 = chartRowSpan(g0, cs, int64_t(width))[0], x1 = chartRowSpan(g1 - 1, cs, int64_t(width))[1];
       const CellWindow w{x0, rowSpan[0], x1, rowSpan[1]};
       r.bandRows = std::max<uint64_t>(r.bandRows, uint64_t(w.height()));
@@ -284,7 +360,7 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
       arena.execute([&] { scratch.read(w, window.data(), nullptr); });
       if (compressed)
         for (float& x : window) x = storedHeight(x, r.heightPrecision);
-      const DemRows view = heldRows(window, w, int64_t(width), int64_t(height), dem.spacing);
+      const DemRows view = heldRows(window, w, int64_t(width), int64_t(height), manifest.spacing);
       arena.execute([&] {
         tbb::parallel_for(g0, g1, [&](uint32_t gx) {
           const ChartInfo& c = manifest.charts[size_t(gy) * manifest.chartsX + gx];
@@ -295,12 +371,11 @@ WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const 
       });
     }
   }
-  r.charts.charts = uint32_t(manifest.charts.size());
+  r.charts.charts = count;
   r.charts.samples = width * height;
   r.charts.storedSamples = perChart * r.charts.charts;
   r.charts.bytesOnDisk = bytes.load();
   r.charts.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  return r;
 }
 
 }  // namespace gimlod

@@ -10,7 +10,11 @@
 #include <cstdint>
 #include <filesystem>
 
+#include <memory>
+#include <vector>
+
 #include "atlas/terrain/dem.h"
+#include "atlas/terrain/scratch_raster.h"
 #include "atlas/terrain/terrain_atlas.h"
 
 namespace gimlod {
@@ -40,5 +44,23 @@ struct WindowedTerrainResult {
 // sample is a void.
 WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const std::filesystem::path& dir,
                                                  const WindowedTerrainOptions& options, AtlasManifest& manifest);
+
+// The two halves of writeTerrainChartsWindowed, for builds that write the charts in several
+// processes (pipeline/sharded_build.h).
+// - prepareTerrainWindows: the DEM read into a scratch raster at scratchFile, its voids filled, the
+//   height step chosen (result.heightPrecision) and the manifest's chart fields filled; the result's
+//   chart figures stay 0.
+// - writeTerrainChartWindows: the chart files of `charts` (chart indices; empty: every chart) from
+//   the scratch raster into dir, with r.heightPrecision; their figures go into r.charts. The files
+//   are those the whole build writes, whichever charts are asked for.
+struct PreparedTerrainWindows {
+  std::unique_ptr<ScratchRaster> scratch;
+  WindowedTerrainResult result;
+};
+PreparedTerrainWindows prepareTerrainWindows(const DemSource& source, const std::filesystem::path& scratchFile,
+                                             const WindowedTerrainOptions& options, AtlasManifest& manifest);
+void writeTerrainChartWindows(const ScratchRaster& scratch, const std::filesystem::path& dir,
+                              const WindowedTerrainOptions& options, const AtlasManifest& manifest,
+                              const std::vector<uint32_t>& charts, WindowedTerrainResult& r);
 
 }  // namespace gimlod

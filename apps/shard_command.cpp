@@ -1,0 +1,228 @@
+#include "apps/shard_command.h"
+
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <vector>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <sys/stat.h>
+
+#include "core/atlas_format.h"
+#include "pipeline/sharded_build.h"
+
+#ifdef GIMLOD_WITH_MPI
+#include <mpi.h>
+#endif
+
+namespace fs = std::filesystem;
+
+namespace gimlod {
+namespace {
+
+// A word for a POSIX shell, quoted where it needs it.
+std::string shellQuoted(const std::string& s) {
+  if (!s.empty() && s.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-+=/.,:@%")
+                        == std::string::npos)
+    return s;
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+// The build's command line for a Slurm job: this gimlod by its absolute path, every argument but
+// --emit-slurm and --shards (and their values), paths made absolute (the jobs start elsewhere).
+std::string jobCommand(const TerrainBuildOptions& o, int argc, char** argv) {
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  std::vector<std::string> words{ec ? std::string(argv[0]) : self.string(), "build", fs::absolute(o.input).string(),
+                                 "-o", fs::absolute(o.output).string()};
+  bool afterBuild = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (!afterBuild) {
+      afterBuild = a == "build";
+      continue;
+    }
+    auto valueOf = [&](const std::string& flag) { return a == flag || a.rfind(flag + "=", 0) == 0; };
+    if (valueOf("--emit-slurm") || valueOf("--shards") || valueOf("-o") || valueOf("--output")) {
+      if (a.find('=') == std::string::npos) ++i;
+      continue;
+    }
+    if (fs::path(a) == o.input && a.rfind("-", 0) != 0) continue;  // the input, written above
+    const bool isPathOption = valueOf("--imagery");
+    words.push_back(a);
+    if (isPathOption && a.find('=') == std::string::npos && i + 1 < argc) words.push_back(fs::absolute(argv[++i]).string());
+  }
+  std::string out;
+  for (const std::string& w : words) {
+    if (!out.empty()) out += ' ';
+    out += shellQuoted(w);
+  }
+  return out;
+}
+
+void writeScript(const fs::path& path, const std::string& text) {
+  atomicWriteFile(path, text.data(), text.size());
+  ::chmod(path.c_str(), 0755);
+}
+
+// Slurm batch scripts for the build: prepare.sbatch, shards.sbatch (a job array), merge.sbatch and
+// submit.sh, which submits them chained by --dependency=afterok.
+int emitSlurm(const TerrainBuildOptions& o, const ShardArgs& a, int argc, char** argv) {
+  const uint32_t n = a.shards ? a.shards : 8;
+  if (n > kMaxShards) throw InputError(fmt::format("{} {} must be at most {}", optionRef("shards"), n, kMaxShards));
+  const fs::path dir = fs::absolute(a.slurmDir);
+  std::error_code ec;
+  fs::create_directories(dir / "logs", ec);
+  if (ec) throw InputError(dir.string() + ": cannot create it (" + ec.message() + ")");
+  const std::string cmd = jobCommand(o, argc, argv);
+  const std::string atlas = shellQuoted(fs::absolute(o.output).string());
+  auto header = [&](const std::string& name, const std::string& extra) {
+    return fmt::format("#!/bin/bash\n#SBATCH --job-name=gimlod-{}\n#SBATCH --output={}/logs/%x-%A_%a.out\n{}"
+                       "# Written by gimlod build --emit-slurm; every node must see the input and {}.shards.\n"
+                       "set -euo pipefail\n",
+                       name, dir.string(), extra, fs::absolute(o.output).string());
+  };
+  writeScript(dir / "prepare.sbatch", header("prepare", "#SBATCH --ntasks=1\n") + cmd + " --prepare\n");
+  writeScript(dir / "shards.sbatch",
+              header("shard", fmt::format("#SBATCH --ntasks=1\n#SBATCH --array=0-{}\n", n - 1)) + cmd +
+                  fmt::format(" --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\"\n", n));
+  const fs::path self = fs::path(cmd.substr(0, cmd.find(' ')));
+  writeScript(dir / "merge.sbatch", header("merge", "#SBATCH --ntasks=1\n") + self.string() + " merge " + atlas +
+                                        fmt::format(" --shards {}\n", n));
+  writeScript(dir / "submit.sh",
+              fmt::format("#!/bin/bash\n# Submits the build's three steps, each after the last succeeds.\nset -euo pipefail\n"
+                          "cd {}\nprepare=$(sbatch --parsable prepare.sbatch)\n"
+                          "shards=$(sbatch --parsable --dependency=afterok:\"$prepare\" shards.sbatch)\n"
+                          "merge=$(sbatch --parsable --dependency=afterok:\"$shards\" merge.sbatch)\n"
+                          "echo \"prepare $prepare, shards $shards (array 0-{}), merge $merge\"\n",
+                          shellQuoted(dir.string()), n - 1));
+  std::cout << fmt::format("wrote {}/submit.sh (prepare.sbatch, shards.sbatch with {} array tasks, merge.sbatch); run "
+                           "it on the cluster's login node\n",
+                           dir.string(), n);
+  return 0;
+}
+
+#ifdef GIMLOD_WITH_MPI
+
+std::string spelled(const TerrainBuildOptions& o, const InputError& e) {
+  return o.spellOption ? e.message(o.spellOption) : std::string(e.what());
+}
+
+// Every rank takes the next shard from a counter held by rank 0 (MPI one-sided fetch-and-add), so
+// a fast rank takes more; returns whether every shard this rank took was built.
+bool takeShards(const TerrainBuildOptions& o, uint32_t shards, int rank) {
+  int* counter = nullptr;
+  MPI_Win win;
+  MPI_Win_allocate(rank == 0 ? sizeof(int) : 0, sizeof(int), MPI_INFO_NULL, MPI_COMM_WORLD, &counter, &win);
+  if (rank == 0) *counter = 0;
+  MPI_Barrier(MPI_COMM_WORLD);
+  bool ok = true;
+  for (;;) {
+    const int one = 1;
+    int next = 0;
+    MPI_Win_lock(MPI_LOCK_EXCLUSIVE, 0, 0, win);
+    MPI_Fetch_and_op(&one, &next, MPI_INT, 0, 0, MPI_SUM, win);
+    MPI_Win_unlock(0, win);
+    if (next >= int(shards)) break;
+    try {
+      const ShardBuildStats s = buildShard(o, {uint32_t(next), shards});
+      std::cout << shardSummary(s, o.output) << std::flush;
+    } catch (const InputError& e) {
+      spdlog::error("shard {} of {}: {}", next, shards, spelled(o, e));
+      ok = false;
+    } catch (const std::exception& e) {
+      spdlog::error("shard {} of {}: {}", next, shards, e.what());
+      ok = false;
+    }
+  }
+  MPI_Win_free(&win);
+  return ok;
+}
+
+// The status rank 0 reached, on every rank.
+int shareStatus(int status) {
+  MPI_Bcast(&status, 1, MPI_INT, 0, MPI_COMM_WORLD);
+  return status;
+}
+
+int runMpi(const TerrainBuildOptions& o, const ShardArgs& a) {
+  int provided = 0;
+  MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
+  int rank = 0, size = 1;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MPI_Comm_size(MPI_COMM_WORLD, &size);
+  spdlog::set_pattern(fmt::format("[%H:%M:%S.%e] [rank {}] [%l] %v", rank));
+  const uint32_t shards = a.shards ? a.shards : uint32_t(size);
+  int status = 0;
+  if (rank == 0) {
+    try {
+      spdlog::info("{} ranks, {} shards", size, shards);
+      std::cout << shardSummary(prepareShards(o), o.output) << std::flush;
+    } catch (const InputError& e) {
+      spdlog::error("prepare: {}", spelled(o, e));
+      status = 2;
+    } catch (const std::exception& e) {
+      spdlog::error("prepare: {}", e.what());
+      status = 1;
+    }
+  }
+  if (shareStatus(status) == 0) {
+    const int mine = takeShards(o, shards, rank) ? 0 : 1;
+    int failed = 0;
+    MPI_Allreduce(&mine, &failed, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+    if (rank == 0 && failed) {
+      spdlog::error("some shards failed (above); their shard area is kept: run them with --shard I/{}, then gimlod "
+                    "merge",
+                    shards);
+      status = 1;
+    } else if (rank == 0) {
+      try {
+        std::cout << shardSummary(mergeShards(o.output, shards), o.output) << std::flush;
+      } catch (const InputError& e) {
+        spdlog::error("merge: {}", spelled(o, e));
+        status = 2;
+      } catch (const std::exception& e) {
+        spdlog::error("merge: {}", e.what());
+        status = 1;
+      }
+    }
+    status = shareStatus(status);
+  }
+  MPI_Finalize();
+  return status;
+}
+
+#endif
+
+}  // namespace
+
+bool mpiAvailable() {
+#ifdef GIMLOD_WITH_MPI
+  return true;
+#else
+  return false;
+#endif
+}
+
+int runShardedBuild(const TerrainBuildOptions& o, const ShardArgs& a, int argc, char** argv) {
+  if (!a.slurmDir.empty()) return emitSlurm(o, a, argc, argv);
+  if (a.mpi) {
+#ifdef GIMLOD_WITH_MPI
+    return runMpi(o, a);
+#else
+    throw InputError("--mpi: this gimlod was built without MPI (install libopenmpi-dev, then configure and build "
+                     "again)");
+#endif
+  }
+  if (a.prepare) {
+    std::cout << shardSummary(prepareShards(o), o.output);
+    return 0;
+  }
+  std::cout << shardSummary(buildShard(o, parseShardId(a.shard)), o.output);
+  return 0;
+}
+
+}  // namespace gimlod
