@@ -79,15 +79,16 @@ int emitSlurm(const TerrainBuildOptions& o, const ShardArgs& a, int argc, char**
   if (ec) throw InputError(dir.string() + ": cannot create it (" + ec.message() + ")");
   const std::string cmd = jobCommand(o, argc, argv);
   const std::string atlas = shellQuoted(fs::absolute(o.output).string());
+  const std::string cpus = o.threads ? fmt::format("#SBATCH --cpus-per-task={}\n", o.threads) : std::string();
   auto header = [&](const std::string& name, const std::string& extra) {
     return fmt::format("#!/bin/bash\n#SBATCH --job-name=gimlod-{}\n#SBATCH --output={}/logs/%x-%A_%a.out\n{}"
                        "# Written by gimlod build --emit-slurm; every node must see the input and {}.shards.\n"
                        "set -euo pipefail\n",
                        name, dir.string(), extra, fs::absolute(o.output).string());
   };
-  writeScript(dir / "prepare.sbatch", header("prepare", "#SBATCH --ntasks=1\n") + cmd + " --prepare\n");
+  writeScript(dir / "prepare.sbatch", header("prepare", "#SBATCH --ntasks=1\n" + cpus) + cmd + " --prepare\n");
   writeScript(dir / "shards.sbatch",
-              header("shard", fmt::format("#SBATCH --ntasks=1\n#SBATCH --array=0-{}\n", n - 1)) + cmd +
+              header("shard", fmt::format("#SBATCH --ntasks=1\n{}#SBATCH --array=0-{}\n", cpus, n - 1)) + cmd +
                   fmt::format(" --shard \"${{SLURM_ARRAY_TASK_ID}}/{}\"\n", n));
   const fs::path self = fs::path(cmd.substr(0, cmd.find(' ')));
   writeScript(dir / "merge.sbatch", header("merge", "#SBATCH --ntasks=1\n") + self.string() + " merge " + atlas +

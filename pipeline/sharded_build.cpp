@@ -219,7 +219,9 @@ std::vector<uint32_t> shardCharts(const std::vector<double>& work, ShardId id) {
   uint32_t run = 0;
   double sum = 0.0;
   for (uint32_t c = 0; c < work.size(); ++c) {
-    if (sum + work[c] > hi && sum > 0.0) ++run, sum = 0.0;
+    // A new run past the bound, or where the charts left are no more than the runs left.
+    const bool fewLeft = work.size() - c <= size_t(id.count - 1 - std::min(run, id.count - 1));
+    if (sum > 0.0 && (sum + work[c] > hi || fewLeft)) ++run, sum = 0.0;
     sum += work[c];
     if (run == id.index) out.push_back(c);
   }
@@ -257,11 +259,14 @@ ShardPrepareStats prepareShards(const TerrainBuildOptions& options) {
                  {"height_range", {dem.minHeight, dem.maxHeight}},
                  {"voids_filled", dem.voidsFilled},
                  {"void_fill_method", dem.voidFillMethod}}},
-               {"scratch", {{"bytes", prepared.result.scratchBytes}, {"tile", prepared.result.scratchTile}}}};
+               {"scratch", {{"bytes", prepared.result.scratchBytes}, {"tile", prepared.result.scratchTile}}},
+               // Every shard builds its charts in the tiles chosen here: the chart files' block order
+               // follows them.
+               {"chart_tile", windowChartTile(m.chartSize, m.blockIntervals, wo.memoryBytes)}};
   // The plan's id: its fingerprint, its manifest and its scratch raster's index.
   const std::vector<uint8_t> manifest = readFileBytes(stage.path() / kManifestName);
   const std::vector<uint8_t> index = readFileBytes(stage.path() / kScratchIndexName);
-  const std::string head = plan["fingerprint"].dump();
+  const std::string head = plan["fingerprint"].dump() + plan["chart_tile"].dump();
   XXH3_state_t* state = XXH3_createState();
   XXH3_64bits_reset(state);
   XXH3_64bits_update(state, head.data(), head.size());
@@ -303,7 +308,9 @@ ShardBuildStats buildShard(const TerrainBuildOptions& options, ShardId id) {
     const ScratchRaster scratch(area / kScratchName, o.input, area / kScratchIndexName);
     WindowedTerrainResult r;
     r.heightPrecision = m.compression.present ? m.compression.heightPrecision : 0.0;
-    writeTerrainChartWindows(scratch, stage.path(), windowedTerrainOptions(o), m, st.charts, r);
+    WindowedTerrainOptions wo = windowedTerrainOptions(o);
+    wo.chartTile = plan.at("chart_tile").get<uint32_t>();
+    writeTerrainChartWindows(scratch, stage.path(), wo, m, st.charts, r);
     AtlasManifest part = m;
     part.charts.clear();
     for (uint32_t c : st.charts) part.charts.push_back(m.charts[c]);

@@ -3,6 +3,7 @@
 #include <fstream>
 #include <iterator>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <cerrno>
@@ -121,6 +122,22 @@ int runCommand(const std::string& command, std::string* output) {
   int status = ::pclose(pipe);
   if (output) *output = out;
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::vector<std::string> filesUnder(const std::filesystem::path& dir, const std::string& except) {
+  std::vector<std::string> out;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir))
+    if (e.is_regular_file() && e.path().filename() != except)
+      out.push_back(std::filesystem::relative(e.path(), dir).generic_string());
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+void expectSameFiles(const std::filesystem::path& a, const std::filesystem::path& b, const std::string& except) {
+  const std::vector<std::string> files = filesUnder(a, except);
+  EXPECT_EQ(files, filesUnder(b, except)) << a << " against " << b;
+  EXPECT_FALSE(files.empty()) << a;
+  for (const std::string& f : files) EXPECT_TRUE(fileBytes(a / f) == fileBytes(b / f)) << f << " differs: " << a << " against " << b;
 }
 
 }  // namespace gimlod::test

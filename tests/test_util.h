@@ -80,6 +80,11 @@ std::string fileBytes(const std::filesystem::path& path);
 // Runs a shell command; returns its exit status and captures stdout+stderr into `output`.
 int runCommand(const std::string& command, std::string* output = nullptr);
 
+// The files under dir (paths relative to it, sorted), but those named `except`.
+std::vector<std::string> filesUnder(const std::filesystem::path& dir, const std::string& except = "");
+// Expects dirs a and b to hold the same files with the same bytes, but those named `except`.
+void expectSameFiles(const std::filesystem::path& a, const std::filesystem::path& b, const std::string& except);
+
 // A CSV file as the commands write it: a header row, then rows of comma-separated fields.
 struct Csv {
   std::vector<std::string> header;

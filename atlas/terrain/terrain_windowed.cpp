@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -149,8 +150,10 @@ uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& 
             });
           });
         }
-  // The lattice a selected chart's coarse levels read: the chart and a chart each side.
-  const int64_t m = cs - 1;
+  // The lattice a selected chart's coarse levels read (the chart and a chart each side) that the
+  // windows did not hold, a scratch tile at a time.
+  const int64_t m = cs - 1, side = scratch.tileSide();
+  std::map<std::pair<int64_t, int64_t>, std::vector<std::array<int64_t, 2>>> missing;  // by scratch tile
   for (const ChartInfo& c : mine.charts) {
     const auto xs = latticeIndices(std::max<int64_t>(0, (c.gridX - 1) * m), std::min(width, (c.gridX + 2) * m + 1), width, stride);
     const auto ys = latticeIndices(std::max<int64_t>(0, (c.gridY - 1) * m), std::min(height, (c.gridY + 2) * m + 1), height, stride);
@@ -158,13 +161,28 @@ uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& 
       for (int64_t i : xs) {
         const size_t k = size_t(j * nx + i);
         if (gathered[k]) continue;
-        const int64_t x = std::min(i * stride, width - 1), y = std::min(j * stride, height - 1);
-        float h = 0.f;
-        scratch.read(CellWindow{x, y, x + 1, y + 1}, &h, nullptr);
-        lattice[k] = storedOf(h, r, compressed);
         gathered[k] = 1;
+        const int64_t x = std::min(i * stride, width - 1), y = std::min(j * stride, height - 1);
+        missing[{y / side, x / side}].push_back({i, j});
       }
   }
+  std::vector<const std::vector<std::array<int64_t, 2>>*> groups;
+  for (const auto& [tile, points] : missing) groups.push_back(&points);
+  arena.execute([&] {
+    tbb::parallel_for(size_t{0}, groups.size(), [&](size_t g) {
+      CellWindow w{width, height, 0, 0};
+      for (const auto& [i, j] : *groups[g]) {
+        const int64_t x = std::min(i * stride, width - 1), y = std::min(j * stride, height - 1);
+        w = {std::min(w.x0, x), std::min(w.y0, y), std::max(w.x1, x + 1), std::max(w.y1, y + 1)};
+      }
+      std::vector<float> held(w.cells());
+      scratch.read(w, held.data(), nullptr);
+      for (const auto& [i, j] : *groups[g]) {
+        const int64_t x = std::min(i * stride, width - 1), y = std::min(j * stride, height - 1);
+        lattice[size_t(j * nx + i)] = storedOf(held[size_t((y - w.y0) * w.width() + x - w.x0)], r, compressed);
+      }
+    });
+  });
   DemRows coarse;
   coarse.heights = lattice.data();
   coarse.rows = ny;
@@ -291,6 +309,10 @@ PreparedTerrainWindows prepareTerrainWindows(const DemSource& source, const fs::
   return prepared;
 }
 
+uint32_t windowChartTile(uint32_t chartSize, uint32_t blockIntervals, uint64_t budget) {
+  return windowTiling(chartSize, blockIntervals, std::max<uint64_t>(budget, uint64_t{16} << 20)).tile;
+}
+
 WindowedTerrainResult writeTerrainChartsWindowed(const DemSource& source, const fs::path& dir,
                                                  const WindowedTerrainOptions& options, AtlasManifest& manifest) {
   const auto start = std::chrono::steady_clock::now();
@@ -317,7 +339,8 @@ void writeTerrainChartWindows(const ScratchRaster& scratch, const fs::path& dir,
   fs::create_directories(dir / "charts");
   const uint32_t cs = atlas.chartSize;
   const uint64_t m = cs - 1, spanRows = 3 * m + 1;
-  const ChartTiling tiling = windowTiling(cs, atlas.blockIntervals, budget);
+  const ChartTiling tiling =
+      options.chartTile ? chartTiling(cs, atlas.blockIntervals, std::max(options.chartTile, 2 * atlas.blockIntervals)) : windowTiling(cs, atlas.blockIntervals, budget);
   if (tiling.tiled()) {
     r.charts.bytesOnDisk = writeTiledChartsWindowed(scratch, dir, manifest, selected, atlas, tiling, budget, r);
     r.charts.charts = count;

@@ -26,7 +26,13 @@ struct WindowedTerrainOptions {
   double heightPrecision = 0.0;
   double defaultHeightPrecision = 0.01;
   uint64_t memoryBytes = uint64_t{1} << 30;  // what the rows, windows and charts in flight may use
+  // The side of the tiles charts are built in (ChartTiling::tile; the chart's intervals: whole), which
+  // the chart files' block order follows; 0: the largest that memoryBytes allows (windowTiling).
+  uint32_t chartTile = 0;
 };
+// The tile side charts of chartSize with blocks of blockIntervals are built in window by window
+// within `budget` bytes: the chart whole (chartSize - 1) where it fits.
+uint32_t windowChartTile(uint32_t chartSize, uint32_t blockIntervals, uint64_t budget);
 
 struct WindowedTerrainResult {
   DemRaster dem;               // the DEM's metadata, heights empty; voids, range, integerHeights
