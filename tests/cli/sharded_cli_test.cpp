@@ -61,6 +61,42 @@ TEST(ShardedCli, TheSlurmScriptsRunInTurnGiveTheOneProcessAtlas) {
   test::expectSameFiles(dir.path() / "one.atlas", dir.path() / "slurm.atlas", "stats.json");
 }
 
+// A one-node Slurm cluster started here (scripts/slurm/local_cluster.sh: slurmctld and slurmd on
+// ports of their own, munge): submit.sh submits the prepare, the array and the merge, which Slurm
+// runs in their order.
+TEST(ShardedCli, AOneNodeSlurmClusterRunsTheSubmittedBuild) {
+  test::TempDir dir("gimlod-sharded-cluster");
+  std::string out;
+  ASSERT_EQ(test::runCommand(tileBuild(dir.path() / "one.atlas"), &out), 0) << out;
+  const fs::path script = test::repoData().parent_path() / "scripts/slurm/local_cluster.sh";
+  const fs::path cluster = dir.path() / "cluster";
+  ASSERT_EQ(test::runCommand("bash " + test::quoted(script) + " start " + test::quoted(cluster), &out), 0) << out;
+  struct Stop {
+    std::string command;
+    ~Stop() { test::runCommand(command); }
+  } stop{"bash " + test::quoted(script) + " stop " + test::quoted(cluster)};
+  const std::string conf = "SLURM_CONF=" + test::quoted(cluster / "slurm.conf") + " ";
+  const fs::path jobs = dir.path() / "jobs", atlas = dir.path() / "slurm.atlas";
+  ASSERT_EQ(test::runCommand(tileBuild(atlas) + " --threads 1 --emit-slurm " + test::quoted(jobs) + " --shards 3", &out), 0)
+      << out;
+  ASSERT_EQ(test::runCommand(conf + "bash " + test::quoted(jobs / "submit.sh"), &out), 0) << out;
+  EXPECT_NE(out.find("(array 0-2)"), std::string::npos) << out;
+  bool done = false;
+  for (int i = 0; i < 600 && !done; ++i) {
+    std::string queue;
+    test::runCommand(conf + "squeue -h", &queue);
+    done = queue.find_first_not_of(" \n") == std::string::npos;
+    if (!done) ::usleep(200000);
+  }
+  ASSERT_TRUE(done) << "the jobs did not finish in 120 s";
+  std::string logs;
+  for (const std::string& f : test::filesUnder(jobs / "logs")) logs += test::fileBytes(jobs / "logs" / f);
+  EXPECT_NE(logs.find("merged 3 shards"), std::string::npos) << logs;
+  EXPECT_NE(logs.find("shard 2 of 3"), std::string::npos) << logs;
+  ASSERT_TRUE(fs::exists(atlas)) << logs;
+  test::expectSameFiles(dir.path() / "one.atlas", atlas, "stats.json");
+}
+
 TEST(ShardedCli, BadShardOptionsAreRefusedByName) {
   test::TempDir dir("gimlod-sharded-bad");
   const std::string app = test::appPath().string();
