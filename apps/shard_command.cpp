@@ -1,6 +1,8 @@
 #include "apps/shard_command.h"
 
+#include <atomic>
 #include <cstdio>
+#include <thread>
 #include <fstream>
 #include <iostream>
 #include <vector>
@@ -8,6 +10,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "core/atlas_format.h"
 #include "pipeline/sharded_build.h"
@@ -112,46 +115,87 @@ std::string spelled(const TerrainBuildOptions& o, const InputError& e) {
   return o.spellOption ? e.message(o.spellOption) : std::string(e.what());
 }
 
-// Every rank takes the next shard from a counter held by rank 0 (MPI one-sided fetch-and-add), so
-// a fast rank takes more; returns whether every shard this rank took was built.
-bool takeShards(const TerrainBuildOptions& o, uint32_t shards, int rank) {
-  int* counter = nullptr;
-  MPI_Win win;
-  MPI_Win_allocate(rank == 0 ? sizeof(int) : 0, sizeof(int), MPI_INFO_NULL, MPI_COMM_WORLD, &counter, &win);
-  if (rank == 0) *counter = 0;
-  MPI_Barrier(MPI_COMM_WORLD);
+// Waits for a request without spinning: MPI's own waits poll the network at full speed, which on
+// ranks sharing a machine takes the cores the working ranks need (a prepare, a last shard).
+void waitIdly(MPI_Request& request) {
+  for (int done = 0;;) {
+    MPI_Test(&request, &done, MPI_STATUS_IGNORE);
+    if (done) return;
+    ::usleep(20000);
+  }
+}
+
+// Builds shard `next` of `shards`, logging a failure; returns whether it was built.
+bool runShard(const TerrainBuildOptions& o, uint32_t next, uint32_t shards) {
+  try {
+    std::cout << shardSummary(buildShard(o, {next, shards}), o.output) << std::flush;
+    return true;
+  } catch (const InputError& e) {
+    spdlog::error("shard {} of {}: {}", next, shards, spelled(o, e));
+  } catch (const std::exception& e) {
+    spdlog::error("shard {} of {}: {}", next, shards, e.what());
+  }
+  return false;
+}
+
+constexpr int kTagAsk = 1, kTagGive = 2;
+
+// The work list: rank 0 holds the next shard's number; its dispatcher thread answers every other
+// rank that asks (a message each way), while its main thread takes shards from the same counter,
+// so a fast rank takes more. Returns whether every shard this rank took was built.
+// Where MPI allows calls from one thread at a time only (below MPI_THREAD_SERIALIZED), rank 0 only
+// dispatches.
+bool takeShards(const TerrainBuildOptions& o, uint32_t shards, int rank, int size, bool rank0Works) {
   bool ok = true;
-  for (;;) {
-    const int one = 1;
-    int next = 0;
-    MPI_Win_lock(MPI_LOCK_EXCLUSIVE, 0, 0, win);
-    MPI_Fetch_and_op(&one, &next, MPI_INT, 0, 0, MPI_SUM, win);
-    MPI_Win_unlock(0, win);
-    if (next >= int(shards)) break;
-    try {
-      const ShardBuildStats s = buildShard(o, {uint32_t(next), shards});
-      std::cout << shardSummary(s, o.output) << std::flush;
-    } catch (const InputError& e) {
-      spdlog::error("shard {} of {}: {}", next, shards, spelled(o, e));
-      ok = false;
-    } catch (const std::exception& e) {
-      spdlog::error("shard {} of {}: {}", next, shards, e.what());
-      ok = false;
+  if (rank != 0) {
+    for (;;) {
+      int next = 0;
+      MPI_Send(&next, 1, MPI_INT, 0, kTagAsk, MPI_COMM_WORLD);
+      MPI_Request reply;
+      MPI_Irecv(&next, 1, MPI_INT, 0, kTagGive, MPI_COMM_WORLD, &reply);
+      waitIdly(reply);
+      if (next >= int(shards)) return ok;
+      ok = runShard(o, uint32_t(next), shards) && ok;
     }
   }
-  MPI_Win_free(&win);
+  std::atomic<int> counter{0};
+  auto dispatch = [&] {
+    for (int open = size - 1; open > 0;) {
+      int ignored = 0;
+      MPI_Status status;
+      MPI_Request ask;
+      MPI_Irecv(&ignored, 1, MPI_INT, MPI_ANY_SOURCE, kTagAsk, MPI_COMM_WORLD, &ask);
+      for (int done = 0; !done;) {
+        MPI_Test(&ask, &done, &status);
+        if (!done) ::usleep(5000);
+      }
+      const int next = counter++;
+      MPI_Send(&next, 1, MPI_INT, status.MPI_SOURCE, kTagGive, MPI_COMM_WORLD);
+      if (next >= int(shards)) --open;
+    }
+  };
+  if (!rank0Works) {
+    dispatch();
+    return ok;
+  }
+  std::thread dispatcher(dispatch);
+  for (int next; (next = counter++) < int(shards);) ok = runShard(o, uint32_t(next), shards) && ok;
+  dispatcher.join();
   return ok;
 }
 
 // The status rank 0 reached, on every rank.
 int shareStatus(int status) {
-  MPI_Bcast(&status, 1, MPI_INT, 0, MPI_COMM_WORLD);
+  MPI_Request request;
+  MPI_Ibcast(&status, 1, MPI_INT, 0, MPI_COMM_WORLD, &request);
+  waitIdly(request);
   return status;
 }
 
 int runMpi(const TerrainBuildOptions& o, const ShardArgs& a) {
   int provided = 0;
-  MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
+  // Rank 0's dispatcher thread calls MPI while its main thread builds shards (which makes no MPI call).
+  MPI_Init_thread(nullptr, nullptr, MPI_THREAD_SERIALIZED, &provided);
   int rank = 0, size = 1;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
   MPI_Comm_size(MPI_COMM_WORLD, &size);
@@ -171,9 +215,12 @@ int runMpi(const TerrainBuildOptions& o, const ShardArgs& a) {
     }
   }
   if (shareStatus(status) == 0) {
-    const int mine = takeShards(o, shards, rank) ? 0 : 1;
+    const bool rank0Works = size == 1 || provided >= MPI_THREAD_SERIALIZED;
+    const int mine = takeShards(o, shards, rank, size, rank0Works) ? 0 : 1;
     int failed = 0;
-    MPI_Allreduce(&mine, &failed, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+    MPI_Request request;
+    MPI_Iallreduce(&mine, &failed, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD, &request);
+    waitIdly(request);
     if (rank == 0 && failed) {
       spdlog::error("some shards failed (above); their shard area is kept: run them with --shard I/{}, then gimlod "
                     "merge",
