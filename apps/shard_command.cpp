@@ -1,5 +1,6 @@
 #include "apps/shard_command.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cstdio>
 #include <thread>
@@ -139,6 +140,7 @@ bool runShard(const TerrainBuildOptions& o, uint32_t next, uint32_t shards) {
 }
 
 constexpr int kTagAsk = 1, kTagGive = 2;
+constexpr uint32_t kShardsPerRank = 4;
 
 // The work list: rank 0 holds the next shard's number; its dispatcher thread answers every other
 // rank that asks (a message each way), while its main thread takes shards from the same counter,
@@ -184,8 +186,8 @@ bool takeShards(const TerrainBuildOptions& o, uint32_t shards, int rank, int siz
   return ok;
 }
 
-// The status rank 0 reached, on every rank.
-int shareStatus(int status) {
+// Rank 0's value, on every rank.
+int fromRank0(int status) {
   MPI_Request request;
   MPI_Ibcast(&status, 1, MPI_INT, 0, MPI_COMM_WORLD, &request);
   waitIdly(request);
@@ -200,12 +202,16 @@ int runMpi(const TerrainBuildOptions& o, const ShardArgs& a) {
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
   MPI_Comm_size(MPI_COMM_WORLD, &size);
   spdlog::set_pattern(fmt::format("[%H:%M:%S.%e] [rank {}] [%l] %v", rank));
-  const uint32_t shards = a.shards ? a.shards : uint32_t(size);
+  // Unless told, kShardsPerRank shards a rank (at most one a chart), so that the work list evens
+  // out what the plan's estimate of each chart's work misses.
+  uint32_t shards = a.shards;
   int status = 0;
   if (rank == 0) {
     try {
+      const ShardPrepareStats prepared = prepareShards(o);
+      std::cout << shardSummary(prepared, o.output) << std::flush;
+      if (!shards) shards = std::clamp<uint32_t>(prepared.charts, 1, kShardsPerRank * uint32_t(size));
       spdlog::info("{} ranks, {} shards", size, shards);
-      std::cout << shardSummary(prepareShards(o), o.output) << std::flush;
     } catch (const InputError& e) {
       spdlog::error("prepare: {}", spelled(o, e));
       status = 2;
@@ -214,7 +220,8 @@ int runMpi(const TerrainBuildOptions& o, const ShardArgs& a) {
       status = 1;
     }
   }
-  if (shareStatus(status) == 0) {
+  if (fromRank0(status) == 0) {
+    shards = uint32_t(fromRank0(int(shards)));
     const bool rank0Works = size == 1 || provided >= MPI_THREAD_SERIALIZED;
     const int mine = takeShards(o, shards, rank, size, rank0Works) ? 0 : 1;
     int failed = 0;
@@ -237,7 +244,7 @@ int runMpi(const TerrainBuildOptions& o, const ShardArgs& a) {
         status = 1;
       }
     }
-    status = shareStatus(status);
+    status = fromRank0(status);
   }
   MPI_Finalize();
   return status;
