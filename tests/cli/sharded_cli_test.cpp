@@ -54,8 +54,8 @@ TEST(ShardedCli, TheSlurmScriptsRunInTurnGiveTheOneProcessAtlas) {
   EXPECT_NE(test::fileBytes(jobs / "shards.sbatch").find("#SBATCH --cpus-per-task=1"), std::string::npos);
   // As Slurm runs them: the prepare, the array's tasks (in any order), the merge.
   ASSERT_EQ(test::runCommand("bash " + test::quoted(jobs / "prepare.sbatch"), &out), 0) << out;
-  for (int task : {2, 0, 1})
-    ASSERT_EQ(test::runCommand("SLURM_ARRAY_TASK_ID=" + std::to_string(task) + " bash " + test::quoted(jobs / "shards.sbatch"), &out), 0)
+  for (const char* task : {"2", "0", "1"})
+    ASSERT_EQ(test::runCommand(std::string("SLURM_ARRAY_TASK_ID=") + task + " bash " + test::quoted(jobs / "shards.sbatch"), &out), 0)
         << out;
   ASSERT_EQ(test::runCommand("bash " + test::quoted(jobs / "merge.sbatch"), &out), 0) << out;
   test::expectSameFiles(dir.path() / "one.atlas", dir.path() / "slurm.atlas", "stats.json");

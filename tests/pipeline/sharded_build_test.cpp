@@ -97,7 +97,7 @@ TEST(ShardedBuild, TheShippedTileIsByteIdenticalForOneTwoThreeAndEightShards) {
   buildTerrainAtlas(one);
   for (uint32_t n : {1u, 2u, 3u, 8u}) {
     SCOPED_TRACE(n);
-    const TerrainBuildOptions o = tileOptions(dir.path() / ("n" + std::to_string(n) + ".atlas"));
+    const TerrainBuildOptions o = tileOptions(dir.path() / (std::to_string(n) + "-shards.atlas"));
     const ShardMergeStats st = buildSharded(o, n);
     ASSERT_EQ(st.shards.size(), n);
     test::expectSameFiles(one.output, o.output, "stats.json");
