@@ -230,11 +230,19 @@ std::vector<uint32_t> shardCharts(const std::vector<double>& work, ShardId id) {
   return out;
 }
 
+namespace {
+
+void refuseImagery(const TerrainBuildOptions& options) {
+  if (!options.imagery.empty())
+    throw InputError(optionRef("imagery") + ": sharded builds drape no imagery yet; build it in one process");
+}
+
+}  // namespace
+
 ShardPrepareStats prepareShards(const TerrainBuildOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   const double cpu0 = cpuSeconds();
-  if (!options.imagery.empty())
-    throw InputError(optionRef("imagery") + ": sharded builds drape no imagery yet; build it in one process");
+  refuseImagery(options);
   const TerrainBuildOptions o = plannedTerrainBuild(options);
   const auto threads = threadLimit(o.threads);
   const fs::path area = shardArea(o.output);
@@ -289,6 +297,7 @@ ShardPrepareStats prepareShards(const TerrainBuildOptions& options) {
 ShardBuildStats buildShard(const TerrainBuildOptions& options, ShardId id) {
   const auto t0 = std::chrono::steady_clock::now();
   const double cpu0 = cpuSeconds();
+  refuseImagery(options);
   const fs::path area = shardArea(options.output);
   const json plan = readPlan(area);
   const json mine = buildFingerprint(options);

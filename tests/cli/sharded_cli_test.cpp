@@ -110,6 +110,8 @@ TEST(ShardedCli, BadShardOptionsAreRefusedByName) {
       {app + " merge " + test::quoted(atlas), "plan.json: no plan"},
       {tileBuild(atlas) + " --prepare --imagery " + test::quoted(test::repoData() / "terrain/mt_rainier_imagery.tif"),
        "--imagery: sharded builds drape no imagery yet"},
+      {tileBuild(atlas) + " --shard 0/2 --imagery " + test::quoted(test::repoData() / "terrain/mt_rainier_imagery.tif"),
+       "--imagery: sharded builds drape no imagery yet"},
       {app + " build " + test::quoted(test::repoData() / "meshes/bun_zipper.ply") + " -o " + test::quoted(atlas) + " --prepare",
        "a mesh is built in one process"},
       {tileBuild(atlas) + " --prepare --shard 0/2", "excludes"},
