@@ -538,8 +538,8 @@ int main(int argc, char** argv) {
                   "DEMs: under mpirun, rank 0 prepares and merges and every rank takes shards from a work list")
       ->excludes("--prepare")
       ->excludes("--shard");
-  build->add_option("--shards", shardArgs.shards, "With --mpi or --emit-slurm: the number of shards (default: the "
-                    "ranks, or 8)");
+  build->add_option("--shards", shardArgs.shards, "With --mpi or --emit-slurm: the number of shards (default: four a "
+                    "rank, at most one a chart; or 8)");
   build->add_option("--emit-slurm", shardArgs.slurmDir,
                     "DEMs: write Slurm batch scripts for this build into DIR (prepare, a job array of shards, the "
                     "merge, and submit.sh chaining them with --dependency=afterok) instead of building")

@@ -126,17 +126,27 @@ void waitIdly(MPI_Request& request) {
   }
 }
 
+// Runs a step (the prepare, a shard, the merge); its exit status (2: bad input or options, 1:
+// another failure), a failure logged under the step's name.
+template <typename Step>
+int runLogged(const TerrainBuildOptions& o, const std::string& what, Step&& step) {
+  try {
+    step();
+    return 0;
+  } catch (const InputError& e) {
+    spdlog::error("{}: {}", what, spelled(o, e));
+    return 2;
+  } catch (const std::exception& e) {
+    spdlog::error("{}: {}", what, e.what());
+    return 1;
+  }
+}
+
 // Builds shard `next` of `shards`, logging a failure; returns whether it was built.
 bool runShard(const TerrainBuildOptions& o, uint32_t next, uint32_t shards) {
-  try {
-    std::cout << shardSummary(buildShard(o, {next, shards}), o.output) << std::flush;
-    return true;
-  } catch (const InputError& e) {
-    spdlog::error("shard {} of {}: {}", next, shards, spelled(o, e));
-  } catch (const std::exception& e) {
-    spdlog::error("shard {} of {}: {}", next, shards, e.what());
-  }
-  return false;
+  return runLogged(o, fmt::format("shard {} of {}", next, shards), [&] {
+           std::cout << shardSummary(buildShard(o, {next, shards}), o.output) << std::flush;
+         }) == 0;
 }
 
 constexpr int kTagAsk = 1, kTagGive = 2;
@@ -207,18 +217,12 @@ int runMpi(const TerrainBuildOptions& o, const ShardArgs& a) {
   uint32_t shards = a.shards;
   int status = 0;
   if (rank == 0) {
-    try {
+    status = runLogged(o, "prepare", [&] {
       const ShardPrepareStats prepared = prepareShards(o);
       std::cout << shardSummary(prepared, o.output) << std::flush;
       if (!shards) shards = std::clamp<uint32_t>(prepared.charts, 1, kShardsPerRank * uint32_t(size));
       spdlog::info("{} ranks, {} shards", size, shards);
-    } catch (const InputError& e) {
-      spdlog::error("prepare: {}", spelled(o, e));
-      status = 2;
-    } catch (const std::exception& e) {
-      spdlog::error("prepare: {}", e.what());
-      status = 1;
-    }
+    });
   }
   if (fromRank0(status) == 0) {
     shards = uint32_t(fromRank0(int(shards)));
@@ -234,15 +238,7 @@ int runMpi(const TerrainBuildOptions& o, const ShardArgs& a) {
                     shards);
       status = 1;
     } else if (rank == 0) {
-      try {
-        std::cout << shardSummary(mergeShards(o.output, shards), o.output) << std::flush;
-      } catch (const InputError& e) {
-        spdlog::error("merge: {}", spelled(o, e));
-        status = 2;
-      } catch (const std::exception& e) {
-        spdlog::error("merge: {}", e.what());
-        status = 1;
-      }
+      status = runLogged(o, "merge", [&] { std::cout << shardSummary(mergeShards(o.output, shards), o.output) << std::flush; });
     }
     status = fromRank0(status);
   }
@@ -253,14 +249,6 @@ int runMpi(const TerrainBuildOptions& o, const ShardArgs& a) {
 #endif
 
 }  // namespace
-
-bool mpiAvailable() {
-#ifdef GIMLOD_WITH_MPI
-  return true;
-#else
-  return false;
-#endif
-}
 
 int runShardedBuild(const TerrainBuildOptions& o, const ShardArgs& a, int argc, char** argv) {
   if (!a.slurmDir.empty()) return emitSlurm(o, a, argc, argv);

@@ -24,7 +24,4 @@ struct ShardArgs {
 // its scripts with its own options replaced. Returns the exit status; throws InputError.
 int runShardedBuild(const TerrainBuildOptions& options, const ShardArgs& args, int argc, char** argv);
 
-// Whether this gimlod was built with MPI.
-bool mpiAvailable();
-
 }  // namespace gimlod

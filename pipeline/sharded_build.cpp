@@ -74,21 +74,29 @@ ShardStepStats stepFromJson(const json& j) {
   return s;
 }
 
-std::string hex64(uint64_t v) { return fmt::format("{:016x}", v); }
+// An XXH3 checksum of bytes given in pieces, as 16 hex digits.
+class Checksum {
+ public:
+  Checksum() : state_(XXH3_createState(), &XXH3_freeState) { XXH3_64bits_reset(state_.get()); }
+  void add(const void* data, size_t bytes) { XXH3_64bits_update(state_.get(), data, bytes); }
+  std::string hex() const { return fmt::format("{:016x}", XXH3_64bits_digest(state_.get())); }
+
+ private:
+  std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> state_;
+};
 
 // XXH3 of a file's bytes, read in pieces.
 std::string fileChecksum(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path.string() + ": cannot open it");
-  std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> state(XXH3_createState(), &XXH3_freeState);
-  XXH3_64bits_reset(state.get());
+  Checksum sum;
   std::vector<char> piece(size_t{4} << 20);
   while (in) {
     in.read(piece.data(), std::streamsize(piece.size()));
-    XXH3_64bits_update(state.get(), piece.data(), size_t(in.gcount()));
+    sum.add(piece.data(), size_t(in.gcount()));
   }
   if (in.bad()) throw InputError(path.string() + ": cannot read it");
-  return hex64(XXH3_64bits_digest(state.get()));
+  return sum.hex();
 }
 
 // What a shard must share with its plan: the input's identity and every option that changes the
@@ -248,7 +256,7 @@ ShardPrepareStats prepareShards(const TerrainBuildOptions& options) {
   const fs::path area = shardArea(o.output);
   StagedDirectory stage(area, kPlanName, "shard area");
   const DemSource source(o.input, terrainDemOptions(o));
-  for (const std::string& warning : source.info().warnings) spdlog::warn("{}: {}", o.input.string(), warning);
+  logTerrainSource(o, source.info());
   AtlasManifest m = terrainManifest(o);
   const WindowedTerrainOptions wo = windowedTerrainOptions(o);
   PreparedTerrainWindows prepared = prepareTerrainWindows(source, stage.path() / kScratchName, wo, m);
@@ -277,14 +285,12 @@ ShardPrepareStats prepareShards(const TerrainBuildOptions& options) {
   const std::vector<uint8_t> manifest = readFileBytes(stage.path() / kManifestName);
   const std::vector<uint8_t> index = readFileBytes(stage.path() / kScratchIndexName);
   const std::string head = plan["fingerprint"].dump() + plan["chart_tile"].dump();
-  XXH3_state_t* state = XXH3_createState();
-  XXH3_64bits_reset(state);
-  XXH3_64bits_update(state, head.data(), head.size());
-  XXH3_64bits_update(state, manifest.data(), manifest.size());
-  XXH3_64bits_update(state, index.data(), index.size());
+  Checksum id;
+  id.add(head.data(), head.size());
+  id.add(manifest.data(), manifest.size());
+  id.add(index.data(), index.size());
   ShardPrepareStats st;
-  st.plan = hex64(XXH3_64bits_digest(state));
-  XXH3_freeState(state);
+  st.plan = id.hex();
   st.charts = uint32_t(m.charts.size());
   plan["id"] = st.plan;
   st.step = stepStats(t0, cpu0);

@@ -189,24 +189,19 @@ void logPlan(const TerrainBuildOptions& o, const TerrainPlan& plan) {
 
 }  // namespace
 
-namespace {
-
-// The planet lattice a DEM was laid on (DemOptions::planetRadius), in the log.
-void logPlanet(const std::filesystem::path& input, const DemRaster& dem) {
+void logTerrainSource(const TerrainBuildOptions& o, const DemRaster& dem) {
+  for (const std::string& warning : dem.warnings) spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
   const PlanetInfo& p = dem.planet;
   if (!p.present) return;
-  spdlog::info("{}: on a sphere of radius {:.1f} m, {}x{} samples{}", input.string(), p.radius, dem.width, dem.height,
+  spdlog::info("{}: on a sphere of radius {:.1f} m, {}x{} samples{}", o.input.string(), p.radius, dem.width, dem.height,
                p.wrapColumns ? fmt::format(", {} columns round the planet", p.wrapColumns) : std::string(", regional"));
 }
-
-}  // namespace
 
 DemRaster readTerrain(const TerrainBuildOptions& o, TerrainReadStats* stats) {
   const auto t0 = std::chrono::steady_clock::now();
   // buildTerrainAtlas has chosen this build because its estimate fits the cap.
   DemRaster dem = loadDem(o.input, terrainDemOptions(o));
-  for (const std::string& warning : dem.warnings) spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
-  logPlanet(o.input, dem);
+  logTerrainSource(o, dem);
   stats->seconds = secondsSince(t0);
   stats->width = dem.width;
   stats->height = dem.height;
@@ -379,9 +374,7 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
   const uint64_t cap = memoryCap(o);
   const DemOptions dopt = terrainDemOptions(o);
   const DemSource source(o.input, dopt);
-  for (const std::string& warning : source.info().warnings)
-    spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
-  logPlanet(o.input, source.info());
+  logTerrainSource(o, source.info());
   AtlasManifest m = terrainManifest(o);
   const WindowedTerrainOptions wo = windowedTerrainOptions(o);
   spdlog::info("{}: {}x{} samples, built window by window in {} MiB of windows (memory cap {} MiB)", o.input.string(),

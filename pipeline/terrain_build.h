@@ -50,6 +50,9 @@ TerrainBuildOptions plannedTerrainBuild(const TerrainBuildOptions& options, Terr
 // How the stages open the DEM (GDAL's block cache capped from the memory cap; a planet's lattice).
 // The chart size must be planned.
 DemOptions terrainDemOptions(const TerrainBuildOptions& options);
+// Logs what opening or reading the DEM found: its warnings (options spelled as o spells them) and
+// the planet lattice it was laid on.
+void logTerrainSource(const TerrainBuildOptions& o, const DemRaster& dem);
 // The manifest fields a build sets before its charts are written.
 AtlasManifest terrainManifest(const TerrainBuildOptions& options);
 TerrainAtlasOptions terrainAtlasOptions(const TerrainBuildOptions& options);

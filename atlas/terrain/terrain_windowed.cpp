@@ -91,7 +91,8 @@ float storedOf(float h, const WindowedTerrainResult& r, bool compressed) {
 // The tiled charts of a DEM held in the scratch raster: rows of tiles across the selected charts,
 // in groups of tiles from the window they read, then every selected chart's coarse levels from the
 // DEM's lattice (gathered from the windows as they pass; the points the windows did not hold, the
-// lattice a chart's coarse normals reach into round it, read one by one). Returns the files' bytes.
+// lattice a chart's coarse normals reach into round it, read a scratch tile at a time). Returns the
+// files' bytes.
 uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& dir, const AtlasManifest& manifest,
                                   const std::vector<uint8_t>& selected, const TerrainAtlasOptions& atlas,
                                   const ChartTiling& tiling, uint64_t budget, WindowedTerrainResult& r) {
@@ -381,8 +382,7 @@ void writeTerrainChartWindows(const ScratchRaster& scratch, const fs::path& dir,
       r.bandColumns = std::max<uint64_t>(r.bandColumns, uint64_t(w.width()));
       window.resize(w.cells());
       arena.execute([&] { scratch.read(w, window.data(), nullptr); });
-      if (compressed)
-        for (float& x : window) x = storedHeight(x, r.heightPrecision);
+      for (float& x : window) x = storedOf(x, r, compressed);
       const DemRows view = heldRows(window, w, int64_t(width), int64_t(height), manifest.spacing);
       arena.execute([&] {
         tbb::parallel_for(g0, g1, [&](uint32_t gx) {
