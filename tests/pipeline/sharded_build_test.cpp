@@ -3,6 +3,8 @@
 // refusals of missing, damaged and foreign shards.
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <fstream>
 #include <numeric>
@@ -121,16 +123,23 @@ TEST(ShardedBuild, APlanetAndChartsBuiltInTilesAreByteIdentical) {
   // Charts of 513 in a memory cap that has them built in tiles (whose block order the files follow),
   // with the lattice of their coarse levels gathered across shards, against one process in the
   // same cap; a shard in another cap keeps the plan's tiles.
+  // Each step's cap is the same headroom over what the process holds when it starts (that grows
+  // and shrinks between steps), so the one process and the prepare choose the same tiles.
   TerrainBuildOptions tiled = tileOptions(dir.path() / "tiled-one.atlas");
+  const auto headroom = [&] { tiled.maxMemory = residentBytes() + (uint64_t{48} << 20); };
   tiled.chartSize = 513;
   tiled.outOfCore = true;
-  tiled.maxMemory = residentBytes() + (uint64_t{48} << 20);
+  headroom();
   const TerrainBuildStats oneProcess = buildTerrainAtlas(tiled);
   ASSERT_TRUE(oneProcess.write.windowed.has_value());
   EXPECT_LT(oneProcess.write.windowed->bandRows, 3u * 512u + 1u) << "the cap did not have the charts built in tiles";
   tiled.output = dir.path() / "tiled.atlas";
   tiled.outOfCore = false;
+  headroom();
   prepareShards(tiled);
+  const nlohmann::json plan = nlohmann::json::parse(std::ifstream(shardArea(tiled.output) / "plan.json"));
+  EXPECT_LT(plan.at("chart_tile").get<uint32_t>(), 512u) << "the plan does not build the charts in tiles";
+  headroom();
   buildShard(tiled, {0, 2});
   TerrainBuildOptions roomy = tiled;
   roomy.maxMemory = 0;
