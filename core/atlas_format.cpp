@@ -91,6 +91,7 @@ constexpr size_t kChartHeaderBytesV3 = kChartHeaderBytesV2 + 4;  // + u32 flags
 constexpr size_t kFrameBytes = 4 * 8 + 2 * 8;                    // HeightFieldFrame
 constexpr uint32_t kFlagDerivedNormals = 1;
 constexpr uint32_t kFlagBorderNormals = 2;  // geometry: normals of block borders stored, the rest derived
+constexpr uint32_t kFlagWrapColumns = 4;    // with derived normals: the frame's columns circle a planet
 constexpr size_t kChannelBytes[kChannelCount] = {sizeof(float), sizeof(PackedNormal), 3 * sizeof(float),
                                                  sizeof(PackedColour)};
 constexpr bool kChannelIsFloat[kChannelCount] = {true, false, true, false};
@@ -308,7 +309,10 @@ void heightFieldNormals(const float* heights, size_t stride, uint32_t u0, uint32
   };
   thread_local std::vector<float> cx;
   cx.resize(w);
-  for (uint32_t u = 0; u < w; ++u) cx[u] = inverseSpan(f.originX + (int64_t{u0 + u} << level), f.maxX, f.spacing[0]);
+  // Columns round a planet: the ring holds the wrapped neighbours, so every span is whole.
+  const float wrapped = static_cast<float>(1.0 / (static_cast<double>(2 * step) * f.spacing[0]));
+  for (uint32_t u = 0; u < w; ++u)
+    cx[u] = f.wrapX ? wrapped : inverseSpan(f.originX + (int64_t{u0 + u} << level), f.maxX, f.spacing[0]);
   auto q = [](float c) { return static_cast<uint8_t>(c * 127.5f + 128.f); };  // c in [-1, 1]
 
   for (uint32_t v = 0; v < h; ++v) {
@@ -828,7 +832,9 @@ ChartFileWriter::ChartFileWriter(fs::path path, uint32_t chartSize, uint32_t blo
   putLe<uint32_t>(buf, 16, levels);
   if (!w.v1) putLe<uint32_t>(buf, 20, mask);
   if (coding.compressed) {
-    putLe<uint32_t>(buf, 24, w.derived ? kFlagDerivedNormals : w.borderNormals ? kFlagBorderNormals : 0);
+    putLe<uint32_t>(buf, 24, w.derived   ? kFlagDerivedNormals | (frame->wrapX ? kFlagWrapColumns : 0)
+                             : w.borderNormals ? kFlagBorderNormals
+                                               : 0);
     if (w.derived) {
       putLe<int64_t>(buf, 28, frame->originX);
       putLe<int64_t>(buf, 36, frame->originY);
@@ -995,7 +1001,9 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
       fail("truncated chart file (no flags)");
     const uint32_t flags = getLe<uint32_t>(fl);
     header = kChartHeaderBytesV3;
-    if ((flags & ~(kFlagDerivedNormals | kFlagBorderNormals)) || flags == (kFlagDerivedNormals | kFlagBorderNormals))
+    if ((flags & ~(kFlagDerivedNormals | kFlagBorderNormals | kFlagWrapColumns)) ||
+        (flags & kFlagDerivedNormals && flags & kFlagBorderNormals) ||
+        (flags & kFlagWrapColumns && !(flags & kFlagDerivedNormals)))
       fail("corrupt chart header (flags " + std::to_string(flags) + ")");
     if (flags & kFlagBorderNormals) {
       if (!(channelMask_ & (1u << kChannelPositions))) fail("corrupt chart header (border normals without positions)");
@@ -1012,6 +1020,7 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
       f.maxX = getLe<int64_t>(fr + 16);
       f.maxY = getLe<int64_t>(fr + 24);
       f.spacing = {getLe<double>(fr + 32), getLe<double>(fr + 40)};
+      f.wrapX = (flags & kFlagWrapColumns) != 0;
       constexpr int64_t kLimit = int64_t{1} << 40;
       if (f.originX < 0 || f.originY < 0 || f.originX > kLimit || f.originY > kLimit || f.maxX < 0 || f.maxY < 0 ||
           f.maxX > kLimit || f.maxY > kLimit || !(f.spacing[0] > 0.0) || !(f.spacing[1] > 0.0) ||

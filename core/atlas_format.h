@@ -241,13 +241,16 @@ using PackedColour = std::array<uint8_t, 4>;
 // Where a terrain chart lies on its DEM's sample lattice. A height field's normal at a sample of
 // pyramid level k is the central difference of the heights 2^k samples away on either side, the
 // neighbours clamped to the DEM (one-sided differences at its edges, flat beyond them), divided by
-// the distance actually spanned. It depends only on global coordinates, so charts agree on shared
-// sides, and a compressed atlas derives the normals from its decoded heights instead of storing
+// the distance actually spanned. Where the columns circle a planet (column maxX is column 0), the
+// differences cross the antimeridian as any other column: the neighbours wrap, and every span is
+// whole. It depends only on global coordinates, so charts agree on shared sides (the antimeridian's
+// included), and a compressed atlas derives the normals from its decoded heights instead of storing
 // them.
 struct HeightFieldFrame {
   int64_t originX = 0, originY = 0;         // global sample of the chart's (0, 0)
   int64_t maxX = 0, maxY = 0;               // the DEM's last column and row
   std::array<double, 2> spacing{1.0, 1.0};  // metres between samples
+  bool wrapX = false;                       // the columns circle a planet (PlanetInfo::wrapColumns = maxX)
 };
 
 // The normals of a geometry image's samples off its border, from its positions (x, y, z

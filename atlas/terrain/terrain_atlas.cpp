@@ -70,17 +70,24 @@ inline float clampedHeight(const DemRaster& dem, int64_t gx, int64_t gy) {
 
 // The same over the rows held (buildChartPyramid checks they cover what a chart row reads), or
 // over a lattice of the DEM (DemRows::stride).
+// Columns round a planet wrap into the window held (DemRows::wrapColumns): column x, in units of
+// `unit` samples, of a window [x0, x0 + cols).
+inline int64_t wrappedColumn(int64_t x, int64_t x0, int64_t cols, int64_t turn) {
+  return x < x0 ? x + turn : x >= x0 + cols ? x - turn : x;
+}
+
 inline float clampedHeight(const DemRows& dem, int64_t gx, int64_t gy) {
   const int64_t s = dem.stride;
+  const int64_t cols = dem.cols > 0 ? dem.cols : dem.width;
   if (s > 1) {
-    const int64_t i = std::clamp<int64_t>(gx, 0, (dem.width - 2 + s) / s * s) / s;
+    const int64_t i = dem.wrapColumns > 0 ? wrappedColumn(gx / s, dem.x0 / s, cols, dem.wrapColumns / s)
+                                          : std::clamp<int64_t>(gx, 0, (dem.width - 2 + s) / s * s) / s;
     const int64_t j = std::clamp<int64_t>(gy, 0, (dem.height - 2 + s) / s * s) / s;
     return dem.heights[static_cast<size_t>(j - dem.y0 / s) * static_cast<size_t>(dem.cols) +
                        static_cast<size_t>(i - dem.x0 / s)];
   }
-  gx = std::clamp<int64_t>(gx, 0, dem.width - 1);
+  gx = dem.wrapColumns > 0 ? wrappedColumn(gx, dem.x0, cols, dem.wrapColumns) : std::clamp<int64_t>(gx, 0, dem.width - 1);
   gy = std::clamp<int64_t>(gy, 0, dem.height - 1);
-  const int64_t cols = dem.cols > 0 ? dem.cols : dem.width;
   return dem.heights[static_cast<size_t>(gy - dem.y0) * static_cast<size_t>(cols) + static_cast<size_t>(gx - dem.x0)];
 }
 
@@ -104,12 +111,17 @@ ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t grid
                                bool keepRing) {
   if (dem.width == 0 || dem.height == 0 || dem.heights.size() != size_t{dem.width} * dem.height)
     throw std::invalid_argument("buildChartPyramid: empty or inconsistent DEM");
+  return buildChartPyramid(wholeRows(dem), gridX, gridY, chartSize, keepRing);
+}
+
+DemRows wholeRows(const DemRaster& dem) {
   DemRows rows;
   rows.heights = dem.heights.data();
   rows.rows = rows.height = dem.height;
   rows.width = dem.width;
   rows.spacing = dem.spacing;
-  return buildChartPyramid(rows, gridX, gridY, chartSize, keepRing);
+  rows.wrapColumns = dem.planet.wrapColumns;
+  return rows;
 }
 
 std::array<int64_t, 2> chartRowSpan(int64_t gridY, uint32_t chartSize, int64_t height) {
@@ -124,10 +136,13 @@ ChartPyramid buildChartPyramid(const DemRows& dem, int32_t gridX, int32_t gridY,
   const auto span = chartRowSpan(gridY, chartSize, dem.height);
   const auto columns = chartRowSpan(gridX, chartSize, dem.width);
   const int64_t cols = dem.cols > 0 ? dem.cols : dem.width;
-  if (dem.width <= 0 || dem.height <= 0 || dem.stride != 1 || dem.y0 > span[0] || dem.y0 + dem.rows < span[1] ||
-      dem.x0 > columns[0] || dem.x0 + cols < columns[1])
-    throw std::invalid_argument("buildChartPyramid: the window held does not cover the chart");
+  // Round a planet, a window narrower than the DEM holds the columns past its ends the chart reads.
   const int64_t m = int64_t{chartSize} - 1;
+  const std::array<int64_t, 2> reach =
+      dem.wrapColumns > 0 && cols < dem.width ? std::array<int64_t, 2>{gridX * m - m, gridX * m + 2 * m + 1} : columns;
+  if (dem.width <= 0 || dem.height <= 0 || dem.stride != 1 || dem.y0 > span[0] || dem.y0 + dem.rows < span[1] ||
+      dem.x0 > reach[0] || dem.x0 + cols < reach[1])
+    throw std::invalid_argument("buildChartPyramid: the window held does not cover the chart");
   return buildPyramidLevels(dem, gridX * m, gridY * m, chartSize - 1, 0, uint32_t(std::countr_zero(chartSize - 1)),
                             keepRing);
 }
@@ -143,6 +158,7 @@ ChartPyramid buildPyramidLevels(const DemRows& dem, int64_t originX, int64_t ori
   frame.maxX = int64_t{dem.width} - 1;
   frame.maxY = int64_t{dem.height} - 1;
   frame.spacing = dem.spacing;
+  frame.wrapX = dem.wrapColumns > 0;
   ChartPyramid p;
   p.heights.resize(last + 1);
   // With the ring, a compressed file derives the normals on reading: none are computed.
@@ -259,13 +275,14 @@ void writeChartCoarseLevels(const DemRows& dem, int32_t gridX, int32_t gridY, ui
   }
 }
 
-std::unique_ptr<ChartFileWriter> openTerrainChart(const fs::path& path, int32_t gridX, int32_t gridY,
-                                                  uint32_t chartSize, const TerrainAtlasOptions& o, int64_t width,
-                                                  int64_t height, const std::array<double, 2>& spacing) {
+std::unique_ptr<ChartFileWriter> openTerrainChart(const fs::path& path, const AtlasManifest& manifest, const ChartInfo& c,
+                                                  const TerrainAtlasOptions& o) {
   std::optional<HeightFieldFrame> frame;
+  const uint32_t chartSize = manifest.chartSize;
   if (o.coding.compressed) {
     const int64_t m = int64_t{chartSize} - 1;
-    frame = HeightFieldFrame{gridX * m, gridY * m, width - 1, height - 1, spacing};
+    frame = HeightFieldFrame{c.gridX * m, c.gridY * m, int64_t{manifest.samplesX} - 1, int64_t{manifest.samplesY} - 1,
+                             manifest.spacing, manifest.planet.wrapColumns > 0};
   }
   return std::make_unique<ChartFileWriter>(path, chartSize, o.blockIntervals, uint32_t(std::countr_zero(chartSize - 1)) + 1,
                                            (1u << kChannelHeights) | (1u << kChannelNormals), o.coding, frame);
@@ -288,6 +305,7 @@ void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& option
   manifest.georef = dem.georef;
   manifest.voidsFilled = dem.voidsFilled;
   manifest.voidFillMethod = dem.voidFillMethod;
+  manifest.planet = dem.planet;
   const uint32_t blockLog2 = static_cast<uint32_t>(std::countr_zero(options.blockIntervals));
   manifest.maxNodeResLog2 = std::min(manifest.maxNodeResLog2, blockLog2);
   manifest.minNodeResLog2 = std::min(manifest.minNodeResLog2, manifest.maxNodeResLog2);
@@ -326,8 +344,7 @@ TiledChartWriter::TiledChartWriter(const fs::path& dir, const AtlasManifest& man
     : manifest_(manifest), options_(options), tiling_(tiling) {
   for (const ChartInfo& c : manifest.charts) {
     charts_.push_back(std::make_unique<Chart>());
-    charts_.back()->file = openTerrainChart(dir / c.file, c.gridX, c.gridY, manifest.chartSize, options,
-                                            manifest.samplesX, manifest.samplesY, manifest.spacing);
+    charts_.back()->file = openTerrainChart(dir / c.file, manifest, c, options);
   }
 }
 
@@ -363,11 +380,7 @@ uint64_t TiledChartWriter::finish(const DemRows& coarse) {
 
 uint64_t writeTiledCharts(const DemRaster& dem, const fs::path& dir, const AtlasManifest& manifest,
                           const TerrainAtlasOptions& options, const ChartTiling& tiling, int concurrency) {
-  DemRows rows;
-  rows.heights = dem.heights.data();
-  rows.rows = rows.height = dem.height;
-  rows.width = dem.width;
-  rows.spacing = dem.spacing;
+  const DemRows rows = wholeRows(dem);
   TiledChartWriter writer(dir, manifest, options, tiling);
   const uint32_t perChart = tiling.tilesPerSide * tiling.tilesPerSide;
   const size_t total = manifest.charts.size() * perChart;

@@ -62,6 +62,11 @@ std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gri
 // row clamped (lattice column i holds the height of column min(i * stride, width - 1)); rows and
 // cols count lattice samples, x0 and y0 are multiples of stride, and only samples at multiples of
 // stride may be asked for.
+// wrapColumns W > 0: the columns circle a planet (column W is column 0; PlanetInfo::wrapColumns):
+// columns are not clamped but wrap, so a chart's neighbours across the antimeridian are the ones
+// at the other end. A column left of the window held is read W columns on, one right of it W
+// columns back: a window of every column wraps by itself, and a narrower one holds the columns
+// past either end it needs, at their unwrapped places (x0 < 0, or x0 + cols > width).
 struct DemRows {
   const float* heights = nullptr;
   int64_t y0 = 0, rows = 0;
@@ -69,7 +74,10 @@ struct DemRows {
   int64_t width = 0, height = 0;  // the whole DEM
   std::array<double, 2> spacing{1.0, 1.0};
   int64_t stride = 1;
+  int64_t wrapColumns = 0;
 };
+// Every row and column of a DEM in memory, its columns wrapping round a planet.
+DemRows wholeRows(const DemRaster& dem);
 // Lattice samples a side of a DEM of `samples` at `stride`: ceil((samples - 1) / stride) + 1.
 inline int64_t latticeSamples(int64_t samples, int64_t stride) { return (samples - 1 + stride - 1) / stride + 1; }
 // The rows a chart row needs (its own, and a chart's worth each side for the coarse levels'
@@ -114,10 +122,10 @@ std::vector<ChartFileWriter::CodedBlock> codeChartTile(const DemRows& dem, int32
 // DEM, or its lattice at stride 2^coarseLevel).
 void writeChartCoarseLevels(const DemRows& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
                             const ChartTiling& t, ChartFileWriter& file, bool ring);
-// A tiled chart's file, opened for writing: a compressed height field derives its normals.
-std::unique_ptr<ChartFileWriter> openTerrainChart(const std::filesystem::path& path, int32_t gridX, int32_t gridY,
-                                                  uint32_t chartSize, const TerrainAtlasOptions& o, int64_t width,
-                                                  int64_t height, const std::array<double, 2>& spacing);
+// A tiled chart's file, opened for writing (the manifest's chart fields filled): a compressed
+// height field derives its normals.
+std::unique_ptr<ChartFileWriter> openTerrainChart(const std::filesystem::path& path, const AtlasManifest& manifest,
+                                                  const ChartInfo& chart, const TerrainAtlasOptions& o);
 
 // The chart files of a tiled atlas while their tiles are coded. Each chart's tiles go into its file
 // in the chart's order (tile rows, then tiles), whichever thread finishes them first: a tile that
@@ -156,7 +164,7 @@ ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t grid
                                uint32_t chartSize, bool keepRing = false);
 
 // Fills the manifest's chart fields for `dem` (chart grid, files, root neighbours, spacing,
-// samples, height range, georeference, voids) without writing anything.
+// samples, height range, georeference, voids, planet) without writing anything.
 void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& options,
                          AtlasManifest& manifest);
 

@@ -41,10 +41,12 @@ ChartTiling windowTiling(uint32_t chartSize, uint32_t blockIntervals, uint64_t b
   return chartTiling(chartSize, blockIntervals, tile);
 }
 
-// The heights of window w of a width x height DEM, as DemRows.
+// The heights of window w of a width x height DEM, as DemRows; wrap: the columns a planet's turn
+// (0: none), past whose ends w may reach.
 DemRows heldRows(const std::vector<float>& heights, const CellWindow& w, int64_t width, int64_t height,
-                   const std::array<double, 2>& spacing) {
+                 const std::array<double, 2>& spacing, int64_t wrap) {
   DemRows rows;
+  rows.wrapColumns = wrap;
   rows.heights = heights.data();
   rows.y0 = w.y0;
   rows.rows = w.height();
@@ -54,6 +56,25 @@ DemRows heldRows(const std::vector<float>& heights, const CellWindow& w, int64_t
   rows.height = height;
   rows.spacing = spacing;
   return rows;
+}
+
+// Window w of the scratch raster into out (w's cells). Round a planet of `wrap` columns a turn
+// (0: none), w may reach past either end of the turn (x < 0, x > wrap): those columns are read
+// from the other end.
+void readWindow(const ScratchRaster& scratch, const CellWindow& w, int64_t wrap, float* out) {
+  if (wrap == 0 || (w.x0 >= 0 && w.x1 <= wrap + 1)) return scratch.read(w, out, nullptr);
+  std::vector<float> part;
+  for (int64_t a = w.x0; a < w.x1;) {
+    // The run of w's columns [a, b) whose columns in the raster are consecutive, a + shift on.
+    const int64_t shift = a < 0 ? wrap : a > wrap ? -wrap : 0;
+    const int64_t b = shift > 0 ? std::min<int64_t>(w.x1, 0) : shift < 0 ? w.x1 : std::min(w.x1, wrap + 1);
+    const CellWindow from{a + shift, w.y0, b + shift, w.y1};
+    part.resize(from.cells());
+    scratch.read(from, part.data(), nullptr);
+    for (int64_t y = 0; y < w.height(); ++y)
+      std::copy_n(part.data() + y * from.width(), from.width(), out + y * w.width() + (a - w.x0));
+    a = b;
+  }
 }
 
 // Lattice indices (DemRows::stride) whose samples lie in [lo, hi) of a side of `samples`.
@@ -106,6 +127,7 @@ uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& 
   const int64_t stride = int64_t{1} << tiling.coarseLevel;
   const int64_t nx = latticeSamples(width, stride), ny = latticeSamples(height, stride);
   const bool compressed = atlas.coding.compressed;
+  const int64_t wrap = manifest.planet.wrapColumns;
   std::vector<float> lattice(size_t(nx * ny));
   std::vector<uint8_t> gathered(lattice.size(), 0);
   // The writer opens the selected charts' files, in the manifest's order.
@@ -127,11 +149,13 @@ uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& 
               tileSpan(tiling, cs, int32_t(g0 / tps), int32_t(chartY), uint32_t(g0 % tps), ty, width, height);
           const auto last =
               tileSpan(tiling, cs, int32_t((g1 - 1) / tps), int32_t(chartY), uint32_t((g1 - 1) % tps), ty, width, height);
-          const CellWindow w{first[0], first[1], last[2], last[3]};
+          // Round a planet, the first and last tiles' margins lie past the antimeridian.
+          const CellWindow w{wrap && g0 == 0 ? -int64_t(margin) : first[0], first[1],
+                             wrap && g1 == tilesX ? width + int64_t(margin) : last[2], last[3]};
           r.bandRows = std::max<uint64_t>(r.bandRows, uint64_t(w.height()));
           r.bandColumns = std::max<uint64_t>(r.bandColumns, uint64_t(w.width()));
           window.resize(w.cells());
-          arena.execute([&] { scratch.read(w, window.data(), nullptr); });
+          arena.execute([&] { readWindow(scratch, w, wrap, window.data()); });
           for (float& x : window) x = storedOf(x, r, compressed);
           for (int64_t j : latticeIndices(w.y0, w.y1, height, stride)) {
             const int64_t y = std::min(j * stride, height - 1) - w.y0;
@@ -140,7 +164,7 @@ uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& 
               gathered[size_t(j * nx + i)] = 1;
             }
           }
-          const DemRows view = heldRows(window, w, width, height, manifest.spacing);
+          const DemRows view = heldRows(window, w, width, height, manifest.spacing, wrap);
           std::atomic<uint64_t> next{g0};
           arena.execute([&] {
             tbb::parallel_for(0, concurrency, [&](int) {
@@ -156,7 +180,14 @@ uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& 
   const int64_t m = cs - 1, side = scratch.tileSide();
   std::map<std::pair<int64_t, int64_t>, std::vector<std::array<int64_t, 2>>> missing;  // by scratch tile
   for (const ChartInfo& c : mine.charts) {
-    const auto xs = latticeIndices(std::max<int64_t>(0, (c.gridX - 1) * m), std::min(width, (c.gridX + 2) * m + 1), width, stride);
+    auto xs = latticeIndices(std::max<int64_t>(0, (c.gridX - 1) * m), std::min(width, (c.gridX + 2) * m + 1), width, stride);
+    // Round a planet, the charts at the antimeridian reach a chart past it.
+    auto reach = [&](int64_t lo, int64_t hi) {
+      const auto more = latticeIndices(lo, hi, width, stride);
+      xs.insert(xs.end(), more.begin(), more.end());
+    };
+    if (wrap && c.gridX == 0) reach(wrap - m, width);
+    if (wrap && c.gridX + 1 == int32_t(manifest.chartsX)) reach(0, m + 1);
     const auto ys = latticeIndices(std::max<int64_t>(0, (c.gridY - 1) * m), std::min(height, (c.gridY + 2) * m + 1), height, stride);
     for (int64_t j : ys)
       for (int64_t i : xs) {
@@ -192,6 +223,7 @@ uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& 
   coarse.height = height;
   coarse.spacing = manifest.spacing;
   coarse.stride = stride;
+  coarse.wrapColumns = wrap;
   return arena.execute([&] { return writer.finish(coarse); });
 }
 
@@ -340,6 +372,7 @@ void writeTerrainChartWindows(const ScratchRaster& scratch, const fs::path& dir,
   fs::create_directories(dir / "charts");
   const uint32_t cs = atlas.chartSize;
   const uint64_t m = cs - 1, spanRows = 3 * m + 1;
+  const int64_t wrap = manifest.planet.wrapColumns;
   const ChartTiling tiling =
       options.chartTile ? chartTiling(cs, atlas.blockIntervals, std::max(options.chartTile, 2 * atlas.blockIntervals)) : windowTiling(cs, atlas.blockIntervals, budget);
   if (tiling.tiled()) {
@@ -376,14 +409,16 @@ void writeTerrainChartWindows(const ScratchRaster& scratch, const fs::path& dir,
   for (uint32_t gy = 0; gy < manifest.chartsY; ++gy) {
     const auto rowSpan = chartRowSpan(gy, cs, int64_t(height));
     for (const auto& [g0, g1] : selectedRuns(selected, manifest.chartsX, gy, groupColumns)) {
-      const int64_t x0 = chartRowSpan(g0, cs, int64_t(width))[0], x1 = chartRowSpan(g1 - 1, cs, int64_t(width))[1];
+      // Round a planet, the charts at the antimeridian read a chart past it.
+      const int64_t x0 = wrap && g0 == 0 ? -int64_t(m) : chartRowSpan(g0, cs, int64_t(width))[0];
+      const int64_t x1 = wrap && g1 == manifest.chartsX ? int64_t(width + m) : chartRowSpan(g1 - 1, cs, int64_t(width))[1];
       const CellWindow w{x0, rowSpan[0], x1, rowSpan[1]};
       r.bandRows = std::max<uint64_t>(r.bandRows, uint64_t(w.height()));
       r.bandColumns = std::max<uint64_t>(r.bandColumns, uint64_t(w.width()));
       window.resize(w.cells());
-      arena.execute([&] { scratch.read(w, window.data(), nullptr); });
+      arena.execute([&] { readWindow(scratch, w, wrap, window.data()); });
       for (float& x : window) x = storedOf(x, r, compressed);
-      const DemRows view = heldRows(window, w, int64_t(width), int64_t(height), manifest.spacing);
+      const DemRows view = heldRows(window, w, int64_t(width), int64_t(height), manifest.spacing, wrap);
       arena.execute([&] {
         tbb::parallel_for(g0, g1, [&](uint32_t gx) {
           const ChartInfo& c = manifest.charts[size_t(gy) * manifest.chartsX + gx];

@@ -3,9 +3,16 @@
 
 #include <cmath>
 
+#include <gdal.h>
+#include <gdal_utils.h>
+#include <nlohmann/json.hpp>
+
 #include "atlas/terrain/planet_grid.h"
 #include "atlas/mesh/mesh_atlas.h"
+#include "core/atlas_format.h"
+#include "core/stage_meter.h"
 #include "pipeline/build.h"
+#include "pipeline/sharded_build.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -188,6 +195,108 @@ TEST(PlanetGrid, TheWindowedBuildGivesTheSameAtlas) {
   EXPECT_GT(files, 10u);
   const std::string stats = test::fileBytes(dir.path() / "windowed.atlas/stats.json");
   EXPECT_NE(stats.find("windowed"), std::string::npos);
+}
+
+// The normals of a chart's samples on the antimeridian are central differences across it, as
+// everywhere else: the first chart column's west border and the last one's east border (the same
+// samples) hold the same normals, bit for bit, stored or derived from compressed heights, at every
+// level; and they match the difference of the heights either side.
+TEST(PlanetGrid, NormalsAreCentralDifferencesAcrossTheAntimeridian) {
+  test::TempDir dir("planet_normals");
+  for (const bool compress : {true, false}) {
+    TerrainBuildOptions o;
+    o.input = test::repoData() / "terrain/etopo_30min.tif";
+    o.planet = true;
+    o.chartSize = 65;
+    o.compress = compress;
+    o.output = dir.path() / (compress ? "compressed.atlas" : "raw.atlas");
+    buildAtlas(o);
+    const AtlasManifest m = readManifest(o.output);
+    ASSERT_EQ(uint64_t(m.chartsX) * (m.chartSize - 1), m.planet.wrapColumns);
+    uint64_t samples = 0, sloped = 0;
+    for (uint32_t gy = 0; gy < m.chartsY; ++gy) {
+      const ChartFileReader west(o.output / m.charts[size_t(gy) * m.chartsX].file);
+      const ChartFileReader east(o.output / m.charts[size_t(gy) * m.chartsX + m.chartsX - 1].file);
+      for (uint32_t k = 0; k < west.levels(); ++k) {
+        const uint32_t s = ((m.chartSize - 1) >> k) + 1;
+        const auto wn = west.readLevelNormals(k), en = east.readLevelNormals(k);
+        const auto wh = west.readLevelHeights(k), eh = east.readLevelHeights(k);
+        for (uint32_t v = 0; v < s; ++v) {
+          const PackedNormal a = wn[size_t(v) * s], b = en[size_t(v) * s + s - 1];
+          ASSERT_EQ(a, b)
+              << (compress ? "compressed" : "raw") << " row " << gy << " level " << k << " sample " << v;
+          // The east slope from the samples a level step either side of the antimeridian.
+          const double dx = (double(wh[size_t(v) * s + 1]) - double(eh[size_t(v) * s + s - 2])) /
+                            (2.0 * double(1u << k) * m.spacing[0]);
+          const double dy = 0.0;  // the north slope is checked by the other tests
+          const double nx = -dx / std::sqrt(dx * dx + dy * dy + 1.0);
+          const double stored = (double(a[0]) - 128.0) / 127.5;
+          EXPECT_LE(std::abs(stored - nx), 0.02 + std::abs(nx) * 0.5)
+              << "row " << gy << " level " << k << " sample " << v << ": east slope " << dx;
+          if (std::abs(dx) > 0.01) {
+            ++sloped;
+            EXPECT_EQ(std::signbit(stored), std::signbit(nx)) << "row " << gy << " level " << k << " sample " << v;
+          }
+          ++samples;
+        }
+      }
+    }
+    EXPECT_GT(sloped, samples / 20) << "too few sloped samples on the antimeridian to tell";
+  }
+}
+
+// A window-by-window build whose memory cap builds charts of 513 in tiles reads the tiles' margins
+// and the coarse lattice across the antimeridian: every level's heights and normals are the
+// in-memory build's; and so are those of a build in three shards, whose charts at the antimeridian
+// gather the lattice past it that their own windows do not hold.
+TEST(PlanetGrid, ChartsBuiltInTilesReadAcrossTheAntimeridian) {
+  test::TempDir dir("planet_tiles");
+  // The shipped Earth at twice its resolution (a VRT): 4 chart columns a turn, so that the charts
+  // at the antimeridian read lattice no window of theirs holds.
+  GDALAllRegister();
+  const char* args[] = {"-of", "VRT", "-outsize", "1537", "723", "-r", "bilinear", nullptr};
+  GDALTranslateOptions* to = GDALTranslateOptionsNew(const_cast<char**>(args), nullptr);
+  GDALDatasetH src = GDALOpen((test::repoData() / "terrain/etopo_30min.tif").c_str(), GA_ReadOnly);
+  ASSERT_NE(src, nullptr);
+  GDALDatasetH vrt = GDALTranslate((dir.path() / "earth2.vrt").c_str(), src, to, nullptr);
+  ASSERT_NE(vrt, nullptr);
+  GDALClose(vrt);
+  GDALClose(src);
+  GDALTranslateOptionsFree(to);
+  TerrainBuildOptions o;
+  o.input = dir.path() / "earth2.vrt";
+  o.planet = true;
+  o.chartSize = 513;
+  o.output = dir.path() / "memory.atlas";
+  buildAtlas(o);
+  o.output = dir.path() / "tiled.atlas";
+  o.outOfCore = true;
+  o.maxMemory = residentBytes() + (uint64_t{48} << 20);
+  const nlohmann::json stats = buildAtlas(o);
+  ASSERT_LT(stats.at("windowed").at("band_rows").get<uint64_t>(), 3u * 512u + 1u)
+      << "the cap did not have the charts built in tiles";
+  TerrainBuildOptions sharded = o;
+  sharded.output = dir.path() / "sharded.atlas";
+  sharded.outOfCore = false;
+  sharded.maxMemory = residentBytes() + (uint64_t{48} << 20);
+  prepareShards(sharded);
+  for (uint32_t i = 0; i < 3; ++i) buildShard(sharded, {i, 3});
+  mergeShards(sharded.output);
+  const AtlasManifest m = readManifest(o.output);
+  ASSERT_GE(m.chartsX, 4u);
+  ASSERT_EQ(uint64_t(m.chartsX) * 512u, m.planet.wrapColumns);
+  for (const ChartInfo& c : m.charts)
+    for (const std::filesystem::path& built : {o.output, sharded.output}) {
+    const ChartFileReader a(dir.path() / "memory.atlas" / c.file), b(built / c.file);
+    for (uint32_t k = 0; k < a.levels(); ++k) {
+      EXPECT_EQ(a.readLevelHeights(k), b.readLevelHeights(k)) << c.file << " level " << k;
+      const auto an = a.readLevelNormals(k), bn = b.readLevelNormals(k);
+      ASSERT_EQ(an.size(), bn.size());
+      size_t differ = 0;
+      for (size_t i = 0; i < an.size(); ++i) differ += an[i] != bn[i];
+      EXPECT_EQ(differ, 0u) << built.filename() << " " << c.file << " level " << k;
+    }
+  }
 }
 
 // The shipped global DEM as a planet atlas: the whole surface, every pyramid level, is closed.
