@@ -116,6 +116,7 @@ std::string flagFor(std::string_view name) {
       {"imagery", "--imagery"},              {"quads", "--quads"},
       {"quadMap", "--quad-map"},              {"sizing", "--sizing"},
       {"outOfCore", "--out-of-core"},         {"planet", "--planet"},
+      {"planetFlattening", "--ellipsoid"},    {"planetRadius", "--radius"},
       {"shard", "--shard"},                   {"shards", "--shards"}};
   const auto it = kFlags.find(name);
   return std::string(it == kFlags.end() ? name : it->second);
@@ -509,6 +510,10 @@ int main(int argc, char** argv) {
                   "the antimeridian and closes at the poles)");
   build->add_option("--radius", terrain.planetRadius, "DEMs with --planet: the sphere's radius, metres")
       ->capture_default_str();
+  std::string ellipsoid;
+  build->add_option("--ellipsoid", ellipsoid,
+                    "DEMs with --planet: draw on a reference ellipsoid instead of a sphere, heights along its "
+                    "normal (WGS84 or GRS80)");
   bool uncompressed = false;
   build->add_flag("--uncompressed", uncompressed,
                   "Write raw chart files (atlas format version 1: float32 heights or positions, 4-byte normals) "
@@ -696,6 +701,15 @@ int main(int argc, char** argv) {
       if (terrain.imagery.empty() && (terrain.imageryExtent || terrain.imageryScaleLog2 >= 0))
         throw InputError("--imagery-scale and --imagery-extent need --imagery");
       if (build->get_option("--radius")->count() > 0 && !terrain.planet) throw InputError("--radius needs --planet");
+      if (!ellipsoid.empty()) {
+        if (!terrain.planet) throw InputError("--ellipsoid needs --planet");
+        if (build->get_option("--radius")->count() > 0)
+          throw InputError("--ellipsoid and --radius: give one (an ellipsoid has its own radii)");
+        const Ellipsoid* e = findEllipsoid(ellipsoid);
+        if (!e) throw InputError("--ellipsoid " + ellipsoid + ": unknown; give WGS84 or GRS80");
+        terrain.planetRadius = e->radius;
+        terrain.planetFlattening = e->flattening;
+      }
       if (!(terrain.planetRadius >= 1.0 && terrain.planetRadius <= 1e9))
         throw InputError("--radius " + std::to_string(terrain.planetRadius) + " must be between 1 and 1e9 metres");
       if (shardArgs.any()) return runShardedBuild(terrain, shardArgs, argc, argv);

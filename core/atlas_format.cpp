@@ -482,6 +482,7 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
     j["planet"] = ojson{{"radius", m.planet.radius},   {"lon0Deg", m.planet.lon0Deg},
                         {"lat0Deg", m.planet.lat0Deg}, {"dlonDeg", m.planet.dlonDeg},
                         {"dlatDeg", m.planet.dlatDeg}, {"wrapColumns", m.planet.wrapColumns}};
+  if (m.planet.present && m.planet.flattening > 0.0) j["planet"]["flattening"] = m.planet.flattening;
   if (m.imagery.present)
     j["imagery"] = ojson{{"source", m.imagery.source}, {"scaleLog2", m.imagery.scaleLog2}, {"coverage", m.imagery.coverage}};
   if (m.compression.present)
@@ -588,7 +589,10 @@ AtlasManifest readManifest(const fs::path& dir) {
     p.dlonDeg = r.number(r.field(pl, "dlonDeg", "planet."), "planet.dlonDeg");
     p.dlatDeg = r.number(r.field(pl, "dlatDeg", "planet."), "planet.dlatDeg");
     p.wrapColumns = uint32_t(r.integer(r.field(pl, "wrapColumns", "planet."), "planet.wrapColumns", 0, INT32_MAX));
+    if (pl.contains("flattening")) p.flattening = r.number(pl["flattening"], "planet.flattening");
     if (!(p.radius >= 1.0 && p.radius <= 1e9)) r.fail("planet.radius must be between 1 m and 1e9 m");
+    if (!(p.flattening >= 0.0 && p.flattening <= kMaxPlanetFlattening))
+      r.fail("planet.flattening must be between 0 (a sphere) and " + std::to_string(kMaxPlanetFlattening));
     if (!(p.dlonDeg > 0.0 && p.dlonDeg <= 360.0 && p.dlatDeg > 0.0 && p.dlatDeg <= 180.0))
       r.fail("planet.dlonDeg and planet.dlatDeg must be positive (at most 360 and 180 degrees)");
     if (!(std::fabs(p.lon0Deg) <= 720.0 && std::fabs(p.lat0Deg) <= 180.0))

@@ -1,6 +1,7 @@
 #include "core/planet.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <numbers>
 
@@ -26,6 +27,22 @@ void angleDifferences(float sa, float ca, float d, float* dsin, float* dcos) {
 }
 
 }  // namespace
+
+const Ellipsoid* findEllipsoid(const std::string& name) {
+  for (const Ellipsoid& e : kEllipsoids) {
+    const std::string n = e.name;
+    if (n.size() == name.size() &&
+        std::equal(n.begin(), n.end(), name.begin(), [](char a, char b) { return std::toupper(a) == std::toupper(b); }))
+      return &e;
+  }
+  return nullptr;
+}
+
+glm::dvec3 surfacePosition(const PlanetInfo& info, double lon, double lat, double h) {
+  const double cl = std::cos(lat), sl = std::sin(lat), e2 = info.eccentricity2();
+  const double N = info.radius / std::sqrt(1.0 - e2 * sl * sl);
+  return {(N + h) * cl * std::cos(lon), (N + h) * cl * std::sin(lon), (N * (1.0 - e2) + h) * sl};
+}
 
 PlanetFrame::PlanetFrame(const PlanetInfo& info, uint32_t samplesX, uint32_t samplesY)
     : info_(info), lastX_(int64_t(samplesX) - 1), lastY_(int64_t(samplesY) - 1) {
@@ -66,13 +83,21 @@ glm::dvec3 PlanetFrame::direction(int64_t gx, int64_t gy) const {
 }
 
 glm::dvec3 PlanetFrame::position(int64_t gx, int64_t gy, double h) const {
-  return (info_.radius + h) * direction(gx, gy);
+  const double e2 = info_.eccentricity2();
+  if (e2 == 0.0) return (info_.radius + h) * direction(gx, gy);
+  // (N + h) n - e^2 N sin(lat) z: N the radius of curvature in the prime vertical.
+  const glm::dvec3 n = direction(gx, gy);
+  const double N = info_.radius / std::sqrt(1.0 - e2 * n.z * n.z);
+  return (N + h) * n - glm::dvec3(0.0, 0.0, e2 * N * n.z);
 }
 
 std::array<int64_t, 2> PlanetFrame::sampleUnder(const glm::dvec3& p) const {
   const double r = glm::length(p);
   if (!(r > 0.0)) return {0, 0};
-  const double lat = std::asin(std::clamp(p.z / r, -1.0, 1.0)) / kDeg;
+  const double e2 = info_.eccentricity2();
+  // On an ellipsoid, the geodetic latitude of the surface point on the ray from the centre.
+  const double lat = (e2 == 0.0 ? std::asin(std::clamp(p.z / r, -1.0, 1.0))
+                                : std::atan2(p.z, (1.0 - e2) * std::hypot(p.x, p.y))) / kDeg;
   double lon = std::atan2(p.y, p.x) / kDeg;
   double x = (lon - info_.lon0Deg) / info_.dlonDeg;
   if (info_.wrapColumns) {
@@ -95,6 +120,8 @@ PlanetAnchor planetAnchor(const PlanetFrame& frame, int64_t gx, int64_t gy) {
   a.cosLon = std::cos(lon);
   a.latBelow = lat + std::numbers::pi / 2;
   a.latAbove = std::numbers::pi / 2 - lat;
+  a.w = std::sqrt(1.0 - frame.info().eccentricity2() * a.sinLat * a.sinLat);
+  a.normalRadius = frame.info().radius / a.w;
   return a;
 }
 
@@ -121,8 +148,20 @@ glm::vec3 planetOffset(const PlanetFrame& frame, const PlanetAnchor& a, int64_t 
     const float cosLat = cLat + dcosLat;
     d = {cosLat * dcosLon + cLon * dcosLat, cosLat * dsinLon + sLon * dcosLat, dsinLat};
   }
-  const float rho = float(info.radius) + h;
-  return rho * d + h * glm::vec3(cLat * cLon, cLat * sLon, sLat);
+  if (info.flattening == 0.0) {
+    const float rho = float(info.radius) + h;
+    return rho * d + h * glm::vec3(cLat * cLon, cLat * sLon, sLat);
+  }
+  // An ellipsoid: P = (N + h) n - e^2 N sin(lat) z, so P - P_A = (N + h)(n - n_A) + (N - N_A + h) n_A
+  // - e^2 (N sin(lat) - N_A sin(lat_A)) z, each difference from the sine's difference alone:
+  // N - N_A = a e^2 (s - s_A)(s + s_A) / (w w_A (w + w_A)).
+  const float e2 = float(info.eccentricity2()), wA = float(a.w), nA = float(a.normalRadius);
+  const float s = sLat + dsinLat;
+  const float ws = std::sqrt(1.0f - e2 * s * s);
+  const float dN = float(info.radius) * e2 * dsinLat * (s + sLat) / (ws * wA * (ws + wA));
+  const float rho = nA + dN + h;
+  const glm::vec3 up(cLat * cLon, cLat * sLon, sLat);
+  return rho * d + (dN + h) * up - glm::vec3(0.0f, 0.0f, e2 * (dN * s + nA * dsinLat));
 }
 
 }  // namespace gimlod

@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <string>
 
 #include <glm/glm.hpp>
 
@@ -17,16 +18,40 @@ namespace gimlod {
 
 inline constexpr double kEarthRadius = 6371008.8;  // metres: the IUGG mean radius
 
+// A reference ellipsoid: its equatorial radius (metres) and flattening.
+struct Ellipsoid {
+  const char* name;
+  double radius, flattening;
+};
+inline constexpr Ellipsoid kEllipsoids[] = {{"WGS84", 6378137.0, 1.0 / 298.257223563},
+                                            {"GRS80", 6378137.0, 1.0 / 298.257222101}};
+
+// The ellipsoid of kEllipsoids called `name` (case-insensitive), or null.
+const Ellipsoid* findEllipsoid(const std::string& name);
+
+// The most flattening a planet may have: Saturn's is 0.098.
+inline constexpr double kMaxPlanetFlattening = 0.1;
+
 // What a planet atlas's manifest records ("planet").
 struct PlanetInfo {
   bool present = false;
-  double radius = kEarthRadius;          // metres: the sphere heights are measured from
+  // The surface heights are measured from: a sphere of `radius` metres (flattening 0), or an
+  // ellipsoid of revolution of equatorial radius `radius` and this flattening, heights along its
+  // normal (geodetic latitudes, as GPS and WGS84 DEMs give them).
+  double radius = kEarthRadius;
+  double flattening = 0.0;
+  double eccentricity2() const { return flattening * (2.0 - flattening); }
+  double polarRadius() const { return radius * (1.0 - flattening); }
   double lon0Deg = 0.0, lat0Deg = 0.0;   // sample (0, 0): longitude and latitude, degrees
   double dlonDeg = 1.0, dlatDeg = 1.0;   // degrees between samples (both > 0; rows go north)
   // W > 0: the samples circle the planet, W columns a turn, and column W is column 0 again
   // (the DEM holds W + 1 columns, the last a copy of the first). 0: a regional DEM.
   uint32_t wrapColumns = 0;
 };
+
+// The planet-centred position of longitude lon and latitude lat (radians; geodetic on an ellipsoid)
+// at height h above the surface, along its normal.
+glm::dvec3 surfacePosition(const PlanetInfo& info, double lon, double lat, double h);
 
 // The lattice's place on the sphere: samples to directions and positions.
 class PlanetFrame {
@@ -47,11 +72,13 @@ class PlanetFrame {
   // The last row on the south pole (-1: none) and the first on the north pole (INT32_MAX: none).
   int64_t southPoleRow() const { return southRow_; }
   int64_t northPoleRow() const { return northRow_; }
+  // The surface's normal (up) at sample (gx, gy): on an ellipsoid, geodetic.
   glm::dvec3 direction(int64_t gx, int64_t gy) const;
   // Planet-centred position (x towards longitude 0 on the equator, z north) of sample (gx, gy) at
   // height h.
   glm::dvec3 position(int64_t gx, int64_t gy, double h) const;
-  // The lattice sample under a point (the nearest to its longitude and latitude).
+  // The lattice sample under a point (the nearest to its longitude and latitude; on an ellipsoid,
+  // the geodetic latitude of the surface point under it).
   std::array<int64_t, 2> sampleUnder(const glm::dvec3& p) const;
 
  private:
@@ -68,6 +95,9 @@ struct PlanetAnchor {
   glm::dvec3 position{0.0};        // planet-centred, metres
   double sinLat = 0, cosLat = 1, sinLon = 0, cosLon = 1;
   double latBelow = 0, latAbove = 0;  // radians from the anchor's latitude to the south and north poles
+  // On an ellipsoid: its radius of curvature in the prime vertical N = a / w, w = sqrt(1 - e^2
+  // sin^2 lat), and w (a sphere: N = radius, w = 1).
+  double normalRadius = 0, w = 1;
 };
 PlanetAnchor planetAnchor(const PlanetFrame& frame, int64_t gx, int64_t gy);
 

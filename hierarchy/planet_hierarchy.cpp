@@ -42,14 +42,18 @@ Hierarchy buildPlanetHierarchy(const AtlasManifest& m, const ChartWindowSource& 
           lon[u] = {std::cos(a), std::sin(a)};
         }
         std::vector<glm::vec3> p(heights.size());
+        const double e2 = m.planet.eccentricity2();
         for (uint32_t v = 0; v <= M; ++v) {
           const int64_t gy = int64_t(chart.gridY) * M + v;
           const double lat = frame.latitude(gy), cl = frame.pole(gy) ? 0.0 : std::cos(lat), sl = std::sin(lat);
           const double z = frame.pole(gy) ? double(frame.pole(gy)) : sl;
+          // The row's radius of curvature in the prime vertical (PlanetFrame::position); a sphere's
+          // radius where e^2 = 0.
+          const double N = e2 == 0.0 ? m.planet.radius : m.planet.radius / std::sqrt(1.0 - e2 * z * z);
           for (uint32_t u = 0; u <= M; ++u) {
             const size_t i = size_t(v) * (M + 1) + u;
-            const double r = m.planet.radius + double(heights[i]);
-            p[i] = glm::vec3(glm::dvec3(r * cl * lon[u].x, r * cl * lon[u].y, r * z) - centre);
+            const double r = N + double(heights[i]);
+            p[i] = glm::vec3(glm::dvec3(r * cl * lon[u].x, r * cl * lon[u].y, r * z - e2 * N * z) - centre);
           }
         }
         return p;

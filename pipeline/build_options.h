@@ -82,10 +82,12 @@ struct TerrainBuildOptions : CommonBuildOptions {
   // would fit in memory; without it that happens only when it would not.
   bool outOfCore = false;
   // A planet atlas (core/planet.h): the DEM, in longitude and latitude, drawn on a sphere of
-  // planetRadius metres; a DEM circling the planet wraps at the antimeridian and closes at the
+  // planetRadius metres, or with planetFlattening > 0 on an ellipsoid of that equatorial radius
+  // (kEllipsoids: WGS84); a DEM circling the planet wraps at the antimeridian and closes at the
   // poles (atlas/terrain/planet_grid.h).
   bool planet = false;
   double planetRadius = kEarthRadius;
+  double planetFlattening = 0.0;
 };
 // Peak resident bytes per DEM sample of the in-memory terrain build, above what the process holds
 // before it, measured: 16.9 on the shipped tile upsampled 4 times (23M samples, 144k voids: the

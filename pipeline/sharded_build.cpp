@@ -122,7 +122,8 @@ json buildFingerprint(const TerrainBuildOptions& o) {
             {"z_scale", o.zScale},
             {"height_precision", o.heightPrecision},
             {"planet", o.planet},
-            {"radius", o.planetRadius}}}};
+            {"radius", o.planetRadius},
+            {"flattening", o.planetFlattening}}}};
 }
 
 // The keys where two fingerprints differ ("input.bytes", "options.chart_size").

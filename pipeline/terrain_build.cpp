@@ -61,6 +61,7 @@ DemOptions terrainDemOptions(const TerrainBuildOptions& o) {
   if (o.planet) {
     if (o.chartSize == kAutoChartSize) throw std::logic_error("demOptions: a planet's chart size is planned first");
     d.planetRadius = o.planetRadius;
+    d.planetFlattening = o.planetFlattening;
     d.planetChartIntervals = o.chartSize - 1;
   }
   return d;
@@ -159,6 +160,9 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& options) {
   if (!std::isfinite(o.zScale) || o.zScale == 0.0)
     throw InputError(optionRef("zScale") + " must be finite and non-zero");
   if (o.threads > 1024) throw InputError(optionRef("threads") + " must be at most 1024");
+  if (!(o.planetFlattening >= 0.0 && o.planetFlattening <= kMaxPlanetFlattening))
+    throw InputError(fmt::format("{} {} must be between 0 (a sphere) and {}", optionRef("planetFlattening"),
+                                 o.planetFlattening, kMaxPlanetFlattening));
   if (o.compress && o.heightPrecision != kAutoHeightPrecision && !(o.heightPrecision >= 1e-6 && o.heightPrecision <= 1000.0))
     throw InputError(fmt::format("{} {} must be between 1e-6 and 1000 metres", optionRef("heightPrecision"),
                                  o.heightPrecision));
@@ -193,7 +197,10 @@ void logTerrainSource(const TerrainBuildOptions& o, const DemRaster& dem) {
   for (const std::string& warning : dem.warnings) spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
   const PlanetInfo& p = dem.planet;
   if (!p.present) return;
-  spdlog::info("{}: on a sphere of radius {:.1f} m, {}x{} samples{}", o.input.string(), p.radius, dem.width, dem.height,
+  const std::string surface = p.flattening > 0.0 ? fmt::format("an ellipsoid of equatorial radius {:.1f} m and "
+                                                                "flattening 1/{:.12g}", p.radius, 1.0 / p.flattening)
+                                                  : fmt::format("a sphere of radius {:.1f} m", p.radius);
+  spdlog::info("{}: on {}, {}x{} samples{}", o.input.string(), surface, dem.width, dem.height,
                p.wrapColumns ? fmt::format(", {} columns round the planet", p.wrapColumns) : std::string(", regional"));
 }
 

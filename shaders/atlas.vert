@@ -45,7 +45,8 @@ uniform vec4 u_anchorTrig;      // its sin lat, cos lat, sin lon, cos lon
 uniform vec2 u_anchorPoles;     // radians from its latitude to the south and north poles
 uniform ivec3 u_planetLattice;  // the last column and row, the columns a turn (0: no wrap)
 uniform ivec2 u_poleRows;       // the last row on the south pole (-1: none), the first on the north
-uniform vec3 u_planetStep;      // radians between columns and rows, the sphere's radius
+uniform vec3 u_planetStep;      // radians between columns and rows, the sphere's (equatorial) radius
+uniform vec3 u_ellipsoid;       // e^2 (0: a sphere), the anchor's N and w (core/planet.h)
 
 // sin x to float precision relative to x for small x (a GPU's sin has an absolute error near 1e-6).
 float planetSin(float x) {
@@ -83,8 +84,17 @@ vec3 planetOffset(ivec2 g, float h) {
     float cosLat = cLat + lat.y;
     d = vec3(cosLat * lon.y + cLon * lat.y, cosLat * lon.x + sLon * lat.y, lat.x);
   }
-  float rho = u_planetStep.z + h;
-  return rho * d + h * vec3(cLat * cLon, cLat * sLon, sLat);
+  if (u_ellipsoid.x == 0.0) {
+    float rho = u_planetStep.z + h;
+    return rho * d + h * vec3(cLat * cLon, cLat * sLon, sLat);
+  }
+  // An ellipsoid: the differences of N and of N sin(lat) from the sine's difference alone.
+  float e2 = u_ellipsoid.x, nA = u_ellipsoid.y, wA = u_ellipsoid.z;
+  float s = sLat + lat.x;
+  float ws = sqrt(1.0 - e2 * s * s);
+  float dN = u_planetStep.z * e2 * lat.x * (s + sLat) / (ws * wA * (ws + wA));
+  float rho = nA + dN + h;
+  return rho * d + (dN + h) * vec3(cLat * cLon, cLat * sLon, sLat) - vec3(0.0, 0.0, e2 * (dN * s + nA * lat.x));
 }
 #endif
 

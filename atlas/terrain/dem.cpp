@@ -334,6 +334,7 @@ void DemSource::layPlanetGrid(const DemOptions& options) {
                        im.offset == std::nearbyint(im.offset);
   PlanetGrid g = planPlanetGrid(dem.georef, dem.width, dem.height, path, options.planetRadius,
                                 options.planetChartIntervals, integer);
+  g.info.flattening = options.planetFlattening;
   std::vector<float> row(dem.width);
   std::vector<uint8_t> valid(dem.width);
   if (g.southRows > 0) {

@@ -36,6 +36,7 @@ struct DemOptions {
   // read is the planet lattice laid from the DEM's rows, its antimeridian on a multiple of
   // planetChartIntervals columns, whichever build reads it. The DEM must be geographic.
   double planetRadius = 0.0;
+  double planetFlattening = 0.0;  // > 0: an ellipsoid of equatorial radius planetRadius
   uint32_t planetChartIntervals = 1;
 };
 

@@ -490,6 +490,7 @@ void AtlasRenderer::Impl::setPlanetUniforms() const {
               GLint(info.wrapColumns));
   glUniform2i(uniform(p, "u_poleRows"), GLint(frame.southPoleRow()), GLint(frame.northPoleRow()));
   glUniform3f(uniform(p, "u_planetStep"), float(info.dlonDeg * deg), float(info.dlatDeg * deg), float(info.radius));
+  glUniform3f(uniform(p, "u_ellipsoid"), float(info.eccentricity2()), float(anchor.normalRadius), float(anchor.w));
 }
 
 void AtlasRenderer::Impl::bindPageArray(uint32_t a) const {

@@ -229,7 +229,8 @@ ViewParams AtlasScene::viewParams(const Camera& camera) const {
   const Camera c = sceneCamera(camera);
   ViewParams v = makeViewParams(c, options_.width, options_.height);
   if (atlas_.manifest.planet.present)
-    v.frustum.setHorizon(c.eye, atlas_.manifest.planet.radius + std::min(0.0f, atlas_.manifest.heightRange[0]));
+    // The sphere within the surface: an ellipsoid's polar radius (it holds the sphere of that radius).
+    v.frustum.setHorizon(c.eye, atlas_.manifest.planet.polarRadius() + std::min(0.0f, atlas_.manifest.heightRange[0]));
   return v;
 }
 

@@ -2,14 +2,18 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
+#include <numbers>
 
 #include <gdal.h>
 #include <gdal_utils.h>
+#include <ogr_spatialref.h>
 #include <nlohmann/json.hpp>
 
 #include "atlas/terrain/planet_grid.h"
 #include "atlas/mesh/mesh_atlas.h"
 #include "core/atlas_format.h"
+#include "core/planet.h"
 #include "core/stage_meter.h"
 #include "pipeline/build.h"
 #include "pipeline/sharded_build.h"
@@ -297,6 +301,51 @@ TEST(PlanetGrid, ChartsBuiltInTilesReadAcrossTheAntimeridian) {
       EXPECT_EQ(differ, 0u) << built.filename() << " " << c.file << " level " << k;
     }
   }
+}
+
+// A WGS84 planet's samples lie where PROJ puts their longitude, latitude and height (EPSG:4979 to
+// the geocentric EPSG:4978), within a millimetre: the shipped globe built with the ellipsoid, the
+// samples of a level of every fifth chart.
+TEST(PlanetGrid, AWgs84PlanetsSamplesLieWhereProjPutsThem) {
+  test::TempDir dir("planet_wgs84");
+  TerrainBuildOptions o;
+  o.input = test::repoData() / "terrain/etopo_30min.tif";
+  o.output = dir.path() / "wgs84.atlas";
+  o.planet = true;
+  o.chartSize = 129;
+  o.planetRadius = kEllipsoids[0].radius;
+  o.planetFlattening = kEllipsoids[0].flattening;
+  buildAtlas(o);
+  const AtlasManifest m = readManifest(o.output);
+  ASSERT_EQ(m.planet.flattening, kEllipsoids[0].flattening);
+  OGRSpatialReference geodetic, geocentric;
+  ASSERT_EQ(geodetic.importFromEPSG(4979), OGRERR_NONE);
+  ASSERT_EQ(geocentric.importFromEPSG(4978), OGRERR_NONE);
+  geodetic.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+  std::unique_ptr<OGRCoordinateTransformation> toCentre(OGRCreateCoordinateTransformation(&geodetic, &geocentric));
+  ASSERT_NE(toCentre, nullptr);
+  const PlanetFrame frame(m.planet, m.samplesX, m.samplesY);
+  const uint32_t level = 2, M = m.chartSize - 1, n = M >> level;
+  double worst = 0.0, offSphere = 0.0;
+  uint64_t checked = 0;
+  for (size_t c = 0; c < m.charts.size(); c += 5) {
+    const std::vector<float> h = ChartFileReader(o.output / m.charts[c].file).readHeightsWindow(level, 0, 0, n);
+    for (uint32_t v = 0; v <= n; ++v)
+      for (uint32_t u = 0; u <= n; ++u) {
+        const int64_t gx = m.charts[c].gridX * int64_t(M) + (int64_t(u) << level);
+        const int64_t gy = m.charts[c].gridY * int64_t(M) + (int64_t(v) << level);
+        double x = frame.longitude(gx) * 180.0 / std::numbers::pi, y = frame.latitude(gy) * 180.0 / std::numbers::pi;
+        double z = h[size_t(v) * (n + 1) + u];
+        ASSERT_TRUE(toCentre->Transform(1, &x, &y, &z));
+        const glm::dvec3 proj(x, y, z), ours = frame.position(gx, gy, h[size_t(v) * (n + 1) + u]);
+        worst = std::max(worst, glm::length(ours - proj));
+        offSphere = std::max(offSphere, std::fabs(glm::length(proj) - m.planet.radius - z));
+        ++checked;
+      }
+  }
+  EXPECT_GT(checked, 2000u);
+  EXPECT_LT(worst, 1e-3);
+  EXPECT_GT(offSphere, 1.0e4) << "the ellipsoid is no sphere";
 }
 
 // The shipped global DEM as a planet atlas: the whole surface, every pyramid level, is closed.

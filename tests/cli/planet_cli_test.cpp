@@ -3,7 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <regex>
+#include <utility>
 
+#include "core/atlas_format.h"
+#include "core/planet.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -79,6 +82,35 @@ TEST(PlanetCli, OptionsThatDoNotApplyAreRefused) {
             0);
   EXPECT_NE(out.find("--planet"), std::string::npos) << out;
   EXPECT_FALSE(fs::exists(dir.path() / "c"));
+  // The ellipsoid: known by name, on a planet only, and not with a radius of its own.
+  const std::pair<const char*, const char*> ellipsoids[] = {{" --planet --ellipsoid Clarke1866", "unknown; give WGS84"},
+                                                            {" --ellipsoid WGS84", "--ellipsoid needs --planet"},
+                                                            {" --planet --ellipsoid WGS84 --radius 6378137", "give one"}};
+  for (const auto& [options, message] : ellipsoids) {
+    EXPECT_NE(test::runCommand(app + " build " + dem + " -o " + test::quoted(dir.path() / "e") + options + " 2>&1", &out),
+              0)
+        << options;
+    EXPECT_NE(out.find(message), std::string::npos) << options << ": " << out;
+    EXPECT_FALSE(fs::exists(dir.path() / "e"));
+  }
+}
+
+// --ellipsoid WGS84 (any case) builds the atlas on the ellipsoid, and says so.
+TEST(PlanetCli, TheEllipsoidIsRecordedAndLogged) {
+  test::TempDir dir("gimlod-planet-cli-wgs84");
+  const std::string app = test::appPath().string();
+  std::string out;
+  const std::string dem = test::quoted(test::repoData() / "terrain/etopo_30min.tif");
+  ASSERT_EQ(test::runCommand(app + " build " + dem + " -o " + test::quoted(dir.path() / "w") +
+                                 " --planet --ellipsoid wgs84 --chart-size 129 2>&1",
+                             &out),
+            0)
+      << out;
+  EXPECT_NE(out.find("an ellipsoid of equatorial radius 6378137.0 m and flattening 1/298.257223563"), std::string::npos)
+      << out;
+  const AtlasManifest m = readManifest(dir.path() / "w");
+  EXPECT_EQ(m.planet.radius, kEllipsoids[0].radius);
+  EXPECT_EQ(m.planet.flattening, kEllipsoids[0].flattening);
 }
 
 }  // namespace

@@ -17,7 +17,7 @@ constexpr uint32_t kM = 32;  // chart intervals
 struct TinyPlanet {
   AtlasManifest m;
   std::vector<float> heights;  // samplesX x samplesY
-  TinyPlanet(double radius) {
+  TinyPlanet(double radius, double flattening = 0.0) {
     m.chartSize = kM + 1;
     m.blockIntervals = 16;
     m.depth = 3;
@@ -29,6 +29,7 @@ struct TinyPlanet {
     m.chartsY = 2;
     m.planet.present = true;
     m.planet.radius = radius;
+    m.planet.flattening = flattening;
     m.planet.wrapColumns = 64;
     m.planet.dlonDeg = 5.625;
     m.planet.dlatDeg = 180.0 / 33.0;
@@ -73,8 +74,8 @@ struct TinyPlanet {
   }
 };
 
-void checkBounds(double radius) {
-  TinyPlanet t(radius);
+void checkBounds(double radius, double flattening = 0.0) {
+  TinyPlanet t(radius, flattening);
   const Hierarchy h = buildPlanetHierarchy(t.m, t.source());
   const PlanetFrame frame(t.m.planet, t.m.samplesX, t.m.samplesY);
   const HierarchyParams& p = h.params;
@@ -130,6 +131,13 @@ void checkBounds(double radius) {
 TEST(PlanetHierarchy, ErrorsBoundTheDrawnSurfaceOnTheSphere) { checkBounds(kEarthRadius); }
 
 TEST(PlanetHierarchy, ErrorsBoundTheDrawnSurfaceOnASmallPlanet) { checkBounds(1.5e5); }
+
+TEST(PlanetHierarchy, ErrorsBoundTheDrawnSurfaceOnTheWgs84Ellipsoid) {
+  checkBounds(kEllipsoids[0].radius, kEllipsoids[0].flattening);
+}
+
+// A small planet flattened as much as a planet may be (kMaxPlanetFlattening; Saturn's is 0.098).
+TEST(PlanetHierarchy, ErrorsBoundTheDrawnSurfaceOnAFlattenedPlanet) { checkBounds(1.5e5, kMaxPlanetFlattening); }
 
 }  // namespace
 }  // namespace gimlod

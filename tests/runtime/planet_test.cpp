@@ -110,6 +110,46 @@ TEST(PlanetOffset, ExactNearTheAnchorAtThePlanetsScale) {
   EXPECT_LT(offsetErrors(f, 500000, 300000, 200000).relative, 1e-6);
 }
 
+// The same lattice on the WGS84 ellipsoid: the offsets' own terms (the radius of curvature's and
+// the polar shift's differences) keep millimetres too; and the ellipsoid is not the sphere (its
+// positions differ by kilometres away from the equator).
+TEST(PlanetOffset, ExactNearTheAnchorOnTheWgs84Ellipsoid) {
+  PlanetInfo p = wholeDegrees();
+  p.radius = kEllipsoids[0].radius;
+  p.flattening = kEllipsoids[0].flattening;
+  p.dlonDeg = p.dlatDeg = 1.0 / 3600.0;
+  p.lon0Deg = -180.0 + 0.5 * p.dlonDeg;
+  p.lat0Deg = -90.0 - 0.5 * p.dlatDeg;
+  p.wrapColumns = 360 * 3600;
+  const uint32_t rows = 180 * 3600 + 2;
+  const PlanetFrame f(p, p.wrapColumns + 1, rows);
+  for (const auto& [ax, ay] : {std::array<int64_t, 2>{500000, 300000}, {1296000 - 3, 400000}, {2, 100000},
+                               {777777, rows - 40}, {123456, 30}, {40000, 324001}}) {
+    const OffsetErrors e = offsetErrors(f, ax, ay, 100);
+    EXPECT_LT(e.absolute, 2e-3) << ax << ", " << ay;
+    EXPECT_LT(e.relative, 1e-6) << ax << ", " << ay;
+    EXPECT_GT(e.control, 0.05) << ax << ", " << ay;
+  }
+  EXPECT_LT(offsetErrors(f, 500000, 300000, 200000).relative, 1e-6);
+  PlanetInfo sphere = p;
+  sphere.flattening = 0.0;
+  const PlanetFrame s(sphere, p.wrapColumns + 1, rows);
+  EXPECT_GT(glm::length(f.position(1000, 500000, 0.0) - s.position(1000, 500000, 0.0)), 1.0e4);
+  // Poles and the antimeridian still share their samples, and a sample is found under its point.
+  for (int64_t y : {int64_t(0), int64_t(rows - 1)})
+    for (int64_t x : {int64_t(0), int64_t(12345), int64_t(p.wrapColumns)})
+      EXPECT_TRUE(sameBits(f.position(x, y, 50.0), f.position(0, y, 50.0))) << x << ", " << y;
+  EXPECT_TRUE(sameBits(f.position(0, 300000, 7.0), f.position(p.wrapColumns, 300000, 7.0)));
+  EXPECT_NEAR(f.position(0, rows - 1, 0.0).z, p.polarRadius(), 1e-6);
+  std::mt19937 rng(5);
+  for (int i = 0; i < 200; ++i) {
+    const int64_t x = rng() % p.wrapColumns, y = 1 + rng() % (rows - 2);
+    const auto g = f.sampleUnder(f.position(x, y, 0.0));
+    EXPECT_EQ(g[0], x);
+    EXPECT_EQ(g[1], y);
+  }
+}
+
 // A frustum that contains everything, so that only the horizon culls.
 Frustum everything() {
   Frustum f;
