@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 
 #include "core/atlas_format.h"
@@ -172,6 +173,72 @@ float surfaceHeight(const AtlasView& a, double lonDeg, double latDeg) {
   return level0[size_t(g[1] % M) * (M + 1) + size_t(g[0] % M)];
 }
 
+// How far from their double-precision positions the vertex shader places a cut's inner vertices
+// within 500 km of the eye, in metres and in pixels (at 640 x 480, the scene's aspect); and where
+// plain float32 planet-centred positions would put them (the control).
+struct Precision {
+  uint64_t near = 0, inView = 0;
+  double worst = 0.0;  // the largest error over (1 mm + 5e-7 of the distance)
+  double control = 0.0, closest = 1e30, closestError = 0.0;
+  double pixelWorst = 0.0, pixelControl = 0.0;
+};
+
+Precision measurePrecision(gl::AtlasScene& scene, const AtlasView& a, const Camera& cam) {
+  const AtlasManifest& m = a.manifest;
+  const Hierarchy& h = a.hierarchy;
+  const PlanetFrame frame(m.planet, m.samplesX, m.samplesY);
+  const uint32_t L = h.params.intervalsLog2, M = 1u << L;
+  AdaptOptions ao;
+  ao.tolerancePx = 1.0;
+  ao.maxNodes = scene.nodeBudget(0);
+  const gl::FrameResult f = scene.renderFrame(cam, ao);
+  const auto verts = scene.capture(f.cut);
+  const glm::dvec3 origin = scene.captureOrigin();
+  EXPECT_LT(glm::length(origin - cam.eye), 1.0e5) << "the anchor lies under the eye";
+  const glm::dmat4 vp = scene.viewProjection(cam);
+  auto pixel = [&](const glm::dvec3& p, glm::dvec2* out) {
+    const glm::dvec4 c = vp * glm::dvec4(p - origin, 1.0);
+    if (!(c.w > 0.0)) return false;
+    *out = (glm::dvec2(c) / c.w * 0.5 + 0.5) * glm::dvec2(640.0, 480.0);
+    return out->x >= 0.0 && out->x <= 640.0 && out->y >= 0.0 && out->y <= 480.0;
+  };
+  Precision r;
+  for (size_t i = 0; i < f.cut.nodes.size(); ++i) {
+    const CutNode& n = f.cut.nodes[i];
+    const ChartInfo& c = m.charts[n.id.chart];
+    const uint32_t k = L - n.id.level - n.res, side = (1u << n.res) + 1;
+    const uint32_t u0 = (n.id.x * (M >> n.id.level)) >> k, v0 = (n.id.y * (M >> n.id.level)) >> k;
+    const uint32_t levelSide = (M >> k) + 1;
+    const std::vector<float> level = ChartFileReader(a.dir / c.file).readHeightsWindow(k, 0, 0, M >> k);
+    for (uint32_t j = 1; j + 1 < side; ++j)
+      for (uint32_t ii = 1; ii + 1 < side; ++ii) {
+        const int64_t gx = int64_t(c.gridX) * M + (int64_t(u0 + ii) << k), gy = int64_t(c.gridY) * M + (int64_t(v0 + j) << k);
+        const double hgt = level[size_t(v0 + j) * levelSide + (u0 + ii)];
+        const glm::dvec3 exact = frame.position(gx, gy, hgt);
+        const double dist = glm::length(exact - cam.eye);
+        if (dist > 5.0e5) continue;
+        ++r.near;
+        const glm::dvec3 got = glm::dvec3(verts[i][size_t(j) * side + ii]) + origin;
+        r.worst = std::max(r.worst, glm::length(got - exact) / (1e-3 + 5e-7 * dist));
+        r.closest = std::min(r.closest, dist);
+        if (dist == r.closest) r.closestError = glm::length(got - exact);
+        const glm::dvec3 plain = glm::dvec3(glm::vec3(exact));
+        r.control = std::max(r.control, glm::length(plain - exact));
+        glm::dvec2 pe, pg, pp;
+        if (pixel(exact, &pe) && pixel(got, &pg) && pixel(plain, &pp)) {
+          ++r.inView;
+          r.pixelWorst = std::max(r.pixelWorst, glm::length(pg - pe));
+          r.pixelControl = std::max(r.pixelControl, glm::length(pp - pe));
+        }
+      }
+  }
+  std::printf("%s: %llu vertices near, %llu in view, %.5f px from their exact projection (float32: %.3f px), "
+              "the nearest %.0f m away within %.2g m\n",
+              a.dir.filename().c_str(), (unsigned long long)r.near, (unsigned long long)r.inView, r.pixelWorst,
+              r.pixelControl, r.closest, r.closestError);
+  return r;
+}
+
 // Camera-relative precision: a camera a metre above the highest land, above the sea floor and by the
 // antimeridian; every inner vertex the vertex shader places within 500 km lies within a millimetre
 // plus 5e-7 of its distance of its double-precision position (the nearest, 36 to 60 km away on this
@@ -180,48 +247,71 @@ TEST_F(PlanetTest, PositionsNearTheEyeKeepMillimetresAMetreAboveTheSurface) {
   for (const AtlasView* a : both()) {
     SCOPED_TRACE(a->dir.filename().string());
     gl::AtlasScene scene(*a, sceneOptions());
-    const AtlasManifest& m = a->manifest;
-    const Hierarchy& h = a->hierarchy;
-    const PlanetFrame frame(m.planet, m.samplesX, m.samplesY);
-    const uint32_t L = h.params.intervalsLog2, M = 1u << L;
-    AdaptOptions ao;
-    ao.tolerancePx = 1.0;
-    ao.maxNodes = scene.nodeBudget(0);
     for (const auto& [lon, lat] : {std::array<double, 2>{86.9, 28.0}, {-150.0, -20.0}, {179.9, 70.0}}) {
-      const Camera cam = cameraAbove(*a, lon, lat, surfaceHeight(*a, lon, lat) + 1.0, 0.5);
-      const gl::FrameResult f = scene.renderFrame(cam, ao);
-      const auto verts = scene.capture(f.cut);
-      const glm::dvec3 origin = scene.captureOrigin();
-      EXPECT_LT(glm::length(origin - cam.eye), 1.0e5) << "the anchor lies under the eye";
-      double worst = 0.0, control = 0.0, closest = 1e30, closestError = 0.0;
-      uint64_t near = 0;
-      for (size_t i = 0; i < f.cut.nodes.size(); ++i) {
-        const CutNode& n = f.cut.nodes[i];
-        const ChartInfo& c = m.charts[n.id.chart];
-        const uint32_t k = L - n.id.level - n.res, side = (1u << n.res) + 1;
-        const uint32_t u0 = (n.id.x * (M >> n.id.level)) >> k, v0 = (n.id.y * (M >> n.id.level)) >> k;
-        const uint32_t levelSide = (M >> k) + 1;
-        const std::vector<float> level = ChartFileReader(a->dir / c.file).readHeightsWindow(k, 0, 0, M >> k);
-        for (uint32_t j = 1; j + 1 < side; ++j)
-          for (uint32_t ii = 1; ii + 1 < side; ++ii) {
-            const int64_t gx = int64_t(c.gridX) * M + (int64_t(u0 + ii) << k), gy = int64_t(c.gridY) * M + (int64_t(v0 + j) << k);
-            const double hgt = level[size_t(v0 + j) * levelSide + (u0 + ii)];
-            const glm::dvec3 exact = frame.position(gx, gy, hgt);
-            const double dist = glm::length(exact - cam.eye);
-            if (dist > 5.0e5) continue;
-            ++near;
-            const glm::dvec3 got = glm::dvec3(verts[i][size_t(j) * side + ii]) + origin;
-            worst = std::max(worst, glm::length(got - exact) / (1e-3 + 5e-7 * dist));
-            closest = std::min(closest, dist);
-            if (dist == closest) closestError = glm::length(got - exact);
-            const glm::dvec3 plain = glm::dvec3(glm::vec3(exact));
-            control = std::max(control, glm::length(plain - exact));
-          }
+      const Precision p = measurePrecision(scene, *a, cameraAbove(*a, lon, lat, surfaceHeight(*a, lon, lat) + 1.0, 0.5));
+      EXPECT_GT(p.near, 20u) << lon << ", " << lat;
+      EXPECT_LT(p.worst, 1.0) << lon << ", " << lat;
+      EXPECT_LT(10.0 * p.closestError, p.control) << lon << ", " << lat << ": the nearest sample, " << p.closest << " m away";
+      EXPECT_GT(p.control, 0.05) << lon << ", " << lat;
+    }
+  }
+}
+
+// No jitter in the image: the shipped 3-arc-second tile (90 m) as a regional planet, on the sphere
+// and on WGS84, seen from a metre above its summit and above its lowest sample. Every inner vertex
+// in view lies within half a pixel (at 640 x 480) of where its double-precision position projects,
+// and within a hundredth of how far float32 planet-centred positions move it: those move the
+// sample a metre below the eye by tens of pixels, and the ground 90 m on by about one.
+TEST_F(PlanetTest, AMetreAboveTheGroundTheImageDoesNotJitter) {
+  for (const bool wgs84 : {false, true}) {
+    TerrainBuildOptions o;
+    o.input = test::repoData() / "terrain/mt_rainier_90m.tif";
+    o.output = dir_->path() / (wgs84 ? "rainier-wgs84.atlas" : "rainier-sphere.atlas");
+    o.planet = true;
+    o.chartSize = 257;
+    if (wgs84) {
+      o.planetRadius = kEllipsoids[0].radius;
+      o.planetFlattening = kEllipsoids[0].flattening;
+    }
+    buildAtlas(o);
+    const AtlasView a = openAtlas(o.output);
+    ASSERT_TRUE(a.manifest.planet.present);
+    ASSERT_EQ(a.manifest.planet.wrapColumns, 0u) << "a regional planet";
+    gl::AtlasScene scene(a, sceneOptions());
+    // The highest and the lowest level-0 samples, from the charts.
+    const uint32_t M = a.manifest.chartSize - 1;
+    std::array<double, 3> high{0, 0, -1e30}, low{0, 0, 1e30};
+    const PlanetFrame frame(a.manifest.planet, a.manifest.samplesX, a.manifest.samplesY);
+    for (const ChartInfo& c : a.manifest.charts) {
+      const std::vector<float> h = ChartFileReader(a.dir / c.file).readHeightsWindow(0, 0, 0, M);
+      for (uint32_t v = 8; v + 8 <= M; ++v)
+        for (uint32_t u = 8; u + 8 <= M; ++u) {
+          const int64_t gx = int64_t(c.gridX) * M + u, gy = int64_t(c.gridY) * M + v;
+          if (gx >= int64_t(a.manifest.samplesX) - 8 || gy >= int64_t(a.manifest.samplesY) - 8) continue;
+          const double z = h[size_t(v) * (M + 1) + u];
+          const std::array<double, 3> s{frame.longitude(gx) / kDeg, frame.latitude(gy) / kDeg, z};
+          if (z > high[2]) high = s;
+          if (z < low[2]) low = s;
+        }
+    }
+    for (const auto& s : {high, low}) {
+      SCOPED_TRACE(std::string(wgs84 ? "WGS84" : "sphere") + " at height " + std::to_string(s[2]));
+      // Looking at the ground about 200 m north, a little down (vertices from 90 m on), and nearly
+      // straight down (the sample a metre below the eye).
+      for (const double ahead : {0.002, 0.00005}) {
+        Camera cam;
+        cam.eye = surfacePosition(a.manifest.planet, s[0] * kDeg, s[1] * kDeg, s[2] + 1.0);
+        cam.target = surfacePosition(a.manifest.planet, s[0] * kDeg, (s[1] + ahead) * kDeg, s[2] - 20.0);
+        cam.up = glm::normalize(cam.eye);
+        cam.fovYDeg = 60.0;
+        const Precision p = measurePrecision(scene, a, cam);
+        EXPECT_GT(p.inView, ahead > 0.001 ? 50u : 0u) << ahead;
+        EXPECT_LT(p.closest, 10.0) << "no vertex near the eye";
+        EXPECT_LT(p.pixelWorst, 0.5) << ahead;
+        EXPECT_GT(p.pixelControl, std::max(0.5, 100.0 * p.pixelWorst)) << ahead << ": float32 planet-centred positions "
+                                                                        "do not jitter here";
+        if (ahead < 0.001) EXPECT_GT(p.pixelControl, 10.0) << "a metre from the eye, float32 jitters by pixels";
       }
-      EXPECT_GT(near, 20u) << lon << ", " << lat;
-      EXPECT_LT(worst, 1.0) << lon << ", " << lat;
-      EXPECT_LT(10.0 * closestError, control) << lon << ", " << lat << ": the nearest sample, " << closest << " m away";
-      EXPECT_GT(control, 0.05) << lon << ", " << lat;
     }
   }
 }
