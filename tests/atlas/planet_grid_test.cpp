@@ -177,13 +177,19 @@ TEST(PlanetGrid, AProjectedDemIsRefusedByName) {
 
 // The window-by-window build reads the same planet lattice: its atlas is byte-identical to the
 // in-memory build's (but the build statistics).
-TEST(PlanetGrid, TheWindowedBuildGivesTheSameAtlas) {
-  test::TempDir dir("planet_windowed");
+// The shipped 30' Earth as a planet atlas at `output`, in charts of chartSize.
+TerrainBuildOptions shippedGlobe(const std::filesystem::path& output, uint32_t chartSize) {
   TerrainBuildOptions o;
   o.input = test::repoData() / "terrain/etopo_30min.tif";
+  o.output = output;
   o.planet = true;
-  o.chartSize = 129;
-  o.output = dir.path() / "memory.atlas";
+  o.chartSize = chartSize;
+  return o;
+}
+
+TEST(PlanetGrid, TheWindowedBuildGivesTheSameAtlas) {
+  test::TempDir dir("planet_windowed");
+  TerrainBuildOptions o = shippedGlobe(dir.path() / "memory.atlas", 129);
   buildAtlas(o);
   o.output = dir.path() / "windowed.atlas";
   o.outOfCore = true;
@@ -208,12 +214,8 @@ TEST(PlanetGrid, TheWindowedBuildGivesTheSameAtlas) {
 TEST(PlanetGrid, NormalsAreCentralDifferencesAcrossTheAntimeridian) {
   test::TempDir dir("planet_normals");
   for (const bool compress : {true, false}) {
-    TerrainBuildOptions o;
-    o.input = test::repoData() / "terrain/etopo_30min.tif";
-    o.planet = true;
-    o.chartSize = 65;
+    TerrainBuildOptions o = shippedGlobe(dir.path() / (compress ? "compressed.atlas" : "raw.atlas"), 65);
     o.compress = compress;
-    o.output = dir.path() / (compress ? "compressed.atlas" : "raw.atlas");
     buildAtlas(o);
     const AtlasManifest m = readManifest(o.output);
     ASSERT_EQ(uint64_t(m.chartsX) * (m.chartSize - 1), m.planet.wrapColumns);
@@ -308,11 +310,7 @@ TEST(PlanetGrid, ChartsBuiltInTilesReadAcrossTheAntimeridian) {
 // samples of a level of every fifth chart.
 TEST(PlanetGrid, AWgs84PlanetsSamplesLieWhereProjPutsThem) {
   test::TempDir dir("planet_wgs84");
-  TerrainBuildOptions o;
-  o.input = test::repoData() / "terrain/etopo_30min.tif";
-  o.output = dir.path() / "wgs84.atlas";
-  o.planet = true;
-  o.chartSize = 129;
+  TerrainBuildOptions o = shippedGlobe(dir.path() / "wgs84.atlas", 129);
   o.planetRadius = kEllipsoids[0].radius;
   o.planetFlattening = kEllipsoids[0].flattening;
   buildAtlas(o);
@@ -351,11 +349,7 @@ TEST(PlanetGrid, AWgs84PlanetsSamplesLieWhereProjPutsThem) {
 // The shipped global DEM as a planet atlas: the whole surface, every pyramid level, is closed.
 TEST(PlanetGrid, TheShippedGlobeExportsAsAClosedSurfaceAtEveryLevel) {
   test::TempDir dir("planet_export");
-  TerrainBuildOptions o;
-  o.input = test::repoData() / "terrain/etopo_30min.tif";
-  o.output = dir.path() / "earth.atlas";
-  o.planet = true;
-  o.chartSize = 257;
+  const TerrainBuildOptions o = shippedGlobe(dir.path() / "earth.atlas", 257);
   buildAtlas(o);
   for (uint32_t level = 0; level <= 8; level += 2) {
     const AtlasSurface s = readAtlasSurface(o.output, level);
