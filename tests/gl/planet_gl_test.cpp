@@ -310,7 +310,9 @@ TEST_F(PlanetTest, AMetreAboveTheGroundTheImageDoesNotJitter) {
         EXPECT_LT(p.pixelWorst, 0.5) << ahead;
         EXPECT_GT(p.pixelControl, std::max(0.5, 100.0 * p.pixelWorst)) << ahead << ": float32 planet-centred positions "
                                                                         "do not jitter here";
-        if (ahead < 0.001) EXPECT_GT(p.pixelControl, 10.0) << "a metre from the eye, float32 jitters by pixels";
+        if (ahead < 0.001) {
+          EXPECT_GT(p.pixelControl, 10.0) << "a metre from the eye, float32 jitters by pixels";
+        }
       }
     }
   }
