@@ -32,16 +32,15 @@ const Ellipsoid* findEllipsoid(const std::string& name) {
   for (const Ellipsoid& e : kEllipsoids) {
     const std::string n = e.name;
     if (n.size() == name.size() &&
-        std::equal(n.begin(), n.end(), name.begin(), [](char a, char b) { return std::toupper(a) == std::toupper(b); }))
+        std::equal(n.begin(), n.end(), name.begin(), [](unsigned char a, unsigned char b) { return std::toupper(a) == std::toupper(b); }))
       return &e;
   }
   return nullptr;
 }
 
 glm::dvec3 surfacePosition(const PlanetInfo& info, double lon, double lat, double h) {
-  const double cl = std::cos(lat), sl = std::sin(lat), e2 = info.eccentricity2();
-  const double N = info.radius / std::sqrt(1.0 - e2 * sl * sl);
-  return {(N + h) * cl * std::cos(lon), (N + h) * cl * std::sin(lon), (N * (1.0 - e2) + h) * sl};
+  const double cl = std::cos(lat), sl = std::sin(lat), N = info.normalRadius(sl);
+  return {(N + h) * cl * std::cos(lon), (N + h) * cl * std::sin(lon), (N * (1.0 - info.eccentricity2()) + h) * sl};
 }
 
 PlanetFrame::PlanetFrame(const PlanetInfo& info, uint32_t samplesX, uint32_t samplesY)
@@ -87,7 +86,7 @@ glm::dvec3 PlanetFrame::position(int64_t gx, int64_t gy, double h) const {
   if (e2 == 0.0) return (info_.radius + h) * direction(gx, gy);
   // (N + h) n - e^2 N sin(lat) z: N the radius of curvature in the prime vertical.
   const glm::dvec3 n = direction(gx, gy);
-  const double N = info_.radius / std::sqrt(1.0 - e2 * n.z * n.z);
+  const double N = info_.normalRadius(n.z);
   return (N + h) * n - glm::dvec3(0.0, 0.0, e2 * N * n.z);
 }
 
@@ -121,7 +120,7 @@ PlanetAnchor planetAnchor(const PlanetFrame& frame, int64_t gx, int64_t gy) {
   a.latBelow = lat + std::numbers::pi / 2;
   a.latAbove = std::numbers::pi / 2 - lat;
   a.w = std::sqrt(1.0 - frame.info().eccentricity2() * a.sinLat * a.sinLat);
-  a.normalRadius = frame.info().radius / a.w;
+  a.normalRadius = frame.info().normalRadius(a.sinLat);
   return a;
 }
 

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <string>
 
@@ -41,6 +42,9 @@ struct PlanetInfo {
   double radius = kEarthRadius;
   double flattening = 0.0;
   double eccentricity2() const { return flattening * (2.0 - flattening); }
+  // The radius of curvature in the prime vertical at a latitude of sine s: N = radius / sqrt(1 -
+  // e^2 s^2) (the radius itself on a sphere).
+  double normalRadius(double s) const { return radius / std::sqrt(1.0 - eccentricity2() * s * s); }
   double polarRadius() const { return radius * (1.0 - flattening); }
   double lon0Deg = 0.0, lat0Deg = 0.0;   // sample (0, 0): longitude and latitude, degrees
   double dlonDeg = 1.0, dlatDeg = 1.0;   // degrees between samples (both > 0; rows go north)

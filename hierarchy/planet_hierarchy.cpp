@@ -47,9 +47,8 @@ Hierarchy buildPlanetHierarchy(const AtlasManifest& m, const ChartWindowSource& 
           const int64_t gy = int64_t(chart.gridY) * M + v;
           const double lat = frame.latitude(gy), cl = frame.pole(gy) ? 0.0 : std::cos(lat), sl = std::sin(lat);
           const double z = frame.pole(gy) ? double(frame.pole(gy)) : sl;
-          // The row's radius of curvature in the prime vertical (PlanetFrame::position); a sphere's
-          // radius where e^2 = 0.
-          const double N = e2 == 0.0 ? m.planet.radius : m.planet.radius / std::sqrt(1.0 - e2 * z * z);
+          // The row's radius of curvature in the prime vertical (PlanetFrame::position).
+          const double N = m.planet.normalRadius(z);
           for (uint32_t u = 0; u <= M; ++u) {
             const size_t i = size_t(v) * (M + 1) + u;
             const double r = N + double(heights[i]);

@@ -14,7 +14,6 @@
 #include <unistd.h>
 #include <xxhash.h>
 
-#include "atlas/terrain/planet_grid.h"
 #include "atlas/terrain/scratch_raster.h"
 #include "atlas/terrain/terrain_windowed.h"
 #include "core/atlas_format.h"
@@ -261,8 +260,6 @@ ShardPrepareStats prepareShards(const TerrainBuildOptions& options) {
   AtlasManifest m = terrainManifest(o);
   const WindowedTerrainOptions wo = windowedTerrainOptions(o);
   PreparedTerrainWindows prepared = prepareTerrainWindows(source, stage.path() / kScratchName, wo, m);
-  m.planet = prepared.result.dem.planet;
-  linkPlanetSeam(m);
   prepared.scratch->keep(stage.path() / kScratchIndexName);
   writeManifest(stage.path(), m);
   const DemRaster& dem = prepared.result.dem;

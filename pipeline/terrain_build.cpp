@@ -16,7 +16,6 @@
 #include <tbb/task_arena.h>
 
 #include "atlas/terrain/imagery.h"
-#include "atlas/terrain/planet_grid.h"
 #include "atlas/terrain/terrain_windowed.h"
 #include "core/atlas_format.h"
 #include "core/block_codec.h"
@@ -340,8 +339,6 @@ TerrainWriteStats writeTerrainAtlas(DemRaster&& dem, const TerrainBuildOptions& 
   if (o.compress) topt.coding.heightPrecision = quantizeHeights(dem, o);
   TerrainWriteStats w;
   w.charts = writeTerrainCharts(dem, topt, dir, m);
-  m.planet = dem.planet;
-  linkPlanetSeam(m);
   if (!o.imagery.empty() && chartTiling(m.chartSize, m.blockIntervals).tiled()) {
     // Charts too large to hold whole take their imagery in tiles, as their geometry.
     writeImageryWindowed(o, dem, dir, m, memoryCap(o) / 2, w);
@@ -388,8 +385,6 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
                source.info().width, source.info().height, wo.memoryBytes >> 20, cap >> 20);
   TerrainWriteStats w;
   const WindowedTerrainResult r = writeTerrainChartsWindowed(source, dir, wo, m);
-  m.planet = r.dem.planet;
-  linkPlanetSeam(m);
   w.charts = r.charts;
   w.windowed.emplace();
   w.windowed->memoryBytes = wo.memoryBytes;

@@ -3,6 +3,8 @@
 // Texture Atlas", I3D 2007, sections 4 and 6 (height-field case: the terrain grid is cut into
 // (2^m+1)^2 charts sharing one row/column, and each chart is mip-mapped by subsampling).
 #include "atlas/terrain/terrain_atlas.h"
+
+#include "atlas/terrain/planet_grid.h"
 #include "core/block_codec.h"
 #include "core/progress.h"
 
@@ -70,8 +72,8 @@ inline float clampedHeight(const DemRaster& dem, int64_t gx, int64_t gy) {
 
 // The same over the rows held (buildChartPyramid checks they cover what a chart row reads), or
 // over a lattice of the DEM (DemRows::stride).
-// Columns round a planet wrap into the window held (DemRows::wrapColumns): column x, in units of
-// `unit` samples, of a window [x0, x0 + cols).
+// Columns round a planet wrap into the window held (DemRows::wrapColumns): column x of a window
+// [x0, x0 + cols) of a turn of `turn` columns (all in the same units: samples, or lattice samples).
 inline int64_t wrappedColumn(int64_t x, int64_t x0, int64_t cols, int64_t turn) {
   return x < x0 ? x + turn : x >= x0 + cols ? x - turn : x;
 }
@@ -330,6 +332,7 @@ void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& option
       link(kEdgeLeft, x > 0, id - 1, kEdgeRight);
     }
   }
+  linkPlanetSeam(manifest);
 }
 
 struct TiledChartWriter::Chart {

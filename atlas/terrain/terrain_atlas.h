@@ -164,7 +164,8 @@ ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t grid
                                uint32_t chartSize, bool keepRing = false);
 
 // Fills the manifest's chart fields for `dem` (chart grid, files, root neighbours, spacing,
-// samples, height range, georeference, voids, planet) without writing anything.
+// samples, height range, georeference, voids, planet, the charts either side of a planet's
+// antimeridian linked) without writing anything.
 void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& options,
                          AtlasManifest& manifest);
 
