@@ -397,80 +397,78 @@ ControlledRun runFrameController(const Hierarchy& hier, const std::vector<ViewPa
   return run;
 }
 
-int runBench(const BenchArgs& a) {
-  // Options.
-  const bool budgetMode = a.mode == "budget";
+// The options of a run, checked; throws InputError naming a bad one.
+struct BenchPlan {
+  bool budgetMode = false;
+  std::vector<uint64_t> nodeBudgets, triBudgets;
+  std::vector<std::string> algorithms;
+  uint32_t width = 0, height = 0;
+  bool costModel = false;  // --frame-ms and --tri-rate given
+};
+
+BenchPlan benchPlan(const BenchArgs& a) {
+  BenchPlan p;
+  p.budgetMode = a.mode == "budget";
+  const bool budgetMode = p.budgetMode;
   if (a.mode != "error" && !budgetMode) throw InputError("--mode '" + a.mode + "' must be error or budget");
-  const std::vector<uint64_t> nodeBudgets = parseList("--nodes", a.nodes, 1u << 24);
-  std::vector<uint64_t> triBudgets;
+  p.nodeBudgets = parseList("--nodes", a.nodes, 1u << 24);
   if (budgetMode) {
-    triBudgets = parseList("--triangles", a.triangles, uint64_t(1) << 40);
+    p.triBudgets = parseList("--triangles", a.triangles, uint64_t(1) << 40);
     if (a.toleranceGiven) throw InputError("--tolerance applies to --mode error only");
   } else {
     if (a.trianglesGiven) throw InputError("--triangles applies to --mode budget only");
-    triBudgets = {0};
+    p.triBudgets = {0};
     if (!(a.tolerance > 0.0) || !std::isfinite(a.tolerance)) throw InputError("--tolerance must be > 0 pixels");
   }
-  const std::vector<std::string> algorithms = parseAlgorithms(a.algorithms);
-  uint32_t w = 0, h = 0;
-  parseFrameSize(a.size, &w, &h);
+  p.algorithms = parseAlgorithms(a.algorithms);
+  parseFrameSize(a.size, &p.width, &p.height);
   validateCameraArgs(a.camera);
   if (a.repeat == 0 || a.repeat > 1000) throw InputError("--repeat must be in [1, 1000]");
   if (a.maxRounds > 1000) throw InputError("--max-rounds must be in [0, 1000]");
-  const bool costModel = a.frameMs != 0.0 || a.triRate != 0.0;
-  if (costModel) {
+  p.costModel = a.frameMs != 0.0 || a.triRate != 0.0;
+  if (p.costModel) {
     if (!(a.frameMs > 0.0) || !std::isfinite(a.frameMs)) throw InputError("--frame-ms must be > 0 (with --tri-rate)");
     if (!(a.triRate > 0.0) || !std::isfinite(a.triRate))
       throw InputError("--tri-rate must be > 0 triangles/s (with --frame-ms); measure it with bench_render");
-    if (std::find(algorithms.begin(), algorithms.end(), "ours") == algorithms.end())
+    if (std::find(p.algorithms.begin(), p.algorithms.end(), "ours") == p.algorithms.end())
       throw InputError("the cost model (--frame-ms, --tri-rate) fits the adaptation cost of 'ours': add it to --algorithms");
   }
   if (a.controlFrames > 100000) throw InputError("--control-frames must be at most 100000");
   if (!(a.loadStep > 0.0) || !(a.loadStep <= 100.0)) throw InputError("--load-step must be in (0, 100]");
+  return p;
+}
 
-  // Inputs.
-  const AtlasView atlas = openAtlas(a.atlas, a.camera.maxRoots);
-  const Hierarchy& hier = atlas.hierarchy;
-  const std::vector<Camera> cams = loadCameras(a.camera, atlas);
-  if (cams.empty()) throw InputError(a.camera.path + ": the camera path has no frames");
-  std::vector<ViewParams> views;
-  for (const Camera& c : cams) views.push_back(makeViewParams(c, w, h));
+// The scene bench --render draws the cuts with, in a headless context it makes.
+std::unique_ptr<gl::AtlasScene> benchScene(const BenchArgs& a, const BenchPlan& p, const AtlasView& atlas,
+                                           std::unique_ptr<gl::EglContext>& context) {
+  context = gl::EglContext::create();
+  spdlog::info("OpenGL: {} ({})", context->renderer(), context->version());
+  gl::SceneOptions so;
+  so.width = p.width;
+  so.height = p.height;
+  // The pool holds every budget's cuts.
+  so.minNodeRoom = uint32_t(*std::max_element(p.nodeBudgets.begin(), p.nodeBudgets.end()));
+  so.gpuCacheBytes = a.gpuCache == "auto" ? 0 : parseBytes("--gpu-cache", a.gpuCache);
+  auto scene = std::make_unique<gl::AtlasScene>(atlas, so);
+  spdlog::info("--render: a page pool of {} pages in {} texture array(s), room for cuts of {} nodes",
+               scene->renderer().pageCapacity(), scene->renderer().pageArrays(), scene->nodeRoom());
+  if (so.gpuCacheBytes > 0 && scene->nodeRoom() < so.minNodeRoom)
+    spdlog::warn("--gpu-cache {} holds cuts of {} nodes: the cuts of larger node budgets draw without some of their "
+                 "pages (their draw_ms is not a full frame's)", a.gpuCache, scene->nodeRoom());
+  return scene;
+}
 
-  const fs::path out = a.output;
-  std::error_code ec;
-  fs::create_directories(out, ec);
-  if (ec || !fs::is_directory(out)) throw InputError(a.output + ": cannot create output directory");
-  if (::access(out.c_str(), W_OK) != 0) throw InputError(a.output + ": output directory is not writable");
-
-  std::unique_ptr<gl::EglContext> context;
-  std::unique_ptr<gl::AtlasScene> scene;
-  if (a.render) {
-    context = gl::EglContext::create();
-    spdlog::info("OpenGL: {} ({})", context->renderer(), context->version());
-    gl::SceneOptions so;
-    so.width = w;
-    so.height = h;
-    so.minNodeRoom = *std::max_element(nodeBudgets.begin(), nodeBudgets.end());  // the pool holds every budget's cuts
-    so.gpuCacheBytes = a.gpuCache == "auto" ? 0 : parseBytes("--gpu-cache", a.gpuCache);
-    scene = std::make_unique<gl::AtlasScene>(atlas, so);
-    spdlog::info("--render: a page pool of {} pages in {} texture array(s), room for cuts of {} nodes",
-                 scene->renderer().pageCapacity(), scene->renderer().pageArrays(), scene->nodeRoom());
-    if (so.gpuCacheBytes > 0 && scene->nodeRoom() < so.minNodeRoom)
-      spdlog::warn("--gpu-cache {} holds cuts of {} nodes: the cuts of larger node budgets draw without some of their "
-                   "pages (their draw_ms is not a full frame's)", a.gpuCache, scene->nodeRoom());
-  }
-
-  // Runs.
-  std::cout << fmt::format("bench {} mode: {} frames x {} pass(es), {}x{}, {} node budget(s){}, algorithms {}\n",
-                           a.mode, cams.size(), a.repeat, w, h, nodeBudgets.size(),
-                           budgetMode ? fmt::format(" x {} triangle budget(s)", triBudgets.size())
-                                      : fmt::format(", tolerance {} px", a.tolerance),
-                           a.algorithms);
+// Every configuration (node budget x triangle budget x algorithm) over every frame and pass: one
+// row each, drawn too where there is a scene.
+std::vector<std::vector<Row>> runConfigurations(const BenchArgs& a, const BenchPlan& p, const Hierarchy& hier,
+                                                const std::vector<Camera>& cams, const std::vector<ViewParams>& views,
+                                                gl::AtlasScene* scene) {
+  const bool budgetMode = p.budgetMode;
   std::vector<std::vector<Row>> configs;
   bool warnedBelowRoots = false;
-  for (uint64_t maxNodes : nodeBudgets) {
-    for (uint64_t maxTris : triBudgets) {
-      for (const std::string& algo : algorithms) {
+  for (uint64_t maxNodes : p.nodeBudgets) {
+    for (uint64_t maxTris : p.triBudgets) {
+      for (const std::string& algo : p.algorithms) {
         Adapter adapt;
         if (budgetMode)
           adapt = makeBudgetAdapter(hier, algo, uint32_t(maxNodes), maxTris, a.maxRounds);
@@ -502,8 +500,12 @@ int runBench(const BenchArgs& a) {
       }
     }
   }
+  return configs;
+}
 
-  // bench.csv: one row per frame per configuration.
+// bench.csv: one row per frame per configuration.
+void writeBenchCsv(const BenchArgs& a, bool budgetMode, const std::vector<std::vector<Row>>& configs,
+                   const fs::path& out) {
   std::string csv =
       "mode,algorithm,max_nodes,max_triangles,tolerance_px,frame,adapt_us,nodes,triangles,max_error_px,"
       "mean_error_px,splits,merges,refines,coarsens,budget_bound,repeat,constraint_splits,draw_ms,root_floor,"
@@ -517,8 +519,11 @@ int runBench(const BenchArgs& a) {
                          r.repeat, r.constraintSplits, optNum(!std::isnan(r.drawMs), r.drawMs), r.rootFloor,
                          int(r.budgetBelowRoots));
   atomicWriteFile(out / "bench.csv", csv.data(), csv.size());
+}
 
-  // summary.csv: per configuration, means over frames.
+// summary.csv: per configuration, means over frames; printed as a table too.
+std::vector<Summary> writeSummary(const BenchArgs& a, bool budgetMode, const std::vector<std::vector<Row>>& configs,
+                                  const fs::path& out) {
   std::vector<Summary> sums;
   for (const auto& rows : configs) sums.push_back(summarize(rows));
   std::string sum =
@@ -540,8 +545,50 @@ int runBench(const BenchArgs& a) {
     std::cout << fmt::format("{:>8} {:>10} {:>12} {:>10.1f} {:>12.1f} {:>10.0f} {:>10.3f} {:>10.3f}\n", s.algorithm,
                              s.maxNodes, budgetMode ? std::to_string(s.maxTriangles) : std::string("-"), s.adaptUs,
                              s.nodes, s.triangles, s.errP50, s.errP95);
+  return sums;
+}
 
-  // Cost model: adapt_us = a + b * nodes, least squares over the rows of "ours".
+// Of the swept budgets of "ours", the one of least mean error whose predicted frame time
+// (a0 + b * nodes microseconds of adaptation, triangles at --tri-rate) fits --frame-ms.
+void chooseBudgets(const BenchArgs& a, const std::vector<Summary>& sums, double a0, double b, nlohmann::json& cm) {
+  nlohmann::json cands = nlohmann::json::array();
+  const Summary* best = nullptr;
+  double bestMs = 0;
+  for (const Summary& s : sums) {
+    if (s.algorithm != "ours") continue;
+    const double ms = (a0 + b * s.maxNodes) * 1e-3 + double(s.maxTriangles) / a.triRate * 1e3;
+    const double msMean = (a0 + b * s.nodes) * 1e-3 + s.triangles / a.triRate * 1e3;
+    const bool fits = ms <= a.frameMs;
+    cands.push_back({{"max_nodes", s.maxNodes}, {"max_triangles", s.maxTriangles},
+                     {"predicted_ms", ms}, {"predicted_ms_at_mean_use", msMean},
+                     {"max_error_px_mean", s.errMean}, {"fits", fits}});
+    if (fits && (!best || s.errMean < best->errMean ||
+                 (s.errMean == best->errMean && s.maxTriangles < best->maxTriangles))) {
+      best = &s;
+      bestMs = ms;
+    }
+  }
+  cm["frame_ms"] = a.frameMs;
+  cm["tri_rate"] = a.triRate;
+  cm["candidates"] = cands;
+  if (best) {
+    cm["choice"] = {{"max_nodes", best->maxNodes}, {"max_triangles", best->maxTriangles},
+                    {"predicted_ms", bestMs}, {"max_error_px_mean", best->errMean}};
+    std::cout << fmt::format(
+        "cost model: for {} ms at {:.3g} triangles/s use --nodes {} --triangles {} (predicted {:.3f} ms, "
+        "mean max error {:.3f} px)\n",
+        a.frameMs, a.triRate, best->maxNodes, best->maxTriangles, bestMs, best->errMean);
+  } else {
+    cm["choice"] = nullptr;
+    std::cout << fmt::format("cost model: no swept configuration fits {} ms at {:.3g} triangles/s\n", a.frameMs,
+                             a.triRate);
+  }
+}
+
+// The cost model: adapt_us = a + b * nodes, least squares over the rows of "ours"; in budget mode
+// with --frame-ms and --tri-rate, the budgets it chooses.
+nlohmann::json fitCostModel(const BenchArgs& a, const BenchPlan& p, const std::vector<std::vector<Row>>& configs,
+                            const std::vector<Summary>& sums) {
   nlohmann::json cm;
   cm["mode"] = a.mode;
   double sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0, n = 0;
@@ -551,56 +598,55 @@ int runBench(const BenchArgs& a) {
         sx += r.nodes, sy += r.adaptUs, sxx += double(r.nodes) * r.nodes, sxy += r.nodes * r.adaptUs;
         syy += r.adaptUs * r.adaptUs, n += 1;
       }
-  if (n > 0) {
-    const double varX = sxx - sx * sx / n, cov = sxy - sx * sy / n, varY = syy - sy * sy / n;
-    const double b = varX > 0 ? cov / varX : (sx > 0 ? sy / sx : 0.0);
-    const double a0 = varX > 0 ? (sy - b * sx) / n : 0.0;
-    const double r2 = varX > 0 && varY > 0 ? cov * cov / (varX * varY) : 0.0;
-    cm["adapt_fit"] = {{"intercept_us", a0}, {"us_per_node", b}, {"r2", r2}, {"rows", size_t(n)}};
-    std::cout << fmt::format("adaptation cost fit (ours, {} frames): adapt_us = {:.2f} + {:.4f} * nodes (r^2 {:.3f})\n",
-                             size_t(n), a0, b, r2);
-    if (budgetMode && costModel) {
-      // Predicted frame time at the budgets (the worst case each configuration allows).
-      nlohmann::json cands = nlohmann::json::array();
-      const Summary* best = nullptr;
-      double bestMs = 0;
-      for (const Summary& s : sums) {
-        if (s.algorithm != "ours") continue;
-        const double ms = (a0 + b * s.maxNodes) * 1e-3 + double(s.maxTriangles) / a.triRate * 1e3;
-        const double msMean = (a0 + b * s.nodes) * 1e-3 + s.triangles / a.triRate * 1e3;
-        const bool fits = ms <= a.frameMs;
-        cands.push_back({{"max_nodes", s.maxNodes}, {"max_triangles", s.maxTriangles},
-                         {"predicted_ms", ms}, {"predicted_ms_at_mean_use", msMean},
-                         {"max_error_px_mean", s.errMean}, {"fits", fits}});
-        if (fits && (!best || s.errMean < best->errMean ||
-                     (s.errMean == best->errMean && s.maxTriangles < best->maxTriangles))) {
-          best = &s;
-          bestMs = ms;
-        }
-      }
-      cm["frame_ms"] = a.frameMs;
-      cm["tri_rate"] = a.triRate;
-      cm["candidates"] = cands;
-      if (best) {
-        cm["choice"] = {{"max_nodes", best->maxNodes}, {"max_triangles", best->maxTriangles},
-                        {"predicted_ms", bestMs}, {"max_error_px_mean", best->errMean}};
-        std::cout << fmt::format(
-            "cost model: for {} ms at {:.3g} triangles/s use --nodes {} --triangles {} (predicted {:.3f} ms, "
-            "mean max error {:.3f} px)\n",
-            a.frameMs, a.triRate, best->maxNodes, best->maxTriangles, bestMs, best->errMean);
-      } else {
-        cm["choice"] = nullptr;
-        std::cout << fmt::format("cost model: no swept configuration fits {} ms at {:.3g} triangles/s\n", a.frameMs,
-                                 a.triRate);
-      }
-    } else if (costModel) {
-      std::cout << "cost model: --frame-ms/--tri-rate choose (nodes, triangles) in --mode budget only; "
-                   "error mode reports the per-node cost fit\n";
-    }
-  } else {
+  if (n == 0) {
     std::cout << "adaptation cost fit: skipped ('ours' not in --algorithms)\n";
+    return cm;
   }
-  if (budgetMode && costModel && a.controlFrames > 0) {
+  const double varX = sxx - sx * sx / n, cov = sxy - sx * sy / n, varY = syy - sy * sy / n;
+  const double b = varX > 0 ? cov / varX : (sx > 0 ? sy / sx : 0.0);
+  const double a0 = varX > 0 ? (sy - b * sx) / n : 0.0;
+  const double r2 = varX > 0 && varY > 0 ? cov * cov / (varX * varY) : 0.0;
+  cm["adapt_fit"] = {{"intercept_us", a0}, {"us_per_node", b}, {"r2", r2}, {"rows", size_t(n)}};
+  std::cout << fmt::format("adaptation cost fit (ours, {} frames): adapt_us = {:.2f} + {:.4f} * nodes (r^2 {:.3f})\n",
+                           size_t(n), a0, b, r2);
+  if (p.budgetMode && p.costModel) {
+    chooseBudgets(a, sums, a0, b, cm);
+  } else if (p.costModel) {
+    std::cout << "cost model: --frame-ms/--tri-rate choose (nodes, triangles) in --mode budget only; "
+                 "error mode reports the per-node cost fit\n";
+  }
+  return cm;
+}
+
+int runBench(const BenchArgs& a) {
+  const BenchPlan p = benchPlan(a);
+  const AtlasView atlas = openAtlas(a.atlas, a.camera.maxRoots);
+  const Hierarchy& hier = atlas.hierarchy;
+  const std::vector<Camera> cams = loadCameras(a.camera, atlas);
+  if (cams.empty()) throw InputError(a.camera.path + ": the camera path has no frames");
+  std::vector<ViewParams> views;
+  for (const Camera& c : cams) views.push_back(makeViewParams(c, p.width, p.height));
+
+  const fs::path out = a.output;
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec || !fs::is_directory(out)) throw InputError(a.output + ": cannot create output directory");
+  if (::access(out.c_str(), W_OK) != 0) throw InputError(a.output + ": output directory is not writable");
+
+  std::unique_ptr<gl::EglContext> context;
+  std::unique_ptr<gl::AtlasScene> scene;
+  if (a.render) scene = benchScene(a, p, atlas, context);
+
+  std::cout << fmt::format("bench {} mode: {} frames x {} pass(es), {}x{}, {} node budget(s){}, algorithms {}\n",
+                           a.mode, cams.size(), a.repeat, p.width, p.height, p.nodeBudgets.size(),
+                           p.budgetMode ? fmt::format(" x {} triangle budget(s)", p.triBudgets.size())
+                                        : fmt::format(", tolerance {} px", a.tolerance),
+                           a.algorithms);
+  const std::vector<std::vector<Row>> configs = runConfigurations(a, p, hier, cams, views, scene.get());
+  writeBenchCsv(a, p.budgetMode, configs, out);
+  const std::vector<Summary> sums = writeSummary(a, p.budgetMode, configs, out);
+  nlohmann::json cm = fitCostModel(a, p, configs, sums);
+  if (p.budgetMode && p.costModel && a.controlFrames > 0) {
     const ControlledRun run = runFrameController(hier, views, a);
     atomicWriteFile(out / "controller.csv", run.csv.data(), run.csv.size());
     cm["controller"] = run.summary;

@@ -509,9 +509,11 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
   atomicWriteFile(dir / kManifestName, text.data(), text.size());
 }
 
-AtlasManifest readManifest(const fs::path& dir) {
-  const fs::path file = dir / kManifestName;
-  JsonReader r{file};
+namespace {
+
+// The manifest file's JSON object, with its format tag checked.
+json parseManifestFile(const fs::path& dir, const JsonReader& r) {
+  const fs::path& file = r.file;
   std::error_code ec;
   if (!fs::exists(file, ec)) {
     if (!fs::exists(dir, ec)) r.fail("no such atlas directory");
@@ -529,8 +531,11 @@ AtlasManifest readManifest(const fs::path& dir) {
   auto fmt = j.find("format");
   if (fmt == j.end() || !fmt->is_string() || fmt->get<std::string>() != kFormatTag)
     r.fail(std::string("not a gimlod atlas manifest (\"format\" must be \"") + kFormatTag + "\")");
+  return j;
+}
 
-  AtlasManifest m;
+// The version, kind, lattice and georeference fields.
+void readManifestGrid(const JsonReader& r, const json& j, AtlasManifest& m) {
   m.version = r.u32(j, "version");
   if (m.version < 1 || m.version > kAtlasFormatVersion)
     r.fail("unsupported atlas format version " + std::to_string(m.version) +
@@ -577,6 +582,10 @@ AtlasManifest readManifest(const fs::path& dir) {
     if (g.contains("centreLatitudeDeg"))
       m.georef.centreLatitudeDeg = r.number(g["centreLatitudeDeg"], "georef.centreLatitudeDeg");
   }
+}
+
+// The planet a heightfield atlas is drawn on (core/planet.h), where there is one.
+void readManifestPlanet(const JsonReader& r, const json& j, AtlasManifest& m) {
   if (j.contains("planet") && !j["planet"].is_null()) {
     const json& pl = j["planet"];
     if (!pl.is_object()) r.fail("field 'planet' must be an object or null");
@@ -598,6 +607,10 @@ AtlasManifest readManifest(const fs::path& dir) {
     if (!(std::fabs(p.lon0Deg) <= 720.0 && std::fabs(p.lat0Deg) <= 180.0))
       r.fail("planet.lon0Deg or planet.lat0Deg is out of range");
   }
+}
+
+// The imagery and compression records.
+void readManifestImageryAndCompression(const JsonReader& r, const json& j, AtlasManifest& m) {
   if (j.contains("imagery") && !j["imagery"].is_null()) {
     const json& im = j["imagery"];
     if (!im.is_object()) r.fail("field 'imagery' must be an object or null");
@@ -630,6 +643,10 @@ AtlasManifest readManifest(const fs::path& dir) {
   if ((m.version >= 2) != m.compression.present)
     r.fail(m.compression.present ? "field 'compression' needs format version 2"
                                  : "format version 2 needs the field 'compression'");
+}
+
+// The hierarchy record, checked against the lattice.
+void readManifestHierarchy(const JsonReader& r, const json& j, AtlasManifest& m) {
   const uint32_t ilog = log2Exact(m.chartSize - 1);
   if (j.contains("hierarchy")) {
     const json& h = j["hierarchy"];
@@ -647,8 +664,56 @@ AtlasManifest readManifest(const fs::path& dir) {
            std::to_string(m.minNodeResLog2) + ") <= maxNodeResLog2 (" +
            std::to_string(m.maxNodeResLog2) + ") <= log2(blockIntervals) (" +
            std::to_string(log2Exact(m.blockIntervals)) + ")");
+}
 
-  // Charts.
+// charts[i] of n: its file, grid position and neighbours.
+void readManifestChart(const JsonReader& r, const json& c, size_t i, int64_t n, AtlasManifest& m) {
+  const bool grid = m.kind == AtlasKind::Heightfield;
+  const std::string ctx = "charts[" + std::to_string(i) + "].";
+  if (!c.is_object()) r.fail("field 'charts[" + std::to_string(i) + "]' must be an object");
+  ChartInfo& ci = m.charts[i];
+  ci.id = r.u32(c, "id", ctx);
+  if (ci.id != i)
+    r.fail("inconsistent chart list: " + ctx + "id is " + std::to_string(ci.id) + ", expected " +
+           std::to_string(i));
+  ci.gridX = static_cast<int32_t>(r.integer(r.field(c, "gridX", ctx), ctx + "gridX", 0, INT32_MAX));
+  ci.gridY = static_cast<int32_t>(r.integer(r.field(c, "gridY", ctx), ctx + "gridY", 0, INT32_MAX));
+  if (grid && (static_cast<uint32_t>(ci.gridX) >= m.chartsX ||
+               static_cast<uint32_t>(ci.gridY) >= m.chartsY ||
+               static_cast<uint32_t>(ci.gridY) * m.chartsX + static_cast<uint32_t>(ci.gridX) != i))
+    r.fail("inconsistent chart list: " + ctx + "grid position (" + std::to_string(ci.gridX) +
+           ", " + std::to_string(ci.gridY) + ") does not match its id in a " +
+           std::to_string(m.chartsX) + " x " + std::to_string(m.chartsY) + " grid");
+  ci.file = r.string(r.field(c, "file", ctx), ctx + "file");
+  const auto insideAtlas = [&](const std::string& file, const std::string& key) {
+    const fs::path fp(file);
+    if (file.empty() || fp.is_absolute() ||
+        std::any_of(fp.begin(), fp.end(), [](const fs::path& e) { return e == ".."; }))
+      r.fail("field '" + ctx + key + "' must be a relative path inside the atlas: '" + file + "'");
+  };
+  insideAtlas(ci.file, "file");
+  if (m.imagery.present) {
+    ci.imageryFile = r.string(r.field(c, "imagery", ctx), ctx + "imagery");
+    insideAtlas(ci.imageryFile, "imagery");
+  }
+  if (c.contains("finest_level")) {
+    if (m.kind != AtlasKind::Geometry) r.fail("field '" + ctx + "finest_level' is for geometry atlases only");
+    ci.finestLevel = static_cast<uint32_t>(
+        r.integer(c["finest_level"], ctx + "finest_level", 0, int64_t(m.intervalsLog2())));
+  }
+  const json& nb = r.field(c, "neighbours", ctx);
+  if (!nb.is_array() || nb.size() != 4) r.fail("field '" + ctx + "neighbours' must have 4 entries");
+  for (size_t e = 0; e < 4; ++e) {
+    const std::string nctx = ctx + "neighbours[" + std::to_string(e) + "].";
+    RootNeighbour& rn = ci.neighbours[e];
+    rn.chart = static_cast<int32_t>(r.integer(r.field(nb[e], "chart", nctx), nctx + "chart", -1, n - 1));
+    rn.edge = static_cast<uint8_t>(r.integer(r.field(nb[e], "edge", nctx), nctx + "edge", 0, 3));
+    if (nb[e].contains("reversed")) rn.reversed = r.boolean(nb[e]["reversed"], nctx + "reversed");
+  }
+}
+
+// The chart list; neighbour relations must be symmetric.
+void readManifestCharts(const JsonReader& r, const json& j, AtlasManifest& m) {
   const json& cs = r.field(j, "charts", "");
   if (!cs.is_array()) r.fail("field 'charts' must be an array");
   if (cs.empty()) r.fail("inconsistent chart list: no charts");
@@ -659,50 +724,7 @@ AtlasManifest readManifest(const fs::path& dir) {
            std::to_string(m.chartsX) + " * " + std::to_string(m.chartsY));
   const int64_t n = static_cast<int64_t>(cs.size());
   m.charts.resize(cs.size());
-  for (size_t i = 0; i < cs.size(); ++i) {
-    const std::string ctx = "charts[" + std::to_string(i) + "].";
-    const json& c = cs[i];
-    if (!c.is_object()) r.fail("field 'charts[" + std::to_string(i) + "]' must be an object");
-    ChartInfo& ci = m.charts[i];
-    ci.id = r.u32(c, "id", ctx);
-    if (ci.id != i)
-      r.fail("inconsistent chart list: " + ctx + "id is " + std::to_string(ci.id) + ", expected " +
-             std::to_string(i));
-    ci.gridX = static_cast<int32_t>(r.integer(r.field(c, "gridX", ctx), ctx + "gridX", 0, INT32_MAX));
-    ci.gridY = static_cast<int32_t>(r.integer(r.field(c, "gridY", ctx), ctx + "gridY", 0, INT32_MAX));
-    if (grid && (static_cast<uint32_t>(ci.gridX) >= m.chartsX ||
-                 static_cast<uint32_t>(ci.gridY) >= m.chartsY ||
-                 static_cast<uint32_t>(ci.gridY) * m.chartsX + static_cast<uint32_t>(ci.gridX) != i))
-      r.fail("inconsistent chart list: " + ctx + "grid position (" + std::to_string(ci.gridX) +
-             ", " + std::to_string(ci.gridY) + ") does not match its id in a " +
-             std::to_string(m.chartsX) + " x " + std::to_string(m.chartsY) + " grid");
-    ci.file = r.string(r.field(c, "file", ctx), ctx + "file");
-    const auto insideAtlas = [&](const std::string& file, const std::string& key) {
-      const fs::path fp(file);
-      if (file.empty() || fp.is_absolute() ||
-          std::any_of(fp.begin(), fp.end(), [](const fs::path& e) { return e == ".."; }))
-        r.fail("field '" + ctx + key + "' must be a relative path inside the atlas: '" + file + "'");
-    };
-    insideAtlas(ci.file, "file");
-    if (m.imagery.present) {
-      ci.imageryFile = r.string(r.field(c, "imagery", ctx), ctx + "imagery");
-      insideAtlas(ci.imageryFile, "imagery");
-    }
-    if (c.contains("finest_level")) {
-      if (m.kind != AtlasKind::Geometry) r.fail("field '" + ctx + "finest_level' is for geometry atlases only");
-      ci.finestLevel = static_cast<uint32_t>(
-          r.integer(c["finest_level"], ctx + "finest_level", 0, int64_t(m.intervalsLog2())));
-    }
-    const json& nb = r.field(c, "neighbours", ctx);
-    if (!nb.is_array() || nb.size() != 4) r.fail("field '" + ctx + "neighbours' must have 4 entries");
-    for (size_t e = 0; e < 4; ++e) {
-      const std::string nctx = ctx + "neighbours[" + std::to_string(e) + "].";
-      RootNeighbour& rn = ci.neighbours[e];
-      rn.chart = static_cast<int32_t>(r.integer(r.field(nb[e], "chart", nctx), nctx + "chart", -1, n - 1));
-      rn.edge = static_cast<uint8_t>(r.integer(r.field(nb[e], "edge", nctx), nctx + "edge", 0, 3));
-      if (nb[e].contains("reversed")) rn.reversed = r.boolean(nb[e]["reversed"], nctx + "reversed");
-    }
-  }
+  for (size_t i = 0; i < cs.size(); ++i) readManifestChart(r, cs[i], i, n, m);
   // Neighbour relations must be symmetric.
   for (size_t i = 0; i < m.charts.size(); ++i) {
     for (uint8_t e = 0; e < 4; ++e) {
@@ -715,6 +737,20 @@ AtlasManifest readManifest(const fs::path& dir) {
                std::to_string(a.edge) + ", which does not name it back");
     }
   }
+}
+
+}  // namespace
+
+AtlasManifest readManifest(const fs::path& dir) {
+  const fs::path file = dir / kManifestName;
+  const JsonReader r{file};
+  const json j = parseManifestFile(dir, r);
+  AtlasManifest m;
+  readManifestGrid(r, j, m);
+  readManifestPlanet(r, j, m);
+  readManifestImageryAndCompression(r, j, m);
+  readManifestHierarchy(r, j, m);
+  readManifestCharts(r, j, m);
   return m;
 }
 

@@ -1,6 +1,7 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 6 (hierarchy creation): per-node bounds and
 // per-resolution maximum sample deviation, built in parallel.
 #include "hierarchy/hierarchy.h"
+#include "core/level_surface.h"
 #include "core/block_codec.h"
 #include "core/progress.h"
 
@@ -59,52 +60,6 @@ template <typename Op>
 void cellReduce(const std::vector<float>& s, uint32_t S, std::vector<float>& out, Op op) {
   cellReduce(s.data(), S, S - 1, out, op);
 }
-
-// fn(i, surface_k(u_i, v_i)) for every level-0 sample i (row-major), where surface_k is the
-// piecewise-linear interpolation of the level-k subsampled grid split along (0,0)-(1,1), as the
-// render grids draw it. T is float (heights) or glm::vec3 (geometry images).
-template <typename T, typename Fn>
-void forEachLevelSample(const std::vector<T>& h, uint32_t S, uint32_t k, Fn&& fn) {
-  const uint32_t M = S - 1;
-  const uint32_t n = M >> k;
-  const uint32_t s = 1u << k;
-  const float inv = 1.0f / float(s);
-  for (uint32_t y = 0; y <= M; ++y) {
-    const uint32_t cy = std::min(y >> k, n - 1);
-    const float fy = float(y - cy * s) * inv;
-    const T* row0 = &h[size_t(cy * s) * S];
-    const T* row1 = &h[size_t((cy + 1) * s) * S];
-    const size_t at = size_t(y) * S;
-    for (uint32_t cx = 0; cx < n; ++cx) {
-      const uint32_t x0 = cx * s;
-      const T h00 = row0[x0], h10 = row0[x0 + s], h01 = row1[x0], h11 = row1[x0 + s];
-      const uint32_t xend = (cx == n - 1) ? s : s - 1;
-      for (uint32_t dx = 0; dx <= xend; ++dx) {
-        const float fx = float(dx) * inv;
-        fn(at + x0 + dx, cellSurface(h00, h10, h01, h11, fx, fy));
-      }
-    }
-  }
-}
-
-// running[i] = max(running[i], dist(p_i, surface_k(u_i, v_i))) for every level-0 sample
-// (forEachLevelSample). Dist: |a - b| for heights, Euclidean for geometry images.
-template <typename T, typename Dist>
-void accumulateLevelError(const std::vector<T>& h, uint32_t S, uint32_t k, std::vector<float>& running, Dist dist) {
-  forEachLevelSample(h, S, k, [&](size_t i, const T& interp) { running[i] = std::max(running[i], dist(h[i], interp)); });
-}
-
-// note: function objects, not functions: a function pointer as Dist would be an indirect call
-// per sample in accumulateLevelError's inner loop.
-struct HeightDistance {
-  float operator()(float a, float b) const { return std::fabs(a - b); }
-};
-struct PointDistance {
-  float operator()(const glm::vec3& a, const glm::vec3& b) const {
-    const glm::vec3 d = a - b;
-    return std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
-  }
-};
 
 // Sizes a chart's node arrays: bounds zero, flags clear, every error NaN (resolutions the node
 // cannot use stay NaN).
@@ -439,25 +394,6 @@ HierarchyParams hierarchyParams(const AtlasManifest& m) {
   p.maxNodeResLog2 = m.maxNodeResLog2;
   p.minNodeResLog2 = m.minNodeResLog2;
   return p;
-}
-
-std::vector<float> geometryLevelErrors(const std::vector<glm::vec3>& positions, uint32_t side, uint32_t levels) {
-  if (!isChartSizeValid(side) || positions.size() != size_t(side) * side || (side - 1) >> levels == 0)
-    throw std::invalid_argument("geometryLevelErrors: positions do not match the side, or too many levels");
-  std::vector<float> out(levels + 1, 0.0f), running(positions.size(), 0.0f);
-  for (uint32_t k = 1; k <= levels; ++k) {
-    accumulateLevelError(positions, side, k, running, PointDistance{});
-    out[k] = *std::max_element(running.begin(), running.end());
-  }
-  return out;
-}
-
-std::vector<glm::vec3> geometryLevelSurface(const std::vector<glm::vec3>& positions, uint32_t side, uint32_t k) {
-  if (!isChartSizeValid(side) || positions.size() != size_t(side) * side || (side - 1) >> k == 0)
-    throw std::invalid_argument("geometryLevelSurface: positions do not match the side, or a level past the pyramid");
-  std::vector<glm::vec3> out(positions.size());
-  forEachLevelSample(positions, side, k, [&](size_t i, const glm::vec3& p) { out[i] = p; });
-  return out;
 }
 
 namespace {

@@ -13,6 +13,7 @@
 #include <glm/vec3.hpp>
 
 #include "core/atlas_format.h"
+#include "core/level_surface.h"
 #include "hierarchy/root_groups.h"
 
 namespace gimlod {
@@ -164,24 +165,6 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
                                  const std::vector<std::array<RootNeighbour, 4>>& roots,
                                  const ChartPositionSource& source, HierarchyStats* stats = nullptr,
                                  const std::vector<uint8_t>& finestLevels = {});
-
-// A grid cell's surface at (fx, fy) in [0, 1]^2 from its corners h00 (0, 0), h10 (1, 0), h01
-// (0, 1) and h11 (1, 1), split along (0,0)-(1,1) as the render grids draw it. T: float (heights)
-// or glm::vec3 (geometry images).
-template <typename T>
-inline T cellSurface(const T& h00, const T& h10, const T& h01, const T& h11, float fx, float fy) {
-  return fx >= fy ? h00 + fx * (h10 - h00) + fy * (h11 - h10)   // lower triangle
-                  : h00 + fy * (h01 - h00) + fx * (h11 - h01);  // upper triangle
-}
-
-// For k = 0..levels: the largest distance from a sample of a side^2 geometry image (row = v) to
-// the surface of its level k', drawn as the render grids draw it, at the sample's own (u, v), over
-// k' <= k: the chart-wide form of buildGeometryHierarchy's node errors (out[0] = 0).
-std::vector<float> geometryLevelErrors(const std::vector<glm::vec3>& positions, uint32_t side, uint32_t levels);
-
-// The surface of level k of a side^2 geometry image (row = v), drawn as the render grids draw it,
-// at every level-0 sample's (u, v): side^2 positions, the level's own samples where they lie.
-std::vector<glm::vec3> geometryLevelSurface(const std::vector<glm::vec3>& positions, uint32_t side, uint32_t k);
 
 // Atomic. compressed: version 2 (the arrays regrouped as byte planes, then zstd with its
 // checksum; about 0.4 of version 1's bytes on mesh atlases), else version 1 (raw). Both are read.

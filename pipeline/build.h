@@ -6,6 +6,9 @@
 // input needs.
 #pragma once
 
+#include <cstdint>
+#include <filesystem>
+
 #include <nlohmann/json.hpp>
 
 #include "pipeline/build_options.h"
@@ -28,5 +31,18 @@ nlohmann::json buildAtlas(const TerrainBuildOptions& options);
 
 // buildMeshAtlas, returning the content of stats.json.
 nlohmann::json buildAtlas(const MeshBuildOptions& options);
+
+// What exportAtlasSurface wrote.
+struct SurfaceExport {
+  uint64_t vertices = 0, triangles = 0;
+  uint64_t samples = 0;        // chart samples read (before welding)
+  uint64_t boundaryEdges = 0;  // edges used by one triangle only (0 where the input was closed)
+};
+
+// `gimlod export`: the surface of a mesh or planet atlas at pyramid level `level`, every chart's
+// grid triangulated as the renderer draws it and welded along the seams, written to `ply` (binary
+// PLY, atomically). Throws InputError naming the atlas, the chart file or the output.
+SurfaceExport exportAtlasSurface(const std::filesystem::path& atlasDir, uint32_t level,
+                                 const std::filesystem::path& ply);
 
 }  // namespace gimlod

@@ -1,7 +1,7 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, sections 3 and 5.
 #include "atlas/mesh/mesh_atlas.h"
 #include "core/block_codec.h"
-#include "hierarchy/hierarchy.h"
+#include "core/level_surface.h"
 #include "core/progress.h"
 
 #include <glm/geometric.hpp>
