@@ -7,7 +7,7 @@
 namespace gimlod {
 namespace {
 
-// What the mesh reader read, repaired and warned about (README, "Mesh input").
+// What the mesh reader read, repaired and warned about (docs/mesh_stage.md, "Mesh input").
 nlohmann::json readJson(const MeshReadStats& rs) {
   return {{"format", rs.info.formatName},
           {"vertices", rs.vertices},
@@ -275,7 +275,7 @@ std::string buildSummary(const std::filesystem::path& output, const MeshBuildSta
   const MeshWriteStats& w = s.write;
   const MeshReadStats& rd = s.chart.read;
   const ChartingStats& ch = s.chart.charting;
-  // Mesh input: what was repaired (README, "Mesh input").
+  // Mesh input: what was repaired (docs/mesh_stage.md, "Mesh input").
   return summaryLines(output, w.charts, w.chartsX, w.chartsY, w.chartSize, meshSamples(w), 0, w.hierarchy,
                       s.bytesOnDisk, s.totalSeconds) +
          fmt::format(

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The demo: installs what is missing, builds gimlod in Release, builds the atlases of the shipped
 # SRTM tile and the shipped scan, renders them to PNG frames with per-frame statistics, and takes
-# a picture of each in the viewer (a scripted run on a virtual display).
+# a picture of each in the viewer (a scripted run on a virtual display), which become the README's
+# pictures (docs/images).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
@@ -19,6 +20,8 @@ xvfb-run -a -s "-screen 0 1280x1024x24" ./build/gimlod view out/rainier.atlas --
   --frames 12 --size 960x540 --screenshot out/view_rainier.png
 xvfb-run -a -s "-screen 0 1280x1024x24" ./build/gimlod view out/bunny.atlas --path scenes/bunny_orbit.json \
   --frames 3 --size 960x540 --overlay chart --screenshot out/view_bunny_charts.png
+# The README's two pictures are these.
+cp out/view_rainier.png out/view_bunny_charts.png docs/images/
 echo "frames and stats.csv are in out/rainier_orbit, out/rainier_flyby and out/bunny_orbit;"
 echo "the viewer's pictures are out/view_rainier.png and out/view_bunny_charts.png."
 echo "To fly through them: ./build/gimlod view out/rainier.atlas (or out/bunny.atlas)"
