@@ -117,7 +117,7 @@ std::vector<std::string> parseAlgorithms(const std::string& text) {
 void measureCut(const Hierarchy& h, const Cut& cut, const ViewParams& v, Row& r) {
   double maxE = 0.0, sum = 0.0;
   for (const CutNode& n : cut.nodes) {
-    const double e = screenError(h, n.id, n.res, v);
+    const double e = screenError(h, n.id, n.resLog2, v);
     maxE = std::max(maxE, e);
     sum += e;
   }

@@ -74,7 +74,7 @@ void addMeshChartOptions(CLI::App* b, BuildArgs& a) {
                     "little stretch), or auto (developable up to 4M triangles, planar above)")
       ->check(CLI::IsMember({"auto", "planar", "developable"}))
       ->capture_default_str();
-  b->add_option("--chart-error", a.mesh.maxChartError,
+  b->add_option("--chart-error", a.mesh.maxPatchError,
                     "Meshes with --charts 0: largest RMS plane distance of a patch / bounding-box diagonal")
       ->capture_default_str();
   b->add_flag("--no-fidelity", a.noFidelity, "Meshes: skip the Hausdorff distance between the input and the atlas");
@@ -211,7 +211,7 @@ MeshBuildOptions meshOptions(const BuildArgs& a, const CommonBuildOptions& commo
   MeshBuildOptions mesh = a.mesh;
   static_cast<CommonBuildOptions&>(mesh) = common;
   if (a.chartSizeOption->count() > 0) mesh.chartSize = a.terrain.chartSize;
-  mesh.charts = a.chartsArg == "auto" ? kAutoCharts : parseCount("--charts", a.chartsArg);
+  mesh.patches = a.chartsArg == "auto" ? kAutoPatches : parseCount("--charts", a.chartsArg);
   mesh.chartMetric = a.chartMetricArg == "developable" ? MeshChartMetric::kDevelopable
                      : a.chartMetricArg == "planar"    ? MeshChartMetric::kPlanar
                                                      : MeshChartMetric::kAuto;
@@ -279,7 +279,7 @@ std::string flagFor(std::string_view name) {
       {"subdataset", "--subdataset"},         {"threads", "--threads"},
       {"band", "--band"},                     {"spacing", "--spacing"},
       {"imagery", "--imagery"},
-      {"charts", "--charts"},                 {"maxChartError", "--chart-error"},
+      {"patches", "--charts"},                 {"maxPatchError", "--chart-error"},
       {"repairRounds", "--repair-rounds"},    {"repairBudget", "--repair-budget"},
       {"maxSampleError", "--sample-error"},
       {"maxMemory", "--max-memory"},          {"measureFidelity", "--no-fidelity"},

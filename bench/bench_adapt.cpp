@@ -49,7 +49,7 @@ struct Args {
 std::vector<std::pair<uint64_t, uint32_t>> sortedNodes(const Cut& cut) {
   std::vector<std::pair<uint64_t, uint32_t>> v;
   v.reserve(cut.nodes.size());
-  for (const CutNode& n : cut.nodes) v.push_back({n.id.key(), n.res});
+  for (const CutNode& n : cut.nodes) v.push_back({n.id.key(), n.resLog2});
   std::sort(v.begin(), v.end());
   return v;
 }

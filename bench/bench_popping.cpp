@@ -119,7 +119,7 @@ int run(int argc, char** argv) {
       const std::vector<uint8_t> now = scene.renderer().readPixels();
       for (const CutNode& n : f.cut.nodes) {
         const int32_t at = previous.find(n.id);
-        switches += at < 0 || previous.nodes[size_t(at)].res != n.res;
+        switches += at < 0 || previous.nodes[size_t(at)].resLog2 != n.resLog2;
       }
       scene.drawCut(path[k], previous);
       const auto [d, o16] = difference(now, scene.renderer().readPixels());

@@ -1,7 +1,7 @@
 // The out-of-core charting stages alone, for profiling: gridify a mesh (or reuse a grid
 // directory), then cluster its cells into a chart layout; prints each stage's wall and CPU time
 // and peak RSS, and the charting's own breakdown. --check also validates the layout
-// (validateChartLayout) and prints a digest of it, to compare the layouts of two builds.
+// (validatePatchLayout) and prints a digest of it, to compare the layouts of two builds.
 //
 //   chart_cells MESH_OR_GRID_DIR [--grid DIR] [--charts N] [--max-memory BYTES] [--threads N]
 //               [--check 1]
@@ -16,7 +16,7 @@
 namespace {
 
 // FNV-1a over the layout's arrays.
-uint64_t digest(const gimlod::ChartLayout& l) {
+uint64_t digest(const gimlod::PatchLayout& l) {
   uint64_t h = 1469598103934665603ull;
   auto bytes = [&](const void* p, size_t n) {
     const auto* b = static_cast<const unsigned char*>(p);
@@ -53,13 +53,13 @@ int main(int argc, char** argv) {
   }
   fs::path input = argv[1], grid = "chart_cells.grid";
   gimlod::ChartingOptions co;
-  co.targetCharts = 128;
+  co.targetPatches = 128;
   gimlod::GridifyOptions go;
   bool check = false;
   for (int i = 2; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
     if (a == "--grid") grid = argv[i + 1];
-    else if (a == "--charts") co.targetCharts = uint32_t(std::stoul(argv[i + 1]));
+    else if (a == "--charts") co.targetPatches = uint32_t(std::stoul(argv[i + 1]));
     else if (a == "--max-memory") go.maxMemoryBytes = std::stoull(argv[i + 1]);
     else if (a == "--threads") co.threads = unsigned(std::stoul(argv[i + 1]));
     else if (a == "--check") check = std::stoul(argv[i + 1]) != 0;
@@ -84,7 +84,7 @@ int main(int argc, char** argv) {
     resetPeak();
     meter.start();
     gimlod::ChartingStats st;
-    const gimlod::ChartLayout l = gimlod::buildChartLayoutFromCells(grid, co, &st);
+    const gimlod::PatchLayout l = gimlod::buildPatchLayoutFromCells(grid, co, &st);
     const gimlod::StageTiming& s = meter.finish("charting");
     std::printf("charting  %8.2f s wall %8.2f s cpu  peak RSS %7.1f MiB  %zu patches (%u before fixing), "
                 "%u cells, %u cell clusters (%u dissolved)\n"
@@ -97,7 +97,7 @@ int main(int argc, char** argv) {
                 (unsigned long long)st.verticesSplit, (unsigned long long)st.nonManifoldEdges,
                 (unsigned long long)st.boundaryEdges);
     if (check) {
-      const std::vector<std::string> errs = gimlod::validateChartLayout(l);
+      const std::vector<std::string> errs = gimlod::validatePatchLayout(l);
       std::printf("check     digest %016llx, %zu validation errors\n", (unsigned long long)digest(l),
                   errs.size());
       for (size_t i = 0; i < errs.size() && i < 10; ++i) std::printf("          %s\n", errs[i].c_str());

@@ -101,7 +101,7 @@ void fillErrors(const HierarchyParams& p, const std::vector<T>& samples, Dist di
   const uint32_t rc = p.resCount();
   for (uint32_t l = 0; l < p.depth; ++l) {
     const uint32_t r = L - l;
-    if (r > p.maxRes(l) || r < p.minNodeResLog2) continue;
+    if (r > p.maxResLog2(l) || r < p.minNodeResLog2) continue;
     for (uint32_t i = nodeIndex(l, 0, 0); i < nodeIndex(l, 0, 0) + (1u << 2 * l); ++i)
       out.errors[size_t(i) * rc + (r - p.minNodeResLog2)] = 0.0f;
   }
@@ -114,7 +114,7 @@ void fillErrors(const HierarchyParams& p, const std::vector<T>& samples, Dist di
     forEachNodeReduction(cells, L, p.depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
       if (L < l + k) return;
       const uint32_t r = L - l - k;
-      if (r >= p.minNodeResLog2 && r <= p.maxRes(l)) out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] = v;
+      if (r >= p.minNodeResLog2 && r <= p.maxResLog2(l)) out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] = v;
     });
   }
 }
@@ -228,7 +228,7 @@ TileSummary buildTerrainTile(const HierarchyParams& p, const AtlasManifest& m, c
   // Errors: 0 at the source resolution, then level by level.
   for (uint32_t l = 0; l < depth; ++l) {
     const uint32_t r = L - l - shift;
-    if (r > p.maxRes(l + shift) || r < p.minNodeResLog2) continue;
+    if (r > p.maxResLog2(l + shift) || r < p.minNodeResLog2) continue;
     for (uint32_t y = 0; y < (1u << l); ++y)
       for (uint32_t x = 0; x < (1u << l); ++x)
         out.errors[size_t(nodeIndex(l + shift, (tx << l) + x, (ty << l) + y)) * rc + (r - p.minNodeResLog2)] = 0.0f;
@@ -240,7 +240,7 @@ TileSummary buildTerrainTile(const HierarchyParams& p, const AtlasManifest& m, c
   auto put = [&](uint32_t k, uint32_t l, uint32_t x, uint32_t y, float v) {
     if (l >= depth || L < l + shift + k) return;
     const uint32_t r = L - l - shift - k;
-    if (r >= p.minNodeResLog2 && r <= p.maxRes(l + shift))
+    if (r >= p.minNodeResLog2 && r <= p.maxResLog2(l + shift))
       out.errors[size_t(nodeIndex(l + shift, (tx << l) + x, (ty << l) + y)) * rc + (r - p.minNodeResLog2)] = v;
   };
   // Band by band of B cell rows, every level k in turn, so that a band's running errors and cells
@@ -287,7 +287,7 @@ TileSummary emptyTerrainTile(const HierarchyParams& p, const AtlasManifest& m, c
       for (uint32_t x = 0; x < (1u << l); ++x) {
         const uint32_t gx = (tx << l) + x, gy = (ty << l) + y;
         setNodeBounds(m, chart, L, l + shift, gx, gy, z, z, out);
-        for (uint32_t r = p.minNodeResLog2; r <= p.maxRes(l + shift); ++r)
+        for (uint32_t r = p.minNodeResLog2; r <= p.maxResLog2(l + shift); ++r)
           out.errors[size_t(nodeIndex(l + shift, gx, gy)) * rc + (r - p.minNodeResLog2)] = 0.0f;
       }
   TileSummary sum;
@@ -323,7 +323,7 @@ void buildAboveTiles(const HierarchyParams& p, const AtlasManifest& m, const Cha
                       out);
         for (uint32_t k = 0; k < u.levelError.size() && k <= L - l; ++k) {
           const uint32_t r = L - l - k;
-          if (r >= p.minNodeResLog2 && r <= p.maxRes(l))
+          if (r >= p.minNodeResLog2 && r <= p.maxResLog2(l))
             out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] = u.levelError[k];
         }
       }

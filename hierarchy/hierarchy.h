@@ -53,12 +53,12 @@ struct HierarchyParams {
   uint32_t minNodeResLog2 = 2;
 
   // Paper eq. 1: the finest resolution (log2 intervals) a node of `level` may use.
-  uint32_t maxRes(uint32_t level) const { return maxRes(level, 0); }
+  uint32_t maxResLog2(uint32_t level) const { return maxResLog2(level, 0); }
   // The same in a chart whose finest samples are pyramid level finestLevel (ChartInfo).
-  uint32_t maxRes(uint32_t level, uint32_t finestLevel) const {
+  uint32_t maxResLog2(uint32_t level, uint32_t finestLevel) const {
     return std::min(intervalsLog2 - finestLevel - level, maxNodeResLog2);
   }
-  uint32_t minRes(uint32_t) const { return minNodeResLog2; }
+  uint32_t minResLog2() const { return minNodeResLog2; }
   uint32_t resCount() const { return maxNodeResLog2 - minNodeResLog2 + 1; }
   // Pyramid level a node of `level` reads at resolution `res`.
   uint32_t pyramidLevel(uint32_t level, uint32_t res) const { return intervalsLog2 - level - res; }
@@ -73,8 +73,8 @@ class Hierarchy {
  public:
   HierarchyParams params;
   std::vector<std::array<RootNeighbour, 4>> roots;  // per chart, indexed by Edge
-  // Per chart, per node (level order): bounds in world units, flags, and errors (metres) for
-  // each res in [minNodeResLog2, maxRes(level)]; NaN for resolutions the node cannot use.
+  // Per chart, per node (level order): bounds in world units, flags, and errors (world units) for
+  // each res in [minNodeResLog2, maxResLog2(level)]; NaN for resolutions the node cannot use.
   struct ChartNodes {
     std::vector<std::array<float, 6>> bounds;  // minx, miny, minz, maxx, maxy, maxz
     std::vector<uint8_t> flags;
@@ -91,7 +91,7 @@ class Hierarchy {
   uint32_t chartCount() const { return uint32_t(charts.size()); }
   uint32_t finestLevel(uint32_t chart) const { return finestLevels.empty() ? 0 : finestLevels[chart]; }
   // The finest resolution node n may use: paper eq. 1 within its chart's finest level.
-  uint32_t maxRes(const NodeId& n) const { return params.maxRes(n.level, finestLevel(n.chart)); }
+  uint32_t maxResLog2(const NodeId& n) const { return params.maxResLog2(n.level, finestLevel(n.chart)); }
   const std::array<float, 6>& bounds(const NodeId& n) const {
     return charts[n.chart].bounds[nodeIndex(n.level, n.x, n.y)];
   }
@@ -138,7 +138,7 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindow
 
 // The hierarchy of a planet atlas (manifest.planet, core/planet.h): each chart's samples placed on
 // the sphere (PlanetFrame::position) and measured as a geometry image (buildGeometryHierarchy), so
-// bounds are planet-centred boxes and errors Euclidean distances in metres, the sphere's curvature
+// bounds are planet-centred boxes and errors Euclidean distances in world units (metres on a planet), the sphere's curvature
 // included. The positions are measured relative to the chart's centre in float, and each error
 // grows by four float steps of the chart's extent (bounds round outwards), so both still hold.
 // Nodes past the DEM's last samples are empty, as on flat terrain. Throws InputError for charts of

@@ -72,7 +72,7 @@ RootGroups buildRootGroups(const Hierarchy& h, uint32_t maxRoots) {
   std::vector<uint32_t> order = mortonOrder(h);
   if (order.size() <= maxRoots) return out;
   for (uint32_t c : order)
-    if (h.maxRes({c, 0, 0, 0}) + 1 < h.params.depth) return out;  // a root could need a split
+    if (h.maxResLog2({c, 0, 0, 0}) + 1 < h.params.depth) return out;  // a root could need a split
 
   const uint32_t minRes = h.params.minNodeResLog2, resCount = h.params.resCount();
   out.minRes = minRes;
@@ -94,8 +94,8 @@ RootGroups buildRootGroups(const Hierarchy& h, uint32_t maxRoots) {
       const NodeId root{order[k], 0, 0, 0};
       growBox(g.bounds, h.bounds(root));
       g.errorMin = std::max(g.errorMin, h.error(root, minRes));
-      g.errorMax = std::max(g.errorMax, h.error(root, h.maxRes(root)));
-      growErrors(uint32_t(out.groups.size()), [&](uint32_t r) { return h.error(root, std::min(r, h.maxRes(root))); });
+      g.errorMax = std::max(g.errorMax, h.error(root, h.maxResLog2(root)));
+      growErrors(uint32_t(out.groups.size()), [&](uint32_t r) { return h.error(root, std::min(r, h.maxResLog2(root))); });
     }
     out.groups.push_back(g);
   }

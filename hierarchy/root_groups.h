@@ -30,7 +30,7 @@ struct RootGroups {
     uint32_t level = 0;                      // 0: its children are chart roots
     std::array<float, 6> bounds{};           // the union of its charts' root boxes
     float errorMin = 0.f;  // largest error of a member root at the minimum resolution (world units)
-    float errorMax = 0.f;  // largest error of a member root at its own maxRes
+    float errorMax = 0.f;  // largest error of a member root at its own maxResLog2
   };
   std::vector<uint32_t> order;     // the non-empty charts, in the groups' order (Morton order of
                                    // their roots' box centres)
@@ -38,7 +38,7 @@ struct RootGroups {
   std::vector<uint32_t> tops;      // the groups without a parent, ascending
   std::vector<int32_t> chartGroup; // per chart: its first-level group; -1 for an empty chart
   // Per group and resolution r in [minRes, minRes + resCount): the largest error of a member root
-  // drawn at r, or at its maxRes where that is lower (world units).
+  // drawn at r, or at its maxResLog2 where that is lower (world units).
   std::vector<float> errors;
   uint32_t minRes = 0, resCount = 0;
   float error(uint32_t g, uint32_t r) const { return errors[size_t(g) * resCount + (r - minRes)]; }
@@ -51,7 +51,7 @@ struct RootGroups {
 // Morton order of their root boxes' centres, then the groups likewise, level by level, until at
 // most maxRoots groups remain. Empty (no groups) when there are maxRoots non-empty charts or fewer,
 // when maxRoots is 0, or when some chart's root cannot take the stitching constraint's largest level
-// gap (maxRes(root) < depth - 1): a closed group's roots never split, so each must be able to raise
+// gap (maxResLog2(root) < depth - 1): a closed group's roots never split, so each must be able to raise
 // its resolution to any neighbour's level instead. Deterministic: the same hierarchy gives the same
 // groups on any machine and thread count.
 RootGroups buildRootGroups(const Hierarchy& h, uint32_t maxRoots = kDefaultMaxRoots);

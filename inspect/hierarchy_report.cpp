@@ -30,7 +30,7 @@ json hierarchyFigures(const AtlasView& atlas, const std::filesystem::path& dir, 
     const uint32_t side = 1u << level;
     json row = {{"level", level}, {"nodes", uint64_t(charts) * side * side}};
     json byRes = json::array();
-    for (uint32_t res = p.minNodeResLog2; res <= p.maxRes(level); ++res) {
+    for (uint32_t res = p.minNodeResLog2; res <= p.maxResLog2(level); ++res) {
       double mx = 0.0, sum = 0.0;
       uint64_t n = 0;
       for (uint32_t c = 0; c < charts; ++c)
@@ -51,7 +51,7 @@ json hierarchyFigures(const AtlasView& atlas, const std::filesystem::path& dir, 
     const uint32_t scale = std::max(1u, 256u / std::max(1u, std::max(cellsX, cellsY)));
     const uint32_t w = cellsX * scale, ht = cellsY * scale;
     json rowMaps = json::array();
-    for (uint32_t res = p.minNodeResLog2; res <= p.maxRes(level); ++res) {
+    for (uint32_t res = p.minNodeResLog2; res <= p.maxResLog2(level); ++res) {
       if (w == 0 || ht == 0 || w > maxImageSide || ht > maxImageSide) break;
       std::vector<uint8_t> rgb(size_t(w) * ht * 3, 40);
       for (uint32_t c = 0; c < charts; ++c) {
@@ -106,7 +106,7 @@ json streamingFigures(const AtlasView& atlas, uint32_t width, uint32_t height) {
   }
   json pages = json::array();
   for (uint32_t l = 0; l < p.depth; ++l) {
-    const uint64_t s = (uint64_t(1) << p.maxRes(l)) + 1;
+    const uint64_t s = (uint64_t(1) << p.maxResLog2(l)) + 1;
     pages.push_back({{"level", l}, {"page_samples_per_side", s}, {"page_bytes", s * s * perSample}});
   }
   std::vector<std::string> names;
@@ -129,11 +129,11 @@ json streamingFigures(const AtlasView& atlas, uint32_t width, uint32_t height) {
     uint32_t raisedCount = 0;
     for (const CutNode& n : cut.nodes) {
       const uint32_t needed = std::max(neededResolution(atlas.hierarchy, n.id, v, o.tolerancePx), p.minNodeResLog2);
-      if (n.res <= needed) continue;
+      if (n.resLog2 <= needed) continue;
       ++raisedCount;
       if (raised.size() < 32)
         raised.push_back({{"chart", n.id.chart}, {"level", n.id.level}, {"x", n.id.x}, {"y", n.id.y},
-                          {"needed_res", needed}, {"drawn_res", n.res}});
+                          {"needed_res", needed}, {"drawn_res", n.resLog2}});
     }
     views.push_back({{"view", names[i]}, {"nodes", cut.nodes.size()}, {"triangles", cut.triangles()},
                      {"page_bytes", bytes}, {"constraint_raises", st.constraintRaises},

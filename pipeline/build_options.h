@@ -107,7 +107,7 @@ inline constexpr uint32_t kDefaultPositionBits = 18;
 // level 0, and settling at level 0 adds noise to their residuals (scripts/mesh_bytes_curve.py).
 inline constexpr double kDefaultPositionTolerance = 0.00005;
 inline constexpr uint32_t kDefaultNormalTolerance = 1;
-inline constexpr uint32_t kAutoCharts = ~0u;
+inline constexpr uint32_t kAutoPatches = ~0u;
 
 // Where a compressed mesh atlas's normals come from: stored with every sample, or derived from the
 // positions on reading (core/atlas_format.h geometryImageNormals; block borders stored); auto:
@@ -125,10 +125,10 @@ struct MeshBuildOptions : CommonBuildOptions {
   // (meshChartSizeForDensity, after the charting).
   uint32_t chartSize = 0;
   // Target patches before quadrangulation (each becomes 1 to 5 quad charts, or 3 to 8 kites, and
-  // the repair may cut more); kAutoCharts: meshPatchTarget of the input's triangles; 0:
-  // maxChartError.
-  uint32_t charts = kAutoCharts;
-  double maxChartError = 0.01;      // with charts = 0: RMS plane distance / bbox diagonal
+  // the repair may cut more); kAutoPatches: meshPatchTarget of the input's triangles; 0:
+  // maxPatchError.
+  uint32_t patches = kAutoPatches;
+  double maxPatchError = 0.01;      // with patches = 0: RMS plane distance / bbox diagonal
   // Patches as planar as may be, or as developable (planes, cylinders, cones): fewer, larger
   // patches that parameterize with less stretch. kAuto: meshChartMetric of the input's triangles.
   MeshChartMetric chartMetric = MeshChartMetric::kAuto;

@@ -63,10 +63,10 @@ HierarchyParams meshHierarchyParams(const MeshBuildOptions& o) {
   if (o.chartSize > 8193)
     throw InputError(optionRef("chartSize") + " " + std::to_string(o.chartSize) +
                      " is above 8193, the largest mesh chart size");
-  if (o.charts == 0 && !(o.maxChartError > 0.0 && std::isfinite(o.maxChartError)))
-    throw InputError(optionRef("maxChartError") +
+  if (o.patches == 0 && !(o.maxPatchError > 0.0 && std::isfinite(o.maxPatchError)))
+    throw InputError(optionRef("maxPatchError") +
                      " must be a positive fraction of the bounding-box diagonal (it is the target when " +
-                     optionRef("charts") + " is 0)");
+                     optionRef("patches") + " is 0)");
   HierarchyParams p;
   p.intervalsLog2 = log2u(o.chartSize - 1);
   p.maxNodeResLog2 = std::min(log2u(o.nodeRes), p.intervalsLog2);
@@ -78,8 +78,8 @@ HierarchyParams meshHierarchyParams(const MeshBuildOptions& o) {
 
 ChartedMesh chartMesh(const MeshBuildOptions& o, const MeshInfo& info, const fs::path& dir, StageMeter& meter) {
   ChartingOptions copt;
-  copt.targetCharts = o.charts == kAutoCharts ? meshPatchTarget(info.triangleEstimate) : o.charts;
-  copt.maxError = o.maxChartError;
+  copt.targetPatches = o.patches == kAutoPatches ? meshPatchTarget(info.triangleEstimate) : o.patches;
+  copt.maxError = o.maxPatchError;
   const MeshChartMetric metric =
       o.chartMetric == MeshChartMetric::kAuto ? meshChartMetric(info.triangleEstimate) : o.chartMetric;
   copt.metric = metric == MeshChartMetric::kDevelopable ? ChartMetric::kDevelopable : ChartMetric::kPlanar;
@@ -94,7 +94,7 @@ ChartedMesh chartMesh(const MeshBuildOptions& o, const MeshInfo& info, const fs:
     const fs::path grid = dir / "grid.tmp";
     GridifyResult gr = gridify(o.input, grid, g);
     finishStage(meter, "gridify");
-    c.layout = buildChartLayoutFromCells(grid, copt, &st.charting);
+    c.layout = buildPatchLayoutFromCells(grid, copt, &st.charting);
     if (o.measureFidelity) {
       c.cells = grid;  // the input for the fidelity figure, removed after it
     } else {
@@ -109,7 +109,7 @@ ChartedMesh chartMesh(const MeshBuildOptions& o, const MeshInfo& info, const fs:
     st.read = c.mesh.stats;
     for (const std::string& w : st.read.warnings) spdlog::warn("{}: {}", o.input.string(), w);
     finishStage(meter, "read");
-    c.layout = buildChartLayout(c.mesh, copt, &st.charting);
+    c.layout = buildPatchLayout(c.mesh, copt, &st.charting);
   }
   finishStage(meter, "charting");
   return c;

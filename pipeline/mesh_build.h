@@ -10,7 +10,7 @@
 #include <filesystem>
 #include <memory>
 
-#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/patch_layout.h"
 #include "atlas/mesh/mesh_io.h"
 #include "atlas/mesh/quad_charts.h"
 #include "atlas/mesh/resample.h"
@@ -28,7 +28,7 @@ HierarchyParams meshHierarchyParams(const MeshBuildOptions& options);
 
 // A mesh read and charted.
 struct ChartedMesh {
-  ChartLayout layout;
+  PatchLayout layout;
   IndexedMesh mesh;             // the input, kept for the fidelity figure (in-memory path)
   std::filesystem::path cells;  // the cell files, kept for the fidelity figure (out-of-core path)
   MeshChartStats stats;

@@ -30,8 +30,8 @@ uint64_t tris(uint32_t res) { return 2ull << (2 * res); }
 
 struct Candidate {
   NodeId id;
-  uint32_t res;     // chosen resolution (clamped to maxRes)
-  bool overTol;     // even maxRes is above tolerance
+  uint32_t resLog2;     // chosen resolution (clamped to maxResLog2)
+  bool overTol;     // even maxResLog2 is above tolerance
   double priority;  // larger splits first
 };
 
@@ -57,8 +57,8 @@ double boxScreenError(const std::array<float, 6>& box, double error, const ViewP
 }
 
 double geomorphFactor(const Hierarchy& h, const CutNode& n, const ViewParams& v, double tolerancePx, double range) {
-  if (n.res <= h.params.minNodeResLog2 || !(tolerancePx > 0.0) || !(range > 0.0)) return 0.0;
-  const double coarser = screenError(h, n.id, n.res - 1, v);
+  if (n.resLog2 <= h.params.minNodeResLog2 || !(tolerancePx > 0.0) || !(range > 0.0)) return 0.0;
+  const double coarser = screenError(h, n.id, n.resLog2 - 1, v);
   return std::clamp(1.0 - (coarser - tolerancePx) / (range * tolerancePx), 0.0, 1.0);
 }
 
@@ -69,7 +69,7 @@ double screenError(const Hierarchy& h, const NodeId& n, uint32_t res, const View
 uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tolPx) {
   const double d = std::max(boxDistance(h.bounds(n), v.eye), v.minDistance);
   const double tolWorld = tolPx * d / v.pixelsPerRadian;
-  const uint32_t rmax = h.maxRes(n);
+  const uint32_t rmax = h.maxResLog2(n);
   for (uint32_t r = h.params.minNodeResLog2; r <= rmax; ++r)
     if (double(h.error(n, r)) <= tolWorld) return r;
   return rmax + 1;
@@ -88,7 +88,7 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
 
   auto makeCandidate = [&](const NodeId& n) {
     Candidate c{n, 0, false, 0.0};
-    c.priority = topDownSplitPriority(h, n, view, tol, options.frustumCull, groups.frozen(n.chart), &c.res, &c.overTol);
+    c.priority = topDownSplitPriority(h, n, view, tol, options.frustumCull, groups.frozen(n.chart), &c.resLog2, &c.overTol);
     return c;
   };
 
@@ -134,15 +134,15 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
   Cut cut;
   cut.nodes.reserve(done.size());
   for (const Candidate& c : done) {
-    cut.nodes.push_back({c.id, c.res, 0.f});
-    // A root held in a closed group for the node budget, over tolerance even at its maxRes.
+    cut.nodes.push_back({c.id, c.resLog2, 0.f});
+    // A root held in a closed group for the node budget, over tolerance even at its maxResLog2.
     if (c.overTol && groups.frozen(c.id.chart) && c.id.level + 1 < h.params.depth) st.nodeBudgetBound = true;
   }
   cut.rebuildIndex();
   enforceStitchConstraint(h, cut, &view, tol, &st);
   if (st.constraintSplits > 0) holdNodeBudget(h, cut, view, chartBudget);
   for (CutNode& n : cut.nodes) {
-    n.errorPx = float(screenError(h, n.id, n.res, view));
+    n.errorPx = float(screenError(h, n.id, n.resLog2, view));
     st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
   }
   markGroupedRoots(groups, cut);
@@ -161,7 +161,7 @@ void setCutCounts(const Cut& cut, AdaptStats& st) {
 
 double topDownSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParams& view, double tolPx, bool cull,
                             bool held, uint32_t* res, bool* overTol) {
-  const uint32_t rmax = h.maxRes(n);
+  const uint32_t rmax = h.maxResLog2(n);
   const uint32_t need = neededResolution(h, n, view, tolPx);
   const bool leaf = held || n.level + 1 >= h.params.depth;
   *overTol = need > rmax;
@@ -172,7 +172,7 @@ double topDownSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParam
   for (uint32_t i = 0; i < 4; ++i) {
     const NodeId ch = n.child(i);
     if (!visible(h, ch, view, cull)) continue;
-    childTris += tris(std::min(neededResolution(h, ch, view, tolPx), h.maxRes(ch)));
+    childTris += tris(std::min(neededResolution(h, ch, view, tolPx), h.maxResLog2(ch)));
   }
   return double(tris(*res)) - double(childTris);  // triangles saved by splitting
 }
@@ -222,9 +222,9 @@ bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* vie
     for (uint32_t i = 0; i < cut.nodes.size(); ++i) {
       CutNode& n = cut.nodes[i];
       const uint32_t gap = gaps[i];
-      if (gap <= n.res) continue;
-      if (gap <= h.maxRes(n.id)) {
-        n.res = gap;
+      if (gap <= n.resLog2) continue;
+      if (gap <= h.maxResLog2(n.id)) {
+        n.resLog2 = gap;
         if (stats) ++stats->constraintRaises;
       } else {
         toSplit.push_back(i);
@@ -240,7 +240,7 @@ bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* vie
         const NodeId ch = cut.nodes[i].id.child(c);
         if (h.flags(ch) & kNodeEmpty) continue;
         uint32_t r = h.params.minNodeResLog2;
-        if (view) r = std::min(neededResolution(h, ch, *view, tolerancePx), h.maxRes(ch));
+        if (view) r = std::min(neededResolution(h, ch, *view, tolerancePx), h.maxResLog2(ch));
         added.push_back({ch, r, 0.f});
       }
     }
@@ -258,7 +258,7 @@ bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* vie
 uint32_t holdNodeBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, uint32_t maxNodes) {
   struct Group {
     NodeId parent;
-    uint32_t res = 0;
+    uint32_t resLog2 = 0;
     double errorPx = 0.0;
   };
   std::vector<SideNeighbour> scratch;
@@ -279,17 +279,17 @@ uint32_t holdNodeBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, ui
         if (h.flags(ch) & kNodeEmpty) continue;
         const int32_t i = cut.find(ch);
         complete = i >= 0;
-        if (complete) finest = std::max(finest, cut.nodes[size_t(i)].res);
+        if (complete) finest = std::max(finest, cut.nodes[size_t(i)].resLog2);
       }
       if (!complete) continue;
-      const uint32_t res = std::min(finest + 1, h.maxRes(p));
+      const uint32_t res = std::min(finest + 1, h.maxResLog2(p));
       groups.push_back({p, res, screenError(h, p, res, view)});
     }
     std::sort(groups.begin(), groups.end(), [](const Group& a, const Group& b) {
       return a.errorPx != b.errorPx ? a.errorPx < b.errorPx : a.parent.key() < b.parent.key();
     });
     // Merged in that order while over the budget (merging one group leaves the others complete);
-    // a parent whose neighbours are too fine for its maxRes gets its children back.
+    // a parent whose neighbours are too fine for its maxResLog2 gets its children back.
     bool merged = false;
     for (const Group& g : groups) {
       if (cut.nodes.size() <= maxNodes) break;
@@ -299,12 +299,12 @@ uint32_t holdNodeBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, ui
         if (child) children.push_back(n);
         return child;
       });
-      cut.nodes.push_back({g.parent, g.res, float(g.errorPx)});
+      cut.nodes.push_back({g.parent, g.resLog2, float(g.errorPx)});
       cut.rebuildIndex();
       const uint32_t gap = finestNeighbourGap(h, cut, uint32_t(cut.nodes.size() - 1), scratch);
-      if (gap <= h.maxRes(g.parent)) {
-        cut.nodes.back().res = std::max(g.res, gap);
-        cut.nodes.back().errorPx = float(screenError(h, g.parent, cut.nodes.back().res, view));
+      if (gap <= h.maxResLog2(g.parent)) {
+        cut.nodes.back().resLog2 = std::max(g.resLog2, gap);
+        cut.nodes.back().errorPx = float(screenError(h, g.parent, cut.nodes.back().resLog2, view));
         merged = true;
         ++merges;
         continue;
@@ -341,8 +341,8 @@ AttributeStats assignAttributeResolutions(const Hierarchy& h, Cut& cut, const Vi
     n.texRes = attributeResolution(h, n.id, v, texelsPerPixel, &n.texBlend);
     const uint64_t side = (1ull << n.texRes) + 1;
     st.texels += side * side;
-    const uint32_t page = h.maxRes(n.id);
-    st.aboveGeometry += n.texRes > n.res;
+    const uint32_t page = h.maxResLog2(n.id);
+    st.aboveGeometry += n.texRes > n.resLog2;
     st.belowPage += n.texRes < page;
     st.abovePage += n.texRes > page;
   }
@@ -353,7 +353,7 @@ uint32_t countStitchViolations(const Hierarchy& h, const Cut& cut) {
   std::vector<SideNeighbour> scratch;
   uint32_t bad = 0;
   for (uint32_t i = 0; i < cut.nodes.size(); ++i)
-    if (finestNeighbourGap(h, cut, i, scratch) > cut.nodes[i].res) ++bad;
+    if (finestNeighbourGap(h, cut, i, scratch) > cut.nodes[i].resLog2) ++bad;
   return bad;
 }
 

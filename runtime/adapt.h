@@ -95,13 +95,13 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
 
 // The top-down greedy's split priority of node n (adaptErrorThreshold, paper 7.1): the triangles
 // saved by drawing its visible children, each at its needed resolution, instead of n at its own;
-// for a node over tolerance even at its maxRes, overTolerancePriority of that error (those split
+// for a node over tolerance even at its maxResLog2, overTolerancePriority of that error (those split
 // first, the worst first); -1 for a leaf or a held node (held: a closed group's root). Sets *res to
-// n's needed resolution clamped to its maxRes, and *overTol.
+// n's needed resolution clamped to its maxResLog2, and *overTol.
 double topDownSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParams& view, double tolPx, bool cull,
                             bool held, uint32_t* res, bool* overTol);
 
-// Lowest resolution of n whose screen error is within tolerance, or maxRes + 1 if none.
+// Lowest resolution of n whose screen error is within tolerance, or maxResLog2 + 1 if none.
 uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tolPx);
 
 // The stitching constraint (paper 7.4): a node's resolution is at least the level difference to
@@ -114,8 +114,8 @@ bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* vie
 // The node budget held after the stitching constraint split past it: while the cut has more than
 // maxNodes nodes (0: no limit), merges a complete group of sibling nodes (every child that is not
 // empty) into their parent, the parent of smallest screen error first, where the parent can meet
-// the constraint at its maxRes. The parent takes one level above its children's finest
-// resolution (capped at its maxRes), raised to the constraint's. Best effort: stops when no group
+// the constraint at its maxResLog2. The parent takes one level above its children's finest
+// resolution (capped at its maxResLog2), raised to the constraint's. Best effort: stops when no group
 // can merge. Returns the merges.
 uint32_t holdNodeBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, uint32_t maxNodes);
 

@@ -15,10 +15,10 @@ namespace {
 constexpr double kOverTolPriority = kOverTolerancePriority;
 uint64_t tris(uint32_t res) { return 2ull << (2 * res); }
 
-// Needed resolution clamped to maxRes, and whether even maxRes is over tolerance.
+// Needed resolution clamped to maxResLog2, and whether even maxResLog2 is over tolerance.
 uint32_t clampedRes(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tol, bool* overTol) {
   const uint32_t need = neededResolution(h, n, v, tol);
-  const uint32_t rmax = h.maxRes(n);
+  const uint32_t rmax = h.maxResLog2(n);
   if (overTol) *overTol = need > rmax;
   return std::min(need, rmax);
 }
@@ -36,7 +36,7 @@ double childTriangles(const Hierarchy& h, const NodeId& n, const ViewParams& v, 
 double splitPriorityOf(const Hierarchy& h, const NodeId& n, uint32_t res, bool drawn, bool overTol,
                        const ViewParams& v, double tol, bool cull) {
   if (n.level + 1 >= h.params.depth) return -1.0;
-  if (drawn && overTol) return overTolerancePriority(screenError(h, n, h.maxRes(n), v));
+  if (drawn && overTol) return overTolerancePriority(screenError(h, n, h.maxResLog2(n), v));
   const double own = drawn ? double(tris(res)) : 0.0;
   return own - childTriangles(h, n, v, tol, cull);
 }
@@ -63,7 +63,7 @@ double dualQueueMergeCost(const Hierarchy& h, const NodeId& parent, const ViewPa
   const uint32_t res = clampedRes(h, parent, v, tolerancePx, &over);
   const bool drawn = nodeDrawable(h, parent, v, cull);
   if (parentOverTol) *parentOverTol = drawn && over;
-  if (drawn && over) return overTolerancePriority(screenError(h, parent, h.maxRes(parent), v));
+  if (drawn && over) return overTolerancePriority(screenError(h, parent, h.maxResLog2(parent), v));
   const double own = drawn ? double(tris(res)) : 0.0;
   return own - childTriangles(h, parent, v, tolerancePx, cull);
 }
@@ -96,7 +96,7 @@ void DualQueueAdapter::reset() {
 Cut DualQueueAdapter::partition() const {
   Cut c;
   c.nodes.reserve(entries_.size());
-  for (const Entry& e : entries_) c.nodes.push_back({e.id, e.res, 0.f});
+  for (const Entry& e : entries_) c.nodes.push_back({e.id, e.resLog2, 0.f});
   c.rebuildIndex();
   return c;
 }
@@ -123,10 +123,10 @@ DualQueueAdapter::Eval DualQueueAdapter::evalNode(const NodeId& n, bool parentIn
   const Hierarchy::ChartNodes& cn = h_.charts[n.chart];
   const uint32_t i = nodeIndex(n.level, n.x, n.y);
   if (cn.flags[i] & kNodeEmpty) return Eval{};
-  return evalBox(cn.bounds[i].data(), &cn.errors[size_t(i) * h_.params.resCount()], h_.maxRes(n), parentInside);
+  return evalBox(cn.bounds[i].data(), &cn.errors[size_t(i) * h_.params.resCount()], h_.maxResLog2(n), parentInside);
 }
 
-DualQueueAdapter::Eval DualQueueAdapter::evalBox(const float* b, const float* err, uint32_t maxRes,
+DualQueueAdapter::Eval DualQueueAdapter::evalBox(const float* b, const float* err, uint32_t maxResLog2,
                                                  bool parentInside) const {
   Eval ev;
   const glm::dvec3 lo{b[0], b[1], b[2]}, hi{b[3], b[4], b[5]};
@@ -142,18 +142,18 @@ DualQueueAdapter::Eval DualQueueAdapter::evalBox(const float* b, const float* er
   const glm::dvec3 q = glm::clamp(view_.eye, lo, hi) - view_.eye;
   const double d = std::max(std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z), view_.minDistance);
   const double tolWorld = opt_.tolerancePx * d / view_.pixelsPerRadian;
-  const uint32_t rmin = h_.params.minNodeResLog2, rmax = maxRes;
+  const uint32_t rmin = h_.params.minNodeResLog2, rmax = maxResLog2;
   uint32_t r = rmin;
   while (r <= rmax && !(double(err[r - rmin]) <= tolWorld)) ++r;
   ev.overTol = r > rmax;
-  ev.res = uint8_t(std::min(r, rmax));
-  ev.errorPx = double(err[ev.res - rmin]) * view_.pixelsPerRadian / d;
+  ev.resLog2 = uint8_t(std::min(r, rmax));
+  ev.errorPx = double(err[ev.resLog2 - rmin]) * view_.pixelsPerRadian / d;
   // The clamped resolution holds for distances in [lower, upper): lower = where err[res] stops
   // meeting the tolerance (none at rmax), upper = where err[res - 1] starts to (none at rmin).
   const double k = view_.pixelsPerRadian / opt_.tolerancePx;
   double slack = std::numeric_limits<double>::infinity();
-  if (ev.res < rmax) slack = d - double(err[ev.res - rmin]) * k;
-  if (ev.res > rmin) slack = std::min(slack, double(err[ev.res - 1 - rmin]) * k - d);
+  if (ev.resLog2 < rmax) slack = d - double(err[ev.resLog2 - rmin]) * k;
+  if (ev.resLog2 > rmin) slack = std::min(slack, double(err[ev.resLog2 - 1 - rmin]) * k - d);
   ev.slack = slack - 1e-9 * d;  // margin for rounding
   return ev;
 }
@@ -161,12 +161,12 @@ DualQueueAdapter::Eval DualQueueAdapter::evalBox(const float* b, const float* er
 void DualQueueAdapter::evaluate(Entry& e) {
   // The entry keeps a copy of its bounds and errors: the per-frame pass then streams through
   // entries_ instead of gathering from the hierarchy's arrays.
-  const Eval ev = e.copied ? evalBox(e.box.data(), e.err.data(), h_.maxRes(e.id), false) : evalNode(e.id, false);
+  const Eval ev = e.copied ? evalBox(e.box.data(), e.err.data(), h_.maxResLog2(e.id), false) : evalNode(e.id, false);
   e.drawnFlipped = e.drawn != ev.drawn;
   e.drawn = ev.drawn;
   e.inside = ev.inside;
   e.overTol = ev.drawn && ev.overTol;
-  e.res = ev.drawn ? ev.res : uint8_t(h_.params.minNodeResLog2);
+  e.resLog2 = ev.drawn ? ev.resLog2 : uint8_t(h_.params.minNodeResLog2);
   e.errorPx = ev.drawn ? ev.errorPx : 0.0;
 }
 
@@ -178,7 +178,7 @@ double DualQueueAdapter::cachedSplitPriority(Entry& e, int32_t* delta, bool* reu
     return -1.0;
   }
   if (!e.drawn || e.overTol || e.id.level + 1 >= h_.params.depth) return splitPriority(e, delta);
-  if (reuse_ && e.cacheSlack >= 0.0 && e.cacheEpoch == epoch_ && e.cacheRes == e.res && e.inside) {
+  if (reuse_ && e.cacheSlack >= 0.0 && e.cacheEpoch == epoch_ && e.cacheRes == e.resLog2 && e.inside) {
     const glm::dvec3 m = view_.eye - e.cacheEye;
     if (m.x * m.x + m.y * m.y + m.z * m.z < e.cacheSlack * e.cacheSlack) {
       *reused = true;
@@ -193,7 +193,7 @@ double DualQueueAdapter::cachedSplitPriority(Entry& e, int32_t* delta, bool* reu
   e.cacheEye = view_.eye;
   e.cachePriority = t;
   e.cacheDelta = *delta;
-  e.cacheRes = e.res;
+  e.cacheRes = e.resLog2;
   e.cacheEpoch = epoch_;
   return t;
 }
@@ -204,13 +204,13 @@ double DualQueueAdapter::splitPriority(const Entry& e, int32_t* delta, double* s
   *delta = -1;
   if (e.overTol) {
     for (uint32_t i = 0; i < 4; ++i) *delta += int32_t(childDrawn(e, i));
-    return overTolerancePriority(e.errorPx);  // errorPx is at maxRes here
+    return overTolerancePriority(e.errorPx);  // errorPx is at maxResLog2 here
   }
-  double t = double(tris(e.res));
+  double t = double(tris(e.resLog2));
   for (uint32_t i = 0; i < 4; ++i) {
     const Eval c = evalNode(e.id.child(i), e.inside);
     if (!c.drawn) continue;
-    t -= double(tris(c.res));
+    t -= double(tris(c.resLog2));
     ++*delta;
     if (slack) *slack = std::min(*slack, c.slack);
   }
@@ -232,12 +232,12 @@ double DualQueueAdapter::mergeCost(const NodeId& parent, bool* overTol, int32_t*
   for (uint32_t i = 0; i < 4; ++i) {
     const int32_t s = slot_[globalIndex(parent.child(i))];
     if (s < 0 || !entries_[s].drawn) continue;
-    t -= double(tris(entries_[s].res));
+    t -= double(tris(entries_[s].resLog2));
     ++*freed;
   }
   *overTol = p.drawn && p.overTol;
   if (*overTol) return overTolerancePriority(p.errorPx);
-  return t + (p.drawn ? double(tris(p.res)) : 0.0);
+  return t + (p.drawn ? double(tris(p.resLog2)) : 0.0);
 }
 
 bool DualQueueAdapter::groupInCut(const NodeId& parent) const {
@@ -590,13 +590,13 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   std::make_heap(mergeHeap_.begin(), mergeHeap_.end(), Greater{});
 
   runQueues(budget, st);
-  if (groups_.active)  // a closed group's root over tolerance even at its maxRes
+  if (groups_.active)  // a closed group's root over tolerance even at its maxResLog2
     for (const Entry& e : entries_)
       if (e.overTol && e.id.level + 1 < h_.params.depth && groups_.frozen(e.id.chart)) st.nodeBudgetBound = true;
 
   // The drawn cut (in partition order, which the operation history determines), with the
   // stitching constraint: gaps from the dense partition index (no hashing), raising resolutions
-  // in place; only when a node would need more than its maxRes does the generic pass split it.
+  // in place; only when a node would need more than its maxResLog2 does the generic pass split it.
   updateGaps();
   out_.nodes.clear();
   out_.nodes.reserve(drawn_);
@@ -608,14 +608,14 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
       continue;
     }
     const uint8_t gap = gaps_[e.g];
-    if (gap <= e.res) {
-      out_.nodes.push_back({e.id, e.res, float(e.errorPx)});
-    } else if (gap <= h_.maxRes(e.id)) {
+    if (gap <= e.resLog2) {
+      out_.nodes.push_back({e.id, e.resLog2, float(e.errorPx)});
+    } else if (gap <= h_.maxResLog2(e.id)) {
       ++st.constraintRaises;
       out_.nodes.push_back({e.id, gap, float(screenError(h_, e.id, gap, view_))});
     } else {
       needSplit = true;
-      out_.nodes.push_back({e.id, e.res, float(e.errorPx)});
+      out_.nodes.push_back({e.id, e.resLog2, float(e.errorPx)});
     }
   }
   out_.rebuildIndex();
@@ -624,7 +624,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   if (needSplit) {
     enforceStitchConstraint(h_, out_, &view_, options.tolerancePx, &st);
     holdNodeBudget(h_, out_, view_, chartBudget);
-    for (CutNode& n : out_.nodes) n.errorPx = float(screenError(h_, n.id, n.res, view_));
+    for (CutNode& n : out_.nodes) n.errorPx = float(screenError(h_, n.id, n.resLog2, view_));
   }
   for (const CutNode& n : out_.nodes) st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
   opsSinceSort_ += frame_.splits + frame_.merges;

@@ -18,14 +18,14 @@ namespace gimlod {
 bool nodeDrawable(const Hierarchy& h, const NodeId& n, const ViewParams& v, bool cull);
 
 // Split priority of n (paper 7.1): triangles saved by replacing n, at its needed resolution, with
-// its children each at theirs (undrawn nodes count 0 triangles). 1e30 + screen error at maxRes when
-// n is drawn and cannot meet tolerance even at maxRes; -1 at the leaf level.
+// its children each at theirs (undrawn nodes count 0 triangles). 1e30 + screen error at maxResLog2 when
+// n is drawn and cannot meet tolerance even at maxResLog2; -1 at the leaf level.
 double dualQueueSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParams& v,
                               double tolerancePx, bool cull);
 
 // Merge cost of the sibling group under `parent` (paper 7.1): triangles added by replacing the
 // non-empty children, each at its needed resolution, with the parent at its needed resolution.
-// Sets *parentOverTol when the drawn parent cannot meet tolerance even at maxRes (then the group
+// Sets *parentOverTol when the drawn parent cannot meet tolerance even at maxResLog2 (then the group
 // is merged only to get back under the node budget). Returns the cost.
 double dualQueueMergeCost(const Hierarchy& h, const NodeId& parent, const ViewParams& v,
                           double tolerancePx, bool cull, bool* parentOverTol);
@@ -86,7 +86,7 @@ class DualQueueAdapter {
   struct Entry {
     NodeId id;
     uint32_t g = 0;            // dense forest index (see globalIndex)
-    uint8_t res = 0;
+    uint8_t resLog2 = 0;
     bool drawn = false;
     bool inside = false;       // bounds entirely inside the frustum (so are the children's)
     bool overTol = false;
@@ -125,7 +125,7 @@ class DualQueueAdapter {
   // Per-view evaluation of one node: drawn, fully inside, needed resolution (clamped).
   struct Eval {
     bool drawn = false, inside = false, overTol = false;
-    uint8_t res = 0;
+    uint8_t resLog2 = 0;
     double errorPx = 0.0;
     double slack = 0.0;  // eye movement before the (clamped) resolution can change
   };
@@ -134,7 +134,7 @@ class DualQueueAdapter {
   NodeId nodeOf(uint32_t g) const;
   // parentInside: the parent is known to lie entirely inside the frustum (skips the test).
   Eval evalNode(const NodeId& n, bool parentInside) const;
-  Eval evalBox(const float* bounds, const float* errors, uint32_t maxRes, bool parentInside) const;
+  Eval evalBox(const float* bounds, const float* errors, uint32_t maxResLog2, bool parentInside) const;
   void evaluate(Entry& e);
   // slack (optional): lowered to the smallest eye movement that may change a child's resolution.
   double splitPriority(const Entry& e, int32_t* delta, double* slack = nullptr) const;

@@ -16,7 +16,7 @@ namespace {
 
 // Tier bases. A tier value is base * (1 + err): adding err to 1e30 would be lost to rounding (all
 // tier members would tie and fall back to key order), scaling keeps the order by err.
-constexpr double kStuckPriority = 1e30;  // split priority base of a drawn node already at maxRes
+constexpr double kStuckPriority = 1e30;  // split priority base of a drawn node already at maxResLog2
 constexpr double kOverCost = 1e30;       // merge cost base when the parent cannot hold the error
 constexpr double kEps = 1e-9;
 
@@ -26,10 +26,10 @@ NodeId keyToNode(uint64_t key) { return NodeId::fromKey(key); }
 
 struct Entry {
   NodeId id;
-  uint32_t res = 0;
+  uint32_t resLog2 = 0;
   uint32_t floor = 0;  // lowest allowed resolution: minRes, or the stitching gap
   uint32_t gap = 0;    // stitching level gap to the finest drawn neighbour (computeFloors)
-  uint32_t maxRes = 0;
+  uint32_t maxResLog2 = 0;
   bool drawn = false;
   bool drawnFlipped = false;  // drawn changed in this frame's evaluation
   bool prioValid = false;  // splitPrio holds this frame's split priority at res and err
@@ -44,7 +44,7 @@ struct Entry {
 struct NodeEval {
   double dist = 1.0;  // eye distance to the bounds, at least the view's minDistance
   const float* errs = nullptr;
-  uint32_t maxRes = 0;
+  uint32_t maxResLog2 = 0;
   bool drawable = false;  // nodeDrawable
 };
 
@@ -52,7 +52,7 @@ struct NodeEval {
 struct Item {
   double priority;
   uint64_t key;
-  uint32_t res;  // resolution when pushed (stale when it changed)
+  uint32_t resLog2;  // resolution when pushed (stale when it changed)
 };
 struct ItemLess {
   bool operator()(const Item& a, const Item& b) const {
@@ -226,7 +226,7 @@ class NodeCache {
     e.drawable = !(cn.flags[i] & kNodeEmpty) && (!cull_ || view_->frustum.intersects(lo, hi));
     e.dist = std::max(glm::length(glm::clamp(view_->eye, lo, hi) - view_->eye), view_->minDistance);
     e.errs = &cn.errors[size_t(i) * h_->params.resCount()];
-    e.maxRes = h_->maxRes(n);
+    e.maxResLog2 = h_->maxResLog2(n);
     return e;
   }
 
@@ -282,7 +282,7 @@ struct QuadQueueAdapter::State {
   // The floors likewise, from the first computeFloors of a frame on: the nodes that joined or left
   // the cut since (cutChanged) mark the entries beside them, whose gaps are found again.
   bool floorsReady = false;
-  uint32_t overMaxRes = 0;  // drawn entries whose gap is above their maxRes
+  uint32_t overMaxRes = 0;  // drawn entries whose gap is above their maxResLog2
   std::vector<NodeId> cutChanged, dirty;
   std::vector<uint32_t> newGap;  // scratch of the full pass, per entry
   // After a frame's evaluation, until its first computeFloors: the floors are last frame's, and
@@ -310,7 +310,7 @@ struct QuadQueueAdapter::State {
   std::vector<uint32_t> listedSplit, listedGroup;
   uint32_t listMark = 1;
 
-  uint32_t minRes() const { return h->params.minNodeResLog2; }
+  uint32_t minResLog2() const { return h->params.minNodeResLog2; }
   uint32_t nodeBudget() const { return opt.maxNodes == 0 ? UINT32_MAX : opt.maxNodes; }
   bool capped() {
     if (ops < opt.maxOpsPerFrame) return false;
@@ -318,13 +318,13 @@ struct QuadQueueAdapter::State {
     return true;
   }
   // screenError(h, e.id, r, view) with the distance evaluated once per frame.
-  double errAt(const Entry& e, uint32_t r) const { return double(e.errs[r - minRes()]) * view.pixelsPerRadian / e.dist; }
-  // Resolution a node needs to hold `tolPx`, clamped to its maxRes (neededResolution's arithmetic).
+  double errAt(const Entry& e, uint32_t r) const { return double(e.errs[r - minResLog2()]) * view.pixelsPerRadian / e.dist; }
+  // Resolution a node needs to hold `tolPx`, clamped to its maxResLog2 (neededResolution's arithmetic).
   uint32_t resFor(const NodeEval& n, double tolPx) const {
     const double tolWorld = tolPx * n.dist / view.pixelsPerRadian;
-    for (uint32_t r = minRes(); r <= n.maxRes; ++r)
-      if (double(n.errs[r - minRes()]) <= tolWorld) return r;
-    return n.maxRes;
+    for (uint32_t r = minResLog2(); r <= n.maxResLog2; ++r)
+      if (double(n.errs[r - minResLog2()]) <= tolWorld) return r;
+    return n.maxResLog2;
   }
   bool reservedNow(const NodeId& n) const { return reserved[cut.index(n)] == reserveMark; }
 
@@ -342,8 +342,8 @@ struct QuadQueueAdapter::State {
       if (e.id.level > 0) recheckGroup(e.id.parent());
     }
     cut.willModify(e);
-    if (e.drawn) triangles = triangles - tris(e.res) + tris(r);
-    e.res = r;
+    if (e.drawn) triangles = triangles - tris(e.resLog2) + tris(r);
+    e.resLog2 = r;
     e.err = e.drawn ? errAt(e, r) : 0.0;
     e.prioValid = false;
   }
@@ -353,9 +353,9 @@ struct QuadQueueAdapter::State {
     e.drawn = n.drawable;
     e.dist = n.dist;
     e.errs = n.errs;
-    e.maxRes = n.maxRes;
-    e.res = e.drawn ? std::clamp(e.res, minRes(), e.maxRes) : minRes();
-    e.err = e.drawn ? errAt(e, e.res) : 0.0;
+    e.maxResLog2 = n.maxResLog2;
+    e.resLog2 = e.drawn ? std::clamp(e.resLog2, minResLog2(), e.maxResLog2) : minResLog2();
+    e.err = e.drawn ? errAt(e, e.resLog2) : 0.0;
     e.prioValid = false;
   }
   void recount() {
@@ -364,16 +364,16 @@ struct QuadQueueAdapter::State {
     for (const auto& [k, e] : cut)
       if (e.drawn) {
         ++drawn;
-        triangles += tris(e.res);
+        triangles += tris(e.resLog2);
         floorTris += tris(e.floor);
-        overMaxRes += uint32_t(e.gap > e.maxRes);
+        overMaxRes += uint32_t(e.gap > e.maxResLog2);
       }
   }
   Cut drawnCut() const {
     Cut c;
     c.nodes.reserve(drawn);
     for (const auto& [k, e] : cut)
-      if (e.drawn) c.nodes.push_back({e.id, e.res, float(e.err)});
+      if (e.drawn) c.nodes.push_back({e.id, e.resLog2, float(e.err)});
     c.rebuildIndex();
     return c;
   }
@@ -381,16 +381,16 @@ struct QuadQueueAdapter::State {
     if (floorsReady) cutChanged.push_back(e.id);
     if (!e.drawn) return;
     ++drawn;
-    triangles += tris(e.res);
+    triangles += tris(e.resLog2);
     floorTris += tris(e.floor);
   }
   void removeCounts(const Entry& e) {
     if (floorsReady) cutChanged.push_back(e.id);
     if (!e.drawn) return;
     --drawn;
-    triangles -= tris(e.res);
+    triangles -= tris(e.resLog2);
     floorTris -= tris(e.floor);
-    if (e.gap > e.maxRes) --overMaxRes;
+    if (e.gap > e.maxResLog2) --overMaxRes;
   }
   // Stitching floors of the drawn nodes (paper 7.4): resolution >= level gap to finer neighbours.
   // As stitchGaps: each drawn node raises the gap of its equal-or-coarser drawn neighbours.
@@ -422,7 +422,7 @@ struct QuadQueueAdapter::State {
   // Sets an entry's gap and floor (an undrawn entry: 0 and minRes), logged while a round runs;
   // counts a drawn entry in floorTris and overMaxRes, and lists it to raise or to refloor.
   void setGap(Entry& e, uint32_t gap) {
-    const uint32_t floor = e.drawn ? std::clamp(gap, minRes(), e.maxRes) : minRes();
+    const uint32_t floor = e.drawn ? std::clamp(gap, minResLog2(), e.maxResLog2) : minResLog2();
     if (gap != e.gap || floor != e.floor) {
       cut.willModify(e);
       if (phase1Ready && e.drawn && floor != e.floor) refloored.push_back(e.id);
@@ -431,8 +431,8 @@ struct QuadQueueAdapter::State {
     }
     if (!e.drawn) return;
     floorTris += tris(floor);
-    overMaxRes += uint32_t(gap > e.maxRes);
-    if (e.res < floor) raise.push_back(e.id);
+    overMaxRes += uint32_t(gap > e.maxResLog2);
+    if (e.resLog2 < floor) raise.push_back(e.id);
   }
 
   void updateFloors() {
@@ -456,7 +456,7 @@ struct QuadQueueAdapter::State {
       Entry& e = *cut.find(n);
       if (e.drawn) {  // out of the counts, back in by setGap
         floorTris -= tris(e.floor);
-        overMaxRes -= uint32_t(e.gap > e.maxRes);
+        overMaxRes -= uint32_t(e.gap > e.maxResLog2);
       }
       setGap(e, e.drawn ? keptGap(*h, e.id, find) : 0);
     }
@@ -467,28 +467,28 @@ struct QuadQueueAdapter::State {
   void pushPhase1(const Entry& e, bool heapify) {
     if (!e.drawn) return;
     const uint64_t k = e.id.key();
-    if (e.res < e.maxRes) {
-      const double gain = (e.err - errAt(e, e.res + 1)) / double(tris(e.res + 1) - tris(e.res));
-      std::vector<Item>& b = refineB[e.res];
-      b.push_back({gain, k, e.res});
+    if (e.resLog2 < e.maxResLog2) {
+      const double gain = (e.err - errAt(e, e.resLog2 + 1)) / double(tris(e.resLog2 + 1) - tris(e.resLog2));
+      std::vector<Item>& b = refineB[e.resLog2];
+      b.push_back({gain, k, e.resLog2});
       if (heapify) std::push_heap(b.begin(), b.end(), ItemLess{});
     }
-    if (e.res > e.floor) {
-      const double loss = (errAt(e, e.res - 1) - e.err) / double(tris(e.res) - tris(e.res - 1));
-      coarsenH.push_back({-loss, k, e.res});
+    if (e.resLog2 > e.floor) {
+      const double loss = (errAt(e, e.resLog2 - 1) - e.err) / double(tris(e.resLog2) - tris(e.resLog2 - 1));
+      coarsenH.push_back({-loss, k, e.resLog2});
       if (heapify) std::push_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
     }
-    errH.push_back({e.err, k, e.res});
+    errH.push_back({e.err, k, e.resLog2});
     if (heapify) std::push_heap(errH.begin(), errH.end(), ItemLess{});
   }
   Entry* validPhase1(const Item& it) {
     Entry* f = cut.find(it.key);
-    if (!f || !f->drawn || f->res != it.res) return nullptr;
+    if (!f || !f->drawn || f->resLog2 != it.resLog2) return nullptr;
     return f;
   }
   Entry* validCoarsen(const Item& it) {
     Entry* f = validPhase1(it);
-    return f && f->res > f->floor ? f : nullptr;
+    return f && f->resLog2 > f->floor ? f : nullptr;
   }
   // The largest error of the cut (0 without a drawn node), from the top of phase 1's error queue.
   double maxErrorNow() {
@@ -505,8 +505,8 @@ struct QuadQueueAdapter::State {
     while (!capped()) {
       Entry* m = nullptr;
       while (!errH.empty() && !(m = validPhase1(errH.front()))) heapPop(errH);
-      if (!m || m->res >= m->maxRes) break;
-      const uint64_t need = tris(m->res + 1) - tris(m->res);
+      if (!m || m->resLog2 >= m->maxResLog2) break;
+      const uint64_t need = tris(m->resLog2 + 1) - tris(m->resLog2);
       const uint64_t free = budget - triangles;
       popped.clear();
       chosen.clear();
@@ -522,23 +522,23 @@ struct QuadQueueAdapter::State {
         // note: dropped for good: the max error only falls during the balance, so a node whose
         // coarsening would reach it now never qualifies later (its own refinement pushes a new
         // item).
-        if (errAt(*c, c->res - 1) >= m->err - kEps) {
+        if (errAt(*c, c->resLog2 - 1) >= m->err - kEps) {
           dropped.push_back(it);  // back in the queue for the next phase 1
           continue;
         }
         popped.push_back(it);
         chosen.push_back(c);
-        freed += tris(c->res) - tris(c->res - 1);
+        freed += tris(c->resLog2) - tris(c->resLog2 - 1);
       }
       for (const Item& it : popped) heapPush(coarsenH, it);
       if (free + freed < need) break;
       // note: setRes logs, but never moves an entry, so the pointers stay valid.
       for (Entry* c : chosen) {
-        setRes(*c, c->res - 1);
+        setRes(*c, c->resLog2 - 1);
         ++st.coarsens, ++ops;
         pushPhase1(*c, true);
       }
-      setRes(*m, m->res + 1);
+      setRes(*m, m->resLog2 + 1);
       ++st.refines, ++ops;
       pushPhase1(*m, true);
       progress = true;
@@ -555,7 +555,7 @@ struct QuadQueueAdapter::State {
   void phase1Queues() {
     for (const NodeId& n : raise) {
       Entry* e = cut.find(n);
-      if (!e || e->res >= e->floor) continue;
+      if (!e || e->resLog2 >= e->floor) continue;
       setRes(*e, e->floor);
       ++st.constraintRaises;
       if (phase1Ready) pushPhase1(*e, true);
@@ -566,9 +566,9 @@ struct QuadQueueAdapter::State {
         if (const Entry* e = cut.find(n)) pushPhase1(*e, true);
       for (const NodeId& n : refloored) {
         const Entry* e = cut.find(n);
-        if (!e || !e->drawn || e->res <= e->floor) continue;
-        const double loss = (errAt(*e, e->res - 1) - e->err) / double(tris(e->res) - tris(e->res - 1));
-        heapPush(coarsenH, {-loss, n.key(), e->res});
+        if (!e || !e->drawn || e->resLog2 <= e->floor) continue;
+        const double loss = (errAt(*e, e->resLog2 - 1) - e->err) / double(tris(e->resLog2) - tris(e->resLog2 - 1));
+        heapPush(coarsenH, {-loss, n.key(), e->resLog2});
       }
     } else {
       // The refine queue is kept per resolution: a refinement's cost (added triangles) depends
@@ -597,7 +597,7 @@ struct QuadQueueAdapter::State {
       while (!coarsenH.empty() && !(e = validCoarsen(coarsenH.front()))) heapPop(coarsenH);
       if (!e) return false;
       heapPop(coarsenH);
-      setRes(*e, e->res - 1);
+      setRes(*e, e->resLog2 - 1);
       ++st.coarsens, ++ops;
       pushPhase1(*e, true);
     }
@@ -614,7 +614,7 @@ struct QuadQueueAdapter::State {
         }
         if (!best) break;
         Entry* e = validPhase1(heapPop(*best));
-        setRes(*e, e->res + 1);
+        setRes(*e, e->resLog2 + 1);
         ++st.refines, ++ops;
         pushPhase1(*e, true);
         progress = true;
@@ -638,8 +638,8 @@ struct QuadQueueAdapter::State {
   double splitPriorityNow(const Entry& e, bool cached) {
     if (!e.drawn || e.id.level + 1 >= h->params.depth) return -1.0;
     if (e.id.level == 0 && groups.frozen(e.id.chart)) return -1.0;  // a closed group's root
-    if (e.res >= e.maxRes) return kStuckPriority * (1.0 + e.err);
-    double t = double(tris(e.res));
+    if (e.resLog2 >= e.maxResLog2) return kStuckPriority * (1.0 + e.err);
+    double t = double(tris(e.resLog2));
     for (uint32_t i = 0; i < 4; ++i) {
       const NodeId c = e.id.child(i);
       const NodeEval ch = cached ? node(c) : node.evaluate(c, nodeIndex(c.level, c.x, c.y));
@@ -656,23 +656,23 @@ struct QuadQueueAdapter::State {
       const Entry* f = cut.find(p.child(i));
       if (!f || !f->drawn) continue;
       tol = std::max(tol, f->err);
-      childTris += double(tris(f->res));
+      childTris += double(tris(f->resLog2));
     }
-    *parentRes = minRes();
+    *parentRes = minResLog2();
     if (!pe.drawable) return -childTris;
-    if (tol < 0.0) return double(tris(minRes()));
+    if (tol < 0.0) return double(tris(minResLog2()));
     const double tolWorld = tol * pe.dist / view.pixelsPerRadian;
-    uint32_t need = minRes();
-    while (need <= pe.maxRes && !(double(pe.errs[need - minRes()]) <= tolWorld)) ++need;
-    if (need > pe.maxRes) {
-      *parentRes = pe.maxRes;
+    uint32_t need = minResLog2();
+    while (need <= pe.maxResLog2 && !(double(pe.errs[need - minResLog2()]) <= tolWorld)) ++need;
+    if (need > pe.maxResLog2) {
+      *parentRes = pe.maxResLog2;
       return kOverCost * (1.0 + parentErrorAtMax(pe));
     }
     *parentRes = need;
     return double(tris(need)) - childTris;
   }
   double parentErrorAtMax(const NodeEval& pe) const {
-    return double(pe.errs[pe.maxRes - minRes()]) * view.pixelsPerRadian / pe.dist;
+    return double(pe.errs[pe.maxResLog2 - minResLog2()]) * view.pixelsPerRadian / pe.dist;
   }
   int64_t drawnDelta(const NodeId& n) {
     const NodeEval ne = node(n);
@@ -712,19 +712,19 @@ struct QuadQueueAdapter::State {
       Entry e;
       e.id = ch;
       e.splitRound = r;
-      e.floor = minRes();
+      e.floor = minResLog2();
       const NodeEval ne = node(ch);
       evaluateWith(e, ne);
       if (e.drawn) {
-        e.res = resFor(ne, tol);
-        e.err = errAt(e, e.res);
+        e.resLog2 = resFor(ne, tol);
+        e.err = errAt(e, e.resLog2);
       }
       addCounts(e);
       Entry& added = cut.insert(e);
       if (phase1Ready) fresh.push_back(ch);
       if (splitHeap) {
         const double p = splitPriority(added);
-        if (p > 0.0) heapPush(*splitHeap, {p, ch.key(), added.res});
+        if (p > 0.0) heapPush(*splitHeap, {p, ch.key(), added.resLog2});
       }
     }
     ++st.splits, ++ops;
@@ -742,8 +742,8 @@ struct QuadQueueAdapter::State {
     Entry e;
     e.id = p;
     e.mergedRound = r;
-    e.res = pres;
-    e.floor = minRes();
+    e.resLog2 = pres;
+    e.floor = minResLog2();
     evaluateWith(e, node(p));
     addCounts(e);
     cut.insert(e);
@@ -778,7 +778,7 @@ struct QuadQueueAdapter::State {
     });
     for (size_t i = 0; i < n; ++i) {
       const Entry& e = items[i].second;
-      if (listed[i].split > 0.0) splitH.push_back({listed[i].split, items[i].first, e.res});
+      if (listed[i].split > 0.0) splitH.push_back({listed[i].split, items[i].first, e.resLog2});
       if (listed[i].merge) mergeH.push_back(mergeItem(e.id.parent(), -listed[i].cost));
     }
     std::make_heap(splitH.begin(), splitH.end(), ItemLess{});
@@ -801,7 +801,7 @@ struct QuadQueueAdapter::State {
       Entry* e = cut.find(n);
       if (!e) continue;
       const double p = splitPriority(*e);
-      if (p > 0.0) heapPush(splitH, {p, n.key(), e->res});
+      if (p > 0.0) heapPush(splitH, {p, n.key(), e->resLog2});
     }
     for (const NodeId& p : groupRecheck) {
       if (cut.count(p) || !groupMergeable(p, r)) continue;
@@ -855,7 +855,7 @@ struct QuadQueueAdapter::State {
       while (!mergeH.empty()) {
         const Item& t = mergeH.front();
         const NodeId p = keyToNode(t.key);
-        if (t.res == mergeSeq[cut.index(p)] && !cut.count(p) && groupMergeable(p, r)) {
+        if (t.resLog2 == mergeSeq[cut.index(p)] && !cut.count(p) && groupMergeable(p, r)) {
           uint32_t pres = 0;
           const double c = -mergeCost(p, &pres);
           if (c == t.priority) return &mergeH.front();
@@ -871,7 +871,7 @@ struct QuadQueueAdapter::State {
       while (!splitH.empty()) {
         const Item& t = splitH.front();
         Entry* f = cut.find(t.key);
-        if (f && f->drawn && f->res == t.res && f->mergedRound != r && !reservedNow(f->id)) return f;
+        if (f && f->drawn && f->resLog2 == t.resLog2 && f->mergedRound != r && !reservedNow(f->id)) return f;
         heapPop(splitH);
       }
       return nullptr;
@@ -934,7 +934,7 @@ struct QuadQueueAdapter::State {
       }
       if (!s) break;
       const int64_t d = drawnDelta(s->id);
-      const int64_t df = d * int64_t(tris(minRes()));
+      const int64_t df = d * int64_t(tris(minResLog2()));
       if (d <= availNodes && df <= availFloor) {
         const Item it = heapPop(splitH);
         reserved[cut.index(s->id)] = reserveMark;
@@ -950,8 +950,8 @@ struct QuadQueueAdapter::State {
       // that lowers the drawn node count can pay; one that does not (a culled group whose parent
       // is visible draws one node more) is set aside for this round.
       // A merge whose parent cannot hold its children's errors (over cost) pays only when the
-      // parent's error at maxRes stays below the error of the node to split: merging zero-error
-      // groups to split the worst node at maxRes is the trade a full node budget needs.
+      // parent's error at maxResLog2 stays below the error of the node to split: merging zero-error
+      // groups to split the worst node at maxResLog2 is the trade a full node budget needs.
       const NodeId mp = m ? keyToNode(m->key) : NodeId{};
       const bool pays = m && (-m->priority < kOverCost ? -m->priority < sp
                                                        : parentErrorAtMax(node(mp)) < s->err - kEps);
@@ -982,7 +982,7 @@ struct QuadQueueAdapter::State {
       if (!s) break;
       const Item it = heapPop(splitH);
       const int64_t d = drawnDelta(s->id);
-      if (int64_t(drawn) + d > nodeBudget_ || int64_t(floorTrisNow()) + d * int64_t(tris(minRes())) > triBudget) {
+      if (int64_t(drawn) + d > nodeBudget_ || int64_t(floorTrisNow()) + d * int64_t(tris(minResLog2())) > triBudget) {
         splitAside.push_back(it);
         continue;
       }
@@ -1009,14 +1009,14 @@ struct QuadQueueAdapter::State {
     for (uint32_t c : charts) {
       Entry root;
       root.id = {c, 0, 0, 0};
-      root.floor = minRes();
+      root.floor = minResLog2();
       if (cut.count(root.id)) continue;
       cut.insert(root);
       if (floorsReady) cutChanged.push_back(root.id);
     }
   }
   // Triangle floor of the drawn nodes at minRes (floors are recomputed after the round).
-  uint64_t floorTrisNow() const { return uint64_t(drawn) * tris(minRes()); }
+  uint64_t floorTrisNow() const { return uint64_t(drawn) * tris(minResLog2()); }
   // Drawn nodes a merge of the group under p removes (drawn children minus the drawn parent).
   int64_t mergeFreedNodes(const NodeId& p) {
     int64_t n = -int64_t(node(p).drawable);
@@ -1085,7 +1085,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
     for (uint32_t c = 0; c < h_.chartCount(); ++c) {
       Entry e;
       e.id = {c, 0, 0, 0};
-      e.floor = s.minRes();
+      e.floor = s.minResLog2();
       if (!(h_.flags(e.id) & kNodeEmpty)) s.cut.insert(e);
     }
   {
@@ -1142,7 +1142,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   }
 
   // The drawn cut; the floors already satisfy the stitching constraint unless a node would need
-  // a resolution above its maxRes (then enforceStitchConstraint splits it, reported as
+  // a resolution above its maxResLog2 (then enforceStitchConstraint splits it, reported as
   // constraintSplits, and groups elsewhere merge back into the node budget).
   // Every drawn node is at or above its floor, so without such a node the constraint holds as it
   // is (enforceStitchConstraint would change nothing) and each node's errorPx is already
@@ -1157,7 +1157,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
       holdNodeBudget(h_, s.out, view, s.opt.maxNodes);
       fitTriangleBudget(h_, s.out, view, options.maxTriangles);
     }
-    for (CutNode& n : s.out.nodes) n.errorPx = float(screenError(h_, n.id, n.res, view));
+    for (CutNode& n : s.out.nodes) n.errorPx = float(screenError(h_, n.id, n.resLog2, view));
   }
   markGroupedRoots(s.groups, s.out);
   AdaptStats counts;
@@ -1187,18 +1187,18 @@ bool fitTriangleBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, uin
   std::vector<Item> heap;
   auto push = [&](uint32_t i) {
     const CutNode& n = cut.nodes[i];
-    if (n.res <= floor[i]) return;
-    const double loss = (screenError(h, n.id, n.res - 1, view) - screenError(h, n.id, n.res, view)) /
-                        double(tris(n.res) - tris(n.res - 1));
-    heapPush(heap, {-loss, i, n.res});
+    if (n.resLog2 <= floor[i]) return;
+    const double loss = (screenError(h, n.id, n.resLog2 - 1, view) - screenError(h, n.id, n.resLog2, view)) /
+                        double(tris(n.resLog2) - tris(n.resLog2 - 1));
+    heapPush(heap, {-loss, i, n.resLog2});
   };
   for (uint32_t i = 0; i < cut.nodes.size(); ++i) push(i);
   while (total > maxTriangles && !heap.empty()) {
     const Item it = heapPop(heap);
     CutNode& n = cut.nodes[it.key];
-    if (n.res != it.res) continue;
-    total -= tris(n.res) - tris(n.res - 1);
-    --n.res;
+    if (n.resLog2 != it.resLog2) continue;
+    total -= tris(n.resLog2) - tris(n.resLog2 - 1);
+    --n.resLog2;
     push(uint32_t(it.key));
   }
   return total <= maxTriangles;

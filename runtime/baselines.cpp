@@ -26,7 +26,7 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
   auto byError = [](const Candidate& a, const Candidate& b) { return a.errorPx < b.errorPx; };
   std::priority_queue<Candidate, std::vector<Candidate>, decltype(byError)> queue(byError);
   auto candidate = [&](const NodeId& n) {
-    return Candidate{screenError(h, n, h.maxRes(n), view), n};
+    return Candidate{screenError(h, n, h.maxResLog2(n), view), n};
   };
   std::vector<NodeId> done;
   uint32_t count = 0;
@@ -72,15 +72,15 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
   }
   Cut cut;
   cut.nodes.reserve(done.size());
-  for (const NodeId& n : done) cut.nodes.push_back({n, h.maxRes(n), 0.f});
+  for (const NodeId& n : done) cut.nodes.push_back({n, h.maxResLog2(n), 0.f});
   cut.rebuildIndex();
   enforceStitchConstraint(h, cut, &view, tolerancePx, &st);
   if (st.constraintSplits > 0) holdNodeBudget(h, cut, view, chartBudget);
   // Constraint splits give children their needed resolution: back to the fixed one (only raises,
   // so the constraint still holds).
   for (CutNode& n : cut.nodes) {
-    n.res = h.maxRes(n.id);
-    n.errorPx = float(screenError(h, n.id, n.res, view));
+    n.resLog2 = h.maxResLog2(n.id);
+    n.errorPx = float(screenError(h, n.id, n.resLog2, view));
     st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
   }
   markGroupedRoots(groups, cut);
@@ -113,7 +113,7 @@ void measureBudgetCut(const Hierarchy& h, const ViewParams& view, Cut& cut, Budg
   st.triangles = cut.triangles();
   double sum = 0.0;
   for (CutNode& n : cut.nodes) {
-    n.errorPx = float(screenError(h, n.id, n.res, view));
+    n.errorPx = float(screenError(h, n.id, n.resLog2, view));
     st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
     sum += n.errorPx;
   }
@@ -133,18 +133,18 @@ Cut replayOps(const Hierarchy& h, const ViewParams& view, bool cull, uint32_t ro
   std::unordered_map<uint64_t, CutNode> live;
   for (uint32_t c = 0; c < h.chartCount(); ++c) {
     const NodeId root{c, 0, 0, 0};
-    if (nodeDrawable(h, root, view, cull)) live[root.key()] = {root, std::min(rootRes, h.maxRes(root)), 0.f};
+    if (nodeDrawable(h, root, view, cull)) live[root.key()] = {root, std::min(rootRes, h.maxResLog2(root)), 0.f};
   }
   for (size_t i = 0; i < count; ++i) {
     const BudgetOp& op = ops[i];
     if (!op.split) {
-      ++live[op.id.key()].res;
+      ++live[op.id.key()].resLog2;
       continue;
     }
     live.erase(op.id.key());
     for (uint32_t k = 0; k < 4; ++k) {
       const NodeId ch = op.id.child(k);
-      if (nodeDrawable(h, ch, view, cull)) live[ch.key()] = {ch, std::min(op.childRes, h.maxRes(ch)), 0.f};
+      if (nodeDrawable(h, ch, view, cull)) live[ch.key()] = {ch, std::min(op.childRes, h.maxResLog2(ch)), 0.f};
     }
   }
   Cut cut;
@@ -156,7 +156,7 @@ Cut replayOps(const Hierarchy& h, const ViewParams& view, bool cull, uint32_t ro
 }
 
 // Replays the operations, enforces the stitching constraint, and backs off (1, 2, 4, ...
-// operations) until the budgets hold. fixedRes: constraint-split children back to maxRes(level).
+// operations) until the budgets hold. fixedRes: constraint-split children back to maxResLog2(level).
 Cut finishBudgetCut(const Hierarchy& h, const ViewParams& view, const BudgetOptions& o, uint32_t rootRes,
                     const std::vector<BudgetOp>& ops, bool fixedRes, BudgetStats& st) {
   const uint64_t nodeBudget = o.maxNodes == 0 ? UINT64_MAX : o.maxNodes;
@@ -167,7 +167,7 @@ Cut finishBudgetCut(const Hierarchy& h, const ViewParams& view, const BudgetOpti
     AdaptStats as;
     enforceStitchConstraint(h, cut, &view, 1.0, &as);
     if (fixedRes && as.constraintSplits > 0)
-      for (CutNode& n : cut.nodes) n.res = std::max(n.res, h.maxRes(n.id));
+      for (CutNode& n : cut.nodes) n.resLog2 = std::max(n.resLog2, h.maxResLog2(n.id));
     if (!fixedRes) fitTriangleBudget(h, cut, view, o.maxTriangles);
     st.constraintRaises = as.constraintRaises;
     st.constraintSplits = as.constraintSplits;
@@ -184,7 +184,7 @@ Cut finishBudgetCut(const Hierarchy& h, const ViewParams& view, const BudgetOpti
 struct ErrorItem {
   double errorPx;
   NodeId id;
-  uint32_t res;
+  uint32_t resLog2;
   bool operator<(const ErrorItem& b) const {
     return errorPx < b.errorPx || (errorPx == b.errorPx && id.key() > b.id.key());
   }
@@ -210,28 +210,28 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
     uint64_t t = 0;
     for (uint32_t c = 0; c < h.chartCount(); ++c) {
       const NodeId root{c, 0, 0, 0};
-      if (nodeDrawable(h, root, view, options.frustumCull)) t += budgetTris(std::min(res, h.maxRes(root)));
+      if (nodeDrawable(h, root, view, options.frustumCull)) t += budgetTris(std::min(res, h.maxResLog2(root)));
     }
     return t;
   };
-  uint32_t rootRes = h.params.maxRes(0);
+  uint32_t rootRes = h.params.maxResLog2(0);
   while (rootRes > h.params.minNodeResLog2 && rootTriangles(rootRes) > options.maxTriangles) --rootRes;
   uint64_t triangles = rootTriangles(rootRes);
   for (uint32_t c = 0; c < h.chartCount(); ++c) {
     const NodeId root{c, 0, 0, 0};
-    const uint32_t res = std::min(rootRes, h.maxRes(root));
+    const uint32_t res = std::min(rootRes, h.maxResLog2(root));
     if (nodeDrawable(h, root, view, options.frustumCull)) queue.push({screenError(h, root, res, view), root, res});
   }
   std::vector<BudgetOp> ops;
   while (!queue.empty()) {
     const ErrorItem it = queue.top();
     queue.pop();
-    if (it.id.level + 1 >= h.params.depth || it.res != h.maxRes(it.id)) continue;
+    if (it.id.level + 1 >= h.params.depth || it.resLog2 != h.maxResLog2(it.id)) continue;
     if (it.id.level == 0 && groups.frozen(it.id.chart)) continue;  // a closed group's root
-    const uint32_t cres = h.maxRes(it.id.child(0));
+    const uint32_t cres = h.maxResLog2(it.id.child(0));
     uint64_t children = 0;
     for (uint32_t i = 0; i < 4; ++i) children += nodeDrawable(h, it.id.child(i), view, options.frustumCull);
-    const uint64_t t = triangles - budgetTris(it.res) + children * budgetTris(cres);
+    const uint64_t t = triangles - budgetTris(it.resLog2) + children * budgetTris(cres);
     if (t > options.maxTriangles || count - 1 + children > nodeBudget) continue;
     triangles = t;
     count = count - 1 + children;

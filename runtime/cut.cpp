@@ -78,7 +78,7 @@ void Cut::rebuildIndex() {
 
 uint64_t Cut::triangles() const {
   uint64_t t = 0;
-  for (const CutNode& n : nodes) t += 2ull << (2 * n.res);
+  for (const CutNode& n : nodes) t += 2ull << (2 * n.resLog2);
   return t;
 }
 

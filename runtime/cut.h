@@ -11,7 +11,7 @@ namespace gimlod {
 
 struct CutNode {
   NodeId id;
-  uint32_t res = 0;      // drawn resolution, log2 intervals
+  uint32_t resLog2 = 0;      // drawn resolution, log2 intervals
   float errorPx = 0.f;   // projected error at `res` for the view it was adapted to
   // Attribute (normal, colour) texture resolution, log2 texels per side (assignAttributeResolutions);
   // 0 means unassigned: the page's own resolution.

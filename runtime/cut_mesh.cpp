@@ -41,7 +41,7 @@ CutMesh buildCutMesh(const Hierarchy& h, const Cut& cut, const std::vector<std::
   std::vector<uint8_t> onOpenBorder;
   for (size_t n = 0; n < cut.nodes.size(); ++n) {
     const CutNode& node = cut.nodes[n];
-    const uint32_t side = (1u << node.res) + 1;
+    const uint32_t side = (1u << node.resLog2) + 1;
     if (captured[n].size() != size_t(side) * side)
       throw std::invalid_argument("buildCutMesh: node " + std::to_string(n) + " has " + std::to_string(captured[n].size()) +
                                   " vertices, not " + std::to_string(side * side));
@@ -61,7 +61,7 @@ CutMesh buildCutMesh(const Hierarchy& h, const Cut& cut, const std::vector<std::
           m.level.push_back(uint8_t(id.level));
           m.nodeX.push_back(id.x);
           m.nodeY.push_back(id.y);
-          m.res.push_back(uint8_t(node.res));
+          m.resLog2.push_back(uint8_t(node.resLog2));
           onOpenBorder.push_back(0);
         }
         // On a chart border without a neighbour (edges: bottom v = 0, right u = 1, top v = 1,
@@ -113,7 +113,7 @@ void writeCutMeshPly(const std::filesystem::path& path, const CutMesh& m) {
     put(out, m.level[i]);
     put(out, m.nodeX[i]);
     put(out, m.nodeY[i]);
-    put(out, m.res[i]);
+    put(out, m.resLog2[i]);
   }
   for (const auto& t : m.triangles) {
     put(out, uint8_t(3));

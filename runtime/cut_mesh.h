@@ -23,7 +23,7 @@ struct CutMesh {
   // Per vertex: the first node (in cut order) that drew it, and that node's resolution (log2
   // intervals); a welded vertex belongs to every node around it.
   std::vector<uint32_t> chart;
-  std::vector<uint8_t> level, res;
+  std::vector<uint8_t> level, resLog2;
   std::vector<uint32_t> nodeX, nodeY;
   std::vector<std::array<uint32_t, 3>> triangles;
   uint64_t boundaryEdges = 0;      // edges used by one triangle only

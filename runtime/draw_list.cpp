@@ -15,8 +15,8 @@ DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const Cu
   d.originX = c.gridX * M + int32_t(n.id.x) * size;
   d.originY = c.gridY * M + int32_t(n.id.y) * size;
   d.sizeLog2 = L - n.id.level;
-  d.res = n.res;
-  d.pageResLog2 = p.maxRes(n.id.level, c.finestLevel);
+  d.resLog2 = n.resLog2;
+  d.pageResLog2 = p.maxResLog2(n.id.level, c.finestLevel);
   d.pageLayer = layer;
   // note: an attribute resolution above the page's is clamped to it (finer attribute pages are
   // not loaded); AttributeStats::abovePage counts those nodes.
@@ -29,7 +29,7 @@ DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const Cu
 }
 
 uint8_t morphByte(const CutNode& n, uint32_t minNodeResLog2) {
-  if (n.res <= minNodeResLog2) return 0;
+  if (n.resLog2 <= minNodeResLog2) return 0;
   return uint8_t(std::lround(std::clamp(double(n.morph), 0.0, 1.0) * 255.0));
 }
 

@@ -17,7 +17,7 @@ namespace gimlod {
 struct DrawNode {
   int32_t originX = 0, originY = 0;
   uint32_t sizeLog2 = 0;     // node side in level-0 intervals
-  uint32_t res = 0;          // drawn grid: 2^res intervals per side, (2^res + 1)^2 vertices
+  uint32_t resLog2 = 0;          // drawn grid: 2^res intervals per side, (2^res + 1)^2 vertices
   uint32_t pageResLog2 = 0;  // page data holds 2^pageResLog2 intervals per side (res <= this)
   uint32_t pageLayer = 0;    // page of the GPU page pool holding this node's data (the renderer's
                              // texture array pageLayer / L, layer pageLayer % L)

@@ -57,7 +57,7 @@ struct Candidate {
 // maxNodes (and, in budget mode, their triangles at the minimum resolution fit maxTriangles); the
 // chart nodes are split only to spend the budget as the adapters will. tolerancePx > 0: the
 // top-down greedy (adaptErrorThreshold): a closed group goes only when it holds a chart root over
-// tolerance even at its maxRes (overTolerancePriority of that error seen from its box), a node by
+// tolerance even at its maxResLog2 (overTolerancePriority of that error seen from its box), a node by
 // topDownSplitPriority. Else (triangle budget): the worst error first, groups and nodes alike, each
 // drawn at the resolution the budgets leave a node (maxTriangles / maxNodes triangles).
 void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes, double tolerancePx,
@@ -104,7 +104,7 @@ void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNode
     if (!nodeDrawable(h, n, v, cull)) return;
     ++count;
     if (!threshold) {  // the worst error first
-      if (n.level + 1 < h.params.depth) queue.push({screenError(h, n, std::min(budgetRes, h.maxRes(n)), v), -1, n});
+      if (n.level + 1 < h.params.depth) queue.push({screenError(h, n, std::min(budgetRes, h.maxResLog2(n)), v), -1, n});
       return;
     }
     uint32_t res = 0;

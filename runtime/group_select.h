@@ -35,13 +35,13 @@ struct GroupSelection {
 //   with four nodes a chart within the budget every group opens, and the cut is the forest's;
 // - then it opens the groups that a top-down pass with groups as nodes opens. With tolerancePx > 0
 //   (the error-threshold adapters) that is the paper's top-down greedy: a closed group that holds a
-//   chart root over tolerance even at its maxRes competes, by that error, with the split priorities
+//   chart root over tolerance even at its maxResLog2 competes, by that error, with the split priorities
 //   of the open charts' nodes (topDownSplitPriority), the best first while the cut fits maxNodes.
 //   Else (triangle-budget adapters, tolerancePx <= 0) the worst error goes first, groups and nodes
 //   alike, each drawn at the resolution the budgets leave a node (maxTriangles / maxNodes
 //   triangles), while the cut fits maxNodes and its nodes at the minimum resolution fit
 //   maxTriangles.
-// A closed group's roots within tolerance at their maxRes need no split: they raise their
+// A closed group's roots within tolerance at their maxResLog2 need no split: they raise their
 // resolution, which costs no node. Errors of a group are its roots' largest, seen from its box.
 void selectRootGroups(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes, double tolerancePx, bool cull,
                       GroupSelection& out, uint64_t maxTriangles = 0);

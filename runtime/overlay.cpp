@@ -90,7 +90,7 @@ std::vector<NodeOverlay> nodeOverlays(const Hierarchy& h, const Cut& cut, Overla
              : mode == OverlayMode::kLevel  ? paletteColour(id.level)
              : mode == OverlayMode::kCustom ? colour(id)
              : mode == OverlayMode::kError  ? heat(n.errorPx)
-                                            : paletteColour(n.res);
+                                            : paletteColour(n.resLog2);
     const uint32_t last = (1u << id.level) - 1;
     const std::array<bool, 4> onBorder = {id.y == 0, id.x == last, id.y == last, id.x == 0};
     for (uint32_t s = 0; s < 4; ++s) {

@@ -38,15 +38,15 @@ class ChartFileSet {
 // The most chart files a PageReader keeps open: a quarter of the process's limit, at most 2048.
 size_t chartFilesKeptOpen();
 
-// Reads node pages: a node's page is its finest-resolution window, (2^maxRes + 1)^2 samples of
-// pyramid level intervalsLog2 - level - maxRes (Hierarchy::maxRes: within its chart's finest
+// Reads node pages: a node's page is its finest-resolution window, (2^maxResLog2 + 1)^2 samples of
+// pyramid level intervalsLog2 - level - maxResLog2 (Hierarchy::maxResLog2: within its chart's finest
 // level, which the chart file's level 0 is); every coarser resolution of the node is a subsampling
 // of it. Thread-safe.
 class PageReader {
  public:
   PageReader(const std::filesystem::path& atlasDir, const AtlasManifest& manifest,
              const HierarchyParams& params);
-  uint32_t pageResLog2(const NodeId& n) const { return params_.maxRes(n.level, finest_[n.chart]); }
+  uint32_t pageResLog2(const NodeId& n) const { return params_.maxResLog2(n.level, finest_[n.chart]); }
   uint32_t pageSamples(const NodeId& n) const { return (1u << pageResLog2(n)) + 1; }
   // samples: (pageSamples)^2 heights, or 3 floats (x, y, z) per sample for a geometry atlas.
   // colours, if given, receives the page's RGBA8 colours when the atlas has them (colours()):

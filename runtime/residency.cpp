@@ -70,10 +70,10 @@ ResidentCut substituteResident(const Hierarchy& h, const Cut& desired, const Vie
     ++out.nodesSubstituted;
     if (it->second == kUnplaced) {
       it->second = uint32_t(drawn.nodes.size());
-      drawn.nodes.push_back({b, p.minRes(b.level), 0.f});
+      drawn.nodes.push_back({b, p.minResLog2(), 0.f});
     }
     CutNode& a = drawn.nodes[it->second];
-    a.res = std::max(a.res, std::min(n.res, h.maxRes(b)));
+    a.resLog2 = std::max(a.resLog2, std::min(n.resLog2, h.maxResLog2(b)));
   }
   drawn.rebuildIndex();
   // Stitching constraint without splits: substitutes only coarsen the cut, so raising their
@@ -84,15 +84,15 @@ ResidentCut substituteResident(const Hierarchy& h, const Cut& desired, const Vie
     for (size_t i = 0; i < drawn.nodes.size(); ++i) {
       CutNode& n = drawn.nodes[i];
       const uint32_t gap = gaps[i];
-      if (gap <= n.res) continue;
-      if (gap <= h.maxRes(n.id))
-        n.res = gap;
+      if (gap <= n.resLog2) continue;
+      if (gap <= h.maxResLog2(n.id))
+        n.resLog2 = gap;
       else
         ++out.stitchUnfixable;
     }
     for (auto& [key, i] : outer)
       if (i != kUnplaced)
-        drawn.nodes[i].errorPx = float(screenError(h, drawn.nodes[i].id, drawn.nodes[i].res, view));
+        drawn.nodes[i].errorPx = float(screenError(h, drawn.nodes[i].id, drawn.nodes[i].resLog2, view));
   }
   return out;
 }

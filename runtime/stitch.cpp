@@ -50,12 +50,12 @@ StitchTables buildStitchTables(const Hierarchy& h, const Cut& cut) {
       sideNeighbours(h, cut, cut.nodes[i].id, s, ns);
       uint8_t* side = t.side(i, s);
       uint8_t* m = morphs ? t.morphs.data() + (side - t.bytes.data()) : nullptr;
-      const uint32_t ownSpacing = L - cut.nodes[i].id.level - cut.nodes[i].res;
+      const uint32_t ownSpacing = L - cut.nodes[i].id.level - cut.nodes[i].resLog2;
       // Where nothing is drawn across, the node's own factor (the shader's rules then give it).
       if (m) std::fill(m, m + t.entriesPerSide, morphByte(cut.nodes[i], minRes));
       for (const SideNeighbour& n : ns) {
         const CutNode& nb = cut.nodes[n.cutIndex];
-        const uint8_t spacing = uint8_t(L - nb.id.level - nb.res);
+        const uint8_t spacing = uint8_t(L - nb.id.level - nb.resLog2);
         const uint32_t e0 = n.t0 >> t.leafLog2;
         const uint32_t e1 = std::min(n.t1 >> t.leafLog2, t.entriesPerSide);
         for (uint32_t e = e0; e < e1; ++e) side[e] = spacing;
@@ -86,10 +86,10 @@ CrackReport countCracks(const Hierarchy& h, const Cut& cut,
       ++r.sharedSides;
       mine.clear();
       theirs.clear();
-      const uint32_t res = cut.nodes[i].res;
+      const uint32_t res = cut.nodes[i].resLog2;
       sideVertices(vertices[i], res, s, mine);
       for (const SideNeighbour& n : ns)
-        sideVertices(vertices[n.cutIndex], cut.nodes[n.cutIndex].res, n.theirSide, theirs);
+        sideVertices(vertices[n.cutIndex], cut.nodes[n.cutIndex].resLog2, n.theirSide, theirs);
       std::sort(theirs.begin(), theirs.end());
       // Only the part of the side that a drawn neighbour covers is shared (the rest may face a
       // culled or empty region, where nothing is drawn to crack against).

@@ -68,7 +68,7 @@ inline void expectPartition(const Hierarchy& h, const Cut& cut, bool full = true
 // (key, resolution) of every cut node, sorted: equal for equal cuts.
 inline std::vector<std::pair<uint64_t, uint32_t>> sortedNodes(const Cut& cut) {
   std::vector<std::pair<uint64_t, uint32_t>> v;
-  for (const CutNode& n : cut.nodes) v.push_back({n.id.key(), n.res});
+  for (const CutNode& n : cut.nodes) v.push_back({n.id.key(), n.resLog2});
   std::sort(v.begin(), v.end());
   return v;
 }
@@ -84,7 +84,7 @@ inline const Cut& converge(DualQueueAdapter& a, const ViewParams& v, const Adapt
 }
 
 inline bool withinToleranceOrFinest(const Hierarchy& h, const CutNode& n, double tol) {
-  const bool finest = n.res == h.params.maxRes(n.id.level) && n.id.level + 1 == h.params.depth;
+  const bool finest = n.resLog2 == h.params.maxResLog2(n.id.level) && n.id.level + 1 == h.params.depth;
   return finest || n.errorPx <= tol + 1e-9;
 }
 

@@ -1,6 +1,6 @@
 // Hand-built chart layouts for the parameterization and resampling tests: flat grids, a cube (or
 // a sphere made from it) as six 4-sided patches, triangulated disks and hemisphere caps with n
-// sides. They depend on nothing but atlas/mesh/chart_layout.h.
+// sides. They depend on nothing but atlas/mesh/patch_layout.h.
 #pragma once
 
 #include <cmath>
@@ -12,12 +12,12 @@
 
 #include <glm/geometric.hpp>
 
-#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/patch_layout.h"
 
 namespace gimlod::test {
 
 // Links every pair of sides whose vertex runs are reverses of each other.
-inline void linkSides(ChartLayout& layout) {
+inline void linkSides(PatchLayout& layout) {
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     for (uint32_t i = 0; i < layout.patches[p].sides.size(); ++i) {
       PatchSide& s = layout.patches[p].sides[i];
@@ -38,7 +38,7 @@ inline void linkSides(ChartLayout& layout) {
 
 // Adds a patch covering grid cells [x0, x1) x [y0, y1) of a grid whose vertex (x, y) has id
 // y * (nx + 1) + x; 4 sides: bottom, right, top, left.
-inline void addGridPatch(ChartLayout& layout, uint32_t nx, uint32_t x0, uint32_t x1, uint32_t y0,
+inline void addGridPatch(PatchLayout& layout, uint32_t nx, uint32_t x0, uint32_t x1, uint32_t y0,
                          uint32_t y1) {
   auto id = [&](uint32_t x, uint32_t y) { return y * (nx + 1) + x; };
   Patch patch;
@@ -68,9 +68,9 @@ inline void addGridPatch(ChartLayout& layout, uint32_t nx, uint32_t x0, uint32_t
 // A flat grid of nx * ny cells over [0, width] x [0, height] at z = 0, cut into patches by the
 // vertical lines x = cuts[k] (grid columns). With warp, interior x and y grid lines are bent
 // (still a valid, non-uniform planar grid).
-inline ChartLayout gridLayout(uint32_t nx, uint32_t ny, float width, float height,
+inline PatchLayout gridLayout(uint32_t nx, uint32_t ny, float width, float height,
                               const std::vector<uint32_t>& cuts = {}, bool warp = false) {
-  ChartLayout layout;
+  PatchLayout layout;
   for (uint32_t y = 0; y <= ny; ++y) {
     for (uint32_t x = 0; x <= nx; ++x) {
       double fx = double(x) / nx, fy = double(y) / ny;
@@ -91,8 +91,8 @@ inline ChartLayout gridLayout(uint32_t nx, uint32_t ny, float width, float heigh
 
 // A cube [-0.5, 0.5]^3 with m x m cells per face, one 4-sided patch per face, welded and linked.
 // With sphere, vertices are pushed onto the unit sphere (curved patches).
-inline ChartLayout cubeLayout(uint32_t m, bool sphere = false) {
-  ChartLayout layout;
+inline PatchLayout cubeLayout(uint32_t m, bool sphere = false) {
+  PatchLayout layout;
   std::map<std::tuple<int, int, int>, uint32_t> ids;
   auto vertex = [&](glm::ivec3 g) {
     auto [it, inserted] = ids.try_emplace({g.x, g.y, g.z}, uint32_t(layout.positions.size()));
@@ -136,9 +136,9 @@ inline ChartLayout cubeLayout(uint32_t m, bool sphere = false) {
 // boundary is split into n sides. With hemisphere, the disk is mapped onto the upper unit
 // hemisphere (radius r -> polar angle r * pi / 2); otherwise it is the flat unit disk at z = 0.
 // With colours, every vertex gets a colour from its position.
-inline ChartLayout diskLayout(uint32_t n, uint32_t rings, uint32_t segments, bool hemisphere,
+inline PatchLayout diskLayout(uint32_t n, uint32_t rings, uint32_t segments, bool hemisphere,
                               bool colours = false) {
-  ChartLayout layout;
+  PatchLayout layout;
   auto place = [&](double r, double theta) {
     glm::dvec3 p;
     if (hemisphere) {

@@ -15,7 +15,7 @@ inline void buildSmallScanAtlas(const std::filesystem::path& output, bool fideli
   MeshBuildOptions o;
   o.input = repoData() / "meshes/bun_zipper.ply";
   o.output = output;
-  o.charts = 24;
+  o.patches = 24;
   o.chartSize = 17;
   o.depth = 3;
   o.nodeRes = 8;

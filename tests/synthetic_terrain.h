@@ -14,17 +14,17 @@ namespace gimlod::test {
 
 // A chartsX x chartsY grid of charts of `chartSize` samples, spacing 1.
 inline AtlasManifest syntheticManifest(uint32_t chartSize, uint32_t chartsX, uint32_t chartsY,
-                                       uint32_t depth, uint32_t maxRes, uint32_t minRes) {
+                                       uint32_t depth, uint32_t maxResLog2, uint32_t minRes) {
   AtlasManifest m;
   m.chartSize = chartSize;
-  m.blockIntervals = 1u << maxRes;
+  m.blockIntervals = 1u << maxResLog2;
   m.chartsX = chartsX;
   m.chartsY = chartsY;
   const uint32_t M = chartSize - 1;
   m.samplesX = chartsX * M + 1;
   m.samplesY = chartsY * M + 1;
   m.depth = depth;
-  m.maxNodeResLog2 = maxRes;
+  m.maxNodeResLog2 = maxResLog2;
   m.minNodeResLog2 = minRes;
   for (uint32_t y = 0; y < chartsY; ++y)
     for (uint32_t x = 0; x < chartsX; ++x) {

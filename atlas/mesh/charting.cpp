@@ -447,8 +447,8 @@ void checkOptions(const ChartingOptions& o) {
     throw InputError(std::string(fn) + ": minSides must be at least 3");
   if (o.maxSides < std::max(4u, 2 * o.minSides - 3))
     throw InputError(std::string(fn) + ": maxSides must be at least max(4, 2 * minSides - 3)");
-  if (o.targetCharts == 0 && !(o.maxError > 0 && std::isfinite(o.maxError)))
-    throw InputError(std::string(fn) + ": maxError must be positive when targetCharts is 0");
+  if (o.targetPatches == 0 && !(o.maxError > 0 && std::isfinite(o.maxError)))
+    throw InputError(std::string(fn) + ": maxError must be positive when targetPatches is 0");
   if (!(o.compactnessWeight >= 0 && std::isfinite(o.compactnessWeight)))
     throw InputError(std::string(fn) + ": compactnessWeight must be finite and >= 0");
 }
@@ -506,8 +506,8 @@ Surface subSurface(const Surface& s, const std::vector<uint32_t>& faces,
 
 // Per-cell clusters of about `clusterTris` triangles (error mode: within maxRms too).
 double cellClusterTriangles(const ChartingOptions& o, uint64_t triangles) {
-  return o.targetCharts > 0
-             ? std::clamp(double(triangles) / (4.0 * o.targetCharts), 1.0, 4096.0)
+  return o.targetPatches > 0
+             ? std::clamp(double(triangles) / (4.0 * o.targetPatches), 1.0, 4096.0)
              : 1024.0;
 }
 
@@ -516,7 +516,7 @@ unsigned threadCount(const ChartingOptions& o) {
 }
 
 // Meshes above this many triangles are clustered in spatial blocks first (like the cells of
-// buildChartLayoutFromCells): same or better charts, several times faster (small heaps).
+// buildPatchLayoutFromCells): same or better charts, several times faster (small heaps).
 constexpr uint64_t kBlockedAbove = 32768;
 constexpr uint32_t kBlockTriangles = 8192;
 
@@ -548,7 +548,7 @@ std::vector<uint32_t> blockLabels(const Surface& s, const Frame& fr, const Chart
   }
   const double clusterTris = cellClusterTriangles(o, nf);
   const double maxRms =
-      o.targetCharts > 0 ? std::numeric_limits<double>::infinity() : o.maxError;
+      o.targetPatches > 0 ? std::numeric_limits<double>::infinity() : o.maxError;
   std::vector<std::vector<uint32_t>> local(blocks.size());
   std::vector<uint32_t> clusters(blocks.size(), 0);
   std::vector<size_t> bytes(blocks.size(), 0);
@@ -581,13 +581,13 @@ std::vector<uint32_t> blockLabels(const Surface& s, const Frame& fr, const Chart
 
 }  // namespace
 
-ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& options,
+PatchLayout buildPatchLayout(const IndexedMesh& mesh, const ChartingOptions& options,
                              ChartingStats* statsOut) {
   const auto t0 = Clock::now();
   checkOptions(options);
   ChartingStats st;
   if (!mesh.colours.empty() && mesh.colours.size() != mesh.positions.size())
-    throw InputError("buildChartLayout: colours must be empty or one per position");
+    throw InputError("buildPatchLayout: colours must be empty or one per position");
   Surface s = weldAndRepair(mesh.positions, mesh.colours, mesh.triangles, st);
   const Frame fr = frameOf(s.positions);
   st.weldSeconds = since(t0);
@@ -600,8 +600,8 @@ ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& opt
     st.cellSeconds = since(t1);
   }
   std::optional<Clusterer> cl(std::in_place, s, fr, std::move(labels));
-  cl->run(options.targetCharts,
-          options.targetCharts > 0 ? std::numeric_limits<double>::infinity() : options.maxError,
+  cl->run(options.targetPatches,
+          options.targetPatches > 0 ? std::numeric_limits<double>::infinity() : options.maxError,
           options.compactnessWeight, options.metric);
   st.clusterSeconds = since(t1);
   st.chartsBeforeFixing = cl->alive();
@@ -611,13 +611,13 @@ ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& opt
   const size_t clusterBytes = cl->bytes();
   std::vector<uint32_t> finalLabels = cl->takeLabels();
   cl.reset();
-  ChartLayout out = layoutFromLabels(s, std::move(finalLabels), fr, options, st, clusterBytes);
+  PatchLayout out = layoutFromLabels(s, std::move(finalLabels), fr, options, st, clusterBytes);
   st.seconds = since(t0);
   if (statsOut) *statsOut = std::move(st);
   return out;
 }
 
-ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
+PatchLayout buildPatchLayoutFromCells(const std::filesystem::path& gridDir,
                                       const ChartingOptions& options, ChartingStats* statsOut) {
   const auto t0 = Clock::now();
   checkOptions(options);
@@ -636,11 +636,11 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   const uint64_t total = std::max<uint64_t>(manifest.triangles, 1);
   // Cell clusters of about a quarter of the final chart size (error mode: 1024 triangles).
   const double clusterTris =
-      options.targetCharts > 0
-          ? std::clamp(double(total) / (4.0 * options.targetCharts), 1.0, 4096.0)
+      options.targetPatches > 0
+          ? std::clamp(double(total) / (4.0 * options.targetPatches), 1.0, 4096.0)
           : 1024.0;
   const double maxRms =
-      options.targetCharts > 0 ? std::numeric_limits<double>::infinity() : options.maxError;
+      options.targetPatches > 0 ? std::numeric_limits<double>::infinity() : options.maxError;
 
   // Each cell hands on its welded vertices and kept triangles (an indexed mesh: about a sixth
   // of the bytes of the 3 corners per triangle of the cell file), with a cluster per triangle.
@@ -778,7 +778,7 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   const auto t1 = Clock::now();
   std::optional<Clusterer> cl(std::in_place, s, fr, std::move(labels));
   if (cl->dissolveNonDisks(st.cellClustersDissolved)) cl.emplace(s, fr, cl->takeLabels());
-  cl->run(options.targetCharts, maxRms, options.compactnessWeight, options.metric);
+  cl->run(options.targetPatches, maxRms, options.compactnessWeight, options.metric);
   st.clusterSeconds += since(t1);
   st.chartsBeforeFixing = cl->alive();
   st.mergesRefusedNotDisk = cl->refused();
@@ -787,7 +787,7 @@ ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
   const size_t clusterBytes = cl->bytes();
   std::vector<uint32_t> finalLabels = cl->takeLabels();
   cl.reset();
-  ChartLayout out = layoutFromLabels(s, std::move(finalLabels), fr, options, st, clusterBytes);
+  PatchLayout out = layoutFromLabels(s, std::move(finalLabels), fr, options, st, clusterBytes);
   st.inputTriangles = manifest.triangles;
   st.seconds = since(t0);
   if (statsOut) *statsOut = std::move(st);

@@ -1,5 +1,5 @@
 // Mesh atlas stages 2-3: cluster a triangle mesh into a conforming chart layout of disk-shaped
-// patches with minSides..maxSides sides (atlas/mesh/chart_layout.h), ready for quadrangulation.
+// patches with minSides..maxSides sides (atlas/mesh/patch_layout.h), ready for quadrangulation.
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (per-cell then global clustering);
 // Garland, Willmott, Heckbert, "Hierarchical Face Clustering on Polygonal Surfaces", I3D 2001
 // (greedy dual-edge collapse on planarity plus compactness); Purnomo, Cohen, Kumar, "Seamless
@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/patch_layout.h"
 #include "atlas/mesh/mesh_io.h"
 
 namespace gimlod {
@@ -36,8 +36,8 @@ struct ChartingOptions {
   // Stop merging at this many clusters. 0: merge until no merge keeps every chart within
   // maxError. Side fixing (splitting patches with more than maxSides sides) may add charts, and
   // merges that would break the disk property are refused, so the result can be above it.
-  uint32_t targetCharts = 0;
-  // Only when targetCharts == 0: the largest RMS distance of a chart's triangles to the chart's
+  uint32_t targetPatches = 0;
+  // Only when targetPatches == 0: the largest RMS distance of a chart's triangles to the chart's
   // least-squares plane, as a fraction of the bounding-box diagonal; > 0.
   double maxError = 0.01;
   // Weight of the compactness term perimeter^2 / (4 pi area) (1 for a disc) in the merge cost
@@ -59,7 +59,7 @@ struct ChartingStats {
   uint64_t inputTriangles = 0;
   uint64_t outputTriangles = 0;        // inputTriangles - droppedDegenerate - droppedDuplicate
   uint64_t inputVertices = 0;          // positions referenced by the input triangles
-  uint64_t outputVertices = 0;         // ChartLayout::positions
+  uint64_t outputVertices = 0;         // PatchLayout::positions
   uint64_t verticesWelded = 0;         // referenced positions merged into an equal earlier one
   uint64_t droppedDegenerate = 0;      // triangles with a repeated vertex after welding
   uint64_t droppedDuplicate = 0;       // triangles repeating another's 3 vertices after welding
@@ -73,7 +73,7 @@ struct ChartingStats {
   uint32_t cornersInserted = 0;        // extra corners for patches with < minSides sides
   uint32_t patchesSplit = 0;           // splits of patches with > maxSides sides
   uint32_t patchesUnfixed = 0;         // patches no split could fix (then the layout is invalid:
-                                       // validateChartLayout names them); 0 on all test meshes
+                                       // validatePatchLayout names them); 0 on all test meshes
   std::vector<uint32_t> sidesHistogram;  // [n] = patches with n sides
   double maxPlanarityError = 0.0;      // max over charts of the RMS plane distance / diagonal
   double meanPlanarityError = 0.0;     // area-weighted mean of the same
@@ -84,7 +84,7 @@ struct ChartingStats {
   double sidesSeconds = 0.0;           // corners, side fixing, layout output
   double seconds = 0.0;                // total
   uint64_t peakBytesEstimate = 0;      // largest sum of the big arrays held at once
-  // Cells of buildChartLayoutFromCells, or spatial blocks of buildChartLayout (large meshes).
+  // Cells of buildPatchLayoutFromCells, or spatial blocks of buildPatchLayout (large meshes).
   uint32_t cells = 0;
   uint32_t cellClusters = 0;           // clusters handed from the cells / blocks to the global stage
   uint32_t cellClustersDissolved = 0;  // of those, not disks in the global mesh (re-split)
@@ -97,8 +97,8 @@ struct ChartingStats {
 //    with the same direction (inconsistent orientation), pairs its first opposite half-edges
 //    and leaves the rest open (nonManifoldEdges). Every vertex whose triangles then form more
 //    than one fan is split into one vertex per fan (verticesSplit), so a fin or a flipped
-//    triangle becomes an open border and ChartLayout::positions may hold copies of a position.
-// 3. Greedy merging (cost above) down to targetCharts, or while within maxError. Above 32768
+//    triangle becomes an open border and PatchLayout::positions may hold copies of a position.
+// 3. Greedy merging (cost above) down to targetPatches, or while within maxError. Above 32768
 //    triangles the surface is first cut into spatial blocks of about 8192 triangles, each
 //    clustered on its own (in parallel) to clusters of about a quarter of the final chart size
 //    (1024 triangles in error mode), then merged globally: the two phases of the cells path,
@@ -109,22 +109,22 @@ struct ChartingStats {
 //    Patches with more than maxSides sides are split along a shortest interior path between two
 //    corners about half the corners apart (falling back to paths ending at non-corner boundary
 //    vertices, which become corners), repeatedly; the count can therefore end above target.
-// The triangles keep their winding (counter-clockwise assumed outward); ChartLayout::triangles
+// The triangles keep their winding (counter-clockwise assumed outward); PatchLayout::triangles
 // holds the surviving triangles in input order (renumbered vertices). Throws InputError on bad
 // options, indices out of range, non-finite referenced positions, or no triangle left.
-ChartLayout buildChartLayout(const IndexedMesh& mesh, const ChartingOptions& options = {},
+PatchLayout buildPatchLayout(const IndexedMesh& mesh, const ChartingOptions& options = {},
                              ChartingStats* stats = nullptr);
 
 // Clusters the cells written by gridify (atlas/mesh/gridify.h). Each cell is welded and clustered
 // on its own, in parallel, down to clusters of about a quarter of the final chart size; the global
 // stage then welds all cells together (recovering the boundaries between cells), keeps every cell
-// cluster that is still a disk, and merges on to the target as buildChartLayout does.
-// note: reduced out-of-core: the global stage holds all triangles (the ChartLayout returned
+// cluster that is still a disk, and merges on to the target as buildPatchLayout does.
+// note: reduced out-of-core: the global stage holds all triangles (the PatchLayout returned
 // holds them anyway); only the per-cell clustering is cell-local. The global stage's peak is
 // about 2.3 times the returned layout (positions, triangles, half-edge twins, labels): 932 MiB
 // for an 18.7M-triangle sphere. Throws InputError as readGridManifest / readCell, and as
-// buildChartLayout.
-ChartLayout buildChartLayoutFromCells(const std::filesystem::path& gridDir,
+// buildPatchLayout.
+PatchLayout buildPatchLayoutFromCells(const std::filesystem::path& gridDir,
                                       const ChartingOptions& options = {},
                                       ChartingStats* stats = nullptr);
 

@@ -190,7 +190,7 @@ struct Frame {
 // Fixes the sides of the clusters given by labels (a cluster per face) and returns the layout,
 // with its statistics in st. Consumes the surface: its positions, colours and triangles move into
 // the layout. clusterBytes: the clusterer's memory, for the peak estimate.
-ChartLayout layoutFromLabels(Surface& s, std::vector<uint32_t> labels, const Frame& fr,
+PatchLayout layoutFromLabels(Surface& s, std::vector<uint32_t> labels, const Frame& fr,
                              const ChartingOptions& o, ChartingStats& st, size_t clusterBytes);
 
 }  // namespace gimlod::charting

@@ -85,9 +85,9 @@ class LayoutBuilder {
     }
   }
 
-  ChartLayout output() {
+  PatchLayout output() {
     // Patches only: the caller moves the surface's positions, colours and triangles in.
-    ChartLayout out;
+    PatchLayout out;
     const uint32_t np = static_cast<uint32_t>(faces_.size());
     out.patches.resize(np);
     std::unordered_map<uint32_t, uint32_t> sideOf;  // patch-boundary half-edge -> side index
@@ -429,7 +429,7 @@ class LayoutBuilder {
 };
 
 // Fills the final statistics from the layout's patches.
-void finishStats(const Surface& s, const ChartLayout& out,
+void finishStats(const Surface& s, const PatchLayout& out,
                  const Frame& fr, ChartingStats& st) {
   st.outputTriangles = s.tris.size();
   st.outputVertices = s.positions.size();
@@ -456,11 +456,11 @@ void finishStats(const Surface& s, const ChartLayout& out,
 }  // namespace
 
 // Consumes the surface: its positions, colours and triangles move into the layout.
-ChartLayout layoutFromLabels(Surface& s, std::vector<uint32_t> labels,
+PatchLayout layoutFromLabels(Surface& s, std::vector<uint32_t> labels,
                              const Frame& fr, const ChartingOptions& o, ChartingStats& st,
                              size_t clusterBytes) {
   const auto t0 = Clock::now();
-  ChartLayout out;
+  PatchLayout out;
   {
     LayoutBuilder lb(s, std::move(labels), o, st);
     lb.fix();

@@ -23,7 +23,7 @@ namespace {
 
 // The triangles reached from the one inside `side`'s first edge, crossing no edge in `walls`
 // (undirected keys); empty if that triangle is not in the graph's patch.
-std::unordered_set<uint32_t> floodFrom(const ChartLayout& layout, const PatchGraph& g,
+std::unordered_set<uint32_t> floodFrom(const PatchLayout& layout, const PatchGraph& g,
                                        const PatchSide& side, const std::unordered_set<uint64_t>& walls) {
   const uint32_t seed = g.triangleOf(directedEdgeKey(side.vertices[0], side.vertices[1]));
   if (seed == ~0u) return {};
@@ -49,7 +49,7 @@ struct SidePlace {
 };
 
 // Cuts patch p along `path` (corner i .. corner j, interior vertices between, interior edges).
-bool splitAlong(ChartLayout& layout, uint32_t p, uint32_t i, uint32_t j, const PatchGraph& g,
+bool splitAlong(PatchLayout& layout, uint32_t p, uint32_t i, uint32_t j, const PatchGraph& g,
                 const std::vector<uint32_t>& path) {
   const Patch& patch = layout.patches[p];
   const uint32_t n = uint32_t(patch.sides.size());
@@ -155,7 +155,7 @@ std::pair<uint32_t, uint32_t> partSides(const Patch& patch, std::pair<uint32_t, 
 
 }  // namespace
 
-bool splitPatchAtCorners(ChartLayout& layout, uint32_t p, uint32_t i, uint32_t j) {
+bool splitPatchAtCorners(PatchLayout& layout, uint32_t p, uint32_t i, uint32_t j) {
   if (p >= layout.patches.size()) return false;
   const Patch& patch = layout.patches[p];
   const uint32_t n = uint32_t(patch.sides.size());
@@ -170,7 +170,7 @@ bool splitPatchAtCorners(ChartLayout& layout, uint32_t p, uint32_t i, uint32_t j
   return splitAlong(layout, p, i, j, g, path);
 }
 
-bool insertCorner(ChartLayout& layout, uint32_t p, uint32_t side, uint32_t k, uint32_t maxSides) {
+bool insertCorner(PatchLayout& layout, uint32_t p, uint32_t side, uint32_t k, uint32_t maxSides) {
   if (p >= layout.patches.size() || side >= layout.patches[p].sides.size()) return false;
   const PatchSide s = layout.patches[p].sides[side];
   if (k == 0 || k + 1 >= s.vertices.size()) return false;
@@ -231,7 +231,7 @@ namespace {
 
 // Of a side's vertices first..last (inner ones by default), the one nearest `fraction` of its arc
 // length (0 if there is none).
-uint32_t sideVertexNear(const ChartLayout& layout, const PatchSide& side, double fraction, uint32_t first = 1,
+uint32_t sideVertexNear(const PatchLayout& layout, const PatchSide& side, double fraction, uint32_t first = 1,
                         uint32_t last = ~0u) {
   const double target = fraction * sideLength(layout, side);
   last = std::min<uint32_t>(last, uint32_t(side.vertices.size()) - 2);
@@ -245,12 +245,12 @@ uint32_t sideVertexNear(const ChartLayout& layout, const PatchSide& side, double
 }
 
 // The inner vertex of a side nearest its arc-length middle (0 if it has none).
-uint32_t sideMiddleVertex(const ChartLayout& layout, const PatchSide& side) {
+uint32_t sideMiddleVertex(const PatchLayout& layout, const PatchSide& side) {
   return sideVertexNear(layout, side, 0.5);
 }
 
 // Every corner vertex with its (patch, corner index) incidences.
-std::unordered_map<uint32_t, std::vector<std::pair<uint32_t, uint32_t>>> cornerIncidences(const ChartLayout& layout) {
+std::unordered_map<uint32_t, std::vector<std::pair<uint32_t, uint32_t>>> cornerIncidences(const PatchLayout& layout) {
   std::unordered_map<uint32_t, std::vector<std::pair<uint32_t, uint32_t>>> at;
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     const auto& sides = layout.patches[p].sides;
@@ -263,7 +263,7 @@ std::unordered_map<uint32_t, std::vector<std::pair<uint32_t, uint32_t>>> cornerI
 bool spokeCorner(uint32_t n, uint32_t i) { return n >= 6 && i % 2 == 0; }
 
 // Whether corner i of patch p is on the border (a side there is open).
-bool borderCorner(const ChartLayout& layout, uint32_t p, uint32_t i) {
+bool borderCorner(const PatchLayout& layout, uint32_t p, uint32_t i) {
   const auto& sides = layout.patches[p].sides;
   const uint32_t n = uint32_t(sides.size());
   return sides[i].neighbourPatch < 0 || sides[(i + n - 1) % n].neighbourPatch < 0;
@@ -271,7 +271,7 @@ bool borderCorner(const ChartLayout& layout, uint32_t p, uint32_t i) {
 
 // Corners of two patches only, away from the border, where neither patch has spokes: one quad of
 // each meets there.
-bool foldedCorner(const ChartLayout& layout, const std::vector<std::pair<uint32_t, uint32_t>>& in) {
+bool foldedCorner(const PatchLayout& layout, const std::vector<std::pair<uint32_t, uint32_t>>& in) {
   if (in.size() != 2) return false;
   for (const auto& [p, i] : in) {
     if (borderCorner(layout, p, i) || spokeCorner(uint32_t(layout.patches[p].sides.size()), i)) return false;
@@ -281,7 +281,7 @@ bool foldedCorner(const ChartLayout& layout, const std::vector<std::pair<uint32_
 
 }  // namespace
 
-uint32_t twoQuadCorners(const ChartLayout& layout) {
+uint32_t twoQuadCorners(const PatchLayout& layout) {
   uint32_t count = 0;
   for (const auto& [v, in] : cornerIncidences(layout)) count += foldedCorner(layout, in);
   return count;
@@ -296,7 +296,7 @@ namespace {
 // connected components of the implication graph (Aspvall, Plass, Tarjan 1979; Boost's
 // strong_components). False, unchanged, if no pairing satisfies every corner that some pairing of
 // `patches` can change.
-bool alignSpokesExactly(ChartLayout& layout, const std::vector<uint32_t>& patches) {
+bool alignSpokesExactly(PatchLayout& layout, const std::vector<uint32_t>& patches) {
   std::vector<int32_t> var(layout.patches.size(), -1);
   std::vector<uint32_t> patchOf;
   for (const uint32_t p : patches) {
@@ -341,7 +341,7 @@ bool alignSpokesExactly(ChartLayout& layout, const std::vector<uint32_t>& patche
 
 }  // namespace
 
-uint32_t alignSpokes(ChartLayout& layout, const std::vector<uint32_t>& only) {
+uint32_t alignSpokes(PatchLayout& layout, const std::vector<uint32_t>& only) {
   std::vector<uint32_t> patches = only;
   if (only.empty()) {
     for (uint32_t p = 0; p < layout.patches.size(); ++p) patches.push_back(p);
@@ -370,7 +370,7 @@ uint32_t alignSpokes(ChartLayout& layout, const std::vector<uint32_t>& only) {
   return twoQuadCorners(layout);
 }
 
-MendCornersResult mendTwoChartCorners(ChartLayout& layout, uint32_t maxSides) {
+MendCornersResult mendTwoChartCorners(PatchLayout& layout, uint32_t maxSides) {
   MendCornersResult r;
   uint32_t& left = r.left;
   left = alignSpokes(layout);
@@ -404,7 +404,7 @@ MendCornersResult mendTwoChartCorners(ChartLayout& layout, uint32_t maxSides) {
   return r;
 }
 
-bool rotationFoldsNoCorner(ChartLayout& layout, uint32_t p) {
+bool rotationFoldsNoCorner(PatchLayout& layout, uint32_t p) {
   auto foldedAtP = [&] {
     const auto at = cornerIncidences(layout);
     uint32_t folded = 0;
@@ -418,7 +418,7 @@ bool rotationFoldsNoCorner(ChartLayout& layout, uint32_t p) {
   return after <= before;
 }
 
-void rotatePatchSides(ChartLayout& layout, uint32_t p, uint32_t k) {
+void rotatePatchSides(PatchLayout& layout, uint32_t p, uint32_t k) {
   Patch& patch = layout.patches.at(p);
   const uint32_t n = uint32_t(patch.sides.size());
   if (n == 0 || k % n == 0) return;
@@ -435,7 +435,7 @@ void rotatePatchSides(ChartLayout& layout, uint32_t p, uint32_t k) {
   std::rotate(patch.sides.begin(), patch.sides.begin() + k % n, patch.sides.end());
 }
 
-uint32_t splitTwoSidedHoles(ChartLayout& layout, uint32_t maxSides) {
+uint32_t splitTwoSidedHoles(PatchLayout& layout, uint32_t maxSides) {
   struct SideAt {
     uint32_t patch, side;
   };
@@ -493,7 +493,7 @@ uint32_t splitTwoSidedHoles(ChartLayout& layout, uint32_t maxSides) {
   return corners;
 }
 
-EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& within, uint32_t maxSides) {
+EvenSidesResult evenSides(PatchLayout& layout, const std::vector<uint32_t>& within, uint32_t maxSides) {
   EvenSidesResult r;
   const uint32_t np = uint32_t(layout.patches.size());
   std::vector<uint8_t> allowed(np, within.empty() ? 1 : 0);
@@ -595,7 +595,7 @@ namespace {
 // with no sources, through boundary vertices (at most 96, spread evenly): the neck. With
 // minShare > 0, only cuts that leave at least that share of the border on either side count.
 // Empty if none. Reads the layout only. See splitPatchThrough and splitPatchAtNeck.
-std::vector<uint32_t> findCut(const ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources,
+std::vector<uint32_t> findCut(const PatchLayout& layout, uint32_t p, std::vector<uint32_t> sources,
                               uint32_t maxSides, double minShare = 0.0, uint32_t minPartEdges = 0) {
   if (p >= layout.patches.size()) return {};
   const Patch& patch = layout.patches[p];
@@ -710,7 +710,7 @@ std::vector<uint32_t> findCut(const ChartLayout& layout, uint32_t p, std::vector
 // Cuts patch p along `best` (findCut's path): new corners at its ends where there are none
 // (indices shift as sides split), then the cut between them. False if that fails (the patch may
 // then have gained a corner, still valid).
-bool applyCut(ChartLayout& layout, uint32_t p, const std::vector<uint32_t>& best, uint32_t maxSides) {
+bool applyCut(PatchLayout& layout, uint32_t p, const std::vector<uint32_t>& best, uint32_t maxSides) {
   if (best.size() < 2) return false;
   for (const uint32_t e : {best.front(), best.back()}) {
     const auto at = boundaryPlaces(layout.patches[p]).at(e);
@@ -728,17 +728,17 @@ bool applyCut(ChartLayout& layout, uint32_t p, const std::vector<uint32_t>& best
   return splitAlong(layout, p, i, j, patchGraph(layout, now), best);
 }
 
-bool splitByCut(ChartLayout& layout, uint32_t p, std::vector<uint32_t> sources, uint32_t maxSides) {
+bool splitByCut(PatchLayout& layout, uint32_t p, std::vector<uint32_t> sources, uint32_t maxSides) {
   return applyCut(layout, p, findCut(layout, p, std::move(sources), maxSides), maxSides);
 }
 
 }  // namespace
 
-bool halvePatch(ChartLayout& layout, uint32_t p, uint32_t maxSides, uint32_t minPartEdges) {
+bool halvePatch(PatchLayout& layout, uint32_t p, uint32_t maxSides, uint32_t minPartEdges) {
   return applyCut(layout, p, findCut(layout, p, {}, maxSides, 0.25, minPartEdges), maxSides);
 }
 
-uint32_t patchTriangleAt(const ChartLayout& layout, uint32_t p, uint32_t v) {
+uint32_t patchTriangleAt(const PatchLayout& layout, uint32_t p, uint32_t v) {
   for (const uint32_t t : layout.patches[p].triangles) {
     const auto& tri = layout.triangles[t];
     if (tri[0] == v || tri[1] == v || tri[2] == v) return t;
@@ -746,7 +746,7 @@ uint32_t patchTriangleAt(const ChartLayout& layout, uint32_t p, uint32_t v) {
   return ~0u;
 }
 
-bool splitPatchThrough(ChartLayout& layout, uint32_t p, uint32_t triangle, uint32_t maxSides) {
+bool splitPatchThrough(PatchLayout& layout, uint32_t p, uint32_t triangle, uint32_t maxSides) {
   if (triangle >= layout.triangles.size()) return false;
   const auto& t = layout.triangles[triangle];
   return splitByCut(layout, p, {t[0], t[1], t[2]}, maxSides);
@@ -755,7 +755,7 @@ bool splitPatchThrough(ChartLayout& layout, uint32_t p, uint32_t triangle, uint3
 namespace {
 
 // The best corner-to-corner cut (splitPatchAtNeck's fallback): no neighbour changes.
-bool splitPatchAtCornerNeck(ChartLayout& layout, uint32_t p) {
+bool splitPatchAtCornerNeck(PatchLayout& layout, uint32_t p) {
   if (p >= layout.patches.size()) return false;
   if (layout.patches[p].sides.size() == 3) {
     // A fourth corner at the arc-length middle of the longest side that has an inner vertex.
@@ -810,7 +810,7 @@ bool splitPatchAtCornerNeck(ChartLayout& layout, uint32_t p) {
 
 }  // namespace
 
-bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s, bool keepHalves) {
+bool straightenSide(PatchLayout& layout, uint32_t p, uint32_t s, bool keepHalves) {
   if (p >= layout.patches.size() || s >= layout.patches[p].sides.size()) return false;
   const PatchSide side = layout.patches[p].sides[s];
   if (side.neighbourPatch < 0 || side.neighbourPatch == int32_t(p)) return false;
@@ -876,7 +876,7 @@ bool straightenSide(ChartLayout& layout, uint32_t p, uint32_t s, bool keepHalves
   return true;
 }
 
-bool lengthenSide(ChartLayout& layout, uint32_t a, uint32_t s, double by) {
+bool lengthenSide(PatchLayout& layout, uint32_t a, uint32_t s, double by) {
   if (a >= layout.patches.size() || s >= layout.patches[a].sides.size() || !(by > 0.0)) return false;
   const uint32_t na = uint32_t(layout.patches[a].sides.size()), sn = (s + 1) % na;
   const PatchSide S = layout.patches[a].sides[s], N = layout.patches[a].sides[sn];
@@ -957,7 +957,7 @@ bool lengthenSide(ChartLayout& layout, uint32_t a, uint32_t s, double by) {
   return true;
 }
 
-uint32_t lengthenShortSides(ChartLayout& layout, double fraction) {
+uint32_t lengthenShortSides(PatchLayout& layout, double fraction) {
   uint32_t lengthened = 0;
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     for (uint32_t s = 0; s < layout.patches[p].sides.size(); ++s) {
@@ -981,7 +981,7 @@ uint32_t lengthenShortSides(ChartLayout& layout, double fraction) {
   return lengthened;
 }
 
-uint32_t straightenSides(ChartLayout& layout, uint32_t rounds, bool keepHalves) {
+uint32_t straightenSides(PatchLayout& layout, uint32_t rounds, bool keepHalves) {
   uint32_t changed = 0;
   std::vector<uint8_t> changedBefore;
   for (uint32_t r = 0; r < rounds; ++r) {
@@ -1046,7 +1046,7 @@ enum class EarStep {
 // patch p and its neighbour across the side, never the number of patches, so the references it
 // holds stay valid. With mayCut, an ear on an open side that cannot take a corner (8 sides
 // already) is answered with NeedsCut, and the caller cuts the patch; else the search goes on.
-EarStep mendFirstSideEar(ChartLayout& layout, uint32_t p, bool mayCut) {
+EarStep mendFirstSideEar(PatchLayout& layout, uint32_t p, bool mayCut) {
   Patch& patch = layout.patches[p];
   // Directed edge -> triangle of this patch (its boundary runs counter-clockwise, so the
   // triangle inside along side edge a -> b holds a -> b).
@@ -1089,7 +1089,7 @@ EarStep mendFirstSideEar(ChartLayout& layout, uint32_t p, bool mayCut) {
 
 }  // namespace
 
-uint32_t moveSideEars(ChartLayout& layout, const std::vector<uint32_t>& only, bool splitFull) {
+uint32_t moveSideEars(PatchLayout& layout, const std::vector<uint32_t>& only, bool splitFull) {
   std::vector<uint32_t> patches = only;
   if (patches.empty()) {
     for (uint32_t p = 0; p < layout.patches.size(); ++p) patches.push_back(p);
@@ -1119,11 +1119,11 @@ uint32_t moveSideEars(ChartLayout& layout, const std::vector<uint32_t>& only, bo
   return moved;
 }
 
-bool splitPatchAtNeck(ChartLayout& layout, uint32_t p) {
+bool splitPatchAtNeck(PatchLayout& layout, uint32_t p) {
   return splitByCut(layout, p, {}, 8) || splitPatchAtCornerNeck(layout, p);
 }
 
-GeometryImageSet resampleAndRepair(ChartLayout& layout, const ResampleOptions& options,
+GeometryImageSet resampleAndRepair(PatchLayout& layout, const ResampleOptions& options,
                                    const ChartRepairOptions& repair, ChartRepairStats* stats) {
   GeometryImageSet set = resampleLayout(layout, options);
   return repairCharts(layout, std::move(set), options, repair, stats);
@@ -1151,7 +1151,7 @@ struct Badness {
 };
 
 // Patch p and its neighbours (ring 1), and their neighbours too (ring 2), sorted.
-std::vector<uint32_t> patchRing(const ChartLayout& layout, std::vector<uint32_t> from) {
+std::vector<uint32_t> patchRing(const PatchLayout& layout, std::vector<uint32_t> from) {
   std::vector<uint32_t> out = from;
   for (uint32_t q : from) {
     for (const PatchSide& side : layout.patches[q].sides) {
@@ -1180,7 +1180,7 @@ struct Trial {
 // any order with the same result as one after another.
 // With wide, the rings are three (making side counts even around a cut may put corners on the
 // second ring's sides, whose own neighbours' links follow).
-std::vector<Trial> disjointBatch(const ChartLayout& layout, std::vector<Fold>& folds, bool wide) {
+std::vector<Trial> disjointBatch(const PatchLayout& layout, std::vector<Fold>& folds, bool wide) {
   std::vector<uint8_t> busy(layout.patches.size(), 0);
   std::vector<Trial> batch;
   std::vector<Fold> rest;
@@ -1205,7 +1205,7 @@ std::vector<Trial> disjointBatch(const ChartLayout& layout, std::vector<Fold>& f
 // Removes the patches flagged dead (nothing live may link to them) and renumbers the links;
 // `perPatch` is compacted alike.
 template <typename T>
-std::vector<int32_t> removePatches(ChartLayout& layout, const std::vector<uint8_t>& dead, std::vector<T>& perPatch) {
+std::vector<int32_t> removePatches(PatchLayout& layout, const std::vector<uint8_t>& dead, std::vector<T>& perPatch) {
   std::vector<int32_t> index(layout.patches.size(), -1);
   uint32_t next = 0;
   for (uint32_t q = 0; q < layout.patches.size(); ++q) {
@@ -1232,7 +1232,7 @@ namespace {
 
 // One repair (see repairCharts): of the sampling errors alone (errorsOnly), or of the flipped
 // texels first and the sampling errors after.
-GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
+GeometryImageSet repairPass(PatchLayout& layout, GeometryImageSet set, const ResampleOptions& options,
                             const ChartRepairOptions& repair, ChartRepairStats& st,
                             const std::function<bool()>& mayGrow, bool errorsOnly) {
   const uint32_t maxRounds = repair.rounds;
@@ -1535,7 +1535,7 @@ GeometryImageSet repairPass(ChartLayout& layout, GeometryImageSet set, const Res
 
 }  // namespace
 
-GeometryImageSet repairCharts(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
+GeometryImageSet repairCharts(PatchLayout& layout, GeometryImageSet set, const ResampleOptions& options,
                               const ChartRepairOptions& repair, ChartRepairStats* stats,
                               const std::function<bool()>& mayGrow) {
   ChartRepairStats local;

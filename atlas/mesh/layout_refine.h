@@ -15,7 +15,7 @@
 #include <cstdint>
 #include <functional>
 
-#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/patch_layout.h"
 #include "atlas/mesh/resample.h"
 
 namespace gimlod {
@@ -30,7 +30,7 @@ namespace gimlod {
 // patch would keep less than half its triangles: a side straightened across a patch's bulge can
 // leave a sliver of a few dozen triangles, which the sides quad layout makes a single chart (on
 // the armadillo, two 4-sided patches of 59 and 65 triangles, one with 154 flipped texels).
-bool straightenSide(ChartLayout& layout, uint32_t patch, uint32_t side, bool keepHalves = false);
+bool straightenSide(PatchLayout& layout, uint32_t patch, uint32_t side, bool keepHalves = false);
 
 // Lengthens shared side `side` of patch `patch` by about `by` (in the input's units): its last
 // corner (where patch A's next side starts, shared with a third patch C, which also borders the
@@ -40,18 +40,18 @@ bool straightenSide(ChartLayout& layout, uint32_t patch, uint32_t side, bool kee
 // B. Every side count and link stays; A keeps its triangles. Returns false, unchanged, when the
 // corner is not such a three-patch corner, the next side has no inner vertex, no path exists, or
 // C's rest or B with its gain would not be a disk.
-bool lengthenSide(ChartLayout& layout, uint32_t patch, uint32_t side, double by);
+bool lengthenSide(PatchLayout& layout, uint32_t patch, uint32_t side, double by);
 
 // A shared side much shorter than the other sides of its patches (three patches meeting twice a
 // few edges apart, as clusters often do) is a whole chart edge in both quad layouts: its charts
 // are squeezed towards triangles there, and their texels fold. Lengthens, with lengthenSide,
 // every shared side shorter than `fraction` of the mean side of either of its patches to twice
 // that, from whichever end lies on the longer next side. Returns the sides lengthened.
-uint32_t lengthenShortSides(ChartLayout& layout, double fraction = 0.125);
+uint32_t lengthenShortSides(PatchLayout& layout, double fraction = 0.125);
 
 // straightenSide on every shared side once per round, until a round changes nothing; returns the
 // sides changed.
-uint32_t straightenSides(ChartLayout& layout, uint32_t rounds = 2, bool keepHalves = false);
+uint32_t straightenSides(PatchLayout& layout, uint32_t rounds = 2, bool keepHalves = false);
 
 // Moves every "ear" of the given patches (all patches if empty) to the neighbour across its side:
 // a triangle whose three vertices are consecutive vertices of one shared side. Its three
@@ -62,7 +62,7 @@ uint32_t straightenSides(ChartLayout& layout, uint32_t rounds = 2, bool keepHalv
 // On an open side the ear's middle vertex becomes a corner instead; a patch that has 8 sides
 // already is first cut at its neck (splitPatchAtNeck) if splitFull, which may change patches
 // beyond its neighbours. Returns the ears mended.
-uint32_t moveSideEars(ChartLayout& layout, const std::vector<uint32_t>& patches = {}, bool splitFull = true);
+uint32_t moveSideEars(PatchLayout& layout, const std::vector<uint32_t>& patches = {}, bool splitFull = true);
 
 // Cuts patch `patch` along the shortest path of interior edges (through interior vertices only)
 // between its corners i and j, which must not be adjacent (2 <= (j - i) mod n <= n - 2). The
@@ -70,12 +70,12 @@ uint32_t moveSideEars(ChartLayout& layout, const std::vector<uint32_t>& patches 
 // is appended as a new patch (its side 0 is the old side j). Both get the cut as their last
 // side, linked to each other; every neighbour's links follow. Returns false, leaving the layout
 // unchanged, when no such path exists or a part would not be a disk.
-bool splitPatchAtCorners(ChartLayout& layout, uint32_t patch, uint32_t i, uint32_t j);
+bool splitPatchAtCorners(PatchLayout& layout, uint32_t patch, uint32_t i, uint32_t j);
 
 // Makes the k-th vertex of side `side` of patch `patch` (0 < k < last) a corner: the side becomes
 // two sides, and so does the neighbour's side across it. Returns false, unchanged, when k is not
 // an inner vertex of the side or either patch would get more than maxSides sides.
-bool insertCorner(ChartLayout& layout, uint32_t patch, uint32_t side, uint32_t k,
+bool insertCorner(PatchLayout& layout, uint32_t patch, uint32_t side, uint32_t k,
                   uint32_t maxSides = 8);
 
 // In the sides quad layout, a corner where only two patches meet (as evenSides makes them), away
@@ -86,8 +86,8 @@ bool insertCorner(ChartLayout& layout, uint32_t patch, uint32_t side, uint32_t k
 // exactly, as 2-SAT), else so that as many as a greedy pass finds do, and returns the count left.
 // With `only`, just those patches rotate. rotationFoldsNoCorner: whether rotating patch p by one
 // leaves no more such corners at its corners (the layout is left as it was).
-uint32_t twoQuadCorners(const ChartLayout& layout);
-uint32_t alignSpokes(ChartLayout& layout, const std::vector<uint32_t>& only = {});
+uint32_t twoQuadCorners(const PatchLayout& layout);
+uint32_t alignSpokes(PatchLayout& layout, const std::vector<uint32_t>& only = {});
 // alignSpokes, then, while such corners are left, gives one of a corner's two patches a corner in
 // the middle of both its sides there (both shared with the other patch, which so gains two, and
 // every side count stays even), kept where alignSpokes then leaves fewer. A 4-sided patch wrapped
@@ -98,20 +98,20 @@ struct MendCornersResult {
   uint32_t corners = 0;
   uint32_t left = 0;
 };
-MendCornersResult mendTwoChartCorners(ChartLayout& layout, uint32_t maxSides = kMaxPatchSides);
-bool rotationFoldsNoCorner(ChartLayout& layout, uint32_t p);
+MendCornersResult mendTwoChartCorners(PatchLayout& layout, uint32_t maxSides = kMaxPatchSides);
+bool rotationFoldsNoCorner(PatchLayout& layout, uint32_t p);
 
 // Rotates the sides of patch p so that old side k becomes side 0 (the neighbours' links follow).
 // The patch and its sampling are the same; only which corners its quads pair differs in the sides
 // quad layout.
-void rotatePatchSides(ChartLayout& layout, uint32_t p, uint32_t k);
+void rotatePatchSides(PatchLayout& layout, uint32_t p, uint32_t k);
 
 // In the sides quad layout a hole bordered by only two sides is two chart edges between the same
 // two corners, and at a chart's coarsest level (its corners alone) they coincide: the hole closes.
 // Gives each such hole two more corners, on its longest side at a third and two thirds of its arc
 // length (its patch keeps its side count's parity), when that side has 3 or more edges and its
 // patch room for two more sides. Returns the corners made.
-uint32_t splitTwoSidedHoles(ChartLayout& layout, uint32_t maxSides = kMaxPatchSides);
+uint32_t splitTwoSidedHoles(PatchLayout& layout, uint32_t maxSides = kMaxPatchSides);
 
 // Makes every patch's side count even, as the sides quad layout needs (atlas/mesh/resample.h), by
 // making inner side vertices corners (insertCorner, the vertex nearest the side's arc-length
@@ -125,11 +125,11 @@ struct EvenSidesResult {
   uint32_t corners = 0;
   uint32_t oddLeft = 0;
 };
-EvenSidesResult evenSides(ChartLayout& layout, const std::vector<uint32_t>& within = {},
+EvenSidesResult evenSides(PatchLayout& layout, const std::vector<uint32_t>& within = {},
                           uint32_t maxSides = kMaxPatchSides);
 
 // The first of patch p's triangles with layout vertex v as a corner; ~0u if none has it.
-uint32_t patchTriangleAt(const ChartLayout& layout, uint32_t p, uint32_t v);
+uint32_t patchTriangleAt(const PatchLayout& layout, uint32_t p, uint32_t v);
 
 // Splits `patch` by a cut through a vertex of layout triangle `triangle` (where its charts fold):
 // of the shortest interior paths from that vertex to the boundary, the pair (or, from a boundary
@@ -137,7 +137,7 @@ uint32_t patchTriangleAt(const ChartLayout& layout, uint32_t p, uint32_t v);
 // that both parts get 3..maxSides sides. Ends of the cut that are not corners become corners
 // (insertCorner, so the neighbours there gain a side, within maxSides). Returns false if no cut
 // qualifies (the layout may then have gained a corner, still valid).
-bool splitPatchThrough(ChartLayout& layout, uint32_t patch, uint32_t triangle, uint32_t maxSides = 8);
+bool splitPatchThrough(PatchLayout& layout, uint32_t patch, uint32_t triangle, uint32_t maxSides = 8);
 
 // Halves `patch`: of the shortest interior paths between boundary vertices (as splitPatchAtNeck
 // takes them), the one whose length is smallest against the smaller part's perimeter among those
@@ -145,14 +145,14 @@ bool splitPatchThrough(ChartLayout& layout, uint32_t patch, uint32_t triangle, u
 // parts with fewer than minPartEdges border edges do not count. Both parts and any neighbour that
 // gains a corner keep 3..maxSides sides. False if none qualifies (the layout may then have gained
 // a corner, still valid).
-bool halvePatch(ChartLayout& layout, uint32_t patch, uint32_t maxSides = 8, uint32_t minPartEdges = 0);
+bool halvePatch(PatchLayout& layout, uint32_t patch, uint32_t maxSides = 8, uint32_t minPartEdges = 0);
 
 // Splits `patch` at its best neck: of the shortest interior paths between boundary vertices (at
 // most 96 start vertices, spread evenly), the one whose length is smallest against the smaller
 // part's perimeter, a new corner at an end costing a factor 1.25; both parts and any neighbour
 // that gains a corner must keep 3..8 sides. Falls back to the best corner-to-corner cut. Returns
 // false if nothing could be split.
-bool splitPatchAtNeck(ChartLayout& layout, uint32_t patch);
+bool splitPatchAtNeck(PatchLayout& layout, uint32_t patch);
 
 struct ChartRepairOptions {
   // Rounds of each of the two repairs (see repairCharts); 0: none.
@@ -198,12 +198,12 @@ struct ChartRepairStats {
 // repair.workBudget (stats->stoppedForWork): the repair's time is about that of parameterizing
 // so many triangles, so a budget of k times the layout's triangles bounds it by about k first
 // resamplings. The result depends on neither the thread count nor the machine.
-GeometryImageSet repairCharts(ChartLayout& layout, GeometryImageSet set, const ResampleOptions& options,
+GeometryImageSet repairCharts(PatchLayout& layout, GeometryImageSet set, const ResampleOptions& options,
                               const ChartRepairOptions& repair, ChartRepairStats* stats = nullptr,
                               const std::function<bool()>& mayGrow = {});
 
 // resampleLayout, then repairCharts.
-GeometryImageSet resampleAndRepair(ChartLayout& layout, const ResampleOptions& options,
+GeometryImageSet resampleAndRepair(PatchLayout& layout, const ResampleOptions& options,
                                    const ChartRepairOptions& repair = {}, ChartRepairStats* stats = nullptr);
 
 }  // namespace gimlod

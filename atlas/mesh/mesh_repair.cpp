@@ -12,7 +12,7 @@
 namespace gimlod::charting {
 
 Surface repairWelded(Welder&& w, ChartingStats& st, std::vector<uint32_t>* perTriangle) {
-  const char* fn = "buildChartLayout";
+  const char* fn = "buildPatchLayout";
   Surface s;
   std::vector<std::array<uint32_t, 3>> tris = std::move(w.tris);
   st.inputTriangles += tris.size();
@@ -230,7 +230,7 @@ Surface repairWelded(Welder&& w, ChartingStats& st, std::vector<uint32_t>* perTr
 
 Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm::u8vec4>& inCol,
                       const std::vector<std::array<uint32_t, 3>>& inTris, ChartingStats& st) {
-  const char* fn = "buildChartLayout";
+  const char* fn = "buildPatchLayout";
   // 1. Weld referenced positions.
   Welder w(std::min(inPos.size(), inTris.size() * 3));
   {

@@ -1,5 +1,5 @@
 // Validation of a chart layout, independent of how it was built.
-#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/patch_layout.h"
 
 #include <algorithm>
 #include <string>
@@ -10,7 +10,7 @@
 
 namespace gimlod {
 
-double sideLength(const ChartLayout& layout, const PatchSide& side) {
+double sideLength(const PatchLayout& layout, const PatchSide& side) {
   double l = 0.0;
   for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
     l += glm::length(layout.positions[side.vertices[k + 1]] - layout.positions[side.vertices[k]]);
@@ -18,14 +18,14 @@ double sideLength(const ChartLayout& layout, const PatchSide& side) {
   return l;
 }
 
-double meanSideLength(const ChartLayout& layout, uint32_t patch) {
+double meanSideLength(const PatchLayout& layout, uint32_t patch) {
   const Patch& p = layout.patches[patch];
   double sum = 0.0;
   for (const PatchSide& s : p.sides) sum += sideLength(layout, s);
   return sum / double(p.sides.size());
 }
 
-std::vector<std::string> validateChartLayout(const ChartLayout& L, uint32_t minSides,
+std::vector<std::string> validatePatchLayout(const PatchLayout& L, uint32_t minSides,
                                              uint32_t maxSides) {
   std::vector<std::string> errs;
   auto addErr = [&](const std::string& m) {

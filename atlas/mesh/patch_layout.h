@@ -34,13 +34,13 @@ struct PatchSide {
 
 // A topological disk of the input surface.
 struct Patch {
-  std::vector<uint32_t> triangles;  // indices into ChartLayout::triangles
+  std::vector<uint32_t> triangles;  // indices into PatchLayout::triangles
   std::vector<PatchSide> sides;     // 3..kMaxPatchSides, counter-clockwise; side i ends where side i+1 starts
 };
 
 // The surface (welded, manifold, after repair) and its patches. Every triangle belongs to
 // exactly one patch; every side with a neighbour appears in both patches, reversed.
-struct ChartLayout {
+struct PatchLayout {
   std::vector<glm::vec3> positions;
   std::vector<glm::u8vec4> colours;                 // empty, or one per position
   std::vector<std::array<uint32_t, 3>> triangles;   // counter-clockwise (outward normals)
@@ -48,9 +48,9 @@ struct ChartLayout {
 };
 
 // The length of a side's vertex run (the sum of its edges' lengths).
-double sideLength(const ChartLayout& layout, const PatchSide& side);
+double sideLength(const PatchLayout& layout, const PatchSide& side);
 // The mean of patch `patch`'s side lengths.
-double meanSideLength(const ChartLayout& layout, uint32_t patch);
+double meanSideLength(const PatchLayout& layout, uint32_t patch);
 
 // Checks a layout independently of how it was built; returns one line per violation (capped at
 // 100 lines), empty when valid: indices in range; every triangle in exactly one patch; each
@@ -58,7 +58,7 @@ double meanSideLength(const ChartLayout& layout, uint32_t patch);
 // sides; the sides chained, corner to corner, exactly along the patch's counter-clockwise
 // boundary loop; neighbour sides reciprocal with reversed vertex lists; open sides only on edges
 // with a single triangle in the whole mesh.
-std::vector<std::string> validateChartLayout(const ChartLayout& layout, uint32_t minSides = 3,
+std::vector<std::string> validatePatchLayout(const PatchLayout& layout, uint32_t minSides = 3,
                                              uint32_t maxSides = 8);
 
 }  // namespace gimlod

@@ -68,7 +68,7 @@ struct LocalPatch {
   std::vector<uint32_t> cornerIndex;               // position of corner i in boundary
 };
 
-LocalPatch buildLocalPatch(const ChartLayout& layout, uint32_t patchId) {
+LocalPatch buildLocalPatch(const PatchLayout& layout, uint32_t patchId) {
   if (patchId >= layout.patches.size()) fail(patchId, "no such patch");
   const Patch& patch = layout.patches[patchId];
   const uint32_t n = uint32_t(patch.sides.size());
@@ -707,7 +707,7 @@ SolveFigures solveMeanValue(const LocalPatch& lp, const std::vector<uint8_t>& is
 
 }  // namespace
 
-PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patch,
+PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patch,
                                         const ParamOptions& options) {
   using Clock = std::chrono::steady_clock;
   const Clock::time_point start = Clock::now();

@@ -19,7 +19,7 @@
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 
-#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/patch_layout.h"
 
 namespace gimlod {
 
@@ -80,7 +80,7 @@ struct PatchParameterization {
   uint32_t patch = 0;
   uint32_t sides = 0;                                 // n, 3..kMaxPatchSides
   std::vector<glm::dvec2> corners;                    // n domain corners, CCW
-  std::vector<uint32_t> vertices;                     // local -> ChartLayout vertex id
+  std::vector<uint32_t> vertices;                     // local -> PatchLayout vertex id
   std::vector<glm::dvec2> uv;                         // per local vertex, in the n-gon
   std::vector<std::array<uint32_t, 3>> triangles;     // local ids, patch triangle order
   std::vector<uint32_t> boundary;                     // local ids of the boundary loop (CCW),
@@ -135,7 +135,7 @@ std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths, boo
 // note: sides are straight polygon edges, so a triangle with all three vertices on one side (an
 // "ear" of a zig-zag side) gets zero parameter area: it is counted in degenerateTriangles and
 // its surface is squeezed into the side (no flips, no seams; a local sampling distortion).
-PatchParameterization parameterizePatch(const ChartLayout& layout, uint32_t patch,
+PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patch,
                                         const ParamOptions& options = {});
 
 // A triangulated disk (surface points xyz, triangles counter-clockwise in the domain) mapped

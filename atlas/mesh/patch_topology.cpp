@@ -11,7 +11,7 @@ namespace {
 // shortestCuts' graph for shortestInteriorPaths: the patch graph's interior edges, with lengths
 // from the layout's float positions, and the paths in a Paths.
 struct CutSearch {
-  const ChartLayout& layout;
+  const PatchLayout& layout;
   const PatchGraph& g;
   Paths r;
   void start(uint32_t source) { r.dist[source] = 0.0; }
@@ -49,7 +49,7 @@ std::pair<const std::pair<uint32_t, uint32_t>*, const std::pair<uint32_t, uint32
   return {adjacency.data() + (lo - adjacency.begin()), adjacency.data() + (hi - adjacency.begin())};
 }
 
-PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch, bool withPaths) {
+PatchGraph patchGraph(const PatchLayout& layout, const Patch& patch, bool withPaths) {
   PatchGraph g;
   for (const PatchSide& s : patch.sides) {
     for (size_t k = 0; k < s.vertices.size(); ++k) {
@@ -76,7 +76,7 @@ PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch, bool withPa
   return g;
 }
 
-Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target,
+Paths shortestCuts(const PatchLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target,
                    size_t boundaryEnds) {
   CutSearch search{layout, g, {}};
   size_t ends = 0;
@@ -90,7 +90,7 @@ Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t sour
   return std::move(search.r);
 }
 
-Paths shortestCutWithin(const ChartLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target,
+Paths shortestCutWithin(const PatchLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target,
                         double bound) {
   CutSearch search{layout, g, {}};
   const glm::vec3 end = layout.positions[target];
@@ -104,7 +104,7 @@ Paths shortestCutWithin(const ChartLayout& layout, const PatchGraph& g, uint32_t
   return std::move(search.r);
 }
 
-std::vector<uint32_t> trianglesWithin(const ChartLayout& layout, const std::vector<uint32_t>& triangles,
+std::vector<uint32_t> trianglesWithin(const PatchLayout& layout, const std::vector<uint32_t>& triangles,
                                       uint32_t source, uint32_t target, double bound) {
   const glm::vec3 pa = layout.positions[source], pb = layout.positions[target];
   std::vector<uint32_t> out;
@@ -120,7 +120,7 @@ std::vector<uint32_t> trianglesWithin(const ChartLayout& layout, const std::vect
   return out;
 }
 
-int64_t eulerCharacteristic(const ChartLayout& layout, const std::vector<uint32_t>& tris) {
+int64_t eulerCharacteristic(const PatchLayout& layout, const std::vector<uint32_t>& tris) {
   std::vector<uint32_t> verts;
   std::vector<uint64_t> edges;
   verts.reserve(tris.size() * 3);
@@ -139,7 +139,7 @@ int64_t eulerCharacteristic(const ChartLayout& layout, const std::vector<uint32_
   return int64_t(v) - int64_t(e) + int64_t(tris.size());
 }
 
-bool isDisk(const ChartLayout& layout, const std::vector<uint32_t>& triangles) {
+bool isDisk(const PatchLayout& layout, const std::vector<uint32_t>& triangles) {
   return eulerCharacteristic(layout, triangles) == 1;
 }
 

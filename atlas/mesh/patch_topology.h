@@ -12,7 +12,7 @@
 #include <utility>
 #include <vector>
 
-#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/patch_layout.h"
 
 namespace gimlod {
 
@@ -80,7 +80,7 @@ struct PatchGraph {
 
 // The graph of `patch` (its triangles and sides) in `layout`. Without withPaths, no adjacency:
 // enough for triangleOf and the boundary, not for the path searches.
-PatchGraph patchGraph(const ChartLayout& layout, const Patch& patch, bool withPaths = true);
+PatchGraph patchGraph(const PatchLayout& layout, const Patch& patch, bool withPaths = true);
 
 // Shortest cut paths from `source`: distances and predecessors over interior vertices.
 struct Paths {
@@ -92,7 +92,7 @@ struct Paths {
 // positions). It may stop early, once `target` is settled, or once `boundaryEnds` boundary
 // vertices are: the paths to settled vertices are then final, and every other vertex in `dist`
 // is at least as far as any settled one (so the nearest ends are exactly known). ~0u: no target.
-Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t source,
+Paths shortestCuts(const PatchLayout& layout, const PatchGraph& g, uint32_t source,
                    uint32_t target = ~0u, size_t boundaryEnds = std::numeric_limits<size_t>::max());
 
 // The shortest interior path from `source` to `target`, if one is shorter than `bound`: the
@@ -103,19 +103,19 @@ Paths shortestCuts(const ChartLayout& layout, const PatchGraph& g, uint32_t sour
 // that path a distance longer than its own. So g need only hold the triangles with a vertex u
 // closer to both ends than `bound` (|source - u| + |u - target| < bound): every edge of every
 // vertex the search goes through.
-Paths shortestCutWithin(const ChartLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target,
+Paths shortestCutWithin(const PatchLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target,
                         double bound);
 
 // The triangles of `triangles` (layout ids, in their order) with a vertex u closer to both
 // `source` and `target` together than `bound` (|source - u| + |u - target| < bound, with a margin
 // for the float lengths' rounding): what shortestCutWithin's graph needs.
-std::vector<uint32_t> trianglesWithin(const ChartLayout& layout, const std::vector<uint32_t>& triangles,
+std::vector<uint32_t> trianglesWithin(const PatchLayout& layout, const std::vector<uint32_t>& triangles,
                                       uint32_t source, uint32_t target, double bound);
 
 // Euler characteristic V - E + F of a set of the layout's triangles.
-int64_t eulerCharacteristic(const ChartLayout& layout, const std::vector<uint32_t>& triangles);
+int64_t eulerCharacteristic(const PatchLayout& layout, const std::vector<uint32_t>& triangles);
 
 // True if V - E + F = 1 (for a connected set of triangles, as a flood fill gives: a disk).
-bool isDisk(const ChartLayout& layout, const std::vector<uint32_t>& triangles);
+bool isDisk(const PatchLayout& layout, const std::vector<uint32_t>& triangles);
 
 }  // namespace gimlod

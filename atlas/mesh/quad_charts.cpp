@@ -56,7 +56,7 @@ std::string spelled(const QuadChartOptions& o, std::string_view name) {
 }
 
 // The diagonal of the layout's bounding box.
-double layoutDiagonal(const ChartLayout& layout) {
+double layoutDiagonal(const PatchLayout& layout) {
   MeshBounds b;
   for (const glm::vec3& p : layout.positions) b.extend(p);
   return b.empty() ? 0.0 : glm::length(glm::dvec3(b.max) - glm::dvec3(b.min));
@@ -65,17 +65,17 @@ double layoutDiagonal(const ChartLayout& layout) {
 // Samples per layout triangle in `charts` charts of chartSize^2 samples (intervals squared).
 // Whether `charts` charts of chartSize^2 samples reach the samples a layout may grow to
 // (meshSampleCap).
-bool atSampleCap(const ChartLayout& layout, uint64_t charts, uint32_t chartSize) {
+bool atSampleCap(const PatchLayout& layout, uint64_t charts, uint32_t chartSize) {
   return double(charts) * double(chartSize - 1) * double(chartSize - 1) >= meshSampleCap(layout.triangles.size());
 }
 
-double samplesPerTriangle(const ChartLayout& layout, uint64_t charts, uint32_t chartSize) {
+double samplesPerTriangle(const PatchLayout& layout, uint64_t charts, uint32_t chartSize) {
   return double(charts) * double(chartSize - 1) * double(chartSize - 1) /
          double(std::max<size_t>(layout.triangles.size(), 1));
 }
 
 // The quad charts of a layout (before any repair).
-uint64_t layoutQuadCount(const ChartLayout& layout, QuadLayout quads) {
+uint64_t layoutQuadCount(const PatchLayout& layout, QuadLayout quads) {
   uint64_t n = 0;
   for (const Patch& pa : layout.patches) n += patchQuadCount(uint32_t(pa.sides.size()), quads);
   return n;
@@ -85,10 +85,10 @@ uint64_t threadCount(const QuadChartOptions& o) {
   return o.threads ? o.threads : uint64_t(std::max(1, tbb::this_task_arena::max_concurrency()));
 }
 
-uint64_t bytesPerSample(const ChartLayout& layout) { return layout.colours.empty() ? 16 : 20; }
+uint64_t bytesPerSample(const PatchLayout& layout) { return layout.colours.empty() ? 16 : 20; }
 
 // A patch's charts (up to 8 quads) and their working arrays at o.chartSize, on every thread.
-uint64_t chartsInFlightBytes(const ChartLayout& layout, const QuadChartOptions& o) {
+uint64_t chartsInFlightBytes(const PatchLayout& layout, const QuadChartOptions& o) {
   return threadCount(o) * uint64_t(o.chartSize) * o.chartSize * (8 * bytesPerSample(layout) + 32);
 }
 
@@ -96,7 +96,7 @@ uint64_t chartsInFlightBytes(const ChartLayout& layout, const QuadChartOptions& 
 // the staging directory once measured, and are read back one chart at a time per thread to be
 // written, so what must fit is a patch's charts (up to 8 quads) and their working arrays on every
 // thread at once in memory, and the spill plus the chart files (with their pyramids) on disk.
-void checkChartRoom(const ChartLayout& layout, uint64_t quads, const QuadChartOptions& o, const fs::path& dir) {
+void checkChartRoom(const PatchLayout& layout, uint64_t quads, const QuadChartOptions& o, const fs::path& dir) {
   const uint64_t samples = uint64_t(o.chartSize) * o.chartSize;
   const uint64_t perSample = bytesPerSample(layout);
   const uint64_t threads = threadCount(o);
@@ -115,14 +115,14 @@ void checkChartRoom(const ChartLayout& layout, uint64_t quads, const QuadChartOp
                                  "{:.1f} GiB free: lower {} or {}",
                                  o.input.string(), quads, o.chartSize, double(disk) / double(1ull << 30),
                                  dir.parent_path().string(), double(space.available) / double(1ull << 30),
-                                 optionRef("chartSize"), optionRef("charts")));
+                                 optionRef("chartSize"), optionRef("patches")));
 }
 
 
 // What the patches' parameterizations may hold at once (ParamGate): maxMemory less what the
 // process holds now (once the heap has handed freed pages back), the parameterization cache's
 // share (maxMemory / 8) and the charts in flight at o.chartSize.
-uint64_t paramGateBudget(const ChartLayout& layout, const QuadChartOptions& o) {
+uint64_t paramGateBudget(const PatchLayout& layout, const QuadChartOptions& o) {
   releaseFreedMemory();
   const uint64_t taken = residentBytes() + o.maxMemory / 8 + chartsInFlightBytes(layout, o);
   return o.maxMemory > taken ? o.maxMemory - taken : 0;
@@ -130,7 +130,7 @@ uint64_t paramGateBudget(const ChartLayout& layout, const QuadChartOptions& o) {
 
 // Logs (at debug level) every chart left with flipped texels: its patch's size and sides (edges
 // and length of each), so that where folds remain can be told apart.
-void logFoldingCharts(const ChartLayout& layout, const GeometryImageSet& set) {
+void logFoldingCharts(const PatchLayout& layout, const GeometryImageSet& set) {
   for (const GeometryImage& g : set.charts) {
     if (g.quality.flippedTexels == 0) continue;
     const Patch& patch = layout.patches[g.patch];
@@ -151,7 +151,7 @@ void logFoldingCharts(const ChartLayout& layout, const GeometryImageSet& set) {
 // is not repaired in vain (the horse: 65^2 straight to 257^2). Fewer while the charts would pass
 // kMaxDensityChartSize or kMaxSamplesPerTriangle (counted with `charts`, the fewer layout's; one
 // doubling may cross it, as the one-layout flow's), or the room checkChartRoom allows.
-uint32_t grownChartSize(const ChartLayout& layout, const QuadChartOptions& options, uint32_t current, uint64_t charts,
+uint32_t grownChartSize(const PatchLayout& layout, const QuadChartOptions& options, uint32_t current, uint64_t charts,
                         double error, double bound, const fs::path& dir) {
   if (current >= kMaxDensityChartSize || atSampleCap(layout, charts, current)) return 0;
   const uint32_t asked = std::max(1u, uint32_t(std::ceil(std::log(error / std::max(bound, 1e-300)) / std::log(4.0))));
@@ -195,7 +195,7 @@ ResampleOptions resampleOptions(const QuadChartOptions& o, QuadLayout quads, Cha
 
 // Makes every patch's side count even for the sides quad layout (st.evenSideCorners the corners
 // added); false when some patch cannot have one.
-bool evenLayout(ChartLayout& layout, MeshResampleStats& st) {
+bool evenLayout(PatchLayout& layout, MeshResampleStats& st) {
   const uint32_t holeCorners = splitTwoSidedHoles(layout);
   const EvenSidesResult even = evenSides(layout);
   st.evenSideCorners = holeCorners + even.corners;
@@ -205,7 +205,7 @@ bool evenLayout(ChartLayout& layout, MeshResampleStats& st) {
 }
 
 // In the sides layout, the corners where only two charts meet (st.twoQuadCorners), with a warning.
-void countTwoQuadCorners(const ChartLayout& layout, const QuadChartOptions& o, MeshResampleStats& st) {
+void countTwoQuadCorners(const PatchLayout& layout, const QuadChartOptions& o, MeshResampleStats& st) {
   if (!st.sideQuads) return;
   st.twoQuadCorners = twoQuadCorners(layout);
   if (st.twoQuadCorners > 0)
@@ -229,7 +229,7 @@ void setChartFigures(const GeometryImageSet& set, MeshResampleStats& st) {
 // with `suffix`. With the sides layout, false in `evened` (and nothing else done) when some patch
 // cannot be given an even side count. A chart size chosen by density is `size` when given (else
 // meshChartSizeForDensity's), and doubled where the bound asks it only with `grow`.
-ResampledMesh resampleInLayout(ChartLayout& layout, const QuadChartOptions& options, QuadLayout quads,
+ResampledMesh resampleInLayout(PatchLayout& layout, const QuadChartOptions& options, QuadLayout quads,
                                const fs::path& dir, StageMeter& meter, const std::string& suffix, bool* evened,
                                uint32_t size = 0, bool grow = true) {
   ResampledMesh r;
@@ -373,7 +373,7 @@ struct PatchSizing {
     bool cutAsked = false;    // it cannot grow: cut it next round
     uint32_t cuts = 0;     // cuts on the way from a charted patch
   };
-  ChartLayout& layout;
+  PatchLayout& layout;
   ResampleOptions ro;
   std::vector<glm::dvec3> normals;  // layoutVertexNormals, once
   std::vector<Entry> patches;
@@ -736,7 +736,7 @@ uint32_t startSizeFloor(uint32_t base, const QuadChartOptions& o) {
 // charts at their own size (MeshSizing::kPatch), from the density's size up: every patch at that
 // size, the folds there cut (repairCharts, flips only: a fold that stays as the texels shrink is
 // the parameterization's, not the sampling's), then sizePatches. Stage "resample".
-ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, QuadLayout quads, const fs::path& dir,
+ResampledMesh resamplePerPatch(PatchLayout& layout, const QuadChartOptions& o, QuadLayout quads, const fs::path& dir,
                                StageMeter& meter) {
   ResampledMesh r;
   MeshResampleStats& st = r.stats;
@@ -872,7 +872,7 @@ ResampledMesh resamplePerPatch(ChartLayout& layout, const QuadChartOptions& o, Q
 
 // Per-patch sizing in one quad layout: sides (straightened by `straighten`, their side counts made
 // even), or kites where some patch cannot have an even side count or with --quads kites.
-ResampledMesh quadChartsPerPatch(ChartLayout& layout, const QuadChartOptions& options, const fs::path& dir,
+ResampledMesh quadChartsPerPatch(PatchLayout& layout, const QuadChartOptions& options, const fs::path& dir,
                                  StageMeter& meter, const std::function<void(QuadLayout)>& straighten) {
   QuadLayout quads = options.quads == MeshQuads::kKites ? QuadLayout::kKites : QuadLayout::kSides;
   MeshResampleStats even;
@@ -898,9 +898,9 @@ ResampledMesh quadChartsPerPatch(ChartLayout& layout, const QuadChartOptions& op
 
 }  // namespace
 
-ResampledMesh makeQuadCharts(ChartLayout&& layout, const QuadChartOptions& options, const fs::path& dir,
+ResampledMesh makeQuadCharts(PatchLayout&& layout, const QuadChartOptions& options, const fs::path& dir,
                              StageMeter& meter) {
-  const std::vector<std::string> bad = validateChartLayout(layout);
+  const std::vector<std::string> bad = validatePatchLayout(layout);
   if (!bad.empty()) throw InputError(options.input.string() + ": the chart layout is invalid: " + bad.front());
   finishStage(meter, "validate");
   const uint64_t layoutTriangles = layout.triangles.size();
@@ -1047,7 +1047,7 @@ ResampledMesh makeQuadCharts(ChartLayout&& layout, const QuadChartOptions& optio
   r.stats.sidesStraightened = straightened;
   r.stats.sideEarsMended = ears;
   r.triangles = layoutTriangles;
-  layout = ChartLayout{};
+  layout = PatchLayout{};
   return r;
 }
 

@@ -14,7 +14,7 @@
 #include <string_view>
 #include <vector>
 
-#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/patch_layout.h"
 #include "atlas/mesh/layout_refine.h"
 #include "atlas/mesh/mesh_io.h"
 #include "atlas/mesh/resample.h"
@@ -177,7 +177,7 @@ struct ResampledMesh {
 // 3/4 of maxMemory is resident or repairBudget is spent). layout is freed. Stages "validate",
 // "straighten", "resample", "chart_repair". Throws
 // InputError naming the file and the parameter to change.
-ResampledMesh makeQuadCharts(ChartLayout&& layout, const QuadChartOptions& options, const std::filesystem::path& dir,
+ResampledMesh makeQuadCharts(PatchLayout&& layout, const QuadChartOptions& options, const std::filesystem::path& dir,
                              StageMeter& meter);
 
 

@@ -32,14 +32,14 @@ uint64_t undirectedKey(uint32_t a, uint32_t b) {
 
 // Attributes of the layout's surface: positions, area-weighted unit vertex normals, colours.
 struct Surface {
-  const ChartLayout& layout;
+  const PatchLayout& layout;
   const std::vector<glm::dvec3>& normals;  // unit, or zero where undefined
   bool hasColours = false;
 };
 
 }  // namespace
 
-std::vector<glm::dvec3> layoutVertexNormals(const ChartLayout& layout) {
+std::vector<glm::dvec3> layoutVertexNormals(const PatchLayout& layout) {
   std::vector<glm::dvec3> n(layout.positions.size(), glm::dvec3(0.0));
   for (const auto& t : layout.triangles) {
     if (t[0] >= n.size() || t[1] >= n.size() || t[2] >= n.size()) {
@@ -312,7 +312,7 @@ struct SideLinks {
   std::vector<std::vector<uint8_t>> opposite;    // [patch][side]: runs opposite to the neighbour
 };
 
-SideLinks validateLinks(const ChartLayout& layout, QuadLayout mode, const char* fn) {
+SideLinks validateLinks(const PatchLayout& layout, QuadLayout mode, const char* fn) {
   auto fail = [&](uint32_t p, uint32_t i, const std::string& what) {
     throw std::invalid_argument(std::string(fn) + ": patch " + std::to_string(p) + " side " +
                                 std::to_string(i) + ": " + what);
@@ -351,7 +351,7 @@ SideLinks validateLinks(const ChartLayout& layout, QuadLayout mode, const char* 
   return links;
 }
 
-std::vector<std::array<RootNeighbour, 4>> neighboursFrom(const ChartLayout& layout, const SideLinks& links,
+std::vector<std::array<RootNeighbour, 4>> neighboursFrom(const PatchLayout& layout, const SideLinks& links,
                                                          QuadLayout mode) {
   const uint32_t m = 2;  // any: only the runs' relative offsets matter here
   std::vector<PatchQuads> plans;
@@ -406,7 +406,7 @@ std::vector<std::array<RootNeighbour, 4>> neighboursFrom(const ChartLayout& layo
 }  // namespace
 
 
-std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout, QuadLayout quads) {
+std::vector<uint32_t> quadChartOffsets(const PatchLayout& layout, QuadLayout quads) {
   std::vector<uint32_t> offsets(layout.patches.size());
   uint32_t next = 0;
   for (size_t p = 0; p < layout.patches.size(); ++p) {
@@ -416,7 +416,7 @@ std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout, QuadLayout qua
   return offsets;
 }
 
-std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layout, QuadLayout quads) {
+std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const PatchLayout& layout, QuadLayout quads) {
   return neighboursFrom(layout, validateLinks(layout, quads, "quadNeighbours"), quads);
 }
 
@@ -805,7 +805,7 @@ namespace {
 
 // Throws std::invalid_argument where resampleLayout's input is malformed (the side links are
 // checked by validateLinks).
-void checkResampleInput(const ChartLayout& layout, const ResampleOptions& options, const ResampleReuse& reuse) {
+void checkResampleInput(const PatchLayout& layout, const ResampleOptions& options, const ResampleReuse& reuse) {
   const uint32_t size = options.chartSize;
   if (!isChartSizeValid(size)) {
     throw std::invalid_argument("resampleLayout: chart size " + std::to_string(size) +
@@ -823,7 +823,7 @@ void checkResampleInput(const ChartLayout& layout, const ResampleOptions& option
 }
 
 // What each patch does: 0 skip (not selected), 1 resample, 2 + k take from source k.
-std::vector<uint32_t> patchActions(const ChartLayout& layout, const ResampleOptions& options,
+std::vector<uint32_t> patchActions(const PatchLayout& layout, const ResampleOptions& options,
                                    const ResampleReuse& reuse) {
   const uint32_t size = options.chartSize;
   std::vector<uint32_t> action(layout.patches.size(), 1);
@@ -864,7 +864,7 @@ struct SideOwners {
 
 // Finds the owner of every patch side, and which owners the patches that resample (action 1)
 // need. Throws std::invalid_argument on a side with a vertex out of range or fewer than 2.
-SideOwners sideOwners(const ChartLayout& layout, const std::vector<uint32_t>& action) {
+SideOwners sideOwners(const PatchLayout& layout, const std::vector<uint32_t>& action) {
   SideOwners so;
   std::vector<SideRef>& owners = so.owners;
   std::vector<uint8_t>& ownerNeeded = so.ownerNeeded;
@@ -904,7 +904,7 @@ SideOwners sideOwners(const ChartLayout& layout, const std::vector<uint32_t>& ac
 // What the patches of one resampleLayout call share: its input, the samples of the patch sides
 // (by owner), and the set the patches fill (each its own charts and stats).
 struct ResampleContext {
-  const ChartLayout& layout;
+  const PatchLayout& layout;
   const ResampleOptions& options;
   const ResampleReuse& reuse;
   const Surface& surface;
@@ -1099,7 +1099,7 @@ struct PatchSampler {
 
   // Whether quad j has its least-stretch map, making it on the first call.
   bool ensureWarp(uint32_t j) {
-    const ChartLayout& layout = c.layout;
+    const PatchLayout& layout = c.layout;
     if (plan.single || warpTried[j]) return bool(warped[j]);
     warpTried[j] = 1;
     if (xyz.empty()) {
@@ -1119,7 +1119,7 @@ struct PatchSampler {
   // The patch's triangle along each side segment: the input face a side sample lies on,
   // seen from this patch (for the flipped-texel test).
   void findSideFaces() {
-    const ChartLayout& layout = c.layout;
+    const PatchLayout& layout = c.layout;
     std::unordered_set<uint64_t> sideEdges;
     for (const PatchSide& side : patch.sides) {
       for (size_t k = 0; k + 1 < side.vertices.size(); ++k) {
@@ -1137,7 +1137,7 @@ struct PatchSampler {
 
   // The unit normal of layout triangle t, or `otherwise` when t is ~0u or degenerate.
   glm::dvec3 faceNormalOr(uint32_t t, const glm::dvec3& otherwise) const {
-    const ChartLayout& layout = c.layout;
+    const PatchLayout& layout = c.layout;
     if (t == ~0u) return otherwise;
     const auto& tri = layout.triangles[t];
     const glm::dvec3 a(layout.positions[tri[0]]);
@@ -1277,7 +1277,7 @@ struct ChartSampler {
 
   // The chart's quality as its samples stand; its flipped texels into flippedAt.
   ImageQuality measure(bool warp, std::vector<uint32_t>& flippedAt) {
-    const ChartLayout& layout = ps.c.layout;
+    const PatchLayout& layout = ps.c.layout;
     const std::vector<QuadWarp>& warps = ps.warps;
     const PatchParameterization& pp = ps.pp;
     // The input faces under the samples (zero where none is known).
@@ -1306,7 +1306,7 @@ struct ChartSampler {
   // error, and a chart of few samples along a curved or kinked side (a small patch) cuts chords
   // across the vertices between them.
   void measureSharedSides(ImageQuality& q) const {
-    const ChartLayout& layout = ps.c.layout;
+    const PatchLayout& layout = ps.c.layout;
     const double last = double(ps.c.sideCount - 1);
     for (uint8_t e = 0; e < 4; ++e) {
       const EdgeSource& src = ps.plan.quads[i][e];
@@ -1600,7 +1600,7 @@ void resamplePatch(const ResampleContext& c, uint32_t p, const PatchQuads& plan)
 
 // The set's figures: the parameterizations and charts of the patches it holds (action != 0)
 // combined, and the triangles this resampling parameterized.
-void combineSetFigures(const ChartLayout& layout, const std::vector<uint32_t>& action, GeometryImageSet& set) {
+void combineSetFigures(const PatchLayout& layout, const std::vector<uint32_t>& action, GeometryImageSet& set) {
   std::vector<ParamQuality> initial, final;
   for (uint32_t p = 0; p < set.patches.size(); ++p) {
     if (action[p] == 0) continue;
@@ -1621,7 +1621,7 @@ void combineSetFigures(const ChartLayout& layout, const std::vector<uint32_t>& a
 
 }  // namespace
 
-GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options) {
+GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions& options) {
   return resampleLayout(layout, options, ResampleReuse{});
 }
 
@@ -1701,7 +1701,7 @@ uint64_t ParamCache::bytes() const {
   return bytes_;
 }
 
-GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options,
+GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions& options,
                                 const ResampleReuse& reuse) {
   const auto start = std::chrono::steady_clock::now();
   checkResampleInput(layout, options, reuse);

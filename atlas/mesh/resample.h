@@ -30,7 +30,7 @@
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
 
-#include "atlas/mesh/chart_layout.h"
+#include "atlas/mesh/patch_layout.h"
 #include "atlas/mesh/patch_param.h"
 #include "core/atlas_format.h"
 
@@ -129,7 +129,7 @@ struct ImageQuality {
 // bottom = side 2j+1, left = side 2j, right and top the spokes to corners 2j+2 and 2j.
 // Sides quad of a 4-sided patch: (0,0) .. (0,1) corners 0..3, edge e = side e.
 struct GeometryImage {
-  uint32_t patch = 0;                        // ChartLayout patch
+  uint32_t patch = 0;                        // PatchLayout patch
   uint32_t quad = 0;                         // i, 0..n-1 within the patch
   std::vector<glm::vec3> positions;          // chartSize^2
   std::vector<PackedNormal> normals;         // chartSize^2, unit normals (packNormal)
@@ -201,25 +201,25 @@ struct GeometryImageSet {
 
 // Per patch, the chart id of its quad 0 (the sum of the quads of the patches before it): quad i
 // of patch p is chart offsets[p] + i.
-std::vector<uint32_t> quadChartOffsets(const ChartLayout& layout, QuadLayout quads = QuadLayout::kKites);
+std::vector<uint32_t> quadChartOffsets(const PatchLayout& layout, QuadLayout quads = QuadLayout::kKites);
 
 // The four neighbours of every quad chart (by Edge): inside a patch from the quads' structure,
 // across patches from PatchSide neighbourPatch / neighbourSide / reversed. Open sides give
 // chart = -1. Throws std::invalid_argument("quadNeighbours: ...") on side links that are not
 // reciprocal or whose vertex runs do not match, or an odd patch in the sides layout.
-std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const ChartLayout& layout,
+std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const PatchLayout& layout,
                                                          QuadLayout quads = QuadLayout::kKites);
 
 // Parameterizes every patch and resamples its quads (patches in parallel). Normals are the
 // layout's area-weighted vertex normals, interpolated and normalized; colours are interpolated
 // when the layout has them. Throws std::invalid_argument on an invalid chartSize, a malformed
 // patch (see parameterizePatch) or bad side links (see quadNeighbours).
-GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options = {});
+GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions& options = {});
 
 // The layout's unit area-weighted vertex normals (zero where undefined), as resampleLayout
 // interpolates them. They depend on positions and triangles only, which layout refinement
 // (atlas/mesh/layout_refine.h) never changes, so a refinement loop computes them once.
-std::vector<glm::dvec3> layoutVertexNormals(const ChartLayout& layout);
+std::vector<glm::dvec3> layoutVertexNormals(const PatchLayout& layout);
 
 // Patch parameterizations kept from one resampling of a layout to the next, so that a patch
 // resampled at another chart size, its triangles and sides unchanged (patchParamAlike), is
@@ -329,7 +329,7 @@ struct ResampleReuse {
 bool patchSamplesAlike(const Patch& a, const Patch& b, uint32_t p);
 
 // resampleLayout, reusing what `reuse` offers.
-GeometryImageSet resampleLayout(const ChartLayout& layout, const ResampleOptions& options,
+GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions& options,
                                 const ResampleReuse& reuse);
 
 // Measures one image (positions and float unit normals, chartSize^2 each). flippedAt, if given,

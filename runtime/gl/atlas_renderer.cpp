@@ -382,15 +382,15 @@ void AtlasRenderer::Impl::validate(std::span<const DrawNode> nodes,
   if (!stitch.morphs.empty() && stitch.morphs.size() != stitch.bytes.size())
     throw std::invalid_argument("StitchTables: morphs and bytes differ in size");
   for (const DrawNode& n : nodes) {
-    const bool ok = n.res >= setup.minResLog2 && n.res <= setup.maxResLog2 &&
-                    n.res <= n.pageResLog2 && n.pageResLog2 <= setup.pageIntervalsLog2 &&
+    const bool ok = n.resLog2 >= setup.minResLog2 && n.resLog2 <= setup.maxResLog2 &&
+                    n.resLog2 <= n.pageResLog2 && n.pageResLog2 <= setup.pageIntervalsLog2 &&
                     n.pageResLog2 <= n.sizeLog2 && n.sizeLog2 < 30 && n.pageLayer < capacity &&
                     n.texLod <= n.pageResLog2 && n.texLodFrac <= 255 && n.morph <= 255;
     if (!ok)
       throw std::invalid_argument(
           "AtlasRenderer: bad DrawNode (origin " + std::to_string(n.originX) + "," +
           std::to_string(n.originY) + " sizeLog2 " + std::to_string(n.sizeLog2) + " res " +
-          std::to_string(n.res) + " pageResLog2 " + std::to_string(n.pageResLog2) + " layer " +
+          std::to_string(n.resLog2) + " pageResLog2 " + std::to_string(n.pageResLog2) + " layer " +
           std::to_string(n.pageLayer) + ")");
   }
 }
@@ -402,7 +402,7 @@ void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
   for (size_t j = 0; j < nodes.size(); ++j) {
     const size_t k = order.empty() ? j : order[j];
     const DrawNode& n = nodes[k];
-    records[j] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.res), int32_t(n.pageResLog2),
+    records[j] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.resLog2), int32_t(n.pageResLog2),
                   int32_t(n.pageLayer % layersPerArray), int32_t(k), int32_t(n.texLod | (n.morph << 8) | (n.texLodFrac << 16))};
   }
   glBindBuffer(GL_ARRAY_BUFFER, nodeBuffer.id());
@@ -609,7 +609,7 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
     for (uint32_t k = 0; k < order.size(); ++k) order[k] = k;
     std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
       const uint32_t arrayA = nodes[a].pageLayer / lpa, arrayB = nodes[b].pageLayer / lpa;
-      return arrayA != arrayB ? arrayA < arrayB : nodes[a].res < nodes[b].res;
+      return arrayA != arrayB ? arrayA < arrayB : nodes[a].resLog2 < nodes[b].resLog2;
     });
     m.uploadNodes(nodes, stitch, order);
     m.bindAtlas(viewProj, eye, stitch);
@@ -617,10 +617,10 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
     std::vector<DrawElementsIndirectCommand> commands;
     std::vector<std::array<uint32_t, 3>> draws;  // (array, first command, commands)
     for (size_t j = 0; j < order.size();) {
-      const uint32_t array = nodes[order[j]].pageLayer / lpa, res = nodes[order[j]].res;
+      const uint32_t array = nodes[order[j]].pageLayer / lpa, res = nodes[order[j]].resLog2;
       if (draws.empty() || draws.back()[0] != array) draws.push_back({array, uint32_t(commands.size()), 0});
       size_t e = j;
-      while (e < order.size() && nodes[order[e]].res == res && nodes[order[e]].pageLayer / lpa == array) ++e;
+      while (e < order.size() && nodes[order[e]].resLog2 == res && nodes[order[e]].pageLayer / lpa == array) ++e;
       const Impl::GridRange& g = m.grid(res);
       commands.push_back({GLuint(g.indexCount), GLuint(e - j), GLuint(g.indexOffsetBytes / sizeof(uint32_t)),
                           g.baseVertex, GLuint(j)});
@@ -722,7 +722,7 @@ std::vector<std::vector<glm::vec3>> AtlasRenderer::captureVertices(
   m.uploadNodes(nodes, stitch);
   m.bindAtlas(glm::mat4(1.0f), glm::vec3(0.0f), stitch);
   size_t total = 0;
-  for (const DrawNode& n : nodes) total += size_t(m.grid(n.res).vertexCount);
+  for (const DrawNode& n : nodes) total += size_t(m.grid(n.resLog2).vertexCount);
   const GLsizeiptr bytes = GLsizeiptr(total * sizeof(glm::vec3));
   glBindBuffer(GL_TRANSFORM_FEEDBACK_BUFFER, m.feedbackBuffer.id());
   glBufferData(GL_TRANSFORM_FEEDBACK_BUFFER, bytes, nullptr, GL_STREAM_READ);
@@ -737,7 +737,7 @@ std::vector<std::vector<glm::vec3>> AtlasRenderer::captureVertices(
   for (size_t k = 0; k < nodes.size(); ++k) {
     const uint32_t array = nodes[k].pageLayer / m.layersPerArray;
     if (array != bound) m.bindPageArray(bound = array);
-    const Impl::GridRange& g = m.grid(nodes[k].res);
+    const Impl::GridRange& g = m.grid(nodes[k].resLog2);
     glDrawArraysInstancedBaseInstance(GL_POINTS, g.baseVertex, g.vertexCount, 1, GLuint(k));
   }
   glEndTransformFeedback();
@@ -761,7 +761,7 @@ std::vector<std::vector<glm::vec3>> AtlasRenderer::captureVertices(
   }
   size_t offset = 0;
   for (size_t k = 0; k < nodes.size(); ++k) {
-    const size_t count = size_t(m.grid(nodes[k].res).vertexCount);
+    const size_t count = size_t(m.grid(nodes[k].resLog2).vertexCount);
     out[k].assign(mapped + offset, mapped + offset + count);
     offset += count;
   }

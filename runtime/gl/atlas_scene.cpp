@@ -418,7 +418,7 @@ void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, doubl
   f.maxErrorPx = 0.0;
   for (CutNode& n : f.cut.nodes) {
     // The adapters set errorPx; substitution changes nodes and resolutions.
-    if (loader_) n.errorPx = float(screenError(h, n.id, n.res, view));
+    if (loader_) n.errorPx = float(screenError(h, n.id, n.resLog2, view));
     f.maxErrorPx = std::max(f.maxErrorPx, double(n.errorPx));
     if (options_.geomorph > 0.0) n.morph = float(geomorphFactor(h, n, view, tolPx, options_.geomorph));
   }

@@ -1,5 +1,5 @@
 // Tests for charting: hand-made meshes for the exact logic (cube faces, corner insertion, holes,
-// non-manifold repair) and the shared scanned meshes for the layout invariants (validateChartLayout
+// non-manifold repair) and the shared scanned meshes for the layout invariants (validatePatchLayout
 // empty, triangles preserved, chart count near the target).
 #include <gtest/gtest.h>
 
@@ -63,17 +63,17 @@ IndexedMesh gridWithHole(int n, int h0, int h1) {
   return m;
 }
 
-void expectValid(const ChartLayout& l, const std::string& what) {
-  const std::vector<std::string> errs = validateChartLayout(l);
+void expectValid(const PatchLayout& l, const std::string& what) {
+  const std::vector<std::string> errs = validatePatchLayout(l);
   EXPECT_TRUE(errs.empty()) << what << ": " << errs.size() << " violations, first: " << errs[0];
 }
 
 TEST(Charting, CubeBecomesSixQuads) {
   const IndexedMesh cube = gridCube(4);
   ChartingOptions o;
-  o.targetCharts = 6;
+  o.targetPatches = 6;
   ChartingStats st;
-  const ChartLayout l = buildChartLayout(cube, o, &st);
+  const PatchLayout l = buildPatchLayout(cube, o, &st);
   expectValid(l, "cube");
   EXPECT_EQ(st.verticesWelded, 6u * 25u - 98u);  // 6 faces of 25 vertices, 98 distinct
   EXPECT_EQ(l.positions.size(), 98u);
@@ -96,9 +96,9 @@ TEST(Charting, CubeSingleFaceDecomposedAtSmallTargetsStaysValid) {
   const IndexedMesh cube = gridCube(3);
   for (uint32_t target : {1u, 2u, 3u, 12u, 40u}) {
     ChartingOptions o;
-    o.targetCharts = target;
+    o.targetPatches = target;
     ChartingStats st;
-    const ChartLayout l = buildChartLayout(cube, o, &st);
+    const PatchLayout l = buildPatchLayout(cube, o, &st);
     expectValid(l, "cube target " + std::to_string(target));
     // A closed surface needs at least two disks.
     EXPECT_GE(l.patches.size(), std::max(2u, target));
@@ -110,16 +110,16 @@ TEST(Charting, TetrahedronNeedsCornerInsertion) {
   m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
   m.triangles = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}};
   ChartingOptions o;
-  o.targetCharts = 2;
+  o.targetPatches = 2;
   ChartingStats st;
-  const ChartLayout l = buildChartLayout(m, o, &st);
+  const PatchLayout l = buildPatchLayout(m, o, &st);
   expectValid(l, "tetrahedron");
   ASSERT_EQ(l.patches.size(), 2u);
   EXPECT_EQ(st.cornersInserted, 3u);
   for (const Patch& p : l.patches) EXPECT_EQ(p.sides.size(), 3u);
   // With 4 charts every vertex joins 3 patches: natural corners only.
-  o.targetCharts = 4;
-  const ChartLayout l4 = buildChartLayout(m, o, &st);
+  o.targetPatches = 4;
+  const PatchLayout l4 = buildPatchLayout(m, o, &st);
   expectValid(l4, "tetrahedron 4");
   EXPECT_EQ(l4.patches.size(), 4u);
   EXPECT_EQ(st.cornersInserted, 0u);
@@ -129,9 +129,9 @@ TEST(Charting, OpenGridWithHole) {
   const IndexedMesh m = gridWithHole(12, 4, 8);
   for (uint32_t target : {1u, 4u, 10u}) {
     ChartingOptions o;
-    o.targetCharts = target;
+    o.targetPatches = target;
     ChartingStats st;
-    const ChartLayout l = buildChartLayout(m, o, &st);
+    const PatchLayout l = buildPatchLayout(m, o, &st);
     expectValid(l, "grid with hole, target " + std::to_string(target));
     // An annulus is not a disk: at least two charts.
     EXPECT_GE(l.patches.size(), std::max(2u, target));
@@ -149,7 +149,7 @@ TEST(Charting, BowTieVertexIsSplit) {
   m.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {-1, 0, 0}, {-1, -1, 0}};
   m.triangles = {{0, 1, 2}, {0, 3, 4}};
   ChartingStats st;
-  const ChartLayout l = buildChartLayout(m, {}, &st);
+  const PatchLayout l = buildPatchLayout(m, {}, &st);
   expectValid(l, "bow-tie");
   EXPECT_EQ(st.nonManifoldVertices, 1u);
   EXPECT_EQ(st.verticesSplit, 1u);
@@ -164,7 +164,7 @@ TEST(Charting, FinEdgeIsRepaired) {
   m.positions = {{0, 0, 0}, {1, 0, 0}, {0.5f, 1, 0}, {0.5f, -1, 0}, {0.5f, 0, 1}, {0.5f, 0, 1}};
   m.triangles = {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}, {0, 1, 5}, {2, 2, 1}};
   ChartingStats st;
-  const ChartLayout l = buildChartLayout(m, {}, &st);
+  const PatchLayout l = buildPatchLayout(m, {}, &st);
   expectValid(l, "fin");
   EXPECT_EQ(st.droppedDegenerate, 1u);
   EXPECT_EQ(st.droppedDuplicate, 1u);
@@ -184,9 +184,9 @@ TEST(Charting, TwoCubesWithColoursKeepTheirColours) {
   for (const glm::vec3& p : m.positions)
     m.colours.push_back(glm::u8vec4(uint8_t(p.x * 50), uint8_t(p.y * 200), uint8_t(p.z * 200), 255));
   ChartingOptions o;
-  o.targetCharts = 12;
+  o.targetPatches = 12;
   ChartingStats st;
-  const ChartLayout l = buildChartLayout(m, o, &st);
+  const PatchLayout l = buildPatchLayout(m, o, &st);
   expectValid(l, "two cubes");
   ASSERT_EQ(l.patches.size(), 12u);
   for (const Patch& p : l.patches) EXPECT_EQ(p.sides.size(), 4u);
@@ -202,9 +202,9 @@ TEST(Charting, FlippedTriangleIsCutOut) {
   IndexedMesh m = gridWithHole(6, 0, 0);
   std::swap(m.triangles[20][1], m.triangles[20][2]);  // inconsistent orientation
   ChartingOptions o;
-  o.targetCharts = 3;
+  o.targetPatches = 3;
   ChartingStats st;
-  const ChartLayout l = buildChartLayout(m, o, &st);
+  const PatchLayout l = buildPatchLayout(m, o, &st);
   expectValid(l, "flipped triangle");
   EXPECT_EQ(st.nonManifoldEdges, 3u);  // its three edges are left open
   EXPECT_EQ(st.verticesSplit, 3u);
@@ -215,44 +215,44 @@ TEST(Charting, BadInputThrows) {
   IndexedMesh m;
   m.positions = {{0, 0, 0}, {1, 0, 0}};
   m.triangles = {{0, 1, 2}};
-  EXPECT_THROW(buildChartLayout(m), InputError);
+  EXPECT_THROW(buildPatchLayout(m), InputError);
   m.positions.push_back({0, 1, 0});
   ChartingOptions o;
   o.minSides = 2;
-  EXPECT_THROW(buildChartLayout(m, o), InputError);
+  EXPECT_THROW(buildPatchLayout(m, o), InputError);
   o = {};
   o.maxSides = 3;
-  EXPECT_THROW(buildChartLayout(m, o), InputError);
+  EXPECT_THROW(buildPatchLayout(m, o), InputError);
   o = {};
   o.maxError = 0;
-  EXPECT_THROW(buildChartLayout(m, o), InputError);
+  EXPECT_THROW(buildPatchLayout(m, o), InputError);
   m.triangles = {{0, 0, 1}};
-  EXPECT_THROW(buildChartLayout(m), InputError);
+  EXPECT_THROW(buildPatchLayout(m), InputError);
 }
 
 TEST(Charting, ValidatorCatchesBrokenLayouts) {
   ChartingOptions o;
-  o.targetCharts = 6;
-  ChartLayout l = buildChartLayout(gridCube(2), o);
-  ASSERT_TRUE(validateChartLayout(l).empty());
-  ChartLayout a = l;
+  o.targetPatches = 6;
+  PatchLayout l = buildPatchLayout(gridCube(2), o);
+  ASSERT_TRUE(validatePatchLayout(l).empty());
+  PatchLayout a = l;
   a.patches[0].sides[0].neighbourSide = (a.patches[0].sides[0].neighbourSide + 1) % 4;
-  EXPECT_FALSE(validateChartLayout(a).empty());
-  ChartLayout b = l;
+  EXPECT_FALSE(validatePatchLayout(a).empty());
+  PatchLayout b = l;
   b.patches[1].triangles.push_back(b.patches[0].triangles[0]);
-  EXPECT_FALSE(validateChartLayout(b).empty());
-  ChartLayout c = l;
+  EXPECT_FALSE(validatePatchLayout(b).empty());
+  PatchLayout c = l;
   std::swap(c.patches[2].sides[0], c.patches[2].sides[1]);
-  EXPECT_FALSE(validateChartLayout(c).empty());
-  EXPECT_FALSE(validateChartLayout(l, 3, 3).empty());  // 4 sides > 3
+  EXPECT_FALSE(validatePatchLayout(c).empty());
+  EXPECT_FALSE(validatePatchLayout(l, 3, 3).empty());  // 4 sides > 3
 }
 
 // Within one patch: a hole (an inner triangle taken out) and a triangle listed twice.
 TEST(Charting, ValidatorCatchesBrokenPatches) {
   ChartingOptions o;
-  o.targetCharts = 6;
-  const ChartLayout l = buildChartLayout(gridCube(4), o);
-  ASSERT_TRUE(validateChartLayout(l).empty());
+  o.targetPatches = 6;
+  const PatchLayout l = buildPatchLayout(gridCube(4), o);
+  ASSERT_TRUE(validatePatchLayout(l).empty());
   auto says = [](const std::vector<std::string>& errs, const std::string& what) {
     for (const std::string& e : errs) {
       if (e.find(what) != std::string::npos) return true;
@@ -270,14 +270,14 @@ TEST(Charting, ValidatorCatchesBrokenPatches) {
     return true;
   });
   ASSERT_NE(inner, p0.triangles.end());
-  ChartLayout holed = l;
+  PatchLayout holed = l;
   holed.patches[0].triangles.erase(holed.patches[0].triangles.begin() + (inner - p0.triangles.begin()));
-  const std::vector<std::string> h = validateChartLayout(holed);
+  const std::vector<std::string> h = validatePatchLayout(holed);
   EXPECT_TRUE(says(h, "patch 0: Euler characteristic 0, not 1")) << (h.empty() ? "" : h.front());
   EXPECT_TRUE(says(h, "patch 0: boundary is not a single loop"));
-  ChartLayout twice = l;
+  PatchLayout twice = l;
   twice.patches[0].triangles.push_back(twice.patches[0].triangles.front());
-  EXPECT_TRUE(says(validateChartLayout(twice), "patch 0: repeated directed edge"));
+  EXPECT_TRUE(says(validatePatchLayout(twice), "patch 0: repeated directed edge"));
 }
 
 struct MeshCase {
@@ -293,10 +293,10 @@ TEST_P(ChartingShared, LayoutValidNearTarget) {
   const IndexedMesh mesh = readMesh(path);
   for (uint32_t target : {50u, 200u}) {
     ChartingOptions o;
-    o.targetCharts = target;
+    o.targetPatches = target;
     ChartingStats st;
     const auto t0 = std::chrono::steady_clock::now();
-    const ChartLayout l = buildChartLayout(mesh, o, &st);
+    const PatchLayout l = buildPatchLayout(mesh, o, &st);
     const double secs =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::printf(
@@ -313,7 +313,7 @@ TEST_P(ChartingShared, LayoutValidNearTarget) {
       if (st.sidesHistogram[n]) std::printf(" %zu:%u", n, st.sidesHistogram[n]);
     std::printf("\n");
     EXPECT_EQ(st.patchesUnfixed, 0u);
-    const std::vector<std::string> errs = validateChartLayout(l);
+    const std::vector<std::string> errs = validatePatchLayout(l);
     EXPECT_TRUE(errs.empty()) << errs.size() << " violations, first: " << errs[0];
     EXPECT_EQ(st.inputTriangles, mesh.triangles.size());
     EXPECT_EQ(l.triangles.size(), st.outputTriangles);
@@ -349,7 +349,7 @@ TEST(Charting, ErrorTargetOnBunny) {
   ChartingOptions o;
   o.maxError = 0.01;
   ChartingStats st;
-  const ChartLayout l = buildChartLayout(mesh, o, &st);
+  const PatchLayout l = buildPatchLayout(mesh, o, &st);
   std::printf("[charting] bunny maxError %.3f: %u charts, planarity max %.4f mean %.4f, %.2fs\n",
               o.maxError, st.charts, st.maxPlanarityError, st.meanPlanarityError, st.seconds);
   expectValid(l, "bunny error mode");
@@ -362,12 +362,12 @@ TEST(Charting, BlockedClusteringIsDeterministic) {
   const fs::path path = test::realData("meshes/bun_zipper.ply");
   const IndexedMesh mesh = readMesh(path);
   ChartingOptions o;
-  o.targetCharts = 80;
+  o.targetPatches = 80;
   o.threads = 1;
   ChartingStats st1, st2;
-  const ChartLayout a = buildChartLayout(mesh, o, &st1);
+  const PatchLayout a = buildPatchLayout(mesh, o, &st1);
   o.threads = 2;
-  const ChartLayout b = buildChartLayout(mesh, o, &st2);
+  const PatchLayout b = buildPatchLayout(mesh, o, &st2);
   EXPECT_GT(st1.cells, 1u);  // the blocked path ran
   ASSERT_EQ(a.patches.size(), b.patches.size());
   for (size_t p = 0; p < a.patches.size(); ++p) {
@@ -385,10 +385,10 @@ TEST(Charting, CellsPathOnBunny) {
   g.targetTrianglesPerCell = 4000;
   const GridifyResult gr = gridify(path, dir.path() / "grid", g);
   ChartingOptions o;
-  o.targetCharts = 100;
+  o.targetPatches = 100;
   o.threads = 2;
   ChartingStats st;
-  const ChartLayout l = buildChartLayoutFromCells(dir.path() / "grid", o, &st);
+  const PatchLayout l = buildPatchLayoutFromCells(dir.path() / "grid", o, &st);
   std::printf("[charting] bunny cells: %u cells, %u cell clusters (%u dissolved), %u charts, "
               "cluster %.2fs total %.2fs\n",
               st.cells, st.cellClusters, st.cellClustersDissolved, st.charts, st.clusterSeconds,
@@ -397,8 +397,8 @@ TEST(Charting, CellsPathOnBunny) {
   EXPECT_GT(st.cells, 4u);
   EXPECT_EQ(l.triangles.size() + st.droppedDegenerate + st.droppedDuplicate, gr.triangles);
   EXPECT_EQ(st.boundaryEdges, 223u);
-  EXPECT_GE(st.charts, o.targetCharts);
-  EXPECT_LE(st.charts, o.targetCharts * 5 / 4);
+  EXPECT_GE(st.charts, o.targetPatches);
+  EXPECT_LE(st.charts, o.targetPatches * 5 / 4);
 }
 
 
@@ -449,7 +449,7 @@ TEST(Charting, DevelopableMetricMakesPatchesThatFitCones) {
   const IndexedMesh mesh = readMesh(test::realData("meshes/bun_zipper.ply"));
   // Area-weighted means over the patches of the cone-fit variance and of the plane fit (mean
   // squared distance, in the bounding-box diagonal's units).
-  auto fits = [](const ChartLayout& l) {
+  auto fits = [](const PatchLayout& l) {
     glm::dvec3 lo(1e300), hi(-1e300);
     for (const glm::vec3& p : l.positions) lo = glm::min(lo, glm::dvec3(p)), hi = glm::max(hi, glm::dvec3(p));
     const double diag = glm::length(hi - lo);
@@ -468,10 +468,10 @@ TEST(Charting, DevelopableMetricMakesPatchesThatFitCones) {
     return std::pair{cone / area, plane / area};
   };
   ChartingOptions o;
-  o.targetCharts = 24;
-  const ChartLayout planar = buildChartLayout(mesh, o);
+  o.targetPatches = 24;
+  const PatchLayout planar = buildPatchLayout(mesh, o);
   o.metric = ChartMetric::kDevelopable;
-  const ChartLayout developable = buildChartLayout(mesh, o);
+  const PatchLayout developable = buildPatchLayout(mesh, o);
   expectValid(developable, "bunny, developable metric");
   const auto [planarCone, planarPlane] = fits(planar);
   const auto [devCone, devPlane] = fits(developable);

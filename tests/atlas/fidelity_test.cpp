@@ -169,7 +169,7 @@ class FidelityOutOfCore : public ::testing::Test {
     o.input = scan;
     o.output = atlas();
     o.chartSize = 17;
-    o.charts = 64;
+    o.patches = 64;
     // Kites: at 17^2 the sides layout's half as many samples leave the atlas farther than the
     // 0.5% margin from the scan in places, which the block test below assumes it is not.
     o.quads = MeshQuads::kKites;

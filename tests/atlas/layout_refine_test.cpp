@@ -30,8 +30,8 @@
 namespace gimlod {
 namespace {
 
-void expectValid(const ChartLayout& layout) {
-  const std::vector<std::string> bad = validateChartLayout(layout);
+void expectValid(const PatchLayout& layout) {
+  const std::vector<std::string> bad = validatePatchLayout(layout);
   EXPECT_TRUE(bad.empty()) << bad.front();
 }
 
@@ -63,14 +63,14 @@ void expectSameCharts(const GeometryImageSet& a, const GeometryImageSet& b) {
 }
 
 // The shipped bunny charted to 128 patches: a real scan whose charts fold at 33^2 samples.
-ChartLayout chartedBunny() {
+PatchLayout chartedBunny() {
   const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
-  copt.targetCharts = 128;
-  return buildChartLayout(mesh, copt);
+  copt.targetPatches = 128;
+  return buildPatchLayout(mesh, copt);
 }
 
-bool sameLayout(const ChartLayout& a, const ChartLayout& b) {
+bool sameLayout(const PatchLayout& a, const PatchLayout& b) {
   if (a.patches.size() != b.patches.size()) return false;
   for (size_t p = 0; p < a.patches.size(); ++p) {
     const Patch &x = a.patches[p], &y = b.patches[p];
@@ -87,7 +87,7 @@ bool sameLayout(const ChartLayout& a, const ChartLayout& b) {
 }
 
 TEST(PatchSplit, CornerToCornerCutMakesTwoLinkedDisks) {
-  ChartLayout layout = test::gridLayout(8, 8, 1.f, 1.f);
+  PatchLayout layout = test::gridLayout(8, 8, 1.f, 1.f);
   ASSERT_EQ(layout.patches.size(), 1u);
   ASSERT_TRUE(splitPatchAtCorners(layout, 0, 0, 2));
   ASSERT_EQ(layout.patches.size(), 2u);
@@ -117,8 +117,8 @@ TEST(PatchSplit, CornerToCornerCutMakesTwoLinkedDisks) {
 }
 
 TEST(PatchSplit, RefusedSplitsLeaveTheLayoutAlone) {
-  ChartLayout layout = test::gridLayout(6, 6, 1.f, 1.f);
-  const ChartLayout before = layout;
+  PatchLayout layout = test::gridLayout(6, 6, 1.f, 1.f);
+  const PatchLayout before = layout;
   EXPECT_FALSE(splitPatchAtCorners(layout, 0, 0, 1));  // adjacent corners: a 2-sided part
   EXPECT_FALSE(splitPatchAtCorners(layout, 0, 1, 1));
   EXPECT_FALSE(splitPatchAtCorners(layout, 3, 0, 2));  // no such patch
@@ -130,7 +130,7 @@ TEST(PatchSplit, RefusedSplitsLeaveTheLayoutAlone) {
 
 TEST(PatchSplit, InsertedCornerSplitsBothSidesOfASeam) {
   // Two 4 x 4 patches side by side; the seam is patch 0's right side (x = 4).
-  ChartLayout layout = test::gridLayout(8, 4, 2.f, 1.f, {4});
+  PatchLayout layout = test::gridLayout(8, 4, 2.f, 1.f, {4});
   ASSERT_EQ(layout.patches.size(), 2u);
   ASSERT_EQ(layout.patches[0].sides[1].neighbourPatch, 1);
   ASSERT_TRUE(insertCorner(layout, 0, 1, 2));
@@ -149,7 +149,7 @@ TEST(PatchSplit, InsertedCornerSplitsBothSidesOfASeam) {
 }
 
 TEST(PatchSplit, NeckCutCrossesALongStripNearItsMiddle) {
-  ChartLayout layout = test::gridLayout(24, 3, 8.f, 1.f);
+  PatchLayout layout = test::gridLayout(24, 3, 8.f, 1.f);
   const size_t total = layout.triangles.size();
   ASSERT_TRUE(splitPatchAtNeck(layout, 0));
   expectValid(layout);
@@ -165,7 +165,7 @@ TEST(PatchSplit, NeckCutCrossesALongStripNearItsMiddle) {
   EXPECT_LT(length, 2.0);
 }
 
-double runLength(const ChartLayout& layout, const std::vector<uint32_t>& run) {
+double runLength(const PatchLayout& layout, const std::vector<uint32_t>& run) {
   double l = 0.0;
   for (size_t k = 0; k + 1 < run.size(); ++k) {
     l += glm::length(layout.positions[run[k + 1]] - layout.positions[run[k]]);
@@ -175,7 +175,7 @@ double runLength(const ChartLayout& layout, const std::vector<uint32_t>& run) {
 
 // The smallest ratio, over the shared sides, of a side's length to the smaller mean side of its
 // two patches.
-double shortestSideRatio(const ChartLayout& layout) {
+double shortestSideRatio(const PatchLayout& layout) {
   double ratio = std::numeric_limits<double>::infinity();
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     for (const PatchSide& s : layout.patches[p].sides) {
@@ -189,11 +189,11 @@ double shortestSideRatio(const ChartLayout& layout) {
 TEST(ShortSides, LengthenedSideMovesItsCornerAndKeepsEverySideCount) {
   // Every shared side of a cube of 8 x 8 cells a face: its end corner moves 3 cells along the next
   // side; the third patch there gives the triangles between to the neighbour.
-  const ChartLayout cube = test::cubeLayout(8);
+  const PatchLayout cube = test::cubeLayout(8);
   uint32_t tried = 0;
   for (uint32_t p = 0; p < cube.patches.size(); ++p) {
     for (uint32_t s = 0; s < 4; ++s) {
-      ChartLayout layout = cube;
+      PatchLayout layout = cube;
       const PatchSide side = layout.patches[p].sides[s];
       const uint32_t q = uint32_t(side.neighbourPatch);
       const double before = sideLength(layout, side);
@@ -215,9 +215,9 @@ TEST(ShortSides, LengthenedSideMovesItsCornerAndKeepsEverySideCount) {
 }
 
 TEST(ShortSides, ShortSidesAreLengthenedAndLongOnesLeftAlone) {
-  ChartLayout layout = test::cubeLayout(16);
+  PatchLayout layout = test::cubeLayout(16);
   // Nothing is short on the cube.
-  ChartLayout same = layout;
+  PatchLayout same = layout;
   EXPECT_EQ(lengthenShortSides(same), 0u);
   EXPECT_EQ(same.patches[0].triangles, layout.patches[0].triangles);
   // Moving one corner four times along the same side leaves that side 1 cell long of 16.
@@ -232,8 +232,8 @@ TEST(ShortSides, ShortSidesAreLengthenedAndLongOnesLeftAlone) {
 }
 
 TEST(LayoutRefine, StraightSidesStayAsTheyAre) {
-  ChartLayout layout = test::gridLayout(8, 4, 2.f, 1.f, {4});
-  const ChartLayout before = layout;
+  PatchLayout layout = test::gridLayout(8, 4, 2.f, 1.f, {4});
+  const PatchLayout before = layout;
   EXPECT_EQ(straightenSides(layout), 0u);
   EXPECT_FALSE(straightenSide(layout, 0, 0));  // open side
   EXPECT_TRUE(sameLayout(layout, before));
@@ -242,9 +242,9 @@ TEST(LayoutRefine, StraightSidesStayAsTheyAre) {
 TEST(LayoutRefine, StraightenedScanSidesAreShorterAndTheLayoutStaysValid) {
   const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
-  copt.targetCharts = 64;
-  ChartLayout layout = buildChartLayout(mesh, copt);
-  const ChartLayout before = layout;
+  copt.targetPatches = 64;
+  PatchLayout layout = buildPatchLayout(mesh, copt);
+  const PatchLayout before = layout;
   const uint32_t changed = straightenSides(layout);
   EXPECT_GT(changed, 0u);
   expectValid(layout);
@@ -271,7 +271,7 @@ TEST(LayoutRefine, StraightenedScanSidesAreShorterAndTheLayoutStaysValid) {
   // Straighter sides parameterize better: the mean image stretch does not rise.
   ResampleOptions ro;
   ro.chartSize = 17;
-  ChartLayout raw = before;
+  PatchLayout raw = before;
   EXPECT_LE(resampleLayout(layout, ro).image.stretchL2, resampleLayout(raw, ro).image.stretchL2);
 }
 
@@ -281,8 +281,8 @@ TEST(LayoutRefine, StraightenedScanSidesAreShorterAndTheLayoutStaysValid) {
 TEST(LayoutRefine, BoundedSearchInTheEllipseFindsTheWholeSearchsPath) {
   const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
-  copt.targetCharts = 64;
-  const ChartLayout layout = buildChartLayout(mesh, copt);
+  copt.targetPatches = 64;
+  const PatchLayout layout = buildPatchLayout(mesh, copt);
   auto pathTo = [](const Paths& paths, uint32_t a, uint32_t b) {
     std::vector<uint32_t> path{b};
     while (path.back() != a) path.push_back(paths.prev.at(path.back()));
@@ -338,15 +338,15 @@ TEST(LayoutRefine, BoundedSearchInTheEllipseFindsTheWholeSearchsPath) {
 TEST(LayoutRefine, KeepHalvesStraightensNoPatchToASliver) {
   const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
-  copt.targetCharts = 48;
-  const ChartLayout layout = buildChartLayout(mesh, copt);
+  copt.targetPatches = 48;
+  const PatchLayout layout = buildPatchLayout(mesh, copt);
   uint32_t shrunk = 0, kept = 0, refused = 0;
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     for (uint32_t s = 0; s < layout.patches[p].sides.size(); ++s) {
       const int32_t q = layout.patches[p].sides[s].neighbourPatch;
       if (q < 0 || uint32_t(q) < p) continue;  // each shared side once
       const size_t np = layout.patches[p].triangles.size(), nq = layout.patches[uint32_t(q)].triangles.size();
-      ChartLayout free = layout, halves = layout;
+      PatchLayout free = layout, halves = layout;
       const bool freeDone = straightenSide(free, p, s);
       const bool shrinks = freeDone && (2 * free.patches[p].triangles.size() < np ||
                                         2 * free.patches[uint32_t(q)].triangles.size() < nq);
@@ -370,7 +370,7 @@ TEST(LayoutRefine, KeepHalvesStraightensNoPatchToASliver) {
 }
 
 TEST(PatchSplit, FlipRepairOnARealScanNeverMakesThingsWorse) {
-  ChartLayout layout = chartedBunny();
+  PatchLayout layout = chartedBunny();
   const size_t patchesBefore = layout.patches.size();
   ResampleOptions ro;
   ro.chartSize = 33;
@@ -397,10 +397,10 @@ TEST(PatchSplit, FlipRepairOnARealScanNeverMakesThingsWorse) {
 }
 
 TEST(PatchSplit, FlipRepairStopsWhenToldMemoryIsShort) {
-  ChartLayout layout = chartedBunny();
+  PatchLayout layout = chartedBunny();
   ResampleOptions ro;
   ro.chartSize = 33;
-  const ChartLayout before = layout;
+  const PatchLayout before = layout;
   GeometryImageSet first = resampleLayout(layout, ro);
   ASSERT_GT(first.image.flippedTexels, 0u);
   const GeometryImageSet reference = resampleLayout(layout, ro);
@@ -412,7 +412,7 @@ TEST(PatchSplit, FlipRepairStopsWhenToldMemoryIsShort) {
   EXPECT_TRUE(sameLayout(layout, before));
   expectSameCharts(set, reference);
   // Allowed a few batches: it stops part way with a valid layout whose charts match it.
-  ChartLayout partial = before;
+  PatchLayout partial = before;
   ChartRepairStats st2;
   uint32_t left = 1;
   const GeometryImageSet some =
@@ -426,11 +426,11 @@ TEST(PatchSplit, FlipRepairStopsWhenToldMemoryIsShort) {
 // reuses unchanged patches' charts) and the writer (which reads them back) give the same charts
 // and the same chart files, byte for byte, as with every sample held in memory.
 TEST(PatchSplit, FlipRepairWithSpilledChartsGivesTheSameAtlas) {
-  const ChartLayout charted = chartedBunny();
+  const PatchLayout charted = chartedBunny();
   test::TempDir tmp("gimlod-spill");
   ResampleOptions ro;
   ro.chartSize = 33;
-  ChartLayout held = charted, spilled = charted;
+  PatchLayout held = charted, spilled = charted;
   ChartRepairStats stHeld, stSpilled;
   const GeometryImageSet setHeld = resampleAndRepair(held, ro, {2}, &stHeld);
   ChartSpill spill(tmp.path() / "samples.tmp", false);
@@ -474,18 +474,18 @@ TEST(PatchSplit, FlipRepairWithSpilledChartsGivesTheSameAtlas) {
 // and batch, so the repair stops after the batch that reaches it, with a valid layout and its
 // charts; a budget of 0 repairs nothing.
 TEST(PatchSplit, FlipRepairStopsAtItsWorkBudget) {
-  const ChartLayout charted = chartedBunny();
+  const PatchLayout charted = chartedBunny();
   ResampleOptions ro;
   ro.chartSize = 33;
   ro.unfold = false;  // the folds as mapped: enough of them for several rounds of cuts
-  ChartLayout full = charted;
+  PatchLayout full = charted;
   ChartRepairStats stFull;
   resampleAndRepair(full, ro, {2}, &stFull);
   const uint64_t work = stFull.trianglesWholeRounds + stFull.trianglesTrials;
   ASSERT_GT(stFull.trianglesWholeRounds, 0u);
   EXPECT_FALSE(stFull.stoppedForWork);
   // Nothing allowed: the charts it was given.
-  ChartLayout none = charted;
+  PatchLayout none = charted;
   ChartRepairStats stNone;
   const GeometryImageSet untouched = repairCharts(none, resampleLayout(none, ro), ro, {2, 0.0, 0}, &stNone);
   EXPECT_TRUE(stNone.stoppedForWork);
@@ -494,7 +494,7 @@ TEST(PatchSplit, FlipRepairStopsAtItsWorkBudget) {
   EXPECT_EQ(untouched.image.flippedTexels, stNone.flippedTexelsFirst);
   // A third of what the whole repair takes: it stops part way, past the budget by at most the
   // batch that crossed it, and what it returns is the resampling of what it leaves.
-  ChartLayout part = charted;
+  PatchLayout part = charted;
   ChartRepairStats stPart;
   const GeometryImageSet some = repairCharts(part, resampleLayout(part, ro), ro, {2, 0.0, work / 3}, &stPart);
   EXPECT_TRUE(stPart.stoppedForWork);
@@ -507,10 +507,10 @@ TEST(PatchSplit, FlipRepairStopsAtItsWorkBudget) {
 
 TEST(PatchSplit, FlipRepairDoesNotDependOnTheThreadCount) {
   // Batches of folds are searched and judged in parallel; the result must be that of one thread.
-  const ChartLayout charted = chartedBunny();
+  const PatchLayout charted = chartedBunny();
   ResampleOptions ro;
   ro.chartSize = 33;
-  ChartLayout one = charted, many = charted;
+  PatchLayout one = charted, many = charted;
   ChartRepairStats stOne, stMany;
   GeometryImageSet setOne;
   {
@@ -529,7 +529,7 @@ TEST(PatchSplit, FlipRepairDoesNotDependOnTheThreadCount) {
 // A patch's parameterization, kept in a ParamCache, serves its resampling at another size: the
 // charts are bit for bit a fresh resampling's, and a patch that changed is parameterized anew.
 TEST(ResampleReuse, CachedParameterizationsGiveTheSameChartsAtEverySize) {
-  ChartLayout layout = test::cubeLayout(8, true);
+  PatchLayout layout = test::cubeLayout(8, true);
   ResampleOptions ro;
   ro.chartSize = 17;
   ParamCache cache(uint64_t(1) << 30);
@@ -610,7 +610,7 @@ TEST(ParamGate, HoldsWithinTheBudgetAndOneAlwaysRuns) {
     EXPECT_GT(gate.waits(), 0u);
   }
 
-  ChartLayout layout = test::cubeLayout(8, true);
+  PatchLayout layout = test::cubeLayout(8, true);
   ResampleOptions ro;
   ro.chartSize = 17;
   ro.threads = 4;
@@ -622,7 +622,7 @@ TEST(ParamGate, HoldsWithinTheBudgetAndOneAlwaysRuns) {
 }
 
 TEST(ResampleReuse, ReusedPatchesAreBitIdenticalAndOnlyChangedOnesAreRedone) {
-  ChartLayout layout = test::cubeLayout(8, true);
+  PatchLayout layout = test::cubeLayout(8, true);
   ResampleOptions ro;
   ro.chartSize = 17;
   GeometryImageSet earlier = resampleLayout(layout, ro);
@@ -670,8 +670,8 @@ TEST(ResampleReuse, ReusedPatchesAreBitIdenticalAndOnlyChangedOnesAreRedone) {
 // A square fanned from its centre whose bottom side 0-5-7-6-1 has an ear (5, 7, 6) hanging
 // below the chord 5-6; with `below`, a second patch fills the band under the bottom side and
 // shares it, else the bottom side is open.
-ChartLayout earLayout(bool below) {
-  ChartLayout l;
+PatchLayout earLayout(bool below) {
+  PatchLayout l;
   l.positions = {{0, 0, 0}, {2, 0, 0}, {2, 2, 0}, {0, 2, 0}, {1, 1, 0}, {0.7f, 0, 0}, {1.3f, 0, 0}, {1, -0.2f, 0}};
   l.triangles = {{0, 5, 4}, {5, 6, 4}, {6, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}, {5, 7, 6}};
   Patch a;
@@ -695,7 +695,7 @@ ChartLayout earLayout(bool below) {
 }
 
 TEST(SideEars, AnEarOnASharedSideMovesToTheNeighbour) {
-  ChartLayout layout = earLayout(true);
+  PatchLayout layout = earLayout(true);
   expectValid(layout);
   ResampleOptions ro;
   ro.chartSize = 17;
@@ -713,7 +713,7 @@ TEST(SideEars, AnEarOnASharedSideMovesToTheNeighbour) {
 }
 
 TEST(SideEars, AnEarOnAnOpenSideGetsACorner) {
-  ChartLayout layout = earLayout(false);
+  PatchLayout layout = earLayout(false);
   expectValid(layout);
   ResampleOptions ro;
   ro.chartSize = 17;
@@ -733,7 +733,7 @@ TEST(SideEars, AnEarOnAnOpenSideGetsACorner) {
 // vector is full when the cut appends (run under AddressSanitizer, a reference held across the
 // cut is a use after free).
 TEST(SideEars, AnEarOnAnOpenSideOfAnEightSidedPatchIsMendedAfterANeckCut) {
-  ChartLayout layout = test::gridLayout(24, 3, 8.f, 1.f);
+  PatchLayout layout = test::gridLayout(24, 3, 8.f, 1.f);
   ASSERT_EQ(layout.patches.size(), 1u);
   // An ear (a, m, b) hanging below the bottom grid edge a -> b at x = 12.
   const uint32_t a = 12, b = 13, m = uint32_t(layout.positions.size());
@@ -769,14 +769,14 @@ TEST(SideEars, AnEarOnAnOpenSideOfAnEightSidedPatchIsMendedAfterANeckCut) {
 // coordinates. On a flat grid the charts are the plane itself (rounding only); on the cube sphere
 // (a polyhedron: it creases at every edge) it about halves each time the chart side doubles.
 TEST(SampleError, ZeroOnAPlaneAndFallingWithTheChartSize) {
-  ChartLayout flat = test::gridLayout(12, 12, 1.0f, 1.0f, {6}, true);
+  PatchLayout flat = test::gridLayout(12, 12, 1.0f, 1.0f, {6}, true);
   ResampleOptions ro;
   ro.chartSize = 17;
   const GeometryImageSet f = resampleLayout(flat, ro);
   EXPECT_LT(f.image.sampleError, 1e-6);
   double last = 0.0;
   for (uint32_t size : {9u, 17u, 33u, 65u}) {
-    ChartLayout sphere = test::cubeLayout(16, true);
+    PatchLayout sphere = test::cubeLayout(16, true);
     ro.chartSize = size;
     const GeometryImageSet s = resampleLayout(sphere, ro);
     std::printf("  sphere at %u^2: sampling error %.3g (radius 1)\n", size, s.image.sampleError);
@@ -799,7 +799,7 @@ TEST(SampleError, ZeroOnAPlaneAndFallingWithTheChartSize) {
 // the shared side and the error is the zigzag's; not counted, or with the charts at the threshold,
 // it is the flat interior's.
 TEST(SampleError, SmallChartsCountTheChordsOfTheirSharedSides) {
-  ChartLayout layout = test::gridLayout(12, 12, 1.0f, 1.0f, {6});
+  PatchLayout layout = test::gridLayout(12, 12, 1.0f, 1.0f, {6});
   std::set<uint32_t> side;
   for (uint32_t y = 0; y <= 12; ++y) {
     const uint32_t v = y * 13 + 6;
@@ -826,7 +826,7 @@ TEST(SampleError, SmallChartsCountTheChordsOfTheirSharedSides) {
 // (the cube sphere: six patches of 16 x 16 cells at 9^2 samples a chart), with no flipped texels,
 // and the charts are those of a full resampling of the final layout.
 TEST(PatchSplit, SamplingErrorRepairReachesItsBound) {
-  ChartLayout layout = test::cubeLayout(16, true);
+  PatchLayout layout = test::cubeLayout(16, true);
   ResampleOptions ro;
   ro.chartSize = 9;
   const GeometryImageSet first = resampleLayout(layout, ro);
@@ -846,7 +846,7 @@ TEST(PatchSplit, SamplingErrorRepairReachesItsBound) {
   expectValid(layout);
   expectSameCharts(set, resampleLayout(layout, ro));
   // Without a bound the same layout is left alone (it has no folds).
-  ChartLayout untouched = test::cubeLayout(16, true);
+  PatchLayout untouched = test::cubeLayout(16, true);
   ChartRepairStats none;
   repairCharts(untouched, resampleLayout(untouched, ro), ro, ChartRepairOptions{}, &none);
   EXPECT_EQ(none.patchesSplit, 0u);
@@ -859,8 +859,8 @@ TEST(PatchSplit, SamplingErrorRepairReachesItsBound) {
 TEST(OpenSides, SlidingRimsFoldLessOnTheBunny) {
   const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
-  copt.targetCharts = 24;
-  ChartLayout layout = buildChartLayout(mesh, copt);
+  copt.targetPatches = 24;
+  PatchLayout layout = buildPatchLayout(mesh, copt);
   straightenSides(layout, 2);
   moveSideEars(layout);
   ResampleOptions ro;
@@ -889,8 +889,8 @@ TEST(OpenSides, SlidingRimsFoldLessOnTheBunny) {
 }
 
 TEST(PatchSplit, RepairLeavesAFoldFreeLayoutUnchanged) {
-  ChartLayout layout = test::cubeLayout(8, true);
-  const ChartLayout before = layout;
+  PatchLayout layout = test::cubeLayout(8, true);
+  const PatchLayout before = layout;
   ResampleOptions ro;
   ro.chartSize = 17;
   ChartRepairStats st;

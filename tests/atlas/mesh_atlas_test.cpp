@@ -43,7 +43,7 @@ Hierarchy hierarchyOfCharts(const fs::path& dir, const AtlasManifest& m) {
 
 TEST(MeshAtlas, ClosedSurfaceStaysWatertightAtEveryLevel) {
   test::TempDir tmp("gimlod-mesh-atlas");
-  const ChartLayout layout = test::cubeLayout(6, true);  // a sphere from six curved patches
+  const PatchLayout layout = test::cubeLayout(6, true);  // a sphere from six curved patches
   ResampleOptions ro;
   ro.chartSize = 33;
   const GeometryImageSet set = resampleLayout(layout, ro);
@@ -243,10 +243,10 @@ TEST(MeshAtlas, ChartsOfDifferentFinestLevelsStayWatertight) {
   const PageReader pages(dir, back, view.hierarchy.params);
   for (const ChartInfo& c : back.charts) {
     const NodeId leaf{c.id, 1, 1, 0};
-    EXPECT_EQ(view.hierarchy.maxRes(leaf), std::min(4 - c.finestLevel, 3u));
-    EXPECT_EQ(view.hierarchy.maxRes(leaf), h.maxRes(leaf));
+    EXPECT_EQ(view.hierarchy.maxResLog2(leaf), std::min(4 - c.finestLevel, 3u));
+    EXPECT_EQ(view.hierarchy.maxResLog2(leaf), h.maxResLog2(leaf));
     // Finer than the chart holds: no error; its own finest samples: error 0.
-    const uint32_t r = h.maxRes(leaf);
+    const uint32_t r = h.maxResLog2(leaf);
     if (r < p.maxNodeResLog2) {
       EXPECT_TRUE(std::isnan(view.hierarchy.error(leaf, r + 1)));
     }

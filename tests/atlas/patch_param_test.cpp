@@ -201,7 +201,7 @@ TEST(PatchParam, MeasureStretchOfKnownMaps) {
 }
 
 TEST(PatchParam, FlatSquareIsAffine) {
-  const ChartLayout layout = test::gridLayout(10, 10, 2.f, 2.f);
+  const PatchLayout layout = test::gridLayout(10, 10, 2.f, 2.f);
   const PatchParameterization pp = parameterizePatch(layout, 0);
   ASSERT_EQ(pp.sides, 4u);
   ASSERT_EQ(pp.uv.size(), layout.positions.size());
@@ -227,7 +227,7 @@ TEST(PatchParam, FlatSquareIsAffine) {
 // reweighting, no sweeps) is as exact as a double factorization. A single-precision solve
 // unrefined is off by about 1e-7 here.
 TEST(PatchParam, TheSolveIsExactToDoublePrecision) {
-  const ChartLayout layout = test::gridLayout(80, 80, 2.f, 2.f);
+  const PatchLayout layout = test::gridLayout(80, 80, 2.f, 2.f);
   ParamOptions o;
   o.stretchIterations = 0;
   o.stretchSweeps = 0;
@@ -249,7 +249,7 @@ TEST(PatchParam, NGonDisksEmbedWithoutFlips) {
   for (const bool hemisphere : {false, true}) {
     for (const uint32_t n : {3u, 5u, 8u}) {
       SCOPED_TRACE(testing::Message() << "n=" << n << " hemisphere=" << hemisphere);
-      const ChartLayout layout = test::diskLayout(n, 12, 48, hemisphere);
+      const PatchLayout layout = test::diskLayout(n, 12, 48, hemisphere);
       const PatchParameterization pp = parameterizePatch(layout, 0);
       EXPECT_EQ(pp.quality.flippedTriangles, 0u);
       EXPECT_EQ(pp.quality.degenerateTriangles, 0u);
@@ -280,8 +280,8 @@ TEST(PatchParam, NGonDisksEmbedWithoutFlips) {
 // length grows from 0.8 on one side to 15.2 on the other (r > 0.5), like a hoof's sole and wall
 // cut off at a slant. Far from developable: the sole's area has to be moved across the whole
 // patch, which the local sweeps do a ring at a time.
-ChartLayout lopsidedCup(uint32_t rings) {
-  ChartLayout layout = test::diskLayout(6, rings, 4 * rings, false);
+PatchLayout lopsidedCup(uint32_t rings) {
+  PatchLayout layout = test::diskLayout(6, rings, 4 * rings, false);
   for (glm::vec3& p : layout.positions) {
     const double r = std::hypot(double(p.x), double(p.y)), theta = std::atan2(double(p.y), double(p.x));
     if (r <= 0.5) {
@@ -295,7 +295,7 @@ ChartLayout lopsidedCup(uint32_t rings) {
 }
 
 TEST(PatchParam, LocalSweepsRunToConvergenceOnACup) {
-  const ChartLayout layout = lopsidedCup(30);
+  const PatchLayout layout = lopsidedCup(30);
   const PatchParameterization full = parameterizePatch(layout, 0);
   ParamOptions capped;
   capped.stretchSweeps = 30;  // the earlier default
@@ -311,7 +311,7 @@ TEST(PatchParam, LocalSweepsRunToConvergenceOnACup) {
 }
 
 TEST(PatchParam, StretchReductionIsOptional) {
-  const ChartLayout layout = test::diskLayout(4, 10, 40, true);
+  const PatchLayout layout = test::diskLayout(4, 10, 40, true);
   ParamOptions off;
   off.stretchIterations = 0;
   off.stretchSweeps = 0;
@@ -326,32 +326,32 @@ TEST(PatchParam, StretchReductionIsOptional) {
 }
 
 TEST(PatchParam, RejectsMalformedPatches) {
-  const ChartLayout good = test::gridLayout(4, 4, 1.f, 1.f);
+  const PatchLayout good = test::gridLayout(4, 4, 1.f, 1.f);
   EXPECT_NO_THROW(parameterizePatch(good, 0));
   EXPECT_THROW(parameterizePatch(good, 1), std::invalid_argument);
 
-  ChartLayout twoSides = good;  // merge sides 0 and 1 and sides 2 and 3
+  PatchLayout twoSides = good;  // merge sides 0 and 1 and sides 2 and 3
   auto& s = twoSides.patches[0].sides;
   s[0].vertices.insert(s[0].vertices.end(), s[1].vertices.begin() + 1, s[1].vertices.end());
   s[2].vertices.insert(s[2].vertices.end(), s[3].vertices.begin() + 1, s[3].vertices.end());
   s = {s[0], s[2]};
   EXPECT_THROW(parameterizePatch(twoSides, 0), std::invalid_argument);
 
-  ChartLayout broken = good;  // side 1 no longer starts where side 0 ends
+  PatchLayout broken = good;  // side 1 no longer starts where side 0 ends
   broken.patches[0].sides[1].vertices.erase(broken.patches[0].sides[1].vertices.begin());
   EXPECT_THROW(parameterizePatch(broken, 0), std::invalid_argument);
 
-  ChartLayout reversed = good;  // sides listed clockwise
+  PatchLayout reversed = good;  // sides listed clockwise
   for (auto& side : reversed.patches[0].sides) std::reverse(side.vertices.begin(), side.vertices.end());
   std::reverse(reversed.patches[0].sides.begin(), reversed.patches[0].sides.end());
   EXPECT_THROW(parameterizePatch(reversed, 0), std::invalid_argument);
 
-  ChartLayout holed = good;  // an annulus: the centre cell's two triangles removed
+  PatchLayout holed = good;  // an annulus: the centre cell's two triangles removed
   auto& tris = holed.patches[0].triangles;
   tris.erase(tris.begin() + 2 * (1 * 4 + 1), tris.begin() + 2 * (1 * 4 + 1) + 2);
   EXPECT_THROW(parameterizePatch(holed, 0), std::invalid_argument);
 
-  ChartLayout zero = good;  // a side of zero length
+  PatchLayout zero = good;  // a side of zero length
   for (uint32_t v : zero.patches[0].sides[0].vertices) zero.positions[v] = {0.f, 0.f, 0.f};
   EXPECT_THROW(parameterizePatch(zero, 0), std::invalid_argument);
 }

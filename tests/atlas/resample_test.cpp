@@ -29,7 +29,7 @@ using test::sameBytes;
 
 // Chart corner (0,0) of quad i is corner i of its patch: the layout vertex exactly, and the
 // same bytes (position, normal, colour) in every chart that meets there.
-void expectCornersShared(const ChartLayout& layout, const GeometryImageSet& set,
+void expectCornersShared(const PatchLayout& layout, const GeometryImageSet& set,
                          uint32_t expectMeeting = 0) {
   std::map<uint32_t, std::vector<uint32_t>> byVertex;
   for (uint32_t c = 0; c < set.charts.size(); ++c) {
@@ -81,7 +81,7 @@ TEST(Resample, EdgeSampleIndexRunsCounterClockwise) {
 }
 
 TEST(Resample, FlatSquareMatchesPlane) {
-  const ChartLayout layout = test::gridLayout(12, 12, 3.f, 3.f);
+  const PatchLayout layout = test::gridLayout(12, 12, 3.f, 3.f);
   ResampleOptions opt;
   opt.chartSize = 17;
   const GeometryImageSet set = resampleLayout(layout, opt);
@@ -129,7 +129,7 @@ TEST(Resample, FlatSquareMatchesPlane) {
 TEST(Resample, TwoPatchesShareABitIdenticalSide) {
   // A warped planar grid cut at column 7 of 16: the two patches have different shapes, so the
   // shared side is sampled from two different parameterizations.
-  const ChartLayout layout = test::gridLayout(16, 9, 4.f, 2.f, {7}, true);
+  const PatchLayout layout = test::gridLayout(16, 9, 4.f, 2.f, {7}, true);
   ASSERT_EQ(layout.patches[0].sides[1].neighbourPatch, 1);
   ASSERT_EQ(layout.patches[1].sides[3].neighbourPatch, 0);
   for (const uint32_t size : {9u, 33u}) {
@@ -154,7 +154,7 @@ TEST(Resample, TwoPatchesShareABitIdenticalSide) {
 TEST(Resample, CubeAndSphereAreSeamless) {
   for (const bool sphere : {false, true}) {
     SCOPED_TRACE(sphere ? "sphere" : "cube");
-    const ChartLayout layout = test::cubeLayout(7, sphere);
+    const PatchLayout layout = test::cubeLayout(7, sphere);
     ResampleOptions opt;
     opt.chartSize = 33;
     const GeometryImageSet set = resampleLayout(layout, opt);
@@ -181,7 +181,7 @@ TEST(Resample, CubeAndSphereAreSeamless) {
 TEST(Resample, NonReversedJoinIsSeamless) {
   // Patch 1 of a two-patch grid re-oriented (triangles and sides reversed): both patches list the
   // shared side in the same order (a non-orientable join, reversed = false).
-  ChartLayout layout = test::gridLayout(8, 4, 2.f, 1.f, {4});
+  PatchLayout layout = test::gridLayout(8, 4, 2.f, 1.f, {4});
   Patch& b = layout.patches[1];
   for (uint32_t t : b.triangles) std::swap(layout.triangles[t][1], layout.triangles[t][2]);
   std::reverse(b.sides.begin(), b.sides.end());
@@ -206,7 +206,7 @@ TEST(Resample, NGonPatchesHaveNoFlippedTexels) {
   for (const bool hemisphere : {false, true}) {
     for (const uint32_t n : {3u, 5u, 8u}) {
       SCOPED_TRACE(testing::Message() << "n=" << n << " hemisphere=" << hemisphere);
-      const ChartLayout layout = test::diskLayout(n, 12, 48, hemisphere, true);
+      const PatchLayout layout = test::diskLayout(n, 12, 48, hemisphere, true);
       ResampleOptions opt;
       opt.chartSize = 33;
       const GeometryImageSet set = resampleLayout(layout, opt);
@@ -239,7 +239,7 @@ TEST(Resample, NGonPatchesHaveNoFlippedTexels) {
 }
 
 TEST(Resample, NeighbourTablesAreReciprocal) {
-  for (const ChartLayout& layout : {test::cubeLayout(3), test::gridLayout(9, 3, 3.f, 1.f, {3, 6}),
+  for (const PatchLayout& layout : {test::cubeLayout(3), test::gridLayout(9, 3, 3.f, 1.f, {3, 6}),
                                     test::diskLayout(5, 3, 20, false)}) {
     const auto nb = quadNeighbours(layout);
     ASSERT_EQ(nb.size(), quadChartOffsets(layout).back() + layout.patches.back().sides.size());
@@ -256,24 +256,24 @@ TEST(Resample, NeighbourTablesAreReciprocal) {
 }
 
 TEST(Resample, RejectsBadInput) {
-  ChartLayout layout = test::gridLayout(6, 3, 2.f, 1.f, {3});
+  PatchLayout layout = test::gridLayout(6, 3, 2.f, 1.f, {3});
   ResampleOptions opt;
   opt.chartSize = 16;
   EXPECT_THROW(resampleLayout(layout, opt), std::invalid_argument);
   opt.chartSize = 9;
   EXPECT_NO_THROW(resampleLayout(layout, opt));
-  ChartLayout oneWay = layout;
+  PatchLayout oneWay = layout;
   oneWay.patches[1].sides[3].neighbourPatch = -1;
   EXPECT_THROW(resampleLayout(oneWay, opt), std::invalid_argument);
   EXPECT_THROW(quadNeighbours(oneWay), std::invalid_argument);
-  ChartLayout notReversed = layout;
+  PatchLayout notReversed = layout;
   notReversed.patches[0].sides[1].reversed = false;
   notReversed.patches[1].sides[3].reversed = false;
   EXPECT_THROW(resampleLayout(notReversed, opt), std::invalid_argument);
 }
 
 TEST(Resample, ThreadCountDoesNotChangeTheResult) {
-  const ChartLayout layout = test::cubeLayout(5, true);
+  const PatchLayout layout = test::cubeLayout(5, true);
   ResampleOptions one, many;
   one.chartSize = many.chartSize = 17;
   one.threads = 1;
@@ -375,7 +375,7 @@ TEST(Resample, BunnyDiskRegion) {
     region = diskRegion(mesh, seed, 2000, loop);
   }
   ASSERT_FALSE(region.empty()) << "no disk-shaped region found";
-  ChartLayout layout;
+  PatchLayout layout;
   layout.positions = mesh.positions;
   layout.triangles = mesh.triangles;
   Patch patch;

@@ -47,11 +47,11 @@ ResampleOptions sidesOptions(uint32_t chartSize) {
 }
 
 // The shipped bunny charted into `patches` patches, with its side counts made even.
-ChartLayout evenedBunny(uint32_t patches) {
+PatchLayout evenedBunny(uint32_t patches) {
   const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
-  copt.targetCharts = patches;
-  ChartLayout layout = buildChartLayout(mesh, copt);
+  copt.targetPatches = patches;
+  PatchLayout layout = buildPatchLayout(mesh, copt);
   if (evenSides(layout).oddLeft > 0) throw std::runtime_error("the bunny's patches could not all be evened");
   return layout;
 }
@@ -68,7 +68,7 @@ TEST(SideQuads, QuadCounts) {
 TEST(SideQuads, CubeAndSphereAreOneChartAPatch) {
   for (const bool sphere : {false, true}) {
     SCOPED_TRACE(sphere ? "sphere" : "cube");
-    const ChartLayout layout = test::cubeLayout(7, sphere);
+    const PatchLayout layout = test::cubeLayout(7, sphere);
     const GeometryImageSet set = resampleLayout(layout, sidesOptions(33));
     ASSERT_EQ(set.charts.size(), 6u);
     for (const GeometryImage& g : set.charts) {
@@ -90,7 +90,7 @@ TEST(SideQuads, EvenNGonsHaveNoFlippedTexels) {
   for (const bool hemisphere : {false, true}) {
     for (const uint32_t n : {4u, 6u, 8u, 10u}) {
       SCOPED_TRACE(testing::Message() << "n=" << n << " hemisphere=" << hemisphere);
-      const ChartLayout layout = test::diskLayout(n, 12, 60, hemisphere, true);
+      const PatchLayout layout = test::diskLayout(n, 12, 60, hemisphere, true);
       const GeometryImageSet set = resampleLayout(layout, sidesOptions(33));
       ASSERT_EQ(set.charts.size(), n == 4 ? 1u : n / 2);
       EXPECT_EQ(set.image.flippedTexels, 0u);
@@ -118,7 +118,7 @@ TEST(SideQuads, TheStretchQuadMapKeepsTheBorderAndLowersTheStretch) {
   for (const bool hemisphere : {false, true}) {
     for (const uint32_t n : {6u, 10u, 12u}) {
       SCOPED_TRACE(testing::Message() << "n=" << n << " hemisphere=" << hemisphere);
-      const ChartLayout layout = test::diskLayout(n, 12, 60, hemisphere);
+      const PatchLayout layout = test::diskLayout(n, 12, 60, hemisphere);
       ResampleOptions o = sidesOptions(33);
       const GeometryImageSet bilinear = resampleLayout(layout, o);
       o.quadMap = QuadMap::kStretch;
@@ -153,7 +153,7 @@ TEST(SideQuads, TheStretchQuadMapKeepsTheBorderAndLowersTheStretch) {
 // The bunny's evened 24-patch layout with its two-chart corners mended, and the sides options at
 // 33^2 without the unfolding (the charts as their quad map places them).
 struct MappedBunny {
-  ChartLayout layout;
+  PatchLayout layout;
   ResampleOptions options;
 };
 MappedBunny mappedBunny() {
@@ -236,18 +236,18 @@ TEST(SideQuads, TheUnfoldingMendsFlippedTexelsOnTheSurfaceAndKeepsTheBorder) {
 }
 
 TEST(SideQuads, AnOddPatchIsRefused) {
-  const ChartLayout layout = test::diskLayout(5, 4, 30, false);
+  const PatchLayout layout = test::diskLayout(5, 4, 30, false);
   EXPECT_THROW(resampleLayout(layout, sidesOptions(17)), std::invalid_argument);
   EXPECT_THROW(quadNeighbours(layout, QuadLayout::kSides), std::invalid_argument);
 }
 
 TEST(EvenSides, AnOpenSideTakesTheCorner) {
-  ChartLayout layout = test::diskLayout(5, 4, 30, false);
+  PatchLayout layout = test::diskLayout(5, 4, 30, false);
   const EvenSidesResult r = evenSides(layout);
   EXPECT_EQ(r.corners, 1u);
   EXPECT_EQ(r.oddLeft, 0u);
   ASSERT_EQ(layout.patches[0].sides.size(), 6u);
-  EXPECT_TRUE(validateChartLayout(layout, 3, kMaxPatchSides).empty());
+  EXPECT_TRUE(validatePatchLayout(layout, 3, kMaxPatchSides).empty());
   const GeometryImageSet set = resampleLayout(layout, sidesOptions(17));
   EXPECT_EQ(set.charts.size(), 3u);
   EXPECT_EQ(set.image.flippedTexels, 0u);
@@ -259,8 +259,8 @@ TEST(EvenSides, AnOpenSideTakesTheCorner) {
 TEST(EvenSides, TheBunnysOddPatchesArePairedAndItsSidesLayoutIsSeamless) {
   const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
-  copt.targetCharts = 48;
-  ChartLayout layout = buildChartLayout(mesh, copt);
+  copt.targetPatches = 48;
+  PatchLayout layout = buildPatchLayout(mesh, copt);
   uint32_t oddBefore = 0, kites = 0;
   for (const Patch& p : layout.patches) {
     oddBefore += p.sides.size() % 2;
@@ -271,7 +271,7 @@ TEST(EvenSides, TheBunnysOddPatchesArePairedAndItsSidesLayoutIsSeamless) {
   EXPECT_EQ(r.oddLeft, 0u);
   EXPECT_GE(r.corners, (oddBefore + 1) / 2);
   for (const Patch& p : layout.patches) EXPECT_EQ(p.sides.size() % 2, 0u);
-  const std::vector<std::string> bad = validateChartLayout(layout, 3, kMaxPatchSides);
+  const std::vector<std::string> bad = validatePatchLayout(layout, 3, kMaxPatchSides);
   EXPECT_TRUE(bad.empty()) << bad.front();
   const GeometryImageSet set = resampleLayout(layout, sidesOptions(9));
   EXPECT_GT(expectSeamless(set), 0u);
@@ -281,7 +281,7 @@ TEST(EvenSides, TheBunnysOddPatchesArePairedAndItsSidesLayoutIsSeamless) {
 }
 
 // The side count of every hole (loop of open sides) of a layout.
-std::vector<uint32_t> holeSideCounts(const ChartLayout& layout) {
+std::vector<uint32_t> holeSideCounts(const PatchLayout& layout) {
   std::map<uint32_t, uint32_t> next;  // open side: start vertex -> end vertex
   for (const Patch& p : layout.patches) {
     for (const PatchSide& s : p.sides) {
@@ -306,8 +306,8 @@ std::vector<uint32_t> holeSideCounts(const ChartLayout& layout) {
 TEST(EvenSides, TwoSidedHolesGetTwoMoreCorners) {
   const IndexedMesh mesh = readMesh(test::repoData() / "meshes/bun_zipper.ply");
   ChartingOptions copt;
-  copt.targetCharts = 48;
-  ChartLayout layout = buildChartLayout(mesh, copt);
+  copt.targetPatches = 48;
+  PatchLayout layout = buildPatchLayout(mesh, copt);
   straightenSides(layout, 2, true);
   moveSideEars(layout);
   const std::vector<uint32_t> before = holeSideCounts(layout);
@@ -321,7 +321,7 @@ TEST(EvenSides, TwoSidedHolesGetTwoMoreCorners) {
   ASSERT_EQ(after.size(), before.size());
   for (const uint32_t n : after) EXPECT_GE(n, 3u);
   for (size_t p = 0; p < layout.patches.size(); ++p) EXPECT_EQ(layout.patches[p].sides.size() % 2, parity[p]) << p;
-  const std::vector<std::string> bad = validateChartLayout(layout, 3, kMaxPatchSides);
+  const std::vector<std::string> bad = validatePatchLayout(layout, 3, kMaxPatchSides);
   EXPECT_TRUE(bad.empty()) << bad.front();
   EXPECT_EQ(splitTwoSidedHoles(layout), 0u);  // nothing left to do
 }
@@ -330,13 +330,13 @@ TEST(EvenSides, TwoSidedHolesGetTwoMoreCorners) {
 // restores it exactly; in the sides layout the other pairing gives the same chart count and
 // still seamless charts.
 TEST(EvenSides, RotatedSidesKeepTheLayoutValid) {
-  ChartLayout layout = test::diskLayout(6, 6, 36, true);
-  ChartLayout two = test::gridLayout(12, 4, 3.f, 1.f, {6});
+  PatchLayout layout = test::diskLayout(6, 6, 36, true);
+  PatchLayout two = test::gridLayout(12, 4, 3.f, 1.f, {6});
   ASSERT_EQ(evenSides(two).oddLeft, 0u);
-  for (ChartLayout* l : {&layout, &two}) {
-    const ChartLayout before = *l;
+  for (PatchLayout* l : {&layout, &two}) {
+    const PatchLayout before = *l;
     rotatePatchSides(*l, 0, 1);
-    EXPECT_TRUE(validateChartLayout(*l, 3, kMaxPatchSides).empty());
+    EXPECT_TRUE(validatePatchLayout(*l, 3, kMaxPatchSides).empty());
     EXPECT_EQ(l->patches[0].sides[0].vertices, before.patches[0].sides[1].vertices);
     const GeometryImageSet set = resampleLayout(*l, sidesOptions(17));
     EXPECT_GT(expectSeamless(set), 0u);
@@ -353,7 +353,7 @@ TEST(EvenSides, RotatedSidesKeepTheLayoutValid) {
 // alignSpokes solves the pairings exactly: from any pairing of the bunny's evened patches it
 // finds one where every corner of two patches starts spokes in one of them.
 TEST(EvenSides, AlignSpokesFindsAPairingWithoutTwoChartCorners) {
-  ChartLayout layout = evenedBunny(48);
+  PatchLayout layout = evenedBunny(48);
   EXPECT_EQ(alignSpokes(layout), 0u);
   uint32_t worstStart = 0;
   for (uint32_t seed = 1; seed <= 8; ++seed) {
@@ -364,7 +364,7 @@ TEST(EvenSides, AlignSpokesFindsAPairingWithoutTwoChartCorners) {
     worstStart = std::max(worstStart, twoQuadCorners(layout));
     EXPECT_EQ(alignSpokes(layout), 0u) << "seed " << seed;
     EXPECT_EQ(twoQuadCorners(layout), 0u);
-    const std::vector<std::string> bad = validateChartLayout(layout, 3, kMaxPatchSides);
+    const std::vector<std::string> bad = validatePatchLayout(layout, 3, kMaxPatchSides);
     EXPECT_TRUE(bad.empty()) << bad.front();
   }
   EXPECT_GT(worstStart, 0u);  // the other pairings did leave such corners
@@ -374,7 +374,7 @@ TEST(EvenSides, AlignSpokesFindsAPairingWithoutTwoChartCorners) {
 // evening leaves some), mendTwoChartCorners adds corners until none is left; the layout stays
 // valid and even, and resamples seamlessly.
 TEST(EvenSides, MendTwoChartCornersLeavesNone) {
-  ChartLayout layout = evenedBunny(24);
+  PatchLayout layout = evenedBunny(24);
   const uint32_t aligned = alignSpokes(layout);
   ASSERT_GT(aligned, 0u);  // this layout needs the mend
   const MendCornersResult mend = mendTwoChartCorners(layout);
@@ -384,7 +384,7 @@ TEST(EvenSides, MendTwoChartCornersLeavesNone) {
   EXPECT_EQ(twoQuadCorners(layout), 0u);
   EXPECT_GT(mend.corners, 0u);
   for (const Patch& p : layout.patches) EXPECT_EQ(p.sides.size() % 2, 0u);
-  const std::vector<std::string> bad = validateChartLayout(layout, 3, kMaxPatchSides);
+  const std::vector<std::string> bad = validatePatchLayout(layout, 3, kMaxPatchSides);
   EXPECT_TRUE(bad.empty()) << bad.front();
   EXPECT_GT(expectSeamless(resampleLayout(layout, sidesOptions(9))), 0u);
 }
@@ -432,7 +432,7 @@ TEST(SideQuads, TheShippedBunnyBuildsWithHalfTheCharts) {
     MeshBuildOptions o;
     o.input = test::repoData() / "meshes/bun_zipper.ply";
     o.output = dir.path() / (sides ? "sides.atlas" : "kites.atlas");
-    o.charts = 24;
+    o.patches = 24;
     o.chartSize = 33;
     o.measureFidelity = false;
     o.quads = sides ? MeshQuads::kSides : MeshQuads::kKites;
@@ -458,7 +458,7 @@ TEST(SideQuads, TheShippedBunnyBuildsWithHalfTheCharts) {
   MeshBuildOptions o;
   o.input = test::repoData() / "meshes/bun_zipper.ply";
   o.output = dir.path() / "auto.atlas";
-  o.charts = 24;
+  o.patches = 24;
   o.chartSize = 33;
   o.measureFidelity = false;
   o.quads = MeshQuads::kAuto;

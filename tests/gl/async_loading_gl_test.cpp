@@ -55,7 +55,7 @@ void expectDrawnCoversDesired(const Cut& drawn, const Cut& desired, int frame) {
         ++found;
         ++covers[i];
         if (a.key() == n.id.key()) {
-          EXPECT_EQ(drawn.nodes[i].res, n.res) << "frame " << frame;
+          EXPECT_EQ(drawn.nodes[i].resLog2, n.resLog2) << "frame " << frame;
         }
       }
       if (a.level == 0) break;
@@ -137,7 +137,7 @@ TEST_F(AsyncLoadingTest, SubstitutesResidentAncestorsCrackFreeAndConverges) {
   ASSERT_EQ(f.cut.nodes.size(), f.desiredCut.nodes.size());
   for (size_t i = 0; i < f.cut.nodes.size(); ++i) {
     EXPECT_EQ(f.cut.nodes[i].id.key(), f.desiredCut.nodes[i].id.key());
-    EXPECT_EQ(f.cut.nodes[i].res, f.desiredCut.nodes[i].res);
+    EXPECT_EQ(f.cut.nodes[i].resLog2, f.desiredCut.nodes[i].resLog2);
   }
   const PageLoaderStats s = scene.loader()->stats();
   EXPECT_GT(s.requested, 0u);

@@ -110,7 +110,7 @@ StitchTables bruteForceStitch(const std::vector<DrawNode>& nodes, uint32_t leafL
           const int32_t bs = 1 << b.sizeLog2;
           if (px2 > 2 * b.originX && px2 < 2 * (b.originX + bs) && py2 > 2 * b.originY &&
               py2 < 2 * (b.originY + bs))
-            t.side(k, side)[e] = uint8_t(b.sizeLog2 - b.res);
+            t.side(k, side)[e] = uint8_t(b.sizeLog2 - b.resLog2);
         }
       }
   }
@@ -140,7 +140,7 @@ void checkSharedSide(const DrawNode& a, const std::vector<glm::vec3>& va, const 
   if (lo >= hi) return;
   auto sideVertices = [](const DrawNode& d, const std::vector<glm::vec3>& v, uint32_t s,
                          int32_t from, int32_t to) {
-    const uint32_t n = 1u << d.res, so = d.sizeLog2 - d.res;
+    const uint32_t n = 1u << d.resLog2, so = d.sizeLog2 - d.resLog2;
     const int32_t start = s == 0 || s == 2 ? d.originX : d.originY;
     std::vector<glm::vec3> out;
     for (uint32_t k = 0; k <= n; ++k) {
@@ -197,7 +197,7 @@ void expectCrackFree(gl::AtlasRenderer& r, const Scene& s, bool controlMustCrack
   const auto verts = r.captureVertices(s.nodes, s.stitch);
   ASSERT_EQ(verts.size(), s.nodes.size());
   for (size_t k = 0; k < s.nodes.size(); ++k) {
-    const uint32_t side = (1u << s.nodes[k].res) + 1;
+    const uint32_t side = (1u << s.nodes[k].resLog2) + 1;
     ASSERT_EQ(verts[k].size(), size_t(side) * side);
   }
   const BorderCheck c = checkAllBorders(s.nodes, verts);
@@ -218,7 +218,7 @@ TEST_F(RendererGlTest, CapturedInteriorVerticesAreTheExactSamples) {
   ASSERT_EQ(verts.size(), 2u);
   for (size_t k = 0; k < nodes.size(); ++k) {
     const DrawNode& d = nodes[k];
-    const uint32_t n = 1u << d.res, so = d.sizeLog2 - d.res;
+    const uint32_t n = 1u << d.resLog2, so = d.sizeLog2 - d.resLog2;
     ASSERT_EQ(verts[k].size(), size_t(n + 1) * (n + 1));
     for (uint32_t j = 0; j <= n; ++j)
       for (uint32_t i = 0; i <= n; ++i) {
@@ -314,7 +314,7 @@ TEST_F(RendererGlTest, DrawShowsTerrainBelowAndSkyAbove) {
   const gl::DrawStats stats = r.draw(viewProj, eye, s.nodes, s.stitch);
   const double callMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   uint64_t triangles = 0;
-  for (const DrawNode& n : s.nodes) triangles += uint64_t(2) << (2 * n.res);
+  for (const DrawNode& n : s.nodes) triangles += uint64_t(2) << (2 * n.resLog2);
   EXPECT_EQ(stats.triangles, triangles);
   EXPECT_EQ(stats.drawCalls, 1u);  // one multi-draw-indirect for the cut (its pages in one array)
   // The draw's own time (submission and glFinish) is within the call; the GPU's, when the timer

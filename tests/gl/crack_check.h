@@ -21,7 +21,7 @@ inline CrackReport captureCracks(gl::AtlasScene& scene, const Cut& cut, bool exp
   const auto verts = scene.capture(cut);
   EXPECT_EQ(verts.size(), cut.nodes.size());
   for (size_t i = 0; i < verts.size() && i < cut.nodes.size(); ++i) {
-    const size_t side = (size_t(1) << cut.nodes[i].res) + 1;
+    const size_t side = (size_t(1) << cut.nodes[i].resLog2) + 1;
     EXPECT_EQ(verts[i].size(), side * side) << "node " << i;
   }
   const CrackReport r = countCracks(scene.atlas().hierarchy, cut, verts);
@@ -59,7 +59,7 @@ inline CutMix cutMix(const Hierarchy& h, const Cut& cut) {
       sideNeighbours(h, cut, n.id, s, ns);
       for (const SideNeighbour& sn : ns) {
         const CutNode& m = cut.nodes[sn.cutIndex];
-        const bool levelDiff = m.id.level != n.id.level, resDiff = m.res != n.res;
+        const bool levelDiff = m.id.level != n.id.level, resDiff = m.resLog2 != n.resLog2;
         ++mix.sides;
         mix.mixed += levelDiff || resDiff;
         if (m.id.chart != n.id.chart) {

@@ -269,7 +269,7 @@ TEST_F(CrackTest, CoherentAdapterCutsAlongAPathOverRealSrtm) {
 // borders, with neighbours at different levels and resolutions; and a drawn frame shows the
 // surface.
 TEST_F(CrackTest, MeshAtlasCutsAcrossChartsOfEveryOrientation) {
-  const ChartLayout layout = test::cubeLayout(8, true);
+  const PatchLayout layout = test::cubeLayout(8, true);
   ResampleOptions ro;
   ro.chartSize = 33;
   const GeometryImageSet set = resampleLayout(layout, ro);
@@ -302,8 +302,8 @@ TEST_F(CrackTest, MeshAtlasCutsAcrossChartsOfEveryOrientation) {
 TEST_F(CrackTest, SidesQuadLayoutOfTheBunnyHasNoCracks) {
   const IndexedMesh mesh = readMesh(test::realData("meshes/bun_zipper.ply"));
   ChartingOptions copt;
-  copt.targetCharts = 48;
-  ChartLayout layout = buildChartLayout(mesh, copt);
+  copt.targetPatches = 48;
+  PatchLayout layout = buildPatchLayout(mesh, copt);
   ASSERT_EQ(evenSides(layout).oddLeft, 0u);
   ResampleOptions ro;
   ro.chartSize = 17;

@@ -61,7 +61,7 @@ class GeomorphTest : public test::GlContextTest<> {
       const auto verts = captureWith(scene, cut, [f](size_t) { return f; });
       ASSERT_EQ(verts.size(), base.size());
       for (size_t k = 0; k < cut.nodes.size(); ++k) {
-        const uint32_t res = cut.nodes[k].res, n = 1u << res;
+        const uint32_t res = cut.nodes[k].resLog2, n = 1u << res;
         const bool morphs = res > h.params.minNodeResLog2;
         // The factor in the node record is quantized to 1/255.
         const float q = morphs ? float(std::lround(f * 255.f)) / 255.f : 0.f;
@@ -199,8 +199,8 @@ TEST_F(GeomorphTest, SceneFactorsFollowTheCoarserError) {
       ASSERT_GE(n.morph, 0.f);
       ASSERT_LE(n.morph, 1.f);
       EXPECT_FLOAT_EQ(n.morph, float(geomorphFactor(h, n, v, ao.tolerancePx, so.geomorph)));
-      if (n.res > h.params.minNodeResLog2) {
-        const double coarser = screenError(h, n.id, n.res - 1, v);
+      if (n.resLog2 > h.params.minNodeResLog2) {
+        const double coarser = screenError(h, n.id, n.resLog2 - 1, v);
         if (coarser >= 1.5 * ao.tolerancePx) {
           EXPECT_EQ(n.morph, 0.f);
         }

@@ -206,7 +206,7 @@ Precision measurePrecision(gl::AtlasScene& scene, const AtlasView& a, const Came
   for (size_t i = 0; i < f.cut.nodes.size(); ++i) {
     const CutNode& n = f.cut.nodes[i];
     const ChartInfo& c = m.charts[n.id.chart];
-    const uint32_t k = L - n.id.level - n.res, side = (1u << n.res) + 1;
+    const uint32_t k = L - n.id.level - n.resLog2, side = (1u << n.resLog2) + 1;
     const uint32_t u0 = (n.id.x * (M >> n.id.level)) >> k, v0 = (n.id.y * (M >> n.id.level)) >> k;
     const uint32_t levelSide = (M >> k) + 1;
     const std::vector<float> level = ChartFileReader(a.dir / c.file).readHeightsWindow(k, 0, 0, M >> k);

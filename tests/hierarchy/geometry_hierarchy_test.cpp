@@ -46,11 +46,11 @@ float bruteError(const std::vector<glm::vec3>& P, uint32_t S, uint32_t L, const 
   return worst;
 }
 
-HierarchyParams params(uint32_t L, uint32_t depth, uint32_t maxRes, uint32_t minRes) {
+HierarchyParams params(uint32_t L, uint32_t depth, uint32_t maxResLog2, uint32_t minRes) {
   HierarchyParams p;
   p.intervalsLog2 = L;
   p.depth = depth;
-  p.maxNodeResLog2 = maxRes;
+  p.maxNodeResLog2 = maxResLog2;
   p.minNodeResLog2 = minRes;
   return p;
 }
@@ -76,17 +76,17 @@ TEST(GeometryHierarchy, ErrorsAndBoundsMatchBruteForceOnACurvedChart) {
         EXPECT_EQ(b[2], lo.z);
         EXPECT_EQ(b[4], hi.y);
         EXPECT_EQ(b[5], hi.z);
-        for (uint32_t r = p.minNodeResLog2; r <= p.maxRes(l); ++r) {
+        for (uint32_t r = p.minNodeResLog2; r <= p.maxResLog2(l); ++r) {
           EXPECT_NEAR(h.error(n, r), bruteError(P, S, L, n, r), 1e-5f) << l << " " << x << " " << y << " res " << r;
           ++checked;
           if (r > p.minNodeResLog2) {
             EXPECT_LE(h.error(n, r), h.error(n, r - 1));  // coarser: never smaller
           }
-          if (l + 1 < p.depth && r <= p.maxRes(l + 1)) {
+          if (l + 1 < p.depth && r <= p.maxResLog2(l + 1)) {
             for (uint32_t c = 0; c < 4; ++c) EXPECT_GE(h.error(n, r), h.error(n.child(c), r) - 1e-7f);
           }
         }
-        EXPECT_EQ(h.error(n, L - l <= p.maxRes(l) ? L - l : p.maxRes(l)) == 0.f, L - l <= p.maxRes(l));
+        EXPECT_EQ(h.error(n, L - l <= p.maxResLog2(l) ? L - l : p.maxResLog2(l)) == 0.f, L - l <= p.maxResLog2(l));
       }
   EXPECT_GT(checked, 20u);
   EXPECT_GT(h.error({0, 0, 0, 0}, 1), 0.01f);  // the curved chart does have error
@@ -114,7 +114,7 @@ TEST(GeometryHierarchy, LiftedHeightFieldHasTheTerrainErrors) {
       for (uint32_t y = 0; y < (1u << l); ++y)
         for (uint32_t x = 0; x < (1u << l); ++x) {
           const NodeId n{c, l, x, y};
-          for (uint32_t r = 2; r <= geometry.params.maxRes(l); ++r)
+          for (uint32_t r = 2; r <= geometry.params.maxResLog2(l); ++r)
             worst = std::max(worst, std::fabs(double(geometry.error(n, r)) - double(terrain.error(n, r))));
           EXPECT_EQ(geometry.bounds(n)[2], terrain.bounds(n)[2]);
           EXPECT_EQ(geometry.bounds(n)[5], terrain.bounds(n)[5]);

@@ -49,16 +49,16 @@ void checkInvariants(const Hierarchy& hier, const AtlasManifest& m,
         for (uint32_t x = 0; x < (1u << l); ++x) {
           const NodeId n{c, l, x, y};
           // Error is zero at the source resolution and never decreases as resolution drops.
-          if (p.maxRes(l) == p.intervalsLog2 - l) {
-            EXPECT_EQ(hier.error(n, p.maxRes(l)), 0.f);
+          if (p.maxResLog2(l) == p.intervalsLog2 - l) {
+            EXPECT_EQ(hier.error(n, p.maxResLog2(l)), 0.f);
           }
-          for (uint32_t r = p.minNodeResLog2; r < p.maxRes(l); ++r)
+          for (uint32_t r = p.minNodeResLog2; r < p.maxResLog2(l); ++r)
             ASSERT_GE(hier.error(n, r), hier.error(n, r + 1)) << "chart " << c << " level " << l;
           // A parent's error is at least each child's at the same pyramid level.
           if (l + 1 < p.depth)
             for (uint32_t i = 0; i < 4; ++i)
-              for (uint32_t r = std::max(p.minNodeResLog2 + 1, 1u); r <= p.maxRes(l); ++r)
-                if (r - 1 <= p.maxRes(l + 1) && r - 1 >= p.minNodeResLog2) {
+              for (uint32_t r = std::max(p.minNodeResLog2 + 1, 1u); r <= p.maxResLog2(l); ++r)
+                if (r - 1 <= p.maxResLog2(l + 1) && r - 1 >= p.minNodeResLog2) {
                   ASSERT_GE(hier.error(n, r), hier.error(n.child(i), r - 1));
                 }
           // Bounds contain every sample of the region.
@@ -85,7 +85,7 @@ TEST(Hierarchy, ErrorsMatchBruteForceOnHandMadeCharts) {
     for (uint32_t l = 0; l < p.depth; ++l)
       for (uint32_t y = 0; y < (1u << l); ++y)
         for (uint32_t x = 0; x < (1u << l); ++x)
-          for (uint32_t r = p.minNodeResLog2; r <= p.maxRes(l); ++r) {
+          for (uint32_t r = p.minNodeResLog2; r <= p.maxResLog2(l); ++r) {
             const uint32_t k = p.pyramidLevel(l, r);
             const float expect = k == 0 ? 0.f : bruteError(h, m.chartSize, l, x, y, k);
             EXPECT_NEAR(hier.error({c, l, x, y}, r), expect, 1e-4f + 1e-6f * expect)
@@ -221,7 +221,7 @@ TEST(Hierarchy, InvariantsOnRealSrtmTile) {
   // Brute-force spot check on the real data for a few nodes of the first chart.
   const auto h = source(0);
   for (uint32_t l = 1; l < 4; ++l)
-    for (uint32_t r = hier.params.minNodeResLog2; r <= hier.params.maxRes(l); ++r) {
+    for (uint32_t r = hier.params.minNodeResLog2; r <= hier.params.maxResLog2(l); ++r) {
       const uint32_t k = hier.params.pyramidLevel(l, r);
       const float expect = k == 0 ? 0.f : bruteError(h, 257, l, 1, 0, k);
       EXPECT_NEAR(hier.error({0, l, 1, 0}, r), expect, 1e-2f);  // float rounding at ~4 km heights

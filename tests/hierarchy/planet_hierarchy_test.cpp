@@ -100,7 +100,7 @@ void checkBounds(double radius, double flattening = 0.0) {
                 EXPECT_GE(double(b[3 + k]), q[k]);
               }
             }
-          for (uint32_t r = p.minNodeResLog2; r <= h.maxRes(n); ++r) {
+          for (uint32_t r = p.minNodeResLog2; r <= h.maxResLog2(n); ++r) {
             const uint32_t s = size >> r;  // level-0 intervals between the grid's vertices
             double worst = 0.0;
             for (uint32_t v = 0; v <= size; ++v)

@@ -110,10 +110,10 @@ TEST(QuadQueue, RainierOrbitNoWorseThanFixedGranularity) {
 // Regression: with a small node budget and a large triangle budget the quad-queue adapter got stuck
 // far above the fixed-granularity baseline (bench path, 100 nodes: p95 70 px vs 4 px at 400k
 // triangles, and half of an 800k budget unused). Causes: tier priorities 1e30 + err lost err to
-// rounding (splits of nodes at maxRes went in key order, not worst first); trade merges that add a
+// rounding (splits of nodes at maxResLog2 went in key order, not worst first); trade merges that add a
 // drawn node (culled group, visible parent) forced budget merges; and with the node budget full no
 // merge of a group whose parent cannot hold its children's errors was ever traded for the split of
-// a worse node at maxRes. On the bench path the error must stay at or below the baseline's in every
+// a worse node at maxResLog2. On the bench path the error must stay at or below the baseline's in every
 // frame, and an error above zero must come with the triangle budget in use.
 TEST(QuadQueue, RainierBenchPathSmallNodeBudgetNoWorseThanFixedPerFrame) {
   const test::DemWorld world = test::loadDemWorld(test::repoData() / "terrain/mt_rainier_90m.tif", 513);  // as `gimlod build` defaults

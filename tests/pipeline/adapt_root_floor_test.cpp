@@ -162,7 +162,7 @@ class RootFloorScan : public ::testing::Test {
     MeshBuildOptions o;
     o.input = test::repoData() / "meshes/bun_zipper.ply";
     o.output = dir_->path() / "bunny.atlas";
-    o.charts = 24;
+    o.patches = 24;
     o.chartSize = 17;
     o.measureFidelity = false;
     buildAtlas(o);

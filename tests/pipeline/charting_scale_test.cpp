@@ -52,10 +52,10 @@ TEST(ChartingScale, OneLargeHeapGivesAValidClosedLayout) {
   const IndexedMesh m = uvSphere(128, 126);
   ASSERT_LE(m.triangles.size(), 32768u);
   ChartingOptions o;
-  o.targetCharts = 12;
+  o.targetPatches = 12;
   ChartingStats st;
-  const ChartLayout l = buildChartLayout(m, o, &st);
-  EXPECT_TRUE(validateChartLayout(l).empty());
+  const PatchLayout l = buildPatchLayout(m, o, &st);
+  EXPECT_TRUE(validatePatchLayout(l).empty());
   EXPECT_EQ(st.cells, 0u);  // not blocked
   EXPECT_EQ(l.triangles.size(), m.triangles.size());
   EXPECT_EQ(st.boundaryEdges, 0u);
@@ -77,10 +77,10 @@ TEST(ChartingScale, CellsPathCountsEveryWeld) {
   const GridifyResult gr = gridify(dir.path() / "sphere.ply", dir.path() / "grid", g);
   ASSERT_GT(gr.cells, 4u);
   ChartingOptions o;
-  o.targetCharts = 20;
+  o.targetPatches = 20;
   ChartingStats st;
-  const ChartLayout l = buildChartLayoutFromCells(dir.path() / "grid", o, &st);
-  EXPECT_TRUE(validateChartLayout(l).empty());
+  const PatchLayout l = buildPatchLayoutFromCells(dir.path() / "grid", o, &st);
+  EXPECT_TRUE(validatePatchLayout(l).empty());
   EXPECT_EQ(l.triangles.size(), m.triangles.size());
   EXPECT_EQ(l.positions.size(), m.positions.size());
   EXPECT_EQ(st.inputVertices, 3 * m.triangles.size());
@@ -98,7 +98,7 @@ TEST(ChartingScale, MeshBuildReportsEveryStage) {
   MeshBuildOptions b;
   b.input = dir.path() / "sphere.ply";
   b.output = dir.path() / "sphere.atlas";
-  b.charts = 12;
+  b.patches = 12;
   b.chartSize = 17;
   b.measureFidelity = false;
   const nlohmann::json stats = buildAtlas(b);

@@ -244,7 +244,7 @@ TEST(CompressedAtlas, Version1AtlasesStillOpen) {
 uint64_t checkCodedBunny(double positionTolerance, uint32_t normalTolerance, const fs::path& dir) {
   MeshBuildOptions o;
   o.input = test::repoData() / "meshes/bun_zipper.ply";
-  o.charts = 24;
+  o.patches = 24;
   o.chartSize = 65;
   o.measureFidelity = false;
   o.positionTolerance = positionTolerance;

@@ -206,7 +206,7 @@ TEST_P(PlanarScanTest, FortyEightPlanarPatchesWithinTheSamplingBound) {
   MeshBuildOptions o;
   o.input = test::sharedScanPath(name);
   o.output = dir.path() / "atlas";
-  o.charts = 48;
+  o.patches = 48;
   o.chartMetric = MeshChartMetric::kPlanar;
   o.quads = MeshQuads::kSides;
   o.measureFidelity = false;

@@ -59,7 +59,7 @@ class DualQueueAdapter {
   struct Entry {
     NodeId id;
     uint32_t g = 0;            // dense forest index (see globalIndex)
-    uint8_t res = 0;
+    uint8_t resLog2 = 0;
     bool drawn = false;
     bool inside = false;       // bounds entirely inside the frustum (so are the children's)
     bool overTol = false;
@@ -97,7 +97,7 @@ class DualQueueAdapter {
   // Per-view evaluation of one node: drawn, fully inside, needed resolution (clamped).
   struct Eval {
     bool drawn = false, inside = false, overTol = false;
-    uint8_t res = 0;
+    uint8_t resLog2 = 0;
     double errorPx = 0.0;
     double slack = 0.0;  // eye movement before the (clamped) resolution can change
   };
@@ -106,7 +106,7 @@ class DualQueueAdapter {
   NodeId nodeOf(uint32_t g) const;
   // parentInside: the parent is known to lie entirely inside the frustum (skips the test).
   Eval evalNode(const NodeId& n, bool parentInside) const;
-  Eval evalBox(const float* bounds, const float* errors, uint32_t maxRes, bool parentInside) const;
+  Eval evalBox(const float* bounds, const float* errors, uint32_t maxResLog2, bool parentInside) const;
   void evaluate(Entry& e);
   // slack (optional): lowered to the smallest eye movement that may change a child's resolution.
   double splitPriority(const Entry& e, int32_t* delta, double* slack = nullptr) const;

@@ -20,7 +20,7 @@ namespace {
 
 // Tier bases. A tier value is base * (1 + err): adding err to 1e30 would be lost to rounding (all
 // tier members would tie and fall back to key order), scaling keeps the order by err.
-constexpr double kStuckPriority = 1e30;  // split priority base of a drawn node already at maxRes
+constexpr double kStuckPriority = 1e30;  // split priority base of a drawn node already at maxResLog2
 constexpr double kOverCost = 1e30;       // merge cost base when the parent cannot hold the error
 constexpr double kEps = 1e-9;
 
@@ -30,7 +30,7 @@ NodeId keyToNode(uint64_t key) { return NodeId::fromKey(key); }
 
 struct Entry {
   NodeId id;
-  uint32_t res = 0;
+  uint32_t resLog2 = 0;
   uint32_t floor = 0;  // lowest allowed resolution: minRes, or the stitching gap
   uint32_t gap = 0;    // stitching level gap to the finest drawn neighbour (computeFloors)
   bool drawn = false;
@@ -43,7 +43,7 @@ struct Entry {
 struct Item {
   double priority;
   uint64_t key;
-  uint32_t res;  // resolution when pushed (stale when it changed)
+  uint32_t resLog2;  // resolution when pushed (stale when it changed)
 };
 struct ItemLess {
   bool operator()(const Item& a, const Item& b) const {
@@ -155,8 +155,8 @@ struct QuadQueueAdapter::State {
   std::vector<SideNeighbour> scratch;
   GroupSelection groups;  // this frame's closed groups (their roots never split)
 
-  uint32_t maxRes(const NodeId& n) const { return h->maxRes(n); }
-  uint32_t minRes() const { return h->params.minNodeResLog2; }
+  uint32_t maxResLog2(const NodeId& n) const { return h->maxResLog2(n); }
+  uint32_t minResLog2() const { return h->params.minNodeResLog2; }
   uint32_t nodeBudget() const { return opt.maxNodes == 0 ? UINT32_MAX : opt.maxNodes; }
   bool capped() {
     if (ops < opt.maxOpsPerFrame) return false;
@@ -167,14 +167,14 @@ struct QuadQueueAdapter::State {
   double errAt(const Entry& e, uint32_t r) const {
     return double(h->error(e.id, r)) * view.pixelsPerRadian / e.dist;
   }
-  // Resolution a node needs to hold `tolPx`, clamped to its maxRes.
+  // Resolution a node needs to hold `tolPx`, clamped to its maxResLog2.
   uint32_t resFor(const NodeId& n, double tolPx) const {
-    return std::min(neededResolution(*h, n, view, tolPx), maxRes(n));
+    return std::min(neededResolution(*h, n, view, tolPx), maxResLog2(n));
   }
 
   void setRes(Entry& e, uint32_t r) {
-    if (e.drawn) triangles = triangles - tris(e.res) + tris(r);
-    e.res = r;
+    if (e.drawn) triangles = triangles - tris(e.resLog2) + tris(r);
+    e.resLog2 = r;
     e.err = e.drawn ? errAt(e, r) : 0.0;
   }
   void evaluate(Entry& e) {
@@ -182,9 +182,9 @@ struct QuadQueueAdapter::State {
     const auto& b = h->bounds(e.id);
     const glm::dvec3 q = glm::clamp(view.eye, glm::dvec3{b[0], b[1], b[2]}, glm::dvec3{b[3], b[4], b[5]}) - view.eye;
     e.dist = std::max(glm::length(q), view.minDistance);
-    e.res = e.drawn ? std::clamp(e.res, minRes(), maxRes(e.id)) : minRes();
-    e.floor = minRes();
-    e.err = e.drawn ? errAt(e, e.res) : 0.0;
+    e.resLog2 = e.drawn ? std::clamp(e.resLog2, minResLog2(), maxResLog2(e.id)) : minResLog2();
+    e.floor = minResLog2();
+    e.err = e.drawn ? errAt(e, e.resLog2) : 0.0;
   }
   void recount() {
     drawn = 0;
@@ -192,7 +192,7 @@ struct QuadQueueAdapter::State {
     for (const auto& [k, e] : cut)
       if (e.drawn) {
         ++drawn;
-        triangles += tris(e.res);
+        triangles += tris(e.resLog2);
         floorTris += tris(e.floor);
       }
   }
@@ -205,20 +205,20 @@ struct QuadQueueAdapter::State {
     Cut c;
     c.nodes.reserve(drawn);
     for (const auto& [k, e] : cut)
-      if (e.drawn) c.nodes.push_back({e.id, e.res, float(e.err)});
+      if (e.drawn) c.nodes.push_back({e.id, e.resLog2, float(e.err)});
     c.rebuildIndex();
     return c;
   }
   void addCounts(const Entry& e) {
     if (!e.drawn) return;
     ++drawn;
-    triangles += tris(e.res);
+    triangles += tris(e.resLog2);
     floorTris += tris(e.floor);
   }
   void removeCounts(const Entry& e) {
     if (!e.drawn) return;
     --drawn;
-    triangles -= tris(e.res);
+    triangles -= tris(e.resLog2);
     floorTris -= tris(e.floor);
   }
   // Stitching floors of the drawn nodes (paper 7.4): resolution >= level gap to finer neighbours.
@@ -238,8 +238,8 @@ struct QuadQueueAdapter::State {
     floorTris = 0;
     for (auto& [k, e] : cut) {
       if (!e.drawn) continue;
-      if (e.gap > maxRes(e.id)) needsConstraintSplit = true;
-      e.floor = std::clamp(e.gap, minRes(), maxRes(e.id));
+      if (e.gap > maxResLog2(e.id)) needsConstraintSplit = true;
+      e.floor = std::clamp(e.gap, minResLog2(), maxResLog2(e.id));
       floorTris += tris(e.floor);
     }
   }
@@ -247,7 +247,7 @@ struct QuadQueueAdapter::State {
   // ---- Phase 1: refine/coarsen dual queue. False when the floors exceed the triangle budget.
   bool phase1() {
     for (auto& [k, e] : cut)
-      if (e.drawn && e.res < e.floor) {
+      if (e.drawn && e.resLog2 < e.floor) {
         setRes(e, e.floor);
         ++st.constraintRaises;
       }
@@ -259,18 +259,18 @@ struct QuadQueueAdapter::State {
     auto push = [&](const Entry& e, bool heapify) {
       if (!e.drawn) return;
       const uint64_t k = e.id.key();
-      if (e.res < maxRes(e.id)) {
-        const double gain = (e.err - errAt(e, e.res + 1)) / double(tris(e.res + 1) - tris(e.res));
-        std::vector<Item>& b = refineB[e.res];
-        b.push_back({gain, k, e.res});
+      if (e.resLog2 < maxResLog2(e.id)) {
+        const double gain = (e.err - errAt(e, e.resLog2 + 1)) / double(tris(e.resLog2 + 1) - tris(e.resLog2));
+        std::vector<Item>& b = refineB[e.resLog2];
+        b.push_back({gain, k, e.resLog2});
         if (heapify) std::push_heap(b.begin(), b.end(), ItemLess{});
       }
-      if (e.res > e.floor) {
-        const double loss = (errAt(e, e.res - 1) - e.err) / double(tris(e.res) - tris(e.res - 1));
-        coarsenH.push_back({-loss, k, e.res});
+      if (e.resLog2 > e.floor) {
+        const double loss = (errAt(e, e.resLog2 - 1) - e.err) / double(tris(e.resLog2) - tris(e.resLog2 - 1));
+        coarsenH.push_back({-loss, k, e.resLog2});
         if (heapify) std::push_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
       }
-      errH.push_back({e.err, k, e.res});
+      errH.push_back({e.err, k, e.resLog2});
       if (heapify) std::push_heap(errH.begin(), errH.end(), ItemLess{});
     };
     for (const auto& [k, e] : cut) push(e, false);
@@ -279,7 +279,7 @@ struct QuadQueueAdapter::State {
     std::make_heap(errH.begin(), errH.end(), ItemLess{});
     auto valid = [&](const Item& it) -> Entry* {
       auto f = cut.find(it.key);
-      if (f == cut.end() || !f->second.drawn || f->second.res != it.res) return nullptr;
+      if (f == cut.end() || !f->second.drawn || f->second.resLog2 != it.resLog2) return nullptr;
       return &f->second;
     };
     const uint64_t budget = opt.maxTriangles;
@@ -289,7 +289,7 @@ struct QuadQueueAdapter::State {
       while (!coarsenH.empty() && !(e = valid(coarsenH.front()))) heapPop(coarsenH);
       if (!e) return false;
       heapPop(coarsenH);
-      setRes(*e, e->res - 1);
+      setRes(*e, e->resLog2 - 1);
       ++st.coarsens, ++ops;
       push(*e, true);
     }
@@ -306,7 +306,7 @@ struct QuadQueueAdapter::State {
         }
         if (!best) break;
         Entry* e = valid(heapPop(*best));
-        setRes(*e, e->res + 1);
+        setRes(*e, e->resLog2 + 1);
         ++st.refines, ++ops;
         push(*e, true);
         progress = true;
@@ -317,8 +317,8 @@ struct QuadQueueAdapter::State {
       while (!capped()) {
         Entry* m = nullptr;
         while (!errH.empty() && !(m = valid(errH.front()))) heapPop(errH);
-        if (!m || m->res >= maxRes(m->id)) break;
-        const uint64_t need = tris(m->res + 1) - tris(m->res);
+        if (!m || m->resLog2 >= maxResLog2(m->id)) break;
+        const uint64_t need = tris(m->resLog2 + 1) - tris(m->resLog2);
         const uint64_t free = budget - triangles;
         std::vector<Item> popped;
         std::vector<Entry*> chosen;
@@ -334,19 +334,19 @@ struct QuadQueueAdapter::State {
           // note: dropped for good: the max error only falls during the balance, so a node whose
           // coarsening would reach it now never qualifies later (its own refinement pushes a new
           // item).
-          if (errAt(*c, c->res - 1) >= m->err - kEps) continue;
+          if (errAt(*c, c->resLog2 - 1) >= m->err - kEps) continue;
           popped.push_back(it);
           chosen.push_back(c);
-          freed += tris(c->res) - tris(c->res - 1);
+          freed += tris(c->resLog2) - tris(c->resLog2 - 1);
         }
         for (const Item& it : popped) heapPush(coarsenH, it);
         if (free + freed < need) break;
         for (Entry* c : chosen) {
-          setRes(*c, c->res - 1);
+          setRes(*c, c->resLog2 - 1);
           ++st.coarsens, ++ops;
           push(*c, true);
         }
-        setRes(*m, m->res + 1);
+        setRes(*m, m->resLog2 + 1);
         ++st.refines, ++ops;
         push(*m, true);
         progress = true;
@@ -362,8 +362,8 @@ struct QuadQueueAdapter::State {
   double splitPriority(const Entry& e) const {
     if (!e.drawn || e.id.level + 1 >= h->params.depth) return -1.0;
     if (e.id.level == 0 && groups.frozen(e.id.chart)) return -1.0;  // a closed group's root
-    if (e.res >= maxRes(e.id)) return kStuckPriority * (1.0 + e.err);
-    double t = double(tris(e.res));
+    if (e.resLog2 >= maxResLog2(e.id)) return kStuckPriority * (1.0 + e.err);
+    double t = double(tris(e.resLog2));
     for (uint32_t i = 0; i < 4; ++i) {
       const NodeId ch = e.id.child(i);
       if (nodeDrawable(*h, ch, view, opt.frustumCull)) t -= double(tris(resFor(ch, e.err)));
@@ -377,15 +377,15 @@ struct QuadQueueAdapter::State {
       auto f = cut.find(p.child(i).key());
       if (f == cut.end() || !f->second.drawn) continue;
       tol = std::max(tol, f->second.err);
-      childTris += double(tris(f->second.res));
+      childTris += double(tris(f->second.resLog2));
     }
-    *parentRes = minRes();
+    *parentRes = minResLog2();
     if (!nodeDrawable(*h, p, view, opt.frustumCull)) return -childTris;
-    if (tol < 0.0) return double(tris(minRes()));
+    if (tol < 0.0) return double(tris(minResLog2()));
     const uint32_t need = neededResolution(*h, p, view, tol);
-    if (need > maxRes(p)) {
-      *parentRes = maxRes(p);
-      return kOverCost * (1.0 + screenError(*h, p, maxRes(p), view));
+    if (need > maxResLog2(p)) {
+      *parentRes = maxResLog2(p);
+      return kOverCost * (1.0 + screenError(*h, p, maxResLog2(p), view));
     }
     *parentRes = need;
     return double(tris(need)) - childTris;
@@ -419,14 +419,14 @@ struct QuadQueueAdapter::State {
       e.splitRound = r;
       evaluate(e);
       if (e.drawn) {
-        e.res = resFor(ch, tol);
-        e.err = errAt(e, e.res);
+        e.resLog2 = resFor(ch, tol);
+        e.err = errAt(e, e.resLog2);
       }
       addCounts(e);
       cut[ch.key()] = e;
       if (splitH) {
         const double p = splitPriority(e);
-        if (p > 0.0) heapPush(*splitH, {p, ch.key(), e.res});
+        if (p > 0.0) heapPush(*splitH, {p, ch.key(), e.resLog2});
       }
     }
     ++st.splits, ++ops;
@@ -443,7 +443,7 @@ struct QuadQueueAdapter::State {
     Entry e;
     e.id = p;
     e.mergedRound = r;
-    e.res = pres;
+    e.resLog2 = pres;
     evaluate(e);
     addCounts(e);
     cut[p.key()] = e;
@@ -457,7 +457,7 @@ struct QuadQueueAdapter::State {
     for (const auto& [k, e] : cut) {
       if (!mandatoryOnly) {
         const double p = splitPriority(e);
-        if (p > 0.0) splitH.push_back({p, k, e.res});
+        if (p > 0.0) splitH.push_back({p, k, e.resLog2});
       }
       if (e.id.level == 0) continue;
       const NodeId par = e.id.parent();
@@ -489,7 +489,7 @@ struct QuadQueueAdapter::State {
       while (!splitH.empty()) {
         const Item& t = splitH.front();
         auto f = cut.find(t.key);
-        if (f != cut.end() && f->second.drawn && f->second.res == t.res && f->second.mergedRound != r &&
+        if (f != cut.end() && f->second.drawn && f->second.resLog2 == t.resLog2 && f->second.mergedRound != r &&
             !reserved.count(t.key))
           return &f->second;
         heapPop(splitH);
@@ -559,7 +559,7 @@ struct QuadQueueAdapter::State {
       }
       if (!s) break;
       const int64_t d = drawnDelta(s->id);
-      const int64_t df = d * int64_t(tris(minRes()));
+      const int64_t df = d * int64_t(tris(minResLog2()));
       if (d <= availNodes && df <= availFloor) {
         const Item it = heapPop(splitH);
         reserved.insert(it.key);
@@ -575,11 +575,11 @@ struct QuadQueueAdapter::State {
       // that lowers the drawn node count can pay; one that does not (a culled group whose parent
       // is visible draws one node more) is set aside for this round.
       // A merge whose parent cannot hold its children's errors (over cost) pays only when the
-      // parent's error at maxRes stays below the error of the node to split: merging zero-error
-      // groups to split the worst node at maxRes is the trade a full node budget needs.
+      // parent's error at maxResLog2 stays below the error of the node to split: merging zero-error
+      // groups to split the worst node at maxResLog2 is the trade a full node budget needs.
       const NodeId mp = m ? keyToNode(m->key) : NodeId{};
       const bool pays = m && (-m->priority < kOverCost ? -m->priority < sp
-                                                       : screenError(*h, mp, maxRes(mp), view) < s->err - kEps);
+                                                       : screenError(*h, mp, maxResLog2(mp), view) < s->err - kEps);
       if (pays && !(s->id.level > 0 && s->id.parent() == mp)) {
         const NodeId p = mp;
         if (mergeFreedNodes(p) <= 0) {
@@ -607,7 +607,7 @@ struct QuadQueueAdapter::State {
       const Item it = heapPop(splitH);
       const int64_t d = drawnDelta(s->id);
       if (int64_t(drawn) + d > nodeBudget_ ||
-          int64_t(floorTrisNow()) + d * int64_t(tris(minRes())) > triBudget)
+          int64_t(floorTrisNow()) + d * int64_t(tris(minResLog2())) > triBudget)
         continue;
       (void)it;
       doSplit(s->id, r, &splitH);
@@ -634,7 +634,7 @@ struct QuadQueueAdapter::State {
     }
   }
   // Triangle floor of the drawn nodes at minRes (floors are recomputed after the round).
-  uint64_t floorTrisNow() const { return uint64_t(drawn) * tris(minRes()); }
+  uint64_t floorTrisNow() const { return uint64_t(drawn) * tris(minResLog2()); }
   // Drawn nodes a merge of the group under p removes (drawn children minus the drawn parent).
   int64_t mergeFreedNodes(const NodeId& p) const {
     int64_t n = -int64_t(nodeDrawable(*h, p, view, opt.frustumCull));
@@ -726,7 +726,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   }
 
   // The drawn cut; the floors already satisfy the stitching constraint unless a node would need
-  // a resolution above its maxRes (then enforceStitchConstraint splits it, reported as
+  // a resolution above its maxResLog2 (then enforceStitchConstraint splits it, reported as
   // constraintSplits, and groups elsewhere merge back into the node budget).
   s.out = s.drawnCut();
   AdaptStats as;
@@ -748,7 +748,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   st.budgetBelowRoots = budgetBelowRoots(options.maxNodes, st.rootFloor);
   double sum = 0.0;
   for (CutNode& n : s.out.nodes) {
-    n.errorPx = float(screenError(h_, n.id, n.res, view));
+    n.errorPx = float(screenError(h_, n.id, n.resLog2, view));
     st.maxErrorPx = std::max(st.maxErrorPx, double(n.errorPx));
     sum += n.errorPx;
   }

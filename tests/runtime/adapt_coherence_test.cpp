@@ -52,7 +52,7 @@ Cut randomCut(const Hierarchy& h, std::mt19937& rng, double splitP, double dropF
       continue;
     }
     if (u(rng) < dropFraction) continue;
-    const uint32_t lo = h.params.minNodeResLog2, hi = h.params.maxRes(n.level);
+    const uint32_t lo = h.params.minNodeResLog2, hi = h.params.maxResLog2(n.level);
     cut.nodes.push_back({n, lo + uint32_t(u(rng) * (hi - lo + 1)) % (hi - lo + 1), 0.f});
   }
   cut.rebuildIndex();

@@ -216,7 +216,7 @@ Hierarchy handMade() {
   h.params.intervalsLog2 = 6;
   h.params.depth = 3;
   h.params.maxNodeResLog2 = 4;
-  h.params.minNodeResLog2 = 2;  // maxRes = 4 on every level; resolutions 2, 3, 4
+  h.params.minNodeResLog2 = 2;  // maxResLog2 = 4 on every level; resolutions 2, 3, 4
   h.roots.resize(1);
   h.charts.resize(1);
   auto& c = h.charts[0];
@@ -309,7 +309,7 @@ TEST(DualQueue, HandMadePrioritiesAndCuts) {
   EXPECT_EQ(adapter.frameStats().splits, 0u);
   ASSERT_EQ(merged.nodes.size(), 1u);
   EXPECT_EQ(merged.nodes[0].id, root);
-  EXPECT_EQ(merged.nodes[0].res, 2u);
+  EXPECT_EQ(merged.nodes[0].resLog2, 2u);
 }
 
 }  // namespace

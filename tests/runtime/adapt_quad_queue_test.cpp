@@ -112,7 +112,7 @@ ViewParams handView() {
   return v;
 }
 
-uint32_t resOf(const Cut& cut, uint32_t chart) { return cut.nodes[cut.find({chart, 0, 0, 0})].res; }
+uint32_t resOf(const Cut& cut, uint32_t chart) { return cut.nodes[cut.find({chart, 0, 0, 0})].resLog2; }
 
 TEST(QuadQueue, HandMadeRefineAndCoarsenChoices) {
   const ViewParams v = handView();
@@ -174,7 +174,7 @@ Hierarchy rootAndChildren(std::array<float, 3> root, std::array<float, 3> child)
 }
 
 TEST(QuadQueue, SplitRoundThatRaisesTheMaxErrorIsUndone) {
-  // Budget 512: the root at res 4 (error 1) fills it exactly. At maxRes it is proposed for a
+  // Budget 512: the root at res 4 (error 1) fills it exactly. At maxResLog2 it is proposed for a
   // split; its children need res 4 (2048 triangles) to hold error 1, so the refine/coarsen pass
   // lands them at res 3 with error 2 > 1: the round is undone.
   const Hierarchy h = rootAndChildren({8, 4, 1}, {5, 2, 0.5f});
@@ -194,7 +194,7 @@ TEST(QuadQueue, SplitRoundThatRaisesTheMaxErrorIsUndone) {
   EXPECT_EQ(st.splits, 0u);
   EXPECT_EQ(sortedNodes(cut), sortedNodes(preRound));
   ASSERT_EQ(cut.nodes.size(), 1u);
-  EXPECT_EQ(cut.nodes[0].res, 4u);
+  EXPECT_EQ(cut.nodes[0].resLog2, 4u);
   EXPECT_DOUBLE_EQ(st.maxErrorPx, 1.0);
 
   // With children that hold error 0.5 at res 3 (4 x 128 = 512), the split round helps and stays.

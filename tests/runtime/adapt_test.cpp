@@ -61,7 +61,7 @@ TEST(Adapt, ErrorWithinToleranceAndPartition) {
     expectPartition(w, cut);
     EXPECT_FALSE(st.nodeBudgetBound);
     for (const CutNode& n : cut.nodes) {
-      const bool atFinest = n.res == w.h.params.maxRes(n.id.level) && n.id.level + 1 == w.h.params.depth;
+      const bool atFinest = n.resLog2 == w.h.params.maxResLog2(n.id.level) && n.id.level + 1 == w.h.params.depth;
       if (!atFinest) {
         EXPECT_LE(n.errorPx, o.tolerancePx + 1e-9) << "level " << n.id.level;
       }
@@ -87,7 +87,7 @@ TEST(Adapt, NodeBudgetBindsAndIsReported) {
 }
 
 // A cut seven levels deep at chart 0's right border, beside chart 1's root: the stitching
-// constraint must split nodes whose maxRes (2^5) is below their level difference to the deep
+// constraint must split nodes whose maxResLog2 (2^5) is below their level difference to the deep
 // nodes, past the node budget; groups merge back until the budget holds, every constraint still
 // met and the charts still tiled.
 TEST(Adapt, ConstraintSplitsMergeBackIntoTheNodeBudget) {
@@ -112,7 +112,7 @@ TEST(Adapt, ConstraintSplitsMergeBackIntoTheNodeBudget) {
   EXPECT_GT(merges, 0u);
   EXPECT_LE(cut.nodes.size(), budget);
   EXPECT_EQ(countStitchViolations(w.h, cut), 0u);
-  for (const CutNode& n : cut.nodes) EXPECT_LE(n.res, w.h.maxRes(n.id));
+  for (const CutNode& n : cut.nodes) EXPECT_LE(n.resLog2, w.h.maxResLog2(n.id));
   expectPartition(w, cut);
 }
 
@@ -158,11 +158,11 @@ TEST(Stitch, TablesForHandMadeCutAcrossCharts) {
   // Open border: zeros.
   EXPECT_EQ(t.side(size_t(i), kEdgeBottom)[0], 0);
   // Lowering chart 1's root below the gap violates the constraint.
-  cut.nodes[0].res = 2;
+  cut.nodes[0].resLog2 = 2;
   EXPECT_GT(countStitchViolations(w.h, cut), 0u);
   EXPECT_TRUE(enforceStitchConstraint(w.h, cut, nullptr, 1.0));
   EXPECT_EQ(countStitchViolations(w.h, cut), 0u);
-  EXPECT_EQ(cut.nodes[0].res, 3u);
+  EXPECT_EQ(cut.nodes[0].resLog2, 3u);
 }
 
 }  // namespace

@@ -23,7 +23,7 @@ Hierarchy twoCharts() {
 CutNode node(uint32_t chart, uint32_t level, uint32_t x, uint32_t y, uint32_t res) {
   CutNode n;
   n.id = {chart, level, x, y};
-  n.res = res;
+  n.resLog2 = res;
   return n;
 }
 

@@ -15,9 +15,9 @@ namespace {
 
 // Two charts side by side (chart 1 right of chart 0), 64 intervals each, with a free choice of
 // depth and resolutions.
-test::World twoCharts(uint32_t depth, uint32_t maxRes, uint32_t minRes) {
+test::World twoCharts(uint32_t depth, uint32_t maxResLog2, uint32_t minRes) {
   test::World w;
-  w.m = test::syntheticManifest(65, 2, 1, depth, maxRes, minRes);
+  w.m = test::syntheticManifest(65, 2, 1, depth, maxResLog2, minRes);
   w.h = buildTerrainHierarchy(w.m, [&](uint32_t c) { return test::syntheticChart(w.m, c); });
   w.lo = {0, 0, -30};
   w.hi = {double(w.m.samplesX), double(w.m.samplesY), 30};
@@ -91,7 +91,7 @@ TEST(Residency, MissingChildrenAreRequestedAndDrawnAsTheirRoot) {
   const test::World w = twoCharts(3, 5, 2);
   // Chart 0 split once (resolutions 3 and 4), chart 1 whole; only the roots are resident.
   std::vector<CutNode> nodes = children(node(0, 0, 0, 0), 3, 2.5f);
-  nodes[2].res = 4;
+  nodes[2].resLog2 = 4;
   nodes[3].errorPx = 5000.f;  // capped at 999 in the priority
   nodes.push_back({node(1, 0, 0, 0), 2, 0.5f});
   const Cut desired = makeCut(nodes);
@@ -124,7 +124,7 @@ TEST(Residency, MissingChildrenAreRequestedAndDrawnAsTheirRoot) {
   ASSERT_EQ(r.cut.nodes.size(), 2u);
   // The root stands in at the finest resolution of the nodes it replaces, in the first one's place.
   EXPECT_EQ(r.cut.nodes[0].id, node(0, 0, 0, 0));
-  EXPECT_EQ(r.cut.nodes[0].res, 4u);
+  EXPECT_EQ(r.cut.nodes[0].resLog2, 4u);
   EXPECT_FLOAT_EQ(r.cut.nodes[0].errorPx, float(screenError(w.h, node(0, 0, 0, 0), 4, view)));
   EXPECT_EQ(r.cut.nodes[1].id, node(1, 0, 0, 0));
   EXPECT_EQ(r.cut.nodes[1].errorPx, 0.5f);
@@ -160,7 +160,7 @@ TEST(Residency, MissingAncestorsAreRequestedOnceAndCoarserFirst) {
   EXPECT_EQ(r.nodesSubstituted, 7u);
   ASSERT_EQ(r.cut.nodes.size(), 2u);
   EXPECT_EQ(r.cut.nodes[0].id, node(0, 0, 0, 0));
-  EXPECT_EQ(r.cut.nodes[0].res, 3u);
+  EXPECT_EQ(r.cut.nodes[0].resLog2, 3u);
   test::expectPartition(w.h, r.cut);
 }
 
@@ -180,7 +180,7 @@ TEST(Residency, InnerSubstitutesGiveWayToOuterOnes) {
   const ResidentCut r = substituteResident(w.h, desired, overview(w), residentSet(resident));
   ASSERT_EQ(r.cut.nodes.size(), 2u);
   EXPECT_EQ(r.cut.nodes[0].id, node(0, 0, 0, 0));
-  EXPECT_EQ(r.cut.nodes[0].res, 4u);
+  EXPECT_EQ(r.cut.nodes[0].resLog2, 4u);
   EXPECT_EQ(r.nodesSubstituted, 7u);
   // With (1,1,0) resident too, (1,0,0) stands in for its children alone.
   resident.insert(node(0, 1, 1, 0).key());
@@ -188,7 +188,7 @@ TEST(Residency, InnerSubstitutesGiveWayToOuterOnes) {
   EXPECT_EQ(s.nodesSubstituted, 4u);
   ASSERT_EQ(s.cut.nodes.size(), 5u);
   EXPECT_EQ(s.cut.nodes[0].id, node(0, 1, 0, 0));
-  EXPECT_EQ(s.cut.nodes[0].res, 4u);
+  EXPECT_EQ(s.cut.nodes[0].resLog2, 4u);
   test::expectPartition(w.h, s.cut);
   EXPECT_EQ(countStitchViolations(w.h, s.cut), 0u);
 }
@@ -217,7 +217,7 @@ TEST(Residency, SubstitutesAreRaisedForTheStitchingConstraint) {
   EXPECT_EQ(countStitchViolations(w.h, r.cut), 0u);
   const int32_t i = r.cut.find(node(0, 1, 1, 1));
   ASSERT_GE(i, 0);
-  EXPECT_EQ(r.cut.nodes[i].res, 1u);  // one level above its level-2 neighbours
+  EXPECT_EQ(r.cut.nodes[i].resLog2, 1u);  // one level above its level-2 neighbours
   EXPECT_FLOAT_EQ(r.cut.nodes[i].errorPx, float(screenError(w.h, node(0, 1, 1, 1), 1, view)));
   test::expectPartition(w.h, r.cut);
 }
@@ -237,7 +237,7 @@ TEST(Residency, UnfixableStitchingIsCounted) {
   EXPECT_EQ(r.stitchUnfixable, 1u);
   ASSERT_EQ(r.cut.nodes.size(), 65u);
   EXPECT_EQ(r.cut.nodes[64].id, node(1, 0, 0, 0));
-  EXPECT_EQ(r.cut.nodes[64].res, 0u);  // left as it was: 2^1 is its finest
+  EXPECT_EQ(r.cut.nodes[64].resLog2, 0u);  // left as it was: 2^1 is its finest
 }
 
 }  // namespace

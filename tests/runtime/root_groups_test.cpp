@@ -58,7 +58,7 @@ TEST(RootGroups, ATreeOverEveryChartWithFewTops) {
       const NodeId root{g.order[k], 0, 0, 0};
       EXPECT_TRUE(boxContains(gr.bounds, w.h.bounds(root)));
       errMin = std::max(errMin, w.h.error(root, w.h.params.minNodeResLog2));
-      errMax = std::max(errMax, w.h.error(root, w.h.maxRes(root)));
+      errMax = std::max(errMax, w.h.error(root, w.h.maxResLog2(root)));
       if (gr.level == 0) firstLevelOf[g.order[k]] = i;
     }
     EXPECT_EQ(gr.errorMin, errMin);
@@ -91,7 +91,7 @@ TEST(RootGroups, NoGroupsWhereTheRootsAreFewOrCouldNotStitch) {
   EXPECT_TRUE(buildRootGroups(w.h, 16).empty()) << "no more charts than roots allowed";
   EXPECT_FALSE(buildRootGroups(w.h, 15).empty());
   EXPECT_TRUE(buildRootGroups(w.h, 0).empty()) << "0: no groups";
-  // maxRes(root) 4 < depth - 1 = 5: a closed group's root could need a split to stitch.
+  // maxResLog2(root) 4 < depth - 1 = 5: a closed group's root could need a split to stitch.
   World deep;
   deep.m = test::syntheticManifest(129, 8, 8, 6, 4, 2);
   deep.h = buildTerrainHierarchy(deep.m, [&](uint32_t c) { return test::syntheticChart(deep.m, c); });
