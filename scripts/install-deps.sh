@@ -11,7 +11,7 @@ PACKAGES=(
   libimgui-dev xvfb xdotool
   libtbb-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev libzstd-dev libxxhash-dev
   openmpi-bin libopenmpi-dev slurm-wlm munge
-  libgtest-dev clang libclang-rt-dev
+  libgtest-dev clang libclang-rt-dev clang-format clang-tidy libpng-dev
   python3-matplotlib libmeshoptimizer-dev
   chromium
 )
