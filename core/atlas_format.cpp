@@ -295,8 +295,9 @@ void geometryImageNormals(const float* xyz, uint32_t side, PackedNormal* out) {
   }
 }
 
-void heightFieldNormals(const float* heights, size_t stride, uint32_t u0, uint32_t v0, uint32_t w, uint32_t h,
-                        uint32_t level, const HeightFieldFrame& f, PackedNormal* out) {
+void heightFieldNormals(const float* heights, size_t stride, const LevelWindow& window, const HeightFieldFrame& f,
+                        PackedNormal* out) {
+  const uint32_t level = window.level, u0 = window.u0, v0 = window.v0, w = window.w, h = window.h;
   // note: single precision, one reciprocal per row and column, and a truncating quantizer: this
   // runs on the loader thread for every page of a compressed atlas, and the builder calls it too,
   // so what is stored (version 1) and what is derived (version 3) agree bit for bit.
@@ -774,9 +775,12 @@ struct ChartFileWriter::Impl {
 
   explicit Impl(const fs::path& path) : file(path) {}
 
-  // One block's channel c, gathered row by row into `out` and coded (version 3) or made little-endian.
-  void blockBytes(uint32_t c, const LevelLayout& l, uint32_t bx, uint32_t by, const BlockChannel& in,
-                  std::vector<uint8_t>& raw, std::vector<uint8_t>& out) const {
+  // Channel c of `block` (its level and place) from `in`, gathered row by row (into `raw`, scratch)
+  // and coded (version 3) or made little-endian into block.bytes[c].
+  void blockBytes(uint32_t c, const BlockChannel& in, std::vector<uint8_t>& raw, CodedBlock& block) const {
+    const LevelLayout& l = layouts[block.level];
+    const uint32_t bx = block.bx, by = block.by;
+    std::vector<uint8_t>& out = block.bytes[c];
     const size_t es = kChannelBytes[c];
     const uint32_t bs = l.blockSamples;
     const bool ring = derived && c == kChannelHeights;  // (bs + 2)^2 from the ring heights
@@ -820,9 +824,11 @@ struct ChartFileWriter::Impl {
   }
 };
 
-ChartFileWriter::ChartFileWriter(fs::path path, uint32_t chartSize, uint32_t blockIntervals, uint32_t levels,
-                                 uint32_t channelMask, const ChartCoding& coding, std::optional<HeightFieldFrame> frame)
+ChartFileWriter::ChartFileWriter(fs::path path, const ChartFileShape& shape, const ChartCoding& coding,
+                                 std::optional<HeightFieldFrame> frame)
     : path_(std::move(path)) {
+  const uint32_t chartSize = shape.chartSize, blockIntervals = shape.blockIntervals, levels = shape.levels;
+  const uint32_t channelMask = shape.channelMask;
   if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) || blockIntervals > chartSize - 1)
     throw std::invalid_argument("ChartFileWriter: bad chartSize/blockIntervals");
   const uint32_t mask = channelMask;
@@ -900,7 +906,7 @@ ChartFileWriter::CodedBlock ChartFileWriter::code(uint32_t level, uint32_t bx, u
   CodedBlock out{level, bx, by, {}};
   std::vector<uint8_t> raw;
   for (uint32_t c = 0; c < kChannelCount; ++c)
-    if (w.stored & (1u << c)) w.blockBytes(c, w.layouts[level], bx, by, data[c], raw, out.bytes[c]);
+    if (w.stored & (1u << c)) w.blockBytes(c, data[c], raw, out);
   return out;
 }
 
@@ -982,7 +988,7 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
   }
   std::optional<HeightFieldFrame> frame;
   if (derived) frame = pyramid.frame;
-  ChartFileWriter writer(path, chartSize, blockIntervals, levels, mask, coding, frame);
+  ChartFileWriter writer(path, {chartSize, blockIntervals, levels, mask}, coding, frame);
   for (uint32_t k = 0; k < levels; ++k) {
     const LevelLayout l = levelLayout(chartSize, blockIntervals, k);
     const uint32_t b = l.blockSamples - 1;
@@ -1153,19 +1159,17 @@ void ChartFileReader::locateWindow(uint32_t level, uint32_t u0, uint32_t v0, uin
   by = pick(v0, "v");
 }
 
-void ChartFileReader::readWindow(uint64_t offset, uint32_t bs, uint32_t du, uint32_t dv,
-                                 uint32_t n, size_t elem, void* out) const {
+void ChartFileReader::readWindow(uint64_t first, uint64_t pitch, size_t rowBytes, uint32_t rows, void* out) const {
   auto* dst = static_cast<char*>(out);
-  const size_t rowBytes = size_t{n + 1} * elem;
   std::lock_guard<std::mutex> lock(mutex_);
   file_.clear();
-  if (du == 0 && n + 1 == bs) {
+  if (rowBytes == pitch) {
     // Whole rows: one contiguous read.
-    file_.seekg(static_cast<std::streamoff>(offset + uint64_t{dv} * bs * elem));
-    file_.read(dst, static_cast<std::streamsize>(rowBytes * (n + 1)));
+    file_.seekg(static_cast<std::streamoff>(first));
+    file_.read(dst, static_cast<std::streamsize>(rowBytes * rows));
   } else {
-    for (uint32_t r = 0; r <= n && file_; ++r) {
-      file_.seekg(static_cast<std::streamoff>(offset + (uint64_t{dv + r} * bs + du) * elem));
+    for (uint32_t r = 0; r < rows && file_; ++r) {
+      file_.seekg(static_cast<std::streamoff>(first + r * pitch));
       file_.read(dst + r * rowBytes, static_cast<std::streamsize>(rowBytes));
     }
   }
@@ -1253,8 +1257,9 @@ const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_
   return last.samples;
 }
 
-void ChartFileReader::readChannel(ChartChannel c, size_t elem, uint32_t level, uint32_t u0, uint32_t v0,
-                                  uint32_t n, void* out) const {
+void ChartFileReader::readChannel(ChartChannel c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
+                                  void* out) const {
+  const size_t elem = kChannelBytes[c];
   if (!hasChannel(c))
     throw std::logic_error("ChartFileReader: " + path_.string() + " has no channel " + std::to_string(c));
   uint32_t bx, by;
@@ -1269,7 +1274,7 @@ void ChartFileReader::readChannel(ChartChannel c, size_t elem, uint32_t level, u
       const auto* ring = reinterpret_cast<const float*>(decodeBlock(kChannelHeights, level, bx, by).data()) +
                          size_t{dv + 1} * side + du + 1;
       if (c == kChannelNormals) {
-        heightFieldNormals(ring, side, u0, v0, n + 1, n + 1, level, *frame_, static_cast<PackedNormal*>(out));
+        heightFieldNormals(ring, side, {level, u0, v0, n + 1, n + 1}, *frame_, static_cast<PackedNormal*>(out));
       } else {
         for (uint32_t r = 0; r <= n; ++r)
           std::memcpy(static_cast<float*>(out) + size_t{r} * (n + 1), ring + size_t{r} * side, size_t{n + 1} * elem);
@@ -1283,27 +1288,29 @@ void ChartFileReader::readChannel(ChartChannel c, size_t elem, uint32_t level, u
       std::memcpy(static_cast<char*>(out) + r * rowBytes, decoded.data() + (size_t{dv + r} * bs + du) * elem, rowBytes);
     return;
   }
-  readWindow(block(level, bx, by).offset[c], l.blockSamples, u0 - bx * b, v0 - by * b, n, elem, out);
+  const uint64_t pitch = uint64_t{l.blockSamples} * elem;
+  readWindow(block(level, bx, by).offset[c] + uint64_t{v0 - by * b} * pitch + uint64_t{u0 - bx * b} * elem, pitch,
+             size_t{n + 1} * elem, n + 1, out);
   if (kChannelIsFloat[c]) floatsFromLe(static_cast<float*>(out), size_t{n + 1} * (n + 1) * elem / sizeof(float));
 }
 
 void ChartFileReader::readHeights(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
                                   float* out) const {
-  readChannel(kChannelHeights, sizeof(float), level, u0, v0, n, out);
+  readChannel(kChannelHeights, level, u0, v0, n, out);
 }
 
 void ChartFileReader::readNormals(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
                                   PackedNormal* out) const {
-  readChannel(kChannelNormals, sizeof(PackedNormal), level, u0, v0, n, out);
+  readChannel(kChannelNormals, level, u0, v0, n, out);
 }
 
 void ChartFileReader::readPositions(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, glm::vec3* out) const {
   static_assert(sizeof(glm::vec3) == 3 * sizeof(float));
-  readChannel(kChannelPositions, sizeof(glm::vec3), level, u0, v0, n, out);
+  readChannel(kChannelPositions, level, u0, v0, n, out);
 }
 
 void ChartFileReader::readColours(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, PackedColour* out) const {
-  readChannel(kChannelColours, sizeof(PackedColour), level, u0, v0, n, out);
+  readChannel(kChannelColours, level, u0, v0, n, out);
 }
 
 namespace {

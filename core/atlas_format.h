@@ -261,11 +261,18 @@ struct HeightFieldFrame {
 // (0, 0, 1) where every one does. The border samples of out are left as they are.
 void geometryImageNormals(const float* xyz, uint32_t side, PackedNormal* out);
 
-// The normals of the window [u0, u0 + w) x [v0, v0 + h) of pyramid level `level` of the chart at
-// `frame`, from its heights with a one-sample ring: heights[0] is the height of (u0, v0), rows are
-// `stride` floats apart, and the ring lies at -1 and at w (h). out: w * h row-major.
-void heightFieldNormals(const float* heights, size_t stride, uint32_t u0, uint32_t v0, uint32_t w, uint32_t h,
-                        uint32_t level, const HeightFieldFrame& frame, PackedNormal* out);
+// A window of one pyramid level of a chart: its samples [u0, u0 + w) x [v0, v0 + h) of level `level`.
+struct LevelWindow {
+  uint32_t level = 0;
+  uint32_t u0 = 0, v0 = 0;
+  uint32_t w = 0, h = 0;
+};
+
+// The normals of the window `window` of the chart at `frame`, from its heights with a one-sample
+// ring: heights[0] is the height of (u0, v0), rows are `stride` floats apart, and the ring lies at
+// -1 and at w (h). out: w * h row-major.
+void heightFieldNormals(const float* heights, size_t stride, const LevelWindow& window, const HeightFieldFrame& frame,
+                        PackedNormal* out);
 
 // One chart's pyramid in memory: level k is a (samples_k)^2 row-major image (row = v). A
 // height-field chart has heights and normals; a geometry chart has positions and normals, and
@@ -334,20 +341,29 @@ struct BlockChannel {
 };
 using BlockData = std::array<BlockChannel, kChannelCount>;
 
+// What a chart file holds: a chart of chartSize samples a side in blocks of blockIntervals, its
+// first `levels` pyramid levels, and the channels of channelMask (bits 1 << ChartChannel).
+struct ChartFileShape {
+  uint32_t chartSize = 0;
+  uint32_t blockIntervals = 0;
+  uint32_t levels = 0;
+  uint32_t channelMask = 0;
+};
+
 // A chart file written a block at a time, in any order and from any thread, so that a chart's
 // size does not bound the memory that writes it: the header and the directory are reserved
 // first, each block is coded (or made little-endian) by the calling thread and appended, and
 // commit() fills the directory in and renames the file into place (AtomicFileWriter). Written in
 // level order (level, then rows of blocks), the file is byte for byte what writeChartFile made
-// when it built whole files in memory. channelMask: as writeChartFile derives it (heights and
+// when it built whole files in memory. shape.channelMask: as writeChartFile derives it (heights and
 // normals, positions and normals with or without colours, or colours alone); frame: a compressed
 // height field's, whose normals are then derived (its blocks give ring heights, no normals).
 class ChartFileWriter {
  public:
   // Throws std::invalid_argument for a bad size, level count, mask or coding; InputError if the
   // file cannot be created.
-  ChartFileWriter(std::filesystem::path path, uint32_t chartSize, uint32_t blockIntervals, uint32_t levels,
-                  uint32_t channelMask, const ChartCoding& coding, std::optional<HeightFieldFrame> frame = {});
+  ChartFileWriter(std::filesystem::path path, const ChartFileShape& shape, const ChartCoding& coding,
+                  std::optional<HeightFieldFrame> frame = {});
   ~ChartFileWriter();
   ChartFileWriter(const ChartFileWriter&) = delete;
   ChartFileWriter& operator=(const ChartFileWriter&) = delete;
@@ -415,13 +431,13 @@ class ChartFileReader {
   // Block holding the window [u0, u0+n] x [v0, v0+n]; throws std::logic_error if none does.
   void locateWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, uint32_t& bx,
                     uint32_t& by) const;
-  // Reads rows of a window of one block (element size `elem`) at `offset`; caller holds no lock.
-  void readWindow(uint64_t offset, uint32_t blockSamples, uint32_t du, uint32_t dv, uint32_t n,
-                  size_t elem, void* out) const;
+  // Reads a window of one block: `rows` rows of `rowBytes` bytes, `pitch` bytes apart from byte
+  // `first` of the file, into out one after the other; caller holds no lock.
+  void readWindow(uint64_t first, uint64_t pitch, size_t rowBytes, uint32_t rows, void* out) const;
   std::filesystem::path path_;
-  // Reads a window of one channel (element size elem) into out.
-  void readChannel(ChartChannel c, size_t elem, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
-                   void* out) const;
+  // Reads a window of one channel into out, in the channel's elements (float, PackedNormal, 3
+  // floats, PackedColour).
+  void readChannel(ChartChannel c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, void* out) const;
   uint32_t chartSize_ = 0, blockIntervals_ = 0, levels_ = 0;
   uint32_t channelMask_ = 0;
   bool compressed_ = false;

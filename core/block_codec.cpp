@@ -160,14 +160,26 @@ inline uint32_t predictFrom(uint8_t neighbours, uint32_t side, uint32_t i, uint3
   return v(0);
 }
 
-// The encoder's traversal (decodePlanar follows it). q: 3 interleaved channels of side^2 samples.
-// decide(l, x, y) settles an uncovered square at level l before anything of that size is coded;
-// code(i, spacing) codes sample i from its neighbours at that spacing (predictPlanar) while
-// squares are coded, then, with spacing 1, every sample still unknown in row order (all its
-// Lorenzo neighbours known by then). The planar squares' samples are placed in q.
+// What the encoder's traversal of a position block works on: q, the block's 3 interleaved channels
+// of side^2 samples (the planar squares' samples placed in it as it goes); known, per sample, bit 1
+// once it is coded or placed and bit 2 on the chart's border; the squares settled so far.
+struct PlanarTraversal {
+  std::vector<uint32_t> q;
+  std::vector<uint8_t> known;
+  PlanarSquares squares;
+};
+
+// The encoder's traversal (decodePlanar follows it) of a block of side^2 samples whose edges on its
+// chart's border are chartBorderSides (kChartBorder* bits), in `traversal` (its known and squares
+// reset first). decide(l, x, y) settles an uncovered square at level l before anything of that
+// size is coded; code(i, spacing) codes sample i from its neighbours at that spacing
+// (predictPlanar) while squares are coded, then, with spacing 1, every sample still unknown in row
+// order (all its Lorenzo neighbours known by then). The planar squares' samples are placed in q.
 template <typename Decide, typename Code>
-void planarPasses(uint32_t side, uint8_t chartBorderSides, std::vector<uint32_t>& q, std::vector<uint8_t>& known,
-                  PlanarSquares& squares, Decide&& decide, Code&& code) {
+void planarPasses(uint32_t side, uint8_t chartBorderSides, PlanarTraversal& traversal, Decide&& decide, Code&& code) {
+  std::vector<uint32_t>& q = traversal.q;
+  std::vector<uint8_t>& known = traversal.known;
+  PlanarSquares& squares = traversal.squares;
   const uint32_t levels = squareLevels(side), last = side - 1;
   known.assign(size_t(side) * side, 0);
   known[0] = 1;  // the first sample: in the header
@@ -239,8 +251,21 @@ inline uint32_t predictPlanar(const std::vector<uint32_t>& q, const std::vector<
 // it), the first sample is coded as a residual from 0, which takes a plane or two more.
 constexpr uint8_t kFlagFirstSample = 1;
 
-std::vector<uint8_t> encodeInts(const char (&magic)[4], const std::vector<int32_t>& q, uint32_t side,
-                                uint8_t channels, HeightQuantization mode, double step, int level) {
+// A kind of integer block: its magic, its name in messages, its channels, and the zstd level it is
+// coded at.
+struct IntBlockKind {
+  const char (&magic)[4];
+  const char* what;
+  uint8_t channels;
+  int level;
+};
+constexpr IntBlockKind kHeightBlocks{kHeightMagic, "height", 1, kLevel};
+constexpr IntBlockKind kPositionBlocks{kPositionMagic, "position", 3, kPositionLevel};
+
+// A block of `kind` of side^2 quantized samples q (channels interleaved), quantized as `mode` to `step`.
+std::vector<uint8_t> encodeInts(const IntBlockKind& kind, const std::vector<int32_t>& q, uint32_t side,
+                                HeightQuantization mode, double step) {
+  const uint8_t channels = kind.channels;
   const size_t n = size_t(side) * side;
   // Residuals, zigzagged, as byte planes per channel (low bytes first); planes above the highest
   // non-zero byte are left out. The first sample goes to the header, its residual 0.
@@ -269,16 +294,18 @@ std::vector<uint8_t> encodeInts(const char (&magic)[4], const std::vector<int32_
       uint8_t* plane = raw.data() + head + (size_t(c) * planes + p) * n;
       for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(z[i * channels + c] >> (8 * p));
     }
-  return frame(magic, raw, level);
+  return frame(kind.magic, raw, kind.level);
 }
 
 // The body of a position block with planar squares (chartBorderSides: kChartBorder* bits), or
 // empty when it has none.
 std::vector<uint8_t> planarBody(const std::vector<int32_t>& q, uint32_t side, double step, uint8_t chartBorderSides) {
   if (squareLevels(side) == 0 || !std::has_single_bit(side - 1)) return {};
-  std::vector<uint32_t> v(q.begin(), q.end());
-  std::vector<uint8_t> known, bits;
-  PlanarSquares squares;
+  PlanarTraversal traversal;
+  traversal.q.assign(q.begin(), q.end());
+  const std::vector<uint32_t>& v = traversal.q;
+  const std::vector<uint8_t>& known = traversal.known;
+  std::vector<uint8_t> bits;
   size_t nbits = 0;
   bool any = false;
   std::vector<uint32_t> z;
@@ -306,7 +333,7 @@ std::vector<uint8_t> planarBody(const std::vector<int32_t>& q, uint32_t side, do
     for (uint32_t c = 0; c < 3; ++c)
       z.push_back(zigzag(int32_t(v[size_t(i) * 3 + c] - predictPlanar(v, known, side, i, spacing, c))));
   };
-  planarPasses(side, chartBorderSides, v, known, squares, decide, code);
+  planarPasses(side, chartBorderSides, traversal, decide, code);
   if (!any) return {};
   const size_t m = z.size() / 3;
   uint32_t all = 0;
@@ -333,11 +360,24 @@ std::vector<uint8_t> planarBody(const std::vector<int32_t>& q, uint32_t side, do
   return raw;
 }
 
-// Checks side^2 decoded values per channel (channel c at q + c n; at most `bound` from 0) of
-// samples [at, at + count) and stores them as interleaved floats: hi gathers the largest q + bound,
-// unsigned (a value below -bound wraps past 2 bound too), for the caller's one check.
-inline void storeFloats(const uint32_t* q, size_t n, uint32_t channels, size_t at, size_t count, double step,
-                        uint32_t bound, uint32_t& hi, float* out) {
+// A block's decoded values: n = side^2 per channel, channel c at q + c n, each at most `bound`
+// from 0 and standing for its multiple of `step`.
+struct DecodedPlanes {
+  const uint32_t* q = nullptr;
+  size_t n = 0;
+  uint32_t channels = 0;
+  double step = 0.0;
+  uint32_t bound = 0;
+};
+
+// Checks the decoded values of samples [at, at + count) and stores them as interleaved floats
+// (channels a sample) in out: hi gathers the largest q + bound, unsigned (a value below -bound
+// wraps past 2 bound too), for the caller's one check.
+inline void storeFloats(const DecodedPlanes& planes, size_t at, size_t count, uint32_t& hi, float* out) {
+  const uint32_t* q = planes.q;
+  const size_t n = planes.n;
+  const uint32_t channels = planes.channels, bound = planes.bound;
+  const double step = planes.step;
   float* o = out + at * channels;
   uint32_t h = hi;
   if (channels == 3) {  // (one loop for the three: a third fewer cycles)
@@ -366,16 +406,26 @@ inline uint32_t pick(bool c, uint32_t a, uint32_t b) {
   return (a & m) | (b & ~m);
 }
 
-// Per planar square of s intervals with corner c00, s a constant S where one is given (the
-// compiler then unrolls the loops of the small squares, the most frequent): paintSquare marks its
-// footprint and its corners with level l where they hold a larger level (cls, corner);
-// placeSquare places its samples where cls[] is l in q (3 channels, channel c at q + c n), as
-// planarSquareSample puts them, in wrapping 32-bit arithmetic: the corners of a valid block lie
-// within 2^23 steps, so every sum of the two triangles' weights (s in all) does within
-// s 2^23 <= 2^31, and comes out exact.
+// A planar square of a block `side` samples a side: its corner (0, 0) at sample c00, its level l
+// and its s intervals.
+struct PlanarSquare {
+  uint32_t side = 0;
+  size_t c00 = 0;
+  uint32_t l = 0;
+  uint32_t s = 0;
+};
+
+// Per planar square sq, its s a constant S where one is given (the compiler then unrolls the loops
+// of the small squares, the most frequent): paintSquare marks its footprint and its corners with
+// its level l where they hold a larger level (cls, corner); placeSquare places its samples where
+// cls[] is l in q (3 channels, channel c at q + c n), as planarSquareSample puts them, in wrapping
+// 32-bit arithmetic: the corners of a valid block lie within 2^23 steps, so every sum of the two
+// triangles' weights (s in all) does within s 2^23 <= 2^31, and comes out exact.
 template <uint32_t S>
-inline void paintSquare(uint32_t* cls, uint32_t* corner, uint32_t side, size_t c00, uint32_t l, uint32_t sRun = S) {
-  const uint32_t s = S ? S : sRun;
+inline void paintSquare(uint32_t* cls, uint32_t* corner, const PlanarSquare& sq) {
+  const uint32_t side = sq.side, l = sq.l;
+  const size_t c00 = sq.c00;
+  const uint32_t s = S ? S : sq.s;
 #pragma GCC unroll 9
   for (uint32_t dy = 0; dy <= s; ++dy)
 #pragma GCC unroll 9
@@ -383,8 +433,10 @@ inline void paintSquare(uint32_t* cls, uint32_t* corner, uint32_t side, size_t c
   for (const size_t c : {c00, c00 + s, c00 + size_t(s) * side, c00 + size_t(s) * side + s}) corner[c] = std::min(corner[c], l);
 }
 template <uint32_t S>
-inline void placeSquare(uint32_t* q, size_t n, const uint32_t* cls, uint32_t side, size_t c00, uint32_t l, uint32_t sRun = S) {
-  const uint32_t s = S ? S : sRun, shift = uint32_t(std::countr_zero(s)), half = s / 2;
+inline void placeSquare(uint32_t* q, size_t n, const uint32_t* cls, const PlanarSquare& sq) {
+  const uint32_t side = sq.side, l = sq.l;
+  const size_t c00 = sq.c00;
+  const uint32_t s = S ? S : sq.s, shift = uint32_t(std::countr_zero(s)), half = s / 2;
   const size_t up = size_t(s) * side;
   for (uint32_t c = 0; c < 3; ++c) {
     uint32_t* qc = q + size_t(c) * n + c00;
@@ -475,9 +527,10 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
   for (uint32_t l = 0; l < levels; ++l) {
     const uint32_t s = last >> l;
     eachSquare(l, [&](size_t c00) {
-      if (s == 2) paintSquare<2>(cls.data(), corner.data(), side, c00, l);
-      else if (s == 4) paintSquare<4>(cls.data(), corner.data(), side, c00, l);
-      else paintSquare<0>(cls.data(), corner.data(), side, c00, l, s);
+      const PlanarSquare sq{side, c00, l, s};
+      if (s == 2) paintSquare<2>(cls.data(), corner.data(), sq);
+      else if (s == 4) paintSquare<4>(cls.data(), corner.data(), sq);
+      else paintSquare<0>(cls.data(), corner.data(), sq);
     });
   }
   for (uint32_t t = 0; t < side; ++t) {  // the chart's border: only as a corner
@@ -537,9 +590,10 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
       continue;
     }
     eachSquare(l, [&](size_t c00) {
-      if (s == 4) placeSquare<4>(q.data(), n, cls.data(), side, c00, l);
-      else if (s == 8) placeSquare<8>(q.data(), n, cls.data(), side, c00, l);
-      else placeSquare<0>(q.data(), n, cls.data(), side, c00, l, s);
+      const PlanarSquare sq{side, c00, l, s};
+      if (s == 4) placeSquare<4>(q.data(), n, cls.data(), sq);
+      else if (s == 8) placeSquare<8>(q.data(), n, cls.data(), sq);
+      else placeSquare<0>(q.data(), n, cls.data(), sq);
     });
   }
   if (j != corners) throw CodecError("corrupt position block (planar squares)");
@@ -565,18 +619,20 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
     }
   }
   uint32_t hi = 0;
-  storeFloats(q.data(), n, 3, 0, n, step, uint32_t(kMaxSteps), hi, out.data());
+  storeFloats({q.data(), n, 3, step, uint32_t(kMaxSteps)}, 0, n, hi, out.data());
   if (hi > uint32_t(2 * kMaxSteps)) throw CodecError("corrupt position block (value out of range)");
 }
 
-// Decodes into out (channels * side^2 floats); returns the quantization.
+// Decodes a block of `kind` into out (channels * side^2 floats); returns the quantization.
 GIMLOD_VECTOR_CLONES
-HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic)[4], const char* what,
-                              uint32_t side, uint8_t channels, std::span<float> out) {
+HeightQuantization decodeInts(std::span<const uint8_t> block, const IntBlockKind& kind, uint32_t side,
+                              std::span<float> out) {
+  const char* what = kind.what;
+  const uint8_t channels = kind.channels;
   const size_t n = size_t(side) * side;
   if (out.size() != n * channels) throw std::invalid_argument(std::string("decode ") + what + ": output size");
   const std::vector<uint8_t>& raw =
-      unframe(block, magic, what, kIntHeaderBytes, kIntHeaderBytes + 4 * channels + 4 * channels * n);
+      unframe(block, kind.magic, what, kIntHeaderBytes, kIntHeaderBytes + 4 * channels + 4 * channels * n);
   const uint8_t mode = raw[0], planes = raw[1], flags = raw[3];
   uint32_t blockSide = 0;
   double step = 0.0;
@@ -635,7 +691,7 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const char (&magic
       else
         for (uint32_t x = 0; x < side; ++x) sum += rr[x], row[x] = sum;
     }
-    storeFloats(q.data(), n, channels, at, side, step, shift, hi, out.data());
+    storeFloats({q.data(), n, channels, step, shift}, at, side, hi, out.data());
   }
   // (A corrupt block has written values out of range before this throws; callers discard them.)
   if (hi > span) throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
@@ -672,8 +728,18 @@ inline uint8_t predictZ(const uint8_t* b, uint32_t side, uint32_t x, uint32_t y,
 
 constexpr uint8_t kKindNormals = 0, kKindColours = 1;
 
-std::vector<uint8_t> encodeBytes(const char (&magic)[4], uint8_t kind, std::span<const Byte4> in, uint32_t side,
-                                 uint8_t channels) {
+// A kind of 8-bit block: its magic, its name in messages, its kind byte and its channels.
+struct ByteBlockKind {
+  const char (&magic)[4];
+  const char* what;
+  uint8_t kind;
+  uint8_t channels;
+};
+constexpr ByteBlockKind kNormalBlocks{kNormalMagic, "normal", kKindNormals, 3};
+constexpr ByteBlockKind kColourBlocks{kColourMagic, "colour", kKindColours, 4};
+
+std::vector<uint8_t> encodeBytes(const ByteBlockKind& blocks, std::span<const Byte4> in, uint32_t side) {
+  const uint8_t kind = blocks.kind, channels = blocks.channels;
   const size_t n = size_t(side) * side;
   if (side == 0 || in.size() != n) throw std::invalid_argument("encode: expected side^2 samples");
   const uint8_t* b = in.data()->data();
@@ -691,15 +757,16 @@ std::vector<uint8_t> encodeBytes(const char (&magic)[4], uint8_t kind, std::span
         plane[s] = zigzag8(uint8_t(b[s * 4 + c] - p));
       }
   }
-  return frame(magic, raw);
+  return frame(blocks.magic, raw);
 }
 
-void decodeBytes(std::span<const uint8_t> block, const char (&magic)[4], const char* what, uint8_t kind,
-                 uint32_t side, uint8_t channels, std::span<Byte4> out) {
+void decodeBytes(std::span<const uint8_t> block, const ByteBlockKind& blocks, uint32_t side, std::span<Byte4> out) {
+  const char* what = blocks.what;
+  const uint8_t kind = blocks.kind, channels = blocks.channels;
   const size_t n = size_t(side) * side;
   if (out.size() != n) throw std::invalid_argument(std::string("decode ") + what + ": output size");
   const size_t expected = kByteHeaderBytes + size_t(channels) * n;
-  const std::vector<uint8_t>& raw = unframe(block, magic, what, kByteHeaderBytes, expected);
+  const std::vector<uint8_t>& raw = unframe(block, blocks.magic, what, kByteHeaderBytes, expected);
   uint32_t blockSide = 0;
   std::memcpy(&blockSide, raw.data() + 4, 4);
   if (raw[0] != kind || raw[1] != channels) throw CodecError(std::string("corrupt ") + what + " block (header)");
@@ -769,7 +836,7 @@ std::vector<uint8_t> encodeHeights(std::span<const float> heights, uint32_t side
       throw std::invalid_argument("encodeHeights: heights span more than 2^23 steps of the precision");
     q[i] = int32_t(v);
   }
-  return encodeInts(kHeightMagic, q, side, 1, mode, step, kLevel);
+  return encodeInts(kHeightBlocks, q, side, mode, step);
 }
 
 HeightQuantization blockQuantization(std::span<const uint8_t> block) {
@@ -793,14 +860,14 @@ HeightQuantization blockQuantization(std::span<const uint8_t> block) {
 }
 
 void decodeHeights(std::span<const uint8_t> block, uint32_t side, std::span<float> out) {
-  decodeInts(block, kHeightMagic, "height", side, 1, out);
+  decodeInts(block, kHeightBlocks, side, out);
 }
 
 std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step, int chartBorderSides) {
   if (chartBorderSides > 15) throw std::invalid_argument("encodePositions: the chart border sides are 4 bits");
   const std::vector<int64_t> points = latticePoints(xyz, side, step, "encodePositions");
   const std::vector<int32_t> q(points.begin(), points.end());
-  std::vector<uint8_t> all = encodeInts(kPositionMagic, q, side, 3, HeightQuantization::kPrecision, step, kPositionLevel);
+  std::vector<uint8_t> all = encodeInts(kPositionBlocks, q, side, HeightQuantization::kPrecision, step);
   if (chartBorderSides >= 0) {  // the planar squares' code where it is the smaller
     const std::vector<uint8_t> raw = planarBody(q, side, step, uint8_t(chartBorderSides));
     if (!raw.empty()) {
@@ -813,7 +880,7 @@ std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, 
 
 
 void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<float> out) {
-  decodeInts(block, kPositionMagic, "position", side, 3, out);
+  decodeInts(block, kPositionBlocks, side, out);
 }
 
 std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, double step, double tolerance) {
@@ -939,11 +1006,11 @@ void settleNormals(std::span<Byte4> normals, uint32_t side, uint32_t tolerance) 
 std::vector<uint8_t> encodeNormals(std::span<const Byte4> normals, uint32_t side) {
   for (const Byte4& nrm : normals)
     if (nrm[3] != 255) throw std::invalid_argument("encodeNormals: a packed normal's fourth byte is not 255");
-  return encodeBytes(kNormalMagic, kKindNormals, normals, side, 3);
+  return encodeBytes(kNormalBlocks, normals, side);
 }
 
 void decodeNormals(std::span<const uint8_t> block, uint32_t side, std::span<Byte4> out) {
-  decodeBytes(block, kNormalMagic, "normal", kKindNormals, side, 3, out);
+  decodeBytes(block, kNormalBlocks, side, out);
 }
 
 namespace {
@@ -998,11 +1065,11 @@ void decodeBorderNormals(std::span<const uint8_t> block, uint32_t side, std::spa
 }
 
 std::vector<uint8_t> encodeColours(std::span<const Byte4> colours, uint32_t side) {
-  return encodeBytes(kColourMagic, kKindColours, colours, side, 4);
+  return encodeBytes(kColourBlocks, colours, side);
 }
 
 void decodeColours(std::span<const uint8_t> block, uint32_t side, std::span<Byte4> out) {
-  decodeBytes(block, kColourMagic, "colour", kKindColours, side, 4, out);
+  decodeBytes(block, kColourBlocks, side, out);
 }
 
 std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw) { return frame(kBytesMagic, raw); }

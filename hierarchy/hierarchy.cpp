@@ -151,13 +151,23 @@ void accumulateHeightError(const std::vector<float>& h, uint32_t S, uint32_t k, 
   }
 }
 
-// running[(y - y0) * S + x] = max(itself, |h_i - surface_k|) for the samples of rows [y0, y1] of a
-// tile of 2^t intervals at chart sample (ox, oy), for a level k > t whose cells are larger than the
-// tile: their corners are samples of the chart's level t (`coarse`, `coarseSide` a side). The cells
-// and the weights are forEachLevelSample's over the whole chart.
-void accumulateCoarseError(const std::vector<float>& h, uint32_t t, uint32_t ox, uint32_t oy, uint32_t L, uint32_t k,
-                           const std::vector<float>& coarse, uint32_t coarseSide, uint32_t y0, uint32_t y1,
-                           float* running) {
+// A tile of 2^t intervals of a chart of 2^L intervals, at chart sample (ox, oy): its heights h
+// ((2^t + 1)^2, row = v), and the chart's level t (`coarse`, `coarseSide` a side), whose samples
+// are the corners of the cells larger than the tile.
+struct TileHeights {
+  const std::vector<float>& h;
+  const std::vector<float>& coarse;
+  uint32_t coarseSide = 0;
+  uint32_t L = 0, t = 0, ox = 0, oy = 0;
+};
+
+// running[(y - y0) * S + x] = max(itself, |h_i - surface_k|) for the samples of rows [y0, y1] of
+// `tile`, for a level k > t whose cells are larger than the tile: their corners are samples of the
+// chart's level t. The cells and the weights are forEachLevelSample's over the whole chart.
+void accumulateCoarseError(const TileHeights& tile, uint32_t k, uint32_t y0, uint32_t y1, float* running) {
+  const std::vector<float>& h = tile.h;
+  const std::vector<float>& coarse = tile.coarse;
+  const uint32_t coarseSide = tile.coarseSide, L = tile.L, t = tile.t, ox = tile.ox, oy = tile.oy;
   const uint32_t S = (1u << t) + 1, n = (1u << L) >> k, s = 1u << k, step = 1u << (k - t);
   const float inv = 1.0f / float(s);
   for (uint32_t y = y0; y <= y1; ++y) {
@@ -183,9 +193,21 @@ struct TileSummary {
   std::vector<float> levelError;  // [k], k = 0 .. intervalsLog2 - minNodeResLog2
 };
 
-// A node's bounds and flag, from its place in the chart and its heights' range.
-void setNodeBounds(const AtlasManifest& m, const ChartInfo& chart, uint32_t L, uint32_t l, uint32_t x, uint32_t y,
-                   float lo, float hi, Hierarchy::ChartNodes& out) {
+// A terrain chart whose nodes are being built: the hierarchy's parameters, the atlas, the chart,
+// and its nodes.
+struct TerrainChartNodes {
+  const HierarchyParams& p;
+  const AtlasManifest& m;
+  const ChartInfo& chart;
+  Hierarchy::ChartNodes& out;
+};
+
+// Node (l, x, y)'s bounds and flag, from its place in the chart and its heights' range [lo, hi].
+void setNodeBounds(const TerrainChartNodes& c, uint32_t l, uint32_t x, uint32_t y, float lo, float hi) {
+  const AtlasManifest& m = c.m;
+  const ChartInfo& chart = c.chart;
+  Hierarchy::ChartNodes& out = c.out;
+  const uint32_t L = c.p.intervalsLog2;
   const uint32_t idx = nodeIndex(l, x, y), size = (1u << L) >> l;
   const int64_t ox = (int64_t(chart.gridX) << L) + int64_t(x) * size, oy = (int64_t(chart.gridY) << L) + int64_t(y) * size;
   out.bounds[idx] = {float(double(ox) * m.spacing[0]), float(double(oy) * m.spacing[1]), lo,
@@ -193,15 +215,16 @@ void setNodeBounds(const AtlasManifest& m, const ChartInfo& chart, uint32_t L, u
   out.flags[idx] = ox >= int64_t(m.samplesX) - 1 || oy >= int64_t(m.samplesY) - 1 ? kNodeEmpty : 0;
 }
 
-// Bounds, flags and errors of the nodes inside tile (tx, ty) of 2^t level-0 intervals of a terrain
-// chart, from the tile's heights h ((2^t + 1)^2, row = v); coarse: the chart's pyramid level t, for
+// Bounds, flags and errors of the nodes inside tile (tx, ty) of 2^t level-0 intervals of terrain
+// chart c, from the tile's heights h ((2^t + 1)^2, row = v); coarse: the chart's pyramid level t, for
 // the levels whose cells are larger than the tile (t < intervalsLog2). A whole chart is its one
 // tile (t = intervalsLog2). Node error at res r = max over the node's samples of the running level
 // error (accumulateLevelError), so errors never decrease as resolution drops. Writes only the
 // tile's own nodes; returns what the nodes above it need.
-TileSummary buildTerrainTile(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart,
-                             const std::vector<float>& h, uint32_t t, uint32_t tx, uint32_t ty,
-                             const std::vector<float>& coarse, Hierarchy::ChartNodes& out) {
+TileSummary buildTerrainTile(const TerrainChartNodes& c, const std::vector<float>& h, uint32_t t, uint32_t tx,
+                             uint32_t ty, const std::vector<float>& coarse) {
+  const HierarchyParams& p = c.p;
+  Hierarchy::ChartNodes& out = c.out;
   const uint32_t L = p.intervalsLog2, S = (1u << t) + 1, shift = L - t, rc = p.resCount();
   const uint32_t depth = p.depth > shift ? p.depth - shift : 0;  // the tile's own levels
   auto fmax = [](float a, float b) { return std::max(a, b); };
@@ -215,8 +238,7 @@ TileSummary buildTerrainTile(const HierarchyParams& p, const AtlasManifest& m, c
     if (l < depth)
       for (uint32_t y = 0; y < n; ++y)
         for (uint32_t x = 0; x < n; ++x)
-          setNodeBounds(m, chart, L, l + shift, (tx << l) + x, (ty << l) + y, mn[size_t(y) * n + x],
-                        mx[size_t(y) * n + x], out);
+          setNodeBounds(c, l + shift, (tx << l) + x, (ty << l) + y, mn[size_t(y) * n + x], mx[size_t(y) * n + x]);
     if (n == 1) break;
     reduce2x2(mn, n, tmp, fmin);
     mn.swap(tmp);
@@ -249,6 +271,7 @@ TileSummary buildTerrainTile(const HierarchyParams& p, const AtlasManifest& m, c
   const uint32_t b = std::min(t, 5u), B = 1u << b, W = (1u << t) >> b;
   std::vector<std::vector<float>> blocks(kmax + 1, std::vector<float>(size_t(W) * W));
   std::vector<float> running(size_t(B + 1) * S), cells;
+  const TileHeights heights{h, coarse, (1u << shift) + 1, L, t, tx << t, ty << t};
   for (uint32_t band = 0; band < W; ++band) {
     const uint32_t y0 = band * B;
     std::fill(running.begin(), running.end(), 0.0f);
@@ -256,7 +279,7 @@ TileSummary buildTerrainTile(const HierarchyParams& p, const AtlasManifest& m, c
       if (k <= t)
         accumulateHeightError(h, S, k, y0, y0 + B, running.data());
       else
-        accumulateCoarseError(h, t, tx << t, ty << t, L, k, coarse, (1u << shift) + 1, y0, y0 + B, running.data());
+        accumulateCoarseError(heights, k, y0, y0 + B, running.data());
       cellReduce(running.data(), S, B, cells, fmax);
       for (uint32_t w = S - 1, rows = B, l = t;; w /= 2, rows /= 2, --l) {
         for (uint32_t y = 0; y < rows; ++y)
@@ -275,20 +298,21 @@ TileSummary buildTerrainTile(const HierarchyParams& p, const AtlasManifest& m, c
   return sum;
 }
 
-// A tile past the DEM's last sample (padding of the chart grid): its nodes are empty, never drawn,
-// and take no reading; their bounds are flat at the lowest height and their errors 0. Its summary
-// leaves the nodes above it to the tiles that hold data.
-TileSummary emptyTerrainTile(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart, uint32_t t,
-                             uint32_t tx, uint32_t ty, Hierarchy::ChartNodes& out) {
+// Tile (tx, ty) of 2^t level-0 intervals of chart c, past the DEM's last sample (padding of the
+// chart grid): its nodes are empty, never drawn, and take no reading; their bounds are flat at the
+// lowest height and their errors 0. Its summary leaves the nodes above it to the tiles that hold
+// data.
+TileSummary emptyTerrainTile(const TerrainChartNodes& c, uint32_t t, uint32_t tx, uint32_t ty) {
+  const HierarchyParams& p = c.p;
   const uint32_t L = p.intervalsLog2, shift = L - t, rc = p.resCount();
-  const float z = m.heightRange[0];
+  const float z = c.m.heightRange[0];
   for (uint32_t l = 0; l + shift < p.depth && l <= t; ++l)
     for (uint32_t y = 0; y < (1u << l); ++y)
       for (uint32_t x = 0; x < (1u << l); ++x) {
         const uint32_t gx = (tx << l) + x, gy = (ty << l) + y;
-        setNodeBounds(m, chart, L, l + shift, gx, gy, z, z, out);
+        setNodeBounds(c, l + shift, gx, gy, z, z);
         for (uint32_t r = p.minNodeResLog2; r <= p.maxResLog2(l + shift); ++r)
-          out.errors[size_t(nodeIndex(l + shift, gx, gy)) * rc + (r - p.minNodeResLog2)] = 0.0f;
+          c.out.errors[size_t(nodeIndex(l + shift, gx, gy)) * rc + (r - p.minNodeResLog2)] = 0.0f;
       }
   TileSummary sum;
   sum.lo = std::numeric_limits<float>::infinity();
@@ -297,10 +321,12 @@ TileSummary emptyTerrainTile(const HierarchyParams& p, const AtlasManifest& m, c
   return sum;
 }
 
-// The nodes of a tiled chart above its tiles (levels below intervalsLog2 - t), from the tiles'
-// summaries (tiles x tiles, row-major).
-void buildAboveTiles(const HierarchyParams& p, const AtlasManifest& m, const ChartInfo& chart, uint32_t t,
-                     std::vector<TileSummary> grid, Hierarchy::ChartNodes& out) {
+// The nodes of a tiled chart above its tiles of 2^t intervals (levels below intervalsLog2 - t), from
+// the tiles' summaries (tiles x tiles, row-major).
+void buildAboveTiles(const TerrainChartNodes& nodes, uint32_t t, std::vector<TileSummary> grid) {
+  const HierarchyParams& p = nodes.p;
+  const AtlasManifest& m = nodes.m;
+  Hierarchy::ChartNodes& out = nodes.out;
   const uint32_t L = p.intervalsLog2, rc = p.resCount();
   std::vector<TileSummary> up;
   for (uint32_t n = 1u << (L - t), l = L - t; n > 1;) {
@@ -319,8 +345,7 @@ void buildAboveTiles(const HierarchyParams& p, const AtlasManifest& m, const Cha
         }
         if (l >= p.depth) continue;
         // (Under empty tiles alone: flat at the lowest height, as they are.)
-        setNodeBounds(m, chart, L, l, x, y, u.lo <= u.hi ? u.lo : m.heightRange[0], u.lo <= u.hi ? u.hi : m.heightRange[0],
-                      out);
+        setNodeBounds(nodes, l, x, y, u.lo <= u.hi ? u.lo : m.heightRange[0], u.lo <= u.hi ? u.hi : m.heightRange[0]);
         for (uint32_t k = 0; k < u.levelError.size() && k <= L - l; ++k) {
           const uint32_t r = L - l - k;
           if (r >= p.minNodeResLog2 && r <= p.maxResLog2(l))
@@ -461,19 +486,19 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindow
     const ChartInfo& chart = manifest.charts[c];
     if (tiles > 1 && ((int64_t(chart.gridX) << L) + int64_t(tx) * T >= int64_t(manifest.samplesX) - 1 ||
                       (int64_t(chart.gridY) << L) + int64_t(ty) * T >= int64_t(manifest.samplesY) - 1)) {
-      summaries[c][tile] = emptyTerrainTile(hier.params, manifest, chart, t, tx, ty, hier.charts[c]);
+      summaries[c][tile] = emptyTerrainTile({hier.params, manifest, chart, hier.charts[c]}, t, tx, ty);
       progress::advance();
       return;
     }
     const std::vector<float> h = source(c, 0, tx * T, ty * T, T);
     if (h.size() != size_t(T + 1) * (T + 1))
       throw InputError("chart " + std::to_string(c) + ": expected " + std::to_string(T + 1) + "^2 heights");
-    summaries[c][tile] = buildTerrainTile(hier.params, manifest, chart, h, t, tx, ty, coarse[c], hier.charts[c]);
+    summaries[c][tile] = buildTerrainTile({hier.params, manifest, chart, hier.charts[c]}, h, t, tx, ty, coarse[c]);
     progress::advance();
   });
   if (tiles > 1)
     tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) {
-      buildAboveTiles(hier.params, manifest, manifest.charts[c], t, std::move(summaries[c]), hier.charts[c]);
+      buildAboveTiles({hier.params, manifest, manifest.charts[c], hier.charts[c]}, t, std::move(summaries[c]));
     });
   if (stats) {
     stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());

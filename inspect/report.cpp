@@ -546,7 +546,7 @@ InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const
 
   SourceDistances distances;
   if (!o.source.empty()) {
-    report["source"] = sourceComparison(m, o.atlas, o.source, dir, 6, 16, &distances);
+    report["source"] = sourceComparison(m, o.atlas, o.source, {dir, 6, 16}, &distances);
     sum["source_hausdorff_percent_of_diagonal"] = report["source"]["hausdorff_percent_of_diagonal"];
     sum["source_mean_percent_of_diagonal"] = report["source"]["mean_percent_of_diagonal"];
   }

@@ -61,7 +61,9 @@ json distanceMaps(const std::vector<float>& distances, uint32_t n, uint32_t char
 // A height-field atlas against its DEM: every level-0 sample inside the DEM against the DEM's
 // height there (after void filling and z-scale, as the build read it): vertical distances.
 json demComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir, const std::filesystem::path& source,
-                   const std::filesystem::path& dir, uint32_t mapCharts, uint32_t worstSamples, SourceDistances* out) {
+                   const SourceReportOptions& report, SourceDistances* out) {
+  const std::filesystem::path& dir = report.dir;
+  const uint32_t mapCharts = report.mapCharts, worstSamples = report.worstSamples;
   const auto t0 = std::chrono::steady_clock::now();
   DemOptions o;
   o.zScale = m.zScale;
@@ -135,9 +137,11 @@ std::vector<glm::vec3> onFullLattice(const std::vector<glm::vec3>& P, uint32_t s
 }  // namespace
 
 json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir,
-                      const std::filesystem::path& source, const std::filesystem::path& dir, uint32_t mapCharts,
-                      uint32_t worstSamples, SourceDistances* distances) {
-  if (m.kind == AtlasKind::Heightfield) return demComparison(m, atlasDir, source, dir, mapCharts, worstSamples, distances);
+                      const std::filesystem::path& source, const SourceReportOptions& report,
+                      SourceDistances* distances) {
+  if (m.kind == AtlasKind::Heightfield) return demComparison(m, atlasDir, source, report, distances);
+  const std::filesystem::path& dir = report.dir;
+  const uint32_t mapCharts = report.mapCharts, worstSamples = report.worstSamples;
   const IndexedMesh mesh = readMesh(source);
   // The atlas surface unwelded, chart by chart: sample k of chart c is position c * n^2 + k, so a
   // distance is found back on its chart; triangles as the renderer draws the grid.

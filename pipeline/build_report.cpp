@@ -152,16 +152,25 @@ nlohmann::json stagesJson(const std::vector<StageTiming>& stages) {
   return j;
 }
 
+// What every build's summary prints: its charts (chartsX x chartsY of chartSize samples a side),
+// samples, voids filled, hierarchy, bytes on disk and time.
+struct SummaryFigures {
+  uint32_t charts = 0, chartsX = 0, chartsY = 0, chartSize = 0;
+  uint64_t samples = 0, voidsFilled = 0;
+  const HierarchyStats& hierarchy;
+  uint64_t bytesOnDisk = 0;
+  double totalSeconds = 0.0;
+};
+
 // The lines every build prints.
-std::string summaryLines(const std::filesystem::path& output, uint32_t charts, uint32_t chartsX, uint32_t chartsY,
-                         uint32_t chartSize, uint64_t samples, uint64_t voidsFilled, const HierarchyStats& hs,
-                         uint64_t bytesOnDisk, double totalSeconds) {
+std::string summaryLines(const std::filesystem::path& output, const SummaryFigures& f) {
+  const HierarchyStats& hs = f.hierarchy;
   return fmt::format(
       "built {}\n  charts            {} ({}x{}, {} samples each side)\n  samples           {}\n"
       "  voids filled      {}\n  hierarchy         {:.2f} M samples/s ({} threads, {:.3f} s)\n"
       "  bytes on disk     {}\n  total             {:.2f} s\n",
-      output.string(), charts, chartsX, chartsY, chartSize, samples, voidsFilled, hs.samplesPerSecond * 1e-6,
-      hs.threads, hs.seconds, bytesOnDisk, totalSeconds);
+      output.string(), f.charts, f.chartsX, f.chartsY, f.chartSize, f.samples, f.voidsFilled,
+      hs.samplesPerSecond * 1e-6, hs.threads, hs.seconds, f.bytesOnDisk, f.totalSeconds);
 }
 
 uint64_t meshSamples(const MeshWriteStats& w) { return w.resampledSamples; }
@@ -262,8 +271,8 @@ nlohmann::json statsJson(const MeshBuildStats& s) {
 
 std::string buildSummary(const std::filesystem::path& output, const TerrainBuildStats& s) {
   const TerrainWriteStats& w = s.write;
-  std::string lines = summaryLines(output, w.charts.charts, w.chartsX, w.chartsY, w.chartSize, w.charts.samples,
-                                   s.read.voidsFilled, w.hierarchy, s.bytesOnDisk, s.totalSeconds);
+  std::string lines = summaryLines(output, {w.charts.charts, w.chartsX, w.chartsY, w.chartSize, w.charts.samples,
+                                            s.read.voidsFilled, w.hierarchy, s.bytesOnDisk, s.totalSeconds});
   if (w.imagery)
     lines += fmt::format("  imagery           {} x {} samples ({} per DEM interval, {}), {:.1f}% covered, {} bytes\n",
                          w.imagery->width, w.imagery->height, 1u << w.imagery->scaleLog2, w.imagery->resampling,
@@ -276,8 +285,8 @@ std::string buildSummary(const std::filesystem::path& output, const MeshBuildSta
   const MeshReadStats& rd = s.chart.read;
   const ChartingStats& ch = s.chart.charting;
   // Mesh input: what was repaired (docs/mesh_stage.md, "Mesh input").
-  return summaryLines(output, w.charts, w.chartsX, w.chartsY, w.chartSize, meshSamples(w), 0, w.hierarchy,
-                      s.bytesOnDisk, s.totalSeconds) +
+  return summaryLines(output, {w.charts, w.chartsX, w.chartsY, w.chartSize, meshSamples(w), 0, w.hierarchy,
+                               s.bytesOnDisk, s.totalSeconds}) +
          fmt::format(
              "  input             {} triangles read, {} kept; dropped: {} non-finite, {} degenerate, {} duplicate\n"
              "  repaired          {} non-manifold edges, {} non-manifold vertices ({} vertex copies), "

@@ -79,8 +79,9 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
                         AdaptStats* stats) {
   AdaptStats st;
   const double tol = options.tolerancePx;
+  const AdaptView step{view, tol, options.frustumCull};
   GroupSelection groups;
-  selectRootGroups(h, view, options.maxNodes, tol, options.frustumCull, groups);
+  selectRootGroups(h, step, options.maxNodes, groups);
   // Every root counts as a node here; the closed groups' roots, which never split, count once a
   // group in the returned cut.
   const uint32_t chartBudget = groups.chartBudget(options.maxNodes);
@@ -88,7 +89,7 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
 
   auto makeCandidate = [&](const NodeId& n) {
     Candidate c{n, 0, false, 0.0};
-    c.priority = topDownSplitPriority(h, n, view, tol, options.frustumCull, groups.frozen(n.chart), &c.resLog2, &c.overTol);
+    c.priority = topDownSplitPriority(h, n, step, groups.frozen(n.chart), &c.resLog2, &c.overTol);
     return c;
   };
 
@@ -159,8 +160,11 @@ void setCutCounts(const Cut& cut, AdaptStats& st) {
   st.closedGroups = st.nodes - (uint32_t(cut.nodes.size()) - st.groupedRoots);
 }
 
-double topDownSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParams& view, double tolPx, bool cull,
-                            bool held, uint32_t* res, bool* overTol) {
+double topDownSplitPriority(const Hierarchy& h, const NodeId& n, const AdaptView& adaptView, bool held, uint32_t* res,
+                            bool* overTol) {
+  const ViewParams& view = adaptView.view;
+  const double tolPx = adaptView.tolerancePx;
+  const bool cull = adaptView.cull;
   const uint32_t rmax = h.maxResLog2(n);
   const uint32_t need = neededResolution(h, n, view, tolPx);
   const bool leaf = held || n.level + 1 >= h.params.depth;

@@ -22,6 +22,14 @@ struct ViewParams {
 };
 ViewParams makeViewParams(const Camera& c, uint32_t width, uint32_t height);
 
+// The view a step of the adaptation is for: the view, the screen-space error tolerated in it in
+// pixels, and whether the nodes outside its frustum are culled.
+struct AdaptView {
+  const ViewParams& view;
+  double tolerancePx = 1.0;
+  bool cull = true;
+};
+
 // Projected size in pixels of a world-space error seen from the closest point of the node's
 // bounds: error * pixelsPerRadian / distance.
 double screenError(const Hierarchy& h, const NodeId& n, uint32_t res, const ViewParams& v);
@@ -98,8 +106,8 @@ Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptO
 // for a node over tolerance even at its maxResLog2, overTolerancePriority of that error (those split
 // first, the worst first); -1 for a leaf or a held node (held: a closed group's root). Sets *res to
 // n's needed resolution clamped to its maxResLog2, and *overTol.
-double topDownSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParams& view, double tolPx, bool cull,
-                            bool held, uint32_t* res, bool* overTol);
+double topDownSplitPriority(const Hierarchy& h, const NodeId& n, const AdaptView& view, bool held, uint32_t* res,
+                            bool* overTol);
 
 // Lowest resolution of n whose screen error is within tolerance, or maxResLog2 + 1 if none.
 uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tolPx);

@@ -33,12 +33,13 @@ double childTriangles(const Hierarchy& h, const NodeId& n, const ViewParams& v, 
   return t;
 }
 
+// The split priority of n at resolution res, drawn or not (culled), over tolerance or not, for `view`.
 double splitPriorityOf(const Hierarchy& h, const NodeId& n, uint32_t res, bool drawn, bool overTol,
-                       const ViewParams& v, double tol, bool cull) {
+                       const AdaptView& view) {
   if (n.level + 1 >= h.params.depth) return -1.0;
-  if (drawn && overTol) return overTolerancePriority(screenError(h, n, h.maxResLog2(n), v));
+  if (drawn && overTol) return overTolerancePriority(screenError(h, n, h.maxResLog2(n), view.view));
   const double own = drawn ? double(tris(res)) : 0.0;
-  return own - childTriangles(h, n, v, tol, cull);
+  return own - childTriangles(h, n, view.view, view.tolerancePx, view.cull);
 }
 
 }  // namespace
@@ -54,7 +55,7 @@ double dualQueueSplitPriority(const Hierarchy& h, const NodeId& n, const ViewPar
                               double tolerancePx, bool cull) {
   bool over = false;
   const uint32_t res = clampedRes(h, n, v, tolerancePx, &over);
-  return splitPriorityOf(h, n, res, nodeDrawable(h, n, v, cull), over, v, tolerancePx, cull);
+  return splitPriorityOf(h, n, res, nodeDrawable(h, n, v, cull), over, {v, tolerancePx, cull});
 }
 
 double dualQueueMergeCost(const Hierarchy& h, const NodeId& parent, const ViewParams& v,
@@ -536,7 +537,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   view_ = view;
   opt_ = options;
   ++frameNo_;
-  selectRootGroups(h_, view, options.maxNodes, options.tolerancePx, options.frustumCull, groups_);
+  selectRootGroups(h_, {view, options.tolerancePx, options.frustumCull}, options.maxNodes, groups_);
   // Every root counts as a node in the partition; the closed groups' roots count once a group in
   // the returned cut.
   const uint32_t chartBudget = groups_.chartBudget(options.maxNodes);

@@ -1056,7 +1056,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   s.st = {};
   BudgetStats& st = s.st;
 
-  selectRootGroups(h_, view, options.maxNodes, 0.0, options.frustumCull, s.groups, options.maxTriangles);
+  selectRootGroups(h_, {view, 0.0, options.frustumCull}, options.maxNodes, s.groups, options.maxTriangles);
   // Every root counts as a node in the kept cut; the closed groups' roots count once a group in
   // the returned cut.
   s.opt.maxNodes = s.groups.chartBudget(options.maxNodes);

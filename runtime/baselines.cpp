@@ -16,7 +16,7 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
                           uint32_t maxNodes, AdaptStats* stats, bool frustumCull) {
   AdaptStats st;
   GroupSelection groups;
-  selectRootGroups(h, view, maxNodes, tolerancePx, frustumCull, groups);
+  selectRootGroups(h, {view, tolerancePx, frustumCull}, maxNodes, groups);
   const uint32_t chartBudget = groups.chartBudget(maxNodes);  // every root a node (group_select.h)
   const uint32_t budget = chartBudget == 0 ? UINT32_MAX : chartBudget;
   struct Candidate {
@@ -127,9 +127,16 @@ struct BudgetOp {
   uint32_t childRes = 0;
 };
 
-// Roots (drawable) at rootRes, then the first `count` operations.
-Cut replayOps(const Hierarchy& h, const ViewParams& view, bool cull, uint32_t rootRes,
-              const std::vector<BudgetOp>& ops, size_t count) {
+// A top-down pass's cut as operations: the roots at rootRes, then the operations in order.
+struct BudgetOps {
+  uint32_t rootRes = 0;
+  std::vector<BudgetOp> ops;
+};
+
+// Roots (drawable) at plan.rootRes, then the first `count` operations.
+Cut replayOps(const Hierarchy& h, const ViewParams& view, bool cull, const BudgetOps& plan, size_t count) {
+  const uint32_t rootRes = plan.rootRes;
+  const std::vector<BudgetOp>& ops = plan.ops;
   std::unordered_map<uint64_t, CutNode> live;
   for (uint32_t c = 0; c < h.chartCount(); ++c) {
     const NodeId root{c, 0, 0, 0};
@@ -157,13 +164,14 @@ Cut replayOps(const Hierarchy& h, const ViewParams& view, bool cull, uint32_t ro
 
 // Replays the operations, enforces the stitching constraint, and backs off (1, 2, 4, ...
 // operations) until the budgets hold. fixedRes: constraint-split children back to maxResLog2(level).
-Cut finishBudgetCut(const Hierarchy& h, const ViewParams& view, const BudgetOptions& o, uint32_t rootRes,
-                    const std::vector<BudgetOp>& ops, bool fixedRes, BudgetStats& st) {
+Cut finishBudgetCut(const Hierarchy& h, const ViewParams& view, const BudgetOptions& o, const BudgetOps& plan,
+                    bool fixedRes, BudgetStats& st) {
+  const std::vector<BudgetOp>& ops = plan.ops;
   const uint64_t nodeBudget = o.maxNodes == 0 ? UINT64_MAX : o.maxNodes;
   size_t count = ops.size(), step = 1;
   Cut cut;
   for (;;) {
-    cut = replayOps(h, view, o.frustumCull, rootRes, ops, count);
+    cut = replayOps(h, view, o.frustumCull, plan, count);
     AdaptStats as;
     enforceStitchConstraint(h, cut, &view, 1.0, &as);
     if (fixedRes && as.constraintSplits > 0)
@@ -196,7 +204,7 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
                                 BudgetStats* stats) {
   BudgetStats st;
   GroupSelection groups;
-  selectRootGroups(h, view, options.maxNodes, 0.0, options.frustumCull, groups, options.maxTriangles);
+  selectRootGroups(h, {view, 0.0, options.frustumCull}, options.maxNodes, groups, options.maxTriangles);
   BudgetOptions o = options;
   o.maxNodes = groups.chartBudget(options.maxNodes);  // every root a node (group_select.h)
   const uint64_t nodeBudget = o.maxNodes == 0 ? UINT64_MAX : o.maxNodes;
@@ -222,7 +230,9 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
     const uint32_t res = std::min(rootRes, h.maxResLog2(root));
     if (nodeDrawable(h, root, view, options.frustumCull)) queue.push({screenError(h, root, res, view), root, res});
   }
-  std::vector<BudgetOp> ops;
+  BudgetOps plan;
+  plan.rootRes = rootRes;
+  std::vector<BudgetOp>& ops = plan.ops;
   while (!queue.empty()) {
     const ErrorItem it = queue.top();
     queue.pop();
@@ -241,7 +251,7 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
       if (nodeDrawable(h, ch, view, options.frustumCull)) queue.push({screenError(h, ch, cres, view), ch, cres});
     }
   }
-  Cut cut = finishBudgetCut(h, view, o, rootRes, ops, true, st);
+  Cut cut = finishBudgetCut(h, view, o, plan, true, st);
   markGroupedRoots(groups, cut);
   measureBudgetCut(h, view, cut, st);
   if (stats) *stats = st;

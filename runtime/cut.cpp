@@ -19,10 +19,22 @@ bool chartEdgeReversed(const Hierarchy& h, const NodeId& n, uint32_t side, uint3
   return h.roots[n.chart][side].reversed;
 }
 
-void collectFiner(const Hierarchy& h, const Cut& cut, const NodeId& n, uint32_t side,
-                  const NodeId& a, uint32_t aSide, std::vector<SideNeighbour>& out) {
+// Side `side` of node n of h, whose neighbours drawn in `cut` are sought.
+struct CutSide {
+  const Hierarchy& h;
+  const Cut& cut;
+  const NodeId& n;
+  uint32_t side;
+};
+
+// The nodes of the cut at or below node a (the node adjacent to n across the side, or a descendant
+// of it) that touch a's side aSide, appended to out with the span of n's side each covers.
+void collectFiner(const CutSide& s, const NodeId& a, uint32_t aSide, std::vector<SideNeighbour>& out) {
+  const Hierarchy& h = s.h;
+  const NodeId& n = s.n;
+  const uint32_t side = s.side;
   if (a.level >= h.params.depth) return;
-  const int32_t i = cut.find(a);
+  const int32_t i = s.cut.find(a);
   if (i >= 0) {
     // Span of a along aSide relative to the same-level adjacent node's origin, mapped to n.
     const uint32_t L = h.params.intervalsLog2;
@@ -41,7 +53,7 @@ void collectFiner(const Hierarchy& h, const Cut& cut, const NodeId& n, uint32_t 
     const uint32_t cx = c & 1, cy = c >> 1;
     const bool touches = (aSide == kEdgeBottom && cy == 0) || (aSide == kEdgeTop && cy == 1) ||
                          (aSide == kEdgeLeft && cx == 0) || (aSide == kEdgeRight && cx == 1);
-    if (touches) collectFiner(h, cut, n, side, a.child(c), aSide, out);
+    if (touches) collectFiner(s, a.child(c), aSide, out);
   }
 }
 
@@ -155,7 +167,7 @@ void sideNeighbours(const Hierarchy& h, const Cut& cut, const NodeId& n, uint32_
     }
     if (a.level == 0) break;
   }
-  collectFiner(h, cut, n, side, adj, adjSide, out);
+  collectFiner({h, cut, n, side}, adj, adjSide, out);
 }
 
 }  // namespace gimlod

@@ -55,13 +55,16 @@ struct Candidate {
 // Opens the closed groups of the frontier that a top-down pass opens with groups as nodes. An item
 // is a closed group or a node of an open chart, and the best goes first while the cut's nodes fit
 // maxNodes (and, in budget mode, their triangles at the minimum resolution fit maxTriangles); the
-// chart nodes are split only to spend the budget as the adapters will. tolerancePx > 0: the
+// chart nodes are split only to spend the budget as the adapters will. view.tolerancePx > 0: the
 // top-down greedy (adaptErrorThreshold): a closed group goes only when it holds a chart root over
 // tolerance even at its maxResLog2 (overTolerancePriority of that error seen from its box), a node by
 // topDownSplitPriority. Else (triangle budget): the worst error first, groups and nodes alike, each
 // drawn at the resolution the budgets leave a node (maxTriangles / maxNodes triangles).
-void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes, double tolerancePx,
-                       uint64_t maxTriangles, bool cull, std::vector<uint8_t>& open) {
+void openGroupsTopDown(const Hierarchy& h, const AdaptView& view, uint32_t maxNodes, uint64_t maxTriangles,
+                       std::vector<uint8_t>& open) {
+  const ViewParams& v = view.view;
+  const double tolerancePx = view.tolerancePx;
+  const bool cull = view.cull;
   const bool threshold = tolerancePx > 0.0;
   // Budget mode: the cut's nodes at the minimum resolution stay within the triangle budget.
   const uint64_t maxCount =
@@ -109,7 +112,7 @@ void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNode
     }
     uint32_t res = 0;
     bool over = false;
-    const double p = topDownSplitPriority(h, n, v, tolerancePx, cull, false, &res, &over);
+    const double p = topDownSplitPriority(h, n, view, false, &res, &over);
     if (p > 0.0) queue.push({p, -1, n});
   };
   // The frontier: its closed groups, and the open charts' roots. No group to open: nothing to do
@@ -153,8 +156,10 @@ void openGroupsTopDown(const Hierarchy& h, const ViewParams& v, uint32_t maxNode
 
 }  // namespace
 
-void selectRootGroups(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes, double tolerancePx, bool cull,
-                      GroupSelection& out, uint64_t maxTriangles) {
+void selectRootGroups(const Hierarchy& h, const AdaptView& view, uint32_t maxNodes, GroupSelection& out,
+                      uint64_t maxTriangles) {
+  const ViewParams& v = view.view;
+  const bool cull = view.cull;
   const RootGroups& rg = h.groups;
   out.closedGroups = out.frozenRoots = out.rootFloor = 0;
   out.active = !rg.empty() && maxNodes != 0;
@@ -192,7 +197,7 @@ void selectRootGroups(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes
         if (boxVisible(rg.groups[c].bounds, v, cull)) queue.push({errorMinPx(c), c});
   }
   // Then the groups a top-down pass opens for their errors.
-  openGroupsTopDown(h, v, maxNodes, tolerancePx, maxTriangles, cull, open);
+  openGroupsTopDown(h, view, maxNodes, maxTriangles, open);
   // A group is closed when it is not open and every group above it is.
   out.closedOf.assign(h.chartCount(), -1);
   forEachReached(rg, open, [&](uint32_t g) {

@@ -28,8 +28,9 @@ struct GroupSelection {
   }
 };
 
-// Chooses the closed groups for a view and a node budget. With no groups or no limit (maxNodes 0)
-// every group is open (active false). Otherwise, from the visible top groups, closed:
+// Chooses the closed groups for a view (view.view, culling with view.cull; tolerancePx:
+// view.tolerancePx) and a node budget. With no groups or no limit (maxNodes 0) every group is open
+// (active false). Otherwise, from the visible top groups, closed:
 // - it opens groups, the largest error at the minimum resolution first, while the cut's roots
 //   (closed groups and open charts) and three nodes for a split of each open chart fit maxNodes:
 //   with four nodes a chart within the budget every group opens, and the cut is the forest's;
@@ -43,8 +44,8 @@ struct GroupSelection {
 //   maxTriangles.
 // A closed group's roots within tolerance at their maxResLog2 need no split: they raise their
 // resolution, which costs no node. Errors of a group are its roots' largest, seen from its box.
-void selectRootGroups(const Hierarchy& h, const ViewParams& v, uint32_t maxNodes, double tolerancePx, bool cull,
-                      GroupSelection& out, uint64_t maxTriangles = 0);
+void selectRootGroups(const Hierarchy& h, const AdaptView& view, uint32_t maxNodes, GroupSelection& out,
+                      uint64_t maxTriangles = 0);
 
 // Marks the cut's nodes that are roots of closed groups (CutNode::group), which Cut::nodeCount then
 // counts once per group.

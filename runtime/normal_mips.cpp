@@ -62,17 +62,17 @@ uint32_t colourMipLevel(const PackedColour* colours, uint32_t samplesPerSide, ui
   });
 }
 
-PageMips pageMips(const PackedNormal* normals, uint32_t samplesPerSide, uint32_t pageSide, uint32_t normalLevels,
-                  const PackedColour* colours, uint32_t colourSamplesPerSide, uint32_t colourSide,
-                  uint32_t colourLevels) {
+PageMips pageMips(const PageMap<PackedNormal>& normals, const PageMap<PackedColour>& colours) {
   PageMips m;
-  for (uint32_t level = 1; normals && level < normalLevels; ++level) {
+  for (uint32_t level = 1; normals.texels && level < normals.levels; ++level) {
     m.normals.emplace_back();
-    m.normalSides.push_back(normalMipLevel(normals, samplesPerSide, pageSide, level, m.normals.back()));
+    m.normalSides.push_back(
+        normalMipLevel(normals.texels, normals.samplesPerSide, normals.layerSide, level, m.normals.back()));
   }
-  for (uint32_t level = 1; colours && level < colourLevels; ++level) {
+  for (uint32_t level = 1; colours.texels && level < colours.levels; ++level) {
     m.colours.emplace_back();
-    m.colourSides.push_back(colourMipLevel(colours, colourSamplesPerSide, colourSide, level, m.colours.back()));
+    m.colourSides.push_back(
+        colourMipLevel(colours.texels, colours.samplesPerSide, colours.layerSide, level, m.colours.back()));
   }
   return m;
 }

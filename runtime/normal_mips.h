@@ -35,11 +35,18 @@ struct PageMips {
   }
 };
 
-// The mips of a page's normals (samplesPerSide^2) for layers of pageSide^2 with normalLevels
-// levels, and of its colours (colourSamplesPerSide^2; none when colours is null) for layers of
-// colourSide^2 with colourLevels levels: normalMipLevel and colourMipLevel of each level.
-PageMips pageMips(const PackedNormal* normals, uint32_t samplesPerSide, uint32_t pageSide, uint32_t normalLevels,
-                  const PackedColour* colours, uint32_t colourSamplesPerSide, uint32_t colourSide,
-                  uint32_t colourLevels);
+// One of a page's attribute maps as pageMips takes it: samplesPerSide^2 texels (row-major; none
+// when null) for pool layers of layerSide^2 with `levels` mip levels.
+template <typename Texel>
+struct PageMap {
+  const Texel* texels = nullptr;
+  uint32_t samplesPerSide = 0;
+  uint32_t layerSide = 0;
+  uint32_t levels = 0;
+};
+
+// The mips of a page's normals and of its colours: normalMipLevel and colourMipLevel of each level
+// of their maps.
+PageMips pageMips(const PageMap<PackedNormal>& normals, const PageMap<PackedColour>& colours);
 
 }  // namespace gimlod

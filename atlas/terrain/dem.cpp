@@ -332,8 +332,8 @@ void DemSource::layPlanetGrid(const DemOptions& options) {
   // Whole metres stay whole (an integer raster, a whole scale and offset).
   const bool integer = GDALDataTypeIsInteger(im.band->GetRasterDataType()) && im.scale == std::nearbyint(im.scale) &&
                        im.offset == std::nearbyint(im.offset);
-  PlanetGrid g = planPlanetGrid(dem.georef, dem.width, dem.height, path, options.planetRadius,
-                                options.planetChartIntervals, integer);
+  PlanetGrid g = planPlanetGrid({dem.georef, dem.width, dem.height, integer}, path, options.planetRadius,
+                                options.planetChartIntervals);
   g.info.flattening = options.planetFlattening;
   std::vector<float> row(dem.width);
   std::vector<uint8_t> valid(dem.width);

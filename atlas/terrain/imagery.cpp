@@ -308,10 +308,11 @@ ImageryPyramid::ImageryPyramid(const ImageryRaster& raster, uint32_t chartsX, ui
   buildLevels(levels, base.width, base.height);
 }
 
-ImageryPyramid::ImageryPyramid(std::vector<PackedColour> rgba, uint32_t x0, uint32_t y0, uint32_t w, uint32_t h,
-                               uint32_t chartsX, uint32_t chartsY, uint32_t chartSize, uint32_t scaleLog2,
+ImageryPyramid::ImageryPyramid(std::vector<PackedColour> rgba, const ImageryWindow& window, const ImageryGrid& grid,
                                uint32_t levels)
-    : chartIntervals_((chartSize - 1) << scaleLog2) {
+    : chartIntervals_((grid.chartSize - 1) << grid.scaleLog2) {
+  const uint32_t x0 = window.x0, y0 = window.y0, w = window.w, h = window.h;
+  const uint32_t chartsX = grid.chartsX, chartsY = grid.chartsY;
   const uint32_t align = levels == 0 ? 1 : 1u << (levels - 1);
   if (levels == 0 || (chartIntervals_ >> (levels - 1)) == 0 || rgba.size() != size_t(w) * h || w == 0 || h == 0 ||
       x0 % align || y0 % align || x0 + uint64_t(w) > uint64_t(chartsX) * chartIntervals_ + 1 ||
@@ -428,9 +429,9 @@ std::unique_ptr<ChartFileWriter> openImageryChart(const fs::path& dir, const Atl
   c.imageryFile = imageryFileName(c.id);
   ChartCoding coding;
   coding.compressed = m.compression.present;  // coded like the atlas's geometry
-  return std::make_unique<ChartFileWriter>(dir / c.imageryFile, m.imagery.chartSize(m.chartSize),
-                                           m.blockIntervals << m.imagery.scaleLog2, m.pyramidLevels(),
-                                           1u << kChannelColours, coding);
+  const ChartFileShape shape{m.imagery.chartSize(m.chartSize), m.blockIntervals << m.imagery.scaleLog2,
+                             m.pyramidLevels(), 1u << kChannelColours};
+  return std::make_unique<ChartFileWriter>(dir / c.imageryFile, shape, coding);
 }
 
 // Levels first and up of chart `c`'s file, cut from `pyramid` whose level 0 is the file's level
@@ -455,11 +456,12 @@ uint64_t writeImageryChart(const ImageryPyramid& pyramid, const fs::path& dir, c
   return file->commit();
 }
 
-// The grid's level-0 samples [x0, x1) x [y0, y1) (the lattice edge-clamped onto the chart grid),
+// The grid's level-0 samples of `window` (the lattice edge-clamped onto the chart grid),
 // reprojected by `imagery`; adds to `covered` the lattice samples with alpha > 0 in the part the
 // caller owns, owned = {x0, y0, x1, y1} (half-open).
-std::vector<PackedColour> gridWindow(const ImagerySource& imagery, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1,
+std::vector<PackedColour> gridWindow(const ImagerySource& imagery, const ImageryWindow& window,
                                      const std::array<uint64_t, 4>& owned, uint64_t& covered) {
+  const uint64_t x0 = window.x0, y0 = window.y0, x1 = x0 + window.w, y1 = y0 + window.h;
   const uint32_t latW = imagery.width(), latH = imagery.height();
   const uint32_t lx0 = uint32_t(std::min<uint64_t>(x0, latW - 1)), ly0 = uint32_t(std::min<uint64_t>(y0, latH - 1));
   const uint32_t lx1 = std::max(uint32_t(std::min<uint64_t>(x1, latW)), lx0 + 1);
@@ -510,9 +512,11 @@ uint64_t chartSamples(uint64_t ci, uint32_t levels) {
 
 // writeImageryChartsWindowed for charts built in tiles (imagery.h says how).
 ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& source, const fs::path& dir,
-                                    AtlasManifest& m, uint64_t memoryBytes, const ChartTiling& t,
+                                    AtlasManifest& m, const ImageryWindowing& windowing,
                                     ImageryWindowStats* windowStats) {
   const auto start = std::chrono::steady_clock::now();
+  const uint64_t memoryBytes = windowing.memoryBytes;
+  const ChartTiling t = chartTiling(m.chartSize, m.blockIntervals, windowing.maxTile);
   const uint32_t s = imagery.scaleLog2(), levels = m.pyramidLevels(), kc = t.coarseLevel, per = t.tilesPerSide;
   const uint64_t ci = uint64_t(m.chartSize - 1) << s, tile = uint64_t(t.tile) << s, margin = uint64_t(1) << kc;
   const uint64_t gridW = m.chartsX * ci + 1, gridH = m.chartsY * ci + 1;
@@ -539,8 +543,9 @@ ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& s
           const bool lastX = cx + 1 == m.chartsX && tx + 1 == per, lastY = cy + 1 == m.chartsY && ty + 1 == per;
           const std::array<uint64_t, 4> owned{ox, oy, lastX ? latW : ox + tile, lastY ? latH : oy + tile};
           const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
-          const ImageryPyramid pyramid(gridWindow(imagery, x0, y0, x1, y1, owned, covered), uint32_t(x0), uint32_t(y0),
-                                       w, h, m.chartsX, m.chartsY, m.chartSize, s, kc + 1);
+          const ImageryWindow window{uint32_t(x0), uint32_t(y0), w, h};
+          const ImageryPyramid pyramid(gridWindow(imagery, window, owned, covered), window,
+                                       {m.chartsX, m.chartsY, m.chartSize, s}, kc + 1);
           if (chart >= 0)
             for (uint32_t k = 0; k < kc; ++k) {
               const uint32_t perTile = uint32_t((tile >> k) / (uint64_t(m.blockIntervals) << s));
@@ -560,8 +565,8 @@ ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& s
   if (covered == 0) fail(m.imagery.source, "does not overlap the DEM");
   m.imagery.coverage = double(covered) / (double(latW) * double(latH));
   // The levels from kc up, from the grid's level kc.
-  const ImageryPyramid top(std::move(coarse), 0, 0, uint32_t(cw), uint32_t(ch), m.chartsX, m.chartsY,
-                           uint32_t(ci >> kc) + 1, 0, levels - kc);
+  const ImageryPyramid top(std::move(coarse), {0, 0, uint32_t(cw), uint32_t(ch)},
+                           {m.chartsX, m.chartsY, uint32_t(ci >> kc) + 1, 0}, levels - kc);
   std::atomic<uint64_t> bytes{0};
   tbb::parallel_for(size_t{0}, m.charts.size(), [&](size_t i) {
     writeChartLevels(top, kc, m, m.charts[i], *files[i]);
@@ -578,13 +583,14 @@ ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& s
 
 }  // namespace
 
-ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::string& source,
-                                             const fs::path& dir, AtlasManifest& m, uint64_t memoryBytes,
-                                             ImageryWindowStats* windowStats, uint32_t maxTile) {
+ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::string& source, const fs::path& dir,
+                                             AtlasManifest& m, const ImageryWindowing& windowing,
+                                             ImageryWindowStats* windowStats) {
   const auto start = std::chrono::steady_clock::now();
   makeImageryDir(dir);
-  const ChartTiling tiling = chartTiling(m.chartSize, m.blockIntervals, maxTile);
-  if (tiling.tiled()) return writeImageryTiles(imagery, source, dir, m, memoryBytes, tiling, windowStats);
+  if (chartTiling(m.chartSize, m.blockIntervals, windowing.maxTile).tiled())
+    return writeImageryTiles(imagery, source, dir, m, windowing, windowStats);
+  const uint64_t memoryBytes = windowing.memoryBytes;
   const uint32_t levels = m.intervalsLog2() + 1;
   const uint32_t s = imagery.scaleLog2();
   const uint64_t ci = uint64_t(m.chartSize - 1) << s;  // imagery intervals per chart
@@ -620,10 +626,10 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
       const uint64_t x1 = std::min(gridW, cx1 * ci + margin + 1), y1 = std::min(gridH, cy1 * ci + margin + 1);
       const std::array<uint64_t, 4> owned{cx0 * ci, cy0 * ci, cx1 == m.chartsX ? latW : cx1 * ci,
                                           cy1 == m.chartsY ? latH : cy1 * ci};
-      std::vector<PackedColour> base = gridWindow(imagery, x0, y0, x1, y1, owned, covered);
       const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
-      const ImageryPyramid pyramid(std::move(base), uint32_t(x0), uint32_t(y0), w, h, m.chartsX, m.chartsY, m.chartSize,
-                                   s, levels);
+      const ImageryWindow window{uint32_t(x0), uint32_t(y0), w, h};
+      std::vector<PackedColour> base = gridWindow(imagery, window, owned, covered);
+      const ImageryPyramid pyramid(std::move(base), window, {m.chartsX, m.chartsY, m.chartSize, s}, levels);
       tbb::parallel_for(size_t{0}, charts.size(), [&](size_t i) {
         bytes += writeImageryChart(pyramid, dir, m, m.charts[charts[i]], samples);
         progress::advance();

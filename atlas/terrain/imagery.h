@@ -97,20 +97,32 @@ std::string imageryFileName(uint32_t id);
 // spacing, each coarser level a [1 2 1]^2 / 16 filter of the finer one centred on its even
 // samples (integer, rounded), edge-clamped. Charts cut their levels out of these global images, so
 // two charts hold bit-identical colours on every shared border sample.
+// A chart grid's imagery: chartsX x chartsY charts of chartSize samples (the geometry's), on a
+// lattice refined by 2^scaleLog2.
+struct ImageryGrid {
+  uint32_t chartsX = 0, chartsY = 0;
+  uint32_t chartSize = 0;
+  uint32_t scaleLog2 = 0;
+};
+
+// A window of a chart grid's level-0 imagery samples: [x0, x0 + w) x [y0, y0 + h).
+struct ImageryWindow {
+  uint32_t x0 = 0, y0 = 0;
+  uint32_t w = 0, h = 0;
+};
+
 class ImageryPyramid {
  public:
   // chartsX x chartsY charts of chartSize samples (the geometry's); `levels` pyramid levels.
   ImageryPyramid(const ImageryRaster& raster, uint32_t chartsX, uint32_t chartsY, uint32_t chartSize,
                  uint32_t levels);
-  // The same pyramid over a window of the chart grid: level-0 samples [x0, x0 + w) x [y0, y0 + h)
-  // of the whole grid's base (the lattice edge-clamped to chartsX * intervals + 1 samples a
-  // side), given in `rgba` (w * h, row 0 south), with x0 and y0 multiples of 2^(levels - 1). Its
-  // charts are the whole pyramid's, bit for bit, for charts at least 2^(levels - 1) level-0
-  // samples inside the window on every side that is not the grid's edge (each coarser level's
-  // filter reads one sample past the window, which the window clamps: one wrong sample at its
-  // edge on every level).
-  ImageryPyramid(std::vector<PackedColour> rgba, uint32_t x0, uint32_t y0, uint32_t w, uint32_t h,
-                 uint32_t chartsX, uint32_t chartsY, uint32_t chartSize, uint32_t scaleLog2, uint32_t levels);
+  // The same pyramid of `grid` over `window` of its whole base (the lattice edge-clamped to
+  // chartsX * intervals + 1 samples a side), whose samples are given in `rgba` (w * h, row 0
+  // south), with x0 and y0 multiples of 2^(levels - 1). Its charts are the whole pyramid's, bit for
+  // bit, for charts at least 2^(levels - 1) level-0 samples inside the window on every side that is
+  // not the grid's edge (each coarser level's filter reads one sample past the window, which the
+  // window clamps: one wrong sample at its edge on every level).
+  ImageryPyramid(std::vector<PackedColour> rgba, const ImageryWindow& window, const ImageryGrid& grid, uint32_t levels);
   // Chart (gridX, gridY)'s attribute pyramid (colours only): level k has
   // (((chartSize - 1) << scaleLog2) >> k) + 1 samples per side.
   ChartPyramid chart(int32_t gridX, int32_t gridY) const;
@@ -147,11 +159,18 @@ struct ImageryWindowStats {
   uint64_t windowSamples = 0; // the most level-0 samples one window held
 };
 
+// How writeImageryChartsWindowed cuts the imagery into windows: within memoryBytes, and, for charts
+// the geometry builds in tiles of maxTile intervals (ChartTiling), in those tiles.
+struct ImageryWindowing {
+  uint64_t memoryBytes = 0;
+  uint32_t maxTile = kMaxChartTile;
+};
+
 // The same files as writeImageryCharts of the whole raster, byte for byte, window by window: each
 // window a block of charts with a margin of 2^(levels - 1) level-0 samples round it, reprojected
-// from `imagery` and filtered into its pyramid, within memoryBytes (at least one chart and its
-// margin), a quarter of it keeping reprojected tiles for the next windows. Throws InputError naming
-// the imagery when it does not overlap the DEM.
+// from `imagery` and filtered into its pyramid, within windowing.memoryBytes (at least one chart and
+// its margin), a quarter of it keeping reprojected tiles for the next windows. Throws InputError
+// naming the imagery when it does not overlap the DEM.
 // Charts the geometry builds in tiles (chartTiling(chartSize, blockIntervals, maxTile).tiled():
 // over maxTile + 1 samples) take their imagery in the same tiles, scaled by 2^scaleLog2: each
 // tile, with a margin of 2^coarseLevel level-0 samples, gives its levels below coarseLevel exactly
@@ -161,7 +180,7 @@ struct ImageryWindowStats {
 // tiles' order, then the coarse levels, whatever memoryBytes is.
 ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::string& source,
                                              const std::filesystem::path& dir, AtlasManifest& manifest,
-                                             uint64_t memoryBytes, ImageryWindowStats* windowStats = nullptr,
-                                             uint32_t maxTile = kMaxChartTile);
+                                             const ImageryWindowing& windowing,
+                                             ImageryWindowStats* windowStats = nullptr);
 
 }  // namespace gimlod

@@ -14,10 +14,11 @@ int64_t PlanetGrid::sourceRow(uint32_t y) const {
   return int64_t(y) - int64_t(southAdded);
 }
 
-PlanetGrid planPlanetGrid(const Georeference& georef, uint32_t W, uint32_t H, const std::filesystem::path& input,
-                          double radius, uint32_t chartIntervals, bool integerHeights) {
-  const auto& gt = georef.geotransform;
-  if (!georef.geographic)
+PlanetGrid planPlanetGrid(const PlanetSource& dem, const std::filesystem::path& input, double radius,
+                          uint32_t chartIntervals) {
+  const uint32_t W = dem.width, H = dem.height;
+  const auto& gt = dem.georef.geotransform;
+  if (!dem.georef.geographic)
     throw InputError(input.string() + ": --planet needs a DEM in longitude and latitude (a geographic reference "
                      "system, or an extent in degrees); this one is projected or has no georeference");
   if (!(gt[1] > 0.0) || gt[2] != 0.0 || gt[4] != 0.0 || gt[5] == 0.0 || W < 2 || H < 2)
@@ -26,7 +27,7 @@ PlanetGrid planPlanetGrid(const Georeference& georef, uint32_t W, uint32_t H, co
   PlanetGrid g;
   g.sourceWidth = W;
   g.sourceHeight = H;
-  g.round = integerHeights;
+  g.round = dem.integerHeights;
   PlanetInfo& p = g.info;
   p.present = true;
   p.radius = radius;

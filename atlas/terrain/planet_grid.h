@@ -39,12 +39,19 @@ struct PlanetGrid {
   int64_t sourceRow(uint32_t y) const;
 };
 
-// The plan for a DEM (its georeference, size, whether its heights are integers) in charts of
-// chartIntervals; the pole rows' means are set by setPoleMeans. Throws InputError naming `input`
-// for a DEM that is not in longitude and latitude.
-PlanetGrid planPlanetGrid(const Georeference& georef, uint32_t width, uint32_t height,
-                          const std::filesystem::path& input, double radius, uint32_t chartIntervals,
-                          bool integerHeights);
+// The DEM a planet grid is laid from: its georeference, its size, and whether its heights are
+// integers.
+struct PlanetSource {
+  const Georeference& georef;
+  uint32_t width = 0, height = 0;
+  bool integerHeights = false;
+};
+
+// The plan for a DEM on a planet of `radius` in charts of chartIntervals; the pole rows' means
+// (southMean, northMean) are left to the caller (poleRowMean). Throws InputError naming `input` for
+// a DEM that is not in longitude and latitude.
+PlanetGrid planPlanetGrid(const PlanetSource& dem, const std::filesystem::path& input, double radius,
+                          uint32_t chartIntervals);
 // The mean of a source row's valid heights (the distinct columns of a turn): a pole row's height.
 // Throws InputError naming `input` when none is valid.
 float poleRowMean(const PlanetGrid& g, const float* heights, const uint8_t* valid, const std::filesystem::path& input);

@@ -145,18 +145,19 @@ ChartPyramid buildChartPyramid(const DemRows& dem, int32_t gridX, int32_t gridY,
   if (dem.width <= 0 || dem.height <= 0 || dem.stride != 1 || dem.y0 > span[0] || dem.y0 + dem.rows < span[1] ||
       dem.x0 > reach[0] || dem.x0 + cols < reach[1])
     throw std::invalid_argument("buildChartPyramid: the window held does not cover the chart");
-  return buildPyramidLevels(dem, gridX * m, gridY * m, chartSize - 1, 0, uint32_t(std::countr_zero(chartSize - 1)),
+  return buildPyramidLevels(dem, {gridX * m, gridY * m, chartSize - 1}, 0, uint32_t(std::countr_zero(chartSize - 1)),
                             keepRing);
 }
 
-ChartPyramid buildPyramidLevels(const DemRows& dem, int64_t originX, int64_t originY, uint32_t intervals,
-                                uint32_t first, uint32_t last, bool keepRing) {
+ChartPyramid buildPyramidLevels(const DemRows& dem, const DemSquare& square, uint32_t first, uint32_t last,
+                                bool keepRing) {
+  const uint32_t intervals = square.intervals;
   if (!std::has_single_bit(intervals) || last > uint32_t(std::countr_zero(intervals)) || first > last ||
       (dem.stride > 1 && (!std::has_single_bit(uint64_t(dem.stride)) || dem.stride > (int64_t{1} << first))))
     throw std::invalid_argument("buildPyramidLevels: bad levels or lattice");
   HeightFieldFrame frame;
-  frame.originX = originX;
-  frame.originY = originY;
+  frame.originX = square.originX;
+  frame.originY = square.originY;
   frame.maxX = int64_t{dem.width} - 1;
   frame.maxY = int64_t{dem.height} - 1;
   frame.spacing = dem.spacing;
@@ -191,7 +192,7 @@ ChartPyramid buildPyramidLevels(const DemRows& dem, int64_t originX, int64_t ori
       ring = {};
     } else {
       p.normals[k].resize(size_t{s} * s);
-      heightFieldNormals(ring.data() + rs + 1, rs, 0, 0, s, s, k, frame, p.normals[k].data());
+      heightFieldNormals(ring.data() + rs + 1, rs, {k, 0, 0, s, s}, frame, p.normals[k].data());
     }
   }
   return p;
@@ -211,10 +212,10 @@ ChartTiling chartTiling(uint32_t chartSize, uint32_t blockIntervals, uint32_t ma
   return t;
 }
 
-std::array<int64_t, 4> tileSpan(const ChartTiling& t, uint32_t chartSize, int32_t gridX, int32_t gridY, uint32_t tx,
-                                uint32_t ty, int64_t width, int64_t height) {
-  const int64_t m = int64_t{chartSize} - 1, margin = t.margin();
-  const int64_t ox = gridX * m + int64_t{tx} * t.tile, oy = gridY * m + int64_t{ty} * t.tile;
+std::array<int64_t, 4> tileSpan(const TiledChart& c, uint32_t tx, uint32_t ty, int64_t width, int64_t height) {
+  const ChartTiling& t = c.tiling;
+  const int64_t m = int64_t{c.chartSize} - 1, margin = t.margin();
+  const int64_t ox = c.gridX * m + int64_t{tx} * t.tile, oy = c.gridY * m + int64_t{ty} * t.tile;
   auto span = [&](int64_t o, int64_t n) {
     const int64_t lo = std::clamp<int64_t>(o - margin, 0, n - 1);
     return std::array<int64_t, 2>{lo, std::clamp<int64_t>(o + t.tile + margin + 1, lo + 1, n)};
@@ -225,12 +226,19 @@ std::array<int64_t, 4> tileSpan(const ChartTiling& t, uint32_t chartSize, int32_
 
 namespace {
 
-// Codes level k's blocks of a pyramid whose level k has `side` samples a side and starts at block
-// (bx0, by0) of the chart's level, appending them to `out`.
-void codePyramidLevel(const ChartPyramid& p, uint32_t k, uint32_t side, uint32_t bx0, uint32_t by0,
-                      uint32_t blockIntervals, const ChartFileWriter& file, bool ring,
+// Where a pyramid's level goes in a chart file: its `side` samples a side start at block (bx0, by0)
+// of the file's level `level`.
+struct LevelSquare {
+  uint32_t level = 0, side = 0;
+  uint32_t bx0 = 0, by0 = 0;
+};
+
+// Codes the blocks of level sq.level of a pyramid for `file` (blocks of its blockIntervals),
+// appending them to `out`.
+void codePyramidLevel(const ChartPyramid& p, const LevelSquare& sq, const ChartFileWriter& file, bool ring,
                       std::vector<ChartFileWriter::CodedBlock>& out) {
-  const uint32_t b = std::min(blockIntervals, side - 1);
+  const uint32_t k = sq.level, side = sq.side, bx0 = sq.bx0, by0 = sq.by0;
+  const uint32_t b = std::min(file.blockIntervals(), side - 1);
   const uint32_t blocks = (side - 1) / b;
   const size_t rs = size_t{side} + 2;
   for (uint32_t by = 0; by < blocks; ++by)
@@ -248,31 +256,33 @@ void codePyramidLevel(const ChartPyramid& p, uint32_t k, uint32_t side, uint32_t
 
 }  // namespace
 
-std::vector<ChartFileWriter::CodedBlock> codeChartTile(const DemRows& dem, int32_t gridX, int32_t gridY,
-                                                       uint32_t chartSize, const ChartTiling& t, uint32_t tx,
+std::vector<ChartFileWriter::CodedBlock> codeChartTile(const DemRows& dem, const TiledChart& c, uint32_t tx,
                                                        uint32_t ty, const ChartFileWriter& file, bool ring) {
-  const int64_t m = int64_t{chartSize} - 1;
-  const ChartPyramid p = buildPyramidLevels(dem, gridX * m + int64_t{tx} * t.tile, gridY * m + int64_t{ty} * t.tile,
-                                            t.tile, 0, t.coarseLevel - 1, ring);
+  const ChartTiling& t = c.tiling;
+  const int64_t m = int64_t{c.chartSize} - 1;
+  const ChartPyramid p =
+      buildPyramidLevels(dem, {c.gridX * m + int64_t{tx} * t.tile, c.gridY * m + int64_t{ty} * t.tile, t.tile}, 0,
+                         t.coarseLevel - 1, ring);
   const uint32_t blockIntervals = file.blockIntervals();
   std::vector<ChartFileWriter::CodedBlock> out;
   for (uint32_t k = 0; k < t.coarseLevel; ++k) {
     const uint32_t perTile = (t.tile >> k) / blockIntervals;
-    codePyramidLevel(p, k, (t.tile >> k) + 1, tx * perTile, ty * perTile, blockIntervals, file, ring, out);
+    codePyramidLevel(p, {k, (t.tile >> k) + 1, tx * perTile, ty * perTile}, file, ring, out);
   }
   return out;
 }
 
-void writeChartCoarseLevels(const DemRows& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
-                            const ChartTiling& t, ChartFileWriter& file, bool ring) {
-  const int64_t m = int64_t{chartSize} - 1;
-  const uint32_t last = uint32_t(std::countr_zero(chartSize - 1));
+void writeChartCoarseLevels(const DemRows& dem, const TiledChart& c, ChartFileWriter& file, bool ring) {
+  const ChartTiling& t = c.tiling;
+  const int64_t m = int64_t{c.chartSize} - 1;
+  const uint32_t last = uint32_t(std::countr_zero(c.chartSize - 1));
   if (t.coarseLevel > last) return;
-  const ChartPyramid p = buildPyramidLevels(dem, gridX * m, gridY * m, chartSize - 1, t.coarseLevel, last, ring);
+  const ChartPyramid p =
+      buildPyramidLevels(dem, {c.gridX * m, c.gridY * m, c.chartSize - 1}, t.coarseLevel, last, ring);
   std::vector<ChartFileWriter::CodedBlock> blocks;
   for (uint32_t k = t.coarseLevel; k <= last; ++k) {
     blocks.clear();
-    codePyramidLevel(p, k, uint32_t(m >> k) + 1, 0, 0, file.blockIntervals(), file, ring, blocks);
+    codePyramidLevel(p, {k, uint32_t(m >> k) + 1, 0, 0}, file, ring, blocks);
     for (const auto& b : blocks) file.append(b);
   }
 }
@@ -286,8 +296,9 @@ std::unique_ptr<ChartFileWriter> openTerrainChart(const fs::path& path, const At
     frame = HeightFieldFrame{c.gridX * m, c.gridY * m, int64_t{manifest.samplesX} - 1, int64_t{manifest.samplesY} - 1,
                              manifest.spacing, manifest.planet.wrapColumns > 0};
   }
-  return std::make_unique<ChartFileWriter>(path, chartSize, o.blockIntervals, uint32_t(std::countr_zero(chartSize - 1)) + 1,
-                                           (1u << kChannelHeights) | (1u << kChannelNormals), o.coding, frame);
+  const ChartFileShape shape{chartSize, o.blockIntervals, uint32_t(std::countr_zero(chartSize - 1)) + 1,
+                             (1u << kChannelHeights) | (1u << kChannelNormals)};
+  return std::make_unique<ChartFileWriter>(path, shape, o.coding, frame);
 }
 
 void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& options,
@@ -356,8 +367,8 @@ TiledChartWriter::~TiledChartWriter() = default;
 void TiledChartWriter::writeTile(const DemRows& dem, uint32_t chart, uint32_t tx, uint32_t ty) {
   const ChartInfo& c = manifest_.charts.at(chart);
   Chart& out = *charts_[chart];
-  std::vector<ChartFileWriter::CodedBlock> blocks =
-      codeChartTile(dem, c.gridX, c.gridY, manifest_.chartSize, tiling_, tx, ty, *out.file, options_.coding.compressed);
+  std::vector<ChartFileWriter::CodedBlock> blocks = codeChartTile(dem, {c.gridX, c.gridY, manifest_.chartSize, tiling_},
+                                                                  tx, ty, *out.file, options_.coding.compressed);
   const std::lock_guard<std::mutex> lock(out.mutex);
   out.waiting.emplace(ty * tiling_.tilesPerSide + tx, std::move(blocks));
   for (auto it = out.waiting.begin(); it != out.waiting.end() && it->first == out.next; it = out.waiting.erase(it)) {
@@ -373,7 +384,7 @@ uint64_t TiledChartWriter::finish(const DemRows& coarse) {
     Chart& out = *charts_[i];
     if (out.next != tiling_.tilesPerSide * tiling_.tilesPerSide)
       throw std::logic_error("TiledChartWriter: chart " + std::to_string(i) + " lacks tiles");
-    writeChartCoarseLevels(coarse, c.gridX, c.gridY, manifest_.chartSize, tiling_, *out.file,
+    writeChartCoarseLevels(coarse, {c.gridX, c.gridY, manifest_.chartSize, tiling_}, *out.file,
                            options_.coding.compressed);
     bytes += out.file->commit();
     out.file.reset();

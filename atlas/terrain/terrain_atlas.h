@@ -87,12 +87,17 @@ std::array<int64_t, 2> chartRowSpan(int64_t gridY, uint32_t chartSize, int64_t h
 ChartPyramid buildChartPyramid(const DemRows& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
                                bool keepRing = false);
 
-// Levels [first, last] of the pyramid of the square of `intervals` level-0 intervals a side whose
-// sample (0, 0) is DEM sample (originX, originY): level k has (intervals >> k) + 1 samples a side;
+// A square of a DEM: `intervals` level-0 intervals a side, its sample (0, 0) at DEM sample
+// (originX, originY).
+struct DemSquare {
+  int64_t originX = 0, originY = 0;
+  uint32_t intervals = 0;
+};
+// Levels [first, last] of the pyramid of `square`: level k has (intervals >> k) + 1 samples a side;
 // the levels before `first` are left empty. As buildChartPyramid, of which it is the general form
 // (a tile of a chart, or a chart's coarse levels from a lattice).
-ChartPyramid buildPyramidLevels(const DemRows& dem, int64_t originX, int64_t originY, uint32_t intervals,
-                                uint32_t first, uint32_t last, bool keepRing = false);
+ChartPyramid buildPyramidLevels(const DemRows& dem, const DemSquare& square, uint32_t first, uint32_t last,
+                                bool keepRing = false);
 
 // A chart too large to build whole in memory is built in tiles of `tile` level-0 intervals a side:
 // a tile holds the levels whose blocks lie inside it (levels below coarseLevel), read from the DEM
@@ -110,18 +115,22 @@ inline constexpr uint32_t kMaxChartTile = 2048;
 // The tiling of charts of chartSize with blocks of blockIntervals: tiles of min(chartSize - 1,
 // maxTile) intervals (maxTile a power of two, at least 2 * blockIntervals).
 ChartTiling chartTiling(uint32_t chartSize, uint32_t blockIntervals, uint32_t maxTile = kMaxChartTile);
-// The DEM samples tile (tx, ty) of chart (gridX, gridY) reads, clamped to the DEM: {x0, y0, x1, y1}.
-std::array<int64_t, 4> tileSpan(const ChartTiling& t, uint32_t chartSize, int32_t gridX, int32_t gridY, uint32_t tx,
-                                uint32_t ty, int64_t width, int64_t height);
-// Codes the blocks of tile (tx, ty) of chart (gridX, gridY) (levels below coarseLevel) for `file`,
-// from `dem` (which must hold the tile's span), in the file's order (levels, then rows of blocks).
-std::vector<ChartFileWriter::CodedBlock> codeChartTile(const DemRows& dem, int32_t gridX, int32_t gridY,
-                                                       uint32_t chartSize, const ChartTiling& t, uint32_t tx,
+// Chart (gridX, gridY) of chartSize samples a side, built in tiles.
+struct TiledChart {
+  int32_t gridX = 0, gridY = 0;
+  uint32_t chartSize = 0;
+  ChartTiling tiling;
+};
+// The DEM samples tile (tx, ty) of chart c reads, clamped to the DEM of width x height:
+// {x0, y0, x1, y1}.
+std::array<int64_t, 4> tileSpan(const TiledChart& c, uint32_t tx, uint32_t ty, int64_t width, int64_t height);
+// Codes the blocks of tile (tx, ty) of chart c (levels below coarseLevel) for `file`, from `dem`
+// (which must hold the tile's span), in the file's order (levels, then rows of blocks).
+std::vector<ChartFileWriter::CodedBlock> codeChartTile(const DemRows& dem, const TiledChart& c, uint32_t tx,
                                                        uint32_t ty, const ChartFileWriter& file, bool ring);
-// Writes the levels from coarseLevel up of chart (gridX, gridY) to `file`, from `dem` (the whole
-// DEM, or its lattice at stride 2^coarseLevel).
-void writeChartCoarseLevels(const DemRows& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
-                            const ChartTiling& t, ChartFileWriter& file, bool ring);
+// Writes the levels from coarseLevel up of chart c to `file`, from `dem` (the whole DEM, or its
+// lattice at stride 2^coarseLevel).
+void writeChartCoarseLevels(const DemRows& dem, const TiledChart& c, ChartFileWriter& file, bool ring);
 // A tiled chart's file, opened for writing (the manifest's chart fields filled): a compressed
 // height field derives its normals.
 std::unique_ptr<ChartFileWriter> openTerrainChart(const std::filesystem::path& path, const AtlasManifest& manifest,

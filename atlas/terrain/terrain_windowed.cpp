@@ -109,14 +109,25 @@ float storedOf(float h, const WindowedTerrainResult& r, bool compressed) {
   return compressed ? storedHeight(h, r.heightPrecision) : h;
 }
 
+// How tiled charts are built window by window: the atlas's options (the heights' step set), the
+// tiling, and the memory the windows and the tiles in flight may use.
+struct TiledWindows {
+  TerrainAtlasOptions atlas;
+  ChartTiling tiling;
+  uint64_t budget = 0;
+};
+
 // The tiled charts of a DEM held in the scratch raster: rows of tiles across the selected charts,
 // in groups of tiles from the window they read, then every selected chart's coarse levels from the
 // DEM's lattice (gathered from the windows as they pass; the points the windows did not hold, the
 // lattice a chart's coarse normals reach into round it, read a scratch tile at a time). Returns the
 // files' bytes.
 uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& dir, const AtlasManifest& manifest,
-                                  const std::vector<uint8_t>& selected, const TerrainAtlasOptions& atlas,
-                                  const ChartTiling& tiling, uint64_t budget, WindowedTerrainResult& r) {
+                                  const std::vector<uint8_t>& selected, const TiledWindows& plan,
+                                  WindowedTerrainResult& r) {
+  const TerrainAtlasOptions& atlas = plan.atlas;
+  const ChartTiling& tiling = plan.tiling;
+  const uint64_t budget = plan.budget;
   const int64_t width = manifest.samplesX, height = manifest.samplesY;
   const uint32_t cs = manifest.chartSize, tps = tiling.tilesPerSide;
   const uint64_t tilesX = uint64_t(manifest.chartsX) * tps;
@@ -146,9 +157,9 @@ uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& 
         for (uint64_t g0 = uint64_t(run[0]) * tps; g0 < uint64_t(run[1]) * tps; g0 += groupTiles) {
           const uint64_t g1 = std::min(g0 + groupTiles, uint64_t(run[1]) * tps);
           const auto first =
-              tileSpan(tiling, cs, int32_t(g0 / tps), int32_t(chartY), uint32_t(g0 % tps), ty, width, height);
-          const auto last =
-              tileSpan(tiling, cs, int32_t((g1 - 1) / tps), int32_t(chartY), uint32_t((g1 - 1) % tps), ty, width, height);
+              tileSpan({int32_t(g0 / tps), int32_t(chartY), cs, tiling}, uint32_t(g0 % tps), ty, width, height);
+          const auto last = tileSpan({int32_t((g1 - 1) / tps), int32_t(chartY), cs, tiling}, uint32_t((g1 - 1) % tps),
+                                     ty, width, height);
           // Round a planet, the first and last tiles' margins lie past the antimeridian.
           const CellWindow w{wrap && g0 == 0 ? -int64_t(margin) : first[0], first[1],
                              wrap && g1 == tilesX ? width + int64_t(margin) : last[2], last[3]};
@@ -376,7 +387,7 @@ void writeTerrainChartWindows(const ScratchRaster& scratch, const fs::path& dir,
   const ChartTiling tiling =
       options.chartTile ? chartTiling(cs, atlas.blockIntervals, std::max(options.chartTile, 2 * atlas.blockIntervals)) : windowTiling(cs, atlas.blockIntervals, budget);
   if (tiling.tiled()) {
-    r.charts.bytesOnDisk = writeTiledChartsWindowed(scratch, dir, manifest, selected, atlas, tiling, budget, r);
+    r.charts.bytesOnDisk = writeTiledChartsWindowed(scratch, dir, manifest, selected, {atlas, tiling, budget}, r);
     r.charts.charts = count;
     r.charts.samples = width * height;
     for (uint32_t k = 0; k <= manifest.intervalsLog2(); ++k) r.charts.storedSamples += ((m >> k) + 1) * ((m >> k) + 1);
@@ -408,7 +419,8 @@ void writeTerrainChartWindows(const ScratchRaster& scratch, const fs::path& dir,
   const progress::ProgressStage stage("charts", count);
   for (uint32_t gy = 0; gy < manifest.chartsY; ++gy) {
     const auto rowSpan = chartRowSpan(gy, cs, int64_t(height));
-    for (const auto& [g0, g1] : selectedRuns(selected, manifest.chartsX, gy, groupColumns)) {
+    for (const auto& run : selectedRuns(selected, manifest.chartsX, gy, groupColumns)) {
+      const uint32_t g0 = run[0], g1 = run[1];  // (named: clang before 16 cannot capture a structured binding)
       // Round a planet, the charts at the antimeridian read a chart past it.
       const int64_t x0 = wrap && g0 == 0 ? -int64_t(m) : chartRowSpan(g0, cs, int64_t(width))[0];
       const int64_t x1 = wrap && g1 == manifest.chartsX ? int64_t(width + m) : chartRowSpan(g1 - 1, cs, int64_t(width))[1];

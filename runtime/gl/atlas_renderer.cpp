@@ -85,8 +85,9 @@ PageMips pagePoolMips(const RendererSetup& setup, uint32_t samplesPerSide, const
   const uint32_t side = (1u << setup.pageIntervalsLog2) + 1;
   const uint32_t colourSide = ((side - 1) << setup.colourScaleLog2) + 1;
   const bool withColours = colours && setup.colours;
-  return pageMips(normals, samplesPerSide, side, mipLevels(side), withColours ? colours : nullptr,
-                  ((samplesPerSide - 1) << setup.colourScaleLog2) + 1, colourSide, mipLevels(colourSide));
+  return pageMips({normals, samplesPerSide, side, mipLevels(side)},
+                  {withColours ? colours : nullptr, ((samplesPerSide - 1) << setup.colourScaleLog2) + 1, colourSide,
+                   mipLevels(colourSide)});
 }
 
 uint64_t pagePoolMipBytes(const RendererSetup& setup) {

@@ -261,8 +261,8 @@ uint64_t windowDifferences(const ImageryRaster& raster, const ImageryPyramid& wh
     for (uint32_t x = x0; x < x1; ++x)
       base[size_t(y - y0) * (x1 - x0) + (x - x0)] =
           raster.rgba[size_t(std::min(y, raster.height - 1)) * raster.width + std::min(x, raster.width - 1)];
-  const ImageryPyramid window(std::move(base), x0, y0, x1 - x0, y1 - y0, chartsX, chartsY, chartSize,
-                              raster.scaleLog2, levels);
+  const ImageryPyramid window(std::move(base), {x0, y0, x1 - x0, y1 - y0},
+                              {chartsX, chartsY, chartSize, raster.scaleLog2}, levels);
   const ChartPyramid a = whole.chart(gridX, gridY), b = window.chart(gridX, gridY);
   uint64_t differ = 0;
   for (uint32_t k = 0; k < levels; ++k)
@@ -286,8 +286,8 @@ TEST(ImageryPyramid, AWindowWithItsMarginGivesTheWholePyramidsCharts) {
     }
   EXPECT_GT(shortDifferences, 0u) << "a window without a margin gave every chart exactly";
   // A window that does not hold the chart is refused.
-  const ImageryPyramid corner(std::vector<PackedColour>(size_t(49) * 49), 0, 0, 49, 49, chartsX, chartsY, chartSize,
-                              raster.scaleLog2, levels);
+  const ImageryPyramid corner(std::vector<PackedColour>(size_t(49) * 49), {0, 0, 49, 49},
+                              {chartsX, chartsY, chartSize, raster.scaleLog2}, levels);
   EXPECT_THROW(corner.chart(2, 0), std::invalid_argument);
 }
 
@@ -311,7 +311,7 @@ TEST_F(ImageryTest, WindowByWindowWritesTheWholeRastersFiles) {
   ImageryWindowStats ws;
   // 8 x 8 charts of 128 intervals and their margins in 3/4 of 24 MiB: (8 * 128 + 2 * 128 + 1)^2
   // x 10 bytes; the rest keeps one reprojected tile.
-  writeImageryChartsWindowed(source, "imagery", dir_.path() / "windows", b, 24u << 20, &ws);
+  writeImageryChartsWindowed(source, "imagery", dir_.path() / "windows", b, {24u << 20}, &ws);
   std::printf("  %zu charts, %u x %u imagery samples: %llu windows of at most %llu samples\n", a.charts.size(),
               raster.width, raster.height, (unsigned long long)ws.windows, (unsigned long long)ws.windowSamples);
   EXPECT_EQ(ws.windows, 4u);
@@ -347,7 +347,7 @@ TEST_F(ImageryTest, TiledChartsTakeTheWholePyramidsColours) {
   ImagerySource source(*dem_, rainier(), o);
   ImageryWindowStats ws;
   // A quarter of 256 MiB keeps every reprojected tile of the 2401^2 lattice.
-  writeImageryChartsWindowed(source, "imagery", dir_.path() / "tiles", a, 256u << 20, &ws, 64);
+  writeImageryChartsWindowed(source, "imagery", dir_.path() / "tiles", a, {256u << 20, 64}, &ws);
   EXPECT_EQ(ws.windows, uint64_t(a.chartsX) * a.chartsY * 16);
   EXPECT_EQ(a.imagery.coverage, raster.coverage);
   const ImageryPyramid whole(raster, a.chartsX, a.chartsY, a.chartSize, a.pyramidLevels());

@@ -49,7 +49,7 @@ float at(const DemRaster& d, uint32_t x, uint32_t y) { return d.heights[size_t(y
 
 // The planet lattice of an in-memory DEM, row by row as DemSource lays it.
 PlanetInfo preparePlanetGrid(DemRaster& d, const std::filesystem::path& input, double radius, uint32_t m) {
-  PlanetGrid g = planPlanetGrid(d.georef, d.width, d.height, input, radius, m, d.integerHeights);
+  PlanetGrid g = planPlanetGrid({d.georef, d.width, d.height, d.integerHeights}, input, radius, m);
   const std::vector<uint8_t> valid(d.heights.size(), 1);
   g.southMean = poleRowMean(g, &d.heights[size_t(g.southMeanRow) * d.width], valid.data(), input);
   g.northMean = poleRowMean(g, &d.heights[size_t(g.northMeanRow) * d.width], valid.data(), input);

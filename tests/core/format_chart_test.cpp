@@ -155,7 +155,7 @@ TEST(FormatChart, BlocksWrittenInAnyOrderReadBackTheSame) {
                    shuffled = tmp.path() / "shuffled.bin";
     writeChartFile(whole, p, cs, bi, coding);
     {
-      ChartFileWriter w(ordered, cs, bi, levels, mask, coding);
+      ChartFileWriter w(ordered, {cs, bi, levels, mask}, coding);
       for (const Block& b : blocks) w.writeBlock(b.level, b.bx, b.by, data(b));
       const uint64_t bytes = w.commit();
       EXPECT_EQ(bytes, fs::file_size(ordered));
@@ -164,7 +164,7 @@ TEST(FormatChart, BlocksWrittenInAnyOrderReadBackTheSame) {
     std::vector<Block> order = blocks;
     std::shuffle(order.begin(), order.end(), std::mt19937(5));
     {
-      ChartFileWriter w(shuffled, cs, bi, levels, mask, coding);
+      ChartFileWriter w(shuffled, {cs, bi, levels, mask}, coding);
       std::atomic<size_t> next{0};
       std::vector<std::thread> threads;
       for (int t = 0; t < 3; ++t)
@@ -191,7 +191,7 @@ TEST(FormatChart, BlocksWrittenInAnyOrderReadBackTheSame) {
   }
   {
     const fs::path partial = tmp.path() / "partial.bin";
-    ChartFileWriter w(partial, cs, bi, levels, mask, {});
+    ChartFileWriter w(partial, {cs, bi, levels, mask}, {});
     for (size_t i = 1; i < blocks.size(); ++i) w.writeBlock(blocks[i].level, blocks[i].bx, blocks[i].by, data(blocks[i]));
     EXPECT_THROW(w.commit(), std::logic_error);
   }

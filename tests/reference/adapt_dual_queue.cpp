@@ -308,7 +308,7 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   view_ = view;
   opt_ = options;
   ++frameNo_;
-  selectRootGroups(h_, view, options.maxNodes, options.tolerancePx, options.frustumCull, groups_);
+  selectRootGroups(h_, {view, options.tolerancePx, options.frustumCull}, options.maxNodes, groups_);
   // Every root counts as a node in the partition; the closed groups' roots count once a group in
   // the returned cut.
   const uint32_t chartBudget = groups_.chartBudget(options.maxNodes);
