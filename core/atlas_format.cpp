@@ -1391,8 +1391,11 @@ StagedDirectory::StagedDirectory(const std::filesystem::path& target, const std:
     throw InputError(target_.string() + ": exists and is not a directory");
   if (fs::is_directory(target_, ec) && !fs::is_empty(target_, ec) && !fs::exists(target_ / markerFile, ec))
     throw InputError(target_.string() + ": exists, is not empty and is not a gimlod " + what_ + "; not replacing it");
-  if (!fs::is_directory(target_.parent_path(), ec))
-    throw InputError(target_.string() + ": parent directory does not exist");
+  // Missing parent folders are made, as `render -o` and `bench -o` make theirs.
+  if (!fs::is_directory(target_.parent_path(), ec) &&
+      (!fs::create_directories(target_.parent_path(), ec) || !fs::is_directory(target_.parent_path(), ec)))
+    throw InputError(target_.string() + ": cannot create its parent directory" +
+                     (ec ? ": " + ec.message() : std::string()));
   // A build killed by a signal (Ctrl-C, timeout, the OOM killer) cannot remove its staging
   // directory: remove those of processes that no longer exist before staging anew.
   {

@@ -191,7 +191,8 @@ class AtomicFileWriter {
 // directory; removed unless committed, when it is renamed onto the target (replacing an earlier
 // output, which is restored if the rename fails). The target must not exist, be empty, or hold
 // `markerFile` (an earlier output of the same kind); anything else is refused. `what` names the
-// kind in messages ("atlas", "grid"). Throws InputError naming the target.
+// kind in messages ("atlas", "grid"). Missing parent directories are made. Throws InputError naming
+// the target.
 class StagedDirectory {
  public:
   StagedDirectory(const std::filesystem::path& target, const std::string& markerFile, const std::string& what);

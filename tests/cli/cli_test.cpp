@@ -199,6 +199,14 @@ TEST_F(CliTest, UnwritableOutput) {
   EXPECT_TRUE(fs::exists(dir_.path() / "mine/keep.txt"));
 }
 
+// An output in folders that do not exist yet is built there, the folders made (as `render -o`
+// makes its folder): a fresh clone runs `build ... -o out/x.atlas` before out/ exists.
+TEST_F(CliTest, MissingOutputFoldersAreMade) {
+  const fs::path out = dir_.path() / "not" / "yet" / "rainier.atlas";
+  ASSERT_EQ(build(dem(), out), 0) << output_;
+  EXPECT_TRUE(fs::is_regular_file(out / "atlas.json")) << output_;
+}
+
 TEST_F(CliTest, MissingInputAndBadRenderOptions) {
   EXPECT_NE(build(dir_.path() / "nope.tif", dir_.path() / "a.atlas"), 0);
   EXPECT_NE(output_.find("nope.tif"), std::string::npos) << output_;
