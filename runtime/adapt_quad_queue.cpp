@@ -867,15 +867,6 @@ struct QuadQueueAdapter::State {
       }
       return nullptr;
     };
-    auto splitTop = [&]() -> Entry* {
-      while (!splitH.empty()) {
-        const Item& t = splitH.front();
-        Entry* f = cut.find(t.key);
-        if (f && f->drawn && f->resLog2 == t.resLog2 && f->mergedRound != r && !reservedNow(f->id)) return f;
-        heapPop(splitH);
-      }
-      return nullptr;
-    };
     auto afterMerge = [&](const NodeId& p) {
       if (p.level == 0) return;
       const NodeId pp = p.parent();
@@ -924,7 +915,7 @@ struct QuadQueueAdapter::State {
         break;
       }
       if (capped()) break;
-      Entry* s = splitTop();
+      Entry* s = splitTop(r);
       if (m && -m->priority <= 0.0) {  // free merge: no triangles added at the local errors
         const NodeId p = keyToNode(m->key);
         if (!s || !(s->id.level > 0 && s->id.parent() == p)) {
@@ -969,7 +960,22 @@ struct QuadQueueAdapter::State {
     }
     for (const Item& it : mergeAside) heapPush(mergeH, it);
     if (mandatoryOnly) return changed;
-    // Split: the reserved splits, then any further split that still fits.
+    return phase2Splits(reservedOrder, r, nodeBudget_, triBudget) || changed;
+  }
+  // Phase 2's valid split top: a drawn node as it was queued, not merged in round r nor reserved.
+  Entry* splitTop(uint32_t r) {
+    while (!splitH.empty()) {
+      const Item& t = splitH.front();
+      Entry* f = cut.find(t.key);
+      if (f && f->drawn && f->resLog2 == t.resLog2 && f->mergedRound != r && !reservedNow(f->id)) return f;
+      heapPop(splitH);
+    }
+    return nullptr;
+  }
+  // Phase 2's splits in round r: the reserved splits (in their order), then any further split that
+  // still fits the node and triangle budgets. Returns whether any was made.
+  bool phase2Splits(const std::vector<Item>& reservedOrder, uint32_t r, int64_t nodeLimit, int64_t triBudget) {
+    bool changed = false;
     ++reserveMark;
     for (const Item& it : reservedOrder) {
       const Entry* f = cut.find(it.key);
@@ -978,11 +984,11 @@ struct QuadQueueAdapter::State {
       changed = true;
     }
     while (!capped()) {
-      Entry* s = splitTop();
+      Entry* s = splitTop(r);
       if (!s) break;
       const Item it = heapPop(splitH);
       const int64_t d = drawnDelta(s->id);
-      if (int64_t(drawn) + d > nodeBudget_ || int64_t(floorTrisNow()) + d * int64_t(tris(minResLog2())) > triBudget) {
+      if (int64_t(drawn) + d > nodeLimit || int64_t(floorTrisNow()) + d * int64_t(tris(minResLog2())) > triBudget) {
         splitAside.push_back(it);
         continue;
       }

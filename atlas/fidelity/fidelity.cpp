@@ -494,110 +494,196 @@ struct Pending {
   uint64_t unresolved = 0;  // more than could be held: counted at the margin
 };
 
-}  // namespace
+// A block's share of one surface: its triangles near the block (within the margin), and its samples
+// in the block.
+struct BlockSurface {
+  std::vector<FloatTriangle> tris;
+  std::vector<Point> samples;
+};
 
-FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, const std::filesystem::path& atlasDir,
-                                       const OutOfCoreFidelityOptions& options) {
-  namespace fs = std::filesystem;
-  const auto t0 = std::chrono::steady_clock::now();
-  if (!(options.marginFraction > 0.0 && options.marginFraction < 1.0) || options.memoryBytes < (16u << 20))
-    throw std::invalid_argument("measureFidelityOutOfCore: the margin must be in (0, 1) and the memory at least 16 MiB");
-  const GridManifest gm = readGridManifest(gridDir);
-  const AtlasManifest am = readManifest(atlasDir);
-  if (am.kind != AtlasKind::Geometry)
-    throw InputError((atlasDir / kManifestName).string() + ": a " + atlasKindName(am.kind) +
-                     " atlas, not a geometry atlas");
-  if (gm.triangles == 0 || gm.bounds.empty() || am.charts.empty())
-    throw std::invalid_argument("measureFidelityOutOfCore: a surface has no triangles");
-  FidelityStats st;
-  {
+// One out-of-core measure (measureFidelityOutOfCore): the two surfaces on disk, where their parts
+// lie, the blocks of cells they are measured in, and each side's figures so far. Its steps: survey
+// the surfaces, choose the blocks, measure block by block, then resolve the samples left pending.
+class OutOfCoreMeasure {
+ public:
+  OutOfCoreMeasure(const std::filesystem::path& gridDir, const std::filesystem::path& atlasDir, const GridManifest& gm,
+                   const AtlasManifest& am, const OutOfCoreFidelityOptions& options)
+      : gridDir_(gridDir), atlasDir_(atlasDir), gm_(gm), am_(am), options_(options) {
     const glm::vec3 e = gm.bounds.max - gm.bounds.min;
-    st.diagonal = std::sqrt(double(e.x) * e.x + double(e.y) * e.y + double(e.z) * e.z);
+    st_.diagonal = std::sqrt(double(e.x) * e.x + double(e.y) * e.y + double(e.z) * e.z);
+    margin_ = options.marginFraction * st_.diagonal;
   }
-  const double margin = options.marginFraction * st.diagonal;
-  auto chartPath = [&](uint32_t c) { return atlasDir / am.charts[c].file; };
+
+  FidelityStats run(std::chrono::steady_clock::time_point t0) {
+    survey();
+    chooseBlocks();
+    pendingCap_ = options_.memoryBytes / 4 / (2 * sizeof(Point) + sizeof(double));
+    for (uint32_t bz = 0; bz < bd_[2]; ++bz)
+      for (uint32_t by = 0; by < bd_[1]; ++by)
+        for (uint32_t bx = 0; bx < bd_[0]; ++bx) measureBlock({bx, by, bz});
+    resolvePending();
+    return finish(t0);
+  }
+
+ private:
+  std::filesystem::path chartPath(uint32_t c) const { return atlasDir_ / am_.charts[c].file; }
   // A chart's finest samples (ChartInfo::finestLevel), am.chartFileSize(c) a side.
-  auto readChart = [&](uint32_t c) {
+  std::vector<glm::vec3> readChart(uint32_t c) const {
     const ChartFileReader reader(chartPath(c));
     if (!reader.hasChannel(kChannelPositions))
       throw InputError(chartPath(c).string() + ": no positions in a geometry atlas chart");
-    if (reader.chartSize() != am.chartFileSize(c))
+    if (reader.chartSize() != am_.chartFileSize(c))
       throw InputError(chartPath(c).string() + ": chart size differs from the manifest's");
     return reader.readLevelPositions(0);
-  };
+  }
   // Points go to the cell holding them, clamped into the grid (as GridManifest::cellOf places a
   // centroid), and so to exactly one block.
-  auto cellAxis = [&](double x, int a) {
-    const double c = std::floor((x - gm.origin[a]) / gm.cellSize[a]);
-    return c <= 0 ? 0u : c >= gm.dims[a] - 1 ? gm.dims[a] - 1 : static_cast<uint32_t>(c);
-  };
-  auto cellIdOf = [&](double x, double y, double z) {
-    return gm.cellId({cellAxis(x, 0), cellAxis(y, 1), cellAxis(z, 2)});
-  };
+  uint32_t cellAxis(double x, int a) const {
+    const double c = std::floor((x - gm_.origin[a]) / gm_.cellSize[a]);
+    return c <= 0 ? 0u : c >= gm_.dims[a] - 1 ? gm_.dims[a] - 1 : static_cast<uint32_t>(c);
+  }
+  uint32_t cellIdOf(double x, double y, double z) const {
+    return gm_.cellId({cellAxis(x, 0), cellAxis(y, 1), cellAxis(z, 2)});
+  }
+  uint32_t blockOf(double x, double y, double z) const {
+    return cellAxis(x, 0) / g_ + bd_[0] * (cellAxis(y, 1) / g_ + bd_[1] * (cellAxis(z, 2) / g_));
+  }
 
   // What is where: the box of every cell's triangles, and of every chart's samples; the atlas
   // samples in every cell (to size the blocks).
-  std::vector<FloatBox> cellBoxes(gm.cells.size(), emptyBox()), chartBoxes(am.charts.size(), emptyBox());
-  const uint64_t gridCells = uint64_t(gm.dims[0]) * gm.dims[1] * gm.dims[2];
-  std::vector<std::atomic<uint64_t>> atlasInCell(gridCells);
-  tbb::parallel_for(size_t(0), gm.cells.size(), [&](size_t i) {
-    for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[i])) extend(cellBoxes[i], boxOf(floatTriangle(t)));
-  });
-  tbb::parallel_for(uint32_t(0), uint32_t(am.charts.size()), [&](uint32_t c) {
-    const std::vector<glm::vec3> P = readChart(c);
-    std::vector<uint32_t> cells(P.size());
-    for (size_t i = 0; i < P.size(); ++i) {
-      extend(chartBoxes[c], P[i]);
-      cells[i] = cellIdOf(P[i].x, P[i].y, P[i].z);
-    }
-    std::sort(cells.begin(), cells.end());
-    for (size_t i = 0; i < cells.size();) {
-      size_t j = i;
-      while (j < cells.size() && cells[j] == cells[i]) ++j;
-      atlasInCell[cells[i]] += j - i;
-      i = j;
-    }
-  });
+  void survey() {
+    cellBoxes_.assign(gm_.cells.size(), emptyBox());
+    chartBoxes_.assign(am_.charts.size(), emptyBox());
+    gridCells_ = uint64_t(gm_.dims[0]) * gm_.dims[1] * gm_.dims[2];
+    atlasInCell_ = std::vector<std::atomic<uint64_t>>(gridCells_);
+    tbb::parallel_for(size_t(0), gm_.cells.size(), [&](size_t i) {
+      for (const MeshTriangle& t : readCell(gridDir_, gm_, gm_.cells[i]))
+        extend(cellBoxes_[i], boxOf(floatTriangle(t)));
+    });
+    tbb::parallel_for(uint32_t(0), uint32_t(am_.charts.size()), [&](uint32_t c) {
+      const std::vector<glm::vec3> P = readChart(c);
+      std::vector<uint32_t> cells(P.size());
+      for (size_t i = 0; i < P.size(); ++i) {
+        extend(chartBoxes_[c], P[i]);
+        cells[i] = cellIdOf(P[i].x, P[i].y, P[i].z);
+      }
+      std::sort(cells.begin(), cells.end());
+      for (size_t i = 0; i < cells.size();) {
+        size_t j = i;
+        while (j < cells.size() && cells[j] == cells[i]) ++j;
+        atlasInCell_[cells[i]] += j - i;
+        i = j;
+      }
+    });
+  }
 
-  // Blocks of g^3 cells: the largest g whose fullest block (with its margin) fits the memory.
-  std::vector<uint64_t> cellCost(gridCells, 0);
-  for (size_t i = 0; i < gm.cells.size(); ++i) cellCost[gm.cells[i].id] = gm.cells[i].triangles * kBytesPerMeshTriangle;
-  for (uint64_t c = 0; c < gridCells; ++c) cellCost[c] += atlasInCell[c] * kBytesPerAtlasSample;
-  const uint32_t maxDim = std::max({gm.dims[0], gm.dims[1], gm.dims[2]});
-  auto blockDims = [&](uint32_t g) {
-    return std::array<uint32_t, 3>{(gm.dims[0] + g - 1) / g, (gm.dims[1] + g - 1) / g, (gm.dims[2] + g - 1) / g};
-  };
-  auto fullestBlock = [&](uint32_t g) {
+  std::array<uint32_t, 3> blockDims(uint32_t g) const {
+    return std::array<uint32_t, 3>{(gm_.dims[0] + g - 1) / g, (gm_.dims[1] + g - 1) / g, (gm_.dims[2] + g - 1) / g};
+  }
+  // The estimated working memory of the fullest block of g^3 cells, its margin included.
+  double fullestBlock(uint32_t g) const {
     const std::array<uint32_t, 3> bd = blockDims(g);
     std::vector<uint64_t> cost(size_t(bd[0]) * bd[1] * bd[2], 0);
-    for (uint32_t z = 0; z < gm.dims[2]; ++z)
-      for (uint32_t y = 0; y < gm.dims[1]; ++y)
-        for (uint32_t x = 0; x < gm.dims[0]; ++x)
-          cost[x / g + bd[0] * (y / g + bd[1] * (z / g))] += cellCost[gm.cellId({x, y, z})];
+    for (uint32_t z = 0; z < gm_.dims[2]; ++z)
+      for (uint32_t y = 0; y < gm_.dims[1]; ++y)
+        for (uint32_t x = 0; x < gm_.dims[0]; ++x)
+          cost[x / g + bd[0] * (y / g + bd[1] * (z / g))] += cellCost_[gm_.cellId({x, y, z})];
     // The margin adds a shell: grow by the ratio of the widened block's face to its own.
-    const double side = g * std::min({gm.cellSize[0], gm.cellSize[1], gm.cellSize[2]});
-    const double grow = side > 0 ? std::pow((side + 2 * margin) / side, 2.0) : 1.0;
+    const double side = g * std::min({gm_.cellSize[0], gm_.cellSize[1], gm_.cellSize[2]});
+    const double grow = side > 0 ? std::pow((side + 2 * margin_) / side, 2.0) : 1.0;
     return double(*std::max_element(cost.begin(), cost.end())) * grow;
-  };
-  uint32_t g = options.maxBlockCells ? std::min(options.maxBlockCells, maxDim) : maxDim;
-  while (g > 1 && fullestBlock(g) > double(options.memoryBytes)) g = (g + 1) / 2;
-  const std::array<uint32_t, 3> bd = blockDims(g);
-  auto blockOf = [&](double x, double y, double z) {
-    return cellAxis(x, 0) / g + bd[0] * (cellAxis(y, 1) / g + bd[1] * (cellAxis(z, 2) / g));
-  };
-  std::vector<uint8_t> blockUsed(size_t(bd[0]) * bd[1] * bd[2], 0);
-  for (uint32_t z = 0; z < gm.dims[2]; ++z)
-    for (uint32_t y = 0; y < gm.dims[1]; ++y)
-      for (uint32_t x = 0; x < gm.dims[0]; ++x)
-        if (cellCost[gm.cellId({x, y, z})]) blockUsed[x / g + bd[0] * (y / g + bd[1] * (z / g))] = 1;
+  }
+  // Blocks of g^3 cells: the largest g whose fullest block (with its margin) fits the memory.
+  void chooseBlocks() {
+    cellCost_.assign(gridCells_, 0);
+    for (size_t i = 0; i < gm_.cells.size(); ++i)
+      cellCost_[gm_.cells[i].id] = gm_.cells[i].triangles * kBytesPerMeshTriangle;
+    for (uint64_t c = 0; c < gridCells_; ++c) cellCost_[c] += atlasInCell_[c] * kBytesPerAtlasSample;
+    const uint32_t maxDim = std::max({gm_.dims[0], gm_.dims[1], gm_.dims[2]});
+    uint32_t g = options_.maxBlockCells ? std::min(options_.maxBlockCells, maxDim) : maxDim;
+    while (g > 1 && fullestBlock(g) > double(options_.memoryBytes)) g = (g + 1) / 2;
+    g_ = g;
+    bd_ = blockDims(g);
+    blockUsed_.assign(size_t(bd_[0]) * bd_[1] * bd_[2], 0);
+    for (uint32_t z = 0; z < gm_.dims[2]; ++z)
+      for (uint32_t y = 0; y < gm_.dims[1]; ++y)
+        for (uint32_t x = 0; x < gm_.dims[0]; ++x)
+          if (cellCost_[gm_.cellId({x, y, z})]) blockUsed_[x / g + bd_[0] * (y / g + bd_[1] * (z / g))] = 1;
+  }
 
-  Pending meshPending, atlasPending;  // input samples without atlas near, atlas samples without input near
-  const uint64_t pendingCap = options.memoryBytes / 4 / (2 * sizeof(Point) + sizeof(double));
-  double atlasMax = 0, atlasSum = 0, meshMax = 0, meshSum = 0;
-  auto addPending = [&](Pending& p, const std::vector<Point>& samples, const std::vector<uint32_t>& ids) {
-    st.samplesBeyondMargin += ids.size();
+  // The block's box widened by the margin; unbounded past the grid's faces, where points outside
+  // the grid are clamped in.
+  Box widenedBlock(const std::array<uint32_t, 3>& b) const {
+    Box e;
+    for (int a = 0; a < 3; ++a) {
+      const double pad = margin_ * (1.0 + 1e-9) + 1e-30;
+      e.lo[a] = b[a] == 0 ? -std::numeric_limits<double>::infinity()
+                          : gm_.origin[a] + double(b[a] * g_) * gm_.cellSize[a] - pad;
+      e.hi[a] = b[a] + 1 == bd_[a] ? std::numeric_limits<double>::infinity()
+                                   : gm_.origin[a] + double((b[a] + 1) * g_) * gm_.cellSize[a] + pad;
+    }
+    return e;
+  }
+  // The input's triangles near the block, and its samples in the block, cell by cell in grid order
+  // (each cell in file order).
+  BlockSurface readMeshNear(uint32_t block, const Box& e) const {
+    std::vector<uint32_t> cellsNear;
+    for (uint32_t i = 0; i < gm_.cells.size(); ++i)
+      if (e.overlaps(cellBoxes_[i])) cellsNear.push_back(i);
+    std::vector<std::vector<FloatTriangle>> meshParts(cellsNear.size());
+    std::vector<std::vector<Point>> meshSampleParts(cellsNear.size()), vertexParts(cellsNear.size());
+    tbb::parallel_for(size_t(0), cellsNear.size(), [&](size_t k) {
+      for (const MeshTriangle& t : readCell(gridDir_, gm_, gm_.cells[cellsNear[k]])) {
+        const FloatTriangle f = floatTriangle(t);
+        if (!e.overlaps(boxOf(f))) continue;
+        for (int i = 0; i < 3; ++i)
+          if (blockOf(t.p[i].x, t.p[i].y, t.p[i].z) == block) vertexParts[k].emplace_back(t.p[i].x, t.p[i].y, t.p[i].z);
+        if (f.triangle().is_degenerate()) continue;
+        meshParts[k].push_back(f);
+        const Point centroid = CGAL::centroid(f.triangle());
+        if (blockOf(centroid.x(), centroid.y(), centroid.z()) == block) meshSampleParts[k].push_back(centroid);
+      }
+    });
+    BlockSurface s;
+    for (size_t k = 0; k < cellsNear.size(); ++k) {
+      s.tris.insert(s.tris.end(), meshParts[k].begin(), meshParts[k].end());
+      s.samples.insert(s.samples.end(), vertexParts[k].begin(), vertexParts[k].end());
+      std::vector<FloatTriangle>().swap(meshParts[k]);
+    }
+    dropRepeats(s.samples);  // a vertex is a corner of several triangles
+    for (const auto& part : meshSampleParts) s.samples.insert(s.samples.end(), part.begin(), part.end());
+    return s;
+  }
+  // The atlas's triangles near the block and its samples in the block, chart by chart.
+  BlockSurface readAtlasNear(uint32_t block, const Box& e) const {
+    std::vector<uint32_t> chartsNear;
+    for (uint32_t c = 0; c < am_.charts.size(); ++c)
+      if (e.overlaps(chartBoxes_[c])) chartsNear.push_back(c);
+    std::vector<std::vector<FloatTriangle>> atlasParts(chartsNear.size());
+    std::vector<std::vector<Point>> atlasSampleParts(chartsNear.size());
+    tbb::parallel_for(size_t(0), chartsNear.size(), [&](size_t k) {
+      const std::vector<glm::vec3> P = readChart(chartsNear[k]);
+      for (const glm::vec3& q : P)
+        if (blockOf(q.x, q.y, q.z) == block) atlasSampleParts[k].emplace_back(q.x, q.y, q.z);
+      chartTriangles(P, am_.chartFileSize(chartsNear[k]), [&](const FloatTriangle& t) {
+        if (e.overlaps(boxOf(t)) && !t.triangle().is_degenerate()) atlasParts[k].push_back(t);
+      });
+    });
+    BlockSurface s;
+    for (size_t k = 0; k < chartsNear.size(); ++k) {
+      s.tris.insert(s.tris.end(), atlasParts[k].begin(), atlasParts[k].end());
+      s.samples.insert(s.samples.end(), atlasSampleParts[k].begin(), atlasSampleParts[k].end());
+      std::vector<FloatTriangle>().swap(atlasParts[k]);
+    }
+    dropRepeats(s.samples);  // seams: bit-identical samples in both charts
+    return s;
+  }
+
+  // Samples (by index) with nothing within the margin, held for the second pass while there is room.
+  void addPending(Pending& p, const std::vector<Point>& samples, const std::vector<uint32_t>& ids) {
+    st_.samplesBeyondMargin += ids.size();
     for (uint32_t i : ids) {
-      if (meshPending.q.size() + atlasPending.q.size() >= pendingCap) {
+      if (meshPending_.q.size() + atlasPending_.q.size() >= pendingCap_) {
         ++p.unresolved;
         continue;
       }
@@ -605,106 +691,47 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
       p.closest.push_back(CGAL::ORIGIN);
       p.d2.push_back(std::numeric_limits<double>::infinity());
     }
-  };
+  }
+  // One side's samples against the other's triangles near the block.
+  void measureSide(const std::vector<FloatTriangle>& tris, const std::vector<Point>& samples, double& max, double& sum,
+                   Pending& pending) {
+    if (samples.empty()) return;
+    if (tris.empty()) {
+      std::vector<uint32_t> all(samples.size());
+      for (uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+      addPending(pending, samples, all);
+      return;
+    }
+    const Forest forest(tris);
+    const Acc a = distances(
+        forest, samples.size(), [&](size_t i) { return samples[i]; }, margin_);
+    max = std::max(max, a.max);
+    sum += a.sum;
+    addPending(pending, samples, a.beyond);
+  }
+  void measureBlock(const std::array<uint32_t, 3>& b) {
+    const uint32_t block = b[0] + bd_[0] * (b[1] + bd_[1] * b[2]);
+    if (!blockUsed_[block]) return;
+    ++st_.blocks;
+    const Box e = widenedBlock(b);
+    BlockSurface mesh = readMeshNear(block, e);
+    const BlockSurface atlas = readAtlasNear(block, e);
+    st_.meshSamples += mesh.samples.size();
+    st_.atlasSamples += atlas.samples.size();
+    // Each side's samples against the other's triangles near the block.
+    measureSide(mesh.tris, atlas.samples, atlasMax_, atlasSum_, atlasPending_);
+    std::vector<FloatTriangle>().swap(mesh.tris);
+    measureSide(atlas.tris, mesh.samples, meshMax_, meshSum_, meshPending_);
+    // The next block's surfaces are as large: where the process already holds more than a block's
+    // share, the heap hands this one's pages back first, or the blocks' arrays, freed on several
+    // threads, pile up past options.memoryBytes. (Handing them back walks the whole heap: after each
+    // of the 56 blocks of an 18.7M-triangle sphere it took the measure from 56 to 85 s, with the
+    // process at 720 MiB of its 2 GiB.)
+    if (residentBytes() > options_.memoryBytes) releaseFreedMemory();
+  }
 
-  for (uint32_t bz = 0; bz < bd[2]; ++bz)
-    for (uint32_t by = 0; by < bd[1]; ++by)
-      for (uint32_t bx = 0; bx < bd[0]; ++bx) {
-        const uint32_t block = bx + bd[0] * (by + bd[1] * bz);
-        if (!blockUsed[block]) continue;
-        ++st.blocks;
-        // The block's box widened by the margin; unbounded past the grid's faces, where points
-        // outside the grid are clamped in.
-        Box e;
-        const std::array<uint32_t, 3> b{bx, by, bz};
-        for (int a = 0; a < 3; ++a) {
-          const double pad = margin * (1.0 + 1e-9) + 1e-30;
-          e.lo[a] = b[a] == 0 ? -std::numeric_limits<double>::infinity() : gm.origin[a] + double(b[a] * g) * gm.cellSize[a] - pad;
-          e.hi[a] = b[a] + 1 == bd[a] ? std::numeric_limits<double>::infinity()
-                                       : gm.origin[a] + double((b[a] + 1) * g) * gm.cellSize[a] + pad;
-        }
-        // The input's triangles near the block, and its samples in the block, cell by cell in
-        // grid order (each cell in file order).
-        std::vector<uint32_t> cellsNear;
-        for (uint32_t i = 0; i < gm.cells.size(); ++i)
-          if (e.overlaps(cellBoxes[i])) cellsNear.push_back(i);
-        std::vector<std::vector<FloatTriangle>> meshParts(cellsNear.size());
-        std::vector<std::vector<Point>> meshSampleParts(cellsNear.size()), vertexParts(cellsNear.size());
-        tbb::parallel_for(size_t(0), cellsNear.size(), [&](size_t k) {
-          for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[cellsNear[k]])) {
-            const FloatTriangle f = floatTriangle(t);
-            if (!e.overlaps(boxOf(f))) continue;
-            for (int i = 0; i < 3; ++i)
-              if (blockOf(t.p[i].x, t.p[i].y, t.p[i].z) == block) vertexParts[k].emplace_back(t.p[i].x, t.p[i].y, t.p[i].z);
-            if (f.triangle().is_degenerate()) continue;
-            meshParts[k].push_back(f);
-            const Point centroid = CGAL::centroid(f.triangle());
-            if (blockOf(centroid.x(), centroid.y(), centroid.z()) == block) meshSampleParts[k].push_back(centroid);
-          }
-        });
-        std::vector<FloatTriangle> meshTris;
-        std::vector<Point> meshSamples;
-        for (size_t k = 0; k < cellsNear.size(); ++k) {
-          meshTris.insert(meshTris.end(), meshParts[k].begin(), meshParts[k].end());
-          meshSamples.insert(meshSamples.end(), vertexParts[k].begin(), vertexParts[k].end());
-          std::vector<FloatTriangle>().swap(meshParts[k]);
-        }
-        dropRepeats(meshSamples);  // a vertex is a corner of several triangles
-        for (const auto& part : meshSampleParts) meshSamples.insert(meshSamples.end(), part.begin(), part.end());
-        // The atlas's triangles near the block and its samples in the block, chart by chart.
-        std::vector<uint32_t> chartsNear;
-        for (uint32_t c = 0; c < am.charts.size(); ++c)
-          if (e.overlaps(chartBoxes[c])) chartsNear.push_back(c);
-        std::vector<std::vector<FloatTriangle>> atlasParts(chartsNear.size());
-        std::vector<std::vector<Point>> atlasSampleParts(chartsNear.size());
-        tbb::parallel_for(size_t(0), chartsNear.size(), [&](size_t k) {
-          const std::vector<glm::vec3> P = readChart(chartsNear[k]);
-          for (const glm::vec3& q : P)
-            if (blockOf(q.x, q.y, q.z) == block) atlasSampleParts[k].emplace_back(q.x, q.y, q.z);
-          chartTriangles(P, am.chartFileSize(chartsNear[k]), [&](const FloatTriangle& t) {
-            if (e.overlaps(boxOf(t)) && !t.triangle().is_degenerate()) atlasParts[k].push_back(t);
-          });
-        });
-        std::vector<FloatTriangle> atlasTris;
-        std::vector<Point> atlasSamples;
-        for (size_t k = 0; k < chartsNear.size(); ++k) {
-          atlasTris.insert(atlasTris.end(), atlasParts[k].begin(), atlasParts[k].end());
-          atlasSamples.insert(atlasSamples.end(), atlasSampleParts[k].begin(), atlasSampleParts[k].end());
-          std::vector<FloatTriangle>().swap(atlasParts[k]);
-        }
-        dropRepeats(atlasSamples);  // seams: bit-identical samples in both charts
-        st.meshSamples += meshSamples.size();
-        st.atlasSamples += atlasSamples.size();
-
-        // Each side's samples against the other's triangles near the block.
-        auto measure = [&](const std::vector<FloatTriangle>& tris, const std::vector<Point>& samples, double& max,
-                           double& sum, Pending& pending) {
-          if (samples.empty()) return;
-          if (tris.empty()) {
-            std::vector<uint32_t> all(samples.size());
-            for (uint32_t i = 0; i < all.size(); ++i) all[i] = i;
-            addPending(pending, samples, all);
-            return;
-          }
-          const Forest forest(tris);
-          const Acc a = distances(forest, samples.size(), [&](size_t i) { return samples[i]; }, margin);
-          max = std::max(max, a.max);
-          sum += a.sum;
-          addPending(pending, samples, a.beyond);
-        };
-        measure(meshTris, atlasSamples, atlasMax, atlasSum, atlasPending);
-        std::vector<FloatTriangle>().swap(meshTris);
-        measure(atlasTris, meshSamples, meshMax, meshSum, meshPending);
-        // The next block's surfaces are as large: where the process already holds more than a
-        // block's share, the heap hands this one's pages back first, or the blocks' arrays, freed
-        // on several threads, pile up past options.memoryBytes. (Handing them back walks the
-        // whole heap: after each of the 56 blocks of an 18.7M-triangle sphere it took the measure
-        // from 56 to 85 s, with the process at 720 MiB of its 2 GiB.)
-        if (residentBytes() > options.memoryBytes) releaseFreedMemory();
-      }
-
-  // Second pass: samples with nothing near, against the whole other surface, a part at a time.
-  auto resolve = [&](Pending& p, const std::vector<FloatTriangle>& part) {
+  // Pending samples against one part of the other surface.
+  static void resolve(Pending& p, const std::vector<FloatTriangle>& part) {
     if (p.q.empty() || part.empty()) return;
     const Forest forest(part);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, p.q.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
@@ -714,12 +741,13 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
         if (n.squaredDistance() < p.d2[i]) p.d2[i] = n.squaredDistance(), p.closest[i] = n.closest();
       }
     });
-  };
+  }
   // The other surface's non-degenerate triangles, item by item (cells or charts), in parts of
   // about partTriangles.
-  const uint64_t partTriangles = std::max<uint64_t>(options.memoryBytes / 2 / kBytesPerMeshTriangle, 1);
-  auto resolveInParts = [&](Pending& p, size_t items, const auto& trianglesOf) {
+  template <class TrianglesOf>
+  void resolveInParts(Pending& p, size_t items, const TrianglesOf& trianglesOf) const {
     if (p.q.empty()) return;
+    const uint64_t partTriangles = std::max<uint64_t>(options_.memoryBytes / 2 / kBytesPerMeshTriangle, 1);
     std::vector<FloatTriangle> part;
     for (size_t i = 0; i < items; ++i) {
       trianglesOf(i, [&](const FloatTriangle& t) {
@@ -730,19 +758,63 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
         part.clear();
       }
     }
-  };
-  resolveInParts(atlasPending, gm.cells.size(), [&](size_t i, const auto& emit) {
-    for (const MeshTriangle& t : readCell(gridDir, gm, gm.cells[i])) emit(floatTriangle(t));
-  });
-  resolveInParts(meshPending, am.charts.size(),
-                 [&](size_t c, const auto& emit) { chartTriangles(readChart(uint32_t(c)), am.chartFileSize(uint32_t(c)), emit); });
-  for (double d2 : atlasPending.d2) atlasMax = std::max(atlasMax, std::sqrt(d2)), atlasSum += std::sqrt(d2);
-  for (double d2 : meshPending.d2) meshMax = std::max(meshMax, std::sqrt(d2)), meshSum += std::sqrt(d2);
-  if (atlasPending.unresolved) atlasMax = std::max(atlasMax, margin), atlasSum += margin * atlasPending.unresolved;
-  if (meshPending.unresolved) meshMax = std::max(meshMax, margin), meshSum += margin * meshPending.unresolved;
-  st.exact = !atlasPending.unresolved && !meshPending.unresolved;
-  setFigures(st, atlasMax, atlasSum, meshMax, meshSum, t0);
-  return st;
+  }
+  // Second pass: samples with nothing near, against the whole other surface, a part at a time.
+  void resolvePending() {
+    resolveInParts(atlasPending_, gm_.cells.size(), [&](size_t i, const auto& emit) {
+      for (const MeshTriangle& t : readCell(gridDir_, gm_, gm_.cells[i])) emit(floatTriangle(t));
+    });
+    resolveInParts(meshPending_, am_.charts.size(), [&](size_t c, const auto& emit) {
+      chartTriangles(readChart(uint32_t(c)), am_.chartFileSize(uint32_t(c)), emit);
+    });
+  }
+  // Both passes' figures together; unresolved samples count at the margin.
+  FidelityStats finish(std::chrono::steady_clock::time_point t0) {
+    for (double d2 : atlasPending_.d2) atlasMax_ = std::max(atlasMax_, std::sqrt(d2)), atlasSum_ += std::sqrt(d2);
+    for (double d2 : meshPending_.d2) meshMax_ = std::max(meshMax_, std::sqrt(d2)), meshSum_ += std::sqrt(d2);
+    if (atlasPending_.unresolved)
+      atlasMax_ = std::max(atlasMax_, margin_), atlasSum_ += margin_ * atlasPending_.unresolved;
+    if (meshPending_.unresolved) meshMax_ = std::max(meshMax_, margin_), meshSum_ += margin_ * meshPending_.unresolved;
+    st_.exact = !atlasPending_.unresolved && !meshPending_.unresolved;
+    setFigures(st_, atlasMax_, atlasSum_, meshMax_, meshSum_, t0);
+    return st_;
+  }
+
+  const std::filesystem::path& gridDir_;
+  const std::filesystem::path& atlasDir_;
+  const GridManifest& gm_;
+  const AtlasManifest& am_;
+  const OutOfCoreFidelityOptions& options_;
+  FidelityStats st_;
+  double margin_ = 0;
+  std::vector<FloatBox> cellBoxes_, chartBoxes_;
+  uint64_t gridCells_ = 0;
+  std::vector<std::atomic<uint64_t>> atlasInCell_;
+  std::vector<uint64_t> cellCost_;  // estimated working memory of every grid cell
+  uint32_t g_ = 1;                  // cells a block side
+  std::array<uint32_t, 3> bd_{};    // blocks along each axis
+  std::vector<uint8_t> blockUsed_;
+  Pending meshPending_, atlasPending_;  // input samples without atlas near, atlas samples without input near
+  uint64_t pendingCap_ = 0;
+  double atlasMax_ = 0, atlasSum_ = 0, meshMax_ = 0, meshSum_ = 0;
+};
+
+}  // namespace
+
+FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, const std::filesystem::path& atlasDir,
+                                       const OutOfCoreFidelityOptions& options) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!(options.marginFraction > 0.0 && options.marginFraction < 1.0) || options.memoryBytes < (16u << 20))
+    throw std::invalid_argument("measureFidelityOutOfCore: the margin must be in (0, 1) and the memory at least 16 MiB");
+  const GridManifest gm = readGridManifest(gridDir);
+  const AtlasManifest am = readManifest(atlasDir);
+  if (am.kind != AtlasKind::Geometry)
+    throw InputError((atlasDir / kManifestName).string() + ": a " + atlasKindName(am.kind) +
+                     " atlas, not a geometry atlas");
+  if (gm.triangles == 0 || gm.bounds.empty() || am.charts.empty())
+    throw std::invalid_argument("measureFidelityOutOfCore: a surface has no triangles");
+  OutOfCoreMeasure measure(gridDir, atlasDir, gm, am, options);
+  return measure.run(t0);
 }
 
 namespace {
