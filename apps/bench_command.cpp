@@ -108,7 +108,8 @@ std::vector<std::string> parseAlgorithms(const std::string& text) {
       throw InputError("--algorithms '" + text + "': " + item + " is listed twice");
     out.push_back(item);
   }
-  if (out.empty() || text.back() == ',') throw InputError("--algorithms must be a non-empty list of ours, fixed, greedy");
+  if (out.empty() || text.back() == ',')
+    throw InputError("--algorithms must be a non-empty list of ours, fixed, greedy");
   return out;
 }
 
@@ -249,8 +250,8 @@ Summary summarize(const std::vector<Row>& rows) {
     err.push_back(r.maxErrorPx);
   }
   const double n = double(rows.size());
-  for (double* v : {&s.adaptUs, &s.nodes, &s.triangles, &s.meanErr, &s.boundFrac, &s.drawMs, &s.errMean,
-                    &s.belowRootsFrac})
+  for (double* v :
+       {&s.adaptUs, &s.nodes, &s.triangles, &s.meanErr, &s.boundFrac, &s.drawMs, &s.errMean, &s.belowRootsFrac})
     *v /= n;
   s.errP50 = percentile(err, 0.5);
   s.errP95 = percentile(err, 0.95);
@@ -381,12 +382,18 @@ ControlledRun runFrameController(const Hierarchy& hier, const std::vector<ViewPa
     return to > from ? sum / double(to - from) : 0.0;
   };
   const double devStart = deviation(step - step / 4, step), devStep = deviation(n - (n - step) / 4, n);
-  run.summary = {{"target_ms", t},          {"frames", n},
-                 {"load_step_frame", step}, {"load_step_factor", a.loadStep},
-                 {"settling_frames_start", settleStart}, {"settling_frames_after_step", settleStep},
-                 {"overshoot_start", overStart}, {"overshoot_after_step", overStep},
-                 {"peak_ms_after_step", peak}, {"steady_deviation_start", devStart},
-                 {"steady_deviation_after_step", devStep}, {"frames_view_needs_less", unusedFrames}};
+  run.summary = {{"target_ms", t},
+                 {"frames", n},
+                 {"load_step_frame", step},
+                 {"load_step_factor", a.loadStep},
+                 {"settling_frames_start", settleStart},
+                 {"settling_frames_after_step", settleStep},
+                 {"overshoot_start", overStart},
+                 {"overshoot_after_step", overStep},
+                 {"peak_ms_after_step", peak},
+                 {"steady_deviation_start", devStart},
+                 {"steady_deviation_after_step", devStep},
+                 {"frames_view_needs_less", unusedFrames}};
   const auto frames = [](int f) { return f < 0 ? std::string("never") : fmt::format("{} frames", f); };
   run.report = fmt::format(
       "frame-time controller ({} frames, target {} ms, triangle rate x{} at frame {}): within 10% after {} from "
@@ -431,7 +438,8 @@ BenchPlan benchPlan(const BenchArgs& a) {
     if (!(a.triRate > 0.0) || !std::isfinite(a.triRate))
       throw InputError("--tri-rate must be > 0 triangles/s (with --frame-ms); measure it with bench_render");
     if (std::find(p.algorithms.begin(), p.algorithms.end(), "ours") == p.algorithms.end())
-      throw InputError("the cost model (--frame-ms, --tri-rate) fits the adaptation cost of 'ours': add it to --algorithms");
+      throw InputError(
+          "the cost model (--frame-ms, --tri-rate) fits the adaptation cost of 'ours': add it to --algorithms");
   }
   if (a.controlFrames > 100000) throw InputError("--control-frames must be at most 100000");
   if (!(a.loadStep > 0.0) || !(a.loadStep <= 100.0)) throw InputError("--load-step must be in (0, 100]");
@@ -453,8 +461,10 @@ std::unique_ptr<gl::AtlasScene> benchScene(const BenchArgs& a, const BenchPlan& 
   spdlog::info("--render: a page pool of {} pages in {} texture array(s), room for cuts of {} nodes",
                scene->renderer().pageCapacity(), scene->renderer().pageArrays(), scene->nodeRoom());
   if (so.gpuCacheBytes > 0 && scene->nodeRoom() < so.minNodeRoom)
-    spdlog::warn("--gpu-cache {} holds cuts of {} nodes: the cuts of larger node budgets draw without some of their "
-                 "pages (their draw_ms is not a full frame's)", a.gpuCache, scene->nodeRoom());
+    spdlog::warn(
+        "--gpu-cache {} holds cuts of {} nodes: the cuts of larger node budgets draw without some of their "
+        "pages (their draw_ms is not a full frame's)",
+        a.gpuCache, scene->nodeRoom());
   return scene;
 }
 
@@ -486,10 +496,11 @@ std::vector<std::vector<Row>> runConfigurations(const BenchArgs& a, const BenchP
             const Cut& cut = adapt(views[i], r);
             measureCut(hier, cut, views[i], r);
             if (r.budgetBelowRoots && !warnedBelowRoots) {
-              spdlog::warn("node budget {} is below the {} visible {} (frame {}): no cut has fewer "
-                           "nodes, so such frames draw the visible roots (root_floor, budget_below_roots in "
-                           "bench.csv)",
-                           maxNodes, r.rootFloor, hier.groups.empty() ? "chart roots" : "top groups", i);
+              spdlog::warn(
+                  "node budget {} is below the {} visible {} (frame {}): no cut has fewer "
+                  "nodes, so such frames draw the visible roots (root_floor, budget_below_roots in "
+                  "bench.csv)",
+                  maxNodes, r.rootFloor, hier.groups.empty() ? "chart roots" : "top groups", i);
               warnedBelowRoots = true;
             }
             if (scene) r.drawMs = scene->drawCut(cams[i], cut).drawMs;
@@ -514,9 +525,9 @@ void writeBenchCsv(const BenchArgs& a, bool budgetMode, const std::vector<std::v
     for (const Row& r : rows)
       csv += fmt::format("{},{},{},{},{},{},{:.3f},{},{},{:.5f},{:.5f},{},{},{},{},{},{},{},{},{},{}\n", a.mode,
                          r.algorithm, r.maxNodes, budgetMode ? std::to_string(r.maxTriangles) : std::string(),
-                         optNum(!budgetMode, a.tolerance, "{}"), r.frame, r.adaptUs, r.nodes, r.triangles,
-                         r.maxErrorPx, r.meanErrorPx, r.splits, r.merges, r.refines, r.coarsens, int(r.budgetBound),
-                         r.repeat, r.constraintSplits, optNum(!std::isnan(r.drawMs), r.drawMs), r.rootFloor,
+                         optNum(!budgetMode, a.tolerance, "{}"), r.frame, r.adaptUs, r.nodes, r.triangles, r.maxErrorPx,
+                         r.meanErrorPx, r.splits, r.merges, r.refines, r.coarsens, int(r.budgetBound), r.repeat,
+                         r.constraintSplits, optNum(!std::isnan(r.drawMs), r.drawMs), r.rootFloor,
                          int(r.budgetBelowRoots));
   atomicWriteFile(out / "bench.csv", csv.data(), csv.size());
 }
@@ -531,16 +542,17 @@ std::vector<Summary> writeSummary(const BenchArgs& a, bool budgetMode, const std
       "triangles_mean,triangles_max,max_error_px_mean,max_error_px_p50,max_error_px_p95,max_error_px_max,"
       "mean_error_px_mean,budget_bound_frac,draw_ms_mean,root_floor_max,budget_below_roots_frac\n";
   for (const Summary& s : sums)
-    sum += fmt::format("{},{},{},{},{},{},{:.3f},{:.2f},{},{:.1f},{},{:.5f},{:.5f},{:.5f},{:.5f},{:.5f},{:.3f},{},{},"
-                       "{:.3f}\n",
-                       a.mode, s.algorithm, s.maxNodes, budgetMode ? std::to_string(s.maxTriangles) : std::string(),
-                       optNum(!budgetMode, a.tolerance, "{}"), s.frames, s.adaptUs, s.nodes, s.nodesMax, s.triangles,
-                       s.trianglesMax, s.errMean, s.errP50, s.errP95, s.errMax, s.meanErr, s.boundFrac,
-                       optNum(a.render, s.drawMs), s.rootFloorMax, s.belowRootsFrac);
+    sum += fmt::format(
+        "{},{},{},{},{},{},{:.3f},{:.2f},{},{:.1f},{},{:.5f},{:.5f},{:.5f},{:.5f},{:.5f},{:.3f},{},{},"
+        "{:.3f}\n",
+        a.mode, s.algorithm, s.maxNodes, budgetMode ? std::to_string(s.maxTriangles) : std::string(),
+        optNum(!budgetMode, a.tolerance, "{}"), s.frames, s.adaptUs, s.nodes, s.nodesMax, s.triangles, s.trianglesMax,
+        s.errMean, s.errP50, s.errP95, s.errMax, s.meanErr, s.boundFrac, optNum(a.render, s.drawMs), s.rootFloorMax,
+        s.belowRootsFrac);
   atomicWriteFile(out / "summary.csv", sum.data(), sum.size());
 
-  std::cout << fmt::format("{:>8} {:>10} {:>12} {:>10} {:>12} {:>10} {:>10} {:>10}\n", "algo", "max_nodes",
-                           "max_tris", "adapt_us", "nodes", "triangles", "err_p50", "err_p95");
+  std::cout << fmt::format("{:>8} {:>10} {:>12} {:>10} {:>12} {:>10} {:>10} {:>10}\n", "algo", "max_nodes", "max_tris",
+                           "adapt_us", "nodes", "triangles", "err_p50", "err_p95");
   for (const Summary& s : sums)
     std::cout << fmt::format("{:>8} {:>10} {:>12} {:>10.1f} {:>12.1f} {:>10.0f} {:>10.3f} {:>10.3f}\n", s.algorithm,
                              s.maxNodes, budgetMode ? std::to_string(s.maxTriangles) : std::string("-"), s.adaptUs,
@@ -559,11 +571,14 @@ void chooseBudgets(const BenchArgs& a, const std::vector<Summary>& sums, double 
     const double ms = (a0 + b * s.maxNodes) * 1e-3 + double(s.maxTriangles) / a.triRate * 1e3;
     const double msMean = (a0 + b * s.nodes) * 1e-3 + s.triangles / a.triRate * 1e3;
     const bool fits = ms <= a.frameMs;
-    cands.push_back({{"max_nodes", s.maxNodes}, {"max_triangles", s.maxTriangles},
-                     {"predicted_ms", ms}, {"predicted_ms_at_mean_use", msMean},
-                     {"max_error_px_mean", s.errMean}, {"fits", fits}});
-    if (fits && (!best || s.errMean < best->errMean ||
-                 (s.errMean == best->errMean && s.maxTriangles < best->maxTriangles))) {
+    cands.push_back({{"max_nodes", s.maxNodes},
+                     {"max_triangles", s.maxTriangles},
+                     {"predicted_ms", ms},
+                     {"predicted_ms_at_mean_use", msMean},
+                     {"max_error_px_mean", s.errMean},
+                     {"fits", fits}});
+    if (fits &&
+        (!best || s.errMean < best->errMean || (s.errMean == best->errMean && s.maxTriangles < best->maxTriangles))) {
       best = &s;
       bestMs = ms;
     }
@@ -572,8 +587,10 @@ void chooseBudgets(const BenchArgs& a, const std::vector<Summary>& sums, double 
   cm["tri_rate"] = a.triRate;
   cm["candidates"] = cands;
   if (best) {
-    cm["choice"] = {{"max_nodes", best->maxNodes}, {"max_triangles", best->maxTriangles},
-                    {"predicted_ms", bestMs}, {"max_error_px_mean", best->errMean}};
+    cm["choice"] = {{"max_nodes", best->maxNodes},
+                    {"max_triangles", best->maxTriangles},
+                    {"predicted_ms", bestMs},
+                    {"max_error_px_mean", best->errMean}};
     std::cout << fmt::format(
         "cost model: for {} ms at {:.3g} triangles/s use --nodes {} --triangles {} (predicted {:.3f} ms, "
         "mean max error {:.3f} px)\n",

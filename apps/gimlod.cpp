@@ -57,10 +57,10 @@ struct RenderArgs {
   StreamingArgs streaming;
   bool topDown = false;
   double tolerance = 1.0, texelRatio = 1.0;
-  double geomorph = 0.0;  // SceneOptions::geomorph
-  uint32_t msaa = 1;      // SceneOptions::samples
-  uint64_t triangles = 0;  // > 0: triangle-budget mode (quad queue)
-  double frameMs = 0.0;    // > 0: the frame-time controller sets the budgets (budget mode)
+  double geomorph = 0.0;               // SceneOptions::geomorph
+  uint32_t msaa = 1;                   // SceneOptions::samples
+  uint64_t triangles = 0;              // > 0: triangle-budget mode (quad queue)
+  double frameMs = 0.0;                // > 0: the frame-time controller sets the budgets (budget mode)
   std::string overlay = "none";        // runtime/overlay.h: none, chart, level, res, error
   std::vector<std::string> exportCut;  // "FRAME:FILE.ply"
   bool noStitch = false;               // exported cuts without the stitching tables (a control)
@@ -100,7 +100,8 @@ NodeColour sourceDistanceColour(const SourceDistances& d) {
     for (uint32_t v = id.y * step; v <= (id.y + 1) * step; ++v)
       for (uint32_t u = id.x * step; u <= (id.x + 1) * step; ++u)
         mx = std::max(mx, d.perSample[size_t(id.chart) * n * n + size_t(v) * n + u]);
-    const double t = mx > 0.f && d.largest > 0.0 ? std::clamp(1.0 + std::log10(double(mx) / d.largest) / 4.0, 0.0, 1.0) : 0.0;
+    const double t =
+        mx > 0.f && d.largest > 0.0 ? std::clamp(1.0 + std::log10(double(mx) / d.largest) / 4.0, 0.0, 1.0) : 0.0;
     const std::array<uint8_t, 3> c = heatColour(t);
     const uint32_t rgba = uint32_t(c[0]) | uint32_t(c[1]) << 8 | uint32_t(c[2]) << 16 | 0xFF000000u;
     cache->emplace(id.key(), rgba);
@@ -217,7 +218,7 @@ int runRender(const RenderArgs& a) {
   so.samples = a.msaa;
   so.overlay = parseOverlayOption(a.overlay);
   so.overlayErrorPx = a.triangles > 0 ? 0.0 : a.tolerance;  // error colouring: red at the tolerance
-  so.minNodeRoom = a.maxNodes;  // the page pool holds the budget's cuts
+  so.minNodeRoom = a.maxNodes;                              // the page pool holds the budget's cuts
   gl::AtlasScene scene(atlas, so);
   spdlog::info("GPU page pool: {} pages of {} bytes in {} texture array(s), room for cuts of {} nodes",
                scene.renderer().pageCapacity(), scene.pageBytes(), scene.renderer().pageArrays(), scene.nodeRoom());
@@ -239,13 +240,14 @@ int runRender(const RenderArgs& a) {
     fo.targetMs = a.frameMs;
     controller.emplace(fo, a.maxNodes, a.triangles > 0 ? a.triangles : 1000000);
   }
-  std::string csv = "frame,nodes,triangles,max_screen_error_px,adapt_ms,stitch_ms,upload_ms,draw_ms,"
-                    "draw_calls,pages_loaded,pages_missing,pages_requested,nodes_substituted,node_budget_bound,"
-                    "constraint_raises,constraint_splits,attribute_texels,attribute_above_page,root_floor,"
-                    "budget_below_roots,max_nodes,max_triangles,frame_ms,gpu_ms,closed_groups,grouped_roots,"
-                    "resident_gpu_bytes,gpu_budget_bytes,resident_ram_bytes,ram_budget_bytes,upload_bytes,"
-                    "loads_issued,loads_done,loads_cancelled,loads_failed,prefetch_requests,pages_needed,"
-                    "pages_resident,incomplete\n";
+  std::string csv =
+      "frame,nodes,triangles,max_screen_error_px,adapt_ms,stitch_ms,upload_ms,draw_ms,"
+      "draw_calls,pages_loaded,pages_missing,pages_requested,nodes_substituted,node_budget_bound,"
+      "constraint_raises,constraint_splits,attribute_texels,attribute_above_page,root_floor,"
+      "budget_below_roots,max_nodes,max_triangles,frame_ms,gpu_ms,closed_groups,grouped_roots,"
+      "resident_gpu_bytes,gpu_budget_bytes,resident_ram_bytes,ram_budget_bytes,upload_bytes,"
+      "loads_issued,loads_done,loads_cancelled,loads_failed,prefetch_requests,pages_needed,"
+      "pages_resident,incomplete\n";
   double drawMsTotal = 0.0;
   uint64_t triTotal = 0;
   bool warnedBelowRoots = false;
@@ -260,9 +262,10 @@ int runRender(const RenderArgs& a) {
       controller->update(
           {f.cut.nodeCount(), f.draw.triangles, f.adaptMs, f.draw.drawMs, std::max(frameMs - f.uploadMs, 0.0)});
     if (f.adapt.budgetBelowRoots && !warnedBelowRoots) {
-      spdlog::warn("--max-nodes {} is below the {} visible {} (frame {}): no cut has fewer nodes, so such frames "
-                   "draw the visible roots (root_floor, budget_below_roots in stats.csv)",
-                   a.maxNodes, f.adapt.rootFloor, atlas.hierarchy.groups.empty() ? "chart roots" : "top groups", i);
+      spdlog::warn(
+          "--max-nodes {} is below the {} visible {} (frame {}): no cut has fewer nodes, so such frames "
+          "draw the visible roots (root_floor, budget_below_roots in stats.csv)",
+          a.maxNodes, f.adapt.rootFloor, atlas.hierarchy.groups.empty() ? "chart roots" : "top groups", i);
       warnedBelowRoots = true;
     }
     writePng(out / fmt::format("frame_{:04d}.png", i), w, h, 4, scene.renderer().readPixels());
@@ -274,28 +277,27 @@ int runRender(const RenderArgs& a) {
       const glm::dvec3 origin = scene.captureOrigin();
       for (glm::vec3& p : mesh.positions) p = glm::vec3(glm::dvec3(p) + origin);
       writeCutMeshPly(ex->second, mesh);
-      spdlog::info("frame {}: wrote the cut as drawn to {}: {} vertices, {} triangles; {} boundary edges, {} on open "
-                   "chart borders, {} elsewhere (cracks, or the edge of what the view culled)",
-                   i, ex->second.string(), mesh.positions.size(), mesh.triangles.size(), mesh.boundaryEdges,
-                   mesh.openBorderEdges, mesh.otherBoundaryEdges);
+      spdlog::info(
+          "frame {}: wrote the cut as drawn to {}: {} vertices, {} triangles; {} boundary edges, {} on open "
+          "chart borders, {} elsewhere (cracks, or the edge of what the view culled)",
+          i, ex->second.string(), mesh.positions.size(), mesh.triangles.size(), mesh.boundaryEdges,
+          mesh.openBorderEdges, mesh.otherBoundaryEdges);
     }
-    csv += fmt::format("{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{},{}", i,
-                       f.cut.nodeCount(),
-                       f.draw.triangles, f.maxErrorPx, f.adaptMs, f.stitchMs, f.uploadMs, f.draw.drawMs,
-                       f.draw.drawCalls, f.pagesLoaded + f.pagesUploaded, f.pagesMissing, f.pagesRequested, f.nodesSubstituted,
-                       int(f.adapt.nodeBudgetBound), f.adapt.constraintRaises,
-                       f.adapt.constraintSplits, f.attributes.texels, f.attributes.abovePage, f.adapt.rootFloor,
-                       int(f.adapt.budgetBelowRoots), budgetMode ? bo.maxNodes : a.maxNodes,
-                       budgetMode ? bo.maxTriangles : 0, frameMs, f.draw.gpuMs, f.adapt.closedGroups,
-                       f.adapt.groupedRoots);
+    csv += fmt::format(
+        "{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4f},{:.4f},{},{}", i,
+        f.cut.nodeCount(), f.draw.triangles, f.maxErrorPx, f.adaptMs, f.stitchMs, f.uploadMs, f.draw.drawMs,
+        f.draw.drawCalls, f.pagesLoaded + f.pagesUploaded, f.pagesMissing, f.pagesRequested, f.nodesSubstituted,
+        int(f.adapt.nodeBudgetBound), f.adapt.constraintRaises, f.adapt.constraintSplits, f.attributes.texels,
+        f.attributes.abovePage, f.adapt.rootFloor, int(f.adapt.budgetBelowRoots), budgetMode ? bo.maxNodes : a.maxNodes,
+        budgetMode ? bo.maxTriangles : 0, frameMs, f.draw.gpuMs, f.adapt.closedGroups, f.adapt.groupedRoots);
     csv += fmt::format(",{},{},{},{},{},{},{},{},{},{},{},{},{}\n", f.residentGpuBytes, f.gpuBudgetBytes,
                        f.residentRamBytes, so.asyncLoads ? so.ramCacheBytes : 0, f.uploadBytes, f.loadsIssued,
-                       f.loadsDone, f.loadsCancelled, f.loadsFailed, f.prefetchRequests, f.pagesNeeded,
-                       f.pagesResident, int(f.incomplete));
+                       f.loadsDone, f.loadsCancelled, f.loadsFailed, f.prefetchRequests, f.pagesNeeded, f.pagesResident,
+                       int(f.incomplete));
     drawMsTotal += f.draw.drawMs;
     triTotal += f.draw.triangles;
-    spdlog::info("frame {:4d}: {:5d} nodes, {:8d} triangles, max error {:.3f} px, adapt {:.3f} ms, draw {:.2f} ms",
-                 i, f.cut.nodeCount(), f.draw.triangles, f.maxErrorPx, f.adaptMs, f.draw.drawMs);
+    spdlog::info("frame {:4d}: {:5d} nodes, {:8d} triangles, max error {:.3f} px, adapt {:.3f} ms, draw {:.2f} ms", i,
+                 f.cut.nodeCount(), f.draw.triangles, f.maxErrorPx, f.adaptMs, f.draw.drawMs);
   }
   atomicWriteFile(out / "stats.csv", csv.data(), csv.size());
   std::cout << fmt::format("rendered {} frames to {} on {}: {:.2f} M triangles/s\n", cams.size(), a.output,
@@ -322,13 +324,15 @@ CLI::App* addRenderCommand(CLI::App& app, RenderArgs& r) {
                    "Error mode with the stateless top-down greedy instead of the coherent dual queue");
   addGeomorphOption(render, r.geomorph);
   addMsaaOption(render, r.msaa);
-  render->add_option("--texel-ratio", r.texelRatio,
-                     "Normal-map texels per pixel of a node's projected size (0: page resolution)")
+  render
+      ->add_option("--texel-ratio", r.texelRatio,
+                   "Normal-map texels per pixel of a node's projected size (0: page resolution)")
       ->capture_default_str();
   addStreamingOptions(render, r.streaming);
-  render->add_option("--overlay", r.overlay,
-                     "Draw over the shading: chart (each chart its colour, seams dark, open borders red), level, res, "
-                     "error (heat map: blue 0, red at the tolerance, or the frame's largest error with --triangles)")
+  render
+      ->add_option("--overlay", r.overlay,
+                   "Draw over the shading: chart (each chart its colour, seams dark, open borders red), level, res, "
+                   "error (heat map: blue 0, red at the tolerance, or the frame's largest error with --triangles)")
       ->capture_default_str();
   render->add_option("--export-cut", r.exportCut,
                      "FRAME:FILE.ply: write the cut drawn at that frame as one welded mesh (stitched positions from "
@@ -364,15 +368,17 @@ CLI::App* addInspectCommand(CLI::App& app, InspectArgs& inspect) {
       "inspect", "Write an inspection report of an atlas (index.html, report.json, images) that opens from disk");
   inspectCmd->add_option("atlas", inspect.report.atlas, "Atlas directory")->required();
   inspectCmd->add_option("-o,--output", inspect.report.output, "Report directory to create")->required();
-  inspectCmd->add_option("--worst", inspect.report.worstCharts, "Charts shown with images, the worst first (figures for all)")
+  inspectCmd
+      ->add_option("--worst", inspect.report.worstCharts, "Charts shown with images, the worst first (figures for all)")
       ->capture_default_str();
   inspectCmd->add_option("--image-size", inspect.report.thumbnailSize, "Largest chart image side in samples")
       ->capture_default_str();
-  inspectCmd->add_option("--source", inspect.report.source,
-                         "The mesh or DEM the atlas was built from: compare them sample by sample (where the distances lie)");
+  inspectCmd->add_option(
+      "--source", inspect.report.source,
+      "The mesh or DEM the atlas was built from: compare them sample by sample (where the distances lie)");
   inspectCmd->add_option("--view-size", inspect.viewSize, "Size WxH of the six rendered views")->capture_default_str();
-  inspectCmd->add_flag("--no-views", [&](int64_t) { inspect.views = false; },
-                       "Skip the rendered views (no GL needed)");
+  inspectCmd->add_flag(
+      "--no-views", [&](int64_t) { inspect.views = false; }, "Skip the rendered views (no GL needed)");
 
   return inspectCmd;
 }
@@ -384,7 +390,8 @@ struct MergeArgs {
 
 CLI::App* addMergeCommand(CLI::App& app, MergeArgs& m) {
   auto* mergeCmd = app.add_subcommand(
-      "merge", "Merge the shards of a build across processes (gimlod build --prepare, then --shard I/N) into the atlas");
+      "merge",
+      "Merge the shards of a build across processes (gimlod build --prepare, then --shard I/N) into the atlas");
   mergeCmd->add_option("atlas", m.atlas, "The atlas directory the shards were built for")->required();
   mergeCmd->add_option("--shards", m.shards, "The N the shards were run with (default: the one N present)");
 

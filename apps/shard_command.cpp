@@ -27,8 +27,8 @@ namespace {
 
 // A word for a POSIX shell, quoted where it needs it.
 std::string shellQuoted(const std::string& s) {
-  if (!s.empty() && s.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-+=/.,:@%")
-                        == std::string::npos)
+  if (!s.empty() && s.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-+=/.,:@%") ==
+                        std::string::npos)
     return s;
   std::string out = "'";
   for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
@@ -57,7 +57,8 @@ std::string jobCommand(const TerrainBuildOptions& o, int argc, char** argv) {
     if (fs::path(a) == o.input && a.rfind("-", 0) != 0) continue;  // the input, written above
     const bool isPathOption = valueOf("--imagery");
     words.push_back(a);
-    if (isPathOption && a.find('=') == std::string::npos && i + 1 < argc) words.push_back(fs::absolute(argv[++i]).string());
+    if (isPathOption && a.find('=') == std::string::npos && i + 1 < argc)
+      words.push_back(fs::absolute(argv[++i]).string());
   }
   std::string out;
   for (const std::string& w : words) {
@@ -85,10 +86,11 @@ int emitSlurm(const TerrainBuildOptions& o, const ShardArgs& a, int argc, char**
   const std::string atlas = shellQuoted(fs::absolute(o.output).string());
   const std::string cpus = o.threads ? fmt::format("#SBATCH --cpus-per-task={}\n", o.threads) : std::string();
   auto header = [&](const std::string& name, const std::string& extra) {
-    return fmt::format("#!/bin/bash\n#SBATCH --job-name=gimlod-{}\n#SBATCH --output={}/logs/%x-%A_%a.out\n{}"
-                       "# Written by gimlod build --emit-slurm; every node must see the input and {}.shards.\n"
-                       "set -euo pipefail\n",
-                       name, dir.string(), extra, fs::absolute(o.output).string());
+    return fmt::format(
+        "#!/bin/bash\n#SBATCH --job-name=gimlod-{}\n#SBATCH --output={}/logs/%x-%A_%a.out\n{}"
+        "# Written by gimlod build --emit-slurm; every node must see the input and {}.shards.\n"
+        "set -euo pipefail\n",
+        name, dir.string(), extra, fs::absolute(o.output).string());
   };
   writeScript(dir / "prepare.sbatch", header("prepare", "#SBATCH --ntasks=1\n" + cpus) + cmd + " --prepare\n");
   writeScript(dir / "shards.sbatch",
@@ -97,16 +99,18 @@ int emitSlurm(const TerrainBuildOptions& o, const ShardArgs& a, int argc, char**
   const fs::path self = fs::path(cmd.substr(0, cmd.find(' ')));
   writeScript(dir / "merge.sbatch", header("merge", "#SBATCH --ntasks=1\n") + self.string() + " merge " + atlas +
                                         fmt::format(" --shards {}\n", n));
-  writeScript(dir / "submit.sh",
-              fmt::format("#!/bin/bash\n# Submits the build's three steps, each after the last succeeds.\nset -euo pipefail\n"
-                          "cd {}\nprepare=$(sbatch --parsable prepare.sbatch)\n"
-                          "shards=$(sbatch --parsable --dependency=afterok:\"$prepare\" shards.sbatch)\n"
-                          "merge=$(sbatch --parsable --dependency=afterok:\"$shards\" merge.sbatch)\n"
-                          "echo \"prepare $prepare, shards $shards (array 0-{}), merge $merge\"\n",
-                          shellQuoted(dir.string()), n - 1));
-  std::cout << fmt::format("wrote {}/submit.sh (prepare.sbatch, shards.sbatch with {} array tasks, merge.sbatch); run "
-                           "it on the cluster's login node\n",
-                           dir.string(), n);
+  writeScript(
+      dir / "submit.sh",
+      fmt::format("#!/bin/bash\n# Submits the build's three steps, each after the last succeeds.\nset -euo pipefail\n"
+                  "cd {}\nprepare=$(sbatch --parsable prepare.sbatch)\n"
+                  "shards=$(sbatch --parsable --dependency=afterok:\"$prepare\" shards.sbatch)\n"
+                  "merge=$(sbatch --parsable --dependency=afterok:\"$shards\" merge.sbatch)\n"
+                  "echo \"prepare $prepare, shards $shards (array 0-{}), merge $merge\"\n",
+                  shellQuoted(dir.string()), n - 1));
+  std::cout << fmt::format(
+      "wrote {}/submit.sh (prepare.sbatch, shards.sbatch with {} array tasks, merge.sbatch); run "
+      "it on the cluster's login node\n",
+      dir.string(), n);
   return 0;
 }
 
@@ -233,12 +237,14 @@ int runMpi(const TerrainBuildOptions& o, const ShardArgs& a) {
     MPI_Iallreduce(&mine, &failed, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD, &request);
     waitIdly(request);
     if (rank == 0 && failed) {
-      spdlog::error("some shards failed (above); their shard area is kept: run them with --shard I/{}, then gimlod "
-                    "merge",
-                    shards);
+      spdlog::error(
+          "some shards failed (above); their shard area is kept: run them with --shard I/{}, then gimlod "
+          "merge",
+          shards);
       status = 1;
     } else if (rank == 0) {
-      status = runLogged(o, "merge", [&] { std::cout << shardSummary(mergeShards(o.output, shards), o.output) << std::flush; });
+      status = runLogged(o, "merge",
+                         [&] { std::cout << shardSummary(mergeShards(o.output, shards), o.output) << std::flush; });
     }
     status = fromRank0(status);
   }
@@ -256,8 +262,9 @@ int runShardedBuild(const TerrainBuildOptions& o, const ShardArgs& a, int argc, 
 #ifdef GIMLOD_WITH_MPI
     return runMpi(o, a);
 #else
-    throw InputError("--mpi: this gimlod was built without MPI (install libopenmpi-dev, then configure and build "
-                     "again)");
+    throw InputError(
+        "--mpi: this gimlod was built without MPI (install libopenmpi-dev, then configure and build "
+        "again)");
 #endif
   }
   if (a.prepare) {

@@ -32,7 +32,8 @@ inline uint64_t parseBytes(const std::string& option, const std::string& text) {
     unit = 1024.0 * 1024.0 * 1024.0;
   else if (!suffix.empty())
     throw InputError(option + " '" + text + "': unknown unit (use K, M or G)");
-  if (!(v > 0.0) || !std::isfinite(v) || v * unit > 1e15) throw InputError(option + " '" + text + "' must be a positive size");
+  if (!(v > 0.0) || !std::isfinite(v) || v * unit > 1e15)
+    throw InputError(option + " '" + text + "' must be a positive size");
   return uint64_t(v * unit);
 }
 
@@ -43,9 +44,9 @@ struct StreamingArgs {
   std::string ramCache = "512M";     // CesiumJS's cacheBytes
   std::string uploadBudget = "32M";  // a frame's uploads (vk_lod_clusters: 32 MiB of transfer a frame)
   uint32_t loaderThreads = 2;
-  std::string ioLatency;  // MS[,JITTER]
-  uint32_t ioDepth = 32;  // reads the simulated storage serves at once
-  double prefetch = 0.5;  // seconds ahead (P-BDAM: half a second)
+  std::string ioLatency;                 // MS[,JITTER]
+  uint32_t ioDepth = 32;                 // reads the simulated storage serves at once
+  double prefetch = 0.5;                 // seconds ahead (P-BDAM: half a second)
   std::vector<CLI::Option*> loaderOnly;  // given, they switch the loader on
 };
 
@@ -63,9 +64,11 @@ inline void addStreamingOptions(CLI::App* cmd, StreamingArgs& a) {
       cmd->add_option("--ram-cache", a.ramCache,
                       "The loader's RAM in bytes: its cache of read pages and the pages read for upload")
           ->capture_default_str(),
-      cmd->add_option("--upload-budget", a.uploadBudget, "Bytes of pages uploaded to the GPU a frame (one page at least)")
+      cmd->add_option("--upload-budget", a.uploadBudget,
+                      "Bytes of pages uploaded to the GPU a frame (one page at least)")
           ->capture_default_str(),
-      cmd->add_option("--uploads-per-frame", a.uploadsPerFrame, "Pages uploaded a frame at most")->capture_default_str(),
+      cmd->add_option("--uploads-per-frame", a.uploadsPerFrame, "Pages uploaded a frame at most")
+          ->capture_default_str(),
       cmd->add_option("--loader-threads", a.loaderThreads, "Threads that read and decode pages")->capture_default_str(),
       cmd->add_option("--io-latency", a.ioLatency,
                       "MS[,JITTER]: simulate slow storage, every disk read waiting MS milliseconds plus up to JITTER"),

@@ -19,8 +19,8 @@
 namespace gimlod {
 
 struct CameraArgs {
-  std::string path;   // camera path JSON; empty: orbit
-  uint32_t orbit = 0; // orbit frames
+  std::string path;      // camera path JSON; empty: orbit
+  uint32_t orbit = 0;    // orbit frames
   uint32_t descent = 0;  // fly-down frames (descentPath)
   double distance = 0.9, elevation = 35.0, fov = 45.0;
   // Top groups above the charts at most (openAtlas, hierarchy/root_groups.h); 0: none.
@@ -126,8 +126,7 @@ inline std::array<float, 3> parseBackground(const std::string& s) {
 // Parses --size WxH (8 <= W, H <= 16384); throws InputError otherwise.
 inline void parseFrameSize(const std::string& size, uint32_t* w, uint32_t* h) {
   char extra;
-  if (std::sscanf(size.c_str(), "%ux%u%c", w, h, &extra) != 2 || *w < 8 || *h < 8 || *w > 16384 ||
-      *h > 16384)
+  if (std::sscanf(size.c_str(), "%ux%u%c", w, h, &extra) != 2 || *w < 8 || *h < 8 || *w > 16384 || *h > 16384)
     throw InputError("--size '" + size + "' must be WxH with 8 <= W, H <= 16384");
 }
 

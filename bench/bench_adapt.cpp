@@ -60,8 +60,8 @@ double since(Clock::time_point t0) { return std::chrono::duration<double, std::m
 // incremental) and the stateless top-down greedy, each on the same frames.
 void benchDual(const Hierarchy& h, const std::vector<ViewParams>& views, const Args& a) {
   std::printf("dual queue, tolerance %.3f px:\n%9s %8s %10s %10s %8s %8s %10s %9s %11s %9s %9s %6s\n", a.tolerance,
-              "max_nodes", "nodes", "ours_us", "us/node", "ops", "reused", "ref_us", "ref/ours", "greedy_us",
-              "err_px", "ref_err", "same");
+              "max_nodes", "nodes", "ours_us", "us/node", "ops", "reused", "ref_us", "ref/ours", "greedy_us", "err_px",
+              "ref_err", "same");
   for (uint32_t budget : a.budgets) {
     AdaptOptions o;
     o.tolerancePx = a.tolerance;
@@ -94,8 +94,8 @@ void benchDual(const Hierarchy& h, const std::vector<ViewParams>& views, const A
       greedyUs += since(t0);
     }
     const double n = double(views.size());
-    std::printf("%9u %8.0f %10.1f %10.4f %8.1f %8.0f %10.1f %9.2f %11.1f %9.4f %9.4f %6u\n", budget, nodes / n,
-                us / n, us / nodes, ops / n, reused / n, refUs / n, refUs / us, greedyUs / n, err, refErr, same);
+    std::printf("%9u %8.0f %10.1f %10.4f %8.1f %8.0f %10.1f %9.2f %11.1f %9.4f %9.4f %6u\n", budget, nodes / n, us / n,
+                us / nodes, ops / n, reused / n, refUs / n, refUs / us, greedyUs / n, err, refErr, same);
   }
 }
 
@@ -161,9 +161,10 @@ int run(int argc, char** argv) {
   const Hierarchy& h = atlas.hierarchy;
   std::vector<ViewParams> views;
   for (Camera c : orbitPath(atlas.lo, atlas.hi, a.frames, 0.35, 20.0)) views.push_back(makeViewParams(c, w, hgt));
-  std::printf("%s: %u charts, %zu top groups, depth %u, %u nodes in the forest; %u-frame orbit, %ux%u, tolerance %.3f px\n",
-              a.atlas.c_str(), h.chartCount(), h.groups.tops.size(), h.params.depth,
-              h.chartCount() * nodesPerChart(h.params.depth), a.frames, w, hgt, a.tolerance);
+  std::printf(
+      "%s: %u charts, %zu top groups, depth %u, %u nodes in the forest; %u-frame orbit, %ux%u, tolerance %.3f px\n",
+      a.atlas.c_str(), h.chartCount(), h.groups.tops.size(), h.params.depth,
+      h.chartCount() * nodesPerChart(h.params.depth), a.frames, w, hgt, a.tolerance);
   if (a.only != "quad") benchDual(h, views, a);
   if (a.only.empty()) std::printf("\n");
   if (a.only != "dual") benchQuad(h, views, a);

@@ -68,11 +68,11 @@ int benchAtlas(const std::filesystem::path& dir) {
   heightS /= 3;
   normalS /= 3;
   const double demSamples = geometry ? samples : double(m.samplesX) * m.samplesY;
-  std::printf("%s: format version %u%s, %zu charts, %.0f stored samples; chart files %.3f bytes per %s sample, "
-              "hierarchy %.3f\n",
-              dir.string().c_str(), m.version, charts.front()->derivedNormals() ? " (normals derived)" : "",
-              charts.size(), samples, double(fileBytes) / demSamples, geometry ? "stored" : "DEM",
-              double(hierarchyBytes) / demSamples);
+  std::printf(
+      "%s: format version %u%s, %zu charts, %.0f stored samples; chart files %.3f bytes per %s sample, "
+      "hierarchy %.3f\n",
+      dir.string().c_str(), m.version, charts.front()->derivedNormals() ? " (normals derived)" : "", charts.size(),
+      samples, double(fileBytes) / demSamples, geometry ? "stored" : "DEM", double(hierarchyBytes) / demSamples);
   std::printf("read block by block on one core: %s alone %.1f M samples/s; with their normals %.1f M samples/s\n",
               geometry ? "positions" : "heights", samples / heightS * 1e-6, samples / normalS * 1e-6);
   if (!charts.front()->compressed()) return 0;
@@ -90,7 +90,8 @@ int benchAtlas(const std::filesystem::path& dir) {
       // (A terrain's blocks with derived normals hold a ring of heights round them.)
       const uint32_t side = l.blockSamples + (!geometry && r->derivedNormals() ? 2 : 0);
       for (uint32_t by = 0; by < l.blocksPerSide; ++by)
-        for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx) blocks.push_back({r->readCodedBlock(channel, k, bx, by), side});
+        for (uint32_t bx = 0; bx < l.blocksPerSide; ++bx)
+          blocks.push_back({r->readCodedBlock(channel, k, bx, by), side});
     }
   std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> zstd(ZSTD_createDCtx(), ZSTD_freeDCtx);
   double codecS = 0.0, zstdS = 0.0;
@@ -99,8 +100,10 @@ int benchAtlas(const std::filesystem::path& dir) {
     auto t0 = Clock::now();
     for (const Coded& b : blocks) {
       values.resize(size_t(b.side) * b.side * (geometry ? 3 : 1));
-      if (geometry) decodePositions(b.code, b.side, values);
-      else decodeHeights(b.code, b.side, values);
+      if (geometry)
+        decodePositions(b.code, b.side, values);
+      else
+        decodeHeights(b.code, b.side, values);
     }
     codecS += std::chrono::duration<double>(Clock::now() - t0).count();
     t0 = Clock::now();
@@ -146,10 +149,11 @@ int benchDem(const std::filesystem::path& input, double precision) {
   for (int r = 0; r < repeats; ++r)
     for (const auto& c : codes) decodeHeights(c, kSide, out);
   const double decodeS = std::chrono::duration<double>(Clock::now() - t0).count() / repeats;
-  std::printf("%s: %zu blocks of 65^2, %s: %.3f bytes per sample (float32: 4); encode %.1f M samples/s, decode "
-              "%.1f M samples/s (one core)\n",
-              input.string().c_str(), blocks.size(), precision > 0.0 ? "quantized" : "integer metres, lossless",
-              double(bytes) / samples, samples / encodeS * 1e-6, samples / decodeS * 1e-6);
+  std::printf(
+      "%s: %zu blocks of 65^2, %s: %.3f bytes per sample (float32: 4); encode %.1f M samples/s, decode "
+      "%.1f M samples/s (one core)\n",
+      input.string().c_str(), blocks.size(), precision > 0.0 ? "quantized" : "integer metres, lossless",
+      double(bytes) / samples, samples / encodeS * 1e-6, samples / decodeS * 1e-6);
   return 0;
 }
 
@@ -158,9 +162,10 @@ int benchDem(const std::filesystem::path& input, double precision) {
 int main(int argc, char** argv) {
   if (argc > 1 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h" ||
                    (std::string(argv[1]) == "--atlas" && argc != 3) || argc > 3)) {
-    std::printf("usage: %s [DEM [PRECISION]]   heights coded as 65^2 blocks: bytes per sample, encode and decode\n"
-                "       %s --atlas ATLAS       an atlas read block by block: samples decoded per second\n",
-                argv[0], argv[0]);
+    std::printf(
+        "usage: %s [DEM [PRECISION]]   heights coded as 65^2 blocks: bytes per sample, encode and decode\n"
+        "       %s --atlas ATLAS       an atlas read block by block: samples decoded per second\n",
+        argv[0], argv[0]);
     return argc > 1 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h") ? 0 : 2;
   }
   try {

@@ -33,9 +33,8 @@ int run(int argc, char** argv) {
   std::vector<std::vector<float>> charts;
   for (const ChartInfo& c : m.charts) charts.push_back(extractChart(dem, c.gridX, c.gridY, chartSize));
   const uint64_t demSamples = uint64_t(dem.width) * dem.height;
-  std::printf("input %s: %ux%u samples, %zu charts of %u^2 (depth %u, R %u, min res %u)\n",
-              input.c_str(), dem.width, dem.height, charts.size(), chartSize, m.depth, 1u << m.maxNodeResLog2,
-              1u << m.minNodeResLog2);
+  std::printf("input %s: %ux%u samples, %zu charts of %u^2 (depth %u, R %u, min res %u)\n", input.c_str(), dem.width,
+              dem.height, charts.size(), chartSize, m.depth, 1u << m.maxNodeResLog2, 1u << m.minNodeResLog2);
 
   const int cores = tbb::info::default_concurrency();
   double perThread[2] = {0, 0};
@@ -44,7 +43,8 @@ int run(int argc, char** argv) {
     double best = 1e30;
     HierarchyStats st;
     for (int r = 0; r < repeats; ++r) {
-      buildTerrainHierarchy(m, [&](uint32_t c) { return charts[c]; }, &st);
+      buildTerrainHierarchy(
+          m, [&](uint32_t c) { return charts[c]; }, &st);
       best = std::min(best, st.seconds);
     }
     const double chartRate = double(st.samples) / best, demRate = double(demSamples) / best;

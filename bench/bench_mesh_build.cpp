@@ -132,12 +132,11 @@ int runBaseline(const fs::path& input) {
     level = std::move(next);
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::printf("%s\n", nlohmann::json({{"triangles", mesh.triangles.size()},
-                                      {"levels", levels},
-                                      {"bytes", bytes},
-                                      {"seconds", seconds}})
-                          .dump()
-                          .c_str());
+  std::printf(
+      "%s\n",
+      nlohmann::json({{"triangles", mesh.triangles.size()}, {"levels", levels}, {"bytes", bytes}, {"seconds", seconds}})
+          .dump()
+          .c_str());
   return 0;
 }
 
@@ -196,7 +195,8 @@ Row benchOne(const fs::path& self, const fs::path& gimlod, const fs::path& mesh,
   std::fflush(stdout);
   {
     const gimlod::AtlasView view = gimlod::openAtlas(atlas);
-    row.roots = view.hierarchy.groups.empty() ? view.hierarchy.chartCount() : uint32_t(view.hierarchy.groups.tops.size());
+    row.roots =
+        view.hierarchy.groups.empty() ? view.hierarchy.chartCount() : uint32_t(view.hierarchy.groups.tops.size());
   }
   fs::remove_all(atlas);
   return row;
@@ -227,9 +227,9 @@ int run(int argc, char** argv) {
     for (std::string n; std::getline(ss, n, ',');) {
       const fs::path ply = work / ("sphere_" + n + ".ply");
       if (!fs::exists(ply)) {
-        const ChildRun r = runChild({(dir / "etopo_sphere").string(), dem, "-o", ply.string(), "--tessellation", "cube",
-                                     "--cube-res", n},
-                                    work / "sphere.log");
+        const ChildRun r = runChild(
+            {(dir / "etopo_sphere").string(), dem, "-o", ply.string(), "--tessellation", "cube", "--cube-res", n},
+            work / "sphere.log");
         if (r.status != 0) throw std::runtime_error("etopo_sphere failed for --cube-res " + n);
       }
       inputs.push_back(ply);
@@ -240,15 +240,17 @@ int run(int argc, char** argv) {
   const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
   std::vector<Row> rows;
   for (const fs::path& in : inputs) rows.push_back(benchOne(self, gimlod, in, work, buildArgs));
-  std::printf("\n| input | triangles | gimlod s | CPU s | M tri/s/core | peak MiB | charts | roots | samples/tri | B/tri | "
-              "Hausdorff %% | flipped | meshopt chain s | peak MiB | B/tri | gimlod / chain |\n"
-              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+  std::printf(
+      "\n| input | triangles | gimlod s | CPU s | M tri/s/core | peak MiB | charts | roots | samples/tri | B/tri | "
+      "Hausdorff %% | flipped | meshopt chain s | peak MiB | B/tri | gimlod / chain |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const Row& r : rows)
-    std::printf("| %s | %llu | %.2f | %.2f | %.3f | %.0f | %u | %u | %.1f | %.1f | %.4f | %llu | %.2f | %.0f | %.2f | %.2f |\n",
-                r.name.c_str(), static_cast<unsigned long long>(r.triangles), r.seconds, r.cpuSeconds,
-                double(r.triangles) / 1e6 / std::max(r.cpuSeconds, 1e-9), r.peakMiB, r.charts, r.roots, r.samplesPerTriangle,
-                r.bytesPerTriangle, r.hausdorff, static_cast<unsigned long long>(r.flipped), r.baseSeconds,
-                r.basePeakMiB, r.baseBytesPerTriangle, r.seconds / std::max(r.baseSeconds, 1e-9));
+    std::printf(
+        "| %s | %llu | %.2f | %.2f | %.3f | %.0f | %u | %u | %.1f | %.1f | %.4f | %llu | %.2f | %.0f | %.2f | %.2f |\n",
+        r.name.c_str(), static_cast<unsigned long long>(r.triangles), r.seconds, r.cpuSeconds,
+        double(r.triangles) / 1e6 / std::max(r.cpuSeconds, 1e-9), r.peakMiB, r.charts, r.roots, r.samplesPerTriangle,
+        r.bytesPerTriangle, r.hausdorff, static_cast<unsigned long long>(r.flipped), r.baseSeconds, r.basePeakMiB,
+        r.baseBytesPerTriangle, r.seconds / std::max(r.baseSeconds, 1e-9));
   std::printf("\n%u cores\n", cores);
   return 0;
 }

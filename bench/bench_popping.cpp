@@ -93,7 +93,8 @@ int run(int argc, char** argv) {
   }
   auto context = gl::EglContext::create();
   std::printf("%s: %zu frames of a slow %s, %ux%u, tolerance %.2f px, %u nodes at most, on %s\n", a.atlas.c_str(),
-              path.size(), a.descent ? "fly-down" : "spiral", w, h, a.tolerance, a.maxNodes, context->renderer().c_str());
+              path.size(), a.descent ? "fly-down" : "spiral", w, h, a.tolerance, a.maxNodes,
+              context->renderer().c_str());
   std::printf("%9s %6s %9s %9s %9s %12s %9s\n", "geomorph", "blend", "max", "mean", "p99", "pixels>16", "switches");
   std::vector<std::pair<int, double>> settings;  // (attribute blend, geomorph range)
   for (const int blend : a.blends)

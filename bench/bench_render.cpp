@@ -60,7 +60,8 @@ int run(int argc, char** argv) {
       const uint32_t x = std::min(uint32_t(gx), dem.width - 2), y = std::min(uint32_t(gy), dem.height - 2);
       const double fx = gx - x, fy = gy - y;
       auto at = [&](uint32_t a, uint32_t b) { return double(dem.heights[size_t(b) * dem.width + a]); };
-      const double z = (1 - fy) * ((1 - fx) * at(x, y) + fx * at(x + 1, y)) + fy * ((1 - fx) * at(x, y + 1) + fx * at(x + 1, y + 1));
+      const double z =
+          (1 - fy) * ((1 - fx) * at(x, y) + fx * at(x + 1, y)) + fy * ((1 - fx) * at(x, y + 1) + fx * at(x + 1, y + 1));
       positions.emplace_back(float(gx * dem.spacing[0]), float(gy * dem.spacing[1]), float(z));
     }
   std::vector<uint32_t> indices;
@@ -87,8 +88,8 @@ int run(int argc, char** argv) {
   std::printf("engine:                          %7.2f ms/frame, %7.2f M triangles/s\n", ms / path.size(), engine);
   std::printf("(a) DEM grid mesh, same shading: %7.2f ms/frame, %7.2f M triangles/s (%llu triangles)\n",
               meshMs / path.size(), same, (unsigned long long)meshTris);
-  std::printf("(b) plain flat-shaded grid:      %7.2f ms/frame, %7.2f M triangles/s (%llu triangles)\n",
-              staticMs, plain, (unsigned long long)staticTris);
+  std::printf("(b) plain flat-shaded grid:      %7.2f ms/frame, %7.2f M triangles/s (%llu triangles)\n", staticMs,
+              plain, (unsigned long long)staticTris);
   std::printf("engine / (a) = %.2f, engine / (b) = %.2f\n", engine / same, engine / plain);
   std::filesystem::remove_all(tmp);
   return 0;

@@ -47,9 +47,7 @@ using namespace gimlod;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
+double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 // The whole terrain's level-0 heights, row-major samplesX x samplesY (gy northwards), assembled
 // from every chart's pyramid level 0 (chart (u, v) is global (gridX * M + u, gridY * M + v)).
@@ -85,8 +83,7 @@ HeightGrid readLevel0(const AtlasView& atlas) {
 // A regular (side+1)^2 grid over the valid extent, bilinear in the level-0 heights.
 void buildGridMesh(const HeightGrid& g, const std::array<double, 2>& spacing, uint64_t triangles,
                    std::vector<glm::vec3>& positions, std::vector<uint32_t>& indices) {
-  const uint32_t side =
-      std::max<uint32_t>(1, uint32_t(std::lround(std::sqrt(double(triangles) / 2.0))));
+  const uint32_t side = std::max<uint32_t>(1, uint32_t(std::lround(std::sqrt(double(triangles) / 2.0))));
   positions.clear();
   indices.clear();
   positions.reserve(size_t(side + 1) * (side + 1));
@@ -97,8 +94,8 @@ void buildGridMesh(const HeightGrid& g, const std::array<double, 2>& spacing, ui
       const double gx = double(i) / side * (g.width - 1), gy = double(j) / side * (g.height - 1);
       const uint32_t x = std::min(uint32_t(gx), g.width - 2), y = std::min(uint32_t(gy), g.height - 2);
       const double fx = gx - x, fy = gy - y;
-      const double z = (1 - fy) * ((1 - fx) * at(x, y) + fx * at(x + 1, y)) +
-                       fy * ((1 - fx) * at(x, y + 1) + fx * at(x + 1, y + 1));
+      const double z =
+          (1 - fy) * ((1 - fx) * at(x, y) + fx * at(x + 1, y)) + fy * ((1 - fx) * at(x, y + 1) + fx * at(x + 1, y + 1));
       positions.emplace_back(float(gx * spacing[0]), float(gy * spacing[1]), float(z));
     }
   for (uint32_t j = 0; j < side; ++j)
@@ -116,7 +113,8 @@ void buildChartMesh(const AtlasView& atlas, uint64_t triangles, std::vector<glm:
   const uint32_t M = m.chartSize - 1;
   uint32_t level = 0;
   auto trisAt = [&](uint32_t k) { return 2.0 * double(m.charts.size()) * double(M >> k) * double(M >> k); };
-  while ((M >> (level + 1)) >= 1 && std::fabs(trisAt(level + 1) - double(triangles)) < std::fabs(trisAt(level) - double(triangles)))
+  while ((M >> (level + 1)) >= 1 &&
+         std::fabs(trisAt(level + 1) - double(triangles)) < std::fabs(trisAt(level) - double(triangles)))
     ++level;
   positions.clear();
   indices.clear();
@@ -154,8 +152,8 @@ double mtps(double trianglesPerFrame, double msPerFrame) {
   return msPerFrame > 0 ? trianglesPerFrame / msPerFrame * 1e-3 : 0.0;
 }
 
-Result runConfig(const AtlasView& atlas, const HeightGrid& grid, const Config& cfg,
-                 uint32_t maxNodes, uint32_t frames) {
+Result runConfig(const AtlasView& atlas, const HeightGrid& grid, const Config& cfg, uint32_t maxNodes,
+                 uint32_t frames) {
   Result r;
   r.config = cfg;
   gl::SceneOptions so;
@@ -219,44 +217,48 @@ Result runConfig(const AtlasView& atlas, const HeightGrid& grid, const Config& c
 
 void printResult(const Result& r) {
   const Config& c = r.config;
-  std::printf("\n== %ux%u, tolerance %.2f px, %u frames: %.0f triangles/frame (min %.0f, max %.0f), "
-              "%.0f nodes, max error %.2f px, node budget bound in %u frames, pages loaded %.1f/frame, "
-              "pages missing %u\n",
-              c.width, c.height, c.tolerancePx, r.frames, r.meanTris, r.minTris, r.maxTris,
-              r.meanNodes, r.maxErrorPx, r.budgetBoundFrames, r.pagesLoaded, r.pagesMissing);
-  std::printf("engine CPU: adapt %.3f, stitch %.3f, upload %.3f ms/frame; draw (wall: submit + "
-              "glFinish) %.3f, GPU (timer query) %.3f; whole renderFrame %.3f ms/frame\n",
-              r.adaptMs, r.stitchMs, r.uploadMs, r.drawMs, r.gpuMs, r.frameMs);
+  std::printf(
+      "\n== %ux%u, tolerance %.2f px, %u frames: %.0f triangles/frame (min %.0f, max %.0f), "
+      "%.0f nodes, max error %.2f px, node budget bound in %u frames, pages loaded %.1f/frame, "
+      "pages missing %u\n",
+      c.width, c.height, c.tolerancePx, r.frames, r.meanTris, r.minTris, r.maxTris, r.meanNodes, r.maxErrorPx,
+      r.budgetBoundFrames, r.pagesLoaded, r.pagesMissing);
+  std::printf(
+      "engine CPU: adapt %.3f, stitch %.3f, upload %.3f ms/frame; draw (wall: submit + "
+      "glFinish) %.3f, GPU (timer query) %.3f; whole renderFrame %.3f ms/frame\n",
+      r.adaptMs, r.stitchMs, r.uploadMs, r.drawMs, r.gpuMs, r.frameMs);
   const double eDraw = mtps(r.meanTris, r.drawMs), eGpu = mtps(r.meanTris, r.gpuMs),
                eFrame = mtps(r.meanTris, r.frameMs);
   const double a = mtps(double(r.meshTris), r.meshMs), b = mtps(double(r.staticTris), r.staticMs);
   std::printf("engine draw (wall):               %8.3f ms/frame, %9.2f M triangles/s\n", r.drawMs, eDraw);
   std::printf("engine GPU (timer query):         %8.3f ms/frame, %9.2f M triangles/s\n", r.gpuMs, eGpu);
   std::printf("engine whole frame (CPU + draw):  %8.3f ms/frame, %9.2f M triangles/s\n", r.frameMs, eFrame);
-  std::printf("(a) atlas grid mesh, same shading:%8.3f ms/frame, %9.2f M triangles/s (%llu triangles)\n",
-              r.meshMs, a, (unsigned long long)r.meshTris);
-  std::printf("(b) plain flat-shaded grid:       %8.3f ms/frame, %9.2f M triangles/s (%llu triangles)\n",
-              r.staticMs, b, (unsigned long long)r.staticTris);
+  std::printf("(a) atlas grid mesh, same shading:%8.3f ms/frame, %9.2f M triangles/s (%llu triangles)\n", r.meshMs, a,
+              (unsigned long long)r.meshTris);
+  std::printf("(b) plain flat-shaded grid:       %8.3f ms/frame, %9.2f M triangles/s (%llu triangles)\n", r.staticMs, b,
+              (unsigned long long)r.staticTris);
   std::printf("floor (clear + glFinish, 2 tris): %8.3f ms/frame\n", r.floorMs);
-  std::printf("engine / (a) = %.2f (draw wall), %.2f (GPU), %.2f (whole frame); "
-              "engine / (b) = %.2f (draw wall), %.2f (GPU), %.2f (whole frame)\n",
-              eDraw / a, eGpu / a, eFrame / a, eDraw / b, eGpu / b, eFrame / b);
+  std::printf(
+      "engine / (a) = %.2f (draw wall), %.2f (GPU), %.2f (whole frame); "
+      "engine / (b) = %.2f (draw wall), %.2f (GPU), %.2f (whole frame)\n",
+      eDraw / a, eGpu / a, eFrame / a, eDraw / b, eGpu / b, eFrame / b);
 }
 
 void printSummary(const std::vector<Result>& results) {
   std::printf("\nsummary (ms/frame; Mt/s = million triangles/s; e = engine draw (wall), g = engine GPU timer)\n");
-  std::printf("%-10s %5s %9s %6s | %6s %6s %6s %7s %7s %7s | %8s %8s | %7s %8s | %7s %8s | %5s %5s %5s %5s\n",
-              "size", "tol", "tris", "nodes", "adapt", "stitch", "upload", "draw", "gpu", "frame",
-              "drawMt/s", "gpuMt/s", "(a)ms", "Mt/s", "(b)ms", "Mt/s", "e/a", "e/b", "g/a", "g/b");
+  std::printf("%-10s %5s %9s %6s | %6s %6s %6s %7s %7s %7s | %8s %8s | %7s %8s | %7s %8s | %5s %5s %5s %5s\n", "size",
+              "tol", "tris", "nodes", "adapt", "stitch", "upload", "draw", "gpu", "frame", "drawMt/s", "gpuMt/s",
+              "(a)ms", "Mt/s", "(b)ms", "Mt/s", "e/a", "e/b", "g/a", "g/b");
   for (const Result& r : results) {
     char size[32];
     std::snprintf(size, sizeof size, "%ux%u", r.config.width, r.config.height);
     const double e = mtps(r.meanTris, r.drawMs), g = mtps(r.meanTris, r.gpuMs);
     const double a = mtps(double(r.meshTris), r.meshMs), b = mtps(double(r.staticTris), r.staticMs);
-    std::printf("%-10s %5.2f %9.0f %6.0f | %6.3f %6.3f %6.3f %7.3f %7.3f %7.3f | %8.1f %8.1f | %7.3f %8.1f | "
-                "%7.3f %8.1f | %5.2f %5.2f %5.2f %5.2f\n",
-                size, r.config.tolerancePx, r.meanTris, r.meanNodes, r.adaptMs, r.stitchMs, r.uploadMs,
-                r.drawMs, r.gpuMs, r.frameMs, e, g, r.meshMs, a, r.staticMs, b, e / a, e / b, g / a, g / b);
+    std::printf(
+        "%-10s %5.2f %9.0f %6.0f | %6.3f %6.3f %6.3f %7.3f %7.3f %7.3f | %8.1f %8.1f | %7.3f %8.1f | "
+        "%7.3f %8.1f | %5.2f %5.2f %5.2f %5.2f\n",
+        size, r.config.tolerancePx, r.meanTris, r.meanNodes, r.adaptMs, r.stitchMs, r.uploadMs, r.drawMs, r.gpuMs,
+        r.frameMs, e, g, r.meshMs, a, r.staticMs, b, e / a, e / b, g / a, g / b);
   }
 }
 
@@ -322,8 +324,8 @@ int main(int argc, char** argv) try {
   std::printf("device: %s (%s)\n", ctx->renderer().c_str(), ctx->version().c_str());
   std::printf("GL_VENDOR: %s\nEGL: %s\n", ctx->vendor().c_str(), ctx->display().c_str());
   std::printf("atlas %s: %zu charts of %u, %ux%u samples; level 0 read in %.0f ms; max nodes %u\n",
-              dir.string().c_str(), atlas.manifest.charts.size(), atlas.manifest.chartSize,
-              grid.width, grid.height, readMs, maxNodes);
+              dir.string().c_str(), atlas.manifest.charts.size(), atlas.manifest.chartSize, grid.width, grid.height,
+              readMs, maxNodes);
   std::fflush(stdout);
   std::vector<Result> results;
   for (const Config& c : configs) {

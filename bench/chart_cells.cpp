@@ -48,7 +48,8 @@ void resetPeak() {
 int main(int argc, char** argv) {
   namespace fs = std::filesystem;
   if (argc < 2) {
-    std::fprintf(stderr, "usage: chart_cells MESH_OR_GRID_DIR [--grid DIR] [--charts N] [--max-memory BYTES] [--threads N]\n");
+    std::fprintf(stderr,
+                 "usage: chart_cells MESH_OR_GRID_DIR [--grid DIR] [--charts N] [--max-memory BYTES] [--threads N]\n");
     return 2;
   }
   fs::path input = argv[1], grid = "chart_cells.grid";
@@ -58,11 +59,16 @@ int main(int argc, char** argv) {
   bool check = false;
   for (int i = 2; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
-    if (a == "--grid") grid = argv[i + 1];
-    else if (a == "--charts") co.targetPatches = uint32_t(std::stoul(argv[i + 1]));
-    else if (a == "--max-memory") go.maxMemoryBytes = std::stoull(argv[i + 1]);
-    else if (a == "--threads") co.threads = unsigned(std::stoul(argv[i + 1]));
-    else if (a == "--check") check = std::stoul(argv[i + 1]) != 0;
+    if (a == "--grid")
+      grid = argv[i + 1];
+    else if (a == "--charts")
+      co.targetPatches = uint32_t(std::stoul(argv[i + 1]));
+    else if (a == "--max-memory")
+      go.maxMemoryBytes = std::stoull(argv[i + 1]);
+    else if (a == "--threads")
+      co.threads = unsigned(std::stoul(argv[i + 1]));
+    else if (a == "--check")
+      check = std::stoul(argv[i + 1]) != 0;
     else {
       std::fprintf(stderr, "chart_cells: unknown option %s\n", a.c_str());
       return 2;
@@ -86,20 +92,20 @@ int main(int argc, char** argv) {
     gimlod::ChartingStats st;
     const gimlod::PatchLayout l = gimlod::buildPatchLayoutFromCells(grid, co, &st);
     const gimlod::StageTiming& s = meter.finish("charting");
-    std::printf("charting  %8.2f s wall %8.2f s cpu  peak RSS %7.1f MiB  %zu patches (%u before fixing), "
-                "%u cells, %u cell clusters (%u dissolved)\n"
-                "          cells %.2f s, weld %.2f s, global cluster %.2f s, sides %.2f s; unfixed %u\n",
-                s.seconds, s.cpuSeconds, double(s.peakRssBytes) / (1 << 20), l.patches.size(), st.chartsBeforeFixing, st.cells,
-                st.cellClusters, st.cellClustersDissolved, st.cellSeconds, st.weldSeconds,
-                st.clusterSeconds - st.cellSeconds, st.sidesSeconds, st.patchesUnfixed);
+    std::printf(
+        "charting  %8.2f s wall %8.2f s cpu  peak RSS %7.1f MiB  %zu patches (%u before fixing), "
+        "%u cells, %u cell clusters (%u dissolved)\n"
+        "          cells %.2f s, weld %.2f s, global cluster %.2f s, sides %.2f s; unfixed %u\n",
+        s.seconds, s.cpuSeconds, double(s.peakRssBytes) / (1 << 20), l.patches.size(), st.chartsBeforeFixing, st.cells,
+        st.cellClusters, st.cellClustersDissolved, st.cellSeconds, st.weldSeconds, st.clusterSeconds - st.cellSeconds,
+        st.sidesSeconds, st.patchesUnfixed);
     std::printf("          %llu triangles, %llu vertices (%llu split), %llu non-manifold edges, %llu open edges\n",
                 (unsigned long long)st.outputTriangles, (unsigned long long)st.outputVertices,
                 (unsigned long long)st.verticesSplit, (unsigned long long)st.nonManifoldEdges,
                 (unsigned long long)st.boundaryEdges);
     if (check) {
       const std::vector<std::string> errs = gimlod::validatePatchLayout(l);
-      std::printf("check     digest %016llx, %zu validation errors\n", (unsigned long long)digest(l),
-                  errs.size());
+      std::printf("check     digest %016llx, %zu validation errors\n", (unsigned long long)digest(l), errs.size());
       for (size_t i = 0; i < errs.size() && i < 10; ++i) std::printf("          %s\n", errs[i].c_str());
     }
   } catch (const std::exception& e) {

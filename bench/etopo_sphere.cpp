@@ -81,12 +81,11 @@ constexpr CubeFace kCubeFaces[6] = {{0, 1, 2, true},  {0, 2, 1, false}, {1, 2, 0
 // Binary little-endian PLY with float x y z vertices and int triangles, buffered writes.
 class PlyWriter {
  public:
-  PlyWriter(const std::filesystem::path& path, const std::string& comment, uint64_t vertices,
-            uint64_t triangles)
+  PlyWriter(const std::filesystem::path& path, const std::string& comment, uint64_t vertices, uint64_t triangles)
       : path_(path), f_(std::fopen(path.string().c_str(), "wb")) {
     if (!f_) throw std::runtime_error(path.string() + ": cannot write");
-    const std::string header = "ply\nformat binary_little_endian 1.0\ncomment " + comment +
-                               "\nelement vertex " + std::to_string(vertices) +
+    const std::string header = "ply\nformat binary_little_endian 1.0\ncomment " + comment + "\nelement vertex " +
+                               std::to_string(vertices) +
                                "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
                                std::to_string(triangles) + "\nproperty list uchar int vertex_indices\nend_header\n";
     append(header.data(), header.size());
@@ -159,8 +158,8 @@ void writeLatLong(const gimlod::DemRaster& dem, const Options& o, uint32_t step)
   };
 
   PlyWriter ply(o.output,
-                "gimlod etopo_sphere from " + o.input.filename().string() + " step " +
-                    std::to_string(step) + " exaggeration " + std::to_string(o.exaggeration),
+                "gimlod etopo_sphere from " + o.input.filename().string() + " step " + std::to_string(step) +
+                    " exaggeration " + std::to_string(o.exaggeration),
                 g.vertices(), g.triangles());
   auto put = [&](double lat, double lon, double h) {
     const double r = o.radius + h;
@@ -171,8 +170,7 @@ void writeLatLong(const gimlod::DemRaster& dem, const Options& o, uint32_t step)
   put(-kPi / 2, 0.0, poleHeight(0));
   for (uint32_t row : rows) {
     const double lat = -kPi / 2 + kPi * row / double(dem.height - 1);
-    for (uint32_t c = 0; c < g.columns; ++c)
-      put(lat, 2 * kPi * double(c) / g.columns, heightKm(dem, o, row, c * step));
+    for (uint32_t c = 0; c < g.columns; ++c) put(lat, 2 * kPi * double(c) / g.columns, heightKm(dem, o, row, c * step));
   }
   put(kPi / 2, 0.0, poleHeight(dem.height - 1));
 
@@ -189,8 +187,8 @@ void writeLatLong(const gimlod::DemRaster& dem, const Options& o, uint32_t step)
   for (uint32_t c = 0; c < g.columns; ++c) ply.triangle(vid(g.rings - 1, c), vid(g.rings - 1, c + 1), north);
   ply.close();
   std::printf("%s: %llu vertices, %llu triangles (%u rings x %u columns + 2 poles), heights %.1f..%.1f m\n",
-              o.output.string().c_str(), (unsigned long long)g.vertices(), (unsigned long long)g.triangles(),
-              g.rings, g.columns, dem.minHeight, dem.maxHeight);
+              o.output.string().c_str(), (unsigned long long)g.vertices(), (unsigned long long)g.triangles(), g.rings,
+              g.columns, dem.minHeight, dem.maxHeight);
 }
 
 void writeCube(const gimlod::DemRaster& dem, const Options& o, uint32_t n) {
@@ -314,15 +312,22 @@ int main(int argc, char** argv) {
       return argv[++i];
     };
     try {
-      if (a == "-o") o.output = next();
-      else if (a == "--tessellation") tessellation = next();
-      else if (a == "--step") step = wholeNumber(a, next(), 0x7fffffff);
+      if (a == "-o")
+        o.output = next();
+      else if (a == "--tessellation")
+        tessellation = next();
+      else if (a == "--step")
+        step = wholeNumber(a, next(), 0x7fffffff);
       else if (a == "--cube-res")
         cubeRes = wholeNumber(a, next(), kMaxCubeRes, " (6 N^2 + 2 vertices must fit PLY int indices)");
-      else if (a == "--exaggeration") o.exaggeration = std::stod(next());
-      else if (a == "--radius") o.radius = std::stod(next());
-      else if (!a.empty() && a[0] == '-') return usage();
-      else o.input = a;
+      else if (a == "--exaggeration")
+        o.exaggeration = std::stod(next());
+      else if (a == "--radius")
+        o.radius = std::stod(next());
+      else if (!a.empty() && a[0] == '-')
+        return usage();
+      else
+        o.input = a;
     } catch (const std::exception& e) {
       std::fprintf(stderr, "etopo_sphere: %s\n", e.what());
       return usage();
@@ -331,17 +336,22 @@ int main(int argc, char** argv) {
   if (o.input.empty() || o.output.empty() || !(o.radius > 0) || !std::isfinite(o.exaggeration)) return usage();
   // An option of the other tessellation would be silently ignored: refuse it instead.
   const char* misfit = nullptr;
-  if (tessellation != "latlong" && tessellation != "cube") misfit = "--tessellation must be latlong or cube";
-  else if (tessellation == "latlong" && cubeRes) misfit = "--cube-res applies only to --tessellation cube";
-  else if (tessellation == "cube" && step) misfit = "--step applies only to --tessellation latlong";
+  if (tessellation != "latlong" && tessellation != "cube")
+    misfit = "--tessellation must be latlong or cube";
+  else if (tessellation == "latlong" && cubeRes)
+    misfit = "--cube-res applies only to --tessellation cube";
+  else if (tessellation == "cube" && step)
+    misfit = "--step applies only to --tessellation latlong";
   if (misfit) {
     std::fprintf(stderr, "etopo_sphere: %s\n", misfit);
     return usage();
   }
   try {
     const gimlod::DemRaster dem = gimlod::loadDem(o.input);  // row 0 = south edge
-    if (tessellation == "cube") writeCube(dem, o, cubeRes.value_or(1248));
-    else writeLatLong(dem, o, step.value_or(1));
+    if (tessellation == "cube")
+      writeCube(dem, o, cubeRes.value_or(1248));
+    else
+      writeLatLong(dem, o, step.value_or(1));
   } catch (const std::exception& e) {
     std::fprintf(stderr, "etopo_sphere: %s\n", e.what());
     return 1;

@@ -242,8 +242,8 @@ Mesh genus3(int triangles) {
     for (int j = 0; j < M; ++j) {
       // Top (radial x angular is +z) and bottom faces.
       for (int k = 0; k < K; ++k) {
-        mesh.quad(annulus(k, j, halfThickness), annulus(k + 1, j, halfThickness),
-                  annulus(k + 1, j + 1, halfThickness), annulus(k, j + 1, halfThickness));
+        mesh.quad(annulus(k, j, halfThickness), annulus(k + 1, j, halfThickness), annulus(k + 1, j + 1, halfThickness),
+                  annulus(k, j + 1, halfThickness));
         mesh.quad(annulus(k, j, -halfThickness), annulus(k, j + 1, -halfThickness),
                   annulus(k + 1, j + 1, -halfThickness), annulus(k + 1, j, -halfThickness));
       }
@@ -420,7 +420,7 @@ void insetGridFace(Mesh& mesh, Welder& weld, const std::array<dvec3, 4>& p, doub
 // the heel, the inner corner and both free ends: the profile below (x, z) extruded along y. The
 // caps and most walls are single big triangles; three walls carry a fine grid inset in them.
 Mesh cadBracket(int triangles) {
-  const std::vector<dvec2> profile = {{0.1, 0},  {2, 0},      {2, 0.15},   {1.95, 0.2}, {0.3, 0.2},
+  const std::vector<dvec2> profile = {{0.1, 0},   {2, 0},      {2, 0.15},   {1.95, 0.2}, {0.3, 0.2},
                                       {0.2, 0.3}, {0.2, 1.45}, {0.15, 1.5}, {0, 1.5},    {0, 0.1}};
   const size_t n = profile.size();
   const double width = 1.0, inset = 0.08;

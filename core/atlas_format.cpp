@@ -80,13 +80,13 @@ namespace {
 
 constexpr const char* kFormatTag = "gimlod-atlas";
 constexpr char kChartMagic[4] = {'G', 'L', 'M', 'C'};
-constexpr uint32_t kChartFileVersion = 1;  // heights + normals
+constexpr uint32_t kChartFileVersion = 1;          // heights + normals
 constexpr uint32_t kChartFileVersionChannels = 2;  // any channels, with a channel mask
 constexpr uint32_t kChartFileVersionCoded = 3;     // any channels, each block coded
 constexpr size_t kChartHeaderBytes = 4 + 4 * 4;
 constexpr size_t kChartHeaderBytesV2 = kChartHeaderBytes + 4;
-constexpr size_t kDirEntryBytes = 16;  // version 1
-constexpr size_t kCodedEntryBytes = 12;  // version 3, per channel: u64 offset, u32 bytes
+constexpr size_t kDirEntryBytes = 16;                            // version 1
+constexpr size_t kCodedEntryBytes = 12;                          // version 3, per channel: u64 offset, u32 bytes
 constexpr size_t kChartHeaderBytesV3 = kChartHeaderBytesV2 + 4;  // + u32 flags
 constexpr size_t kFrameBytes = 4 * 8 + 2 * 8;                    // HeightFieldFrame
 constexpr uint32_t kFlagDerivedNormals = 1;
@@ -140,9 +140,7 @@ uint32_t log2Exact(uint32_t v) { return static_cast<uint32_t>(std::countr_zero(v
 struct JsonReader {
   const fs::path& file;
 
-  [[noreturn]] void fail(const std::string& what) const {
-    throw InputError(quoted(file) + ": " + what);
-  }
+  [[noreturn]] void fail(const std::string& what) const { throw InputError(quoted(file) + ": " + what); }
   const json& field(const json& j, const char* key, const std::string& ctx) const {
     auto it = j.find(key);
     if (it == j.end()) fail("missing field '" + ctx + key + "'");
@@ -153,20 +151,18 @@ struct JsonReader {
     int64_t x;
     if (v.is_number_unsigned()) {
       uint64_t u = v.get<uint64_t>();
-      if (u > static_cast<uint64_t>(std::numeric_limits<int64_t>::max()))
-        fail("field '" + name + "' is out of range");
+      if (u > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) fail("field '" + name + "' is out of range");
       x = static_cast<int64_t>(u);
     } else {
       x = v.get<int64_t>();
     }
     if (x < lo || x > hi)
-      fail("field '" + name + "' = " + std::to_string(x) + " is out of range [" +
-           std::to_string(lo) + ", " + std::to_string(hi) + "]");
+      fail("field '" + name + "' = " + std::to_string(x) + " is out of range [" + std::to_string(lo) + ", " +
+           std::to_string(hi) + "]");
     return x;
   }
   uint32_t u32(const json& j, const char* key, const std::string& ctx = "") const {
-    return static_cast<uint32_t>(
-        integer(field(j, key, ctx), ctx + key, 0, std::numeric_limits<uint32_t>::max()));
+    return static_cast<uint32_t>(integer(field(j, key, ctx), ctx + key, 0, std::numeric_limits<uint32_t>::max()));
   }
   uint64_t u64(const json& v, const std::string& name) const {
     if (!v.is_number_unsigned() && !(v.is_number_integer() && v.get<int64_t>() >= 0))
@@ -205,9 +201,7 @@ nlohmann::ordered_json toJson(const RootNeighbour& n) {
 
 // ---- small shared helpers ---------------------------------------------------------------------
 
-bool isChartSizeValid(uint32_t n) {
-  return n >= 3 && n <= 65537 && std::has_single_bit(n - 1);
-}
+bool isChartSizeValid(uint32_t n) { return n >= 3 && n <= 65537 && std::has_single_bit(n - 1); }
 
 PackedNormal packNormal(float x, float y, float z) {
   auto q = [](float c) -> uint8_t {
@@ -339,20 +333,17 @@ void heightFieldNormals(const float* heights, size_t stride, const LevelWindow& 
 
 uint32_t AtlasManifest::intervalsLog2() const {
   if (!isChartSizeValid(chartSize))
-    throw std::logic_error("AtlasManifest: chartSize " + std::to_string(chartSize) +
-                           " is not 2^m+1");
+    throw std::logic_error("AtlasManifest: chartSize " + std::to_string(chartSize) + " is not 2^m+1");
   return log2Exact(chartSize - 1);
 }
 
 LevelLayout levelLayout(uint32_t chartSize, uint32_t blockIntervals, uint32_t level) {
-  if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) ||
-      blockIntervals > chartSize - 1)
-    throw std::logic_error("levelLayout: bad chartSize " + std::to_string(chartSize) +
-                           " / blockIntervals " + std::to_string(blockIntervals));
+  if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) || blockIntervals > chartSize - 1)
+    throw std::logic_error("levelLayout: bad chartSize " + std::to_string(chartSize) + " / blockIntervals " +
+                           std::to_string(blockIntervals));
   const uint32_t m = chartSize - 1;
   if (level > log2Exact(m))
-    throw std::logic_error("levelLayout: level " + std::to_string(level) + " > log2(" +
-                           std::to_string(m) + ")");
+    throw std::logic_error("levelLayout: level " + std::to_string(level) + " > log2(" + std::to_string(m) + ")");
   const uint32_t intervals = m >> level;
   LevelLayout l;
   l.samples = intervals + 1;
@@ -366,7 +357,8 @@ LevelLayout levelLayout(uint32_t chartSize, uint32_t blockIntervals, uint32_t le
 AtomicFileWriter::AtomicFileWriter(fs::path path)
     : path_(std::move(path)), tmp_(path_.string() + ".tmp-" + std::to_string(::getpid())) {
   fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd_ < 0) throw InputError(quoted(path_) + ": cannot create " + tmp_.filename().string() + ": " + std::strerror(errno));
+  if (fd_ < 0)
+    throw InputError(quoted(path_) + ": cannot create " + tmp_.filename().string() + ": " + std::strerror(errno));
 }
 
 AtomicFileWriter::~AtomicFileWriter() {
@@ -480,12 +472,13 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
         {"centreLatitudeDeg", m.georef.centreLatitudeDeg}}},
   };
   if (m.planet.present)
-    j["planet"] = ojson{{"radius", m.planet.radius},   {"lon0Deg", m.planet.lon0Deg},
-                        {"lat0Deg", m.planet.lat0Deg}, {"dlonDeg", m.planet.dlonDeg},
-                        {"dlatDeg", m.planet.dlatDeg}, {"wrapColumns", m.planet.wrapColumns}};
+    j["planet"] =
+        ojson{{"radius", m.planet.radius},   {"lon0Deg", m.planet.lon0Deg}, {"lat0Deg", m.planet.lat0Deg},
+              {"dlonDeg", m.planet.dlonDeg}, {"dlatDeg", m.planet.dlatDeg}, {"wrapColumns", m.planet.wrapColumns}};
   if (m.planet.present && m.planet.flattening > 0.0) j["planet"]["flattening"] = m.planet.flattening;
   if (m.imagery.present)
-    j["imagery"] = ojson{{"source", m.imagery.source}, {"scaleLog2", m.imagery.scaleLog2}, {"coverage", m.imagery.coverage}};
+    j["imagery"] =
+        ojson{{"source", m.imagery.source}, {"scaleLog2", m.imagery.scaleLog2}, {"coverage", m.imagery.coverage}};
   if (m.compression.present)
     j["compression"] = ojson{{"codec", "lorenzo-zstd"},
                              {"heightPrecision", m.compression.heightPrecision},
@@ -539,20 +532,21 @@ json parseManifestFile(const fs::path& dir, const JsonReader& r) {
 void readManifestGrid(const JsonReader& r, const json& j, AtlasManifest& m) {
   m.version = r.u32(j, "version");
   if (m.version < 1 || m.version > kAtlasFormatVersion)
-    r.fail("unsupported atlas format version " + std::to_string(m.version) +
-           " (this build reads version " + std::to_string(kAtlasFormatVersion) +
-           "; rebuild the atlas)");
+    r.fail("unsupported atlas format version " + std::to_string(m.version) + " (this build reads version " +
+           std::to_string(kAtlasFormatVersion) + "; rebuild the atlas)");
   const std::string kind = r.string(r.field(j, "kind", ""), "kind");
-  if (kind == atlasKindName(AtlasKind::Heightfield)) m.kind = AtlasKind::Heightfield;
-  else if (kind == atlasKindName(AtlasKind::Geometry)) m.kind = AtlasKind::Geometry;
-  else r.fail("unknown atlas kind '" + kind + "' (expected heightfield or geometry)");
+  if (kind == atlasKindName(AtlasKind::Heightfield))
+    m.kind = AtlasKind::Heightfield;
+  else if (kind == atlasKindName(AtlasKind::Geometry))
+    m.kind = AtlasKind::Geometry;
+  else
+    r.fail("unknown atlas kind '" + kind + "' (expected heightfield or geometry)");
   m.chartSize = r.u32(j, "chartSize");
-  if (!isChartSizeValid(m.chartSize))
-    r.fail("chartSize " + std::to_string(m.chartSize) + " is not 2^m+1 (3..65537)");
+  if (!isChartSizeValid(m.chartSize)) r.fail("chartSize " + std::to_string(m.chartSize) + " is not 2^m+1 (3..65537)");
   m.blockIntervals = r.u32(j, "blockIntervals");
   if (!std::has_single_bit(m.blockIntervals) || m.blockIntervals > m.chartSize - 1)
-    r.fail("blockIntervals " + std::to_string(m.blockIntervals) +
-           " is not a power of two <= chartSize-1 (" + std::to_string(m.chartSize - 1) + ")");
+    r.fail("blockIntervals " + std::to_string(m.blockIntervals) + " is not a power of two <= chartSize-1 (" +
+           std::to_string(m.chartSize - 1) + ")");
   m.chartsX = r.u32(j, "chartsX");
   m.chartsY = r.u32(j, "chartsY");
   if (j.contains("samplesX")) m.samplesX = r.u32(j, "samplesX");
@@ -570,15 +564,13 @@ void readManifestGrid(const JsonReader& r, const json& j, AtlasManifest& m) {
     m.heightRange = {static_cast<float>(hr[0]), static_cast<float>(hr[1])};
   }
   if (j.contains("voidsFilled")) m.voidsFilled = r.u64(j["voidsFilled"], "voidsFilled");
-  if (j.contains("voidFillMethod"))
-    m.voidFillMethod = r.string(j["voidFillMethod"], "voidFillMethod");
+  if (j.contains("voidFillMethod")) m.voidFillMethod = r.string(j["voidFillMethod"], "voidFillMethod");
   if (j.contains("source")) m.source = r.string(j["source"], "source");
   if (j.contains("georef")) {
     const json& g = j["georef"];
     if (!g.is_object()) r.fail("field 'georef' must be an object");
     if (g.contains("wkt")) m.georef.wkt = r.string(g["wkt"], "georef.wkt");
-    if (g.contains("geotransform"))
-      m.georef.geotransform = r.numbers<6>(g["geotransform"], "georef.geotransform");
+    if (g.contains("geotransform")) m.georef.geotransform = r.numbers<6>(g["geotransform"], "georef.geotransform");
     if (g.contains("geographic")) m.georef.geographic = r.boolean(g["geographic"], "georef.geographic");
     if (g.contains("centreLatitudeDeg"))
       m.georef.centreLatitudeDeg = r.number(g["centreLatitudeDeg"], "georef.centreLatitudeDeg");
@@ -617,8 +609,8 @@ void readManifestImageryAndCompression(const JsonReader& r, const json& j, Atlas
     if (!im.is_object()) r.fail("field 'imagery' must be an object or null");
     if (m.kind != AtlasKind::Heightfield) r.fail("field 'imagery' is for heightfield atlases only");
     m.imagery.present = true;
-    m.imagery.scaleLog2 = uint32_t(r.integer(r.field(im, "scaleLog2", "imagery."), "imagery.scaleLog2", 0,
-                                             kMaxImageryScaleLog2));
+    m.imagery.scaleLog2 =
+        uint32_t(r.integer(r.field(im, "scaleLog2", "imagery."), "imagery.scaleLog2", 0, kMaxImageryScaleLog2));
     if (im.contains("source")) m.imagery.source = r.string(im["source"], "imagery.source");
     if (im.contains("coverage")) m.imagery.coverage = r.number(im["coverage"], "imagery.coverage");
   }
@@ -628,13 +620,16 @@ void readManifestImageryAndCompression(const JsonReader& r, const json& j, Atlas
     const std::string codec = r.string(r.field(c, "codec", "compression."), "compression.codec");
     if (codec != "lorenzo-zstd") r.fail("unknown compression codec '" + codec + "' (expected lorenzo-zstd)");
     m.compression.present = true;
-    if (c.contains("heightPrecision")) m.compression.heightPrecision = r.number(c["heightPrecision"], "compression.heightPrecision");
-    if (c.contains("positionStep")) m.compression.positionStep = r.number(c["positionStep"], "compression.positionStep");
+    if (c.contains("heightPrecision"))
+      m.compression.heightPrecision = r.number(c["heightPrecision"], "compression.heightPrecision");
+    if (c.contains("positionStep"))
+      m.compression.positionStep = r.number(c["positionStep"], "compression.positionStep");
     if (c.contains("positionTolerance"))
       m.compression.positionTolerance = r.number(c["positionTolerance"], "compression.positionTolerance");
     if (c.contains("normalTolerance")) {
       const double t = r.number(c["normalTolerance"], "compression.normalTolerance");
-      if (!(t >= 0.0 && t <= 127.0) || t != std::floor(t)) r.fail("compression.normalTolerance must be a whole number in [0, 127]");
+      if (!(t >= 0.0 && t <= 127.0) || t != std::floor(t))
+        r.fail("compression.normalTolerance must be a whole number in [0, 127]");
       m.compression.normalTolerance = uint32_t(t);
     }
     if (!(m.compression.heightPrecision >= 0.0) || !(m.compression.positionStep >= 0.0) ||
@@ -658,12 +653,10 @@ void readManifestHierarchy(const JsonReader& r, const json& j, AtlasManifest& m)
     if (h.contains("minNodeResLog2")) m.minNodeResLog2 = r.u32(h, "minNodeResLog2", "hierarchy.");
   }
   if (m.depth < 1 || m.depth > ilog + 1)
-    r.fail("hierarchy.depth " + std::to_string(m.depth) + " must be in [1, " +
-           std::to_string(ilog + 1) + "]");
+    r.fail("hierarchy.depth " + std::to_string(m.depth) + " must be in [1, " + std::to_string(ilog + 1) + "]");
   if (m.minNodeResLog2 > m.maxNodeResLog2 || m.maxNodeResLog2 > log2Exact(m.blockIntervals))
-    r.fail("hierarchy node resolutions must satisfy minNodeResLog2 (" +
-           std::to_string(m.minNodeResLog2) + ") <= maxNodeResLog2 (" +
-           std::to_string(m.maxNodeResLog2) + ") <= log2(blockIntervals) (" +
+    r.fail("hierarchy node resolutions must satisfy minNodeResLog2 (" + std::to_string(m.minNodeResLog2) +
+           ") <= maxNodeResLog2 (" + std::to_string(m.maxNodeResLog2) + ") <= log2(blockIntervals) (" +
            std::to_string(log2Exact(m.blockIntervals)) + ")");
 }
 
@@ -675,16 +668,14 @@ void readManifestChart(const JsonReader& r, const json& c, size_t i, int64_t n, 
   ChartInfo& ci = m.charts[i];
   ci.id = r.u32(c, "id", ctx);
   if (ci.id != i)
-    r.fail("inconsistent chart list: " + ctx + "id is " + std::to_string(ci.id) + ", expected " +
-           std::to_string(i));
+    r.fail("inconsistent chart list: " + ctx + "id is " + std::to_string(ci.id) + ", expected " + std::to_string(i));
   ci.gridX = static_cast<int32_t>(r.integer(r.field(c, "gridX", ctx), ctx + "gridX", 0, INT32_MAX));
   ci.gridY = static_cast<int32_t>(r.integer(r.field(c, "gridY", ctx), ctx + "gridY", 0, INT32_MAX));
-  if (grid && (static_cast<uint32_t>(ci.gridX) >= m.chartsX ||
-               static_cast<uint32_t>(ci.gridY) >= m.chartsY ||
+  if (grid && (static_cast<uint32_t>(ci.gridX) >= m.chartsX || static_cast<uint32_t>(ci.gridY) >= m.chartsY ||
                static_cast<uint32_t>(ci.gridY) * m.chartsX + static_cast<uint32_t>(ci.gridX) != i))
-    r.fail("inconsistent chart list: " + ctx + "grid position (" + std::to_string(ci.gridX) +
-           ", " + std::to_string(ci.gridY) + ") does not match its id in a " +
-           std::to_string(m.chartsX) + " x " + std::to_string(m.chartsY) + " grid");
+    r.fail("inconsistent chart list: " + ctx + "grid position (" + std::to_string(ci.gridX) + ", " +
+           std::to_string(ci.gridY) + ") does not match its id in a " + std::to_string(m.chartsX) + " x " +
+           std::to_string(m.chartsY) + " grid");
   ci.file = r.string(r.field(c, "file", ctx), ctx + "file");
   const auto insideAtlas = [&](const std::string& file, const std::string& key) {
     const fs::path fp(file);
@@ -699,8 +690,8 @@ void readManifestChart(const JsonReader& r, const json& c, size_t i, int64_t n, 
   }
   if (c.contains("finest_level")) {
     if (m.kind != AtlasKind::Geometry) r.fail("field '" + ctx + "finest_level' is for geometry atlases only");
-    ci.finestLevel = static_cast<uint32_t>(
-        r.integer(c["finest_level"], ctx + "finest_level", 0, int64_t(m.intervalsLog2())));
+    ci.finestLevel =
+        static_cast<uint32_t>(r.integer(c["finest_level"], ctx + "finest_level", 0, int64_t(m.intervalsLog2())));
   }
   const json& nb = r.field(c, "neighbours", ctx);
   if (!nb.is_array() || nb.size() != 4) r.fail("field '" + ctx + "neighbours' must have 4 entries");
@@ -721,8 +712,8 @@ void readManifestCharts(const JsonReader& r, const json& j, AtlasManifest& m) {
   if (cs.size() > (size_t{1} << 24)) r.fail("inconsistent chart list: too many charts");
   const bool grid = m.kind == AtlasKind::Heightfield;
   if (grid && static_cast<uint64_t>(m.chartsX) * m.chartsY != cs.size())
-    r.fail("inconsistent chart list: " + std::to_string(cs.size()) + " charts but chartsX * chartsY = " +
-           std::to_string(m.chartsX) + " * " + std::to_string(m.chartsY));
+    r.fail("inconsistent chart list: " + std::to_string(cs.size()) +
+           " charts but chartsX * chartsY = " + std::to_string(m.chartsX) + " * " + std::to_string(m.chartsY));
   const int64_t n = static_cast<int64_t>(cs.size());
   m.charts.resize(cs.size());
   for (size_t i = 0; i < cs.size(); ++i) readManifestChart(r, cs[i], i, n, m);
@@ -733,9 +724,8 @@ void readManifestCharts(const JsonReader& r, const json& j, AtlasManifest& m) {
       if (a.chart < 0) continue;
       const RootNeighbour& b = m.charts[static_cast<size_t>(a.chart)].neighbours[a.edge];
       if (b.chart != static_cast<int32_t>(i) || b.edge != e || b.reversed != a.reversed)
-        r.fail("inconsistent chart list: chart " + std::to_string(i) + " edge " +
-               std::to_string(e) + " names chart " + std::to_string(a.chart) + " edge " +
-               std::to_string(a.edge) + ", which does not name it back");
+        r.fail("inconsistent chart list: chart " + std::to_string(i) + " edge " + std::to_string(e) + " names chart " +
+               std::to_string(a.chart) + " edge " + std::to_string(a.edge) + ", which does not name it back");
     }
   }
 }
@@ -817,9 +807,7 @@ struct ChartFileWriter::Impl {
         out = borderNormals ? encodeBorderNormals({reinterpret_cast<const PackedNormal*>(raw.data()), count}, bs)
                             : encodeNormals({reinterpret_cast<const PackedNormal*>(raw.data()), count}, bs);
         break;
-      default:
-        out = encodeColours({reinterpret_cast<const PackedColour*>(raw.data()), count}, bs);
-        break;
+      default: out = encodeColours({reinterpret_cast<const PackedColour*>(raw.data()), count}, bs); break;
     }
   }
 };
@@ -833,8 +821,8 @@ ChartFileWriter::ChartFileWriter(fs::path path, const ChartFileShape& shape, con
     throw std::invalid_argument("ChartFileWriter: bad chartSize/blockIntervals");
   const uint32_t mask = channelMask;
   const bool heightField = mask == kHeightFieldMask;
-  const bool geometry = (mask & (1u << kChannelPositions)) && (mask & (1u << kChannelNormals)) &&
-                        !(mask & (1u << kChannelHeights));
+  const bool geometry =
+      (mask & (1u << kChannelPositions)) && (mask & (1u << kChannelNormals)) && !(mask & (1u << kChannelHeights));
   if (!heightField && !geometry && mask != kAttributeMask)
     throw std::invalid_argument(
         "ChartFileWriter: a chart has heights and normals, or positions and normals (and colours), or colours alone");
@@ -872,15 +860,19 @@ ChartFileWriter::ChartFileWriter(fs::path path, const ChartFileShape& shape, con
   w.directory.assign(w.header + entries * w.entryBytes, 0);
   std::vector<uint8_t>& buf = w.directory;
   std::memcpy(buf.data(), kChartMagic, 4);
-  putLe<uint32_t>(buf, 4, coding.compressed ? kChartFileVersionCoded : w.v1 ? kChartFileVersion : kChartFileVersionChannels);
+  putLe<uint32_t>(buf, 4,
+                  coding.compressed ? kChartFileVersionCoded
+                  : w.v1            ? kChartFileVersion
+                                    : kChartFileVersionChannels);
   putLe<uint32_t>(buf, 8, chartSize);
   putLe<uint32_t>(buf, 12, blockIntervals);
   putLe<uint32_t>(buf, 16, levels);
   if (!w.v1) putLe<uint32_t>(buf, 20, mask);
   if (coding.compressed) {
-    putLe<uint32_t>(buf, 24, w.derived   ? kFlagDerivedNormals | (frame->wrapX ? kFlagWrapColumns : 0)
-                             : w.borderNormals ? kFlagBorderNormals
-                                               : 0);
+    putLe<uint32_t>(buf, 24,
+                    w.derived         ? kFlagDerivedNormals | (frame->wrapX ? kFlagWrapColumns : 0)
+                    : w.borderNormals ? kFlagBorderNormals
+                                      : 0);
     if (w.derived) {
       putLe<int64_t>(buf, 28, frame->originX);
       putLe<int64_t>(buf, 36, frame->originY);
@@ -898,7 +890,8 @@ ChartFileWriter::~ChartFileWriter() = default;
 uint32_t ChartFileWriter::chartSize() const { return impl_->chartSize; }
 uint32_t ChartFileWriter::blockIntervals() const { return impl_->blockIntervals; }
 
-ChartFileWriter::CodedBlock ChartFileWriter::code(uint32_t level, uint32_t bx, uint32_t by, const BlockData& data) const {
+ChartFileWriter::CodedBlock ChartFileWriter::code(uint32_t level, uint32_t bx, uint32_t by,
+                                                  const BlockData& data) const {
   const Impl& w = *impl_;
   if (level >= w.levels || bx >= w.layouts[level].blocksPerSide || by >= w.layouts[level].blocksPerSide)
     throw std::logic_error("ChartFileWriter: no block (" + std::to_string(bx) + ", " + std::to_string(by) +
@@ -941,10 +934,9 @@ uint64_t ChartFileWriter::commit() {
   return w.end;
 }
 
-uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint32_t chartSize,
-                        uint32_t blockIntervals, const ChartCoding& coding) {
-  if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) ||
-      blockIntervals > chartSize - 1)
+uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint32_t chartSize, uint32_t blockIntervals,
+                        const ChartCoding& coding) {
+  if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) || blockIntervals > chartSize - 1)
     throw std::invalid_argument("writeChartFile: bad chartSize/blockIntervals");
   // Channels present, as levels of samples.
   std::array<std::vector<const uint8_t*>, kChannelCount> data;
@@ -969,7 +961,7 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
   const bool ringed = coding.compressed && !pyramid.heights.empty() && pyramid.frame &&
                       pyramid.ringHeights.size() == pyramid.heights.size();
   if (ringed && mask == (1u << kChannelHeights)) mask = kHeightFieldMask;
-  const uint32_t levels = static_cast<uint32_t>(mask == kAttributeMask ? pyramid.colours.size()
+  const uint32_t levels = static_cast<uint32_t>(mask == kAttributeMask     ? pyramid.colours.size()
                                                 : mask == kHeightFieldMask ? pyramid.heights.size()
                                                                            : pyramid.normals.size());
   for (uint32_t c = 0; c < kChannelCount; ++c)
@@ -1078,13 +1070,13 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
     }
   }
   const size_t entryBytes = version == kChartFileVersion ? kDirEntryBytes
-                            : compressed_ ? kCodedEntryBytes * size_t(std::popcount(stored))
-                                          : 8 * size_t(std::popcount(channelMask_));
+                            : compressed_                ? kCodedEntryBytes * size_t(std::popcount(stored))
+                                                         : 8 * size_t(std::popcount(channelMask_));
   chartSize_ = getLe<uint32_t>(hdr + 8);
   blockIntervals_ = getLe<uint32_t>(hdr + 12);
   levels_ = getLe<uint32_t>(hdr + 16);
-  if (!isChartSizeValid(chartSize_) || !std::has_single_bit(blockIntervals_) ||
-      blockIntervals_ > chartSize_ - 1 || levels_ < 1 || levels_ > log2Exact(chartSize_ - 1) + 1)
+  if (!isChartSizeValid(chartSize_) || !std::has_single_bit(blockIntervals_) || blockIntervals_ > chartSize_ - 1 ||
+      levels_ < 1 || levels_ > log2Exact(chartSize_ - 1) + 1)
     fail("corrupt chart header (chartSize " + std::to_string(chartSize_) + ", blockIntervals " +
          std::to_string(blockIntervals_) + ", levels " + std::to_string(levels_) + ")");
   size_t entries = 0;
@@ -1122,36 +1114,34 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
         if (off >= dirEnd && off <= fileSize && bytes <= fileSize - off) continue;
         if (off < dirEnd || off > (uint64_t{1} << 50))
           fail("corrupt chart file (block offset out of range at level " + std::to_string(k) + ")");
-        fail("truncated chart file (" + std::to_string(fileSize) +
-             " bytes; level " + std::to_string(k) + " blocks extend beyond the end)");
+        fail("truncated chart file (" + std::to_string(fileSize) + " bytes; level " + std::to_string(k) +
+             " blocks extend beyond the end)");
       }
     }
   }
 }
 
-const ChartFileReader::BlockEntry& ChartFileReader::block(uint32_t level, uint32_t bx,
-                                                          uint32_t by) const {
+const ChartFileReader::BlockEntry& ChartFileReader::block(uint32_t level, uint32_t bx, uint32_t by) const {
   const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
   return directory_[level][size_t{by} * l.blocksPerSide + bx];
 }
 
-void ChartFileReader::locateWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
-                                   uint32_t& bx, uint32_t& by) const {
+void ChartFileReader::locateWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, uint32_t& bx,
+                                   uint32_t& by) const {
   if (level >= levels_)
-    throw std::logic_error("ChartFileReader: level " + std::to_string(level) + " >= " +
-                           std::to_string(levels_) + " in " + path_.string());
+    throw std::logic_error("ChartFileReader: level " + std::to_string(level) + " >= " + std::to_string(levels_) +
+                           " in " + path_.string());
   const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
   const uint32_t b = l.blockSamples - 1;
   auto pick = [&](uint32_t w0, const char* axis) {
     if (uint64_t{w0} + n >= l.samples)
-      throw std::logic_error(std::string("ChartFileReader: window ") + axis + " [" +
-                             std::to_string(w0) + ", " + std::to_string(uint64_t{w0} + n) +
-                             "] outside level " + std::to_string(level) + " of " + path_.string());
+      throw std::logic_error(std::string("ChartFileReader: window ") + axis + " [" + std::to_string(w0) + ", " +
+                             std::to_string(uint64_t{w0} + n) + "] outside level " + std::to_string(level) + " of " +
+                             path_.string());
     uint32_t blk = std::min(w0 / b, l.blocksPerSide - 1);
     if (w0 + n > blk * b + b)
-      throw std::logic_error(std::string("ChartFileReader: window ") + axis + " [" +
-                             std::to_string(w0) + ", " + std::to_string(w0 + n) +
-                             "] crosses a block boundary (block " + std::to_string(b) +
+      throw std::logic_error(std::string("ChartFileReader: window ") + axis + " [" + std::to_string(w0) + ", " +
+                             std::to_string(w0 + n) + "] crosses a block boundary (block " + std::to_string(b) +
                              " intervals) at level " + std::to_string(level));
     return blk;
   };
@@ -1173,8 +1163,7 @@ void ChartFileReader::readWindow(uint64_t first, uint64_t pitch, size_t rowBytes
       file_.read(dst + r * rowBytes, static_cast<std::streamsize>(rowBytes));
     }
   }
-  if (!file_)
-    throw InputError(quoted(path_) + ": read failed (file truncated or changed while in use)");
+  if (!file_) throw InputError(quoted(path_) + ": read failed (file truncated or changed while in use)");
 }
 
 namespace {
@@ -1197,7 +1186,8 @@ void ChartFileReader::readCode(ChartChannel c, uint32_t level, uint32_t bx, uint
 
 std::vector<uint8_t> ChartFileReader::readCodedBlock(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by) const {
   if (!compressed_ || !hasChannel(c))
-    throw std::logic_error("ChartFileReader: " + path_.string() + " has no coded blocks of channel " + std::to_string(c));
+    throw std::logic_error("ChartFileReader: " + path_.string() + " has no coded blocks of channel " +
+                           std::to_string(c));
   if (level >= levels_ || std::max(bx, by) >= levelLayout(chartSize_, blockIntervals_, level).blocksPerSide)
     throw std::logic_error("ChartFileReader: " + path_.string() + " has no block (" + std::to_string(bx) + ", " +
                            std::to_string(by) + ") at level " + std::to_string(level));
@@ -1207,7 +1197,7 @@ std::vector<uint8_t> ChartFileReader::readCodedBlock(ChartChannel c, uint32_t le
 }
 
 const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_t level, uint32_t bx,
-                                                        uint32_t by) const {
+                                                         uint32_t by) const {
   // The thread's last decoded block: a page's heights and then its derived normals decode once.
   struct Decoded {
     uint64_t serial = 0;
@@ -1238,8 +1228,10 @@ const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_
       case kChannelHeights: decodeHeights(code, side, {static_cast<float*>(out), count}); break;
       case kChannelPositions: decodePositions(code, side, {static_cast<float*>(out), 3 * count}); break;
       case kChannelNormals:
-        if (borderNormals_) decodeBorderNormals(code, side, {static_cast<PackedNormal*>(out), count});
-        else decodeNormals(code, side, {static_cast<PackedNormal*>(out), count});
+        if (borderNormals_)
+          decodeBorderNormals(code, side, {static_cast<PackedNormal*>(out), count});
+        else
+          decodeNormals(code, side, {static_cast<PackedNormal*>(out), count});
         break;
       default: decodeColours(code, side, {static_cast<PackedColour*>(out), count}); break;
     }
@@ -1294,13 +1286,11 @@ void ChartFileReader::readChannel(ChartChannel c, uint32_t level, uint32_t u0, u
   if (kChannelIsFloat[c]) floatsFromLe(static_cast<float*>(out), size_t{n + 1} * (n + 1) * elem / sizeof(float));
 }
 
-void ChartFileReader::readHeights(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
-                                  float* out) const {
+void ChartFileReader::readHeights(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, float* out) const {
   readChannel(kChannelHeights, level, u0, v0, n, out);
 }
 
-void ChartFileReader::readNormals(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,
-                                  PackedNormal* out) const {
+void ChartFileReader::readNormals(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, PackedNormal* out) const {
   readChannel(kChannelNormals, level, u0, v0, n, out);
 }
 
@@ -1332,10 +1322,9 @@ std::vector<T> assembleLevel(const LevelLayout& l, ReadFn read) {
 
 std::vector<float> ChartFileReader::readLevelHeights(uint32_t level) const {
   if (level >= levels_) throw std::logic_error("ChartFileReader: level out of range");
-  return assembleLevel<float>(levelLayout(chartSize_, blockIntervals_, level),
-                              [&](uint32_t u0, uint32_t v0, uint32_t n, float* out) {
-                                readHeights(level, u0, v0, n, out);
-                              });
+  return assembleLevel<float>(
+      levelLayout(chartSize_, blockIntervals_, level),
+      [&](uint32_t u0, uint32_t v0, uint32_t n, float* out) { readHeights(level, u0, v0, n, out); });
 }
 
 std::vector<float> ChartFileReader::readHeightsWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n) const {
@@ -1359,26 +1348,23 @@ std::vector<float> ChartFileReader::readHeightsWindow(uint32_t level, uint32_t u
 
 std::vector<PackedNormal> ChartFileReader::readLevelNormals(uint32_t level) const {
   if (level >= levels_) throw std::logic_error("ChartFileReader: level out of range");
-  return assembleLevel<PackedNormal>(levelLayout(chartSize_, blockIntervals_, level),
-                                     [&](uint32_t u0, uint32_t v0, uint32_t n, PackedNormal* out) {
-                                       readNormals(level, u0, v0, n, out);
-                                     });
+  return assembleLevel<PackedNormal>(
+      levelLayout(chartSize_, blockIntervals_, level),
+      [&](uint32_t u0, uint32_t v0, uint32_t n, PackedNormal* out) { readNormals(level, u0, v0, n, out); });
 }
 
 std::vector<glm::vec3> ChartFileReader::readLevelPositions(uint32_t level) const {
   if (level >= levels_) throw std::logic_error("ChartFileReader: level out of range");
-  return assembleLevel<glm::vec3>(levelLayout(chartSize_, blockIntervals_, level),
-                                  [&](uint32_t u0, uint32_t v0, uint32_t n, glm::vec3* out) {
-                                    readPositions(level, u0, v0, n, out);
-                                  });
+  return assembleLevel<glm::vec3>(
+      levelLayout(chartSize_, blockIntervals_, level),
+      [&](uint32_t u0, uint32_t v0, uint32_t n, glm::vec3* out) { readPositions(level, u0, v0, n, out); });
 }
 
 std::vector<PackedColour> ChartFileReader::readLevelColours(uint32_t level) const {
   if (level >= levels_) throw std::logic_error("ChartFileReader: level out of range");
-  return assembleLevel<PackedColour>(levelLayout(chartSize_, blockIntervals_, level),
-                                     [&](uint32_t u0, uint32_t v0, uint32_t n, PackedColour* out) {
-                                       readColours(level, u0, v0, n, out);
-                                     });
+  return assembleLevel<PackedColour>(
+      levelLayout(chartSize_, blockIntervals_, level),
+      [&](uint32_t u0, uint32_t v0, uint32_t n, PackedColour* out) { readColours(level, u0, v0, n, out); });
 }
 
 StagedDirectory::StagedDirectory(const std::filesystem::path& target, const std::string& markerFile,

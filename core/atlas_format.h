@@ -77,10 +77,10 @@ struct RootNeighbour {
 };
 
 struct Georeference {
-  std::string wkt;                          // source spatial reference, may be empty
-  std::array<double, 6> geotransform{};     // GDAL geotransform of the source raster
-  bool geographic = false;                  // source units were degrees
-  double centreLatitudeDeg = 0.0;           // latitude used for degree-to-metre conversion
+  std::string wkt;                       // source spatial reference, may be empty
+  std::array<double, 6> geotransform{};  // GDAL geotransform of the source raster
+  bool geographic = false;               // source units were degrees
+  double centreLatitudeDeg = 0.0;        // latitude used for degree-to-metre conversion
 };
 
 struct ChartInfo {
@@ -105,18 +105,18 @@ struct ChartInfo {
 // the terrain and 0 where it does not.
 struct ImageryInfo {
   bool present = false;
-  uint32_t scaleLog2 = 0;      // 0..kMaxImageryScaleLog2
-  std::string source;          // the raster it came from
-  double coverage = 0.0;       // fraction of the terrain's samples the imagery covers
+  uint32_t scaleLog2 = 0;  // 0..kMaxImageryScaleLog2
+  std::string source;      // the raster it came from
+  double coverage = 0.0;   // fraction of the terrain's samples the imagery covers
   uint32_t chartSize(uint32_t geometryChartSize) const { return ((geometryChartSize - 1) << scaleLog2) + 1; }
 };
 inline constexpr uint32_t kMaxImageryScaleLog2 = 2;
 
 // How an atlas's chart files store their blocks (ChartCoding), as the manifest records it.
 struct CompressionInfo {
-  bool present = false;         // chart files are coded (version 3); the manifest is version 2
-  double heightPrecision = 0.0; // metres: non-integer heights were quantized to it (0: none were)
-  double positionStep = 0.0;    // positions' lattice step (geometry atlases)
+  bool present = false;          // chart files are coded (version 3); the manifest is version 2
+  double heightPrecision = 0.0;  // metres: non-integer heights were quantized to it (0: none were)
+  double positionStep = 0.0;     // positions' lattice step (geometry atlases)
   // Geometry atlases: how far a position off its chart's border (same units) and a packed
   // normal byte may have been settled from its input (settlePositions, settleNormals); 0: none.
   double positionTolerance = 0.0;
@@ -139,17 +139,17 @@ struct AtlasManifest {
   std::string voidFillMethod;
   std::string source;
   Georeference georef;
-  ImageryInfo imagery;                      // terrain imagery (heightfield atlases only)
-  PlanetInfo planet;                        // a height field on a sphere (heightfield atlases only)
-  CompressionInfo compression;              // coded chart files (version 2)
+  ImageryInfo imagery;          // terrain imagery (heightfield atlases only)
+  PlanetInfo planet;            // a height field on a sphere (heightfield atlases only)
+  CompressionInfo compression;  // coded chart files (version 2)
   std::vector<ChartInfo> charts;
   // Hierarchy parameters (log2 values). depth = number of quadtree levels (root = level 0).
   std::string hierarchyFile = "hierarchy.bin";
   uint32_t depth = 5;
-  uint32_t maxNodeResLog2 = 6;              // log2(R)
+  uint32_t maxNodeResLog2 = 6;  // log2(R)
   uint32_t minNodeResLog2 = 2;
 
-  uint32_t intervalsLog2() const;           // log2(chartSize - 1)
+  uint32_t intervalsLog2() const;  // log2(chartSize - 1)
   uint32_t pyramidLevels() const { return intervalsLog2() + 1; }
   // Samples a side of chart c's file (ChartInfo::finestLevel).
   uint32_t chartFileSize(uint32_t c) const { return ((chartSize - 1) >> charts[c].finestLevel) + 1; }
@@ -279,10 +279,10 @@ void heightFieldNormals(const float* heights, size_t stride, const LevelWindow& 
 // height-field chart has heights and normals; a geometry chart has positions and normals, and
 // colours when the source had them. Absent channels are empty.
 struct ChartPyramid {
-  std::vector<std::vector<float>> heights;          // [level][v * samples + u]
-  std::vector<std::vector<PackedNormal>> normals;   // [level][v * samples + u]
-  std::vector<std::vector<glm::vec3>> positions;    // [level][v * samples + u]
-  std::vector<std::vector<PackedColour>> colours;   // [level][v * samples + u]
+  std::vector<std::vector<float>> heights;         // [level][v * samples + u]
+  std::vector<std::vector<PackedNormal>> normals;  // [level][v * samples + u]
+  std::vector<std::vector<glm::vec3>> positions;   // [level][v * samples + u]
+  std::vector<std::vector<PackedColour>> colours;  // [level][v * samples + u]
   // Height-field charts for a compressed file (writeChartFile): each level's heights with a
   // one-sample ring from the neighbouring lattice ((samples + 2)^2, row-major), and where the chart
   // lies. The file then stores these heights and derives the normals from them on reading.
@@ -331,8 +331,8 @@ struct ChartCoding {
 // Written block by block in level order (ChartFileWriter) and renamed into place. Returns bytes
 // written. Throws std::invalid_argument on a malformed pyramid or one the coding cannot take,
 // InputError if the file cannot be written.
-uint64_t writeChartFile(const std::filesystem::path& path, const ChartPyramid& pyramid,
-                        uint32_t chartSize, uint32_t blockIntervals, const ChartCoding& coding = {});
+uint64_t writeChartFile(const std::filesystem::path& path, const ChartPyramid& pyramid, uint32_t chartSize,
+                        uint32_t blockIntervals, const ChartCoding& coding = {});
 
 // One channel of one block as a writer takes it: element (0, 0) of the block (of its ring, for the
 // ring heights of a height field whose normals are derived), rows `stride` elements apart.
@@ -378,7 +378,9 @@ class ChartFileWriter {
   // Appends a coded block. Thread-safe; a block is written once (std::logic_error otherwise). The
   // file's bytes follow the order of the calls.
   void append(const CodedBlock& block);
-  void writeBlock(uint32_t level, uint32_t bx, uint32_t by, const BlockData& data) { append(code(level, bx, by, data)); }
+  void writeBlock(uint32_t level, uint32_t bx, uint32_t by, const BlockData& data) {
+    append(code(level, bx, by, data));
+  }
   // Throws std::logic_error when a block is missing. Returns the file's bytes.
   uint64_t commit();
   const std::filesystem::path& path() const { return path_; }
@@ -415,7 +417,7 @@ class ChartFileReader {
   std::vector<PackedColour> readLevelColours(uint32_t level) const;
   uint32_t channelMask() const { return channelMask_; }  // bits 1 << ChartChannel
   bool hasChannel(ChartChannel c) const { return (channelMask_ >> c) & 1u; }
-  bool compressed() const { return compressed_; }  // version 3: blocks decoded on read
+  bool compressed() const { return compressed_; }                               // version 3: blocks decoded on read
   bool derivedNormals() const { return frame_.has_value() || borderNormals_; }  // from heights or positions
   const std::filesystem::path& path() const { return path_; }
   // Version 3: the code of block (bx, by) of level `level`'s channel c as stored, undecoded (for
@@ -430,8 +432,7 @@ class ChartFileReader {
   };
   const BlockEntry& block(uint32_t level, uint32_t bx, uint32_t by) const;
   // Block holding the window [u0, u0+n] x [v0, v0+n]; throws std::logic_error if none does.
-  void locateWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, uint32_t& bx,
-                    uint32_t& by) const;
+  void locateWindow(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, uint32_t& bx, uint32_t& by) const;
   // Reads a window of one block: `rows` rows of `rowBytes` bytes, `pitch` bytes apart from byte
   // `first` of the file, into out one after the other; caller holds no lock.
   void readWindow(uint64_t first, uint64_t pitch, size_t rowBytes, uint32_t rows, void* out) const;

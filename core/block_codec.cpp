@@ -36,8 +36,12 @@ constexpr int kLevel = 3;
 // Heights keep level 3: a terrain build codes billions of samples, at about a third of the speed.
 constexpr int kPositionLevel = 9;
 
-struct CCtxFree { void operator()(ZSTD_CCtx* c) const { ZSTD_freeCCtx(c); } };
-struct DCtxFree { void operator()(ZSTD_DCtx* c) const { ZSTD_freeDCtx(c); } };
+struct CCtxFree {
+  void operator()(ZSTD_CCtx* c) const { ZSTD_freeCCtx(c); }
+};
+struct DCtxFree {
+  void operator()(ZSTD_DCtx* c) const { ZSTD_freeDCtx(c); }
+};
 
 ZSTD_CCtx* compressor() {
   thread_local std::unique_ptr<ZSTD_CCtx, CCtxFree> c([] {
@@ -87,7 +91,10 @@ const std::vector<uint8_t>& unframe(std::span<const uint8_t> block, const char (
 
 inline uint32_t zigzag(int32_t r) { return (uint32_t(r) << 1) ^ uint32_t(r >> 31); }
 inline int32_t unzigzag(uint32_t z) { return int32_t(z >> 1) ^ -int32_t(z & 1); }
-inline uint8_t zigzag8(uint8_t r) { const int8_t s = int8_t(r); return uint8_t((uint8_t(s) << 1) ^ uint8_t(s >> 7)); }
+inline uint8_t zigzag8(uint8_t r) {
+  const int8_t s = int8_t(r);
+  return uint8_t((uint8_t(s) << 1) ^ uint8_t(s >> 7));
+}
 inline uint8_t unzigzag8(uint8_t z) { return uint8_t((z >> 1) ^ uint8_t(-int(z & 1))); }
 
 // The Lorenzo prediction of sample (x, y) of an interleaved image (stride channels) from its
@@ -235,8 +242,8 @@ void planarPasses(uint32_t side, uint8_t chartBorderSides, PlanarTraversal& trav
 
 // The prediction of channel c of sample i coded at `spacing` (planarPasses), from the neighbours
 // `known` then.
-inline uint32_t predictPlanar(const std::vector<uint32_t>& q, const std::vector<uint8_t>& known, uint32_t side, uint32_t i,
-                              uint32_t spacing, uint32_t c) {
+inline uint32_t predictPlanar(const std::vector<uint32_t>& q, const std::vector<uint8_t>& known, uint32_t side,
+                              uint32_t i, uint32_t spacing, uint32_t c) {
   const uint32_t x = i % side, y = i / side;
   const bool l = x >= spacing && (known[i - spacing] & 1), b = y >= spacing && (known[i - spacing * side] & 1);
   const bool lb = l && b && (known[i - spacing - spacing * side] & 1);
@@ -320,7 +327,8 @@ std::vector<uint8_t> planarBody(const std::vector<int32_t>& q, uint32_t side, do
         if (known[i] || (dx % s == 0 && dy % s == 0)) continue;
         for (uint32_t c = 0; c < 3 && flat; ++c) {
           auto at = [&](uint32_t a, uint32_t b) { return int64_t(q[(size_t(b) * side + a) * 3 + c]); };
-          flat = at(u, w) == planarSquareSample(at(x0, y0), at(x0 + s, y0), at(x0, y0 + s), at(x0 + s, y0 + s), s, dx, dy);
+          flat =
+              at(u, w) == planarSquareSample(at(x0, y0), at(x0 + s, y0), at(x0, y0 + s), at(x0 + s, y0 + s), s, dx, dy);
         }
       }
     if (bits.size() * 8 <= nbits) bits.push_back(0);
@@ -429,8 +437,10 @@ inline void paintSquare(uint32_t* cls, uint32_t* corner, const PlanarSquare& sq)
 #pragma GCC unroll 9
   for (uint32_t dy = 0; dy <= s; ++dy)
 #pragma GCC unroll 9
-    for (uint32_t dx = 0; dx <= s; ++dx) cls[c00 + size_t(dy) * side + dx] = std::min(cls[c00 + size_t(dy) * side + dx], l);
-  for (const size_t c : {c00, c00 + s, c00 + size_t(s) * side, c00 + size_t(s) * side + s}) corner[c] = std::min(corner[c], l);
+    for (uint32_t dx = 0; dx <= s; ++dx)
+      cls[c00 + size_t(dy) * side + dx] = std::min(cls[c00 + size_t(dy) * side + dx], l);
+  for (const size_t c : {c00, c00 + s, c00 + size_t(s) * side, c00 + size_t(s) * side + s})
+    corner[c] = std::min(corner[c], l);
 }
 template <uint32_t S>
 inline void placeSquare(uint32_t* q, size_t n, const uint32_t* cls, const PlanarSquare& sq) {
@@ -447,10 +457,12 @@ inline void placeSquare(uint32_t* q, size_t n, const uint32_t* cls, const Planar
       uint32_t* row = qc + size_t(dy) * side;
       uint32_t v = s * q00 + dy * (q01 - q00) + half;  // dx < dy: up the left edge, then along
 #pragma GCC unroll 9
-      for (uint32_t dx = 0; dx < dy; ++dx, v += q11 - q01) row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
+      for (uint32_t dx = 0; dx < dy; ++dx, v += q11 - q01)
+        row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
       v = s * q00 + dy * (q11 - q00) + half;  // dx >= dy: along the diagonal, then along
 #pragma GCC unroll 9
-      for (uint32_t dx = dy; dx <= s; ++dx, v += q10 - q00) row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
+      for (uint32_t dx = dy; dx <= s; ++dx, v += q10 - q00)
+        row[dx] = pick(lv[dx] == l, uint32_t(int32_t(v) >> shift), row[dx]);
     }
   }
 }
@@ -528,9 +540,12 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
     const uint32_t s = last >> l;
     eachSquare(l, [&](size_t c00) {
       const PlanarSquare sq{side, c00, l, s};
-      if (s == 2) paintSquare<2>(cls.data(), corner.data(), sq);
-      else if (s == 4) paintSquare<4>(cls.data(), corner.data(), sq);
-      else paintSquare<0>(cls.data(), corner.data(), sq);
+      if (s == 2)
+        paintSquare<2>(cls.data(), corner.data(), sq);
+      else if (s == 4)
+        paintSquare<4>(cls.data(), corner.data(), sq);
+      else
+        paintSquare<0>(cls.data(), corner.data(), sq);
     });
   }
   for (uint32_t t = 0; t < side; ++t) {  // the chart's border: only as a corner
@@ -591,9 +606,12 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
     }
     eachSquare(l, [&](size_t c00) {
       const PlanarSquare sq{side, c00, l, s};
-      if (s == 4) placeSquare<4>(q.data(), n, cls.data(), sq);
-      else if (s == 8) placeSquare<8>(q.data(), n, cls.data(), sq);
-      else placeSquare<0>(q.data(), n, cls.data(), sq);
+      if (s == 4)
+        placeSquare<4>(q.data(), n, cls.data(), sq);
+      else if (s == 8)
+        placeSquare<8>(q.data(), n, cls.data(), sq);
+      else
+        placeSquare<0>(q.data(), n, cls.data(), sq);
     });
   }
   if (j != corners) throw CodecError("corrupt position block (planar squares)");
@@ -639,7 +657,8 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const IntBlockKind
   std::memcpy(&blockSide, raw.data() + 4, 4);
   std::memcpy(&step, raw.data() + 8, 8);
   if (mode > uint8_t(HeightQuantization::kPrecision) || planes < 1 || planes > 4 || raw[2] != channels ||
-      (flags & ~(kFlagFirstSample | kFlagPlanar)) != 0 || !(step > 0.0) || !(step <= 1e30))  // decoded values stay finite floats
+      (flags & ~(kFlagFirstSample | kFlagPlanar)) != 0 || !(step > 0.0) ||
+      !(step <= 1e30))  // decoded values stay finite floats
     throw CodecError(std::string("corrupt ") + what + " block (header)");
   const size_t head = kIntHeaderBytes + ((flags & kFlagFirstSample) ? 4 * size_t(channels) : 0);
   if (blockSide == side && (flags & kFlagPlanar)) {
@@ -675,9 +694,15 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const IntBlockKind
       const uint8_t *b0 = base + size_t(ch) * planes * n + at, *b1 = b0 + n, *b2 = b1 + n, *b3 = b2 + n;
       uint32_t* rr = r.data();
       switch (planes) {  // one vector loop per plane count
-        case 1: for (uint32_t x = 0; x < side; ++x) rr[x] = unz(b0[x]); break;
-        case 2: for (uint32_t x = 0; x < side; ++x) rr[x] = unz(b0[x] | uint32_t(b1[x]) << 8); break;
-        case 3: for (uint32_t x = 0; x < side; ++x) rr[x] = unz(b0[x] | uint32_t(b1[x]) << 8 | uint32_t(b2[x]) << 16); break;
+        case 1:
+          for (uint32_t x = 0; x < side; ++x) rr[x] = unz(b0[x]);
+          break;
+        case 2:
+          for (uint32_t x = 0; x < side; ++x) rr[x] = unz(b0[x] | uint32_t(b1[x]) << 8);
+          break;
+        case 3:
+          for (uint32_t x = 0; x < side; ++x) rr[x] = unz(b0[x] | uint32_t(b1[x]) << 8 | uint32_t(b2[x]) << 16);
+          break;
         default:
           for (uint32_t x = 0; x < side; ++x)
             rr[x] = unz(b0[x] | uint32_t(b1[x]) << 8 | uint32_t(b2[x]) << 16 | uint32_t(b3[x]) << 24);
@@ -753,7 +778,8 @@ std::vector<uint8_t> encodeBytes(const ByteBlockKind& blocks, std::span<const By
     for (uint32_t y = 0; y < side; ++y)
       for (uint32_t x = 0; x < side; ++x) {
         const size_t s = size_t(y) * side + x;
-        const uint8_t p = kind == kKindNormals && c == 2 ? predictZ(b, side, x, y, t) : predictByte(b + c, side, 4, x, y);
+        const uint8_t p =
+            kind == kKindNormals && c == 2 ? predictZ(b, side, x, y, t) : predictByte(b + c, side, 4, x, y);
         plane[s] = zigzag8(uint8_t(b[s * 4 + c] - p));
       }
   }
@@ -877,7 +903,6 @@ std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, 
   }
   return all;
 }
-
 
 void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<float> out) {
   decodeInts(block, kPositionBlocks, side, out);
@@ -1018,10 +1043,10 @@ namespace {
 // The index of the k-th border sample in ring order (see encodeBorderNormals).
 size_t borderSample(uint32_t side, uint32_t k) {
   const uint32_t m = side - 1;
-  if (k < m) return k;                                                  // first row, left to right
-  if (k < 2 * m) return size_t(k - m) * side + m;                       // last column, upwards
-  if (k < 3 * m) return size_t(m) * side + (m - (k - 2 * m));           // last row, right to left
-  return size_t(m - (k - 3 * m)) * side;                                // first column, downwards
+  if (k < m) return k;                                         // first row, left to right
+  if (k < 2 * m) return size_t(k - m) * side + m;              // last column, upwards
+  if (k < 3 * m) return size_t(m) * side + (m - (k - 2 * m));  // last row, right to left
+  return size_t(m - (k - 3 * m)) * side;                       // first column, downwards
 }
 
 }  // namespace
@@ -1058,7 +1083,8 @@ void decodeBorderNormals(std::span<const uint8_t> block, uint32_t side, std::spa
   Byte4 prev{128, 128, 128, 255};
   for (uint32_t k = 0; k < ring; ++k) {
     Byte4& nrm = out[borderSample(side, k)];
-    for (uint32_t c = 0; c < 3; ++c) nrm[c] = uint8_t(prev[c] + unzigzag8(raw[kByteHeaderBytes + size_t(c) * ring + k]));
+    for (uint32_t c = 0; c < 3; ++c)
+      nrm[c] = uint8_t(prev[c] + unzigzag8(raw[kByteHeaderBytes + size_t(c) * ring + k]));
     nrm[3] = 255;
     prev = nrm;
   }

@@ -74,7 +74,8 @@ inline constexpr uint8_t kChartBorderBottom = 1, kChartBorderRight = 2, kChartBo
 // (x0, y0 + s), q11 (x0 + s, y0 + s), per coordinate: on the two triangles split along
 // (0,0)-(1,1), rounded half up, in exact integer arithmetic. The two squares of an edge agree on
 // it, and a square's subsampling puts its samples where the half-size square would.
-inline int32_t planarSquareSample(int64_t q00, int64_t q10, int64_t q01, int64_t q11, uint32_t s, uint32_t dx, uint32_t dy) {
+inline int32_t planarSquareSample(int64_t q00, int64_t q10, int64_t q01, int64_t q11, uint32_t s, uint32_t dx,
+                                  uint32_t dy) {
   const int64_t si = s;
   const int64_t v = dx >= dy ? si * q00 + int64_t(dx) * (q10 - q00) + int64_t(dy) * (q11 - q10)
                              : si * q00 + int64_t(dy) * (q01 - q00) + int64_t(dx) * (q11 - q01);

@@ -61,7 +61,8 @@ void forEachLevelSample(const std::vector<T>& h, uint32_t S, uint32_t k, Fn&& fn
 // (forEachLevelSample). Dist: |a - b| for heights, Euclidean for geometry images.
 template <typename T, typename Dist>
 void accumulateLevelError(const std::vector<T>& h, uint32_t S, uint32_t k, std::vector<float>& running, Dist dist) {
-  forEachLevelSample(h, S, k, [&](size_t i, const T& interp) { running[i] = std::max(running[i], dist(h[i], interp)); });
+  forEachLevelSample(h, S, k,
+                     [&](size_t i, const T& interp) { running[i] = std::max(running[i], dist(h[i], interp)); });
 }
 
 // note: function objects, not functions: a function pointer as Dist would be an indirect call

@@ -31,8 +31,9 @@ void angleDifferences(float sa, float ca, float d, float* dsin, float* dcos) {
 const Ellipsoid* findEllipsoid(const std::string& name) {
   for (const Ellipsoid& e : kEllipsoids) {
     const std::string n = e.name;
-    if (n.size() == name.size() &&
-        std::equal(n.begin(), n.end(), name.begin(), [](unsigned char a, unsigned char b) { return std::toupper(a) == std::toupper(b); }))
+    if (n.size() == name.size() && std::equal(n.begin(), n.end(), name.begin(), [](unsigned char a, unsigned char b) {
+          return std::toupper(a) == std::toupper(b);
+        }))
       return &e;
   }
   return nullptr;
@@ -95,8 +96,9 @@ std::array<int64_t, 2> PlanetFrame::sampleUnder(const glm::dvec3& p) const {
   if (!(r > 0.0)) return {0, 0};
   const double e2 = info_.eccentricity2();
   // On an ellipsoid, the geodetic latitude of the surface point on the ray from the centre.
-  const double lat = (e2 == 0.0 ? std::asin(std::clamp(p.z / r, -1.0, 1.0))
-                                : std::atan2(p.z, (1.0 - e2) * std::hypot(p.x, p.y))) / kDeg;
+  const double lat =
+      (e2 == 0.0 ? std::asin(std::clamp(p.z / r, -1.0, 1.0)) : std::atan2(p.z, (1.0 - e2) * std::hypot(p.x, p.y))) /
+      kDeg;
   double lon = std::atan2(p.y, p.x) / kDeg;
   double x = (lon - info_.lon0Deg) / info_.dlonDeg;
   if (info_.wrapColumns) {
@@ -104,7 +106,8 @@ std::array<int64_t, 2> PlanetFrame::sampleUnder(const glm::dvec3& p) const {
     x = std::fmod(std::fmod(x, w) + w, w);
   }
   const double y = (lat - info_.lat0Deg) / info_.dlatDeg;
-  return {column(std::llround(std::clamp(x, 0.0, double(lastX_)))), row(std::llround(std::clamp(y, 0.0, double(lastY_))))};
+  return {column(std::llround(std::clamp(x, 0.0, double(lastX_)))),
+          row(std::llround(std::clamp(y, 0.0, double(lastY_))))};
 }
 
 PlanetAnchor planetAnchor(const PlanetFrame& frame, int64_t gx, int64_t gy) {
@@ -132,7 +135,7 @@ glm::vec3 planetOffset(const PlanetFrame& frame, const PlanetAnchor& a, int64_t 
   if (w > 0 && 2 * dx > w) dx -= w;
   if (w > 0 && 2 * dx < -w) dx += w;
   const float sLat = float(a.sinLat), cLat = float(a.cosLat), sLon = float(a.sinLon), cLon = float(a.cosLon);
-  const bool south = frame.pole(r) < 0, north = frame.pole(r) > 0;
+  const bool south = frame.pole(r)<0, north = frame.pole(r)> 0;
   float dp = float(r - a.gy) * float(info.dlatDeg * kDeg);
   if (south) dp = -float(a.latBelow);
   if (north) dp = float(a.latAbove);

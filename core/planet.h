@@ -46,8 +46,8 @@ struct PlanetInfo {
   // e^2 s^2) (the radius itself on a sphere).
   double normalRadius(double s) const { return radius / std::sqrt(1.0 - eccentricity2() * s * s); }
   double polarRadius() const { return radius * (1.0 - flattening); }
-  double lon0Deg = 0.0, lat0Deg = 0.0;   // sample (0, 0): longitude and latitude, degrees
-  double dlonDeg = 1.0, dlatDeg = 1.0;   // degrees between samples (both > 0; rows go north)
+  double lon0Deg = 0.0, lat0Deg = 0.0;  // sample (0, 0): longitude and latitude, degrees
+  double dlonDeg = 1.0, dlatDeg = 1.0;  // degrees between samples (both > 0; rows go north)
   // W > 0: the samples circle the planet, W columns a turn, and column W is column 0 again
   // (the DEM holds W + 1 columns, the last a copy of the first). 0: a regional DEM.
   uint32_t wrapColumns = 0;
@@ -96,7 +96,7 @@ class PlanetFrame {
 // a sample's position minus the anchor's from the integer offsets alone (planetOffset).
 struct PlanetAnchor {
   int64_t gx = 0, gy = 0;
-  glm::dvec3 position{0.0};        // planet-centred, metres
+  glm::dvec3 position{0.0};  // planet-centred, metres
   double sinLat = 0, cosLat = 1, sinLon = 0, cosLon = 1;
   double latBelow = 0, latAbove = 0;  // radians from the anchor's latitude to the south and north poles
   // On an ellipsoid: its radius of curvature in the prime vertical N = a / w, w = sqrt(1 - e^2

@@ -41,16 +41,21 @@ Report reportOf(const StageState& s, bool finished) {
   r.done = std::min(s.done.load(), s.total);
   r.seconds = std::chrono::duration<double>(Clock::now() - s.start).count();
   r.finished = finished;
-  if (finished) r.etaSeconds = 0.0;
-  else if (r.done > 0 && r.total > 0) r.etaSeconds = r.seconds * double(r.total - r.done) / double(r.done);
+  if (finished)
+    r.etaSeconds = 0.0;
+  else if (r.done > 0 && r.total > 0)
+    r.etaSeconds = r.seconds * double(r.total - r.done) / double(r.done);
   return r;
 }
 
 std::string duration(double s) {
   char buf[32];
-  if (s < 60) std::snprintf(buf, sizeof buf, "%.0f s", s);
-  else if (s < 3600) std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
-  else std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, int(s) / 60 % 60);
+  if (s < 60)
+    std::snprintf(buf, sizeof buf, "%.0f s", s);
+  else if (s < 3600)
+    std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
+  else
+    std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, int(s) / 60 % 60);
   return buf;
 }
 
@@ -109,8 +114,10 @@ std::string format(const Report& r, int width) {
                 static_cast<unsigned long long>(r.done), static_cast<unsigned long long>(r.total),
                 duration(r.seconds).c_str());
   std::string out = buf;
-  if (r.finished) out += ", done";
-  else if (r.etaSeconds >= 0.0) out += ", ETA " + duration(r.etaSeconds);
+  if (r.finished)
+    out += ", done";
+  else if (r.etaSeconds >= 0.0)
+    out += ", ETA " + duration(r.etaSeconds);
   return out;
 }
 

@@ -13,9 +13,9 @@ namespace gimlod::progress {
 struct Report {
   std::string stage;
   uint64_t done = 0, total = 0;
-  double seconds = 0.0;     // since the stage began
-  double etaSeconds = -1.0; // remaining at the rate so far; < 0: not known yet
-  bool finished = false;    // the stage's last report
+  double seconds = 0.0;      // since the stage began
+  double etaSeconds = -1.0;  // remaining at the rate so far; < 0: not known yet
+  bool finished = false;     // the stage's last report
 };
 using Sink = std::function<void(const Report&)>;
 

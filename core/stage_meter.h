@@ -34,9 +34,9 @@ inline double secondsSince(std::chrono::steady_clock::time_point t0) {
 // One finished stage.
 struct StageTiming {
   std::string stage;
-  double seconds = 0.0;         // wall time
-  double cpuSeconds = 0.0;      // process CPU time, all threads
-  uint64_t peakRssBytes = 0;    // the largest resident size seen during the stage
+  double seconds = 0.0;       // wall time
+  double cpuSeconds = 0.0;    // process CPU time, all threads
+  uint64_t peakRssBytes = 0;  // the largest resident size seen during the stage
 };
 
 // Measures consecutive stages. A sampler thread reads the resident size every 5 ms and keeps the

@@ -33,8 +33,7 @@ void reduceRects2x2(const std::vector<float>& in, uint32_t w, uint32_t rows, std
     const float* r0 = &in[size_t(2 * y) * w];
     const float* r1 = r0 + w;
     float* o = &out[size_t(y) * h];
-    for (uint32_t x = 0; x < h; ++x)
-      o[x] = op(op(r0[2 * x], r0[2 * x + 1]), op(r1[2 * x], r1[2 * x + 1]));
+    for (uint32_t x = 0; x < h; ++x) o[x] = op(op(r0[2 * x], r0[2 * x + 1]), op(r1[2 * x], r1[2 * x + 1]));
   }
 }
 // The same for an n x n array.
@@ -114,7 +113,8 @@ void fillErrors(const HierarchyParams& p, const std::vector<T>& samples, Dist di
     forEachNodeReduction(cells, L, p.depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
       if (L < l + k) return;
       const uint32_t r = L - l - k;
-      if (r >= p.minNodeResLog2 && r <= p.maxResLog2(l)) out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] = v;
+      if (r >= p.minNodeResLog2 && r <= p.maxResLog2(l))
+        out.errors[size_t(nodeIndex(l, x, y)) * rc + (r - p.minNodeResLog2)] = v;
     });
   }
 }
@@ -137,7 +137,7 @@ void accumulateHeightError(const std::vector<float>& h, uint32_t S, uint32_t k, 
       const uint32_t x0 = cx * s, xend = (cx == n - 1) ? s : s - 1;
       const float h00 = row0[x0], h10 = row0[x0 + s], h01 = row1[x0], h11 = row1[x0 + s];
       const float upper = h00 + fy * (h01 - h00), du = h11 - h01;  // dx < dy
-      const float dl = h10 - h00, lower = fy * (h11 - h10);       // dx >= dy
+      const float dl = h10 - h00, lower = fy * (h11 - h10);        // dx >= dy
       const uint32_t split = std::min(dy, xend + 1);
       for (uint32_t dx = 0; dx < split; ++dx) {
         const float surface = upper + float(dx) * inv * du;
@@ -209,8 +209,9 @@ void setNodeBounds(const TerrainChartNodes& c, uint32_t l, uint32_t x, uint32_t 
   Hierarchy::ChartNodes& out = c.out;
   const uint32_t L = c.p.intervalsLog2;
   const uint32_t idx = nodeIndex(l, x, y), size = (1u << L) >> l;
-  const int64_t ox = (int64_t(chart.gridX) << L) + int64_t(x) * size, oy = (int64_t(chart.gridY) << L) + int64_t(y) * size;
-  out.bounds[idx] = {float(double(ox) * m.spacing[0]), float(double(oy) * m.spacing[1]), lo,
+  const int64_t ox = (int64_t(chart.gridX) << L) + int64_t(x) * size,
+                oy = (int64_t(chart.gridY) << L) + int64_t(y) * size;
+  out.bounds[idx] = {float(double(ox) * m.spacing[0]),        float(double(oy) * m.spacing[1]),        lo,
                      float(double(ox + size) * m.spacing[0]), float(double(oy + size) * m.spacing[1]), hi};
   out.flags[idx] = ox >= int64_t(m.samplesX) - 1 || oy >= int64_t(m.samplesY) - 1 ? kNodeEmpty : 0;
 }
@@ -292,9 +293,10 @@ TileSummary buildTerrainTile(const TerrainChartNodes& c, const std::vector<float
     }
   }
   for (uint32_t k = 1; k <= kmax; ++k)
-    sum.levelError[k] = forEachNodeReduction(blocks[k], t - b, depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
-      if (l < t - b) put(k, l, x, y, v);
-    });
+    sum.levelError[k] =
+        forEachNodeReduction(blocks[k], t - b, depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
+          if (l < t - b) put(k, l, x, y, v);
+        });
   return sum;
 }
 
@@ -400,10 +402,8 @@ void putVec(std::vector<uint8_t>& b, const std::vector<T>& v) {
 
 void HierarchyParams::validate() const {
   if (depth < 1) throw InputError(optionRef("depth") + " must be at least 1");
-  if (minNodeResLog2 > maxNodeResLog2)
-    throw InputError("minimum node resolution exceeds the maximum node resolution");
-  if (maxNodeResLog2 > intervalsLog2)
-    throw InputError("maximum node resolution exceeds the chart resolution");
+  if (minNodeResLog2 > maxNodeResLog2) throw InputError("minimum node resolution exceeds the maximum node resolution");
+  if (maxNodeResLog2 > intervalsLog2) throw InputError("maximum node resolution exceeds the chart resolution");
   if (depth - 1 + minNodeResLog2 > intervalsLog2)
     throw InputError(optionRef("depth") + " " + std::to_string(depth) + " is too deep for charts of " +
                      std::to_string((1u << intervalsLog2) + 1) + " samples: leaves would have fewer than 2^" +
@@ -444,8 +444,7 @@ std::vector<uint8_t> finestLevels(const AtlasManifest& m, const HierarchyParams&
   return out;
 }
 
-Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeightSource& source,
-                                HierarchyStats* stats) {
+Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeightSource& source, HierarchyStats* stats) {
   const uint32_t M = manifest.chartSize - 1;
   return buildTerrainHierarchy(
       manifest,
@@ -457,8 +456,8 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartHeight
       stats, M);
 }
 
-Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindowSource& source,
-                                HierarchyStats* stats, uint32_t maxTile) {
+Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindowSource& source, HierarchyStats* stats,
+                                uint32_t maxTile) {
   Hierarchy hier;
   hier.params = hierarchyParams(manifest);
   hier.params.validate();
@@ -509,8 +508,7 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindow
   return hier;
 }
 
-Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
-                                 const std::vector<std::array<RootNeighbour, 4>>& roots,
+Hierarchy buildGeometryHierarchy(const HierarchyParams& params, const std::vector<std::array<RootNeighbour, 4>>& roots,
                                  const ChartPositionSource& source, HierarchyStats* stats,
                                  const std::vector<uint8_t>& finestLevels) {
   Hierarchy hier;
@@ -596,9 +594,7 @@ std::vector<uint8_t> ungroup(std::span<const uint8_t> prefix, std::span<const ui
   return v1;
 }
 
-BodyLayout layoutOf(const HierarchyParams& p, uint32_t count) {
-  return {count, nodesPerChart(p.depth), p.resCount()};
-}
+BodyLayout layoutOf(const HierarchyParams& p, uint32_t count) { return {count, nodesPerChart(p.depth), p.resCount()}; }
 
 }  // namespace
 
@@ -619,8 +615,10 @@ void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool 
   if (compressed) coder.emplace(l.size(), [&](const uint8_t* p, size_t n) { file.write(p, n); });
   std::vector<uint8_t> piece;
   auto flush = [&] {
-    if (coder) coder->add(piece);
-    else file.write(piece.data(), piece.size());
+    if (coder)
+      coder->add(piece);
+    else
+      file.write(piece.data(), piece.size());
     piece.clear();
   };
   auto emit = [&](const void* p, size_t n) {
@@ -728,8 +726,8 @@ Hierarchy readHierarchy(const std::filesystem::path& path) {
   }
   const uint32_t nodes = nodesPerChart(h.params.depth);
   // The header fixes the file's size: check it before allocating what a corrupt count claims.
-  const uint64_t perChart = 4 * (4 + 1 + 1) +
-                            uint64_t(nodes) * (sizeof(std::array<float, 6>) + 1 + sizeof(float) * h.params.resCount());
+  const uint64_t perChart =
+      4 * (4 + 1 + 1) + uint64_t(nodes) * (sizeof(std::array<float, 6>) + 1 + sizeof(float) * h.params.resCount());
   if (uint64_t(b.size() - pos) != uint64_t(count) * perChart)
     throw InputError(path.string() + ": hierarchy file holds " + std::to_string(b.size()) + " bytes, its header (" +
                      std::to_string(count) + " charts of depth " + std::to_string(h.params.depth) + ") needs " +
@@ -743,8 +741,7 @@ Hierarchy readHierarchy(const std::filesystem::path& path) {
       get(&n.edge, 1);
       get(&rev, 1);
       n.reversed = rev != 0;
-      if (n.chart >= int32_t(count) || n.edge > 3)
-        throw InputError(path.string() + ": corrupt root neighbour");
+      if (n.chart >= int32_t(count) || n.edge > 3) throw InputError(path.string() + ": corrupt root neighbour");
     }
     auto& cn = h.charts[c];
     cn.bounds.resize(nodes);

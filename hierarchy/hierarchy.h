@@ -24,13 +24,10 @@ struct NodeId {
   uint32_t level = 0;
   uint32_t x = 0, y = 0;
   bool operator==(const NodeId&) const = default;
-  uint64_t key() const {
-    return (uint64_t(chart) << 40) | (uint64_t(level) << 34) | (uint64_t(y) << 17) | uint64_t(x);
-  }
+  uint64_t key() const { return (uint64_t(chart) << 40) | (uint64_t(level) << 34) | (uint64_t(y) << 17) | uint64_t(x); }
   // Inverse of key().
   static NodeId fromKey(uint64_t k) {
-    return {uint32_t(k >> 40), uint32_t((k >> 34) & 63u), uint32_t(k & 0x1FFFFu),
-            uint32_t((k >> 17) & 0x1FFFFu)};
+    return {uint32_t(k >> 40), uint32_t((k >> 34) & 63u), uint32_t(k & 0x1FFFFu), uint32_t((k >> 17) & 0x1FFFFu)};
   }
   NodeId parent() const { return {chart, level - 1, x >> 1, y >> 1}; }
   NodeId child(uint32_t i) const { return {chart, level + 1, 2 * x + (i & 1), 2 * y + (i >> 1)}; }
@@ -98,14 +95,13 @@ class Hierarchy {
   uint8_t flags(const NodeId& n) const { return charts[n.chart].flags[nodeIndex(n.level, n.x, n.y)]; }
   // Geometric error (world units) of node n drawn at resolution res.
   float error(const NodeId& n, uint32_t res) const {
-    return charts[n.chart].errors[nodeIndex(n.level, n.x, n.y) * params.resCount() +
-                                  (res - params.minNodeResLog2)];
+    return charts[n.chart].errors[nodeIndex(n.level, n.x, n.y) * params.resCount() + (res - params.minNodeResLog2)];
   }
 };
 
 struct HierarchyStats {
-  uint64_t samples = 0;      // level-0 samples processed (all charts)
-  double seconds = 0.0;      // wall time, including the source reads
+  uint64_t samples = 0;  // level-0 samples processed (all charts)
+  double seconds = 0.0;  // wall time, including the source reads
   double samplesPerSecond = 0.0;
   uint32_t threads = 0;
 };
@@ -138,11 +134,10 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindow
 
 // The hierarchy of a planet atlas (manifest.planet, core/planet.h): each chart's samples placed on
 // the sphere (PlanetFrame::position) and measured as a geometry image (buildGeometryHierarchy), so
-// bounds are planet-centred boxes and errors Euclidean distances in world units (metres on a planet), the sphere's curvature
-// included. The positions are measured relative to the chart's centre in float, and each error
-// grows by four float steps of the chart's extent (bounds round outwards), so both still hold.
-// Nodes past the DEM's last samples are empty, as on flat terrain. Throws InputError for charts of
-// more than kMaxPlanetChartIntervals intervals.
+// bounds are planet-centred boxes and errors Euclidean distances in world units (metres on a planet), the sphere's
+// curvature included. The positions are measured relative to the chart's centre in float, and each error grows by four
+// float steps of the chart's extent (bounds round outwards), so both still hold. Nodes past the DEM's last samples are
+// empty, as on flat terrain. Throws InputError for charts of more than kMaxPlanetChartIntervals intervals.
 inline constexpr uint32_t kMaxPlanetChartIntervals = 4096;
 Hierarchy buildPlanetHierarchy(const AtlasManifest& manifest, const ChartWindowSource& source,
                                HierarchyStats* stats = nullptr);
@@ -161,8 +156,7 @@ using ChartPositionSource = std::function<std::vector<glm::vec3>(uint32_t chart)
 // finestLevels: per chart (or empty: all 0), as ChartInfo::finestLevel; a chart's errors are those
 // of its own samples, and a node has none at resolutions finer than its chart holds. Throws
 // InputError for a wrong image size, a non-finite position or a finest level over maxFinestLevel.
-Hierarchy buildGeometryHierarchy(const HierarchyParams& params,
-                                 const std::vector<std::array<RootNeighbour, 4>>& roots,
+Hierarchy buildGeometryHierarchy(const HierarchyParams& params, const std::vector<std::array<RootNeighbour, 4>>& roots,
                                  const ChartPositionSource& source, HierarchyStats* stats = nullptr,
                                  const std::vector<uint8_t>& finestLevels = {});
 

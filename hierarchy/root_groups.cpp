@@ -60,9 +60,10 @@ void growBox(std::array<float, 6>& box, const std::array<float, 6>& b) {
   }
 }
 
-constexpr std::array<float, 6> kEmptyBox{std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
-                                         std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
-                                         -std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity()};
+constexpr std::array<float, 6> kEmptyBox{
+    std::numeric_limits<float>::infinity(),  std::numeric_limits<float>::infinity(),
+    std::numeric_limits<float>::infinity(),  -std::numeric_limits<float>::infinity(),
+    -std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity()};
 
 }  // namespace
 
@@ -95,7 +96,8 @@ RootGroups buildRootGroups(const Hierarchy& h, uint32_t maxRoots) {
       growBox(g.bounds, h.bounds(root));
       g.errorMin = std::max(g.errorMin, h.error(root, minRes));
       g.errorMax = std::max(g.errorMax, h.error(root, h.maxResLog2(root)));
-      growErrors(uint32_t(out.groups.size()), [&](uint32_t r) { return h.error(root, std::min(r, h.maxResLog2(root))); });
+      growErrors(uint32_t(out.groups.size()),
+                 [&](uint32_t r) { return h.error(root, std::min(r, h.maxResLog2(root))); });
     }
     out.groups.push_back(g);
   }

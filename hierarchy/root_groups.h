@@ -23,20 +23,20 @@ inline constexpr uint32_t kGroupFanout = 4;
 
 struct RootGroups {
   struct Group {
-    uint32_t begin = 0, end = 0;             // its charts: order[begin, end)
-    uint32_t childBegin = 0, childEnd = 0;   // its children: groups [childBegin, childEnd), or for a
-                                             // first-level group (level 0) the charts order[begin, end)
-    int32_t parent = -1;                     // -1: a top group
-    uint32_t level = 0;                      // 0: its children are chart roots
-    std::array<float, 6> bounds{};           // the union of its charts' root boxes
-    float errorMin = 0.f;  // largest error of a member root at the minimum resolution (world units)
-    float errorMax = 0.f;  // largest error of a member root at its own maxResLog2
+    uint32_t begin = 0, end = 0;            // its charts: order[begin, end)
+    uint32_t childBegin = 0, childEnd = 0;  // its children: groups [childBegin, childEnd), or for a
+                                            // first-level group (level 0) the charts order[begin, end)
+    int32_t parent = -1;                    // -1: a top group
+    uint32_t level = 0;                     // 0: its children are chart roots
+    std::array<float, 6> bounds{};          // the union of its charts' root boxes
+    float errorMin = 0.f;                   // largest error of a member root at the minimum resolution (world units)
+    float errorMax = 0.f;                   // largest error of a member root at its own maxResLog2
   };
-  std::vector<uint32_t> order;     // the non-empty charts, in the groups' order (Morton order of
-                                   // their roots' box centres)
-  std::vector<Group> groups;       // first-level groups first, then each level above in turn
-  std::vector<uint32_t> tops;      // the groups without a parent, ascending
-  std::vector<int32_t> chartGroup; // per chart: its first-level group; -1 for an empty chart
+  std::vector<uint32_t> order;      // the non-empty charts, in the groups' order (Morton order of
+                                    // their roots' box centres)
+  std::vector<Group> groups;        // first-level groups first, then each level above in turn
+  std::vector<uint32_t> tops;       // the groups without a parent, ascending
+  std::vector<int32_t> chartGroup;  // per chart: its first-level group; -1 for an empty chart
   // Per group and resolution r in [minRes, minRes + resCount): the largest error of a member root
   // drawn at r, or at its maxResLog2 where that is lower (world units).
   std::vector<float> errors;

@@ -82,7 +82,10 @@ json hierarchyFigures(const AtlasView& atlas, const std::filesystem::path& dir, 
     row["heat_maps"] = rowMaps;
     levels.push_back(row);
   }
-  return {{"levels", levels}, {"heat_maps", maps}, {"largest_error", largest}, {"layout_columns", cols},
+  return {{"levels", levels},
+          {"heat_maps", maps},
+          {"largest_error", largest},
+          {"layout_columns", cols},
           {"layout_rows", rows}};
 }
 
@@ -100,9 +103,10 @@ json streamingFigures(const AtlasView& atlas, uint32_t width, uint32_t height) {
   for (uint32_t l = 0; l < m.pyramidLevels(); ++l) {
     const uint64_t n = ((m.chartSize - 1) >> l) + 1;
     // The charts whose finest samples are no coarser than the level hold it.
-    const uint64_t holding = uint64_t(std::count_if(m.charts.begin(), m.charts.end(),
-                                                    [&](const ChartInfo& c) { return c.finestLevel <= l; }));
-    levels.push_back({{"pyramid_level", l}, {"samples_per_side", n}, {"charts", holding}, {"bytes", holding * n * n * perSample}});
+    const uint64_t holding = uint64_t(
+        std::count_if(m.charts.begin(), m.charts.end(), [&](const ChartInfo& c) { return c.finestLevel <= l; }));
+    levels.push_back(
+        {{"pyramid_level", l}, {"samples_per_side", n}, {"charts", holding}, {"bytes", holding * n * n * perSample}});
   }
   json pages = json::array();
   for (uint32_t l = 0; l < p.depth; ++l) {
@@ -132,13 +136,22 @@ json streamingFigures(const AtlasView& atlas, uint32_t width, uint32_t height) {
       if (n.resLog2 <= needed) continue;
       ++raisedCount;
       if (raised.size() < 32)
-        raised.push_back({{"chart", n.id.chart}, {"level", n.id.level}, {"x", n.id.x}, {"y", n.id.y},
-                          {"needed_res", needed}, {"drawn_res", n.resLog2}});
+        raised.push_back({{"chart", n.id.chart},
+                          {"level", n.id.level},
+                          {"x", n.id.x},
+                          {"y", n.id.y},
+                          {"needed_res", needed},
+                          {"drawn_res", n.resLog2}});
     }
-    views.push_back({{"view", names[i]}, {"nodes", cut.nodes.size()}, {"triangles", cut.triangles()},
-                     {"page_bytes", bytes}, {"constraint_raises", st.constraintRaises},
-                     {"constraint_splits", st.constraintSplits}, {"max_error_px", st.maxErrorPx},
-                     {"nodes_raised", raisedCount}, {"raised", raised}});
+    views.push_back({{"view", names[i]},
+                     {"nodes", cut.nodes.size()},
+                     {"triangles", cut.triangles()},
+                     {"page_bytes", bytes},
+                     {"constraint_raises", st.constraintRaises},
+                     {"constraint_splits", st.constraintSplits},
+                     {"max_error_px", st.maxErrorPx},
+                     {"nodes_raised", raisedCount},
+                     {"raised", raised}});
     nodesSum += double(cut.nodes.size());
     bytesSum += double(bytes);
     nodesMax = std::max<uint64_t>(nodesMax, cut.nodes.size());

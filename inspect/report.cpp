@@ -124,7 +124,8 @@ ChartImages chartImages(const AtlasManifest& m, const fs::path& atlasDir, uint32
         const size_t i = size_t(v) * n + u;
         const double s = mean > 0.0 ? len[size_t(v) * (n - 1) + u] / mean : 1.0;
         worst = std::max(worst, s);
-        std::array<uint8_t, 3> c = heat(std::max(s, mean > 0.0 ? mean / std::max(len[size_t(v) * (n - 1) + u], 1e-30) : 1.0));
+        std::array<uint8_t, 3> c =
+            heat(std::max(s, mean > 0.0 ? mean / std::max(len[size_t(v) * (n - 1) + u], 1e-30) : 1.0));
         const glm::dvec3 d1 = glm::dvec3(pos[i + n + 1]) - glm::dvec3(pos[i]);
         const glm::dvec3 d2 = glm::dvec3(pos[i + n]) - glm::dvec3(pos[i + 1]);
         glm::dvec3 nsum(0.0);
@@ -208,13 +209,25 @@ json seamJson(const SeamReport& s) {
                       {"corner_mismatches", l.cornerMismatches},
                       {"max_corner_difference", l.maxCornerDifference}});
   for (const SeamOffender& o : s.offenders)
-    offenders.push_back({{"level", o.level}, {"chart", o.chart}, {"edge", o.edge}, {"sample", o.sample},
-                         {"other_chart", o.otherChart}, {"other_edge", o.otherEdge}, {"other_sample", o.otherSample},
-                         {"corner", o.corner}, {"difference", o.difference}});
+    offenders.push_back({{"level", o.level},
+                         {"chart", o.chart},
+                         {"edge", o.edge},
+                         {"sample", o.sample},
+                         {"other_chart", o.otherChart},
+                         {"other_edge", o.otherEdge},
+                         {"other_sample", o.otherSample},
+                         {"corner", o.corner},
+                         {"difference", o.difference}});
   for (const auto& [charts, corners] : s.cornerValence) valence[std::to_string(charts)] = corners;
-  return {{"seamless", s.seamless()},   {"mismatches", s.mismatches()}, {"max_difference", s.maxDifference()},
-          {"shared_edges", s.sharedEdges}, {"open_edges", s.openEdges},  {"corner_valence", valence},
-          {"levels", levels},           {"offenders", offenders},      {"seconds", s.seconds}};
+  return {{"seamless", s.seamless()},
+          {"mismatches", s.mismatches()},
+          {"max_difference", s.maxDifference()},
+          {"shared_edges", s.sharedEdges},
+          {"open_edges", s.openEdges},
+          {"corner_valence", valence},
+          {"levels", levels},
+          {"offenders", offenders},
+          {"seconds", s.seconds}};
 }
 
 // The hierarchy: per level, the largest error against resolution as an SVG chart (log scale),
@@ -242,13 +255,15 @@ std::string errorCurveHtml(const json& hr) {
       << ")\" text-anchor=\"middle\">largest error (log)</text>";
     for (double d = l0; d <= l1; d += 1.0)
       h << "<line x1=\"" << pad << "\" x2=\"" << W - pad << "\" y1=\"" << Y(std::pow(10.0, d)) << "\" y2=\""
-        << Y(std::pow(10.0, d)) << "\" stroke=\"#ddd\"/><text x=\"" << W - pad + 2 << "\" y=\"" << Y(std::pow(10.0, d)) + 4
-        << "\" font-size=\"10\">1e" << int(d) << "</text>";
-    static const char* kColours[] = {"#4477aa", "#228833", "#ccbb44", "#ee6677", "#aa3377", "#66ccee", "#bbbbbb", "#000000"};
+        << Y(std::pow(10.0, d)) << "\" stroke=\"#ddd\"/><text x=\"" << W - pad + 2 << "\" y=\""
+        << Y(std::pow(10.0, d)) + 4 << "\" font-size=\"10\">1e" << int(d) << "</text>";
+    static const char* kColours[] = {"#4477aa", "#228833", "#ccbb44", "#ee6677",
+                                     "#aa3377", "#66ccee", "#bbbbbb", "#000000"};
     for (const json& l : hr["levels"]) {
       std::ostringstream pts;
       for (const json& e : l["errors"])
-        if (e["max_error"].get<double>() > 0.0) pts << X(e["res"].get<double>()) << "," << Y(e["max_error"].get<double>()) << " ";
+        if (e["max_error"].get<double>() > 0.0)
+          pts << X(e["res"].get<double>()) << "," << Y(e["max_error"].get<double>()) << " ";
       const uint32_t level = l["level"].get<uint32_t>();
       h << "<polyline fill=\"none\" stroke-width=\"2\" stroke=\"" << kColours[level % 8] << "\" points=\"" << pts.str()
         << "\"><title>level " << level << "</title></polyline>";
@@ -269,7 +284,8 @@ std::string errorCurveHtml(const json& hr) {
     h << "<div class=\"level\">";
     for (const json& m : l["heat_maps"])
       h << "<figure><img src=\"" << html(m["file"].get<std::string>()) << "\" alt=\"level " << l["level"] << " res "
-        << m["res"] << " errors\"><figcaption>level " << l["level"] << ", resolution " << m["res"] << "</figcaption></figure>";
+        << m["res"] << " errors\"><figcaption>level " << l["level"] << ", resolution " << m["res"]
+        << "</figcaption></figure>";
     h << "</div>\n";
   }
   return h.str();
@@ -279,10 +295,12 @@ std::string sourceHtml(const json& s) {
   std::ostringstream h;
   h << "<h2>Source comparison</h2>\n<p>The atlas (level 0, every chart's grid as drawn) against "
     << html(s["source"].get<std::string>()) << ", two-sided, sample by sample.</p>\n<table id=\"source\">";
-  for (const char* k : {"hausdorff_percent_of_diagonal", "mean_percent_of_diagonal", "hausdorff", "max_atlas_to_mesh",
-                        "max_mesh_to_atlas", "diagonal", "atlas_samples", "mesh_samples", "max_vertical_distance",
-                        "mean_vertical_distance", "height_range", "samples_compared", "voids_filled_in_source", "seconds"})
-    if (s.contains(k)) h << "<tr><td>" << k << "</td><td data-key=\"source_" << k << "\">" << number(s[k]) << "</td></tr>";
+  for (const char* k :
+       {"hausdorff_percent_of_diagonal", "mean_percent_of_diagonal", "hausdorff", "max_atlas_to_mesh",
+        "max_mesh_to_atlas", "diagonal", "atlas_samples", "mesh_samples", "max_vertical_distance",
+        "mean_vertical_distance", "height_range", "samples_compared", "voids_filled_in_source", "seconds"})
+    if (s.contains(k))
+      h << "<tr><td>" << k << "</td><td data-key=\"source_" << k << "\">" << number(s[k]) << "</td></tr>";
   h << "</table>\n<table id=\"source-worst-atlas\"><tr><th>atlas sample: chart</th><th>u</th><th>v</th><th>position "
        "(a DEM: its sample)</th>"
        "<th>distance to the input</th></tr>";
@@ -299,7 +317,8 @@ std::string sourceHtml(const json& s) {
        "distance or less, red: the largest).</p>\n";
   for (const json& m : s["distance_maps"])
     h << "<figure><img src=\"" << html(m["file"].get<std::string>()) << "\" alt=\"chart " << m["chart"]
-      << " distances\"><figcaption>chart " << m["chart"] << ": " << number(m["max_distance"]) << "</figcaption></figure>";
+      << " distances\"><figcaption>chart " << m["chart"] << ": " << number(m["max_distance"])
+      << "</figcaption></figure>";
   h << "\n";
   return h.str();
 }
@@ -309,23 +328,27 @@ std::string streamingHtml(const json& s) {
   h << "<h2>Memory and streaming</h2>\n<table id=\"pyramid-bytes\"><tr><th>pyramid level</th><th>samples a side</th>"
        "<th>bytes</th></tr>";
   for (const json& l : s["pyramid_levels"])
-    h << "<tr><td>" << l["pyramid_level"] << "</td><td>" << l["samples_per_side"] << "</td><td>" << l["bytes"] << "</td></tr>";
+    h << "<tr><td>" << l["pyramid_level"] << "</td><td>" << l["samples_per_side"] << "</td><td>" << l["bytes"]
+      << "</td></tr>";
   h << "</table>\n<table id=\"pages\"><tr><th>node level</th><th>page samples a side</th><th>page bytes</th></tr>";
   for (const json& l : s["pages"])
-    h << "<tr><td>" << l["level"] << "</td><td>" << l["page_samples_per_side"] << "</td><td>" << l["page_bytes"] << "</td></tr>";
+    h << "<tr><td>" << l["level"] << "</td><td>" << l["page_samples_per_side"] << "</td><td>" << l["page_bytes"]
+      << "</td></tr>";
   h << "</table>\n<p>The six axis views at " << html(s["view_size"].get<std::string>())
     << ", 1-pixel tolerance, no node budget:</p>\n<table id=\"view-needs\"><tr><th>view</th><th>nodes (pages)</th>"
-       "<th>triangles</th><th>page bytes</th><th>stitching raises</th><th>stitching splits</th><th>nodes drawn finer than "
+       "<th>triangles</th><th>page bytes</th><th>stitching raises</th><th>stitching splits</th><th>nodes drawn finer "
+       "than "
        "their error needs</th></tr>";
   for (const json& v : s["views"])
     h << "<tr><td>" << html(v["view"].get<std::string>()) << "</td><td>" << v["nodes"] << "</td><td>" << v["triangles"]
-      << "</td><td>" << v["page_bytes"] << "</td><td>" << v["constraint_raises"] << "</td><td>" << v["constraint_splits"]
-      << "</td><td>" << v["nodes_raised"] << "</td></tr>";
+      << "</td><td>" << v["page_bytes"] << "</td><td>" << v["constraint_raises"] << "</td><td>"
+      << v["constraint_splits"] << "</td><td>" << v["nodes_raised"] << "</td></tr>";
   h << "</table>\n";
   for (const json& v : s["views"]) {
     if (v["raised"].empty()) continue;
     h << "<p>Nodes the stitching constraint raised in the view from " << html(v["view"].get<std::string>())
-      << " (the first " << v["raised"].size() << "):</p>\n<table id=\"raised\"><tr><th>chart</th><th>level</th>"
+      << " (the first " << v["raised"].size()
+      << "):</p>\n<table id=\"raised\"><tr><th>chart</th><th>level</th>"
          "<th>x</th><th>y</th><th>resolution its error needs</th><th>drawn</th></tr>";
     for (const json& n : v["raised"])
       h << "<tr><td>" << n["chart"] << "</td><td>" << n["level"] << "</td><td>" << n["x"] << "</td><td>" << n["y"]
@@ -352,12 +375,13 @@ std::string pageHtml(const json& r) {
     h << "<tr><td>" << html(k) << "</td><td data-key=\"" << html(k) << "\">" << number(v) << "</td></tr>";
   h << "</table>\n";
   if (r.contains("stages") && r["stages"].is_array() && !r["stages"].empty()) {
-    h << "<h2>Build stages</h2>\n<table id=\"stages\"><tr><th>stage</th><th>seconds</th><th>CPU seconds</th><th>peak RSS "
+    h << "<h2>Build stages</h2>\n<table id=\"stages\"><tr><th>stage</th><th>seconds</th><th>CPU seconds</th><th>peak "
+         "RSS "
          "(bytes)</th></tr>";
     for (const json& st : r["stages"])
       h << "<tr><td>" << number(st.value("stage", json(""))) << "</td><td>" << number(st.value("seconds", json(0.0)))
-        << "</td><td>" << number(st.value("cpu_seconds", json(0.0))) << "</td><td>" << number(st.value("peak_rss_bytes", json(0)))
-        << "</td></tr>";
+        << "</td><td>" << number(st.value("cpu_seconds", json(0.0))) << "</td><td>"
+        << number(st.value("peak_rss_bytes", json(0))) << "</td></tr>";
     h << "</table>\n";
   }
   if (!r["views"].empty()) {
@@ -391,7 +415,8 @@ std::string pageHtml(const json& r) {
     << "</p>\n<table id=\"seams\"><tr><th>level</th><th>edge samples</th><th>edge mismatches</th><th>max edge "
        "difference</th><th>corner samples</th><th>corner mismatches</th><th>max corner difference</th></tr>";
   for (const json& l : seams["levels"])
-    h << "<tr" << (l["edge_mismatches"].get<uint64_t>() + l["corner_mismatches"].get<uint64_t>() ? " class=\"bad\"" : "")
+    h << "<tr"
+      << (l["edge_mismatches"].get<uint64_t>() + l["corner_mismatches"].get<uint64_t>() ? " class=\"bad\"" : "")
       << "><td>" << l["level"] << "</td><td>" << l["edge_samples"] << "</td><td>" << l["edge_mismatches"] << "</td><td>"
       << number(l["max_edge_difference"]) << "</td><td>" << l["corner_samples"] << "</td><td>" << l["corner_mismatches"]
       << "</td><td>" << number(l["max_corner_difference"]) << "</td></tr>";
@@ -400,9 +425,9 @@ std::string pageHtml(const json& r) {
     h << "<table id=\"seam-offenders\"><tr><th>level</th><th>chart</th><th>edge</th><th>sample</th><th>other "
          "chart</th><th>other edge</th><th>other sample</th><th>corner</th><th>difference</th></tr>";
     for (const json& o : seams["offenders"])
-      h << "<tr><td>" << o["level"] << "</td><td>" << o["chart"] << "</td><td>" << o["edge"] << "</td><td>" << o["sample"]
-        << "</td><td>" << o["other_chart"] << "</td><td>" << o["other_edge"] << "</td><td>" << o["other_sample"]
-        << "</td><td>" << o["corner"] << "</td><td>" << number(o["difference"]) << "</td></tr>";
+      h << "<tr><td>" << o["level"] << "</td><td>" << o["chart"] << "</td><td>" << o["edge"] << "</td><td>"
+        << o["sample"] << "</td><td>" << o["other_chart"] << "</td><td>" << o["other_edge"] << "</td><td>"
+        << o["other_sample"] << "</td><td>" << o["corner"] << "</td><td>" << number(o["difference"]) << "</td></tr>";
     h << "</table>\n";
   }
   if (r.contains("source")) h << sourceHtml(r["source"]);
@@ -452,7 +477,8 @@ InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const
 
 InspectResult writeInspectReport(const InspectOptions& o) {
   if (o.worstCharts > 10000) throw InputError(optionRef("worstCharts") + " must be at most 10000");
-  if (o.thumbnailSize < 3 || o.thumbnailSize > 1025) throw InputError(optionRef("thumbnailSize") + " must be in [3, 1025]");
+  if (o.thumbnailSize < 3 || o.thumbnailSize > 1025)
+    throw InputError(optionRef("thumbnailSize") + " must be in [3, 1025]");
   const AtlasManifest m = readManifest(o.atlas);
   json stats = json::object();
   const fs::path statsFile = o.atlas / "stats.json";
@@ -581,7 +607,8 @@ InspectResult writeReport(const InspectOptions& o, const AtlasManifest& m, const
     json entry = {{"file", name}, {"caption", views[i].caption}};
     for (const auto& [k, v] : views[i].figures.items()) entry[k] = v;
     if (entry.contains("other_boundary_edges"))
-      sum["crack_edges_in_views"] = sum.value("crack_edges_in_views", uint64_t(0)) + entry["other_boundary_edges"].get<uint64_t>();
+      sum["crack_edges_in_views"] =
+          sum.value("crack_edges_in_views", uint64_t(0)) + entry["other_boundary_edges"].get<uint64_t>();
     report["views"].push_back(entry);
     ++result.images;
   }

@@ -73,7 +73,8 @@ SeamReport validateSeams(const std::filesystem::path& atlasDir, uint32_t maxOffe
   std::vector<std::unique_ptr<ChartFileReader>> readers(charts);
   for (uint32_t c = 0; c < charts; ++c) {
     readers[c] = std::make_unique<ChartFileReader>(atlasDir / m.charts[c].file);
-    if (readers[c]->chartSize() != m.chartFileSize(c) || readers[c]->levels() != m.pyramidLevels() - m.charts[c].finestLevel)
+    if (readers[c]->chartSize() != m.chartFileSize(c) ||
+        readers[c]->levels() != m.pyramidLevels() - m.charts[c].finestLevel)
       throw InputError((atlasDir / m.charts[c].file).string() + ": chart size or levels differ from the manifest's");
   }
   // Corner groups: corner i of chart c is where its edge i starts; across edge e to (d, f), the
@@ -140,7 +141,8 @@ SeamReport validateSeams(const std::filesystem::path& atlasDir, uint32_t maxOffe
       ++sl.cornerMismatches;
       const double d = difference(a, b);
       sl.maxCornerDifference = std::max(sl.maxCornerDifference, d);
-      keepOffender(report.offenders, {level, i / 4, i % 4, 0, it->second / 4, it->second % 4, 0, true, d}, maxOffenders);
+      keepOffender(report.offenders, {level, i / 4, i % 4, 0, it->second / 4, it->second % 4, 0, true, d},
+                   maxOffenders);
     }
     report.levels.push_back(sl);
   }

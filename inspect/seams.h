@@ -15,24 +15,24 @@ struct SeamOffender {
   uint32_t level = 0;
   uint32_t chart = 0, edge = 0, sample = 0;  // sample k along the edge (corners: edge = corner)
   uint32_t otherChart = 0, otherEdge = 0, otherSample = 0;
-  bool corner = false;                        // a corner group, not an edge
-  double difference = 0.0;                    // distance (geometry) or |height difference|
+  bool corner = false;      // a corner group, not an edge
+  double difference = 0.0;  // distance (geometry) or |height difference|
 };
 
 struct SeamLevel {
   uint32_t level = 0;
-  uint64_t edgeSamples = 0;      // samples compared along shared edges (each pair once)
-  uint64_t edgeMismatches = 0;   // of those, not bit-identical
+  uint64_t edgeSamples = 0;     // samples compared along shared edges (each pair once)
+  uint64_t edgeMismatches = 0;  // of those, not bit-identical
   double maxEdgeDifference = 0.0;
-  uint64_t cornerSamples = 0;    // chart corners in a group of 2 or more
-  uint64_t cornerMismatches = 0; // corners not bit-identical with their group's first
+  uint64_t cornerSamples = 0;     // chart corners in a group of 2 or more
+  uint64_t cornerMismatches = 0;  // corners not bit-identical with their group's first
   double maxCornerDifference = 0.0;
 };
 
 struct SeamReport {
   uint32_t charts = 0;
-  uint64_t sharedEdges = 0;  // chart edge pairs
-  uint64_t openEdges = 0;    // chart edges without a neighbour (the input's own borders)
+  uint64_t sharedEdges = 0;                    // chart edge pairs
+  uint64_t openEdges = 0;                      // chart edges without a neighbour (the input's own borders)
   std::map<uint32_t, uint32_t> cornerValence;  // charts meeting at a corner -> corners
   std::vector<SeamLevel> levels;
   std::vector<SeamOffender> offenders;  // the largest differences first, at most maxOffenders

@@ -28,7 +28,8 @@ std::vector<uint32_t> largest(const std::vector<float>& values, uint32_t count) 
   std::vector<uint32_t> idx(values.size());
   std::iota(idx.begin(), idx.end(), 0u);
   const size_t k = std::min<size_t>(count, idx.size());
-  std::partial_sort(idx.begin(), idx.begin() + k, idx.end(), [&](uint32_t a, uint32_t b) { return values[a] > values[b]; });
+  std::partial_sort(idx.begin(), idx.begin() + k, idx.end(),
+                    [&](uint32_t a, uint32_t b) { return values[a] > values[b]; });
   idx.resize(k);
   return idx;
 }
@@ -38,7 +39,8 @@ std::vector<uint32_t> largest(const std::vector<float>& values, uint32_t count) 
 json distanceMaps(const std::vector<float>& distances, uint32_t n, uint32_t charts, uint32_t count, double top,
                   const std::filesystem::path& dir) {
   std::vector<float> chartMax(charts, 0.f);
-  for (size_t i = 0; i < distances.size(); ++i) chartMax[i / (size_t(n) * n)] = std::max(chartMax[i / (size_t(n) * n)], distances[i]);
+  for (size_t i = 0; i < distances.size(); ++i)
+    chartMax[i / (size_t(n) * n)] = std::max(chartMax[i / (size_t(n) * n)], distances[i]);
   json maps = json::array();
   top = std::max(top, 1e-30);
   for (uint32_t c : largest(chartMax, count)) {
@@ -95,8 +97,11 @@ json demComparison(const AtlasManifest& m, const std::filesystem::path& atlasDir
   json worst = json::array();
   for (uint32_t i : largest(distances, worstSamples)) {
     const uint32_t c = i / (n * n), k = i % (n * n);
-    worst.push_back({{"chart", c}, {"u", k % n}, {"v", k / n},
-                     {"gx", int64_t(m.charts[c].gridX) * step + k % n}, {"gy", int64_t(m.charts[c].gridY) * step + k / n},
+    worst.push_back({{"chart", c},
+                     {"u", k % n},
+                     {"v", k / n},
+                     {"gx", int64_t(m.charts[c].gridX) * step + k % n},
+                     {"gy", int64_t(m.charts[c].gridY) * step + k / n},
                      {"distance", distances[i]}});
   }
   return {{"source", source.string()},
@@ -129,7 +134,8 @@ std::vector<glm::vec3> onFullLattice(const std::vector<glm::vec3>& P, uint32_t s
       const float fx = float(u - cx * step) * inv, fy = float(v - cy * step) * inv;
       const glm::vec3 p00 = P[size_t(cy) * side + cx], p10 = P[size_t(cy) * side + cx + 1];
       const glm::vec3 p01 = P[size_t(cy + 1) * side + cx], p11 = P[size_t(cy + 1) * side + cx + 1];
-      out[size_t(v) * n + u] = fx >= fy ? p00 + fx * (p10 - p00) + fy * (p11 - p10) : p00 + fy * (p01 - p00) + fx * (p11 - p01);
+      out[size_t(v) * n + u] =
+          fx >= fy ? p00 + fx * (p10 - p00) + fy * (p11 - p10) : p00 + fy * (p01 - p00) + fx * (p11 - p01);
     }
   return out;
 }
@@ -182,8 +188,11 @@ json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlas
   {
     glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
     for (const glm::vec3& p : positions) lo = glm::min(lo, p), hi = glm::max(hi, p);
-    const double cell = std::max(double(glm::length(hi - lo)) / std::max(1.0, std::cbrt(double(positions.size()))), 1e-12);
-    const auto key = [&](int64_t x, int64_t y, int64_t z) { return (uint64_t(x) * 73856093u) ^ (uint64_t(y) * 19349663u) ^ (uint64_t(z) * 83492791u); };
+    const double cell =
+        std::max(double(glm::length(hi - lo)) / std::max(1.0, std::cbrt(double(positions.size()))), 1e-12);
+    const auto key = [&](int64_t x, int64_t y, int64_t z) {
+      return (uint64_t(x) * 73856093u) ^ (uint64_t(y) * 19349663u) ^ (uint64_t(z) * 83492791u);
+    };
     const auto cellOf = [&](const glm::vec3& p, int k) { return int64_t(std::floor((double(p[k]) - lo[k]) / cell)); };
     std::unordered_map<uint64_t, std::vector<uint32_t>> grid;
     grid.reserve(positions.size() / 4 + 1);
@@ -216,14 +225,18 @@ json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlas
     distances->chartSize = n;
     distances->perSample = detail.atlasDistances;
     for (size_t j = 0; j < nearestSample.size(); ++j)
-      distances->perSample[nearestSample[j]] = std::max(distances->perSample[nearestSample[j]], detail.meshDistances[j]);
+      distances->perSample[nearestSample[j]] =
+          std::max(distances->perSample[nearestSample[j]], detail.meshDistances[j]);
     distances->largest = st.hausdorff;
   }
   json atlasWorst = json::array(), meshWorst = json::array();
   for (uint32_t i : largest(detail.atlasDistances, worstSamples)) {
     const glm::vec3& p = positions[i];
     const uint32_t c = i / (n * n), k = i % (n * n);
-    atlasWorst.push_back({{"chart", c}, {"u", k % n}, {"v", k / n}, {"position", {p.x, p.y, p.z}},
+    atlasWorst.push_back({{"chart", c},
+                          {"u", k % n},
+                          {"v", k / n},
+                          {"position", {p.x, p.y, p.z}},
                           {"distance", detail.atlasDistances[i]}});
   }
   for (uint32_t i : largest(detail.meshDistances, worstSamples)) {
@@ -241,7 +254,8 @@ json sourceComparison(const AtlasManifest& m, const std::filesystem::path& atlas
   out["worst_atlas_samples"] = atlasWorst;
   out["worst_input_samples"] = meshWorst;
   // Maps of the farthest charts.
-  out["distance_maps"] = distanceMaps(detail.atlasDistances, n, uint32_t(m.charts.size()), mapCharts, st.maxAtlasToMesh, dir);
+  out["distance_maps"] =
+      distanceMaps(detail.atlasDistances, n, uint32_t(m.charts.size()), mapCharts, st.maxAtlasToMesh, dir);
   out["kind"] = "mesh";
   return out;
 }

@@ -59,16 +59,16 @@ inline constexpr double kDefaultHeightPrecision = 0.01;
 
 // A terrain atlas from a DEM (any single-band raster GDAL reads).
 struct TerrainBuildOptions : CommonBuildOptions {
-  std::string subdataset;    // netCDF variable; empty: the first 2D one
-  uint32_t band = 0;         // the heights' band, from 1 (DemOptions::band); 0: band 1, refusing an RGB image
+  std::string subdataset;  // netCDF variable; empty: the first 2D one
+  uint32_t band = 0;       // the heights' band, from 1 (DemOptions::band); 0: band 1, refusing an RGB image
   std::array<double, 2> spacing{0.0, 0.0};  // metres between samples, east and north; 0: from the georeference
   // Samples per chart side, 2^m + 1 in [9, kMaxTerrainChartSize]; kAutoChartSize: from the DEM's
   // size (planTerrain).
   uint32_t chartSize = kAutoChartSize;
-  double zScale = 1.0;       // height multiplier; finite and non-zero
+  double zScale = 1.0;  // height multiplier; finite and non-zero
   // Colour imagery draped over the DEM (atlas/terrain/imagery.h); empty path: none.
   std::filesystem::path imagery;
-  int imageryScaleLog2 = -1;  // kAutoImageryScale, or 0..2
+  int imageryScaleLog2 = -1;                           // kAutoImageryScale, or 0..2
   std::optional<std::array<double, 4>> imageryExtent;  // for imagery without a georeference
   // The build's memory cap, bytes. A DEM whose in-memory build would exceed it (about
   // kTerrainBytesPerSample per sample) is built window by window within it instead; with imagery
@@ -128,26 +128,26 @@ struct MeshBuildOptions : CommonBuildOptions {
   // the repair may cut more); kAutoPatches: meshPatchTarget of the input's triangles; 0:
   // maxPatchError.
   uint32_t patches = kAutoPatches;
-  double maxPatchError = 0.01;      // with patches = 0: RMS plane distance / bbox diagonal
+  double maxPatchError = 0.01;  // with patches = 0: RMS plane distance / bbox diagonal
   // Patches as planar as may be, or as developable (planes, cylinders, cones): fewer, larger
   // patches that parameterize with less stretch. kAuto: meshChartMetric of the input's triangles.
   MeshChartMetric chartMetric = MeshChartMetric::kAuto;
-  uint32_t straightenRounds = 2;    // rounds of straightening shared sides (atlas/layout_refine.h)
+  uint32_t straightenRounds = 2;  // rounds of straightening shared sides (atlas/layout_refine.h)
   // Rounds of each repair (atlas/layout_refine.h repairCharts: cutting patches whose charts have
   // flipped texels or a sampling error over maxSampleError), in [0, 16]; 0 keeps the charting's.
   uint32_t repairRounds = 4;
-  double repairBudget = 8.0;        // the repair's work cap: layout triangles parameterized again,
-                                    // as a multiple of the layout's triangles (counting at most
-                                    // kRepairTrianglesCounted of them), in [0, 100]
+  double repairBudget = 8.0;  // the repair's work cap: layout triangles parameterized again,
+                              // as a multiple of the layout's triangles (counting at most
+                              // kRepairTrianglesCounted of them), in [0, 100]
   // The largest sampling error a chart may keep (ImageQuality::sampleError) as a fraction of the
   // bounding-box diagonal, in [0, 0.1]; 0: only flips are repaired; kAutoSampleError:
   // kDefaultSampleError when the chart size is chosen by density (chartSize 0), else 0 (a chart
   // size given is kept as it is, with the patches it was given).
   double maxSampleError = kAutoSampleError;
-  uint64_t maxMemory = 4ull << 30;  // bytes, at least 64 MiB; above a quarter of it the cells
-                                    // (out-of-core) path runs
-  bool measureFidelity = true;      // two-sided Hausdorff distance input <-> atlas (out of core on
-                                    // that path)
+  uint64_t maxMemory = 4ull << 30;              // bytes, at least 64 MiB; above a quarter of it the cells
+                                                // (out-of-core) path runs
+  bool measureFidelity = true;                  // two-sided Hausdorff distance input <-> atlas (out of core on
+                                                // that path)
   MeshFidelity fidelity = MeshFidelity::kFast;  // how, in memory (the out-of-core path measures by blocks)
   // Compressed atlases: positions are quantized on one lattice of 2^positionBits steps across the
   // bounding-box diagonal (a power-of-two step), before the hierarchy and the fidelity are
@@ -195,7 +195,6 @@ struct MeshBuildOptions : CommonBuildOptions {
 inline constexpr uint64_t kFewPatchesTriangles = 4'000'000;
 uint32_t meshPatchTarget(uint64_t triangles);
 MeshChartMetric meshChartMetric(uint64_t triangles);
-
 
 // The option's name as opts spell it in messages (CommonBuildOptions::spellOption).
 inline std::string spelledOption(const CommonBuildOptions& opts, std::string_view name) {

@@ -38,21 +38,31 @@ nlohmann::json gridifyJson(const GridifyResult& gr) {
 }
 
 nlohmann::json chartingJson(const ChartingStats& cst, bool outOfCore) {
-  return {{"triangles", cst.outputTriangles},     {"patches", cst.charts},
-          {"dropped_degenerate", cst.droppedDegenerate}, {"dropped_duplicate", cst.droppedDuplicate},
-          {"vertices_welded", cst.verticesWelded}, {"non_manifold_edges", cst.nonManifoldEdges},
-          {"non_manifold_vertices", cst.nonManifoldVertices}, {"vertices_split", cst.verticesSplit},
-          {"boundary_edges", cst.boundaryEdges},   {"corners_inserted", cst.cornersInserted},
-          {"patches_split", cst.patchesSplit},     {"max_planarity_error", cst.maxPlanarityError},
-          {"sides_histogram", cst.sidesHistogram}, {"out_of_core", outOfCore},
-          {"cells", cst.cells},                    {"cell_clusters", cst.cellClusters},
+  return {{"triangles", cst.outputTriangles},
+          {"patches", cst.charts},
+          {"dropped_degenerate", cst.droppedDegenerate},
+          {"dropped_duplicate", cst.droppedDuplicate},
+          {"vertices_welded", cst.verticesWelded},
+          {"non_manifold_edges", cst.nonManifoldEdges},
+          {"non_manifold_vertices", cst.nonManifoldVertices},
+          {"vertices_split", cst.verticesSplit},
+          {"boundary_edges", cst.boundaryEdges},
+          {"corners_inserted", cst.cornersInserted},
+          {"patches_split", cst.patchesSplit},
+          {"max_planarity_error", cst.maxPlanarityError},
+          {"sides_histogram", cst.sidesHistogram},
+          {"out_of_core", outOfCore},
+          {"cells", cst.cells},
+          {"cell_clusters", cst.cellClusters},
           {"cell_clusters_dissolved", cst.cellClustersDissolved},
           {"charts_before_fixing", cst.chartsBeforeFixing},
           {"merges_refused_not_disk", cst.mergesRefusedNotDisk},
           {"patches_unfixed", cst.patchesUnfixed},
-          {"weld_seconds", cst.weldSeconds},       {"cluster_seconds", cst.clusterSeconds},
+          {"weld_seconds", cst.weldSeconds},
+          {"cluster_seconds", cst.clusterSeconds},
           {"cell_seconds", cst.cellSeconds},
-          {"sides_seconds", cst.sidesSeconds},     {"peak_bytes_estimate", cst.peakBytesEstimate},
+          {"sides_seconds", cst.sidesSeconds},
+          {"peak_bytes_estimate", cst.peakBytesEstimate},
           {"seconds", cst.seconds}};
 }
 
@@ -109,8 +119,12 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
   // degenerate texels.
   nlohmann::json perChart = nlohmann::json::array();
   for (const ChartQuality& c : rs.perChart) {
-    perChart.push_back({{"patch", c.patch}, {"quad", c.quad}, {"side", c.side}, {"stretch_l2", c.quality.stretchL2},
-                        {"stretch_linf", c.quality.stretchLinf}, {"flipped_texels", c.quality.flippedTexels},
+    perChart.push_back({{"patch", c.patch},
+                        {"quad", c.quad},
+                        {"side", c.side},
+                        {"stretch_l2", c.quality.stretchL2},
+                        {"stretch_linf", c.quality.stretchLinf},
+                        {"flipped_texels", c.quality.flippedTexels},
                         {"texels_against_vertex_normals", c.quality.texelsAgainstNormals},
                         {"degenerate_texels", c.quality.degenerateTexels},
                         {"sample_error", c.quality.sampleError}});
@@ -147,7 +161,9 @@ nlohmann::json fidelityJson(const FidelityStats& f, bool outOfCore, MeshFidelity
 nlohmann::json stagesJson(const std::vector<StageTiming>& stages) {
   nlohmann::json j = nlohmann::json::array();
   for (const StageTiming& s : stages)
-    j.push_back({{"stage", s.stage}, {"seconds", s.seconds}, {"cpu_seconds", s.cpuSeconds},
+    j.push_back({{"stage", s.stage},
+                 {"seconds", s.seconds},
+                 {"cpu_seconds", s.cpuSeconds},
                  {"peak_rss_bytes", s.peakRssBytes}});
   return j;
 }
@@ -239,8 +255,10 @@ nlohmann::json statsJson(const MeshBuildStats& s) {
   stats["charting"] = chartingJson(ch.charting, ch.outOfCore);
   stats["charting"]["metric"] = ch.developable ? "developable" : "planar";
   stats["resample"] = resampleJson(s.resample, w.spilledBytes);
-  if (s.fidelity) stats["fidelity"] = fidelityJson(*s.fidelity, ch.outOfCore, s.fidelityMode);
-  else stats["fidelity"] = "not measured (--no-fidelity)";  // note: a stats.json value, read as such
+  if (s.fidelity)
+    stats["fidelity"] = fidelityJson(*s.fidelity, ch.outOfCore, s.fidelityMode);
+  else
+    stats["fidelity"] = "not measured (--no-fidelity)";  // note: a stats.json value, read as such
   stats["charts"] = w.charts;
   stats["chart_size"] = w.chartSize;
   stats["samples"] = meshSamples(w);

@@ -26,8 +26,8 @@ namespace gimlod {
 
 // Read and fill: the DEM as loaded, its voids filled.
 struct TerrainReadStats {
-  uint32_t width = 0, height = 0;           // samples
-  std::array<double, 2> spacing{1.0, 1.0};  // metres between samples (x east, y north)
+  uint32_t width = 0, height = 0;              // samples
+  std::array<double, 2> spacing{1.0, 1.0};     // metres between samples (x east, y north)
   std::array<float, 2> heightRange{0.f, 0.f};  // metres, after z-scale
   uint64_t voidsFilled = 0;
   std::string voidFillMethod;
@@ -38,9 +38,9 @@ struct TerrainReadStats {
 // The imagery draped over it (absent without --imagery).
 struct TerrainImageryStats {
   std::string source;
-  uint32_t scaleLog2 = 0;      // imagery samples per DEM interval: 2^scaleLog2
+  uint32_t scaleLog2 = 0;          // imagery samples per DEM interval: 2^scaleLog2
   uint32_t width = 0, height = 0;  // the reprojected imagery
-  double coverage = 0.0;       // fraction of the terrain covered
+  double coverage = 0.0;           // fraction of the terrain covered
   std::string resampling;
   uint64_t storedSamples = 0;
   uint64_t bytesOnDisk = 0;
@@ -60,12 +60,12 @@ struct TerrainWindowedStats {
 };
 
 struct TerrainWriteStats {
-  TerrainAtlasStats charts;                   // chart files (atlas/terrain_atlas.h)
+  TerrainAtlasStats charts;  // chart files (atlas/terrain_atlas.h)
   std::optional<TerrainWindowedStats> windowed;
   std::optional<TerrainImageryStats> imagery;
-  uint32_t chartsX = 0, chartsY = 0;          // the chart grid
-  uint32_t chartSize = 0;                     // samples per chart side
-  uint32_t depth = 0;                         // quadtree levels per chart
+  uint32_t chartsX = 0, chartsY = 0;  // the chart grid
+  uint32_t chartSize = 0;             // samples per chart side
+  uint32_t depth = 0;                 // quadtree levels per chart
   HierarchyStats hierarchy;
 };
 
@@ -74,7 +74,7 @@ struct TerrainBuildStats {
   std::string input;  // absolute path of the DEM
   TerrainReadStats read;
   TerrainWriteStats write;
-  uint64_t bytesOnDisk = 0;   // the atlas directory (stats.json aside)
+  uint64_t bytesOnDisk = 0;  // the atlas directory (stats.json aside)
   double totalSeconds = 0.0;
   uint64_t peakRssBytes = 0;  // the process's peak resident set (VmHWM) when the build ended
 };
@@ -88,7 +88,7 @@ struct MeshChartStats {
   std::optional<GridifyResult> gridify;  // the cell files (out-of-core path; manifest left empty)
   MeshReadStats read;
   ChartingStats charting;
-  double seconds = 0.0;                  // wall, from the build's start to the end of the charting
+  double seconds = 0.0;  // wall, from the build's start to the end of the charting
 };
 
 // Write: the chart files, the hierarchy and the manifest.
@@ -96,16 +96,16 @@ struct MeshWriteStats {
   uint32_t charts = 0;
   uint32_t chartsX = 0, chartsY = 0;
   uint32_t chartSize = 0;
-  uint32_t depth = 0;                  // quadtree levels per chart
-  std::array<float, 6> bounds{};       // min x, y, z, max x, y, z over every sample
-  uint64_t spilledBytes = 0;           // of the chart spill (atlas/resample.h ChartSpill)
+  uint32_t depth = 0;             // quadtree levels per chart
+  std::array<float, 6> bounds{};  // min x, y, z, max x, y, z over every sample
+  uint64_t spilledBytes = 0;      // of the chart spill (atlas/resample.h ChartSpill)
   // The samples the charts were resampled with, each at its own size (GeometryImage::level).
   uint64_t resampledSamples = 0;
   HierarchyStats hierarchy;
   // Normals: stored, or derived from the positions on reading (block borders stored), with the
   // angles between the derived normals and the resampled ones over the derived samples.
   bool normalsDerived = false;
-  double samplesPerTriangle = 0.0;     // what the automatic choice went by
+  double samplesPerTriangle = 0.0;  // what the automatic choice went by
   NormalAngles normalAngles;
   // The charts' finest levels (ChartInfo::finestLevel): charts by level, and their samples summed.
   std::vector<uint32_t> chartsByFinestLevel;
@@ -123,7 +123,7 @@ struct MeshBuildStats {
   MeshFidelity fidelityMode = MeshFidelity::kFast;
   std::vector<StageTiming> stages;
   uint64_t peakRssBytes = 0;
-  uint64_t bytesOnDisk = 0;   // the atlas directory (stats.json aside)
+  uint64_t bytesOnDisk = 0;  // the atlas directory (stats.json aside)
   double totalSeconds = 0.0;
 };
 

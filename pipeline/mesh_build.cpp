@@ -175,7 +175,8 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
     finest = chartFinestLevels(r.set, r.spill.get(), coarsen);
   }
   uint64_t kept = 0;
-  for (const GeometryImage& g : r.set.charts) w.resampledSamples += uint64_t(g.side(r.set.chartSize)) * g.side(r.set.chartSize);
+  for (const GeometryImage& g : r.set.charts)
+    w.resampledSamples += uint64_t(g.side(r.set.chartSize)) * g.side(r.set.chartSize);
   for (size_t i = 0; i < r.set.charts.size(); ++i) {
     const uint64_t side = ((r.set.chartSize - 1) >> (finest.empty() ? r.set.charts[i].level : finest[i])) + 1;
     kept += side * side;
@@ -185,10 +186,11 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
       o.compress && (o.normals == MeshNormals::kDerived ||
                      (o.normals == MeshNormals::kAuto && w.samplesPerTriangle <= kDerivedNormalsSamplesPerTriangle));
   if (o.compress)
-    spdlog::info("positions on a lattice of {:.4g} ({:.4g}% of the diagonal), settled within {:.4g}% of it; normals "
-                 "within {} packed steps",
-                 coding.positionStep, 100.0 * coding.positionStep / std::max(diagonal, 1e-300),
-                 100.0 * o.positionTolerance, o.normalTolerance);
+    spdlog::info(
+        "positions on a lattice of {:.4g} ({:.4g}% of the diagonal), settled within {:.4g}% of it; normals "
+        "within {} packed steps",
+        coding.positionStep, 100.0 * coding.positionStep / std::max(diagonal, 1e-300), 100.0 * o.positionTolerance,
+        o.normalTolerance);
   {
     const GeometryChartsWritten written =
         writeGeometryCharts(r.set, dir, 1u << p.maxNodeResLog2, m, r.spill.get(), coding, finest,
@@ -198,21 +200,24 @@ MeshWriteStats writeMeshAtlas(ResampledMesh&& r, const HierarchyParams& p, const
     w.finestSamples = written.finestSamples;
     w.planarSamples = written.planarSamples;
     if (written.chartsByFinestLevel.size() > 1)
-      spdlog::info("charts by their finest level (0 = {}^2 samples): {}; {} samples ({:.1f} per input triangle, "
-                   "{:.2f} of the resampled charts')",
-                   r.set.chartSize, fmt::join(written.chartsByFinestLevel, ", "), written.finestSamples,
-                   double(written.finestSamples) / double(triangles),
-                   double(written.finestSamples) / double(std::max<uint64_t>(w.resampledSamples, 1)));
+      spdlog::info(
+          "charts by their finest level (0 = {}^2 samples): {}; {} samples ({:.1f} per input triangle, "
+          "{:.2f} of the resampled charts')",
+          r.set.chartSize, fmt::join(written.chartsByFinestLevel, ", "), written.finestSamples,
+          double(written.finestSamples) / double(triangles),
+          double(written.finestSamples) / double(std::max<uint64_t>(w.resampledSamples, 1)));
     if (written.planarSamples > 0)
       spdlog::info("{} of the charts' finest samples ({:.2f}) moved onto planar squares, whose corners alone are coded",
-                   written.planarSamples, double(written.planarSamples) / double(std::max<uint64_t>(written.finestSamples, 1)));
+                   written.planarSamples,
+                   double(written.planarSamples) / double(std::max<uint64_t>(written.finestSamples, 1)));
     w.normalsDerived = coding.deriveGeometryNormals;
     w.normalAngles = written.normalAngles;
   }
   if (w.normalsDerived)
-    spdlog::info("normals derived from the positions ({:.1f} samples per input triangle): {:.2f} degrees from the "
-                 "resampled ones at the median, {:.2f} at the 99th percentile, {:.1f} at most",
-                 w.samplesPerTriangle, w.normalAngles.median, w.normalAngles.p99, w.normalAngles.max);
+    spdlog::info(
+        "normals derived from the positions ({:.1f} samples per input triangle): {:.2f} degrees from the "
+        "resampled ones at the median, {:.2f} at the 99th percentile, {:.1f} at most",
+        w.samplesPerTriangle, w.normalAngles.median, w.normalAngles.p99, w.normalAngles.max);
   w.spilledBytes = r.spill->bytes();
   r.spill.reset();  // the file goes before the staging directory becomes the atlas
   r.set = GeometryImageSet{};
@@ -265,9 +270,10 @@ FidelityStats measureMeshFidelity(ChartedMesh& c, const MeshBuildOptions& o, con
                                  f.atlasSamples, f.atlasSamplesTotal, 100.0 * f.atlasFractionAbove)
                    : std::string());
   if (!f.exact)
-    spdlog::warn("{}: too many samples lie far from the other surface to resolve them all within {}; the "
-                 "Hausdorff figure is a lower bound",
-                 o.input.string(), spelledOption(o, "maxMemory"));
+    spdlog::warn(
+        "{}: too many samples lie far from the other surface to resolve them all within {}; the "
+        "Hausdorff figure is a lower bound",
+        o.input.string(), spelledOption(o, "maxMemory"));
   finishStage(meter, "fidelity");
   return f;
 }

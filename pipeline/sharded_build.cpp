@@ -108,7 +108,8 @@ json buildFingerprint(const TerrainBuildOptions& o) {
   return {{"input",
            {{"path", input.string()},
             {"bytes", ec ? uint64_t{0} : uint64_t(bytes)},
-            {"modified_ns", int64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(modified.time_since_epoch()).count())}}},
+            {"modified_ns",
+             int64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(modified.time_since_epoch()).count())}}},
           {"options",
            {{"chart_size", o.chartSize},
             {"depth", o.depth},
@@ -130,7 +131,8 @@ std::string fingerprintDifference(const json& a, const json& b) {
   std::vector<std::string> keys;
   for (const char* part : {"input", "options"})
     for (const auto& [k, v] : a.at(part).items())
-      if (!b.contains(part) || !b.at(part).contains(k) || b.at(part).at(k) != v) keys.push_back(std::string(part) + "." + k);
+      if (!b.contains(part) || !b.at(part).contains(k) || b.at(part).at(k) != v)
+        keys.push_back(std::string(part) + "." + k);
   return keys.empty() ? std::string("the fingerprints differ") : fmt::format("{}", fmt::join(keys, ", "));
 }
 
@@ -196,8 +198,8 @@ ShardId parseShardId(std::string_view text) {
   };
   if (slash == std::string_view::npos || !number(text.substr(0, slash), id.index) ||
       !number(text.substr(slash + 1), id.count) || id.count == 0 || id.count > kMaxShards || id.index >= id.count)
-    throw InputError(fmt::format("{} \"{}\" must be I/N with 0 <= I < N <= {} (shards count from 0)", optionRef("shard"),
-                                 text, kMaxShards));
+    throw InputError(fmt::format("{} \"{}\" must be I/N with 0 <= I < N <= {} (shards count from 0)",
+                                 optionRef("shard"), text, kMaxShards));
   return id;
 }
 
@@ -306,9 +308,10 @@ ShardBuildStats buildShard(const TerrainBuildOptions& options, ShardId id) {
   const json plan = readPlan(area);
   const json mine = buildFingerprint(options);
   if (plan.at("fingerprint") != mine)
-    throw InputError(fmt::format("{}: the plan was made from another input or other options ({}); prepare again or "
-                                 "give the shard the plan's",
-                                 (area / kPlanName).string(), fingerprintDifference(plan.at("fingerprint"), mine)));
+    throw InputError(
+        fmt::format("{}: the plan was made from another input or other options ({}); prepare again or "
+                    "give the shard the plan's",
+                    (area / kPlanName).string(), fingerprintDifference(plan.at("fingerprint"), mine)));
   const auto threads = threadLimit(options.threads);
   const AtlasManifest m = readManifest(area);
   TerrainBuildOptions o = options;
@@ -386,20 +389,23 @@ uint32_t shardCountIn(const fs::path& area) {
 std::string checkShard(const fs::path& area, const json& plan, ShardId id, json& record) {
   const fs::path dir = area / shardDirName(id);
   std::error_code ec;
-  if (!fs::exists(dir / kShardRecordName, ec)) return fmt::format("shard {} of {} is missing ({})", id.index, id.count, dir.string());
+  if (!fs::exists(dir / kShardRecordName, ec))
+    return fmt::format("shard {} of {} is missing ({})", id.index, id.count, dir.string());
   try {
     record = readJsonFile(dir / kShardRecordName, kShardFormat);
   } catch (const InputError& e) {
     return fmt::format("shard {} of {} is damaged ({})", id.index, id.count, e.what());
   }
   if (record.value("plan", std::string()) != plan.at("id").get<std::string>())
-    return fmt::format("shard {} of {} was built from another plan ({}: {})", id.index, id.count, dir.string(),
-                       record.contains("fingerprint") && record["fingerprint"] != plan.at("fingerprint")
-                           ? "another input or other options: " + fingerprintDifference(plan.at("fingerprint"), record["fingerprint"])
-                           : std::string("an earlier prepare"));
+    return fmt::format(
+        "shard {} of {} was built from another plan ({}: {})", id.index, id.count, dir.string(),
+        record.contains("fingerprint") && record["fingerprint"] != plan.at("fingerprint")
+            ? "another input or other options: " + fingerprintDifference(plan.at("fingerprint"), record["fingerprint"])
+            : std::string("an earlier prepare"));
   if (record.value("shard", ~0u) != id.index || record.value("of", 0u) != id.count ||
       record.value("charts", std::vector<uint32_t>{}) != shardCharts(plan.at("work").get<std::vector<double>>(), id))
-    return fmt::format("shard {} of {} does not hold the charts the plan gives it ({})", id.index, id.count, dir.string());
+    return fmt::format("shard {} of {} does not hold the charts the plan gives it ({})", id.index, id.count,
+                       dir.string());
   for (const json& f : record.value("files", json::array())) {
     const fs::path path = dir / f.value("path", std::string());
     if (!fs::is_regular_file(path, ec) || fs::file_size(path, ec) != f.value("bytes", uint64_t{0}) ||
@@ -454,12 +460,9 @@ json shardStatsJson(const ShardMergeStats& st, const json& plan, const AtlasMani
   t.totalSeconds = st.prepare.seconds + slowest + st.merge.seconds;
   t.peakRssBytes = peak;
   json j = statsJson(t);
-  j["sharded"] = {{"shards", st.shards.size()},
-                  {"prepare", stepJson(st.prepare)},
-                  {"merge", stepJson(st.merge)},
-                  {"per_shard", shards},
-                  {"balance", st.balance},
-                  {"critical_path_seconds", t.totalSeconds},
+  j["sharded"] = {{"shards", st.shards.size()},  {"prepare", stepJson(st.prepare)},
+                  {"merge", stepJson(st.merge)}, {"per_shard", shards},
+                  {"balance", st.balance},       {"critical_path_seconds", t.totalSeconds},
                   {"cpu_seconds", cpu}};
   return j;
 }
@@ -546,17 +549,18 @@ std::string shardSummary(const ShardBuildStats& s, const fs::path& atlas) {
 
 std::string shardSummary(const ShardMergeStats& s, const fs::path& atlas) {
   std::string out = fmt::format("merged {} shards into {}: {} bytes\n", s.shards.size(), atlas.string(), s.bytesOnDisk);
-  out += fmt::format("  prepare  {:9.2f} s  CPU {:9.2f} s  peak {:6} MiB  {}\n", s.prepare.seconds, s.prepare.cpuSeconds,
-                     s.prepare.peakRssBytes >> 20, s.prepare.host);
+  out += fmt::format("  prepare  {:9.2f} s  CPU {:9.2f} s  peak {:6} MiB  {}\n", s.prepare.seconds,
+                     s.prepare.cpuSeconds, s.prepare.peakRssBytes >> 20, s.prepare.host);
   for (const ShardBuildStats& sh : s.shards)
     out += fmt::format("  shard {:<3}{:9.2f} s  CPU {:9.2f} s  peak {:6} MiB  {}  ({} charts)\n", sh.id.index,
                        sh.step.seconds, sh.step.cpuSeconds, sh.step.peakRssBytes >> 20, sh.step.host, sh.charts.size());
   out += fmt::format("  merge    {:9.2f} s  CPU {:9.2f} s  peak {:6} MiB  {}\n", s.merge.seconds, s.merge.cpuSeconds,
                      s.merge.peakRssBytes >> 20, s.merge.host);
-  out += fmt::format("  balance: the slowest shard took {:.2f} times the mean shard's time; critical path {:.2f} s, "
-                     "CPU {:.2f} s in all\n",
-                     s.balance, s.stats.at("sharded").at("critical_path_seconds").get<double>(),
-                     s.stats.at("sharded").at("cpu_seconds").get<double>());
+  out += fmt::format(
+      "  balance: the slowest shard took {:.2f} times the mean shard's time; critical path {:.2f} s, "
+      "CPU {:.2f} s in all\n",
+      s.balance, s.stats.at("sharded").at("critical_path_seconds").get<double>(),
+      s.stats.at("sharded").at("cpu_seconds").get<double>());
   return out;
 }
 

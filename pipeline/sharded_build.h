@@ -51,8 +51,8 @@ std::vector<uint32_t> shardCharts(const std::vector<double>& work, ShardId id);
 
 // What a step measured, for its log line and the merge's report.
 struct ShardStepStats {
-  double seconds = 0.0;      // wall
-  double cpuSeconds = 0.0;   // user + system, all threads
+  double seconds = 0.0;     // wall
+  double cpuSeconds = 0.0;  // user + system, all threads
   uint64_t peakRssBytes = 0;
   std::string host;
 };

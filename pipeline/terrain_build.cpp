@@ -108,7 +108,8 @@ TerrainPlan planTerrain(const fs::path& input, uint64_t width, uint64_t height, 
   uint32_t cs = o.chartSize;
   if (plan.autoChartSize) {
     cs = 513;
-    while (cs < kMaxTerrainChartSize && along(width, cs - 1) * along(height, cs - 1) > kTargetTerrainCharts) cs = 2 * cs - 1;
+    while (cs < kMaxTerrainChartSize && along(width, cs - 1) * along(height, cs - 1) > kTargetTerrainCharts)
+      cs = 2 * cs - 1;
   }
   plan.chartSize = cs;
   plan.samplesX = width;
@@ -148,8 +149,8 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& options) {
   }
   const TerrainBuildOptions& o = options;
   if (!(o.chartSize >= 9 && o.chartSize <= kMaxTerrainChartSize && isPowerOfTwo(o.chartSize - 1)))
-    throw InputError(fmt::format("{} {} must be 2^m+1 between 9 and {} (e.g. 257, 513, 1025)",
-                                 optionRef("chartSize"), o.chartSize, kMaxTerrainChartSize));
+    throw InputError(fmt::format("{} {} must be 2^m+1 between 9 and {} (e.g. 257, 513, 1025)", optionRef("chartSize"),
+                                 o.chartSize, kMaxTerrainChartSize));
   if (!isPowerOfTwo(o.nodeRes) || o.nodeRes < 4 || o.nodeRes > 1024 || o.nodeRes > o.chartSize - 1)
     throw InputError(fmt::format("{} {} must be a power of two in [4, min(1024, {} - 1)]", optionRef("nodeRes"),
                                  o.nodeRes, optionRef("chartSize")));
@@ -162,9 +163,10 @@ void validateTerrainBuildOptions(const TerrainBuildOptions& options) {
   if (!(o.planetFlattening >= 0.0 && o.planetFlattening <= kMaxPlanetFlattening))
     throw InputError(fmt::format("{} {} must be between 0 (a sphere) and {}", optionRef("planetFlattening"),
                                  o.planetFlattening, kMaxPlanetFlattening));
-  if (o.compress && o.heightPrecision != kAutoHeightPrecision && !(o.heightPrecision >= 1e-6 && o.heightPrecision <= 1000.0))
-    throw InputError(fmt::format("{} {} must be between 1e-6 and 1000 metres", optionRef("heightPrecision"),
-                                 o.heightPrecision));
+  if (o.compress && o.heightPrecision != kAutoHeightPrecision &&
+      !(o.heightPrecision >= 1e-6 && o.heightPrecision <= 1000.0))
+    throw InputError(
+        fmt::format("{} {} must be between 1e-6 and 1000 metres", optionRef("heightPrecision"), o.heightPrecision));
   validateImageryOptions(imageryOptions(o));
   HierarchyParams p;
   p.intervalsLog2 = log2u(o.chartSize - 1);
@@ -185,8 +187,9 @@ std::string voidsFilledText(uint64_t voids, uint64_t samples) {
 void logPlan(const TerrainBuildOptions& o, const TerrainPlan& plan) {
   spdlog::info("{}: {} x {} charts of {} samples{}, {} quadtree levels{}", o.input.string(), plan.chartsX, plan.chartsY,
                plan.chartSize,
-               plan.autoChartSize ? fmt::format(" (the smallest from 513 giving at most {} charts)", kTargetTerrainCharts)
-                                  : std::string(),
+               plan.autoChartSize
+                   ? fmt::format(" (the smallest from 513 giving at most {} charts)", kTargetTerrainCharts)
+                   : std::string(),
                plan.depth, fmt::format(" (finest nodes {} intervals wide)", (plan.chartSize - 1) >> (plan.depth - 1)));
 }
 
@@ -196,9 +199,11 @@ void logTerrainSource(const TerrainBuildOptions& o, const DemRaster& dem) {
   for (const std::string& warning : dem.warnings) spdlog::warn("{}: {}", o.input.string(), spelledMessage(o, warning));
   const PlanetInfo& p = dem.planet;
   if (!p.present) return;
-  const std::string surface = p.flattening > 0.0 ? fmt::format("an ellipsoid of equatorial radius {:.1f} m and "
-                                                                "flattening 1/{:.12g}", p.radius, 1.0 / p.flattening)
-                                                  : fmt::format("a sphere of radius {:.1f} m", p.radius);
+  const std::string surface = p.flattening > 0.0 ? fmt::format(
+                                                       "an ellipsoid of equatorial radius {:.1f} m and "
+                                                       "flattening 1/{:.12g}",
+                                                       p.radius, 1.0 / p.flattening)
+                                                 : fmt::format("a sphere of radius {:.1f} m", p.radius);
   spdlog::info("{}: on {}, {}x{} samples{}", o.input.string(), surface, dem.width, dem.height,
                p.wrapColumns ? fmt::format(", {} columns round the planet", p.wrapColumns) : std::string(", regional"));
 }
@@ -445,12 +450,12 @@ TerrainBuildStats buildTerrainAtlas(const TerrainBuildOptions& options) {
   // below what the process holds, with room for windows, cannot be kept.
   const uint64_t held = residentBytes();
   if (memoryCap(o) < held + (uint64_t{32} << 20))
-    throw InputError(fmt::format("{} {} MiB is below the {} MiB this program holds before reading the DEM, plus 32 MiB "
-                                 "for the windows",
-                                 optionRef("maxMemory"), memoryCap(o) >> 20, held >> 20));
+    throw InputError(
+        fmt::format("{} {} MiB is below the {} MiB this program holds before reading the DEM, plus 32 MiB "
+                    "for the windows",
+                    optionRef("maxMemory"), memoryCap(o) >> 20, held >> 20));
   bool windowed = o.outOfCore;
-  if (!windowed)
-    windowed = samples * inMemoryBytesPerSample(o) + double(residentBytes()) > double(memoryCap(o));
+  if (!windowed) windowed = samples * inMemoryBytesPerSample(o) + double(residentBytes()) > double(memoryCap(o));
   StagedDirectory stage(o.output, kManifestName, "atlas");
   if (windowed) {
     stats.write = writeTerrainAtlasWindowed(o, stage.path(), &stats.read);

@@ -30,9 +30,9 @@ uint64_t tris(uint32_t res) { return 2ull << (2 * res); }
 
 struct Candidate {
   NodeId id;
-  uint32_t resLog2;     // chosen resolution (clamped to maxResLog2)
-  bool overTol;     // even maxResLog2 is above tolerance
-  double priority;  // larger splits first
+  uint32_t resLog2;  // chosen resolution (clamped to maxResLog2)
+  bool overTol;      // even maxResLog2 is above tolerance
+  double priority;   // larger splits first
 };
 
 struct ByPriority {
@@ -75,8 +75,7 @@ uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams&
   return rmax + 1;
 }
 
-Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptOptions& options,
-                        AdaptStats* stats) {
+Cut adaptErrorThreshold(const Hierarchy& h, const ViewParams& view, const AdaptOptions& options, AdaptStats* stats) {
   AdaptStats st;
   const double tol = options.tolerancePx;
   const AdaptView step{view, tol, options.frustumCull};
@@ -187,8 +186,7 @@ uint32_t countVisibleRoots(const Hierarchy& h, const ViewParams& v, bool cull) {
   return n;
 }
 
-uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i,
-                            std::vector<SideNeighbour>& scratch) {
+uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i, std::vector<SideNeighbour>& scratch) {
   uint32_t gap = 0;
   const NodeId& id = cut.nodes[i].id;
   for (uint32_t s = 0; s < 4; ++s) {
@@ -215,8 +213,8 @@ void stitchGaps(const Hierarchy& h, const Cut& cut, std::vector<uint32_t>& gaps)
   }
 }
 
-bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* view,
-                             double tolerancePx, AdaptStats* stats) {
+bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* view, double tolerancePx,
+                             AdaptStats* stats) {
   std::vector<uint32_t> gaps;
   // Each pass splits the nodes that cannot reach the needed resolution; the tree is finite, so
   // this ends after at most depth passes.
@@ -338,8 +336,7 @@ uint32_t attributeResolution(const Hierarchy& h, const NodeId& n, const ViewPara
   return res;
 }
 
-AttributeStats assignAttributeResolutions(const Hierarchy& h, Cut& cut, const ViewParams& v,
-                                          double texelsPerPixel) {
+AttributeStats assignAttributeResolutions(const Hierarchy& h, Cut& cut, const ViewParams& v, double texelsPerPixel) {
   AttributeStats st;
   for (CutNode& n : cut.nodes) {
     n.texRes = attributeResolution(h, n.id, v, texelsPerPixel, &n.texBlend);

@@ -67,7 +67,7 @@ struct AdaptStats {
   uint32_t constraintRaises = 0;  // resolutions raised by the stitching constraint
   uint32_t constraintSplits = 0;  // splits forced by the stitching constraint
   uint32_t culled = 0;
-  bool nodeBudgetBound = false;   // some node stays above tolerance because of maxNodes
+  bool nodeBudgetBound = false;  // some node stays above tolerance because of maxNodes
   double maxErrorPx = 0.0;
   uint64_t triangles = 0;
   // The smallest cut: the visible top groups (hierarchy/root_groups.h), or the visible chart roots
@@ -116,8 +116,8 @@ uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams&
 // its finest neighbour on any side, so it has a vertex for every small neighbour's corner. Raises
 // resolutions, and splits nodes whose maximum resolution is too low. Returns false when the cut
 // could not be fixed (never for a valid hierarchy).
-bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* view,
-                             double tolerancePx, AdaptStats* stats = nullptr);
+bool enforceStitchConstraint(const Hierarchy& h, Cut& cut, const ViewParams* view, double tolerancePx,
+                             AdaptStats* stats = nullptr);
 
 // The node budget held after the stitching constraint split past it: while the cut has more than
 // maxNodes nodes (0: no limit), merges a complete group of sibling nodes (every child that is not
@@ -129,8 +129,7 @@ uint32_t holdNodeBudget(const Hierarchy& h, Cut& cut, const ViewParams& view, ui
 
 // Largest level difference between cut node i and a finer drawn neighbour on any of its sides:
 // the lowest resolution the stitching constraint allows it. scratch is reused storage.
-uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i,
-                            std::vector<SideNeighbour>& scratch);
+uint32_t finestNeighbourGap(const Hierarchy& h, const Cut& cut, uint32_t i, std::vector<SideNeighbour>& scratch);
 
 // For each side of node m (level > 0), walks from the adjacent node of m's level (across chart
 // borders too) up its ancestors, calling stop(a, m.level - a.level) until it returns true (the
@@ -143,10 +142,22 @@ void walkToCoarserNeighbours(const Hierarchy& h, const NodeId& m, Stop&& stop) {
     NodeId a = m;
     bool inChart = true;
     switch (side) {  // inside the chart without adjacentNode's border logic
-      case kEdgeBottom: inChart = a.y > 0; --a.y; break;
-      case kEdgeRight: inChart = a.x < last; ++a.x; break;
-      case kEdgeTop: inChart = a.y < last; ++a.y; break;
-      default: inChart = a.x > 0; --a.x; break;
+      case kEdgeBottom:
+        inChart = a.y > 0;
+        --a.y;
+        break;
+      case kEdgeRight:
+        inChart = a.x < last;
+        ++a.x;
+        break;
+      case kEdgeTop:
+        inChart = a.y < last;
+        ++a.y;
+        break;
+      default:
+        inChart = a.x > 0;
+        --a.x;
+        break;
     }
     uint32_t aSide;
     if (!inChart && !adjacentNode(h, m, side, &a, &aSide)) continue;
@@ -233,15 +244,14 @@ uint32_t attributeResolution(const Hierarchy& h, const NodeId& n, const ViewPara
                              float* blend = nullptr);
 
 struct AttributeStats {
-  uint64_t texels = 0;        // sum over nodes of (2^texRes + 1)^2: attribute data the cut uses
-  uint32_t aboveGeometry = 0; // nodes whose attribute resolution is finer than their geometry
-  uint32_t belowPage = 0;     // nodes sampling a coarser level than their page holds
-  uint32_t abovePage = 0;     // nodes that want finer data than their page (page res is used)
+  uint64_t texels = 0;         // sum over nodes of (2^texRes + 1)^2: attribute data the cut uses
+  uint32_t aboveGeometry = 0;  // nodes whose attribute resolution is finer than their geometry
+  uint32_t belowPage = 0;      // nodes sampling a coarser level than their page holds
+  uint32_t abovePage = 0;      // nodes that want finer data than their page (page res is used)
 };
 
 // Sets texRes of every cut node (attributeResolution). Returns what the choice amounts to.
-AttributeStats assignAttributeResolutions(const Hierarchy& h, Cut& cut, const ViewParams& v,
-                                          double texelsPerPixel);
+AttributeStats assignAttributeResolutions(const Hierarchy& h, Cut& cut, const ViewParams& v, double texelsPerPixel);
 
 // The number of constraint violations in a cut (0 for a valid cut). For tests and checks.
 uint32_t countStitchViolations(const Hierarchy& h, const Cut& cut);

@@ -51,15 +51,14 @@ bool nodeDrawable(const Hierarchy& h, const NodeId& n, const ViewParams& v, bool
   return v.frustum.intersects({b[0], b[1], b[2]}, {b[3], b[4], b[5]});
 }
 
-double dualQueueSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParams& v,
-                              double tolerancePx, bool cull) {
+double dualQueueSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tolerancePx, bool cull) {
   bool over = false;
   const uint32_t res = clampedRes(h, n, v, tolerancePx, &over);
   return splitPriorityOf(h, n, res, nodeDrawable(h, n, v, cull), over, {v, tolerancePx, cull});
 }
 
-double dualQueueMergeCost(const Hierarchy& h, const NodeId& parent, const ViewParams& v,
-                          double tolerancePx, bool cull, bool* parentOverTol) {
+double dualQueueMergeCost(const Hierarchy& h, const NodeId& parent, const ViewParams& v, double tolerancePx, bool cull,
+                          bool* parentOverTol) {
   bool over = false;
   const uint32_t res = clampedRes(h, parent, v, tolerancePx, &over);
   const bool drawn = nodeDrawable(h, parent, v, cull);
@@ -71,7 +70,10 @@ double dualQueueMergeCost(const Hierarchy& h, const NodeId& parent, const ViewPa
 
 DualQueueAdapter::DualQueueAdapter(const Hierarchy& h, uint32_t maxOpsPerFrame, bool reusePriorities,
                                    uint32_t parallelMin)
-    : h_(h), maxOps_(std::max(maxOpsPerFrame, 1u)), reuse_(reusePriorities), parallelMin_(parallelMin),
+    : h_(h),
+      maxOps_(std::max(maxOpsPerFrame, 1u)),
+      reuse_(reusePriorities),
+      parallelMin_(parallelMin),
       perChart_(nodesPerChart(h.params.depth)) {
   local_.resize(perChart_);
   for (uint32_t l = 0; l < h.params.depth; ++l)
@@ -566,8 +568,8 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
   // queues, and the cut, do not depend on the thread count.
   const size_t n = entries_.size();
   parallelPass(n, parallelMin_, [&](size_t i) { evaluate(entries_[i]); });
-  if (options.tolerancePx != epochTol_ || view.pixelsPerRadian != epochPpr_ ||
-      view.minDistance != epochMinDist_ || options.frustumCull != epochCull_) {
+  if (options.tolerancePx != epochTol_ || view.pixelsPerRadian != epochPpr_ || view.minDistance != epochMinDist_ ||
+      options.frustumCull != epochCull_) {
     ++epoch_;
     epochTol_ = options.tolerancePx;
     epochPpr_ = view.pixelsPerRadian;

@@ -20,24 +20,23 @@ bool nodeDrawable(const Hierarchy& h, const NodeId& n, const ViewParams& v, bool
 // Split priority of n (paper 7.1): triangles saved by replacing n, at its needed resolution, with
 // its children each at theirs (undrawn nodes count 0 triangles). 1e30 + screen error at maxResLog2 when
 // n is drawn and cannot meet tolerance even at maxResLog2; -1 at the leaf level.
-double dualQueueSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParams& v,
-                              double tolerancePx, bool cull);
+double dualQueueSplitPriority(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tolerancePx, bool cull);
 
 // Merge cost of the sibling group under `parent` (paper 7.1): triangles added by replacing the
 // non-empty children, each at its needed resolution, with the parent at its needed resolution.
 // Sets *parentOverTol when the drawn parent cannot meet tolerance even at maxResLog2 (then the group
 // is merged only to get back under the node budget). Returns the cost.
-double dualQueueMergeCost(const Hierarchy& h, const NodeId& parent, const ViewParams& v,
-                          double tolerancePx, bool cull, bool* parentOverTol);
+double dualQueueMergeCost(const Hierarchy& h, const NodeId& parent, const ViewParams& v, double tolerancePx, bool cull,
+                          bool* parentOverTol);
 
 // What one update did, beyond AdaptStats.
 struct DualQueueFrameStats {
   uint32_t splits = 0;
   uint32_t merges = 0;
-  uint32_t trades = 0;        // merges done to make room for a better split under the budget
+  uint32_t trades = 0;          // merges done to make room for a better split under the budget
   uint32_t partitionNodes = 0;  // nodes of the persistent cut, drawn or not
   uint32_t drawnNodes = 0;      // before the stitching constraint
-  bool opCapBound = false;    // stopped at maxOpsPerFrame before converging
+  bool opCapBound = false;      // stopped at maxOpsPerFrame before converging
   uint32_t priorityReuses = 0;  // split priorities kept from an earlier frame (coherence)
 };
 
@@ -85,15 +84,15 @@ class DualQueueAdapter {
   // One partition node. Lives in entries_; slot_[g] is its position (swap-removed).
   struct Entry {
     NodeId id;
-    uint32_t g = 0;            // dense forest index (see globalIndex)
+    uint32_t g = 0;  // dense forest index (see globalIndex)
     uint8_t resLog2 = 0;
     bool drawn = false;
-    bool inside = false;       // bounds entirely inside the frustum (so are the children's)
+    bool inside = false;  // bounds entirely inside the frustum (so are the children's)
     bool overTol = false;
     bool drawnFlipped = false;  // drawn changed in this frame's evaluation
-    double errorPx = 0.0;      // screen error at res (drawn nodes)
-    uint32_t splitFrame = 0;   // frame in which a split created this node
-    uint32_t mergedFrame = 0;  // frame in which a merge created this node
+    double errorPx = 0.0;       // screen error at res (drawn nodes)
+    uint32_t splitFrame = 0;    // frame in which a split created this node
+    uint32_t mergedFrame = 0;   // frame in which a merge created this node
     // Coherence (paper 7.1, after ROAM's deferred priority updates): the split priority of a
     // node that is not over tolerance depends on its own resolution and its children's needed
     // resolutions, which are step functions of the eye distance; the distance to a box moves
@@ -112,8 +111,8 @@ class DualQueueAdapter {
   };
   struct Item {
     double priority;
-    uint32_t g;    // split: the node; merge: the parent
-    bool overTol;  // merge items: the parent cannot meet tolerance
+    uint32_t g;     // split: the node; merge: the parent
+    bool overTol;   // merge items: the parent cannot meet tolerance
     int32_t nodes;  // split: drawn-node change of the split; merge: drawn nodes it frees
   };
   struct Less {
@@ -163,15 +162,15 @@ class DualQueueAdapter {
   uint32_t parallelMin_;
   uint32_t perChart_;
   uint32_t frameNo_ = 0;
-  std::vector<NodeId> local_;    // chart-local node of each level-order index
-  std::vector<int32_t> slot_;    // per forest node: position in entries_, or -1
-  std::vector<Entry> entries_;   // the persistent cut (a partition of the non-empty area)
+  std::vector<NodeId> local_;   // chart-local node of each level-order index
+  std::vector<int32_t> slot_;   // per forest node: position in entries_, or -1
+  std::vector<Entry> entries_;  // the persistent cut (a partition of the non-empty area)
   std::vector<Item> splitHeap_, mergeHeap_;
   std::vector<PassItems> pass_;
   // Per-frame context.
   ViewParams view_;
   AdaptOptions opt_;
-  uint32_t epoch_ = 0;           // bumped when the tolerance, projection or culling changes
+  uint32_t epoch_ = 0;  // bumped when the tolerance, projection or culling changes
   double epochTol_ = -1.0, epochPpr_ = -1.0, epochMinDist_ = -1.0;
   bool epochCull_ = true;
   uint32_t drawn_ = 0;

@@ -32,9 +32,9 @@ struct Entry {
   uint32_t maxResLog2 = 0;
   bool drawn = false;
   bool drawnFlipped = false;  // drawn changed in this frame's evaluation
-  bool prioValid = false;  // splitPrio holds this frame's split priority at res and err
-  double err = 0.0;    // screen error at res; 0 when not drawn
-  double dist = 1.0;   // eye distance to the bounds this frame (as screenError clamps it)
+  bool prioValid = false;     // splitPrio holds this frame's split priority at res and err
+  double err = 0.0;           // screen error at res; 0 when not drawn
+  double dist = 1.0;          // eye distance to the bounds this frame (as screenError clamps it)
   double splitPrio = 0.0;
   const float* errs = nullptr;  // the node's errors, [res - minRes] (Hierarchy::error)
   uint32_t splitRound = 0, mergedRound = 0;
@@ -153,9 +153,7 @@ class EntryMap {
           slot_[index(l.entry.id)] = int32_t(l.slot);
           break;
         }
-        case Op::kModify:
-          *find(l.entry.id) = l.entry;
-          break;
+        case Op::kModify: *find(l.entry.id) = l.entry; break;
       }
     }
     log_.clear();
@@ -245,7 +243,7 @@ class NodeCache {
 }  // namespace
 
 struct QuadQueueAdapter::State {
-  EntryMap cut;  // partition of the non-empty chart area
+  EntryMap cut;    // partition of the non-empty chart area
   NodeCache node;  // this frame's view-dependent node data
   uint32_t drawn = 0;
   uint64_t triangles = 0;  // drawn
@@ -318,7 +316,9 @@ struct QuadQueueAdapter::State {
     return true;
   }
   // screenError(h, e.id, r, view) with the distance evaluated once per frame.
-  double errAt(const Entry& e, uint32_t r) const { return double(e.errs[r - minResLog2()]) * view.pixelsPerRadian / e.dist; }
+  double errAt(const Entry& e, uint32_t r) const {
+    return double(e.errs[r - minResLog2()]) * view.pixelsPerRadian / e.dist;
+  }
   // Resolution a node needs to hold `tolPx`, clamped to its maxResLog2 (neededResolution's arithmetic).
   uint32_t resFor(const NodeEval& n, double tolPx) const {
     const double tolWorld = tolPx * n.dist / view.pixelsPerRadian;
@@ -816,9 +816,7 @@ struct QuadQueueAdapter::State {
   bool collapseCulled(uint32_t r) {
     std::vector<Item>& heap = mergeH;
     heap.clear();
-    auto collapsible = [&](const NodeId& p) {
-      return !node(p).drawable && groupMergeable(p, r) && groupUndrawn(p);
-    };
+    auto collapsible = [&](const NodeId& p) { return !node(p).drawable && groupMergeable(p, r) && groupUndrawn(p); };
     for (const auto& [k, e] : cut)
       if (!e.drawn && e.id.level > 0 && firstOfGroup(e) && collapsible(e.id.parent()))
         heap.push_back({0.0, e.id.parent().key(), 0});
@@ -944,8 +942,8 @@ struct QuadQueueAdapter::State {
       // parent's error at maxResLog2 stays below the error of the node to split: merging zero-error
       // groups to split the worst node at maxResLog2 is the trade a full node budget needs.
       const NodeId mp = m ? keyToNode(m->key) : NodeId{};
-      const bool pays = m && (-m->priority < kOverCost ? -m->priority < sp
-                                                       : parentErrorAtMax(node(mp)) < s->err - kEps);
+      const bool pays =
+          m && (-m->priority < kOverCost ? -m->priority < sp : parentErrorAtMax(node(mp)) < s->err - kEps);
       if (pays && !(s->id.level > 0 && s->id.parent() == mp)) {
         if (mergeFreedNodes(mp) <= 0) {
           mergeAside.push_back(heapPop(mergeH));
@@ -999,7 +997,8 @@ struct QuadQueueAdapter::State {
   }
   // Replaces the kept nodes of every chart in a closed group by the chart's root.
   void collapseClosedCharts() {
-    if (!groups.active || std::none_of(groups.closedOf.begin(), groups.closedOf.end(), [](int32_t g) { return g >= 0; }))
+    if (!groups.active ||
+        std::none_of(groups.closedOf.begin(), groups.closedOf.end(), [](int32_t g) { return g >= 0; }))
       return;
     std::vector<NodeId> drop;
     std::vector<uint32_t> charts;

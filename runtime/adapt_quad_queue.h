@@ -15,22 +15,22 @@ struct BudgetOptions {
   uint64_t maxTriangles = 1000000;  // triangle budget; must be >= 2 * 4^minRes * (visible roots)
   uint32_t maxNodes = 4096;         // node budget; 0 means no limit
   bool frustumCull = true;
-  uint32_t maxOpsPerFrame = 4096;   // cap on refine/coarsen/split/merge operations per frame
-  uint32_t maxRounds = 16;          // split/merge rounds per frame (0: refine/coarsen only)
+  uint32_t maxOpsPerFrame = 4096;  // cap on refine/coarsen/split/merge operations per frame
+  uint32_t maxRounds = 16;         // split/merge rounds per frame (0: refine/coarsen only)
 };
 
 struct BudgetStats {
   uint32_t refines = 0, coarsens = 0, splits = 0, merges = 0;
-  uint32_t rounds = 0;        // refine/coarsen + split/merge rounds this frame
-  uint32_t undos = 0;         // split/merge rounds undone because the max error got worse
-  uint32_t tieUndos = 0;      // rounds undone because the max error did not improve (tie rule)
-  uint32_t undoneOps = 0;     // operations of undone rounds (not in refines..merges)
-  bool opCapBound = false;    // maxOpsPerFrame stopped the frame early
-  uint32_t nodes = 0;         // drawn nodes (Cut::nodeCount: a closed group's roots once)
-  uint64_t triangles = 0;     // drawn triangles (<= maxTriangles)
+  uint32_t rounds = 0;      // refine/coarsen + split/merge rounds this frame
+  uint32_t undos = 0;       // split/merge rounds undone because the max error got worse
+  uint32_t tieUndos = 0;    // rounds undone because the max error did not improve (tie rule)
+  uint32_t undoneOps = 0;   // operations of undone rounds (not in refines..merges)
+  bool opCapBound = false;  // maxOpsPerFrame stopped the frame early
+  uint32_t nodes = 0;       // drawn nodes (Cut::nodeCount: a closed group's roots once)
+  uint64_t triangles = 0;   // drawn triangles (<= maxTriangles)
   double maxErrorPx = 0.0, meanErrorPx = 0.0;
   uint32_t constraintRaises = 0, constraintSplits = 0;
-  uint32_t budgetMerges = 0;  // merges forced by maxNodes or by the triangle floor (in merges)
+  uint32_t budgetMerges = 0;      // merges forced by maxNodes or by the triangle floor (in merges)
   uint32_t rootFloor = 0;         // the smallest cut (AdaptStats::rootFloor): no cut has fewer nodes
   bool budgetBelowRoots = false;  // maxNodes < rootFloor: the cut is the visible roots, over maxNodes
   uint32_t closedGroups = 0;      // closed groups drawn (AdaptStats::closedGroups)

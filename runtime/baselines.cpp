@@ -12,8 +12,8 @@
 
 namespace gimlod {
 
-Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tolerancePx,
-                          uint32_t maxNodes, AdaptStats* stats, bool frustumCull) {
+Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tolerancePx, uint32_t maxNodes,
+                          AdaptStats* stats, bool frustumCull) {
   AdaptStats st;
   GroupSelection groups;
   selectRootGroups(h, {view, tolerancePx, frustumCull}, maxNodes, groups);
@@ -25,9 +25,7 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
   };
   auto byError = [](const Candidate& a, const Candidate& b) { return a.errorPx < b.errorPx; };
   std::priority_queue<Candidate, std::vector<Candidate>, decltype(byError)> queue(byError);
-  auto candidate = [&](const NodeId& n) {
-    return Candidate{screenError(h, n, h.maxResLog2(n), view), n};
-  };
+  auto candidate = [&](const NodeId& n) { return Candidate{screenError(h, n, h.maxResLog2(n), view), n}; };
   std::vector<NodeId> done;
   uint32_t count = 0;
   for (uint32_t c = 0; c < h.chartCount(); ++c) {
@@ -90,8 +88,8 @@ Cut adaptFixedGranularity(const Hierarchy& h, const ViewParams& view, double tol
   return cut;
 }
 
-Cut adaptTopDownGreedy(const Hierarchy& h, const ViewParams& view, double tolerancePx,
-                       uint32_t maxNodes, AdaptStats* stats, bool frustumCull) {
+Cut adaptTopDownGreedy(const Hierarchy& h, const ViewParams& view, double tolerancePx, uint32_t maxNodes,
+                       AdaptStats* stats, bool frustumCull) {
   AdaptOptions o;
   o.tolerancePx = tolerancePx;
   o.maxNodes = maxNodes;
@@ -258,8 +256,7 @@ Cut adaptFixedGranularityBudget(const Hierarchy& h, const ViewParams& view, cons
   return cut;
 }
 
-Cut adaptGreedyBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options,
-                      BudgetStats* stats) {
+Cut adaptGreedyBudget(const Hierarchy& h, const ViewParams& view, const BudgetOptions& options, BudgetStats* stats) {
   BudgetStats st;
   AdaptOptions ao;
   ao.maxNodes = options.maxNodes;

@@ -74,8 +74,7 @@ Frustum frustumFromMatrix(const glm::dmat4& m) {
   // Gribb-Hartmann: rows of the matrix combined.
   auto row = [&](int i) { return glm::dvec4(m[0][i], m[1][i], m[2][i], m[3][i]); };
   Frustum f;
-  f.planes = {row(3) + row(0), row(3) - row(0), row(3) + row(1),
-              row(3) - row(1), row(3) + row(2), row(3) - row(2)};
+  f.planes = {row(3) + row(0), row(3) - row(0), row(3) + row(1), row(3) - row(1), row(3) + row(2), row(3) - row(2)};
   for (auto& p : f.planes) p /= glm::length(glm::dvec3(p));
   return f;
 }
@@ -115,17 +114,17 @@ Camera zUpCamera(const glm::dvec3& eye, const glm::dvec3& target, double fovYDeg
 
 }  // namespace
 
-std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames,
-                              double distanceFraction, double elevationDeg, double fovYDeg) {
+std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames, double distanceFraction,
+                              double elevationDeg, double fovYDeg) {
   const glm::dvec3 centre = (lo + hi) * 0.5;
   const double radius = glm::length(hi - lo) * distanceFraction;
   const double el = glm::radians(elevationDeg);
   std::vector<Camera> path;
   for (uint32_t i = 0; i < frames; ++i) {
     const double a = 2.0 * std::numbers::pi * double(i) / double(std::max(frames, 1u));
-    path.push_back(zUpCamera(centre + radius * glm::dvec3(std::cos(el) * std::cos(a), std::cos(el) * std::sin(a),
-                                                          std::sin(el)),
-                             centre, fovYDeg, lo, hi));
+    path.push_back(
+        zUpCamera(centre + radius * glm::dvec3(std::cos(el) * std::cos(a), std::cos(el) * std::sin(a), std::sin(el)),
+                  centre, fovYDeg, lo, hi));
   }
   return path;
 }
@@ -153,8 +152,12 @@ std::vector<Camera> axisViews(const glm::dvec3& lo, const glm::dvec3& hi, double
   const glm::dvec3 centre = (lo + hi) * 0.5;
   const double radius = std::max(0.5 * glm::length(hi - lo), 1e-12);
   const double distance = radius / std::sin(0.5 * glm::radians(fovYDeg));
-  static const std::array<std::pair<glm::dvec3, const char*>, 6> kAxes = {
-      {{{1, 0, 0}, "+x"}, {{-1, 0, 0}, "-x"}, {{0, 1, 0}, "+y"}, {{0, -1, 0}, "-y"}, {{0, 0, 1}, "+z"}, {{0, 0, -1}, "-z"}}};
+  static const std::array<std::pair<glm::dvec3, const char*>, 6> kAxes = {{{{1, 0, 0}, "+x"},
+                                                                           {{-1, 0, 0}, "-x"},
+                                                                           {{0, 1, 0}, "+y"},
+                                                                           {{0, -1, 0}, "-y"},
+                                                                           {{0, 0, 1}, "+z"},
+                                                                           {{0, 0, -1}, "-z"}}};
   std::vector<Camera> views;
   if (names) names->clear();
   for (const auto& [axis, name] : kAxes) {
@@ -182,19 +185,15 @@ std::vector<Camera> readCameraPath(const std::filesystem::path& path) {
     throw InputError(path.string() + ": invalid JSON: " + e.what());
   }
   const nlohmann::json& frames = j.is_object() && j.contains("frames") ? j["frames"] : j;
-  if (!frames.is_array() || frames.empty())
-    throw InputError(path.string() + ": expected a non-empty list of frames");
-  auto vec3 = [&](const nlohmann::json& fr, const char* key, size_t i, bool required,
-                  glm::dvec3 fallback) {
+  if (!frames.is_array() || frames.empty()) throw InputError(path.string() + ": expected a non-empty list of frames");
+  auto vec3 = [&](const nlohmann::json& fr, const char* key, size_t i, bool required, glm::dvec3 fallback) {
     if (!fr.contains(key)) {
-      if (required)
-        throw InputError(path.string() + ": frame " + std::to_string(i) + " has no \"" + key + "\"");
+      if (required) throw InputError(path.string() + ": frame " + std::to_string(i) + " has no \"" + key + "\"");
       return fallback;
     }
     const auto& a = fr[key];
     if (!a.is_array() || a.size() != 3 || !a[0].is_number() || !a[1].is_number() || !a[2].is_number())
-      throw InputError(path.string() + ": frame " + std::to_string(i) + ": \"" + key +
-                       "\" must be [x, y, z]");
+      throw InputError(path.string() + ": frame " + std::to_string(i) + ": \"" + key + "\" must be [x, y, z]");
     glm::dvec3 v{a[0].get<double>(), a[1].get<double>(), a[2].get<double>()};
     if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
       throw InputError(path.string() + ": frame " + std::to_string(i) + ": non-finite \"" + key + "\"");

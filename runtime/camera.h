@@ -57,8 +57,8 @@ double pixelsPerRadian(const Camera& c, uint32_t viewportHeight);
 void fitClipPlanes(Camera& c, const glm::dvec3& lo, const glm::dvec3& hi);
 
 // N frames circling the box centre at distance = fraction * diagonal, elevation in degrees.
-std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames,
-                              double distanceFraction, double elevationDeg, double fovYDeg = 45.0);
+std::vector<Camera> orbitPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames, double distanceFraction,
+                              double elevationDeg, double fovYDeg = 45.0);
 
 // N frames flying down onto a terrain (z up): from the box's south-west, a diagonal above its top,
 // towards its centre, the height above the top falling geometrically to 1/500 of the diagonal,

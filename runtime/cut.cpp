@@ -110,8 +110,7 @@ uint32_t Cut::nodeCount() const {
   return count;
 }
 
-bool adjacentNode(const Hierarchy& h, const NodeId& n, uint32_t side, NodeId* adj,
-                  uint32_t* adjSide) {
+bool adjacentNode(const Hierarchy& h, const NodeId& n, uint32_t side, NodeId* adj, uint32_t* adjSide) {
   const int32_t last = (1 << n.level) - 1;
   int32_t x = int32_t(n.x), y = int32_t(n.y);
   switch (side) {
@@ -135,18 +134,29 @@ bool adjacentNode(const Hierarchy& h, const NodeId& n, uint32_t side, NodeId* ad
   const uint32_t a = (r.edge == kEdgeBottom || r.edge == kEdgeRight) ? ccw : count - 1 - ccw;
   NodeId o{uint32_t(r.chart), n.level, 0, 0};
   switch (r.edge) {
-    case kEdgeBottom: o.x = a; o.y = 0; break;
-    case kEdgeRight: o.x = count - 1; o.y = a; break;
-    case kEdgeTop: o.x = a; o.y = count - 1; break;
-    default: o.x = 0; o.y = a; break;
+    case kEdgeBottom:
+      o.x = a;
+      o.y = 0;
+      break;
+    case kEdgeRight:
+      o.x = count - 1;
+      o.y = a;
+      break;
+    case kEdgeTop:
+      o.x = a;
+      o.y = count - 1;
+      break;
+    default:
+      o.x = 0;
+      o.y = a;
+      break;
   }
   *adj = o;
   *adjSide = r.edge;
   return true;
 }
 
-uint32_t mapAlongSide(const Hierarchy& h, const NodeId& n, uint32_t side, uint32_t adjSide,
-                      uint32_t t, uint32_t size) {
+uint32_t mapAlongSide(const Hierarchy& h, const NodeId& n, uint32_t side, uint32_t adjSide, uint32_t t, uint32_t size) {
   uint32_t ccw = alongToCcw(adjSide, t, size);
   if (chartEdgeReversed(h, n, side, adjSide)) ccw = size - ccw;
   return alongToCcw(side, ccw, size);

@@ -11,7 +11,7 @@ namespace gimlod {
 
 struct CutNode {
   NodeId id;
-  uint32_t resLog2 = 0;      // drawn resolution, log2 intervals
+  uint32_t resLog2 = 0;  // drawn resolution, log2 intervals
   float errorPx = 0.f;   // projected error at `res` for the view it was adapted to
   // Attribute (normal, colour) texture resolution, log2 texels per side (assignAttributeResolutions);
   // 0 means unassigned: the page's own resolution.
@@ -88,11 +88,9 @@ void sideNeighbours(const Hierarchy& h, const Cut& cut, const NodeId& n, uint32_
 
 // The node of the same level adjacent across `side`, and the side of it that faces n; false at
 // an open border.
-bool adjacentNode(const Hierarchy& h, const NodeId& n, uint32_t side, NodeId* adj,
-                  uint32_t* adjSide);
+bool adjacentNode(const Hierarchy& h, const NodeId& n, uint32_t side, NodeId* adj, uint32_t* adjSide);
 
 // Maps an along-side coordinate of adj's side `adjSide` (in [0, size]) to n's side `side`.
-uint32_t mapAlongSide(const Hierarchy& h, const NodeId& n, uint32_t side, uint32_t adjSide,
-                      uint32_t t, uint32_t size);
+uint32_t mapAlongSide(const Hierarchy& h, const NodeId& n, uint32_t side, uint32_t adjSide, uint32_t t, uint32_t size);
 
 }  // namespace gimlod

@@ -43,8 +43,8 @@ CutMesh buildCutMesh(const Hierarchy& h, const Cut& cut, const std::vector<std::
     const CutNode& node = cut.nodes[n];
     const uint32_t side = (1u << node.resLog2) + 1;
     if (captured[n].size() != size_t(side) * side)
-      throw std::invalid_argument("buildCutMesh: node " + std::to_string(n) + " has " + std::to_string(captured[n].size()) +
-                                  " vertices, not " + std::to_string(side * side));
+      throw std::invalid_argument("buildCutMesh: node " + std::to_string(n) + " has " +
+                                  std::to_string(captured[n].size()) + " vertices, not " + std::to_string(side * side));
     const NodeId& id = node.id;
     const uint32_t cells = 1u << id.level;  // nodes per chart side at this level
     const std::array<RootNeighbour, 4>& roots = h.roots[id.chart];

@@ -26,10 +26,10 @@ struct CutMesh {
   std::vector<uint8_t> level, resLog2;
   std::vector<uint32_t> nodeX, nodeY;
   std::vector<std::array<uint32_t, 3>> triangles;
-  uint64_t boundaryEdges = 0;      // edges used by one triangle only
-  uint64_t openBorderEdges = 0;    // of those, along chart borders without a neighbour (or, for a
-                                   // height field, along the edge of the DEM's valid samples)
-  uint64_t otherBoundaryEdges = 0; // the rest: cracks, or the edge of the culled part of the view
+  uint64_t boundaryEdges = 0;       // edges used by one triangle only
+  uint64_t openBorderEdges = 0;     // of those, along chart borders without a neighbour (or, for a
+                                    // height field, along the edge of the DEM's valid samples)
+  uint64_t otherBoundaryEdges = 0;  // the rest: cracks, or the edge of the culled part of the view
 };
 
 // Builds the mesh of `cut` from captured[i], the (2^res + 1)^2 stitched positions of cut node i

@@ -5,8 +5,7 @@
 
 namespace gimlod {
 
-DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n,
-                      uint32_t layer) {
+DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n, uint32_t layer) {
   const ChartInfo& c = m.charts[n.id.chart];
   const uint32_t L = p.intervalsLog2;
   const int32_t M = int32_t(1u << L);

@@ -17,7 +17,7 @@ namespace gimlod {
 struct DrawNode {
   int32_t originX = 0, originY = 0;
   uint32_t sizeLog2 = 0;     // node side in level-0 intervals
-  uint32_t resLog2 = 0;          // drawn grid: 2^res intervals per side, (2^res + 1)^2 vertices
+  uint32_t resLog2 = 0;      // drawn grid: 2^res intervals per side, (2^res + 1)^2 vertices
   uint32_t pageResLog2 = 0;  // page data holds 2^pageResLog2 intervals per side (res <= this)
   uint32_t pageLayer = 0;    // page of the GPU page pool holding this node's data (the renderer's
                              // texture array pageLayer / L, layer pageLayer % L)
@@ -25,7 +25,7 @@ struct DrawNode {
   // attribute resolution when that is coarser (0: the page's full resolution).
   uint32_t texLod = 0;
   uint32_t texLodFrac = 0;  // CutNode::texBlend in 1/255 steps: the shader samples mip texLod + this
-  uint32_t morph = 0;  // CutNode::morph in 1/255 steps (0..255)
+  uint32_t morph = 0;       // CutNode::morph in 1/255 steps (0..255)
 };
 
 // Border stitching tables, as in paper section 7.4. For every node and each side
@@ -42,9 +42,7 @@ struct StitchTables {
   std::vector<uint8_t> bytes;   // nodes * 4 * entriesPerSide
   std::vector<uint8_t> morphs;  // as bytes, or empty
   uint8_t* side(size_t node, uint32_t s) { return bytes.data() + (node * 4 + s) * entriesPerSide; }
-  const uint8_t* side(size_t node, uint32_t s) const {
-    return bytes.data() + (node * 4 + s) * entriesPerSide;
-  }
+  const uint8_t* side(size_t node, uint32_t s) const { return bytes.data() + (node * 4 + s) * entriesPerSide; }
 };
 
 // A cut node's geomorph factor in 1/255 steps (DrawNode::morph): 0 at the coarsest resolution,
@@ -52,7 +50,6 @@ struct StitchTables {
 uint8_t morphByte(const CutNode& n, uint32_t minNodeResLog2);
 
 // The draw record of a cut node whose page is in `layer`.
-DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n,
-                      uint32_t layer);
+DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n, uint32_t layer);
 
 }  // namespace gimlod

@@ -8,17 +8,19 @@ namespace gimlod {
 
 FrameController::FrameController(const FrameControllerOptions& options, uint32_t startNodes, uint64_t startTriangles)
     : o_(options) {
-  if (!(o_.targetMs > 0.0) || !std::isfinite(o_.targetMs)) throw std::invalid_argument("FrameController: target must be > 0 ms");
+  if (!(o_.targetMs > 0.0) || !std::isfinite(o_.targetMs))
+    throw std::invalid_argument("FrameController: target must be > 0 ms");
   if (!(o_.gain > 0.0 && o_.gain <= 1.0) || !(o_.smoothing > 0.0 && o_.smoothing <= 1.0) ||
-      !(o_.nodeShare > 0.0 && o_.nodeShare < 1.0) || !(o_.deadBand >= 0.0 && o_.deadBand < 0.5) ||
-      o_.minNodes == 0 || o_.minNodes > o_.maxNodes || o_.minTriangles == 0 || o_.minTriangles > o_.maxTriangles)
+      !(o_.nodeShare > 0.0 && o_.nodeShare < 1.0) || !(o_.deadBand >= 0.0 && o_.deadBand < 0.5) || o_.minNodes == 0 ||
+      o_.minNodes > o_.maxNodes || o_.minTriangles == 0 || o_.minTriangles > o_.maxTriangles)
     throw std::invalid_argument("FrameController: options out of range");
   nodes_ = std::clamp(startNodes, o_.minNodes, o_.maxNodes);
   triangles_ = std::clamp(startTriangles, o_.minTriangles, o_.maxTriangles);
 }
 
 void FrameController::setTarget(double targetMs) {
-  if (!(targetMs > 0.0) || !std::isfinite(targetMs)) throw std::invalid_argument("FrameController: target must be > 0 ms");
+  if (!(targetMs > 0.0) || !std::isfinite(targetMs))
+    throw std::invalid_argument("FrameController: target must be > 0 ms");
   o_.targetMs = targetMs;
 }
 
@@ -65,10 +67,11 @@ void FrameController::update(const FrameSample& f) {
 
   // Part of the way there, in proportion (nodes) and in ratio (triangles).
   const double g = o_.gain;
-  nodes_ = uint32_t(std::clamp<long long>(std::llround(double(nodes_) + g * (wantNodes - double(nodes_))), o_.minNodes,
-                                          o_.maxNodes));
-  triangles_ = uint64_t(std::clamp<double>(std::round(double(triangles_) * std::pow(wantTriangles / double(triangles_), g)),
-                                           double(o_.minTriangles), double(o_.maxTriangles)));
+  nodes_ = uint32_t(
+      std::clamp<long long>(std::llround(double(nodes_) + g * (wantNodes - double(nodes_))), o_.minNodes, o_.maxNodes));
+  triangles_ =
+      uint64_t(std::clamp<double>(std::round(double(triangles_) * std::pow(wantTriangles / double(triangles_), g)),
+                                  double(o_.minTriangles), double(o_.maxTriangles)));
 }
 
 }  // namespace gimlod

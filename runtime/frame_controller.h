@@ -17,11 +17,11 @@
 namespace gimlod {
 
 struct FrameControllerOptions {
-  double targetMs = 16.7;         // the frame time to hold; > 0
-  double nodeShare = 0.25;        // at most this share of the adapt+draw time goes to nodes
-  double gain = 0.5;              // share of the way to the wanted budgets moved per frame, (0, 1]
-  double deadBand = 0.03;         // no change while the smoothed frame time is within this of the target
-  double smoothing = 0.3;         // weight of the newest frame in the smoothed unit costs, (0, 1]
+  double targetMs = 16.7;   // the frame time to hold; > 0
+  double nodeShare = 0.25;  // at most this share of the adapt+draw time goes to nodes
+  double gain = 0.5;        // share of the way to the wanted budgets moved per frame, (0, 1]
+  double deadBand = 0.03;   // no change while the smoothed frame time is within this of the target
+  double smoothing = 0.3;   // weight of the newest frame in the smoothed unit costs, (0, 1]
   uint32_t minNodes = 16, maxNodes = 1u << 20;
   uint64_t minTriangles = 1000, maxTriangles = uint64_t(1) << 32;
 };

@@ -10,14 +10,12 @@
 namespace gimlod {
 
 inline constexpr uint32_t kPrimitiveRestartIndex = 0xFFFFFFFFu;  // GL_PRIMITIVE_RESTART_FIXED_INDEX
-inline constexpr uint32_t kStripBandQuads = 16;  // about half a post-transform vertex cache
+inline constexpr uint32_t kStripBandQuads = 16;                  // about half a post-transform vertex cache
 
 using Triangle = std::array<uint32_t, 3>;
 
 // Vertex index of grid vertex (i, j) in a grid with n = 2^res intervals per side (row-major).
-inline uint32_t gridVertexIndex(uint32_t res, uint32_t i, uint32_t j) {
-  return j * ((1u << res) + 1u) + i;
-}
+inline uint32_t gridVertexIndex(uint32_t res, uint32_t i, uint32_t j) { return j * ((1u << res) + 1u) + i; }
 
 // Strip indices for the (2^res+1)^2 grid: bands of bandQuads columns, one strip per row of
 // quads in each band, strips separated by kPrimitiveRestartIndex. Every quad (i,j)-(i+1,j+1) is
@@ -26,8 +24,7 @@ std::vector<uint32_t> buildGridStripIndices(uint32_t res, uint32_t bandQuads = k
 
 // Expands restart-separated triangle strips into triangles with GL's strip winding rule (odd
 // triangles swap their first two vertices); drops degenerate triangles.
-std::vector<Triangle> expandStrips(std::span<const uint32_t> indices,
-                                   uint32_t restart = kPrimitiveRestartIndex);
+std::vector<Triangle> expandStrips(std::span<const uint32_t> indices, uint32_t restart = kPrimitiveRestartIndex);
 
 // The triangles the hierarchy's error metric assumes, counter-clockwise: per quad
 // {(i,j),(i+1,j),(i+1,j+1)} and {(i,j),(i+1,j+1),(i,j+1)}.

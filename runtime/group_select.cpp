@@ -79,7 +79,8 @@ void openGroupsTopDown(const Hierarchy& h, const AdaptView& view, uint32_t maxNo
   // Budget mode: errors at the resolution a node of the budgets gets, maxTriangles / maxCount
   // triangles, within the nodes' resolutions.
   uint32_t budgetRes = h.params.minNodeResLog2;
-  while (budgetRes < h.params.maxNodeResLog2 && maxCount > 0 && (2ull << (2 * (budgetRes + 1))) * maxCount <= maxTriangles)
+  while (budgetRes < h.params.maxNodeResLog2 && maxCount > 0 &&
+         (2ull << (2 * (budgetRes + 1))) * maxCount <= maxTriangles)
     ++budgetRes;
   std::priority_queue<Item> queue;
   uint64_t count = 0;
@@ -212,8 +213,7 @@ void selectRootGroups(const Hierarchy& h, const AdaptView& view, uint32_t maxNod
 }
 
 void markGroupedRoots(const GroupSelection& s, Cut& cut) {
-  for (CutNode& n : cut.nodes)
-    n.group = s.frozen(n.id.chart) && n.id.level == 0 ? s.closedOf[n.id.chart] : -1;
+  for (CutNode& n : cut.nodes) n.group = s.frozen(n.id.chart) && n.id.level == 0 ? s.closedOf[n.id.chart] : -1;
 }
 
 }  // namespace gimlod

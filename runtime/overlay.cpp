@@ -73,7 +73,8 @@ std::vector<NodeOverlay> nodeOverlays(const Hierarchy& h, const Cut& cut, Overla
                                       double errorScalePx) {
   std::vector<NodeOverlay> out;
   if (mode == OverlayMode::kNone) return out;
-  if (mode == OverlayMode::kCustom && !colour) throw std::invalid_argument("nodeOverlays: kCustom needs a colour per node");
+  if (mode == OverlayMode::kCustom && !colour)
+    throw std::invalid_argument("nodeOverlays: kCustom needs a colour per node");
   if (mode == OverlayMode::kError && !(errorScalePx > 0.0)) {
     errorScalePx = 0.0;
     for (const CutNode& n : cut.nodes) errorScalePx = std::max(errorScalePx, double(n.errorPx));

@@ -113,8 +113,8 @@ std::vector<LoadedPage> PageLoader::takeCompleted(const std::function<bool(uint6
   return out;
 }
 
-bool PageLoader::tryGetResident(const NodeId& n, std::vector<float>& samples,
-                                std::vector<PackedNormal>& normals, std::vector<PackedColour>* colours) {
+bool PageLoader::tryGetResident(const NodeId& n, std::vector<float>& samples, std::vector<PackedNormal>& normals,
+                                std::vector<PackedColour>* colours) {
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = ramIndex_.find(n.key());
   if (it == ramIndex_.end()) return false;

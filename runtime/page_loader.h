@@ -30,8 +30,8 @@ struct LoadedPage {
   std::vector<float> samples;
   std::vector<PackedNormal> normals;
   std::vector<PackedColour> colours;  // empty unless the atlas has colours
-  PageMips mips;  // made by PageLoaderOptions::prepare, if set
-  bool fromRam = false;  // served by the RAM cache, not the disk
+  PageMips mips;                      // made by PageLoaderOptions::prepare, if set
+  bool fromRam = false;               // served by the RAM cache, not the disk
   size_t bytes() const {
     return samples.size() * sizeof(float) + normals.size() * sizeof(PackedNormal) +
            colours.size() * sizeof(PackedColour) + mips.bytes();
@@ -113,8 +113,8 @@ class PageLoader {
   std::vector<LoadedPage> takeCompleted(const std::function<bool(uint64_t key)>& wanted, size_t maxPages,
                                         size_t maxBytes, const std::function<bool(uint64_t key)>& first = {});
   // Copies n's page from the RAM cache; false (outputs untouched) when it is not there.
-  bool tryGetResident(const NodeId& n, std::vector<float>& samples,
-                      std::vector<PackedNormal>& normals, std::vector<PackedColour>* colours = nullptr);
+  bool tryGetResident(const NodeId& n, std::vector<float>& samples, std::vector<PackedNormal>& normals,
+                      std::vector<PackedColour>* colours = nullptr);
 
   // Stops / restarts serving the queue (reads in progress finish). For tests and throttling.
   void pause();
@@ -132,15 +132,13 @@ class PageLoader {
     double priority;
     uint64_t seq;  // FIFO among equal priorities
     NodeId id;
-    bool operator<(const Queued& o) const {
-      return priority != o.priority ? priority > o.priority : seq < o.seq;
-    }
+    bool operator<(const Queued& o) const { return priority != o.priority ? priority > o.priority : seq < o.seq; }
   };
   void run(uint32_t thread);
   // Reads and decodes q's page (whose key is in reading_), unlocking `lock` meanwhile, and files
   // it as finished or failed.
   void readPage(const Queued& q, std::unique_lock<std::mutex>& lock);
-  bool canStart() const;  // mutex_ held
+  bool canStart() const;                        // mutex_ held
   size_t stagedBytesOf(const NodeId& n) const;  // a page's bytes once read and prepared
   size_t cacheBudget() const;
   void insertRam(LoadedPage&& page);  // a page as read (no mips)

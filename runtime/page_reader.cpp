@@ -64,8 +64,8 @@ PageReader::PageReader(const std::filesystem::path& atlasDir, const AtlasManifes
                        " samples and " + std::to_string(reader->levels()) + " levels, the manifest says " +
                        std::to_string(size) + " and " + std::to_string(manifest.pyramidLevels() - c.finestLevel));
     if (!reader->hasChannel(geometry_ ? kChannelPositions : kChannelHeights))
-      throw InputError((atlasDir / c.file).string() + ": has no " + (geometry_ ? "positions" : "heights") +
-                       " for a " + atlasKindName(manifest.kind) + " atlas");
+      throw InputError((atlasDir / c.file).string() + ": has no " + (geometry_ ? "positions" : "heights") + " for a " +
+                       atlasKindName(manifest.kind) + " atlas");
   }
   if (manifest.imagery.present) {
     // Terrain imagery: one attribute file per chart on the refined lattice.

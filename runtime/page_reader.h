@@ -44,8 +44,7 @@ size_t chartFilesKeptOpen();
 // of it. Thread-safe.
 class PageReader {
  public:
-  PageReader(const std::filesystem::path& atlasDir, const AtlasManifest& manifest,
-             const HierarchyParams& params);
+  PageReader(const std::filesystem::path& atlasDir, const AtlasManifest& manifest, const HierarchyParams& params);
   uint32_t pageResLog2(const NodeId& n) const { return params_.maxResLog2(n.level, finest_[n.chart]); }
   uint32_t pageSamples(const NodeId& n) const { return (1u << pageResLog2(n)) + 1; }
   // samples: (pageSamples)^2 heights, or 3 floats (x, y, z) per sample for a geometry atlas.

@@ -22,10 +22,22 @@ void sideVertices(const std::vector<glm::vec3>& v, uint32_t res, uint32_t s, std
   for (uint32_t k = 0; k <= n; ++k) {
     uint32_t i = 0, j = 0;
     switch (s) {
-      case kEdgeBottom: i = k; j = 0; break;
-      case kEdgeRight: i = n; j = k; break;
-      case kEdgeTop: i = k; j = n; break;
-      default: i = 0; j = k; break;
+      case kEdgeBottom:
+        i = k;
+        j = 0;
+        break;
+      case kEdgeRight:
+        i = n;
+        j = k;
+        break;
+      case kEdgeTop:
+        i = k;
+        j = n;
+        break;
+      default:
+        i = 0;
+        j = k;
+        break;
     }
     out.push_back(bitsOf(v[size_t(j) * w + i]));
   }
@@ -40,8 +52,8 @@ StitchTables buildStitchTables(const Hierarchy& h, const Cut& cut) {
   t.entriesPerSide = 1u << (h.params.depth - 1);
   t.bytes.assign(cut.nodes.size() * 4 * t.entriesPerSide, 0);
   const uint32_t minRes = h.params.minNodeResLog2;
-  const bool morphs = std::any_of(cut.nodes.begin(), cut.nodes.end(),
-                                  [&](const CutNode& n) { return morphByte(n, minRes) != 0; });
+  const bool morphs =
+      std::any_of(cut.nodes.begin(), cut.nodes.end(), [&](const CutNode& n) { return morphByte(n, minRes) != 0; });
   if (morphs) t.morphs.assign(t.bytes.size(), 0);
   std::vector<SideNeighbour> ns;
   for (size_t i = 0; i < cut.nodes.size(); ++i) {
@@ -63,7 +75,7 @@ StitchTables buildStitchTables(const Hierarchy& h, const Cut& cut) {
         // A coarser or alike neighbour: its factor. A finer one: a cap on the node's own, 0 where
         // the neighbour's side is no longer than the node's vertex spacing (its corners may then be
         // odd vertices of the node's lattice, and a node's corners never move), else none.
-        const uint8_t value = spacing >= ownSpacing ? morphByte(nb, minRes)
+        const uint8_t value = spacing >= ownSpacing           ? morphByte(nb, minRes)
                               : L - nb.id.level <= ownSpacing ? uint8_t(0)
                                                               : uint8_t(255);
         std::fill(m + e0, m + std::max(e0, e1), value);
@@ -73,8 +85,7 @@ StitchTables buildStitchTables(const Hierarchy& h, const Cut& cut) {
   return t;
 }
 
-CrackReport countCracks(const Hierarchy& h, const Cut& cut,
-                        const std::vector<std::vector<glm::vec3>>& vertices) {
+CrackReport countCracks(const Hierarchy& h, const Cut& cut, const std::vector<std::vector<glm::vec3>>& vertices) {
   CrackReport r;
   std::vector<SideNeighbour> ns;
   std::vector<Bits> mine, theirs;
@@ -96,8 +107,8 @@ CrackReport countCracks(const Hierarchy& h, const Cut& cut,
       const uint32_t step = 1u << (h.params.intervalsLog2 - cut.nodes[i].id.level - res);
       for (uint32_t k = 0; k < mine.size(); ++k) {
         const uint32_t t = k * step;
-        const bool shared = std::any_of(ns.begin(), ns.end(),
-                                        [&](const SideNeighbour& n) { return t >= n.t0 && t <= n.t1; });
+        const bool shared =
+            std::any_of(ns.begin(), ns.end(), [&](const SideNeighbour& n) { return t >= n.t0 && t <= n.t1; });
         if (!shared) continue;
         ++r.borderVertices;
         if (!std::binary_search(theirs.begin(), theirs.end(), mine[k])) ++r.mismatches;

@@ -27,7 +27,6 @@ struct CrackReport {
 // vertices[i] holds cut node i's stitched positions, index j * (2^res + 1) + i, as captured by
 // transform feedback. Every border vertex must coincide bit for bit with a vertex on the facing
 // side of a neighbour across that side.
-CrackReport countCracks(const Hierarchy& h, const Cut& cut,
-                        const std::vector<std::vector<glm::vec3>>& vertices);
+CrackReport countCracks(const Hierarchy& h, const Cut& cut, const std::vector<std::vector<glm::vec3>>& vertices);
 
 }  // namespace gimlod

@@ -114,10 +114,12 @@ struct NamedAdapter {
 };
 
 inline Outcome outcomeOf(Cut cut, const AdaptStats& st) {
-  return {std::move(cut), st.rootFloor, st.budgetBelowRoots, st.constraintSplits, st.nodes, st.closedGroups, st.groupedRoots};
+  return {std::move(cut), st.rootFloor,    st.budgetBelowRoots, st.constraintSplits,
+          st.nodes,       st.closedGroups, st.groupedRoots};
 }
 inline Outcome outcomeOf(Cut cut, const BudgetStats& st) {
-  return {std::move(cut), st.rootFloor, st.budgetBelowRoots, st.constraintSplits, st.nodes, st.closedGroups, st.groupedRoots};
+  return {std::move(cut), st.rootFloor,    st.budgetBelowRoots, st.constraintSplits,
+          st.nodes,       st.closedGroups, st.groupedRoots};
 }
 
 // Every adapter, in error-threshold mode at tolerancePx and in triangle-budget mode at
@@ -141,32 +143,40 @@ inline std::vector<NamedAdapter> allAdapters(const Hierarchy& h, double toleranc
   };
   const Hierarchy* hp = &h;
   return {
-      {"dual queue", [=](const ViewParams& v, uint32_t n) {
+      {"dual queue",
+       [=](const ViewParams& v, uint32_t n) {
          AdaptStats st;
          Cut cut = dq->update(v, adaptOpts(n), &st);
          return outcomeOf(std::move(cut), st);
-       }, true},
-      {"top-down greedy", [=](const ViewParams& v, uint32_t n) {
+       },
+       true},
+      {"top-down greedy",
+       [=](const ViewParams& v, uint32_t n) {
          AdaptStats st;
          Cut cut = adaptTopDownGreedy(*hp, v, tolerancePx, n, &st, cull);
          return outcomeOf(std::move(cut), st);
        }},
-      {"fixed granularity", [=](const ViewParams& v, uint32_t n) {
+      {"fixed granularity",
+       [=](const ViewParams& v, uint32_t n) {
          AdaptStats st;
          Cut cut = adaptFixedGranularity(*hp, v, tolerancePx, n, &st, cull);
          return outcomeOf(std::move(cut), st);
        }},
-      {"quad queue", [=](const ViewParams& v, uint32_t n) {
+      {"quad queue",
+       [=](const ViewParams& v, uint32_t n) {
          BudgetStats st;
          Cut cut = qq->update(v, budgetOpts(n), &st);
          return outcomeOf(std::move(cut), st);
-       }, true},
-      {"fixed granularity (triangle budget)", [=](const ViewParams& v, uint32_t n) {
+       },
+       true},
+      {"fixed granularity (triangle budget)",
+       [=](const ViewParams& v, uint32_t n) {
          BudgetStats st;
          Cut cut = adaptFixedGranularityBudget(*hp, v, budgetOpts(n), &st);
          return outcomeOf(std::move(cut), st);
        }},
-      {"greedy (triangle budget)", [=](const ViewParams& v, uint32_t n) {
+      {"greedy (triangle budget)",
+       [=](const ViewParams& v, uint32_t n) {
          BudgetStats st;
          Cut cut = adaptGreedyBudget(*hp, v, budgetOpts(n), &st);
          return outcomeOf(std::move(cut), st);

@@ -42,7 +42,8 @@ inline uint32_t cornerSample(uint32_t n, uint32_t corner) { return edgeSample(n,
 
 // Samples off their chart's border whose position is bit-identical to another sample's; `where`
 // gets the first few groups as chart (u, v).
-inline uint64_t coincidentInteriorSamples(const std::vector<std::vector<glm::vec3>>& pos, uint32_t n, std::string* where) {
+inline uint64_t coincidentInteriorSamples(const std::vector<std::vector<glm::vec3>>& pos, uint32_t n,
+                                          std::string* where) {
   struct Ref {
     std::array<uint32_t, 3> key;
     uint32_t chart, index;
@@ -80,7 +81,6 @@ inline uint64_t coincidentInteriorSamples(const std::vector<std::vector<glm::vec
   }
   return count;
 }
-
 
 // Seams and corners, read back from the chart files the manifest lists.
 inline void checkSeams(const std::filesystem::path& dir) {
@@ -126,8 +126,7 @@ inline void checkSeams(const std::filesystem::path& dir) {
   std::string hist;
   for (const auto& [n, count] : valenceHistogram) hist += " " + std::to_string(count) + "x" + std::to_string(n);
   std::cout << "  " << charts << " charts, " << sharedEdges / 2 << " shared edges, " << openEdges << " open, "
-            << orientations.size() << " (edge, neighbour edge) pairs; corners (groups x charts):" << hist
-            << "\n";
+            << orientations.size() << " (edge, neighbour edge) pairs; corners (groups x charts):" << hist << "\n";
   std::string pairs;
   uint64_t rotated = 0;  // pairs other than bottom-top / left-right, as a terrain grid would join
   for (const auto& [e, f] : orientations) {

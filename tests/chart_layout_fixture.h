@@ -38,8 +38,7 @@ inline void linkSides(PatchLayout& layout) {
 
 // Adds a patch covering grid cells [x0, x1) x [y0, y1) of a grid whose vertex (x, y) has id
 // y * (nx + 1) + x; 4 sides: bottom, right, top, left.
-inline void addGridPatch(PatchLayout& layout, uint32_t nx, uint32_t x0, uint32_t x1, uint32_t y0,
-                         uint32_t y1) {
+inline void addGridPatch(PatchLayout& layout, uint32_t nx, uint32_t x0, uint32_t x1, uint32_t y0, uint32_t y1) {
   auto id = [&](uint32_t x, uint32_t y) { return y * (nx + 1) + x; };
   Patch patch;
   for (uint32_t y = y0; y < y1; ++y) {
@@ -105,10 +104,9 @@ inline PatchLayout cubeLayout(uint32_t m, bool sphere = false) {
   };
   const int mm = int(m);
   // Origin, U, V with U x V the outward normal.
-  const glm::ivec3 faces[6][3] = {
-      {{0, 0, mm}, {1, 0, 0}, {0, 1, 0}}, {{0, 0, 0}, {0, 1, 0}, {1, 0, 0}},
-      {{mm, 0, 0}, {0, 1, 0}, {0, 0, 1}}, {{0, 0, 0}, {0, 0, 1}, {0, 1, 0}},
-      {{0, mm, 0}, {0, 0, 1}, {1, 0, 0}}, {{0, 0, 0}, {1, 0, 0}, {0, 0, 1}}};
+  const glm::ivec3 faces[6][3] = {{{0, 0, mm}, {1, 0, 0}, {0, 1, 0}}, {{0, 0, 0}, {0, 1, 0}, {1, 0, 0}},
+                                  {{mm, 0, 0}, {0, 1, 0}, {0, 0, 1}}, {{0, 0, 0}, {0, 0, 1}, {0, 1, 0}},
+                                  {{0, mm, 0}, {0, 0, 1}, {1, 0, 0}}, {{0, 0, 0}, {1, 0, 0}, {0, 0, 1}}};
   for (const auto& f : faces) {
     auto id = [&](int a, int b) { return vertex(f[0] + a * f[1] + b * f[2]); };
     Patch patch;
@@ -136,8 +134,7 @@ inline PatchLayout cubeLayout(uint32_t m, bool sphere = false) {
 // boundary is split into n sides. With hemisphere, the disk is mapped onto the upper unit
 // hemisphere (radius r -> polar angle r * pi / 2); otherwise it is the flat unit disk at z = 0.
 // With colours, every vertex gets a colour from its position.
-inline PatchLayout diskLayout(uint32_t n, uint32_t rings, uint32_t segments, bool hemisphere,
-                              bool colours = false) {
+inline PatchLayout diskLayout(uint32_t n, uint32_t rings, uint32_t segments, bool hemisphere, bool colours = false) {
   PatchLayout layout;
   auto place = [&](double r, double theta) {
     glm::dvec3 p;
@@ -149,8 +146,8 @@ inline PatchLayout diskLayout(uint32_t n, uint32_t rings, uint32_t segments, boo
     }
     layout.positions.emplace_back(p);
     if (colours) {
-      layout.colours.emplace_back(uint8_t(127.5 + 127.5 * p.x), uint8_t(127.5 + 127.5 * p.y),
-                                  uint8_t(255 * p.z), uint8_t(255));
+      layout.colours.emplace_back(uint8_t(127.5 + 127.5 * p.x), uint8_t(127.5 + 127.5 * p.y), uint8_t(255 * p.z),
+                                  uint8_t(255));
     }
   };
   place(0.0, 0.0);

@@ -29,9 +29,8 @@ inline DemWorld loadDemWorld(const std::filesystem::path& file, uint32_t chartSi
   TerrainAtlasOptions topt;
   topt.chartSize = chartSize;
   fillTerrainManifest(w.dem, topt, w.m);
-  w.h = buildTerrainHierarchy(w.m, [&](uint32_t c) {
-    return extractChart(w.dem, w.m.charts[c].gridX, w.m.charts[c].gridY, chartSize);
-  });
+  w.h = buildTerrainHierarchy(
+      w.m, [&](uint32_t c) { return extractChart(w.dem, w.m.charts[c].gridX, w.m.charts[c].gridY, chartSize); });
   w.lo = {0, 0, w.dem.minHeight};
   w.hi = {(w.dem.width - 1) * w.dem.spacing[0], (w.dem.height - 1) * w.dem.spacing[1], w.dem.maxHeight};
   return w;

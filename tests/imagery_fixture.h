@@ -39,8 +39,8 @@ inline void writeTestRaster(const std::filesystem::path& path, int width, int he
   for (int b = 0; b < bands; ++b) {
     for (int y = 0; y < height; ++y)
       for (int x = 0; x < width; ++x) plane[size_t(y) * width + x] = colour(x, y)[size_t(std::min(b, 2))];
-    if (ds->GetRasterBand(b + 1)->RasterIO(GF_Write, 0, 0, width, height, plane.data(), width, height, GDT_UInt16,
-                                           0, 0) != CE_None)
+    if (ds->GetRasterBand(b + 1)->RasterIO(GF_Write, 0, 0, width, height, plane.data(), width, height, GDT_UInt16, 0,
+                                           0) != CE_None)
       throw std::runtime_error("writeTestRaster: cannot write " + path.string());
   }
   GDALClose(ds);
@@ -76,7 +76,7 @@ inline void writeUtmImagery(const std::filesystem::path& path, const std::vector
 
 // Three points on the shipped Rainier tile (N46W122) and their colours.
 inline std::vector<GeoPoint> rainierPoints() {
-  return {{-121.7603, 46.8529, {230, 30, 30}},   // the summit
+  return {{-121.7603, 46.8529, {230, 30, 30}},  // the summit
           {-121.45, 46.30, {30, 200, 40}},
           {-121.90, 46.62, {40, 60, 230}}};
 }

@@ -93,8 +93,7 @@ inline std::filesystem::path cachedScanAtlasPath(const std::string& name, bool w
   }
   char hex[17];
   std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(stamp));
-  return testCache() / ("scans-" + std::string(hex)) /
-         (name + (withFidelity ? "_fidelity" : "") + ".atlas");
+  return testCache() / ("scans-" + std::string(hex)) / (name + (withFidelity ? "_fidelity" : "") + ".atlas");
 }
 
 // The atlas of scan `name` at the default mesh options, built once for the test executables: the
@@ -152,7 +151,7 @@ inline const BuiltScanAtlas& scanAtlas(const std::string& name, bool withFidelit
   } lock{::open((dir.string() + ".lock").c_str(), O_CREAT | O_RDWR, 0644)};
   if (lock.fd >= 0) ::flock(lock.fd, LOCK_EX);
   if (const BuiltScanAtlas* b = cached(dir, withFidelity)) return *b;  // built while waiting
-  MeshBuildOptions o;  // the defaults of `gimlod build` for meshes
+  MeshBuildOptions o;                                                  // the defaults of `gimlod build` for meshes
   o.input = sharedScanPath(name);
   o.output = dir;
   o.measureFidelity = withFidelity;

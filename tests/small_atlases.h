@@ -26,8 +26,8 @@ inline void buildSmallScanAtlas(const std::filesystem::path& output, bool fideli
 
 // The shipped Rainier tile (1201^2 samples) in chartSize^2-sample charts, `depth` levels of
 // minNodeRes..nodeRes intervals.
-inline void buildRainierAtlas(const std::filesystem::path& output, uint32_t chartSize, uint32_t depth,
-                              uint32_t nodeRes, uint32_t minNodeRes) {
+inline void buildRainierAtlas(const std::filesystem::path& output, uint32_t chartSize, uint32_t depth, uint32_t nodeRes,
+                              uint32_t minNodeRes) {
   TerrainBuildOptions o;
   o.input = repoData() / "terrain/mt_rainier_90m.tif";
   o.output = output;

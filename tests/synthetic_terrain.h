@@ -13,8 +13,8 @@
 namespace gimlod::test {
 
 // A chartsX x chartsY grid of charts of `chartSize` samples, spacing 1.
-inline AtlasManifest syntheticManifest(uint32_t chartSize, uint32_t chartsX, uint32_t chartsY,
-                                       uint32_t depth, uint32_t maxResLog2, uint32_t minRes) {
+inline AtlasManifest syntheticManifest(uint32_t chartSize, uint32_t chartsX, uint32_t chartsY, uint32_t depth,
+                                       uint32_t maxResLog2, uint32_t minRes) {
   AtlasManifest m;
   m.chartSize = chartSize;
   m.blockIntervals = 1u << maxResLog2;

@@ -57,8 +57,8 @@ std::filesystem::path appPath() {
 
 TempDir::TempDir(const std::string& tag) {
   std::random_device rd;
-  path_ = std::filesystem::temp_directory_path() /
-          (tag + "-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
+  path_ =
+      std::filesystem::temp_directory_path() / (tag + "-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
   std::filesystem::create_directories(path_);
 }
 
@@ -80,14 +80,14 @@ bool waitForFiles(const std::filesystem::path& dir, const std::function<bool()>&
     throw std::runtime_error("inotify_add_watch " + dir.string() + ": " + std::strerror(errno));
   // Checked after the watch is in place, so a write between the check and the wait is seen.
   while (!ready()) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     if (left.count() <= 0) return false;
     pollfd p{fd, POLLIN, 0};
     if (::poll(&p, 1, int(left.count())) < 0 && errno != EINTR)
       throw std::runtime_error("poll: " + std::string(std::strerror(errno)));
     alignas(inotify_event) char events[4096];
-    while (::read(fd, events, sizeof events) > 0) {
-    }
+    while (::read(fd, events, sizeof events) > 0) {}
   }
   return true;
 }
@@ -137,7 +137,8 @@ void expectSameFiles(const std::filesystem::path& a, const std::filesystem::path
   const std::vector<std::string> files = filesUnder(a, except);
   EXPECT_EQ(files, filesUnder(b, except)) << a << " against " << b;
   EXPECT_FALSE(files.empty()) << a;
-  for (const std::string& f : files) EXPECT_TRUE(fileBytes(a / f) == fileBytes(b / f)) << f << " differs: " << a << " against " << b;
+  for (const std::string& f : files)
+    EXPECT_TRUE(fileBytes(a / f) == fileBytes(b / f)) << f << " differs: " << a << " against " << b;
 }
 
 }  // namespace gimlod::test

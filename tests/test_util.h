@@ -13,12 +13,12 @@
 #include <tbb/global_control.h>
 
 // Skips the current test (fails it where sharedDataRequired()) unless `present` holds.
-#define GIMLOD_NEED_SHARED_DATA(present)                                                         \
-  do {                                                                                           \
-    if (!(present)) {                                                                            \
-      if (::gimlod::test::sharedDataRequired()) FAIL() << "missing shared data: " #present;      \
-      GTEST_SKIP() << "no ../shared/data (" #present ")";                                        \
-    }                                                                                            \
+#define GIMLOD_NEED_SHARED_DATA(present)                                                    \
+  do {                                                                                      \
+    if (!(present)) {                                                                       \
+      if (::gimlod::test::sharedDataRequired()) FAIL() << "missing shared data: " #present; \
+      GTEST_SKIP() << "no ../shared/data (" #present ")";                                   \
+    }                                                                                       \
   } while (0)
 
 namespace gimlod::test {
@@ -61,6 +61,7 @@ class TempDir {
   const std::filesystem::path& path() const { return path_; }
   // Writes `bytes` to the file `name` in it; returns the file's path.
   std::filesystem::path write(const std::string& name, const std::string& bytes) const;
+
  private:
   std::filesystem::path path_;
 };

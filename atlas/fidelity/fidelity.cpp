@@ -53,7 +53,8 @@ struct FloatBox {
 // closest point over the runs is the closest over the triangles either way: the answer is the same.
 constexpr size_t kRun = 4;
 
-struct GroupDatumMap {  // CGAL's primitive wants a datum: the run's first triangle (the search below reads the whole run)
+struct GroupDatumMap {  // CGAL's primitive wants a datum: the run's first triangle (the search below reads the whole
+                        // run)
   using key_type = uint32_t;
   using value_type = Triangle;
   using reference = Triangle;
@@ -70,7 +71,8 @@ struct GroupCentreMap {  // where the build sorts a run: its box's centre
   const FloatBox* b = nullptr;
   friend Point get(const GroupCentreMap& m, uint32_t g) {
     const FloatBox& b = m.b[g];
-    return Point(0.5 * (double(b.lo[0]) + b.hi[0]), 0.5 * (double(b.lo[1]) + b.hi[1]), 0.5 * (double(b.lo[2]) + b.hi[2]));
+    return Point(0.5 * (double(b.lo[0]) + b.hi[0]), 0.5 * (double(b.lo[1]) + b.hi[1]),
+                 0.5 * (double(b.lo[2]) + b.hi[2]));
   }
 };
 struct GroupBoxMap {
@@ -109,8 +111,10 @@ std::vector<FloatTriangle> nonDegenerate(const std::vector<glm::vec3>& p, const 
     if (first == keep.end()) return {};
     const FloatTriangle* last = &out[size_t(first - keep.begin())];
     for (size_t i = 0; i < t.size(); ++i) {
-      if (keep[i]) last = &out[i];
-      else out[i] = *last;
+      if (keep[i])
+        last = &out[i];
+      else
+        out[i] = *last;
     }
     return out;
   }
@@ -160,7 +164,8 @@ class Forest {
     FloatBox b;
     for (int c = 0; c < 3; ++c) b.lo[c] = std::numeric_limits<float>::infinity(), b.hi[c] = -b.lo[c];
     for (size_t i = g * run; i < std::min(n_, (g + 1) * run); ++i)
-      for (int k = 0; k < 9; ++k) b.lo[k % 3] = std::min(b.lo[k % 3], tris_[i].v[k]), b.hi[k % 3] = std::max(b.hi[k % 3], tris_[i].v[k]);
+      for (int k = 0; k < 9; ++k)
+        b.lo[k % 3] = std::min(b.lo[k % 3], tris_[i].v[k]), b.hi[k % 3] = std::max(b.hi[k % 3], tris_[i].v[k]);
     return b;
   }
   double boxDiagonalSum(size_t run) const {
@@ -169,7 +174,8 @@ class Forest {
         [&](const tbb::blocked_range<size_t>& r, double sum) {
           for (size_t g = r.begin(); g != r.end(); ++g) {
             const FloatBox b = box(g, run);
-            sum += std::sqrt(double(b.hi[0] - b.lo[0]) * (b.hi[0] - b.lo[0]) + double(b.hi[1] - b.lo[1]) * (b.hi[1] - b.lo[1]) +
+            sum += std::sqrt(double(b.hi[0] - b.lo[0]) * (b.hi[0] - b.lo[0]) +
+                             double(b.hi[1] - b.lo[1]) * (b.hi[1] - b.lo[1]) +
                              double(b.hi[2] - b.lo[2]) * (b.hi[2] - b.lo[2]));
           }
           return sum;
@@ -189,7 +195,8 @@ class Forest {
     float lo[3], hi[3];
     for (int c = 0; c < 3; ++c) lo[c] = hi[c] = centre(ids[b], c);
     for (size_t i = b; i < e; ++i)
-      for (int c = 0; c < 3; ++c) lo[c] = std::min(lo[c], centre(ids[i], c)), hi[c] = std::max(hi[c], centre(ids[i], c));
+      for (int c = 0; c < 3; ++c)
+        lo[c] = std::min(lo[c], centre(ids[i], c)), hi[c] = std::max(hi[c], centre(ids[i], c));
     int axis = 0;
     for (int c = 1; c < 3; ++c)
       if (hi[c] - lo[c] > hi[axis] - lo[axis]) axis = c;
@@ -381,27 +388,28 @@ FidelityStats measureFidelity(const std::vector<glm::vec3>& meshPositions,
   // builds on one thread, so this keeps both cores busy).
   std::unique_ptr<Forest> atlasForest;
   Acc a;
-  tbb::parallel_invoke([&] { atlasForest = std::make_unique<Forest>(atlas); },
-                       [&] {
-                         const Forest meshForest(mesh);
-                         a = distances(
-                             meshForest, atlasPositions.size(),
-                             [&](size_t i) {
-                               return Point(atlasPositions[i].x, atlasPositions[i].y, atlasPositions[i].z);
-                             },
-                             std::numeric_limits<double>::infinity(), detail ? detail->atlasDistances.data() : nullptr);
-                       });
+  tbb::parallel_invoke(
+      [&] { atlasForest = std::make_unique<Forest>(atlas); },
+      [&] {
+        const Forest meshForest(mesh);
+        a = distances(
+            meshForest, atlasPositions.size(),
+            [&](size_t i) { return Point(atlasPositions[i].x, atlasPositions[i].y, atlasPositions[i].z); },
+            std::numeric_limits<double>::infinity(), detail ? detail->atlasDistances.data() : nullptr);
+      });
   st.atlasSamples = atlasPositions.size();
   if (detail) {
     detail->meshSamples.resize(meshSamples.size());
     for (size_t i = 0; i < meshSamples.size(); ++i)
-      detail->meshSamples[i] = glm::vec3(float(meshSamples[i].x()), float(meshSamples[i].y()), float(meshSamples[i].z()));
+      detail->meshSamples[i] =
+          glm::vec3(float(meshSamples[i].x()), float(meshSamples[i].y()), float(meshSamples[i].z()));
     detail->meshDistances.assign(meshSamples.size(), 0.f);
     detail->meshClosest.assign(meshSamples.size(), glm::vec3(0.f));
   }
-  const Acc b = distances(*atlasForest, meshSamples.size(), [&](size_t i) { return meshSamples[i]; },
-                          std::numeric_limits<double>::infinity(), detail ? detail->meshDistances.data() : nullptr,
-                          detail ? detail->meshClosest.data() : nullptr);
+  const Acc b = distances(
+      *atlasForest, meshSamples.size(), [&](size_t i) { return meshSamples[i]; },
+      std::numeric_limits<double>::infinity(), detail ? detail->meshDistances.data() : nullptr,
+      detail ? detail->meshClosest.data() : nullptr);
   st.meshSamples = meshSamples.size();
 
   setFigures(st, a.max, a.sum, b.max, b.sum, t0);
@@ -459,7 +467,8 @@ void dropRepeats(std::vector<Point>& p) {
   std::vector<uint32_t> order(p.size());
   for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
   auto key = [&](uint32_t i) { return std::array<double, 3>{p[i].x(), p[i].y(), p[i].z()}; };
-  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key(a) < key(b) || (key(a) == key(b) && a < b); });
+  std::sort(order.begin(), order.end(),
+            [&](uint32_t a, uint32_t b) { return key(a) < key(b) || (key(a) == key(b) && a < b); });
   std::vector<uint8_t> keep(p.size(), 1);
   for (size_t i = 1; i < order.size(); ++i)
     if (key(order[i]) == key(order[i - 1])) keep[order[i]] = 0;
@@ -805,7 +814,8 @@ FidelityStats measureFidelityOutOfCore(const std::filesystem::path& gridDir, con
                                        const OutOfCoreFidelityOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   if (!(options.marginFraction > 0.0 && options.marginFraction < 1.0) || options.memoryBytes < (16u << 20))
-    throw std::invalid_argument("measureFidelityOutOfCore: the margin must be in (0, 1) and the memory at least 16 MiB");
+    throw std::invalid_argument(
+        "measureFidelityOutOfCore: the margin must be in (0, 1) and the memory at least 16 MiB");
   const GridManifest gm = readGridManifest(gridDir);
   const AtlasManifest am = readManifest(atlasDir);
   if (am.kind != AtlasKind::Geometry)
@@ -896,8 +906,7 @@ bool sampleKept(uint32_t c, size_t i, uint64_t keep) {
 
 void atomicMin(std::atomic<double>& a, double v) {
   double cur = a.load(std::memory_order_relaxed);
-  while (v < cur && !a.compare_exchange_weak(cur, v, std::memory_order_relaxed)) {
-  }
+  while (v < cur && !a.compare_exchange_weak(cur, v, std::memory_order_relaxed)) {}
 }
 
 }  // namespace
@@ -907,7 +916,8 @@ FidelityStats measureFidelityByCharts(const std::vector<glm::vec3>& meshPosition
                                       const std::filesystem::path& atlasDir, const ChartFidelityOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   if (!(options.marginFraction > 0.0 && options.marginFraction < 1.0) || options.atlasSamples == 0)
-    throw std::invalid_argument("measureFidelityByCharts: the margin must be in (0, 1) and some atlas samples measured");
+    throw std::invalid_argument(
+        "measureFidelityByCharts: the margin must be in (0, 1) and some atlas samples measured");
   const AtlasManifest am = readManifest(atlasDir);
   if (am.kind != AtlasKind::Geometry)
     throw InputError((atlasDir / kManifestName).string() + ": a " + atlasKindName(am.kind) +

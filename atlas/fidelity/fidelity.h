@@ -13,25 +13,25 @@
 namespace gimlod {
 
 struct FidelityStats {
-  double diagonal = 0.0;            // of the input mesh's bounding box
-  double maxAtlasToMesh = 0.0;      // over every atlas vertex: distance to the input surface
+  double diagonal = 0.0;        // of the input mesh's bounding box
+  double maxAtlasToMesh = 0.0;  // over every atlas vertex: distance to the input surface
   double meanAtlasToMesh = 0.0;
-  double maxMeshToAtlas = 0.0;      // over every input vertex and triangle centroid: to the atlas
+  double maxMeshToAtlas = 0.0;  // over every input vertex and triangle centroid: to the atlas
   double meanMeshToAtlas = 0.0;
-  double hausdorff = 0.0;           // max of the two maxima
-  double hausdorffPercent = 0.0;    // hausdorff / diagonal * 100
-  double meanPercent = 0.0;         // mean of the two means / diagonal * 100
+  double hausdorff = 0.0;         // max of the two maxima
+  double hausdorffPercent = 0.0;  // hausdorff / diagonal * 100
+  double meanPercent = 0.0;       // mean of the two means / diagonal * 100
   uint64_t atlasSamples = 0, meshSamples = 0;
   double seconds = 0.0;
   // Out of core (measureFidelityOutOfCore) only:
-  uint32_t blocks = 0;              // blocks of grid cells measured one at a time
-  uint64_t samplesBeyondMargin = 0; // samples whose closest point lay beyond their block's margin
-                                    // (found by a second pass over the whole other surface)
-  bool exact = true;                // false: some samples beyond the margin were not resolved
-                                    // (too many to hold); they count at the margin, so the
-                                    // maximum is a lower bound
+  uint32_t blocks = 0;               // blocks of grid cells measured one at a time
+  uint64_t samplesBeyondMargin = 0;  // samples whose closest point lay beyond their block's margin
+                                     // (found by a second pass over the whole other surface)
+  bool exact = true;                 // false: some samples beyond the margin were not resolved
+                                     // (too many to hold); they count at the margin, so the
+                                     // maximum is a lower bound
   // Chart by chart (measureFidelityByCharts) only:
-  uint64_t atlasSamplesTotal = 0;   // the atlas's samples, of which atlasSamples were measured
+  uint64_t atlasSamplesTotal = 0;  // the atlas's samples, of which atlasSamples were measured
   // With a subset measured: with 99% confidence, at most this fraction of the atlas samples lie
   // farther from the input than maxAtlasToMesh (ln(100) / atlasSamples); 0 when all were.
   double atlasFractionAbove = 0.0;
@@ -39,11 +39,11 @@ struct FidelityStats {
 
 // Where the distances lie, sample by sample (for inspection).
 struct FidelityDetail {
-  std::vector<float> atlasDistances;  // per atlas position: to the input surface
-  std::vector<glm::vec3> meshSamples; // the input's samples: its used vertices, then its triangles'
-                                      // centroids (non-degenerate ones, in order)
-  std::vector<float> meshDistances;   // per input sample: to the atlas surface
-  std::vector<glm::vec3> meshClosest; // per input sample: the closest point of the atlas surface
+  std::vector<float> atlasDistances;   // per atlas position: to the input surface
+  std::vector<glm::vec3> meshSamples;  // the input's samples: its used vertices, then its triangles'
+                                       // centroids (non-degenerate ones, in order)
+  std::vector<float> meshDistances;    // per input sample: to the atlas surface
+  std::vector<glm::vec3> meshClosest;  // per input sample: the closest point of the atlas surface
 };
 
 // Both surfaces as positions + triangles. The atlas side is sampled at its vertices (the chart

@@ -22,7 +22,6 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
-
 #include "atlas/mesh/charting_internal.h"
 #include "atlas/mesh/gridify.h"
 #include "core/stage_meter.h"
@@ -58,8 +57,7 @@ double minEigenvalue(const double c[6]) {
   if (p <= 0) return q;
   const double b00 = (a00 - q) / p, b11 = (a11 - q) / p, b22 = (a22 - q) / p;
   const double b01 = a01 / p, b02 = a02 / p, b12 = a12 / p;
-  const double det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) +
-                     b02 * (b01 * b12 - b11 * b02);
+  const double det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02);
   const double r = std::clamp(det / 2.0, -1.0, 1.0);
   const double phi = std::acos(r) / 3.0;
   return q + 2.0 * p * std::cos(phi + 2.0 * kPi / 3.0);
@@ -72,8 +70,7 @@ namespace charting {
 Moments triangleMoments(const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
   Moments r;
   const glm::dvec3 e1 = b - a, e2 = c - a;
-  const glm::dvec3 cr{e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z,
-                      e1.x * e2.y - e1.y * e2.x};
+  const glm::dvec3 cr{e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x};
   const double A = 0.5 * std::sqrt(cr.x * cr.x + cr.y * cr.y + cr.z * cr.z);
   const glm::dvec3 g = (a + b + c) / 3.0;
   r.area = A;
@@ -215,8 +212,7 @@ class Clusterer {
       }
     }
     if (F == 0 || start == kNone) return false;
-    if (static_cast<int64_t>(V) - static_cast<int64_t>(E2 / 2) + static_cast<int64_t>(F) != 1)
-      return false;
+    if (static_cast<int64_t>(V) - static_cast<int64_t>(E2 / 2) + static_cast<int64_t>(F) != 1) return false;
     // Connected: flood over interior edges (marks in a bit per face, cleared afterwards).
     if (faceSeen_.size() != (s_.tris.size() + 63) / 64) faceSeen_.assign((s_.tris.size() + 63) / 64, 0);
     auto seen = [&](uint32_t f) { return (faceSeen_[f >> 6] >> (f & 63)) & 1; };
@@ -276,8 +272,8 @@ class Clusterer {
   uint32_t alive() const { return alive_; }
   uint32_t refused() const { return refused_; }
   size_t bytes() const {
-    return mom_.size() * (sizeof(Moments) + 8 + 4 + 4 + 4 + 4 + sizeof(std::vector<Adj>)) +
-           nextFace_.size() * 8 + heapPeak_ * sizeof(Cand) + vstamp_.size() * 4;
+    return mom_.size() * (sizeof(Moments) + 8 + 4 + 4 + 4 + 4 + sizeof(std::vector<Adj>)) + nextFace_.size() * 8 +
+           heapPeak_ * sizeof(Cand) + vstamp_.size() * 4;
   }
 
  private:
@@ -296,12 +292,8 @@ class Clusterer {
     const auto& t = s_.tris[f];
     return triangleMoments(npos(t[0]), npos(t[1]), npos(t[2]));
   }
-  double edgeLength(uint32_t h) const {
-    return glm::length(npos(s_.origin(h)) - npos(s_.dest(h)));
-  }
-  glm::dvec3 npos(uint32_t v) const {
-    return (glm::dvec3(s_.positions[v]) - fr_.centre) / fr_.diag;
-  }
+  double edgeLength(uint32_t h) const { return glm::length(npos(s_.origin(h)) - npos(s_.dest(h))); }
+  glm::dvec3 npos(uint32_t v) const { return (glm::dvec3(s_.positions[v]) - fr_.centre) / fr_.diag; }
 
   void push(uint32_t a, const Adj& e) {
     const uint32_t b = e.other;
@@ -443,8 +435,7 @@ class Clusterer {
 
 void checkOptions(const ChartingOptions& o) {
   const char* fn = "charting options";
-  if (o.minSides < 3)
-    throw InputError(std::string(fn) + ": minSides must be at least 3");
+  if (o.minSides < 3) throw InputError(std::string(fn) + ": minSides must be at least 3");
   if (o.maxSides < std::max(4u, 2 * o.minSides - 3))
     throw InputError(std::string(fn) + ": maxSides must be at least max(4, 2 * minSides - 3)");
   if (o.targetPatches == 0 && !(o.maxError > 0 && std::isfinite(o.maxError)))
@@ -467,9 +458,8 @@ Frame frameOf(const std::vector<glm::vec3>& p) {
 // Faces of a block of a Surface as a Surface of its own (edges to other blocks open; vertex
 // identity kept, so a closed disk there is a closed disk in the whole surface).
 // faceLocal: each face's index in its block.
-Surface subSurface(const Surface& s, const std::vector<uint32_t>& faces,
-                   const std::vector<uint32_t>& faceBlock, const std::vector<uint32_t>& faceLocal,
-                   uint32_t block) {
+Surface subSurface(const Surface& s, const std::vector<uint32_t>& faces, const std::vector<uint32_t>& faceBlock,
+                   const std::vector<uint32_t>& faceLocal, uint32_t block) {
   Surface r;
   std::vector<uint32_t> verts;
   verts.reserve(faces.size() * 3);
@@ -506,9 +496,7 @@ Surface subSurface(const Surface& s, const std::vector<uint32_t>& faces,
 
 // Per-cell clusters of about `clusterTris` triangles (error mode: within maxRms too).
 double cellClusterTriangles(const ChartingOptions& o, uint64_t triangles) {
-  return o.targetPatches > 0
-             ? std::clamp(double(triangles) / (4.0 * o.targetPatches), 1.0, 4096.0)
-             : 1024.0;
+  return o.targetPatches > 0 ? std::clamp(double(triangles) / (4.0 * o.targetPatches), 1.0, 4096.0) : 1024.0;
 }
 
 unsigned threadCount(const ChartingOptions& o) {
@@ -521,8 +509,8 @@ constexpr uint64_t kBlockedAbove = 32768;
 constexpr uint32_t kBlockTriangles = 8192;
 
 // Initial labels for the global merge: each block of the surface clustered on its own.
-std::vector<uint32_t> blockLabels(const Surface& s, const Frame& fr, const ChartingOptions& o,
-                                  ChartingStats& st, size_t& peakBytes) {
+std::vector<uint32_t> blockLabels(const Surface& s, const Frame& fr, const ChartingOptions& o, ChartingStats& st,
+                                  size_t& peakBytes) {
   const uint32_t nf = static_cast<uint32_t>(s.tris.size());
   MeshBounds bounds;
   for (const glm::vec3& p : s.positions) bounds.extend(p);
@@ -547,16 +535,14 @@ std::vector<uint32_t> blockLabels(const Surface& s, const Frame& fr, const Chart
     blocks[it->second].push_back(f);
   }
   const double clusterTris = cellClusterTriangles(o, nf);
-  const double maxRms =
-      o.targetPatches > 0 ? std::numeric_limits<double>::infinity() : o.maxError;
+  const double maxRms = o.targetPatches > 0 ? std::numeric_limits<double>::infinity() : o.maxError;
   std::vector<std::vector<uint32_t>> local(blocks.size());
   std::vector<uint32_t> clusters(blocks.size(), 0);
   std::vector<size_t> bytes(blocks.size(), 0);
   tbb::task_arena arena(static_cast<int>(std::max(1u, threadCount(o))));
   arena.execute([&] {
     tbb::parallel_for(size_t{0}, blocks.size(), [&](size_t b) {
-      const Surface sub =
-          subSurface(s, blocks[b], faceBlock, faceLocal, static_cast<uint32_t>(b));
+      const Surface sub = subSurface(s, blocks[b], faceBlock, faceLocal, static_cast<uint32_t>(b));
       std::vector<uint32_t> labels(sub.tris.size());
       std::iota(labels.begin(), labels.end(), 0u);
       Clusterer cl(sub, fr, std::move(labels));
@@ -581,8 +567,7 @@ std::vector<uint32_t> blockLabels(const Surface& s, const Frame& fr, const Chart
 
 }  // namespace
 
-PatchLayout buildPatchLayout(const IndexedMesh& mesh, const ChartingOptions& options,
-                             ChartingStats* statsOut) {
+PatchLayout buildPatchLayout(const IndexedMesh& mesh, const ChartingOptions& options, ChartingStats* statsOut) {
   const auto t0 = Clock::now();
   checkOptions(options);
   ChartingStats st;
@@ -600,8 +585,7 @@ PatchLayout buildPatchLayout(const IndexedMesh& mesh, const ChartingOptions& opt
     st.cellSeconds = since(t1);
   }
   std::optional<Clusterer> cl(std::in_place, s, fr, std::move(labels));
-  cl->run(options.targetPatches,
-          options.targetPatches > 0 ? std::numeric_limits<double>::infinity() : options.maxError,
+  cl->run(options.targetPatches, options.targetPatches > 0 ? std::numeric_limits<double>::infinity() : options.maxError,
           options.compactnessWeight, options.metric);
   st.clusterSeconds = since(t1);
   st.chartsBeforeFixing = cl->alive();
@@ -617,8 +601,8 @@ PatchLayout buildPatchLayout(const IndexedMesh& mesh, const ChartingOptions& opt
   return out;
 }
 
-PatchLayout buildPatchLayoutFromCells(const std::filesystem::path& gridDir,
-                                      const ChartingOptions& options, ChartingStats* statsOut) {
+PatchLayout buildPatchLayoutFromCells(const std::filesystem::path& gridDir, const ChartingOptions& options,
+                                      ChartingStats* statsOut) {
   const auto t0 = Clock::now();
   checkOptions(options);
   releaseFreedMemory();  // whatever the caller freed before (gridify's cell buffers)
@@ -636,11 +620,8 @@ PatchLayout buildPatchLayoutFromCells(const std::filesystem::path& gridDir,
   const uint64_t total = std::max<uint64_t>(manifest.triangles, 1);
   // Cell clusters of about a quarter of the final chart size (error mode: 1024 triangles).
   const double clusterTris =
-      options.targetPatches > 0
-          ? std::clamp(double(total) / (4.0 * options.targetPatches), 1.0, 4096.0)
-          : 1024.0;
-  const double maxRms =
-      options.targetPatches > 0 ? std::numeric_limits<double>::infinity() : options.maxError;
+      options.targetPatches > 0 ? std::clamp(double(total) / (4.0 * options.targetPatches), 1.0, 4096.0) : 1024.0;
+  const double maxRms = options.targetPatches > 0 ? std::numeric_limits<double>::infinity() : options.maxError;
 
   // Each cell hands on its welded vertices and kept triangles (an indexed mesh: about a sixth
   // of the bytes of the 3 corners per triangle of the cell file), with a cluster per triangle.
@@ -648,7 +629,7 @@ PatchLayout buildPatchLayoutFromCells(const std::filesystem::path& gridDir,
     std::vector<glm::vec3> pos;  // the cell's welded (and fan-split) vertices
     std::vector<glm::u8vec4> col;
     std::vector<std::array<uint32_t, 3>> tris;  // kept triangles, in cell-file order
-    std::vector<uint32_t> label;  // cell-local cluster per kept triangle
+    std::vector<uint32_t> label;                // cell-local cluster per kept triangle
     uint32_t clusters = 0;
     ChartingStats st;
     size_t bytes = 0;
@@ -656,15 +637,13 @@ PatchLayout buildPatchLayoutFromCells(const std::filesystem::path& gridDir,
   std::vector<CellResult> cells(manifest.cells.size());
   const auto tCells = Clock::now();
   const unsigned threads =
-      options.threads ? options.threads
-                      : static_cast<unsigned>(tbb::this_task_arena::max_concurrency());
+      options.threads ? options.threads : static_cast<unsigned>(tbb::this_task_arena::max_concurrency());
   tbb::task_arena arena(static_cast<int>(std::max(1u, threads)));
   // Largest cells first, one task each, so that no large cell is left to run alone at the end.
   std::vector<uint32_t> order(manifest.cells.size());
   std::iota(order.begin(), order.end(), 0u);
-  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-    return manifest.cells[a].triangles > manifest.cells[b].triangles;
-  });
+  std::stable_sort(order.begin(), order.end(),
+                   [&](uint32_t a, uint32_t b) { return manifest.cells[a].triangles > manifest.cells[b].triangles; });
   auto clusterCell = [&](size_t ci) {
     CellResult& r = cells[ci];
     Surface s;

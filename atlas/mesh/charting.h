@@ -57,33 +57,33 @@ struct ChartingOptions {
 
 struct ChartingStats {
   uint64_t inputTriangles = 0;
-  uint64_t outputTriangles = 0;        // inputTriangles - droppedDegenerate - droppedDuplicate
-  uint64_t inputVertices = 0;          // positions referenced by the input triangles
-  uint64_t outputVertices = 0;         // PatchLayout::positions
-  uint64_t verticesWelded = 0;         // referenced positions merged into an equal earlier one
-  uint64_t droppedDegenerate = 0;      // triangles with a repeated vertex after welding
-  uint64_t droppedDuplicate = 0;       // triangles repeating another's 3 vertices after welding
-  uint64_t nonManifoldEdges = 0;       // edges with > 2 triangles or inconsistent orientation
-  uint64_t nonManifoldVertices = 0;    // vertices whose triangles form more than one fan
-  uint64_t verticesSplit = 0;          // vertex copies made by the repair (bow-ties, fins)
-  uint64_t boundaryEdges = 0;          // open edges after repair
+  uint64_t outputTriangles = 0;      // inputTriangles - droppedDegenerate - droppedDuplicate
+  uint64_t inputVertices = 0;        // positions referenced by the input triangles
+  uint64_t outputVertices = 0;       // PatchLayout::positions
+  uint64_t verticesWelded = 0;       // referenced positions merged into an equal earlier one
+  uint64_t droppedDegenerate = 0;    // triangles with a repeated vertex after welding
+  uint64_t droppedDuplicate = 0;     // triangles repeating another's 3 vertices after welding
+  uint64_t nonManifoldEdges = 0;     // edges with > 2 triangles or inconsistent orientation
+  uint64_t nonManifoldVertices = 0;  // vertices whose triangles form more than one fan
+  uint64_t verticesSplit = 0;        // vertex copies made by the repair (bow-ties, fins)
+  uint64_t boundaryEdges = 0;        // open edges after repair
   uint32_t charts = 0;
-  uint32_t chartsBeforeFixing = 0;     // clusters when the greedy merging stopped
-  uint32_t mergesRefusedNotDisk = 0;   // merge candidates refused by the disk check
-  uint32_t cornersInserted = 0;        // extra corners for patches with < minSides sides
-  uint32_t patchesSplit = 0;           // splits of patches with > maxSides sides
-  uint32_t patchesUnfixed = 0;         // patches no split could fix (then the layout is invalid:
-                                       // validatePatchLayout names them); 0 on all test meshes
+  uint32_t chartsBeforeFixing = 0;       // clusters when the greedy merging stopped
+  uint32_t mergesRefusedNotDisk = 0;     // merge candidates refused by the disk check
+  uint32_t cornersInserted = 0;          // extra corners for patches with < minSides sides
+  uint32_t patchesSplit = 0;             // splits of patches with > maxSides sides
+  uint32_t patchesUnfixed = 0;           // patches no split could fix (then the layout is invalid:
+                                         // validatePatchLayout names them); 0 on all test meshes
   std::vector<uint32_t> sidesHistogram;  // [n] = patches with n sides
-  double maxPlanarityError = 0.0;      // max over charts of the RMS plane distance / diagonal
-  double meanPlanarityError = 0.0;     // area-weighted mean of the same
-  double weldSeconds = 0.0;            // weld, repair, adjacency
-  double clusterSeconds = 0.0;         // greedy merging (cells and global)
-  double cellSeconds = 0.0;            // of which the per-cell / per-block phase (read, weld and
-                                       // clustering of each cell, in parallel)
-  double sidesSeconds = 0.0;           // corners, side fixing, layout output
-  double seconds = 0.0;                // total
-  uint64_t peakBytesEstimate = 0;      // largest sum of the big arrays held at once
+  double maxPlanarityError = 0.0;        // max over charts of the RMS plane distance / diagonal
+  double meanPlanarityError = 0.0;       // area-weighted mean of the same
+  double weldSeconds = 0.0;              // weld, repair, adjacency
+  double clusterSeconds = 0.0;           // greedy merging (cells and global)
+  double cellSeconds = 0.0;              // of which the per-cell / per-block phase (read, weld and
+                                         // clustering of each cell, in parallel)
+  double sidesSeconds = 0.0;             // corners, side fixing, layout output
+  double seconds = 0.0;                  // total
+  uint64_t peakBytesEstimate = 0;        // largest sum of the big arrays held at once
   // Cells of buildPatchLayoutFromCells, or spatial blocks of buildPatchLayout (large meshes).
   uint32_t cells = 0;
   uint32_t cellClusters = 0;           // clusters handed from the cells / blocks to the global stage
@@ -124,8 +124,7 @@ PatchLayout buildPatchLayout(const IndexedMesh& mesh, const ChartingOptions& opt
 // about 2.3 times the returned layout (positions, triangles, half-edge twins, labels): 932 MiB
 // for an 18.7M-triangle sphere. Throws InputError as readGridManifest / readCell, and as
 // buildPatchLayout.
-PatchLayout buildPatchLayoutFromCells(const std::filesystem::path& gridDir,
-                                      const ChartingOptions& options = {},
+PatchLayout buildPatchLayoutFromCells(const std::filesystem::path& gridDir, const ChartingOptions& options = {},
                                       ChartingStats* stats = nullptr);
 
 }  // namespace gimlod

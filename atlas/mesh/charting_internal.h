@@ -21,16 +21,14 @@ namespace gimlod::charting {
 using Clock = std::chrono::steady_clock;
 inline constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
 
-inline double since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+inline double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 inline uint32_t nextHe(uint32_t h) { return h - h % 3 + (h % 3 + 1) % 3; }
 
 // The boundary half-edge of cluster c (faces labelled c) that follows boundary half-edge h: turn
 // around h's head through c's faces until a half-edge whose twin is missing or outside c.
-inline uint32_t nextBoundaryHe(const std::vector<uint32_t>& twin, const std::vector<uint32_t>& label,
-                               uint32_t h, uint32_t c) {
+inline uint32_t nextBoundaryHe(const std::vector<uint32_t>& twin, const std::vector<uint32_t>& label, uint32_t h,
+                               uint32_t c) {
   uint32_t n = nextHe(h);
   while (true) {
     const uint32_t t = twin[n];
@@ -88,7 +86,7 @@ struct Surface {
   std::vector<glm::vec3> positions;
   std::vector<glm::u8vec4> colours;
   std::vector<std::array<uint32_t, 3>> tris;
-  std::vector<uint32_t> twin;     // per half-edge 3f+i (v[i] -> v[i+1]); kNone: open
+  std::vector<uint32_t> twin;  // per half-edge 3f+i (v[i] -> v[i+1]); kNone: open
   // Faces round a vertex: either vfStart / vfFaces (CSR, ascending faces; a block's sub-surface,
   // where a vertex may have several fans), or vHe (every vertex one fan, as weldAndRepair
   // leaves it): an outgoing half-edge, the open one if the fan is open, kNone if no face.
@@ -123,8 +121,8 @@ struct Surface {
     std::sort(out.begin(), out.end());
   }
   size_t bytes() const {
-    return positions.size() * 12 + colours.size() * 4 + tris.size() * 12 + twin.size() * 4 +
-           vHe.size() * 4 + vfStart.size() * 4 + vfFaces.size() * 4;
+    return positions.size() * 12 + colours.size() * 4 + tris.size() * 12 + twin.size() * 4 + vHe.size() * 4 +
+           vfStart.size() * 4 + vfFaces.size() * 4;
   }
 };
 // Step 1 of the repair, streamed: welds exactly equal positions as triangles are added, so that
@@ -190,7 +188,7 @@ struct Frame {
 // Fixes the sides of the clusters given by labels (a cluster per face) and returns the layout,
 // with its statistics in st. Consumes the surface: its positions, colours and triangles move into
 // the layout. clusterBytes: the clusterer's memory, for the peak estimate.
-PatchLayout layoutFromLabels(Surface& s, std::vector<uint32_t> labels, const Frame& fr,
-                             const ChartingOptions& o, ChartingStats& st, size_t clusterBytes);
+PatchLayout layoutFromLabels(Surface& s, std::vector<uint32_t> labels, const Frame& fr, const ChartingOptions& o,
+                             ChartingStats& st, size_t clusterBytes);
 
 }  // namespace gimlod::charting

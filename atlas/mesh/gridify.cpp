@@ -41,9 +41,7 @@ constexpr uint64_t kMinBufferBytes = uint64_t{64} << 10;
 constexpr uint32_t kMaxCellsPerAxis = 1024;
 constexpr const char* kGridFormatTag = "gimlod-grid";
 
-[[noreturn]] void fail(const fs::path& file, const std::string& what) {
-  throw InputError(file.string() + ": " + what);
-}
+[[noreturn]] void fail(const fs::path& file, const std::string& what) { throw InputError(file.string() + ": " + what); }
 
 std::string cellFileName(uint32_t id) {
   char buf[32];
@@ -71,8 +69,7 @@ void validate(const GridifyOptions& o) {
   if (o.maxMemoryBytes < kMinMemoryBytes)
     bad("maxMemoryBytes " + std::to_string(o.maxMemoryBytes) + " is below the minimum of 64 MiB");
   if (o.targetTrianglesPerCell == 0) bad("targetTrianglesPerCell must be at least 1");
-  if (!(o.bufferFraction > 0.0 && o.bufferFraction <= 0.5))
-    bad("bufferFraction must be in (0, 0.5]");
+  if (!(o.bufferFraction > 0.0 && o.bufferFraction <= 0.5)) bad("bufferFraction must be in (0, 0.5]");
   if (static_cast<double>(o.maxMemoryBytes) * o.bufferFraction < double(kMinBufferBytes))
     bad("bufferFraction * maxMemoryBytes is below 64 KiB");
   if (o.read.chunkTriangles == 0) bad("read.chunkTriangles must be at least 1");
@@ -83,8 +80,7 @@ void validate(const GridifyOptions& o) {
 // Buckets triangles into per-cell buffers and appends them to cell files under a byte budget.
 class GridWriter : public TriangleSink {
  public:
-  GridWriter(const fs::path& dir, const GridifyOptions& o, const MeshInfo* probed,
-             GridifyResult& result)
+  GridWriter(const fs::path& dir, const GridifyOptions& o, const MeshInfo* probed, GridifyResult& result)
       : dir_(dir), o_(o), probed_(probed), r_(result) {
     budget_ = static_cast<uint64_t>(static_cast<double>(o.maxMemoryBytes) * o.bufferFraction);
     r_.bufferBudgetBytes = budget_;
@@ -95,10 +91,9 @@ class GridWriter : public TriangleSink {
     GridManifest& m = r_.manifest;
     m.hasColours = info.hasColours || (probed_ && probed_->hasColours);
     m.recordBytes = m.hasColours ? 48 : 36;
-    const uint64_t maxCells = std::min<uint64_t>(
-        1u << 20, o_.maxMemoryBytes / 16 / sizeof(Cell));
-    m.dims = chooseGridDims(src.bounds, std::max<uint64_t>(src.triangleEstimate, 1),
-                            o_.targetTrianglesPerCell, maxCells);
+    const uint64_t maxCells = std::min<uint64_t>(1u << 20, o_.maxMemoryBytes / 16 / sizeof(Cell));
+    m.dims =
+        chooseGridDims(src.bounds, std::max<uint64_t>(src.triangleEstimate, 1), o_.targetTrianglesPerCell, maxCells);
     for (int a = 0; a < 3; ++a) {
       const double lo = src.bounds.empty() ? 0.0 : double(src.bounds.min[a]);
       const double hi = src.bounds.empty() ? 1.0 : double(src.bounds.max[a]);
@@ -175,8 +170,7 @@ class GridWriter : public TriangleSink {
   void grow(uint32_t id, size_t rec) {
     Cell& c = cells_[id];
     const uint64_t minCap = rec * 64;
-    uint64_t newCap =
-        std::max<uint64_t>(minCap, std::min<uint64_t>(2 * c.buf.capacity(), budget_ / 4));
+    uint64_t newCap = std::max<uint64_t>(minCap, std::min<uint64_t>(2 * c.buf.capacity(), budget_ / 4));
     if (newCap <= c.buf.capacity()) {
       flushCell(id);  // already at its largest share: write it out and start again
       newCap = minCap;
@@ -184,8 +178,10 @@ class GridWriter : public TriangleSink {
     uint64_t growth = newCap - c.buf.capacity();
     if (allocated_ + growth > budget_) {
       makeRoom(growth);
-      if (c.buf.capacity() == 0) growth = newCap = minCap;  // it was flushed too
-      else growth = newCap - c.buf.capacity();
+      if (c.buf.capacity() == 0)
+        growth = newCap = minCap;  // it was flushed too
+      else
+        growth = newCap - c.buf.capacity();
     }
     const uint64_t before = c.buf.capacity();
     c.buf.reserve(static_cast<size_t>(newCap));
@@ -200,9 +196,8 @@ class GridWriter : public TriangleSink {
     std::sort(active_.begin(), active_.end());
     active_.erase(std::unique(active_.begin(), active_.end()), active_.end());
     std::erase_if(active_, [&](uint32_t id) { return cells_[id].buf.capacity() == 0; });
-    std::sort(active_.begin(), active_.end(), [&](uint32_t a, uint32_t b) {
-      return cells_[a].buf.capacity() > cells_[b].buf.capacity();
-    });
+    std::sort(active_.begin(), active_.end(),
+              [&](uint32_t a, uint32_t b) { return cells_[a].buf.capacity() > cells_[b].buf.capacity(); });
     size_t k = 0;
     while (k < active_.size() && allocated_ + growth > budget_ / 2) flushCell(active_[k++]);
     active_.erase(active_.begin(), active_.begin() + static_cast<ptrdiff_t>(k));
@@ -246,8 +241,7 @@ nlohmann::ordered_json manifestJson(const GridManifest& m, const GridifyResult& 
   using ojson = nlohmann::ordered_json;
   ojson cells = ojson::array();
   for (const GridCell& c : m.cells)
-    cells.push_back({{"id", c.id}, {"coord", c.coord}, {"triangles", c.triangles},
-                     {"file", c.file}});
+    cells.push_back({{"id", c.id}, {"coord", c.coord}, {"triangles", c.triangles}, {"file", c.file}});
   ojson j;
   j["format"] = kGridFormatTag;
   j["version"] = m.version;
@@ -300,8 +294,8 @@ std::array<std::array<double, 3>, 2> GridManifest::cellBox(const std::array<uint
   return b;
 }
 
-std::array<uint32_t, 3> chooseGridDims(const MeshBounds& bounds, uint64_t triangles,
-                                       uint32_t targetPerCell, uint64_t maxCells) {
+std::array<uint32_t, 3> chooseGridDims(const MeshBounds& bounds, uint64_t triangles, uint32_t targetPerCell,
+                                       uint64_t maxCells) {
   std::array<uint32_t, 3> dims{1, 1, 1};
   if (bounds.empty() || targetPerCell == 0 || maxCells == 0) return dims;
   const double k = std::ceil(double(triangles) / targetPerCell);
@@ -327,8 +321,7 @@ std::array<uint32_t, 3> chooseGridDims(const MeshBounds& bounds, uint64_t triang
 
 namespace {
 
-GridifyResult gridifyStaged(const fs::path& mesh, const fs::path& outDir,
-                            const GridifyOptions& options) {
+GridifyResult gridifyStaged(const fs::path& mesh, const fs::path& outDir, const GridifyOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   validate(options);
   GridifyResult result;
@@ -350,9 +343,8 @@ GridifyResult gridifyStaged(const fs::path& mesh, const fs::path& outDir,
   const MeshReadStats& rs = result.read;
   if (rs.trianglesOut == 0)
     fail(mesh, "no valid triangles (" + std::to_string(rs.trianglesRead) + " read: " +
-                   std::to_string(rs.droppedNonFinite) + " non-finite, " +
-                   std::to_string(rs.droppedDegenerate) + " degenerate, " +
-                   std::to_string(rs.droppedDuplicate) + " duplicate)");
+                   std::to_string(rs.droppedNonFinite) + " non-finite, " + std::to_string(rs.droppedDegenerate) +
+                   " degenerate, " + std::to_string(rs.droppedDuplicate) + " duplicate)");
   writer.finish();
 
   GridManifest& m = result.manifest;
@@ -362,9 +354,8 @@ GridifyResult gridifyStaged(const fs::path& mesh, const fs::path& outDir,
   m.droppedDegenerate = rs.droppedDegenerate;
   m.droppedDuplicate = rs.droppedDuplicate;
   m.duplicateCheckComplete = rs.duplicateCheckComplete;
-  result.peakTrackedBytes = rs.vertexArrayBytes + rs.duplicateSetBytes +
-                            result.peakBufferedBytes + writer.cellTableBytes() +
-                            uint64_t{ro.chunkTriangles} * sizeof(MeshTriangle);
+  result.peakTrackedBytes = rs.vertexArrayBytes + rs.duplicateSetBytes + result.peakBufferedBytes +
+                            writer.cellTableBytes() + uint64_t{ro.chunkTriangles} * sizeof(MeshTriangle);
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const std::string text = manifestJson(m, result).dump(1) + "\n";
   atomicWriteFile(stage.path() / kGridManifestName, text.data(), text.size());
@@ -390,8 +381,7 @@ GridManifest readGridManifest(const fs::path& dir) {
   try {
     const nlohmann::json j = nlohmann::json::parse(in);
     if (!j.is_object() || j.value("format", "") != kGridFormatTag)
-      fail(file, std::string("not a gimlod grid manifest (\"format\" must be \"") +
-                     kGridFormatTag + "\")");
+      fail(file, std::string("not a gimlod grid manifest (\"format\" must be \"") + kGridFormatTag + "\")");
     m.version = j.at("version").get<uint32_t>();
     if (m.version < 1 || m.version > kGridFormatVersion)
       fail(file, "unsupported grid format version " + std::to_string(m.version));
@@ -434,21 +424,19 @@ GridManifest readGridManifest(const fs::path& dir) {
     cells *= m.dims[a];
   }
   for (const GridCell& c : m.cells) {
-    if (c.id >= cells || m.cellId(c.coord) != c.id || c.coord[0] >= m.dims[0] ||
-        c.coord[1] >= m.dims[1] || c.coord[2] >= m.dims[2])
+    if (c.id >= cells || m.cellId(c.coord) != c.id || c.coord[0] >= m.dims[0] || c.coord[1] >= m.dims[1] ||
+        c.coord[2] >= m.dims[2])
       fail(file, "cell " + std::to_string(c.id) + " is outside the grid or has a wrong coord");
     if (c.file != cellFileName(c.id))
       fail(file, "cell " + std::to_string(c.id) + " has an unexpected file name '" + c.file + "'");
     sum += c.triangles;
   }
   if (sum != m.triangles)
-    fail(file, "cell triangle counts add up to " + std::to_string(sum) + ", not " +
-                   std::to_string(m.triangles));
+    fail(file, "cell triangle counts add up to " + std::to_string(sum) + ", not " + std::to_string(m.triangles));
   return m;
 }
 
-std::vector<MeshTriangle> readCell(const fs::path& dir, const GridManifest& m,
-                                   const GridCell& cell) {
+std::vector<MeshTriangle> readCell(const fs::path& dir, const GridManifest& m, const GridCell& cell) {
   const fs::path file = dir / cell.file;
   std::ifstream in(file, std::ios::binary);
   if (!in) fail(file, "cannot open cell file");
@@ -456,14 +444,13 @@ std::vector<MeshTriangle> readCell(const fs::path& dir, const GridManifest& m,
   const uint64_t size = fs::file_size(file, ec);
   const uint64_t want = kCellHeaderBytes + cell.triangles * m.recordBytes;
   if (ec || size != want)
-    fail(file, "cell file has " + std::to_string(size) + " bytes; " +
-                   std::to_string(cell.triangles) + " triangles need " + std::to_string(want));
+    fail(file, "cell file has " + std::to_string(size) + " bytes; " + std::to_string(cell.triangles) +
+                   " triangles need " + std::to_string(want));
   uint8_t header[kCellHeaderBytes];
   in.read(reinterpret_cast<char*>(header), sizeof header);
   uint32_t words[3];
   std::memcpy(words, header + 4, sizeof words);
-  if (!in || std::memcmp(header, kCellMagic, 4) != 0 || words[0] != kGridFormatVersion ||
-      words[1] != m.recordBytes)
+  if (!in || std::memcmp(header, kCellMagic, 4) != 0 || words[0] != kGridFormatVersion || words[1] != m.recordBytes)
     fail(file, "bad cell file header");
   std::vector<uint8_t> bytes(static_cast<size_t>(cell.triangles * m.recordBytes));
   in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
@@ -474,8 +461,10 @@ std::vector<MeshTriangle> readCell(const fs::path& dir, const GridManifest& m,
     const uint8_t* p = bytes.data() + i * m.recordBytes;
     MeshTriangle& t = tris[i];
     std::memcpy(t.p.data(), p, 36);
-    if (m.hasColours) std::memcpy(t.c.data(), p + 36, 12);
-    else t.c = {white, white, white};
+    if (m.hasColours)
+      std::memcpy(t.c.data(), p + 36, 12);
+    else
+      t.c = {white, white, white};
     t.v = {kNoVertex, kNoVertex, kNoVertex};
   }
   return tris;

@@ -31,10 +31,10 @@ struct GridifyOptions {
 
 // One non-empty cell.
 struct GridCell {
-  uint32_t id = 0;                      // x + dims[0] * (y + dims[1] * z)
-  std::array<uint32_t, 3> coord{};      // (x, y, z)
+  uint32_t id = 0;                  // x + dims[0] * (y + dims[1] * z)
+  std::array<uint32_t, 3> coord{};  // (x, y, z)
   uint64_t triangles = 0;
-  std::string file;                     // relative to the grid directory
+  std::string file;  // relative to the grid directory
 };
 
 // The grid directory's manifest (grid.json). Cell (x, y, z) covers
@@ -42,24 +42,22 @@ struct GridCell {
 // centroid (see cellOf).
 struct GridManifest {
   uint32_t version = kGridFormatVersion;
-  std::string source;                   // the mesh file
+  std::string source;  // the mesh file
   std::array<double, 3> origin{};
   std::array<double, 3> cellSize{1.0, 1.0, 1.0};
   std::array<uint32_t, 3> dims{1, 1, 1};
-  bool hasColours = false;              // records carry per-vertex colours
-  uint32_t recordBytes = 36;            // 9 float32 positions (+ 3 RGBA8 colours: 48)
+  bool hasColours = false;    // records carry per-vertex colours
+  uint32_t recordBytes = 36;  // 9 float32 positions (+ 3 RGBA8 colours: 48)
   uint64_t triangles = 0;
-  MeshBounds bounds;                    // of the triangles
-  std::vector<GridCell> cells;          // the non-empty cells, by id
+  MeshBounds bounds;            // of the triangles
+  std::vector<GridCell> cells;  // the non-empty cells, by id
   // Repairs made by the reader, for the pipeline's report.
   uint64_t trianglesRead = 0, droppedNonFinite = 0, droppedDegenerate = 0, droppedDuplicate = 0;
   bool duplicateCheckComplete = true;
 
   // The cell holding the triangle's centroid (computed in double, clamped into the grid).
   std::array<uint32_t, 3> cellOf(const MeshTriangle& t) const;
-  uint32_t cellId(const std::array<uint32_t, 3>& c) const {
-    return c[0] + dims[0] * (c[1] + dims[1] * c[2]);
-  }
+  uint32_t cellId(const std::array<uint32_t, 3>& c) const { return c[0] + dims[0] * (c[1] + dims[1] * c[2]); }
   // The box of a cell: {min, max}.
   std::array<std::array<double, 3>, 2> cellBox(const std::array<uint32_t, 3>& c) const;
 };
@@ -67,25 +65,25 @@ struct GridManifest {
 struct GridifyResult {
   GridManifest manifest;
   MeshReadStats read;
-  uint64_t cells = 0;                   // non-empty cells
+  uint64_t cells = 0;  // non-empty cells
   uint64_t triangles = 0;
   uint64_t maxCellTriangles = 0;
-  uint64_t bufferBudgetBytes = 0;       // bufferFraction * maxMemoryBytes
-  uint64_t peakBufferedBytes = 0;       // largest total of allocated cell-buffer bytes
-  uint64_t peakTrackedBytes = 0;        // vertex array + duplicate set + peak buffers + chunk
-                                        // + cell table (an upper bound of this stage's heap)
-  uint64_t flushRounds = 0;             // times the buffers reached the budget
-  uint64_t cellWrites = 0;              // appends to cell files
+  uint64_t bufferBudgetBytes = 0;  // bufferFraction * maxMemoryBytes
+  uint64_t peakBufferedBytes = 0;  // largest total of allocated cell-buffer bytes
+  uint64_t peakTrackedBytes = 0;   // vertex array + duplicate set + peak buffers + chunk
+                                   // + cell table (an upper bound of this stage's heap)
+  uint64_t flushRounds = 0;        // times the buffers reached the budget
+  uint64_t cellWrites = 0;         // appends to cell files
   uint64_t bytesWritten = 0;
-  bool probed = false;                  // a bounds pre-pass was needed (OBJ, STL)
+  bool probed = false;  // a bounds pre-pass was needed (OBJ, STL)
   double seconds = 0.0;
 };
 
 // Grid dimensions for `triangles` triangles in `bounds`: cubic cells sized so that a surface
 // (area estimated as half the box's surface area) gives about targetPerCell triangles per cell;
 // zero-extent axes get 1 cell; at most 1024 cells per axis and maxCells in all.
-std::array<uint32_t, 3> chooseGridDims(const MeshBounds& bounds, uint64_t triangles,
-                                       uint32_t targetPerCell, uint64_t maxCells = 1u << 20);
+std::array<uint32_t, 3> chooseGridDims(const MeshBounds& bounds, uint64_t triangles, uint32_t targetPerCell,
+                                       uint64_t maxCells = 1u << 20);
 
 // Streams the mesh into outDir: grid.json plus cells/cell_NNNNNNNN.bin. Each cell file:
 // "GLGC", u32 version, u32 recordBytes, u32 0, then the cell's triangles (recordBytes each:

@@ -19,8 +19,7 @@ namespace {
 class LayoutBuilder {
  public:
   // labels: a cluster per face (any ids), renumbered in place by first face.
-  LayoutBuilder(const Surface& s, std::vector<uint32_t> labels, const ChartingOptions& o,
-                ChartingStats& st)
+  LayoutBuilder(const Surface& s, std::vector<uint32_t> labels, const ChartingOptions& o, ChartingStats& st)
       : s_(s), o_(o), st_(st), label_(std::move(labels)) {
     const uint32_t nf = static_cast<uint32_t>(s.tris.size());
     {
@@ -47,9 +46,12 @@ class LayoutBuilder {
       bool three = false;
       s.forFaces(v, [&](uint32_t f) {
         const uint32_t c = label_[f];
-        if (first == kNone || c == first) first = c;
-        else if (second == kNone || c == second) second = c;
-        else three = true;
+        if (first == kNone || c == first)
+          first = c;
+        else if (second == kNone || c == second)
+          second = c;
+        else
+          three = true;
         return three;
       });
       corner_[v] = three || (open[v] && second != kNone);
@@ -128,8 +130,8 @@ class LayoutBuilder {
   uint32_t unfixed() const { return unfixed_; }
   const std::vector<uint32_t>& labels() const { return label_; }
   size_t bytes() const {
-    return label_.size() * 8 + corner_.size() + local_.size() * 4 +
-           ldist_.capacity() * 8 + (lprev_.capacity() + lvisit_.capacity() + lpos_.capacity()) * 4;
+    return label_.size() * 8 + corner_.size() + local_.size() * 4 + ldist_.capacity() * 8 +
+           (lprev_.capacity() + lvisit_.capacity() + lpos_.capacity()) * 4;
   }
 
  private:
@@ -155,8 +157,7 @@ class LayoutBuilder {
   }
 
   double length(uint32_t h) const {
-    return glm::length(glm::dvec3(s_.positions[s_.origin(h)]) -
-                       glm::dvec3(s_.positions[s_.dest(h)]));
+    return glm::length(glm::dvec3(s_.positions[s_.origin(h)]) - glm::dvec3(s_.positions[s_.dest(h)]));
   }
 
   // Adds corners at the middle (by length) of the longest runs until the patch has minSides.
@@ -200,9 +201,7 @@ class LayoutBuilder {
         a = b;
       }
       if (bestA == kNone) return;  // cannot happen on a loop of >= 3 edges
-      auto at = [&](size_t i) {
-        return i <= L ? cum[i] : cum[L] + cum[i - L];
-      };
+      auto at = [&](size_t i) { return i <= L ? cum[i] : cum[L] + cum[i - L]; };
       const double mid = 0.5 * (at(bestA) + at(bestB));
       size_t pick = bestA + 1;
       double bestD = std::abs(at(pick) - mid);
@@ -262,9 +261,12 @@ class LayoutBuilder {
         for (uint32_t k = 0; k < 3; ++k) {
           const uint32_t h = 3 * f + k;
           uint32_t w;
-          if (b.s_.origin(h) == u) w = b.s_.dest(h);
-          else if (b.s_.dest(h) == u) w = b.s_.origin(h);
-          else continue;
+          if (b.s_.origin(h) == u)
+            w = b.s_.dest(h);
+          else if (b.s_.dest(h) == u)
+            w = b.s_.origin(h);
+          else
+            continue;
           const uint32_t t = b.s_.twin[h];
           if (t == kNone || b.label_[t / 3] != p || w == a) continue;  // boundary edge
           fn(w, b.length(h));
@@ -302,8 +304,7 @@ class LayoutBuilder {
     return q;
   }
 
-  uint32_t splitNumbered(uint32_t p, const std::vector<uint32_t>& loop,
-                         std::vector<uint32_t>& touched) {
+  uint32_t splitNumbered(uint32_t p, const std::vector<uint32_t>& loop, std::vector<uint32_t>& touched) {
     const size_t L = loop.size();
     std::vector<uint32_t> cc(2 * L + 1, 0);  // corners among loop positions [0, t)
     for (size_t t = 0; t < L; ++t) lpos_[local_[s_.origin(loop[t])]] = static_cast<uint32_t>(t);
@@ -335,8 +336,8 @@ class LayoutBuilder {
           const uint32_t worst = std::max(s1, s2);
           if (worst >= std::max<uint32_t>(k, o_.maxSides + 1) && worst > o_.maxSides) continue;
           const double over = worst > o_.maxSides ? double(worst - o_.maxSides) : 0.0;
-          const double score = ldist_[local_[b]] * (1.0 + 0.25 * std::abs(double(s1) - double(s2))) *
-                               (1.0 + 10.0 * over);
+          const double score =
+              ldist_[local_[b]] * (1.0 + 0.25 * std::abs(double(s1) - double(s2))) * (1.0 + 10.0 * over);
           if (score < bestScore) {
             bestScore = score;
             best.clear();
@@ -393,9 +394,7 @@ class LayoutBuilder {
         side.push_back(f);
         for (uint32_t k = 0; k < 3; ++k) {
           const uint32_t h = 3 * f + k, t = s_.twin[h];
-          if (t == kNone || label_[t / 3] != p ||
-              std::binary_search(marked.begin(), marked.end(), h))
-            continue;
+          if (t == kNone || label_[t / 3] != p || std::binary_search(marked.begin(), marked.end(), h)) continue;
           label_[t / 3] = mark;
           stack.push_back(t / 3);
         }
@@ -429,8 +428,7 @@ class LayoutBuilder {
 };
 
 // Fills the final statistics from the layout's patches.
-void finishStats(const Surface& s, const PatchLayout& out,
-                 const Frame& fr, ChartingStats& st) {
+void finishStats(const Surface& s, const PatchLayout& out, const Frame& fr, ChartingStats& st) {
   st.outputTriangles = s.tris.size();
   st.outputVertices = s.positions.size();
   st.charts = static_cast<uint32_t>(out.patches.size());
@@ -443,8 +441,7 @@ void finishStats(const Surface& s, const PatchLayout& out,
     if (st.sidesHistogram.size() <= n) st.sidesHistogram.resize(n + 1, 0);
     ++st.sidesHistogram[n];
     Moments M;
-    for (uint32_t f : p.triangles)
-      M.add(triangleMoments(npos(s.tris[f][0]), npos(s.tris[f][1]), npos(s.tris[f][2])));
+    for (uint32_t f : p.triangles) M.add(triangleMoments(npos(s.tris[f][0]), npos(s.tris[f][1]), npos(s.tris[f][2])));
     const double rms = std::sqrt(planeMsd(M));
     st.maxPlanarityError = std::max(st.maxPlanarityError, rms);
     sum += rms * M.area;
@@ -456,17 +453,15 @@ void finishStats(const Surface& s, const PatchLayout& out,
 }  // namespace
 
 // Consumes the surface: its positions, colours and triangles move into the layout.
-PatchLayout layoutFromLabels(Surface& s, std::vector<uint32_t> labels,
-                             const Frame& fr, const ChartingOptions& o, ChartingStats& st,
-                             size_t clusterBytes) {
+PatchLayout layoutFromLabels(Surface& s, std::vector<uint32_t> labels, const Frame& fr, const ChartingOptions& o,
+                             ChartingStats& st, size_t clusterBytes) {
   const auto t0 = Clock::now();
   PatchLayout out;
   {
     LayoutBuilder lb(s, std::move(labels), o, st);
     lb.fix();
     out = lb.output();
-    st.peakBytesEstimate =
-        std::max<uint64_t>(st.peakBytesEstimate, s.bytes() + std::max(clusterBytes, lb.bytes()));
+    st.peakBytesEstimate = std::max<uint64_t>(st.peakBytesEstimate, s.bytes() + std::max(clusterBytes, lb.bytes()));
     st.patchesUnfixed = lb.unfixed();
   }
   finishStats(s, out, fr, st);

@@ -23,8 +23,8 @@ namespace {
 
 // The triangles reached from the one inside `side`'s first edge, crossing no edge in `walls`
 // (undirected keys); empty if that triangle is not in the graph's patch.
-std::unordered_set<uint32_t> floodFrom(const PatchLayout& layout, const PatchGraph& g,
-                                       const PatchSide& side, const std::unordered_set<uint64_t>& walls) {
+std::unordered_set<uint32_t> floodFrom(const PatchLayout& layout, const PatchGraph& g, const PatchSide& side,
+                                       const std::unordered_set<uint64_t>& walls) {
   const uint32_t seed = g.triangleOf(directedEdgeKey(side.vertices[0], side.vertices[1]));
   if (seed == ~0u) return {};
   std::unordered_set<uint32_t> part{seed};
@@ -197,8 +197,7 @@ bool insertCorner(PatchLayout& layout, uint32_t p, uint32_t side, uint32_t k, ui
       if (ps.neighbourPatch == int32_t(p) || ps.neighbourPatch == q) {
         ps.neighbourSide = newIndex(ps.neighbourPatch, ps.neighbourSide);
       } else {
-        layout.patches[uint32_t(ps.neighbourPatch)].sides[ps.neighbourSide].neighbourSide =
-            newIndex(x, o);
+        layout.patches[uint32_t(ps.neighbourPatch)].sides[ps.neighbourSide].neighbourSide = newIndex(x, o);
       }
     }
   }
@@ -316,8 +315,9 @@ bool alignSpokesExactly(PatchLayout& layout, const std::vector<uint32_t>& patche
     for (int k = 0; k < 2; ++k) {
       const auto& [p, i] = in[k];
       open = open || borderCorner(layout, p, i);
-      lit[k] = var[p] >= 0 ? int64_t(2 * var[p] + i % 2)
-                           : spokeCorner(uint32_t(layout.patches[p].sides.size()), i) ? kTrue : kFalse;
+      lit[k] = var[p] >= 0                                                ? int64_t(2 * var[p] + i % 2)
+               : spokeCorner(uint32_t(layout.patches[p].sides.size()), i) ? kTrue
+                                                                          : kFalse;
     }
     if (open || lit[0] == kTrue || lit[1] == kTrue) continue;
     if (lit[0] == kFalse && lit[1] == kFalse) continue;
@@ -328,7 +328,8 @@ bool alignSpokesExactly(PatchLayout& layout, const std::vector<uint32_t>& patche
   }
   // Tarjan's algorithm numbers the components in reverse topological order.
   std::vector<int> comp(2 * patchOf.size());
-  boost::strong_components(implies, boost::make_iterator_property_map(comp.begin(), boost::get(boost::vertex_index, implies)));
+  boost::strong_components(implies,
+                           boost::make_iterator_property_map(comp.begin(), boost::get(boost::vertex_index, implies)));
   for (size_t v = 0; v < patchOf.size(); ++v) {
     if (comp[2 * v] == comp[2 * v + 1]) return false;
   }
@@ -475,8 +476,9 @@ uint32_t splitTwoSidedHoles(PatchLayout& layout, uint32_t maxSides) {
     // cannot capture structured bindings).
     const uint32_t p = hole.first, start = hole.second;
     const auto& sides = layout.patches[p].sides;
-    const auto it = std::find_if(sides.begin(), sides.end(),
-                                 [&](const PatchSide& s) { return s.neighbourPatch < 0 && s.vertices.front() == start; });
+    const auto it = std::find_if(sides.begin(), sides.end(), [&](const PatchSide& s) {
+      return s.neighbourPatch < 0 && s.vertices.front() == start;
+    });
     if (it == sides.end()) continue;  // (not reached: corners made elsewhere keep its start)
     const uint32_t i = uint32_t(it - sides.begin());
     if (it->vertices.size() < 4 || sides.size() + 2 > maxSides) continue;
@@ -508,7 +510,8 @@ EvenSidesResult evenSides(PatchLayout& layout, const std::vector<uint32_t>& with
     int32_t best = -1;
     double bestLength = -1.0;
     if (sidesOf(p) + 1 > roomP) return best;
-    if (towards >= 0 && (!allowed[uint32_t(towards)] || uint32_t(towards) == p || sidesOf(uint32_t(towards)) + 1 > roomQ))
+    if (towards >= 0 &&
+        (!allowed[uint32_t(towards)] || uint32_t(towards) == p || sidesOf(uint32_t(towards)) + 1 > roomQ))
       return best;
     for (uint32_t i = 0; i < sidesOf(p); ++i) {
       const PatchSide& side = layout.patches[p].sides[i];
@@ -595,8 +598,8 @@ namespace {
 // with no sources, through boundary vertices (at most 96, spread evenly): the neck. With
 // minShare > 0, only cuts that leave at least that share of the border on either side count.
 // Empty if none. Reads the layout only. See splitPatchThrough and splitPatchAtNeck.
-std::vector<uint32_t> findCut(const PatchLayout& layout, uint32_t p, std::vector<uint32_t> sources,
-                              uint32_t maxSides, double minShare = 0.0, uint32_t minPartEdges = 0) {
+std::vector<uint32_t> findCut(const PatchLayout& layout, uint32_t p, std::vector<uint32_t> sources, uint32_t maxSides,
+                              double minShare = 0.0, uint32_t minPartEdges = 0) {
   if (p >= layout.patches.size()) return {};
   const Patch& patch = layout.patches[p];
   const PatchGraph g = patchGraph(layout, patch);
@@ -871,8 +874,7 @@ bool straightenSide(PatchLayout& layout, uint32_t p, uint32_t s, bool keepHalves
   layout.patches[p].triangles = std::move(inP);
   layout.patches[q].triangles = std::move(inQ);
   layout.patches[p].sides[s].vertices = path;
-  layout.patches[q].sides[t].vertices =
-      side.reversed ? std::vector<uint32_t>(path.rbegin(), path.rend()) : path;
+  layout.patches[q].sides[t].vertices = side.reversed ? std::vector<uint32_t>(path.rbegin(), path.rend()) : path;
   return true;
 }
 
@@ -964,15 +966,16 @@ uint32_t lengthenShortSides(PatchLayout& layout, double fraction) {
       const PatchSide& side = layout.patches[p].sides[s];
       if (side.neighbourPatch <= int32_t(p)) continue;  // each shared side once
       const uint32_t q = uint32_t(side.neighbourPatch), t = side.neighbourSide;
-      const double want = fraction * std::min(meanSideLength(layout, p), meanSideLength(layout, q)), length = sideLength(layout, side);
+      const double want = fraction * std::min(meanSideLength(layout, p), meanSideLength(layout, q)),
+                   length = sideLength(layout, side);
       if (!(length < want)) continue;
       // From the end on the longer next side first (p's next side at one end, q's at the other).
       const double nextP = sideLength(layout, layout.patches[p].sides[(s + 1) % layout.patches[p].sides.size()]);
       const double nextQ = sideLength(layout, layout.patches[q].sides[(t + 1) % layout.patches[q].sides.size()]);
-      const bool done = nextP >= nextQ ? lengthenSide(layout, p, s, 2.0 * want - length) ||
-                                             lengthenSide(layout, q, t, 2.0 * want - length)
-                                       : lengthenSide(layout, q, t, 2.0 * want - length) ||
-                                             lengthenSide(layout, p, s, 2.0 * want - length);
+      const bool done =
+          nextP >= nextQ
+              ? lengthenSide(layout, p, s, 2.0 * want - length) || lengthenSide(layout, q, t, 2.0 * want - length)
+              : lengthenSide(layout, q, t, 2.0 * want - length) || lengthenSide(layout, p, s, 2.0 * want - length);
       lengthened += done ? 1 : 0;
       spdlog::debug("side {} of patch {} ({} edges, {:.4g} long, {:.3f} of the shorter mean side): {}", s, p,
                     side.vertices.size() - 1, length, length / (want / fraction), done ? "lengthened" : "left");
@@ -1428,9 +1431,7 @@ GeometryImageSet repairPass(PatchLayout& layout, GeometryImageSet set, const Res
   // disjoint two rings (disjointBatch): cuts searched in parallel, made in turn, judged by one
   // resampling of every changed patch, the failures undone.
   work = &st.trianglesTrials;
-  for (uint32_t round = 0; round < maxRounds && toRepair(set) && !st.stoppedForMemory &&
-                           !st.stoppedForWork;
-       ++round) {
+  for (uint32_t round = 0; round < maxRounds && toRepair(set) && !st.stoppedForMemory && !st.stoppedForWork; ++round) {
     std::vector<Fold> queue = folding(set);
     // Kept current as splits are kept (a later split's neighbours may be earlier ones' parts).
     std::vector<Badness> patchBadness = badnessPerPatch(set);

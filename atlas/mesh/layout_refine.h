@@ -75,8 +75,7 @@ bool splitPatchAtCorners(PatchLayout& layout, uint32_t patch, uint32_t i, uint32
 // Makes the k-th vertex of side `side` of patch `patch` (0 < k < last) a corner: the side becomes
 // two sides, and so does the neighbour's side across it. Returns false, unchanged, when k is not
 // an inner vertex of the side or either patch would get more than maxSides sides.
-bool insertCorner(PatchLayout& layout, uint32_t patch, uint32_t side, uint32_t k,
-                  uint32_t maxSides = 8);
+bool insertCorner(PatchLayout& layout, uint32_t patch, uint32_t side, uint32_t k, uint32_t maxSides = 8);
 
 // In the sides quad layout, a corner where only two patches meet (as evenSides makes them), away
 // from the border, where neither patch starts spokes has one quad of each: two charts meet there,
@@ -169,17 +168,17 @@ struct ChartRepairOptions {
 };
 
 struct ChartRepairStats {
-  uint32_t rounds = 0;          // resampling rounds after the first
+  uint32_t rounds = 0;  // resampling rounds after the first
   uint32_t patchesSplit = 0;
-  uint32_t patchesUnsplit = 0;  // patches of the last round still to repair that no split helped
-  uint32_t flippedTexelsFirst = 0;  // flipped texels of the first resampling
-  double sampleErrorFirst = 0.0;    // largest sampling error of the first resampling
+  uint32_t patchesUnsplit = 0;         // patches of the last round still to repair that no split helped
+  uint32_t flippedTexelsFirst = 0;     // flipped texels of the first resampling
+  double sampleErrorFirst = 0.0;       // largest sampling error of the first resampling
   uint32_t patchesOverErrorFirst = 0;  // patches of the first resampling over maxSampleError
-  bool stoppedForMemory = false;    // mayGrow said no before the repair was done
+  bool stoppedForMemory = false;       // mayGrow said no before the repair was done
   // Layout triangles parameterized again (a patch once per resampling of it): by whole rounds,
   // and by patch trials (with the rounds' closing resamplings).
   uint64_t trianglesWholeRounds = 0, trianglesTrials = 0;
-  bool stoppedForWork = false;      // the work budget ran out before the repair was done
+  bool stoppedForWork = false;  // the work budget ran out before the repair was done
 };
 
 // Two repairs of up to repair.rounds rounds each, from `set`, the resampling of `layout`, of the

@@ -120,8 +120,7 @@ uint64_t placeOnPlanarSquares(const std::vector<glm::vec3>& P0, uint32_t chartSi
   std::vector<float> allowed(P0.size());
   {
     const std::vector<glm::vec3> d = drawnEverywhere(stored);
-    for (size_t i = 0; i < P0.size(); ++i)
-      allowed[i] = std::max(float(planar.budget), glm::length(P0[i] - d[i]));
+    for (size_t i = 0; i < P0.size(); ++i) allowed[i] = std::max(float(planar.budget), glm::length(P0[i] - d[i]));
   }
   // A sample's lattice point (the samples, settled, lie on the lattice).
   auto lattice = [&](const glm::vec3& p, int c) { return int64_t(std::llround(double(p[c]) / step)); };
@@ -153,7 +152,8 @@ uint64_t placeOnPlanarSquares(const std::vector<glm::vec3>& P0, uint32_t chartSi
               if (known[i] || (dx % s == 0 && dy % s == 0)) continue;
               for (int c = 0; c < 3; ++c)
                 G[i][c] = float(double(planarSquareSample(lattice(c00, c), lattice(c10, c), lattice(c01, c),
-                                                          lattice(c11, c), s, dx, dy)) * step);
+                                                          lattice(c11, c), s, dx, dy)) *
+                                step);
               moved.push_back(i);
             }
           // No two samples of the square may round to one lattice point, nor three onto one line (a
@@ -229,12 +229,14 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, con
   std::vector<PackedNormal> normals = subsampled(image.normals, chartSize, 1u << finestLevel);
   const std::vector<glm::u8vec4> colours = subsampled(image.colours, chartSize, 1u << finestLevel);
   if (coding.compressed) {
-    const std::vector<float> s = settlePositions({reinterpret_cast<const float*>(positions.data()), 3 * positions.size()},
-                                                 size, coding.positionStep, coding.positionTolerance);
+    const std::vector<float> s =
+        settlePositions({reinterpret_cast<const float*>(positions.data()), 3 * positions.size()}, size,
+                        coding.positionStep, coding.positionTolerance);
     std::memcpy(positions.data(), s.data(), s.size() * sizeof(float));
     if (!coding.deriveGeometryNormals) settleNormals(normals, size, coding.normalTolerance);
     if (planar.budget > 0.0) {
-      const uint64_t moved = placeOnPlanarSquares(image.positions, chartSize, finestLevel, coding.positionStep, planar, positions);
+      const uint64_t moved =
+          placeOnPlanarSquares(image.positions, chartSize, finestLevel, coding.positionStep, planar, positions);
       if (planarSamples) *planarSamples = moved;
     }
   }
@@ -270,7 +272,8 @@ void addNormalAngles(const ChartPyramid& p, uint32_t chartSize, uint32_t blockIn
       const auto a = unpackNormal(derived[i]), b = unpackNormal(p.normals[0][i]);
       const double la = std::sqrt(double(a[0]) * a[0] + double(a[1]) * a[1] + double(a[2]) * a[2]);
       const double lb = std::sqrt(double(b[0]) * b[0] + double(b[1]) * b[1] + double(b[2]) * b[2]);
-      const double c = la > 0 && lb > 0 ? (double(a[0]) * b[0] + double(a[1]) * b[1] + double(a[2]) * b[2]) / (la * lb) : 1.0;
+      const double c =
+          la > 0 && lb > 0 ? (double(a[0]) * b[0] + double(a[1]) * b[1] + double(a[2]) * b[2]) / (la * lb) : 1.0;
       const double deg = std::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
       ++bins[std::min(kAngleBins - 1, size_t(deg / kAngleBin))];
     }
@@ -325,7 +328,8 @@ const GeometryImage& chartSamples(const GeometryImageSet& set, size_t i, const C
 
 }  // namespace
 
-std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const ChartSpill* spill, const ChartCoarsening& c) {
+std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const ChartSpill* spill,
+                                        const ChartCoarsening& c) {
   std::vector<uint32_t> out(set.charts.size(), 0);
   for (size_t i = 0; i < set.charts.size(); ++i) out[i] = set.charts[i].level;
   if (!(c.bound > 0.0) || c.maxFinestLevel == 0) return out;
@@ -342,10 +346,9 @@ std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const Chart
   return out;
 }
 
-GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs::path& dir,
-                                          uint32_t blockIntervals, AtlasManifest& m, const ChartSpill* spill,
-                                          const ChartCoding& coding, const std::vector<uint32_t>& finestLevels,
-                                          double planarBound) {
+GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs::path& dir, uint32_t blockIntervals,
+                                          AtlasManifest& m, const ChartSpill* spill, const ChartCoding& coding,
+                                          const std::vector<uint32_t>& finestLevels, double planarBound) {
   const auto t0 = std::chrono::steady_clock::now();
   if (set.charts.empty()) throw std::invalid_argument("writeGeometryCharts: no charts");
   if (!finestLevels.empty() && finestLevels.size() != set.charts.size())
@@ -364,7 +367,8 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
   m.charts.resize(set.charts.size());
   m.compression = CompressionInfo{};
   if (coding.compressed) {
-    if (!(coding.positionStep > 0.0)) throw std::invalid_argument("writeGeometryCharts: compressed positions need a step");
+    if (!(coding.positionStep > 0.0))
+      throw std::invalid_argument("writeGeometryCharts: compressed positions need a step");
     m.compression.present = true;
     m.compression.positionStep = coding.positionStep;
     m.compression.positionTolerance = coding.positionTolerance;
@@ -395,8 +399,8 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
     PlanarPlacement planar;
     planar.budget = std::max(0.0, planarBound - img.quality.sampleError);
     planar.blockIntervals = blockIntervals;
-    const ChartPyramid pyramid = geometryPyramid(samples, img.side(set.chartSize), coding, c.finestLevel - img.level,
-                                                 planar, &planarSamples[i]);
+    const ChartPyramid pyramid =
+        geometryPyramid(samples, img.side(set.chartSize), coding, c.finestLevel - img.level, planar, &planarSamples[i]);
     const uint32_t size = ((set.chartSize - 1) >> c.finestLevel) + 1;
     finestSamples[i] = uint64_t(size) * size;
     glm::vec3 lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
@@ -435,8 +439,7 @@ GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const fs:
   return w;
 }
 
-std::vector<glm::vec3> readDrawnChartLevel(const fs::path& atlasDir, const AtlasManifest& m, size_t i,
-                                           uint32_t level) {
+std::vector<glm::vec3> readDrawnChartLevel(const fs::path& atlasDir, const AtlasManifest& m, size_t i, uint32_t level) {
   // A chart whose finest level is coarser than `level` gives its finest; its neighbours' border
   // samples facing it are stitched onto its lattice, as the renderer stitches them (each moved to
   // the lattice point below it).
@@ -514,11 +517,9 @@ AtlasSurface readAtlasSurface(const fs::path& atlasDir, uint32_t level) {
   // Charts are read in parallel, then welded in chart order.
   const auto drawnLevel = [&](size_t i) { return std::max(level, m.charts[i].finestLevel); };
   std::vector<std::vector<glm::vec3>> levels(m.charts.size());
-  tbb::parallel_for(size_t(0), m.charts.size(),
-                    [&](size_t i) {
-                      levels[i] = planet ? readPlanetChartLevel(atlasDir, m, i, level)
-                                         : readDrawnChartLevel(atlasDir, m, i, level);
-                    });
+  tbb::parallel_for(size_t(0), m.charts.size(), [&](size_t i) {
+    levels[i] = planet ? readPlanetChartLevel(atlasDir, m, i, level) : readDrawnChartLevel(atlasDir, m, i, level);
+  });
   std::unordered_map<Key, uint32_t, KeyHash> weld;
   for (size_t chart = 0; chart < levels.size(); ++chart) {
     const std::vector<glm::vec3> P = std::move(levels[chart]);

@@ -52,8 +52,8 @@ struct NormalAngles {
 struct GeometryChartsWritten {
   uint64_t bytes = 0;
   double seconds = 0.0;
-  std::array<float, 6> bounds{};  // min x, y, z, max x, y, z over every sample
-  NormalAngles normalAngles;      // coding.deriveGeometryNormals only
+  std::array<float, 6> bounds{};              // min x, y, z, max x, y, z over every sample
+  NormalAngles normalAngles;                  // coding.deriveGeometryNormals only
   std::vector<uint32_t> chartsByFinestLevel;  // [finest level]: charts that keep it (ChartInfo)
   uint64_t finestSamples = 0;                 // the charts' finest levels' samples, summed
   uint64_t planarSamples = 0;                 // of those, the ones moved onto planar squares
@@ -94,8 +94,8 @@ std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const Chart
 // (input units, > 0; compressed coding): each chart's finest level moves its planar squares within
 // planarBound less the chart's sampling error (geometryPyramid's PlanarPlacement).
 GeometryChartsWritten writeGeometryCharts(const GeometryImageSet& set, const std::filesystem::path& dir,
-                                          uint32_t blockIntervals, AtlasManifest& m,
-                                          const ChartSpill* spill = nullptr, const ChartCoding& coding = {},
+                                          uint32_t blockIntervals, AtlasManifest& m, const ChartSpill* spill = nullptr,
+                                          const ChartCoding& coding = {},
                                           const std::vector<uint32_t>& finestLevels = {}, double planarBound = 0.0);
 
 // The surface of a geometry atlas (or a planet atlas, its heights on the sphere) at pyramid level

@@ -68,7 +68,6 @@ MeshFormat detectFormat(FileBuffer& f, MeshReadStats& stats) {
   fail(path, "unsupported mesh format (expected PLY, OBJ, OFF or STL content)");
 }
 
-
 void checkOptions(const fs::path& path, const MeshReadOptions& o) {
   if (o.chunkTriangles == 0) fail(path, "bad read options: chunkTriangles must be at least 1");
 }
@@ -79,8 +78,8 @@ class NullSink : public TriangleSink {
 };
 
 // The one reader behind the entry points. va receives the vertex array of indexed formats.
-MeshReadStats streamImpl(const fs::path& path, TriangleSink& sink, const MeshReadOptions& o,
-                         VertexArray& va, bool verticesOnly) {
+MeshReadStats streamImpl(const fs::path& path, TriangleSink& sink, const MeshReadOptions& o, VertexArray& va,
+                         bool verticesOnly) {
   const auto t0 = std::chrono::steady_clock::now();
   checkOptions(path, o);
   FileBuffer f(path);
@@ -108,8 +107,8 @@ MeshReadStats streamImpl(const fs::path& path, TriangleSink& sink, const MeshRea
       } else {
         why += "all " + std::to_string(stats.trianglesRead) + " triangles were dropped (" +
                std::to_string(stats.droppedNonFinite) + " with a NaN or infinite coordinate, " +
-               std::to_string(stats.droppedDegenerate) + " degenerate: repeated vertex or zero " +
-               "area, " + std::to_string(stats.droppedDuplicate) + " duplicate)";
+               std::to_string(stats.droppedDegenerate) + " degenerate: repeated vertex or zero " + "area, " +
+               std::to_string(stats.droppedDuplicate) + " duplicate)";
       }
       fail(path, why);
     }
@@ -151,8 +150,7 @@ MeshReadStats streamMesh(const fs::path& path, TriangleSink& sink, const MeshRea
   return streamImpl(path, sink, options, va, false);
 }
 
-MeshReadStats streamMesh(const fs::path& path,
-                         const std::function<void(std::span<const MeshTriangle>)>& consume,
+MeshReadStats streamMesh(const fs::path& path, const std::function<void(std::span<const MeshTriangle>)>& consume,
                          const MeshReadOptions& options) {
   class FunctionSink : public TriangleSink {
    public:

@@ -29,9 +29,9 @@ inline constexpr uint32_t kNoVertex = std::numeric_limits<uint32_t>::max();
 // One triangle as delivered to a sink. Corners are in the file's winding order (triangle strips
 // are decoded with alternating winding, so all triangles of a strip share its orientation).
 struct MeshTriangle {
-  std::array<glm::vec3, 3> p;     // positions, as stored in the file (converted to float)
-  std::array<glm::u8vec4, 3> c;   // per-vertex RGBA colours; opaque white when the mesh has none
-  std::array<uint32_t, 3> v;      // source vertex indices (0-based); kNoVertex for STL
+  std::array<glm::vec3, 3> p;    // positions, as stored in the file (converted to float)
+  std::array<glm::u8vec4, 3> c;  // per-vertex RGBA colours; opaque white when the mesh has none
+  std::array<uint32_t, 3> v;     // source vertex indices (0-based); kNoVertex for STL
 };
 
 // Axis-aligned box; empty (min > max) until extended.
@@ -46,18 +46,18 @@ struct MeshBounds {
 // What is known about a mesh before its faces are read.
 struct MeshInfo {
   MeshFormat format = MeshFormat::kPly;
-  std::string formatName;          // e.g. "PLY binary big-endian", "OBJ", "STL binary"
-  uint64_t vertices = 0;           // vertex records (0 for STL)
-  uint64_t faces = 0;              // face records: polygons, strips or facets (declared or counted)
-  uint64_t triangleEstimate = 0;   // expected triangles before repair (for sizing; not exact)
-  bool hasColours = false;         // per-vertex colours present
-  bool boundsKnown = false;        // bounds below are valid
-  MeshBounds bounds;               // of all finite vertex positions (unreferenced ones included)
+  std::string formatName;         // e.g. "PLY binary big-endian", "OBJ", "STL binary"
+  uint64_t vertices = 0;          // vertex records (0 for STL)
+  uint64_t faces = 0;             // face records: polygons, strips or facets (declared or counted)
+  uint64_t triangleEstimate = 0;  // expected triangles before repair (for sizing; not exact)
+  bool hasColours = false;        // per-vertex colours present
+  bool boundsKnown = false;       // bounds below are valid
+  MeshBounds bounds;              // of all finite vertex positions (unreferenced ones included)
 };
 
 struct MeshReadOptions {
-  uint32_t chunkTriangles = 1u << 16;      // triangles per TriangleSink::consume call; >= 1
-  bool removeDuplicates = true;            // drop triangles repeating a triangle's 3 vertices
+  uint32_t chunkTriangles = 1u << 16;  // triangles per TriangleSink::consume call; >= 1
+  bool removeDuplicates = true;        // drop triangles repeating a triangle's 3 vertices
   // Memory bound of the duplicate set (16-byte slots at most 70% full: 23 to 46 bytes per
   // triangle). When full, later triangles are still checked against it but no longer added:
   // stats.duplicateCheckComplete = false. 0 means no bound.
@@ -71,24 +71,24 @@ struct MeshReadOptions {
 // trianglesRead == trianglesOut + droppedNonFinite + droppedDegenerate + droppedDuplicate.
 struct MeshReadStats {
   MeshInfo info;
-  uint64_t vertices = 0;              // vertex records read
-  uint64_t nonFiniteVertices = 0;     // vertices with a NaN or infinite coordinate
-  uint64_t faces = 0;                 // face records read (polygons, strips, facets)
-  uint64_t shortFaces = 0;            // faces with fewer than 3 corners (skipped, no triangles)
-  uint64_t polygonsFanned = 0;        // faces with more than 3 corners, fan-triangulated
-  uint64_t strips = 0;                // triangle strips decoded (a -1 index starts a new one)
-  uint64_t trianglesRead = 0;         // candidate triangles after strip / fan decoding
-  uint64_t trianglesOut = 0;          // triangles delivered to the sink
-  uint64_t droppedNonFinite = 0;      // used a vertex with a NaN or infinite coordinate
-  uint64_t droppedDegenerate = 0;     // repeated vertex index, or exactly zero area
+  uint64_t vertices = 0;                // vertex records read
+  uint64_t nonFiniteVertices = 0;       // vertices with a NaN or infinite coordinate
+  uint64_t faces = 0;                   // face records read (polygons, strips, facets)
+  uint64_t shortFaces = 0;              // faces with fewer than 3 corners (skipped, no triangles)
+  uint64_t polygonsFanned = 0;          // faces with more than 3 corners, fan-triangulated
+  uint64_t strips = 0;                  // triangle strips decoded (a -1 index starts a new one)
+  uint64_t trianglesRead = 0;           // candidate triangles after strip / fan decoding
+  uint64_t trianglesOut = 0;            // triangles delivered to the sink
+  uint64_t droppedNonFinite = 0;        // used a vertex with a NaN or infinite coordinate
+  uint64_t droppedDegenerate = 0;       // repeated vertex index, or exactly zero area
   uint64_t droppedStripDegenerate = 0;  // of droppedDegenerate: inside strips (strip turns)
-  uint64_t droppedDuplicate = 0;      // same 3 vertices (any order) as an earlier triangle
-  bool duplicateCheckComplete = true; // false if the duplicate set reached its memory bound
+  uint64_t droppedDuplicate = 0;        // same 3 vertices (any order) as an earlier triangle
+  bool duplicateCheckComplete = true;   // false if the duplicate set reached its memory bound
   bool hasColours = false;
-  MeshBounds bounds;                  // of the delivered triangles
+  MeshBounds bounds;  // of the delivered triangles
   uint64_t bytesRead = 0;
-  uint64_t vertexArrayBytes = 0;      // memory held for the vertex array
-  uint64_t duplicateSetBytes = 0;     // memory held for the duplicate set
+  uint64_t vertexArrayBytes = 0;   // memory held for the vertex array
+  uint64_t duplicateSetBytes = 0;  // memory held for the duplicate set
   double seconds = 0.0;
   std::vector<std::string> warnings;  // non-fatal issues (trailing data, unused elements, ...)
 };
@@ -122,8 +122,7 @@ MeshInfo probeMesh(const std::filesystem::path& path, const MeshReadOptions& opt
 // unknown PLY property types, unsupported format variants, a face index outside the vertex
 // array (naming the face), vertex counts that cannot fit the file, bad options. Exceptions
 // thrown by the sink propagate.
-MeshReadStats streamMesh(const std::filesystem::path& path, TriangleSink& sink,
-                         const MeshReadOptions& options = {});
+MeshReadStats streamMesh(const std::filesystem::path& path, TriangleSink& sink, const MeshReadOptions& options = {});
 // The same with a callback per chunk.
 MeshReadStats streamMesh(const std::filesystem::path& path,
                          const std::function<void(std::span<const MeshTriangle>)>& consume,
@@ -131,9 +130,9 @@ MeshReadStats streamMesh(const std::filesystem::path& path,
 
 // A whole mesh in memory, for small meshes and tests.
 struct IndexedMesh {
-  std::vector<glm::vec3> positions;   // every vertex of the file, in file order (STL: welded
-                                      // exactly equal positions, in first-use order)
-  std::vector<glm::u8vec4> colours;   // empty, or one per position
+  std::vector<glm::vec3> positions;                // every vertex of the file, in file order (STL: welded
+                                                   // exactly equal positions, in first-use order)
+  std::vector<glm::u8vec4> colours;                // empty, or one per position
   std::vector<std::array<uint32_t, 3>> triangles;  // after repair, in file order
   MeshReadStats stats;
 };

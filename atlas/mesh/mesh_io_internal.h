@@ -110,8 +110,8 @@ class FileBuffer {
         return true;
       }
       if (avail == capacity_)
-        fail(path_, "line " + std::to_string(line_ + 1) + " is longer than " +
-                        std::to_string(capacity_ >> 20) + " MiB (binary data in a text file?)");
+        fail(path_, "line " + std::to_string(line_ + 1) + " is longer than " + std::to_string(capacity_ >> 20) +
+                        " MiB (binary data in a text file?)");
       fill(avail + 1);
     }
   }
@@ -187,6 +187,7 @@ class TokenReader {
       t_ = Tokens{line, 0};
     }
   }
+
  private:
   FileBuffer& f_;
   Tokens t_;
@@ -228,9 +229,7 @@ struct VertexArray {
   std::vector<glm::u8vec4> col;  // empty or pos.size()
 };
 
-inline bool finite(const glm::vec3& p) {
-  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
-}
+inline bool finite(const glm::vec3& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
 
 // Exactly zero area: the cross product of two edges (computed in double) vanishes.
 inline bool zeroArea(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c) {
@@ -341,16 +340,18 @@ class DuplicateSet {
 class Emitter {
  public:
   Emitter(TriangleSink& sink, const MeshReadOptions& o, MeshReadStats& stats)
-      : sink_(sink), stats_(stats), dedupe_(o.removeDuplicates), dup_(o.duplicateSetBytes),
-        chunkSize_(o.chunkTriangles) {
-  }
+      : sink_(sink),
+        stats_(stats),
+        dedupe_(o.removeDuplicates),
+        dup_(o.duplicateSetBytes),
+        chunkSize_(o.chunkTriangles) {}
   void setVertices(const VertexArray* va) { va_ = va; }
   void begin(const MeshInfo& info) {
     if (begun_) return;
     begun_ = true;
     if (dedupe_) dup_.reserve(info.triangleEstimate);
-    chunk_.reserve(std::min<size_t>(std::min<uint64_t>(chunkSize_, info.triangleEstimate + 1),
-                                    size_t{1} << 20) + kBatch);
+    chunk_.reserve(std::min<size_t>(std::min<uint64_t>(chunkSize_, info.triangleEstimate + 1), size_t{1} << 20) +
+                   kBatch);
     sink_.begin(info);
   }
 
@@ -371,8 +372,10 @@ class Emitter {
     }
     MeshTriangle& t = chunk_.emplace_back();
     t.p = {pa, pb, pc};
-    if (va_->col.empty()) t.c = {kWhite, kWhite, kWhite};
-    else t.c = {va_->col[a], va_->col[b], va_->col[c]};
+    if (va_->col.empty())
+      t.c = {kWhite, kWhite, kWhite};
+    else
+      t.c = {va_->col[a], va_->col[b], va_->col[c]};
     t.v = {a, b, c};
     if (!dedupe_) return accept();
     uint32_t s[3] = {a, b, c};
@@ -408,8 +411,7 @@ class Emitter {
       w[i] = mix64((x << 32 | y) ^ mix64(z + 0x9e3779b97f4a7c15ull)) ^ z * 0xff51afd7ed558ccdull;
     }
     std::sort(w.begin(), w.end());
-    DupKey k{mix64(w[0] ^ mix64(w[1] ^ mix64(w[2]))),
-             mix64(w[2] + 0x632be59bd9b4e019ull) ^ mix64(w[0] + 3 * w[1])};
+    DupKey k{mix64(w[0] ^ mix64(w[1] ^ mix64(w[2]))), mix64(w[2] + 0x632be59bd9b4e019ull) ^ mix64(w[0] + 3 * w[1])};
     if (k.isEmpty()) k.b = 1;
     pend(k);
   }
@@ -424,8 +426,9 @@ class Emitter {
     stats_.duplicateCheckComplete = dup_.complete();
     stats_.duplicateSetBytes = dup_.bytes();
     if (!dup_.complete())
-      warn(stats_, "the duplicate-triangle set reached its memory bound; later duplicates are "
-                   "only caught against earlier triangles (the per-cell stage catches the rest)");
+      warn(stats_,
+           "the duplicate-triangle set reached its memory bound; later duplicates are "
+           "only caught against earlier triangles (the per-cell stage catches the rest)");
   }
 
  private:
@@ -487,8 +490,10 @@ class FanDecoder {
  public:
   void start() { n_ = 0; }
   void push(uint32_t i, Emitter& e) {
-    if (n_ == 0) first_ = i;
-    else if (n_ >= 2) e.indexed(first_, prev_, i, false);
+    if (n_ == 0)
+      first_ = i;
+    else if (n_ >= 2)
+      e.indexed(first_, prev_, i, false);
     prev_ = i;
     ++n_;
   }
@@ -505,8 +510,10 @@ class StripDecoder {
   bool push(uint32_t i, Emitter& e) {
     const bool started = n_ == 0;
     if (n_ >= 2) {
-      if ((n_ - 2) % 2 == 0) e.indexed(a_, b_, i, true);
-      else e.indexed(b_, a_, i, true);
+      if ((n_ - 2) % 2 == 0)
+        e.indexed(a_, b_, i, true);
+      else
+        e.indexed(b_, a_, i, true);
     }
     a_ = b_;
     b_ = i;
@@ -520,16 +527,14 @@ class StripDecoder {
   uint64_t n_ = 0;
 };
 
-inline void checkVertexBytes(const fs::path& path, uint64_t vertices, bool colours,
-                      const MeshReadOptions& o, const std::string& where = "") {
+inline void checkVertexBytes(const fs::path& path, uint64_t vertices, bool colours, const MeshReadOptions& o,
+                             const std::string& where = "") {
   if (vertices > kMaxVertices)
-    fail(path, std::to_string(vertices) + " vertices: more than the supported " +
-                   std::to_string(kMaxVertices));
+    fail(path, std::to_string(vertices) + " vertices: more than the supported " + std::to_string(kMaxVertices));
   const uint64_t bytes = vertices * (colours ? 16 : 12);
   if (o.maxVertexBytes != 0 && bytes > o.maxVertexBytes)
-    fail(path, where + "the vertex array of " + std::to_string(vertices) + " vertices needs " +
-                   std::to_string(bytes) + " bytes, more than the " +
-                   std::to_string(o.maxVertexBytes) +
+    fail(path, where + "the vertex array of " + std::to_string(vertices) + " vertices needs " + std::to_string(bytes) +
+                   " bytes, more than the " + std::to_string(o.maxVertexBytes) +
                    " bytes allowed (raise the memory cap, or convert the mesh to binary STL, which "
                    "streams without a vertex array)");
 }
@@ -556,16 +561,17 @@ U loadSwapped(const uint8_t* p, bool swap) {
   U u;
   std::memcpy(&u, p, sizeof u);
   if (swap) {
-    if constexpr (sizeof(U) == 2) u = __builtin_bswap16(u);
-    else if constexpr (sizeof(U) == 4) u = __builtin_bswap32(u);
-    else u = __builtin_bswap64(u);
+    if constexpr (sizeof(U) == 2)
+      u = __builtin_bswap16(u);
+    else if constexpr (sizeof(U) == 4)
+      u = __builtin_bswap32(u);
+    else
+      u = __builtin_bswap64(u);
   }
   return u;
 }
 
-inline bool startsWith(std::string_view s, std::string_view p) {
-  return s.substr(0, p.size()) == p;
-}
+inline bool startsWith(std::string_view s, std::string_view p) { return s.substr(0, p.size()) == p; }
 
 // What a reader of an indexed format (PLY, OFF, OBJ) works with: the file, where its triangles
 // go, its vertex array, the counts and the options.
@@ -585,12 +591,11 @@ class IndexedReader {
 
 // The format readers, one per file (atlas/mesh/mesh_io_ply.cpp and so on). Each reads the file
 // from its start; the indexed formats fill va, and with verticesOnly stop after the vertices.
-void readPly(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats,
-             const MeshReadOptions& o, bool verticesOnly);
-void readOff(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats,
-             const MeshReadOptions& o, bool verticesOnly);
-void readObj(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats,
-             const MeshReadOptions& o);
+void readPly(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats, const MeshReadOptions& o,
+             bool verticesOnly);
+void readOff(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats, const MeshReadOptions& o,
+             bool verticesOnly);
+void readObj(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats, const MeshReadOptions& o);
 void readStl(FileBuffer& f, Emitter& emit, MeshReadStats& stats);
 
 }  // namespace gimlod::meshio

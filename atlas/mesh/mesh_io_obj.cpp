@@ -35,21 +35,19 @@ class ObjReader : IndexedReader {
         while (n < 7 && t.next(tok)) {
           if (tok[0] == '#') break;
           if (!parseDouble(tok, c[n]))
-            fail(path_, "line " + std::to_string(f_.lineNumber()) + ": bad number " + shown(tok) +
-                            cutShort(f_));
+            fail(path_, "line " + std::to_string(f_.lineNumber()) + ": bad number " + shown(tok) + cutShort(f_));
           ++n;
         }
         if (n < 3)
-          fail(path_, "line " + std::to_string(f_.lineNumber()) + ": vertex needs 3 coordinates" +
-                          cutShort(f_));
+          fail(path_, "line " + std::to_string(f_.lineNumber()) + ": vertex needs 3 coordinates" + cutShort(f_));
         if (va_.pos.size() >= kMaxVertices ||
             (o_.maxVertexBytes != 0 && (va_.pos.size() + 1) * bytesPerVertex > o_.maxVertexBytes))
-          checkVertexBytes(path_, va_.pos.size() + 1, true, o_,
-                           "line " + std::to_string(f_.lineNumber()) + ": ");
-        const glm::vec3 p(static_cast<float>(c[0]), static_cast<float>(c[1]),
-                          static_cast<float>(c[2]));
-        if (finite(p)) info.bounds.extend(p);
-        else ++stats_.nonFiniteVertices;
+          checkVertexBytes(path_, va_.pos.size() + 1, true, o_, "line " + std::to_string(f_.lineNumber()) + ": ");
+        const glm::vec3 p(static_cast<float>(c[0]), static_cast<float>(c[1]), static_cast<float>(c[2]));
+        if (finite(p))
+          info.bounds.extend(p);
+        else
+          ++stats_.nonFiniteVertices;
         if (n >= 6) {
           if (va_.col.size() < va_.pos.size()) va_.col.resize(va_.pos.size(), kWhite);
           va_.col.push_back(colourFromFloat(c[3], c[4], c[5], 1.0));
@@ -69,19 +67,19 @@ class ObjReader : IndexedReader {
         int64_t idx = 0;
         auto [ptr, ec] = std::from_chars(tok.data(), e, idx);
         if (ec != std::errc() || (ptr != e && *ptr != '/'))
-          fail(path_, "line " + std::to_string(f_.lineNumber()) + ": bad face corner " +
-                          shown(tok) + cutShort(f_));
+          fail(path_, "line " + std::to_string(f_.lineNumber()) + ": bad face corner " + shown(tok) + cutShort(f_));
         const int64_t n = static_cast<int64_t>(va_.pos.size());
         const int64_t i = idx > 0 ? idx - 1 : n + idx;
         if (idx == 0 || i < 0 || i >= n)
-          fail(path_, "line " + std::to_string(f_.lineNumber()) + ": face " +
-                          std::to_string(face) + " (counting from 0): vertex index " +
-                          std::to_string(idx) + " is out of range (" + std::to_string(n) +
-                          " vertices defined before it)");
+          fail(path_, "line " + std::to_string(f_.lineNumber()) + ": face " + std::to_string(face) +
+                          " (counting from 0): vertex index " + std::to_string(idx) + " is out of range (" +
+                          std::to_string(n) + " vertices defined before it)");
         fan.push(static_cast<uint32_t>(i), emit_);
       }
-      if (fan.corners() < 3) ++stats_.shortFaces;
-      else if (fan.corners() > 3) ++stats_.polygonsFanned;
+      if (fan.corners() < 3)
+        ++stats_.shortFaces;
+      else if (fan.corners() > 3)
+        ++stats_.polygonsFanned;
     }
     if (!va_.col.empty()) va_.col.resize(va_.pos.size(), kWhite);
     stats_.vertices = va_.pos.size();
@@ -90,13 +88,11 @@ class ObjReader : IndexedReader {
     info.faces = stats_.faces;
     info.hasColours = stats_.hasColours;
   }
-
 };
 
 }  // namespace
 
-void readObj(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats,
-             const MeshReadOptions& o) {
+void readObj(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats, const MeshReadOptions& o) {
   ObjReader(f, emit, va, stats, o).run();
 }
 

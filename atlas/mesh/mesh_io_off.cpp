@@ -20,8 +20,10 @@ class OffReader : IndexedReader {
     if (kw.size() < 3 || kw.substr(kw.size() - 3) != "OFF")
       fail(path_, "not an OFF file (it does not start with 'OFF')");
     for (char c : kw.substr(0, kw.size() - 3)) {
-      if (c == 'C') colours_ = true;
-      else if (c == 'N') normals_ = true;
+      if (c == 'C')
+        colours_ = true;
+      else if (c == 'N')
+        normals_ = true;
       else if (c != 'S' && c != 'T')
         fail(path_, "unsupported OFF variant " + shown(kw) + " (4D and nD OFF)");
     }
@@ -37,17 +39,15 @@ class OffReader : IndexedReader {
       if (got == 0) t = Tokens{line};
       while (got < 3 && t.next(tok))
         if (!parseInt(tok, counts[got++])) fail(path_, "bad OFF counts " + shown(tok));
-      if (got < 2) fail(path_, "line " + std::to_string(f_.lineNumber()) +
-                                   ": want 'vertices faces [edges]' counts");
+      if (got < 2) fail(path_, "line " + std::to_string(f_.lineNumber()) + ": want 'vertices faces [edges]' counts");
     }
     if (counts[0] < 0 || counts[1] < 0) fail(path_, "negative OFF counts");
     const uint64_t nv = static_cast<uint64_t>(counts[0]), nf = static_cast<uint64_t>(counts[1]);
     // Each vertex line needs at least "0 0 0\n", each face line "0\n".
     const uint64_t body = f_.remaining();
     if (nv > (body + 1) / 6 || nf > (body + 1 - nv * 6) / 2 + 1)
-      fail(path_, "the header declares " + std::to_string(nv) + " vertices and " +
-                      std::to_string(nf) + " faces but only " + std::to_string(body) +
-                      " bytes follow (truncated or corrupt file)");
+      fail(path_, "the header declares " + std::to_string(nv) + " vertices and " + std::to_string(nf) +
+                      " faces but only " + std::to_string(body) + " bytes follow (truncated or corrupt file)");
     MeshInfo& info = stats_.info;
     info.format = MeshFormat::kOff;
     info.formatName = "OFF";
@@ -64,8 +64,7 @@ class OffReader : IndexedReader {
     stats_.vertexArrayBytes = nv * (colours_ ? 16 : 12);
     for (uint64_t i = 0; i < nv; ++i) {
       if (!dataLine(line))
-        fail(path_, "truncated: the file ends after " + std::to_string(i) + " of " +
-                        std::to_string(nv) + " vertices");
+        fail(path_, "truncated: the file ends after " + std::to_string(i) + " of " + std::to_string(nv) + " vertices");
       readVertex(line, i);
     }
     info.boundsKnown = true;
@@ -75,8 +74,7 @@ class OffReader : IndexedReader {
     FanDecoder fan;
     for (uint64_t i = 0; i < nf; ++i) {
       if (!dataLine(line))
-        fail(path_, "truncated: the file ends after " + std::to_string(i) + " of " +
-                        std::to_string(nf) + " faces");
+        fail(path_, "truncated: the file ends after " + std::to_string(i) + " of " + std::to_string(nf) + " faces");
       ++stats_.faces;
       Tokens ft{line};
       int64_t n = -1;
@@ -88,16 +86,18 @@ class OffReader : IndexedReader {
         int64_t idx;
         if (!ft.next(tok) || !parseInt(tok, idx))
           fail(path_, "line " + std::to_string(f_.lineNumber()) + ": face " + std::to_string(i) +
-                          " (counting from 0) declares " + std::to_string(n) +
-                          " corners but does not list them" + cutShort(f_));
+                          " (counting from 0) declares " + std::to_string(n) + " corners but does not list them" +
+                          cutShort(f_));
         if (idx < 0 || static_cast<uint64_t>(idx) >= nv)
           fail(path_, "line " + std::to_string(f_.lineNumber()) + ": face " + std::to_string(i) +
-                          " (counting from 0): vertex index " + std::to_string(idx) +
-                          " is out of range (" + std::to_string(nv) + " vertices)");
+                          " (counting from 0): vertex index " + std::to_string(idx) + " is out of range (" +
+                          std::to_string(nv) + " vertices)");
         fan.push(static_cast<uint32_t>(idx), emit_);
       }
-      if (n < 3) ++stats_.shortFaces;
-      else if (n > 3) ++stats_.polygonsFanned;
+      if (n < 3)
+        ++stats_.shortFaces;
+      else if (n > 3)
+        ++stats_.polygonsFanned;
     }
     if (dataLine(line)) warn(stats_, "text after the last OFF face ignored");
   }
@@ -126,8 +126,10 @@ class OffReader : IndexedReader {
     }
     const glm::vec3 p(static_cast<float>(v[0]), static_cast<float>(v[1]), static_cast<float>(v[2]));
     va_.pos[i] = p;
-    if (finite(p)) stats_.info.bounds.extend(p);
-    else ++stats_.nonFiniteVertices;
+    if (finite(p))
+      stats_.info.bounds.extend(p);
+    else
+      ++stats_.nonFiniteVertices;
     if (!colours_) return;
     if (normals_)
       for (int k = 0; k < 3; ++k) t.next(tok);
@@ -153,8 +155,8 @@ class OffReader : IndexedReader {
 
 }  // namespace
 
-void readOff(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats,
-             const MeshReadOptions& o, bool verticesOnly) {
+void readOff(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats, const MeshReadOptions& o,
+             bool verticesOnly) {
   OffReader(f, emit, va, stats, o).run(verticesOnly);
 }
 

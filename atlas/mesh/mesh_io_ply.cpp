@@ -12,9 +12,13 @@ enum class PlyType : uint8_t { kI8, kU8, kI16, kU16, kI32, kU32, kF32, kF64 };
 
 size_t plySize(PlyType t) {
   switch (t) {
-    case PlyType::kI8: case PlyType::kU8: return 1;
-    case PlyType::kI16: case PlyType::kU16: return 2;
-    case PlyType::kI32: case PlyType::kU32: case PlyType::kF32: return 4;
+    case PlyType::kI8:
+    case PlyType::kU8: return 1;
+    case PlyType::kI16:
+    case PlyType::kU16: return 2;
+    case PlyType::kI32:
+    case PlyType::kU32:
+    case PlyType::kF32: return 4;
     case PlyType::kF64: return 8;
   }
   return 0;
@@ -24,12 +28,10 @@ bool plyIsInt(PlyType t) { return t != PlyType::kF32 && t != PlyType::kF64; }
 
 bool plyTypeFromName(std::string_view s, PlyType& t) {
   static const std::pair<const char*, PlyType> kNames[] = {
-      {"char", PlyType::kI8},    {"int8", PlyType::kI8},     {"uchar", PlyType::kU8},
-      {"uint8", PlyType::kU8},   {"short", PlyType::kI16},   {"int16", PlyType::kI16},
-      {"ushort", PlyType::kU16}, {"uint16", PlyType::kU16},  {"int", PlyType::kI32},
-      {"int32", PlyType::kI32},  {"uint", PlyType::kU32},    {"uint32", PlyType::kU32},
-      {"float", PlyType::kF32},  {"float32", PlyType::kF32}, {"double", PlyType::kF64},
-      {"float64", PlyType::kF64}};
+      {"char", PlyType::kI8},   {"int8", PlyType::kI8},     {"uchar", PlyType::kU8},   {"uint8", PlyType::kU8},
+      {"short", PlyType::kI16}, {"int16", PlyType::kI16},   {"ushort", PlyType::kU16}, {"uint16", PlyType::kU16},
+      {"int", PlyType::kI32},   {"int32", PlyType::kI32},   {"uint", PlyType::kU32},   {"uint32", PlyType::kU32},
+      {"float", PlyType::kF32}, {"float32", PlyType::kF32}, {"double", PlyType::kF64}, {"float64", PlyType::kF64}};
   for (const auto& [n, v] : kNames)
     if (s == n) {
       t = v;
@@ -93,13 +95,11 @@ uint64_t plyMinInstanceBytes(const PlyElement& e, bool ascii) {
 PlyHeader readPlyHeader(FileBuffer& f) {
   const fs::path& path = f.path();
   std::string_view line;
-  if (!f.nextLine(line) || line != "ply")
-    fail(path, "not a PLY file (the first line is not 'ply')");
+  if (!f.nextLine(line) || line != "ply") fail(path, "not a PLY file (the first line is not 'ply')");
   PlyHeader h;
   bool haveFormat = false, done = false;
   while (!done) {
-    if (f.offset() > (uint64_t{1} << 20))
-      fail(path, "bad PLY header: no 'end_header' in the first MiB");
+    if (f.offset() > (uint64_t{1} << 20)) fail(path, "bad PLY header: no 'end_header' in the first MiB");
     if (!f.nextLine(line)) fail(path, "bad PLY header: the file ends before 'end_header'");
     if (f.lineUnterminated() && line != "end_header")
       fail(path, "bad PLY header: the file ends before 'end_header', in the middle of header line " +
@@ -113,16 +113,19 @@ PlyHeader readPlyHeader(FileBuffer& f) {
       done = true;
     } else if (kw == "format") {
       if (!t.next(a) || !t.next(b)) fail(path, where + ": bad format line");
-      if (a == "ascii") h.encoding = PlyHeader::kAscii;
-      else if (a == "binary_little_endian") h.encoding = PlyHeader::kLittle;
-      else if (a == "binary_big_endian") h.encoding = PlyHeader::kBig;
-      else fail(path, where + ": unsupported PLY format " + shown(a));
+      if (a == "ascii")
+        h.encoding = PlyHeader::kAscii;
+      else if (a == "binary_little_endian")
+        h.encoding = PlyHeader::kLittle;
+      else if (a == "binary_big_endian")
+        h.encoding = PlyHeader::kBig;
+      else
+        fail(path, where + ": unsupported PLY format " + shown(a));
       if (b != "1.0" && b != "1") fail(path, where + ": unsupported PLY version " + shown(b));
       haveFormat = true;
     } else if (kw == "element") {
       int64_t n = -1;
-      if (!t.next(a) || !t.next(b))
-        fail(path, where + ": bad element line (want 'element NAME COUNT')");
+      if (!t.next(a) || !t.next(b)) fail(path, where + ": bad element line (want 'element NAME COUNT')");
       if (!parseInt(b, n) || n < 0) {
         const bool digits = !b.empty() && b.find_first_not_of("0123456789") == std::string_view::npos;
         fail(path, where + ": bad element line (want 'element NAME COUNT'): the count " + shown(b) +
@@ -139,16 +142,12 @@ PlyHeader readPlyHeader(FileBuffer& f) {
       if (a == "list") {
         if (!t.next(b) || !t.next(c) || !t.next(d)) fail(path, where + ": bad list property line");
         p.list = true;
-        if (!plyTypeFromName(b, p.countType))
-          fail(path, where + ": unknown PLY property type " + shown(b));
-        if (!plyTypeFromName(c, p.type))
-          fail(path, where + ": unknown PLY property type " + shown(c));
-        if (!plyIsInt(p.countType))
-          fail(path, where + ": list count type " + shown(b) + " is not an integer type");
+        if (!plyTypeFromName(b, p.countType)) fail(path, where + ": unknown PLY property type " + shown(b));
+        if (!plyTypeFromName(c, p.type)) fail(path, where + ": unknown PLY property type " + shown(c));
+        if (!plyIsInt(p.countType)) fail(path, where + ": list count type " + shown(b) + " is not an integer type");
         p.name = std::string(d);
       } else {
-        if (!plyTypeFromName(a, p.type))
-          fail(path, where + ": unknown PLY property type " + shown(a));
+        if (!plyTypeFromName(a, p.type)) fail(path, where + ": unknown PLY property type " + shown(a));
         if (!t.next(b)) fail(path, where + ": property without a name");
         p.name = std::string(b);
       }
@@ -168,20 +167,16 @@ PlyHeader readPlyHeader(FileBuffer& f) {
       e.kind = PlyElement::kVertex;
       vertexAt = static_cast<int>(i);
       for (const char* axis : {"x", "y", "z"}) {
-        auto it = std::find_if(e.props.begin(), e.props.end(),
-                               [&](const PlyProp& p) { return p.name == axis; });
-        if (it == e.props.end())
-          fail(path, std::string("PLY vertex element has no '") + axis + "'");
+        auto it = std::find_if(e.props.begin(), e.props.end(), [&](const PlyProp& p) { return p.name == axis; });
+        if (it == e.props.end()) fail(path, std::string("PLY vertex element has no '") + axis + "'");
         if (it->list) fail(path, std::string("PLY vertex property '") + axis + "' is a list");
       }
     } else if (e.name == "face" || e.name == "tristrips") {
       e.kind = e.name == "face" ? PlyElement::kFace : PlyElement::kStrips;
       for (size_t k = 0; k < e.props.size(); ++k)
-        if (e.props[k].name == "vertex_indices" ||
-            (e.kind == PlyElement::kFace && e.props[k].name == "vertex_index"))
+        if (e.props[k].name == "vertex_indices" || (e.kind == PlyElement::kFace && e.props[k].name == "vertex_index"))
           e.indexProp = static_cast<int>(k);
-      if (e.indexProp < 0)
-        fail(path, "PLY element '" + e.name + "' has no 'vertex_indices' property");
+      if (e.indexProp < 0) fail(path, "PLY element '" + e.name + "' has no 'vertex_indices' property");
       const PlyProp& ip = e.props[static_cast<size_t>(e.indexProp)];
       if (!ip.list || !plyIsInt(ip.type))
         fail(path, "PLY property '" + e.name + "." + ip.name + "' must be a list of integers");
@@ -189,10 +184,8 @@ PlyHeader readPlyHeader(FileBuffer& f) {
     }
   }
   if (vertexAt < 0) fail(path, "PLY file has no vertex element");
-  if (firstFaceAt < 0)
-    fail(path, "PLY file has no face or tristrips element (a point cloud, not a mesh)");
-  if (firstFaceAt < vertexAt)
-    fail(path, "PLY faces come before the vertices (not supported: faces are streamed)");
+  if (firstFaceAt < 0) fail(path, "PLY file has no face or tristrips element (a point cloud, not a mesh)");
+  if (firstFaceAt < vertexAt) fail(path, "PLY faces come before the vertices (not supported: faces are streamed)");
 
   const bool ascii = h.encoding == PlyHeader::kAscii;
   const uint64_t body = f.remaining();
@@ -200,15 +193,14 @@ PlyHeader readPlyHeader(FileBuffer& f) {
   for (const PlyElement& e : h.elements) {
     const uint64_t per = plyMinInstanceBytes(e, ascii);
     if (per != 0 && e.count > (body - std::min(need, body)) / per + 1)
-      fail(path, "the header declares " + std::to_string(e.count) + " '" + e.name +
-                     "' elements, needing at least " + std::to_string(e.count) + " x " +
-                     std::to_string(per) + " bytes, but only " + std::to_string(body) +
-                     " bytes follow the header (truncated or corrupt file)");
+      fail(path, "the header declares " + std::to_string(e.count) + " '" + e.name + "' elements, needing at least " +
+                     std::to_string(e.count) + " x " + std::to_string(per) + " bytes, but only " +
+                     std::to_string(body) + " bytes follow the header (truncated or corrupt file)");
     need += e.count * per;
   }
   if (need > body + (ascii ? 1 : 0))
-    fail(path, "truncated: the header's elements need at least " + std::to_string(need) +
-                   " bytes but only " + std::to_string(body) + " follow the header");
+    fail(path, "truncated: the header's elements need at least " + std::to_string(need) + " bytes but only " +
+                   std::to_string(body) + " follow the header");
   return h;
 }
 
@@ -232,13 +224,20 @@ PlyVertexLayout plyVertexLayout(const PlyElement& e) {
     const std::string& n = e.props[i].name;
     if (e.props[i].list) continue;
     const int k = static_cast<int>(i);
-    if (n == "x") l.x = k;
-    else if (n == "y") l.y = k;
-    else if (n == "z") l.z = k;
-    else if (n == "red" || n == "diffuse_red" || n == "r") l.r = k;
-    else if (n == "green" || n == "diffuse_green" || n == "g") l.g = k;
-    else if (n == "blue" || n == "diffuse_blue" || n == "b") l.b = k;
-    else if (n == "alpha" || n == "diffuse_alpha" || n == "a") l.a = k;
+    if (n == "x")
+      l.x = k;
+    else if (n == "y")
+      l.y = k;
+    else if (n == "z")
+      l.z = k;
+    else if (n == "red" || n == "diffuse_red" || n == "r")
+      l.r = k;
+    else if (n == "green" || n == "diffuse_green" || n == "g")
+      l.g = k;
+    else if (n == "blue" || n == "diffuse_blue" || n == "b")
+      l.b = k;
+    else if (n == "alpha" || n == "diffuse_alpha" || n == "a")
+      l.a = k;
   }
   return l;
 }
@@ -302,13 +301,11 @@ class PlyReader : IndexedReader {
     return "'" + e.name + "' element " + std::to_string(i);
   }
   [[noreturn]] void truncated(const PlyElement& e, uint64_t i) {
-    fail(path_, "truncated: the file ends in " + elementWhere(e, i) + " of " +
-                    std::to_string(e.count) + " (the header promises " + std::to_string(e.count) +
-                    ")");
+    fail(path_, "truncated: the file ends in " + elementWhere(e, i) + " of " + std::to_string(e.count) +
+                    " (the header promises " + std::to_string(e.count) + ")");
   }
   [[noreturn]] void badToken(const PlyElement& e, uint64_t i, std::string_view tok) {
-    fail(path_, "line " + std::to_string(f_.lineNumber()) + ": bad value " + shown(tok) +
-                    " in " + elementWhere(e, i));
+    fail(path_, "line " + std::to_string(f_.lineNumber()) + ": bad value " + shown(tok) + " in " + elementWhere(e, i));
   }
 
   // ASCII: next token as a number (truncated file if none).
@@ -341,8 +338,7 @@ class PlyReader : IndexedReader {
     stats_.hasColours = colours;
     stats_.vertexArrayBytes = e.count * (colours ? 16 : 12);
     std::vector<double> v(e.props.size(), 0.0);
-    const bool fixed =
-        std::none_of(e.props.begin(), e.props.end(), [](const PlyProp& p) { return p.list; });
+    const bool fixed = std::none_of(e.props.begin(), e.props.end(), [](const PlyProp& p) { return p.list; });
     std::vector<size_t> offs(e.props.size());
     size_t record = 0;
     for (size_t k = 0; k < e.props.size(); ++k) {
@@ -379,8 +375,8 @@ class PlyReader : IndexedReader {
             const int64_t n = plyInt(f_.data(), p.countType, swap_);
             f_.advance(plySize(p.countType));
             if (n < 0 || static_cast<uint64_t>(n) > f_.remaining() / plySize(p.type) ||
-              !f_.skip(static_cast<uint64_t>(n) * plySize(p.type)))
-            truncated(e, i);
+                !f_.skip(static_cast<uint64_t>(n) * plySize(p.type)))
+              truncated(e, i);
           } else {
             if (!f_.ensure(plySize(p.type))) truncated(e, i);
             v[k] = plyScalar(f_.data(), p.type, swap_);
@@ -388,11 +384,12 @@ class PlyReader : IndexedReader {
           }
         }
       }
-      const glm::vec3 pos(static_cast<float>(v[l.x]), static_cast<float>(v[l.y]),
-                          static_cast<float>(v[l.z]));
+      const glm::vec3 pos(static_cast<float>(v[l.x]), static_cast<float>(v[l.y]), static_cast<float>(v[l.z]));
       va_.pos[i] = pos;
-      if (finite(pos)) bounds.extend(pos);
-      else ++stats_.nonFiniteVertices;
+      if (finite(pos))
+        bounds.extend(pos);
+      else
+        ++stats_.nonFiniteVertices;
       if (colours) va_.col[i] = plyColour(v.data(), e, l);
     }
     stats_.info.boundsKnown = true;
@@ -418,8 +415,10 @@ class PlyReader : IndexedReader {
 
   void endList(const PlyElement& e) {
     if (e.kind == PlyElement::kFace) {
-      if (fan_.corners() < 3) ++stats_.shortFaces;
-      else if (fan_.corners() > 3) ++stats_.polygonsFanned;
+      if (fan_.corners() < 3)
+        ++stats_.shortFaces;
+      else if (fan_.corners() > 3)
+        ++stats_.polygonsFanned;
     }
   }
 
@@ -441,8 +440,10 @@ class PlyReader : IndexedReader {
           const int64_t n = asciiInt(e, i, tr_);
           if (n < 0) fail(path_, elementWhere(e, i) + ": negative list length");
           for (int64_t j = 0; j < n; ++j) {
-            if (isIndex) pushIndex(asciiInt(e, i, tr_), e, i);
-            else asciiNumber(e, i, tr_);
+            if (isIndex)
+              pushIndex(asciiInt(e, i, tr_), e, i);
+            else
+              asciiNumber(e, i, tr_);
           }
         } else {
           if (!p.list) {
@@ -533,8 +534,8 @@ class PlyReader : IndexedReader {
 
 }  // namespace
 
-void readPly(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats,
-             const MeshReadOptions& o, bool verticesOnly) {
+void readPly(FileBuffer& f, Emitter& emit, VertexArray& va, MeshReadStats& stats, const MeshReadOptions& o,
+             bool verticesOnly) {
   PlyReader(f, emit, va, stats, o).run(verticesOnly);
 }
 

@@ -32,14 +32,15 @@ bool stlIsBinary(FileBuffer& f) {
 
 class StlReader {
  public:
-  StlReader(FileBuffer& f, Emitter& emit, MeshReadStats& stats)
-      : f_(f), path_(f.path()), emit_(emit), stats_(stats) {}
+  StlReader(FileBuffer& f, Emitter& emit, MeshReadStats& stats) : f_(f), path_(f.path()), emit_(emit), stats_(stats) {}
 
   void run() {
     MeshInfo& info = stats_.info;
     info.format = MeshFormat::kStl;
-    if (stlIsBinary(f_)) runBinary();
-    else runAscii();
+    if (stlIsBinary(f_))
+      runBinary();
+    else
+      runAscii();
   }
 
  private:
@@ -53,11 +54,9 @@ class StlReader {
     f_.advance(84);
     const uint64_t need = 84 + 50 * uint64_t{count};
     if (f_.size() < need)
-      fail(path_, "truncated binary STL: the header promises " + std::to_string(count) +
-                      " facets (" + std::to_string(need) + " bytes) but the file has " +
-                      std::to_string(f_.size()) + " bytes");
-    if (f_.size() > need)
-      warn(stats_, std::to_string(f_.size() - need) + " bytes after the last STL facet ignored");
+      fail(path_, "truncated binary STL: the header promises " + std::to_string(count) + " facets (" +
+                      std::to_string(need) + " bytes) but the file has " + std::to_string(f_.size()) + " bytes");
+    if (f_.size() > need) warn(stats_, std::to_string(f_.size() - need) + " bytes after the last STL facet ignored");
     info.faces = count;
     info.triangleEstimate = count;
     emit_.begin(info);
@@ -67,8 +66,7 @@ class StlReader {
       constexpr bool kSwap = std::endian::native == std::endian::big;
       glm::vec3 p[3];
       for (int k = 0; k < 3; ++k)
-        for (int c = 0; c < 3; ++c)
-          p[k][c] = std::bit_cast<float>(loadSwapped<uint32_t>(d + 12 * k + 4 * c, kSwap));
+        for (int c = 0; c < 3; ++c) p[k][c] = std::bit_cast<float>(loadSwapped<uint32_t>(d + 12 * k + 4 * c, kSwap));
       f_.advance(50);
       ++stats_.faces;
       emit_.soup(p[0], p[1], p[2]);
@@ -90,8 +88,7 @@ class StlReader {
       // A bad last line without its line break: the file was cut in the middle of it.
       const auto bad = [&](const std::string& what) {
         if (f_.lineUnterminated())
-          fail(path_, "truncated ASCII STL: the file ends in the middle of " + where + " (" +
-                          what + ")");
+          fail(path_, "truncated ASCII STL: the file ends in the middle of " + where + " (" + what + ")");
         fail(path_, where + ": " + what);
       };
       if (tok == "vertex") {
@@ -100,8 +97,7 @@ class StlReader {
         for (double& v : c)
           if (!t.next(tok) || !parseDouble(tok, v)) bad("vertex needs 3 coordinates");
         if (corners < 3)
-          p[corners] = glm::vec3(static_cast<float>(c[0]), static_cast<float>(c[1]),
-                                 static_cast<float>(c[2]));
+          p[corners] = glm::vec3(static_cast<float>(c[0]), static_cast<float>(c[1]), static_cast<float>(c[2]));
         ++corners;
       } else if (tok == "facet") {
         if (inFacet) fail(path_, where + ": 'facet' inside a facet (missing 'endfacet')");
@@ -110,8 +106,8 @@ class StlReader {
       } else if (tok == "endfacet") {
         if (!inFacet) fail(path_, where + ": 'endfacet' without 'facet'");
         if (corners != 3)
-          fail(path_, where + ": facet " + std::to_string(stats_.faces) + " has " +
-                          std::to_string(corners) + " vertices (STL facets are triangles)");
+          fail(path_, where + ": facet " + std::to_string(stats_.faces) + " has " + std::to_string(corners) +
+                          " vertices (STL facets are triangles)");
         inFacet = false;
         ++stats_.faces;
         emit_.soup(p[0], p[1], p[2]);
@@ -135,8 +131,6 @@ class StlReader {
 
 }  // namespace
 
-void readStl(FileBuffer& f, Emitter& emit, MeshReadStats& stats) {
-  StlReader(f, emit, stats).run();
-}
+void readStl(FileBuffer& f, Emitter& emit, MeshReadStats& stats) { StlReader(f, emit, stats).run(); }
 
 }  // namespace gimlod::meshio

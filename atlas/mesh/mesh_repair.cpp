@@ -241,8 +241,8 @@ Surface weldAndRepair(const std::vector<glm::vec3>& inPos, const std::vector<glm
       for (int k = 0; k < 3; ++k) {
         const uint32_t v = t[k];
         if (v >= inPos.size())
-          throw InputError(std::string(fn) + ": triangle index " + std::to_string(v) +
-                           " outside the " + std::to_string(inPos.size()) + " positions");
+          throw InputError(std::string(fn) + ": triangle index " + std::to_string(v) + " outside the " +
+                           std::to_string(inPos.size()) + " positions");
         if (remap[v] == kNone) {
           const glm::vec3& p = inPos[v];
           if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))

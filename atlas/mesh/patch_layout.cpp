@@ -133,14 +133,12 @@ std::vector<std::string> checkPatch(const PatchLayout& L, size_t pi, uint32_t mi
         fail(sn + ": open side on an interior edge");
     }
     if (S.neighbourPatch >= 0) {
-      if (size_t(S.neighbourPatch) >= L.patches.size() ||
-          S.neighbourSide >= L.patches[S.neighbourPatch].sides.size()) {
+      if (size_t(S.neighbourPatch) >= L.patches.size() || S.neighbourSide >= L.patches[S.neighbourPatch].sides.size()) {
         fail(sn + ": neighbour out of range");
         continue;
       }
       const PatchSide& O = L.patches[S.neighbourPatch].sides[S.neighbourSide];
-      if (O.neighbourPatch != int32_t(pi) || O.neighbourSide != si)
-        fail(sn + ": neighbour side does not point back");
+      if (O.neighbourPatch != int32_t(pi) || O.neighbourSide != si) fail(sn + ": neighbour side does not point back");
       std::vector<uint32_t> rev(S.vertices.rbegin(), S.vertices.rend());
       if (O.vertices != rev || !S.reversed) fail(sn + ": neighbour vertices not reversed");
     }
@@ -151,8 +149,7 @@ std::vector<std::string> checkPatch(const PatchLayout& L, size_t pi, uint32_t mi
 
 }  // namespace
 
-std::vector<std::string> validatePatchLayout(const PatchLayout& L, uint32_t minSides,
-                                             uint32_t maxSides) {
+std::vector<std::string> validatePatchLayout(const PatchLayout& L, uint32_t minSides, uint32_t maxSides) {
   std::vector<std::string> errs;
   auto addErr = [&](const std::string& m) {
     if (errs.size() < 100) errs.push_back(m);
@@ -185,8 +182,8 @@ std::vector<std::string> validatePatchLayout(const PatchLayout& L, uint32_t minS
         continue;
       }
       if (owner[f] >= 0)
-        addErr("triangle " + std::to_string(f) + ": in patches " + std::to_string(owner[f]) +
-             " and " + std::to_string(p));
+        addErr("triangle " + std::to_string(f) + ": in patches " + std::to_string(owner[f]) + " and " +
+               std::to_string(p));
       owner[f] = static_cast<int32_t>(p);
     }
   }

@@ -42,8 +42,8 @@ struct Patch {
 // exactly one patch; every side with a neighbour appears in both patches, reversed.
 struct PatchLayout {
   std::vector<glm::vec3> positions;
-  std::vector<glm::u8vec4> colours;                 // empty, or one per position
-  std::vector<std::array<uint32_t, 3>> triangles;   // counter-clockwise (outward normals)
+  std::vector<glm::u8vec4> colours;                // empty, or one per position
+  std::vector<std::array<uint32_t, 3>> triangles;  // counter-clockwise (outward normals)
   std::vector<Patch> patches;
 };
 
@@ -58,7 +58,6 @@ double meanSideLength(const PatchLayout& layout, uint32_t patch);
 // sides; the sides chained, corner to corner, exactly along the patch's counter-clockwise
 // boundary loop; neighbour sides reciprocal with reversed vertex lists; open sides only on edges
 // with a single triangle in the whole mesh.
-std::vector<std::string> validatePatchLayout(const PatchLayout& layout, uint32_t minSides = 3,
-                                             uint32_t maxSides = 8);
+std::vector<std::string> validatePatchLayout(const PatchLayout& layout, uint32_t minSides = 3, uint32_t maxSides = 8);
 
 }  // namespace gimlod

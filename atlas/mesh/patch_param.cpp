@@ -32,13 +32,13 @@ uint64_t edgeKey(uint32_t a, uint32_t b) { return (uint64_t{a} << 32) | b; }
 struct TriangleStretch {
   double areaParam = 0.0;  // signed
   double area3D = 0.0;
-  double l2sq = 0.0;       // (a + c) / 2
-  double gammaSq = 0.0;    // largest singular value squared
+  double l2sq = 0.0;     // (a + c) / 2
+  double gammaSq = 0.0;  // largest singular value squared
   bool degenerate = false;
 };
 
-TriangleStretch triangleStretch(const glm::dvec2& p1, const glm::dvec2& p2, const glm::dvec2& p3,
-                                const glm::dvec3& q1, const glm::dvec3& q2, const glm::dvec3& q3) {
+TriangleStretch triangleStretch(const glm::dvec2& p1, const glm::dvec2& p2, const glm::dvec2& p3, const glm::dvec3& q1,
+                                const glm::dvec3& q2, const glm::dvec3& q3) {
   TriangleStretch r;
   const glm::dvec2 e1 = p2 - p1, e2 = p3 - p1;
   const double twice = e1.x * e2.y - e2.x * e1.y;
@@ -72,7 +72,8 @@ LocalPatch buildLocalPatch(const PatchLayout& layout, uint32_t patchId) {
   if (patchId >= layout.patches.size()) fail(patchId, "no such patch");
   const Patch& patch = layout.patches[patchId];
   const uint32_t n = uint32_t(patch.sides.size());
-  if (n < 3 || n > kMaxPatchSides) fail(patchId, std::to_string(n) + " sides (3.." + std::to_string(kMaxPatchSides) + " supported)");
+  if (n < 3 || n > kMaxPatchSides)
+    fail(patchId, std::to_string(n) + " sides (3.." + std::to_string(kMaxPatchSides) + " supported)");
   if (patch.triangles.empty()) fail(patchId, "no triangles");
 
   LocalPatch lp;
@@ -124,15 +125,15 @@ LocalPatch buildLocalPatch(const PatchLayout& layout, uint32_t patchId) {
     const PatchSide& s = patch.sides[i];
     if (s.vertices.size() < 2) fail(patchId, "side " + std::to_string(i) + " has < 2 vertices");
     if (s.vertices.back() != patch.sides[(i + 1) % n].vertices.front()) {
-      fail(patchId, "side " + std::to_string(i) + " does not end where side " +
-                        std::to_string((i + 1) % n) + " starts");
+      fail(patchId,
+           "side " + std::to_string(i) + " does not end where side " + std::to_string((i + 1) % n) + " starts");
     }
     lp.cornerIndex[i] = uint32_t(lp.boundary.size());
     for (size_t k = 0; k + 1 < s.vertices.size(); ++k) {
       auto it = local.find(s.vertices[k]);
       if (it == local.end()) {
-        fail(patchId, "side " + std::to_string(i) + " vertex " + std::to_string(s.vertices[k]) +
-                          " is not in the patch");
+        fail(patchId,
+             "side " + std::to_string(i) + " vertex " + std::to_string(s.vertices[k]) + " is not in the patch");
       }
       if (seen[it->second]++) {
         fail(patchId, "boundary vertex " + std::to_string(s.vertices[k]) + " repeats");
@@ -144,13 +145,12 @@ LocalPatch buildLocalPatch(const PatchLayout& layout, uint32_t patchId) {
   for (size_t k = 0; k < nb; ++k) {
     const uint32_t a = lp.boundary[k], b = lp.boundary[(k + 1) % nb];
     if (!hasEdge(a, b) || hasEdge(b, a)) {
-      fail(patchId, "sides do not follow the boundary (edge " + std::to_string(lp.vertices[a]) +
-                        "-" + std::to_string(lp.vertices[b]) + ")");
+      fail(patchId, "sides do not follow the boundary (edge " + std::to_string(lp.vertices[a]) + "-" +
+                        std::to_string(lp.vertices[b]) + ")");
     }
   }
   if (boundaryEdges != nb) {
-    fail(patchId, "not a disk: " + std::to_string(boundaryEdges) + " boundary edges, sides hold " +
-                      std::to_string(nb));
+    fail(patchId, "not a disk: " + std::to_string(boundaryEdges) + " boundary edges, sides hold " + std::to_string(nb));
   }
   // Euler characteristic of a disk, and connectivity.
   const int64_t v = int64_t(lp.vertices.size()), f = int64_t(lp.triangles.size());
@@ -401,8 +401,7 @@ class InteriorSolver {
 std::vector<double> vertexStretch(const LocalPatch& lp, const std::vector<glm::dvec2>& uv) {
   std::vector<double> num(lp.vertices.size(), 0.0), den(lp.vertices.size(), 0.0);
   for (const auto& t : lp.triangles) {
-    const TriangleStretch s = triangleStretch(uv[t[0]], uv[t[1]], uv[t[2]], lp.xyz[t[0]],
-                                              lp.xyz[t[1]], lp.xyz[t[2]]);
+    const TriangleStretch s = triangleStretch(uv[t[0]], uv[t[1]], uv[t[2]], lp.xyz[t[0]], lp.xyz[t[1]], lp.xyz[t[2]]);
     if (s.degenerate || s.areaParam <= 0.0) continue;
     for (uint32_t v : t) {
       num[v] += s.area3D * s.l2sq;
@@ -427,8 +426,8 @@ std::vector<double> vertexStretch(const LocalPatch& lp, const std::vector<glm::d
 // The stretch energy of the triangles around vertex v with v at `at`, from their Gram matrices;
 // infinite if a parameter triangle would flip or collapse (Sander's barrier). With `gradient`,
 // also its exact derivative there.
-double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv, std::span<const uint32_t> ring,
-                  uint32_t v, const glm::dvec2& at, const std::vector<TriangleGram>& grams, double k2,
+double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv, std::span<const uint32_t> ring, uint32_t v,
+                  const glm::dvec2& at, const std::vector<TriangleGram>& grams, double k2,
                   glm::dvec2* gradient = nullptr) {
   double e = 0.0;
   if (gradient) *gradient = glm::dvec2(0.0);
@@ -450,8 +449,8 @@ double ringEnergy(const LocalPatch& lp, const std::vector<glm::dvec2>& uv, std::
 // ring's stretch energy (symmetric Dirichlet or L2), never accepting a step that flips a triangle. Gauss-Seidel sweeps
 // until the total energy stops dropping. Returns the sweeps run.
 uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>& isBoundary,
-                                const std::vector<glm::dvec2>& slide, uint32_t maxSweeps,
-                                bool symmetric, std::vector<glm::dvec2>& uv) {
+                                const std::vector<glm::dvec2>& slide, uint32_t maxSweeps, bool symmetric,
+                                std::vector<glm::dvec2>& uv) {
   // Each vertex's triangles, in compressed rows: ring v is rings[ringAt[v]] .. rings[ringAt[v + 1] - 1].
   const std::vector<uint32_t> ringAt = cornerRowStarts(lp, 1);
   std::vector<uint32_t> rings(ringAt.back());
@@ -482,7 +481,7 @@ uint32_t optimizeStretchLocally(const LocalPatch& lp, const std::vector<uint8_t>
       glm::dvec2 g(0.0);
       const double e0 = ringEnergy(lp, uv, ring, v, p, grams, k2, &g);
       if (slides) g = glm::dot(g, slide[v]) * slide[v];  // along its polygon edge only
-      if (!std::isfinite(e0)) continue;  // a flipped start: leave it to the counts
+      if (!std::isfinite(e0)) continue;                  // a flipped start: leave it to the counts
       before += e0;
       double scale = 0.0;  // mean distance to the ring's vertices in the parameter domain
       for (uint32_t t : ring) {
@@ -604,10 +603,12 @@ std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths, boo
     std::vector<double> pairs(n / 2);
     for (size_t j = 0; j < n / 2; ++j) pairs[j] = sideLengths[2 * j] + sideLengths[2 * j + 1];
     const double regular = 2.0 * std::numbers::pi / double(n / 2);
-    const std::vector<double> phi = proportionalAngles(pairs, 0.4 * regular, std::min(1.8 * regular, 0.75 * std::numbers::pi));
+    const std::vector<double> phi =
+        proportionalAngles(pairs, 0.4 * regular, std::min(1.8 * regular, 0.75 * std::numbers::pi));
     theta.resize(n);
     for (size_t j = 0; j < n / 2; ++j) {
-      const double f = pairs[j] > 0.0 && std::isfinite(pairs[j]) ? std::clamp(sideLengths[2 * j] / pairs[j], 0.2, 0.8) : 0.5;
+      const double f =
+          pairs[j] > 0.0 && std::isfinite(pairs[j]) ? std::clamp(sideLengths[2 * j] / pairs[j], 0.2, 0.8) : 0.5;
       theta[2 * j] = phi[j] * f;
       theta[2 * j + 1] = phi[j] - theta[2 * j];
     }
@@ -629,8 +630,7 @@ ParamQuality measureStretch(const std::vector<glm::dvec2>& uv, const std::vector
   ParamQuality q;
   double l2num = 0.0, gammaMax = 0.0;
   for (const auto& t : triangles) {
-    const TriangleStretch s =
-        triangleStretch(uv[t[0]], uv[t[1]], uv[t[2]], xyz[t[0]], xyz[t[1]], xyz[t[2]]);
+    const TriangleStretch s = triangleStretch(uv[t[0]], uv[t[1]], uv[t[2]], xyz[t[0]], xyz[t[1]], xyz[t[2]]);
     if (s.degenerate) {
       ++q.degenerateTriangles;
       continue;
@@ -688,7 +688,8 @@ SolveFigures solveMeanValue(const LocalPatch& lp, const std::vector<uint8_t>& is
   std::vector<glm::dvec2> trial = out.uv;
   for (uint32_t it = 0; it < options.stretchIterations; ++it) {
     const std::vector<double> sigma = vertexStretch(lp, trial);
-    for (size_t e = 0; e < weights.w.size(); ++e) weights.w[e] /= std::pow(sigma[weights.j[e]], options.stretchExponent);
+    for (size_t e = 0; e < weights.w.size(); ++e)
+      weights.w[e] /= std::pow(sigma[weights.j[e]], options.stretchExponent);
     if (!solver.solve(weights, trial)) break;
     const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
     const bool better = q.flippedTriangles <= out.quality.flippedTriangles &&
@@ -707,8 +708,7 @@ SolveFigures solveMeanValue(const LocalPatch& lp, const std::vector<uint8_t>& is
 
 }  // namespace
 
-PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patch,
-                                        const ParamOptions& options) {
+PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patch, const ParamOptions& options) {
   using Clock = std::chrono::steady_clock;
   const Clock::time_point start = Clock::now();
   LocalPatch lp = buildLocalPatch(layout, patch);
@@ -732,8 +732,7 @@ PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patc
     std::vector<double>& cum = arc[i];
     cum.assign(1, 0.0);
     for (size_t k = begin; k < end; ++k) {
-      cum.push_back(cum.back() + glm::length(lp.xyz[lp.boundary[(k + 1) % nb]] -
-                                             lp.xyz[lp.boundary[k]]));
+      cum.push_back(cum.back() + glm::length(lp.xyz[lp.boundary[(k + 1) % nb]] - lp.xyz[lp.boundary[k]]));
     }
     sideLength[i] = cum.back();
     if (!(sideLength[i] > 0.0)) fail(patch, "side " + std::to_string(i) + " has zero length");
@@ -766,8 +765,8 @@ PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patc
   const Clock::time_point solved = Clock::now();
   if (options.stretchSweeps > 0) {
     std::vector<glm::dvec2> trial = out.uv;
-    out.sweepsUsed = optimizeStretchLocally(lp, isBoundary, slide, options.stretchSweeps,
-                                            options.symmetricEnergy, trial);
+    out.sweepsUsed =
+        optimizeStretchLocally(lp, isBoundary, slide, options.stretchSweeps, options.symmetricEnergy, trial);
     const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
     // The symmetric energy trades a little L2 stretch for no spread-out slivers; it only ever
     // lowers its own energy, so it is kept unless it flips something.
@@ -779,11 +778,12 @@ PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patc
   }
 
   const auto seconds = [](Clock::duration d) { return std::chrono::duration<double>(d).count(); };
-  spdlog::debug("parameterized patch {} ({} triangles, {} sides): solves {:.2f} s ({} reweightings; LU of {} "
-                "unknowns, {} entries in {} precision), {} sweeps {:.2f} s, L2 stretch {:.3f} -> {:.3f}",
-                patch, lp.triangles.size(), n, seconds(solved - start), out.iterationsUsed, solve.unknowns,
-                solve.factorEntries, solve.inDouble ? "double" : "single", out.sweepsUsed,
-                seconds(Clock::now() - solved), out.initial.stretchL2, out.quality.stretchL2);
+  spdlog::debug(
+      "parameterized patch {} ({} triangles, {} sides): solves {:.2f} s ({} reweightings; LU of {} "
+      "unknowns, {} entries in {} precision), {} sweeps {:.2f} s, L2 stretch {:.3f} -> {:.3f}",
+      patch, lp.triangles.size(), n, seconds(solved - start), out.iterationsUsed, solve.unknowns, solve.factorEntries,
+      solve.inDouble ? "double" : "single", out.sweepsUsed, seconds(Clock::now() - solved), out.initial.stretchL2,
+      out.quality.stretchL2);
   out.vertices = std::move(lp.vertices);
   out.triangles = std::move(lp.triangles);
   out.boundary = std::move(lp.boundary);
@@ -792,9 +792,8 @@ PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patc
 }
 
 ParamQuality mapDiskOntoDomain(const std::vector<glm::dvec3>& xyz,
-                               const std::vector<std::array<uint32_t, 3>>& triangles,
-                               const std::vector<uint8_t>& fixed, const ParamOptions& options,
-                               std::vector<glm::dvec2>& uv) {
+                               const std::vector<std::array<uint32_t, 3>>& triangles, const std::vector<uint8_t>& fixed,
+                               const ParamOptions& options, std::vector<glm::dvec2>& uv) {
   if (fixed.size() != xyz.size() || uv.size() != xyz.size()) {
     throw std::invalid_argument("mapDiskOntoDomain: xyz, fixed and uv must have one entry per vertex");
   }
@@ -810,8 +809,8 @@ ParamQuality mapDiskOntoDomain(const std::vector<glm::dvec3>& xyz,
   ParamQuality quality = measureStretch(uv, lp.xyz, lp.triangles);
   if (options.stretchSweeps > 0) {
     std::vector<glm::dvec2> trial = uv;
-    optimizeStretchLocally(lp, fixed, std::vector<glm::dvec2>(xyz.size(), glm::dvec2(0.0)),
-                           options.stretchSweeps, options.symmetricEnergy, trial);
+    optimizeStretchLocally(lp, fixed, std::vector<glm::dvec2>(xyz.size(), glm::dvec2(0.0)), options.stretchSweeps,
+                           options.symmetricEnergy, trial);
     const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
     if (q.flippedTriangles <= quality.flippedTriangles) {
       uv = std::move(trial);

@@ -66,8 +66,8 @@ struct ParamOptions {
 // Linf = G (G >= g the singular values of the Jacobian), normalized by sqrt(area3D / areaParam)
 // so that 1 is an isometry up to a global scale (and the minimum).
 struct ParamQuality {
-  double stretchL2 = 1.0;        // sqrt(sum_T A3D(T) L2(T)^2 / sum A3D), normalized; >= 1
-  double stretchLinf = 1.0;      // max_T Linf(T), normalized
+  double stretchL2 = 1.0;            // sqrt(sum_T A3D(T) L2(T)^2 / sum A3D), normalized; >= 1
+  double stretchLinf = 1.0;          // max_T Linf(T), normalized
   uint32_t flippedTriangles = 0;     // negative parameter area (0 for a valid embedding)
   uint32_t degenerateTriangles = 0;  // zero parameter or 3D area (excluded from the stretch)
   double area3D = 0.0;               // surface area of the valid triangles
@@ -78,18 +78,18 @@ struct ParamQuality {
 // whose centre, the origin, is strictly inside.
 struct PatchParameterization {
   uint32_t patch = 0;
-  uint32_t sides = 0;                                 // n, 3..kMaxPatchSides
-  std::vector<glm::dvec2> corners;                    // n domain corners, CCW
-  std::vector<uint32_t> vertices;                     // local -> PatchLayout vertex id
-  std::vector<glm::dvec2> uv;                         // per local vertex, in the n-gon
-  std::vector<std::array<uint32_t, 3>> triangles;     // local ids, patch triangle order
-  std::vector<uint32_t> boundary;                     // local ids of the boundary loop (CCW),
-                                                      // starting at corner 0
-  std::vector<uint32_t> cornerIndex;                  // n entries: position in `boundary`
-  ParamQuality initial;                               // the mean-value embedding
-  ParamQuality quality;                               // the result
-  uint32_t iterationsUsed = 0;                        // reweighting passes kept
-  uint32_t sweepsUsed = 0;                            // local optimization sweeps run
+  uint32_t sides = 0;                              // n, 3..kMaxPatchSides
+  std::vector<glm::dvec2> corners;                 // n domain corners, CCW
+  std::vector<uint32_t> vertices;                  // local -> PatchLayout vertex id
+  std::vector<glm::dvec2> uv;                      // per local vertex, in the n-gon
+  std::vector<std::array<uint32_t, 3>> triangles;  // local ids, patch triangle order
+  std::vector<uint32_t> boundary;                  // local ids of the boundary loop (CCW),
+                                                   // starting at corner 0
+  std::vector<uint32_t> cornerIndex;               // n entries: position in `boundary`
+  ParamQuality initial;                            // the mean-value embedding
+  ParamQuality quality;                            // the result
+  uint32_t iterationsUsed = 0;                     // reweighting passes kept
+  uint32_t sweepsUsed = 0;                         // local optimization sweeps run
 };
 
 // A triangle's 3D edges from its first vertex, e1 = q1 - q0 and e2 = q2 - q0, as their Gram
@@ -135,8 +135,7 @@ std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths, boo
 // note: sides are straight polygon edges, so a triangle with all three vertices on one side (an
 // "ear" of a zig-zag side) gets zero parameter area: it is counted in degenerateTriangles and
 // its surface is squeezed into the side (no flips, no seams; a local sampling distortion).
-PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patch,
-                                        const ParamOptions& options = {});
+PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patch, const ParamOptions& options = {});
 
 // A triangulated disk (surface points xyz, triangles counter-clockwise in the domain) mapped
 // onto a convex domain whose border vertices are given: `fixed` flags them and uv holds their
@@ -145,9 +144,8 @@ PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patc
 // triangle. uv receives every vertex; returns the map's quality. Throws std::invalid_argument if
 // the sizes disagree or the system cannot be solved.
 ParamQuality mapDiskOntoDomain(const std::vector<glm::dvec3>& xyz,
-                               const std::vector<std::array<uint32_t, 3>>& triangles,
-                               const std::vector<uint8_t>& fixed, const ParamOptions& options,
-                               std::vector<glm::dvec2>& uv);
+                               const std::vector<std::array<uint32_t, 3>>& triangles, const std::vector<uint8_t>& fixed,
+                               const ParamOptions& options, std::vector<glm::dvec2>& uv);
 
 // Sander et al. stretch of the map from parameter triangles `uv` to surface triangles `xyz`
 // (same indexing). Shared by the parameterization and the resampler's image quality.

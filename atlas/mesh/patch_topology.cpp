@@ -36,8 +36,7 @@ struct CutSearch {
 }  // namespace
 
 uint32_t PatchGraph::triangleOf(uint64_t key) const {
-  const auto it = std::lower_bound(edgeTriangles.begin(), edgeTriangles.end(),
-                                   std::pair<uint64_t, uint32_t>{key, 0u});
+  const auto it = std::lower_bound(edgeTriangles.begin(), edgeTriangles.end(), std::pair<uint64_t, uint32_t>{key, 0u});
   return it != edgeTriangles.end() && it->first == key ? it->second : ~0u;
 }
 

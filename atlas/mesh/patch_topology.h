@@ -74,8 +74,7 @@ struct PatchGraph {
   // The patch's triangle holding directed edge `key`, ~0u if none.
   uint32_t triangleOf(uint64_t key) const;
   // The interior neighbours of vertex u, as a range of `adjacency`.
-  std::pair<const std::pair<uint32_t, uint32_t>*, const std::pair<uint32_t, uint32_t>*> neighboursOf(
-      uint32_t u) const;
+  std::pair<const std::pair<uint32_t, uint32_t>*, const std::pair<uint32_t, uint32_t>*> neighboursOf(uint32_t u) const;
 };
 
 // The graph of `patch` (its triangles and sides) in `layout`. Without withPaths, no adjacency:
@@ -92,8 +91,8 @@ struct Paths {
 // positions). It may stop early, once `target` is settled, or once `boundaryEnds` boundary
 // vertices are: the paths to settled vertices are then final, and every other vertex in `dist`
 // is at least as far as any settled one (so the nearest ends are exactly known). ~0u: no target.
-Paths shortestCuts(const PatchLayout& layout, const PatchGraph& g, uint32_t source,
-                   uint32_t target = ~0u, size_t boundaryEnds = std::numeric_limits<size_t>::max());
+Paths shortestCuts(const PatchLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target = ~0u,
+                   size_t boundaryEnds = std::numeric_limits<size_t>::max());
 
 // The shortest interior path from `source` to `target`, if one is shorter than `bound`: the
 // search of shortestCuts(layout, g, source, target), but a vertex u whose distance plus its
@@ -103,8 +102,7 @@ Paths shortestCuts(const PatchLayout& layout, const PatchGraph& g, uint32_t sour
 // that path a distance longer than its own. So g need only hold the triangles with a vertex u
 // closer to both ends than `bound` (|source - u| + |u - target| < bound): every edge of every
 // vertex the search goes through.
-Paths shortestCutWithin(const PatchLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target,
-                        double bound);
+Paths shortestCutWithin(const PatchLayout& layout, const PatchGraph& g, uint32_t source, uint32_t target, double bound);
 
 // The triangles of `triangles` (layout ids, in their order) with a vertex u closer to both
 // `source` and `target` together than `bound` (|source - u| + |u - target| < bound, with a margin

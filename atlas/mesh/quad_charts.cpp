@@ -33,14 +33,13 @@ uint64_t meshRepairWorkBudget(double repairBudget, uint64_t layoutTriangles) {
   return uint64_t(std::llround(repairBudget * double(std::min(layoutTriangles, kRepairTrianglesCounted))));
 }
 
-double meshSampleCap(uint64_t triangles) {
-  return std::max(kMaxSamplesPerTriangle * double(triangles), kMinSampleCap);
-}
+double meshSampleCap(uint64_t triangles) { return std::max(kMaxSamplesPerTriangle * double(triangles), kMinSampleCap); }
 
 uint32_t patchChartSizeForDensity(uint64_t triangles, uint64_t quads, uint32_t smallest, uint32_t largest) {
   const double wanted = kSamplesPerTriangle * double(triangles);
   uint32_t intervals = smallest - 1;
-  while (intervals + 1 < largest && double(std::max<uint64_t>(quads, 1)) * intervals * intervals < wanted) intervals *= 2;
+  while (intervals + 1 < largest && double(std::max<uint64_t>(quads, 1)) * intervals * intervals < wanted)
+    intervals *= 2;
   return intervals + 1;
 }
 
@@ -102,22 +101,22 @@ void checkChartRoom(const PatchLayout& layout, uint64_t quads, const QuadChartOp
   const uint64_t threads = threadCount(o);
   const uint64_t inFlight = chartsInFlightBytes(layout, o);
   if (inFlight > o.maxMemory)
-    throw InputError(fmt::format("{}: quad charts of {}^2 samples need {:.1f} GiB of geometry images at once "
-                                 "({} threads), more than {} ({:.1f} GiB): lower {} or {}, or raise {}",
-                                 o.input.string(), o.chartSize, double(inFlight) / double(1ull << 30), threads,
-                                 optionRef("maxMemory"), double(o.maxMemory) / double(1ull << 30),
-                                 optionRef("chartSize"), optionRef("threads"), optionRef("maxMemory")));
+    throw InputError(
+        fmt::format("{}: quad charts of {}^2 samples need {:.1f} GiB of geometry images at once "
+                    "({} threads), more than {} ({:.1f} GiB): lower {} or {}, or raise {}",
+                    o.input.string(), o.chartSize, double(inFlight) / double(1ull << 30), threads,
+                    optionRef("maxMemory"), double(o.maxMemory) / double(1ull << 30), optionRef("chartSize"),
+                    optionRef("threads"), optionRef("maxMemory")));
   const uint64_t disk = quads * samples * perSample * 3;  // the spill, and chart files a third larger
   std::error_code ec;
   const fs::space_info space = fs::space(dir, ec);
   if (!ec && disk > space.available)
-    throw InputError(fmt::format("{}: {} quad charts of {}^2 samples need about {:.1f} GiB of disk in {}, which has "
-                                 "{:.1f} GiB free: lower {} or {}",
-                                 o.input.string(), quads, o.chartSize, double(disk) / double(1ull << 30),
-                                 dir.parent_path().string(), double(space.available) / double(1ull << 30),
-                                 optionRef("chartSize"), optionRef("patches")));
+    throw InputError(
+        fmt::format("{}: {} quad charts of {}^2 samples need about {:.1f} GiB of disk in {}, which has "
+                    "{:.1f} GiB free: lower {} or {}",
+                    o.input.string(), quads, o.chartSize, double(disk) / double(1ull << 30), dir.parent_path().string(),
+                    double(space.available) / double(1ull << 30), optionRef("chartSize"), optionRef("patches")));
 }
-
 
 // What the patches' parameterizations may hold at once (ParamGate): maxMemory less what the
 // process holds now (once the heap has handed freed pages back), the parameterization cache's
@@ -180,7 +179,8 @@ std::string quadMapName(MeshQuadMap m) {
 
 // The resampler's options for `quads` from the quad chart options (the chart size set by the
 // caller), for a layout of `bounds`.
-ResampleOptions resampleOptions(const QuadChartOptions& o, QuadLayout quads, ChartSpill* spill, const MeshBounds& bounds) {
+ResampleOptions resampleOptions(const QuadChartOptions& o, QuadLayout quads, ChartSpill* spill,
+                                const MeshBounds& bounds) {
   ResampleOptions ro;
   if (o.positionStep) ro.minSampleGap = 2.0 * o.positionStep(bounds);
   ro.threads = o.threads;
@@ -209,9 +209,10 @@ void countTwoQuadCorners(const PatchLayout& layout, const QuadChartOptions& o, M
   if (!st.sideQuads) return;
   st.twoQuadCorners = twoQuadCorners(layout);
   if (st.twoQuadCorners > 0)
-    spdlog::warn("{}: {} corners of the sides quad layout have only two charts meeting (their corner texels fold "
-                 "flat onto each other)",
-                 o.input.string(), st.twoQuadCorners);
+    spdlog::warn(
+        "{}: {} corners of the sides quad layout have only two charts meeting (their corner texels fold "
+        "flat onto each other)",
+        o.input.string(), st.twoQuadCorners);
 }
 
 // The figures a build reports of its charts, from the set.
@@ -247,8 +248,9 @@ ResampledMesh resampleInLayout(PatchLayout& layout, const QuadChartOptions& opti
     st.densityChartSize = o.chartSize;
     if (size > 0) o.chartSize = size;
     spdlog::info("chart size {}{} for {} quad charts ({}) of {} triangles ({:.1f} samples per triangle)", o.chartSize,
-                 o.chartSize != st.densityChartSize ? fmt::format(" (doubled from the density's {})", st.densityChartSize)
-                                                    : std::string(),
+                 o.chartSize != st.densityChartSize
+                     ? fmt::format(" (doubled from the density's {})", st.densityChartSize)
+                     : std::string(),
                  quadCharts, st.sideQuads ? "sides" : "kites", layout.triangles.size(),
                  samplesPerTriangle(layout, quadCharts, o.chartSize));
   }
@@ -273,7 +275,8 @@ ResampledMesh resampleInLayout(PatchLayout& layout, const QuadChartOptions& opti
     try {
       checkChartRoom(layout, charts, larger, dir);
     } catch (const InputError& e) {
-      spdlog::info("chart size stays {}: {}", o.chartSize, o.spellOption ? e.message(o.spellOption) : std::string(e.what()));
+      spdlog::info("chart size stays {}: {}", o.chartSize,
+                   o.spellOption ? e.message(o.spellOption) : std::string(e.what()));
       return false;
     }
     spdlog::info("chart size {} -> {}: {}", o.chartSize, larger.chartSize, why);
@@ -296,13 +299,14 @@ ResampledMesh resampleInLayout(PatchLayout& layout, const QuadChartOptions& opti
   while (grow && st.chartSizeByDensity && maxError > 0.0 && o.chartSize < kMaxDensityChartSize) {
     const std::vector<uint8_t> over = patchesOverSampleError(first, layout.patches.size(), maxError);
     uint64_t overTriangles = 0;
-    for (uint32_t p = 0; p < layout.patches.size(); ++p) overTriangles += over[p] ? layout.patches[p].triangles.size() : 0;
+    for (uint32_t p = 0; p < layout.patches.size(); ++p)
+      overTriangles += over[p] ? layout.patches[p].triangles.size() : 0;
     if (double(overTriangles) <= kCoarseSurfaceToDouble * double(layout.triangles.size()) ||
         atSampleCap(layout, first.charts.size(), o.chartSize))
       break;
-    const std::string why =
-        fmt::format("patches with {:.0f}% of the triangles sample the surface more coarsely than {:.4f}% of the diagonal",
-                    100.0 * double(overTriangles) / double(layout.triangles.size()), 100.0 * o.maxSampleError);
+    const std::string why = fmt::format(
+        "patches with {:.0f}% of the triangles sample the surface more coarsely than {:.4f}% of the diagonal",
+        100.0 * double(overTriangles) / double(layout.triangles.size()), 100.0 * o.maxSampleError);
     if (!doubleChartSize(quadCharts, why, nullptr)) break;
   }
   st.chartSize = o.chartSize;
@@ -326,9 +330,9 @@ ResampledMesh resampleInLayout(PatchLayout& layout, const QuadChartOptions& opti
         st.repair.stoppedForWork || st.repair.stoppedForMemory || o.chartSize >= kMaxDensityChartSize ||
         atSampleCap(layout, r.set.charts.size(), o.chartSize))
       break;
-    const std::string why = fmt::format("the repair left a sampling error of {:.4f}% of the diagonal (bound {:.4f}%)",
-                                        100.0 * r.set.image.sampleError / std::max(diagonal, 1e-300),
-                                        100.0 * o.maxSampleError);
+    const std::string why =
+        fmt::format("the repair left a sampling error of {:.4f}% of the diagonal (bound {:.4f}%)",
+                    100.0 * r.set.image.sampleError / std::max(diagonal, 1e-300), 100.0 * o.maxSampleError);
     if (!doubleChartSize(layoutQuadCount(layout, quads), why, &unrepaired)) break;
     ++st.repairDoublings;
     st.repair = {};
@@ -336,18 +340,19 @@ ResampledMesh resampleInLayout(PatchLayout& layout, const QuadChartOptions& opti
   st.chartSize = o.chartSize;
   const GeometryImageSet& set = r.set;
   if (spdlog::should_log(spdlog::level::debug)) logFoldingCharts(layout, set);
-  const std::string left = fmt::format("{} flipped texels left, largest sampling error {:.4f}% of the diagonal",
-                                       set.image.flippedTexels,
-                                       100.0 * set.image.sampleError / std::max(diagonal, 1e-300));
+  const std::string left =
+      fmt::format("{} flipped texels left, largest sampling error {:.4f}% of the diagonal", set.image.flippedTexels,
+                  100.0 * set.image.sampleError / std::max(diagonal, 1e-300));
   if (st.repair.stoppedForMemory)
     spdlog::warn("{}: the chart repair stopped at 3/4 of {} ({}); raise {} to repair more", o.input.string(),
                  spelled(o, "maxMemory"), left, spelled(o, "maxMemory"));
   st.repairWork = double(st.repair.trianglesWholeRounds + st.repair.trianglesTrials) /
                   double(std::max<uint64_t>(layoutTriangles, 1));
   if (st.repair.stoppedForWork)
-    spdlog::warn("{}: the chart repair stopped at its budget, {:.2f} times the surface's triangles parameterized "
-                 "again ({}); raise {} to repair more",
-                 o.input.string(), st.repairWork, left, spelled(o, "repairBudget"));
+    spdlog::warn(
+        "{}: the chart repair stopped at its budget, {:.2f} times the surface's triangles parameterized "
+        "again ({}); raise {} to repair more",
+        o.input.string(), st.repairWork, left, spelled(o, "repairBudget"));
   st.patches = layout.patches.size();
   countTwoQuadCorners(layout, o, st);
   finishStage(meter, "chart_repair" + suffix);
@@ -371,7 +376,7 @@ struct PatchSizing {
     bool settled = false;     // neither doubled nor cut again
     bool uncuttable = false;  // no cut was found, or none that folds less
     bool cutAsked = false;    // it cannot grow: cut it next round
-    uint32_t cuts = 0;     // cuts on the way from a charted patch
+    uint32_t cuts = 0;        // cuts on the way from a charted patch
   };
   PatchLayout& layout;
   ResampleOptions ro;
@@ -465,7 +470,8 @@ struct PatchSizing {
   uint32_t worstTriangle(uint32_t p) const {
     const GeometryImage* worst = nullptr;
     for (const GeometryImage& g : patches[p].charts)
-      if (g.quality.sampleErrorVertex != ~0u && (!worst || g.quality.sampleError > worst->quality.sampleError)) worst = &g;
+      if (g.quality.sampleErrorVertex != ~0u && (!worst || g.quality.sampleError > worst->quality.sampleError))
+        worst = &g;
     if (!worst) return ~0u;
     return patchTriangleAt(layout, p, worst->quality.sampleErrorVertex);
   }
@@ -490,7 +496,8 @@ struct PatchSizing {
       if (worst == ~0u) return false;
       done = splitPatchThrough(layout, p, worst, maxSides);
     } else {
-      done = fold != ~0u ? splitPatchThrough(layout, p, fold, maxSides) : halvePatch(layout, p, maxSides, sides ? 4 : 0);
+      done =
+          fold != ~0u ? splitPatchThrough(layout, p, fold, maxSides) : halvePatch(layout, p, maxSides, sides ? 4 : 0);
       if (!done) layout.patches = saved;  // (a failed cut may have left a corner)
       done = done || splitPatchAtNeck(layout, p);
     }
@@ -605,7 +612,8 @@ constexpr uint32_t kMaxSizingCuts = 4;
 
 // Per-patch sizing, after the first resampling. Each patch whose charts sample the surface more
 // coarsely than `bound` is resampled at twice the size, up to kMaxDensityChartSize, the samples
-// `cap`, and texel sides of ResampleOptions::minSampleGap. A patch is cut at its neck instead, its parts starting again at `base`, where:
+// `cap`, and texel sides of ResampleOptions::minSampleGap. A patch is cut at its neck instead, its parts starting again
+// at `base`, where:
 //   - a doubling did not halve its sampling error (a smooth surface's drops about four times: this
 //     one's parameterization squeezes it), or it cannot grow;
 //   - its charts fold, or a doubling made them fold more (the finer texels resolve a fold of the
@@ -640,8 +648,8 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
       // Below the layout's density size a patch's error comes from its creases and kinked sides as
       // much as from its map, and falls only with the texel size: there a doubling that does not
       // halve it is no squeeze.
-      const bool squeezing = doubled && err > bound && e.previousSize >= base &&
-                             err > 0.5 * PatchSizing::worstError(e.previousCharts);
+      const bool squeezing =
+          doubled && err > bound && e.previousSize >= base && err > 0.5 * PatchSizing::worstError(e.previousCharts);
       if ((flips > 0 || squeezing || e.cutAsked) && mayCut(e))
         squeezed.push_back({double(flips) + err / bound, p});
       else if (err > bound)
@@ -687,10 +695,10 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
       // on one line.
       double shortest = std::numeric_limits<double>::infinity();
       for (const GeometryImage& g : e.charts) shortest = std::min(shortest, g.quality.shortestTexelSide);
-      uint32_t* stop = e.size >= kMaxDensityChartSize         ? &st.patchesAtLargestSize
-                       : samples + growth > cap                ? &st.patchesAtSampleCap
+      uint32_t* stop = e.size >= kMaxDensityChartSize       ? &st.patchesAtLargestSize
+                       : samples + growth > cap             ? &st.patchesAtSampleCap
                        : 0.5 * shortest < z.ro.minSampleGap ? &st.patchesAtLattice
-                                                               : nullptr;
+                                                            : nullptr;
       if (!stop) {
         try {
           checkChartRoom(z.layout, e.charts.size(), room, dir);
@@ -755,13 +763,15 @@ ResampledMesh resamplePerPatch(PatchLayout& layout, const QuadChartOptions& o, Q
   for (const glm::vec3& q : layout.positions) r.bounds.extend(q);
   const double bound = (o.maxSampleError == kAutoSampleError ? kDefaultSampleError : o.maxSampleError) * diagonal;
   st.maxSampleError = bound;
-  spdlog::info("charts from {}^2 for {} quad charts ({}) of {} triangles ({:.1f} samples per triangle), each patch's "
-               "doubled while they sample the surface more coarsely than {:.4f}% of the diagonal",
-               base, quadCharts, st.sideQuads ? "sides" : "kites", layout.triangles.size(),
-               samplesPerTriangle(layout, quadCharts, base), 100.0 * bound / std::max(diagonal, 1e-300));
+  spdlog::info(
+      "charts from {}^2 for {} quad charts ({}) of {} triangles ({:.1f} samples per triangle), each patch's "
+      "doubled while they sample the surface more coarsely than {:.4f}% of the diagonal",
+      base, quadCharts, st.sideQuads ? "sides" : "kites", layout.triangles.size(),
+      samplesPerTriangle(layout, quadCharts, base), 100.0 * bound / std::max(diagonal, 1e-300));
 
   r.spill = std::make_unique<ChartSpill>(dir / "samples.tmp", !layout.colours.empty());
-  PatchSizing z{layout, resampleOptions(o, quads, r.spill.get(), r.bounds), layoutVertexNormals(layout), {}, 0, 0, nullptr};
+  PatchSizing z{layout, resampleOptions(o, quads, r.spill.get(), r.bounds), layoutVertexNormals(layout), {}, 0, 0,
+                nullptr};
   z.ro.chartSize = base;
   // Charts below the density's size are charged for the chords they cut across their shared sides.
   z.ro.chordsBelow = base;
@@ -839,30 +849,33 @@ ResampledMesh resamplePerPatch(PatchLayout& layout, const QuadChartOptions& o, Q
   }
   const double samples = z.samples();
   if (gate.waits() > 0)
-    spdlog::info("{} patches waited for others to be resampled, to keep their working memory within {:.0f} MiB "
-                 "(of {})",
-                 gate.waits(), double(gate.budget()) / double(1 << 20), spelled(o, "maxMemory"));
+    spdlog::info(
+        "{} patches waited for others to be resampled, to keep their working memory within {:.0f} MiB "
+        "(of {})",
+        gate.waits(), double(gate.budget()) / double(1 << 20), spelled(o, "maxMemory"));
   r.set = z.gather(top, quads);
   GeometryImageSet& set = r.set;
   st.chartSize = top;
   st.patches = layout.patches.size();
-  spdlog::info("patches by chart size from {}^2 up, doubling: {}, and {} below it ({} rounds, {} patch doublings, {} "
-               "cuts, {:.1f} samples per triangle)",
-               base, fmt::join(st.patchesBySize, ", "), st.patchesBelowDensitySize, st.sizeRounds, st.patchesDoubled,
-               st.repair.patchesSplit,
-               samples / double(std::max<size_t>(layout.triangles.size(), 1)));
+  spdlog::info(
+      "patches by chart size from {}^2 up, doubling: {}, and {} below it ({} rounds, {} patch doublings, {} "
+      "cuts, {:.1f} samples per triangle)",
+      base, fmt::join(st.patchesBySize, ", "), st.patchesBelowDensitySize, st.sizeRounds, st.patchesDoubled,
+      st.repair.patchesSplit, samples / double(std::max<size_t>(layout.triangles.size(), 1)));
   if (set.image.flippedTexels > 0 || set.image.sampleError > bound)
-    spdlog::warn("{}: {} flipped texels and a sampling error of {:.4f}% of the diagonal (bound {:.4f}%) are left; "
-                 "patches over the bound that could not grow: {} at {}^2, {} at the samples' cap ({:.0f} per "
-                 "triangle), {} at texels as short as the position lattice allows, {} at {}",
-                 o.input.string(), set.image.flippedTexels, 100.0 * set.image.sampleError / std::max(diagonal, 1e-300),
-                 100.0 * bound / std::max(diagonal, 1e-300), st.patchesAtLargestSize, kMaxDensityChartSize,
-                 st.patchesAtSampleCap, cap / double(std::max<size_t>(layout.triangles.size(), 1)), st.patchesAtLattice,
-                 st.patchesAtMemory, spelled(o, "maxMemory"));
+    spdlog::warn(
+        "{}: {} flipped texels and a sampling error of {:.4f}% of the diagonal (bound {:.4f}%) are left; "
+        "patches over the bound that could not grow: {} at {}^2, {} at the samples' cap ({:.0f} per "
+        "triangle), {} at texels as short as the position lattice allows, {} at {}",
+        o.input.string(), set.image.flippedTexels, 100.0 * set.image.sampleError / std::max(diagonal, 1e-300),
+        100.0 * bound / std::max(diagonal, 1e-300), st.patchesAtLargestSize, kMaxDensityChartSize,
+        st.patchesAtSampleCap, cap / double(std::max<size_t>(layout.triangles.size(), 1)), st.patchesAtLattice,
+        st.patchesAtMemory, spelled(o, "maxMemory"));
   if (st.repair.stoppedForWork)
-    spdlog::warn("{}: the cuts stopped at their budget, {} times the surface's triangles parameterized again; raise {} "
-                 "to cut more",
-                 o.input.string(), o.repairBudget, spelled(o, "repairBudget"));
+    spdlog::warn(
+        "{}: the cuts stopped at their budget, {} times the surface's triangles parameterized again; raise {} "
+        "to cut more",
+        o.input.string(), o.repairBudget, spelled(o, "repairBudget"));
   countTwoQuadCorners(layout, o, st);
   if (spdlog::should_log(spdlog::level::debug)) logFoldingCharts(layout, set);
   finishStage(meter, "resample");
@@ -882,9 +895,10 @@ ResampledMesh quadChartsPerPatch(PatchLayout& layout, const QuadChartOptions& op
     std::vector<Patch> charted = layout.patches;
     straighten(QuadLayout::kSides);
     if (!evenLayout(layout, even)) {
-      spdlog::warn("{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
-                   "of sides with inner vertices joins them to another such patch or to a hole); built with kites",
-                   options.input.string());
+      spdlog::warn(
+          "{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
+          "of sides with inner vertices joins them to another such patch or to a hole); built with kites",
+          options.input.string());
       layout.patches = std::move(charted);
       quads = QuadLayout::kKites;
       even = {};
@@ -910,9 +924,8 @@ ResampledMesh makeQuadCharts(PatchLayout&& layout, const QuadChartOptions& optio
   uint32_t lengthened = 0, straightened = 0, ears = 0;
   auto straighten = [&](QuadLayout quads, const std::string& suffix) {
     lengthened = lengthenShortSides(layout);
-    straightened = options.straightenRounds
-                       ? straightenSides(layout, options.straightenRounds, quads == QuadLayout::kSides)
-                       : 0;
+    straightened =
+        options.straightenRounds ? straightenSides(layout, options.straightenRounds, quads == QuadLayout::kSides) : 0;
     ears = moveSideEars(layout);
     finishStage(meter, "straighten" + suffix);
   };
@@ -962,10 +975,11 @@ ResampledMesh makeQuadCharts(PatchLayout&& layout, const QuadChartOptions& optio
         sides = resampleInLayout(layout, each, QuadLayout::kSides, dir, meter, suffix, &evened, size, !automatic);
         if (!evened) {
           sidesPossible = false;
-          spdlog::warn("{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
-                       "of sides with inner vertices joins them to another such patch or to a hole); built with {} "
-                       "kites",
-                       options.input.string(), spelled(options, "quads"));
+          spdlog::warn(
+              "{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
+              "of sides with inner vertices joins them to another such patch or to a hole); built with {} "
+              "kites",
+              options.input.string(), spelled(options, "quads"));
           return;
         }
         sidesPatches = layout.patches;
@@ -981,8 +995,8 @@ ResampledMesh makeQuadCharts(PatchLayout&& layout, const QuadChartOptions& optio
       }
       layout.patches = charted;
       straighten(QuadLayout::kKites, suffix + " (kites)");
-      ResampledMesh kites = resampleInLayout(layout, each, QuadLayout::kKites, dir, meter, suffix + " (kites)",
-                                             &evened, size, !automatic);
+      ResampledMesh kites = resampleInLayout(layout, each, QuadLayout::kKites, dir, meter, suffix + " (kites)", &evened,
+                                             size, !automatic);
       const bool kitesClean = kites.set.image.flippedTexels == 0 && withinBound(kites);
       std::vector<Patch> kitesPatches = layout.patches;
       const uint32_t kitesStraightened = straightened, kitesEars = ears;
@@ -1001,11 +1015,12 @@ ResampledMesh makeQuadCharts(PatchLayout&& layout, const QuadChartOptions& optio
                                              kites.stats.maxSampleError, dir);
         if (next > 0) {
           const double percent = 100.0 / std::max(layoutDiagonal(layout), 1e-300);
-          spdlog::info("chart size {} -> {}: neither layout meets the sampling bound ({}kites {:.4f}% of the "
-                       "diagonal, bound {:.4f}%)",
-                       kites.stats.chartSize, next,
-                       sidesBuilt ? fmt::format("sides {:.4f}%, ", percent * sides.set.image.sampleError) : "",
-                       percent * kites.set.image.sampleError, percent * kites.stats.maxSampleError);
+          spdlog::info(
+              "chart size {} -> {}: neither layout meets the sampling bound ({}kites {:.4f}% of the "
+              "diagonal, bound {:.4f}%)",
+              kites.stats.chartSize, next,
+              sidesBuilt ? fmt::format("sides {:.4f}%, ", percent * sides.set.image.sampleError) : "",
+              percent * kites.set.image.sampleError, percent * kites.stats.maxSampleError);
           size = next;
           suffix = fmt::format(" at {}", size);
           continue;
@@ -1019,13 +1034,13 @@ ResampledMesh makeQuadCharts(PatchLayout&& layout, const QuadChartOptions& optio
         keepSides = withinBound(sides) ? samples(sides) <= samples(kites)
                                        : sides.set.image.sampleError <= kites.set.image.sampleError;
       if (sidesBuilt) {
-        spdlog::info("quad layout: sides ({} charts of {}^2) left {} flipped texels, {} two-chart corners and a "
-                     "sampling error {:.3g}, kites ({} charts of {}^2) {} flipped texels and {:.3g} (bound {:.3g}): "
-                     "keeping {}",
-                     sides.set.charts.size(), sides.set.chartSize, sides.set.image.flippedTexels,
-                     sides.stats.twoQuadCorners, sides.set.image.sampleError, kites.set.charts.size(),
-                     kites.set.chartSize, kites.set.image.flippedTexels, kites.set.image.sampleError,
-                     sides.stats.maxSampleError, keepSides ? "sides" : "kites");
+        spdlog::info(
+            "quad layout: sides ({} charts of {}^2) left {} flipped texels, {} two-chart corners and a "
+            "sampling error {:.3g}, kites ({} charts of {}^2) {} flipped texels and {:.3g} (bound {:.3g}): "
+            "keeping {}",
+            sides.set.charts.size(), sides.set.chartSize, sides.set.image.flippedTexels, sides.stats.twoQuadCorners,
+            sides.set.image.sampleError, kites.set.charts.size(), kites.set.chartSize, kites.set.image.flippedTexels,
+            kites.set.image.sampleError, sides.stats.maxSampleError, keepSides ? "sides" : "kites");
       }
       if (keepSides) {
         sides.stats.alternativeFlippedTexels = int64_t(kites.set.image.flippedTexels);

@@ -130,29 +130,29 @@ struct ChartQuality {
 // Resample and repair: layout checks, side straightening, resampling and the flip repair.
 struct MeshResampleStats {
   uint64_t charts = 0;
-  ParamQuality param;                  // all patches' parameterizations
-  ImageQuality image;                  // all charts' sampled images
-  uint32_t sidesLengthened = 0;        // short sides lengthened (lengthenShortSides)
+  ParamQuality param;            // all patches' parameterizations
+  ImageQuality image;            // all charts' sampled images
+  uint32_t sidesLengthened = 0;  // short sides lengthened (lengthenShortSides)
   uint32_t sidesStraightened = 0;
   uint32_t sideEarsMended = 0;
-  bool sideQuads = false;              // the sides quad layout (else kites)
-  std::string quadMap = "bilinear";    // the quad map: bilinear, stretch or folding
-  bool unfold = true;                  // samples round flipped texels slid (ResampleOptions::unfold)
-  uint32_t evenSideCorners = 0;        // corners made so every patch has an even side count
+  bool sideQuads = false;                 // the sides quad layout (else kites)
+  std::string quadMap = "bilinear";       // the quad map: bilinear, stretch or folding
+  bool unfold = true;                     // samples round flipped texels slid (ResampleOptions::unfold)
+  uint32_t evenSideCorners = 0;           // corners made so every patch has an even side count
   int64_t alternativeFlippedTexels = -1;  // auto: the other layout's flipped texels; -1: not built
-  uint32_t twoQuadCorners = 0;         // sides layout: corners where only two charts meet
+  uint32_t twoQuadCorners = 0;            // sides layout: corners where only two charts meet
   ChartRepairStats repair;
-  uint32_t chartSize = 0;              // the quad charts' side in samples
-  bool chartSizeByDensity = false;     // chosen by meshChartSizeForDensity
-  uint32_t densityChartSize = 0;       // what meshChartSizeForDensity chose, before any doubling
-  uint32_t repairDoublings = 0;        // times it was doubled after a repair left the bound unmet
-  double maxSampleError = 0.0;         // the repair's bound, in the input's units (0: none)
-  double repairWork = 0.0;             // layout triangles parameterized again / layout triangles
-  uint64_t patches = 0;                // after the repair
-  bool perPatchSize = false;           // MeshSizing::kPatch: charts at their patches' own sizes
-  uint32_t sizeRounds = 0;             // per-patch sizing: resampling rounds
-  uint32_t patchesDoubled = 0;         // per-patch sizing: patch resamplings at a doubled size
-  std::vector<uint32_t> patchesBySize; // per-patch sizing: [k] patches of (density size - 1) * 2^k + 1
+  uint32_t chartSize = 0;                // the quad charts' side in samples
+  bool chartSizeByDensity = false;       // chosen by meshChartSizeForDensity
+  uint32_t densityChartSize = 0;         // what meshChartSizeForDensity chose, before any doubling
+  uint32_t repairDoublings = 0;          // times it was doubled after a repair left the bound unmet
+  double maxSampleError = 0.0;           // the repair's bound, in the input's units (0: none)
+  double repairWork = 0.0;               // layout triangles parameterized again / layout triangles
+  uint64_t patches = 0;                  // after the repair
+  bool perPatchSize = false;             // MeshSizing::kPatch: charts at their patches' own sizes
+  uint32_t sizeRounds = 0;               // per-patch sizing: resampling rounds
+  uint32_t patchesDoubled = 0;           // per-patch sizing: patch resamplings at a doubled size
+  std::vector<uint32_t> patchesBySize;   // per-patch sizing: [k] patches of (density size - 1) * 2^k + 1
   uint32_t patchesBelowDensitySize = 0;  // per-patch sizing: patches at their own size below the density's
   // Per-patch sizing: patches left over the sampling bound, by what stopped their growth: the
   // largest chart size (kMaxDensityChartSize), the samples cap (meshSampleCap), texels as short as
@@ -166,7 +166,7 @@ struct ResampledMesh {
   GeometryImageSet set;
   std::unique_ptr<ChartSpill> spill;  // where the charts' samples are, in dir
   MeshResampleStats stats;
-  MeshBounds bounds;  // of the layout
+  MeshBounds bounds;       // of the layout
   uint64_t triangles = 0;  // of the layout
 };
 
@@ -179,7 +179,6 @@ struct ResampledMesh {
 // InputError naming the file and the parameter to change.
 ResampledMesh makeQuadCharts(PatchLayout&& layout, const QuadChartOptions& options, const std::filesystem::path& dir,
                              StageMeter& meter);
-
 
 // Ends the meter's running stage as `name`, and logs its time and peak memory.
 void finishStage(StageMeter& meter, const std::string& name);

@@ -26,9 +26,7 @@
 namespace gimlod {
 namespace {
 
-uint64_t undirectedKey(uint32_t a, uint32_t b) {
-  return a < b ? (uint64_t{a} << 32) | b : (uint64_t{b} << 32) | a;
-}
+uint64_t undirectedKey(uint32_t a, uint32_t b) { return a < b ? (uint64_t{a} << 32) | b : (uint64_t{b} << 32) | a; }
 
 // Attributes of the layout's surface: positions, area-weighted unit vertex normals, colours.
 struct Surface {
@@ -45,8 +43,7 @@ std::vector<glm::dvec3> layoutVertexNormals(const PatchLayout& layout) {
     if (t[0] >= n.size() || t[1] >= n.size() || t[2] >= n.size()) {
       throw std::invalid_argument("resampleLayout: triangle vertex out of range");
     }
-    const glm::dvec3 a(layout.positions[t[0]]), b(layout.positions[t[1]]),
-        c(layout.positions[t[2]]);
+    const glm::dvec3 a(layout.positions[t[0]]), b(layout.positions[t[1]]), c(layout.positions[t[2]]);
     const glm::dvec3 w = glm::cross(b - a, c - a);  // twice the area times the unit normal
     for (uint32_t v : t) n[v] += w;
   }
@@ -60,7 +57,8 @@ std::vector<glm::dvec3> layoutVertexNormals(const PatchLayout& layout) {
 uint32_t patchQuadCount(uint32_t sides, QuadLayout quads) {
   if (quads == QuadLayout::kKites) return sides;
   if (sides % 2 != 0)
-    throw std::invalid_argument("a patch of " + std::to_string(sides) + " sides in the sides quad layout (which needs an even count)");
+    throw std::invalid_argument("a patch of " + std::to_string(sides) +
+                                " sides in the sides quad layout (which needs an even count)");
   return sides == 4 ? 1 : sides / 2;
 }
 
@@ -71,7 +69,7 @@ struct Sample {
   glm::vec3 p{0.f};
   glm::vec3 n{0.f, 0.f, 1.f};
   glm::u8vec4 c{255, 255, 255, 255};
-  uint32_t triangle = ~0u;  // the layout triangle it was located in; ~0u for side samples
+  uint32_t triangle = ~0u;            // the layout triangle it was located in; ~0u for side samples
   uint32_t edgeA = ~0u, edgeB = ~0u;  // side samples: the side segment (vertex ids) it lies on
 };
 
@@ -88,8 +86,7 @@ Sample interpolate(const Surface& s, const std::array<uint32_t, 3>& v, const glm
   out.p = glm::vec3(p);
   double l = glm::length(n);
   if (!(l > 1e-12)) {  // opposite vertex normals cancel: use the face normal
-    const glm::dvec3 a(s.layout.positions[v[0]]), bb(s.layout.positions[v[1]]),
-        cc(s.layout.positions[v[2]]);
+    const glm::dvec3 a(s.layout.positions[v[0]]), bb(s.layout.positions[v[1]]), cc(s.layout.positions[v[2]]);
     n = glm::cross(bb - a, cc - a);
     l = glm::length(n);
   }
@@ -118,8 +115,8 @@ Sample vertexSample(const Surface& s, uint32_t v) {
 std::vector<Sample> sampleSide(const Surface& s, const std::vector<uint32_t>& poly, uint32_t count) {
   std::vector<double> cum(1, 0.0);
   for (size_t k = 0; k + 1 < poly.size(); ++k) {
-    cum.push_back(cum.back() + glm::length(glm::dvec3(s.layout.positions[poly[k + 1]]) -
-                                           glm::dvec3(s.layout.positions[poly[k]])));
+    cum.push_back(cum.back() +
+                  glm::length(glm::dvec3(s.layout.positions[poly[k + 1]]) - glm::dvec3(s.layout.positions[poly[k]])));
   }
   const double total = cum.back();
   const size_t segments = poly.size() - 1;
@@ -190,8 +187,7 @@ class Locator {
 
   // The triangle (local ids) containing p and its barycentric weights, clamped to the triangle.
   // `hint` is a triangle to try first, updated to the result.
-  void locate(const glm::dvec2& p, uint32_t& hint, std::array<uint32_t, 3>& tri,
-              glm::dvec3& bary) const {
+  void locate(const glm::dvec2& p, uint32_t& hint, std::array<uint32_t, 3>& tri, glm::dvec3& bary) const {
     double best = -1e300;
     uint32_t bestTri = 0;
     glm::dvec3 bestBary(1.0, 0.0, 0.0);
@@ -241,8 +237,7 @@ class Locator {
  private:
   std::pair<uint32_t, uint32_t> cellOf(const glm::dvec2& p) const {
     const double fx = std::floor((p.x - lo_.x) / cell_), fy = std::floor((p.y - lo_.y) / cell_);
-    return {uint32_t(std::clamp(fx, 0.0, double(nx_ - 1))),
-            uint32_t(std::clamp(fy, 0.0, double(ny_ - 1)))};
+    return {uint32_t(std::clamp(fx, 0.0, double(nx_ - 1))), uint32_t(std::clamp(fy, 0.0, double(ny_ - 1)))};
   }
   glm::dvec3 barycentric(uint32_t t, const glm::dvec2& p) const {
     const auto& tri = triangles_[t];
@@ -275,8 +270,8 @@ struct EdgeSource {
 uint32_t sideSampleCount(uint32_t m, QuadLayout mode) { return mode == QuadLayout::kKites ? 2 * m + 1 : m + 1; }
 
 struct PatchQuads {
-  uint32_t sideSamples = 0;  // sideSampleCount
-  bool single = false;       // one quad, all four edges sides (a 4-sided patch, sides layout)
+  uint32_t sideSamples = 0;                      // sideSampleCount
+  bool single = false;                           // one quad, all four edges sides (a 4-sided patch, sides layout)
   std::vector<std::array<EdgeSource, 4>> quads;  // by Edge
   std::vector<EdgeSource> spokeTargets;          // the border sample each spoke starts at
 };
@@ -308,14 +303,14 @@ PatchQuads patchQuads(uint32_t n, uint32_t m, QuadLayout mode) {
 // For each patch side: -1 if it has no neighbour, else whether its vertex run is the reverse of
 // the neighbour's. Validates the links.
 struct SideLinks {
-  std::vector<uint32_t> offsets;                 // first chart of each patch
-  std::vector<std::vector<uint8_t>> opposite;    // [patch][side]: runs opposite to the neighbour
+  std::vector<uint32_t> offsets;               // first chart of each patch
+  std::vector<std::vector<uint8_t>> opposite;  // [patch][side]: runs opposite to the neighbour
 };
 
 SideLinks validateLinks(const PatchLayout& layout, QuadLayout mode, const char* fn) {
   auto fail = [&](uint32_t p, uint32_t i, const std::string& what) {
-    throw std::invalid_argument(std::string(fn) + ": patch " + std::to_string(p) + " side " +
-                                std::to_string(i) + ": " + what);
+    throw std::invalid_argument(std::string(fn) + ": patch " + std::to_string(p) + " side " + std::to_string(i) + ": " +
+                                what);
   };
   SideLinks links;
   try {
@@ -341,8 +336,7 @@ SideLinks validateLinks(const PatchLayout& layout, QuadLayout mode, const char* 
       }
       if (o.reversed != s.reversed) fail(p, i, "reversed flags differ across the side");
       const bool same = o.vertices == s.vertices;
-      const bool rev = std::equal(o.vertices.begin(), o.vertices.end(), s.vertices.rbegin(),
-                                  s.vertices.rend()) &&
+      const bool rev = std::equal(o.vertices.begin(), o.vertices.end(), s.vertices.rbegin(), s.vertices.rend()) &&
                        o.vertices.size() == s.vertices.size();
       if (s.reversed ? !rev : !same) fail(p, i, "vertex run does not match the neighbour's");
       links.opposite[p][i] = s.reversed ? 1 : 0;
@@ -386,8 +380,9 @@ std::vector<std::array<RootNeighbour, 4>> neighboursFrom(const PatchLayout& layo
         const EdgeSource& src = pq.quads[j][e];
         if (src.spoke) {
           // The right edge's spoke is the top edge's of the next quad.
-          nb[e] = e == kEdgeRight ? RootNeighbour{int32_t(links.offsets[p] + (j + 1) % count), kEdgeTop, true}
-                                  : RootNeighbour{int32_t(links.offsets[p] + (j + count - 1) % count), kEdgeRight, true};
+          nb[e] = e == kEdgeRight
+                      ? RootNeighbour{int32_t(links.offsets[p] + (j + 1) % count), kEdgeTop, true}
+                      : RootNeighbour{int32_t(links.offsets[p] + (j + count - 1) % count), kEdgeRight, true};
           continue;
         }
         const PatchSide& side = layout.patches[p].sides[src.index];
@@ -405,7 +400,6 @@ std::vector<std::array<RootNeighbour, 4>> neighboursFrom(const PatchLayout& layo
 
 }  // namespace
 
-
 std::vector<uint32_t> quadChartOffsets(const PatchLayout& layout, QuadLayout quads) {
   std::vector<uint32_t> offsets(layout.patches.size());
   uint32_t next = 0;
@@ -420,9 +414,8 @@ std::vector<std::array<RootNeighbour, 4>> quadNeighbours(const PatchLayout& layo
   return neighboursFrom(layout, validateLinks(layout, quads, "quadNeighbours"), quads);
 }
 
-ImageQuality measureImage(const std::vector<glm::vec3>& positions,
-                          const std::vector<glm::vec3>& normals, uint32_t chartSize,
-                          std::vector<uint32_t>* flippedAt,
+ImageQuality measureImage(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
+                          uint32_t chartSize, std::vector<uint32_t>* flippedAt,
                           const std::vector<glm::vec3>* faceNormals) {
   ImageQuality q;
   const uint32_t m = chartSize - 1;
@@ -438,10 +431,8 @@ ImageQuality measureImage(const std::vector<glm::vec3>& positions,
   };
   for (uint32_t v = 0; v < m; ++v) {
     for (uint32_t u = 0; u < m; ++u) {
-      const size_t i00 = size_t(v) * chartSize + u, i10 = i00 + 1, i01 = i00 + chartSize,
-                   i11 = i01 + 1;
-      const glm::dvec3 p00(positions[i00]), p10(positions[i10]), p01(positions[i01]),
-          p11(positions[i11]);
+      const size_t i00 = size_t(v) * chartSize + u, i10 = i00 + 1, i01 = i00 + chartSize, i11 = i01 + 1;
+      const glm::dvec3 p00(positions[i00]), p10(positions[i10]), p01(positions[i01]), p11(positions[i11]);
       // Triangles (00, 10, 11) and (00, 11, 01), each of parameter area 1 / (2 m^2).
       q.shortestTexelSide = std::min({q.shortestTexelSide, glm::length(p10 - p00), glm::length(p01 - p00)});
       triangle((p10 - p00) * scale, (p11 - p10) * scale);
@@ -453,8 +444,8 @@ ImageQuality measureImage(const std::vector<glm::vec3>& positions,
         ++q.degenerateTexels;
         continue;
       }
-      const glm::dvec3 n = glm::dvec3(normals[i00]) + glm::dvec3(normals[i10]) +
-                           glm::dvec3(normals[i01]) + glm::dvec3(normals[i11]);
+      const glm::dvec3 n =
+          glm::dvec3(normals[i00]) + glm::dvec3(normals[i10]) + glm::dvec3(normals[i01]) + glm::dvec3(normals[i11]);
       const bool againstNormals = glm::dot(cr, n) < 0.0;
       bool againstFaces = againstNormals;
       if (faceNormals) {
@@ -575,7 +566,8 @@ bool buildQuadWarp(const PatchParameterization& pp, const std::vector<glm::dvec3
   // before 16 cannot capture structured bindings).
   const glm::dvec2 &qa = q[0], &qb = q[1], &qc = q[2], &qe = q[3];
   const std::array<glm::dvec2, 2> from{qb, qc}, to{qc, qe};
-  const double scale = std::max({glm::length(qb - qa), glm::length(qc - qb), glm::length(qe - qc), glm::length(qa - qe)});
+  const double scale =
+      std::max({glm::length(qb - qa), glm::length(qc - qb), glm::length(qe - qc), glm::length(qa - qe)});
   const double eps = 1e-10 * scale;
   auto side = [&](int l, const glm::dvec2& p) {  // signed distance, > 0 inside; snapped to 0 near the line
     const glm::dvec2 d = to[l] - from[l];
@@ -658,7 +650,7 @@ bool buildQuadWarp(const PatchParameterization& pp, const std::vector<glm::dvec3
           if (sp > 0.0) {
             x.a = uint32_t(l), x.b = ~0u;  // leaving: on along the spoke
           } else {
-            x.a = p.a, x.b = p.b;          // entering: on along the edge
+            x.a = p.a, x.b = p.b;  // entering: on along the edge
           }
           next.push_back(x);
         }
@@ -808,8 +800,7 @@ namespace {
 void checkResampleInput(const PatchLayout& layout, const ResampleOptions& options, const ResampleReuse& reuse) {
   const uint32_t size = options.chartSize;
   if (!isChartSizeValid(size)) {
-    throw std::invalid_argument("resampleLayout: chart size " + std::to_string(size) +
-                                " is not 2^k + 1");
+    throw std::invalid_argument("resampleLayout: chart size " + std::to_string(size) + " is not 2^k + 1");
   }
   if (!layout.colours.empty() && layout.colours.size() != layout.positions.size()) {
     throw std::invalid_argument("resampleLayout: colours must be empty or one per position");
@@ -841,8 +832,7 @@ std::vector<uint32_t> patchActions(const PatchLayout& layout, const ResampleOpti
       if (p >= src.set->patches.size()) continue;
       const PatchResampleStats& st = src.set->patches[p];
       if (st.sides != layout.patches[p].sides.size() || st.quads != patchQuadCount(st.sides, options.quads) ||
-          st.firstChart + st.quads > src.set->charts.size() ||
-          !src.set->charts[st.firstChart].hasSamples(size)) {
+          st.firstChart + st.quads > src.set->charts.size() || !src.set->charts[st.firstChart].hasSamples(size)) {
         continue;
       }
       action[p] = 2 + uint32_t(k);
@@ -858,7 +848,7 @@ struct SideRef {
 };
 struct SideOwners {
   std::vector<SideRef> owners;
-  std::vector<uint8_t> ownerNeeded;  // some patch that resamples holds it
+  std::vector<uint8_t> ownerNeeded;              // some patch that resamples holds it
   std::vector<std::vector<uint32_t>> sideIndex;  // [patch][side]: its owner, an index into owners
 };
 
@@ -876,13 +866,13 @@ SideOwners sideOwners(const PatchLayout& layout, const std::vector<uint32_t>& ac
     for (uint32_t i = 0; i < patch.sides.size(); ++i) {
       for (uint32_t v : patch.sides[i].vertices) {
         if (v >= layout.positions.size()) {
-          throw std::invalid_argument("resampleLayout: patch " + std::to_string(p) + " side " +
-                                      std::to_string(i) + ": vertex out of range");
+          throw std::invalid_argument("resampleLayout: patch " + std::to_string(p) + " side " + std::to_string(i) +
+                                      ": vertex out of range");
         }
       }
       if (patch.sides[i].vertices.size() < 2) {
-        throw std::invalid_argument("resampleLayout: patch " + std::to_string(p) + " side " +
-                                    std::to_string(i) + " has < 2 vertices");
+        throw std::invalid_argument("resampleLayout: patch " + std::to_string(p) + " side " + std::to_string(i) +
+                                    " has < 2 vertices");
       }
       if (ownsSide(layout.patches[p], p, i)) {
         sideIndex[p][i] = uint32_t(owners.size());
@@ -912,9 +902,9 @@ struct ResampleContext {
   const SideOwners& owners;
   const std::vector<std::array<RootNeighbour, 4>>& neighbours;  // by chart
   const std::vector<std::vector<Sample>>& sides;                // by owner
-  uint32_t size;       // options.chartSize
-  uint32_t m;          // size - 1
-  uint32_t sideCount;  // samples of a whole patch side (sideSampleCount)
+  uint32_t size;                                                // options.chartSize
+  uint32_t m;                                                   // size - 1
+  uint32_t sideCount;                                           // samples of a whole patch side (sideSampleCount)
   GeometryImageSet& set;
 };
 
@@ -964,8 +954,7 @@ std::shared_ptr<const PatchParameterization> parameterization(const ResampleCont
   if (c.reuse.params) {
     if (auto pp = c.reuse.params->find(patch, p)) return pp;
   }
-  auto pp = std::make_shared<const PatchParameterization>(
-      parameterizePatch(c.layout, p, patchParamOptions(c.options)));
+  auto pp = std::make_shared<const PatchParameterization>(parameterizePatch(c.layout, p, patchParamOptions(c.options)));
   if (c.reuse.params) c.reuse.params->put(patch, p, pp);
   return pp;
 }
@@ -977,9 +966,16 @@ std::shared_ptr<const PatchParameterization> parameterization(const ResampleCont
 // is part of the result.
 struct PatchSampler {
   PatchSampler(const ResampleContext& context, uint32_t patchId, const PatchQuads& quads)
-      : c(context), p(patchId), patch(context.layout.patches[patchId]), n(uint32_t(patch.sides.size())),
-        plan(quads), nq(uint32_t(quads.quads.size())), held(parameterization(context, patchId)), pp(*held),
-        openSides(n), locator(pp) {}
+      : c(context),
+        p(patchId),
+        patch(context.layout.patches[patchId]),
+        n(uint32_t(patch.sides.size())),
+        plan(quads),
+        nq(uint32_t(quads.quads.size())),
+        held(parameterization(context, patchId)),
+        pp(*held),
+        openSides(n),
+        locator(pp) {}
   PatchSampler(const PatchSampler&) = delete;
   PatchSampler& operator=(const PatchSampler&) = delete;
 
@@ -1002,7 +998,7 @@ struct PatchSampler {
   std::vector<QuadWarp> warps;
   std::vector<uint8_t> warpTried, warped;
   std::vector<glm::dvec3> xyz;
-  std::unordered_map<uint64_t, uint32_t> sideFace;  // findSideFaces
+  std::unordered_map<uint64_t, uint32_t> sideFace;                         // findSideFaces
   std::vector<std::vector<std::pair<uint32_t, glm::dvec2>>> quadVertices;  // placeVertices
 
   // Side sample k of side i in this patch's direction (0 = corner i, sideCount - 1 = corner i+1).
@@ -1012,8 +1008,7 @@ struct PatchSampler {
     const std::vector<SideRef>& owners = c.owners.owners;
     if (!openSides[i].empty()) return openSides[i][k];
     const std::vector<Sample>& s = c.sides[sideIndex[p][i]];
-    const bool flipped = owners[sideIndex[p][i]].patch != p ||
-                         owners[sideIndex[p][i]].side != i;
+    const bool flipped = owners[sideIndex[p][i]].patch != p || owners[sideIndex[p][i]].side != i;
     return s[flipped && c.links.opposite[p][i] ? sideCount - 1 - k : k];
   }
 
@@ -1022,8 +1017,7 @@ struct PatchSampler {
     std::array<uint32_t, 3> tri;
     glm::dvec3 b;
     locator.locate(d, hint, tri, b);
-    Sample r = interpolate(c.surface, {pp.vertices[tri[0]], pp.vertices[tri[1]], pp.vertices[tri[2]]},
-                           b);
+    Sample r = interpolate(c.surface, {pp.vertices[tri[0]], pp.vertices[tri[1]], pp.vertices[tri[2]]}, b);
     r.triangle = patch.triangles[hint];  // the parameterization keeps the patch's order
     return r;
   }
@@ -1141,7 +1135,8 @@ struct PatchSampler {
     if (t == ~0u) return otherwise;
     const auto& tri = layout.triangles[t];
     const glm::dvec3 a(layout.positions[tri[0]]);
-    const glm::dvec3 cr = glm::cross(glm::dvec3(layout.positions[tri[1]]) - a, glm::dvec3(layout.positions[tri[2]]) - a);
+    const glm::dvec3 cr =
+        glm::cross(glm::dvec3(layout.positions[tri[1]]) - a, glm::dvec3(layout.positions[tri[2]]) - a);
     const double l = glm::length(cr);
     return l > 0.0 && std::isfinite(l) ? cr / l : otherwise;
   }
@@ -1176,7 +1171,9 @@ struct PatchSampler {
 // patch take turns with one set.
 struct ChartBuffers {
   explicit ChartBuffers(uint32_t size)
-      : floatNormals(size_t(size) * size), triangles(size_t(size) * size, ~0u), domain(size_t(size) * size),
+      : floatNormals(size_t(size) * size),
+        triangles(size_t(size) * size, ~0u),
+        domain(size_t(size) * size),
         faceNormals(size_t(size) * size) {}
   std::vector<glm::vec3> floatNormals;
   std::vector<uint32_t> triangles;
@@ -1189,8 +1186,14 @@ struct ChartBuffers {
 // of placing them (the bilinear map or the quad's warp, the unfolding) tried on it.
 struct ChartSampler {
   ChartSampler(PatchSampler& patchSampler, ChartBuffers& buffers, uint32_t quad, GeometryImage& image)
-      : ps(patchSampler), i(quad), size(patchSampler.c.size), m(patchSampler.c.m), img(image),
-        floatNormals(buffers.floatNormals), triangles(buffers.triangles), domain(buffers.domain),
+      : ps(patchSampler),
+        i(quad),
+        size(patchSampler.c.size),
+        m(patchSampler.c.m),
+        img(image),
+        floatNormals(buffers.floatNormals),
+        triangles(buffers.triangles),
+        domain(buffers.domain),
         faceNormals(buffers.faceNormals) {}
 
   PatchSampler& ps;
@@ -1201,7 +1204,7 @@ struct ChartSampler {
   std::vector<uint32_t>& triangles;
   std::vector<glm::dvec2>& domain;
   std::vector<glm::vec3>& faceNormals;
-  bool unfolded = false;  // some inner samples slid off the map (unfold below)
+  bool unfolded = false;          // some inner samples slid off the map (unfold below)
   std::vector<uint32_t> flipped;  // the flipped texels, as their (0,0) samples
 
   // The chart's samples and what is known of them, to try another placement and go back.
@@ -1281,15 +1284,16 @@ struct ChartSampler {
     const std::vector<QuadWarp>& warps = ps.warps;
     const PatchParameterization& pp = ps.pp;
     // The input faces under the samples (zero where none is known).
-    for (size_t k = 0; k < faceNormals.size(); ++k) faceNormals[k] = glm::vec3(ps.faceNormalOr(triangles[k], glm::dvec3(0.0)));
+    for (size_t k = 0; k < faceNormals.size(); ++k)
+      faceNormals[k] = glm::vec3(ps.faceNormalOr(triangles[k], glm::dvec3(0.0)));
     flippedAt.clear();
     ImageQuality q = measureImage(img.positions, floatNormals, size, &flippedAt, &faceNormals);
     // How far the chart's surface passes from the input vertices it stands for, each at its
     // chart coordinates under the map used.
     for (auto [v, st] : ps.quadVertices[i]) {
       if (warp && warps[i].ofPatchVertex[v] != ~0u) st = warps[i].square[warps[i].ofPatchVertex[v]];
-      const double e = chartSurfaceDistance(img.positions, size, st, glm::dvec3(layout.positions[pp.vertices[v]]),
-                                            unfolded ? 2 : 1);
+      const double e =
+          chartSurfaceDistance(img.positions, size, st, glm::dvec3(layout.positions[pp.vertices[v]]), unfolded ? 2 : 1);
       if (e > q.sampleError) {
         q.sampleError = e;
         q.sampleErrorVertex = pp.vertices[v];
@@ -1314,7 +1318,8 @@ struct ChartSampler {
       const std::vector<uint32_t>& run = ps.patch.sides[src.index].vertices;
       std::vector<double> arc(run.size(), 0.0);
       for (size_t k = 1; k < run.size(); ++k)
-        arc[k] = arc[k - 1] + glm::length(glm::dvec3(layout.positions[run[k]]) - glm::dvec3(layout.positions[run[k - 1]]));
+        arc[k] =
+            arc[k - 1] + glm::length(glm::dvec3(layout.positions[run[k]]) - glm::dvec3(layout.positions[run[k - 1]]));
       if (!(arc.back() > 0.0)) continue;
       for (size_t k = 1; k + 1 < run.size(); ++k) {
         const double t = arc[k] / arc.back() * last;  // where the vertex lies among the side's samples
@@ -1376,7 +1381,11 @@ struct ChartSampler {
 // measures a sample's slide is judged by.
 struct Unfolding {
   explicit Unfolding(ChartSampler& chart)
-      : ch(chart), size(chart.size), m(chart.m), gap(chart.ps.c.options.minSampleGap), start(chart.domain),
+      : ch(chart),
+        size(chart.size),
+        m(chart.m),
+        gap(chart.ps.c.options.minSampleGap),
+        start(chart.domain),
         startPositions(chart.img.positions) {}
 
   ChartSampler& ch;
@@ -1449,7 +1458,8 @@ struct Unfolding {
     if (!(l > 0.0)) return -1.0;
     double best = -1.0;
     for (int j = 0; j < 4; ++j)
-      best = std::max(best, glm::dot(cr, c[j] == moved ? fn : ch.ps.faceNormalOr(ch.triangles[c[j]], ch.floatNormals[c[j]])) / l);
+      best = std::max(
+          best, glm::dot(cr, c[j] == moved ? fn : ch.ps.faceNormalOr(ch.triangles[c[j]], ch.floatNormals[c[j]])) / l);
     return best;
   }
   // What inner sample k at x (face normal fn) costs its four texels: their agreement short
@@ -1650,9 +1660,9 @@ std::shared_ptr<const PatchParameterization> ParamCache::find(const Patch& patch
 }
 
 void ParamCache::put(const Patch& patch, uint32_t p, std::shared_ptr<const PatchParameterization> pp) {
-  uint64_t bytes = sizeof(Entry) + patch.triangles.size() * sizeof(uint32_t) +
-                   pp->uv.size() * sizeof(glm::dvec2) + pp->vertices.size() * sizeof(uint32_t) +
-                   pp->triangles.size() * sizeof(pp->triangles[0]) + pp->boundary.size() * sizeof(uint32_t);
+  uint64_t bytes = sizeof(Entry) + patch.triangles.size() * sizeof(uint32_t) + pp->uv.size() * sizeof(glm::dvec2) +
+                   pp->vertices.size() * sizeof(uint32_t) + pp->triangles.size() * sizeof(pp->triangles[0]) +
+                   pp->boundary.size() * sizeof(uint32_t);
   for (const PatchSide& s : patch.sides) bytes += sizeof(PatchSide) + s.vertices.size() * sizeof(uint32_t);
   const std::lock_guard<std::mutex> lock(mutex_);
   const auto it = entries_.find(p);
@@ -1701,8 +1711,7 @@ uint64_t ParamCache::bytes() const {
   return bytes_;
 }
 
-GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions& options,
-                                const ResampleReuse& reuse) {
+GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions& options, const ResampleReuse& reuse) {
   const auto start = std::chrono::steady_clock::now();
   checkResampleInput(layout, options, reuse);
   const uint32_t size = options.chartSize;
@@ -1722,18 +1731,16 @@ GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions
   const std::vector<uint32_t> action = patchActions(layout, options, reuse);
   const SideOwners owners = sideOwners(layout, action);
 
-  const int concurrency =
-      options.threads ? int(options.threads) : tbb::this_task_arena::max_concurrency();
+  const int concurrency = options.threads ? int(options.threads) : tbb::this_task_arena::max_concurrency();
   tbb::task_arena arena(concurrency);
   std::vector<std::vector<Sample>> sides(owners.owners.size());
-  const ResampleContext context{layout, options, reuse, surface, links, owners, neighbours, sides,
-                                size, m, sideCount, set};
+  const ResampleContext context{layout,     options, reuse, surface, links,     owners,
+                                neighbours, sides,   size,  m,       sideCount, set};
   arena.execute([&] {
     tbb::parallel_for(size_t{0}, owners.owners.size(), [&](size_t k) {
       if (!owners.ownerNeeded[k]) return;
-      sides[k] = sampleSide(surface,
-                            layout.patches[owners.owners[k].patch].sides[owners.owners[k].side].vertices,
-                            sideCount);
+      sides[k] =
+          sampleSide(surface, layout.patches[owners.owners[k].patch].sides[owners.owners[k].side].vertices, sideCount);
     });
     const progress::ProgressStage stage("resample", layout.patches.size());
     tbb::parallel_for(uint32_t{0}, uint32_t(layout.patches.size()), [&](uint32_t p) {
@@ -1772,7 +1779,8 @@ void ChartSpill::put(GeometryImage& image) {
   const size_t n = size_t(side) * side;
   if (!isChartSizeValid(side) || image.positions.size() != n || image.normals.size() != n ||
       image.colours.size() != (colours_ ? n : 0))
-    throw std::invalid_argument("ChartSpill::put: the image's samples are not a (2^k+1)^2 image with the spill's colours");
+    throw std::invalid_argument(
+        "ChartSpill::put: the image's samples are not a (2^k+1)^2 image with the spill's colours");
   const size_t bytes =
       sizeof(uint32_t) + n * (sizeof(glm::vec3) + sizeof(PackedNormal) + (colours_ ? sizeof(glm::u8vec4) : 0));
   const uint64_t at = end_.fetch_add(bytes);
@@ -1788,7 +1796,8 @@ void ChartSpill::put(GeometryImage& image) {
     const ssize_t w = ::pwrite(fd_, buf.data() + done, bytes - done, off_t(at + done));
     if (w <= 0) {
       if (w < 0 && errno == EINTR) continue;
-      throw InputError(file_.string() + ": cannot write chart samples (" + (w < 0 ? std::strerror(errno) : "no space") + ")");
+      throw InputError(file_.string() + ": cannot write chart samples (" + (w < 0 ? std::strerror(errno) : "no space") +
+                       ")");
     }
     done += size_t(w);
   }
@@ -1805,7 +1814,8 @@ void ChartSpill::get(GeometryImage& image) const {
       const ssize_t r = ::pread(fd_, static_cast<uint8_t*>(out) + done, bytes - done, off_t(at + done));
       if (r <= 0) {
         if (r < 0 && errno == EINTR) continue;
-        throw InputError(file_.string() + ": cannot read chart samples back (" + (r < 0 ? std::strerror(errno) : "short file") + ")");
+        throw InputError(file_.string() + ": cannot read chart samples back (" +
+                         (r < 0 ? std::strerror(errno) : "short file") + ")");
       }
       done += size_t(r);
     }
@@ -1820,7 +1830,8 @@ void ChartSpill::get(GeometryImage& image) const {
   const uint64_t at = uint64_t(image.spilled) + sizeof(uint32_t);
   read(image.positions.data(), n * sizeof(glm::vec3), at);
   read(image.normals.data(), n * sizeof(PackedNormal), at + n * sizeof(glm::vec3));
-  if (colours_) read(image.colours.data(), n * sizeof(glm::u8vec4), at + n * (sizeof(glm::vec3) + sizeof(PackedNormal)));
+  if (colours_)
+    read(image.colours.data(), n * sizeof(glm::u8vec4), at + n * (sizeof(glm::vec3) + sizeof(PackedNormal)));
   image.spilled = -1;
 }
 

@@ -61,9 +61,9 @@ uint32_t patchQuadCount(uint32_t sides, QuadLayout quads);
 enum class QuadMap : uint8_t { kBilinear, kStretch, kFolding };
 
 struct ResampleOptions {
-  uint32_t chartSize = 513;  // samples per quad chart side; must be 2^k + 1 with k >= 1
-  uint32_t threads = 0;      // worker threads for the per-patch work; 0 = all hardware threads
-  ParamOptions param;        // per-patch parameterization
+  uint32_t chartSize = 513;     // samples per quad chart side; must be 2^k + 1 with k >= 1
+  uint32_t threads = 0;         // worker threads for the per-patch work; 0 = all hardware threads
+  ParamOptions param;           // per-patch parameterization
   ChartSpill* spill = nullptr;  // if set, every chart's samples go there once it is measured
   QuadLayout quads = QuadLayout::kKites;
   QuadMap quadMap = QuadMap::kBilinear;
@@ -114,7 +114,7 @@ struct ImageQuality {
   // In the input's units; the worst vertex is a layout vertex id (~0u when none).
   double sampleError = 0.0;
   uint32_t sampleErrorVertex = ~0u;
-  double area3D = 0.0;            // surface area of the sampled grid
+  double area3D = 0.0;  // surface area of the sampled grid
   // The shortest side of a texel (in the input's units; infinite without texels): how far apart
   // the closest neighbouring samples lie, where the map squeezes the surface most.
   double shortestTexelSide = std::numeric_limits<double>::infinity();
@@ -129,15 +129,15 @@ struct ImageQuality {
 // bottom = side 2j+1, left = side 2j, right and top the spokes to corners 2j+2 and 2j.
 // Sides quad of a 4-sided patch: (0,0) .. (0,1) corners 0..3, edge e = side e.
 struct GeometryImage {
-  uint32_t patch = 0;                        // PatchLayout patch
-  uint32_t quad = 0;                         // i, 0..n-1 within the patch
-  std::vector<glm::vec3> positions;          // chartSize^2
-  std::vector<PackedNormal> normals;         // chartSize^2, unit normals (packNormal)
-  std::vector<glm::u8vec4> colours;          // chartSize^2, or empty if the layout has none
-  std::array<RootNeighbour, 4> neighbours;   // by Edge; chart = index into GeometryImageSet
+  uint32_t patch = 0;                       // PatchLayout patch
+  uint32_t quad = 0;                        // i, 0..n-1 within the patch
+  std::vector<glm::vec3> positions;         // chartSize^2
+  std::vector<PackedNormal> normals;        // chartSize^2, unit normals (packNormal)
+  std::vector<glm::u8vec4> colours;         // chartSize^2, or empty if the layout has none
+  std::array<RootNeighbour, 4> neighbours;  // by Edge; chart = index into GeometryImageSet
   ImageQuality quality;
-  std::vector<uint32_t> foldTriangles;       // layout triangles under flipped texels (<= 8)
-  int64_t spilled = -1;                      // where a ChartSpill holds the samples; -1: here
+  std::vector<uint32_t> foldTriangles;  // layout triangles under flipped texels (<= 8)
+  int64_t spilled = -1;                 // where a ChartSpill holds the samples; -1: here
   // The pyramid level of the set's chart size that the image holds: ((chartSize - 1) >> level) + 1
   // samples a side (charts sampled at their own size; core/atlas_format.h ChartInfo::finestLevel).
   uint8_t level = 0;
@@ -178,24 +178,23 @@ class ChartSpill {
   std::atomic<uint64_t> end_{0};
 };
 
-
 struct PatchResampleStats {
-  ParamQuality paramInitial;   // the mean-value embedding
-  ParamQuality param;          // after stretch reduction
+  ParamQuality paramInitial;  // the mean-value embedding
+  ParamQuality param;         // after stretch reduction
   uint32_t stretchIterations = 0;
-  uint32_t firstChart = 0;     // charts [firstChart, firstChart + quads) belong to this patch
+  uint32_t firstChart = 0;  // charts [firstChart, firstChart + quads) belong to this patch
   uint32_t sides = 0;
   uint32_t quads = 0;
 };
 
 struct GeometryImageSet {
   uint32_t chartSize = 0;
-  std::vector<GeometryImage> charts;      // patch by patch, quad by quad
+  std::vector<GeometryImage> charts;  // patch by patch, quad by quad
   std::vector<PatchResampleStats> patches;
-  ParamQuality paramInitial;              // all patches combined (combineQuality)
+  ParamQuality paramInitial;  // all patches combined (combineQuality)
   ParamQuality param;
-  ImageQuality image;                     // all charts combined
-  uint64_t trianglesParameterized = 0;    // of the patches this resampling parameterized (not reused)
+  ImageQuality image;                   // all charts combined
+  uint64_t trianglesParameterized = 0;  // of the patches this resampling parameterized (not reused)
   double seconds = 0.0;
 };
 
@@ -329,16 +328,14 @@ struct ResampleReuse {
 bool patchSamplesAlike(const Patch& a, const Patch& b, uint32_t p);
 
 // resampleLayout, reusing what `reuse` offers.
-GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions& options,
-                                const ResampleReuse& reuse);
+GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions& options, const ResampleReuse& reuse);
 
 // Measures one image (positions and float unit normals, chartSize^2 each). flippedAt, if given,
 // receives the sample index of the (0,0) corner of every flipped texel. faceNormals, if given, are
 // the unit normals of the input faces under the samples (zero where none); without them a texel
 // is flipped when it opposes the vertex normals.
-ImageQuality measureImage(const std::vector<glm::vec3>& positions,
-                          const std::vector<glm::vec3>& normals, uint32_t chartSize,
-                          std::vector<uint32_t>* flippedAt = nullptr,
+ImageQuality measureImage(const std::vector<glm::vec3>& positions, const std::vector<glm::vec3>& normals,
+                          uint32_t chartSize, std::vector<uint32_t>* flippedAt = nullptr,
                           const std::vector<glm::vec3>* faceNormals = nullptr);
 
 // One flag per patch (patches of them): whether one of its charts in set has a sampling error over

@@ -45,21 +45,18 @@ std::string formatNumber(double v) {
   return buf;
 }
 
-[[noreturn]] void fail(const fs::path& file, const std::string& what) {
-  throw InputError(file.string() + ": " + what);
-}
+[[noreturn]] void fail(const fs::path& file, const std::string& what) { throw InputError(file.string() + ": " + what); }
 
 DatasetPtr openRaster(const std::string& name) {
   constexpr unsigned kFlags = GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR;
   DatasetPtr ds(GDALDataset::FromHandle(GDALOpenEx(name.c_str(), kFlags, nullptr, nullptr, nullptr)));
   // note: GDAL's ESRI ASCII grid driver types the band Int32 when the first values look integral,
   // and then reads "nan" tokens as 0; reopen such grids as Float32 so NaN voids are seen.
-  if (ds && ds->GetDriver() && EQUAL(ds->GetDriver()->GetDescription(), "AAIGrid") &&
-      ds->GetRasterCount() > 0 && GDALDataTypeIsInteger(ds->GetRasterBand(1)->GetRasterDataType())) {
+  if (ds && ds->GetDriver() && EQUAL(ds->GetDriver()->GetDescription(), "AAIGrid") && ds->GetRasterCount() > 0 &&
+      GDALDataTypeIsInteger(ds->GetRasterBand(1)->GetRasterDataType())) {
     const char* const openOptions[] = {"DATATYPE=Float32", nullptr};
     const char* const drivers[] = {"AAIGrid", nullptr};
-    DatasetPtr f(GDALDataset::FromHandle(
-        GDALOpenEx(name.c_str(), kFlags, drivers, openOptions, nullptr)));
+    DatasetPtr f(GDALDataset::FromHandle(GDALOpenEx(name.c_str(), kFlags, drivers, openOptions, nullptr)));
     if (f) return f;
   }
   return ds;
@@ -79,7 +76,9 @@ DatasetPtr openDem(const fs::path& path, const DemOptions& options, GdalErrorCap
                    std::vector<std::string>& warnings) {
   DatasetPtr ds = openRaster(path.string());
   if (!ds) fail(path, withGdal("not a raster GDAL can read", cap));
-  struct Sub { std::string name, desc; };
+  struct Sub {
+    std::string name, desc;
+  };
   std::vector<Sub> subs;
   if (char** md = ds->GetMetadata("SUBDATASETS")) {
     for (int i = 1;; ++i) {
@@ -94,12 +93,10 @@ DatasetPtr openDem(const fs::path& path, const DemOptions& options, GdalErrorCap
   if (!want.empty()) {
     if (subs.empty()) {
       // A single-variable netCDF opens directly; accept its own variable name.
-      const char* var = ds->GetRasterCount() > 0
-                            ? ds->GetRasterBand(1)->GetMetadataItem("NETCDF_VARNAME")
-                            : nullptr;
+      const char* var = ds->GetRasterCount() > 0 ? ds->GetRasterBand(1)->GetMetadataItem("NETCDF_VARNAME") : nullptr;
       if (var && want == var) return ds;
-      fail(path, "has no subdataset '" + want + "'" +
-                     (var ? std::string(" (its only variable is '") + var + "')" : ""));
+      fail(path,
+           "has no subdataset '" + want + "'" + (var ? std::string(" (its only variable is '") + var + "')" : ""));
     }
     for (const Sub& s : subs) {
       const size_t colon = s.name.rfind(':');
@@ -123,20 +120,17 @@ DatasetPtr openDem(const fs::path& path, const DemOptions& options, GdalErrorCap
       return sub;
     }
   }
-  std::string why = subs.empty() ? "no raster bands" : "no 2D subdataset among " +
-                                                           std::to_string(subs.size());
+  std::string why = subs.empty() ? "no raster bands" : "no 2D subdataset among " + std::to_string(subs.size());
   fail(path, withGdal("not a raster GDAL can read (" + why + ")", cap));
 }
 
 // Metres per unit of a vertical unit string, or 0 if unknown.
 double verticalUnitToMetres(std::string unit) {
   std::transform(unit.begin(), unit.end(), unit.begin(), [](unsigned char c) { return std::tolower(c); });
-  if (unit.empty() || unit == "m" || unit == "metre" || unit == "metres" || unit == "meter" ||
-      unit == "meters")
+  if (unit.empty() || unit == "m" || unit == "metre" || unit == "metres" || unit == "meter" || unit == "meters")
     return 1.0;
   if (unit == "ft" || unit == "foot" || unit == "feet" || unit == "international foot") return 0.3048;
-  if (unit == "us-ft" || unit == "ftus" || unit == "us survey foot" || unit == "foot_us")
-    return 1200.0 / 3937.0;
+  if (unit == "us-ft" || unit == "ftus" || unit == "us survey foot" || unit == "foot_us") return 1200.0 / 3937.0;
   return 0.0;
 }
 
@@ -151,7 +145,6 @@ double metresPerDegreeLongitude(double phiDeg) {
   const double phi = std::clamp(phiDeg, -89.0, 89.0) * std::numbers::pi / 180.0;
   return 111412.84 * std::cos(phi) - 93.5 * std::cos(3 * phi);
 }
-
 
 struct DemSource::Impl {
   fs::path path;
@@ -175,7 +168,8 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
   if (!std::isfinite(options.zScale) || options.zScale == 0.0)
     fail(path, "z-scale " + formatNumber(options.zScale) + " must be finite and non-zero");
   for (double s : options.spacing)
-    if (!(s == 0.0 && options.spacing[0] == 0.0 && options.spacing[1] == 0.0) && !(s > 0.0 && std::isfinite(s) && s < 1e9))
+    if (!(s == 0.0 && options.spacing[0] == 0.0 && options.spacing[1] == 0.0) &&
+        !(s > 0.0 && std::isfinite(s) && s < 1e9))
       fail(path, optionRef("spacing") + " " + formatNumber(s) + " m must be positive and finite");
   std::error_code ec;
   if (!fs::exists(path, ec)) fail(path, "no such file");
@@ -196,16 +190,17 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
   if (ds->GetRasterCount() < 1) fail(path, "not a raster GDAL can read (no bands)");
   const int bands = ds->GetRasterCount();
   if (options.band > uint32_t(bands))
-    fail(path, optionRef("band") + " " + std::to_string(options.band) + ": the raster has " + std::to_string(bands) + " band" +
-                   (bands == 1 ? "" : "s"));
+    fail(path, optionRef("band") + " " + std::to_string(options.band) + ": the raster has " + std::to_string(bands) +
+                   " band" + (bands == 1 ? "" : "s"));
   if (options.band == 0 && bands > 1) {
     bool bytes = true;
     for (int b = 1; b <= bands; ++b) bytes = bytes && ds->GetRasterBand(b)->GetRasterDataType() == GDT_Byte;
     if (bytes && (bands == 3 || bands == 4))
       fail(path, std::to_string(bands) + " bands of bytes: a colour image (" + (bands == 3 ? "RGB" : "RGBA") +
-                     "), not heights; drape it over a DEM with " + optionRef("imagery") + ", or give " + optionRef("band") +
-                     " N to read one band as heights");
-    dem.warnings.push_back(std::to_string(bands) + " bands; using band 1 as heights (" + optionRef("band") + " N chooses another)");
+                     "), not heights; drape it over a DEM with " + optionRef("imagery") + ", or give " +
+                     optionRef("band") + " N to read one band as heights");
+    dem.warnings.push_back(std::to_string(bands) + " bands; using band 1 as heights (" + optionRef("band") +
+                           " N chooses another)");
   }
   dem.width = static_cast<uint32_t>(w);
   dem.height = static_cast<uint32_t>(h);
@@ -227,12 +222,10 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
   const double bandOffset = band->GetOffset(&hasOffset);
   double unit = verticalUnitToMetres(band->GetUnitType() ? band->GetUnitType() : "");
   if (unit == 0.0) {
-    dem.warnings.push_back(std::string("vertical unit '") + band->GetUnitType() +
-                           "' not recognised; assumed metres");
+    dem.warnings.push_back(std::string("vertical unit '") + band->GetUnitType() + "' not recognised; assumed metres");
     unit = 1.0;
   } else if (unit != 1.0) {
-    dem.warnings.push_back(std::string("vertical unit '") + band->GetUnitType() +
-                           "' converted to metres");
+    dem.warnings.push_back(std::string("vertical unit '") + band->GetUnitType() + "' converted to metres");
   }
   im.scale = (hasScale ? bandScale : 1.0) * unit * options.zScale;
   im.offset = (hasOffset ? bandOffset : 0.0) * unit * options.zScale;
@@ -259,8 +252,7 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
     const double sx = std::hypot(gt[1], gt[4]), sy = std::hypot(gt[2], gt[5]);
     if (!(sx > 0) || !(sy > 0) || !std::isfinite(sx) || !std::isfinite(sy))
       fail(path, "invalid geotransform (zero or non-finite pixel size)");
-    if (gt[2] != 0.0 || gt[4] != 0.0)
-      dem.warnings.push_back("rotated geotransform: rotation ignored");
+    if (gt[2] != 0.0 || gt[4] != 0.0) dem.warnings.push_back("rotated geotransform: rotation ignored");
     im.flip = gt[5] < 0;  // GDAL row 0 is north for the usual north-up rasters
     const double cxDeg = gt[0] + gt[1] * w * 0.5 + gt[2] * h * 0.5;
     const double cyDeg = gt[3] + gt[4] * w * 0.5 + gt[5] * h * 0.5;
@@ -279,8 +271,9 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
           dem.spacing = {sx, sy};
         }
         if (!srs->IsProjected() && !srs->IsLocal())
-          dem.warnings.push_back("spatial reference is neither geographic nor projected; "
-                                 "horizontal units taken as its linear units");
+          dem.warnings.push_back(
+              "spatial reference is neither geographic nor projected; "
+              "horizontal units taken as its linear units");
       }
     } else {
       // No SRS: degrees if the pixel extent fits the globe and pixels are under a degree. The
@@ -290,11 +283,12 @@ DemSource::DemSource(const fs::path& path, const DemOptions& options) : impl_(st
       const double x0 = std::min(gt[0], gt[0] + gt[1] * w), x1 = std::max(gt[0], gt[0] + gt[1] * w);
       const double y0 = std::min(gt[3], gt[3] + gt[5] * h), y1 = std::max(gt[3], gt[3] + gt[5] * h);
       const double slackX = std::max(sx, 0.5), slackY = std::max(sy, 0.5);
-      geographic = sx < 1.0 && sy < 1.0 && x0 >= -180.0 - slackX && x1 <= 360.0 + slackX &&
-                   y0 >= -90.0 - slackY && y1 <= 90.0 + slackY;
+      geographic = sx < 1.0 && sy < 1.0 && x0 >= -180.0 - slackX && x1 <= 360.0 + slackX && y0 >= -90.0 - slackY &&
+                   y1 <= 90.0 + slackY;
       if (geographic) {
-        dem.warnings.push_back("no spatial reference; extent fits longitude/latitude, so units "
-                               "are taken as degrees");
+        dem.warnings.push_back(
+            "no spatial reference; extent fits longitude/latitude, so units "
+            "are taken as degrees");
       } else {
         dem.warnings.push_back("no spatial reference; geotransform units taken as metres");
         dem.spacing = {sx, sy};
@@ -383,7 +377,8 @@ void DemSource::readRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* va
 void DemSource::readSourceRows(uint32_t y0, uint32_t rows, float* heights, uint8_t* valid, bool showProgress) const {
   Impl& im = *impl_;  // its chunk cache changes
   const fs::path& path = im.path;
-  const uint32_t w = im.planet ? im.planet->sourceWidth : info_.width, h = im.planet ? im.planet->sourceHeight : info_.height;
+  const uint32_t w = im.planet ? im.planet->sourceWidth : info_.width,
+                 h = im.planet ? im.planet->sourceHeight : info_.height;
   if (rows == 0) return;
   if (uint64_t{y0} + rows > h) throw std::logic_error("DemSource::readRows: rows beyond the raster");
   // GDAL's rows run north to south when the raster is north-up (flip): ours south to north.
@@ -411,8 +406,8 @@ void DemSource::readSourceRows(uint32_t y0, uint32_t rows, float* heights, uint8
       if (im.maskBand) {
         im.chunkMask.resize(cn);
         cap.clear();
-        if (im.band->GetMaskBand()->RasterIO(GF_Read, 0, int(c0), int(w), int(c1 - c0), im.chunkMask.data(),
-                                             int(w), int(c1 - c0), GDT_Byte, 0, 0, nullptr) != CE_None ||
+        if (im.band->GetMaskBand()->RasterIO(GF_Read, 0, int(c0), int(w), int(c1 - c0), im.chunkMask.data(), int(w),
+                                             int(c1 - c0), GDT_Byte, 0, 0, nullptr) != CE_None ||
             !cap.failures().empty())
           fail(path, withGdal("cannot read the raster's mask band", cap));
       }
@@ -431,8 +426,7 @@ void DemSource::readSourceRows(uint32_t y0, uint32_t rows, float* heights, uint8
                         (!mask.empty() && mask[i] == 0);
     valid[i] = isVoid ? 0 : 1;
     if (!isVoid && (im.scale != 1.0 || im.offset != 0.0)) heights[i] = static_cast<float>(v * im.scale + im.offset);
-    if (!isVoid && !std::isfinite(heights[i]))
-      fail(path, "heights overflow after z-scale " + formatNumber(im.zScale));
+    if (!isVoid && !std::isfinite(heights[i])) fail(path, "heights overflow after z-scale " + formatNumber(im.zScale));
   }
   if (im.flip && rows > 1) {
     for (uint32_t r = 0; r < rows / 2; ++r) {
@@ -451,8 +445,10 @@ DemRaster loadDem(const fs::path& path, const DemOptions& options) {
   if (options.maxMemory > 0 && need > double(options.maxMemory)) {
     const auto size = [](double bytes) {
       char text[32];
-      if (bytes >= double(1ull << 30)) std::snprintf(text, sizeof text, "%.1f GiB", bytes / double(1ull << 30));
-      else std::snprintf(text, sizeof text, "%.1f MiB", bytes / double(1ull << 20));
+      if (bytes >= double(1ull << 30))
+        std::snprintf(text, sizeof text, "%.1f GiB", bytes / double(1ull << 30));
+      else
+        std::snprintf(text, sizeof text, "%.1f MiB", bytes / double(1ull << 20));
       return std::string(text);
     };
     fail(path, std::to_string(w) + " x " + std::to_string(h) + " samples need about " + size(need) +

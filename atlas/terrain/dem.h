@@ -16,7 +16,7 @@
 namespace gimlod {
 
 struct DemOptions {
-  double zScale = 1.0;   // multiplies heights; must be finite and non-zero
+  double zScale = 1.0;     // multiplies heights; must be finite and non-zero
   std::string subdataset;  // netCDF variable (empty: the first 2D one GDAL offers)
   // GDAL's block cache for the read, bytes (it holds copies of the blocks read, by default 5% of
   // the machine's memory); 0: GDAL's default. Process-wide: set before the read.
@@ -49,9 +49,9 @@ struct DemRaster {
   uint64_t voidsFilled = 0;
   std::string voidFillMethod;
   float minHeight = 0.f, maxHeight = 0.f;
-  bool integerHeights = false;  // every sample the source gave (voids aside) is a whole number
+  bool integerHeights = false;        // every sample the source gave (voids aside) is a whole number
   std::vector<std::string> warnings;  // non-fatal issues (extra bands, no georeference, ...)
-  PlanetInfo planet;  // read as a planet lattice (DemOptions::planetRadius)
+  PlanetInfo planet;                  // read as a planet lattice (DemOptions::planetRadius)
 };
 
 // Human-readable name of the void-fill method (stored in DemRaster::voidFillMethod).

@@ -33,7 +33,10 @@ class GdalErrorCapture {
   // Failure messages since the last clear(), joined with "; ".
   const std::string& failures() const { return failures_; }
   const std::vector<std::string>& warnings() const { return warnings_; }
-  void clear() { failures_.clear(); CPLErrorReset(); }
+  void clear() {
+    failures_.clear();
+    CPLErrorReset();
+  }
 
  private:
   static void CPL_STDCALL handler(CPLErr cls, CPLErrorNum, const char* msg) {
@@ -60,6 +63,5 @@ using DatasetPtr = std::unique_ptr<GDALDataset, DatasetCloser>;
 inline std::string withGdal(const std::string& what, const GdalErrorCapture& cap) {
   return cap.failures().empty() ? what : what + " (" + cap.failures() + ")";
 }
-
 
 }  // namespace gimlod

@@ -24,9 +24,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-[[noreturn]] void fail(const fs::path& file, const std::string& what) {
-  throw InputError(file.string() + ": " + what);
-}
+[[noreturn]] void fail(const fs::path& file, const std::string& what) { throw InputError(file.string() + ": " + what); }
 
 // A virtual copy of `src` (nothing is read) whose geotransform and reference system can be set.
 DatasetPtr virtualCopy(GDALDataset* src, const fs::path& path, const GdalErrorCapture& cap) {
@@ -61,9 +59,9 @@ void validateImageryOptions(const ImageryOptions& o) {
                      " must be 1, 2 or 4 imagery samples per DEM sample interval");
   if (o.extent) {
     const auto& e = *o.extent;
-    if (!std::all_of(e.begin(), e.end(), [](double v) { return std::isfinite(v); }) || !(e[2] > e[0]) ||
-        !(e[3] > e[1]))
-      throw InputError(optionRef("imageryExtent") + " must be finite WEST,SOUTH,EAST,NORTH with east > west and north > south");
+    if (!std::all_of(e.begin(), e.end(), [](double v) { return std::isfinite(v); }) || !(e[2] > e[0]) || !(e[3] > e[1]))
+      throw InputError(optionRef("imageryExtent") +
+                       " must be finite WEST,SOUTH,EAST,NORTH with east > west and north > south");
   }
 }
 
@@ -133,8 +131,8 @@ struct ImagerySource::Impl {
     GDALWarpAppOptions* wopts = GDALWarpAppOptionsNew(args.List(), nullptr);
     int usageError = 0;
     cap.clear();
-    GDALDatasetH done = GDALWarp(nullptr, GDALDataset::ToHandle(target.get()), int(sources.size()), sources.data(),
-                                 wopts, &usageError);
+    GDALDatasetH done =
+        GDALWarp(nullptr, GDALDataset::ToHandle(target.get()), int(sources.size()), sources.data(), wopts, &usageError);
     GDALWarpAppOptionsFree(wopts);
     if (!done || usageError || !cap.failures().empty())
       fail(path, withGdal("reprojection onto the DEM failed (unreadable or truncated imagery?)", cap));
@@ -144,7 +142,8 @@ struct ImagerySource::Impl {
                                                  int(th), GDT_Byte, 0, 0) != CE_None)
         fail(path, withGdal("cannot read the reprojected imagery", cap));
     for (const std::string& w : cap.warnings())
-      if (warnings.size() < 8 && std::find(warnings.begin(), warnings.end(), w) == warnings.end()) warnings.push_back(w);
+      if (warnings.size() < 8 && std::find(warnings.begin(), warnings.end(), w) == warnings.end())
+        warnings.push_back(w);
   }
 };
 
@@ -189,8 +188,8 @@ ImagerySource::ImagerySource(const DemRaster& dem, const fs::path& demPath, cons
                      " WEST,SOUTH,EAST,NORTH in the DEM's reference system");
     const auto& e = *o.extent;
     im.placed = virtualCopy(source, path, cap);
-    const double gt[6] = {e[0], (e[2] - e[0]) / source->GetRasterXSize(), 0.0,
-                          e[3], 0.0, -(e[3] - e[1]) / source->GetRasterYSize()};
+    const double gt[6] = {e[0], (e[2] - e[0]) / source->GetRasterXSize(), 0.0, e[3],
+                          0.0,  -(e[3] - e[1]) / source->GetRasterYSize()};
     im.placed->SetGeoTransform(const_cast<double*>(gt));
     if (!dem.georef.wkt.empty()) im.placed->SetProjection(dem.georef.wkt.c_str());
     source = im.placed.get();
@@ -205,10 +204,10 @@ ImagerySource::ImagerySource(const DemRaster& dem, const fs::path& demPath, cons
   // Scale: the power of two nearest the DEM spacing over the imagery's pixel size.
   const double demPixel = std::sqrt(std::abs(dgt[1] * dgt[5]));
   const double ratio = demPixel / pixelSizeInDemUnits(source, dem.georef.wkt, path, cap);
-  im.scaleLog2 = o.scaleLog2 != kAutoImageryScale
-                     ? uint32_t(o.scaleLog2)
-                     : uint32_t(std::clamp<long>(std::lround(std::log2(std::max(ratio, 1e-9))), 0,
-                                                 long(kMaxImageryScaleLog2)));
+  im.scaleLog2 =
+      o.scaleLog2 != kAutoImageryScale
+          ? uint32_t(o.scaleLog2)
+          : uint32_t(std::clamp<long>(std::lround(std::log2(std::max(ratio, 1e-9))), 0, long(kMaxImageryScaleLog2)));
   const double s = double(1u << im.scaleLog2);
   im.resampling = ratio / s > 1.5 ? "average" : "bilinear";
 
@@ -390,8 +389,8 @@ void makeImageryDir(const fs::path& dir) {
   std::error_code ec;
   fs::create_directories(dir / "imagery", ec);
   if (ec || !fs::is_directory(dir / "imagery"))
-    throw InputError((dir / "imagery").string() + ": cannot create directory: " +
-                     (ec ? ec.message() : std::string("not a directory")));
+    throw InputError((dir / "imagery").string() +
+                     ": cannot create directory: " + (ec ? ec.message() : std::string("not a directory")));
 }
 
 void setImageryInfo(AtlasManifest& m, uint32_t scaleLog2, const std::string& source, double coverage) {
@@ -475,7 +474,8 @@ std::vector<PackedColour> gridWindow(const ImagerySource& imagery, const Imagery
   std::vector<PackedColour> base(size_t(w) * h);
   for (uint32_t y = 0; y < h; ++y) {
     const size_t src = size_t(std::min<uint64_t>(y0 + y, latH - 1) - ly0) * lw;
-    for (uint32_t x = 0; x < w; ++x) base[size_t(y) * w + x] = lattice[src + (std::min<uint64_t>(x0 + x, latW - 1) - lx0)];
+    for (uint32_t x = 0; x < w; ++x)
+      base[size_t(y) * w + x] = lattice[src + (std::min<uint64_t>(x0 + x, latW - 1) - lx0)];
   }
   return base;
 }
@@ -524,7 +524,8 @@ ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& s
   imagery.keepTiles(memoryBytes / 4);
   setImageryInfo(m, s, source, 0.0);
   std::vector<int64_t> at(size_t(m.chartsX) * m.chartsY, -1);
-  for (size_t i = 0; i < m.charts.size(); ++i) at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
+  for (size_t i = 0; i < m.charts.size(); ++i)
+    at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
   // The whole grid's level kc, gathered from the tiles.
   const uint64_t cw = ((gridW - 1) >> kc) + 1, ch = ((gridH - 1) >> kc) + 1;
   std::vector<PackedColour> coarse(cw * ch);
@@ -606,7 +607,8 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
   while (n < std::max(m.chartsX, m.chartsY) && windowBytes(n + 1) <= memoryBytes / 4 * 3) ++n;
   // Charts by grid cell.
   std::vector<int64_t> at(size_t(m.chartsX) * m.chartsY, -1);
-  for (size_t i = 0; i < m.charts.size(); ++i) at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
+  for (size_t i = 0; i < m.charts.size(); ++i)
+    at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
   setImageryInfo(m, s, source, 0.0);
   std::atomic<uint64_t> bytes{0}, samples{0};
   uint64_t covered = 0, windows = 0, most = 0;

@@ -68,7 +68,7 @@ class ImagerySource {
   ImagerySource& operator=(const ImagerySource&) = delete;
 
   uint32_t scaleLog2() const;
-  uint32_t width() const;   // (dem.width - 1) * 2^scaleLog2 + 1
+  uint32_t width() const;  // (dem.width - 1) * 2^scaleLog2 + 1
   uint32_t height() const;
   const std::string& resampling() const;  // GDAL's method: "bilinear" or "average"
   // GDAL's warnings so far.
@@ -87,8 +87,7 @@ class ImagerySource {
 
 // Reads and reprojects the imagery onto `dem`'s whole lattice (ImagerySource). Throws InputError
 // as ImagerySource does, and for imagery that does not overlap the DEM.
-ImageryRaster loadImagery(const DemRaster& dem, const std::filesystem::path& demPath,
-                          const ImageryOptions& options);
+ImageryRaster loadImagery(const DemRaster& dem, const std::filesystem::path& demPath, const ImageryOptions& options);
 
 // Relative path of chart `id`'s imagery file: "imagery/chart_0007.bin".
 std::string imageryFileName(uint32_t id);
@@ -114,8 +113,7 @@ struct ImageryWindow {
 class ImageryPyramid {
  public:
   // chartsX x chartsY charts of chartSize samples (the geometry's); `levels` pyramid levels.
-  ImageryPyramid(const ImageryRaster& raster, uint32_t chartsX, uint32_t chartsY, uint32_t chartSize,
-                 uint32_t levels);
+  ImageryPyramid(const ImageryRaster& raster, uint32_t chartsX, uint32_t chartsY, uint32_t chartSize, uint32_t levels);
   // The same pyramid of `grid` over `window` of its whole base (the lattice edge-clamped to
   // chartsX * intervals + 1 samples a side), whose samples are given in `rgba` (w * h, row 0
   // south), with x0 and y0 multiples of 2^(levels - 1). Its charts are the whole pyramid's, bit for
@@ -155,8 +153,8 @@ ImageryWriteStats writeImageryCharts(const ImageryRaster& raster, const std::str
                                      const std::filesystem::path& dir, AtlasManifest& manifest);
 
 struct ImageryWindowStats {
-  uint64_t windows = 0;       // windows of charts reprojected
-  uint64_t windowSamples = 0; // the most level-0 samples one window held
+  uint64_t windows = 0;        // windows of charts reprojected
+  uint64_t windowSamples = 0;  // the most level-0 samples one window held
 };
 
 // How writeImageryChartsWindowed cuts the imagery into windows: within memoryBytes, and, for charts

@@ -19,7 +19,8 @@ PlanetGrid planPlanetGrid(const PlanetSource& dem, const std::filesystem::path& 
   const uint32_t W = dem.width, H = dem.height;
   const auto& gt = dem.georef.geotransform;
   if (!dem.georef.geographic)
-    throw InputError(input.string() + ": --planet needs a DEM in longitude and latitude (a geographic reference "
+    throw InputError(input.string() +
+                     ": --planet needs a DEM in longitude and latitude (a geographic reference "
                      "system, or an extent in degrees); this one is projected or has no georeference");
   if (!(gt[1] > 0.0) || gt[2] != 0.0 || gt[4] != 0.0 || gt[5] == 0.0 || W < 2 || H < 2)
     throw InputError(input.string() + ": --planet needs a north-up, unrotated longitude/latitude grid");
@@ -61,8 +62,10 @@ PlanetGrid planPlanetGrid(const PlanetSource& dem, const std::filesystem::path& 
   const double slack = std::max(0.5 * p.dlatDeg, 0.5);
   if (south < -90.0 - slack || north > 90.0 + slack || std::fabs(p.lon0Deg) > 540.0) {
     char text[160];
-    std::snprintf(text, sizeof text, ": --planet: latitudes %.4f to %.4f or longitude %.4f lie off the sphere; is the "
-                  "grid in degrees?", south, north, p.lon0Deg);
+    std::snprintf(text, sizeof text,
+                  ": --planet: latitudes %.4f to %.4f or longitude %.4f lie off the sphere; is the "
+                  "grid in degrees?",
+                  south, north, p.lon0Deg);
     throw InputError(input.string() + text);
   }
   const double tol = 0.01 * p.dlatDeg;
@@ -129,8 +132,8 @@ void planetGridRow(const PlanetGrid& g, uint32_t y, const float* source, const u
 Georeference planetGridGeoref(const PlanetGrid& g, const Georeference& source) {
   Georeference r = source;
   const PlanetInfo& p = g.info;
-  r.geotransform = {p.lon0Deg - 0.5 * p.dlonDeg, p.dlonDeg, 0.0, p.lat0Deg + (double(g.height()) - 0.5) * p.dlatDeg,
-                    0.0, -p.dlatDeg};
+  r.geotransform = {
+      p.lon0Deg - 0.5 * p.dlonDeg, p.dlonDeg, 0.0, p.lat0Deg + (double(g.height()) - 0.5) * p.dlatDeg, 0.0, -p.dlatDeg};
   return r;
 }
 

@@ -25,13 +25,13 @@ namespace gimlod {
 struct PlanetGrid {
   PlanetInfo info;
   uint32_t sourceWidth = 0, sourceHeight = 0;
-  uint32_t turn = 0;         // distinct source columns a turn (0: no wrap)
+  uint32_t turn = 0;                        // distinct source columns a turn (0: no wrap)
   uint32_t southAdded = 0, northAdded = 0;  // pole rows added (0 or 1)
   // Rows [0, southRows) and [northFrom, height()) lie on a pole: uniform, at the mean of source
   // row southMeanRow (northMeanRow). southRows 0 and northFrom height(): no pole.
   uint32_t southRows = 0, northFrom = 0;
   uint32_t southMeanRow = 0, northMeanRow = 0;
-  bool round = false;        // heights rounded to whole metres
+  bool round = false;                        // heights rounded to whole metres
   float southMean = 0.0f, northMean = 0.0f;  // the pole rows' height
   uint32_t width() const { return info.wrapColumns ? info.wrapColumns + 1 : sourceWidth; }
   uint32_t height() const { return sourceHeight + southAdded + northAdded; }

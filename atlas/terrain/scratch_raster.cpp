@@ -234,7 +234,8 @@ void ScratchRaster::check(const CellWindow& w, const char* what) const {
 
 CellWindow ScratchRaster::tileWindow(uint64_t t) const {
   const int64_t tx = int64_t(t % tilesX_), ty = int64_t(t / tilesX_), s = tile_;
-  return {tx * s, ty * s, std::min<int64_t>((tx + 1) * s, int64_t(width_)), std::min<int64_t>((ty + 1) * s, int64_t(height_))};
+  return {tx * s, ty * s, std::min<int64_t>((tx + 1) * s, int64_t(width_)),
+          std::min<int64_t>((ty + 1) * s, int64_t(height_))};
 }
 
 std::vector<uint64_t> ScratchRaster::tilesOf(const CellWindow& w) const {
@@ -272,7 +273,8 @@ void ScratchRaster::decode(uint64_t t, Decoded& out) const {
   while (got < coded.size()) {
     const ssize_t r = ::pread(fd_, coded.data() + got, coded.size() - got, off_t(entry.offset + got));
     if (r < 0 && errno == EINTR) continue;
-    if (r <= 0) fail("tile " + std::to_string(t) + ": cannot read it (" + (r < 0 ? std::strerror(errno) : "short") + ")");
+    if (r <= 0)
+      fail("tile " + std::to_string(t) + ": cannot read it (" + (r < 0 ? std::strerror(errno) : "short") + ")");
     got += size_t(r);
   }
   try {
@@ -296,7 +298,8 @@ void ScratchRaster::write(const CellWindow& w, const float* heights, const uint8
     copyOverlap(heights, w, d.h.data(), tw, o);
     if (valid) copyOverlap(valid, w, d.v.data(), tw, o);
     uint8_t validity = 0;
-    const std::vector<uint8_t> coded = encodeTile(d.h.data(), d.v.data(), uint32_t(tw.width()), uint32_t(tw.height()), &validity);
+    const std::vector<uint8_t> coded =
+        encodeTile(d.h.data(), d.v.data(), uint32_t(tw.width()), uint32_t(tw.height()), &validity);
     const std::lock_guard lock(mutex_);
     const uint64_t at = end_;
     size_t put = 0;

@@ -34,12 +34,11 @@ void validateTerrainAtlasOptions(const TerrainAtlasOptions& o) {
                      " is not a power of two between 4 and 1024 (e.g. 32, 64, 128)");
   if (b > cs - 1)
     throw InputError(optionRef("blockIntervals") + " " + std::to_string(b) + " exceeds " + optionRef("chartSize") +
-                     " - 1 (" +
-                     std::to_string(cs - 1) + ")");
+                     " - 1 (" + std::to_string(cs - 1) + ")");
 }
 
-double terrainHeightPrecision(const fs::path& input, double requested, bool integerHeights, double fallback,
-                              float lo, float hi) {
+double terrainHeightPrecision(const fs::path& input, double requested, bool integerHeights, double fallback, float lo,
+                              float hi) {
   const double p = requested > 0.0 ? requested : integerHeights ? 1.0 : fallback;
   const double top = std::max(std::abs(double(lo)), std::abs(double(hi)));
   if (top / p > double(1u << 23)) {
@@ -51,9 +50,7 @@ double terrainHeightPrecision(const fs::path& input, double requested, bool inte
   return p;
 }
 
-float storedHeight(float h, double precision) {
-  return h == std::nearbyint(h) ? h : quantizeToStep(h, precision);
-}
+float storedHeight(float h, double precision) { return h == std::nearbyint(h) ? h : quantizeToStep(h, precision); }
 
 std::string chartFileName(uint32_t id) {
   char buf[32];
@@ -88,7 +85,8 @@ inline float clampedHeight(const DemRows& dem, int64_t gx, int64_t gy) {
     return dem.heights[static_cast<size_t>(j - dem.y0 / s) * static_cast<size_t>(dem.cols) +
                        static_cast<size_t>(i - dem.x0 / s)];
   }
-  gx = dem.wrapColumns > 0 ? wrappedColumn(gx, dem.x0, cols, dem.wrapColumns) : std::clamp<int64_t>(gx, 0, dem.width - 1);
+  gx = dem.wrapColumns > 0 ? wrappedColumn(gx, dem.x0, cols, dem.wrapColumns)
+                           : std::clamp<int64_t>(gx, 0, dem.width - 1);
   gy = std::clamp<int64_t>(gy, 0, dem.height - 1);
   return dem.heights[static_cast<size_t>(gy - dem.y0) * static_cast<size_t>(cols) + static_cast<size_t>(gx - dem.x0)];
 }
@@ -99,8 +97,7 @@ uint32_t chartsAlong(uint32_t samples, uint32_t m) {
 
 }  // namespace
 
-std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gridY,
-                                uint32_t chartSize) {
+std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gridY, uint32_t chartSize) {
   const int64_t m = int64_t{chartSize} - 1;
   std::vector<float> out(size_t{chartSize} * chartSize);
   for (uint32_t v = 0; v < chartSize; ++v)
@@ -109,8 +106,7 @@ std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gri
   return out;
 }
 
-ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
-                               bool keepRing) {
+ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t gridY, uint32_t chartSize, bool keepRing) {
   if (dem.width == 0 || dem.height == 0 || dem.heights.size() != size_t{dem.width} * dem.height)
     throw std::invalid_argument("buildChartPyramid: empty or inconsistent DEM");
   return buildChartPyramid(wholeRows(dem), gridX, gridY, chartSize, keepRing);
@@ -131,8 +127,7 @@ std::array<int64_t, 2> chartRowSpan(int64_t gridY, uint32_t chartSize, int64_t h
   return {std::max<int64_t>(0, gridY * m - m), std::min<int64_t>(height, gridY * m + 2 * m + 1)};
 }
 
-ChartPyramid buildChartPyramid(const DemRows& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
-                               bool keepRing) {
+ChartPyramid buildChartPyramid(const DemRows& dem, int32_t gridX, int32_t gridY, uint32_t chartSize, bool keepRing) {
   if (chartSize < 3 || !std::has_single_bit(chartSize - 1))
     throw std::invalid_argument("buildChartPyramid: chartSize is not 2^m+1");
   const auto span = chartRowSpan(gridY, chartSize, dem.height);
@@ -185,8 +180,7 @@ ChartPyramid buildPyramidLevels(const DemRows& dem, const DemSquare& square, uin
     }
     auto& h = p.heights[k];
     h.resize(size_t{s} * s);
-    for (uint32_t v = 0; v < s; ++v)
-      std::copy_n(ring.data() + (v + 1) * rs + 1, s, h.data() + size_t{v} * s);
+    for (uint32_t v = 0; v < s; ++v) std::copy_n(ring.data() + (v + 1) * rs + 1, s, h.data() + size_t{v} * s);
     if (keepRing) {
       p.ringHeights[k] = std::move(ring);
       ring = {};
@@ -207,8 +201,8 @@ ChartTiling chartTiling(uint32_t chartSize, uint32_t blockIntervals, uint32_t ma
   t.tile = std::min(m, maxTile);
   t.tilesPerSide = m / t.tile;
   const uint32_t levels = uint32_t(std::countr_zero(m)) + 1;
-  t.coarseLevel = t.tiled() ? uint32_t(std::countr_zero(t.tile)) - uint32_t(std::countr_zero(blockIntervals)) + 1
-                            : levels;
+  t.coarseLevel =
+      t.tiled() ? uint32_t(std::countr_zero(t.tile)) - uint32_t(std::countr_zero(blockIntervals)) + 1 : levels;
   return t;
 }
 
@@ -287,22 +281,25 @@ void writeChartCoarseLevels(const DemRows& dem, const TiledChart& c, ChartFileWr
   }
 }
 
-std::unique_ptr<ChartFileWriter> openTerrainChart(const fs::path& path, const AtlasManifest& manifest, const ChartInfo& c,
-                                                  const TerrainAtlasOptions& o) {
+std::unique_ptr<ChartFileWriter> openTerrainChart(const fs::path& path, const AtlasManifest& manifest,
+                                                  const ChartInfo& c, const TerrainAtlasOptions& o) {
   std::optional<HeightFieldFrame> frame;
   const uint32_t chartSize = manifest.chartSize;
   if (o.coding.compressed) {
     const int64_t m = int64_t{chartSize} - 1;
-    frame = HeightFieldFrame{c.gridX * m, c.gridY * m, int64_t{manifest.samplesX} - 1, int64_t{manifest.samplesY} - 1,
-                             manifest.spacing, manifest.planet.wrapColumns > 0};
+    frame = HeightFieldFrame{c.gridX * m,
+                             c.gridY * m,
+                             int64_t{manifest.samplesX} - 1,
+                             int64_t{manifest.samplesY} - 1,
+                             manifest.spacing,
+                             manifest.planet.wrapColumns > 0};
   }
   const ChartFileShape shape{chartSize, o.blockIntervals, uint32_t(std::countr_zero(chartSize - 1)) + 1,
                              (1u << kChannelHeights) | (1u << kChannelNormals)};
   return std::make_unique<ChartFileWriter>(path, shape, o.coding, frame);
 }
 
-void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& options,
-                         AtlasManifest& manifest) {
+void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& options, AtlasManifest& manifest) {
   validateTerrainAtlasOptions(options);
   const uint32_t cs = options.chartSize;
   const uint32_t cx = chartsAlong(dem.width, cs - 1), cy = chartsAlong(dem.height, cs - 1);
@@ -334,8 +331,8 @@ void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& option
       c.gridY = static_cast<int32_t>(y);
       c.file = chartFileName(id);
       auto link = [&](Edge e, bool present, uint32_t other, Edge otherEdge) {
-        c.neighbours[e] = present ? RootNeighbour{static_cast<int32_t>(other), otherEdge, true}
-                                  : RootNeighbour{-1, 0, true};
+        c.neighbours[e] =
+            present ? RootNeighbour{static_cast<int32_t>(other), otherEdge, true} : RootNeighbour{-1, 0, true};
       };
       link(kEdgeBottom, y > 0, id - cx, kEdgeTop);
       link(kEdgeRight, x + 1 < cx, id + 1, kEdgeLeft);
@@ -414,8 +411,8 @@ uint64_t writeTiledCharts(const DemRaster& dem, const fs::path& dir, const Atlas
   return arena.execute([&] { return writer.finish(rows); });
 }
 
-TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOptions& options,
-                                     const fs::path& dir, AtlasManifest& manifest) {
+TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOptions& options, const fs::path& dir,
+                                     AtlasManifest& manifest) {
   const auto start = std::chrono::steady_clock::now();
   validateTerrainAtlasOptions(options);
   if (dem.width == 0 || dem.height == 0 || dem.heights.size() != size_t{dem.width} * dem.height)
@@ -426,8 +423,8 @@ TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOpt
   const fs::path chartDir = dir / "charts";
   fs::create_directories(chartDir, ec);
   if (ec || !fs::is_directory(chartDir))
-    throw InputError(chartDir.string() + ": cannot create directory: " +
-                     (ec ? ec.message() : std::string("not a directory")));
+    throw InputError(chartDir.string() +
+                     ": cannot create directory: " + (ec ? ec.message() : std::string("not a directory")));
 
   fillTerrainManifest(dem, options, manifest);
   manifest.compression = CompressionInfo{};
@@ -446,19 +443,17 @@ TerrainAtlasStats writeTerrainCharts(const DemRaster& dem, const TerrainAtlasOpt
   constexpr uint64_t kMemoryBudget = uint64_t{4} << 30;
   const uint64_t perChartBytes = perChart * 2 * (sizeof(float) + sizeof(PackedNormal));
   const int concurrency = static_cast<int>(std::clamp<uint64_t>(
-      kMemoryBudget / perChartBytes, 1,
-      static_cast<uint64_t>(tbb::this_task_arena::max_concurrency())));
+      kMemoryBudget / perChartBytes, 1, static_cast<uint64_t>(tbb::this_task_arena::max_concurrency())));
   std::atomic<uint64_t> bytes{0};
   const ChartTiling tiling = chartTiling(cs, options.blockIntervals);
   if (tiling.tiled()) {
     // A tile in flight holds its pyramid with ring heights and its coded blocks: about 24 bytes per
     // level-0 sample.
     const uint64_t perTile = uint64_t{tiling.tile + 1} * (tiling.tile + 1) * 24;
-    bytes = writeTiledCharts(dem, dir, manifest, options, tiling,
-                             int(std::clamp<uint64_t>(kMemoryBudget / perTile, 1,
-                                                      uint64_t(tbb::this_task_arena::max_concurrency()))));
-  }
-  else {
+    bytes = writeTiledCharts(
+        dem, dir, manifest, options, tiling,
+        int(std::clamp<uint64_t>(kMemoryBudget / perTile, 1, uint64_t(tbb::this_task_arena::max_concurrency()))));
+  } else {
     tbb::task_arena arena(concurrency);
     const progress::ProgressStage stage("charts", manifest.charts.size());
     arena.execute([&] {

@@ -52,8 +52,7 @@ std::string chartFileName(uint32_t id);
 
 // The chart's level-0 heights, (chartSize)^2 row-major (row = v = north), edge-clamped outside
 // the DEM. Shared by the writer and the tests.
-std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gridY,
-                                uint32_t chartSize);
+std::vector<float> extractChart(const DemRaster& dem, int32_t gridX, int32_t gridY, uint32_t chartSize);
 
 // Rows [y0, y0 + rows) and columns [x0, x0 + cols) of a DEM's heights, row-major: what a group
 // of charts' pyramids are built from when the DEM does not fit in memory. Access is edge-clamped
@@ -169,14 +168,13 @@ uint64_t writeTiledCharts(const DemRaster& dem, const std::filesystem::path& dir
 // Builds the pyramid (subsampling) and normal maps of one chart. The normal at a sample comes from
 // central differences of the global DEM at that level's spacing (heightFieldNormals), so shared
 // borders match. keepRing: also the ring heights and frame a compressed file derives normals from.
-ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t gridY,
-                               uint32_t chartSize, bool keepRing = false);
+ChartPyramid buildChartPyramid(const DemRaster& dem, int32_t gridX, int32_t gridY, uint32_t chartSize,
+                               bool keepRing = false);
 
 // Fills the manifest's chart fields for `dem` (chart grid, files, root neighbours, spacing,
 // samples, height range, georeference, voids, planet, the charts either side of a planet's
 // antimeridian linked) without writing anything.
-void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& options,
-                         AtlasManifest& manifest);
+void fillTerrainManifest(const DemRaster& dem, const TerrainAtlasOptions& options, AtlasManifest& manifest);
 
 // Writes all chart files into `dir` (which must exist) and fills the manifest's chart fields
 // (kind, chartSize, blockIntervals, chartsX/Y, charts, neighbours, spacing, samples, heightRange,

@@ -36,8 +36,7 @@ ChartTiling windowTiling(uint32_t chartSize, uint32_t blockIntervals, uint64_t b
   };
   uint32_t tile = kMaxChartTile;
   while (tile > 2 * blockIntervals && !fits(tile)) tile /= 2;
-  if (m <= tile && (3 * m + 1) * (3 * m + 1) * 4 > budget / 4 && m / 2 >= 2 * blockIntervals)
-    tile = uint32_t(m / 2);
+  if (m <= tile && (3 * m + 1) * (3 * m + 1) * 4 > budget / 4 && m / 2 >= 2 * blockIntervals) tile = uint32_t(m / 2);
   return chartTiling(chartSize, blockIntervals, tile);
 }
 
@@ -191,7 +190,8 @@ uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& 
   const int64_t m = cs - 1, side = scratch.tileSide();
   std::map<std::pair<int64_t, int64_t>, std::vector<std::array<int64_t, 2>>> missing;  // by scratch tile
   for (const ChartInfo& c : mine.charts) {
-    auto xs = latticeIndices(std::max<int64_t>(0, (c.gridX - 1) * m), std::min(width, (c.gridX + 2) * m + 1), width, stride);
+    auto xs =
+        latticeIndices(std::max<int64_t>(0, (c.gridX - 1) * m), std::min(width, (c.gridX + 2) * m + 1), width, stride);
     // Round a planet, the charts at the antimeridian reach a chart past it.
     auto reach = [&](int64_t lo, int64_t hi) {
       const auto more = latticeIndices(lo, hi, width, stride);
@@ -199,7 +199,8 @@ uint64_t writeTiledChartsWindowed(const ScratchRaster& scratch, const fs::path& 
     };
     if (wrap && c.gridX == 0) reach(wrap - m, width);
     if (wrap && c.gridX + 1 == int32_t(manifest.chartsX)) reach(0, m + 1);
-    const auto ys = latticeIndices(std::max<int64_t>(0, (c.gridY - 1) * m), std::min(height, (c.gridY + 2) * m + 1), height, stride);
+    const auto ys = latticeIndices(std::max<int64_t>(0, (c.gridY - 1) * m), std::min(height, (c.gridY + 2) * m + 1),
+                                   height, stride);
     for (int64_t j : ys)
       for (int64_t i : xs) {
         const size_t k = size_t(j * nx + i);
@@ -279,8 +280,7 @@ PreparedTerrainWindows prepareTerrainWindows(const DemSource& source, const fs::
       ~Join() {
         try {
           g.wait();
-        } catch (...) {
-        }
+        } catch (...) {}
       }
     } join{coding};
     int at = 0;
@@ -311,8 +311,8 @@ PreparedTerrainWindows prepareTerrainWindows(const DemSource& source, const fs::
     }
     coding.wait();
   }
-  if (voids == width * height) throw InputError(input.string() + ": every sample is nodata (" +
-                                                std::to_string(voids) + " samples)");
+  if (voids == width * height)
+    throw InputError(input.string() + ": every sample is nodata (" + std::to_string(voids) + " samples)");
 
   // 2. The step a compressed atlas quantizes heights to, and the range of what it stores.
   const bool compressed = options.atlas.coding.compressed;
@@ -385,7 +385,8 @@ void writeTerrainChartWindows(const ScratchRaster& scratch, const fs::path& dir,
   const uint64_t m = cs - 1, spanRows = 3 * m + 1;
   const int64_t wrap = manifest.planet.wrapColumns;
   const ChartTiling tiling =
-      options.chartTile ? chartTiling(cs, atlas.blockIntervals, std::max(options.chartTile, 2 * atlas.blockIntervals)) : windowTiling(cs, atlas.blockIntervals, budget);
+      options.chartTile ? chartTiling(cs, atlas.blockIntervals, std::max(options.chartTile, 2 * atlas.blockIntervals))
+                        : windowTiling(cs, atlas.blockIntervals, budget);
   if (tiling.tiled()) {
     r.charts.bytesOnDisk = writeTiledChartsWindowed(scratch, dir, manifest, selected, {atlas, tiling, budget}, r);
     r.charts.charts = count;
@@ -398,10 +399,11 @@ void writeTerrainChartWindows(const ScratchRaster& scratch, const fs::path& dir,
   // A window of g chart columns holds spanRows x ((g + 2) m + 1) heights; the charts in flight
   // take the other half of the budget.
   if (spanRows * spanRows * 4 > budget / 4)
-    throw InputError(input.string() + ": a chart and its neighbours' margins (" + std::to_string(spanRows) + "^2 samples) need " +
-                     std::to_string((spanRows * spanRows * 4) >> 20) + " MiB, over a quarter of the " +
-                     std::to_string(budget >> 20) + " MiB the windows may use; give a smaller " +
-                     optionRef("chartSize") + " or a larger " + optionRef("maxMemory"));
+    throw InputError(input.string() + ": a chart and its neighbours' margins (" + std::to_string(spanRows) +
+                     "^2 samples) need " + std::to_string((spanRows * spanRows * 4) >> 20) +
+                     " MiB, over a quarter of the " + std::to_string(budget >> 20) +
+                     " MiB the windows may use; give a smaller " + optionRef("chartSize") + " or a larger " +
+                     optionRef("maxMemory"));
   const uint64_t groupColumns =
       std::clamp<uint64_t>((budget / 4 / (spanRows * 4) - 1) / m, 3, manifest.chartsX + 2) - 2;
   uint64_t perChart = 0;
@@ -423,7 +425,8 @@ void writeTerrainChartWindows(const ScratchRaster& scratch, const fs::path& dir,
       const uint32_t g0 = run[0], g1 = run[1];  // (named: clang before 16 cannot capture a structured binding)
       // Round a planet, the charts at the antimeridian read a chart past it.
       const int64_t x0 = wrap && g0 == 0 ? -int64_t(m) : chartRowSpan(g0, cs, int64_t(width))[0];
-      const int64_t x1 = wrap && g1 == manifest.chartsX ? int64_t(width + m) : chartRowSpan(g1 - 1, cs, int64_t(width))[1];
+      const int64_t x1 =
+          wrap && g1 == manifest.chartsX ? int64_t(width + m) : chartRowSpan(g1 - 1, cs, int64_t(width))[1];
       const CellWindow w{x0, rowSpan[0], x1, rowSpan[1]};
       r.bandRows = std::max<uint64_t>(r.bandRows, uint64_t(w.height()));
       r.bandColumns = std::max<uint64_t>(r.bandColumns, uint64_t(w.width()));

@@ -20,7 +20,7 @@
 namespace gimlod {
 
 struct WindowedTerrainOptions {
-  TerrainAtlasOptions atlas;   // chart size, block size, coding (its height precision: see below)
+  TerrainAtlasOptions atlas;  // chart size, block size, coding (its height precision: see below)
   // Compressed atlases: heights that are not whole are quantized to this step, in metres; 0: 1 for
   // a DEM of whole metres, else kDefaultHeightPrecision (what the in-memory build chooses).
   double heightPrecision = 0.0;
@@ -35,7 +35,7 @@ struct WindowedTerrainOptions {
 uint32_t windowChartTile(uint32_t chartSize, uint32_t blockIntervals, uint64_t budget);
 
 struct WindowedTerrainResult {
-  DemRaster dem;               // the DEM's metadata, heights empty; voids, range, integerHeights
+  DemRaster dem;  // the DEM's metadata, heights empty; voids, range, integerHeights
   TerrainAtlasStats charts;
   double heightPrecision = 0;  // the step used (compressed atlases)
   uint64_t scratchBytes = 0;   // the most the scratch raster took on disk (removed at the end)

@@ -34,7 +34,8 @@ class Geometry {
   const std::vector<double>& py(uint32_t l) const { return py_[l]; }
   CellWindow all(uint32_t l) const { return {0, 0, width(l), height(l)}; }
   CellWindow clamp(CellWindow w, uint32_t l) const {
-    return {std::max<int64_t>(w.x0, 0), std::max<int64_t>(w.y0, 0), std::min(w.x1, width(l)), std::min(w.y1, height(l))};
+    return {std::max<int64_t>(w.x0, 0), std::max<int64_t>(w.y0, 0), std::min(w.x1, width(l)),
+            std::min(w.y1, height(l))};
   }
 
  private:
@@ -64,7 +65,9 @@ struct Level {
   std::vector<uint8_t> ok;
   explicit Level(CellWindow win = {}) : w(win), v(win.cells(), 0.f), ok(win.cells(), 0) {}
   size_t at(int64_t x, int64_t y) const { return size_t(y - w.y0) * size_t(w.width()) + size_t(x - w.x0); }
-  bool covers(const CellWindow& o) const { return o.empty() || (o.x0 >= w.x0 && o.y0 >= w.y0 && o.x1 <= w.x1 && o.y1 <= w.y1); }
+  bool covers(const CellWindow& o) const {
+    return o.empty() || (o.x0 >= w.x0 && o.y0 >= w.y0 && o.x1 <= w.x1 && o.y1 <= w.y1);
+  }
 };
 
 CellWindow expand(const CellWindow& w, int64_t m) { return {w.x0 - m, w.y0 - m, w.x1 + m, w.y1 + m}; }
@@ -76,9 +79,7 @@ CellWindow unite(const CellWindow& a, const CellWindow& b) {
 // The level-l cells the pull of a level-(l+1) window reads: 2i-1 .. 2i+2.
 CellWindow childSupport(const CellWindow& w) { return {2 * w.x0 - 1, 2 * w.y0 - 1, 2 * w.x1 + 1, 2 * w.y1 + 1}; }
 // The level-(l+1) cells the push of a level-l window reads: x/2 and its neighbours.
-CellWindow parents(const CellWindow& w) {
-  return {w.x0 / 2 - 1, w.y0 / 2 - 1, (w.x1 - 1) / 2 + 2, (w.y1 - 1) / 2 + 2};
-}
+CellWindow parents(const CellWindow& w) { return {w.x0 / 2 - 1, w.y0 / 2 - 1, (w.x1 - 1) / 2 + 2, (w.y1 - 1) / 2 + 2}; }
 
 // Pulls level l+1 over `target` (clamped) from `fine` (level l), which must cover its taps.
 Level pull(const Geometry& g, uint32_t l, const Level& fine, CellWindow target, bool* anyVoid) {
@@ -124,10 +125,13 @@ Tap pushTap(const std::vector<double>& fine, const std::vector<double>& coarse, 
   const int64_t last = int64_t(coarse.size()) - 1;
   const int64_t i = std::min(x / 2, last);
   Tap t{i, i, 0.0};
-  if (fine[size_t(x)] < coarse[size_t(i)] && i > 0) t.c0 = i - 1;
-  else if (fine[size_t(x)] > coarse[size_t(i)] && i < last) t.c1 = i + 1;
+  if (fine[size_t(x)] < coarse[size_t(i)] && i > 0)
+    t.c0 = i - 1;
+  else if (fine[size_t(x)] > coarse[size_t(i)] && i < last)
+    t.c1 = i + 1;
   if (t.c0 != t.c1)
-    t.t = std::clamp((fine[size_t(x)] - coarse[size_t(t.c0)]) / (coarse[size_t(t.c1)] - coarse[size_t(t.c0)]), 0.0, 1.0);
+    t.t =
+        std::clamp((fine[size_t(x)] - coarse[size_t(t.c0)]) / (coarse[size_t(t.c1)] - coarse[size_t(t.c0)]), 0.0, 1.0);
   return t;
 }
 
@@ -280,8 +284,8 @@ void fillVoidsWindowed(uint32_t width, uint32_t height, float lo, float hi, cons
   std::vector<bool> levelHasVoids(c + 1, false);
   levelHasVoids[0] = true;
   {
-    const int64_t rowsPerBand = std::max<int64_t>(
-        1, (int64_t(windowSamples) / std::max<int64_t>(width, 1) - 2 * margin) >> c);
+    const int64_t rowsPerBand =
+        std::max<int64_t>(1, (int64_t(windowSamples) / std::max<int64_t>(width, 1) - 2 * margin) >> c);
     for (int64_t j0 = 0; j0 < g.height(c); j0 += rowsPerBand) {
       const CellWindow need{0, j0, g.width(c), std::min(j0 + rowsPerBand, g.height(c))};
       std::vector<CellWindow> win(c + 1);
@@ -323,7 +327,8 @@ void fillVoidsWindowed(uint32_t width, uint32_t height, float lo, float hi, cons
       g.ensure(l + 1);
       levels.push_back(pull(g, l, levels.back(), g.all(l + 1), &anyVoid));
     }
-    for (size_t i = levels.size() - 1; i-- > 0;) push(g, c + uint32_t(i), levels[i + 1], levels[i], g.all(c + uint32_t(i)), true);
+    for (size_t i = levels.size() - 1; i-- > 0;)
+      push(g, c + uint32_t(i), levels[i + 1], levels[i], g.all(c + uint32_t(i)), true);
     coarse = std::move(levels[0]);
   }
 
@@ -345,8 +350,7 @@ void fillVoidsWindowed(uint32_t width, uint32_t height, float lo, float hi, cons
         }
       // Valid samples come back unchanged; fills are clamped to the valid range, as fillVoids does.
       Level original = readLevel0(core);
-      for (size_t i = 0; i < out.size(); ++i)
-        out[i] = original.ok[i] ? original.v[i] : std::clamp(out[i], lo, hi);
+      for (size_t i = 0; i < out.size(); ++i) out[i] = original.ok[i] ? original.v[i] : std::clamp(out[i], lo, hi);
       io.write(core, out.data());
     }
 }

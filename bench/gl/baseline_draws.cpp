@@ -18,8 +18,8 @@
 namespace gimlod::bench {
 namespace {
 
-using gl::GlObject;
 using gl::checkGl;
+using gl::GlObject;
 using gl::makeBuffer;
 using gl::makeVertexArray;
 using gl::uniform;
@@ -50,8 +50,7 @@ float staticHeight(float x, float y) {
 }
 
 StaticMesh buildStaticMesh(uint64_t triangles) {
-  const uint32_t side = std::max<uint32_t>(
-      1, static_cast<uint32_t>(std::lround(std::sqrt(double(triangles) / 2.0))));
+  const uint32_t side = std::max<uint32_t>(1, static_cast<uint32_t>(std::lround(std::sqrt(double(triangles) / 2.0))));
   if (uint64_t(side) * side * 6 > uint64_t(std::numeric_limits<GLsizei>::max()))
     throw std::invalid_argument("drawStaticMeshMs: too many triangles");
   std::vector<glm::vec3> positions;
@@ -75,14 +74,12 @@ StaticMesh buildStaticMesh(uint64_t triangles) {
   glBindVertexArray(mesh.vertexArray.id());
   mesh.vertices = makeBuffer();
   glBindBuffer(GL_ARRAY_BUFFER, mesh.vertices.id());
-  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(positions.size() * sizeof(glm::vec3)),
-               positions.data(), GL_STATIC_DRAW);
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(positions.size() * sizeof(glm::vec3)), positions.data(), GL_STATIC_DRAW);
   glEnableVertexAttribArray(GIMLOD_ATTRIB_POSITION);
   glVertexAttribPointer(GIMLOD_ATTRIB_POSITION, 3, GL_FLOAT, GL_FALSE, sizeof(glm::vec3), nullptr);
   mesh.indices = makeBuffer();
   glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, mesh.indices.id());
-  glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(idx.size() * sizeof(uint32_t)), idx.data(),
-               GL_STATIC_DRAW);
+  glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(idx.size() * sizeof(uint32_t)), idx.data(), GL_STATIC_DRAW);
   glBindVertexArray(0);
   glBindBuffer(GL_ARRAY_BUFFER, 0);
   checkGl("static mesh upload");
@@ -104,8 +101,7 @@ double BaselineDraws::drawStaticMeshMs(uint64_t triangles, uint32_t frames, uint
   const float aspect = float(renderer_.setup().width) / float(renderer_.setup().height);
   const glm::mat4 viewProj =
       glm::perspective(glm::radians(50.0f), aspect, 0.01f, 10.0f) *
-      glm::lookAt(glm::vec3(0.5f, -0.55f, 0.75f), glm::vec3(0.5f, 0.45f, 0.0f),
-                  glm::vec3(0.0f, 0.0f, 1.0f));
+      glm::lookAt(glm::vec3(0.5f, -0.55f, 0.75f), glm::vec3(0.5f, 0.45f, 0.0f), glm::vec3(0.0f, 0.0f, 1.0f));
   glUseProgram(staticProgram_.id());
   glUniformMatrix4fv(uniform(staticProgram_, "u_viewProj"), 1, GL_FALSE, glm::value_ptr(viewProj));
   glUniform2f(uniform(staticProgram_, "u_heightRange"), -0.12f, 0.12f);

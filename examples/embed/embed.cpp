@@ -31,8 +31,8 @@ struct HeadlessContext {
   EGLContext context = EGL_NO_CONTEXT;
 
   HeadlessContext() {
-    auto getPlatformDisplay = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(
-        eglGetProcAddress("eglGetPlatformDisplayEXT"));
+    auto getPlatformDisplay =
+        reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
     auto queryDevices = reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
     std::vector<EGLDisplay> candidates;
     if (getPlatformDisplay) {
@@ -45,15 +45,14 @@ struct HeadlessContext {
     candidates.push_back(eglGetDisplay(EGL_DEFAULT_DISPLAY));
     for (EGLDisplay d : candidates) {
       if (d == EGL_NO_DISPLAY || !eglInitialize(d, nullptr, nullptr)) continue;
-      const EGLint configAttribs[] = {EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT,
-                                      EGL_NONE};
+      const EGLint configAttribs[] = {EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT, EGL_NONE};
       EGLConfig config;
       EGLint configs = 0;
       if (!eglChooseConfig(d, configAttribs, &config, 1, &configs) || configs == 0 || !eglBindAPI(EGL_OPENGL_API))
         continue;
-      const EGLint contextAttribs[] = {EGL_CONTEXT_MAJOR_VERSION, 4, EGL_CONTEXT_MINOR_VERSION, 3,
-                                       EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
-                                       EGL_NONE};
+      const EGLint contextAttribs[] = {
+          EGL_CONTEXT_MAJOR_VERSION,           4,       EGL_CONTEXT_MINOR_VERSION, 3, EGL_CONTEXT_OPENGL_PROFILE_MASK,
+          EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
       context = eglCreateContext(d, config, EGL_NO_CONTEXT, contextAttribs);
       if (context != EGL_NO_CONTEXT && eglMakeCurrent(d, EGL_NO_SURFACE, EGL_NO_SURFACE, context)) {
         display = d;
@@ -174,8 +173,8 @@ int main(int argc, char** argv) {
     const double drawn = coverage(pixels, options.background);
     std::printf("%s: %.1f%% of the pixels drawn\n", argv[2], 100.0 * drawn);
     if (drawn < 0.01) {
-      std::fprintf(stderr, "embed: %s: the frame is empty (%.3f%% of the pixels differ from the background)\n",
-                   argv[2], 100.0 * drawn);
+      std::fprintf(stderr, "embed: %s: the frame is empty (%.3f%% of the pixels differ from the background)\n", argv[2],
+                   100.0 * drawn);
       return 1;
     }
   } catch (const std::exception& e) {

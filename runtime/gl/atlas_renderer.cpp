@@ -33,7 +33,7 @@ constexpr GLuint kStitchBinding = GIMLOD_STITCH_BINDING;
 constexpr GLuint kOverlayBinding = GIMLOD_OVERLAY_BINDING;
 constexpr GLuint kGridAttrib = GIMLOD_ATTRIB_GRID, kNodeAttribA = GIMLOD_ATTRIB_NODE_A,
                  kNodeAttribB = GIMLOD_ATTRIB_NODE_B;
-constexpr uint32_t kMaxGridResLog2 = 12;                 // (2^12+1)^2 vertices; ushort (i, j)
+constexpr uint32_t kMaxGridResLog2 = 12;  // (2^12+1)^2 vertices; ushort (i, j)
 
 // std430 layout of atlas.vert's NodeRecord.
 // Layout fixed by GL for glMultiDrawElementsIndirect.
@@ -57,9 +57,7 @@ GLint getInteger(GLenum name) {
 glm::vec3 lightDirection() { return glm::normalize(glm::vec3(-0.45f, -0.35f, 0.82f)); }
 
 using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
+double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 // Mip levels of a texture of side `side` down to 1x1.
 uint32_t mipLevels(uint32_t side) {
@@ -124,8 +122,10 @@ GlObject linkAtlasProgram(bool geometry, bool planet) {
     return s;
   };
   const std::string vert = variant(kShader_atlas_vert), frag = variant(kShader_atlas_frag);
-  GlObject program = linkProgram(geometry ? "atlas (mesh)" : planet ? "atlas (planet)" : "atlas", vert.c_str(),
-                                 frag.c_str(), {"v_world"});
+  GlObject program = linkProgram(geometry ? "atlas (mesh)"
+                                 : planet ? "atlas (planet)"
+                                          : "atlas",
+                                 vert.c_str(), frag.c_str(), {"v_world"});
   setPagePoolUnits(program);
   return program;
 }
@@ -140,7 +140,7 @@ struct AtlasRenderer::Impl {
   };
 
   RendererSetup setup;
-  uint32_t pageSide = 0;  // P = 2^pageIntervalsLog2 + 1
+  uint32_t pageSide = 0;        // P = 2^pageIntervalsLog2 + 1
   uint32_t capacity = 0;        // pages in the pool
   uint32_t layersPerArray = 0;  // page p is layer p % layersPerArray of array p / layersPerArray
   GlObject colourBuffer, depthBuffer, framebuffer;
@@ -158,7 +158,7 @@ struct AtlasRenderer::Impl {
   std::vector<GridRange> grids;  // [res - minResLog2]
   GlObject nodeBuffer, stitchBuffer, indirectBuffer, feedbackBuffer, feedbackQuery;
   GLint morphWords = -1;  // the word of the stitch buffer where the neighbours' morph bytes begin; -1: none
-  GlObject timerQuery;  // GL_TIME_ELAPSED round each draw
+  GlObject timerQuery;    // GL_TIME_ELAPSED round each draw
   GlObject overlayBuffer;
   std::vector<NodeOverlay> overlay;  // per node of the next draw; empty: no overlay
   bool overlayColours = false;       // the records colour the nodes (else only their flags count)
@@ -177,8 +177,7 @@ struct AtlasRenderer::Impl {
   void validate(std::span<const DrawNode> nodes, const StitchTables& stitch) const;
   // Node records in the order given (record j is node order[j]; empty order: node order); each
   // record keeps its node's index for the stitching tables.
-  void uploadNodes(std::span<const DrawNode> nodes, const StitchTables& stitch,
-                   std::span<const uint32_t> order = {});
+  void uploadNodes(std::span<const DrawNode> nodes, const StitchTables& stitch, std::span<const uint32_t> order = {});
   void setShading(const GlObject& program, const glm::mat4& viewProj, const glm::vec3& eye) const;
   void bindAtlas(const glm::mat4& viewProj, const glm::vec3& eye, const StitchTables& stitch);
   void setPlanetUniforms() const;
@@ -192,8 +191,7 @@ AtlasRenderer::Impl::Impl(const RendererSetup& s) : setup(s) {
   if (setup.width == 0 || setup.height == 0)
     throw std::invalid_argument("AtlasRenderer: framebuffer size must be positive");
   if (setup.minResLog2 > setup.maxResLog2 || setup.maxResLog2 > kMaxGridResLog2)
-    throw std::invalid_argument("AtlasRenderer: need minResLog2 <= maxResLog2 <= " +
-                                std::to_string(kMaxGridResLog2));
+    throw std::invalid_argument("AtlasRenderer: need minResLog2 <= maxResLog2 <= " + std::to_string(kMaxGridResLog2));
   if (setup.pageIntervalsLog2 > kMaxGridResLog2)
     throw std::invalid_argument("AtlasRenderer: pageIntervalsLog2 too large");
   checkGl("context before AtlasRenderer setup");
@@ -227,16 +225,19 @@ void AtlasRenderer::Impl::checkLimits() const {
   if (setup.planet.present && !hasClipControl())
     throw std::runtime_error("AtlasRenderer: planet atlases need glClipControl (OpenGL 4.5 or ARB_clip_control)");
   if (getInteger(GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS) < 2)
-    throw std::runtime_error("AtlasRenderer: the GL implementation offers fewer than 2 shader "
-                             "storage blocks in the vertex stage");
+    throw std::runtime_error(
+        "AtlasRenderer: the GL implementation offers fewer than 2 shader "
+        "storage blocks in the vertex stage");
   const GLint maxSide = getInteger(GL_MAX_TEXTURE_SIZE);
   if (static_cast<int64_t>(setup.width) > getInteger(GL_MAX_RENDERBUFFER_SIZE) ||
       static_cast<int64_t>(setup.height) > getInteger(GL_MAX_RENDERBUFFER_SIZE) ||
       (int64_t(1) << setup.pageIntervalsLog2) + 1 > maxSide)
     throw std::runtime_error("AtlasRenderer: framebuffer or page size exceeds GL limits");
   if (setup.samples > 1 && int64_t(setup.samples) > getInteger(GL_MAX_SAMPLES))
-    throw std::runtime_error("AtlasRenderer: " + std::to_string(setup.samples) + " samples per pixel asked; the GL "
-                             "implementation offers " + std::to_string(getInteger(GL_MAX_SAMPLES)) + " at most");
+    throw std::runtime_error("AtlasRenderer: " + std::to_string(setup.samples) +
+                             " samples per pixel asked; the GL "
+                             "implementation offers " +
+                             std::to_string(getInteger(GL_MAX_SAMPLES)) + " at most");
 }
 
 namespace {
@@ -290,7 +291,8 @@ void AtlasRenderer::Impl::resolve() const {
 void AtlasRenderer::Impl::createPagePool() {
   capacity = std::max<uint32_t>(setup.pageCapacity, 1);
   const uint32_t maxLayers = static_cast<uint32_t>(std::max<GLint>(getInteger(GL_MAX_ARRAY_TEXTURE_LAYERS), 1));
-  layersPerArray = std::min(setup.layersPerArray == 0 ? maxLayers : std::min(setup.layersPerArray, maxLayers), capacity);
+  layersPerArray =
+      std::min(setup.layersPerArray == 0 ? maxLayers : std::min(setup.layersPerArray, maxLayers), capacity);
   const uint32_t arrays = (capacity + layersPerArray - 1) / layersPerArray;
   auto makeArray = [&](GLenum format, GLint levels, uint32_t side, uint32_t a) {
     const uint32_t layers = std::min(layersPerArray, capacity - a * layersPerArray);
@@ -298,10 +300,10 @@ void AtlasRenderer::Impl::createPagePool() {
     glBindTexture(GL_TEXTURE_2D_ARRAY, tex.id());
     glTexStorage3D(GL_TEXTURE_2D_ARRAY, levels, format, GLsizei(side), GLsizei(side), GLsizei(layers));
     if (const GLenum e = glGetError(); e != GL_NO_ERROR)
-      throw std::runtime_error("AtlasRenderer: a page pool of " + std::to_string(capacity) + " pages of " +
-                               std::to_string(side) + "^2 samples: " +
-                               (e == GL_OUT_OF_MEMORY ? std::string("out of GPU memory")
-                                                      : "GL error " + std::to_string(e)));
+      throw std::runtime_error(
+          "AtlasRenderer: a page pool of " + std::to_string(capacity) + " pages of " + std::to_string(side) +
+          "^2 samples: " +
+          (e == GL_OUT_OF_MEMORY ? std::string("out of GPU memory") : "GL error " + std::to_string(e)));
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, levels > 1 ? GL_LINEAR_MIPMAP_LINEAR : GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
@@ -345,13 +347,11 @@ void AtlasRenderer::Impl::createGrids() {
   }
   gridVertices = makeBuffer();
   glBindBuffer(GL_ARRAY_BUFFER, gridVertices.id());
-  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(vertices.size() * sizeof(uint16_t)), vertices.data(),
-               GL_STATIC_DRAW);
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(vertices.size() * sizeof(uint16_t)), vertices.data(), GL_STATIC_DRAW);
   glBindBuffer(GL_ARRAY_BUFFER, 0);
   gridIndices = makeBuffer();
   glBindBuffer(GL_ARRAY_BUFFER, gridIndices.id());  // bound to the VAO as element buffer later
-  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(indices.size() * sizeof(uint32_t)), indices.data(),
-               GL_STATIC_DRAW);
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(indices.size() * sizeof(uint32_t)), indices.data(), GL_STATIC_DRAW);
   glBindBuffer(GL_ARRAY_BUFFER, 0);
   checkGl("grid buffers");
 }
@@ -375,40 +375,42 @@ void AtlasRenderer::Impl::createVertexArray() {
   checkGl("vertex array setup");
 }
 
-void AtlasRenderer::Impl::validate(std::span<const DrawNode> nodes,
-                                     const StitchTables& stitch) const {
+void AtlasRenderer::Impl::validate(std::span<const DrawNode> nodes, const StitchTables& stitch) const {
   if (stitch.entriesPerSide == 0) throw std::invalid_argument("StitchTables: entriesPerSide = 0");
   if (!stitch.bytes.empty() && stitch.bytes.size() < nodes.size() * 4 * stitch.entriesPerSide)
     throw std::invalid_argument("StitchTables: fewer bytes than nodes * 4 * entriesPerSide");
   if (!stitch.morphs.empty() && stitch.morphs.size() != stitch.bytes.size())
     throw std::invalid_argument("StitchTables: morphs and bytes differ in size");
   for (const DrawNode& n : nodes) {
-    const bool ok = n.resLog2 >= setup.minResLog2 && n.resLog2 <= setup.maxResLog2 &&
-                    n.resLog2 <= n.pageResLog2 && n.pageResLog2 <= setup.pageIntervalsLog2 &&
-                    n.pageResLog2 <= n.sizeLog2 && n.sizeLog2 < 30 && n.pageLayer < capacity &&
-                    n.texLod <= n.pageResLog2 && n.texLodFrac <= 255 && n.morph <= 255;
+    const bool ok = n.resLog2 >= setup.minResLog2 && n.resLog2 <= setup.maxResLog2 && n.resLog2 <= n.pageResLog2 &&
+                    n.pageResLog2 <= setup.pageIntervalsLog2 && n.pageResLog2 <= n.sizeLog2 && n.sizeLog2 < 30 &&
+                    n.pageLayer < capacity && n.texLod <= n.pageResLog2 && n.texLodFrac <= 255 && n.morph <= 255;
     if (!ok)
-      throw std::invalid_argument(
-          "AtlasRenderer: bad DrawNode (origin " + std::to_string(n.originX) + "," +
-          std::to_string(n.originY) + " sizeLog2 " + std::to_string(n.sizeLog2) + " res " +
-          std::to_string(n.resLog2) + " pageResLog2 " + std::to_string(n.pageResLog2) + " layer " +
-          std::to_string(n.pageLayer) + ")");
+      throw std::invalid_argument("AtlasRenderer: bad DrawNode (origin " + std::to_string(n.originX) + "," +
+                                  std::to_string(n.originY) + " sizeLog2 " + std::to_string(n.sizeLog2) + " res " +
+                                  std::to_string(n.resLog2) + " pageResLog2 " + std::to_string(n.pageResLog2) +
+                                  " layer " + std::to_string(n.pageLayer) + ")");
   }
 }
 
-void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
-                                        const StitchTables& stitch, std::span<const uint32_t> order) {
+void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes, const StitchTables& stitch,
+                                      std::span<const uint32_t> order) {
   validate(nodes, stitch);
   std::vector<NodeRecord> records(std::max<size_t>(nodes.size(), 1), NodeRecord{});
   for (size_t j = 0; j < nodes.size(); ++j) {
     const size_t k = order.empty() ? j : order[j];
     const DrawNode& n = nodes[k];
-    records[j] = {n.originX, n.originY, int32_t(n.sizeLog2), int32_t(n.resLog2), int32_t(n.pageResLog2),
-                  int32_t(n.pageLayer % layersPerArray), int32_t(k), int32_t(n.texLod | (n.morph << 8) | (n.texLodFrac << 16))};
+    records[j] = {n.originX,
+                  n.originY,
+                  int32_t(n.sizeLog2),
+                  int32_t(n.resLog2),
+                  int32_t(n.pageResLog2),
+                  int32_t(n.pageLayer % layersPerArray),
+                  int32_t(k),
+                  int32_t(n.texLod | (n.morph << 8) | (n.texLodFrac << 16))};
   }
   glBindBuffer(GL_ARRAY_BUFFER, nodeBuffer.id());
-  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(records.size() * sizeof(NodeRecord)), records.data(),
-               GL_STREAM_DRAW);
+  glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(records.size() * sizeof(NodeRecord)), records.data(), GL_STREAM_DRAW);
   glBindBuffer(GL_ARRAY_BUFFER, 0);
   // note: an empty table means "no neighbours anywhere"; the shader still needs the words.
   // The neighbours' morph bytes follow, from the next whole word (u_morphWords).
@@ -420,8 +422,7 @@ void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
   if (morphs) std::memcpy(words.data() + tableWords, stitch.morphs.data(), tableBytes);
   morphWords = morphs ? GLint(tableWords) : -1;
   glBindBuffer(GL_SHADER_STORAGE_BUFFER, stitchBuffer.id());
-  glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(words.size() * sizeof(uint32_t)),
-               words.data(), GL_STREAM_DRAW);
+  glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(words.size() * sizeof(uint32_t)), words.data(), GL_STREAM_DRAW);
   glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kStitchBinding, stitchBuffer.id());
   // The overlays by node index (as the stitching tables), uploaded only when there are some: the
@@ -439,8 +440,7 @@ void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes,
   checkGl("node and stitch table upload");
 }
 
-void AtlasRenderer::Impl::setShading(const GlObject& p, const glm::mat4& viewProj,
-                                       const glm::vec3& eye) const {
+void AtlasRenderer::Impl::setShading(const GlObject& p, const glm::mat4& viewProj, const glm::vec3& eye) const {
   glUseProgram(p.id());
   const glm::vec2 spacing(float(setup.spacing[0]), float(setup.spacing[1]));
   const glm::vec2 valid(float(setup.validSamples[0]), float(setup.validSamples[1]));
@@ -452,8 +452,7 @@ void AtlasRenderer::Impl::setShading(const GlObject& p, const glm::mat4& viewPro
   glUniform2fv(optionalUniform(p, "u_validSamples"), 1, glm::value_ptr(valid));
   glUniform2f(optionalUniform(p, "u_heightRange"), setup.heightRange[0], setup.heightRange[1]);
   glUniform3fv(uniform(p, "u_lightDir"), 1, glm::value_ptr(light));
-  glUniform3f(uniform(p, "u_background"), setup.background[0], setup.background[1],
-              setup.background[2]);
+  glUniform3f(uniform(p, "u_background"), setup.background[0], setup.background[1], setup.background[2]);
   // note: fog scale from the valid extent; no fog when the extent is unknown.
   const float fog = 1.5f * glm::length(valid * spacing);
   glUniform1f(uniform(p, "u_fogDistance"), fog);
@@ -462,8 +461,7 @@ void AtlasRenderer::Impl::setShading(const GlObject& p, const glm::mat4& viewPro
   glUniform1f(optionalUniform(p, "u_colourScale"), float(1u << setup.colourScaleLog2));
 }
 
-void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& eye,
-                                        const StitchTables& stitch) {
+void AtlasRenderer::Impl::bindAtlas(const glm::mat4& viewProj, const glm::vec3& eye, const StitchTables& stitch) {
   setShading(atlasProgram, viewProj, eye);
   glUniform1i(uniform(atlasProgram, "u_leafLog2"), GLint(stitch.leafLog2));
   glUniform1i(uniform(atlasProgram, "u_entriesPerSide"), GLint(stitch.entriesPerSide));
@@ -529,8 +527,7 @@ void AtlasRenderer::Impl::beginFrame() const {
   }
 }
 
-AtlasRenderer::AtlasRenderer(const RendererSetup& setup)
-    : impl_(std::make_unique<Impl>(setup)) {}
+AtlasRenderer::AtlasRenderer(const RendererSetup& setup) : impl_(std::make_unique<Impl>(setup)) {}
 
 AtlasRenderer::~AtlasRenderer() = default;
 
@@ -562,11 +559,10 @@ void AtlasRenderer::setShading(const GlObject& program, const glm::mat4& viewPro
 void AtlasRenderer::setColours(bool on) { impl_->drawColours = on; }
 
 void AtlasRenderer::uploadPage(uint32_t page, uint32_t samplesPerSide, const float* samples,
-                                 const PackedNormal* normals, const PackedColour* colours, const PageMips* mips) {
-  if (page >= impl_->capacity || samplesPerSide == 0 || samplesPerSide > impl_->pageSide ||
-      !samples)
-    throw std::invalid_argument("AtlasRenderer::uploadPage: page " + std::to_string(page) +
-                                " / side " + std::to_string(samplesPerSide) + " out of range");
+                               const PackedNormal* normals, const PackedColour* colours, const PageMips* mips) {
+  if (page >= impl_->capacity || samplesPerSide == 0 || samplesPerSide > impl_->pageSide || !samples)
+    throw std::invalid_argument("AtlasRenderer::uploadPage: page " + std::to_string(page) + " / side " +
+                                std::to_string(samplesPerSide) + " out of range");
   const uint32_t array = page / impl_->layersPerArray, layer = page % impl_->layersPerArray;
   const GLsizei s = GLsizei(samplesPerSide);
   glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
@@ -593,8 +589,8 @@ void AtlasRenderer::uploadPage(uint32_t page, uint32_t samplesPerSide, const flo
   checkGl("uploadPage glTexSubImage3D");
 }
 
-DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
-                                std::span<const DrawNode> nodes, const StitchTables& stitch) {
+DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye, std::span<const DrawNode> nodes,
+                              const StitchTables& stitch) {
   Impl& m = *impl_;
   DrawStats stats;
   const auto t0 = Clock::now();
@@ -630,8 +626,8 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye,
       j = e;
     }
     glBindBuffer(GL_DRAW_INDIRECT_BUFFER, m.indirectBuffer.id());
-    glBufferData(GL_DRAW_INDIRECT_BUFFER, GLsizeiptr(commands.size() * sizeof(commands[0])),
-                 commands.data(), GL_STREAM_DRAW);
+    glBufferData(GL_DRAW_INDIRECT_BUFFER, GLsizeiptr(commands.size() * sizeof(commands[0])), commands.data(),
+                 GL_STREAM_DRAW);
     if (m.wireframe) glPolygonMode(GL_FRONT_AND_BACK, GL_LINE);
     for (const auto& [array, first, count] : draws) {
       m.bindPageArray(array);
@@ -682,9 +678,7 @@ void AtlasRenderer::setWireframe(bool on) { impl_->wireframe = on; }
 
 const AtlasRenderer::InspectionViews& AtlasRenderer::inspectionViews() const { return impl_->inspection; }
 
-void AtlasRenderer::setInspectionViews(const InspectionViews& v) {
-  impl_->inspection = v;
-}
+void AtlasRenderer::setInspectionViews(const InspectionViews& v) { impl_->inspection = v; }
 
 namespace {
 
@@ -715,8 +709,8 @@ std::vector<uint8_t> readWindowPixels(uint32_t width, uint32_t height) {
   return rgba;
 }
 
-std::vector<std::vector<glm::vec3>> AtlasRenderer::captureVertices(
-    std::span<const DrawNode> nodes, const StitchTables& stitch) {
+std::vector<std::vector<glm::vec3>> AtlasRenderer::captureVertices(std::span<const DrawNode> nodes,
+                                                                   const StitchTables& stitch) {
   Impl& m = *impl_;
   std::vector<std::vector<glm::vec3>> out(nodes.size());
   if (nodes.empty()) return out;
@@ -751,11 +745,10 @@ std::vector<std::vector<glm::vec3>> AtlasRenderer::captureVertices(
   GLuint written = 0;
   glGetQueryObjectuiv(m.feedbackQuery.id(), GL_QUERY_RESULT, &written);
   if (written != total)
-    throw std::runtime_error("captureVertices: transform feedback wrote " +
-                             std::to_string(written) + " of " + std::to_string(total) +
-                             " vertices");
-  const auto* mapped = static_cast<const glm::vec3*>(
-      glMapBufferRange(GL_TRANSFORM_FEEDBACK_BUFFER, 0, bytes, GL_MAP_READ_BIT));
+    throw std::runtime_error("captureVertices: transform feedback wrote " + std::to_string(written) + " of " +
+                             std::to_string(total) + " vertices");
+  const auto* mapped =
+      static_cast<const glm::vec3*>(glMapBufferRange(GL_TRANSFORM_FEEDBACK_BUFFER, 0, bytes, GL_MAP_READ_BIT));
   if (!mapped) {
     checkGl("captureVertices glMapBufferRange");
     throw std::runtime_error("captureVertices: glMapBufferRange returned null");

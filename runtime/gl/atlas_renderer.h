@@ -21,10 +21,10 @@
 namespace gimlod::gl {
 
 struct RendererSetup {
-  uint32_t width = 640, height = 480;          // offscreen framebuffer size
-  uint32_t samples = 1;                        // samples per pixel (multisampling); 1: none
+  uint32_t width = 640, height = 480;  // offscreen framebuffer size
+  uint32_t samples = 1;                // samples per pixel (multisampling); 1: none
   std::array<float, 3> background{0.53f, 0.70f, 0.92f};
-  uint32_t pageIntervalsLog2 = 6;              // page side = 2^this + 1 samples (= log2 R)
+  uint32_t pageIntervalsLog2 = 6;  // page side = 2^this + 1 samples (= log2 R)
   // Pages in the page pool. A texture array holds at most GL_MAX_ARRAY_TEXTURE_LAYERS (2048 on
   // Mesa and NVIDIA), so the pool is as many arrays as it takes: page p is layer p % L of array
   // p / L, and a cut whose pages lie in k arrays is k multi-draws (one per array, whose textures
@@ -105,8 +105,8 @@ class AtlasRenderer {
   // RendererSetup::colours; else ignored), ((samplesPerSide - 1) << colourScaleLog2) + 1 per side,
   // get their mip chain too.
   // mips, if given, are the page's (pagePoolMips), uploaded instead of made here.
-  void uploadPage(uint32_t page, uint32_t samplesPerSide, const float* samples,
-                  const PackedNormal* normals, const PackedColour* colours = nullptr, const PageMips* mips = nullptr);
+  void uploadPage(uint32_t page, uint32_t samplesPerSide, const float* samples, const PackedNormal* normals,
+                  const PackedColour* colours = nullptr, const PageMips* mips = nullptr);
   // Draws the pages' colours (RendererSetup::colours) or the neutral material.
   void setColours(bool on);
 
@@ -159,8 +159,7 @@ class AtlasRenderer {
 
   // Runs the same vertex shader with transform feedback and returns, per node, the stitched
   // world position of every grid vertex, index j * (2^res + 1) + i.
-  std::vector<std::vector<glm::vec3>> captureVertices(std::span<const DrawNode> nodes,
-                                                      const StitchTables& stitch);
+  std::vector<std::vector<glm::vec3>> captureVertices(std::span<const DrawNode> nodes, const StitchTables& stitch);
 
  private:
   struct Impl;

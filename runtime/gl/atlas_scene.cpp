@@ -41,8 +41,8 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o, const Pag
   // The roots stay resident, and a cut needs room to split one of them.
   if (o.gpuCacheBytes > 0 && s.pageCapacity < uint64_t(charts) + 4)
     throw InputError("a GPU page cache of " + std::to_string(o.gpuCacheBytes) + " bytes holds " +
-                     std::to_string(s.pageCapacity) + " pages of " + std::to_string(pageBytes) + " bytes; the atlas's " +
-                     std::to_string(charts) + " chart roots stay resident and a cut needs " +
+                     std::to_string(s.pageCapacity) + " pages of " + std::to_string(pageBytes) +
+                     " bytes; the atlas's " + std::to_string(charts) + " chart roots stay resident and a cut needs " +
                      std::to_string(uint64_t(charts) + 4) + " pages at least (" +
                      std::to_string((uint64_t(charts) + 4) * pageBytes) + " bytes)");
   return s;
@@ -53,14 +53,15 @@ PageLoaderOptions loaderOptions(const SceneOptions& o, const RendererSetup& setu
   PageLoaderOptions l;
   // The normals' and colours' mips are made on the loader threads, not at upload.
   l.prepare = [setup, &pages](LoadedPage& p) {
-    p.mips = pagePoolMips(setup, pages.pageSamples(p.id), p.normals.data(), p.colours.empty() ? nullptr : p.colours.data());
+    p.mips =
+        pagePoolMips(setup, pages.pageSamples(p.id), p.normals.data(), p.colours.empty() ? nullptr : p.colours.data());
   };
   const uint64_t mipBytes = pagePoolMipBytes(setup);
   l.preparedBytes = [mipBytes](const NodeId&) { return size_t(mipBytes); };
   l.ramBytes = o.ramCacheBytes;
   // Pages read ahead of their upload: two frames' worth, within half the RAM.
-  const uint64_t frame = o.uploadBytesPerFrame > 0 ? o.uploadBytesPerFrame
-                                                   : uint64_t(std::max(o.maxUploadsPerFrame, 1u)) * largestPage;
+  const uint64_t frame =
+      o.uploadBytesPerFrame > 0 ? o.uploadBytesPerFrame : uint64_t(std::max(o.maxUploadsPerFrame, 1u)) * largestPage;
   l.stagedBytes = size_t(std::max<uint64_t>(std::min<uint64_t>(2 * frame, o.ramCacheBytes / 2), largestPage));
   l.threads = std::max(o.loaderThreads, 1u);
   l.ioLatencyMs = o.ioLatencyMs;
@@ -92,12 +93,15 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
   }
   if (options_.asyncLoads) {
     uint64_t largest = 0;
-    for (uint32_t c = 0; c < atlas_.hierarchy.chartCount(); ++c) largest = std::max<uint64_t>(largest, pages_.pageBytes({c, 0, 0, 0}));
+    for (uint32_t c = 0; c < atlas_.hierarchy.chartCount(); ++c)
+      largest = std::max<uint64_t>(largest, pages_.pageBytes({c, 0, 0, 0}));
     largest += pagePoolMipBytes(renderer_->setup());  // a page waits for its upload with its mips
     // A page waiting for its upload and one in the cache at least.
     if (options_.ramCacheBytes < 2 * largest)
-      throw InputError("the loader's RAM of " + std::to_string(options_.ramCacheBytes) + " bytes must hold two of the "
-                       "atlas's pages, " + std::to_string(2 * largest) + " bytes");
+      throw InputError("the loader's RAM of " + std::to_string(options_.ramCacheBytes) +
+                       " bytes must hold two of the "
+                       "atlas's pages, " +
+                       std::to_string(2 * largest) + " bytes");
     loader_ = std::make_unique<PageLoader>(pages_, loaderOptions(options_, renderer_->setup(), pages_, largest));
   }
 }
@@ -284,9 +288,9 @@ DrawStats AtlasScene::drawCut(const Camera& camera, const Cut& cut, FrameResult*
   const std::vector<DrawNode> nodes = prepare(cut, frame);
   // The overlay records: the colouring's, and the stand-in flags for the "pages loading" view.
   const bool colourNodes = options_.overlay != OverlayMode::kNone;
-  std::vector<NodeOverlay> records =
-      colourNodes ? nodeOverlays(atlas_.hierarchy, cut, options_.overlay, options_.overlayColour, options_.overlayErrorPx)
-                  : std::vector<NodeOverlay>();
+  std::vector<NodeOverlay> records = colourNodes ? nodeOverlays(atlas_.hierarchy, cut, options_.overlay,
+                                                                options_.overlayColour, options_.overlayErrorPx)
+                                                 : std::vector<NodeOverlay>();
   if (renderer_->inspectionViews().loading && !standIns_.empty()) {
     records.resize(cut.nodes.size());
     for (size_t i = 0; i < cut.nodes.size(); ++i)
@@ -313,7 +317,8 @@ uint32_t nodeRoomOf(uint32_t pages, uint32_t roots, bool grouped) {
 }  // namespace
 
 uint32_t AtlasScene::pagePoolPages(const SceneOptions& o, uint32_t charts, bool grouped, uint64_t pageBytes) {
-  if (o.gpuCacheBytes > 0 && pageBytes > 0) return uint32_t(std::min<uint64_t>(o.gpuCacheBytes / pageBytes, UINT32_MAX));
+  if (o.gpuCacheBytes > 0 && pageBytes > 0)
+    return uint32_t(std::min<uint64_t>(o.gpuCacheBytes / pageBytes, UINT32_MAX));
   const uint64_t want = std::max<uint64_t>(o.pageCapacity, 1);
   uint64_t pages = charts < want / 2 ? want : uint64_t(charts) + std::max<uint64_t>(want / 2, 1);
   // With groups, F = 4/3 N + 4 free pages hold cuts of N nodes (nodeRoomOf(R + F, R, true) >= N).

@@ -43,14 +43,14 @@ struct SceneOptions {
   // Paper 7.2: pages load on loader threads and missing nodes draw with a resident ancestor.
   // Off (the default): every page is read synchronously, so frames are deterministic.
   bool asyncLoads = false;
-  uint32_t maxUploadsPerFrame = 64;            // async: loaded pages uploaded per frame
-  uint64_t uploadBytesPerFrame = 0;            // async: and their bytes (0: no limit; one page always)
+  uint32_t maxUploadsPerFrame = 64;  // async: loaded pages uploaded per frame
+  uint64_t uploadBytesPerFrame = 0;  // async: and their bytes (0: no limit; one page always)
   // async: the RAM the loader holds, its cache of read pages and the pages read for upload
   // (PageLoaderOptions::ramBytes; those may take at most half, and twice a frame's uploads).
   size_t ramCacheBytes = size_t(256) << 20;
   uint32_t loaderThreads = 2;                  // async: loader threads
   double ioLatencyMs = 0.0, ioJitterMs = 0.0;  // async: simulated slow storage (PageLoaderOptions)
-  uint32_t ioDepth = 32;  // async: reads the simulated storage serves at once (PageLoaderOptions)
+  uint32_t ioDepth = 32;                       // async: reads the simulated storage serves at once (PageLoaderOptions)
   // async: prefetch the cut of the view this many seconds ahead, the camera extrapolated from the
   // last two frames at frameSeconds apart, at a priority below every page the frame needs (0: off).
   double prefetchSeconds = 0.0;
@@ -74,17 +74,17 @@ struct SceneOptions {
   // Drawn over the shading (runtime/overlay.h): charts, levels or resolutions told apart, seams
   // and open borders marked. Capture is unaffected.
   OverlayMode overlay = OverlayMode::kNone;
-  NodeColour overlayColour;  // the colours of OverlayMode::kCustom
+  NodeColour overlayColour;     // the colours of OverlayMode::kCustom
   double overlayErrorPx = 0.0;  // OverlayMode::kError: the error drawn red (0: the cut's largest)
 };
 
 struct FrameResult {
-  Cut cut;         // the cut actually drawn (async: with resident ancestors substituted)
-  Cut desiredCut;  // async: the cut the adaptation chose; empty without asyncLoads (`cut` is it)
-  AdaptStats adapt;        // of the desired cut (rootFloor, budgetBelowRoots: in both modes)
-  BudgetStats budget;      // budget mode: the quad-queue's stats (adapt holds its counts too)
+  Cut cut;                    // the cut actually drawn (async: with resident ancestors substituted)
+  Cut desiredCut;             // async: the cut the adaptation chose; empty without asyncLoads (`cut` is it)
+  AdaptStats adapt;           // of the desired cut (rootFloor, budgetBelowRoots: in both modes)
+  BudgetStats budget;         // budget mode: the quad-queue's stats (adapt holds its counts too)
   AttributeStats attributes;  // attribute resolutions of the desired cut (texelsPerPixel > 0)
-  double maxErrorPx = 0.0;  // of the drawn cut: above the tolerance while ancestors stand in
+  double maxErrorPx = 0.0;    // of the drawn cut: above the tolerance while ancestors stand in
   DrawStats draw;
   double adaptMs = 0.0, stitchMs = 0.0, uploadMs = 0.0;
   uint32_t pagesLoaded = 0;
@@ -198,15 +198,15 @@ class AtlasScene {
   std::unique_ptr<AtlasRenderer> renderer_;
   PagePool pool_;
   uint64_t frame_ = 0;
-  bool frameStarted_ = false;  // streamPages began frame_; prepare must not advance it
+  bool frameStarted_ = false;              // streamPages began frame_; prepare must not advance it
   std::unordered_set<uint64_t> standIns_;  // async: drawn nodes standing in for pages still loading
   std::vector<float> samples_;
   std::vector<PackedNormal> normals_;
   std::vector<PackedColour> colours_;
-  uint64_t pageBytes_ = 0;               // GPU bytes of one pool page
-  uint64_t uploadBytes_ = 0;             // this frame's
-  PageLoaderStats lastLoads_;            // the loader's counts at the end of the last frame
-  bool hasLastCamera_ = false;           // prefetch: the last frame's camera
+  uint64_t pageBytes_ = 0;      // GPU bytes of one pool page
+  uint64_t uploadBytes_ = 0;    // this frame's
+  PageLoaderStats lastLoads_;   // the loader's counts at the end of the last frame
+  bool hasLastCamera_ = false;  // prefetch: the last frame's camera
   Camera lastCamera_;
   std::unique_ptr<DualQueueAdapter> dualQueue_;
   std::unique_ptr<QuadQueueAdapter> quadQueue_;

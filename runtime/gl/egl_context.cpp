@@ -110,8 +110,7 @@ void addDeviceDisplays(const char* clientExts, std::vector<Candidate>* out) {
   std::vector<Candidate> hardware, software;
   for (size_t i = 0; i < devices.size(); ++i) {
     const bool hasDeviceQuery = deviceBase || hasExtension(clientExts, "EGL_EXT_device_query");
-    const char* devExts =
-        hasDeviceQuery ? eglQueryDeviceStringEXT(devices[i], EGL_EXTENSIONS) : nullptr;
+    const char* devExts = hasDeviceQuery ? eglQueryDeviceStringEXT(devices[i], EGL_EXTENSIONS) : nullptr;
     if (hasDeviceQuery && !devExts) eglGetError();
     EGLDisplay dpy = eglGetPlatformDisplayEXT(EGL_PLATFORM_DEVICE_EXT, devices[i], nullptr);
     if (dpy == EGL_NO_DISPLAY) {
@@ -131,21 +130,31 @@ std::vector<Candidate> candidateDisplays() {
   const char* exts = clientExtensions();
   addDeviceDisplays(exts, &out);
   if (hasExtension(exts, "EGL_MESA_platform_surfaceless")) {
-    EGLDisplay dpy = eglGetPlatformDisplayEXT(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY,
-                                              nullptr);
-    if (dpy != EGL_NO_DISPLAY) out.push_back({dpy, "Mesa surfaceless platform"});
-    else eglGetError();
+    EGLDisplay dpy = eglGetPlatformDisplayEXT(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
+    if (dpy != EGL_NO_DISPLAY)
+      out.push_back({dpy, "Mesa surfaceless platform"});
+    else
+      eglGetError();
   }
   EGLDisplay dpy = eglGetDisplay(EGL_DEFAULT_DISPLAY);
-  if (dpy != EGL_NO_DISPLAY) out.push_back({dpy, "default display"});
-  else eglGetError();
+  if (dpy != EGL_NO_DISPLAY)
+    out.push_back({dpy, "default display"});
+  else
+    eglGetError();
   return out;
 }
 
 EGLConfig chooseConfig(EGLDisplay dpy, bool needPbuffer) {
-  const EGLint attribs[] = {EGL_SURFACE_TYPE, needPbuffer ? EGL_PBUFFER_BIT : 0,
-                            EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT,
-                            EGL_RED_SIZE, 8, EGL_GREEN_SIZE, 8, EGL_BLUE_SIZE, 8,
+  const EGLint attribs[] = {EGL_SURFACE_TYPE,
+                            needPbuffer ? EGL_PBUFFER_BIT : 0,
+                            EGL_RENDERABLE_TYPE,
+                            EGL_OPENGL_BIT,
+                            EGL_RED_SIZE,
+                            8,
+                            EGL_GREEN_SIZE,
+                            8,
+                            EGL_BLUE_SIZE,
+                            8,
                             EGL_NONE};
   EGLConfig config = nullptr;
   EGLint n = 0;
@@ -157,11 +166,9 @@ EGLConfig chooseConfig(EGLDisplay dpy, bool needPbuffer) {
 // Core profile, newest first down to 4.3.
 EGLContext createCoreContext(EGLDisplay dpy, EGLConfig config) {
   for (int minor = 6; minor >= 3; --minor) {
-    const EGLint attribs[] = {EGL_CONTEXT_MAJOR_VERSION, 4,
-                              EGL_CONTEXT_MINOR_VERSION, minor,
-                              EGL_CONTEXT_OPENGL_PROFILE_MASK,
-                              EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
-                              EGL_NONE};
+    const EGLint attribs[] = {
+        EGL_CONTEXT_MAJOR_VERSION,           4,       EGL_CONTEXT_MINOR_VERSION, minor, EGL_CONTEXT_OPENGL_PROFILE_MASK,
+        EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
     EGLContext ctx = eglCreateContext(dpy, config, EGL_NO_CONTEXT, attribs);
     if (ctx != EGL_NO_CONTEXT) return ctx;
     eglGetError();
@@ -180,8 +187,7 @@ std::unique_ptr<EglContext> EglContext::create() {
       if (!initializeDisplay(c.display)) failEgl("eglInitialize");
       result->display_ = c.display;
       if (!eglBindAPI(EGL_OPENGL_API)) failEgl("eglBindAPI(EGL_OPENGL_API)");
-      const bool surfaceless =
-          hasExtension(eglQueryString(c.display, EGL_EXTENSIONS), "EGL_KHR_surfaceless_context");
+      const bool surfaceless = hasExtension(eglQueryString(c.display, EGL_EXTENSIONS), "EGL_KHR_surfaceless_context");
       EGLConfig config = chooseConfig(c.display, !surfaceless);
       result->context_ = createCoreContext(c.display, config);
       EGLSurface surface = EGL_NO_SURFACE;
@@ -197,8 +203,8 @@ std::unique_ptr<EglContext> EglContext::create() {
       glGetIntegerv(GL_MAJOR_VERSION, &major);
       glGetIntegerv(GL_MINOR_VERSION, &minor);
       if (major * 10 + minor < 43)
-        throw std::runtime_error("context reports OpenGL " + std::to_string(major) + "." +
-                                 std::to_string(minor) + " (< 4.3)");
+        throw std::runtime_error("context reports OpenGL " + std::to_string(major) + "." + std::to_string(minor) +
+                                 " (< 4.3)");
       const char* eglVendor = eglQueryString(c.display, EGL_VENDOR);
       result->displayName_ = c.name + ", EGL vendor " + (eglVendor ? eglVendor : "?");
       return result;
@@ -208,8 +214,7 @@ std::unique_ptr<EglContext> EglContext::create() {
     }
   }
   if (candidates.empty()) reasons = "\n  no EGL display available";
-  throw std::runtime_error("EglContext: no headless OpenGL 4.3 core context could be created:" +
-                           reasons);
+  throw std::runtime_error("EglContext: no headless OpenGL 4.3 core context could be created:" + reasons);
 }
 
 EglContext::~EglContext() {

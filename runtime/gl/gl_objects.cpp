@@ -35,8 +35,7 @@ GlObject compileShader(const char* programName, GLenum stage, const char* source
     glGetShaderiv(shader.id(), GL_INFO_LOG_LENGTH, &length);
     std::string log(static_cast<size_t>(std::max(length, 1)), '\0');
     glGetShaderInfoLog(shader.id(), length, nullptr, log.data());
-    throw std::runtime_error(std::string("compiling the ") +
-                             (stage == GL_VERTEX_SHADER ? "vertex" : "fragment") +
+    throw std::runtime_error(std::string("compiling the ") + (stage == GL_VERTEX_SHADER ? "vertex" : "fragment") +
                              " shader of " + programName + " failed:\n" + log);
   }
   return shader;
@@ -96,8 +95,8 @@ GlObject linkProgram(const char* name, const char* vertexSource, const char* fra
   glAttachShader(program.id(), vs.id());
   glAttachShader(program.id(), fs.id());
   if (!feedbackVaryings.empty())
-    glTransformFeedbackVaryings(program.id(), static_cast<GLsizei>(feedbackVaryings.size()),
-                                feedbackVaryings.data(), GL_INTERLEAVED_ATTRIBS);
+    glTransformFeedbackVaryings(program.id(), static_cast<GLsizei>(feedbackVaryings.size()), feedbackVaryings.data(),
+                                GL_INTERLEAVED_ATTRIBS);
   glLinkProgram(program.id());
   GLint ok = GL_FALSE, length = 0;
   glGetProgramiv(program.id(), GL_LINK_STATUS, &ok);

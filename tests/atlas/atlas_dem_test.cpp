@@ -45,9 +45,7 @@ RawBand readRaw(const fs::path& path) {
   int has = 0;
   r.nodata = GDALGetRasterNoDataValue(b, &has);
   r.hasNodata = has != 0;
-  if (GDALRasterIO(b, GF_Read, 0, 0, r.w, r.h, r.v.data(), r.w, r.h, GDT_Float64, 0, 0) !=
-      CE_None)
-    r.v.clear();
+  if (GDALRasterIO(b, GF_Read, 0, 0, r.w, r.h, r.v.data(), r.w, r.h, GDT_Float64, 0, 0) != CE_None) r.v.clear();
   GDALClose(ds);
   return r;
 }
@@ -192,11 +190,11 @@ TEST(AtlasDem, RowsReadTheSameWhateverTheBandsAsked) {
     return h;
   };
   const std::vector<float> whole = read(0, 1000);
-  for (const auto& [y0, rows] : std::vector<std::pair<uint32_t, uint32_t>>{{0, 640}, {472, 256}, {100, 37}, {640, 360}}) {
+  for (const auto& [y0, rows] :
+       std::vector<std::pair<uint32_t, uint32_t>>{{0, 640}, {472, 256}, {100, 37}, {640, 360}}) {
     const std::vector<float> part = read(y0, rows);
     size_t differ = 0;
-    for (size_t i = 0; i < part.size(); ++i)
-      differ += std::memcmp(&part[i], &whole[size_t(y0) * w + i], 4) != 0;
+    for (size_t i = 0; i < part.size(); ++i) differ += std::memcmp(&part[i], &whole[size_t(y0) * w + i], 4) != 0;
     EXPECT_EQ(differ, 0u) << "rows " << y0 << " + " << rows;
   }
 }
@@ -271,8 +269,7 @@ TEST(AtlasFillVoids, HoleInRampFollowsRamp) {
   EXPECT_LT(maxErr, 5.0) << "max deviation from the ramp";
   // No spikes: neighbouring filled samples differ by at most a few ramp steps.
   for (uint32_t y = 15; y < 31; ++y)
-    for (uint32_t x = 20; x < 40; ++x)
-      EXPECT_LT(std::fabs(v[y * w + x + 1] - v[y * w + x]), 3.0f * 3);
+    for (uint32_t x = 20; x < 40; ++x) EXPECT_LT(std::fabs(v[y * w + x + 1] - v[y * w + x]), 3.0f * 3);
 }
 
 TEST(AtlasFillVoids, SingleValidSample) {
@@ -360,8 +357,8 @@ TEST(AtlasDemErrors, DamagedTileDataFailsInRead) {
   GDALDatasetH src = GDALOpen(terrain("mt_rainier_90m.tif").c_str(), GA_ReadOnly);
   ASSERT_NE(src, nullptr);
   const char* opts[] = {"TILED=YES", "COMPRESS=DEFLATE", nullptr};
-  GDALDatasetH dst = GDALCreateCopy(GDALGetDriverByName("GTiff"), full.c_str(), src, FALSE,
-                                    const_cast<char**>(opts), nullptr, nullptr);
+  GDALDatasetH dst = GDALCreateCopy(GDALGetDriverByName("GTiff"), full.c_str(), src, FALSE, const_cast<char**>(opts),
+                                    nullptr, nullptr);
   ASSERT_NE(dst, nullptr);
   GDALClose(dst);
   GDALClose(src);
@@ -462,8 +459,7 @@ TEST(AtlasDemErrors, NanTokensInIntegerLookingAsciiGrid) {
   const fs::path f = tmp.path() / "nans.asc";
   std::string grid = "ncols 9\nnrows 7\nxllcorner 0\nyllcorner 0\ncellsize 30\n";
   for (int r = 0; r < 7; ++r) {
-    for (int c = 0; c < 9; ++c)
-      grid += (r == 4 && c >= 3 && c <= 5) ? "nan " : std::to_string(100 + r + c) + " ";
+    for (int c = 0; c < 9; ++c) grid += (r == 4 && c >= 3 && c <= 5) ? "nan " : std::to_string(100 + r + c) + " ";
     grid += "\n";
   }
   std::ofstream(f) << grid;

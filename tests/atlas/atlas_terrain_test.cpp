@@ -20,8 +20,7 @@ DemRaster planeDem(uint32_t w, uint32_t h, double a, double b, std::array<double
   d.spacing = spacing;
   d.heights.resize(size_t(w) * h);
   for (uint32_t y = 0; y < h; ++y)
-    for (uint32_t x = 0; x < w; ++x)
-      d.heights[size_t(y) * w + x] = float(a * x * spacing[0] + b * y * spacing[1]);
+    for (uint32_t x = 0; x < w; ++x) d.heights[size_t(y) * w + x] = float(a * x * spacing[0] + b * y * spacing[1]);
   d.minHeight = *std::min_element(d.heights.begin(), d.heights.end());
   d.maxHeight = *std::max_element(d.heights.begin(), d.heights.end());
   return d;
@@ -119,13 +118,12 @@ TEST(AtlasTerrain, SmallDemGridAndManifest) {
 // Shared side of two charts at one level: column u = s-1 of `a` vs u = 0 of `b` (horizontal
 // neighbours), or row v = s-1 of `a` vs v = 0 of `b` (vertical).
 template <typename T>
-void expectSharedSideIdentical(const std::vector<T>& a, const std::vector<T>& b, uint32_t s,
-                               bool horizontal, const char* what, uint32_t level) {
+void expectSharedSideIdentical(const std::vector<T>& a, const std::vector<T>& b, uint32_t s, bool horizontal,
+                               const char* what, uint32_t level) {
   for (uint32_t i = 0; i < s; ++i) {
     const size_t ia = horizontal ? size_t(i) * s + (s - 1) : size_t(s - 1) * s + i;
     const size_t ib = horizontal ? size_t(i) * s : i;
-    ASSERT_EQ(0, std::memcmp(&a[ia], &b[ib], sizeof(T)))
-        << what << " differ at level " << level << " index " << i;
+    ASSERT_EQ(0, std::memcmp(&a[ia], &b[ib], sizeof(T))) << what << " differ at level " << level << " index " << i;
   }
 }
 
@@ -134,8 +132,8 @@ TEST(AtlasTerrain, RainierSeamsBitIdentical) {
   test::TempDir tmp("gimlod-terrain");
   AtlasManifest m;
   const TerrainAtlasStats st = writeTerrainCharts(dem, {129, 32, {}}, tmp.path(), m);
-  std::printf("[ timing   ] writeTerrainCharts(rainier, 129/32): %u charts, %.3f s, %.1f MB\n",
-              st.charts, st.seconds, st.bytesOnDisk / 1e6);
+  std::printf("[ timing   ] writeTerrainCharts(rainier, 129/32): %u charts, %.3f s, %.1f MB\n", st.charts, st.seconds,
+              st.bytesOnDisk / 1e6);
   EXPECT_EQ(m.chartsX, 10u);  // ceil(1200 / 128)
   EXPECT_EQ(m.chartsY, 10u);
   EXPECT_EQ(m.voidsFilled, 9033u);
@@ -144,10 +142,8 @@ TEST(AtlasTerrain, RainierSeamsBitIdentical) {
 
   // A chart in the middle, its right neighbour and its top neighbour; plus the last column
   // (partly outside the DEM, edge-clamped).
-  const std::pair<uint32_t, uint32_t> pairs[] = {{4 * 10 + 4, 4 * 10 + 5},
-                                                 {4 * 10 + 4, 5 * 10 + 4},
-                                                 {9 * 10 + 8, 9 * 10 + 9},
-                                                 {8 * 10 + 9, 9 * 10 + 9}};
+  const std::pair<uint32_t, uint32_t> pairs[] = {
+      {4 * 10 + 4, 4 * 10 + 5}, {4 * 10 + 4, 5 * 10 + 4}, {9 * 10 + 8, 9 * 10 + 9}, {8 * 10 + 9, 9 * 10 + 9}};
   for (auto [ia, ib] : pairs) {
     const ChartInfo& ca = r.charts[ia];
     const bool horizontal = ca.neighbours[kEdgeRight].chart == int32_t(ib);
@@ -156,10 +152,8 @@ TEST(AtlasTerrain, RainierSeamsBitIdentical) {
     ASSERT_EQ(fa.levels(), 8u);
     for (uint32_t k = 0; k < fa.levels(); ++k) {
       const uint32_t s = (128 >> k) + 1;
-      expectSharedSideIdentical(fa.readLevelHeights(k), fb.readLevelHeights(k), s, horizontal,
-                                "heights", k);
-      expectSharedSideIdentical(fa.readLevelNormals(k), fb.readLevelNormals(k), s, horizontal,
-                                "normals", k);
+      expectSharedSideIdentical(fa.readLevelHeights(k), fb.readLevelHeights(k), s, horizontal, "heights", k);
+      expectSharedSideIdentical(fa.readLevelNormals(k), fb.readLevelNormals(k), s, horizontal, "normals", k);
     }
     // The files hold exactly what buildChartPyramid computes.
     const ChartPyramid p = buildChartPyramid(dem, ca.gridX, ca.gridY, 129);

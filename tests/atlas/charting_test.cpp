@@ -36,8 +36,7 @@ IndexedMesh gridCube(int n) {
   for (const auto& fr : frames) {
     const uint32_t base = static_cast<uint32_t>(m.positions.size());
     for (int j = 0; j <= n; ++j)
-      for (int i = 0; i <= n; ++i)
-        m.positions.push_back(fr[0] + fr[1] * (float(i) / n) + fr[2] * (float(j) / n));
+      for (int i = 0; i <= n; ++i) m.positions.push_back(fr[0] + fr[1] * (float(i) / n) + fr[2] * (float(j) / n));
     auto id = [&](int i, int j) { return base + uint32_t(j * (n + 1) + i); };
     for (int j = 0; j < n; ++j)
       for (int i = 0; i < n; ++i) {
@@ -193,8 +192,7 @@ TEST(Charting, TwoCubesWithColoursKeepTheirColours) {
   ASSERT_EQ(l.colours.size(), l.positions.size());
   for (size_t v = 0; v < l.positions.size(); ++v) {
     const glm::vec3& p = l.positions[v];
-    EXPECT_EQ(l.colours[v],
-              glm::u8vec4(uint8_t(p.x * 50), uint8_t(p.y * 200), uint8_t(p.z * 200), 255));
+    EXPECT_EQ(l.colours[v], glm::u8vec4(uint8_t(p.x * 50), uint8_t(p.y * 200), uint8_t(p.z * 200), 255));
   }
 }
 
@@ -297,16 +295,14 @@ TEST_P(ChartingShared, LayoutValidNearTarget) {
     ChartingStats st;
     const auto t0 = std::chrono::steady_clock::now();
     const PatchLayout l = buildPatchLayout(mesh, o, &st);
-    const double secs =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::printf(
         "[charting] %s target %u: %u charts (%u clustered, %u splits, %u corners inserted), "
         "%zu tris, weld %.2fs cluster %.2fs sides %.2fs total %.2fs; planarity max %.4f mean "
         "%.4f; nm edges %llu vertices split %llu; peak ~%.0f MB\n",
-        GetParam().file, target, st.charts, st.chartsBeforeFixing, st.patchesSplit,
-        st.cornersInserted, l.triangles.size(), st.weldSeconds, st.clusterSeconds,
-        st.sidesSeconds, secs, st.maxPlanarityError, st.meanPlanarityError,
-        (unsigned long long)st.nonManifoldEdges, (unsigned long long)st.verticesSplit,
+        GetParam().file, target, st.charts, st.chartsBeforeFixing, st.patchesSplit, st.cornersInserted,
+        l.triangles.size(), st.weldSeconds, st.clusterSeconds, st.sidesSeconds, secs, st.maxPlanarityError,
+        st.meanPlanarityError, (unsigned long long)st.nonManifoldEdges, (unsigned long long)st.verticesSplit,
         st.peakBytesEstimate / 1e6);
     std::printf("[charting]   sides histogram:");
     for (size_t n = 0; n < st.sidesHistogram.size(); ++n)
@@ -317,8 +313,7 @@ TEST_P(ChartingShared, LayoutValidNearTarget) {
     EXPECT_TRUE(errs.empty()) << errs.size() << " violations, first: " << errs[0];
     EXPECT_EQ(st.inputTriangles, mesh.triangles.size());
     EXPECT_EQ(l.triangles.size(), st.outputTriangles);
-    EXPECT_EQ(st.outputTriangles + st.droppedDegenerate + st.droppedDuplicate,
-              st.inputTriangles);
+    EXPECT_EQ(st.outputTriangles + st.droppedDegenerate + st.droppedDuplicate, st.inputTriangles);
     if (GetParam().boundaryEdges != ~0ull) {
       EXPECT_EQ(st.boundaryEdges, GetParam().boundaryEdges);
     }
@@ -333,10 +328,8 @@ TEST_P(ChartingShared, LayoutValidNearTarget) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Charting, ChartingShared,
-                         ::testing::Values(MeshCase{"bun_zipper.ply", 223},
-                                           MeshCase{"igea.ply", ~0ull},
-                                           MeshCase{"turbineblade.ply", ~0ull},
-                                           MeshCase{"horse.ply", ~0ull},
+                         ::testing::Values(MeshCase{"bun_zipper.ply", 223}, MeshCase{"igea.ply", ~0ull},
+                                           MeshCase{"turbineblade.ply", ~0ull}, MeshCase{"horse.ply", ~0ull},
                                            MeshCase{"armadillo.obj", ~0ull}),
                          [](const auto& info) {
                            std::string n = info.param.file;
@@ -350,8 +343,8 @@ TEST(Charting, ErrorTargetOnBunny) {
   o.maxError = 0.01;
   ChartingStats st;
   const PatchLayout l = buildPatchLayout(mesh, o, &st);
-  std::printf("[charting] bunny maxError %.3f: %u charts, planarity max %.4f mean %.4f, %.2fs\n",
-              o.maxError, st.charts, st.maxPlanarityError, st.meanPlanarityError, st.seconds);
+  std::printf("[charting] bunny maxError %.3f: %u charts, planarity max %.4f mean %.4f, %.2fs\n", o.maxError, st.charts,
+              st.maxPlanarityError, st.meanPlanarityError, st.seconds);
   expectValid(l, "bunny error mode");
   EXPECT_GT(st.charts, 10u);
   // Splits only cut charts that met the bound; a half's RMS can exceed its parent's a little.
@@ -389,10 +382,10 @@ TEST(Charting, CellsPathOnBunny) {
   o.threads = 2;
   ChartingStats st;
   const PatchLayout l = buildPatchLayoutFromCells(dir.path() / "grid", o, &st);
-  std::printf("[charting] bunny cells: %u cells, %u cell clusters (%u dissolved), %u charts, "
-              "cluster %.2fs total %.2fs\n",
-              st.cells, st.cellClusters, st.cellClustersDissolved, st.charts, st.clusterSeconds,
-              st.seconds);
+  std::printf(
+      "[charting] bunny cells: %u cells, %u cell clusters (%u dissolved), %u charts, "
+      "cluster %.2fs total %.2fs\n",
+      st.cells, st.cellClusters, st.cellClustersDissolved, st.charts, st.clusterSeconds, st.seconds);
   expectValid(l, "bunny cells");
   EXPECT_GT(st.cells, 4u);
   EXPECT_EQ(l.triangles.size() + st.droppedDegenerate + st.droppedDuplicate, gr.triangles);
@@ -400,7 +393,6 @@ TEST(Charting, CellsPathOnBunny) {
   EXPECT_GE(st.charts, o.targetPatches);
   EXPECT_LE(st.charts, o.targetPatches * 5 / 4);
 }
-
 
 // The cone fit of the developable metric, on faceted surfaces: 0 where every face normal makes
 // one angle with an axis (a plane, a half cylinder, a cone), and about theta^4 / 48 on a spherical

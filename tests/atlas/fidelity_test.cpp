@@ -71,7 +71,8 @@ double pointTriangleDistance(const glm::dvec3& p, const glm::dvec3& a, const glm
   const double vb = d5 * d2 - d1 * d6;
   if (vb <= 0 && d2 >= 0 && d6 <= 0) return glm::length(p - (a + ac * (d2 / (d2 - d6))));
   const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) return glm::length(p - (b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))));
+  if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0)
+    return glm::length(p - (b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))));
   const double denom = 1.0 / (va + vb + vc);
   return glm::length(p - (a + ab * (vb * denom) + ac * (vc * denom)));
 }
@@ -129,7 +130,8 @@ TEST(Fidelity, MatchesBruteForce) {
   for (size_t i = 0; i < mp.size(); ++i)
     if (used[i]) meshSamples.push_back(mp[i]);
   for (const auto& f : mt)
-    if (!degenerate(mp, f)) meshSamples.push_back((glm::dvec3(mp[f[0]]) + glm::dvec3(mp[f[1]]) + glm::dvec3(mp[f[2]])) / 3.0);
+    if (!degenerate(mp, f))
+      meshSamples.push_back((glm::dvec3(mp[f[0]]) + glm::dvec3(mp[f[1]]) + glm::dvec3(mp[f[2]])) / 3.0);
   const OneSided a2m = bruteForce(atlasSamples, mp, mt), m2a = bruteForce(meshSamples, ap, at);
 
   auto check = [&](const FidelityStats& s) {

@@ -21,9 +21,7 @@ namespace fs = std::filesystem;
 fs::path meshPath(const std::string& name) { return test::realData("meshes/" + name); }
 bool haveMeshes() { return fs::exists(test::sharedData() / "meshes"); }
 
-void writeFile(const fs::path& p, const std::string& text) {
-  std::ofstream(p, std::ios::binary) << text;
-}
+void writeFile(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
 
 // A triangle as comparable bits: positions and colours, corners in order.
 using TriKey = std::array<uint32_t, 12>;
@@ -57,8 +55,7 @@ std::vector<std::string> stagingLeftovers(const fs::path& dir) {
 
 // Checks a grid on disk against the reader's output: every triangle in exactly one cell (the
 // multisets are equal), each in the cell of its centroid, and that centroid inside the cell box.
-void expectGridPartitionsMesh(const fs::path& mesh, const fs::path& grid,
-                              const GridifyResult& r) {
+void expectGridPartitionsMesh(const fs::path& mesh, const fs::path& grid, const GridifyResult& r) {
   const GridManifest m = readGridManifest(grid);
   EXPECT_EQ(m.triangles, r.triangles);
   EXPECT_EQ(m.cells.size(), r.cells);
@@ -106,8 +103,7 @@ TEST(Gridify, BunnyCellsPartitionTheReadersTriangles) {
   expectGridPartitionsMesh(meshPath("bun_zipper.ply"), out, r);
   EXPECT_TRUE(stagingLeftovers(dir.path()).empty());
   EXPECT_FALSE(fs::exists(out / "cells" / "cell_00000000.bin.tmp"));
-  for (const auto& e : fs::directory_iterator(out / "cells"))
-    EXPECT_EQ(e.path().extension(), ".bin") << e.path();
+  for (const auto& e : fs::directory_iterator(out / "cells")) EXPECT_EQ(e.path().extension(), ".bin") << e.path();
 }
 
 TEST(Gridify, TinyBufferBudgetForcesManyFlushesAndStaysUnderIt) {
@@ -275,8 +271,7 @@ TEST(Gridify, VertexArrayMustFitAQuarterOfTheCap) {
     gridify(mesh, dir.path() / "grid", o);
     ADD_FAILURE() << "expected InputError";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("vertex array of 1500000 vertices"), std::string::npos)
-        << e.what();
+    EXPECT_NE(std::string(e.what()).find("vertex array of 1500000 vertices"), std::string::npos) << e.what();
   }
   EXPECT_TRUE(stagingLeftovers(dir.path()).empty());
 }

@@ -60,7 +60,8 @@ TEST_F(ImageryTest, ReprojectedColoursLandOnTheirGeographicPoints) {
   EXPECT_EQ(im.width, dem_->width);
   EXPECT_EQ(im.height, dem_->height);
   for (const test::GeoPoint& p : test::rainierPoints())
-    expectColour(sampleAt(im, *dem_, p.lon, p.lat), p.rgb, "point " + std::to_string(p.lon) + "," + std::to_string(p.lat));
+    expectColour(sampleAt(im, *dem_, p.lon, p.lat), p.rgb,
+                 "point " + std::to_string(p.lon) + "," + std::to_string(p.lat));
   // Grey between the squares; nothing at the tile's south-west corner, which the UTM rectangle
   // leaves out.
   expectColour(sampleAt(im, *dem_, -121.6, 46.5), {128, 128, 128}, "between");
@@ -104,9 +105,12 @@ TEST_F(ImageryTest, AWholeEarthImageWrapsAroundTheAntimeridian) {
   dem.georef.geotransform = {-2.5, 5.0, 0.0, 92.5, 0.0, -5.0};
   dem.georef.geographic = true;
   const fs::path img = dir_.path() / "world.tif";
-  test::writeTestRaster(img, 360, 180, [](int x, int) {
-    return x < 180 ? std::array<uint8_t, 3>{220, 20, 20} : std::array<uint8_t, 3>{20, 20, 220};
-  }, {}, 0);
+  test::writeTestRaster(
+      img, 360, 180,
+      [](int x, int) {
+        return x < 180 ? std::array<uint8_t, 3>{220, 20, 20} : std::array<uint8_t, 3>{20, 20, 220};
+      },
+      {}, 0);
   ImageryOptions o;
   o.path = img;
   EXPECT_THROW(
@@ -122,7 +126,7 @@ TEST_F(ImageryTest, AWholeEarthImageWrapsAroundTheAntimeridian) {
   EXPECT_GT(im.coverage, 0.99);  // all but the samples on the poles, at the image's very edge
   const uint32_t s = 1u << im.scaleLog2;
   const auto at = [&](uint32_t gx, uint32_t gy) { return im.rgba[size_t(gy * s) * im.width + gx * s]; };
-  expectColour(at(18, 18), {20, 20, 220}, "longitude 90");       // east of Greenwich
+  expectColour(at(18, 18), {20, 20, 220}, "longitude 90");         // east of Greenwich
   expectColour(at(54, 18), {220, 20, 20}, "longitude 270 = -90");  // west of it, through the wrap
   expectColour(at(71, 30), {220, 20, 20}, "longitude 355 = -5");
 }
@@ -144,8 +148,12 @@ TEST_F(ImageryTest, BadImageryIsNamed) {
   expectError(o, *dem_, "not a raster GDAL can read");
   // Truncated: the first half of a valid GeoTIFF.
   const fs::path full = dir_.path() / "full.tif";
-  test::writeTestRaster(full, 256, 256, [](int x, int y) { return std::array<uint8_t, 3>{uint8_t(x), uint8_t(y), 7}; },
-                        {600000.0, 40.0, 0.0, 5170000.0, 0.0, -40.0}, 32610);
+  test::writeTestRaster(
+      full, 256, 256,
+      [](int x, int y) {
+        return std::array<uint8_t, 3>{uint8_t(x), uint8_t(y), 7};
+      },
+      {600000.0, 40.0, 0.0, 5170000.0, 0.0, -40.0}, 32610);
   o.path = dir_.path() / "truncated.tif";
   {
     std::ifstream in(full, std::ios::binary);
@@ -160,18 +168,30 @@ TEST_F(ImageryTest, BadImageryIsNamed) {
   }
   // 16-bit imagery.
   o.path = dir_.path() / "u16.tif";
-  test::writeTestRaster(o.path, 16, 16, [](int, int) { return std::array<uint8_t, 3>{1, 2, 3}; },
-                        {600000.0, 40.0, 0.0, 5170000.0, 0.0, -40.0}, 32610, 3, GDT_UInt16);
+  test::writeTestRaster(
+      o.path, 16, 16,
+      [](int, int) {
+        return std::array<uint8_t, 3>{1, 2, 3};
+      },
+      {600000.0, 40.0, 0.0, 5170000.0, 0.0, -40.0}, 32610, 3, GDT_UInt16);
   expectError(o, *dem_, "8-bit");
   // Two colour bands.
   o.path = dir_.path() / "two.tif";
-  test::writeTestRaster(o.path, 16, 16, [](int, int) { return std::array<uint8_t, 3>{1, 2, 3}; },
-                        {600000.0, 40.0, 0.0, 5170000.0, 0.0, -40.0}, 32610, 2);
+  test::writeTestRaster(
+      o.path, 16, 16,
+      [](int, int) {
+        return std::array<uint8_t, 3>{1, 2, 3};
+      },
+      {600000.0, 40.0, 0.0, 5170000.0, 0.0, -40.0}, 32610, 2);
   expectError(o, *dem_, "grey, grey + alpha, RGB or RGBA");
   // Somewhere else on Earth (UTM zone 10N, but 2,000 km south).
   o.path = dir_.path() / "far.tif";
-  test::writeTestRaster(o.path, 16, 16, [](int, int) { return std::array<uint8_t, 3>{1, 2, 3}; },
-                        {600000.0, 40.0, 0.0, 3000000.0, 0.0, -40.0}, 32610);
+  test::writeTestRaster(
+      o.path, 16, 16,
+      [](int, int) {
+        return std::array<uint8_t, 3>{1, 2, 3};
+      },
+      {600000.0, 40.0, 0.0, 3000000.0, 0.0, -40.0}, 32610);
   expectError(o, *dem_, "does not overlap");
   // A DEM without a georeference.
   DemRaster plain;
@@ -247,9 +267,8 @@ ImageryRaster randomRaster(uint32_t chartsX, uint32_t chartsY, uint32_t interval
 
 // The charts of a window whose margin is `margin` level-0 samples round the chart (gridX, gridY),
 // against the whole pyramid's: the number of differing samples over every level.
-uint64_t windowDifferences(const ImageryRaster& raster, const ImageryPyramid& whole, uint32_t chartsX,
-                           uint32_t chartsY, uint32_t chartSize, uint32_t levels, int32_t gridX, int32_t gridY,
-                           uint32_t margin) {
+uint64_t windowDifferences(const ImageryRaster& raster, const ImageryPyramid& whole, uint32_t chartsX, uint32_t chartsY,
+                           uint32_t chartSize, uint32_t levels, int32_t gridX, int32_t gridY, uint32_t margin) {
   const uint32_t ci = (chartSize - 1) << raster.scaleLog2;
   const uint32_t gridW = chartsX * ci + 1, gridH = chartsY * ci + 1;
   const uint32_t x0 = std::max<int64_t>(int64_t(gridX) * ci - margin, 0);
@@ -281,7 +300,8 @@ TEST(ImageryPyramid, AWindowWithItsMarginGivesTheWholePyramidsCharts) {
   uint64_t shortDifferences = 0;
   for (int32_t y = 0; y < int32_t(chartsY); ++y)
     for (int32_t x = 0; x < int32_t(chartsX); ++x) {
-      EXPECT_EQ(windowDifferences(raster, whole, chartsX, chartsY, chartSize, levels, x, y, margin), 0u) << x << "," << y;
+      EXPECT_EQ(windowDifferences(raster, whole, chartsX, chartsY, chartSize, levels, x, y, margin), 0u)
+          << x << "," << y;
       shortDifferences += windowDifferences(raster, whole, chartsX, chartsY, chartSize, levels, x, y, 0);
     }
   EXPECT_GT(shortDifferences, 0u) << "a window without a margin gave every chart exactly";

@@ -76,8 +76,7 @@ bool sameLayout(const PatchLayout& a, const PatchLayout& b) {
     const Patch &x = a.patches[p], &y = b.patches[p];
     if (x.triangles != y.triangles || x.sides.size() != y.sides.size()) return false;
     for (size_t s = 0; s < x.sides.size(); ++s) {
-      if (x.sides[s].vertices != y.sides[s].vertices ||
-          x.sides[s].neighbourPatch != y.sides[s].neighbourPatch ||
+      if (x.sides[s].vertices != y.sides[s].vertices || x.sides[s].neighbourPatch != y.sides[s].neighbourPatch ||
           x.sides[s].neighbourSide != y.sides[s].neighbourSide) {
         return false;
       }
@@ -108,8 +107,8 @@ TEST(PatchSplit, CornerToCornerCutMakesTwoLinkedDisks) {
   EXPECT_EQ(ca.neighbourSide, uint32_t(b.sides.size() - 1));
   EXPECT_EQ(cb.neighbourSide, uint32_t(a.sides.size() - 1));
   EXPECT_EQ(std::vector<uint32_t>(ca.vertices.rbegin(), ca.vertices.rend()), cb.vertices);
-  EXPECT_EQ(cb.vertices.front(), 0u);            // grid corner (0, 0)
-  EXPECT_EQ(cb.vertices.back(), 8u * 9u + 8u);   // grid corner (8, 8)
+  EXPECT_EQ(cb.vertices.front(), 0u);           // grid corner (0, 0)
+  EXPECT_EQ(cb.vertices.back(), 8u * 9u + 8u);  // grid corner (8, 8)
   for (uint32_t p = 0; p < 2; ++p) {
     const PatchParameterization pp = parameterizePatch(layout, p);
     EXPECT_EQ(pp.quality.flippedTriangles, 0u);
@@ -122,9 +121,9 @@ TEST(PatchSplit, RefusedSplitsLeaveTheLayoutAlone) {
   EXPECT_FALSE(splitPatchAtCorners(layout, 0, 0, 1));  // adjacent corners: a 2-sided part
   EXPECT_FALSE(splitPatchAtCorners(layout, 0, 1, 1));
   EXPECT_FALSE(splitPatchAtCorners(layout, 3, 0, 2));  // no such patch
-  EXPECT_FALSE(insertCorner(layout, 0, 0, 0));          // a corner already
-  EXPECT_FALSE(insertCorner(layout, 0, 0, 6));          // past the side's inner vertices
-  EXPECT_FALSE(insertCorner(layout, 0, 0, 3, 4));       // would give 5 sides, 4 allowed
+  EXPECT_FALSE(insertCorner(layout, 0, 0, 0));         // a corner already
+  EXPECT_FALSE(insertCorner(layout, 0, 0, 6));         // past the side's inner vertices
+  EXPECT_FALSE(insertCorner(layout, 0, 0, 3, 4));      // would give 5 sides, 4 allowed
   EXPECT_TRUE(sameLayout(layout, before));
 }
 
@@ -180,7 +179,8 @@ double shortestSideRatio(const PatchLayout& layout) {
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
     for (const PatchSide& s : layout.patches[p].sides) {
       if (s.neighbourPatch < 0) continue;
-      ratio = std::min(ratio, sideLength(layout, s) / std::min(meanSideLength(layout, p), meanSideLength(layout, uint32_t(s.neighbourPatch))));
+      ratio = std::min(ratio, sideLength(layout, s) / std::min(meanSideLength(layout, p),
+                                                               meanSideLength(layout, uint32_t(s.neighbourPatch))));
     }
   }
   return ratio;
@@ -362,8 +362,9 @@ TEST(LayoutRefine, KeepHalvesStraightensNoPatchToASliver) {
       }
     }
   }
-  std::printf("  bunny, 48 patches: %u sides straightened with keepHalves, %u refused, %u would shrink a patch below half\n",
-              kept, refused, shrunk);
+  std::printf(
+      "  bunny, 48 patches: %u sides straightened with keepHalves, %u refused, %u would shrink a patch below half\n",
+      kept, refused, shrunk);
   EXPECT_GT(kept, 0u);
   EXPECT_GT(shrunk, 0u);
   EXPECT_EQ(refused, shrunk);
@@ -463,7 +464,8 @@ TEST(PatchSplit, FlipRepairWithSpilledChartsGivesTheSameAtlas) {
     return std::string((std::istreambuf_iterator<char>(in)), {});
   };
   for (size_t c = 0; c < mHeld.charts.size(); ++c)
-    EXPECT_EQ(bytes(tmp.path() / "held" / mHeld.charts[c].file), bytes(tmp.path() / "spilled" / mSpilled.charts[c].file))
+    EXPECT_EQ(bytes(tmp.path() / "held" / mHeld.charts[c].file),
+              bytes(tmp.path() / "spilled" / mSpilled.charts[c].file))
         << "chart " << c;
   // Read back: the same samples.
   for (GeometryImage& g : setSpilled.charts) spill.get(g);

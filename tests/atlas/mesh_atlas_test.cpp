@@ -37,8 +37,9 @@ Hierarchy hierarchyOfCharts(const fs::path& dir, const AtlasManifest& m) {
   std::vector<std::array<RootNeighbour, 4>> roots;
   for (const ChartInfo& c : m.charts) roots.push_back(c.neighbours);
   return buildGeometryHierarchy(
-      hierarchyParams(m), roots, [&](uint32_t c) { return ChartFileReader(dir / m.charts[c].file).readLevelPositions(0); },
-      nullptr, finestLevels(m, hierarchyParams(m)));
+      hierarchyParams(m), roots,
+      [&](uint32_t c) { return ChartFileReader(dir / m.charts[c].file).readLevelPositions(0); }, nullptr,
+      finestLevels(m, hierarchyParams(m)));
 }
 
 TEST(MeshAtlas, ClosedSurfaceStaysWatertightAtEveryLevel) {
@@ -116,8 +117,8 @@ TEST(ChartCoarsening, KeepsTheCoarsestLevelWithinTheBound) {
       bowl[size_t(v) * n + u] = {x, y, 2.0f * (x * x + y * y)};
     }
   EXPECT_EQ(chartFinestLevel(plane, n, 0.0, {1e-6, 3}), 3u);
-  EXPECT_EQ(chartFinestLevel(plane, n, 0.0, {0.0, 3}), 0u);     // no bound: nothing dropped
-  EXPECT_EQ(chartFinestLevel(plane, n, 2e-6, {1e-6, 3}), 0u);   // the sampling alone is over it
+  EXPECT_EQ(chartFinestLevel(plane, n, 0.0, {0.0, 3}), 0u);    // no bound: nothing dropped
+  EXPECT_EQ(chartFinestLevel(plane, n, 2e-6, {1e-6, 3}), 0u);  // the sampling alone is over it
   for (const double sampleError : {0.0, 1e-3}) {
     for (const double bound : {2e-3, 5e-3, 1e-2, 3e-2, 1e-1}) {
       const uint32_t k = chartFinestLevel(bowl, n, sampleError, {bound, 4});
@@ -177,11 +178,13 @@ TEST(PlanarSquares, MoveWithinTheBudgetNeverTheBorderAndStoreFewerBytes) {
       const std::vector<glm::vec3> before = drawn(base.positions[0]), after = drawn(planar.positions[0]);
       for (size_t i = 0; i < img.positions.size(); ++i)
         EXPECT_LE(glm::length(after[i] - img.positions[i]),
-                  std::max(budget, double(glm::length(before[i] - img.positions[i]))) + 1e-6) << i;
+                  std::max(budget, double(glm::length(before[i] - img.positions[i]))) + 1e-6)
+            << i;
       for (size_t k = 1; k < planar.positions.size(); ++k)
         for (uint32_t y = 0; y < (M >> k) + 1; ++y)
           for (uint32_t x = 0; x < (M >> k) + 1; ++x)
-            EXPECT_EQ(planar.positions[k][size_t(y) * ((M >> k) + 1) + x], planar.positions[0][size_t(y << k) * side + (x << k)]);
+            EXPECT_EQ(planar.positions[k][size_t(y) * ((M >> k) + 1) + x],
+                      planar.positions[0][size_t(y << k) * side + (x << k)]);
       if (budget == 0.0) {
         EXPECT_EQ(moved, 0u);
         continue;
@@ -289,7 +292,8 @@ TEST(MeshAtlas, ChartsOfDifferentFinestLevelsStayWatertight) {
   expectError([&] { openAtlas(dir); }, manifest.string(), "finest level");
   bad.charts[1].finestLevel = back.charts[1].finestLevel == 1 ? 2 : 1;
   writeManifest(dir, bad);
-  expectError([&] { PageReader(dir, bad, hierarchyParams(bad)); }, (dir / bad.charts[1].file).string(), "the manifest says");
+  expectError([&] { PageReader(dir, bad, hierarchyParams(bad)); }, (dir / bad.charts[1].file).string(),
+              "the manifest says");
   expectError([&] { readAtlasSurface(dir, 0); }, (dir / bad.charts[1].file).string(), "chart size differs");
   expectError([&] { validateSeams(dir); }, (dir / bad.charts[1].file).string(), "chart size or levels differ");
 }

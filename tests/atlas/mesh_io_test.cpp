@@ -23,12 +23,9 @@ using Tri = std::array<uint32_t, 3>;
 fs::path meshPath(const std::string& name) { return test::realData("meshes/" + name); }
 bool haveMeshes() { return fs::exists(test::sharedData() / "meshes"); }
 
-void writeFile(const fs::path& p, const std::string& text) {
-  std::ofstream(p, std::ios::binary) << text;
-}
+void writeFile(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
 void writeFile(const fs::path& p, const std::vector<uint8_t>& bytes) {
-  std::ofstream(p, std::ios::binary)
-      .write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+  std::ofstream(p, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
 }
 
 // Little- or big-endian byte writer for binary PLY and STL.
@@ -62,15 +59,12 @@ void expectReadError(const fs::path& file, std::initializer_list<std::string> fr
   expectInputError([&] { readMesh(file, o); }, file, fragments);
 }
 
-uint64_t dropped(const MeshReadStats& s) {
-  return s.droppedNonFinite + s.droppedDegenerate + s.droppedDuplicate;
-}
+uint64_t dropped(const MeshReadStats& s) { return s.droppedNonFinite + s.droppedDegenerate + s.droppedDuplicate; }
 
 // A square pyramid: quad base (0 3 2 1), four triangular sides; closed, outward winding.
 // Vertex i has colour (10i, 20i, 30i).
 const float kPyramid[5][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0.5f, 0.5f, 1}};
-const std::vector<Tri> kPyramidTris = {{0, 3, 2}, {0, 2, 1}, {0, 1, 4},
-                                       {1, 2, 4}, {2, 3, 4}, {3, 0, 4}};
+const std::vector<Tri> kPyramidTris = {{0, 3, 2}, {0, 2, 1}, {0, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}};
 
 std::string pyramidAsciiPly() {
   std::string s =
@@ -78,9 +72,8 @@ std::string pyramidAsciiPly() {
       "property float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
       "property uchar blue\nelement face 5\nproperty list uchar int vertex_indices\nend_header\n";
   for (int i = 0; i < 5; ++i)
-    s += std::to_string(kPyramid[i][0]) + " " + std::to_string(kPyramid[i][1]) + " " +
-         std::to_string(kPyramid[i][2]) + " " + std::to_string(10 * i) + " " +
-         std::to_string(20 * i) + " " + std::to_string(30 * i) + "\n";
+    s += std::to_string(kPyramid[i][0]) + " " + std::to_string(kPyramid[i][1]) + " " + std::to_string(kPyramid[i][2]) +
+         " " + std::to_string(10 * i) + " " + std::to_string(20 * i) + " " + std::to_string(30 * i) + "\n";
   s += "4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n";
   return s;
 }
@@ -107,8 +100,7 @@ std::vector<uint8_t> pyramidBinaryPly(bool big) {
   }
   w.put<int32_t>(0);
   w.put<int32_t>(1);
-  const std::vector<std::vector<uint32_t>> faces = {
-      {0, 3, 2, 1}, {0, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}};
+  const std::vector<std::vector<uint32_t>> faces = {{0, 3, 2, 1}, {0, 1, 4}, {1, 2, 4}, {2, 3, 4}, {3, 0, 4}};
   for (const auto& f : faces) {
     w.put<uint16_t>(0xBEEF);
     w.put<uint8_t>(static_cast<uint8_t>(f.size()));
@@ -129,8 +121,7 @@ void expectPyramid(const IndexedMesh& m, bool colours) {
   EXPECT_EQ(m.stats.hasColours, colours);
   if (colours) {
     ASSERT_EQ(m.colours.size(), 5u);
-    for (int i = 0; i < 5; ++i)
-      EXPECT_EQ(m.colours[i], glm::u8vec4(10 * i, 20 * i, 30 * i, 255)) << i;
+    for (int i = 0; i < 5; ++i) EXPECT_EQ(m.colours[i], glm::u8vec4(10 * i, 20 * i, 30 * i, 255)) << i;
   } else {
     EXPECT_TRUE(m.colours.empty());
   }
@@ -184,8 +175,7 @@ TEST(MeshIoFormats, PlyBinaryBothEndiansWithExtraElementsAndProperties) {
     const IndexedMesh m = readMesh(f);
     SCOPED_TRACE(f.string());
     expectPyramid(m, true);
-    EXPECT_EQ(m.stats.info.formatName,
-              big ? "PLY binary big-endian" : "PLY binary little-endian");
+    EXPECT_EQ(m.stats.info.formatName, big ? "PLY binary big-endian" : "PLY binary little-endian");
     ASSERT_EQ(m.stats.warnings.size(), 1u);  // the edge element is ignored, and said so
     EXPECT_NE(m.stats.warnings[0].find("edge"), std::string::npos);
   }
@@ -199,9 +189,10 @@ TEST(MeshIoFormats, PlyTriangleStripsAlternateWindingAndRestart) {
   //  | / | / |       | .
   //  0---2---4       6---7   (diagonals 1-2 and 3-4)
   Bytes w;
-  w.text("ply\nformat binary_little_endian 1.0\nelement vertex 9\nproperty float x\n"
-         "property float y\nproperty float z\nelement tristrips 1\n"
-         "property list int int vertex_indices\nend_header\n");
+  w.text(
+      "ply\nformat binary_little_endian 1.0\nelement vertex 9\nproperty float x\n"
+      "property float y\nproperty float z\nelement tristrips 1\n"
+      "property list int int vertex_indices\nend_header\n");
   const float xy[9][2] = {{0, 0}, {0, 1}, {1, 0}, {1, 1}, {2, 0}, {2, 1}, {5, 0}, {6, 0}, {5, 1}};
   for (const auto& p : xy) {
     w.put<float>(p[0]);
@@ -218,8 +209,7 @@ TEST(MeshIoFormats, PlyTriangleStripsAlternateWindingAndRestart) {
   EXPECT_EQ(m.stats.trianglesRead, 4u + 2u);
   EXPECT_EQ(m.stats.droppedStripDegenerate, 1u);
   EXPECT_EQ(m.stats.droppedDegenerate, 1u);
-  EXPECT_EQ(m.triangles,
-            (std::vector<Tri>{{0, 1, 2}, {2, 1, 3}, {2, 3, 4}, {4, 3, 5}, {7, 6, 8}}));
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}, {2, 1, 3}, {2, 3, 4}, {4, 3, 5}, {7, 6, 8}}));
   // Every triangle has the orientation of the first (all in the z = 0 plane).
   auto signedArea = [&](const Tri& t) {
     const glm::vec3 a = m.positions[t[0]], b = m.positions[t[1]], c = m.positions[t[2]];
@@ -237,12 +227,11 @@ TEST(MeshIoFormats, ObjNegativeAndSlashedIndicesAndPolygons) {
   const fs::path f = dir.path() / "pyramid.obj";
   std::string s = "# hand-made\nmtllib none.mtl\no pyramid\n";
   for (const auto& p : kPyramid)
-    s += "v " + std::to_string(p[0]) + " " + std::to_string(p[1]) + " " +
-         std::to_string(p[2]) + "\n";
+    s += "v " + std::to_string(p[0]) + " " + std::to_string(p[1]) + " " + std::to_string(p[2]) + "\n";
   s += "vt 0 0\nvn 0 0 1\ng sides\ns off\nusemtl none\n";
   s += "f -5/1/1 -2/1/1 -3/1/1 -4/1/1\n";  // the base quad 0 3 2 1, by negative indices
   s += "f 1//1 2//1 5//1\n";
-  s += "f 2/1 3/1 5/1\r\n";               // CRLF line ending
+  s += "f 2/1 3/1 5/1\r\n";  // CRLF line ending
   s += "  f\t3 4 5   # trailing comment\n";
   s += "f 4/1/1 1/1/1 -1/1/1\n";
   s += "l 1 2\np 3\n";
@@ -276,9 +265,8 @@ TEST(MeshIoFormats, OffWithCommentsQuadAndColours) {
   const fs::path c = dir.path() / "pyramid_c.off";
   s = "COFF 5 5 0\n";
   for (int i = 0; i < 5; ++i)
-    s += std::to_string(kPyramid[i][0]) + " " + std::to_string(kPyramid[i][1]) + " " +
-         std::to_string(kPyramid[i][2]) + " " + std::to_string(10 * i) + " " +
-         std::to_string(20 * i) + " " + std::to_string(30 * i) + " 255\n";
+    s += std::to_string(kPyramid[i][0]) + " " + std::to_string(kPyramid[i][1]) + " " + std::to_string(kPyramid[i][2]) +
+         " " + std::to_string(10 * i) + " " + std::to_string(20 * i) + " " + std::to_string(30 * i) + " 255\n";
   s += "4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n";
   writeFile(c, s);
   expectPyramid(readMesh(c), true);
@@ -288,8 +276,7 @@ std::vector<std::array<glm::vec3, 3>> pyramidSoup() {
   std::vector<std::array<glm::vec3, 3>> soup;
   for (const Tri& t : kPyramidTris) {
     std::array<glm::vec3, 3> s;
-    for (int k = 0; k < 3; ++k)
-      s[k] = glm::vec3(kPyramid[t[k]][0], kPyramid[t[k]][1], kPyramid[t[k]][2]);
+    for (int k = 0; k < 3; ++k) s[k] = glm::vec3(kPyramid[t[k]][0], kPyramid[t[k]][1], kPyramid[t[k]][2]);
     soup.push_back(s);
   }
   return soup;
@@ -300,8 +287,7 @@ std::string asciiStl(const std::vector<std::array<glm::vec3, 3>>& soup) {
   for (const auto& t : soup) {
     s += "  facet normal 0 0 0\n    outer loop\n";
     for (const glm::vec3& p : t)
-      s += "      vertex " + std::to_string(p.x) + " " + std::to_string(p.y) + " " +
-           std::to_string(p.z) + "\n";
+      s += "      vertex " + std::to_string(p.x) + " " + std::to_string(p.y) + " " + std::to_string(p.z) + "\n";
     s += "    endloop\n  endfacet\n";
   }
   return s + "endsolid test\n";
@@ -328,8 +314,7 @@ std::vector<uint8_t> binaryStl(const std::vector<std::array<glm::vec3, 3>>& soup
 
 TEST(MeshIoFormats, StlAsciiAndBinaryWeldToTheSameMesh) {
   test::TempDir dir("mesh-io");
-  const fs::path a = dir.path() / "p_ascii.stl", b = dir.path() / "p_bin.stl",
-                 c = dir.path() / "p_solid_header.stl";
+  const fs::path a = dir.path() / "p_ascii.stl", b = dir.path() / "p_bin.stl", c = dir.path() / "p_solid_header.stl";
   writeFile(a, asciiStl(pyramidSoup()));
   writeFile(b, binaryStl(pyramidSoup()));
   writeFile(c, binaryStl(pyramidSoup(), "solid but binary"));
@@ -344,8 +329,7 @@ TEST(MeshIoFormats, StlAsciiAndBinaryWeldToTheSameMesh) {
     repeatedDirectedEdges(m.triangles, &boundary);
     EXPECT_EQ(boundary, 0u);
     for (size_t i = 0; i < 6; ++i)
-      for (int k = 0; k < 3; ++k)
-        EXPECT_EQ(m.positions[m.triangles[i][k]], pyramidSoup()[i][k]);
+      for (int k = 0; k < 3; ++k) EXPECT_EQ(m.positions[m.triangles[i][k]], pyramidSoup()[i][k]);
   }
 }
 
@@ -650,8 +634,7 @@ TEST(MeshIoBadInput, BadPlyHeaders) {
       {"element face 5\nproperty list uchar int vertex_indices\n", "", "no face or tristrips"},
       {"vertex_indices", "corners", "no 'vertex_indices'"},
       {"element vertex 5", "element vertex -5", "bad element line"},
-      {"element vertex 5\nproperty float x", "property float x\nelement vertex 5",
-       "property before any element"},
+      {"element vertex 5\nproperty float x", "property float x\nelement vertex 5", "property before any element"},
   };
   int i = 0;
   for (const Case& c : cases) {
@@ -691,8 +674,8 @@ TEST(MeshIoBadInput, BadPlyHeaders) {
 TEST(MeshIoBadInput, HugeDeclaredCountsFailBeforeAllocating) {
   test::TempDir dir("mesh-io");
   // 4 billion vertices (48 GB) declared in a file of a few hundred bytes.
-  std::string bin = std::string(reinterpret_cast<const char*>(pyramidBinaryPly(false).data()),
-                                pyramidBinaryPly(false).size());
+  std::string bin =
+      std::string(reinterpret_cast<const char*>(pyramidBinaryPly(false).data()), pyramidBinaryPly(false).size());
   bin.replace(bin.find("element vertex 5"), 16, "element vertex 4000000000");
   const fs::path f = dir.path() / "huge.ply";
   writeFile(f, bin);
@@ -709,9 +692,10 @@ TEST(MeshIoBadInput, HugeDeclaredCountsFailBeforeAllocating) {
   std::vector<uint8_t> strips;
   {
     Bytes w;
-    w.text("ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
-           "property float y\nproperty float z\nelement tristrips 1\n"
-           "property list int int vertex_indices\nend_header\n");
+    w.text(
+        "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+        "property float y\nproperty float z\nelement tristrips 1\n"
+        "property list int int vertex_indices\nend_header\n");
     for (int k = 0; k < 9; ++k) w.put<float>(float(k % 2));
     w.put<int32_t>(2000000000);
     w.put<int32_t>(0);
@@ -746,8 +730,9 @@ TEST(MeshIoBadInput, UnsupportedVariantsAndJunk) {
   writeFile(n, "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n5 0 1 2\n");
   expectReadError(n, {"declares 5 corners"});
   const fs::path s = dir.path() / "quad.stl";
-  writeFile(s, "solid q\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"
-               "vertex 1 1 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid q\n");
+  writeFile(s,
+            "solid q\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"
+            "vertex 1 1 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid q\n");
   expectReadError(s, {"has 4 vertices"});
   const fs::path j = dir.path() / "junk.stl";
   writeFile(j, "solid j\nfacet normal 0 0 1\nbanana\n");
@@ -824,8 +809,8 @@ TEST(MeshIoReal, EverySharedMeshReadsWithItsListedTriangleCount) {
 TEST(MeshIoReal, IgeaStripsDecodeToAConsistentlyOrientedGenusZeroSurface) {
   GIMLOD_NEED_SHARED_DATA(haveMeshes());
   const IndexedMesh m = readMesh(meshPath("igea.ply"));
-  EXPECT_EQ(m.stats.faces, 1u);        // one tristrips element instance ...
-  EXPECT_EQ(m.stats.strips, 35048u);   // ... holding 35,048 strips separated by -1
+  EXPECT_EQ(m.stats.faces, 1u);       // one tristrips element instance ...
+  EXPECT_EQ(m.stats.strips, 35048u);  // ... holding 35,048 strips separated by -1
   EXPECT_EQ(m.triangles.size(), 268686u);
   uint64_t boundary = 1, edges = 0;
   const uint64_t repeated = repeatedDirectedEdges(m.triangles, &boundary, &edges);
@@ -856,8 +841,7 @@ TEST(MeshIoReal, HorseIsBigEndianWithColoursBunnyIsAscii) {
   const glm::vec3 ext = h.stats.bounds.max - h.stats.bounds.min;
   for (int k = 0; k < 3; ++k) EXPECT_TRUE(ext[k] > 1e-3f && ext[k] < 1e3f) << ext[k];
   // The first vertex, as decoded independently from the big-endian bytes.
-  EXPECT_EQ(h.positions[0], glm::vec3(-0.002022000029683113f, -0.04017850011587143f,
-                                      -0.0008630002848803997f));
+  EXPECT_EQ(h.positions[0], glm::vec3(-0.002022000029683113f, -0.04017850011587143f, -0.0008630002848803997f));
   // Every vertex of this file is coloured (255, 255, 255) after a float "confidence": a wrong
   // record layout would read other bytes.
   for (const glm::u8vec4& c : h.colours) ASSERT_EQ(c, glm::u8vec4(255, 255, 255, 255));

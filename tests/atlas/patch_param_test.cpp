@@ -26,8 +26,8 @@ double leftOf(const std::vector<glm::dvec2>& corners, uint32_t i, const glm::dve
 
 // The stretch energy computed another way, as the reference for gramStretchEnergy: from the map's
 // Jacobian J = [ss st], its columns in 3D, with the gradient from their derivatives.
-double jacobianStretchEnergy(const glm::dvec2 p[3], const glm::dvec3 q[3], double area3D, double k2,
-                             int moving = 0, glm::dvec2* gradient = nullptr) {
+double jacobianStretchEnergy(const glm::dvec2 p[3], const glm::dvec3 q[3], double area3D, double k2, int moving = 0,
+                             glm::dvec2* gradient = nullptr) {
   const double inf = std::numeric_limits<double>::infinity();
   const glm::dvec2 e1 = p[1] - p[0], e2 = p[2] - p[0];
   const double twice = e1.x * e2.y - e2.x * e1.y;
@@ -88,9 +88,8 @@ TEST(PatchParam, DomainPolygonFollowsSideLengths) {
   EXPECT_NEAR(angle(c[1], c[2]), angle(c[0], c[1]), 1e-12);
   // Extreme lengths are clamped: every central angle below pi (convex, origin inside), every
   // corner on the unit circle, and the short sides keep 0.4 of the regular angle.
-  for (const std::vector<double>& lengths :
-       {std::vector<double>{100, 1, 1}, std::vector<double>{1, 1e-6, 1, 1e-6, 50},
-        std::vector<double>{1, 2, 3, 4, 5, 6, 7, 200}}) {
+  for (const std::vector<double>& lengths : {std::vector<double>{100, 1, 1}, std::vector<double>{1, 1e-6, 1, 1e-6, 50},
+                                             std::vector<double>{1, 2, 3, 4, 5, 6, 7, 200}}) {
     c = patchPolygon(lengths);
     const size_t n = lengths.size();
     double sum = 0.0;
@@ -146,8 +145,8 @@ TEST(PatchParam, GramEnergyEqualsTheJacobianEnergy) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (int trial = 0; trial < 400; ++trial) {
-    const glm::dvec3 q[3] = {{u(rng), u(rng), u(rng)}, {u(rng), u(rng), u(rng)},
-                             {u(rng), u(rng), trial % 4 == 0 ? 0.0 : u(rng)}};
+    const glm::dvec3 q[3] = {
+        {u(rng), u(rng), u(rng)}, {u(rng), u(rng), u(rng)}, {u(rng), u(rng), trial % 4 == 0 ? 0.0 : u(rng)}};
     glm::dvec2 p[3] = {{u(rng), u(rng)}, {u(rng), u(rng)}, {u(rng), u(rng)}};
     if (trial % 7 == 0) p[2] = p[0] + 1e-3 * (p[1] - p[0]) + glm::dvec2(1e-4 * u(rng), 1e-4 * u(rng));  // a sliver
     const TriangleGram g = triangleGram(q[0], q[1], q[2]);
@@ -268,10 +267,9 @@ TEST(PatchParam, NGonDisksEmbedWithoutFlips) {
       for (const glm::dvec2& p : pp.uv) {
         for (uint32_t i = 0; i < n; ++i) EXPECT_GE(leftOf(pp.corners, i, p), -1e-12);
       }
-      std::printf("  n=%u %s: L2 %.4f -> %.4f, Linf %.4f -> %.4f (%u reweightings, %u sweeps)\n",
-                  n, hemisphere ? "hemisphere" : "flat disk", pp.initial.stretchL2,
-                  pp.quality.stretchL2, pp.initial.stretchLinf, pp.quality.stretchLinf,
-                  pp.iterationsUsed, pp.sweepsUsed);
+      std::printf("  n=%u %s: L2 %.4f -> %.4f, Linf %.4f -> %.4f (%u reweightings, %u sweeps)\n", n,
+                  hemisphere ? "hemisphere" : "flat disk", pp.initial.stretchL2, pp.quality.stretchL2,
+                  pp.initial.stretchLinf, pp.quality.stretchLinf, pp.iterationsUsed, pp.sweepsUsed);
     }
   }
 }

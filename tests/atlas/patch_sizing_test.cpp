@@ -124,8 +124,8 @@ TEST(PatchSizing, TheShippedBunnysPatchesTakeTheirOwnSizesAndStaySeamless) {
   ASSERT_EQ(perChart.size(), m.charts.size());
   std::set<uint32_t> levels;
   for (size_t i = 0; i < m.charts.size(); ++i) {
-    const uint32_t own = uint32_t(std::countr_zero(m.chartSize - 1) -
-                                  std::countr_zero(perChart[i].at("side").get<uint32_t>() - 1));
+    const uint32_t own =
+        uint32_t(std::countr_zero(m.chartSize - 1) - std::countr_zero(perChart[i].at("side").get<uint32_t>() - 1));
     EXPECT_GE(m.charts[i].finestLevel, own) << "chart " << i << " is stored finer than it was sampled";
     levels.insert(m.charts[i].finestLevel);
   }

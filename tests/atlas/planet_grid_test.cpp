@@ -108,7 +108,8 @@ TEST(PlanetGrid, CellCentredGlobeWrapsOnChartBordersAndGainsPoleRows) {
 TEST(PlanetGrid, GridRegisteredGlobeKeepsItsSamples) {
   // 41 x 21 samples of 9 degrees on the meridians and parallels: the last column repeats the
   // first, the first and last rows lie on the poles.
-  DemRaster d = geographicDem(41, 21, -184.5, 94.5, 9.0, [](uint32_t x, uint32_t y) { return float((x % 40) + 100 * y); });
+  DemRaster d =
+      geographicDem(41, 21, -184.5, 94.5, 9.0, [](uint32_t x, uint32_t y) { return float((x % 40) + 100 * y); });
   const DemRaster before = d;
   const PlanetInfo p = preparePlanetGrid(d, "grid.tif", 1000.0, 8);
   EXPECT_EQ(p.wrapColumns, 40u);
@@ -135,7 +136,7 @@ TEST(PlanetGrid, RowsPastThePolesMeetThere) {
   EXPECT_EQ(p.wrapColumns, 1472u);
   EXPECT_EQ(d.height, 724u);
   const PlanetFrame f(p, d.width, d.height);
-  ASSERT_GE(f.southPoleRow(), 1);  // rows 0 and 1 lie on or past the south pole
+  ASSERT_GE(f.southPoleRow(), 1);    // rows 0 and 1 lie on or past the south pole
   ASSERT_LE(f.northPoleRow(), 722);  // rows 722 and 723 on or past the north pole
   for (int64_t y = 0; y <= f.southPoleRow(); ++y)
     for (uint32_t x = 0; x < d.width; ++x) EXPECT_EQ(at(d, x, uint32_t(y)), at(d, 0, 0));
@@ -229,8 +230,7 @@ TEST(PlanetGrid, NormalsAreCentralDifferencesAcrossTheAntimeridian) {
         const auto wh = west.readLevelHeights(k), eh = east.readLevelHeights(k);
         for (uint32_t v = 0; v < s; ++v) {
           const PackedNormal a = wn[size_t(v) * s], b = en[size_t(v) * s + s - 1];
-          ASSERT_EQ(a, b)
-              << (compress ? "compressed" : "raw") << " row " << gy << " level " << k << " sample " << v;
+          ASSERT_EQ(a, b) << (compress ? "compressed" : "raw") << " row " << gy << " level " << k << " sample " << v;
           // The east slope from the samples a level step either side of the antimeridian: the normal's
           // east component is -dx / sqrt(dx^2 + dy^2 + 1), so within the north slope's share of
           // -dx / sqrt(dx^2 + 1), which the other tests check.
@@ -294,16 +294,16 @@ TEST(PlanetGrid, ChartsBuiltInTilesReadAcrossTheAntimeridian) {
   ASSERT_EQ(uint64_t(m.chartsX) * 512u, m.planet.wrapColumns);
   for (const ChartInfo& c : m.charts)
     for (const std::filesystem::path& built : {o.output, sharded.output}) {
-    const ChartFileReader a(dir.path() / "memory.atlas" / c.file), b(built / c.file);
-    for (uint32_t k = 0; k < a.levels(); ++k) {
-      EXPECT_EQ(a.readLevelHeights(k), b.readLevelHeights(k)) << c.file << " level " << k;
-      const auto an = a.readLevelNormals(k), bn = b.readLevelNormals(k);
-      ASSERT_EQ(an.size(), bn.size());
-      size_t differ = 0;
-      for (size_t i = 0; i < an.size(); ++i) differ += an[i] != bn[i];
-      EXPECT_EQ(differ, 0u) << built.filename() << " " << c.file << " level " << k;
+      const ChartFileReader a(dir.path() / "memory.atlas" / c.file), b(built / c.file);
+      for (uint32_t k = 0; k < a.levels(); ++k) {
+        EXPECT_EQ(a.readLevelHeights(k), b.readLevelHeights(k)) << c.file << " level " << k;
+        const auto an = a.readLevelNormals(k), bn = b.readLevelNormals(k);
+        ASSERT_EQ(an.size(), bn.size());
+        size_t differ = 0;
+        for (size_t i = 0; i < an.size(); ++i) differ += an[i] != bn[i];
+        EXPECT_EQ(differ, 0u) << built.filename() << " " << c.file << " level " << k;
+      }
     }
-  }
 }
 
 // A WGS84 planet's samples lie where PROJ puts their longitude, latitude and height (EPSG:4979 to

@@ -29,8 +29,7 @@ using test::sameBytes;
 
 // Chart corner (0,0) of quad i is corner i of its patch: the layout vertex exactly, and the
 // same bytes (position, normal, colour) in every chart that meets there.
-void expectCornersShared(const PatchLayout& layout, const GeometryImageSet& set,
-                         uint32_t expectMeeting = 0) {
+void expectCornersShared(const PatchLayout& layout, const GeometryImageSet& set, uint32_t expectMeeting = 0) {
   std::map<uint32_t, std::vector<uint32_t>> byVertex;
   for (uint32_t c = 0; c < set.charts.size(); ++c) {
     const GeometryImage& g = set.charts[c];
@@ -64,12 +63,12 @@ void expectNoFlips(const GeometryImageSet& set) {
 }
 
 void print(const char* what, const GeometryImageSet& set) {
-  std::printf("  %s: %zu charts of %u^2, param L2 %.4f -> %.4f (Linf %.3f -> %.3f), image L2 "
-              "%.4f Linf %.3f, flipped %u, degenerate %u, %.3f s\n",
-              what, set.charts.size(), set.chartSize, set.paramInitial.stretchL2,
-              set.param.stretchL2, set.paramInitial.stretchLinf, set.param.stretchLinf,
-              set.image.stretchL2, set.image.stretchLinf, set.image.flippedTexels,
-              set.image.degenerateTexels, set.seconds);
+  std::printf(
+      "  %s: %zu charts of %u^2, param L2 %.4f -> %.4f (Linf %.3f -> %.3f), image L2 "
+      "%.4f Linf %.3f, flipped %u, degenerate %u, %.3f s\n",
+      what, set.charts.size(), set.chartSize, set.paramInitial.stretchL2, set.param.stretchL2,
+      set.paramInitial.stretchLinf, set.param.stretchLinf, set.image.stretchL2, set.image.stretchLinf,
+      set.image.flippedTexels, set.image.degenerateTexels, set.seconds);
 }
 
 TEST(Resample, EdgeSampleIndexRunsCounterClockwise) {
@@ -239,8 +238,8 @@ TEST(Resample, NGonPatchesHaveNoFlippedTexels) {
 }
 
 TEST(Resample, NeighbourTablesAreReciprocal) {
-  for (const PatchLayout& layout : {test::cubeLayout(3), test::gridLayout(9, 3, 3.f, 1.f, {3, 6}),
-                                    test::diskLayout(5, 3, 20, false)}) {
+  for (const PatchLayout& layout :
+       {test::cubeLayout(3), test::gridLayout(9, 3, 3.f, 1.f, {3, 6}), test::diskLayout(5, 3, 20, false)}) {
     const auto nb = quadNeighbours(layout);
     ASSERT_EQ(nb.size(), quadChartOffsets(layout).back() + layout.patches.back().sides.size());
     for (uint32_t c = 0; c < nb.size(); ++c) {
@@ -291,8 +290,7 @@ TEST(Resample, ThreadCountDoesNotChangeTheResult) {
 // A BFS-grown region of about `target` triangles from `seed`, closed over notches (triangles
 // with two region neighbours are added); empty unless it is a disk. Fills `loop` with its
 // boundary loop (in the triangles' orientation).
-std::vector<uint32_t> diskRegion(const IndexedMesh& mesh, uint32_t seed, size_t target,
-                                 std::vector<uint32_t>& loop) {
+std::vector<uint32_t> diskRegion(const IndexedMesh& mesh, uint32_t seed, size_t target, std::vector<uint32_t>& loop) {
   const size_t nt = mesh.triangles.size();
   std::unordered_map<uint64_t, std::vector<uint32_t>> edgeTris;
   auto key = [](uint32_t a, uint32_t b) { return (uint64_t{std::min(a, b)} << 32) | std::max(a, b); };
@@ -361,8 +359,7 @@ std::vector<uint32_t> diskRegion(const IndexedMesh& mesh, uint32_t seed, size_t 
   for (uint32_t t : region) {
     for (uint32_t v : mesh.triangles[t]) verts[v] = 1;
   }
-  const int64_t euler = int64_t(verts.size()) - int64_t((directed.size() + boundaryEdges) / 2) +
-                        int64_t(region.size());
+  const int64_t euler = int64_t(verts.size()) - int64_t((directed.size() + boundaryEdges) / 2) + int64_t(region.size());
   if (euler != 1) return {};
   return region;
 }
@@ -392,11 +389,11 @@ TEST(Resample, BunnyDiskRegion) {
   EXPECT_EQ(pp.quality.flippedTriangles, 0u);
   EXPECT_TRUE(std::isfinite(pp.quality.stretchL2));
   EXPECT_TRUE(std::isfinite(pp.quality.stretchLinf));
-  std::printf("  bunny region: %zu triangles, %zu boundary vertices, param L2 %.4f -> %.4f, Linf "
-              "%.3f -> %.3f (%u reweightings, %u sweeps), degenerate %u\n",
-              region.size(), nb, pp.initial.stretchL2, pp.quality.stretchL2, pp.initial.stretchLinf,
-              pp.quality.stretchLinf, pp.iterationsUsed, pp.sweepsUsed,
-              pp.quality.degenerateTriangles);
+  std::printf(
+      "  bunny region: %zu triangles, %zu boundary vertices, param L2 %.4f -> %.4f, Linf "
+      "%.3f -> %.3f (%u reweightings, %u sweeps), degenerate %u\n",
+      region.size(), nb, pp.initial.stretchL2, pp.quality.stretchL2, pp.initial.stretchLinf, pp.quality.stretchLinf,
+      pp.iterationsUsed, pp.sweepsUsed, pp.quality.degenerateTriangles);
 
   ResampleOptions opt;
   opt.chartSize = 65;
@@ -455,7 +452,8 @@ TEST(ResampleQuality, ATexelOverAnInputFinIsNotFlippedButOneOverACreaseIs) {
   EXPECT_EQ(measureImage(flatImage(true), up, 5, nullptr, &fin).flippedTexels, 12u);
   // A crease of 100 degrees (faces tilted 50 degrees either way): a mirrored image faces away
   // from both sides of it, so every texel is flipped.
-  const float s = float(std::sin(50.0 * 3.14159265358979 / 180.0)), c = float(std::cos(50.0 * 3.14159265358979 / 180.0));
+  const float s = float(std::sin(50.0 * 3.14159265358979 / 180.0)),
+              c = float(std::cos(50.0 * 3.14159265358979 / 180.0));
   std::vector<glm::vec3> crease(25);
   for (int v = 0; v < 5; ++v) {
     for (int u = 0; u < 5; ++u) crease[size_t(v) * 5 + u] = u < 2 ? glm::vec3(s, 0, c) : glm::vec3(-s, 0, c);

@@ -74,10 +74,12 @@ TEST(ScratchRaster, WindowsComeBackBitForBit) {
     for (size_t i = 0; i < h.size(); ++i) {
       const double x = double(i % size_t(w.width())), y = double(i / size_t(w.width()));
       const double smooth = 1500.0 + 300.0 * std::sin(x * 0.05 + round) * std::cos(y * 0.03);
-      h[i] = kind == 0 ? float(std::round(smooth))
-           : kind == 1 ? float(smooth + 0.001 * double(rng() % 1000))
-           : kind == 2 ? (i % 7 == 0 ? -0.f : i % 11 == 0 ? std::numeric_limits<float>::denorm_min() : float(smooth))
-                       : float(int64_t(rng() % (1u << 25)) - (1 << 24));
+      h[i] = kind == 0   ? float(std::round(smooth))
+             : kind == 1 ? float(smooth + 0.001 * double(rng() % 1000))
+             : kind == 2 ? (i % 7 == 0    ? -0.f
+                            : i % 11 == 0 ? std::numeric_limits<float>::denorm_min()
+                                          : float(smooth))
+                         : float(int64_t(rng() % (1u << 25)) - (1 << 24));
       v[i] = uint8_t(rng() % 9 != 0);
     }
     const bool keepValidity = round % 5 == 4;
@@ -117,7 +119,7 @@ TEST(ScratchRaster, RewritesKeepAboutOneVersionOfEveryTile) {
     for (int k = 0; k < 8; ++k) s.write({0, 0, W, H}, h.data(), v.data());
     EXPECT_EQ(s.liveBytes(), once);
     EXPECT_EQ(s.peakBytes(), once);
-    struct stat st{};
+    struct stat st {};
     ASSERT_EQ(::stat(path.c_str(), &st), 0);
     // Where the file system frees punched pages, the disk used stays about one version.
     std::printf("  9 versions of %llu bytes: %llu bytes in the file, %llu bytes on disk\n", (unsigned long long)once,

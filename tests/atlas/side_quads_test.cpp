@@ -134,7 +134,8 @@ TEST(SideQuads, TheStretchQuadMapKeepsTheBorderAndLowersTheStretch) {
         for (uint32_t e = 0; e < 4; ++e) {
           for (uint32_t k = 0; k < 33; ++k) {
             const size_t i = edgeSampleIndex(33, e, k);
-            ASSERT_TRUE(sameBytes(&a.positions[i], &b.positions[i], sizeof(glm::vec3))) << "chart " << c << " edge " << e;
+            ASSERT_TRUE(sameBytes(&a.positions[i], &b.positions[i], sizeof(glm::vec3)))
+                << "chart " << c << " edge " << e;
           }
         }
         interiorChanged += a.positions[16 * 33 + 16] != b.positions[16 * 33 + 16];
@@ -359,7 +360,8 @@ TEST(EvenSides, AlignSpokesFindsAPairingWithoutTwoChartCorners) {
   for (uint32_t seed = 1; seed <= 8; ++seed) {
     // Another pairing for some patches of 6 or more sides.
     for (uint32_t p = 0; p < layout.patches.size(); ++p) {
-      if (layout.patches[p].sides.size() >= 6 && ((p * 2654435761u) >> (seed % 24)) % 3 == 0) rotatePatchSides(layout, p, 1);
+      if (layout.patches[p].sides.size() >= 6 && ((p * 2654435761u) >> (seed % 24)) % 3 == 0)
+        rotatePatchSides(layout, p, 1);
     }
     worstStart = std::max(worstStart, twoQuadCorners(layout));
     EXPECT_EQ(alignSpokes(layout), 0u) << "seed " << seed;
@@ -378,8 +380,8 @@ TEST(EvenSides, MendTwoChartCornersLeavesNone) {
   const uint32_t aligned = alignSpokes(layout);
   ASSERT_GT(aligned, 0u);  // this layout needs the mend
   const MendCornersResult mend = mendTwoChartCorners(layout);
-  std::printf("  24 patches: %u two-chart corners after alignSpokes, %u after the mend (%u corners added)\n",
-              aligned, mend.left, mend.corners);
+  std::printf("  24 patches: %u two-chart corners after alignSpokes, %u after the mend (%u corners added)\n", aligned,
+              mend.left, mend.corners);
   EXPECT_EQ(mend.left, 0u);
   EXPECT_EQ(twoQuadCorners(layout), 0u);
   EXPECT_GT(mend.corners, 0u);
@@ -407,8 +409,9 @@ TEST(SideQuads, TheBunnysSidesBuildMeetsTheSamplingBound) {
   const nlohmann::json stats = nlohmann::json::parse(std::ifstream(o.output / "stats.json"));
   const nlohmann::json& r = stats.at("resample");
   std::printf("  bunny, sides: %u charts at %u^2, sampling error %.3g (bound %.3g), %u doublings after the repair\n",
-              stats.at("charts").get<uint32_t>(), stats.at("chart_size").get<uint32_t>(), r.at("sample_error").get<double>(),
-              r.at("max_sample_error").get<double>(), r.at("chart_size_doublings_after_repair").get<uint32_t>());
+              stats.at("charts").get<uint32_t>(), stats.at("chart_size").get<uint32_t>(),
+              r.at("sample_error").get<double>(), r.at("max_sample_error").get<double>(),
+              r.at("chart_size_doublings_after_repair").get<uint32_t>());
   EXPECT_TRUE(r.at("chart_size_by_density").get<bool>());
   EXPECT_GT(r.at("chart_size_doublings_after_repair").get<uint32_t>(), 0u);
   EXPECT_GT(r.at("max_sample_error").get<double>(), 0.0);

@@ -40,7 +40,8 @@ struct Fixture {
     return o;
   }
   // The charts of `o`, built whole (tile 0) or in tiles of `tile` intervals, into dir.
-  AtlasManifest build(const fs::path& dir, const TerrainAtlasOptions& o, uint32_t tileIntervals, int concurrency = 2) const {
+  AtlasManifest build(const fs::path& dir, const TerrainAtlasOptions& o, uint32_t tileIntervals,
+                      int concurrency = 2) const {
     fs::create_directories(dir / "charts");
     AtlasManifest m;
     if (tileIntervals == 0) {
@@ -78,7 +79,8 @@ TEST(ChartTiling, TiledChartsHoldTheWholeChartsSamples) {
   const Fixture f;
   for (const bool compressed : {true, false}) {
     const TerrainAtlasOptions o = f.options(1025, compressed);
-    const fs::path whole = f.tmp.path() / (compressed ? "whole-c" : "whole"), tiled = f.tmp.path() / (compressed ? "tiled-c" : "tiled");
+    const fs::path whole = f.tmp.path() / (compressed ? "whole-c" : "whole"),
+                   tiled = f.tmp.path() / (compressed ? "tiled-c" : "tiled");
     const AtlasManifest a = f.build(whole, o, 0);
     const AtlasManifest b = f.build(tiled, o, 256);
     ASSERT_EQ(a.charts.size(), 9u);

@@ -64,7 +64,8 @@ void expectSameCharts(bool compressed) {
   EXPECT_LT(r.bandRows, dem.height);
   ASSERT_EQ(a.charts.size(), b.charts.size());
   for (size_t i = 0; i < a.charts.size(); ++i)
-    EXPECT_EQ(test::fileBytes(tmp.path() / "memory" / a.charts[i].file), test::fileBytes(tmp.path() / "windows" / b.charts[i].file))
+    EXPECT_EQ(test::fileBytes(tmp.path() / "memory" / a.charts[i].file),
+              test::fileBytes(tmp.path() / "windows" / b.charts[i].file))
         << a.charts[i].file;
   EXPECT_EQ(a.heightRange, b.heightRange);
   EXPECT_EQ(a.compression.present, b.compression.present);

@@ -24,8 +24,8 @@ struct Raster {
 // The tile's raw samples, its -32768 voids marked.
 Raster rawTile() {
   GDALAllRegister();
-  GDALDataset* ds = GDALDataset::FromHandle(
-      GDALOpen((test::repoData() / "terrain/mt_rainier_90m.tif").c_str(), GA_ReadOnly));
+  GDALDataset* ds =
+      GDALDataset::FromHandle(GDALOpen((test::repoData() / "terrain/mt_rainier_90m.tif").c_str(), GA_ReadOnly));
   Raster r;
   r.width = uint32_t(ds->GetRasterXSize());
   r.height = uint32_t(ds->GetRasterYSize());

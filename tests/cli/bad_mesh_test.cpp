@@ -157,9 +157,9 @@ class BadMesh : public ::testing::Test {
   // `timeout 60 gimlod build IN -o DIR/out.atlas ARGS`; the exit status (124: it hung).
   int build(const fs::path& in, const std::string& args = "--charts 8 --chart-size 9 --depth 2") {
     out_ = dir_.path() / "out.atlas";
-    const int rc = test::runCommand("timeout 60 " + test::appPath().string() + " build '" + in.string() + "' -o '" +
-                                        out_.string() + "' " + args,
-                                    &output_);
+    const int rc = test::runCommand(
+        "timeout 60 " + test::appPath().string() + " build '" + in.string() + "' -o '" + out_.string() + "' " + args,
+        &output_);
     EXPECT_NE(rc, 124) << in << " " << args << ": the build hung (killed after 60 s)\n" << output_;
     return rc;
   }
@@ -167,8 +167,7 @@ class BadMesh : public ::testing::Test {
   // The build is rejected with an InputError (exit 2) naming the file (or option) and every
   // fragment, and leaves nothing behind.
   void expectRejected(const fs::path& in, std::initializer_list<std::string> fragments,
-                      const std::string& args = "--charts 8 --chart-size 9 --depth 2",
-                      const std::string& names = "") {
+                      const std::string& args = "--charts 8 --chart-size 9 --depth 2", const std::string& names = "") {
     SCOPED_TRACE(in.filename().string() + " " + args);
     EXPECT_EQ(build(in, args), 2) << output_;
     const std::string named = names.empty() ? in.filename().string() : names;
@@ -182,7 +181,8 @@ class BadMesh : public ::testing::Test {
     EXPECT_FALSE(fs::exists(out_)) << output_;
     for (const auto& e : fs::directory_iterator(dir_.path()))
       EXPECT_EQ(e.path().filename().string().find("out.atlas"), std::string::npos)
-          << "left behind: " << e.path() << "\n" << output_;
+          << "left behind: " << e.path() << "\n"
+          << output_;
   }
 
   // Reading the file through the API throws an InputError naming it and every fragment.
@@ -303,8 +303,7 @@ TEST_F(BadMesh, TruncatedTextFormats) {
   const std::string stl = stlAscii(m);
   // Cut in the middle of a line, and at a line break inside a facet.
   expectBothReject(write("cut_mid.stl", stl.substr(0, stl.size() / 2 + 3)), {"truncated"});
-  expectBothReject(write("cut_line.stl", stl.substr(0, stl.find("endloop", stl.size() / 2))),
-                   {"ends inside a facet"});
+  expectBothReject(write("cut_line.stl", stl.substr(0, stl.find("endloop", stl.size() / 2))), {"ends inside a facet"});
   const std::string bin = stlBinary(m);
   expectBothReject(write("cut_bin.stl", bin.substr(0, bin.size() - 30)),
                    {"truncated binary STL", std::to_string(m.f.size()) + " facets"});
@@ -465,22 +464,22 @@ TEST_F(BadMesh, DegenerateAndDuplicateTrianglesAreDroppedAndCounted) {
   Mesh m = sphere(5);
   const size_t kept = m.f.size();
   const uint32_t nv = uint32_t(m.v.size());
-  m.v.push_back(m.v[5]);                             // a copy of vertex 5 (same position)
+  m.v.push_back(m.v[5]);                                     // a copy of vertex 5 (same position)
   m.v.insert(m.v.end(), {{0, 0, 5}, {1, 0, 5}, {2, 0, 5}});  // on one line
-  m.f.push_back(m.f[4]);                             // exact duplicate
-  m.f.push_back({m.f[9][2], m.f[9][1], m.f[9][0]});  // reversed duplicate
-  m.f.push_back({m.f[11][1], m.f[11][2], m.f[11][0]});  // rotated duplicate
-  m.f.push_back({6, 6, 7});                          // repeated index
-  m.f.push_back({5, nv, 8});                         // coincident positions: zero area
-  m.f.push_back({nv + 1, nv + 3, nv + 2});           // collinear: zero area
+  m.f.push_back(m.f[4]);                                     // exact duplicate
+  m.f.push_back({m.f[9][2], m.f[9][1], m.f[9][0]});          // reversed duplicate
+  m.f.push_back({m.f[11][1], m.f[11][2], m.f[11][0]});       // rotated duplicate
+  m.f.push_back({6, 6, 7});                                  // repeated index
+  m.f.push_back({5, nv, 8});                                 // coincident positions: zero area
+  m.f.push_back({nv + 1, nv + 3, nv + 2});                   // collinear: zero area
   for (const fs::path& f : {write("degdup.off", offText(m)), write("degdup.ply", plyAscii(m))}) {
     SCOPED_TRACE(f.filename().string());
     const IndexedMesh r = readMesh(f);
     EXPECT_EQ(r.stats.droppedDuplicate, 3u);
     EXPECT_EQ(r.stats.droppedDegenerate, 3u);
     EXPECT_EQ(r.triangles.size(), kept);
-    EXPECT_EQ(r.stats.trianglesRead, r.stats.trianglesOut + r.stats.droppedNonFinite + r.stats.droppedDegenerate +
-                                         r.stats.droppedDuplicate);
+    EXPECT_EQ(r.stats.trianglesRead,
+              r.stats.trianglesOut + r.stats.droppedNonFinite + r.stats.droppedDegenerate + r.stats.droppedDuplicate);
     const nlohmann::json s = built(f);
     EXPECT_EQ(s["read"]["dropped_duplicate"], 3);
     EXPECT_EQ(s["read"]["dropped_degenerate"], 3);
@@ -604,13 +603,13 @@ TEST_F(BadMesh, ObjRelativeIndicesAndPolygons) {
   // A cube of quads, some with negative (relative) indices, some with texture / normal slashes.
   const std::string cube =
       "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
-      "f -8 -5 -6 -7\n"        // bottom 1 4 3 2
-      "f 5/1 6/2 7/3 8/4\n"    // top
+      "f -8 -5 -6 -7\n"      // bottom 1 4 3 2
+      "f 5/1 6/2 7/3 8/4\n"  // top
       "f 1//1 2//1 6//1 5//1\n"
-      "f -6 -5 -1 -2\n"        // 3 4 8 7
+      "f -6 -5 -1 -2\n"  // 3 4 8 7
       "f 2 3 7 6\n"
       "f 1 5 8 4\n"
-      "f 1 2\n";               // a face with 2 corners: skipped and counted
+      "f 1 2\n";  // a face with 2 corners: skipped and counted
   const fs::path f = write("cube.obj", cube);
   const IndexedMesh r = readMesh(f);
   EXPECT_EQ(r.triangles.size(), 12u);
@@ -649,9 +648,9 @@ TEST_F(BadMesh, OutOfCorePathRepairsAndCleansUp) {
   ASSERT_GT(m.f.size() * 256, (64u << 20) / 4);
   const uint32_t nv = uint32_t(m.v.size());
   m.v.push_back({std::numeric_limits<float>::quiet_NaN(), 0, 0});
-  m.f.push_back({0, 1, nv});         // non-finite
-  m.f.push_back(m.f[100]);           // duplicate
-  m.f.push_back({7, 7, 8});          // degenerate
+  m.f.push_back({0, 1, nv});  // non-finite
+  m.f.push_back(m.f[100]);    // duplicate
+  m.f.push_back({7, 7, 8});   // degenerate
   const size_t valid = m.f.size() - 3;
   // A fin on one edge (non-manifold edge), a triangle touching the south pole only (non-manifold
   // vertex), and a second, small sphere (another component).

@@ -40,9 +40,8 @@ class BenchCliTest : public ::testing::Test {
   static fs::path atlas() { return dir_->path() / "rainier.atlas"; }
   // Runs `gimlod bench ATLAS -o OUT ARGS`; returns the exit code and keeps the output.
   int bench(const fs::path& out, const std::string& args) {
-    return test::runCommand(test::appPath().string() + " bench '" + atlas().string() + "' -o '" + out.string() +
-                                "' " + args,
-                            &output_);
+    return test::runCommand(
+        test::appPath().string() + " bench '" + atlas().string() + "' -o '" + out.string() + "' " + args, &output_);
   }
 
   static test::TempDir* dir_;
@@ -82,8 +81,8 @@ TEST_F(BenchCliTest, ErrorModeWritesEveryFrameOfEveryConfiguration) {
   EXPECT_EQ(perAlgo["greedy"], 8);
   const Csv sum = readCsv(out / "summary.csv");
   EXPECT_EQ(sum.rows.size(), 6u);
-  for (const char* c : {"adapt_us_mean", "nodes_mean", "triangles_mean", "max_error_px_p50", "max_error_px_p95",
-                        "max_error_px_max"})
+  for (const char* c :
+       {"adapt_us_mean", "nodes_mean", "triangles_mean", "max_error_px_p50", "max_error_px_p95", "max_error_px_max"})
     EXPECT_NE(std::find(sum.header.begin(), sum.header.end(), c), sum.header.end()) << c;
   EXPECT_TRUE(fs::exists(out / "cost_model.json"));
 }
@@ -115,8 +114,9 @@ TEST_F(BenchCliTest, BudgetModeKeepsTheTriangleBudget) {
 TEST_F(BenchCliTest, FrameTimeControllerHoldsTheTargetThroughALoadStep) {
   const fs::path out = dir_->path() / "controller";
   // 20 ms at 10M triangles/s: about 200k triangles, far above the adaptation's own time.
-  const int rc = bench(out, "--mode budget --orbit 6 --distance 0.5 --nodes 500 --triangles 100000 --algorithms ours "
-                            "--frame-ms 20 --tri-rate 1e7 --control-frames 160 --load-step 0.5");
+  const int rc = bench(out,
+                       "--mode budget --orbit 6 --distance 0.5 --nodes 500 --triangles 100000 --algorithms ours "
+                       "--frame-ms 20 --tri-rate 1e7 --control-frames 160 --load-step 0.5");
   ASSERT_EQ(rc, 0) << output_;
   EXPECT_NE(output_.find("frame-time controller"), std::string::npos) << output_;
   const Csv csv = readCsv(out / "controller.csv");
@@ -181,9 +181,8 @@ TEST(BenchCliRootFloor, BudgetsBelowTheVisibleRootsAreReported) {
   test::TempDir dir("gimlod-bench-roots");
   const fs::path atlas = dir.path() / "bunny.atlas";
   std::string output;
-  ASSERT_EQ(test::runCommand(test::appPath().string() + " build '" +
-                                 test::realData("meshes/bun_zipper.ply").string() + "' -o '" + atlas.string() +
-                                 "' --charts 24 --chart-size 17 --no-fidelity",
+  ASSERT_EQ(test::runCommand(test::appPath().string() + " build '" + test::realData("meshes/bun_zipper.ply").string() +
+                                 "' -o '" + atlas.string() + "' --charts 24 --chart-size 17 --no-fidelity",
                              &output),
             0)
       << output;

@@ -18,9 +18,8 @@ class CliTest : public ::testing::Test {
  protected:
   // Runs `gimlod build INPUT -o OUT ARGS`; returns the exit code and keeps the output.
   int build(const fs::path& input, const fs::path& out, const std::string& args = "") {
-    return test::runCommand(test::appPath().string() + " build '" + input.string() + "' -o '" +
-                                out.string() + "' " + args,
-                            &output_);
+    return test::runCommand(
+        test::appPath().string() + " build '" + input.string() + "' -o '" + out.string() + "' " + args, &output_);
   }
   // Nothing named like the atlas, staged or final, is left in dir.
   void expectNoAtlas(const fs::path& dir, const std::string& name) {
@@ -80,8 +79,8 @@ TEST_F(CliTest, NansAreFilledAndReported) {
 }
 
 TEST_F(CliTest, InvalidOptions) {
-  for (const std::string args : {"--chart-size 500", "--chart-size 3", "--depth 0", "--depth 40",
-                                 "--node-res 48", "--z-scale 0", "--min-node-res 128"}) {
+  for (const std::string args : {"--chart-size 500", "--chart-size 3", "--depth 0", "--depth 40", "--node-res 48",
+                                 "--z-scale 0", "--min-node-res 128"}) {
     EXPECT_NE(build(dem(), dir_.path() / "a.atlas", args), 0) << args;
     const std::string opt = args.substr(0, args.find(' '));
     EXPECT_TRUE(output_.find(opt) != std::string::npos || output_.find("depth") != std::string::npos)
@@ -144,7 +143,8 @@ TEST_F(CliTest, DemBuildsWithinTheMemoryCapOrSaysWhyNot) {
   const AtlasManifest im = readManifest(dir_.path() / "im.atlas");
   ASSERT_TRUE(im.imagery.present);
   for (const ChartInfo& c : im.charts)
-    EXPECT_EQ(test::fileBytes(dir_.path() / "im.atlas" / c.imageryFile), test::fileBytes(dir_.path() / "iw.atlas" / c.imageryFile))
+    EXPECT_EQ(test::fileBytes(dir_.path() / "im.atlas" / c.imageryFile),
+              test::fileBytes(dir_.path() / "iw.atlas" / c.imageryFile))
         << c.imageryFile;
   // The tile fits in memory; --out-of-core builds it window by window all the same.
   EXPECT_EQ(build(dem(), dir_.path() / "m.atlas", "--max-memory 1G"), 0) << output_;
@@ -236,10 +236,10 @@ TEST_F(CliTest, MeshBuildExportAndBadMeshes) {
   EXPECT_NE(stats.find("\"kind\": \"geometry\""), std::string::npos);
   EXPECT_NE(stats.find("\"triangles\": 69451"), std::string::npos) << stats.substr(0, 400);
   const fs::path ply = dir_.path() / "surface.ply";
-  ASSERT_EQ(test::runCommand(test::appPath().string() + " export '" + atlas.string() + "' -o '" + ply.string() +
-                                 "' --level 1",
-                             &output_),
-            0)
+  ASSERT_EQ(
+      test::runCommand(
+          test::appPath().string() + " export '" + atlas.string() + "' -o '" + ply.string() + "' --level 1", &output_),
+      0)
       << output_;
   EXPECT_TRUE(fs::exists(ply));
   // The same renderer draws the mesh atlas (geometry pages).
@@ -249,10 +249,10 @@ TEST_F(CliTest, MeshBuildExportAndBadMeshes) {
             0)
       << output_;
   EXPECT_TRUE(fs::exists(dir_.path() / "frames" / "frame_0000.png"));
-  EXPECT_NE(test::runCommand(test::appPath().string() + " export '" + atlas.string() + "' -o '" + ply.string() +
-                                 "' --level 9",
-                             &output_),
-            0);
+  EXPECT_NE(
+      test::runCommand(
+          test::appPath().string() + " export '" + atlas.string() + "' -o '" + ply.string() + "' --level 9", &output_),
+      0);
   // Bad meshes: nothing left behind.
   const fs::path empty = writeFile("empty.ply", "");
   EXPECT_NE(build(empty, dir_.path() / "e.atlas"), 0);

@@ -54,10 +54,10 @@ class ColouredMesh : public ::testing::Test {
     dir_ = new test::TempDir("gimlod-colour");
     writeColouredPlane(dir_->path() / "plane.ply", 48);
     std::string out;
-    const int rc = test::runCommand(test::appPath().string() + " build '" + (dir_->path() / "plane.ply").string() +
-                                        "' -o '" + (dir_->path() / "plane.atlas").string() +
-                                        "' --charts 8 --chart-size 33 --no-fidelity",
-                                    &out);
+    const int rc =
+        test::runCommand(test::appPath().string() + " build '" + (dir_->path() / "plane.ply").string() + "' -o '" +
+                             (dir_->path() / "plane.atlas").string() + "' --charts 8 --chart-size 33 --no-fidelity",
+                         &out);
     if (rc != 0) ADD_FAILURE() << out;
   }
   static void TearDownTestSuite() {
@@ -85,7 +85,8 @@ TEST_F(ColouredMesh, SharedEdgesHoldBitIdenticalColours) {
 // faces the light the same way everywhere, so each channel is the colour's times one factor).
 TEST_F(ColouredMesh, RenderDrawsEachQuadrantInItsColour) {
   const fs::path path = dir_->path() / "top.json";
-  std::ofstream(path) << R"({"frames": [{"eye": [0.5, 0.5, 2.0], "target": [0.5, 0.5, 0.0], "up": [0, 1, 0], "fov_deg": 45}]})";
+  std::ofstream(path)
+      << R"({"frames": [{"eye": [0.5, 0.5, 2.0], "target": [0.5, 0.5, 0.0], "up": [0, 1, 0], "fov_deg": 45}]})";
   const fs::path frames = dir_->path() / "frames";
   std::string out;
   ASSERT_EQ(test::runCommand(test::appPath().string() + " render '" + atlas().string() + "' --path '" + path.string() +

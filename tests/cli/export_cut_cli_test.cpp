@@ -28,7 +28,8 @@ Exported exportCut(const fs::path& atlas, const fs::path& ply, const std::string
                                   &out);
   EXPECT_EQ(rc, 0) << out;
   std::smatch m;
-  const std::regex line(R"((\d+) vertices, (\d+) triangles; (\d+) boundary edges, (\d+) on open chart borders, (\d+) elsewhere)");
+  const std::regex line(
+      R"((\d+) vertices, (\d+) triangles; (\d+) boundary edges, (\d+) on open chart borders, (\d+) elsewhere)");
   EXPECT_TRUE(std::regex_search(out, m, line)) << out;
   if (m.empty()) return {};
   return {std::stoull(m[1]), std::stoull(m[2]), std::stoull(m[3]), std::stoull(m[4]), std::stoull(m[5])};
@@ -55,7 +56,8 @@ TEST(ExportCut, ShippedScanIsWatertightButForItsHolesAndCracksWithoutStitching) 
   const fs::path atlas = dir.path() / "bunny.atlas";
   std::string out;
   ASSERT_EQ(test::runCommand(app + " build '" + (test::repoData() / "meshes/bun_zipper.ply").string() + "' -o '" +
-                                 atlas.string() + "' --charts 24 --chart-size 33 --depth 3 --node-res 8 --min-node-res 2 "
+                                 atlas.string() +
+                                 "' --charts 24 --chart-size 33 --depth 3 --node-res 8 --min-node-res 2 "
                                  "--no-fidelity",
                              &out),
             0)

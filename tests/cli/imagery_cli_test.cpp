@@ -31,11 +31,10 @@ class ImageryDrapedDem : public ::testing::Test {
     // 40 m pixels: finer than the DEM, so the atlas keeps 2 imagery samples per DEM interval.
     test::writeUtmImagery(dir_->path() / "utm.tif", test::rainierPoints(), e[0], e[1], e[2], e[3], 40.0, 3000.0);
     std::string out;
-    const int rc = test::runCommand(test::appPath().string() + " build '" +
-                                        (test::repoData() / "terrain" / "mt_rainier_90m.tif").string() + "' -o '" +
-                                        atlas().string() + "' --chart-size 257 --imagery '" +
-                                        (dir_->path() / "utm.tif").string() + "'",
-                                    &out);
+    const int rc = test::runCommand(
+        test::appPath().string() + " build '" + (test::repoData() / "terrain" / "mt_rainier_90m.tif").string() +
+            "' -o '" + atlas().string() + "' --chart-size 257 --imagery '" + (dir_->path() / "utm.tif").string() + "'",
+        &out);
     if (rc != 0) ADD_FAILURE() << out;
   }
   static void TearDownTestSuite() {
@@ -117,8 +116,8 @@ TEST_F(ImageryDrapedDem, RenderDrawsTheImageryAtItsGeographicPoints) {
     const size_t dominant = size_t(std::max_element(want.begin(), want.end()) - want.begin());
     for (size_t c = 0; c < 3; ++c) {
       if (c == dominant) continue;
-      EXPECT_GT(int(p[dominant]), int(p[c]) + 60) << "point " << i << ": pixel " << int(p[0]) << "," << int(p[1])
-                                                   << "," << int(p[2]);
+      EXPECT_GT(int(p[dominant]), int(p[c]) + 60)
+          << "point " << i << ": pixel " << int(p[0]) << "," << int(p[1]) << "," << int(p[2]);
     }
   }
 }

@@ -30,7 +30,8 @@ std::vector<uint8_t> readRgb(const fs::path& png, int* w = nullptr, int* h = nul
 
 size_t distinctColours(const std::vector<uint8_t>& rgb) {
   std::set<uint32_t> c;
-  for (size_t i = 0; i + 2 < rgb.size(); i += 3) c.insert(uint32_t(rgb[i]) << 16 | uint32_t(rgb[i + 1]) << 8 | rgb[i + 2]);
+  for (size_t i = 0; i + 2 < rgb.size(); i += 3)
+    c.insert(uint32_t(rgb[i]) << 16 | uint32_t(rgb[i + 1]) << 8 | rgb[i + 2]);
   return c.size();
 }
 
@@ -39,12 +40,12 @@ class InspectCli : public ::testing::Test {
   static void SetUpTestSuite() {
     dir_ = new test::TempDir("gimlod-inspect-cli");
     std::string out;
-    ASSERT_EQ(test::runCommand(test::appPath().string() + " build '" +
-                                   (test::repoData() / "meshes/bun_zipper.ply").string() + "' -o '" +
-                                   (dir_->path() / "bunny.atlas").string() +
-                                   "' --charts 24 --chart-size 17 --depth 3 --node-res 8 --min-node-res 2 --no-fidelity",
-                               &out),
-              0)
+    ASSERT_EQ(
+        test::runCommand(test::appPath().string() + " build '" + (test::repoData() / "meshes/bun_zipper.ply").string() +
+                             "' -o '" + (dir_->path() / "bunny.atlas").string() +
+                             "' --charts 24 --chart-size 17 --depth 3 --node-res 8 --min-node-res 2 --no-fidelity",
+                         &out),
+        0)
         << out;
   }
   static void TearDownTestSuite() { delete dir_; }
@@ -132,7 +133,8 @@ TEST_F(InspectCli, ChartOverlayChangesThePictureAndBadNamesAreRefused) {
   std::set<uint32_t> hues;
   for (size_t i = 0; i + 2 < charts.size(); i += 3) {
     const int r = charts[i], g = charts[i + 1], b = charts[i + 2];
-    if (std::max({r, g, b}) - std::min({r, g, b}) > 30) hues.insert(uint32_t(r / 32) << 6 | uint32_t(g / 32) << 3 | uint32_t(b / 32));
+    if (std::max({r, g, b}) - std::min({r, g, b}) > 30)
+      hues.insert(uint32_t(r / 32) << 6 | uint32_t(g / 32) << 3 | uint32_t(b / 32));
   }
   EXPECT_GT(hues.size(), 8u);
   EXPECT_EQ(test::runCommand(app + " render '" + atlas + "' -o '" + (dir_->path() / "bad").string() +

@@ -31,8 +31,7 @@ class MeshFamilyTest : public ::testing::TestWithParam<std::string> {
   static void SetUpTestSuite() {
     tmp_ = new test::TempDir("gimlod-mesh-family");
     std::string output;
-    ASSERT_EQ(test::runCommand(std::string(GIMLOD_MESH_FAMILY) + " " + test::quoted(tmp_->path()) +
-                                   " --triangles 6000",
+    ASSERT_EQ(test::runCommand(std::string(GIMLOD_MESH_FAMILY) + " " + test::quoted(tmp_->path()) + " --triangles 6000",
                                &output),
               0)
         << output;
@@ -61,8 +60,8 @@ TEST_P(MeshFamilyTest, AtTheDefaultsWithinTheBounds) {
   std::cout << "  " << GetParam() << ": " << st["charts"] << " charts of " << st["chart_size"] << "^2 ("
             << r["quads"].get<std::string>() << "), " << r["flipped_texels"] << " flipped texels, "
             << double(st["samples"].get<uint64_t>()) / triangles << " samples and "
-            << double(st["bytes_on_disk"].get<uint64_t>()) / triangles << " bytes per triangle, Hausdorff "
-            << hausdorff << "%\n";
+            << double(st["bytes_on_disk"].get<uint64_t>()) / triangles << " bytes per triangle, Hausdorff " << hausdorff
+            << "%\n";
   {
     SCOPED_TRACE("seams");
     test::checkSeams(atlas);
@@ -79,8 +78,8 @@ TEST_P(MeshFamilyTest, AtTheDefaultsWithinTheBounds) {
   const uint32_t density = r["chart_size_for_density"].get<uint32_t>();
   std::map<uint32_t, uint32_t> patchSide;
   for (const nlohmann::json& c : r["per_chart"]) patchSide[c["patch"].get<uint32_t>()] = c["side"].get<uint32_t>();
-  const auto smaller = uint32_t(std::count_if(patchSide.begin(), patchSide.end(),
-                                              [&](const auto& ps) { return ps.second < density; }));
+  const auto smaller =
+      uint32_t(std::count_if(patchSide.begin(), patchSide.end(), [&](const auto& ps) { return ps.second < density; }));
   EXPECT_EQ(smaller, r["patches_below_density_size"].get<uint32_t>());
   std::cout << "  " << GetParam() << ": " << smaller << " of " << patchSide.size() << " patches below the density's "
             << density << "^2\n";
@@ -93,11 +92,11 @@ TEST_P(MeshFamilyTest, AtTheDefaultsWithinTheBounds) {
     for (const std::string distance : {"1.5", "0.3"}) {
       SCOPED_TRACE(mode + ", distance " + distance);
       const fs::path out = tmp_->path() / (GetParam() + "-bench");
-      ASSERT_EQ(test::runCommand(test::appPath().string() + " bench " + test::quoted(atlas) + " -o " +
-                                     test::quoted(out) + " --orbit 6 --distance " + distance +
-                                     " --nodes 100 --mode " + mode,
-                                 &output),
-                0)
+      ASSERT_EQ(
+          test::runCommand(test::appPath().string() + " bench " + test::quoted(atlas) + " -o " + test::quoted(out) +
+                               " --orbit 6 --distance " + distance + " --nodes 100 --mode " + mode,
+                           &output),
+          0)
           << output;
       const test::Csv csv = test::readCsv(out / "bench.csv");
       ASSERT_EQ(csv.rows.size(), 18u);
@@ -107,8 +106,8 @@ TEST_P(MeshFamilyTest, AtTheDefaultsWithinTheBounds) {
         EXPECT_EQ(csv.num(i, "budget_below_roots"), 0.0);
         floor = std::max(floor, csv.num(i, "root_floor"));
       }
-      std::cout << "  " << GetParam() << ", " << mode << ", distance " << distance << ": root floor at most "
-                << floor << "\n";
+      std::cout << "  " << GetParam() << ", " << mode << ", distance " << distance << ": root floor at most " << floor
+                << "\n";
     }
   }
 }
@@ -134,8 +133,8 @@ TEST(MeshFamilyLarge, ThinPartsKeepTheirSurfaceAtOneHundredThousandTriangles) {
       << output;
   const nlohmann::json st = nlohmann::json::parse(std::ifstream(atlas / "stats.json"));
   const double hausdorff = st["fidelity"]["hausdorff_percent_of_diagonal"].get<double>();
-  std::cout << "  thin_parts at 100,000 triangles: Hausdorff " << hausdorff << "%, "
-            << st["resample"]["flipped_texels"] << " flipped texels\n";
+  std::cout << "  thin_parts at 100,000 triangles: Hausdorff " << hausdorff << "%, " << st["resample"]["flipped_texels"]
+            << " flipped texels\n";
   EXPECT_LT(hausdorff, 1.0);
 }
 

@@ -20,7 +20,8 @@ TEST(PlanetCli, TheShippedGlobeBuildsRendersAndExportsClosed) {
   const fs::path dem = test::repoData() / "terrain/etopo_30min.tif";
   const fs::path atlas = dir.path() / "earth.atlas";
   std::string out;
-  ASSERT_EQ(test::runCommand(app + " build " + test::quoted(dem) + " -o " + test::quoted(atlas) + " --planet 2>&1", &out), 0)
+  ASSERT_EQ(
+      test::runCommand(app + " build " + test::quoted(dem) + " -o " + test::quoted(atlas) + " --planet 2>&1", &out), 0)
       << out;
   EXPECT_NE(out.find("columns round the planet"), std::string::npos) << out;
   ASSERT_EQ(test::runCommand(app + " export " + test::quoted(atlas) + " -o " + test::quoted(dir.path() / "earth.ply") +
@@ -67,13 +68,12 @@ TEST(PlanetCli, OptionsThatDoNotApplyAreRefused) {
   const std::string app = test::appPath().string();
   std::string out;
   const std::string dem = test::quoted(test::repoData() / "terrain/etopo_30min.tif");
-  EXPECT_NE(test::runCommand(app + " build " + dem + " -o " + test::quoted(dir.path() / "a") + " --radius 1000 2>&1",
-                             &out),
-            0);
+  EXPECT_NE(
+      test::runCommand(app + " build " + dem + " -o " + test::quoted(dir.path() / "a") + " --radius 1000 2>&1", &out),
+      0);
   EXPECT_NE(out.find("--radius needs --planet"), std::string::npos) << out;
-  EXPECT_NE(test::runCommand(app + " build " + dem + " -o " + test::quoted(dir.path() / "b") +
-                                 " --planet --radius -5 2>&1",
-                             &out),
+  EXPECT_NE(test::runCommand(
+                app + " build " + dem + " -o " + test::quoted(dir.path() / "b") + " --planet --radius -5 2>&1", &out),
             0);
   EXPECT_NE(out.find("--radius"), std::string::npos) << out;
   EXPECT_NE(test::runCommand(app + " build " + test::quoted(test::repoData() / "meshes/bun_zipper.ply") + " -o " +
@@ -83,12 +83,13 @@ TEST(PlanetCli, OptionsThatDoNotApplyAreRefused) {
   EXPECT_NE(out.find("--planet"), std::string::npos) << out;
   EXPECT_FALSE(fs::exists(dir.path() / "c"));
   // The ellipsoid: known by name, on a planet only, and not with a radius of its own.
-  const std::pair<const char*, const char*> ellipsoids[] = {{" --planet --ellipsoid Clarke1866", "unknown; give WGS84"},
-                                                            {" --ellipsoid WGS84", "--ellipsoid needs --planet"},
-                                                            {" --planet --ellipsoid WGS84 --radius 6378137", "give one"}};
+  const std::pair<const char*, const char*> ellipsoids[] = {
+      {" --planet --ellipsoid Clarke1866", "unknown; give WGS84"},
+      {" --ellipsoid WGS84", "--ellipsoid needs --planet"},
+      {" --planet --ellipsoid WGS84 --radius 6378137", "give one"}};
   for (const auto& [options, message] : ellipsoids) {
-    EXPECT_NE(test::runCommand(app + " build " + dem + " -o " + test::quoted(dir.path() / "e") + options + " 2>&1", &out),
-              0)
+    EXPECT_NE(
+        test::runCommand(app + " build " + dem + " -o " + test::quoted(dir.path() / "e") + options + " 2>&1", &out), 0)
         << options;
     EXPECT_NE(out.find(message), std::string::npos) << options << ": " << out;
     EXPECT_FALSE(fs::exists(dir.path() / "e"));

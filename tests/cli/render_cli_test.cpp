@@ -33,11 +33,11 @@ std::vector<std::vector<std::string>> readCsv(const fs::path& p) {
 // Builds the shipped DEM at the defaults into DIR/rainier.atlas; gtest-fails on error.
 fs::path buildShippedDem(const test::TempDir& dir, std::string* out) {
   const fs::path atlas = dir.path() / "rainier.atlas";
-  EXPECT_EQ(test::runCommand(test::appPath().string() + " build '" +
-                                 (test::repoData() / "terrain/mt_rainier_90m.tif").string() + "' -o '" +
-                                 atlas.string() + "'",
-                             out),
-            0)
+  EXPECT_EQ(
+      test::runCommand(test::appPath().string() + " build '" +
+                           (test::repoData() / "terrain/mt_rainier_90m.tif").string() + "' -o '" + atlas.string() + "'",
+                       out),
+      0)
       << *out;
   return atlas;
 }
@@ -56,8 +56,8 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
   EXPECT_TRUE(fs::exists(atlas / "hierarchy.bin"));
 
   // Rebuilding over an existing atlas replaces it and leaves nothing staged behind.
-  ASSERT_EQ(test::runCommand(app + " build '" + (test::repoData() / "terrain/mt_rainier_90m.tif").string() +
-                                 "' -o '" + atlas.string() + "' --chart-size 257 --depth 4",
+  ASSERT_EQ(test::runCommand(app + " build '" + (test::repoData() / "terrain/mt_rainier_90m.tif").string() + "' -o '" +
+                                 atlas.string() + "' --chart-size 257 --depth 4",
                              &out),
             0)
       << out;
@@ -66,7 +66,9 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
     EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos) << e.path();
 
   const double tolerance = 1.5;
-  for (const std::string& camera : {std::string("--orbit 3"), "--path '" + (test::repoData().parent_path() / "scenes/rainier_flyby.json").string() + "'"}) {
+  for (const std::string& camera :
+       {std::string("--orbit 3"),
+        "--path '" + (test::repoData().parent_path() / "scenes/rainier_flyby.json").string() + "'"}) {
     const fs::path frames = dir.path() / "frames";
     fs::remove_all(frames);
     ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + frames.string() + "' " + camera +
@@ -177,15 +179,15 @@ TEST(RenderCli, StreamingKeepsItsByteBudgets) {
   EXPECT_GT(issued, 0u);
   EXPECT_GT(done, 0u);
   // Bad streaming options name themselves or what they cannot hold.
-  for (const auto& [bad, named] : std::vector<std::pair<std::string, std::string>>{
-           {"--gpu-cache 10K", "GPU page cache"},
-           {"--ram-cache 2K", "loader's RAM"},
-           {"--ram-cache lots", "--ram-cache"},
-           {"--io-latency fast", "--io-latency"},
-           {"--io-latency 5,-1", "--io-latency"},
-           {"--prefetch -1", "--prefetch"},
-           {"--loader-threads 0", "--loader-threads"},
-           {"--io-depth 0", "--io-depth"}}) {
+  for (const auto& [bad, named] :
+       std::vector<std::pair<std::string, std::string>>{{"--gpu-cache 10K", "GPU page cache"},
+                                                        {"--ram-cache 2K", "loader's RAM"},
+                                                        {"--ram-cache lots", "--ram-cache"},
+                                                        {"--io-latency fast", "--io-latency"},
+                                                        {"--io-latency 5,-1", "--io-latency"},
+                                                        {"--prefetch -1", "--prefetch"},
+                                                        {"--loader-threads 0", "--loader-threads"},
+                                                        {"--io-depth 0", "--io-depth"}}) {
     EXPECT_NE(test::runCommand(app + " render '" + atlas.string() + "' -o '" + (dir.path() / "bad").string() +
                                    "' --orbit 1 --size 32x32 " + bad,
                                &out),

@@ -25,10 +25,10 @@ TEST_P(ScanExportCli, LevelTwoReadsBackWithTheScansTopology) {
   const test::Topology in = test::inputTopology(test::sharedScanPath(name));
   const fs::path ply = built->dir.parent_path() / (name + "_level2.ply");
   std::string out;
-  ASSERT_EQ(test::runCommand(test::appPath().string() + " export " + built->dir.string() + " -o " + ply.string() +
-                                 " --level 2",
-                             &out),
-            0)
+  ASSERT_EQ(
+      test::runCommand(
+          test::appPath().string() + " export " + built->dir.string() + " -o " + ply.string() + " --level 2", &out),
+      0)
       << out;
   const test::Topology cli = test::inputTopology(ply);
   EXPECT_EQ(cli.boundaryLoops, in.boundaryLoops);

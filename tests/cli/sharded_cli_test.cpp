@@ -14,8 +14,8 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string tileBuild(const fs::path& atlas) {
-  return test::appPath().string() + " build " + test::quoted(test::repoData() / "terrain/mt_rainier_90m.tif") +
-         " -o " + test::quoted(atlas) + " --chart-size 129";
+  return test::appPath().string() + " build " + test::quoted(test::repoData() / "terrain/mt_rainier_90m.tif") + " -o " +
+         test::quoted(atlas) + " --chart-size 129";
 }
 
 TEST(ShardedCli, ThreeMpiRanksGiveTheOneProcessAtlas) {
@@ -23,7 +23,8 @@ TEST(ShardedCli, ThreeMpiRanksGiveTheOneProcessAtlas) {
   std::string out;
   ASSERT_EQ(test::runCommand(tileBuild(dir.path() / "one.atlas"), &out), 0) << out;
   // CI runs as root, which mpirun refuses unless told.
-  const std::string mpirun = std::string("mpirun --oversubscribe ") + (::geteuid() == 0 ? "--allow-run-as-root " : "") + "-n 3 ";
+  const std::string mpirun =
+      std::string("mpirun --oversubscribe ") + (::geteuid() == 0 ? "--allow-run-as-root " : "") + "-n 3 ";
   ASSERT_EQ(test::runCommand(mpirun + tileBuild(dir.path() / "mpi.atlas") + " --mpi --threads 1", &out), 0) << out;
   for (const char* rank : {"[rank 0]", "[rank 1]", "[rank 2]"}) EXPECT_NE(out.find(rank), std::string::npos) << out;
   EXPECT_NE(out.find("merged 12 shards"), std::string::npos) << out;  // four a rank
@@ -55,7 +56,9 @@ TEST(ShardedCli, TheSlurmScriptsRunInTurnGiveTheOneProcessAtlas) {
   // As Slurm runs them: the prepare, the array's tasks (in any order), the merge.
   ASSERT_EQ(test::runCommand("bash " + test::quoted(jobs / "prepare.sbatch"), &out), 0) << out;
   for (const char* task : {"2", "0", "1"})
-    ASSERT_EQ(test::runCommand(std::string("SLURM_ARRAY_TASK_ID=") + task + " bash " + test::quoted(jobs / "shards.sbatch"), &out), 0)
+    ASSERT_EQ(test::runCommand(
+                  std::string("SLURM_ARRAY_TASK_ID=") + task + " bash " + test::quoted(jobs / "shards.sbatch"), &out),
+              0)
         << out;
   ASSERT_EQ(test::runCommand("bash " + test::quoted(jobs / "merge.sbatch"), &out), 0) << out;
   test::expectSameFiles(dir.path() / "one.atlas", dir.path() / "slurm.atlas", "stats.json");
@@ -77,7 +80,8 @@ TEST(ShardedCli, AOneNodeSlurmClusterRunsTheSubmittedBuild) {
   } stop{"bash " + test::quoted(script) + " stop " + test::quoted(cluster)};
   const std::string conf = "SLURM_CONF=" + test::quoted(cluster / "slurm.conf") + " ";
   const fs::path jobs = dir.path() / "jobs", atlas = dir.path() / "slurm.atlas";
-  ASSERT_EQ(test::runCommand(tileBuild(atlas) + " --threads 1 --emit-slurm " + test::quoted(jobs) + " --shards 3", &out), 0)
+  ASSERT_EQ(
+      test::runCommand(tileBuild(atlas) + " --threads 1 --emit-slurm " + test::quoted(jobs) + " --shards 3", &out), 0)
       << out;
   ASSERT_EQ(test::runCommand(conf + "bash " + test::quoted(jobs / "submit.sh"), &out), 0) << out;
   EXPECT_NE(out.find("(array 0-2)"), std::string::npos) << out;
@@ -112,7 +116,8 @@ TEST(ShardedCli, BadShardOptionsAreRefusedByName) {
        "--imagery: sharded builds drape no imagery yet"},
       {tileBuild(atlas) + " --shard 0/2 --imagery " + test::quoted(test::repoData() / "terrain/mt_rainier_imagery.tif"),
        "--imagery: sharded builds drape no imagery yet"},
-      {app + " build " + test::quoted(test::repoData() / "meshes/bun_zipper.ply") + " -o " + test::quoted(atlas) + " --prepare",
+      {app + " build " + test::quoted(test::repoData() / "meshes/bun_zipper.ply") + " -o " + test::quoted(atlas) +
+           " --prepare",
        "a mesh is built in one process"},
       {tileBuild(atlas) + " --prepare --shard 0/2", "excludes"},
   };

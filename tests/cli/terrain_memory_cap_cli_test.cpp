@@ -66,7 +66,8 @@ TEST(WindowedTerrain, ADemSeveralTimesTheMemoryCapBuildsUnderIt) {
   long rssKib = 0;
   const fs::path atlas = tmp.path() / "atlas";
   // Over the cap, the build goes window by window by itself (under a sanitizer it is told to).
-  std::vector<std::string> args{"build", vrt.string(), "-o", atlas.string(), "--max-memory", cap, "--chart-size", "257"};
+  std::vector<std::string> args{"build",        vrt.string(), "-o",           atlas.string(),
+                                "--max-memory", cap,          "--chart-size", "257"};
   if (!kCheckCap) args.push_back("--out-of-core");
   ASSERT_EQ(runApp(args, &rssKib), 0);
   const nlohmann::json st = nlohmann::json::parse(std::ifstream(atlas / "stats.json"));

@@ -28,8 +28,8 @@ constexpr uint32_t kSide = 65;
 // The tile's raw int16 metres (voids included: -32768 is an integer too) as floats.
 std::vector<float> rawTile(uint32_t* width, uint32_t* height) {
   GDALAllRegister();
-  GDALDataset* ds = GDALDataset::FromHandle(
-      GDALOpen((test::repoData() / "terrain/mt_rainier_90m.tif").c_str(), GA_ReadOnly));
+  GDALDataset* ds =
+      GDALDataset::FromHandle(GDALOpen((test::repoData() / "terrain/mt_rainier_90m.tif").c_str(), GA_ReadOnly));
   *width = uint32_t(ds->GetRasterXSize());
   *height = uint32_t(ds->GetRasterYSize());
   std::vector<float> h(size_t(*width) * *height);
@@ -105,8 +105,7 @@ TEST(HeightCodec, CorruptOrTruncatedBlocksAreDetected) {
       // the true heights.
       EXPECT_EQ(out, block) << "a flipped bit at byte " << at << " decoded to other heights";
       ++benign;
-    } catch (const CodecError&) {
-    }
+    } catch (const CodecError&) {}
   }
   EXPECT_LE(benign, 4u);  // nearly every flip is caught by the checksum
   EXPECT_THROW(decodeHeights(code, kSide - 2, std::span(out.data(), size_t(kSide - 2) * (kSide - 2))), CodecError);
@@ -145,7 +144,8 @@ double distance3(const float* a, const float* b) {
 
 // Settled positions: the border at its nearest lattice point, every other sample on the lattice
 // within min(tolerance, d / 4) of its input (d: the distance to the nearest other sample of its
-// 5x5 grid window), no two samples of such a window merged, decoded exactly, and coded in fewer bytes than the nearest points.
+// 5x5 grid window), no two samples of such a window merged, decoded exactly, and coded in fewer bytes than the nearest
+// points.
 TEST(PositionSettling, WithinTheToleranceOnTheLatticeAndCheaper) {
   const double step = std::exp2(-18.0), tolerance = 2e-4;
   for (const uint32_t squeeze : {~0u, 40u}) {
@@ -338,8 +338,7 @@ TEST(PositionCodec, PlanarSquaresRoundTripExactlyAndCodeFewerBytes) {
             try {
               decodePositions(bad, side, back);
               EXPECT_EQ(back, in) << "byte " << at;
-            } catch (const CodecError&) {
-            }
+            } catch (const CodecError&) {}
           }
           EXPECT_THROW(decodePositions(std::span(planar).first(planar.size() - 3), side, back), CodecError);
         }
@@ -375,7 +374,8 @@ TEST(PositionCodec, DamagedPlanarBodiesDecodeOrThrow) {
         for (uint32_t c = 0; c < 3; ++c) {
           const uint32_t x0 = std::min(x / 4 * 4, side - 5), y0 = std::min(y / 4 * 4, side - 5);
           auto at = [&](uint32_t u, uint32_t v) { return grid[(size_t(v) * side + u) * 3 + c]; };
-          const int64_t v = planarSquareSample(at(x0, y0), at(x0 + 4, y0), at(x0, y0 + 4), at(x0 + 4, y0 + 4), 4, x - x0, y - y0);
+          const int64_t v =
+              planarSquareSample(at(x0, y0), at(x0 + 4, y0), at(x0, y0 + 4), at(x0 + 4, y0 + 4), 4, x - x0, y - y0);
           in[(size_t(y) * side + x) * 3 + c] = float(double(v + (off(rng) ? 0 : bump(rng))) * step);
         }
     const std::vector<uint8_t> block = encodePositions(in, side, step, kChartBorderLeft);

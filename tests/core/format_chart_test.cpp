@@ -24,7 +24,7 @@ ChartPyramid makePyramid(uint32_t chartSize, uint32_t seed) {
   std::uniform_real_distribution<float> d(-500.f, 4000.f);
   ChartPyramid p;
   const uint32_t m = chartSize - 1;
-  for (uint32_t s = m; ; s >>= 1) {
+  for (uint32_t s = m;; s >>= 1) {
     const size_t n = size_t(s + 1) * (s + 1);
     std::vector<float> h(n);
     std::vector<PackedNormal> nr(n);
@@ -98,10 +98,11 @@ TEST(FormatChart, RoundTripBlocksAndWindows) {
     EXPECT_EQ(r.readLevelNormals(k), p.normals[k]) << "level " << k;
   }
   // Windows: whole blocks, sub-windows, windows touching the shared block row/column.
-  struct W { uint32_t level, u0, v0, n; };
-  const W windows[] = {{0, 0, 0, 16},  {0, 16, 32, 16}, {0, 48, 48, 16}, {0, 20, 37, 5},
-                       {0, 16, 16, 0}, {0, 64, 64, 0},  {0, 60, 0, 4},   {1, 16, 0, 16},
-                       {1, 3, 18, 8},  {2, 0, 0, 16},   {3, 2, 4, 4},    {6, 0, 0, 1}};
+  struct W {
+    uint32_t level, u0, v0, n;
+  };
+  const W windows[] = {{0, 0, 0, 16}, {0, 16, 32, 16}, {0, 48, 48, 16}, {0, 20, 37, 5}, {0, 16, 16, 0}, {0, 64, 64, 0},
+                       {0, 60, 0, 4}, {1, 16, 0, 16},  {1, 3, 18, 8},   {2, 0, 0, 16},  {3, 2, 4, 4},   {6, 0, 0, 1}};
   for (const W& w : windows) {
     const LevelLayout l = levelLayout(cs, bi, w.level);
     const uint32_t n1 = w.n + 1;
@@ -169,7 +170,8 @@ TEST(FormatChart, BlocksWrittenInAnyOrderReadBackTheSame) {
       std::vector<std::thread> threads;
       for (int t = 0; t < 3; ++t)
         threads.emplace_back([&] {
-          for (size_t i; (i = next++) < order.size();) w.writeBlock(order[i].level, order[i].bx, order[i].by, data(order[i]));
+          for (size_t i; (i = next++) < order.size();)
+            w.writeBlock(order[i].level, order[i].bx, order[i].by, data(order[i]));
         });
       for (std::thread& t : threads) t.join();
       EXPECT_THROW(w.writeBlock(0, 0, 0, data(blocks[0])), std::logic_error);
@@ -192,7 +194,8 @@ TEST(FormatChart, BlocksWrittenInAnyOrderReadBackTheSame) {
   {
     const fs::path partial = tmp.path() / "partial.bin";
     ChartFileWriter w(partial, {cs, bi, levels, mask}, {});
-    for (size_t i = 1; i < blocks.size(); ++i) w.writeBlock(blocks[i].level, blocks[i].bx, blocks[i].by, data(blocks[i]));
+    for (size_t i = 1; i < blocks.size(); ++i)
+      w.writeBlock(blocks[i].level, blocks[i].bx, blocks[i].by, data(blocks[i]));
     EXPECT_THROW(w.commit(), std::logic_error);
   }
   EXPECT_FALSE(fs::exists(tmp.path() / "partial.bin"));
@@ -244,8 +247,7 @@ TEST(FormatChart, TruncatedAndCorruptFiles) {
     return f;
   };
   expectReaderError(writeBytes("cut_end.bin", {bytes.begin(), bytes.end() - 1}), "truncated");
-  expectReaderError(writeBytes("cut_half.bin", {bytes.begin(), bytes.begin() + size / 2}),
-                    "truncated");
+  expectReaderError(writeBytes("cut_half.bin", {bytes.begin(), bytes.begin() + size / 2}), "truncated");
   expectReaderError(writeBytes("cut_dir.bin", {bytes.begin(), bytes.begin() + 40}), "truncated");
   expectReaderError(writeBytes("cut_header.bin", {bytes.begin(), bytes.begin() + 10}), "truncated");
   expectReaderError(writeBytes("empty.bin", {}), "truncated");
@@ -394,7 +396,8 @@ TEST(FormatChart, GeometryImageNormalsMatchTheirDefinitionBitForBit) {
             found = pack(a, b, expected);
             ++fallbacks;
           }
-          ASSERT_EQ(n[size_t(v) * side + u], expected) << "side " << side << ", kind " << kind << ", at " << u << "," << v;
+          ASSERT_EQ(n[size_t(v) * side + u], expected)
+              << "side " << side << ", kind " << kind << ", at " << u << "," << v;
         }
       EXPECT_EQ(n[0], (PackedNormal{9, 9, 9, 9}));  // the border is left alone
     }
@@ -418,7 +421,8 @@ TEST(FormatChart, GeometryNormalsDerivedInsideBlocks) {
       for (uint32_t u = 0; u < s; ++u) {
         // A patch of the unit sphere, u eastwards and v northwards: outward normals.
         const double lon = 0.8 * (double(u << k) / 64.0 - 0.5), lat = 0.8 * (double(v << k) / 64.0 - 0.5);
-        const glm::vec3 q(float(std::cos(lat) * std::cos(lon)), float(std::cos(lat) * std::sin(lon)), float(std::sin(lat)));
+        const glm::vec3 q(float(std::cos(lat) * std::cos(lon)), float(std::cos(lat) * std::sin(lon)),
+                          float(std::sin(lat)));
         pos[size_t(v) * s + u] = q;
         nrm[size_t(v) * s + u] = packNormal(q.x, q.y, q.z);
       }

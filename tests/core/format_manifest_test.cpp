@@ -148,10 +148,8 @@ TEST(FormatManifest, ValidationErrors) {
   expectBad([](json& j) { j["chartsX"] = 3; }, "inconsistent chart list");
   expectBad([](json& j) { j["charts"][1]["id"] = 5; }, "inconsistent chart list");
   expectBad([](json& j) { j["charts"][1]["gridX"] = 0; }, "inconsistent chart list");
-  expectBad([](json& j) { j["charts"][0]["neighbours"][1]["chart"] = -1; },
-            "inconsistent chart list");
-  expectBad([](json& j) { j["charts"][0]["neighbours"][1]["edge"] = 2; },
-            "inconsistent chart list");
+  expectBad([](json& j) { j["charts"][0]["neighbours"][1]["chart"] = -1; }, "inconsistent chart list");
+  expectBad([](json& j) { j["charts"][0]["neighbours"][1]["edge"] = 2; }, "inconsistent chart list");
   expectBad([](json& j) { j["charts"][0]["neighbours"][1]["chart"] = 7; }, "out of range");
   expectBad([](json& j) { j["charts"][0]["file"] = "../../etc/passwd"; }, "relative path");
   expectBad([](json& j) { j["charts"][0].erase("neighbours"); }, "charts[0].neighbours");

@@ -16,28 +16,22 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     std::vector<std::array<uint8_t, 4>> bytes(n);
     try {
       gimlod::decodeHeights(in, side, std::span<float>(floats.data(), n));
-    } catch (const gimlod::CodecError&) {
-    }
+    } catch (const gimlod::CodecError&) {}
     try {
       gimlod::decodePositions(in, side, floats);
-    } catch (const gimlod::CodecError&) {
-    }
+    } catch (const gimlod::CodecError&) {}
     try {
       gimlod::decodeNormals(in, side, bytes);
-    } catch (const gimlod::CodecError&) {
-    }
+    } catch (const gimlod::CodecError&) {}
     try {
       gimlod::decodeColours(in, side, bytes);
-    } catch (const gimlod::CodecError&) {
-    }
+    } catch (const gimlod::CodecError&) {}
     try {
       gimlod::decodeBorderNormals(in, side, bytes);
-    } catch (const gimlod::CodecError&) {
-    }
+    } catch (const gimlod::CodecError&) {}
   }
   try {
     (void)gimlod::blockQuantization(in);
-  } catch (const gimlod::CodecError&) {
-  }
+  } catch (const gimlod::CodecError&) {}
   return 0;
 }

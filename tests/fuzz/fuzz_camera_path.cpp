@@ -15,7 +15,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       const glm::dvec3 sum = c.eye + c.target + c.up;
       if (!std::isfinite(sum.x + sum.y + sum.z + c.fovYDeg + c.nearPlane + c.farPlane)) __builtin_trap();
     }
-  } catch (const gimlod::InputError&) {
-  }
+  } catch (const gimlod::InputError&) {}
   return 0;
 }

@@ -16,7 +16,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       if (r.hasChannel(gimlod::kChannelNormals)) (void)r.readLevelNormals(level);
       if (r.hasChannel(gimlod::kChannelColours)) (void)r.readLevelColours(level);
     }
-  } catch (const gimlod::InputError&) {
-  }
+  } catch (const gimlod::InputError&) {}
   return 0;
 }

@@ -11,7 +11,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const auto path = gimlod::fuzz::writeInput("hierarchy.bin", data, size);
   try {
     (void)gimlod::readHierarchy(path);
-  } catch (const gimlod::InputError&) {
-  }
+  } catch (const gimlod::InputError&) {}
   return 0;
 }

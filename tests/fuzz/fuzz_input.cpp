@@ -13,7 +13,8 @@ namespace {
 struct Scratch {
   std::filesystem::path dir;
   Scratch() {
-    const std::filesystem::path base = std::filesystem::exists("/dev/shm") ? "/dev/shm" : std::filesystem::temp_directory_path();
+    const std::filesystem::path base =
+        std::filesystem::exists("/dev/shm") ? "/dev/shm" : std::filesystem::temp_directory_path();
     dir = base / ("gimlod-fuzz-" + std::to_string(::getpid()));
     std::filesystem::create_directories(dir);
   }

@@ -18,7 +18,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         if (n.chart >= int32_t(m.charts.size()) || n.edge > 3) __builtin_trap();
       }
     }
-  } catch (const gimlod::InputError&) {
-  }
+  } catch (const gimlod::InputError&) {}
   return 0;
 }

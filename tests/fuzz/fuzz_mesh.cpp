@@ -12,12 +12,11 @@
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const auto path = gimlod::fuzz::writeInput(std::string("input") + GIMLOD_FUZZ_MESH_EXTENSION, data, size);
   gimlod::MeshReadOptions options;
-  options.chunkTriangles = 7;               // many small chunks: the chunk seams are exercised
-  options.duplicateSetBytes = 1u << 16;     // a full duplicate set is exercised too
+  options.chunkTriangles = 7;            // many small chunks: the chunk seams are exercised
+  options.duplicateSetBytes = 1u << 16;  // a full duplicate set is exercised too
   try {
     (void)gimlod::probeMesh(path, options);
-  } catch (const gimlod::InputError&) {
-  }
+  } catch (const gimlod::InputError&) {}
   try {
     const gimlod::IndexedMesh mesh = gimlod::readMesh(path, options);
     for (const auto& t : mesh.triangles) {
@@ -26,7 +25,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       }
     }
     if (!mesh.colours.empty() && mesh.colours.size() != mesh.positions.size()) __builtin_trap();
-  } catch (const gimlod::InputError&) {
-  }
+  } catch (const gimlod::InputError&) {}
   return 0;
 }

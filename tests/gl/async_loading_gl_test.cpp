@@ -90,8 +90,8 @@ TEST_F(AsyncLoadingTest, SubstitutesResidentAncestorsCrackFreeAndConverges) {
     const auto verts = scene.capture(f.cut);
     ASSERT_EQ(verts.size(), f.cut.nodes.size());
     const CrackReport r = countCracks(h, f.cut, verts);
-    EXPECT_EQ(r.mismatches, 0u) << "frame " << i << ": " << r.mismatches << " of "
-                                << r.borderVertices << " border vertices";
+    EXPECT_EQ(r.mismatches, 0u) << "frame " << i << ": " << r.mismatches << " of " << r.borderVertices
+                                << " border vertices";
     if (f.cut.nodes.size() > 1) {
       EXPECT_GT(r.borderVertices, 0u) << "frame " << i;
     }

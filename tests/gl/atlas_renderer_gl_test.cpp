@@ -34,8 +34,7 @@ TEST_F(RendererGlTest, ContextIsCore43OrNewer) {
   EXPECT_GE(major * 10 + minor, 43) << context_->version();
   EXPECT_TRUE(profile & GL_CONTEXT_CORE_PROFILE_BIT);
   EXPECT_FALSE(context_->renderer().empty());
-  EXPECT_NE(context_->version().find(std::to_string(major) + "." + std::to_string(minor)),
-            std::string::npos);
+  EXPECT_NE(context_->version().find(std::to_string(major) + "." + std::to_string(minor)), std::string::npos);
   EXPECT_EQ(glGetError(), GLenum(GL_NO_ERROR));
   EXPECT_NE(context_->display().find("EGL vendor"), std::string::npos) << context_->display();
   EXPECT_FALSE(context_->vendor().empty());
@@ -67,8 +66,7 @@ struct Scene {
   StitchTables stitch;
 };
 
-DrawNode makeNode(int32_t x, int32_t y, uint32_t sizeLog2, uint32_t res, uint32_t pageResLog2,
-                  uint32_t layer) {
+DrawNode makeNode(int32_t x, int32_t y, uint32_t sizeLog2, uint32_t res, uint32_t pageResLog2, uint32_t layer) {
   return DrawNode{x, y, sizeLog2, res, pageResLog2, layer};
 }
 
@@ -87,8 +85,7 @@ void uploadPages(gl::AtlasRenderer& r, const std::vector<DrawNode>& nodes, Heigh
 
 // Test-side stitch tables by brute force over the node rectangles (independent of
 // runtime/stitch.cpp): each entry holds the log2 spacing of the node across that side.
-StitchTables bruteForceStitch(const std::vector<DrawNode>& nodes, uint32_t leafLog2,
-                              uint32_t entriesPerSide) {
+StitchTables bruteForceStitch(const std::vector<DrawNode>& nodes, uint32_t leafLog2, uint32_t entriesPerSide) {
   StitchTables t;
   t.leafLog2 = leafLog2;
   t.entriesPerSide = entriesPerSide;
@@ -101,15 +98,14 @@ StitchTables bruteForceStitch(const std::vector<DrawNode>& nodes, uint32_t leafL
         // A point just across the side, in the middle of the entry's span (doubled coords).
         const int32_t t2 = 2 * int32_t(e << leafLog2) + (1 << leafLog2);
         const int32_t px2 = side == 0 || side == 2 ? 2 * a.originX + t2
-                            : side == 1           ? 2 * (a.originX + size) + 1
-                                                  : 2 * a.originX - 1;
+                            : side == 1            ? 2 * (a.originX + size) + 1
+                                                   : 2 * a.originX - 1;
         const int32_t py2 = side == 1 || side == 3 ? 2 * a.originY + t2
-                            : side == 2           ? 2 * (a.originY + size) + 1
-                                                  : 2 * a.originY - 1;
+                            : side == 2            ? 2 * (a.originY + size) + 1
+                                                   : 2 * a.originY - 1;
         for (const DrawNode& b : nodes) {
           const int32_t bs = 1 << b.sizeLog2;
-          if (px2 > 2 * b.originX && px2 < 2 * (b.originX + bs) && py2 > 2 * b.originY &&
-              py2 < 2 * (b.originY + bs))
+          if (px2 > 2 * b.originX && px2 < 2 * (b.originX + bs) && py2 > 2 * b.originY && py2 < 2 * (b.originY + bs))
             t.side(k, side)[e] = uint8_t(b.sizeLog2 - b.resLog2);
         }
       }
@@ -130,16 +126,13 @@ void checkSharedSide(const DrawNode& a, const std::vector<glm::vec3>& va, const 
                      const std::vector<glm::vec3>& vb, uint32_t side, BorderCheck* out) {
   const int32_t as = 1 << a.sizeLog2, bs = 1 << b.sizeLog2;
   const bool horizontal = side == 0 || side == 2;
-  const int32_t aLine = side == 0 ? a.originY : side == 1 ? a.originX + as
-                        : side == 2 ? a.originY + as : a.originX;
-  const int32_t bLine = side == 0 ? b.originY + bs : side == 1 ? b.originX
-                        : side == 2 ? b.originY : b.originX + bs;
+  const int32_t aLine = side == 0 ? a.originY : side == 1 ? a.originX + as : side == 2 ? a.originY + as : a.originX;
+  const int32_t bLine = side == 0 ? b.originY + bs : side == 1 ? b.originX : side == 2 ? b.originY : b.originX + bs;
   if (aLine != bLine) return;
   const int32_t aLo = horizontal ? a.originX : a.originY, bLo = horizontal ? b.originX : b.originY;
   const int32_t lo = std::max(aLo, bLo), hi = std::min(aLo + as, bLo + bs);
   if (lo >= hi) return;
-  auto sideVertices = [](const DrawNode& d, const std::vector<glm::vec3>& v, uint32_t s,
-                         int32_t from, int32_t to) {
+  auto sideVertices = [](const DrawNode& d, const std::vector<glm::vec3>& v, uint32_t s, int32_t from, int32_t to) {
     const uint32_t n = 1u << d.resLog2, so = d.sizeLog2 - d.resLog2;
     const int32_t start = s == 0 || s == 2 ? d.originX : d.originY;
     std::vector<glm::vec3> out;
@@ -155,20 +148,17 @@ void checkSharedSide(const DrawNode& a, const std::vector<glm::vec3>& va, const 
   const auto theirs = sideVertices(b, vb, (side + 2) % 4, INT32_MIN, INT32_MAX);
   for (const glm::vec3& p : mine) {
     ++out->borderVertices;
-    const bool found = std::any_of(theirs.begin(), theirs.end(),
-                                   [&](const glm::vec3& q) { return sameBits(p, q); });
+    const bool found = std::any_of(theirs.begin(), theirs.end(), [&](const glm::vec3& q) { return sameBits(p, q); });
     out->mismatches += !found;
   }
 }
 
-BorderCheck checkAllBorders(const std::vector<DrawNode>& nodes,
-                            const std::vector<std::vector<glm::vec3>>& verts) {
+BorderCheck checkAllBorders(const std::vector<DrawNode>& nodes, const std::vector<std::vector<glm::vec3>>& verts) {
   BorderCheck c;
   for (size_t a = 0; a < nodes.size(); ++a)
     for (size_t b = 0; b < nodes.size(); ++b)
       if (a != b)
-        for (uint32_t side = 0; side < 4; ++side)
-          checkSharedSide(nodes[a], verts[a], nodes[b], verts[b], side, &c);
+        for (uint32_t side = 0; side < 4; ++side) checkSharedSide(nodes[a], verts[a], nodes[b], verts[b], side, &c);
   return c;
 }
 
@@ -192,8 +182,7 @@ gl::RendererSetup smallSetup(uint32_t pageIntervalsLog2) {
 
 // Captures with the given tables and with zeroed tables; checks the stitched run is exact, the
 // negative control cracks (when expected), and the captured layout is the grid order.
-void expectCrackFree(gl::AtlasRenderer& r, const Scene& s, bool controlMustCrack,
-                     const std::string& label) {
+void expectCrackFree(gl::AtlasRenderer& r, const Scene& s, bool controlMustCrack, const std::string& label) {
   const auto verts = r.captureVertices(s.nodes, s.stitch);
   ASSERT_EQ(verts.size(), s.nodes.size());
   for (size_t k = 0; k < s.nodes.size(); ++k) {
@@ -224,8 +213,7 @@ TEST_F(RendererGlTest, CapturedInteriorVerticesAreTheExactSamples) {
       for (uint32_t i = 0; i <= n; ++i) {
         const int32_t gx = d.originX + int32_t(i << so), gy = d.originY + int32_t(j << so);
         const glm::vec3 want(float(gx) * 1.5f, float(gy) * 2.0f, randomHeight(gx, gy));
-        EXPECT_TRUE(sameBits(verts[k][size_t(j) * (n + 1) + i], want))
-            << "node " << k << " (" << i << "," << j << ")";
+        EXPECT_TRUE(sameBits(verts[k][size_t(j) * (n + 1) + i], want)) << "node " << k << " (" << i << "," << j << ")";
       }
   }
 }
@@ -239,8 +227,7 @@ TEST_F(RendererGlTest, HandBuiltTablesStitchTwoResolutions) {
   s.stitch.entriesPerSide = 1;
   s.stitch.bytes = {0, 2, 0, 0,   // node 0: right side meets spacing 2^2
                     0, 0, 0, 0};  // node 1: left side meets spacing 2^0 (finer: no move)
-  EXPECT_EQ(bruteForceStitch(s.nodes, 4, 1).bytes,
-            (std::vector<uint8_t>{0, 2, 0, 0, 0, 0, 0, 0}));
+  EXPECT_EQ(bruteForceStitch(s.nodes, 4, 1).bytes, (std::vector<uint8_t>{0, 2, 0, 0, 0, 0, 0, 0}));
   uploadPages(r, s.nodes, randomHeight);
   expectCrackFree(r, s, true, "random heights");
   // On a plane the unstitched T-junctions lie on the coarse edge, but their vertices still do
@@ -307,9 +294,8 @@ TEST_F(RendererGlTest, DrawShowsTerrainBelowAndSkyAbove) {
   gl::AtlasRenderer r(setup);
   const Scene s = quadScene(r);
   const glm::vec3 eye(32.f, -30.f, 20.f);
-  const glm::mat4 viewProj =
-      glm::perspective(glm::radians(50.f), 128.f / 96.f, 0.5f, 500.f) *
-      glm::lookAt(eye, glm::vec3(32.f, 20.f, 0.f), glm::vec3(0.f, 0.f, 1.f));
+  const glm::mat4 viewProj = glm::perspective(glm::radians(50.f), 128.f / 96.f, 0.5f, 500.f) *
+                             glm::lookAt(eye, glm::vec3(32.f, 20.f, 0.f), glm::vec3(0.f, 0.f, 1.f));
   const auto t0 = std::chrono::steady_clock::now();
   const gl::DrawStats stats = r.draw(viewProj, eye, s.nodes, s.stitch);
   const double callMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -398,7 +384,8 @@ TEST_F(RendererGlTest, AttributeLevelChangesShadingNotGeometry) {
   EXPECT_LT(coarse.first, fine.first / 3) << "the coarsest normal level should be nearly even";
   ASSERT_EQ(fine.second.size(), coarse.second.size());
   for (size_t k = 0; k < fine.second.size(); ++k)
-    EXPECT_EQ(0, std::memcmp(fine.second[k].data(), coarse.second[k].data(), fine.second[k].size() * sizeof(glm::vec3)));
+    EXPECT_EQ(0,
+              std::memcmp(fine.second[k].data(), coarse.second[k].data(), fine.second[k].size() * sizeof(glm::vec3)));
   std::vector<DrawNode> bad = {makeNode(0, 0, 5, 5, 5, 0)};
   bad[0].texLod = 6;  // beyond the page's levels
   EXPECT_THROW(r.draw(viewProj, glm::vec3(0.f), bad, t), std::invalid_argument);

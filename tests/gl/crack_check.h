@@ -35,11 +35,11 @@ inline CrackReport captureCracks(gl::AtlasScene& scene, const Cut& cut, bool exp
 // Node-side adjacencies of a cut (each counted from both sides) and how many of them join nodes of
 // different levels or resolutions, within a chart and across chart borders.
 struct CutMix {
-  uint64_t sides = 0;                  // (node side, drawn neighbour) pairs
-  uint64_t mixed = 0;                  // of those, level or resolution differs
-  uint64_t crossChart = 0;             // neighbour in another chart
-  uint64_t crossChartLevelDiff = 0;    // across charts, different levels
-  uint64_t crossChartResDiff = 0;      // across charts, different resolutions
+  uint64_t sides = 0;                // (node side, drawn neighbour) pairs
+  uint64_t mixed = 0;                // of those, level or resolution differs
+  uint64_t crossChart = 0;           // neighbour in another chart
+  uint64_t crossChartLevelDiff = 0;  // across charts, different levels
+  uint64_t crossChartResDiff = 0;    // across charts, different resolutions
   CutMix& operator+=(const CutMix& o) {
     sides += o.sides;
     mixed += o.mixed;

@@ -68,9 +68,8 @@ class CrackTest : public test::GlContextTest<> {
     writeGeometryCharts(set, dir, 16, m);
     std::vector<std::array<RootNeighbour, 4>> roots;
     for (const ChartInfo& c : m.charts) roots.push_back(c.neighbours);
-    writeHierarchy(dir / m.hierarchyFile, buildGeometryHierarchy(hierarchyParams(m), roots, [&](uint32_t c) {
-                     return set.charts[c].positions;
-                   }));
+    writeHierarchy(dir / m.hierarchyFile, buildGeometryHierarchy(hierarchyParams(m), roots,
+                                                                 [&](uint32_t c) { return set.charts[c].positions; }));
     writeManifest(dir, m);
     meshScene_.reset();
     meshAtlas_ = std::make_unique<AtlasView>(openAtlas(dir));
@@ -176,8 +175,8 @@ TEST_F(CrackTest, AdaptedCutsOverRealSrtmTiles) {
       const uint64_t mixed = mix.mixed;
       crossChart += mix.crossChart;
       const CrackReport r = check(scene, cut, mixed > 0);
-      EXPECT_EQ(r.mismatches, 0u) << tile << " camera " << i << ": " << r.mismatches << " of "
-                                  << r.borderVertices << " border vertices";
+      EXPECT_EQ(r.mismatches, 0u) << tile << " camera " << i << ": " << r.mismatches << " of " << r.borderVertices
+                                  << " border vertices";
       EXPECT_GT(r.borderVertices, 0u);
     }
     EXPECT_GT(crossChart, 0u) << "no cut crossed a chart border";
@@ -255,8 +254,8 @@ TEST_F(CrackTest, CoherentAdapterCutsAlongAPathOverRealSrtm) {
       const Cut cut = which == 0 ? dq.update(v, ao) : qq.update(v, bo);
       ASSERT_EQ(countStitchViolations(h, cut), 0u) << "frame " << f << (which ? " quad" : " dual");
       const CrackReport r = check(scene, cut, f == 0);
-      EXPECT_EQ(r.mismatches, 0u) << "frame " << f << (which ? " quad" : " dual") << ": " << r.mismatches
-                                  << " of " << r.borderVertices;
+      EXPECT_EQ(r.mismatches, 0u) << "frame " << f << (which ? " quad" : " dual") << ": " << r.mismatches << " of "
+                                  << r.borderVertices;
       checked += r.borderVertices;
     }
   }
@@ -289,12 +288,12 @@ TEST_F(CrackTest, MeshAtlasCutsAcrossChartsOfEveryOrientation) {
   const std::vector<uint8_t> px = scene.renderer().readPixels();
   auto at = [&](int x, int y) { return px.data() + (size_t(y) * so.width + x) * 4; };
   auto isBackground = [&](const uint8_t* p) {
-    return std::abs(p[0] - int(so.background[0] * 255.f + 0.5f)) <= 2 && std::abs(p[2] - int(so.background[2] * 255.f + 0.5f)) <= 2;
+    return std::abs(p[0] - int(so.background[0] * 255.f + 0.5f)) <= 2 &&
+           std::abs(p[2] - int(so.background[2] * 255.f + 0.5f)) <= 2;
   };
   EXPECT_FALSE(isBackground(at(48, 36)));
   EXPECT_TRUE(isBackground(at(0, 0)));
 }
-
 
 // The sides quad layout on a real scan: the shipped bunny in 48 patches, its odd patches paired
 // by evenSides, so 4-sided patches are single charts beside patches of up to 10 sides split round

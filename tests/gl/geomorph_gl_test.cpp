@@ -80,7 +80,8 @@ class GeomorphTest : public test::GlContextTest<> {
                 continue;  // the crack check holds it to its neighbour's
               }
               if ((along & 1) == 0) {
-                ASSERT_EQ(verts[k][v], base[k][v]) << "node " << k << " open border vertex " << i << "," << j << " moved";
+                ASSERT_EQ(verts[k][v], base[k][v])
+                    << "node " << k << " open border vertex " << i << "," << j << " moved";
                 continue;
               }
               const size_t step = alongX ? 1 : n + 1;

@@ -58,9 +58,9 @@ TEST_F(PageArraysTest, AnAtlasOfMoreChartsThanATextureArrayHoldsIsDrawn) {
   o.tolerancePx = 0.5;
   const gl::FrameResult f = scene.renderFrame(overview(atlas), o);
   const test::CutMix mix = test::cutMix(atlas.hierarchy, f.cut);
-  std::cout << "  " << charts << " charts, " << scene.renderer().pageArrays() << " arrays; cut of " << f.cut.nodes.size()
-            << " nodes, " << mix.crossChartResDiff << " chart sides between resolutions, " << f.draw.drawCalls
-            << " multi-draws\n";
+  std::cout << "  " << charts << " charts, " << scene.renderer().pageArrays() << " arrays; cut of "
+            << f.cut.nodes.size() << " nodes, " << mix.crossChartResDiff << " chart sides between resolutions, "
+            << f.draw.drawCalls << " multi-draws\n";
   EXPECT_GT(mix.crossChartResDiff, 0u) << "the cut should stitch across charts";
   EXPECT_EQ(f.pagesMissing, 0u);
   EXPECT_GT(f.cut.nodes.size(), size_t(maxLayers)) << "the overview should draw roots from every array";

@@ -106,8 +106,8 @@ TEST_F(PlanetTest, CutsAreCrackFreeAcrossChartsTheAntimeridianAndThePoles) {
     test::CutMix mix;
     uint64_t seamSides = 0, poleNodes = 0, checked = 0;
     std::vector<uint32_t> levels(h.params.depth, 0);
-    const double views[][4] = {{180.0, 0.0, 2.0e6, 20.0},   {-179.0, 10.0, 4.0e5, 15.0}, {0.0, 88.0, 1.5e6, -10.0},
-                               {179.5, -87.0, 8.0e5, 5.0},  {60.0, 30.0, 2.0e7, 0.0},    {-90.0, 89.9, 3.0e5, -30.0}};
+    const double views[][4] = {{180.0, 0.0, 2.0e6, 20.0},  {-179.0, 10.0, 4.0e5, 15.0}, {0.0, 88.0, 1.5e6, -10.0},
+                               {179.5, -87.0, 8.0e5, 5.0}, {60.0, 30.0, 2.0e7, 0.0},    {-90.0, 89.9, 3.0e5, -30.0}};
     for (const auto& v : views) {
       const gl::FrameResult f = scene.renderFrame(cameraAbove(*a, v[0], v[1], v[2], v[3]), ao);
       ASSERT_FALSE(f.cut.nodes.empty());
@@ -212,7 +212,8 @@ Precision measurePrecision(gl::AtlasScene& scene, const AtlasView& a, const Came
     const std::vector<float> level = ChartFileReader(a.dir / c.file).readHeightsWindow(k, 0, 0, M >> k);
     for (uint32_t j = 1; j + 1 < side; ++j)
       for (uint32_t ii = 1; ii + 1 < side; ++ii) {
-        const int64_t gx = int64_t(c.gridX) * M + (int64_t(u0 + ii) << k), gy = int64_t(c.gridY) * M + (int64_t(v0 + j) << k);
+        const int64_t gx = int64_t(c.gridX) * M + (int64_t(u0 + ii) << k),
+                      gy = int64_t(c.gridY) * M + (int64_t(v0 + j) << k);
         const double hgt = level[size_t(v0 + j) * levelSide + (u0 + ii)];
         const glm::dvec3 exact = frame.position(gx, gy, hgt);
         const double dist = glm::length(exact - cam.eye);
@@ -232,10 +233,11 @@ Precision measurePrecision(gl::AtlasScene& scene, const AtlasView& a, const Came
         }
       }
   }
-  std::printf("%s: %llu vertices near, %llu in view, %.5f px from their exact projection (float32: %.3f px), "
-              "the nearest %.0f m away within %.2g m\n",
-              a.dir.filename().c_str(), (unsigned long long)r.near, (unsigned long long)r.inView, r.pixelWorst,
-              r.pixelControl, r.closest, r.closestError);
+  std::printf(
+      "%s: %llu vertices near, %llu in view, %.5f px from their exact projection (float32: %.3f px), "
+      "the nearest %.0f m away within %.2g m\n",
+      a.dir.filename().c_str(), (unsigned long long)r.near, (unsigned long long)r.inView, r.pixelWorst, r.pixelControl,
+      r.closest, r.closestError);
   return r;
 }
 
@@ -248,10 +250,12 @@ TEST_F(PlanetTest, PositionsNearTheEyeKeepMillimetresAMetreAboveTheSurface) {
     SCOPED_TRACE(a->dir.filename().string());
     gl::AtlasScene scene(*a, sceneOptions());
     for (const auto& [lon, lat] : {std::array<double, 2>{86.9, 28.0}, {-150.0, -20.0}, {179.9, 70.0}}) {
-      const Precision p = measurePrecision(scene, *a, cameraAbove(*a, lon, lat, surfaceHeight(*a, lon, lat) + 1.0, 0.5));
+      const Precision p =
+          measurePrecision(scene, *a, cameraAbove(*a, lon, lat, surfaceHeight(*a, lon, lat) + 1.0, 0.5));
       EXPECT_GT(p.near, 20u) << lon << ", " << lat;
       EXPECT_LT(p.worst, 1.0) << lon << ", " << lat;
-      EXPECT_LT(10.0 * p.closestError, p.control) << lon << ", " << lat << ": the nearest sample, " << p.closest << " m away";
+      EXPECT_LT(10.0 * p.closestError, p.control)
+          << lon << ", " << lat << ": the nearest sample, " << p.closest << " m away";
       EXPECT_GT(p.control, 0.05) << lon << ", " << lat;
     }
   }
@@ -308,8 +312,9 @@ TEST_F(PlanetTest, AMetreAboveTheGroundTheImageDoesNotJitter) {
         EXPECT_GT(p.inView, ahead > 0.001 ? 50u : 0u) << ahead;
         EXPECT_LT(p.closest, 10.0) << "no vertex near the eye";
         EXPECT_LT(p.pixelWorst, 0.5) << ahead;
-        EXPECT_GT(p.pixelControl, std::max(0.5, 100.0 * p.pixelWorst)) << ahead << ": float32 planet-centred positions "
-                                                                        "do not jitter here";
+        EXPECT_GT(p.pixelControl, std::max(0.5, 100.0 * p.pixelWorst)) << ahead
+                                                                       << ": float32 planet-centred positions "
+                                                                          "do not jitter here";
         if (ahead < 0.001) {
           EXPECT_GT(p.pixelControl, 10.0) << "a metre from the eye, float32 jitters by pixels";
         }

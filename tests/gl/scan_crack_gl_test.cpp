@@ -30,8 +30,8 @@ class ScanCrackTest : public test::GlContextTest<::testing::TestWithParam<std::s
 
 // A path spiralling in: frame i of `frames` circles the box centre at a distance going from
 // `far` to `near` times the diagonal (orbitPath's frame i at that distance).
-std::vector<Camera> spiralPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames, double far,
-                               double near, double elevationDeg) {
+std::vector<Camera> spiralPath(const glm::dvec3& lo, const glm::dvec3& hi, uint32_t frames, double far, double near,
+                               double elevationDeg) {
   std::vector<Camera> path;
   for (uint32_t i = 0; i < frames; ++i) {
     const double t = frames > 1 ? double(i) / (frames - 1) : 0.0;
@@ -74,7 +74,8 @@ TEST_P(ScanCrackTest, DualQueueCutsAlongAPathHaveNoCracks) {
   bool mixedSeams = false;
   for (const ChartInfo& c : atlas.manifest.charts)
     for (const RootNeighbour& r : c.neighbours)
-      mixedSeams = mixedSeams || (r.chart >= 0 && atlas.manifest.charts[uint32_t(r.chart)].finestLevel != c.finestLevel);
+      mixedSeams =
+          mixedSeams || (r.chart >= 0 && atlas.manifest.charts[uint32_t(r.chart)].finestLevel != c.finestLevel);
   uint64_t mixedSides = 0;
   std::vector<SideNeighbour> across;
   uint32_t maxLevel = 0, controls = 0;

@@ -20,9 +20,8 @@ namespace {
 
 class ShaderInterfaceGlTest : public test::GlContextTest<::testing::TestWithParam<bool>> {};
 // Uniforms AtlasRenderer sets on its program (setShading, bindAtlas, setPagePoolUnits).
-constexpr const char* kAtlasUniforms[] = {"u_viewProj", "u_eye",     "u_lightDir",  "u_background",
-                                          "u_fogDistance", "u_samples", "u_normals", "u_leafLog2",
-                                          "u_entriesPerSide", "u_overlay"};
+constexpr const char* kAtlasUniforms[] = {"u_viewProj", "u_eye",     "u_lightDir", "u_background",     "u_fogDistance",
+                                          "u_samples",  "u_normals", "u_leafLog2", "u_entriesPerSide", "u_overlay"};
 // Set through optionalUniform: used by terrain atlases only.
 constexpr const char* kTerrainUniforms[] = {"u_spacing", "u_validSamples", "u_heightRange"};
 

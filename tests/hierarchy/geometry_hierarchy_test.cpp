@@ -70,7 +70,8 @@ TEST(GeometryHierarchy, ErrorsAndBoundsMatchBruteForceOnACurvedChart) {
         const uint32_t size = 1u << (L - l);
         glm::vec3 lo(1e30f), hi(-1e30f);
         for (uint32_t v = y * size; v <= (y + 1) * size; ++v)
-          for (uint32_t u = x * size; u <= (x + 1) * size; ++u) lo = glm::min(lo, P[v * S + u]), hi = glm::max(hi, P[v * S + u]);
+          for (uint32_t u = x * size; u <= (x + 1) * size; ++u)
+            lo = glm::min(lo, P[v * S + u]), hi = glm::max(hi, P[v * S + u]);
         const auto& b = h.bounds(n);
         EXPECT_EQ(b[0], lo.x);
         EXPECT_EQ(b[2], lo.z);

@@ -16,8 +16,7 @@ namespace {
 
 // Independent brute force: max over the node's closed region of |h - surface at level k'|,
 // maximised over 1 <= k' <= k; the surface splits each cell along (0,0)-(1,1).
-float bruteError(const std::vector<float>& h, uint32_t S, uint32_t level, uint32_t x, uint32_t y,
-                 uint32_t k) {
+float bruteError(const std::vector<float>& h, uint32_t S, uint32_t level, uint32_t x, uint32_t y, uint32_t k) {
   const uint32_t M = S - 1, size = M >> level;
   float worst = 0.f;
   for (uint32_t kk = 1; kk <= k; ++kk) {
@@ -29,8 +28,8 @@ float bruteError(const std::vector<float>& h, uint32_t S, uint32_t level, uint32
         auto at = [&](uint32_t a, uint32_t b) { return double(h[size_t(b * s) * S + a * s]); };
         const double h00 = at(cu, cv), h10 = at(cu + 1, cv), h01 = at(cu, cv + 1), h11 = at(cu + 1, cv + 1);
         // Barycentric interpolation on the triangle containing (fx, fy).
-        const double z = fx >= fy ? h00 * (1 - fx) + h10 * (fx - fy) + h11 * fy
-                                  : h00 * (1 - fy) + h01 * (fy - fx) + h11 * fx;
+        const double z =
+            fx >= fy ? h00 * (1 - fx) + h10 * (fx - fy) + h11 * fy : h00 * (1 - fy) + h01 * (fy - fx) + h11 * fx;
         worst = std::max(worst, float(std::fabs(h[size_t(v) * S + u] - z)));
       }
   }
@@ -140,7 +139,8 @@ TEST(Hierarchy, FileRoundTripAndCorruption) {
       // Bitwise: unavailable resolutions hold NaN.
       ASSERT_EQ(back.charts[c].errors.size(), hier.charts[c].errors.size());
       EXPECT_EQ(std::memcmp(back.charts[c].errors.data(), hier.charts[c].errors.data(),
-                            hier.charts[c].errors.size() * sizeof(float)), 0);
+                            hier.charts[c].errors.size() * sizeof(float)),
+                0);
       EXPECT_EQ(back.charts[c].bounds, hier.charts[c].bounds);
       EXPECT_EQ(back.charts[c].flags, hier.charts[c].flags);
       for (uint32_t e = 0; e < 4; ++e) {
@@ -213,9 +213,7 @@ TEST(Hierarchy, InvariantsOnRealSrtmTile) {
   m.samplesX = dem.width;
   m.samplesY = dem.height;
   m.spacing = dem.spacing;
-  auto source = [&](uint32_t c) {
-    return extractChart(dem, m.charts[c].gridX, m.charts[c].gridY, m.chartSize);
-  };
+  auto source = [&](uint32_t c) { return extractChart(dem, m.charts[c].gridX, m.charts[c].gridY, m.chartSize); };
   const Hierarchy hier = buildTerrainHierarchy(m, source);
   checkInvariants(hier, m, source);
   // Brute-force spot check on the real data for a few nodes of the first chart.

@@ -112,8 +112,8 @@ void checkBounds(double radius, double flattening = 0.0) {
                 const glm::dvec3 h00 = corner(cx, cy), h10 = corner(cx + 1, cy), h01 = corner(cx, cy + 1),
                                  h11 = corner(cx + 1, cy + 1);
                 const double dx = fx, dy = fy;
-                const glm::dvec3 drawn = dx >= dy ? h00 + dx * (h10 - h00) + dy * (h11 - h10)
-                                                  : h00 + dy * (h01 - h00) + dx * (h11 - h01);
+                const glm::dvec3 drawn =
+                    dx >= dy ? h00 + dx * (h10 - h00) + dy * (h11 - h10) : h00 + dy * (h01 - h00) + dx * (h11 - h01);
                 worst = std::max(worst, glm::length(drawn - P(x * size + u, y * size + v)));
               }
             const double stored = h.error(n, r);

@@ -117,12 +117,14 @@ TEST_F(InspectReportTest, ScanReportHoldsTheBuildsFiguresAndItsImages) {
   ASSERT_EQ(streaming["views"].size(), 6u);
   for (const json& v : streaming["views"]) {
     EXPECT_GT(v["nodes"].get<uint64_t>(), 0u);
-    EXPECT_GE(v["page_bytes"].get<uint64_t>(), v["nodes"].get<uint64_t>() * streaming["pages"].back()["page_bytes"].get<uint64_t>());
+    EXPECT_GE(v["page_bytes"].get<uint64_t>(),
+              v["nodes"].get<uint64_t>() * streaming["pages"].back()["page_bytes"].get<uint64_t>());
     // Every node listed as raised is drawn finer than its error needs; no more are listed than counted.
     EXPECT_LE(v["raised"].size(), v["nodes_raised"].get<size_t>());
     for (const json& n : v["raised"]) EXPECT_GT(n["drawn_res"].get<uint32_t>(), n["needed_res"].get<uint32_t>());
   }
-  EXPECT_EQ(streaming["pyramid_levels"][0]["bytes"].get<uint64_t>(), st["charts"].get<uint64_t>() * 17 * 17 * streaming["bytes_per_sample"].get<uint64_t>());
+  EXPECT_EQ(streaming["pyramid_levels"][0]["bytes"].get<uint64_t>(),
+            st["charts"].get<uint64_t>() * 17 * 17 * streaming["bytes_per_sample"].get<uint64_t>());
   expectImagesMatchFiles(o.output);
   EXPECT_GT(r.bytes, 0u);
 }
@@ -138,7 +140,8 @@ TEST_F(InspectReportTest, SourceComparisonFindsTheBuildsFidelityAndWhereItLies) 
   const InspectResult r = writeInspectReport(o);
   const json st = stats("bunny.atlas");
   const json& src = r.figures["source"];
-  EXPECT_NEAR(src["hausdorff_percent_of_diagonal"].get<double>(), st["fidelity"]["hausdorff_percent_of_diagonal"].get<double>(),
+  EXPECT_NEAR(src["hausdorff_percent_of_diagonal"].get<double>(),
+              st["fidelity"]["hausdorff_percent_of_diagonal"].get<double>(),
               1e-9 * st["fidelity"]["hausdorff_percent_of_diagonal"].get<double>());
   EXPECT_NEAR(src["max_mesh_to_atlas"].get<double>(), st["fidelity"]["max_mesh_to_atlas"].get<double>(),
               1e-9 * st["fidelity"]["max_mesh_to_atlas"].get<double>());
@@ -150,7 +153,8 @@ TEST_F(InspectReportTest, SourceComparisonFindsTheBuildsFidelityAndWhereItLies) 
               1e-6 * src["max_mesh_to_atlas"].get<double>());
   EXPECT_LT(src["worst_input_samples"][0]["chart"].get<uint32_t>(), st["charts"].get<uint32_t>());
   for (size_t i = 1; i < src["worst_input_samples"].size(); ++i)
-    EXPECT_LE(src["worst_input_samples"][i]["distance"].get<double>(), src["worst_input_samples"][i - 1]["distance"].get<double>());
+    EXPECT_LE(src["worst_input_samples"][i]["distance"].get<double>(),
+              src["worst_input_samples"][i - 1]["distance"].get<double>());
   ASSERT_EQ(src["distance_maps"].size(), 6u);
   EXPECT_EQ(r.figures["summary"]["source_hausdorff_percent_of_diagonal"], src["hausdorff_percent_of_diagonal"]);
   expectImagesMatchFiles(o.output);
@@ -278,7 +282,7 @@ TEST_F(InspectReportTest, BadInputLeavesNoReport) {
   o.atlas = damaged;
   o.output = path("r4");
   for (const std::string& text : {std::string("{\"charts\": "), std::string("[1, 2]"),
-                                 std::string(R"({"resample": {"per_chart": [{"flipped_texels": "many"}]}})")}) {
+                                  std::string(R"({"resample": {"per_chart": [{"flipped_texels": "many"}]}})")}) {
     std::ofstream(damaged / "stats.json", std::ios::trunc) << text;
     try {
       writeInspectReport(o);
@@ -311,8 +315,10 @@ TEST_F(InspectReportTest, OpensInHeadlessChromium) {
   const std::string url = "file://" + fs::absolute(o.output / "index.html").string();
   // The browser is not built with the sanitizers: it gets none of their preloads.
   chromium = "env -u LD_PRELOAD " + chromium;
-  const std::string flags = " --headless --no-sandbox --disable-gpu --hide-scrollbars --virtual-time-budget=5000 "
-                            "--user-data-dir=" + (dir_->path() / "chromium-profile").string();
+  const std::string flags =
+      " --headless --no-sandbox --disable-gpu --hide-scrollbars --virtual-time-budget=5000 "
+      "--user-data-dir=" +
+      (dir_->path() / "chromium-profile").string();
   std::string dom;
   ASSERT_EQ(test::runCommand(chromium + flags + " --dump-dom '" + url + "' 2>/dev/null", &dom), 0) << dom;
   std::smatch m;
@@ -328,10 +334,10 @@ TEST_F(InspectReportTest, OpensInHeadlessChromium) {
 
   const fs::path shot = dir_->path() / "shot.png";
   std::string out;
-  ASSERT_EQ(test::runCommand(chromium + flags + " --window-size=1000,800 --screenshot=" + shot.string() + " '" + url +
-                                 "' 2>&1",
-                             &out),
-            0)
+  ASSERT_EQ(
+      test::runCommand(
+          chromium + flags + " --window-size=1000,800 --screenshot=" + shot.string() + " '" + url + "' 2>&1", &out),
+      0)
       << out;
   auto in = OIIO::ImageInput::open(shot.string());
   ASSERT_TRUE(in) << shot;

@@ -48,8 +48,10 @@ class SeamsTest : public ::testing::Test {
       }
     }
     const uint32_t at = edgeSampleIndex(m.chartSize, edge, k);
-    if (m.kind == AtlasKind::Geometry) p.positions[0][at].z += 1.0f;
-    else p.heights[0][at] += 1.0f;
+    if (m.kind == AtlasKind::Geometry)
+      p.positions[0][at].z += 1.0f;
+    else
+      p.heights[0][at] += 1.0f;
     writeChartFile(file, p, m.chartSize, m.blockIntervals);
     return c;
   }
@@ -73,7 +75,8 @@ TEST_F(SeamsTest, ShippedScanAndDemAreSeamlessAtEveryLevel) {
     }
     // Every shared edge pair is compared once per level, sample by sample.
     uint64_t expected = 0;
-    for (uint32_t level = 0; level < m.pyramidLevels(); ++level) expected += r.sharedEdges * (((m.chartSize - 1) >> level) + 1);
+    for (uint32_t level = 0; level < m.pyramidLevels(); ++level)
+      expected += r.sharedEdges * (((m.chartSize - 1) >> level) + 1);
     EXPECT_EQ(compared, expected);
     EXPECT_TRUE(r.seamless());
     EXPECT_TRUE(r.offenders.empty());

@@ -59,13 +59,13 @@ TEST(DualQueue, NoMoreTrianglesThanFixedGranularityOnRainier) {
     dq += st.triangles, fixed += fs.triangles, greedy += gs.triangles;
     bound += st.nodeBudgetBound, fixedBound += fs.nodeBudgetBound, greedyBound += gs.nodeBudgetBound;
     err = std::max(err, st.maxErrorPx), ferr = std::max(ferr, fs.maxErrorPx), gerr = std::max(gerr, gs.maxErrorPx);
-
   }
-  std::printf("rainier orbit, 24 frames, 1 px, 400 nodes: triangles/frame (budget-bound frames, max "
-              "error px): dual-queue %llu (%d, %.2f), top-down greedy %llu (%d, %.2f), fixed "
-              "granularity %llu (%d, %.2f)\n",
-              (unsigned long long)(dq / 24), bound, err, (unsigned long long)(greedy / 24), greedyBound,
-              gerr, (unsigned long long)(fixed / 24), fixedBound, ferr);
+  std::printf(
+      "rainier orbit, 24 frames, 1 px, 400 nodes: triangles/frame (budget-bound frames, max "
+      "error px): dual-queue %llu (%d, %.2f), top-down greedy %llu (%d, %.2f), fixed "
+      "granularity %llu (%d, %.2f)\n",
+      (unsigned long long)(dq / 24), bound, err, (unsigned long long)(greedy / 24), greedyBound, gerr,
+      (unsigned long long)(fixed / 24), fixedBound, ferr);
 }
 
 TEST(QuadQueue, RainierOrbitNoWorseThanFixedGranularity) {
@@ -97,11 +97,12 @@ TEST(QuadQueue, RainierOrbitNoWorseThanFixedGranularity) {
       qSum += st.maxErrorPx, fSum += fs.maxErrorPx, gSum += gs.maxErrorPx;
     }
     const double n = double(path.size());
-    std::printf("rainier orbit, %zu frames, %llu triangles, %u nodes: max error px over path (mean of "
-                "per-frame max): quad-queue %.3f (%.3f), fixed %.3f (%.3f), greedy %.3f (%.3f); quad-queue "
-                "worse than fixed in %d frames; quad-queue %.0f us/frame (coherent)\n",
-                path.size(), (unsigned long long)o.maxTriangles, nodes, qMax, qSum / n, fMax, fSum / n, gMax,
-                gSum / n, worseFrames, us / n);
+    std::printf(
+        "rainier orbit, %zu frames, %llu triangles, %u nodes: max error px over path (mean of "
+        "per-frame max): quad-queue %.3f (%.3f), fixed %.3f (%.3f), greedy %.3f (%.3f); quad-queue "
+        "worse than fixed in %d frames; quad-queue %.0f us/frame (coherent)\n",
+        path.size(), (unsigned long long)o.maxTriangles, nodes, qMax, qSum / n, fMax, fSum / n, gMax, gSum / n,
+        worseFrames, us / n);
     // The paper's claim: decoupling resolution from node size lowers the error at equal budgets.
     EXPECT_LE(qMax, fMax);
   }
@@ -116,7 +117,8 @@ TEST(QuadQueue, RainierOrbitNoWorseThanFixedGranularity) {
 // a worse node at maxResLog2. On the bench path the error must stay at or below the baseline's in every
 // frame, and an error above zero must come with the triangle budget in use.
 TEST(QuadQueue, RainierBenchPathSmallNodeBudgetNoWorseThanFixedPerFrame) {
-  const test::DemWorld world = test::loadDemWorld(test::repoData() / "terrain/mt_rainier_90m.tif", 513);  // as `gimlod build` defaults
+  const test::DemWorld world =
+      test::loadDemWorld(test::repoData() / "terrain/mt_rainier_90m.tif", 513);  // as `gimlod build` defaults
   const Hierarchy& h = world.h;
   const glm::dvec3 lo = world.lo, hi = world.hi;
   std::vector<Camera> path = readCameraPath(test::repoData().parent_path() / "scenes/rainier_bench.json");
@@ -137,8 +139,8 @@ TEST(QuadQueue, RainierBenchPathSmallNodeBudgetNoWorseThanFixedPerFrame) {
       const Cut fixed = adaptFixedGranularityBudget(h, v, o, &fs);
       expectWithinBudget(h, fixed, o, fs);
       EXPECT_LE(st.maxErrorPx, fs.maxErrorPx + 1e-9)
-          << "frame " << f << ", " << triangles << " triangles: quad-queue " << st.nodes << " nodes "
-          << st.triangles << " triangles, fixed " << fs.nodes << " nodes " << fs.triangles << " triangles";
+          << "frame " << f << ", " << triangles << " triangles: quad-queue " << st.nodes << " nodes " << st.triangles
+          << " triangles, fixed " << fs.nodes << " nodes " << fs.triangles << " triangles";
       // Error left: within 25% of the triangle budget (one refinement step quadruples a node's).
       if (st.maxErrorPx > 0.0) {
         EXPECT_GE(4 * st.triangles, 3 * o.maxTriangles)
@@ -148,9 +150,10 @@ TEST(QuadQueue, RainierBenchPathSmallNodeBudgetNoWorseThanFixedPerFrame) {
       unused += st.maxErrorPx > 0.0 && 4 * st.triangles < 3 * o.maxTriangles;
       qMax = std::max(qMax, st.maxErrorPx), fMax = std::max(fMax, fs.maxErrorPx);
     }
-    std::printf("rainier bench path, 100 nodes, %llu triangles: max error px quad-queue %.3f, fixed %.3f; "
-                "quad-queue worse in %d frames, budget unused with error left in %d frames\n",
-                (unsigned long long)triangles, qMax, fMax, worse, unused);
+    std::printf(
+        "rainier bench path, 100 nodes, %llu triangles: max error px quad-queue %.3f, fixed %.3f; "
+        "quad-queue worse in %d frames, budget unused with error left in %d frames\n",
+        (unsigned long long)triangles, qMax, fMax, worse, unused);
   }
 }
 
@@ -193,9 +196,10 @@ TEST(QuadQueue, HundredNodesHoldOnALargerDemAtTheBuildsPlan) {
     most = std::max(most, cut.nodes.size()), mostFixed = std::max(mostFixed, fixed.nodes.size());
     floor = std::max(floor, st.rootFloor);
   }
-  std::printf("rainier x4 (%u x %u charts of %u, depth %u), orbit and bench path, 100 nodes, 400k triangles: most "
-              "nodes drawn quad-queue %zu, fixed %zu; most visible roots %u\n",
-              plan.chartsX, plan.chartsY, plan.chartSize, plan.depth, most, mostFixed, floor);
+  std::printf(
+      "rainier x4 (%u x %u charts of %u, depth %u), orbit and bench path, 100 nodes, 400k triangles: most "
+      "nodes drawn quad-queue %zu, fixed %zu; most visible roots %u\n",
+      plan.chartsX, plan.chartsY, plan.chartSize, plan.depth, most, mostFixed, floor);
 }
 
 }  // namespace

@@ -174,8 +174,7 @@ class RootFloorScan : public ::testing::Test {
   }
   // The shipped orbit path, then a closer orbit whose views cut part of the scan away.
   static std::vector<ViewParams> path() {
-    std::vector<Camera> cams =
-        readCameraPath(test::repoData().parent_path() / "scenes/bunny_orbit.json");
+    std::vector<Camera> cams = readCameraPath(test::repoData().parent_path() / "scenes/bunny_orbit.json");
     for (Camera& c : cams) fitClipPlanes(c, atlas_->lo, atlas_->hi);
     for (const Camera& c : orbitPath(atlas_->lo, atlas_->hi, 16, 0.3, 20.0, 45.0)) cams.push_back(c);
     std::vector<ViewParams> views;
@@ -256,7 +255,8 @@ TEST_F(RootFloorScan, NoAdapterDrawsMoreThanTheBudgetAboveTheFloor) {
   Hierarchy forest = atlas_->hierarchy;
   forest.groups = {};
   uint32_t below = 0;
-  EXPECT_GT(checkBudgetsAlongPath("bunny", forest, path(), &below), 0u) << "the largest budget is above the visible roots";
+  EXPECT_GT(checkBudgetsAlongPath("bunny", forest, path(), &below), 0u)
+      << "the largest budget is above the visible roots";
   EXPECT_GT(below, 0u) << "more visible chart roots than the smallest budget";
   // The roots in groups (as openAtlas opens it): every budget holds in every frame.
   ASSERT_FALSE(atlas_->hierarchy.groups.empty());
@@ -275,8 +275,10 @@ TEST_P(RootFloorSharedScan, NoAdapterDrawsMoreThanTheBudgetAboveTheFloor) {
   const test::BuiltScanAtlas& built = test::scanAtlas(name, true);
   const AtlasView atlas = openAtlas(built.dir);
   std::vector<ViewParams> views;
-  for (const Camera& c : orbitPath(atlas.lo, atlas.hi, 8, 0.9, 30.0, 45.0)) views.push_back(makeViewParams(c, 640, 480));
-  for (const Camera& c : orbitPath(atlas.lo, atlas.hi, 16, 0.2, 20.0, 45.0)) views.push_back(makeViewParams(c, 640, 480));
+  for (const Camera& c : orbitPath(atlas.lo, atlas.hi, 8, 0.9, 30.0, 45.0))
+    views.push_back(makeViewParams(c, 640, 480));
+  for (const Camera& c : orbitPath(atlas.lo, atlas.hi, 16, 0.2, 20.0, 45.0))
+    views.push_back(makeViewParams(c, 640, 480));
   Hierarchy forest = atlas.hierarchy;
   forest.groups = {};
   checkBudgetsAlongPath(name, forest, views);

@@ -117,8 +117,7 @@ TEST(ChartingScale, MeshBuildReportsEveryStage) {
     largest = std::max(largest, s.at("peak_rss_bytes").get<uint64_t>());
   }
   EXPECT_LE(stageSeconds, stats.at("total_seconds").get<double>());
-  for (const char* want : {"read", "charting", "validate", "resample", "write"})
-    EXPECT_TRUE(names.count(want)) << want;
+  for (const char* want : {"read", "charting", "validate", "resample", "write"}) EXPECT_TRUE(names.count(want)) << want;
   EXPECT_GE(stats.at("peak_rss_bytes").get<uint64_t>(), largest);  // VmHWM: the process peak
 }
 

@@ -197,7 +197,8 @@ TEST(CompressedAtlas, FloatHeightsStayWithinHalfThePrecision) {
       for (uint32_t u = 0; u < m.chartSize; ++u) {
         const int64_t gx = std::min<int64_t>(c.gridX * 256 + u, fl.width - 1);
         const int64_t gy = std::min<int64_t>(c.gridY * 256 + v, fl.height - 1);
-        worst = std::max(worst, std::abs(double(h[size_t(v) * m.chartSize + u]) - fl.heights[size_t(gy) * fl.width + gx]));
+        worst =
+            std::max(worst, std::abs(double(h[size_t(v) * m.chartSize + u]) - fl.heights[size_t(gy) * fl.width + gx]));
       }
   }
   EXPECT_GT(worst, 0.0);
@@ -233,7 +234,8 @@ TEST(CompressedAtlas, Version1AtlasesStillOpen) {
         }
   EXPECT_GT(pages, 25u);
   EXPECT_LE(worst, 0.5);
-  EXPECT_LT(fs::file_size(tmp.path() / "v2/charts/chart_0000.bin") * 5, fs::file_size(tmp.path() / "v1/charts/chart_0000.bin"));
+  EXPECT_LT(fs::file_size(tmp.path() / "v2/charts/chart_0000.bin") * 5,
+            fs::file_size(tmp.path() / "v1/charts/chart_0000.bin"));
 }
 
 // The shipped bunny, compressed and not: the same layout; on every chart border the positions
@@ -323,10 +325,11 @@ uint64_t checkCodedBunny(double positionTolerance, uint32_t normalTolerance, con
       ++sides;
     }
   EXPECT_GT(sides, m2.charts.size());
-  std::printf("  bunny chart files, tolerances %g of the diagonal and %u packed steps: %llu bytes raw, %llu "
-              "compressed (%.1fx smaller), lattice step %.3g\n",
-              positionTolerance, normalTolerance, (unsigned long long)raw, (unsigned long long)coded,
-              double(raw) / double(coded), step);
+  std::printf(
+      "  bunny chart files, tolerances %g of the diagonal and %u packed steps: %llu bytes raw, %llu "
+      "compressed (%.1fx smaller), lattice step %.3g\n",
+      positionTolerance, normalTolerance, (unsigned long long)raw, (unsigned long long)coded,
+      double(raw) / double(coded), step);
   EXPECT_LT(coded * 2, raw);
   return coded;
 }
@@ -357,10 +360,11 @@ TEST(CompressedAtlas, SparseMeshAtlasesDeriveTheirNormals) {
   EXPECT_FALSE(stored.write.normalsDerived);
   EXPECT_LE(derived.write.samplesPerTriangle, kDerivedNormalsSamplesPerTriangle);
   const NormalAngles& a = derived.write.normalAngles;
-  std::printf("  bunny at 65^2, %.1f samples per triangle: derived normals %.2f degrees from the resampled ones at "
-              "the median, %.2f at the 99th percentile; atlas %llu bytes against %llu with stored normals\n",
-              derived.write.samplesPerTriangle, a.median, a.p99, (unsigned long long)derived.bytesOnDisk,
-              (unsigned long long)stored.bytesOnDisk);
+  std::printf(
+      "  bunny at 65^2, %.1f samples per triangle: derived normals %.2f degrees from the resampled ones at "
+      "the median, %.2f at the 99th percentile; atlas %llu bytes against %llu with stored normals\n",
+      derived.write.samplesPerTriangle, a.median, a.p99, (unsigned long long)derived.bytesOnDisk,
+      (unsigned long long)stored.bytesOnDisk);
   EXPECT_GT(a.samples, 100000u);
   EXPECT_LT(a.median, 5.0);
   EXPECT_LT(a.p99, 30.0);
@@ -371,7 +375,8 @@ TEST(CompressedAtlas, SparseMeshAtlasesDeriveTheirNormals) {
   // Seams: the normals on both sides of every shared chart side, bit for bit, at every level.
   const AtlasManifest m = readManifest(tmp.path() / "auto");
   std::vector<std::unique_ptr<ChartFileReader>> readers;
-  for (const ChartInfo& c : m.charts) readers.push_back(std::make_unique<ChartFileReader>(tmp.path() / "auto" / c.file));
+  for (const ChartInfo& c : m.charts)
+    readers.push_back(std::make_unique<ChartFileReader>(tmp.path() / "auto" / c.file));
   ASSERT_TRUE(readers.front()->derivedNormals());
   size_t checked = 0;
   for (uint32_t k = 0; k < readers.front()->levels(); ++k) {
@@ -395,7 +400,8 @@ TEST(CompressedAtlas, SparseMeshAtlasesDeriveTheirNormals) {
   const MeshBuildStats dense = buildMeshAtlas(o);
   EXPECT_GT(dense.write.samplesPerTriangle, kDerivedNormalsSamplesPerTriangle);
   EXPECT_FALSE(dense.write.normalsDerived);
-  EXPECT_FALSE(ChartFileReader(tmp.path() / "dense" / readManifest(tmp.path() / "dense").charts[0].file).derivedNormals());
+  EXPECT_FALSE(
+      ChartFileReader(tmp.path() / "dense" / readManifest(tmp.path() / "dense").charts[0].file).derivedNormals());
 }
 
 TEST(CompressedAtlas, PositionLatticeIsNoFinerThanTheCoordinates) {

@@ -29,12 +29,14 @@ class InputKindTest : public ::testing::Test {
   test::TempDir dir_{"gimlod-input-kind"};
 };
 
-const std::string kPly = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-                         "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
-                         "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+const std::string kPly =
+    "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+    "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+    "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
 const std::string kOff = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
-const std::string kAsciiStl = "solid t\n  facet normal 0 0 1\n    outer loop\n      vertex 0 0 0\n"
-                              "      vertex 1 0 0\n      vertex 0 1 0\n    endloop\n  endfacet\nendsolid t\n";
+const std::string kAsciiStl =
+    "solid t\n  facet normal 0 0 1\n    outer loop\n      vertex 0 0 0\n"
+    "      vertex 1 0 0\n      vertex 0 1 0\n    endloop\n  endfacet\nendsolid t\n";
 const std::string kObj = "# a triangle\no t\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
 
 TEST_F(InputKindTest, ByContentWithTheRightExtension) {

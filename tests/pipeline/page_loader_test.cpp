@@ -46,8 +46,7 @@ class PageLoaderTest : public ::testing::Test {
     const size_t s = pages_->pageSamples({0, level, 0, 0});
     return s * s * (sizeof(float) + sizeof(PackedNormal));
   }
-  static void expectPageEquals(const NodeId& n, const std::vector<float>& h,
-                               const std::vector<PackedNormal>& nr) {
+  static void expectPageEquals(const NodeId& n, const std::vector<float>& h, const std::vector<PackedNormal>& nr) {
     std::vector<float> eh;
     std::vector<PackedNormal> en;
     pages_->read(n, eh, en);
@@ -157,7 +156,7 @@ TEST_F(PageLoaderTest, RamBudgetEvictsLeastRecentlyUsed) {
   load(x);
   load(y);
   EXPECT_TRUE(loader.tryGetResident(x, h, nr));  // x is now more recent than y
-  load(z);                                        // evicts y
+  load(z);                                       // evicts y
   EXPECT_TRUE(loader.tryGetResident(x, h, nr));
   EXPECT_FALSE(loader.tryGetResident(y, h, nr));
   EXPECT_TRUE(loader.tryGetResident(z, h, nr));

@@ -108,9 +108,8 @@ TEST_P(ScanAtlasTest, FlippedTexels) {
   ASSERT_TRUE(r.is_object());
   const uint64_t flipped = r["flipped_texels"].get<uint64_t>();
   const uint64_t samples = built->stats["samples"].get<uint64_t>();
-  std::cout << "  " << name << ": " << flipped << " flipped texels of " << samples << " samples, "
-            << r["param_flipped"] << " flipped parameterization triangles, " << r["degenerate_texels"]
-            << " degenerate texels\n";
+  std::cout << "  " << name << ": " << flipped << " flipped texels of " << samples << " samples, " << r["param_flipped"]
+            << " flipped parameterization triangles, " << r["degenerate_texels"] << " degenerate texels\n";
   EXPECT_EQ(r["param_flipped"].get<uint64_t>(), 0u);
   EXPECT_EQ(flipped, 0u) << name << ": " << flipped << " flipped texels";
 }
@@ -136,9 +135,9 @@ TEST_P(ScanAtlasTest, TensOfChartsWithinTheBounds) {
   const double samplesPerTriangle = double(st["samples"].get<uint64_t>()) / double(triangles);
   const double hausdorff = st["fidelity"]["hausdorff_percent_of_diagonal"].get<double>();
   std::cout << "  " << name << ": " << charts << " charts of " << st["chart_size"] << "^2 from "
-            << st["charting"]["patches"] << " patches (" << r["patches"] << " after the repair), "
-            << samplesPerTriangle << " samples per triangle, sampling error " << error << " (bound " << bound
-            << "), Hausdorff " << hausdorff << "%\n";
+            << st["charting"]["patches"] << " patches (" << r["patches"] << " after the repair), " << samplesPerTriangle
+            << " samples per triangle, sampling error " << error << " (bound " << bound << "), Hausdorff " << hausdorff
+            << "%\n";
   // Tens of developable patches to start from (the paper's 1M triangle scan: 30), not hundreds.
   const uint32_t patches = st["charting"]["charts_before_fixing"].get<uint32_t>();
   EXPECT_GE(patches, 16u);
@@ -188,15 +187,16 @@ TEST(ScanAtlas, TheShippedBunnyFollowsItsDensity) {
   const std::vector<uint32_t> bySize = r["patches_by_size"].get<std::vector<uint32_t>>();
   ASSERT_FALSE(bySize.empty());
   EXPECT_GT(2 * bySize[0], r["patches"].get<uint32_t>());
-  EXPECT_EQ(st["chart_size"].get<uint32_t>(), ((r["chart_size_for_density"].get<uint32_t>() - 1) << (bySize.size() - 1)) + 1);
+  EXPECT_EQ(st["chart_size"].get<uint32_t>(),
+            ((r["chart_size_for_density"].get<uint32_t>() - 1) << (bySize.size() - 1)) + 1);
   // The hierarchy follows the largest chart size: leaves 32 intervals wide.
   EXPECT_EQ(st["hierarchy_depth"].get<uint32_t>(), meshDepth(kAutoDepth, log2u(st["chart_size"].get<uint32_t>() - 1)));
 }
 
 // A former default layout stays reachable: 48 planar patches in the sides layout (--charts 48
-// --chart-metric planar --quads sides) give 150 and 151 quad charts on igea and the turbine blade, every chart within the
-// sampling-error bound, with no flipped texel. (On the bunny, with its holes, 48 planar patches
-// leave 2 flipped texels since the chart size no longer doubles for a tenth of the surface.)
+// --chart-metric planar --quads sides) give 150 and 151 quad charts on igea and the turbine blade, every chart within
+// the sampling-error bound, with no flipped texel. (On the bunny, with its holes, 48 planar patches leave 2 flipped
+// texels since the chart size no longer doubles for a tenth of the surface.)
 class PlanarScanTest : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(PlanarScanTest, FortyEightPlanarPatchesWithinTheSamplingBound) {
@@ -211,13 +211,14 @@ TEST_P(PlanarScanTest, FortyEightPlanarPatchesWithinTheSamplingBound) {
   o.quads = MeshQuads::kSides;
   o.measureFidelity = false;
   nlohmann::json st;
-  ASSERT_NO_THROW(st = buildAtlas(o)) << "gimlod build " << o.input << " --charts 48 --chart-metric planar --quads sides";
+  ASSERT_NO_THROW(st = buildAtlas(o)) << "gimlod build " << o.input
+                                      << " --charts 48 --chart-metric planar --quads sides";
   const nlohmann::json& r = st["resample"];
   const uint32_t charts = st["charts"].get<uint32_t>();
   const double bound = r["max_sample_error"].get<double>(), error = r["sample_error"].get<double>();
   std::cout << "  " << name << ": " << charts << " charts of " << st["chart_size"] << "^2 from " << r["patches"]
-            << " patches, " << r["flipped_texels"] << " flipped texels, sampling error " << error << " (bound "
-            << bound << ")\n";
+            << " patches, " << r["flipped_texels"] << " flipped texels, sampling error " << error << " (bound " << bound
+            << ")\n";
   EXPECT_EQ(st["charting"]["metric"].get<std::string>(), "planar");
   EXPECT_GE(charts, 125u);
   EXPECT_LE(charts, 200u);

@@ -55,7 +55,8 @@ TEST(TerrainPlan, TensOfTreesFromOneMillionToTwentyBillionSamples) {
   const TerrainPlan puget = planTerrain("dem.tif", 16385, 16385, o);
   EXPECT_EQ(puget.chartSize, 2049u);
   EXPECT_EQ(puget.chartsX * puget.chartsY, 64u);
-  const TerrainPlan america = planTerrain("dem.tif", 172800, 32000, o), earth = planTerrain("dem.tif", 207360, 103680, o);
+  const TerrainPlan america = planTerrain("dem.tif", 172800, 32000, o),
+                    earth = planTerrain("dem.tif", 207360, 103680, o);
   EXPECT_EQ(america.chartSize, 16385u);
   EXPECT_EQ(america.chartsX * america.chartsY, 11u * 2u);
   EXPECT_EQ(earth.chartSize, 32769u);

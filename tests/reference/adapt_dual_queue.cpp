@@ -340,8 +340,8 @@ const Cut& DualQueueAdapter::update(const ViewParams& view, const AdaptOptions& 
     evaluate(e);
     drawn_ += uint32_t(e.drawn);
   }
-  if (options.tolerancePx != epochTol_ || view.pixelsPerRadian != epochPpr_ ||
-      view.minDistance != epochMinDist_ || options.frustumCull != epochCull_) {
+  if (options.tolerancePx != epochTol_ || view.pixelsPerRadian != epochPpr_ || view.minDistance != epochMinDist_ ||
+      options.frustumCull != epochCull_) {
     ++epoch_;
     epochTol_ = options.tolerancePx;
     epochPpr_ = view.pixelsPerRadian;

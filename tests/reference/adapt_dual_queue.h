@@ -58,10 +58,10 @@ class DualQueueAdapter {
   // One partition node. Lives in entries_; slot_[g] is its position (swap-removed).
   struct Entry {
     NodeId id;
-    uint32_t g = 0;            // dense forest index (see globalIndex)
+    uint32_t g = 0;  // dense forest index (see globalIndex)
     uint8_t resLog2 = 0;
     bool drawn = false;
-    bool inside = false;       // bounds entirely inside the frustum (so are the children's)
+    bool inside = false;  // bounds entirely inside the frustum (so are the children's)
     bool overTol = false;
     double errorPx = 0.0;      // screen error at res (drawn nodes)
     uint32_t splitFrame = 0;   // frame in which a split created this node
@@ -84,8 +84,8 @@ class DualQueueAdapter {
   };
   struct Item {
     double priority;
-    uint32_t g;    // split: the node; merge: the parent
-    bool overTol;  // merge items: the parent cannot meet tolerance
+    uint32_t g;     // split: the node; merge: the parent
+    bool overTol;   // merge items: the parent cannot meet tolerance
     int32_t nodes;  // split: drawn-node change of the split; merge: drawn nodes it frees
   };
   struct Less {
@@ -127,14 +127,14 @@ class DualQueueAdapter {
   bool reuse_;
   uint32_t perChart_;
   uint32_t frameNo_ = 0;
-  std::vector<NodeId> local_;    // chart-local node of each level-order index
-  std::vector<int32_t> slot_;    // per forest node: position in entries_, or -1
-  std::vector<Entry> entries_;   // the persistent cut (a partition of the non-empty area)
+  std::vector<NodeId> local_;   // chart-local node of each level-order index
+  std::vector<int32_t> slot_;   // per forest node: position in entries_, or -1
+  std::vector<Entry> entries_;  // the persistent cut (a partition of the non-empty area)
   std::vector<Item> splitHeap_, mergeHeap_;
   // Per-frame context.
   ViewParams view_;
   AdaptOptions opt_;
-  uint32_t epoch_ = 0;           // bumped when the tolerance, projection or culling changes
+  uint32_t epoch_ = 0;  // bumped when the tolerance, projection or culling changes
   double epochTol_ = -1.0, epochPpr_ = -1.0, epochMinDist_ = -1.0;
   bool epochCull_ = true;
   uint32_t drawn_ = 0;

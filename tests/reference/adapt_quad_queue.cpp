@@ -34,8 +34,8 @@ struct Entry {
   uint32_t floor = 0;  // lowest allowed resolution: minRes, or the stitching gap
   uint32_t gap = 0;    // stitching level gap to the finest drawn neighbour (computeFloors)
   bool drawn = false;
-  double err = 0.0;    // screen error at res; 0 when not drawn
-  double dist = 1.0;   // eye distance to the bounds this frame (as screenError clamps it)
+  double err = 0.0;   // screen error at res; 0 when not drawn
+  double dist = 1.0;  // eye distance to the bounds this frame (as screenError clamps it)
   uint32_t splitRound = 0, mergedRound = 0;
 };
 
@@ -164,9 +164,7 @@ struct QuadQueueAdapter::State {
     return true;
   }
   // screenError(h, e.id, r, view) with the distance evaluated once per frame.
-  double errAt(const Entry& e, uint32_t r) const {
-    return double(h->error(e.id, r)) * view.pixelsPerRadian / e.dist;
-  }
+  double errAt(const Entry& e, uint32_t r) const { return double(h->error(e.id, r)) * view.pixelsPerRadian / e.dist; }
   // Resolution a node needs to hold `tolPx`, clamped to its maxResLog2.
   uint32_t resFor(const NodeId& n, double tolPx) const {
     return std::min(neededResolution(*h, n, view, tolPx), maxResLog2(n));
@@ -606,8 +604,7 @@ struct QuadQueueAdapter::State {
       if (!s) break;
       const Item it = heapPop(splitH);
       const int64_t d = drawnDelta(s->id);
-      if (int64_t(drawn) + d > nodeBudget_ ||
-          int64_t(floorTrisNow()) + d * int64_t(tris(minResLog2())) > triBudget)
+      if (int64_t(drawn) + d > nodeBudget_ || int64_t(floorTrisNow()) + d * int64_t(tris(minResLog2())) > triBudget)
         continue;
       (void)it;
       doSplit(s->id, r, &splitH);

@@ -162,9 +162,8 @@ TEST(AttributeResolution, FromProjectedDiagonalAndRatio) {
     for (double ratio : {0.5, 1.0, 2.0}) {
       v.eye = glm::dvec3(centre.x, centre.y, hi.z + dist);  // straight above: distance = dist
       const double texels = diag * v.pixelsPerRadian / dist * ratio;
-      const uint32_t expect =
-          std::clamp(uint32_t(std::ceil(std::log2(std::max(texels, 4.0)))), w.h.params.minNodeResLog2,
-                     w.h.params.intervalsLog2 - n.level);
+      const uint32_t expect = std::clamp(uint32_t(std::ceil(std::log2(std::max(texels, 4.0)))),
+                                         w.h.params.minNodeResLog2, w.h.params.intervalsLog2 - n.level);
       EXPECT_EQ(attributeResolution(w.h, n, v, ratio), expect) << dist << " " << ratio;
     }
   // Inside the bounds: the finest data the pyramid has for the node.

@@ -13,17 +13,13 @@
 namespace gimlod {
 namespace {
 
+using test::converge;
 using test::expectPartition;
 using test::makeWorld;
 using test::sortedNodes;
 using test::viewAt;
-using test::World;
-using test::converge;
 using test::withinToleranceOrFinest;
-
-
-
-
+using test::World;
 
 TEST(DualQueue, ErrorModeWithinToleranceAndPartitionAcrossRandomViews) {
   const World w = makeWorld(65, 3, 2, 4);
@@ -177,8 +173,8 @@ TEST(DualQueue, PathAndBackReturnsToTheFreshCut) {
     // saves triangles, no merge is free), and split savings are not monotone down the tree, so
     // the history decides which optimum. Both must be valid optima of the same quality class:
     // within tolerance (error mode) or within the budget, and close in triangles.
-    std::printf("path and back, budget %u: %llu triangles, max %.3f px, %zu nodes; fresh %llu, %.3f px, %zu\n",
-                budget, (unsigned long long)back.triangles(), backStats.maxErrorPx, back.nodes.size(),
+    std::printf("path and back, budget %u: %llu triangles, max %.3f px, %zu nodes; fresh %llu, %.3f px, %zu\n", budget,
+                (unsigned long long)back.triangles(), backStats.maxErrorPx, back.nodes.size(),
                 (unsigned long long)start.triangles(), fs.maxErrorPx, start.nodes.size());
     if (budget == 0) {
       EXPECT_FALSE(backStats.nodeBudgetBound);
@@ -228,11 +224,11 @@ Hierarchy handMade() {
     float* e = &c.errors[nodeIndex(id.level, id.x, id.y) * 3];
     e[0] = e2, e[1] = e3, e[2] = e4;
   };
-  set({0, 0, 0, 0}, 8, 4, 2);    // over tolerance even at res 4
-  set({0, 1, 0, 0}, .5f, .5f, .5f);  // res 2: 32 triangles
-  set({0, 1, 1, 0}, 2, 1, .5f);  // res 3: 128
-  set({0, 1, 0, 1}, 3, 3, 1);    // res 4: 512
-  set({0, 1, 1, 1}, 5, 5, 5);    // over tolerance
+  set({0, 0, 0, 0}, 8, 4, 2);                                                      // over tolerance even at res 4
+  set({0, 1, 0, 0}, .5f, .5f, .5f);                                                // res 2: 32 triangles
+  set({0, 1, 1, 0}, 2, 1, .5f);                                                    // res 3: 128
+  set({0, 1, 0, 1}, 3, 3, 1);                                                      // res 4: 512
+  set({0, 1, 1, 1}, 5, 5, 5);                                                      // over tolerance
   for (uint32_t i = 0; i < 4; ++i) set(NodeId{0, 1, 1, 1}.child(i), 2, .8f, .8f);  // res 3: 128
   return h;
 }

@@ -18,15 +18,11 @@ namespace gimlod {
 namespace {
 
 using test::expectPartition;
+using test::expectWithinBudget;
 using test::makeWorld;
 using test::sortedNodes;
 using test::viewAt;
 using test::World;
-using test::expectWithinBudget;
-
-
-
-
 
 uint32_t opsOf(const BudgetStats& s) { return s.refines + s.coarsens + s.splits + s.merges; }
 

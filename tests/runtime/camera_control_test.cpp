@@ -155,8 +155,8 @@ TEST(CameraControl, DistanceToSurfaceIsTheNearestLeafBox) {
         }
     return best;
   };
-  for (const glm::dvec3& p : {glm::dvec3(10.5, 20.25, 200.0), glm::dvec3(-40.0, 70.0, 5.0), glm::dvec3(50.0, 30.0, 21.0),
-                              glm::dvec3(90.0, 60.0, -80.0)})
+  for (const glm::dvec3& p : {glm::dvec3(10.5, 20.25, 200.0), glm::dvec3(-40.0, 70.0, 5.0),
+                              glm::dvec3(50.0, 30.0, 21.0), glm::dvec3(90.0, 60.0, -80.0)})
     EXPECT_DOUBLE_EQ(distanceToSurface(w.h, p), bruteForce(p)) << p.x << "," << p.y << "," << p.z;
   const double ground = test::syntheticHeight(40, 20);
   EXPECT_DOUBLE_EQ(distanceToSurface(w.h, {40.0, 20.0, ground}), 0.0);
@@ -264,8 +264,8 @@ TEST(CameraControl, FlyingOverAPlanetKeepsUpRadialAndTheHorizonLevel) {
   c.setSurfaceDistance(1000.0);
   auto longitude = [&]() { return std::atan2(c.eye().y, c.eye().x); };
   for (int i = 0; i < 2000 && longitude() < 1.0; ++i) c.move({0.0, 0.0, 1.0}, 1.0);  // forward, east
-  EXPECT_GE(longitude(), 1.0);  // flown a sixth of the way round
-  EXPECT_LT(std::fabs(c.eye().z), 1.0);  // along the equator
+  EXPECT_GE(longitude(), 1.0);                                                       // flown a sixth of the way round
+  EXPECT_LT(std::fabs(c.eye().z), 1.0);                                              // along the equator
   EXPECT_NEAR(glm::dot(glm::normalize(c.camera().up), glm::normalize(c.camera().eye)), 1.0, 1e-12);
   EXPECT_NEAR(pitch(), before, 1e-6);
   // Orbiting keeps the axis up.

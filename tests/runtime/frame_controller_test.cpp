@@ -17,7 +17,7 @@ namespace {
 // The simulated frame: the cut uses the budgets, up to what the view can use.
 struct Plant {
   double overheadMs = 1.0, msPerNode = 0.002, trianglesPerMs = 1e5;
-  double drawFixedMs = 4.0;  // clearing and shading the frame, whatever the triangles
+  double drawFixedMs = 4.0;                    // clearing and shading the frame, whatever the triangles
   uint64_t viewTriangles = uint64_t(1) << 40;  // the most triangles the view can use
   FrameSample draw(uint32_t nodes, uint64_t triangles) const {
     FrameSample f;

@@ -45,7 +45,8 @@ TEST(Overlay, ChartColoursAreOpaqueAndTellNeighboursApart) {
     // Consecutive ids (often neighbouring charts) differ clearly in some channel.
     const uint32_t next = chartColour(c + 1);
     int most = 0;
-    for (int k = 0; k < 3; ++k) most = std::max(most, std::abs(int((rgba >> (8 * k)) & 255) - int((next >> (8 * k)) & 255)));
+    for (int k = 0; k < 3; ++k)
+      most = std::max(most, std::abs(int((rgba >> (8 * k)) & 255) - int((next >> (8 * k)) & 255)));
     EXPECT_GT(most, 40) << "charts " << c << " and " << c + 1;
   }
   EXPECT_GT(colours.size(), 240u);
@@ -96,13 +97,15 @@ TEST(Overlay, ErrorColouringIsAHeatMapAgainstTheTolerance) {
   cut.nodes = {node(0, 0, 0, 0, 4), node(0, 1, 1, 0, 3), node(1, 2, 1, 1, 2), node(1, 2, 0, 3, 2)};
   const float errors[4] = {0.f, 0.5f, 1.f, 3.f};
   for (size_t i = 0; i < 4; ++i) cut.nodes[i].errorPx = errors[i];
-  const auto rgb = [](uint32_t c) { return std::array<int, 3>{int(c & 255), int((c >> 8) & 255), int((c >> 16) & 255)}; };
+  const auto rgb = [](uint32_t c) {
+    return std::array<int, 3>{int(c & 255), int((c >> 8) & 255), int((c >> 16) & 255)};
+  };
   const std::vector<NodeOverlay> o = nodeOverlays(h, cut, OverlayMode::kError, {}, 1.0);
   ASSERT_EQ(o.size(), 4u);
-  EXPECT_EQ(rgb(o[0].rgba), (std::array<int, 3>{0, 0, 255}));    // no error: blue
-  EXPECT_EQ(rgb(o[1].rgba), (std::array<int, 3>{0, 255, 0}));    // half the tolerance: green
-  EXPECT_EQ(rgb(o[2].rgba), (std::array<int, 3>{255, 0, 0}));    // at the tolerance: red
-  EXPECT_EQ(o[3].rgba, o[2].rgba);                               // above it: red too
+  EXPECT_EQ(rgb(o[0].rgba), (std::array<int, 3>{0, 0, 255}));  // no error: blue
+  EXPECT_EQ(rgb(o[1].rgba), (std::array<int, 3>{0, 255, 0}));  // half the tolerance: green
+  EXPECT_EQ(rgb(o[2].rgba), (std::array<int, 3>{255, 0, 0}));  // at the tolerance: red
+  EXPECT_EQ(o[3].rgba, o[2].rgba);                             // above it: red too
   for (const NodeOverlay& n : o) EXPECT_EQ(n.rgba >> 24, 255u);
   EXPECT_EQ(o[3].chartBorderSides, 0b1100u);
   // Without a scale, the largest error (3 px) is red and 1.5 px would be green.

@@ -14,7 +14,8 @@ namespace {
 
 bool sameBits(const glm::dvec3& a, const glm::dvec3& b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 
-// A whole planet of 1-degree cells, cell-centred, with pole rows added (as atlas/terrain/planet_grid.h lays a cell-centred DEM).
+// A whole planet of 1-degree cells, cell-centred, with pole rows added (as atlas/terrain/planet_grid.h lays a
+// cell-centred DEM).
 PlanetInfo wholeDegrees() {
   PlanetInfo p;
   p.present = true;
@@ -108,8 +109,12 @@ constexpr uint32_t kArcSecondRows = 180 * 3600 + 2;
 // error stays a small fraction of the distance.
 void expectExactNearTheAnchor(const PlanetFrame& f) {
   const uint32_t rows = kArcSecondRows;
-  for (const auto& [ax, ay] : {std::array<int64_t, 2>{500000, 300000}, {1296000 - 3, 400000}, {2, 100000},
-                               {777777, rows - 40}, {123456, 30}, {40000, 324001}}) {
+  for (const auto& [ax, ay] : {std::array<int64_t, 2>{500000, 300000},
+                               {1296000 - 3, 400000},
+                               {2, 100000},
+                               {777777, rows - 40},
+                               {123456, 30},
+                               {40000, 324001}}) {
     const OffsetErrors e = offsetErrors(f, ax, ay, 100);
     EXPECT_LT(e.absolute, 2e-3) << ax << ", " << ay;
     EXPECT_LT(e.relative, 1e-6) << ax << ", " << ay;

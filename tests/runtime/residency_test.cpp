@@ -24,9 +24,7 @@ test::World twoCharts(uint32_t depth, uint32_t maxResLog2, uint32_t minRes) {
   return w;
 }
 
-ViewParams overview(const test::World& w) {
-  return test::viewAt(w, {64.0, -80.0, 90.0}, {64.0, 32.0, 0.0});
-}
+ViewParams overview(const test::World& w) { return test::viewAt(w, {64.0, -80.0, 90.0}, {64.0, 32.0, 0.0}); }
 
 Cut makeCut(std::vector<CutNode> nodes) {
   Cut c;

@@ -227,8 +227,8 @@ TEST_F(ViewWindow, ScriptedRunDrawsWhatRenderDraws) {
                                &out),
               0)
         << out;
-    ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' --path '" + path.string() + "' --size 320x240 -o '" +
-                                   frames.string() + "'" + kBackgroundArg + msaa,
+    ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' --path '" + path.string() +
+                                   "' --size 320x240 -o '" + frames.string() + "'" + kBackgroundArg + msaa,
                                &out),
               0)
         << out;
@@ -270,7 +270,8 @@ class Session {
   ~Session() {
     if (!finished()) {
       key("Escape");
-      test::waitForFiles(cwd_, [&] { return finished(); }, 10s);
+      test::waitForFiles(
+          cwd_, [&] { return finished(); }, 10s);
     }
   }
   bool ok() const { return ok_; }
@@ -300,7 +301,8 @@ class Session {
   // `done`, rechecking at each row the window writes (one a frame); false on time-out, or when
   // the program ended without satisfying it.
   bool waitFor(const std::function<bool(const std::vector<std::map<std::string, std::string>>&)>& done) const {
-    test::waitForFiles(cwd_, [&] { return finished() || done(readStats(stats_)); }, 60s);
+    test::waitForFiles(
+        cwd_, [&] { return finished() || done(readStats(stats_)); }, 60s);
     return done(readStats(stats_));
   }
   // The row of the latest frame drawn after `after` more frames than now.
@@ -314,7 +316,8 @@ class Session {
   Image screenshot() {
     const fs::path file = cwd_ / fmt(shots_++);
     key("p");
-    test::waitForFiles(cwd_, [&] { return fs::exists(file); }, 60s);
+    test::waitForFiles(
+        cwd_, [&] { return fs::exists(file); }, 60s);
     return readImage(file);
   }
 
@@ -334,8 +337,7 @@ class Session {
 TEST_F(ViewWindow, KeysAndDragsChangeWhatIsDrawn) {
   const fs::path cwd = dir() / "keys";
   fs::create_directories(cwd);
-  Session s(env(), quoted(dir() / "bunny.atlas") + " --size 480x360 --hide-ui --tolerance 4" + kBackgroundArg,
-            cwd);
+  Session s(env(), quoted(dir() / "bunny.atlas") + " --size 480x360 --hide-ui --tolerance 4" + kBackgroundArg, cwd);
   ASSERT_TRUE(s.ok()) << "the window did not come up";
   auto plainRow = s.settle();
   const Image plain = s.screenshot();
@@ -433,7 +435,8 @@ TEST_F(ViewWindow, KeysAndDragsChangeWhatIsDrawn) {
   ASSERT_TRUE(s.waitFor([](const auto& r) { return !r.empty() && !r.back().at("target_ms").empty(); }));
   const auto held = s.settle(1);
   EXPECT_EQ(held.at("mode"), "budget");
-  EXPECT_TRUE(s.waitFor([&](const auto& r) { return !r.empty() && r.back().at("max_triangles") != held.at("max_triangles"); }));
+  EXPECT_TRUE(
+      s.waitFor([&](const auto& r) { return !r.empty() && r.back().at("max_triangles") != held.at("max_triangles"); }));
 
   s.key("Escape");
   ASSERT_TRUE(s.waitFor([&](const auto&) { return s.finished(); }));
@@ -447,8 +450,7 @@ TEST_F(ViewWindow, RecordedPathReplaysThroughRender) {
   fs::create_directories(cwd);
   const fs::path atlas = dir() / "rainier.atlas", path = cwd / "recorded.json";
   {
-    Session s(env(), quoted(atlas) + " --size 320x240 --hide-ui --record " + quoted(path) + kBackgroundArg,
-              cwd);
+    Session s(env(), quoted(atlas) + " --size 320x240 --hide-ui --record " + quoted(path) + kBackgroundArg, cwd);
     ASSERT_TRUE(s.ok()) << "the window did not come up";
     s.settle();
     s.key("r");
@@ -456,7 +458,8 @@ TEST_F(ViewWindow, RecordedPathReplaysThroughRender) {
     s.drag(160, 120, 230, 150);
     s.settle();
     s.key("r");
-    test::waitForFiles(cwd, [&] { return fs::exists(path); }, 60s);
+    test::waitForFiles(
+        cwd, [&] { return fs::exists(path); }, 60s);
     ASSERT_TRUE(fs::exists(path));
     s.settle();
     const Image window = s.screenshot();
