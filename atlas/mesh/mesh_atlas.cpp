@@ -326,6 +326,15 @@ const GeometryImage& chartSamples(const GeometryImageSet& set, size_t i, const C
   return back;
 }
 
+// The coarsest of the image's own levels down to which no level has more flipped texels than its
+// samples (GeometryImage::flippedAtLevel against ImageQuality::flippedTexels): a coarser finest
+// level must not fold where the resampled chart did not.
+uint32_t levelsWithoutMoreFlips(const GeometryImage& g) {
+  uint32_t k = 0;
+  while (k < g.flippedAtLevel.size() && g.flippedAtLevel[k] <= g.quality.flippedTexels) ++k;
+  return k < g.flippedAtLevel.size() ? k : ~0u;
+}
+
 }  // namespace
 
 std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const ChartSpill* spill,
@@ -339,7 +348,7 @@ std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const Chart
     if (!(set.charts[i].quality.sampleError <= c.bound) || own >= c.maxFinestLevel) return;
     GeometryImage back;
     ChartCoarsening rest = c;
-    rest.maxFinestLevel = c.maxFinestLevel - own;
+    rest.maxFinestLevel = std::min(c.maxFinestLevel - own, levelsWithoutMoreFlips(set.charts[i]));
     out[i] = own + chartFinestLevel(chartSamples(set, i, spill, back).positions, set.charts[i].side(set.chartSize),
                                     set.charts[i].quality.sampleError, rest);
   });

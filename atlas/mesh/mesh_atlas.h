@@ -76,7 +76,9 @@ uint32_t chartFinestLevel(const std::vector<glm::vec3>& positions, uint32_t char
                           const ChartCoarsening& c);
 // chartFinestLevel of every chart of `set` (in parallel; spilled charts read back from `spill`),
 // as a level of set.chartSize: a chart sampled at its own size (GeometryImage::level) keeps at
-// least that level, and is coarsened from there.
+// least that level, and is coarsened from there, never past a level with more flipped texels than
+// its own samples have (GeometryImage::flippedAtLevel), so the flipped texels a build reports are
+// those of the levels it keeps.
 std::vector<uint32_t> chartFinestLevels(const GeometryImageSet& set, const ChartSpill* spill, const ChartCoarsening& c);
 
 // Writes set's charts to dir/charts/chart_NNNN.bin (atomically, in parallel) and fills m's

@@ -1375,6 +1375,25 @@ struct ChartSampler {
       if (img.foldTriangles.size() >= 8) break;
     }
   }
+
+  // The flipped texels of each coarser pyramid level of the chart (GeometryImage::flippedAtLevel),
+  // measured as level 0's are: every 2^k-th sample, with the input faces under them.
+  void measureLevels() {
+    img.flippedAtLevel.clear();
+    for (uint32_t k = 1; (m >> k) >= 1 && (m >> k << k) == m; ++k) {
+      const uint32_t s = (m >> k) + 1, step = 1u << k;
+      std::vector<glm::vec3> p(size_t(s) * s), n(size_t(s) * s), f(size_t(s) * s);
+      for (uint32_t v = 0; v < s; ++v) {
+        for (uint32_t u = 0; u < s; ++u) {
+          const size_t from = size_t(v) * step * size + size_t(u) * step, to = size_t(v) * s + u;
+          p[to] = img.positions[from];
+          n[to] = floatNormals[from];
+          f[to] = glm::vec3(ps.faceNormalOr(triangles[from], glm::dvec3(0.0)));
+        }
+      }
+      img.flippedAtLevel.push_back(measureImage(p, n, s, nullptr, &f).flippedTexels);
+    }
+  }
 };
 
 // One unfolding of a chart (ChartSampler::unfold): where its samples stood when it began, and the
@@ -1572,6 +1591,7 @@ void sampleChart(PatchSampler& ps, ChartBuffers& buffers, uint32_t i) {
   const bool warp = chart.placeByMap();
   if (c.options.unfold && img.quality.flippedTexels > 0) chart.unfold(warp);
   chart.findFoldTriangles();
+  chart.measureLevels();
   if (c.options.spill) c.options.spill->put(img);
 }
 

@@ -137,7 +137,10 @@ struct GeometryImage {
   std::array<RootNeighbour, 4> neighbours;  // by Edge; chart = index into GeometryImageSet
   ImageQuality quality;
   std::vector<uint32_t> foldTriangles;  // layout triangles under flipped texels (<= 8)
-  int64_t spilled = -1;                 // where a ChartSpill holds the samples; -1: here
+  // [k - 1]: the flipped texels (ImageQuality::flippedTexels) of the image's pyramid level k >= 1,
+  // every 2^k-th of its samples a side.
+  std::vector<uint32_t> flippedAtLevel;
+  int64_t spilled = -1;  // where a ChartSpill holds the samples; -1: here
   // The pyramid level of the set's chart size that the image holds: ((chartSize - 1) >> level) + 1
   // samples a side (charts sampled at their own size; core/atlas_format.h ChartInfo::finestLevel).
   uint8_t level = 0;

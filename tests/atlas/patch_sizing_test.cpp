@@ -93,6 +93,31 @@ TEST(PatchSizing, ACoarserImageIsWrittenAtItsOwnLevel) {
   EXPECT_THROW(writeGeometryCharts(set, dir.path(), 32, m, nullptr, {}, {0, 0}), std::invalid_argument);
 }
 
+// A chart is not coarsened past a level that folds more than its own samples do: the flipped
+// texels a build reports are those of the levels it keeps.
+TEST(PatchSizing, AChartKeepsNoLevelThatFoldsMoreThanItsSamples) {
+  GeometryImageSet set;
+  set.chartSize = 65;
+  set.charts.push_back(rampImage(65, 0.f, false));
+  set.charts.push_back(rampImage(33, 100.f, false));
+  set.charts.back().level = 1;
+  ChartCoarsening c;
+  c.bound = 1.0;
+  c.maxFinestLevel = 3;
+  // Without flipped texels anywhere the flat ramps coarsen as far as allowed.
+  set.charts[0].flippedAtLevel = {0, 0, 0, 0, 0};
+  set.charts[1].flippedAtLevel = {0, 0, 0, 0};
+  EXPECT_EQ(chartFinestLevels(set, nullptr, c), (std::vector<uint32_t>{3, 3}));
+  // Level 2 of the first folds (level 1 of the second, its level 2 of the set): each stops above.
+  set.charts[0].flippedAtLevel = {0, 2, 0, 0, 0};
+  set.charts[1].flippedAtLevel = {1, 0, 0, 0};
+  EXPECT_EQ(chartFinestLevels(set, nullptr, c), (std::vector<uint32_t>{1, 1}));
+  // No more than the samples themselves fold: allowed.
+  set.charts[0].quality.flippedTexels = 2;
+  set.charts[1].quality.flippedTexels = 1;
+  EXPECT_EQ(chartFinestLevels(set, nullptr, c), (std::vector<uint32_t>{3, 3}));
+}
+
 // The shipped bunny at the defaults: one quad layout (sides), its patches at more than one size,
 // each chart's file at its own size or coarser; seamless (bit-identical shared edges and corners)
 // at every level, charts of different sizes included; every chart within the sampling bound; the
