@@ -328,7 +328,8 @@ const GeometryImage& chartSamples(const GeometryImageSet& set, size_t i, const C
 
 // The coarsest of the image's own levels down to which no level has more flipped texels than its
 // samples (GeometryImage::flippedAtLevel against ImageQuality::flippedTexels): a coarser finest
-// level must not fold where the resampled chart did not.
+// level must not fold where the resampled chart did not. No limit (~0u) when every measured level
+// passes, or none was measured (an image that was not resampled).
 uint32_t levelsWithoutMoreFlips(const GeometryImage& g) {
   uint32_t k = 0;
   while (k < g.flippedAtLevel.size() && g.flippedAtLevel[k] <= g.quality.flippedTexels) ++k;
