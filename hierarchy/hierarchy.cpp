@@ -13,6 +13,9 @@
 #include <limits>
 #include <optional>
 #include <stdexcept>
+#include <type_traits>
+
+#include <glm/common.hpp>
 
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -151,47 +154,156 @@ void accumulateHeightError(const std::vector<float>& h, uint32_t S, uint32_t k, 
   }
 }
 
-// A tile of 2^t intervals of a chart of 2^L intervals, at chart sample (ox, oy): its heights h
-// ((2^t + 1)^2, row = v), and the chart's level t (`coarse`, `coarseSide` a side), whose samples
-// are the corners of the cells larger than the tile.
-struct TileHeights {
-  const std::vector<float>& h;
-  const std::vector<float>& coarse;
-  uint32_t coarseSide = 0;
-  uint32_t L = 0, t = 0, ox = 0, oy = 0;
-};
-
-// running[(y - y0) * S + x] = max(itself, |h_i - surface_k|) for the samples of rows [y0, y1] of
-// `tile`, for a level k > t whose cells are larger than the tile: their corners are samples of the
-// chart's level t. The cells and the weights are forEachLevelSample's over the whole chart.
-void accumulateCoarseError(const TileHeights& tile, uint32_t k, uint32_t y0, uint32_t y1, float* running) {
-  const std::vector<float>& h = tile.h;
-  const std::vector<float>& coarse = tile.coarse;
-  const uint32_t coarseSide = tile.coarseSide, L = tile.L, t = tile.t, ox = tile.ox, oy = tile.oy;
-  const uint32_t S = (1u << t) + 1, n = (1u << L) >> k, s = 1u << k, step = 1u << (k - t);
+// accumulateHeightError for a geometry image: Euclidean distances (PointDistance), each component
+// of the surface computed as cellSurface computes it, the same floats.
+void accumulatePointError(const std::vector<glm::vec3>& h, uint32_t S, uint32_t k, uint32_t y0, uint32_t y1,
+                          float* running) {
+  const uint32_t M = S - 1, n = M >> k, s = 1u << k;
   const float inv = 1.0f / float(s);
+  auto dist = [](const glm::vec3& p, float x, float y, float z) {
+    const float dx = p.x - x, dy = p.y - y, dz = p.z - z;
+    return std::sqrt(dx * dx + dy * dy + dz * dz);
+  };
   for (uint32_t y = y0; y <= y1; ++y) {
-    const uint32_t Y = oy + y, cy = std::min(Y >> k, n - 1);
-    const float fy = float(Y - cy * s) * inv;
-    const float* row0 = &coarse[size_t(cy * step) * coarseSide];
-    const float* row1 = &coarse[size_t((cy + 1) * step) * coarseSide];
-    for (uint32_t x = 0; x < S; ++x) {
-      const uint32_t X = ox + x, cx = std::min(X >> k, n - 1);
-      const float fx = float(X - cx * s) * inv;
-      const uint32_t c0 = cx * step, c1 = (cx + 1) * step;
-      const float surface = cellSurface(row0[c0], row0[c1], row1[c0], row1[c1], fx, fy);
-      float& r = running[size_t(y - y0) * S + x];
-      r = std::max(r, std::fabs(h[size_t(y) * S + x] - surface));
+    const uint32_t cy = std::min(y >> k, n - 1), dy = y - cy * s;
+    const float fy = float(dy) * inv;
+    const glm::vec3* row0 = &h[size_t(cy * s) * S];
+    const glm::vec3* row1 = &h[size_t((cy + 1) * s) * S];
+    const glm::vec3* hy = &h[size_t(y) * S];
+    float* ry = running + size_t(y - y0) * S;
+    for (uint32_t cx = 0; cx < n; ++cx) {
+      const uint32_t x0 = cx * s, xend = (cx == n - 1) ? s : s - 1;
+      const glm::vec3 h00 = row0[x0], h10 = row0[x0 + s], h01 = row1[x0], h11 = row1[x0 + s];
+      const glm::vec3 upper = h00 + fy * (h01 - h00), du = h11 - h01;  // dx < dy
+      const glm::vec3 dl = h10 - h00, lower = fy * (h11 - h10);        // dx >= dy
+      const uint32_t split = std::min(dy, xend + 1);
+      for (uint32_t dx = 0; dx < split; ++dx) {
+        const float fx = float(dx) * inv;
+        const float d = dist(hy[x0 + dx], upper.x + fx * du.x, upper.y + fx * du.y, upper.z + fx * du.z);
+        ry[x0 + dx] = std::max(ry[x0 + dx], d);
+      }
+      for (uint32_t dx = split; dx <= xend; ++dx) {
+        const float fx = float(dx) * inv;
+        const float d =
+            dist(hy[x0 + dx], h00.x + fx * dl.x + lower.x, h00.y + fx * dl.y + lower.y, h00.z + fx * dl.z + lower.z);
+        ry[x0 + dx] = std::max(ry[x0 + dx], d);
+      }
     }
   }
 }
 
-// What the nodes above a tile need of it: its heights' range and, per pyramid level k, the largest
-// running error (fillErrors) over its samples.
+// A tile of 2^t intervals of a chart of 2^L intervals, at chart sample (ox, oy): its samples h
+// ((2^t + 1)^2, row = v), and the chart's pyramid level t (`coarse`, `coarseSide` a side), whose
+// samples are the corners of the cells larger than the tile. T: float (heights) or glm::vec3.
+template <typename T>
+struct TileSamples {
+  const std::vector<T>& h;
+  const std::vector<T>& coarse;
+  uint32_t coarseSide = 0;
+  uint32_t L = 0, t = 0, ox = 0, oy = 0;
+};
+
+// running[(y - y0) * S + x] = max(itself, dist(h_i, surface_k)) for the samples of rows [y0, y1] of
+// `tile`, for a level k > t whose cells are larger than the tile: their corners are samples of the
+// chart's level t. The cells and the weights are forEachLevelSample's over the whole chart.
+template <typename T, typename Dist>
+void accumulateCoarseError(const TileSamples<T>& tile, uint32_t k, uint32_t y0, uint32_t y1, float* running,
+                           Dist dist) {
+  const std::vector<T>& h = tile.h;
+  const std::vector<T>& coarse = tile.coarse;
+  const uint32_t coarseSide = tile.coarseSide, ox = tile.ox, oy = tile.oy;
+  const uint32_t S = (1u << tile.t) + 1, n = (1u << tile.L) >> k, s = 1u << k, step = 1u << (k - tile.t);
+  const float inv = 1.0f / float(s);
+  for (uint32_t y = y0; y <= y1; ++y) {
+    const uint32_t Y = oy + y, cy = std::min(Y >> k, n - 1);
+    const float fy = float(Y - cy * s) * inv;
+    const T* row0 = &coarse[size_t(cy * step) * coarseSide];
+    const T* row1 = &coarse[size_t((cy + 1) * step) * coarseSide];
+    for (uint32_t x = 0; x < S; ++x) {
+      const uint32_t X = ox + x, cx = std::min(X >> k, n - 1);
+      const float fx = float(X - cx * s) * inv;
+      const uint32_t c0 = cx * step, c1 = (cx + 1) * step;
+      const T surface = cellSurface(row0[c0], row0[c1], row1[c0], row1[c1], fx, fy);
+      float& r = running[size_t(y - y0) * S + x];
+      r = std::max(r, dist(h[size_t(y) * S + x], surface));
+    }
+  }
+}
+
+// Errors of the nodes inside tile (tx, ty) of `tile` (tile.t intervals a side): 0 at the source
+// resolution, then at res r = L - l - k the largest running error of level k (accumulateLevelError)
+// over the node's samples, so errors never decrease as resolution drops; a positive error grows by
+// margin[k] where margin is not empty. Writes only the tile's own nodes; returns, per level k, the
+// largest running error over the tile's samples (with its margin), for the nodes above the tile.
+template <typename Dist, typename T>
+std::vector<float> tileErrors(const HierarchyParams& p, Hierarchy::ChartNodes& out, const TileSamples<T>& tile,
+                              uint32_t tx, uint32_t ty, const std::vector<float>& margin) {
+  const Dist dist;
+  const uint32_t L = p.intervalsLog2, t = tile.t, S = (1u << t) + 1, shift = L - t, rc = p.resCount();
+  const uint32_t depth = p.depth > shift ? p.depth - shift : 0;  // the tile's own levels
+  auto fmax = [](float a, float b) { return std::max(a, b); };
+  for (uint32_t l = 0; l < depth; ++l) {
+    const uint32_t r = L - l - shift;
+    if (r > p.maxResLog2(l + shift) || r < p.minNodeResLog2) continue;
+    for (uint32_t y = 0; y < (1u << l); ++y)
+      for (uint32_t x = 0; x < (1u << l); ++x)
+        out.errors[size_t(nodeIndex(l + shift, (tx << l) + x, (ty << l) + y)) * rc + (r - p.minNodeResLog2)] = 0.0f;
+  }
+  const uint32_t kmax = L - p.minNodeResLog2;
+  auto grown = [&](uint32_t k, float v) { return margin.empty() || !(v > 0.0f) ? v : v + margin[k]; };
+  // Node (l, x, y) of the tile at res r = L - l - shift - k takes v, the largest running error of
+  // level k over its samples.
+  auto put = [&](uint32_t k, uint32_t l, uint32_t x, uint32_t y, float v) {
+    if (l >= depth || L < l + shift + k) return;
+    const uint32_t r = L - l - shift - k;
+    if (r >= p.minNodeResLog2 && r <= p.maxResLog2(l + shift))
+      out.errors[size_t(nodeIndex(l + shift, (tx << l) + x, (ty << l) + y)) * rc + (r - p.minNodeResLog2)] =
+          grown(k, v);
+  };
+  // Band by band of B cell rows, every level k in turn, so that a band's running errors and cells
+  // stay in cache: the nodes of B cells or fewer a side are finished in their band, the larger
+  // ones from each level's blocks of B x B cells (W x W of them).
+  const uint32_t b = std::min(t, 5u), B = 1u << b, W = (1u << t) >> b;
+  std::vector<std::vector<float>> blocks(kmax + 1, std::vector<float>(size_t(W) * W));
+  std::vector<float> running(size_t(B + 1) * S), cells, tmp;
+  for (uint32_t band = 0; band < W; ++band) {
+    const uint32_t y0 = band * B;
+    std::fill(running.begin(), running.end(), 0.0f);
+    for (uint32_t k = 1; k <= kmax; ++k) {
+      if (k > t)
+        accumulateCoarseError(tile, k, y0, y0 + B, running.data(), dist);
+      else if constexpr (std::is_same_v<T, float>)
+        accumulateHeightError(tile.h, S, k, y0, y0 + B, running.data());
+      else
+        accumulatePointError(tile.h, S, k, y0, y0 + B, running.data());
+      cellReduce(running.data(), S, B, cells, fmax);
+      for (uint32_t w = S - 1, rows = B, l = t;; w /= 2, rows /= 2, --l) {
+        for (uint32_t y = 0; y < rows; ++y)
+          for (uint32_t x = 0; x < w; ++x) put(k, l, x, band * rows + y, cells[size_t(y) * w + x]);
+        if (rows == 1) break;
+        reduceRects2x2(cells, w, rows, tmp, fmax);
+        cells.swap(tmp);
+      }
+      std::copy(cells.begin(), cells.end(), blocks[k].begin() + std::ptrdiff_t(size_t(band) * W));
+    }
+  }
+  std::vector<float> levelError(kmax + 1, 0.0f);
+  for (uint32_t k = 1; k <= kmax; ++k)
+    levelError[k] =
+        grown(k, forEachNodeReduction(blocks[k], t - b, depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
+                if (l < t - b) put(k, l, x, y, v);
+              }));
+  return levelError;
+}
+
+// What the nodes above a tile need of it: its samples' range (heights, or boxes) and, per pyramid
+// level k, the largest running error (fillErrors) over its samples.
+template <typename T>
 struct TileSummary {
-  float lo = 0, hi = 0;
+  T lo = T(0), hi = T(0);
   std::vector<float> levelError;  // [k], k = 0 .. intervalsLog2 - minNodeResLog2
 };
+using HeightTileSummary = TileSummary<float>;
 
 // A terrain chart whose nodes are being built: the hierarchy's parameters, the atlas, the chart,
 // and its nodes.
@@ -222,15 +334,14 @@ void setNodeBounds(const TerrainChartNodes& c, uint32_t l, uint32_t x, uint32_t 
 // tile (t = intervalsLog2). Node error at res r = max over the node's samples of the running level
 // error (accumulateLevelError), so errors never decrease as resolution drops. Writes only the
 // tile's own nodes; returns what the nodes above it need.
-TileSummary buildTerrainTile(const TerrainChartNodes& c, const std::vector<float>& h, uint32_t t, uint32_t tx,
-                             uint32_t ty, const std::vector<float>& coarse) {
+HeightTileSummary buildTerrainTile(const TerrainChartNodes& c, const std::vector<float>& h, uint32_t t, uint32_t tx,
+                                   uint32_t ty, const std::vector<float>& coarse) {
   const HierarchyParams& p = c.p;
-  Hierarchy::ChartNodes& out = c.out;
-  const uint32_t L = p.intervalsLog2, S = (1u << t) + 1, shift = L - t, rc = p.resCount();
+  const uint32_t L = p.intervalsLog2, S = (1u << t) + 1, shift = L - t;
   const uint32_t depth = p.depth > shift ? p.depth - shift : 0;  // the tile's own levels
   auto fmax = [](float a, float b) { return std::max(a, b); };
   auto fmin = [](float a, float b) { return std::min(a, b); };
-  TileSummary sum;
+  HeightTileSummary sum;
   // Bounds: min/max mips over cells.
   std::vector<float> mn, mx, tmp;
   cellReduce(h, S, mn, fmin);
@@ -248,55 +359,8 @@ TileSummary buildTerrainTile(const TerrainChartNodes& c, const std::vector<float
   }
   sum.lo = mn[0];
   sum.hi = mx[0];
-  // Errors: 0 at the source resolution, then level by level.
-  for (uint32_t l = 0; l < depth; ++l) {
-    const uint32_t r = L - l - shift;
-    if (r > p.maxResLog2(l + shift) || r < p.minNodeResLog2) continue;
-    for (uint32_t y = 0; y < (1u << l); ++y)
-      for (uint32_t x = 0; x < (1u << l); ++x)
-        out.errors[size_t(nodeIndex(l + shift, (tx << l) + x, (ty << l) + y)) * rc + (r - p.minNodeResLog2)] = 0.0f;
-  }
-  const uint32_t kmax = L - p.minNodeResLog2;
-  sum.levelError.assign(kmax + 1, 0.0f);
-  // Node (l, x, y) of the tile at res r = L - l - shift - k takes v, the largest running error of
-  // level k over its samples.
-  auto put = [&](uint32_t k, uint32_t l, uint32_t x, uint32_t y, float v) {
-    if (l >= depth || L < l + shift + k) return;
-    const uint32_t r = L - l - shift - k;
-    if (r >= p.minNodeResLog2 && r <= p.maxResLog2(l + shift))
-      out.errors[size_t(nodeIndex(l + shift, (tx << l) + x, (ty << l) + y)) * rc + (r - p.minNodeResLog2)] = v;
-  };
-  // Band by band of B cell rows, every level k in turn, so that a band's running errors and cells
-  // stay in cache: the nodes of B cells or fewer a side are finished in their band, the larger
-  // ones from each level's blocks of B x B cells (W x W of them).
-  const uint32_t b = std::min(t, 5u), B = 1u << b, W = (1u << t) >> b;
-  std::vector<std::vector<float>> blocks(kmax + 1, std::vector<float>(size_t(W) * W));
-  std::vector<float> running(size_t(B + 1) * S), cells;
-  const TileHeights heights{h, coarse, (1u << shift) + 1, L, t, tx << t, ty << t};
-  for (uint32_t band = 0; band < W; ++band) {
-    const uint32_t y0 = band * B;
-    std::fill(running.begin(), running.end(), 0.0f);
-    for (uint32_t k = 1; k <= kmax; ++k) {
-      if (k <= t)
-        accumulateHeightError(h, S, k, y0, y0 + B, running.data());
-      else
-        accumulateCoarseError(heights, k, y0, y0 + B, running.data());
-      cellReduce(running.data(), S, B, cells, fmax);
-      for (uint32_t w = S - 1, rows = B, l = t;; w /= 2, rows /= 2, --l) {
-        for (uint32_t y = 0; y < rows; ++y)
-          for (uint32_t x = 0; x < w; ++x) put(k, l, x, band * rows + y, cells[size_t(y) * w + x]);
-        if (rows == 1) break;
-        reduceRects2x2(cells, w, rows, tmp, fmax);
-        cells.swap(tmp);
-      }
-      std::copy(cells.begin(), cells.end(), blocks[k].begin() + std::ptrdiff_t(size_t(band) * W));
-    }
-  }
-  for (uint32_t k = 1; k <= kmax; ++k)
-    sum.levelError[k] =
-        forEachNodeReduction(blocks[k], t - b, depth, fmax, [&](uint32_t l, uint32_t x, uint32_t y, float v) {
-          if (l < t - b) put(k, l, x, y, v);
-        });
+  const TileSamples<float> tile{h, coarse, (1u << shift) + 1, L, t, tx << t, ty << t};
+  sum.levelError = tileErrors<HeightDistance>(p, c.out, tile, tx, ty, {});
   return sum;
 }
 
@@ -304,7 +368,7 @@ TileSummary buildTerrainTile(const TerrainChartNodes& c, const std::vector<float
 // chart grid): its nodes are empty, never drawn, and take no reading; their bounds are flat at the
 // lowest height and their errors 0. Its summary leaves the nodes above it to the tiles that hold
 // data.
-TileSummary emptyTerrainTile(const TerrainChartNodes& c, uint32_t t, uint32_t tx, uint32_t ty) {
+HeightTileSummary emptyTerrainTile(const TerrainChartNodes& c, uint32_t t, uint32_t tx, uint32_t ty) {
   const HierarchyParams& p = c.p;
   const uint32_t L = p.intervalsLog2, shift = L - t, rc = p.resCount();
   const float z = c.m.heightRange[0];
@@ -316,7 +380,7 @@ TileSummary emptyTerrainTile(const TerrainChartNodes& c, uint32_t t, uint32_t tx
         for (uint32_t r = p.minNodeResLog2; r <= p.maxResLog2(l + shift); ++r)
           c.out.errors[size_t(nodeIndex(l + shift, gx, gy)) * rc + (r - p.minNodeResLog2)] = 0.0f;
       }
-  TileSummary sum;
+  HeightTileSummary sum;
   sum.lo = std::numeric_limits<float>::infinity();
   sum.hi = -sum.lo;
   sum.levelError.assign(L - p.minNodeResLog2 + 1, 0.0f);
@@ -324,30 +388,29 @@ TileSummary emptyTerrainTile(const TerrainChartNodes& c, uint32_t t, uint32_t tx
 }
 
 // The nodes of a tiled chart above its tiles of 2^t intervals (levels below intervalsLog2 - t), from
-// the tiles' summaries (tiles x tiles, row-major).
-void buildAboveTiles(const TerrainChartNodes& nodes, uint32_t t, std::vector<TileSummary> grid) {
-  const HierarchyParams& p = nodes.p;
-  const AtlasManifest& m = nodes.m;
-  Hierarchy::ChartNodes& out = nodes.out;
+// the tiles' summaries (tiles x tiles, row-major): each takes the largest error and the range of
+// its tiles; setBounds(l, x, y, summary) sets its bounds from the range.
+template <typename T, typename SetBounds>
+void buildAboveTiles(const HierarchyParams& p, Hierarchy::ChartNodes& out, uint32_t t, std::vector<TileSummary<T>> grid,
+                     SetBounds setBounds) {
   const uint32_t L = p.intervalsLog2, rc = p.resCount();
-  std::vector<TileSummary> up;
+  std::vector<TileSummary<T>> up;
   for (uint32_t n = 1u << (L - t), l = L - t; n > 1;) {
     n /= 2;
     --l;
     up.assign(size_t(n) * n, {});
     for (uint32_t y = 0; y < n; ++y)
       for (uint32_t x = 0; x < n; ++x) {
-        TileSummary& u = up[size_t(y) * n + x];
+        TileSummary<T>& u = up[size_t(y) * n + x];
         u = grid[size_t(2 * y) * 2 * n + 2 * x];
         for (uint32_t i = 1; i < 4; ++i) {
-          const TileSummary& c = grid[size_t(2 * y + (i >> 1)) * 2 * n + 2 * x + (i & 1)];
-          u.lo = std::min(u.lo, c.lo);
-          u.hi = std::max(u.hi, c.hi);
+          const TileSummary<T>& c = grid[size_t(2 * y + (i >> 1)) * 2 * n + 2 * x + (i & 1)];
+          u.lo = glm::min(u.lo, c.lo);
+          u.hi = glm::max(u.hi, c.hi);
           for (size_t k = 0; k < u.levelError.size(); ++k) u.levelError[k] = std::max(u.levelError[k], c.levelError[k]);
         }
         if (l >= p.depth) continue;
-        // (Under empty tiles alone: flat at the lowest height, as they are.)
-        setNodeBounds(nodes, l, x, y, u.lo <= u.hi ? u.lo : m.heightRange[0], u.lo <= u.hi ? u.hi : m.heightRange[0]);
+        setBounds(l, x, y, u);
         for (uint32_t k = 0; k < u.levelError.size() && k <= L - l; ++k) {
           const uint32_t r = L - l - k;
           if (r >= p.minNodeResLog2 && r <= p.maxResLog2(l))
@@ -380,6 +443,110 @@ void buildGeometryChart(const HierarchyParams& p, const std::vector<glm::vec3>& 
   }
 
   fillErrors(p, P, PointDistance{}, out);
+}
+
+// Four float steps of the largest coordinate in `points` (relative to their origin): how far a
+// float position, or a distance measured between such positions, may be from its exact value.
+float floatMargin(const glm::vec3* points, size_t count, float atLeast = 0.0f) {
+  float e = 0.0f;
+  for (size_t i = 0; i < count; ++i)
+    e = std::max({e, std::fabs(points[i].x), std::fabs(points[i].y), std::fabs(points[i].z)});
+  return std::max(atLeast, float(4.0 * double(e) * std::ldexp(1.0, -23)));
+}
+
+// A tile's error margins per level k (floatMargin, never decreasing with k): its own samples for
+// k <= t, and for k > t the corners of the level-k cells its samples lie in (the chart's level t).
+std::vector<float> tileMargins(const HierarchyParams& p, const GeometryTile& g, uint32_t t, uint32_t tx, uint32_t ty) {
+  const uint32_t L = p.intervalsLog2, kmax = L - p.minNodeResLog2, T = 1u << t, side = ((1u << L) >> t) + 1;
+  std::vector<float> margin(kmax + 1, floatMargin(g.positions.data(), g.positions.size()));
+  for (uint32_t k = t + 1; k <= kmax; ++k) {
+    const uint32_t n = (1u << L) >> k, step = 1u << (k - t);
+    float m = margin[k - 1];
+    for (const uint32_t Y : {ty * T, ty * T + T})
+      for (const uint32_t X : {tx * T, tx * T + T}) {
+        const uint32_t cx = std::min(X >> k, n - 1), cy = std::min(Y >> k, n - 1);
+        for (const uint32_t j : {cy, cy + 1})
+          for (const uint32_t i : {cx, cx + 1}) m = floatMargin(&g.coarse[size_t(j * step) * side + i * step], 1, m);
+      }
+    margin[k] = m;
+  }
+  return margin;
+}
+
+// Bounds and errors of the nodes inside tile (tx, ty) of 2^t intervals of a geometry chart measured
+// in tiles (buildTiledGeometryHierarchy); returns what the nodes above it need.
+TileSummary<glm::vec3> buildGeometryTile(const HierarchyParams& p, Hierarchy::ChartNodes& out, const GeometryTile& g,
+                                         uint32_t t, uint32_t tx, uint32_t ty) {
+  const uint32_t L = p.intervalsLog2, S = (1u << t) + 1, shift = L - t;
+  const uint32_t depth = p.depth > shift ? p.depth - shift : 0;  // the tile's own levels
+  const std::vector<float> margin = tileMargins(p, g, t, tx, ty);
+  const float inf = std::numeric_limits<float>::infinity();
+  auto fmax = [](float a, float b) { return std::max(a, b); };
+  auto fmin = [](float a, float b) { return std::min(a, b); };
+  TileSummary<glm::vec3> sum;
+  // Bounds: per-component min/max mips over cells, grown by the margin and rounded outwards.
+  std::vector<float> comp(size_t(S) * S), mn, mx, tmp;
+  for (int c = 0; c < 3; ++c) {
+    for (size_t i = 0; i < comp.size(); ++i) comp[i] = g.positions[i][c];
+    cellReduce(comp, S, mn, fmin);
+    cellReduce(comp, S, mx, fmax);
+    auto lo = [&](float v) { return std::nextafter(float(double(v) - double(margin[0]) + g.origin[c]), -inf); };
+    auto hi = [&](float v) { return std::nextafter(float(double(v) + double(margin[0]) + g.origin[c]), inf); };
+    for (uint32_t n = 1u << t, l = t;; n /= 2, --l) {
+      if (l < depth)
+        for (uint32_t y = 0; y < n; ++y)
+          for (uint32_t x = 0; x < n; ++x) {
+            auto& b = out.bounds[nodeIndex(l + shift, (tx << l) + x, (ty << l) + y)];
+            b[c] = lo(mn[size_t(y) * n + x]);
+            b[3 + c] = hi(mx[size_t(y) * n + x]);
+          }
+      if (n == 1) break;
+      reduce2x2(mn, n, tmp, fmin);
+      mn.swap(tmp);
+      reduce2x2(mx, n, tmp, fmax);
+      mx.swap(tmp);
+    }
+    sum.lo[c] = lo(mn[0]);
+    sum.hi[c] = hi(mx[0]);
+  }
+  const TileSamples<glm::vec3> tile{g.positions, g.coarse, ((1u << L) >> t) + 1, L, t, tx << t, ty << t};
+  sum.levelError = tileErrors<PointDistance>(p, out, tile, tx, ty, margin);
+  return sum;
+}
+
+// Tile (tx, ty) past the data: its nodes take no reading, their boxes are empty at the origin and
+// their errors 0; its summary leaves the nodes above it to the tiles that hold data.
+TileSummary<glm::vec3> emptyGeometryTile(const HierarchyParams& p, Hierarchy::ChartNodes& out, uint32_t t, uint32_t tx,
+                                         uint32_t ty) {
+  const uint32_t L = p.intervalsLog2, shift = L - t, rc = p.resCount();
+  for (uint32_t l = 0; l + shift < p.depth && l <= t; ++l)
+    for (uint32_t y = 0; y < (1u << l); ++y)
+      for (uint32_t x = 0; x < (1u << l); ++x) {
+        const uint32_t i = nodeIndex(l + shift, (tx << l) + x, (ty << l) + y);
+        out.bounds[i] = {};
+        for (uint32_t r = p.minNodeResLog2; r <= p.maxResLog2(l + shift); ++r)
+          out.errors[size_t(i) * rc + (r - p.minNodeResLog2)] = 0.0f;
+      }
+  TileSummary<glm::vec3> sum;
+  sum.lo = glm::vec3(std::numeric_limits<float>::infinity());
+  sum.hi = -sum.lo;
+  sum.levelError.assign(L - p.minNodeResLog2 + 1, 0.0f);
+  return sum;
+}
+
+// Throws InputError naming the chart and tile when a tile's arrays are not of their sizes or hold a
+// non-finite position.
+void checkGeometryTile(const GeometryTile& g, uint32_t chart, uint32_t tx, uint32_t ty, size_t tileSamples,
+                       size_t coarseSamples) {
+  const std::string where = "chart " + std::to_string(chart) + " tile " + std::to_string(tx) + "," + std::to_string(ty);
+  if (g.positions.size() != tileSamples || g.coarse.size() != coarseSamples)
+    throw InputError(where + ": expected " + std::to_string(tileSamples) + " positions and " +
+                     std::to_string(coarseSamples) + " of the coarse level, got " + std::to_string(g.positions.size()) +
+                     " and " + std::to_string(g.coarse.size()));
+  for (const auto* v : {&g.positions, &g.coarse})
+    for (const glm::vec3& q : *v)
+      if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z))
+        throw InputError(where + ": non-finite position");
 }
 
 void putBytes(std::vector<uint8_t>& b, const void* p, size_t n) {
@@ -475,7 +642,7 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindow
   const progress::ProgressStage stage("hierarchy", uint64_t(count) * perChart);
   // Each chart's level t, for the levels whose cells span several tiles.
   std::vector<std::vector<float>> coarse(count);
-  std::vector<std::vector<TileSummary>> summaries(count, std::vector<TileSummary>(perChart));
+  std::vector<std::vector<HeightTileSummary>> summaries(count, std::vector<HeightTileSummary>(perChart));
   tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) {
     initChartNodes(hier.params, hier.charts[c]);
     if (tiles > 1) coarse[c] = source(c, t, 0, 0, M >> t);
@@ -497,7 +664,13 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindow
   });
   if (tiles > 1)
     tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) {
-      buildAboveTiles({hier.params, manifest, manifest.charts[c], hier.charts[c]}, t, std::move(summaries[c]));
+      const TerrainChartNodes nodes{hier.params, manifest, manifest.charts[c], hier.charts[c]};
+      const float z = manifest.heightRange[0];
+      // (Under empty tiles alone: flat at the lowest height, as they are.)
+      buildAboveTiles(hier.params, hier.charts[c], t, std::move(summaries[c]),
+                      [&](uint32_t l, uint32_t x, uint32_t y, const HeightTileSummary& u) {
+                        setNodeBounds(nodes, l, x, y, u.lo <= u.hi ? u.lo : z, u.lo <= u.hi ? u.hi : z);
+                      });
     });
   if (stats) {
     stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
@@ -546,6 +719,56 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params, const std::vecto
   if (stats) {
     stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
     stats->samples = samples;
+    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    stats->samplesPerSecond = stats->seconds > 0 ? double(stats->samples) / stats->seconds : 0.0;
+  }
+  return hier;
+}
+
+Hierarchy buildTiledGeometryHierarchy(const HierarchyParams& params,
+                                      const std::vector<std::array<RootNeighbour, 4>>& roots,
+                                      const GeometryTileSource& source, HierarchyStats* stats, uint32_t maxTile) {
+  Hierarchy hier;
+  hier.params = params;
+  hier.params.validate();
+  if (!std::has_single_bit(maxTile) || maxTile < 2)
+    throw std::invalid_argument("buildTiledGeometryHierarchy: the tile must be a power of two");
+  const uint32_t count = uint32_t(roots.size());
+  hier.charts.resize(count);
+  hier.roots = roots;
+  const uint32_t L = params.intervalsLog2, M = 1u << L;
+  const uint32_t t = std::min(L, uint32_t(std::countr_zero(maxTile))), T = 1u << t, tiles = M / T;
+  const uint32_t perChart = tiles * tiles;
+  const size_t tileSamples = size_t(T + 1) * (T + 1), coarseSamples = size_t(tiles + 1) * (tiles + 1);
+  const auto t0 = std::chrono::steady_clock::now();
+  const progress::ProgressStage stage("hierarchy", uint64_t(count) * perChart);
+  std::vector<std::vector<TileSummary<glm::vec3>>> summaries(count, std::vector<TileSummary<glm::vec3>>(perChart));
+  tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) { initChartNodes(params, hier.charts[c]); });
+  tbb::parallel_for(uint64_t(0), uint64_t(count) * perChart, [&](uint64_t i) {
+    const uint32_t c = uint32_t(i / perChart), tile = uint32_t(i % perChart), tx = tile % tiles, ty = tile / tiles;
+    const std::optional<GeometryTile> g = source(c, t, tx, ty);
+    if (!g) {
+      summaries[c][tile] = emptyGeometryTile(params, hier.charts[c], t, tx, ty);
+    } else {
+      checkGeometryTile(*g, c, tx, ty, tileSamples, tiles > 1 ? coarseSamples : 0);
+      summaries[c][tile] = buildGeometryTile(params, hier.charts[c], *g, t, tx, ty);
+    }
+    progress::advance();
+  });
+  tbb::parallel_for(uint32_t(0), count, [&](uint32_t c) {
+    Hierarchy::ChartNodes& out = hier.charts[c];
+    if (tiles == 1) return;
+    // (Under empty tiles alone: an empty box at the origin, as they have.)
+    buildAboveTiles(params, out, t, std::move(summaries[c]),
+                    [&](uint32_t l, uint32_t x, uint32_t y, const TileSummary<glm::vec3>& u) {
+                      auto& b = out.bounds[nodeIndex(l, x, y)];
+                      b = {};
+                      if (u.lo.x <= u.hi.x) b = {u.lo.x, u.lo.y, u.lo.z, u.hi.x, u.hi.y, u.hi.z};
+                    });
+  });
+  if (stats) {
+    stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
+    stats->samples = uint64_t(count) * (M + 1) * (M + 1);
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     stats->samplesPerSecond = stats->seconds > 0 ? double(stats->samples) / stats->seconds : 0.0;
   }

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <vector>
 
 #include <glm/vec3.hpp>
@@ -132,15 +133,41 @@ inline constexpr uint32_t kHierarchyTile = 1024;
 Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindowSource& source, HierarchyStats* stats,
                                 uint32_t maxTile = kHierarchyTile);
 
+// A tile of a geometry image measured in tiles (buildTiledGeometryHierarchy), its positions
+// relative to `origin`, in float: the tile's level-0 samples ((2^t + 1)^2, row = v) and the chart's
+// pyramid level t (((intervals >> t) + 1)^2; empty when the tile is the whole chart).
+struct GeometryTile {
+  glm::dvec3 origin{0.0};
+  std::vector<glm::vec3> positions;
+  std::vector<glm::vec3> coarse;
+};
+// (chart, t, tx, ty) -> tile (tx, ty) of 2^t intervals of the chart, or nothing for a tile past the
+// data (its nodes are never drawn: errors 0, empty boxes). Must be thread-safe.
+using GeometryTileSource =
+    std::function<std::optional<GeometryTile>(uint32_t chart, uint32_t t, uint32_t tx, uint32_t ty)>;
+
+// The hierarchy of a geometry-image atlas whose charts are read in tiles of at most maxTile
+// intervals (a power of two): the errors and boxes of buildGeometryHierarchy, each tile's samples
+// measured relative to its own origin in float, so that a chart of any size keeps the precision
+// of its tiles' extent. Each positive error grows by four float steps of the largest coordinate it
+// was measured from (the tile's samples, and the corners of the coarser cells they lie in), each
+// box by four of its tile's and rounded outwards, so both still hold for the exact positions. A
+// node above the tiles takes the largest error and the union of the boxes of its tiles. Memory: a
+// few tiles' worth a thread, whatever the chart's size. Flags are left clear. Throws InputError
+// naming the chart and tile for arrays of the wrong size or a non-finite position.
+Hierarchy buildTiledGeometryHierarchy(const HierarchyParams& params,
+                                      const std::vector<std::array<RootNeighbour, 4>>& roots,
+                                      const GeometryTileSource& source, HierarchyStats* stats = nullptr,
+                                      uint32_t maxTile = kHierarchyTile);
+
 // The hierarchy of a planet atlas (manifest.planet, core/planet.h): each chart's samples placed on
-// the sphere (PlanetFrame::position) and measured as a geometry image (buildGeometryHierarchy), so
-// bounds are planet-centred boxes and errors Euclidean distances in world units (metres on a planet), the sphere's
-// curvature included. The positions are measured relative to the chart's centre in float, and each error grows by four
-// float steps of the chart's extent (bounds round outwards), so both still hold. Nodes past the DEM's last samples are
-// empty, as on flat terrain. Throws InputError for charts of more than kMaxPlanetChartIntervals intervals.
-inline constexpr uint32_t kMaxPlanetChartIntervals = 4096;
+// the sphere (PlanetFrame::position) and measured in tiles of maxTile intervals relative to each
+// tile's centre (buildTiledGeometryHierarchy), so bounds are planet-centred boxes and errors
+// Euclidean distances in world units (metres on a planet), the sphere's curvature included, with
+// the precision of a tile's extent whatever the chart's size. Nodes past the DEM's last samples are
+// empty, as on flat terrain.
 Hierarchy buildPlanetHierarchy(const AtlasManifest& manifest, const ChartWindowSource& source,
-                               HierarchyStats* stats = nullptr);
+                               HierarchyStats* stats = nullptr, uint32_t maxTile = kHierarchyTile);
 
 // Mesh-atlas input: chart id -> its finest geometry image, side ((chartSize - 1) >> finest level)
 // + 1 positions (row = v). Must be thread-safe.

@@ -107,7 +107,7 @@ TerrainPlan planTerrain(const fs::path& input, uint64_t width, uint64_t height, 
   auto along = [](uint64_t samples, uint64_t m) { return std::max<uint64_t>(1, (samples - 1 + m - 1) / m); };
   uint32_t cs = o.chartSize;
   if (plan.autoChartSize) {
-    cs = 513;
+    cs = kMinPlannedChartSize;
     while (cs < kMaxTerrainChartSize && along(width, cs - 1) * along(height, cs - 1) > kTargetTerrainCharts)
       cs = 2 * cs - 1;
   }
@@ -409,6 +409,32 @@ TerrainWriteStats writeTerrainAtlasWindowed(const TerrainBuildOptions& o, const 
   return w;
 }
 
+namespace {
+
+// A planet's chart size: the plan's, or a half or a quarter of it where that adds fewer columns.
+// The lattice resamples each row of a DEM that circles the planet to whole charts round the turn
+// (atlas/terrain/planet_grid.h), so the columns past the DEM's own are stored samples, unlike a
+// flat grid's empty padding. The largest size whose turn is within 1/16 of the DEM's columns, else
+// the one that adds the fewest (ETOPO5 at 5.5G samples: 104,832 columns make 114,688 in charts of
+// 16,385, 106,496 in charts of 8,193). Never below kMinPlannedChartSize, where the plan's depth
+// stops following the chart's size and smaller charts would have more nodes an area. A regional
+// DEM keeps the plan's.
+uint32_t planetChartSize(const TerrainBuildOptions& options, uint32_t planned, uint64_t width) {
+  uint32_t best = planned;
+  uint64_t fewest = UINT64_MAX;
+  for (uint32_t size = planned, i = 0; i < 3 && size >= kMinPlannedChartSize; ++i, size = (size - 1) / 2 + 1) {
+    TerrainBuildOptions o = options;
+    o.chartSize = size;
+    const uint64_t turn = DemSource(options.input, terrainDemOptions(o)).info().planet.wrapColumns;
+    if (turn == 0) return planned;
+    if (turn * 16 <= width * 17) return size;
+    if (turn < fewest) best = size, fewest = turn;
+  }
+  return best;
+}
+
+}  // namespace
+
 TerrainBuildOptions plannedTerrainBuild(const TerrainBuildOptions& options, TerrainPlan* planOut) {
   std::error_code ec;
   validateTerrainBuildOptions(options);
@@ -423,10 +449,9 @@ TerrainBuildOptions plannedTerrainBuild(const TerrainBuildOptions& options, Terr
     raw.chartSize = kMaxTerrainChartSize;
     const DemSource source(options.input, terrainDemOptions(raw));
     const uint64_t w = source.info().width, h = source.info().height;
-    // Planet charts are measured whole on the sphere (buildPlanetHierarchy), and the antimeridian is
-    // laid on a chart border: the chart size first, then the lattice.
+    // A planet's antimeridian is laid on a chart border: the chart size first, then the lattice.
     if (options.planet && options.chartSize == kAutoChartSize)
-      po.chartSize = std::min(planTerrain(options.input, w, h, options).chartSize, kMaxPlanetChartIntervals + 1);
+      po.chartSize = planetChartSize(options, planTerrain(options.input, w, h, options).chartSize, w);
     plan = planTerrain(options.input, w, h, po);
   }
   const TerrainBuildOptions o = plannedOptions(po, plan);

@@ -33,6 +33,7 @@ struct TerrainPlan {
   bool autoChartSize = false, autoDepth = false;
 };
 inline constexpr uint32_t kTargetTerrainCharts = 64;
+inline constexpr uint32_t kMinPlannedChartSize = 513;  // the smallest chart the plan chooses
 // The bytes a terrain hierarchy of `charts` trees of `depth` levels holds in memory (bounds, flags
 // and an error for each of resCount resolutions, per node).
 uint64_t terrainHierarchyBytes(uint64_t charts, uint32_t depth, uint32_t resCount);

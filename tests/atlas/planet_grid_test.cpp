@@ -4,6 +4,7 @@
 #include <cmath>
 #include <memory>
 #include <numbers>
+#include <tuple>
 
 #include <gdal.h>
 #include <gdal_utils.h>
@@ -17,6 +18,7 @@
 #include "core/stage_meter.h"
 #include "pipeline/build.h"
 #include "pipeline/sharded_build.h"
+#include "pipeline/terrain_build.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -252,6 +254,43 @@ TEST(PlanetGrid, NormalsAreCentralDifferencesAcrossTheAntimeridian) {
   }
 }
 
+// The shipped Earth resampled to w x h samples (a VRT) at `path`.
+void upsampledEarth(const std::filesystem::path& path, uint32_t w, uint32_t h) {
+  GDALAllRegister();
+  const std::string ws = std::to_string(w), hs = std::to_string(h);
+  const char* args[] = {"-of", "VRT", "-outsize", ws.c_str(), hs.c_str(), "-r", "bilinear", nullptr};
+  GDALTranslateOptions* to = GDALTranslateOptionsNew(const_cast<char**>(args), nullptr);
+  GDALDatasetH src = GDALOpen((test::repoData() / "terrain/etopo_30min.tif").c_str(), GA_ReadOnly);
+  ASSERT_NE(src, nullptr);
+  GDALDatasetH vrt = GDALTranslate(path.c_str(), src, to, nullptr);
+  ASSERT_NE(vrt, nullptr);
+  GDALClose(vrt);
+  GDALClose(src);
+  GDALTranslateOptionsFree(to);
+}
+
+// A planet's chart size is the plan's unless that adds over 1/16 of the DEM's columns round the
+// turn: 9,000 columns make 9,216 in the plan's charts of 1,025 (kept); 8,400 would make 9,216
+// there (9.7% more), 8,704 in charts of 513 (3.6%).
+TEST(PlanetGrid, ChartsAreHalvedWhereThePlansWouldAddColumns) {
+  test::TempDir dir("planet_chart_size");
+  for (const auto& [w, planned, chosen, turn] : {std::tuple{9000u, 1025u, 1025u, 9216u}, {8400u, 1025u, 513u, 8704u}}) {
+    SCOPED_TRACE(w);
+    const std::filesystem::path vrt = dir.path() / ("earth" + std::to_string(w) + ".vrt");
+    upsampledEarth(vrt, w, w / 2);
+    TerrainBuildOptions o;
+    o.input = vrt;
+    TerrainPlan flat;
+    plannedTerrainBuild(o, &flat);
+    EXPECT_EQ(flat.chartSize, planned);
+    o.planet = true;
+    const TerrainBuildOptions p = plannedTerrainBuild(o);
+    EXPECT_EQ(p.chartSize, chosen);
+    o.chartSize = p.chartSize;
+    EXPECT_EQ(DemSource(vrt, terrainDemOptions(o)).info().planet.wrapColumns, turn);
+  }
+}
+
 // A window-by-window build whose memory cap builds charts of 513 in tiles reads the tiles' margins
 // and the coarse lattice across the antimeridian: every level's heights and normals are the
 // in-memory build's; and so are those of a build in three shards, whose charts at the antimeridian
@@ -260,16 +299,7 @@ TEST(PlanetGrid, ChartsBuiltInTilesReadAcrossTheAntimeridian) {
   test::TempDir dir("planet_tiles");
   // The shipped Earth at twice its resolution (a VRT): 4 chart columns a turn, so that the charts
   // at the antimeridian read lattice no window of theirs holds.
-  GDALAllRegister();
-  const char* args[] = {"-of", "VRT", "-outsize", "1537", "723", "-r", "bilinear", nullptr};
-  GDALTranslateOptions* to = GDALTranslateOptionsNew(const_cast<char**>(args), nullptr);
-  GDALDatasetH src = GDALOpen((test::repoData() / "terrain/etopo_30min.tif").c_str(), GA_ReadOnly);
-  ASSERT_NE(src, nullptr);
-  GDALDatasetH vrt = GDALTranslate((dir.path() / "earth2.vrt").c_str(), src, to, nullptr);
-  ASSERT_NE(vrt, nullptr);
-  GDALClose(vrt);
-  GDALClose(src);
-  GDALTranslateOptionsFree(to);
+  upsampledEarth(dir.path() / "earth2.vrt", 1537, 723);
   TerrainBuildOptions o;
   o.input = dir.path() / "earth2.vrt";
   o.planet = true;
