@@ -445,6 +445,15 @@ void buildGeometryChart(const HierarchyParams& p, const std::vector<glm::vec3>& 
   fillErrors(p, P, PointDistance{}, out);
 }
 
+// A build's figures: its samples and the time since t0, on this arena's threads.
+void setStats(HierarchyStats* stats, uint64_t samples, std::chrono::steady_clock::time_point t0) {
+  if (!stats) return;
+  stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
+  stats->samples = samples;
+  stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  stats->samplesPerSecond = stats->seconds > 0 ? double(stats->samples) / stats->seconds : 0.0;
+}
+
 // Four float steps of the largest coordinate in `points` (relative to their origin): how far a
 // float position, or a distance measured between such positions, may be from its exact value.
 float floatMargin(const glm::vec3* points, size_t count, float atLeast = 0.0f) {
@@ -672,12 +681,7 @@ Hierarchy buildTerrainHierarchy(const AtlasManifest& manifest, const ChartWindow
                         setNodeBounds(nodes, l, x, y, u.lo <= u.hi ? u.lo : z, u.lo <= u.hi ? u.hi : z);
                       });
     });
-  if (stats) {
-    stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
-    stats->samples = uint64_t(count) * (M + 1) * (M + 1);
-    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    stats->samplesPerSecond = stats->seconds > 0 ? double(stats->samples) / stats->seconds : 0.0;
-  }
+  setStats(stats, uint64_t(count) * (M + 1) * (M + 1), t0);
   return hier;
 }
 
@@ -716,12 +720,7 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params, const std::vecto
     samples += P.size();
     progress::advance();
   });
-  if (stats) {
-    stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
-    stats->samples = samples;
-    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    stats->samplesPerSecond = stats->seconds > 0 ? double(stats->samples) / stats->seconds : 0.0;
-  }
+  setStats(stats, samples, t0);
   return hier;
 }
 
@@ -766,12 +765,7 @@ Hierarchy buildTiledGeometryHierarchy(const HierarchyParams& params,
                       if (u.lo.x <= u.hi.x) b = {u.lo.x, u.lo.y, u.lo.z, u.hi.x, u.hi.y, u.hi.z};
                     });
   });
-  if (stats) {
-    stats->threads = uint32_t(tbb::this_task_arena::max_concurrency());
-    stats->samples = uint64_t(count) * (M + 1) * (M + 1);
-    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    stats->samplesPerSecond = stats->seconds > 0 ? double(stats->samples) / stats->seconds : 0.0;
-  }
+  setStats(stats, uint64_t(count) * (M + 1) * (M + 1), t0);
   return hier;
 }
 
