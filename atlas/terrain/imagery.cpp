@@ -424,6 +424,61 @@ uint64_t writeColourSquare(const ColourSquare& sq, ChartFileWriter& file) {
   return uint64_t(sq.intervals + 1) * (sq.intervals + 1);
 }
 
+// The colours of the antimeridian on a planet whose charts circle it: the west border column of the
+// first column of charts, per chart row and level, which the last column of charts takes as its
+// east border (the same place), so that both hold the same colours at every level. A coarser
+// level's filter is edge-clamped on either side of the antimeridian; without this the two borders
+// would differ where the colours change across it, and level 0's last column is the imagery's
+// east edge as reprojected, not its west edge.
+class AntimeridianColumns {
+ public:
+  explicit AntimeridianColumns(const AtlasManifest& m)
+      : ci_(uint64_t(m.chartSize - 1) << m.imagery.scaleLog2),
+        east_(m.chartsX - 1),
+        active_(m.planet.present && m.planet.wrapColumns != 0 &&
+                uint64_t(m.chartsX) * (m.chartSize - 1) == m.planet.wrapColumns) {
+    if (!active_) return;
+    columns_.assign(m.chartsY, std::vector<std::vector<PackedColour>>(m.pyramidLevels()));
+    for (auto& row : columns_)
+      for (uint32_t k = 0; k < row.size(); ++k) row[k].resize(size_t(ci_ >> k) + 1);
+  }
+  bool east(const ChartInfo& c) const { return active_ && uint32_t(c.gridX) == east_; }
+  // Records rows [y0, y0 + n] of chart row gy's west border at file level k from `pyramid`'s level
+  // k - first, which holds them.
+  void record(const ImageryPyramid& pyramid, uint32_t first, uint32_t k, uint32_t gy, uint64_t y0, uint64_t n) {
+    if (!active_) return;
+    const uint64_t y = (uint64_t(gy) * ci_ >> k) + y0;
+    const PackedColour* p = pyramid.at(k - first, 0, y);
+    for (uint64_t v = 0; v <= n; ++v) columns_[gy][k][size_t(y0 + v)] = p[v * pyramid.stride(k - first)];
+  }
+  // The levels first and up of every chart row's west border, from a pyramid of the whole grid.
+  void recordAll(const ImageryPyramid& pyramid, uint32_t first) {
+    for (uint32_t gy = 0; active_ && gy < columns_.size(); ++gy)
+      for (uint32_t k = first; k < columns_[gy].size(); ++k) record(pyramid, first, k, gy, 0, ci_ >> k);
+  }
+  // `sq`, rows [y0, y0 + sq.intervals] of chart row gy's east border chart at its level, with its
+  // last column the west border's (copied into `buffer`).
+  ColourSquare eastBorder(const ColourSquare& sq, uint32_t gy, uint64_t y0, std::vector<PackedColour>& buffer) const {
+    const size_t side = size_t(sq.intervals) + 1;
+    buffer.resize(side * side);
+    const std::vector<PackedColour>& west = columns_[gy][sq.fileLevel];
+    for (size_t v = 0; v < side; ++v) {
+      std::copy_n(sq.origin + v * sq.stride, side - 1, buffer.begin() + std::ptrdiff_t(v * side));
+      buffer[v * side + side - 1] = west[size_t(y0) + v];
+    }
+    ColourSquare out = sq;
+    out.origin = buffer.data();
+    out.stride = side;
+    return out;
+  }
+
+ private:
+  uint64_t ci_ = 0;
+  uint32_t east_ = 0;
+  bool active_ = false;
+  std::vector<std::vector<std::vector<PackedColour>>> columns_;  // [gridY][level][row]
+};
+
 std::unique_ptr<ChartFileWriter> openImageryChart(const fs::path& dir, const AtlasManifest& m, ChartInfo& c) {
   c.imageryFile = imageryFileName(c.id);
   ChartCoding coding;
@@ -435,23 +490,27 @@ std::unique_ptr<ChartFileWriter> openImageryChart(const fs::path& dir, const Atl
 
 // Levels first and up of chart `c`'s file, cut from `pyramid` whose level 0 is the file's level
 // `first`; returns their samples.
+// A chart at the antimeridian's east side takes its east border from `seam`.
 uint64_t writeChartLevels(const ImageryPyramid& pyramid, uint32_t first, const AtlasManifest& m, const ChartInfo& c,
-                          ChartFileWriter& file) {
+                          ChartFileWriter& file, const AntimeridianColumns& seam) {
   const uint64_t ci = uint64_t(m.chartSize - 1) << m.imagery.scaleLog2;
   uint64_t samples = 0;
+  std::vector<PackedColour> buffer;
   for (uint32_t k = first; k < m.pyramidLevels(); ++k) {
     const uint32_t j = k - first;
     const uint64_t x = (uint64_t(c.gridX) * ci) >> k, y = (uint64_t(c.gridY) * ci) >> k;
-    samples += writeColourSquare({pyramid.at(j, x, y), pyramid.stride(j), uint32_t(ci >> k), k, 0, 0}, file);
+    ColourSquare sq{pyramid.at(j, x, y), pyramid.stride(j), uint32_t(ci >> k), k, 0, 0};
+    if (seam.east(c)) sq = seam.eastBorder(sq, uint32_t(c.gridY), 0, buffer);
+    samples += writeColourSquare(sq, file);
   }
   return samples;
 }
 
 // Writes chart `c`'s imagery file, cut from `pyramid`; returns its bytes and adds its samples.
 uint64_t writeImageryChart(const ImageryPyramid& pyramid, const fs::path& dir, const AtlasManifest& m, ChartInfo& c,
-                           std::atomic<uint64_t>& samples) {
+                           std::atomic<uint64_t>& samples, const AntimeridianColumns& seam) {
   const auto file = openImageryChart(dir, m, c);
-  samples += writeChartLevels(pyramid, 0, m, c, *file);
+  samples += writeChartLevels(pyramid, 0, m, c, *file, seam);
   return file->commit();
 }
 
@@ -488,10 +547,12 @@ ImageryWriteStats writeImageryCharts(const ImageryRaster& raster, const std::str
   makeImageryDir(dir);
   const ImageryPyramid pyramid(raster, m.chartsX, m.chartsY, m.chartSize, m.intervalsLog2() + 1);
   setImageryInfo(m, raster.scaleLog2, source, raster.coverage);
+  AntimeridianColumns seam(m);
+  seam.recordAll(pyramid, 0);
   std::atomic<uint64_t> bytes{0}, samples{0};
   const progress::ProgressStage stage("imagery charts", m.charts.size());
   tbb::parallel_for(size_t{0}, m.charts.size(), [&](size_t i) {
-    bytes += writeImageryChart(pyramid, dir, m, m.charts[i], samples);
+    bytes += writeImageryChart(pyramid, dir, m, m.charts[i], samples, seam);
     progress::advance();
   });
   ImageryWriteStats st;
@@ -523,6 +584,8 @@ ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& s
   const uint64_t latW = imagery.width(), latH = imagery.height();
   imagery.keepTiles(memoryBytes / 4);
   setImageryInfo(m, s, source, 0.0);
+  AntimeridianColumns seam(m);
+  std::vector<PackedColour> buffer;
   std::vector<int64_t> at(size_t(m.chartsX) * m.chartsY, -1);
   for (size_t i = 0; i < m.charts.size(); ++i)
     at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
@@ -547,12 +610,20 @@ ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& s
           const ImageryWindow window{uint32_t(x0), uint32_t(y0), w, h};
           const ImageryPyramid pyramid(gridWindow(imagery, window, owned, covered), window,
                                        {m.chartsX, m.chartsY, m.chartSize, s}, kc + 1);
+          for (uint32_t k = 0; k < kc && cx == 0 && tx == 0; ++k)
+            seam.record(pyramid, 0, k, cy, ty * (tile >> k), tile >> k);
           if (chart >= 0)
             for (uint32_t k = 0; k < kc; ++k) {
               const uint32_t perTile = uint32_t((tile >> k) / (uint64_t(m.blockIntervals) << s));
-              writeColourSquare({pyramid.at(k, ox >> k, oy >> k), pyramid.stride(k), uint32_t(tile >> k), k,
-                                 tx * perTile, ty * perTile},
-                                *files[size_t(chart)]);
+              ColourSquare sq{pyramid.at(k, ox >> k, oy >> k),
+                              pyramid.stride(k),
+                              uint32_t(tile >> k),
+                              k,
+                              tx * perTile,
+                              ty * perTile};
+              if (tx + 1 == per && seam.east(m.charts[size_t(chart)]))
+                sq = seam.eastBorder(sq, cy, ty * (tile >> k), buffer);
+              writeColourSquare(sq, *files[size_t(chart)]);
             }
           const uint64_t n = (tile >> kc) + 1;
           for (uint64_t v = 0; v < n; ++v)
@@ -568,9 +639,10 @@ ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& s
   // The levels from kc up, from the grid's level kc.
   const ImageryPyramid top(std::move(coarse), {0, 0, uint32_t(cw), uint32_t(ch)},
                            {m.chartsX, m.chartsY, uint32_t(ci >> kc) + 1, 0}, levels - kc);
+  seam.recordAll(top, kc);
   std::atomic<uint64_t> bytes{0};
   tbb::parallel_for(size_t{0}, m.charts.size(), [&](size_t i) {
-    writeChartLevels(top, kc, m, m.charts[i], *files[i]);
+    writeChartLevels(top, kc, m, m.charts[i], *files[i], seam);
     bytes += files[i]->commit();
     files[i].reset();
   });
@@ -610,6 +682,7 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
   for (size_t i = 0; i < m.charts.size(); ++i)
     at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
   setImageryInfo(m, s, source, 0.0);
+  AntimeridianColumns seam(m);
   std::atomic<uint64_t> bytes{0}, samples{0};
   uint64_t covered = 0, windows = 0, most = 0;
   const progress::ProgressStage stage("imagery charts", m.charts.size());
@@ -632,8 +705,10 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
       const ImageryWindow window{uint32_t(x0), uint32_t(y0), w, h};
       std::vector<PackedColour> base = gridWindow(imagery, window, owned, covered);
       const ImageryPyramid pyramid(std::move(base), window, {m.chartsX, m.chartsY, m.chartSize, s}, levels);
+      for (uint64_t cy = cy0; cy < cy1 && cx0 == 0; ++cy)
+        for (uint32_t k = 0; k < levels; ++k) seam.record(pyramid, 0, k, uint32_t(cy), 0, ci >> k);
       tbb::parallel_for(size_t{0}, charts.size(), [&](size_t i) {
-        bytes += writeImageryChart(pyramid, dir, m, m.charts[charts[i]], samples);
+        bytes += writeImageryChart(pyramid, dir, m, m.charts[charts[i]], samples, seam);
         progress::advance();
       });
       ++windows;

@@ -12,6 +12,9 @@
 #include <nlohmann/json.hpp>
 
 #include "atlas/terrain/planet_grid.h"
+#include "atlas/terrain/dem.h"
+#include "atlas/terrain/terrain_atlas.h"
+#include "atlas/terrain/imagery.h"
 #include "atlas/mesh/mesh_atlas.h"
 #include "core/atlas_format.h"
 #include "core/planet.h"
@@ -19,6 +22,7 @@
 #include "pipeline/build.h"
 #include "pipeline/sharded_build.h"
 #include "pipeline/terrain_build.h"
+#include "tests/imagery_fixture.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -334,6 +338,89 @@ TEST(PlanetGrid, ChartsBuiltInTilesReadAcrossTheAntimeridian) {
         EXPECT_EQ(differ, 0u) << built.filename() << " " << c.file << " level " << k;
       }
     }
+}
+
+// A global image whose colours change across the antimeridian (red ramps up eastwards from 0 at
+// 180 W to 255 at 180 E; green waves; blue ramps with latitude).
+void writeGlobeImagery(const std::filesystem::path& path) {
+  test::writeTestRaster(
+      path, 720, 360,
+      [](int x, int y) {
+        return std::array<uint8_t, 3>{uint8_t(x * 255 / 719), uint8_t(128 + 100 * std::sin(0.026 * x + 0.05 * y)),
+                                      uint8_t(y * 255 / 359)};
+      },
+      {-180.0, 0.5, 0.0, 90.0, 0.0, -0.5}, 4326);
+}
+
+// The colours of chart files `west` and `east` at level k, on the west one's first column and the
+// east one's last: the same place on the planet.
+size_t seamDifferences(const std::filesystem::path& west, const std::filesystem::path& east, uint32_t k) {
+  const ChartFileReader w(west), e(east);
+  const std::vector<PackedColour> a = w.readLevelColours(k), b = e.readLevelColours(k);
+  const size_t side = size_t(std::lround(std::sqrt(double(a.size()))));
+  size_t differ = 0;
+  for (size_t v = 0; v < side; ++v) differ += a[v * side] != b[v * side + side - 1];
+  return differ;
+}
+
+// The seam's differences in every level of every chart row of the atlas in `dir` (manifest m), and
+// the levels checked.
+std::pair<size_t, uint32_t> seamDifferences(const std::filesystem::path& dir, const AtlasManifest& m) {
+  size_t differ = 0;
+  uint32_t levels = 0;
+  for (uint32_t gy = 0; gy < m.chartsY; ++gy) {
+    const ChartInfo& west = m.charts[size_t(gy) * m.chartsX];
+    const ChartInfo& east = m.charts[size_t(gy) * m.chartsX + m.chartsX - 1];
+    for (uint32_t k = 0; k < m.pyramidLevels(); ++k, ++levels)
+      differ += seamDifferences(dir / west.imageryFile, dir / east.imageryFile, k);
+  }
+  return {differ, levels};
+}
+
+// A planet's imagery meets itself at the antimeridian: the first column of charts' west borders and
+// the last column's east borders hold the same colours at every level, where the colours change
+// across it, written whole, window by window and in tiles; and the windows' and tiles' colours are
+// the whole raster's.
+TEST(PlanetGrid, ImageryMeetsItselfAtTheAntimeridianAtEveryLevel) {
+  test::TempDir dir("planet_imagery");
+  writeGlobeImagery(dir.path() / "globe.tif");
+  const std::filesystem::path input = test::repoData() / "terrain/etopo_30min.tif";
+  DemOptions d;
+  d.planetRadius = kEarthRadius;
+  d.planetChartIntervals = 128;
+  const DemRaster dem = loadDem(input, d);
+  TerrainAtlasOptions atlas;
+  atlas.chartSize = 129;
+  atlas.blockIntervals = 16;
+  ImageryOptions io;
+  io.path = dir.path() / "globe.tif";
+  ImagerySource source(dem, input, io);
+  for (const char* way : {"whole", "windows", "tiles"}) {
+    SCOPED_TRACE(way);
+    const std::filesystem::path out = dir.path() / way;
+    std::filesystem::create_directories(out);
+    AtlasManifest m;
+    writeTerrainCharts(dem, atlas, out, m);
+    ASSERT_EQ(uint64_t(m.chartsX) * (m.chartSize - 1), m.planet.wrapColumns);
+    ImageryWindowStats ws;
+    if (way == std::string("whole"))
+      writeImageryCharts(loadImagery(dem, input, io), "globe", out, m);
+    else if (way == std::string("windows"))
+      writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{2} << 20}, &ws);
+    else
+      writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{64} << 20, 32}, &ws);
+    if (way == std::string("windows")) EXPECT_GT(ws.windows, 1u) << "the seam is not across windows";
+    if (way == std::string("tiles")) EXPECT_GT(ws.windows, m.charts.size()) << "the charts were not built in tiles";
+    const auto [differ, levels] = seamDifferences(out, m);
+    EXPECT_EQ(differ, 0u);
+    EXPECT_EQ(levels, m.chartsY * m.pyramidLevels());
+    for (const ChartInfo& c : m.charts) {
+      const ChartFileReader got(out / c.imageryFile), want(dir.path() / "whole" / c.imageryFile);
+      ASSERT_EQ(got.levels(), want.levels());
+      for (uint32_t k = 0; k < got.levels(); ++k)
+        EXPECT_TRUE(got.readLevelColours(k) == want.readLevelColours(k)) << c.imageryFile << " level " << k;
+    }
+  }
 }
 
 // A WGS84 planet's samples lie where PROJ puts their longitude, latitude and height (EPSG:4979 to
