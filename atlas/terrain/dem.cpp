@@ -329,6 +329,7 @@ void DemSource::layPlanetGrid(const DemOptions& options) {
   PlanetGrid g = planPlanetGrid({dem.georef, dem.width, dem.height, integer}, path, options.planetRadius,
                                 options.planetChartIntervals);
   g.info.flattening = options.planetFlattening;
+  if (!g.warning.empty()) dem.warnings.push_back(g.warning);
   std::vector<float> row(dem.width);
   std::vector<uint8_t> valid(dem.width);
   if (g.southRows > 0) {

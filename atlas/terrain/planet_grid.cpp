@@ -41,6 +41,14 @@ PlanetGrid planPlanetGrid(const PlanetSource& dem, const std::filesystem::path& 
     g.turn = W;
   else if (W > 2 && std::fabs(double(W - 1) * dx - 360.0) < 0.5 * dx)
     g.turn = W - 1;
+  if (!g.turn && std::fabs(double(W) * dx - 360.0) < 3.6) {
+    char text[200];
+    std::snprintf(text, sizeof text,
+                  "spans %.4f degrees of longitude, not 360 within half a pixel (%.6f): drawn as a regional DEM "
+                  "that does not wrap; give its extent exactly (gdal_translate -a_ullr) to wrap it",
+                  double(W) * dx, 0.5 * dx);
+    g.warning = text;
+  }
   if (g.turn) {
     const uint64_t m = std::max<uint32_t>(chartIntervals, 1);
     const uint64_t to = (g.turn + m - 1) / m * m;

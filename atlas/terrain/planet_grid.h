@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <string>
 
 #include "core/atlas_format.h"
 #include "core/planet.h"
@@ -33,6 +34,7 @@ struct PlanetGrid {
   uint32_t southMeanRow = 0, northMeanRow = 0;
   bool round = false;                        // heights rounded to whole metres
   float southMean = 0.0f, northMean = 0.0f;  // the pole rows' height
+  std::string warning;                       // a DEM that nearly circles the planet but is regional
   uint32_t width() const { return info.wrapColumns ? info.wrapColumns + 1 : sourceWidth; }
   uint32_t height() const { return sourceHeight + southAdded + northAdded; }
   // The source row of row y, or -1 for an added pole row.

@@ -170,6 +170,26 @@ TEST(PlanetGrid, ARegionalDemIsLeftAsItIs) {
   EXPECT_NEAR(p.lat0Deg, 49.205, 1e-9);
 }
 
+// A DEM whose extent misses 360 degrees by more than half its pixel (ETOPO5's NetCDF spans 360.0033
+// degrees; resampled to 207,872 columns that is 3.8 pixels) is regional, and says why; its
+// extent given exactly, it wraps. The regional DEM above says nothing.
+TEST(PlanetGrid, ANearlyGlobalDemThatDoesNotWrapSaysSo) {
+  Georeference near;
+  near.geographic = true;
+  near.geotransform = {-0.0416671, 360.0033 / 207872, 0.0, 90.04, 0.0, -0.0017};
+  const PlanetGrid g = planPlanetGrid({near, 207872, 1000, true}, "big.vrt", kEarthRadius, 16384);
+  EXPECT_EQ(g.info.wrapColumns, 0u);
+  EXPECT_NE(g.warning.find("360.0033 degrees"), std::string::npos) << g.warning;
+  EXPECT_NE(g.warning.find("-a_ullr"), std::string::npos) << g.warning;
+  Georeference exact = near;
+  exact.geotransform[1] = 360.0 / 207872;
+  const PlanetGrid w = planPlanetGrid({exact, 207872, 1000, true}, "big.vrt", kEarthRadius, 16384);
+  EXPECT_EQ(w.info.wrapColumns, 212992u);
+  EXPECT_TRUE(w.warning.empty()) << w.warning;
+  DemRaster alps = geographicDem(100, 80, 10.0, 50.0, 0.01, [](uint32_t, uint32_t) { return 0.0f; });
+  EXPECT_TRUE(planPlanetGrid({alps.georef, 100, 80, true}, "alps.tif", kEarthRadius, 64).warning.empty());
+}
+
 TEST(PlanetGrid, AProjectedDemIsRefusedByName) {
   DemRaster d = geographicDem(10, 10, 500000.0, 5200000.0, 30.0, [](uint32_t, uint32_t) { return 0.0f; });
   d.georef.geographic = false;
