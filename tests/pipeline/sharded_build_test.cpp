@@ -124,9 +124,13 @@ TEST(ShardedBuild, APlanetAndChartsBuiltInTilesAreByteIdentical) {
   // with the lattice of their coarse levels gathered across shards, against one process in the
   // same cap; a shard in another cap keeps the plan's tiles.
   // Each step's cap is the same headroom over what the process holds when it starts (that grows
-  // and shrinks between steps), so the one process and the prepare choose the same tiles.
+  // and shrinks between steps), so the one process and the prepare choose the same tiles; freed
+  // memory is handed back first, so that what the process holds does not fall after the cap is set.
   TerrainBuildOptions tiled = tileOptions(dir.path() / "tiled-one.atlas");
-  const auto headroom = [&] { tiled.maxMemory = residentBytes() + (uint64_t{48} << 20); };
+  const auto headroom = [&] {
+    releaseFreedMemory();
+    tiled.maxMemory = residentBytes() + (uint64_t{48} << 20);
+  };
   tiled.chartSize = 513;
   tiled.outOfCore = true;
   headroom();
