@@ -429,8 +429,12 @@ TEST(PlanetGrid, ImageryMeetsItselfAtTheAntimeridianAtEveryLevel) {
       writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{2} << 20}, &ws);
     else
       writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{64} << 20, 32}, &ws);
-    if (way == std::string("windows")) EXPECT_GT(ws.windows, 1u) << "the seam is not across windows";
-    if (way == std::string("tiles")) EXPECT_GT(ws.windows, m.charts.size()) << "the charts were not built in tiles";
+    if (way == std::string("windows")) {
+      EXPECT_GT(ws.windows, 1u) << "the seam is not across windows";
+    }
+    if (way == std::string("tiles")) {
+      EXPECT_GT(ws.windows, m.charts.size()) << "the charts were not built in tiles";
+    }
     const auto [differ, levels] = seamDifferences(out, m);
     EXPECT_EQ(differ, 0u);
     EXPECT_EQ(levels, m.chartsY * m.pyramidLevels());
