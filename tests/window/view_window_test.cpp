@@ -258,9 +258,12 @@ class Session {
     rc_ = cwd / "rc";
     fs::remove(stats_);
     fs::remove(rc_);
+    // The exit status is written whole and then renamed into place, so `finished()` never sees
+    // the file before its number is in it.
     const std::string cmd = "cd '" + cwd.string() + "' && (" + env + test::appPath().string() + " view " + options +
                             " --stats '" + stats_.string() + "' --exit-after 100000 > view.log 2>&1; echo $? > '" +
-                            rc_.string() + "') > /dev/null 2>&1 &";
+                            rc_.string() + ".part' && mv '" + rc_.string() + ".part' '" + rc_.string() +
+                            "') > /dev/null 2>&1 &";
     ok_ = test::runCommand(cmd) == 0;
     std::string id;
     ok_ = ok_ && test::runCommand(env + "timeout 30 xdotool search --sync --name 'gimlod view'", &id) == 0;
