@@ -122,9 +122,10 @@ double meshPositionStep(const MeshBounds& b, uint32_t positionBits) {
   for (int a = 0; a < 3; ++a) largest = std::max({largest, std::abs(double(b.min[a])), std::abs(double(b.max[a]))});
   // A power of two, so lattice points are exact floats, and no finer than 2^-22 of the largest
   // coordinate, so every coordinate is within 2^23 steps (float holds nothing finer there).
-  const double wanted = std::floor(std::log2(std::max(diagonal, 1e-30)) - double(positionBits));
-  const double floorExp = std::floor(std::log2(std::max(largest, 1e-30))) - 22.0;
-  return std::exp2(std::max(wanted, floorExp));
+  // The exponents are read off the doubles (ilogb: floor of log2, exactly), not computed by libm.
+  const int wanted = std::ilogb(std::max(diagonal, 1e-30)) - int(positionBits);
+  const int floorExp = std::ilogb(std::max(largest, 1e-30)) - 22;
+  return std::ldexp(1.0, std::max(wanted, floorExp));
 }
 
 QuadChartOptions quadChartOptions(const MeshBuildOptions& o) {

@@ -3,6 +3,7 @@
 // I3D 2001 (dual-edge collapse, plane-fit quadric, compactness); Niski, Purnomo, Cohen, I3D
 // 2007, section 5 (per-cell then global clustering); Purnomo, Cohen, Kumar, SGP 2004 (patches).
 #include "atlas/mesh/charting.h"
+#include "atlas/mesh/portable_math.h"
 
 #include <algorithm>
 #include <atomic>
@@ -59,8 +60,8 @@ double minEigenvalue(const double c[6]) {
   const double b01 = a01 / p, b02 = a02 / p, b12 = a12 / p;
   const double det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02);
   const double r = std::clamp(det / 2.0, -1.0, 1.0);
-  const double phi = std::acos(r) / 3.0;
-  return q + 2.0 * p * std::cos(phi + 2.0 * kPi / 3.0);
+  const double phi = pmath::acos(r) / 3.0;
+  return q + 2.0 * p * pmath::cos(phi + 2.0 * kPi / 3.0);
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 // "Out-of-core simplification of large polygonal models", SIGGRAPH 2000, for the streamed
 // uniform-grid bucketing).
 #include "atlas/mesh/gridify.h"
+#include "atlas/mesh/portable_math.h"
 
 #include <algorithm>
 #include <bit>
@@ -314,7 +315,7 @@ std::array<uint32_t, 3> chooseGridDims(const MeshBounds& bounds, uint64_t triang
       total *= dims[a];
     }
     if (total <= maxCells) break;
-    side *= std::max(1.05, std::cbrt(double(total) / double(maxCells)));
+    side *= std::max(1.05, pmath::cbrt(double(total) / double(maxCells)));
   }
   return dims;
 }

@@ -1,5 +1,6 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, sections 3 and 5.
 #include "atlas/mesh/mesh_atlas.h"
+#include "atlas/mesh/portable_math.h"
 #include "core/block_codec.h"
 #include "core/level_surface.h"
 #include "core/progress.h"
@@ -274,7 +275,7 @@ void addNormalAngles(const ChartPyramid& p, uint32_t chartSize, uint32_t blockIn
       const double lb = std::sqrt(double(b[0]) * b[0] + double(b[1]) * b[1] + double(b[2]) * b[2]);
       const double c =
           la > 0 && lb > 0 ? (double(a[0]) * b[0] + double(a[1]) * b[1] + double(a[2]) * b[2]) / (la * lb) : 1.0;
-      const double deg = std::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
+      const double deg = pmath::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / 3.14159265358979323846;
       ++bins[std::min(kAngleBins - 1, size_t(deg / kAngleBin))];
     }
 }

@@ -1,6 +1,7 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (parameterize); Floater 2003 (mean-value
 // weights); Sander et al. 2001 (stretch); Yoshizawa, Belyaev, Seidel 2004 (stretch reweighting).
 #include "atlas/mesh/patch_param.h"
+#include "atlas/mesh/portable_math.h"
 
 #include <algorithm>
 #include <chrono>
@@ -549,7 +550,7 @@ double gramStretchEnergy(const TriangleGram& g, const glm::dvec2& p0, const glm:
 
 glm::dvec2 polygonCorner(uint32_t n, uint32_t i) {
   const double a = 2.0 * std::numbers::pi * double(i % n) / double(n);
-  return {std::cos(a), std::sin(a)};
+  return {pmath::cos(a), pmath::sin(a)};
 }
 
 namespace {
@@ -619,7 +620,7 @@ std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths, boo
   std::vector<glm::dvec2> corners(n);
   double angle = 0.0;
   for (size_t i = 0; i < n; ++i) {
-    corners[i] = {std::cos(angle), std::sin(angle)};
+    corners[i] = {pmath::cos(angle), pmath::sin(angle)};
     angle += theta[i];
   }
   return corners;
@@ -689,7 +690,7 @@ SolveFigures solveMeanValue(const LocalPatch& lp, const std::vector<uint8_t>& is
   for (uint32_t it = 0; it < options.stretchIterations; ++it) {
     const std::vector<double> sigma = vertexStretch(lp, trial);
     for (size_t e = 0; e < weights.w.size(); ++e)
-      weights.w[e] /= std::pow(sigma[weights.j[e]], options.stretchExponent);
+      weights.w[e] /= pmath::pow(sigma[weights.j[e]], options.stretchExponent);
     if (!solver.solve(weights, trial)) break;
     const ParamQuality q = measureStretch(trial, lp.xyz, lp.triangles);
     const bool better = q.flippedTriangles <= out.quality.flippedTriangles &&

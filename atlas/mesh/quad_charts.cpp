@@ -153,7 +153,9 @@ void logFoldingCharts(const PatchLayout& layout, const GeometryImageSet& set) {
 uint32_t grownChartSize(const PatchLayout& layout, const QuadChartOptions& options, uint32_t current, uint64_t charts,
                         double error, double bound, const fs::path& dir) {
   if (current >= kMaxDensityChartSize || atSampleCap(layout, charts, current)) return 0;
-  const uint32_t asked = std::max(1u, uint32_t(std::ceil(std::log(error / std::max(bound, 1e-300)) / std::log(4.0))));
+  // The least k >= 1 with bound * 4^k >= error, by exact multiplications.
+  uint32_t asked = 1;
+  for (double reach = 4.0 * std::max(bound, 1e-300); reach < error && asked < 64; reach *= 4.0) ++asked;
   QuadChartOptions larger = options;
   larger.chartSize = current;
   for (uint32_t k = 0; k < asked && larger.chartSize < kMaxDensityChartSize &&

@@ -1,6 +1,7 @@
 // Based on: Niski, Purnomo, Cohen, I3D 2007, section 5 (quadrangulate, resample); Purnomo, Cohen,
 // Kumar, "Seamless Texture Atlases", SGP 2004 (shared boundary sampling).
 #include "atlas/mesh/resample.h"
+#include "atlas/mesh/portable_math.h"
 #include "core/progress.h"
 
 #include <fcntl.h>
@@ -510,7 +511,7 @@ struct QuadPoint {
 };
 QuadPoint quadOf(const std::vector<QuadCorners>& quads, const glm::dvec2& d) {
   constexpr double kTwoPi = 6.283185307179586;
-  auto angle = [](const glm::dvec2& x) { return std::atan2(x.y, x.x); };
+  auto angle = [](const glm::dvec2& x) { return pmath::atan2(x.y, x.x); };
   auto ccw = [&](double from, double to) {  // angle from `from` to `to`, counter-clockwise, in [0, 2pi)
     double a = to - from;
     while (a < 0.0) a += kTwoPi;
@@ -1522,7 +1523,7 @@ struct Unfolding {
         for (const double scale : {0.5, 0.25, 0.125}) {
           for (int dir = 0; dir < 8; ++dir) {
             const double angle = dir * (3.14159265358979323846 / 4.0);
-            glm::dvec2 to = domain[k] + (scale * h) * glm::dvec2(std::cos(angle), std::sin(angle));
+            glm::dvec2 to = domain[k] + (scale * h) * glm::dvec2(pmath::cos(angle), pmath::sin(angle));
             const glm::dvec2 off = to - start[k];
             const double reach = kUnfoldReach * h, len = glm::length(off);
             if (len > reach) to = start[k] + off * (reach / len);
@@ -1698,7 +1699,7 @@ void ParamCache::put(const Patch& patch, uint32_t p, std::shared_ptr<const Patch
 uint64_t paramWorkingBytes(uint64_t triangles, uint32_t singlePrecisionFrom) {
   const double n = double(triangles / 2 + 1);
   const double perEntry = n >= double(singlePrecisionFrom) ? 72.0 : 110.0;
-  return uint64_t(n * (perEntry * std::log2(std::max(n, 2.0)) + 640.0));
+  return uint64_t(n * (perEntry * pmath::log2(std::max(n, 2.0)) + 640.0));
 }
 
 ParamGate::Hold::Hold(ParamGate& gate, uint64_t bytes) : gate_(gate), bytes_(bytes) {
