@@ -378,7 +378,10 @@ struct PatchSizing {
     bool settled = false;     // neither doubled nor cut again
     bool uncuttable = false;  // no cut was found, or none that folds less
     bool cutAsked = false;    // it cannot grow: cut it next round
-    uint32_t cuts = 0;        // cuts on the way from a charted patch
+    // Doubled because it folds, no cut helps and it meets the bound: the finer texels are kept
+    // only where they fold less (a fold narrower than a texel is the sampling's).
+    bool grownForFolds = false;
+    uint32_t cuts = 0;  // cuts on the way from a charted patch
   };
   PatchLayout& layout;
   ResampleOptions ro;
@@ -624,7 +627,9 @@ constexpr uint32_t kMaxSizingCuts = 4;
 // Each cut is resampled at once and kept only where the patches it changed fold less than before
 // (a cut for folds) or no more (a cut for the sampling error).
 // Where no cut is found it goes on growing while it can: the sampling bound (and so the Hausdorff
-// distance) goes before the folds. The cuts stop once their trials have parameterized
+// distance) goes before the folds. A patch that meets the bound but still folds, with no cut that
+// helps, is doubled too, and each such doubling is kept only where its charts fold less (a fold
+// narrower than a texel is the sampling's). The cuts stop once their trials have parameterized
 // --repair-budget times the layout's triangles (st.repair.stoppedForWork), as the repair's do.
 // Returns the sizing rounds.
 uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, double bound, double cap, bool sides,
@@ -640,6 +645,14 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
       if (e.settled) continue;
       const double err = z.error(p);
       const uint64_t flips = PatchSizing::flips(e.charts);
+      if (e.grownForFolds) {
+        e.grownForFolds = false;
+        if (flips >= PatchSizing::flips(e.previousCharts)) {
+          z.shrink(p);
+          e.settled = true;
+          continue;
+        }
+      }
       const bool doubled = e.previousSize > 0;
       const bool foldedMore = doubled && flips > PatchSizing::flips(e.previousCharts);
       if (foldedMore && !mayCut(e) && PatchSizing::worstError(e.previousCharts) <= bound) {
@@ -654,7 +667,7 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
           doubled && err > bound && e.previousSize >= base && err > 0.5 * PatchSizing::worstError(e.previousCharts);
       if ((flips > 0 || squeezing || e.cutAsked) && mayCut(e))
         squeezed.push_back({double(flips) + err / bound, p});
-      else if (err > bound)
+      else if (err > bound || flips > 0)
         asking.push_back({err / bound, p});
     }
     // Cuts first, each kept only where it folds less (or, for the sampling error, no more).
@@ -708,6 +721,7 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
           stop = &st.patchesAtMemory;
         }
       }
+      const bool forFolds = z.error(p) <= bound;  // asked for its folds alone
       if (stop) {
         // Cut next round where it may be; else it stays.
         if (mayCut(e)) {
@@ -715,11 +729,12 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
           any = true;
         } else {
           z.patches[p].settled = true;
-          ++*stop;
+          if (!forFolds) ++*stop;
         }
         continue;
       }
       z.grow(p);
+      z.patches[p].grownForFolds = forFolds;
       samples += growth;
       ++st.patchesDoubled;
       any = true;
