@@ -8,6 +8,7 @@
 
 #include <fstream>
 #include <iostream>
+#include <ostream>
 #include <string>
 
 #include "tests/test_util.h"
@@ -35,6 +36,9 @@ struct PortableCase {
   const char* imagery;  // under data/, or empty
   const char* options;
 };
+
+// The case's name in the test's output (not its bytes).
+void PrintTo(const PortableCase& c, std::ostream* os) { *os << c.name; }
 
 class PortableAtlas : public ::testing::TestWithParam<PortableCase> {};
 
