@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -1508,6 +1509,16 @@ struct Unfolding {
     return moving;
   }
 
+  // The pattern search's 8 directions, at multiples of a quarter turn's half.
+  static inline const std::array<glm::dvec2, 8> kDirections = [] {
+    std::array<glm::dvec2, 8> d;
+    for (int i = 0; i < 8; ++i) {
+      const double angle = i * (3.14159265358979323846 / 4.0);
+      d[size_t(i)] = {pmath::cos(angle), pmath::sin(angle)};
+    }
+    return d;
+  }();
+
   // Slides the samples `moving` (a pattern search, in sweeps until none moves).
   void slide(const std::vector<size_t>& moving) {
     std::vector<glm::dvec2>& domain = ch.domain;
@@ -1521,9 +1532,8 @@ struct Unfolding {
         Sample bestSample;
         bool found = false;
         for (const double scale : {0.5, 0.25, 0.125}) {
-          for (int dir = 0; dir < 8; ++dir) {
-            const double angle = dir * (3.14159265358979323846 / 4.0);
-            glm::dvec2 to = domain[k] + (scale * h) * glm::dvec2(pmath::cos(angle), pmath::sin(angle));
+          for (const glm::dvec2& dir : kDirections) {
+            glm::dvec2 to = domain[k] + (scale * h) * dir;
             const glm::dvec2 off = to - start[k];
             const double reach = kUnfoldReach * h, len = glm::length(off);
             if (len > reach) to = start[k] + off * (reach / len);
