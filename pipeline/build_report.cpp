@@ -93,6 +93,7 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"texels_unfolded", rs.image.texelsUnfolded},
                       {"samples_unfolded_past_quad", rs.image.samplesPastQuad},
                       {"even_side_corners", rs.evenSideCorners},
+                      {"side_edges_split", rs.sideEdgesSplit},
                       {"other_quads_flipped_texels", rs.alternativeFlippedTexels},
                       {"two_quad_corners", rs.twoQuadCorners},
                       {"flipped_texels_before_splits", flips.flippedTexelsFirst},

@@ -2,6 +2,7 @@
 #include "atlas/mesh/layout_refine.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -12,7 +13,9 @@
 
 #include <boost/graph/adjacency_list.hpp>
 #include <boost/graph/strong_components.hpp>
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
+#include <glm/vec4.hpp>
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
 
@@ -590,6 +593,81 @@ EvenSidesResult evenSides(PatchLayout& layout, const std::vector<uint32_t>& with
   }
   for (uint32_t p = 0; p < np; ++p) r.oddLeft += odd(p);
   return r;
+}
+
+namespace {
+
+// Splits patch p's triangle with the directed edge a -> b at vertex m on that edge: it keeps
+// a -> m, and a new triangle of p takes m -> b. False if p has no such triangle.
+bool splitTriangleAtEdge(PatchLayout& layout, uint32_t p, uint32_t a, uint32_t b, uint32_t m) {
+  std::vector<uint32_t>& triangles = layout.patches[p].triangles;
+  for (const uint32_t t : triangles) {
+    const std::array<uint32_t, 3> tri = layout.triangles[t];
+    for (int c = 0; c < 3; ++c) {
+      if (tri[c] != a || tri[(c + 1) % 3] != b) continue;
+      const uint32_t o = tri[(c + 2) % 3];
+      layout.triangles[t] = {a, m, o};
+      layout.triangles.push_back({m, b, o});
+      triangles.push_back(uint32_t(layout.triangles.size() - 1));
+      return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+uint32_t splitSingleEdgeSides(PatchLayout& layout, const std::vector<uint32_t>& patches) {
+  uint32_t split = 0;
+  for (const uint32_t p : patches) {
+    if (p >= layout.patches.size()) continue;
+    for (uint32_t i = 0; i < layout.patches[p].sides.size(); ++i) {
+      const PatchSide& side = layout.patches[p].sides[i];
+      if (side.vertices.size() != 2 || !side.reversed) continue;
+      const uint32_t a = side.vertices[0], b = side.vertices[1];
+      const glm::vec3 pa = layout.positions[a], pb = layout.positions[b];
+      if (pa == pb) continue;
+      const int32_t q = side.neighbourPatch;
+      const uint32_t t = side.neighbourSide;
+      const uint32_t m = uint32_t(layout.positions.size());
+      layout.positions.push_back(0.5f * (pa + pb));
+      if (!layout.colours.empty()) {
+        const glm::vec4 mean = 0.5f * (glm::vec4(layout.colours[a]) + glm::vec4(layout.colours[b]));
+        layout.colours.push_back(glm::u8vec4(glm::round(mean)));
+      }
+      if (!splitTriangleAtEdge(layout, p, a, b, m) || (q >= 0 && !splitTriangleAtEdge(layout, uint32_t(q), b, a, m)))
+        throw std::logic_error("splitSingleEdgeSides: a side's edge has no triangle in its patch");
+      auto& own = layout.patches[p].sides[i].vertices;
+      own.insert(own.begin() + 1, m);
+      if (q >= 0) {
+        auto& across = layout.patches[uint32_t(q)].sides[t].vertices;
+        across.insert(across.begin() + 1, m);
+      }
+      ++split;
+    }
+  }
+  return split;
+}
+
+uint32_t cornerTrianglePairs(PatchLayout& layout, uint32_t maxSides) {
+  if (maxSides < 6) return 0;
+  uint32_t corners = 0;
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    const auto& sides = layout.patches[p].sides;
+    if (sides.size() != 3) continue;
+    const int32_t q = sides[0].neighbourPatch;
+    if (q <= int32_t(p) || layout.patches[uint32_t(q)].sides.size() != 3) continue;
+    if (!std::all_of(sides.begin(), sides.end(), [&](const PatchSide& s) { return s.neighbourPatch == q; })) continue;
+    splitSingleEdgeSides(layout, {p});
+    // From the last side back, so the sides not yet split keep their indices.
+    for (uint32_t i = 3; i-- > 0;) {
+      const uint32_t k = sideMiddleVertex(layout, layout.patches[p].sides[i]);
+      if (k == 0 || !insertCorner(layout, p, i, k, maxSides))
+        throw std::logic_error("cornerTrianglePairs: a side with an inner vertex took no corner");
+      ++corners;
+    }
+  }
+  return corners;
 }
 
 namespace {

@@ -127,6 +127,20 @@ struct EvenSidesResult {
 EvenSidesResult evenSides(PatchLayout& layout, const std::vector<uint32_t>& within = {},
                           uint32_t maxSides = kMaxPatchSides);
 
+// Splits, at its midpoint, the one edge of every side of `patches` that has no inner vertex: the
+// triangle on either side of it becomes two (the surface stays the same), and the side, with the
+// neighbour's across it, gains the midpoint as an inner vertex that evenSides can make a corner.
+// Sides of zero length, and joins that are not reversed, are left as they are. Returns the edges
+// split.
+uint32_t splitSingleEdgeSides(PatchLayout& layout, const std::vector<uint32_t>& patches);
+
+// Two 3-sided patches that share all three sides (a closed piece cut in two) can have no even side
+// count by single corners: one corner would leave two single quads meeting there with nothing to
+// start spokes. Gives each such pair a corner in the middle of each shared side (splitting
+// single-edge sides first), so both have 6 sides and 3 charts each, as many as their kites. Returns
+// the corners made.
+uint32_t cornerTrianglePairs(PatchLayout& layout, uint32_t maxSides = kMaxPatchSides);
+
 // The first of patch p's triangles with layout vertex v as a corner; ~0u if none has it.
 uint32_t patchTriangleAt(const PatchLayout& layout, uint32_t p, uint32_t v);
 

@@ -6,6 +6,7 @@
 #include <bit>
 #include <functional>
 #include <limits>
+#include <numeric>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -195,13 +196,63 @@ ResampleOptions resampleOptions(const QuadChartOptions& o, QuadLayout quads, Cha
   return ro;
 }
 
+// The patches with an odd side count.
+std::vector<uint32_t> oddPatches(const PatchLayout& layout) {
+  std::vector<uint32_t> odd;
+  for (uint32_t p = 0; p < layout.patches.size(); ++p)
+    if (layout.patches[p].sides.size() % 2 == 1) odd.push_back(p);
+  return odd;
+}
+
+// Logs, at debug level, each patch left with an odd side count: its sides' edges and neighbours.
+void logOddPatches(const PatchLayout& layout) {
+  if (!spdlog::should_log(spdlog::level::debug)) return;
+  for (const uint32_t p : oddPatches(layout)) {
+    std::string sides;
+    for (const PatchSide& s : layout.patches[p].sides)
+      sides += fmt::format(" [{} edges, {}]", s.vertices.size() - 1,
+                           s.neighbourPatch < 0 ? std::string("open")
+                                                : fmt::format("patch {} of {} sides", s.neighbourPatch,
+                                                              layout.patches[s.neighbourPatch].sides.size()));
+    spdlog::debug("odd patch {} ({} triangles):{}", p, layout.patches[p].triangles.size(), sides);
+  }
+}
+
 // Makes every patch's side count even for the sides quad layout (st.evenSideCorners the corners
-// added); false when some patch cannot have one.
+// added); false when some patch cannot have one. Where evenSides leaves patches odd, two repairs
+// that keep the surface follow: pairs of 3-sided patches closing a piece get a corner on each
+// shared side (cornerTrianglePairs), and sides of one edge of the patches left odd, then of every
+// patch (for the chains between them), are split at their midpoints so that they can take a corner
+// (splitSingleEdgeSides; st.sideEdgesSplit). If patches are still odd, the triangles and vertices
+// are as they were (the caller restores the patches).
 bool evenLayout(PatchLayout& layout, MeshResampleStats& st) {
   const uint32_t holeCorners = splitTwoSidedHoles(layout);
-  const EvenSidesResult even = evenSides(layout);
+  EvenSidesResult even = evenSides(layout);
   st.evenSideCorners = holeCorners + even.corners;
-  if (even.oddLeft != 0) return false;
+  if (even.oddLeft != 0) {
+    const size_t positions = layout.positions.size(), colours = layout.colours.size();
+    const std::vector<std::array<uint32_t, 3>> triangles = layout.triangles;
+    st.evenSideCorners += cornerTrianglePairs(layout);
+    for (uint32_t round = 0; round < 2 && even.oddLeft != 0; ++round) {
+      std::vector<uint32_t> split = oddPatches(layout);
+      if (round == 1) {  // the chains between them too: every patch
+        split.resize(layout.patches.size());
+        std::iota(split.begin(), split.end(), 0u);
+      }
+      st.sideEdgesSplit += splitSingleEdgeSides(layout, split);
+      even = evenSides(layout);
+      st.evenSideCorners += even.corners;
+    }
+    if (even.oddLeft != 0) {
+      logOddPatches(layout);
+      layout.triangles = triangles;
+      layout.positions.resize(positions);
+      layout.colours.resize(colours);
+      st.sideEdgesSplit = 0;
+      return false;
+    }
+    spdlog::info("side counts made even with {} edges split at their midpoints", st.sideEdgesSplit);
+  }
   st.evenSideCorners += mendTwoChartCorners(layout).corners;
   return true;
 }
@@ -924,6 +975,7 @@ ResampledMesh quadChartsPerPatch(PatchLayout& layout, const QuadChartOptions& op
   if (quads == QuadLayout::kKites) straighten(QuadLayout::kKites);
   ResampledMesh r = resamplePerPatch(layout, options, quads, dir, meter);
   r.stats.evenSideCorners = even.evenSideCorners;
+  r.stats.sideEdgesSplit = even.sideEdgesSplit;
   return r;
 }
 

@@ -139,6 +139,7 @@ struct MeshResampleStats {
   std::string quadMap = "bilinear";       // the quad map: bilinear, stretch or folding
   bool unfold = true;                     // samples round flipped texels slid (ResampleOptions::unfold)
   uint32_t evenSideCorners = 0;           // corners made so every patch has an even side count
+  uint32_t sideEdgesSplit = 0;            // edges split at their midpoints so that sides could take a corner
   int64_t alternativeFlippedTexels = -1;  // auto: the other layout's flipped texels; -1: not built
   uint32_t twoQuadCorners = 0;            // sides layout: corners where only two charts meet
   ChartRepairStats repair;

@@ -7,7 +7,8 @@
 // sides is seamless on disk with about half the charts; the least-stretch quad map keeps the
 // border samples and lowers the stretch of a wide n-gon's quads, and the folding map folds less;
 // alignSpokes finds a pairing without two-chart corners and mendTwoChartCorners mends those no
-// pairing serves.
+// pairing serves; sides of one edge are split at their midpoints, and two 3-sided patches closing a
+// piece get a corner on each shared side.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -325,6 +326,123 @@ TEST(EvenSides, TwoSidedHolesGetTwoMoreCorners) {
   const std::vector<std::string> bad = validatePatchLayout(layout, 3, kMaxPatchSides);
   EXPECT_TRUE(bad.empty()) << bad.front();
   EXPECT_EQ(splitTwoSidedHoles(layout), 0u);  // nothing left to do
+}
+
+// The area of a layout's triangles.
+double layoutArea(const PatchLayout& layout) {
+  double area = 0.0;
+  for (const auto& t : layout.triangles) {
+    const glm::dvec3 a(layout.positions[t[0]]), b(layout.positions[t[1]]), c(layout.positions[t[2]]);
+    area += 0.5 * glm::length(glm::cross(b - a, c - a));
+  }
+  return area;
+}
+
+// Two triangles of a unit square, each a patch of three one-edge sides (two open, one shared), as
+// charting leaves small patches at a hole's rim: no side has an inner vertex to take a corner.
+// Split at their midpoints, every side has one; the surface is the same, the layout valid, and
+// each patch then takes a corner on an open side and is one chart, seamless.
+TEST(EvenSides, SingleEdgeSidesAreSplitAtTheirMidpointsSoTheyCanTakeACorner) {
+  PatchLayout layout;
+  layout.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  layout.colours = {{0, 0, 0, 255}, {255, 0, 0, 255}, {255, 255, 0, 255}, {0, 255, 0, 255}};
+  layout.triangles = {{0, 1, 2}, {0, 2, 3}};
+  layout.patches.resize(2);
+  layout.patches[0].triangles = {0};
+  layout.patches[0].sides = {{{0, 1}}, {{1, 2}}, {{2, 0}}};
+  layout.patches[1].triangles = {1};
+  layout.patches[1].sides = {{{0, 2}}, {{2, 3}}, {{3, 0}}};
+  test::linkSides(layout);
+  ASSERT_EQ(layout.patches[0].sides[2].neighbourPatch, 1);
+  ASSERT_TRUE(validatePatchLayout(layout, 3, kMaxPatchSides).empty());
+  {
+    PatchLayout copy = layout;
+    EXPECT_EQ(evenSides(copy).oddLeft, 2u);
+  }
+  const double area = layoutArea(layout);
+  // The shared side is split once, from whichever patch reaches it first.
+  EXPECT_EQ(splitSingleEdgeSides(layout, {0, 1}), 5u);
+  EXPECT_EQ(layout.triangles.size(), 2u + 6u);
+  EXPECT_EQ(layout.positions.size(), 4u + 5u);
+  EXPECT_EQ(layout.colours.size(), layout.positions.size());
+  EXPECT_EQ(layout.positions[4], glm::vec3(0.5f, 0.f, 0.f));
+  EXPECT_EQ(layout.colours[4], glm::u8vec4(128, 0, 0, 255));  // the mean of its ends, rounded
+  EXPECT_NEAR(layoutArea(layout), area, 1e-6);
+  for (const Patch& p : layout.patches)
+    for (const PatchSide& side : p.sides) EXPECT_EQ(side.vertices.size(), 3u);
+  std::vector<std::string> bad = validatePatchLayout(layout, 3, kMaxPatchSides);
+  ASSERT_TRUE(bad.empty()) << bad.front();
+  EXPECT_EQ(splitSingleEdgeSides(layout, {0, 1}), 0u);  // nothing left to split
+  EXPECT_EQ(evenSides(layout).oddLeft, 0u);
+  bad = validatePatchLayout(layout, 3, kMaxPatchSides);
+  ASSERT_TRUE(bad.empty()) << bad.front();
+  const GeometryImageSet set = resampleLayout(layout, sidesOptions(9));
+  EXPECT_EQ(set.charts.size(), 2u);
+  EXPECT_GT(expectSeamless(set), 0u);
+  EXPECT_EQ(set.image.flippedTexels, 0u);
+}
+
+// A unit sphere as two 3-sided patches, the hemispheres of diskLayout(3, ...), sharing all three
+// sides along the equator.
+PatchLayout twoHemispheres(uint32_t rings, uint32_t segments) {
+  PatchLayout layout = test::diskLayout(3, rings, segments, true);
+  const uint32_t equator = 1 + (rings - 1) * segments;  // the first vertex of the last ring
+  const uint32_t n = uint32_t(layout.positions.size());
+  std::vector<uint32_t> mirrored(n);
+  for (uint32_t v = 0; v < n; ++v) {
+    if (v >= equator) {
+      mirrored[v] = v;
+    } else {
+      mirrored[v] = uint32_t(layout.positions.size());
+      const glm::vec3 p = layout.positions[v];
+      layout.positions.push_back({p.x, p.y, -p.z});
+    }
+  }
+  Patch lower;
+  const size_t upper = layout.triangles.size();
+  for (size_t t = 0; t < upper; ++t) {
+    const auto tri = layout.triangles[t];
+    lower.triangles.push_back(uint32_t(layout.triangles.size()));
+    layout.triangles.push_back({mirrored[tri[0]], mirrored[tri[2]], mirrored[tri[1]]});
+  }
+  for (uint32_t i = 3; i-- > 0;) {
+    const auto& v = layout.patches[0].sides[i].vertices;
+    PatchSide side;
+    side.vertices.assign(v.rbegin(), v.rend());
+    lower.sides.push_back(side);
+  }
+  layout.patches.push_back(lower);
+  test::linkSides(layout);
+  return layout;
+}
+
+// A closed piece cut into two 3-sided patches has no even side counts by single corners (one
+// corner would leave two single quads meeting there): each shared side gets a corner, so both
+// have 6 sides and 3 charts, seamless. With one-edge sides (three segments round the equator),
+// they are split first.
+TEST(EvenSides, TwoTrianglePatchesClosingAPieceGetACornerOnEachSide) {
+  for (const uint32_t segments : {3u, 24u}) {
+    SCOPED_TRACE(std::to_string(segments) + " segments round the equator");
+    PatchLayout layout = twoHemispheres(4, segments);
+    std::vector<std::string> bad = validatePatchLayout(layout, 3, kMaxPatchSides);
+    ASSERT_TRUE(bad.empty()) << bad.front();
+    {
+      PatchLayout copy = layout;
+      EXPECT_EQ(evenSides(copy).oddLeft, 2u);
+    }
+    const double area = layoutArea(layout);
+    EXPECT_EQ(cornerTrianglePairs(layout), 3u);
+    EXPECT_NEAR(layoutArea(layout), area, 1e-9 * area);
+    ASSERT_EQ(layout.patches.size(), 2u);
+    for (const Patch& p : layout.patches) EXPECT_EQ(p.sides.size(), 6u);
+    bad = validatePatchLayout(layout, 3, kMaxPatchSides);
+    ASSERT_TRUE(bad.empty()) << bad.front();
+    EXPECT_EQ(evenSides(layout).oddLeft, 0u);
+    EXPECT_EQ(cornerTrianglePairs(layout), 0u);  // nothing left to do
+    const GeometryImageSet set = resampleLayout(layout, sidesOptions(17));
+    EXPECT_EQ(set.charts.size(), 6u);
+    EXPECT_GT(expectSeamless(set), 0u);
+  }
 }
 
 // Rotating a patch's sides keeps the layout valid and every link reciprocal; rotating back
