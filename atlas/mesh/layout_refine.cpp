@@ -649,6 +649,25 @@ uint32_t splitSingleEdgeSides(PatchLayout& layout, const std::vector<uint32_t>& 
   return split;
 }
 
+std::vector<uint32_t> patchesNear(const PatchLayout& layout, const std::vector<uint32_t>& from, uint32_t reach) {
+  const uint32_t np = uint32_t(layout.patches.size());
+  std::vector<uint32_t> depth(np, ~0u), reached;
+  for (const uint32_t p : from) {
+    if (p < np && depth[p] == ~0u) depth[p] = 0, reached.push_back(p);
+  }
+  for (size_t at = 0; at < reached.size(); ++at) {
+    const uint32_t x = reached[at];
+    if (depth[x] == reach) continue;
+    for (const PatchSide& side : layout.patches[x].sides) {
+      if (side.neighbourPatch < 0 || depth[uint32_t(side.neighbourPatch)] != ~0u) continue;
+      depth[uint32_t(side.neighbourPatch)] = depth[x] + 1;
+      reached.push_back(uint32_t(side.neighbourPatch));
+    }
+  }
+  std::sort(reached.begin(), reached.end());
+  return reached;
+}
+
 uint32_t cornerTrianglePairs(PatchLayout& layout, uint32_t maxSides) {
   if (maxSides < 6) return 0;
   uint32_t corners = 0;

@@ -134,6 +134,9 @@ EvenSidesResult evenSides(PatchLayout& layout, const std::vector<uint32_t>& with
 // split.
 uint32_t splitSingleEdgeSides(PatchLayout& layout, const std::vector<uint32_t>& patches);
 
+// The patches within `reach` links (shared sides) of the patches `from`, them included, sorted.
+std::vector<uint32_t> patchesNear(const PatchLayout& layout, const std::vector<uint32_t>& from, uint32_t reach);
+
 // Two 3-sided patches that share all three sides (a closed piece cut in two) can have no even side
 // count by single corners: one corner would leave two single quads meeting there with nothing to
 // start spokes. Gives each such pair a corner in the middle of each shared side (splitting

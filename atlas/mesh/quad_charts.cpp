@@ -219,12 +219,13 @@ void logOddPatches(const PatchLayout& layout) {
 }
 
 // Makes every patch's side count even for the sides quad layout (st.evenSideCorners the corners
-// added); false when some patch cannot have one. Where evenSides leaves patches odd, two repairs
-// that keep the surface follow: pairs of 3-sided patches closing a piece get a corner on each
-// shared side (cornerTrianglePairs), and sides of one edge of the patches left odd, then of every
-// patch (for the chains between them), are split at their midpoints so that they can take a corner
-// (splitSingleEdgeSides; st.sideEdgesSplit). If patches are still odd, the triangles and vertices
-// are as they were (the caller restores the patches).
+// added); false when some patch cannot have one. Where evenSides leaves patches odd, repairs that
+// keep the surface follow, each followed by evenSides again: pairs of 3-sided patches closing a
+// piece get a corner on each shared side (cornerTrianglePairs); then the sides of one edge of the
+// patches left odd, and if need be of the patches within 2, 4 and 8 links of them (for the chains
+// between), are split at their midpoints so that they can take a corner (splitSingleEdgeSides;
+// st.sideEdgesSplit). If patches are still odd, the triangles and vertices are as they were (the
+// caller restores the patches).
 bool evenLayout(PatchLayout& layout, MeshResampleStats& st) {
   const uint32_t holeCorners = splitTwoSidedHoles(layout);
   EvenSidesResult even = evenSides(layout);
@@ -232,16 +233,18 @@ bool evenLayout(PatchLayout& layout, MeshResampleStats& st) {
   if (even.oddLeft != 0) {
     const size_t positions = layout.positions.size(), colours = layout.colours.size();
     const std::vector<std::array<uint32_t, 3>> triangles = layout.triangles;
-    st.evenSideCorners += cornerTrianglePairs(layout);
-    for (uint32_t round = 0; round < 2 && even.oddLeft != 0; ++round) {
-      std::vector<uint32_t> split = oddPatches(layout);
-      if (round == 1) {  // the chains between them too: every patch
-        split.resize(layout.patches.size());
-        std::iota(split.begin(), split.end(), 0u);
-      }
-      st.sideEdgesSplit += splitSingleEdgeSides(layout, split);
+    auto again = [&] {
       even = evenSides(layout);
       st.evenSideCorners += even.corners;
+      return even.oddLeft == 0;
+    };
+    const uint32_t pairs = cornerTrianglePairs(layout);
+    st.evenSideCorners += pairs;
+    bool done = pairs > 0 && again();
+    for (uint32_t reach = 0; reach <= 8 && !done; reach = std::max(2 * reach, 2u)) {
+      const uint32_t split = splitSingleEdgeSides(layout, patchesNear(layout, oddPatches(layout), reach));
+      st.sideEdgesSplit += split;
+      done = split > 0 && again();
     }
     if (even.oddLeft != 0) {
       logOddPatches(layout);

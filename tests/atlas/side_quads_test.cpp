@@ -354,6 +354,8 @@ TEST(EvenSides, SingleEdgeSidesAreSplitAtTheirMidpointsSoTheyCanTakeACorner) {
   layout.patches[1].sides = {{{0, 2}}, {{2, 3}}, {{3, 0}}};
   test::linkSides(layout);
   ASSERT_EQ(layout.patches[0].sides[2].neighbourPatch, 1);
+  EXPECT_EQ(patchesNear(layout, {1}, 0), std::vector<uint32_t>{1});
+  EXPECT_EQ(patchesNear(layout, {1}, 1), (std::vector<uint32_t>{0, 1}));
   ASSERT_TRUE(validatePatchLayout(layout, 3, kMaxPatchSides).empty());
   {
     PatchLayout copy = layout;
