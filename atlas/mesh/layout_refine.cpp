@@ -668,27 +668,6 @@ std::vector<uint32_t> patchesNear(const PatchLayout& layout, const std::vector<u
   return reached;
 }
 
-uint32_t cornerTrianglePairs(PatchLayout& layout, uint32_t maxSides) {
-  if (maxSides < 6) return 0;
-  uint32_t corners = 0;
-  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
-    const auto& sides = layout.patches[p].sides;
-    if (sides.size() != 3) continue;
-    const int32_t q = sides[0].neighbourPatch;
-    if (q <= int32_t(p) || layout.patches[uint32_t(q)].sides.size() != 3) continue;
-    if (!std::all_of(sides.begin(), sides.end(), [&](const PatchSide& s) { return s.neighbourPatch == q; })) continue;
-    splitSingleEdgeSides(layout, {p});
-    // From the last side back, so the sides not yet split keep their indices.
-    for (uint32_t i = 3; i-- > 0;) {
-      const uint32_t k = sideMiddleVertex(layout, layout.patches[p].sides[i]);
-      if (k == 0 || !insertCorner(layout, p, i, k, maxSides))
-        throw std::logic_error("cornerTrianglePairs: a side with an inner vertex took no corner");
-      ++corners;
-    }
-  }
-  return corners;
-}
-
 namespace {
 
 // The best acceptable cut of patch p passing through one of `sources` (vertices of the patch);

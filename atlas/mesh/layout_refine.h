@@ -137,13 +137,6 @@ uint32_t splitSingleEdgeSides(PatchLayout& layout, const std::vector<uint32_t>& 
 // The patches within `reach` links (shared sides) of the patches `from`, them included, sorted.
 std::vector<uint32_t> patchesNear(const PatchLayout& layout, const std::vector<uint32_t>& from, uint32_t reach);
 
-// Two 3-sided patches that share all three sides (a closed piece cut in two) can have no even side
-// count by single corners: one corner would leave two single quads meeting there with nothing to
-// start spokes. Gives each such pair a corner in the middle of each shared side (splitting
-// single-edge sides first), so both have 6 sides and 3 charts each, as many as their kites. Returns
-// the corners made.
-uint32_t cornerTrianglePairs(PatchLayout& layout, uint32_t maxSides = kMaxPatchSides);
-
 // The first of patch p's triangles with layout vertex v as a corner; ~0u if none has it.
 uint32_t patchTriangleAt(const PatchLayout& layout, uint32_t p, uint32_t v);
 

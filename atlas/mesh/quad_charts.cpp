@@ -219,18 +219,17 @@ void logOddPatches(const PatchLayout& layout) {
 }
 
 // Makes every patch's side count even for the sides quad layout (st.evenSideCorners the corners
-// added); false when some patch cannot have one. Where evenSides leaves patches odd, repairs that
-// keep the surface follow, each followed by evenSides again: pairs of 3-sided patches closing a
-// piece get a corner on each shared side (cornerTrianglePairs); then the sides of one edge of the
-// patches left odd, and if need be of the patches within 2, 4 and 8 links of them (for the chains
-// between), are split at their midpoints so that they can take a corner (splitSingleEdgeSides;
-// st.sideEdgesSplit). If patches are still odd, the triangles and vertices are as they were (the
+// added); false when some patch cannot have one. With `repair`, where evenSides leaves patches odd,
+// the sides of one edge of the patches left odd, and if need be of the patches within 2, 4 and 8
+// links of them (for the chains between), are split at their midpoints so that they can take a
+// corner (splitSingleEdgeSides; st.sideEdgesSplit), evenSides trying again after each step; the
+// surface is the same. If patches are still odd, the triangles and vertices are as they were (the
 // caller restores the patches).
-bool evenLayout(PatchLayout& layout, MeshResampleStats& st) {
+bool evenLayout(PatchLayout& layout, MeshResampleStats& st, bool repair) {
   const uint32_t holeCorners = splitTwoSidedHoles(layout);
   EvenSidesResult even = evenSides(layout);
   st.evenSideCorners = holeCorners + even.corners;
-  if (even.oddLeft != 0) {
+  if (even.oddLeft != 0 && repair) {
     const size_t positions = layout.positions.size(), colours = layout.colours.size();
     const std::vector<std::array<uint32_t, 3>> triangles = layout.triangles;
     auto again = [&] {
@@ -238,9 +237,7 @@ bool evenLayout(PatchLayout& layout, MeshResampleStats& st) {
       st.evenSideCorners += even.corners;
       return even.oddLeft == 0;
     };
-    const uint32_t pairs = cornerTrianglePairs(layout);
-    st.evenSideCorners += pairs;
-    bool done = pairs > 0 && again();
+    bool done = false;
     for (uint32_t reach = 0; reach <= 8 && !done; reach = std::max(2 * reach, 2u)) {
       const uint32_t split = splitSingleEdgeSides(layout, patchesNear(layout, oddPatches(layout), reach));
       st.sideEdgesSplit += split;
@@ -255,6 +252,10 @@ bool evenLayout(PatchLayout& layout, MeshResampleStats& st) {
       return false;
     }
     spdlog::info("side counts made even with {} edges split at their midpoints", st.sideEdgesSplit);
+  }
+  if (even.oddLeft != 0) {
+    logOddPatches(layout);
+    return false;
   }
   st.evenSideCorners += mendTwoChartCorners(layout).corners;
   return true;
@@ -296,7 +297,9 @@ ResampledMesh resampleInLayout(PatchLayout& layout, const QuadChartOptions& opti
   st.sideQuads = quads == QuadLayout::kSides;
   st.unfold = o.unfold;
   st.quadMap = quadMapName(o.quadMap);
-  if (st.sideQuads && !(*evened = evenLayout(layout, st))) return r;
+  // One chart size: the auto flow builds kites from the charted patches too, so no repair may
+  // change the triangles.
+  if (st.sideQuads && !(*evened = evenLayout(layout, st, false))) return r;
   const uint64_t quadCharts = layoutQuadCount(layout, quads);
   if (o.chartSize == 0) {
     o.chartSize = meshChartSizeForDensity(layout.triangles.size(), quadCharts);
@@ -965,7 +968,7 @@ ResampledMesh quadChartsPerPatch(PatchLayout& layout, const QuadChartOptions& op
     // patch's triangle list: 75 MB at 18.7M triangles, freed before the resampling).
     std::vector<Patch> charted = layout.patches;
     straighten(QuadLayout::kSides);
-    if (!evenLayout(layout, even)) {
+    if (!evenLayout(layout, even, true)) {
       spdlog::warn(
           "{}: some patches cannot be given an even number of sides for the sides quad layout (no chain "
           "of sides with inner vertices joins them to another such patch or to a hole); built with kites",

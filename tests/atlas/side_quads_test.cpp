@@ -7,8 +7,7 @@
 // sides is seamless on disk with about half the charts; the least-stretch quad map keeps the
 // border samples and lowers the stretch of a wide n-gon's quads, and the folding map folds less;
 // alignSpokes finds a pairing without two-chart corners and mendTwoChartCorners mends those no
-// pairing serves; sides of one edge are split at their midpoints, and two 3-sided patches closing a
-// piece get a corner on each shared side.
+// pairing serves; sides of one edge are split at their midpoints so they can take a corner.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -382,69 +381,6 @@ TEST(EvenSides, SingleEdgeSidesAreSplitAtTheirMidpointsSoTheyCanTakeACorner) {
   EXPECT_EQ(set.charts.size(), 2u);
   EXPECT_GT(expectSeamless(set), 0u);
   EXPECT_EQ(set.image.flippedTexels, 0u);
-}
-
-// A unit sphere as two 3-sided patches, the hemispheres of diskLayout(3, ...), sharing all three
-// sides along the equator.
-PatchLayout twoHemispheres(uint32_t rings, uint32_t segments) {
-  PatchLayout layout = test::diskLayout(3, rings, segments, true);
-  const uint32_t equator = 1 + (rings - 1) * segments;  // the first vertex of the last ring
-  const uint32_t n = uint32_t(layout.positions.size());
-  std::vector<uint32_t> mirrored(n);
-  for (uint32_t v = 0; v < n; ++v) {
-    if (v >= equator) {
-      mirrored[v] = v;
-    } else {
-      mirrored[v] = uint32_t(layout.positions.size());
-      const glm::vec3 p = layout.positions[v];
-      layout.positions.push_back({p.x, p.y, -p.z});
-    }
-  }
-  Patch lower;
-  const size_t upper = layout.triangles.size();
-  for (size_t t = 0; t < upper; ++t) {
-    const auto tri = layout.triangles[t];
-    lower.triangles.push_back(uint32_t(layout.triangles.size()));
-    layout.triangles.push_back({mirrored[tri[0]], mirrored[tri[2]], mirrored[tri[1]]});
-  }
-  for (uint32_t i = 3; i-- > 0;) {
-    const auto& v = layout.patches[0].sides[i].vertices;
-    PatchSide side;
-    side.vertices.assign(v.rbegin(), v.rend());
-    lower.sides.push_back(side);
-  }
-  layout.patches.push_back(lower);
-  test::linkSides(layout);
-  return layout;
-}
-
-// A closed piece cut into two 3-sided patches has no even side counts by single corners (one
-// corner would leave two single quads meeting there): each shared side gets a corner, so both
-// have 6 sides and 3 charts, seamless. With one-edge sides (three segments round the equator),
-// they are split first.
-TEST(EvenSides, TwoTrianglePatchesClosingAPieceGetACornerOnEachSide) {
-  for (const uint32_t segments : {3u, 24u}) {
-    SCOPED_TRACE(std::to_string(segments) + " segments round the equator");
-    PatchLayout layout = twoHemispheres(4, segments);
-    std::vector<std::string> bad = validatePatchLayout(layout, 3, kMaxPatchSides);
-    ASSERT_TRUE(bad.empty()) << bad.front();
-    {
-      PatchLayout copy = layout;
-      EXPECT_EQ(evenSides(copy).oddLeft, 2u);
-    }
-    const double area = layoutArea(layout);
-    EXPECT_EQ(cornerTrianglePairs(layout), 3u);
-    EXPECT_NEAR(layoutArea(layout), area, 1e-9 * area);
-    ASSERT_EQ(layout.patches.size(), 2u);
-    for (const Patch& p : layout.patches) EXPECT_EQ(p.sides.size(), 6u);
-    bad = validatePatchLayout(layout, 3, kMaxPatchSides);
-    ASSERT_TRUE(bad.empty()) << bad.front();
-    EXPECT_EQ(evenSides(layout).oddLeft, 0u);
-    EXPECT_EQ(cornerTrianglePairs(layout), 0u);  // nothing left to do
-    const GeometryImageSet set = resampleLayout(layout, sidesOptions(17));
-    EXPECT_EQ(set.charts.size(), 6u);
-    EXPECT_GT(expectSeamless(set), 0u);
-  }
 }
 
 // Rotating a patch's sides keeps the layout valid and every link reciprocal; rotating back
