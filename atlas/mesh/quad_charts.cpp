@@ -6,7 +6,6 @@
 #include <bit>
 #include <functional>
 #include <limits>
-#include <numeric>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -244,14 +243,13 @@ bool evenLayout(PatchLayout& layout, MeshResampleStats& st, bool repair) {
       done = split > 0 && again();
     }
     if (even.oddLeft != 0) {
-      logOddPatches(layout);
       layout.triangles = triangles;
       layout.positions.resize(positions);
       layout.colours.resize(colours);
       st.sideEdgesSplit = 0;
-      return false;
+    } else {
+      spdlog::info("side counts made even with {} edges split at their midpoints", st.sideEdgesSplit);
     }
-    spdlog::info("side counts made even with {} edges split at their midpoints", st.sideEdgesSplit);
   }
   if (even.oddLeft != 0) {
     logOddPatches(layout);
