@@ -14,6 +14,7 @@
 #include <unistd.h>
 #include <xxhash.h>
 
+#include "atlas/terrain/imagery.h"
 #include "atlas/terrain/scratch_raster.h"
 #include "atlas/terrain/terrain_windowed.h"
 #include "core/atlas_format.h"
@@ -100,16 +101,20 @@ std::string fileChecksum(const fs::path& path) {
 
 // What a shard must share with its plan: the input's identity and every option that changes the
 // atlas's bytes (not the threads, the memory cap or the window-by-window choice, which do not).
-json buildFingerprint(const TerrainBuildOptions& o) {
+// A file's identity: its absolute path, size and modification time.
+json fileIdentity(const fs::path& file) {
   std::error_code ec;
-  const fs::path input = fs::absolute(o.input);
-  const auto bytes = fs::file_size(input, ec);
-  const auto modified = fs::last_write_time(input, ec);
-  return {{"input",
-           {{"path", input.string()},
-            {"bytes", ec ? uint64_t{0} : uint64_t(bytes)},
-            {"modified_ns",
-             int64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(modified.time_since_epoch()).count())}}},
+  const fs::path path = fs::absolute(file);
+  const auto bytes = fs::file_size(path, ec);
+  const auto modified = fs::last_write_time(path, ec);
+  return {{"path", path.string()},
+          {"bytes", ec ? uint64_t{0} : uint64_t(bytes)},
+          {"modified_ns",
+           int64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(modified.time_since_epoch()).count())}};
+}
+
+json buildFingerprint(const TerrainBuildOptions& o) {
+  return {{"input", fileIdentity(o.input)},
           {"options",
            {{"chart_size", o.chartSize},
             {"depth", o.depth},
@@ -123,7 +128,10 @@ json buildFingerprint(const TerrainBuildOptions& o) {
             {"height_precision", o.heightPrecision},
             {"planet", o.planet},
             {"radius", o.planetRadius},
-            {"flattening", o.planetFlattening}}}};
+            {"flattening", o.planetFlattening},
+            {"imagery", o.imagery.empty() ? json() : fileIdentity(o.imagery)},
+            {"imagery_scale", o.imageryScaleLog2},
+            {"imagery_extent", o.imageryExtent ? json(*o.imageryExtent) : json()}}}};
 }
 
 // The keys where two fingerprints differ ("input.bytes", "options.chart_size").
@@ -242,9 +250,47 @@ std::vector<uint32_t> shardCharts(const std::vector<double>& work, ShardId id) {
 
 namespace {
 
-void refuseImagery(const TerrainBuildOptions& options) {
-  if (!options.imagery.empty())
-    throw InputError(optionRef("imagery") + ": sharded builds drape no imagery yet; build it in one process");
+// Imagery on charts built in tiles takes its coarse levels from the whole grid's: refused.
+void refuseTiledImagery(const TerrainBuildOptions& options, const AtlasManifest& m) {
+  if (!options.imagery.empty() && chartTiling(m.chartSize, m.blockIntervals).tiled())
+    throw InputError(
+        fmt::format("{}: sharded builds drape imagery on charts of at most {} samples, and these are {}; give {} {} or "
+                    "less, or build in one process",
+                    optionRef("imagery"), kMaxChartTile + 1, m.chartSize, optionRef("chart-size"), kMaxChartTile + 1));
+}
+
+// The prepare's imagery: the manifest's imagery fields (the coverage is the merge's) and the plan's.
+json prepareImagery(const TerrainBuildOptions& o, const DemRaster& dem, AtlasManifest& m) {
+  const ImagerySource imagery(dem, o.input, imageryOptions(o));
+  m.imagery.present = true;
+  m.imagery.scaleLog2 = imagery.scaleLog2();
+  m.imagery.source = fs::absolute(o.imagery).string();
+  m.imagery.coverage = 0.0;
+  for (ChartInfo& c : m.charts) c.imageryFile = imageryFileName(c.id);
+  for (const std::string& warning : imagery.warnings()) spdlog::warn("{}: {}", o.imagery.string(), warning);
+  return {{"width", imagery.width()},
+          {"height", imagery.height()},
+          {"scale", imagery.scaleLog2()},
+          {"resampling", imagery.resampling()}};
+}
+
+// Shard charts' imagery files into `dir`: the figures its record keeps.
+json writeShardImagery(const TerrainBuildOptions& o, const WindowedTerrainOptions& wo, const AtlasManifest& m,
+                       const std::vector<uint32_t>& charts, const fs::path& dir) {
+  const DemSource source(o.input, terrainDemOptions(o));
+  ImagerySource imagery(source.info(), o.input, imageryOptions(o));
+  AtlasManifest part = m;
+  ImageryWindowing windowing;
+  windowing.memoryBytes = wo.memoryBytes;
+  windowing.charts = charts;
+  ImageryWindowStats ws;
+  const ImageryWriteStats st = writeImageryChartsWindowed(imagery, m.imagery.source, dir, part, windowing, &ws);
+  return {{"covered_samples", st.coveredSamples},
+          {"stored_samples", st.storedSamples},
+          {"bytes", st.bytesOnDisk},
+          {"seconds", st.seconds},
+          {"windows", ws.windows},
+          {"window_samples", ws.windowSamples}};
 }
 
 }  // namespace
@@ -252,19 +298,20 @@ void refuseImagery(const TerrainBuildOptions& options) {
 ShardPrepareStats prepareShards(const TerrainBuildOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   const double cpu0 = cpuSeconds();
-  refuseImagery(options);
   const TerrainBuildOptions o = plannedTerrainBuild(options);
   const auto threads = threadLimit(o.threads);
+  AtlasManifest m = terrainManifest(o);
+  refuseTiledImagery(o, m);
   const fs::path area = shardArea(o.output);
   StagedDirectory stage(area, kPlanName, "shard area");
   const DemSource source(o.input, terrainDemOptions(o));
   logTerrainSource(o, source.info());
-  AtlasManifest m = terrainManifest(o);
   const WindowedTerrainOptions wo = windowedTerrainOptions(o);
   PreparedTerrainWindows prepared = prepareTerrainWindows(source, stage.path() / kScratchName, wo, m);
   prepared.scratch->keep(stage.path() / kScratchIndexName);
-  writeManifest(stage.path(), m);
   const DemRaster& dem = prepared.result.dem;
+  const json imagery = o.imagery.empty() ? json() : prepareImagery(o, dem, m);
+  writeManifest(stage.path(), m);
   json plan = {{"format", kPlanFormat},
                {"version", kShardFormatVersion},
                {"kind", "terrain"},
@@ -280,7 +327,8 @@ ShardPrepareStats prepareShards(const TerrainBuildOptions& options) {
                {"scratch", {{"bytes", prepared.result.scratchBytes}, {"tile", prepared.result.scratchTile}}},
                // Every shard builds its charts in the tiles chosen here: the chart files' block order
                // follows them.
-               {"chart_tile", windowChartTile(m.chartSize, m.blockIntervals, wo.memoryBytes)}};
+               {"chart_tile", windowChartTile(m.chartSize, m.blockIntervals, wo.memoryBytes)},
+               {"imagery", imagery}};
   // The plan's id: its fingerprint, its manifest and its scratch raster's index.
   const std::vector<uint8_t> manifest = readFileBytes(stage.path() / kManifestName);
   const std::vector<uint8_t> index = readFileBytes(stage.path() / kScratchIndexName);
@@ -303,7 +351,6 @@ ShardPrepareStats prepareShards(const TerrainBuildOptions& options) {
 ShardBuildStats buildShard(const TerrainBuildOptions& options, ShardId id) {
   const auto t0 = std::chrono::steady_clock::now();
   const double cpu0 = cpuSeconds();
-  refuseImagery(options);
   const fs::path area = shardArea(options.output);
   const json plan = readPlan(area);
   const json mine = buildFingerprint(options);
@@ -337,6 +384,7 @@ ShardBuildStats buildShard(const TerrainBuildOptions& options, ShardId id) {
     for (auto& roots : h.roots) roots = {};  // the merge takes them from the manifest
     writeHierarchy(stage.path() / kShardQuadtrees, h, true);
     st.hierarchySeconds = hs.seconds;
+    if (m.imagery.present) st.imagery = writeShardImagery(o, wo, m, st.charts, stage.path());
   }
   json files = json::array();
   for (const auto& e : fs::recursive_directory_iterator(stage.path())) {
@@ -359,6 +407,7 @@ ShardBuildStats buildShard(const TerrainBuildOptions& options, ShardId id) {
                                                   {"files", files},
                                                   {"bytes", st.bytes},
                                                   {"hierarchy_seconds", st.hierarchySeconds},
+                                                  {"imagery", st.imagery},
                                                   {"step", stepJson(st.step)}});
   stage.commit();
   return st;
@@ -456,6 +505,23 @@ json shardStatsJson(const ShardMergeStats& st, const json& plan, const AtlasMani
     shards.push_back(std::move(j));
   }
   w.hierarchy.samples = uint64_t(m.charts.size()) * m.chartSize * m.chartSize;
+  if (m.imagery.present) {
+    const json& planned = plan.at("imagery");
+    TerrainImageryStats& im = w.imagery.emplace();
+    im.source = m.imagery.source;
+    im.scaleLog2 = planned.at("scale").get<uint32_t>();
+    im.width = planned.at("width").get<uint32_t>();
+    im.height = planned.at("height").get<uint32_t>();
+    im.coverage = m.imagery.coverage;
+    im.resampling = planned.at("resampling").get<std::string>();
+    for (const ShardBuildStats& s : st.shards) {
+      im.storedSamples += s.imagery.value("stored_samples", uint64_t{0});
+      im.bytesOnDisk += s.imagery.value("bytes", uint64_t{0});
+      im.writeSeconds = std::max(im.writeSeconds, s.imagery.value("seconds", 0.0));
+      im.windows += s.imagery.value("windows", uint64_t{0});
+      im.windowSamples = std::max(im.windowSamples, s.imagery.value("window_samples", uint64_t{0}));
+    }
+  }
   t.bytesOnDisk = st.bytesOnDisk;
   t.totalSeconds = st.prepare.seconds + slowest + st.merge.seconds;
   t.peakRssBytes = peak;
@@ -483,7 +549,7 @@ ShardMergeStats mergeShards(const fs::path& atlas, uint32_t count) {
   const double cpu0 = cpuSeconds();
   const fs::path area = shardArea(atlas);
   const json plan = readPlan(area);
-  const AtlasManifest m = readManifest(area);
+  AtlasManifest m = readManifest(area);
   if (count == 0) count = shardCountIn(area);
   std::vector<json> records(count);
   std::vector<std::string> problems;
@@ -508,18 +574,33 @@ ShardMergeStats mergeShards(const fs::path& atlas, uint32_t count) {
     s.step = stepFromJson(records[i]["step"]);
     s.bytes = records[i].value("bytes", uint64_t{0});
     s.hierarchySeconds = records[i].value("hierarchy_seconds", 0.0);
+    s.imagery = records[i].value("imagery", json());
     if (!s.charts.empty()) {
       Hierarchy part = readHierarchy(dir / kShardQuadtrees);
       if (part.charts.size() != s.charts.size())
         throw InputError((dir / kShardQuadtrees).string() + ": not the shard's charts' quadtrees");
       for (size_t k = 0; k < s.charts.size(); ++k) h.charts[s.charts[k]] = std::move(part.charts[k]);
-      for (uint32_t c : s.charts) placeFile(dir / m.charts[c].file, stage.path() / m.charts[c].file);
+      for (uint32_t c : s.charts) {
+        placeFile(dir / m.charts[c].file, stage.path() / m.charts[c].file);
+        if (m.imagery.present) placeFile(dir / m.charts[c].imageryFile, stage.path() / m.charts[c].imageryFile);
+      }
     }
     st.shards.push_back(std::move(s));
   }
   writeHierarchy(stage.path() / m.hierarchyFile, h, m.compression.present);
-  const std::vector<uint8_t> manifest = readFileBytes(area / kManifestName);
-  atomicWriteFile(stage.path() / kManifestName, manifest.data(), manifest.size());
+  if (m.imagery.present) {
+    // The coverage, from the lattice samples each shard's charts own.
+    uint64_t covered = 0;
+    for (const ShardBuildStats& s : st.shards) covered += s.imagery.value("covered_samples", uint64_t{0});
+    if (covered == 0) throw InputError(m.imagery.source + ": does not overlap the DEM");
+    const json& im = plan.at("imagery");
+    m.imagery.coverage =
+        double(covered) / (double(im.at("width").get<uint64_t>()) * double(im.at("height").get<uint64_t>()));
+    writeManifest(stage.path(), m);
+  } else {
+    const std::vector<uint8_t> manifest = readFileBytes(area / kManifestName);
+    atomicWriteFile(stage.path() / kManifestName, manifest.data(), manifest.size());
+  }
   st.prepare = stepFromJson(plan.at("prepare"));
   st.bytesOnDisk = directoryBytes(stage.path());
   double slowest = 0.0, sum = 0.0;

@@ -72,6 +72,7 @@ struct ShardBuildStats {
   ShardStepStats step;
   uint64_t bytes = 0;  // the shard's chart and quadtree files
   double hierarchySeconds = 0.0;
+  nlohmann::json imagery;  // its imagery's figures (null without imagery)
 };
 // Shard `id` of options.output's build. Throws InputError when the area has no plan, or one made
 // from another input or other options than these.

@@ -37,6 +37,11 @@ std::string spelledMessage(const CommonBuildOptions& opts, const std::string& ma
 }
 
 // The imagery options of a build.
+// The in-memory build's memory cap: --max-memory, or 3/4 of the machine's memory.
+uint64_t memoryCap(const TerrainBuildOptions& o) { return o.maxMemory ? o.maxMemory : physicalMemoryBytes() / 4 * 3; }
+
+}  // namespace
+
 ImageryOptions imageryOptions(const TerrainBuildOptions& o) {
   ImageryOptions io;
   io.path = o.imagery;
@@ -44,11 +49,6 @@ ImageryOptions imageryOptions(const TerrainBuildOptions& o) {
   io.extent = o.imageryExtent;
   return io;
 }
-
-// The in-memory build's memory cap: --max-memory, or 3/4 of the machine's memory.
-uint64_t memoryCap(const TerrainBuildOptions& o) { return o.maxMemory ? o.maxMemory : physicalMemoryBytes() / 4 * 3; }
-
-}  // namespace
 
 DemOptions terrainDemOptions(const TerrainBuildOptions& o) {
   DemOptions d;
@@ -326,7 +326,8 @@ void writeImageryWindowed(const TerrainBuildOptions& o, const DemRaster& dem, co
   im.height = imagery.height();
   im.resampling = imagery.resampling();
   ImageryWindowStats ws;
-  const ImageryWriteStats st = writeImageryChartsWindowed(imagery, im.source, dir, m, {memoryBytes}, &ws);
+  const ImageryWriteStats st =
+      writeImageryChartsWindowed(imagery, im.source, dir, m, {memoryBytes, kMaxChartTile, {}}, &ws);
   for (const std::string& warning : imagery.warnings()) spdlog::warn("{}: {}", o.imagery.string(), warning);
   im.coverage = m.imagery.coverage;
   im.windows = ws.windows;

@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "atlas/terrain/dem.h"
+#include "atlas/terrain/imagery.h"
 #include "atlas/terrain/terrain_windowed.h"
 #include "hierarchy/hierarchy.h"
 #include "pipeline/build_options.h"
@@ -54,6 +55,8 @@ DemOptions terrainDemOptions(const TerrainBuildOptions& options);
 // Logs what opening or reading the DEM found: its warnings (options spelled as o spells them) and
 // the planet lattice it was laid on.
 void logTerrainSource(const TerrainBuildOptions& o, const DemRaster& dem);
+// How the build opens its imagery (options.imagery and the imagery options).
+ImageryOptions imageryOptions(const TerrainBuildOptions& options);
 // The manifest fields a build sets before its charts are written.
 AtlasManifest terrainManifest(const TerrainBuildOptions& options);
 TerrainAtlasOptions terrainAtlasOptions(const TerrainBuildOptions& options);

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <list>
+#include <stdexcept>
 
 #include <gdal_alg.h>
 #include <gdal_utils.h>
@@ -515,10 +516,10 @@ uint64_t writeImageryChart(const ImageryPyramid& pyramid, const fs::path& dir, c
 }
 
 // The grid's level-0 samples of `window` (the lattice edge-clamped onto the chart grid),
-// reprojected by `imagery`; adds to `covered` the lattice samples with alpha > 0 in the part the
-// caller owns, owned = {x0, y0, x1, y1} (half-open).
+// reprojected by `imagery`; adds to `covered` the lattice samples with alpha > 0 in the parts the
+// caller owns, each {x0, y0, x1, y1} (half-open).
 std::vector<PackedColour> gridWindow(const ImagerySource& imagery, const ImageryWindow& window,
-                                     const std::array<uint64_t, 4>& owned, uint64_t& covered) {
+                                     const std::vector<std::array<uint64_t, 4>>& ownedParts, uint64_t& covered) {
   const uint64_t x0 = window.x0, y0 = window.y0, x1 = x0 + window.w, y1 = y0 + window.h;
   const uint32_t latW = imagery.width(), latH = imagery.height();
   const uint32_t lx0 = uint32_t(std::min<uint64_t>(x0, latW - 1)), ly0 = uint32_t(std::min<uint64_t>(y0, latH - 1));
@@ -526,9 +527,10 @@ std::vector<PackedColour> gridWindow(const ImagerySource& imagery, const Imagery
   const uint32_t ly1 = std::max(uint32_t(std::min<uint64_t>(y1, latH)), ly0 + 1);
   const std::vector<PackedColour> lattice = imagery.window(lx0, ly0, lx1 - lx0, ly1 - ly0);
   const uint32_t lw = lx1 - lx0;
-  for (uint64_t y = owned[1]; y < std::min<uint64_t>(owned[3], latH); ++y)
-    for (uint64_t x = owned[0]; x < std::min<uint64_t>(owned[2], latW); ++x)
-      covered += lattice[size_t(y - ly0) * lw + size_t(x - lx0)][3] > 0;
+  for (const auto& owned : ownedParts)
+    for (uint64_t y = owned[1]; y < std::min<uint64_t>(owned[3], latH); ++y)
+      for (uint64_t x = owned[0]; x < std::min<uint64_t>(owned[2], latW); ++x)
+        covered += lattice[size_t(y - ly0) * lw + size_t(x - lx0)][3] > 0;
   const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
   std::vector<PackedColour> base(size_t(w) * h);
   for (uint32_t y = 0; y < h; ++y) {
@@ -605,7 +607,8 @@ ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& s
           const uint64_t x0 = ox > margin ? ox - margin : 0, y0 = oy > margin ? oy - margin : 0;
           const uint64_t x1 = std::min(gridW, ox + tile + margin + 1), y1 = std::min(gridH, oy + tile + margin + 1);
           const bool lastX = cx + 1 == m.chartsX && tx + 1 == per, lastY = cy + 1 == m.chartsY && ty + 1 == per;
-          const std::array<uint64_t, 4> owned{ox, oy, lastX ? latW : ox + tile, lastY ? latH : oy + tile};
+          const std::vector<std::array<uint64_t, 4>> owned{
+              {ox, oy, lastX ? latW : ox + tile, lastY ? latH : oy + tile}};
           const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
           const ImageryWindow window{uint32_t(x0), uint32_t(y0), w, h};
           const ImageryPyramid pyramid(gridWindow(imagery, window, owned, covered), window,
@@ -648,6 +651,7 @@ ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& s
   });
   if (windowStats) *windowStats = {windows, most};
   ImageryWriteStats st;
+  st.coveredSamples = covered;
   st.bytesOnDisk = bytes.load();
   st.storedSamples = chartSamples(ci, levels) * m.charts.size();
   st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -661,8 +665,11 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
                                              ImageryWindowStats* windowStats) {
   const auto start = std::chrono::steady_clock::now();
   makeImageryDir(dir);
-  if (chartTiling(m.chartSize, m.blockIntervals, windowing.maxTile).tiled())
+  if (chartTiling(m.chartSize, m.blockIntervals, windowing.maxTile).tiled()) {
+    if (!windowing.charts.empty())
+      throw std::invalid_argument("writeImageryChartsWindowed: charts built in tiles take every chart");
     return writeImageryTiles(imagery, source, dir, m, windowing, windowStats);
+  }
   const uint64_t memoryBytes = windowing.memoryBytes;
   const uint32_t levels = m.intervalsLog2() + 1;
   const uint32_t s = imagery.scaleLog2();
@@ -677,35 +684,55 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
   uint64_t n = 1;
   auto windowBytes = [&](uint64_t k) { return (k * ci + 2 * margin + 1) * (k * ci + 2 * margin + 1) * 10; };
   while (n < std::max(m.chartsX, m.chartsY) && windowBytes(n + 1) <= memoryBytes / 4 * 3) ++n;
-  // Charts by grid cell.
+  // The selected charts by grid cell.
   std::vector<int64_t> at(size_t(m.chartsX) * m.chartsY, -1);
   for (size_t i = 0; i < m.charts.size(); ++i)
-    at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
+    if (windowing.charts.empty() || std::binary_search(windowing.charts.begin(), windowing.charts.end(), uint32_t(i)))
+      at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
   setImageryInfo(m, s, source, 0.0);
   AntimeridianColumns seam(m);
+  // A chart owns its lattice samples but its east column and north row (the last charts' too).
+  auto ownedBy = [&](const ChartInfo& c) {
+    const uint64_t x = uint64_t(c.gridX) * ci, y = uint64_t(c.gridY) * ci;
+    return std::array<uint64_t, 4>{x, y, uint32_t(c.gridX) + 1 == m.chartsX ? latW : x + ci,
+                                   uint32_t(c.gridY) + 1 == m.chartsY ? latH : y + ci};
+  };
   std::atomic<uint64_t> bytes{0}, samples{0};
   uint64_t covered = 0, windows = 0, most = 0;
-  const progress::ProgressStage stage("imagery charts", m.charts.size());
-  for (uint64_t cy0 = 0; cy0 < m.chartsY; cy0 += n)
+  const progress::ProgressStage stage("imagery charts",
+                                      windowing.charts.empty() ? m.charts.size() : windowing.charts.size());
+  for (uint64_t cy0 = 0; cy0 < m.chartsY; cy0 += n) {
+    const uint64_t cy1 = std::min<uint64_t>(cy0 + n, m.chartsY);
+    // A row of windows with a chart east of the antimeridian takes the west border from its first.
+    bool eastBorder = false;
+    for (uint64_t cy = cy0; cy < cy1; ++cy) {
+      const int64_t c = at[cy * m.chartsX + m.chartsX - 1];
+      eastBorder = eastBorder || (c >= 0 && seam.east(m.charts[size_t(c)]));
+    }
     for (uint64_t cx0 = 0; cx0 < m.chartsX; cx0 += n) {
-      const uint64_t cx1 = std::min<uint64_t>(cx0 + n, m.chartsX), cy1 = std::min<uint64_t>(cy0 + n, m.chartsY);
+      const uint64_t cx1 = std::min<uint64_t>(cx0 + n, m.chartsX);
       std::vector<size_t> charts;
+      std::vector<std::array<uint64_t, 4>> owned;
+      // The window spans the charts it writes (and, for the antimeridian, the first column's rows).
+      const bool westBorder = cx0 == 0 && eastBorder;
+      uint64_t bx0 = westBorder ? 0 : cx1, by0 = westBorder ? cy0 : cy1, bx1 = westBorder ? 1 : cx0,
+               by1 = westBorder ? cy1 : cy0;
       for (uint64_t cy = cy0; cy < cy1; ++cy)
         for (uint64_t cx = cx0; cx < cx1; ++cx)
-          if (at[cy * m.chartsX + cx] >= 0) charts.push_back(size_t(at[cy * m.chartsX + cx]));
-      if (charts.empty()) continue;
-      // The grid's level-0 window (edge-clamped onto the lattice), the charts and their margin; the
-      // coverage over the lattice samples these charts own (the last column and row with the last
-      // charts).
-      const uint64_t x0 = cx0 * ci > margin ? cx0 * ci - margin : 0, y0 = cy0 * ci > margin ? cy0 * ci - margin : 0;
-      const uint64_t x1 = std::min(gridW, cx1 * ci + margin + 1), y1 = std::min(gridH, cy1 * ci + margin + 1);
-      const std::array<uint64_t, 4> owned{cx0 * ci, cy0 * ci, cx1 == m.chartsX ? latW : cx1 * ci,
-                                          cy1 == m.chartsY ? latH : cy1 * ci};
+          if (at[cy * m.chartsX + cx] >= 0) {
+            charts.push_back(size_t(at[cy * m.chartsX + cx]));
+            owned.push_back(ownedBy(m.charts[charts.back()]));
+            bx0 = std::min(bx0, cx), bx1 = std::max(bx1, cx + 1), by0 = std::min(by0, cy), by1 = std::max(by1, cy + 1);
+          }
+      if (charts.empty() && !westBorder) continue;
+      // The grid's level-0 window (edge-clamped onto the lattice): the charts and their margin.
+      const uint64_t x0 = bx0 * ci > margin ? bx0 * ci - margin : 0, y0 = by0 * ci > margin ? by0 * ci - margin : 0;
+      const uint64_t x1 = std::min(gridW, bx1 * ci + margin + 1), y1 = std::min(gridH, by1 * ci + margin + 1);
       const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
       const ImageryWindow window{uint32_t(x0), uint32_t(y0), w, h};
       std::vector<PackedColour> base = gridWindow(imagery, window, owned, covered);
       const ImageryPyramid pyramid(std::move(base), window, {m.chartsX, m.chartsY, m.chartSize, s}, levels);
-      for (uint64_t cy = cy0; cy < cy1 && cx0 == 0; ++cy)
+      for (uint64_t cy = cy0; cy < cy1 && westBorder; ++cy)
         for (uint32_t k = 0; k < levels; ++k) seam.record(pyramid, 0, k, uint32_t(cy), 0, ci >> k);
       tbb::parallel_for(size_t{0}, charts.size(), [&](size_t i) {
         bytes += writeImageryChart(pyramid, dir, m, m.charts[charts[i]], samples, seam);
@@ -714,10 +741,19 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
       ++windows;
       most = std::max<uint64_t>(most, uint64_t(w) * h);
     }
+  }
+  ImageryWriteStats st;
+  st.coveredSamples = covered;
+  if (!windowing.charts.empty()) {  // a part of the charts: the caller sums the coverage
+    if (windowStats) *windowStats = {windows, most};
+    st.bytesOnDisk = bytes.load();
+    st.storedSamples = samples.load();
+    st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return st;
+  }
   if (covered == 0) fail(m.imagery.source, "does not overlap the DEM");
   m.imagery.coverage = double(covered) / (double(latW) * double(latH));
   if (windowStats) *windowStats = {windows, most};
-  ImageryWriteStats st;
   st.bytesOnDisk = bytes.load();
   st.storedSamples = samples.load();
   st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -144,6 +144,7 @@ class ImageryPyramid {
 struct ImageryWriteStats {
   uint64_t bytesOnDisk = 0;
   uint64_t storedSamples = 0;
+  uint64_t coveredSamples = 0;  // lattice samples with alpha > 0 that the written charts own
   double seconds = 0.0;
 };
 
@@ -162,6 +163,9 @@ struct ImageryWindowStats {
 struct ImageryWindowing {
   uint64_t memoryBytes = 0;
   uint32_t maxTile = kMaxChartTile;
+  // The charts to write, by index into the manifest's charts, ascending; empty: every chart.
+  // Charts the geometry builds in tiles take every chart.
+  std::vector<uint32_t> charts;
 };
 
 // The same files as writeImageryCharts of the whole raster, byte for byte, window by window: each
@@ -176,6 +180,11 @@ struct ImageryWindowing {
 // (1/4^coarseLevel of the samples), gives the levels above. A chart's colours are those of the
 // whole pyramid, so shared borders stay bit-identical; its file holds its tiles' blocks in the
 // tiles' order, then the coarse levels, whatever memoryBytes is.
+// With windowing.charts, only those charts' files are written (the same bytes) and only their chart
+// fields are filled; the coverage counts the lattice samples those charts own (a chart owns its
+// samples but its east column and north row, which the last column and row of charts own), and a
+// chart east of the antimeridian takes its west border's colours from the first column's windows,
+// reprojected for it. Summed over a partition of the charts, coveredSamples is the whole build's.
 ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::string& source,
                                              const std::filesystem::path& dir, AtlasManifest& manifest,
                                              const ImageryWindowing& windowing,

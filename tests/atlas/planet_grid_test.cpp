@@ -4,6 +4,7 @@
 #include <cmath>
 #include <memory>
 #include <numbers>
+#include <numeric>
 #include <tuple>
 
 #include <gdal.h>
@@ -397,6 +398,14 @@ std::pair<size_t, uint32_t> seamDifferences(const std::filesystem::path& dir, co
   return {differ, levels};
 }
 
+// The shipped globe (`input`) read as a planet lattice for charts of `intervals`.
+DemRaster globeLattice(const std::filesystem::path& input, uint32_t intervals) {
+  DemOptions d;
+  d.planetRadius = kEarthRadius;
+  d.planetChartIntervals = intervals;
+  return loadDem(input, d);
+}
+
 // A planet's imagery meets itself at the antimeridian: the first column of charts' west borders and
 // the last column's east borders hold the same colours at every level, where the colours change
 // across it, written whole, window by window and in tiles; and the windows' and tiles' colours are
@@ -405,10 +414,7 @@ TEST(PlanetGrid, ImageryMeetsItselfAtTheAntimeridianAtEveryLevel) {
   test::TempDir dir("planet_imagery");
   writeGlobeImagery(dir.path() / "globe.tif");
   const std::filesystem::path input = test::repoData() / "terrain/etopo_30min.tif";
-  DemOptions d;
-  d.planetRadius = kEarthRadius;
-  d.planetChartIntervals = 128;
-  const DemRaster dem = loadDem(input, d);
+  const DemRaster dem = globeLattice(input, 128);
   TerrainAtlasOptions atlas;
   atlas.chartSize = 129;
   atlas.blockIntervals = 16;
@@ -426,9 +432,9 @@ TEST(PlanetGrid, ImageryMeetsItselfAtTheAntimeridianAtEveryLevel) {
     if (way == std::string("whole"))
       writeImageryCharts(loadImagery(dem, input, io), "globe", out, m);
     else if (way == std::string("windows"))
-      writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{2} << 20}, &ws);
+      writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{2} << 20, kMaxChartTile, {}}, &ws);
     else
-      writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{64} << 20, 32}, &ws);
+      writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{64} << 20, 32, {}}, &ws);
     if (way == std::string("windows")) {
       EXPECT_GT(ws.windows, 1u) << "the seam is not across windows";
     }
@@ -444,6 +450,58 @@ TEST(PlanetGrid, ImageryMeetsItselfAtTheAntimeridianAtEveryLevel) {
       for (uint32_t k = 0; k < got.levels(); ++k)
         EXPECT_TRUE(got.readLevelColours(k) == want.readLevelColours(k)) << c.imageryFile << " level " << k;
     }
+  }
+}
+
+// Imagery written for parts of the charts, as the shards of a build write it, is the whole's, file for
+// file, and the parts' covered samples add up to the whole's coverage: parts of whole rows, of rows
+// cut anywhere, and the east column alone, whose east borders come from windows of the first column
+// that the part does not hold.
+TEST(PlanetGrid, ImageryWrittenInPartsIsTheWholesFileForFile) {
+  test::TempDir dir("planet_imagery_parts");
+  writeGlobeImagery(dir.path() / "globe.tif");
+  const std::filesystem::path input = test::repoData() / "terrain/etopo_30min.tif";
+  const DemRaster dem = globeLattice(input, 64);
+  TerrainAtlasOptions atlas;
+  atlas.chartSize = 65;
+  atlas.blockIntervals = 16;
+  ImageryOptions io;
+  io.path = dir.path() / "globe.tif";
+  ImagerySource source(dem, input, io);
+  AtlasManifest whole;
+  std::filesystem::create_directories(dir.path() / "whole");
+  writeTerrainCharts(dem, atlas, dir.path() / "whole", whole);
+  const AtlasManifest charts = whole;
+  ImageryWindowStats ws;
+  writeImageryChartsWindowed(source, "globe", dir.path() / "whole", whole, {uint64_t{1} << 20, kMaxChartTile, {}}, &ws);
+  ASSERT_GT(ws.windows, 2u) << "one window holds every chart";
+  const uint32_t n = uint32_t(whole.charts.size());
+  std::vector<uint32_t> east, rest;
+  for (uint32_t c = 0; c < n; ++c) (uint32_t(whole.charts[c].gridX) + 1 == whole.chartsX ? east : rest).push_back(c);
+  auto run = [](uint32_t from, uint32_t to) {
+    std::vector<uint32_t> r(to - from);
+    std::iota(r.begin(), r.end(), from);
+    return r;
+  };
+  const uint32_t row = whole.chartsX;
+  const std::vector<std::vector<std::vector<uint32_t>>> splits = {
+      {run(0, 2 * row), run(2 * row, n)},                 // whole rows
+      {run(0, n / 3), run(n / 3, n - 5), run(n - 5, n)},  // rows cut anywhere
+      {east, rest}};
+  for (size_t s = 0; s < splits.size(); ++s) {
+    SCOPED_TRACE(s);
+    const std::filesystem::path out = dir.path() / ("parts" + std::to_string(s));
+    uint64_t covered = 0;
+    for (const std::vector<uint32_t>& part : splits[s]) {
+      AtlasManifest m = charts;
+      covered +=
+          writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{1} << 20, kMaxChartTile, part}).coveredSamples;
+      for (uint32_t c : part) EXPECT_EQ(m.charts[c].imageryFile, whole.charts[c].imageryFile);
+    }
+    EXPECT_EQ(double(covered) / (double(source.width()) * double(source.height())), whole.imagery.coverage);
+    for (const ChartInfo& c : whole.charts)
+      EXPECT_TRUE(test::fileBytes(out / c.imageryFile) == test::fileBytes(dir.path() / "whole" / c.imageryFile))
+          << c.imageryFile;
   }
 }
 

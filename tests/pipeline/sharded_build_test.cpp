@@ -152,6 +152,56 @@ TEST(ShardedBuild, APlanetAndChartsBuiltInTilesAreByteIdentical) {
   test::expectSameFiles(dir.path() / "tiled-one.atlas", tiled.output, "stats.json");
 }
 
+// The shipped tile with its imagery: each shard drapes its own charts, the merge takes the coverage
+// from the lattice samples their charts own; the atlas is one process's, file for file. A shard given
+// other imagery options is refused, and so is imagery on charts built in tiles.
+TEST(ShardedBuild, ADrapedTileIsByteIdenticalForThreeAndEightShards) {
+  test::TempDir dir("gimlod-sharded-imagery");
+  const fs::path imagery = test::repoData() / "terrain/mt_rainier_imagery.tif";
+  TerrainBuildOptions one = tileOptions(dir.path() / "one.atlas");
+  one.imagery = imagery;
+  one.imageryScaleLog2 = 0;  // on the DEM's lattice: 1201^2 samples
+  buildTerrainAtlas(one);
+  const AtlasManifest m = readManifest(one.output);
+  ASSERT_TRUE(m.imagery.present);
+  ASSERT_GT(m.imagery.coverage, 0.0);
+  for (uint32_t n : {3u, 8u}) {
+    SCOPED_TRACE(n);
+    TerrainBuildOptions o = one;
+    o.output = dir.path() / (std::to_string(n) + "-shards.atlas");
+    const ShardMergeStats st = buildSharded(o, n);
+    test::expectSameFiles(one.output, o.output, "stats.json");
+    const nlohmann::json& im = st.stats.at("imagery");
+    EXPECT_EQ(im.at("coverage").get<double>(), m.imagery.coverage);
+    EXPECT_GT(im.at("bytes_on_disk").get<uint64_t>(), 0u);
+  }
+  // Other imagery than the plan's.
+  TerrainBuildOptions o = one;
+  o.output = dir.path() / "foreign.atlas";
+  prepareShards(o);
+  TerrainBuildOptions other = o;
+  other.imageryScaleLog2 = 1;
+  try {
+    buildShard(other, {0, 2});
+    ADD_FAILURE() << "a shard ran with another imagery scale";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("options.imagery_scale"), std::string::npos) << e.what();
+  }
+  // Charts of 4097 samples are built in tiles.
+  TerrainBuildOptions tiled = o;
+  tiled.output = dir.path() / "tiled.atlas";
+  tiled.chartSize = 4097;
+  try {
+    prepareShards(tiled);
+    ADD_FAILURE() << "prepared imagery on charts built in tiles";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("sharded builds drape imagery on charts of at most 2049 samples"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(fs::exists(shardArea(tiled.output)));
+}
+
 TEST(ShardedBuild, AMissingShardIsNamedAndRunAgainAloneGivesTheSameAtlas) {
   test::TempDir dir("gimlod-sharded-missing");
   TerrainBuildOptions one = tileOptions(dir.path() / "one.atlas");
