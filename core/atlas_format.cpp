@@ -934,6 +934,37 @@ uint64_t ChartFileWriter::commit() {
   return w.end;
 }
 
+uint64_t ChartFileWriter::commitPartial() {
+  Impl& w = *impl_;
+  const std::lock_guard<std::mutex> lock(w.mutex);
+  w.file.writeAt(0, w.directory.data(), w.directory.size());
+  w.file.commit();
+  return w.end;
+}
+
+ChartFileWriter::ChartFileWriter(fs::path path, const ChartFileShape& shape, const ChartCoding& coding,
+                                 const fs::path& partial)
+    : ChartFileWriter(std::move(path), shape, coding) {
+  Impl& w = *impl_;
+  const std::vector<uint8_t> bytes = readFileBytes(partial);
+  const size_t head = w.directory.size();
+  if (bytes.size() < head ||
+      !std::equal(w.directory.begin(), w.directory.begin() + std::ptrdiff_t(w.header), bytes.begin()))
+    throw InputError(quoted(partial) + ": not a partial chart file of this shape and coding");
+  // A block's entry holds its first stored channel's offset, past the directory once written.
+  for (size_t e = 0; e < w.written.size(); ++e) {
+    const size_t at = w.header + e * w.entryBytes;
+    const uint64_t offset = getLe<uint64_t>(bytes.data() + at);
+    if (offset == 0) continue;
+    if (offset < head || offset > bytes.size())
+      throw InputError(quoted(partial) + ": a block's offset lies outside the file");
+    w.written[e] = 1;
+    std::copy_n(bytes.begin() + std::ptrdiff_t(at), w.entryBytes, w.directory.begin() + std::ptrdiff_t(at));
+  }
+  w.file.write(bytes.data() + head, bytes.size() - head);
+  w.end = bytes.size();
+}
+
 uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint32_t chartSize, uint32_t blockIntervals,
                         const ChartCoding& coding) {
   if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) || blockIntervals > chartSize - 1)

@@ -365,6 +365,11 @@ class ChartFileWriter {
   // file cannot be created.
   ChartFileWriter(std::filesystem::path path, const ChartFileShape& shape, const ChartCoding& coding,
                   std::optional<HeightFieldFrame> frame = {});
+  // Carries on the partial chart file `partial` (commitPartial's, of the same shape and coding):
+  // its blocks are copied into `path` in their order, and the writer takes the others. Throws
+  // InputError naming `partial` when it is not such a file.
+  ChartFileWriter(std::filesystem::path path, const ChartFileShape& shape, const ChartCoding& coding,
+                  const std::filesystem::path& partial);
   ~ChartFileWriter();
   ChartFileWriter(const ChartFileWriter&) = delete;
   ChartFileWriter& operator=(const ChartFileWriter&) = delete;
@@ -383,6 +388,9 @@ class ChartFileWriter {
   }
   // Throws std::logic_error when a block is missing. Returns the file's bytes.
   uint64_t commit();
+  // Writes the file with the blocks appended so far (a partial chart file: the directory holds
+  // their entries alone), for a writer of another process to carry on. Returns its bytes.
+  uint64_t commitPartial();
   const std::filesystem::path& path() const { return path_; }
   uint32_t chartSize() const;
   uint32_t blockIntervals() const;

@@ -34,6 +34,7 @@ constexpr const char* kShardRecordName = "shard.json";
 constexpr const char* kShardQuadtrees = "quadtrees.bin";
 constexpr const char* kScratchName = "dem.scratch";
 constexpr const char* kScratchIndexName = "dem.scratch.index";
+constexpr const char* kImageryCoarseName = "imagery/coarse.bin";
 constexpr const char* kPlanFormat = "gimlod-shard-plan";
 constexpr const char* kShardFormat = "gimlod-shard";
 constexpr int kShardFormatVersion = 1;
@@ -250,15 +251,6 @@ std::vector<uint32_t> shardCharts(const std::vector<double>& work, ShardId id) {
 
 namespace {
 
-// Imagery on charts built in tiles takes its coarse levels from the whole grid's: refused.
-void refuseTiledImagery(const TerrainBuildOptions& options, const AtlasManifest& m) {
-  if (!options.imagery.empty() && chartTiling(m.chartSize, m.blockIntervals).tiled())
-    throw InputError(
-        fmt::format("{}: sharded builds drape imagery on charts of at most {} samples, and these are {}; give {} {} or "
-                    "less, or build in one process",
-                    optionRef("imagery"), kMaxChartTile + 1, m.chartSize, optionRef("chart-size"), kMaxChartTile + 1));
-}
-
 // The prepare's imagery: the manifest's imagery fields (the coverage is the merge's) and the plan's.
 json prepareImagery(const TerrainBuildOptions& o, const DemRaster& dem, AtlasManifest& m) {
   const ImagerySource imagery(dem, o.input, imageryOptions(o));
@@ -274,7 +266,8 @@ json prepareImagery(const TerrainBuildOptions& o, const DemRaster& dem, AtlasMan
           {"resampling", imagery.resampling()}};
 }
 
-// Shard charts' imagery files into `dir`: the figures its record keeps.
+// The shard charts' imagery in `dir`: partial chart files (the levels below the coarse level) and
+// their coarse level's samples (kImageryCoarseName); the figures its record keeps.
 json writeShardImagery(const TerrainBuildOptions& o, const WindowedTerrainOptions& wo, const AtlasManifest& m,
                        const std::vector<uint32_t>& charts, const fs::path& dir) {
   const DemSource source(o.input, terrainDemOptions(o));
@@ -283,14 +276,45 @@ json writeShardImagery(const TerrainBuildOptions& o, const WindowedTerrainOption
   ImageryWindowing windowing;
   windowing.memoryBytes = wo.memoryBytes;
   windowing.charts = charts;
-  ImageryWindowStats ws;
-  const ImageryWriteStats st = writeImageryChartsWindowed(imagery, m.imagery.source, dir, part, windowing, &ws);
-  return {{"covered_samples", st.coveredSamples},
-          {"stored_samples", st.storedSamples},
-          {"bytes", st.bytesOnDisk},
-          {"seconds", st.seconds},
-          {"windows", ws.windows},
-          {"window_samples", ws.windowSamples}};
+  const ImageryPart written = writeImageryChartsPart(imagery, m.imagery.source, dir, part, windowing);
+  atomicWriteFile(dir / kImageryCoarseName, written.coarse.data(), written.coarse.size() * sizeof(PackedColour));
+  return {{"covered_samples", written.stats.coveredSamples},
+          {"stored_samples", written.stats.storedSamples},
+          {"bytes", written.stats.bytesOnDisk},
+          {"seconds", written.stats.seconds},
+          {"windows", written.windows.windows},
+          {"window_samples", written.windows.windowSamples},
+          {"coarse_level", written.coarseLevel}};
+}
+
+// The merge's imagery: every chart's file carried on from its shard's partial file with the levels
+// from the coarse level up, and the manifest's coverage. Returns the bytes and samples it added.
+ImageryWriteStats mergeImagery(const fs::path& area, const fs::path& dir, const json& plan,
+                               std::vector<ShardBuildStats>& shards, AtlasManifest& m) {
+  const uint32_t coarseLevel = shardImageryTiling(m).coarseLevel;
+  const uint64_t n = ((uint64_t(m.chartSize - 1) << m.imagery.scaleLog2) >> coarseLevel) + 1;
+  std::vector<PackedColour> coarse(n * n * m.charts.size());
+  std::vector<fs::path> partials(m.charts.size());
+  uint64_t covered = 0;
+  for (const ShardBuildStats& s : shards) {
+    if (s.charts.empty()) continue;
+    const fs::path shardDir = area / shardDirName(s.id), file = shardDir / kImageryCoarseName;
+    const std::vector<uint8_t> bytes = readFileBytes(file);
+    if (s.imagery.value("coarse_level", ~0u) != coarseLevel ||
+        bytes.size() != s.charts.size() * n * n * sizeof(PackedColour))
+      throw InputError(file.string() + ": not the coarse imagery samples of the shard's charts");
+    for (size_t k = 0; k < s.charts.size(); ++k) {
+      std::memcpy(coarse.data() + s.charts[k] * n * n, bytes.data() + k * n * n * sizeof(PackedColour),
+                  n * n * sizeof(PackedColour));
+      partials[s.charts[k]] = shardDir / m.charts[s.charts[k]].imageryFile;
+    }
+    covered += s.imagery.value("covered_samples", uint64_t{0});
+  }
+  if (covered == 0) throw InputError(m.imagery.source + ": does not overlap the DEM");
+  const json& im = plan.at("imagery");
+  m.imagery.coverage =
+      double(covered) / (double(im.at("width").get<uint64_t>()) * double(im.at("height").get<uint64_t>()));
+  return finishImageryCharts(dir, m, partials, std::move(coarse), coarseLevel);
 }
 
 }  // namespace
@@ -301,7 +325,6 @@ ShardPrepareStats prepareShards(const TerrainBuildOptions& options) {
   const TerrainBuildOptions o = plannedTerrainBuild(options);
   const auto threads = threadLimit(o.threads);
   AtlasManifest m = terrainManifest(o);
-  refuseTiledImagery(o, m);
   const fs::path area = shardArea(o.output);
   StagedDirectory stage(area, kPlanName, "shard area");
   const DemSource source(o.input, terrainDemOptions(o));
@@ -514,9 +537,10 @@ json shardStatsJson(const ShardMergeStats& st, const json& plan, const AtlasMani
     im.height = planned.at("height").get<uint32_t>();
     im.coverage = m.imagery.coverage;
     im.resampling = planned.at("resampling").get<std::string>();
+    im.storedSamples = st.imagery.storedSamples;
+    im.bytesOnDisk = st.imagery.bytesOnDisk;  // the files the merge finished
     for (const ShardBuildStats& s : st.shards) {
       im.storedSamples += s.imagery.value("stored_samples", uint64_t{0});
-      im.bytesOnDisk += s.imagery.value("bytes", uint64_t{0});
       im.writeSeconds = std::max(im.writeSeconds, s.imagery.value("seconds", 0.0));
       im.windows += s.imagery.value("windows", uint64_t{0});
       im.windowSamples = std::max(im.windowSamples, s.imagery.value("window_samples", uint64_t{0}));
@@ -580,22 +604,13 @@ ShardMergeStats mergeShards(const fs::path& atlas, uint32_t count) {
       if (part.charts.size() != s.charts.size())
         throw InputError((dir / kShardQuadtrees).string() + ": not the shard's charts' quadtrees");
       for (size_t k = 0; k < s.charts.size(); ++k) h.charts[s.charts[k]] = std::move(part.charts[k]);
-      for (uint32_t c : s.charts) {
-        placeFile(dir / m.charts[c].file, stage.path() / m.charts[c].file);
-        if (m.imagery.present) placeFile(dir / m.charts[c].imageryFile, stage.path() / m.charts[c].imageryFile);
-      }
+      for (uint32_t c : s.charts) placeFile(dir / m.charts[c].file, stage.path() / m.charts[c].file);
     }
     st.shards.push_back(std::move(s));
   }
   writeHierarchy(stage.path() / m.hierarchyFile, h, m.compression.present);
   if (m.imagery.present) {
-    // The coverage, from the lattice samples each shard's charts own.
-    uint64_t covered = 0;
-    for (const ShardBuildStats& s : st.shards) covered += s.imagery.value("covered_samples", uint64_t{0});
-    if (covered == 0) throw InputError(m.imagery.source + ": does not overlap the DEM");
-    const json& im = plan.at("imagery");
-    m.imagery.coverage =
-        double(covered) / (double(im.at("width").get<uint64_t>()) * double(im.at("height").get<uint64_t>()));
+    st.imagery = mergeImagery(area, stage.path(), plan, st.shards, m);
     writeManifest(stage.path(), m);
   } else {
     const std::vector<uint8_t> manifest = readFileBytes(area / kManifestName);

@@ -29,6 +29,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "atlas/terrain/imagery.h"
 #include "pipeline/build_options.h"
 
 namespace gimlod {
@@ -82,8 +83,9 @@ struct ShardMergeStats {
   std::vector<ShardBuildStats> shards;
   ShardStepStats prepare, merge;
   uint64_t bytesOnDisk = 0;
-  double balance = 0.0;  // the slowest shard's time over the mean shard's
-  nlohmann::json stats;  // what stats.json holds
+  double balance = 0.0;       // the slowest shard's time over the mean shard's
+  ImageryWriteStats imagery;  // the imagery's levels the merge wrote, and its files' bytes
+  nlohmann::json stats;       // what stats.json holds
 };
 // Merges the shards of the build of `atlas` (count: the N the shards were run with; 0: the one N
 // the area holds). Throws InputError naming every shard that is missing, damaged or from another

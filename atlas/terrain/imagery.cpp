@@ -480,13 +480,20 @@ class AntimeridianColumns {
   std::vector<std::vector<std::vector<PackedColour>>> columns_;  // [gridY][level][row]
 };
 
-std::unique_ptr<ChartFileWriter> openImageryChart(const fs::path& dir, const AtlasManifest& m, ChartInfo& c) {
-  c.imageryFile = imageryFileName(c.id);
+ChartFileShape imageryShape(const AtlasManifest& m) {
+  return {m.imagery.chartSize(m.chartSize), m.blockIntervals << m.imagery.scaleLog2, m.pyramidLevels(),
+          1u << kChannelColours};
+}
+
+ChartCoding imageryCoding(const AtlasManifest& m) {
   ChartCoding coding;
   coding.compressed = m.compression.present;  // coded like the atlas's geometry
-  const ChartFileShape shape{m.imagery.chartSize(m.chartSize), m.blockIntervals << m.imagery.scaleLog2,
-                             m.pyramidLevels(), 1u << kChannelColours};
-  return std::make_unique<ChartFileWriter>(dir / c.imageryFile, shape, coding);
+  return coding;
+}
+
+std::unique_ptr<ChartFileWriter> openImageryChart(const fs::path& dir, const AtlasManifest& m, ChartInfo& c) {
+  c.imageryFile = imageryFileName(c.id);
+  return std::make_unique<ChartFileWriter>(dir / c.imageryFile, imageryShape(m), imageryCoding(m));
 }
 
 // Levels first and up of chart `c`'s file, cut from `pyramid` whose level 0 is the file's level
@@ -573,103 +580,210 @@ uint64_t chartSamples(uint64_t ci, uint32_t levels) {
   return n;
 }
 
+// The tiles of a chart grid's imagery (tiling t, scaled by the imagery's scale) that `selected`
+// charts hold, each reprojected with a margin of 2^coarseLevel level-0 samples into its levels below
+// the coarse level (written into the chart's file in `files`) and its coarse level (into `coarse`,
+// the whole grid's level, cw x ch). A chart row whose east chart is selected at the antimeridian
+// also takes the first column's west tiles, whose border its east border is.
+struct TilePass {
+  ChartTiling t;
+  std::vector<PackedColour> coarse;
+  uint64_t cw = 0, ch = 0;
+  uint64_t covered = 0, windows = 0, most = 0;
+};
+
+void passImageryTiles(ImagerySource& imagery, const fs::path& dir, AtlasManifest& m,
+                      const std::vector<uint8_t>& selected, std::vector<std::unique_ptr<ChartFileWriter>>& files,
+                      AntimeridianColumns& seam, TilePass& p) {
+  const ChartTiling& t = p.t;
+  const uint32_t s = imagery.scaleLog2(), kc = t.coarseLevel, per = t.tilesPerSide;
+  const uint64_t ci = uint64_t(m.chartSize - 1) << s, tile = uint64_t(t.tile) << s, margin = uint64_t(1) << kc;
+  const uint64_t gridW = m.chartsX * ci + 1, gridH = m.chartsY * ci + 1;
+  const uint64_t latW = imagery.width(), latH = imagery.height();
+  std::vector<int64_t> at(size_t(m.chartsX) * m.chartsY, -1);
+  for (size_t i = 0; i < m.charts.size(); ++i)
+    at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
+  p.cw = ((gridW - 1) >> kc) + 1, p.ch = ((gridH - 1) >> kc) + 1;
+  p.coarse.assign(p.cw * p.ch, PackedColour{});
+  std::vector<PackedColour> buffer;
+  uint64_t tiles = 0;
+  for (uint8_t x : selected) tiles += x ? uint64_t(per) * per : 0;
+  const progress::ProgressStage stage("imagery tiles", tiles);
+  for (uint32_t cy = 0; cy < m.chartsY; ++cy) {
+    const int64_t eastChart = at[size_t(cy) * m.chartsX + m.chartsX - 1];
+    const bool westBorder = eastChart >= 0 && selected[size_t(eastChart)] && seam.east(m.charts[size_t(eastChart)]);
+    for (uint32_t cx = 0; cx < m.chartsX; ++cx) {
+      const int64_t chart = at[size_t(cy) * m.chartsX + cx];
+      const bool mine = chart >= 0 && selected[size_t(chart)];
+      if (!mine && !(cx == 0 && westBorder)) continue;
+      if (mine) files[size_t(chart)] = openImageryChart(dir, m, m.charts[size_t(chart)]);
+      for (uint32_t ty = 0; ty < per; ++ty)
+        for (uint32_t tx = 0; tx < (mine ? per : 1); ++tx) {
+          const uint64_t ox = cx * ci + tx * tile, oy = cy * ci + ty * tile;
+          const uint64_t x0 = ox > margin ? ox - margin : 0, y0 = oy > margin ? oy - margin : 0;
+          const uint64_t x1 = std::min(gridW, ox + tile + margin + 1), y1 = std::min(gridH, oy + tile + margin + 1);
+          const bool lastX = cx + 1 == m.chartsX && tx + 1 == per, lastY = cy + 1 == m.chartsY && ty + 1 == per;
+          std::vector<std::array<uint64_t, 4>> owned;
+          if (mine) owned.push_back({ox, oy, lastX ? latW : ox + tile, lastY ? latH : oy + tile});
+          const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
+          const ImageryWindow window{uint32_t(x0), uint32_t(y0), w, h};
+          const ImageryPyramid pyramid(gridWindow(imagery, window, owned, p.covered), window,
+                                       {m.chartsX, m.chartsY, m.chartSize, s}, kc + 1);
+          for (uint32_t k = 0; k < kc && cx == 0 && tx == 0; ++k)
+            seam.record(pyramid, 0, k, cy, ty * (tile >> k), tile >> k);
+          ++p.windows;
+          p.most = std::max<uint64_t>(p.most, uint64_t(w) * h);
+          if (!mine) continue;
+          for (uint32_t k = 0; k < kc; ++k) {
+            const uint32_t perTile = uint32_t((tile >> k) / (uint64_t(m.blockIntervals) << s));
+            ColourSquare sq{
+                pyramid.at(k, ox >> k, oy >> k), pyramid.stride(k), uint32_t(tile >> k), k, tx * perTile, ty * perTile};
+            if (tx + 1 == per && seam.east(m.charts[size_t(chart)]))
+              sq = seam.eastBorder(sq, cy, ty * (tile >> k), buffer);
+            writeColourSquare(sq, *files[size_t(chart)]);
+          }
+          const uint64_t n = (tile >> kc) + 1;
+          for (uint64_t v = 0; v < n; ++v)
+            std::copy_n(pyramid.at(kc, ox >> kc, (oy >> kc) + v), n,
+                        p.coarse.begin() + std::ptrdiff_t(((oy >> kc) + v) * p.cw + (ox >> kc)));
+          progress::advance();
+        }
+    }
+  }
+}
+
+// Samples in every level of a chart's imagery of `ci` level-0 intervals from level `first`.
+uint64_t chartSamplesFrom(uint64_t ci, uint32_t first, uint32_t levels) {
+  return chartSamples(ci, levels) - chartSamples(ci, first);
+}
+
+// The levels from p.t.coarseLevel up of every chart with a file in `files`, from the whole grid's
+// coarse level in p (its west borders recorded into `seam`), each file then committed.
+uint64_t finishImageryFiles(const AtlasManifest& m, TilePass& p, std::vector<std::unique_ptr<ChartFileWriter>>& files,
+                            AntimeridianColumns& seam) {
+  const uint32_t kc = p.t.coarseLevel, levels = m.pyramidLevels();
+  const uint64_t ci = uint64_t(m.chartSize - 1) << m.imagery.scaleLog2;
+  const ImageryPyramid top(std::move(p.coarse), {0, 0, uint32_t(p.cw), uint32_t(p.ch)},
+                           {m.chartsX, m.chartsY, uint32_t(ci >> kc) + 1, 0}, levels - kc);
+  seam.recordAll(top, kc);
+  std::atomic<uint64_t> bytes{0};
+  tbb::parallel_for(size_t{0}, m.charts.size(), [&](size_t i) {
+    if (!files[i]) return;
+    writeChartLevels(top, kc, m, m.charts[i], *files[i], seam);
+    bytes += files[i]->commit();
+    files[i].reset();
+  });
+  return bytes.load();
+}
+
 // writeImageryChartsWindowed for charts built in tiles (imagery.h says how).
 ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& source, const fs::path& dir,
                                     AtlasManifest& m, const ImageryWindowing& windowing,
                                     ImageryWindowStats* windowStats) {
   const auto start = std::chrono::steady_clock::now();
-  const uint64_t memoryBytes = windowing.memoryBytes;
-  const ChartTiling t = chartTiling(m.chartSize, m.blockIntervals, windowing.maxTile);
-  const uint32_t s = imagery.scaleLog2(), levels = m.pyramidLevels(), kc = t.coarseLevel, per = t.tilesPerSide;
-  const uint64_t ci = uint64_t(m.chartSize - 1) << s, tile = uint64_t(t.tile) << s, margin = uint64_t(1) << kc;
-  const uint64_t gridW = m.chartsX * ci + 1, gridH = m.chartsY * ci + 1;
-  const uint64_t latW = imagery.width(), latH = imagery.height();
-  imagery.keepTiles(memoryBytes / 4);
-  setImageryInfo(m, s, source, 0.0);
+  imagery.keepTiles(windowing.memoryBytes / 4);
+  setImageryInfo(m, imagery.scaleLog2(), source, 0.0);
   AntimeridianColumns seam(m);
-  std::vector<PackedColour> buffer;
-  std::vector<int64_t> at(size_t(m.chartsX) * m.chartsY, -1);
-  for (size_t i = 0; i < m.charts.size(); ++i)
-    at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
-  // The whole grid's level kc, gathered from the tiles.
-  const uint64_t cw = ((gridW - 1) >> kc) + 1, ch = ((gridH - 1) >> kc) + 1;
-  std::vector<PackedColour> coarse(cw * ch);
+  TilePass p;
+  p.t = chartTiling(m.chartSize, m.blockIntervals, windowing.maxTile);
   std::vector<std::unique_ptr<ChartFileWriter>> files(m.charts.size());
-  uint64_t covered = 0, windows = 0, most = 0;
-  const progress::ProgressStage stage("imagery tiles", uint64_t(m.chartsX) * m.chartsY * per * per);
-  for (uint32_t cy = 0; cy < m.chartsY; ++cy)
-    for (uint32_t cx = 0; cx < m.chartsX; ++cx) {
-      const int64_t chart = at[size_t(cy) * m.chartsX + cx];
-      if (chart >= 0) files[size_t(chart)] = openImageryChart(dir, m, m.charts[size_t(chart)]);
-      for (uint32_t ty = 0; ty < per; ++ty)
-        for (uint32_t tx = 0; tx < per; ++tx) {
-          const uint64_t ox = cx * ci + tx * tile, oy = cy * ci + ty * tile;
-          const uint64_t x0 = ox > margin ? ox - margin : 0, y0 = oy > margin ? oy - margin : 0;
-          const uint64_t x1 = std::min(gridW, ox + tile + margin + 1), y1 = std::min(gridH, oy + tile + margin + 1);
-          const bool lastX = cx + 1 == m.chartsX && tx + 1 == per, lastY = cy + 1 == m.chartsY && ty + 1 == per;
-          const std::vector<std::array<uint64_t, 4>> owned{
-              {ox, oy, lastX ? latW : ox + tile, lastY ? latH : oy + tile}};
-          const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
-          const ImageryWindow window{uint32_t(x0), uint32_t(y0), w, h};
-          const ImageryPyramid pyramid(gridWindow(imagery, window, owned, covered), window,
-                                       {m.chartsX, m.chartsY, m.chartSize, s}, kc + 1);
-          for (uint32_t k = 0; k < kc && cx == 0 && tx == 0; ++k)
-            seam.record(pyramid, 0, k, cy, ty * (tile >> k), tile >> k);
-          if (chart >= 0)
-            for (uint32_t k = 0; k < kc; ++k) {
-              const uint32_t perTile = uint32_t((tile >> k) / (uint64_t(m.blockIntervals) << s));
-              ColourSquare sq{pyramid.at(k, ox >> k, oy >> k),
-                              pyramid.stride(k),
-                              uint32_t(tile >> k),
-                              k,
-                              tx * perTile,
-                              ty * perTile};
-              if (tx + 1 == per && seam.east(m.charts[size_t(chart)]))
-                sq = seam.eastBorder(sq, cy, ty * (tile >> k), buffer);
-              writeColourSquare(sq, *files[size_t(chart)]);
-            }
-          const uint64_t n = (tile >> kc) + 1;
-          for (uint64_t v = 0; v < n; ++v)
-            std::copy_n(pyramid.at(kc, ox >> kc, (oy >> kc) + v), n,
-                        coarse.begin() + std::ptrdiff_t(((oy >> kc) + v) * cw + (ox >> kc)));
-          ++windows;
-          most = std::max<uint64_t>(most, uint64_t(w) * h);
-          progress::advance();
-        }
-    }
-  if (covered == 0) fail(m.imagery.source, "does not overlap the DEM");
-  m.imagery.coverage = double(covered) / (double(latW) * double(latH));
-  // The levels from kc up, from the grid's level kc.
-  const ImageryPyramid top(std::move(coarse), {0, 0, uint32_t(cw), uint32_t(ch)},
-                           {m.chartsX, m.chartsY, uint32_t(ci >> kc) + 1, 0}, levels - kc);
-  seam.recordAll(top, kc);
-  std::atomic<uint64_t> bytes{0};
-  tbb::parallel_for(size_t{0}, m.charts.size(), [&](size_t i) {
-    writeChartLevels(top, kc, m, m.charts[i], *files[i], seam);
-    bytes += files[i]->commit();
-    files[i].reset();
-  });
-  if (windowStats) *windowStats = {windows, most};
+  passImageryTiles(imagery, dir, m, std::vector<uint8_t>(m.charts.size(), 1), files, seam, p);
+  if (p.covered == 0) fail(m.imagery.source, "does not overlap the DEM");
+  m.imagery.coverage = double(p.covered) / (double(imagery.width()) * double(imagery.height()));
+  if (windowStats) *windowStats = {p.windows, p.most};
   ImageryWriteStats st;
-  st.coveredSamples = covered;
-  st.bytesOnDisk = bytes.load();
-  st.storedSamples = chartSamples(ci, levels) * m.charts.size();
+  st.coveredSamples = p.covered;
+  st.bytesOnDisk = finishImageryFiles(m, p, files, seam);
+  st.storedSamples =
+      chartSamples(uint64_t(m.chartSize - 1) << imagery.scaleLog2(), m.pyramidLevels()) * m.charts.size();
   st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return st;
 }
 
 }  // namespace
 
+ChartTiling shardImageryTiling(const AtlasManifest& m, uint32_t maxTile) {
+  const ChartTiling t = chartTiling(m.chartSize, m.blockIntervals, maxTile);
+  if (t.tiled()) return t;
+  ChartTiling whole;
+  whole.tile = m.chartSize - 1;
+  whole.tilesPerSide = 1;
+  whole.coarseLevel = std::min<uint32_t>(m.pyramidLevels() - 1, kShardImageryCoarseLevel);
+  return whole;
+}
+
+ImageryPart writeImageryChartsPart(ImagerySource& imagery, const std::string& source, const fs::path& dir,
+                                   AtlasManifest& m, const ImageryWindowing& windowing) {
+  const auto start = std::chrono::steady_clock::now();
+  makeImageryDir(dir);
+  imagery.keepTiles(windowing.memoryBytes / 4);
+  setImageryInfo(m, imagery.scaleLog2(), source, 0.0);
+  AntimeridianColumns seam(m);
+  TilePass p;
+  p.t = shardImageryTiling(m, windowing.maxTile);
+  std::vector<uint8_t> selected(m.charts.size(), 0);
+  for (uint32_t c : windowing.charts) selected.at(c) = 1;
+  std::vector<std::unique_ptr<ChartFileWriter>> files(m.charts.size());
+  passImageryTiles(imagery, dir, m, selected, files, seam, p);
+  ImageryPart part;
+  part.coarseLevel = p.t.coarseLevel;
+  const uint64_t ci = uint64_t(m.chartSize - 1) << imagery.scaleLog2(), n = (ci >> p.t.coarseLevel) + 1;
+  for (uint32_t c : windowing.charts) {
+    const ChartInfo& chart = m.charts[c];
+    const uint64_t x0 = (uint64_t(chart.gridX) * ci) >> p.t.coarseLevel,
+                   y0 = (uint64_t(chart.gridY) * ci) >> p.t.coarseLevel;
+    for (uint64_t v = 0; v < n; ++v)
+      part.coarse.insert(part.coarse.end(), p.coarse.begin() + std::ptrdiff_t((y0 + v) * p.cw + x0),
+                         p.coarse.begin() + std::ptrdiff_t((y0 + v) * p.cw + x0 + n));
+    part.stats.bytesOnDisk += files[c]->commitPartial();
+    files[c].reset();
+  }
+  part.stats.coveredSamples = p.covered;
+  part.stats.storedSamples = chartSamplesFrom(ci, 0, p.t.coarseLevel) * windowing.charts.size();
+  part.windows = {p.windows, p.most};
+  part.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return part;
+}
+
+ImageryWriteStats finishImageryCharts(const fs::path& dir, AtlasManifest& m, const std::vector<fs::path>& partials,
+                                      std::vector<PackedColour> coarse, uint32_t coarseLevel) {
+  const auto start = std::chrono::steady_clock::now();
+  makeImageryDir(dir);
+  const uint64_t ci = uint64_t(m.chartSize - 1) << m.imagery.scaleLog2, n = (ci >> coarseLevel) + 1;
+  if (partials.size() != m.charts.size() || coarse.size() != n * n * m.charts.size() ||
+      coarseLevel >= m.pyramidLevels())
+    throw std::invalid_argument("finishImageryCharts: a partial file and coarse samples per chart");
+  TilePass p;
+  p.t.coarseLevel = coarseLevel;
+  p.cw = ((m.chartsX * ci) >> coarseLevel) + 1, p.ch = ((m.chartsY * ci) >> coarseLevel) + 1;
+  p.coarse.assign(p.cw * p.ch, PackedColour{});
+  std::vector<std::unique_ptr<ChartFileWriter>> files(m.charts.size());
+  for (size_t c = 0; c < m.charts.size(); ++c) {
+    ChartInfo& chart = m.charts[c];
+    const uint64_t x0 = (uint64_t(chart.gridX) * ci) >> coarseLevel, y0 = (uint64_t(chart.gridY) * ci) >> coarseLevel;
+    for (uint64_t v = 0; v < n; ++v)
+      std::copy_n(coarse.begin() + std::ptrdiff_t((c * n + v) * n), n,
+                  p.coarse.begin() + std::ptrdiff_t((y0 + v) * p.cw + x0));
+    chart.imageryFile = imageryFileName(chart.id);
+    files[c] =
+        std::make_unique<ChartFileWriter>(dir / chart.imageryFile, imageryShape(m), imageryCoding(m), partials[c]);
+  }
+  coarse = {};
+  AntimeridianColumns seam(m);
+  ImageryWriteStats st;
+  st.bytesOnDisk = finishImageryFiles(m, p, files, seam);
+  st.storedSamples = chartSamplesFrom(ci, coarseLevel, m.pyramidLevels()) * m.charts.size();
+  st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return st;
+}
+
 ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::string& source, const fs::path& dir,
                                              AtlasManifest& m, const ImageryWindowing& windowing,
                                              ImageryWindowStats* windowStats) {
   const auto start = std::chrono::steady_clock::now();
   makeImageryDir(dir);
-  if (chartTiling(m.chartSize, m.blockIntervals, windowing.maxTile).tiled()) {
-    if (!windowing.charts.empty())
-      throw std::invalid_argument("writeImageryChartsWindowed: charts built in tiles take every chart");
+  if (chartTiling(m.chartSize, m.blockIntervals, windowing.maxTile).tiled())
     return writeImageryTiles(imagery, source, dir, m, windowing, windowStats);
-  }
   const uint64_t memoryBytes = windowing.memoryBytes;
   const uint32_t levels = m.intervalsLog2() + 1;
   const uint32_t s = imagery.scaleLog2();
@@ -684,55 +798,35 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
   uint64_t n = 1;
   auto windowBytes = [&](uint64_t k) { return (k * ci + 2 * margin + 1) * (k * ci + 2 * margin + 1) * 10; };
   while (n < std::max(m.chartsX, m.chartsY) && windowBytes(n + 1) <= memoryBytes / 4 * 3) ++n;
-  // The selected charts by grid cell.
+  // Charts by grid cell.
   std::vector<int64_t> at(size_t(m.chartsX) * m.chartsY, -1);
   for (size_t i = 0; i < m.charts.size(); ++i)
-    if (windowing.charts.empty() || std::binary_search(windowing.charts.begin(), windowing.charts.end(), uint32_t(i)))
-      at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
+    at[size_t(m.charts[i].gridY) * m.chartsX + m.charts[i].gridX] = int64_t(i);
   setImageryInfo(m, s, source, 0.0);
   AntimeridianColumns seam(m);
-  // A chart owns its lattice samples but its east column and north row (the last charts' too).
-  auto ownedBy = [&](const ChartInfo& c) {
-    const uint64_t x = uint64_t(c.gridX) * ci, y = uint64_t(c.gridY) * ci;
-    return std::array<uint64_t, 4>{x, y, uint32_t(c.gridX) + 1 == m.chartsX ? latW : x + ci,
-                                   uint32_t(c.gridY) + 1 == m.chartsY ? latH : y + ci};
-  };
   std::atomic<uint64_t> bytes{0}, samples{0};
   uint64_t covered = 0, windows = 0, most = 0;
-  const progress::ProgressStage stage("imagery charts",
-                                      windowing.charts.empty() ? m.charts.size() : windowing.charts.size());
-  for (uint64_t cy0 = 0; cy0 < m.chartsY; cy0 += n) {
-    const uint64_t cy1 = std::min<uint64_t>(cy0 + n, m.chartsY);
-    // A row of windows with a chart east of the antimeridian takes the west border from its first.
-    bool eastBorder = false;
-    for (uint64_t cy = cy0; cy < cy1; ++cy) {
-      const int64_t c = at[cy * m.chartsX + m.chartsX - 1];
-      eastBorder = eastBorder || (c >= 0 && seam.east(m.charts[size_t(c)]));
-    }
+  const progress::ProgressStage stage("imagery charts", m.charts.size());
+  for (uint64_t cy0 = 0; cy0 < m.chartsY; cy0 += n)
     for (uint64_t cx0 = 0; cx0 < m.chartsX; cx0 += n) {
-      const uint64_t cx1 = std::min<uint64_t>(cx0 + n, m.chartsX);
+      const uint64_t cx1 = std::min<uint64_t>(cx0 + n, m.chartsX), cy1 = std::min<uint64_t>(cy0 + n, m.chartsY);
       std::vector<size_t> charts;
-      std::vector<std::array<uint64_t, 4>> owned;
-      // The window spans the charts it writes (and, for the antimeridian, the first column's rows).
-      const bool westBorder = cx0 == 0 && eastBorder;
-      uint64_t bx0 = westBorder ? 0 : cx1, by0 = westBorder ? cy0 : cy1, bx1 = westBorder ? 1 : cx0,
-               by1 = westBorder ? cy1 : cy0;
       for (uint64_t cy = cy0; cy < cy1; ++cy)
         for (uint64_t cx = cx0; cx < cx1; ++cx)
-          if (at[cy * m.chartsX + cx] >= 0) {
-            charts.push_back(size_t(at[cy * m.chartsX + cx]));
-            owned.push_back(ownedBy(m.charts[charts.back()]));
-            bx0 = std::min(bx0, cx), bx1 = std::max(bx1, cx + 1), by0 = std::min(by0, cy), by1 = std::max(by1, cy + 1);
-          }
-      if (charts.empty() && !westBorder) continue;
-      // The grid's level-0 window (edge-clamped onto the lattice): the charts and their margin.
-      const uint64_t x0 = bx0 * ci > margin ? bx0 * ci - margin : 0, y0 = by0 * ci > margin ? by0 * ci - margin : 0;
-      const uint64_t x1 = std::min(gridW, bx1 * ci + margin + 1), y1 = std::min(gridH, by1 * ci + margin + 1);
+          if (at[cy * m.chartsX + cx] >= 0) charts.push_back(size_t(at[cy * m.chartsX + cx]));
+      if (charts.empty()) continue;
+      // The grid's level-0 window (edge-clamped onto the lattice), the charts and their margin; the
+      // coverage over the lattice samples these charts own (the last column and row with the last
+      // charts).
+      const uint64_t x0 = cx0 * ci > margin ? cx0 * ci - margin : 0, y0 = cy0 * ci > margin ? cy0 * ci - margin : 0;
+      const uint64_t x1 = std::min(gridW, cx1 * ci + margin + 1), y1 = std::min(gridH, cy1 * ci + margin + 1);
+      const std::vector<std::array<uint64_t, 4>> owned{
+          {cx0 * ci, cy0 * ci, cx1 == m.chartsX ? latW : cx1 * ci, cy1 == m.chartsY ? latH : cy1 * ci}};
       const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
       const ImageryWindow window{uint32_t(x0), uint32_t(y0), w, h};
       std::vector<PackedColour> base = gridWindow(imagery, window, owned, covered);
       const ImageryPyramid pyramid(std::move(base), window, {m.chartsX, m.chartsY, m.chartSize, s}, levels);
-      for (uint64_t cy = cy0; cy < cy1 && westBorder; ++cy)
+      for (uint64_t cy = cy0; cy < cy1 && cx0 == 0; ++cy)
         for (uint32_t k = 0; k < levels; ++k) seam.record(pyramid, 0, k, uint32_t(cy), 0, ci >> k);
       tbb::parallel_for(size_t{0}, charts.size(), [&](size_t i) {
         bytes += writeImageryChart(pyramid, dir, m, m.charts[charts[i]], samples, seam);
@@ -741,19 +835,11 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
       ++windows;
       most = std::max<uint64_t>(most, uint64_t(w) * h);
     }
-  }
-  ImageryWriteStats st;
-  st.coveredSamples = covered;
-  if (!windowing.charts.empty()) {  // a part of the charts: the caller sums the coverage
-    if (windowStats) *windowStats = {windows, most};
-    st.bytesOnDisk = bytes.load();
-    st.storedSamples = samples.load();
-    st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return st;
-  }
   if (covered == 0) fail(m.imagery.source, "does not overlap the DEM");
   m.imagery.coverage = double(covered) / (double(latW) * double(latH));
   if (windowStats) *windowStats = {windows, most};
+  ImageryWriteStats st;
+  st.coveredSamples = covered;
   st.bytesOnDisk = bytes.load();
   st.storedSamples = samples.load();
   st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

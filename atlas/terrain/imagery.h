@@ -163,8 +163,7 @@ struct ImageryWindowStats {
 struct ImageryWindowing {
   uint64_t memoryBytes = 0;
   uint32_t maxTile = kMaxChartTile;
-  // The charts to write, by index into the manifest's charts, ascending; empty: every chart.
-  // Charts the geometry builds in tiles take every chart.
+  // writeImageryChartsPart: the charts to write, by index into the manifest's charts.
   std::vector<uint32_t> charts;
 };
 
@@ -180,14 +179,41 @@ struct ImageryWindowing {
 // (1/4^coarseLevel of the samples), gives the levels above. A chart's colours are those of the
 // whole pyramid, so shared borders stay bit-identical; its file holds its tiles' blocks in the
 // tiles' order, then the coarse levels, whatever memoryBytes is.
-// With windowing.charts, only those charts' files are written (the same bytes) and only their chart
-// fields are filled; the coverage counts the lattice samples those charts own (a chart owns its
-// samples but its east column and north row, which the last column and row of charts own), and a
-// chart east of the antimeridian takes its west border's colours from the first column's windows,
-// reprojected for it. Summed over a partition of the charts, coveredSamples is the whole build's.
 ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::string& source,
                                              const std::filesystem::path& dir, AtlasManifest& manifest,
                                              const ImageryWindowing& windowing,
                                              ImageryWindowStats* windowStats = nullptr);
+
+// The imagery of a build in shards, in two steps whose files are writeImageryChartsWindowed's, byte
+// for byte. Each chart is split at a coarse level (shardImageryTiling): the levels below it come
+// from the chart's tiles of the geometry (a chart's own tile where the geometry has none), each
+// reprojected with a margin of 2^coarseLevel level-0 samples; the levels from it up come from the
+// whole grid's coarse level (1/4^coarseLevel of the samples), gathered from every chart.
+inline constexpr uint32_t kShardImageryCoarseLevel = 4;
+ChartTiling shardImageryTiling(const AtlasManifest& manifest, uint32_t maxTile = kMaxChartTile);
+
+struct ImageryPart {
+  uint32_t coarseLevel = 0;
+  // Each chart's coarse level, ((((chartSize - 1) << scaleLog2) >> coarseLevel) + 1)^2 samples
+  // row-major, chart after chart in windowing.charts' order.
+  std::vector<PackedColour> coarse;
+  ImageryWriteStats stats;  // coveredSamples: the lattice samples with alpha > 0 the charts' tiles own
+  ImageryWindowStats windows;
+};
+// Step 1, a shard's: the imagery files of windowing.charts in dir/imagery, partial chart files
+// (ChartFileWriter::commitPartial) holding the levels below the coarse level, and those charts'
+// chart fields and the manifest's imagery fields (its coverage 0). A row of charts whose east chart
+// is written at the antimeridian also reprojects the first column's west tiles for its border.
+// Summed over a partition of the charts, stats.coveredSamples is the whole build's coverage times
+// the lattice's samples.
+ImageryPart writeImageryChartsPart(ImagerySource& imagery, const std::string& source, const std::filesystem::path& dir,
+                                   AtlasManifest& manifest, const ImageryWindowing& windowing);
+// Step 2, the merge's: every chart's file in dir/imagery, carried on from its partial file
+// (`partials`, by chart) with the levels from coarseLevel up, filtered from the whole grid's coarse
+// level assembled from `coarse` (every chart's, in the manifest's order, as writeImageryChartsPart
+// gives them); fills the charts' imagery files. The manifest's imagery fields must be filled.
+ImageryWriteStats finishImageryCharts(const std::filesystem::path& dir, AtlasManifest& manifest,
+                                      const std::vector<std::filesystem::path>& partials,
+                                      std::vector<PackedColour> coarse, uint32_t coarseLevel);
 
 }  // namespace gimlod

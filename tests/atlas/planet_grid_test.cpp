@@ -453,11 +453,12 @@ TEST(PlanetGrid, ImageryMeetsItselfAtTheAntimeridianAtEveryLevel) {
   }
 }
 
-// Imagery written for parts of the charts, as the shards of a build write it, is the whole's, file for
-// file, and the parts' covered samples add up to the whole's coverage: parts of whole rows, of rows
-// cut anywhere, and the east column alone, whose east borders come from windows of the first column
-// that the part does not hold.
-TEST(PlanetGrid, ImageryWrittenInPartsIsTheWholesFileForFile) {
+// Imagery written in parts of the charts and finished from their coarse levels, as the shards and
+// the merge of a build write it, is the whole's, file for file, and the parts' covered samples add
+// up to the whole's coverage: parts of whole rows, of rows cut anywhere, and the east column alone
+// (whose east borders come from tiles of the first column that the part does not hold), for charts
+// in one tile each and in tiles of 32 intervals.
+TEST(PlanetGrid, ImageryWrittenInPartsAndFinishedIsTheWholesFileForFile) {
   test::TempDir dir("planet_imagery_parts");
   writeGlobeImagery(dir.path() / "globe.tif");
   const std::filesystem::path input = test::repoData() / "terrain/etopo_30min.tif";
@@ -469,12 +470,9 @@ TEST(PlanetGrid, ImageryWrittenInPartsIsTheWholesFileForFile) {
   io.path = dir.path() / "globe.tif";
   ImagerySource source(dem, input, io);
   AtlasManifest whole;
-  std::filesystem::create_directories(dir.path() / "whole");
-  writeTerrainCharts(dem, atlas, dir.path() / "whole", whole);
+  std::filesystem::create_directories(dir.path() / "geometry");
+  writeTerrainCharts(dem, atlas, dir.path() / "geometry", whole);
   const AtlasManifest charts = whole;
-  ImageryWindowStats ws;
-  writeImageryChartsWindowed(source, "globe", dir.path() / "whole", whole, {uint64_t{1} << 20, kMaxChartTile, {}}, &ws);
-  ASSERT_GT(ws.windows, 2u) << "one window holds every chart";
   const uint32_t n = uint32_t(whole.charts.size());
   std::vector<uint32_t> east, rest;
   for (uint32_t c = 0; c < n; ++c) (uint32_t(whole.charts[c].gridX) + 1 == whole.chartsX ? east : rest).push_back(c);
@@ -488,20 +486,47 @@ TEST(PlanetGrid, ImageryWrittenInPartsIsTheWholesFileForFile) {
       {run(0, 2 * row), run(2 * row, n)},                 // whole rows
       {run(0, n / 3), run(n / 3, n - 5), run(n - 5, n)},  // rows cut anywhere
       {east, rest}};
-  for (size_t s = 0; s < splits.size(); ++s) {
-    SCOPED_TRACE(s);
-    const std::filesystem::path out = dir.path() / ("parts" + std::to_string(s));
-    uint64_t covered = 0;
-    for (const std::vector<uint32_t>& part : splits[s]) {
+  for (const uint32_t maxTile : {kMaxChartTile, 32u}) {
+    // One process's files: charts in tiles of maxTile intervals (in one tile each, the whole
+    // raster's files).
+    const std::filesystem::path one = dir.path() / ("whole" + std::to_string(maxTile));
+    whole = charts;
+    if (maxTile == kMaxChartTile)
+      writeImageryCharts(loadImagery(dem, input, io), "globe", one, whole);
+    else
+      writeImageryChartsWindowed(source, "globe", one, whole, {uint64_t{64} << 20, maxTile, {}});
+    for (size_t s = 0; s < splits.size(); ++s) {
+      SCOPED_TRACE(testing::Message() << "tiles of " << maxTile << ", split " << s);
+      const std::filesystem::path out = dir.path() / ("parts" + std::to_string(maxTile) + "-" + std::to_string(s));
+      uint64_t covered = 0;
+      uint32_t coarseLevel = 0;
+      std::vector<PackedColour> coarse;  // every chart's coarse level, in the manifest's order
+      std::vector<std::filesystem::path> partials(n);
+      for (size_t k = 0; k < splits[s].size(); ++k) {
+        const std::vector<uint32_t>& part = splits[s][k];
+        const std::filesystem::path partDir = out / ("part" + std::to_string(k));
+        AtlasManifest m = charts;
+        const ImageryPart written =
+            writeImageryChartsPart(source, "globe", partDir, m, {uint64_t{1} << 20, maxTile, part});
+        coarseLevel = written.coarseLevel;
+        const size_t side = ((size_t(m.imagery.chartSize(m.chartSize)) - 1) >> coarseLevel) + 1, per = side * side;
+        ASSERT_EQ(written.coarse.size(), part.size() * per);
+        coarse.resize(n * per);
+        covered += written.stats.coveredSamples;
+        for (size_t i = 0; i < part.size(); ++i) {
+          std::copy_n(written.coarse.begin() + std::ptrdiff_t(i * per), per,
+                      coarse.begin() + std::ptrdiff_t(part[i] * per));
+          partials[part[i]] = partDir / m.charts[part[i]].imageryFile;
+        }
+      }
+      EXPECT_EQ(double(covered) / (double(source.width()) * double(source.height())), whole.imagery.coverage);
       AtlasManifest m = charts;
-      covered +=
-          writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{1} << 20, kMaxChartTile, part}).coveredSamples;
-      for (uint32_t c : part) EXPECT_EQ(m.charts[c].imageryFile, whole.charts[c].imageryFile);
+      m.imagery = whole.imagery;
+      finishImageryCharts(out / "finished", m, partials, std::move(coarse), coarseLevel);
+      for (const ChartInfo& c : whole.charts)
+        EXPECT_TRUE(test::fileBytes(out / "finished" / c.imageryFile) == test::fileBytes(one / c.imageryFile))
+            << c.imageryFile;
     }
-    EXPECT_EQ(double(covered) / (double(source.width()) * double(source.height())), whole.imagery.coverage);
-    for (const ChartInfo& c : whole.charts)
-      EXPECT_TRUE(test::fileBytes(out / c.imageryFile) == test::fileBytes(dir.path() / "whole" / c.imageryFile))
-          << c.imageryFile;
   }
 }
 

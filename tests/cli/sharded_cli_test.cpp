@@ -112,10 +112,6 @@ TEST(ShardedCli, BadShardOptionsAreRefusedByName) {
       {tileBuild(atlas) + " --shard 3/3", "--shard \"3/3\" must be I/N"},
       {tileBuild(atlas) + " --shard 0/2", "plan.json: no plan"},
       {app + " merge " + test::quoted(atlas), "plan.json: no plan"},
-      {app + " build " + test::quoted(test::repoData() / "terrain/mt_rainier_90m.tif") + " -o " + test::quoted(atlas) +
-           " --chart-size 4097 --prepare --imagery " +
-           test::quoted(test::repoData() / "terrain/mt_rainier_imagery.tif"),
-       "--imagery: sharded builds drape imagery on charts of at most 2049 samples, and these are 4097"},
       {app + " build " + test::quoted(test::repoData() / "meshes/bun_zipper.ply") + " -o " + test::quoted(atlas) +
            " --prepare",
        "a mesh is built in one process"},
