@@ -56,9 +56,13 @@ std::string jobCommand(const TerrainBuildOptions& o, int argc, char** argv) {
     }
     if (fs::path(a) == o.input && a.rfind("-", 0) != 0) continue;  // the input, written above
     const bool isPathOption = valueOf("--imagery");
+    const size_t equals = a.find('=');
+    if (isPathOption && equals != std::string::npos) {  // --imagery=PATH
+      words.push_back(a.substr(0, equals + 1) + fs::absolute(a.substr(equals + 1)).string());
+      continue;
+    }
     words.push_back(a);
-    if (isPathOption && a.find('=') == std::string::npos && i + 1 < argc)
-      words.push_back(fs::absolute(argv[++i]).string());
+    if (isPathOption && i + 1 < argc) words.push_back(fs::absolute(argv[++i]).string());
   }
   std::string out;
   for (const std::string& w : words) {

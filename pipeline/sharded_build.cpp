@@ -100,8 +100,6 @@ std::string fileChecksum(const fs::path& path) {
   return sum.hex();
 }
 
-// What a shard must share with its plan: the input's identity and every option that changes the
-// atlas's bytes (not the threads, the memory cap or the window-by-window choice, which do not).
 // A file's identity: its absolute path, size and modification time.
 json fileIdentity(const fs::path& file) {
   std::error_code ec;
@@ -114,6 +112,9 @@ json fileIdentity(const fs::path& file) {
            int64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(modified.time_since_epoch()).count())}};
 }
 
+// What a shard must share with its plan: the input's identity and every option that changes the
+// atlas's bytes, the imagery's identity included (not the threads, the memory cap or the
+// window-by-window choice, which do not).
 json buildFingerprint(const TerrainBuildOptions& o) {
   return {{"input", fileIdentity(o.input)},
           {"options",
@@ -288,9 +289,10 @@ json writeShardImagery(const TerrainBuildOptions& o, const WindowedTerrainOption
 }
 
 // The merge's imagery: every chart's file carried on from its shard's partial file with the levels
-// from the coarse level up, and the manifest's coverage. Returns the bytes and samples it added.
+// from the coarse level up, and the manifest's coverage. Returns the finished files' bytes and the
+// samples of the levels it wrote.
 ImageryWriteStats mergeImagery(const fs::path& area, const fs::path& dir, const json& plan,
-                               std::vector<ShardBuildStats>& shards, AtlasManifest& m) {
+                               const std::vector<ShardBuildStats>& shards, AtlasManifest& m) {
   const uint32_t coarseLevel = shardImageryTiling(m).coarseLevel;
   const uint64_t n = ((uint64_t(m.chartSize - 1) << m.imagery.scaleLog2) >> coarseLevel) + 1;
   std::vector<PackedColour> coarse(n * n * m.charts.size());

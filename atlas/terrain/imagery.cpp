@@ -580,21 +580,21 @@ uint64_t chartSamples(uint64_t ci, uint32_t levels) {
   return n;
 }
 
-// The tiles of a chart grid's imagery (tiling t, scaled by the imagery's scale) that `selected`
-// charts hold, each reprojected with a margin of 2^coarseLevel level-0 samples into its levels below
-// the coarse level (written into the chart's file in `files`) and its coarse level (into `coarse`,
-// the whole grid's level, cw x ch). A chart row whose east chart is selected at the antimeridian
-// also takes the first column's west tiles, whose border its east border is.
+// The tiles of a chart grid's imagery (tiling p.t, scaled by the imagery's scale) that the charts
+// p.selected flags hold, each reprojected with a margin of 2^coarseLevel level-0 samples into its
+// levels below the coarse level (written into the chart's file in `files`) and its coarse level
+// (into p.coarse, the whole grid's level, cw x ch). A chart row whose east chart is selected at the
+// antimeridian also takes the first column's west tiles, whose border its east border is.
 struct TilePass {
   ChartTiling t;
+  std::vector<uint8_t> selected;  // by chart
   std::vector<PackedColour> coarse;
   uint64_t cw = 0, ch = 0;
   uint64_t covered = 0, windows = 0, most = 0;
 };
 
 void passImageryTiles(ImagerySource& imagery, const fs::path& dir, AtlasManifest& m,
-                      const std::vector<uint8_t>& selected, std::vector<std::unique_ptr<ChartFileWriter>>& files,
-                      AntimeridianColumns& seam, TilePass& p) {
+                      std::vector<std::unique_ptr<ChartFileWriter>>& files, AntimeridianColumns& seam, TilePass& p) {
   const ChartTiling& t = p.t;
   const uint32_t s = imagery.scaleLog2(), kc = t.coarseLevel, per = t.tilesPerSide;
   const uint64_t ci = uint64_t(m.chartSize - 1) << s, tile = uint64_t(t.tile) << s, margin = uint64_t(1) << kc;
@@ -607,14 +607,14 @@ void passImageryTiles(ImagerySource& imagery, const fs::path& dir, AtlasManifest
   p.coarse.assign(p.cw * p.ch, PackedColour{});
   std::vector<PackedColour> buffer;
   uint64_t tiles = 0;
-  for (uint8_t x : selected) tiles += x ? uint64_t(per) * per : 0;
+  for (uint8_t x : p.selected) tiles += x ? uint64_t(per) * per : 0;
   const progress::ProgressStage stage("imagery tiles", tiles);
   for (uint32_t cy = 0; cy < m.chartsY; ++cy) {
     const int64_t eastChart = at[size_t(cy) * m.chartsX + m.chartsX - 1];
-    const bool westBorder = eastChart >= 0 && selected[size_t(eastChart)] && seam.east(m.charts[size_t(eastChart)]);
+    const bool westBorder = eastChart >= 0 && p.selected[size_t(eastChart)] && seam.east(m.charts[size_t(eastChart)]);
     for (uint32_t cx = 0; cx < m.chartsX; ++cx) {
       const int64_t chart = at[size_t(cy) * m.chartsX + cx];
-      const bool mine = chart >= 0 && selected[size_t(chart)];
+      const bool mine = chart >= 0 && p.selected[size_t(chart)];
       if (!mine && !(cx == 0 && westBorder)) continue;
       if (mine) files[size_t(chart)] = openImageryChart(dir, m, m.charts[size_t(chart)]);
       for (uint32_t ty = 0; ty < per; ++ty)
@@ -687,7 +687,8 @@ ImageryWriteStats writeImageryTiles(ImagerySource& imagery, const std::string& s
   TilePass p;
   p.t = chartTiling(m.chartSize, m.blockIntervals, windowing.maxTile);
   std::vector<std::unique_ptr<ChartFileWriter>> files(m.charts.size());
-  passImageryTiles(imagery, dir, m, std::vector<uint8_t>(m.charts.size(), 1), files, seam, p);
+  p.selected.assign(m.charts.size(), 1);
+  passImageryTiles(imagery, dir, m, files, seam, p);
   if (p.covered == 0) fail(m.imagery.source, "does not overlap the DEM");
   m.imagery.coverage = double(p.covered) / (double(imagery.width()) * double(imagery.height()));
   if (windowStats) *windowStats = {p.windows, p.most};
@@ -721,10 +722,10 @@ ImageryPart writeImageryChartsPart(ImagerySource& imagery, const std::string& so
   AntimeridianColumns seam(m);
   TilePass p;
   p.t = shardImageryTiling(m, windowing.maxTile);
-  std::vector<uint8_t> selected(m.charts.size(), 0);
-  for (uint32_t c : windowing.charts) selected.at(c) = 1;
+  p.selected.assign(m.charts.size(), 0);
+  for (uint32_t c : windowing.charts) p.selected.at(c) = 1;
   std::vector<std::unique_ptr<ChartFileWriter>> files(m.charts.size());
-  passImageryTiles(imagery, dir, m, selected, files, seam, p);
+  passImageryTiles(imagery, dir, m, files, seam, p);
   ImageryPart part;
   part.coarseLevel = p.t.coarseLevel;
   const uint64_t ci = uint64_t(m.chartSize - 1) << imagery.scaleLog2(), n = (ci >> p.t.coarseLevel) + 1;

@@ -37,13 +37,22 @@ TEST(ShardedCli, ThreeMpiRanksGiveTheOneProcessAtlas) {
   test::expectSameFiles(dir.path() / "one.atlas", dir.path() / "mpi5.atlas", "stats.json");
 }
 
+// The shipped tile draped with its imagery; the scripts are emitted from the data's folder, with
+// the input and the imagery named relative to it, and run from elsewhere.
 TEST(ShardedCli, TheSlurmScriptsRunInTurnGiveTheOneProcessAtlas) {
   test::TempDir dir("gimlod-sharded-slurm");
   std::string out;
-  ASSERT_EQ(test::runCommand(tileBuild(dir.path() / "one.atlas"), &out), 0) << out;
+  const std::string drape = " --imagery-scale 1 --imagery";
+  ASSERT_EQ(test::runCommand(tileBuild(dir.path() / "one.atlas") + drape + " " +
+                                 test::quoted(test::repoData() / "terrain/mt_rainier_imagery.tif"),
+                             &out),
+            0)
+      << out;
   const fs::path jobs = dir.path() / "jobs";
-  ASSERT_EQ(test::runCommand(tileBuild(dir.path() / "slurm.atlas") + " --threads 1 --emit-slurm " + test::quoted(jobs) +
-                                 " --shards 3",
+  ASSERT_EQ(test::runCommand("cd " + test::quoted(test::repoData() / "terrain") + " && " + test::appPath().string() +
+                                 " build mt_rainier_90m.tif -o " + test::quoted(dir.path() / "slurm.atlas") +
+                                 " --chart-size 129" + drape + "=mt_rainier_imagery.tif --threads 1 --emit-slurm " +
+                                 test::quoted(jobs) + " --shards 3",
                              &out),
             0)
       << out;
