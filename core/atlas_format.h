@@ -389,7 +389,8 @@ class ChartFileWriter {
   // Throws std::logic_error when a block is missing. Returns the file's bytes.
   uint64_t commit();
   // Writes the file with the blocks appended so far (a partial chart file: the directory holds
-  // their entries alone), for a writer of another process to carry on. Returns its bytes.
+  // their entries alone), for a writer of another process to carry on; this writer takes no more
+  // blocks. Returns the file's bytes.
   uint64_t commitPartial();
   const std::filesystem::path& path() const { return path_; }
   uint32_t chartSize() const;
