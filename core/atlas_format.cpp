@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <fcntl.h>
 #include <limits>
 #include <random>
@@ -946,23 +947,32 @@ ChartFileWriter::ChartFileWriter(fs::path path, const ChartFileShape& shape, con
                                  const fs::path& partial)
     : ChartFileWriter(std::move(path), shape, coding) {
   Impl& w = *impl_;
-  const std::vector<uint8_t> bytes = readFileBytes(partial);
+  std::ifstream in(partial, std::ios::binary);
+  std::error_code ec;
+  const uint64_t size = fs::file_size(partial, ec);
   const size_t head = w.directory.size();
-  if (bytes.size() < head ||
-      !std::equal(w.directory.begin(), w.directory.begin() + std::ptrdiff_t(w.header), bytes.begin()))
+  std::vector<uint8_t> directory(head);
+  if (!in || ec || size < head || !in.read(reinterpret_cast<char*>(directory.data()), std::streamsize(head)) ||
+      !std::equal(w.directory.begin(), w.directory.begin() + std::ptrdiff_t(w.header), directory.begin()))
     throw InputError(quoted(partial) + ": not a partial chart file of this shape and coding");
   // A block's entry holds its first stored channel's offset, past the directory once written.
   for (size_t e = 0; e < w.written.size(); ++e) {
     const size_t at = w.header + e * w.entryBytes;
-    const uint64_t offset = getLe<uint64_t>(bytes.data() + at);
+    const uint64_t offset = getLe<uint64_t>(directory.data() + at);
     if (offset == 0) continue;
-    if (offset < head || offset > bytes.size())
-      throw InputError(quoted(partial) + ": a block's offset lies outside the file");
+    if (offset < head || offset > size) throw InputError(quoted(partial) + ": a block's offset lies outside the file");
     w.written[e] = 1;
-    std::copy_n(bytes.begin() + std::ptrdiff_t(at), w.entryBytes, w.directory.begin() + std::ptrdiff_t(at));
+    std::copy_n(directory.begin() + std::ptrdiff_t(at), w.entryBytes, w.directory.begin() + std::ptrdiff_t(at));
   }
-  w.file.write(bytes.data() + head, bytes.size() - head);
-  w.end = bytes.size();
+  // The blocks, a piece at a time.
+  std::vector<char> piece(size_t{4} << 20);
+  for (uint64_t left = size - head; left > 0;) {
+    const size_t n = size_t(std::min<uint64_t>(left, piece.size()));
+    if (!in.read(piece.data(), std::streamsize(n))) throw InputError(quoted(partial) + ": cannot read it");
+    w.file.write(piece.data(), n);
+    left -= n;
+  }
+  w.end = size;
 }
 
 uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint32_t chartSize, uint32_t blockIntervals,

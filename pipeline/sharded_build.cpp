@@ -276,8 +276,7 @@ json writeShardImagery(const TerrainBuildOptions& o, const WindowedTerrainOption
   AtlasManifest part = m;
   ImageryWindowing windowing;
   windowing.memoryBytes = wo.memoryBytes;
-  windowing.charts = charts;
-  const ImageryPart written = writeImageryChartsPart(imagery, m.imagery.source, dir, part, windowing);
+  const ImageryPart written = writeImageryChartsPart(imagery, m.imagery.source, dir, part, windowing, charts);
   atomicWriteFile(dir / kImageryCoarseName, written.coarse.data(), written.coarse.size() * sizeof(PackedColour));
   return {{"covered_samples", written.stats.coveredSamples},
           {"stored_samples", written.stats.storedSamples},

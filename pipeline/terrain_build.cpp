@@ -326,8 +326,7 @@ void writeImageryWindowed(const TerrainBuildOptions& o, const DemRaster& dem, co
   im.height = imagery.height();
   im.resampling = imagery.resampling();
   ImageryWindowStats ws;
-  const ImageryWriteStats st =
-      writeImageryChartsWindowed(imagery, im.source, dir, m, {memoryBytes, kMaxChartTile, {}}, &ws);
+  const ImageryWriteStats st = writeImageryChartsWindowed(imagery, im.source, dir, m, {memoryBytes}, &ws);
   for (const std::string& warning : imagery.warnings()) spdlog::warn("{}: {}", o.imagery.string(), warning);
   im.coverage = m.imagery.coverage;
   im.windows = ws.windows;

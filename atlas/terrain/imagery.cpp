@@ -523,10 +523,10 @@ uint64_t writeImageryChart(const ImageryPyramid& pyramid, const fs::path& dir, c
 }
 
 // The grid's level-0 samples of `window` (the lattice edge-clamped onto the chart grid),
-// reprojected by `imagery`; adds to `covered` the lattice samples with alpha > 0 in the parts the
-// caller owns, each {x0, y0, x1, y1} (half-open).
+// reprojected by `imagery`; adds to `covered` the lattice samples with alpha > 0 in the part the
+// caller owns, owned = {x0, y0, x1, y1} (half-open; empty where it owns none).
 std::vector<PackedColour> gridWindow(const ImagerySource& imagery, const ImageryWindow& window,
-                                     const std::vector<std::array<uint64_t, 4>>& ownedParts, uint64_t& covered) {
+                                     const std::array<uint64_t, 4>& owned, uint64_t& covered) {
   const uint64_t x0 = window.x0, y0 = window.y0, x1 = x0 + window.w, y1 = y0 + window.h;
   const uint32_t latW = imagery.width(), latH = imagery.height();
   const uint32_t lx0 = uint32_t(std::min<uint64_t>(x0, latW - 1)), ly0 = uint32_t(std::min<uint64_t>(y0, latH - 1));
@@ -534,10 +534,9 @@ std::vector<PackedColour> gridWindow(const ImagerySource& imagery, const Imagery
   const uint32_t ly1 = std::max(uint32_t(std::min<uint64_t>(y1, latH)), ly0 + 1);
   const std::vector<PackedColour> lattice = imagery.window(lx0, ly0, lx1 - lx0, ly1 - ly0);
   const uint32_t lw = lx1 - lx0;
-  for (const auto& owned : ownedParts)
-    for (uint64_t y = owned[1]; y < std::min<uint64_t>(owned[3], latH); ++y)
-      for (uint64_t x = owned[0]; x < std::min<uint64_t>(owned[2], latW); ++x)
-        covered += lattice[size_t(y - ly0) * lw + size_t(x - lx0)][3] > 0;
+  for (uint64_t y = owned[1]; y < std::min<uint64_t>(owned[3], latH); ++y)
+    for (uint64_t x = owned[0]; x < std::min<uint64_t>(owned[2], latW); ++x)
+      covered += lattice[size_t(y - ly0) * lw + size_t(x - lx0)][3] > 0;
   const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
   std::vector<PackedColour> base(size_t(w) * h);
   for (uint32_t y = 0; y < h; ++y) {
@@ -623,8 +622,9 @@ void passImageryTiles(ImagerySource& imagery, const fs::path& dir, AtlasManifest
           const uint64_t x0 = ox > margin ? ox - margin : 0, y0 = oy > margin ? oy - margin : 0;
           const uint64_t x1 = std::min(gridW, ox + tile + margin + 1), y1 = std::min(gridH, oy + tile + margin + 1);
           const bool lastX = cx + 1 == m.chartsX && tx + 1 == per, lastY = cy + 1 == m.chartsY && ty + 1 == per;
-          std::vector<std::array<uint64_t, 4>> owned;
-          if (mine) owned.push_back({ox, oy, lastX ? latW : ox + tile, lastY ? latH : oy + tile});
+          const std::array<uint64_t, 4> owned =
+              mine ? std::array<uint64_t, 4>{ox, oy, lastX ? latW : ox + tile, lastY ? latH : oy + tile}
+                   : std::array<uint64_t, 4>{};
           const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
           const ImageryWindow window{uint32_t(x0), uint32_t(y0), w, h};
           const ImageryPyramid pyramid(gridWindow(imagery, window, owned, p.covered), window,
@@ -714,7 +714,8 @@ ChartTiling shardImageryTiling(const AtlasManifest& m, uint32_t maxTile) {
 }
 
 ImageryPart writeImageryChartsPart(ImagerySource& imagery, const std::string& source, const fs::path& dir,
-                                   AtlasManifest& m, const ImageryWindowing& windowing) {
+                                   AtlasManifest& m, const ImageryWindowing& windowing,
+                                   const std::vector<uint32_t>& charts) {
   const auto start = std::chrono::steady_clock::now();
   makeImageryDir(dir);
   imagery.keepTiles(windowing.memoryBytes / 4);
@@ -723,13 +724,13 @@ ImageryPart writeImageryChartsPart(ImagerySource& imagery, const std::string& so
   TilePass p;
   p.t = shardImageryTiling(m, windowing.maxTile);
   p.selected.assign(m.charts.size(), 0);
-  for (uint32_t c : windowing.charts) p.selected.at(c) = 1;
+  for (uint32_t c : charts) p.selected.at(c) = 1;
   std::vector<std::unique_ptr<ChartFileWriter>> files(m.charts.size());
   passImageryTiles(imagery, dir, m, files, seam, p);
   ImageryPart part;
   part.coarseLevel = p.t.coarseLevel;
   const uint64_t ci = uint64_t(m.chartSize - 1) << imagery.scaleLog2(), n = (ci >> p.t.coarseLevel) + 1;
-  for (uint32_t c : windowing.charts) {
+  for (uint32_t c : charts) {
     const ChartInfo& chart = m.charts[c];
     const uint64_t x0 = (uint64_t(chart.gridX) * ci) >> p.t.coarseLevel,
                    y0 = (uint64_t(chart.gridY) * ci) >> p.t.coarseLevel;
@@ -740,7 +741,7 @@ ImageryPart writeImageryChartsPart(ImagerySource& imagery, const std::string& so
     files[c].reset();
   }
   part.stats.coveredSamples = p.covered;
-  part.stats.storedSamples = chartSamplesFrom(ci, 0, p.t.coarseLevel) * windowing.charts.size();
+  part.stats.storedSamples = chartSamplesFrom(ci, 0, p.t.coarseLevel) * charts.size();
   part.windows = {p.windows, p.most};
   part.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return part;
@@ -821,8 +822,8 @@ ImageryWriteStats writeImageryChartsWindowed(ImagerySource& imagery, const std::
       // charts).
       const uint64_t x0 = cx0 * ci > margin ? cx0 * ci - margin : 0, y0 = cy0 * ci > margin ? cy0 * ci - margin : 0;
       const uint64_t x1 = std::min(gridW, cx1 * ci + margin + 1), y1 = std::min(gridH, cy1 * ci + margin + 1);
-      const std::vector<std::array<uint64_t, 4>> owned{
-          {cx0 * ci, cy0 * ci, cx1 == m.chartsX ? latW : cx1 * ci, cy1 == m.chartsY ? latH : cy1 * ci}};
+      const std::array<uint64_t, 4> owned{cx0 * ci, cy0 * ci, cx1 == m.chartsX ? latW : cx1 * ci,
+                                          cy1 == m.chartsY ? latH : cy1 * ci};
       const uint32_t w = uint32_t(x1 - x0), h = uint32_t(y1 - y0);
       const ImageryWindow window{uint32_t(x0), uint32_t(y0), w, h};
       std::vector<PackedColour> base = gridWindow(imagery, window, owned, covered);

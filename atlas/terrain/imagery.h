@@ -163,8 +163,6 @@ struct ImageryWindowStats {
 struct ImageryWindowing {
   uint64_t memoryBytes = 0;
   uint32_t maxTile = kMaxChartTile;
-  // writeImageryChartsPart: the charts to write, by index into the manifest's charts.
-  std::vector<uint32_t> charts;
 };
 
 // The same files as writeImageryCharts of the whole raster, byte for byte, window by window: each
@@ -195,19 +193,20 @@ ChartTiling shardImageryTiling(const AtlasManifest& manifest, uint32_t maxTile =
 struct ImageryPart {
   uint32_t coarseLevel = 0;
   // Each chart's coarse level, ((((chartSize - 1) << scaleLog2) >> coarseLevel) + 1)^2 samples
-  // row-major, chart after chart in windowing.charts' order.
+  // row-major, chart after chart in the order of the charts given.
   std::vector<PackedColour> coarse;
   ImageryWriteStats stats;  // coveredSamples: the lattice samples with alpha > 0 the charts' tiles own
   ImageryWindowStats windows;
 };
-// Step 1, a shard's: the imagery files of windowing.charts in dir/imagery, partial chart files
+// Step 1, a shard's: the imagery files of `charts` (indices into the manifest's) in dir/imagery, partial chart files
 // (ChartFileWriter::commitPartial) holding the levels below the coarse level, and those charts'
 // chart fields and the manifest's imagery fields (its coverage 0). A row of charts whose east chart
 // is written at the antimeridian also reprojects the first column's west tiles for its border.
 // Summed over a partition of the charts, stats.coveredSamples is the whole build's coverage times
 // the lattice's samples.
 ImageryPart writeImageryChartsPart(ImagerySource& imagery, const std::string& source, const std::filesystem::path& dir,
-                                   AtlasManifest& manifest, const ImageryWindowing& windowing);
+                                   AtlasManifest& manifest, const ImageryWindowing& windowing,
+                                   const std::vector<uint32_t>& charts);
 // Step 2, the merge's: every chart's file in dir/imagery, carried on from its partial file
 // (`partials`, by chart) with the levels from coarseLevel up, filtered from the whole grid's coarse
 // level assembled from `coarse` (every chart's, in the manifest's order, as writeImageryChartsPart

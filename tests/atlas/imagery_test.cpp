@@ -331,7 +331,7 @@ TEST_F(ImageryTest, WindowByWindowWritesTheWholeRastersFiles) {
   ImageryWindowStats ws;
   // 8 x 8 charts of 128 intervals and their margins in 3/4 of 24 MiB: (8 * 128 + 2 * 128 + 1)^2
   // x 10 bytes; the rest keeps one reprojected tile.
-  writeImageryChartsWindowed(source, "imagery", dir_.path() / "windows", b, {24u << 20, kMaxChartTile, {}}, &ws);
+  writeImageryChartsWindowed(source, "imagery", dir_.path() / "windows", b, {24u << 20}, &ws);
   std::printf("  %zu charts, %u x %u imagery samples: %llu windows of at most %llu samples\n", a.charts.size(),
               raster.width, raster.height, (unsigned long long)ws.windows, (unsigned long long)ws.windowSamples);
   EXPECT_EQ(ws.windows, 4u);
@@ -367,7 +367,7 @@ TEST_F(ImageryTest, TiledChartsTakeTheWholePyramidsColours) {
   ImagerySource source(*dem_, rainier(), o);
   ImageryWindowStats ws;
   // A quarter of 256 MiB keeps every reprojected tile of the 2401^2 lattice.
-  writeImageryChartsWindowed(source, "imagery", dir_.path() / "tiles", a, {256u << 20, 64, {}}, &ws);
+  writeImageryChartsWindowed(source, "imagery", dir_.path() / "tiles", a, {256u << 20, 64}, &ws);
   EXPECT_EQ(ws.windows, uint64_t(a.chartsX) * a.chartsY * 16);
   EXPECT_EQ(a.imagery.coverage, raster.coverage);
   const ImageryPyramid whole(raster, a.chartsX, a.chartsY, a.chartSize, a.pyramidLevels());

@@ -406,21 +406,27 @@ DemRaster globeLattice(const std::filesystem::path& input, uint32_t intervals) {
   return loadDem(input, d);
 }
 
+// The globe's imagery (writeGlobeImagery) written into `dir`, and the options that drape it.
+ImageryOptions globeImageryOptions(const std::filesystem::path& dir) {
+  writeGlobeImagery(dir / "globe.tif");
+  ImageryOptions io;
+  io.path = dir / "globe.tif";
+  return io;
+}
+
 // A planet's imagery meets itself at the antimeridian: the first column of charts' west borders and
 // the last column's east borders hold the same colours at every level, where the colours change
 // across it, written whole, window by window and in tiles; and the windows' and tiles' colours are
 // the whole raster's.
 TEST(PlanetGrid, ImageryMeetsItselfAtTheAntimeridianAtEveryLevel) {
   test::TempDir dir("planet_imagery");
-  writeGlobeImagery(dir.path() / "globe.tif");
   const std::filesystem::path input = test::repoData() / "terrain/etopo_30min.tif";
   const DemRaster dem = globeLattice(input, 128);
+  const ImageryOptions io = globeImageryOptions(dir.path());
+  ImagerySource source(dem, input, io);
   TerrainAtlasOptions atlas;
   atlas.chartSize = 129;
   atlas.blockIntervals = 16;
-  ImageryOptions io;
-  io.path = dir.path() / "globe.tif";
-  ImagerySource source(dem, input, io);
   for (const char* way : {"whole", "windows", "tiles"}) {
     SCOPED_TRACE(way);
     const std::filesystem::path out = dir.path() / way;
@@ -432,9 +438,9 @@ TEST(PlanetGrid, ImageryMeetsItselfAtTheAntimeridianAtEveryLevel) {
     if (way == std::string("whole"))
       writeImageryCharts(loadImagery(dem, input, io), "globe", out, m);
     else if (way == std::string("windows"))
-      writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{2} << 20, kMaxChartTile, {}}, &ws);
+      writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{2} << 20}, &ws);
     else
-      writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{64} << 20, 32, {}}, &ws);
+      writeImageryChartsWindowed(source, "globe", out, m, {uint64_t{64} << 20, 32}, &ws);
     if (way == std::string("windows")) {
       EXPECT_GT(ws.windows, 1u) << "the seam is not across windows";
     }
@@ -460,15 +466,13 @@ TEST(PlanetGrid, ImageryMeetsItselfAtTheAntimeridianAtEveryLevel) {
 // in one tile each and in tiles of 32 intervals.
 TEST(PlanetGrid, ImageryWrittenInPartsAndFinishedIsTheWholesFileForFile) {
   test::TempDir dir("planet_imagery_parts");
-  writeGlobeImagery(dir.path() / "globe.tif");
   const std::filesystem::path input = test::repoData() / "terrain/etopo_30min.tif";
   const DemRaster dem = globeLattice(input, 64);
+  const ImageryOptions io = globeImageryOptions(dir.path());
+  ImagerySource source(dem, input, io);
   TerrainAtlasOptions atlas;
   atlas.chartSize = 65;
   atlas.blockIntervals = 16;
-  ImageryOptions io;
-  io.path = dir.path() / "globe.tif";
-  ImagerySource source(dem, input, io);
   AtlasManifest whole;
   std::filesystem::create_directories(dir.path() / "geometry");
   writeTerrainCharts(dem, atlas, dir.path() / "geometry", whole);
@@ -494,7 +498,7 @@ TEST(PlanetGrid, ImageryWrittenInPartsAndFinishedIsTheWholesFileForFile) {
     if (maxTile == kMaxChartTile)
       writeImageryCharts(loadImagery(dem, input, io), "globe", one, whole);
     else
-      writeImageryChartsWindowed(source, "globe", one, whole, {uint64_t{64} << 20, maxTile, {}});
+      writeImageryChartsWindowed(source, "globe", one, whole, {uint64_t{64} << 20, maxTile});
     for (size_t s = 0; s < splits.size(); ++s) {
       SCOPED_TRACE(testing::Message() << "tiles of " << maxTile << ", split " << s);
       const std::filesystem::path out = dir.path() / ("parts" + std::to_string(maxTile) + "-" + std::to_string(s));
@@ -507,7 +511,7 @@ TEST(PlanetGrid, ImageryWrittenInPartsAndFinishedIsTheWholesFileForFile) {
         const std::filesystem::path partDir = out / ("part" + std::to_string(k));
         AtlasManifest m = charts;
         const ImageryPart written =
-            writeImageryChartsPart(source, "globe", partDir, m, {uint64_t{1} << 20, maxTile, part});
+            writeImageryChartsPart(source, "globe", partDir, m, {uint64_t{1} << 20, maxTile}, part);
         coarseLevel = written.coarseLevel;
         const size_t side = ((size_t(m.imagery.chartSize(m.chartSize)) - 1) >> coarseLevel) + 1, per = side * side;
         ASSERT_EQ(written.coarse.size(), part.size() * per);
