@@ -109,6 +109,36 @@ inline int64_t predict(const int32_t* q, uint32_t side, uint32_t stride, uint32_
   return 0;
 }
 
+// A side of 2^k + 1 samples, k >= 1: the sides the interpolation order covers.
+bool interpolatedSide(uint32_t side) { return side >= 3 && std::has_single_bit(side - 1); }
+
+// The interpolation order of a block of side 2^k + 1: its four corners, then for each spacing h
+// from (side - 1) / 2 down to 1, the midpoints of the rows' intervals of 2h (between (x - h, y) and
+// (x + h, y)), those of the columns' (between (x, y - h) and (x, y + h)), and the centres (between
+// all four of those). f(x, y, h, pass): pass 0 a corner, 1 a row's midpoint, 2 a column's, 3 a centre.
+// One sample of that order: its place, the spacing and the pass.
+struct OrderStep {
+  uint32_t x = 0, y = 0, h = 0;
+  int pass = 0;
+};
+
+template <class F>
+void forEachInterpolated(uint32_t side, F&& f) {
+  const uint32_t m = side - 1;
+  f(0u, 0u, m, 0);
+  f(m, 0u, m, 0);
+  f(0u, m, m, 0);
+  f(m, m, m, 0);
+  for (uint32_t h = m / 2; h >= 1; h /= 2) {
+    for (uint32_t y = 0; y <= m; y += 2 * h)
+      for (uint32_t x = h; x < m; x += 2 * h) f(x, y, h, 1);
+    for (uint32_t y = h; y < m; y += 2 * h)
+      for (uint32_t x = 0; x <= m; x += 2 * h) f(x, y, h, 2);
+    for (uint32_t y = h; y < m; y += 2 * h)
+      for (uint32_t x = h; x < m; x += 2 * h) f(x, y, h, 3);
+  }
+}
+
 // The same for bytes, clamped to [0, 255]; the first sample 128.
 inline uint8_t predictByte(const uint8_t* b, uint32_t side, uint32_t stride, uint32_t x, uint32_t y) {
   const size_t row = size_t(side) * stride;
@@ -257,6 +287,7 @@ inline uint32_t predictPlanar(const std::vector<uint32_t>& q, const std::vector<
 // i32; then the residuals as byte planes. Without flag 1 (blocks written before
 // it), the first sample is coded as a residual from 0, which takes a plane or two more.
 constexpr uint8_t kFlagFirstSample = 1;
+constexpr uint8_t kFlagInterpolated = 4;  // residuals in forEachInterpolated's order
 
 // A kind of integer block: its magic, its name in messages, its channels, and the zstd level it is
 // coded at.
@@ -302,6 +333,60 @@ std::vector<uint8_t> encodeInts(const IntBlockKind& kind, const std::vector<int3
       for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(z[i * channels + c] >> (8 * p));
     }
   return frame(kind.magic, raw, kind.level);
+}
+
+// The interpolated prediction of channel c of sample (x, y) in forEachInterpolated's order (pass,
+// spacing h) from the values already decoded (channels interleaved): the mean of the pass's
+// neighbours, rounded down; the first corner's value for the other corners (the first one is in
+// the header: 0).
+inline int64_t interpolatedValue(const int32_t* q, uint32_t side, uint32_t channels, uint32_t c, const OrderStep& o) {
+  const uint32_t x = o.x, y = o.y, h = o.h;
+  const auto at = [&](uint32_t u, uint32_t v) { return int64_t(q[(size_t(v) * side + u) * channels + c]); };
+  switch (o.pass) {
+    case 1: return (at(x - h, y) + at(x + h, y) + 1) >> 1;
+    case 2: return (at(x, y - h) + at(x, y + h) + 1) >> 1;
+    case 3: return (at(x - h, y - h) + at(x + h, y + h) + 1) >> 1;
+    default: return x == 0 && y == 0 ? 0 : at(0, 0);
+  }
+}
+
+// The body of a block of `kind` whose residuals follow the interpolation order (flag
+// kFlagInterpolated; side 2^k + 1), else empty.
+std::vector<uint8_t> interpolatedBody(const IntBlockKind& kind, const std::vector<int32_t>& q, uint32_t side,
+                                      HeightQuantization mode, double step) {
+  if (!interpolatedSide(side)) return {};
+  const uint8_t channels = kind.channels;
+  const size_t n = size_t(side) * side;
+  std::vector<uint32_t> z(n * channels);  // in the order, channels interleaved
+  uint32_t all = 0;
+  size_t k = 0;
+  forEachInterpolated(side, [&](uint32_t x, uint32_t y, uint32_t h, int pass) {
+    for (uint32_t c = 0; c < channels; ++c) {
+      const int64_t v = q[(size_t(y) * side + x) * channels + c];
+      const uint32_t r =
+          k == 0 ? 0 : zigzag(int32_t(v - interpolatedValue(q.data(), side, channels, c, {x, y, h, pass})));
+      z[k * channels + c] = r;
+      all |= r;
+    }
+    ++k;
+  });
+  uint8_t planes = 1;
+  while (planes < 4 && (all >> (8 * planes)) != 0) ++planes;
+  const size_t head = kIntHeaderBytes + 4 * size_t(channels);
+  std::vector<uint8_t> raw(head + size_t(planes) * channels * n);
+  raw[0] = uint8_t(mode);
+  raw[1] = planes;
+  raw[2] = channels;
+  raw[3] = kFlagFirstSample | kFlagInterpolated;
+  std::memcpy(raw.data() + 4, &side, 4);
+  std::memcpy(raw.data() + 8, &step, 8);
+  std::memcpy(raw.data() + kIntHeaderBytes, q.data(), 4 * size_t(channels));
+  for (uint32_t c = 0; c < channels; ++c)
+    for (uint8_t p = 0; p < planes; ++p) {
+      uint8_t* plane = raw.data() + head + (size_t(c) * planes + p) * n;
+      for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(z[i * channels + c] >> (8 * p));
+    }
+  return raw;
 }
 
 // The body of a position block with planar squares (chartBorderSides: kChartBorder* bits), or
@@ -641,6 +726,41 @@ void decodePlanar(const std::vector<uint8_t>& raw, size_t head, uint32_t side, d
   if (hi > uint32_t(2 * kMaxSteps)) throw CodecError("corrupt position block (value out of range)");
 }
 
+// Decodes the residual planes of an interpolated body (from byte `head` of raw) into out: each
+// value its prediction plus its residual, in wrapping unsigned arithmetic (a crafted block cannot
+// overflow), then the floats; false when a value lies beyond `shape`'s bound (its q unused).
+bool decodeInterpolatedInts(const std::vector<uint8_t>& raw, size_t head, uint32_t side, DecodedPlanes shape,
+                            std::span<float> out) {
+  const uint32_t channels = shape.channels, planes = raw[1];
+  const size_t n = shape.n;
+  thread_local std::vector<int32_t> q;  // channels interleaved, as the predictions read them
+  thread_local std::vector<uint32_t> byChannel;
+  q.resize(n * channels);
+  byChannel.resize(n * channels);
+  const uint8_t* base = raw.data() + head;
+  int32_t first[4] = {0, 0, 0, 0};
+  std::memcpy(first, raw.data() + kIntHeaderBytes, 4 * size_t(channels));
+  size_t k = 0;
+  forEachInterpolated(side, [&](uint32_t x, uint32_t y, uint32_t h, int pass) {
+    const size_t s = size_t(y) * side + x;
+    for (uint32_t c = 0; c < channels; ++c) {
+      const uint8_t* b = base + size_t(c) * planes * n + k;
+      uint32_t z = 0;
+      for (uint32_t p = 0; p < planes; ++p) z |= uint32_t(b[p * n]) << (8 * p);
+      const uint32_t pred =
+          k == 0 ? uint32_t(first[c]) : uint32_t(interpolatedValue(q.data(), side, channels, c, {x, y, h, pass}));
+      const uint32_t v = pred + uint32_t(unzigzag(z));
+      q[s * channels + c] = int32_t(v);
+      byChannel[size_t(c) * n + s] = v;
+    }
+    ++k;
+  });
+  uint32_t hi = 0;
+  shape.q = byChannel.data();
+  storeFloats(shape, 0, n, hi, out.data());
+  return hi <= 2 * shape.bound;
+}
+
 // Decodes a block of `kind` into out (channels * side^2 floats); returns the quantization.
 GIMLOD_VECTOR_CLONES
 HeightQuantization decodeInts(std::span<const uint8_t> block, const IntBlockKind& kind, uint32_t side,
@@ -657,10 +777,19 @@ HeightQuantization decodeInts(std::span<const uint8_t> block, const IntBlockKind
   std::memcpy(&blockSide, raw.data() + 4, 4);
   std::memcpy(&step, raw.data() + 8, 8);
   if (mode > uint8_t(HeightQuantization::kPrecision) || planes < 1 || planes > 4 || raw[2] != channels ||
-      (flags & ~(kFlagFirstSample | kFlagPlanar)) != 0 || !(step > 0.0) ||
+      (flags & ~(kFlagFirstSample | kFlagPlanar | kFlagInterpolated)) != 0 || !(step > 0.0) ||
       !(step <= 1e30))  // decoded values stay finite floats
     throw CodecError(std::string("corrupt ") + what + " block (header)");
   const size_t head = kIntHeaderBytes + ((flags & kFlagFirstSample) ? 4 * size_t(channels) : 0);
+  if (blockSide == side && (flags & kFlagInterpolated)) {
+    if ((flags & kFlagPlanar) || !(flags & kFlagFirstSample) || !interpolatedSide(side) ||
+        raw.size() != head + size_t(planes) * channels * n)
+      throw CodecError(std::string("corrupt ") + what + " block (header)");
+    const int64_t bound = mode == uint8_t(HeightQuantization::kInteger) ? kMaxIntegerSteps : kMaxSteps;
+    if (!decodeInterpolatedInts(raw, head, side, {nullptr, n, channels, step, uint32_t(bound)}, out))
+      throw CodecError(std::string("corrupt ") + what + " block (value out of range)");
+    return HeightQuantization(mode);
+  }
   if (blockSide == side && (flags & kFlagPlanar)) {
     if (channels != 3 || !(flags & kFlagFirstSample) || mode != uint8_t(HeightQuantization::kPrecision))
       throw CodecError(std::string("corrupt ") + what + " block (header)");
@@ -889,11 +1018,19 @@ void decodeHeights(std::span<const uint8_t> block, uint32_t side, std::span<floa
   decodeInts(block, kHeightBlocks, side, out);
 }
 
-std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step, int chartBorderSides) {
+std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step, int chartBorderSides,
+                                     bool interpolated) {
   if (chartBorderSides > 15) throw std::invalid_argument("encodePositions: the chart border sides are 4 bits");
   const std::vector<int64_t> points = latticePoints(xyz, side, step, "encodePositions");
   const std::vector<int32_t> q(points.begin(), points.end());
   std::vector<uint8_t> all = encodeInts(kPositionBlocks, q, side, HeightQuantization::kPrecision, step);
+  if (interpolated) {  // the interpolation order's code where it is the smaller
+    const std::vector<uint8_t> raw = interpolatedBody(kPositionBlocks, q, side, HeightQuantization::kPrecision, step);
+    if (!raw.empty()) {
+      std::vector<uint8_t> interpolated = frame(kPositionMagic, raw, kPositionLevel);
+      if (interpolated.size() < all.size()) all.swap(interpolated);
+    }
+  }
   if (chartBorderSides >= 0) {  // the planar squares' code where it is the smaller
     const std::vector<uint8_t> raw = planarBody(q, side, step, uint8_t(chartBorderSides));
     if (!raw.empty()) {
@@ -908,19 +1045,76 @@ void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<fl
   decodeInts(block, kPositionBlocks, side, out);
 }
 
-std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, double step, double tolerance) {
-  if (!(tolerance >= 0.0) || !std::isfinite(tolerance))
-    throw std::invalid_argument("settlePositions: the tolerance must be finite and >= 0");
-  const size_t n = size_t(side) * side;
-  std::vector<int64_t> q = latticePoints(xyz, side, step, "settlePositions");
-  auto distance = [&](size_t a, size_t b) {
-    const double dx = double(xyz[3 * a]) - xyz[3 * b], dy = double(xyz[3 * a + 1]) - xyz[3 * b + 1],
-                 dz = double(xyz[3 * a + 2]) - xyz[3 * b + 2];
-    return std::sqrt(dx * dx + dy * dy + dz * dz);
-  };
-  // Per coordinate at most t / sqrt(3), so at most t in all.
-  const double perCoordinate = 2.0 / (std::sqrt(3.0) * step);
-  // The lattice points taken: the border's first, then each sample's as it is settled.
+namespace {
+
+// settlePositions' state: the input, the lattice points chosen so far, and those taken.
+class PositionSettler {
+ public:
+  PositionSettler(std::span<const float> xyz, uint32_t side, double step, double tolerance)
+      : xyz_(xyz),
+        side_(side),
+        step_(step),
+        tolerance_(tolerance),
+        q_(latticePoints(xyz, side, step, "settlePositions")) {
+    taken_.reserve(size_t(side) * side);
+    for (uint32_t y = 0; y < side; ++y)
+      for (uint32_t x = 0; x < side; ++x)
+        if (border(x, y)) taken_.insert(point(size_t(y) * side + x));
+  }
+  bool border(uint32_t x, uint32_t y) const { return x == 0 || y == 0 || x + 1 == side_ || y + 1 == side_; }
+
+  // Settles sample (x, y), off the border, in forEachInterpolated's order (pass, spacing h).
+  void settle(uint32_t x, uint32_t y, uint32_t h, int pass) {
+    const size_t i = size_t(y) * side_ + x;
+    // Per coordinate at most t / sqrt(3), so at most t in all.
+    const double perCoordinate = 2.0 / (std::sqrt(3.0) * step_);
+    const int64_t stride = int64_t(std::floor(std::min(tolerance_, windowDistance(x, y) / 4.0) * perCoordinate));
+    const Point nearest{q_[3 * i], q_[3 * i + 1], q_[3 * i + 2]};
+    if (stride > 1)
+      for (int c = 0; c < 3; ++c) {
+        const int64_t p = prediction(x, y, h, pass, c);
+        const int64_t k = int64_t(std::nearbyint((double(xyz_[3 * i + c]) / step_ - double(p)) / double(stride)));
+        const int64_t v = p + k * stride;
+        if (std::abs(v) <= kMaxSteps) q_[3 * i + c] = v;
+      }
+    // No sample may meet another: the border samples (fixed at their nearest lattice points) and
+    // every sample settled before it, anywhere in the image. On a densely sampled chart the
+    // sample beside the border may round to the border's lattice point, and where a chart folds
+    // back over itself, or its texels are barely a lattice step wide, samples farther apart in
+    // the grid may too. Then its nearest lattice point, else the nearest free one beside it. Nor
+    // may a centre (pass 3, the last corner of the four texels of spacing h round it) close a
+    // triangle of no area (three samples on one line) in them.
+    const auto blocked = [&](const Point& c) { return taken_.count(c) > 0 || (pass == 3 && flat(x, y, h, c)); };
+    if (stride > 1 && blocked(point(i))) std::copy(nearest.begin(), nearest.end(), q_.begin() + 3 * i);
+    for (int64_t r = 1; blocked(point(i)) && r <= kSettleReach; ++r) {
+      // The free lattice points at Chebyshev distance r from the nearest, the closest to the input.
+      double best = std::numeric_limits<double>::infinity();
+      Point chosen = nearest;
+      for (int64_t dz = -r; dz <= r; ++dz)
+        for (int64_t dy = -r; dy <= r; ++dy)
+          for (int64_t dx = -r; dx <= r; ++dx) {
+            if (std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) != r) continue;
+            const Point c{nearest[0] + dx, nearest[1] + dy, nearest[2] + dz};
+            if (blocked(c)) continue;
+            double d2 = 0.0;
+            for (int k = 0; k < 3; ++k) {
+              const double e = double(c[k]) - double(xyz_[3 * i + k]) / step_;
+              d2 += e * e;
+            }
+            if (d2 < best) best = d2, chosen = c;
+          }
+      std::copy(chosen.begin(), chosen.end(), q_.begin() + 3 * i);
+    }
+    taken_.insert(point(i));
+  }
+
+  std::vector<float> floats() const {
+    std::vector<float> out(q_.size());
+    for (size_t i = 0; i < q_.size(); ++i) out[i] = float(double(q_[i]) * step_);
+    return out;
+  }
+
+ private:
   using Point = std::array<int64_t, 3>;
   struct PointHash {
     size_t operator()(const Point& c) const {
@@ -929,113 +1123,208 @@ std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, do
       return size_t(h ^ (h >> 29));
     }
   };
-  auto key = [&](size_t i) { return Point{q[3 * i], q[3 * i + 1], q[3 * i + 2]}; };
-  std::unordered_set<Point, PointHash> taken;
-  taken.reserve(n);
-  for (uint32_t y = 0; y < side; ++y)
-    for (uint32_t x = 0; x < side; ++x)
-      if (x == 0 || y == 0 || x + 1 == side || y + 1 == side) taken.insert(key(size_t(y) * side + x));
-  constexpr int kRing = 2;  // the window of grid neighbours kept apart: (2 kRing + 1)^2
-  for (uint32_t y = 1; y + 1 < side; ++y)
-    for (uint32_t x = 1; x + 1 < side; ++x) {
-      const size_t i = size_t(y) * side + x, below = i - side;
-      const uint32_t x0 = x >= kRing ? x - kRing : 0, x1 = std::min(x + kRing, side - 1);
-      const uint32_t y0 = y >= kRing ? y - kRing : 0, y1 = std::min(y + kRing, side - 1);
-      double d = std::numeric_limits<double>::infinity();
-      for (uint32_t v = y0; v <= y1; ++v)
-        for (uint32_t u = x0; u <= x1; ++u)
-          if (u != x || v != y) d = std::min(d, distance(i, size_t(v) * side + u));
-      const int64_t stride = int64_t(std::floor(std::min(tolerance, d / 4.0) * perCoordinate));
-      const std::array<int64_t, 3> nearest{q[3 * i], q[3 * i + 1], q[3 * i + 2]};
-      if (stride > 1) {
-        for (int c = 0; c < 3; ++c) {
-          const int64_t p = q[3 * (i - 1) + c] + q[3 * below + c] - q[3 * (below - 1) + c];
-          const int64_t k = int64_t(std::nearbyint((double(xyz[3 * i + c]) / step - double(p)) / double(stride)));
-          const int64_t v = p + k * stride;
-          if (std::abs(v) <= kMaxSteps) q[3 * i + c] = v;
-        }
-      }
-      // No sample may meet another: the border samples (fixed at their nearest lattice points) and
-      // every sample settled before it, anywhere in the image. On a densely sampled chart the
-      // sample beside the border may round to the border's lattice point, and where a chart folds
-      // back over itself, or its texels are barely a lattice step wide, samples farther apart in
-      // the grid may too. Then its nearest lattice point, else the nearest free one beside it.
-      // Nor may it close a triangle of no area (three samples on one line) with the samples settled
-      // before it, in the texel whose last corner it is, at any level (stride) that keeps it.
-      auto flat = [&](const Point& c) {
-        auto p = [&](uint32_t u, uint32_t v) {
-          const size_t j = size_t(v) * side + u;
-          return j == i ? c : Point{q[3 * j], q[3 * j + 1], q[3 * j + 2]};
-        };
-        auto line = [](const Point& a, const Point& b, const Point& d) {
-          const int64_t ux = b[0] - a[0], uy = b[1] - a[1], uz = b[2] - a[2];
-          const int64_t vx = d[0] - a[0], vy = d[1] - a[1], vz = d[2] - a[2];
-          return uy * vz == uz * vy && uz * vx == ux * vz && ux * vy == uy * vx;
-        };
-        for (uint32_t t = 1; t <= x && t <= y && x % t == 0 && y % t == 0; t *= 2) {
-          const Point p00 = p(x - t, y - t), p10 = p(x, y - t), p01 = p(x - t, y);
-          if (line(p00, p10, c) || line(p00, c, p01)) return true;
-        }
-        return false;
-      };
-      auto blocked = [&](const Point& c) { return taken.count(c) > 0 || flat(c); };
-      if (stride > 1 && blocked(key(i))) std::copy(nearest.begin(), nearest.end(), q.begin() + 3 * i);
-      for (int64_t r = 1; blocked(key(i)) && r <= kSettleReach; ++r) {
-        // The free lattice points at Chebyshev distance r from the nearest, the closest to the input.
-        double best = std::numeric_limits<double>::infinity();
-        std::array<int64_t, 3> chosen = nearest;
-        for (int64_t dz = -r; dz <= r; ++dz)
-          for (int64_t dy = -r; dy <= r; ++dy)
-            for (int64_t dx = -r; dx <= r; ++dx) {
-              if (std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) != r) continue;
-              const std::array<int64_t, 3> c{nearest[0] + dx, nearest[1] + dy, nearest[2] + dz};
-              if (blocked(c)) continue;
-              double d2 = 0.0;
-              for (int k = 0; k < 3; ++k) {
-                const double e = double(c[k]) - double(xyz[3 * i + k]) / step;
-                d2 += e * e;
-              }
-              if (d2 < best) best = d2, chosen = c;
-            }
-        std::copy(chosen.begin(), chosen.end(), q.begin() + 3 * i);
-      }
-      taken.insert(key(i));
+  Point point(size_t i) const { return Point{q_[3 * i], q_[3 * i + 1], q_[3 * i + 2]}; }
+
+  // The interpolated prediction of coordinate c (as the coder makes it, from the settled values).
+  int64_t prediction(uint32_t x, uint32_t y, uint32_t h, int pass, int c) const {
+    const auto at = [&](uint32_t u, uint32_t v) { return q_[3 * (size_t(v) * side_ + u) + size_t(c)]; };
+    switch (pass) {
+      case 1: return (at(x - h, y) + at(x + h, y) + 1) >> 1;
+      case 2: return (at(x, y - h) + at(x, y + h) + 1) >> 1;
+      default: return (at(x - h, y - h) + at(x + h, y + h) + 1) >> 1;
     }
-  std::vector<float> out(3 * n);
-  for (size_t i = 0; i < 3 * n; ++i) out[i] = float(double(q[i]) * step);
-  return out;
+  }
+
+  // The input distance from sample (x, y) to the nearest other sample of its 5x5 grid window.
+  double windowDistance(uint32_t x, uint32_t y) const {
+    constexpr uint32_t kRing = 2;  // the window of grid neighbours kept apart: (2 kRing + 1)^2
+    const size_t i = size_t(y) * side_ + x;
+    const uint32_t x0 = x >= kRing ? x - kRing : 0, x1 = std::min(x + kRing, side_ - 1);
+    const uint32_t y0 = y >= kRing ? y - kRing : 0, y1 = std::min(y + kRing, side_ - 1);
+    double d = std::numeric_limits<double>::infinity();
+    for (uint32_t v = y0; v <= y1; ++v)
+      for (uint32_t u = x0; u <= x1; ++u) {
+        if (u == x && v == y) continue;
+        const size_t j = size_t(v) * side_ + u;
+        const double dx = double(xyz_[3 * i]) - xyz_[3 * j], dy = double(xyz_[3 * i + 1]) - xyz_[3 * j + 1],
+                     dz = double(xyz_[3 * i + 2]) - xyz_[3 * j + 2];
+        d = std::min(d, std::sqrt(dx * dx + dy * dy + dz * dz));
+      }
+    return d;
+  }
+
+  // Whether c at centre (x, y) leaves a triangle of no area in one of the four texels of spacing h
+  // round it (each split along its (0,0)-(1,1) diagonal, as the render grid draws it).
+  bool flat(uint32_t x, uint32_t y, uint32_t h, const Point& c) const {
+    const auto p = [&](uint32_t u, uint32_t v) { return u == x && v == y ? c : point(size_t(v) * side_ + u); };
+    const auto line = [](const Point& a, const Point& b, const Point& d) {
+      const int64_t ux = b[0] - a[0], uy = b[1] - a[1], uz = b[2] - a[2];
+      const int64_t vx = d[0] - a[0], vy = d[1] - a[1], vz = d[2] - a[2];
+      return uy * vz == uz * vy && uz * vx == ux * vz && ux * vy == uy * vx;
+    };
+    // c's triangles whose other two corners are apart (a border merged by its lattice is not c's).
+    const auto closes = [&](const Point& a, const Point& b) { return a != b && line(a, b, c); };
+    for (const uint32_t a : {x - h, x})
+      for (const uint32_t b : {y - h, y}) {
+        const Point p00 = p(a, b), p10 = p(a + h, b), p01 = p(a, b + h), p11 = p(a + h, b + h);
+        const bool cornerX = a + h == x, cornerY = b + h == y;  // c is p1? / p?1
+        if (cornerX == cornerY) {                               // p00 or p11: on the diagonal, in both triangles
+          if (cornerX ? closes(p00, p10) || closes(p00, p01) : closes(p10, p11) || closes(p11, p01)) return true;
+        } else if (closes(p00, p11)) {  // p10 or p01: in one triangle, with the diagonal
+          return true;
+        }
+      }
+    return false;
+  }
+
+  std::span<const float> xyz_;
+  uint32_t side_;
+  double step_, tolerance_;
+  std::vector<int64_t> q_;
+  std::unordered_set<Point, PointHash> taken_;  // the border's first, then each sample's as it is settled
+};
+
+}  // namespace
+
+std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, double step, double tolerance) {
+  if (!(tolerance >= 0.0) || !std::isfinite(tolerance))
+    throw std::invalid_argument("settlePositions: the tolerance must be finite and >= 0");
+  PositionSettler settler(xyz, side, step, tolerance);  // checks the sizes and the step
+  if (side < 3) return settler.floats();                // every sample on the border
+  if (!interpolatedSide(side)) throw std::invalid_argument("settlePositions: the side must be 2^k + 1");
+  forEachInterpolated(side, [&](uint32_t x, uint32_t y, uint32_t h, int pass) {
+    if (!settler.border(x, y)) settler.settle(x, y, h, pass);
+  });
+  return settler.floats();
 }
 
-void settleNormals(std::span<Byte4> normals, uint32_t side, uint32_t tolerance) {
-  if (side == 0 || normals.size() != size_t(side) * side)
-    throw std::invalid_argument("settleNormals: expected side^2 normals");
+namespace {
+
+constexpr char kInterpolatedNormalMagic[4] = {'G', 'N', 'I', '1'};
+
+// The interpolated prediction of byte c of sample (x, y) of a block of side `side` (4 bytes a
+// sample) in forEachInterpolated's order: the rounded mean of the neighbours the pass names; a
+// corner 128.
+inline int interpolatedByte(const uint8_t* b, uint32_t side, uint32_t c, const OrderStep& o) {
+  const uint32_t x = o.x, y = o.y, h = o.h;
+  const auto at = [&](uint32_t u, uint32_t v) { return int(b[(size_t(v) * side + u) * 4 + c]); };
+  switch (o.pass) {
+    case 1: return (at(x - h, y) + at(x + h, y) + 1) >> 1;
+    case 2: return (at(x, y - h) + at(x, y + h) + 1) >> 1;
+    case 3: return (at(x - h, y) + at(x + h, y) + at(x, y - h) + at(x, y + h) + 2) >> 2;
+    default: return 128;
+  }
+}
+
+// The z prediction of a normal in that order: unit length from its x and y, on the side of the
+// middle that the interpolated z is on.
+inline int interpolatedZ(const uint8_t* b, uint32_t side, const OrderStep& o, const std::array<uint8_t, 65536>& t) {
+  const uint32_t x = o.x, y = o.y;
+  const size_t i = (size_t(y) * side + x) * 4;
+  const int up = t[size_t(b[i]) * 256 + b[i + 1]];
+  return interpolatedByte(b, side, 2, o) >= 128 ? up : 255 - up;
+}
+
+// Settles the normals of one block (origin (x0, y0) of an image `side` samples wide, `bs` = 2^k + 1
+// samples a side) in forEachInterpolated's order: each byte off the block's border moves towards
+// its prediction in multiples of 2 tolerance + 1, by at most the tolerance.
+void settleInterpolatedBlock(uint8_t* image, uint32_t side, uint32_t x0, uint32_t y0, uint32_t bs, int tol) {
+  thread_local std::vector<uint8_t> b;
+  b.resize(size_t(bs) * bs * 4);
+  for (uint32_t v = 0; v < bs; ++v)
+    std::memcpy(b.data() + size_t(v) * bs * 4, image + (size_t(y0 + v) * side + x0) * 4, size_t(bs) * 4);
+  const auto& t = unitZ();
+  const int stride = 2 * tol + 1;
+  const auto settle = [&](uint8_t& byte, int p) {
+    const int v = byte, k = int(std::lround(double(v - p) / stride)), settled = p + k * stride;
+    if (settled >= 0 && settled <= 255 && std::abs(settled - v) <= tol) byte = uint8_t(settled);
+  };
+  forEachInterpolated(bs, [&](uint32_t x, uint32_t y, uint32_t h, int pass) {
+    if (x == 0 || y == 0 || x + 1 == bs || y + 1 == bs) return;
+    uint8_t* s = b.data() + (size_t(y) * bs + x) * 4;
+    for (uint32_t c = 0; c < 2; ++c) settle(s[c], interpolatedByte(b.data(), bs, c, {x, y, h, pass}));
+    settle(s[2], interpolatedZ(b.data(), bs, {x, y, h, pass}, t));
+  });
+  for (uint32_t v = 0; v < bs; ++v)
+    std::memcpy(image + (size_t(y0 + v) * side + x0) * 4, b.data() + size_t(v) * bs * 4, size_t(bs) * 4);
+}
+
+std::vector<uint8_t> encodeInterpolatedNormals(std::span<const Byte4> normals, uint32_t side) {
+  const size_t n = size_t(side) * side;
+  std::vector<uint8_t> raw(kByteHeaderBytes + 3 * n);
+  raw[0] = kKindNormals;
+  raw[1] = 3;
+  std::memcpy(raw.data() + 4, &side, 4);
+  const uint8_t* b = reinterpret_cast<const uint8_t*>(normals.data());
+  uint8_t* planes = raw.data() + kByteHeaderBytes;
+  const auto& t = unitZ();
+  size_t k = 0;
+  forEachInterpolated(side, [&](uint32_t x, uint32_t y, uint32_t h, int pass) {
+    const size_t s = (size_t(y) * side + x) * 4;
+    for (uint32_t c = 0; c < 2; ++c)
+      planes[c * n + k] = zigzag8(uint8_t(b[s + c] - interpolatedByte(b, side, c, {x, y, h, pass})));
+    planes[2 * n + k] = zigzag8(uint8_t(b[s + 2] - interpolatedZ(b, side, {x, y, h, pass}, t)));
+    ++k;
+  });
+  return frame(kInterpolatedNormalMagic, raw);
+}
+
+void decodeInterpolatedNormals(std::span<const uint8_t> block, uint32_t side, std::span<Byte4> out) {
+  const size_t n = size_t(side) * side;
+  if (out.size() != n) throw std::invalid_argument("decode normal: output size");
+  if (!interpolatedSide(side))
+    throw CodecError("interpolated normal block for a side of " + std::to_string(side) + " (not 2^k + 1)");
+  const size_t expected = kByteHeaderBytes + 3 * n;
+  const std::vector<uint8_t>& raw = unframe(block, kInterpolatedNormalMagic, "normal", kByteHeaderBytes, expected);
+  uint32_t blockSide = 0;
+  std::memcpy(&blockSide, raw.data() + 4, 4);
+  if (raw[0] != kKindNormals || raw[1] != 3) throw CodecError("corrupt normal block (header)");
+  if (blockSide != side || raw.size() != expected)
+    throw CodecError("normal block of side " + std::to_string(blockSide) + ", expected " + std::to_string(side));
+  uint8_t* b = reinterpret_cast<uint8_t*>(out.data());
+  const uint8_t* planes = raw.data() + kByteHeaderBytes;
+  const auto& t = unitZ();
+  size_t k = 0;
+  forEachInterpolated(side, [&](uint32_t x, uint32_t y, uint32_t h, int pass) {
+    const size_t s = (size_t(y) * side + x) * 4;
+    for (uint32_t c = 0; c < 2; ++c)
+      b[s + c] = uint8_t(interpolatedByte(b, side, c, {x, y, h, pass}) + unzigzag8(planes[c * n + k]));
+    b[s + 2] = uint8_t(interpolatedZ(b, side, {x, y, h, pass}, t) + unzigzag8(planes[2 * n + k]));
+    b[s + 3] = 255;
+    ++k;
+  });
+}
+
+}  // namespace
+
+void settleNormals(std::span<Byte4> normals, uint32_t side, uint32_t tolerance, uint32_t blockIntervals) {
+  if (!interpolatedSide(side) || normals.size() != size_t(side) * side)
+    throw std::invalid_argument("settleNormals: expected side^2 normals, side 2^k + 1");
+  if (!std::has_single_bit(blockIntervals))
+    throw std::invalid_argument("settleNormals: blockIntervals must be a power of two");
   if (tolerance > 127) throw std::invalid_argument("settleNormals: a tolerance above 127 packed steps");
   if (tolerance == 0) return;
-  uint8_t* b = normals.data()->data();
-  const int stride = 2 * int(tolerance) + 1, tol = int(tolerance);
-  const auto& t = unitZ();
-  for (uint32_t y = 1; y + 1 < side; ++y)
-    for (uint32_t x = 1; x + 1 < side; ++x) {
-      uint8_t* s = b + (size_t(y) * side + x) * 4;
-      for (uint32_t c = 0; c < 2; ++c) {
-        const int p = predictByte(b + c, side, 4, x, y), v = s[c];
-        const int k = int(std::lround(double(v - p) / stride));
-        const int settled = p + k * stride;
-        if (settled >= 0 && settled <= 255 && std::abs(settled - v) <= tol) s[c] = uint8_t(settled);
-      }
-      const int z = predictZ(b, side, x, y, t);
-      if (std::abs(z - int(s[2])) <= tol) s[2] = uint8_t(z);
-    }
+  const uint32_t B = std::min(blockIntervals, side - 1);
+  if (B < 2) return;  // blocks of 2 samples a side: every sample on a border
+  for (uint32_t y0 = 0; y0 + 1 < side; y0 += B)
+    for (uint32_t x0 = 0; x0 + 1 < side; x0 += B)
+      settleInterpolatedBlock(reinterpret_cast<uint8_t*>(normals.data()), side, x0, y0, B + 1, int(tolerance));
 }
 
 std::vector<uint8_t> encodeNormals(std::span<const Byte4> normals, uint32_t side) {
   for (const Byte4& nrm : normals)
     if (nrm[3] != 255) throw std::invalid_argument("encodeNormals: a packed normal's fourth byte is not 255");
-  return encodeBytes(kNormalBlocks, normals, side);
+  std::vector<uint8_t> lorenzo = encodeBytes(kNormalBlocks, normals, side);
+  if (!interpolatedSide(side)) return lorenzo;
+  std::vector<uint8_t> interpolated = encodeInterpolatedNormals(normals, side);
+  return interpolated.size() < lorenzo.size() ? interpolated : lorenzo;
 }
 
 void decodeNormals(std::span<const uint8_t> block, uint32_t side, std::span<Byte4> out) {
-  decodeBytes(block, kNormalBlocks, side, out);
+  if (block.size() >= kMagicBytes && std::memcmp(block.data(), kInterpolatedNormalMagic, kMagicBytes) == 0)
+    decodeInterpolatedNormals(block, side, out);
+  else
+    decodeBytes(block, kNormalBlocks, side, out);
 }
 
 namespace {

@@ -1,6 +1,7 @@
 // Block codecs for compressed atlases: one chart block of one channel in, a self-checking byte
 // string out. Every codec predicts each sample from its decoded neighbours by the 2D Lorenzo
-// predictor (left + below - below-left; a block's first sample is stored as it is), maps the
+// predictor (left + below - below-left; a block's first sample is stored as it is), or positions
+// and normals by interpolation from coarse to fine where that codes smaller, maps the
 // residuals to small unsigned values, splits them into byte planes and entropy-codes the whole with
 // zstd and its frame checksum, so a corrupt or truncated block is detected, never decoded to wrong
 // samples.
@@ -65,9 +66,14 @@ HeightQuantization blockQuantization(std::span<const uint8_t> block);
 // grids' two triangles of the square's corners put them (planarSquareSample), the largest first.
 // It codes their corners and none of their other samples, and the decoder interpolates those, so
 // the block still decodes to exactly its samples; samples on a chart-border edge are always coded.
-// That code is kept where it is smaller than every sample's.
+// That code is kept where it is smaller than every sample's. Every sample's residuals are coded
+// in row order (Lorenzo) or, for a side of 2^k + 1, in settlePositions' interpolation order,
+// whichever is smaller.
 // A writer that moves samples there (geometryPyramid) stores fewer. -1: every sample coded.
-std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step, int chartBorderSides = -1);
+// interpolated false: the row order's and the planar squares' codes only (flags 1 and 2, as
+// readers before flag 4 decode).
+std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, double step, int chartBorderSides = -1,
+                                     bool interpolated = true);
 inline constexpr uint8_t kChartBorderBottom = 1, kChartBorderRight = 2, kChartBorderTop = 4, kChartBorderLeft = 8;
 // Where a planar square of s intervals (a power of two) puts its sample (x0 + dx, y0 + dy),
 // 0 <= dx, dy <= s, from its corners' lattice points q00 (x0, y0), q10 (x0 + s, y0), q01
@@ -84,37 +90,51 @@ inline int32_t planarSquareSample(int64_t q00, int64_t q10, int64_t q01, int64_t
 // Decodes a block made by encodePositions into out (3 side^2 floats). Throws CodecError.
 void decodePositions(std::span<const uint8_t> block, uint32_t side, std::span<float> out);
 
-// Error-bounded settling: picks the values a lossless Lorenzo coding codes cheaply. Quantizing each
+// Error-bounded settling: picks the values a lossless coding codes cheaply. Quantizing each
 // coordinate to its nearest lattice point leaves the residuals of a smooth surface spread over
-// many values; choosing instead, for each sample off the image's border in row order, the lattice
-// point the predictor (left + below - below-left, from the samples already chosen) reaches in
-// whole multiples of S steps, with S as large as the sample's tolerance allows, makes most
-// residuals 0 where the surface is smooth. The coding itself stays lossless: readers decode
-// exactly the settled values, and whatever is measured on them (errors, distances) holds for what
-// is drawn.
+// many values; choosing instead, for each sample off the image's border in the interpolation
+// order (the corners, then for each spacing h from (side - 1) / 2 down to 1 the midpoints of the
+// rows' intervals of 2h, of the columns', and the centres), the lattice point its prediction (the
+// mean of its two neighbours at h, a centre's along the diagonal (0,0)-(1,1), from the samples
+// already chosen) reaches in whole multiples of S steps, with S as large as the sample's tolerance
+// allows, makes most residuals 0 where the surface is smooth, at every pyramid level that
+// subsamples the image and in every block of 2^j + 1 samples a side (encodePositions' interpolated
+// code). The coding itself stays lossless: readers decode exactly the settled values, and
+// whatever is measured on them (errors, distances) holds for what is drawn.
 // - Border samples (first and last row and column) go to their nearest lattice point, as
 //   quantizeToStep puts them, so sides shared with other images stay bit-identical.
 // - Each other sample moves at most min(tolerance, d / 4) from its input (Euclidean), d its
 //   distance to the nearest other sample of its 5x5 grid window, so close samples are not merged;
 //   a sample whose choice would coincide with a border sample or one settled before it, anywhere
-//   in the image, or close a triangle of no area (three samples on one line) in the texel whose
-//   last corner it is, at any level that keeps it, takes its nearest lattice point, or else the
-//   free lattice point closest to its input within 3 steps of that (per coordinate).
-// side^2 positions (x, y, z interleaved, row-major) in, settled positions out (the input of
-// encodePositions). tolerance 0: every sample to its nearest lattice point. Throws
-// std::invalid_argument as encodePositions does, or on a negative tolerance.
+//   in the image, or (a centre, the last corner of the four texels of spacing h round it) close a
+//   triangle of no area (three samples on one line) in them, takes its nearest lattice point, or
+//   else the free lattice point closest to its input within 3 steps of that (per coordinate).
+// side^2 positions (x, y, z interleaved, row-major) in, side 2^k + 1 (or at most 2: every sample
+// on the border), settled positions out (the input of encodePositions). tolerance 0: every sample
+// to its nearest lattice point. Throws std::invalid_argument as encodePositions does, on another
+// side, or on a negative tolerance.
 std::vector<float> settlePositions(std::span<const float> xyz, uint32_t side, double step, double tolerance);
 
 // Encodes side^2 packed unit normals (x, y, z bytes, n * 127.5 + 127.5; the fourth byte 255)
-// losslessly. Throws std::invalid_argument if a fourth byte is not 255.
+// losslessly. Two predictions are tried and the smaller code kept: the Lorenzo predictor, and,
+// where side is 2^k + 1, interpolation in coarse-to-fine order (the corners, then for each spacing
+// h from (side - 1) / 2 down to 1 the midpoints of the rows' intervals of 2h, the columns', and the
+// centres, each from the rounded mean of its two or four neighbours at h). Either way z is
+// predicted from x and y (unit length). decodeNormals reads both. Throws std::invalid_argument if
+// a fourth byte is not 255.
 std::vector<uint8_t> encodeNormals(std::span<const std::array<uint8_t, 4>> normals, uint32_t side);
 void decodeNormals(std::span<const uint8_t> block, uint32_t side, std::span<std::array<uint8_t, 4>> out);
 
-// The same for side^2 packed unit normals (the input of encodeNormals), in place: each byte of a
-// sample off the border moves by at most `tolerance` (in packed steps of 1/127.5), the x and y
-// bytes towards the Lorenzo prediction in multiples of 2 tolerance + 1, z to the unit length
-// encodeNormals predicts from them when that is within the tolerance. tolerance 0 changes nothing.
-void settleNormals(std::span<std::array<uint8_t, 4>> normals, uint32_t side, uint32_t tolerance);
+// Error-bounded settling of side^2 packed unit normals (the input of encodeNormals), in place,
+// block by block (blocks of min(blockIntervals, side - 1) intervals, as a chart file stores them):
+// in the interpolation order, each byte of a sample off its block's border moves towards its
+// prediction in multiples of 2 tolerance + 1, by at most `tolerance` packed steps (1/127.5), z
+// towards the unit length predicted from x and y. Smooth normals then interpolate to 0 residuals.
+// Samples on block borders (which neighbouring blocks and charts share) never move. tolerance 0
+// changes nothing. Throws std::invalid_argument unless side is 2^k + 1, blockIntervals a power
+// of two and tolerance at most 127.
+void settleNormals(std::span<std::array<uint8_t, 4>> normals, uint32_t side, uint32_t tolerance,
+                   uint32_t blockIntervals);
 
 // Geometry images whose normals are derived from their positions store only the normals of a
 // block's border (4 (side - 1) samples, which the neighbouring block shares), coded losslessly

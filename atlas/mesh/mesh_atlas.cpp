@@ -230,21 +230,32 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, con
   std::vector<PackedNormal> normals = subsampled(image.normals, chartSize, 1u << finestLevel);
   const std::vector<glm::u8vec4> colours = subsampled(image.colours, chartSize, 1u << finestLevel);
   if (coding.compressed) {
-    const std::vector<float> s =
-        settlePositions({reinterpret_cast<const float*>(positions.data()), 3 * positions.size()}, size,
-                        coding.positionStep, coding.positionTolerance);
-    std::memcpy(positions.data(), s.data(), s.size() * sizeof(float));
-    if (!coding.deriveGeometryNormals) settleNormals(normals, size, coding.normalTolerance);
+    // The nearest lattice points (kept apart), the planar squares on them, then every sample off
+    // the border settled in the interpolation order, the squares' too: interpolation predicts a
+    // planar square's samples as it predicts any smooth surface's. The drawn surface so stays
+    // within the sampling bound plus the tolerance, as it does off the squares.
+    const auto settle = [&](double tolerance) {
+      const std::vector<float> s =
+          settlePositions({reinterpret_cast<const float*>(positions.data()), 3 * positions.size()}, size,
+                          coding.positionStep, tolerance);
+      std::memcpy(positions.data(), s.data(), s.size() * sizeof(float));
+    };
+    settle(0.0);
     if (planar.budget > 0.0) {
       const uint64_t moved =
           placeOnPlanarSquares(image.positions, chartSize, finestLevel, coding.positionStep, planar, positions);
       if (planarSamples) *planarSamples = moved;
     }
+    settle(coding.positionTolerance);
   }
   ChartPyramid p;
   for (uint32_t k = 0; (M >> k) >= 1; ++k) {
     p.positions.push_back(subsampled(positions, size, 1u << k));
     p.normals.push_back(subsampled(normals, size, 1u << k));
+    // Stored normals are settled level by level, in the blocks each level is coded in: a level
+    // subsampled from a settled finer one would predict badly. Shared borders never move.
+    if (coding.compressed && !coding.deriveGeometryNormals && (M >> k) >= 2)
+      settleNormals(p.normals.back(), (M >> k) + 1, coding.normalTolerance, planar.blockIntervals);
     if (!colours.empty()) {
       std::vector<PackedColour> col;
       for (const glm::u8vec4& c : subsampled(colours, size, 1u << k)) col.push_back({c.r, c.g, c.b, c.a});

@@ -9,6 +9,8 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <set>
+#include <string>
 
 #include <glm/geometric.hpp>
 
@@ -265,6 +267,72 @@ TEST(PositionCodec, BlocksWithoutTheFirstSampleInTheHeaderStillDecode) {
   EXPECT_NE(now, block);
 }
 
+// The raw body of a coded block (its zstd frame after the magic), or empty when it does not decode.
+std::vector<uint8_t> blockBody(const std::vector<uint8_t>& block) {
+  const unsigned long long size = ZSTD_getFrameContentSize(block.data() + 4, block.size() - 4);
+  if (size == ZSTD_CONTENTSIZE_ERROR || size == ZSTD_CONTENTSIZE_UNKNOWN) return {};
+  std::vector<uint8_t> raw(size);
+  const size_t got = ZSTD_decompress(raw.data(), raw.size(), block.data() + 4, block.size() - 4);
+  if (ZSTD_isError(got) || got != size) return {};
+  return raw;
+}
+
+// A position block of `raw` (the magic and a checksummed zstd frame), as a writer frames it.
+std::vector<uint8_t> positionBlock(const std::vector<uint8_t>& raw) {
+  std::vector<uint8_t> block = {'G', 'P', 'B', '1'};
+  block.resize(4 + ZSTD_compressBound(raw.size()));
+  ZSTD_CCtx* cctx = ZSTD_createCCtx();
+  ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
+  const size_t written = ZSTD_compress2(cctx, block.data() + 4, block.size() - 4, raw.data(), raw.size());
+  ZSTD_freeCCtx(cctx);
+  block.resize(ZSTD_isError(written) ? 4 : 4 + written);
+  return block;
+}
+
+// A settled sheet is coded in the interpolation order (flag 4), decodes exactly, and takes fewer
+// bytes than the same samples' other codes would (a smooth sheet's settled samples are their
+// coarser neighbours' means); damage, another side, an interpolated body on a side that is not
+// 2^k + 1, with planar squares, or with values past the lattice's bound are CodecError.
+TEST(PositionCodec, InterpolatedBlocksRoundTripAndDetectDamage) {
+  const double step = std::exp2(-18.0);
+  const std::vector<float> in = settlePositions(sheet(kSide, 1.0 / 64), kSide, step, 2e-4);
+  const std::vector<uint8_t> code = encodePositions(in, kSide, step, 0);
+  std::vector<uint8_t> raw = blockBody(code);
+  ASSERT_GT(raw.size(), 16u);
+  EXPECT_EQ(raw[3], 1 | 4);  // the first sample in the header, the interpolation order
+  std::vector<float> back(in.size());
+  decodePositions(code, kSide, back);
+  EXPECT_EQ(back, in);
+  std::printf("  settled sheet: %zu bytes\n", code.size());
+  std::vector<uint8_t> bad = code;
+  bad[bad.size() - 1] ^= 0x10;
+  EXPECT_THROW(decodePositions(bad, kSide, back), CodecError);
+  EXPECT_THROW(decodePositions({code.data(), code.size() - 3}, kSide, back), CodecError);
+  std::vector<float> smaller(3 * 33 * 33);
+  EXPECT_THROW(decodePositions(code, 33, smaller), CodecError);
+  // The same body, re-framed, decodes; changed as a crafted block would be, it is refused.
+  EXPECT_NO_THROW(decodePositions(positionBlock(raw), kSide, back));
+  EXPECT_EQ(back, in);
+  std::vector<uint8_t> planar = raw;
+  planar[3] |= 2;
+  EXPECT_THROW(decodePositions(positionBlock(planar), kSide, back), CodecError);
+  std::vector<uint8_t> noFirst = raw;
+  noFirst[3] = 4;
+  EXPECT_THROW(decodePositions(positionBlock(noFirst), kSide, back), CodecError);
+  // Side 11 (not 2^k + 1): the header's side and the body's size made to agree.
+  constexpr uint32_t odd = 11;
+  std::vector<uint8_t> oddBody(16 + 12 + size_t(raw[1]) * 3 * odd * odd, 0);
+  std::copy(raw.begin(), raw.begin() + 28, oddBody.begin());
+  std::memcpy(oddBody.data() + 4, &odd, 4);
+  std::vector<float> oddOut(3 * odd * odd);
+  EXPECT_THROW(decodePositions(positionBlock(oddBody), odd, oddOut), CodecError);
+  // Every residual at the largest value its planes hold: the values leave the lattice's bound.
+  std::vector<uint8_t> far(raw.begin(), raw.begin() + 28);
+  far[1] = 4;  // four byte planes
+  far.resize(28 + 4 * 3 * size_t(kSide) * kSide, uint8_t(0xFE));
+  EXPECT_THROW(decodePositions(positionBlock(far), kSide, back), CodecError);
+}
+
 // Blocks whose squares a writer placed on their corners' triangles, largest first, nested at
 // every size and against every set of chart-border edges (whose samples stay put), with
 // coordinates near 0 and across the whole lattice: each decodes to exactly its samples, codes in
@@ -320,8 +388,9 @@ TEST(PositionCodec, PlanarSquaresRoundTripExactlyAndCodeFewerBytes) {
           }
           std::vector<float> in(q.size());
           for (size_t i = 0; i < q.size(); ++i) in[i] = float(double(q[i]) * step);
-          const std::vector<uint8_t> all = encodePositions(in, side, step),
-                                     planar = encodePositions(in, side, step, border);
+          // (Row order alone against row order or planar squares: the interpolated code apart.)
+          const std::vector<uint8_t> all = encodePositions(in, side, step, -1, false),
+                                     planar = encodePositions(in, side, step, border, false);
           std::vector<float> back(in.size(), -1.0f);
           decodePositions(planar, side, back);
           ASSERT_EQ(back, in);
@@ -378,7 +447,7 @@ TEST(PositionCodec, DamagedPlanarBodiesDecodeOrThrow) {
               planarSquareSample(at(x0, y0), at(x0 + 4, y0), at(x0, y0 + 4), at(x0 + 4, y0 + 4), 4, x - x0, y - y0);
           in[(size_t(y) * side + x) * 3 + c] = float(double(v + (off(rng) ? 0 : bump(rng))) * step);
         }
-    const std::vector<uint8_t> block = encodePositions(in, side, step, kChartBorderLeft);
+    const std::vector<uint8_t> block = encodePositions(in, side, step, kChartBorderLeft, false);
     std::vector<uint8_t> raw(ZSTD_getFrameContentSize(block.data() + 4, block.size() - 4));
     ASSERT_EQ(ZSTD_decompress(raw.data(), raw.size(), block.data() + 4, block.size() - 4), raw.size());
     ASSERT_EQ(raw[3], 1 | 2) << "a block with planar squares";
@@ -439,11 +508,23 @@ TEST(PositionSettling, SamplesBesideTheBorderNeverMeetIt) {
   }
 }
 
-// Settled normals: the border unchanged, every byte within the tolerance, decoded exactly, coded
-// in fewer bytes; tolerance 0 changes nothing.
+// The normals of a sphere's cap seen from above, side^2 samples: smooth, as resampled normals are.
+std::vector<PackedNormal> capNormals(uint32_t side) {
+  std::vector<PackedNormal> n(size_t(side) * side);
+  for (uint32_t v = 0; v < side; ++v)
+    for (uint32_t u = 0; u < side; ++u) {
+      const float x = (float(u) / float(side - 1) - 0.5f) * 1.2f, y = (float(v) / float(side - 1) - 0.4f) * 1.2f;
+      const glm::vec3 d = glm::normalize(glm::vec3(x, y, std::sqrt(std::max(0.05f, 1.0f - x * x - y * y))));
+      n[size_t(v) * side + u] = packNormal(d.x, d.y, d.z);
+    }
+  return n;
+}
+
+// Settled normals: block borders unchanged, every byte within the tolerance, decoded exactly,
+// coded in fewer bytes, by interpolation; tolerance 0 changes nothing.
 TEST(NormalSettling, WithinTheToleranceAndCheaper) {
   const std::vector<float> xyz = sheet(kSide, 1.0 / 64);
-  std::vector<PackedNormal> in(size_t(kSide) * kSide);
+  std::vector<PackedNormal> sheetNormals(size_t(kSide) * kSide);
   for (uint32_t v = 0; v < kSide; ++v)
     for (uint32_t u = 0; u < kSide; ++u) {
       const size_t i = size_t(v) * kSide + u;
@@ -454,34 +535,75 @@ TEST(NormalSettling, WithinTheToleranceAndCheaper) {
       const glm::vec3 dv = glm::vec3(xyz[3 * up], xyz[3 * up + 1], xyz[3 * up + 2]) - p;
       glm::vec3 n = glm::normalize(glm::cross(du, dv));
       if (n.z < 0) n = -n;
-      in[i] = packNormal(n.x, n.y, n.z);
+      sheetNormals[i] = packNormal(n.x, n.y, n.z);
     }
-  std::vector<PackedNormal> same = in;
-  settleNormals(same, kSide, 0);
-  EXPECT_EQ(same, in);
-  for (const uint32_t tolerance : {1u, 2u}) {
-    std::vector<PackedNormal> settled = in;
-    settleNormals(settled, kSide, tolerance);
-    size_t moved = 0;
-    for (uint32_t v = 0; v < kSide; ++v)
-      for (uint32_t u = 0; u < kSide; ++u) {
-        const size_t i = size_t(v) * kSide + u;
-        const bool border = u == 0 || v == 0 || u + 1 == kSide || v + 1 == kSide;
-        for (int c = 0; c < 4; ++c) {
-          const int d = std::abs(int(settled[i][c]) - int(in[i][c]));
-          ASSERT_LE(d, border || c == 3 ? 0 : int(tolerance)) << u << "," << v << " byte " << c;
-          moved += d > 0;
+  for (const std::vector<PackedNormal>& in : {sheetNormals, capNormals(kSide)}) {
+    std::vector<PackedNormal> same = in;
+    settleNormals(same, kSide, 0, 16);
+    EXPECT_EQ(same, in);
+    for (const uint32_t tolerance : {1u, 2u})
+      for (const uint32_t blockIntervals : {16u, 64u}) {
+        std::vector<PackedNormal> settled = in;
+        settleNormals(settled, kSide, tolerance, blockIntervals);
+        size_t moved = 0;
+        for (uint32_t v = 0; v < kSide; ++v)
+          for (uint32_t u = 0; u < kSide; ++u) {
+            const size_t i = size_t(v) * kSide + u;
+            const bool border = u % blockIntervals == 0 || v % blockIntervals == 0;
+            for (int c = 0; c < 4; ++c) {
+              const int d = std::abs(int(settled[i][c]) - int(in[i][c]));
+              ASSERT_LE(d, border || c == 3 ? 0 : int(tolerance)) << u << "," << v << " byte " << c;
+              moved += d > 0;
+            }
+          }
+        EXPECT_GT(moved, 0u);
+        const std::vector<uint8_t> a = encodeNormals(in, kSide), b = encodeNormals(settled, kSide);
+        std::vector<PackedNormal> back(settled.size());
+        decodeNormals(b, kSide, back);
+        EXPECT_EQ(back, settled);
+        std::printf("  normals: %zu bytes as sampled, %zu settled within %u packed steps in blocks of %u\n", a.size(),
+                    b.size(), tolerance, blockIntervals);
+        EXPECT_LT(b.size(), a.size());
+        if (blockIntervals == 64) {
+          EXPECT_EQ(std::string(b.begin(), b.begin() + 4), "GNI1");  // the interpolated code
         }
       }
-    EXPECT_GT(moved, 0u);
-    const std::vector<uint8_t> a = encodeNormals(in, kSide), b = encodeNormals(settled, kSide);
-    std::vector<PackedNormal> back(settled.size());
-    decodeNormals(b, kSide, back);
-    EXPECT_EQ(back, settled);
-    std::printf("  normals: %zu bytes as sampled, %zu settled within %u packed steps\n", a.size(), b.size(), tolerance);
-    EXPECT_LT(b.size(), a.size());
   }
-  EXPECT_THROW(settleNormals(same, kSide, 128), std::invalid_argument);
+  std::vector<PackedNormal> same = sheetNormals;
+  EXPECT_THROW(settleNormals(same, kSide, 128, 64), std::invalid_argument);
+  EXPECT_THROW(settleNormals(same, kSide, 1, 48), std::invalid_argument);
+  std::vector<PackedNormal> odd(11 * 11, PackedNormal{128, 128, 255, 255});
+  EXPECT_THROW(settleNormals(odd, 11, 1, 8), std::invalid_argument);
+}
+
+// Normal blocks of every side, smooth or noise: back exactly, whichever prediction codes them;
+// damage and a wrong side detected.
+TEST(NormalCodec, RoundTripsWithEitherPredictionAndDetectsDamage) {
+  std::mt19937 rng(7);
+  std::set<std::string> magics;
+  for (const uint32_t side : {2u, 3u, 11u, 17u, kSide}) {
+    std::vector<PackedNormal> noise(size_t(side) * side);
+    for (auto& n : noise) n = {uint8_t(rng()), uint8_t(rng()), uint8_t(rng()), 255};
+    std::vector<PackedNormal> settledCap = capNormals(side);
+    if (side == kSide) settleNormals(settledCap, side, 2, 64);
+    for (const std::vector<PackedNormal>& in : {noise, capNormals(side), settledCap}) {
+      const std::vector<uint8_t> code = encodeNormals(in, side);
+      magics.insert(std::string(code.begin(), code.begin() + 4));
+      std::vector<PackedNormal> out(in.size(), PackedNormal{1, 2, 3, 4});
+      decodeNormals(code, side, out);
+      EXPECT_EQ(out, in) << side;
+      std::vector<PackedNormal> larger(size_t(side + 1) * (side + 1));
+      EXPECT_THROW(decodeNormals(code, side + 1, larger), CodecError);
+      std::vector<uint8_t> bad = code;
+      bad[bad.size() - 1] ^= 0x10;
+      EXPECT_THROW(decodeNormals(bad, side, out), CodecError);
+      EXPECT_THROW(decodeNormals({code.data(), code.size() - 3}, side, out), CodecError);
+      EXPECT_THROW(decodeColours(code, side, out), CodecError);  // another kind of block
+    }
+  }
+  EXPECT_EQ(magics, (std::set<std::string>{"GNB1", "GNI1"}));  // both predictions were kept somewhere
+  std::vector<PackedNormal> bad(9, PackedNormal{128, 128, 255, 7});
+  EXPECT_THROW((void)encodeNormals(bad, 3), std::invalid_argument);
 }
 
 // Whole byte strings: back exactly; corrupt or truncated frames, and frames that claim more

@@ -1,6 +1,6 @@
 // libFuzzer harness for the block decoders: any bytes end in decoded samples or a CodecError, for
-// every block side the atlas uses and every kind of block (heights, positions, normals, border
-// normals, colours).
+// every block side the atlas uses and every kind of block (heights, positions, normals of either
+// prediction, border normals, colours).
 #include <array>
 #include <cstddef>
 #include <cstdint>
