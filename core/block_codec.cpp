@@ -300,39 +300,67 @@ struct IntBlockKind {
 constexpr IntBlockKind kHeightBlocks{kHeightMagic, "height", 1, kLevel};
 constexpr IntBlockKind kPositionBlocks{kPositionMagic, "position", 3, kPositionLevel};
 
-// A block of `kind` of side^2 quantized samples q (channels interleaved), quantized as `mode` to `step`.
-std::vector<uint8_t> encodeInts(const IntBlockKind& kind, const std::vector<int32_t>& q, uint32_t side,
-                                HeightQuantization mode, double step) {
-  const uint8_t channels = kind.channels;
-  const size_t n = size_t(side) * side;
-  // Residuals, zigzagged, as byte planes per channel (low bytes first); planes above the highest
-  // non-zero byte are left out. The first sample goes to the header, its residual 0.
-  std::vector<uint32_t> z(n * channels);
+// How an integer body's header describes its samples.
+struct IntBodyHeader {
+  HeightQuantization mode = HeightQuantization::kPrecision;
+  double step = 1.0;
+  uint32_t side = 0;
+  uint8_t channels = 0;
+  uint8_t flags = 0;  // kFlagFirstSample, with kFlagInterpolated for that order
+};
+
+// The body of zigzagged residuals z (channels interleaved, sample by sample in the order the
+// header's flags name), the first sample of q (channels interleaved) in the header: byte planes
+// per channel (low bytes first), planes above the highest non-zero byte left out.
+std::vector<uint8_t> intBody(const IntBodyHeader& h, const std::vector<uint32_t>& z, const int32_t* first) {
+  const uint8_t channels = h.channels;
+  const size_t n = size_t(h.side) * h.side;
   uint32_t all = 0;
-  for (uint32_t y = 0; y < side; ++y)
-    for (uint32_t x = 0; x < side; ++x)
-      for (uint32_t c = 0; c < channels; ++c) {
-        const size_t i = (size_t(y) * side + x) * channels + c;
-        z[i] = i < channels ? 0 : zigzag(int32_t(int64_t(q[i]) - predict(q.data() + c, side, channels, x, y)));
-        all |= z[i];
-      }
+  for (const uint32_t r : z) all |= r;
   uint8_t planes = 1;
   while (planes < 4 && (all >> (8 * planes)) != 0) ++planes;
   const size_t head = kIntHeaderBytes + 4 * size_t(channels);
   std::vector<uint8_t> raw(head + size_t(planes) * channels * n);
-  raw[0] = uint8_t(mode);
+  raw[0] = uint8_t(h.mode);
   raw[1] = planes;
   raw[2] = channels;
-  raw[3] = kFlagFirstSample;
-  std::memcpy(raw.data() + 4, &side, 4);
-  std::memcpy(raw.data() + 8, &step, 8);
-  std::memcpy(raw.data() + kIntHeaderBytes, q.data(), 4 * size_t(channels));
+  raw[3] = h.flags;
+  std::memcpy(raw.data() + 4, &h.side, 4);
+  std::memcpy(raw.data() + 8, &h.step, 8);
+  std::memcpy(raw.data() + kIntHeaderBytes, first, 4 * size_t(channels));
   for (uint32_t c = 0; c < channels; ++c)
     for (uint8_t p = 0; p < planes; ++p) {
       uint8_t* plane = raw.data() + head + (size_t(c) * planes + p) * n;
       for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(z[i * channels + c] >> (8 * p));
     }
-  return frame(kind.magic, raw, kind.level);
+  return raw;
+}
+
+// The zigzagged Lorenzo residuals of side^2 samples q (channels interleaved), in row order; the
+// first sample's 0 (it goes to the header).
+std::vector<uint32_t> lorenzoResiduals(const std::vector<int32_t>& q, uint32_t side, uint32_t channels) {
+  std::vector<uint32_t> z(size_t(side) * side * channels);
+  for (uint32_t y = 0; y < side; ++y)
+    for (uint32_t x = 0; x < side; ++x)
+      for (uint32_t c = 0; c < channels; ++c) {
+        const size_t i = (size_t(y) * side + x) * channels + c;
+        z[i] = i < channels ? 0 : zigzag(int32_t(int64_t(q[i]) - predict(q.data() + c, side, channels, x, y)));
+      }
+  return z;
+}
+
+// What residuals cost, roughly, before the entropy coder: their bits, summed (0 for a 0).
+uint64_t residualBits(const std::vector<uint32_t>& z) {
+  uint64_t bits = 0;
+  for (const uint32_t r : z) bits += uint64_t(std::bit_width(r));
+  return bits;
+}
+
+// A block of `kind` of side^2 quantized samples q (channels interleaved), quantized as `mode` to `step`.
+std::vector<uint8_t> encodeInts(const IntBlockKind& kind, const std::vector<int32_t>& q, uint32_t side,
+                                HeightQuantization mode, double step) {
+  const IntBodyHeader h{mode, step, side, kind.channels, kFlagFirstSample};
+  return frame(kind.magic, intBody(h, lorenzoResiduals(q, side, kind.channels), q.data()), kind.level);
 }
 
 // The interpolated prediction of channel c of sample (x, y) in forEachInterpolated's order (pass,
@@ -350,43 +378,20 @@ inline int64_t interpolatedValue(const int32_t* q, uint32_t side, uint32_t chann
   }
 }
 
-// The body of a block of `kind` whose residuals follow the interpolation order (flag
-// kFlagInterpolated; side 2^k + 1), else empty.
-std::vector<uint8_t> interpolatedBody(const IntBlockKind& kind, const std::vector<int32_t>& q, uint32_t side,
-                                      HeightQuantization mode, double step) {
-  if (!interpolatedSide(side)) return {};
-  const uint8_t channels = kind.channels;
-  const size_t n = size_t(side) * side;
-  std::vector<uint32_t> z(n * channels);  // in the order, channels interleaved
-  uint32_t all = 0;
+// The zigzagged residuals of side^2 samples q (channels interleaved) in the interpolation order
+// (side 2^k + 1), sample by sample; the first sample's 0 (it goes to the header).
+std::vector<uint32_t> interpolatedResiduals(const std::vector<int32_t>& q, uint32_t side, uint32_t channels) {
+  std::vector<uint32_t> z(size_t(side) * side * channels);
   size_t k = 0;
   forEachInterpolated(side, [&](uint32_t x, uint32_t y, uint32_t h, int pass) {
     for (uint32_t c = 0; c < channels; ++c) {
       const int64_t v = q[(size_t(y) * side + x) * channels + c];
-      const uint32_t r =
+      z[k * channels + c] =
           k == 0 ? 0 : zigzag(int32_t(v - interpolatedValue(q.data(), side, channels, c, {x, y, h, pass})));
-      z[k * channels + c] = r;
-      all |= r;
     }
     ++k;
   });
-  uint8_t planes = 1;
-  while (planes < 4 && (all >> (8 * planes)) != 0) ++planes;
-  const size_t head = kIntHeaderBytes + 4 * size_t(channels);
-  std::vector<uint8_t> raw(head + size_t(planes) * channels * n);
-  raw[0] = uint8_t(mode);
-  raw[1] = planes;
-  raw[2] = channels;
-  raw[3] = kFlagFirstSample | kFlagInterpolated;
-  std::memcpy(raw.data() + 4, &side, 4);
-  std::memcpy(raw.data() + 8, &step, 8);
-  std::memcpy(raw.data() + kIntHeaderBytes, q.data(), 4 * size_t(channels));
-  for (uint32_t c = 0; c < channels; ++c)
-    for (uint8_t p = 0; p < planes; ++p) {
-      uint8_t* plane = raw.data() + head + (size_t(c) * planes + p) * n;
-      for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(z[i * channels + c] >> (8 * p));
-    }
-  return raw;
+  return z;
 }
 
 // The body of a position block with planar squares (chartBorderSides: kChartBorder* bits), or
@@ -1023,14 +1028,15 @@ std::vector<uint8_t> encodePositions(std::span<const float> xyz, uint32_t side, 
   if (chartBorderSides > 15) throw std::invalid_argument("encodePositions: the chart border sides are 4 bits");
   const std::vector<int64_t> points = latticePoints(xyz, side, step, "encodePositions");
   const std::vector<int32_t> q(points.begin(), points.end());
-  std::vector<uint8_t> all = encodeInts(kPositionBlocks, q, side, HeightQuantization::kPrecision, step);
-  if (interpolated) {  // the interpolation order's code where it is the smaller
-    const std::vector<uint8_t> raw = interpolatedBody(kPositionBlocks, q, side, HeightQuantization::kPrecision, step);
-    if (!raw.empty()) {
-      std::vector<uint8_t> interpolated = frame(kPositionMagic, raw, kPositionLevel);
-      if (interpolated.size() < all.size()) all.swap(interpolated);
-    }
+  // Row order or, for a side of 2^k + 1, the interpolation order, whichever residuals take fewer
+  // bits (one entropy coding, not two).
+  std::vector<uint32_t> z = lorenzoResiduals(q, side, 3);
+  IntBodyHeader h{HeightQuantization::kPrecision, step, side, 3, kFlagFirstSample};
+  if (interpolated && interpolatedSide(side)) {
+    std::vector<uint32_t> zi = interpolatedResiduals(q, side, 3);
+    if (residualBits(zi) < residualBits(z)) z.swap(zi), h.flags |= kFlagInterpolated;
   }
+  std::vector<uint8_t> all = frame(kPositionMagic, intBody(h, z, q.data()), kPositionLevel);
   if (chartBorderSides >= 0) {  // the planar squares' code where it is the smaller
     const std::vector<uint8_t> raw = planarBody(q, side, step, uint8_t(chartBorderSides));
     if (!raw.empty()) {

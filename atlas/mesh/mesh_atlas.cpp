@@ -240,7 +240,9 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, con
                           coding.positionStep, tolerance);
       std::memcpy(positions.data(), s.data(), s.size() * sizeof(float));
     };
-    settle(0.0);
+    for (glm::vec3& q : positions)  // the nearest lattice points (the settling below keeps them apart)
+      q = {quantizeToStep(q.x, coding.positionStep), quantizeToStep(q.y, coding.positionStep),
+           quantizeToStep(q.z, coding.positionStep)};
     if (planar.budget > 0.0) {
       const uint64_t moved =
           placeOnPlanarSquares(image.positions, chartSize, finestLevel, coding.positionStep, planar, positions);
