@@ -920,19 +920,28 @@ std::vector<uint8_t> encodeBytes(const ByteBlockKind& blocks, std::span<const By
   return frame(blocks.magic, raw);
 }
 
+// The body of an 8-bit block of `magic` (kind and channels in its header, `what` in messages),
+// checked: `side` as the caller expects, exactly `expected` bytes. The thread's buffer (unframe).
+const std::vector<uint8_t>& byteBody(std::span<const uint8_t> block, const char (&magic)[4], const char* what,
+                                     const std::array<uint8_t, 2>& kindChannels, uint32_t side, size_t expected) {
+  const std::vector<uint8_t>& raw = unframe(block, magic, what, kByteHeaderBytes, expected);
+  uint32_t blockSide = 0;
+  std::memcpy(&blockSide, raw.data() + 4, 4);
+  if (raw[0] != kindChannels[0] || raw[1] != kindChannels[1])
+    throw CodecError(std::string("corrupt ") + what + " block (header)");
+  if (blockSide != side || raw.size() != expected)
+    throw CodecError(std::string(what) + " block of side " + std::to_string(blockSide) + ", expected " +
+                     std::to_string(side));
+  return raw;
+}
+
 void decodeBytes(std::span<const uint8_t> block, const ByteBlockKind& blocks, uint32_t side, std::span<Byte4> out) {
   const char* what = blocks.what;
   const uint8_t kind = blocks.kind, channels = blocks.channels;
   const size_t n = size_t(side) * side;
   if (out.size() != n) throw std::invalid_argument(std::string("decode ") + what + ": output size");
-  const size_t expected = kByteHeaderBytes + size_t(channels) * n;
-  const std::vector<uint8_t>& raw = unframe(block, blocks.magic, what, kByteHeaderBytes, expected);
-  uint32_t blockSide = 0;
-  std::memcpy(&blockSide, raw.data() + 4, 4);
-  if (raw[0] != kind || raw[1] != channels) throw CodecError(std::string("corrupt ") + what + " block (header)");
-  if (blockSide != side || raw.size() != expected)
-    throw CodecError(std::string(what) + " block of side " + std::to_string(blockSide) + ", expected " +
-                     std::to_string(side));
+  const std::vector<uint8_t>& raw =
+      byteBody(block, blocks.magic, what, {kind, channels}, side, kByteHeaderBytes + size_t(channels) * n);
   uint8_t* b = out.data()->data();
   const auto& t = unitZ();
   const uint8_t* planes = raw.data() + kByteHeaderBytes;
@@ -1280,13 +1289,8 @@ void decodeInterpolatedNormals(std::span<const uint8_t> block, uint32_t side, st
   if (out.size() != n) throw std::invalid_argument("decode normal: output size");
   if (!interpolatedSide(side))
     throw CodecError("interpolated normal block for a side of " + std::to_string(side) + " (not 2^k + 1)");
-  const size_t expected = kByteHeaderBytes + 3 * n;
-  const std::vector<uint8_t>& raw = unframe(block, kInterpolatedNormalMagic, "normal", kByteHeaderBytes, expected);
-  uint32_t blockSide = 0;
-  std::memcpy(&blockSide, raw.data() + 4, 4);
-  if (raw[0] != kKindNormals || raw[1] != 3) throw CodecError("corrupt normal block (header)");
-  if (blockSide != side || raw.size() != expected)
-    throw CodecError("normal block of side " + std::to_string(blockSide) + ", expected " + std::to_string(side));
+  const std::vector<uint8_t>& raw =
+      byteBody(block, kInterpolatedNormalMagic, "normal", {kKindNormals, 3}, side, kByteHeaderBytes + 3 * n);
   uint8_t* b = reinterpret_cast<uint8_t*>(out.data());
   const uint8_t* planes = raw.data() + kByteHeaderBytes;
   const auto& t = unitZ();
@@ -1368,13 +1372,8 @@ void decodeBorderNormals(std::span<const uint8_t> block, uint32_t side, std::spa
   if (side < 2 || out.size() != size_t(side) * side)
     throw std::invalid_argument("decodeBorderNormals: expected side^2 normals, side >= 2");
   const uint32_t ring = 4 * (side - 1);
-  const size_t expected = kByteHeaderBytes + 3 * size_t(ring);
-  const std::vector<uint8_t>& raw = unframe(block, kBorderNormalMagic, "border normal", kByteHeaderBytes, expected);
-  uint32_t blockSide = 0;
-  std::memcpy(&blockSide, raw.data() + 4, 4);
-  if (raw[0] != kKindNormals || raw[1] != 3) throw CodecError("corrupt border normal block (header)");
-  if (blockSide != side || raw.size() != expected)
-    throw CodecError("border normal block of side " + std::to_string(blockSide) + ", expected " + std::to_string(side));
+  const std::vector<uint8_t>& raw = byteBody(block, kBorderNormalMagic, "border normal", {kKindNormals, 3}, side,
+                                             kByteHeaderBytes + 3 * size_t(ring));
   Byte4 prev{128, 128, 128, 255};
   for (uint32_t k = 0; k < ring; ++k) {
     Byte4& nrm = out[borderSample(side, k)];

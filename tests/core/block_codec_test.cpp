@@ -217,6 +217,28 @@ TEST(PositionCodec, RoundTripsExactlyAtEveryResidualWidth) {
   EXPECT_EQ(back, in);
 }
 
+// The raw body of a coded block (its zstd frame after the magic), or empty when it does not decode.
+std::vector<uint8_t> blockBody(const std::vector<uint8_t>& block) {
+  const unsigned long long size = ZSTD_getFrameContentSize(block.data() + 4, block.size() - 4);
+  if (size == ZSTD_CONTENTSIZE_ERROR || size == ZSTD_CONTENTSIZE_UNKNOWN) return {};
+  std::vector<uint8_t> raw(size);
+  const size_t got = ZSTD_decompress(raw.data(), raw.size(), block.data() + 4, block.size() - 4);
+  if (ZSTD_isError(got) || got != size) return {};
+  return raw;
+}
+
+// A position block of `raw` (the magic and a checksummed zstd frame), as a writer frames it.
+std::vector<uint8_t> positionBlock(const std::vector<uint8_t>& raw) {
+  std::vector<uint8_t> block = {'G', 'P', 'B', '1'};
+  block.resize(4 + ZSTD_compressBound(raw.size()));
+  ZSTD_CCtx* cctx = ZSTD_createCCtx();
+  ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
+  const size_t written = ZSTD_compress2(cctx, block.data() + 4, block.size() - 4, raw.data(), raw.size());
+  ZSTD_freeCCtx(cctx);
+  block.resize(ZSTD_isError(written) ? 4 : 4 + written);
+  return block;
+}
+
 // Blocks written before the first sample moved to the block's header (flags 0: every sample a
 // Lorenzo residual, the first from 0) still decode, built here byte by byte as that writer did.
 TEST(PositionCodec, BlocksWithoutTheFirstSampleInTheHeaderStillDecode) {
@@ -247,14 +269,8 @@ TEST(PositionCodec, BlocksWithoutTheFirstSampleInTheHeaderStillDecode) {
   for (uint32_t c = 0; c < 3; ++c)
     for (uint32_t p = 0; p < planes; ++p)
       for (size_t i = 0; i < n; ++i) raw[16 + (c * planes + p) * n + i] = uint8_t(z[i * 3 + c] >> (8 * p));
-  std::vector<uint8_t> block = {'G', 'P', 'B', '1'};
-  block.resize(4 + ZSTD_compressBound(raw.size()));
-  ZSTD_CCtx* cctx = ZSTD_createCCtx();
-  ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
-  const size_t written = ZSTD_compress2(cctx, block.data() + 4, block.size() - 4, raw.data(), raw.size());
-  ZSTD_freeCCtx(cctx);
-  ASSERT_FALSE(ZSTD_isError(written));
-  block.resize(4 + written);
+  const std::vector<uint8_t> block = positionBlock(raw);
+  ASSERT_GT(block.size(), 4u);
   std::vector<float> back(q.size());
   decodePositions(block, side, back);
   for (size_t i = 0; i < q.size(); ++i) EXPECT_EQ(back[i], float(q[i] * step)) << i;
@@ -265,28 +281,6 @@ TEST(PositionCodec, BlocksWithoutTheFirstSampleInTheHeaderStillDecode) {
   decodePositions(now, side, back);
   EXPECT_EQ(back, in);
   EXPECT_NE(now, block);
-}
-
-// The raw body of a coded block (its zstd frame after the magic), or empty when it does not decode.
-std::vector<uint8_t> blockBody(const std::vector<uint8_t>& block) {
-  const unsigned long long size = ZSTD_getFrameContentSize(block.data() + 4, block.size() - 4);
-  if (size == ZSTD_CONTENTSIZE_ERROR || size == ZSTD_CONTENTSIZE_UNKNOWN) return {};
-  std::vector<uint8_t> raw(size);
-  const size_t got = ZSTD_decompress(raw.data(), raw.size(), block.data() + 4, block.size() - 4);
-  if (ZSTD_isError(got) || got != size) return {};
-  return raw;
-}
-
-// A position block of `raw` (the magic and a checksummed zstd frame), as a writer frames it.
-std::vector<uint8_t> positionBlock(const std::vector<uint8_t>& raw) {
-  std::vector<uint8_t> block = {'G', 'P', 'B', '1'};
-  block.resize(4 + ZSTD_compressBound(raw.size()));
-  ZSTD_CCtx* cctx = ZSTD_createCCtx();
-  ZSTD_CCtx_setParameter(cctx, ZSTD_c_checksumFlag, 1);
-  const size_t written = ZSTD_compress2(cctx, block.data() + 4, block.size() - 4, raw.data(), raw.size());
-  ZSTD_freeCCtx(cctx);
-  block.resize(ZSTD_isError(written) ? 4 : 4 + written);
-  return block;
 }
 
 // A settled sheet is coded in the interpolation order (flag 4), decodes exactly, and takes fewer
