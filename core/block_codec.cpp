@@ -112,16 +112,16 @@ inline int64_t predict(const int32_t* q, uint32_t side, uint32_t stride, uint32_
 // A side of 2^k + 1 samples, k >= 1: the sides the interpolation order covers.
 bool interpolatedSide(uint32_t side) { return side >= 3 && std::has_single_bit(side - 1); }
 
-// The interpolation order of a block of side 2^k + 1: its four corners, then for each spacing h
-// from (side - 1) / 2 down to 1, the midpoints of the rows' intervals of 2h (between (x - h, y) and
-// (x + h, y)), those of the columns' (between (x, y - h) and (x, y + h)), and the centres (between
-// all four of those). f(x, y, h, pass): pass 0 a corner, 1 a row's midpoint, 2 a column's, 3 a centre.
-// One sample of that order: its place, the spacing and the pass.
+// One sample of the interpolation order (below): its place, the spacing and the pass.
 struct OrderStep {
   uint32_t x = 0, y = 0, h = 0;
   int pass = 0;
 };
 
+// The interpolation order of a block of side 2^k + 1: its four corners, then for each spacing h
+// from (side - 1) / 2 down to 1, the midpoints of the rows' intervals of 2h (between (x - h, y) and
+// (x + h, y)), those of the columns' (between (x, y - h) and (x, y + h)), and the centres (between
+// all four of those). f(x, y, h, pass): pass 0 a corner, 1 a row's midpoint, 2 a column's, 3 a centre.
 template <class F>
 void forEachInterpolated(uint32_t side, F&& f) {
   const uint32_t m = side - 1;
@@ -367,7 +367,8 @@ std::vector<uint8_t> encodeInts(const IntBlockKind& kind, const std::vector<int3
 // spacing h) from the values already decoded (channels interleaved): the mean of the pass's
 // neighbours, rounded down; the first corner's value for the other corners (the first one is in
 // the header: 0).
-inline int64_t interpolatedValue(const int32_t* q, uint32_t side, uint32_t channels, uint32_t c, const OrderStep& o) {
+template <class T>  // int32_t (decoded values) or int64_t (the settler's lattice points)
+inline int64_t interpolatedValue(const T* q, uint32_t side, uint32_t channels, uint32_t c, const OrderStep& o) {
   const uint32_t x = o.x, y = o.y, h = o.h;
   const auto at = [&](uint32_t u, uint32_t v) { return int64_t(q[(size_t(v) * side + u) * channels + c]); };
   switch (o.pass) {
@@ -1087,7 +1088,8 @@ class PositionSettler {
     const Point nearest{q_[3 * i], q_[3 * i + 1], q_[3 * i + 2]};
     if (stride > 1)
       for (int c = 0; c < 3; ++c) {
-        const int64_t p = prediction(x, y, h, pass, c);
+        const int64_t p =
+            interpolatedValue(q_.data(), side_, 3, uint32_t(c), {x, y, h, pass});  // as the coder predicts
         const int64_t k = int64_t(std::nearbyint((double(xyz_[3 * i + c]) / step_ - double(p)) / double(stride)));
         const int64_t v = p + k * stride;
         if (std::abs(v) <= kMaxSteps) q_[3 * i + c] = v;
@@ -1139,16 +1141,6 @@ class PositionSettler {
     }
   };
   Point point(size_t i) const { return Point{q_[3 * i], q_[3 * i + 1], q_[3 * i + 2]}; }
-
-  // The interpolated prediction of coordinate c (as the coder makes it, from the settled values).
-  int64_t prediction(uint32_t x, uint32_t y, uint32_t h, int pass, int c) const {
-    const auto at = [&](uint32_t u, uint32_t v) { return q_[3 * (size_t(v) * side_ + u) + size_t(c)]; };
-    switch (pass) {
-      case 1: return (at(x - h, y) + at(x + h, y) + 1) >> 1;
-      case 2: return (at(x, y - h) + at(x, y + h) + 1) >> 1;
-      default: return (at(x - h, y - h) + at(x + h, y + h) + 1) >> 1;
-    }
-  }
 
   // The input distance from sample (x, y) to the nearest other sample of its 5x5 grid window.
   double windowDistance(uint32_t x, uint32_t y) const {

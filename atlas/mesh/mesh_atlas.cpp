@@ -234,12 +234,6 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, con
     // the border settled in the interpolation order, the squares' too: interpolation predicts a
     // planar square's samples as it predicts any smooth surface's. The drawn surface so stays
     // within the sampling bound plus the tolerance, as it does off the squares.
-    const auto settle = [&](double tolerance) {
-      const std::vector<float> s =
-          settlePositions({reinterpret_cast<const float*>(positions.data()), 3 * positions.size()}, size,
-                          coding.positionStep, tolerance);
-      std::memcpy(positions.data(), s.data(), s.size() * sizeof(float));
-    };
     for (glm::vec3& q : positions)  // the nearest lattice points (the settling below keeps them apart)
       q = {quantizeToStep(q.x, coding.positionStep), quantizeToStep(q.y, coding.positionStep),
            quantizeToStep(q.z, coding.positionStep)};
@@ -248,7 +242,10 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, con
           placeOnPlanarSquares(image.positions, chartSize, finestLevel, coding.positionStep, planar, positions);
       if (planarSamples) *planarSamples = moved;
     }
-    settle(coding.positionTolerance);
+    const std::vector<float> s =
+        settlePositions({reinterpret_cast<const float*>(positions.data()), 3 * positions.size()}, size,
+                        coding.positionStep, coding.positionTolerance);
+    std::memcpy(positions.data(), s.data(), s.size() * sizeof(float));
   }
   ChartPyramid p;
   for (uint32_t k = 0; (M >> k) >= 1; ++k) {
