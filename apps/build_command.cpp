@@ -99,7 +99,7 @@ void addMeshChartOptions(CLI::App* b, BuildArgs& a) {
       ->capture_default_str();
   b->add_option("--sample-error", a.sampleErrorPercent,
                 "Meshes: the largest distance, in % of the bounding-box diagonal, from an input vertex to its "
-                "chart's surface; patches whose charts exceed it are cut; 0: flips only (default: 0.05 when the "
+                "chart's surface; patches whose charts exceed it are cut; 0: flips only (default: 0.08 when the "
                 "chart size is chosen by density, else 0)");
 }
 
