@@ -1390,6 +1390,7 @@ GeometryImageSet repairPass(PatchLayout& layout, GeometryImageSet set, const Res
     ResampleReuse reuse;
     reuse.normals = &normals;
     reuse.only = &only;
+    reuse.params = repair.params;
     GeometryImageSet r = resampleLayout(layout, options, reuse);
     *work += r.trianglesParameterized;
     return r;
@@ -1400,6 +1401,7 @@ GeometryImageSet repairPass(PatchLayout& layout, GeometryImageSet set, const Res
                      GeometryImageSet* extra) {
     ResampleReuse reuse;
     reuse.normals = &normals;
+    reuse.params = repair.params;
     if (extra) reuse.earlier.push_back({extraPatches, extra});
     reuse.earlier.push_back({&earlierPatches, &set});
     set = resampleLayout(layout, options, reuse);

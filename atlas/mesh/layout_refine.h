@@ -175,6 +175,11 @@ struct ChartRepairOptions {
   // layoutVertexNormals(layout), if the caller holds them (positions and triangles never change in
   // a repair); computed once by the repair otherwise.
   const std::vector<glm::dvec3>* normals = nullptr;
+  // If set, the trials' and rounds' parameterizations are taken from it where a patch is alike,
+  // and put there (ResampleReuse::params): a neighbour that a trial cut gave a corner, and the
+  // cut's parts, are parameterized once for the trial, the round that keeps the cut and the
+  // resamplings after the repair. The charts are the same with it or without it.
+  ParamCache* params = nullptr;
 };
 
 struct ChartRepairStats {

@@ -868,6 +868,7 @@ ResampledMesh resamplePerPatch(PatchLayout& layout, const QuadChartOptions& o, Q
       repair.rounds = o.repairRounds;
       repair.workBudget = meshRepairWorkBudget(o.repairBudget, layout.triangles.size());
       repair.normals = &z.normals;
+      repair.params = z.params.get();
       // No stop for memory: the gate keeps the cut patches' working memory within --max-memory,
       // and their charts go to the spill, so the work budget alone ends the repair, and where it
       // ends depends on neither the machine nor what the heap holds.

@@ -949,13 +949,12 @@ ParamOptions patchParamOptions(const ResampleOptions& options) {
   return paramOptions;
 }
 
-// Patch p's parameterization: from the reuse's cache where it holds one of a patch alike, else
-// made, and put there.
-std::shared_ptr<const PatchParameterization> parameterization(const ResampleContext& c, uint32_t p) {
+// Patch p's parameterization: `cached` (what the reuse's cache held of a patch alike) where
+// given, else made, and put there.
+std::shared_ptr<const PatchParameterization> parameterization(const ResampleContext& c, uint32_t p,
+                                                              std::shared_ptr<const PatchParameterization> cached) {
+  if (cached) return cached;
   const Patch& patch = c.layout.patches[p];
-  if (c.reuse.params) {
-    if (auto pp = c.reuse.params->find(patch, p)) return pp;
-  }
   auto pp = std::make_shared<const PatchParameterization>(parameterizePatch(c.layout, p, patchParamOptions(c.options)));
   if (c.reuse.params) c.reuse.params->put(patch, p, pp);
   return pp;
@@ -967,14 +966,15 @@ std::shared_ptr<const PatchParameterization> parameterization(const ResampleCont
 // resamplePatch; sampleAt keeps one locator hint for the whole patch, so the order of the steps
 // is part of the result.
 struct PatchSampler {
-  PatchSampler(const ResampleContext& context, uint32_t patchId, const PatchQuads& quads)
+  PatchSampler(const ResampleContext& context, uint32_t patchId, const PatchQuads& quads,
+               std::shared_ptr<const PatchParameterization> cached)
       : c(context),
         p(patchId),
         patch(context.layout.patches[patchId]),
         n(uint32_t(patch.sides.size())),
         plan(quads),
         nq(uint32_t(quads.quads.size())),
-        held(parameterization(context, patchId)),
+        held(parameterization(context, patchId, std::move(cached))),
         pp(*held),
         openSides(n),
         locator(pp) {}
@@ -1607,21 +1607,25 @@ void sampleChart(PatchSampler& ps, ChartBuffers& buffers, uint32_t i) {
 }
 
 // The working memory of resampling patch p (held at the gate through its parameterization and
-// sampling): its parameterization's where none is cached, and the point location's grid, about
-// 64 bytes a triangle while it is built.
-uint64_t patchWorkingBytes(const ResampleContext& c, uint32_t p) {
+// sampling): its parameterization's, or where it is `cached` the local mesh the cache makes again
+// (about 48 bytes a triangle with its vertex map), and the point location's grid, about 64 bytes
+// a triangle while it is built.
+uint64_t patchWorkingBytes(const ResampleContext& c, uint32_t p, bool cached) {
   const Patch& patch = c.layout.patches[p];
-  const bool cached = c.reuse.params && c.reuse.params->holds(patch, p);
-  return (cached ? 0 : paramWorkingBytes(patch.triangles.size(), c.options.param.singlePrecisionFrom)) +
-         64 * uint64_t(patch.triangles.size());
+  const uint64_t triangles = patch.triangles.size();
+  return (cached ? 48 * triangles : paramWorkingBytes(triangles, c.options.param.singlePrecisionFrom)) +
+         64 * triangles;
 }
 
 // Resamples patch p (action 1): parameterizes it, samples what its quads share, then each quad
 // chart.
 void resamplePatch(const ResampleContext& c, uint32_t p, const PatchQuads& plan) {
+  // Taken from the cache before the gate, so that what the gate counts is what runs.
+  std::shared_ptr<const PatchParameterization> cached =
+      c.reuse.params ? c.reuse.params->find(c.layout, c.layout.patches[p], p) : nullptr;
   std::optional<ParamGate::Hold> hold;
-  if (c.options.gate) hold.emplace(*c.options.gate, patchWorkingBytes(c, p));
-  PatchSampler ps(c, p, plan);
+  if (c.options.gate) hold.emplace(*c.options.gate, patchWorkingBytes(c, p, cached != nullptr));
+  PatchSampler ps(c, p, plan, std::move(cached));
   PatchResampleStats& st = c.set.patches[p];
   st.paramInitial = ps.pp.initial;
   st.param = ps.pp.quality;
@@ -1677,32 +1681,74 @@ bool patchParamAlike(const Patch& a, const Patch& b) {
   return true;
 }
 
-const ParamCache::Entry* ParamCache::entryFor(const Patch& patch, uint32_t p) const {
-  const auto it = entries_.find(p);
-  return it == entries_.end() || !patchParamAlike(it->second.patch, patch) ? nullptr : &it->second;
+ParamCache::Order::iterator ParamCache::entryFor(const Patch& patch, uint32_t p) const {
+  const auto [first, last] = byPatch_.equal_range(p);
+  for (auto it = first; it != last; ++it) {
+    if (!patchParamAlike(it->second->patch, patch)) continue;
+    order_.splice(order_.begin(), order_, it->second);
+    return it->second;
+  }
+  return order_.end();
 }
 
-std::shared_ptr<const PatchParameterization> ParamCache::find(const Patch& patch, uint32_t p) const {
-  const std::lock_guard<std::mutex> lock(mutex_);
-  const Entry* e = entryFor(patch, p);
-  if (!e) return nullptr;
-  ++hits_;
-  return e->pp;
+std::shared_ptr<const PatchParameterization> ParamCache::find(const PatchLayout& layout, const Patch& patch,
+                                                              uint32_t p) const {
+  std::shared_ptr<const PatchParameterization> kept;
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    const auto e = entryFor(patch, p);
+    if (e == order_.end()) return nullptr;
+    ++hits_;
+    kept = e->pp;
+  }
+  // The local vertices in the order the patch's triangles first use them (buildLocalPatch's).
+  auto pp = std::make_shared<PatchParameterization>(*kept);
+  std::unordered_map<uint32_t, uint32_t> local;
+  local.reserve(pp->uv.size());
+  pp->vertices.reserve(pp->uv.size());
+  pp->triangles.reserve(patch.triangles.size());
+  for (const uint32_t t : patch.triangles) {
+    std::array<uint32_t, 3> lt;
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t v = layout.triangles[t][k];
+      const auto [it, inserted] = local.try_emplace(v, uint32_t(pp->vertices.size()));
+      if (inserted) pp->vertices.push_back(v);
+      lt[k] = it->second;
+    }
+    pp->triangles.push_back(lt);
+  }
+  if (pp->vertices.size() != pp->uv.size())
+    throw std::logic_error("ParamCache::find: patch " + std::to_string(p) + " has other vertices than its entry");
+  return pp;
 }
 
 void ParamCache::put(const Patch& patch, uint32_t p, std::shared_ptr<const PatchParameterization> pp) {
+  // Kept without the local vertex and triangle lists, which find makes again.
+  // (Swapped out, not cleared: a cleared vector keeps its memory.)
+  auto stripped = std::make_shared<PatchParameterization>(*pp);
+  std::vector<uint32_t>().swap(stripped->vertices);
+  std::vector<std::array<uint32_t, 3>>().swap(stripped->triangles);
   uint64_t bytes = sizeof(Entry) + patch.triangles.size() * sizeof(uint32_t) + pp->uv.size() * sizeof(glm::dvec2) +
-                   pp->vertices.size() * sizeof(uint32_t) + pp->triangles.size() * sizeof(pp->triangles[0]) +
                    pp->boundary.size() * sizeof(uint32_t);
   for (const PatchSide& s : patch.sides) bytes += sizeof(PatchSide) + s.vertices.size() * sizeof(uint32_t);
+  pp = std::move(stripped);
   const std::lock_guard<std::mutex> lock(mutex_);
-  const auto it = entries_.find(p);
-  if (it != entries_.end()) {
-    bytes_ -= it->second.bytes;
-    entries_.erase(it);
-  }
-  if (bytes_ + bytes > maxBytes_) return;
-  entries_.emplace(p, Entry{patch, std::move(pp), bytes});
+  auto erase = [&](Order::iterator e) {
+    const auto [first, last] = byPatch_.equal_range(e->p);
+    for (auto it = first; it != last; ++it) {
+      if (it->second == e) {
+        byPatch_.erase(it);
+        break;
+      }
+    }
+    bytes_ -= e->bytes;
+    order_.erase(e);
+  };
+  if (const auto same = entryFor(patch, p); same != order_.end()) erase(same);
+  if (bytes > maxBytes_) return;
+  while (!order_.empty() && bytes_ + bytes > maxBytes_) erase(std::prev(order_.end()));
+  order_.push_front(Entry{p, patch, std::move(pp), bytes});
+  byPatch_.emplace(p, order_.begin());
   bytes_ += bytes;
 }
 
@@ -1734,7 +1780,7 @@ ParamGate::Hold::~Hold() {
 
 bool ParamCache::holds(const Patch& patch, uint32_t p) const {
   const std::lock_guard<std::mutex> lock(mutex_);
-  return entryFor(patch, p) != nullptr;
+  return entryFor(patch, p) != order_.end();
 }
 
 uint64_t ParamCache::bytes() const {

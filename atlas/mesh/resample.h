@@ -22,6 +22,7 @@
 #include <cstdint>
 #include <limits>
 #include <filesystem>
+#include <list>
 #include <memory>
 #include <mutex>
 #include <unordered_map>
@@ -224,33 +225,44 @@ GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions
 std::vector<glm::dvec3> layoutVertexNormals(const PatchLayout& layout);
 
 // Patch parameterizations kept from one resampling of a layout to the next, so that a patch
-// resampled at another chart size, its triangles and sides unchanged (patchParamAlike), is
-// parameterized once. A patch's parameterization depends on nothing else but the options (the
-// quad layout's paired polygon), which one cache is used with throughout, so its charts are bit
-// for bit those of a fresh parameterization. Holds at most maxBytes of parameterizations (a put
-// past it is dropped); find and put may run on several threads at once.
+// resampled at another chart size, or again after a cut elsewhere left it as it was
+// (patchParamAlike: its triangles and sides unchanged), is parameterized once. A patch's
+// parameterization depends on nothing else but the options (the quad layout's paired polygon),
+// which one cache is used with throughout, so its charts are bit for bit those of a fresh
+// parameterization. Several versions of a patch may be kept (a trial cut gives a neighbour a
+// corner, and the trial may be undone). Holds at most maxBytes of parameterizations (about 12
+// bytes a triangle: the patch's triangle list and the coordinates): past it, the least recently
+// used are dropped. find and put may run on several threads at once; which
+// entries are kept then depends on their order, the charts never do.
 class ParamCache {
  public:
   explicit ParamCache(uint64_t maxBytes) : maxBytes_(maxBytes) {}
-  // Patch p's parameterization if one was put for a patch alike; null otherwise.
-  std::shared_ptr<const PatchParameterization> find(const Patch& patch, uint32_t p) const;
+  // Patch p's parameterization if one was put for a patch alike; null otherwise. An entry keeps
+  // no local vertex and triangle lists (they are the patch's triangles, numbered as
+  // parameterizePatch numbers them): they are made again from `layout`, whose patch p is `patch`.
+  std::shared_ptr<const PatchParameterization> find(const PatchLayout& layout, const Patch& patch, uint32_t p) const;
   // Whether find would return one (not counted as a hit).
   bool holds(const Patch& patch, uint32_t p) const;
-  // Keeps pp as patch p's parameterization, in place of any earlier one of p.
+  // Keeps pp as the parameterization of patch p as `patch` is now (in place of one for a patch
+  // alike), dropping the least recently used past maxBytes; nothing is kept if pp alone is larger.
   void put(const Patch& patch, uint32_t p, std::shared_ptr<const PatchParameterization> pp);
   uint64_t hits() const { return hits_; }
   uint64_t bytes() const;
 
  private:
   struct Entry {
+    uint32_t p = 0;
     Patch patch;
     std::shared_ptr<const PatchParameterization> pp;
     uint64_t bytes = 0;
   };
-  // Patch p's entry if it is for a patch alike; null otherwise. The caller holds mutex_.
-  const Entry* entryFor(const Patch& patch, uint32_t p) const;
+  using Order = std::list<Entry>;
+  // Patch p's entry for a patch alike, made the most recently used; end() if none. The caller
+  // holds mutex_.
+  Order::iterator entryFor(const Patch& patch, uint32_t p) const;
   mutable std::mutex mutex_;
-  std::unordered_map<uint32_t, Entry> entries_;
+  mutable Order order_;  // most recently used first
+  std::unordered_multimap<uint32_t, Order::iterator> byPatch_;
   uint64_t bytes_ = 0;
   const uint64_t maxBytes_;
   mutable std::atomic<uint64_t> hits_{0};

@@ -560,8 +560,14 @@ TEST(ResampleReuse, CachedParameterizationsGiveTheSameChartsAtEverySize) {
   Patch opened = layout.patches[1];
   opened.sides[0].neighbourPatch = -1;
   EXPECT_FALSE(patchParamAlike(opened, layout.patches[1]));
-  EXPECT_EQ(cache.find(opened, 1), nullptr);
-  EXPECT_NE(cache.find(layout.patches[1], 1), nullptr);
+  EXPECT_EQ(cache.find(layout, opened, 1), nullptr);
+  const auto kept = cache.find(layout, layout.patches[1], 1);
+  ASSERT_NE(kept, nullptr);
+  // Made again from the layout, its local mesh is the parameterization's own.
+  const PatchParameterization fresh = parameterizePatch(layout, 1);
+  EXPECT_EQ(kept->vertices, fresh.vertices);
+  EXPECT_EQ(kept->triangles, fresh.triangles);
+  EXPECT_EQ(kept->uv, fresh.uv);
 
   // Past its bytes, the cache keeps nothing more, and the charts are the same.
   ParamCache tiny(1);
@@ -569,7 +575,79 @@ TEST(ResampleReuse, CachedParameterizationsGiveTheSameChartsAtEverySize) {
   small.params = &tiny;
   expectSameCharts(resampleLayout(layout, ro, small), resampleLayout(layout, ro));
   EXPECT_EQ(tiny.bytes(), 0u);
-  EXPECT_EQ(tiny.find(layout.patches[1], 1), nullptr);
+  EXPECT_EQ(tiny.find(layout, layout.patches[1], 1), nullptr);
+}
+
+// The cache keeps several versions of a patch (a trial cut gives a neighbour a corner, and the
+// trial may be undone), and past its bytes drops the least recently used, not the newest.
+TEST(ResampleReuse, TheCacheKeepsVersionsAndDropsTheLeastRecentlyUsed) {
+  PatchLayout layout = test::cubeLayout(8, true);
+  const Patch plain = layout.patches[0];
+  auto pp = [&](uint32_t p) { return std::make_shared<const PatchParameterization>(parameterizePatch(layout, p)); };
+  const auto plainMap = pp(0);
+  ASSERT_TRUE(insertCorner(layout, 0, 0, 4));
+  const Patch cornered = layout.patches[0];
+  ASSERT_FALSE(patchParamAlike(plain, cornered));
+  const auto corneredMap = pp(0), otherMap = pp(1);
+  // Room for two of the three.
+  ParamCache measure(uint64_t(1) << 30);
+  measure.put(plain, 0, plainMap);
+  const uint64_t one = measure.bytes();
+  measure.put(layout.patches[1], 1, otherMap);
+  const uint64_t bigger = std::max(one, measure.bytes() - one);
+  ParamCache cache(one + bigger + bigger / 2);
+  cache.put(plain, 0, plainMap);
+  cache.put(cornered, 0, corneredMap);
+  // What a hit gives: the map put, with the local mesh made again from the layout.
+  auto found = [&](const Patch& patch, uint32_t p, const std::shared_ptr<const PatchParameterization>& map) {
+    const auto got = cache.find(layout, patch, p);
+    return got && got->uv == map->uv && got->triangles == map->triangles && got->vertices == map->vertices;
+  };
+  EXPECT_TRUE(found(plain, 0, plainMap));
+  EXPECT_TRUE(found(cornered, 0, corneredMap));
+  EXPECT_TRUE(found(plain, 0, plainMap));  // now the cornered version is the least recent
+  cache.put(layout.patches[1], 1, otherMap);
+  EXPECT_EQ(cache.find(layout, cornered, 0), nullptr);
+  EXPECT_TRUE(found(plain, 0, plainMap));
+  EXPECT_TRUE(found(layout.patches[1], 1, otherMap));
+  EXPECT_LE(cache.bytes(), one + bigger + bigger / 2);
+  // Put again for a patch alike, a version replaces the one it had.
+  const uint64_t held = cache.bytes();
+  cache.put(plain, 0, plainMap);
+  EXPECT_EQ(cache.bytes(), held);
+  EXPECT_EQ(cache.hits(), 5u);
+}
+
+// The repair takes its parameterizations from the cache and puts them there: the patches a kept
+// cut changed are not parameterized again by a later resampling, and the charts are bit for bit
+// those of the repair without the cache.
+TEST(PatchSplit, FlipRepairSharesTheParameterizationCache) {
+  const PatchLayout charted = chartedBunny();
+  ResampleOptions ro;
+  ro.chartSize = 33;
+  PatchLayout plain = charted, cached = charted;
+  straightenSides(plain, 2);
+  straightenSides(cached, 2);
+  ChartRepairStats stPlain, stCached;
+  const GeometryImageSet setPlain = repairCharts(plain, resampleLayout(plain, ro), ro, {2}, &stPlain);
+  ASSERT_GT(stPlain.patchesSplit, 0u) << "the bunny at 33^2 should need splits";
+  ParamCache cache(uint64_t(1) << 30);
+  ResampleReuse reuse;
+  reuse.params = &cache;
+  ChartRepairOptions repair{2};
+  repair.params = &cache;
+  const GeometryImageSet setCached = repairCharts(cached, resampleLayout(cached, ro, reuse), ro, repair, &stCached);
+  EXPECT_TRUE(sameLayout(plain, cached));
+  EXPECT_EQ(stPlain.patchesSplit, stCached.patchesSplit);
+  // The same work is counted, so the repair stops where it did.
+  EXPECT_EQ(stPlain.trianglesTrials, stCached.trianglesTrials);
+  EXPECT_EQ(stPlain.trianglesWholeRounds, stCached.trianglesWholeRounds);
+  expectSameCharts(setPlain, setCached);
+  // Every patch of the repaired layout is in the cache: a resampling parameterizes none again.
+  const uint64_t hitsBefore = cache.hits();
+  ro.chartSize = 65;
+  expectSameCharts(resampleLayout(cached, ro, reuse), resampleLayout(cached, ro));
+  EXPECT_EQ(cache.hits() - hitsBefore, cached.patches.size());
 }
 
 // The gate holds a parameterization back while those running and it would need more than its
