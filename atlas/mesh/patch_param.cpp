@@ -79,23 +79,18 @@ LocalPatch buildLocalPatch(const PatchLayout& layout, uint32_t patchId) {
 
   LocalPatch lp;
   const uint32_t nv = uint32_t(layout.positions.size());
-  std::unordered_map<uint32_t, uint32_t> local;
-  local.reserve(patch.triangles.size());
-  lp.triangles.reserve(patch.triangles.size());
   for (uint32_t t : patch.triangles) {
     if (t >= layout.triangles.size()) fail(patchId, "triangle " + std::to_string(t) + " out of range");
-    std::array<uint32_t, 3> lt;
-    for (int c = 0; c < 3; ++c) {
-      const uint32_t v = layout.triangles[t][c];
+    for (const uint32_t v : layout.triangles[t]) {
       if (v >= nv) fail(patchId, "vertex " + std::to_string(v) + " out of range");
-      auto [it, inserted] = local.try_emplace(v, uint32_t(lp.vertices.size()));
-      if (inserted) lp.vertices.push_back(v);
-      lt[c] = it->second;
     }
+  }
+  const std::unordered_map<uint32_t, uint32_t> local = numberPatchVertices(layout, patch, lp.vertices, lp.triangles);
+  for (size_t k = 0; k < lp.triangles.size(); ++k) {
+    const auto& lt = lp.triangles[k];
     if (lt[0] == lt[1] || lt[1] == lt[2] || lt[0] == lt[2]) {
-      fail(patchId, "triangle " + std::to_string(t) + " repeats a vertex");
+      fail(patchId, "triangle " + std::to_string(patch.triangles[k]) + " repeats a vertex");
     }
-    lp.triangles.push_back(lt);
   }
   lp.xyz.reserve(lp.vertices.size());
   for (uint32_t v : lp.vertices) lp.xyz.emplace_back(layout.positions[v]);
@@ -708,6 +703,27 @@ SolveFigures solveMeanValue(const LocalPatch& lp, const std::vector<uint8_t>& is
 }
 
 }  // namespace
+
+std::unordered_map<uint32_t, uint32_t> numberPatchVertices(const PatchLayout& layout, const Patch& patch,
+                                                           std::vector<uint32_t>& vertices,
+                                                           std::vector<std::array<uint32_t, 3>>& triangles) {
+  vertices.clear();
+  triangles.clear();
+  std::unordered_map<uint32_t, uint32_t> local;
+  local.reserve(patch.triangles.size());
+  triangles.reserve(patch.triangles.size());
+  for (const uint32_t t : patch.triangles) {
+    std::array<uint32_t, 3> lt;
+    for (int c = 0; c < 3; ++c) {
+      const uint32_t v = layout.triangles[t][c];
+      const auto [it, inserted] = local.try_emplace(v, uint32_t(vertices.size()));
+      if (inserted) vertices.push_back(v);
+      lt[c] = it->second;
+    }
+    triangles.push_back(lt);
+  }
+  return local;
+}
 
 PatchParameterization parameterizePatch(const PatchLayout& layout, uint32_t patch, const ParamOptions& options) {
   using Clock = std::chrono::steady_clock;

@@ -14,6 +14,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <unordered_map>
 #include <vector>
 
 #include <glm/vec2.hpp>
@@ -126,6 +127,14 @@ glm::dvec2 polygonCorner(uint32_t n, uint32_t i);
 // two sides' lengths, within [0.2, 0.8] of it. With paired and n = 4 (one quad, the chart itself),
 // the square.
 std::vector<glm::dvec2> patchPolygon(const std::vector<double>& sideLengths, bool paired = false);
+
+// The local mesh a parameterization of `patch` is numbered in: its layout vertices in the order
+// its triangles first use them (PatchParameterization::vertices) and its triangles in those local
+// ids (PatchParameterization::triangles); returns the map from layout to local vertex ids.
+// Triangle and vertex ids must be in range.
+std::unordered_map<uint32_t, uint32_t> numberPatchVertices(const PatchLayout& layout, const Patch& patch,
+                                                           std::vector<uint32_t>& vertices,
+                                                           std::vector<std::array<uint32_t, 3>>& triangles);
 
 // Parameterizes patch `patch` of `layout`. The patch must be a triangulated disk whose boundary
 // loop is exactly its sides' concatenation in order (side i ends where side i+1 starts, edges

@@ -78,7 +78,7 @@ struct Sample {
 // Interpolates the attributes of vertices v[0..2] with barycentric weights b (sum 1).
 Sample interpolate(const Surface& s, const std::array<uint32_t, 3>& v, const glm::dvec3& b) {
   Sample out;
-  glm::dvec3 p(0.0), n(0.0), c(0.0);
+  glm::dvec3 p(0.0), n(0.0);
   glm::dvec4 col(0.0);
   for (int k = 0; k < 3; ++k) {
     p += b[k] * glm::dvec3(s.layout.positions[v[k]]);
@@ -1613,8 +1613,7 @@ void sampleChart(PatchSampler& ps, ChartBuffers& buffers, uint32_t i) {
 uint64_t patchWorkingBytes(const ResampleContext& c, uint32_t p, bool cached) {
   const Patch& patch = c.layout.patches[p];
   const uint64_t triangles = patch.triangles.size();
-  return (cached ? 48 * triangles : paramWorkingBytes(triangles, c.options.param.singlePrecisionFrom)) +
-         64 * triangles;
+  return (cached ? 48 * triangles : paramWorkingBytes(triangles, c.options.param.singlePrecisionFrom)) + 64 * triangles;
 }
 
 // Resamples patch p (action 1): parameterizes it, samples what its quads share, then each quad
@@ -1701,22 +1700,8 @@ std::shared_ptr<const PatchParameterization> ParamCache::find(const PatchLayout&
     ++hits_;
     kept = e->pp;
   }
-  // The local vertices in the order the patch's triangles first use them (buildLocalPatch's).
   auto pp = std::make_shared<PatchParameterization>(*kept);
-  std::unordered_map<uint32_t, uint32_t> local;
-  local.reserve(pp->uv.size());
-  pp->vertices.reserve(pp->uv.size());
-  pp->triangles.reserve(patch.triangles.size());
-  for (const uint32_t t : patch.triangles) {
-    std::array<uint32_t, 3> lt;
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t v = layout.triangles[t][k];
-      const auto [it, inserted] = local.try_emplace(v, uint32_t(pp->vertices.size()));
-      if (inserted) pp->vertices.push_back(v);
-      lt[k] = it->second;
-    }
-    pp->triangles.push_back(lt);
-  }
+  numberPatchVertices(layout, patch, pp->vertices, pp->triangles);
   if (pp->vertices.size() != pp->uv.size())
     throw std::logic_error("ParamCache::find: patch " + std::to_string(p) + " has other vertices than its entry");
   return pp;
@@ -1776,11 +1761,6 @@ ParamGate::Hold::~Hold() {
     --gate_.running_;
   }
   gate_.freed_.notify_all();
-}
-
-bool ParamCache::holds(const Patch& patch, uint32_t p) const {
-  const std::lock_guard<std::mutex> lock(mutex_);
-  return entryFor(patch, p) != order_.end();
 }
 
 uint64_t ParamCache::bytes() const {

@@ -232,8 +232,8 @@ std::vector<glm::dvec3> layoutVertexNormals(const PatchLayout& layout);
 // parameterization. Several versions of a patch may be kept (a trial cut gives a neighbour a
 // corner, and the trial may be undone). Holds at most maxBytes of parameterizations (about 12
 // bytes a triangle: the patch's triangle list and the coordinates): past it, the least recently
-// used are dropped. find and put may run on several threads at once; which
-// entries are kept then depends on their order, the charts never do.
+// used are dropped. find and put may run on several threads at once; which entries are kept then
+// depends on their order, the charts never do.
 class ParamCache {
  public:
   explicit ParamCache(uint64_t maxBytes) : maxBytes_(maxBytes) {}
@@ -241,8 +241,6 @@ class ParamCache {
   // no local vertex and triangle lists (they are the patch's triangles, numbered as
   // parameterizePatch numbers them): they are made again from `layout`, whose patch p is `patch`.
   std::shared_ptr<const PatchParameterization> find(const PatchLayout& layout, const Patch& patch, uint32_t p) const;
-  // Whether find would return one (not counted as a hit).
-  bool holds(const Patch& patch, uint32_t p) const;
   // Keeps pp as the parameterization of patch p as `patch` is now (in place of one for a patch
   // alike), dropping the least recently used past maxBytes; nothing is kept if pp alone is larger.
   void put(const Patch& patch, uint32_t p, std::shared_ptr<const PatchParameterization> pp);
