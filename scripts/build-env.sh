@@ -9,5 +9,8 @@ if [ "${GIMLOD_CCACHE:-1}" != 0 ] && command -v ccache >/dev/null 2>&1; then
   export CCACHE_BASEDIR=${CCACHE_BASEDIR:-$(pwd)}
   # note: debug builds carry the build folder's path; without this every clone would miss.
   export CCACHE_NOHASHDIR=${CCACHE_NOHASHDIR:-true}
+  # note: the test binaries' precompiled header (tests/CMakeLists.txt); without these the cache
+  # refuses every file compiled with it.
+  export CCACHE_SLOPPINESS=${CCACHE_SLOPPINESS:-pch_defines,time_macros,include_file_mtime,include_file_ctime}
   GIMLOD_CMAKE_CACHE_ARGS=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
 fi

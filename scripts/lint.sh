@@ -7,6 +7,7 @@
 # clang-tidy reads the compile commands of a configured build folder (build/, made by
 # scripts/test.sh; configured and built here if missing).
 #   bash scripts/lint.sh [JOBS]     JOBS: clang-tidy processes (default: the cores)
+#   bash scripts/lint.sh format     the formatting alone (seconds; CI runs it before it builds)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=${1:-$(nproc)}
@@ -20,6 +21,7 @@ if ! clang-format --dry-run --Werror "${files[@]}" 2>/tmp/gimlod-lint-format.$$;
 fi
 rm -f /tmp/gimlod-lint-format.$$
 echo "gimlod lint: ${#files[@]} files formatted as .clang-format says"
+[ "$jobs" = format ] && exit 0
 if [ ! -f build/compile_commands.json ]; then
   source scripts/build-env.sh
   cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release "${GIMLOD_CMAKE_CACHE_ARGS[@]}" >/dev/null

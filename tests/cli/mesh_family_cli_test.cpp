@@ -75,7 +75,9 @@ TEST_P(MeshFamilyTest, AtTheDefaultsWithinTheBounds) {
   // is built in the sides layout (n/2 charts an n-sided patch, where kites are n); but for those
   // whose closed pieces are charted as two 3-sided patches sharing all three sides, which no single
   // corner can even.
-  if (GetParam() != "many_pieces" && GetParam() != "thin_parts") EXPECT_EQ(r["quads"].get<std::string>(), "sides");
+  if (GetParam() != "many_pieces" && GetParam() != "thin_parts") {
+    EXPECT_EQ(r["quads"].get<std::string>(), "sides");
+  }
   EXPECT_LT(hausdorff, 0.1) << GetParam() << ": Hausdorff distance above 0.1% of the diagonal";
   // A patch with fewer triangles than its quads' share of the density's samples keeps charts of
   // its own, smaller size: the patches the stats count below the density's size are exactly those
