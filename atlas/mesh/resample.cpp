@@ -1669,21 +1669,50 @@ GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions
   return resampleLayout(layout, options, ResampleReuse{});
 }
 
-bool patchParamAlike(const Patch& a, const Patch& b) {
-  if (a.triangles != b.triangles || a.sides.size() != b.sides.size()) return false;
-  for (size_t i = 0; i < a.sides.size(); ++i) {
-    if (a.sides[i].vertices != b.sides[i].vertices ||
-        (a.sides[i].neighbourPatch < 0) != (b.sides[i].neighbourPatch < 0)) {
-      return false;
-    }
+namespace {
+
+// The sides of two versions of a patch parameterize alike: the same vertex runs, and the same
+// ones open.
+bool sidesAlike(const std::vector<PatchSide>& a, const std::vector<PatchSide>& b) {
+  if (a.size() != b.size()) return false;
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (a[i].vertices != b[i].vertices || (a[i].neighbourPatch < 0) != (b[i].neighbourPatch < 0)) return false;
   }
   return true;
 }
 
-ParamCache::Order::iterator ParamCache::entryFor(const Patch& patch, uint32_t p) const {
+// SplitMix64's finalizer (Steele, Lea, Flood, "Fast splittable pseudorandom number generators").
+uint64_t finalizeDigest(uint64_t x) {
+  x ^= x >> 30;
+  x *= 0xbf58476d1ce4e5b9ull;
+  x ^= x >> 27;
+  x *= 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+
+}  // namespace
+
+bool patchParamAlike(const Patch& a, const Patch& b) {
+  return a.triangles == b.triangles && sidesAlike(a.sides, b.sides);
+}
+
+std::array<uint64_t, 2> patchDigest(const Patch& patch) {
+  // Lane 0 mixes each index into its state; lane 1 is a polynomial in the indices (mod 2^64,
+  // an odd base), so a difference that one lane misses the other sees independently.
+  uint64_t a = 0x243f6a8885a308d3ull ^ patch.triangles.size(), b = patch.triangles.size();
+  for (const uint32_t t : patch.triangles) {
+    a = finalizeDigest(a ^ (uint64_t(t) + 0x9e3779b97f4a7c15ull));
+    b = b * 0xff51afd7ed558ccdull + t + 1;
+  }
+  return {a, finalizeDigest(b)};
+}
+
+ParamCache::Order::iterator ParamCache::entryFor(const Patch& patch, const std::array<uint64_t, 2>& digest,
+                                                 uint32_t p) const {
   const auto [first, last] = byPatch_.equal_range(p);
   for (auto it = first; it != last; ++it) {
-    if (!patchParamAlike(it->second->patch, patch)) continue;
+    const Entry& e = *it->second;
+    if (e.triangles != patch.triangles.size() || e.digest != digest || !sidesAlike(e.sides, patch.sides)) continue;
     order_.splice(order_.begin(), order_, it->second);
     return it->second;
   }
@@ -1692,10 +1721,11 @@ ParamCache::Order::iterator ParamCache::entryFor(const Patch& patch, uint32_t p)
 
 std::shared_ptr<const PatchParameterization> ParamCache::find(const PatchLayout& layout, const Patch& patch,
                                                               uint32_t p) const {
+  const std::array<uint64_t, 2> digest = patchDigest(patch);
   std::shared_ptr<const PatchParameterization> kept;
   {
     const std::lock_guard<std::mutex> lock(mutex_);
-    const auto e = entryFor(patch, p);
+    const auto e = entryFor(patch, digest, p);
     if (e == order_.end()) return nullptr;
     ++hits_;
     kept = e->pp;
@@ -1708,13 +1738,13 @@ std::shared_ptr<const PatchParameterization> ParamCache::find(const PatchLayout&
 }
 
 void ParamCache::put(const Patch& patch, uint32_t p, std::shared_ptr<const PatchParameterization> pp) {
+  const std::array<uint64_t, 2> digest = patchDigest(patch);
   // Kept without the local vertex and triangle lists, which find makes again.
   // (Swapped out, not cleared: a cleared vector keeps its memory.)
   auto stripped = std::make_shared<PatchParameterization>(*pp);
   std::vector<uint32_t>().swap(stripped->vertices);
   std::vector<std::array<uint32_t, 3>>().swap(stripped->triangles);
-  uint64_t bytes = sizeof(Entry) + patch.triangles.size() * sizeof(uint32_t) + pp->uv.size() * sizeof(glm::dvec2) +
-                   pp->boundary.size() * sizeof(uint32_t);
+  uint64_t bytes = sizeof(Entry) + pp->uv.size() * sizeof(glm::dvec2) + pp->boundary.size() * sizeof(uint32_t);
   for (const PatchSide& s : patch.sides) bytes += sizeof(PatchSide) + s.vertices.size() * sizeof(uint32_t);
   pp = std::move(stripped);
   const std::lock_guard<std::mutex> lock(mutex_);
@@ -1729,10 +1759,10 @@ void ParamCache::put(const Patch& patch, uint32_t p, std::shared_ptr<const Patch
     bytes_ -= e->bytes;
     order_.erase(e);
   };
-  if (const auto same = entryFor(patch, p); same != order_.end()) erase(same);
+  if (const auto same = entryFor(patch, digest, p); same != order_.end()) erase(same);
   if (bytes > maxBytes_) return;
   while (!order_.empty() && bytes_ + bytes > maxBytes_) erase(std::prev(order_.end()));
-  order_.push_front(Entry{p, patch, std::move(pp), bytes});
+  order_.push_front(Entry{p, patch.triangles.size(), digest, patch.sides, std::move(pp), bytes});
   byPatch_.emplace(p, order_.begin());
   bytes_ += bytes;
 }

@@ -230,10 +230,14 @@ std::vector<glm::dvec3> layoutVertexNormals(const PatchLayout& layout);
 // parameterization depends on nothing else but the options (the quad layout's paired polygon),
 // which one cache is used with throughout, so its charts are bit for bit those of a fresh
 // parameterization. Several versions of a patch may be kept (a trial cut gives a neighbour a
-// corner, and the trial may be undone). Holds at most maxBytes of parameterizations (about 12
-// bytes a triangle: the patch's triangle list and the coordinates): past it, the least recently
-// used are dropped. find and put may run on several threads at once; which entries are kept then
-// depends on their order, the charts never do.
+// corner, and the trial may be undone). Holds at most maxBytes of parameterizations (about 8
+// bytes a triangle: the coordinates): past it, the least recently used are dropped. find and put
+// may run on several threads at once; which entries are kept then depends on their order, the
+// charts never do. An entry knows its patch's triangles by their count and a 128-bit digest of
+// the list (patchDigest), not by a copy (4 bytes a triangle more), so that the 18.7M-triangle
+// sphere's first resampling (about 150 MB) leaves room, within an eighth of 2 GiB, for the
+// versions the repair and the sizing add. Two lists of one patch that differ share a digest with
+// a chance of about 2^-128.
 class ParamCache {
  public:
   explicit ParamCache(uint64_t maxBytes) : maxBytes_(maxBytes) {}
@@ -250,14 +254,16 @@ class ParamCache {
  private:
   struct Entry {
     uint32_t p = 0;
-    Patch patch;
+    size_t triangles = 0;              // the patch's triangle count
+    std::array<uint64_t, 2> digest{};  // and patchDigest of its list
+    std::vector<PatchSide> sides;
     std::shared_ptr<const PatchParameterization> pp;
     uint64_t bytes = 0;
   };
   using Order = std::list<Entry>;
-  // Patch p's entry for a patch alike, made the most recently used; end() if none. The caller
-  // holds mutex_.
-  Order::iterator entryFor(const Patch& patch, uint32_t p) const;
+  // Patch p's entry for a patch alike (its triangles' digest `digest`), made the most recently
+  // used; end() if none. The caller holds mutex_.
+  Order::iterator entryFor(const Patch& patch, const std::array<uint64_t, 2>& digest, uint32_t p) const;
   mutable std::mutex mutex_;
   mutable Order order_;  // most recently used first
   std::unordered_multimap<uint32_t, Order::iterator> byPatch_;
@@ -314,6 +320,8 @@ class ParamGate {
 // Whether two versions of a patch parameterize identically: the same triangles in the same order,
 // and the same sides (vertex runs, and which are open).
 bool patchParamAlike(const Patch& a, const Patch& b);
+// A 128-bit digest of a patch's triangle list, in its order (two independent 64-bit hashes).
+std::array<uint64_t, 2> patchDigest(const Patch& patch);
 
 // What a resampling of a refined layout may take from earlier resamplings of the same surface.
 struct ResampleReuse {

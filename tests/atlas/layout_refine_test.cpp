@@ -618,6 +618,40 @@ TEST(ResampleReuse, TheCacheKeepsVersionsAndDropsTheLeastRecentlyUsed) {
   EXPECT_EQ(cache.hits(), 5u);
 }
 
+// An entry knows its patch's triangles by their count and digest, not by a copy of the list: a
+// list of the same length in another order, or with one triangle swapped for another, is another
+// patch; the entry's bytes are the coordinates, the boundary and the sides.
+TEST(ResampleReuse, TheCacheKnowsAPatchByItsTrianglesDigest) {
+  const PatchLayout layout = test::cubeLayout(32, true);
+  const Patch& patch = layout.patches[0];
+  const auto map = std::make_shared<const PatchParameterization>(parameterizePatch(layout, 0));
+  ParamCache cache(uint64_t(1) << 30);
+  cache.put(patch, 0, map);
+  uint64_t sides = 0;
+  for (const PatchSide& s : patch.sides) sides += sizeof(PatchSide) + s.vertices.size() * sizeof(uint32_t);
+  const uint64_t coordinates = map->uv.size() * sizeof(glm::dvec2) + map->boundary.size() * sizeof(uint32_t);
+  ASSERT_GT(patch.triangles.size() * sizeof(uint32_t), 4096u);
+  EXPECT_GE(cache.bytes(), coordinates + sides);
+  EXPECT_LT(cache.bytes(), coordinates + sides + 1024);
+
+  Patch reordered = patch;
+  std::swap(reordered.triangles[3], reordered.triangles[7]);
+  Patch replaced = patch;
+  replaced.triangles[5] = layout.patches[1].triangles[0];
+  for (const Patch* other : {&reordered, &replaced}) {
+    EXPECT_EQ(other->triangles.size(), patch.triangles.size());
+    EXPECT_NE(patchDigest(*other), patchDigest(patch));
+    EXPECT_FALSE(patchParamAlike(*other, patch));
+    EXPECT_EQ(cache.find(layout, *other, 0), nullptr);
+  }
+  const Patch copy = patch;
+  EXPECT_EQ(patchDigest(copy), patchDigest(patch));
+  const auto hit = cache.find(layout, copy, 0);
+  ASSERT_NE(hit, nullptr);
+  EXPECT_EQ(hit->uv, map->uv);
+  EXPECT_EQ(cache.hits(), 1u);
+}
+
 // The repair takes its parameterizations from the cache and puts them there: the patches a kept
 // cut changed are not parameterized again by a later resampling, and the charts are bit for bit
 // those of the repair without the cache.
