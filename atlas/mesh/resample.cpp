@@ -14,6 +14,8 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <mutex>
+#include <numeric>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -22,7 +24,9 @@
 
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
 #include <tbb/task_arena.h>
 
 namespace gimlod {
@@ -1784,6 +1788,11 @@ ParamGate::Hold::Hold(ParamGate& gate, uint64_t bytes) : gate_(gate), bytes_(byt
   ++gate_.running_;
 }
 
+bool ParamGate::fitsNow(uint64_t bytes) {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  return running_ == 0 || held_ + bytes <= budget_;
+}
+
 ParamGate::Hold::~Hold() {
   {
     const std::lock_guard<std::mutex> lock(gate_.mutex_);
@@ -1797,6 +1806,20 @@ uint64_t ParamCache::bytes() const {
   const std::lock_guard<std::mutex> lock(mutex_);
   return bytes_;
 }
+
+namespace {
+
+// The order resampleLayout takes its patches in: those it resamples (action 1) by their triangles,
+// most first, then the others (charts kept or taken from an earlier set), each set in patch order.
+std::vector<uint32_t> resampleOrder(const PatchLayout& layout, const std::vector<uint32_t>& action) {
+  std::vector<uint32_t> order(layout.patches.size());
+  std::iota(order.begin(), order.end(), 0u);
+  const auto work = [&](uint32_t p) { return action[p] == 1 ? layout.patches[p].triangles.size() + 1 : size_t{0}; };
+  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return work(a) > work(b); });
+  return order;
+}
+
+}  // namespace
 
 GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions& options, const ResampleReuse& reuse) {
   const auto start = std::chrono::steady_clock::now();
@@ -1830,19 +1853,47 @@ GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions
           sampleSide(surface, layout.patches[owners.owners[k].patch].sides[owners.owners[k].side].vertices, sideCount);
     });
     const progress::ProgressStage stage("resample", layout.patches.size());
-    tbb::parallel_for(uint32_t{0}, uint32_t(layout.patches.size()), [&](uint32_t p) {
-      const progress::Tick tick;
-      const uint32_t n = uint32_t(layout.patches[p].sides.size());
-      const PatchQuads plan = patchQuads(n, m, options.quads);
-      const uint32_t nq = uint32_t(plan.quads.size());
-      if (action[p] == 0) {
-        keepUnsampled(context, p, n, nq);
-      } else if (action[p] >= 2) {
-        takeEarlierCharts(context, p, action[p] - 2, nq);
-      } else {
-        resamplePatch(context, p, plan);
+    // The patches to resample, largest first, each taken by the next free thread (longest
+    // processing time first): the last to start are the smallest, so the threads finish about
+    // together. Under a gate, a thread takes the largest patch whose working memory fits beside
+    // those running, so small patches run beside a large one instead of a thread waiting at the
+    // gate for the next large one. A patch's charts do not depend on the order.
+    std::vector<uint32_t> remaining = resampleOrder(layout, action);
+    std::mutex picking;
+    const auto pick = [&](uint32_t& p) {
+      const std::lock_guard<std::mutex> lock(picking);
+      if (remaining.empty()) return false;
+      size_t k = 0;
+      if (options.gate) {
+        while (k < remaining.size() && action[remaining[k]] == 1 &&
+               !options.gate->fitsNow(patchWorkingBytes(context, remaining[k], false)))
+          ++k;
+        if (k == remaining.size()) k = 0;
       }
-    });
+      p = remaining[k];
+      remaining.erase(remaining.begin() + ptrdiff_t(k));
+      return true;
+    };
+    tbb::parallel_for(
+        tbb::blocked_range<int>(0, concurrency, 1),
+        [&](const tbb::blocked_range<int>& workers) {
+          for (int w = workers.begin(); w != workers.end(); ++w) {
+            for (uint32_t p = 0; pick(p);) {
+              const progress::Tick tick;
+              const uint32_t n = uint32_t(layout.patches[p].sides.size());
+              const PatchQuads plan = patchQuads(n, m, options.quads);
+              const uint32_t nq = uint32_t(plan.quads.size());
+              if (action[p] == 0) {
+                keepUnsampled(context, p, n, nq);
+              } else if (action[p] >= 2) {
+                takeEarlierCharts(context, p, action[p] - 2, nq);
+              } else {
+                resamplePatch(context, p, plan);
+              }
+            }
+          }
+        },
+        tbb::simple_partitioner());
   });
 
   combineSetFigures(layout, action, set);

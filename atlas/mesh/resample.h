@@ -305,6 +305,9 @@ class ParamGate {
   };
 
   uint64_t budget() const { return budget_; }
+  // Whether a hold of `bytes` would run now without waiting (a hint: others may take or give
+  // back holds at once).
+  bool fitsNow(uint64_t bytes);
   // Holds that had to wait for others to be given back.
   uint64_t waits() const { return waits_; }
 

@@ -724,15 +724,31 @@ TEST(ParamGate, HoldsWithinTheBudgetAndOneAlwaysRuns) {
     EXPECT_GT(gate.waits(), 0u);
   }
 
+  // What resampleLayout asks before it picks a patch: whether a hold would run now.
+  ParamGate hint(100);
+  EXPECT_TRUE(hint.fitsNow(500));  // nothing runs: one always may
+  {
+    const ParamGate::Hold hold(hint, 70);
+    EXPECT_TRUE(hint.fitsNow(30));
+    EXPECT_FALSE(hint.fitsNow(31));
+  }
+  EXPECT_TRUE(hint.fitsNow(100));
+
+  // Patches taken largest first, and under a gate the largest that fits: the charts are an
+  // ungated resampling's, at any thread count and gate.
   PatchLayout layout = test::cubeLayout(8, true);
   ResampleOptions ro;
   ro.chartSize = 17;
   ro.threads = 4;
-  ParamGate oneAtATime(0);
-  ro.gate = &oneAtATime;
-  const GeometryImageSet gated = resampleLayout(layout, ro);
-  ro.gate = nullptr;
-  expectSameCharts(gated, resampleLayout(layout, ro));
+  const GeometryImageSet ungated = resampleLayout(layout, ro);
+  for (const uint64_t budget : {uint64_t(0), uint64_t(1) << 18}) {
+    for (const uint32_t threads : {1u, 4u}) {
+      ParamGate gate(budget);
+      ro.gate = &gate;
+      ro.threads = threads;
+      expectSameCharts(resampleLayout(layout, ro), ungated);
+    }
+  }
 }
 
 TEST(ResampleReuse, ReusedPatchesAreBitIdenticalAndOnlyChangedOnesAreRedone) {
