@@ -1859,17 +1859,28 @@ GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions
     // those running, so small patches run beside a large one instead of a thread waiting at the
     // gate for the next large one. A patch's charts do not depend on the order.
     std::vector<uint32_t> remaining = resampleOrder(layout, action);
+    size_t toResample = size_t(std::count(action.begin(), action.end(), 1u));  // remaining's first
     std::mutex picking;
     const auto pick = [&](uint32_t& p) {
       const std::lock_guard<std::mutex> lock(picking);
       if (remaining.empty()) return false;
       size_t k = 0;
-      if (options.gate) {
-        while (k < remaining.size() && action[remaining[k]] == 1 &&
-               !options.gate->fitsNow(patchWorkingBytes(context, remaining[k], false)))
-          ++k;
-        if (k == remaining.size()) k = 0;
+      if (options.gate && toResample > 0) {
+        // The first of the patches to resample that fits (their estimates fall along the list,
+        // so a bisection finds it), else the first whose charts are kept or taken, else the
+        // largest, which then waits at the gate.
+        size_t lo = 0, hi = toResample;
+        while (lo < hi) {
+          const size_t mid = (lo + hi) / 2;
+          if (options.gate->fitsNow(patchWorkingBytes(context, remaining[mid], false))) {
+            hi = mid;
+          } else {
+            lo = mid + 1;
+          }
+        }
+        k = lo < remaining.size() ? lo : 0;
       }
+      if (k < toResample) --toResample;
       p = remaining[k];
       remaining.erase(remaining.begin() + ptrdiff_t(k));
       return true;
