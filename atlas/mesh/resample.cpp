@@ -1866,9 +1866,11 @@ GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions
       if (remaining.empty()) return false;
       size_t k = 0;
       if (options.gate && toResample > 0) {
-        // The first of the patches to resample that fits (their estimates fall along the list,
-        // so a bisection finds it), else the first whose charts are kept or taken, else the
-        // largest, which then waits at the gate.
+        // The first of the patches to resample that fits, found by bisection (their estimates
+        // fall along the list but for a step down where the factors turn single precision, past
+        // which a fitting patch may be passed over: a choice of order only, the gate still
+        // holds), else the first whose charts are kept or taken, else the largest, which then
+        // waits at the gate.
         size_t lo = 0, hi = toResample;
         while (lo < hi) {
           const size_t mid = (lo + hi) / 2;
@@ -1885,22 +1887,21 @@ GeometryImageSet resampleLayout(const PatchLayout& layout, const ResampleOptions
       remaining.erase(remaining.begin() + ptrdiff_t(k));
       return true;
     };
+    // One task per thread (ranges of one, never merged), each taking patches until none is left.
     tbb::parallel_for(
         tbb::blocked_range<int>(0, concurrency, 1),
-        [&](const tbb::blocked_range<int>& workers) {
-          for (int w = workers.begin(); w != workers.end(); ++w) {
-            for (uint32_t p = 0; pick(p);) {
-              const progress::Tick tick;
-              const uint32_t n = uint32_t(layout.patches[p].sides.size());
-              const PatchQuads plan = patchQuads(n, m, options.quads);
-              const uint32_t nq = uint32_t(plan.quads.size());
-              if (action[p] == 0) {
-                keepUnsampled(context, p, n, nq);
-              } else if (action[p] >= 2) {
-                takeEarlierCharts(context, p, action[p] - 2, nq);
-              } else {
-                resamplePatch(context, p, plan);
-              }
+        [&](const tbb::blocked_range<int>&) {
+          for (uint32_t p = 0; pick(p);) {
+            const progress::Tick tick;
+            const uint32_t n = uint32_t(layout.patches[p].sides.size());
+            const PatchQuads plan = patchQuads(n, m, options.quads);
+            const uint32_t nq = uint32_t(plan.quads.size());
+            if (action[p] == 0) {
+              keepUnsampled(context, p, n, nq);
+            } else if (action[p] >= 2) {
+              takeEarlierCharts(context, p, action[p] - 2, nq);
+            } else {
+              resamplePatch(context, p, plan);
             }
           }
         },
