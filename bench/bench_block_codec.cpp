@@ -85,7 +85,7 @@ int benchAtlas(const std::filesystem::path& dir) {
   };
   std::vector<Coded> blocks;
   for (const auto& r : charts)
-    for (uint32_t k = 0; k < r->levels(); ++k) {
+    for (uint32_t k = 0; k < r->storedLevels(); ++k) {  // (the coarser levels subsample the last)
       const LevelLayout l = levelLayout(r->chartSize(), r->blockIntervals(), k);
       // (A terrain's blocks with derived normals hold a ring of heights round them.)
       const uint32_t side = l.blockSamples + (!geometry && r->derivedNormals() ? 2 : 0);

@@ -91,8 +91,9 @@ constexpr size_t kCodedEntryBytes = 12;                          // version 3, p
 constexpr size_t kChartHeaderBytesV3 = kChartHeaderBytesV2 + 4;  // + u32 flags
 constexpr size_t kFrameBytes = 4 * 8 + 2 * 8;                    // HeightFieldFrame
 constexpr uint32_t kFlagDerivedNormals = 1;
-constexpr uint32_t kFlagBorderNormals = 2;  // geometry: normals of block borders stored, the rest derived
-constexpr uint32_t kFlagWrapColumns = 4;    // with derived normals: the frame's columns circle a planet
+constexpr uint32_t kFlagBorderNormals = 2;     // geometry: normals of block borders stored, the rest derived
+constexpr uint32_t kFlagWrapColumns = 4;       // with derived normals: the frame's columns circle a planet
+constexpr uint32_t kFlagSubsampledLevels = 8;  // geometry: levels past the first one-block level not stored
 constexpr size_t kChannelBytes[kChannelCount] = {sizeof(float), sizeof(PackedNormal), 3 * sizeof(float),
                                                  sizeof(PackedColour)};
 constexpr bool kChannelIsFloat[kChannelCount] = {true, false, true, false};
@@ -351,6 +352,11 @@ LevelLayout levelLayout(uint32_t chartSize, uint32_t blockIntervals, uint32_t le
   l.blocksPerSide = std::max(1u, intervals / blockIntervals);
   l.blockSamples = std::min(blockIntervals, intervals) + 1;
   return l;
+}
+
+uint32_t firstSingleBlockLevel(uint32_t chartSize, uint32_t blockIntervals) {
+  levelLayout(chartSize, blockIntervals, 0);  // checks both
+  return log2Exact(chartSize - 1) - log2Exact(blockIntervals);
 }
 
 // ---- atomic file writing ----------------------------------------------------------------------
@@ -750,8 +756,9 @@ AtlasManifest readManifest(const fs::path& dir) {
 
 struct ChartFileWriter::Impl {
   uint32_t chartSize = 0, blockIntervals = 0, levels = 0;
-  uint32_t mask = 0;    // channels of the chart
-  uint32_t stored = 0;  // channels stored (a derived height field stores no normals)
+  uint32_t storedLevels = 0;  // levels with blocks (all but those flag 8 leaves out)
+  uint32_t mask = 0;          // channels of the chart
+  uint32_t stored = 0;        // channels stored (a derived height field stores no normals)
   ChartCoding coding;
   bool v1 = false, derived = false, borderNormals = false;
   size_t entryBytes = 0;
@@ -833,11 +840,15 @@ ChartFileWriter::ChartFileWriter(fs::path path, const ChartFileShape& shape, con
     throw std::invalid_argument("ChartFileWriter: compressed positions need a positionStep > 0");
   if (frame && !(coding.compressed && heightField))
     throw std::invalid_argument("ChartFileWriter: only a compressed height field derives its normals");
+  if (shape.subsampledLevels && !(coding.compressed && geometry))
+    throw std::invalid_argument("ChartFileWriter: only a compressed geometry chart leaves its coarse levels out");
   impl_ = std::make_unique<Impl>(path_);
   Impl& w = *impl_;
   w.chartSize = chartSize;
   w.blockIntervals = blockIntervals;
   w.levels = levels;
+  w.storedLevels =
+      shape.subsampledLevels ? std::min(levels, firstSingleBlockLevel(chartSize, blockIntervals) + 1) : levels;
   w.mask = mask;
   w.coding = coding;
   w.v1 = heightField && !coding.compressed;
@@ -851,7 +862,7 @@ ChartFileWriter::ChartFileWriter(fs::path path, const ChartFileShape& shape, con
                  : w.v1            ? kDirEntryBytes
                                    : 8 * size_t(std::popcount(mask));
   size_t entries = 0;
-  for (uint32_t k = 0; k < levels; ++k) {
+  for (uint32_t k = 0; k < w.storedLevels; ++k) {
     w.layouts.push_back(levelLayout(chartSize, blockIntervals, k));
     w.levelEntry.push_back(entries);
     entries += size_t{w.layouts[k].blocksPerSide} * w.layouts[k].blocksPerSide;
@@ -871,9 +882,10 @@ ChartFileWriter::ChartFileWriter(fs::path path, const ChartFileShape& shape, con
   if (!w.v1) putLe<uint32_t>(buf, 20, mask);
   if (coding.compressed) {
     putLe<uint32_t>(buf, 24,
-                    w.derived         ? kFlagDerivedNormals | (frame->wrapX ? kFlagWrapColumns : 0)
-                    : w.borderNormals ? kFlagBorderNormals
-                                      : 0);
+                    (w.derived         ? kFlagDerivedNormals | (frame->wrapX ? kFlagWrapColumns : 0)
+                     : w.borderNormals ? kFlagBorderNormals
+                                       : 0) |
+                        (shape.subsampledLevels ? kFlagSubsampledLevels : 0));
     if (w.derived) {
       putLe<int64_t>(buf, 28, frame->originX);
       putLe<int64_t>(buf, 36, frame->originY);
@@ -894,7 +906,7 @@ uint32_t ChartFileWriter::blockIntervals() const { return impl_->blockIntervals;
 ChartFileWriter::CodedBlock ChartFileWriter::code(uint32_t level, uint32_t bx, uint32_t by,
                                                   const BlockData& data) const {
   const Impl& w = *impl_;
-  if (level >= w.levels || bx >= w.layouts[level].blocksPerSide || by >= w.layouts[level].blocksPerSide)
+  if (level >= w.storedLevels || bx >= w.layouts[level].blocksPerSide || by >= w.layouts[level].blocksPerSide)
     throw std::logic_error("ChartFileWriter: no block (" + std::to_string(bx) + ", " + std::to_string(by) +
                            ") on level " + std::to_string(level));
   CodedBlock out{level, bx, by, {}};
@@ -975,6 +987,28 @@ ChartFileWriter::ChartFileWriter(fs::path path, const ChartFileShape& shape, con
   w.end = size;
 }
 
+bool coarseLevelsSubsampled(const ChartPyramid& pyramid, uint32_t chartSize, uint32_t blockIntervals) {
+  if (pyramid.positions.empty() || !pyramid.heights.empty()) return false;
+  const uint32_t s = firstSingleBlockLevel(chartSize, blockIntervals);
+  auto subsamples = [&](const auto& levels) {
+    if (levels.empty()) return true;
+    if (levels.size() != pyramid.positions.size() || levels.size() <= s) return false;
+    const uint32_t from = ((chartSize - 1) >> s) + 1;
+    if (levels[s].size() != size_t{from} * from) return false;
+    for (uint32_t k = s + 1; k < levels.size(); ++k) {
+      const uint32_t side = ((chartSize - 1) >> k) + 1, step = 1u << (k - s);
+      if (levels[k].size() != size_t{side} * side) return false;
+      for (uint32_t v = 0; v < side; ++v)
+        for (uint32_t u = 0; u < side; ++u)
+          if (std::memcmp(&levels[k][size_t{v} * side + u], &levels[s][size_t{v * step} * from + u * step],
+                          sizeof(levels[k][0])) != 0)
+            return false;
+    }
+    return true;
+  };
+  return subsamples(pyramid.positions) && subsamples(pyramid.normals) && subsamples(pyramid.colours);
+}
+
 uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint32_t chartSize, uint32_t blockIntervals,
                         const ChartCoding& coding) {
   if (!isChartSizeValid(chartSize) || !std::has_single_bit(blockIntervals) || blockIntervals > chartSize - 1)
@@ -1021,8 +1055,14 @@ uint64_t writeChartFile(const fs::path& path, const ChartPyramid& pyramid, uint3
   }
   std::optional<HeightFieldFrame> frame;
   if (derived) frame = pyramid.frame;
-  ChartFileWriter writer(path, {chartSize, blockIntervals, levels, mask}, coding, frame);
-  for (uint32_t k = 0; k < levels; ++k) {
+  // A compressed geometry chart whose coarse levels subsample the first one-block level stores
+  // none of them.
+  const bool subsampled = coding.compressed && (mask & (1u << kChannelPositions)) &&
+                          levels > firstSingleBlockLevel(chartSize, blockIntervals) + 1 &&
+                          coarseLevelsSubsampled(pyramid, chartSize, blockIntervals);
+  ChartFileWriter writer(path, {chartSize, blockIntervals, levels, mask, subsampled}, coding, frame);
+  const uint32_t stored = subsampled ? firstSingleBlockLevel(chartSize, blockIntervals) + 1 : levels;
+  for (uint32_t k = 0; k < stored; ++k) {
     const LevelLayout l = levelLayout(chartSize, blockIntervals, k);
     const uint32_t b = l.blockSamples - 1;
     for (uint32_t by = 0; by < l.blocksPerSide; ++by)
@@ -1074,16 +1114,22 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
       fail("corrupt chart header (channel mask " + std::to_string(channelMask_) + ")");
   }
   uint32_t stored = channelMask_;  // channels with blocks in the file
+  bool subsampledLevels = false;
   if (compressed_) {
     uint8_t fl[4];
     if (fileSize < kChartHeaderBytesV3 || !file_.read(reinterpret_cast<char*>(fl), 4))
       fail("truncated chart file (no flags)");
     const uint32_t flags = getLe<uint32_t>(fl);
     header = kChartHeaderBytesV3;
-    if ((flags & ~(kFlagDerivedNormals | kFlagBorderNormals | kFlagWrapColumns)) ||
+    if ((flags & ~(kFlagDerivedNormals | kFlagBorderNormals | kFlagWrapColumns | kFlagSubsampledLevels)) ||
         (flags & kFlagDerivedNormals && flags & kFlagBorderNormals) ||
         (flags & kFlagWrapColumns && !(flags & kFlagDerivedNormals)))
       fail("corrupt chart header (flags " + std::to_string(flags) + ")");
+    if (flags & kFlagSubsampledLevels) {
+      if (!(channelMask_ & (1u << kChannelPositions)))
+        fail("corrupt chart header (subsampled levels without positions)");
+      subsampledLevels = true;
+    }
     if (flags & kFlagBorderNormals) {
       if (!(channelMask_ & (1u << kChannelPositions))) fail("corrupt chart header (border normals without positions)");
       borderNormals_ = true;
@@ -1120,8 +1166,10 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
       levels_ < 1 || levels_ > log2Exact(chartSize_ - 1) + 1)
     fail("corrupt chart header (chartSize " + std::to_string(chartSize_) + ", blockIntervals " +
          std::to_string(blockIntervals_) + ", levels " + std::to_string(levels_) + ")");
+  storedLevels_ =
+      subsampledLevels ? std::min(levels_, firstSingleBlockLevel(chartSize_, blockIntervals_) + 1) : levels_;
   size_t entries = 0;
-  for (uint32_t k = 0; k < levels_; ++k) {
+  for (uint32_t k = 0; k < storedLevels_; ++k) {
     const LevelLayout l = levelLayout(chartSize_, blockIntervals_, k);
     entries += size_t{l.blocksPerSide} * l.blocksPerSide;
   }
@@ -1130,9 +1178,9 @@ ChartFileReader::ChartFileReader(const fs::path& path) : path_(path) {
   std::vector<uint8_t> dir(entries * entryBytes);
   if (!file_.read(reinterpret_cast<char*>(dir.data()), static_cast<std::streamsize>(dir.size())))
     fail("truncated chart file (block directory unreadable)");
-  directory_.resize(levels_);
+  directory_.resize(storedLevels_);
   size_t at = 0;
-  for (uint32_t k = 0; k < levels_; ++k) {
+  for (uint32_t k = 0; k < storedLevels_; ++k) {
     const LevelLayout l = levelLayout(chartSize_, blockIntervals_, k);
     const uint64_t bs2 = uint64_t{l.blockSamples} * l.blockSamples;
     directory_[k].resize(size_t{l.blocksPerSide} * l.blocksPerSide);
@@ -1229,12 +1277,39 @@ std::vector<uint8_t> ChartFileReader::readCodedBlock(ChartChannel c, uint32_t le
   if (!compressed_ || !hasChannel(c))
     throw std::logic_error("ChartFileReader: " + path_.string() + " has no coded blocks of channel " +
                            std::to_string(c));
-  if (level >= levels_ || std::max(bx, by) >= levelLayout(chartSize_, blockIntervals_, level).blocksPerSide)
+  if (level >= storedLevels_ || std::max(bx, by) >= levelLayout(chartSize_, blockIntervals_, level).blocksPerSide)
     throw std::logic_error("ChartFileReader: " + path_.string() + " has no block (" + std::to_string(bx) + ", " +
                            std::to_string(by) + ") at level " + std::to_string(level));
   std::vector<uint8_t> code;
   readCode(c, level, bx, by, code);
   return code;
+}
+
+void ChartFileReader::decodeCode(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by,
+                                 std::vector<uint8_t>& out) const {
+  const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
+  const uint32_t side = l.blockSamples + (frame_ && c == kChannelHeights ? 2 : 0);
+  thread_local std::vector<uint8_t> code;
+  readCode(c, level, bx, by, code);
+  const size_t count = size_t{side} * side;
+  out.resize(count * kChannelBytes[c]);
+  void* to = out.data();
+  try {
+    switch (c) {
+      case kChannelHeights: decodeHeights(code, side, {static_cast<float*>(to), count}); break;
+      case kChannelPositions: decodePositions(code, side, {static_cast<float*>(to), 3 * count}); break;
+      case kChannelNormals:
+        if (borderNormals_)
+          decodeBorderNormals(code, side, {static_cast<PackedNormal*>(to), count});
+        else
+          decodeNormals(code, side, {static_cast<PackedNormal*>(to), count});
+        break;
+      default: decodeColours(code, side, {static_cast<PackedColour*>(to), count}); break;
+    }
+  } catch (const CodecError& err) {
+    throw InputError(quoted(path_) + ": level " + std::to_string(level) + " block (" + std::to_string(bx) + ", " +
+                     std::to_string(by) + ") " + channelName(c) + ": " + err.what());
+  }
 }
 
 const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_t level, uint32_t bx,
@@ -1248,46 +1323,59 @@ const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_
   thread_local Decoded last;
   if (last.serial == serial_ && last.channel == c && last.level == level && last.bx == bx && last.by == by)
     return last.samples;
-  // Border normals: the block's positions first (the thread's last block when a page's positions
-  // were just read), kept while the border decodes into the same buffer.
-  thread_local std::vector<float> positions;
-  if (borderNormals_ && c == kChannelNormals) {
-    const std::vector<uint8_t>& p = decodeBlock(kChannelPositions, level, bx, by);
-    positions.resize(p.size() / sizeof(float));
-    std::memcpy(positions.data(), p.data(), p.size());
-  }
-  last.serial = 0;
-  const LevelLayout l = levelLayout(chartSize_, blockIntervals_, level);
-  const uint32_t side = l.blockSamples + (frame_ && c == kChannelHeights ? 2 : 0);
-  thread_local std::vector<uint8_t> code;
-  readCode(c, level, bx, by, code);
-  const size_t count = size_t{side} * side;
-  last.samples.resize(count * kChannelBytes[c]);
-  void* out = last.samples.data();
-  try {
-    switch (c) {
-      case kChannelHeights: decodeHeights(code, side, {static_cast<float*>(out), count}); break;
-      case kChannelPositions: decodePositions(code, side, {static_cast<float*>(out), 3 * count}); break;
-      case kChannelNormals:
-        if (borderNormals_)
-          decodeBorderNormals(code, side, {static_cast<PackedNormal*>(out), count});
-        else
-          decodeNormals(code, side, {static_cast<PackedNormal*>(out), count});
-        break;
-      default: decodeColours(code, side, {static_cast<PackedColour*>(out), count}); break;
+  thread_local std::vector<uint8_t> samples, xyz;
+  if (level >= storedLevels_) {
+    // A level the file leaves out (flag 8): the stored level's samples (border normals with the
+    // others derived from this level's own positions, as on any level).
+    const uint32_t side = levelLayout(chartSize_, blockIntervals_, level).samples;
+    subsampleStored(c, level, samples);
+    if (borderNormals_ && c == kChannelNormals) {
+      subsampleStored(kChannelPositions, level, xyz);
+      geometryImageNormals(reinterpret_cast<const float*>(xyz.data()), side,
+                           reinterpret_cast<PackedNormal*>(samples.data()));
     }
-  } catch (const CodecError& err) {
-    throw InputError(quoted(path_) + ": level " + std::to_string(level) + " block (" + std::to_string(bx) + ", " +
-                     std::to_string(by) + ") " + channelName(c) + ": " + err.what());
+  } else {
+    // Border normals: the block's positions first (the thread's last block when a page's
+    // positions were just read), kept while the border decodes.
+    if (borderNormals_ && c == kChannelNormals) xyz = decodeBlock(kChannelPositions, level, bx, by);
+    decodeCode(c, level, bx, by, samples);
+    if (borderNormals_ && c == kChannelNormals)
+      geometryImageNormals(reinterpret_cast<const float*>(xyz.data()),
+                           levelLayout(chartSize_, blockIntervals_, level).blockSamples,
+                           reinterpret_cast<PackedNormal*>(samples.data()));
   }
-  if (borderNormals_ && c == kChannelNormals)
-    geometryImageNormals(positions.data(), side, static_cast<PackedNormal*>(out));
+  last.samples.swap(samples);
   last.serial = serial_;
   last.channel = c;
   last.level = level;
   last.bx = bx;
   last.by = by;
   return last.samples;
+}
+
+void ChartFileReader::subsampleStored(ChartChannel c, uint32_t level, std::vector<uint8_t>& out) const {
+  // The thread's last stored level's block of each channel, as coded (normals of flag 2: their
+  // border alone), so that every level left out of a chart decodes it once.
+  struct Source {
+    uint64_t serial = 0;
+    std::vector<uint8_t> samples;
+  };
+  thread_local std::array<Source, kChannelCount> sources;
+  const uint32_t s = storedLevels_ - 1, step = 1u << (level - s);
+  Source& source = sources[c];
+  if (source.serial != serial_) {
+    source.serial = 0;
+    decodeCode(c, s, 0, 0, source.samples);
+    source.serial = serial_;
+  }
+  const uint32_t from = levelLayout(chartSize_, blockIntervals_, s).samples;
+  const uint32_t side = levelLayout(chartSize_, blockIntervals_, level).samples;
+  const size_t es = kChannelBytes[c];
+  out.resize(size_t{side} * side * es);
+  for (uint32_t v = 0; v < side; ++v)
+    for (uint32_t u = 0; u < side; ++u)
+      std::memcpy(out.data() + (size_t{v} * side + u) * es,
+                  source.samples.data() + (size_t{v * step} * from + u * step) * es, es);
 }
 
 void ChartFileReader::readChannel(ChartChannel c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,

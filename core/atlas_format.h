@@ -228,6 +228,10 @@ struct LevelLayout {
 // Layout of pyramid level `level`; throws std::logic_error on an invalid chartSize, blockIntervals
 // or level.
 LevelLayout levelLayout(uint32_t chartSize, uint32_t blockIntervals, uint32_t level);
+// The finest pyramid level that one block holds whole: log2((chartSize - 1) / blockIntervals).
+// Every coarser level is a subsampling of it (every 2^j-th sample), so a chart file with flag 8
+// stores the levels down to this one only (writeChartFile).
+uint32_t firstSingleBlockLevel(uint32_t chartSize, uint32_t blockIntervals);
 
 // The sample channels a chart file can hold.
 enum ChartChannel : uint32_t {
@@ -309,6 +313,10 @@ struct ChartCoding {
   bool deriveGeometryNormals = false;
 };
 
+// Whether a geometry pyramid's levels past the first one-block level (firstSingleBlockLevel) are
+// every channel's subsamplings of it, so that a compressed chart file need not store them.
+bool coarseLevelsSubsampled(const ChartPyramid& pyramid, uint32_t chartSize, uint32_t blockIntervals);
+
 // Writes a chart file. A height-field pyramid (heights + normals) is written uncompressed in
 // version 1; a pyramid with positions or colours, or colours alone (an attribute chart: terrain
 // imagery), in version 2: the same, but the header adds u32 channelMask
@@ -327,7 +335,10 @@ struct ChartCoding {
 // coding.deriveGeometryNormals) each normals block holds its border's normals only
 // (encodeBorderNormals) and the reader derives the others from the block's positions
 // (geometryImageNormals). Each directory entry holds, per stored channel, u64 offset and u32
-// byte count of the block's code.
+// byte count of the block's code. With flag 8 (a compressed geometry pyramid whose coarse levels
+// are subsamplings: coarseLevelsSubsampled) the file stores levels 0 to firstSingleBlockLevel
+// only, and the reader takes each coarser level's samples from that level's block (normals of
+// flag 2: their border, the others derived from the level's positions as at any level).
 // Written block by block in level order (ChartFileWriter) and renamed into place. Returns bytes
 // written. Throws std::invalid_argument on a malformed pyramid or one the coding cannot take,
 // InputError if the file cannot be written.
@@ -349,6 +360,9 @@ struct ChartFileShape {
   uint32_t blockIntervals = 0;
   uint32_t levels = 0;
   uint32_t channelMask = 0;
+  // Compressed geometry only: the levels past firstSingleBlockLevel are not stored (flag 8); the
+  // writer takes blocks of the stored levels only.
+  bool subsampledLevels = false;
 };
 
 // A chart file written a block at a time, in any order and from any thread, so that a chart's
@@ -409,6 +423,8 @@ class ChartFileReader {
   uint32_t chartSize() const { return chartSize_; }
   uint32_t blockIntervals() const { return blockIntervals_; }
   uint32_t levels() const { return levels_; }
+  // Levels with blocks in the file: levels() unless the coarser ones are subsampled (flag 8).
+  uint32_t storedLevels() const { return storedLevels_; }
   // Reads the window of level `level` with origin (u0, v0) and side n+1 samples (n intervals),
   // which must lie inside one block. Output row-major (n+1)^2.
   void readHeights(uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, float* out) const;
@@ -431,7 +447,8 @@ class ChartFileReader {
   const std::filesystem::path& path() const { return path_; }
   // Version 3: the code of block (bx, by) of level `level`'s channel c as stored, undecoded (for
   // inspection and benchmarks; the read functions decode it). Throws std::logic_error on an
-  // uncompressed file, a channel it lacks or a block it does not have; InputError if the read fails.
+  // uncompressed file, a channel it lacks or a block it does not have (a level past
+  // storedLevels() has none); InputError if the read fails.
   std::vector<uint8_t> readCodedBlock(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by) const;
 
  private:
@@ -449,7 +466,7 @@ class ChartFileReader {
   // Reads a window of one channel into out, in the channel's elements (float, PackedNormal, 3
   // floats, PackedColour).
   void readChannel(ChartChannel c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n, void* out) const;
-  uint32_t chartSize_ = 0, blockIntervals_ = 0, levels_ = 0;
+  uint32_t chartSize_ = 0, blockIntervals_ = 0, levels_ = 0, storedLevels_ = 0;
   uint32_t channelMask_ = 0;
   bool compressed_ = false;
   std::optional<HeightFieldFrame> frame_;  // normals derived from the heights (version 3)
@@ -458,6 +475,12 @@ class ChartFileReader {
   // Version 3: the whole block (bx, by) of stored channel c, decoded (side^2 elements, side the
   // block's samples, plus 2 for ring heights); the thread's buffer, valid until its next call.
   const std::vector<uint8_t>& decodeBlock(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by) const;
+  // Version 3: block (bx, by) of level `level`'s stored channel c decoded into out as coded
+  // (normals of flag 2: their border alone). Throws InputError naming the file and the block.
+  void decodeCode(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by, std::vector<uint8_t>& out) const;
+  // Version 3 with flag 8: level `level` (past the stored ones) of channel c, every 2^j-th sample
+  // of the last stored level's block, into out.
+  void subsampleStored(ChartChannel c, uint32_t level, std::vector<uint8_t>& out) const;
   // Version 3: the stored code of block (bx, by) of channel c into `code`.
   void readCode(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by, std::vector<uint8_t>& code) const;
   std::vector<std::vector<BlockEntry>> directory_;  // [level][by * blocksPerSide + bx]

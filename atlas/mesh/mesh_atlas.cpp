@@ -248,13 +248,21 @@ ChartPyramid geometryPyramid(const GeometryImage& image, uint32_t chartSize, con
     std::memcpy(positions.data(), s.data(), s.size() * sizeof(float));
   }
   ChartPyramid p;
+  // The first level one block holds whole: the coarser ones subsample it in every channel, so a
+  // compressed chart file stores none of them (writeChartFile's flag 8).
+  const uint32_t single = M >= 2 ? firstSingleBlockLevel(size, std::min(planar.blockIntervals, M)) : 0;
   for (uint32_t k = 0; (M >> k) >= 1; ++k) {
     p.positions.push_back(subsampled(positions, size, 1u << k));
-    p.normals.push_back(subsampled(normals, size, 1u << k));
-    // Stored normals are settled level by level, in the blocks each level is coded in: a level
-    // subsampled from a settled finer one would predict badly. Shared borders never move.
-    if (coding.compressed && !coding.deriveGeometryNormals && (M >> k) >= 2)
-      settleNormals(p.normals.back(), (M >> k) + 1, coding.normalTolerance, planar.blockIntervals);
+    if (k > single) {
+      p.normals.push_back(subsampled(p.normals[single], (M >> single) + 1, 1u << (k - single)));
+    } else {
+      p.normals.push_back(subsampled(normals, size, 1u << k));
+      // Stored normals are settled level by level, in the blocks each level is coded in, down to
+      // that level: a level of several blocks subsampled from a settled finer one would predict
+      // badly. Shared borders never move.
+      if (coding.compressed && !coding.deriveGeometryNormals && (M >> k) >= 2)
+        settleNormals(p.normals.back(), (M >> k) + 1, coding.normalTolerance, planar.blockIntervals);
+    }
     if (!colours.empty()) {
       std::vector<PackedColour> col;
       for (const glm::u8vec4& c : subsampled(colours, size, 1u << k)) col.push_back({c.r, c.g, c.b, c.a});

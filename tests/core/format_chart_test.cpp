@@ -322,6 +322,93 @@ TEST(FormatChart, GeometryChannelsRoundTrip) {
   expectReaderError(bad, "channel mask");
 }
 
+// A compressed geometry chart whose coarse levels subsample the first level one block holds
+// (firstSingleBlockLevel) stores none of them (flag 8), and reads every level, whole or by window,
+// as the pyramid has it; one whose coarse levels are not subsamplings is stored whole.
+TEST(FormatChart, CoarseLevelsThatSubsampleAreNotStored) {
+  test::TempDir tmp("gimlod-chart");
+  const uint32_t cs = 257, bi = 64;  // levels 0 to 2 in 16, 4 and 1 blocks; 3 to 8 subsample level 2
+  ASSERT_EQ(firstSingleBlockLevel(cs, bi), 2u);
+  ASSERT_EQ(firstSingleBlockLevel(65, 64), 0u);
+  const double step = std::exp2(-16.0);
+  ChartPyramid p;
+  std::mt19937 rng(11);
+  for (uint32_t k = 0; (256u >> k) >= 1; ++k) {
+    const uint32_t s = (256u >> k) + 1;
+    std::vector<glm::vec3> pos(size_t(s) * s);
+    std::vector<PackedNormal> nrm(pos.size());
+    std::vector<PackedColour> col(pos.size());
+    for (uint32_t v = 0; v < s; ++v)
+      for (uint32_t u = 0; u < s; ++u) {
+        // A wavy sheet on the lattice, a function of the level-0 sample: every level subsamples
+        // level 0 exactly.
+        const uint32_t x = u << k, y = v << k;
+        const auto q = [&](double c) { return float(std::round(c / step) * step); };
+        pos[size_t(v) * s + u] = {q(x / 256.0), q(y / 256.0), q(0.1 * std::sin(0.05 * x) * std::cos(0.07 * y))};
+        nrm[size_t(v) * s + u] = {uint8_t(x * 7 + y), uint8_t(x ^ y), uint8_t(128 + (x + y) % 100), 255};
+        col[size_t(v) * s + u] = {uint8_t(x), uint8_t(y), uint8_t(x * y), 255};
+      }
+    p.positions.push_back(std::move(pos));
+    p.normals.push_back(std::move(nrm));
+    p.colours.push_back(std::move(col));
+    if ((256u >> k) == 1) break;
+  }
+  ASSERT_EQ(p.positions.size(), 9u);
+  EXPECT_TRUE(coarseLevelsSubsampled(p, cs, bi));
+  ChartCoding coding;
+  coding.compressed = true;
+  coding.positionStep = step;
+  const fs::path f = tmp.path() / "subsampled.bin";
+  const uint64_t bytes = writeChartFile(f, p, cs, bi, coding);
+  const ChartFileReader r(f);
+  EXPECT_EQ(r.levels(), 9u);
+  EXPECT_EQ(r.storedLevels(), 3u);
+  for (uint32_t k = 0; k < r.levels(); ++k) {
+    EXPECT_EQ(r.readLevelPositions(k), p.positions[k]) << "level " << k;
+    EXPECT_EQ(r.readLevelNormals(k), p.normals[k]) << "level " << k;
+    EXPECT_EQ(r.readLevelColours(k), p.colours[k]) << "level " << k;
+  }
+  // A window of a level left out (level 4: 17 samples), read after a block of another level.
+  std::vector<glm::vec3> xyz(4 * 4);
+  r.readPositions(1, 64, 64, 3, xyz.data());
+  r.readPositions(4, 5, 9, 3, xyz.data());
+  for (uint32_t v = 0; v < 4; ++v)
+    for (uint32_t u = 0; u < 4; ++u) ASSERT_EQ(xyz[v * 4 + u], p.positions[4][size_t(9 + v) * 17 + 5 + u]);
+  EXPECT_NO_THROW(r.readCodedBlock(kChannelPositions, 2, 0, 0));
+  EXPECT_THROW(r.readCodedBlock(kChannelPositions, 3, 0, 0), std::logic_error);
+  // Border normals: the left-out levels' borders subsample level 2's, the rest derived.
+  coding.deriveGeometryNormals = true;
+  const fs::path g = tmp.path() / "border.bin";
+  writeChartFile(g, p, cs, bi, coding);
+  const ChartFileReader rb(g);
+  EXPECT_EQ(rb.storedLevels(), 3u);
+  for (uint32_t k = 3; k < rb.levels(); ++k) {
+    const uint32_t s = (256u >> k) + 1;
+    const std::vector<glm::vec3> pos = rb.readLevelPositions(k);
+    EXPECT_EQ(pos, p.positions[k]) << "level " << k;
+    std::vector<PackedNormal> want = p.normals[k];
+    geometryImageNormals(reinterpret_cast<const float*>(pos.data()), s, want.data());
+    EXPECT_EQ(rb.readLevelNormals(k), want) << "level " << k;
+  }
+  // One coarse sample that is not its level-2 sample: every level stored, as written.
+  ChartPyramid other = p;
+  other.positions[5][7].z += float(step);
+  EXPECT_FALSE(coarseLevelsSubsampled(other, cs, bi));
+  coding.deriveGeometryNormals = false;
+  const fs::path h = tmp.path() / "whole.bin";
+  EXPECT_GT(writeChartFile(h, other, cs, bi, coding), bytes);
+  const ChartFileReader rw(h);
+  EXPECT_EQ(rw.storedLevels(), rw.levels());
+  EXPECT_EQ(rw.readLevelPositions(5), other.positions[5]);
+  // Flag 8 on a chart without positions is refused by name.
+  std::ifstream in(f, std::ios::binary);
+  std::vector<char> b((std::istreambuf_iterator<char>(in)), {});
+  b[20] = 3;  // heights and normals
+  const fs::path bad = tmp.path() / "badflag.bin";
+  std::ofstream(bad, std::ios::binary).write(b.data(), std::streamsize(b.size()));
+  expectReaderError(bad, "subsampled levels without positions");
+}
+
 // Derived normals of a sphere's grid (u eastwards, v northwards): outward, within a degree.
 TEST(FormatChart, GeometryImageNormalsFollowTheSurface) {
   constexpr uint32_t kSide = 65;
@@ -445,6 +532,10 @@ TEST(FormatChart, GeometryNormalsDerivedInsideBlocks) {
   EXPECT_FALSE(ChartFileReader(g).derivedNormals());
   EXPECT_THROW(r.readCodedBlock(kChannelPositions, r.levels(), 0, 0), std::logic_error);
   EXPECT_THROW(r.readCodedBlock(kChannelPositions, 0, 4, 0), std::logic_error);  // 4 blocks a side
+  // The sphere's levels are subsamplings of one another: those past level 2 (16 intervals, one
+  // block) are not stored, and have no code.
+  ASSERT_EQ(r.storedLevels(), 3u);
+  EXPECT_THROW(r.readCodedBlock(kChannelPositions, 3, 0, 0), std::logic_error);
   EXPECT_THROW(r.readCodedBlock(kChannelHeights, 0, 0, 0), std::logic_error);
   double worst = 0.0;
   size_t derived = 0;
@@ -465,8 +556,10 @@ TEST(FormatChart, GeometryNormalsDerivedInsideBlocks) {
         EXPECT_EQ(again, mine) << "level " << k << " block " << bx << "," << by;
         // The block's code as stored decodes to what the reader gave.
         std::vector<float> coded(xyz.size());
-        decodePositions(r.readCodedBlock(kChannelPositions, k, bx, by), l.blockSamples, coded);
-        EXPECT_EQ(coded, xyz) << "level " << k << " block " << bx << "," << by;
+        if (k < r.storedLevels()) {
+          decodePositions(r.readCodedBlock(kChannelPositions, k, bx, by), l.blockSamples, coded);
+          EXPECT_EQ(coded, xyz) << "level " << k << " block " << bx << "," << by;
+        }
         for (uint32_t v = 0; v <= b; ++v)
           for (uint32_t u = 0; u <= b; ++u) {
             const size_t i = size_t(by * b + v) * s + bx * b + u;
