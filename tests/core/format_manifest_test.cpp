@@ -104,6 +104,34 @@ TEST(FormatManifest, RoundTrip) {
   EXPECT_FALSE(readManifest(tmp.path()).compression.present);
 }
 
+// A neighbour's "reversed" is written only where it is false (true is the default and what every
+// build writes); one written as true, as earlier builds did, reads back the same.
+TEST(FormatManifest, ReversedIsWrittenOnlyWhereItIsNotTheDefault) {
+  test::TempDir tmp("gimlod-manifest");
+  AtlasManifest a = sampleManifest();
+  writeManifest(tmp.path(), a);
+  json j = json::parse(std::ifstream(tmp.path() / kManifestName));
+  EXPECT_FALSE(j["charts"][0]["neighbours"][kEdgeRight].contains("reversed"));
+  EXPECT_EQ(j["charts"][0]["neighbours"][kEdgeRight]["chart"], 1);
+  EXPECT_TRUE(readManifest(tmp.path()).charts[0].neighbours[kEdgeRight].reversed);
+  a.charts[0].neighbours[kEdgeRight].reversed = false;
+  a.charts[1].neighbours[kEdgeLeft].reversed = false;
+  writeManifest(tmp.path(), a);
+  j = json::parse(std::ifstream(tmp.path() / kManifestName));
+  EXPECT_EQ(j["charts"][1]["neighbours"][kEdgeLeft]["reversed"], false);
+  const AtlasManifest b = readManifest(tmp.path());
+  EXPECT_FALSE(b.charts[0].neighbours[kEdgeRight].reversed);
+  EXPECT_FALSE(b.charts[1].neighbours[kEdgeLeft].reversed);
+  EXPECT_TRUE(b.charts[0].neighbours[kEdgeLeft].reversed);  // an open border's, by default
+  // As earlier builds wrote it.
+  writeManifest(tmp.path(), sampleManifest());
+  j = json::parse(std::ifstream(tmp.path() / kManifestName));
+  for (auto& c : j["charts"])
+    for (auto& n : c["neighbours"]) n["reversed"] = true;
+  std::ofstream(tmp.path() / kManifestName) << j.dump();
+  EXPECT_TRUE(readManifest(tmp.path()).charts[1].neighbours[kEdgeLeft].reversed);
+}
+
 // Writes the sample manifest, edits its JSON, and expects readManifest to fail naming the
 // manifest and mentioning `what`.
 void expectBad(const std::function<void(json&)>& edit, const std::string& what) {
