@@ -1342,7 +1342,10 @@ const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_
     // Border normals: the block's positions first (the thread's last block when a page's
     // positions were just read), kept while the border decodes.
     if (borderNormals_ && c == kChannelNormals) xyz = decodeBlock(kChannelPositions, level, bx, by);
-    decodeCode(c, level, bx, by, samples);
+    if (level + 1 == storedLevels_ && storedLevels_ < levels_)
+      samples = storedSource(c);  // the block the levels left out subsample: decoded once
+    else
+      decodeCode(c, level, bx, by, samples);
     if (borderNormals_ && c == kChannelNormals)
       geometryImageNormals(reinterpret_cast<const float*>(xyz.data()),
                            levelLayout(chartSize_, blockIntervals_, level).blockSamples,
@@ -1357,29 +1360,40 @@ const std::vector<uint8_t>& ChartFileReader::decodeBlock(ChartChannel c, uint32_
   return last.samples;
 }
 
-void ChartFileReader::subsampleStored(ChartChannel c, uint32_t level, std::vector<uint8_t>& out) const {
+const std::vector<uint8_t>& ChartFileReader::storedSource(ChartChannel c) const {
   // The thread's last stored level's block of each channel, as coded (normals of flag 2: their
-  // border alone), so that every level left out of a chart decodes it once.
+  // border alone), so that a chart's levels left out decode it once.
   struct Source {
     uint64_t serial = 0;
     std::vector<uint8_t> samples;
   };
   thread_local std::array<Source, kChannelCount> sources;
-  const uint32_t s = storedLevels_ - 1, step = 1u << (level - s);
   Source& source = sources[c];
   if (source.serial != serial_) {
     source.serial = 0;
-    decodeCode(c, s, 0, 0, source.samples);
+    decodeCode(c, storedLevels_ - 1, 0, 0, source.samples);
     source.serial = serial_;
   }
+  return source.samples;
+}
+
+void ChartFileReader::subsampleStored(ChartChannel c, uint32_t level, std::vector<uint8_t>& out) const {
+  const uint32_t s = storedLevels_ - 1, step = 1u << (level - s);
+  const std::vector<uint8_t>& source = storedSource(c);
   const uint32_t from = levelLayout(chartSize_, blockIntervals_, s).samples;
   const uint32_t side = levelLayout(chartSize_, blockIntervals_, level).samples;
-  const size_t es = kChannelBytes[c];
-  out.resize(size_t{side} * side * es);
-  for (uint32_t v = 0; v < side; ++v)
-    for (uint32_t u = 0; u < side; ++u)
-      std::memcpy(out.data() + (size_t{v} * side + u) * es,
-                  source.samples.data() + (size_t{v * step} * from + u * step) * es, es);
+  out.resize(size_t{side} * side * kChannelBytes[c]);
+  auto copy = [&](auto element) {
+    using T = decltype(element);
+    const auto* in = reinterpret_cast<const T*>(source.data());
+    auto* to = reinterpret_cast<T*>(out.data());
+    for (uint32_t v = 0; v < side; ++v)
+      for (uint32_t u = 0; u < side; ++u) to[size_t{v} * side + u] = in[size_t{v * step} * from + u * step];
+  };
+  if (c == kChannelPositions)
+    copy(glm::vec3{});
+  else
+    copy(PackedNormal{});  // normals and colours: 4 bytes a sample (a file of heights leaves none out)
 }
 
 void ChartFileReader::readChannel(ChartChannel c, uint32_t level, uint32_t u0, uint32_t v0, uint32_t n,

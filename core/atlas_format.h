@@ -478,6 +478,9 @@ class ChartFileReader {
   // Version 3: block (bx, by) of level `level`'s stored channel c decoded into out as coded
   // (normals of flag 2: their border alone). Throws InputError naming the file and the block.
   void decodeCode(ChartChannel c, uint32_t level, uint32_t bx, uint32_t by, std::vector<uint8_t>& out) const;
+  // Version 3 with flag 8: the last stored level's block of channel c decoded as coded (the
+  // thread's, kept for this reader's next call).
+  const std::vector<uint8_t>& storedSource(ChartChannel c) const;
   // Version 3 with flag 8: level `level` (past the stored ones) of channel c, every 2^j-th sample
   // of the last stored level's block, into out.
   void subsampleStored(ChartChannel c, uint32_t level, std::vector<uint8_t>& out) const;
