@@ -169,7 +169,9 @@ std::vector<uint8_t> readFileBytes(const std::filesystem::path& path);
 void atomicWriteFile(const std::filesystem::path& path, const void* data, size_t bytes);
 
 // The same, piece by piece: the pieces go to path.tmp-<pid>, which commit() flushes and renames
-// over path; a writer destroyed uncommitted removes it. Throws InputError naming path.
+// over path; a writer destroyed uncommitted removes it. Throws InputError naming path. A file
+// inside a StagedDirectory of this process is not flushed on its own: the directory's commit
+// flushes them all at once.
 class AtomicFileWriter {
  public:
   explicit AtomicFileWriter(std::filesystem::path path);
@@ -191,8 +193,9 @@ class AtomicFileWriter {
 // directory; removed unless committed, when it is renamed onto the target (replacing an earlier
 // output, which is restored if the rename fails). The target must not exist, be empty, or hold
 // `markerFile` (an earlier output of the same kind); anything else is refused. `what` names the
-// kind in messages ("atlas", "grid"). Missing parent directories are made. Throws InputError naming
-// the target.
+// kind in messages ("atlas", "grid"). Missing parent directories are made. commit() flushes the
+// file system the directory is on (syncfs) before the rename, so every file inside is on the disk
+// when the output appears. Throws InputError naming the target.
 class StagedDirectory {
  public:
   StagedDirectory(const std::filesystem::path& target, const std::string& markerFile, const std::string& what);

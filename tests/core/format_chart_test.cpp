@@ -625,5 +625,40 @@ TEST(FormatChart, AtomicWriteFailsCleanly) {
   EXPECT_EQ(files, 1u);  // only ok.txt
 }
 
+// Files written inside a staged directory (flushed together by its commit, not one by one) appear
+// whole when it is committed and not before; a stage dropped uncommitted leaves the earlier output
+// and no staging directory; a file outside any stage is written as before.
+TEST(FormatChart, StagedFilesAppearWholeWhenTheDirectoryIsCommitted) {
+  test::TempDir tmp("gimlod-chart");
+  const fs::path target = tmp.path() / "out";
+  std::vector<uint8_t> bytes(size_t{1} << 20);
+  for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = uint8_t(i * 7 + (i >> 9));
+  auto fileBytes = [](const fs::path& f) {
+    std::ifstream in(f, std::ios::binary);
+    return std::vector<uint8_t>((std::istreambuf_iterator<char>(in)), {});
+  };
+  {
+    StagedDirectory stage(target, "marker", "test output");
+    atomicWriteFile(stage.path() / "marker", "m", 1);
+    AtomicFileWriter w(stage.path() / "big.bin");
+    w.write(bytes.data(), bytes.size() / 2);
+    w.write(bytes.data() + bytes.size() / 2, bytes.size() - bytes.size() / 2);
+    w.commit();
+    EXPECT_FALSE(fs::exists(target));
+    stage.commit();
+  }
+  EXPECT_EQ(fileBytes(target / "big.bin"), bytes);
+  {
+    StagedDirectory stage(target, "marker", "test output");
+    atomicWriteFile(stage.path() / "marker", "n", 1);
+  }
+  EXPECT_EQ(fileBytes(target / "marker"), std::vector<uint8_t>{'m'});
+  size_t entries = 0;
+  for (const auto& e : fs::directory_iterator(tmp.path())) entries += e.path() != target;
+  EXPECT_EQ(entries, 0u) << "a staging directory was left";
+  atomicWriteFile(tmp.path() / "outside.bin", bytes.data(), bytes.size());
+  EXPECT_EQ(fileBytes(tmp.path() / "outside.bin"), bytes);
+}
+
 }  // namespace
 }  // namespace gimlod
