@@ -224,6 +224,17 @@ TEST(FormatChart, ConcurrentReads) {
   EXPECT_EQ(bad.load(), 0);
 }
 
+// Every level of a geometry chart file reads back as the pyramid has it: positions, normals and
+// colours.
+void expectGeometryLevels(const ChartFileReader& r, const ChartPyramid& p) {
+  ASSERT_EQ(r.levels(), p.positions.size());
+  for (uint32_t k = 0; k < r.levels(); ++k) {
+    EXPECT_EQ(r.readLevelPositions(k), p.positions[k]) << "level " << k;
+    EXPECT_EQ(r.readLevelNormals(k), p.normals[k]) << "level " << k;
+    EXPECT_EQ(r.readLevelColours(k), p.colours[k]) << "level " << k;
+  }
+}
+
 void expectReaderError(const fs::path& f, const char* what) {
   try {
     ChartFileReader r(f);
@@ -293,11 +304,7 @@ TEST(FormatChart, GeometryChannelsRoundTrip) {
   EXPECT_TRUE(r.hasChannel(kChannelPositions));
   EXPECT_TRUE(r.hasChannel(kChannelColours));
   EXPECT_FALSE(r.hasChannel(kChannelHeights));
-  for (uint32_t k = 0; k < r.levels(); ++k) {
-    EXPECT_EQ(r.readLevelPositions(k), p.positions[k]) << "level " << k;
-    EXPECT_EQ(r.readLevelNormals(k), p.normals[k]) << "level " << k;
-    EXPECT_EQ(r.readLevelColours(k), p.colours[k]) << "level " << k;
-  }
+  expectGeometryLevels(r, p);
   std::vector<glm::vec3> win(5 * 5);
   r.readPositions(0, 9, 17, 4, win.data());
   for (uint32_t v = 0; v < 5; ++v)
@@ -363,11 +370,7 @@ TEST(FormatChart, CoarseLevelsThatSubsampleAreNotStored) {
   const ChartFileReader r(f);
   EXPECT_EQ(r.levels(), 9u);
   EXPECT_EQ(r.storedLevels(), 3u);
-  for (uint32_t k = 0; k < r.levels(); ++k) {
-    EXPECT_EQ(r.readLevelPositions(k), p.positions[k]) << "level " << k;
-    EXPECT_EQ(r.readLevelNormals(k), p.normals[k]) << "level " << k;
-    EXPECT_EQ(r.readLevelColours(k), p.colours[k]) << "level " << k;
-  }
+  expectGeometryLevels(r, p);
   // A window of a level left out (level 4: 17 samples), read after a block of another level.
   std::vector<glm::vec3> xyz(4 * 4);
   r.readPositions(1, 64, 64, 3, xyz.data());
