@@ -483,6 +483,9 @@ void atomicWriteFile(const fs::path& path, const void* data, size_t bytes) {
 
 // ---- manifest ---------------------------------------------------------------------------------
 
+// The chart list file's zstd level: 16 MB of JSON codes in 0.3 s, 20% smaller than at level 3.
+constexpr int kChartListLevel = 9;
+
 void writeManifest(const fs::path& dir, const AtlasManifest& m) {
   using ojson = nlohmann::ordered_json;  // keeps "format" and "version" first
   ojson charts = ojson::array();
@@ -497,7 +500,7 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
   }
   ojson j = {
       {"format", kFormatTag},
-      {"version", m.compression.present ? kAtlasFormatVersion : 1u},
+      {"version", m.compression.present ? 2u : 1u},
       {"kind", atlasKindName(m.kind)},
       {"chartSize", m.chartSize},
       {"blockIntervals", m.blockIntervals},
@@ -536,17 +539,31 @@ void writeManifest(const fs::path& dir, const AtlasManifest& m) {
                          {"maxNodeResLog2", m.maxNodeResLog2},
                          {"minNodeResLog2", m.minNodeResLog2}};
   // One line per chart (a mesh atlas lists thousands; indented, each took 500 bytes).
-  j["charts"] = ojson::array();
-  // note: dump() throws on invalid UTF-8 (e.g. a Latin-1 file name in `source`); replace instead.
-  std::string text = j.dump(2, ' ', false, ojson::error_handler_t::replace) + "\n";
+  const bool external = m.compression.present && charts.size() > kInlineChartsMax;
+  const char* const indent = external ? "\n" : "\n    ";
   std::string list = "[";
   for (size_t i = 0; i < charts.size(); ++i)
-    list += (i ? ",\n    " : "\n    ") + charts[i].dump(-1, ' ', false, ojson::error_handler_t::replace);
-  list += charts.empty() ? "]" : "\n  ]";
-  const std::string empty = "\"charts\": []";
-  const size_t at = text.rfind(empty);
-  text.replace(at, empty.size(), "\"charts\": " + list);
+    list += (i ? "," : "") + std::string(indent) + charts[i].dump(-1, ' ', false, ojson::error_handler_t::replace);
+  list += charts.empty() ? "]" : external ? "\n]\n" : "\n  ]";
+  if (external) {
+    const std::vector<uint8_t> coded =
+        compressFrame({reinterpret_cast<const uint8_t*>(list.data()), list.size()}, kChartListLevel);
+    atomicWriteFile(dir / kChartListName, coded.data(), coded.size());
+    j["version"] = 3u;
+    j["chartList"] = kChartListName;
+  } else {
+    j["charts"] = ojson::array();
+  }
+  // note: dump() throws on invalid UTF-8 (e.g. a Latin-1 file name in `source`); replace instead.
+  std::string text = j.dump(2, ' ', false, ojson::error_handler_t::replace) + "\n";
+  if (!external) {
+    const std::string empty = "\"charts\": []";
+    const size_t at = text.rfind(empty);
+    text.replace(at, empty.size(), "\"charts\": " + list);
+  }
   atomicWriteFile(dir / kManifestName, text.data(), text.size());
+  std::error_code ec;
+  if (!external) fs::remove(dir / kChartListName, ec);
 }
 
 namespace {
@@ -750,9 +767,35 @@ void readManifestChart(const JsonReader& r, const json& c, size_t i, int64_t n, 
   }
 }
 
+// The chart list of a version 3 manifest: its file's JSON array. Errors name that file.
+json readChartList(const fs::path& dir, const JsonReader& r, const json& j) {
+  if (j.contains("charts")) r.fail("a version 3 manifest has 'chartList' in place of 'charts', not both");
+  const std::string name = r.string(r.field(j, "chartList", ""), "chartList");
+  const fs::path rel(name);
+  if (name.empty() || rel.is_absolute() ||
+      std::any_of(rel.begin(), rel.end(), [](const fs::path& e) { return e == ".."; }))
+    r.fail("field 'chartList' must be a relative path inside the atlas: '" + name + "'");
+  const fs::path file = dir / rel;
+  const JsonReader lr{file};
+  const std::vector<uint8_t> coded = readFileBytes(file);
+  std::vector<uint8_t> text;
+  try {
+    // A JSON chart list codes at least 4 times smaller; a frame claiming far more is corrupt.
+    text = decompressFrame(coded, 4096 * coded.size() + (size_t(1) << 20));
+  } catch (const CodecError& e) {
+    lr.fail(std::string("not a chart list (one zstd frame of JSON): ") + e.what());
+  }
+  json list;
+  try {
+    list = json::parse(text.begin(), text.end());
+  } catch (const json::exception& e) {
+    lr.fail(std::string("invalid JSON: ") + e.what());
+  }
+  return list;
+}
+
 // The chart list; neighbour relations must be symmetric.
-void readManifestCharts(const JsonReader& r, const json& j, AtlasManifest& m) {
-  const json& cs = r.field(j, "charts", "");
+void readManifestCharts(const JsonReader& r, const json& cs, AtlasManifest& m) {
   if (!cs.is_array()) r.fail("field 'charts' must be an array");
   if (cs.empty()) r.fail("inconsistent chart list: no charts");
   if (cs.size() > (size_t{1} << 24)) r.fail("inconsistent chart list: too many charts");
@@ -787,7 +830,12 @@ AtlasManifest readManifest(const fs::path& dir) {
   readManifestPlanet(r, j, m);
   readManifestImageryAndCompression(r, j, m);
   readManifestHierarchy(r, j, m);
-  readManifestCharts(r, j, m);
+  if (m.version >= 3) {
+    const json list = readChartList(dir, r, j);
+    readManifestCharts(JsonReader{dir / j["chartList"].get<std::string>()}, list, m);
+  } else {
+    readManifestCharts(r, r.field(j, "charts", ""), m);
+  }
   return m;
 }
 

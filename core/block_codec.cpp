@@ -1387,16 +1387,25 @@ void decodeColours(std::span<const uint8_t> block, uint32_t side, std::span<Byte
 std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw) { return frame(kBytesMagic, raw); }
 
 std::vector<uint8_t> decompressBytes(std::span<const uint8_t> coded, size_t maxBytes) {
-  // Into a vector of its own (not unframe's buffer, which a thread keeps): a body may be large.
   if (coded.size() < kMagicBytes || std::memcmp(coded.data(), kBytesMagic, kMagicBytes) != 0)
     throw CodecError("not a compressed block (bad magic)");
-  const uint8_t* f = coded.data() + kMagicBytes;
-  const size_t fBytes = coded.size() - kMagicBytes;
-  const unsigned long long size = ZSTD_getFrameContentSize(f, fBytes);
+  return decompressFrame(coded.subspan(kMagicBytes), maxBytes);
+}
+
+std::vector<uint8_t> compressFrame(std::span<const uint8_t> raw, int level) {
+  const char none[4] = {};
+  std::vector<uint8_t> out = frame(none, raw, level);
+  out.erase(out.begin(), out.begin() + kMagicBytes);
+  return out;
+}
+
+std::vector<uint8_t> decompressFrame(std::span<const uint8_t> coded, size_t maxBytes) {
+  // Into a vector of its own (not unframe's buffer, which a thread keeps): a body may be large.
+  const unsigned long long size = ZSTD_getFrameContentSize(coded.data(), coded.size());
   if (size == ZSTD_CONTENTSIZE_ERROR || size == ZSTD_CONTENTSIZE_UNKNOWN || size > maxBytes)
     throw CodecError("corrupt or truncated compressed block (frame header)");
   std::vector<uint8_t> raw(size);
-  const size_t got = ZSTD_decompressDCtx(decompressor(), raw.data(), raw.size(), f, fBytes);
+  const size_t got = ZSTD_decompressDCtx(decompressor(), raw.data(), raw.size(), coded.data(), coded.size());
   if (ZSTD_isError(got) || got != size)
     throw CodecError(std::string("corrupt or truncated compressed block (") +
                      (ZSTD_isError(got) ? ZSTD_getErrorName(got) : "short") + ")");

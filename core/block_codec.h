@@ -170,5 +170,9 @@ class BytesCompressor {
   std::unique_ptr<State> state_;
 };
 std::vector<uint8_t> decompressBytes(std::span<const uint8_t> coded, size_t maxBytes);
+// A plain zstd frame (with its content size and checksum, no magic of ours: the zstd tool reads
+// it) at zstd level `level`, and back. decompressFrame throws CodecError as decompressBytes does.
+std::vector<uint8_t> compressFrame(std::span<const uint8_t> raw, int level);
+std::vector<uint8_t> decompressFrame(std::span<const uint8_t> coded, size_t maxBytes);
 
 }  // namespace gimlod

@@ -360,6 +360,10 @@ ShardPrepareStats prepareShards(const TerrainBuildOptions& options) {
   Checksum id;
   id.add(head.data(), head.size());
   id.add(manifest.data(), manifest.size());
+  if (fs::exists(stage.path() / kChartListName)) {
+    const std::vector<uint8_t> list = readFileBytes(stage.path() / kChartListName);
+    id.add(list.data(), list.size());
+  }
   id.add(index.data(), index.size());
   ShardPrepareStats st;
   st.plan = id.hex();
@@ -614,8 +618,11 @@ ShardMergeStats mergeShards(const fs::path& atlas, uint32_t count) {
     st.imagery = mergeImagery(area, stage.path(), plan, st.shards, m);
     writeManifest(stage.path(), m);
   } else {
-    const std::vector<uint8_t> manifest = readFileBytes(area / kManifestName);
-    atomicWriteFile(stage.path() / kManifestName, manifest.data(), manifest.size());
+    for (const char* name : {kChartListName, kManifestName}) {  // the list first, as writeManifest does
+      if (!fs::exists(area / name)) continue;
+      const std::vector<uint8_t> bytes = readFileBytes(area / name);
+      atomicWriteFile(stage.path() / name, bytes.data(), bytes.size());
+    }
   }
   st.prepare = stepFromJson(plan.at("prepare"));
   st.bytesOnDisk = directoryBytes(stage.path());

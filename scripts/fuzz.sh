@@ -12,7 +12,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 RUNS=${1:-100000}
 shift || true
-ALL=(fuzz_mesh_ply fuzz_mesh_obj fuzz_mesh_off fuzz_mesh_stl fuzz_manifest fuzz_chart_file fuzz_block_codec fuzz_hierarchy fuzz_camera_path)
+ALL=(fuzz_mesh_ply fuzz_mesh_obj fuzz_mesh_off fuzz_mesh_stl fuzz_manifest fuzz_chart_list fuzz_chart_file fuzz_block_codec fuzz_hierarchy fuzz_camera_path)
 NAMES=("$@")
 [ ${#NAMES[@]} -eq 0 ] && NAMES=("${ALL[@]}")
 

@@ -9,7 +9,7 @@ PACKAGES=(
   libgdal-dev gdal-bin
   libglfw3-dev libglm-dev libepoxy-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libgl-dev
   libimgui-dev xvfb xdotool
-  libtbb-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev libzstd-dev libxxhash-dev
+  libtbb-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev libzstd-dev zstd libxxhash-dev
   libsleef-dev
   openmpi-bin libopenmpi-dev slurm-wlm munge
   libgtest-dev clang libclang-rt-dev clang-format clang-tidy libpng-dev

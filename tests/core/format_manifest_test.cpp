@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/atlas_format.h"
+#include "core/block_codec.h"
 #include "tests/test_util.h"
 
 namespace gimlod {
@@ -56,7 +57,7 @@ TEST(FormatManifest, RoundTrip) {
   const AtlasManifest a = sampleManifest();
   writeManifest(tmp.path(), a);
   const AtlasManifest b = readManifest(tmp.path());
-  EXPECT_EQ(b.version, kAtlasFormatVersion);
+  EXPECT_EQ(b.version, 2u);  // its charts inline (kInlineChartsMax)
   EXPECT_EQ(b.kind, a.kind);
   EXPECT_EQ(b.chartSize, a.chartSize);
   EXPECT_EQ(b.blockIntervals, a.blockIntervals);
@@ -95,7 +96,8 @@ TEST(FormatManifest, RoundTrip) {
   std::ifstream in(tmp.path() / kManifestName);
   const json j = json::parse(in);
   EXPECT_EQ(j["format"], "gimlod-atlas");
-  EXPECT_EQ(j["version"], kAtlasFormatVersion);
+  EXPECT_EQ(j["version"], 2u);
+  EXPECT_FALSE(fs::exists(tmp.path() / kChartListName));
   // Without compression the manifest is version 1, which earlier builds read.
   AtlasManifest plain = sampleManifest();
   plain.compression = CompressionInfo{};
@@ -212,6 +214,126 @@ TEST(FormatManifest, FinestLevelsRoundTrip) {
   EXPECT_EQ(b.charts[1].finestLevel, 3u);
   EXPECT_EQ(b.chartFileSize(0), 129u);
   EXPECT_EQ(b.chartFileSize(1), 17u);
+}
+
+// A geometry manifest of `n` charts in a ring (each chart's right edge joined to the next one's
+// left), chart c at finest level c % 4.
+AtlasManifest ringManifest(uint32_t n) {
+  AtlasManifest m = sampleManifest();
+  m.kind = AtlasKind::Geometry;
+  m.chartsX = n;
+  m.chartsY = 1;
+  m.samplesX = m.samplesY = 0;
+  m.charts.clear();
+  for (uint32_t i = 0; i < n; ++i) {
+    ChartInfo c;
+    c.id = i;
+    c.gridX = int32_t(i);
+    c.file = "charts/chart_" + std::to_string(i) + ".bin";
+    c.finestLevel = i % 4;
+    c.neighbours[kEdgeRight] = {int32_t((i + 1) % n), kEdgeLeft, true};
+    c.neighbours[kEdgeLeft] = {int32_t((i + n - 1) % n), kEdgeRight, true};
+    m.charts.push_back(c);
+  }
+  return m;
+}
+
+void expectSameCharts(const AtlasManifest& a, const AtlasManifest& b) {
+  ASSERT_EQ(a.charts.size(), b.charts.size());
+  for (size_t i = 0; i < a.charts.size(); ++i) {
+    EXPECT_EQ(b.charts[i].file, a.charts[i].file);
+    EXPECT_EQ(b.charts[i].gridX, a.charts[i].gridX);
+    EXPECT_EQ(b.charts[i].finestLevel, a.charts[i].finestLevel);
+    for (int e = 0; e < 4; ++e) {
+      EXPECT_EQ(b.charts[i].neighbours[e].chart, a.charts[i].neighbours[e].chart) << i << " " << e;
+      EXPECT_EQ(b.charts[i].neighbours[e].edge, a.charts[i].neighbours[e].edge) << i << " " << e;
+    }
+  }
+}
+
+// Past kInlineChartsMax charts a compressed atlas's chart list is a file of its own, one zstd
+// frame of the same JSON (version 3); up to it, and uncompressed, the list stays inline (version
+// 2 or 1) and a list file left from before is removed. A list file that is missing, corrupt, not
+// JSON, or named outside the atlas is refused naming the file.
+TEST(FormatManifest, ManyChartsGoToAChartListFile) {
+  test::TempDir tmp("gimlod-manifest");
+  const AtlasManifest many = ringManifest(uint32_t(kInlineChartsMax) + 1);
+  writeManifest(tmp.path(), many);
+  const fs::path list = tmp.path() / kChartListName;
+  ASSERT_TRUE(fs::exists(list));
+  json j = json::parse(std::ifstream(tmp.path() / kManifestName));
+  EXPECT_EQ(j["version"], 3);
+  EXPECT_EQ(j["chartList"], kChartListName);
+  EXPECT_FALSE(j.contains("charts"));
+  AtlasManifest b = readManifest(tmp.path());
+  EXPECT_EQ(b.version, 3u);
+  expectSameCharts(many, b);
+  // The list is the JSON an inline list would be, and codes to a small part of it.
+  const std::string codedText = test::fileBytes(list);
+  const std::vector<uint8_t> coded(codedText.begin(), codedText.end());
+  const std::vector<uint8_t> text = decompressFrame(coded, size_t(1) << 26);
+  const json charts = json::parse(text.begin(), text.end());
+  ASSERT_EQ(charts.size(), many.charts.size());
+  EXPECT_EQ(charts[5]["finest_level"], 1);
+  EXPECT_EQ(charts[5]["neighbours"][kEdgeRight]["chart"], 6);
+  EXPECT_LT(coded.size() * 4, text.size());
+
+  auto expectRefused = [&](const std::string& file, const std::string& what) {
+    try {
+      readManifest(tmp.path());
+      ADD_FAILURE() << "expected an InputError naming " << file;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(file), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  };
+  std::vector<uint8_t> cut(coded.begin(), coded.begin() + coded.size() / 2);
+  std::ofstream(list, std::ios::binary).write(reinterpret_cast<const char*>(cut.data()), std::streamsize(cut.size()));
+  expectRefused(kChartListName, "zstd");
+  std::vector<uint8_t> flipped = coded;
+  flipped[flipped.size() / 2] ^= 0x40;
+  std::ofstream(list, std::ios::binary)
+      .write(reinterpret_cast<const char*>(flipped.data()), std::streamsize(flipped.size()));
+  expectRefused(kChartListName, "zstd");
+  const std::string notJson = "[{\"id\": 0,";
+  const std::vector<uint8_t> frame =
+      compressFrame({reinterpret_cast<const uint8_t*>(notJson.data()), notJson.size()}, 3);
+  std::ofstream(list, std::ios::binary)
+      .write(reinterpret_cast<const char*>(frame.data()), std::streamsize(frame.size()));
+  expectRefused(kChartListName, "invalid JSON");
+  // A list whose neighbours do not name each other back is refused like an inline one.
+  json broken = charts;
+  broken[3]["neighbours"][kEdgeRight]["chart"] = 9;
+  const std::string brokenText = broken.dump();
+  const std::vector<uint8_t> brokenFrame =
+      compressFrame({reinterpret_cast<const uint8_t*>(brokenText.data()), brokenText.size()}, 3);
+  std::ofstream(list, std::ios::binary)
+      .write(reinterpret_cast<const char*>(brokenFrame.data()), std::streamsize(brokenFrame.size()));
+  expectRefused(kChartListName, "does not name it back");
+  fs::remove(list);
+  expectRefused(kChartListName, "");
+  j["chartList"] = "../elsewhere.json.zst";
+  std::ofstream(tmp.path() / kManifestName) << j.dump();
+  expectRefused(kManifestName, "relative path inside the atlas");
+  j["chartList"] = kChartListName;
+  j["charts"] = json::array();
+  std::ofstream(tmp.path() / kManifestName) << j.dump();
+  expectRefused(kManifestName, "not both");
+
+  // At most kInlineChartsMax charts, or uncompressed: inline, and the old list file goes.
+  writeManifest(tmp.path(), many);
+  const AtlasManifest few = ringManifest(uint32_t(kInlineChartsMax));
+  writeManifest(tmp.path(), few);
+  EXPECT_FALSE(fs::exists(list));
+  b = readManifest(tmp.path());
+  EXPECT_EQ(b.version, 2u);
+  expectSameCharts(few, b);
+  AtlasManifest plain = many;
+  plain.compression = CompressionInfo{};
+  writeManifest(tmp.path(), plain);
+  EXPECT_FALSE(fs::exists(list));
+  EXPECT_EQ(json::parse(std::ifstream(tmp.path() / kManifestName))["charts"].size(), many.charts.size());
+  expectSameCharts(many, readManifest(tmp.path()));
 }
 
 TEST(FormatManifest, MissingAndMalformedFiles) {
