@@ -26,6 +26,7 @@ namespace {
 constexpr char kMagic[4] = {'G', 'L', 'M', 'H'};
 constexpr uint32_t kHierarchyVersion = 1;            // raw
 constexpr uint32_t kCompressedHierarchyVersion = 2;  // the version-1 body regrouped and zstd-coded
+constexpr uint32_t kQuantizedHierarchyVersion = 3;   // boxes inset from their parents', errors rounded up
 
 // Reduces a w x rows array of per-cell values by 2x2 blocks with `op` into a (w/2) x (rows/2) array.
 template <typename Op>
@@ -815,6 +816,194 @@ BodyLayout layoutOf(const HierarchyParams& p, uint32_t count) { return {count, n
 
 }  // namespace
 
+namespace {
+
+// Version 3 (HierarchyCoding::kQuantized). A node's box below a chart's root is its parent's (as
+// decoded) inset on each of its six sides by q / 255 of the parent's extent on that axis, q a
+// byte; the root's box is stored whole. Each q is the largest whose inset side still holds the
+// node's own box, so a decoded box holds every sample the node's exact box held. Each error is
+// rounded up to its top 16 bits (bfloat16: within 2^-7 of it, never below it; NaN stays NaN).
+// The insets are computed in double and rounded to float once, with no step a compiler may fuse
+// or reorder, so every reader decodes the same floats.
+float insetLow(float lo, float hi, uint8_t q) {
+  return float(std::fma(double(hi) - double(lo), double(q) / 255.0, double(lo)));
+}
+float insetHigh(float lo, float hi, uint8_t q) {
+  return float(std::fma(double(lo) - double(hi), double(q) / 255.0, double(hi)));
+}
+
+// The largest q whose inset side (low: rising from lo; high: falling from hi) does not pass
+// `side`; -1 when even q = 0 does (the node's box is not inside its parent's).
+int insetFor(float lo, float hi, float side, bool low) {
+  auto holds = [&](int q) {
+    return low ? insetLow(lo, hi, uint8_t(q)) <= side : insetHigh(lo, hi, uint8_t(q)) >= side;
+  };
+  if (!holds(0)) return -1;
+  const double extent = double(hi) - double(lo);
+  int q = extent > 0.0 ? int(std::clamp(std::floor((low ? side - lo : hi - side) / extent * 255.0), 0.0, 255.0)) : 0;
+  while (q > 0 && !holds(q)) --q;
+  while (q < 255 && holds(q + 1)) ++q;
+  return q;
+}
+
+uint16_t errorCode(float e) {
+  if (std::isnan(e)) return 0x7FC0;
+  uint32_t u;
+  std::memcpy(&u, &e, 4);
+  return uint16_t((uint64_t(u) + 0xFFFF) >> 16);  // (e >= 0: rounds the magnitude up)
+}
+float errorOfCode(uint16_t c) {
+  const uint32_t u = uint32_t(c) << 16;
+  float e;
+  std::memcpy(&e, &u, 4);
+  return e;
+}
+
+// The parent of node n of a chart (level order), for n >= 1.
+uint32_t parentNode(uint32_t n) {
+  uint32_t level = 0;
+  while (nodeIndex(level + 1, 0, 0) <= n) ++level;
+  const uint32_t i = n - nodeIndex(level, 0, 0), side = 1u << level;
+  return nodeIndex(level - 1, (i % side) / 2, (i / side) / 2);
+}
+
+struct QuantizedLayout {
+  uint32_t count = 0, nodes = 0, resCount = 0;
+  static constexpr size_t kHeader = 5 * 4, kRoots = 4 * (4 + 1 + 1), kRootBox = 6 * 4;
+  size_t size() const {
+    return kHeader + size_t(count) * (kRoots + kRootBox + size_t(nodes - 1) * 6 + nodes + size_t(nodes) * resCount * 2);
+  }
+};
+
+// The body of version 3 (before zstd), or nothing when some box is not inside its parent's or
+// some error is negative (the file is then written as version 2). Layout: the header (as in
+// version 1), every chart's roots, the root boxes as 4 byte planes of their floats, the insets as
+// 6 planes (low x, y, z, high x, y, z; chart by chart, node by node from 1), the flags, then the
+// error codes as 2 planes (high bytes first).
+std::optional<std::vector<uint8_t>> quantizedBody(const Hierarchy& h) {
+  const uint32_t count = uint32_t(h.charts.size()), nodes = nodesPerChart(h.params.depth);
+  const QuantizedLayout l{count, nodes, h.params.resCount()};
+  std::vector<uint8_t> insets(size_t(count) * (nodes - 1) * 6);
+  const size_t plane = size_t(count) * (nodes - 1);
+  std::vector<std::array<float, 6>> decoded(nodes);
+  for (uint32_t c = 0; c < count; ++c) {
+    const auto& b = h.charts[c].bounds;
+    decoded[0] = b[0];
+    for (uint32_t n = 1; n < nodes; ++n) {
+      const std::array<float, 6>& parent = decoded[parentNode(n)];
+      for (uint32_t k = 0; k < 6; ++k) {
+        const bool low = k < 3;
+        const float lo = parent[k % 3], hi = parent[k % 3 + 3];
+        const int q = insetFor(lo, hi, b[n][k], low);
+        if (q < 0) return std::nullopt;
+        insets[k * plane + size_t(c) * (nodes - 1) + (n - 1)] = uint8_t(q);
+        decoded[n][k] = low ? insetLow(lo, hi, uint8_t(q)) : insetHigh(lo, hi, uint8_t(q));
+      }
+    }
+  }
+  std::vector<uint8_t> body;
+  body.reserve(l.size());
+  const uint32_t header[5] = {count, h.params.intervalsLog2, h.params.depth, h.params.maxNodeResLog2,
+                              h.params.minNodeResLog2};
+  putBytes(body, header, sizeof header);
+  for (uint32_t c = 0; c < count; ++c)
+    for (const RootNeighbour& n : h.roots[c]) {
+      const uint8_t rev = n.reversed;
+      putBytes(body, &n.chart, 4);
+      putBytes(body, &n.edge, 1);
+      putBytes(body, &rev, 1);
+    }
+  for (uint32_t byte = 0; byte < 4; ++byte)
+    for (uint32_t c = 0; c < count; ++c)
+      for (const float v : h.charts[c].bounds[0]) body.push_back(reinterpret_cast<const uint8_t*>(&v)[byte]);
+  body.insert(body.end(), insets.begin(), insets.end());
+  for (const Hierarchy::ChartNodes& n : h.charts) body.insert(body.end(), n.flags.begin(), n.flags.end());
+  for (const uint32_t shift : {8u, 0u})
+    for (const Hierarchy::ChartNodes& n : h.charts)
+      for (const float e : n.errors) {
+        if (e < 0.0f) return std::nullopt;
+        body.push_back(uint8_t(errorCode(e) >> shift));
+      }
+  return body;
+}
+
+// Version 3's body decoded, after its header's checks (count, params). Throws InputError naming
+// the file where a box is inverted.
+Hierarchy readQuantizedBody(const std::filesystem::path& path, std::span<const uint8_t> body, uint32_t count,
+                            const HierarchyParams& params) {
+  const uint32_t nodes = nodesPerChart(params.depth), rc = params.resCount();
+  const QuantizedLayout l{count, nodes, rc};
+  if (body.size() != l.size())
+    throw InputError(path.string() + ": hierarchy file holds " + std::to_string(body.size()) +
+                     " bytes once decoded, its header (" + std::to_string(count) + " charts of depth " +
+                     std::to_string(params.depth) + ") needs " + std::to_string(l.size()));
+  Hierarchy h;
+  h.params = params;
+  h.charts.resize(count);
+  h.roots.resize(count);
+  size_t at = QuantizedLayout::kHeader;
+  for (uint32_t c = 0; c < count; ++c)
+    for (RootNeighbour& n : h.roots[c]) {
+      std::memcpy(&n.chart, body.data() + at, 4);
+      n.edge = body[at + 4];
+      n.reversed = body[at + 5] != 0;
+      at += 6;
+      if (n.chart >= int32_t(count) || n.edge > 3) throw InputError(path.string() + ": corrupt root neighbour");
+    }
+  const size_t rootBoxes = at, insets = rootBoxes + size_t(count) * 24, plane = size_t(count) * (nodes - 1);
+  const size_t flags = insets + 6 * plane, errors = flags + size_t(count) * nodes;
+  const size_t errorPlane = size_t(count) * nodes * rc;
+  for (uint32_t c = 0; c < count; ++c) {
+    Hierarchy::ChartNodes& cn = h.charts[c];
+    cn.bounds.resize(nodes);
+    for (uint32_t k = 0; k < 6; ++k) {
+      uint8_t v[4];
+      for (uint32_t byte = 0; byte < 4; ++byte)
+        v[byte] = body[rootBoxes + byte * size_t(count) * 6 + size_t(c) * 6 + k];
+      std::memcpy(&cn.bounds[0][k], v, 4);
+    }
+    for (uint32_t n = 1; n < nodes; ++n) {
+      const std::array<float, 6>& parent = cn.bounds[parentNode(n)];
+      for (uint32_t k = 0; k < 6; ++k) {
+        const uint8_t q = body[insets + k * plane + size_t(c) * (nodes - 1) + (n - 1)];
+        cn.bounds[n][k] = k < 3 ? insetLow(parent[k], parent[k + 3], q) : insetHigh(parent[k - 3], parent[k], q);
+      }
+    }
+    for (const std::array<float, 6>& b : cn.bounds)
+      if (!(b[0] <= b[3] && b[1] <= b[4] && b[2] <= b[5]))
+        throw InputError(path.string() + ": chart " + std::to_string(c) +
+                         " has a node box that is inverted or not finite");
+    cn.flags.assign(body.begin() + flags + size_t(c) * nodes, body.begin() + flags + size_t(c + 1) * nodes);
+    cn.errors.resize(size_t(nodes) * rc);
+    for (size_t i = 0; i < cn.errors.size(); ++i) {
+      const size_t e = size_t(c) * nodes * rc + i;
+      cn.errors[i] = errorOfCode(uint16_t(body[errors + e] << 8 | body[errors + errorPlane + e]));
+    }
+  }
+  return h;
+}
+
+}  // namespace
+
+void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, HierarchyCoding coding) {
+  if (coding == HierarchyCoding::kQuantized) {
+    for (const Hierarchy::ChartNodes& c : h.charts)
+      if (c.bounds.size() != nodesPerChart(h.params.depth) || c.flags.size() != c.bounds.size() ||
+          c.errors.size() != c.bounds.size() * h.params.resCount())
+        throw std::invalid_argument("writeHierarchy: a chart's arrays do not match the parameters");
+    if (const std::optional<std::vector<uint8_t>> body = quantizedBody(h)) {
+      std::vector<uint8_t> out;
+      putBytes(out, kMagic, 4);
+      put(out, kQuantizedHierarchyVersion);
+      const std::vector<uint8_t> coded = compressBytes(*body);
+      out.insert(out.end(), coded.begin(), coded.end());
+      atomicWriteFile(path, out.data(), out.size());
+      return;
+    }
+  }
+  writeHierarchy(path, h, coding != HierarchyCoding::kRaw);
+}
+
 void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool compressed) {
   // Streamed in pieces of about 1 MiB (coded as they come): the body is never held whole, so an
   // atlas's hierarchy takes about its own size in memory to write, however many charts it has.
@@ -899,9 +1088,9 @@ Hierarchy readHierarchy(const std::filesystem::path& path) {
   if (std::memcmp(magic, kMagic, 4) != 0) throw InputError(path.string() + ": not a gimlod hierarchy file");
   uint32_t version, count;
   get(&version, 4);
-  if (version != kHierarchyVersion && version != kCompressedHierarchyVersion)
+  if (version != kHierarchyVersion && version != kCompressedHierarchyVersion && version != kQuantizedHierarchyVersion)
     throw InputError(path.string() + ": unsupported hierarchy version " + std::to_string(version));
-  if (version == kCompressedHierarchyVersion) {
+  if (version != kHierarchyVersion) {
     // Back to version 1's bytes; the checks below then hold for both versions.
     std::vector<uint8_t> body;
     try {
@@ -917,8 +1106,17 @@ Hierarchy readHierarchy(const std::filesystem::path& path) {
     std::memcpy(&p.depth, body.data() + 8, 4);
     std::memcpy(&p.maxNodeResLog2, body.data() + 12, 4);
     std::memcpy(&p.minNodeResLog2, body.data() + 16, 4);
-    if (p.depth > 12 || p.maxNodeResLog2 > 16 || p.minNodeResLog2 > p.maxNodeResLog2 || count > (1u << 24))
+    if (p.intervalsLog2 > 16 || p.depth > 12 || p.maxNodeResLog2 > 16 || p.minNodeResLog2 > p.maxNodeResLog2 ||
+        count > (1u << 24))
       throw InputError(path.string() + ": corrupt hierarchy header");
+    if (version == kQuantizedHierarchyVersion) {
+      try {
+        p.validate();
+      } catch (const InputError& e) {
+        throw InputError(path.string() + ": " + e.what());
+      }
+      return readQuantizedBody(path, body, count, p);
+    }
     const BodyLayout l = layoutOf(p, count);
     if (body.size() != l.size())
       throw InputError(path.string() + ": hierarchy file holds " + std::to_string(body.size()) +

@@ -187,8 +187,19 @@ Hierarchy buildGeometryHierarchy(const HierarchyParams& params, const std::vecto
                                  const ChartPositionSource& source, HierarchyStats* stats = nullptr,
                                  const std::vector<uint8_t>& finestLevels = {});
 
-// Atomic. compressed: version 2 (the arrays regrouped as byte planes, then zstd with its
-// checksum; about 0.4 of version 1's bytes on mesh atlases), else version 1 (raw). Both are read.
+// How writeHierarchy codes the file (docs/format.md section 12).
+//   raw: version 1, the arrays as they are.
+//   grouped: version 2, the arrays regrouped as byte planes, then zstd with its checksum (about
+//     0.4 of version 1's bytes on mesh atlases). Reads back bit for bit.
+//   quantized: version 3, conservative: a node's box below its chart's root is its parent's inset
+//     by a byte a side (in 255ths of the parent's extent), and holds the node's box; each error is
+//     rounded up to 16 bits (at most 2^-7 above it). About 0.4 of version 2's bytes on mesh
+//     atlases, where the boxes were three quarters of them. Written as version 2 where a box does
+//     not lie inside its parent's (a flat terrain's empty nodes) or an error is negative.
+enum class HierarchyCoding : uint8_t { kRaw, kGrouped, kQuantized };
+// Atomic. All three versions are read.
+void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, HierarchyCoding coding);
+// compressed: grouped (version 2), else raw (version 1).
 void writeHierarchy(const std::filesystem::path& path, const Hierarchy& h, bool compressed = true);
 Hierarchy readHierarchy(const std::filesystem::path& path);  // throws InputError naming the file
 

@@ -3,11 +3,15 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
 
 #include <glm/glm.hpp>
 
 #include "hierarchy/hierarchy.h"
 #include "tests/synthetic_terrain.h"
+#include "tests/test_util.h"
 
 namespace gimlod {
 namespace {
@@ -121,6 +125,118 @@ TEST(GeometryHierarchy, LiftedHeightFieldHasTheTerrainErrors) {
           EXPECT_EQ(geometry.bounds(n)[5], terrain.bounds(n)[5]);
         }
   EXPECT_LT(worst, 1e-3);
+}
+
+uint32_t fileVersion(const std::filesystem::path& path) {
+  uint32_t version = 0;
+  std::ifstream(path, std::ios::binary).seekg(4).read(reinterpret_cast<char*>(&version), 4);
+  return version;
+}
+
+// Three curved charts of different sizes and ripples, with neighbours, at depth 4.
+Hierarchy threeCaps() {
+  const HierarchyParams p = params(6, 4, 4, 1);
+  std::vector<std::array<RootNeighbour, 4>> roots(3);
+  roots[0][kEdgeRight] = {1, kEdgeLeft, true};
+  roots[1][kEdgeLeft] = {0, kEdgeRight, true};
+  roots[1][kEdgeTop] = {2, kEdgeBottom, false};
+  roots[2][kEdgeBottom] = {1, kEdgeTop, false};
+  return buildGeometryHierarchy(p, roots, [](uint32_t c) {
+    std::vector<glm::vec3> P = capChart(65, 0.02f + 0.05f * float(c));
+    for (glm::vec3& q : P) q = q * (1.f + float(c)) + glm::vec3(float(c) * 3.f, -1.f, 1000.f * float(c));
+    return P;
+  });
+}
+
+// Quantized (version 3): every box read back holds the exact box, inset from its parent's by
+// whole 255ths, and every error is the exact one rounded up by less than 2^-7 of it (NaN where
+// the node has none); flags and roots are the same, the file under half of version 2's, and the
+// decoded hierarchy codes to itself again. A box outside its parent's makes it version 2, exact.
+TEST(GeometryHierarchy, QuantizedFilesHoldTheExactBoxesAndErrors) {
+  const Hierarchy h = threeCaps();
+  test::TempDir dir;
+  const auto v2 = dir.path() / "v2.bin", v3 = dir.path() / "v3.bin";
+  writeHierarchy(v2, h, HierarchyCoding::kGrouped);
+  writeHierarchy(v3, h, HierarchyCoding::kQuantized);
+  EXPECT_EQ(fileVersion(v2), 2u);
+  ASSERT_EQ(fileVersion(v3), 3u);
+  EXPECT_LT(2 * std::filesystem::file_size(v3), std::filesystem::file_size(v2));
+  const Hierarchy back = readHierarchy(v3);
+  ASSERT_EQ(back.chartCount(), h.chartCount());
+  EXPECT_EQ(back.params.depth, h.params.depth);
+  uint32_t insetBoxes = 0, roundedErrors = 0;
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    const auto &exact = h.charts[c], &read = back.charts[c];
+    EXPECT_EQ(read.bounds[0], exact.bounds[0]);  // the root's box is stored whole
+    for (size_t n = 0; n < exact.bounds.size(); ++n)
+      for (uint32_t k = 0; k < 3; ++k) {
+        ASSERT_LE(read.bounds[n][k], exact.bounds[n][k]) << c << " " << n << " " << k;
+        ASSERT_GE(read.bounds[n][k + 3], exact.bounds[n][k + 3]) << c << " " << n << " " << k;
+        // Within 1/255 of the root's extent (the parent's, and so at most the root's) per side.
+        const float slack = (exact.bounds[0][k + 3] - exact.bounds[0][k]) / 255.f * 1.001f;
+        EXPECT_LE(exact.bounds[n][k] - read.bounds[n][k], slack);
+        EXPECT_LE(read.bounds[n][k + 3] - exact.bounds[n][k + 3], slack);
+        insetBoxes += read.bounds[n][k] > read.bounds[0][k];
+      }
+    ASSERT_EQ(read.errors.size(), exact.errors.size());
+    for (size_t i = 0; i < exact.errors.size(); ++i) {
+      if (std::isnan(exact.errors[i])) {
+        EXPECT_TRUE(std::isnan(read.errors[i])) << i;
+        continue;
+      }
+      ASSERT_GE(read.errors[i], exact.errors[i]) << c << " " << i;
+      EXPECT_LE(read.errors[i], exact.errors[i] * (1.f + 1.f / 128.f)) << c << " " << i;
+      roundedErrors += read.errors[i] > exact.errors[i];
+    }
+    EXPECT_EQ(read.flags, exact.flags);
+    for (uint32_t e = 0; e < 4; ++e) {
+      EXPECT_EQ(back.roots[c][e].chart, h.roots[c][e].chart);
+      EXPECT_EQ(back.roots[c][e].edge, h.roots[c][e].edge);
+      EXPECT_EQ(back.roots[c][e].reversed, h.roots[c][e].reversed);
+    }
+  }
+  EXPECT_GT(insetBoxes, 100u);
+  EXPECT_GT(roundedErrors, 100u);
+  // The decoded hierarchy is coded by the same boxes and errors.
+  writeHierarchy(dir.path() / "again.bin", back, HierarchyCoding::kQuantized);
+  const Hierarchy again = readHierarchy(dir.path() / "again.bin");
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    EXPECT_EQ(again.charts[c].bounds, back.charts[c].bounds);
+    EXPECT_EQ(std::memcmp(again.charts[c].errors.data(), back.charts[c].errors.data(),
+                          back.charts[c].errors.size() * sizeof(float)),
+              0);
+  }
+  // A box outside its parent's cannot be inset: version 2, bit for bit.
+  Hierarchy outside = h;
+  outside.charts[1].bounds[7][4] = outside.charts[1].bounds[0][4] + 1.f;
+  writeHierarchy(v3, outside, HierarchyCoding::kQuantized);
+  EXPECT_EQ(fileVersion(v3), 2u);
+  EXPECT_EQ(readHierarchy(v3).charts[1].bounds, outside.charts[1].bounds);
+}
+
+// Damaged version 3 files are refused naming the file: a flipped byte (the checksum), a cut file,
+// and a body whose size does not match its header.
+TEST(GeometryHierarchy, DamagedQuantizedFilesAreRefused) {
+  test::TempDir dir;
+  const auto path = dir.path() / "hierarchy.bin";
+  writeHierarchy(path, threeCaps(), HierarchyCoding::kQuantized);
+  const std::string good = test::fileBytes(path);
+  auto expectRefused = [&](const std::string& bytes, const char* what) {
+    std::ofstream(path, std::ios::binary | std::ios::trunc).write(bytes.data(), std::streamsize(bytes.size()));
+    try {
+      readHierarchy(path);
+      ADD_FAILURE() << what;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(path.string()), std::string::npos) << e.what();
+    }
+  };
+  for (const size_t at : {size_t(12), good.size() / 2, good.size() - 2}) {
+    std::string bad = good;
+    bad[at] = char(bad[at] ^ 0x21);
+    expectRefused(bad, "a flipped byte");
+  }
+  expectRefused(good.substr(0, good.size() / 2), "a cut file");
+  expectRefused(good.substr(0, 8), "no body");
 }
 
 TEST(GeometryHierarchy, BadImagesAreRejected) {
