@@ -813,12 +813,8 @@ bool splitByCut(PatchLayout& layout, uint32_t p, std::vector<uint32_t> sources, 
 
 }  // namespace
 
-// The share of the perimeter each part of a balanced cut keeps at least (halvePatch, and
-// splitPatchFromDeepest, whose cut then runs down both sides of a tube).
-constexpr double kBalancedCutShare = 0.25;
-
 bool halvePatch(PatchLayout& layout, uint32_t p, uint32_t maxSides, uint32_t minPartEdges) {
-  return applyCut(layout, p, findCut(layout, p, {}, maxSides, kBalancedCutShare, minPartEdges), maxSides);
+  return applyCut(layout, p, findCut(layout, p, {}, maxSides, 0.25, minPartEdges), maxSides);
 }
 
 uint32_t patchTriangleAt(const PatchLayout& layout, uint32_t p, uint32_t v) {
@@ -827,43 +823,6 @@ uint32_t patchTriangleAt(const PatchLayout& layout, uint32_t p, uint32_t v) {
     if (tri[0] == v || tri[1] == v || tri[2] == v) return t;
   }
   return ~0u;
-}
-
-uint32_t deepestPatchVertex(const PatchLayout& layout, uint32_t p) {
-  const PatchGraph g = patchGraph(layout, layout.patches[p]);
-  std::unordered_map<uint32_t, double> dist;
-  using Item = std::pair<double, uint32_t>;
-  std::priority_queue<Item, std::vector<Item>, std::greater<>> queue;
-  for (const uint32_t v : g.onBoundary) {
-    dist[v] = 0.0;
-    queue.push({0.0, v});
-  }
-  uint32_t deepest = ~0u;
-  double far = 0.0;
-  while (!queue.empty()) {
-    const auto [d, u] = queue.top();
-    queue.pop();
-    if (d > dist.at(u)) continue;
-    if (d > far || (d == far && d > 0.0 && u < deepest)) far = d, deepest = u;
-    const auto [begin, end] = g.neighboursOf(u);
-    for (auto it = begin; it != end; ++it) {
-      const uint32_t w = it->second;
-      if (g.onBoundary.contains(w)) continue;
-      const double nd = d + glm::length(layout.positions[w] - layout.positions[u]);
-      const auto [at, inserted] = dist.try_emplace(w, nd);
-      if (!inserted && !(nd < at->second)) continue;
-      at->second = nd;
-      queue.push({nd, w});
-    }
-  }
-  return deepest;
-}
-
-bool splitPatchFromDeepest(PatchLayout& layout, uint32_t p, uint32_t maxSides) {
-  if (p >= layout.patches.size()) return false;
-  const uint32_t v = deepestPatchVertex(layout, p);
-  if (v == ~0u) return false;
-  return applyCut(layout, p, findCut(layout, p, {v}, maxSides, kBalancedCutShare), maxSides);
 }
 
 bool splitPatchThrough(PatchLayout& layout, uint32_t p, uint32_t triangle, uint32_t maxSides) {
@@ -1241,56 +1200,6 @@ uint32_t moveSideEars(PatchLayout& layout, const std::vector<uint32_t>& only, bo
 
 bool splitPatchAtNeck(PatchLayout& layout, uint32_t p) {
   return splitByCut(layout, p, {}, 8) || splitPatchAtCornerNeck(layout, p);
-}
-
-uint32_t splitOpenSideEars(PatchLayout& layout) {
-  uint32_t split = 0;
-  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
-    // Directed edge -> triangle of this patch, as mendFirstSideEar finds its ears.
-    std::unordered_map<uint64_t, uint32_t> inside;
-    for (uint32_t t : layout.patches[p].triangles) {
-      const auto& tri = layout.triangles[t];
-      for (int c = 0; c < 3; ++c) inside[directedEdgeKey(tri[c], tri[(c + 1) % 3])] = t;
-    }
-    for (const PatchSide& side : layout.patches[p].sides) {
-      if (side.neighbourPatch >= 0) continue;
-      const std::vector<uint32_t>& v = side.vertices;
-      for (size_t k = 0; k + 2 < v.size(); ++k) {
-        const uint32_t a = v[k], b = v[k + 1], c = v[k + 2];
-        const auto ear = inside.find(directedEdgeKey(a, b));
-        if (ear == inside.end()) continue;
-        const uint32_t t = ear->second;
-        const auto& et = layout.triangles[t];
-        if (et[0] != c && et[1] != c && et[2] != c) continue;
-        const auto across = inside.find(directedEdgeKey(a, c));  // the triangle across the ear's inner edge
-        if (across == inside.end()) continue;
-        const uint32_t u = across->second;
-        uint32_t d = ~0u;
-        for (uint32_t w : layout.triangles[u])
-          if (w != a && w != c) d = w;
-        // The inner edge's midpoint: a vertex of the surface as it is, inside the patch.
-        const uint32_t m = uint32_t(layout.positions.size());
-        layout.positions.push_back(0.5f * (layout.positions[a] + layout.positions[c]));
-        if (!layout.colours.empty())
-          layout.colours.push_back(glm::u8vec4((glm::uvec4(layout.colours[a]) + glm::uvec4(layout.colours[c])) / 2u));
-        const uint32_t t2 = uint32_t(layout.triangles.size()), u2 = t2 + 1;
-        layout.triangles[t] = {a, b, m};  // the ear holds a -> b -> c -> a, the triangle across a -> c
-        layout.triangles.push_back({b, c, m});
-        layout.triangles[u] = {a, m, d};
-        layout.triangles.push_back({m, c, d});
-        layout.patches[p].triangles.push_back(t2);
-        layout.patches[p].triangles.push_back(u2);
-        for (const uint32_t x : {t, u, t2, u2}) {
-          const auto& tri = layout.triangles[x];
-          for (int e = 0; e < 3; ++e) inside[directedEdgeKey(tri[e], tri[(e + 1) % 3])] = x;
-        }
-        inside.erase(directedEdgeKey(a, c));
-        inside.erase(directedEdgeKey(c, a));
-        ++split;
-      }
-    }
-  }
-  return split;
 }
 
 GeometryImageSet resampleAndRepair(PatchLayout& layout, const ResampleOptions& options,

@@ -64,14 +64,6 @@ uint32_t straightenSides(PatchLayout& layout, uint32_t rounds = 2, bool keepHalv
 // beyond its neighbours. Returns the ears mended.
 uint32_t moveSideEars(PatchLayout& layout, const std::vector<uint32_t>& patches = {}, bool splitFull = true);
 
-// Splits every ear left on an open side (one moveSideEars could not make a corner of: its patch
-// has no side to spare) at the midpoint of its inner edge, with the triangle across that edge:
-// its middle vertex then has two triangles, with a vertex inside the patch, and the ear is no
-// longer flat in the parameterization (a flat ear's middle vertex lies off every chart's surface,
-// about a triangle's height away, however finely the chart samples it). The surface is the same;
-// the layout gains a vertex and two triangles an ear. Returns the ears split.
-uint32_t splitOpenSideEars(PatchLayout& layout);
-
 // Cuts patch `patch` along the shortest path of interior edges (through interior vertices only)
 // between its corners i and j, which must not be adjacent (2 <= (j - i) mod n <= n - 2). The
 // part with sides i..j-1 keeps the patch's index (its side 0 is the old side i); the other part
@@ -155,17 +147,6 @@ uint32_t patchTriangleAt(const PatchLayout& layout, uint32_t p, uint32_t v);
 // (insertCorner, so the neighbours there gain a side, within maxSides). Returns false if no cut
 // qualifies (the layout may then have gained a corner, still valid).
 bool splitPatchThrough(PatchLayout& layout, uint32_t patch, uint32_t triangle, uint32_t maxSides = 8);
-
-// The vertex of `patch` farthest from its boundary (shortest paths along its edges; of equally far
-// ones the lowest id), ~0u for a patch without inner vertices.
-uint32_t deepestPatchVertex(const PatchLayout& layout, uint32_t patch);
-
-// Splits `patch` by a cut through its deepest vertex (deepestPatchVertex) whose ends lie at least a
-// quarter of the perimeter apart on both sides, under splitPatchThrough's rules otherwise. Where a
-// patch closes round a tip (a tube closed at one end), this cuts it from the tip down both sides,
-// where a cut between boundary points would run along the rim and a cut through the tip to its
-// nearest boundary points would cut a sliver off. Returns false if no cut qualifies.
-bool splitPatchFromDeepest(PatchLayout& layout, uint32_t patch, uint32_t maxSides = 8);
 
 // Halves `patch`: of the shortest interior paths between boundary vertices (as splitPatchAtNeck
 // takes them), the one whose length is smallest against the smaller part's perimeter among those
