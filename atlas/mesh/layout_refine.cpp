@@ -813,8 +813,12 @@ bool splitByCut(PatchLayout& layout, uint32_t p, std::vector<uint32_t> sources, 
 
 }  // namespace
 
+// The share of the perimeter each part of a balanced cut keeps at least (halvePatch, and
+// splitPatchFromDeepest, whose cut then runs down both sides of a tube).
+constexpr double kBalancedCutShare = 0.25;
+
 bool halvePatch(PatchLayout& layout, uint32_t p, uint32_t maxSides, uint32_t minPartEdges) {
-  return applyCut(layout, p, findCut(layout, p, {}, maxSides, 0.25, minPartEdges), maxSides);
+  return applyCut(layout, p, findCut(layout, p, {}, maxSides, kBalancedCutShare, minPartEdges), maxSides);
 }
 
 uint32_t patchTriangleAt(const PatchLayout& layout, uint32_t p, uint32_t v) {
@@ -823,6 +827,43 @@ uint32_t patchTriangleAt(const PatchLayout& layout, uint32_t p, uint32_t v) {
     if (tri[0] == v || tri[1] == v || tri[2] == v) return t;
   }
   return ~0u;
+}
+
+uint32_t deepestPatchVertex(const PatchLayout& layout, uint32_t p) {
+  const PatchGraph g = patchGraph(layout, layout.patches[p]);
+  std::unordered_map<uint32_t, double> dist;
+  using Item = std::pair<double, uint32_t>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<>> queue;
+  for (const uint32_t v : g.onBoundary) {
+    dist[v] = 0.0;
+    queue.push({0.0, v});
+  }
+  uint32_t deepest = ~0u;
+  double far = 0.0;
+  while (!queue.empty()) {
+    const auto [d, u] = queue.top();
+    queue.pop();
+    if (d > dist.at(u)) continue;
+    if (d > far || (d == far && d > 0.0 && u < deepest)) far = d, deepest = u;
+    const auto [begin, end] = g.neighboursOf(u);
+    for (auto it = begin; it != end; ++it) {
+      const uint32_t w = it->second;
+      if (g.onBoundary.contains(w)) continue;
+      const double nd = d + glm::length(layout.positions[w] - layout.positions[u]);
+      const auto [at, inserted] = dist.try_emplace(w, nd);
+      if (!inserted && !(nd < at->second)) continue;
+      at->second = nd;
+      queue.push({nd, w});
+    }
+  }
+  return deepest;
+}
+
+bool splitPatchFromDeepest(PatchLayout& layout, uint32_t p, uint32_t maxSides) {
+  if (p >= layout.patches.size()) return false;
+  const uint32_t v = deepestPatchVertex(layout, p);
+  if (v == ~0u) return false;
+  return applyCut(layout, p, findCut(layout, p, {v}, maxSides, kBalancedCutShare), maxSides);
 }
 
 bool splitPatchThrough(PatchLayout& layout, uint32_t p, uint32_t triangle, uint32_t maxSides) {

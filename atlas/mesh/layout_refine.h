@@ -148,6 +148,17 @@ uint32_t patchTriangleAt(const PatchLayout& layout, uint32_t p, uint32_t v);
 // qualifies (the layout may then have gained a corner, still valid).
 bool splitPatchThrough(PatchLayout& layout, uint32_t patch, uint32_t triangle, uint32_t maxSides = 8);
 
+// The vertex of `patch` farthest from its boundary (shortest paths along its edges; of equally far
+// ones the lowest id), ~0u for a patch without inner vertices.
+uint32_t deepestPatchVertex(const PatchLayout& layout, uint32_t patch);
+
+// Splits `patch` by a cut through its deepest vertex (deepestPatchVertex) whose ends lie at least a
+// quarter of the perimeter apart on both sides, under splitPatchThrough's rules otherwise. Where a
+// patch closes round a tip (a tube closed at one end), this cuts it from the tip down both sides,
+// where a cut between boundary points would run along the rim and a cut through the tip to its
+// nearest boundary points would cut a sliver off. Returns false if no cut qualifies.
+bool splitPatchFromDeepest(PatchLayout& layout, uint32_t patch, uint32_t maxSides = 8);
+
 // Halves `patch`: of the shortest interior paths between boundary vertices (as splitPatchAtNeck
 // takes them), the one whose length is smallest against the smaller part's perimeter among those
 // that leave at least a quarter of the border on either side, so that neither part is a sliver;

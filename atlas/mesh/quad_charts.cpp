@@ -417,6 +417,15 @@ ResampledMesh resampleInLayout(PatchLayout& layout, const QuadChartOptions& opti
   return r;
 }
 
+// At most this many cuts lead from a charted patch to any of its parts under per-patch sizing.
+constexpr uint32_t kMaxSizingCuts = 4;
+// The L2 stretch past which a patch's parameterization is cut before it is doubled: doubling from
+// the smallest density size (65^2) to the largest (kMaxDensityChartSize) shrinks texels 16 times,
+// so a map that squeezes the surface more than that cannot be sampled within the bound by growing.
+// (The mean-value map of a tube closed at one end squeezes its tip exponentially in the tube's
+// length; the shared scans' patches stay under 6.)
+constexpr double kCollapsedStretch = double(kMaxDensityChartSize - 1) / 64.0;
+
 // Per-patch sizing (MeshSizing::kPatch): each patch's charts and size, and the rounds that
 // resample them.
 struct PatchSizing {
@@ -523,8 +532,22 @@ struct PatchSizing {
     e.previousSize = 0;
   }
   // Where a cut of a patch goes: through a fold of its charts, else across in halves, else at its
-  // neck (kFirst); or through the input vertex farthest from its charts (kWorstVertex).
-  enum class CutAt { kFirst, kWorstVertex };
+  // neck (kFirst); through the input vertex farthest from its charts (kWorstVertex); or through
+  // its vertex farthest from its boundary (kDeepest), for a parameterization collapsed round a tip.
+  enum class CutAt { kFirst, kWorstVertex, kDeepest };
+  // Patch p's parameterization squeezes the surface more than doubling can make up for: its stretch
+  // is past kCollapsedStretch, or its charts sample it more coarsely than `bound` where their
+  // texels are already too short to halve.
+  bool collapsed(uint32_t p, double bound) const {
+    const Entry& e = patches[p];
+    if (e.stats.param.stretchL2 > kCollapsedStretch) return true;
+    return error(p) > bound && 0.5 * shortestTexelSide(e.charts) < ro.minSampleGap;
+  }
+  static double shortestTexelSide(const std::vector<GeometryImage>& charts) {
+    double shortest = std::numeric_limits<double>::infinity();
+    for (const GeometryImage& g : charts) shortest = std::min(shortest, g.quality.shortestTexelSide);
+    return shortest;
+  }
   // A layout triangle of patch p at the input vertex farthest from its charts' surface (~0u when
   // none is known).
   uint32_t worstTriangle(uint32_t p) const {
@@ -551,7 +574,9 @@ struct PatchSizing {
     // are made even after, and no part there with fewer than 4 border edges.
     const uint32_t maxSides = sides ? 9 : 8;
     bool done = false;
-    if (at == CutAt::kWorstVertex) {
+    if (at == CutAt::kDeepest) {
+      done = splitPatchFromDeepest(layout, p, maxSides);
+    } else if (at == CutAt::kWorstVertex) {
       const uint32_t worst = worstTriangle(p);
       if (worst == ~0u) return false;
       done = splitPatchThrough(layout, p, worst, maxSides);
@@ -604,6 +629,7 @@ struct PatchSizing {
   bool tryCut(uint32_t p, uint32_t base, bool sides, bool folding, double bound) {
     const double before = error(p);
     const bool missing = before > 2.0 * bound;
+    if (collapsed(p, bound) && tryCutAt(p, base, sides, folding, CutAt::kDeepest, 0.5 * before)) return true;
     if (tryCutAt(p, base, sides, folding, CutAt::kFirst, missing ? 0.5 * before : 0.0)) return true;
     return missing && tryCutAt(p, base, sides, folding, CutAt::kWorstVertex, 0.5 * before);
   }
@@ -667,9 +693,6 @@ struct PatchSizing {
   }
 };
 
-// At most this many cuts lead from a charted patch to any of its parts under per-patch sizing.
-constexpr uint32_t kMaxSizingCuts = 4;
-
 // Per-patch sizing, after the first resampling. Each patch whose charts sample the surface more
 // coarsely than `bound` is resampled at twice the size, up to kMaxDensityChartSize, the samples
 // `cap`, and texel sides of ResampleOptions::minSampleGap. A patch is cut at its neck instead, its parts starting again
@@ -678,7 +701,9 @@ constexpr uint32_t kMaxSizingCuts = 4;
 //     one's parameterization squeezes it), or it cannot grow;
 //   - its charts fold, or a doubling made them fold more (the finer texels resolve a fold of the
 //     parameterization); where no cut is found, it goes back to the size before if that one met
-//     the bound.
+//     the bound;
+//   - its parameterization has collapsed (PatchSizing::collapsed): then the cut goes first through
+//     its vertex farthest from its boundary, down both sides (splitPatchFromDeepest).
 // Each cut is resampled at once and kept only where the patches it changed fold less than before
 // (a cut for folds) or no more (a cut for the sampling error).
 // Where no cut is found it goes on growing while it can: the sampling bound (and so the Hausdorff
@@ -720,7 +745,7 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
       // halve it is no squeeze.
       const bool squeezing =
           doubled && err > bound && e.previousSize >= base && err > 0.5 * PatchSizing::worstError(e.previousCharts);
-      if ((flips > 0 || squeezing || e.cutAsked) && mayCut(e))
+      if ((flips > 0 || squeezing || e.cutAsked || z.collapsed(p, bound)) && mayCut(e))
         squeezed.push_back({double(flips) + err / bound, p});
       else if (err > bound || flips > 0)
         asking.push_back({err / bound, p});
@@ -763,8 +788,7 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
       // Halved texel sides must stay ResampleOptions::minSampleGap (two lattice steps of the coding)
       // long: on texels of a step or so, the coding's rounding puts samples on one point or three
       // on one line.
-      double shortest = std::numeric_limits<double>::infinity();
-      for (const GeometryImage& g : e.charts) shortest = std::min(shortest, g.quality.shortestTexelSide);
+      const double shortest = PatchSizing::shortestTexelSide(e.charts);
       uint32_t* stop = e.size >= kMaxDensityChartSize       ? &st.patchesAtLargestSize
                        : samples + growth > cap             ? &st.patchesAtSampleCap
                        : 0.5 * shortest < z.ro.minSampleGap ? &st.patchesAtLattice

@@ -857,6 +857,72 @@ TEST(SideEars, AnEarOnAnOpenSideGetsACorner) {
   EXPECT_EQ(resampleLayout(layout, ro).param.degenerateTriangles, 0u);
 }
 
+// A tube closed at one end by a cone (a sock), open at its rim, as one 3-sided patch: its
+// mean-value map squeezes the tip exponentially in the tube's length. The cut from its deepest
+// vertex (the tip) runs down both sides, into two halves that each reach the tip and the rim and
+// map with a quarter of the whole's stretch or less.
+TEST(PatchSplit, ASockIsCutFromItsTipDownBothSides) {
+  constexpr double kPi = 3.14159265358979323846;
+  const uint32_t segments = 24, rings = 160;
+  const float radius = 0.03f, length = 2.0f;  // the antenna of mesh_family's thin_parts
+  PatchLayout layout;
+  for (uint32_t k = 0; k <= rings; ++k)
+    for (uint32_t j = 0; j < segments; ++j) {
+      const double a = 2.0 * kPi * j / segments;
+      layout.positions.push_back(
+          {radius * float(std::cos(a)), radius * float(std::sin(a)), length * float(k) / float(rings)});
+    }
+  const uint32_t tip = uint32_t(layout.positions.size());
+  layout.positions.push_back({0.f, 0.f, length + radius});
+  auto at = [&](uint32_t k, uint32_t j) { return k * segments + j % segments; };
+  Patch sock;
+  for (uint32_t k = 0; k < rings; ++k)
+    for (uint32_t j = 0; j < segments; ++j) {  // outward normals, counter-clockwise
+      sock.triangles.push_back(uint32_t(layout.triangles.size()));
+      layout.triangles.push_back({at(k, j), at(k, j + 1), at(k + 1, j + 1)});
+      sock.triangles.push_back(uint32_t(layout.triangles.size()));
+      layout.triangles.push_back({at(k, j), at(k + 1, j + 1), at(k + 1, j)});
+    }
+  for (uint32_t j = 0; j < segments; ++j) {
+    sock.triangles.push_back(uint32_t(layout.triangles.size()));
+    layout.triangles.push_back({at(rings, j), at(rings, j + 1), tip});
+  }
+  // The rim, in the order its triangles run round it. Three open sides.
+  std::vector<uint32_t> rim;
+  for (uint32_t j = 0; j <= segments; ++j) rim.push_back(at(0, j));
+  for (uint32_t s = 0; s < 3; ++s) {
+    PatchSide side;
+    side.vertices.assign(rim.begin() + s * segments / 3, rim.begin() + (s + 1) * segments / 3 + 1);
+    sock.sides.push_back(side);
+  }
+  layout.patches.push_back(sock);
+  expectValid(layout);
+  EXPECT_EQ(deepestPatchVertex(layout, 0), tip);
+  const PatchParameterization whole = parameterizePatch(layout, 0);
+  // Past the L2 stretch of 16 the per-patch sizing takes a map for collapsed (quad_charts.cpp).
+  EXPECT_TRUE(whole.quality.degenerateTriangles > 0 || whole.quality.stretchL2 > 16.0) << "the whole sock collapses";
+
+  ASSERT_TRUE(splitPatchFromDeepest(layout, 0));
+  expectValid(layout);
+  ASSERT_EQ(layout.patches.size(), 2u);
+  for (uint32_t p = 0; p < 2; ++p) {
+    SCOPED_TRACE(p);
+    float low = length, high = 0.f;
+    for (const uint32_t t : layout.patches[p].triangles)
+      for (const uint32_t v : layout.triangles[t])
+        low = std::min(low, layout.positions[v].z), high = std::max(high, layout.positions[v].z);
+    EXPECT_EQ(low, 0.f) << "reaches the rim";
+    EXPECT_EQ(high, length + radius) << "reaches the tip";
+    const PatchParameterization half = parameterizePatch(layout, p);
+    std::printf("[sock] part %u: %zu triangles, L2 stretch %.3g, mean-value %.3g (the whole sock: %.3g, %.3g)\n", p,
+                layout.patches[p].triangles.size(), half.quality.stretchL2, half.initial.stretchL2,
+                whole.quality.stretchL2, whole.initial.stretchL2);
+    EXPECT_GT(layout.patches[p].triangles.size(), 2 * segments * rings / 5) << "not a sliver";
+    EXPECT_EQ(half.quality.degenerateTriangles, 0u);
+    EXPECT_LT(half.quality.stretchL2, 0.25 * whole.quality.stretchL2);
+  }
+}
+
 // An ear on an open side of a patch that has 8 sides already cannot take a corner: the patch is
 // cut at its neck first, which appends a patch (and so may move every patch in memory), and the
 // part with the ear then gets its corner. Built as a single patch so that the layout's patch
