@@ -115,6 +115,7 @@ nlohmann::json resampleJson(const MeshResampleStats& rs, uint64_t spilledBytes) 
                       {"patches_over_bound_at_largest_size", rs.patchesAtLargestSize},
                       {"patches_over_bound_at_sample_cap", rs.patchesAtSampleCap},
                       {"patches_over_bound_at_lattice", rs.patchesAtLattice},
+                      {"patches_over_bound_flat", rs.patchesAtFlatError},
                       {"patches_over_bound_at_memory", rs.patchesAtMemory}};
   // Per chart: its patch and quad, its side in samples, stretch of the sampled image, flipped and
   // degenerate texels.

@@ -1243,6 +1243,79 @@ bool splitPatchAtNeck(PatchLayout& layout, uint32_t p) {
   return splitByCut(layout, p, {}, 8) || splitPatchAtCornerNeck(layout, p);
 }
 
+void EarSplits::undo(PatchLayout& layout) {
+  if (changed.empty()) return;
+  for (auto it = changed.rbegin(); it != changed.rend(); ++it) layout.triangles[it->first] = it->second;
+  layout.triangles.resize(triangles);
+  layout.positions.resize(positions);
+  layout.colours.resize(colours);
+  changed.clear();
+}
+
+namespace {
+
+// Splits patch p's ear t (a -> b -> c, with a -> b and b -> c on an open side) and the triangle u
+// across its inner edge (a -> c -> d) at the edge's midpoint.
+void splitEar(PatchLayout& layout, uint32_t p, uint32_t t, uint32_t u, std::array<uint32_t, 4> abcd,
+              EarSplits& record) {
+  const auto [a, b, c, d] = abcd;
+  const uint32_t m = uint32_t(layout.positions.size());
+  layout.positions.push_back(0.5f * (layout.positions[a] + layout.positions[c]));
+  if (!layout.colours.empty())
+    layout.colours.push_back(glm::u8vec4((glm::uvec4(layout.colours[a]) + glm::uvec4(layout.colours[c])) / 2u));
+  record.changed.push_back({t, layout.triangles[t]});
+  record.changed.push_back({u, layout.triangles[u]});
+  const uint32_t t2 = uint32_t(layout.triangles.size()), u2 = t2 + 1;
+  layout.triangles[t] = {a, b, m};
+  layout.triangles.push_back({b, c, m});
+  layout.triangles[u] = {a, m, d};
+  layout.triangles.push_back({m, c, d});
+  layout.patches[p].triangles.push_back(t2);
+  layout.patches[p].triangles.push_back(u2);
+}
+
+}  // namespace
+
+uint32_t splitOpenSideEars(PatchLayout& layout, EarSplits* record) {
+  *record = EarSplits{layout.positions.size(), layout.colours.size(), layout.triangles.size(), {}};
+  uint32_t split = 0;
+  for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    // Directed edge -> triangle of this patch, as mendFirstSideEar finds its ears.
+    std::unordered_map<uint64_t, uint32_t> inside;
+    auto index = [&](uint32_t t) {
+      const auto& tri = layout.triangles[t];
+      for (int c = 0; c < 3; ++c) inside[directedEdgeKey(tri[c], tri[(c + 1) % 3])] = t;
+    };
+    for (uint32_t t : layout.patches[p].triangles) index(t);
+    for (const PatchSide& side : layout.patches[p].sides) {
+      if (side.neighbourPatch >= 0) continue;
+      const std::vector<uint32_t>& v = side.vertices;
+      for (size_t k = 0; k + 2 < v.size(); ++k) {
+        const uint32_t a = v[k], b = v[k + 1], c = v[k + 2];
+        const auto ear = inside.find(directedEdgeKey(a, b));
+        if (ear == inside.end()) continue;
+        const uint32_t t = ear->second;
+        const auto& et = layout.triangles[t];
+        if (et[0] != c && et[1] != c && et[2] != c) continue;
+        const auto across = inside.find(directedEdgeKey(a, c));  // the triangle across the ear's inner edge
+        if (across == inside.end()) continue;
+        const uint32_t u = across->second;
+        uint32_t d = ~0u;
+        for (uint32_t w : layout.triangles[u])
+          if (w != a && w != c) d = w;
+        if (std::find(v.begin(), v.end(), d) != v.end()) continue;
+        splitEar(layout, p, t, u, {a, b, c, d}, *record);
+        for (const uint32_t x : {t, u, uint32_t(layout.triangles.size() - 2), uint32_t(layout.triangles.size() - 1)})
+          index(x);
+        inside.erase(directedEdgeKey(a, c));
+        inside.erase(directedEdgeKey(c, a));
+        ++split;
+      }
+    }
+  }
+  return split;
+}
+
 GeometryImageSet resampleAndRepair(PatchLayout& layout, const ResampleOptions& options,
                                    const ChartRepairOptions& repair, ChartRepairStats* stats) {
   GeometryImageSet set = resampleLayout(layout, options);

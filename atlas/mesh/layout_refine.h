@@ -12,8 +12,11 @@
 // well); Sander, Snyder, Gortler, Hoppe, SIGGRAPH 2001 (charts split where stretch is high).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
+#include <utility>
+#include <vector>
 
 #include "atlas/mesh/patch_layout.h"
 #include "atlas/mesh/resample.h"
@@ -63,6 +66,26 @@ uint32_t straightenSides(PatchLayout& layout, uint32_t rounds = 2, bool keepHalv
 // already is first cut at its neck (splitPatchAtNeck) if splitFull, which may change patches
 // beyond its neighbours. Returns the ears mended.
 uint32_t moveSideEars(PatchLayout& layout, const std::vector<uint32_t>& patches = {}, bool splitFull = true);
+
+// What splitOpenSideEars changed: undo() puts the triangles and vertices back, for when the
+// patches it split are dropped (a quad layout tried, then another straightened from the charted
+// patches).
+struct EarSplits {
+  size_t positions = 0, colours = 0, triangles = 0;                   // the sizes before the splits
+  std::vector<std::pair<uint32_t, std::array<uint32_t, 3>>> changed;  // triangles split in place, as they were
+  void undo(PatchLayout& layout);
+};
+
+// Splits every ear left on an open side (one moveSideEars could not make a corner of: its patch
+// has no side to spare) at the midpoint of its inner edge, with the triangle across that edge,
+// where that triangle's third vertex is not on the ear's side: the ear's middle vertex then has
+// two triangles, with a vertex inside the patch, and the ear is no longer flat in the
+// parameterization (a flat ear's middle vertex lies off every chart's surface, about a triangle's
+// height away, however finely the chart samples it). A triangle across with all its vertices on
+// the side (a strip of rim triangles) is left: the new vertex would lie on the side's line in the
+// polygon, and the map would collapse there. The surface is the same; the layout gains a vertex
+// and two triangles an ear. Records the changes in *record; returns the ears split.
+uint32_t splitOpenSideEars(PatchLayout& layout, EarSplits* record);
 
 // Cuts patch `patch` along the shortest path of interior edges (through interior vertices only)
 // between its corners i and j, which must not be adjacent (2 <= (j - i) mod n <= n - 2). The

@@ -424,6 +424,9 @@ constexpr uint32_t kMaxSizingCuts = 4;
 // so a map that squeezes the surface more than that cannot be sampled within the bound by growing.
 // (The mean-value map of a tube closed at one end squeezes its tip exponentially in the tube's
 // length; the shared scans' patches stay under 6.)
+// A doubling that keeps this share of a patch's sampling error or more is flat (a smooth surface's
+// error falls about four times).
+constexpr double kFlatDoubling = 0.9;
 constexpr double kCollapsedStretch = double(kMaxDensityChartSize - 1) / 64.0;
 
 // Per-patch sizing (MeshSizing::kPatch): each patch's charts and size, and the rounds that
@@ -446,6 +449,8 @@ struct PatchSizing {
     // only where they fold less (a fold narrower than a texel is the sampling's).
     bool grownForFolds = false;
     uint32_t cuts = 0;  // cuts on the way from a charted patch
+    // Doublings in a row, up to its last, that lowered its sampling error by less than a tenth.
+    uint32_t flatDoublings = 0;
   };
   PatchLayout& layout;
   ResampleOptions ro;
@@ -517,11 +522,16 @@ struct PatchSizing {
   // Doubles patch p's size, keeping its charts to go back to.
   void grow(uint32_t p) {
     Entry& e = patches[p];
+    e.flatDoublings = e.previousSize > 0 && flatDoubling(e) ? e.flatDoublings + 1 : 0;
     e.previousSize = e.size;
     e.previousCharts = std::move(e.charts);
     e.previousStats = e.stats;
     e.size = 2 * e.size - 1;
     e.todo = true;
+  }
+  // Its last doubling lowered its sampling error by less than a tenth.
+  static bool flatDoubling(const Entry& e) {
+    return worstError(e.charts) >= kFlatDoubling * worstError(e.previousCharts);
   }
   // Puts patch p back at the size before its last doubling.
   void shrink(uint32_t p) {
@@ -738,6 +748,17 @@ uint32_t sizePatches(PatchSizing& z, const QuadChartOptions& o, uint32_t base, d
       if (foldedMore && !mayCut(e) && PatchSizing::worstError(e.previousCharts) <= bound) {
         z.shrink(p);
         e.settled = true;
+        continue;
+      }
+      // Two doublings in a row that lowered the error by less than a tenth, and no cut left: the
+      // error is not the sampling's (a vertex no chart of this map passes near), and more doublings
+      // would only add samples (and raise the largest chart size, and with it every chart's
+      // coarsest level). It stays, at the smaller error of the two sizes.
+      if (doubled && !mayCut(e) && err > bound && e.flatDoublings >= 1 && PatchSizing::flatDoubling(e) &&
+          flips <= PatchSizing::flips(e.previousCharts)) {
+        if (err > PatchSizing::worstError(e.previousCharts)) z.shrink(p);
+        e.settled = true;
+        ++st.patchesAtFlatError;
         continue;
       }
       // Below the layout's density size a patch's error comes from its creases and kinked sides as
@@ -963,11 +984,12 @@ ResampledMesh resamplePerPatch(PatchLayout& layout, const QuadChartOptions& o, Q
     spdlog::warn(
         "{}: {} flipped texels and a sampling error of {:.4f}% of the diagonal (bound {:.4f}%) are left; "
         "patches over the bound that could not grow: {} at {}^2, {} at the samples' cap ({:.0f} per "
-        "triangle), {} at texels as short as the position lattice allows, {} at {}",
+        "triangle), {} at texels as short as the position lattice allows, {} at {}, {} whose doublings stopped "
+        "lowering their error",
         o.input.string(), set.image.flippedTexels, 100.0 * set.image.sampleError / std::max(diagonal, 1e-300),
         100.0 * bound / std::max(diagonal, 1e-300), st.patchesAtLargestSize, kMaxDensityChartSize,
         st.patchesAtSampleCap, cap / double(std::max<size_t>(layout.triangles.size(), 1)), st.patchesAtLattice,
-        st.patchesAtMemory, spelled(o, "maxMemory"));
+        st.patchesAtMemory, spelled(o, "maxMemory"), st.patchesAtFlatError);
   if (st.repair.stoppedForWork)
     spdlog::warn(
         "{}: the cuts stopped at their budget, {} times the surface's triangles parameterized again; raise {} "
@@ -1020,11 +1042,14 @@ ResampledMesh makeQuadCharts(PatchLayout&& layout, const QuadChartOptions& optio
   // 4-sided patch a single chart, so there no straightening may leave a patch a sliver of itself;
   // kites keep the straightening they were measured with.
   uint32_t lengthened = 0, straightened = 0, ears = 0;
+  EarSplits earSplits;  // the last straightening's, undone before the next (from the charted patches)
   auto straighten = [&](QuadLayout quads, const std::string& suffix) {
+    earSplits.undo(layout);
     lengthened = lengthenShortSides(layout);
     straightened =
         options.straightenRounds ? straightenSides(layout, options.straightenRounds, quads == QuadLayout::kSides) : 0;
     ears = moveSideEars(layout);
+    ears += splitOpenSideEars(layout, &earSplits);
     finishStage(meter, "straighten" + suffix);
   };
   ResampledMesh r;

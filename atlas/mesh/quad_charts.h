@@ -162,6 +162,7 @@ struct MeshResampleStats {
   // largest chart size (kMaxDensityChartSize), the samples cap (meshSampleCap), texels as short as
   // the coding's lattice allows (ResampleOptions::minSampleGap), or the memory.
   uint32_t patchesAtLargestSize = 0, patchesAtSampleCap = 0, patchesAtLattice = 0, patchesAtMemory = 0;
+  uint32_t patchesAtFlatError = 0;  // two doublings in a row lowered its error by less than a tenth
   std::vector<ChartQuality> perChart;
 };
 

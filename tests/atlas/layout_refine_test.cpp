@@ -857,6 +857,74 @@ TEST(SideEars, AnEarOnAnOpenSideGetsACorner) {
   EXPECT_EQ(resampleLayout(layout, ro).param.degenerateTriangles, 0u);
 }
 
+// An ear left on an open side (moveSideEars would have made its middle vertex a corner) is split
+// at its inner edge: the middle vertex, lifted out of the plane here, then has area round it in the
+// polygon, and the chart passes through it instead of a triangle's height away. Undone, the layout
+// is as it was.
+TEST(SideEars, AnEarLeftOnAnOpenSideIsSplitAtItsInnerEdge) {
+  PatchLayout shared = earLayout(true);
+  EarSplits none;
+  EXPECT_EQ(splitOpenSideEars(shared, &none), 0u) << "an ear on a shared side is moveSideEars' to mend";
+  PatchLayout layout = earLayout(false);
+  layout.positions[7].z = 0.3f;
+  const PatchLayout original = layout;
+  auto area = [](const PatchLayout& l) {
+    double a = 0.0;
+    for (const auto& t : l.triangles)
+      a += 0.5 * glm::length(glm::cross(glm::dvec3(l.positions[t[1]] - l.positions[t[0]]),
+                                        glm::dvec3(l.positions[t[2]] - l.positions[t[0]])));
+    return a;
+  };
+  const double areaBefore = area(layout);
+  ResampleOptions ro;
+  ro.chartSize = 17;
+  const GeometryImageSet before = resampleLayout(layout, ro);
+  EXPECT_GT(before.param.degenerateTriangles, 0u) << "the ear has no area in the polygon";
+  EXPECT_GT(before.image.sampleError, 0.1) << "the chart misses the ear's middle vertex";
+
+  EarSplits record;
+  EXPECT_EQ(splitOpenSideEars(layout, &record), 1u);
+  expectValid(layout);
+  ASSERT_EQ(layout.positions.size(), 9u);
+  EXPECT_EQ(layout.positions[8], glm::vec3(1.0f, 0.0f, 0.0f)) << "the midpoint of the inner edge 5-6";
+  EXPECT_EQ(layout.triangles.size(), 9u);
+  EXPECT_EQ(layout.patches[0].triangles.size(), 9u);
+  EXPECT_EQ(layout.patches[0].sides[0].vertices, (std::vector<uint32_t>{0, 5, 7, 6, 1})) << "the sides stay";
+  uint32_t fan = 0;
+  for (const auto& t : layout.triangles) fan += uint32_t(std::count(t.begin(), t.end(), 7u));
+  EXPECT_EQ(fan, 2u);
+  EXPECT_NEAR(area(layout), areaBefore, 1e-6 * areaBefore) << "the surface is the same";
+  const GeometryImageSet after = resampleLayout(layout, ro);
+  EXPECT_EQ(after.param.degenerateTriangles, 0u);
+  EXPECT_LT(after.image.sampleError, 0.1 * before.image.sampleError);
+  EarSplits again;
+  EXPECT_EQ(splitOpenSideEars(layout, &again), 0u) << "nothing left to split";
+
+  record.undo(layout);
+  layout.patches = original.patches;
+  EXPECT_EQ(layout.triangles, original.triangles);
+  EXPECT_EQ(layout.positions, original.positions);
+  expectValid(layout);
+}
+
+// A strip of rim triangles: the triangle across an ear's inner edge has its third vertex on the
+// ear's side too, so the midpoint would lie on the side's line in the polygon. It is left.
+TEST(SideEars, AnEarWhoseTriangleAcrossLiesOnTheSameSideIsLeft) {
+  // One open 4-sided patch: side 0 runs 0 -> 4 -> 5 -> 6 -> 1; the ear 4 -> 5 -> 6 has 4 -> 6 -> 1
+  // across its inner edge, every vertex on side 0.
+  PatchLayout layout;
+  layout.positions = {{0, 0, 0}, {4, 0, 0}, {4, 2, 0}, {0, 2, 0}, {1, 0, 0}, {2, -0.3f, 0}, {3, -0.2f, 0}};
+  layout.triangles = {{4, 5, 6}, {4, 6, 1}, {0, 4, 3}, {4, 1, 2}, {4, 2, 3}};
+  Patch p;
+  p.triangles = {0, 1, 2, 3, 4};
+  p.sides = {{{0, 4, 5, 6, 1}}, {{1, 2}}, {{2, 3}}, {{3, 0}}};
+  layout.patches = {p};
+  expectValid(layout);
+  EarSplits record;
+  EXPECT_EQ(splitOpenSideEars(layout, &record), 0u);
+  EXPECT_EQ(layout.triangles.size(), 5u);
+}
+
 // A tube closed at one end by a cone (a sock), open at its rim, as one 3-sided patch: its
 // mean-value map squeezes the tip exponentially in the tube's length. The cut from its deepest
 // vertex (the tip) runs down both sides, into two halves that each reach the tip and the rim and
