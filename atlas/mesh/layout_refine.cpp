@@ -1280,6 +1280,8 @@ uint32_t splitOpenSideEars(PatchLayout& layout, EarSplits* record) {
   *record = EarSplits{layout.positions.size(), layout.colours.size(), layout.triangles.size(), {}};
   uint32_t split = 0;
   for (uint32_t p = 0; p < layout.patches.size(); ++p) {
+    const std::vector<PatchSide>& sides = layout.patches[p].sides;
+    if (std::none_of(sides.begin(), sides.end(), [](const PatchSide& s) { return s.neighbourPatch < 0; })) continue;
     // Directed edge -> triangle of this patch, as mendFirstSideEar finds its ears.
     std::unordered_map<uint64_t, uint32_t> inside;
     auto index = [&](uint32_t t) {
@@ -1287,7 +1289,7 @@ uint32_t splitOpenSideEars(PatchLayout& layout, EarSplits* record) {
       for (int c = 0; c < 3; ++c) inside[directedEdgeKey(tri[c], tri[(c + 1) % 3])] = t;
     };
     for (uint32_t t : layout.patches[p].triangles) index(t);
-    for (const PatchSide& side : layout.patches[p].sides) {
+    for (const PatchSide& side : sides) {
       if (side.neighbourPatch >= 0) continue;
       const std::vector<uint32_t>& v = side.vertices;
       for (size_t k = 0; k + 2 < v.size(); ++k) {

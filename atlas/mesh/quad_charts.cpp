@@ -424,10 +424,10 @@ constexpr uint32_t kMaxSizingCuts = 4;
 // so a map that squeezes the surface more than that cannot be sampled within the bound by growing.
 // (The mean-value map of a tube closed at one end squeezes its tip exponentially in the tube's
 // length; the shared scans' patches stay under 6.)
+constexpr double kCollapsedStretch = double(kMaxDensityChartSize - 1) / 64.0;
 // A doubling that keeps this share of a patch's sampling error or more is flat (a smooth surface's
 // error falls about four times).
 constexpr double kFlatDoubling = 0.9;
-constexpr double kCollapsedStretch = double(kMaxDensityChartSize - 1) / 64.0;
 
 // Per-patch sizing (MeshSizing::kPatch): each patch's charts and size, and the rounds that
 // resample them.
