@@ -285,8 +285,9 @@ CLI::App* addBenchCommand(CLI::App& app, BenchArgs& a) {
       ->capture_default_str();
   b->add_flag("--render", a.render, "Also draw each cut (headless EGL) and record draw_ms");
   b->add_option("--gpu-cache", a.gpuCache,
-                "With --render: the GPU page pool in bytes (K, M, G), the chart roots resident; auto: a pool that "
-                "holds the largest node budget's cuts")
+                "With --render: the GPU page pool in bytes (K, M, G), the chart roots resident while they fit "
+                "with room to split one, else each root a coarser stand-in; auto: a pool that holds the largest "
+                "node budget's cuts")
       ->capture_default_str();
   b->add_option("--frame-ms", a.frameMs, "Cost model: target frame time in ms (needs --tri-rate)");
   b->add_option("--tri-rate", a.triRate, "Cost model: triangle throughput in triangles/s (e.g. from bench_render)");

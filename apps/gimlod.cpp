@@ -222,6 +222,11 @@ int runRender(const RenderArgs& a) {
   gl::AtlasScene scene(atlas, so);
   spdlog::info("GPU page pool: {} pages of {} bytes in {} texture array(s), room for cuts of {} nodes",
                scene.renderer().pageCapacity(), scene.pageBytes(), scene.renderer().pageArrays(), scene.nodeRoom());
+  if (!scene.rootStandIns().empty())
+    spdlog::info(
+        "the {} chart roots do not fit the GPU cache with room to split: each has a stand-in of {}^2 samples "
+        "({} bytes in all), and their pages come and go like the others",
+        atlas.hierarchy.chartCount(), (1u << scene.renderer().setup().standInIntervalsLog2) + 1, scene.standInBytes());
   if (scene.nodeBudget(a.maxNodes) != a.maxNodes)
     spdlog::warn("--max-nodes {} is above what the GPU page pool holds ({} pages): using {}", a.maxNodes,
                  scene.renderer().pageCapacity(), scene.nodeRoom());
@@ -247,7 +252,7 @@ int runRender(const RenderArgs& a) {
       "budget_below_roots,max_nodes,max_triangles,frame_ms,gpu_ms,closed_groups,grouped_roots,"
       "resident_gpu_bytes,gpu_budget_bytes,resident_ram_bytes,ram_budget_bytes,upload_bytes,"
       "loads_issued,loads_done,loads_cancelled,loads_failed,prefetch_requests,pages_needed,"
-      "pages_resident,incomplete\n";
+      "pages_resident,incomplete,roots_on_stand_ins,charts_coarsened\n";
   double drawMsTotal = 0.0;
   uint64_t triTotal = 0;
   bool warnedBelowRoots = false;
@@ -290,10 +295,10 @@ int runRender(const RenderArgs& a) {
         int(f.adapt.nodeBudgetBound), f.adapt.constraintRaises, f.adapt.constraintSplits, f.attributes.texels,
         f.attributes.abovePage, f.adapt.rootFloor, int(f.adapt.budgetBelowRoots), budgetMode ? bo.maxNodes : a.maxNodes,
         budgetMode ? bo.maxTriangles : 0, frameMs, f.draw.gpuMs, f.adapt.closedGroups, f.adapt.groupedRoots);
-    csv += fmt::format(",{},{},{},{},{},{},{},{},{},{},{},{},{}\n", f.residentGpuBytes, f.gpuBudgetBytes,
+    csv += fmt::format(",{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", f.residentGpuBytes, f.gpuBudgetBytes,
                        f.residentRamBytes, so.asyncLoads ? so.ramCacheBytes : 0, f.uploadBytes, f.loadsIssued,
                        f.loadsDone, f.loadsCancelled, f.loadsFailed, f.prefetchRequests, f.pagesNeeded, f.pagesResident,
-                       int(f.incomplete));
+                       int(f.incomplete), f.rootsOnStandIns, f.chartsCoarsened);
     drawMsTotal += f.draw.drawMs;
     triTotal += f.draw.triangles;
     spdlog::info("frame {:4d}: {:5d} nodes, {:8d} triangles, max error {:.3f} px, adapt {:.3f} ms, draw {:.2f} ms", i,

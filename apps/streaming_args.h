@@ -57,8 +57,9 @@ inline void addStreamingOptions(CLI::App* cmd, StreamingArgs& a) {
                 "Load pages on loader threads; missing nodes draw with a resident ancestor's data (implied by the "
                 "loader's options below)");
   cmd->add_option("--gpu-cache", a.gpuCache,
-                  "GPU page pool in bytes (K, M, G): as many pages as fit, the chart roots resident; auto: a pool "
-                  "that holds the node budget's cuts")
+                  "GPU page pool in bytes (K, M, G): as many pages as fit, the chart roots resident while they fit "
+                  "with room to split one, else each root a coarser stand-in; auto: a pool that holds the node "
+                  "budget's cuts")
       ->capture_default_str();
   a.loaderOnly = {
       cmd->add_option("--ram-cache", a.ramCache,

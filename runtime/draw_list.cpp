@@ -5,7 +5,8 @@
 
 namespace gimlod {
 
-DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n, uint32_t layer) {
+DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n, uint32_t layer,
+                      uint32_t pageResLog2) {
   const ChartInfo& c = m.charts[n.id.chart];
   const uint32_t L = p.intervalsLog2;
   const int32_t M = int32_t(1u << L);
@@ -15,7 +16,7 @@ DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const Cu
   d.originY = c.gridY * M + int32_t(n.id.y) * size;
   d.sizeLog2 = L - n.id.level;
   d.resLog2 = n.resLog2;
-  d.pageResLog2 = p.maxResLog2(n.id.level, c.finestLevel);
+  d.pageResLog2 = std::min(p.maxResLog2(n.id.level, c.finestLevel), pageResLog2);
   d.pageLayer = layer;
   // note: an attribute resolution above the page's is clamped to it (finer attribute pages are
   // not loaded); AttributeStats::abovePage counts those nodes.

@@ -49,7 +49,10 @@ struct StitchTables {
 // which has none coarser to move onto.
 uint8_t morphByte(const CutNode& n, uint32_t minNodeResLog2);
 
-// The draw record of a cut node whose page is in `layer`.
-DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n, uint32_t layer);
+// The draw record of a cut node whose page is in `layer`. pageResLog2: the page there holds the
+// node at this resolution (a root's stand-in) rather than at the finest its level may use, when
+// that is coarser; n.resLog2 must not be above it.
+DrawNode makeDrawNode(const AtlasManifest& m, const HierarchyParams& p, const CutNode& n, uint32_t layer,
+                      uint32_t pageResLog2 = ~0u);
 
 }  // namespace gimlod

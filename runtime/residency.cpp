@@ -29,18 +29,33 @@ PageRequestPlan planPageRequests(const Hierarchy& h, const Cut& desired, const R
   return plan;
 }
 
-ResidentCut substituteResident(const Hierarchy& h, const Cut& desired, const ViewParams& view,
-                               const ResidentFn& resident) {
+namespace {
+
+// One pass of substituteResident with the charts in levelCap held to levels <= their cap. Fills
+// overGap with the charts whose root, on its stand-in, is left below its stitching gap.
+ResidentCut substituteOnce(const Hierarchy& h, const Cut& desired, const ViewParams& view, const ResidentFn& resident,
+                           const RootStandIns& standIns, const std::unordered_map<uint32_t, uint32_t>& levelCap,
+                           std::vector<uint32_t>& overGap) {
   const HierarchyParams& p = h.params;
-  // Every missing node draws as its nearest resident ancestor (roots are locked resident).
+  const auto isResident = [&](const NodeId& n) {
+    if (!resident(n.key())) return false;
+    const auto c = levelCap.find(n.chart);
+    return c == levelCap.end() || n.level <= c->second;
+  };
+  // The finest resolution node b can be drawn at: its level's, or its stand-in's.
+  const auto drawable = [&](const NodeId& b) {
+    const uint32_t r = h.maxResLog2(b);
+    return b.level == 0 && !standIns.empty() && !isResident(b) ? std::min<uint32_t>(r, standIns.resLog2[b.chart]) : r;
+  };
+  // Every missing node draws as its nearest resident ancestor (or its root's stand-in).
   // Substitutes under another substitute are dropped, so the cut stays a partition.
   std::unordered_set<uint64_t> substitutes;
   std::vector<NodeId> candidates;
   for (const CutNode& n : desired.nodes) {
-    if (resident(n.id.key())) continue;
+    if (isResident(n.id)) continue;
     NodeId a = n.id;
-    while (a.level > 0 && !resident(a.key())) a = a.parent();
-    assert(resident(a.key()) && "substituteResident: root pages must be resident");
+    while (a.level > 0 && !isResident(a)) a = a.parent();
+    assert((isResident(a) || !standIns.empty()) && "substituteResident: root pages must be resident");
     if (substitutes.insert(a.key()).second) candidates.push_back(a);
   }
   constexpr uint32_t kUnplaced = ~0u;
@@ -65,6 +80,12 @@ ResidentCut substituteResident(const Hierarchy& h, const Cut& desired, const Vie
     }
     if (it == outer.end()) {
       drawn.nodes.push_back(n);
+      if (n.id.level == 0 && !standIns.empty() && !isResident(n.id)) {  // a desired root on its stand-in
+        ++out.nodesSubstituted;
+        CutNode& r = drawn.nodes.back();
+        r.resLog2 = std::min(r.resLog2, drawable(n.id));
+        outer[n.id.key()] = uint32_t(drawn.nodes.size() - 1);  // its error is the stand-in's
+      }
       continue;
     }
     ++out.nodesSubstituted;
@@ -73,20 +94,25 @@ ResidentCut substituteResident(const Hierarchy& h, const Cut& desired, const Vie
       drawn.nodes.push_back({b, p.minResLog2(), 0.f});
     }
     CutNode& a = drawn.nodes[it->second];
-    a.resLog2 = std::max(a.resLog2, std::min(n.resLog2, h.maxResLog2(b)));
+    a.resLog2 = std::max(a.resLog2, std::min(n.resLog2, drawable(b)));
   }
   drawn.rebuildIndex();
   // Stitching constraint without splits: substitutes only coarsen the cut, so raising their
-  // resolution suffices whenever log2 R >= depth - 1; anything else is counted.
+  // resolution suffices whenever log2 R >= depth - 1; a root on its stand-in only up to the
+  // stand-in's (the caller holds its neighbours coarser); anything else is counted.
   if (out.nodesSubstituted > 0) {
     std::vector<uint32_t> gaps;
     stitchGaps(h, drawn, gaps);
     for (size_t i = 0; i < drawn.nodes.size(); ++i) {
       CutNode& n = drawn.nodes[i];
       const uint32_t gap = gaps[i];
+      const bool standIn = n.id.level == 0 && !standIns.empty() && !isResident(n.id);
+      out.rootsOnStandIns += standIn;
       if (gap <= n.resLog2) continue;
-      if (gap <= h.maxResLog2(n.id))
+      if (gap <= drawable(n.id))
         n.resLog2 = gap;
+      else if (standIn)
+        overGap.push_back(n.id.chart);
       else
         ++out.stitchUnfixable;
     }
@@ -95,6 +121,35 @@ ResidentCut substituteResident(const Hierarchy& h, const Cut& desired, const Vie
         drawn.nodes[i].errorPx = float(screenError(h, drawn.nodes[i].id, drawn.nodes[i].resLog2, view));
   }
   return out;
+}
+
+}  // namespace
+
+ResidentCut substituteResident(const Hierarchy& h, const Cut& desired, const ViewParams& view,
+                               const ResidentFn& resident, const RootStandIns& standIns) {
+  std::unordered_map<uint32_t, uint32_t> levelCap;  // chart -> the deepest level drawn there
+  std::vector<uint32_t> overGap;
+  // Each pass caps charts beside the roots left below their gaps; caps only fall, so this ends
+  // (at the latest with every chart at its roots' stand-ins' levels).
+  for (;;) {
+    overGap.clear();
+    ResidentCut out = substituteOnce(h, desired, view, resident, standIns, levelCap, overGap);
+    bool capped = false;
+    for (const uint32_t c : overGap)
+      for (const RootNeighbour& nb : h.roots[c]) {
+        if (nb.chart < 0) continue;
+        const uint32_t cap = standIns.resLog2[c];
+        auto [it, fresh] = levelCap.try_emplace(uint32_t(nb.chart), cap);
+        if (!fresh && it->second <= cap) continue;
+        it->second = cap;
+        capped = true;
+      }
+    out.chartsCoarsened = uint32_t(levelCap.size());
+    if (!capped) {
+      out.stitchUnfixable += uint32_t(overGap.size());
+      return out;
+    }
+  }
 }
 
 }  // namespace gimlod

@@ -95,6 +95,12 @@ uint64_t pagePoolMipBytes(const RendererSetup& setup) {
          (setup.colours ? layerBytes(colourSide, mipLevels(colourSide), 4) - layerBytes(colourSide, 1, 4) : 0);
 }
 
+uint64_t standInPageBytes(const RendererSetup& setup) {
+  RendererSetup s = setup;
+  s.pageIntervalsLog2 = setup.standInIntervalsLog2;
+  return pagePoolPageBytes(s);
+}
+
 uint64_t pagePoolPageBytes(const RendererSetup& setup) {
   // Level 0 of the samples, the normals and the colours, then their mips.
   const uint64_t side = (1u << setup.pageIntervalsLog2) + 1;
@@ -143,6 +149,17 @@ struct AtlasRenderer::Impl {
   uint32_t pageSide = 0;        // P = 2^pageIntervalsLog2 + 1
   uint32_t capacity = 0;        // pages in the pool
   uint32_t layersPerArray = 0;  // page p is layer p % layersPerArray of array p / layersPerArray
+  // Root stand-ins (RendererSetup::standIns): page capacity + k is stand-in k, layer
+  // k % standInLayers of array poolArrays + k / standInLayers.
+  uint32_t poolArrays = 0, standIns = 0, standInLayers = 1;
+  uint32_t arrayOf(uint32_t page) const {
+    return page < capacity ? page / layersPerArray : poolArrays + (page - capacity) / standInLayers;
+  }
+  uint32_t layerOf(uint32_t page) const {
+    return page < capacity ? page % layersPerArray : (page - capacity) % standInLayers;
+  }
+  // The page side of `page`'s layer (the pool's, or the stand-ins').
+  uint32_t sideOf(uint32_t page) const { return page < capacity ? pageSide : (1u << setup.standInIntervalsLog2) + 1; }
   GlObject colourBuffer, depthBuffer, framebuffer;
   // With setup.samples > 1: the multisampled target the frame is drawn into, resolved into
   // framebuffer at the end of each draw.
@@ -294,8 +311,7 @@ void AtlasRenderer::Impl::createPagePool() {
   layersPerArray =
       std::min(setup.layersPerArray == 0 ? maxLayers : std::min(setup.layersPerArray, maxLayers), capacity);
   const uint32_t arrays = (capacity + layersPerArray - 1) / layersPerArray;
-  auto makeArray = [&](GLenum format, GLint levels, uint32_t side, uint32_t a) {
-    const uint32_t layers = std::min(layersPerArray, capacity - a * layersPerArray);
+  auto makeLayers = [&](GLenum format, GLint levels, uint32_t side, uint32_t layers) {
     GlObject tex = makeTexture();
     glBindTexture(GL_TEXTURE_2D_ARRAY, tex.id());
     glTexStorage3D(GL_TEXTURE_2D_ARRAY, levels, format, GLsizei(side), GLsizei(side), GLsizei(layers));
@@ -312,6 +328,9 @@ void AtlasRenderer::Impl::createPagePool() {
     checkGl("page pool glTexStorage3D");
     return tex;
   };
+  auto makeArray = [&](GLenum format, GLint levels, uint32_t side, uint32_t a) {
+    return makeLayers(format, levels, side, std::min(layersPerArray, capacity - a * layersPerArray));
+  };
   // note: the vertex shader reads samples with texelFetch (no filtering); the fragment shader
   // samples heights bilinearly for colouring at page resolution, finer than the drawn grid. Normals
   // carry a mip chain so each node's normal map is read at its attribute resolution (texLod).
@@ -322,6 +341,22 @@ void AtlasRenderer::Impl::createPagePool() {
     samples.push_back(makeArray(setup.geometry ? GL_RGB32F : GL_R32F, 1, pageSide, a));
     normals.push_back(makeArray(GL_RGBA8, GLint(normalLevels), pageSide, a));
     if (setup.colours) colours.push_back(makeArray(GL_RGBA8, GLint(colourLevels), colourSide, a));
+  }
+  poolArrays = arrays;
+  // The root stand-ins: arrays of their own, of small layers, as many layers each as the GL allows.
+  standIns = setup.standIns;
+  if (standIns > 0) {
+    if (setup.standInIntervalsLog2 > setup.pageIntervalsLog2)
+      throw std::invalid_argument("AtlasRenderer: stand-ins finer than the pool's pages");
+    standInLayers = std::min(maxLayers, standIns);
+    const uint32_t side = (1u << setup.standInIntervalsLog2) + 1;
+    const uint32_t cSide = ((side - 1) << setup.colourScaleLog2) + 1;
+    for (uint32_t first = 0; first < standIns; first += standInLayers) {
+      const uint32_t layers = std::min(standInLayers, standIns - first);
+      samples.push_back(makeLayers(setup.geometry ? GL_RGB32F : GL_R32F, 1, side, layers));
+      normals.push_back(makeLayers(GL_RGBA8, GLint(mipLevels(side)), side, layers));
+      if (setup.colours) colours.push_back(makeLayers(GL_RGBA8, GLint(mipLevels(cSide)), cSide, layers));
+    }
   }
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
 }
@@ -384,7 +419,9 @@ void AtlasRenderer::Impl::validate(std::span<const DrawNode> nodes, const Stitch
   for (const DrawNode& n : nodes) {
     const bool ok = n.resLog2 >= setup.minResLog2 && n.resLog2 <= setup.maxResLog2 && n.resLog2 <= n.pageResLog2 &&
                     n.pageResLog2 <= setup.pageIntervalsLog2 && n.pageResLog2 <= n.sizeLog2 && n.sizeLog2 < 30 &&
-                    n.pageLayer < capacity && n.texLod <= n.pageResLog2 && n.texLodFrac <= 255 && n.morph <= 255;
+                    (n.pageLayer < capacity ||
+                     (n.pageLayer - capacity < standIns && n.pageResLog2 <= setup.standInIntervalsLog2)) &&
+                    n.texLod <= n.pageResLog2 && n.texLodFrac <= 255 && n.morph <= 255;
     if (!ok)
       throw std::invalid_argument("AtlasRenderer: bad DrawNode (origin " + std::to_string(n.originX) + "," +
                                   std::to_string(n.originY) + " sizeLog2 " + std::to_string(n.sizeLog2) + " res " +
@@ -405,7 +442,7 @@ void AtlasRenderer::Impl::uploadNodes(std::span<const DrawNode> nodes, const Sti
                   int32_t(n.sizeLog2),
                   int32_t(n.resLog2),
                   int32_t(n.pageResLog2),
-                  int32_t(n.pageLayer % layersPerArray),
+                  int32_t(layerOf(n.pageLayer)),
                   int32_t(k),
                   int32_t(n.texLod | (n.morph << 8) | (n.texLodFrac << 16))};
   }
@@ -533,7 +570,12 @@ AtlasRenderer::~AtlasRenderer() = default;
 
 uint32_t AtlasRenderer::pageCapacity() const { return impl_->capacity; }
 
-uint32_t AtlasRenderer::pageArrays() const { return uint32_t(impl_->samples.size()); }
+uint32_t AtlasRenderer::pageArrays() const { return impl_->poolArrays; }
+
+uint32_t AtlasRenderer::standInPage(uint32_t k) const {
+  if (k >= impl_->standIns) throw std::invalid_argument("AtlasRenderer::standInPage: no stand-in " + std::to_string(k));
+  return impl_->capacity + k;
+}
 
 uint32_t AtlasRenderer::layersPerArray() const { return impl_->layersPerArray; }
 
@@ -560,10 +602,11 @@ void AtlasRenderer::setColours(bool on) { impl_->drawColours = on; }
 
 void AtlasRenderer::uploadPage(uint32_t page, uint32_t samplesPerSide, const float* samples,
                                const PackedNormal* normals, const PackedColour* colours, const PageMips* mips) {
-  if (page >= impl_->capacity || samplesPerSide == 0 || samplesPerSide > impl_->pageSide || !samples)
+  if (page >= impl_->capacity + impl_->standIns || samplesPerSide == 0 || samplesPerSide > impl_->sideOf(page) ||
+      !samples)
     throw std::invalid_argument("AtlasRenderer::uploadPage: page " + std::to_string(page) + " / side " +
                                 std::to_string(samplesPerSide) + " out of range");
-  const uint32_t array = page / impl_->layersPerArray, layer = page % impl_->layersPerArray;
+  const uint32_t array = impl_->arrayOf(page), layer = impl_->layerOf(page);
   const GLsizei s = GLsizei(samplesPerSide);
   glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
   glBindTexture(GL_TEXTURE_2D_ARRAY, impl_->samples[array].id());
@@ -579,7 +622,9 @@ void AtlasRenderer::uploadPage(uint32_t page, uint32_t samplesPerSide, const flo
       glTexSubImage3D(GL_TEXTURE_2D_ARRAY, GLint(l + 1), 0, 0, GLint(layer), GLsizei(sides[l]), GLsizei(sides[l]), 1,
                       GL_RGBA, GL_UNSIGNED_BYTE, levels[l].data());
   };
-  const PageMips made = mips ? PageMips{} : pagePoolMips(impl_->setup, samplesPerSide, normals, colours);
+  RendererSetup layerSetup = impl_->setup;  // a stand-in's mips are its layers'
+  if (page >= impl_->capacity) layerSetup.pageIntervalsLog2 = layerSetup.standInIntervalsLog2;
+  const PageMips made = mips ? PageMips{} : pagePoolMips(layerSetup, samplesPerSide, normals, colours);
   const PageMips& m = mips ? *mips : made;
   if (normals) uploadAttribute(impl_->normals[array], normals, samplesPerSide, m.normals, m.normalSides);
   if (colours && impl_->setup.colours)
@@ -601,11 +646,10 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye, s
     // group), so the cut is one multi-draw per array (the arrays the cut's pages lie in; one for
     // a pool within the GL's layer limit) of one instanced command per resolution: the per-node
     // cost on the GPU side is an instance, not a draw command.
-    const uint32_t lpa = m.layersPerArray;
     std::vector<uint32_t> order(nodes.size());
     for (uint32_t k = 0; k < order.size(); ++k) order[k] = k;
     std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-      const uint32_t arrayA = nodes[a].pageLayer / lpa, arrayB = nodes[b].pageLayer / lpa;
+      const uint32_t arrayA = m.arrayOf(nodes[a].pageLayer), arrayB = m.arrayOf(nodes[b].pageLayer);
       return arrayA != arrayB ? arrayA < arrayB : nodes[a].resLog2 < nodes[b].resLog2;
     });
     m.uploadNodes(nodes, stitch, order);
@@ -614,10 +658,10 @@ DrawStats AtlasRenderer::draw(const glm::mat4& viewProj, const glm::vec3& eye, s
     std::vector<DrawElementsIndirectCommand> commands;
     std::vector<std::array<uint32_t, 3>> draws;  // (array, first command, commands)
     for (size_t j = 0; j < order.size();) {
-      const uint32_t array = nodes[order[j]].pageLayer / lpa, res = nodes[order[j]].resLog2;
+      const uint32_t array = m.arrayOf(nodes[order[j]].pageLayer), res = nodes[order[j]].resLog2;
       if (draws.empty() || draws.back()[0] != array) draws.push_back({array, uint32_t(commands.size()), 0});
       size_t e = j;
-      while (e < order.size() && nodes[order[e]].resLog2 == res && nodes[order[e]].pageLayer / lpa == array) ++e;
+      while (e < order.size() && nodes[order[e]].resLog2 == res && m.arrayOf(nodes[order[e]].pageLayer) == array) ++e;
       const Impl::GridRange& g = m.grid(res);
       commands.push_back({GLuint(g.indexCount), GLuint(e - j), GLuint(g.indexOffsetBytes / sizeof(uint32_t)),
                           g.baseVertex, GLuint(j)});
@@ -730,7 +774,7 @@ std::vector<std::vector<glm::vec3>> AtlasRenderer::captureVertices(std::span<con
   glBeginTransformFeedback(GL_POINTS);
   uint32_t bound = 0;  // the page-pool array bound (bindAtlas binds the first)
   for (size_t k = 0; k < nodes.size(); ++k) {
-    const uint32_t array = nodes[k].pageLayer / m.layersPerArray;
+    const uint32_t array = m.arrayOf(nodes[k].pageLayer);
     if (array != bound) m.bindPageArray(bound = array);
     const Impl::GridRange& g = m.grid(nodes[k].resLog2);
     glDrawArraysInstancedBaseInstance(GL_POINTS, g.baseVertex, g.vertexCount, 1, GLuint(k));

@@ -45,6 +45,12 @@ struct RendererSetup {
   // Colour texels per page sample interval, log2: a colour page has ((side - 1) << this) + 1
   // texels per side (terrain imagery finer than the heights; 0 for meshes).
   uint32_t colourScaleLog2 = 0;
+  // Root stand-ins: `standIns` pages of 2^standInIntervalsLog2 + 1 samples per side (at most the
+  // pool's), with their normals' and colours' mips, in texture arrays of their own beside the pool
+  // (AtlasRenderer::standInPage). A chart root whose page is not in the pool draws from its
+  // stand-in at that resolution or coarser. 0: none.
+  uint32_t standIns = 0;
+  uint32_t standInIntervalsLog2 = 0;
   // A planet atlas (core/planet.h; validSamples its lattice): heights drawn on the sphere, every
   // position relative to the anchor (setPlanetAnchor), so viewProj and eye are too.
   PlanetInfo planet;
@@ -54,6 +60,8 @@ struct RendererSetup {
 // its normals (RGBA8 with the mip chain) and its colours (RGBA8 with the mip chain, where the
 // atlas has them). The pool's textures hold pageCapacity such pages. No GL needed.
 uint64_t pagePoolPageBytes(const RendererSetup& setup);
+// GPU bytes of one root stand-in (RendererSetup::standInIntervalsLog2), counted as pagePoolPageBytes.
+uint64_t standInPageBytes(const RendererSetup& setup);
 
 // The mips uploadPage makes for a page of samplesPerSide^2 samples (its normals, and its colours
 // where the pool has them), made beforehand: on the page loader's threads. No GL needed.
@@ -94,10 +102,15 @@ class AtlasRenderer {
 
   uint32_t pageCapacity() const;
   const RendererSetup& setup() const;
-  // Texture arrays in the page pool (RendererSetup::pageCapacity) and layers in each.
+  // Texture arrays in the page pool (RendererSetup::pageCapacity) and layers in each; the
+  // stand-ins' arrays are not counted.
   uint32_t pageArrays() const;
+  // The page (DrawNode::pageLayer, uploadPage) of root stand-in k < RendererSetup::standIns:
+  // pageCapacity() + k.
+  uint32_t standInPage(uint32_t k) const;
   uint32_t layersPerArray() const;
-  // Uploads one node page (page = its slot in the pool, 0..pageCapacity() - 1): (n+1)^2 samples
+  // Uploads one node page (page = its slot in the pool, 0..pageCapacity() - 1, or a stand-in's
+  // standInPage, of at most 2^standInIntervalsLog2 + 1 samples per side): (n+1)^2 samples
   // and normals, n = 2^pageIntervalsLog2 at most.
   // Smaller pages (deep nodes) occupy the lower-left corner of the layer.
   // The normals also get their mip chain (normalMipLevel), for DrawNode::texLod. With

@@ -18,6 +18,38 @@ double msSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
+// Pages a cut needs beside the roots at least: room to split one of them.
+constexpr uint32_t kRoomToSplit = 4;
+
+// A GPU cache of `bytes` that cannot hold every root's page and room to split one: each root gets
+// a stand-in, the root at 2^s intervals (s below the pages' resolution, and at least the coarsest
+// a node is drawn at), the finest s whose stand-ins take at most half the cache; the pool gets the
+// rest, at least kRoomToSplit pages (InputError otherwise, naming the least).
+// resLog2 > 0: that resolution instead, within the same limits.
+void standInSetup(RendererSetup& s, uint64_t bytes, uint32_t charts, uint32_t resLog2) {
+  const uint64_t pageBytes = pagePoolPageBytes(s);
+  s.standIns = charts;
+  const uint32_t lowest = std::min(s.minResLog2, s.pageIntervalsLog2);
+  const uint32_t highest = std::max(lowest, s.pageIntervalsLog2 - std::min(s.pageIntervalsLog2, 1u));
+  s.standInIntervalsLog2 = lowest;
+  for (uint32_t r = lowest + 1; r <= highest && resLog2 == 0; ++r) {
+    RendererSetup t = s;
+    t.standInIntervalsLog2 = r;
+    if (uint64_t(charts) * standInPageBytes(t) > bytes / 2) break;
+    s.standInIntervalsLog2 = r;
+  }
+  if (resLog2 > 0) s.standInIntervalsLog2 = std::clamp(resLog2, lowest, highest);
+  const uint64_t standIns = uint64_t(charts) * standInPageBytes(s);
+  const uint64_t least = standIns + kRoomToSplit * pageBytes;
+  if (bytes < least)
+    throw InputError("a GPU page cache of " + std::to_string(bytes) + " bytes cannot hold the atlas's " +
+                     std::to_string(charts) + " chart roots' stand-ins of " +
+                     std::to_string((1u << s.standInIntervalsLog2) + 1) + "^2 samples (" + std::to_string(standIns) +
+                     " bytes) and " + std::to_string(kRoomToSplit) + " pages of " + std::to_string(pageBytes) +
+                     " bytes: it needs " + std::to_string(least) + " bytes at least");
+  s.pageCapacity = uint32_t(std::min<uint64_t>((bytes - standIns) / pageBytes, UINT32_MAX));
+}
+
 RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o, const PageReader& pages) {
   RendererSetup s;
   s.geometry = a.manifest.kind == AtlasKind::Geometry;
@@ -37,14 +69,11 @@ RendererSetup rendererSetup(const AtlasView& a, const SceneOptions& o, const Pag
   s.planet = a.manifest.planet;
   const uint64_t pageBytes = pagePoolPageBytes(s);
   const uint32_t charts = a.hierarchy.chartCount();
-  s.pageCapacity = AtlasScene::pagePoolPages(o, charts, !a.hierarchy.groups.empty(), pageBytes);
-  // The roots stay resident, and a cut needs room to split one of them.
-  if (o.gpuCacheBytes > 0 && s.pageCapacity < uint64_t(charts) + 4)
-    throw InputError("a GPU page cache of " + std::to_string(o.gpuCacheBytes) + " bytes holds " +
-                     std::to_string(s.pageCapacity) + " pages of " + std::to_string(pageBytes) +
-                     " bytes; the atlas's " + std::to_string(charts) + " chart roots stay resident and a cut needs " +
-                     std::to_string(uint64_t(charts) + 4) + " pages at least (" +
-                     std::to_string((uint64_t(charts) + 4) * pageBytes) + " bytes)");
+  s.pageCapacity = AtlasScene::pagePoolPages(o, charts, pageBytes);
+  // The roots stay resident while they fit with room to split one of them; past that, every
+  // root gets a stand-in (standInSetup).
+  if (o.gpuCacheBytes > 0 && s.pageCapacity < uint64_t(charts) + kRoomToSplit)
+    standInSetup(s, o.gpuCacheBytes, charts, o.standInResLog2);
   return s;
 }
 
@@ -81,15 +110,19 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
       pool_(renderer_->pageCapacity()),
       pageBytes_(pagePoolPageBytes(renderer_->setup())) {
   // The roots' pages stay resident (paper 7.2), so every frame can be drawn; pagePoolPages
-  // leaves room for them.
-  assert(atlas_.hierarchy.chartCount() < pool_.capacity());
-  for (uint32_t c = 0; c < atlas_.hierarchy.chartCount(); ++c) {
-    const NodeId root{c, 0, 0, 0};
-    PagePool::Slot slot;
-    pool_.acquire(root.key(), frame_, &slot);
-    pages_.read(root, samples_, normals_, &colours_);
-    upload(slot.layer, root, samples_, normals_, colours_);
-    pool_.lock(root.key());
+  // leaves room for them. Where they do not fit, each root gets a stand-in instead.
+  if (renderer_->setup().standIns > 0) {
+    makeRootStandIns();
+  } else {
+    assert(atlas_.hierarchy.chartCount() < pool_.capacity());
+    for (uint32_t c = 0; c < atlas_.hierarchy.chartCount(); ++c) {
+      const NodeId root{c, 0, 0, 0};
+      PagePool::Slot slot;
+      pool_.acquire(root.key(), frame_, &slot);
+      pages_.read(root, samples_, normals_, &colours_);
+      upload(slot.layer, root, samples_, normals_, colours_);
+      pool_.lock(root.key());
+    }
   }
   if (options_.asyncLoads) {
     uint64_t largest = 0;
@@ -104,6 +137,46 @@ AtlasScene::AtlasScene(const AtlasView& atlas, const SceneOptions& options)
                        std::to_string(2 * largest) + " bytes");
     loader_ = std::make_unique<PageLoader>(pages_, loaderOptions(options_, renderer_->setup(), pages_, largest));
   }
+}
+
+void AtlasScene::makeRootStandIns() {
+  const RendererSetup& setup = renderer_->setup();
+  const uint32_t charts = atlas_.hierarchy.chartCount();
+  rootStandIns_.resLog2.assign(charts, 0);
+  const size_t channels = setup.geometry ? 3 : 1;
+  std::vector<float> samples;
+  std::vector<PackedNormal> normals;
+  std::vector<PackedColour> colours;
+  for (uint32_t c = 0; c < charts; ++c) {
+    const NodeId root{c, 0, 0, 0};
+    pages_.read(root, samples_, normals_, &colours_);
+    // The root at the stand-in's resolution: every stride-th sample, as a node drawn that coarse
+    // reads them, so its vertices are the page's bit for bit.
+    const uint32_t pageRes = atlas_.hierarchy.maxResLog2(root);
+    const uint32_t res = std::min(pageRes, setup.standInIntervalsLog2);
+    rootStandIns_.resLog2[c] = uint8_t(res);
+    const uint32_t stride = 1u << (pageRes - res), side = (1u << res) + 1, pageSide = (1u << pageRes) + 1;
+    samples.resize(size_t(side) * side * channels);
+    normals.resize(size_t(side) * side);
+    for (uint32_t j = 0; j < side; ++j)
+      for (uint32_t i = 0; i < side; ++i) {
+        const size_t from = size_t(j) * stride * pageSide + size_t(i) * stride, to = size_t(j) * side + i;
+        for (size_t k = 0; k < channels; ++k) samples[to * channels + k] = samples_[from * channels + k];
+        normals[to] = normals_[from];
+      }
+    colours.clear();
+    if (!colours_.empty()) {
+      const uint32_t cs = setup.colourScaleLog2;
+      const uint32_t cSide = ((side - 1) << cs) + 1, cPageSide = ((pageSide - 1) << cs) + 1;
+      colours.resize(size_t(cSide) * cSide);
+      for (uint32_t j = 0; j < cSide; ++j)
+        for (uint32_t i = 0; i < cSide; ++i)
+          colours[size_t(j) * cSide + i] = colours_[size_t(j) * stride * cPageSide + size_t(i) * stride];
+    }
+    renderer_->uploadPage(renderer_->standInPage(c), side, samples.data(), normals.data(),
+                          colours.empty() ? nullptr : colours.data());
+  }
+  standInBytes_ = uint64_t(charts) * standInPageBytes(setup);
 }
 
 void AtlasScene::waitForLoads() {
@@ -143,7 +216,8 @@ Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, const Ca
   ++frame_;
   frameStarted_ = true;
   const Hierarchy& h = atlas_.hierarchy;
-  const auto resident = [this](uint64_t key) { return pool_.contains(key); };
+  const std::unordered_set<uint64_t> served = rootsServedByStandIns(desired);
+  const auto resident = [&](uint64_t key) { return pool_.contains(key) || served.count(key) != 0; };
   // 1. Touch the resident desired pages, so the uploads below cannot evict them.
   uint32_t residentNow = 0;
   for (const CutNode& n : desired.nodes) {
@@ -186,23 +260,71 @@ Cut AtlasScene::streamPages(const Cut& desired, const ViewParams& view, const Ca
   const auto thisFrame = [&](uint64_t key) { return plan.wanted.count(key) != 0; };
   for (const LoadedPage& pg : loader_->takeCompleted(wanted, maxPages, SIZE_MAX, thisFrame))
     uploaded += uint32_t(uploadLoaded(pg, thisFrame(pg.id.key()) ? 0 : keepFrom));
-  // 4. Every missing node draws as its nearest resident ancestor, stitched.
-  ResidentCut drawn = substituteResident(h, desired, view, resident);
-  assert(drawn.stitchUnfixable == 0 && "stitching constraint needs a split into a non-resident node");
-  standIns_.clear();
-  if (drawn.nodesSubstituted > 0)
-    for (const CutNode& n : drawn.cut.nodes)
-      if (desired.find(n.id) < 0) standIns_.insert(n.id.key());
   if (f) {
     f->pagesRequested = uint32_t(plan.wanted.size());
     f->pagesUploaded = uploaded;
-    f->nodesSubstituted = drawn.nodesSubstituted;
-    f->stitchUnfixable = drawn.stitchUnfixable;
     f->pagesNeeded = uint32_t(desired.nodes.size());
     f->pagesResident = residentNow;
     f->prefetchRequests = prefetches;
   }
+  // 4. Every missing node draws as its nearest resident ancestor, stitched.
+  return drawableCut(desired, view, resident, f);
+}
+
+std::unordered_set<uint64_t> AtlasScene::rootsServedByStandIns(const Cut& desired) const {
+  std::unordered_set<uint64_t> served;
+  if (rootStandIns_.empty()) return served;
+  for (const CutNode& n : desired.nodes) {
+    if (n.id.level != 0) continue;
+    const uint32_t s = rootStandIns_.resLog2[n.id.chart];
+    // Its vertices are the page's at that resolution; its attributes too where it asks no finer.
+    const bool attributes = n.texRes != 0 ? n.texRes <= s : s == atlas_.hierarchy.maxResLog2(n.id);
+    if (n.resLog2 <= s && attributes) served.insert(n.id.key());
+  }
+  return served;
+}
+
+Cut AtlasScene::drawableCut(const Cut& desired, const ViewParams& view, const ResidentFn& resident, FrameResult* f) {
+  ResidentCut drawn = substituteResident(atlas_.hierarchy, desired, view, resident, rootStandIns_);
+  assert(drawn.stitchUnfixable == 0 && "stitching constraint needs a split into a non-resident node");
+  standIns_.clear();
+  if (drawn.nodesSubstituted > 0)
+    for (const CutNode& n : drawn.cut.nodes)
+      if (desired.find(n.id) < 0 || (n.id.level == 0 && !resident(n.id.key()))) standIns_.insert(n.id.key());
+  if (f) {
+    f->nodesSubstituted = drawn.nodesSubstituted;
+    f->stitchUnfixable = drawn.stitchUnfixable;
+    f->rootsOnStandIns = drawn.rootsOnStandIns;
+    f->chartsCoarsened = drawn.chartsCoarsened;
+  }
   return std::move(drawn.cut);
+}
+
+Cut AtlasScene::loadSynchronously(const Cut& desired, const ViewParams& view, FrameResult* f) {
+  ++frame_;
+  frameStarted_ = true;
+  const std::unordered_set<uint64_t> served = rootsServedByStandIns(desired);
+  const auto resident = [&](uint64_t key) { return pool_.contains(key) || served.count(key) != 0; };
+  for (const CutNode& n : desired.nodes) {
+    PagePool::Slot slot;
+    if (pool_.contains(n.id.key())) pool_.acquire(n.id.key(), frame_, &slot);  // the reads below keep it
+  }
+  // The missing pages and their missing ancestors, as the loader would be asked for them (coarser
+  // first), while the pool has a layer this frame has not used: a node whose page does not fit
+  // then draws as its parent rather than its root.
+  std::vector<PageRequest> requests = planPageRequests(atlas_.hierarchy, desired, resident, {}).requests;
+  std::stable_sort(requests.begin(), requests.end(),
+                   [](const PageRequest& a, const PageRequest& b) { return a.priority > b.priority; });
+  syncLoaded_ = 0;
+  for (const PageRequest& r : requests) {
+    PagePool::Slot slot;
+    if (!pool_.acquire(r.id.key(), frame_, &slot)) break;
+    if (!slot.needsUpload) continue;
+    pages_.read(r.id, samples_, normals_, &colours_);
+    upload(slot.layer, r.id, samples_, normals_, colours_);
+    ++syncLoaded_;
+  }
+  return drawableCut(desired, view, resident, f);
 }
 
 void AtlasScene::resize(uint32_t width, uint32_t height) {
@@ -256,9 +378,17 @@ std::vector<DrawNode> AtlasScene::prepare(const Cut& cut, FrameResult* frame) {
   const auto t0 = std::chrono::steady_clock::now();
   std::vector<DrawNode> nodes;
   nodes.reserve(cut.nodes.size());
-  uint32_t loaded = 0, missing = 0;
+  uint32_t loaded = syncLoaded_, missing = 0;
+  syncLoaded_ = 0;
   for (const CutNode& n : cut.nodes) {
     PagePool::Slot slot;
+    // A root not in the pool, drawn no finer than its stand-in, draws from it.
+    if (n.id.level == 0 && !rootStandIns_.empty() && !pool_.contains(n.id.key()) &&
+        n.resLog2 <= rootStandIns_.resLog2[n.id.chart]) {
+      nodes.push_back(makeDrawNode(atlas_.manifest, atlas_.hierarchy.params, n, renderer_->standInPage(n.id.chart),
+                                   rootStandIns_.resLog2[n.id.chart]));
+      continue;
+    }
     if (pool_.acquire(n.id.key(), frame_, &slot)) {
       if (slot.needsUpload) {
         pages_.read(n.id, samples_, normals_, &colours_);
@@ -306,44 +436,28 @@ DrawStats AtlasScene::drawCut(const Camera& camera, const Cut& cut, FrameResult*
 
 namespace {
 
-// AtlasScene::nodeRoom of a pool of `pages` with `roots` locked. grouped: the hierarchy has
-// groups above the charts (hierarchy/root_groups.h); a closed group's roots count once against the
-// budget, so only the bound by the free pages holds (every non-root node counts against the budget).
-uint32_t nodeRoomOf(uint32_t pages, uint32_t roots, bool grouped) {
-  const uint32_t free = (pages - roots) * 3 / 4;
-  return grouped ? free : std::max(free, roots + free * 3 / 4);
-}
+// AtlasScene::nodeRoom of a pool of `pages` with `roots` locked: 3/4 of the other pages. Every
+// node of a cut but the locked roots may need a page, the culled roots do not make room for more
+// (a view of one chart of many may split it as deep as the pages allow), and the stitching
+// constraint may add nodes past the budget; 3/4 also holds a cut's ancestors (a quadtree cut of N
+// nodes has at most N/3), which the loaders ask for so that a missing node draws as its parent.
+uint32_t nodeRoomOf(uint32_t pages, uint32_t roots) { return (pages - std::min(pages, roots)) * 3 / 4; }
 
 }  // namespace
 
-uint32_t AtlasScene::pagePoolPages(const SceneOptions& o, uint32_t charts, bool grouped, uint64_t pageBytes) {
+uint32_t AtlasScene::pagePoolPages(const SceneOptions& o, uint32_t charts, uint64_t pageBytes) {
   if (o.gpuCacheBytes > 0 && pageBytes > 0)
     return uint32_t(std::min<uint64_t>(o.gpuCacheBytes / pageBytes, UINT32_MAX));
   const uint64_t want = std::max<uint64_t>(o.pageCapacity, 1);
   uint64_t pages = charts < want / 2 ? want : uint64_t(charts) + std::max<uint64_t>(want / 2, 1);
-  // With groups, F = 4/3 N + 4 free pages hold cuts of N nodes (nodeRoomOf(R + F, R, true) >= N).
-  if (grouped && o.minNodeRoom > 0) {
-    const uint64_t n = o.minNodeRoom;
-    return uint32_t(std::min<uint64_t>(std::max(pages, uint64_t(charts) + (4 * n + 2) / 3 + 4), UINT32_MAX));
-  }
-  // nodeRoomOf(R + F, R) >= R + 9/16 F - 2, so F = 16/9 (N - R) + 4 free pages hold cuts of N
-  // nodes (with N <= R any pool does: the room is at least the roots).
-  if (o.minNodeRoom > charts) {
-    const uint64_t n = o.minNodeRoom;
-    pages = std::max(pages, uint64_t(charts) + (16 * (n - charts) + 8) / 9 + 4);
-  }
+  // F = 4/3 N + 4 free pages hold cuts of N nodes (nodeRoomOf(R + F, R) >= N).
+  if (o.minNodeRoom > 0) pages = std::max(pages, uint64_t(charts) + (4 * uint64_t(o.minNodeRoom) + 2) / 3 + 4);
   return uint32_t(std::min<uint64_t>(pages, UINT32_MAX));
 }
 
 uint32_t AtlasScene::nodeRoom() const {
-  // Keep the cut's pages within the pool. The roots' pages are locked, so the cut's other nodes
-  // must fit in the rest, `free` (3/4 of it: the stitching constraint may add nodes past the
-  // budget). A cut of at most `free` nodes does; so does one of at most roots + 3/4 free: each
-  // split root leaves the cut but puts >= 4 nodes in it, so with k roots split the non-root nodes
-  // N satisfy 4k <= N <= 3/4 free + k, hence k <= free / 4 and N <= free. The second bound is
-  // the larger one for atlases of many charts (a scan's hundreds), where the first would leave
-  // almost no room to split.
-  return nodeRoomOf(pool_.capacity(), atlas_.hierarchy.chartCount(), !atlas_.hierarchy.groups.empty());
+  // With stand-ins no page is locked.
+  return nodeRoomOf(pool_.capacity(), rootStandIns_.empty() ? atlas_.hierarchy.chartCount() : 0);
 }
 
 uint32_t AtlasScene::nodeBudget(uint32_t maxNodes) const {
@@ -416,6 +530,9 @@ void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, doubl
   if (loader_) {
     f.desiredCut = std::move(f.cut);
     f.cut = streamPages(f.desiredCut, view, camera, tolPx, maxNodes, &f);
+  } else if (!rootStandIns_.empty()) {
+    f.desiredCut = std::move(f.cut);
+    f.cut = loadSynchronously(f.desiredCut, view, &f);
   } else {
     standIns_.clear();
   }
@@ -423,15 +540,15 @@ void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, doubl
   f.maxErrorPx = 0.0;
   for (CutNode& n : f.cut.nodes) {
     // The adapters set errorPx; substitution changes nodes and resolutions.
-    if (loader_) n.errorPx = float(screenError(h, n.id, n.resLog2, view));
+    if (!f.desiredCut.nodes.empty()) n.errorPx = float(screenError(h, n.id, n.resLog2, view));
     f.maxErrorPx = std::max(f.maxErrorPx, double(n.errorPx));
     if (options_.geomorph > 0.0) n.morph = float(geomorphFactor(h, n, view, tolPx, options_.geomorph));
   }
   f.draw = drawCut(camera, f.cut, &f);
   f.uploadMs += substituteMs;
   // What the caches hold now, and this frame's loads.
-  f.residentGpuBytes = uint64_t(pool_.resident()) * pageBytes_;
-  f.gpuBudgetBytes = uint64_t(pool_.capacity()) * pageBytes_;
+  f.residentGpuBytes = uint64_t(pool_.resident()) * pageBytes_ + standInBytes_;
+  f.gpuBudgetBytes = uint64_t(pool_.capacity()) * pageBytes_ + standInBytes_;
   f.uploadBytes = uploadBytes_;
   if (loader_) {
     const PageLoaderStats s = loader_->stats();
@@ -442,8 +559,8 @@ void AtlasScene::finishFrame(const Camera& camera, const ViewParams& view, doubl
     f.loadsFailed = uint32_t(s.failed - lastLoads_.failed);
     lastLoads_ = s;
   } else {
-    f.pagesNeeded = uint32_t(f.cut.nodes.size());
-    f.pagesResident = f.pagesNeeded - f.pagesLoaded;
+    f.pagesNeeded = uint32_t(f.desiredCut.nodes.empty() ? f.cut.nodes.size() : f.desiredCut.nodes.size());
+    f.pagesResident = f.pagesNeeded - std::min(f.pagesNeeded, f.pagesLoaded);
   }
   f.incomplete = f.pagesMissing > 0 || f.stitchUnfixable > 0;
   lastCamera_ = camera;

@@ -19,6 +19,7 @@
 #include "runtime/page_pool.h"
 #include "runtime/page_reader.h"
 #include "runtime/overlay.h"
+#include "runtime/residency.h"
 #include "runtime/stitch.h"
 
 namespace gimlod::gl {
@@ -38,8 +39,14 @@ struct SceneOptions {
   uint32_t layersPerArray = 0;  // RendererSetup::layersPerArray (0: the GL limit; tests set less)
   // The GPU page pool by its bytes (0: by pageCapacity and minNodeRoom): as many pages as fit
   // (AtlasRenderer's pagePoolPageBytes: samples, normals and colours alike). The chart roots stay
-  // resident, so it must hold them and room to split (InputError otherwise, naming the least).
+  // resident while they fit with room to split one; past that each root gets a stand-in, a page of
+  // the root at a coarser resolution in small texture arrays of their own (RendererSetup::standIns),
+  // and the pool is the rest of the bytes (InputError below the stand-ins and 4 pages, naming the
+  // least).
   uint64_t gpuCacheBytes = 0;
+  // The roots' stand-ins hold them at 2^this intervals (within the pages' resolution less one and
+  // the coarsest a node is drawn at); 0: the finest whose stand-ins take at most half the cache.
+  uint32_t standInResLog2 = 0;
   // Paper 7.2: pages load on loader threads and missing nodes draw with a resident ancestor.
   // Off (the default): every page is read synchronously, so frames are deterministic.
   bool asyncLoads = false;
@@ -79,8 +86,10 @@ struct SceneOptions {
 };
 
 struct FrameResult {
-  Cut cut;                    // the cut actually drawn (async: with resident ancestors substituted)
-  Cut desiredCut;             // async: the cut the adaptation chose; empty without asyncLoads (`cut` is it)
+  Cut cut;  // the cut actually drawn (async: with resident ancestors substituted)
+  // The cut the adaptation chose, where the drawn one may differ (async, or roots on stand-ins);
+  // else empty (`cut` is it).
+  Cut desiredCut;
   AdaptStats adapt;           // of the desired cut (rootFloor, budgetBelowRoots: in both modes)
   BudgetStats budget;         // budget mode: the quad-queue's stats (adapt holds its counts too)
   AttributeStats attributes;  // attribute resolutions of the desired cut (texelsPerPixel > 0)
@@ -95,6 +104,8 @@ struct FrameResult {
   uint32_t pagesUploaded = 0;     // async: loaded pages uploaded this frame
   uint32_t nodesSubstituted = 0;  // async: desired nodes drawn as a resident ancestor
   uint32_t stitchUnfixable = 0;   // async: drawn nodes left violating the stitching constraint
+  uint32_t rootsOnStandIns = 0;   // chart roots drawn from their stand-ins (not in the pool)
+  uint32_t chartsCoarsened = 0;   // charts held coarser beside a root on its stand-in
   // Streaming (async): what the caches hold after the frame, against their budgets.
   uint64_t residentGpuBytes = 0;  // pages in the GPU pool times a page's bytes (both modes)
   uint64_t gpuBudgetBytes = 0;    // the pool's pages times a page's bytes (both modes)
@@ -115,18 +126,19 @@ class AtlasScene {
   AtlasScene(const AtlasView& atlas, const SceneOptions& options);
   const AtlasView& atlas() const { return atlas_; }
   // The largest node budget a frame gets such that the cut's pages fit the page pool beside the
-  // locked roots: the larger of 3/4 of the unlocked pages and the root count plus 9/16 of them
-  // (see the .cpp); larger budgets are lowered to it.
+  // locked roots: 3/4 of the other pages (see the .cpp); larger budgets are lowered to it.
   uint32_t nodeRoom() const;
   // The pages of the pool a scene of `options` makes for an atlas of `charts` charts.
   // With gpuCacheBytes, as many pages of pageBytes as it holds.
-  static uint32_t pagePoolPages(const SceneOptions& options, uint32_t charts, bool grouped = false,
-                                uint64_t pageBytes = 0);
+  static uint32_t pagePoolPages(const SceneOptions& options, uint32_t charts, uint64_t pageBytes = 0);
   // maxNodes within nodeRoom (0: nodeRoom).
   uint32_t nodeBudget(uint32_t maxNodes) const;
   AtlasRenderer& renderer() { return *renderer_; }
   // GPU bytes of one page of the pool (pagePoolPageBytes); the pool holds renderer().pageCapacity().
   uint64_t pageBytes() const { return pageBytes_; }
+  // The roots' stand-ins (empty: the roots' pages are locked in the pool) and their GPU bytes.
+  const RootStandIns& rootStandIns() const { return rootStandIns_; }
+  uint64_t standInBytes() const { return standInBytes_; }
   // The atlas carries per-sample colours (a mesh's vertex colours or terrain imagery), which are drawn.
   bool hasColours() const { return pages_.colours(); }
   // A new frame size (a resized window): the projection and the screen-space errors follow.
@@ -183,6 +195,17 @@ class AtlasScene {
   // enforced. Starts the frame that prepare draws.
   Cut streamPages(const Cut& desired, const ViewParams& view, const Camera& camera, double prefetchTolPx,
                   uint32_t maxNodes, FrameResult* frame);
+  // The desired roots whose stand-ins draw them as their pages would (RootStandIns): they need no
+  // page in the pool.
+  std::unordered_set<uint64_t> rootsServedByStandIns(const Cut& desired) const;
+  // The cut drawn for `desired` with `resident` pages (substituteResident, stand-ins included),
+  // noting the nodes standing in (standIns_) and the counts in f.
+  Cut drawableCut(const Cut& desired, const ViewParams& view, const ResidentFn& resident, FrameResult* f);
+  // Without the loader, with root stand-ins: reads the desired pages into the pool while it has
+  // room this frame (coarser first) and returns the drawable cut. Starts the frame prepare draws.
+  Cut loadSynchronously(const Cut& desired, const ViewParams& view, FrameResult* f);
+  // Reads every chart root and uploads its stand-in (RendererSetup::standIns).
+  void makeRootStandIns();
   // The view prefetchSeconds ahead, from the last two cameras; false without a previous one.
   bool predictedView(const Camera& camera, ViewParams* view) const;
   // Uploads a loaded page into the pool; false when no layer is free this frame (keepFrom:
@@ -205,6 +228,9 @@ class AtlasScene {
   std::vector<PackedColour> colours_;
   uint64_t pageBytes_ = 0;      // GPU bytes of one pool page
   uint64_t uploadBytes_ = 0;    // this frame's
+  RootStandIns rootStandIns_;   // empty: the roots are locked in the pool
+  uint64_t standInBytes_ = 0;   // GPU bytes of the stand-ins
+  uint32_t syncLoaded_ = 0;     // pages loadSynchronously read this frame
   PageLoaderStats lastLoads_;   // the loader's counts at the end of the last frame
   bool hasLastCamera_ = false;  // prefetch: the last frame's camera
   Camera lastCamera_;

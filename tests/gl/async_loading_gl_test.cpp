@@ -4,8 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <mutex>
 
 #include "pipeline/build.h"
@@ -44,8 +46,9 @@ class AsyncLoadingTest : public test::GlContextTest<> {
 };
 
 // The drawn cut is a coarsening of the desired one: every desired node is drawn itself (at its
-// resolution) or through exactly one drawn ancestor, and every drawn node covers a desired node.
-void expectDrawnCoversDesired(const Cut& drawn, const Cut& desired, int frame) {
+// resolution, or coarser for a root on its stand-in with rootsOnStandIns) or through exactly one
+// drawn ancestor, and every drawn node covers a desired node.
+void expectDrawnCoversDesired(const Cut& drawn, const Cut& desired, int frame, bool rootsOnStandIns = false) {
   std::vector<uint32_t> covers(drawn.nodes.size(), 0);
   for (const CutNode& n : desired.nodes) {
     uint32_t found = 0;
@@ -54,7 +57,9 @@ void expectDrawnCoversDesired(const Cut& drawn, const Cut& desired, int frame) {
       if (i >= 0) {
         ++found;
         ++covers[i];
-        if (a.key() == n.id.key()) {
+        if (a.key() == n.id.key() && rootsOnStandIns && a.level == 0) {
+          EXPECT_LE(drawn.nodes[i].resLog2, n.resLog2) << "frame " << frame;
+        } else if (a.key() == n.id.key()) {
           EXPECT_EQ(drawn.nodes[i].resLog2, n.resLog2) << "frame " << frame;
         }
       }
@@ -243,12 +248,98 @@ TEST_F(AsyncLoadingTest, ByteBudgetsHoldInEveryFrame) {
       EXPECT_GT(substituted, 0u) << "the budgets never held a page back";
     }
   }
+}
+
+// A GPU cache below every root's page and room to split one: the roots get stand-ins (each root's
+// page at a coarser resolution, in arrays of their own), the pool the rest. With the loader and
+// without, the budgets hold in every frame, every frame is complete, stitched and crack-free, and
+// roots are drawn from their stand-ins. A cache below the stand-ins and four pages is refused.
+TEST_F(AsyncLoadingTest, ACacheBelowTheRootsDrawsThemFromStandIns) {
+  const AtlasView atlas = build();
+  const Hierarchy& h = atlas.hierarchy;
+  gl::SceneOptions so;
+  so.width = 96;
+  so.height = 72;
+  uint64_t pageBytes = 0;
+  {
+    gl::AtlasScene probe(atlas, so);
+    pageBytes = probe.pageBytes();
+    EXPECT_TRUE(probe.rootStandIns().empty()) << "a pool that holds the roots locks them";
+  }
+  const uint32_t roots = h.chartCount();
   so.gpuCacheBytes = (roots + 3) * pageBytes;
+  AdaptOptions ao;
+  ao.tolerancePx = 1.0;
+  ao.maxNodes = 1500;
+  // The stand-ins at their default resolution, then at the coarsest, below depth - 1: a root on
+  // its stand-in may then hold the charts beside it coarser.
+  for (const uint32_t standInRes : {0u, h.params.minResLog2()})
+    for (const bool async : {true, false}) {
+      SCOPED_TRACE(async ? "loader" : "synchronous");
+      so.asyncLoads = async;
+      so.maxUploadsPerFrame = 2;
+      so.standInResLog2 = standInRes;
+      gl::AtlasScene scene(atlas, so);
+      ASSERT_EQ(scene.rootStandIns().resLog2.size(), roots);
+      EXPECT_LT(scene.renderer().pageCapacity(), roots + 3);
+      EXPECT_GE(scene.renderer().pageCapacity(), 4u);
+      uint32_t onStandIns = 0, coarsened = 0;
+      for (int i = 0; i < 24; ++i) {
+        const gl::FrameResult f = scene.renderFrame(camera(atlas, double(std::min(i, 16)) / 16), ao);
+        EXPECT_LE(f.residentGpuBytes, so.gpuCacheBytes) << "frame " << i;
+        EXPECT_LE(f.gpuBudgetBytes, so.gpuCacheBytes) << "frame " << i;
+        EXPECT_FALSE(f.incomplete) << "frame " << i;
+        EXPECT_EQ(f.pagesMissing, 0u) << "frame " << i;
+        EXPECT_EQ(f.stitchUnfixable, 0u) << "frame " << i;
+        EXPECT_EQ(countStitchViolations(h, f.cut), 0u) << "frame " << i;
+        expectDrawnCoversDesired(f.cut, f.desiredCut, i, true);
+        const auto verts = scene.capture(f.cut);
+        const CrackReport r = countCracks(h, f.cut, verts);
+        EXPECT_EQ(r.mismatches, 0u) << "frame " << i << ": " << r.mismatches << " of " << r.borderVertices;
+        onStandIns += f.rootsOnStandIns;
+        coarsened += f.chartsCoarsened;
+        if (async && i % 3 == 2) scene.waitForLoads();
+      }
+      EXPECT_GT(onStandIns, 0u) << "no root was drawn from its stand-in";
+      std::cout << "  " << (async ? "loader" : "synchronous") << ": " << scene.renderer().pageCapacity()
+                << " pool pages, stand-ins of 2^" << uint32_t(scene.rootStandIns().resLog2[0]) << " intervals; "
+                << onStandIns << " roots drawn from stand-ins, " << coarsened << " charts held coarser beside them\n";
+    }
+  so.gpuCacheBytes = 3 * pageBytes;
   try {
     gl::AtlasScene tooSmall(atlas, so);
-    ADD_FAILURE() << "a GPU cache below the roots was taken";
+    ADD_FAILURE() << "a GPU cache below the stand-ins and four pages was taken";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("chart roots"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("stand-ins"), std::string::npos) << e.what();
+  }
+}
+
+// A root drawn from its stand-in, at the stand-in's resolution or coarser, has the vertices its
+// own page gives, bit for bit, so a cut mixing both stays crack-free.
+TEST_F(AsyncLoadingTest, AStandInDrawsItsRootsVerticesBitForBit) {
+  const AtlasView atlas = build();
+  const Hierarchy& h = atlas.hierarchy;
+  gl::SceneOptions so;
+  so.width = 96;
+  so.height = 72;
+  gl::AtlasScene locked(atlas, so);
+  so.gpuCacheBytes = (h.chartCount() + 3) * locked.pageBytes();
+  gl::AtlasScene standing(atlas, so);
+  ASSERT_FALSE(standing.rootStandIns().empty());
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    const uint32_t s = standing.rootStandIns().resLog2[c];
+    ASSERT_LT(s, h.maxResLog2(NodeId{c, 0, 0, 0})) << "the stand-in is the page itself";
+    for (uint32_t res = h.params.minResLog2(); res <= s; ++res) {
+      Cut cut;
+      cut.nodes.push_back({NodeId{c, 0, 0, 0}, res});
+      cut.rebuildIndex();
+      const auto a = locked.capture(cut), b = standing.capture(cut);
+      ASSERT_EQ(a.size(), 1u);
+      ASSERT_EQ(b.size(), 1u);
+      ASSERT_EQ(a[0].size(), b[0].size());
+      EXPECT_EQ(0, std::memcmp(a[0].data(), b[0].data(), a[0].size() * sizeof(glm::vec3)))
+          << "chart " << c << " at 2^" << res;
+    }
   }
 }
 

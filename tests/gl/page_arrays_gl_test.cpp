@@ -40,7 +40,8 @@ class PageArraysTest : public test::GlContextTest<> {
 };
 
 // Charts of 17^2 make 75 x 75 = 5,625 charts, every one's root page resident: more pages than a
-// texture array holds. Every chart root a root of the forest (no groups): the room holds them all.
+// texture array holds. Every chart root a root of the forest (no groups): a pool made for cuts of
+// as many nodes as charts holds them all.
 TEST_F(PageArraysTest, AnAtlasOfMoreChartsThanATextureArrayHoldsIsDrawn) {
   const AtlasView atlas = buildRainier(17, 2, 8, 0);
   GLint maxLayers = 0;
@@ -50,6 +51,7 @@ TEST_F(PageArraysTest, AnAtlasOfMoreChartsThanATextureArrayHoldsIsDrawn) {
   gl::SceneOptions so;
   so.width = 192;
   so.height = 144;
+  so.minNodeRoom = charts;
   gl::AtlasScene scene(atlas, so);
   EXPECT_GT(scene.renderer().pageCapacity(), charts);
   EXPECT_GE(scene.renderer().pageArrays(), (charts + uint32_t(maxLayers) - 1) / uint32_t(maxLayers));

@@ -238,5 +238,75 @@ TEST(Residency, UnfixableStitchingIsCounted) {
   EXPECT_EQ(r.cut.nodes[64].resLog2, 0u);  // left as it was: 2^1 is its finest
 }
 
+TEST(Residency, ARootOnItsStandInHoldsTheChartsBesideItCoarse) {
+  // log2 R = depth - 1 and resolutions from 2^0. Chart 1's root wants 2^3 beside chart 0's level-3
+  // leaves, but its page is missing and its stand-in holds it at 2^1 only: chart 0 is held to
+  // level 1 (its resident level-1 nodes stand in for the leaves), and the root draws at 2^1.
+  const test::World w = twoCharts(4, 3, 0);
+  std::vector<CutNode> nodes;
+  for (uint32_t y = 0; y < 8; ++y)
+    for (uint32_t x = 0; x < 8; ++x) nodes.push_back({node(0, 3, x, y), 0});
+  nodes.push_back({node(1, 0, 0, 0), 3});
+  const Cut desired = makeCut(nodes);
+  ASSERT_EQ(countStitchViolations(w.h, desired), 0u);
+  std::unordered_set<uint64_t> resident;
+  for (uint32_t level = 0; level < 4; ++level)
+    for (uint32_t y = 0; y < (1u << level); ++y)
+      for (uint32_t x = 0; x < (1u << level); ++x) resident.insert(node(0, level, x, y).key());
+  const ViewParams view = overview(w);
+  // Without a stand-in's limit the root would be drawn at its own resolution.
+  RootStandIns standIns;
+  standIns.resLog2 = {1, 1};
+  const ResidentCut r = substituteResident(w.h, desired, view, residentSet(resident), standIns);
+  EXPECT_EQ(r.stitchUnfixable, 0u);
+  EXPECT_EQ(r.rootsOnStandIns, 1u);
+  EXPECT_EQ(r.chartsCoarsened, 1u);
+  EXPECT_EQ(countStitchViolations(w.h, r.cut), 0u);
+  test::expectPartition(w.h, r.cut);
+  ASSERT_EQ(r.cut.nodes.size(), 5u);  // chart 0's four level-1 nodes and chart 1's root
+  for (const CutNode& n : r.cut.nodes) {
+    if (n.id.chart == 0) {
+      EXPECT_EQ(n.id.level, 1u);
+    } else {
+      EXPECT_EQ(n.id, node(1, 0, 0, 0));
+      EXPECT_EQ(n.resLog2, 1u);  // raised to its stand-in's resolution, no further
+      EXPECT_FLOAT_EQ(n.errorPx, float(screenError(w.h, n.id, 1, view)));
+    }
+  }
+  // A stand-in as fine as the gap needs leaves chart 0 alone.
+  standIns.resLog2 = {3, 3};
+  const ResidentCut fine = substituteResident(w.h, desired, view, residentSet(resident), standIns);
+  EXPECT_EQ(fine.chartsCoarsened, 0u);
+  EXPECT_EQ(fine.cut.nodes.size(), desired.nodes.size());
+  EXPECT_EQ(countStitchViolations(w.h, fine.cut), 0u);
+}
+
+TEST(Residency, RootsOnStandInsCoarsenInTurn) {
+  // Both roots missing, stand-ins of 2^1, chart 0 desired at level 3 and chart 1 at level 2 with
+  // no page resident: each chart falls to its root, on its stand-in, and nothing is left unstitched.
+  const test::World w = twoCharts(4, 3, 0);
+  std::vector<CutNode> nodes;
+  for (uint32_t y = 0; y < 8; ++y)
+    for (uint32_t x = 0; x < 8; ++x) nodes.push_back({node(0, 3, x, y), 0});
+  for (uint32_t y = 0; y < 4; ++y)
+    for (uint32_t x = 0; x < 4; ++x) nodes.push_back({node(1, 2, x, y), 1});
+  const Cut desired = makeCut(nodes);
+  std::unordered_set<uint64_t> resident;
+  for (uint32_t y = 0; y < 8; ++y)
+    for (uint32_t x = 0; x < 8; ++x) resident.insert(node(0, 3, x, y).key());  // chart 0's leaves only
+  RootStandIns standIns;
+  standIns.resLog2 = {1, 1};
+  const ResidentCut r = substituteResident(w.h, desired, overview(w), residentSet(resident), standIns);
+  EXPECT_EQ(r.stitchUnfixable, 0u);
+  EXPECT_EQ(countStitchViolations(w.h, r.cut), 0u);
+  test::expectPartition(w.h, r.cut);
+  ASSERT_EQ(r.cut.nodes.size(), 2u);
+  EXPECT_EQ(r.rootsOnStandIns, 2u);
+  for (const CutNode& n : r.cut.nodes) {
+    EXPECT_EQ(n.id.level, 0u);
+    EXPECT_LE(n.resLog2, 1u);
+  }
+}
+
 }  // namespace
 }  // namespace gimlod
