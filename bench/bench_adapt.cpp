@@ -7,7 +7,8 @@
 // incremental) on the same frames: ref/ours is the speed-up, same the frames with identical cuts.
 // Usage: bench_adapt ATLAS_DIR [tolerance_px=0.02] [frames=240] [WxH=1280x720] [triangles=4000000]
 //        [max_roots=16] (top groups above the charts, openAtlas; 0: every chart root a root)
-//        [--budgets 100,1000,...] [--only dual|quad] [--ours-only]
+//        [--budgets 100,1000,...] [--only dual|quad] [--ours-only] [--ops]
+//        [--parallel-min N] (0: the adapters on one thread)
 // Reads a built atlas only (no GDAL), e.g. `gimlod build ../shared/data/terrain/etopo5.cdf
 // -o out/etopo.atlas --depth 6`.
 #include <CLI/CLI.hpp>
@@ -43,6 +44,8 @@ struct Args {
   std::vector<uint32_t> budgets{100u, 250u, 500u, 1000u, 2000u, 5000u, 10000u, 20000u};
   std::string only;
   bool oursOnly = false;  // skip the references and the greedy (for profiles of the adapters alone)
+  bool opsBreakdown = false;  // the quad queue's operations per frame, by kind
+  uint32_t parallelMin = kDefaultParallelMin;  // the adapters' parallelMin (0: one thread)
 };
 
 // (key, resolution) of every node, sorted: equal for equal cuts.
@@ -66,7 +69,7 @@ void benchDual(const Hierarchy& h, const std::vector<ViewParams>& views, const A
     AdaptOptions o;
     o.tolerancePx = a.tolerance;
     o.maxNodes = budget;
-    DualQueueAdapter ours(h);
+    DualQueueAdapter ours(h, 1024, true, a.parallelMin);
     reference::DualQueueAdapter ref(h);
     for (const ViewParams& v : views) {  // warm-up: a coherent state
       ours.update(v, o);
@@ -109,13 +112,14 @@ void benchQuad(const Hierarchy& h, const std::vector<ViewParams>& views, const A
     BudgetOptions o;
     o.maxTriangles = a.triangles;
     o.maxNodes = budget;
-    QuadQueueAdapter ours(h);
+    QuadQueueAdapter ours(h, a.parallelMin);
     reference::QuadQueueAdapter ref(h);
     for (const ViewParams& v : views) {  // warm-up pass
       ours.update(v, o);
       if (!a.oursOnly) ref.update(v, o);
     }
     double us = 0.0, nodes = 0.0, rounds = 0.0, ops = 0.0, err = 0.0, refUs = 0.0, refErr = 0.0;
+    BudgetStats kinds;  // summed over the frames
     uint32_t same = 0;
     for (const ViewParams& v : views) {
       BudgetStats st, rst;
@@ -125,6 +129,8 @@ void benchQuad(const Hierarchy& h, const std::vector<ViewParams>& views, const A
       nodes += double(cut.nodeCount());
       rounds += st.rounds;
       ops += st.refines + st.coarsens + st.splits + st.merges + st.undoneOps;
+      kinds.refines += st.refines, kinds.coarsens += st.coarsens, kinds.splits += st.splits;
+      kinds.merges += st.merges, kinds.undoneOps += st.undoneOps, kinds.undos += st.undos + st.tieUndos;
       err += st.maxErrorPx;
       if (a.oursOnly) continue;
       t0 = Clock::now();
@@ -136,6 +142,10 @@ void benchQuad(const Hierarchy& h, const std::vector<ViewParams>& views, const A
     const double n = double(views.size());
     std::printf("%9u %8.0f %10.1f %10.4f %8.2f %8.0f %10.1f %9.2f %9.4f %9.4f %6u\n", budget, nodes / n, us / n,
                 us / nodes, rounds / n, ops / n, refUs / n, refUs / us, err / n, refErr / n, same);
+    if (a.opsBreakdown)
+      std::printf("%9s per frame: %.1f refines, %.1f coarsens, %.1f splits, %.1f merges, %.1f undone in %.2f undos\n",
+                  "", kinds.refines / n, kinds.coarsens / n, kinds.splits / n, kinds.merges / n, kinds.undoneOps / n,
+                  kinds.undos / n);
   }
 }
 
@@ -150,6 +160,8 @@ int run(int argc, char** argv) {
   app.add_option("max_roots", a.maxRoots, "top groups above the charts (0: every chart root a root)");
   app.add_option("--budgets", a.budgets, "node budgets")->delimiter(',');
   app.add_option("--only", a.only, "one adapter")->check(CLI::IsMember({"dual", "quad"}));
+  app.add_option("--parallel-min", a.parallelMin, "kept cuts of at least this many nodes are evaluated in parallel (0: never)");
+  app.add_flag("--ops", a.opsBreakdown, "the quad queue's operations per frame, by kind");
   app.add_flag("--ours-only", a.oursOnly, "time the adapters alone: no reference, no greedy (ref and same columns 0)");
   CLI11_PARSE(app, argc, argv);
   uint32_t w = 0, hgt = 0;

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include "runtime/adapt_dual_queue.h"
@@ -272,11 +273,20 @@ struct QuadQueueAdapter::State {
   std::vector<std::vector<Item>> refineB;
   // Phase 1's queues are built once a frame and then kept up to date from round to round: the
   // entries phase 2 added (fresh), those whose floor changed (refloored), those below their floor
-  // (raise), and the coarsenings the balance set aside (dropped) are what a fresh build would
+  // (raise), and the coarsenings the balance set aside (parked) are what a fresh build would
   // have that the kept queues lack. Stale items are skipped as they surface.
   bool phase1Ready = false;
   std::vector<NodeId> fresh, refloored, raise;
-  std::vector<Item> dropped;
+  // Coarsenings the balance passed over because they would reach the max error, in a min-heap
+  // on the error they would give (parkedLess): in a balanced cut that is nearly every node, so
+  // they wait here instead of being popped again by each later balance. The ones below a later
+  // max error go back to coarsenH when a balance starts; all of them when the cut is over the
+  // triangle budget (which coarsens by loss alone).
+  struct Parked {
+    double coarsenedErr;
+    Item item;
+  };
+  std::vector<Parked> parked;
   // The floors likewise, from the first computeFloors of a frame on: the nodes that joined or left
   // the cut since (cutChanged) mark the entries beside them, whose gaps are found again.
   bool floorsReady = false;
@@ -499,6 +509,7 @@ struct QuadQueueAdapter::State {
   // increase per removed triangle first. Every trade lowers the sorted error vector
   // lexicographically, so this ends. Returns whether anything changed.
   bool balance(uint64_t budget) {
+    unpark(maxErrorNow());
     bool progress = false;
     std::vector<Item> popped;
     std::vector<Entry*> chosen;
@@ -519,19 +530,26 @@ struct QuadQueueAdapter::State {
           popped.push_back(it);
           continue;
         }
-        // note: dropped for good: the max error only falls during the balance, so a node whose
+        // note: parked for this balance: the max error only falls during it, so a node whose
         // coarsening would reach it now never qualifies later (its own refinement pushes a new
         // item).
-        if (errAt(*c, c->resLog2 - 1) >= m->err - kEps) {
-          dropped.push_back(it);  // back in the queue for the next phase 1
+        const double coarsened = errAt(*c, c->resLog2 - 1);
+        if (coarsened >= m->err - kEps) {
+          parked.push_back({coarsened, it});
+          std::push_heap(parked.begin(), parked.end(), parkedLess);
           continue;
         }
         popped.push_back(it);
         chosen.push_back(c);
         freed += tris(c->resLog2) - tris(c->resLog2 - 1);
       }
-      for (const Item& it : popped) heapPush(coarsenH, it);
-      if (free + freed < need) break;
+      if (free + freed < need) {
+        for (const Item& it : popped) heapPush(coarsenH, it);
+        break;
+      }
+      // note: the items popped are not pushed back: each is for m or a chosen node at the
+      // resolution it leaves now (pushPhase1 queues its new ones).
+
       // note: setRes logs, but never moves an entry, so the pointers stay valid.
       for (Entry* c : chosen) {
         setRes(*c, c->resLog2 - 1);
@@ -545,11 +563,20 @@ struct QuadQueueAdapter::State {
     }
     return progress;
   }
-  bool phase1() {
-    const bool ok = phase1Run();
-    for (const Item& it : dropped) heapPush(coarsenH, it);
-    dropped.clear();
-    return ok;
+  static bool parkedLess(const Parked& a, const Parked& b) { return a.coarsenedErr > b.coarsenedErr; }
+  // Back to coarsenH: the parked coarsenings that stay below maxErr (every one at infinity).
+  void unpark(double maxErr) {
+    if (maxErr == std::numeric_limits<double>::infinity()) {
+      for (const Parked& p : parked) coarsenH.push_back(p.item);
+      parked.clear();
+      std::make_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
+      return;
+    }
+    while (!parked.empty() && parked.front().coarsenedErr < maxErr - kEps) {
+      heapPush(coarsenH, parked.front().item);
+      std::pop_heap(parked.begin(), parked.end(), parkedLess);
+      parked.pop_back();
+    }
   }
   // The queues as a fresh build would have them: built once a frame, then brought up to date.
   void phase1Queues() {
@@ -578,6 +605,7 @@ struct QuadQueueAdapter::State {
       refineB.resize(h->params.maxNodeResLog2 + 1);
       for (auto& b : refineB) b.clear();
       coarsenH.clear();
+      parked.clear();
       errH.clear();
       for (const auto& [k, e] : cut) pushPhase1(e, false);
       for (auto& b : refineB) std::make_heap(b.begin(), b.end(), ItemLess{});
@@ -588,10 +616,11 @@ struct QuadQueueAdapter::State {
     fresh.clear();
     refloored.clear();
   }
-  bool phase1Run() {
+  bool phase1() {
     phase1Queues();
     const uint64_t budget = opt.maxTriangles;
     // (a) Within the triangle budget (never capped).
+    if (triangles > budget) unpark(std::numeric_limits<double>::infinity());
     while (triangles > budget) {
       Entry* e = nullptr;
       while (!coarsenH.empty() && !(e = validCoarsen(coarsenH.front()))) heapPop(coarsenH);
@@ -764,17 +793,20 @@ struct QuadQueueAdapter::State {
     const size_t n = cut.size();
     listed.resize(n);
     auto* items = &*cut.begin();
+    // On one thread the children's and parents' view data go through the frame's cache, where the
+    // rest of the frame finds them; the threads of a parallel pass compute their own.
+    const bool serial = parallelMin == 0 || n < parallelMin;
     parallelPass(n, parallelMin, [&](size_t i) {
       Entry& e = items[i].second;
       Listed& q = listed[i];
-      q.split = splits ? splitPriority(e, false) : -1.0;
+      q.split = splits ? splitPriority(e, serial) : -1.0;
       q.merge = false;
       if (e.id.level == 0 || !firstOfGroup(e)) return;
       const NodeId par = e.id.parent();
       if (!groupMergeable(par, r)) return;
       uint32_t pres = 0;
       q.merge = true;
-      q.cost = mergeCostWith(par, node.evaluate(par, nodeIndex(par.level, par.x, par.y)), &pres);
+      q.cost = mergeCostWith(par, serial ? node(par) : node.evaluate(par, nodeIndex(par.level, par.x, par.y)), &pres);
     });
     for (size_t i = 0; i < n; ++i) {
       const Entry& e = items[i].second;
