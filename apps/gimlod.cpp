@@ -267,10 +267,12 @@ int runRender(const RenderArgs& a) {
       controller->update(
           {f.cut.nodeCount(), f.draw.triangles, f.adaptMs, f.draw.drawMs, std::max(frameMs - f.uploadMs, 0.0)});
     if (f.adapt.budgetBelowRoots && !warnedBelowRoots) {
+      const uint32_t budget = scene.nodeBudget(a.maxNodes);
       spdlog::warn(
-          "--max-nodes {} is below the {} visible {} (frame {}): no cut has fewer nodes, so such frames "
+          "{} {} is below the {} visible {} (frame {}): no cut has fewer nodes, so such frames "
           "draw the visible roots (root_floor, budget_below_roots in stats.csv)",
-          a.maxNodes, f.adapt.rootFloor, atlas.hierarchy.groups.empty() ? "chart roots" : "top groups", i);
+          budget == a.maxNodes ? "--max-nodes" : "the GPU page pool's room of", budget, f.adapt.rootFloor,
+          atlas.hierarchy.groups.empty() ? "chart roots" : "top groups", i);
       warnedBelowRoots = true;
     }
     writePng(out / fmt::format("frame_{:04d}.png", i), w, h, 4, scene.renderer().readPixels());

@@ -137,7 +137,8 @@ TEST(RenderCli, BuildAndRenderShippedDem) {
 }
 
 // The shipped DEM flown along the shipped fly-by with the loader under small byte budgets, a
-// simulated slow disk and geomorphs: every frame complete, every cache within its budget; bad
+// simulated slow disk and geomorphs: every frame complete, every cache within its budget. An orbit
+// under a GPU cache below the roots' pages draws roots from their stand-ins, complete. Bad
 // streaming options name themselves.
 TEST(RenderCli, StreamingKeepsItsByteBudgets) {
   test::TempDir dir("gimlod-stream");
@@ -178,9 +179,36 @@ TEST(RenderCli, StreamingKeepsItsByteBudgets) {
   }
   EXPECT_GT(issued, 0u);
   EXPECT_GT(done, 0u);
+  // A GPU cache below the roots' pages: the roots are drawn from stand-ins, with the loader and
+  // without, and every frame stays complete within the cache.
+  // The orbit sees every chart, more roots than the pool's room for nodes.
+  for (const std::string loader : {"", " --loader-threads 2 --io-latency 2,1"}) {
+    const fs::path small = dir.path() / "small";
+    ASSERT_EQ(test::runCommand(app + " render '" + atlas.string() + "' -o '" + small.string() +
+                                   "' --orbit 8 --size 96x64 --gpu-cache 400K" + loader,
+                               &out),
+              0)
+        << out;
+    EXPECT_NE(out.find("stand-in"), std::string::npos) << out;
+    EXPECT_NE(out.find("the GPU page pool's room of"), std::string::npos) << out;
+    const auto sr = readCsv(small / "stats.csv");
+    ASSERT_GE(sr.size(), 4u);
+    auto scol = [&](const std::string& name) {
+      return size_t(std::find(sr[0].begin(), sr[0].end(), name) - sr[0].begin());
+    };
+    ASSERT_LT(scol("roots_on_stand_ins"), sr[0].size());
+    uint64_t onStandIns = 0;
+    for (size_t r = 1; r < sr.size(); ++r) {
+      EXPECT_LE(std::stoull(sr[r][scol("resident_gpu_bytes")]), 400u << 10) << loader << " frame " << r - 1;
+      EXPECT_EQ(sr[r][scol("incomplete")], "0") << loader << " frame " << r - 1;
+      EXPECT_EQ(sr[r][scol("pages_missing")], "0") << loader << " frame " << r - 1;
+      onStandIns += std::stoull(sr[r][scol("roots_on_stand_ins")]);
+    }
+    EXPECT_GT(onStandIns, 0u) << loader;
+  }
   // Bad streaming options name themselves or what they cannot hold.
   for (const auto& [bad, named] :
-       std::vector<std::pair<std::string, std::string>>{{"--gpu-cache 10K", "GPU page cache"},
+       std::vector<std::pair<std::string, std::string>>{{"--gpu-cache 10K", "stand-ins"},
                                                         {"--ram-cache 2K", "loader's RAM"},
                                                         {"--ram-cache lots", "--ram-cache"},
                                                         {"--io-latency fast", "--io-latency"},
