@@ -131,6 +131,7 @@ void benchQuad(const Hierarchy& h, const std::vector<ViewParams>& views, const A
       ops += st.refines + st.coarsens + st.splits + st.merges + st.undoneOps;
       kinds.refines += st.refines, kinds.coarsens += st.coarsens, kinds.splits += st.splits;
       kinds.merges += st.merges, kinds.undoneOps += st.undoneOps, kinds.undos += st.undos + st.tieUndos;
+      kinds.boundedPriorities += st.boundedPriorities;
       err += st.maxErrorPx;
       if (a.oursOnly) continue;
       t0 = Clock::now();
@@ -143,9 +144,11 @@ void benchQuad(const Hierarchy& h, const std::vector<ViewParams>& views, const A
     std::printf("%9u %8.0f %10.1f %10.4f %8.2f %8.0f %10.1f %9.2f %9.4f %9.4f %6u\n", budget, nodes / n, us / n,
                 us / nodes, rounds / n, ops / n, refUs / n, refUs / us, err / n, refErr / n, same);
     if (a.opsBreakdown)
-      std::printf("%9s per frame: %.1f refines, %.1f coarsens, %.1f splits, %.1f merges, %.1f undone in %.2f undos\n",
-                  "", kinds.refines / n, kinds.coarsens / n, kinds.splits / n, kinds.merges / n, kinds.undoneOps / n,
-                  kinds.undos / n);
+      std::printf(
+          "%9s per frame: %.1f refines, %.1f coarsens, %.1f splits, %.1f merges, %.1f undone in %.2f undos; %.0f "
+          "split priorities from bounds\n",
+          "", kinds.refines / n, kinds.coarsens / n, kinds.splits / n, kinds.merges / n, kinds.undoneOps / n,
+          kinds.undos / n, kinds.boundedPriorities / n);
   }
 }
 

@@ -33,6 +33,7 @@ struct Entry {
   uint32_t maxResLog2 = 0;
   bool drawn = false;
   bool drawnFlipped = false;  // drawn changed in this frame's evaluation
+  bool inside = false;        // drawn and its bounds inside the frustum (from the frame's evaluation)
   bool prioValid = false;     // splitPrio holds this frame's split priority at res and err
   double err = 0.0;           // screen error at res; 0 when not drawn
   double dist = 1.0;          // eye distance to the bounds this frame (as screenError clamps it)
@@ -47,6 +48,7 @@ struct NodeEval {
   const float* errs = nullptr;
   uint32_t maxResLog2 = 0;
   bool drawable = false;  // nodeDrawable
+  bool inside = false;    // drawable and inside every plane (evaluated with classify)
 };
 
 // Heap item; all heaps are max-heaps on priority, ties broken by key (deterministic).
@@ -207,7 +209,7 @@ class NodeCache {
   }
   // note: every node's planes are tested, even below a node inside the frustum: a node's bounds
   // need not lie in its parent's (a terrain's nodes past the raster's edge lie flat at the lowest
-  // height).
+  // height; see nestedChildren).
   NodeEval operator()(const NodeId& n) {
     const uint32_t i = nodeIndex(n.level, n.x, n.y);
     Slot& s = slot_[size_t(n.chart) * perChart_ + i];
@@ -215,14 +217,22 @@ class NodeCache {
     s = {frame_, uint32_t(evals_.size())};
     return evals_.emplace_back(evaluate(n, i));
   }
-  // The node's NodeEval, not cached.
-  NodeEval evaluate(const NodeId& n, uint32_t i) const {
+  // The node's NodeEval, not cached; withInside: classified, so that inside is set.
+  NodeEval evaluate(const NodeId& n, uint32_t i, bool withInside = false) const {
     NodeEval e;
     const Hierarchy::ChartNodes& cn = h_->charts[n.chart];
     const auto& b = cn.bounds[i];
     const glm::dvec3 lo{b[0], b[1], b[2]}, hi{b[3], b[4], b[5]};
     // The same arithmetic as nodeDrawable, neededResolution and screenError.
-    e.drawable = !(cn.flags[i] & kNodeEmpty) && (!cull_ || view_->frustum.intersects(lo, hi));
+    if (cn.flags[i] & kNodeEmpty) {
+      e.drawable = false;
+    } else if (withInside) {
+      const int c = cull_ ? view_->frustum.classify(lo, hi) : 2;
+      e.drawable = c != 0;
+      e.inside = c == 2;
+    } else {
+      e.drawable = !cull_ || view_->frustum.intersects(lo, hi);
+    }
     e.dist = std::max(glm::length(glm::clamp(view_->eye, lo, hi) - view_->eye), view_->minDistance);
     e.errs = &cn.errors[size_t(i) * h_->params.resCount()];
     e.maxResLog2 = h_->maxResLog2(n);
@@ -240,6 +250,41 @@ class NodeCache {
   std::vector<Slot> slot_;
   std::vector<NodeEval> evals_;
 };
+
+// Per forest node: 1 when every non-empty child's bounds lie within the node's. Then a child of a
+// node inside the frustum is inside too, and its eye distance is at least the node's and at most
+// the node's plus the node's extent (splitPriorityBound). Not so where a terrain's padding lies
+// flat at the lowest height (emptyTerrainTile): such children are empty, and not looked at.
+std::vector<uint8_t> nestedChildren(const Hierarchy& h) {
+  const uint32_t per = nodesPerChart(h.params.depth);
+  std::vector<uint8_t> nested(size_t(per) * h.chartCount(), 0);
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    const Hierarchy::ChartNodes& cn = h.charts[c];
+    for (uint32_t l = 0; l + 1 < h.params.depth; ++l)
+      for (uint32_t y = 0; y < (1u << l); ++y)
+        for (uint32_t x = 0; x < (1u << l); ++x) {
+          const NodeId n{c, l, x, y};
+          const auto& b = cn.bounds[nodeIndex(l, x, y)];
+          bool in = true;
+          for (uint32_t k = 0; k < 4 && in; ++k) {
+            const NodeId ch = n.child(k);
+            const uint32_t i = nodeIndex(ch.level, ch.x, ch.y);
+            if (cn.flags[i] & kNodeEmpty) continue;
+            const auto& cb = cn.bounds[i];
+            for (int a = 0; a < 3; ++a) in = in && cb[a] >= b[a] && cb[a + 3] <= b[a + 3];
+          }
+          nested[size_t(c) * per + nodeIndex(l, x, y)] = uint8_t(in);
+        }
+  }
+  return nested;
+}
+
+// The first resolution from minRes whose error is at most tolWorld, else maxRes (as resFor).
+uint32_t firstWithin(const float* errs, uint32_t minRes, uint32_t maxRes, double tolWorld) {
+  for (uint32_t r = minRes; r <= maxRes; ++r)
+    if (double(errs[r - minRes]) <= tolWorld) return r;
+  return maxRes;
+}
 
 }  // namespace
 
@@ -267,9 +312,11 @@ struct QuadQueueAdapter::State {
   struct Listed {  // one entry's phase-2 items (listMerges)
     double split = -1.0, cost = 0.0;
     bool merge = false;
+    bool bounded = false;  // the split priority was settled by splitPriorityBound
   };
   std::vector<Listed> listed;
   uint32_t parallelMin = kDefaultParallelMin;
+  std::vector<uint8_t> nested;  // nestedChildren, per forest node
   std::vector<std::vector<Item>> refineB;
   // Phase 1's queues are built once a frame and then kept up to date from round to round: the
   // entries phase 2 added (fresh), those whose floor changed (refloored), those below their floor
@@ -357,10 +404,11 @@ struct QuadQueueAdapter::State {
     e.err = e.drawn ? errAt(e, r) : 0.0;
     e.prioValid = false;
   }
-  void evaluate(Entry& e) { evaluateWith(e, node.evaluate(e.id, nodeIndex(e.id.level, e.id.x, e.id.y))); }
+  void evaluate(Entry& e) { evaluateWith(e, node.evaluate(e.id, nodeIndex(e.id.level, e.id.x, e.id.y), true)); }
   void evaluateWith(Entry& e, const NodeEval& n) {
     e.drawnFlipped = e.drawn != n.drawable;
     e.drawn = n.drawable;
+    e.inside = n.inside;
     e.dist = n.dist;
     e.errs = n.errs;
     e.maxResLog2 = n.maxResLog2;
@@ -659,21 +707,58 @@ struct QuadQueueAdapter::State {
   // the triangle floor, and zero-effect merges of culled groups. Returns whether anything changed.
   // cached: the children's view data through the frame's cache (single-threaded callers; a child
   // split or listed later in the frame finds it there), else computed directly.
-  double splitPriority(Entry& e, bool cached = true) {
+  // bounded (optional): set when splitPriorityBound settled it.
+  double splitPriority(Entry& e, bool cached = true, bool* bounded = nullptr) {
     if (e.prioValid) return e.splitPrio;
     e.prioValid = true;
-    return e.splitPrio = splitPriorityNow(e, cached);
+    return e.splitPrio = splitPriorityNow(e, cached, bounded);
   }
-  double splitPriorityNow(const Entry& e, bool cached) {
+  double splitPriorityNow(const Entry& e, bool cached, bool* bounded = nullptr) {
     if (!e.drawn || e.id.level + 1 >= h->params.depth) return -1.0;
     if (e.id.level == 0 && groups.frozen(e.id.chart)) return -1.0;  // a closed group's root
     if (e.resLog2 >= e.maxResLog2) return kStuckPriority * (1.0 + e.err);
+    bool exact = false;
+    const double bound = splitPriorityBound(e, &exact);
+    if (exact || bound <= 0.0) {
+      if (bounded) *bounded = true;
+      return bound;
+    }
     double t = double(tris(e.resLog2));
     for (uint32_t i = 0; i < 4; ++i) {
       const NodeId c = e.id.child(i);
       const NodeEval ch = cached ? node(c) : node.evaluate(c, nodeIndex(c.level, c.x, c.y));
       if (ch.drawable) t -= double(tris(resFor(ch, e.err)));
     }
+    return t;
+  }
+  // Without the children's view data: for a node inside the frustum whose children lie within
+  // it, every non-empty child is drawn, at an eye distance in [dist, dist + extent]; each child's
+  // resolution at the node's error is then known to within the resolutions at the two ends. The
+  // split priority at the children's coarsest is returned, an upper bound: *exact when every
+  // child's resolution is known. Without the conditions, +infinity. The ends are widened by 1e-9
+  // (relative), far beyond the rounding of the arithmetic resFor does, so the bound holds for it.
+  double splitPriorityBound(const Entry& e, bool* exact) const {
+    *exact = false;
+    if (!e.inside || !nested[cut.index(e.id)]) return std::numeric_limits<double>::infinity();
+    const Hierarchy::ChartNodes& cn = h->charts[e.id.chart];
+    const auto& b = cn.bounds[nodeIndex(e.id.level, e.id.x, e.id.y)];
+    const double extent = double(b[3] - b[0]) + double(b[4] - b[1]) + double(b[5] - b[2]);  // >= the diagonal
+    const double errWorld = double(e.errs[e.resLog2 - minResLog2()]);
+    const double tolNear = errWorld * (1.0 - 1e-9), tolFar = errWorld * (1.0 + extent / e.dist) * (1.0 + 1e-9);
+    const uint32_t rc = h->params.resCount();
+    double t = double(tris(e.resLog2));
+    bool known = true;
+    for (uint32_t k = 0; k < 4; ++k) {
+      const NodeId c = e.id.child(k);
+      const uint32_t i = nodeIndex(c.level, c.x, c.y);
+      if (cn.flags[i] & kNodeEmpty) continue;
+      const float* errs = &cn.errors[size_t(i) * rc];
+      const uint32_t maxRes = h->maxResLog2(c);
+      const uint32_t coarsest = firstWithin(errs, minResLog2(), maxRes, tolFar);
+      t -= double(tris(coarsest));
+      known = known && coarsest == firstWithin(errs, minResLog2(), maxRes, tolNear);
+    }
+    *exact = known;
     return t;
   }
   // Merge cost (added triangles) of the group under p, and the parent's resolution.
@@ -799,7 +884,8 @@ struct QuadQueueAdapter::State {
     parallelPass(n, parallelMin, [&](size_t i) {
       Entry& e = items[i].second;
       Listed& q = listed[i];
-      q.split = splits ? splitPriority(e, serial) : -1.0;
+      q.bounded = false;
+      q.split = splits ? splitPriority(e, serial, &q.bounded) : -1.0;
       q.merge = false;
       if (e.id.level == 0 || !firstOfGroup(e)) return;
       const NodeId par = e.id.parent();
@@ -810,6 +896,7 @@ struct QuadQueueAdapter::State {
     });
     for (size_t i = 0; i < n; ++i) {
       const Entry& e = items[i].second;
+      st.boundedPriorities += uint32_t(listed[i].bounded);
       if (listed[i].split > 0.0) splitH.push_back({listed[i].split, items[i].first, e.resLog2});
       if (listed[i].merge) mergeH.push_back(mergeItem(e.id.parent(), -listed[i].cost));
     }
@@ -1106,6 +1193,7 @@ const Cut& QuadQueueAdapter::update(const ViewParams& view, const BudgetOptions&
   }
   s.phase1Ready = s.phase2Ready = false;
   if (s.dirtyMark.size() != s.cut.forestSize()) s.dirtyMark.assign(s.cut.forestSize(), 0);
+  if (s.nested.size() != s.cut.forestSize()) s.nested = nestedChildren(h_);
   s.fresh.clear();
   s.refloored.clear();
   if (s.mergeSeq.size() != s.cut.forestSize()) s.mergeSeq.assign(s.cut.forestSize(), 0);

@@ -145,12 +145,12 @@ TEST(AdaptEquivalence, TheQuadQueueCutsAreTheReferencesOnRandomForests) {
 
 // Deep forests (7 levels) on an orbit, with node budgets in the thousands and triangles to spare:
 // many rounds a frame, with trades of splits for merges whose parents cannot hold their
-// children's errors, and undone rounds.
+// children's errors, undone rounds, and split priorities settled from bounds.
 TEST(AdaptEquivalence, TheQuadQueueCutsAreTheReferencesOnDeepForests) {
   struct Case {
     uint32_t chartsX, nodes;
   };
-  uint32_t frames = 0, rounds = 0, undone = 0;
+  uint32_t frames = 0, rounds = 0, undone = 0, bounded = 0;
   for (const Case& c : {Case{2, 1335}, Case{3, 1669}}) {
     const World w = makeWorld(1025, c.chartsX, 2, 7);
     BudgetOptions o;
@@ -171,10 +171,12 @@ TEST(AdaptEquivalence, TheQuadQueueCutsAreTheReferencesOnDeepForests) {
       ++frames;
       rounds += st.rounds;
       undone += st.undoneOps;
+      bounded += st.boundedPriorities;
     }
   }
   EXPECT_GT(rounds, 2 * frames) << "too few rounds a frame to check the kept queues";
   EXPECT_GT(undone, 0u) << "no round undone";
+  EXPECT_GT(bounded, 0u) << "no split priority settled without the children's view data";
 }
 
 TEST(AdaptEquivalence, TheDualQueueCutsAreTheReferencesOnRandomForests) {
