@@ -350,6 +350,36 @@ AttributeStats assignAttributeResolutions(const Hierarchy& h, Cut& cut, const Vi
   return st;
 }
 
+std::vector<uint8_t> nestedChildren(const Hierarchy& h) {
+  const uint32_t per = nodesPerChart(h.params.depth);
+  std::vector<uint8_t> nested(size_t(per) * h.chartCount(), 0);
+  for (uint32_t c = 0; c < h.chartCount(); ++c) {
+    const Hierarchy::ChartNodes& cn = h.charts[c];
+    for (uint32_t l = 0; l + 1 < h.params.depth; ++l)
+      for (uint32_t y = 0; y < (1u << l); ++y)
+        for (uint32_t x = 0; x < (1u << l); ++x) {
+          const NodeId n{c, l, x, y};
+          const auto& b = cn.bounds[nodeIndex(l, x, y)];
+          bool in = true;
+          for (uint32_t k = 0; k < 4 && in; ++k) {
+            const NodeId ch = n.child(k);
+            const uint32_t i = nodeIndex(ch.level, ch.x, ch.y);
+            if (cn.flags[i] & kNodeEmpty) continue;
+            const auto& cb = cn.bounds[i];
+            for (int a = 0; a < 3; ++a) in = in && cb[a] >= b[a] && cb[a + 3] <= b[a + 3];
+          }
+          nested[size_t(c) * per + nodeIndex(l, x, y)] = uint8_t(in);
+        }
+  }
+  return nested;
+}
+
+uint32_t firstWithin(const float* errs, uint32_t minRes, uint32_t maxRes, double tolWorld) {
+  for (uint32_t r = minRes; r <= maxRes; ++r)
+    if (double(errs[r - minRes]) <= tolWorld) return r;
+  return maxRes;
+}
+
 uint32_t countStitchViolations(const Hierarchy& h, const Cut& cut) {
   std::vector<SideNeighbour> scratch;
   uint32_t bad = 0;

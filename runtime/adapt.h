@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <vector>
 
 #include <glm/glm.hpp>
 
@@ -111,6 +112,18 @@ double topDownSplitPriority(const Hierarchy& h, const NodeId& n, const AdaptView
 
 // Lowest resolution of n whose screen error is within tolerance, or maxResLog2 + 1 if none.
 uint32_t neededResolution(const Hierarchy& h, const NodeId& n, const ViewParams& v, double tolPx);
+
+// Per forest node (chart * nodesPerChart + nodeIndex): 1 when every non-empty child's bounds lie
+// within the node's. Then a child of a node inside the frustum is inside too (Frustum::classify),
+// and its eye distance is at least the node's and at most the node's plus the node's extent: the
+// adapters bound their children's resolutions from that without the children's view data. Not so
+// where a terrain's padding lies flat at the lowest height (emptyTerrainTile): such children are
+// empty, and not looked at.
+std::vector<uint8_t> nestedChildren(const Hierarchy& h);
+// The first resolution from minRes whose error (errs[res - minRes]) is at most tolWorld, else
+// maxRes: neededResolution's search, at a tolerance in world units. Never lower for a larger
+// tolWorld.
+uint32_t firstWithin(const float* errs, uint32_t minRes, uint32_t maxRes, double tolWorld);
 
 // The stitching constraint (paper 7.4): a node's resolution is at least the level difference to
 // its finest neighbour on any side, so it has a vertex for every small neighbour's corner. Raises
