@@ -374,12 +374,6 @@ std::vector<uint8_t> nestedChildren(const Hierarchy& h) {
   return nested;
 }
 
-uint32_t firstWithin(const float* errs, uint32_t minRes, uint32_t maxRes, double tolWorld) {
-  for (uint32_t r = minRes; r <= maxRes; ++r)
-    if (double(errs[r - minRes]) <= tolWorld) return r;
-  return maxRes;
-}
-
 uint32_t countStitchViolations(const Hierarchy& h, const Cut& cut) {
   std::vector<SideNeighbour> scratch;
   uint32_t bad = 0;

@@ -123,7 +123,11 @@ std::vector<uint8_t> nestedChildren(const Hierarchy& h);
 // The first resolution from minRes whose error (errs[res - minRes]) is at most tolWorld, else
 // maxRes: neededResolution's search, at a tolerance in world units. Never lower for a larger
 // tolWorld.
-uint32_t firstWithin(const float* errs, uint32_t minRes, uint32_t maxRes, double tolWorld);
+inline uint32_t firstWithin(const float* errs, uint32_t minRes, uint32_t maxRes, double tolWorld) {
+  for (uint32_t r = minRes; r <= maxRes; ++r)
+    if (double(errs[r - minRes]) <= tolWorld) return r;
+  return maxRes;
+}
 
 // The stitching constraint (paper 7.4): a node's resolution is at least the level difference to
 // its finest neighbour on any side, so it has a vertex for every small neighbour's corner. Raises
