@@ -42,6 +42,18 @@ class AsyncLoadingTest : public test::GlContextTest<> {
     return c;
   }
 
+  // A 96x72 scene's options, and the bytes of one of its pages (*standIns: whether a scene at the
+  // default cache gives its roots stand-ins).
+  static gl::SceneOptions smallScene(const AtlasView& a, uint64_t* pageBytes, bool* standIns = nullptr) {
+    gl::SceneOptions so;
+    so.width = 96;
+    so.height = 72;
+    gl::AtlasScene probe(a, so);
+    *pageBytes = probe.pageBytes();
+    if (standIns) *standIns = !probe.rootStandIns().empty();
+    return so;
+  }
+
   test::TempDir dir_{"gimlod-async"};
 };
 
@@ -203,14 +215,8 @@ TEST_F(AsyncLoadingTest, PagesLoadingViewMarksTheStandInsUntilTheirPagesArrive) 
 TEST_F(AsyncLoadingTest, ByteBudgetsHoldInEveryFrame) {
   const AtlasView atlas = build();
   const Hierarchy& h = atlas.hierarchy;
-  gl::SceneOptions so;
-  so.width = 96;
-  so.height = 72;
   uint64_t pageBytes = 0;
-  {
-    gl::AtlasScene probe(atlas, so);
-    pageBytes = probe.pageBytes();
-  }
+  gl::SceneOptions so = smallScene(atlas, &pageBytes);
   ASSERT_GT(pageBytes, 0u);
   const uint32_t roots = h.chartCount();
   ASSERT_GT(4 * roots, 12u) << "the pool must hold less than one level of pages";
@@ -257,15 +263,10 @@ TEST_F(AsyncLoadingTest, ByteBudgetsHoldInEveryFrame) {
 TEST_F(AsyncLoadingTest, ACacheBelowTheRootsDrawsThemFromStandIns) {
   const AtlasView atlas = build();
   const Hierarchy& h = atlas.hierarchy;
-  gl::SceneOptions so;
-  so.width = 96;
-  so.height = 72;
   uint64_t pageBytes = 0;
-  {
-    gl::AtlasScene probe(atlas, so);
-    pageBytes = probe.pageBytes();
-    EXPECT_TRUE(probe.rootStandIns().empty()) << "a pool that holds the roots locks them";
-  }
+  bool standInsAtDefault = true;
+  gl::SceneOptions so = smallScene(atlas, &pageBytes, &standInsAtDefault);
+  EXPECT_FALSE(standInsAtDefault) << "a pool that holds the roots locks them";
   const uint32_t roots = h.chartCount();
   so.gpuCacheBytes = (roots + 3) * pageBytes;
   AdaptOptions ao;
