@@ -31,11 +31,15 @@ PageRequestPlan planPageRequests(const Hierarchy& h, const Cut& desired, const R
 
 namespace {
 
-// One pass of substituteResident with the charts in levelCap held to levels <= their cap. Fills
-// overGap with the charts whose root, on its stand-in, is left below its stitching gap.
-ResidentCut substituteOnce(const Hierarchy& h, const Cut& desired, const ViewParams& view, const ResidentFn& resident,
-                           const RootStandIns& standIns, const std::unordered_map<uint32_t, uint32_t>& levelCap,
-                           std::vector<uint32_t>& overGap) {
+// One pass of substituteResident with the charts in levelCap held to levels <= their cap: the
+// cut, and the charts whose root, on its stand-in, is left below its stitching gap.
+struct SubstitutePass {
+  ResidentCut out;
+  std::vector<uint32_t> overGap;
+};
+SubstitutePass substituteOnce(const Hierarchy& h, const Cut& desired, const ViewParams& view,
+                              const ResidentFn& resident, const RootStandIns& standIns,
+                              const std::unordered_map<uint32_t, uint32_t>& levelCap) {
   const HierarchyParams& p = h.params;
   const auto isResident = [&](const NodeId& n) {
     if (!resident(n.key())) return false;
@@ -68,7 +72,8 @@ ResidentCut substituteOnce(const Hierarchy& h, const Cut& desired, const ViewPar
     }
     if (!inner) outer[a.key()] = kUnplaced;
   }
-  ResidentCut out;
+  SubstitutePass pass;
+  ResidentCut& out = pass.out;
   Cut& drawn = out.cut;
   drawn.nodes.reserve(desired.nodes.size());
   for (const CutNode& n : desired.nodes) {
@@ -112,7 +117,7 @@ ResidentCut substituteOnce(const Hierarchy& h, const Cut& desired, const ViewPar
       if (gap <= drawable(n.id))
         n.resLog2 = gap;
       else if (standIn)
-        overGap.push_back(n.id.chart);
+        pass.overGap.push_back(n.id.chart);
       else
         ++out.stitchUnfixable;
     }
@@ -120,7 +125,7 @@ ResidentCut substituteOnce(const Hierarchy& h, const Cut& desired, const ViewPar
       if (i != kUnplaced)
         drawn.nodes[i].errorPx = float(screenError(h, drawn.nodes[i].id, drawn.nodes[i].resLog2, view));
   }
-  return out;
+  return pass;
 }
 
 }  // namespace
@@ -128,12 +133,10 @@ ResidentCut substituteOnce(const Hierarchy& h, const Cut& desired, const ViewPar
 ResidentCut substituteResident(const Hierarchy& h, const Cut& desired, const ViewParams& view,
                                const ResidentFn& resident, const RootStandIns& standIns) {
   std::unordered_map<uint32_t, uint32_t> levelCap;  // chart -> the deepest level drawn there
-  std::vector<uint32_t> overGap;
   // Each pass caps charts beside the roots left below their gaps; caps only fall, so this ends
   // (at the latest with every chart at its roots' stand-ins' levels).
   for (;;) {
-    overGap.clear();
-    ResidentCut out = substituteOnce(h, desired, view, resident, standIns, levelCap, overGap);
+    auto [out, overGap] = substituteOnce(h, desired, view, resident, standIns, levelCap);
     bool capped = false;
     for (const uint32_t c : overGap)
       for (const RootNeighbour& nb : h.roots[c]) {
