@@ -43,7 +43,7 @@ struct Args {
   uint32_t maxRoots = kDefaultMaxRoots;
   std::vector<uint32_t> budgets{100u, 250u, 500u, 1000u, 2000u, 5000u, 10000u, 20000u};
   std::string only;
-  bool oursOnly = false;  // skip the references and the greedy (for profiles of the adapters alone)
+  bool oursOnly = false;      // skip the references and the greedy (for profiles of the adapters alone)
   bool opsBreakdown = false;  // the quad queue's operations per frame, by kind
   uint32_t parallelMin = kDefaultParallelMin;  // the adapters' parallelMin (0: one thread)
 };
@@ -163,7 +163,8 @@ int run(int argc, char** argv) {
   app.add_option("max_roots", a.maxRoots, "top groups above the charts (0: every chart root a root)");
   app.add_option("--budgets", a.budgets, "node budgets")->delimiter(',');
   app.add_option("--only", a.only, "one adapter")->check(CLI::IsMember({"dual", "quad"}));
-  app.add_option("--parallel-min", a.parallelMin, "kept cuts of at least this many nodes are evaluated in parallel (0: never)");
+  app.add_option("--parallel-min", a.parallelMin,
+                 "kept cuts of at least this many nodes are evaluated in parallel (0: never)");
   app.add_flag("--ops", a.opsBreakdown, "the quad queue's operations per frame, by kind");
   app.add_flag("--ours-only", a.oursOnly, "time the adapters alone: no reference, no greedy (ref and same columns 0)");
   CLI11_PARSE(app, argc, argv);

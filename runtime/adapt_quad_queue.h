@@ -21,14 +21,14 @@ struct BudgetOptions {
 
 struct BudgetStats {
   uint32_t refines = 0, coarsens = 0, splits = 0, merges = 0;
-  uint32_t rounds = 0;      // refine/coarsen + split/merge rounds this frame
-  uint32_t undos = 0;       // split/merge rounds undone because the max error got worse
-  uint32_t tieUndos = 0;    // rounds undone because the max error did not improve (tie rule)
-  uint32_t undoneOps = 0;   // operations of undone rounds (not in refines..merges)
+  uint32_t rounds = 0;             // refine/coarsen + split/merge rounds this frame
+  uint32_t undos = 0;              // split/merge rounds undone because the max error got worse
+  uint32_t tieUndos = 0;           // rounds undone because the max error did not improve (tie rule)
+  uint32_t undoneOps = 0;          // operations of undone rounds (not in refines..merges)
   uint32_t boundedPriorities = 0;  // split priorities listed without the children's view data
-  bool opCapBound = false;  // maxOpsPerFrame stopped the frame early
-  uint32_t nodes = 0;       // drawn nodes (Cut::nodeCount: a closed group's roots once)
-  uint64_t triangles = 0;   // drawn triangles (<= maxTriangles)
+  bool opCapBound = false;         // maxOpsPerFrame stopped the frame early
+  uint32_t nodes = 0;              // drawn nodes (Cut::nodeCount: a closed group's roots once)
+  uint64_t triangles = 0;          // drawn triangles (<= maxTriangles)
   double maxErrorPx = 0.0, meanErrorPx = 0.0;
   uint32_t constraintRaises = 0, constraintSplits = 0;
   uint32_t budgetMerges = 0;      // merges forced by maxNodes or by the triangle floor (in merges)
