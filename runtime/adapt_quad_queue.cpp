@@ -185,6 +185,10 @@ class EntryMap {
   std::vector<Logged> log_;
 };
 
+// How a node's evaluation meets the frustum: intersects, classify (sets NodeEval::inside), or
+// not at all for a node known to lie inside it.
+enum class FrustumTest : uint8_t { kIntersects, kClassify, kInside };
+
 // Per-frame cache of NodeEval, found through dense per-forest-node stamps.
 class NodeCache {
  public:
@@ -210,15 +214,17 @@ class NodeCache {
   // note: every node's planes are tested, even below a node inside the frustum: a node's bounds
   // need not lie in its parent's (a terrain's nodes past the raster's edge lie flat at the lowest
   // height; see nestedChildren).
-  NodeEval operator()(const NodeId& n) {
+  // cull: how the frustum is met; kInside for a non-empty node known to lie inside it (a child
+  // of a node inside it that holds its children's bounds, nestedChildren).
+  NodeEval operator()(const NodeId& n, FrustumTest cull = FrustumTest::kIntersects) {
     const uint32_t i = nodeIndex(n.level, n.x, n.y);
     Slot& s = slot_[size_t(n.chart) * perChart_ + i];
     if (s.frame == frame_) return evals_[s.at];
     s = {frame_, uint32_t(evals_.size())};
-    return evals_.emplace_back(evaluate(n, i));
+    return evals_.emplace_back(evaluate(n, i, cull));
   }
   // The node's NodeEval, not cached; withInside: classified, so that inside is set.
-  NodeEval evaluate(const NodeId& n, uint32_t i, bool withInside = false) const {
+  NodeEval evaluate(const NodeId& n, uint32_t i, FrustumTest cull = FrustumTest::kIntersects) const {
     NodeEval e;
     const Hierarchy::ChartNodes& cn = h_->charts[n.chart];
     const auto& b = cn.bounds[i];
@@ -226,7 +232,9 @@ class NodeCache {
     // The same arithmetic as nodeDrawable, neededResolution and screenError.
     if (cn.flags[i] & kNodeEmpty) {
       e.drawable = false;
-    } else if (withInside) {
+    } else if (cull == FrustumTest::kInside) {
+      e.drawable = e.inside = true;
+    } else if (cull == FrustumTest::kClassify) {
       const int c = cull_ ? view_->frustum.classify(lo, hi) : 2;
       e.drawable = c != 0;
       e.inside = c == 2;
@@ -369,7 +377,13 @@ struct QuadQueueAdapter::State {
     e.err = e.drawn ? errAt(e, r) : 0.0;
     e.prioValid = false;
   }
-  void evaluate(Entry& e) { evaluateWith(e, node.evaluate(e.id, nodeIndex(e.id.level, e.id.x, e.id.y), true)); }
+  void evaluate(Entry& e) {
+    evaluateWith(e, node.evaluate(e.id, nodeIndex(e.id.level, e.id.x, e.id.y), FrustumTest::kClassify));
+  }
+  // How e's children meet the frustum: not at all when e is inside it and holds their bounds.
+  FrustumTest childTest(const Entry& e) const {
+    return e.inside && nested[cut.index(e.id)] ? FrustumTest::kInside : FrustumTest::kIntersects;
+  }
   void evaluateWith(Entry& e, const NodeEval& n) {
     e.drawnFlipped = e.drawn != n.drawable;
     e.drawn = n.drawable;
@@ -691,7 +705,7 @@ struct QuadQueueAdapter::State {
     double t = double(tris(e.resLog2));
     for (uint32_t i = 0; i < 4; ++i) {
       const NodeId c = e.id.child(i);
-      const NodeEval ch = cached ? node(c) : node.evaluate(c, nodeIndex(c.level, c.x, c.y));
+      const NodeEval ch = cached ? node(c, childTest(e)) : node.evaluate(c, nodeIndex(c.level, c.x, c.y), childTest(e));
       if (ch.drawable) t -= double(tris(resFor(ch, e.err)));
     }
     return t;
@@ -753,6 +767,14 @@ struct QuadQueueAdapter::State {
   double parentErrorAtMax(const NodeEval& pe) const {
     return double(pe.errs[pe.maxResLog2 - minResLog2()]) * view.pixelsPerRadian / pe.dist;
   }
+  // The drawn-node change of splitting e: its non-empty children, without their view data when e
+  // is inside the frustum and holds their bounds (nestedChildren), less e.
+  int64_t drawnDelta(const Entry& e) {
+    if (!e.inside || !nested[cut.index(e.id)]) return drawnDelta(e.id);
+    int64_t d = -1;
+    for (uint32_t i = 0; i < 4; ++i) d += int64_t(!(h->flags(e.id.child(i)) & kNodeEmpty));
+    return d;
+  }
   int64_t drawnDelta(const NodeId& n) {
     const NodeEval ne = node(n);
     int64_t d = -int64_t(ne.drawable);
@@ -783,6 +805,7 @@ struct QuadQueueAdapter::State {
     if (phase2Ready) recheckGroup(n);  // its children: mergeable again from the next round
     Entry* it = cut.find(n);
     const double tol = it->err;
+    const FrustumTest test = childTest(*it);
     removeCounts(*it);
     cut.erase(n);
     for (uint32_t i = 0; i < 4; ++i) {
@@ -792,7 +815,7 @@ struct QuadQueueAdapter::State {
       e.id = ch;
       e.splitRound = r;
       e.floor = minResLog2();
-      const NodeEval ne = node(ch);
+      const NodeEval ne = node(ch, test);
       evaluateWith(e, ne);
       if (e.drawn) {
         e.resLog2 = resFor(ne, tol);
@@ -1006,7 +1029,7 @@ struct QuadQueueAdapter::State {
         }
       }
       if (!s) break;
-      const int64_t d = drawnDelta(s->id);
+      const int64_t d = drawnDelta(*s);
       const int64_t df = d * int64_t(tris(minResLog2()));
       if (d <= availNodes && df <= availFloor) {
         const Item it = heapPop(splitH);
@@ -1069,7 +1092,7 @@ struct QuadQueueAdapter::State {
       Entry* s = splitTop(r);
       if (!s) break;
       const Item it = heapPop(splitH);
-      const int64_t d = drawnDelta(s->id);
+      const int64_t d = drawnDelta(*s);
       if (int64_t(drawn) + d > nodeLimit || int64_t(floorTrisNow()) + d * int64_t(tris(minResLog2())) > triBudget) {
         splitAside.push_back(it);
         continue;
