@@ -591,14 +591,13 @@ struct QuadQueueAdapter::State {
     return progress;
   }
   static bool parkedLess(const Parked& a, const Parked& b) { return a.coarsenedErr > b.coarsenedErr; }
-  // Back to coarsenH: the parked coarsenings that stay below maxErr (every one at infinity).
+  // Back to coarsenH: every parked coarsening (one heap build), or those that stay below maxErr.
+  void unparkAll() {
+    for (const Parked& p : parked) coarsenH.push_back(p.item);
+    parked.clear();
+    std::make_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
+  }
   void unpark(double maxErr) {
-    if (maxErr == std::numeric_limits<double>::infinity()) {
-      for (const Parked& p : parked) coarsenH.push_back(p.item);
-      parked.clear();
-      std::make_heap(coarsenH.begin(), coarsenH.end(), ItemLess{});
-      return;
-    }
     while (!parked.empty() && parked.front().coarsenedErr < maxErr - kEps) {
       heapPush(coarsenH, parked.front().item);
       std::pop_heap(parked.begin(), parked.end(), parkedLess);
@@ -647,7 +646,7 @@ struct QuadQueueAdapter::State {
     phase1Queues();
     const uint64_t budget = opt.maxTriangles;
     // (a) Within the triangle budget (never capped).
-    if (triangles > budget) unpark(std::numeric_limits<double>::infinity());
+    if (triangles > budget) unparkAll();
     while (triangles > budget) {
       Entry* e = nullptr;
       while (!coarsenH.empty() && !(e = validCoarsen(coarsenH.front()))) heapPop(coarsenH);
